@@ -1,0 +1,603 @@
+"""The 3D twin: a viser scene of the tracker and the fixed array at a site.
+
+The tracker is posed by the same Denavit–Hartenberg kinematics as the
+simulation (:mod:`sim.kinematics`, seed 000 Table 2 / eq. 23 with seed 002's
+d1 and a2) and the sun comes from :func:`sim.sun.solar_position` (NREL SPA via
+pvlib). World coordinates are East-North-Up in metres, z up, origin on the
+ground at the foot of the tracker's pedestal.
+
+Scene tree (children inherit their parent's transform; handles are kept and
+only their ``wxyz`` / ``position`` / ``visible`` / ``points`` change)::
+
+    /ground, /compass/{N,E,S,W}
+    /tracker                         D–H base frame {0} on top of the pedestal
+    /tracker/pedestal
+    /tracker/azimuth                 frame {1} (A1, joint 1 = azimuth)
+    /tracker/azimuth/elevation       frame {2} (A2, joint 2 = elevation)
+    /tracker/azimuth/elevation/panels          panel frame (z = normal)
+    /tracker/azimuth/elevation/panels/module_i four KD205GX-LP, 2 x 2
+    /tracker/azimuth/elevation/panels/camera   seed 000's camera frustum
+    /fixed, /fixed/panels/module_i   4 x KD205GX-LP at 16° facing south
+    /sun, /sun/disc, /sun/ray        sun marker and its ray to the tracker
+    /sun_path                        the day's sun path (line segments)
+
+GUI: date, time-of-day slider, play/pause with a speed, a live mode that
+follows the service's clock (the ``ts`` of :meth:`TwinScene.update_live`, or
+the wall clock when no update has come), and readouts of the angles and power.
+
+The FastAPI lifespan owns one :class:`TwinScene`: ``start()`` on startup,
+``update_live()`` from the live twin loop, ``stop()`` on shutdown. The only
+background thread is the play/live ticker, which ``stop()`` joins.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import viser
+import viser.transforms as vtf
+from numpy.typing import NDArray
+
+from sim.kinematics import (
+    TrackerGeometry,
+    forward_kinematics,
+    inverse_kinematics,
+    joint_transforms,
+)
+from sim.sites import Site
+from sim.sun import solar_position, sun_vector_enu
+
+logger = logging.getLogger(__name__)
+
+# Kyocera KD205GX-LP outline from pvlib's CEC module table
+# ('Kyocera_Solar_KD205GX_LP': Length 1.5 m, Width 0.99 m); frame depth 46 mm
+# from the Kyocera datasheet (visual only).
+MODULE_LENGTH_M = 1.50
+MODULE_WIDTH_M = 0.99
+MODULE_DEPTH_M = 0.046
+MODULE_GAP_M = 0.02
+#: Modules are mounted landscape, 2 x 2: long side along the elevation axis.
+ARRAY_WIDTH_M = 2 * MODULE_LENGTH_M + MODULE_GAP_M
+ARRAY_HEIGHT_M = 2 * MODULE_WIDTH_M + MODULE_GAP_M
+
+#: Height of the D–H base frame {0} above the ground [m]. Seed 000 gives no
+#: number; chosen so the 2 x 2 array clears the ground with the panel vertical
+#: (elevation axis at PEDESTAL_HEIGHT_M + d1 ≈ 1.66 m > ARRAY_HEIGHT_M / 2).
+PEDESTAL_HEIGHT_M = 1.30
+#: Where the fixed array stands (ENU, m): east of the tracker, clear of its swing.
+FIXED_ARRAY_ORIGIN_M = (4.5, 0.0, 0.0)
+FIXED_LOWER_EDGE_M = 0.5
+#: Seed 000, section 3.3: the fixed reference array, 16° tilt facing south.
+DEFAULT_FIXED_TILT_DEG = 16.0
+DEFAULT_FIXED_AZIMUTH_DEG = 180.0
+#: Seed 000, section 2.2: camera 640 x 480 px, 67° field of view (taken as the
+#: horizontal field), at the top centre of the array, looking along the normal.
+CAMERA_WIDTH_PX = 640
+CAMERA_HEIGHT_PX = 480
+CAMERA_FOV_DEG = 67.0
+#: Distance at which the sun marker and the day's path are drawn [m].
+SUN_DISTANCE_M = 5.5
+SUN_PATH_STEP_MIN = 5
+TICK_S = 0.1
+LIVE_REFRESH_S = 5.0
+
+_PANEL_BLUE = (28, 52, 110)
+_STEEL = (150, 150, 155)
+_SUN_YELLOW = (255, 200, 40)
+
+
+@dataclass(frozen=True)
+class ScenePose:
+    """What the scene shows at one instant (angles in degrees, ENU vectors)."""
+
+    ts: pd.Timestamp
+    solar_azimuth_deg: float
+    solar_elevation_deg: float
+    azimuth_joint_deg: float
+    elevation_joint_deg: float
+    stowed: bool
+    tracker_normal_enu: NDArray[np.float64]
+    tracker_aoi_deg: float
+    fixed_aoi_deg: float
+
+
+def _wxyz(rotation: NDArray[np.floating]) -> NDArray[np.float64]:
+    return np.asarray(vtf.SO3.from_matrix(rotation).wxyz, dtype=float)
+
+
+def _fixed_orientation(site: Site) -> tuple[float, float]:
+    """(surface_tilt, surface_azimuth) [°] of the site's ``fixed`` array, or
+    seed 000's 16° facing south when the site has none."""
+    fixed = site.arrays.get("fixed")
+    if fixed is None:
+        return DEFAULT_FIXED_TILT_DEG, DEFAULT_FIXED_AZIMUTH_DEG
+    return float(fixed.surface_tilt), float(fixed.surface_azimuth)
+
+
+class TwinScene:
+    """The viser 3D twin of one site.
+
+    Parameters
+    ----------
+    site : sim.sites.Site
+        Location (``latitude``, ``longitude``, ``altitude``, ``timezone``), the
+        tracker geometry (``tracker``) and the arrays (``arrays['fixed']`` gives
+        the fixed array's tilt/azimuth; seed 000's 16°/180° if absent).
+    host, port : str, int
+        Where viser listens. Port 0 picks a free port (see :attr:`port`); a busy
+        port makes viser take the next free one.
+    clock : callable, optional
+        Returns the current UTC time; the wall clock by default.
+    """
+
+    def __init__(
+        self,
+        site: Site,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        clock: Callable[[], pd.Timestamp] | None = None,
+    ) -> None:
+        self.site = site
+        self.host = host
+        self.requested_port = port
+        self._clock = clock or (lambda: pd.Timestamp.now(tz="UTC"))
+        self._geometry: TrackerGeometry = site.tracker
+        self._tz = site.timezone
+        self._fixed_tilt_deg, self._fixed_azimuth_deg = _fixed_orientation(site)
+        self._lock = threading.RLock()
+        self._stop_event = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.server: viser.ViserServer | None = None
+        self.nodes: dict[str, Any] = {}
+        self.gui: dict[str, Any] = {}
+        self.pose: ScenePose | None = None
+        self._day: dt.date | None = None
+        self._hours = 12.0
+        self._playing = False
+        self._live = True
+        self._last_live_refresh = 0.0
+        self._syncing_gui = False
+        self._azimuth_reference: float | None = None
+        self._live_ts: pd.Timestamp | None = None
+        self._live_tracker_power_w: float | None = None
+        self._live_fixed_power_w: float | None = None
+
+    # ------------------------------------------------------------------ lifecycle
+    @property
+    def port(self) -> int:
+        """The port viser actually bound (``requested_port`` until started)."""
+        return self.server.get_port() if self.server is not None else self.requested_port
+
+    @property
+    def running(self) -> bool:
+        return self.server is not None
+
+    def start(self) -> None:
+        """Start viser, build the scene and the GUI, start the ticker thread.
+
+        Returns at once (viser serves from its own thread). Calling it on a
+        running scene does nothing.
+        """
+        with self._lock:
+            if self.server is not None:
+                logger.warning("TwinScene.start() on a running scene ignored")
+                return
+            self.server = viser.ViserServer(host=self.host, port=self.requested_port,
+                                            verbose=False)
+            if self.requested_port not in (0, self.server.get_port()):
+                logger.warning("viser port %d busy, serving on %d",
+                               self.requested_port, self.server.get_port())
+            self.nodes = {}
+            self.gui = {}
+            self._day = None
+            self._azimuth_reference = None
+            self._build_static_scene()
+            self._build_gui()
+            self.show_time(self._live_now())
+            self._stop_event.clear()
+            self._thread = threading.Thread(target=self._tick_loop, name="twin3d-ticker",
+                                            daemon=True)
+            self._thread.start()
+            logger.info("3D twin for %s at http://%s:%d/", self.site.site_id, self.host,
+                        self.port)
+
+    def stop(self) -> None:
+        """Stop the ticker thread and viser, freeing the port. Idempotent."""
+        self._stop_event.set()
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join(timeout=5.0)
+        with self._lock:
+            server, self.server = self.server, None
+            self.nodes = {}
+            self.gui = {}
+        if server is not None:
+            server.stop()
+
+    # ---------------------------------------------------------------- public API
+    def update_live(
+        self, ts: pd.Timestamp | dt.datetime, tracker_power_w: float | None,
+        fixed_power_w: float | None,
+    ) -> None:
+        """Latest time and powers from the service's live twin loop.
+
+        In live mode the scene moves to ``ts`` at once. ``ts`` must be
+        timezone-aware (ValueError otherwise); powers may be None (unknown).
+        """
+        stamp = pd.Timestamp(ts)
+        if stamp.tzinfo is None:
+            raise ValueError("ts must be timezone-aware")
+        with self._lock:
+            self._live_ts = stamp.tz_convert("UTC")
+            self._live_tracker_power_w = None if tracker_power_w is None else float(
+                tracker_power_w)
+            self._live_fixed_power_w = None if fixed_power_w is None else float(fixed_power_w)
+            if self.server is None:
+                return
+            if self._live:
+                self.show_time(self._live_ts)
+            else:
+                self._refresh_readout()
+
+    def pose_at(self, ts: pd.Timestamp) -> ScenePose:
+        """Sun and tracker pose at ``ts`` (no scene change).
+
+        The tracker follows the sun by :func:`sim.kinematics.inverse_kinematics`
+        (limits applied; the previous azimuth as the wrap reference); with the
+        sun below the horizon the scene shows it stowed flat (elevation joint at
+        its upper limit).
+        """
+        stamp = pd.Timestamp(ts)
+        if stamp.tzinfo is None:
+            raise ValueError("ts must be timezone-aware")
+        site = self.site
+        sp = solar_position(pd.DatetimeIndex([stamp]), site.latitude, site.longitude,
+                            site.altitude)
+        sun_az = float(sp["azimuth"].iloc[0])
+        sun_el = float(sp["apparent_elevation"].iloc[0])
+        az_j, el_j = inverse_kinematics(sun_az, sun_el, self._geometry,
+                                        reference_azimuth=self._azimuth_reference)
+        az_joint, el_joint = float(az_j), float(el_j)
+        stowed = sun_el <= 0.0
+        if stowed:
+            el_joint = self._geometry.elevation_max_deg
+        normal = forward_kinematics(az_joint, el_joint, self._geometry)
+        sun_vec = sun_vector_enu(90.0 - sun_el, sun_az)
+        fixed_normal = forward_kinematics(self._fixed_azimuth_deg,
+                                          90.0 - self._fixed_tilt_deg, self._geometry)
+        return ScenePose(
+            ts=stamp.tz_convert("UTC"),
+            solar_azimuth_deg=sun_az,
+            solar_elevation_deg=sun_el,
+            azimuth_joint_deg=az_joint,
+            elevation_joint_deg=el_joint,
+            stowed=stowed,
+            tracker_normal_enu=normal,
+            tracker_aoi_deg=float(np.degrees(np.arccos(np.clip(normal @ sun_vec, -1, 1)))),
+            fixed_aoi_deg=float(np.degrees(np.arccos(np.clip(fixed_normal @ sun_vec, -1, 1)))),
+        )
+
+    def show_time(self, ts: pd.Timestamp) -> ScenePose:
+        """Pose the whole scene at ``ts`` (tz-aware) and sync the GUI to it."""
+        with self._lock:
+            if self.server is None:
+                raise RuntimeError("TwinScene is not running; call start() first")
+            pose = self.pose_at(ts)
+            self._azimuth_reference = pose.azimuth_joint_deg
+            local = pose.ts.tz_convert(self._tz)
+            if local.date() != self._day:
+                self._set_day(local.date())
+            self._hours = local.hour + local.minute / 60.0 + local.second / 3600.0
+            self._apply_pose(pose)
+            self.pose = pose
+            self._sync_gui(local)
+            self._refresh_readout()
+            return pose
+
+    # ------------------------------------------------------------- scene building
+    def _add(self, name: str, handle: Any) -> Any:
+        self.nodes[name] = handle
+        return handle
+
+    def _build_static_scene(self) -> None:
+        assert self.server is not None
+        scene = self.server.scene
+        scene.set_up_direction("+z")
+        geom = self._geometry
+        self._add("/ground", scene.add_grid(
+            "/ground", width=24.0, height=24.0, plane="xy", cell_size=1.0, section_size=5.0,
+            plane_color=(200, 214, 180), plane_opacity=0.6, position=(0.0, 0.0, -0.002)))
+        for label, (lx, ly) in {"N": (0.0, 10.0), "E": (10.0, 0.0), "S": (0.0, -10.0),
+                                "W": (-10.0, 0.0)}.items():
+            self._add(f"/compass/{label}", scene.add_label(
+                f"/compass/{label}", label, position=(lx, ly, 0.05), anchor="center-center",
+                font_screen_scale=1.6))
+
+        # Tracker: base frame {0} on top of the pedestal.
+        self._add("/tracker", scene.add_frame("/tracker", show_axes=False,
+                                              position=(0.0, 0.0, PEDESTAL_HEIGHT_M)))
+        self._add("/tracker/pedestal", scene.add_box(
+            "/tracker/pedestal", color=_STEEL, dimensions=(0.22, 0.22, PEDESTAL_HEIGHT_M),
+            position=(0.0, 0.0, -PEDESTAL_HEIGHT_M / 2.0)))
+        self._add("/tracker/footing", scene.add_box(
+            "/tracker/footing", color=(120, 120, 120), dimensions=(0.7, 0.7, 0.12),
+            position=(0.0, 0.0, -PEDESTAL_HEIGHT_M + 0.06)))
+        # Frame {1}: z1 is the (horizontal) elevation axis, y1 is up (alpha1 = 90°).
+        self._add("/tracker/azimuth", scene.add_frame("/tracker/azimuth", show_axes=False))
+        self._add("/tracker/azimuth/turret", scene.add_box(
+            "/tracker/azimuth/turret", color=(110, 110, 118),
+            dimensions=(0.18, geom.d1_m, 0.26), position=(0.0, -geom.d1_m / 2.0, 0.0)))
+        self._add("/tracker/azimuth/axle", scene.add_box(
+            "/tracker/azimuth/axle", color=(90, 90, 95),
+            dimensions=(0.07, 0.07, ARRAY_WIDTH_M * 0.8)))
+        # Frame {2}: x2 is the panel normal; the link a2 runs along it.
+        self._add("/tracker/azimuth/elevation", scene.add_frame(
+            "/tracker/azimuth/elevation", show_axes=False))
+        self._add("/tracker/azimuth/elevation/arm", scene.add_box(
+            "/tracker/azimuth/elevation/arm", color=_STEEL,
+            dimensions=(geom.a2_m, 0.08, 0.08), position=(-geom.a2_m / 2.0, 0.0, 0.0)))
+        self._add("/tracker/azimuth/elevation/panels", scene.add_frame(
+            "/tracker/azimuth/elevation/panels", show_axes=False))
+        self._add_modules("/tracker/azimuth/elevation/panels")
+        for i, y in enumerate((-0.5, 0.5)):  # purlins behind the modules
+            name = f"/tracker/azimuth/elevation/panels/rail_{i}"
+            self._add(name, scene.add_box(name, color=_STEEL,
+                                          dimensions=(ARRAY_WIDTH_M * 0.95, 0.05, 0.04),
+                                          position=(0.0, y, -MODULE_DEPTH_M / 2 - 0.02)))
+        vfov = 2.0 * np.arctan(np.tan(np.radians(CAMERA_FOV_DEG) / 2.0)
+                               * CAMERA_HEIGHT_PX / CAMERA_WIDTH_PX)
+        # OpenCV camera (+z forward, +y down): looking along the normal, image
+        # "down" = down the panel's slope.
+        self._add("/tracker/azimuth/elevation/panels/camera", scene.add_camera_frustum(
+            "/tracker/azimuth/elevation/panels/camera", fov=float(vfov),
+            aspect=CAMERA_WIDTH_PX / CAMERA_HEIGHT_PX, scale=0.35, color=(200, 40, 40),
+            thickness=0.012, wxyz=(0.0, 0.0, 0.0, 1.0),
+            position=(0.0, ARRAY_HEIGHT_M / 2.0 + 0.06, 0.03)))
+
+        # Fixed array: same panel-frame convention, orientation from the D–H
+        # model evaluated at the fixed normal (azimuth, 90° − tilt).
+        t0p = joint_transforms(self._fixed_azimuth_deg, 90.0 - self._fixed_tilt_deg, geom)[2]
+        rot = t0p[:3, :3]
+        half = ARRAY_HEIGHT_M / 2.0 * np.sin(np.radians(self._fixed_tilt_deg))
+        centre = np.array(FIXED_ARRAY_ORIGIN_M) + (0.0, 0.0, FIXED_LOWER_EDGE_M + half)
+        self._add("/fixed", scene.add_frame("/fixed", show_axes=False,
+                                            position=tuple(centre), wxyz=_wxyz(rot)))
+        self._add("/fixed/panels", scene.add_frame("/fixed/panels", show_axes=False))
+        self._add_modules("/fixed/panels")
+        for i, (x, y) in enumerate([(sx * ARRAY_WIDTH_M * 0.42, sy * ARRAY_HEIGHT_M * 0.42)
+                                    for sx in (-1, 1) for sy in (-1, 1)]):
+            foot = centre + rot @ np.array([x, y, 0.0])
+            name = f"/fixed_legs/leg_{i}"
+            self._add(name, scene.add_box(name, color=_STEEL,
+                                          dimensions=(0.05, 0.05, float(foot[2])),
+                                          position=(float(foot[0]), float(foot[1]),
+                                                    float(foot[2]) / 2.0)))
+
+        # Sun: /sun's local z points at the sun, so the ray is a constant segment.
+        self._add("/sun", scene.add_frame("/sun", show_axes=False))
+        self._add("/sun/disc", scene.add_icosphere("/sun/disc", radius=0.28,
+                                                   color=_SUN_YELLOW, cast_shadow=False))
+        self._add("/sun/ray", scene.add_line_segments(
+            "/sun/ray", points=np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, -SUN_DISTANCE_M]]]),
+            colors=_SUN_YELLOW, thickness=0.02))
+        self._add("/sun_path", scene.add_line_segments(
+            "/sun_path", points=np.zeros((1, 2, 3)), colors=(230, 150, 20), thickness=0.03))
+        # From the south-east, a little above the panels: tracker in front,
+        # fixed array to its right, the sun's arc behind.
+        self.server.initial_camera.position = (6.8, -8.4, 4.2)
+        self.server.initial_camera.look_at = (2.3, 1.2, 2.9)
+
+    def _add_modules(self, parent: str) -> None:
+        assert self.server is not None
+        for i, (x, y) in enumerate([(sx * (MODULE_LENGTH_M + MODULE_GAP_M) / 2.0,
+                                     sy * (MODULE_WIDTH_M + MODULE_GAP_M) / 2.0)
+                                    for sy in (1, -1) for sx in (-1, 1)]):
+            name = f"{parent}/module_{i}"
+            self._add(name, self.server.scene.add_box(
+                name, color=_PANEL_BLUE,
+                dimensions=(MODULE_LENGTH_M, MODULE_WIDTH_M, MODULE_DEPTH_M),
+                position=(x, y, 0.0)))
+
+    def _sun_centre(self) -> NDArray[np.float64]:
+        """The point the sun marker and path are drawn around: the tracker's
+        elevation axis."""
+        return np.array([0.0, 0.0, PEDESTAL_HEIGHT_M + self._geometry.d1_m])
+
+    def _set_day(self, day: dt.date) -> None:
+        """Recompute the day's sun path (local calendar day of the site)."""
+        self._day = day
+        start = pd.Timestamp(day).tz_localize(self._tz)
+        times = pd.date_range(start, start + pd.Timedelta(days=1),
+                              freq=f"{SUN_PATH_STEP_MIN}min", inclusive="left")
+        sp = solar_position(times, self.site.latitude, self.site.longitude,
+                            self.site.altitude)
+        el = sp["apparent_elevation"].to_numpy()
+        pts = self._sun_centre() + SUN_DISTANCE_M * sun_vector_enu(90.0 - el,
+                                                                   sp["azimuth"].to_numpy())
+        up = (el[:-1] > 0.0) & (el[1:] > 0.0)
+        segments = np.stack([pts[:-1][up], pts[1:][up]], axis=1)
+        if len(segments) == 0:  # polar night
+            segments = np.zeros((1, 2, 3))
+        self.nodes["/sun_path"].points = segments.astype(np.float32)
+        if "date" in self.gui:
+            self._syncing_gui = True
+            try:
+                self.gui["date"].value = day.isoformat()
+            finally:
+                self._syncing_gui = False
+
+    def _apply_pose(self, pose: ScenePose) -> None:
+        assert self.server is not None
+        t01, t02, t0p = joint_transforms(pose.azimuth_joint_deg, pose.elevation_joint_deg,
+                                         self._geometry)
+        t12 = np.linalg.solve(t01, t02)
+        t2p = np.linalg.solve(t02, t0p)
+        sun_dir = sun_vector_enu(90.0 - pose.solar_elevation_deg, pose.solar_azimuth_deg)
+        # rotation whose z axis is the sun direction
+        z = sun_dir
+        x = np.cross([0.0, 0.0, 1.0], z)
+        x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-9 else np.array([1.0, 0.0, 0.0])
+        sun_rot = np.column_stack([x, np.cross(z, x), z])
+        n = self.nodes
+        with self.server.atomic():
+            n["/tracker/azimuth"].wxyz = _wxyz(t01[:3, :3])
+            n["/tracker/azimuth"].position = t01[:3, 3]
+            n["/tracker/azimuth/elevation"].wxyz = _wxyz(t12[:3, :3])
+            n["/tracker/azimuth/elevation"].position = t12[:3, 3]
+            n["/tracker/azimuth/elevation/panels"].wxyz = _wxyz(t2p[:3, :3])
+            n["/tracker/azimuth/elevation/panels"].position = t2p[:3, 3]
+            n["/sun"].position = self._sun_centre() + SUN_DISTANCE_M * sun_dir
+            n["/sun"].wxyz = _wxyz(sun_rot)
+            n["/sun"].visible = pose.solar_elevation_deg > 0.0
+
+    # ---------------------------------------------------------------------- GUI
+    def _build_gui(self) -> None:
+        assert self.server is not None
+        gui = self.server.gui
+        g = self.gui
+        gui.add_markdown(f"**{self.site.name}** — 3D twin  \n"
+                         f"{self.site.latitude:.4f}°, {self.site.longitude:.4f}° · "
+                         f"{self._tz}")
+        with gui.add_folder("Time"):
+            g["live"] = gui.add_checkbox("Live (service clock)", initial_value=self._live,
+                                         hint="Follow the service's clock and live power")
+            g["date"] = gui.add_text("Date (local)", initial_value="",
+                                     hint="YYYY-MM-DD, in the site's time zone")
+            g["hours"] = gui.add_slider(
+                "Local time [h]", min=0.0, max=24.0, step=0.01, initial_value=12.0,
+                marks=((0.0, "0"), (6.0, "6"), (12.0, "12"), (18.0, "18"), (24.0, "24")))
+            g["play"] = gui.add_button("Play", icon=viser.Icon.PLAYER_PLAY)
+            g["speed"] = gui.add_slider("Speed [min/s]", min=1, max=120, step=1,
+                                        initial_value=10,
+                                        hint="Simulated minutes per second of playback")
+        with gui.add_folder("Readouts"):
+            g["readout"] = gui.add_markdown("")
+
+        @g["live"].on_update
+        def _(_: Any) -> None:
+            if self._syncing_gui:
+                return
+            self._live = bool(g["live"].value)
+            if self._live:
+                self._set_playing(False)
+                self.show_time(self._live_now())
+
+        @g["hours"].on_update
+        def _(_: Any) -> None:
+            if self._syncing_gui:
+                return
+            self._leave_live()
+            self._show_hours(float(g["hours"].value))
+
+        @g["date"].on_update
+        def _(_: Any) -> None:
+            if self._syncing_gui:
+                return
+            try:
+                day = dt.date.fromisoformat(str(g["date"].value).strip())
+            except ValueError:
+                self._refresh_readout(error=f"Date {g['date'].value!r} is not YYYY-MM-DD")
+                return
+            self._leave_live()
+            with self._lock:
+                if self.server is not None:
+                    self._set_day(day)
+                self._show_hours(self._hours)
+
+        @g["play"].on_click
+        def _(_: Any) -> None:
+            self._leave_live()
+            self._set_playing(not self._playing)
+
+    def _leave_live(self) -> None:
+        if self._live:
+            self._live = False
+            self._syncing_gui = True
+            try:
+                self.gui["live"].value = False
+            finally:
+                self._syncing_gui = False
+
+    def _set_playing(self, playing: bool) -> None:
+        self._playing = playing
+        button = self.gui.get("play")
+        if button is not None:
+            button.label = "Pause" if playing else "Play"
+            button.icon = viser.Icon.PLAYER_PAUSE if playing else viser.Icon.PLAYER_PLAY
+
+    def _show_hours(self, hours: float) -> None:
+        with self._lock:
+            if self.server is None or self._day is None:
+                return
+            start = pd.Timestamp(self._day).tz_localize(self._tz)
+            self.show_time(start + pd.Timedelta(hours=hours))
+
+    def _sync_gui(self, local: pd.Timestamp) -> None:
+        if "hours" not in self.gui:
+            return
+        self._syncing_gui = True
+        try:
+            self.gui["hours"].value = round(self._hours, 2)
+            self.gui["date"].value = local.date().isoformat()
+        finally:
+            self._syncing_gui = False
+
+    def _refresh_readout(self, error: str | None = None) -> None:
+        if "readout" not in self.gui or self.pose is None:
+            return
+        p = self.pose
+        local = p.ts.tz_convert(self._tz)
+
+        def watts(x: float | None) -> str:
+            return "—" if x is None or not np.isfinite(x) else f"{x:.0f} W"
+
+        live_at = ("no live data yet" if self._live_ts is None else
+                   self._live_ts.tz_convert(self._tz).strftime("%Y-%m-%d %H:%M"))
+        state = "stowed (sun down)" if p.stowed else "tracking"
+        lines = [
+            f"**{local:%Y-%m-%d %H:%M} {local.tzname()}** "
+            f"({'live' if self._live else 'playing' if self._playing else 'scrubbing'})",
+            "",
+            "| | azimuth | elevation |",
+            "|---|---|---|",
+            f"| sun | {p.solar_azimuth_deg:.1f}° | {p.solar_elevation_deg:.1f}° |",
+            f"| tracker joints | {p.azimuth_joint_deg:.1f}° | {p.elevation_joint_deg:.1f}° |",
+            "",
+            f"Tracker: {state}, AOI {p.tracker_aoi_deg:.1f}°  ",
+            f"Fixed ({self._fixed_tilt_deg:.0f}° tilt, {self._fixed_azimuth_deg:.0f}° az): "
+            f"AOI {p.fixed_aoi_deg:.1f}°",
+            "",
+            f"Live power ({live_at}): tracker {watts(self._live_tracker_power_w)}, "
+            f"fixed {watts(self._live_fixed_power_w)}",
+        ]
+        if error:
+            lines.append(f"\n**{error}**")
+        self.gui["readout"].content = "\n".join(lines)
+
+    # ------------------------------------------------------------------- ticker
+    def _live_now(self) -> pd.Timestamp:
+        return self._live_ts if self._live_ts is not None else pd.Timestamp(self._clock())
+
+    def _tick_loop(self) -> None:
+        """Play mode advances the scrubbed time; live mode refreshes from the
+        clock every LIVE_REFRESH_S. Runs until ``stop()`` sets the event."""
+        while not self._stop_event.wait(TICK_S):
+            try:
+                if self._playing:
+                    speed_min_s = float(self.gui["speed"].value)
+                    self._show_hours((self._hours + speed_min_s * TICK_S / 60.0) % 24.0)
+                elif self._live and time.monotonic() - self._last_live_refresh > LIVE_REFRESH_S:
+                    self._last_live_refresh = time.monotonic()
+                    with self._lock:
+                        if self.server is not None:
+                            self.show_time(self._live_now())
+            except Exception:  # keep the ticker alive; the service must not die
+                logger.exception("3D twin tick failed")
