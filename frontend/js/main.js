@@ -1,0 +1,93 @@
+// Dashboard shell: site picker, hash navigation between pages, shared state.
+import { getMeta, getSites, siteList } from "./api.js";
+import { loadPlotly, resizeVisible, wireCsvButtons } from "./charts.js";
+import { localDate, zoneLabel } from "./time.js";
+import { banner } from "./ui.js";
+import * as overview from "./overview.js";
+import * as simulation from "./simulation.js";
+import * as sky from "./sky.js";
+import * as twin from "./twin.js";
+
+const PAGES = { overview, simulation, sky, twin };
+
+/** Shared state every page reads: the site, its zone, the selected day, server meta. */
+export const state = {
+  sites: [],
+  site: null,
+  tz: "UTC",
+  day: null,
+  meta: {},
+  page: null,
+};
+
+const started = new Set();
+
+function pageFromHash() {
+  const name = (location.hash || "#overview").slice(1).split("?")[0];
+  return PAGES[name] ? name : "overview";
+}
+
+/** Parameters after the page in the hash: #overview?site=tehuantepec&day=2026-11-20. */
+function hashParams() {
+  return new URLSearchParams((location.hash.split("?")[1]) || "");
+}
+
+function showPage(name) {
+  state.page = name;
+  for (const sec of document.querySelectorAll("section.page")) sec.hidden = sec.dataset.page !== name;
+  for (const a of document.querySelectorAll(".tabs a")) a.classList.toggle("active", a.dataset.page === name);
+  const mod = PAGES[name];
+  if (!started.has(name)) {
+    started.add(name);
+    mod.init(state);
+  } else {
+    mod.show?.(state);
+  }
+  for (const [other, m] of Object.entries(PAGES)) if (other !== name) m.hide?.(state);
+  resizeVisible(document.getElementById(`page-${name}`));
+}
+
+function setSite(siteId) {
+  state.site = state.sites.find((s) => s.site_id === siteId) || state.sites[0] || null;
+  state.tz = state.site?.timezone || "UTC";
+  state.day = localDate(state.tz);
+  document.getElementById("site-tz").textContent = zoneLabel(state.tz);
+  document.getElementById("site-select").title = state.site?.name || "";
+  document.getElementById("site-select").value = state.site?.site_id || "";
+  localStorage.setItem("heliotwin.site", state.site?.site_id || "");
+}
+
+async function boot() {
+  wireCsvButtons();
+  const select = document.getElementById("site-select");
+  const [sitesRes, metaRes] = await Promise.allSettled([getSites(), getMeta()]);
+  if (metaRes.status === "fulfilled") state.meta = metaRes.value || {};
+  if (sitesRes.status === "rejected") {
+    banner(`Could not load the sites: ${sitesRes.reason.message}`, "error");
+    return;
+  }
+  state.sites = siteList(sitesRes.value);
+  if (!state.sites.length) {
+    banner("The service has no sites configured (data/sites/).", "error");
+    return;
+  }
+  for (const s of state.sites) {
+    const opt = new Option(s.site_id, s.site_id);
+    opt.title = s.name || s.site_id;
+    select.add(opt);
+  }
+  const saved = hashParams().get("site") || localStorage.getItem("heliotwin.site");
+  const known = (id) => state.sites.some((s) => s.site_id === id);
+  setSite(known(saved) ? saved : known(state.meta.default_site) ? state.meta.default_site : state.sites[0].site_id);
+  const day = hashParams().get("day");
+  if (day && /^\d{4}-\d{2}-\d{2}$/.test(day) && day <= state.day) state.day = day;
+  select.addEventListener("change", () => {
+    setSite(select.value);
+    for (const [name, m] of Object.entries(PAGES)) if (started.has(name)) m.siteChanged?.(state, name === state.page);
+  });
+  window.addEventListener("hashchange", () => showPage(pageFromHash()));
+  showPage(pageFromHash());
+  loadPlotly(); // after the page has sent its requests: Plotly's start-up overlaps the answers
+}
+
+boot().catch((err) => banner(`Dashboard failed to start: ${err.message}`, "error")).finally(loadPlotly);

@@ -1,0 +1,463 @@
+// Overview: one site and one day — power (measured and twin), energies, gain, tiles, loggers.
+import { getEnergy, getMeasurements, getStatus, pick, seriesRows } from "./api.js";
+import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
+import { addDays, fmtAge, fmtDate, fmtDateTime, fmtTime, localDate, toLocalWall } from "./time.js";
+import { banner, energy, h, num, pct, remember, tile } from "./ui.js";
+
+let ARRAYS = []; // the selected site's array names, tracker first
+const SOURCES = ["measured", "twin"];
+const LIVE_MS = 30000;
+const HISTORY_DAYS = 28;
+const MAX_POINTS = 1440;
+
+let st = null;
+let timer = null;
+let controller = null;
+const lastDay = { measured: {}, status: null, followToday: true };
+
+const $ = (id) => document.getElementById(id);
+
+function siteArrays(site) {
+  const arrays = site?.arrays || {};
+  const rank = (n) => (arrays[n]?.mount === "tracker" ? 0 : arrays[n]?.mount === "fixed" ? 1 : 2);
+  return Object.keys(arrays).sort((a, b) => rank(a) - rank(b) || a.localeCompare(b));
+}
+
+function colorOf(arr) {
+  return COLORS[st.site.arrays?.[arr]?.mount] || COLORS[arr] || COLORS.grey;
+}
+
+function bandOf(arr) {
+  const c = colorOf(arr);
+  const [r, g, b] = [1, 3, 5].map((i) => parseInt(c.slice(i, i + 2), 16));
+  return `rgba(${r},${g},${b},0.15)`;
+}
+
+/** The value of a field in a point, whether stored (number) or bucketed ({min, mean, max}). */
+function fieldOf(p, name, stat = "mean") {
+  const v = p[name];
+  if (typeof v === "number") {
+    if (stat === "mean") return v;
+    const alt = p[`${name}_${stat}`] ?? p[stat]?.[name];
+    return typeof alt === "number" ? alt : v;
+  }
+  if (v && typeof v === "object") return v[stat] ?? v.mean ?? null;
+  return null;
+}
+
+/** Points → {x, y, ymin, ymax, ts, gaps}; nulls inserted at gaps so lines do not bridge them. */
+function toSeries(body, tz) {
+  const pts = seriesRows(body);
+  const bucket = body?.bucket_s || 0;
+  const times = pts.map((p) => Date.parse(p.ts));
+  const diffs = times.slice(1).map((t, i) => t - times[i]).sort((a, b) => a - b);
+  const step = bucket > 0 ? bucket * 1000 : diffs.length ? diffs[Math.floor(diffs.length / 2)] : 60000;
+  const gapMs = Math.max(3 * step, 5 * 60000);
+  const out = { x: [], y: [], ymin: [], ymax: [], rows: [], gaps: [], bucket, count: pts.length };
+  pts.forEach((p, i) => {
+    if (i > 0 && times[i] - times[i - 1] > gapMs) {
+      out.gaps.push([pts[i - 1].ts, p.ts, (times[i] - times[i - 1]) / 60000]);
+      out.x.push(toLocalWall(tz, times[i - 1] + step)); out.y.push(null); out.ymin.push(null); out.ymax.push(null);
+    }
+    const mean = fieldOf(p, "power_w");
+    out.x.push(toLocalWall(tz, times[i]));
+    out.y.push(mean);
+    out.ymin.push(fieldOf(p, "power_w", "min"));
+    out.ymax.push(fieldOf(p, "power_w", "max"));
+    out.rows.push([p.ts, toLocalWall(tz, times[i]), mean]);
+  });
+  return out;
+}
+
+function powerTraces(series) {
+  const traces = [];
+  for (const arr of ARRAYS) {
+    const color = colorOf(arr);
+    const m = series[`${arr}-measured`];
+    const t = series[`${arr}-twin`];
+    if (m && m.bucket > 0 && m.ymax.some((v, i) => v !== m.y[i])) {
+      traces.push({ x: m.x, y: m.ymax, type: "scatter", mode: "lines", line: { width: 0 }, hoverinfo: "skip", showlegend: false });
+      traces.push({ x: m.x, y: m.ymin, type: "scatter", mode: "lines", line: { width: 0 }, fill: "tonexty",
+        fillcolor: bandOf(arr), hoverinfo: "skip", showlegend: false });
+    }
+    if (m && m.count) {
+      traces.push({ x: m.x, y: m.y, name: `${arr} measured`, type: "scatter", mode: "lines", line: { color, width: 2 },
+        hovertemplate: "%{y:.0f} W", connectgaps: false });
+    }
+    if (t && t.count) {
+      traces.push({ x: t.x, y: t.y, name: `${arr} twin`, type: "scatter", mode: "lines", line: { color, width: 1.5, dash: "dash" },
+        hovertemplate: "%{y:.0f} W", connectgaps: false });
+    }
+  }
+  return traces;
+}
+
+async function drawPower(series) {
+  const day = st.day;
+  const traces = powerTraces(series);
+  if (!traces.length) {
+    const noArrays = st.site.arrays && !Object.keys(st.site.arrays).length;
+    showEmpty("chart-power", noArrays ? "This site has no PV arrays (a camera site): see the Sky camera page."
+      : `No readings for ${fmtDate(day)} — pick another day.`);
+    return;
+  }
+  const shapes = [];
+  if (day === localDate(st.tz)) {
+    const now = toLocalWall(st.tz, Date.now());
+    shapes.push({ type: "line", xref: "x", yref: "paper", x0: now, x1: now, y0: 0, y1: 1, line: { color: COLORS.grey, width: 1, dash: "dot" } });
+  }
+  const layout = baseLayout({
+    xaxis: { title: { text: `Local time (${st.tz})` }, type: "date", range: [`${day} 00:00`, `${addDays(day, 1)} 00:00`],
+      tickformat: "%H:%M", gridcolor: "#e9edf1" },
+    yaxis: { title: { text: "Power [W]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
+    shapes,
+  });
+  const rows = [];
+  for (const key of Object.keys(series)) {
+    const [arr, source] = key.split("-");
+    for (const r of series[key].rows) rows.push([r[0], r[1], arr, source, r[2]]);
+  }
+  await draw("chart-power", traces, layout, {
+    columns: ["ts_utc", "local_time", "array", "source", "power_w"], rows, filename: `power_${st.site.site_id}_${day}.csv`,
+  });
+}
+
+function energyOf(row, arr, source) {
+  const v = pick(row, `arrays.${arr}.${source}_wh`);
+  return typeof v === "number" ? v : null;
+}
+
+function gainOf(row, source) {
+  const given = source === "measured" ? row.gain_pct : row.twin_gain_pct;
+  if (typeof given === "number") return given;
+  const tr = energyOf(row, "tracker", source);
+  const fx = energyOf(row, "fixed", source);
+  return tr !== null && fx ? (100 * (tr - fx)) / fx : null;
+}
+
+function drawDayEnergy(row) {
+  const box = $("day-energy");
+  box.innerHTML = "";
+  $("day-energy-title").textContent = `Energy of ${fmtDate(st.day)}`;
+  if (!row) {
+    box.append(h("p", { class: "muted" }, "No energy recorded for this day."));
+    return;
+  }
+  const table = h("table", {}, h("tr", {}, h("th", {}, ""), h("th", {}, "Measured"), h("th", {}, "Twin"),
+    h("th", { title: "measured as a share of the twin's expectation" }, "of twin")));
+  for (const arr of ARRAYS) {
+    const m = energyOf(row, arr, "measured");
+    const t = energyOf(row, arr, "twin");
+    table.append(h("tr", {},
+      h("td", {}, h("span", { class: "dot", style: `background:${colorOf(arr)}` }), arr),
+      h("td", {}, energy(m)), h("td", {}, energy(t)),
+      h("td", {}, m !== null && t ? `${num((100 * m) / t, 0)} %` : "—")));
+  }
+  box.append(table,
+    h("div", { class: "gain-big", "data-testid": "gain-day" }, pct(gainOf(row, "measured"))),
+    h("div", { class: "muted" }, `tracking gain measured (tracker over fixed); the twin expects ${pct(gainOf(row, "twin"))}`));
+}
+
+/** A date axis with one tick per day (per week past ten days), labelled "18 Nov". */
+function dayAxis(tz, dates) {
+  const day = 86400000;
+  return { type: "date", title: { text: `Day (${tz})` }, tickformat: "%d %b", gridcolor: "#e9edf1",
+    dtick: dates.length > 10 ? 7 * day : day };
+}
+
+/** Days from the first one with a measured reading on (the window before it holds only the twin). */
+function fromFirstMeasured(rows) {
+  const first = rows.findIndex((r) => ARRAYS.some((a) => energyOf(r, a, "measured") !== null));
+  return first > 0 ? rows.slice(first) : rows;
+}
+
+async function drawHistory(allRows) {
+  const tz = st.tz;
+  const rows = fromFirstMeasured(allRows);
+  const dates = rows.map((r) => localDate(tz, Date.parse(r.period_start)));
+  if (!rows.length) {
+    showEmpty("chart-daily", "No daily energy in the last 4 weeks.");
+    showEmpty("chart-cumulative", "No daily energy in the last 4 weeks.");
+    return;
+  }
+  const kwh = (v) => (v === null ? null : v / 1000);
+  const traces = [];
+  for (const arr of ARRAYS) {
+    traces.push({ x: dates, y: rows.map((r) => kwh(energyOf(r, arr, "measured"))), name: `${arr} measured`, type: "bar",
+      marker: { color: colorOf(arr) }, hovertemplate: "%{y:.2f} kWh" });
+  }
+  for (const arr of ARRAYS) {
+    traces.push({ x: dates, y: rows.map((r) => kwh(energyOf(r, arr, "twin"))), name: `${arr} twin`, type: "scatter",
+      mode: "markers", marker: { color: colorOf(arr), symbol: "line-ew-open", size: 14, line: { width: 2, color: colorOf(arr) } },
+      hovertemplate: "%{y:.2f} kWh" });
+  }
+  traces.push({ x: dates, y: rows.map((r) => gainOf(r, "measured")), name: "gain", yaxis: "y2", type: "scatter",
+    mode: "lines+markers", line: { color: COLORS.gain, width: 1.5 }, marker: { size: 5 }, hovertemplate: "%{y:.1f} %" });
+  const layout = baseLayout({
+    barmode: "group", bargap: 0.25,
+    xaxis: dayAxis(tz, dates),
+    yaxis: { title: { text: "Energy [kWh]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
+    yaxis2: { title: { text: "Tracking gain [%]" }, overlaying: "y", side: "right", showgrid: false, zeroline: true,
+      zerolinecolor: "#c3e6cb", ticksuffix: " %", tickformat: ".1f" },
+  });
+  const energyCols = ARRAYS.flatMap((a) => SOURCES.map((src) => [a, src]));
+  const table = {
+    columns: ["date", ...energyCols.map(([a, src]) => `${a}_${src}_wh`), "gain_pct", "twin_gain_pct"],
+    rows: rows.map((r, i) => [dates[i], ...energyCols.map(([a, src]) => energyOf(r, a, src)),
+      gainOf(r, "measured"), gainOf(r, "twin")]),
+    filename: `daily_energy_${st.site.site_id}_${dates[0]}_${dates[dates.length - 1]}.csv`,
+  };
+  await draw("chart-daily", traces, layout, table);
+
+  // Cumulative over complete logger days only (every array ≥ 90 % of its usual readings per
+  // day), so measured and twin add up the same hours and compare like for like.
+  const usual = Object.fromEntries(ARRAYS.map((a) => [a, Math.max(0, ...rows.map((r) => pick(r, `arrays.${a}.readings`) || 0))]));
+  const complete = rows.map((r) => ARRAYS.every((a) => (pick(r, `arrays.${a}.readings`) || 0) >= 0.9 * usual[a] && usual[a] > 0));
+  const cumRows = rows.filter((_, i) => complete[i]);
+  const cumDates = dates.filter((_, i) => complete[i]);
+  if (!cumRows.length) {
+    showEmpty("chart-cumulative", "No complete logger day in the last 4 weeks yet.");
+    return;
+  }
+  const cum = [];
+  const cumTable = cumDates.map((d) => [d]);
+  for (const arr of ARRAYS) {
+    for (const source of SOURCES) {
+      let acc = 0;
+      const y = cumRows.map((r, i) => {
+        acc += energyOf(r, arr, source) || 0;
+        cumTable[i].push(acc);
+        return acc / 1000;
+      });
+      cum.push({ x: cumDates, y, name: `${arr} ${source}`, type: "scatter", mode: "lines+markers", marker: { size: 4 },
+        line: { color: colorOf(arr), width: source === "measured" ? 2.5 : 1.5, dash: source === "measured" ? "solid" : "dash" },
+        hovertemplate: "%{y:.2f} kWh" });
+    }
+  }
+  await draw("chart-cumulative", cum, baseLayout({
+    xaxis: dayAxis(tz, cumDates),
+    yaxis: { title: { text: "Cumulative energy [kWh]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
+  }), {
+    columns: ["date", ...ARRAYS.flatMap((a) => SOURCES.map((src) => `${a}_${src}_cumulative_wh`))],
+    rows: cumTable, filename: `cumulative_energy_${st.site.site_id}_${cumDates[0]}_${cumDates[cumDates.length - 1]}.csv`,
+  });
+}
+
+/** ok / warn / bad from the service's logger state ("reporting", "stale", "never") or the age. */
+function freshness(entry, ageS) {
+  if (entry?.logger === "reporting") return "ok";
+  if (entry?.logger === "never") return "bad";
+  if (ageS === null || ageS === undefined) return "bad";
+  const fresh = lastDay.status?.fresh_s || 300;
+  if (ageS <= fresh) return "ok";
+  return ageS <= 12 * fresh ? "warn" : "bad";
+}
+
+function arrayStatus(status, arr) {
+  return pick(status, `arrays.${arr}`) || {};
+}
+
+function ageOf(entry) {
+  if (typeof entry.age_s === "number") return entry.age_s;
+  return entry.last_ts ? (Date.now() - Date.parse(entry.last_ts)) / 1000 : null;
+}
+
+function drawTiles(status) {
+  const box = $("tiles");
+  box.innerHTML = "";
+  if (!status) return;
+  const tz = st.tz;
+  const tr = arrayStatus(status, "tracker");
+  const fx = arrayStatus(status, "fixed");
+  const powerTile = (label, e) => tile(label, `${num(e.power_w, 0)} W`,
+    `twin ${num(e.twin_power_w, 0)} W · ${e.last_ts ? fmtAge(e.last_ts) : "no reading yet"}`, freshness(e, ageOf(e)));
+  if (ARRAYS.length) {
+    box.append(
+      powerTile("Tracker power now", tr),
+      powerTile("Fixed power now", fx),
+      tile("Tracker energy today", energy(tr.energy_today_wh), `twin ${energy(tr.twin_energy_today_wh)}`),
+      tile("Fixed energy today", energy(fx.energy_today_wh), `twin ${energy(fx.twin_energy_today_wh)}`),
+      tile("Gain today", pct(status.gain_today_pct), `tracker over fixed · twin ${pct(status.twin_gain_today_pct)}`),
+    );
+  }
+  box.append(
+    tile("Sun now", `${num(pick(status, "sun.elevation_deg"), 1)}°`,
+      `elevation · azimuth ${num(pick(status, "sun.azimuth_deg"), 1)}° from N`),
+    tile("Tracker angles now", `${num(pick(status, "tracker.elevation_joint_deg"), 1)}°`,
+      `elevation · azimuth ${num(pick(status, "tracker.azimuth_joint_deg"), 1)}° (twin)`),
+    tile("Site time", fmtTime(tz, status.time_utc || status.time || new Date().toISOString()), tz),
+  );
+}
+
+function drawLoggers(status, series) {
+  const box = $("loggers");
+  box.innerHTML = "";
+  if (!ARRAYS.length) {
+    box.append(h("p", { class: "muted" }, "No loggers: this site has no PV arrays."));
+    return;
+  }
+  const table = h("table", {}, h("tr", {}, h("th", {}, "Array"), h("th", {}, "Last reading"), h("th", {}, "Readings"), h("th", {}, "Gaps")));
+  for (const arr of ARRAYS) {
+    const s = arrayStatus(status || {}, arr);
+    const m = series[`${arr}-measured`];
+    const last = s.last_ts || (m && m.rows.length ? m.rows[m.rows.length - 1][0] : null);
+    const age = s.last_ts ? ageOf(s) : last ? (Date.now() - Date.parse(last)) / 1000 : null;
+    const gaps = m ? m.gaps : [];
+    const longest = gaps.reduce((a, g) => Math.max(a, g[2]), 0);
+    table.append(h("tr", {},
+      h("td", { title: s.logger || "" }, h("span", { class: `dot ${freshness(s, age)}` }), arr),
+      h("td", { title: last ? fmtDateTime(st.tz, last) : "" }, last ? fmtAge(last) : "never"),
+      h("td", {}, m ? num(m.count) : "—"),
+      h("td", { title: gaps.map((g) => `${fmtTime(st.tz, g[0])}–${fmtTime(st.tz, g[1])}`).join(", ") },
+        gaps.length ? `${gaps.length} (longest ${num(longest, 0)} min)` : "none")));
+  }
+  box.append(table, h("div", { class: "muted" }, "Readings and gaps (> 5 min) of the selected day; hover for times."));
+}
+
+async function refreshStatus(signal) {
+  try {
+    lastDay.status = await getStatus(st.site.site_id, signal);
+  } catch (err) {
+    if (err.name === "AbortError") return;
+    lastDay.status = null;
+    banner(`Status unavailable: ${err.message}`);
+  }
+  drawTiles(lastDay.status);
+  drawLoggers(lastDay.status, lastDay.measured);
+}
+
+/** Load everything for the selected day; `quiet` keeps the charts while refreshing. */
+async function load(quiet = false) {
+  if (!st.site) return;
+  controller?.abort();
+  controller = new AbortController();
+  const { signal } = controller;
+  const site = st.site.site_id;
+  const day = st.day;
+  const today = localDate(st.tz);
+  $("day-input").value = day;
+  $("day-input").max = today;
+  $("day-next").disabled = day >= today;
+  lastDay.followToday = day === today; // then the page moves on to the next day at midnight
+  if (st.page === "overview") remember(st, "overview");
+  if (!quiet) {
+    for (const id of ["chart-power", "chart-daily", "chart-cumulative"]) {
+      const el = $(id);
+      if (!el.classList.contains("js-plotly-plot")) showEmpty(id, "Loading…");
+    }
+  }
+  ARRAYS = siteArrays(st.site);
+  if (!ARRAYS.length) {
+    lastDay.measured = {};
+    await drawPower({});
+    drawDayEnergy(null);
+    showEmpty("chart-daily", "This site has no PV arrays.");
+    showEmpty("chart-cumulative", "This site has no PV arrays.");
+    await refreshStatus(signal);
+    banner("");
+    document.body.dataset.overviewLoaded = `${site}/${day}`;
+    return;
+  }
+  const end = addDays(day, 1);
+  const series = {};
+  const measurementJobs = [];
+  for (const arr of ARRAYS) {
+    for (const source of SOURCES) {
+      measurementJobs.push(getMeasurements(site, { array: arr, source, start: day, end, maxPoints: MAX_POINTS }, signal)
+        .then((body) => { series[`${arr}-${source}`] = toSeries(body, st.tz); })
+        .catch((err) => { if (err.name !== "AbortError") series[`${arr}-${source}`] = toSeries(null, st.tz); throw err; }));
+    }
+  }
+  const energyJob = getEnergy(site, { start: addDays(day, 1 - HISTORY_DAYS), end, interval: "day" }, signal);
+  energyJob.catch(() => {}); // awaited below unless a newer load aborts this one first
+  const statusJob = refreshStatus(signal);
+  const errors = [];
+  const measured = await Promise.allSettled(measurementJobs);
+  if (signal.aborted) return;
+  for (const r of measured) if (r.status === "rejected") errors.push(r.reason.message);
+  lastDay.measured = series;
+  await drawPower(series);
+  drawLoggers(lastDay.status, series);
+  try {
+    const body = await energyJob;
+    if (signal.aborted) return;
+    const rows = (body && body.rows) || [];
+    drawDayEnergy(rows.find((r) => localDate(st.tz, Date.parse(r.period_start)) === day));
+    await drawHistory(rows);
+  } catch (err) {
+    if (err.name === "AbortError") return;
+    errors.push(err.message);
+    drawDayEnergy(null);
+    showEmpty("chart-daily", "Energy unavailable.");
+    showEmpty("chart-cumulative", "Energy unavailable.");
+  }
+  await statusJob;
+  if (signal.aborted) return;
+  banner(errors.length ? `Some data could not be loaded: ${errors[0]}` : "");
+  $("live-stamp").textContent = `updated ${fmtTime(st.tz, new Date().toISOString())}`;
+  document.body.dataset.overviewLoaded = `${site}/${day}`;
+  if (!performance.getEntriesByName("heliotwin:overview-loaded").length) performance.mark("heliotwin:overview-loaded");
+}
+
+function tick() {
+  if (!st.site || document.hidden) return;
+  const today = localDate(st.tz);
+  if (lastDay.followToday && st.day !== today) {
+    st.day = today; // left open overnight on "today": follow the new day
+    load();
+  } else if (st.day === today) {
+    load(true); // only the current day changes
+  } else {
+    refreshStatus(); // an older day needs only the tiles
+  }
+}
+
+function startLive() {
+  stopLive();
+  if ($("live-toggle").checked) timer = setInterval(tick, LIVE_MS);
+}
+
+function stopLive() {
+  if (timer) clearInterval(timer);
+  timer = null;
+}
+
+function setDay(day) {
+  const today = localDate(st.tz);
+  st.day = day > today ? today : day;
+  load();
+}
+
+export function init(state) {
+  st = state;
+  $("day-prev").addEventListener("click", () => setDay(addDays(st.day, -1)));
+  $("day-next").addEventListener("click", () => setDay(addDays(st.day, 1)));
+  $("day-today").addEventListener("click", () => setDay(localDate(st.tz)));
+  $("day-input").addEventListener("change", (ev) => { if (ev.target.value) setDay(ev.target.value); });
+  $("live-toggle").addEventListener("change", startLive);
+  document.addEventListener("visibilitychange", () => { if (!document.hidden && timer) tick(); });
+  document.addEventListener("keydown", (ev) => {
+    // ← → step through the days when the overview is shown and no field has the focus
+    if (st.page !== "overview" || ev.altKey || ev.ctrlKey || ev.metaKey) return;
+    if (ev.target.closest?.("input, select, textarea")) return;
+    if (ev.key === "ArrowLeft") setDay(addDays(st.day, -1));
+    else if (ev.key === "ArrowRight" && st.day < localDate(st.tz)) setDay(addDays(st.day, 1));
+  });
+  load();
+  startLive();
+}
+
+export function show() {
+  startLive();
+  load(true);
+}
+
+export function hide() {
+  stopLive();
+}
+
+export function siteChanged(state, visible) {
+  st = state;
+  for (const id of ["chart-power", "chart-daily", "chart-cumulative"]) showEmpty(id, "Loading…");
+  if (visible) load();
+}

@@ -1,0 +1,410 @@
+// Sky camera: upload frames, find the sun, compare with the ephemeris, calibrate a fisheye.
+import { api, pick } from "./api.js";
+import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
+import { addDays, fmtDateTime, localDate, localMidnightMs, toLocalWall, zoneOffsetMs } from "./time.js";
+import { banner, h, num } from "./ui.js";
+
+let st = null;
+let files = []; // [{file, input (datetime-local), url, width, height}]
+
+const $ = (id) => document.getElementById(id);
+const DEG = Math.PI / 180;
+
+/** A time written in a file name: 20160615_093900, 20180321061000, optional "UTCp1"/"UTC+1" zone. */
+export function timeFromName(name) {
+  const m = name.match(/(20\d{2})(\d{2})(\d{2})[_T-]?(\d{2})(\d{2})(\d{2})/);
+  if (!m) return null;
+  const z = name.match(/UTC([pm+-])(\d{1,2})/i);
+  const offsetH = z ? (z[1] === "m" || z[1] === "-" ? -1 : 1) * Number(z[2]) : null;
+  return { wall: `${m[1]}-${m[2]}-${m[3]}T${m[4]}:${m[5]}:${m[6]}`, offsetH };
+}
+
+function offsetString(minutes) {
+  const sign = minutes < 0 ? "-" : "+";
+  const a = Math.abs(minutes);
+  return `${sign}${String(Math.floor(a / 60)).padStart(2, "0")}:${String(a % 60).padStart(2, "0")}`;
+}
+
+/** The ISO timestamp (with offset) a row's datetime-local input stands for. */
+function rowTimestamp(row) {
+  const wall = row.input.value;
+  if (!wall) return null;
+  const full = wall.length === 16 ? `${wall}:00` : wall;
+  let offMin;
+  if (row.offsetH !== null && row.offsetH !== undefined && row.fromName) offMin = row.offsetH * 60;
+  else if ($("sky-name-tz").value === "site") offMin = zoneOffsetMs(st.tz, Date.parse(`${full}Z`)) / 60000;
+  else offMin = 0;
+  return `${full}${offsetString(offMin)}`;
+}
+
+function readSize(url) {
+  return new Promise((resolve, reject) => {
+    const img = new Image();
+    img.onload = () => resolve(img);
+    img.onerror = () => reject(new Error("not an image the browser can show"));
+    img.src = url;
+  });
+}
+
+function renderFileList() {
+  const box = $("sky-file-list");
+  box.innerHTML = "";
+  for (const row of files) {
+    row.input.addEventListener("input", () => { row.fromName = false; });
+    const zoneNote = row.offsetH !== null && row.fromName ? ` (UTC${offsetString(row.offsetH * 60)}, from the name)` : "";
+    box.append(h("div", { class: "row" }, h("span", { class: "name", title: row.file.name + zoneNote }, row.file.name + zoneNote), row.input));
+  }
+  if (files.length) box.append(h("div", { class: "muted" }, "Time of each frame (needed for the ephemeris and for calibration)."));
+}
+
+function onFiles() {
+  for (const f of files) URL.revokeObjectURL(f.url);
+  files = [...$("sky-files").files].map((file) => {
+    const parsed = timeFromName(file.name);
+    const input = h("input", { type: "datetime-local", step: "1", "aria-label": `time of ${file.name}` });
+    if (parsed) input.value = parsed.wall;
+    return { file, input, url: URL.createObjectURL(file), offsetH: parsed?.offsetH ?? null, fromName: Boolean(parsed) };
+  });
+  renderFileList();
+}
+
+const storedCameras = new Map(); // calibration id → its camera parameters
+
+async function storedCamera(id) {
+  if (!storedCameras.has(id)) {
+    const cal = await api(`/api/v1/vision/calibrations/${encodeURIComponent(id)}`);
+    storedCameras.set(id, cal.camera || {});
+  }
+  return storedCameras.get(id);
+}
+
+async function cameraParams(form) {
+  const cam = $("sky-camera").value;
+  const calibration = $("sky-calibration").value;
+  if (calibration) {
+    form.append("calibration_id", calibration);
+    return { camera: "calibration", stored: await storedCamera(calibration) };
+  }
+  form.append("camera", cam);
+  const box = document.querySelector(`.cam-params[data-camera="${cam}"]`);
+  const params = { camera: cam };
+  for (const el of box.querySelectorAll("input, select")) {
+    if (el.value === "") continue;
+    form.append(el.name, el.value);
+    params[el.name] = el.tagName === "SELECT" ? el.value : Number(el.value);
+  }
+  return params;
+}
+
+function placeParams(form) {
+  if ($("sky-place").value === "site") {
+    form.append("site_id", st.site.site_id);
+    return;
+  }
+  for (const name of ["latitude_deg", "longitude_deg", "elevation_m"]) {
+    const el = document.querySelector(`#sky-coords [name="${name}"]`);
+    if (el.value !== "") form.append(name, el.value);
+  }
+}
+
+/** Fisheye projection az/el → pixel, for the ephemeris marker when the API gives no pixel. */
+export function fisheyePixel(p, azimuthDeg, elevationDeg, width, height) {
+  const k = p.px_per_deg || Math.min(width, height) / 180;
+  const f = k / DEG; // focal length [px/rad] equal to k near the centre
+  const theta = (90 - elevationDeg) * DEG;
+  const r = { equisolid: 2 * f * Math.sin(theta / 2), stereographic: 2 * f * Math.tan(theta / 2),
+    orthographic: f * Math.sin(theta) }[p.projection] ?? k * (90 - elevationDeg);
+  const phi = ((p.north_offset_deg || 0) + (p.east === "right" ? azimuthDeg : -azimuthDeg)) * DEG;
+  const cx = p.cx_px ?? (width - 1) / 2;
+  const cy = p.cy_px ?? (height - 1) / 2;
+  return [cx + r * Math.sin(phi), cy - r * Math.cos(phi)];
+}
+
+function drawMarker(ctx, x, y, color, radius, cross) {
+  ctx.strokeStyle = color;
+  ctx.lineWidth = Math.max(2, radius / 5);
+  ctx.beginPath();
+  ctx.arc(x, y, radius, 0, 2 * Math.PI);
+  ctx.stroke();
+  if (cross) {
+    ctx.beginPath();
+    ctx.moveTo(x - radius * 1.8, y); ctx.lineTo(x - radius * 0.4, y);
+    ctx.moveTo(x + radius * 0.4, y); ctx.lineTo(x + radius * 1.8, y);
+    ctx.moveTo(x, y - radius * 1.8); ctx.lineTo(x, y - radius * 0.4);
+    ctx.moveTo(x, y + radius * 0.4); ctx.lineTo(x, y + radius * 1.8);
+    ctx.stroke();
+  }
+}
+
+function resultCard(row, img, res, params) {
+  const canvas = h("canvas", { "data-testid": "sky-canvas" });
+  const scale = Math.min(1, 900 / Math.max(img.naturalWidth, img.naturalHeight));
+  canvas.width = Math.round(img.naturalWidth * scale);
+  canvas.height = Math.round(img.naturalHeight * scale);
+  const ctx = canvas.getContext("2d");
+  ctx.drawImage(img, 0, 0, canvas.width, canvas.height);
+  const radius = Math.max(8, canvas.width / 28);
+  const centroid = pick(res, "centroid_px");
+  const eph = pick(res, "ephemeris");
+  let ephPx = pick(res, "ephemeris_px", "ephemeris.centroid_px", "ephemeris.pixel_px", "ephemeris.px");
+  const cam = params.camera === "calibration" ? { ...(params.stored || {}), camera: "fisheye" } : params;
+  if (!ephPx && eph && cam.camera === "fisheye" && typeof eph.elevation_deg === "number" && eph.elevation_deg > -5) {
+    ephPx = fisheyePixel(cam, eph.azimuth_deg, eph.elevation_deg, img.naturalWidth, img.naturalHeight);
+  }
+  if (cam.camera === "pinhole") {
+    const rx = pick(res, "reference_px.0") ?? cam.reference_x_px ?? (img.naturalWidth - 1) / 2;
+    const ry = pick(res, "reference_px.1") ?? cam.reference_y_px ?? (img.naturalHeight - 1) / 2;
+    ctx.setLineDash([4, 4]);
+    drawMarker(ctx, rx * scale, ry * scale, "#1971c2", radius * 0.6, true);
+    ctx.setLineDash([]);
+  }
+  if (ephPx) drawMarker(ctx, ephPx[0] * scale, ephPx[1] * scale, "#1971c2", radius, false);
+  if (res.sun_found && centroid) drawMarker(ctx, centroid[0] * scale, centroid[1] * scale, "#ff6b00", radius * 0.7, true);
+
+  const rows = [];
+  const kv = (k, v) => rows.push(h("tr", {}, h("th", {}, k), h("td", {}, v)));
+  kv("Sun found", res.sun_found ? `yes (confidence ${num(res.confidence, 2)})` : `no (confidence ${num(res.confidence, 2)})`);
+  if (centroid) kv("Centroid [px]", `${num(centroid[0], 1)}, ${num(centroid[1], 1)}`);
+  if (typeof res.azimuth_deg === "number") kv("Detected az / el [°]", `${num(res.azimuth_deg, 2)} / ${num(res.elevation_deg, 2)}`);
+  if (eph) kv("Ephemeris az / el [°]", `${num(eph.azimuth_deg, 2)} / ${num(eph.elevation_deg, 2)}`);
+  const sep = pick(res, "error.separation_deg", "error.angular_error_deg", "separation_deg", "angular_error_deg", "error_deg");
+  if (typeof sep === "number") kv("Error vs ephemeris [°]", num(sep, 2));
+  const pe = pick(res, "pointing_error_deg");
+  if (pe) kv("Pointing error [°] (right, up)", `${num(pe[0], 3)}, ${num(pe[1], 3)}`);
+  if (typeof res.pointing_error_mrad === "number") kv("Pointing error [mrad]", num(res.pointing_error_mrad, 2));
+  if (res.method) kv("Method", res.method);
+  const ts = rowTimestamp(row);
+  const when = !ts ? "" : $("sky-place").value === "site" ? `  · ${fmtDateTime(st.tz, ts)} (${st.tz})` : `  · ${ts}`;
+  return h("article", { class: "card sky-result", "data-testid": "sky-result", "data-sun-found": String(Boolean(res.sun_found)) },
+    h("header", {}, h("h2", { title: row.file.name }, row.file.name)),
+    canvas,
+    h("div", { class: "legend" }, h("span", { class: "det" }, "✛ detected sun"), "  ",
+      h("span", { class: "eph" }, cam.camera === "pinhole" ? "┼ reference pixel (dashed)" : "○ ephemeris sun"), when),
+    h("table", { class: "kv" }, rows));
+}
+
+function errorCard(row, message) {
+  return h("article", { class: "card sky-result", "data-testid": "sky-result" },
+    h("header", {}, h("h2", {}, row.file.name)), h("p", { class: "error" }, message));
+}
+
+async function detectAll(ev) {
+  ev.preventDefault();
+  if (!files.length) {
+    $("sky-status").textContent = "Choose one or more images first.";
+    return;
+  }
+  const out = $("sky-results");
+  out.innerHTML = "";
+  $("sky-detect").disabled = true;
+  let done = 0;
+  for (const row of files) {
+    $("sky-status").textContent = `detecting ${++done} of ${files.length}…`;
+    const form = new FormData();
+    form.append("file", row.file, row.file.name);
+    let params;
+    try {
+      params = await cameraParams(form);
+    } catch (err) {
+      out.append(errorCard(row, `Calibration unavailable: ${err.message}`));
+      continue;
+    }
+    placeParams(form);
+    const ts = rowTimestamp(row);
+    if (ts) form.append("timestamp", ts);
+    try {
+      const [res, img] = await Promise.all([api("/api/v1/vision/sun", { method: "POST", form, token: $("sky-token").value.trim() }), readSize(row.url)]);
+      out.append(resultCard(row, img, res, params));
+    } catch (err) {
+      out.append(errorCard(row, err.message));
+    }
+  }
+  $("sky-status").textContent = `${files.length} image(s) done.`;
+  $("sky-detect").disabled = false;
+  const first = files.map(rowTimestamp).find(Boolean);
+  if (first) $("sky-day").value = localDate(trajectoryZone(), Date.parse(first));
+  loadTrajectory();
+}
+
+async function calibrate() {
+  const timed = files.filter((r) => rowTimestamp(r));
+  if (timed.length < 3) {
+    $("sky-status").textContent = "Calibration needs at least 3 images, each with its time.";
+    return;
+  }
+  const form = new FormData();
+  for (const r of timed) {
+    form.append("files", r.file, r.file.name);
+    form.append("timestamps", rowTimestamp(r));
+  }
+  placeParams(form);
+  const projection = document.querySelector('.cam-params[data-camera="fisheye"] [name="projection"]').value;
+  form.append("projection", projection);
+  form.append("east", "auto"); // fit the mirror too
+  $("sky-calibrate").disabled = true;
+  $("sky-status").textContent = `fitting a ${projection} camera to ${timed.length} frames…`;
+  const box = $("sky-calibration-result");
+  box.innerHTML = "";
+  try {
+    const res = await api("/api/v1/vision/calibrations", { method: "POST", form, token: $("sky-token").value.trim() });
+    const fitted = res.camera && typeof res.camera === "object" ? { ...res, ...res.camera } : res;
+    const show = [["calibration_id", "Calibration id", 0], ["projection", "Projection"], ["cx_px", "Centre x [px]", 1],
+      ["cy_px", "Centre y [px]", 1], ["px_per_deg", "Scale [px/°]", 3], ["north_offset_deg", "North offset [°]", 2],
+      ["east", "East"], ["n_frames", "Frames used", 0], ["rms_px", "Residual RMS [px]", 2], ["max_px", "Residual max [px]", 2],
+      ["rms_deg", "Residual RMS [°]", 3]];
+    const rows = show.filter(([k]) => fitted[k] !== undefined && fitted[k] !== null)
+      .map(([k, label, d]) => h("tr", {}, h("th", {}, label), h("td", {}, typeof fitted[k] === "number" ? num(fitted[k], d ?? 3) : String(fitted[k]))));
+    for (const k of ["projection", "px_per_deg", "cx_px", "cy_px", "north_offset_deg", "east"]) {
+      const field = document.querySelector(`.cam-params[data-camera="fisheye"] [name="${k}"]`);
+      if (field && fitted[k] !== undefined && fitted[k] !== null) {
+        field.value = typeof fitted[k] === "number" ? String(Number(fitted[k].toFixed(4))) : fitted[k];
+      }
+    }
+    const frames = (res.frames || []).map((f) => h("tr", {},
+      h("td", { title: f.filename }, f.filename), h("td", {}, f.sun_found ? "yes" : "no"), h("td", {}, f.used ? "yes" : "no"),
+      h("td", {}, num(f.residual_px, 1)), h("td", {}, num(f.residual_deg, 2))));
+    box.append(h("article", { class: "card", "data-testid": "calibration-result" },
+      h("header", {}, h("h2", {}, `Fitted ${fitted.projection ?? ""} camera`)),
+      h("div", { class: "grid two-even" },
+        h("table", { class: "kv" }, rows),
+        frames.length ? h("table", { class: "kv frames" },
+          h("tr", {}, h("th", {}, "Frame"), h("th", {}, "Sun"), h("th", {}, "Used"), h("th", {}, "Residual [px]"), h("th", {}, "[°]")),
+          frames) : null)));
+    if (res.calibration_id !== undefined) {
+      const sel = $("sky-calibration");
+      sel.add(new Option(`#${res.calibration_id} ${fitted.projection ?? ""} · ${num(fitted.rms_px, 1)} px RMS (just fitted)`, res.calibration_id));
+      sel.value = String(res.calibration_id);
+      sel.dispatchEvent(new Event("change"));
+    }
+    $("sky-status").textContent = "Calibrated: detection now uses this calibration (see Calibration).";
+  } catch (err) {
+    box.append(h("article", { class: "card" }, h("p", { class: "error" }, `Calibration failed: ${err.message}`)));
+    $("sky-status").textContent = "";
+  } finally {
+    $("sky-calibrate").disabled = false;
+  }
+}
+
+function detectionList(body) {
+  if (Array.isArray(body)) return body;
+  return body?.detections || body?.rows || body?.items || [];
+}
+
+/** The sky map's day runs midnight to midnight in the site's zone, or in UTC for a free place. */
+function trajectoryZone() {
+  return $("sky-place").value === "site" ? st.tz : "UTC";
+}
+
+/** Time-axis range around the detections, at least an hour wide (one frame gives no span). */
+function paddedRange(isos, tz) {
+  const ms = isos.map((t) => Date.parse(t));
+  const lo = Math.min(...ms);
+  const hi = Math.max(...ms);
+  const pad = Math.max(30 * 60000, (hi - lo) * 0.05);
+  return [toLocalWall(tz, lo - pad), toLocalWall(tz, hi + pad)];
+}
+
+async function loadTrajectory() {
+  if (!st.site) return;
+  const day = $("sky-day").value || st.day;
+  const tz = trajectoryZone();
+  const start = new Date(localMidnightMs(tz, day)).toISOString();
+  const end = new Date(localMidnightMs(tz, addDays(day, 1))).toISOString();
+  const params = { start, end };
+  if ($("sky-place").value === "site") params.site_id = st.site.site_id;
+  let list = [];
+  try {
+    list = detectionList(await api("/api/v1/vision/detections", { params }));
+  } catch (err) {
+    showEmpty("chart-sky-track", `Detections unavailable: ${err.message}`);
+    showEmpty("chart-sky-error", "");
+    return;
+  }
+  const found = list.filter((d) => d.camera !== "pinhole" && d.sun_found !== false && typeof d.azimuth_deg === "number"
+    && typeof pick(d, "timestamp", "ts") === "string");
+  if (!found.length) {
+    showEmpty("chart-sky-track", "No fisheye detections stored for this day.");
+    showEmpty("chart-sky-error", "Upload timestamped all-sky frames to see the error through the day.");
+    return;
+  }
+  const ts = (d) => pick(d, "timestamp", "ts");
+  const ephAz = (d) => pick(d, "ephemeris.azimuth_deg", "ephemeris_azimuth_deg");
+  const ephEl = (d) => pick(d, "ephemeris.elevation_deg", "ephemeris_elevation_deg");
+  const label = found.map((d) => toLocalWall(tz, ts(d)).slice(11, 16));
+  await draw("chart-sky-track", [
+    { type: "scatterpolar", r: found.map((d) => 90 - d.elevation_deg), theta: found.map((d) => d.azimuth_deg), text: label,
+      mode: "markers", name: "detected", marker: { color: "#ff6b00", size: 8, symbol: "cross" }, hovertemplate: "%{text}: az %{theta:.1f}°, zenith %{r:.1f}°" },
+    { type: "scatterpolar", r: found.map((d) => 90 - (ephEl(d) ?? NaN)), theta: found.map((d) => ephAz(d) ?? null), text: label,
+      mode: "markers", name: "ephemeris (SPA)", marker: { color: COLORS.fixed, size: 9, symbol: "circle-open" }, hovertemplate: "%{text}: az %{theta:.1f}°, zenith %{r:.1f}°" },
+  ], baseLayout({
+    margin: { l: 30, r: 30, t: 30, b: 30 }, hovermode: "closest",
+    polar: { radialaxis: { range: [0, 90], tickvals: [30, 60, 90], ticksuffix: "°", angle: 45, tickfont: { size: 10 } },
+      angularaxis: { rotation: 90, direction: "clockwise", tickvals: [0, 90, 180, 270], ticktext: ["N 0°", "E 90°", "S 180°", "W 270°"] } },
+  }), {
+    columns: ["ts_utc", "local_time", "azimuth_deg", "elevation_deg", "ephemeris_azimuth_deg", "ephemeris_elevation_deg"],
+    rows: found.map((d) => [ts(d), toLocalWall(tz, ts(d)), d.azimuth_deg, d.elevation_deg, ephAz(d), ephEl(d)]),
+    filename: `sky_detections_${day}.csv`,
+  });
+  const errs = found.map((d) => {
+    if (typeof pick(d, "error.separation_deg") === "number") return d.error.separation_deg;
+    const a = ephAz(d);
+    const e = ephEl(d);
+    if (typeof a !== "number" || typeof e !== "number") return null;
+    const c = Math.sin(d.elevation_deg * DEG) * Math.sin(e * DEG)
+      + Math.cos(d.elevation_deg * DEG) * Math.cos(e * DEG) * Math.cos((d.azimuth_deg - a) * DEG);
+    return Math.acos(Math.max(-1, Math.min(1, c))) / DEG;
+  });
+  await draw("chart-sky-error", [{ x: found.map((d) => toLocalWall(tz, ts(d))), y: errs, type: "scatter", mode: "markers",
+    name: "angular error", marker: { color: "#ff6b00", size: 7 }, hovertemplate: "%{y:.2f}°" }],
+  baseLayout({ xaxis: { type: "date", title: { text: `Time (${tz})` }, gridcolor: "#e9edf1", range: paddedRange(found.map(ts), tz) },
+    yaxis: { title: { text: "Detected − ephemeris [°]" }, rangemode: "tozero", gridcolor: "#e9edf1" } }));
+}
+
+async function loadCalibrations() {
+  try {
+    const body = await api("/api/v1/vision/calibrations");
+    const list = Array.isArray(body) ? body : body?.calibrations || [];
+    const sel = $("sky-calibration");
+    for (const c of list) {
+      const id = c.calibration_id ?? c.id;
+      if (id !== undefined) {
+        sel.add(new Option(`#${id} ${c.projection ?? ""} · ${num(c.rms_px, 1)} px RMS · ${c.created_at ? fmtDateTime(st.tz, c.created_at) : ""}`, id));
+      }
+    }
+  } catch (err) {
+    // Listing is optional: a service without it still takes a calibration id typed by hand.
+    if (err.status !== 404 && err.status !== 405) banner(`Calibrations unavailable: ${err.message}`);
+  }
+}
+
+export function init(state) {
+  st = state;
+  $("sky-files").addEventListener("change", onFiles);
+  $("sky-camera").addEventListener("change", () => {
+    const cam = $("sky-camera").value;
+    for (const box of document.querySelectorAll(".cam-params")) box.hidden = box.dataset.camera !== cam;
+    $("sky-calibrate").disabled = cam !== "fisheye"; // calibration fits an all-sky camera
+    $("sky-calibrate").title = cam === "fisheye" ? "Fit the fisheye camera from the timestamped images above"
+      : "Calibration fits a fisheye (all-sky) camera";
+  });
+  $("sky-place").addEventListener("change", () => { $("sky-coords").hidden = $("sky-place").value !== "coords"; loadTrajectory(); });
+  $("sky-calibration").addEventListener("change", () => {
+    // a stored calibration is the camera: its parameters replace the ones typed here
+    const stored = Boolean($("sky-calibration").value);
+    $("sky-camera").disabled = stored;
+    for (const el of document.querySelectorAll(".cam-params input, .cam-params select")) el.disabled = stored;
+  });
+  $("sky-form").addEventListener("submit", detectAll);
+  $("sky-calibrate").addEventListener("click", calibrate);
+  $("sky-token-wrap").hidden = !st.meta?.vision_require_token;
+  $("sky-day").value = st.day;
+  $("sky-day").addEventListener("change", loadTrajectory);
+  loadCalibrations();
+  loadTrajectory();
+}
+
+export function siteChanged(state) {
+  st = state;
+  $("sky-day").value = st.day;
+  loadTrajectory();
+}

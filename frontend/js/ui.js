@@ -1,0 +1,58 @@
+// Small DOM helpers shared by the pages.
+
+export function banner(message, kind = "warn") {
+  const el = document.getElementById("banner");
+  if (!message) { el.hidden = true; return; }
+  el.textContent = message;
+  el.className = `banner ${kind === "error" ? "error" : ""}`;
+  el.hidden = false;
+}
+
+/** Create an element: h("td", {class: "x"}, "text", child). */
+export function h(tag, attrs = {}, ...children) {
+  const el = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs || {})) {
+    if (v === undefined || v === null || v === false) continue;
+    if (k === "class") el.className = v;
+    else if (k === "text") el.textContent = v;
+    else el.setAttribute(k, v === true ? "" : v);
+  }
+  for (const c of children.flat()) {
+    if (c === null || c === undefined || c === false) continue;
+    el.append(c instanceof Node ? c : String(c));
+  }
+  return el;
+}
+
+/** A number with fixed decimals, or an em dash when missing. */
+export function num(v, digits = 0) {
+  return typeof v === "number" && Number.isFinite(v)
+    ? v.toLocaleString(undefined, { minimumFractionDigits: digits, maximumFractionDigits: digits })
+    : "—";
+}
+
+/** Energy in Wh shown as kWh above 1 kWh. */
+export function energy(wh) {
+  if (typeof wh !== "number" || !Number.isFinite(wh)) return "—";
+  if (Math.abs(wh) >= 1e6) return `${num(wh / 1e6, 2)} MWh`;
+  return Math.abs(wh) >= 1000 ? `${num(wh / 1000, Math.abs(wh) >= 1e5 ? 1 : 2)} kWh` : `${num(wh, 0)} Wh`;
+}
+
+export function pct(v, digits = 1) {
+  if (typeof v !== "number" || !Number.isFinite(v)) return "—";
+  return `${v > 0 ? "+" : ""}${num(v, digits)} %`;
+}
+
+/** One status tile. */
+export function tile(label, value, sub, level) {
+  return h("div", { class: `tile ${level || ""}`, "data-testid": "tile" },
+    h("div", { class: "label" }, label),
+    h("div", { class: "value" }, value),
+    sub ? h("div", { class: "sub" }, sub) : null);
+}
+
+/** Keep the site and day in the address, so a reload or a shared link shows the same view. */
+export function remember(state, page) {
+  const q = new URLSearchParams({ site: state.site?.site_id || "", day: state.day || "" });
+  history.replaceState(null, "", `#${page}?${q}`);
+}

@@ -1,0 +1,178 @@
+"""End-to-end fixtures: a real ``heliotwin serve`` with data, and Debian's Chromium.
+
+The server runs as a subprocess on free ports (API and viser) with a temporary
+SQLite file (``HELIOTWIN_DATABASE_URL``); the demo logger back-fills a few days
+of minute readings over real HTTP, as at ``make run``. The browser is Debian's
+``/usr/bin/chromium`` driven by Playwright (sync API); SwiftShader gives the
+viser iframe a WebGL context without a GPU.
+
+Without Chromium the tests skip with a message, unless
+``HELIOTWIN_REQUIRE_SERVICES=1`` (CI), where they fail.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from zoneinfo import ZoneInfo
+
+import httpx
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+ARTIFACTS = ROOT / "test-artifacts"
+CHROMIUM = Path(os.environ.get("HELIOTWIN_CHROMIUM", "/usr/bin/chromium"))
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-background-networking",
+    "--use-gl=swiftshader",
+    "--enable-unsafe-swiftshader",
+]
+SITE_ID = "tehuantepec"
+BACKFILL_DAYS = 3
+START_TIMEOUT_S = 90.0
+
+
+def _require_or_skip(reason: str) -> None:
+    if os.environ.get("HELIOTWIN_REQUIRE_SERVICES") == "1":
+        pytest.fail(f"{reason} (HELIOTWIN_REQUIRE_SERVICES=1)")
+    pytest.skip(reason)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _heliotwin() -> list[str]:
+    exe = Path(sys.executable).with_name("heliotwin")
+    return [str(exe)] if exe.exists() else [sys.executable, "-m", "backend"]
+
+
+@dataclass
+class Server:
+    """A running ``heliotwin serve`` and what the tests need to know about it."""
+
+    url: str
+    viser_url: str
+    env: dict[str, str]
+    site: dict = field(default_factory=dict)
+
+    @property
+    def tz(self) -> ZoneInfo:
+        return ZoneInfo(self.site.get("timezone", "UTC"))
+
+    def today(self) -> dt.date:
+        return dt.datetime.now(self.tz).date()
+
+
+def _wait_healthy(client: httpx.Client, proc: subprocess.Popen, log: Path) -> None:
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            tail = log.read_text()[-3000:]
+            raise RuntimeError(f"heliotwin serve exited {proc.returncode}:\n{tail}")
+        with contextlib.suppress(httpx.HTTPError):
+            if client.get("/healthz", timeout=2).status_code == 200:
+                return
+        time.sleep(0.3)
+    tail = log.read_text()[-3000:]
+    raise RuntimeError(f"heliotwin serve not healthy after {START_TIMEOUT_S} s:\n{tail}")
+
+
+def _wait_for_backfill(client: httpx.Client, server: Server) -> None:
+    """Wait until the demo logger has readings for yesterday and today (site time)."""
+    deadline = time.monotonic() + START_TIMEOUT_S
+    day = server.today() - dt.timedelta(days=1)
+    while time.monotonic() < deadline:
+        r = client.get(
+            f"/api/v1/sites/{SITE_ID}/measurements",
+            params={"array": "fixed", "start": day.isoformat(),
+                    "end": (day + dt.timedelta(days=2)).isoformat(), "max_points": 100},
+        )
+        if r.status_code == 200 and len(r.json().get("points", [])) >= 50:
+            return
+        time.sleep(0.5)
+    raise RuntimeError("the demo logger back-filled no readings for yesterday in time")
+
+
+@pytest.fixture(scope="session")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    """``heliotwin serve`` on free ports with a temporary SQLite file and back-filled data."""
+    if not CHROMIUM.exists():
+        _require_or_skip(f"Chromium not found at {CHROMIUM}: browser tests skipped "
+                         "(apt-get install chromium, or set HELIOTWIN_CHROMIUM)")
+    tmp = tmp_path_factory.mktemp("e2e")
+    port, viser_port = _free_port(), _free_port()
+    env = {
+        **os.environ,
+        "HELIOTWIN_DATABASE_URL": f"sqlite:///{tmp / 'heliotwin.sqlite'}",
+        "HELIOTWIN_DEMO_BACKFILL_DAYS": str(BACKFILL_DAYS),
+        "PYTHONUNBUFFERED": "1",
+    }
+    log = tmp / "serve.log"
+    cmd = [*_heliotwin(), "serve", "--host", "127.0.0.1", "--port", str(port),
+           "--viser-port", str(viser_port)]
+    with open(log, "wb") as out:
+        proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=out, stderr=subprocess.STDOUT)
+    url = f"http://127.0.0.1:{port}"
+    try:
+        with httpx.Client(base_url=url, timeout=30) as client:
+            _wait_healthy(client, proc, log)
+            srv = Server(url=url, viser_url=f"http://127.0.0.1:{viser_port}/", env=env)
+            srv.site = client.get(f"/api/v1/sites/{SITE_ID}").raise_for_status().json()
+            _wait_for_backfill(client, srv)
+        yield srv
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=5)
+        ARTIFACTS.mkdir(exist_ok=True)
+        shutil.copy(log, ARTIFACTS / "e2e-serve.log")
+
+
+@pytest.fixture(scope="session")
+def browser(server: Server) -> Iterator[object]:
+    """Debian's Chromium under Playwright, shared by the session."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture()
+def page(browser, server: Server, request: pytest.FixtureRequest) -> Iterator[object]:
+    """A fresh page that records console errors and uncaught exceptions; none may occur."""
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    pg = context.new_page()
+    errors: list[str] = []
+
+    def on_console(msg) -> None:  # type: ignore[no-untyped-def]
+        if msg.type == "error":
+            errors.append(f"console.error: {msg.text} ({msg.location.get('url', '')})")
+
+    pg.on("console", on_console)
+    pg.on("pageerror", lambda e: errors.append(f"pageerror: {e}"))
+    pg.set_default_timeout(20_000)
+    pg.console_errors = errors  # type: ignore[attr-defined]
+    yield pg
+    ARTIFACTS.mkdir(exist_ok=True)
+    with contextlib.suppress(Exception):
+        pg.screenshot(path=str(ARTIFACTS / f"e2e-{request.node.name}-final.png"), full_page=True)
+    context.close()
+    assert not errors, "errors in the browser console:\n" + "\n".join(errors)
