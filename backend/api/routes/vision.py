@@ -1,0 +1,570 @@
+"""``/api/v1/vision``: find the sun in uploaded frames, calibrate fisheye cameras, evaluate.
+
+- ``POST /sun`` — one frame (multipart ``file``) and a camera (``camera`` with
+  its parameters, or ``calibration_id``), optional ``timestamp`` and place
+  (``site_id`` or ``latitude_deg``/``longitude_deg``/``elevation_m``) → the
+  detection, the ephemeris (SPA, apparent elevation) and the error. Stored.
+- ``POST /calibrations`` — ``files`` with one ``timestamps`` each and a place →
+  a fitted fisheye camera (``vision.calibrate``), stored with its residuals.
+- ``GET /calibrations``, ``GET /calibrations/{id}``.
+- ``POST /evaluate`` — a batch against SPA for each detection method: seed
+  003's Table 2 (per frame) and Table 3 (MAD/MSE/RMSE/MAPE).
+- ``GET /detections?site_id=&start=&end=`` — stored detections for the day's
+  trajectory on the dashboard.
+
+Uploads are bounded: the body is read in chunks and refused with 413 past
+``max_upload_bytes`` (Content-Length is not trusted alone); each image's size
+is read from its PNG/JPEG header and refused (413) above
+``vision_max_pixels`` before anything is decoded; a non-image or a corrupt
+one is a 415/422 naming the field. The image work runs in a worker thread.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import datetime as dt
+from dataclasses import dataclass
+from typing import Annotated, Any
+from zoneinfo import ZoneInfo
+
+import anyio
+import numpy as np
+import orjson
+import pandas as pd
+from fastapi import APIRouter, HTTPException, Query, Request
+from fastapi.responses import Response
+from starlette.datastructures import FormData, UploadFile
+
+from backend.api.deps import ContextDep, SessionDep, VisionTokenDep
+from backend.queries import parse_day_or_time
+from backend.vision_store import (
+    get_calibration,
+    insert_calibration,
+    insert_detection,
+    list_calibrations,
+    list_detections,
+)
+from sim.sun import solar_position
+from vision.calibrate import fit_fisheye
+from vision.cameras import FisheyeCamera, PinholeCamera, camera_from_params
+from vision.detect import METHODS, detect_sun
+from vision.imageio import ImageError, decode_image
+from vision.metrics import angular_separation_deg, error_table
+
+router = APIRouter(prefix="/api/v1/vision", tags=["vision"])
+
+_JSON = "application/json"
+_MAX_FILES = 64
+
+
+def _json(data: Any, status: int = 200) -> Response:
+    return Response(orjson.dumps(data, option=orjson.OPT_SERIALIZE_NUMPY), status_code=status,
+                    media_type=_JSON)
+
+
+def _f(v: Any) -> float | None:
+    """A finite float or None (NaN is no JSON number)."""
+    if v is None:
+        return None
+    v = float(v)
+    return v if np.isfinite(v) else None
+
+
+# --------------------------------------------------------------------------- input
+
+
+async def _read_form(request: Request, limit: int) -> FormData:
+    """The multipart form, read in chunks and refused past ``limit`` bytes (413)."""
+    ctype = request.headers.get("content-type", "")
+    if not ctype.lower().startswith("multipart/form-data"):
+        raise HTTPException(415, "send multipart/form-data (an image in the field 'file')")
+    length = request.headers.get("content-length")
+    if length is not None and length.isdigit() and int(length) > limit:
+        raise HTTPException(413, f"body of {length} bytes; the limit is {limit} bytes "
+                                 "(HELIOTWIN_MAX_UPLOAD_BYTES)")
+    chunks: list[bytes] = []
+    size = 0
+    async for chunk in request.stream():
+        size += len(chunk)
+        if size > limit:
+            raise HTTPException(413, f"body over {limit} bytes (HELIOTWIN_MAX_UPLOAD_BYTES)")
+        chunks.append(chunk)
+    body = b"".join(chunks)
+
+    async def receive() -> dict[str, Any]:
+        return {"type": "http.request", "body": body, "more_body": False}
+
+    try:
+        return await Request(request.scope, receive).form(
+            max_files=_MAX_FILES, max_fields=256, max_part_size=limit)
+    except HTTPException:
+        raise
+    except Exception as exc:  # malformed multipart
+        raise HTTPException(400, f"malformed multipart body: {exc}") from None
+
+
+def _text(form: FormData, name: str) -> str | None:
+    v = form.get(name)
+    if v is None or isinstance(v, UploadFile):
+        return None
+    v = v.strip()
+    return v or None
+
+
+def _texts(form: FormData, name: str) -> list[str]:
+    return [v.strip() for v in form.getlist(name) if isinstance(v, str) and v.strip()]
+
+
+def _fields(form: FormData) -> dict[str, object]:
+    return {k: v for k, v in form.multi_items() if isinstance(v, str)}
+
+
+async def _image(upload: Any, field: str, max_pixels: int) -> np.ndarray:
+    if not isinstance(upload, UploadFile):
+        raise HTTPException(422, f"{field}: an image file is required")
+    data = await upload.read()
+    if not data:
+        raise HTTPException(422, f"{field}: the file {upload.filename!r} is empty")
+    try:
+        return await anyio.to_thread.run_sync(decode_image, data, max_pixels)
+    except ImageError as exc:
+        status = 413 if exc.too_large else (415 if "not a PNG or JPEG" in str(exc) else 422)
+        extra = " (HELIOTWIN_VISION_MAX_PIXELS)" if exc.too_large else ""
+        raise HTTPException(status, f"{field} {upload.filename!r}: {exc}{extra}") from None
+
+
+def _timestamp(text: str | None, field: str = "timestamp") -> dt.datetime | None:
+    if text is None:
+        return None
+    try:
+        value = dt.datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError:
+        raise HTTPException(422, f"{field}: {text!r} is not an ISO 8601 date-time") from None
+    if value.tzinfo is None:
+        raise HTTPException(422, f"{field}: {text!r} has no UTC offset; add one "
+                                 "(e.g. +00:00 or -06:00)")
+    return value.astimezone(dt.UTC)
+
+
+@dataclass(frozen=True)
+class Place:
+    site_id: str | None
+    latitude_deg: float
+    longitude_deg: float
+    elevation_m: float
+    zone: ZoneInfo
+
+
+def _place(ctx: Any, form: FormData, required: bool = False) -> Place | None:
+    site_id = _text(form, "site_id")
+    lat, lon = _text(form, "latitude_deg"), _text(form, "longitude_deg")
+    if site_id is not None:
+        if lat is not None or lon is not None:
+            raise HTTPException(422, "give site_id or latitude_deg/longitude_deg, not both")
+        info = ctx.registry.get(site_id)
+        if info is None:
+            known = ", ".join(ctx.registry.sites) or "none"
+            raise HTTPException(404, f"site_id: unknown site {site_id!r}; known: {known}")
+        s = info.site
+        return Place(site_id, s.latitude, s.longitude, s.altitude, info.zone)
+    if lat is None and lon is None:
+        if required:
+            raise HTTPException(422, "a place is required: site_id, or latitude_deg and "
+                                     "longitude_deg")
+        return None
+    if lat is None or lon is None:
+        raise HTTPException(422, "latitude_deg and longitude_deg go together")
+    try:
+        la, lo = float(lat), float(lon)
+        el = float(_text(form, "elevation_m") or 0.0)
+    except ValueError:
+        raise HTTPException(422, "latitude_deg, longitude_deg and elevation_m must be "
+                                 "numbers") from None
+    if not -90.0 <= la <= 90.0:
+        raise HTTPException(422, f"latitude_deg: {la} is outside [-90, 90]")
+    if not -180.0 <= lo <= 180.0:
+        raise HTTPException(422, f"longitude_deg: {lo} is outside [-180, 180]")
+    if not (np.isfinite(el) and -500.0 <= el <= 9000.0):
+        raise HTTPException(422, f"elevation_m: {el} is outside [-500, 9000]")
+    return Place(None, la, lo, el, ZoneInfo("UTC"))
+
+
+def _ephemeris(times: list[dt.datetime], place: Place) -> pd.DataFrame:
+    """SPA sun positions (``sim.sun.solar_position``): apparent elevation, azimuth."""
+    return solar_position(pd.DatetimeIndex(times), place.latitude_deg, place.longitude_deg,
+                          altitude=place.elevation_m)
+
+
+def _method(form: FormData) -> str:
+    method = _text(form, "method") or "robust"
+    if method not in METHODS:
+        raise HTTPException(422, f"method: must be one of {', '.join(METHODS)}, got {method!r}")
+    return method
+
+
+def _stored_camera(session: Any, form: FormData) -> tuple[FisheyeCamera | None, int | None]:
+    raw = _text(form, "calibration_id")
+    if raw is None:
+        return None, None
+    if not raw.isdigit():
+        raise HTTPException(422, f"calibration_id: {raw!r} is not an integer id")
+    cal = get_calibration(session, int(raw))
+    if cal is None:
+        raise HTTPException(404, f"calibration_id: no calibration {raw}")
+    return FisheyeCamera.from_dict(cal["camera"]), int(raw)
+
+
+def _camera(form: FormData, stored: FisheyeCamera | None, w: int, h: int
+            ) -> PinholeCamera | FisheyeCamera:
+    kind = _text(form, "camera") or ("fisheye" if stored is not None else None)
+    if stored is not None:
+        if kind != "fisheye":
+            raise HTTPException(422, "camera: a calibration_id is a fisheye camera")
+        return stored
+    if kind is None:
+        raise HTTPException(422, "camera: required ('pinhole' or 'fisheye'), or give "
+                                 "calibration_id")
+    try:
+        return camera_from_params(kind, _fields(form), w, h)
+    except ValueError as exc:
+        raise HTTPException(422, str(exc)) from None
+
+
+# --------------------------------------------------------------------------- work
+
+
+def _analyse(img: np.ndarray, cam: PinholeCamera | FisheyeCamera, method: str,
+             eph: tuple[float, float] | None) -> dict[str, Any]:
+    """Detection + angles (+ error against the ephemeris) for one decoded frame."""
+    d = detect_sun(img, method=method, camera=cam if method == "robust" else None)
+    out: dict[str, Any] = {
+        "sun_found": d.sun_found,
+        "confidence": d.confidence,
+        "centroid_px": list(d.centroid_px) if d.centroid_px is not None else None,
+        "method": d.method,
+        "image_size_px": [int(img.shape[1]), int(img.shape[0])],
+    }
+    if isinstance(cam, FisheyeCamera):
+        out["camera"] = "fisheye"
+        az = el = None
+        if d.centroid_px is not None:
+            a, e = cam.pixel_to_sky(*d.centroid_px)
+            az, el = _f(a), _f(e)
+        out["azimuth_deg"], out["elevation_deg"] = az, el
+    else:
+        out["camera"] = "pinhole"
+        if d.centroid_px is not None:
+            hh, vv, tot = cam.pointing_error(*d.centroid_px)
+            out["pointing_error_deg"] = [_f(hh), _f(vv)]
+            out["pointing_error_mrad"] = _f(tot)
+        else:
+            out["pointing_error_deg"] = None
+            out["pointing_error_mrad"] = None
+    if eph is not None:
+        out["ephemeris"] = {"azimuth_deg": eph[0], "elevation_deg": eph[1]}
+        if out.get("azimuth_deg") is not None and out.get("elevation_deg") is not None:
+            sep = float(angular_separation_deg(out["azimuth_deg"], out["elevation_deg"], *eph))
+            daz = (out["azimuth_deg"] - eph[0] + 180.0) % 360.0 - 180.0
+            out["error"] = {"separation_deg": sep, "azimuth_deg": daz,
+                            "elevation_deg": out["elevation_deg"] - eph[1]}
+    return out
+
+
+def _sun_job(img: np.ndarray, cam: PinholeCamera | FisheyeCamera, method: str,
+             ts: dt.datetime | None, place: Place | None) -> dict[str, Any]:
+    """Ephemeris (when time and place are known) and analysis, in one worker-thread hop."""
+    eph = None
+    if ts is not None and place is not None:
+        sp = _ephemeris([ts], place)
+        eph = (float(sp["azimuth"].iloc[0]), float(sp["apparent_elevation"].iloc[0]))
+    return _analyse(img, cam, method, eph)
+
+
+def _detection_row(res: dict[str, Any], ts: dt.datetime | None, place: Place | None,
+                   cal_id: int | None) -> dict[str, Any]:
+    c = res["centroid_px"] or [None, None]
+    pe = res.get("pointing_error_deg") or [None, None]
+    eph = res.get("ephemeris") or {}
+    return {
+        "ts_ms": None if ts is None else int(round(ts.timestamp() * 1000)),
+        "site_id": place.site_id if place else None,
+        "latitude_deg": place.latitude_deg if place else None,
+        "longitude_deg": place.longitude_deg if place else None,
+        "camera": res["camera"], "calibration_id": cal_id, "method": res["method"],
+        "image_width_px": res["image_size_px"][0], "image_height_px": res["image_size_px"][1],
+        "sun_found": bool(res["sun_found"]), "confidence": float(res["confidence"]),
+        "centroid_x_px": c[0], "centroid_y_px": c[1],
+        "azimuth_deg": res.get("azimuth_deg"), "elevation_deg": res.get("elevation_deg"),
+        "pointing_error_horizontal_deg": pe[0], "pointing_error_vertical_deg": pe[1],
+        "pointing_error_mrad": res.get("pointing_error_mrad"),
+        "ephemeris_azimuth_deg": eph.get("azimuth_deg"),
+        "ephemeris_elevation_deg": eph.get("elevation_deg"),
+        "error_deg": (res.get("error") or {}).get("separation_deg"),
+    }
+
+
+def _iso(ts: dt.datetime | None) -> str | None:
+    return None if ts is None else ts.isoformat().replace("+00:00", "Z")
+
+
+# --------------------------------------------------------------------------- routes
+
+_SUN_DOC = {
+    "requestBody": {"content": {"multipart/form-data": {"schema": {
+        "type": "object", "required": ["file"],
+        "properties": {
+            "file": {"type": "string", "format": "binary", "description": "PNG or JPEG frame"},
+            "camera": {"type": "string", "enum": ["pinhole", "fisheye"]},
+            "fov_deg": {"type": "number", "description": "pinhole horizontal FOV [°] (67)"},
+            "cx_px": {"type": "number"}, "cy_px": {"type": "number"},
+            "reference_x_px": {"type": "number"}, "reference_y_px": {"type": "number"},
+            "projection": {"type": "string",
+                           "enum": ["equidistant", "equisolid", "stereographic",
+                                    "orthographic"]},
+            "px_per_deg": {"type": "number"}, "north_offset_deg": {"type": "number"},
+            "east": {"type": "string", "enum": ["left", "right"]},
+            "calibration_id": {"type": "integer"},
+            "method": {"type": "string", "enum": list(METHODS)},
+            "timestamp": {"type": "string", "description": "ISO 8601 with offset"},
+            "site_id": {"type": "string"}, "latitude_deg": {"type": "number"},
+            "longitude_deg": {"type": "number"}, "elevation_m": {"type": "number"},
+        }}}}, "required": True},
+}
+
+
+@router.post("/sun", openapi_extra=_SUN_DOC,
+             responses={401: {}, 404: {}, 413: {}, 415: {}, 422: {}})
+async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
+                   _token: VisionTokenDep) -> Response:
+    """Find the sun in one frame; with time and place, compare with SPA. The result is stored."""
+    s = ctx.settings
+    form = await _read_form(request, s.max_upload_bytes)
+    uploads = form.getlist("file")
+    if len(uploads) != 1:
+        raise HTTPException(422, f"file: exactly one image is needed, got {len(uploads)}")
+    ts = _timestamp(_text(form, "timestamp"))
+    place = _place(ctx, form)
+    method = _method(form)
+    stored, cal_id = _stored_camera(session, form)
+    img = await _image(uploads[0], "file", s.vision_max_pixels)
+    cam = _camera(form, stored, img.shape[1], img.shape[0])
+    res = await anyio.to_thread.run_sync(_sun_job, img, cam, method, ts, place)
+    row = _detection_row(res, ts, place, cal_id)
+    det_id = await asyncio.wrap_future(ctx.writer.call(lambda c: insert_detection(c, row)))
+    res.update({"detection_id": det_id, "calibration_id": cal_id, "timestamp": _iso(ts),
+                "site_id": place.site_id if place else None,
+                "latitude_deg": place.latitude_deg if place else None,
+                "longitude_deg": place.longitude_deg if place else None})
+    return _json(res)
+
+
+async def _timed_frames(ctx: Any, form: FormData, min_frames: int
+                        ) -> tuple[list[tuple[str, np.ndarray, dt.datetime]], Place]:
+    uploads = form.getlist("files")
+    stamps = _texts(form, "timestamps")
+    if len(uploads) < min_frames:
+        raise HTTPException(422, f"files: at least {min_frames} images are needed, "
+                                 f"got {len(uploads)}")
+    if len(stamps) != len(uploads):
+        raise HTTPException(422, f"timestamps: one per file in the same order; got "
+                                 f"{len(stamps)} for {len(uploads)} files")
+    place = _place(ctx, form, required=True)
+    assert place is not None
+    frames = []
+    for i, (up, text) in enumerate(zip(uploads, stamps, strict=True)):
+        ts = _timestamp(text, f"timestamps[{i}]")
+        assert ts is not None
+        img = await _image(up, f"files[{i}]", ctx.settings.vision_max_pixels)
+        name = up.filename if isinstance(up, UploadFile) and up.filename else f"files[{i}]"
+        frames.append((name, img, ts))
+    sizes = {(f[1].shape[1], f[1].shape[0]) for f in frames}
+    if len(sizes) != 1:
+        raise HTTPException(422, f"files: every frame must have the same size, got "
+                                 f"{sorted(sizes)}")
+    return frames, place
+
+
+def _calibrate(frames: list[tuple[str, np.ndarray, dt.datetime]], place: Place,
+               projection: str, east: str, n_radial: int, fit_tilt: bool, method: str
+               ) -> dict[str, Any]:
+    sp = _ephemeris([f[2] for f in frames], place)
+    az, el = sp["azimuth"].to_numpy(), sp["apparent_elevation"].to_numpy()
+    report, use = [], []
+    for i, (name, img, ts) in enumerate(frames):
+        d = detect_sun(img, method=method)
+        ok = d.sun_found and el[i] > 0
+        report.append({"filename": name, "timestamp": _iso(ts), "sun_found": d.sun_found,
+                       "confidence": d.confidence,
+                       "centroid_px": list(d.centroid_px) if d.centroid_px else None,
+                       "ephemeris": {"azimuth_deg": float(az[i]), "elevation_deg": float(el[i])},
+                       "used": bool(ok)})
+        if ok:
+            use.append(i)
+    n_par = 4 + n_radial + (2 if fit_tilt else 0)
+    if 2 * len(use) < n_par + 2:
+        missing = [str(r["filename"]) for r in report if not r["used"]]
+        raise ValueError(f"files: only {len(use)} frames have a sun found above the horizon "
+                         f"(no sun in: {', '.join(missing) or 'none'}); {n_par} parameters "
+                         f"need at least {(n_par + 3) // 2}")
+    xy = np.array([report[i]["centroid_px"] for i in use], float)
+    h, w = frames[0][1].shape[:2]
+    res = fit_fisheye(xy[:, 0], xy[:, 1], az[use], el[use], (w, h), projection=projection,
+                      east=east, n_radial=n_radial, fit_tilt=fit_tilt)
+    for k, i in enumerate(use):
+        report[i]["residual_px"] = float(res.residuals_px[k])
+        report[i]["residual_deg"] = float(res.residuals_deg[k])
+    out = res.to_dict()
+    cam = out["camera"]
+    return {
+        "site_id": place.site_id, "latitude_deg": place.latitude_deg,
+        "longitude_deg": place.longitude_deg, "elevation_m": place.elevation_m,
+        "projection": cam["projection"], "cx_px": cam["cx_px"], "cy_px": cam["cy_px"],
+        "px_per_deg": cam["px_per_deg"], "north_offset_deg": cam["north_offset_deg"],
+        "east": cam["east"], "radial_coeffs": cam["radial_coeffs"],
+        "tilt_north_deg": cam["tilt_north_deg"], "tilt_east_deg": cam["tilt_east_deg"],
+        "image_width_px": w, "image_height_px": h, "n_frames": len(use),
+        "rms_px": out["rms_px"], "max_px": out["max_px"], "rms_deg": out["rms_deg"],
+        "max_deg": out["max_deg"], "frames": report,
+    }
+
+
+_CAL_DOC = {
+    "requestBody": {"content": {"multipart/form-data": {"schema": {
+        "type": "object", "required": ["files", "timestamps"],
+        "properties": {
+            "files": {"type": "array", "items": {"type": "string", "format": "binary"}},
+            "timestamps": {"type": "array", "items": {"type": "string"},
+                           "description": "ISO 8601 with offset, one per file, same order"},
+            "projection": {"type": "string"}, "east": {"type": "string",
+                                                      "enum": ["auto", "left", "right"]},
+            "n_radial": {"type": "integer", "minimum": 0, "maximum": 2},
+            "fit_tilt": {"type": "boolean"},
+            "site_id": {"type": "string"}, "latitude_deg": {"type": "number"},
+            "longitude_deg": {"type": "number"}, "elevation_m": {"type": "number"},
+        }}}}, "required": True},
+}
+
+
+@router.post("/calibrations", openapi_extra=_CAL_DOC, status_code=201,
+             responses={401: {}, 404: {}, 413: {}, 415: {}, 422: {}})
+async def post_calibration(request: Request, ctx: ContextDep, _token: VisionTokenDep
+                           ) -> Response:
+    """Fit a fisheye camera (centre, scale, north offset, mirror) to timestamped frames."""
+    form = await _read_form(request, ctx.settings.max_upload_bytes)
+    projection = _text(form, "projection") or "equidistant"
+    east = _text(form, "east") or "auto"
+    fit_tilt = (_text(form, "fit_tilt") or "false").lower() in ("1", "true", "yes", "on")
+    n_radial_text = _text(form, "n_radial") or "0"
+    if n_radial_text not in ("0", "1", "2"):
+        raise HTTPException(422, f"n_radial: must be 0, 1 or 2, got {n_radial_text!r}")
+    method = _method(form)
+    frames, place = await _timed_frames(ctx, form, 3)
+    try:
+        row = await anyio.to_thread.run_sync(
+            _calibrate, frames, place, projection, east, int(n_radial_text), fit_tilt, method)
+    except ValueError as exc:
+        raise HTTPException(422, str(exc)) from None
+    cal_id = await asyncio.wrap_future(ctx.writer.call(lambda c: insert_calibration(c, row)))
+    body = {k: v for k, v in row.items() if k not in ("radial_coeffs",)}
+    body["calibration_id"] = cal_id
+    body["camera"] = {k: row[k] for k in ("projection", "cx_px", "cy_px", "px_per_deg",
+                                           "north_offset_deg", "east", "radial_coeffs",
+                                           "tilt_north_deg", "tilt_east_deg")}
+    return _json(body, 201)
+
+
+@router.get("/calibrations")
+def get_calibrations(session: SessionDep,
+                     limit: Annotated[int, Query(gt=0, le=1000)] = 200) -> Response:
+    """Stored calibrations, newest first."""
+    return _json({"calibrations": list_calibrations(session, limit)})
+
+
+@router.get("/calibrations/{calibration_id}", responses={404: {}})
+def get_one_calibration(calibration_id: int, session: SessionDep) -> Response:
+    """One stored calibration with its per-frame residuals."""
+    cal = get_calibration(session, calibration_id)
+    if cal is None:
+        raise HTTPException(404, f"no calibration {calibration_id}")
+    return _json(cal)
+
+
+@router.get("/detections", responses={404: {}, 422: {}})
+def get_detections(ctx: ContextDep, session: SessionDep,
+                   site_id: str | None = None, start: str | None = None,
+                   end: str | None = None,
+                   limit: Annotated[int, Query(gt=0, le=100_000)] = 10_000) -> Response:
+    """Stored detections in [start, end) (bare dates: the site's midnight, else UTC)."""
+    zone = ZoneInfo("UTC")
+    if site_id is not None:
+        info = ctx.registry.get(site_id)
+        if info is None:
+            raise HTTPException(404, f"site_id: unknown site {site_id!r}")
+        zone = info.zone
+    bounds: list[int | None] = []
+    for name, text in (("start", start), ("end", end)):
+        if text is None:
+            bounds.append(None)
+            continue
+        try:
+            t = parse_day_or_time(text, zone, name)
+        except ValueError as exc:
+            raise HTTPException(422, str(exc)) from None
+        bounds.append(int(round(t.timestamp() * 1000)))
+    if bounds[0] is not None and bounds[1] is not None and bounds[1] <= bounds[0]:
+        raise HTTPException(422, f"end ({end}) must be after start ({start})")
+    rows = list_detections(session, site_id, bounds[0], bounds[1], limit)
+    return _json({"site_id": site_id, "start": start, "end": end, "detections": rows})
+
+
+def _evaluate(frames: list[tuple[str, np.ndarray, dt.datetime]], place: Place,
+              cam: FisheyeCamera, methods: list[str]) -> dict[str, Any]:
+    sp = _ephemeris([f[2] for f in frames], place)
+    az, el = sp["azimuth"].to_numpy(), sp["apparent_elevation"].to_numpy()
+    rows: list[dict[str, Any]] = []
+    per: dict[str, dict[str, list[float]]] = {m: {"ra": [], "re": [], "a": [], "e": []}
+                                              for m in methods}
+    for i, (name, img, ts) in enumerate(frames):
+        row: dict[str, Any] = {"filename": name, "timestamp": _iso(ts),
+                               "ephemeris_azimuth_deg": float(az[i]),
+                               "ephemeris_elevation_deg": float(el[i])}
+        for m in methods:
+            res = _analyse(img, cam, m, (float(az[i]), float(el[i])))
+            row[f"{m}_sun_found"] = res["sun_found"]
+            row[f"{m}_azimuth_deg"] = res["azimuth_deg"]
+            row[f"{m}_elevation_deg"] = res["elevation_deg"]
+            if res["azimuth_deg"] is not None and el[i] > 0:
+                per[m]["ra"].append(float(az[i]))
+                per[m]["re"].append(float(el[i]))
+                per[m]["a"].append(res["azimuth_deg"])
+                per[m]["e"].append(res["elevation_deg"])
+        rows.append(row)
+    table3: dict[str, Any] = {}
+    for m, v in per.items():
+        table3[m] = {"n_found": len(v["a"]), "n_frames": len(frames),
+                     "metrics": error_table(v["ra"], v["re"], v["a"], v["e"]) if v["a"] else None}
+    return {"n_frames": len(frames), "site_id": place.site_id,
+            "latitude_deg": place.latitude_deg, "longitude_deg": place.longitude_deg,
+            "camera": cam.to_dict(), "table2": rows, "table3": table3}
+
+
+@router.post("/evaluate", openapi_extra=_CAL_DOC,
+             responses={401: {}, 404: {}, 413: {}, 415: {}, 422: {}})
+async def post_evaluate(request: Request, ctx: ContextDep, session: SessionDep,
+                        _token: VisionTokenDep) -> Response:
+    """Each method's angles against SPA on a batch: seed 003's Table 2 and Table 3."""
+    form = await _read_form(request, ctx.settings.max_upload_bytes)
+    methods = _texts(form, "methods") or list(METHODS)
+    bad = [m for m in methods if m not in METHODS]
+    if bad:
+        raise HTTPException(422, f"methods: unknown {', '.join(bad)}; known: "
+                                 f"{', '.join(METHODS)}")
+    stored, _ = _stored_camera(session, form)
+    frames, place = await _timed_frames(ctx, form, 1)
+    h, w = frames[0][1].shape[:2]
+    cam = _camera(form, stored, w, h)
+    if not isinstance(cam, FisheyeCamera):
+        raise HTTPException(422, "camera: evaluate compares azimuth/elevation, which needs a "
+                                 "fisheye camera")
+    out = await anyio.to_thread.run_sync(_evaluate, frames, place, cam, methods)
+    return _json(out)

@@ -1,0 +1,234 @@
+"""``heliotwin vision``: find the sun in an image file, or calibrate a fisheye camera.
+
+    heliotwin vision detect sky.jpg --camera fisheye --px-per-deg 11.7 --cx-px 972 \\
+        --cy-px 956 --timestamp 2016-06-15T08:39:00Z --lat 53.52 --lon 10.105 --json
+    heliotwin vision detect frame.png --camera pinhole --fov-deg 67 --json
+    heliotwin vision calibrate a.jpg b.jpg c.jpg --timestamps T1 T2 T3 --lat 53.52 \\
+        --lon 10.105 --json
+
+The same library (``vision``) and ephemeris (``sim.sun``, SPA) as
+``POST /api/v1/vision/sun`` and ``/calibrations``; nothing is stored.
+Heavy imports happen inside the commands.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+
+def _time(text: str) -> datetime:
+    try:
+        value = datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"not an ISO 8601 time: {text!r}") from exc
+    if value.tzinfo is None:
+        raise argparse.ArgumentTypeError(f"{text!r} has no UTC offset; add e.g. +00:00")
+    return value
+
+
+def _place_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--site", help="a configured site id (its latitude/longitude/altitude)")
+    p.add_argument("--lat", type=float, help="latitude [deg], north positive")
+    p.add_argument("--lon", type=float, help="longitude [deg], east positive")
+    p.add_argument("--elevation-m", type=float, default=0.0, help="altitude [m] (default 0)")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``vision detect`` and ``vision calibrate``."""
+    p = subparsers.add_parser("vision", help="sun detection and fisheye calibration on files",
+                              description="Sun detection and fisheye calibration on image files.")
+    sub = p.add_subparsers(dest="vision_command", metavar="ACTION", required=True)
+
+    d = sub.add_parser("detect", help="find the sun in one image",
+                       description="Find the sun in one PNG/JPEG image.")
+    d.add_argument("image", type=Path)
+    d.add_argument("--camera", choices=("pinhole", "fisheye"), required=True)
+    d.add_argument("--method", default="robust",
+                   choices=("robust", "seed000_hsv", "seed003_gray240"))
+    d.add_argument("--fov-deg", type=float, help="pinhole horizontal field of view (67)")
+    d.add_argument("--cx-px", type=float, help="optical centre column (image centre)")
+    d.add_argument("--cy-px", type=float, help="optical centre row (image centre)")
+    d.add_argument("--reference-x-px", type=float, help="pinhole reference pixel column")
+    d.add_argument("--reference-y-px", type=float, help="pinhole reference pixel row")
+    d.add_argument("--projection", default="equidistant",
+                   choices=("equidistant", "equisolid", "stereographic", "orthographic"))
+    d.add_argument("--px-per-deg", type=float, help="fisheye radial scale [px/deg]")
+    d.add_argument("--north-offset-deg", type=float, default=0.0,
+                   help="where north lies, clockwise from image-up (0)")
+    d.add_argument("--east", choices=("left", "right"), default="left",
+                   help="east left of north (raw view from below, default) or right")
+    d.add_argument("--timestamp", type=_time, help="frame time, ISO 8601 with offset")
+    _place_args(d)
+    d.add_argument("--json", action="store_true", help="print JSON")
+    d.set_defaults(func=run_detect)
+
+    c = sub.add_parser("calibrate", help="fit a fisheye camera to timestamped images",
+                       description="Fit centre, scale, north offset and mirror of a fisheye "
+                                   "camera to the sun in timestamped images (SPA ephemeris).")
+    c.add_argument("images", type=Path, nargs="+")
+    c.add_argument("--timestamps", type=_time, nargs="+", required=True,
+                   help="one ISO 8601 time with offset per image, same order")
+    c.add_argument("--projection", default="equidistant",
+                   choices=("equidistant", "equisolid", "stereographic", "orthographic"))
+    c.add_argument("--east", choices=("auto", "left", "right"), default="auto")
+    c.add_argument("--n-radial", type=int, choices=(0, 1, 2), default=0,
+                   help="radial polynomial terms to fit (0)")
+    c.add_argument("--fit-tilt", action="store_true", help="also fit two tilt angles")
+    _place_args(c)
+    c.add_argument("--json", action="store_true", help="print JSON")
+    c.set_defaults(func=run_calibrate)
+
+
+def _place(args: argparse.Namespace) -> tuple[float, float, float] | None:
+    if args.site:
+        from sim.sites import load_site
+
+        site = load_site(args.site)
+        return site.latitude, site.longitude, site.altitude
+    if args.lat is None and args.lon is None:
+        return None
+    if args.lat is None or args.lon is None:
+        raise ValueError("--lat and --lon go together")
+    return args.lat, args.lon, args.elevation_m
+
+
+def _read(path: Path) -> Any:
+    from vision.imageio import decode_image
+
+    return decode_image(path.read_bytes(), 400_000_000)
+
+
+def detect(args: argparse.Namespace) -> dict[str, Any]:
+    """The answer of ``vision detect`` as a JSON-ready dict (units in the keys)."""
+    import pandas as pd
+
+    from sim.sun import solar_position
+    from vision.cameras import FisheyeCamera, camera_from_params
+    from vision.detect import detect_sun
+    from vision.metrics import angular_separation_deg
+
+    img = _read(args.image)
+    h, w = img.shape[:2]
+    params = {k: getattr(args, k) for k in ("fov_deg", "cx_px", "cy_px", "reference_x_px",
+                                           "reference_y_px", "projection", "px_per_deg",
+                                           "north_offset_deg", "east")}
+    cam = camera_from_params(args.camera, params, w, h)
+    d = detect_sun(img, method=args.method, camera=cam if args.method == "robust" else None)
+    out: dict[str, Any] = {"image": str(args.image), "image_size_px": [w, h],
+                           "camera": args.camera, **d.to_dict()}
+    out.pop("fov", None)
+    if isinstance(cam, FisheyeCamera):
+        az = el = None
+        if d.centroid_px is not None:
+            a, e = cam.pixel_to_sky(*d.centroid_px)
+            az, el = float(a), float(e)
+        out["azimuth_deg"], out["elevation_deg"] = az, el
+    elif d.centroid_px is not None:
+        hh, vv, tot = cam.pointing_error(*d.centroid_px)
+        out["pointing_error_deg"] = [float(hh), float(vv)]
+        out["pointing_error_mrad"] = float(tot)
+    place = _place(args)
+    if args.timestamp is not None and place is not None:
+        sp = solar_position(pd.DatetimeIndex([pd.Timestamp(args.timestamp)]), place[0],
+                            place[1], altitude=place[2])
+        eaz, eel = float(sp["azimuth"].iloc[0]), float(sp["apparent_elevation"].iloc[0])
+        out["ephemeris"] = {"azimuth_deg": eaz, "elevation_deg": eel}
+        if out.get("azimuth_deg") is not None:
+            out["error"] = {"separation_deg": float(angular_separation_deg(
+                out["azimuth_deg"], out["elevation_deg"], eaz, eel))}
+    return out
+
+
+def calibrate(args: argparse.Namespace) -> dict[str, Any]:
+    """The answer of ``vision calibrate`` as a JSON-ready dict."""
+    import numpy as np
+    import pandas as pd
+
+    from sim.sun import solar_position
+    from vision.calibrate import fit_fisheye
+    from vision.detect import detect_sun
+
+    if len(args.timestamps) != len(args.images):
+        raise ValueError(f"--timestamps: {len(args.timestamps)} times for "
+                         f"{len(args.images)} images")
+    place = _place(args)
+    if place is None:
+        raise ValueError("a place is needed: --site, or --lat and --lon")
+    sp = solar_position(pd.DatetimeIndex([pd.Timestamp(t) for t in args.timestamps]),
+                        place[0], place[1], altitude=place[2])
+    frames, xy, use = [], [], []
+    size = None
+    for i, path in enumerate(args.images):
+        img = _read(path)
+        size = size or (img.shape[1], img.shape[0])
+        d = detect_sun(img)
+        el = float(sp["apparent_elevation"].iloc[i])
+        ok = d.sun_found and el > 0
+        frames.append({"image": str(path), "sun_found": d.sun_found,
+                       "confidence": d.confidence, "centroid_px": d.to_dict()["centroid_px"],
+                       "used": ok})
+        if ok:
+            xy.append(d.centroid_px)
+            use.append(i)
+    if len(use) < 3:
+        raise ValueError(f"only {len(use)} images have a sun found above the horizon")
+    arr = np.array(xy, float)
+    assert size is not None
+    res = fit_fisheye(arr[:, 0], arr[:, 1], sp["azimuth"].to_numpy()[use],
+                      sp["apparent_elevation"].to_numpy()[use], size, projection=args.projection,
+                      east=args.east, n_radial=args.n_radial, fit_tilt=args.fit_tilt)
+    out = res.to_dict()
+    out["frames"] = frames
+    return out
+
+
+def _run(fn: Any, args: argparse.Namespace) -> int:
+    from vision.imageio import ImageError
+
+    try:
+        out = fn(args)
+    except (ValueError, ImageError, OSError) as exc:
+        print(f"heliotwin vision: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        print(_summary(out))
+    return 0
+
+
+def _summary(out: dict[str, Any]) -> str:
+    if "camera" in out and isinstance(out["camera"], dict):
+        c = out["camera"]
+        return (f"{c['projection']} centre ({c['cx_px']:.1f}, {c['cy_px']:.1f}) px, "
+                f"{c['px_per_deg']:.3f} px/deg, north {c['north_offset_deg']:.2f} deg, "
+                f"east {c['east']}; residual rms {out['rms_px']:.2f} px / "
+                f"{out['rms_deg']:.3f} deg over {out['n_frames']} frames")
+    if not out["sun_found"]:
+        return f"no sun (confidence {out['confidence']:.2f})"
+    x, y = out["centroid_px"]
+    text = f"sun at ({x:.2f}, {y:.2f}) px, confidence {out['confidence']:.2f}"
+    if out.get("azimuth_deg") is not None:
+        text += f"; azimuth {out['azimuth_deg']:.2f} deg, elevation {out['elevation_deg']:.2f} deg"
+    if out.get("pointing_error_mrad") is not None:
+        h, v = out["pointing_error_deg"]
+        text += f"; pointing error ({h:.3f}, {v:.3f}) deg = {out['pointing_error_mrad']:.2f} mrad"
+    if "ephemeris" in out:
+        e = out["ephemeris"]
+        text += f"; SPA {e['azimuth_deg']:.2f}/{e['elevation_deg']:.2f} deg"
+    return text
+
+
+def run_detect(args: argparse.Namespace) -> int:
+    """``heliotwin vision detect``."""
+    return _run(detect, args)
+
+
+def run_calibrate(args: argparse.Namespace) -> int:
+    """``heliotwin vision calibrate``."""
+    return _run(calibrate, args)

@@ -1,0 +1,335 @@
+"""``/api/v1/vision`` over real HTTP (``backend/api/routes/vision.py``).
+
+Expected sun positions come from pvlib's SPA (an independent implementation of
+the ephemeris the service takes from ``sim.sun``) and from synthetic frames
+whose sun is placed by a known camera; the real all-sky frames of
+``../shared/real-sky`` are used when that folder exists.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as dt
+import json
+import struct
+import subprocess
+import sys
+import zlib
+from pathlib import Path
+
+import cv2
+import httpx
+import numpy as np
+import pandas as pd
+import pvlib
+import pytest
+from live_service import ServerProcess
+
+from vision.cameras import FisheyeCamera
+from vision.synth import fisheye_frame
+
+SUN = "/api/v1/vision/sun"
+ROOT = Path(__file__).resolve().parents[2]
+REAL_SKY = ROOT.parent / "shared" / "real-sky"
+# the built-in site (data/sites/tehuantepec.json; seed 000)
+TEHUANTEPEC = (16.288750, -95.240871)
+
+
+def _jpeg(img: np.ndarray) -> bytes:
+    ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 95])
+    assert ok
+    return buf.tobytes()
+
+
+def _png(img: np.ndarray) -> bytes:
+    ok, buf = cv2.imencode(".png", img)
+    assert ok
+    return buf.tobytes()
+
+
+def _disc(x: int = 400, y: int = 200) -> bytes:
+    img = np.full((480, 640, 3), 40, np.uint8)
+    cv2.circle(img, (x, y), 9, (255, 255, 255), -1)
+    return _jpeg(img)
+
+
+def _spa(ts: str, lat: float, lon: float, alt: float = 0.0) -> tuple[float, float]:
+    sp = pvlib.solarposition.get_solarposition(pd.DatetimeIndex([pd.Timestamp(ts)]), lat, lon,
+                                               altitude=alt, method="nrel_numpy")
+    return float(sp.azimuth.iloc[0]), float(sp.apparent_elevation.iloc[0])
+
+
+def _sep(a1: float, e1: float, a2: float, e2: float) -> float:
+    a1, e1, a2, e2 = map(np.radians, (a1, e1, a2, e2))
+    c = np.sin(e1) * np.sin(e2) + np.cos(e1) * np.cos(e2) * np.cos(a1 - a2)
+    return float(np.degrees(np.arccos(np.clip(c, -1, 1))))
+
+
+def test_pinhole_frame(client: httpx.Client) -> None:
+    r = client.post(SUN, files={"file": ("f.jpg", _disc(), "image/jpeg")},
+                    data={"camera": "pinhole", "fov_deg": "67"})
+    assert r.status_code == 200, r.text
+    d = r.json()
+    assert d["sun_found"] and 0.5 <= d["confidence"] <= 1.0
+    assert d["centroid_px"] == pytest.approx([400, 200], abs=0.5)
+    f = 320 / np.tan(np.radians(33.5))
+    h, v = d["pointing_error_deg"]
+    assert h == pytest.approx(np.degrees(np.arctan(80.5 / f)), abs=0.05)
+    assert v > 0
+    assert d["pointing_error_mrad"] > 0 and isinstance(d["detection_id"], int)
+
+
+def test_fisheye_synthetic_frame_against_spa(client: httpx.Client) -> None:
+    ts = "2024-02-10T10:30:00-06:00"
+    az, el = _spa(ts, *TEHUANTEPEC, 0.0)
+    cam = FisheyeCamera(319.5, 239.5, 2.6, north_offset_deg=12.0, east="left")
+    frame = fisheye_frame(az, el, camera=cam, seed=1)
+    r = client.post(SUN, files={"file": ("sky.png", _png(frame.image), "image/png")},
+                    data={"camera": "fisheye", "projection": "equidistant", "cx_px": "319.5",
+                          "cy_px": "239.5", "px_per_deg": "2.6", "north_offset_deg": "12",
+                          "east": "left", "timestamp": ts, "site_id": "tehuantepec"})
+    assert r.status_code == 200, r.text
+    d = r.json()
+    assert d["sun_found"]
+    assert d["ephemeris"]["azimuth_deg"] == pytest.approx(az, abs=0.02)
+    assert d["ephemeris"]["elevation_deg"] == pytest.approx(el, abs=0.02)
+    assert _sep(d["azimuth_deg"], d["elevation_deg"], az, el) < 0.2
+    assert d["error"]["separation_deg"] < 0.2
+    assert d["timestamp"] == "2024-02-10T16:30:00Z"
+
+
+def test_latitude_longitude_instead_of_a_site(client: httpx.Client) -> None:
+    ts = "2024-02-11T12:00:00+01:00"
+    r = client.post(SUN, files={"file": ("f.jpg", _disc(), "image/jpeg")},
+                    data={"camera": "fisheye", "px_per_deg": "2.6", "timestamp": ts,
+                          "latitude_deg": "53.52", "longitude_deg": "10.1",
+                          "elevation_m": "20"})
+    assert r.status_code == 200, r.text
+    az, el = _spa(ts, 53.52, 10.1, 20.0)
+    assert r.json()["ephemeris"]["azimuth_deg"] == pytest.approx(az, abs=0.02)
+    assert r.json()["ephemeris"]["elevation_deg"] == pytest.approx(el, abs=0.02)
+
+
+def test_detections_of_a_day(client: httpx.Client) -> None:
+    day = "2024-02-12"
+    for hour in (9, 11, 13):
+        ts = f"{day}T{hour:02d}:00:00-06:00"
+        az, el = _spa(ts, *TEHUANTEPEC)
+        frame = fisheye_frame(az, el, seed=hour)
+        r = client.post(SUN, files={"file": ("s.png", _png(frame.image), "image/png")},
+                        data={"camera": "fisheye", "px_per_deg": "2.6", "timestamp": ts,
+                              "site_id": "tehuantepec"})
+        assert r.status_code == 200, r.text
+    r = client.get("/api/v1/vision/detections",
+                   params={"site_id": "tehuantepec", "start": day, "end": "2024-02-13"})
+    assert r.status_code == 200, r.text
+    rows = r.json()["detections"]
+    assert [x["timestamp"][11:13] for x in rows] == ["15", "17", "19"]
+    for x in rows:
+        assert _sep(x["azimuth_deg"], x["elevation_deg"], x["ephemeris"]["azimuth_deg"],
+                    x["ephemeris"]["elevation_deg"]) < 0.3
+    r = client.get("/api/v1/vision/detections", params={"site_id": "nowhere"})
+    assert r.status_code == 404
+
+
+@pytest.mark.parametrize("data,files,status,word", [
+    ({"camera": "pinhole"}, {"file": ("x.txt", b"not an image", "text/plain")}, 415, "file"),
+    ({"camera": "pinhole"}, {"file": ("x.jpg", b"\xff\xd8\xff\xe0\x00\x10JFIF", "image/jpeg")},
+     422, "file"),
+    ({"camera": "fisheye"}, None, 422, "px_per_deg"),
+    ({"camera": "zoom"}, None, 422, "camera"),
+    ({"camera": "fisheye", "px_per_deg": "-2"}, None, 422, "px_per_deg"),
+    ({"camera": "pinhole", "fov_deg": "abc"}, None, 422, "fov_deg"),
+    ({"camera": "pinhole", "timestamp": "2024-02-10T10:00:00"}, None, 422, "timestamp"),
+    ({"camera": "pinhole", "site_id": "atlantis"}, None, 404, "site_id"),
+    ({"camera": "pinhole", "latitude_deg": "95", "longitude_deg": "0"}, None, 422, "latitude"),
+    ({"camera": "pinhole", "method": "magic"}, None, 422, "method"),
+    ({"calibration_id": "999999"}, None, 404, "calibration_id"),
+    ({"camera": "pinhole"}, {}, 422, "file"),
+])
+def test_bad_input_is_a_4xx_naming_the_field(client: httpx.Client, data: dict,
+                                              files: dict | None, status: int,
+                                              word: str) -> None:
+    if files is None:
+        files = {"file": ("f.jpg", _disc(), "image/jpeg")}
+    if not files:
+        files = {"dummy": ("d.txt", b"x", "text/plain")}
+    r = client.post(SUN, files=files, data=data)
+    assert r.status_code == status, r.text
+    assert word in r.json()["detail"]
+
+
+def _png_header_only(w: int, h: int) -> bytes:
+    ihdr = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)
+    chunk = b"IHDR" + ihdr
+    return (b"\x89PNG\r\n\x1a\n" + struct.pack(">I", len(ihdr)) + chunk
+            + struct.pack(">I", zlib.crc32(chunk)) + b"\x00" * 64)
+
+
+def test_decompression_bomb_refused_from_its_header(client: httpx.Client) -> None:
+    r = client.post(SUN, files={"file": ("bomb.png", _png_header_only(100_000, 100_000),
+                                         "image/png")}, data={"camera": "pinhole"})
+    assert r.status_code == 413, r.text
+    assert "100000" in r.json()["detail"] and "file" in r.json()["detail"]
+
+
+def test_oversized_body_is_413_even_without_content_length(client: httpx.Client) -> None:
+    big = b"\xff\xd8" + b"\x00" * (11 * 1024 * 1024)
+    r = client.post(SUN, files={"file": ("big.jpg", big, "image/jpeg")},
+                    data={"camera": "pinhole"})
+    assert r.status_code == 413
+    boundary = "b0undary"
+    head = (f"--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; "
+            f"filename=\"big.jpg\"\r\nContent-Type: image/jpeg\r\n\r\n").encode()
+
+    def chunks():  # streamed: httpx sends it chunked, with no Content-Length
+        yield head
+        for _ in range(12):
+            yield b"\x00" * (1024 * 1024)
+        yield f"\r\n--{boundary}--\r\n".encode()
+
+    r = client.post(SUN, content=chunks(),
+                    headers={"Content-Type": f"multipart/form-data; boundary={boundary}"})
+    assert r.status_code == 413
+    assert client.get("/healthz").status_code == 200
+
+
+def test_calibrate_then_detect_with_the_calibration(client: httpx.Client) -> None:
+    """Synthetic frames of a turned, mirrored camera → the fitted camera → a new frame."""
+    truth = FisheyeCamera(326.0, 236.0, 2.55, north_offset_deg=30.0, east="right")
+    times = [f"2024-03-05T{h:02d}:15:00-06:00" for h in (8, 10, 12, 14, 16)]
+    files, stamps = [], []
+    for i, ts in enumerate(times):
+        az, el = _spa(ts, *TEHUANTEPEC)
+        files.append(("files", (f"f{i}.png", _png(fisheye_frame(az, el, camera=truth,
+                                                                seed=i).image), "image/png")))
+        stamps.append(ts)
+    r = client.post("/api/v1/vision/calibrations", files=files,
+                    data={"timestamps": stamps, "site_id": "tehuantepec",
+                          "projection": "equidistant"})
+    assert r.status_code == 201, r.text
+    cal = r.json()
+    cam = cal["camera"]
+    assert cam["east"] == "right"
+    assert cam["px_per_deg"] == pytest.approx(2.55, rel=0.02)
+    assert (cam["north_offset_deg"] - 30.0 + 180) % 360 - 180 == pytest.approx(0, abs=1.0)
+    assert cal["rms_px"] < 0.5 and cal["n_frames"] == 5
+    got = client.get(f"/api/v1/vision/calibrations/{cal['calibration_id']}")
+    assert got.status_code == 200 and len(got.json()["frames"]) == 5
+    listed = client.get("/api/v1/vision/calibrations").json()["calibrations"]
+    assert cal["calibration_id"] in [c["calibration_id"] for c in listed]
+    ts = "2024-03-05T11:40:00-06:00"
+    az, el = _spa(ts, *TEHUANTEPEC)
+    frame = fisheye_frame(az, el, camera=truth, seed=9)
+    r = client.post(SUN, files={"file": ("n.png", _png(frame.image), "image/png")},
+                    data={"calibration_id": str(cal["calibration_id"]), "timestamp": ts,
+                          "site_id": "tehuantepec"})
+    assert r.status_code == 200, r.text
+    assert r.json()["error"]["separation_deg"] < 0.5
+
+
+def test_calibration_input_errors(client: httpx.Client) -> None:
+    f = ("files", ("a.jpg", _disc(), "image/jpeg"))
+    r = client.post("/api/v1/vision/calibrations", files=[f, f, f],
+                    data={"timestamps": ["2024-03-05T10:00:00Z"] * 2, "site_id": "tehuantepec"})
+    assert r.status_code == 422 and "timestamps" in r.json()["detail"]
+    r = client.post("/api/v1/vision/calibrations", files=[f, f, f],
+                    data={"timestamps": ["2024-03-05T10:00:00Z"] * 3})
+    assert r.status_code == 422 and "place" in r.json()["detail"]
+
+
+def test_evaluate_gives_seed003_tables(client: httpx.Client) -> None:
+    cam = FisheyeCamera(319.5, 239.5, 2.6)
+    times = [f"2024-03-06T{h:02d}:00:00-06:00" for h in (9, 12, 15)]
+    files = []
+    for i, ts in enumerate(times):
+        az, el = _spa(ts, *TEHUANTEPEC)
+        files.append(("files", (f"e{i}.png", _png(fisheye_frame(az, el, camera=cam,
+                                                                 seed=i).image), "image/png")))
+    r = client.post("/api/v1/vision/evaluate", files=files,
+                    data={"timestamps": times, "site_id": "tehuantepec", "camera": "fisheye",
+                          "px_per_deg": "2.6"})
+    assert r.status_code == 200, r.text
+    d = r.json()
+    assert len(d["table2"]) == 3
+    assert set(d["table3"]) == {"robust", "seed000_hsv", "seed003_gray240"}
+    robust = d["table3"]["robust"]
+    assert robust["n_found"] == 3
+    assert robust["metrics"]["separation"]["max_deg"] < 0.2
+
+
+@pytest.mark.skipif(not (REAL_SKY / "metadata.csv").is_file(),
+                    reason="real-sky images not present")
+def test_real_wettermast_calibration_over_http(client: httpx.Client) -> None:
+    with (REAL_SKY / "metadata.csv").open(newline="") as fh:
+        rows = [r for r in csv.DictReader(fh) if r["sun_row_label"]]
+    files = [("files", (r["filename"], (REAL_SKY / r["filename"]).read_bytes(), "image/jpeg"))
+             for r in rows]
+    stamps = [r["utc_time"] for r in rows]
+    r = client.post("/api/v1/vision/calibrations", files=files,
+                    data={"timestamps": stamps, "latitude_deg": rows[0]["lat"],
+                          "longitude_deg": rows[0]["lon"]})
+    assert r.status_code == 201, r.text
+    cal = r.json()
+    assert cal["n_frames"] == 6 and cal["rms_px"] <= 4.0
+    uceeb = REAL_SKY / "UCEEB_20180321085500_11.jpg"
+    r = client.post(SUN, files={"file": (uceeb.name, uceeb.read_bytes(), "image/jpeg")},
+                    data={"camera": "fisheye", "px_per_deg": "10", "timestamp":
+                          dt.datetime(2018, 3, 21, 8, 55, tzinfo=dt.UTC).isoformat(),
+                          "latitude_deg": "50.1567017", "longitude_deg": "14.1694847",
+                          "elevation_m": "360"})
+    assert r.status_code == 200 and not r.json()["sun_found"]
+
+
+def test_vision_token_required_when_configured(tmp_path: Path) -> None:
+    server = ServerProcess(f"sqlite:///{tmp_path / 'v.sqlite'}", tmp_path / "server.log",
+                           {"HELIOTWIN_VISION_REQUIRE_TOKEN": "true"}).start()
+    try:
+        token = server.token()
+        with httpx.Client(base_url=server.base_url, timeout=60) as c:
+            files = {"file": ("f.jpg", _disc(), "image/jpeg")}
+            r = c.post(SUN, files=files, data={"camera": "pinhole"})
+            assert r.status_code == 401
+            r = c.post(SUN, files=files, data={"camera": "pinhole"},
+                       headers={"Authorization": f"Bearer {token}"})
+            assert r.status_code == 200, r.text
+    finally:
+        server.stop()
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "backend", "vision", *args], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_cli_detect_fisheye_json(tmp_path: Path) -> None:
+    ts = "2024-02-10T10:30:00-06:00"
+    az, el = _spa(ts, *TEHUANTEPEC)
+    path = tmp_path / "sky.png"
+    path.write_bytes(_png(fisheye_frame(az, el, seed=4).image))
+    out = _cli("detect", str(path), "--camera", "fisheye", "--px-per-deg", "2.6",
+               "--timestamp", ts, "--site", "tehuantepec", "--json")
+    assert out.returncode == 0, out.stderr
+    d = json.loads(out.stdout)
+    assert d["sun_found"] and _sep(d["azimuth_deg"], d["elevation_deg"], az, el) < 0.2
+    assert d["ephemeris"]["azimuth_deg"] == pytest.approx(az, abs=0.02)
+
+
+def test_cli_calibrate_and_bad_file(tmp_path: Path) -> None:
+    truth = FisheyeCamera(322.0, 241.0, 2.6, north_offset_deg=-15.0)
+    paths, stamps = [], []
+    for i, hour in enumerate((8, 11, 14, 16)):
+        ts = f"2024-03-07T{hour:02d}:00:00-06:00"
+        az, el = _spa(ts, *TEHUANTEPEC)
+        p = tmp_path / f"c{i}.png"
+        p.write_bytes(_png(fisheye_frame(az, el, camera=truth, seed=i).image))
+        paths.append(str(p))
+        stamps.append(ts)
+    out = _cli("calibrate", *paths, "--timestamps", *stamps, "--site", "tehuantepec", "--json")
+    assert out.returncode == 0, out.stderr
+    d = json.loads(out.stdout)
+    assert d["camera"]["px_per_deg"] == pytest.approx(2.6, rel=0.02) and d["rms_px"] < 0.5
+    bad = tmp_path / "bad.jpg"
+    bad.write_bytes(b"hello")
+    out = _cli("detect", str(bad), "--camera", "pinhole")
+    assert out.returncode == 2 and "not a PNG or JPEG" in out.stderr
