@@ -1,10 +1,11 @@
 """The dashboard: ``frontend/`` served at ``/`` and ``/static/``, Plotly at ``/vendor/``.
 
 The dashboard is static HTML, CSS and JavaScript modules (no build step). Its
-charts use Plotly.js, taken from the ``plotly`` Python package that is already a
-dependency (``plotly/package_data/plotly.min.js``), so the page needs no CDN and
-works without internet. Plotly is served under a versioned URL with a one-year,
-immutable cache header and gzip-compressed once in memory (≈4.8 MB → ≈1.4 MB).
+charts use Plotly.js, a partial bundle vendored in ``frontend/vendor/plotly/``
+(plotly.js from npm with only the traces the pages draw; how it was built is in
+its README), so the page needs no CDN, npm or internet at run time. Plotly is
+served under a URL that carries its version and a hash of the file, with a
+one-year immutable cache header, gzip-compressed once in memory (≈1.2 MB → ≈0.4 MB).
 
 ``create_app`` includes this router last, so its ``/`` never shadows the API.
 """
@@ -13,11 +14,11 @@ from __future__ import annotations
 
 import gzip
 import hashlib
+import json
 import logging
 from functools import lru_cache
 from pathlib import Path
 
-import plotly
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import HTMLResponse, Response
 from fastapi.staticfiles import StaticFiles
@@ -25,8 +26,8 @@ from fastapi.staticfiles import StaticFiles
 logger = logging.getLogger(__name__)
 
 FRONTEND_DIR = Path(__file__).resolve().parents[3] / "frontend"
-PLOTLY_JS = Path(plotly.__file__).resolve().parent / "package_data" / "plotly.min.js"
-PLOTLY_VERSION = plotly.__version__
+PLOTLY_DIR = FRONTEND_DIR / "vendor" / "plotly"
+PLOTLY_JS = PLOTLY_DIR / "plotly.min.js"
 VERSION_TOKEN = "__PLOTLY_VERSION__"
 IMMUTABLE = "public, max-age=31536000, immutable"
 
@@ -50,25 +51,42 @@ class _RevalidatedStaticFiles(StaticFiles):
 def _plotly_bytes() -> tuple[bytes, bytes, str]:
     """The Plotly bundle, its gzip encoding and a strong ETag (read once)."""
     raw = PLOTLY_JS.read_bytes()
-    packed = gzip.compress(raw, compresslevel=6, mtime=0)
+    packed = gzip.compress(raw, compresslevel=9, mtime=0)
     etag = '"' + hashlib.sha256(raw).hexdigest()[:32] + '"'
-    logger.info("plotly.min.js %s: %d bytes, %d gzipped", PLOTLY_VERSION, len(raw), len(packed))
+    logger.info("plotly.min.js: %d bytes, %d gzipped", len(raw), len(packed))
     return raw, packed, etag
+
+
+@lru_cache(maxsize=1)
+def plotly_version() -> str:
+    """``<plotly.js version>-<8 hex of the file's sha256>``: the cache-busting token in its URL.
+
+    The version comes from ``frontend/vendor/plotly/package.json`` (what the bundle
+    was built from); the hash changes when the bundle is rebuilt with other traces.
+    """
+    try:
+        pinned = json.loads((PLOTLY_DIR / "package.json").read_text(encoding="utf-8"))
+        version = str(pinned["dependencies"]["plotly.js"])
+        digest = hashlib.sha256(PLOTLY_JS.read_bytes()).hexdigest()[:8]
+    except (OSError, ValueError, KeyError) as exc:
+        logger.warning("vendored Plotly not readable in %s: %s", PLOTLY_DIR, exc)
+        return "missing"
+    return f"{version}-{digest}"
 
 
 @router.get("/", response_class=HTMLResponse)
 def dashboard_index() -> HTMLResponse:
-    """The dashboard page (the Plotly URL carries the installed version)."""
+    """The dashboard page (the Plotly URL carries the vendored bundle's version)."""
     index = FRONTEND_DIR / "index.html"
     if not index.is_file():
         raise HTTPException(status_code=404, detail=f"dashboard not found at {index}")
-    html = index.read_text(encoding="utf-8").replace(VERSION_TOKEN, PLOTLY_VERSION)
+    html = index.read_text(encoding="utf-8").replace(VERSION_TOKEN, plotly_version())
     return HTMLResponse(html, headers={"Cache-Control": "no-cache"})
 
 
 @router.get("/vendor/plotly.min.js")
 def plotly_bundle(request: Request) -> Response:
-    """Plotly.js from the installed ``plotly`` package, gzip when accepted."""
+    """The vendored Plotly.js bundle, gzip when accepted (any ``?v=`` is the same file)."""
     if not PLOTLY_JS.is_file():
         raise HTTPException(status_code=404, detail=f"plotly bundle missing at {PLOTLY_JS}")
     raw, packed, etag = _plotly_bytes()
