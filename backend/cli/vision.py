@@ -104,13 +104,13 @@ def _read(path: Path) -> Any:
 
 
 def detect(args: argparse.Namespace) -> dict[str, Any]:
-    """The answer of ``vision detect`` as a JSON-ready dict (units in the keys)."""
+    """The answer of ``vision detect`` as a JSON-ready dict (``vision.analyse.analyse_frame``,
+    the same shape as ``POST /api/v1/vision/sun`` without the stored ids)."""
     import pandas as pd
 
     from sim.sun import solar_position
-    from vision.cameras import FisheyeCamera, camera_from_params
-    from vision.detect import detect_sun
-    from vision.metrics import angular_separation_deg
+    from vision.analyse import analyse_frame
+    from vision.cameras import camera_from_params
 
     img = _read(args.image)
     h, w = img.shape[:2]
@@ -118,40 +118,22 @@ def detect(args: argparse.Namespace) -> dict[str, Any]:
                                            "reference_y_px", "projection", "px_per_deg",
                                            "north_offset_deg", "east")}
     cam = camera_from_params(args.camera, params, w, h)
-    d = detect_sun(img, method=args.method, camera=cam if args.method == "robust" else None)
-    out: dict[str, Any] = {"image": str(args.image), "image_size_px": [w, h],
-                           "camera": args.camera, **d.to_dict()}
-    out.pop("fov", None)
-    if isinstance(cam, FisheyeCamera):
-        az = el = None
-        if d.centroid_px is not None:
-            a, e = cam.pixel_to_sky(*d.centroid_px)
-            az, el = float(a), float(e)
-        out["azimuth_deg"], out["elevation_deg"] = az, el
-    elif d.centroid_px is not None:
-        hh, vv, tot = cam.pointing_error(*d.centroid_px)
-        out["pointing_error_deg"] = [float(hh), float(vv)]
-        out["pointing_error_mrad"] = float(tot)
+    eph = None
     place = _place(args)
     if args.timestamp is not None and place is not None:
         sp = solar_position(pd.DatetimeIndex([pd.Timestamp(args.timestamp)]), place[0],
                             place[1], altitude=place[2])
-        eaz, eel = float(sp["azimuth"].iloc[0]), float(sp["apparent_elevation"].iloc[0])
-        out["ephemeris"] = {"azimuth_deg": eaz, "elevation_deg": eel}
-        if out.get("azimuth_deg") is not None:
-            out["error"] = {"separation_deg": float(angular_separation_deg(
-                out["azimuth_deg"], out["elevation_deg"], eaz, eel))}
-    return out
+        eph = (float(sp["azimuth"].iloc[0]), float(sp["apparent_elevation"].iloc[0]))
+    return {"image": str(args.image), **analyse_frame(img, cam, args.method, eph)}
 
 
 def calibrate(args: argparse.Namespace) -> dict[str, Any]:
-    """The answer of ``vision calibrate`` as a JSON-ready dict."""
-    import numpy as np
+    """The answer of ``vision calibrate`` as a JSON-ready dict
+    (``vision.calibrate.calibrate_frames`` against SPA, ``sim.sun``)."""
     import pandas as pd
 
     from sim.sun import solar_position
-    from vision.calibrate import fit_fisheye
-    from vision.detect import detect_sun
+    from vision.calibrate import calibrate_frames
 
     if len(args.timestamps) != len(args.images):
         raise ValueError(f"--timestamps: {len(args.timestamps)} times for "
@@ -161,29 +143,13 @@ def calibrate(args: argparse.Namespace) -> dict[str, Any]:
         raise ValueError("a place is needed: --site, or --lat and --lon")
     sp = solar_position(pd.DatetimeIndex([pd.Timestamp(t) for t in args.timestamps]),
                         place[0], place[1], altitude=place[2])
-    frames, xy, use = [], [], []
-    size = None
-    for i, path in enumerate(args.images):
-        img = _read(path)
-        size = size or (img.shape[1], img.shape[0])
-        d = detect_sun(img)
-        el = float(sp["apparent_elevation"].iloc[i])
-        ok = d.sun_found and el > 0
-        frames.append({"image": str(path), "sun_found": d.sun_found,
-                       "confidence": d.confidence, "centroid_px": d.to_dict()["centroid_px"],
-                       "used": ok})
-        if ok:
-            xy.append(d.centroid_px)
-            use.append(i)
-    if len(use) < 3:
-        raise ValueError(f"only {len(use)} images have a sun found above the horizon")
-    arr = np.array(xy, float)
-    assert size is not None
-    res = fit_fisheye(arr[:, 0], arr[:, 1], sp["azimuth"].to_numpy()[use],
-                      sp["apparent_elevation"].to_numpy()[use], size, projection=args.projection,
-                      east=args.east, n_radial=args.n_radial, fit_tilt=args.fit_tilt)
+    res, frames = calibrate_frames(
+        [_read(p) for p in args.images], sp["azimuth"].to_numpy(),
+        sp["apparent_elevation"].to_numpy(), names=[str(p) for p in args.images],
+        projection=args.projection, east=args.east, n_radial=args.n_radial,
+        fit_tilt=args.fit_tilt)
     out = res.to_dict()
-    out["frames"] = frames
+    out["frames"] = [{"image": f.pop("name"), **f} for f in frames]
     return out
 
 

@@ -96,6 +96,13 @@ def test_fisheye_synthetic_frame_against_spa(client: httpx.Client) -> None:
     assert _sep(d["azimuth_deg"], d["elevation_deg"], az, el) < 0.2
     assert d["error"]["separation_deg"] < 0.2
     assert d["timestamp"] == "2024-02-10T16:30:00Z"
+    # the ephemeris sun's pixel, by seed 003's eqs. 9-11 written out (east left: angle Δ − A)
+    r, phi = 2.6 * (90.0 - el), np.radians(12.0 - az)
+    want = [319.5 + r * np.sin(phi), 239.5 - r * np.cos(phi)]
+    assert d["ephemeris"]["centroid_px"] == pytest.approx(want, abs=0.05)
+    assert d["error"]["distance_px"] == pytest.approx(
+        float(np.hypot(d["centroid_px"][0] - want[0], d["centroid_px"][1] - want[1])), abs=0.1)
+    assert d["error"]["distance_px"] < 0.6
 
 
 def test_latitude_longitude_instead_of_a_site(client: httpx.Client) -> None:
@@ -146,6 +153,18 @@ def test_detections_of_a_day(client: httpx.Client) -> None:
     ({"camera": "pinhole", "method": "magic"}, None, 422, "method"),
     ({"calibration_id": "999999"}, None, 404, "calibration_id"),
     ({"camera": "pinhole"}, {}, 422, "file"),
+    ({"camera": "pinhole"}, {"file": ("e.jpg", b"", "image/jpeg")}, 422, "file"),
+    ({"camera": "pinhole"}, {"file": ("t.jpg", _disc()[:-40], "image/jpeg")}, 422, "file"),
+    ({"camera": "pinhole", "timestamp": "0001-01-01T00:00:00+00:00"}, None, 422, "timestamp"),
+    ({"camera": "pinhole", "timestamp": "9999-12-31T23:00:00-05:00"}, None, 422, "timestamp"),
+    ({"calibration_id": "99999999999999999999"}, None, 404, "calibration_id"),
+    ({"camera": "pinhole", "cx_px": "1e300"}, None, 422, "cx_px"),
+    ({"camera": "pinhole", "reference_y_px": "-40"}, None, 422, "reference_y_px"),
+    ({"camera": "fisheye", "px_per_deg": "1e-300"}, None, 422, "px_per_deg"),
+    ({"camera": "fisheye", "px_per_deg": "2", "north_offset_deg": "nan"}, None, 422,
+     "north_offset_deg"),
+    ({"camera": "pinhole", "latitude_deg": "1", "longitude_deg": "abc"}, None, 422,
+     "longitude_deg"),
 ])
 def test_bad_input_is_a_4xx_naming_the_field(client: httpx.Client, data: dict,
                                               files: dict | None, status: int,
@@ -157,6 +176,24 @@ def test_bad_input_is_a_4xx_naming_the_field(client: httpx.Client, data: dict,
     r = client.post(SUN, files=files, data=data)
     assert r.status_code == status, r.text
     assert word in r.json()["detail"]
+
+
+@pytest.mark.parametrize("img", [np.zeros((1, 1, 3), np.uint8), np.full((1, 1), 255, np.uint8),
+                                 np.full((60, 80, 3), 65535, np.uint16)])
+def test_odd_but_valid_images_are_answered(client: httpx.Client, img: np.ndarray) -> None:
+    """A 1×1 frame, a grey one, a 16-bit one: decoded and answered, no sun invented."""
+    for camera in ("pinhole", "fisheye"):
+        r = client.post(SUN, files={"file": ("o.png", _png(img), "image/png")},
+                        data={"camera": camera, "px_per_deg": "0.5"})
+        assert r.status_code == 200, r.text
+        assert r.json()["sun_found"] is False and r.json()["centroid_px"] is None
+
+
+def test_too_many_files_is_a_422_naming_files(client: httpx.Client) -> None:
+    f = ("files", ("a.jpg", b"\xff\xd8", "image/jpeg"))
+    r = client.post("/api/v1/vision/calibrations", files=[f] * 65,
+                    data={"timestamps": ["2024-03-05T10:00:00Z"] * 65, "site_id": "tehuantepec"})
+    assert r.status_code == 422 and "files" in r.json()["detail"]
 
 
 def _png_header_only(w: int, h: int) -> bytes:

@@ -31,7 +31,7 @@ import anyio
 import numpy as np
 import orjson
 import pandas as pd
-from fastapi import APIRouter, HTTPException, Query, Request
+from fastapi import APIRouter, HTTPException, Path, Query, Request
 from fastapi.responses import Response
 from starlette.datastructures import FormData, UploadFile
 
@@ -45,29 +45,31 @@ from backend.vision_store import (
     list_detections,
 )
 from sim.sun import solar_position
-from vision.calibrate import fit_fisheye
-from vision.cameras import FisheyeCamera, PinholeCamera, camera_from_params
-from vision.detect import METHODS, detect_sun
-from vision.imageio import ImageError, decode_image
-from vision.metrics import angular_separation_deg, error_table
+from vision.analyse import analyse_frame
+from vision.calibrate import calibrate_frames
+from vision.cameras import (
+    EAST_SIDES,
+    PROJECTIONS,
+    FisheyeCamera,
+    PinholeCamera,
+    camera_from_params,
+)
+from vision.detect import METHODS
+from vision.imageio import ImageError, decode_image, image_size
+from vision.metrics import error_table
 
 router = APIRouter(prefix="/api/v1/vision", tags=["vision"])
 
 _JSON = "application/json"
 _MAX_FILES = 64
+_MAX_ID = 2**31 - 1  # ids are 32-bit integers on PostgreSQL
+# the ephemeris works on nanosecond pandas timestamps (1677-2262); frames are from now-ish
+_FIRST_YEAR, _LAST_YEAR = 1900, 2200
 
 
 def _json(data: Any, status: int = 200) -> Response:
     return Response(orjson.dumps(data, option=orjson.OPT_SERIALIZE_NUMPY), status_code=status,
                     media_type=_JSON)
-
-
-def _f(v: Any) -> float | None:
-    """A finite float or None (NaN is no JSON number)."""
-    if v is None:
-        return None
-    v = float(v)
-    return v if np.isfinite(v) else None
 
 
 # --------------------------------------------------------------------------- input
@@ -97,10 +99,13 @@ async def _read_form(request: Request, limit: int) -> FormData:
     try:
         return await Request(request.scope, receive).form(
             max_files=_MAX_FILES, max_fields=256, max_part_size=limit)
-    except HTTPException:
-        raise
-    except Exception as exc:  # malformed multipart
-        raise HTTPException(400, f"malformed multipart body: {exc}") from None
+    except Exception as exc:  # starlette's HTTPException(400) for a malformed body or limits
+        text = str(getattr(exc, "detail", exc))
+        if "Too many files" in text:
+            raise HTTPException(422, f"files: at most {_MAX_FILES} files per request") from None
+        if "Too many fields" in text:
+            raise HTTPException(422, "form: at most 256 fields per request") from None
+        raise HTTPException(400, f"malformed multipart body: {text}") from None
 
 
 def _text(form: FormData, name: str) -> str | None:
@@ -119,18 +124,51 @@ def _fields(form: FormData) -> dict[str, object]:
     return {k: v for k, v in form.multi_items() if isinstance(v, str)}
 
 
-async def _image(upload: Any, field: str, max_pixels: int) -> np.ndarray:
+@dataclass(frozen=True)
+class _Upload:
+    """An uploaded image whose header has been checked, not yet decoded."""
+
+    field: str
+    filename: str
+    data: bytes
+    size_px: tuple[int, int]
+
+
+def _image_error(field: str, name: str, exc: ImageError) -> HTTPException:
+    status = 413 if exc.too_large else (415 if "not a PNG or JPEG" in str(exc) else 422)
+    extra = " (HELIOTWIN_VISION_MAX_PIXELS)" if exc.too_large else ""
+    return HTTPException(status, f"{field} {name!r}: {exc}{extra}")
+
+
+async def _upload(upload: Any, field: str, max_pixels: int) -> _Upload:
+    """The file's bytes, its PNG/JPEG header read and its pixel count checked (no decoding)."""
     if not isinstance(upload, UploadFile):
         raise HTTPException(422, f"{field}: an image file is required")
     data = await upload.read()
+    name = upload.filename or field
     if not data:
-        raise HTTPException(422, f"{field}: the file {upload.filename!r} is empty")
+        raise HTTPException(422, f"{field}: the file {name!r} is empty")
     try:
-        return await anyio.to_thread.run_sync(decode_image, data, max_pixels)
+        fmt, w, h = image_size(data)
+        if w * h > max_pixels:
+            raise ImageError(f"{fmt.upper()} image of {w}×{h} = {w * h} pixels exceeds the "
+                             f"limit of {max_pixels} pixels", too_large=True)
     except ImageError as exc:
-        status = 413 if exc.too_large else (415 if "not a PNG or JPEG" in str(exc) else 422)
-        extra = " (HELIOTWIN_VISION_MAX_PIXELS)" if exc.too_large else ""
-        raise HTTPException(status, f"{field} {upload.filename!r}: {exc}{extra}") from None
+        raise _image_error(field, name, exc) from None
+    return _Upload(field, name, data, (w, h))
+
+
+def _decode(up: _Upload, max_pixels: int) -> np.ndarray:
+    """Decode in the calling (worker) thread; a corrupt file is a 4xx naming its field."""
+    try:
+        return decode_image(up.data, max_pixels)
+    except ImageError as exc:
+        raise _image_error(up.field, up.filename, exc) from None
+
+
+async def _image(upload: Any, field: str, max_pixels: int) -> np.ndarray:
+    up = await _upload(upload, field, max_pixels)
+    return await anyio.to_thread.run_sync(_decode, up, max_pixels)
 
 
 def _timestamp(text: str | None, field: str = "timestamp") -> dt.datetime | None:
@@ -143,7 +181,14 @@ def _timestamp(text: str | None, field: str = "timestamp") -> dt.datetime | None
     if value.tzinfo is None:
         raise HTTPException(422, f"{field}: {text!r} has no UTC offset; add one "
                                  "(e.g. +00:00 or -06:00)")
-    return value.astimezone(dt.UTC)
+    try:
+        utc = value.astimezone(dt.UTC)
+    except OverflowError:
+        utc = None
+    if utc is None or not _FIRST_YEAR <= utc.year < _LAST_YEAR:
+        raise HTTPException(422, f"{field}: {text!r} is outside the years "
+                                 f"{_FIRST_YEAR}-{_LAST_YEAR - 1}")
+    return utc
 
 
 @dataclass(frozen=True)
@@ -174,12 +219,8 @@ def _place(ctx: Any, form: FormData, required: bool = False) -> Place | None:
         return None
     if lat is None or lon is None:
         raise HTTPException(422, "latitude_deg and longitude_deg go together")
-    try:
-        la, lo = float(lat), float(lon)
-        el = float(_text(form, "elevation_m") or 0.0)
-    except ValueError:
-        raise HTTPException(422, "latitude_deg, longitude_deg and elevation_m must be "
-                                 "numbers") from None
+    la, lo = _float(lat, "latitude_deg"), _float(lon, "longitude_deg")
+    el = _float(_text(form, "elevation_m") or "0", "elevation_m")
     if not -90.0 <= la <= 90.0:
         raise HTTPException(422, f"latitude_deg: {la} is outside [-90, 90]")
     if not -180.0 <= lo <= 180.0:
@@ -187,6 +228,13 @@ def _place(ctx: Any, form: FormData, required: bool = False) -> Place | None:
     if not (np.isfinite(el) and -500.0 <= el <= 9000.0):
         raise HTTPException(422, f"elevation_m: {el} is outside [-500, 9000]")
     return Place(None, la, lo, el, ZoneInfo("UTC"))
+
+
+def _float(text: str, field: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise HTTPException(422, f"{field}: {text!r} is not a number") from None
 
 
 def _ephemeris(times: list[dt.datetime], place: Place) -> pd.DataFrame:
@@ -208,6 +256,8 @@ def _stored_camera(session: Any, form: FormData) -> tuple[FisheyeCamera | None, 
         return None, None
     if not raw.isdigit():
         raise HTTPException(422, f"calibration_id: {raw!r} is not an integer id")
+    if int(raw) > _MAX_ID:
+        raise HTTPException(404, f"calibration_id: no calibration {raw}")
     cal = get_calibration(session, int(raw))
     if cal is None:
         raise HTTPException(404, f"calibration_id: no calibration {raw}")
@@ -233,43 +283,6 @@ def _camera(form: FormData, stored: FisheyeCamera | None, w: int, h: int
 # --------------------------------------------------------------------------- work
 
 
-def _analyse(img: np.ndarray, cam: PinholeCamera | FisheyeCamera, method: str,
-             eph: tuple[float, float] | None) -> dict[str, Any]:
-    """Detection + angles (+ error against the ephemeris) for one decoded frame."""
-    d = detect_sun(img, method=method, camera=cam if method == "robust" else None)
-    out: dict[str, Any] = {
-        "sun_found": d.sun_found,
-        "confidence": d.confidence,
-        "centroid_px": list(d.centroid_px) if d.centroid_px is not None else None,
-        "method": d.method,
-        "image_size_px": [int(img.shape[1]), int(img.shape[0])],
-    }
-    if isinstance(cam, FisheyeCamera):
-        out["camera"] = "fisheye"
-        az = el = None
-        if d.centroid_px is not None:
-            a, e = cam.pixel_to_sky(*d.centroid_px)
-            az, el = _f(a), _f(e)
-        out["azimuth_deg"], out["elevation_deg"] = az, el
-    else:
-        out["camera"] = "pinhole"
-        if d.centroid_px is not None:
-            hh, vv, tot = cam.pointing_error(*d.centroid_px)
-            out["pointing_error_deg"] = [_f(hh), _f(vv)]
-            out["pointing_error_mrad"] = _f(tot)
-        else:
-            out["pointing_error_deg"] = None
-            out["pointing_error_mrad"] = None
-    if eph is not None:
-        out["ephemeris"] = {"azimuth_deg": eph[0], "elevation_deg": eph[1]}
-        if out.get("azimuth_deg") is not None and out.get("elevation_deg") is not None:
-            sep = float(angular_separation_deg(out["azimuth_deg"], out["elevation_deg"], *eph))
-            daz = (out["azimuth_deg"] - eph[0] + 180.0) % 360.0 - 180.0
-            out["error"] = {"separation_deg": sep, "azimuth_deg": daz,
-                            "elevation_deg": out["elevation_deg"] - eph[1]}
-    return out
-
-
 def _sun_job(img: np.ndarray, cam: PinholeCamera | FisheyeCamera, method: str,
              ts: dt.datetime | None, place: Place | None) -> dict[str, Any]:
     """Ephemeris (when time and place are known) and analysis, in one worker-thread hop."""
@@ -277,7 +290,7 @@ def _sun_job(img: np.ndarray, cam: PinholeCamera | FisheyeCamera, method: str,
     if ts is not None and place is not None:
         sp = _ephemeris([ts], place)
         eph = (float(sp["azimuth"].iloc[0]), float(sp["apparent_elevation"].iloc[0]))
-    return _analyse(img, cam, method, eph)
+    return analyse_frame(img, cam, method, eph)
 
 
 def _detection_row(res: dict[str, Any], ts: dt.datetime | None, place: Place | None,
@@ -345,7 +358,7 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
     ts = _timestamp(_text(form, "timestamp"))
     place = _place(ctx, form)
     method = _method(form)
-    stored, cal_id = _stored_camera(session, form)
+    stored, cal_id = await anyio.to_thread.run_sync(_stored_camera, session, form)
     img = await _image(uploads[0], "file", s.vision_max_pixels)
     cam = _camera(form, stored, img.shape[1], img.shape[0])
     res = await anyio.to_thread.run_sync(_sun_job, img, cam, method, ts, place)
@@ -358,8 +371,13 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
     return _json(res)
 
 
+_Frame = tuple[_Upload, dt.datetime]
+
+
 async def _timed_frames(ctx: Any, form: FormData, min_frames: int
-                        ) -> tuple[list[tuple[str, np.ndarray, dt.datetime]], Place]:
+                        ) -> tuple[list[_Frame], Place]:
+    """Files with their timestamps and the place; headers checked, nothing decoded yet
+    (the work decodes one frame at a time, so a batch holds one decoded frame)."""
     uploads = form.getlist("files")
     stamps = _texts(form, "timestamps")
     if len(uploads) < min_frames:
@@ -370,51 +388,37 @@ async def _timed_frames(ctx: Any, form: FormData, min_frames: int
                                  f"{len(stamps)} for {len(uploads)} files")
     place = _place(ctx, form, required=True)
     assert place is not None
-    frames = []
+    frames: list[_Frame] = []
     for i, (up, text) in enumerate(zip(uploads, stamps, strict=True)):
         ts = _timestamp(text, f"timestamps[{i}]")
         assert ts is not None
-        img = await _image(up, f"files[{i}]", ctx.settings.vision_max_pixels)
-        name = up.filename if isinstance(up, UploadFile) and up.filename else f"files[{i}]"
-        frames.append((name, img, ts))
-    sizes = {(f[1].shape[1], f[1].shape[0]) for f in frames}
+        frames.append((await _upload(up, f"files[{i}]", ctx.settings.vision_max_pixels), ts))
+    sizes = {f[0].size_px for f in frames}
     if len(sizes) != 1:
         raise HTTPException(422, f"files: every frame must have the same size, got "
                                  f"{sorted(sizes)}")
     return frames, place
 
 
-def _calibrate(frames: list[tuple[str, np.ndarray, dt.datetime]], place: Place,
-               projection: str, east: str, n_radial: int, fit_tilt: bool, method: str
+def _calibrate(frames: list[_Frame], place: Place, projection: str, east: str,
+               n_radial: int, fit_tilt: bool, method: str, max_pixels: int
                ) -> dict[str, Any]:
-    sp = _ephemeris([f[2] for f in frames], place)
+    """Ephemeris for each frame, then ``vision.calibrate.calibrate_frames``; a stored row."""
+    sp = _ephemeris([f[1] for f in frames], place)
     az, el = sp["azimuth"].to_numpy(), sp["apparent_elevation"].to_numpy()
-    report, use = [], []
-    for i, (name, img, ts) in enumerate(frames):
-        d = detect_sun(img, method=method)
-        ok = d.sun_found and el[i] > 0
-        report.append({"filename": name, "timestamp": _iso(ts), "sun_found": d.sun_found,
-                       "confidence": d.confidence,
-                       "centroid_px": list(d.centroid_px) if d.centroid_px else None,
-                       "ephemeris": {"azimuth_deg": float(az[i]), "elevation_deg": float(el[i])},
-                       "used": bool(ok)})
-        if ok:
-            use.append(i)
-    n_par = 4 + n_radial + (2 if fit_tilt else 0)
-    if 2 * len(use) < n_par + 2:
-        missing = [str(r["filename"]) for r in report if not r["used"]]
-        raise ValueError(f"files: only {len(use)} frames have a sun found above the horizon "
-                         f"(no sun in: {', '.join(missing) or 'none'}); {n_par} parameters "
-                         f"need at least {(n_par + 3) // 2}")
-    xy = np.array([report[i]["centroid_px"] for i in use], float)
-    h, w = frames[0][1].shape[:2]
-    res = fit_fisheye(xy[:, 0], xy[:, 1], az[use], el[use], (w, h), projection=projection,
-                      east=east, n_radial=n_radial, fit_tilt=fit_tilt)
-    for k, i in enumerate(use):
-        report[i]["residual_px"] = float(res.residuals_px[k])
-        report[i]["residual_deg"] = float(res.residuals_deg[k])
+    res, frame_reports = calibrate_frames(
+        (_decode(f[0], max_pixels) for f in frames), az, el,
+        names=[f[0].filename for f in frames], method=method,
+        projection=projection, east=east, n_radial=n_radial, fit_tilt=fit_tilt)
+    report = []
+    for i, (r, (up, ts)) in enumerate(zip(frame_reports, frames, strict=True)):
+        r = {"filename": up.filename, "timestamp": _iso(ts),
+             **{k: v for k, v in r.items() if k != "name"}}
+        r["ephemeris"] = {"azimuth_deg": float(az[i]), "elevation_deg": float(el[i])}
+        report.append(r)
     out = res.to_dict()
     cam = out["camera"]
+    w, h = frames[0][0].size_px
     return {
         "site_id": place.site_id, "latitude_deg": place.latitude_deg,
         "longitude_deg": place.longitude_deg, "elevation_m": place.elevation_m,
@@ -422,7 +426,7 @@ def _calibrate(frames: list[tuple[str, np.ndarray, dt.datetime]], place: Place,
         "px_per_deg": cam["px_per_deg"], "north_offset_deg": cam["north_offset_deg"],
         "east": cam["east"], "radial_coeffs": cam["radial_coeffs"],
         "tilt_north_deg": cam["tilt_north_deg"], "tilt_east_deg": cam["tilt_east_deg"],
-        "image_width_px": w, "image_height_px": h, "n_frames": len(use),
+        "image_width_px": w, "image_height_px": h, "n_frames": res.n_frames,
         "rms_px": out["rms_px"], "max_px": out["max_px"], "rms_deg": out["rms_deg"],
         "max_deg": out["max_deg"], "frames": report,
     }
@@ -452,8 +456,16 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
     """Fit a fisheye camera (centre, scale, north offset, mirror) to timestamped frames."""
     form = await _read_form(request, ctx.settings.max_upload_bytes)
     projection = _text(form, "projection") or "equidistant"
+    if projection not in PROJECTIONS:
+        raise HTTPException(422, f"projection: must be one of {', '.join(PROJECTIONS)}, "
+                                 f"got {projection!r}")
     east = _text(form, "east") or "auto"
-    fit_tilt = (_text(form, "fit_tilt") or "false").lower() in ("1", "true", "yes", "on")
+    if east not in ("auto", *EAST_SIDES):
+        raise HTTPException(422, f"east: must be auto, left or right, got {east!r}")
+    tilt_text = (_text(form, "fit_tilt") or "false").lower()
+    if tilt_text not in ("1", "true", "yes", "on", "0", "false", "no", "off"):
+        raise HTTPException(422, f"fit_tilt: must be true or false, got {tilt_text!r}")
+    fit_tilt = tilt_text in ("1", "true", "yes", "on")
     n_radial_text = _text(form, "n_radial") or "0"
     if n_radial_text not in ("0", "1", "2"):
         raise HTTPException(422, f"n_radial: must be 0, 1 or 2, got {n_radial_text!r}")
@@ -461,9 +473,10 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
     frames, place = await _timed_frames(ctx, form, 3)
     try:
         row = await anyio.to_thread.run_sync(
-            _calibrate, frames, place, projection, east, int(n_radial_text), fit_tilt, method)
+            _calibrate, frames, place, projection, east, int(n_radial_text), fit_tilt, method,
+            ctx.settings.vision_max_pixels)
     except ValueError as exc:
-        raise HTTPException(422, str(exc)) from None
+        raise HTTPException(422, f"files: {exc}") from None
     cal_id = await asyncio.wrap_future(ctx.writer.call(lambda c: insert_calibration(c, row)))
     body = {k: v for k, v in row.items() if k not in ("radial_coeffs",)}
     body["calibration_id"] = cal_id
@@ -481,7 +494,8 @@ def get_calibrations(session: SessionDep,
 
 
 @router.get("/calibrations/{calibration_id}", responses={404: {}})
-def get_one_calibration(calibration_id: int, session: SessionDep) -> Response:
+def get_one_calibration(calibration_id: Annotated[int, Path(ge=1, le=_MAX_ID)],
+                        session: SessionDep) -> Response:
     """One stored calibration with its per-frame residuals."""
     cal = get_calibration(session, calibration_id)
     if cal is None:
@@ -517,19 +531,21 @@ def get_detections(ctx: ContextDep, session: SessionDep,
     return _json({"site_id": site_id, "start": start, "end": end, "detections": rows})
 
 
-def _evaluate(frames: list[tuple[str, np.ndarray, dt.datetime]], place: Place,
-              cam: FisheyeCamera, methods: list[str]) -> dict[str, Any]:
-    sp = _ephemeris([f[2] for f in frames], place)
+def _evaluate(frames: list[_Frame], place: Place, cam: FisheyeCamera, methods: list[str],
+              max_pixels: int) -> dict[str, Any]:
+    """Each method on each frame (decoded one at a time) against SPA: seed 003's Tables 2, 3."""
+    sp = _ephemeris([f[1] for f in frames], place)
     az, el = sp["azimuth"].to_numpy(), sp["apparent_elevation"].to_numpy()
     rows: list[dict[str, Any]] = []
     per: dict[str, dict[str, list[float]]] = {m: {"ra": [], "re": [], "a": [], "e": []}
                                               for m in methods}
-    for i, (name, img, ts) in enumerate(frames):
-        row: dict[str, Any] = {"filename": name, "timestamp": _iso(ts),
+    for i, (up, ts) in enumerate(frames):
+        img = _decode(up, max_pixels)
+        row: dict[str, Any] = {"filename": up.filename, "timestamp": _iso(ts),
                                "ephemeris_azimuth_deg": float(az[i]),
                                "ephemeris_elevation_deg": float(el[i])}
         for m in methods:
-            res = _analyse(img, cam, m, (float(az[i]), float(el[i])))
+            res = analyse_frame(img, cam, m, (float(az[i]), float(el[i])))
             row[f"{m}_sun_found"] = res["sun_found"]
             row[f"{m}_azimuth_deg"] = res["azimuth_deg"]
             row[f"{m}_elevation_deg"] = res["elevation_deg"]
@@ -559,12 +575,13 @@ async def post_evaluate(request: Request, ctx: ContextDep, session: SessionDep,
     if bad:
         raise HTTPException(422, f"methods: unknown {', '.join(bad)}; known: "
                                  f"{', '.join(METHODS)}")
-    stored, _ = _stored_camera(session, form)
+    stored, _ = await anyio.to_thread.run_sync(_stored_camera, session, form)
     frames, place = await _timed_frames(ctx, form, 1)
-    h, w = frames[0][1].shape[:2]
+    w, h = frames[0][0].size_px
     cam = _camera(form, stored, w, h)
     if not isinstance(cam, FisheyeCamera):
         raise HTTPException(422, "camera: evaluate compares azimuth/elevation, which needs a "
                                  "fisheye camera")
-    out = await anyio.to_thread.run_sync(_evaluate, frames, place, cam, methods)
+    out = await anyio.to_thread.run_sync(_evaluate, frames, place, cam, methods,
+                                         ctx.settings.vision_max_pixels)
     return _json(out)

@@ -1,0 +1,271 @@
+"""``/api/v1/sites/{site_id}/measurements``: field-logger ingestion and read-back.
+
+POST takes ``{"readings": [...]}`` (JSON) or ``text/csv`` with a header row,
+validated in bulk by :mod:`backend.ingest` and committed by the writer before
+the answer ``{"accepted": N, "duplicates": M}``. GET answers a range raw (when
+it holds no more than ``max_points`` readings) or downsampled into buckets with
+min/mean/max, as JSON or CSV.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import csv
+import io
+import logging
+import re
+from collections.abc import AsyncIterator, Iterator, Mapping
+from concurrent.futures.process import BrokenProcessPool
+from typing import Annotated, Any, Literal
+
+import anyio
+import numpy as np
+import orjson
+from fastapi import APIRouter, HTTPException, Query, Request
+from fastapi.responses import Response, StreamingResponse
+from starlette.types import ASGIApp, Receive, Scope, Send
+
+from backend.api.deps import ContextDep, check_site_token, site_or_404
+from backend.context import ServiceContext
+from backend.ingest import Batch, IngestError, Limits, parse_csv_batch, parse_json_batch
+from backend.models import SOURCE_CODES
+from backend.queries import QUANTITIES, count_rows, downsample, iso_utc, parse_day_or_time, raw_rows
+from backend.writer import MeasurementJob
+
+logger = logging.getLogger(__name__)
+router = APIRouter(prefix="/api/v1/sites", tags=["measurements"])
+
+_JSON = "application/json"
+_OFFLOAD_BYTES = 32 * 1024  # parse bigger bodies in a worker process (or thread)
+
+_POST_DOC: dict[str, Any] = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "application/json": {"schema": {
+                "type": "object", "required": ["readings"],
+                "properties": {"readings": {"type": "array", "items": {
+                    "type": "object", "required": ["ts", "array"],
+                    "properties": {
+                        "ts": {"type": "string", "format": "date-time",
+                               "description": "ISO 8601 with UTC offset"},
+                        "array": {"type": "string", "example": "tracker"},
+                        "voltage_v": {"type": "number"}, "current_a": {"type": "number"},
+                        "power_w": {"type": "number",
+                                    "description": "optional; voltage_v·current_a when absent"},
+                        "voltage_adc": {"type": "integer",
+                                        "description": "raw divider ADC count (seed 000 eq. 19)"},
+                        "current_adc": {"type": "integer",
+                                        "description": "raw ACS712 ADC count (seed 000 eq. 17)"},
+                    }}}},
+            }},
+            "text/csv": {"schema": {"type": "string", "example":
+                                    "ts,array,voltage_v,current_a,power_w\n"
+                                    "2024-03-15T12:00:00-06:00,tracker,26.1,27.3,712.5\n"}},
+        },
+    },
+}
+
+
+def _limits(ctx: Any) -> Limits:
+    s = ctx.settings
+    return Limits(s.max_batch_rows, s.future_tolerance_s, s.max_voltage_v, s.max_current_a,
+                  s.min_current_a, s.power_tolerance_w)
+
+
+def _json(data: Any, status: int = 200) -> Response:
+    return Response(orjson.dumps(data), status_code=status, media_type=_JSON)
+
+
+def _too_large(msg: str) -> IngestError:
+    return IngestError(413, [{"loc": ["body"], "row": None, "field": None, "type": "too_large",
+                              "msg": msg}])
+
+
+async def _read_body(chunks: AsyncIterator[bytes], length: str | None, limit: int) -> bytes:
+    if length is not None and length.isdigit() and int(length) > limit:
+        raise _too_large(f"body of {length} bytes; the limit is {limit} bytes "
+                         "(HELIOTWIN_MAX_UPLOAD_BYTES): split the batch")
+    parts: list[bytes] = []
+    size = 0
+    async for chunk in chunks:
+        size += len(chunk)
+        if size > limit:
+            raise _too_large(f"body over {limit} bytes: split the batch")
+        parts.append(chunk)
+    return b"".join(parts)
+
+
+async def ingest(ctx: ServiceContext, site_id: str, headers: Mapping[str, str],
+                 chunks: AsyncIterator[bytes]) -> tuple[int, bytes, dict[str, str]]:
+    """Authorise, read, validate and store one POST; ``(status, JSON body, headers)``."""
+    try:
+        await check_site_token(ctx, site_id, headers.get("authorization"))
+        info = site_or_404(ctx, site_id)
+    except HTTPException as exc:
+        return exc.status_code, orjson.dumps({"detail": exc.detail}), dict(exc.headers or {})
+    ctype = headers.get("content-type", _JSON).split(";")[0].strip().lower()
+    try:
+        if ctype not in (_JSON, "text/csv", "application/csv", ""):
+            raise IngestError(415, [{"loc": ["header", "content-type"], "row": None,
+                                     "field": "content-type", "type": "unsupported",
+                                     "msg": f"Content-Type {ctype!r}: send application/json "
+                                            "or text/csv"}])
+        body = await _read_body(chunks, headers.get("content-length"),
+                                ctx.settings.max_upload_bytes)
+        parse = parse_csv_batch if ctype in ("text/csv", "application/csv") else parse_json_batch
+        arrays, limits = info.ingest_arrays(), _limits(ctx)
+        batch: Batch | None = None
+        if len(body) > _OFFLOAD_BYTES and ctx.parsers is not None:
+            try:
+                batch = await asyncio.get_running_loop().run_in_executor(
+                    ctx.parsers, parse, body, arrays, limits)
+            except BrokenProcessPool:  # a parser died (memory?): validate here instead
+                logger.exception("parser process pool broken; validating on a thread")
+        if batch is None and len(body) > _OFFLOAD_BYTES:
+            batch = await anyio.to_thread.run_sync(parse, body, arrays, limits)
+        elif batch is None:
+            batch = parse(body, arrays, limits)
+    except IngestError as exc:
+        return exc.status, orjson.dumps({"detail": exc.errors}), {}
+    job = MeasurementJob(batch.array_ids, SOURCE_CODES["measured"], batch.ts_s,
+                         batch.voltage_v, batch.current_a, batch.power_w)
+    try:
+        accepted, duplicates = await asyncio.wrap_future(ctx.writer.submit(job))
+    except Exception as exc:  # nothing was committed: the logger should send it again
+        logger.error("storing %d readings failed: %r", len(job), exc)
+        return 503, orjson.dumps({"detail": f"storage unavailable ({type(exc).__name__}); "
+                                            "nothing was stored, send the batch again"}), {
+            "Retry-After": "5"}
+    return 200, orjson.dumps({"accepted": accepted, "duplicates": duplicates}), {}
+
+
+@router.post("/{site_id}/measurements", openapi_extra=_POST_DOC,
+             responses={401: {}, 403: {}, 413: {}, 415: {}, 422: {}})
+async def post_measurements(site_id: str, request: Request) -> Response:
+    """Store readings of a site's arrays (``Authorization: Bearer <site write token>``).
+
+    Answers ``{"accepted": N, "duplicates": M}`` once the readings are committed;
+    a reading whose (array, ts) is already stored counts as a duplicate. In the
+    running app :class:`IngestFastPath` answers these requests before FastAPI's
+    routing (same :func:`ingest`); this route documents them and serves them
+    when the middleware is not installed.
+    """
+    status, body, headers = await ingest(request.app.state.ctx, site_id, request.headers,
+                                         request.stream())
+    return Response(body, status_code=status, media_type=_JSON, headers=headers)
+
+
+class IngestFastPath:
+    """ASGI middleware serving ``POST /api/v1/sites/{site_id}/measurements`` directly.
+
+    Field loggers send this request more than all others together; FastAPI's
+    routing and dependency solving cost more per request than validating and
+    storing a reading, so the middleware hands it straight to :func:`ingest`.
+    Everything else passes through untouched.
+    """
+
+    _PATH = re.compile(r"^/api/v1/sites/([^/]+)/measurements$")
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        match = (self._PATH.match(scope["path"])
+                 if scope["type"] == "http" and scope["method"] == "POST" else None)
+        if match is None:
+            await self.app(scope, receive, send)
+            return
+        headers = {k.decode("latin-1"): v.decode("latin-1") for k, v in scope["headers"]}
+
+        async def chunks() -> AsyncIterator[bytes]:
+            more = True
+            while more:
+                message = await receive()
+                if message["type"] == "http.disconnect":
+                    raise OSError("client disconnected")
+                more = message.get("more_body", False)
+                yield message.get("body", b"")
+
+        status, body, extra = await ingest(scope["app"].state.ctx, match.group(1), headers,
+                                           chunks())
+        out = [(b"content-type", b"application/json"),
+               (b"content-length", str(len(body)).encode())]
+        out += [(k.lower().encode(), v.encode()) for k, v in extra.items()]
+        await send({"type": "http.response.start", "status": status, "headers": out})
+        await send({"type": "http.response.body", "body": body})
+
+
+def _range(info: Any, start: str | None, end: str | None) -> tuple[int, int]:
+    if start is None or end is None:
+        raise HTTPException(422, "start and end are required (a date YYYY-MM-DD in the site's "
+                                 "time zone, or an ISO 8601 date-time with offset)")
+    try:
+        t0 = parse_day_or_time(start, info.zone, "start")
+        t1 = parse_day_or_time(end, info.zone, "end")
+    except ValueError as exc:
+        raise HTTPException(422, str(exc)) from None
+    if not t1 > t0:
+        raise HTTPException(422, f"end ({end}) must be after start ({start}); end is exclusive")
+    return int(t0.timestamp()), int(t1.timestamp())
+
+
+def _csv_lines(header: list[str], cols: list[list[Any]]) -> Iterator[str]:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    w.writerows(zip(*cols, strict=True))
+    yield buf.getvalue()
+
+
+@router.get("/{site_id}/measurements", responses={404: {}, 422: {}})
+def get_measurements(
+    site_id: str,
+    request: Request,
+    ctx: ContextDep,
+    array: Annotated[str | None, Query(description="array name, e.g. tracker")] = None,
+    start: Annotated[str | None, Query(description="date or ISO date-time, inclusive")] = None,
+    end: Annotated[str | None, Query(description="date or ISO date-time, exclusive")] = None,
+    max_points: Annotated[int | None, Query(ge=1, le=1_000_000)] = None,
+    source: Literal["measured", "twin"] = "measured",
+    format: Literal["json", "csv"] | None = None,
+) -> Response:
+    """Readings of one array over a range: raw, or min/mean/max buckets past ``max_points``."""
+    info = site_or_404(ctx, site_id)
+    if array is None or array not in info.arrays:
+        raise HTTPException(422, f"array: {'missing' if array is None else repr(array)}; "
+                                 f"this site has {', '.join(info.arrays)}")
+    t0, t1 = _range(info, start, end)
+    want_csv = format == "csv" or (format is None and "text/csv" in
+                                   request.headers.get("accept", ""))
+    if source == "twin":
+        ctx.twin.ensure(site_id, t0, t1)
+    arr = info.arrays[array]
+    src = SOURCE_CODES[source]
+    with ctx.engine.connect() as conn:
+        n = count_rows(conn, arr.array_id, src, t0, t1, info.phase_s)
+        limit = max_points if max_points is not None else (
+            None if want_csv else ctx.settings.max_json_points)
+        if limit is not None and n > limit and max_points is None:
+            raise HTTPException(422, f"{n} readings in the range; pass max_points (buckets) or "
+                                     "format=csv for all of them")
+        if limit is None or n <= limit:
+            rows = raw_rows(conn, arr.array_id, src, t0, t1)
+            bucket_s = 0
+            cols: dict[str, list[Any]] = {"ts": iso_utc(rows[:, 0].astype(np.int64))}
+            for j, q in enumerate(QUANTITIES):
+                cols[q] = rows[:, j + 1].tolist()
+        else:
+            b = downsample(conn, arr.array_id, src, t0, t1, limit, info.phase_s)
+            bucket_s = b.width_s
+            cols = b.points()
+    if want_csv:
+        name = f"{site_id}_{array}_{source}_{start}_{end}.csv".replace(":", "")
+        return StreamingResponse(_csv_lines(list(cols), list(cols.values())),
+                                 media_type="text/csv",
+                                 headers={"Content-Disposition": f'attachment; filename="{name}"'})
+    keys = list(cols)
+    points = [dict(zip(keys, vals, strict=True)) for vals in zip(*cols.values(), strict=True)]
+    return _json({"site_id": site_id, "array": array, "source": source,
+                  "start": iso_utc(np.array([t0]))[0], "end": iso_utc(np.array([t1]))[0],
+                  "bucket_s": bucket_s, "count": n, "points": points})

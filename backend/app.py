@@ -1,0 +1,152 @@
+"""The FastAPI application: routers and the lifespan that owns every background part.
+
+``create_app(settings)`` includes the core routers (health/meta, sites,
+measurements, energy, simulations), then — when those modules exist —
+``backend.api.routes.vision`` and, last, ``backend.api.routes.dashboard`` (its
+``/`` must never shadow the API). The lifespan:
+
+1. runs the migrations, loads the built-in sites, starts the writer
+   (:func:`backend.context.open_context`);
+2. starts the 3D scene (``backend.twin3d.TwinScene``) when enabled and present;
+3. starts the live twin loop (an asyncio task, every minute);
+4. starts the demo logger thread when enabled (making its own token if none is
+   configured);
+
+and on shutdown stops them in reverse order, the writer last, so everything
+acknowledged is committed before the process exits.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import gc
+import importlib
+import logging
+import threading
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from types import ModuleType
+from typing import Any
+
+import anyio
+from fastapi import FastAPI
+
+from backend.api.routes import energy, health, measurements, simulations, sites
+from backend.context import ServiceContext, open_context
+from backend.settings import Settings, get_settings
+from backend.tokens import create_token
+
+logger = logging.getLogger(__name__)
+
+
+def optional_module(name: str) -> ModuleType | None:
+    """Import ``name``, or None when exactly that module does not exist (yet)."""
+    try:
+        return importlib.import_module(name)
+    except ModuleNotFoundError as exc:
+        if exc.name == name:
+            return None
+        raise
+
+
+def _start_scene(ctx: ServiceContext) -> Any:
+    s = ctx.settings
+    if not s.viser:
+        return None
+    twin3d = optional_module("backend.twin3d")
+    info = ctx.registry.get(s.default_site)
+    if twin3d is None or info is None:
+        return None
+    try:
+        scene = twin3d.TwinScene(info.site, s.host, s.viser_port)
+        scene.start()
+    except Exception:  # the service runs without its 3D view rather than not at all
+        logger.exception("3D scene did not start")
+        return None
+    return scene
+
+
+def _demo_base_url(settings: Settings) -> str:
+    host = "127.0.0.1" if settings.host in ("0.0.0.0", "::", "") else settings.host
+    return f"http://{host}:{settings.port}"
+
+
+def _start_demo(ctx: ServiceContext, stop: threading.Event) -> threading.Thread | None:
+    s = ctx.settings
+    info = ctx.registry.get(s.default_site)
+    if not s.demo_logger or info is None:
+        return None
+    from backend.demo_logger import DemoLogger
+
+    token = s.demo_token or ctx.writer.call(
+        lambda conn: create_token(conn, s.default_site, "demo-logger (heliotwin serve)")
+    ).result()
+    demo = DemoLogger(info.site, _demo_base_url(s), token)
+
+    def run() -> None:
+        try:
+            demo.run(stop, backfill_days=s.demo_backfill_days)
+        except Exception:
+            logger.exception("demo logger stopped")
+        finally:
+            demo.close()
+
+    thread = threading.Thread(target=run, name="heliotwin-demo-logger", daemon=True)
+    thread.start()
+    return thread
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """Build the application (nothing starts until the lifespan runs)."""
+    settings = settings or get_settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        ctx = await anyio.to_thread.run_sync(open_context, settings)
+        app.state.ctx = ctx
+        scene = await anyio.to_thread.run_sync(_start_scene, ctx)
+        ctx.twin.scene = scene
+        app.state.scene = scene
+        stop_live = asyncio.Event()
+        live_task = None
+        if settings.live_twin:
+            live_task = asyncio.create_task(
+                ctx.twin.run_live(stop_live, settings.live_twin_interval_s), name="live-twin")
+        stop_demo = threading.Event()
+        demo_thread = _start_demo(ctx, stop_demo)
+        # everything loaded so far (pvlib, pandas, the app) lives as long as the
+        # process: keep it out of the collector's full passes, which would
+        # otherwise pause request handling for tens of milliseconds
+        gc.collect()
+        gc.freeze()
+        try:
+            yield
+        finally:
+            stop_demo.set()
+            stop_live.set()
+            if live_task is not None:
+                await live_task
+            if demo_thread is not None:
+                await anyio.to_thread.run_sync(demo_thread.join, 10.0)
+            if scene is not None:
+                await anyio.to_thread.run_sync(scene.stop)
+            await anyio.to_thread.run_sync(ctx.close)
+            logger.info("service stopped")
+
+    app = FastAPI(
+        title="heliotwin",
+        summary="Digital twin and field dashboard for dual-axis solar trackers",
+        version=health.service_version(),
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.add_middleware(measurements.IngestFastPath)
+    for module in (health, sites, measurements, energy, simulations):
+        app.include_router(module.router)
+    vision = optional_module("backend.api.routes.vision")
+    if vision is not None:
+        app.include_router(vision.router)
+    dashboard = optional_module("backend.api.routes.dashboard")
+    if dashboard is not None:
+        app.include_router(dashboard.router)
+    return app

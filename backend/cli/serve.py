@@ -1,0 +1,49 @@
+"""``heliotwin serve``: the API and dashboard, the 3D twin, the live twin loop, the demo logger."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+
+logger = logging.getLogger(__name__)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``serve`` subcommand."""
+    p = subparsers.add_parser(
+        "serve", help="run the service (API + dashboard, 3D twin, live twin, demo logger)",
+        description="Run the service. Settings come from HELIOTWIN_* environment variables "
+                    "(see the README); the flags below override them.",
+    )
+    p.add_argument("--host", default=None, help="interface (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=None, help="API/dashboard port (default 8000)")
+    p.add_argument("--viser-port", type=int, default=None, help="3D twin port (default 8080)")
+    p.add_argument("--no-demo", action="store_true", help="do not run the demo field logger")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Start uvicorn with :func:`backend.app.create_app` until interrupted."""
+    import uvicorn
+
+    from backend.app import create_app
+    from backend.settings import get_settings
+
+    overrides: dict[str, object] = {}
+    if args.host is not None:
+        overrides["host"] = args.host
+    if args.port is not None:
+        overrides["port"] = args.port
+    if args.viser_port is not None:
+        overrides["viser_port"] = args.viser_port
+    if args.no_demo:
+        overrides["demo_logger"] = False
+    settings = get_settings(**overrides)
+    app = create_app(settings)
+    print(f"heliotwin: dashboard and API on http://{settings.host}:{settings.port}/ "
+          f"(OpenAPI at /docs), 3D twin on :{settings.viser_port}", flush=True)
+    uvicorn.run(
+        app, host=settings.host, port=settings.port, loop="uvloop", http="httptools",
+        access_log=settings.access_log, log_level="info", timeout_graceful_shutdown=10,
+    )
+    return 0

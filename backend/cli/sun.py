@@ -1,0 +1,116 @@
+"""``heliotwin sun``: sun position for one place and time (DESIGN.md, CLI contract).
+
+    heliotwin sun --lat 39.742476 --lon -105.1786 --time 2003-10-17T12:30:30-07:00 \\
+        --elevation-m 1830.14 --pressure-hpa 820 --temperature-c 11 --delta-t-s 67 --json
+
+Heavy imports (numpy, pandas, pvlib) happen inside the command so that the
+other subcommands do not pay for them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from datetime import datetime
+from typing import Any
+
+
+def _parse_time(text: str) -> datetime:
+    """An ISO 8601 time that must carry a UTC offset."""
+    try:
+        value = datetime.fromisoformat(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"not an ISO 8601 time: {text!r}") from exc
+    if value.tzinfo is None:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} has no UTC offset; write e.g. {text}+00:00 or {text}-06:00"
+        )
+    return value
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``sun`` subcommand."""
+    p = subparsers.add_parser(
+        "sun",
+        help="sun position (NREL SPA or Duffie-Beckman) for one place and time",
+        description="Sun position for one place and time. Azimuth clockwise from north; "
+        "apparent = with atmospheric refraction (SPA's topocentric zenith).",
+    )
+    p.add_argument("--lat", type=float, required=True, help="latitude [deg], north positive")
+    p.add_argument("--lon", type=float, required=True, help="longitude [deg], east positive")
+    p.add_argument("--time", type=_parse_time, required=True, help="ISO 8601 time with offset")
+    p.add_argument("--elevation-m", type=float, default=0.0, help="site elevation [m] (default 0)")
+    p.add_argument(
+        "--pressure-hpa", type=float, default=1013.25, help="air pressure [hPa] (default 1013.25)"
+    )
+    p.add_argument(
+        "--temperature-c", type=float, default=12.0, help="air temperature [C] (default 12)"
+    )
+    p.add_argument("--delta-t-s", type=float, default=67.0, help="TT - UT1 [s] (default 67)")
+    p.add_argument(
+        "--method", choices=("spa", "duffie-beckman"), default="spa", help="algorithm (default spa)"
+    )
+    p.add_argument("--json", action="store_true", help="print JSON (default: a short text line)")
+    p.set_defaults(func=run)
+
+
+def compute(args: argparse.Namespace) -> dict[str, Any]:
+    """The answer as a JSON-ready dict with units in the keys."""
+    import pandas as pd
+
+    from sim.sun import solar_position, sun_vector_enu
+
+    when = pd.Timestamp(args.time)
+    pos = solar_position(
+        when,
+        args.lat,
+        args.lon,
+        altitude=args.elevation_m,
+        pressure=args.pressure_hpa * 100.0,
+        temperature=args.temperature_c,
+        delta_t=args.delta_t_s,
+        method=args.method,
+    ).iloc[0]
+    east, north, up = sun_vector_enu(pos["apparent_zenith"], pos["azimuth"]).tolist()
+    return {
+        "time": when.tz_convert("UTC").isoformat(),
+        "method": args.method,
+        "latitude_deg": args.lat,
+        "longitude_deg": args.lon,
+        "azimuth_deg": float(pos["azimuth"]),
+        "zenith_deg": float(pos["zenith"]),
+        "apparent_zenith_deg": float(pos["apparent_zenith"]),
+        "elevation_deg": float(pos["elevation"]),
+        "apparent_elevation_deg": float(pos["apparent_elevation"]),
+        "sun_vector_enu": [east, north, up],
+    }
+
+
+def _check(args: argparse.Namespace) -> str | None:
+    """Return an error message for out-of-range input, else None."""
+    if not -90.0 <= args.lat <= 90.0:
+        return f"--lat {args.lat}: latitude must be within [-90, 90] deg"
+    if not -180.0 <= args.lon <= 180.0:
+        return f"--lon {args.lon}: longitude must be within [-180, 180] deg"
+    if args.pressure_hpa <= 0:
+        return f"--pressure-hpa {args.pressure_hpa}: pressure must be positive"
+    return None
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print the sun position; exit 2 on bad input."""
+    problem = _check(args)
+    if problem:
+        print(f"heliotwin sun: error: {problem}", file=sys.stderr)
+        return 2
+    out = compute(args)
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(
+            f"{out['time']}  azimuth {out['azimuth_deg']:.5f} deg  "
+            f"apparent elevation {out['apparent_elevation_deg']:.5f} deg  "
+            f"(apparent zenith {out['apparent_zenith_deg']:.5f} deg, {out['method']})"
+        )
+    return 0

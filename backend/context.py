@@ -1,0 +1,99 @@
+"""Everything the running service holds: built at start-up, closed at shutdown.
+
+:func:`open_context` runs the migrations, loads the built-in sites from
+``Settings.sites_dir`` into the database, and starts the writer; the FastAPI
+lifespan (``backend/app.py``) keeps the result in ``app.state.ctx`` and the
+dependencies in ``backend/api/deps.py`` hand its parts to the routes.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import os
+import signal
+import threading
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+
+from sqlalchemy import Engine
+from sqlalchemy.orm import Session, sessionmaker
+
+from backend.db import make_engine, make_sessionmaker, run_migrations
+from backend.registry import Registry, sync_sites
+from backend.settings import Settings
+from backend.simulations import SimulationRunner
+from backend.tokens import TokenCache
+from backend.twin_service import TwinService
+from backend.writer import Writer
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class ServiceContext:
+    """The service's long-lived parts."""
+
+    settings: Settings
+    engine: Engine
+    sessions: sessionmaker[Session]
+    registry: Registry
+    writer: Writer
+    tokens: TokenCache
+    twin: TwinService
+    simulations: SimulationRunner
+    parsers: ProcessPoolExecutor | None = None
+
+    def close(self) -> None:
+        """Stop the background parts (parsers, runs, writer) and dispose of the engine."""
+        if self.parsers is not None:
+            self.parsers.shutdown(wait=True, cancel_futures=True)
+        self.simulations.stop()
+        self.writer.stop()
+        self.engine.dispose()
+
+
+def _watch_parent(ppid: int) -> None:
+    while os.getppid() == ppid:
+        time.sleep(1.0)
+    os._exit(0)  # the service is gone (even by SIGKILL): no orphan parser stays behind
+
+
+def _parser_init(ppid: int) -> None:
+    """Set up a parser process: default signal handling, and exit with the service."""
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, signal.SIG_DFL)
+    threading.Thread(target=_watch_parent, args=(ppid,), daemon=True).start()
+
+
+def open_context(settings: Settings) -> ServiceContext:
+    """Start the parser processes, migrate, load sites, start the writer."""
+    parsers = None
+    if settings.parse_processes > 0:
+        # Validating a big batch holds the GIL for ~1 ms per 1,000 readings; worker
+        # processes let it run beside the writer instead of taking turns with it.
+        # Forked first, before this module starts any thread of its own; they only
+        # run ``backend.ingest`` (NumPy, orjson) on the bytes they are sent.
+        parsers = ProcessPoolExecutor(settings.parse_processes,
+                                      mp_context=multiprocessing.get_context("fork"),
+                                      initializer=_parser_init, initargs=(os.getpid(),))
+        parsers.submit(int).result()
+    engine = make_engine(settings)
+    run_migrations(engine)
+    registry = Registry.load_files(settings.sites_dir)
+    sites = [info.site for info in registry.sites.values()]
+    with engine.begin() as conn:
+        sync_sites(conn, sites)
+        registry.refresh_arrays(conn)
+    logger.info("sites loaded: %s", ", ".join(registry.sites) or "none")
+    writer = Writer(engine, registry.phase_of_array, settings.energy_max_gap_s,
+                    settings.writer_max_group_rows)
+    writer.start()
+    twin = TwinService(registry, engine, writer, settings.twin_on_demand_max_days,
+                       scene_site=settings.default_site)
+    return ServiceContext(
+        settings=settings, engine=engine, sessions=make_sessionmaker(engine),
+        registry=registry, writer=writer, tokens=TokenCache(engine), twin=twin,
+        simulations=SimulationRunner(registry, engine, writer), parsers=parsers,
+    )

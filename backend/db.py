@@ -1,0 +1,122 @@
+"""Engine, sessions and migrations (SQLAlchemy 2 + Alembic).
+
+SQLite runs in WAL mode with foreign keys on and a busy timeout, so readers on
+the pool never block the one writer (``backend/writer.py``) and the writer never
+blocks them (SQLite docs, "Write-Ahead Logging"). ``synchronous`` comes from
+``Settings.sqlite_synchronous``: NORMAL by default, with which a commit in WAL
+mode survives a crash or SIGKILL of the service (it is in the WAL file before
+the answer goes out) but the last commits may be lost in an OS crash or power
+cut; FULL also fsyncs the WAL at every group commit (SQLite docs, "PRAGMA
+synchronous"). PostgreSQL needs nothing special.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from sqlalchemy import Connection, Engine, create_engine, event
+from sqlalchemy.engine import make_url
+from sqlalchemy.orm import Session, sessionmaker
+
+from backend.settings import Settings
+
+if TYPE_CHECKING:
+    from alembic.config import Config
+
+logger = logging.getLogger(__name__)
+
+MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
+_migrate_lock = threading.Lock()
+
+
+def make_engine(settings: Settings) -> Engine:
+    """Create the engine for ``settings.database_url`` (SQLite pragmas set per connection)."""
+    url = make_url(settings.database_url)
+    if url.get_backend_name() == "sqlite":
+        pool: dict[str, int] = {}
+        if url.database and url.database != ":memory:":
+            Path(url.database).parent.mkdir(parents=True, exist_ok=True)
+            pool = {"pool_size": 16, "max_overflow": 16}
+        engine = create_engine(
+            url, connect_args={"check_same_thread": False, "timeout": 30.0}, **pool
+        )
+        synchronous = settings.sqlite_synchronous
+
+        @event.listens_for(engine, "connect")
+        def _sqlite_pragmas(dbapi_conn: Any, _record: Any) -> None:
+            cur = dbapi_conn.cursor()
+            cur.execute("PRAGMA journal_mode=WAL")
+            cur.execute("PRAGMA foreign_keys=ON")
+            cur.execute(f"PRAGMA synchronous={synchronous}")
+            cur.execute("PRAGMA busy_timeout=30000")
+            cur.execute("PRAGMA cache_size=-65536")
+            cur.close()
+
+        install_sqlite_transactions(engine)
+        return engine
+    return create_engine(url, pool_size=16, max_overflow=16, pool_pre_ping=True)
+
+
+def install_sqlite_transactions(engine: Engine) -> None:
+    """Let SQLAlchemy, not ``sqlite3``, emit BEGIN (SQLAlchemy docs, "pysqlite" recipe).
+
+    Connections with the execution option ``sqlite_immediate`` begin with
+    ``BEGIN IMMEDIATE`` so the writer takes the write lock up front.
+    """
+
+    @event.listens_for(engine, "connect")
+    def _autocommit_driver(dbapi_conn: Any, _record: Any) -> None:
+        dbapi_conn.isolation_level = None
+
+    @event.listens_for(engine, "begin")
+    def _begin(conn: Connection) -> None:
+        immediate = conn.get_execution_options().get("sqlite_immediate", False)
+        conn.exec_driver_sql("BEGIN IMMEDIATE" if immediate else "BEGIN")
+
+
+def make_sessionmaker(engine: Engine) -> sessionmaker[Session]:
+    """A session factory bound to ``engine`` (objects stay usable after commit)."""
+    return sessionmaker(engine, expire_on_commit=False)
+
+
+@contextmanager
+def session_scope(factory: sessionmaker[Session]) -> Iterator[Session]:
+    """A session that commits on success and rolls back on error."""
+    session = factory()
+    try:
+        yield session
+        session.commit()
+    except BaseException:
+        session.rollback()
+        raise
+    finally:
+        session.close()
+
+
+def alembic_config(engine: Engine) -> Config:
+    """Alembic config pointing at ``backend/migrations`` (no ``alembic.ini`` needed)."""
+    # alembic logs its plugin set-up at INFO on import; nothing for the service log
+    logging.getLogger("alembic").setLevel(logging.WARNING)
+    from alembic.config import Config
+
+    cfg = Config()
+    cfg.set_main_option("script_location", str(MIGRATIONS_DIR))
+    url = engine.url.render_as_string(hide_password=False)
+    cfg.set_main_option("sqlalchemy.url", url.replace("%", "%%"))
+    return cfg
+
+
+def run_migrations(engine: Engine) -> None:
+    """Upgrade the database to every head revision (core ``0001_initial`` and later)."""
+    cfg = alembic_config(engine)
+    from alembic import command
+
+    with _migrate_lock, engine.begin() as conn:
+        cfg.attributes["connection"] = conn
+        command.upgrade(cfg, "heads")
+    logger.info("database at the latest schema (%s)", engine.url.get_backend_name())

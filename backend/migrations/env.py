@@ -1,0 +1,46 @@
+"""Alembic environment: the core tables (``backend.models``) and, when present, the
+vision tables (``backend.vision_store``) on the same ``Base.metadata``.
+
+``backend.db.run_migrations`` passes an open connection in
+``config.attributes["connection"]``; run from the ``alembic`` command line the URL
+comes from ``sqlalchemy.url`` or ``HELIOTWIN_DATABASE_URL``.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from alembic import context
+from sqlalchemy import create_engine
+
+import backend.models
+from backend.settings import get_settings
+
+try:
+    importlib.import_module("backend.vision_store")
+except ModuleNotFoundError as exc:  # the vision tables are not written yet
+    if exc.name != "backend.vision_store":
+        raise
+
+target_metadata = backend.models.Base.metadata
+
+
+def _run(connection) -> None:  # type: ignore[no-untyped-def]
+    context.configure(
+        connection=connection,
+        target_metadata=target_metadata,
+        render_as_batch=connection.dialect.name == "sqlite",
+    )
+    with context.begin_transaction():
+        context.run_migrations()
+
+
+connection = context.config.attributes.get("connection")
+if connection is not None:
+    _run(connection)
+else:
+    url = context.config.get_main_option("sqlalchemy.url") or get_settings().database_url
+    engine = create_engine(url)
+    with engine.begin() as conn:
+        _run(conn)
+    engine.dispose()

@@ -1,0 +1,192 @@
+"""ORM classes of the core tables (SQLAlchemy 2 declarative).
+
+Times at rest are UTC: measurement keys are integer Unix seconds (``ts_s``),
+which are unambiguous, compact, and identical on SQLite and PostgreSQL.
+``measurements`` and ``measurement_rollups`` are ``WITHOUT ROWID`` on SQLite, so
+the primary key is the table's clustered order and range scans per series are
+sequential. The schema itself is created by Alembic (``backend/migrations``);
+``tests/backend/test_migrations.py`` checks that these classes and the
+migrations agree.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+
+from sqlalchemy import (
+    BigInteger,
+    CheckConstraint,
+    DateTime,
+    Float,
+    ForeignKey,
+    Integer,
+    LargeBinary,
+    SmallInteger,
+    String,
+    Text,
+    UniqueConstraint,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+#: ``measurements.source`` codes (the API speaks the names).
+SOURCE_CODES: dict[str, int] = {"measured": 0, "twin": 1}
+SOURCE_NAMES: dict[int, str] = {v: k for k, v in SOURCE_CODES.items()}
+
+#: Width of one rollup bucket [s]; buckets start at ``k * ROLLUP_WIDTH_S + site phase``.
+ROLLUP_WIDTH_S = 3600
+
+
+def utcnow() -> dt.datetime:
+    """The current time, tz-aware UTC."""
+    return dt.datetime.now(dt.UTC)
+
+
+class Base(DeclarativeBase):
+    """Declarative base of every table (core and ``backend/vision_store.py``)."""
+
+
+class SiteRow(Base):
+    """A site: place, time zone and its config as loaded from ``data/sites/``."""
+
+    __tablename__ = "sites"
+
+    site_id: Mapped[str] = mapped_column(String(64), primary_key=True)
+    name: Mapped[str] = mapped_column(String(200))
+    latitude_deg: Mapped[float] = mapped_column(Float)
+    longitude_deg: Mapped[float] = mapped_column(Float)
+    altitude_m: Mapped[float] = mapped_column(Float)
+    timezone: Mapped[str] = mapped_column(String(64))
+    #: Offset of rollup buckets from the Unix hour grid [s], so that local hours
+    #: (and so local days and months) start on bucket boundaries.
+    bucket_phase_s: Mapped[int] = mapped_column(Integer, default=0)
+    config_json: Mapped[str] = mapped_column(Text)
+    updated_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class ArrayRow(Base):
+    """A PV array of a site (``tracker`` or ``fixed``) and its logger calibration.
+
+    The calibration converts a logger's raw ADC counts (seed 000, eqs. 16–19):
+    ``v_adc = counts · adc_vref_v / (2**adc_bits − 1)``; current from the ACS712
+    ``I = (v_adc − current_zero_v) / sensitivity`` (eq. 17); panel voltage from the
+    resistive divider ``V_in = v_adc · divider_ratio`` with
+    ``divider_ratio = (R1 + R2 + R3) / Rx`` (eq. 19 inverted).
+    """
+
+    __tablename__ = "arrays"
+    __table_args__ = (UniqueConstraint("site_id", "name", name="uq_arrays_site_name"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    site_id: Mapped[str] = mapped_column(ForeignKey("sites.site_id", ondelete="CASCADE"))
+    name: Mapped[str] = mapped_column(String(64))
+    kind: Mapped[str] = mapped_column(String(16))
+    config_json: Mapped[str] = mapped_column(Text)
+    adc_bits: Mapped[int] = mapped_column(Integer, default=10)
+    adc_vref_v: Mapped[float] = mapped_column(Float, default=5.0)
+    current_zero_v: Mapped[float] = mapped_column(Float, default=2.5)
+    current_sensitivity_mv_per_a: Mapped[float] = mapped_column(Float, default=100.0)
+    divider_ratio: Mapped[float] = mapped_column(Float, default=10.0)
+
+
+class LoggerToken(Base):
+    """A field logger's write token for one site, stored as its SHA-256 hash."""
+
+    __tablename__ = "logger_tokens"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    site_id: Mapped[str] = mapped_column(ForeignKey("sites.site_id", ondelete="CASCADE"))
+    token_sha256: Mapped[str] = mapped_column(String(64), unique=True)
+    token_prefix: Mapped[str] = mapped_column(String(12))
+    label: Mapped[str] = mapped_column(String(200), default="")
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class Measurement(Base):
+    """One reading of one array: measured by a logger or expected by the twin."""
+
+    __tablename__ = "measurements"
+    __table_args__ = (
+        CheckConstraint("source IN (0, 1)", name="ck_measurements_source"),
+        {"sqlite_with_rowid": False},
+    )
+
+    array_id: Mapped[int] = mapped_column(
+        ForeignKey("arrays.id", ondelete="CASCADE"), primary_key=True
+    )
+    source: Mapped[int] = mapped_column(SmallInteger, primary_key=True)
+    ts_s: Mapped[int] = mapped_column(BigInteger, primary_key=True)
+    voltage_v: Mapped[float] = mapped_column(Float)
+    current_a: Mapped[float] = mapped_column(Float)
+    power_w: Mapped[float] = mapped_column(Float)
+
+
+class MeasurementRollup(Base):
+    """Per-hour aggregate of one series, maintained by the writer at write time.
+
+    ``energy_wh`` is the trapezoid integral of power over the part of the hour
+    covered by consecutive readings no further apart than
+    ``Settings.energy_max_gap_s``, split exactly at the bucket edges.
+    """
+
+    __tablename__ = "measurement_rollups"
+    __table_args__ = ({"sqlite_with_rowid": False},)
+
+    array_id: Mapped[int] = mapped_column(
+        ForeignKey("arrays.id", ondelete="CASCADE"), primary_key=True
+    )
+    source: Mapped[int] = mapped_column(SmallInteger, primary_key=True)
+    bucket_s: Mapped[int] = mapped_column(BigInteger, primary_key=True)
+    n: Mapped[int] = mapped_column(Integer)
+    energy_wh: Mapped[float] = mapped_column(Float)
+    sum_voltage_v: Mapped[float] = mapped_column(Float)
+    sum_current_a: Mapped[float] = mapped_column(Float)
+    sum_power_w: Mapped[float] = mapped_column(Float)
+    min_voltage_v: Mapped[float] = mapped_column(Float)
+    max_voltage_v: Mapped[float] = mapped_column(Float)
+    min_current_a: Mapped[float] = mapped_column(Float)
+    max_current_a: Mapped[float] = mapped_column(Float)
+    min_power_w: Mapped[float] = mapped_column(Float)
+    max_power_w: Mapped[float] = mapped_column(Float)
+    first_ts_s: Mapped[int] = mapped_column(BigInteger)
+    last_ts_s: Mapped[int] = mapped_column(BigInteger)
+
+
+class TwinCoverage(Base):
+    """How far the twin series of one site is stored for one local day."""
+
+    __tablename__ = "twin_coverage"
+
+    site_id: Mapped[str] = mapped_column(
+        ForeignKey("sites.site_id", ondelete="CASCADE"), primary_key=True
+    )
+    day_start_s: Mapped[int] = mapped_column(BigInteger, primary_key=True)
+    covered_until_s: Mapped[int] = mapped_column(BigInteger)
+
+
+class SimulationRun(Base):
+    """A twin scenario run from the API (synchronous or in the background)."""
+
+    __tablename__ = "simulation_runs"
+
+    run_id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    site_id: Mapped[str] = mapped_column(ForeignKey("sites.site_id", ondelete="CASCADE"))
+    params_json: Mapped[str] = mapped_column(Text)
+    status: Mapped[str] = mapped_column(String(16))
+    progress: Mapped[float] = mapped_column(Float, default=0.0)
+    summary_json: Mapped[str | None] = mapped_column(Text, nullable=True)
+    error: Mapped[str | None] = mapped_column(Text, nullable=True)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    finished_at: Mapped[dt.datetime | None] = mapped_column(
+        DateTime(timezone=True), nullable=True
+    )
+
+
+class SimulationSeries(Base):
+    """The time series of a finished run: columns as a compressed ``.npz`` blob."""
+
+    __tablename__ = "simulation_series"
+
+    run_id: Mapped[str] = mapped_column(
+        ForeignKey("simulation_runs.run_id", ondelete="CASCADE"), primary_key=True
+    )
+    npz: Mapped[bytes] = mapped_column(LargeBinary)

@@ -1,0 +1,265 @@
+"""Reads for dashboards and people: measurements (raw or downsampled) and energy.
+
+Both are answered from the hourly rollups (``measurement_rollups``) for the
+whole hours of a range and from the raw rows only for the partial hours at its
+edges, so a year costs a few thousand rollup rows instead of half a million
+readings. Downsampled buckets carry min/mean/max so peaks survive.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+from dataclasses import dataclass
+from zoneinfo import ZoneInfo
+
+import numpy as np
+from sqlalchemy import Connection
+
+from backend.models import ROLLUP_WIDTH_S
+from backend.rollups import integrate_clipped_wh
+from backend.sqlraw import fetch
+
+W = ROLLUP_WIDTH_S
+QUANTITIES = ("voltage_v", "current_a", "power_w")
+
+_RAW = (
+    "SELECT ts_s, voltage_v, current_a, power_w FROM measurements "
+    "WHERE array_id = ? AND source = ? AND ts_s >= ? AND ts_s < ? ORDER BY ts_s"
+)
+_RAW_COUNT = (
+    "SELECT COUNT(*) FROM measurements WHERE array_id = ? AND source = ? AND ts_s >= ? AND ts_s < ?"
+)
+_ROLLUP_COUNT = (
+    "SELECT COALESCE(SUM(n), 0) FROM measurement_rollups "
+    "WHERE array_id = ? AND source = ? AND bucket_s >= ? AND bucket_s < ?"
+)
+_ROLLUP_BUCKETS = (
+    "SELECT (bucket_s - ?) / ?, SUM(n), SUM(sum_voltage_v), SUM(sum_current_a), SUM(sum_power_w), "
+    "MIN(min_voltage_v), MIN(min_current_a), MIN(min_power_w), "
+    "MAX(max_voltage_v), MAX(max_current_a), MAX(max_power_w) FROM measurement_rollups "
+    "WHERE array_id = ? AND source = ? AND bucket_s >= ? AND bucket_s < ? "
+    "GROUP BY 1 ORDER BY 1"
+)
+_RAW_BUCKETS = (
+    "SELECT (ts_s - ?) / ?, COUNT(*), SUM(voltage_v), SUM(current_a), SUM(power_w), "
+    "MIN(voltage_v), MIN(current_a), MIN(power_w), MAX(voltage_v), MAX(current_a), MAX(power_w) "
+    "FROM measurements WHERE array_id = ? AND source = ? AND ts_s >= ? AND ts_s < ? "
+    "GROUP BY 1 ORDER BY 1"
+)
+_ROLLUP_ENERGY = (
+    "SELECT array_id, source, bucket_s, energy_wh, n FROM measurement_rollups "
+    "WHERE array_id IN ({ids}) AND bucket_s >= ? AND bucket_s < ? ORDER BY bucket_s"
+)
+
+
+def grid_ceil(t: int, phase: int) -> int:
+    """First rollup edge at or after ``t``."""
+    return -((phase - t) // W) * W + phase
+
+
+def grid_floor(t: int, phase: int) -> int:
+    """Last rollup edge at or before ``t``."""
+    return ((t - phase) // W) * W + phase
+
+
+def iso_utc(ts_s: np.ndarray | list[int]) -> list[str]:
+    """ISO 8601 UTC strings (``…Z``) of Unix seconds."""
+    return np.datetime_as_string(np.asarray(ts_s, "datetime64[s]"), unit="s",
+                                 timezone="UTC").tolist()
+
+
+def count_rows(conn: Connection, array_id: int, source: int, start: int, end: int,
+               phase: int) -> int:
+    """Readings of a series in ``[start, end)``: rollup counts inside, raw counts at the edges."""
+    a, b = grid_ceil(start, phase), grid_floor(end, phase)
+    if a >= b:
+        return int(fetch(conn, _RAW_COUNT, (array_id, source, start, end))[0][0])
+    n = int(fetch(conn, _ROLLUP_COUNT, (array_id, source, a, b))[0][0])
+    if start < a:
+        n += int(fetch(conn, _RAW_COUNT, (array_id, source, start, a))[0][0])
+    if b < end:
+        n += int(fetch(conn, _RAW_COUNT, (array_id, source, b, end))[0][0])
+    return n
+
+
+def raw_rows(conn: Connection, array_id: int, source: int, start: int, end: int) -> np.ndarray:
+    """Stored readings ``(ts_s, voltage_v, current_a, power_w)`` in ``[start, end)``."""
+    rows = fetch(conn, _RAW, (array_id, source, start, end))
+    return np.array(rows, np.float64).reshape(-1, 4)
+
+
+@dataclass
+class Buckets:
+    """Per-bucket aggregates, parallel arrays (index = bucket number from ``origin``)."""
+
+    origin_s: int
+    width_s: int
+    k: np.ndarray
+    n: np.ndarray
+    sums: np.ndarray  # (m, 3)
+    mins: np.ndarray
+    maxs: np.ndarray
+
+    def points(self) -> dict[str, list[object]]:
+        """Columns of the answer: ts, n, mean/min/max per quantity."""
+        n = np.maximum(self.n, 1)
+        out: dict[str, list[object]] = {
+            "ts": list(iso_utc(self.origin_s + self.k * self.width_s)), "n": self.n.tolist(),
+        }
+        for j, q in enumerate(QUANTITIES):
+            out[q] = (self.sums[:, j] / n).tolist()
+            out[f"{q}_min"] = self.mins[:, j].tolist()
+            out[f"{q}_max"] = self.maxs[:, j].tolist()
+        return out
+
+
+def _buckets_from_rows(rows: list[tuple[object, ...]], origin: int, width: int) -> Buckets:
+    a = np.array(rows, np.float64).reshape(-1, 11)
+    return Buckets(origin, width, a[:, 0].astype(np.int64), a[:, 1].astype(np.int64),
+                   a[:, 2:5], a[:, 5:8], a[:, 8:11])
+
+
+def _merge(parts: list[Buckets], origin: int, width: int) -> Buckets:
+    parts = [p for p in parts if p.k.size]
+    if not parts:
+        e = np.zeros((0, 3))
+        return Buckets(origin, width, np.zeros(0, np.int64), np.zeros(0, np.int64), e, e, e)
+    k = np.concatenate([p.k for p in parts])
+    uk, inv = np.unique(k, return_inverse=True)
+    m = uk.size
+    n = np.bincount(inv, weights=np.concatenate([p.n for p in parts]), minlength=m)
+    sums = np.zeros((m, 3))
+    mins = np.full((m, 3), np.inf)
+    maxs = np.full((m, 3), -np.inf)
+    s_all = np.concatenate([p.sums for p in parts])
+    np.add.at(sums, inv, s_all)
+    np.minimum.at(mins, inv, np.concatenate([p.mins for p in parts]))
+    np.maximum.at(maxs, inv, np.concatenate([p.maxs for p in parts]))
+    return Buckets(origin, width, uk, n.astype(np.int64), sums, mins, maxs)
+
+
+def downsample(conn: Connection, array_id: int, source: int, start: int, end: int,
+               max_points: int, phase: int) -> Buckets:
+    """Aggregate ``[start, end)`` into at most ``max_points`` buckets (min/mean/max).
+
+    Widths of an hour or more are whole hours on the rollup grid (so the rollups
+    answer); shorter widths group the raw rows, starting at ``start``.
+    """
+    span = end - start
+    width = max(1, math.ceil(span / max_points))
+    if width < W:
+        rows = fetch(conn, _RAW_BUCKETS, (start, width, array_id, source, start, end))
+        return _buckets_from_rows(rows, start, width)
+    width = W * math.ceil(span / max(1, max_points - 1) / W)
+    origin = grid_floor(start, phase)
+    a, b = grid_ceil(start, phase), grid_floor(end, phase)
+    parts: list[Buckets] = []
+    if a < b:
+        rows = fetch(conn, _ROLLUP_BUCKETS, (origin, width, array_id, source, a, b))
+        parts.append(_buckets_from_rows(rows, origin, width))
+    for lo, hi in ((start, min(a, end)), (max(b, start), end)):
+        if lo < hi and not (a < b and lo == a):
+            rows = fetch(conn, _RAW_BUCKETS, (origin, width, array_id, source, lo, hi))
+            parts.append(_buckets_from_rows(rows, origin, width))
+    return _merge(parts, origin, width)
+
+
+# ---------------------------------------------------------------- energy
+
+
+def period_edges(start: dt.datetime, end: dt.datetime, interval: str,
+                 zone: ZoneInfo) -> list[dt.datetime]:
+    """Edges of local calendar hours, days or months that cover ``[start, end)``, clipped."""
+    local = start.astimezone(zone)
+    if interval == "hour":
+        cur = local.replace(minute=0, second=0, microsecond=0)
+    elif interval == "day":
+        cur = local.replace(hour=0, minute=0, second=0, microsecond=0)
+    else:
+        cur = local.replace(day=1, hour=0, minute=0, second=0, microsecond=0)
+    edges = [start]
+    guard = 0
+    while guard < 200_000:
+        guard += 1
+        if interval == "hour":
+            utc = cur.astimezone(dt.UTC) + dt.timedelta(hours=1)
+            cur = utc.astimezone(zone)
+        elif interval == "day":
+            d = cur.date() + dt.timedelta(days=1)
+            cur = dt.datetime(d.year, d.month, d.day, tzinfo=zone)
+        else:
+            y, m = (cur.year + 1, 1) if cur.month == 12 else (cur.year, cur.month + 1)
+            cur = dt.datetime(y, m, 1, tzinfo=zone)
+        if cur >= end:
+            break
+        if cur > start:
+            edges.append(cur)
+    edges.append(end)
+    return edges
+
+
+@dataclass
+class EnergyTable:
+    """Energy [Wh] and reading counts per (array, source, period)."""
+
+    edges_s: np.ndarray
+    energy_wh: dict[tuple[int, int], np.ndarray]
+    readings: dict[tuple[int, int], np.ndarray]
+
+
+def energy_table(conn: Connection, array_ids: list[int], edges_s: np.ndarray, phase: int,
+                 max_gap_s: int) -> EnergyTable:
+    """Energy per period for every array and source; periods ``[edges[i], edges[i+1])``."""
+    nper = edges_s.size - 1
+    start, end = int(edges_s[0]), int(edges_s[-1])
+    keys = [(a, s) for a in array_ids for s in (0, 1)]
+    energy = {key: np.zeros(nper) for key in keys}
+    counts = {key: np.zeros(nper, np.int64) for key in keys}
+    a, b = grid_ceil(start, phase), grid_floor(end, phase)
+    if a < b:
+        sql = _ROLLUP_ENERGY.format(ids=", ".join("?" * len(array_ids)))
+        rows = fetch(conn, sql, (*array_ids, a, b))
+        if rows:
+            r = np.array(rows, np.float64)
+            per = np.searchsorted(edges_s, r[:, 2], side="right") - 1
+            for key in keys:
+                sel = (r[:, 0] == key[0]) & (r[:, 1] == key[1])
+                energy[key] += np.bincount(per[sel], weights=r[sel, 3], minlength=nper)[:nper]
+                counts[key] += np.bincount(per[sel], weights=r[sel, 4],
+                                           minlength=nper)[:nper].astype(np.int64)
+    # partial hours: before the first and after the last whole rollup bucket, and
+    # periods whose edges are off the hour grid (only with an unaligned start/end)
+    pieces = [(start, min(a, end)), (max(b, start), end)] if a < b else [(start, end)]
+    for lo, hi in pieces:
+        if lo >= hi:
+            continue
+        for key in keys:
+            rows = fetch(conn, _RAW, (key[0], key[1], lo - max_gap_s, hi + max_gap_s))
+            if not rows:
+                continue
+            r = np.array(rows, np.float64)
+            inner = edges_s[(edges_s > lo) & (edges_s < hi)]
+            cuts = np.concatenate([[lo], inner, [hi]])
+            for c0, c1 in zip(cuts[:-1], cuts[1:], strict=True):
+                p = int(np.searchsorted(edges_s, c0, side="right") - 1)
+                energy[key][p] += integrate_clipped_wh(r[:, 0], r[:, 3], c0, c1, max_gap_s)
+                counts[key][p] += int(np.count_nonzero((r[:, 0] >= c0) & (r[:, 0] < c1)))
+    return EnergyTable(edges_s, energy, counts)
+
+
+def parse_day_or_time(text: str, zone: ZoneInfo, name: str) -> dt.datetime:
+    """A bare date (midnight in ``zone``) or an ISO date-time with offset; ValueError says why."""
+    text = text.strip()
+    try:
+        if len(text) == 10:
+            d = dt.date.fromisoformat(text)
+            return dt.datetime(d.year, d.month, d.day, tzinfo=zone)
+        value = dt.datetime.fromisoformat(text)
+    except ValueError:
+        raise ValueError(f"{name}: {text!r} is not a date (YYYY-MM-DD) or an ISO 8601 "
+                         "date-time with offset") from None
+    if value.tzinfo is None:
+        raise ValueError(f"{name}: {text!r} has no UTC offset; add one or give a bare date")
+    return value
+

@@ -1,0 +1,266 @@
+"""Hourly rollups of a measurement series and the energy rule.
+
+Energy is the trapezoid integral of ``power_w`` over time between consecutive
+readings of one series (array and source). Two readings further apart than
+``max_gap_s`` are not bridged: that interval adds nothing, so a logger outage
+shows as missing energy instead of an invented straight line. An interval that
+crosses a bucket edge is split there, with the power at the edge interpolated
+linearly, so hourly buckets add up exactly to the integral over any range made
+of whole buckets.
+
+Buckets start at ``k · 3600 + phase_s`` (``phase_s`` is the site's UTC offset
+modulo one hour), so local hours, days and months are unions of buckets.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from backend.models import ROLLUP_WIDTH_S
+
+ROLLUP_COLUMNS = (
+    "bucket_s", "n", "energy_wh",
+    "sum_voltage_v", "sum_current_a", "sum_power_w",
+    "min_voltage_v", "min_current_a", "min_power_w",
+    "max_voltage_v", "max_current_a", "max_power_w",
+    "first_ts_s", "last_ts_s",
+)
+
+
+def bucket_index(ts_s: np.ndarray, phase_s: int, width_s: int = ROLLUP_WIDTH_S) -> np.ndarray:
+    """Index ``k`` of the bucket ``[k·width + phase, (k+1)·width + phase)`` holding each time."""
+    return (np.asarray(ts_s, np.int64) - phase_s) // width_s
+
+
+def affected_runs(
+    ts_s: np.ndarray, phase_s: int, max_gap_s: int, width_s: int = ROLLUP_WIDTH_S
+) -> list[tuple[int, int]]:
+    """Runs ``(k_first, k_last)`` of buckets whose rollup new readings at ``ts_s`` can change.
+
+    A reading at ``t`` changes the intervals to its neighbours, which lie within
+    ``max_gap_s`` of ``t`` when they count at all (``max_gap_s <= width_s``).
+    """
+    ts = np.asarray(ts_s, np.int64)
+    ks = np.unique(np.concatenate([
+        bucket_index(ts - max_gap_s, phase_s, width_s),
+        bucket_index(ts, phase_s, width_s),
+        bucket_index(ts + max_gap_s, phase_s, width_s),
+    ]))
+    if ks.size == 0:
+        return []
+    breaks = np.flatnonzero(np.diff(ks) > 1)
+    starts = np.concatenate([[0], breaks + 1])
+    ends = np.concatenate([breaks, [ks.size - 1]])
+    return [(int(ks[a]), int(ks[b])) for a, b in zip(starts, ends, strict=True)]
+
+
+def interval_energy_wh(
+    ts_s: np.ndarray, power_w: np.ndarray, max_gap_s: float
+) -> np.ndarray:
+    """Trapezoid energy [Wh] of each interval between consecutive readings (0 past the gap)."""
+    t = np.asarray(ts_s, np.float64)
+    p = np.asarray(power_w, np.float64)
+    dt_s = np.diff(t)
+    e = 0.5 * (p[1:] + p[:-1]) * dt_s / 3600.0
+    return np.where(dt_s <= max_gap_s, e, 0.0)
+
+
+@dataclass
+class SeriesWindow:
+    """Readings of one series over a window, sorted by time."""
+
+    ts_s: np.ndarray
+    voltage_v: np.ndarray
+    current_a: np.ndarray
+    power_w: np.ndarray
+
+
+def energy_per_bucket(
+    w: SeriesWindow, k_first: int, k_last: int, phase_s: int, max_gap_s: int,
+    width_s: int = ROLLUP_WIDTH_S,
+) -> np.ndarray:
+    """Energy [Wh] of buckets ``k_first..k_last`` from the readings in ``w``.
+
+    ``w`` must hold every reading in ``[start(k_first) − max_gap_s, end(k_last) + max_gap_s]``.
+    """
+    out = np.zeros(k_last - k_first + 1)
+    if w.ts_s.size < 2:
+        return out
+    t0, t1 = w.ts_s[:-1], w.ts_s[1:]
+    p0, p1 = w.power_w[:-1], w.power_w[1:]
+    keep = (t1 - t0) <= max_gap_s
+    t0, t1, p0, p1 = t0[keep], t1[keep], p0[keep], p1[keep]
+    k0 = bucket_index(t0, phase_s, width_s)
+    k1 = bucket_index(t1 - 1, phase_s, width_s)  # an interval ending on an edge stays left
+    edge = (k0 + 1) * width_s + phase_s
+    split = k1 > k0
+    b = np.where(split, edge, t1)
+    frac = (b - t0) / (t1 - t0)
+    pb = p0 + (p1 - p0) * frac
+    left = 0.5 * (p0 + pb) * (b - t0) / 3600.0
+    right = np.where(split, 0.5 * (pb + p1) * (t1 - b) / 3600.0, 0.0)
+    n = out.size
+    for k, e in ((k0, left), (k0 + 1, right)):
+        sel = (k >= k_first) & (k <= k_last)
+        out += np.bincount(k[sel] - k_first, weights=e[sel], minlength=n)[:n]
+    return out
+
+
+def _stats(
+    w: SeriesWindow, k_first: int, k_last: int, phase_s: int, width_s: int
+) -> tuple[np.ndarray, list[list[float | int]]]:
+    """Bucket indices and per-bucket columns (n, sums, mins, maxs, first, last) in a range."""
+    k = bucket_index(w.ts_s, phase_s, width_s)
+    inside = (k >= k_first) & (k <= k_last)
+    if not inside.any():
+        return np.zeros(0, np.int64), []
+    ki = k[inside]
+    ts = w.ts_s[inside]
+    cols = [w.voltage_v[inside], w.current_a[inside], w.power_w[inside]]
+    uk, first = np.unique(ki, return_index=True)
+    counts = np.diff(np.concatenate([first, [ki.size]]))
+    last = first + counts - 1
+    out = [counts.tolist()]
+    out += [np.add.reduceat(c, first).tolist() for c in cols]
+    out += [np.minimum.reduceat(c, first).tolist() for c in cols]
+    out += [np.maximum.reduceat(c, first).tolist() for c in cols]
+    out += [ts[first].tolist(), ts[last].tolist()]
+    return uk, out
+
+
+def rollup_rows(
+    w: SeriesWindow, k_first: int, k_last: int, phase_s: int, max_gap_s: int,
+    width_s: int = ROLLUP_WIDTH_S,
+) -> list[tuple[float | int, ...]]:
+    """Rollup rows (``ROLLUP_COLUMNS`` order) of the non-empty buckets ``k_first..k_last``."""
+    uk, cols = _stats(w, k_first, k_last, phase_s, width_s)
+    if uk.size == 0:
+        return []
+    energy = energy_per_bucket(w, k_first, k_last, phase_s, max_gap_s, width_s)
+    return list(zip((uk * width_s + phase_s).tolist(), cols[0],
+                    energy[uk - k_first].tolist(), *cols[1:], strict=True))
+
+
+def increment_rows(
+    prev: tuple[int, float] | None, nxt: tuple[int, float] | None, w: SeriesWindow,
+    phase_s: int, max_gap_s: int, width_s: int = ROLLUP_WIDTH_S,
+) -> list[tuple[float | int, ...]]:
+    """Rollup *increments* for readings ``w`` put into a hole of a stored series.
+
+    ``prev``/``nxt`` are ``(ts_s, power_w)`` of the stored readings just before and
+    after ``w`` (None at either end of the series); no stored reading lies between
+    them. Counts, sums and energy are to be added to the stored rollups (energy:
+    the new intervals prev → w → nxt minus the old interval prev → nxt),
+    minima/maxima and first/last merged. A bucket that only changes energy gets
+    ``n = 0`` and neutral extremes.
+    """
+    if w.ts_s.size <= SMALL:
+        return _increment_rows_small(prev, nxt, w, phase_s, max_gap_s, width_s)
+    ends = [p for p in (prev, nxt) if p is not None]
+    k_all = bucket_index(np.concatenate([w.ts_s, [e[0] for e in ends]]).astype(np.int64),
+                         phase_s, width_s)
+    k_first, k_last = int(k_all.min()), int(k_all.max())
+    ts = np.concatenate([[prev[0]] if prev else [], w.ts_s, [nxt[0]] if nxt else []])
+    pw = np.concatenate([[prev[1]] if prev else [], w.power_w, [nxt[1]] if nxt else []])
+    nan = np.full(ts.size, np.nan)
+    energy = energy_per_bucket(SeriesWindow(ts.astype(np.int64), nan, nan, pw),
+                               k_first, k_last, phase_s, max_gap_s, width_s)
+    if prev is not None and nxt is not None:
+        old = SeriesWindow(np.array([prev[0], nxt[0]], np.int64), nan[:2], nan[:2],
+                           np.array([prev[1], nxt[1]]))
+        energy -= energy_per_bucket(old, k_first, k_last, phase_s, max_gap_s, width_s)
+    uk, cols = _stats(w, k_first, k_last, phase_s, width_s)
+    rows = {int(k): [int(k) * width_s + phase_s, c[0], float(energy[int(k) - k_first]), *c[1:]]
+            for k, *c in zip(uk.tolist(), *cols, strict=True)}
+    inf = float("inf")
+    for j in np.flatnonzero(energy).tolist():
+        k = k_first + j
+        if k not in rows:
+            rows[k] = [k * width_s + phase_s, 0, float(energy[j]), 0.0, 0.0, 0.0,
+                       inf, inf, inf, -inf, -inf, -inf, 2**62, -(2**62)]
+    return [tuple(rows[k]) for k in sorted(rows)]
+
+
+SMALL = 8  # at most this many new readings: plain Python beats NumPy's per-call cost
+
+
+def _interval_wh(t0: int, p0: float, t1: int, p1: float, phase_s: int, max_gap_s: int,
+                 width_s: int) -> list[tuple[int, float]]:
+    """``(bucket, Wh)`` parts of one interval, split at a bucket edge (as energy_per_bucket)."""
+    if t1 - t0 > max_gap_s:
+        return []
+    k0 = (t0 - phase_s) // width_s
+    k1 = (t1 - 1 - phase_s) // width_s
+    if k0 == k1:
+        return [(k0, 0.5 * (p0 + p1) * (t1 - t0) / 3600.0)]
+    b = (k0 + 1) * width_s + phase_s
+    pb = p0 + (p1 - p0) * ((b - t0) / (t1 - t0))
+    return [(k0, 0.5 * (p0 + pb) * (b - t0) / 3600.0), (k1, 0.5 * (pb + p1) * (t1 - b) / 3600.0)]
+
+
+def _increment_rows_small(
+    prev: tuple[int, float] | None, nxt: tuple[int, float] | None, w: SeriesWindow,
+    phase_s: int, max_gap_s: int, width_s: int,
+) -> list[tuple[float | int, ...]]:
+    """:func:`increment_rows` for a few readings, in plain Python."""
+    ts = w.ts_s.tolist()
+    vs, cs, ps = w.voltage_v.tolist(), w.current_a.tolist(), w.power_w.tolist()
+    pts = ([prev] if prev else []) + list(zip(ts, ps, strict=True)) + ([nxt] if nxt else [])
+    energy: dict[int, float] = {}
+    for (t0, p0), (t1, p1) in zip(pts[:-1], pts[1:], strict=True):
+        for k, e in _interval_wh(t0, p0, t1, p1, phase_s, max_gap_s, width_s):
+            energy[k] = energy.get(k, 0.0) + e
+    if prev is not None and nxt is not None:
+        for k, e in _interval_wh(prev[0], prev[1], nxt[0], nxt[1], phase_s, max_gap_s, width_s):
+            energy[k] = energy.get(k, 0.0) - e
+    inf = float("inf")
+    rows: dict[int, list[float | int]] = {}
+    for t, v, c, p in zip(ts, vs, cs, ps, strict=True):
+        k = (t - phase_s) // width_s
+        r = rows.get(k)
+        if r is None:
+            rows[k] = [k * width_s + phase_s, 1, 0.0, v, c, p, v, c, p, v, c, p, t, t]
+            continue
+        r[1] += 1
+        r[3] += v
+        r[4] += c
+        r[5] += p
+        r[6], r[7], r[8] = min(r[6], v), min(r[7], c), min(r[8], p)
+        r[9], r[10], r[11] = max(r[9], v), max(r[10], c), max(r[11], p)
+        r[12], r[13] = min(r[12], t), max(r[13], t)
+    for k, e in energy.items():
+        if e == 0.0:
+            continue
+        r = rows.get(k)
+        if r is None:
+            rows[k] = [k * width_s + phase_s, 0, e, 0.0, 0.0, 0.0,
+                       inf, inf, inf, -inf, -inf, -inf, 2**62, -(2**62)]
+        else:
+            r[2] = e
+    return [tuple(rows[k]) for k in sorted(rows)]
+
+
+def integrate_clipped_wh(
+    ts_s: np.ndarray, power_w: np.ndarray, t0: float, t1: float, max_gap_s: float
+) -> float:
+    """Energy [Wh] of a series over ``[t0, t1)`` by the same rule as the rollups.
+
+    ``ts_s`` must hold every reading within ``max_gap_s`` of the range. Each
+    interval no longer than ``max_gap_s`` is clipped to the range, with the power
+    at a clip point interpolated linearly.
+    """
+    if len(ts_s) < 2:
+        return 0.0
+    a = np.asarray(ts_s[:-1], np.float64)
+    b = np.asarray(ts_s[1:], np.float64)
+    pa = np.asarray(power_w[:-1], np.float64)
+    pb = np.asarray(power_w[1:], np.float64)
+    keep = ((b - a) <= max_gap_s) & (b > t0) & (a < t1)
+    a, b, pa, pb = a[keep], b[keep], pa[keep], pb[keep]
+    lo = np.maximum(a, t0)
+    hi = np.minimum(b, t1)
+    p_lo = pa + (pb - pa) * (lo - a) / (b - a)
+    p_hi = pa + (pb - pa) * (hi - a) / (b - a)
+    return float(np.sum(0.5 * (p_lo + p_hi) * (hi - lo)) / 3600.0)

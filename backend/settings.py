@@ -1,0 +1,115 @@
+"""Service settings: one typed object from ``HELIOTWIN_*`` environment variables.
+
+Every field has a working default (SQLite under the repository's ``data/``,
+port 8000 for the API and dashboard, 8080 for viser). ``get_settings()`` builds
+the object; nothing is read from the environment at import time. The README's
+settings table (between ``<!-- settings:start -->`` and ``<!-- settings:end -->``)
+documents every field, and ``tests/backend/test_settings.py`` checks that it does.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+DATA_DIR = REPO_ROOT / "data"
+
+
+def _default_database_url() -> str:
+    return f"sqlite:///{DATA_DIR / 'heliotwin.sqlite'}"
+
+
+class Settings(BaseSettings):
+    """All settings of the service and the ``heliotwin`` commands that use the database."""
+
+    model_config = SettingsConfigDict(env_prefix="HELIOTWIN_", extra="ignore")
+
+    database_url: str = Field(
+        default_factory=_default_database_url,
+        description="SQLAlchemy URL; `postgresql+psycopg://user@host:5432/db` for PostgreSQL.",
+    )
+    host: str = Field("127.0.0.1", description="Interface the API and dashboard listen on.")
+    port: int = Field(8000, ge=0, le=65535, description="Port of the API and dashboard.")
+    viser_port: int = Field(8080, ge=0, le=65535, description="Port of the viser 3D twin.")
+    viser: bool = Field(True, description="Start the viser 3D twin with the service.")
+    sites_dir: Path = Field(DATA_DIR / "sites", description="Folder of built-in site configs.")
+    default_site: str = Field(
+        "tehuantepec", description="Site of the 3D scene, the demo logger and the dashboard."
+    )
+    max_upload_bytes: int = Field(
+        10 * 1024 * 1024, gt=0, description="Largest request body accepted (ingest, images)."
+    )
+    max_batch_rows: int = Field(
+        100_000, gt=0, description="Most readings in one measurements POST (more → 413)."
+    )
+    max_json_points: int = Field(
+        200_000, gt=0, description="Most raw points one JSON measurements answer holds."
+    )
+    future_tolerance_s: int = Field(
+        900, ge=0, description="How far past the server clock a reading may be stamped."
+    )
+    max_voltage_v: float = Field(1500.0, gt=0, description="Highest plausible array voltage.")
+    max_current_a: float = Field(100.0, gt=0, description="Highest plausible array current.")
+    min_current_a: float = Field(
+        -1.0, le=0, description="Lowest plausible current (sensor offset at night)."
+    )
+    power_tolerance_w: float = Field(
+        5.0, ge=0, description="Allowed gap between power_w and voltage_v·current_a, beyond 5 %."
+    )
+    energy_max_gap_s: int = Field(
+        600, gt=0, le=3600, description="Longest gap between readings that energy bridges."
+    )
+    parse_processes: int = Field(
+        1, ge=0, le=8, description="Worker processes validating large ingest batches (0: none)."
+    )
+    writer_max_group_rows: int = Field(
+        200_000, gt=0, description="Most rows the writer commits in one group commit."
+    )
+    sqlite_synchronous: str = Field(
+        "NORMAL", pattern="^(NORMAL|FULL|EXTRA)$",
+        description="SQLite `synchronous`: NORMAL survives a killed process, FULL also "
+                    "a power cut (one fsync per group commit).",
+    )
+    live_twin: bool = Field(True, description="Write the twin's I/V/P every minute (source twin).")
+    live_twin_interval_s: float = Field(
+        60.0, gt=0, description="Period of the live twin loop (tests shorten it)."
+    )
+    twin_on_demand_max_days: int = Field(
+        800, ge=0, description="Most days of twin series one energy query may compute."
+    )
+    demo_logger: bool = Field(True, description="`heliotwin serve` runs the demo field logger.")
+    demo_token: str | None = Field(
+        None, description="Write token of the demo logger; created at start when unset."
+    )
+    demo_backfill_days: int = Field(
+        7, ge=0, le=366, description="Days of history the demo logger back-fills at start."
+    )
+    max_simulation_steps: int = Field(
+        1_100_000, gt=0, description="Most time steps one simulation request may ask for."
+    )
+    vision_max_pixels: int = Field(
+        40_000_000, gt=0, description="Largest image (pixels) the vision endpoints decode."
+    )
+    vision_require_token: bool = Field(
+        False, description="Vision endpoints need a site write token."
+    )
+    access_log: bool = Field(False, description="Log every HTTP request (uvicorn access log).")
+
+    @model_validator(mode="after")
+    def _check(self) -> Settings:
+        if self.database_url.startswith("postgresql://"):
+            self.database_url = "postgresql+psycopg://" + self.database_url[len("postgresql://"):]
+        return self
+
+    @property
+    def is_sqlite(self) -> bool:
+        """Whether the database is SQLite."""
+        return self.database_url.startswith("sqlite")
+
+
+def get_settings(**overrides: object) -> Settings:
+    """Build the settings from the environment, with keyword overrides on top."""
+    return Settings(**overrides)  # type: ignore[arg-type]

@@ -1,0 +1,211 @@
+"""The twin's expected I/V/P beside the measurements (source ``twin``).
+
+Two ways the twin series gets into ``measurements``:
+
+- the live loop (:meth:`TwinService.run_live`): every minute while the service
+  runs, ``sim.twin.simulate(site, t, t + 60 s)`` for each site, written through
+  the writer, and handed to the 3D scene (``update_live``);
+- on demand (:meth:`TwinService.ensure`): before a query reads twin data of past
+  days, the missing part of each local day up to now is simulated in one
+  vectorised run and stored, so ``twin_wh`` exists for any day, not only for the
+  minutes the service happened to be running. ``twin_coverage`` remembers how
+  far each day is stored.
+
+The twin uses clear sky (``sim.twin.simulate`` with ``weather=None``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import datetime as dt
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from sqlalchemy import Connection, Engine, select
+from sqlalchemy.dialects import postgresql, sqlite
+
+from backend.models import SOURCE_CODES, TwinCoverage
+from backend.registry import Registry, SiteInfo
+from backend.writer import MeasurementJob, Writer
+from sim.twin import simulate
+
+logger = logging.getLogger(__name__)
+TWIN = SOURCE_CODES["twin"]
+
+
+@dataclass
+class LiveSample:
+    """The twin at one minute: what the status tiles and the 3D scene show."""
+
+    ts_s: int
+    values: dict[str, float]
+
+
+def jobs_from_series(info: SiteInfo, series: pd.DataFrame) -> list[MeasurementJob]:
+    """One ``twin`` measurement job per array from a ``TwinResult.series``."""
+    ts = (series.index.as_unit("s").asi8).astype(np.int64)
+    jobs = []
+    for name, arr in info.arrays.items():
+        cols = [f"{name}_{q}" for q in ("voltage_v", "current_a", "power_w")]
+        if not all(c in series.columns for c in cols):
+            continue
+        v, i, p = (np.nan_to_num(series[c].to_numpy(np.float64)) for c in cols)
+        jobs.append(MeasurementJob(np.full(ts.size, arr.array_id, np.int64), TWIN, ts, v, i, p))
+    return jobs
+
+
+class TwinService:
+    """Writes and caches twin series for every site."""
+
+    def __init__(self, registry: Registry, engine: Engine, writer: Writer,
+                 max_days: int, scene: Any = None, scene_site: str | None = None) -> None:
+        self.registry = registry
+        self.engine = engine
+        self.writer = writer
+        self.max_days = max_days
+        self.scene = scene
+        self.scene_site = scene_site
+        self.latest: dict[str, LiveSample] = {}
+        self._locks = {sid: threading.Lock() for sid in registry.sites}
+
+    def simulable(self, site_id: str) -> bool:
+        """Whether ``sim.twin.simulate`` can run the site (it has a tracker and a fixed array)."""
+        info = self.registry.sites.get(site_id)
+        return info is not None and {"tracker", "fixed"} <= set(info.site.arrays)
+
+    # -- on demand ----------------------------------------------------------
+    def _day_starts(self, info: SiteInfo, start_s: int, end_s: int) -> list[int]:
+        zone = info.zone
+        d = dt.datetime.fromtimestamp(start_s, zone).date()
+        out = []
+        for _ in range(self.max_days + 1):
+            t = int(dt.datetime(d.year, d.month, d.day, tzinfo=zone).timestamp())
+            if t >= end_s:
+                break
+            out.append(t)
+            d += dt.timedelta(days=1)
+        if len(out) > self.max_days:
+            logger.warning("twin on demand limited to %d days", self.max_days)
+            out = out[: self.max_days]
+        return out
+
+    def ensure(self, site_id: str, start_s: int, end_s: int, now_s: float | None = None) -> int:
+        """Store the twin series of every local day touching ``[start_s, end_s)`` up to now.
+
+        Returns the number of readings simulated (0 when everything was stored).
+        """
+        if not self.simulable(site_id):
+            return 0
+        info = self.registry.sites[site_id]
+        now_minute = int((time.time() if now_s is None else now_s) // 60 * 60)
+        days = self._day_starts(info, start_s, min(end_s, now_minute + 1))
+        if not days:
+            return 0
+        with self._locks[site_id]:
+            with self.engine.connect() as conn:
+                covered = dict(conn.execute(
+                    select(TwinCoverage.day_start_s, TwinCoverage.covered_until_s).where(
+                        TwinCoverage.site_id == site_id,
+                        TwinCoverage.day_start_s >= days[0],
+                        TwinCoverage.day_start_s <= days[-1],
+                    )).tuples().all())
+            spans: list[tuple[int, int]] = []  # (from, to) of missing pieces
+            marks: list[tuple[int, int]] = []
+            for j, day in enumerate(days):
+                day_end = days[j + 1] if j + 1 < len(days) else int(
+                    (dt.datetime.fromtimestamp(day, info.zone) + dt.timedelta(hours=36))
+                    .replace(hour=0, minute=0, second=0).timestamp())
+                want = min(day_end, now_minute)
+                have = covered.get(day, day)
+                if have >= want:
+                    continue
+                marks.append((day, want))
+                if spans and spans[-1][1] == have:
+                    spans[-1] = (spans[-1][0], want)
+                else:
+                    spans.append((have, want))
+            total = 0
+            for lo, hi in spans:
+                total += self._simulate_and_store(info, lo, hi)
+            if marks:
+                self.writer.call(lambda conn: _mark_coverage(conn, site_id, marks)).result()
+            return total
+
+    def _simulate_and_store(self, info: SiteInfo, lo: int, hi: int) -> int:
+        result = simulate(info.site, pd.Timestamp(lo, unit="s", tz="UTC"),
+                          pd.Timestamp(hi, unit="s", tz="UTC"), step_s=60)
+        futures = [self.writer.submit(job) for job in jobs_from_series(info, result.series)]
+        for f in futures:
+            f.result()
+        logger.info("twin stored for %s: %d minutes from %s", info.site_id,
+                    len(result.series), pd.Timestamp(lo, unit="s", tz="UTC"))
+        return len(result.series)
+
+    # -- live ---------------------------------------------------------------
+    def sample(self, site_id: str, now_s: float | None = None) -> LiveSample:
+        """The twin at the current minute (computed, cached per minute; empty if not simulable)."""
+        minute = int((time.time() if now_s is None else now_s) // 60 * 60)
+        cached = self.latest.get(site_id)
+        if cached is not None and cached.ts_s == minute:
+            return cached
+        if not self.simulable(site_id):
+            return LiveSample(minute, {})
+        info = self.registry.sites[site_id]
+        result = simulate(info.site, pd.Timestamp(minute, unit="s", tz="UTC"),
+                          pd.Timestamp(minute + 60, unit="s", tz="UTC"), step_s=60)
+        row = result.series.iloc[0]
+        sample = LiveSample(minute, {k: float(v) for k, v in row.items()})
+        self.latest[site_id] = sample
+        return sample
+
+    def live_step(self, now_s: float | None = None) -> None:
+        """One tick of the live loop: the current minute for every site, stored."""
+        minute = int((time.time() if now_s is None else now_s) // 60 * 60)
+        futures = []
+        for site_id, info in self.registry.sites.items():
+            if not self.simulable(site_id):
+                continue
+            result = simulate(info.site, pd.Timestamp(minute, unit="s", tz="UTC"),
+                              pd.Timestamp(minute + 60, unit="s", tz="UTC"), step_s=60)
+            row = result.series.iloc[0]
+            self.latest[site_id] = LiveSample(minute, {k: float(v) for k, v in row.items()})
+            futures += [self.writer.submit(job) for job in jobs_from_series(info, result.series)]
+            if self.scene is not None and site_id == self.scene_site:
+                try:
+                    self.scene.update_live(
+                        pd.Timestamp(minute, unit="s", tz="UTC"),
+                        float(row.get("tracker_power_w", 0.0)),
+                        float(row.get("fixed_power_w", 0.0)),
+                    )
+                except Exception:  # the scene must never stop the loop
+                    logger.exception("3D scene update failed")
+        for f in futures:
+            f.result()
+
+    async def run_live(self, stop: asyncio.Event, interval_s: float) -> None:
+        """Call :meth:`live_step` every ``interval_s`` until ``stop`` is set."""
+        while not stop.is_set():
+            try:
+                await asyncio.to_thread(self.live_step)
+            except Exception:
+                logger.exception("live twin step failed")
+            delay = interval_s - (time.time() % interval_s) if interval_s >= 60 else interval_s
+            try:
+                await asyncio.wait_for(stop.wait(), timeout=delay)
+            except TimeoutError:
+                pass
+
+
+def _mark_coverage(conn: Connection, site_id: str, marks: list[tuple[int, int]]) -> None:
+    ins = postgresql.insert if conn.dialect.name == "postgresql" else sqlite.insert
+    for day, until in marks:
+        stmt = ins(TwinCoverage).values(site_id=site_id, day_start_s=day, covered_until_s=until)
+        conn.execute(stmt.on_conflict_do_update(
+            index_elements=["site_id", "day_start_s"],
+            set_={"covered_until_s": stmt.excluded.covered_until_s},
+        ))

@@ -1,0 +1,359 @@
+"""The one writer: a thread fed by a queue, committing in groups.
+
+Every write of the running service goes through :class:`Writer`. Request
+handlers submit a measurement batch (or a function to run in the writer's
+transaction) and await a future. The writer takes whatever is queued — up to
+``Settings.writer_max_group_rows`` rows — into one transaction: each batch is
+inserted ``ON CONFLICT DO NOTHING`` (should the group fail, each batch is tried
+again alone, so one failing batch fails alone, all-or-nothing), the hourly
+rollups of every touched series are recomputed once for the whole group, and
+one COMMIT (one fsync with
+SQLite ``synchronous=FULL``) makes the group durable. Only then are the futures
+resolved, so a 2xx answer means the rows are committed.
+
+The hot path talks to the DBAPI driver directly (``sqlite3`` ``executemany``;
+PostgreSQL ``INSERT … SELECT FROM unnest(arrays)``) because SQLAlchemy Core
+would cost more than the whole rest of the request.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+from collections.abc import Callable
+from concurrent.futures import Future
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from sqlalchemy import Connection, Engine
+
+from backend.rollups import (
+    ROLLUP_COLUMNS,
+    SeriesWindow,
+    affected_runs,
+    increment_rows,
+    rollup_rows,
+)
+
+logger = logging.getLogger(__name__)
+
+_STOP = object()
+
+
+@dataclass
+class MeasurementJob:
+    """Readings of one request: equal-length arrays, one source."""
+
+    array_ids: np.ndarray
+    source: int
+    ts_s: np.ndarray
+    voltage_v: np.ndarray
+    current_a: np.ndarray
+    power_w: np.ndarray
+    future: Future[tuple[int, int]] = field(default_factory=Future)
+
+    def __len__(self) -> int:
+        return int(self.ts_s.shape[0])
+
+
+@dataclass
+class CallJob:
+    """A function run by the writer in a transaction of its own."""
+
+    fn: Callable[[Connection], Any]
+    future: Future[Any] = field(default_factory=Future)
+
+
+class _Sql:
+    """Dialect-specific statements of the hot path."""
+
+    def __init__(self, dialect: str) -> None:
+        self.pg = dialect == "postgresql"
+        ph = "%s" if self.pg else "?"
+        cols = ", ".join(ROLLUP_COLUMNS)
+        updates = ", ".join(f"{c} = excluded.{c}" for c in ROLLUP_COLUMNS[1:])
+        self.upsert_rollup = (
+            f"INSERT INTO measurement_rollups (array_id, source, {cols}) "
+            f"VALUES ({', '.join([ph] * (len(ROLLUP_COLUMNS) + 2))}) "
+            f"ON CONFLICT (array_id, source, bucket_s) DO UPDATE SET {updates}"
+        )
+        least, greatest = ("LEAST", "GREATEST") if self.pg else ("MIN", "MAX")
+        t = "measurement_rollups"
+        merge = ", ".join(
+            [f"{c} = {t}.{c} + excluded.{c}" for c in ROLLUP_COLUMNS[1:6]]
+            + [f"{c} = {least}({t}.{c}, excluded.{c})" for c in ROLLUP_COLUMNS[6:9]]
+            + [f"{c} = {greatest}({t}.{c}, excluded.{c})" for c in ROLLUP_COLUMNS[9:12]]
+            + [f"first_ts_s = {least}({t}.first_ts_s, excluded.first_ts_s)",
+               f"last_ts_s = {greatest}({t}.last_ts_s, excluded.last_ts_s)"]
+        )
+        self.merge_rollup = (
+            f"INSERT INTO measurement_rollups (array_id, source, {cols}) "
+            f"VALUES ({', '.join([ph] * (len(ROLLUP_COLUMNS) + 2))}) "
+            f"ON CONFLICT (array_id, source, bucket_s) DO UPDATE SET {merge}"
+        )
+        series = f"FROM measurements WHERE array_id = {ph} AND source = {ph}"
+        self.before = f"SELECT ts_s, power_w {series} AND ts_s < {ph} ORDER BY ts_s DESC LIMIT 1"
+        self.after = f"SELECT ts_s, power_w {series} AND ts_s >= {ph} ORDER BY ts_s LIMIT 1"
+        self.window = (
+            "SELECT ts_s, voltage_v, current_a, power_w FROM measurements "
+            f"WHERE array_id = {ph} AND source = {ph} AND ts_s >= {ph} AND ts_s <= {ph} "
+            "ORDER BY ts_s"
+        )
+        if self.pg:
+            self.insert = (
+                "INSERT INTO measurements (array_id, source, ts_s, voltage_v, current_a, power_w) "
+                "SELECT * FROM unnest(%s::int[], %s::smallint[], %s::bigint[], "
+                "%s::float8[], %s::float8[], %s::float8[]) ON CONFLICT DO NOTHING"
+            )
+        else:
+            self.insert = (
+                "INSERT INTO measurements (array_id, source, ts_s, voltage_v, current_a, power_w) "
+                "VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT DO NOTHING"
+            )
+
+    def insert_job(self, cur: Any, job: MeasurementJob) -> int:
+        n = len(job)
+        if self.pg:
+            cur.execute(self.insert, (
+                job.array_ids.tolist(), [job.source] * n, job.ts_s.tolist(),
+                job.voltage_v.tolist(), job.current_a.tolist(), job.power_w.tolist(),
+            ))
+            return int(cur.rowcount)
+        cur.executemany(self.insert, zip(
+            job.array_ids.tolist(), [job.source] * n, job.ts_s.tolist(),
+            job.voltage_v.tolist(), job.current_a.tolist(), job.power_w.tolist(), strict=True,
+        ))
+        return int(cur.rowcount)
+
+
+class Writer:
+    """The service's single database writer (a daemon thread and a queue)."""
+
+    def __init__(
+        self, engine: Engine, phase_of_array: Callable[[int], int], max_gap_s: int,
+        max_group_rows: int = 200_000,
+    ) -> None:
+        self.engine = engine
+        self.phase_of_array = phase_of_array
+        self.max_gap_s = max_gap_s
+        self.max_group_rows = max_group_rows
+        self._queue: queue.Queue[Any] = queue.Queue()
+        self._thread: threading.Thread | None = None
+        self._sql = _Sql(engine.dialect.name)
+        self.groups_committed = 0
+        self._checkpointer: threading.Thread | None = None
+        self._stop_checkpoints = threading.Event()
+
+    # -- lifecycle ---------------------------------------------------------
+    def start(self) -> None:
+        """Start the writer thread (and, on SQLite, the WAL checkpointer)."""
+        self._thread = threading.Thread(target=self._run, name="heliotwin-writer", daemon=True)
+        self._thread.start()
+        if not self._sql.pg:
+            self._stop_checkpoints.clear()
+            self._checkpointer = threading.Thread(
+                target=self._checkpoint_loop, name="heliotwin-checkpoint", daemon=True)
+            self._checkpointer.start()
+
+    def stop(self, timeout_s: float = 30.0) -> None:
+        """Finish everything queued so far, then stop the thread."""
+        if self._thread is None:
+            return
+        self._queue.put(_STOP)
+        self._thread.join(timeout_s)
+        self._thread = None
+        self._stop_checkpoints.set()
+        if self._checkpointer is not None:
+            self._checkpointer.join(timeout_s)
+            self._checkpointer = None
+
+    # -- submitting --------------------------------------------------------
+    def submit(self, job: MeasurementJob) -> Future[tuple[int, int]]:
+        """Queue a batch; the future gives ``(accepted, duplicates)`` once committed."""
+        self._check_running()
+        self._queue.put(job)
+        return job.future
+
+    def call(self, fn: Callable[[Connection], Any]) -> Future[Any]:
+        """Run ``fn(connection)`` in a writer transaction; the future gives its result."""
+        self._check_running()
+        job = CallJob(fn)
+        self._queue.put(job)
+        return job.future
+
+    def _check_running(self) -> None:
+        if self._thread is None:
+            raise RuntimeError("the writer is not running")
+
+    # -- the threads -------------------------------------------------------
+    def _checkpoint_loop(self, interval_s: float = 1.0) -> None:
+        """SQLite: copy the WAL into the database file every second, off the writer.
+
+        The writer's connection has automatic checkpoints off, so a commit never
+        waits for a checkpoint (whose fsync can take long on a busy disk); a
+        PASSIVE checkpoint waits for no reader or writer (SQLite docs, "WAL").
+        """
+        conn = self.engine.connect()
+        try:
+            dbapi: Any = conn.connection.driver_connection
+            while not self._stop_checkpoints.wait(interval_s):
+                try:
+                    dbapi.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchall()
+                except Exception:  # noqa: BLE001 - a busy database: try again next time
+                    logger.debug("checkpoint skipped", exc_info=True)
+            dbapi.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchall()
+        finally:
+            conn.close()
+
+    def _run(self) -> None:
+        conn = self.engine.connect().execution_options(sqlite_immediate=True)
+        if not self._sql.pg:
+            conn.connection.driver_connection.execute(  # type: ignore[union-attr]
+                "PRAGMA wal_autocheckpoint=0")
+        try:
+            for first in iter(self._queue.get, _STOP):
+                group = [first]
+                rows = len(first) if isinstance(first, MeasurementJob) else 0
+                stop_after = False
+                while rows < self.max_group_rows:
+                    try:
+                        nxt = self._queue.get_nowait()
+                    except queue.Empty:
+                        break
+                    if nxt is _STOP:
+                        stop_after = True
+                        break
+                    group.append(nxt)
+                    rows += len(nxt) if isinstance(nxt, MeasurementJob) else 0
+                self._commit_group(conn, group)
+                if stop_after:
+                    break
+        finally:
+            conn.close()
+            logger.info("writer stopped after %d group commits", self.groups_committed)
+
+    def _commit_group(self, conn: Connection, group: list[Any]) -> None:
+        jobs = [j for j in group if isinstance(j, MeasurementJob)]
+        if jobs:
+            try:
+                counts = self._commit_measurements(conn, jobs)
+            except Exception as exc:
+                if len(jobs) == 1:
+                    logger.warning("write of %d readings failed: %r", len(jobs[0]), exc)
+                    jobs[0].future.set_exception(exc)
+                else:  # find the culprit: each batch alone, all-or-nothing
+                    for job in jobs:
+                        self._commit_group(conn, [job])
+            else:
+                self.groups_committed += 1
+                for job, accepted in zip(jobs, counts, strict=True):
+                    job.future.set_result((accepted, len(job) - accepted))
+        for job in group:
+            if isinstance(job, CallJob):
+                try:
+                    with conn.begin():
+                        result = job.fn(conn)
+                except Exception as exc:  # noqa: BLE001 - reported to the submitter
+                    logger.warning("write call failed: %r", exc)
+                    job.future.set_exception(exc)
+                else:
+                    job.future.set_result(result)
+
+    def _commit_measurements(self, conn: Connection, jobs: list[MeasurementJob]) -> list[int]:
+        """Insert the batches and refresh their rollups in one transaction; accepted counts.
+
+        Plain DBAPI: ``BEGIN IMMEDIATE`` … ``COMMIT`` on SQLite (the driver is in
+        autocommit mode, see ``backend.db``), the driver's implicit transaction and
+        ``commit()`` on PostgreSQL.
+        """
+        dbapi: Any = conn.connection.driver_connection
+        cur = dbapi.cursor()
+        try:
+            if not self._sql.pg:
+                cur.execute("BEGIN IMMEDIATE")
+            touched: dict[tuple[int, int], list[tuple[np.ndarray, ...]]] = {}
+            for job in jobs:
+                self._note_touched(job, touched)
+            around = {key: self._neighbours(cur, key, parts) for key, parts in touched.items()}
+            counts = [self._sql.insert_job(cur, job) for job in jobs]
+            for key, parts in touched.items():
+                self._update_rollups(cur, key, parts, around[key])
+            if self._sql.pg:
+                dbapi.commit()
+            else:
+                cur.execute("COMMIT")
+            return counts
+        except BaseException:
+            if self._sql.pg:
+                dbapi.rollback()
+            elif dbapi.in_transaction:
+                cur.execute("ROLLBACK")
+            raise
+        finally:
+            cur.close()
+
+    @staticmethod
+    def _note_touched(
+        job: MeasurementJob, touched: dict[tuple[int, int], list[tuple[np.ndarray, ...]]]
+    ) -> None:
+        cols = (job.ts_s, job.voltage_v, job.current_a, job.power_w)
+        ids = job.array_ids
+        if ids.size and (ids == ids[0]).all():
+            touched.setdefault((int(ids[0]), job.source), []).append(cols)
+            return
+        for aid in np.unique(ids).tolist():
+            sel = ids == aid
+            touched.setdefault((aid, job.source), []).append(tuple(c[sel] for c in cols))
+
+    def _neighbours(self, cur: Any, key: tuple[int, int], parts: list[tuple[np.ndarray, ...]]
+                    ) -> tuple[tuple[int, float] | None, tuple[int, float] | None] | None:
+        """Stored readings just before and after the new ones, or None when stored
+        readings lie among them (then the rollups are recomputed)."""
+        lo = int(min(p[0].min() for p in parts))
+        hi = int(max(p[0].max() for p in parts))
+        cur.execute(self._sql.after, (*key, lo))
+        row = cur.fetchone()
+        if row is not None and row[0] <= hi:
+            return None
+        nxt = None if row is None else (int(row[0]), float(row[1]))
+        cur.execute(self._sql.before, (*key, lo))
+        row = cur.fetchone()
+        return (None if row is None else (int(row[0]), float(row[1]))), nxt
+
+    def _update_rollups(
+        self, cur: Any, key: tuple[int, int], parts: list[tuple[np.ndarray, ...]],
+        around: tuple[tuple[int, float] | None, tuple[int, float] | None] | None,
+    ) -> None:
+        """Rollups after new readings: merged increments when they fill a hole of the
+        series (appends of live loggers, back-fills in any order), else recomputed."""
+        ts = np.concatenate([p[0] for p in parts])
+        if around is not None:
+            uts, first = np.unique(ts, return_index=True)  # first write of a second wins
+            cols = [np.concatenate([p[j] for p in parts])[first] for j in (1, 2, 3)]
+            rows = increment_rows(around[0], around[1], SeriesWindow(uts, *cols),
+                                  self.phase_of_array(key[0]), self.max_gap_s)
+            cur.executemany(self._sql.merge_rollup, [(*key, *r) for r in rows])
+            return
+        self._refresh_rollups(cur, key[0], key[1], ts)
+
+    def _refresh_rollups(self, cur: Any, array_id: int, source: int, ts_s: np.ndarray) -> None:
+        """Recompute the rollups of every bucket that new readings at ``ts_s`` can change."""
+        phase = self.phase_of_array(array_id)
+        gap = self.max_gap_s
+        width = 3600
+        out: list[tuple[Any, ...]] = []
+        for k_first, k_last in affected_runs(ts_s, phase, gap):
+            lo = k_first * width + phase - gap
+            hi = (k_last + 1) * width + phase + gap
+            cur.execute(self._sql.window, (array_id, source, lo, hi))
+            fetched = cur.fetchall()
+            if not fetched:
+                continue
+            data = np.array(fetched, dtype=np.float64)
+            window = SeriesWindow(data[:, 0].astype(np.int64), data[:, 1], data[:, 2], data[:, 3])
+            out.extend((array_id, source, *row)
+                       for row in rollup_rows(window, k_first, k_last, phase, gap))
+        if out:
+            cur.executemany(self._sql.upsert_rollup, out)

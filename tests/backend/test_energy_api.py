@@ -1,0 +1,161 @@
+"""Energy per period over real HTTP (``backend/api/routes/energy.py``).
+
+Expected energies come from an independent integration of what was posted
+(``numpy.trapezoid`` over each run of readings not split by a long gap), never
+from the service's own code.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+from typing import TYPE_CHECKING
+
+import httpx
+import numpy as np
+import pytest
+
+if TYPE_CHECKING:
+    from live_service import LiveServer
+
+TZ = dt.timezone(dt.timedelta(hours=-6))
+BASE = "/api/v1/sites/tehuantepec"
+MAX_GAP_S = 600
+
+
+def bell(day: dt.date, array: str, scale: float, minutes: list[int]) -> list[dict]:
+    t0 = dt.datetime(day.year, day.month, day.day, tzinfo=TZ)
+    out = []
+    for m in minutes:
+        h = m / 60
+        s = math.sin(math.pi * (h - 6.5) / 12) if 6.5 < h < 18.5 else 0.0
+        p = scale * 700 * s**1.3 + 0.002 * (m % 89)
+        v = 25.0 if p > 0.01 else 0.0
+        out.append({"ts": (t0 + dt.timedelta(minutes=m)).isoformat(), "array": array,
+                    "voltage_v": v, "current_a": p / v if v else 0.0, "power_w": p if v else 0.0})
+    return out
+
+
+def independent_energy_wh(readings: list[dict], t0: float, t1: float) -> float:
+    """Trapezoid per run of readings no more than MAX_GAP_S apart, clipped to [t0, t1)."""
+    ts = np.array([dt.datetime.fromisoformat(r["ts"]).timestamp() for r in readings])
+    p = np.array([r["power_w"] for r in readings])
+    order = np.argsort(ts)
+    ts, p = ts[order], p[order]
+    runs = np.split(np.arange(ts.size), np.flatnonzero(np.diff(ts) > MAX_GAP_S) + 1)
+    total = 0.0
+    for run in runs:
+        sel = run[(ts[run] >= t0) & (ts[run] <= t1)]
+        if sel.size > 1:
+            total += float(np.trapezoid(p[sel], ts[sel])) / 3600.0
+    return total
+
+
+def _post(client: httpx.Client, token: str, readings: list[dict]) -> None:
+    for k in range(0, len(readings), 5000):
+        r = client.post(f"{BASE}/measurements", json={"readings": readings[k:k + 5000]},
+                        headers={"Authorization": f"Bearer {token}"})
+        assert r.status_code == 200, r.text
+
+
+def test_energy_per_day_matches_independent_trapezoid(client: httpx.Client,
+                                                      live_server: LiveServer) -> None:
+    days = [dt.date(2023, 6, 1) + dt.timedelta(days=k) for k in range(3)]
+    tracker = [x for d in days for x in bell(d, "tracker", 1.0, list(range(1440)))]
+    fixed = [x for d in days for x in bell(d, "fixed", 0.8, list(range(0, 1440, 2)))]
+    _post(client, live_server.write_token, tracker + fixed)
+    r = client.get(f"{BASE}/energy", params={"start": "2023-06-01", "end": "2023-06-04",
+                                             "interval": "day"})
+    assert r.status_code == 200, r.text
+    data = r.json()
+    assert [row["period_start"] for row in data["rows"]] == [
+        f"2023-06-0{k}T00:00:00-06:00" for k in (1, 2, 3)]
+    for d, row in zip(days, data["rows"], strict=True):
+        t0 = dt.datetime(d.year, d.month, d.day, tzinfo=TZ).timestamp()
+        t1 = t0 + 86400
+        exp_tr = independent_energy_wh(tracker, t0, t1)
+        exp_fx = independent_energy_wh(fixed, t0, t1)
+        got_tr = row["arrays"]["tracker"]["measured_wh"]
+        got_fx = row["arrays"]["fixed"]["measured_wh"]
+        assert got_tr == pytest.approx(exp_tr, rel=1e-9)
+        assert got_fx == pytest.approx(exp_fx, rel=1e-9)
+        assert row["gain_pct"] == pytest.approx(100 * (exp_tr / exp_fx - 1), rel=1e-9)
+        assert row["arrays"]["tracker"]["readings"] == 1440
+    # hours add up to the day, months hold the whole range
+    hours = client.get(f"{BASE}/energy", params={"start": "2023-06-02", "end": "2023-06-03",
+                                                 "interval": "hour"}).json()["rows"]
+    assert len(hours) == 24
+    assert sum(h["arrays"]["tracker"]["measured_wh"] or 0 for h in hours) == pytest.approx(
+        data["rows"][1]["arrays"]["tracker"]["measured_wh"], rel=1e-9)
+    month = client.get(f"{BASE}/energy", params={"start": "2023-06-01", "end": "2023-07-01",
+                                                 "interval": "month"}).json()["rows"]
+    assert len(month) == 1
+    assert month[0]["arrays"]["tracker"]["measured_wh"] == pytest.approx(
+        independent_energy_wh(tracker, 0, 4e9), rel=1e-9)
+
+
+def test_energy_does_not_bridge_long_gaps(client: httpx.Client,
+                                          live_server: LiveServer) -> None:
+    day = dt.date(2023, 7, 1)
+    minutes = [m for m in range(1440) if not 600 <= m < 660]  # a 61-minute outage at 10:00
+    minutes += [m for m in range(720, 730)]  # re-sent minutes do not count twice
+    rd = bell(day, "tracker", 1.0, minutes)
+    _post(client, live_server.write_token, rd)
+    row = client.get(f"{BASE}/energy", params={"start": "2023-07-01", "end": "2023-07-02"}
+                     ).json()["rows"][0]
+    unique = bell(day, "tracker", 1.0, sorted(set(minutes)))
+    full = bell(day, "tracker", 1.0, list(range(1440)))
+    t0 = dt.datetime(2023, 7, 1, tzinfo=TZ).timestamp()
+    got = row["arrays"]["tracker"]["measured_wh"]
+    assert got == pytest.approx(independent_energy_wh(unique, t0, t0 + 86400), rel=1e-9)
+    assert got < independent_energy_wh(full, t0, t0 + 86400) - 300  # the gap is not filled
+    assert row["gain_pct"] is None and row["arrays"]["fixed"]["measured_wh"] is None
+
+
+def test_unaligned_range_and_out_of_order_posts(client: httpx.Client,
+                                                live_server: LiveServer) -> None:
+    day = dt.date(2023, 8, 1)
+    rd = bell(day, "fixed", 1.0, list(range(1440)))
+    _post(client, live_server.write_token, rd[700:])  # afternoon first,
+    _post(client, live_server.write_token, rd[:700])  # then the morning (rollups refreshed)
+    start = dt.datetime(2023, 8, 1, 9, 17, 30, tzinfo=TZ)
+    end = dt.datetime(2023, 8, 1, 15, 42, 10, tzinfo=TZ)
+    rows = client.get(f"{BASE}/energy", params={"start": start.isoformat(),
+                                                "end": end.isoformat(), "interval": "day"}
+                      ).json()["rows"]
+    assert len(rows) == 1
+    ts = np.array([dt.datetime.fromisoformat(r["ts"]).timestamp() for r in rd])
+    p = np.array([r["power_w"] for r in rd])
+    grid = np.arange(start.timestamp(), end.timestamp() + 0.5, 0.5)
+    expected = float(np.trapezoid(np.interp(grid, ts, p), grid)) / 3600  # dense, independent
+    assert rows[0]["arrays"]["fixed"]["measured_wh"] == pytest.approx(expected, rel=1e-6)
+
+
+def test_twin_energy_exists_for_past_days(client: httpx.Client) -> None:
+    r = client.get(f"{BASE}/energy", params={"start": "2021-03-14", "end": "2021-03-17"})
+    rows = r.json()["rows"]
+    assert len(rows) == 3
+    for row in rows:
+        tr, fx = row["arrays"]["tracker"]["twin_wh"], row["arrays"]["fixed"]["twin_wh"]
+        # clear-sky March days at 16° N: 4 × 205 Wp arrays give several kWh a day
+        assert 3000 < fx < tr < 9000
+        assert row["twin_gain_pct"] > 10
+        assert row["arrays"]["tracker"]["measured_wh"] is None
+    twin = client.get(f"{BASE}/measurements", params={
+        "array": "tracker", "source": "twin", "start": "2021-03-15", "end": "2021-03-16",
+        "max_points": 2000}).json()
+    assert len(twin["points"]) == 1440 and max(p["power_w"] for p in twin["points"]) > 500
+    csv_text = client.get(f"{BASE}/energy", params={"start": "2021-03-14", "end": "2021-03-17",
+                                                    "format": "csv"}).text
+    assert csv_text.splitlines()[0].startswith("period_start,period_end,tracker_measured_wh")
+    assert len(csv_text.splitlines()) == 4
+
+
+def test_energy_errors(client: httpx.Client) -> None:
+    r = client.get(f"{BASE}/energy", params={"start": "2022-01-02", "end": "2022-01-01"})
+    assert r.status_code == 422
+    r = client.get(f"{BASE}/energy", params={"start": "2022-01-01", "end": "2022-01-02",
+                                             "interval": "week"})
+    assert r.status_code == 422
+    r = client.get(f"{BASE}/energy", params={"start": "2022-01-01T00:00:00", "end": "2022-01-02"})
+    assert r.status_code == 422 and "offset" in r.json()["detail"]

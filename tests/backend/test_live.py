@@ -1,0 +1,66 @@
+"""The running service: live twin loop, demo logger, status tiles, meta, clean shutdown."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import httpx
+from live_service import ServerProcess
+
+if TYPE_CHECKING:
+    from live_service import Database
+
+BASE = "/api/v1/sites/tehuantepec"
+
+
+def _wait(predicate, timeout_s: float = 60.0) -> bool:  # type: ignore[no-untyped-def]
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.3)
+    return False
+
+
+def test_serve_with_live_twin_and_demo_logger(database: Database, tmp_path: Path) -> None:
+    server = ServerProcess(database.url, tmp_path / "server.log", demo=True, extra_env={
+        "HELIOTWIN_LIVE_TWIN": "true", "HELIOTWIN_LIVE_TWIN_INTERVAL_S": "1",
+        "HELIOTWIN_DEMO_BACKFILL_DAYS": "1"}).start()
+    try:
+        with httpx.Client(base_url=server.base_url, timeout=60) as c:
+            meta = c.get("/api/v1/meta").json()
+            assert {"version", "viser_port", "vision_require_token"} <= set(meta)
+
+            def demo_reported() -> bool:  # back-filled (its last minutes may be an outage)
+                s = c.get(f"{BASE}/status").json()
+                return s["arrays"]["tracker"]["logger"] != "never"
+
+            assert _wait(demo_reported), server.log_tail()
+            status = c.get(f"{BASE}/status").json()
+            for key in ("time", "sun", "tracker", "arrays", "gain_today_pct"):
+                assert key in status
+            assert -90 <= status["sun"]["elevation_deg"] <= 90
+            assert 0 <= status["sun"]["azimuth_deg"] < 360
+            tr = status["arrays"]["tracker"]
+            assert tr["age_s"] < 3600 and tr["twin_power_w"] is not None
+            assert tr["logger"] in ("reporting", "stale")
+            # the demo logger back-filled a day of minutes for both arrays over HTTP
+            now = time.time()
+            q = {"start": time.strftime("%Y-%m-%dT%H:%M:%S+00:00", time.gmtime(now - 86400)),
+                 "end": time.strftime("%Y-%m-%dT%H:%M:%S+00:00", time.gmtime(now + 60))}
+            n = c.get(f"{BASE}/measurements", params={**q, "array": "fixed",
+                                                       "max_points": 10}).json()
+            assert 1300 < sum(p["n"] for p in n["points"]) <= 1442
+            # the live twin loop writes source=twin rows each interval
+            live = {"start": time.strftime("%Y-%m-%dT%H:%M:00+00:00", time.gmtime(now - 120)),
+                    "end": q["end"]}
+            twin = c.get(f"{BASE}/measurements", params={**live, "array": "tracker",
+                                                          "source": "twin"}).json()
+            assert len(twin["points"]) >= 2
+    finally:
+        code = server.stop()
+    # uvicorn shuts down gracefully, then re-raises SIGTERM (exit status -15)
+    assert code in (0, -15), server.log_tail()
+    assert "service stopped" in server.log_path.read_text()

@@ -1,0 +1,204 @@
+"""Ingestion and read-back over real HTTP (``backend/api/routes/measurements.py``).
+
+Each test uses its own days, since the server and its database are shared.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as dt
+import io
+import math
+from typing import TYPE_CHECKING
+
+import httpx
+import numpy as np
+import pytest
+
+if TYPE_CHECKING:
+    from live_service import LiveServer
+
+TZ = dt.timezone(dt.timedelta(hours=-6))  # Tehuantepec: UTC-6, no DST
+PATH = "/api/v1/sites/tehuantepec/measurements"
+
+
+def day_readings(day: dt.date, array: str, scale: float = 1.0, every_min: int = 1) -> list[dict]:
+    """Minute readings of one local day: a bell from 06:30 to 18:30, distinct values."""
+    out = []
+    t0 = dt.datetime(day.year, day.month, day.day, tzinfo=TZ)
+    for m in range(0, 24 * 60, every_min):
+        h = m / 60.0
+        s = math.sin(math.pi * (h - 6.5) / 12.0) if 6.5 < h < 18.5 else 0.0
+        p = scale * 720.0 * s**1.2 + 0.001 * (m % 97)
+        v = 24.0 + 2.0 * s if p > 0.01 else 0.0
+        i = p / v if v else 0.0
+        out.append({"ts": (t0 + dt.timedelta(minutes=m)).isoformat(), "array": array,
+                    "voltage_v": round(v, 4), "current_a": round(i, 6),
+                    "power_w": round(v * i, 4)})
+    return out
+
+
+def post(client: httpx.Client, token: str | None, body: object, **kw: object) -> httpx.Response:
+    headers = {"Authorization": f"Bearer {token}"} if token else {}
+    if isinstance(body, str):
+        return client.post(PATH, content=body, headers={**headers, "Content-Type": "text/csv"})
+    return client.post(PATH, json=body, headers=headers, **kw)
+
+
+def test_tokens_401_and_403(client: httpx.Client, live_server: LiveServer) -> None:
+    rd = day_readings(dt.date(2023, 1, 2), "tracker")[:3]
+    r = post(client, None, {"readings": rd})
+    assert r.status_code == 401 and "token" in r.json()["detail"]
+    assert post(client, "ht_not-a-real-token", {"readings": rd}).status_code == 401
+    other = live_server.token("guadalajara_fisheye")
+    r = post(client, other, {"readings": rd})
+    assert r.status_code == 403 and "guadalajara_fisheye" in r.json()["detail"]
+    assert post(client, live_server.write_token, {"readings": rd}).status_code == 200
+
+
+@pytest.mark.parametrize(("change", "field", "words"), [
+    ({"ts": "2023-01-03T12:00:00"}, "ts", "no UTC offset"),
+    ({"ts": "yesterday"}, "ts", "not an ISO 8601"),
+    ({"voltage_v": "NaN"}, "voltage_v", "not finite"),
+    ({"voltage_v": "twelve"}, "voltage_v", "not a number"),
+    ({"voltage_v": -3.0}, "voltage_v", "outside"),
+    ({"current_a": 5000.0}, "current_a", "outside"),
+    ({"array": "roof"}, "array", "unknown array 'roof'"),
+    ({"power_w": 99999.0}, "power_w", "disagrees"),
+    ({"ts": "2099-01-01T00:00:00+00:00"}, "ts", "after the server clock"),
+])
+def test_422_names_row_and_field(client: httpx.Client, live_server: LiveServer,
+                                 change: dict, field: str, words: str) -> None:
+    rd = day_readings(dt.date(2023, 1, 3), "tracker")[700:705]
+    rd[3] = {**rd[3], **change}
+    r = post(client, live_server.write_token, {"readings": rd})
+    assert r.status_code == 422, r.text
+    err = r.json()["detail"][0]
+    assert (err["row"], err["field"]) == (3, field)
+    assert words in err["msg"]
+    # all-or-nothing: the four good rows were not stored either
+    got = client.get(PATH, params={"array": "tracker", "start": "2023-01-03",
+                                   "end": "2023-01-04"}).json()
+    assert got["points"] == []
+
+
+def test_missing_fields_and_bad_shapes(client: httpx.Client, live_server: LiveServer) -> None:
+    tok = live_server.write_token
+    r = post(client, tok, {"readings": [{"ts": "2023-01-04T12:00:00Z", "array": "fixed"}]})
+    assert r.status_code == 422 and r.json()["detail"][0]["field"] == "voltage_v"
+    r = post(client, tok, {"readings": [1, 2]})
+    assert r.status_code == 422 and "object" in r.json()["detail"][0]["msg"]
+    r = post(client, tok, {"rows": []})
+    assert r.status_code == 422 and "readings" in r.json()["detail"][0]["msg"]
+    r = client.post(PATH, content=b"{not json", headers={"Authorization": f"Bearer {tok}",
+                                                          "Content-Type": "application/json"})
+    assert r.status_code == 422 and "JSON" in r.json()["detail"][0]["msg"]
+
+
+def test_idempotent_resend_and_partial_overlap(client: httpx.Client,
+                                               live_server: LiveServer) -> None:
+    rd = day_readings(dt.date(2023, 1, 5), "tracker")
+    tok = live_server.write_token
+    assert post(client, tok, {"readings": rd[:1000]}).json() == {"accepted": 1000,
+                                                                 "duplicates": 0}
+    assert post(client, tok, {"readings": rd[:1000]}).json() == {"accepted": 0,
+                                                                 "duplicates": 1000}
+    assert post(client, tok, {"readings": rd[900:]}).json() == {"accepted": 440,
+                                                                "duplicates": 100}
+    # the same minute twice in one batch counts once
+    dup = [rd[0], rd[0], rd[1]]
+    assert post(client, tok, {"readings": dup}).json() == {"accepted": 0, "duplicates": 3}
+    got = client.get(PATH, params={"array": "tracker", "start": "2023-01-05",
+                                   "end": "2023-01-06", "max_points": 5000}).json()
+    assert got["bucket_s"] == 0 and len(got["points"]) == 1440
+
+
+def test_csv_ingest_and_csv_errors_name_the_line(client: httpx.Client,
+                                                 live_server: LiveServer) -> None:
+    rd = day_readings(dt.date(2023, 1, 6), "fixed", every_min=10)
+    text = "ts,array,voltage_v,current_a,power_w\n" + "".join(
+        f"{x['ts']},{x['array']},{x['voltage_v']},{x['current_a']},{x['power_w']}\n" for x in rd)
+    r = post(client, live_server.write_token, text)
+    assert r.json() == {"accepted": len(rd), "duplicates": 0}
+    bad = "ts,array,voltage_v,current_a\n2023-01-07T10:00:00Z,fixed,25,3\n" \
+          "2023-01-07T10:01:00Z,fixed,,3\n"
+    r = post(client, live_server.write_token, bad)
+    err = r.json()["detail"][0]
+    assert r.status_code == 422 and (err["row"], err["line"], err["field"]) == (1, 3, "voltage_v")
+    r = post(client, live_server.write_token, "time,array,volts\n1,2,3\n")
+    assert r.status_code == 422 and "header" in r.json()["detail"][0]["msg"]
+
+
+def test_adc_readings_use_stored_calibration(client: httpx.Client,
+                                             live_server: LiveServer) -> None:
+    """Seed 000 eqs. 16–19: V_pin = n·5/1023; I = (V_pin − 2.5)/0.1; V = V_pin·ratio."""
+    tok = live_server.write_token
+    cal = {"adc_bits": 10, "adc_vref_v": 5.0, "current_zero_v": 2.5,
+           "current_sensitivity_mv_per_a": 100.0, "divider_ratio": 8.0}
+    url = "/api/v1/sites/tehuantepec/arrays/fixed/calibration"
+    assert client.put(url, json=cal).status_code == 401
+    r = client.put(url, json=cal, headers={"Authorization": f"Bearer {tok}"})
+    assert r.status_code == 200
+    assert client.get(url).json()["divider_ratio"] == 8.0
+    reading = {"ts": "2023-01-08T12:00:00-06:00", "array": "fixed",
+               "voltage_adc": 640, "current_adc": 1000}
+    assert post(client, tok, {"readings": [reading]}).json()["accepted"] == 1
+    p = client.get(PATH, params={"array": "fixed", "start": "2023-01-08",
+                                 "end": "2023-01-09"}).json()["points"][0]
+    v_expected = 640 * 5.0 / 1023 * 8.0  # 25.024 V
+    i_expected = (1000 * 5.0 / 1023 - 2.5) / 0.100  # 23.876 A
+    assert p["voltage_v"] == pytest.approx(v_expected, rel=1e-12)
+    assert p["current_a"] == pytest.approx(i_expected, rel=1e-12)
+    assert p["power_w"] == pytest.approx(v_expected * i_expected, rel=1e-12)
+    bad = {**reading, "ts": "2023-01-08T12:01:00-06:00", "current_adc": 1024}
+    r = post(client, tok, {"readings": [bad]})
+    assert r.status_code == 422 and r.json()["detail"][0]["field"] == "current_adc"
+
+
+def test_size_limits_413(client: httpx.Client, live_server: LiveServer) -> None:
+    tok = live_server.write_token
+    one = day_readings(dt.date(2023, 1, 9), "tracker")[0]
+    r = post(client, tok, {"readings": [one] * 100_001})
+    assert r.status_code == 413
+    big = b'{"readings": [' + b" " * (11 * 1024 * 1024) + b"]}"
+    r = client.post(PATH, content=big, headers={"Authorization": f"Bearer {tok}",
+                                                 "Content-Type": "application/json"})
+    assert r.status_code == 413 and "limit" in r.json()["detail"][0]["msg"]
+
+
+def test_downsampled_buckets_keep_peaks_and_csv_export(client: httpx.Client,
+                                                       live_server: LiveServer) -> None:
+    tok = live_server.write_token
+    days = [dt.date(2023, 2, 1) + dt.timedelta(days=k) for k in range(3)]
+    rd = [x for d in days for x in day_readings(d, "tracker")]
+    rd[2000] = {**rd[2000], "power_w": 2000.0, "voltage_v": 40.0, "current_a": 50.0}
+    assert post(client, tok, {"readings": rd})
+    params = {"array": "tracker", "start": "2023-02-01", "end": "2023-02-04"}
+    full = client.get(PATH, params={**params, "max_points": 10_000}).json()
+    assert full["bucket_s"] == 0 and len(full["points"]) == len(rd)
+    powers = np.array([p["power_w"] for p in full["points"]])
+    for max_points in (50, 500):  # rollup buckets (≥ 1 h) and raw buckets (< 1 h)
+        got = client.get(PATH, params={**params, "max_points": max_points}).json()
+        pts = got["points"]
+        assert 0 < len(pts) <= max_points and got["bucket_s"] > 0
+        assert max(p["power_w_max"] for p in pts) == 2000.0
+        assert sum(p["n"] for p in pts) == len(rd)
+        assert sum(p["power_w"] * p["n"] for p in pts) == pytest.approx(powers.sum(), rel=1e-9)
+        assert min(p["power_w_min"] for p in pts) == powers.min()
+    r = client.get(PATH, params={**params, "format": "csv"})
+    rows = list(csv.DictReader(io.StringIO(r.text)))
+    assert r.headers["content-type"].startswith("text/csv") and len(rows) == len(rd)
+    assert float(rows[2000]["power_w"]) == 2000.0
+    r = client.get(PATH, params={**params, "max_points": 10}, headers={"Accept": "text/csv"})
+    assert r.text.splitlines()[0].startswith("ts,n,voltage_v")
+
+
+def test_read_errors(client: httpx.Client) -> None:
+    assert client.get(PATH, params={"start": "2023-01-01", "end": "2023-01-02"}).status_code == 422
+    r = client.get(PATH, params={"array": "tracker", "start": "2023-01-02T00:00:00",
+                                 "end": "2023-01-03"})
+    assert r.status_code == 422 and "offset" in r.json()["detail"]
+    r = client.get(PATH, params={"array": "tracker", "start": "2023-01-03", "end": "2023-01-02"})
+    assert r.status_code == 422
+    r = client.get("/api/v1/sites/atlantis/measurements")
+    assert r.status_code == 404 and "tehuantepec" in r.json()["detail"]

@@ -1,0 +1,79 @@
+"""``/api/v1/simulations``: synchronous summary, background runs with progress, series."""
+
+from __future__ import annotations
+
+import csv
+import io
+import time
+
+import httpx
+import pandas as pd
+import pytest
+
+from sim.sites import load_site
+from sim.twin import simulate
+
+
+def test_sync_summary_is_the_twin_summary(client: httpx.Client) -> None:
+    r = client.post("/api/v1/simulations", json={"site_id": "tehuantepec",
+                                                 "start": "2024-03-15", "end": "2024-03-16"})
+    assert r.status_code == 200, r.text
+    got = r.json()
+    site = load_site("tehuantepec")
+    ref = simulate(site, pd.Timestamp("2024-03-15", tz=site.timezone),
+                   pd.Timestamp("2024-03-16", tz=site.timezone)).summary()
+    for key in ("tracker_energy_wh", "fixed_energy_wh", "gain_pct", "tracker_peak_w",
+                "fixed_peak_w"):
+        assert got[key] == pytest.approx(ref[key], rel=1e-9)
+    assert got["site_id"] == "tehuantepec" and got["run_id"]
+
+
+def test_background_run_progress_and_series(client: httpx.Client) -> None:
+    r = client.post("/api/v1/simulations", json={
+        "site_id": "tehuantepec", "start": "2024-01-01", "end": "2024-03-01", "step_s": 60,
+        "background": True})
+    assert r.status_code == 202, r.text
+    run = r.json()
+    assert set(run) >= {"run_id", "status", "progress"}
+    url = f"/api/v1/simulations/{run['run_id']}"
+    seen = []
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        state = client.get(url).json()
+        seen.append(state["progress"])
+        if state["status"] in ("done", "failed"):
+            break
+        time.sleep(0.05)
+    assert state["status"] == "done", state
+    assert seen == sorted(seen) and seen[-1] == 1.0
+    assert state["summary"]["tracker_energy_wh"] > state["summary"]["fixed_energy_wh"] > 0
+    series = client.get(f"{url}/series", params={"max_points": 500}).json()
+    assert 0 < len(series["points"]) <= 500 and series["bucket_s"] > 0
+    assert "tracker_power_w" in series["points"][0]
+    text = client.get(f"{url}/series", params={"format": "csv", "max_points": 100}).text
+    rows = list(csv.DictReader(io.StringIO(text)))
+    assert len(rows) <= 100 and float(max(r["tracker_power_w"] for r in rows)) > 0
+
+
+def test_simulation_errors(client: httpx.Client) -> None:
+    r = client.post("/api/v1/simulations", json={"start": "2024-01-02", "end": "2024-01-01"})
+    assert r.status_code == 422
+    r = client.post("/api/v1/simulations", json={"start": "2024-01-01", "end": "2030-01-01",
+                                                 "step_s": 1})
+    assert r.status_code == 422 and "limit" in r.json()["detail"]
+    r = client.post("/api/v1/simulations", json={"site_id": "mars", "start": "2024-01-01",
+                                                 "end": "2024-01-02"})
+    assert r.status_code == 404
+    assert client.get("/api/v1/simulations/nope").status_code == 404
+
+
+def test_sites_and_meta(client: httpx.Client) -> None:
+    sites = {s["site_id"]: s for s in client.get("/api/v1/sites").json()}
+    assert set(sites["tehuantepec"]["arrays"]) == {"tracker", "fixed"}
+    one = client.get("/api/v1/sites/tehuantepec").json()
+    assert one["arrays"]["tracker"]["kind"] == "tracker"
+    assert one["arrays"]["fixed"]["calibration"]["current_sensitivity_mv_per_a"] == 100.0
+    assert client.get("/healthz").json() == {"status": "ok"}
+    assert client.get("/docs").status_code == 200
+    paths = client.get("/openapi.json").json()["paths"]
+    assert "/api/v1/sites/{site_id}/measurements" in paths
