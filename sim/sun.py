@@ -1,0 +1,294 @@
+"""Sun position: NREL SPA (through pvlib) and the Duffie–Beckman approximation.
+
+Two methods, one output shape (a DataFrame with pvlib's column names):
+
+- ``"spa"`` — the NREL Solar Position Algorithm (Reda & Andreas 2004,
+  doi:10.1016/j.solener.2003.12.003) as implemented by :mod:`pvlib.spa`, with
+  pressure, temperature and ΔT honoured. For long series the expensive
+  geocentric part (heliocentric VSOP87 series, nutation, aberration, ~100
+  periodic terms per step) is evaluated on an hourly grid and linearly
+  interpolated, and the observer-dependent (topocentric) part of SPA — parallax,
+  hour angle, elevation, refraction, azimuth — runs at every time stamp with
+  pvlib's own SPA functions. The geocentric quantities (right ascension,
+  declination, Earth–Sun distance, sidereal time minus right ascension) vary so
+  slowly that linear interpolation over one hour is off by less than 1e-5°
+  (checked against ``pvlib.solarposition.spa_python`` in tests/sim/test_sun.py).
+- ``"duffie-beckman"`` — seed 001, eqs. 1–4 (González-Camarillo et al. 2025,
+  after Duffie & Beckman, *Solar Engineering of Thermal Processes*): Cooper's
+  declination, hour angle from standard time with longitude correction and the
+  equation of time, spherical-Earth zenith and azimuth.
+
+Azimuths are degrees clockwise from true north (pvlib convention) everywhere.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike
+
+METHODS = ("spa", "duffie-beckman")
+
+#: SPA geocentric quantities are evaluated on a grid of this spacing [s] and
+#: interpolated when the series is longer than the grid (see module docstring).
+SPA_GEOCENTRIC_STEP_S = 3600.0
+
+_COLUMNS = ["apparent_zenith", "zenith", "apparent_elevation", "elevation", "azimuth"]
+
+
+def _as_utc_index(times: pd.DatetimeIndex | pd.Timestamp) -> pd.DatetimeIndex:
+    """Return ``times`` as a UTC DatetimeIndex; naive times are misuse."""
+    if isinstance(times, pd.Timestamp):
+        times = pd.DatetimeIndex([times])
+    times = pd.DatetimeIndex(times)
+    if times.tz is None:
+        raise ValueError("times must be timezone-aware (got naive timestamps)")
+    return times.tz_convert("UTC")
+
+
+def _unix_seconds(times: pd.DatetimeIndex) -> np.ndarray:
+    """Seconds since 1970-01-01 UTC as float64, independent of the index resolution."""
+    return np.asarray((times - pd.Timestamp(0, tz="UTC")) / pd.Timedelta(seconds=1), dtype=float)
+
+
+def _spa_geocentric(unixtime: np.ndarray, delta_t: float) -> tuple[np.ndarray, ...]:
+    """SPA geocentric part (Reda & Andreas 2004, steps 3.1–3.8) via :mod:`pvlib.spa`.
+
+    Returns
+    -------
+    v_minus_alpha : apparent sidereal time minus geocentric right ascension [°], unwrapped
+    delta : geocentric sun declination [°]
+    radius : Earth heliocentric radius vector [AU]
+    """
+    from pvlib import spa
+
+    v, alpha, delta = spa.solar_position_numpy(
+        unixtime, 0.0, 0.0, 0.0, 1013.25, 12.0, delta_t, 0.5667, 1, sst=True
+    )
+    (radius,) = spa.solar_position_numpy(
+        unixtime, 0.0, 0.0, 0.0, 1013.25, 12.0, delta_t, 0.5667, 1, esd=True
+    )
+    v_minus_alpha = np.rad2deg(np.unwrap(np.deg2rad(np.asarray(v) - np.asarray(alpha))))
+    return v_minus_alpha, np.asarray(delta), np.asarray(radius)
+
+
+def _spa_topocentric(
+    v_minus_alpha: np.ndarray,
+    delta: np.ndarray,
+    radius: np.ndarray,
+    latitude: float,
+    longitude: float,
+    altitude: float,
+    pressure_hpa: float,
+    temperature: float,
+) -> dict[str, np.ndarray]:
+    """SPA topocentric part (Reda & Andreas 2004, steps 3.9–3.15) via :mod:`pvlib.spa`."""
+    from pvlib import spa
+
+    hour_angle = np.mod(v_minus_alpha + longitude, 360.0)  # eq. 11 (H = ν + σ − α)
+    xi = spa.equatorial_horizontal_parallax(radius)
+    u = spa.uterm(latitude)
+    x = spa.xterm(u, latitude, altitude)
+    y = spa.yterm(u, latitude, altitude)
+    delta_alpha = spa.parallax_sun_right_ascension(x, xi, hour_angle, delta)
+    delta_prime = spa.topocentric_sun_declination(delta, x, y, xi, delta_alpha, hour_angle)
+    hour_angle_prime = spa.topocentric_local_hour_angle(hour_angle, delta_alpha)
+    e0 = spa.topocentric_elevation_angle_without_atmosphere(latitude, delta_prime, hour_angle_prime)
+    delta_e = spa.atmospheric_refraction_correction(pressure_hpa, temperature, e0, 0.5667)
+    e = spa.topocentric_elevation_angle(e0, delta_e)
+    gamma = spa.topocentric_astronomers_azimuth(hour_angle_prime, delta_prime, latitude)
+    return {
+        "apparent_zenith": 90.0 - e,
+        "zenith": 90.0 - e0,
+        "apparent_elevation": e,
+        "elevation": e0,
+        "azimuth": np.asarray(spa.topocentric_azimuth_angle(gamma), dtype=float),
+    }
+
+
+def _spa(
+    times: pd.DatetimeIndex,
+    latitude: float,
+    longitude: float,
+    altitude: float,
+    pressure: float,
+    temperature: float,
+    delta_t: float,
+) -> dict[str, np.ndarray]:
+    """NREL SPA with the geocentric part interpolated on an hourly grid when that is cheaper."""
+    unixtime = _unix_seconds(times)
+    n_grid = 0
+    if len(unixtime):
+        t0 = np.floor(unixtime.min() / SPA_GEOCENTRIC_STEP_S) * SPA_GEOCENTRIC_STEP_S
+        n_grid = int(np.ceil((unixtime.max() - t0) / SPA_GEOCENTRIC_STEP_S)) + 2
+    if n_grid and n_grid < len(unixtime):
+        grid = t0 + SPA_GEOCENTRIC_STEP_S * np.arange(n_grid)
+        g_va, g_delta, g_radius = _spa_geocentric(grid, delta_t)
+        v_minus_alpha = np.interp(unixtime, grid, g_va)
+        delta = np.interp(unixtime, grid, g_delta)
+        radius = np.interp(unixtime, grid, g_radius)
+    else:
+        v_minus_alpha, delta, radius = _spa_geocentric(unixtime, delta_t)
+    return _spa_topocentric(
+        v_minus_alpha, delta, radius, latitude, longitude, altitude, pressure / 100.0, temperature
+    )
+
+
+def cooper_declination(day_of_year: ArrayLike) -> np.ndarray:
+    """Solar declination [°] by Cooper's formula — seed 001, eq. 1.
+
+    δ = 23.45 sin(360 (284 + N) / 365), N the day of the year (1…365/366).
+    """
+    return 23.45 * np.sin(np.deg2rad(360.0 * (284.0 + np.asarray(day_of_year)) / 365.0))
+
+
+def equation_of_time_spencer(day_of_year: ArrayLike) -> np.ndarray:
+    """Equation of time [min] as used by Duffie & Beckman (their eq. 1.5.3, after Spencer 1971).
+
+    E = 229.2 (0.000075 + 0.001868 cos B − 0.032077 sin B − 0.014615 cos 2B
+    − 0.04089 sin 2B), with B = (N − 1) 360/365.
+    """
+    b = np.deg2rad((np.asarray(day_of_year) - 1.0) * 360.0 / 365.0)
+    return 229.2 * (
+        0.000075
+        + 0.001868 * np.cos(b)
+        - 0.032077 * np.sin(b)
+        - 0.014615 * np.cos(2 * b)
+        - 0.04089 * np.sin(2 * b)
+    )
+
+
+def azimuth_from_south_to_north_cw(gamma_s: ArrayLike) -> np.ndarray:
+    """Convert a Duffie–Beckman solar azimuth to pvlib's convention.
+
+    Duffie & Beckman (and seed 001, eq. 4) measure γs from due south, positive
+    towards the west (afternoon, ω > 0); pvlib measures degrees clockwise from
+    true north. Returns azimuth [°] in [0, 360).
+    """
+    return np.mod(180.0 + np.asarray(gamma_s), 360.0)
+
+
+def _duffie_beckman(
+    times: pd.DatetimeIndex, latitude: float, longitude: float, pressure: float, temperature: float
+) -> dict[str, np.ndarray]:
+    """Seed 001, eqs. 1–4 (Duffie–Beckman); refraction added with SPA's eq. 42 for ``apparent_*``.
+
+    Standard time uses the zone meridian nearest the site (L_std = 15°·round(L/15));
+    N is the day of year in that standard time. Solar time = standard time +
+    4 (L_loc − L_std) + E minutes (east-positive longitudes), ω = 15° (t_solar − 12 h).
+    """
+    from pvlib import spa
+
+    standard_meridian = 15.0 * np.round(longitude / 15.0)
+    local_standard = times + pd.Timedelta(hours=float(standard_meridian / 15.0))
+    day_of_year = np.asarray(local_standard.day_of_year, dtype=float)
+    hours = np.asarray(
+        (local_standard - local_standard.normalize()) / pd.Timedelta(hours=1), dtype=float
+    )
+    solar_time_h = (
+        hours
+        + (4.0 * (longitude - standard_meridian) + equation_of_time_spencer(day_of_year)) / 60.0
+    )
+    omega_rad = np.deg2rad(15.0 * (solar_time_h - 12.0))
+    delta_rad = np.deg2rad(cooper_declination(day_of_year))
+    phi_rad = np.deg2rad(latitude)
+    cos_z = np.sin(delta_rad) * np.sin(phi_rad) + np.cos(delta_rad) * np.cos(phi_rad) * np.cos(
+        omega_rad
+    )
+    zenith_rad = np.arccos(np.clip(cos_z, -1.0, 1.0))  # eq. 2
+    elevation = 90.0 - np.rad2deg(zenith_rad)  # eq. 3
+    # eq. 4 gives |γs| = asin(cos δ sin ω / sin θz), ambiguous beyond ±90°; Duffie &
+    # Beckman's quadrant-safe form: γs = sign(ω) |acos((cos θz sin φ − sin δ)/(sin θz cos φ))|.
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos_gamma = (cos_z * np.sin(phi_rad) - np.sin(delta_rad)) / (
+            np.sin(zenith_rad) * np.cos(phi_rad)
+        )
+    gamma_s = np.sign(omega_rad) * np.abs(np.rad2deg(np.arccos(np.clip(cos_gamma, -1.0, 1.0))))
+    delta_e = spa.atmospheric_refraction_correction(
+        pressure / 100.0, temperature, elevation, 0.5667
+    )
+    apparent_elevation = elevation + delta_e
+    return {
+        "apparent_zenith": 90.0 - apparent_elevation,
+        "zenith": np.rad2deg(zenith_rad),
+        "apparent_elevation": apparent_elevation,
+        "elevation": elevation,
+        "azimuth": azimuth_from_south_to_north_cw(gamma_s),
+    }
+
+
+def solar_position(
+    times: pd.DatetimeIndex | pd.Timestamp,
+    latitude: float,
+    longitude: float,
+    altitude: float = 0.0,
+    pressure: float = 101325.0,
+    temperature: float = 12.0,
+    delta_t: float = 67.0,
+    method: str = "spa",
+) -> pd.DataFrame:
+    """Sun position for a site.
+
+    Parameters
+    ----------
+    times : pandas.DatetimeIndex or pandas.Timestamp
+        Timezone-aware times.
+    latitude, longitude : float
+        Site coordinates [°], north and east positive.
+    altitude : float
+        Site elevation above sea level [m].
+    pressure : float
+        Local air pressure [Pa] (for refraction).
+    temperature : float
+        Local air temperature [°C] (for refraction).
+    delta_t : float
+        ΔT = TT − UT1 [s] (SPA only).
+    method : {"spa", "duffie-beckman"}
+        NREL SPA via pvlib, or seed 001 eqs. 1–4.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Indexed like ``times`` (in UTC), columns ``apparent_zenith``, ``zenith``,
+        ``apparent_elevation``, ``elevation``, ``azimuth`` [°]; apparent = with
+        atmospheric refraction (SPA eq. 42), azimuth clockwise from north.
+    """
+    index = _as_utc_index(times)
+    if method == "spa":
+        cols = _spa(index, latitude, longitude, altitude, pressure, temperature, delta_t)
+    elif method == "duffie-beckman":
+        cols = _duffie_beckman(index, latitude, longitude, pressure, temperature)
+    else:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
+    return pd.DataFrame({k: np.asarray(cols[k], dtype=float) for k in _COLUMNS}, index=index)
+
+
+def sun_vector_enu(zenith: ArrayLike, azimuth: ArrayLike) -> np.ndarray:
+    """Unit vector towards the sun in East-North-Up coordinates.
+
+    Parameters
+    ----------
+    zenith : array_like
+        Solar zenith [°].
+    azimuth : array_like
+        Solar azimuth [°], clockwise from north.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape ``(..., 3)``: (east, north, up).
+    """
+    z = np.deg2rad(np.asarray(zenith, dtype=float))
+    a = np.deg2rad(np.asarray(azimuth, dtype=float))
+    return np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)
+
+
+def angular_separation(
+    zenith_1: ArrayLike, azimuth_1: ArrayLike, zenith_2: ArrayLike, azimuth_2: ArrayLike
+) -> np.ndarray:
+    """Great-circle angle [°] between two sun directions (via their ENU unit vectors)."""
+    v1 = sun_vector_enu(zenith_1, azimuth_1)
+    v2 = sun_vector_enu(zenith_2, azimuth_2)
+    cross = np.linalg.norm(np.cross(v1, v2), axis=-1)
+    dot = np.sum(v1 * v2, axis=-1)
+    return np.rad2deg(np.arctan2(cross, dot))

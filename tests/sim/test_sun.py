@@ -1,0 +1,101 @@
+"""Sun position: NREL SPA reference case, interpolated SPA vs pvlib, Duffie–Beckman (seed 001)."""
+
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pvlib
+import pytest
+
+from sim.sun import (
+    angular_separation,
+    azimuth_from_south_to_north_cw,
+    cooper_declination,
+    equation_of_time_spencer,
+    solar_position,
+    sun_vector_enu,
+)
+
+# Reda & Andreas (2004), Appendix A.5 (../shared/reference/spa_reference.json).
+SPA_CASE: dict[str, Any] = dict(
+    latitude=39.742476,
+    longitude=-105.1786,
+    altitude=1830.14,
+    pressure=82000.0,
+    temperature=11.0,
+    delta_t=67.0,
+)
+SPA_TIME = pd.Timestamp("2003-10-17T12:30:30-07:00")
+
+
+def test_spa_reference_case() -> None:
+    pos = solar_position(SPA_TIME, **SPA_CASE).iloc[0]
+    assert abs(pos["apparent_zenith"] - 50.11162) <= 1e-4
+    assert abs(pos["azimuth"] - 194.34024) <= 1e-4
+
+
+def test_interpolated_spa_matches_pvlib_spa() -> None:
+    # 12 days at 1 min: long enough for the hourly-grid route of sim.sun._spa
+    times = pd.date_range("2024-06-10", periods=12 * 1440, freq="1min", tz="UTC")
+    ours = solar_position(times, 16.28875, -95.240871, 50.0, 100725.0, 27.0, 69.0)
+    ref = pvlib.solarposition.spa_python(times, 16.28875, -95.240871, 50.0, 100725.0, 27.0, 69.0)
+    sep = angular_separation(ours["zenith"], ours["azimuth"], ref["zenith"], ref["azimuth"])
+    assert np.max(sep) < 1e-5
+    assert np.max(np.abs(ours["apparent_zenith"] - ref["apparent_zenith"])) < 1e-5
+
+
+def test_duffie_beckman_textbook_values() -> None:
+    # Duffie & Beckman, Solar Engineering of Thermal Processes, Example 1.5.1 (Feb 3,
+    # n = 34: E = -13.5 min) and Example 1.6.1 (Feb 13, n = 44: declination -14 deg).
+    assert equation_of_time_spencer(34) == pytest.approx(-13.5, abs=0.1)
+    assert cooper_declination(44) == pytest.approx(-14.0, abs=0.1)
+    # Cooper's equation peaks at +23.45 deg near the June solstice (n = 172)
+    assert cooper_declination(172) == pytest.approx(23.45, abs=0.01)
+
+
+def test_duffie_beckman_example_solar_time() -> None:
+    # Example 1.5.1: Madison (89.4 W, standard meridian 90 W), 10:30 CST on Feb 3 is
+    # 10:19 solar time (correction 4 (90 - 89.4) - 13.5 = -11 min); the hour angle is
+    # 15 deg/h * (10:19 - 12:00) (morning), so the sun is east of south.
+    t = pd.Timestamp("2024-02-03T10:30:00-06:00")
+    pos = solar_position(t, 43.0, -89.4, method="duffie-beckman").iloc[0]
+    delta = np.deg2rad(cooper_declination(34))
+    omega = np.deg2rad(15 * (10 + 19 / 60 - 12))
+    phi = np.deg2rad(43.0)
+    cos_z = np.sin(delta) * np.sin(phi) + np.cos(delta) * np.cos(phi) * np.cos(omega)
+    assert pos["zenith"] == pytest.approx(np.rad2deg(np.arccos(cos_z)), abs=0.05)
+    assert 90 < pos["azimuth"] < 180
+
+
+def test_duffie_beckman_within_its_accuracy_of_spa_over_a_year() -> None:
+    # Cooper's declination is good to ~1 deg and the EoT to ~1 min (0.25 deg):
+    # seed 001 finds the algorithms differ by far less than its 100 mrad drift.
+    times = pd.date_range("2024-01-01", "2025-01-01", freq="20min", inclusive="left", tz="UTC")
+    db = solar_position(times, 16.28875, -95.240871, method="duffie-beckman")
+    ref = pvlib.solarposition.spa_python(times, 16.28875, -95.240871)
+    day = ref["elevation"] > 0
+    sep = angular_separation(db["zenith"], db["azimuth"], ref["zenith"], ref["azimuth"])[day]
+    assert np.max(sep) < 1.5
+    assert 0.05 < np.mean(sep) < 0.7
+    assert np.max(sep) < np.rad2deg(0.100)  # well below seed 001's 100 mrad open-loop drift
+
+
+def test_azimuth_conversion_from_south() -> None:
+    assert azimuth_from_south_to_north_cw(np.array([0.0, 90.0, -90.0])) == pytest.approx(
+        [180.0, 270.0, 90.0]
+    )
+
+
+def test_sun_vector_enu() -> None:
+    assert sun_vector_enu(0.0, 123.0) == pytest.approx([0, 0, 1], abs=1e-12)
+    assert sun_vector_enu(90.0, 90.0) == pytest.approx([1, 0, 0], abs=1e-12)
+    v = sun_vector_enu(np.array([30.0, 60.0]), np.array([180.0, 45.0]))
+    assert v.shape == (2, 3)
+    assert np.linalg.norm(v, axis=-1) == pytest.approx([1, 1])
+
+
+def test_misuse_raises() -> None:
+    with pytest.raises(ValueError, match="timezone-aware"):
+        solar_position(pd.Timestamp("2024-01-01 12:00"), 0.0, 0.0)
+    with pytest.raises(ValueError, match="spa, duffie-beckman"):
+        solar_position(SPA_TIME, 0.0, 0.0, method="grena")
