@@ -33,7 +33,9 @@ background thread is the play/live ticker, which ``stop()`` joins.
 from __future__ import annotations
 
 import datetime as dt
+import errno
 import logging
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -87,6 +89,8 @@ CAMERA_FOV_DEG = 67.0
 SUN_DISTANCE_M = 5.5
 SUN_PATH_STEP_MIN = 5
 TICK_S = 0.1
+#: How many ports from the requested one :meth:`TwinScene.start` tries.
+PORT_TRIES = 20
 LIVE_REFRESH_S = 5.0
 
 _PANEL_BLUE = (28, 52, 110)
@@ -107,6 +111,36 @@ class ScenePose:
     tracker_normal_enu: NDArray[np.float64]
     tracker_aoi_deg: float
     fixed_aoi_deg: float
+
+
+def _free_port(host: str, port: int) -> int:
+    """``port`` if ``host`` can listen on it, else the next free one (0 stays 0: the OS picks).
+
+    Raises ValueError for a port outside 0–65535 and OSError for a host that
+    does not resolve or is not an address of this machine, or when none of
+    :data:`PORT_TRIES` ports from ``port`` on is free.
+    """
+    if not 0 <= port <= 65535:
+        raise ValueError(f"viser port must be in 0-65535, got {port}")
+    try:
+        family, _, _, _, addr = socket.getaddrinfo(host or None, port, type=socket.SOCK_STREAM,
+                                                   flags=socket.AI_PASSIVE)[0]
+    except socket.gaierror as exc:
+        raise OSError(f"viser host {host!r} does not resolve: {exc.strerror}") from None
+    last: OSError | None = None
+    for candidate in range(port, min(port + PORT_TRIES, 65536)) if port else (0,):
+        with socket.socket(family, socket.SOCK_STREAM) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                probe.bind((addr[0], candidate, *addr[2:]))
+            except OSError as exc:
+                if exc.errno != errno.EADDRINUSE:
+                    raise OSError(f"viser cannot listen on {host!r}: {exc.strerror}") from None
+                last = exc
+                continue
+        return candidate
+    raise OSError(f"viser: no free port in {port}-{port + PORT_TRIES - 1} on {host!r} "
+                  f"({last.strerror if last else 'busy'})")
 
 
 def _wxyz(rotation: NDArray[np.floating]) -> NDArray[np.float64]:
@@ -133,7 +167,7 @@ class TwinScene:
         the fixed array's tilt/azimuth; seed 000's 16°/180° if absent).
     host, port : str, int
         Where viser listens. Port 0 picks a free port (see :attr:`port`); a busy
-        port makes viser take the next free one.
+        port makes :meth:`start` take the next free one (logged).
     clock : callable, optional
         Returns the current UTC time; the wall clock by default.
     """
@@ -184,24 +218,32 @@ class TwinScene:
         """Start viser, build the scene and the GUI, start the ticker thread.
 
         Returns at once (viser serves from its own thread). Calling it on a
-        running scene does nothing.
+        running scene does nothing. A host that cannot be listened on, or no
+        free port among the next :data:`PORT_TRIES`, is an OSError raised
+        before viser starts (viser itself would retry such a host forever); a
+        failure while building the scene stops viser again before re-raising.
         """
         with self._lock:
             if self.server is not None:
                 logger.warning("TwinScene.start() on a running scene ignored")
                 return
-            self.server = viser.ViserServer(host=self.host, port=self.requested_port,
-                                            verbose=False)
-            if self.requested_port not in (0, self.server.get_port()):
-                logger.warning("viser port %d busy, serving on %d",
-                               self.requested_port, self.server.get_port())
+            port = _free_port(self.host, self.requested_port)
+            if port != self.requested_port:
+                logger.warning("viser port %d busy, serving on %d", self.requested_port, port)
+            self.server = viser.ViserServer(host=self.host, port=port, verbose=False)
             self.nodes = {}
             self.gui = {}
             self._day = None
             self._azimuth_reference = None
-            self._build_static_scene()
-            self._build_gui()
-            self.show_time(self._live_now())
+            try:
+                self._build_static_scene()
+                self._build_gui()
+                self.show_time(self._live_now())
+            except BaseException:
+                server, self.server = self.server, None
+                self.nodes, self.gui = {}, {}
+                server.stop()
+                raise
             self._stop_event.clear()
             self._thread = threading.Thread(target=self._tick_loop, name="twin3d-ticker",
                                             daemon=True)

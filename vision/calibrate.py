@@ -12,6 +12,7 @@ kept. Residuals are reported in pixels and as the angle on the sky.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -161,3 +162,62 @@ def fit_fisheye(
     fitted += ["tilt_north_deg", "tilt_east_deg"] if fit_tilt else []
     return CalibrationResult(cam, res_px, np.asarray(res_deg, float), int(x.size),
                              other[0] if other else None, tuple(f for f in fitted if f))
+
+
+def calibrate_frames(
+    images: Iterable[NDArray[Any]],
+    azimuth_deg: ArrayLike,
+    elevation_deg: ArrayLike,
+    names: Sequence[str] | None = None,
+    method: str = "robust",
+    **fit_kwargs: Any,
+) -> tuple[CalibrationResult, list[dict[str, Any]]]:
+    """Detect the sun in each frame (:func:`vision.detect.detect_sun`) and fit a camera.
+
+    ``images`` may be a generator: each frame is dropped once its sun is found,
+    so a batch of large frames needs the memory of one. ``azimuth_deg``/
+    ``elevation_deg`` are the ephemeris sun at each frame's time; frames with
+    no sun found or the sun below the horizon are left out.
+    ``fit_kwargs`` go to :func:`fit_fisheye` (``projection``, ``east``,
+    ``n_radial``, ``fit_tilt``). Returns the fit and one report per frame
+    (``name``, ``sun_found``, ``confidence``, ``centroid_px``, ``used`` and, for
+    the used ones, ``residual_px`` and ``residual_deg``). A ValueError names the
+    frames without a sun when too few are left.
+    """
+    from vision.detect import detect_sun
+
+    az = np.asarray(azimuth_deg, float).ravel()
+    el = np.asarray(elevation_deg, float).ravel()
+    if az.size != el.size:
+        raise ValueError(f"{az.size} azimuths but {el.size} elevations")
+    names = list(names) if names is not None else [f"frame {i}" for i in range(az.size)]
+    sizes: set[tuple[int, int]] = set()
+    report: list[dict[str, Any]] = []
+    use: list[int] = []
+    for i, img in enumerate(images):
+        if i >= az.size:
+            raise ValueError(f"more frames than the {az.size} sun positions")
+        sizes.add((int(img.shape[1]), int(img.shape[0])))
+        if len(sizes) != 1:
+            raise ValueError(f"every frame must have the same size, got {sorted(sizes)}")
+        d = detect_sun(img, method=method)
+        ok = d.sun_found and d.centroid_px is not None and el[i] > 0
+        report.append({"name": names[i], "sun_found": d.sun_found, "confidence": d.confidence,
+                       "centroid_px": list(d.centroid_px) if d.centroid_px else None,
+                       "used": bool(ok)})
+        if ok:
+            use.append(i)
+    if len(report) != az.size:
+        raise ValueError(f"{len(report)} frames but {az.size} sun positions")
+    n_par = 4 + int(fit_kwargs.get("n_radial", 0)) + (2 if fit_kwargs.get("fit_tilt") else 0)
+    if 2 * len(use) < n_par + 2:
+        missing = [str(r["name"]) for r in report if not r["used"]]
+        raise ValueError(f"only {len(use)} frames have a sun found above the horizon "
+                         f"(none used: {', '.join(missing) or 'none'}); {n_par} parameters "
+                         f"need at least {(n_par + 3) // 2}")
+    xy = np.array([report[i]["centroid_px"] for i in use], float)
+    res = fit_fisheye(xy[:, 0], xy[:, 1], az[use], el[use], sizes.pop(), **fit_kwargs)
+    for k, i in enumerate(use):
+        report[i]["residual_px"] = float(res.residuals_px[k])
+        report[i]["residual_deg"] = float(res.residuals_deg[k])
+    return res, report

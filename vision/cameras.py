@@ -365,7 +365,8 @@ FISHEYE_FIELDS: tuple[str, ...] = ("projection", "px_per_deg", "cx_px", "cy_px",
 
 
 def _number(params: dict[str, object], name: str, default: float | None = None,
-            positive: bool = False) -> float | None:
+            positive: bool = False, bounds: tuple[float, float] | None = None
+            ) -> float | None:
     raw = params.get(name)
     if raw is None or (isinstance(raw, str) and raw.strip() == ""):
         return default
@@ -377,6 +378,8 @@ def _number(params: dict[str, object], name: str, default: float | None = None,
         raise ValueError(f"{name}: must be finite, got {raw!r}")
     if positive and value <= 0:
         raise ValueError(f"{name}: must be positive, got {raw!r}")
+    if bounds is not None and not bounds[0] <= value <= bounds[1]:
+        raise ValueError(f"{name}: {value:g} is outside [{bounds[0]:g}, {bounds[1]:g}]")
     return value
 
 
@@ -389,17 +392,22 @@ def camera_from_params(camera: str, params: dict[str, object], width_px: int,
     ``camera="fisheye"``: ``px_per_deg`` (required), ``projection`` (default
     equidistant), ``cx_px``/``cy_px`` (default the image centre),
     ``north_offset_deg`` (default 0), ``east`` (default left). Values may be
-    strings (form fields). A ValueError names the offending field.
+    strings (form fields). A ValueError names the offending field. Pixel
+    positions must lie on the image (−0.5 … size − 0.5) and ``px_per_deg`` in
+    [0.01, 1000].
     """
+    xs, ys = (-0.5, width_px - 0.5), (-0.5, height_px - 0.5)
     if camera == "pinhole":
         fov = _number(params, "fov_deg", 67.0, positive=True)
         if fov is None or not 0 < fov < 180:
             raise ValueError(f"fov_deg: must be between 0 and 180, got {fov}")
         return PinholeCamera(width_px, height_px, fov,
-                             _number(params, "cx_px"), _number(params, "cy_px"),
-                             _number(params, "reference_x_px"), _number(params, "reference_y_px"))
+                             _number(params, "cx_px", bounds=xs),
+                             _number(params, "cy_px", bounds=ys),
+                             _number(params, "reference_x_px", bounds=xs),
+                             _number(params, "reference_y_px", bounds=ys))
     if camera == "fisheye":
-        k = _number(params, "px_per_deg", positive=True)
+        k = _number(params, "px_per_deg", positive=True, bounds=(0.01, 1000.0))
         if k is None:
             raise ValueError("px_per_deg: required for a fisheye camera (or give calibration_id)")
         projection = str(params.get("projection") or "equidistant")
@@ -409,8 +417,8 @@ def camera_from_params(camera: str, params: dict[str, object], width_px: int,
         east = str(params.get("east") or "left")
         if east not in EAST_SIDES:
             raise ValueError(f"east: must be 'left' or 'right', got {east!r}")
-        cx = _number(params, "cx_px", (width_px - 1) / 2.0)
-        cy = _number(params, "cy_px", (height_px - 1) / 2.0)
+        cx = _number(params, "cx_px", (width_px - 1) / 2.0, bounds=xs)
+        cy = _number(params, "cy_px", (height_px - 1) / 2.0, bounds=ys)
         off = _number(params, "north_offset_deg", 0.0)
         return FisheyeCamera(float(cx), float(cy), float(k), float(off), east,  # type: ignore[arg-type]
                              projection)

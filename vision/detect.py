@@ -29,7 +29,7 @@ the top-left pixel's centre. OpenCV does the image work.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import cv2
@@ -43,6 +43,7 @@ METHODS: tuple[str, ...] = ("robust", "seed000_hsv", "seed003_gray240")
 _SMALL_AREA_PX = 30  # below: intensity-weighted centroid only; above: also a limb fit
 _MAX_CANDIDATES = 12
 _SCORED = 4  # candidates whose glare is examined
+_CORE_MAX_RADIUS_PX = 64.0  # above: the core's opening runs on a shrunk mask
 
 
 class CameraModel(Protocol):
@@ -76,11 +77,6 @@ class SunDetection:
     n_candidates: int = 0
     ghosts_rejected: int = 0
     fov: FovCircle | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["centroid_px"] = list(self.centroid_px) if self.centroid_px is not None else None
-        return d
 
 
 # --------------------------------------------------------------------------- helpers
@@ -449,13 +445,24 @@ def _core(c: _Candidate, labels: NDArray[Any]) -> _Candidate | None:
     candidate restricted to it, or None when nothing was removed.
     """
     mask = c.mask(labels)
-    dist = cv2.distanceTransform(mask, cv2.DIST_L2, 3)
+    # a zero border: a blob that fills its box (a saturated rectangle) has no zero pixel
+    padded = cv2.copyMakeBorder(mask, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    dist = cv2.distanceTransform(padded, cv2.DIST_L2, 3)[1:-1, 1:-1]
     _, d_max, _, (px, py) = cv2.minMaxLoc(dist)
     if d_max < 2.0:
         return None
-    k = max(1, int(0.6 * d_max))
+    # the opening's cost grows with the kernel's area: past an inscribed radius of
+    # _CORE_MAX_RADIUS_PX it runs on a shrunk mask (enough to cut thin streaks)
+    f = min(1.0, _CORE_MAX_RADIUS_PX / d_max)
+    k = max(1, int(0.6 * d_max * f))
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * k + 1, 2 * k + 1))
-    opened = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
+    if f < 1.0:
+        small = cv2.resize(mask, None, fx=f, fy=f, interpolation=cv2.INTER_NEAREST)
+        opened_small = cv2.morphologyEx(small, cv2.MORPH_OPEN, kernel)
+        opened = cv2.resize(opened_small, (mask.shape[1], mask.shape[0]),
+                            interpolation=cv2.INTER_NEAREST) & mask
+    else:
+        opened = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
     n, lab, stats, cents = cv2.connectedComponentsWithStats(opened, connectivity=8)
     i = int(lab[py, px])
     if n < 2 or i == 0 or stats[i, 4] >= 0.97 * c.area:

@@ -70,7 +70,12 @@ def _jpeg_size(data: bytes) -> tuple[int, int]:
 
 
 def decode_image(data: bytes, max_pixels: int) -> NDArray[np.uint8]:
-    """Decode a PNG/JPEG to 8-bit BGR after checking its header size against ``max_pixels``."""
+    """Decode a PNG/JPEG to 8-bit BGR after checking its header size against ``max_pixels``.
+
+    16-bit and grey images become 8-bit BGR; a JPEG's EXIF orientation is applied
+    (``cv2.IMREAD_COLOR``), so pixel coordinates are those of the image as a
+    browser shows it.
+    """
     fmt, w, h = image_size(data)
     if w <= 0 or h <= 0:
         raise ImageError(f"{fmt.upper()} header gives an empty image ({w}×{h})")
@@ -80,7 +85,9 @@ def decode_image(data: bytes, max_pixels: int) -> NDArray[np.uint8]:
     img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
     if img is None:
         raise ImageError(f"corrupt or truncated {fmt.upper()} image")
-    if img.shape[1] != w or img.shape[0] != h:
+    # IMREAD_COLOR applies a JPEG's EXIF orientation (as browsers do when they show it),
+    # so an orientation of 5-8 swaps the header's width and height
+    if (img.shape[1], img.shape[0]) not in ((w, h), (h, w)):
         raise ImageError(f"{fmt.upper()} decodes to {img.shape[1]}×{img.shape[0]}, "
                          f"not the {w}×{h} of its header")
     return np.asarray(img, dtype=np.uint8)

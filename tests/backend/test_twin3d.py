@@ -193,3 +193,55 @@ def test_start_stop_twice_frees_the_port() -> None:
     twin.stop()  # idempotent
     with pytest.raises(RuntimeError, match="start"):
         twin.show_time(pd.Timestamp("2024-03-15 12:00", tz=TZ))
+
+
+def test_busy_port_moves_to_the_next_free_one() -> None:
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        twin = TwinScene(SITE, "127.0.0.1", port)
+        try:
+            t0 = time.monotonic()
+            twin.start()
+            assert time.monotonic() - t0 < 10.0
+            bound = twin.port
+            assert twin.running and port < bound < port + 20
+            assert httpx.get(f"http://127.0.0.1:{bound}/", timeout=10.0).status_code == 200
+        finally:
+            twin.stop()
+        assert _port_is_free(bound)
+
+
+@pytest.mark.parametrize("host,port,error", [("256.1.1.1", 0, OSError),  # not an address
+                                             ("192.0.2.1", 0, OSError),  # TEST-NET-1, not ours
+                                             ("127.0.0.1", 70000, ValueError)])
+def test_unusable_host_or_port_fails_fast(host: str, port: int, error: type) -> None:
+    """viser alone would retry such a host on port after port, forever."""
+    twin = TwinScene(SITE, host, port)
+    t0 = time.monotonic()
+    with pytest.raises(error):
+        twin.start()
+    assert time.monotonic() - t0 < 5.0 and not twin.running
+    twin.stop()
+
+
+def test_failure_while_building_stops_viser(monkeypatch: pytest.MonkeyPatch) -> None:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    twin = TwinScene(SITE, "127.0.0.1", port)
+
+    def broken() -> None:
+        raise RuntimeError("GUI failed")
+
+    monkeypatch.setattr(twin, "_build_gui", broken)
+    with pytest.raises(RuntimeError, match="GUI failed"):
+        twin.start()
+    assert not twin.running and _port_is_free(port)
+    monkeypatch.undo()
+    twin.start()  # and it can start again
+    try:
+        assert twin.running and twin.port == port
+    finally:
+        twin.stop()

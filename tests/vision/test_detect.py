@@ -219,3 +219,24 @@ def test_strong_blooming_along_the_columns(glare_deg: float) -> None:
     errs, missed = _tracker_errors_mrad(6, bloom=1.0, glare_deg=glare_deg)
     assert missed == 0
     assert float(np.sqrt(np.mean(errs**2))) <= 0.5
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_frame_filled_by_a_saturated_box_does_not_crash(method: str) -> None:
+    """A blob that fills its bounding box has no zero pixel for the distance transform."""
+    img = np.full((600, 800, 3), 10, np.uint8)
+    img[:, :400] = 255
+    d = detect_sun(img, method=method)
+    if method == "robust":
+        assert not d.sun_found  # a half-white frame is no sun
+    assert d.confidence <= 1.0
+
+
+def test_large_glare_with_a_streak_uses_the_shrunk_opening() -> None:
+    """A 300 px radius disc with a smear column: the core (a disc) is found at its centre."""
+    img = np.full((1600, 1600, 3), 30, np.uint8)
+    cv2.circle(img, (820, 760), 300, (255, 255, 255), -1)
+    cv2.line(img, (820, 0), (820, 1599), (255, 255, 255), 9)
+    d = detect_sun(img)
+    assert d.sun_found
+    assert d.centroid_px == pytest.approx((820, 760), abs=1.0)

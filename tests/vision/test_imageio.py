@@ -60,3 +60,30 @@ def test_truncated_png_body_is_an_image_error() -> None:
     ok, buf = cv2.imencode(".png", _img())
     with pytest.raises(ImageError):
         decode_image(buf.tobytes()[:40], 1_000_000)
+
+
+def _with_exif_orientation(jpeg: bytes, orientation: int) -> bytes:
+    """Insert an APP1 Exif segment (TIFF, big-endian, one IFD entry 0x0112) after SOI."""
+    ifd = struct.pack(">H", 1) + struct.pack(">HHIHH", 0x0112, 3, 1, orientation, 0)
+    tiff = b"MM\x00\x2a\x00\x00\x00\x08" + ifd + struct.pack(">I", 0)
+    app1 = b"Exif\x00\x00" + tiff
+    return jpeg[:2] + b"\xff\xe1" + struct.pack(">H", len(app1) + 2) + app1 + jpeg[2:]
+
+
+def test_exif_rotated_jpeg_decodes_as_shown() -> None:
+    """Orientation 6 (turn 90° clockwise to show): a 60×40 raster is shown 40 wide, 60 high."""
+    img = np.full((40, 60, 3), 100, np.uint8)
+    img[2:8, 2:8] = 255  # top-left of the raster → top-right once shown
+    ok, buf = cv2.imencode(".jpg", img)
+    out = decode_image(_with_exif_orientation(buf.tobytes(), 6), 10_000)
+    assert out.shape == (60, 40, 3)
+    assert out[5, 40 - 6].min() > 200 and out[5, 5].max() < 150
+
+
+@pytest.mark.parametrize("shape,dtype", [((1, 1, 3), np.uint8), ((30, 20), np.uint8),
+                                         ((30, 20, 3), np.uint16), ((30, 20, 4), np.uint8)])
+def test_odd_pngs_decode_to_8bit_bgr(shape: tuple[int, ...], dtype: type) -> None:
+    ok, buf = cv2.imencode(".png", np.full(shape, np.iinfo(dtype).max, dtype))
+    out = decode_image(buf.tobytes(), 10_000)
+    assert out.dtype == np.uint8 and out.shape == (shape[0], shape[1], 3)
+    assert out.min() == 255

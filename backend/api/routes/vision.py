@@ -3,7 +3,10 @@
 - ``POST /sun`` — one frame (multipart ``file``) and a camera (``camera`` with
   its parameters, or ``calibration_id``), optional ``timestamp`` and place
   (``site_id`` or ``latitude_deg``/``longitude_deg``/``elevation_m``) → the
-  detection, the ephemeris (SPA, apparent elevation) and the error. Stored.
+  detection (``vision.analyse.analyse_frame``), the ephemeris (SPA, apparent
+  elevation; for a fisheye also its pixel ``ephemeris.centroid_px`` through
+  the same camera model) and the error (``error.separation_deg`` on the
+  sphere, ``error.distance_px``). Stored.
 - ``POST /calibrations`` — ``files`` with one ``timestamps`` each and a place →
   a fitted fisheye camera (``vision.calibrate``), stored with its residuals.
 - ``GET /calibrations``, ``GET /calibrations/{id}``.
@@ -16,7 +19,8 @@ Uploads are bounded: the body is read in chunks and refused with 413 past
 ``max_upload_bytes`` (Content-Length is not trusted alone); each image's size
 is read from its PNG/JPEG header and refused (413) above
 ``vision_max_pixels`` before anything is decoded; a non-image or a corrupt
-one is a 415/422 naming the field. The image work runs in a worker thread.
+one is a 415/422 naming the field. The image and database work runs in worker
+threads; a batch is decoded one frame at a time, so it holds one decoded frame.
 """
 
 from __future__ import annotations

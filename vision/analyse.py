@@ -1,0 +1,104 @@
+"""One frame → a JSON-ready answer: detection, the camera's angles, the ephemeris comparison.
+
+The shape of ``POST /api/v1/vision/sun`` and ``heliotwin vision detect`` (both
+call :func:`analyse_frame`). The ephemeris sun position is the caller's (the
+service takes it from SPA); this module only projects it through the same
+camera model as the detection and measures the angle between the two.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vision.cameras import FisheyeCamera, PinholeCamera
+from vision.detect import detect_sun
+from vision.metrics import angular_separation_deg, wrap_deg
+
+
+def finite(v: Any) -> float | None:
+    """A finite float, or None (NaN is no JSON number)."""
+    if v is None:
+        return None
+    f = float(v)
+    return f if np.isfinite(f) else None
+
+
+def ephemeris_block(cam: PinholeCamera | FisheyeCamera, azimuth_deg: float,
+                    elevation_deg: float) -> dict[str, Any]:
+    """``{"azimuth_deg", "elevation_deg"[, "centroid_px"]}`` for the ephemeris sun.
+
+    For a fisheye camera ``centroid_px`` is the ephemeris sun's pixel ``[x, y]``
+    through the camera model (projection, radial terms and tilt included,
+    :meth:`FisheyeCamera.sky_to_pixel`; seed 003, eqs. 9–11), or None when the
+    sun is below the horizon or outside the lens's domain. A pinhole camera's
+    pointing is unknown here, so it gets no pixel.
+    """
+    out: dict[str, Any] = {"azimuth_deg": float(azimuth_deg),
+                           "elevation_deg": float(elevation_deg)}
+    if isinstance(cam, FisheyeCamera):
+        px = None
+        if elevation_deg >= 0.0:
+            x, y = cam.sky_to_pixel(azimuth_deg, elevation_deg)
+            fx, fy = finite(x), finite(y)
+            px = [fx, fy] if fx is not None and fy is not None else None
+        out["centroid_px"] = px
+    return out
+
+
+def analyse_frame(image: NDArray[Any], cam: PinholeCamera | FisheyeCamera,
+                  method: str = "robust",
+                  ephemeris_deg: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Detect the sun in ``image`` and express it in ``cam``'s terms.
+
+    Returns ``sun_found``, ``confidence``, ``centroid_px``, ``method``,
+    ``image_size_px``, ``camera`` and — fisheye — ``azimuth_deg``/``elevation_deg``
+    or — pinhole — ``pointing_error_deg`` [right, up] and ``pointing_error_mrad``.
+    With ``ephemeris_deg = (azimuth, elevation)``: ``ephemeris`` (see
+    :func:`ephemeris_block`) and, when both suns are known, ``error`` with the
+    angle between them on the sphere (``separation_deg``), the azimuth
+    (wrapped) and elevation differences, detected − ephemeris, and for a
+    fisheye the pixel distance between the two (``distance_px``).
+    """
+    d = detect_sun(image, method=method, camera=cam if method == "robust" else None)
+    c = d.centroid_px
+    out: dict[str, Any] = {
+        "sun_found": d.sun_found,
+        "confidence": d.confidence,
+        "centroid_px": [float(c[0]), float(c[1])] if c is not None else None,
+        "method": d.method,
+        "image_size_px": [int(image.shape[1]), int(image.shape[0])],
+    }
+    if isinstance(cam, FisheyeCamera):
+        out["camera"] = "fisheye"
+        az = el = None
+        if c is not None:
+            a, e = cam.pixel_to_sky(*c)
+            az, el = finite(a), finite(e)
+        out["azimuth_deg"], out["elevation_deg"] = az, el
+    else:
+        out["camera"] = "pinhole"
+        out["pointing_error_deg"] = out["pointing_error_mrad"] = None
+        if c is not None:
+            hh, vv, tot = cam.pointing_error(*c)
+            out["pointing_error_deg"] = [finite(hh), finite(vv)]
+            out["pointing_error_mrad"] = finite(tot)
+    if ephemeris_deg is None:
+        return out
+    eaz, eel = (float(v) for v in ephemeris_deg)
+    eph = ephemeris_block(cam, eaz, eel)
+    out["ephemeris"] = eph
+    if out.get("azimuth_deg") is not None and out.get("elevation_deg") is not None:
+        err: dict[str, Any] = {
+            "separation_deg": float(angular_separation_deg(out["azimuth_deg"],
+                                                           out["elevation_deg"], eaz, eel)),
+            "azimuth_deg": float(wrap_deg(out["azimuth_deg"] - eaz)),
+            "elevation_deg": out["elevation_deg"] - eel,
+        }
+        if c is not None and eph.get("centroid_px") is not None:
+            ex, ey = eph["centroid_px"]
+            err["distance_px"] = float(np.hypot(c[0] - ex, c[1] - ey))
+        out["error"] = err
+    return out
