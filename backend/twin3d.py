@@ -51,8 +51,8 @@ from numpy.typing import NDArray
 from sim.kinematics import (
     TrackerGeometry,
     forward_kinematics,
-    inverse_kinematics,
     joint_transforms,
+    tracking_angles,
 )
 from sim.sites import Site
 from sim.sun import solar_position, sun_vector_enu
@@ -292,7 +292,7 @@ class TwinScene:
     def pose_at(self, ts: pd.Timestamp) -> ScenePose:
         """Sun and tracker pose at ``ts`` (no scene change).
 
-        The tracker follows the sun by :func:`sim.kinematics.inverse_kinematics`
+        The tracker follows the sun by :func:`sim.kinematics.tracking_angles`
         (limits applied; the previous azimuth as the wrap reference); with the
         sun below the horizon the scene shows it stowed flat (elevation joint at
         its upper limit).
@@ -305,12 +305,10 @@ class TwinScene:
                             site.altitude)
         sun_az = float(sp["azimuth"].iloc[0])
         sun_el = float(sp["apparent_elevation"].iloc[0])
-        az_j, el_j = inverse_kinematics(sun_az, sun_el, self._geometry,
-                                        reference_azimuth=self._azimuth_reference)
+        az_j, el_j = tracking_angles(sun_az, sun_el, self._geometry,
+                                     reference_azimuth=self._azimuth_reference)
         az_joint, el_joint = float(az_j), float(el_j)
         stowed = sun_el <= 0.0
-        if stowed:
-            el_joint = self._geometry.elevation_max_deg
         normal = forward_kinematics(az_joint, el_joint, self._geometry)
         sun_vec = sun_vector_enu(90.0 - sun_el, sun_az)
         fixed_normal = forward_kinematics(self._fixed_azimuth_deg,

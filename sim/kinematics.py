@@ -252,6 +252,42 @@ def inverse_kinematics(
     return az_joint, el_joint
 
 
+def tracking_angles(
+    solar_azimuth: ArrayLike,
+    solar_elevation: ArrayLike,
+    geometry: TrackerGeometry,
+    reference_azimuth: ArrayLike | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Joint angles of ideal tracking with the night stow.
+
+    While the sun is above the horizon this is :func:`inverse_kinematics`;
+    with the sun at or below it the tracker is stowed flat (elevation joint at
+    ``elevation_max_deg``, the panel facing the zenith as far as the joint
+    allows) with its azimuth joint where tracking would put it. The twin
+    (:mod:`sim.twin`) and the 3D scene both use this, so the pose they report
+    at night is the same.
+
+    Parameters
+    ----------
+    solar_azimuth, solar_elevation : array_like
+        Sun azimuth clockwise from north and elevation [°].
+    geometry : TrackerGeometry
+    reference_azimuth : array_like, optional
+        Azimuth joint angle to stay near [°] (see :func:`inverse_kinematics`).
+
+    Returns
+    -------
+    azimuth_joint_deg, elevation_joint_deg : ndarray
+        [°]; NaN where the inputs are NaN.
+    """
+    az_joint, el_joint = inverse_kinematics(
+        solar_azimuth, solar_elevation, geometry, reference_azimuth=reference_azimuth
+    )
+    sun_down = np.broadcast_to(np.asarray(solar_elevation, dtype=float), el_joint.shape) <= 0.0
+    el_joint = np.where(sun_down, geometry.elevation_max_deg, el_joint)
+    return az_joint, el_joint
+
+
 def forward_kinematics(
     azimuth_joint_deg: ArrayLike, elevation_joint_deg: ArrayLike, geometry: TrackerGeometry
 ) -> NDArray[np.float64]:

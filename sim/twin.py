@@ -200,7 +200,7 @@ def _arrays_step(
     out["solar_azimuth"] = azimuth
     out["apparent_elevation"] = app_el
 
-    az_joint, el_joint = kinematics.inverse_kinematics(
+    az_joint, el_joint = kinematics.tracking_angles(
         azimuth,
         app_el,
         site.tracker,
@@ -292,7 +292,7 @@ def simulate(
         Step [s] (default 60).
     controller : {"ideal"}
         Ideal tracking: the panel normal on the apparent sun within the
-        joint limits (:func:`sim.kinematics.inverse_kinematics`).
+        joint limits and a flat night stow (:func:`sim.kinematics.tracking_angles`).
     weather : pandas.DataFrame, optional
         Tz-aware index; ``ghi``, ``dni``, ``dhi`` [W m⁻²], optional
         ``temp_air`` [°C] and ``wind_speed`` [m s⁻¹]; interpolated linearly onto

@@ -18,6 +18,7 @@ from sim.kinematics import (
     joint_angles_from_dh,
     joint_transforms,
     normal_to_tilt_azimuth,
+    tracking_angles,
 )
 
 GEOM = TrackerGeometry()
@@ -228,3 +229,15 @@ def test_vectorised_shapes_broadcast() -> None:
     tilt, surf_az = normal_to_tilt_azimuth(forward_kinematics(az_j, el_j, GEOM))
     assert tilt.shape == surf_az.shape == (2, 3)
     assert [t.shape for t in joint_transforms(az_j, el_j, GEOM)] == [(2, 3, 4, 4)] * 3
+
+
+def test_tracking_angles_stow_flat_at_night_and_track_by_day() -> None:
+    """Sun up: the same angles as inverse kinematics; sun down: panel flat."""
+    geometry = TrackerGeometry()
+    az, el = tracking_angles([100.0, 250.0, 300.0], [35.0, -0.5, -20.0], geometry)
+    ik_az, ik_el = inverse_kinematics([100.0, 250.0, 300.0], [35.0, -0.5, -20.0], geometry)
+    np.testing.assert_allclose(az, ik_az)
+    assert el[0] == pytest.approx(35.0)
+    np.testing.assert_allclose(el[1:], geometry.elevation_max_deg)
+    tilt, _ = normal_to_tilt_azimuth(forward_kinematics(az[1:], el[1:], geometry))
+    np.testing.assert_allclose(tilt, 0.0, atol=1e-9)
