@@ -3,7 +3,9 @@
 ``create_app(settings)`` includes the core routers (health/meta, sites,
 measurements, energy, simulations), then — when those modules exist —
 ``backend.api.routes.vision`` and, last, ``backend.api.routes.dashboard`` (its
-``/`` must never shadow the API). The lifespan:
+``/`` must never shadow the API), and two middlewares: gzip for answers of
+2 KiB or more and, ahead of it, the ingest fast path
+(``backend.api.routes.measurements.IngestFastPath``). The lifespan:
 
 1. runs the migrations, loads the built-in sites, starts the writer
    (:func:`backend.context.open_context`);
@@ -29,7 +31,12 @@ from types import ModuleType
 from typing import Any
 
 import anyio
-from fastapi import FastAPI
+import orjson
+from fastapi import FastAPI, Request
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import Response
+from starlette.middleware.gzip import GZipMiddleware
 
 from backend.api.routes import energy, health, measurements, simulations, sites
 from backend.context import ServiceContext, open_context
@@ -96,6 +103,13 @@ def _start_demo(ctx: ServiceContext, stop: threading.Event) -> threading.Thread 
     return thread
 
 
+async def validation_error(request: Request, exc: RequestValidationError) -> Response:
+    """FastAPI's 422 body, written by orjson: an input of NaN or Infinity (Python's JSON
+    reader takes those literals) comes back as null instead of failing as a 500."""
+    body = orjson.dumps({"detail": jsonable_encoder(exc.errors())})
+    return Response(body, status_code=422, media_type="application/json")
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the application (nothing starts until the lifespan runs)."""
     settings = settings or get_settings()
@@ -140,6 +154,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
     )
     app.state.settings = settings
+    app.add_exception_handler(RequestValidationError, validation_error)  # type: ignore[arg-type]
+    # the last middleware added runs first: the ingest fast path answers loggers
+    # before gzip looks at the request (its answers are small); gzip leaves
+    # responses that already carry a Content-Encoding (the dashboard's Plotly) alone.
+    # Level 5: a year downsampled to 2,000 points (480 kB of JSON) packs to 106 kB in
+    # 9 ms; level 9 (Starlette's default) saves 6 kB more for 25 ms.
+    app.add_middleware(GZipMiddleware, minimum_size=2048, compresslevel=5)
     app.add_middleware(measurements.IngestFastPath)
     for module in (health, sites, measurements, energy, simulations):
         app.include_router(module.router)

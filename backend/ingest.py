@@ -31,6 +31,8 @@ import orjson
 #: Readings stamped before this instant are rejected (1990-01-01T00:00:00Z).
 MIN_TS_S = 631_152_000
 MAX_ERRORS = 20
+#: Python types a number column may hold (``str`` for CSV cells; ``bool`` is not a number).
+_SCALARS = frozenset((float, int, str, type(None)))
 FIELDS = ("ts", "array", "voltage_v", "current_a", "power_w", "voltage_adc", "current_adc")
 
 
@@ -208,6 +210,7 @@ def parse_timestamps(values: Sequence[Any], errors: _Errors, field: str = "ts") 
         ts, ok = _fast_timestamps(arr)
     for r in np.flatnonzero(~ok).tolist():
         value = values[r]
+        ts[r] = MIN_TS_S  # a rejected row gets one error, not more from the range checks
         if not isinstance(value, str):
             what = "missing" if value is None else f"a {type(value).__name__}"
             errors.add(r, field, f"timestamp is {what}; send ISO 8601 with an offset", "missing"
@@ -234,14 +237,20 @@ def _floats(values: list[Any], field: str, errors: _Errors) -> tuple[np.ndarray,
     missing = values.count(None)
     if missing == len(values):
         return np.full(len(values), np.nan), np.zeros(len(values), bool)
-    try:
-        col = np.array(values, dtype=np.float64)
-    except (TypeError, ValueError):
+    col = None
+    if _SCALARS.issuperset(map(type, values)):  # no bool, list, object: NumPy converts all
+        try:
+            col = np.array(values, dtype=np.float64)
+        except ValueError:  # a string that is not a number
+            col = None
+    if col is None:
         col = np.empty(len(values), np.float64)
         for r, x in enumerate(values):
             try:
+                if type(x) not in _SCALARS:
+                    raise TypeError
                 col[r] = np.nan if x is None else float(x)
-            except (TypeError, ValueError):
+            except (TypeError, ValueError, OverflowError):
                 errors.add(r, field, f"not a number: {str(x)[:40]!r}", "type_error")
                 col[r] = 0.0
     if missing == 0:
@@ -305,7 +314,7 @@ def build_batch(
         errors.add_rows(np.flatnonzero(late), "ts", lambda r: (
             f"timestamp {columns['ts'][r]} is {int(ts[r] - now_s)} s after the server clock "
             f"(tolerance {limits.future_tolerance_s} s)"), "value_error")
-    early = (ts < MIN_TS_S) & (ts != 0)
+    early = ts < MIN_TS_S
     if early.any():
         errors.add_rows(np.flatnonzero(early), "ts", lambda r: "timestamp before 1990",
                         "value_error")
@@ -420,13 +429,20 @@ def parse_csv_batch(
         raise IngestError(422, [{"loc": ["body"], "row": None, "field": None,
                                  "type": "value_error",
                                  "msg": f"CSV is not UTF-8: {exc}"}]) from exc
-    rows = list(csv.reader(io.StringIO(text)))
+    reader = csv.reader(io.StringIO(text))
+    try:
+        rows = list(reader)
+    except csv.Error as exc:
+        raise IngestError(422, [{"loc": ["body"], "row": None, "field": None,
+                                 "type": "value_error", "line": reader.line_num,
+                                 "msg": f"CSV line {reader.line_num}: {exc}"}]) from exc
     while rows and not any(cell.strip() for cell in rows[-1]):
         rows.pop()
     if not rows:
         _check_rows(0, limits)
     header = [h.strip() for h in rows[0]]
     unknown = [h for h in header if h not in FIELDS]
+    unknown += sorted({f"{h} (twice)" for h in header if header.count(h) > 1})
     if unknown or "ts" not in header or "array" not in header:
         raise IngestError(422, [{"loc": ["body", "header"], "row": None, "field": "header",
                                  "type": "value_error", "line": 1,

@@ -78,7 +78,7 @@ class Settings(BaseSettings):
         60.0, gt=0, description="Period of the live twin loop (tests shorten it)."
     )
     twin_on_demand_max_days: int = Field(
-        800, ge=0, description="Most days of twin series one energy query may compute."
+        800, ge=0, description="Most days of twin series one query (energy, source=twin) computes."
     )
     demo_logger: bool = Field(True, description="`heliotwin serve` runs the demo field logger.")
     demo_token: str | None = Field(

@@ -159,3 +159,10 @@ def test_energy_errors(client: httpx.Client) -> None:
     assert r.status_code == 422
     r = client.get(f"{BASE}/energy", params={"start": "2022-01-01T00:00:00", "end": "2022-01-02"})
     assert r.status_code == 422 and "offset" in r.json()["detail"]
+    # ranges beyond what a calendar can hold, or too many periods: 422, not 500
+    r = client.get(f"{BASE}/energy", params={"start": "0001-01-01", "end": "9999-12-31",
+                                             "interval": "month"})
+    assert r.status_code == 422 and "start" in r.json()["detail"]
+    r = client.get(f"{BASE}/energy", params={"start": "1950-01-01", "end": "2150-01-01",
+                                             "interval": "hour"})
+    assert r.status_code == 422 and "limit" in r.json()["detail"]

@@ -87,3 +87,37 @@ def test_row_limit_is_413() -> None:
     with pytest.raises(IngestError) as err:
         parse_json_batch(orjson.dumps({"readings": [one] * 11}), ARRAYS, Limits(max_rows=10))
     assert err.value.status == 413 and "limit is 10" in err.value.errors[0]["msg"]
+
+
+@pytest.mark.parametrize(("value", "field"), [
+    (True, "voltage_v"),     # a JSON boolean is not a number (NumPy would read 1.0)
+    ([26.0], "voltage_v"),   # a list would become a 2-D column and fail in the database
+    ({"v": 1}, "current_a"),
+    ("26,1", "current_a"),
+])
+def test_non_numbers_are_422_naming_the_field(value: object, field: str) -> None:
+    one = {"ts": "2024-05-01T10:00:00Z", "array": "tracker", "voltage_v": 26.0,
+           "current_a": 7.0}
+    body = orjson.dumps({"readings": [one, dict(one, **{field: value})]})
+    with pytest.raises(IngestError) as err:
+        parse_json_batch(body, ARRAYS, Limits())
+    assert err.value.status == 422
+    assert (err.value.errors[0]["row"], err.value.errors[0]["field"]) == (1, field)
+
+
+def test_1970_epoch_is_before_1990() -> None:
+    one = {"ts": "1970-01-01T00:00:00Z", "array": "tracker", "voltage_v": 1, "current_a": 1}
+    with pytest.raises(IngestError) as err:
+        parse_json_batch(orjson.dumps({"readings": [one]}), ARRAYS, Limits())
+    assert err.value.errors[0]["field"] == "ts" and "1990" in err.value.errors[0]["msg"]
+
+
+@pytest.mark.parametrize(("body", "needle"), [
+    ('ts,array,voltage_v,current_a\n2024-05-01T10:00:00Z,"' + "a" * 200_000 + '",1,1\n',
+     "line 2"),
+    ("ts,ts,array,voltage_v,current_a\n2024-05-01T10:00:00Z,x,tracker,1,1\n", "twice"),
+])
+def test_malformed_csv_is_422(body: str, needle: str) -> None:
+    with pytest.raises(IngestError) as err:
+        parse_csv_batch(body.encode(), ARRAYS, Limits())
+    assert err.value.status == 422 and needle in err.value.errors[0]["msg"]

@@ -111,6 +111,14 @@ def test_idempotent_resend_and_partial_overlap(client: httpx.Client,
     got = client.get(PATH, params={"array": "tracker", "start": "2023-01-05",
                                    "end": "2023-01-06", "max_points": 5000}).json()
     assert got["bucket_s"] == 0 and len(got["points"]) == 1440
+    # a new second twice in one batch with other values: the first is stored, once
+    one = {"ts": "2023-01-07T12:00:00-06:00", "array": "tracker", "voltage_v": 25.0,
+           "current_a": 4.0}
+    assert post(client, tok, {"readings": [one, dict(one, current_a=8.0)]}).json() == {
+        "accepted": 1, "duplicates": 1}
+    got = client.get(PATH, params={"array": "tracker", "start": "2023-01-07",
+                                   "end": "2023-01-08"}).json()
+    assert [(p["current_a"], p["power_w"]) for p in got["points"]] == [(4.0, 100.0)]
 
 
 def test_csv_ingest_and_csv_errors_name_the_line(client: httpx.Client,
@@ -150,6 +158,13 @@ def test_adc_readings_use_stored_calibration(client: httpx.Client,
     assert p["voltage_v"] == pytest.approx(v_expected, rel=1e-12)
     assert p["current_a"] == pytest.approx(i_expected, rel=1e-12)
     assert p["power_w"] == pytest.approx(v_expected * i_expected, rel=1e-12)
+    # NaN/Infinity literals (Python's JSON reads them) and absurd values: 422, nothing stored
+    auth = {"Authorization": f"Bearer {tok}", "Content-Type": "application/json"}
+    for bad in ('{"current_zero_v": NaN}', '{"adc_vref_v": Infinity}',
+                '{"divider_ratio": 1e308}'):
+        r = client.put(url, content=bad, headers=auth)
+        assert r.status_code == 422, (bad, r.text)
+    assert client.get(url).json() == cal
     bad = {**reading, "ts": "2023-01-08T12:01:00-06:00", "current_adc": 1024}
     r = post(client, tok, {"readings": [bad]})
     assert r.status_code == 422 and r.json()["detail"][0]["field"] == "current_adc"
@@ -202,3 +217,17 @@ def test_read_errors(client: httpx.Client) -> None:
     assert r.status_code == 422
     r = client.get("/api/v1/sites/atlantis/measurements")
     assert r.status_code == 404 and "tehuantepec" in r.json()["detail"]
+    r = client.get(PATH, params={"array": "tracker", "start": "0001-01-01", "end": "2023-01-02"})
+    assert r.status_code == 422 and "start" in r.json()["detail"]
+
+
+def test_large_answers_are_gzipped(client: httpx.Client, live_server: LiveServer) -> None:
+    rows = [{"ts": f"2021-06-01T{h:02d}:{m:02d}:00Z", "array": "fixed", "voltage_v": 25.0,
+             "current_a": 4.0} for h in range(3) for m in range(60)]
+    auth = {"Authorization": f"Bearer {live_server.write_token}"}
+    assert client.post(PATH, json={"readings": rows}, headers=auth).status_code == 200
+    params = {"array": "fixed", "start": "2021-06-01T00:00:00Z", "end": "2021-06-01T03:00:00Z"}
+    for extra in ({}, {"format": "csv"}):
+        r = client.get(PATH, params={**params, **extra}, headers={"Accept-Encoding": "gzip"})
+        assert r.headers.get("content-encoding") == "gzip"
+        assert r.text.count("25.0") == 180  # httpx decoded the one gzip layer

@@ -74,6 +74,7 @@ def test_sites_and_meta(client: httpx.Client) -> None:
     assert one["arrays"]["tracker"]["kind"] == "tracker"
     assert one["arrays"]["fixed"]["calibration"]["current_sensitivity_mv_per_a"] == 100.0
     assert client.get("/healthz").json() == {"status": "ok"}
+    assert "ideal" in client.get("/api/v1/meta").json()["controllers"]
     assert client.get("/docs").status_code == 200
     paths = client.get("/openapi.json").json()["paths"]
     assert "/api/v1/sites/{site_id}/measurements" in paths

@@ -22,11 +22,12 @@ from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import Response
 
 from backend.api.deps import ContextDep, site_or_404
-from backend.queries import energy_table, parse_day_or_time, period_edges
+from backend.queries import energy_table, parse_range, period_edges
 
 router = APIRouter(prefix="/api/v1/sites", tags=["energy"])
 
 MAX_PERIODS = 50_000
+_SHORTEST_S = {"hour": 3600.0, "day": 82800.0, "month": 28 * 86400.0}  # DST days: 23 h
 
 
 def _gain(tracker: float | None, fixed: float | None) -> float | None:
@@ -39,6 +40,10 @@ def energy_rows(ctx: Any, site_id: str, start: dt.datetime, end: dt.datetime,
                 interval: str) -> dict[str, Any]:
     """The energy answer for a validated range (also used by the status tiles)."""
     info = site_or_404(ctx, site_id)
+    at_least = (end - start).total_seconds() / _SHORTEST_S[interval]
+    if at_least > MAX_PERIODS + 2:  # before building millions of period edges
+        raise HTTPException(422, f"over {int(at_least)} periods of one {interval}; the limit is "
+                                 f"{MAX_PERIODS}: use a longer interval or a shorter range")
     edges = period_edges(start, end, interval, info.zone)
     if len(edges) - 1 > MAX_PERIODS:
         raise HTTPException(422, f"{len(edges) - 1} periods of one {interval}; the limit is "
@@ -104,12 +109,9 @@ def get_energy(
     """Energy per period for every array, measured and twin, with the tracking gain."""
     info = site_or_404(ctx, site_id)
     try:
-        t0 = parse_day_or_time(start, info.zone, "start")
-        t1 = parse_day_or_time(end, info.zone, "end")
+        t0, t1 = parse_range(start, end, info.zone)
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
-    if not t1 > t0:
-        raise HTTPException(422, f"end ({end}) must be after start ({start}); end is exclusive")
     data = energy_rows(ctx, site_id, t0, t1, interval)
     if format == "csv":
         buf = io.StringIO()

@@ -8,6 +8,7 @@ from typing import Any
 from fastapi import APIRouter
 
 from backend.api.deps import SettingsDep
+from sim.twin import CONTROLLERS
 
 router = APIRouter(tags=["service"])
 
@@ -37,4 +38,5 @@ def meta(settings: SettingsDep) -> dict[str, Any]:
         "default_site": settings.default_site,
         "energy_max_gap_s": settings.energy_max_gap_s,
         "docs_url": "/docs",
+        "controllers": list(CONTROLLERS),
     }

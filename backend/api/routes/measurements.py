@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import csv
 import io
+import itertools
 import logging
 import re
 from collections.abc import AsyncIterator, Iterator, Mapping
@@ -23,13 +24,15 @@ import numpy as np
 import orjson
 from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.responses import Response, StreamingResponse
+from starlette.datastructures import Headers
+from starlette.requests import ClientDisconnect
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from backend.api.deps import ContextDep, check_site_token, site_or_404
 from backend.context import ServiceContext
 from backend.ingest import Batch, IngestError, Limits, parse_csv_batch, parse_json_batch
 from backend.models import SOURCE_CODES
-from backend.queries import QUANTITIES, count_rows, downsample, iso_utc, parse_day_or_time, raw_rows
+from backend.queries import QUANTITIES, count_rows, downsample, iso_utc, parse_range, raw_rows
 from backend.writer import MeasurementJob
 
 logger = logging.getLogger(__name__)
@@ -120,8 +123,11 @@ async def ingest(ctx: ServiceContext, site_id: str, headers: Mapping[str, str],
             try:
                 batch = await asyncio.get_running_loop().run_in_executor(
                     ctx.parsers, parse, body, arrays, limits)
-            except BrokenProcessPool:  # a parser died (memory?): validate here instead
-                logger.exception("parser process pool broken; validating on a thread")
+            except BrokenProcessPool:  # a parser died (memory?): validate on threads from now
+                logger.exception("parser process pool broken; validating on threads instead")
+                broken, ctx.parsers = ctx.parsers, None
+                if broken is not None:
+                    broken.shutdown(wait=False, cancel_futures=True)
         if batch is None and len(body) > _OFFLOAD_BYTES:
             batch = await anyio.to_thread.run_sync(parse, body, arrays, limits)
         elif batch is None:
@@ -176,19 +182,22 @@ class IngestFastPath:
         if match is None:
             await self.app(scope, receive, send)
             return
-        headers = {k.decode("latin-1"): v.decode("latin-1") for k, v in scope["headers"]}
+        headers = Headers(scope=scope)  # what ``Request.headers`` gives the route
 
         async def chunks() -> AsyncIterator[bytes]:
             more = True
             while more:
                 message = await receive()
                 if message["type"] == "http.disconnect":
-                    raise OSError("client disconnected")
+                    raise ClientDisconnect
                 more = message.get("more_body", False)
                 yield message.get("body", b"")
 
-        status, body, extra = await ingest(scope["app"].state.ctx, match.group(1), headers,
-                                           chunks())
+        try:
+            status, body, extra = await ingest(scope["app"].state.ctx, match.group(1), headers,
+                                               chunks())
+        except ClientDisconnect:  # the logger hung up mid-body: nothing stored, no answer
+            return
         out = [(b"content-type", b"application/json"),
                (b"content-length", str(len(body)).encode())]
         out += [(k.lower().encode(), v.encode()) for k, v in extra.items()]
@@ -201,21 +210,26 @@ def _range(info: Any, start: str | None, end: str | None) -> tuple[int, int]:
         raise HTTPException(422, "start and end are required (a date YYYY-MM-DD in the site's "
                                  "time zone, or an ISO 8601 date-time with offset)")
     try:
-        t0 = parse_day_or_time(start, info.zone, "start")
-        t1 = parse_day_or_time(end, info.zone, "end")
+        t0, t1 = parse_range(start, end, info.zone)
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
-    if not t1 > t0:
-        raise HTTPException(422, f"end ({end}) must be after start ({start}); end is exclusive")
     return int(t0.timestamp()), int(t1.timestamp())
 
 
-def _csv_lines(header: list[str], cols: list[list[Any]]) -> Iterator[str]:
+def _csv_lines(header: list[str], cols: list[list[Any]], chunk_rows: int = 20_000
+               ) -> Iterator[str]:
+    """The CSV text in pieces of ``chunk_rows`` rows (a year is not one string in memory)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(header)
-    w.writerows(zip(*cols, strict=True))
-    yield buf.getvalue()
+    rows = zip(*cols, strict=True)
+    while part := list(itertools.islice(rows, chunk_rows)):
+        w.writerows(part)
+        yield buf.getvalue()
+        buf.seek(0)
+        buf.truncate()
+    if buf.tell():  # no rows: the header alone
+        yield buf.getvalue()
 
 
 @router.get("/{site_id}/measurements", responses={404: {}, 422: {}})

@@ -16,7 +16,7 @@ from fastapi.responses import Response
 from pydantic import BaseModel, Field
 
 from backend.api.deps import ContextDep, site_or_404
-from backend.queries import iso_utc, parse_day_or_time
+from backend.queries import iso_utc, parse_range
 from backend.simulations import RunParams
 from sim.twin import CONTROLLERS
 
@@ -38,15 +38,12 @@ class SimulationCreate(BaseModel):
 def _params(ctx: Any, body: SimulationCreate) -> RunParams:
     info = site_or_404(ctx, body.site_id)
     try:
-        t0 = parse_day_or_time(body.start, info.zone, "start")
-        t1 = parse_day_or_time(body.end, info.zone, "end")
+        t0, t1 = parse_range(body.start, body.end, info.zone)
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
-    if not t1 > t0:
-        raise HTTPException(422, f"end ({body.end}) must be after start ({body.start})")
     steps = (t1 - t0).total_seconds() / body.step_s
     if steps > ctx.settings.max_simulation_steps:
-        raise HTTPException(422, f"{steps:.0f} steps asked; the limit is "
+        raise HTTPException(422, f"{steps:.4g} steps asked; the limit is "
                                  f"{ctx.settings.max_simulation_steps}: use a larger step_s "
                                  "or a shorter range")
     if body.controller not in CONTROLLERS:
@@ -56,7 +53,8 @@ def _params(ctx: Any, body: SimulationCreate) -> RunParams:
                      body.controller)
 
 
-@router.post("", responses={202: {"description": "accepted (background run)"}, 422: {}})
+@router.post("", responses={202: {"description": "accepted (background run)"}, 400: {},
+                                 404: {}, 422: {}})
 async def create_simulation(body: SimulationCreate, ctx: ContextDep) -> Response:
     """Run a twin scenario; the summary, or 202 with a ``run_id`` to poll."""
     params = _params(ctx, body)

@@ -9,7 +9,7 @@ import time
 from typing import Any
 
 from fastapi import APIRouter, HTTPException
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from backend.api.deps import ContextDep, SiteTokenDep, site_or_404
 from backend.api.routes.energy import energy_rows
@@ -27,14 +27,18 @@ _LAST = ("SELECT ts_s, voltage_v, current_a, power_w FROM measurements "
 
 
 class CalibrationModel(BaseModel):
-    """Logger calibration of one array (seed 000, eqs. 16–19)."""
+    """Logger calibration of one array (seed 000, eqs. 16–19); NaN/Infinity are a 422."""
+
+    model_config = ConfigDict(allow_inf_nan=False)
 
     adc_bits: int = Field(10, ge=8, le=24, description="ADC resolution [bit]")
-    adc_vref_v: float = Field(5.0, gt=0, description="ADC reference voltage [V]")
-    current_zero_v: float = Field(2.5, description="ACS712 output at 0 A [V] (eq. 16)")
+    adc_vref_v: float = Field(5.0, gt=0, le=50, description="ADC reference voltage [V]")
+    current_zero_v: float = Field(2.5, ge=0, le=50,
+                                  description="ACS712 output at 0 A [V] (eq. 16)")
     current_sensitivity_mv_per_a: float = Field(
-        100.0, gt=0, description="ACS712 sensitivity [mV/A] (eq. 16)")
-    divider_ratio: float = Field(10.0, gt=0, description="(R1+R2+R3)/Rx of the divider (eq. 19)")
+        100.0, gt=0, le=10_000, description="ACS712 sensitivity [mV/A] (eq. 16)")
+    divider_ratio: float = Field(10.0, ge=1, le=10_000,
+                                 description="(R1+R2+R3)/Rx of the divider (eq. 19)")
 
 
 def _site_dict(info: Any) -> dict[str, Any]:
@@ -68,7 +72,8 @@ def get_calibration(site_id: str, array: str, ctx: ContextDep) -> CalibrationMod
     return CalibrationModel(**dataclasses.asdict(info.arrays[array].calibration))
 
 
-@router.put("/{site_id}/arrays/{array}/calibration", responses={401: {}, 403: {}, 404: {}})
+@router.put("/{site_id}/arrays/{array}/calibration", responses={400: {}, 401: {}, 403: {},
+                                                                      404: {}})
 async def put_calibration(site_id: str, array: str, body: CalibrationModel, ctx: ContextDep,
                           _token_site: SiteTokenDep) -> CalibrationModel:
     """Store the calibration of an array's logger (needs the site's write token)."""
