@@ -91,7 +91,8 @@ def open_context(settings: Settings) -> ServiceContext:
                     settings.writer_max_group_rows)
     writer.start()
     twin = TwinService(registry, engine, writer, settings.twin_on_demand_max_days,
-                       scene_site=settings.default_site)
+                       scene_site=settings.default_site,
+                       history_days=settings.twin_history_days)
     return ServiceContext(
         settings=settings, engine=engine, sessions=make_sessionmaker(engine),
         registry=registry, writer=writer, tokens=TokenCache(engine), twin=twin,

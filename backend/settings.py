@@ -80,6 +80,12 @@ class Settings(BaseSettings):
     twin_on_demand_max_days: int = Field(
         800, ge=0, description="Most days of twin series one query (energy, source=twin) computes."
     )
+    twin_history_days: int = Field(
+        400,
+        ge=0,
+        description="Days before now that reads fill with the twin on demand; older days only "
+        "where measured data exist.",
+    )
     demo_logger: bool = Field(True, description="`heliotwin serve` runs the demo field logger.")
     demo_token: str | None = Field(
         None, description="Write token of the demo logger; created at start when unset."

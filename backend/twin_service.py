@@ -26,10 +26,10 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from sqlalchemy import Connection, Engine, select
+from sqlalchemy import Connection, Engine, func, select
 from sqlalchemy.dialects import postgresql, sqlite
 
-from backend.models import SOURCE_CODES, TwinCoverage
+from backend.models import SOURCE_CODES, MeasurementRollup, TwinCoverage
 from backend.registry import Registry, SiteInfo
 from backend.writer import MeasurementJob, Writer
 from sim.twin import simulate
@@ -63,11 +63,13 @@ class TwinService:
     """Writes and caches twin series for every site."""
 
     def __init__(self, registry: Registry, engine: Engine, writer: Writer,
-                 max_days: int, scene: Any = None, scene_site: str | None = None) -> None:
+                 max_days: int, scene: Any = None, scene_site: str | None = None,
+                 history_days: int = 400) -> None:
         self.registry = registry
         self.engine = engine
         self.writer = writer
         self.max_days = max_days
+        self.history_days = history_days
         self.scene = scene
         self.scene_site = scene_site
         self.latest: dict[str, LiveSample] = {}
@@ -103,6 +105,7 @@ class TwinService:
             return 0
         info = self.registry.sites[site_id]
         now_minute = int((time.time() if now_s is None else now_s) // 60 * 60)
+        start_s = max(start_s, self._history_floor_s(info, now_minute))
         days = self._day_starts(info, start_s, min(end_s, now_minute + 1))
         if not days:
             return 0
@@ -135,6 +138,26 @@ class TwinService:
             if marks:
                 self.writer.call(lambda conn: _mark_coverage(conn, site_id, marks)).result()
             return total
+
+    def _history_floor_s(self, info: SiteInfo, now_s: int) -> int:
+        """Earliest time reads fill with the twin: ``history_days`` before now, or the
+        first measured reading of the site if that is older.
+
+        Reads need no token, so without this floor anyone could make the server
+        simulate and store twin series for any range of years.
+        """
+        floor = now_s - self.history_days * 86_400
+        array_ids = [a.array_id for a in info.arrays.values()]
+        if not array_ids:
+            return floor
+        with self.engine.connect() as conn:
+            first = conn.execute(
+                select(func.min(MeasurementRollup.first_ts_s)).where(
+                    MeasurementRollup.array_id.in_(array_ids),
+                    MeasurementRollup.source == SOURCE_CODES["measured"],
+                )
+            ).scalar()
+        return floor if first is None else min(floor, int(first))
 
     def _simulate_and_store(self, info: SiteInfo, lo: int, hi: int) -> int:
         result = simulate(info.site, pd.Timestamp(lo, unit="s", tz="UTC"),

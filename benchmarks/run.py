@@ -30,7 +30,8 @@ def machine_note() -> str:
     except OSError:
         commit = "?"
     cpu = platform.processor() or platform.machine()
-    for line in Path("/proc/cpuinfo").read_text().splitlines() if Path("/proc/cpuinfo").exists() else []:
+    cpuinfo = Path("/proc/cpuinfo")
+    for line in cpuinfo.read_text().splitlines() if cpuinfo.exists() else []:
         if line.startswith("model name"):
             cpu = line.split(":", 1)[1].strip()
             break

@@ -132,20 +132,22 @@ def test_unaligned_range_and_out_of_order_posts(client: httpx.Client,
 
 
 def test_twin_energy_exists_for_past_days(client: httpx.Client) -> None:
-    r = client.get(f"{BASE}/energy", params={"start": "2021-03-14", "end": "2021-03-17"})
+    d0 = dt.datetime.now(TZ).date() - dt.timedelta(days=40)  # within HELIOTWIN_TWIN_HISTORY_DAYS
+    day = [(d0 + dt.timedelta(days=k)).isoformat() for k in range(4)]
+    r = client.get(f"{BASE}/energy", params={"start": day[0], "end": day[3]})
     rows = r.json()["rows"]
     assert len(rows) == 3
     for row in rows:
         tr, fx = row["arrays"]["tracker"]["twin_wh"], row["arrays"]["fixed"]["twin_wh"]
-        # clear-sky March days at 16° N: 4 × 205 Wp arrays give several kWh a day
+        # clear-sky days at 16° N: 4 × 205 Wp arrays give several kWh a day
         assert 3000 < fx < tr < 9000
         assert row["twin_gain_pct"] > 10
         assert row["arrays"]["tracker"]["measured_wh"] is None
     twin = client.get(f"{BASE}/measurements", params={
-        "array": "tracker", "source": "twin", "start": "2021-03-15", "end": "2021-03-16",
+        "array": "tracker", "source": "twin", "start": day[1], "end": day[2],
         "max_points": 2000}).json()
     assert len(twin["points"]) == 1440 and max(p["power_w"] for p in twin["points"]) > 500
-    csv_text = client.get(f"{BASE}/energy", params={"start": "2021-03-14", "end": "2021-03-17",
+    csv_text = client.get(f"{BASE}/energy", params={"start": day[0], "end": day[3],
                                                     "format": "csv"}).text
     assert csv_text.splitlines()[0].startswith("period_start,period_end,tracker_measured_wh")
     assert len(csv_text.splitlines()) == 4
@@ -166,3 +168,19 @@ def test_energy_errors(client: httpx.Client) -> None:
     r = client.get(f"{BASE}/energy", params={"start": "1950-01-01", "end": "2150-01-01",
                                              "interval": "hour"})
     assert r.status_code == 422 and "limit" in r.json()["detail"]
+
+
+def test_twin_on_demand_is_bounded_to_recent_or_measured_days(client: httpx.Client,
+                                                              live_server: LiveServer) -> None:
+    """Anonymous reads fill the twin only for recent days or days after the first
+    measured reading; far older ranges stay empty instead of growing the database."""
+    r = client.get(f"{BASE}/energy", params={"start": "1995-03-01", "end": "1995-03-03",
+                                             "interval": "day"})
+    assert r.status_code == 200, r.text
+    assert all(row["arrays"]["tracker"]["twin_wh"] in (None, 0) for row in r.json()["rows"])
+    recent = dt.datetime.now(TZ).date() - dt.timedelta(days=3)
+    r = client.get(f"{BASE}/energy", params={"start": recent.isoformat(),
+                                             "end": (recent + dt.timedelta(days=1)).isoformat(),
+                                             "interval": "day"})
+    assert r.status_code == 200, r.text
+    assert r.json()["rows"][0]["arrays"]["tracker"]["twin_wh"] > 1000
