@@ -1,15 +1,14 @@
 """The FastAPI application: routers and the lifespan that owns every background part.
 
-``create_app(settings)`` includes the core routers (health/meta, sites,
-measurements, energy, simulations), then — when those modules exist —
-``backend.api.routes.vision`` and, last, ``backend.api.routes.dashboard`` (its
-``/`` must never shadow the API), and two middlewares: gzip for answers of
+``create_app(settings)`` includes the API routers (health/meta, sites,
+measurements, energy, simulations, vision) and, last, the dashboard (its ``/``
+must never shadow the API), and two middlewares: gzip for answers of
 2 KiB or more and, ahead of it, the ingest fast path
 (``backend.api.routes.measurements.IngestFastPath``). The lifespan:
 
 1. runs the migrations, loads the built-in sites, starts the writer
    (:func:`backend.context.open_context`);
-2. starts the 3D scene (``backend.twin3d.TwinScene``) when enabled and present;
+2. starts the 3D scene (``backend.twin3d.TwinScene``) when enabled;
 3. starts the live twin loop (an asyncio task, every minute);
 4. starts the demo logger thread when enabled (making its own token if none is
    configured);
@@ -22,13 +21,10 @@ from __future__ import annotations
 
 import asyncio
 import gc
-import importlib
 import logging
 import threading
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from types import ModuleType
-from typing import Any
 
 import anyio
 import orjson
@@ -38,34 +34,22 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import Response
 from starlette.middleware.gzip import GZipMiddleware
 
-from backend.api.routes import energy, health, measurements, simulations, sites
+from backend.api.routes import dashboard, energy, health, measurements, simulations, sites, vision
 from backend.context import ServiceContext, open_context
 from backend.settings import Settings, get_settings
 from backend.tokens import create_token
+from backend.twin3d import TwinScene
 
 logger = logging.getLogger(__name__)
 
 
-def optional_module(name: str) -> ModuleType | None:
-    """Import ``name``, or None when exactly that module does not exist (yet)."""
-    try:
-        return importlib.import_module(name)
-    except ModuleNotFoundError as exc:
-        if exc.name == name:
-            return None
-        raise
-
-
-def _start_scene(ctx: ServiceContext) -> Any:
+def _start_scene(ctx: ServiceContext) -> TwinScene | None:
     s = ctx.settings
-    if not s.viser:
-        return None
-    twin3d = optional_module("backend.twin3d")
     info = ctx.registry.get(s.default_site)
-    if twin3d is None or info is None:
+    if not s.viser or info is None:
         return None
     try:
-        scene = twin3d.TwinScene(info.site, s.host, s.viser_port)
+        scene = TwinScene(info.site, s.host, s.viser_port)
         scene.start()
     except Exception:  # the service runs without its 3D view rather than not at all
         logger.exception("3D scene did not start")
@@ -162,12 +146,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # 9 ms; level 9 (Starlette's default) saves 6 kB more for 25 ms.
     app.add_middleware(GZipMiddleware, minimum_size=2048, compresslevel=5)
     app.add_middleware(measurements.IngestFastPath)
-    for module in (health, sites, measurements, energy, simulations):
+    for module in (health, sites, measurements, energy, simulations, vision, dashboard):
         app.include_router(module.router)
-    vision = optional_module("backend.api.routes.vision")
-    if vision is not None:
-        app.include_router(vision.router)
-    dashboard = optional_module("backend.api.routes.dashboard")
-    if dashboard is not None:
-        app.include_router(dashboard.router)
     return app

@@ -8,19 +8,12 @@ comes from ``sqlalchemy.url`` or ``HELIOTWIN_DATABASE_URL``.
 
 from __future__ import annotations
 
-import importlib
-
 from alembic import context
 from sqlalchemy import create_engine
 
 import backend.models
+import backend.vision_store  # noqa: F401  (registers the vision tables on Base.metadata)
 from backend.settings import get_settings
-
-try:
-    importlib.import_module("backend.vision_store")
-except ModuleNotFoundError as exc:  # the vision tables are not written yet
-    if exc.name != "backend.vision_store":
-        raise
 
 target_metadata = backend.models.Base.metadata
 

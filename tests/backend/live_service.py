@@ -92,6 +92,7 @@ class ServerProcess:
     log_path: Path
     extra_env: dict[str, str] = field(default_factory=dict)
     demo: bool = False
+    viser_port: int = 0  # 0: a free one
     port: int = 0
     proc: subprocess.Popen[bytes] | None = None
 
@@ -117,7 +118,8 @@ class ServerProcess:
         log = self.log_path.open("ab")
         self.proc = subprocess.Popen(
             [*HELIOTWIN, "serve", "--host", "127.0.0.1", "--port", str(self.port),
-             "--viser-port", str(free_port()), *([] if self.demo else ["--no-demo"])],
+             "--viser-port", str(self.viser_port or free_port()),
+             *([] if self.demo else ["--no-demo"])],
             cwd=ROOT, env=self.env, stdout=log, stderr=subprocess.STDOUT,
         )
         deadline = time.monotonic() + timeout_s

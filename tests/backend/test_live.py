@@ -64,3 +64,25 @@ def test_serve_with_live_twin_and_demo_logger(database: Database, tmp_path: Path
     # uvicorn shuts down gracefully, then re-raises SIGTERM (exit status -15)
     assert code in (0, -15), server.log_tail()
     assert "service stopped" in server.log_path.read_text()
+
+
+def test_meta_reports_the_port_the_3d_twin_really_uses(database: Database,
+                                                       tmp_path: Path) -> None:
+    """With the configured viser port taken, the scene moves to a free one and
+    /api/v1/meta says which, so the dashboard's iframe finds it."""
+    import socket
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        taken = busy.getsockname()[1]
+        server = ServerProcess(database.url, tmp_path / "server.log", viser_port=taken,
+                               extra_env={"HELIOTWIN_VISER": "true"}).start()
+        try:
+            meta = httpx.get(server.base_url + "/api/v1/meta", timeout=30).json()
+            assert meta["viser_enabled"] is True
+            assert meta["viser_port"] != taken
+            page = httpx.get(f"http://127.0.0.1:{meta['viser_port']}/", timeout=30)
+            assert page.status_code == 200, server.log_tail()
+        finally:
+            server.stop()

@@ -5,7 +5,7 @@ from __future__ import annotations
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
 
 from backend.api.deps import SettingsDep
 from sim.twin import CONTROLLERS
@@ -28,12 +28,17 @@ def healthz() -> dict[str, str]:
 
 
 @router.get("/api/v1/meta")
-def meta(settings: SettingsDep) -> dict[str, Any]:
-    """What the dashboard needs to know about this service."""
+def meta(request: Request, settings: SettingsDep) -> dict[str, Any]:
+    """What the dashboard needs to know about this service.
+
+    ``viser_port`` is the port the 3D scene really listens on: it moves to the next
+    free port when the configured one is busy.
+    """
+    scene = getattr(request.app.state, "scene", None)
     return {
         "version": service_version(),
-        "viser_port": settings.viser_port,
-        "viser_enabled": settings.viser,
+        "viser_port": scene.port if scene is not None else settings.viser_port,
+        "viser_enabled": scene is not None,
         "vision_require_token": settings.vision_require_token,
         "default_site": settings.default_site,
         "energy_max_gap_s": settings.energy_max_gap_s,
