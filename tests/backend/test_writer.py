@@ -17,7 +17,7 @@ from sqlalchemy import text
 
 from backend.context import open_context
 from backend.settings import get_settings
-from backend.writer import MeasurementJob
+from backend.writer import SQLITE_CHUNK_ROWS, MeasurementJob
 
 T0 = 1_700_000_000 // 3600 * 3600 - 3600  # on the UTC hour grid (phase 0 for UTC-6)
 
@@ -90,3 +90,50 @@ def test_call_jobs_and_failures_stay_isolated(ctx) -> None:  # type: ignore[no-u
         bad.result(timeout=30)
     assert also_ok.result(timeout=30) == (10, 0)
     assert ctx.writer.call(lambda conn: 41 + 1).result(timeout=30) == 42
+
+
+def test_big_batch_counts_duplicates_and_keeps_first_values(ctx) -> None:  # type: ignore[no-untyped-def]
+    """A batch over several multi-row INSERT chunks (SQLITE_CHUNK_ROWS) with readings
+    already stored and readings repeated inside the batch: exact counts, first write wins."""
+    assert SQLITE_CHUNK_ROWS < 2000  # the batch below spans more than two chunks
+    aid = ctx.registry.sites["tehuantepec"].arrays["tracker"].array_id
+    stored = T0 + 60 * np.arange(1000, 1700)
+    assert ctx.writer.submit(_job(aid, stored, 1)).result(timeout=60) == (700, 0)
+    ts = np.concatenate([T0 + 60 * np.arange(2500), T0 + 60 * np.arange(100)])  # 100 repeats
+    job = _job(aid, ts, 2)
+    power_w = job.power_w  # the writer puts the job's columns in key order
+    assert ctx.writer.submit(job).result(timeout=60) == (1800, 800)
+    with ctx.engine.connect() as conn:
+        got = dict(conn.execute(text(
+            "SELECT ts_s, power_w FROM measurements WHERE array_id = :a AND source = 0"),
+            {"a": aid}).all())
+    assert len(got) == 2500
+    first_p = _job(aid, stored, 1).power_w
+    assert got[int(stored[0])] == first_p[0]  # stored before: kept
+    assert got[int(ts[0])] == power_w[0]  # repeated in the batch: its first value kept
+    assert got[int(ts[2499])] == power_w[2499]
+
+
+def test_mixed_arrays_in_any_order_give_per_series_rollups(ctx) -> None:  # type: ignore[no-untyped-def]
+    """One batch of both arrays, shuffled: each series' rollups match its own readings."""
+    arrays = ctx.registry.sites["tehuantepec"].arrays
+    ids = np.array([arrays["tracker"].array_id, arrays["fixed"].array_id])
+    rng = np.random.default_rng(7)
+    aid = np.repeat(ids, 600)
+    ts = T0 + 60 * np.tile(np.arange(600), 2)
+    order = rng.permutation(aid.size)
+    v = 20 + 10 * rng.random(aid.size)
+    i = 30 * rng.random(aid.size)
+    job = MeasurementJob(aid[order], 0, ts[order].astype(np.int64), v[order], i[order],
+                         (v * i)[order])
+    assert ctx.writer.submit(job).result(timeout=60) == (1200, 0)
+    with ctx.engine.connect() as conn:
+        for k, a in enumerate(ids.tolist()):
+            n, s, e = conn.execute(text(
+                "SELECT SUM(n), SUM(sum_power_w), SUM(energy_wh) FROM measurement_rollups "
+                "WHERE array_id = :a AND source = 0"), {"a": a}).one()
+            p = (v * i)[k * 600:(k + 1) * 600]
+            assert n == 600
+            assert s == pytest.approx(p.sum(), rel=1e-12)
+            assert e == pytest.approx(float(np.trapezoid(p, 60.0 * np.arange(600))) / 3600,
+                                      rel=1e-9)
