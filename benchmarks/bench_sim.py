@@ -23,15 +23,15 @@ import statistics
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from pvlib import location, modelchain, pvsystem, solarposition, temperature
+from pvlib import solarposition
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests" / "sim"))  # pvlib_reference: the independent baseline
 
 LAT, LON, ALT, TEMP_AIR, WIND = 16.28875, -95.240871, 50.0, 27.0, 1.0
 TZ = "America/Mexico_City"
@@ -46,52 +46,16 @@ def log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-@dataclass
-class DualAxisMount(pvsystem.AbstractMount):
-    """Ideal two-axis tracking for pvlib's ModelChain: the normal on the apparent sun."""
-
-    def get_orientation(self, solar_zenith, solar_azimuth):  # noqa: ANN001, ANN201
-        return {"surface_tilt": np.clip(solar_zenith, 0, 90), "surface_azimuth": solar_azimuth}
-
-
 def baseline(times: pd.DatetimeIndex) -> tuple[float, float, dict[str, float]]:
-    """pvlib ModelChain (CEC) for both arrays; returns (wall s, CPU s, energies [Wh])."""
-    t0 = time.perf_counter()
-    c0 = time.process_time()
-    module = pvsystem.retrieve_sam("CECMod")["Kyocera_Solar_KD205GX_LP"]
-    temp = temperature.TEMPERATURE_MODEL_PARAMETERS["sapm"]["open_rack_glass_polymer"]
-    arrays = [
-        pvsystem.Array(
-            mount,
-            albedo=0.2,
-            module_parameters=module,
-            temperature_model_parameters=temp,
-            modules_per_string=1,
-            strings=4,
-            name=name,
-        )
-        for name, mount in (("tracker", DualAxisMount()), ("fixed", pvsystem.FixedMount(16, 180)))
-    ]
-    system = pvsystem.PVSystem(arrays=arrays, inverter_parameters={"pdc0": 2000.0})
-    loc = location.Location(LAT, LON, altitude=ALT)
-    mc = modelchain.ModelChain(
-        system,
-        loc,
-        aoi_model="physical",
-        spectral_model="no_loss",
-        temperature_model="sapm",
-        dc_model="cec",
-        ac_model="pvwatts",
-        transposition_model="haydavies",
+    """pvlib ModelChain (CEC) for both arrays — the independent reference of
+    tests/sim/pvlib_reference.py; returns (wall s, CPU s, energies [Wh])."""
+    from pvlib_reference import modelchain_dc_power
+
+    t0, c0 = time.perf_counter(), time.process_time()
+    dc = modelchain_dc_power(
+        times, LAT, LON, altitude=ALT, temp_air=TEMP_AIR, wind_speed=WIND
     )
-    weather = loc.get_clearsky(times)
-    weather["temp_air"] = TEMP_AIR
-    weather["wind_speed"] = WIND
-    mc.run_model(weather)
-    energies = {
-        name: float(dc["p_mp"].fillna(0).clip(lower=0).sum() / 60.0)
-        for name, dc in zip(("tracker", "fixed"), mc.results.dc, strict=True)
-    }
+    energies = {name: float(dc[name].sum() / 60.0) for name in ("tracker", "fixed")}
     return time.perf_counter() - t0, time.process_time() - c0, energies
 
 
