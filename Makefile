@@ -23,8 +23,9 @@ test: $(STAMP)  ## run the whole test suite
 bench: $(STAMP)  ## measure the speed figures and write benchmarks/RESULTS.md
 	$(BIN)/python benchmarks/run.py
 
-lint: $(STAMP)
+lint: $(STAMP)  ## ruff and mypy, both clean on main
 	$(BIN)/ruff check backend sim vision tests benchmarks
+	$(BIN)/mypy backend sim vision
 
 clean:
 	rm -rf $(VENV) build *.egg-info

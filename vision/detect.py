@@ -459,8 +459,11 @@ def _core(c: _Candidate, labels: NDArray[Any]) -> _Candidate | None:
     if f < 1.0:
         small = cv2.resize(mask, None, fx=f, fy=f, interpolation=cv2.INTER_NEAREST)
         opened_small = cv2.morphologyEx(small, cv2.MORPH_OPEN, kernel)
-        opened = cv2.resize(opened_small, (mask.shape[1], mask.shape[0]),
-                            interpolation=cv2.INTER_NEAREST) & mask
+        opened = cv2.bitwise_and(
+            cv2.resize(opened_small, (mask.shape[1], mask.shape[0]),
+                       interpolation=cv2.INTER_NEAREST),
+            mask,
+        )
     else:
         opened = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
     n, lab, stats, cents = cv2.connectedComponentsWithStats(opened, connectivity=8)
