@@ -31,7 +31,6 @@ import gzip
 import http.server
 import os
 import re
-import socket
 import statistics
 import subprocess
 import sys
@@ -41,6 +40,7 @@ import time
 from pathlib import Path
 
 import httpx
+from _common import free_port, log  # noqa: E402  (bench scripts run from this folder)
 
 ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM = os.environ.get("HELIOTWIN_CHROMIUM", "/usr/bin/chromium")
@@ -75,16 +75,6 @@ MEASURE_JS = """() => {
   return {first: t("heliotwin:first-chart"), loaded: t("heliotwin:overview-loaded"),
           plotly: t("heliotwin:plotly-ready"), bytes, decoded, requests: n};
 }"""
-
-
-def log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _has_data(client: httpx.Client) -> bool:

@@ -22,7 +22,6 @@ import http.client
 import math
 import os
 import signal
-import socket
 import sqlite3
 import statistics
 import subprocess
@@ -34,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 import orjson
+from _common import free_port, log  # noqa: E402  (bench scripts run from this folder)
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -42,16 +42,6 @@ TZ = dt.timezone(dt.timedelta(hours=-6))
 YEAR = 2023
 SITE = "tehuantepec"
 PATH = f"/api/v1/sites/{SITE}/measurements"
-
-
-def log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def year_readings() -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from _common import log  # noqa: E402  (bench scripts run from this folder)
 from pvlib import solarposition
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,10 +41,6 @@ YEAR = 2023  # 525,600 one-minute steps
 
 def kwh(wh: float) -> str:
     return f"{wh / 1000:.2f}"
-
-
-def log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
 
 
 def baseline(times: pd.DatetimeIndex) -> tuple[float, float, dict[str, float]]:

@@ -22,7 +22,6 @@ from __future__ import annotations
 import csv
 import os
 import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -39,6 +38,8 @@ import pvlib
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from _common import free_port, log  # noqa: E402  (bench scripts run from this folder)
+
 from vision import metrics  # noqa: E402
 from vision.calibrate import fit_fisheye  # noqa: E402
 from vision.cameras import FisheyeCamera, PinholeCamera  # noqa: E402
@@ -46,10 +47,6 @@ from vision.detect import METHODS, detect_sun, threshold_moments, to_gray  # noq
 from vision.synth import fisheye_frame, tracker_frame  # noqa: E402
 
 REAL_SKY = ROOT.parent / "shared" / "real-sky"
-
-
-def log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
 
 
 def per_frame_s(fn: Callable[[np.ndarray], object], frames: list[np.ndarray],
@@ -177,12 +174,6 @@ def real_accuracy(rows: list[dict[str, object]], method: str) -> tuple[str, str,
 
 
 # --------------------------------------------------------------------------- HTTP
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def http_latency(n: int = 200) -> tuple[float, float, float] | None:
