@@ -15,7 +15,8 @@ from numpy.typing import NDArray
 
 from vision.cameras import FisheyeCamera, PinholeCamera
 from vision.detect import detect_sun
-from vision.metrics import angular_separation_deg, wrap_deg
+from vision.metrics import wrap_deg
+from vision.sphere import angular_separation_deg
 
 
 def finite(v: Any) -> float | None:

@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from vision.cameras import EAST_SIDES, PROJECTIONS, FisheyeCamera
-from vision.metrics import angular_separation_deg
+from vision.sphere import angular_separation_deg
 
 
 @dataclass(frozen=True)

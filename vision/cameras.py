@@ -22,6 +22,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from vision.sphere import enu_from_sky, sky_from_enu
+
 Projection = Literal["equidistant", "equisolid", "stereographic", "orthographic"]
 PROJECTIONS: tuple[str, ...] = ("equidistant", "equisolid", "stereographic", "orthographic")
 EAST_SIDES: tuple[str, ...] = ("left", "right")
@@ -167,22 +169,6 @@ def _unproject_rad(rho: FloatArray, projection: str) -> FloatArray:
         if projection == "orthographic":
             return np.arcsin(np.where(rho <= 1.0, rho, np.nan))
     raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
-
-
-def enu_from_sky(azimuth_deg: ArrayLike, elevation_deg: ArrayLike) -> FloatArray:
-    """Unit vectors ``[..., 3]`` (east, north, up) from azimuth/elevation [°]."""
-    az = np.radians(_as_float(azimuth_deg))
-    el = np.radians(_as_float(elevation_deg))
-    return np.stack([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], axis=-1)
-
-
-def sky_from_enu(v: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """Azimuth (clockwise from north, [0, 360)) and elevation [°] of ENU vectors."""
-    v = _as_float(v)
-    n = np.linalg.norm(v, axis=-1)
-    az = np.degrees(np.arctan2(v[..., 0], v[..., 1])) % 360.0
-    el = np.degrees(np.arcsin(np.clip(v[..., 2] / n, -1.0, 1.0)))
-    return az, el
 
 
 def _tilt_matrix(tilt_north_deg: float, tilt_east_deg: float) -> FloatArray:

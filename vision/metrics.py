@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from vision.sphere import angular_separation_deg
+
 
 def _pair(actual: ArrayLike, estimate: ArrayLike
           ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -55,19 +57,6 @@ def mape(actual: ArrayLike, estimate: ArrayLike, circular: bool = False) -> floa
         raise ValueError("MAPE is undefined when a reference value is zero")
     d = wrap_deg(a - f) if circular else a - f
     return float(100.0 * np.mean(np.abs(d) / np.abs(a)))
-
-
-def angular_separation_deg(
-    azimuth1_deg: ArrayLike,
-    elevation1_deg: ArrayLike,
-    azimuth2_deg: ArrayLike,
-    elevation2_deg: ArrayLike,
-) -> NDArray[np.float64]:
-    """Great-circle angle [°] between two sky directions (haversine form, stable near 0)."""
-    a1, e1, a2, e2 = (np.radians(np.asarray(v, dtype=float)) for v in
-                      (azimuth1_deg, elevation1_deg, azimuth2_deg, elevation2_deg))
-    h = np.sin((e2 - e1) / 2) ** 2 + np.cos(e1) * np.cos(e2) * np.sin((a2 - a1) / 2) ** 2
-    return np.degrees(2.0 * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0))))
 
 
 def error_table(

@@ -25,7 +25,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from vision.cameras import FisheyeCamera, PinholeCamera, enu_from_sky
+from vision.cameras import FisheyeCamera, PinholeCamera
+from vision.sphere import enu_from_sky
 
 SUN_RADIUS_DEG = 0.2665  # half of the sun's 0.533° mean apparent diameter
 

@@ -1,0 +1,43 @@
+"""Directions on the sky sphere: the one set of functions every package uses.
+
+A sky direction is (azimuth, elevation) in degrees — azimuth clockwise from true
+north (pvlib's convention), elevation above the horizon — or an ENU unit vector
+(east, north, up). ``sim`` (sun vectors, pointing errors) and ``vision``
+(camera models, error metrics) both call these; no other copy exists.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+def enu_from_sky(azimuth_deg: ArrayLike, elevation_deg: ArrayLike) -> FloatArray:
+    """Unit vectors ``[..., 3]`` (east, north, up) from azimuth/elevation [°]."""
+    az = np.radians(np.asarray(azimuth_deg, dtype=float))
+    el = np.radians(np.asarray(elevation_deg, dtype=float))
+    return np.stack([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], axis=-1)
+
+
+def sky_from_enu(v: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Azimuth (clockwise from north, [0, 360)) and elevation [°] of ENU vectors."""
+    v = np.asarray(v, dtype=float)
+    n = np.linalg.norm(v, axis=-1)
+    az = np.degrees(np.arctan2(v[..., 0], v[..., 1])) % 360.0
+    el = np.degrees(np.arcsin(np.clip(v[..., 2] / n, -1.0, 1.0)))
+    return az, el
+
+
+def angular_separation_deg(
+    azimuth1_deg: ArrayLike,
+    elevation1_deg: ArrayLike,
+    azimuth2_deg: ArrayLike,
+    elevation2_deg: ArrayLike,
+) -> FloatArray:
+    """Great-circle angle [°] between two sky directions (haversine form, stable near 0)."""
+    a1, e1, a2, e2 = (np.radians(np.asarray(v, dtype=float)) for v in
+                      (azimuth1_deg, elevation1_deg, azimuth2_deg, elevation2_deg))
+    h = np.sin((e2 - e1) / 2) ** 2 + np.cos(e1) * np.cos(e2) * np.sin((a2 - a1) / 2) ** 2
+    return np.degrees(2.0 * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0))))
