@@ -21,6 +21,8 @@ SUBCOMMAND_MODULES = (
     "backend.cli.token",
     "backend.cli.demo_logger",
     "backend.cli.vision",
+    "backend.cli.dynamics",
+    "backend.cli.plant",
 )
 
 
