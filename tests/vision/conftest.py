@@ -1,4 +1,4 @@
-"""Shared fixtures for the vision tests: the real all-sky images beside the repository."""
+"""Shared fixtures for the vision tests: the real all-sky frames shipped in tests/data/real-sky."""
 
 from __future__ import annotations
 
@@ -7,17 +7,23 @@ from pathlib import Path
 
 import pytest
 
-REAL_SKY = Path(__file__).resolve().parents[2].parent / "shared" / "real-sky"
+REAL_SKY = Path(__file__).resolve().parents[1] / "data" / "real-sky"
+
+
+def read_real_sky() -> list[dict[str, str]]:
+    """Rows of ``metadata.csv`` joined with ``split.csv``, each with its ``path``."""
+    with (REAL_SKY / "metadata.csv").open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    with (REAL_SKY / "split.csv").open(newline="") as fh:
+        split = {r["filename"]: r for r in csv.DictReader(fh)}
+    for r in rows:
+        r["path"] = str(REAL_SKY / r["filename"])
+        r["split"] = split[r["filename"]]["split"]
+        r["sun_visible"] = split[r["filename"]]["sun_visible"]
+    return rows
 
 
 @pytest.fixture(scope="session")
 def real_sky() -> list[dict[str, str]]:
-    """Rows of ../shared/real-sky/metadata.csv with a ``path``; skips when absent."""
-    meta = REAL_SKY / "metadata.csv"
-    if not meta.is_file():
-        pytest.skip(f"real-sky images not present at {REAL_SKY}")
-    with meta.open(newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    for r in rows:
-        r["path"] = str(REAL_SKY / r["filename"])
-    return rows
+    """The nine real frames (never skipped: they are part of the repository)."""
+    return read_real_sky()
