@@ -1,0 +1,373 @@
+"""Plants of dual-axis trackers: layout, collector and wiring (``data/plants/*.json``).
+
+A plant file names its keys with units (``latitude_deg``, ``width_m`` …). Tracker
+positions may be given in the plant's own east-north-up frame (``"frame": "enu"``)
+or in seed 004's frame (``"frame": "seed004"``: x towards west, y towards south,
+z towards the zenith — Fernández-Ahumada et al., Sensors 2021, 21, 726, §2.1
+item 2 and Table 1), converted once by :func:`enu_from_seed004`.
+
+A user adds a plant by dropping ``<plant_id>.json`` into the plants directory;
+a malformed file raises ``ValueError`` naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+_PLANT_ID = re.compile(r"^[a-z0-9][a-z0-9_-]{0,63}$")
+FRAMES = ("enu", "seed004")
+MODULE_ORIENTATIONS = ("portrait", "landscape")
+
+
+class UnknownPlantError(ValueError):
+    """No plant file with that id."""
+
+
+def default_plants_dir() -> Path:
+    """The repository's ``data/plants/`` (found relative to this package)."""
+    return Path(__file__).resolve().parents[2] / "data" / "plants"
+
+
+def enu_from_seed004(xyz_seed004: ArrayLike) -> FloatArray:
+    """Convert seed 004's local frame to east-north-up.
+
+    Seed 004 (Fernández-Ahumada et al. 2021, §2.1 item 2, Table 1 and eqs. 1, 4–6)
+    uses a right-handed frame with Ox towards the west, Oy towards the south and
+    Oz towards the zenith. East = −x, north = −y, up = z (a rotation by 180° about
+    the vertical, so it stays right-handed). The same map applies to positions [m]
+    and to direction vectors (seed eq. 1 sun vector, eq. 4 collector normal).
+
+    Parameters
+    ----------
+    xyz_seed004 : array_like, shape (..., 3)
+        (x west, y south, z zenith).
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 3)
+        (east, north, up).
+    """
+    v = np.asarray(xyz_seed004, dtype=float)
+    if v.shape[-1:] != (3,):
+        raise ValueError(f"xyz_seed004 must have a last axis of length 3, got shape {v.shape}")
+    return np.stack([-v[..., 0], -v[..., 1], v[..., 2]], axis=-1)
+
+
+@dataclass(frozen=True)
+class Collector:
+    """A tracker's collector and its electrical layout.
+
+    The collector is a ``width × height`` rectangle centred on the tracker's pivot;
+    its width lies horizontal (seed 004 eq. 5, vector u), its height along the
+    in-plane vector v (eq. 6). It carries ``modules_across × modules_high``
+    modules; each module has ``bypass_diodes`` substrings (Martinez-Moreno's
+    "blocks"); each row of modules is one series string.
+
+    Parameters
+    ----------
+    width, height : float
+        Collector size [m] (seed 004: a = 12, b = 5).
+    modules_across, modules_high : int
+        Module grid on the collector.
+    module_orientation : {"portrait", "landscape"}
+        Portrait: a module's bypass substrings are vertical strips; landscape:
+        horizontal strips.
+    bypass_diodes : int
+        Bypass-diode substrings per module.
+    module_power : float
+        Module DC power at STC [W].
+    gamma_pdc : float
+        Power temperature coefficient [1/°C].
+    module_name : str
+    """
+
+    width: float
+    height: float
+    modules_across: int
+    modules_high: int
+    module_orientation: str
+    bypass_diodes: int
+    module_power: float
+    gamma_pdc: float
+    module_name: str = ""
+
+    @property
+    def area(self) -> float:
+        """Collector area [m²]."""
+        return self.width * self.height
+
+    @property
+    def diagonal(self) -> float:
+        """Collector diagonal [m]."""
+        return float(np.hypot(self.width, self.height))
+
+    @property
+    def power_stc(self) -> float:
+        """Collector DC power at STC [W]."""
+        return self.module_power * self.modules_across * self.modules_high
+
+    def strings(self) -> FloatArray:
+        """String rectangles ``(S, 4)`` = (u0, u1, v0, v1) [m] in collector coordinates."""
+        h = self.height / self.modules_high
+        v0 = -self.height / 2 + h * np.arange(self.modules_high)
+        return np.stack([np.full_like(v0, -self.width / 2), np.full_like(v0, self.width / 2),
+                         v0, v0 + h], axis=-1)
+
+    def blocks(self) -> tuple[FloatArray, NDArray[np.int64]]:
+        """Bypass-diode blocks: rectangles ``(B, 4)`` (u0, u1, v0, v1) [m] and their string index."""
+        mw, mh = self.width / self.modules_across, self.height / self.modules_high
+        n = self.bypass_diodes
+        rects, owner = [], []
+        for r in range(self.modules_high):
+            for c in range(self.modules_across):
+                u0, v0 = -self.width / 2 + c * mw, -self.height / 2 + r * mh
+                for k in range(n):
+                    if self.module_orientation == "portrait":
+                        rects.append((u0 + k * mw / n, u0 + (k + 1) * mw / n, v0, v0 + mh))
+                    else:
+                        rects.append((u0, u0 + mw, v0 + k * mh / n, v0 + (k + 1) * mh / n))
+                    owner.append(r)
+        return np.asarray(rects, dtype=float), np.asarray(owner, dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class Plant:
+    """A plant of identical dual-axis trackers on (nearly) flat ground.
+
+    Parameters
+    ----------
+    plant_id, name : str
+    latitude, longitude : float
+        [°], north and east positive.
+    altitude : float
+        [m].
+    timezone : str
+        IANA zone.
+    tracker_ids : tuple of int
+    positions : numpy.ndarray, shape (N, 3)
+        Pivot positions (east, north, up) [m].
+    collector : Collector
+    albedo : float
+        Ground reflectance [-].
+    temp_air, wind_speed : float
+        Clear-sky weather [°C], [m s⁻¹].
+    fixed_tilt, fixed_azimuth : float
+        Orientation of the fixed comparison plant [°].
+    """
+
+    plant_id: str
+    name: str
+    latitude: float
+    longitude: float
+    altitude: float
+    timezone: str
+    tracker_ids: tuple[int, ...]
+    positions: FloatArray
+    collector: Collector
+    albedo: float = 0.2
+    temp_air: float = 20.0
+    wind_speed: float = 1.0
+    fixed_tilt: float = 30.0
+    fixed_azimuth: float = 180.0
+    source: str = ""
+    notes: str = ""
+
+    @property
+    def n_trackers(self) -> int:
+        """Number of trackers."""
+        return len(self.tracker_ids)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready description, units in the keys, positions in ENU."""
+        c = self.collector
+        return {
+            "plant_id": self.plant_id,
+            "name": self.name,
+            "latitude_deg": self.latitude,
+            "longitude_deg": self.longitude,
+            "altitude_m": self.altitude,
+            "timezone": self.timezone,
+            "albedo": self.albedo,
+            "temp_air_c": self.temp_air,
+            "wind_speed_m_s": self.wind_speed,
+            "fixed": {"surface_tilt_deg": self.fixed_tilt,
+                      "surface_azimuth_deg": self.fixed_azimuth},
+            "collector": {
+                "width_m": c.width, "height_m": c.height, "area_m2": c.area,
+                "modules_across": c.modules_across, "modules_high": c.modules_high,
+                "module_orientation": c.module_orientation, "bypass_diodes": c.bypass_diodes,
+                "module_power_w": c.module_power, "gamma_pdc_per_c": c.gamma_pdc,
+                "module_name": c.module_name, "power_stc_w": c.power_stc,
+            },
+            "trackers": [
+                {"tracker_id": tid, "east_m": float(p[0]), "north_m": float(p[1]),
+                 "up_m": float(p[2])}
+                for tid, p in zip(self.tracker_ids, self.positions, strict=True)
+            ],
+            "source": self.source,
+            "notes": self.notes,
+        }
+
+
+def _num(d: dict[str, Any], key: str, where: str, default: float | None = None,
+         lo: float | None = None, hi: float | None = None, positive: bool = False) -> float:
+    if key not in d:
+        if default is None:
+            raise ValueError(f"{where}: missing field {key!r}")
+        return default
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v):
+        raise ValueError(f"{where}: field {key!r} must be a finite number, got {v!r}")
+    v = float(v)
+    if positive and not v > 0:
+        raise ValueError(f"{where}: field {key!r} must be positive, got {v}")
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        raise ValueError(f"{where}: field {key!r} = {v} outside [{lo}, {hi}]")
+    return v
+
+
+def _int(d: dict[str, Any], key: str, where: str, default: int | None = None) -> int:
+    if key not in d:
+        if default is None:
+            raise ValueError(f"{where}: missing field {key!r}")
+        return default
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+        raise ValueError(f"{where}: field {key!r} must be a positive integer, got {v!r}")
+    return v
+
+
+def _collector(d: Any, where: str) -> Collector:
+    if not isinstance(d, dict):
+        raise ValueError(f"{where}: field 'collector' must be an object")
+    w = f"{where}: collector"
+    orient = d.get("module_orientation", "portrait")
+    if orient not in MODULE_ORIENTATIONS:
+        raise ValueError(f"{w}: field 'module_orientation' must be one of "
+                         f"{', '.join(MODULE_ORIENTATIONS)}, got {orient!r}")
+    return Collector(
+        width=_num(d, "width_m", w, positive=True),
+        height=_num(d, "height_m", w, positive=True),
+        modules_across=_int(d, "modules_across", w),
+        modules_high=_int(d, "modules_high", w),
+        module_orientation=orient,
+        bypass_diodes=_int(d, "bypass_diodes", w),
+        module_power=_num(d, "module_power_w", w, positive=True),
+        gamma_pdc=_num(d, "gamma_pdc_per_c", w, default=-0.004, lo=-0.02, hi=0.0),
+        module_name=str(d.get("module_name", "")),
+    )
+
+
+def plant_from_dict(d: dict[str, Any], where: str = "plant") -> Plant:
+    """Build a :class:`Plant` from the layout of ``data/plants/*.json``; ValueError names the field."""
+    if not isinstance(d, dict):
+        raise ValueError(f"{where}: a plant file must hold a JSON object")
+    if "plant_id" not in d:
+        raise ValueError(f"{where}: missing field 'plant_id'")
+    plant_id = str(d["plant_id"])
+    lat = _num(d, "latitude_deg", where, lo=-90, hi=90)
+    lon = _num(d, "longitude_deg", where, lo=-180, hi=180)
+    tz = d.get("timezone")
+    if not isinstance(tz, str):
+        raise ValueError(f"{where}: missing field 'timezone' (an IANA zone name)")
+    try:
+        ZoneInfo(tz)
+    except (ZoneInfoNotFoundError, ValueError):
+        raise ValueError(f"{where}: field 'timezone' {tz!r} is not an IANA time zone") from None
+    frame = d.get("frame", "enu")
+    if frame not in FRAMES:
+        raise ValueError(f"{where}: field 'frame' must be one of {', '.join(FRAMES)}, "
+                         f"got {frame!r}")
+    collector = _collector(d.get("collector"), where)
+    rows = d.get("trackers")
+    if not isinstance(rows, list) or len(rows) < 1:
+        raise ValueError(f"{where}: field 'trackers' must be a non-empty list")
+    keys = ("x_m", "y_m", "z_m") if frame == "seed004" else ("east_m", "north_m", "up_m")
+    ids: list[int] = []
+    xyz = []
+    for k, row in enumerate(rows):
+        w = f"{where}: trackers[{k}]"
+        if not isinstance(row, dict):
+            raise ValueError(f"{w} must be an object")
+        ids.append(_int(row, "tracker_id", w))
+        xyz.append([_num(row, keys[0], w), _num(row, keys[1], w),
+                    _num(row, keys[2], w, default=0.0)])
+    if len(set(ids)) != len(ids):
+        dup = sorted({i for i in ids if ids.count(i) > 1})
+        raise ValueError(f"{where}: field 'trackers' has duplicate tracker_id {dup}")
+    positions = np.asarray(xyz, dtype=float)
+    if frame == "seed004":
+        positions = enu_from_seed004(positions)
+    if len(ids) > 1:
+        gaps = np.linalg.norm(positions[:, None, :2] - positions[None, :, :2], axis=-1)
+        np.fill_diagonal(gaps, np.inf)
+        i, j = np.unravel_index(np.argmin(gaps), gaps.shape)
+        if gaps[i, j] < collector.diagonal:
+            raise ValueError(
+                f"{where}: field 'trackers': trackers {ids[i]} and {ids[j]} are "
+                f"{gaps[i, j]:.2f} m apart, less than the collector diagonal "
+                f"{collector.diagonal:.2f} m (their collectors would collide)")
+    fixed = d.get("fixed", {})
+    if not isinstance(fixed, dict):
+        raise ValueError(f"{where}: field 'fixed' must be an object")
+    return Plant(
+        plant_id=plant_id,
+        name=str(d.get("name", plant_id)),
+        latitude=lat,
+        longitude=lon,
+        altitude=_num(d, "altitude_m", where, default=0.0, lo=-500, hi=9000),
+        timezone=tz,
+        tracker_ids=tuple(ids),
+        positions=positions,
+        collector=collector,
+        albedo=_num(d, "albedo", where, default=0.2, lo=0, hi=1),
+        temp_air=_num(d, "temp_air_c", where, default=20.0, lo=-60, hi=60),
+        wind_speed=_num(d, "wind_speed_m_s", where, default=1.0, lo=0, hi=60),
+        fixed_tilt=_num(fixed, "surface_tilt_deg", f"{where}: fixed", default=30.0, lo=0, hi=90),
+        fixed_azimuth=_num(fixed, "surface_azimuth_deg", f"{where}: fixed", default=180.0,
+                           lo=0, hi=360),
+        source=str(d.get("source", "")),
+        notes=str(d.get("notes", "")),
+    )
+
+
+def load_plant(plant_id: str, plants_dir: str | Path | None = None) -> Plant:
+    """Read ``<plants_dir>/<plant_id>.json`` (default: :func:`default_plants_dir`).
+
+    Raises
+    ------
+    UnknownPlantError
+        No such plant (the message lists the known ids).
+    ValueError
+        The file is malformed (the message names the file and the field).
+    """
+    directory = Path(plants_dir) if plants_dir is not None else default_plants_dir()
+    path = directory / f"{plant_id}.json"
+    if not _PLANT_ID.match(plant_id) or not path.is_file():
+        known = ", ".join(p.stem for p in sorted(directory.glob("*.json"))) or "none"
+        raise UnknownPlantError(f"unknown plant {plant_id!r}; known plants: {known}")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not valid JSON: {exc}") from None
+    plant = plant_from_dict(data, where=str(path))
+    if plant.plant_id != plant_id:
+        raise ValueError(f"{path}: field 'plant_id' {plant.plant_id!r} does not match the "
+                         "file name")
+    return plant
+
+
+def list_plants(plants_dir: str | Path | None = None) -> list[Plant]:
+    """All plants in ``plants_dir`` (default: :func:`default_plants_dir`), sorted by id."""
+    directory = Path(plants_dir) if plants_dir is not None else default_plants_dir()
+    return [load_plant(p.stem, directory) for p in sorted(directory.glob("*.json"))]

@@ -1,0 +1,314 @@
+"""Inter-shading of a plant of dual-axis trackers (seed 004 §2.1), vectorised over time.
+
+Seed 004 (Fernández-Ahumada et al., Sensors 2021, 21, 726, §2.1, Fig. 1–2) decides
+with a Boolean whether an orientation (γ, α) of the collectors causes
+inter-shading at a sun position, from the collector size a × b, the tracker
+positions, the sun vector s (eq. 1), the collector normal n (eq. 4) and the
+in-plane unit vectors u (horizontal, eq. 5) and v (eq. 6). This module computes
+that Boolean and, beyond the seed, the shaded *fraction* of every collector.
+
+Geometry (collectors parallel: every tracker has the same orientation at a
+time step, as seed 004's position server sends one orientation to all). A
+point X of collector i is shaded by collector j when the ray X + λ s (λ > 0)
+hits j. With d = p_j − p_i, λ = (d·n)/(s·n) and j's rectangle, projected along
+s onto i's plane, is i's rectangle shifted by the in-plane coordinates of
+P = d − λ s: (P·u, P·v). The shade is the intersection of two axis-aligned
+rectangles in (u, v); the shade of several neighbours is their union, whose area
+is computed exactly on the grid of the rectangles' edges.
+
+A necessary condition that does not depend on the orientation prunes the
+neighbour pairs first: the shifted rectangle can only overlap when |P| is
+below the collector's diagonal, and |P| ≥ |d⊥|, the distance of d from the
+sun ray (P and d differ by a multiple of s).
+
+Times where the sun is below the horizon give NaN fractions. A collector whose
+front faces away from the sun (s·n ≤ 0) receives no beam and counts as unshaded.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from vision.sphere import enu_from_sky
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+_CHUNK = 20_000
+_EPS_AREA_M2 = 1e-9
+
+
+def collector_axes(azimuth: ArrayLike, elevation: ArrayLike) -> tuple[FloatArray, ...]:
+    """Collector normal n and in-plane unit vectors u, v in ENU (seed 004 eqs. 4–6).
+
+    Parameters
+    ----------
+    azimuth : array_like
+        Azimuth of the collector normal [°], clockwise from north.
+    elevation : array_like
+        Elevation of the collector normal above the horizon [°] (seed 004's α;
+        surface tilt = 90° − elevation).
+
+    Returns
+    -------
+    n, u, v : numpy.ndarray, shape (..., 3)
+        n the normal (eq. 4), u horizontal in the plane (eq. 5: the collector's
+        width, pointing to the right when facing the collector's front),
+        v = u × n in the plane pointing up-slope (eq. 6: the collector's height).
+    """
+    az = np.radians(np.asarray(azimuth, dtype=float))
+    n = enu_from_sky(azimuth, elevation)
+    u = np.stack([-np.cos(az), np.sin(az), np.zeros_like(az)], axis=-1)
+    v = np.cross(u, n)
+    return n, u, v
+
+
+def candidate_pairs(positions: ArrayLike, sun_enu: ArrayLike,
+                    diagonal: float) -> tuple[IntArray, IntArray, IntArray]:
+    """Pairs (step, i, j) where collector j may shade collector i, whatever the orientation.
+
+    Keeps the pairs with |d⊥| < diagonal (d = p_j − p_i, d⊥ its part
+    perpendicular to the sun vector) and d·s > −diagonal (j not behind i as
+    seen from the sun); every other pair is certainly unshaded (module docstring).
+
+    Parameters
+    ----------
+    positions : array_like, shape (N, 3)
+        Pivot positions, ENU [m].
+    sun_enu : array_like, shape (T, 3)
+        Unit vectors towards the sun.
+    diagonal : float
+        Collector diagonal [m].
+
+    Returns
+    -------
+    step, i, j : numpy.ndarray of int
+        Indices of the candidate pairs, sorted by step then i.
+    """
+    p = np.asarray(positions, dtype=float)
+    s = np.asarray(sun_enu, dtype=float).reshape(-1, 3)
+    n = len(p)
+    ii, jj = np.nonzero(~np.eye(n, dtype=bool))
+    d = p[jj] - p[ii]                                   # (P, 3)
+    d2 = np.einsum("pk,pk->p", d, d)
+    thr = d2 - diagonal**2
+    out_t, out_p = [], []
+    for k0 in range(0, len(s), _CHUNK):
+        ds = s[k0:k0 + _CHUNK] @ d.T                    # (T, P)
+        hit = (ds > -diagonal) & ((ds * ds > thr) | (thr < 0))
+        t, q = np.nonzero(hit)
+        out_t.append(t + k0)
+        out_p.append(q)
+    t_all = np.concatenate(out_t).astype(np.int64)
+    q_all = np.concatenate(out_p)
+    return t_all, ii[q_all].astype(np.int64), jj[q_all].astype(np.int64)
+
+
+def pair_shade_rects(positions: ArrayLike, sun_enu: ArrayLike, normal_az: ArrayLike,
+                     normal_el: ArrayLike, width: float, height: float, step: IntArray,
+                     i: IntArray, j: IntArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Shade of collector j on collector i as a rectangle in i's (u, v) coordinates.
+
+    Parameters
+    ----------
+    positions : array_like, shape (N, 3)
+        Pivot positions, ENU [m].
+    sun_enu : array_like, shape (T, 3)
+        Sun unit vectors.
+    normal_az, normal_el : array_like, shape (T,)
+        Common collector orientation at each step [°].
+    width, height : float
+        Collector size [m].
+    step, i, j : numpy.ndarray of int
+        The pairs (from :func:`candidate_pairs`).
+
+    Returns
+    -------
+    rects : numpy.ndarray, shape (M, 4)
+        (u0, u1, v0, v1) [m] of the shaded part of i, collector centred on (0, 0).
+    shading : numpy.ndarray of bool, shape (M,)
+        True where the shade has positive area.
+    """
+    p = np.asarray(positions, dtype=float)
+    s = np.asarray(sun_enu, dtype=float).reshape(-1, 3)[step]
+    n, u, v = collector_axes(np.asarray(normal_az, dtype=float).reshape(-1)[step],
+                             np.asarray(normal_el, dtype=float).reshape(-1)[step])
+    d = p[j] - p[i]
+    sn = np.einsum("mk,mk->m", s, n)
+    dn = np.einsum("mk,mk->m", d, n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = dn / sn
+    proj = d - lam[:, None] * s
+    du = np.einsum("mk,mk->m", proj, u)
+    dv = np.einsum("mk,mk->m", proj, v)
+    a2, b2 = width / 2, height / 2
+    u0 = np.maximum(-a2, du - a2)
+    u1 = np.minimum(a2, du + a2)
+    v0 = np.maximum(-b2, dv - b2)
+    v1 = np.minimum(b2, dv + b2)
+    shading = (sn > 0) & (lam > 0) & ((u1 - u0) * (v1 - v0) > _EPS_AREA_M2) \
+        & (u1 > u0) & (v1 > v0)
+    return np.stack([u0, u1, v0, v1], axis=-1), shading
+
+
+def union_area(rects: ArrayLike, clip: ArrayLike | None = None) -> FloatArray:
+    """Exact area [m²] of the union of axis-aligned rectangles, per group.
+
+    Parameters
+    ----------
+    rects : array_like, shape (G, K, 4)
+        (u0, u1, v0, v1); empty slots have u1 ≤ u0 or v1 ≤ v0.
+    clip : array_like, shape (4,) or (G, 4), optional
+        Count only the part inside this rectangle.
+
+    Returns
+    -------
+    numpy.ndarray, shape (G,)
+    """
+    r = np.array(rects, dtype=float)
+    if clip is not None:
+        c = np.broadcast_to(np.asarray(clip, dtype=float), (r.shape[0], 4))[:, None, :]
+        r[..., 0] = np.maximum(r[..., 0], c[..., 0])
+        r[..., 1] = np.minimum(r[..., 1], c[..., 1])
+        r[..., 2] = np.maximum(r[..., 2], c[..., 2])
+        r[..., 3] = np.minimum(r[..., 3], c[..., 3])
+    valid = (r[..., 1] > r[..., 0]) & (r[..., 3] > r[..., 2])
+    if r.shape[1] == 1:
+        return np.where(valid[:, 0], (r[:, 0, 1] - r[:, 0, 0]) * (r[:, 0, 3] - r[:, 0, 2]), 0.0)
+    xs = np.sort(r[..., :2].reshape(len(r), -1), axis=1)       # (G, 2K)
+    ys = np.sort(r[..., 2:].reshape(len(r), -1), axis=1)
+    cx = (xs[:, 1:] + xs[:, :-1]) / 2                           # (G, 2K−1)
+    cy = (ys[:, 1:] + ys[:, :-1]) / 2
+    dx = np.diff(xs, axis=1)
+    dy = np.diff(ys, axis=1)
+    inx = (cx[:, :, None] > r[:, None, :, 0]) & (cx[:, :, None] < r[:, None, :, 1]) \
+        & valid[:, None, :]                                     # (G, X, K)
+    iny = (cy[:, :, None] > r[:, None, :, 2]) & (cy[:, :, None] < r[:, None, :, 3])
+    covered = np.einsum("gxk,gyk->gxy", inx.astype(np.float64), iny.astype(np.float64)) > 0
+    return np.einsum("gxy,gx,gy->g", covered.astype(np.float64), dx, dy)
+
+
+@dataclass(frozen=True)
+class PlantShade:
+    """Shade on every collector at every step (common orientation per step).
+
+    Attributes
+    ----------
+    fraction : numpy.ndarray, shape (T, N)
+        Shaded fraction of each collector's area [-]; NaN with the sun down.
+    group_step, group_tracker : numpy.ndarray of int, shape (G,)
+        The (step, tracker) of each shaded collector.
+    group_rects : numpy.ndarray, shape (G, K, 4)
+        The shade rectangles (u0, u1, v0, v1) [m] on that collector (padded with empties).
+    group_by : numpy.ndarray of int, shape (G, K)
+        Index of the shading tracker of each rectangle (−1 for padding).
+    """
+
+    fraction: FloatArray
+    group_step: IntArray
+    group_tracker: IntArray
+    group_rects: FloatArray
+    group_by: IntArray
+
+    @property
+    def shaded(self) -> NDArray[np.bool_]:
+        """Seed 004's Boolean per collector and step: some of it is shaded."""
+        return np.nan_to_num(self.fraction) > 0
+
+    def shaded_by(self, step: int, tracker: int) -> list[int]:
+        """Indices of the trackers that shade ``tracker`` at ``step``."""
+        g = np.nonzero((self.group_step == step) & (self.group_tracker == tracker))[0]
+        if not len(g):
+            return []
+        return sorted(int(b) for b in self.group_by[g[0]] if b >= 0)
+
+
+def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation: ArrayLike,
+                surface_azimuth: ArrayLike, surface_elevation: ArrayLike, width: float,
+                height: float) -> PlantShade:
+    """Shaded fraction of every collector of a plant at every step (seed 004 §2.1 geometry).
+
+    Parameters
+    ----------
+    positions : array_like, shape (N, 3)
+        Pivot positions, ENU [m] (collectors centred on them).
+    solar_azimuth, solar_elevation : array_like, shape (T,)
+        Sun direction [°] (azimuth clockwise from north). Use the apparent
+        elevation: the shade follows the refracted ray.
+    surface_azimuth, surface_elevation : array_like, shape (T,)
+        The collectors' common orientation: azimuth and elevation of the normal [°].
+        For sun tracking pass the sun's own angles.
+    width, height : float
+        Collector size [m] (seed 004: a, b).
+
+    Returns
+    -------
+    PlantShade
+    """
+    p = np.asarray(positions, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise ValueError(f"positions must have shape (N, 3), got {p.shape}")
+    az = np.atleast_1d(np.asarray(solar_azimuth, dtype=float))
+    el = np.atleast_1d(np.asarray(solar_elevation, dtype=float))
+    saz = np.broadcast_to(np.asarray(surface_azimuth, dtype=float), az.shape)
+    sel = np.broadcast_to(np.asarray(surface_elevation, dtype=float), az.shape)
+    if el.shape != az.shape:
+        raise ValueError("solar_azimuth and solar_elevation must have the same shape")
+    n_t, n = len(az), len(p)
+    fraction = np.zeros((n_t, n))
+    up = el > 0
+    fraction[~up] = np.nan
+    sun = enu_from_sky(az, el)
+    diag = float(np.hypot(width, height))
+    upi = np.nonzero(up)[0]
+    t, i, j = candidate_pairs(p, sun[upi], diag)
+    t = upi[t]
+    rects, shading = pair_shade_rects(p, sun, saz, sel, width, height, t, i, j)
+    t, i, j, rects = t[shading], i[shading], j[shading], rects[shading]
+    key = t * n + i
+    order = np.argsort(key, kind="stable")
+    key, j, rects = key[order], j[order], rects[order]
+    gkey, start, count = np.unique(key, return_index=True, return_counts=True)
+    kmax = int(count.max()) if len(count) else 1
+    g_rects = np.zeros((len(gkey), kmax, 4))
+    g_by = np.full((len(gkey), kmax), -1, dtype=np.int64)
+    slot = np.arange(len(key)) - np.repeat(start, count)
+    gidx = np.repeat(np.arange(len(gkey)), count)
+    g_rects[gidx, slot] = rects
+    g_by[gidx, slot] = j
+    area = np.zeros(len(gkey))
+    for k in np.unique(count):
+        sel_g = count == k
+        area[sel_g] = union_area(g_rects[sel_g, :k])
+    g_step, g_tracker = gkey // n, gkey % n
+    fraction[g_step, g_tracker] = np.minimum(area / (width * height), 1.0)
+    return PlantShade(fraction, g_step.astype(np.int64), g_tracker.astype(np.int64),
+                      g_rects, g_by)
+
+
+def shades_anyone(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation: ArrayLike,
+                  surface_azimuth: ArrayLike, surface_elevation: ArrayLike, width: float,
+                  height: float) -> NDArray[np.bool_]:
+    """Seed 004's Boolean for the whole plant: does this orientation shade any collector?
+
+    Same arguments as :func:`plant_shade`, all broadcast to one shape ``(M,)``
+    (e.g. one sun position against a grid of candidate orientations). False
+    with the sun down.
+    """
+    p = np.asarray(positions, dtype=float)
+    arrs = np.broadcast_arrays(*(np.atleast_1d(np.asarray(x, dtype=float)) for x in
+                                 (solar_azimuth, solar_elevation, surface_azimuth,
+                                  surface_elevation)))
+    az, el, saz, sel = (a.reshape(-1) for a in arrs)
+    out = np.zeros(len(az), dtype=bool)
+    up = np.nonzero(el > 0)[0]
+    if not len(up):
+        return out
+    sun = enu_from_sky(az[up], el[up])
+    t, i, j = candidate_pairs(p, sun, float(np.hypot(width, height)))
+    _, shading = pair_shade_rects(p, sun, saz[up], sel[up], width, height, t, i, j)
+    out[up[np.unique(t[shading])]] = True
+    return out
