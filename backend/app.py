@@ -8,7 +8,7 @@ must never shadow the API), and two middlewares: gzip for answers of
 
 1. runs the migrations, loads the built-in sites, starts the writer
    (:func:`backend.context.open_context`);
-2. starts the 3D scene (``backend.twin3d.TwinScene``) when enabled;
+2. starts the 3D scene (``backend.twin.scene.TwinScene``) when enabled;
 3. starts the live twin loop (an asyncio task, every minute);
 4. starts the demo logger thread when enabled (making its own token if none is
    configured);
@@ -35,10 +35,10 @@ from fastapi.responses import Response
 from starlette.middleware.gzip import GZipMiddleware
 
 from backend.api.routes import dashboard, energy, health, measurements, simulations, sites, vision
+from backend.auth import create_token
 from backend.context import ServiceContext, open_context
 from backend.settings import Settings, get_settings
-from backend.tokens import create_token
-from backend.twin3d import TwinScene
+from backend.twin.scene import TwinScene
 
 logger = logging.getLogger(__name__)
 
@@ -67,7 +67,7 @@ def _start_demo(ctx: ServiceContext, stop: threading.Event) -> threading.Thread 
     info = ctx.registry.get(s.default_site)
     if not s.demo_logger or info is None:
         return None
-    from backend.demo_logger import DemoLogger
+    from backend.twin.demo_logger import DemoLogger
 
     token = s.demo_token or ctx.writer.call(
         lambda conn: create_token(conn, s.default_site, "demo-logger (heliotwin serve)")

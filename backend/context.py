@@ -20,13 +20,13 @@ from dataclasses import dataclass
 from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
-from backend.db import make_engine, make_sessionmaker, run_migrations
-from backend.registry import Registry, sync_sites
+from backend.auth import TokenCache
+from backend.measurements.writer import Writer
 from backend.settings import Settings
-from backend.simulations import SimulationRunner
-from backend.tokens import TokenCache
-from backend.twin_service import TwinService
-from backend.writer import Writer
+from backend.sites import Registry, sync_sites
+from backend.storage.engine import make_engine, make_sessionmaker, run_migrations
+from backend.twin.service import TwinService
+from backend.twin.simulations import SimulationRunner
 
 logger = logging.getLogger(__name__)
 
@@ -74,7 +74,7 @@ def open_context(settings: Settings) -> ServiceContext:
         # Validating a big batch holds the GIL for ~1 ms per 1,000 readings; worker
         # processes let it run beside the writer instead of taking turns with it.
         # Forked first, before this module starts any thread of its own; they only
-        # run ``backend.ingest`` (NumPy, orjson) on the bytes they are sent.
+        # run ``backend.measurements.parse`` (NumPy, orjson) on the bytes they are sent.
         parsers = ProcessPoolExecutor(settings.parse_processes,
                                       mp_context=multiprocessing.get_context("fork"),
                                       initializer=_parser_init, initargs=(os.getpid(),))

@@ -74,8 +74,8 @@ def baseline_executemany(n_rows: int) -> float:
 
     Rows in primary-key order, 1,000 per ``executemany``, one transaction.
     """
-    from backend.db import make_engine, run_migrations
-    from backend.registry import Registry, sync_sites
+    from backend.storage.engine import make_engine, run_migrations
+    from backend.sites import Registry, sync_sites
     from backend.settings import get_settings
 
     with tempfile.TemporaryDirectory() as d:

@@ -20,8 +20,8 @@ from fastapi import Depends, HTTPException, Request
 from sqlalchemy.orm import Session
 
 from backend.context import ServiceContext
-from backend.registry import SiteInfo
 from backend.settings import Settings
+from backend.sites import SiteInfo
 
 _BEARER = {"WWW-Authenticate": "Bearer"}
 

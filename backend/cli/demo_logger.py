@@ -26,8 +26,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
 def run(args: argparse.Namespace) -> int:
     """Run until interrupted (or, with ``--once``, until the back-fill is posted)."""
-    from backend.demo_logger import DemoLogger
     from backend.settings import get_settings
+    from backend.twin.demo_logger import DemoLogger
     from sim.sites import UnknownSiteError, load_site
 
     try:

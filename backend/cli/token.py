@@ -21,10 +21,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
 def create(args: argparse.Namespace) -> int:
     """Migrate if needed, load the built-in sites, store and print a new token."""
-    from backend.db import make_engine, run_migrations
-    from backend.registry import Registry, sync_sites
+    from backend.auth import UnknownSite, create_token
     from backend.settings import get_settings
-    from backend.tokens import UnknownSite, create_token
+    from backend.sites import Registry, sync_sites
+    from backend.storage.engine import make_engine, run_migrations
 
     settings = get_settings()
     engine = make_engine(settings)

@@ -1,4 +1,4 @@
-"""Bulk validation (``backend/ingest.py``): timestamps, ADC conversion, row/field errors."""
+"""Bulk validation (``backend/measurements/parse.py``): timestamps, ADC conversion, row/field errors."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import orjson
 import pytest
 
-from backend.ingest import (
+from backend.measurements.parse import (
     Calibration,
     IngestError,
     Limits,

@@ -1,4 +1,4 @@
-"""Migrations (``backend/migrations``) build exactly the tables ``backend/models.py`` declares."""
+"""Migrations (``backend/storage/migrations``) build exactly the tables ``backend/storage/tables.py`` declares."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ from alembic.script import ScriptDirectory
 from live_service import new_database
 from sqlalchemy import inspect
 
-from backend.db import alembic_config, make_engine, run_migrations
-from backend.models import Base
+from backend.storage.engine import alembic_config, make_engine, run_migrations
+from backend.storage.tables import Base
 from backend.settings import get_settings
 
 

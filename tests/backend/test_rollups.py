@@ -1,11 +1,11 @@
-"""Rollups and the energy rule (``backend/rollups.py``) against a dense independent integration."""
+"""Rollups and the energy rule (``backend/measurements/rollups.py``) against a dense independent integration."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from backend.rollups import (
+from backend.measurements.rollups import (
     SeriesWindow,
     affected_runs,
     energy_per_bucket,

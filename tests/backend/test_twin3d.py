@@ -1,4 +1,4 @@
-"""Tests of backend/twin3d.py: the viser scene, over a real server on a free port.
+"""Tests of backend/twin/scene.py: the viser scene, over a real server on a free port.
 
 The tracker's pose is checked against the sun direction from pvlib's own
 solar-position code (independent of sim.sun and sim.kinematics) and against
@@ -16,7 +16,7 @@ import pvlib
 import pytest
 import viser.transforms as vtf
 
-from backend.twin3d import PEDESTAL_HEIGHT_M, TwinScene
+from backend.twin.scene import PEDESTAL_HEIGHT_M, TwinScene
 from sim.kinematics import forward_kinematics, inverse_kinematics
 from sim.sites import load_site
 

@@ -17,7 +17,7 @@ from sqlalchemy import text
 
 from backend.context import open_context
 from backend.settings import get_settings
-from backend.writer import SQLITE_CHUNK_ROWS, MeasurementJob
+from backend.measurements.writer import SQLITE_CHUNK_ROWS, MeasurementJob
 
 T0 = 1_700_000_000 // 3600 * 3600 - 3600  # on the UTC hour grid (phase 0 for UTC-6)
 

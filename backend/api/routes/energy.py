@@ -22,7 +22,7 @@ from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import Response
 
 from backend.api.deps import ContextDep, site_or_404
-from backend.queries import energy_table, parse_range, period_edges
+from backend.measurements.queries import energy_table, parse_range, period_edges
 
 router = APIRouter(prefix="/api/v1/sites", tags=["energy"])
 

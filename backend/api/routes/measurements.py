@@ -1,7 +1,7 @@
 """``/api/v1/sites/{site_id}/measurements``: field-logger ingestion and read-back.
 
 POST takes ``{"readings": [...]}`` (JSON) or ``text/csv`` with a header row,
-validated in bulk by :mod:`backend.ingest` and committed by the writer before
+validated in bulk by :mod:`backend.measurements.parse` and committed by the writer before
 the answer ``{"accepted": N, "duplicates": M}``. GET answers a range raw (when
 it holds no more than ``max_points`` readings) or downsampled into buckets with
 min/mean/max, as JSON or CSV.
@@ -30,10 +30,17 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from backend.api.deps import ContextDep, check_site_token, site_or_404
 from backend.context import ServiceContext
-from backend.ingest import Batch, IngestError, Limits, parse_csv_batch, parse_json_batch
-from backend.models import SOURCE_CODES
-from backend.queries import QUANTITIES, count_rows, downsample, iso_utc, parse_range, raw_rows
-from backend.writer import MeasurementJob
+from backend.measurements.parse import Batch, IngestError, Limits, parse_csv_batch, parse_json_batch
+from backend.measurements.queries import (
+    QUANTITIES,
+    count_rows,
+    downsample,
+    iso_utc,
+    parse_range,
+    raw_rows,
+)
+from backend.measurements.writer import MeasurementJob
+from backend.storage.tables import SOURCE_CODES
 
 logger = logging.getLogger(__name__)
 router = APIRouter(prefix="/api/v1/sites", tags=["measurements"])

@@ -13,9 +13,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from backend.api.deps import ContextDep, SiteTokenDep, site_or_404
 from backend.api.routes.energy import energy_rows
-from backend.ingest import Calibration
-from backend.queries import iso_utc
-from backend.sqlraw import fetch
+from backend.measurements.parse import Calibration
+from backend.measurements.queries import iso_utc
+from backend.storage.sqlraw import fetch
 
 router = APIRouter(prefix="/api/v1/sites", tags=["sites"])
 

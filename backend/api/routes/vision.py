@@ -40,8 +40,8 @@ from fastapi.responses import Response
 from starlette.datastructures import FormData, UploadFile
 
 from backend.api.deps import ContextDep, SessionDep, VisionTokenDep
-from backend.queries import parse_day_or_time
-from backend.vision_store import (
+from backend.measurements.queries import parse_day_or_time
+from backend.vision.store import (
     get_calibration,
     insert_calibration,
     insert_detection,

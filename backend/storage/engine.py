@@ -1,7 +1,7 @@
 """Engine, sessions and migrations (SQLAlchemy 2 + Alembic).
 
 SQLite runs in WAL mode with foreign keys on and a busy timeout, so readers on
-the pool never block the one writer (``backend/writer.py``) and the writer never
+the pool never block the one writer (``backend/measurements/writer.py``) and the writer never
 blocks them (SQLite docs, "Write-Ahead Logging"). ``synchronous`` comes from
 ``Settings.sqlite_synchronous``: NORMAL by default, with which a commit in WAL
 mode survives a crash or SIGKILL of the service (it is in the WAL file before
@@ -99,7 +99,7 @@ def session_scope(factory: sessionmaker[Session]) -> Iterator[Session]:
 
 
 def alembic_config(engine: Engine) -> Config:
-    """Alembic config pointing at ``backend/migrations`` (no ``alembic.ini`` needed)."""
+    """Alembic config pointing at ``backend/storage/migrations`` (no ``alembic.ini`` needed)."""
     # alembic logs its plugin set-up at INFO on import; nothing for the service log
     logging.getLogger("alembic").setLevel(logging.WARNING)
     from alembic.config import Config

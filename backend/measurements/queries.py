@@ -16,9 +16,9 @@ from zoneinfo import ZoneInfo
 import numpy as np
 from sqlalchemy import Connection
 
-from backend.models import ROLLUP_WIDTH_S
-from backend.rollups import integrate_clipped_wh
-from backend.sqlraw import fetch
+from backend.measurements.rollups import integrate_clipped_wh
+from backend.storage.sqlraw import fetch
+from backend.storage.tables import ROLLUP_WIDTH_S
 
 W = ROLLUP_WIDTH_S
 QUANTITIES = ("voltage_v", "current_a", "power_w")

@@ -20,8 +20,8 @@ from zoneinfo import ZoneInfo
 from sqlalchemy import Connection, select, update
 from sqlalchemy.dialects import postgresql, sqlite
 
-from backend.ingest import Calibration
-from backend.models import ROLLUP_WIDTH_S, ArrayRow, SiteRow, utcnow
+from backend.measurements.parse import Calibration
+from backend.storage.tables import ROLLUP_WIDTH_S, ArrayRow, SiteRow, utcnow
 from sim.sites import Site, list_sites
 
 logger = logging.getLogger(__name__)
@@ -61,7 +61,7 @@ class SiteInfo:
         return self.site.site_id
 
     def ingest_arrays(self) -> dict[str, tuple[int, Calibration]]:
-        """``{name: (array_id, calibration)}`` for :mod:`backend.ingest`."""
+        """``{name: (array_id, calibration)}`` for :mod:`backend.measurements.parse`."""
         return {a.name: (a.array_id, a.calibration) for a in self.arrays.values()}
 
     def array_of_kind(self, kind: str) -> ArrayInfo | None:

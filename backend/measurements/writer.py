@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from sqlalchemy import Connection, Engine
 
-from backend.rollups import (
+from backend.measurements.rollups import (
     ROLLUP_COLUMNS,
     SeriesWindow,
     affected_runs,
@@ -306,7 +306,7 @@ class Writer:
         """Insert the batches and refresh their rollups in one transaction; accepted counts.
 
         Plain DBAPI: ``BEGIN IMMEDIATE`` … ``COMMIT`` on SQLite (the driver is in
-        autocommit mode, see ``backend.db``), the driver's implicit transaction and
+        autocommit mode, see ``backend.storage.engine``), the driver's implicit transaction and
         ``commit()`` on PostgreSQL.
         """
         dbapi: Any = conn.connection.driver_connection

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from backend.models import ROLLUP_WIDTH_S
+from backend.storage.tables import ROLLUP_WIDTH_S
 
 ROLLUP_COLUMNS = (
     "bucket_s", "n", "energy_wh",

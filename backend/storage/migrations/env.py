@@ -1,7 +1,6 @@
-"""Alembic environment: the core tables (``backend.models``) and, when present, the
-vision tables (``backend.vision_store``) on the same ``Base.metadata``.
+"""Alembic environment: every table of ``backend.storage.tables`` on one ``Base.metadata``.
 
-``backend.db.run_migrations`` passes an open connection in
+``backend.storage.engine.run_migrations`` passes an open connection in
 ``config.attributes["connection"]``; run from the ``alembic`` command line the URL
 comes from ``sqlalchemy.url`` or ``HELIOTWIN_DATABASE_URL``.
 """
@@ -11,11 +10,10 @@ from __future__ import annotations
 from alembic import context
 from sqlalchemy import create_engine
 
-import backend.models
-import backend.vision_store  # noqa: F401  (registers the vision tables on Base.metadata)
+import backend.storage.tables
 from backend.settings import get_settings
 
-target_metadata = backend.models.Base.metadata
+target_metadata = backend.storage.tables.Base.metadata
 
 
 def _run(connection) -> None:  # type: ignore[no-untyped-def]

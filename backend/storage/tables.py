@@ -4,7 +4,7 @@ Times at rest are UTC: measurement keys are integer Unix seconds (``ts_s``),
 which are unambiguous, compact, and identical on SQLite and PostgreSQL.
 ``measurements`` and ``measurement_rollups`` are ``WITHOUT ROWID`` on SQLite, so
 the primary key is the table's clustered order and range scans per series are
-sequential. The schema itself is created by Alembic (``backend/migrations``);
+sequential. The schema itself is created by Alembic (``backend/storage/migrations``);
 ``tests/backend/test_migrations.py`` checks that these classes and the
 migrations agree.
 """
@@ -15,10 +15,12 @@ import datetime as dt
 
 from sqlalchemy import (
     BigInteger,
+    Boolean,
     CheckConstraint,
     DateTime,
     Float,
     ForeignKey,
+    Index,
     Integer,
     LargeBinary,
     SmallInteger,
@@ -42,7 +44,7 @@ def utcnow() -> dt.datetime:
 
 
 class Base(DeclarativeBase):
-    """Declarative base of every table (core and ``backend/vision_store.py``)."""
+    """Declarative base of every table (core and ``backend/vision/store.py``)."""
 
 
 class SiteRow(Base):
@@ -190,3 +192,65 @@ class SimulationSeries(Base):
         ForeignKey("simulation_runs.run_id", ondelete="CASCADE"), primary_key=True
     )
     npz: Mapped[bytes] = mapped_column(LargeBinary)
+
+
+class VisionCalibration(Base):
+    """A fisheye camera fitted from timestamped frames (``vision.calibrate``)."""
+
+    __tablename__ = "vision_calibrations"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True))
+    site_id: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    latitude_deg: Mapped[float] = mapped_column(Float)
+    longitude_deg: Mapped[float] = mapped_column(Float)
+    elevation_m: Mapped[float] = mapped_column(Float)
+    projection: Mapped[str] = mapped_column(String(16))
+    cx_px: Mapped[float] = mapped_column(Float)
+    cy_px: Mapped[float] = mapped_column(Float)
+    px_per_deg: Mapped[float] = mapped_column(Float)
+    north_offset_deg: Mapped[float] = mapped_column(Float)
+    east: Mapped[str] = mapped_column(String(8))
+    radial_coeffs_json: Mapped[str] = mapped_column(Text)
+    tilt_north_deg: Mapped[float] = mapped_column(Float)
+    tilt_east_deg: Mapped[float] = mapped_column(Float)
+    image_width_px: Mapped[int] = mapped_column(Integer)
+    image_height_px: Mapped[int] = mapped_column(Integer)
+    n_frames: Mapped[int] = mapped_column(Integer)
+    rms_px: Mapped[float] = mapped_column(Float)
+    max_px: Mapped[float] = mapped_column(Float)
+    rms_deg: Mapped[float] = mapped_column(Float)
+    max_deg: Mapped[float] = mapped_column(Float)
+    frames_json: Mapped[str] = mapped_column(Text)
+
+
+class VisionDetection(Base):
+    """One frame's detection, with the ephemeris when time and place were given."""
+
+    __tablename__ = "vision_detections"
+    __table_args__ = (Index("ix_vision_detections_site_ts", "site_id", "ts_ms"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True))
+    ts_ms: Mapped[int | None] = mapped_column(BigInteger, nullable=True)
+    site_id: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    latitude_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    longitude_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    camera: Mapped[str] = mapped_column(String(16))
+    calibration_id: Mapped[int | None] = mapped_column(
+        Integer, ForeignKey("vision_calibrations.id", ondelete="SET NULL"), nullable=True)
+    method: Mapped[str] = mapped_column(String(32))
+    image_width_px: Mapped[int] = mapped_column(Integer)
+    image_height_px: Mapped[int] = mapped_column(Integer)
+    sun_found: Mapped[bool] = mapped_column(Boolean)
+    confidence: Mapped[float] = mapped_column(Float)
+    centroid_x_px: Mapped[float | None] = mapped_column(Float, nullable=True)
+    centroid_y_px: Mapped[float | None] = mapped_column(Float, nullable=True)
+    azimuth_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    elevation_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    pointing_error_horizontal_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    pointing_error_vertical_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    pointing_error_mrad: Mapped[float | None] = mapped_column(Float, nullable=True)
+    ephemeris_azimuth_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    ephemeris_elevation_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    error_deg: Mapped[float | None] = mapped_column(Float, nullable=True)

@@ -29,9 +29,9 @@ import pandas as pd
 from sqlalchemy import Connection, Engine, func, select
 from sqlalchemy.dialects import postgresql, sqlite
 
-from backend.models import SOURCE_CODES, MeasurementRollup, TwinCoverage
-from backend.registry import Registry, SiteInfo
-from backend.writer import MeasurementJob, Writer
+from backend.measurements.writer import MeasurementJob, Writer
+from backend.sites import Registry, SiteInfo
+from backend.storage.tables import SOURCE_CODES, MeasurementRollup, TwinCoverage
 from sim.twin import simulate
 
 logger = logging.getLogger(__name__)

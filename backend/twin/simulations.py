@@ -22,9 +22,9 @@ import numpy as np
 import pandas as pd
 from sqlalchemy import Connection, Engine, insert, select, update
 
-from backend.models import SimulationRun, SimulationSeries, utcnow
-from backend.registry import Registry
-from backend.writer import Writer
+from backend.measurements.writer import Writer
+from backend.sites import Registry
+from backend.storage.tables import SimulationRun, SimulationSeries, utcnow
 from sim.twin import simulate
 
 logger = logging.getLogger(__name__)

@@ -1,4 +1,4 @@
-"""Vision tables: stored sun detections and fisheye calibrations (``backend/vision_store.py``).
+"""Vision tables: stored sun detections and fisheye calibrations (``backend/vision/store.py``).
 
 Revision ID: 0002_vision
 Revises: 0001_initial

@@ -15,7 +15,7 @@ import threading
 
 from sqlalchemy import Connection, Engine, insert, select
 
-from backend.models import LoggerToken, SiteRow, utcnow
+from backend.storage.tables import LoggerToken, SiteRow, utcnow
 
 
 class UnknownSite(LookupError):
