@@ -124,7 +124,7 @@ class Collector:
                          v0, v0 + h], axis=-1)
 
     def blocks(self) -> tuple[FloatArray, NDArray[np.int64]]:
-        """Bypass-diode blocks: rectangles ``(B, 4)`` (u0, u1, v0, v1) [m] and their string index."""
+        """Bypass-diode blocks: rectangles ``(B, 4)`` (u0, u1, v0, v1) [m], their string index."""
         mw, mh = self.width / self.modules_across, self.height / self.modules_high
         n = self.bypass_diodes
         rects, owner = [], []
@@ -269,7 +269,7 @@ def _collector(d: Any, where: str) -> Collector:
 
 
 def plant_from_dict(d: dict[str, Any], where: str = "plant") -> Plant:
-    """Build a :class:`Plant` from the layout of ``data/plants/*.json``; ValueError names the field."""
+    """A :class:`Plant` from the layout of ``data/plants/*.json``; ValueError names the field."""
     if not isinstance(d, dict):
         raise ValueError(f"{where}: a plant file must hold a JSON object")
     if "plant_id" not in d:

@@ -1,0 +1,293 @@
+"""A plant over a time range: sun, weather, strategy, shade and DC energy.
+
+Per step: SPA sun (:func:`sim.sun.solar_position`); clear sky (Ineichen–Perez,
+:func:`sim.sky.clearsky_ineichen`) or weather; the strategy's common orientation
+(:mod:`sim.plant.strategies`); every collector's shade (:mod:`sim.plant.shading`);
+Perez POA (:func:`sim.sky.poa_irradiance`) with the physical IAM on the beam
+(:func:`sim.sky.iam_physical`); the beam scaled by the area or the
+Martinez-Moreno factor (:mod:`sim.plant.electrical`); SAPM cell temperature
+(``pvlib.temperature.sapm_cell``, open rack glass/polymer: a = −3.56, b = −0.075,
+ΔT = 3 °C) and PVWatts DC power (``pvlib.pvsystem.pvwatts_dc``). A fixed plant of
+the same collectors on the same pivots (``Plant.fixed_tilt``/``fixed_azimuth``),
+with its own shade, is simulated alongside.
+
+Weather from a TMY3 file of another place is moved by mean solar time
+(:func:`weather_for_plant`), so that its noon falls on the plant's noon.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from sim.plant.electrical import beam_factors
+from sim.plant.layout import Plant
+from sim.plant.shading import plant_shade
+from sim.plant.strategies import orientations
+from sim.sky import clearsky_ineichen, iam_physical, poa_irradiance
+from sim.sun import solar_position
+
+FloatArray = NDArray[np.float64]
+_CHUNK = 50_000
+_SAPM = {"a": -3.56, "b": -0.075, "deltaT": 3.0}
+#: Daily clearness index below which a day counts as cloudy [-].
+CLOUDY_KT = 0.4
+
+
+def weather_for_plant(weather: pd.DataFrame, station_longitude: float, plant: Plant,
+                      start: pd.Timestamp, end: pd.Timestamp) -> pd.DataFrame:
+    """Move a typical-year weather series to the plant by mean solar time, repeating the year.
+
+    The series' UTC times are shifted by (station longitude − plant longitude)/15 h
+    so that each record keeps its mean solar time of day, then copies one year
+    earlier and later are added so that any range inside is covered.
+
+    Parameters
+    ----------
+    weather : pandas.DataFrame
+        Tz-aware index; ``ghi``, ``dni``, ``dhi`` [W m⁻²] (``temp_air`` [°C],
+        ``wind_speed`` [m s⁻¹] optional), e.g. from :func:`sim.sky.read_tmy3`.
+    station_longitude : float
+        [°] east positive.
+    plant : Plant
+    start, end : pandas.Timestamp
+        The range to cover.
+    """
+    if weather.index.tz is None:
+        raise ValueError("weather index must be timezone-aware")
+    missing = [c for c in ("ghi", "dni", "dhi") if c not in weather.columns]
+    if missing:
+        raise ValueError(f"weather lacks columns {missing}")
+    w = weather.copy()
+    w.index = w.index.tz_convert("UTC") + pd.Timedelta(
+        hours=(station_longitude - plant.longitude) / 15.0)
+    span = w.index[-1] - w.index[0] + (w.index[1] - w.index[0])
+    parts = [w]
+    k = 1
+    while parts[0].index[0] > start or parts[-1].index[-1] < end:
+        if k > 50:
+            raise ValueError("weather too short to cover the run")
+        before, after = w.copy(), w.copy()
+        before.index = before.index - k * span
+        after.index = after.index + k * span
+        parts = [before, *parts, after]
+        k += 1
+    return pd.concat(parts).sort_index()
+
+
+def _seconds(index: pd.DatetimeIndex) -> FloatArray:
+    return np.asarray((index - pd.Timestamp(0, tz="UTC")) / pd.Timedelta(seconds=1), dtype=float)
+
+
+def _sky(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame | None
+         ) -> dict[str, FloatArray]:
+    pos = solar_position(times, plant.latitude, plant.longitude, plant.altitude)
+    sky: dict[str, FloatArray] = {
+        "solar_azimuth": pos["azimuth"].to_numpy(),
+        "apparent_elevation": pos["apparent_elevation"].to_numpy(),
+        "apparent_zenith": pos["apparent_zenith"].to_numpy(),
+        "zenith": pos["zenith"].to_numpy(),
+    }
+    cs = clearsky_ineichen(times, sky["apparent_zenith"], plant.latitude, plant.longitude,
+                           plant.altitude)
+    sky["dni_extra"], sky["airmass_relative"] = cs["dni_extra"], cs["airmass_relative"]
+    if weather is None:
+        for k in ("ghi", "dni", "dhi"):
+            sky[k] = cs[k]
+        sky["temp_air"] = np.full(len(times), plant.temp_air)
+        sky["wind_speed"] = np.full(len(times), plant.wind_speed)
+    else:
+        t_w = _seconds(weather.index)
+        t = _seconds(times)
+        if t[0] < t_w[0] or t[-1] > t_w[-1]:
+            raise ValueError(f"weather covers {weather.index[0]}..{weather.index[-1]}, "
+                             f"not {times[0]}..{times[-1]}")
+        for k in ("ghi", "dni", "dhi"):
+            sky[k] = np.interp(t, t_w, weather[k].to_numpy(float))
+        sky["temp_air"] = (np.interp(t, t_w, weather["temp_air"].to_numpy(float))
+                           if "temp_air" in weather else np.full(len(t), plant.temp_air))
+        sky["wind_speed"] = (np.interp(t, t_w, weather["wind_speed"].to_numpy(float))
+                             if "wind_speed" in weather else np.full(len(t), plant.wind_speed))
+    night = sky["apparent_elevation"] <= 0
+    sky["dni"] = np.where(night, 0.0, sky["dni"])
+    for k in ("ghi", "dhi"):
+        sky[k] = np.where(night, 0.0, np.maximum(sky[k], 0.0))
+    return sky
+
+
+def _power(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: FloatArray
+           ) -> dict[str, Any]:
+    """Shade, POA and DC power of every collector for one orientation series."""
+    from pvlib.pvsystem import pvwatts_dc
+    from pvlib.temperature import sapm_cell
+
+    c = plant.collector
+    shade = plant_shade(plant.positions, sky["solar_azimuth"], sky["apparent_elevation"],
+                        saz, sel, c.width, c.height)
+    f_area, f_elec = beam_factors(shade, c)
+    poa = poa_irradiance(90.0 - sel, saz, sky["apparent_zenith"], sky["solar_azimuth"],
+                         sky["dni"], sky["ghi"], sky["dhi"], sky["dni_extra"],
+                         sky["airmass_relative"], albedo=plant.albedo, model="perez")
+    aoi = np.degrees(np.arccos(np.clip(np.sum(
+        _enu(saz, sel) * _enu(sky["solar_azimuth"], sky["apparent_elevation"]), axis=-1),
+        -1, 1)))
+    beam = poa["poa_direct"] * np.where(aoi < 90, iam_physical(np.minimum(aoi, 89.999)), 0.0)
+    diffuse = poa["poa_diffuse"]
+    t_cell = sapm_cell(poa["poa_global"], sky["temp_air"], sky["wind_speed"], **_SAPM)
+    pdc0 = c.power_stc
+
+    def dc(g: FloatArray) -> FloatArray:
+        return np.asarray(pvwatts_dc(g, t_cell[:, None] if g.ndim == 2 else t_cell, pdc0,
+                                     c.gamma_pdc), dtype=float)
+
+    g_unshaded = beam + diffuse
+    g_area = beam[:, None] * np.nan_to_num(f_area, nan=1.0) + diffuse[:, None]
+    g_elec = beam[:, None] * np.nan_to_num(f_elec, nan=1.0) + diffuse[:, None]
+    return {"shade": shade, "poa_global": poa["poa_global"],
+            "p_unshaded": dc(g_unshaded) * plant.n_trackers,
+            "p_area": dc(g_area).sum(axis=1), "p_elec": dc(g_elec).sum(axis=1)}
+
+
+def _enu(az: FloatArray, el: FloatArray) -> FloatArray:
+    from vision.sphere import enu_from_sky
+
+    return enu_from_sky(az, el)
+
+
+@dataclass
+class PlantResult:
+    """A plant run: its per-step series and per-day table.
+
+    ``series`` (UTC index): ``solar_azimuth``, ``apparent_elevation``, ``dni``,
+    ``ghi``, ``surface_azimuth``, ``surface_elevation``, ``poa_global``,
+    ``mean_shaded_fraction``, ``trackers_shaded``, ``power_w`` (electrical
+    model), ``power_area_w``, ``power_unshaded_w``, ``fixed_power_w``.
+    ``daily`` (local date): energies [Wh], ``clearness_index`` [-].
+    """
+
+    plant: Plant
+    start: pd.Timestamp
+    end: pd.Timestamp
+    step_s: float
+    strategy: str
+    sky_source: str
+    series: pd.DataFrame
+    daily: pd.DataFrame
+    any_shaded_steps: int
+    daylight_steps: int
+    dni_weighted_shaded_fraction: float
+
+    def summary(self) -> dict[str, Any]:
+        """The CLI/HTTP summary (DESIGN.md contract), units in the keys."""
+        s, h = self.series, self.step_s / 3600.0
+        e = float(s["power_w"].sum() * h)
+        e_area = float(s["power_area_w"].sum() * h)
+        e_un = float(s["power_unshaded_w"].sum() * h)
+        e_fix = float(s["fixed_power_w"].sum() * h)
+        day = s["apparent_elevation"] > 0
+
+        def pct(x: float) -> float | None:
+            return round(100.0 * (1.0 - x / e_un), 4) if e_un > 0 else None
+
+        return {
+            "plant_id": self.plant.plant_id,
+            "trackers": self.plant.n_trackers,
+            "start": self.start.isoformat(),
+            "end": self.end.isoformat(),
+            "step_s": self.step_s,
+            "strategy": self.strategy,
+            "sky": self.sky_source,
+            "daylight_steps": self.daylight_steps,
+            "fraction_of_daylight_any_shaded": (
+                self.any_shaded_steps / self.daylight_steps if self.daylight_steps else None),
+            "dni_weighted_shaded_fraction": self.dni_weighted_shaded_fraction,
+            "mean_shaded_fraction": (float(s["mean_shaded_fraction"][day].mean())
+                                     if day.any() else None),
+            "plant_energy_wh": round(e, 3),
+            "plant_energy_area_model_wh": round(e_area, 3),
+            "plant_energy_unshaded_wh": round(e_un, 3),
+            "shading_loss_area_pct": pct(e_area),
+            "shading_loss_electrical_pct": pct(e),
+            "fixed_energy_wh": round(e_fix, 3),
+            "gain_vs_fixed_pct": round(100.0 * (e / e_fix - 1.0), 4) if e_fix > 0 else None,
+            "plant_peak_w": round(float(s["power_w"].max()), 3),
+            "poa_insolation_wh_m2": round(float(s["poa_global"].sum() * h), 3),
+        }
+
+
+def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s: float = 60.0,
+                   strategy: str = "sun", weather: pd.DataFrame | None = None,
+                   progress: Callable[[float], None] | None = None) -> PlantResult:
+    """Simulate a plant from ``start`` (inclusive) to ``end`` (exclusive).
+
+    Parameters
+    ----------
+    plant : Plant
+    start, end : pandas.Timestamp
+        Tz-aware.
+    step_s : float
+        [s].
+    strategy : {"sun", "backtrack", "sky_scan"}
+    weather : pandas.DataFrame, optional
+        Covering the range (see :func:`weather_for_plant`); clear sky when None.
+    progress : callable, optional
+        Called with the fraction done.
+    """
+    if start.tz is None or end.tz is None:
+        raise ValueError("start and end must be timezone-aware")
+    if not end > start:
+        raise ValueError("end must be after start (end is exclusive)")
+    if not step_s > 0:
+        raise ValueError(f"step_s must be positive, got {step_s}")
+    times = pd.date_range(start.tz_convert("UTC"), end.tz_convert("UTC"),
+                          freq=pd.Timedelta(seconds=step_s), inclusive="left")
+    frames, any_shaded, daylight, dni_f, dni_sum = [], 0, 0, 0.0, 0.0
+    for k0 in range(0, len(times), _CHUNK):
+        tt = times[k0:k0 + _CHUNK]
+        sky = _sky(plant, tt, weather)
+        saz, sel = orientations(strategy, plant, sky)
+        run = _power(plant, sky, saz, sel)
+        fix_az = np.full(len(tt), plant.fixed_azimuth)
+        fix_el = np.full(len(tt), 90.0 - plant.fixed_tilt)
+        fixed = _power(plant, sky, fix_az, fix_el)
+        frac = run["shade"].fraction
+        up = sky["apparent_elevation"] > 0
+        mean_f = np.where(up, np.nanmean(np.where(up[:, None], frac, 0.0), axis=1), np.nan)
+        n_sh = np.where(up, (np.nan_to_num(frac) > 0).sum(axis=1), 0)
+        any_shaded += int((n_sh[up] > 0).sum())
+        daylight += int(up.sum())
+        dni_f += float(np.sum(sky["dni"][up] * mean_f[up]))
+        dni_sum += float(np.sum(sky["dni"][up]))
+        frames.append(pd.DataFrame({
+            "solar_azimuth": sky["solar_azimuth"], "apparent_elevation": sky["apparent_elevation"],
+            "dni": sky["dni"], "ghi": sky["ghi"],
+            "ghi_extra": np.maximum(sky["dni_extra"] * np.cos(np.radians(sky["zenith"])), 0.0),
+            "surface_azimuth": saz, "surface_elevation": sel, "poa_global": run["poa_global"],
+            "mean_shaded_fraction": mean_f, "trackers_shaded": n_sh,
+            "power_w": run["p_elec"], "power_area_w": run["p_area"],
+            "power_unshaded_w": run["p_unshaded"], "fixed_power_w": fixed["p_elec"],
+        }, index=tt))
+        if progress is not None:
+            progress(min(1.0, (k0 + len(tt)) / len(times)))
+    series = pd.concat(frames)
+    h = step_s / 3600.0
+    local = series.index.tz_convert(plant.timezone)
+    grp = series.groupby(local.date)
+    daily = pd.DataFrame({
+        "energy_wh": grp["power_w"].sum() * h,
+        "energy_area_model_wh": grp["power_area_w"].sum() * h,
+        "energy_unshaded_wh": grp["power_unshaded_w"].sum() * h,
+        "fixed_energy_wh": grp["fixed_power_w"].sum() * h,
+        "clearness_index": grp["ghi"].sum() / grp["ghi_extra"].sum().replace(0, np.nan),
+    })
+    return PlantResult(plant, start, end, float(step_s), strategy,
+                       "clearsky-ineichen" if weather is None else "weather", series, daily,
+                       any_shaded, daylight, dni_f / dni_sum if dni_sum > 0 else float("nan"))
+
+
+__all__ = ["CLOUDY_KT", "PlantResult", "simulate_plant", "weather_for_plant"]
