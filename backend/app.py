@@ -37,6 +37,7 @@ from starlette.middleware.gzip import GZipMiddleware
 from backend.api.routes import dashboard, energy, health, measurements, simulations, sites, vision
 from backend.auth import create_token
 from backend.context import ServiceContext, open_context
+from backend.errors import InputError
 from backend.settings import Settings, get_settings
 from backend.twin.scene import TwinScene
 
@@ -94,6 +95,12 @@ async def validation_error(request: Request, exc: RequestValidationError) -> Res
     return Response(body, status_code=422, media_type="application/json")
 
 
+async def input_error(request: Request, exc: InputError) -> Response:
+    """A service function's :class:`backend.errors.InputError` → its 4xx with ``detail``."""
+    body = orjson.dumps({"detail": exc.detail})
+    return Response(body, status_code=exc.status_code, media_type="application/json")
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the application (nothing starts until the lifespan runs)."""
     settings = settings or get_settings()
@@ -139,6 +146,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = settings
     app.add_exception_handler(RequestValidationError, validation_error)  # type: ignore[arg-type]
+    app.add_exception_handler(InputError, input_error)  # type: ignore[arg-type]
     # the last middleware added runs first: the ingest fast path answers loggers
     # before gzip looks at the request (its answers are small); gzip leaves
     # responses that already carry a Content-Encoding (the dashboard's Plotly) alone.

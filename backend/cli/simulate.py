@@ -16,11 +16,9 @@ import argparse
 import json
 import logging
 import os
-import re
 import sys
 from typing import Any
 
-_BARE_DATE = re.compile(r"^\d{4}-\d{2}-\d{2}$")
 _BAR_MIN_STEPS = 20_000  # a progress bar only for long runs (two weeks at 1 min and up)
 
 
@@ -61,25 +59,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def parse_when(text: str, timezone: str, field: str) -> Any:
-    """A bare date (midnight in ``timezone``) or an ISO date-time with offset → ``pd.Timestamp``."""
+    """A bare date (midnight in ``timezone``) or an ISO date-time with offset → ``pd.Timestamp``
+    (the rules of :mod:`backend.timestamps`)."""
     import pandas as pd
 
+    from backend.timestamps import TimestampError, parse_day_or_instant
+
     try:
-        if _BARE_DATE.match(text):
-            # midnight can fall in a DST change in some zones: take the first valid instant
-            return pd.Timestamp(text).tz_localize(
-                timezone, ambiguous=True, nonexistent="shift_forward"
-            )
-        value = pd.Timestamp(text)
-    except (ValueError, TypeError) as exc:
-        raise InputError(
-            f"--{field}: {text!r} is not a date (YYYY-MM-DD) or ISO date-time ({exc})"
-        ) from None
-    if value.tz is None:
-        raise InputError(
-            f"--{field}: {text!r} has no UTC offset; add one (e.g. -06:00) or give a bare date"
-        )
-    return value
+        return pd.Timestamp(parse_day_or_instant(text, timezone, f"--{field}"))
+    except TimestampError as exc:
+        raise InputError(str(exc)) from None
 
 
 def _progress_bar(enabled: bool) -> tuple[Any, Any]:

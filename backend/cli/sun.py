@@ -17,16 +17,13 @@ from typing import Any
 
 
 def _parse_time(text: str) -> datetime:
-    """An ISO 8601 time that must carry a UTC offset."""
+    """An ISO 8601 time that must carry a UTC offset (:mod:`backend.timestamps`)."""
+    from backend.timestamps import TimestampError, parse_instant
+
     try:
-        value = datetime.fromisoformat(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"not an ISO 8601 time: {text!r}") from exc
-    if value.tzinfo is None:
-        raise argparse.ArgumentTypeError(
-            f"{text!r} has no UTC offset; write e.g. {text}+00:00 or {text}-06:00"
-        )
-    return value
+        return parse_instant(text, "--time")
+    except TimestampError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

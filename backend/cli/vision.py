@@ -22,13 +22,13 @@ from typing import Any
 
 
 def _time(text: str) -> datetime:
+    """An ISO 8601 time with offset (:mod:`backend.timestamps`)."""
+    from backend.timestamps import TimestampError, parse_instant
+
     try:
-        value = datetime.fromisoformat(text.replace("Z", "+00:00"))
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"not an ISO 8601 time: {text!r}") from exc
-    if value.tzinfo is None:
-        raise argparse.ArgumentTypeError(f"{text!r} has no UTC offset; add e.g. +00:00")
-    return value
+        return parse_instant(text, "timestamp")
+    except TimestampError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _place_args(p: argparse.ArgumentParser) -> None:

@@ -4,10 +4,8 @@ A batch (JSON ``{"readings": [...]}`` or CSV with a header row) is turned into
 columns — ``orjson`` to parse, one list comprehension per field, NumPy to check
 every row at once — and either becomes a :class:`Batch` of arrays or fails whole
 with :class:`IngestError`, whose entries name the row, the field and what was
-wrong. Timestamps in the common form ``YYYY-MM-DDTHH:MM:SS±HH:MM`` (or ``Z``) are
-parsed vectorised; any other ISO 8601 form goes through
-``datetime.fromisoformat``. Timestamps are stored as whole UTC seconds (a
-fractional part is dropped).
+wrong. Timestamps follow :mod:`backend.timestamps` (vectorised for the form
+loggers send) and are stored as whole UTC seconds (a fractional part is dropped).
 
 Raw logger readings carry ADC counts instead of volts and amperes, as the
 Arduino logger of seed 000 produces them; they are converted with the array's
@@ -17,9 +15,7 @@ stored calibration (:class:`Calibration`, seed 000 eqs. 16–19).
 from __future__ import annotations
 
 import csv
-import datetime as dt
 import io
-import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -28,8 +24,8 @@ from typing import Any
 import numpy as np
 import orjson
 
-#: Readings stamped before this instant are rejected (1990-01-01T00:00:00Z).
-MIN_TS_S = 631_152_000
+from backend.timestamps import READINGS_FROM_S, parse_instants
+
 MAX_ERRORS = 20
 #: Python types a number column may hold (``str`` for CSV cells; ``bool`` is not a number).
 _SCALARS = frozenset((float, int, str, type(None)))
@@ -139,93 +135,12 @@ class _Errors:
 # ---------------------------------------------------------------- timestamps
 
 
-def _days_from_civil(y: np.ndarray, m: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Days since 1970-01-01 of a proleptic Gregorian date (H. Hinnant's algorithm)."""
-    y = y - (m <= 2)
-    era = y // 400
-    yoe = y - era * 400
-    doy = (153 * (m + np.where(m > 2, -3, 9)) + 2) // 5 + d - 1
-    doe = yoe * 365 + yoe // 4 - yoe // 100 + doy
-    return era * 146097 + doe - 719468
-
-
-_DIGITS = np.array([0, 1, 2, 3, 5, 6, 8, 9, 11, 12, 14, 15, 17, 18])
-_MONTH_DAYS = np.array([0, 31, 29, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31])
-
-
-def _fast_timestamps(strings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vectorised parse of ``YYYY-MM-DDTHH:MM:SS±HH:MM`` / ``…Z``; returns (ts_s, ok)."""
-    n = strings.shape[0]
-    width = strings.dtype.itemsize // 4
-    if width < 20:
-        return np.zeros(n, np.int64), np.zeros(n, bool)
-    raw = strings.view(np.uint32).reshape(n, width)
-    c = raw[:, :25].astype(np.int32)
-    if c.shape[1] < 25:
-        c = np.pad(c, ((0, 0), (0, 25 - c.shape[1])))
-    length = np.count_nonzero(raw, axis=1)
-    dig = c - 48
-    ok = np.all((dig[:, _DIGITS] >= 0) & (dig[:, _DIGITS] <= 9), axis=1)
-    ok &= (c[:, 4] == 45) & (c[:, 7] == 45) & (c[:, 13] == 58) & (c[:, 16] == 58)
-    ok &= (c[:, 10] == 84) | (c[:, 10] == 32) | (c[:, 10] == 116)
-    zulu = (length == 20) & ((c[:, 19] == 90) | (c[:, 19] == 122))
-    odig = dig[:, [20, 21, 23, 24]]
-    offset = (
-        (length == 25)
-        & ((c[:, 19] == 43) | (c[:, 19] == 45))
-        & (c[:, 22] == 58)
-        & np.all((odig >= 0) & (odig <= 9), axis=1)
-    )
-    ok &= zulu | offset
-    year = dig[:, 0] * 1000 + dig[:, 1] * 100 + dig[:, 2] * 10 + dig[:, 3]
-    month = dig[:, 5] * 10 + dig[:, 6]
-    day = dig[:, 8] * 10 + dig[:, 9]
-    hour = dig[:, 11] * 10 + dig[:, 12]
-    minute = dig[:, 14] * 10 + dig[:, 15]
-    second = dig[:, 17] * 10 + dig[:, 18]
-    leap = (year % 4 == 0) & ((year % 100 != 0) | (year % 400 == 0))
-    mdays = _MONTH_DAYS[np.clip(month, 0, 12)] - ((month == 2) & ~leap)
-    ok &= (month >= 1) & (month <= 12) & (day >= 1) & (day <= mdays)
-    ok &= (hour <= 23) & (minute <= 59) & (second <= 59)
-    off_h = odig[:, 0] * 10 + odig[:, 1]
-    off_m = odig[:, 2] * 10 + odig[:, 3]
-    ok &= ~offset | ((off_h <= 23) & (off_m <= 59))
-    sign = np.where(c[:, 19] == 45, -1, 1)
-    off_s = np.where(offset, sign * (off_h * 3600 + off_m * 60), 0)
-    days = _days_from_civil(year.astype(np.int64), month, day)
-    ts = days * 86400 + hour * 3600 + minute * 60 + second - off_s
-    return ts.astype(np.int64), ok
-
-
 def parse_timestamps(values: Sequence[Any], errors: _Errors, field: str = "ts") -> np.ndarray:
-    """Parse ISO 8601 timestamps with an offset to UTC Unix seconds (int64).
-
-    Naive timestamps, non-strings and unparseable text are reported per row.
-    """
-    n = len(values)
-    ts = np.zeros(n, np.int64)
-    ok = np.zeros(n, bool)
-    arr = np.asarray(values) if n >= 32 else np.zeros(0, "U25")
-    if n >= 32 and arr.dtype.kind == "U" and arr.ndim == 1:  # numpy pays off past a few rows
-        ts, ok = _fast_timestamps(arr)
-    for r in np.flatnonzero(~ok).tolist():
-        value = values[r]
-        ts[r] = MIN_TS_S  # a rejected row gets one error, not more from the range checks
-        if not isinstance(value, str):
-            what = "missing" if value is None else f"a {type(value).__name__}"
-            errors.add(r, field, f"timestamp is {what}; send ISO 8601 with an offset", "missing"
-                       if value is None else "type_error")
-            continue
-        try:
-            parsed = dt.datetime.fromisoformat(value.strip())
-        except ValueError:
-            errors.add(r, field, f"not an ISO 8601 timestamp: {value[:40]!r}", "value_error")
-            continue
-        if parsed.tzinfo is None or parsed.utcoffset() is None:
-            errors.add(r, field, f"timestamp {value[:40]!r} has no UTC offset (naive); "
-                       "add +00:00, Z or the logger's offset", "timezone_naive")
-            continue
-        ts[r] = math.floor(parsed.timestamp())
+    """Timestamps → UTC Unix seconds (int64) by :func:`backend.timestamps.parse_instants`;
+    naive, non-string and unparseable stamps are reported per row."""
+    ts, problems = parse_instants(values)
+    for row, message, code in problems:
+        errors.add(row, field, message, code)
     return ts
 
 
@@ -314,7 +229,7 @@ def build_batch(
         errors.add_rows(np.flatnonzero(late), "ts", lambda r: (
             f"timestamp {columns['ts'][r]} is {int(ts[r] - now_s)} s after the server clock "
             f"(tolerance {limits.future_tolerance_s} s)"), "value_error")
-    early = ts < MIN_TS_S
+    early = ts < READINGS_FROM_S
     if early.any():
         errors.add_rows(np.flatnonzero(early), "ts", lambda r: "timestamp before 1990",
                         "value_error")

@@ -246,37 +246,3 @@ def energy_table(conn: Connection, array_ids: list[int], edges_s: np.ndarray, ph
                 energy[key][p] += integrate_clipped_wh(r[:, 0], r[:, 3], c0, c1, max_gap_s)
                 counts[key][p] += int(np.count_nonzero((r[:, 0] >= c0) & (r[:, 0] < c1)))
     return EnergyTable(edges_s, energy, counts)
-
-
-#: Years a query range may name (readings before 1990 are never stored).
-QUERY_YEARS = (1900, 2199)
-
-
-def parse_day_or_time(text: str, zone: ZoneInfo, name: str) -> dt.datetime:
-    """A bare date (midnight in ``zone``) or an ISO date-time with offset; ValueError says why."""
-    text = text.strip()
-    try:
-        if len(text) == 10:
-            d = dt.date.fromisoformat(text)
-            value = dt.datetime(d.year, d.month, d.day, tzinfo=zone)
-        else:
-            value = dt.datetime.fromisoformat(text)
-    except ValueError:
-        raise ValueError(f"{name}: {text!r} is not a date (YYYY-MM-DD) or an ISO 8601 "
-                         "date-time with offset") from None
-    if value.tzinfo is None:
-        raise ValueError(f"{name}: {text!r} has no UTC offset; add one or give a bare date")
-    if not QUERY_YEARS[0] <= value.year <= QUERY_YEARS[1]:
-        raise ValueError(f"{name}: {text!r} is outside the years {QUERY_YEARS[0]}–"
-                         f"{QUERY_YEARS[1]} this service answers for")
-    return value
-
-
-def parse_range(start: str, end: str, zone: ZoneInfo) -> tuple[dt.datetime, dt.datetime]:
-    """``[start, end)`` of a query (see :func:`parse_day_or_time`); ValueError says why."""
-    t0 = parse_day_or_time(start, zone, "start")
-    t1 = parse_day_or_time(end, zone, "end")
-    if not t1 > t0:
-        raise ValueError(f"end ({end}) must be after start ({start}); end is exclusive")
-    return t0, t1
-

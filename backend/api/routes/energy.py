@@ -22,7 +22,8 @@ from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import Response
 
 from backend.api.deps import ContextDep, site_or_404
-from backend.measurements.queries import energy_table, parse_range, period_edges
+from backend.measurements.queries import energy_table, period_edges
+from backend.timestamps import parse_range
 
 router = APIRouter(prefix="/api/v1/sites", tags=["energy"])
 

@@ -36,11 +36,11 @@ from backend.measurements.queries import (
     count_rows,
     downsample,
     iso_utc,
-    parse_range,
     raw_rows,
 )
 from backend.measurements.writer import MeasurementJob
 from backend.storage.tables import SOURCE_CODES
+from backend.timestamps import parse_range
 
 logger = logging.getLogger(__name__)
 router = APIRouter(prefix="/api/v1/sites", tags=["measurements"])

@@ -16,7 +16,8 @@ from fastapi.responses import Response
 from pydantic import BaseModel, Field
 
 from backend.api.deps import ContextDep, site_or_404
-from backend.measurements.queries import iso_utc, parse_range
+from backend.measurements.queries import iso_utc
+from backend.timestamps import parse_range
 from backend.twin.simulations import RunParams
 from sim.twin import CONTROLLERS
 

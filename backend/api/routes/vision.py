@@ -27,20 +27,30 @@ from __future__ import annotations
 
 import asyncio
 import datetime as dt
-from dataclasses import dataclass
 from typing import Annotated, Any
 from zoneinfo import ZoneInfo
 
 import anyio
 import numpy as np
 import orjson
-import pandas as pd
 from fastapi import APIRouter, HTTPException, Path, Query, Request
 from fastapi.responses import Response
 from starlette.datastructures import FormData, UploadFile
 
 from backend.api.deps import ContextDep, SessionDep, VisionTokenDep
-from backend.measurements.queries import parse_day_or_time
+from backend.timestamps import TimestampError, parse_day_or_instant, parse_instant
+from backend.vision.service import (
+    Frame,
+    Place,
+    Upload,
+    analyse,
+    calibrate,
+    check_image,
+    decode,
+    detection_row,
+    evaluate,
+    iso,
+)
 from backend.vision.store import (
     get_calibration,
     insert_calibration,
@@ -48,9 +58,6 @@ from backend.vision.store import (
     list_calibrations,
     list_detections,
 )
-from sim.sun import solar_position
-from vision.analyse import analyse_frame
-from vision.calibrate import calibrate_frames
 from vision.cameras import (
     EAST_SIDES,
     PROJECTIONS,
@@ -59,16 +66,12 @@ from vision.cameras import (
     camera_from_params,
 )
 from vision.detect import METHODS
-from vision.imageio import ImageError, decode_image, image_size
-from vision.metrics import error_table
 
 router = APIRouter(prefix="/api/v1/vision", tags=["vision"])
 
 _JSON = "application/json"
 _MAX_FILES = 64
 _MAX_ID = 2**31 - 1  # ids are 32-bit integers on PostgreSQL
-# the ephemeris works on nanosecond pandas timestamps (1677-2262); frames are from now-ish
-_FIRST_YEAR, _LAST_YEAR = 1900, 2200
 
 
 def _json(data: Any, status: int = 200) -> Response:
@@ -128,80 +131,25 @@ def _fields(form: FormData) -> dict[str, object]:
     return {k: v for k, v in form.multi_items() if isinstance(v, str)}
 
 
-@dataclass(frozen=True)
-class _Upload:
-    """An uploaded image whose header has been checked, not yet decoded."""
-
-    field: str
-    filename: str
-    data: bytes
-    size_px: tuple[int, int]
-
-
-def _image_error(field: str, name: str, exc: ImageError) -> HTTPException:
-    status = 413 if exc.too_large else (415 if "not a PNG or JPEG" in str(exc) else 422)
-    extra = " (HELIOTWIN_VISION_MAX_PIXELS)" if exc.too_large else ""
-    return HTTPException(status, f"{field} {name!r}: {exc}{extra}")
-
-
-async def _upload(upload: Any, field: str, max_pixels: int) -> _Upload:
-    """The file's bytes, its PNG/JPEG header read and its pixel count checked (no decoding)."""
+async def _upload(upload: Any, field: str, max_pixels: int) -> Upload:
+    """The file's bytes with its header checked (:func:`backend.vision.service.check_image`)."""
     if not isinstance(upload, UploadFile):
         raise HTTPException(422, f"{field}: an image file is required")
-    data = await upload.read()
-    name = upload.filename or field
-    if not data:
-        raise HTTPException(422, f"{field}: the file {name!r} is empty")
-    try:
-        fmt, w, h = image_size(data)
-        if w * h > max_pixels:
-            raise ImageError(f"{fmt.upper()} image of {w}×{h} = {w * h} pixels exceeds the "
-                             f"limit of {max_pixels} pixels", too_large=True)
-    except ImageError as exc:
-        raise _image_error(field, name, exc) from None
-    return _Upload(field, name, data, (w, h))
-
-
-def _decode(up: _Upload, max_pixels: int) -> np.ndarray:
-    """Decode in the calling (worker) thread; a corrupt file is a 4xx naming its field."""
-    try:
-        return decode_image(up.data, max_pixels)
-    except ImageError as exc:
-        raise _image_error(up.field, up.filename, exc) from None
+    return check_image(await upload.read(), upload.filename or field, field, max_pixels)
 
 
 async def _image(upload: Any, field: str, max_pixels: int) -> np.ndarray:
     up = await _upload(upload, field, max_pixels)
-    return await anyio.to_thread.run_sync(_decode, up, max_pixels)
+    return await anyio.to_thread.run_sync(decode, up, max_pixels)
 
 
 def _timestamp(text: str | None, field: str = "timestamp") -> dt.datetime | None:
     if text is None:
         return None
     try:
-        value = dt.datetime.fromisoformat(text.replace("Z", "+00:00"))
-    except ValueError:
-        raise HTTPException(422, f"{field}: {text!r} is not an ISO 8601 date-time") from None
-    if value.tzinfo is None:
-        raise HTTPException(422, f"{field}: {text!r} has no UTC offset; add one "
-                                 "(e.g. +00:00 or -06:00)")
-    try:
-        utc = value.astimezone(dt.UTC)
-    except OverflowError:
-        utc = None
-    if utc is None or not _FIRST_YEAR <= utc.year < _LAST_YEAR:
-        raise HTTPException(422, f"{field}: {text!r} is outside the years "
-                                 f"{_FIRST_YEAR}-{_LAST_YEAR - 1}")
-    return utc
-
-
-@dataclass(frozen=True)
-class Place:
-    site_id: str | None
-    latitude_deg: float
-    longitude_deg: float
-    elevation_m: float
-    zone: ZoneInfo
+        return parse_instant(text, field)
+    except TimestampError as exc:
+        raise HTTPException(422, str(exc)) from None
 
 
 def _place(ctx: Any, form: FormData, required: bool = False) -> Place | None:
@@ -239,12 +187,6 @@ def _float(text: str, field: str) -> float:
         return float(text)
     except ValueError:
         raise HTTPException(422, f"{field}: {text!r} is not a number") from None
-
-
-def _ephemeris(times: list[dt.datetime], place: Place) -> pd.DataFrame:
-    """SPA sun positions (``sim.sun.solar_position``): apparent elevation, azimuth."""
-    return solar_position(pd.DatetimeIndex(times), place.latitude_deg, place.longitude_deg,
-                          altitude=place.elevation_m)
 
 
 def _method(form: FormData) -> str:
@@ -285,43 +227,6 @@ def _camera(form: FormData, stored: FisheyeCamera | None, w: int, h: int
 
 
 # --------------------------------------------------------------------------- work
-
-
-def _sun_job(img: np.ndarray, cam: PinholeCamera | FisheyeCamera, method: str,
-             ts: dt.datetime | None, place: Place | None) -> dict[str, Any]:
-    """Ephemeris (when time and place are known) and analysis, in one worker-thread hop."""
-    eph = None
-    if ts is not None and place is not None:
-        sp = _ephemeris([ts], place)
-        eph = (float(sp["azimuth"].iloc[0]), float(sp["apparent_elevation"].iloc[0]))
-    return analyse_frame(img, cam, method, eph)
-
-
-def _detection_row(res: dict[str, Any], ts: dt.datetime | None, place: Place | None,
-                   cal_id: int | None) -> dict[str, Any]:
-    c = res["centroid_px"] or [None, None]
-    pe = res.get("pointing_error_deg") or [None, None]
-    eph = res.get("ephemeris") or {}
-    return {
-        "ts_ms": None if ts is None else int(round(ts.timestamp() * 1000)),
-        "site_id": place.site_id if place else None,
-        "latitude_deg": place.latitude_deg if place else None,
-        "longitude_deg": place.longitude_deg if place else None,
-        "camera": res["camera"], "calibration_id": cal_id, "method": res["method"],
-        "image_width_px": res["image_size_px"][0], "image_height_px": res["image_size_px"][1],
-        "sun_found": bool(res["sun_found"]), "confidence": float(res["confidence"]),
-        "centroid_x_px": c[0], "centroid_y_px": c[1],
-        "azimuth_deg": res.get("azimuth_deg"), "elevation_deg": res.get("elevation_deg"),
-        "pointing_error_horizontal_deg": pe[0], "pointing_error_vertical_deg": pe[1],
-        "pointing_error_mrad": res.get("pointing_error_mrad"),
-        "ephemeris_azimuth_deg": eph.get("azimuth_deg"),
-        "ephemeris_elevation_deg": eph.get("elevation_deg"),
-        "error_deg": (res.get("error") or {}).get("separation_deg"),
-    }
-
-
-def _iso(ts: dt.datetime | None) -> str | None:
-    return None if ts is None else ts.isoformat().replace("+00:00", "Z")
 
 
 # --------------------------------------------------------------------------- routes
@@ -365,21 +270,18 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
     stored, cal_id = await anyio.to_thread.run_sync(_stored_camera, session, form)
     img = await _image(uploads[0], "file", s.vision_max_pixels)
     cam = _camera(form, stored, img.shape[1], img.shape[0])
-    res = await anyio.to_thread.run_sync(_sun_job, img, cam, method, ts, place)
-    row = _detection_row(res, ts, place, cal_id)
+    res = await anyio.to_thread.run_sync(analyse, img, cam, method, ts, place)
+    row = detection_row(res, ts, place, cal_id)
     det_id = await asyncio.wrap_future(ctx.writer.call(lambda c: insert_detection(c, row)))
-    res.update({"detection_id": det_id, "calibration_id": cal_id, "timestamp": _iso(ts),
+    res.update({"detection_id": det_id, "calibration_id": cal_id, "timestamp": iso(ts),
                 "site_id": place.site_id if place else None,
                 "latitude_deg": place.latitude_deg if place else None,
                 "longitude_deg": place.longitude_deg if place else None})
     return _json(res)
 
 
-_Frame = tuple[_Upload, dt.datetime]
-
-
 async def _timed_frames(ctx: Any, form: FormData, min_frames: int
-                        ) -> tuple[list[_Frame], Place]:
+                        ) -> tuple[list[Frame], Place]:
     """Files with their timestamps and the place; headers checked, nothing decoded yet
     (the work decodes one frame at a time, so a batch holds one decoded frame)."""
     uploads = form.getlist("files")
@@ -392,7 +294,7 @@ async def _timed_frames(ctx: Any, form: FormData, min_frames: int
                                  f"{len(stamps)} for {len(uploads)} files")
     place = _place(ctx, form, required=True)
     assert place is not None
-    frames: list[_Frame] = []
+    frames: list[Frame] = []
     for i, (up, text) in enumerate(zip(uploads, stamps, strict=True)):
         ts = _timestamp(text, f"timestamps[{i}]")
         assert ts is not None
@@ -402,38 +304,6 @@ async def _timed_frames(ctx: Any, form: FormData, min_frames: int
         raise HTTPException(422, f"files: every frame must have the same size, got "
                                  f"{sorted(sizes)}")
     return frames, place
-
-
-def _calibrate(frames: list[_Frame], place: Place, projection: str, east: str,
-               n_radial: int, fit_tilt: bool, method: str, max_pixels: int
-               ) -> dict[str, Any]:
-    """Ephemeris for each frame, then ``vision.calibrate.calibrate_frames``; a stored row."""
-    sp = _ephemeris([f[1] for f in frames], place)
-    az, el = sp["azimuth"].to_numpy(), sp["apparent_elevation"].to_numpy()
-    res, frame_reports = calibrate_frames(
-        (_decode(f[0], max_pixels) for f in frames), az, el,
-        names=[f[0].filename for f in frames], method=method,
-        projection=projection, east=east, n_radial=n_radial, fit_tilt=fit_tilt)
-    report = []
-    for i, (r, (up, ts)) in enumerate(zip(frame_reports, frames, strict=True)):
-        r = {"filename": up.filename, "timestamp": _iso(ts),
-             **{k: v for k, v in r.items() if k != "name"}}
-        r["ephemeris"] = {"azimuth_deg": float(az[i]), "elevation_deg": float(el[i])}
-        report.append(r)
-    out = res.to_dict()
-    cam = out["camera"]
-    w, h = frames[0][0].size_px
-    return {
-        "site_id": place.site_id, "latitude_deg": place.latitude_deg,
-        "longitude_deg": place.longitude_deg, "elevation_m": place.elevation_m,
-        "projection": cam["projection"], "cx_px": cam["cx_px"], "cy_px": cam["cy_px"],
-        "px_per_deg": cam["px_per_deg"], "north_offset_deg": cam["north_offset_deg"],
-        "east": cam["east"], "radial_coeffs": cam["radial_coeffs"],
-        "tilt_north_deg": cam["tilt_north_deg"], "tilt_east_deg": cam["tilt_east_deg"],
-        "image_width_px": w, "image_height_px": h, "n_frames": res.n_frames,
-        "rms_px": out["rms_px"], "max_px": out["max_px"], "rms_deg": out["rms_deg"],
-        "max_deg": out["max_deg"], "frames": report,
-    }
 
 
 _CAL_DOC = {
@@ -477,7 +347,7 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
     frames, place = await _timed_frames(ctx, form, 3)
     try:
         row = await anyio.to_thread.run_sync(
-            _calibrate, frames, place, projection, east, int(n_radial_text), fit_tilt, method,
+            calibrate, frames, place, projection, east, int(n_radial_text), fit_tilt, method,
             ctx.settings.vision_max_pixels)
     except ValueError as exc:
         raise HTTPException(422, f"files: {exc}") from None
@@ -525,7 +395,7 @@ def get_detections(ctx: ContextDep, session: SessionDep,
             bounds.append(None)
             continue
         try:
-            t = parse_day_or_time(text, zone, name)
+            t = parse_day_or_instant(text, zone, name)
         except ValueError as exc:
             raise HTTPException(422, str(exc)) from None
         bounds.append(int(round(t.timestamp() * 1000)))
@@ -533,39 +403,6 @@ def get_detections(ctx: ContextDep, session: SessionDep,
         raise HTTPException(422, f"end ({end}) must be after start ({start})")
     rows = list_detections(session, site_id, bounds[0], bounds[1], limit)
     return _json({"site_id": site_id, "start": start, "end": end, "detections": rows})
-
-
-def _evaluate(frames: list[_Frame], place: Place, cam: FisheyeCamera, methods: list[str],
-              max_pixels: int) -> dict[str, Any]:
-    """Each method on each frame (decoded one at a time) against SPA: seed 003's Tables 2, 3."""
-    sp = _ephemeris([f[1] for f in frames], place)
-    az, el = sp["azimuth"].to_numpy(), sp["apparent_elevation"].to_numpy()
-    rows: list[dict[str, Any]] = []
-    per: dict[str, dict[str, list[float]]] = {m: {"ra": [], "re": [], "a": [], "e": []}
-                                              for m in methods}
-    for i, (up, ts) in enumerate(frames):
-        img = _decode(up, max_pixels)
-        row: dict[str, Any] = {"filename": up.filename, "timestamp": _iso(ts),
-                               "ephemeris_azimuth_deg": float(az[i]),
-                               "ephemeris_elevation_deg": float(el[i])}
-        for m in methods:
-            res = analyse_frame(img, cam, m, (float(az[i]), float(el[i])))
-            row[f"{m}_sun_found"] = res["sun_found"]
-            row[f"{m}_azimuth_deg"] = res["azimuth_deg"]
-            row[f"{m}_elevation_deg"] = res["elevation_deg"]
-            if res["azimuth_deg"] is not None and el[i] > 0:
-                per[m]["ra"].append(float(az[i]))
-                per[m]["re"].append(float(el[i]))
-                per[m]["a"].append(res["azimuth_deg"])
-                per[m]["e"].append(res["elevation_deg"])
-        rows.append(row)
-    table3: dict[str, Any] = {}
-    for m, v in per.items():
-        table3[m] = {"n_found": len(v["a"]), "n_frames": len(frames),
-                     "metrics": error_table(v["ra"], v["re"], v["a"], v["e"]) if v["a"] else None}
-    return {"n_frames": len(frames), "site_id": place.site_id,
-            "latitude_deg": place.latitude_deg, "longitude_deg": place.longitude_deg,
-            "camera": cam.to_dict(), "table2": rows, "table3": table3}
 
 
 @router.post("/evaluate", openapi_extra=_CAL_DOC,
@@ -586,6 +423,6 @@ async def post_evaluate(request: Request, ctx: ContextDep, session: SessionDep,
     if not isinstance(cam, FisheyeCamera):
         raise HTTPException(422, "camera: evaluate compares azimuth/elevation, which needs a "
                                  "fisheye camera")
-    out = await anyio.to_thread.run_sync(_evaluate, frames, place, cam, methods,
+    out = await anyio.to_thread.run_sync(evaluate, frames, place, cam, methods,
                                          ctx.settings.vision_max_pixels)
     return _json(out)

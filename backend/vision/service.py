@@ -1,0 +1,186 @@
+"""The vision service: find the sun in uploaded frames, calibrate fisheye cameras, evaluate.
+
+What ``/api/v1/vision`` does once the request is parsed (``backend/api/routes/vision.py``
+parses and shapes): each frame's header is checked before anything is decoded
+(:func:`check_image`), frames are decoded one at a time in the worker thread
+that does the work, the ephemeris is NREL SPA (``sim.sun.solar_position``,
+apparent elevation), detection and calibration are ``vision``'s. Bad input
+raises :class:`backend.errors.InputError` naming the field.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from dataclasses import dataclass
+from typing import Any
+from zoneinfo import ZoneInfo
+
+import numpy as np
+import pandas as pd
+
+from backend.errors import InputError
+from sim.sun import solar_position
+from vision.analyse import analyse_frame
+from vision.calibrate import calibrate_frames
+from vision.cameras import FisheyeCamera, PinholeCamera
+from vision.imageio import ImageError, decode_image, image_size
+from vision.metrics import error_table
+
+
+@dataclass(frozen=True)
+class Upload:
+    """An uploaded image whose header has been checked, not yet decoded."""
+
+    field: str
+    filename: str
+    data: bytes
+    size_px: tuple[int, int]
+
+
+Frame = tuple[Upload, dt.datetime]
+"""A checked upload and its UTC time."""
+
+
+def _image_error(field: str, name: str, exc: ImageError) -> InputError:
+    status = 413 if exc.too_large else (415 if "not a PNG or JPEG" in str(exc) else 422)
+    extra = " (HELIOTWIN_VISION_MAX_PIXELS)" if exc.too_large else ""
+    return InputError(status, f"{field} {name!r}: {exc}{extra}")
+
+
+def check_image(data: bytes, filename: str, field: str, max_pixels: int) -> Upload:
+    """The file's PNG/JPEG header read and its pixel count checked (nothing decoded)."""
+    if not data:
+        raise InputError(422, f"{field}: the file {filename!r} is empty")
+    try:
+        fmt, w, h = image_size(data)
+        if w * h > max_pixels:
+            raise ImageError(f"{fmt.upper()} image of {w}×{h} = {w * h} pixels exceeds the "
+                             f"limit of {max_pixels} pixels", too_large=True)
+    except ImageError as exc:
+        raise _image_error(field, filename, exc) from None
+    return Upload(field, filename, data, (w, h))
+
+
+def decode(up: Upload, max_pixels: int) -> np.ndarray:
+    """Decode in the calling (worker) thread; a corrupt file is a 4xx naming its field."""
+    try:
+        return decode_image(up.data, max_pixels)
+    except ImageError as exc:
+        raise _image_error(up.field, up.filename, exc) from None
+
+
+@dataclass(frozen=True)
+class Place:
+    site_id: str | None
+    latitude_deg: float
+    longitude_deg: float
+    elevation_m: float
+    zone: ZoneInfo
+
+
+def ephemeris(times: list[dt.datetime], place: Place) -> pd.DataFrame:
+    """SPA sun positions (``sim.sun.solar_position``): apparent elevation, azimuth."""
+    return solar_position(pd.DatetimeIndex(times), place.latitude_deg, place.longitude_deg,
+                          altitude=place.elevation_m)
+
+
+def analyse(img: np.ndarray, cam: PinholeCamera | FisheyeCamera, method: str,
+             ts: dt.datetime | None, place: Place | None) -> dict[str, Any]:
+    """Ephemeris (when time and place are known) and analysis, in one worker-thread hop."""
+    eph = None
+    if ts is not None and place is not None:
+        sp = ephemeris([ts], place)
+        eph = (float(sp["azimuth"].iloc[0]), float(sp["apparent_elevation"].iloc[0]))
+    return analyse_frame(img, cam, method, eph)
+
+
+def detection_row(res: dict[str, Any], ts: dt.datetime | None, place: Place | None,
+                   cal_id: int | None) -> dict[str, Any]:
+    c = res["centroid_px"] or [None, None]
+    pe = res.get("pointing_error_deg") or [None, None]
+    eph = res.get("ephemeris") or {}
+    return {
+        "ts_ms": None if ts is None else int(round(ts.timestamp() * 1000)),
+        "site_id": place.site_id if place else None,
+        "latitude_deg": place.latitude_deg if place else None,
+        "longitude_deg": place.longitude_deg if place else None,
+        "camera": res["camera"], "calibration_id": cal_id, "method": res["method"],
+        "image_width_px": res["image_size_px"][0], "image_height_px": res["image_size_px"][1],
+        "sun_found": bool(res["sun_found"]), "confidence": float(res["confidence"]),
+        "centroid_x_px": c[0], "centroid_y_px": c[1],
+        "azimuth_deg": res.get("azimuth_deg"), "elevation_deg": res.get("elevation_deg"),
+        "pointing_error_horizontal_deg": pe[0], "pointing_error_vertical_deg": pe[1],
+        "pointing_error_mrad": res.get("pointing_error_mrad"),
+        "ephemeris_azimuth_deg": eph.get("azimuth_deg"),
+        "ephemeris_elevation_deg": eph.get("elevation_deg"),
+        "error_deg": (res.get("error") or {}).get("separation_deg"),
+    }
+
+
+def iso(ts: dt.datetime | None) -> str | None:
+    return None if ts is None else ts.isoformat().replace("+00:00", "Z")
+
+
+def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
+               n_radial: int, fit_tilt: bool, method: str, max_pixels: int
+               ) -> dict[str, Any]:
+    """Ephemeris for each frame, then ``vision.calibrate.calibrate_frames``; a stored row."""
+    sp = ephemeris([f[1] for f in frames], place)
+    az, el = sp["azimuth"].to_numpy(), sp["apparent_elevation"].to_numpy()
+    res, frame_reports = calibrate_frames(
+        (decode(f[0], max_pixels) for f in frames), az, el,
+        names=[f[0].filename for f in frames], method=method,
+        projection=projection, east=east, n_radial=n_radial, fit_tilt=fit_tilt)
+    report = []
+    for i, (r, (up, ts)) in enumerate(zip(frame_reports, frames, strict=True)):
+        r = {"filename": up.filename, "timestamp": iso(ts),
+             **{k: v for k, v in r.items() if k != "name"}}
+        r["ephemeris"] = {"azimuth_deg": float(az[i]), "elevation_deg": float(el[i])}
+        report.append(r)
+    out = res.to_dict()
+    cam = out["camera"]
+    w, h = frames[0][0].size_px
+    return {
+        "site_id": place.site_id, "latitude_deg": place.latitude_deg,
+        "longitude_deg": place.longitude_deg, "elevation_m": place.elevation_m,
+        "projection": cam["projection"], "cx_px": cam["cx_px"], "cy_px": cam["cy_px"],
+        "px_per_deg": cam["px_per_deg"], "north_offset_deg": cam["north_offset_deg"],
+        "east": cam["east"], "radial_coeffs": cam["radial_coeffs"],
+        "tilt_north_deg": cam["tilt_north_deg"], "tilt_east_deg": cam["tilt_east_deg"],
+        "image_width_px": w, "image_height_px": h, "n_frames": res.n_frames,
+        "rms_px": out["rms_px"], "max_px": out["max_px"], "rms_deg": out["rms_deg"],
+        "max_deg": out["max_deg"], "frames": report,
+    }
+
+
+def evaluate(frames: list[Frame], place: Place, cam: FisheyeCamera, methods: list[str],
+              max_pixels: int) -> dict[str, Any]:
+    """Each method on each frame (decoded one at a time) against SPA: seed 003's Tables 2, 3."""
+    sp = ephemeris([f[1] for f in frames], place)
+    az, el = sp["azimuth"].to_numpy(), sp["apparent_elevation"].to_numpy()
+    rows: list[dict[str, Any]] = []
+    per: dict[str, dict[str, list[float]]] = {m: {"ra": [], "re": [], "a": [], "e": []}
+                                              for m in methods}
+    for i, (up, ts) in enumerate(frames):
+        img = decode(up, max_pixels)
+        row: dict[str, Any] = {"filename": up.filename, "timestamp": iso(ts),
+                               "ephemeris_azimuth_deg": float(az[i]),
+                               "ephemeris_elevation_deg": float(el[i])}
+        for m in methods:
+            res = analyse_frame(img, cam, m, (float(az[i]), float(el[i])))
+            row[f"{m}_sun_found"] = res["sun_found"]
+            row[f"{m}_azimuth_deg"] = res["azimuth_deg"]
+            row[f"{m}_elevation_deg"] = res["elevation_deg"]
+            if res["azimuth_deg"] is not None and el[i] > 0:
+                per[m]["ra"].append(float(az[i]))
+                per[m]["re"].append(float(el[i]))
+                per[m]["a"].append(res["azimuth_deg"])
+                per[m]["e"].append(res["elevation_deg"])
+        rows.append(row)
+    table3: dict[str, Any] = {}
+    for m, v in per.items():
+        table3[m] = {"n_found": len(v["a"]), "n_frames": len(frames),
+                     "metrics": error_table(v["ra"], v["re"], v["a"], v["e"]) if v["a"] else None}
+    return {"n_frames": len(frames), "site_id": place.site_id,
+            "latitude_deg": place.latitude_deg, "longitude_deg": place.longitude_deg,
+            "camera": cam.to_dict(), "table2": rows, "table3": table3}
