@@ -25,6 +25,7 @@ import logging
 import threading
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from typing import Any
 
 import anyio
 import orjson
@@ -156,4 +157,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(measurements.IngestFastPath)
     for module in (health, sites, measurements, energy, simulations, vision, dashboard):
         app.include_router(module.router)
+    generate_openapi = app.openapi
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            app.openapi_schema = measurements.document_ingest(generate_openapi())
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
     return app

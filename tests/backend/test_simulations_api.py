@@ -77,4 +77,7 @@ def test_sites_and_meta(client: httpx.Client) -> None:
     assert "ideal" in client.get("/api/v1/meta").json()["controllers"]
     assert client.get("/docs").status_code == 200
     paths = client.get("/openapi.json").json()["paths"]
-    assert "/api/v1/sites/{site_id}/measurements" in paths
+    ingest = paths["/api/v1/sites/{site_id}/measurements"]
+    assert set(ingest) == {"get", "post"}  # POST is served by the middleware, documented once
+    assert set(ingest["post"]["requestBody"]["content"]) == {"application/json", "text/csv"}
+    assert {"401", "413", "422"} <= set(ingest["post"]["responses"])

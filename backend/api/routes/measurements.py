@@ -153,20 +153,38 @@ async def ingest(ctx: ServiceContext, site_id: str, headers: Mapping[str, str],
     return 200, orjson.dumps({"accepted": accepted, "duplicates": duplicates}), {}
 
 
-@router.post("/{site_id}/measurements", openapi_extra=_POST_DOC,
-             responses={401: {}, 403: {}, 413: {}, 415: {}, 422: {}})
-async def post_measurements(site_id: str, request: Request) -> Response:
-    """Store readings of a site's arrays (``Authorization: Bearer <site write token>``).
+def document_ingest(schema: dict[str, Any]) -> dict[str, Any]:
+    """Add ``POST /api/v1/sites/{site_id}/measurements`` to an OpenAPI ``schema``.
 
-    Answers ``{"accepted": N, "duplicates": M}`` once the readings are committed;
-    a reading whose (array, ts) is already stored counts as a duplicate. In the
-    running app :class:`IngestFastPath` answers these requests before FastAPI's
-    routing (same :func:`ingest`); this route documents them and serves them
-    when the middleware is not installed.
+    :class:`IngestFastPath` serves that request outside FastAPI's routing, so no
+    route declares it; this is its one honest description (what it accepts and
+    answers), merged beside the ``GET`` of the same path.
     """
-    status, body, headers = await ingest(request.app.state.ctx, site_id, request.headers,
-                                         request.stream())
-    return Response(body, status_code=status, media_type=_JSON, headers=headers)
+    ops = schema.setdefault("paths", {}).setdefault("/api/v1/sites/{site_id}/measurements", {})
+    ops["post"] = {
+        "tags": ["measurements"],
+        "summary": "Store readings of a site's arrays",
+        "description": (
+            "`Authorization: Bearer <site write token>`. Answers `{\"accepted\": N, "
+            "\"duplicates\": M}` once the readings are committed; a reading whose (array, ts) "
+            "is already stored counts as a duplicate. A batch is validated whole: any bad row "
+            "is a 4xx naming the row and the field, and nothing of the batch is stored."),
+        "operationId": "post_measurements",
+        "parameters": [{"name": "site_id", "in": "path", "required": True,
+                        "schema": {"type": "string"}}],
+        **_POST_DOC,
+        "responses": {
+            "200": {"description": "stored", "content": {_JSON: {"schema": {
+                "type": "object", "properties": {"accepted": {"type": "integer"},
+                                                 "duplicates": {"type": "integer"}}}}}},
+            **{str(c): {"description": d} for c, d in (
+                (401, "no or unknown token"), (403, "the token is for another site"),
+                (404, "unknown site"), (413, "body too large"),
+                (415, "not JSON or CSV"), (422, "invalid rows (each named)"),
+                (503, "storage unavailable; nothing stored, send again"))},
+        },
+    }
+    return schema
 
 
 class IngestFastPath:
@@ -174,7 +192,8 @@ class IngestFastPath:
 
     Field loggers send this request more than all others together; FastAPI's
     routing and dependency solving cost more per request than validating and
-    storing a reading, so the middleware hands it straight to :func:`ingest`.
+    storing a reading, so the middleware hands it straight to :func:`ingest` —
+    the only code path for it; :func:`document_ingest` describes it in OpenAPI.
     Everything else passes through untouched.
     """
 
