@@ -36,7 +36,8 @@ FloatArray = NDArray[np.float64]
 STRATEGIES = ("sun", "backtrack", "sky_scan")
 STOW_AZIMUTH, STOW_ELEVATION = 180.0, 90.0
 
-_BT_AZ_OFFSETS = np.arange(-45.0, 45.1, 5.0)
+_BT_AZ_OFFSETS = np.arange(-45.0, 45.1, 3.0)
+_BT_REFINE = np.arange(-2.5, 2.6, 0.5)
 _BT_ITER = 12
 _SCAN_EL = np.arange(0.0, 86.0, 5.0)
 _SCAN_AZ = np.arange(0.0, 360.0, 10.0)
@@ -108,19 +109,37 @@ def _poa(plant: Plant, cand_az: FloatArray, cand_el: FloatArray, sky: dict[str, 
     return out["poa_global"].reshape(shape)
 
 
-def _backtrack_candidates(plant: Plant, sky: dict[str, FloatArray],
-                          steps: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:
-    """Lowest shade-free elevation per azimuth offset (bisection), plus flat: ``(S, C)``."""
+def _lowest_free(plant: Plant, sky: dict[str, FloatArray], steps: NDArray[np.int64],
+                 caz: FloatArray) -> FloatArray:
+    """Lowest shade-free normal elevation above the sun's for each candidate azimuth (bisection).
+
+    The upper end (flat, 90°) shades nobody on level ground; where the shade-free
+    set is not an interval, the bisection still ends on a shade-free elevation.
+    """
     az0 = sky["solar_azimuth"][steps]
     el0 = sky["apparent_elevation"][steps]
-    caz = (az0[:, None] + _BT_AZ_OFFSETS[None, :]) % 360.0
-    lo = np.repeat(el0[:, None], len(_BT_AZ_OFFSETS), axis=1)
+    lo = np.repeat(el0[:, None], caz.shape[1], axis=1)
     hi = np.full_like(lo, 90.0)
     for _ in range(_BT_ITER):
         mid = (lo + hi) / 2
         free = shade_free(plant, az0, el0, caz, mid)
         hi = np.where(free, mid, hi)
         lo = np.where(free, lo, mid)
+    return hi
+
+
+def _backtrack_candidates(plant: Plant, sky: dict[str, FloatArray],
+                          steps: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:
+    """Shade-free candidates ``(S, C)``: the lowest shade-free elevation on a 3° azimuth fan
+    (±45° about the sun), refined at 0.5° about the best of the fan, plus flat."""
+    az0 = sky["solar_azimuth"][steps]
+    caz = (az0[:, None] + _BT_AZ_OFFSETS[None, :]) % 360.0
+    hi = _lowest_free(plant, sky, steps, caz)
+    a, _ = _best(plant, caz, hi, sky, steps, check=False)
+    raz = (a[:, None] + _BT_REFINE[None, :]) % 360.0
+    rel = _lowest_free(plant, sky, steps, raz)
+    caz = np.concatenate([caz, raz], axis=1)
+    hi = np.concatenate([hi, rel], axis=1)
     caz = np.concatenate([caz, np.full((len(steps), 1), STOW_AZIMUTH)], axis=1)
     cel = np.concatenate([hi, np.full((len(steps), 1), 90.0)], axis=1)
     return caz, cel

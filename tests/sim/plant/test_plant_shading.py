@@ -1,0 +1,85 @@
+"""Inter-shading against twoaxistracking and brute-force ray sampling (never against itself)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from plant_reference import sampled_fractions, twoaxistracking_fractions, utc_from_true_solar_time
+
+from sim.plant.layout import load_plant
+from sim.plant.shading import plant_shade, shades_anyone, union_area
+from sim.sun import solar_position
+
+PLANT = load_plant("penarroya")
+W, H = PLANT.collector.width, PLANT.collector.height
+
+
+def test_sun_tracking_fractions_equal_twoaxistracking() -> None:
+    rng = np.random.default_rng(4)
+    az = rng.uniform(45, 315, 60)
+    el = rng.uniform(0.5, 35, 60)
+    ours = plant_shade(PLANT.positions, az, el, az, el, W, H).fraction
+    ref = twoaxistracking_fractions(PLANT.positions, az, el, W, H)
+    assert (ref > 0).mean() > 0.2, "the sample must hold shaded collectors"
+    # same geometry, exact polygon areas in both: agreement to rounding
+    np.testing.assert_allclose(ours, ref, atol=1e-9)
+
+
+def _instant(day: str, tst_h: float) -> tuple[float, float]:
+    t = utc_from_true_solar_time(day, tst_h, PLANT.longitude)
+    pos = solar_position(t, PLANT.latitude, PLANT.longitude, PLANT.altitude)
+    return float(pos["azimuth"].iloc[0]), float(pos["apparent_elevation"].iloc[0])
+
+
+@pytest.mark.parametrize(("day", "tst_h", "n_shaded"), [
+    ("2021-12-21", 8.4, 23), ("2021-12-21", 15.4, 24),
+    ("2021-06-21", 7.5, 0), ("2021-06-21", 15.8, 0),
+])
+def test_seed_004_instants(day: str, tst_h: float, n_shaded: int) -> None:
+    """Seed 004 Fig. 6's instants: who is shaded, and the plant's mean shaded fraction."""
+    az, el = _instant(day, tst_h)
+    shade = plant_shade(PLANT.positions, [az], [el], [az], [el], W, H)
+    ref = twoaxistracking_fractions(PLANT.positions, [az], [el], W, H)[0]
+    sampled = sampled_fractions(PLANT.positions, az, el, az, el, W, H)
+    assert int(shade.shaded[0].sum()) == n_shaded == int((ref > 0).sum())
+    np.testing.assert_array_equal(shade.shaded[0], ref > 0)
+    assert shade.fraction[0].mean() == pytest.approx(ref.mean(), abs=1e-12)
+    # ray sampling on a 0.1 m grid: within a sample cell's share of the collector
+    np.testing.assert_allclose(shade.fraction[0], sampled, atol=1.5e-3)
+
+
+def test_shaded_by_names_the_sunward_neighbour() -> None:
+    az, el = _instant("2021-12-21", 8.4)           # morning: the sun in the south-east
+    shade = plant_shade(PLANT.positions, [az], [el], [az], [el], W, H)
+    ids = PLANT.tracker_ids
+    k = ids.index(8)
+    by = [ids[b] for b in shade.shaded_by(0, k)]
+    assert by, "tracker 8 is shaded at 08:24"
+    for b in by:  # every shading tracker lies towards the sun from tracker 8
+        d = PLANT.positions[ids.index(b)] - PLANT.positions[k]
+        assert np.degrees(np.arctan2(d[0], d[1])) % 360 == pytest.approx(az, abs=60)
+
+
+@pytest.mark.parametrize(("n_az", "n_el"), [(150.0, 40.0), (200.0, 25.0), (120.0, 60.0)])
+def test_non_sun_orientations_match_ray_sampling(n_az: float, n_el: float) -> None:
+    """A common orientation off the sun (backtracking, sky scan): oblique projection."""
+    az, el = 135.0, 12.0
+    ours = plant_shade(PLANT.positions, [az], [el], [n_az], [n_el], W, H).fraction[0]
+    sampled = sampled_fractions(PLANT.positions, az, el, n_az, n_el, W, H)
+    np.testing.assert_allclose(ours, sampled, atol=2e-3)
+    assert shades_anyone(PLANT.positions, az, el, n_az, n_el, W, H)[0] == bool((ours > 0).any())
+
+
+def test_union_area_of_overlapping_rectangles() -> None:
+    rects = np.array([[[0, 2, 0, 2], [1, 3, 1, 3], [0, 0, 0, 0]]], dtype=float)
+    assert union_area(rects)[0] == pytest.approx(7.0)          # 4 + 4 − 1
+    assert union_area(rects, clip=[0, 1, 0, 3])[0] == pytest.approx(2.0)
+
+
+def test_night_is_nan_and_flat_collectors_never_shade() -> None:
+    shade = plant_shade(PLANT.positions, [180.0, 100.0], [-5.0, 3.0], [180.0, 100.0],
+                        [90.0, 90.0], W, H)
+    assert np.isnan(shade.fraction[0]).all()
+    assert (shade.fraction[1] == 0).all()
+    with pytest.raises(ValueError, match="shape"):
+        plant_shade(PLANT.positions[:, :2], [1.0], [1.0], [1.0], [1.0], W, H)

@@ -1,0 +1,60 @@
+"""A plant day: shade statistics against twoaxistracking on pvlib's own sun and clear sky."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from plant_reference import twoaxistracking_fractions
+
+from sim.plant.layout import load_plant
+from sim.plant.simulate import simulate_plant, weather_for_plant
+
+PLANT = load_plant("penarroya")
+
+
+def test_winter_day_shade_statistics_match_an_independent_computation() -> None:
+    import pvlib
+
+    start = pd.Timestamp("2021-12-21", tz="Europe/Madrid")
+    end = start + pd.Timedelta(days=1)
+    result = simulate_plant(PLANT, start, end, step_s=600, strategy="sun")
+    s = result.summary()
+    times = pd.date_range(start, end, freq="600s", inclusive="left")
+    loc = pvlib.location.Location(PLANT.latitude, PLANT.longitude, altitude=PLANT.altitude)
+    sp = loc.get_solarposition(times)
+    day = sp["apparent_elevation"].to_numpy() > 0
+    az = sp["azimuth"].to_numpy()[day]
+    el = sp["apparent_elevation"].to_numpy()[day]
+    frac = twoaxistracking_fractions(PLANT.positions, az, el, 12.0, 5.0)
+    dni = loc.get_clearsky(times, solar_position=sp)["dni"].to_numpy()[day]
+    assert s["daylight_steps"] == int(day.sum())
+    assert s["fraction_of_daylight_any_shaded"] == pytest.approx(
+        float((frac > 0).any(axis=1).mean()), abs=1e-9)
+    dni_w = float(np.sum(dni * frac.mean(axis=1)) / np.sum(dni))
+    assert s["dni_weighted_shaded_fraction"] == pytest.approx(dni_w, rel=2e-3)
+    assert 0 < s["shading_loss_area_pct"] < s["shading_loss_electrical_pct"] < 20
+    assert s["plant_energy_wh"] < s["plant_energy_area_model_wh"] < s["plant_energy_unshaded_wh"]
+
+
+def test_summer_day_nobody_shaded_and_tracker_beats_fixed() -> None:
+    start = pd.Timestamp("2021-06-21", tz="Europe/Madrid")
+    s = simulate_plant(PLANT, start, start + pd.Timedelta(days=1), step_s=900).summary()
+    assert s["fraction_of_daylight_any_shaded"] < 0.2
+    assert s["gain_vs_fixed_pct"] > 20
+
+
+def test_tmy3_weather_moved_by_solar_time_and_bad_input() -> None:
+    from sim.sky import pvlib_tmy3_path, read_tmy3
+
+    weather, meta = read_tmy3(pvlib_tmy3_path(), coerce_year=2021)
+    start = pd.Timestamp("2021-01-01", tz="Europe/Madrid")
+    end = start + pd.Timedelta(days=2)
+    w = weather_for_plant(weather, meta["longitude"], PLANT, start, end)
+    assert w.index[0] <= start and w.index[-1] >= end
+    s = simulate_plant(PLANT, start, end, step_s=1800, weather=w).summary()
+    assert s["sky"] == "weather" and s["plant_energy_wh"] > 0
+    with pytest.raises(ValueError, match="timezone-aware"):
+        simulate_plant(PLANT, pd.Timestamp("2021-01-01"), pd.Timestamp("2021-01-02"))
+    with pytest.raises(ValueError, match="step_s must be positive"):
+        simulate_plant(PLANT, start, end, step_s=0)

@@ -1,0 +1,82 @@
+"""Strategies: backtracking shades nobody and is the POA optimum; the scan goes flat when overcast."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from plant_reference import sampled_fractions, utc_from_true_solar_time
+
+from sim.plant.layout import load_plant
+from sim.plant.shading import shades_anyone
+from sim.plant.simulate import _sky
+from sim.plant.strategies import orientations
+
+PLANT = load_plant("penarroya")
+W, H = PLANT.collector.width, PLANT.collector.height
+
+
+def _sky_at(day: str, tst_h: float) -> dict[str, np.ndarray]:
+    t = utc_from_true_solar_time(day, tst_h, PLANT.longitude)
+    return _sky(PLANT, pd.DatetimeIndex([t]), None)
+
+
+def _pvlib_poa(sky: dict[str, np.ndarray], az: np.ndarray, el: np.ndarray) -> np.ndarray:
+    """Perez POA straight from pvlib (not through sim.sky)."""
+    from pvlib.irradiance import get_total_irradiance
+
+    tot = get_total_irradiance(90 - el, az, sky["apparent_zenith"][0], sky["solar_azimuth"][0],
+                               sky["dni"][0], sky["ghi"][0], sky["dhi"][0],
+                               dni_extra=sky["dni_extra"][0],
+                               airmass=sky["airmass_relative"][0], albedo=PLANT.albedo,
+                               model="perez")
+    return np.asarray(tot["poa_global"], dtype=float)
+
+
+@pytest.mark.parametrize("tst_h", [8.4, 15.4])
+def test_backtrack_shades_nobody_and_beats_a_dense_search(tst_h: float) -> None:
+    sky = _sky_at("2021-12-21", tst_h)
+    az, el = orientations("backtrack", PLANT, sky)
+    # nobody shaded, by independent ray sampling
+    assert sampled_fractions(PLANT.positions, sky["solar_azimuth"][0],
+                             sky["apparent_elevation"][0], az[0], el[0], W, H).max() == 0
+    # a dense grid of shade-free orientations (1° × 0.5°) holds nothing better (≤ 0.2 %)
+    gaz, gel = np.meshgrid(sky["solar_azimuth"][0] + np.arange(-45, 46, 1.0),
+                           np.arange(sky["apparent_elevation"][0], 90, 0.5))
+    free = ~shades_anyone(PLANT.positions, sky["solar_azimuth"][0],
+                          sky["apparent_elevation"][0], gaz.ravel(), gel.ravel(), W, H)
+    best = _pvlib_poa(sky, gaz.ravel()[free] % 360, gel.ravel()[free]).max()
+    ours = _pvlib_poa(sky, az % 360, el)[0]
+    assert ours >= best * 0.998
+    # and it is not simply "raise the collector until the shade clears"
+    sun = _pvlib_poa(sky, sky["solar_azimuth"], sky["apparent_elevation"])[0]
+    assert ours < sun
+
+
+def test_sun_orientation_kept_where_it_shades_nobody() -> None:
+    sky = _sky_at("2021-06-21", 10.0)
+    az, el = orientations("backtrack", PLANT, sky)
+    assert (az[0], el[0]) == (sky["solar_azimuth"][0], sky["apparent_elevation"][0])
+
+
+def test_sky_scan_goes_flat_under_overcast_and_follows_the_sun_when_clear() -> None:
+    sky = _sky_at("2021-06-21", 10.0)
+    clear_az, clear_el = orientations("sky_scan", PLANT, sky)
+    assert abs(clear_el[0] - sky["apparent_elevation"][0]) < 5
+    overcast = dict(sky, dni=np.array([0.0]), ghi=np.array([120.0]), dhi=np.array([120.0]))
+    _, flat_el = orientations("sky_scan", PLANT, overcast)
+    assert flat_el[0] >= 80
+
+
+def test_sky_scan_is_at_least_backtracking() -> None:
+    sky = _sky_at("2021-12-21", 8.4)
+    a1, e1 = orientations("backtrack", PLANT, sky)
+    a2, e2 = orientations("sky_scan", PLANT, sky)
+    assert _pvlib_poa(sky, a2 % 360, e2)[0] >= _pvlib_poa(sky, a1 % 360, e1)[0] - 1e-6
+    assert not shades_anyone(PLANT.positions, sky["solar_azimuth"], sky["apparent_elevation"],
+                             a2, e2, W, H)[0]
+
+
+def test_unknown_strategy() -> None:
+    with pytest.raises(ValueError, match="strategy must be one of sun, backtrack, sky_scan"):
+        orientations("moon", PLANT, _sky_at("2021-06-21", 10.0))
