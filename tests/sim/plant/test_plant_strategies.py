@@ -1,4 +1,4 @@
-"""Strategies: backtracking shades nobody and is the POA optimum; the scan goes flat when overcast."""
+"""Strategies: backtracking shades nobody and is the POA optimum; overcast scans go flat."""
 
 from __future__ import annotations
 
