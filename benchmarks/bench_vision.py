@@ -40,13 +40,20 @@ sys.path.insert(0, str(ROOT))
 
 from _common import free_port, log  # noqa: E402  (bench scripts run from this folder)
 
+from vision import confidence as conf  # noqa: E402
 from vision import metrics  # noqa: E402
 from vision.calibrate import fit_fisheye  # noqa: E402
 from vision.cameras import FisheyeCamera, PinholeCamera  # noqa: E402
 from vision.detect import METHODS, detect_sun, threshold_moments, to_gray  # noqa: E402
+from vision.evalset import (  # noqa: E402
+    LabelledFrame,
+    fisheye_640_scenes,
+    synth_frames,
+    varied_scenes,
+)
 from vision.synth import fisheye_frame, tracker_frame  # noqa: E402
 
-REAL_SKY = ROOT.parent / "shared" / "real-sky"
+REAL_SKY = ROOT / "tests" / "data" / "real-sky"
 
 
 def per_frame_s(fn: Callable[[np.ndarray], object], frames: list[np.ndarray],
@@ -89,15 +96,145 @@ def fisheye_set(**kw: object) -> list[tuple[np.ndarray, float, float]]:
     return out
 
 
-def real_rows() -> list[dict[str, str]]:
-    meta = REAL_SKY / "metadata.csv"
-    if not meta.is_file():
-        return []
-    with meta.open(newline="") as fh:
-        rows = list(csv.DictReader(fh))
+def real_rows() -> list[dict[str, object]]:
+    """Real frames with metadata, split and the SPA sun (pvlib, apparent elevation)."""
+    with (REAL_SKY / "metadata.csv").open(newline="") as fh:
+        rows: list[dict[str, object]] = list(csv.DictReader(fh))
+    with (REAL_SKY / "split.csv").open(newline="") as fh:
+        split = {r["filename"]: r for r in csv.DictReader(fh)}
     for r in rows:
-        r["image"] = cv2.imread(str(REAL_SKY / r["filename"]))
+        r["image"] = cv2.imread(str(REAL_SKY / str(r["filename"])))
+        r["split"] = split[str(r["filename"])]["split"]
+        r["sun_visible"] = split[str(r["filename"])]["sun_visible"] == "1"
+        sp = pvlib.solarposition.get_solarposition(
+            pd.DatetimeIndex([pd.Timestamp(str(r["utc_time"]))]), float(str(r["lat"])),
+            float(str(r["lon"])), method="nrel_numpy")
+        r["sun_az"] = float(sp.azimuth.iloc[0])
+        r["sun_el"] = float(sp.apparent_elevation.iloc[0])
     return rows
+
+
+# --------------------------------------------------------------------------- evaluation
+
+
+def synthetic_set(split: str, quick: bool = False) -> list[LabelledFrame]:
+    """The labelled synthetic frames of ``split`` (both renderers, every sky)."""
+    n = 6 if quick else 1
+    return (list(varied_scenes(split, 60 // n, max_size_px=1920))
+            + list(fisheye_640_scenes(split, 24 // n))
+            + list(fisheye_640_scenes(split, 8 // n, overcast=True))
+            + list(synth_frames(split, 30 // n)))
+
+
+def correct_tol_px(px_per_deg: float) -> float:
+    """A detection is correct within max(3 px, 0.5°)."""
+    return max(3.0, 0.5 * px_per_deg)
+
+
+def evaluate_synthetic(frames: list[LabelledFrame], use_ephemeris: bool, method: str = "robust"
+                       ) -> list[dict[str, object]]:
+    """One record per frame: features, confidence, found, correct, errors."""
+    out = []
+    for lf in frames:
+        cam = lf.camera
+        exp = None
+        if use_ephemeris:
+            ex, ey = cam.sky_to_pixel(lf.azimuth_deg, lf.elevation_deg)
+            exp = (float(ex), float(ey))
+        d = detect_sun(lf.frame.image, method=method,
+                       camera=cam if method == "robust" else None, expected_px=exp)
+        rec = _record(d, lf.frame.sun_px, lf.frame.sun_visible, cam, lf.azimuth_deg,
+                      lf.elevation_deg)
+        rec["source"] = lf.source
+        out.append(rec)
+    return out
+
+
+def _record(d: object, truth_px: tuple[float, float], visible: bool, cam: FisheyeCamera,
+            az: float, el: float) -> dict[str, object]:
+    c = d.centroid_px  # type: ignore[attr-defined]
+    err_px = err_deg = float("nan")
+    if c is not None:
+        err_px = float(np.hypot(c[0] - truth_px[0], c[1] - truth_px[1]))
+        a2, e2 = cam.pixel_to_sky(*c)
+        err_deg = float(metrics.angular_separation_deg(a2, e2, az, el))
+    cand_ok = False
+    cp = d.candidate_px  # type: ignore[attr-defined]
+    if visible and cp is not None:
+        r_eq = float(np.sqrt(max(d.area_px, 1) / np.pi))  # type: ignore[attr-defined]
+        lim = max(3.0, 1.0 * cam.px_per_deg, r_eq)
+        cand_ok = bool(np.hypot(cp[0] - truth_px[0], cp[1] - truth_px[1]) <= lim)
+    feats = d.features  # type: ignore[attr-defined]
+    return {"found": bool(d.sun_found), "confidence": float(d.confidence),  # type: ignore
+            "visible": bool(visible), "err_px": err_px, "err_deg": err_deg,
+            "reason": d.reason, "features": feats, "cand_ok": cand_ok,  # type: ignore
+            "ppd": float(cam.px_per_deg)}
+
+
+
+def real_records(rows: list[dict[str, object]], split: str | None, use_ephemeris: bool,
+                 cam: FisheyeCamera | None, method: str = "robust") -> list[dict[str, object]]:
+    """Records for the real frames of ``split`` (None: all). Without a camera (blind, as a
+    new user would) the scale comes from the image circle; ``cam`` (a calibration fitted on
+    the development frames) is needed for the ephemeris path."""
+    out = []
+    for r in rows:
+        if split is not None and r["split"] != split:
+            continue
+        img = r["image"]
+        c = cam if cam is not None and str(r["filename"]).startswith("Wettermast") else None
+        exp = None
+        if use_ephemeris and c is not None:
+            ex, ey = c.sky_to_pixel(float(r["sun_az"]), float(r["sun_el"]))  # type: ignore
+            exp = (float(ex), float(ey))
+        d = detect_sun(img, method=method, camera=c if method == "robust" else None,
+                       expected_px=exp)
+        truth = ((float(str(r["sun_col_label"])), float(str(r["sun_row_label"])))
+                 if r["sun_row_label"] else (float("nan"), float("nan")))
+        ref_cam = c or FisheyeCamera(960.0, 960.0, 11.7)
+        rec = _record(d, truth, bool(r["sun_visible"]), ref_cam, float(r["sun_az"]),  # type: ignore
+                      float(r["sun_el"]))  # type: ignore[arg-type]
+        if c is None:
+            rec["err_deg"] = float("nan")
+        rec["source"] = "real/" + str(r["filename"]).split("_")[0]
+        rec["filename"] = r["filename"]
+        out.append(rec)
+    return out
+
+
+def fit_confidence() -> dict[str, object]:
+    """Fit the logistic confidence on the development split; returns the JSON to store."""
+    cv2.setNumThreads(2)
+    frames = synthetic_set("development")
+    rows = real_rows()
+    recs = []
+    for eph in (False, True):
+        recs += evaluate_synthetic(frames, eph)
+        recs += real_records(rows, "development", eph, _dev_calibration(rows))
+    x = np.array([[r["features"][k] for k in conf.FEATURES] for r in recs  # type: ignore
+                  if r["features"]])
+    y = np.array([float(r["cand_ok"]) for r in recs if r["features"]])
+    w, b = conf.fit_logistic(x, y, l2=1.0)
+    return {"features": list(conf.FEATURES), "weights": [round(float(v), 5) for v in w],
+            "intercept": round(b, 5), "n_development": int(len(y)),
+            "n_positive": int(y.sum()),
+            "fitted_by": "benchmarks/bench_vision.py --fit-confidence (development split only)"}
+
+
+def _dev_calibration(rows: list[dict[str, object]]) -> FisheyeCamera | None:
+    """Equidistant calibration from the blind detections on the development real frames."""
+    dev = [r for r in rows if r["split"] == "development" and r["sun_row_label"]]
+    xy, az, el = [], [], []
+    for r in dev:
+        d = detect_sun(r["image"], "robust")
+        if d.centroid_px is not None:
+            xy.append(d.centroid_px)
+            az.append(r["sun_az"])
+            el.append(r["sun_el"])
+    if len(xy) < 3:
+        return None
+    a = np.array(xy)
+    return fit_fisheye(a[:, 0], a[:, 1], np.array(az), np.array(el), (1920, 1920)).camera
 
 
 # --------------------------------------------------------------------------- accuracy
@@ -313,4 +450,11 @@ def main() -> int:
 
 
 if __name__ == "__main__":
+    if "--fit-confidence" in sys.argv:
+        import json
+
+        model = fit_confidence()
+        (ROOT / "vision" / "confidence.json").write_text(json.dumps(model, indent=1) + "\n")
+        log(f"wrote vision/confidence.json: {model}")
+        sys.exit(0)
     sys.exit(main())

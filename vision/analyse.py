@@ -54,7 +54,10 @@ def analyse_frame(image: NDArray[Any], cam: PinholeCamera | FisheyeCamera,
                   ephemeris_deg: tuple[float, float] | None = None) -> dict[str, Any]:
     """Detect the sun in ``image`` and express it in ``cam``'s terms.
 
-    Returns ``sun_found``, ``confidence``, ``centroid_px``, ``method``,
+    Returns ``sun_found``, ``confidence`` (a calibrated probability), ``reason``
+    (why not, on a "no sun" answer; None otherwise), ``centroid_px``, ``method``,
+    ``distance_from_ephemeris_px`` (fisheye with an ephemeris: the detection's
+    distance from the predicted pixel, which is searched first; else None),
     ``image_size_px``, ``camera`` and — fisheye — ``azimuth_deg``/``elevation_deg``
     or — pinhole — ``pointing_error_deg`` [right, up] and ``pointing_error_mrad``.
     With ``ephemeris_deg = (azimuth, elevation)``: ``ephemeris`` (see
@@ -63,14 +66,21 @@ def analyse_frame(image: NDArray[Any], cam: PinholeCamera | FisheyeCamera,
     (wrapped) and elevation differences, detected − ephemeris, and for a
     fisheye the pixel distance between the two (``distance_px``).
     """
-    d = detect_sun(image, method=method, camera=cam if method == "robust" else None)
+    expected = None
+    if ephemeris_deg is not None and isinstance(cam, FisheyeCamera) and ephemeris_deg[1] >= 0:
+        ex, ey = (finite(v) for v in cam.sky_to_pixel(*(float(v) for v in ephemeris_deg)))
+        expected = (ex, ey) if ex is not None and ey is not None else None
+    d = detect_sun(image, method=method, camera=cam if method == "robust" else None,
+                   expected_px=expected)
     c = d.centroid_px
     out: dict[str, Any] = {
         "sun_found": d.sun_found,
         "confidence": d.confidence,
+        "reason": d.reason,
         "centroid_px": [float(c[0]), float(c[1])] if c is not None else None,
         "method": d.method,
         "image_size_px": [int(image.shape[1]), int(image.shape[0])],
+        "distance_from_ephemeris_px": finite(d.distance_from_ephemeris_px),
     }
     if isinstance(cam, FisheyeCamera):
         out["camera"] = "fisheye"

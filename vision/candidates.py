@@ -1,0 +1,289 @@
+"""Bright-region candidates: clusters of components, their shape, core, glare and ghosts."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from vision.detection import FovCircle
+
+_CORE_MAX_RADIUS_PX = 64.0  # above: the core's opening runs on a shrunk mask
+
+
+_RING_COS = np.cos(np.linspace(0.0, 2 * np.pi, 24, endpoint=False))
+_RING_SIN = np.sin(np.linspace(0.0, 2 * np.pi, 24, endpoint=False))
+
+
+def _ring_values(gray: NDArray[np.uint8], cx: float, cy: float, radius: float,
+                 fov: FovCircle | None) -> NDArray[np.float64]:
+    """Grey values at 24 points of a circle (nearest pixel), those inside the frame/FOV."""
+    xs = cx + radius * _RING_COS
+    ys = cy + radius * _RING_SIN
+    h, w = gray.shape
+    ok = (xs >= 0) & (xs <= w - 1) & (ys >= 0) & (ys <= h - 1)
+    if fov is not None:
+        ok &= (xs - fov.cx_px) ** 2 + (ys - fov.cy_px) ** 2 < fov.radius_px**2
+    return gray[(ys[ok] + 0.5).astype(np.intp), (xs[ok] + 0.5).astype(np.intp)].astype(float)
+
+
+def _clamp(v: float, lo: float, hi: float) -> float:
+    return float(min(max(v, lo), hi))
+
+
+def _weighted_centroid(gray: NDArray[np.uint8], cx: float, cy: float, radius: float,
+                       level: float) -> tuple[float, float] | None:
+    """Intensity-weighted centroid of ``gray − level`` (clipped at 0) in a disc window."""
+    h, w = gray.shape
+    x0, y0 = max(0, int(cx - radius)), max(0, int(cy - radius))
+    x1, y1 = min(w, int(cx + radius) + 2), min(h, int(cy + radius) + 2)
+    if x1 <= x0 or y1 <= y0:
+        return None
+    win = gray[y0:y1, x0:x1].astype(np.float32) - np.float32(level)
+    np.maximum(win, 0, out=win)
+    disc = np.zeros(win.shape, np.float32)
+    cv2.circle(disc, (int(round((cx - x0) * 16)), int(round((cy - y0) * 16))),
+               int(round(radius * 16)), 1.0, -1, cv2.LINE_8, 4)  # 1/16 px centre
+    m = cv2.moments(win * disc, False)
+    if m["m00"] <= 0:
+        return None
+    return x0 + m["m10"] / m["m00"], y0 + m["m01"] / m["m00"]
+
+
+@dataclass
+class _Candidate:
+    """A cluster of bright components (a glare cut by a mast stays one candidate)."""
+
+    labels: list[int]
+    area: int
+    x: int
+    y: int
+    w: int
+    h: int
+    cx: float
+    cy: float
+    score: float = 0.0
+    glare: float = 0.0  # set by _score(): the glare evidence 0–1
+    shape: float = 0.0  # set by the detector: the shape term 0–1
+    ghost: bool = False
+    ox: int = 0  # where the label image (a region of interest) starts in the frame
+    oy: int = 0
+
+    core: NDArray[np.uint8] | None = None  # set by _core(): the disc without its streaks
+
+    def mask(self, labels: NDArray[Any]) -> NDArray[np.uint8]:
+        if self.core is not None:
+            return self.core
+        y0, x0 = self.y - self.oy, self.x - self.ox
+        roi = labels[y0:y0 + self.h, x0:x0 + self.w]
+        if len(self.labels) == 1:
+            return (roi == self.labels[0]).astype(np.uint8)
+        return np.isin(roi, self.labels).astype(np.uint8)
+
+
+def _clusters(stats: NDArray[Any], cents: NDArray[Any], order: NDArray[np.int64],
+              ox: int = 0, oy: int = 0) -> list[_Candidate]:
+    """Group components whose boxes lie within a quarter radius (+3 px) of each other."""
+    items = [int(i) for i in order]
+    parent = {i: i for i in items}
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            i = parent[i]
+        return i
+
+    for ai, a in enumerate(items):
+        xa, ya, wa, ha, aa = stats[a]
+        for b in items[ai + 1:]:
+            xb, yb, wb, hb, ab = stats[b]
+            gap_x = max(xb - (xa + wa), xa - (xb + wb), 0)
+            gap_y = max(yb - (ya + ha), ya - (yb + hb), 0)
+            reach = 3.0 + 0.25 * np.sqrt(max(aa, ab) / np.pi)
+            if max(gap_x, gap_y) <= reach:
+                parent[root(b)] = root(a)
+    groups: dict[int, list[int]] = {}
+    for i in items:
+        groups.setdefault(root(i), []).append(i)
+    out = []
+    for members in groups.values():
+        st = stats[members]
+        area = int(st[:, 4].sum())
+        x0, y0 = int(st[:, 0].min()), int(st[:, 1].min())
+        x1, y1 = int((st[:, 0] + st[:, 2]).max()), int((st[:, 1] + st[:, 3]).max())
+        cx = float((cents[members, 0] * st[:, 4]).sum() / area)
+        cy = float((cents[members, 1] * st[:, 4]).sum() / area)
+        out.append(_Candidate(members, area, x0, y0, x1 - x0, y1 - y0, cx, cy, ox=ox, oy=oy))
+    return out
+
+
+def _shape(c: _Candidate, labels: NDArray[Any]) -> float:
+    """Circularity 0–1 from the cluster's second moments.
+
+    ``aspect = √(λ2/λ1)`` and ``fill = A / (4π√(λ1 λ2))`` (1 for a filled disc);
+    thin spikes (a flare streak, blooming) barely move them, ragged or
+    elongated cloud edges do.
+    """
+    if c.area < 5:
+        return 1.0
+    m = cv2.moments(c.mask(labels), True)
+    mu20, mu02, mu11 = m["mu20"] / m["m00"], m["mu02"] / m["m00"], m["mu11"] / m["m00"]
+    half_tr = 0.5 * (mu20 + mu02)
+    disc = np.sqrt(max(half_tr**2 - (mu20 * mu02 - mu11**2), 0.0))
+    l1, l2 = half_tr + disc, max(half_tr - disc, 1e-6)
+    aspect = float(np.sqrt(l2 / l1))
+    fill = c.area / (4.0 * np.pi * np.sqrt(l1 * l2))
+    return min(1.0, aspect / 0.75) * _clamp(fill / 0.85, 0.0, 1.0)
+
+
+def _core(c: _Candidate, labels: NDArray[Any]) -> _Candidate | None:
+    """The candidate's disc without the streaks attached to it (blooming, smear, a flare).
+
+    A morphological opening with a disc of 0.6 × the largest inscribed radius
+    (the distance transform's maximum) removes everything thinner than the
+    core; the opened component under that maximum is the core. Returns a
+    candidate restricted to it, or None when nothing was removed.
+    """
+    mask = c.mask(labels)
+    # a zero border: a blob that fills its box (a saturated rectangle) has no zero pixel
+    padded = cv2.copyMakeBorder(mask, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    dist = cv2.distanceTransform(padded, cv2.DIST_L2, 3)[1:-1, 1:-1]
+    _, d_max, _, (px, py) = cv2.minMaxLoc(dist)
+    if d_max < 2.0:
+        return None
+    # the opening's cost grows with the kernel's area: past an inscribed radius of
+    # _CORE_MAX_RADIUS_PX it runs on a shrunk mask (enough to cut thin streaks)
+    f = min(1.0, _CORE_MAX_RADIUS_PX / d_max)
+    k = max(1, int(0.6 * d_max * f))
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * k + 1, 2 * k + 1))
+    if f < 1.0:
+        small = cv2.resize(mask, None, fx=f, fy=f, interpolation=cv2.INTER_NEAREST)
+        opened_small = cv2.morphologyEx(small, cv2.MORPH_OPEN, kernel)
+        opened = cv2.bitwise_and(
+            cv2.resize(opened_small, (mask.shape[1], mask.shape[0]),
+                       interpolation=cv2.INTER_NEAREST),
+            mask,
+        )
+    else:
+        opened = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
+    n, lab, stats, cents = cv2.connectedComponentsWithStats(opened, connectivity=8)
+    i = int(lab[py, px])
+    if n < 2 or i == 0 or stats[i, 4] >= 0.97 * c.area:
+        return None
+    x, y, w, h, area = (int(v) for v in stats[i])
+    core = (lab[y:y + h, x:x + w] == i).astype(np.uint8)
+    # only streaks count: what was removed must be thin, straight and centred on
+    # the core (spikes on both sides), not the lobes of a ragged cloud highlight
+    rest = mask.copy()
+    rest[y:y + h, x:x + w] -= core
+    m = cv2.moments(rest, True)
+    if m["m00"] <= 0:
+        return None
+    mu20, mu02, mu11 = m["mu20"] / m["m00"], m["mu02"] / m["m00"], m["mu11"] / m["m00"]
+    half_tr = 0.5 * (mu20 + mu02)
+    disc = np.sqrt(max(half_tr**2 - (mu20 * mu02 - mu11**2), 0.0))
+    aspect = np.sqrt(max(half_tr - disc, 0.0) / max(half_tr + disc, 1e-9))
+    off = np.hypot(m["m10"] / m["m00"] - cents[i, 0], m["m01"] / m["m00"] - cents[i, 1])
+    if aspect > 0.35 or off > max(2.0, 0.5 * d_max):
+        return None
+    return _Candidate(c.labels, area, c.x + x, c.y + y, w, h, c.x + float(cents[i, 0]),
+                      c.y + float(cents[i, 1]), ox=c.ox, oy=c.oy, core=core)
+
+
+def _prior(c: _Candidate, labels: NDArray[Any], diam: float) -> tuple[float, float]:
+    """``(shape term, size term)`` of the score: cheap, so computed for every candidate.
+
+    A candidate that is not a clean disc is narrowed to its core
+    (:func:`_core`) when the core is the cleaner disc: a sun with blooming or
+    smear along its columns is a disc with spikes.
+    """
+    raw = _shape(c, labels)
+    if raw < 0.95 and c.area >= 30:
+        core = _core(c, labels)
+        if core is not None:
+            core_shape = _shape(core, labels)
+            if core_shape > raw:
+                c.area, c.x, c.y, c.w, c.h = core.area, core.x, core.y, core.w, core.h
+                c.cx, c.cy, c.core = core.cx, core.cy, core.core
+                raw = core_shape
+    shape = _clamp((raw - 0.45) / 0.4, 0.0, 1.0)
+    min_area = max(4.0, np.pi * (0.0025 * diam) ** 2)
+    return shape, _clamp(c.area / min_area, 0.25, 1.0)
+
+
+def _score(c: _Candidate, gray: NDArray[np.uint8], shape: float, size: float, peak: float,
+           bg: float, fov: FovCircle | None, diam: float) -> float:
+    """Sun-likeness 0–1 of one bright cluster.
+
+    ``shape²`` (a sun's saturated core is a clean disc; cloud highlights are
+    ragged) × glare evidence × a size prior (radius ≥ ~0.25 % of the
+    diameter). The glare evidence is the larger of (a) an isotropic glare that
+    falls off outward — three rings at 1.6 R, 2.5 R and 4 R whose
+    inter-quartile spread is small and whose medians decline by ≥ 15 % of the
+    frame's contrast — and (b) a sharp drop right outside the disc to no less
+    than the sky's level (a clear-sky sun next to a cloud; not white text on a
+    dark overlay box). A bright cloud highlight passes neither.
+    """
+    r_eq = np.sqrt(c.area / np.pi)
+    contrast = max(peak - bg, 1.0)
+    iso = 1.0
+    medians = []
+    for rad in (1.6 * r_eq + 2.0, 2.5 * r_eq + 3.0, max(4.0 * r_eq, 0.03 * diam)):
+        v = _ring_values(gray, c.cx, c.cy, rad, fov)
+        if v.size < 8:
+            iso *= 0.5
+            medians.append(np.nan)
+            continue
+        v.sort()
+        n = v.size
+        q25, med, q75 = v[n // 4], v[n // 2], v[(3 * n) // 4]
+        medians.append(float(med))
+        iso *= _clamp(1.0 - ((q75 - q25) / contrast - 0.06) / 0.25, 0.0, 1.0)
+    m1, _, m3 = medians
+    falloff = (m1 - m3) / contrast if np.isfinite(m1) and np.isfinite(m3) else 0.0
+    iso_glare = iso ** (1.0 / 3.0) * _clamp((falloff - 0.05) / 0.15, 0.0, 1.0)
+    drop = (peak - m1) / contrast if np.isfinite(m1) else 0.0
+    sharp = _clamp((drop - 0.3) / 0.3, 0.0, 1.0)
+    if np.isfinite(m1) and m1 < bg - 0.15 * contrast:
+        sharp = 0.0  # ringed by something darker than the sky: white text on a dark box
+    glare = max(iso_glare, sharp)
+    c.glare = float(glare)
+    return float(shape**2 * (0.25 + 0.75 * glare) * size)
+
+
+def _mark_ghosts(cands: list[_Candidate], centre: tuple[float, float]) -> int:
+    """Flag clusters on the line through the optical centre, opposite a larger one."""
+    n = 0
+    ox, oy = centre
+    for a in cands:
+        for b in cands:
+            if a is b or b.ghost or a.ghost or b.area >= a.area:
+                continue
+            va = np.array([a.cx - ox, a.cy - oy])
+            vb = np.array([b.cx - ox, b.cy - oy])
+            na, nb = np.linalg.norm(va), np.linalg.norm(vb)
+            if na < 3 or nb < 3:
+                continue
+            if float(va @ vb / (na * nb)) < -np.cos(np.radians(6.0)):
+                b.ghost = True
+                n += 1
+    return n
+
+
+def _symmetry(mask: NDArray[np.uint8]) -> float:
+    """Overlap (IoU) of a blob with itself turned 180° about its centroid: ~1 for a disc,
+    an oval, or a disc with spikes on both sides; low for a disc cut by a box or the
+    horizon."""
+    m = cv2.moments(mask, True)
+    if m["m00"] <= 0:
+        return 0.0
+    mx, my = m["m10"] / m["m00"], m["m01"] / m["m00"]
+    h, w = mask.shape
+    turn = np.array([[-1.0, 0.0, 2.0 * mx], [0.0, -1.0, 2.0 * my]])
+    rot = cv2.warpAffine(mask, turn, (w, h), flags=cv2.INTER_NEAREST)
+    inter = cv2.countNonZero(cv2.bitwise_and(mask, rot))
+    union = cv2.countNonZero(cv2.bitwise_or(mask, rot))
+    return inter / union if union else 0.0
+

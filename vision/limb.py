@@ -1,0 +1,164 @@
+"""Circle and sphere-cone fits to a glare's limb (Kåsa 1976 algebraic fit, RANSAC).
+
+Used for a glare cut by the horizon, a mast or an overlay, where the arc that
+is left is the only trustworthy part of the outline.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vision.detection import CameraModel
+
+
+def _circle_fit(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[float, float, float]:
+    """Algebraic (Kåsa) least-squares circle fit → (cx, cy, r), by its 2×2 normal equations
+    in centred coordinates (Kåsa 1976)."""
+    mx, my = float(x.mean()), float(y.mean())
+    u, v = x - mx, y - my
+    suu, svv, suv = float(u @ u), float(v @ v), float(u @ v)
+    uu, vv = u * u, v * v
+    su3, sv3 = float(u @ uu), float(v @ vv)
+    suvv, svuu = float(u @ vv), float(v @ uu)
+    det = suu * svv - suv * suv
+    if abs(det) < 1e-12:
+        return mx, my, 0.0
+    b1, b2 = 0.5 * (su3 + suvv), 0.5 * (sv3 + svuu)
+    uc = (b1 * svv - b2 * suv) / det
+    vc = (b2 * suu - b1 * suv) / det
+    r = float(np.sqrt(uc * uc + vc * vc + (suu + svv) / len(x)))
+    return mx + uc, my + vc, r
+
+
+def _ransac_circle(x: NDArray[np.float64], y: NDArray[np.float64], n_trials: int = 256
+                   ) -> NDArray[np.bool_]:
+    """Inliers of the circle through most limb points (RANSAC on point triples, fixed seed).
+
+    The limb of a glare cut by a mast, the horizon or an overlay box is an arc
+    plus straight cut edges; the arc is the largest set of points on one
+    circle. The tolerance, max(1.5 px, 5 % of the radius), also keeps the
+    whole of a limb that the fisheye projection has made slightly oval.
+    """
+    n = len(x)
+    rng = np.random.default_rng(12345)
+    idx = rng.integers(0, n, size=(n_trials, 3))
+    # hypotheses are scored on at most 120 evenly spaced points, the inliers on all
+    sub = np.linspace(0, n - 1, min(n, 120)).astype(int)
+    x1, y1 = x[idx[:, 0]], y[idx[:, 0]]
+    x2, y2 = x[idx[:, 1]], y[idx[:, 1]]
+    x3, y3 = x[idx[:, 2]], y[idx[:, 2]]
+    d = 2.0 * (x1 * (y2 - y3) + x2 * (y3 - y1) + x3 * (y1 - y2))
+    ok = np.abs(d) > 1e-6
+    s1, s2, s3 = x1**2 + y1**2, x2**2 + y2**2, x3**2 + y3**2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ux = (s1 * (y2 - y3) + s2 * (y3 - y1) + s3 * (y1 - y2)) / d
+        uy = (s1 * (x3 - x2) + s2 * (x1 - x3) + s3 * (x2 - x1)) / d
+    r = np.hypot(x1 - ux, y1 - uy)
+    # the sun's limb circle is no wider than the blob and centred inside its box
+    # (this rules out a horizon or overlay edge that happens to be an arc)
+    ext = max(float(np.ptp(x)), float(np.ptp(y)))
+    ok &= np.isfinite(r) & (r <= 0.6 * ext + 2.0)
+    ok &= (ux >= x.min()) & (ux <= x.max()) & (uy >= y.min()) & (uy <= y.max())
+    if not np.any(ok):
+        return np.ones(n, bool)
+    ux, uy, r = ux[ok], uy[ok], r[ok]
+    tol = np.maximum(1.5, 0.05 * r)
+    xs, ys = x[sub], y[sub]
+    res = np.abs(np.hypot(xs[None, :] - ux[:, None], ys[None, :] - uy[:, None]) - r[:, None])
+    best = int(np.argmax((res <= tol[:, None]).sum(axis=1)))
+    return np.abs(np.hypot(x - ux[best], y - uy[best]) - r[best]) <= tol[best]
+
+
+def _plane_axis(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Axis of the small circle through unit vectors ``[N, 3]`` (least-squares plane normal)."""
+    m = v.mean(axis=0)
+    _, _, vt = np.linalg.svd(v - m, full_matrices=False)
+    return vt[2] if np.dot(vt[2], m) > 0 else -vt[2]
+
+
+def _ransac_cone(v: NDArray[np.float64], tol_rad: float, n_trials: int = 256
+                 ) -> NDArray[np.bool_]:
+    """Inliers of the small circle on the sphere through most limb directions ``[N, 3]``.
+
+    Three unit vectors fix a plane, hence a cone (axis, half-angle); the
+    residual is the angular distance of each point from that cone.
+    """
+    n = len(v)
+    rng = np.random.default_rng(12345)
+    idx = rng.integers(0, n, size=(n_trials, 3))
+    sub = np.linspace(0, n - 1, min(n, 120)).astype(int)
+    a, b, c = v[idx[:, 0]], v[idx[:, 1]], v[idx[:, 2]]
+    nrm = np.cross(b - a, c - a)
+    length = np.linalg.norm(nrm, axis=1)
+    ok = length > 1e-12
+    if not np.any(ok):
+        return np.ones(n, bool)
+    nrm = nrm[ok] / length[ok, None]
+    nrm *= np.sign(np.sum(nrm * a[ok], axis=1))[:, None]
+    half = np.arccos(np.clip(np.sum(nrm * a[ok], axis=1), -1.0, 1.0))
+    mean_dir = v.mean(axis=0)
+    ok2 = (half < np.radians(45.0)) & (nrm @ mean_dir > 0)
+    # the axis must lie within the limb's spread (the sun is inside its glare)
+    spread = float(np.max(np.arccos(np.clip(v @ (mean_dir / np.linalg.norm(mean_dir)), -1, 1))))
+    axis_off = np.arccos(np.clip(nrm @ (mean_dir / np.linalg.norm(mean_dir)), -1.0, 1.0))
+    ok2 &= (axis_off <= spread) & (half <= 1.2 * spread + 1e-6)
+    if not np.any(ok2):
+        return np.ones(n, bool)
+    nrm, half = nrm[ok2], half[ok2]
+    res = np.abs(np.arccos(np.clip(v[sub] @ nrm.T, -1.0, 1.0)) - half[None, :])
+    tol = np.maximum(tol_rad, 0.05 * half)
+    best = int(np.argmax((res <= tol[None, :]).sum(axis=0)))
+    return np.abs(np.arccos(np.clip(v @ nrm[best], -1.0, 1.0)) - half[best]) <= tol[best]
+
+
+def _robust_limb_centre(pts: NDArray[np.float64], camera: CameraModel | None
+                        ) -> tuple[float, float, float, float]:
+    """Centre of the limb points ``[N, 2]``: RANSAC inliers, then a trimmed least-squares fit.
+
+    Without a camera: a circle in the image. With one: the limb, mapped to unit
+    vectors, is a small circle on the sphere (a fisheye draws it as an oval
+    near the horizon); RANSAC finds the cone through most of it, a plane is
+    fitted to the inliers (trimmed on their angular residual) and its normal —
+    the glare's axis — is projected back. Returns
+    ``(x, y, radius_px, inlier_fraction)``.
+    """
+    x, y = pts[:, 0], pts[:, 1]
+    if camera is not None:
+        v_all = camera.pixel_to_direction(x, y)
+        fin = np.all(np.isfinite(v_all), axis=1)
+        if fin.sum() >= 12:
+            v = v_all[fin]
+            r_px = 0.25 * (np.ptp(x[fin]) + np.ptp(y[fin]))
+            centre_dir = v.mean(axis=0) / np.linalg.norm(v.mean(axis=0))
+            ang_r = float(np.median(np.arccos(np.clip(v @ centre_dir, -1, 1))))
+            tol = 1.5 * ang_r / max(r_px, 1.0)
+            keep = _ransac_cone(v, tol)
+            if keep.sum() >= 6:
+                axis = _plane_axis(v[keep])
+                for _ in range(3):  # re-select inliers among all points around the fit
+                    ang = np.arccos(np.clip(v @ axis, -1.0, 1.0))
+                    half = float(np.median(ang[keep]))
+                    new = np.abs(ang - half) <= max(tol, 0.05 * half)
+                    if new.sum() < 6 or np.array_equal(new, keep):
+                        break
+                    keep = new
+                    axis = _plane_axis(v[keep])
+                px, py = camera.direction_to_pixel(axis)
+                if np.isfinite(px) and np.isfinite(py):
+                    return float(px), float(py), float(r_px), float(keep.mean())
+    cx, cy, r = _circle_fit(x, y)
+    if np.all(np.abs(np.hypot(x - cx, y - cy) - r) <= max(1.5, 0.05 * r)):
+        return cx, cy, r, 1.0  # a clean limb: no outliers to hunt
+    keep = _ransac_circle(x, y) if len(x) >= 12 else np.ones(len(x), bool)
+    if keep.sum() < 6:
+        keep = np.ones(len(x), bool)
+    cx, cy, r = _circle_fit(x[keep], y[keep])
+    for _ in range(3):  # re-select inliers among all points around the fit
+        res = np.abs(np.hypot(x - cx, y - cy) - r)
+        new = res <= max(1.5, 0.05 * r)
+        if new.sum() < 6 or np.array_equal(new, keep):
+            break
+        keep = new
+        cx, cy, r = _circle_fit(x[keep], y[keep])
+    return cx, cy, r, float(keep.mean())

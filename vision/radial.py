@@ -1,0 +1,278 @@
+"""The sun's centre as the centre of radial symmetry of its glare (Parthasarathy 2012).
+
+Follows R. Parthasarathy, "Rapid, accurate particle tracking by calculation of
+radial symmetry centers", Nature Methods 9:724–726 (2012): at every corner
+between four pixels the intensity gradient (Roberts cross, smoothed 3 × 3)
+defines a line; for a radially symmetric image every line passes through the
+centre, so the centre is the point with the least weighted squared distance
+to all lines — a 2 × 2 linear system, no iteration over a model. Weights as in
+the paper: the squared gradient magnitude over the distance from the current
+estimate.
+
+Made robust for sky frames (our additions, each a plain reweighting):
+
+* only gradients that point toward the estimate (the glare brightens inward)
+  take part, and lines far from the estimate are down-weighted with a Cauchy
+  function of their distance (iteratively reweighted least squares), so a
+  cloud edge, a flare ghost or a tree line in the window barely moves it;
+* pixels darker than the sky around the glare (trees, an obstacle, outside
+  the image circle, a text box) and their neighbours are left out, so the
+  mask edge contributes no gradient;
+* with a camera model, the lines are moved to the tangent (gnomonic) plane of
+  the sphere at the estimate before the solve: there a glare that is a small
+  circle on the sky is a circle centred on the sun, where the fisheye draws
+  it as an off-centre oval near the horizon.
+
+A saturated core has no gradient inside; its limb and the halo around it
+carry all the weight, so a clipped (saturated) sun is handled as a flat-top
+radially symmetric spot. A limb cut by the horizon or an obstacle still
+points at the centre on the arc that is left.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from vision.detection import CameraModel
+
+
+@dataclass(frozen=True)
+class RadialFit:
+    """Result of :func:`radial_symmetry_centre`.
+
+    ``coherence`` is the fraction of the inward-pointing gradient weight whose
+    lines pass within the inlier band of the centre (≈ 1 for a sun's glare, low
+    for a cloud highlight); ``spread_px`` the weighted RMS distance of the
+    inlier lines from the centre [px]; ``n_lines`` how many lines took part.
+    """
+
+    x_px: float
+    y_px: float
+    coherence: float
+    spread_px: float
+    n_lines: int
+
+
+def _solve(px: NDArray[np.float64], py: NDArray[np.float64], nx: NDArray[np.float64],
+           ny: NDArray[np.float64], w: NDArray[np.float64]) -> tuple[float, float] | None:
+    """Point nearest (weighted least squares) to the lines through (px, py) along (nx, ny)."""
+    a11 = float(np.sum(w * (1.0 - nx * nx)))
+    a22 = float(np.sum(w * (1.0 - ny * ny)))
+    a12 = float(-np.sum(w * nx * ny))
+    det = a11 * a22 - a12 * a12
+    if not np.isfinite(det) or det <= 1e-9 * max(a11 * a22, 1e-30):
+        return None
+    b1 = float(np.sum(w * ((1.0 - nx * nx) * px - nx * ny * py)))
+    b2 = float(np.sum(w * (-nx * ny * px + (1.0 - ny * ny) * py)))
+    return (a22 * b1 - a12 * b2) / det, (a11 * b2 - a12 * b1) / det
+
+
+def _tangent(camera: CameraModel, x: NDArray[np.float64], y: NDArray[np.float64],
+             axis: NDArray[np.float64], e1: NDArray[np.float64], e2: NDArray[np.float64]
+             ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Gnomonic coordinates [rad] about ``axis`` of pixels (x, y)."""
+    v = camera.pixel_to_direction(x, y)
+    d = v @ axis
+    d = np.where(d > 1e-6, d, np.nan)
+    return (v @ e1) / d, (v @ e2) / d
+
+
+def gradient_lines(gray: NDArray[np.uint8], x0: int, y0: int, x1: int, y1: int,
+                   dark_level: float, glare_level: float = 0.0, saturated_level: float = 256.0,
+                   sky_gradient: tuple[float, float] = (0.0, 0.0)
+                   ) -> tuple[NDArray[np.float64], ...]:
+    """Midpoints, unit gradient directions and squared magnitudes in a window.
+
+    Window ``[x0, x1) × [y0, y1)`` of ``gray``; gradients by the Roberts
+    cross at the corners between pixels, smoothed by a 3 × 3 box
+    (Parthasarathy 2012); corners touching a pixel below ``dark_level`` (or
+    next to one) are dropped, as are gradients weaker than 2 % of the
+    strongest, and corners whose four pixels are all below ``glare_level``
+    (plain sky: its own gradient, e.g. toward the horizon, says nothing about
+    the sun). ``sky_gradient`` [grey px⁻¹] is subtracted from every gradient
+    that does not touch a saturated pixel (≥ ``saturated_level``): there the
+    frame is glare + sky, and a radially symmetric glare's own gradient points
+    at its centre. Returns ``(px, py, nx, ny, g2, clipped)``.
+    """
+    win = gray[y0:y1, x0:x1].astype(np.float32)
+    d_u = win[:-1, 1:] - win[1:, :-1]  # along (+x, −y)
+    d_v = win[:-1, :-1] - win[1:, 1:]  # along (−x, −y)
+    d_u = cv2.blur(d_u, (3, 3))
+    d_v = cv2.blur(d_v, (3, 3))
+    gx = 0.5 * (d_u - d_v)
+    gy = -0.5 * (d_u + d_v)
+    sat = (win >= np.float32(saturated_level)).astype(np.uint8)
+    sat = cv2.dilate(sat, np.ones((3, 3), np.uint8))  # the 3 × 3 smoothing's reach
+    clip4 = (sat[:-1, :-1] | sat[1:, 1:] | sat[:-1, 1:] | sat[1:, :-1]) > 0
+    gx = np.where(clip4, gx, gx - np.float32(sky_gradient[0]))
+    gy = np.where(clip4, gy, gy - np.float32(sky_gradient[1]))
+    g2 = gx * gx + gy * gy
+    ok = (win >= np.float32(dark_level)).astype(np.uint8)
+    ok = cv2.erode(ok, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE)
+    ok4 = ok[:-1, :-1] & ok[1:, 1:] & ok[:-1, 1:] & ok[1:, :-1]
+    if glare_level > 0:
+        hi = (win >= np.float32(glare_level)).astype(np.uint8)
+        ok4 &= hi[:-1, :-1] | hi[1:, 1:] | hi[:-1, 1:] | hi[1:, :-1]
+    gmax = float(g2.max()) if g2.size else 0.0
+    sel = (ok4 > 0) & (g2 > 4e-4 * gmax) & (g2 > 1.0)
+    iy, ix = np.nonzero(sel)
+    g2s = g2[iy, ix].astype(np.float64)
+    mag = np.sqrt(g2s)
+    nx = gx[iy, ix] / mag
+    ny = gy[iy, ix] / mag
+    return (ix + x0 + 0.5, iy + y0 + 0.5, nx.astype(np.float64), ny.astype(np.float64), g2s,
+            clip4[iy, ix])
+
+
+def sky_plane_gradient(gray: NDArray[np.uint8], cx: float, cy: float, r_in: float,
+                       r_out: float, lo: float, hi: float) -> tuple[float, float]:
+    """Gradient (d/dx, d/dy) [grey px⁻¹] of a plane fitted to the annulus
+    ``r_in ≤ r < r_out`` around (cx, cy), pixels in ``[lo, hi)`` only.
+
+    A radially symmetric glare contributes no slope to a plane fitted over a
+    whole annulus centred on it; what is left is the sky's own gradient
+    (brighter toward the horizon). Returns (0, 0) with too few pixels.
+    """
+    h, w = gray.shape
+    x0, y0 = max(0, int(cx - r_out)), max(0, int(cy - r_out))
+    x1, y1 = min(w, int(cx + r_out) + 1), min(h, int(cy + r_out) + 1)
+    if x1 - x0 < 3 or y1 - y0 < 3:
+        return 0.0, 0.0
+    step = max(1, int(r_out // 40))
+    win = gray[y0:y1:step, x0:x1:step].astype(np.float64)
+    yy, xx = np.mgrid[y0:y1:step, x0:x1:step]
+    dx, dy = xx - cx, yy - cy
+    rr = np.hypot(dx, dy)
+    m = (rr >= r_in) & (rr < r_out) & (win >= lo) & (win < hi)
+    if m.sum() < 24:
+        return 0.0, 0.0
+    # a full annulus is needed for the glare's symmetric part to cancel: all four quadrants
+    quads = {(bool(a), bool(b)) for a, b in zip(dx[m] > 0, dy[m] > 0, strict=True)}
+    if len(quads) < 4:
+        return 0.0, 0.0
+    a = np.column_stack([np.ones(int(m.sum())), dx[m], dy[m]])
+    coef, *_ = np.linalg.lstsq(a, win[m], rcond=None)
+    return float(coef[1]), float(coef[2])
+
+
+def radial_symmetry_centre(gray: NDArray[np.uint8], start_px: tuple[float, float],
+                           radius_px: float, dark_level: float, glare_level: float = 0.0,
+                           camera: CameraModel | None = None, n_iter: int = 5,
+                           saturated_level: float = 256.0,
+                           sky_gradient: tuple[float, float] = (0.0, 0.0)
+                           ) -> RadialFit | None:
+    """Centre of radial symmetry of the glare around ``start_px`` (see the module docstring).
+
+    Parameters
+    ----------
+    gray : 8-bit grey frame.
+    start_px : first estimate ``(x, y)`` [px] (the bright blob's centroid).
+    radius_px : half-width of the square window [px] (about twice the blob's
+        equivalent radius: the limb and the inner halo).
+    dark_level : grey level below which a pixel is not sky (trees, mask, box).
+    glare_level : grey level a corner must reach to count (part of the glare).
+    camera : optional pixel ↔ direction model: the lines are solved in the
+        tangent plane of the sphere at the estimate.
+    n_iter : reweighting passes.
+    saturated_level, sky_gradient : see :func:`gradient_lines`; gradients
+        touching a saturated pixel are used only when fewer than 30 others are
+        left (a bare disc on a flat sky).
+
+    Returns None when too few gradient lines are left.
+    """
+    h, w = gray.shape
+    cx, cy = start_px
+    r = max(4.0, float(radius_px))
+    x0, y0 = max(0, int(cx - r)), max(0, int(cy - r))
+    x1, y1 = min(w, int(cx + r) + 2), min(h, int(cy + r) + 2)
+    if x1 - x0 < 4 or y1 - y0 < 4:
+        return None
+    px, py, nx, ny, g2, clipped = gradient_lines(gray, x0, y0, x1, y1, dark_level, glare_level,
+                                                 saturated_level, sky_gradient)
+    if int((~clipped).sum()) >= 30:
+        px, py, nx, ny, g2 = px[~clipped], py[~clipped], nx[~clipped], ny[~clipped], g2[~clipped]
+    if px.size < 8:
+        return None
+    ux, uy, mx, my = px, py, nx, ny  # the solve's coordinates (image, or tangent plane)
+    axis = e1 = e2 = None
+    scale = 1.0  # tangent-plane units per pixel
+    ex, ey = float(cx), float(cy)
+    band = 1.0
+    for it in range(n_iter):
+        if camera is not None and it in (0, 2):
+            axis = camera.pixel_to_direction(np.array([ex]), np.array([ey]))[0]
+            helper = np.array([0.0, 0.0, 1.0]) if abs(axis[2]) < 0.9 else np.array([1.0, 0, 0])
+            e1 = np.cross(helper, axis)
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(axis, e1)
+            tx, ty = _tangent(camera, px, py, axis, e1, e2)
+            sx, sy = _tangent(camera, px + 0.5 * nx, py + 0.5 * ny, axis, e1, e2)
+            dx, dy = sx - tx, sy - ty
+            step = np.hypot(dx, dy)
+            good = np.isfinite(step) & (step > 0)
+            if good.sum() < 8:
+                camera = None
+            else:
+                scale = float(np.median(step[good])) / 0.5
+                ux = np.where(good, tx / scale, 0.0)
+                uy = np.where(good, ty / scale, 0.0)
+                mx = np.where(good, dx / np.where(good, step, 1.0), 0.0)
+                my = np.where(good, dy / np.where(good, step, 1.0), 0.0)
+                g2 = np.where(good, g2, 0.0)
+        if camera is not None and axis is not None:
+            cux, cuy = _tangent_of(camera, ex, ey, axis, e1, e2, scale)
+        else:
+            cux, cuy = ex, ey
+        ddx, ddy = cux - ux, cuy - uy
+        dist = np.hypot(ddx, ddy)
+        inward = (mx * ddx + my * ddy) / np.maximum(dist, 1e-9)
+        perp = np.abs(ddx * my - ddy * mx)
+        cos_min = 0.3 if it == 0 else 0.7
+        base = g2 * (inward > cos_min) / np.maximum(dist, 2.0)
+        if it == 0:
+            wgt = base
+        else:
+            wgt = base / (1.0 + (perp / band) ** 2)
+        got = _solve(ux, uy, mx, my, wgt)
+        if got is None:
+            return None
+        nux, nuy = got
+        if camera is not None and axis is not None:
+            v = axis + (nux * scale) * e1 + (nuy * scale) * e2
+            qx, qy = camera.direction_to_pixel(v / np.linalg.norm(v))
+            ex, ey = float(qx), float(qy)
+        else:
+            ex, ey = float(nux), float(nuy)
+        if not (np.isfinite(ex) and np.isfinite(ey)):
+            return None
+        ddx, ddy = nux - ux, nuy - uy
+        perp = np.abs(ddx * my - ddy * mx)
+        sw = float(base.sum())
+        if sw <= 0:
+            return None
+        # the inlier band: the weighted median line distance, at least 0.5 px
+        order = np.argsort(perp)
+        cw = np.cumsum(base[order])
+        med = float(perp[order][min(int(np.searchsorted(cw, 0.5 * cw[-1])), len(order) - 1)])
+        band = max(0.5, 1.5 * med)
+    dist = np.hypot(ddx, ddy)
+    inward = (mx * ddx + my * ddy) / np.maximum(dist, 1e-9)
+    base = g2 * (inward > 0.0) / np.maximum(dist, 2.0)
+    tol = np.maximum(1.5, 0.08 * dist)
+    inl = perp <= tol
+    total = float((g2 / np.maximum(dist, 2.0)).sum())
+    coherence = float(base[inl].sum() / total) if total > 0 else 0.0
+    wi = base * inl
+    spread = float(np.sqrt((wi * perp**2).sum() / wi.sum())) if wi.sum() > 0 else float("inf")
+    return RadialFit(ex, ey, coherence, spread, int(px.size))
+
+
+def _tangent_of(camera: CameraModel, x: float, y: float, axis: NDArray[np.float64],
+                e1: NDArray[np.float64], e2: NDArray[np.float64], scale: float
+                ) -> tuple[float, float]:
+    tx, ty = _tangent(camera, np.array([x]), np.array([y]), axis, e1, e2)
+    return float(tx[0]) / scale, float(ty[0]) / scale
