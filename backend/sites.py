@@ -9,7 +9,6 @@ id, kind and calibration.
 
 from __future__ import annotations
 
-import datetime as dt
 import json
 import logging
 import threading
@@ -20,8 +19,9 @@ from zoneinfo import ZoneInfo
 from sqlalchemy import Connection, select, update
 from sqlalchemy.dialects import postgresql, sqlite
 
+from backend.measurements.buckets import bucket_phase_s
 from backend.measurements.parse import Calibration
-from backend.storage.tables import ROLLUP_WIDTH_S, ArrayRow, SiteRow, utcnow
+from backend.storage.tables import ArrayRow, SiteRow, utcnow
 from sim.sites import Site, list_sites
 
 logger = logging.getLogger(__name__)
@@ -29,12 +29,6 @@ logger = logging.getLogger(__name__)
 CALIBRATION_FIELDS = (
     "adc_bits", "adc_vref_v", "current_zero_v", "current_sensitivity_mv_per_a", "divider_ratio",
 )
-
-
-def bucket_phase_s(timezone: str) -> int:
-    """Offset [s] of the zone's local hours from the UTC hour grid (standard time)."""
-    offset = dt.datetime(2024, 1, 15, tzinfo=ZoneInfo(timezone)).utcoffset()
-    return int(offset.total_seconds()) % ROLLUP_WIDTH_S if offset else 0
 
 
 @dataclass

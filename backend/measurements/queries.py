@@ -16,11 +16,10 @@ from zoneinfo import ZoneInfo
 import numpy as np
 from sqlalchemy import Connection
 
+from backend.measurements.buckets import ROLLUP_WIDTH_S, grid_ceil, grid_floor
 from backend.measurements.rollups import integrate_clipped_wh
 from backend.storage.sqlraw import fetch
-from backend.storage.tables import ROLLUP_WIDTH_S
 
-W = ROLLUP_WIDTH_S
 QUANTITIES = ("voltage_v", "current_a", "power_w")
 
 _RAW = (
@@ -51,16 +50,6 @@ _ROLLUP_ENERGY = (
     "SELECT array_id, source, bucket_s, energy_wh, n FROM measurement_rollups "
     "WHERE array_id IN ({ids}) AND bucket_s >= ? AND bucket_s < ? ORDER BY bucket_s"
 )
-
-
-def grid_ceil(t: int, phase: int) -> int:
-    """First rollup edge at or after ``t``."""
-    return -((phase - t) // W) * W + phase
-
-
-def grid_floor(t: int, phase: int) -> int:
-    """Last rollup edge at or before ``t``."""
-    return ((t - phase) // W) * W + phase
 
 
 def iso_utc(ts_s: np.ndarray | list[int]) -> list[str]:
@@ -148,10 +137,10 @@ def downsample(conn: Connection, array_id: int, source: int, start: int, end: in
     """
     span = end - start
     width = max(1, math.ceil(span / max_points))
-    if width < W:
+    if width < ROLLUP_WIDTH_S:
         rows = fetch(conn, _RAW_BUCKETS, (start, width, array_id, source, start, end))
         return _buckets_from_rows(rows, start, width)
-    width = W * math.ceil(span / max(1, max_points - 1) / W)
+    width = ROLLUP_WIDTH_S * math.ceil(span / max(1, max_points - 1) / ROLLUP_WIDTH_S)
     origin = grid_floor(start, phase)
     a, b = grid_ceil(start, phase), grid_floor(end, phase)
     parts: list[Buckets] = []

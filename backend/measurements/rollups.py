@@ -8,17 +8,18 @@ crosses a bucket edge is split there, with the power at the edge interpolated
 linearly, so hourly buckets add up exactly to the integral over any range made
 of whole buckets.
 
-Buckets start at ``k · 3600 + phase_s`` (``phase_s`` is the site's UTC offset
-modulo one hour), so local hours, days and months are unions of buckets.
+The rule itself is :func:`trapezoid_wh`, used by every path here and by
+queries; the bucket grid is :mod:`backend.measurements.buckets`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from backend.storage.tables import ROLLUP_WIDTH_S
+from backend.measurements.buckets import ROLLUP_WIDTH_S, bucket_index
 
 ROLLUP_COLUMNS = (
     "bucket_s", "n", "energy_wh",
@@ -27,11 +28,6 @@ ROLLUP_COLUMNS = (
     "max_voltage_v", "max_current_a", "max_power_w",
     "first_ts_s", "last_ts_s",
 )
-
-
-def bucket_index(ts_s: np.ndarray, phase_s: int, width_s: int = ROLLUP_WIDTH_S) -> np.ndarray:
-    """Index ``k`` of the bucket ``[k·width + phase, (k+1)·width + phase)`` holding each time."""
-    return (np.asarray(ts_s, np.int64) - phase_s) // width_s
 
 
 def affected_runs(
@@ -56,15 +52,15 @@ def affected_runs(
     return [(int(ks[a]), int(ks[b])) for a, b in zip(starts, ends, strict=True)]
 
 
-def interval_energy_wh(
-    ts_s: np.ndarray, power_w: np.ndarray, max_gap_s: float
-) -> np.ndarray:
-    """Trapezoid energy [Wh] of each interval between consecutive readings (0 past the gap)."""
-    t = np.asarray(ts_s, np.float64)
-    p = np.asarray(power_w, np.float64)
-    dt_s = np.diff(t)
-    e = 0.5 * (p[1:] + p[:-1]) * dt_s / 3600.0
-    return np.where(dt_s <= max_gap_s, e, 0.0)
+def trapezoid_wh(t0: Any, p0: Any, t1: Any, p1: Any, lo: Any, hi: Any) -> Any:
+    """THE energy rule [Wh]: the part ``[lo, hi]`` of the straight line from power
+    ``p0`` at ``t0`` to ``p1`` at ``t1`` (``t0 ≤ lo ≤ hi ≤ t1``), integrated.
+
+    Plain arithmetic, so it takes Python floats (the few-reading path) and NumPy
+    arrays (everything else) alike; callers drop intervals longer than the gap.
+    """
+    slope = (p1 - p0) / (t1 - t0)
+    return 0.5 * (2.0 * p0 + slope * (lo - t0 + hi - t0)) * (hi - lo) / 3600.0
 
 
 @dataclass
@@ -94,13 +90,9 @@ def energy_per_bucket(
     t0, t1, p0, p1 = t0[keep], t1[keep], p0[keep], p1[keep]
     k0 = bucket_index(t0, phase_s, width_s)
     k1 = bucket_index(t1 - 1, phase_s, width_s)  # an interval ending on an edge stays left
-    edge = (k0 + 1) * width_s + phase_s
-    split = k1 > k0
-    b = np.where(split, edge, t1)
-    frac = (b - t0) / (t1 - t0)
-    pb = p0 + (p1 - p0) * frac
-    left = 0.5 * (p0 + pb) * (b - t0) / 3600.0
-    right = np.where(split, 0.5 * (pb + p1) * (t1 - b) / 3600.0, 0.0)
+    edge = np.where(k1 > k0, (k0 + 1) * width_s + phase_s, t1)  # intervals span ≤ 2 buckets
+    left = trapezoid_wh(t0, p0, t1, p1, t0, edge)
+    right = trapezoid_wh(t0, p0, t1, p1, edge, t1)
     n = out.size
     for k, e in ((k0, left), (k0 + 1, right)):
         sel = (k >= k_first) & (k <= k_last)
@@ -174,12 +166,10 @@ def increment_rows(
     uk, cols = _stats(w, k_first, k_last, phase_s, width_s)
     rows = {int(k): [int(k) * width_s + phase_s, c[0], float(energy[int(k) - k_first]), *c[1:]]
             for k, *c in zip(uk.tolist(), *cols, strict=True)}
-    inf = float("inf")
     for j in np.flatnonzero(energy).tolist():
         k = k_first + j
         if k not in rows:
-            rows[k] = [k * width_s + phase_s, 0, float(energy[j]), 0.0, 0.0, 0.0,
-                       inf, inf, inf, -inf, -inf, -inf, 2**62, -(2**62)]
+            rows[k] = _energy_only_row(k, float(energy[j]), phase_s, width_s)
     return [tuple(rows[k]) for k in sorted(rows)]
 
 
@@ -194,10 +184,18 @@ def _interval_wh(t0: int, p0: float, t1: int, p1: float, phase_s: int, max_gap_s
     k0 = (t0 - phase_s) // width_s
     k1 = (t1 - 1 - phase_s) // width_s
     if k0 == k1:
-        return [(k0, 0.5 * (p0 + p1) * (t1 - t0) / 3600.0)]
+        return [(k0, trapezoid_wh(t0, p0, t1, p1, t0, t1))]
     b = (k0 + 1) * width_s + phase_s
-    pb = p0 + (p1 - p0) * ((b - t0) / (t1 - t0))
-    return [(k0, 0.5 * (p0 + pb) * (b - t0) / 3600.0), (k1, 0.5 * (pb + p1) * (t1 - b) / 3600.0)]
+    return [(k0, trapezoid_wh(t0, p0, t1, p1, t0, b)), (k1, trapezoid_wh(t0, p0, t1, p1, b, t1))]
+
+
+def _energy_only_row(k: int, energy_wh: float, phase_s: int, width_s: int
+                     ) -> list[float | int]:
+    """A rollup increment for a bucket whose energy changes but that gains no reading:
+    ``n = 0``, neutral sums and extremes, so merging it changes only the energy."""
+    inf = float("inf")
+    return [k * width_s + phase_s, 0, energy_wh, 0.0, 0.0, 0.0,
+            inf, inf, inf, -inf, -inf, -inf, 2**62, -(2**62)]
 
 
 def _increment_rows_small(
@@ -215,7 +213,6 @@ def _increment_rows_small(
     if prev is not None and nxt is not None:
         for k, e in _interval_wh(prev[0], prev[1], nxt[0], nxt[1], phase_s, max_gap_s, width_s):
             energy[k] = energy.get(k, 0.0) - e
-    inf = float("inf")
     rows: dict[int, list[float | int]] = {}
     for t, v, c, p in zip(ts, vs, cs, ps, strict=True):
         k = (t - phase_s) // width_s
@@ -235,8 +232,7 @@ def _increment_rows_small(
             continue
         r = rows.get(k)
         if r is None:
-            rows[k] = [k * width_s + phase_s, 0, e, 0.0, 0.0, 0.0,
-                       inf, inf, inf, -inf, -inf, -inf, 2**62, -(2**62)]
+            rows[k] = _energy_only_row(k, e, phase_s, width_s)
         else:
             r[2] = e
     return [tuple(rows[k]) for k in sorted(rows)]
@@ -259,8 +255,4 @@ def integrate_clipped_wh(
     pb = np.asarray(power_w[1:], np.float64)
     keep = ((b - a) <= max_gap_s) & (b > t0) & (a < t1)
     a, b, pa, pb = a[keep], b[keep], pa[keep], pb[keep]
-    lo = np.maximum(a, t0)
-    hi = np.minimum(b, t1)
-    p_lo = pa + (pb - pa) * (lo - a) / (b - a)
-    p_hi = pa + (pb - pa) * (hi - a) / (b - a)
-    return float(np.sum(0.5 * (p_lo + p_hi) * (hi - lo)) / 3600.0)
+    return float(np.sum(trapezoid_wh(a, pa, b, pb, np.maximum(a, t0), np.minimum(b, t1))))

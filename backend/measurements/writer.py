@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 from sqlalchemy import Connection, Engine
 
+from backend.measurements.buckets import ROLLUP_WIDTH_S
 from backend.measurements.rollups import (
     ROLLUP_COLUMNS,
     SeriesWindow,
@@ -385,7 +386,7 @@ class Writer:
         """Recompute the rollups of every bucket that new readings at ``ts_s`` can change."""
         phase = self.phase_of_array(array_id)
         gap = self.max_gap_s
-        width = 3600
+        width = ROLLUP_WIDTH_S
         out: list[tuple[Any, ...]] = []
         for k_first, k_last in affected_runs(ts_s, phase, gap):
             lo = k_first * width + phase - gap

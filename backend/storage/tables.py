@@ -34,8 +34,6 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 SOURCE_CODES: dict[str, int] = {"measured": 0, "twin": 1}
 SOURCE_NAMES: dict[int, str] = {v: k for k, v in SOURCE_CODES.items()}
 
-#: Width of one rollup bucket [s]; buckets start at ``k * ROLLUP_WIDTH_S + site phase``.
-ROLLUP_WIDTH_S = 3600
 
 
 def utcnow() -> dt.datetime:
