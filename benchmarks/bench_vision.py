@@ -221,6 +221,92 @@ def fit_confidence() -> dict[str, object]:
             "fitted_by": "benchmarks/bench_vision.py --fit-confidence (development split only)"}
 
 
+def reliability_table(recs: list[dict[str, object]]) -> list[str]:
+    """Markdown rows: confidence bin → fraction whose winning region is the sun, count."""
+    edges = [0.0, 0.1, 0.3, 0.5, 0.7, 0.9, 1.0001]
+    out = ["| confidence | frames | fraction correct | mean confidence |", "|---|---|---|---|"]
+    conf_v = np.array([float(r["confidence"]) for r in recs])  # type: ignore[arg-type]
+    ok = np.array([bool(r["cand_ok"]) for r in recs])
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        m = (conf_v >= lo) & (conf_v < hi)
+        if m.sum() == 0:
+            out.append(f"| {lo:.1f}–{min(hi, 1):.1f} | 0 | — | — |")
+            continue
+        out.append(f"| {lo:.1f}–{min(hi, 1):.1f} | {int(m.sum())} | {ok[m].mean():.2f} | "
+                   f"{conf_v[m].mean():.2f} |")
+    brier = float(np.mean((conf_v - ok) ** 2))
+    out.append(f"| all | {len(recs)} | {ok.mean():.2f} | {conf_v.mean():.2f} (Brier "
+               f"{brier:.3f}) |")
+    return out
+
+
+def summary(recs: list[dict[str, object]]) -> str:
+    """found / visible, wrong suns, RMS and worst error [°] (or [px] when no camera)."""
+    vis = [r for r in recs if r["visible"]]
+    inv = [r for r in recs if not r["visible"]]
+    found = [r for r in vis if r["found"]]
+    invented = sum(1 for r in inv if r["found"])
+    e = np.array([float(r["err_deg"]) for r in found])  # type: ignore[arg-type]
+    p = np.array([float(r["err_px"]) for r in found])  # type: ignore[arg-type]
+    txt = f"{len(found)}/{len(vis)} found"
+    if inv:
+        txt += f", {invented}/{len(inv)} no-sun frames given a sun"
+    if e.size and np.isfinite(e).all():
+        txt += f", {np.sqrt(np.mean(e**2)):.2f}° RMS (worst {e.max():.2f}°)"
+    if p.size and np.isfinite(p).all():
+        txt += f", median {np.median(p):.2f} px (worst {p.max():.1f} px)"
+    return txt
+
+
+def evaluation_report(quick: bool = False) -> list[str]:
+    """The generalisation tables of docs/validation-vision.md (development and held-out)."""
+    rows = real_rows()
+    cal = _dev_calibration(rows)
+    out: list[str] = []
+    recs_by: dict[tuple[str, str, bool], list[dict[str, object]]] = {}
+    for split in ("development", "heldout"):
+        frames = synthetic_set(split, quick)
+        for m in METHODS:
+            for eph in ((False, True) if m == "robust" else (False,)):
+                recs = evaluate_synthetic(frames, eph, m)
+                recs += real_records(rows, split, eph, cal, m)
+                recs_by[(split, m, eph)] = recs
+    groups = ["skyrender/clear", "skyrender/cirrus", "skyrender/cumulus", "skyrender/overcast",
+              "fisheye640/clear", "fisheye640/cirrus", "fisheye640/overcast", "synth/clear",
+              "synth/thin-cloud", "synth/overcast", "real/Wettermast", "real/FE3", "real/UCEEB"]
+    cols = [("robust", False), ("robust", True), ("seed000_hsv", False),
+            ("seed003_gray240", False)]
+    for split in ("development", "heldout"):
+        out += ["", f"**{split}** (every method given the same camera model; "
+                "`robust+eph` also the ephemeris prediction)", "",
+                "| set | robust | robust+eph | seed000_hsv | seed003_gray240 |",
+                "|---|---|---|---|---|"]
+        for g in groups:
+            cells = []
+            for m, eph in cols:
+                sel = [r for r in recs_by[(split, m, eph)] if r["source"] == g]
+                cells.append(summary(sel) if sel else "—")
+            n = len([r for r in recs_by[(split, "robust", False)] if r["source"] == g])
+            if n:
+                out.append(f"| {g} ({n}) | " + " | ".join(cells) + " |")
+    for split in ("development", "heldout"):
+        recs = recs_by[(split, "robust", False)] + recs_by[(split, "robust", True)]
+        out += ["", f"Reliability of `robust`'s confidence, {split} split (blind and "
+                "ephemeris runs pooled; correct = the winning region is the visible sun):", ""]
+        out += reliability_table(recs)
+    held_real = [r for r in recs_by[("heldout", "robust", False)]
+                 if str(r["source"]).startswith("real/")]
+    out += ["", "Held-out real frames, `robust` blind (distance to the hand label, "
+            "confidence, reason):", "", "| frame | found | distance | confidence | reason |",
+            "|---|---|---|---|---|"]
+    for r in held_real:
+        dist = f"{float(r['err_px']):.2f} px" if r["found"] and np.isfinite(
+            float(r["err_px"])) else "—"  # type: ignore[arg-type]
+        out.append(f"| {r['filename']} | {r['found']} | {dist} | {float(r['confidence']):.2f} | "  # type: ignore[arg-type]
+                   f"{r['reason'] or ''} |")
+    return out
+
+
 def _dev_calibration(rows: list[dict[str, object]]) -> FisheyeCamera | None:
     """Equidistant calibration from the blind detections on the development real frames."""
     dev = [r for r in rows if r["split"] == "development" and r["sun_row_label"]]
@@ -450,6 +536,10 @@ def main() -> int:
 
 
 if __name__ == "__main__":
+    if "--evaluate" in sys.argv:
+        cv2.setNumThreads(2)
+        print("\n".join(evaluation_report(quick="--quick" in sys.argv)))
+        sys.exit(0)
     if "--fit-confidence" in sys.argv:
         import json
 
