@@ -9,6 +9,16 @@ the current, voltage and power at the maximum power point (CEC single-diode,
 :mod:`sim.pv`). Energies are left Riemann sums of the power samples (each
 sample stands for one step).
 
+Controllers other than ``"ideal"`` (:mod:`sim.control`) run in
+:func:`sim.tracking.run_loop` on a tick grid (1 s for the camera loop, the
+step or 60 s otherwise): their joint commands go through the motors'
+profiles and the disturbances (:mod:`sim.disturbances`), and the tracker's
+power comes from the *actual* panel normal. The pointing error is the angle
+between that normal and the apparent sun; the pointing loss is the energy an
+ideal tracker makes minus the actual one (same PV model), or, with
+``receiver="cpv"``, a concentrator that converts only the beam inside its
+acceptance angle.
+
 Speed: the sun is computed once for both arrays; the irradiance and electrics
 only for steps with the sun above the horizon; the single-diode model goes
 through :class:`sim.pv.MppTable`. Work is done in chunks so that a
@@ -17,18 +27,25 @@ through :class:`sim.pv.MppTable`. Work is done in chunks so that a
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from sim import disturbances as dist
 from sim import kinematics, pv, sky, sun
+from sim.control import CONTROLLERS, ControlSettings, make_controller, noon_reference_azimuth
 from sim.sites import Site
+from sim.tracking import CameraSetup, DriveLimits, LoopState, move_energies_wh, run_loop
+from vision.sphere import angular_separation_deg, enu_from_sky, sky_from_enu
 
-CONTROLLERS = ("ideal",)
-"""Controllers :func:`simulate` knows (others come with the controller issue)."""
+__all__ = ["CONTROLLERS", "RECEIVERS", "SERIES_COLUMNS", "TwinResult", "simulate"]
+
+RECEIVERS = ("flat", "cpv")
+"""Receivers: flat PV modules, or a concentrator (beam inside the acceptance angle only)."""
 
 SERIES_COLUMNS = [
     "solar_azimuth",
@@ -47,6 +64,9 @@ SERIES_COLUMNS = [
     "fixed_current_a",
     "fixed_voltage_v",
     "fixed_power_w",
+    "azimuth_command_deg",
+    "elevation_command_deg",
+    "pointing_error_mrad",
 ]
 
 _CHUNK_STEPS = 1 << 16  # ~45 days at 1 min: bounded memory and progress granularity
@@ -68,6 +88,18 @@ class TwinResult:
     controller: str
     sky: str
     series: pd.DataFrame
+    receiver: str = "flat"
+    acceptance_angle_deg: float = 0.5
+    spot_distance_m: float = 1.5
+    disturbances: dist.Disturbances = field(default_factory=dist.Disturbances)
+    ideal_tracker_energy_wh: float | None = None
+    moves: int = 0
+    actuator_move_energy_wh: float = 0.0
+    actuator_standby_energy_wh: float = 0.0
+    camera_frames: int = 0
+    camera_frames_found: int = 0
+    normal_azimuth: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    normal_elevation: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def energy_wh(self, array: str) -> float:
         """Energy of ``array`` (``"tracker"``/``"fixed"``) over the run [Wh]."""
@@ -101,7 +133,64 @@ class TwinResult:
         out["fixed_modules"] = self.site.arrays["fixed"].modules
         out["wiring"] = {k: a.wiring for k, a in self.site.arrays.items()}
         out["timezone"] = self.site.timezone
+        out.update(self._pointing_summary(tracker_wh, fixed_wh))
         return out
+
+    def _pointing_summary(self, tracker_wh: float, fixed_wh: float) -> dict[str, Any]:
+        """Pointing statistics (IEC 62817-style, over the daylight steps), actuators, losses."""
+        s = self.series
+        day = s["apparent_elevation"].to_numpy() > 0
+        err = s["pointing_error_mrad"].to_numpy()[day]
+        az_err, el_err = _error_components_mrad(s, self.normal_azimuth, self.normal_elevation)
+        az_err, el_err = az_err[day], el_err[day]
+
+        def rms(x: np.ndarray) -> float | None:
+            return float(np.sqrt(np.mean(x**2))) if x.size else None
+
+        actuator_wh = self.actuator_move_energy_wh + self.actuator_standby_energy_wh
+        ideal_wh = tracker_wh if self.ideal_tracker_energy_wh is None else (
+            self.ideal_tracker_energy_wh)
+        f = self.spot_distance_m
+        spot_x = f * np.tan(az_err / 1000.0)
+        spot_y = f * np.tan(el_err / 1000.0)
+        return {
+            "daylight_steps": int(day.sum()),
+            "pointing_error_rms_mrad": rms(err),
+            "pointing_error_p95_mrad": float(np.percentile(err, 95)) if err.size else None,
+            "pointing_error_max_mrad": float(err.max()) if err.size else None,
+            "azimuth_error_rms_mrad": rms(az_err),
+            "elevation_error_rms_mrad": rms(el_err),
+            "moves": int(self.moves),
+            "actuator_energy_wh": actuator_wh,
+            "actuator_move_energy_wh": self.actuator_move_energy_wh,
+            "actuator_standby_energy_wh": self.actuator_standby_energy_wh,
+            "net_gain_pct": (
+                100.0 * ((tracker_wh - actuator_wh) / fixed_wh - 1.0) if fixed_wh > 0 else None
+            ),
+            "pointing_loss_wh": ideal_wh - tracker_wh,
+            "receiver": self.receiver,
+            "acceptance_angle_deg": self.acceptance_angle_deg if self.receiver == "cpv" else None,
+            "spot_distance_m": f,
+            "spot_displacement_rms_m": rms(np.hypot(spot_x, spot_y)),
+            "spot_x_rms_m": rms(spot_x),
+            "spot_y_rms_m": rms(spot_y),
+            "camera_frames": int(self.camera_frames),
+            "camera_frames_found": int(self.camera_frames_found),
+            "disturbances": self.disturbances.to_dict(),
+        }
+
+
+def _error_components_mrad(
+    s: pd.DataFrame, n_az: np.ndarray, n_el: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pointing error split on the sky: across (azimuth, × cos elevation) and along
+    (elevation) [mrad], normal minus sun."""
+    sun_az = s["solar_azimuth"].to_numpy()
+    sun_el = s["apparent_elevation"].to_numpy()
+    d_az = (n_az - sun_az + 180.0) % 360.0 - 180.0
+    az = np.radians(d_az) * np.cos(np.radians(sun_el)) * 1000.0
+    el = np.radians(n_el - sun_el) * 1000.0
+    return az, el
 
 
 def _as_timestamp(value: Any) -> Any:
@@ -167,29 +256,32 @@ def _weather_on(
 
 
 def _noon_reference_azimuth(times: pd.DatetimeIndex, site: Site) -> np.ndarray:
-    """Azimuth joint reference for a continuous daily sweep [°].
+    """Azimuth joint reference for a continuous daily sweep [°] (see
+    :func:`sim.control.noon_reference_azimuth`)."""
+    return noon_reference_azimuth(times, site)
 
-    On days when the noon sun is north of the zenith the sweep east→north→west
-    is kept continuous around 0°, otherwise east→south→west around 180°. The
-    side is read from the SPA sun at each local solar day's noon (12:00 mean
-    solar time corrected by the equation of time, seed 001's D&B step), so it
-    is exact even on the days the sun passes within a degree of the zenith.
-    """
-    shift = pd.Timedelta(hours=site.longitude / 15.0)
-    solar_days = (times + shift).normalize()
-    days, inverse = np.unique(solar_days.asi8, return_inverse=True)
-    day_index = pd.DatetimeIndex(days.astype(f"datetime64[{solar_days.unit}]")).tz_localize("UTC")
-    eot_min = sun.equation_of_time_spencer(np.asarray(day_index.day_of_year, dtype=float))
-    noon = day_index + pd.Timedelta(hours=12) - shift - pd.to_timedelta(eot_min, unit="min")
-    noon_azimuth = sun.solar_position(noon, site.latitude, site.longitude)["azimuth"].to_numpy()
-    side = np.where(np.cos(np.deg2rad(noon_azimuth)) > 0, 0.0, 180.0)
-    return side[inverse.ravel()]
+
+def _beam_transmission(aoi: np.ndarray, acceptance_angle_deg: float) -> np.ndarray:
+    """CPV receiver: the beam is converted inside the acceptance half-angle, lost outside."""
+    return np.where(aoi <= acceptance_angle_deg, 1.0, 0.0)
 
 
 def _arrays_step(
-    site: Site, times: pd.DatetimeIndex, pos: pd.DataFrame, weather: dict[str, np.ndarray] | None
+    site: Site,
+    times: pd.DatetimeIndex,
+    pos: pd.DataFrame,
+    weather: dict[str, np.ndarray] | None,
+    pose: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    receiver: str = "flat",
+    acceptance_angle_deg: float = 0.5,
 ) -> dict[str, np.ndarray]:
-    """All series columns for one chunk of steps."""
+    """All series columns for one chunk of steps.
+
+    ``pose`` = (azimuth joint, elevation joint [°], actual normal ENU) of a
+    controlled tracker; None: ideal tracking (:func:`sim.kinematics.tracking_angles`).
+    The extra key ``ideal_tracker_power_w`` is the ideal tracker's power when
+    a pose or the CPV receiver is given.
+    """
     from pvlib import atmosphere
 
     n = len(times)
@@ -200,21 +292,29 @@ def _arrays_step(
     out["solar_azimuth"] = azimuth
     out["apparent_elevation"] = app_el
 
-    az_joint, el_joint = kinematics.tracking_angles(
+    az_ideal, el_ideal = kinematics.tracking_angles(
         azimuth,
         app_el,
         site.tracker,
         reference_azimuth=_noon_reference_azimuth(times, site),
     )
+    ideal_normal = kinematics.forward_kinematics(az_ideal, el_ideal, site.tracker)
+    if pose is None:
+        az_joint, el_joint, normal = az_ideal, el_ideal, ideal_normal
+    else:
+        az_joint, el_joint, normal = pose
     out["azimuth_joint_deg"], out["elevation_joint_deg"] = az_joint, el_joint
-    tilt, surf_az = kinematics.normal_to_tilt_azimuth(
-        kinematics.forward_kinematics(az_joint, el_joint, site.tracker)
-    )
+    tilt, surf_az = kinematics.normal_to_tilt_azimuth(normal)
     fixed = site.arrays["fixed"]
     out["tracker_aoi"] = sky.angle_of_incidence(tilt, surf_az, app_zen, azimuth)
     out["fixed_aoi"] = sky.angle_of_incidence(
         fixed.surface_tilt, fixed.surface_azimuth, app_zen, azimuth
     )
+    n_az, n_el = sky_from_enu(normal)
+    out["pointing_error_mrad"] = 1000.0 * np.radians(
+        angular_separation_deg(n_az, n_el, azimuth, app_el)
+    )
+    out["normal_azimuth"], out["normal_elevation"] = n_az, n_el
 
     if weather is None:
         temp_air = np.full(n, site.temp_air)
@@ -223,6 +323,9 @@ def _arrays_step(
         temp_air, wind = weather["temp_air"], weather["wind_speed"]
     out["tracker_temp_cell"] = temp_air.copy()
     out["fixed_temp_cell"] = temp_air.copy()
+    want_ideal = pose is not None or receiver == "cpv"
+    if want_ideal:
+        out["ideal_tracker_power_w"] = np.zeros(n)
 
     day = app_el > 0
     if not np.any(day):
@@ -239,36 +342,58 @@ def _arrays_step(
             atmosphere.get_relative_airmass(app_zen[day], "kastenyoung1989"), dtype=float
         )
     orientation = {
-        "tracker": (tilt[day], surf_az[day]),
-        "fixed": (fixed.surface_tilt, fixed.surface_azimuth),
+        "tracker": (tilt[day], surf_az[day], out["tracker_aoi"][day]),
+        "fixed": (fixed.surface_tilt, fixed.surface_azimuth, out["fixed_aoi"][day]),
     }
-    for name, (s_tilt, s_az) in orientation.items():
-        arr = site.arrays[name]
-        poa = sky.poa_irradiance(
-            s_tilt,
-            s_az,
-            app_zen[day],
-            azimuth[day],
-            irr["dni"],
-            irr["ghi"],
-            irr["dhi"],
-            irr["dni_extra"],
-            irr["airmass_relative"],
-            albedo=arr.albedo,
-            model=site.transposition_model,
-        )
-        t_cell = pv.cell_temperature(
-            poa["poa_global"], temp_air[day], wind[day], arr.temperature_model
-        )
-        e_eff = sky.effective_irradiance(
-            poa["poa_direct"], poa["poa_diffuse"], out[f"{name}_aoi"][day]
-        )
+    if want_ideal:
+        i_tilt, i_az = kinematics.normal_to_tilt_azimuth(ideal_normal[day])
+        i_aoi = sky.angle_of_incidence(i_tilt, i_az, app_zen[day], azimuth[day])
+        orientation["ideal_tracker"] = (i_tilt, i_az, i_aoi)
+    for name, (s_tilt, s_az, aoi) in orientation.items():
+        arr = site.arrays["tracker" if name == "ideal_tracker" else name]
+        if name != "fixed" and receiver == "cpv":
+            # a concentrator converts the beam inside its acceptance angle only
+            beam = irr["dni"] * _beam_transmission(aoi, acceptance_angle_deg)
+            poa_global, e_eff = beam, beam
+        else:
+            poa = sky.poa_irradiance(
+                s_tilt,
+                s_az,
+                app_zen[day],
+                azimuth[day],
+                irr["dni"],
+                irr["ghi"],
+                irr["dhi"],
+                irr["dni_extra"],
+                irr["airmass_relative"],
+                albedo=arr.albedo,
+                model=site.transposition_model,
+            )
+            poa_global = poa["poa_global"]
+            e_eff = sky.effective_irradiance(poa["poa_direct"], poa["poa_diffuse"], aoi)
+        t_cell = pv.cell_temperature(poa_global, temp_air[day], wind[day], arr.temperature_model)
         mpp = pv.array_mpp(e_eff, t_cell, arr)
-        out[f"{name}_poa_global"][day] = poa["poa_global"]
+        if name == "ideal_tracker":
+            out["ideal_tracker_power_w"][day] = mpp["power_w"]
+            continue
+        out[f"{name}_poa_global"][day] = poa_global
         out[f"{name}_temp_cell"][day] = t_cell
         for q in ("current_a", "voltage_v", "power_w"):
             out[f"{name}_{q}"][day] = mpp[q]
     return out
+
+
+def _tick_s(controller: str, step_s: float, settings: ControlSettings) -> float:
+    """The control loop's tick [s]: the camera interval for the camera loops (at most 60 s),
+    else 60 s, never longer than the step, and dividing it."""
+    if controller == "closed_loop_camera":
+        want = settings.camera_interval_s or 1.0
+    elif controller == "hybrid":
+        want = min(60.0, settings.camera_interval_s or 60.0)
+    else:
+        want = 60.0
+    want = min(want, step_s)
+    return step_s / math.ceil(step_s / want - 1e-9)
 
 
 def simulate(
@@ -279,6 +404,13 @@ def simulate(
     controller: str = "ideal",
     weather: pd.DataFrame | None = None,
     progress: Callable[[float], None] | None = None,
+    disturbances: dist.Disturbances | None = None,
+    receiver: str = "flat",
+    acceptance_angle_deg: float = 0.5,
+    settings: ControlSettings | None = None,
+    limits: DriveLimits | None = None,
+    camera: CameraSetup | None = None,
+    spot_distance_m: float = 1.5,
 ) -> TwinResult:
     """Run the tracker and the fixed array side by side.
 
@@ -290,9 +422,12 @@ def simulate(
         Timezone-aware; ``start`` inclusive, ``end`` exclusive.
     step_s : float
         Step [s] (default 60).
-    controller : {"ideal"}
-        Ideal tracking: the panel normal on the apparent sun within the
-        joint limits and a flat night stow (:func:`sim.kinematics.tracking_angles`).
+    controller : str
+        One of :data:`CONTROLLERS` (:mod:`sim.control`). ``"ideal"``: the
+        panel normal on the apparent sun within the joint limits and a flat
+        night stow (:func:`sim.kinematics.tracking_angles`), no motors, and no
+        disturbance reaches it. The others run their control loop with the
+        motors and ``disturbances``.
     weather : pandas.DataFrame, optional
         Tz-aware index; ``ghi``, ``dni``, ``dhi`` [W m⁻²], optional
         ``temp_air`` [°C] and ``wind_speed`` [m s⁻¹]; interpolated linearly onto
@@ -300,6 +435,21 @@ def simulate(
         temperature and wind speed.
     progress : callable, optional
         Called with the fraction done (0…1) after each chunk.
+    disturbances : Disturbances, optional
+        Installation and machine errors (:mod:`sim.disturbances`); default none.
+    receiver : {"flat", "cpv"}
+        Flat PV modules (the site's), or a concentrator with the same
+        electrics that converts only the beam (DNI) within
+        ``acceptance_angle_deg`` of its axis [°].
+    settings : ControlSettings, optional
+        Dead band, stow, PID and camera-loop parameters.
+    limits : DriveLimits, optional
+        Axis speed and acceleration limits.
+    camera : CameraSetup, optional
+        The tracker camera, exposure and clouds for the camera loops.
+    spot_distance_m : float
+        Distance from the optics to the receiver for the spot displacement
+        ``f tan θ`` [m] (seed 001: the Fresnel concentrator's focal distance, 1.5 m).
 
     Returns
     -------
@@ -307,30 +457,83 @@ def simulate(
     """
     start, end = _as_timestamp(start), _as_timestamp(end)
     _check_inputs(site, start, end, step_s, controller)
+    if receiver not in RECEIVERS:
+        raise ValueError(f"receiver must be one of {', '.join(RECEIVERS)}; got {receiver!r}")
+    if not 0 < acceptance_angle_deg < 90:
+        raise ValueError(f"acceptance_angle_deg must be in (0, 90), got {acceptance_angle_deg}")
+    if not spot_distance_m > 0:
+        raise ValueError(f"spot_distance_m must be > 0, got {spot_distance_m}")
+    d = disturbances if disturbances is not None else dist.Disturbances()
+    settings = settings or ControlSettings()
+    limits = limits or DriveLimits()
+    camera = camera or CameraSetup()
     from pvlib import atmosphere
 
     start_utc, end_utc = start.tz_convert("UTC"), end.tz_convert("UTC")
     times = pd.date_range(start_utc, end_utc, freq=pd.Timedelta(seconds=step_s), inclusive="left")
     weather_on = None if weather is None else _weather_on(times, weather, site)
     pressure = float(atmosphere.alt2pres(site.altitude))
+    ctl = None
+    if controller != "ideal":
+        ctl = make_controller(controller, site, settings, clock_offset_s=d.clock_offset_s)
+        tick_s = _tick_s(controller, float(step_s), settings)
+        every = int(round(step_s / tick_s))
+    state: LoopState | None = None
+    moves: list = []
     # one (column, step) block, filled chunk by chunk and handed to pandas without a copy
     block = np.empty((len(SERIES_COLUMNS), len(times)))
-    for i0 in range(0, len(times), _CHUNK_STEPS):
-        chunk = times[i0 : i0 + _CHUNK_STEPS]
+    extra = {k: np.zeros(len(times)) for k in ("ideal_tracker_power_w", "normal_azimuth",
+                                              "normal_elevation")}
+    chunk_steps = _CHUNK_STEPS if ctl is None else max(1, min(_CHUNK_STEPS, (1 << 17) // every))
+    for i0 in range(0, len(times), chunk_steps):
+        chunk = times[i0 : i0 + chunk_steps]
         pos = sun.solar_position(
             chunk, site.latitude, site.longitude, site.altitude, pressure, site.temp_air
         )
         w = (
             None
             if weather_on is None
-            else {k: v[i0 : i0 + _CHUNK_STEPS] for k, v in weather_on.items()}
+            else {k: v[i0 : i0 + chunk_steps] for k, v in weather_on.items()}
         )
-        part = _arrays_step(site, chunk, pos, w)
+        pose = None
+        if ctl is not None:
+            ticks = pd.date_range(chunk[0], periods=len(chunk) * every,
+                                  freq=pd.Timedelta(seconds=tick_s))
+            if every == 1:
+                t_pos = pos
+            else:
+                t_pos = sun.solar_position(ticks, site.latitude, site.longitude, site.altitude,
+                                           pressure, site.temp_air)
+            sun_enu = enu_from_sky(t_pos["azimuth"].to_numpy(),
+                                   t_pos["apparent_elevation"].to_numpy())
+            t0_s = (chunk[0] - times[0]).total_seconds()
+            res, state = run_loop(ctl, ticks, t0_s, tick_s, every, sun_enu, d, limits, camera,
+                                  state)
+            moves.extend(res.moves)
+            normal = dist.normal_enu(res.azimuth_joint_deg, res.elevation_joint_deg, d)
+            pose = (res.azimuth_joint_deg, res.elevation_joint_deg, normal)
+        part = _arrays_step(site, chunk, pos, w, pose, receiver, acceptance_angle_deg)
+        if ctl is not None:
+            part["azimuth_command_deg"] = res.azimuth_command_deg
+            part["elevation_command_deg"] = res.elevation_command_deg
+        else:
+            part["azimuth_command_deg"] = part["azimuth_joint_deg"]
+            part["elevation_command_deg"] = part["elevation_joint_deg"]
         for k, c in enumerate(SERIES_COLUMNS):
             block[k, i0 : i0 + len(chunk)] = part[c]
+        for name, arr in extra.items():
+            if name in part:
+                arr[i0 : i0 + len(chunk)] = part[name]
         if progress is not None:
             progress(min(1.0, (i0 + len(chunk)) / len(times)))
     series = pd.DataFrame(block.T, index=times, columns=SERIES_COLUMNS, copy=False)
+    move_wh = standby_wh = 0.0
+    if ctl is not None:
+        _, move_wh = move_energies_wh(moves, limits)
+        standby_wh = _standby_energy_wh(len(times) * float(step_s))
+    ideal_wh = None
+    if ctl is not None or receiver == "cpv":
+        ideal_wh = float(extra["ideal_tracker_power_w"].sum() * step_s / 3600.0)
     return TwinResult(
         site=site,
         start=start,
@@ -339,4 +542,25 @@ def simulate(
         controller=controller,
         sky="clearsky-ineichen" if weather is None else "weather",
         series=series,
+        receiver=receiver,
+        acceptance_angle_deg=float(acceptance_angle_deg),
+        spot_distance_m=float(spot_distance_m),
+        disturbances=d,
+        ideal_tracker_energy_wh=ideal_wh,
+        moves=len(moves),
+        actuator_move_energy_wh=move_wh,
+        actuator_standby_energy_wh=standby_wh,
+        camera_frames=0 if state is None else state.frames,
+        camera_frames_found=0 if state is None else state.frames_found,
+        normal_azimuth=extra["normal_azimuth"],
+        normal_elevation=extra["normal_elevation"],
     )
+
+
+def _standby_energy_wh(duration_s: float) -> float:
+    """Both drives' standby electronics over the run [Wh] (``AxisDrive.standby_power_w``)."""
+    from sim import motors
+
+    p = (motors.AxisDrive.azimuth_default().standby_power_w
+         + motors.AxisDrive.elevation_default().standby_power_w)
+    return float(p) * duration_s / 3600.0

@@ -1,0 +1,413 @@
+"""The world side of a control loop: the tracker's axes, its camera and its disturbances.
+
+:func:`run_loop` steps a :class:`sim.control.Controller` through the ticks of
+a run. At each tick the *true* pose (the motor-side angles, the gear backlash,
+the pedestal's rotation) gives the panel normal; the controller gets only the
+encoder readings (with their drift) and, when it asked for one, a camera frame
+rendered from the true pose (:func:`sim.frames.render_sun_roi`) and detected by
+:func:`vision.detect.detect_sun`. A command moves an idle axis along a speed-
+and acceleration-limited profile (the trapezoid of
+:func:`sim.dynamics.move_profile`); while it moves, later commands to that
+axis wait. Nights are skipped in one step once the tracker is stowed.
+
+Each move is logged (:class:`Move`); :func:`move_energies_wh` costs them
+afterwards in one vectorised pass: the profile's rates and accelerations
+through the inverse dynamics (seed 002, eq. 24, :func:`sim.dynamics.inverse_dynamics`)
+plus the gust torque give the output torque, and :func:`sim.motors.electrical_power_w`
+the power drawn, integrated over the move's samples only — the dynamics are
+evaluated only while an axis moves. The servo is taken to follow its profile
+(torque = inverse dynamics), so no forward integration is needed for the
+energy; the axis not moving is held by its self-locking gear at no power.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from sim import disturbances as dist
+from sim.control import CameraMeasurement, Controller, Reading
+from sim.frames import CloudField, pointing_error_deg, render_sun_roi
+from vision.cameras import PinholeCamera
+
+__all__ = ["DriveLimits", "CameraSetup", "Move", "LoopResult", "LoopState", "run_loop",
+           "move_energies_wh", "trapezoid_duration_s"]
+
+
+@dataclass(frozen=True)
+class DriveLimits:
+    """Speed and acceleration limits of the two axes (output side).
+
+    Defaults: 0.05 rad s⁻¹ (2.86° s⁻¹) and 0.1 rad s⁻² (5.73° s⁻²) on both
+    axes, the slew limits :func:`sim.motors.tracking_motion_energy` assumes
+    (no seed gives them; the drives' own limit is 0.2 rad s⁻¹,
+    ``AxisDrive.max_output_speed_rad_s``).
+    """
+
+    azimuth_rate_deg_s: float = math.degrees(0.05)
+    azimuth_accel_deg_s2: float = math.degrees(0.1)
+    elevation_rate_deg_s: float = math.degrees(0.05)
+    elevation_accel_deg_s2: float = math.degrees(0.1)
+
+    def __post_init__(self) -> None:
+        for k, v in self.__dict__.items():
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"DriveLimits.{k} must be a positive number, got {v}")
+
+    def axis(self, k: int) -> tuple[float, float]:
+        """(rate [° s⁻¹], acceleration [° s⁻²]) of axis ``k`` (0 azimuth, 1 elevation)."""
+        if k == 0:
+            return self.azimuth_rate_deg_s, self.azimuth_accel_deg_s2
+        return self.elevation_rate_deg_s, self.elevation_accel_deg_s2
+
+
+@dataclass(frozen=True)
+class CameraSetup:
+    """The tracker camera and its sky, for the camera loops.
+
+    ``camera`` is seed 000's narrow camera (640 × 480, 67°) by default;
+    ``glare_deg``, ``sky_level`` and ``noise_dn`` as :func:`vision.synth.tracker_frame`;
+    ``clouds`` optional drifting clouds; ``roi_half_px`` half the rendered ROI.
+    """
+
+    camera: PinholeCamera = field(default_factory=PinholeCamera)
+    roi_half_px: int = 24
+    glare_deg: float = 0.8
+    sky_level: float = 0.35
+    noise_dn: float = 2.0
+    clouds: CloudField | None = None
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Move:
+    """One axis move: ``axis`` 0 azimuth / 1 elevation, start time since the run's start [s],
+    signed displacement and start angle [°], the elevation joint at the start [°], the gust
+    torque on the axis [N m]."""
+
+    axis: int
+    t0_s: float
+    delta_deg: float
+    start_deg: float
+    elevation_deg: float
+    gust_nm: float
+
+
+def trapezoid_duration_s(delta_deg: float, rate: float, accel: float) -> float:
+    """Duration of a trapezoidal move [s] (as :func:`sim.dynamics.move_profile`)."""
+    d = abs(delta_deg)
+    v = min(rate, math.sqrt(d * accel))
+    if v == 0.0:
+        return 0.0
+    ta = v / accel
+    return 2.0 * ta + (d / v - ta)
+
+
+def _trapezoid_position(delta_deg: float, rate: float, accel: float, tt: float) -> float:
+    """Displacement after ``tt`` seconds of a trapezoidal move [°]."""
+    d = abs(delta_deg)
+    v = min(rate, math.sqrt(d * accel))
+    if v == 0.0:
+        return 0.0
+    ta = v / accel
+    tc = d / v - ta
+    tt = min(max(tt, 0.0), 2 * ta + tc)
+    if tt < ta:
+        q = 0.5 * accel * tt * tt
+    elif tt <= ta + tc:
+        q = 0.5 * accel * ta * ta + v * (tt - ta)
+    else:
+        t3 = tt - ta - tc
+        q = 0.5 * accel * ta * ta + v * tc + v * t3 - 0.5 * accel * t3 * t3
+    return math.copysign(min(q, d), delta_deg)
+
+
+class _Axis:
+    """Motor-side angle, the gear flank in contact, and the move under way."""
+
+    def __init__(self, angle_deg: float, rate: float, accel: float) -> None:
+        self.motor = angle_deg
+        self.rate, self.accel = rate, accel
+        self.side = 1.0
+        self.t0 = 0.0
+        self.delta = 0.0
+        self.t_end = -math.inf
+
+    def moving(self, t: float) -> bool:
+        return t < self.t_end
+
+    def settle(self, t: float) -> None:
+        if self.delta != 0.0 and t >= self.t_end:
+            self.motor += self.delta
+            self.delta = 0.0
+
+    def position(self, t: float) -> float:
+        if self.delta == 0.0:
+            return self.motor
+        return self.motor + _trapezoid_position(self.delta, self.rate, self.accel, t - self.t0)
+
+    def start(self, t: float, delta: float) -> None:
+        self.t0, self.delta = t, delta
+        self.t_end = t + trapezoid_duration_s(delta, self.rate, self.accel)
+        self.side = 1.0 if delta > 0 else -1.0
+
+
+@dataclass
+class LoopState:
+    """What carries over from one chunk of ticks to the next."""
+
+    axes: list[_Axis]
+    last_frame_s: float = -math.inf
+    rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
+    frames: int = 0
+    frames_found: int = 0
+
+
+@dataclass
+class LoopResult:
+    """Per-sample arrays of one chunk [°]: commands, true output-side joint angles (base
+    frame), the true panel normal (ENU); and the moves started in the chunk."""
+
+    azimuth_command_deg: NDArray[np.float64]
+    elevation_command_deg: NDArray[np.float64]
+    azimuth_joint_deg: NDArray[np.float64]
+    elevation_joint_deg: NDArray[np.float64]
+    moves: list[Move]
+
+
+def _detector(name: str):  # type: ignore[no-untyped-def]
+    from vision.detect import detect_robust, detect_seed000, detect_seed003
+
+    if name == "robust":
+        return lambda img: detect_robust(img, auto_fov=False)
+    if name == "seed003_gray240":
+        return detect_seed003
+    if name == "seed000_hsv":
+        return detect_seed000
+    raise ValueError(f"unknown detector {name!r}")
+
+
+def run_loop(
+    controller: Controller,
+    ticks: pd.DatetimeIndex,
+    t0_s: float,
+    tick_s: float,
+    sample_every: int,
+    sun_enu: NDArray[np.float64],
+    d: dist.Disturbances,
+    limits: DriveLimits,
+    camera: CameraSetup,
+    state: LoopState | None,
+) -> tuple[LoopResult, LoopState]:
+    """Run ``controller`` over one chunk of ``ticks`` (UTC, uniform ``tick_s``).
+
+    Parameters
+    ----------
+    ticks : pandas.DatetimeIndex
+        The chunk's tick times; ``t0_s`` is the first one's time since the run's start.
+    sample_every : int
+        Samples are taken at every ``sample_every``-th tick of the chunk,
+        starting with its first (the chunk must start on a sample), before the
+        controller acts at that tick.
+    sun_enu : ndarray, shape (n_ticks, 3)
+        True (apparent) sun direction at the ticks, ENU.
+    state : LoopState, optional
+        From the previous chunk; None to start with the tracker stowed.
+
+    Returns
+    -------
+    (LoopResult, LoopState)
+    """
+    from sim import dynamics
+
+    n = len(ticks)
+    controller.plan(ticks, tick_s)
+    g = controller.site.tracker
+    if state is None:
+        az0 = float(controller.eph["now_azimuth_deg"][0])
+        state = LoopState(axes=[_Axis(az0, *limits.axis(0)), _Axis(g.elevation_max_deg,
+                                                                     *limits.axis(1))],
+                          rng=np.random.default_rng(camera.seed))
+        controller.stowed = True
+    ax_az, ax_el = state.axes
+    t_s = t0_s + tick_s * np.arange(n)
+    gust = dist.gust_torque_nm(t_s, d)
+    inertia = dynamics.TrackerInertia.seed002()
+    n_samples = (n + sample_every - 1) // sample_every
+    out = {k: np.empty(n_samples) for k in ("az_cmd", "el_cmd", "az", "el")}
+    moves: list[Move] = []
+    night = np.asarray(controller.eph["night"], dtype=bool)
+    # index of the next daylight tick from each tick (n when none): skips whole nights
+    day_idx = np.flatnonzero(~night)
+    next_day = np.searchsorted(day_idx, np.arange(n))
+    if day_idx.size:
+        next_day = np.where(next_day < len(day_idx),
+                            day_idx[np.minimum(next_day, len(day_idx) - 1)], n)
+    else:
+        next_day = np.full(n, n)
+    half_b = 0.5 * d.backlash_deg
+    enc_rate = float(dist.encoder_error_deg(1.0, d))
+    detect = None
+    if controller.camera_interval_s and controller.detector:
+        detect = _detector(controller.detector)
+    cam = camera.camera
+    interval = controller.camera_interval_s or math.inf
+
+    def output(t: float, i: int) -> tuple[float, float]:
+        """True output-side joint angles (motor angle minus the backlash offset)."""
+        a, e = ax_az.position(t), ax_el.position(t)
+        if half_b:
+            side_az = ax_az.side
+            if gust[i, 0] != 0.0 and not ax_az.moving(t):
+                side_az = -math.copysign(1.0, gust[i, 0])
+            side_el = ax_el.side
+            if not ax_el.moving(t):  # held: the flank the load presses (gravity minus gust)
+                hold = float(dynamics.gravity(math.radians(e), inertia)[1]) - gust[i, 1]
+                side_el = 1.0 if hold >= 0 else -1.0
+            a -= side_az * half_b
+            e -= side_el * half_b
+        return a, e
+
+    i = 0
+    while i < n:
+        t = float(t_s[i])
+        ax_az.settle(t)
+        ax_el.settle(t)
+        idle = not (ax_az.moving(t) or ax_el.moving(t))
+        if night[i] and controller.stowed and idle:
+            j = int(next_day[i])  # the pose holds until the next daylight tick
+            a, e = output(t, i)
+            k0, k1 = -(-i // sample_every), -(-j // sample_every)
+            out["az"][k0:k1], out["el"][k0:k1] = a, e
+            out["az_cmd"][k0:k1], out["el_cmd"][k0:k1] = controller.command_deg
+            i = j
+            continue
+        if i % sample_every == 0:
+            k = i // sample_every
+            out["az"][k], out["el"][k] = output(t, i)
+            out["az_cmd"][k], out["el_cmd"][k] = controller.command_deg
+        enc = enc_rate * t
+        reading = Reading(t, ax_az.position(t) + enc, ax_el.position(t) + enc,
+                          ax_az.moving(t), ax_el.moving(t))
+        meas = None
+        if detect is not None and not night[i] and t - state.last_frame_s >= interval - 1e-6:
+            state.last_frame_s = t
+            meas = _frame(output(t, i), sun_enu[i], d, camera, cam, detect, state, t)
+        cmd = controller.command(i, reading, meas)
+        for k_ax, ax, c, r in ((0, ax_az, cmd[0], reading.azimuth_deg),
+                               (1, ax_el, cmd[1], reading.elevation_deg)):
+            delta = c - r
+            if not ax.moving(t) and abs(delta) > 1e-9 and math.isfinite(delta):
+                moves.append(Move(k_ax, t, delta, ax.motor, ax_el.motor, float(gust[i, k_ax])))
+                ax.start(t, delta)
+        i += 1
+    res = LoopResult(out["az_cmd"], out["el_cmd"], out["az"], out["el"], moves)
+    return res, state
+
+
+def _frame(pose: tuple[float, float], sun_enu: NDArray[np.float64], d: dist.Disturbances,
+           setup: CameraSetup, cam: PinholeCamera, detect,  # type: ignore[no-untyped-def]
+           state: LoopState, t: float) -> CameraMeasurement:
+    """Render the ROI seen from ``pose``, detect the sun, return its angles from the
+    reference pixel."""
+    if sun_enu[2] <= 0.0:  # the sun below the horizon: the Earth hides it
+        state.frames += 1
+        return CameraMeasurement.none()
+    m = dist.camera_axes(pose[0], pose[1], d)
+    roi = render_sun_roi(m @ sun_enu, cam, setup.roi_half_px, setup.glare_deg, setup.sky_level,
+                         setup.clouds, t, noise_dn=setup.noise_dn, rng=state.rng)
+    state.frames += 1
+    if not roi.sun_in_frame:
+        return CameraMeasurement.none()
+    peak = int(roi.image.max())
+    det = detect(roi.image)
+    if not det.sun_found or det.centroid_px is None:
+        return CameraMeasurement.none()
+    state.frames_found += 1
+    x = det.centroid_px[0] + roi.x0_px
+    y = det.centroid_px[1] + roi.y0_px
+    h, v = pointing_error_deg(cam, x, y)
+    return CameraMeasurement(True, float(h), float(v), float(det.confidence), int(det.area_px),
+                             peak)
+
+
+def move_energies_wh(moves: list[Move], limits: DriveLimits, dt_s: float = 0.01
+                     ) -> tuple[NDArray[np.float64], float]:
+    """Electrical energy of each move [Wh] and the total [Wh].
+
+    Each move's trapezoid is sampled every ``dt_s``; the moving joint's
+    torque is the inverse dynamics (seed 002, eq. 24) along it, the other joint
+    at rest, plus the gust torque on the axis; :func:`sim.motors.electrical_power_w`
+    of that torque and rate, summed over the move's samples (left Riemann sum).
+    All moves of one axis are done in one vectorised pass (padded to the
+    longest, masked).
+    """
+    from sim import dynamics, motors
+
+    inertia = dynamics.TrackerInertia.seed002()
+    energies = np.zeros(len(moves))
+    drives = (motors.AxisDrive.azimuth_default(), motors.AxisDrive.elevation_default())
+    for axis in (0, 1):
+        idx = np.array([k for k, m in enumerate(moves) if m.axis == axis], dtype=np.int64)
+        if idx.size == 0:
+            continue
+        rate_deg, acc_deg = limits.axis(axis)
+        rate, acc = math.radians(rate_deg), math.radians(acc_deg)
+        delta = np.radians([moves[k].delta_deg for k in idx])
+        q2 = np.radians([moves[k].elevation_deg for k in idx])
+        gust = np.array([moves[k].gust_nm for k in idx])
+        dist_ = np.abs(delta)
+        v = np.minimum(rate, np.sqrt(dist_ * acc))
+        ta = v / acc
+        tc = np.where(v > 0, dist_ / np.where(v > 0, v, 1.0), 0.0) - ta
+        total = 2 * ta + tc
+        nsamp = np.ceil(total / dt_s - 1e-9).astype(np.int64)
+        order = np.argsort(nsamp)
+        # chunks of moves of similar length, at most ~2 M samples each
+        groups: list[NDArray[np.int64]] = []
+        start = 0
+        while start < len(order):
+            stop = start + 1
+            while stop < len(order) and (stop - start + 1) * int(nsamp[order[stop]]) <= 2_000_000:
+                stop += 1
+            groups.append(order[start:stop])
+            start = stop
+        for chunk in groups:
+            nmax = int(nsamp[chunk].max())
+            if nmax == 0:
+                continue
+            tt = np.arange(nmax)[None, :] * dt_s
+            mask = tt < total[chunk, None]
+            a_ = ta[chunk, None]
+            c_ = tc[chunk, None]
+            vv = v[chunk, None]
+            t3 = np.maximum(tt - a_ - c_, 0.0)
+            sgn = np.sign(delta[chunk])[:, None]
+            qd = sgn * np.where(tt < a_, acc * tt, np.where(tt > a_ + c_, vv - acc * t3, vv))
+            qdd = sgn * np.where(tt < a_, acc, np.where(tt > a_ + c_, -acc, 0.0))
+            q_el = q2[chunk, None] + (0.0 if axis == 0 else sgn * _trapezoid_disp(
+                tt, a_, c_, vv, acc))
+            zero = np.zeros_like(qd)
+            if axis == 0:
+                tau = dynamics.inverse_dynamics(q_el, qd, zero, qdd, zero, inertia)[0]
+            else:
+                tau = dynamics.inverse_dynamics(q_el, zero, qd, zero, qdd, inertia)[1]
+            tau = tau - gust[chunk, None]
+            p = np.asarray(motors.electrical_power_w(drives[axis], tau, qd), dtype=float)
+            energies[idx[chunk]] = np.sum(np.where(mask, p, 0.0), axis=1) * dt_s / 3600.0
+    return energies, float(energies.sum())
+
+
+def _trapezoid_disp(tt: NDArray[Any], ta: NDArray[Any], tc: NDArray[Any],
+                    v: NDArray[Any], acc: float) -> NDArray[Any]:
+    """Unsigned displacement of trapezoids at times ``tt`` (broadcast) [rad]."""
+    t3 = np.maximum(tt - ta - tc, 0.0)
+    q_acc = 0.5 * acc * tt**2
+    q_cruise = 0.5 * acc * ta**2 + v * (tt - ta)
+    q_dec = 0.5 * acc * ta**2 + v * tc + v * t3 - 0.5 * acc * t3**2
+    return np.where(tt < ta, q_acc, np.where(tt > ta + tc, q_dec, q_cruise))
