@@ -113,7 +113,7 @@ def test_day_of_tracking_vs_seed000_reference_34(tehuantepec_day) -> None:
     out = tracking_motion_energy(az, el)
     # seed 000, Table 1, ref. [34]: 1.5 Wh/day for a small tracker's motion;
     # seed 002's panel on these drives needs far less (docs/dynamics.md)
-    assert 0.02 < out["motion_wh"] < 0.2  # measured 0.07 Wh
+    assert 0.02 < out["motion_wh"] < 0.08  # measured 0.039 Wh (5-min targets)
     assert out["motion_wh"] < 1.5
     assert out["standby_wh"] == pytest.approx(0.5 * 24.0)
     assert out["total_wh"] == pytest.approx(out["motion_wh"] + out["standby_wh"])
