@@ -16,7 +16,14 @@ Two methods, one output shape (a DataFrame with pvlib's column names):
 - ``"duffie-beckman"`` — seed 001, eqs. 1–4 (González-Camarillo et al. 2025,
   after Duffie & Beckman, *Solar Engineering of Thermal Processes*): Cooper's
   declination, hour angle from standard time with longitude correction and the
-  equation of time, spherical-Earth zenith and azimuth.
+  equation of time, spherical-Earth zenith and azimuth — each step pvlib's
+  function of that name, chosen to reproduce seed 001's open loop.
+
+The SPA path calls functions of :mod:`pvlib.spa` that pvlib does not document
+as public (they pay for the 16× speed-up of the hourly geocentric grid), so
+``pyproject.toml`` pins the pvlib range they are tested on and
+``tests/sim/test_sun.py`` checks that pin and that each function still exists
+(:data:`PVLIB_SPA_INTERNALS`).
 
 Azimuths are degrees clockwise from true north (pvlib convention) everywhere.
 """
@@ -32,6 +39,16 @@ METHODS = ("spa", "duffie-beckman")
 #: SPA geocentric quantities are evaluated on a grid of this spacing [s] and
 #: interpolated when the series is longer than the grid (see module docstring).
 SPA_GEOCENTRIC_STEP_S = 3600.0
+
+#: Undocumented :mod:`pvlib.spa` functions this module relies on (tested to exist).
+PVLIB_SPA_INTERNALS = (
+    "solar_position_numpy", "julian_day", "julian_ephemeris_day", "julian_ephemeris_century",
+    "julian_ephemeris_millennium", "heliocentric_radius_vector", "equatorial_horizontal_parallax",
+    "uterm", "xterm", "yterm", "parallax_sun_right_ascension", "topocentric_sun_declination",
+    "topocentric_local_hour_angle", "topocentric_elevation_angle_without_atmosphere",
+    "atmospheric_refraction_correction", "topocentric_elevation_angle",
+    "topocentric_astronomers_azimuth", "topocentric_azimuth_angle",
+)
 
 _COLUMNS = ["apparent_zenith", "zenith", "apparent_elevation", "elevation", "azimuth"]
 
@@ -65,9 +82,10 @@ def _spa_geocentric(unixtime: np.ndarray, delta_t: float) -> tuple[np.ndarray, .
     v, alpha, delta = spa.solar_position_numpy(
         unixtime, 0.0, 0.0, 0.0, 1013.25, 12.0, delta_t, 0.5667, 1, sst=True
     )
-    (radius,) = spa.solar_position_numpy(
-        unixtime, 0.0, 0.0, 0.0, 1013.25, 12.0, delta_t, 0.5667, 1, esd=True
-    )
+    # the radius vector alone (SPA step 3.2.8), not a second run of the whole chain
+    jme = spa.julian_ephemeris_millennium(spa.julian_ephemeris_century(
+        spa.julian_ephemeris_day(spa.julian_day(unixtime), delta_t)))
+    radius = spa.heliocentric_radius_vector(jme)
     v_minus_alpha = np.rad2deg(np.unwrap(np.deg2rad(np.asarray(v) - np.asarray(alpha))))
     return v_minus_alpha, np.asarray(delta), np.asarray(radius)
 
@@ -134,76 +152,46 @@ def _spa(
     )
 
 
-def cooper_declination(day_of_year: ArrayLike) -> np.ndarray:
-    """Solar declination [°] by Cooper's formula — seed 001, eq. 1.
-
-    δ = 23.45 sin(360 (284 + N) / 365), N the day of the year (1…365/366).
-    """
-    return 23.45 * np.sin(np.deg2rad(360.0 * (284.0 + np.asarray(day_of_year)) / 365.0))
-
-
 def equation_of_time_spencer(day_of_year: ArrayLike) -> np.ndarray:
-    """Equation of time [min] as used by Duffie & Beckman (their eq. 1.5.3, after Spencer 1971).
+    """Equation of time [min], Spencer (1971) as Duffie & Beckman use it (their eq. 1.5.3;
+    seed 001's D&B step): ``pvlib.solarposition.equation_of_time_spencer71``."""
+    from pvlib import solarposition
 
-    E = 229.2 (0.000075 + 0.001868 cos B − 0.032077 sin B − 0.014615 cos 2B
-    − 0.04089 sin 2B), with B = (N − 1) 360/365.
-    """
-    b = np.deg2rad((np.asarray(day_of_year) - 1.0) * 360.0 / 365.0)
-    return 229.2 * (
-        0.000075
-        + 0.001868 * np.cos(b)
-        - 0.032077 * np.sin(b)
-        - 0.014615 * np.cos(2 * b)
-        - 0.04089 * np.sin(2 * b)
-    )
-
-
-def azimuth_from_south_to_north_cw(gamma_s: ArrayLike) -> np.ndarray:
-    """Convert a Duffie–Beckman solar azimuth to pvlib's convention.
-
-    Duffie & Beckman (and seed 001, eq. 4) measure γs from due south, positive
-    towards the west (afternoon, ω > 0); pvlib measures degrees clockwise from
-    true north. Returns azimuth [°] in [0, 360).
-    """
-    return np.mod(180.0 + np.asarray(gamma_s), 360.0)
+    return np.asarray(solarposition.equation_of_time_spencer71(np.asarray(day_of_year)))
 
 
 def _duffie_beckman(
     times: pd.DatetimeIndex, latitude: float, longitude: float, pressure: float, temperature: float
 ) -> dict[str, np.ndarray]:
-    """Seed 001, eqs. 1–4 (Duffie–Beckman); refraction added with SPA's eq. 42 for ``apparent_*``.
+    """Seed 001, eqs. 1–4 (Duffie–Beckman) with pvlib's implementations of each step.
 
-    Standard time uses the zone meridian nearest the site (L_std = 15°·round(L/15));
-    N is the day of year in that standard time. Solar time = standard time +
-    4 (L_loc − L_std) + E minutes (east-positive longitudes), ω = 15° (t_solar − 12 h).
+    Cooper's declination (eq. 1, ``declination_cooper69``), Spencer's equation
+    of time and the hour angle from true solar time (``hour_angle``: standard
+    time + 4 (L_loc − L_std) + E, the same instant whatever meridian the clock
+    keeps), spherical-Earth zenith (eqs. 2–3, ``solar_zenith_analytical``) and
+    azimuth (eq. 4 in its quadrant-safe form, ``solar_azimuth_analytical``, which
+    already measures clockwise from north, so seed 001's from-south convention
+    needs no conversion). N is the day of year in the standard time of the
+    zone meridian nearest the site, as the seed counts it. Refraction for
+    ``apparent_*`` is SPA's eq. 42.
     """
-    from pvlib import spa
+    from pvlib import solarposition, spa
 
     standard_meridian = 15.0 * np.round(longitude / 15.0)
     local_standard = times + pd.Timedelta(hours=float(standard_meridian / 15.0))
     day_of_year = np.asarray(local_standard.day_of_year, dtype=float)
-    hours = np.asarray(
-        (local_standard - local_standard.normalize()) / pd.Timedelta(hours=1), dtype=float
-    )
-    solar_time_h = (
-        hours
-        + (4.0 * (longitude - standard_meridian) + equation_of_time_spencer(day_of_year)) / 60.0
-    )
-    omega_rad = np.deg2rad(15.0 * (solar_time_h - 12.0))
-    delta_rad = np.deg2rad(cooper_declination(day_of_year))
-    phi_rad = np.deg2rad(latitude)
-    cos_z = np.sin(delta_rad) * np.sin(phi_rad) + np.cos(delta_rad) * np.cos(phi_rad) * np.cos(
-        omega_rad
-    )
-    zenith_rad = np.arccos(np.clip(cos_z, -1.0, 1.0))  # eq. 2
-    elevation = 90.0 - np.rad2deg(zenith_rad)  # eq. 3
-    # eq. 4 gives |γs| = asin(cos δ sin ω / sin θz), ambiguous beyond ±90°; Duffie &
-    # Beckman's quadrant-safe form: γs = sign(ω) |acos((cos θz sin φ − sin δ)/(sin θz cos φ))|.
+    eot_min = equation_of_time_spencer(day_of_year)
+    declination_rad = np.asarray(solarposition.declination_cooper69(day_of_year))
+    hour_angle = np.asarray(solarposition.hour_angle(times, longitude, eot_min))
+    # pvlib counts from UTC midnight: wrap to (−180°, 180°], the range its azimuth's sign needs
+    hour_angle_rad = np.deg2rad(180.0 - np.mod(180.0 - hour_angle, 360.0))
+    latitude_rad = np.deg2rad(latitude)
+    zenith_rad = np.asarray(solarposition.solar_zenith_analytical(
+        latitude_rad, hour_angle_rad, declination_rad))
     with np.errstate(invalid="ignore", divide="ignore"):
-        cos_gamma = (cos_z * np.sin(phi_rad) - np.sin(delta_rad)) / (
-            np.sin(zenith_rad) * np.cos(phi_rad)
-        )
-    gamma_s = np.sign(omega_rad) * np.abs(np.rad2deg(np.arccos(np.clip(cos_gamma, -1.0, 1.0))))
+        azimuth_rad = np.asarray(solarposition.solar_azimuth_analytical(
+            latitude_rad, hour_angle_rad, declination_rad, zenith_rad))
+    elevation = 90.0 - np.rad2deg(zenith_rad)
     delta_e = spa.atmospheric_refraction_correction(
         pressure / 100.0, temperature, elevation, 0.5667
     )
@@ -213,7 +201,7 @@ def _duffie_beckman(
         "zenith": np.rad2deg(zenith_rad),
         "apparent_elevation": apparent_elevation,
         "elevation": elevation,
-        "azimuth": azimuth_from_south_to_north_cw(gamma_s),
+        "azimuth": np.mod(np.rad2deg(azimuth_rad), 360.0),
     }
 
 
@@ -261,34 +249,3 @@ def solar_position(
     else:
         raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
     return pd.DataFrame({k: np.asarray(cols[k], dtype=float) for k in _COLUMNS}, index=index)
-
-
-def sun_vector_enu(zenith: ArrayLike, azimuth: ArrayLike) -> np.ndarray:
-    """Unit vector towards the sun in East-North-Up coordinates.
-
-    Parameters
-    ----------
-    zenith : array_like
-        Solar zenith [°].
-    azimuth : array_like
-        Solar azimuth [°], clockwise from north.
-
-    Returns
-    -------
-    numpy.ndarray
-        Shape ``(..., 3)``: (east, north, up).
-    """
-    z = np.deg2rad(np.asarray(zenith, dtype=float))
-    a = np.deg2rad(np.asarray(azimuth, dtype=float))
-    return np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)
-
-
-def angular_separation(
-    zenith_1: ArrayLike, azimuth_1: ArrayLike, zenith_2: ArrayLike, azimuth_2: ArrayLike
-) -> np.ndarray:
-    """Great-circle angle [°] between two sun directions (via their ENU unit vectors)."""
-    v1 = sun_vector_enu(zenith_1, azimuth_1)
-    v2 = sun_vector_enu(zenith_2, azimuth_2)
-    cross = np.linalg.norm(np.cross(v1, v2), axis=-1)
-    dot = np.sum(v1 * v2, axis=-1)
-    return np.rad2deg(np.arctan2(cross, dot))

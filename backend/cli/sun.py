@@ -56,7 +56,8 @@ def compute(args: argparse.Namespace) -> dict[str, Any]:
     """The answer as a JSON-ready dict with units in the keys."""
     import pandas as pd
 
-    from sim.sun import solar_position, sun_vector_enu
+    from sim.sun import solar_position
+    from vision.sphere import enu_from_sky
 
     when = pd.Timestamp(args.time)
     pos = solar_position(
@@ -69,7 +70,7 @@ def compute(args: argparse.Namespace) -> dict[str, Any]:
         delta_t=args.delta_t_s,
         method=args.method,
     ).iloc[0]
-    east, north, up = sun_vector_enu(pos["apparent_zenith"], pos["azimuth"]).tolist()
+    east, north, up = enu_from_sky(pos["azimuth"], pos["apparent_elevation"]).tolist()
     return {
         "time": when.tz_convert("UTC").isoformat(),
         "method": args.method,

@@ -22,11 +22,22 @@ from typing import Any
 import httpx
 import numpy as np
 import pandas as pd
+from tenacity import Retrying, retry_if_exception_type, stop_after_attempt, wait_exponential
 
 from sim.sites import Site
 from sim.twin import simulate
 
 logger = logging.getLogger(__name__)
+
+
+class _Retryable(Exception):
+    """A failed post worth retrying: no connection, or a 5xx."""
+
+
+class _Stopped(Exception):
+    """The logger was stopped during a retry's wait."""
+
+
 logging.getLogger("httpx").setLevel(logging.WARNING)  # one line per post is noise
 
 BATCH = 1000
@@ -72,6 +83,7 @@ class DemoLogger:
         self.client = httpx.Client(base_url=self.base_url, timeout=timeout_s,
                                    headers={"Authorization": f"Bearer {token}"})
         self.posted = 0
+        self.readings_dropped = 0  # given up after retries or refused: each one logged
         self.stop = threading.Event()
 
     def close(self) -> None:
@@ -115,32 +127,57 @@ class DemoLogger:
         return out
 
     def post(self, readings: list[dict[str, Any]], attempts: int = 5) -> tuple[int, int]:
-        """Post readings in batches of 1000; retries on connection errors and 5xx."""
+        """Post readings in batches of 1000, each retried (tenacity, exponential backoff up
+        to 10 s) on connection errors and 5xx; a batch that still fails, or is refused
+        with a 4xx, is dropped and logged with its size and time span."""
         accepted = duplicates = 0
+        path = f"/api/v1/sites/{self.site.site_id}/measurements"
+        retrying = Retrying(
+            stop=stop_after_attempt(attempts),
+            wait=wait_exponential(multiplier=1.0, max=10.0),
+            retry=retry_if_exception_type(_Retryable),
+            sleep=self._sleep,
+            before_sleep=lambda state: logger.warning(
+                "demo logger: %s (attempt %d of %d)",
+                state.outcome.exception() if state.outcome else "?", state.attempt_number,
+                attempts),
+            reraise=True,
+        )
         for k in range(0, len(readings), BATCH):
             chunk = readings[k : k + BATCH]
-            for attempt in range(attempts):
-                try:
-                    r = self.client.post(f"/api/v1/sites/{self.site.site_id}/measurements",
-                                         json={"readings": chunk})
-                except httpx.HTTPError as exc:
-                    logger.warning("demo logger: %s (attempt %d)", exc, attempt + 1)
-                    if self.stop.wait(min(2.0 ** attempt, 10.0)):
-                        return accepted, duplicates
-                    continue
-                if r.status_code >= 500:
-                    if self.stop.wait(min(2.0 ** attempt, 10.0)):
-                        return accepted, duplicates
-                    continue
-                if r.status_code != 200:
-                    logger.error("demo logger: %s %s", r.status_code, r.text[:300])
+            try:
+                r = retrying(self._post_once, path, chunk)
+            except (_Retryable, _Stopped) as exc:
+                self.readings_dropped += len(chunk)
+                logger.error("demo logger: dropped %d readings %s..%s: %s", len(chunk),
+                             chunk[0]["ts"], chunk[-1]["ts"], exc)
+                if isinstance(exc, _Stopped):
                     break
-                body = r.json()
-                accepted += body["accepted"]
-                duplicates += body["duplicates"]
-                break
+                continue
+            if r.status_code != 200:
+                self.readings_dropped += len(chunk)
+                logger.error("demo logger: dropped %d readings %s..%s: %s %s", len(chunk),
+                             chunk[0]["ts"], chunk[-1]["ts"], r.status_code, r.text[:300])
+                continue
+            body = r.json()
+            accepted += body["accepted"]
+            duplicates += body["duplicates"]
         self.posted += accepted
         return accepted, duplicates
+
+    def _post_once(self, path: str, chunk: list[dict[str, Any]]) -> httpx.Response:
+        try:
+            r = self.client.post(path, json={"readings": chunk})
+        except httpx.HTTPError as exc:
+            raise _Retryable(f"{type(exc).__name__}: {exc}") from exc
+        if r.status_code >= 500:
+            raise _Retryable(f"{r.status_code} {r.text[:200]}")
+        return r
+
+    def _sleep(self, seconds: float) -> None:
+        """tenacity's sleep: wakes at once and gives up when the logger is stopped."""
+        if self.stop.wait(seconds):
+            raise _Stopped("stopped while retrying")
 
     def backfill(self, days: float, now_s: float | None = None) -> tuple[int, int]:
         """Post the last ``days`` days up to the current minute."""

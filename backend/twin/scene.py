@@ -54,8 +54,10 @@ from sim.kinematics import (
     joint_transforms,
     tracking_angles,
 )
+from sim.pv import ArrayConfig
 from sim.sites import Site
-from sim.sun import solar_position, sun_vector_enu
+from sim.sun import solar_position
+from vision.sphere import enu_from_sky
 
 logger = logging.getLogger(__name__)
 
@@ -77,9 +79,6 @@ PEDESTAL_HEIGHT_M = 1.30
 #: Where the fixed array stands (ENU, m): east of the tracker, clear of its swing.
 FIXED_ARRAY_ORIGIN_M = (4.5, 0.0, 0.0)
 FIXED_LOWER_EDGE_M = 0.5
-#: Seed 000, section 3.3: the fixed reference array, 16° tilt facing south.
-DEFAULT_FIXED_TILT_DEG = 16.0
-DEFAULT_FIXED_AZIMUTH_DEG = 180.0
 #: Seed 000, section 2.2: camera 640 x 480 px, 67° field of view (taken as the
 #: horizontal field), at the top centre of the array, looking along the normal.
 CAMERA_WIDTH_PX = 640
@@ -148,11 +147,9 @@ def _wxyz(rotation: NDArray[np.floating]) -> NDArray[np.float64]:
 
 
 def _fixed_orientation(site: Site) -> tuple[float, float]:
-    """(surface_tilt, surface_azimuth) [°] of the site's ``fixed`` array, or
-    seed 000's 16° facing south when the site has none."""
-    fixed = site.arrays.get("fixed")
-    if fixed is None:
-        return DEFAULT_FIXED_TILT_DEG, DEFAULT_FIXED_AZIMUTH_DEG
+    """(surface_tilt, surface_azimuth) [°] of the site's ``fixed`` array (its config is
+    the one place they are set), or an ``ArrayConfig``'s defaults when it has none."""
+    fixed = site.arrays.get("fixed") or ArrayConfig("fixed")
     return float(fixed.surface_tilt), float(fixed.surface_azimuth)
 
 
@@ -164,7 +161,7 @@ class TwinScene:
     site : sim.sites.Site
         Location (``latitude``, ``longitude``, ``altitude``, ``timezone``), the
         tracker geometry (``tracker``) and the arrays (``arrays['fixed']`` gives
-        the fixed array's tilt/azimuth; seed 000's 16°/180° if absent).
+        the fixed array's tilt/azimuth).
     host, port : str, int
         Where viser listens. Port 0 picks a free port (see :attr:`port`); a busy
         port makes :meth:`start` take the next free one (logged).
@@ -310,7 +307,7 @@ class TwinScene:
         az_joint, el_joint = float(az_j), float(el_j)
         stowed = sun_el <= 0.0
         normal = forward_kinematics(az_joint, el_joint, self._geometry)
-        sun_vec = sun_vector_enu(90.0 - sun_el, sun_az)
+        sun_vec = enu_from_sky(sun_az, sun_el)
         fixed_normal = forward_kinematics(self._fixed_azimuth_deg,
                                           90.0 - self._fixed_tilt_deg, self._geometry)
         return ScenePose(
@@ -460,8 +457,7 @@ class TwinScene:
         sp = solar_position(times, self.site.latitude, self.site.longitude,
                             self.site.altitude)
         el = sp["apparent_elevation"].to_numpy()
-        pts = self._sun_centre() + SUN_DISTANCE_M * sun_vector_enu(90.0 - el,
-                                                                   sp["azimuth"].to_numpy())
+        pts = self._sun_centre() + SUN_DISTANCE_M * enu_from_sky(sp["azimuth"].to_numpy(), el)
         up = (el[:-1] > 0.0) & (el[1:] > 0.0)
         segments = np.stack([pts[:-1][up], pts[1:][up]], axis=1)
         if len(segments) == 0:  # polar night
@@ -480,7 +476,7 @@ class TwinScene:
                                          self._geometry)
         t12 = np.linalg.solve(t01, t02)
         t2p = np.linalg.solve(t02, t0p)
-        sun_dir = sun_vector_enu(90.0 - pose.solar_elevation_deg, pose.solar_azimuth_deg)
+        sun_dir = enu_from_sky(pose.solar_azimuth_deg, pose.solar_elevation_deg)
         # rotation whose z axis is the sun direction
         z = sun_dir
         x = np.cross([0.0, 0.0, 1.0], z)

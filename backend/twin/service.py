@@ -170,6 +170,14 @@ class TwinService:
         return len(result.series)
 
     # -- live ---------------------------------------------------------------
+    def _minute(self, info: SiteInfo, minute: int) -> tuple[LiveSample, pd.DataFrame]:
+        """The one-minute simulation both the tiles and the live loop use (cached)."""
+        result = simulate(info.site, pd.Timestamp(minute, unit="s", tz="UTC"),
+                          pd.Timestamp(minute + 60, unit="s", tz="UTC"), step_s=60)
+        sample = LiveSample(minute, {k: float(v) for k, v in result.series.iloc[0].items()})
+        self.latest[info.site_id] = sample
+        return sample, result.series
+
     def sample(self, site_id: str, now_s: float | None = None) -> LiveSample:
         """The twin at the current minute (computed, cached per minute; empty if not simulable)."""
         minute = int((time.time() if now_s is None else now_s) // 60 * 60)
@@ -178,13 +186,7 @@ class TwinService:
             return cached
         if not self.simulable(site_id):
             return LiveSample(minute, {})
-        info = self.registry.sites[site_id]
-        result = simulate(info.site, pd.Timestamp(minute, unit="s", tz="UTC"),
-                          pd.Timestamp(minute + 60, unit="s", tz="UTC"), step_s=60)
-        row = result.series.iloc[0]
-        sample = LiveSample(minute, {k: float(v) for k, v in row.items()})
-        self.latest[site_id] = sample
-        return sample
+        return self._minute(self.registry.sites[site_id], minute)[0]
 
     def live_step(self, now_s: float | None = None) -> None:
         """One tick of the live loop: the current minute for every site, stored."""
@@ -193,17 +195,14 @@ class TwinService:
         for site_id, info in self.registry.sites.items():
             if not self.simulable(site_id):
                 continue
-            result = simulate(info.site, pd.Timestamp(minute, unit="s", tz="UTC"),
-                              pd.Timestamp(minute + 60, unit="s", tz="UTC"), step_s=60)
-            row = result.series.iloc[0]
-            self.latest[site_id] = LiveSample(minute, {k: float(v) for k, v in row.items()})
-            futures += [self.writer.submit(job) for job in jobs_from_series(info, result.series)]
+            sample, series = self._minute(info, minute)
+            futures += [self.writer.submit(job) for job in jobs_from_series(info, series)]
             if self.scene is not None and site_id == self.scene_site:
                 try:
                     self.scene.update_live(
                         pd.Timestamp(minute, unit="s", tz="UTC"),
-                        float(row.get("tracker_power_w", 0.0)),
-                        float(row.get("fixed_power_w", 0.0)),
+                        sample.values.get("tracker_power_w", 0.0),
+                        sample.values.get("fixed_power_w", 0.0),
                     )
                 except Exception:  # the scene must never stop the loop
                     logger.exception("3D scene update failed")

@@ -7,14 +7,18 @@ import pandas as pd
 import pvlib
 import pytest
 
-from sim.sun import (
-    angular_separation,
-    azimuth_from_south_to_north_cw,
-    cooper_declination,
-    equation_of_time_spencer,
-    solar_position,
-    sun_vector_enu,
-)
+from sim.sun import PVLIB_SPA_INTERNALS, equation_of_time_spencer, solar_position
+from vision.sphere import angular_separation_deg
+
+
+def angular_separation(z1: Any, a1: Any, z2: Any, a2: Any) -> np.ndarray:
+    """Great-circle angle [°] between (zenith, azimuth) pairs."""
+    return angular_separation_deg(a1, 90.0 - np.asarray(z1), a2, 90.0 - np.asarray(z2))
+
+
+def cooper_declination(day_of_year: float) -> float:
+    """Seed 001, eq. 1, written independently of pvlib: δ = 23.45 sin(360 (284 + N)/365)."""
+    return float(23.45 * np.sin(np.deg2rad(360.0 * (284.0 + day_of_year) / 365.0)))
 
 # Reda & Andreas (2004), Appendix A.5 (../shared/reference/spa_reference.json).
 SPA_CASE: dict[str, Any] = dict(
@@ -26,6 +30,11 @@ SPA_CASE: dict[str, Any] = dict(
     delta_t=67.0,
 )
 SPA_TIME = pd.Timestamp("2003-10-17T12:30:30-07:00")
+# Duffie–Beckman vs SPA at Tehuantepec over 2024, daylight, 20 min: measured 1.165° worst,
+# 0.413° mean (Cooper's declination is good to ~1°, the EoT to ~1 min) — far below seed
+# 001's 100 mrad (5.7°) open-loop drift, which is mechanical, not the algorithm.
+MAX_DB_SEP_DEG = 1.2
+MEAN_DB_SEP_DEG = (0.39, 0.44)
 
 
 def test_spa_reference_case() -> None:
@@ -75,23 +84,24 @@ def test_duffie_beckman_within_its_accuracy_of_spa_over_a_year() -> None:
     ref = pvlib.solarposition.spa_python(times, 16.28875, -95.240871)
     day = ref["elevation"] > 0
     sep = angular_separation(db["zenith"], db["azimuth"], ref["zenith"], ref["azimuth"])[day]
-    assert np.max(sep) < 1.5
-    assert 0.05 < np.mean(sep) < 0.7
-    assert np.max(sep) < np.rad2deg(0.100)  # well below seed 001's 100 mrad open-loop drift
+    assert np.max(sep) < MAX_DB_SEP_DEG
+    assert MEAN_DB_SEP_DEG[0] < np.mean(sep) < MEAN_DB_SEP_DEG[1]
 
 
-def test_azimuth_conversion_from_south() -> None:
-    assert azimuth_from_south_to_north_cw(np.array([0.0, 90.0, -90.0])) == pytest.approx(
-        [180.0, 270.0, 90.0]
-    )
+def test_pvlib_in_the_range_its_spa_internals_are_tested_on() -> None:
+    # sim.sun calls undocumented pvlib.spa functions: the installed pvlib must be in
+    # the range pyproject.toml pins, and every function must still be there.
+    from importlib.metadata import requires, version
 
+    from packaging.requirements import Requirement
 
-def test_sun_vector_enu() -> None:
-    assert sun_vector_enu(0.0, 123.0) == pytest.approx([0, 0, 1], abs=1e-12)
-    assert sun_vector_enu(90.0, 90.0) == pytest.approx([1, 0, 0], abs=1e-12)
-    v = sun_vector_enu(np.array([30.0, 60.0]), np.array([180.0, 45.0]))
-    assert v.shape == (2, 3)
-    assert np.linalg.norm(v, axis=-1) == pytest.approx([1, 1])
+    pin = next(Requirement(r) for r in requires("heliotwin") or [] if r.startswith("pvlib"))
+    assert pin.specifier, "pvlib must be pinned to a tested range"
+    assert version("pvlib") in pin.specifier
+    assert any(s.operator in ("<", "<=", "~=", "==") for s in pin.specifier), "no upper bound"
+    missing = [name for name in PVLIB_SPA_INTERNALS if not callable(getattr(pvlib.spa, name,
+                                                                            None))]
+    assert not missing
 
 
 def test_misuse_raises() -> None:

@@ -1,0 +1,68 @@
+"""The demo logger's posting: retries on 5xx and lost connections, and every drop logged."""
+
+from __future__ import annotations
+
+import logging
+
+import httpx
+import pytest
+
+from backend.twin.demo_logger import DemoLogger
+from sim.sites import load_site
+
+
+def _logger_with(handler: httpx.MockTransport) -> DemoLogger:
+    demo = DemoLogger(load_site("tehuantepec"), "http://logger.test", "tok")
+    demo.client = httpx.Client(base_url="http://logger.test", transport=handler)
+    demo._sleep = lambda seconds: None  # type: ignore[method-assign]  # no real waiting
+    return demo
+
+
+def _readings(n: int) -> list[dict[str, object]]:
+    return [{"ts": f"2024-03-15T12:{m:02d}:00Z", "array": "tracker", "voltage_v": 26.0,
+             "current_a": 7.0, "power_w": 182.0} for m in range(n)]
+
+
+def test_retries_5xx_then_succeeds() -> None:
+    calls = []
+
+    def handle(request: httpx.Request) -> httpx.Response:
+        calls.append(request)
+        if len(calls) < 3:
+            return httpx.Response(503, text="busy")
+        return httpx.Response(200, json={"accepted": 5, "duplicates": 0})
+
+    demo = _logger_with(httpx.MockTransport(handle))
+    assert demo.post(_readings(5)) == (5, 0)
+    assert len(calls) == 3
+    assert demo.readings_dropped == 0
+
+
+def test_gives_up_after_the_last_attempt_and_logs_the_drop(
+        caplog: pytest.LogCaptureFixture) -> None:
+    def handle(request: httpx.Request) -> httpx.Response:
+        raise httpx.ConnectError("refused", request=request)
+
+    demo = _logger_with(httpx.MockTransport(handle))
+    with caplog.at_level(logging.WARNING, logger="backend.twin.demo_logger"):
+        assert demo.post(_readings(7), attempts=3) == (0, 0)
+    assert demo.readings_dropped == 7
+    retries = [r for r in caplog.records if r.levelno == logging.WARNING]
+    drops = [r for r in caplog.records if r.levelno == logging.ERROR]
+    assert len(retries) == 2  # attempts 1 and 2 are retried, the 3rd gives up
+    assert len(drops) == 1 and "dropped 7 readings" in drops[0].getMessage()
+    assert "2024-03-15T12:00:00Z..2024-03-15T12:06:00Z" in drops[0].getMessage()
+
+
+def test_a_4xx_is_dropped_at_once_and_logged(caplog: pytest.LogCaptureFixture) -> None:
+    calls = []
+
+    def handle(request: httpx.Request) -> httpx.Response:
+        calls.append(request)
+        return httpx.Response(422, json={"detail": "bad"})
+
+    demo = _logger_with(httpx.MockTransport(handle))
+    with caplog.at_level(logging.ERROR, logger="backend.twin.demo_logger"):
+        demo.post(_readings(2))
+    assert len(calls) == 1 and demo.readings_dropped == 2
+    assert "422" in caplog.records[-1].getMessage()
