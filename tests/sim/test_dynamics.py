@@ -27,8 +27,6 @@ from sim.dynamics import (
     potential_energy,
 )
 
-sp = pytest.importorskip("sympy")
-
 # seed 002, section II-A and Table 1 (../shared/reference/seed002_dynamics.json)
 D1_M, A2_M = 0.355, 0.091
 M1, M2 = 4.23619, 37.73207
@@ -47,7 +45,7 @@ def test_seed002_parameters_are_table_1() -> None:
     assert (P.cg1_m, P.cg2_m, P.g_m_s2) == (CG1_M, CG2_M, G)
 
 
-def _dh(theta, d, a, alpha):  # standard D–H, written out here independently
+def _dh(sp, theta, d, a, alpha):  # standard D–H, written out here independently
     ct, st, ca, sa = sp.cos(theta), sp.sin(theta), sp.cos(alpha), sp.sin(alpha)
     return sp.Matrix(
         [
@@ -64,13 +62,15 @@ def _sympy_tau():
     """τ(q1, q2, q̇1, q̇2, q̈1, q̈2) from L = K − U and Lagrange's equations (seed 002, eq. 4).
 
     τ_i = Σ_j ∂²L/∂q̇_i∂q̇_j q̈_j + Σ_j ∂²L/∂q̇_i∂q_j q̇_j − ∂L/∂q_i (the total time
-    derivative written out, so plain symbols suffice).
+    derivative written out, so plain symbols suffice). sympy is a test-only
+    dependency; without it only these tests are skipped.
     """
+    sp = pytest.importorskip("sympy")
     q = sp.symbols("q1 q2")
     w = sp.symbols("w1 w2")
     acc = sp.symbols("a1 a2")
-    a1 = _dh(q[0], D1_M, 0, sp.pi / 2)
-    t02 = a1 * _dh(q[1], 0, A2_M, 0)
+    a1 = _dh(sp, q[0], D1_M, 0, sp.pi / 2)
+    t02 = a1 * _dh(sp, q[1], 0, A2_M, 0)
     r1, r2 = a1[:3, :3], t02[:3, :3]
     o1 = a1[:3, 3]
     # centres of gravity: link 1 along y1 (on the azimuth axis), link 2 along x2
