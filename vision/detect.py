@@ -95,7 +95,7 @@ def px_per_deg_of(camera: CameraModel | None, fov: FovCircle | None, width_px: i
     return width_px / 67.0
 
 
-def _search(gray: NDArray[np.uint8], work: NDArray[np.uint8], small_bg: float,
+def _search(gray: NDArray[np.uint8], work: NDArray[Any], small_bg: float,
             fov: FovCircle | None, diam: float, centre: tuple[float, float],
             ppd: float, expected_px: tuple[float, float] | None) -> _Pick | str:
     """Candidates in ``work`` (the frame, masked), the winner and its probability; or a reason."""

@@ -32,6 +32,7 @@ points at the centre on the arc that is left.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -84,7 +85,7 @@ def _tangent(camera: CameraModel, x: NDArray[np.float64], y: NDArray[np.float64]
 def gradient_lines(gray: NDArray[np.uint8], x0: int, y0: int, x1: int, y1: int,
                    dark_level: float, glare_level: float = 0.0, saturated_level: float = 256.0,
                    sky_gradient: tuple[float, float] = (0.0, 0.0)
-                   ) -> tuple[NDArray[np.float64], ...]:
+                   ) -> tuple[NDArray[Any], ...]:
     """Midpoints, unit gradient directions and squared magnitudes in a window.
 
     Window ``[x0, x1) × [y0, y1)`` of ``gray``; gradients by the Roberts
@@ -98,21 +99,22 @@ def gradient_lines(gray: NDArray[np.uint8], x0: int, y0: int, x1: int, y1: int,
     frame is glare + sky, and a radially symmetric glare's own gradient points
     at its centre. Returns ``(px, py, nx, ny, g2, clipped)``.
     """
-    win = gray[y0:y1, x0:x1].astype(np.float32)
-    d_u = win[:-1, 1:] - win[1:, :-1]  # along (+x, −y)
-    d_v = win[:-1, :-1] - win[1:, 1:]  # along (−x, −y)
+    win: NDArray[Any] = gray[y0:y1, x0:x1].astype(np.float32)
+    d_u: NDArray[Any] = win[:-1, 1:] - win[1:, :-1]  # along (+x, −y)
+    d_v: NDArray[Any] = win[:-1, :-1] - win[1:, 1:]  # along (−x, −y)
     d_u = cv2.blur(d_u, (3, 3))
     d_v = cv2.blur(d_v, (3, 3))
     gx = 0.5 * (d_u - d_v)
     gy = -0.5 * (d_u + d_v)
-    sat = (win >= np.float32(saturated_level)).astype(np.uint8)
-    sat = cv2.dilate(sat, np.ones((3, 3), np.uint8))  # the 3 × 3 smoothing's reach
+    sat: NDArray[Any] = (win >= np.float32(saturated_level)).astype(np.uint8)
+    sat = np.asarray(cv2.dilate(sat, np.ones((3, 3), np.uint8)), np.uint8)  # the blur's reach
     clip4 = (sat[:-1, :-1] | sat[1:, 1:] | sat[:-1, 1:] | sat[1:, :-1]) > 0
     gx = np.where(clip4, gx, gx - np.float32(sky_gradient[0]))
     gy = np.where(clip4, gy, gy - np.float32(sky_gradient[1]))
     g2 = gx * gx + gy * gy
-    ok = (win >= np.float32(dark_level)).astype(np.uint8)
-    ok = cv2.erode(ok, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE)
+    ok: NDArray[Any] = (win >= np.float32(dark_level)).astype(np.uint8)
+    ok = np.asarray(cv2.erode(ok, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE),
+                    np.uint8)
     ok4 = ok[:-1, :-1] & ok[1:, 1:] & ok[:-1, 1:] & ok[1:, :-1]
     if glare_level > 0:
         hi = (win >= np.float32(glare_level)).astype(np.uint8)
@@ -198,7 +200,9 @@ def radial_symmetry_centre(gray: NDArray[np.uint8], start_px: tuple[float, float
     if px.size < 8:
         return None
     ux, uy, mx, my = px, py, nx, ny  # the solve's coordinates (image, or tangent plane)
-    axis = e1 = e2 = None
+    axis: Any = None
+    e1: Any = None
+    e2: Any = None
     scale = 1.0  # tangent-plane units per pixel
     ex, ey = float(cx), float(cy)
     band = 1.0

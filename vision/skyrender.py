@@ -30,6 +30,7 @@ full well (1.0 → 255) before quantisation.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import cv2
 import numpy as np
@@ -96,7 +97,7 @@ def _fractal(rng: np.random.Generator, h: int, w: int, octaves: int = 5,
              stretch: float = 1.0, angle_deg: float = 0.0) -> NDArray[np.float32]:
     """Fractal value noise in [0, 1] (octaves of bicubic-upsampled noise, ``stretch`` ≥ 1
     elongates it along ``angle_deg``: fibrous cirrus)."""
-    out = np.zeros((h, w), np.float32)
+    out: NDArray[Any] = np.zeros((h, w), np.float32)
     amp, total = 1.0, 0.0
     for o in range(octaves):
         cells = 3 * 2 ** o
