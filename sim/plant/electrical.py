@@ -24,13 +24,26 @@ from sim.plant.shading import PlantShade, union_area
 FloatArray = NDArray[np.float64]
 
 
-def _overlaps(rects: FloatArray, boxes: FloatArray) -> NDArray[np.bool_]:
-    """(G, K, 4) rectangles against (B, 4) boxes → (G, B): some rectangle overlaps the box."""
-    r = rects[:, :, None, :]
-    b = boxes[None, None, :, :]
-    hit = (np.minimum(r[..., 1], b[..., 1]) > np.maximum(r[..., 0], b[..., 0]) + 1e-12) & \
-        (np.minimum(r[..., 3], b[..., 3]) > np.maximum(r[..., 2], b[..., 2]) + 1e-12)
-    return np.asarray(hit.any(axis=1))
+def _blocks_hit(rects: FloatArray, string: FloatArray, n_u: int, n_v: int) -> FloatArray:
+    """Blocks of one string (a regular n_u × n_v grid of cells) that some rectangle overlaps.
+
+    Each rectangle covers an index rectangle of cells; the count of their union
+    is the union "area" of those index rectangles (exact on integers).
+    rects (G, K, 4) → count (G,).
+    """
+    u0, u1, v0, v1 = string
+    cu, cv = (u1 - u0) / n_u, (v1 - v0) / n_v
+    ru0 = np.clip(rects[..., 0], u0, u1)
+    ru1 = np.clip(rects[..., 1], u0, u1)
+    rv0 = np.clip(rects[..., 2], v0, v1)
+    rv1 = np.clip(rects[..., 3], v0, v1)
+    live = (ru1 - ru0 > 1e-12) & (rv1 - rv0 > 1e-12)
+    iu0 = np.floor((ru0 - u0) / cu + 1e-9)
+    iu1 = np.ceil((ru1 - u0) / cu - 1e-9)
+    iv0 = np.floor((rv0 - v0) / cv + 1e-9)
+    iv1 = np.ceil((rv1 - v0) / cv - 1e-9)
+    idx = np.stack([iu0, np.where(live, iu1, iu0), iv0, np.where(live, iv1, iv0)], axis=-1)
+    return union_area(idx)
 
 
 def beam_factors(shade: PlantShade, collector: Collector) -> tuple[FloatArray, FloatArray]:
@@ -57,18 +70,16 @@ def beam_factors(shade: PlantShade, collector: Collector) -> tuple[FloatArray, F
     if not len(shade.group_step):
         return area, electrical
     strings = collector.strings()
-    blocks, owner = collector.blocks()
-    total_blocks = np.bincount(owner, minlength=len(strings)).astype(float)
+    n_u, n_v = collector.block_grid()
     string_area = (strings[:, 1] - strings[:, 0]) * (strings[:, 3] - strings[:, 2])
     factor = np.zeros(len(shade.group_step))
     for s in range(len(strings)):
         f_s = union_area(shade.group_rects, clip=strings[s]) / string_area[s]
-        in_s = blocks[owner == s]
         n_sb = np.zeros(len(factor))
-        for g0 in range(0, len(factor), 4096):  # bounded memory: (4096, K, B)
-            hit = _overlaps(shade.group_rects[g0:g0 + 4096], in_s)
-            n_sb[g0:g0 + 4096] = hit.sum(axis=1)
-        loss = direct_martinez(1.0, 1.0, np.minimum(f_s, 1.0), n_sb, total_blocks[s])
+        for g0 in range(0, len(factor), 20_000):  # bounded memory: (20000, K, n_u, n_v)
+            n_sb[g0:g0 + 20_000] = _blocks_hit(shade.group_rects[g0:g0 + 20_000], strings[s],
+                                               n_u, n_v)
+        loss = direct_martinez(1.0, 1.0, np.minimum(f_s, 1.0), n_sb, float(n_u * n_v))
         factor += (1.0 - np.asarray(loss, dtype=float)) / len(strings)
     electrical[shade.group_step, shade.group_tracker] = factor
     return area, electrical

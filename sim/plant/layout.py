@@ -123,6 +123,12 @@ class Collector:
         return np.stack([np.full_like(v0, -self.width / 2), np.full_like(v0, self.width / 2),
                          v0, v0 + h], axis=-1)
 
+    def block_grid(self) -> tuple[int, int]:
+        """Blocks of one string as a regular grid: (across the width, up the string's height)."""
+        if self.module_orientation == "portrait":
+            return self.modules_across * self.bypass_diodes, 1
+        return self.modules_across, self.bypass_diodes
+
     def blocks(self) -> tuple[FloatArray, NDArray[np.int64]]:
         """Bypass-diode blocks: rectangles ``(B, 4)`` (u0, u1, v0, v1) [m], their string index."""
         mw, mh = self.width / self.modules_across, self.height / self.modules_high

@@ -39,6 +39,7 @@ IntArray = NDArray[np.int64]
 
 _CHUNK = 20_000
 _EPS_AREA_M2 = 1e-9
+_IE_MAX = 4  # inclusion–exclusion up to this many rectangles, edge grid beyond
 
 
 def collector_axes(azimuth: ArrayLike, elevation: ArrayLike) -> tuple[FloatArray, ...]:
@@ -91,20 +92,82 @@ def candidate_pairs(positions: ArrayLike, sun_enu: ArrayLike,
     p = np.asarray(positions, dtype=float)
     s = np.asarray(sun_enu, dtype=float).reshape(-1, 3)
     n = len(p)
-    ii, jj = np.nonzero(~np.eye(n, dtype=bool))
-    d = p[jj] - p[ii]                                   # (P, 3)
+    ii, jj = np.triu_indices(n, 1)
+    d = p[jj] - p[ii]                                   # (P, 3), i < j
     d2 = np.einsum("pk,pk->p", d, d)
     thr = d2 - diagonal**2
-    out_t, out_p = [], []
-    for k0 in range(0, len(s), _CHUNK):
-        ds = s[k0:k0 + _CHUNK] @ d.T                    # (T, P)
-        hit = (ds > -diagonal) & ((ds * ds > thr) | (thr < 0))
-        t, q = np.nonzero(hit)
-        out_t.append(t + k0)
-        out_p.append(q)
+    empty = np.zeros(0, dtype=np.int64)
+    if not len(d):
+        return empty, empty, empty
+    # |d⊥| ≥ |d| sin(angle(d, s)) ≥ |d| sin(elevation − steepest offset): skip high suns
+    slope = float(np.max(np.abs(np.arcsin(np.clip(d[:, 2] / np.sqrt(d2), -1, 1)))))
+    ratio = diagonal / float(np.sqrt(d2.min()))
+    el_max = np.arcsin(min(1.0, ratio)) + slope if ratio < 1 else np.pi
+    steps = np.nonzero(np.arcsin(np.clip(s[:, 2], -1, 1)) < el_max)[0]
+    out_t, out_i, out_j = [], [], []
+    for k0 in range(0, len(steps), _CHUNK):
+        st = steps[k0:k0 + _CHUNK]
+        ds = s[st] @ d.T                                # (T, P)
+        near = (ds * ds > thr) | (thr < 0)              # |d⊥| < diagonal, both directions
+        fwd = near & (ds > -diagonal)                   # j may shade i
+        bwd = near & (ds < diagonal)                    # i may shade j
+        t, q = np.nonzero(fwd)
+        out_t.append(st[t])
+        out_i.append(ii[q])
+        out_j.append(jj[q])
+        t, q = np.nonzero(bwd)
+        out_t.append(st[t])
+        out_i.append(jj[q])
+        out_j.append(ii[q])
+    if not out_t:
+        return empty, empty, empty
     t_all = np.concatenate(out_t).astype(np.int64)
-    q_all = np.concatenate(out_p)
-    return t_all, ii[q_all].astype(np.int64), jj[q_all].astype(np.int64)
+    i_all = np.concatenate(out_i).astype(np.int64)
+    j_all = np.concatenate(out_j).astype(np.int64)
+    order = np.lexsort((j_all, i_all, t_all))
+    return t_all[order], i_all[order], j_all[order]
+
+
+def _sun_facing_pairs(positions: FloatArray, sun_az: FloatArray, sun_el: FloatArray,
+                      width: float, height: float
+                      ) -> tuple[IntArray, IntArray, IntArray, FloatArray]:
+    """Shading pairs and their rectangles when every collector faces the sun (n = s).
+
+    Then λ = d·s and P = d⊥, so (du, dv) = (d·u, d·v): the exact overlap test
+    |du| < a, |dv| < b, d·s > 0 runs on all pairs at once (both directions of a
+    pair from one product).
+    """
+    n_tr = len(positions)
+    ii, jj = np.triu_indices(n_tr, 1)
+    d = (positions[jj] - positions[ii]).T.astype(np.float32)        # (3, P)
+    n, u, v = collector_axes(sun_az, sun_el)
+    out_t, out_i, out_j, out_du, out_dv = [], [], [], [], []
+    for k0 in range(0, len(sun_az), _CHUNK):
+        sl = slice(k0, k0 + _CHUNK)
+        du = u[sl].astype(np.float32) @ d
+        dv = v[sl].astype(np.float32) @ d
+        hit = (np.abs(du) < width) & (np.abs(dv) < height)
+        t, q = np.nonzero(hit)
+        ds = np.einsum("tk,kt->t", n[sl][t], d[:, q].astype(np.float64))
+        fwd = ds > 0                          # j (at +d) is sunward of i: j shades i
+        tt = t + k0
+        out_t.append(tt)
+        out_i.append(np.where(fwd, ii[q], jj[q]))
+        out_j.append(np.where(fwd, jj[q], ii[q]))
+        # exact (float64) offsets, sign flipped for the reverse direction
+        d64 = (positions[jj[q]] - positions[ii[q]]) * np.where(fwd, 1.0, -1.0)[:, None]
+        out_du.append(np.einsum("mk,mk->m", d64, u[tt]))
+        out_dv.append(np.einsum("mk,mk->m", d64, v[tt]))
+    cat = np.concatenate
+    t_all, i_all, j_all = cat(out_t), cat(out_i), cat(out_j)
+    du_all, dv_all = cat(out_du), cat(out_dv)
+    a2, b2 = width / 2, height / 2
+    rects = np.stack([np.maximum(-a2, du_all - a2), np.minimum(a2, du_all + a2),
+                      np.maximum(-b2, dv_all - b2), np.minimum(b2, dv_all + b2)], axis=-1)
+    keep = ((rects[:, 1] - rects[:, 0]) * (rects[:, 3] - rects[:, 2]) > _EPS_AREA_M2) \
+        & (rects[:, 1] > rects[:, 0]) & (rects[:, 3] > rects[:, 2])
+    return (t_all[keep].astype(np.int64), i_all[keep].astype(np.int64),
+            j_all[keep].astype(np.int64), rects[keep])
 
 
 def pair_shade_rects(positions: ArrayLike, sun_enu: ArrayLike, normal_az: ArrayLike,
@@ -176,8 +239,22 @@ def union_area(rects: ArrayLike, clip: ArrayLike | None = None) -> FloatArray:
         r[..., 2] = np.maximum(r[..., 2], c[..., 2])
         r[..., 3] = np.minimum(r[..., 3], c[..., 3])
     valid = (r[..., 1] > r[..., 0]) & (r[..., 3] > r[..., 2])
-    if r.shape[1] == 1:
-        return np.where(valid[:, 0], (r[:, 0, 1] - r[:, 0, 0]) * (r[:, 0, 3] - r[:, 0, 2]), 0.0)
+    # bucket the groups by the slot of their last non-empty rectangle; empty rectangles
+    # before it add nothing to either union formula
+    last = np.where(valid.any(axis=1), r.shape[1] - np.argmax(valid[:, ::-1], axis=1), 0)
+    out = np.zeros(len(r))
+    for k in np.unique(last):
+        if k == 0:
+            continue
+        g = np.nonzero(last == k)[0]
+        sub = r[g, :k]
+        out[g] = (_union_inclusion_exclusion(sub) if k <= _IE_MAX
+                  else _union_grid(sub, valid[g, :k]))
+    return out
+
+
+def _union_grid(r: FloatArray, valid: NDArray[np.bool_]) -> FloatArray:
+    """Union area of rectangles ``(G, K, 4)`` (``valid`` the non-empty ones) on their edge grid."""
     xs = np.sort(r[..., :2].reshape(len(r), -1), axis=1)       # (G, 2K)
     ys = np.sort(r[..., 2:].reshape(len(r), -1), axis=1)
     cx = (xs[:, 1:] + xs[:, :-1]) / 2                           # (G, 2K−1)
@@ -189,6 +266,19 @@ def union_area(rects: ArrayLike, clip: ArrayLike | None = None) -> FloatArray:
     iny = (cy[:, :, None] > r[:, None, :, 2]) & (cy[:, :, None] < r[:, None, :, 3])
     covered = np.einsum("gxk,gyk->gxy", inx.astype(np.float64), iny.astype(np.float64)) > 0
     return np.einsum("gxy,gx,gy->g", covered.astype(np.float64), dx, dy)
+
+
+def _union_inclusion_exclusion(r: FloatArray) -> FloatArray:
+    """Union area of few rectangles per group: Σ over subsets (−1)^(|S|+1) |∩S|."""
+    k = r.shape[1]
+    total = np.zeros(len(r))
+    for mask in range(1, 1 << k):
+        members = [m for m in range(k) if mask >> m & 1]
+        sub = r[:, members]
+        w = np.clip(sub[..., 1].min(axis=1) - sub[..., 0].max(axis=1), 0.0, None)
+        h = np.clip(sub[..., 3].min(axis=1) - sub[..., 2].max(axis=1), 0.0, None)
+        total += (1.0 if len(members) % 2 else -1.0) * w * h
+    return total
 
 
 @dataclass(frozen=True)
@@ -264,10 +354,15 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
     sun = enu_from_sky(az, el)
     diag = float(np.hypot(width, height))
     upi = np.nonzero(up)[0]
-    t, i, j = candidate_pairs(p, sun[upi], diag)
-    t = upi[t]
-    rects, shading = pair_shade_rects(p, sun, saz, sel, width, height, t, i, j)
-    t, i, j, rects = t[shading], i[shading], j[shading], rects[shading]
+    facing = np.einsum("tk,tk->t", sun[upi], enu_from_sky(saz[upi], sel[upi]))
+    if len(upi) and facing.min() > 1 - 1e-12:     # sun tracking: the exact fast path
+        t, i, j, rects = _sun_facing_pairs(p, az[upi], el[upi], width, height)
+        t = upi[t]
+    else:
+        t, i, j = candidate_pairs(p, sun[upi], diag)
+        t = upi[t]
+        rects, shading = pair_shade_rects(p, sun, saz, sel, width, height, t, i, j)
+        t, i, j, rects = t[shading], i[shading], j[shading], rects[shading]
     key = t * n + i
     order = np.argsort(key, kind="stable")
     key, j, rects = key[order], j[order], rects[order]
