@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-import datetime as dt
 import time
 from typing import Any
 
@@ -12,18 +11,11 @@ from fastapi import APIRouter, HTTPException
 from pydantic import BaseModel, ConfigDict, Field
 
 from backend.api.deps import ContextDep, SiteTokenDep, site_or_404
-from backend.api.routes.energy import energy_rows
 from backend.measurements.parse import Calibration
-from backend.measurements.queries import iso_utc
-from backend.storage.sqlraw import fetch
+from backend.measurements.status import status
 
 router = APIRouter(prefix="/api/v1/sites", tags=["sites"])
 
-#: A logger whose last reading is older than this is "stale" [s].
-FRESH_S = 300
-
-_LAST = ("SELECT ts_s, voltage_v, current_a, power_w FROM measurements "
-         "WHERE array_id = ? AND source = 0 ORDER BY ts_s DESC LIMIT 1")
 
 
 class CalibrationModel(BaseModel):
@@ -90,46 +82,4 @@ async def put_calibration(site_id: str, array: str, body: CalibrationModel, ctx:
 @router.get("/{site_id}/status", responses={404: {}})
 def site_status(site_id: str, ctx: ContextDep) -> dict[str, Any]:
     """The overview tiles: sun and tracker now, last readings, twin power, today's energy."""
-    info = site_or_404(ctx, site_id)
-    now = time.time()
-    sample = ctx.twin.sample(site_id, now)
-    v = sample.values
-    arrays: dict[str, Any] = {}
-    with ctx.engine.connect() as conn:
-        for name, arr in info.arrays.items():
-            last = fetch(conn, _LAST, (arr.array_id,))
-            entry: dict[str, Any] = {"kind": arr.kind, "last_ts": None, "power_w": None,
-                                     "voltage_v": None, "current_a": None, "age_s": None,
-                                     "logger": "never",
-                                     "twin_power_w": v.get(f"{name}_power_w")}
-            if last:
-                ts, volt, amp, pw = last[0]
-                age = now - ts
-                entry.update(last_ts=iso_utc([int(ts)])[0], power_w=pw, voltage_v=volt,
-                             current_a=amp, age_s=round(age, 1),
-                             logger="reporting" if age <= FRESH_S else "stale")
-            arrays[name] = entry
-    local_now = dt.datetime.fromtimestamp(now, info.zone)
-    today = local_now.replace(hour=0, minute=0, second=0, microsecond=0)
-    tomorrow_d = today.date() + dt.timedelta(days=1)
-    tomorrow = dt.datetime(tomorrow_d.year, tomorrow_d.month, tomorrow_d.day, tzinfo=info.zone)
-    energy = energy_rows(ctx, site_id, today, tomorrow, "day")
-    row = energy["rows"][0]
-    for name in arrays:
-        arrays[name]["energy_today_wh"] = row["arrays"][name]["measured_wh"]
-        arrays[name]["twin_energy_today_wh"] = row["arrays"][name]["twin_wh"]
-    return {
-        "site_id": site_id,
-        "time": local_now.isoformat(),
-        "time_utc": iso_utc([int(now)])[0],
-        "timezone": info.site.timezone,
-        "sun": {"azimuth_deg": v.get("solar_azimuth"),
-                "elevation_deg": v.get("apparent_elevation")},
-        "tracker": {"azimuth_joint_deg": v.get("azimuth_joint_deg"),
-                    "elevation_joint_deg": v.get("elevation_joint_deg")},
-        "twin_minute": iso_utc([sample.ts_s])[0],
-        "arrays": arrays,
-        "gain_today_pct": row["gain_pct"],
-        "twin_gain_today_pct": row["twin_gain_pct"],
-        "fresh_s": FRESH_S,
-    }
+    return status(ctx, site_or_404(ctx, site_id), time.time())
