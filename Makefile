@@ -1,17 +1,18 @@
 # heliotwin — the two commands a new user needs: `make run` and `make test`.
-# Every target creates .venv and installs the project into it when missing or stale.
+# Every target creates .venv and installs the project into it when missing or stale,
+# with the versions CI tested (constraints.txt; `make lock` refreshes it).
 
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test bench lint clean
+.PHONY: run test bench lint lock clean
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[dev]'
 	@touch $(STAMP)
 
 run: $(STAMP)  ## start the service: API + dashboard on :8000, 3D twin on :8080, demo logger
@@ -26,6 +27,15 @@ bench: $(STAMP)  ## measure the speed figures and write benchmarks/RESULTS.md
 lint: $(STAMP)  ## ruff and mypy, both clean on main
 	$(BIN)/ruff check backend sim vision tests benchmarks
 	$(BIN)/mypy backend sim vision
+
+lock:  ## resolve pyproject.toml's ranges afresh in a scratch venv and pin them in constraints.txt
+	rm -rf build/lock-venv
+	$(PYTHON) -m venv build/lock-venv
+	build/lock-venv/bin/python -m pip install --quiet --upgrade pip
+	build/lock-venv/bin/python -m pip install --quiet -e '.[dev]'
+	( echo "# pip constraints: the versions CI tested (make lock writes this file)"; \
+	  build/lock-venv/bin/python -m pip freeze --exclude-editable ) > constraints.txt
+	rm -rf build/lock-venv
 
 clean:
 	rm -rf $(VENV) build *.egg-info
