@@ -394,29 +394,34 @@ def iv_curve(
     return pd.DataFrame({"voltage_v": voltage, "current_a": current, "power_w": voltage * current})
 
 
+def _as_is(value: Any) -> Any:
+    return value
+
+
+#: Site-file key → (:class:`ArrayConfig` field, converter); units in the keys at the boundary.
+_SITE_FILE_KEYS: dict[str, tuple[str, Any]] = {
+    "mount": ("mount", _as_is),
+    "module": ("module", _as_is),
+    "modules_in_series": ("modules_in_series", int),
+    "strings_in_parallel": ("strings_in_parallel", int),
+    "surface_tilt_deg": ("surface_tilt", float),
+    "surface_azimuth_deg": ("surface_azimuth", float),
+    "temperature_model": ("temperature_model", _as_is),
+    "albedo": ("albedo", float),
+}
+
+
 def array_config_from_dict(name: str, d: dict[str, Any]) -> ArrayConfig:
-    """Build an :class:`ArrayConfig` from a site-file entry (units in the keys)."""
-    known = {
-        "mount",
-        "module",
-        "modules_in_series",
-        "strings_in_parallel",
-        "surface_tilt_deg",
-        "surface_azimuth_deg",
-        "temperature_model",
-        "albedo",
-    }
+    """Build an :class:`ArrayConfig` from a site-file entry (units in the keys).
+
+    A key left out takes the dataclass field's default (declared once, on
+    :class:`ArrayConfig`).
+    """
+    known = set(_SITE_FILE_KEYS)
     unknown = sorted(set(d) - known)
     if unknown:
         raise ValueError(f"array {name!r}: unknown keys {unknown}; known: {sorted(known)}")
-    return ArrayConfig(
-        name=name,
-        mount=d.get("mount", "fixed"),
-        module=d.get("module", KD205GX_LP),
-        modules_in_series=int(d.get("modules_in_series", 1)),
-        strings_in_parallel=int(d.get("strings_in_parallel", 4)),
-        surface_tilt=float(d.get("surface_tilt_deg", 0.0)),
-        surface_azimuth=float(d.get("surface_azimuth_deg", 180.0)),
-        temperature_model=d.get("temperature_model", "open_rack_glass_polymer"),
-        albedo=float(d.get("albedo", 0.2)),
-    )
+    kwargs = {
+        field: convert(d[key]) for key, (field, convert) in _SITE_FILE_KEYS.items() if key in d
+    }
+    return ArrayConfig(name=name, **kwargs)
