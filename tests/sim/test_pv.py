@@ -56,7 +56,7 @@ def test_cell_temperature_is_sapm() -> None:
     )
 
 
-def test_mpp_table_within_0p1pct_of_full_single_diode_over_a_year() -> None:
+def test_mpp_table_close_to_full_single_diode_over_a_clear_year() -> None:
     # Realistic (irradiance, temperature) pairs from an independent pvlib chain:
     # a clear-sky year at Tehuantepec on the fixed 16 deg south plane, 10-min steps.
     loc = location.Location(16.28875, -95.240871, altitude=50)
@@ -95,8 +95,10 @@ def test_mpp_table_within_0p1pct_of_full_single_diode_over_a_year() -> None:
     )
     i_mp, v_mp = mpp_table().lookup(e[lit], t[lit])
     energy_full, energy_table = sd["p_mp"].sum(), (i_mp * v_mp).sum()
-    assert abs(energy_table / energy_full - 1) < 1e-3
-    assert np.max(np.abs(i_mp * v_mp - sd["p_mp"])) < 0.2  # W per module, at every step
+    # measured: -0.00058 % in energy, 0.035 W per module at worst; bounds 2x those
+    # (the twin's own years, both arrays, clear sky and TMY3: tests/sim/test_mpp_year.py)
+    assert -1.2e-5 < energy_table / energy_full - 1 < 0
+    assert np.max(np.abs(i_mp * v_mp - sd["p_mp"])) < 0.07  # W per module, at every step
 
 
 def test_mpp_table_falls_back_to_exact_outside_grid() -> None:
