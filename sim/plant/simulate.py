@@ -84,8 +84,13 @@ def _seconds(index: pd.DatetimeIndex) -> FloatArray:
     return np.asarray((index - pd.Timestamp(0, tz="UTC")) / pd.Timedelta(seconds=1), dtype=float)
 
 
-def _sky(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame | None
-         ) -> dict[str, FloatArray]:
+def sky_conditions(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame | None = None
+                   ) -> dict[str, FloatArray]:
+    """Sun (SPA) and irradiance at ``times``: the ``sky`` dict of :mod:`sim.plant.strategies`.
+
+    Clear sky (Ineichen–Perez) unless ``weather`` (covering ``times``) is given;
+    irradiance is zero with the sun down.
+    """
     pos = solar_position(times, plant.latitude, plant.longitude, plant.altitude)
     sky: dict[str, FloatArray] = {
         "solar_azimuth": pos["azimuth"].to_numpy(),
@@ -93,8 +98,9 @@ def _sky(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame | None
         "apparent_zenith": pos["apparent_zenith"].to_numpy(),
         "zenith": pos["zenith"].to_numpy(),
     }
-    cs = clearsky_ineichen(times, sky["apparent_zenith"], plant.latitude, plant.longitude,
-                           plant.altitude)
+    with np.errstate(divide="ignore", invalid="ignore"):  # pvlib's Ineichen at night
+        cs = clearsky_ineichen(times, sky["apparent_zenith"], plant.latitude, plant.longitude,
+                               plant.altitude)
     sky["dni_extra"], sky["airmass_relative"] = cs["dni_extra"], cs["airmass_relative"]
     if weather is None:
         for k in ("ghi", "dni", "dhi"):
@@ -192,7 +198,7 @@ class PlantResult:
         day = s["apparent_elevation"] > 0
 
         def pct(x: float) -> float | None:
-            return round(100.0 * (1.0 - x / e_un), 4) if e_un > 0 else None
+            return round(100.0 * (1.0 - x / e_un), 4) + 0.0 if e_un > 0 else None
 
         return {
             "plant_id": self.plant.plant_id,
@@ -249,7 +255,7 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
     frames, any_shaded, daylight, dni_f, dni_sum = [], 0, 0, 0.0, 0.0
     for k0 in range(0, len(times), _CHUNK):
         tt = times[k0:k0 + _CHUNK]
-        sky = _sky(plant, tt, weather)
+        sky = sky_conditions(plant, tt, weather)
         saz, sel = orientations(strategy, plant, sky)
         run = _power(plant, sky, saz, sel)
         fix_az = np.full(len(tt), plant.fixed_azimuth)
@@ -290,4 +296,4 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
                        any_shaded, daylight, dni_f / dni_sum if dni_sum > 0 else float("nan"))
 
 
-__all__ = ["CLOUDY_KT", "PlantResult", "simulate_plant", "weather_for_plant"]
+__all__ = ["CLOUDY_KT", "PlantResult", "simulate_plant", "sky_conditions", "weather_for_plant"]

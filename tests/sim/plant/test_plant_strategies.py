@@ -9,7 +9,7 @@ from plant_reference import sampled_fractions, utc_from_true_solar_time
 
 from sim.plant.layout import load_plant
 from sim.plant.shading import shades_anyone
-from sim.plant.simulate import _sky
+from sim.plant.simulate import sky_conditions
 from sim.plant.strategies import orientations
 
 PLANT = load_plant("penarroya")
@@ -18,7 +18,7 @@ W, H = PLANT.collector.width, PLANT.collector.height
 
 def _sky_at(day: str, tst_h: float) -> dict[str, np.ndarray]:
     t = utc_from_true_solar_time(day, tst_h, PLANT.longitude)
-    return _sky(PLANT, pd.DatetimeIndex([t]), None)
+    return sky_conditions(PLANT, pd.DatetimeIndex([t]))
 
 
 def _pvlib_poa(sky: dict[str, np.ndarray], az: np.ndarray, el: np.ndarray) -> np.ndarray:

@@ -1,0 +1,240 @@
+"""Plants for the HTTP service: loaded configs (cached, reloaded when a file changes),
+positions for a plant controller, the sky map and a day's shade (seed 004).
+
+The routes in ``backend/api/routes/plants.py`` are thin: they parse and call
+:class:`PlantService`. All physics is in :mod:`sim.plant`.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import logging
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from sim.plant import Plant, UnknownPlantError, default_plants_dir, load_plant
+from sim.plant.shading import plant_shade
+from sim.plant.simulate import simulate_plant, sky_conditions
+from sim.plant.strategies import STRATEGIES, orientations, sky_map
+
+log = logging.getLogger(__name__)
+
+__all__ = ["STRATEGIES", "PlantService", "UnknownPlantError", "lambert_xy", "sky_map_png"]
+
+
+def lambert_xy(azimuth_deg: np.ndarray, elevation_deg: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Lambert azimuthal equal-area disk (seed 004 Fig. 6): unit radius at the horizon.
+
+    r = √2 · sin(ζ/2), ζ the zenith angle; x east, y north.
+    """
+    zeta = np.radians(90.0 - np.asarray(elevation_deg, dtype=float))
+    r = np.sqrt(2.0) * np.sin(zeta / 2)
+    az = np.radians(np.asarray(azimuth_deg, dtype=float))
+    return r * np.sin(az), r * np.cos(az)
+
+
+class PlantService:
+    """The plants of one directory, cached by file modification time."""
+
+    def __init__(self, plants_dir: str | Path | None = None) -> None:
+        self.plants_dir = Path(plants_dir) if plants_dir is not None else default_plants_dir()
+        self._cache: dict[str, tuple[float, Plant]] = {}
+        self._lock = threading.Lock()
+
+    def ids(self) -> list[str]:
+        """Plant ids (file stems), sorted."""
+        return sorted(p.stem for p in self.plants_dir.glob("*.json"))
+
+    def get(self, plant_id: str) -> Plant:
+        """A plant; ``UnknownPlantError`` / ``ValueError`` as :func:`sim.plant.load_plant`."""
+        path = self.plants_dir / f"{plant_id}.json"
+        try:
+            mtime = path.stat().st_mtime
+        except OSError:
+            mtime = -1.0
+        with self._lock:
+            hit = self._cache.get(plant_id)
+            if hit is not None and hit[0] == mtime:
+                return hit[1]
+        plant = load_plant(plant_id, self.plants_dir)
+        with self._lock:
+            self._cache[plant_id] = (mtime, plant)
+        return plant
+
+    def list(self) -> list[dict[str, Any]]:
+        """Every loadable plant (summary); a bad file is logged and left out."""
+        out = []
+        for pid in self.ids():
+            try:
+                p = self.get(pid)
+            except ValueError as exc:
+                log.warning("plant %s left out: %s", pid, exc)
+                continue
+            out.append({"plant_id": p.plant_id, "name": p.name, "trackers": p.n_trackers,
+                        "latitude_deg": p.latitude, "longitude_deg": p.longitude,
+                        "timezone": p.timezone})
+        return out
+
+    def positions(self, plant_id: str, time: dt.datetime, strategy: str = "sun"
+                  ) -> dict[str, Any]:
+        """What a plant controller polls: every tracker's orientation, shade and shaders."""
+        plant = self.get(plant_id)
+        ts = pd.Timestamp(time).tz_convert("UTC")
+        sky = sky_conditions(plant, pd.DatetimeIndex([ts]))
+        saz, sel = orientations(strategy, plant, sky)
+        c = plant.collector
+        shade = plant_shade(plant.positions, sky["solar_azimuth"], sky["apparent_elevation"],
+                            saz, sel, c.width, c.height)
+        up = bool(sky["apparent_elevation"][0] > 0)
+        trackers = []
+        for k, tid in enumerate(plant.tracker_ids):
+            f = shade.fraction[0, k]
+            trackers.append({
+                "tracker_id": tid,
+                "azimuth_deg": round(float(saz[0]), 4),
+                "elevation_deg": round(float(sel[0]), 4),
+                "shaded_fraction": round(float(f), 6) if up else None,
+                "shaded_by": [plant.tracker_ids[b] for b in shade.shaded_by(0, k)],
+            })
+        fr = shade.fraction[0]
+        return {
+            "plant_id": plant.plant_id,
+            "time": ts.isoformat(),
+            "strategy": strategy,
+            "sun": {"azimuth_deg": round(float(sky["solar_azimuth"][0]), 4),
+                    "elevation_deg": round(float(sky["apparent_elevation"][0]), 4)},
+            "sun_up": up,
+            "trackers_shaded": int((np.nan_to_num(fr) > 0).sum()),
+            "mean_shaded_fraction": round(float(fr.mean()), 6) if up else None,
+            "trackers": trackers,
+        }
+
+    def sky_map(self, plant_id: str, time: dt.datetime, resolution_deg: float = 3.0,
+                strategy: str = "sky_scan") -> dict[str, Any]:
+        """The hemispheric POA map (clear sky) with the shaded region, the sun and the pick."""
+        plant = self.get(plant_id)
+        ts = pd.Timestamp(time).tz_convert("UTC")
+        sky = sky_conditions(plant, pd.DatetimeIndex([ts]))
+        m = sky_map(plant, sky, 0, resolution_deg)
+        saz, sel = orientations(strategy, plant, sky)
+        poa = np.where(m["shading"], np.nan, m["poa_global"])
+        best = {"azimuth_deg": round(float(saz[0]), 3), "elevation_deg": round(float(sel[0]), 3)}
+
+        def grid(a: np.ndarray, nd: int = 1) -> list[list[float | None]]:
+            return [[None if not np.isfinite(v) else round(float(v), nd) for v in row]
+                    for row in a]
+
+        return {
+            "plant_id": plant.plant_id,
+            "time": ts.isoformat(),
+            "projection": "lambert_azimuthal_equal_area",
+            "sky": "clearsky-ineichen",
+            "transposition_model": "perez",
+            "sun": {"azimuth_deg": round(float(sky["solar_azimuth"][0]), 4),
+                    "elevation_deg": round(float(sky["apparent_elevation"][0]), 4)},
+            "strategy": strategy,
+            "chosen": best,
+            "azimuth_deg": [float(a) for a in m["azimuth"]],
+            "elevation_deg": [float(e) for e in m["elevation"]],
+            "poa_global_w_m2": grid(poa),
+            "shading": [[bool(v) for v in row] for row in m["shading"]],
+        }
+
+    def day(self, plant_id: str, date: dt.date, step_s: float = 600.0) -> dict[str, Any]:
+        """A clear-sky day: each tracker's shaded fraction (sun tracking) and strategy energies."""
+        plant = self.get(plant_id)
+        start = pd.Timestamp(date.isoformat()).tz_localize(plant.timezone, ambiguous=True,
+                                                            nonexistent="shift_forward")
+        end = (start + pd.Timedelta(days=1)).normalize()
+        end = pd.Timestamp(end.date().isoformat()).tz_localize(
+            plant.timezone, ambiguous=True, nonexistent="shift_forward")
+        strategies: dict[str, Any] = {}
+        shade_rows: list[list[float]] = []
+        times: list[str] = []
+        for strategy in STRATEGIES:
+            r = simulate_plant(plant, start, end, step_s=step_s, strategy=strategy)
+            s = r.summary()
+            strategies[strategy] = {k: s[k] for k in (
+                "plant_energy_wh", "plant_energy_area_model_wh", "plant_energy_unshaded_wh",
+                "shading_loss_area_pct", "shading_loss_electrical_pct",
+                "fraction_of_daylight_any_shaded", "fixed_energy_wh")}
+            if strategy == "sun":
+                day = r.series["apparent_elevation"] > 0
+                ser = r.series[day]
+                sky = sky_conditions(plant, pd.DatetimeIndex(ser.index))
+                c = plant.collector
+                sh = plant_shade(plant.positions, sky["solar_azimuth"],
+                                 sky["apparent_elevation"], sky["solar_azimuth"],
+                                 sky["apparent_elevation"], c.width, c.height)
+                shade_rows = [[round(float(v), 5) for v in row] for row in sh.fraction]
+                times = [t.isoformat() for t in ser.index]
+                fixed = s["fixed_energy_wh"]
+        strategies["fixed"] = {"plant_energy_wh": fixed}
+        return {"plant_id": plant.plant_id, "date": date.isoformat(), "step_s": step_s,
+                "sky": "clearsky-ineichen", "tracker_ids": list(plant.tracker_ids),
+                "times": times, "shaded_fraction": shade_rows, "strategies": strategies}
+
+
+def sky_map_png(m: dict[str, Any], size_px: int = 420) -> bytes:
+    """Render a sky map (from :meth:`PlantService.sky_map`) as a Lambert-disk PNG with OpenCV.
+
+    Colour: POA (turbo colour map, its range in the corner), grey: orientations that
+    shade a collector, yellow disc: the sun, white cross: the chosen orientation.
+    North up, east right (looking down on the sky map).
+    """
+    import cv2
+
+    az = np.asarray(m["azimuth_deg"], dtype=float)
+    el = np.asarray(m["elevation_deg"], dtype=float)
+    poa = np.array([[np.nan if v is None else v for v in row] for row in m["poa_global_w_m2"]],
+                   dtype=float)
+    shaded = np.asarray(m["shading"], dtype=bool)
+    half = size_px // 2
+    yy, xx = np.mgrid[0:size_px, 0:size_px]
+    x = (xx - half + 0.5) / (half - 10)
+    y = -(yy - half + 0.5) / (half - 10)
+    r = np.hypot(x, y)
+    inside = r <= 1.0
+    zeta = 2 * np.degrees(np.arcsin(np.clip(r / np.sqrt(2.0), 0, 1)))
+    e_px = 90.0 - zeta
+    a_px = np.degrees(np.arctan2(x, y)) % 360.0
+    res_a = az[1] - az[0] if len(az) > 1 else 360.0
+    res_e = el[1] - el[0] if len(el) > 1 else 90.0
+    ia = np.round(a_px / res_a).astype(int) % len(az)
+    ie = np.clip(np.round(e_px / res_e).astype(int), 0, len(el) - 1)
+    val = poa[ie, ia]
+    lo = float(np.nanmin(poa)) if np.isfinite(poa).any() else 0.0
+    hi = float(np.nanmax(poa)) if np.isfinite(poa).any() else 1.0
+    norm = np.clip((np.nan_to_num(val, nan=lo) - lo) / max(hi - lo, 1e-9), 0, 1)
+    img = cv2.applyColorMap((norm * 255).astype(np.uint8), cv2.COLORMAP_TURBO)
+    img[shaded[ie, ia] & inside] = (150, 150, 150)
+    img[~inside] = (255, 255, 255)
+
+    def px(a: float, e: float) -> tuple[int, int]:
+        lx, ly = lambert_xy(np.array(a), np.array(e))
+        return int(half + float(lx) * (half - 10)), int(half - float(ly) * (half - 10))
+
+    for e_ring in (30.0, 60.0):
+        cv2.circle(img, (half, half), abs(px(0.0, e_ring)[1] - half), (60, 60, 60), 1)
+    cv2.circle(img, (half, half), half - 10, (0, 0, 0), 1)
+    for label, a in (("N", 0.0), ("E", 90.0), ("S", 180.0), ("W", 270.0)):
+        p = px(a, -3.0)
+        cv2.putText(img, label, (p[0] - 5, p[1] + 5), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
+                    (0, 0, 0), 1, cv2.LINE_AA)
+    sun = m["sun"]
+    if sun["elevation_deg"] > 0:
+        cv2.circle(img, px(sun["azimuth_deg"], sun["elevation_deg"]), 7, (0, 215, 255), -1)
+        cv2.circle(img, px(sun["azimuth_deg"], sun["elevation_deg"]), 7, (0, 0, 0), 1)
+    ch = m["chosen"]
+    cv2.drawMarker(img, px(ch["azimuth_deg"], ch["elevation_deg"]), (255, 255, 255),
+                   cv2.MARKER_CROSS, 16, 2)
+    cv2.putText(img, f"{lo:.0f}-{hi:.0f} W/m2", (6, size_px - 8), cv2.FONT_HERSHEY_SIMPLEX,
+                0.4, (0, 0, 0), 1, cv2.LINE_AA)
+    ok, buf = cv2.imencode(".png", img)
+    if not ok:
+        raise RuntimeError("PNG encoding failed")
+    return bytes(buf.tobytes())

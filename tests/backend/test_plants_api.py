@@ -1,0 +1,207 @@
+"""``/api/v1/plants`` over real HTTP (uvicorn on a free port) and ``heliotwin plant`` as a process.
+
+Until ``backend/app.py`` registers the router, the server is a small FastAPI app that
+includes it; shaded trackers are checked against twoaxistracking, never the model itself.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import cv2
+import httpx
+import numpy as np
+import pytest
+import uvicorn
+from fastapi import FastAPI
+
+from backend.api.routes.plants import router
+from backend.plants import PlantService
+from sim.plant import default_plants_dir, load_plant
+
+ROOT = Path(__file__).resolve().parents[2]
+PLANT = load_plant("penarroya")
+# seed 004 Fig. 6a: 21 December 08:24 true solar time at Peñarroya
+DEC21_0824_TST = "2021-12-21T08:43:03Z"
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def plants_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("plants")
+    shutil.copy(default_plants_dir() / "penarroya.json", d / "penarroya.json")
+    return d
+
+
+@pytest.fixture(scope="module")
+def base_url(plants_dir: Path) -> Iterator[str]:
+    app = FastAPI()
+    app.include_router(router)
+    app.state.plants = PlantService(plants_dir)
+    port = _free_port()
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 20
+    while not server.started:
+        if time.monotonic() > deadline:
+            raise RuntimeError("uvicorn did not start")
+        time.sleep(0.05)
+    yield f"http://127.0.0.1:{port}"
+    server.should_exit = True
+    thread.join(timeout=10)
+
+
+@pytest.fixture()
+def client(base_url: str) -> Iterator[httpx.Client]:
+    with httpx.Client(base_url=base_url, timeout=60) as c:
+        yield c
+
+
+def _twoaxistracking_shaded(az: float, el: float) -> dict[int, float]:
+    from shapely import geometry
+    from twoaxistracking.shading import shaded_fraction
+
+    geom = geometry.box(-6, -2.5, 6, 2.5)
+    out = {}
+    for i, tid in enumerate(PLANT.tracker_ids):
+        d = np.delete(PLANT.positions - PLANT.positions[i], i, axis=0)
+        dist = np.hypot(d[:, 0], d[:, 1])
+        raz = np.degrees(np.arctan2(d[:, 0], d[:, 1])) % 360
+        out[tid] = shaded_fraction(el, az, geom, geom, 13.0, dist, raz, np.zeros_like(dist))
+    return out
+
+
+def test_list_and_get(client: httpx.Client) -> None:
+    plants = client.get("/api/v1/plants").raise_for_status().json()
+    assert [p["plant_id"] for p in plants] == ["penarroya"]
+    assert plants[0]["trackers"] == 29
+    p = client.get("/api/v1/plants/penarroya").raise_for_status().json()
+    assert p["collector"]["width_m"] == 12 and p["collector"]["height_m"] == 5
+    assert p["trackers"][0] == {"tracker_id": 1, "east_m": -18.5, "north_m": -22.7, "up_m": 0.0}
+    r = client.get("/api/v1/plants/atlantis")
+    assert r.status_code == 404 and "known plants: penarroya" in r.json()["detail"]
+
+
+def test_dropped_in_plant_appears(client: httpx.Client, plants_dir: Path) -> None:
+    d = json.loads((plants_dir / "penarroya.json").read_text())
+    d.update(plant_id="pair", frame="enu", trackers=[
+        {"tracker_id": 1, "east_m": 0, "north_m": 0}, {"tracker_id": 2, "east_m": 0,
+                                                        "north_m": 20}])
+    (plants_dir / "pair.json").write_text(json.dumps(d))
+    try:
+        ids = [p["plant_id"] for p in client.get("/api/v1/plants").json()]
+        assert ids == ["pair", "penarroya"]
+    finally:
+        (plants_dir / "pair.json").unlink()
+
+
+def test_positions_at_seed_004_instant_match_twoaxistracking(client: httpx.Client) -> None:
+    r = client.get("/api/v1/plants/penarroya/positions",
+                   params={"time": DEC21_0824_TST, "strategy": "sun"}).raise_for_status().json()
+    assert set(r) >= {"plant_id", "time", "strategy", "sun", "trackers"}
+    sun = r["sun"]
+    ref = _twoaxistracking_shaded(sun["azimuth_deg"], sun["elevation_deg"])
+    got = {t["tracker_id"]: t for t in r["trackers"]}
+    assert sorted(got) == list(PLANT.tracker_ids)
+    for tid, f in ref.items():
+        assert got[tid]["shaded_fraction"] == pytest.approx(f, abs=2e-6)
+        assert bool(got[tid]["shaded_by"]) == (f > 0)
+        assert got[tid]["azimuth_deg"] == pytest.approx(sun["azimuth_deg"], abs=1e-3)
+    assert r["trackers_shaded"] == sum(f > 0 for f in ref.values()) == 23
+    bt = client.get("/api/v1/plants/penarroya/positions",
+                    params={"time": DEC21_0824_TST, "strategy": "backtrack"}).json()
+    assert all(t["shaded_fraction"] == 0 and t["shaded_by"] == [] for t in bt["trackers"])
+    assert bt["trackers"][0]["elevation_deg"] > sun["elevation_deg"]
+
+
+def test_positions_midsummer_nobody_shaded_and_night(client: httpx.Client) -> None:
+    r = client.get("/api/v1/plants/penarroya/positions",
+                   params={"time": "2021-06-21T10:00:00+02:00"}).json()
+    assert r["strategy"] == "sun" and r["trackers_shaded"] == 0
+    night = client.get("/api/v1/plants/penarroya/positions",
+                       params={"time": "2021-06-21T01:00:00+02:00"}).json()
+    assert night["sun_up"] is False
+    assert night["trackers"][0]["shaded_fraction"] is None
+    assert night["trackers"][0]["elevation_deg"] == 90.0      # stowed flat
+
+
+@pytest.mark.parametrize(("params", "status", "words"), [
+    ({"time": "2021-12-21T08:00:00"}, 422, "time"),
+    ({"time": "yesterday"}, 422, "time"),
+    ({}, 422, "time"),
+    ({"time": DEC21_0824_TST, "strategy": "moon"}, 422, "strategy"),
+])
+def test_positions_bad_input(client: httpx.Client, params: dict, status: int, words: str) -> None:
+    r = client.get("/api/v1/plants/penarroya/positions", params=params)
+    assert r.status_code == status
+    assert words in json.dumps(r.json()["detail"])
+    assert client.get("/api/v1/plants/nope/positions",
+                      params={"time": DEC21_0824_TST}).status_code == 404
+
+
+def test_sky_map_json_and_png(client: httpx.Client) -> None:
+    url = "/api/v1/plants/penarroya/sky-map"
+    m = client.get(url, params={"time": DEC21_0824_TST}).raise_for_status().json()
+    assert m["projection"] == "lambert_azimuthal_equal_area"
+    poa = np.array([[np.nan if v is None else v for v in row] for row in m["poa_global_w_m2"]])
+    shading = np.array(m["shading"])
+    assert poa.shape == shading.shape == (len(m["elevation_deg"]), len(m["azimuth_deg"]))
+    assert shading.any() and not shading.all()
+    assert np.isnan(poa[shading]).all()
+    # the chosen (sky-scan) orientation lies outside the shading region
+    ia = int(round(m["chosen"]["azimuth_deg"] / 3)) % len(m["azimuth_deg"])
+    ie = int(round(m["chosen"]["elevation_deg"] / 3))
+    assert np.isfinite(poa[ie, ia]) or m["chosen"]["elevation_deg"] % 3
+    png = client.get(url, params={"time": DEC21_0824_TST}, headers={"Accept": "image/png"})
+    assert png.headers["content-type"] == "image/png"
+    img = cv2.imdecode(np.frombuffer(png.content, np.uint8), cv2.IMREAD_COLOR)
+    assert img.shape == (420, 420, 3)
+    grey = np.all(img == 150, axis=-1).mean()
+    assert 0.01 < grey < 0.9, "the shading region is drawn grey"
+    assert client.get(url, params={"time": "2021-12-21T08:00"}).status_code == 422
+
+
+def test_day_compares_strategies(client: httpx.Client) -> None:
+    d = client.get("/api/v1/plants/penarroya/day",
+                   params={"date": "2021-12-21", "step_s": 1800}).raise_for_status().json()
+    assert set(d["strategies"]) == {"sun", "backtrack", "sky_scan", "fixed"}
+    assert len(d["shaded_fraction"]) == len(d["times"]) > 10
+    assert len(d["shaded_fraction"][0]) == 29
+    assert d["strategies"]["backtrack"]["fraction_of_daylight_any_shaded"] == 0
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "backend", "plant", *args], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_cli_simulate_and_list() -> None:
+    out = _cli("simulate", "--plant", "penarroya", "--start", "2021-12-21", "--end",
+               "2021-12-22", "--step-s", "900", "--json")
+    assert out.returncode == 0, out.stderr
+    s = json.loads(out.stdout)
+    for key in ("plant_id", "trackers", "daylight_steps", "fraction_of_daylight_any_shaded",
+                "dni_weighted_shaded_fraction", "plant_energy_wh", "shading_loss_area_pct",
+                "shading_loss_electrical_pct"):
+        assert key in s
+    assert s["trackers"] == 29 and 0 < s["fraction_of_daylight_any_shaded"] < 1
+    assert "penarroya" in _cli("list").stdout
+    bad = _cli("simulate", "--plant", "penarroya", "--start", "2021-12-21T00:00", "--end",
+               "2021-12-22")
+    assert bad.returncode == 2 and "--start" in bad.stderr
+    assert _cli("simulate", "--plant", "x", "--start", "2021-12-21", "--end",
+                "2021-12-22").returncode == 2
