@@ -19,6 +19,8 @@ import os
 import sys
 from typing import Any
 
+from backend.twin.parameters import MACHINE_PARAMETERS, RECEIVERS
+
 _BAR_MIN_STEPS = 20_000  # a progress bar only for long runs (two weeks at 1 min and up)
 
 
@@ -42,7 +44,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--end", required=True, help="YYYY-MM-DD or ISO date-time with offset (exclusive)"
     )
     p.add_argument("--step-s", type=float, default=60.0, help="time step [s] (default 60)")
-    p.add_argument("--controller", default="ideal", help="tracking controller (default ideal)")
+    p.add_argument(
+        "--controller",
+        default="ideal",
+        help="tracking controller: ideal, open_loop_spa, open_loop_duffie_beckman, "
+        "chronological, closed_loop_camera, hybrid (default ideal)",
+    )
+    p.add_argument(
+        "--receiver", default="flat", choices=RECEIVERS,
+        help="flat PV, or a CPV receiver that loses the beam outside --acceptance-angle-deg",
+    )
+    machine = p.add_argument_group("machine (disturbances; default a perfect machine)")
+    for param in MACHINE_PARAMETERS:
+        machine.add_argument(
+            "--" + param.name.replace("_", "-"), type=float, default=param.default,
+            metavar="X", help=f"{param.help} (default {param.default:g})",
+        )
     p.add_argument(
         "--tmy3", metavar="PATH", help="use the weather of a TMY3 file instead of clear sky"
     )
@@ -121,20 +138,20 @@ def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
                 site.latitude,
                 site.longitude,
             )
-    from sim.twin import simulate
+    from backend.twin.scenario import Scenario, run_scenario
 
+    machine = {p.name: getattr(args, p.name) for p in MACHINE_PARAMETERS
+               if getattr(args, p.name) != p.default}
+    try:
+        scenario = Scenario(site.site_id, start, end, args.step_s, args.controller,
+                            args.receiver, machine)
+    except ValueError as exc:
+        name, _, problem = str(exc).partition(":")
+        raise InputError(f"--{name.replace('_', '-')}:{problem}") from None
     steps = (end - start).total_seconds() / args.step_s
     callback, bar = _progress_bar(not args.no_progress and steps >= _BAR_MIN_STEPS)
     try:
-        result = simulate(
-            site,
-            start,
-            end,
-            step_s=args.step_s,
-            controller=args.controller,
-            weather=weather,
-            progress=callback,
-        )
+        result = run_scenario(site, scenario, weather=weather, progress=callback)
     except ValueError as exc:
         raise InputError(str(exc)) from None
     finally:

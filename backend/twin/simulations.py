@@ -1,10 +1,11 @@
 """Twin scenarios run from the API: synchronous, or in the background with progress.
 
-A run is ``sim.twin.simulate`` with the request's site, range, step and
-controller. Background runs execute one at a time on a worker thread; their
-status and progress live in memory while they run, and the finished run (its
-summary and its series as a compressed ``.npz``) is stored in
-``simulation_runs``/``simulation_series``, so results survive a restart.
+A run is a :class:`backend.twin.scenario.Scenario` (site, range, step,
+controller, disturbances, receiver) through ``run_scenario``. Background runs
+execute one at a time on a worker thread; their status and progress live in
+memory while they run, and the finished run (its summary and its series as a
+compressed ``.npz``) is stored in ``simulation_runs``/``simulation_series``, so
+results survive a restart.
 """
 
 from __future__ import annotations
@@ -25,29 +26,13 @@ from sqlalchemy import Connection, Engine, insert, select, update
 from backend.measurements.writer import Writer
 from backend.sites import Registry
 from backend.storage.tables import SimulationRun, SimulationSeries, utcnow
-from sim.twin import simulate
+from backend.twin.scenario import Scenario, run_scenario
 
 logger = logging.getLogger(__name__)
 
 
 class Cancelled(Exception):
     """The service is stopping; a background run gives up."""
-
-
-@dataclass
-class RunParams:
-    """A validated simulation request."""
-
-    site_id: str
-    start: pd.Timestamp
-    end: pd.Timestamp
-    step_s: float
-    controller: str
-
-    def to_json(self) -> str:
-        return json.dumps({"site_id": self.site_id, "start": self.start.isoformat(),
-                           "end": self.end.isoformat(), "step_s": self.step_s,
-                           "controller": self.controller})
 
 
 @dataclass
@@ -102,12 +87,12 @@ class SimulationRunner:
         self._stopping.set()
         self._pool.shutdown(wait=True, cancel_futures=True)
 
-    def _record(self, state: RunState, params: RunParams) -> None:
+    def _record(self, state: RunState, params: Scenario) -> None:
         self.writer.call(lambda conn: conn.execute(insert(SimulationRun).values(
             run_id=state.run_id, site_id=state.site_id, params_json=params.to_json(),
             status=state.status, progress=0.0, created_at=utcnow()))).result()
 
-    def _execute(self, state: RunState, params: RunParams) -> dict[str, Any]:
+    def _execute(self, state: RunState, params: Scenario) -> dict[str, Any]:
         info = self.registry.sites[params.site_id]
 
         def progress(fraction: float) -> None:
@@ -117,8 +102,7 @@ class SimulationRunner:
 
         state.status = "running"
         try:
-            result = simulate(info.site, params.start, params.end, step_s=params.step_s,
-                              controller=params.controller, progress=progress)
+            result = run_scenario(info.site, params, progress=progress)
         except Exception as exc:
             state.status, state.error = "failed", str(exc)
             self.writer.call(lambda conn: _finish(conn, state, None)).result()
@@ -135,7 +119,7 @@ class SimulationRunner:
                 self._series.pop(next(iter(self._series)))
         return summary
 
-    def run_sync(self, params: RunParams) -> dict[str, Any]:
+    def run_sync(self, params: Scenario) -> dict[str, Any]:
         """Run now and return the summary (with ``run_id``)."""
         state = RunState(uuid.uuid4().hex, params.site_id, "running",
                          params=json.loads(params.to_json()))
@@ -144,7 +128,7 @@ class SimulationRunner:
             self._runs[state.run_id] = state
         return self._execute(state, params)
 
-    def start_background(self, params: RunParams) -> RunState:
+    def start_background(self, params: Scenario) -> RunState:
         """Queue a run; poll :meth:`get` for its progress."""
         state = RunState(uuid.uuid4().hex, params.site_id, "queued",
                          params=json.loads(params.to_json()))

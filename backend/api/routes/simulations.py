@@ -13,30 +13,44 @@ import orjson
 import pandas as pd
 from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import Response
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field, create_model
 
 from backend.api.deps import ContextDep, site_or_404
 from backend.measurements.queries import iso_utc
 from backend.timestamps import parse_range
-from backend.twin.simulations import RunParams
+from backend.twin.parameters import MACHINE_PARAMETERS, RECEIVERS
+from backend.twin.scenario import Scenario
 from sim.twin import CONTROLLERS
 
 router = APIRouter(prefix="/api/v1/simulations", tags=["simulations"])
 
 
-class SimulationCreate(BaseModel):
+class _SimulationBase(BaseModel):
     """A twin scenario (DESIGN.md ``heliotwin simulate``)."""
+
+    model_config = ConfigDict(allow_inf_nan=False)
 
     site_id: str = Field("tehuantepec", examples=["tehuantepec"])
     start: str = Field(..., description="date (site midnight) or ISO date-time with offset",
                        examples=["2024-03-15"])
     end: str = Field(..., description="exclusive", examples=["2024-03-16"])
     step_s: float = Field(60.0, gt=0, le=86400, description="time step [s]")
-    controller: str = Field("ideal", description="tracking controller")
+    controller: Literal[CONTROLLERS] = Field(  # type: ignore[valid-type]
+        "ideal", description="tracking controller")
+    receiver: Literal[RECEIVERS] = Field(  # type: ignore[valid-type]
+        "flat", description="flat PV, or a CPV receiver with an acceptance angle")
     background: bool = Field(False, description="answer 202 at once and run in the background")
 
 
-def _params(ctx: Any, body: SimulationCreate) -> RunParams:
+#: The request body: the base fields plus every machine parameter of the scenario table.
+SimulationCreate = create_model(
+    "SimulationCreate", __base__=_SimulationBase,
+    **{p.name: (float, Field(p.default, ge=p.minimum, le=p.maximum, description=p.help))
+       for p in MACHINE_PARAMETERS},  # type: ignore[call-overload]
+)
+
+
+def _params(ctx: Any, body: _SimulationBase) -> Scenario:
     info = site_or_404(ctx, body.site_id)
     try:
         t0, t1 = parse_range(body.start, body.end, info.zone)
@@ -47,19 +61,22 @@ def _params(ctx: Any, body: SimulationCreate) -> RunParams:
         raise HTTPException(422, f"{steps:.4g} steps asked; the limit is "
                                  f"{ctx.settings.max_simulation_steps}: use a larger step_s "
                                  "or a shorter range")
-    if body.controller not in CONTROLLERS:
-        raise HTTPException(422, f"controller: {body.controller!r} is not one of "
-                                 f"{', '.join(CONTROLLERS)}")
-    return RunParams(body.site_id, pd.Timestamp(t0), pd.Timestamp(t1), body.step_s,
-                     body.controller)
+    machine = {p.name: float(getattr(body, p.name)) for p in MACHINE_PARAMETERS
+               if getattr(body, p.name) != p.default}
+    try:
+        return Scenario(body.site_id, pd.Timestamp(t0), pd.Timestamp(t1), body.step_s,
+                        body.controller, body.receiver, machine)
+    except ValueError as exc:
+        raise HTTPException(422, str(exc)) from None
 
 
 @router.post("", responses={202: {"description": "accepted (background run)"}, 400: {},
                                  404: {}, 422: {}})
-async def create_simulation(body: SimulationCreate, ctx: ContextDep) -> Response:
+async def create_simulation(body: SimulationCreate,  # type: ignore[valid-type]
+                            ctx: ContextDep) -> Response:
     """Run a twin scenario; the summary, or 202 with a ``run_id`` to poll."""
     params = _params(ctx, body)
-    if body.background:
+    if body.background:  # type: ignore[attr-defined]
         state = await asyncio.to_thread(ctx.simulations.start_background, params)
         return Response(orjson.dumps({"run_id": state.run_id, "status": state.status,
                                       "progress": state.progress}),

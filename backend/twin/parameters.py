@@ -1,0 +1,44 @@
+"""The machine parameters of a twin scenario, declared once (no heavy imports: the CLI
+builds its flags from this table at start-up, the HTTP schema its fields)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+RECEIVERS = ("flat", "cpv")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One machine parameter: its name (units in it), default, bounds and help."""
+
+    name: str
+    default: float
+    help: str
+    minimum: float | None = None
+    maximum: float | None = None
+
+
+#: The disturbances (``sim.disturbances.Disturbances``, same names) and the receiver's
+#: acceptance angle; defaults are a perfect machine.
+MACHINE_PARAMETERS: tuple[Parameter, ...] = (
+    Parameter("pedestal_yaw_deg", 0.0, "azimuth misalignment of the pedestal [deg]",
+              -180.0, 180.0),
+    Parameter("pedestal_tilt_deg", 0.0, "tilt of the pedestal axis from vertical [deg]",
+              0.0, 45.0),
+    Parameter("pedestal_tilt_azimuth_deg", 0.0, "azimuth the pedestal leans to [deg]",
+              -360.0, 360.0),
+    Parameter("encoder_drift_mrad_per_h", 0.0, "joint-reading drift, both axes [mrad/h]",
+              -1000.0, 1000.0),
+    Parameter("clock_offset_s", 0.0, "controller clock minus true time [s]",
+              -86400.0, 86400.0),
+    Parameter("backlash_deg", 0.0, "gear backlash per axis [deg]", 0.0, 10.0),
+    Parameter("gust_torque_nm", 0.0, "wind-gust torque amplitude per axis [N m]", 0.0, 1000.0),
+    Parameter("camera_offset_right_deg", 0.0, "camera boresight right of the normal [deg]",
+              -30.0, 30.0),
+    Parameter("camera_offset_up_deg", 0.0, "camera boresight above the normal [deg]",
+              -30.0, 30.0),
+    Parameter("acceptance_angle_deg", 0.5, "CPV receiver's acceptance half-angle [deg]",
+              0.01, 10.0),
+)
+DISTURBANCE_NAMES = tuple(p.name for p in MACHINE_PARAMETERS if p.name != "acceptance_angle_deg")
