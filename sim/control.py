@@ -250,6 +250,7 @@ class Controller:
 
     name = "controller"
     method = "spa"
+    gate: _CameraGate | None = None
     camera_interval_s: float | None = None
     detector: str | None = None
 
@@ -262,6 +263,11 @@ class Controller:
         self.eph: dict[str, NDArray[Any]] = {}
         self.command_deg = (math.nan, math.nan)
         self.stowed = False
+
+    @property
+    def frames_used(self) -> int:
+        """Camera frames whose detection the controller used (0 without a camera)."""
+        return 0 if self.gate is None else self.gate.accepted
 
     # -- planning ---------------------------------------------------------------------------
     def lead_s(self, tick_s: float) -> float:
@@ -396,6 +402,7 @@ class _CameraGate:
         self.s = settings
         self.areas: list[int] = []
         self.rejected_in_a_row = 0
+        self.accepted = 0
 
     def usable(self, m: CameraMeasurement | None, expected: tuple[float, float] | None) -> bool:
         """True when ``m`` is the clear sun: confident, of its clear-sky size, and (when the
@@ -418,6 +425,7 @@ class _CameraGate:
                 if self.rejected_in_a_row < self.s.reacquire_frames:
                     return False
         self.rejected_in_a_row = 0
+        self.accepted += 1
         self.areas.append(int(m.area_px))
         if len(self.areas) > 60:
             del self.areas[0]

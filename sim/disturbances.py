@@ -59,6 +59,7 @@ __all__ = [
     "base_rotation",
     "normal_enu",
     "camera_axes",
+    "sun_in_camera",
     "encoder_error_deg",
     "backlash_offset_deg",
     "gust_torque_nm",
@@ -231,6 +232,23 @@ def camera_axes(
     if d.moves_base:
         m = m @ base_rotation(d).T
     return m
+
+
+def sun_in_camera(
+    azimuth_joint_deg: float, elevation_joint_deg: float, d: Disturbances,
+    sun_enu: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """The sun's direction in camera coordinates (right, up, forward): ``camera_axes(...) @ s``.
+
+    Scalar arithmetic (no disturbance of the camera or the base: three dot products).
+    """
+    if d.moves_base or d.camera_offset_right_deg or d.camera_offset_up_deg:
+        return camera_axes(azimuth_joint_deg, elevation_joint_deg, d) @ sun_enu
+    az, el = math.radians(azimuth_joint_deg), math.radians(elevation_joint_deg)
+    sa, ca, se, ce = math.sin(az), math.cos(az), math.sin(el), math.cos(el)
+    e, n, u = float(sun_enu[0]), float(sun_enu[1]), float(sun_enu[2])
+    return np.array([ca * e - sa * n, -sa * se * e - ca * se * n + ce * u,
+                     sa * ce * e + ca * ce * n + se * u])
 
 
 def encoder_error_deg(t_s: ArrayLike, d: Disturbances) -> NDArray[np.float64]:

@@ -76,7 +76,7 @@ class CameraSetup:
     """
 
     camera: PinholeCamera = field(default_factory=PinholeCamera)
-    roi_half_px: int = 24
+    roi_half_px: int = 16
     glare_deg: float = 0.8
     sky_level: float = 0.35
     noise_dn: float = 2.0
@@ -229,11 +229,14 @@ def run_loop(
     controller.plan(ticks, tick_s)
     g = controller.site.tracker
     if state is None:
-        az0 = float(controller.eph["now_azimuth_deg"][0])
-        state = LoopState(axes=[_Axis(az0, *limits.axis(0)), _Axis(g.elevation_max_deg,
-                                                                     *limits.axis(1))],
+        # a run starts in the steady state: stowed at night, on the ephemeris target by day
+        stowed = bool(controller.eph["night"][0])
+        az0 = float(controller.eph["ahead_azimuth_deg"][0])
+        el0 = g.elevation_max_deg if stowed else float(controller.eph["ahead_elevation_deg"][0])
+        state = LoopState(axes=[_Axis(az0, *limits.axis(0)), _Axis(el0, *limits.axis(1))],
                           rng=np.random.default_rng(camera.seed))
-        controller.stowed = True
+        controller.stowed = stowed
+        controller.command_deg = (az0, el0)
     ax_az, ax_el = state.axes
     t_s = t0_s + tick_s * np.arange(n)
     gust = dist.gust_torque_nm(t_s, d)
@@ -318,8 +321,8 @@ def _frame(pose: tuple[float, float], sun_enu: NDArray[np.float64], d: dist.Dist
     if sun_enu[2] <= 0.0:  # the sun below the horizon: the Earth hides it
         state.frames += 1
         return CameraMeasurement.none()
-    m = dist.camera_axes(pose[0], pose[1], d)
-    roi = render_sun_roi(m @ sun_enu, cam, setup.roi_half_px, setup.glare_deg, setup.sky_level,
+    s_cam = dist.sun_in_camera(pose[0], pose[1], d, sun_enu)
+    roi = render_sun_roi(s_cam, cam, setup.roi_half_px, setup.glare_deg, setup.sky_level,
                          setup.clouds, t, noise_dn=setup.noise_dn, rng=state.rng)
     state.frames += 1
     if not roi.sun_in_frame:

@@ -98,6 +98,7 @@ class TwinResult:
     actuator_standby_energy_wh: float = 0.0
     camera_frames: int = 0
     camera_frames_found: int = 0
+    camera_frames_used: int = 0
     normal_azimuth: np.ndarray = field(default_factory=lambda: np.zeros(0))
     normal_elevation: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
@@ -176,6 +177,7 @@ class TwinResult:
             "spot_y_rms_m": rms(spot_y),
             "camera_frames": int(self.camera_frames),
             "camera_frames_found": int(self.camera_frames_found),
+            "camera_frames_used": int(self.camera_frames_used),
             "disturbances": self.disturbances.to_dict(),
         }
 
@@ -552,6 +554,7 @@ def simulate(
         actuator_standby_energy_wh=standby_wh,
         camera_frames=0 if state is None else state.frames,
         camera_frames_found=0 if state is None else state.frames_found,
+        camera_frames_used=0 if ctl is None else ctl.frames_used,
         normal_azimuth=extra["normal_azimuth"],
         normal_elevation=extra["normal_elevation"],
     )
