@@ -7,8 +7,9 @@ import * as overview from "./overview.js";
 import * as simulation from "./simulation.js";
 import * as sky from "./sky.js";
 import * as twin from "./twin.js";
+import * as plant from "./plant.js";
 
-const PAGES = { overview, simulation, sky, twin };
+const PAGES = { overview, simulation, sky, twin, plant };
 
 /** Shared state every page reads: the site, its zone, the selected day, server meta. */
 export const state = {

@@ -1,0 +1,157 @@
+// Plant: a plant of dual-axis trackers seen from above with each collector's shade through a
+// clear-sky day, the strategies compared, and seed 004's sky map with the chosen orientation.
+import { api } from "./api.js";
+import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
+import { fmtTime } from "./time.js";
+import { banner, energy, num, tile } from "./ui.js";
+
+const $ = (id) => document.getElementById(id);
+const enc = encodeURIComponent;
+
+const view = { plants: [], plant: null, day: null, index: 0, token: 0 };
+
+function localDateIn(tz) {
+  return new Intl.DateTimeFormat("en-CA", { timeZone: tz, year: "numeric", month: "2-digit", day: "2-digit" })
+    .format(new Date());
+}
+
+async function drawLayout() {
+  const p = view.plant;
+  const d = view.day;
+  if (!p || !d || !d.times.length) { showEmpty("chart-plant-layout", "No daylight on this day."); return; }
+  const row = d.shaded_fraction[view.index] || [];
+  const east = p.trackers.map((t) => t.east_m);
+  const north = p.trackers.map((t) => t.north_m);
+  const f = row.map((v) => (v > 0 ? v : 0));
+  const text = p.trackers.map((t, k) => `tracker ${t.tracker_id}<br>shaded ${num(100 * (row[k] || 0), 1)} %`);
+  await draw("chart-plant-layout", [{
+    type: "scatter", mode: "markers+text", x: east, y: north, text: p.trackers.map((t) => String(t.tracker_id)),
+    textposition: "top center", hovertext: text, hoverinfo: "text", name: "shaded fraction",
+    marker: { symbol: "square", size: 22, color: f, cmin: 0, cmax: Math.max(0.05, ...f),
+      colorscale: [[0, "#d3f9d8"], [1, "#343a40"]], line: { color: "#495057", width: 1 },
+      colorbar: { title: { text: "shaded [-]" }, thickness: 12 } },
+  }], baseLayout({
+    hovermode: "closest", showlegend: false,
+    xaxis: { title: { text: "east [m]" }, gridcolor: "#e9edf1", zeroline: false, scaleanchor: "y" },
+    yaxis: { title: { text: "north [m]" }, gridcolor: "#e9edf1", zeroline: false },
+    margin: { l: 60, r: 20, t: 10, b: 46 },
+  }), {
+    columns: ["tracker_id", "east_m", "north_m", "shaded_fraction"],
+    rows: p.trackers.map((t, k) => [t.tracker_id, t.east_m, t.north_m, row[k]]),
+    filename: `${p.plant_id}-shade-${d.times[view.index]}.csv`,
+  });
+  $("plant-time-label").textContent = `${fmtTime(p.timezone, d.times[view.index])} (${p.timezone})`;
+}
+
+async function drawShadeDay() {
+  const d = view.day;
+  const tz = view.plant.timezone;
+  const x = d.times.map((t) => new Date(t).toLocaleString("sv-SE", { timeZone: tz }));
+  const shaded = d.shaded_fraction.map((r) => r.filter((v) => v > 0).length);
+  const mean = d.shaded_fraction.map((r) => r.reduce((a, b) => a + b, 0) / r.length);
+  await draw("chart-plant-shade", [
+    { type: "scatter", mode: "lines+markers", x, y: shaded, name: "collectors shaded", line: { color: COLORS.tracker } },
+    { type: "scatter", mode: "lines", x, y: mean.map((v) => 100 * v), name: "mean shaded [%]", yaxis: "y2", line: { color: COLORS.grey } },
+  ], baseLayout({
+    yaxis: { title: { text: "collectors shaded [-]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
+    yaxis2: { title: { text: "mean shaded [%]" }, overlaying: "y", side: "right", rangemode: "tozero" },
+  }), {
+    columns: ["time", "collectors_shaded", "mean_shaded_pct"],
+    rows: d.times.map((t, k) => [t, shaded[k], 100 * mean[k]]),
+    filename: `${view.plant.plant_id}-shade-${d.date}.csv`,
+  });
+}
+
+async function drawStrategies() {
+  const s = view.day.strategies;
+  const names = ["sun", "backtrack", "sky_scan", "fixed"];
+  const y = names.map((n) => s[n]?.plant_energy_wh ?? null);
+  await draw("chart-plant-strategies", [{
+    type: "bar", x: names, y: y.map((v) => v / 1000), name: "plant energy",
+    marker: { color: [COLORS.sun, COLORS.tracker, COLORS.gain, COLORS.fixed] },
+    text: y.map((v) => energy(v)), textposition: "auto",
+  }], baseLayout({ hovermode: "closest", showlegend: false, yaxis: { title: { text: "plant energy [kWh]" }, rangemode: "tozero" } }), {
+    columns: ["strategy", "plant_energy_wh"], rows: names.map((n, k) => [n, y[k]]),
+    filename: `${view.plant.plant_id}-strategies-${view.day.date}.csv`,
+  });
+  const box = $("plant-summary");
+  box.innerHTML = "";
+  const sun = s.sun || {};
+  box.append(
+    tile("Trackers", String(view.plant.trackers.length), view.plant.name),
+    tile("Shading loss (sun)", `${num(sun.shading_loss_electrical_pct, 2)} %`, `bypass diodes; ${num(sun.shading_loss_area_pct, 2)} % by area`),
+    tile("Daylight shaded", `${num(100 * (sun.fraction_of_daylight_any_shaded || 0), 1)} %`, "of steps, any collector"),
+    tile("Backtrack vs sun", `${num(100 * ((s.backtrack?.plant_energy_wh || 0) / (sun.plant_energy_wh || 1) - 1), 2)} %`, "clear sky"),
+  );
+}
+
+function drawSkyMap() {
+  const p = view.plant;
+  const d = view.day;
+  const img = $("plant-sky-map");
+  if (!d.times.length) { img.removeAttribute("src"); return; }
+  const t = d.times[view.index];
+  const strategy = $("plant-strategy").value;
+  img.dataset.time = t;
+  img.dataset.loaded = "";
+  img.onload = () => { img.dataset.loaded = t; };
+  img.src = `/api/v1/plants/${enc(p.plant_id)}/sky-map?time=${enc(t)}&strategy=${enc(strategy)}&format=png`;
+  api(`/api/v1/plants/${enc(p.plant_id)}/positions`, { params: { time: t, strategy } }).then((pos) => {
+    const tr = pos.trackers[0];
+    $("plant-chosen").textContent = `${strategy}: azimuth ${num(tr.azimuth_deg, 1)}°, elevation ${num(tr.elevation_deg, 1)}° · ` +
+      `sun ${num(pos.sun.azimuth_deg, 1)}°, ${num(pos.sun.elevation_deg, 1)}° · ${pos.trackers_shaded} collectors shaded`;
+  }).catch((err) => banner(`Positions: ${err.message}`, "error"));
+}
+
+async function loadDay() {
+  const p = view.plant;
+  const date = $("plant-day").value;
+  if (!p || !date) return;
+  const token = ++view.token;
+  document.body.removeAttribute("data-plant-loaded");
+  showEmpty("chart-plant-layout", "Loading…");
+  try {
+    const d = await api(`/api/v1/plants/${enc(p.plant_id)}/day`, { params: { date } });
+    if (token !== view.token) return;
+    view.day = d;
+    // start at the first step with shade, else at noon
+    const first = d.shaded_fraction.findIndex((r) => r.some((v) => v > 0));
+    view.index = first >= 0 ? first : Math.floor(d.times.length / 2);
+    const slider = $("plant-time");
+    slider.max = String(Math.max(0, d.times.length - 1));
+    slider.value = String(view.index);
+    await Promise.all([drawLayout(), drawShadeDay(), drawStrategies()]);
+    drawSkyMap();
+    document.body.dataset.plantLoaded = `${p.plant_id}/${date}`;
+  } catch (err) {
+    banner(`Plant day: ${err.message}`, "error");
+  }
+}
+
+async function selectPlant(id) {
+  view.plant = await api(`/api/v1/plants/${enc(id)}`);
+  if (!$("plant-day").value) $("plant-day").value = localDateIn(view.plant.timezone);
+  await loadDay();
+}
+
+export async function init() {
+  $("plant-day").addEventListener("change", loadDay);
+  $("plant-time").addEventListener("input", () => {
+    view.index = Number($("plant-time").value);
+    drawLayout();
+    drawSkyMap();
+  });
+  $("plant-strategy").addEventListener("change", drawSkyMap);
+  $("plant-select").addEventListener("change", () => selectPlant($("plant-select").value));
+  try {
+    view.plants = await api("/api/v1/plants");
+  } catch (err) {
+    banner(`Could not load the plants: ${err.message}`, "error");
+    return;
+  }
+  if (!view.plants.length) { banner("The service has no plants configured (data/plants/).", "warn"); return; }
+  for (const p of view.plants) $("plant-select").add(new Option(`${p.plant_id} (${p.trackers})`, p.plant_id));
+  const day = new URLSearchParams(location.hash.split("?")[1] || "").get("day");
+  if (day && /^\d{4}-\d{2}-\d{2}$/.test(day)) $("plant-day").value = day;
+  await selectPlant(view.plants[0].plant_id);
+}
