@@ -45,9 +45,15 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import viser
-import viser.transforms as vtf
 from numpy.typing import NDArray
 
+from backend.twin.scene_build import (
+    PEDESTAL_HEIGHT_M,
+    SUN_DISTANCE_M,
+    SUN_PATH_STEP_MIN,
+    build_static_scene,
+    wxyz,
+)
 from sim.kinematics import (
     TrackerGeometry,
     forward_kinematics,
@@ -61,41 +67,10 @@ from vision.sphere import enu_from_sky
 
 logger = logging.getLogger(__name__)
 
-# Kyocera KD205GX-LP outline from pvlib's CEC module table
-# ('Kyocera_Solar_KD205GX_LP': Length 1.5 m, Width 0.99 m); frame depth 46 mm
-# from the Kyocera datasheet (visual only).
-MODULE_LENGTH_M = 1.50
-MODULE_WIDTH_M = 0.99
-MODULE_DEPTH_M = 0.046
-MODULE_GAP_M = 0.02
-#: Modules are mounted landscape, 2 x 2: long side along the elevation axis.
-ARRAY_WIDTH_M = 2 * MODULE_LENGTH_M + MODULE_GAP_M
-ARRAY_HEIGHT_M = 2 * MODULE_WIDTH_M + MODULE_GAP_M
-
-#: Height of the D–H base frame {0} above the ground [m]. Seed 000 gives no
-#: number; chosen so the 2 x 2 array clears the ground with the panel vertical
-#: (elevation axis at PEDESTAL_HEIGHT_M + d1 ≈ 1.66 m > ARRAY_HEIGHT_M / 2).
-PEDESTAL_HEIGHT_M = 1.30
-#: Where the fixed array stands (ENU, m): east of the tracker, clear of its swing.
-FIXED_ARRAY_ORIGIN_M = (4.5, 0.0, 0.0)
-FIXED_LOWER_EDGE_M = 0.5
-#: Seed 000, section 2.2: camera 640 x 480 px, 67° field of view (taken as the
-#: horizontal field), at the top centre of the array, looking along the normal.
-CAMERA_WIDTH_PX = 640
-CAMERA_HEIGHT_PX = 480
-CAMERA_FOV_DEG = 67.0
-#: Distance at which the sun marker and the day's path are drawn [m].
-SUN_DISTANCE_M = 5.5
-SUN_PATH_STEP_MIN = 5
 TICK_S = 0.1
 #: How many ports from the requested one :meth:`TwinScene.start` tries.
 PORT_TRIES = 20
 LIVE_REFRESH_S = 5.0
-
-_PANEL_BLUE = (28, 52, 110)
-_STEEL = (150, 150, 155)
-_SUN_YELLOW = (255, 200, 40)
-
 
 @dataclass(frozen=True)
 class ScenePose:
@@ -140,10 +115,6 @@ def _free_port(host: str, port: int) -> int:
         return candidate
     raise OSError(f"viser: no free port in {port}-{port + PORT_TRIES - 1} on {host!r} "
                   f"({last.strerror if last else 'busy'})")
-
-
-def _wxyz(rotation: NDArray[np.floating]) -> NDArray[np.float64]:
-    return np.asarray(vtf.SO3.from_matrix(rotation).wxyz, dtype=float)
 
 
 def _fixed_orientation(site: Site) -> tuple[float, float]:
@@ -346,102 +317,8 @@ class TwinScene:
 
     def _build_static_scene(self) -> None:
         assert self.server is not None
-        scene = self.server.scene
-        scene.set_up_direction("+z")
-        geom = self._geometry
-        self._add("/ground", scene.add_grid(
-            "/ground", width=24.0, height=24.0, plane="xy", cell_size=1.0, section_size=5.0,
-            plane_color=(200, 214, 180), plane_opacity=0.6, position=(0.0, 0.0, -0.002)))
-        for label, (lx, ly) in {"N": (0.0, 10.0), "E": (10.0, 0.0), "S": (0.0, -10.0),
-                                "W": (-10.0, 0.0)}.items():
-            self._add(f"/compass/{label}", scene.add_label(
-                f"/compass/{label}", label, position=(lx, ly, 0.05), anchor="center-center",
-                font_screen_scale=1.6))
-
-        # Tracker: base frame {0} on top of the pedestal.
-        self._add("/tracker", scene.add_frame("/tracker", show_axes=False,
-                                              position=(0.0, 0.0, PEDESTAL_HEIGHT_M)))
-        self._add("/tracker/pedestal", scene.add_box(
-            "/tracker/pedestal", color=_STEEL, dimensions=(0.22, 0.22, PEDESTAL_HEIGHT_M),
-            position=(0.0, 0.0, -PEDESTAL_HEIGHT_M / 2.0)))
-        self._add("/tracker/footing", scene.add_box(
-            "/tracker/footing", color=(120, 120, 120), dimensions=(0.7, 0.7, 0.12),
-            position=(0.0, 0.0, -PEDESTAL_HEIGHT_M + 0.06)))
-        # Frame {1}: z1 is the (horizontal) elevation axis, y1 is up (alpha1 = 90°).
-        self._add("/tracker/azimuth", scene.add_frame("/tracker/azimuth", show_axes=False))
-        self._add("/tracker/azimuth/turret", scene.add_box(
-            "/tracker/azimuth/turret", color=(110, 110, 118),
-            dimensions=(0.18, geom.d1_m, 0.26), position=(0.0, -geom.d1_m / 2.0, 0.0)))
-        self._add("/tracker/azimuth/axle", scene.add_box(
-            "/tracker/azimuth/axle", color=(90, 90, 95),
-            dimensions=(0.07, 0.07, ARRAY_WIDTH_M * 0.8)))
-        # Frame {2}: x2 is the panel normal; the link a2 runs along it.
-        self._add("/tracker/azimuth/elevation", scene.add_frame(
-            "/tracker/azimuth/elevation", show_axes=False))
-        self._add("/tracker/azimuth/elevation/arm", scene.add_box(
-            "/tracker/azimuth/elevation/arm", color=_STEEL,
-            dimensions=(geom.a2_m, 0.08, 0.08), position=(-geom.a2_m / 2.0, 0.0, 0.0)))
-        self._add("/tracker/azimuth/elevation/panels", scene.add_frame(
-            "/tracker/azimuth/elevation/panels", show_axes=False))
-        self._add_modules("/tracker/azimuth/elevation/panels")
-        for i, y in enumerate((-0.5, 0.5)):  # purlins behind the modules
-            name = f"/tracker/azimuth/elevation/panels/rail_{i}"
-            self._add(name, scene.add_box(name, color=_STEEL,
-                                          dimensions=(ARRAY_WIDTH_M * 0.95, 0.05, 0.04),
-                                          position=(0.0, y, -MODULE_DEPTH_M / 2 - 0.02)))
-        vfov = 2.0 * np.arctan(np.tan(np.radians(CAMERA_FOV_DEG) / 2.0)
-                               * CAMERA_HEIGHT_PX / CAMERA_WIDTH_PX)
-        # OpenCV camera (+z forward, +y down): looking along the normal, image
-        # "down" = down the panel's slope.
-        self._add("/tracker/azimuth/elevation/panels/camera", scene.add_camera_frustum(
-            "/tracker/azimuth/elevation/panels/camera", fov=float(vfov),
-            aspect=CAMERA_WIDTH_PX / CAMERA_HEIGHT_PX, scale=0.35, color=(200, 40, 40),
-            thickness=0.012, wxyz=(0.0, 0.0, 0.0, 1.0),
-            position=(0.0, ARRAY_HEIGHT_M / 2.0 + 0.06, 0.03)))
-
-        # Fixed array: same panel-frame convention, orientation from the D–H
-        # model evaluated at the fixed normal (azimuth, 90° − tilt).
-        t0p = joint_transforms(self._fixed_azimuth_deg, 90.0 - self._fixed_tilt_deg, geom)[2]
-        rot = t0p[:3, :3]
-        half = ARRAY_HEIGHT_M / 2.0 * np.sin(np.radians(self._fixed_tilt_deg))
-        centre = np.array(FIXED_ARRAY_ORIGIN_M) + (0.0, 0.0, FIXED_LOWER_EDGE_M + half)
-        self._add("/fixed", scene.add_frame("/fixed", show_axes=False,
-                                            position=tuple(centre), wxyz=_wxyz(rot)))
-        self._add("/fixed/panels", scene.add_frame("/fixed/panels", show_axes=False))
-        self._add_modules("/fixed/panels")
-        for i, (x, y) in enumerate([(sx * ARRAY_WIDTH_M * 0.42, sy * ARRAY_HEIGHT_M * 0.42)
-                                    for sx in (-1, 1) for sy in (-1, 1)]):
-            foot = centre + rot @ np.array([x, y, 0.0])
-            name = f"/fixed_legs/leg_{i}"
-            self._add(name, scene.add_box(name, color=_STEEL,
-                                          dimensions=(0.05, 0.05, float(foot[2])),
-                                          position=(float(foot[0]), float(foot[1]),
-                                                    float(foot[2]) / 2.0)))
-
-        # Sun: /sun's local z points at the sun, so the ray is a constant segment.
-        self._add("/sun", scene.add_frame("/sun", show_axes=False))
-        self._add("/sun/disc", scene.add_icosphere("/sun/disc", radius=0.28,
-                                                   color=_SUN_YELLOW, cast_shadow=False))
-        self._add("/sun/ray", scene.add_line_segments(
-            "/sun/ray", points=np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, -SUN_DISTANCE_M]]]),
-            colors=_SUN_YELLOW, thickness=0.02))
-        self._add("/sun_path", scene.add_line_segments(
-            "/sun_path", points=np.zeros((1, 2, 3)), colors=(230, 150, 20), thickness=0.03))
-        # From the south-east, a little above the panels: tracker in front,
-        # fixed array to its right, the sun's arc behind.
-        self.server.initial_camera.position = (6.8, -8.4, 4.2)
-        self.server.initial_camera.look_at = (2.3, 1.2, 2.9)
-
-    def _add_modules(self, parent: str) -> None:
-        assert self.server is not None
-        for i, (x, y) in enumerate([(sx * (MODULE_LENGTH_M + MODULE_GAP_M) / 2.0,
-                                     sy * (MODULE_WIDTH_M + MODULE_GAP_M) / 2.0)
-                                    for sy in (1, -1) for sx in (-1, 1)]):
-            name = f"{parent}/module_{i}"
-            self._add(name, self.server.scene.add_box(
-                name, color=_PANEL_BLUE,
-                dimensions=(MODULE_LENGTH_M, MODULE_WIDTH_M, MODULE_DEPTH_M),
-                position=(x, y, 0.0)))
+        self.nodes.update(build_static_scene(self.server, self._geometry,
+                                             self._fixed_tilt_deg, self._fixed_azimuth_deg))
 
     def _sun_centre(self) -> NDArray[np.float64]:
         """The point the sun marker and path are drawn around: the tracker's
@@ -484,14 +361,14 @@ class TwinScene:
         sun_rot = np.column_stack([x, np.cross(z, x), z])
         n = self.nodes
         with self.server.atomic():
-            n["/tracker/azimuth"].wxyz = _wxyz(t01[:3, :3])
+            n["/tracker/azimuth"].wxyz = wxyz(t01[:3, :3])
             n["/tracker/azimuth"].position = t01[:3, 3]
-            n["/tracker/azimuth/elevation"].wxyz = _wxyz(t12[:3, :3])
+            n["/tracker/azimuth/elevation"].wxyz = wxyz(t12[:3, :3])
             n["/tracker/azimuth/elevation"].position = t12[:3, 3]
-            n["/tracker/azimuth/elevation/panels"].wxyz = _wxyz(t2p[:3, :3])
+            n["/tracker/azimuth/elevation/panels"].wxyz = wxyz(t2p[:3, :3])
             n["/tracker/azimuth/elevation/panels"].position = t2p[:3, 3]
             n["/sun"].position = self._sun_centre() + SUN_DISTANCE_M * sun_dir
-            n["/sun"].wxyz = _wxyz(sun_rot)
+            n["/sun"].wxyz = wxyz(sun_rot)
             n["/sun"].visible = pose.solar_elevation_deg > 0.0
 
     # ---------------------------------------------------------------------- GUI
