@@ -79,61 +79,63 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--n-radial", type=int, choices=(0, 1, 2), default=0,
                    help="radial polynomial terms to fit (0)")
     c.add_argument("--fit-tilt", action="store_true", help="also fit two tilt angles")
+    c.add_argument("--method", default="robust",
+                   choices=("robust", "seed000_hsv", "seed003_gray240"))
     _place_args(c)
     c.add_argument("--json", action="store_true", help="print JSON")
     c.set_defaults(func=run_calibrate)
 
 
-def _place(args: argparse.Namespace) -> tuple[float, float, float] | None:
+#: The CLI reads local files: a bigger frame than the service accepts is fine.
+_MAX_PIXELS = 400_000_000
+
+
+def _place(args: argparse.Namespace) -> Any:
+    """The ``Place`` of ``--site`` or ``--lat/--lon`` (None when neither is given)."""
+    from zoneinfo import ZoneInfo
+
+    from backend.vision.service import Place
+
     if args.site:
         from sim.sites import load_site
 
         site = load_site(args.site)
-        return site.latitude, site.longitude, site.altitude
+        return Place(site.site_id, site.latitude, site.longitude, site.altitude,
+                     ZoneInfo(site.timezone))
     if args.lat is None and args.lon is None:
         return None
     if args.lat is None or args.lon is None:
         raise ValueError("--lat and --lon go together")
-    return args.lat, args.lon, args.elevation_m
+    return Place(None, args.lat, args.lon, args.elevation_m, ZoneInfo("UTC"))
 
 
-def _read(path: Path) -> Any:
-    from vision.imageio import decode_image
+def _upload(path: Path, field: str) -> Any:
+    from backend.vision.service import check_image
 
-    return decode_image(path.read_bytes(), 400_000_000)
+    return check_image(path.read_bytes(), str(path), field, _MAX_PIXELS)
 
 
 def detect(args: argparse.Namespace) -> dict[str, Any]:
-    """The answer of ``vision detect`` as a JSON-ready dict (``vision.analyse.analyse_frame``,
-    the same shape as ``POST /api/v1/vision/sun`` without the stored ids)."""
-    import pandas as pd
-
-    from sim.sun import solar_position
-    from vision.analyse import analyse_frame
+    """The answer of ``vision detect``: the service's analysis (``backend.vision.service``,
+    the same as ``POST /api/v1/vision/sun`` without the stored ids)."""
+    from backend.vision.service import analyse, decode
     from vision.cameras import camera_from_params
 
-    img = _read(args.image)
+    img = decode(_upload(args.image, "image"), _MAX_PIXELS)
     h, w = img.shape[:2]
     params = {k: getattr(args, k) for k in ("fov_deg", "cx_px", "cy_px", "reference_x_px",
                                            "reference_y_px", "projection", "px_per_deg",
                                            "north_offset_deg", "east")}
     cam = camera_from_params(args.camera, params, w, h)
-    eph = None
-    place = _place(args)
-    if args.timestamp is not None and place is not None:
-        sp = solar_position(pd.DatetimeIndex([pd.Timestamp(args.timestamp)]), place[0],
-                            place[1], altitude=place[2])
-        eph = (float(sp["azimuth"].iloc[0]), float(sp["apparent_elevation"].iloc[0]))
-    return {"image": str(args.image), **analyse_frame(img, cam, args.method, eph)}
+    return {"image": str(args.image), **analyse(img, cam, args.method, args.timestamp,
+                                                _place(args))}
 
 
 def calibrate(args: argparse.Namespace) -> dict[str, Any]:
-    """The answer of ``vision calibrate`` as a JSON-ready dict
-    (``vision.calibrate.calibrate_frames`` against SPA, ``sim.sun``)."""
-    import pandas as pd
-
-    from sim.sun import solar_position
-    from vision.calibrate import calibrate_frames
+    """The answer of ``vision calibrate``: the service's calibration against SPA
+    (``backend.vision.service.calibrate``, as ``POST /api/v1/vision/calibrations``)."""
+    from backend.vision.service import calibrate as fit
+    from backend.vision.service import calibration_answer
 
     if len(args.timestamps) != len(args.images):
         raise ValueError(f"--timestamps: {len(args.timestamps)} times for "
@@ -141,16 +143,10 @@ def calibrate(args: argparse.Namespace) -> dict[str, Any]:
     place = _place(args)
     if place is None:
         raise ValueError("a place is needed: --site, or --lat and --lon")
-    sp = solar_position(pd.DatetimeIndex([pd.Timestamp(t) for t in args.timestamps]),
-                        place[0], place[1], altitude=place[2])
-    res, frames = calibrate_frames(
-        [_read(p) for p in args.images], sp["azimuth"].to_numpy(),
-        sp["apparent_elevation"].to_numpy(), names=[str(p) for p in args.images],
-        projection=args.projection, east=args.east, n_radial=args.n_radial,
-        fit_tilt=args.fit_tilt)
-    out = res.to_dict()
-    out["frames"] = [{"image": f.pop("name"), **f} for f in frames]
-    return out
+    frames = [(_upload(p, f"images[{i}]"), t)
+              for i, (p, t) in enumerate(zip(args.images, args.timestamps, strict=True))]
+    return calibration_answer(fit(frames, place, args.projection, args.east, args.n_radial,
+                                  args.fit_tilt, args.method, _MAX_PIXELS))
 
 
 def _run(fn: Any, args: argparse.Namespace) -> int:

@@ -184,3 +184,14 @@ def evaluate(frames: list[Frame], place: Place, cam: FisheyeCamera, methods: lis
     return {"n_frames": len(frames), "site_id": place.site_id,
             "latitude_deg": place.latitude_deg, "longitude_deg": place.longitude_deg,
             "camera": cam.to_dict(), "table2": rows, "table3": table3}
+
+
+CAMERA_FIELDS = ("projection", "cx_px", "cy_px", "px_per_deg", "north_offset_deg", "east",
+                 "radial_coeffs", "tilt_north_deg", "tilt_east_deg")
+
+
+def calibration_answer(row: dict[str, Any]) -> dict[str, Any]:
+    """What a calibration answers (HTTP and CLI): the stored row with its ``camera``."""
+    body = {k: v for k, v in row.items() if k != "radial_coeffs"}
+    body["camera"] = {k: row[k] for k in CAMERA_FIELDS}
+    return body

@@ -45,6 +45,7 @@ from backend.vision.service import (
     Upload,
     analyse,
     calibrate,
+    calibration_answer,
     check_image,
     decode,
     detection_row,
@@ -352,12 +353,7 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
     except ValueError as exc:
         raise HTTPException(422, f"files: {exc}") from None
     cal_id = await asyncio.wrap_future(ctx.writer.call(lambda c: insert_calibration(c, row)))
-    body = {k: v for k, v in row.items() if k not in ("radial_coeffs",)}
-    body["calibration_id"] = cal_id
-    body["camera"] = {k: row[k] for k in ("projection", "cx_px", "cy_px", "px_per_deg",
-                                           "north_offset_deg", "east", "radial_coeffs",
-                                           "tilt_north_deg", "tilt_east_deg")}
-    return _json(body, 201)
+    return _json({**calibration_answer(row), "calibration_id": cal_id}, 201)
 
 
 @router.get("/calibrations")

@@ -1,0 +1,75 @@
+"""``heliotwin vision detect|calibrate`` as a user runs them, on frames rendered with the sun
+where pvlib's SPA puts it (the ephemeris here is pvlib's own, not the product's)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import pandas as pd
+import pvlib
+import pytest
+
+from vision.cameras import FisheyeCamera
+from vision.synth import fisheye_frame
+
+ROOT = Path(__file__).resolve().parents[1]
+LAT, LON = 20.676, -103.347  # Guadalajara (seed 003)
+TIMES = pd.date_range("2018-03-02T15:00Z", periods=6, freq="50min")
+CAMERA = FisheyeCamera(cx_px=320.4, cy_px=238.7, px_per_deg=2.6, north_offset_deg=7.0)
+
+
+def heliotwin(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "backend", *args], capture_output=True,
+                          text=True, cwd=ROOT, timeout=120)
+
+
+@pytest.fixture(scope="module")
+def frames(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    sun = pvlib.solarposition.spa_python(TIMES, LAT, LON)
+    out = []
+    for i, (az, el) in enumerate(zip(sun["azimuth"], sun["apparent_elevation"], strict=True)):
+        path = tmp_path_factory.mktemp("sky") / f"frame_{i}.png"
+        cv2.imwrite(str(path), fisheye_frame(float(az), float(el), CAMERA, seed=i).image)
+        out.append(path)
+    return out
+
+
+def test_calibrate_recovers_the_camera(frames: list[Path]) -> None:
+    p = heliotwin("vision", "calibrate", *map(str, frames), "--timestamps",
+                  *[t.isoformat() for t in TIMES], "--lat", str(LAT), "--lon", str(LON),
+                  "--json")
+    assert p.returncode == 0, p.stderr
+    out = json.loads(p.stdout)
+    cam = out["camera"]
+    assert cam["px_per_deg"] == pytest.approx(2.6, abs=0.03)
+    assert cam["north_offset_deg"] == pytest.approx(7.0, abs=0.5)
+    assert (cam["cx_px"], cam["cy_px"]) == pytest.approx((320.4, 238.7), abs=1.5)
+    assert out["rms_deg"] < 0.3 and len(out["frames"]) == 6
+
+
+def test_detect_with_time_and_place_reports_the_ephemeris_error(frames: list[Path]) -> None:
+    p = heliotwin("vision", "detect", str(frames[2]), "--camera", "fisheye", "--px-per-deg",
+                  "2.6", "--cx-px", "320.4", "--cy-px", "238.7", "--north-offset-deg", "7",
+                  "--timestamp", TIMES[2].isoformat(), "--lat", str(LAT), "--lon", str(LON),
+                  "--json")
+    assert p.returncode == 0, p.stderr
+    out = json.loads(p.stdout)
+    assert out["sun_found"]
+    assert out["error"]["separation_deg"] < 0.5
+    text = heliotwin("vision", "detect", str(frames[2]), "--camera", "fisheye",
+                     "--px-per-deg", "2.6")
+    assert text.returncode == 0 and text.stdout.startswith("sun at (")
+
+
+def test_bad_input_exits_2_naming_the_problem(tmp_path: Path) -> None:
+    junk = tmp_path / "junk.png"
+    junk.write_bytes(b"not an image")
+    p = heliotwin("vision", "detect", str(junk), "--camera", "fisheye")
+    assert p.returncode == 2 and "image" in p.stderr and "PNG or JPEG" in p.stderr
+    p = heliotwin("vision", "calibrate", str(junk), "--timestamps", "2018-03-02T15:00",
+                  "--lat", "20")
+    assert p.returncode == 2 and "no UTC offset" in p.stderr
