@@ -19,7 +19,7 @@ import os
 import sys
 from typing import Any
 
-from backend.twin.parameters import MACHINE_PARAMETERS, RECEIVERS
+from backend.twin.parameters import MACHINE_PARAMETERS
 
 _BAR_MIN_STEPS = 20_000  # a progress bar only for long runs (two weeks at 1 min and up)
 
@@ -51,8 +51,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "chronological, closed_loop_camera, hybrid (default ideal)",
     )
     p.add_argument(
-        "--receiver", default="flat", choices=RECEIVERS,
-        help="flat PV, or a CPV receiver that loses the beam outside --acceptance-angle-deg",
+        "--receiver", default="flat",
+        help="flat (PV, default), or cpv: a receiver that loses the beam outside "
+        "--acceptance-angle-deg",
     )
     machine = p.add_argument_group("machine (disturbances; default a perfect machine)")
     for param in MACHINE_PARAMETERS:

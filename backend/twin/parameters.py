@@ -5,8 +5,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-RECEIVERS = ("flat", "cpv")
-
 
 @dataclass(frozen=True)
 class Parameter:

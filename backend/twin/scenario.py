@@ -16,10 +16,10 @@ from typing import Any
 
 import pandas as pd
 
-from backend.twin.parameters import DISTURBANCE_NAMES, MACHINE_PARAMETERS, RECEIVERS
+from backend.twin.parameters import DISTURBANCE_NAMES, MACHINE_PARAMETERS
 from sim.disturbances import Disturbances
 from sim.sites import Site
-from sim.twin import CONTROLLERS, TwinResult, simulate
+from sim.twin import CONTROLLERS, RECEIVERS, TwinResult, simulate
 
 
 @dataclass(frozen=True)

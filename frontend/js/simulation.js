@@ -36,6 +36,39 @@ function summaryTiles(summary) {
     tile("Period", `${num((Date.parse(summary.end) - Date.parse(summary.start)) / 86400000, 1)} days`,
       `${summary.start?.slice(0, 10) ?? "?"} → ${summary.end?.slice(0, 10) ?? "?"} · step ${num(summary.step_s)} s · ${summary.controller ?? "ideal"}`),
   );
+  if (summary.pointing_error_rms_mrad === undefined) return;
+  box.append(
+    tile("Pointing error", `${num(summary.pointing_error_rms_mrad, 1)} mrad`,
+      `RMS over daylight · p95 ${num(summary.pointing_error_p95_mrad, 1)} · max ${num(summary.pointing_error_max_mrad, 1)} mrad`),
+    tile("Pointing loss", energy(summary.pointing_loss_wh), `against ideal pointing · ${summary.receiver ?? "flat"} receiver`),
+    tile("Actuators", energy(summary.actuator_energy_wh), `${num(summary.moves, 0)} moves`),
+    tile("Net gain", pct(summary.net_gain_pct), "tracking gain after the actuators' energy"),
+  );
+}
+
+/** The machine parameters (disturbances, acceptance angle) as inputs, from the service's table. */
+function machineFields(params) {
+  const box = $("sim-machine-fields");
+  box.innerHTML = "";
+  for (const p of params || []) {
+    const label = document.createElement("label");
+    label.textContent = p.help;
+    const input = document.createElement("input");
+    Object.assign(input, { type: "number", step: "any", name: p.name, id: `sim-${p.name}`, value: p.default });
+    if (p.minimum !== null) input.min = p.minimum;
+    if (p.maximum !== null) input.max = p.maximum;
+    input.dataset.default = p.default;
+    label.append(input);
+    box.append(label);
+  }
+}
+
+function machineValues() {
+  const out = {};
+  for (const input of $("sim-machine-fields").querySelectorAll("input")) {
+    if (input.value !== "" && Number(input.value) !== Number(input.dataset.default)) out[input.name] = Number(input.value);
+  }
+  return out;
 }
 
 /** Energy per local day [Wh] from mean power over steps of `stepS` seconds (rectangle rule). */
@@ -101,11 +134,14 @@ async function drawResult(runId, allRows, stepS) {
   const xa = long ? rows.map((r) => toLocalWall(tz, r.ts)) : x;
   const sunEl = firstKey(rows, "apparent_elevation", "sun_elevation_deg", "apparent_elevation_deg") || "apparent_elevation";
   const sunAz = firstKey(rows, "solar_azimuth", "sun_azimuth_deg", "azimuth_deg") || "solar_azimuth";
+  const commanded = rows.some((r) => colValue(r, "elevation_command_deg") !== null);
   const angleCols = [
     [sunEl, "sun elevation", COLORS.sun, "solid", "y"],
-    ["elevation_joint_deg", "tracker elevation", COLORS.tracker, "dash", "y"],
+    ["elevation_joint_deg", "tracker elevation (actual)", COLORS.tracker, "dash", "y"],
+    ...(commanded ? [["elevation_command_deg", "elevation commanded", COLORS.tracker, "dot", "y"]] : []),
     [sunAz, "sun azimuth", COLORS.sun, "dot", "y2"],
-    ["azimuth_joint_deg", "tracker azimuth", COLORS.fixed, "dash", "y2"],
+    ["azimuth_joint_deg", "tracker azimuth (actual)", COLORS.fixed, "dash", "y2"],
+    ...(commanded ? [["azimuth_command_deg", "azimuth commanded", COLORS.fixed, "dot", "y2"]] : []),
   ];
   await draw("chart-sim-angles", angleCols.map(([c, name, color, dash, yaxis]) => ({
     x: xa, y: rows.map((r) => colValue(r, c)), name, yaxis, type: "scatter", mode: "lines",
@@ -114,11 +150,33 @@ async function drawResult(runId, allRows, stepS) {
     xaxis,
     yaxis: { title: { text: "Elevation [°]" }, gridcolor: "#e9edf1", range: [-10, 90], dtick: 30 },
     yaxis2: { title: { text: "Azimuth [°] (from N, clockwise)" }, overlaying: "y", side: "right", showgrid: false,
-      nticks: 7 },
+      tickmode: "linear", tick0: 0, dtick: 45 },
   }), {
     columns: ["ts_utc", "local_time", ...angleCols.map((a) => a[0])],
     rows: rows.map((r, i) => [r.ts, xa[i], ...angleCols.map((a) => colValue(r, a[0]))]),
     filename: `simulation_${runId}_angles.csv`,
+  });
+  await drawPointing(runId, rows, xa, long ? firstDay : "");
+}
+
+/** The angle between panel normal and sun through the (first) day [mrad], daylight only. */
+async function drawPointing(runId, rows, x, day) {
+  const has = rows.some((r) => colValue(r, "pointing_error_mrad") !== null);
+  $("sim-pointing-card").hidden = !has;
+  if (!has) return;
+  $("sim-pointing-title").textContent = day ? `Pointing error on ${day}, the run's first day` : "Pointing error";
+  const sunEl = (r) => colValue(r, "apparent_elevation");
+  const y = rows.map((r) => (sunEl(r) > 0 ? colValue(r, "pointing_error_mrad") : null));
+  await draw("chart-sim-pointing", [{
+    x, y, name: "pointing error", type: "scatter", mode: "lines", line: { color: COLORS.tracker, width: 1.6 },
+    hovertemplate: "%{y:.2f} mrad",
+  }], baseLayout({
+    xaxis: { type: "date", title: { text: `Local time (${st.tz})` }, gridcolor: "#e9edf1" },
+    yaxis: { title: { text: "Panel normal to sun [mrad]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
+  }), {
+    columns: ["ts_utc", "local_time", "pointing_error_mrad"],
+    rows: rows.map((r, i) => [r.ts, x[i], y[i]]),
+    filename: `simulation_${runId}_pointing.csv`,
   });
 }
 
@@ -145,7 +203,8 @@ async function run(ev) {
   try {
     const body = {
       site_id: st.site.site_id, start, end, step_s: Number($("sim-step").value),
-      controller: $("sim-controller").value, background: true,
+      controller: $("sim-controller").value, receiver: $("sim-receiver").value,
+      ...machineValues(), background: true,
     };
     let res = await api("/api/v1/simulations", { method: "POST", json: body });
     const runId = res.run_id;
@@ -196,6 +255,13 @@ export function init(state) {
     sel.innerHTML = "";
     for (const c of controllers) sel.add(new Option(c, c));
   }
+  const receivers = pick(st.meta, "receivers");
+  if (Array.isArray(receivers) && receivers.length) {
+    const sel = $("sim-receiver");
+    sel.innerHTML = "";
+    for (const r of receivers) sel.add(new Option(r === "cpv" ? "CPV (acceptance angle)" : "flat PV", r));
+  }
+  machineFields(pick(st.meta, "machine_parameters"));
   $("sim-form").addEventListener("submit", run);
   showEmpty("chart-sim-power", "Run a simulation to see its power.");
   showEmpty("chart-sim-angles", "Run a simulation to see the sun and tracker angles.");

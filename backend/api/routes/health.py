@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 from fastapi import APIRouter, Request
 
 from backend.api.deps import SettingsDep
-from sim.twin import CONTROLLERS
+from backend.twin.parameters import MACHINE_PARAMETERS
+from sim.twin import CONTROLLERS, RECEIVERS
 
 router = APIRouter(tags=["service"])
 
@@ -44,4 +46,6 @@ def meta(request: Request, settings: SettingsDep) -> dict[str, Any]:
         "energy_max_gap_s": settings.energy_max_gap_s,
         "docs_url": "/docs",
         "controllers": list(CONTROLLERS),
+        "receivers": list(RECEIVERS),
+        "machine_parameters": [dataclasses.asdict(p) for p in MACHINE_PARAMETERS],
     }

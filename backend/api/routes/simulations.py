@@ -18,9 +18,9 @@ from pydantic import BaseModel, ConfigDict, Field, create_model
 from backend.api.deps import ContextDep, site_or_404
 from backend.measurements.queries import iso_utc
 from backend.timestamps import parse_range
-from backend.twin.parameters import MACHINE_PARAMETERS, RECEIVERS
+from backend.twin.parameters import MACHINE_PARAMETERS
 from backend.twin.scenario import Scenario
-from sim.twin import CONTROLLERS
+from sim.twin import CONTROLLERS, RECEIVERS
 
 router = APIRouter(prefix="/api/v1/simulations", tags=["simulations"])
 
