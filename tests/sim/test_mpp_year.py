@@ -75,8 +75,12 @@ def mpp_table_year_error(
     end: pd.Timestamp,
     step_s: float = 60,
     weather: pd.DataFrame | None = None,
+    inputs: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> dict[str, dict[str, float]]:
     """Per array: the table's energy error against the full single-diode solution.
+
+    ``inputs``, when given, receives per array the recorded (effective
+    irradiance [W m⁻²], cell temperature [°C]) of the daytime steps.
 
     Returns ``{array: {"energy_rel", "max_abs_w", "points", "twin_energy_wh"}}``:
     relative energy difference (table / exact − 1, [-]), the largest
@@ -90,6 +94,8 @@ def mpp_table_year_error(
     for name, parts in seen.items():
         e = np.concatenate([p[0] for p in parts])
         t = np.concatenate([p[1] for p in parts])
+        if inputs is not None:
+            inputs[name] = (e, t)
         i_mp, v_mp = pv.mpp_table(site.arrays[name].module).lookup(e, t)
         p_table = i_mp * v_mp
         p_exact = pv.module_mpp_exact(e, t, site.arrays[name].module)["p_mp"]
@@ -107,17 +113,17 @@ def mpp_table_year_error(
     return out
 
 
-def clear_sky_year(step_s: float = 60) -> dict[str, dict[str, float]]:
+def clear_sky_year(step_s: float = 60, inputs: Any = None) -> dict[str, dict[str, float]]:
     """:func:`mpp_table_year_error` for a clear-sky 2023 at ``tehuantepec``."""
     site = load_site("tehuantepec")
     start = pd.Timestamp("2023-01-01", tz=site.timezone)
-    return mpp_table_year_error(site, start, start + pd.DateOffset(years=1), step_s)
+    return mpp_table_year_error(site, start, start + pd.DateOffset(years=1), step_s, inputs=inputs)
 
 
-def tmy3_year(step_s: float = 60) -> dict[str, dict[str, float]]:
+def tmy3_year(step_s: float = 60, inputs: Any = None) -> dict[str, dict[str, float]]:
     """:func:`mpp_table_year_error` for pvlib's TMY3 year (Greensboro NC)."""
     site, weather, start, end = greensboro_tmy3()
-    return mpp_table_year_error(site, start, end, step_s, weather=weather)
+    return mpp_table_year_error(site, start, end, step_s, weather=weather, inputs=inputs)
 
 
 # Measured by benchmarks/bench_sim.py at 1-min steps (benchmarks/results.json,

@@ -1,0 +1,69 @@
+"""Every figure quoted in the docs comes from benchmarks/results.json, and is up to date with it."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def docs_figures():  # noqa: ANN201
+    spec = importlib.util.spec_from_file_location(
+        "docs_figures", ROOT / "benchmarks" / "docs_figures.py"
+    )
+    assert spec and spec.loader
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["docs_figures"] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_results_json_figures_are_complete(docs_figures) -> None:
+    figures = docs_figures.load_figures()
+    assert figures, "benchmarks/results.json is missing: run `make bench`"
+    for name, fig in figures.items():
+        assert name.startswith(fig["section"] + "."), name
+        assert {"value", "unit", "text", "target", "met"} <= set(fig), name
+        # a figure with a target says whether it is met, and one without says nothing
+        assert (fig["target"] is None) == (fig["met"] is None), name
+
+
+@pytest.mark.parametrize(
+    "path",
+    [*sorted((ROOT / "docs").glob("*.md")), ROOT / "benchmarks" / "RESULTS.md"],
+    ids=lambda p: p.name,
+)
+def test_doc_markers_have_figures_and_are_up_to_date(docs_figures, path: Path) -> None:
+    text = path.read_text(encoding="utf-8")
+    new, missing = docs_figures.rewrite(text, docs_figures.load_figures())
+    assert not missing, f"{path.name}: no figure in results.json for {sorted(set(missing))}"
+    assert new == text, (
+        f"{path.name} is out of date with results.json: run python benchmarks/docs_figures.py"
+    )
+
+
+def test_rewrite_fills_markers_and_verdicts(docs_figures) -> None:
+    figs = {
+        "x.rate": {
+            "section": "x",
+            "value": 990.0,
+            "unit": "req/s",
+            "text": "990 req/s",
+            "target": "≥ 1,000 req/s",
+            "met": False,
+        },
+    }
+    text = "rate <!-- fig:x.rate -->old<!-- /fig --> (<!-- fig:x.rate:verdict -->met<!-- /fig -->)"
+    new, missing = docs_figures.rewrite(text, figs)
+    assert missing == []
+    assert new == (
+        "rate <!-- fig:x.rate -->990 req/s<!-- /fig --> "
+        "(<!-- fig:x.rate:verdict -->**not met**<!-- /fig -->)"
+    )
+    _, missing = docs_figures.rewrite("<!-- fig:x.nope -->1<!-- /fig -->", figs)
+    assert missing == ["x.nope"]
