@@ -128,46 +128,74 @@ def candidate_pairs(positions: ArrayLike, sun_enu: ArrayLike,
     return t_all[order], i_all[order], j_all[order]
 
 
-def _sun_facing_pairs(positions: FloatArray, sun_az: FloatArray, sun_el: FloatArray,
-                      width: float, height: float
-                      ) -> tuple[IntArray, IntArray, IntArray, FloatArray]:
-    """Shading pairs and their rectangles when every collector faces the sun (n = s).
+def _direct_pairs(positions: FloatArray, sun: FloatArray, surface_az: FloatArray,
+                  surface_el: FloatArray, width: float, height: float
+                  ) -> tuple[IntArray, IntArray, IntArray, FloatArray]:
+    """Shading pairs and their rectangles for a common orientation, all pairs at once.
 
-    Then λ = d·s and P = d⊥, so (du, dv) = (d·u, d·v): the exact overlap test
-    |du| < a, |dv| < b, d·s > 0 runs on all pairs at once (both directions of a
-    pair from one product).
+    With d = p_j − p_i: λ = (d·n)/(s·n) and (du, dv) = (d·u − λ s·u, d·v − λ s·v)
+    are linear in d, so three products (steps × 3)·(3 × pairs) give them for every
+    unordered pair; the reverse direction is (−du, −dv) with −λ, and the
+    direction with λ > 0 is the one that can shade. Only steps with the sun
+    below the layout's bound (see :func:`candidate_pairs`; tighter for collectors
+    facing the sun) are looked at.
     """
     n_tr = len(positions)
     ii, jj = np.triu_indices(n_tr, 1)
-    d = (positions[jj] - positions[ii]).T.astype(np.float32)        # (3, P)
-    n, u, v = collector_axes(sun_az, sun_el)
-    out_t, out_i, out_j, out_du, out_dv = [], [], [], [], []
-    for k0 in range(0, len(sun_az), _CHUNK):
+    d64 = positions[jj] - positions[ii]
+    empty_i = np.zeros(0, dtype=np.int64)
+    if not len(d64):
+        return empty_i, empty_i, empty_i, np.zeros((0, 4))
+    d2 = np.einsum("pk,pk->p", d64, d64)
+    slope = float(np.max(np.abs(np.arcsin(np.clip(d64[:, 2] / np.sqrt(d2), -1, 1)))))
+    ratio = np.hypot(width, height) / float(np.sqrt(d2.min()))
+    el_max = np.arcsin(ratio) + slope if ratio < 1 else np.pi
+    # facing the sun, |dv| = sin(elevation)·|d·ĥ| ≥ sin(elevation)·√(|d|² − a²): tighter
+    d_min = float(np.sqrt(d2.min()))
+    el_facing = (np.arcsin(min(1.0, height / np.sqrt(d_min**2 - width**2))) + slope
+                 if d_min > width else np.pi)
+    facing = np.einsum("tk,tk->t", sun, enu_from_sky(surface_az, surface_el)) > 1 - 1e-12
+    sun_el = np.arcsin(np.clip(sun[:, 2], -1, 1))
+    steps = np.nonzero(sun_el < np.where(facing, min(el_facing, el_max), el_max))[0]
+    d = d64.T.astype(np.float32)                                    # (3, P)
+    n, u, v = collector_axes(surface_az[steps], surface_el[steps])
+    s = sun[steps]
+    sn = np.einsum("tk,tk->t", s, n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ru = np.where(sn > 0, np.einsum("tk,tk->t", s, u) / sn, np.nan)
+        rv = np.where(sn > 0, np.einsum("tk,tk->t", s, v) / sn, np.nan)
+    out: list[list[NDArray[np.generic]]] = [[], [], [], [], []]
+    for k0 in range(0, len(steps), _CHUNK):
         sl = slice(k0, k0 + _CHUNK)
-        du = u[sl].astype(np.float32) @ d
-        dv = v[sl].astype(np.float32) @ d
-        hit = (np.abs(du) < width) & (np.abs(dv) < height)
+        dn = n[sl].astype(np.float32) @ d                           # λ·(s·n)
+        du = u[sl].astype(np.float32) @ d - ru[sl, None].astype(np.float32) * dn
+        dv = v[sl].astype(np.float32) @ d - rv[sl, None].astype(np.float32) * dn
+        # float32 screen with a margin; the survivors are recomputed in float64
+        hit = (np.abs(du) < width + 1e-3) & (np.abs(dv) < height + 1e-3) & (dn != 0)
         t, q = np.nonzero(hit)
-        ds = np.einsum("tk,kt->t", n[sl][t], d[:, q].astype(np.float64))
-        fwd = ds > 0                          # j (at +d) is sunward of i: j shades i
-        tt = t + k0
-        out_t.append(tt)
-        out_i.append(np.where(fwd, ii[q], jj[q]))
-        out_j.append(np.where(fwd, jj[q], ii[q]))
-        # exact (float64) offsets, sign flipped for the reverse direction
-        d64 = (positions[jj[q]] - positions[ii[q]]) * np.where(fwd, 1.0, -1.0)[:, None]
-        out_du.append(np.einsum("mk,mk->m", d64, u[tt]))
-        out_dv.append(np.einsum("mk,mk->m", d64, v[tt]))
-    cat = np.concatenate
-    t_all, i_all, j_all = cat(out_t), cat(out_i), cat(out_j)
-    du_all, dv_all = cat(out_du), cat(out_dv)
+        tt = k0 + t
+        dq = d64[q]
+        lam_sign = np.einsum("mk,mk->m", dq, n[tt])
+        fwd = lam_sign > 0                    # j (at +d) is in front of i's plane: j shades i
+        dq = dq * np.where(fwd, 1.0, -1.0)[:, None]
+        lam = np.einsum("mk,mk->m", dq, n[tt]) / sn[tt]
+        proj = dq - lam[:, None] * s[tt]
+        out[0].append(steps[tt])
+        out[1].append(np.where(fwd, ii[q], jj[q]))
+        out[2].append(np.where(fwd, jj[q], ii[q]))
+        out[3].append(np.einsum("mk,mk->m", proj, u[tt]))
+        out[4].append(np.einsum("mk,mk->m", proj, v[tt]))
+    if not out[0]:
+        return empty_i, empty_i, empty_i, np.zeros((0, 4))
+    t_all, i_all, j_all, du_all, dv_all = (np.concatenate(x) for x in out)
     a2, b2 = width / 2, height / 2
     rects = np.stack([np.maximum(-a2, du_all - a2), np.minimum(a2, du_all + a2),
                       np.maximum(-b2, dv_all - b2), np.minimum(b2, dv_all + b2)], axis=-1)
     keep = ((rects[:, 1] - rects[:, 0]) * (rects[:, 3] - rects[:, 2]) > _EPS_AREA_M2) \
         & (rects[:, 1] > rects[:, 0]) & (rects[:, 3] > rects[:, 2])
-    return (t_all[keep].astype(np.int64), i_all[keep].astype(np.int64),
-            j_all[keep].astype(np.int64), rects[keep])
+    order = np.lexsort((j_all[keep], i_all[keep], t_all[keep]))
+    return (t_all[keep][order].astype(np.int64), i_all[keep][order].astype(np.int64),
+            j_all[keep][order].astype(np.int64), rects[keep][order])
 
 
 def pair_shade_rects(positions: ArrayLike, sun_enu: ArrayLike, normal_az: ArrayLike,
@@ -352,17 +380,9 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
     up = el > 0
     fraction[~up] = np.nan
     sun = enu_from_sky(az, el)
-    diag = float(np.hypot(width, height))
     upi = np.nonzero(up)[0]
-    facing = np.einsum("tk,tk->t", sun[upi], enu_from_sky(saz[upi], sel[upi]))
-    if len(upi) and facing.min() > 1 - 1e-12:     # sun tracking: the exact fast path
-        t, i, j, rects = _sun_facing_pairs(p, az[upi], el[upi], width, height)
-        t = upi[t]
-    else:
-        t, i, j = candidate_pairs(p, sun[upi], diag)
-        t = upi[t]
-        rects, shading = pair_shade_rects(p, sun, saz, sel, width, height, t, i, j)
-        t, i, j, rects = t[shading], i[shading], j[shading], rects[shading]
+    t, i, j, rects = _direct_pairs(p, sun[upi], saz[upi], sel[upi], width, height)
+    t = upi[t]
     key = t * n + i
     order = np.argsort(key, kind="stable")
     key, j, rects = key[order], j[order], rects[order]

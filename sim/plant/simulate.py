@@ -296,4 +296,37 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
                        any_shaded, daylight, dni_f / dni_sum if dni_sum > 0 else float("nan"))
 
 
-__all__ = ["CLOUDY_KT", "PlantResult", "simulate_plant", "sky_conditions", "weather_for_plant"]
+
+
+
+def compare_strategies(plant: Plant, start: pd.Timestamp, end: pd.Timestamp,
+                       step_s: float = 600.0, weather: pd.DataFrame | None = None,
+                       strategies: tuple[str, ...] = ("sun", "backtrack", "sky_scan"),
+                       cloudy_kt: float = CLOUDY_KT) -> dict[str, Any]:
+    """Every strategy over one range, and the gain of each over ``sun`` on cloudy days.
+
+    Returns
+    -------
+    dict
+        ``summaries`` (strategy → :meth:`PlantResult.summary`), ``cloudy_days``
+        (days with daily clearness index < ``cloudy_kt``), ``cloudy_gain_pct``
+        (strategy → gain over ``sun`` in plant energy on those days [%]),
+        ``fixed_energy_wh``.
+    """
+    results = {s: simulate_plant(plant, start, end, step_s, s, weather) for s in strategies}
+    out: dict[str, Any] = {"summaries": {s: r.summary() for s, r in results.items()}}
+    base = results.get("sun")
+    if base is not None:
+        cloudy = base.daily["clearness_index"] < cloudy_kt
+        out["cloudy_days"] = int(cloudy.sum())
+        e_sun = float(base.daily["energy_wh"][cloudy].sum())
+        out["cloudy_gain_pct"] = {
+            s: (round(100.0 * (float(r.daily["energy_wh"][cloudy].sum()) / e_sun - 1.0), 3)
+                if e_sun > 0 else None)
+            for s, r in results.items()}
+    out["fixed_energy_wh"] = next(iter(results.values())).summary()["fixed_energy_wh"]
+    return out
+
+
+__all__ = ["CLOUDY_KT", "PlantResult", "compare_strategies", "simulate_plant", "sky_conditions",
+           "weather_for_plant"]

@@ -117,5 +117,10 @@ def test_plant_page_shows_layout_shade_strategies_and_sky_map(plant_page, plant_
     page.wait_for_function(
         "() => document.getElementById('chart-plant-layout').data[0].marker.color"
         ".every(c => c === 0)")
+    page.wait_for_function(
+        "() => { const i = document.getElementById('plant-sky-map');"
+        " return i.complete && i.dataset.loaded === i.dataset.time; }")
+    page.wait_for_function("() => document.getElementById('plant-chosen').textContent"
+                           ".includes('0 collectors shaded')")
     ARTIFACTS.mkdir(exist_ok=True)
     page.screenshot(path=str(ARTIFACTS / "plant.png"), full_page=True)
