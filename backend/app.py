@@ -35,7 +35,17 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import Response
 from starlette.middleware.gzip import GZipMiddleware
 
-from backend.api.routes import dashboard, energy, health, measurements, simulations, sites, vision
+from backend.api.routes import (
+    dashboard,
+    energy,
+    health,
+    measurements,
+    plants,
+    simulations,
+    sites,
+    twin3d,
+    vision,
+)
 from backend.auth import create_token
 from backend.context import ServiceContext, open_context
 from backend.errors import InputError
@@ -155,7 +165,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # 9 ms; level 9 (Starlette's default) saves 6 kB more for 25 ms.
     app.add_middleware(GZipMiddleware, minimum_size=2048, compresslevel=5)
     app.add_middleware(measurements.IngestFastPath)
-    for module in (health, sites, measurements, energy, simulations, vision, dashboard):
+    for module in (health, sites, measurements, energy, simulations, twin3d, plants, vision,
+                   dashboard):
         app.include_router(module.router)
     generate_openapi = app.openapi
 

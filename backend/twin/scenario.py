@@ -50,8 +50,7 @@ class Scenario:
                 raise ValueError(f"{name}: {value} is outside [{p.minimum}, {p.maximum}]")
 
     def disturbances(self) -> Disturbances:
-        values: dict[str, Any] = {k: v for k, v in self.machine.items() if k in DISTURBANCE_NAMES}
-        return Disturbances(**values)
+        return disturbances_of(self.machine)
 
     def to_dict(self) -> dict[str, Any]:
         return {"site_id": self.site_id, "start": self.start.isoformat(),
@@ -71,3 +70,9 @@ def run_scenario(site: Site, scenario: Scenario, weather: pd.DataFrame | None = 
         disturbances=scenario.disturbances(), receiver=scenario.receiver,
         acceptance_angle_deg=scenario.machine.get("acceptance_angle_deg", 0.5),
     )
+
+
+def disturbances_of(params: dict[str, Any]) -> Disturbances:
+    """The disturbances of a stored run's parameters (:meth:`Scenario.to_dict`)."""
+    values: dict[str, Any] = {k: float(params[k]) for k in DISTURBANCE_NAMES if k in params}
+    return Disturbances(**values)

@@ -51,9 +51,11 @@ from backend.twin.scene_build import (
     PEDESTAL_HEIGHT_M,
     SUN_DISTANCE_M,
     SUN_PATH_STEP_MIN,
+    build_ghost,
     build_static_scene,
     wxyz,
 )
+from sim.disturbances import Disturbances, base_rotation
 from sim.kinematics import (
     TrackerGeometry,
     forward_kinematics,
@@ -71,6 +73,9 @@ TICK_S = 0.1
 #: How many ports from the requested one :meth:`TwinScene.start` tries.
 PORT_TRIES = 20
 LIVE_REFRESH_S = 5.0
+#: A replayed run's ideal pose is drawn (the ghost) when the actual normal is further than
+#: this from the sun [mrad] — 0.3°, well above the ideal controller's own residual.
+GHOST_THRESHOLD_MRAD = 5.0
 
 @dataclass(frozen=True)
 class ScenePose:
@@ -85,6 +90,58 @@ class ScenePose:
     tracker_normal_enu: NDArray[np.float64]
     tracker_aoi_deg: float
     fixed_aoi_deg: float
+    ideal_azimuth_joint_deg: float = float("nan")
+    ideal_elevation_joint_deg: float = float("nan")
+    #: Angle between the panel normal and the sun [mrad] in a replayed run (None when live).
+    pointing_error_mrad: float | None = None
+    replay_run_id: str | None = None
+
+    @property
+    def ghost_visible(self) -> bool:
+        """Whether the ideal pose is drawn beside the actual one (they differ visibly)."""
+        return (self.pointing_error_mrad is not None and not self.stowed
+                and self.pointing_error_mrad > GHOST_THRESHOLD_MRAD)
+
+
+@dataclass(frozen=True)
+class Replay:
+    """A simulation run shown in the scene: the tracker takes the run's actual joint angles
+    (``sim.twin.simulate``'s series) on its disturbed base, the ghost the ideal pose."""
+
+    run_id: str
+    ts_s: NDArray[np.int64]
+    azimuth_joint_deg: NDArray[np.float64]
+    elevation_joint_deg: NDArray[np.float64]
+    pointing_error_mrad: NDArray[np.float64]
+    base_rotation: NDArray[np.float64]
+    step_s: float
+
+    @classmethod
+    def from_series(cls, run_id: str, series: pd.DataFrame, disturbances: Disturbances,
+                    step_s: float) -> Replay:
+        missing = [c for c in ("azimuth_joint_deg", "elevation_joint_deg",
+                               "pointing_error_mrad") if c not in series.columns]
+        if missing:
+            raise ValueError(f"run {run_id}: its series lacks {', '.join(missing)}")
+        return cls(run_id, series.index.as_unit("s").asi8.astype(np.int64),
+                   series["azimuth_joint_deg"].to_numpy(float),
+                   series["elevation_joint_deg"].to_numpy(float),
+                   series["pointing_error_mrad"].to_numpy(float),
+                   np.asarray(base_rotation(disturbances)), float(step_s))
+
+    @property
+    def start(self) -> pd.Timestamp:
+        return pd.Timestamp(int(self.ts_s[0]), unit="s", tz="UTC")
+
+    @property
+    def end(self) -> pd.Timestamp:
+        return pd.Timestamp(int(self.ts_s[-1] + self.step_s), unit="s", tz="UTC")
+
+    def row_at(self, ts: pd.Timestamp) -> int | None:
+        """The step holding ``ts`` (each sample stands for its step), or None outside."""
+        t = ts.value // 1_000_000_000
+        i = int(np.searchsorted(self.ts_s, t, side="right")) - 1
+        return i if 0 <= i < len(self.ts_s) and t < self.ts_s[i] + self.step_s else None
 
 
 def _free_port(host: str, port: int) -> int:
@@ -168,6 +225,7 @@ class TwinScene:
         self._last_live_refresh = 0.0
         self._syncing_gui = False
         self._azimuth_reference: float | None = None
+        self.replay: Replay | None = None
         self._live_ts: pd.Timestamp | None = None
         self._live_tracker_power_w: float | None = None
         self._live_fixed_power_w: float | None = None
@@ -275,9 +333,17 @@ class TwinScene:
         sun_el = float(sp["apparent_elevation"].iloc[0])
         az_j, el_j = tracking_angles(sun_az, sun_el, self._geometry,
                                      reference_azimuth=self._azimuth_reference)
-        az_joint, el_joint = float(az_j), float(el_j)
+        ideal_az, ideal_el = float(az_j), float(el_j)
+        az_joint, el_joint, error_mrad, run_id = ideal_az, ideal_el, None, None
+        base = np.eye(3)
+        row = None if self.replay is None else self.replay.row_at(stamp.tz_convert("UTC"))
+        if row is not None and self.replay is not None:
+            r = self.replay
+            az_joint = float(r.azimuth_joint_deg[row])
+            el_joint = float(r.elevation_joint_deg[row])
+            error_mrad, run_id, base = float(r.pointing_error_mrad[row]), r.run_id, r.base_rotation
         stowed = sun_el <= 0.0
-        normal = forward_kinematics(az_joint, el_joint, self._geometry)
+        normal = base @ forward_kinematics(az_joint, el_joint, self._geometry)
         sun_vec = enu_from_sky(sun_az, sun_el)
         fixed_normal = forward_kinematics(self._fixed_azimuth_deg,
                                           90.0 - self._fixed_tilt_deg, self._geometry)
@@ -291,7 +357,36 @@ class TwinScene:
             tracker_normal_enu=normal,
             tracker_aoi_deg=float(np.degrees(np.arccos(np.clip(normal @ sun_vec, -1, 1)))),
             fixed_aoi_deg=float(np.degrees(np.arccos(np.clip(fixed_normal @ sun_vec, -1, 1)))),
+            ideal_azimuth_joint_deg=ideal_az,
+            ideal_elevation_joint_deg=ideal_el,
+            pointing_error_mrad=error_mrad,
+            replay_run_id=run_id,
         )
+
+    def load_replay(self, replay: Replay) -> ScenePose | None:
+        """Show a simulation run: scrubbing its days poses the tracker as the run did; the
+        scene leaves live mode and moves to the run's start."""
+        with self._lock:
+            self.replay = replay
+            if self.server is None:
+                return None
+            self._leave_live()
+            self._set_playing(False)
+            return self.show_time(replay.start)
+
+    def clear_replay(self) -> ScenePose | None:
+        """Back to ideal tracking and the live clock."""
+        with self._lock:
+            self.replay = None
+            if self.server is None:
+                return None
+            self._live = True
+            self._syncing_gui = True
+            try:
+                self.gui["live"].value = True
+            finally:
+                self._syncing_gui = False
+            return self.show_time(self._live_now())
 
     def show_time(self, ts: pd.Timestamp) -> ScenePose:
         """Pose the whole scene at ``ts`` (tz-aware) and sync the GUI to it."""
@@ -319,6 +414,7 @@ class TwinScene:
         assert self.server is not None
         self.nodes.update(build_static_scene(self.server, self._geometry,
                                              self._fixed_tilt_deg, self._fixed_azimuth_deg))
+        self.nodes.update(build_ghost(self.server))
 
     def _sun_centre(self) -> NDArray[np.float64]:
         """The point the sun marker and path are drawn around: the tracker's
@@ -359,8 +455,19 @@ class TwinScene:
         x = np.cross([0.0, 0.0, 1.0], z)
         x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-9 else np.array([1.0, 0.0, 0.0])
         sun_rot = np.column_stack([x, np.cross(z, x), z])
+        base = self.replay.base_rotation if pose.replay_run_id and self.replay else np.eye(3)
+        g01, g02, g0p = joint_transforms(pose.ideal_azimuth_joint_deg,
+                                         pose.ideal_elevation_joint_deg, self._geometry)
         n = self.nodes
         with self.server.atomic():
+            n["/tracker"].wxyz = wxyz(base)
+            n["/ghost"].visible = pose.ghost_visible
+            n["/ghost/azimuth"].wxyz = wxyz(g01[:3, :3])
+            n["/ghost/azimuth"].position = g01[:3, 3]
+            n["/ghost/azimuth/elevation"].wxyz = wxyz(np.linalg.solve(g01, g02)[:3, :3])
+            n["/ghost/azimuth/elevation"].position = np.linalg.solve(g01, g02)[:3, 3]
+            n["/ghost/azimuth/elevation/panels"].wxyz = wxyz(np.linalg.solve(g02, g0p)[:3, :3])
+            n["/ghost/azimuth/elevation/panels"].position = np.linalg.solve(g02, g0p)[:3, 3]
             n["/tracker/azimuth"].wxyz = wxyz(t01[:3, :3])
             n["/tracker/azimuth"].position = t01[:3, 3]
             n["/tracker/azimuth/elevation"].wxyz = wxyz(t12[:3, :3])
@@ -475,6 +582,10 @@ class TwinScene:
         live_at = ("no live data yet" if self._live_ts is None else
                    self._live_ts.tz_convert(self._tz).strftime("%Y-%m-%d %H:%M"))
         state = "stowed (sun down)" if p.stowed else "tracking"
+        run = []
+        if p.replay_run_id is not None:
+            run = ["", f"Run {p.replay_run_id[:8]}: pointing error {p.pointing_error_mrad:.1f} mrad"
+                   + (" (ideal pose shown translucent)" if p.ghost_visible else "")]
         lines = [
             f"**{local:%Y-%m-%d %H:%M} {local.tzname()}** "
             f"({'live' if self._live else 'playing' if self._playing else 'scrubbing'})",
@@ -490,6 +601,7 @@ class TwinScene:
             "",
             f"Live power ({live_at}): tracker {watts(self._live_tracker_power_w)}, "
             f"fixed {watts(self._live_fixed_power_w)}",
+            *run,
         ]
         if error:
             lines.append(f"\n**{error}**")

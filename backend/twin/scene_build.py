@@ -46,11 +46,43 @@ SUN_PATH_STEP_MIN = 5
 _PANEL_BLUE = (28, 52, 110)
 _STEEL = (150, 150, 155)
 _SUN_YELLOW = (255, 200, 40)
+_GHOST_WHITE = (235, 240, 250)
 
 
 def wxyz(rotation: NDArray[np.floating]) -> NDArray[np.float64]:
     """A rotation matrix as viser's (w, x, y, z) quaternion."""
     return np.asarray(vtf.SO3.from_matrix(rotation).wxyz, dtype=float)
+
+
+def _modules(server: viser.ViserServer, parent: str, color: tuple[int, int, int],
+             opacity: float | None) -> dict[str, Any]:
+    """The 2 × 2 modules of an array under ``parent`` (landscape, long side along x)."""
+    out = {}
+    for i, (x, y) in enumerate([(sx * (MODULE_LENGTH_M + MODULE_GAP_M) / 2.0,
+                                 sy * (MODULE_WIDTH_M + MODULE_GAP_M) / 2.0)
+                                for sy in (1, -1) for sx in (-1, 1)]):
+        name = f"{parent}/module_{i}"
+        out[name] = server.scene.add_box(
+            name, color=color, dimensions=(MODULE_LENGTH_M, MODULE_WIDTH_M, MODULE_DEPTH_M),
+            position=(x, y, 0.0), opacity=opacity, cast_shadow=opacity is None)
+    return out
+
+
+def build_ghost(server: viser.ViserServer) -> dict[str, Any]:
+    """The ideal pose's panels, translucent: ``/ghost/azimuth/elevation/panels`` with the
+    tracker's joint frames (posed like them), hidden until the actual pose strays."""
+    scene = server.scene
+    nodes: dict[str, Any] = {
+        "/ghost": scene.add_frame("/ghost", show_axes=False, visible=False,
+                                  position=(0.0, 0.0, PEDESTAL_HEIGHT_M)),
+        "/ghost/azimuth": scene.add_frame("/ghost/azimuth", show_axes=False),
+        "/ghost/azimuth/elevation": scene.add_frame("/ghost/azimuth/elevation",
+                                                    show_axes=False),
+        "/ghost/azimuth/elevation/panels": scene.add_frame("/ghost/azimuth/elevation/panels",
+                                                           show_axes=False),
+    }
+    nodes.update(_modules(server, "/ghost/azimuth/elevation/panels", _GHOST_WHITE, 0.35))
+    return nodes
 
 
 def build_static_scene(server: viser.ViserServer, geom: TrackerGeometry,
@@ -64,14 +96,7 @@ def build_static_scene(server: viser.ViserServer, geom: TrackerGeometry,
         return handle
 
     def add_modules(parent: str) -> None:
-        for i, (x, y) in enumerate([(sx * (MODULE_LENGTH_M + MODULE_GAP_M) / 2.0,
-                                     sy * (MODULE_WIDTH_M + MODULE_GAP_M) / 2.0)
-                                    for sy in (1, -1) for sx in (-1, 1)]):
-            name = f"{parent}/module_{i}"
-            add(name, scene.add_box(
-                name, color=_PANEL_BLUE,
-                dimensions=(MODULE_LENGTH_M, MODULE_WIDTH_M, MODULE_DEPTH_M),
-                position=(x, y, 0.0)))
+        nodes.update(_modules(server, parent, _PANEL_BLUE, None))
 
     scene.set_up_direction("+z")
     add("/ground", scene.add_grid(

@@ -199,6 +199,7 @@ async function run(ev) {
   $("sim-run").disabled = true;
   banner("");
   $("sim-csv").hidden = true;
+  $("sim-3d").hidden = true;
   setProgress(0, "starting…");
   try {
     const body = {
@@ -227,6 +228,9 @@ async function run(ev) {
       csv.href = `${seriesUrl}?format=csv`;
       csv.setAttribute("download", `simulation_${runId}.csv`);
       csv.hidden = false;
+      const show3d = $("sim-3d");
+      show3d.dataset.runId = runId;
+      show3d.hidden = st.meta?.viser_enabled === false || body.site_id !== st.meta?.default_site;
     }
     document.body.dataset.simulationDone = runId || "sync";
   } catch (err) {
@@ -235,6 +239,17 @@ async function run(ev) {
   } finally {
     running = false;
     $("sim-run").disabled = false;
+  }
+}
+
+/** Pose the 3D twin as the run did (actual joints, disturbed base, ideal ghost) and go there. */
+async function showIn3d() {
+  const runId = $("sim-3d").dataset.runId;
+  try {
+    await api("/api/v1/twin3d/replay", { method: "PUT", json: { run_id: runId } });
+    location.hash = "#twin";
+  } catch (err) {
+    banner(`3D twin: ${err.message}`, "error");
   }
 }
 
@@ -263,6 +278,7 @@ export function init(state) {
   }
   machineFields(pick(st.meta, "machine_parameters"));
   $("sim-form").addEventListener("submit", run);
+  $("sim-3d").addEventListener("click", showIn3d);
   showEmpty("chart-sim-power", "Run a simulation to see its power.");
   showEmpty("chart-sim-angles", "Run a simulation to see the sun and tracker angles.");
 }

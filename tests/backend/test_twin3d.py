@@ -245,3 +245,42 @@ def test_failure_while_building_stops_viser(monkeypatch: pytest.MonkeyPatch) -> 
         assert twin.running and twin.port == port
     finally:
         twin.stop()
+
+
+def test_a_replayed_run_poses_the_actual_tracker_with_a_ghost_of_the_ideal(
+        scene: TwinScene) -> None:
+    # A day of open-loop SPA with a 2° pedestal yaw: the twin's actual joints on a base
+    # turned by 2° point off the sun; the scene must show that (the panel normal seen in
+    # the scene = the sun direction of pvlib, turned 2° about the vertical) and the ghost.
+    from backend.twin.scene import GHOST_THRESHOLD_MRAD, Replay
+    from sim.disturbances import Disturbances
+    from sim.twin import simulate
+
+    d = Disturbances(pedestal_yaw_deg=2.0)
+    start = pd.Timestamp("2024-03-15", tz=TZ)
+    run = simulate(SITE, start, start + pd.Timedelta(days=1), step_s=300,
+                   controller="open_loop_spa", disturbances=d)
+    try:
+        pose = scene.load_replay(Replay.from_series("run-a", run.series, d, 300.0))
+        assert pose is not None and pose.replay_run_id == "run-a"
+        noon = pd.Timestamp("2024-03-15 12:30", tz=TZ)
+        pose = scene.show_time(noon)
+        assert pose.pointing_error_mrad > GHOST_THRESHOLD_MRAD and pose.ghost_visible
+        assert scene.nodes["/ghost"].visible
+        shown = _world(scene, "/tracker/azimuth/elevation/panels")[:3, 2]
+        ghost = _world(scene, "/ghost/azimuth/elevation/panels")[:3, 2]
+        _, _, sun = _pvlib_sun(noon)
+        # the ghost (ideal pose, level base) is on the sun; the shown panel is the run's
+        # actual joints on a base turned 2° clockwise: azimuth joint + 2°
+        assert np.degrees(np.arccos(np.clip(ghost @ sun, -1, 1))) < 0.05
+        row = run.series.loc[noon.tz_convert("UTC")]
+        a = np.radians(row["azimuth_joint_deg"] + 2.0)
+        e = np.radians(row["elevation_joint_deg"])
+        yawed = np.array([np.sin(a) * np.cos(e), np.cos(a) * np.cos(e), np.sin(e)])
+        assert np.degrees(np.arccos(np.clip(shown @ yawed, -1, 1))) < 0.01
+        err = np.degrees(np.arccos(np.clip(shown @ sun, -1, 1)))
+        assert err * 17.453 == pytest.approx(pose.pointing_error_mrad, rel=0.05)
+    finally:
+        scene.clear_replay()
+    pose = scene.show_time(pd.Timestamp("2024-03-15 12:30", tz=TZ))
+    assert pose.replay_run_id is None and not scene.nodes["/ghost"].visible

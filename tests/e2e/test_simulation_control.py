@@ -43,3 +43,32 @@ def test_open_loop_with_a_pedestal_yaw_points_off_and_says_so(page, server) -> N
                           ".map(t => t.name)")
     assert "azimuth commanded" in names and "tracker azimuth (actual)" in names
     page.screenshot(path=str(ARTIFACTS / "simulation-control.png"), full_page=True)
+
+
+def test_a_run_shown_in_the_3d_twin(page, server) -> None:
+    import httpx
+
+    page.goto(server.url + "/#simulation")
+    page.wait_for_selector("#sim-machine-fields input[name=pedestal_yaw_deg]", state="attached")
+    day = (server.today() - dt.timedelta(days=1)).isoformat()
+    page.fill("#sim-start", day)
+    page.fill("#sim-end", server.today().isoformat())
+    page.select_option("#sim-step", "300")
+    page.select_option("#sim-controller", "open_loop_spa")
+    page.click("#sim-machine summary")
+    page.fill("#sim-pedestal_yaw_deg", "3")
+    page.click("#sim-run")
+    page.wait_for_selector("body[data-simulation-done]", timeout=90_000)
+    run_id = page.get_attribute("#sim-3d", "data-run-id")
+    with page.expect_response("**/api/v1/twin3d/replay") as answer:
+        page.click("#sim-3d")
+    assert answer.value.status == 200
+    replay = answer.value.json()
+    assert replay["run_id"] == run_id and replay["start"].startswith(day[:4])
+    page.wait_for_url("**/#twin")
+    page.wait_for_selector("#twin-frame[src]")
+    bad = httpx.put(server.url + "/api/v1/twin3d/replay", json={"run_id": "nope"}, timeout=10)
+    assert bad.status_code == 404 and "run_id" in bad.json()["detail"]
+    # the scene now replays the run; the service says so and goes back to live on DELETE
+    r = httpx.delete(server.url + "/api/v1/twin3d/replay", timeout=10)
+    assert r.status_code == 200 and r.json() == {"replay": None}
