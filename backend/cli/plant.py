@@ -101,7 +101,7 @@ def execute(args: argparse.Namespace) -> dict[str, Any]:
         from sim.sky import read_tmy3
 
         try:
-            tmy, meta = read_tmy3(args.tmy3, coerce_year=start.tz_convert("UTC").year)
+            tmy, meta = read_tmy3(args.tmy3, coerce_year=start.year)
         except (OSError, ValueError, KeyError) as exc:
             raise InputError(f"--tmy3: cannot read {args.tmy3!r}: {exc}") from None
         weather = weather_for_plant(tmy, float(meta["longitude"]), plant, start, end)
