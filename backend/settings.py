@@ -36,6 +36,8 @@ class Settings(BaseSettings):
     viser_port: int = Field(8080, ge=0, le=65535, description="Port of the viser 3D twin.")
     viser: bool = Field(True, description="Start the viser 3D twin with the service.")
     sites_dir: Path = Field(DATA_DIR / "sites", description="Folder of built-in site configs.")
+    plants_dir: Path = Field(DATA_DIR / "plants",
+                             description="Folder of plant layouts (seed 004), one JSON each.")
     default_site: str = Field(
         "tehuantepec", description="Site of the 3D scene, the demo logger and the dashboard."
     )
