@@ -44,7 +44,6 @@ used.
 from __future__ import annotations
 
 import math
-import statistics
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -100,6 +99,10 @@ class ControlSettings:
     chronological_interval_min : float
         The chronological controller's period [min] (seed 000's ref. [34]:
         5, 30 or 60).
+    update_interval_s : float
+        How often the ephemeris controllers (and ``hybrid``) update their
+        command [s]; each aims half an interval ahead. 30 s keeps the lag
+        below 0.13° (the sun moves ≤ 0.25° min⁻¹).
     camera_interval_s : float, optional
         Frame interval [s]; default 1 for ``closed_loop_camera`` (seed 000),
         60 for ``hybrid``.
@@ -121,6 +124,10 @@ class ControlSettings:
         A frame whose brightest pixel is below this is not used: the clear
         sun saturates the sensor (seed 001's fixed exposure), a sun behind
         cloud or a cloud's bright edge does not [DN].
+    reference_area_px : float, optional
+        The clear sun's detected area [px] (a clear-sky calibration; the twin
+        measures it on a clear frame of its camera). Default: learned, the
+        90th percentile of the recent glares (cloud only shrinks them).
     detector : str, optional
         ``vision.detect`` method; default ``"robust"`` for
         ``"seed000_hsv"`` for ``closed_loop_camera`` (seed 000's Table 3
@@ -132,6 +139,7 @@ class ControlSettings:
     stow_elevation_deg: float = 0.0
     wake_lead_s: float = 300.0
     chronological_interval_min: float = 30.0
+    update_interval_s: float = 30.0
     camera_interval_s: float | None = None
     kp: float = 0.7
     ki_per_s: float = 0.02
@@ -140,8 +148,9 @@ class ControlSettings:
     min_confidence: float = 0.5
     max_jump_deg: float = 1.0
     reacquire_frames: int = 5
-    area_tolerance: float = 1.6
+    area_tolerance: float = 1.2
     min_peak_dn: int = 250
+    reference_area_px: float | None = None
     detector: str | None = None
 
     def __post_init__(self) -> None:
@@ -149,6 +158,8 @@ class ControlSettings:
             raise ValueError(f"dead_band_deg must be >= 0, got {self.dead_band_deg}")
         if not self.chronological_interval_min > 0:
             raise ValueError("chronological_interval_min must be > 0")
+        if not self.update_interval_s > 0:
+            raise ValueError(f"update_interval_s must be > 0, got {self.update_interval_s}")
         if self.camera_interval_s is not None and not self.camera_interval_s > 0:
             raise ValueError(f"camera_interval_s must be > 0, got {self.camera_interval_s}")
         if not 0 < self.hybrid_gain <= 1:
@@ -403,6 +414,7 @@ class _CameraGate:
         self.areas: list[int] = []
         self.rejected_in_a_row = 0
         self.accepted = 0
+        self.ref_area: float | None = None
 
     def usable(self, m: CameraMeasurement | None, expected: tuple[float, float] | None) -> bool:
         """True when ``m`` is the clear sun: confident, of its clear-sky size, and (when the
@@ -413,11 +425,20 @@ class _CameraGate:
             return False
         if m.peak_dn < self.s.min_peak_dn:  # a sun dimmed by cloud, or no sun but a cloud edge
             return False
-        if len(self.areas) >= 5:
-            ref = float(statistics.median(self.areas))
-            tol = self.s.area_tolerance
-            if not ref / tol <= m.area_px <= ref * tol:
-                return False
+        # the clear sun's glare is the largest a frame shows (cloud only cuts or dims it): the
+        # reference is the 90th percentile of the recent saturated glares' areas
+        self.areas.append(int(m.area_px))
+        if len(self.areas) > 300:
+            del self.areas[0]
+        if self.s.reference_area_px is not None:
+            self.ref_area = float(self.s.reference_area_px)
+        elif len(self.areas) < 5:
+            return False
+        elif self.ref_area is None or len(self.areas) % 10 == 0:
+            self.ref_area = float(np.percentile(self.areas, 90))
+        tol = self.s.area_tolerance
+        if not self.ref_area / tol <= m.area_px <= self.ref_area * tol:
+            return False
         if expected is not None:
             jump = math.hypot(m.right_deg - expected[0], m.up_deg - expected[1])
             if jump > self.s.max_jump_deg:
@@ -426,9 +447,6 @@ class _CameraGate:
                     return False
         self.rejected_in_a_row = 0
         self.accepted += 1
-        self.areas.append(int(m.area_px))
-        if len(self.areas) > 60:
-            del self.areas[0]
         return True
 
 
@@ -451,7 +469,7 @@ class ClosedLoopCamera(Controller):
         s = self.settings
         self.camera_interval_s = s.camera_interval_s or 1.0
         self.detector = s.detector or "seed000_hsv"
-        self.gate = _CameraGate(s)
+        self._gate = self.gate = _CameraGate(s)
         self._reset()
 
     def lead_s(self, tick_s: float) -> float:
@@ -467,7 +485,7 @@ class ClosedLoopCamera(Controller):
         if measurement is None:  # no frame at this tick: hold the current command
             return self.command_deg
         expected = (0.0, 0.0) if self.locked else None
-        if not self.gate.usable(measurement, expected):
+        if not self._gate.usable(measurement, expected):
             self._reset()
             return super()._track(i, reading, measurement)
         self.locked = True
@@ -505,7 +523,7 @@ class Hybrid(Controller):
         s = self.settings
         self.camera_interval_s = s.camera_interval_s or 60.0
         self.detector = s.detector or "seed003_gray240"
-        self.gate = _CameraGate(s)
+        self._gate = self.gate = _CameraGate(s)
         self.correction = [0.0, 0.0]
         self.have_correction = False
 
@@ -521,7 +539,7 @@ class Hybrid(Controller):
             if self.have_correction:
                 expected = ((az_e + c[0] - reading.azimuth_deg) * w,
                             el_e + c[1] - reading.elevation_deg)
-            if self.gate.usable(measurement, expected):
+            if self._gate.usable(measurement, expected):
                 new = (reading.azimuth_deg + measurement.right_deg / w - az_e,
                        reading.elevation_deg + measurement.up_deg - el_e)
                 g = self.settings.hybrid_gain if self.have_correction else 1.0

@@ -240,15 +240,29 @@ def sun_in_camera(
 ) -> NDArray[np.float64]:
     """The sun's direction in camera coordinates (right, up, forward): ``camera_axes(...) @ s``.
 
-    Scalar arithmetic (no disturbance of the camera or the base: three dot products).
+    The same frames as :func:`camera_axes` in scalar arithmetic (called once per frame):
+    the sun into the base frame (``Rᵀ s``), then onto the panel's and the camera's axes.
     """
-    if d.moves_base or d.camera_offset_right_deg or d.camera_offset_up_deg:
-        return camera_axes(azimuth_joint_deg, elevation_joint_deg, d) @ sun_enu
+    e, n_, u_ = (float(x) for x in sun_enu)
+    if d.moves_base:
+        r = _base_rotation_rows(d)  # s_base = Rᵀ s: the columns of R dotted with s
+        e, n_, u_ = (r[0][k] * e + r[1][k] * n_ + r[2][k] * u_ for k in range(3))
     az, el = math.radians(azimuth_joint_deg), math.radians(elevation_joint_deg)
     sa, ca, se, ce = math.sin(az), math.cos(az), math.sin(el), math.cos(el)
-    e, n, u = float(sun_enu[0]), float(sun_enu[1]), float(sun_enu[2])
-    return np.array([ca * e - sa * n, -sa * se * e - ca * se * n + ce * u,
-                     sa * ce * e + ca * ce * n + se * u])
+    x = ca * e - sa * n_  # on the right axis
+    y = -sa * se * e - ca * se * n_ + ce * u_  # on the up axis
+    z = sa * ce * e + ca * ce * n_ + se * u_  # on the normal
+    if d.camera_offset_right_deg or d.camera_offset_up_deg:
+        o_r, o_u = math.radians(d.camera_offset_right_deg), math.radians(d.camera_offset_up_deg)
+        cr, sr, cu, su = math.cos(o_r), math.sin(o_r), math.cos(o_u), math.sin(o_u)
+        f1, x = cr * z + sr * x, cr * x - sr * z
+        z, y = cu * f1 + su * y, cu * y - su * f1
+    return np.array([x, y, z])
+
+
+@lru_cache(maxsize=32)
+def _base_rotation_rows(d: Disturbances) -> tuple[tuple[float, ...], ...]:
+    return tuple(tuple(float(v) for v in row) for row in base_rotation(d))
 
 
 def encoder_error_deg(t_s: ArrayLike, d: Disturbances) -> NDArray[np.float64]:

@@ -149,6 +149,15 @@ def _pixel_grid(
     return dirs, (1.0 - vignetting * r2).astype(np.float32)
 
 
+@lru_cache(maxsize=8)
+def _grey_scale(camera: PinholeCamera, vignetting: float,
+                sky_level: float) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """Vignetting × grey full scale, and the clear sky's grey level per pixel [DN]."""
+    _, vig = _pixel_grid(camera, vignetting)
+    vl = vig * _LUMA_255
+    return vl, (np.float32(sky_level) * vl).astype(np.float32)
+
+
 @dataclass(frozen=True)
 class SunRoi:
     """A rendered region of a tracker-camera frame: ``image`` starts at pixel (x0, y0)."""
@@ -225,21 +234,31 @@ def render_sun_roi(
     theta2 = cv2.transform(dirs[sl], m)
     # vision.synth._sun_radiance: aureole (glare/θ)², the disc's plateau inside SUN_RADIUS
     r2 = math.radians(SUN_RADIUS_DEG) ** 2
-    lum = np.float32(math.radians(glare_deg) ** 2) / cv2.max(theta2, r2)
+    lum = np.float32(math.radians(glare_deg) ** 2) / np.maximum(theta2, np.float32(r2))
     cloudy = clouds is not None and clouds.cover > 0
     if cloudy or (glare_deg / SUN_RADIUS_DEG) ** 2 * (1.0 - vignetting) < 2.0:
         # the disc's plateau shows only through cloud or at a short exposure: otherwise
         # the aureole already saturates the disc many times over
         lum[theta2 <= r2] += np.float32((glare_deg / SUN_RADIUS_DEG) ** 2 * 4)
+    sky = np.float32(sky_level)
+    if clouds is not None and cloudy:
         xx, yy = np.meshgrid(np.arange(x0, x1, dtype=float), np.arange(y0, y1, dtype=float))
         c = clouds.density(np.degrees((xx - sxf) / f), np.degrees(-(yy - syf) / f), t_s)
         c = c.astype(np.float32)
         lum *= np.exp(-np.float32(clouds.optical_depth) * c)
-        lum += np.float32(sky_level) * (1.0 + 1.2 * c * min(1.0, clouds.optical_depth))
+        lum += sky * (1.0 + 1.2 * c * min(1.0, clouds.optical_depth))
+        lum *= vig[sl]
+        img = lum[..., None] * _TINT_255 if colour else lum * _LUMA_255
+    elif colour:
+        lum += sky
+        lum *= vig[sl]
+        img = lum[..., None] * _TINT_255
     else:
-        lum += np.float32(sky_level)
-    lum *= vig[sl]
-    img = lum[..., None] * _TINT_255 if colour else lum * _LUMA_255
+        # (sun + sky) · vignetting · grey scale, with the constant sky term precomputed
+        vl, svl = _grey_scale(camera, vignetting, sky_level)
+        lum *= vl[sl]
+        lum += svl[sl]
+        img = lum
     img = np.asarray(img, dtype=np.float32)
     if noise_dn > 0:
         gen = rng if rng is not None else np.random.default_rng(0)
@@ -251,5 +270,5 @@ def render_sun_roi(
         shot += np.float32(noise_dn)
         shot *= bank[k:k + n].reshape(img.shape)
         img += shot
-    out = cv2.convertScaleAbs(img)  # round and saturate to 0…255 (the image is >= 0)
+    out = np.asarray(cv2.convertScaleAbs(img), dtype=np.uint8)  # round, saturate to 0…255
     return SunRoi(out, x0, y0, (sxf, syf), True)

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -39,7 +39,14 @@ from sim import disturbances as dist
 from sim import kinematics, pv, sky, sun
 from sim.control import CONTROLLERS, ControlSettings, make_controller, noon_reference_azimuth
 from sim.sites import Site
-from sim.tracking import CameraSetup, DriveLimits, LoopState, move_energies_wh, run_loop
+from sim.tracking import (
+    CameraSetup,
+    DriveLimits,
+    LoopState,
+    clear_sky_area_px,
+    move_energies_wh,
+    run_loop,
+)
 from vision.sphere import angular_separation_deg, enu_from_sky, sky_from_enu
 
 __all__ = ["CONTROLLERS", "RECEIVERS", "SERIES_COLUMNS", "TwinResult", "simulate"]
@@ -386,14 +393,15 @@ def _arrays_step(
 
 
 def _tick_s(controller: str, step_s: float, settings: ControlSettings) -> float:
-    """The control loop's tick [s]: the camera interval for the camera loops (at most 60 s),
-    else 60 s, never longer than the step, and dividing it."""
+    """The control loop's tick [s]: the frame interval for ``closed_loop_camera``, else the
+    update interval (and the frame interval if shorter), never longer than the step, and
+    dividing it."""
     if controller == "closed_loop_camera":
         want = settings.camera_interval_s or 1.0
     elif controller == "hybrid":
-        want = min(60.0, settings.camera_interval_s or 60.0)
+        want = min(settings.update_interval_s, settings.camera_interval_s or 60.0)
     else:
-        want = 60.0
+        want = settings.update_interval_s
     want = min(want, step_s)
     return step_s / math.ceil(step_s / want - 1e-9)
 
@@ -477,6 +485,10 @@ def simulate(
     pressure = float(atmosphere.alt2pres(site.altitude))
     ctl = None
     if controller != "ideal":
+        if controller in ("closed_loop_camera", "hybrid") and settings.reference_area_px is None:
+            detector = settings.detector or (
+                "seed000_hsv" if controller == "closed_loop_camera" else "seed003_gray240")
+            settings = replace(settings, reference_area_px=clear_sky_area_px(camera, detector))
         ctl = make_controller(controller, site, settings, clock_offset_s=d.clock_offset_s)
         tick_s = _tick_s(controller, float(step_s), settings)
         every = int(round(step_s / tick_s))

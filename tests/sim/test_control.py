@@ -194,9 +194,9 @@ def test_clock_offset_shifts_the_hour_angle(site) -> None:
                      disturbances=Disturbances(clock_offset_s=240.0),
                      settings=ControlSettings(dead_band_deg=0.01)).series
     err = s["pointing_error_mrad"].to_numpy()
-    # at a sample the pose is the target set 60 s before for 30 s ahead, on a clock 240 s
-    # fast: the sun 210 s ahead, 210 s x 15 deg/h x cos(dec -2.4 deg) = 0.874 deg = 15.3 mrad
-    assert np.median(err) == pytest.approx(15.3, abs=0.3)
+    # at a sample the pose is the target set 30 s before for 15 s ahead, on a clock 240 s
+    # fast: the sun 225 s ahead, 225 s x 15 deg/h x cos(dec -2.4 deg) = 0.937 deg = 16.35 mrad
+    assert np.median(err) == pytest.approx(16.35, abs=0.3)
 
 
 def test_encoder_drift_grows_linearly(site) -> None:
@@ -243,29 +243,39 @@ def test_camera_offset_misleads_the_camera_loop_not_the_ephemeris(site) -> None:
 
 def test_clouds_do_not_make_the_closed_loop_wander(site) -> None:
     cloudy = CameraSetup(clouds=CloudField(cover=0.5, optical_depth=3.0, seed=1))
-    d = Disturbances(pedestal_yaw_deg=2.0)
-    r = _noon_window(site, 1.0, controller="closed_loop_camera", disturbances=d, camera=cloudy)
+    r = _noon_window(site, 1.0, controller="closed_loop_camera", camera=cloudy)
     s = r.summary()
-    # the clouds hid or cut the sun in part of the hour: those frames were not used ...
-    assert s["camera_frames_used"] < 0.9 * s["camera_frames"]
+    # the clouds hid or cut the sun in over half of the 3,600 frames: those were not used
+    assert s["camera_frames"] == 3600 and s["camera_frames_used"] < 0.5 * s["camera_frames"]
+    # ... the loop fell back to the ephemeris and stayed as close as on a clear sky
+    # (measured: 2.6 mrad max, 1.5 RMS; clear 2.4 max, 1.6 RMS)
     err = r.series["pointing_error_mrad"]
-    # ... and the loop fell back to the ephemeris (2 deg yaw -> ~30 mrad), never beyond it
-    assert err.max() < 40.0
-    # without the gate that ignores dimmed or cut suns it follows the clouds' edges
+    assert err.max() < 3.5
+    # without the gate that ignores dimmed or cut suns it chases the clouds' edges (11 mrad)
     loose = ControlSettings(min_peak_dn=0, area_tolerance=1e9, max_jump_deg=1e9,
                             min_confidence=0.0)
-    r2 = _noon_window(site, 1.0, controller="closed_loop_camera", disturbances=d,
-                      camera=cloudy, settings=loose)
-    assert r2.series["pointing_error_mrad"].max() > err.max()
+    r2 = _noon_window(site, 1.0, controller="closed_loop_camera", camera=cloudy, settings=loose)
+    assert r2.series["pointing_error_mrad"].max() > 3 * err.max()
+    # with a 2 deg pedestal yaw it never goes beyond the ephemeris's own error (~12 mrad)
+    d = Disturbances(pedestal_yaw_deg=2.0)
+    r3 = _noon_window(site, 1.0, controller="closed_loop_camera", camera=cloudy, disturbances=d)
+    assert r3.series["pointing_error_mrad"].max() < 12.5
 
 
 def test_hybrid_keeps_its_correction_through_clouds(site) -> None:
     cloudy = CameraSetup(clouds=CloudField(cover=0.6, optical_depth=4.0, seed=5))
     d = Disturbances(pedestal_yaw_deg=2.0)
     r = _noon_window(site, 3.0, controller="hybrid", disturbances=d, camera=cloudy)
+    clear = _noon_window(site, 3.0, controller="hybrid", disturbances=d).series
     s = r.summary()
     assert s["camera_frames_used"] < 0.9 * s["camera_frames"]
-    assert s["pointing_error_rms_mrad"] < 4.0
+    # after the first correction (the run starts uncorrected, ~30 mrad off) the cloudy run
+    # stays as close to the sun as the clear one
+    late = r.series.index > r.series.index[0] + pd.Timedelta(minutes=30)
+    assert r.series.loc[late, "pointing_error_mrad"].max() < 6.0
+    rms = float(np.sqrt(np.mean(r.series.loc[late, "pointing_error_mrad"] ** 2)))
+    rms_clear = float(np.sqrt(np.mean(clear.loc[late, "pointing_error_mrad"] ** 2)))
+    assert rms < rms_clear + 0.5
 
 
 def test_cpv_loses_the_beam_outside_its_acceptance(site) -> None:
