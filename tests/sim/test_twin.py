@@ -5,10 +5,10 @@ import pandas as pd
 import pytest
 from pvlib_reference import modelchain_dc_power
 
-from sim.sites import load_site, site_from_dict
-from sim.sky import pvlib_tmy3_path, read_tmy3
 from sim.control import CONTROLLERS
 from sim.disturbances import Disturbances
+from sim.sites import load_site, site_from_dict
+from sim.sky import pvlib_tmy3_path, read_tmy3
 from sim.twin import CONTROLLERS as TWIN_CONTROLLERS
 from sim.twin import SERIES_COLUMNS, simulate
 
