@@ -37,6 +37,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 YEAR_START, YEAR_END = "2021-01-01", "2022-01-01"
+TABLE_STEP_S = 1800  # the strategy table (sky_scan scans ~650 orientations per step)
+
+
+def gain_text(res: dict) -> str:
+    g = res.get("cloudy_gain_pct", {}).get("sky_scan")
+    return "no cloudy day" if g is None else f"{g:+.2f} % ({res['cloudy_days']} days)"
 
 
 def met(ok: bool) -> str:
@@ -130,25 +136,32 @@ def main() -> None:
     diff = float(np.max(np.abs(ours - ref)))
     ratio = t_ref / t_ours
     any_ref = float((ref > 0).any(axis=1).mean())
+    log(f"  twoaxistracking {t_ref:.1f} s, plant_shade {t_ours:.2f} s ({ratio:.0f}x), "
+        f"max diff {diff:.1e}, any shaded {any_ref:.4f}")
     log("heliotwin plant simulate --strategy sun, year at 1 min (x2) ...")
     runs = [cli_year("sun", 60) for _ in range(2)]
     t_cli = min(r[0] for r in runs)
     s1 = runs[0][1]
+    log(f"  CLI year at 1 min: {[round(r[0], 1) for r in runs]} s; {json.dumps(s1)}")
     log("backtrack, year at 1 min ...")
     t0 = time.perf_counter()
     bt = simulate_plant(plant, pd.Timestamp(YEAR_START, tz=plant.timezone),
                         pd.Timestamp(YEAR_END, tz=plant.timezone), 60, "backtrack").summary()
     t_bt = time.perf_counter() - t0
+    log(f"  backtrack year at 1 min: {t_bt:.1f} s; {json.dumps(bt)}")
     log("/positions latency ...")
     lat = positions_latency()
     p50, p95 = statistics.median(lat), float(np.percentile(lat, 95))
-    log("strategies, clear sky and TMY3, year at 10 min ...")
+    log(f"  /positions median {p50:.1f} ms, p95 {p95:.1f} ms")
+    log(f"strategies, clear sky and TMY3, year at {TABLE_STEP_S} s ...")
     start = pd.Timestamp(YEAR_START, tz=plant.timezone)
     end = pd.Timestamp(YEAR_END, tz=plant.timezone)
-    clear = compare_strategies(plant, start, end, 600)
+    clear = compare_strategies(plant, start, end, TABLE_STEP_S)
+    log(f"  clear: {json.dumps(clear)}")
     tmy, meta = read_tmy3(pvlib_tmy3_path(), coerce_year=2021)
     w = weather_for_plant(tmy, float(meta["longitude"]), plant, start, end)
-    cloudy = compare_strategies(plant, start, end, 600, weather=w)
+    cloudy = compare_strategies(plant, start, end, TABLE_STEP_S, weather=w)
+    log(f"  tmy3: {json.dumps(cloudy)}")
 
     cpu = os.cpu_count()
     lines = [
@@ -178,7 +191,8 @@ def main() -> None:
         f"with bypass diodes. Backtracking: {bt['plant_energy_wh'] / 1e6:.2f} MWh vs sun "
         f"{s1['plant_energy_wh'] / 1e6:.2f} MWh.",
         "",
-        "| year at 10 min | sun (electrical) | sun (area model) | backtrack | sky_scan | fixed | "
+        f"| year at {TABLE_STEP_S // 60} min | sun (electrical) | sun (area model) | backtrack "
+        "| sky_scan | fixed | "
         "sky_scan over sun, cloudy days |",
         "|---|---|---|---|---|---|---|",
     ]
@@ -190,7 +204,7 @@ def main() -> None:
             f"{s['backtrack']['plant_energy_wh'] / 1e6:.2f} MWh | "
             f"{s['sky_scan']['plant_energy_wh'] / 1e6:.2f} MWh | "
             f"{res['fixed_energy_wh'] / 1e6:.2f} MWh | "
-            f"{res['cloudy_gain_pct']['sky_scan']:+.2f} % ({res['cloudy_days']} days) |")
+            f"{gain_text(res)} |")
     print("\n".join(lines))
 
 
