@@ -38,7 +38,7 @@ import pvlib
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from _common import free_port, log  # noqa: E402  (bench scripts run from this folder)
+from _common import Figures, free_port, log  # noqa: E402  (bench scripts run from this folder)
 
 from vision import confidence as conf  # noqa: E402
 from vision import metrics  # noqa: E402
@@ -475,15 +475,21 @@ def main() -> int:
             ("640×480 synthetic fisheye (clear + thin cloud)",
              [f[0] for f in fe_clear + fe_cloud]),
             (f"1920×1920, {big_note}", big)]
+    fig = Figures("vision")
+    keys = ["tracker_640_fps", "fisheye_640_fps", "allsky_1920_fps"]
+    targets = [1000.0, 1000.0, 60.0]
     speed_rows = []
-    for name, frames in sets:
+    for (name, frames), key, target in zip(sets, keys, targets, strict=True):
         log(f"timing {name}")
         base = per_frame_s(kernel, frames)
         rob = per_frame_s(lambda f: detect_sun(f, "robust"), frames)
         s3 = per_frame_s(lambda f: detect_sun(f, "seed003_gray240"), frames)
         s0 = per_frame_s(lambda f: detect_sun(f, "seed000_hsv"), frames, passes=2)
+        rob_text = fig.add(key, 1 / rob, "fps", f"{1 / rob:,.0f} fps", f"≥ {target:,.0f} fps",
+                           1 / rob >= target)
         speed_rows.append(
-            f"| {name} | {1 / base:,.0f} fps | **{1 / rob:,.0f} fps** ({rob / base:.1f}×) | "
+            f"| {name} | {1 / base:,.0f} fps | **{rob_text}** ({rob / base:.1f}×) "
+            f"{fig.verdict(key)} | "
             f"{1 / s3:,.0f} fps ({s3 / base:.1f}×) | {1 / s0:,.0f} fps ({s0 / base:.1f}×) |")
 
     log("accuracy per method")
@@ -527,11 +533,15 @@ def main() -> int:
         out.append("HTTP: the server did not start; no latency measured.")
     else:
         post, get, p90 = lat
-        out.append(f"HTTP (`heliotwin serve`, SQLite, keep-alive, 200 requests): "
-                   f"`POST /api/v1/vision/sun` with a 640×480 JPEG (fisheye, time + site, "
-                   f"stored) **{post:.1f} ms median** (p90 {p90:.1f} ms) vs `GET /healthz` "
-                   f"{get:.1f} ms on the same server ({post / get:.1f}×). Target ≤ 15 ms.")
+        out.append("HTTP (`heliotwin serve`, SQLite, keep-alive, 200 requests): "
+                   "`POST /api/v1/vision/sun` with a 640×480 JPEG (fisheye, time + site, "
+                   "stored) **" + fig.add("http_sun_ms", post, "ms", f"{post:.1f} ms", "≤ 15 ms",
+                                           post <= 15.0)
+                   + f" median** (p90 {p90:.1f} ms) vs `GET /healthz` "
+                   f"{get:.1f} ms on the same server ({post / get:.1f}×). Target ≤ 15 ms: "
+                   + fig.verdict("http_sun_ms") + ".")
     print("\n".join(out))
+    fig.write()
     return 0
 
 
