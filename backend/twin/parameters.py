@@ -38,5 +38,11 @@ MACHINE_PARAMETERS: tuple[Parameter, ...] = (
               -30.0, 30.0),
     Parameter("acceptance_angle_deg", 0.5, "CPV receiver's acceptance half-angle [deg]",
               0.01, 10.0),
+    Parameter("spot_distance_m", 1.5, "lens-to-receiver distance for the spot shift [m]",
+              0.01, 100.0),
+    Parameter("chronological_interval_min", 30.0, "chronological controller's period [min]",
+              1.0, 240.0),
 )
-DISTURBANCE_NAMES = tuple(p.name for p in MACHINE_PARAMETERS if p.name != "acceptance_angle_deg")
+#: Parameters that are not disturbances: they go to simulate() or to ControlSettings.
+RUN_PARAMETERS = ("acceptance_angle_deg", "spot_distance_m", "chronological_interval_min")
+DISTURBANCE_NAMES = tuple(p.name for p in MACHINE_PARAMETERS if p.name not in RUN_PARAMETERS)

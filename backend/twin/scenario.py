@@ -16,7 +16,8 @@ from typing import Any
 
 import pandas as pd
 
-from backend.twin.parameters import DISTURBANCE_NAMES, MACHINE_PARAMETERS
+from backend.twin.parameters import DISTURBANCE_NAMES, MACHINE_PARAMETERS, RUN_PARAMETERS
+from sim.control import ControlSettings
 from sim.disturbances import Disturbances
 from sim.sites import Site
 from sim.twin import CONTROLLERS, RECEIVERS, TwinResult, simulate
@@ -64,11 +65,15 @@ class Scenario:
 def run_scenario(site: Site, scenario: Scenario, weather: pd.DataFrame | None = None,
                  progress: Callable[[float], None] | None = None) -> TwinResult:
     """``sim.twin.simulate`` for ``scenario`` (the one call the CLI and the API share)."""
+    defaults = {p.name: p.default for p in MACHINE_PARAMETERS}
+    run = {k: scenario.machine.get(k, defaults[k]) for k in RUN_PARAMETERS}
     return simulate(
         site, scenario.start, scenario.end, step_s=scenario.step_s,
         controller=scenario.controller, weather=weather, progress=progress,
         disturbances=scenario.disturbances(), receiver=scenario.receiver,
-        acceptance_angle_deg=scenario.machine.get("acceptance_angle_deg", 0.5),
+        acceptance_angle_deg=run["acceptance_angle_deg"],
+        spot_distance_m=run["spot_distance_m"],
+        settings=ControlSettings(chronological_interval_min=run["chronological_interval_min"]),
     )
 
 
