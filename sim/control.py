@@ -43,6 +43,7 @@ used.
 
 from __future__ import annotations
 
+import datetime as dt
 import math
 from dataclasses import dataclass, replace
 from typing import Any, NamedTuple
@@ -203,16 +204,21 @@ def noon_reference_azimuth(times: pd.DatetimeIndex, site: Site) -> NDArray[np.fl
 
     On days when the noon sun is north of the zenith the sweep east→north→west
     is kept continuous around 0°, otherwise east→south→west around 180°. The
-    side is read from the SPA sun at each local solar day's noon (12:00 mean
-    solar time corrected by the equation of time, seed 001's D&B step,
-    :func:`sim.sun.equation_of_time_spencer`).
+    side is read from the SPA sun at each solar day's transit, which NREL SPA
+    gives directly (``pvlib.solarposition.sun_rise_set_transit_spa``, Reda &
+    Andreas 2004, appendix A.2); solar days are the calendar days of the zone
+    whose offset is the longitude's nearest hour.
     """
-    shift = pd.Timedelta(hours=site.longitude / 15.0)
-    solar_days = (times + shift).normalize()
-    days, inverse = np.unique(solar_days.asi8, return_inverse=True)
-    day_index = pd.DatetimeIndex(days.astype(f"datetime64[{solar_days.unit}]")).tz_localize("UTC")
-    eot_min = sun.equation_of_time_spencer(np.asarray(day_index.day_of_year, dtype=float))
-    noon = day_index + pd.Timedelta(hours=12) - shift - pd.to_timedelta(eot_min, unit="min")
+    from pvlib import solarposition
+
+    zone = dt.timezone(dt.timedelta(hours=round(site.longitude / 15.0)))
+    local_days = times.tz_convert(zone).normalize()
+    days, inverse = np.unique(local_days.asi8, return_inverse=True)
+    day_index = pd.DatetimeIndex(days.astype(f"datetime64[{local_days.unit}]")).tz_localize(
+        "UTC").tz_convert(zone)
+    transit = solarposition.sun_rise_set_transit_spa(
+        day_index + pd.Timedelta(hours=12), site.latitude, site.longitude)["transit"]
+    noon = pd.DatetimeIndex(transit).tz_convert("UTC")
     noon_azimuth = sun.solar_position(noon, site.latitude, site.longitude)["azimuth"].to_numpy()
     side = np.where(np.cos(np.deg2rad(noon_azimuth)) > 0, 0.0, 180.0)
     return np.asarray(side[inverse.ravel()], dtype=float)
