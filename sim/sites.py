@@ -8,6 +8,7 @@ same values under pvlib glossary names. The built-in ``tehuantepec`` is seed
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from dataclasses import dataclass, field
@@ -15,7 +16,9 @@ from pathlib import Path
 from typing import Any
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
+from sim.dynamics import TrackerInertia
 from sim.kinematics import TrackerGeometry
+from sim.motors import AxisDrive
 from sim.pv import ArrayConfig, array_config_from_dict
 
 _SITE_ID = re.compile(r"^[a-z0-9][a-z0-9_-]{0,63}$")
@@ -60,6 +63,13 @@ class Site:
         Wind speed used with clear-sky runs [m s⁻¹].
     transposition_model : str
         ``"haydavies"`` (default), ``"perez"`` or ``"isotropic"``.
+    drives : dict of str to AxisDrive
+        ``"azimuth"`` and ``"elevation"``: each axis's DC motor and gearbox
+        (:mod:`sim.motors`; the config's ``tracker.drives.<axis>`` overrides the
+        defaults field by field, units in the names).
+    inertia : TrackerInertia
+        The two links' masses, inertias and centres of gravity (seed 002,
+        Table 1 by default; the config's ``tracker.inertia`` overrides).
     """
 
     site_id: str
@@ -73,6 +83,9 @@ class Site:
     temp_air: float = 25.0
     wind_speed: float = 1.0
     transposition_model: str = "haydavies"
+    drives: dict[str, AxisDrive] = field(default_factory=lambda: {
+        "azimuth": AxisDrive.azimuth_default(), "elevation": AxisDrive.elevation_default()})
+    inertia: TrackerInertia = field(default_factory=TrackerInertia.seed002)
     source: str = ""
     notes: str = ""
 
@@ -88,7 +101,11 @@ class Site:
             "temp_air_c": self.temp_air,
             "wind_speed_m_s": self.wind_speed,
             "transposition_model": self.transposition_model,
-            "tracker": {k: getattr(self.tracker, k) for k in _TRACKER_KEYS},
+            "tracker": {
+                **{k: getattr(self.tracker, k) for k in _TRACKER_KEYS},
+                "drives": {axis: dataclasses.asdict(d) for axis, d in self.drives.items()},
+                "inertia": dataclasses.asdict(self.inertia),
+            },
             "arrays": {name: arr.to_dict() for name, arr in self.arrays.items()},
             "source": self.source,
             "notes": self.notes,
@@ -112,7 +129,10 @@ def site_from_dict(d: dict[str, Any], where: str = "site") -> Site:
         ZoneInfo(tz)
     except (ZoneInfoNotFoundError, ValueError):
         raise ValueError(f"{where}: timezone {tz!r} is not an IANA time zone") from None
-    tracker_d = d.get("tracker", {})
+    tracker_d = dict(d.get("tracker", {}))
+    drives = _drives_from_dict(tracker_d.pop("drives", {}), where)
+    inertia = _overrides(TrackerInertia.seed002(), tracker_d.pop("inertia", {}),
+                         f"{where}: tracker.inertia")
     unknown = sorted(set(tracker_d) - set(_TRACKER_KEYS))
     if unknown:
         raise ValueError(f"{where}: tracker has unknown keys {unknown}")
@@ -131,9 +151,35 @@ def site_from_dict(d: dict[str, Any], where: str = "site") -> Site:
         temp_air=float(d.get("temp_air_c", 25.0)),
         wind_speed=float(d.get("wind_speed_m_s", 1.0)),
         transposition_model=str(d.get("transposition_model", "haydavies")),
+        drives=drives,
+        inertia=inertia,
         source=str(d.get("source", "")),
         notes=str(d.get("notes", "")),
     )
+
+
+def _overrides(default: Any, values: Any, where: str) -> Any:
+    """``default`` (a frozen dataclass) with the fields of ``values`` replaced; unknown or
+    non-numeric fields and the dataclass's own checks are a ValueError naming them."""
+    if not isinstance(values, dict):
+        raise ValueError(f"{where}: must be an object of field: value")
+    names = {f.name for f in dataclasses.fields(default)}
+    unknown = sorted(set(values) - names)
+    if unknown:
+        raise ValueError(f"{where}: unknown keys {unknown}; known: {sorted(names)}")
+    try:
+        return dataclasses.replace(default, **{k: float(v) for k, v in values.items()})
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def _drives_from_dict(values: Any, where: str) -> dict[str, AxisDrive]:
+    defaults = {"azimuth": AxisDrive.azimuth_default(), "elevation": AxisDrive.elevation_default()}
+    if not isinstance(values, dict) or set(values) - set(defaults):
+        raise ValueError(f"{where}: tracker.drives must be an object with 'azimuth' and/or "
+                         "'elevation'")
+    return {axis: _overrides(d, values.get(axis, {}), f"{where}: tracker.drives.{axis}")
+            for axis, d in defaults.items()}
 
 
 def load_site(site_id: str, sites_dir: str | Path | None = None) -> Site:

@@ -239,7 +239,7 @@ def run_loop(
     ax_az, ax_el = state.axes
     t_s = t0_s + tick_s * np.arange(n)
     gust = dist.gust_torque_nm(t_s, d)
-    inertia = dynamics.TrackerInertia.seed002()
+    inertia = controller.site.inertia
     n_samples = (n + sample_every - 1) // sample_every
     out = {k: np.empty(n_samples) for k in ("az_cmd", "el_cmd", "az", "el")}
     moves: list[Move] = []
@@ -362,7 +362,8 @@ def _frame(pose: tuple[float, float], sun_enu: NDArray[np.float64], d: dist.Dist
                              peak)
 
 
-def move_energies_wh(moves: list[Move], limits: DriveLimits, dt_s: float = 0.01
+def move_energies_wh(moves: list[Move], limits: DriveLimits, dt_s: float = 0.01,
+                     drives: tuple[Any, Any] | None = None, inertia: Any = None,
                      ) -> tuple[NDArray[np.float64], float]:
     """Electrical energy of each move [Wh] and the total [Wh].
 
@@ -380,9 +381,10 @@ def move_energies_wh(moves: list[Move], limits: DriveLimits, dt_s: float = 0.01
 
     if not dt_s > 0:
         raise ValueError(f"dt_s must be > 0, got {dt_s}")
-    inertia = dynamics.TrackerInertia.seed002()
+    inertia = dynamics.TrackerInertia.seed002() if inertia is None else inertia
     energies = np.zeros(len(moves))
-    drives = (motors.AxisDrive.azimuth_default(), motors.AxisDrive.elevation_default())
+    if drives is None:
+        drives = (motors.AxisDrive.azimuth_default(), motors.AxisDrive.elevation_default())
     for axis in (0, 1):
         idx = np.array([k for k, m in enumerate(moves) if m.axis == axis], dtype=np.int64)
         if idx.size == 0:

@@ -543,8 +543,10 @@ def simulate(
     series = pd.DataFrame(block.T, index=times, columns=SERIES_COLUMNS, copy=False)
     move_wh = standby_wh = 0.0
     if ctl is not None:
-        _, move_wh = move_energies_wh(moves, limits)
-        standby_wh = _standby_energy_wh(len(times) * float(step_s))
+        _, move_wh = move_energies_wh(
+            moves, limits, drives=(site.drives["azimuth"], site.drives["elevation"]),
+            inertia=site.inertia)
+        standby_wh = _standby_energy_wh(site, len(times) * float(step_s))
     ideal_wh = None
     if ctl is not None or receiver == "cpv":
         ideal_wh = float(extra["ideal_tracker_power_w"].sum() * step_s / 3600.0)
@@ -572,10 +574,7 @@ def simulate(
     )
 
 
-def _standby_energy_wh(duration_s: float) -> float:
+def _standby_energy_wh(site: Site, duration_s: float) -> float:
     """Both drives' standby electronics over the run [Wh] (``AxisDrive.standby_power_w``)."""
-    from sim import motors
-
-    p = (motors.AxisDrive.azimuth_default().standby_power_w
-         + motors.AxisDrive.elevation_default().standby_power_w)
+    p = sum(d.standby_power_w for d in site.drives.values())
     return float(p) * duration_s / 3600.0

@@ -50,3 +50,52 @@ def test_malformed_site_names_the_key(tmp_path) -> None:
     )
     with pytest.raises(ValueError, match="timezone"):
         load_site("tz", tmp_path)
+
+
+def _with_tracker(tmp_path, tracker: dict) -> object:
+    d = json.loads((default_sites_dir() / "tehuantepec.json").read_text())
+    d["site_id"] = "custom"
+    d["tracker"].update(tracker)
+    (tmp_path / "custom.json").write_text(json.dumps(d))
+    return load_site("custom", tmp_path)
+
+
+def test_drives_and_inertia_come_from_the_config(tmp_path) -> None:
+    site = load_site("tehuantepec")
+    assert site.drives["elevation"].supply_voltage_v == 24.0  # seed 000: MD03 drivers at 24 V
+    assert site.drives["azimuth"].gear_ratio == 1000.0
+    assert site.inertia.m2_kg == pytest.approx(37.73207)  # seed 002, Table 1
+    custom = _with_tracker(tmp_path, {"drives": {"elevation": {"standby_power_w": 2.0}},
+                                      "inertia": {"m2_kg": 50.0}})
+    assert custom.drives["elevation"].standby_power_w == 2.0
+    assert custom.drives["elevation"].gear_ratio == 1500.0  # the rest from the defaults
+    assert custom.inertia.m2_kg == 50.0
+    assert json.loads(json.dumps(custom.to_dict()))["tracker"]["drives"]["elevation"][
+        "standby_power_w"] == 2.0
+
+
+def test_a_site_s_drives_set_the_actuator_energy(tmp_path) -> None:
+    import pandas as pd
+
+    from sim.twin import simulate
+
+    start = pd.Timestamp("2024-03-15", tz="America/Mexico_City")
+    runs = [simulate(site, start, start + pd.Timedelta(days=1), step_s=300,
+                     controller="open_loop_spa").summary()
+            for site in (load_site("tehuantepec"),
+                         _with_tracker(tmp_path, {"drives": {
+                             "azimuth": {"standby_power_w": 1.0},
+                             "elevation": {"standby_power_w": 1.0}}}))]
+    # standby: 2 × 0.25 W × 24 h = 12 Wh, then 2 × 1 W × 24 h = 48 Wh
+    assert runs[0]["actuator_standby_energy_wh"] == pytest.approx(12.0)
+    assert runs[1]["actuator_standby_energy_wh"] == pytest.approx(48.0)
+
+
+@pytest.mark.parametrize(("tracker", "words"), [
+    ({"drives": {"azimuth": {"gear_ratoi": 3.0}}}, "tracker.drives.azimuth: unknown keys"),
+    ({"drives": {"roll": {}}}, "tracker.drives must be"),
+    ({"inertia": {"m2_kg": "heavy"}}, "tracker.inertia"),
+])
+def test_bad_drives_name_the_field(tmp_path, tracker: dict, words: str) -> None:
+    with pytest.raises(ValueError, match=words):
+        _with_tracker(tmp_path, tracker)
