@@ -16,6 +16,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from fastapi.responses import Response
 
 from backend.plants import STRATEGIES, PlantService, UnknownPlantError, sky_map_png
+from backend.timestamps import TimestampError, parse_instant
 
 router = APIRouter(prefix="/api/v1/plants", tags=["plants"])
 
@@ -33,11 +34,12 @@ def get_plant_service(request: Request) -> PlantService:
 PlantServiceDep = Annotated[PlantService, Depends(get_plant_service)]
 
 
-def _aware(value: dt.datetime, field: str) -> dt.datetime:
-    if value.tzinfo is None or value.utcoffset() is None:
-        raise HTTPException(422, f"{field}: {value.isoformat()!r} has no UTC offset; "
-                                 "send ISO 8601 with an offset, e.g. 2021-12-21T08:00:00Z")
-    return value
+def _time(text: str, field: str = "time") -> dt.datetime:
+    """An instant by the service's one rule set (:mod:`backend.timestamps`); 422 otherwise."""
+    try:
+        return parse_instant(text, field)
+    except TimestampError as exc:
+        raise HTTPException(422, str(exc)) from None
 
 
 def _plant_or_404(service: PlantService, plant_id: str) -> None:
@@ -71,29 +73,29 @@ def get_plant(plant_id: str, service: PlantServiceDep) -> dict[str, Any]:
 
 @router.get("/{plant_id}/positions", responses={404: {}, 422: {}})
 def positions(plant_id: str, service: PlantServiceDep,
-              time: Annotated[dt.datetime, Query(description="ISO 8601 with offset")],
+              time: Annotated[str, Query(description="ISO 8601 with offset")],
               strategy: Annotated[str, Query(description="sun | backtrack | sky_scan")] = "sun",
               ) -> dict[str, Any]:
     """Every tracker's orientation under a strategy, its shaded fraction and who shades it."""
-    _aware(time, "time")
+    when = _time(time)
     _plant_or_404(service, plant_id)
-    return service.positions(plant_id, time, _strategy(strategy))
+    return service.positions(plant_id, when, _strategy(strategy))
 
 
 @router.get("/{plant_id}/sky-map", responses={404: {}, 422: {},
                                               200: {"content": {"image/png": {}}}})
 async def sky_map(plant_id: str, request: Request, service: PlantServiceDep,
-                  time: Annotated[dt.datetime, Query(description="ISO 8601 with offset")],
+                  time: Annotated[str, Query(description="ISO 8601 with offset")],
                   resolution_deg: Annotated[float, Query(ge=1.0, le=15.0)] = 3.0,
                   strategy: Annotated[str, Query()] = "sky_scan",
                   format: Annotated[str | None, Query(pattern="^(json|png)$")] = None,
                   ) -> Any:
     """Seed 004 Fig. 6: POA over the hemisphere of orientations (clear sky, Perez), grey where
     an orientation would shade a collector; ``Accept: image/png`` (or ``format=png``) for PNG."""
-    _aware(time, "time")
+    when = _time(time)
     _plant_or_404(service, plant_id)
     m = await anyio.to_thread.run_sync(
-        lambda: service.sky_map(plant_id, time, resolution_deg, _strategy(strategy)))
+        lambda: service.sky_map(plant_id, when, resolution_deg, _strategy(strategy)))
     want_png = format == "png" or (format is None and
                                    "image/png" in request.headers.get("accept", ""))
     if want_png:
