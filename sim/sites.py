@@ -9,19 +9,17 @@ same values under pvlib glossary names. The built-in ``tehuantepec`` is seed
 from __future__ import annotations
 
 import dataclasses
-import json
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
+from sim.configs import read_config
 from sim.dynamics import TrackerInertia
 from sim.kinematics import TrackerGeometry
 from sim.motors import AxisDrive
 from sim.pv import ArrayConfig, array_config_from_dict
 
-_SITE_ID = re.compile(r"^[a-z0-9][a-z0-9_-]{0,63}$")
 _TRACKER_KEYS = (
     "d1_m",
     "a2_m",
@@ -193,14 +191,7 @@ def load_site(site_id: str, sites_dir: str | Path | None = None) -> Site:
         The file is malformed (the message names the key).
     """
     directory = Path(sites_dir) if sites_dir is not None else default_sites_dir()
-    path = directory / f"{site_id}.json"
-    if not _SITE_ID.match(site_id) or not path.is_file():
-        known = ", ".join(p.stem for p in sorted(directory.glob("*.json"))) or "none"
-        raise UnknownSiteError(f"unknown site {site_id!r}; known sites: {known}")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not valid JSON: {exc}") from None
+    path, data = read_config("site", site_id, directory, UnknownSiteError)
     site = site_from_dict(data, where=str(path))
     if site.site_id != site_id:
         raise ValueError(f"{path}: site_id {site.site_id!r} does not match the file name")

@@ -12,8 +12,6 @@ a malformed file raises ``ValueError`` naming the file and the field.
 
 from __future__ import annotations
 
-import json
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,9 +20,10 @@ from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sim.configs import read_config
+
 FloatArray = NDArray[np.float64]
 
-_PLANT_ID = re.compile(r"^[a-z0-9][a-z0-9_-]{0,63}$")
 FRAMES = ("enu", "seed004")
 MODULE_ORIENTATIONS = ("portrait", "landscape")
 
@@ -358,14 +357,7 @@ def load_plant(plant_id: str, plants_dir: str | Path | None = None) -> Plant:
         The file is malformed (the message names the file and the field).
     """
     directory = Path(plants_dir) if plants_dir is not None else default_plants_dir()
-    path = directory / f"{plant_id}.json"
-    if not _PLANT_ID.match(plant_id) or not path.is_file():
-        known = ", ".join(p.stem for p in sorted(directory.glob("*.json"))) or "none"
-        raise UnknownPlantError(f"unknown plant {plant_id!r}; known plants: {known}")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not valid JSON: {exc}") from None
+    path, data = read_config("plant", plant_id, directory, UnknownPlantError)
     plant = plant_from_dict(data, where=str(path))
     if plant.plant_id != plant_id:
         raise ValueError(f"{path}: field 'plant_id' {plant.plant_id!r} does not match the "
