@@ -1,4 +1,4 @@
-"""Bulk validation (``backend/measurements/parse.py``): timestamps, ADC conversion, row/field errors."""
+"""Bulk validation (``backend/measurements/parse.py``): timestamps, ADC, row/field errors."""
 
 from __future__ import annotations
 

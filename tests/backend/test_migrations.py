@@ -1,4 +1,4 @@
-"""Migrations (``backend/storage/migrations``) build exactly the tables ``backend/storage/tables.py`` declares."""
+"""Migrations (``backend/storage/migrations``) build exactly the tables of ``tables.py``."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ from alembic.script import ScriptDirectory
 from live_service import new_database
 from sqlalchemy import inspect
 
+from backend.settings import get_settings
 from backend.storage.engine import alembic_config, make_engine, run_migrations
 from backend.storage.tables import Base
-from backend.settings import get_settings
 
 
 @pytest.mark.parametrize("backend", ["sqlite", "postgresql"])

@@ -1,4 +1,4 @@
-"""Rollups and the energy rule (``backend/measurements/rollups.py``) against a dense independent integration."""
+"""Rollups and the energy rule (``measurements/rollups.py``) against a dense integration."""
 
 from __future__ import annotations
 

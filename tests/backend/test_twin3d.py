@@ -252,7 +252,7 @@ def test_a_replayed_run_poses_the_actual_tracker_with_a_ghost_of_the_ideal(
     # A day of open-loop SPA with a 2° pedestal yaw: the twin's actual joints on a base
     # turned by 2° point off the sun; the scene must show that (the panel normal seen in
     # the scene = the sun direction of pvlib, turned 2° about the vertical) and the ghost.
-    from backend.twin.scene import GHOST_THRESHOLD_MRAD, Replay
+    from backend.twin.scene_pose import GHOST_THRESHOLD_MRAD, Replay
     from sim.disturbances import Disturbances
     from sim.twin import simulate
 

@@ -16,8 +16,8 @@ from live_service import new_database
 from sqlalchemy import text
 
 from backend.context import open_context
-from backend.settings import get_settings
 from backend.measurements.writer import SQLITE_CHUNK_ROWS, MeasurementJob
+from backend.settings import get_settings
 
 T0 = 1_700_000_000 // 3600 * 3600 - 3600  # on the UTC hour grid (phase 0 for UTC-6)
 

@@ -14,7 +14,7 @@ from pydantic import BaseModel, Field
 
 from backend.api.deps import ContextDep
 from backend.twin.scenario import disturbances_of
-from backend.twin.scene import Replay
+from backend.twin.scene_pose import Replay
 
 router = APIRouter(prefix="/api/v1/twin3d", tags=["twin3d"])
 
