@@ -3,7 +3,7 @@
 Expected sun positions come from pvlib's SPA (an independent implementation of
 the ephemeris the service takes from ``sim.sun``) and from synthetic frames
 whose sun is placed by a known camera; the real all-sky frames of
-``../shared/real-sky`` are used when that folder exists.
+``tests/data/real-sky`` (copied from ``../shared/real-sky``) are used.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from vision.synth import fisheye_frame
 
 SUN = "/api/v1/vision/sun"
 ROOT = Path(__file__).resolve().parents[2]
-REAL_SKY = ROOT.parent / "shared" / "real-sky"
+REAL_SKY = ROOT / "tests" / "data" / "real-sky"  # copied from shared/, with licences
 # the built-in site (data/sites/tehuantepec.json; seed 000)
 TEHUANTEPEC = (16.288750, -95.240871)
 
@@ -295,8 +295,6 @@ def test_evaluate_gives_seed003_tables(client: httpx.Client) -> None:
     assert robust["metrics"]["separation"]["max_deg"] < 0.2
 
 
-@pytest.mark.skipif(not (REAL_SKY / "metadata.csv").is_file(),
-                    reason="real-sky images not present")
 def test_real_wettermast_calibration_over_http(client: httpx.Client) -> None:
     with (REAL_SKY / "metadata.csv").open(newline="") as fh:
         rows = [r for r in csv.DictReader(fh) if r["sun_row_label"]]

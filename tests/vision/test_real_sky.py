@@ -1,4 +1,4 @@
-"""The real all-sky images of ../shared/real-sky (skipped when that folder is absent).
+"""The real all-sky images of tests/data/real-sky (copied from ../shared/real-sky).
 
 Expected values: the hand labels in the file names (row, column) and the sun's
 position from pvlib's SPA — never this code.
