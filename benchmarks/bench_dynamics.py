@@ -49,7 +49,7 @@ def main() -> int:
     el = 80.0 * np.sin(np.pi * minutes / 720.0)
     t_day = best_of(lambda: tracking_motion_energy(az, el))
     out = [
-        "## Dynamics",
+        "## dynamics — the analytic plant and pymunk",
         "",
         f"Seed 002's azimuth return at 1 ms ({n:,} steps, controller every step): analytic RK4 "
         f"plant **{n / t_rk4:,.0f} steps/s**, pymunk plant {n / t_pymunk:,.0f} steps/s "

@@ -165,7 +165,7 @@ def main() -> None:
 
     cpu = os.cpu_count()
     lines = [
-        "## bench_plant",
+        "## plant — shading, strategies and the position server",
         "",
         f"Peñarroya I (29 trackers, 12 m × 5 m), clear-sky year {YEAR_START[:4]}; "
         f"{cpu} cores shared with other work.",
