@@ -19,7 +19,8 @@ def _points(page, chart_id: str) -> int:
     return int(page.get_attribute(f"#{chart_id}", "data-points") or 0)
 
 
-def test_open_loop_with_a_pedestal_yaw_points_off_and_says_so(page, server) -> None:
+def _run_open_loop(page, server, yaw_deg: str) -> str:
+    """Yesterday at 5 min with ``open_loop_spa`` and a pedestal yaw, run from the page."""
     page.goto(server.url + "/#simulation")
     page.wait_for_selector("#sim-machine-fields input[name=pedestal_yaw_deg]", state="attached")
     day = (server.today() - dt.timedelta(days=1)).isoformat()
@@ -28,9 +29,14 @@ def test_open_loop_with_a_pedestal_yaw_points_off_and_says_so(page, server) -> N
     page.select_option("#sim-step", "300")
     page.select_option("#sim-controller", "open_loop_spa")
     page.click("#sim-machine summary")
-    page.fill("#sim-pedestal_yaw_deg", "2")
+    page.fill("#sim-pedestal_yaw_deg", yaw_deg)
     page.click("#sim-run")
     page.wait_for_selector("body[data-simulation-done]", timeout=90_000)
+    return day
+
+
+def test_open_loop_with_a_pedestal_yaw_points_off_and_says_so(page, server) -> None:
+    _run_open_loop(page, server, "2")
     tiles = page.text_content("#sim-summary") or ""
     rms = re.search(r"Pointing error\s*([\d.]+) mrad", tiles)
     assert rms, tiles
@@ -48,17 +54,7 @@ def test_open_loop_with_a_pedestal_yaw_points_off_and_says_so(page, server) -> N
 def test_a_run_shown_in_the_3d_twin(page, server) -> None:
     import httpx
 
-    page.goto(server.url + "/#simulation")
-    page.wait_for_selector("#sim-machine-fields input[name=pedestal_yaw_deg]", state="attached")
-    day = (server.today() - dt.timedelta(days=1)).isoformat()
-    page.fill("#sim-start", day)
-    page.fill("#sim-end", server.today().isoformat())
-    page.select_option("#sim-step", "300")
-    page.select_option("#sim-controller", "open_loop_spa")
-    page.click("#sim-machine summary")
-    page.fill("#sim-pedestal_yaw_deg", "3")
-    page.click("#sim-run")
-    page.wait_for_selector("body[data-simulation-done]", timeout=90_000)
+    day = _run_open_loop(page, server, "3")
     run_id = page.get_attribute("#sim-3d", "data-run-id")
     with page.expect_response("**/api/v1/twin3d/replay") as answer:
         page.click("#sim-3d")

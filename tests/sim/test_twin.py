@@ -4,11 +4,11 @@ import numpy as np
 import pandas as pd
 import pytest
 from pvlib_reference import modelchain_dc_power
+from test_mpp_year import greensboro_tmy3
 
 from sim.control import CONTROLLERS
 from sim.disturbances import Disturbances
-from sim.sites import load_site, site_from_dict
-from sim.sky import pvlib_tmy3_path, read_tmy3
+from sim.sites import load_site
 from sim.twin import CONTROLLERS as TWIN_CONTROLLERS
 from sim.twin import SERIES_COLUMNS, simulate
 
@@ -101,27 +101,14 @@ def test_one_step_and_errors(site) -> None:
 
 
 def test_twin_on_pvlib_tmy3_weather() -> None:
-    weather, meta = read_tmy3(pvlib_tmy3_path(), coerce_year=1990)
-    site = site_from_dict(
-        {
-            "site_id": "greensboro",
-            "latitude_deg": meta["latitude"],
-            "longitude_deg": meta["longitude"],
-            "altitude_m": meta["altitude"],
-            "timezone": "America/New_York",
-            "arrays": {
-                "tracker": {"mount": "tracker"},
-                "fixed": {"mount": "fixed", "surface_tilt_deg": 16, "surface_azimuth_deg": 180},
-            },
-        }
-    )
+    site, weather, _, _ = greensboro_tmy3()
     start = pd.Timestamp("1990-05-01 00:30", tz="UTC")
     result = simulate(site, start, start + pd.Timedelta(days=31), step_s=3600, weather=weather)
     s = result.summary()
     assert s["sky"] == "weather"
     w = weather.loc[result.series.index]
     ref = modelchain_dc_power(
-        w.index, meta["latitude"], meta["longitude"], meta["altitude"], weather=w
+        w.index, site.latitude, site.longitude, site.altitude, weather=w
     )
     # measured: -0.067 % and -0.057 % (hourly TMY3: interpolation of the weather at the steps)
     assert s["tracker_energy_wh"] == pytest.approx(ref["tracker"].sum(), rel=1e-3)
