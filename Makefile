@@ -7,7 +7,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test bench lint lock clean
+.PHONY: run test bench fuzz lint lock clean
 
 $(STAMP): pyproject.toml constraints.txt
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -23,6 +23,10 @@ test: $(STAMP)  ## run the whole test suite
 
 bench: $(STAMP)  ## measure the speed figures and write benchmarks/RESULTS.md
 	$(BIN)/python benchmarks/run.py
+
+fuzz: $(STAMP)  ## schema fuzzing of every operation, long: 300 examples each and the coverage phase
+	HELIOTWIN_FUZZ_EXAMPLES=300 HELIOTWIN_FUZZ_COVERAGE=1 \
+		$(BIN)/python -m pytest tests/backend/test_schema_fuzz.py -q
 
 lint: $(STAMP)  ## ruff and mypy, both clean on main
 	$(BIN)/ruff check backend sim vision tests benchmarks

@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import csv
 import io
+import re
 import time
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -24,12 +26,32 @@ from typing import Any
 import numpy as np
 import orjson
 
+from backend.errors import load_json_pairs, repeated_keys
 from backend.timestamps import READINGS_FROM_S, parse_instants
 
-MAX_ERRORS = 20
-#: Python types a number column may hold (``str`` for CSV cells; ``bool`` is not a number).
-_SCALARS = frozenset((float, int, str, type(None)))
+#: Problems listed per batch in all, and per field (a bounded answer that still shows
+#: every kind of problem at once); the rest are counted in one closing entry.
+MAX_ERRORS = 50
+MAX_ERRORS_PER_FIELD = 10
+#: A CSV header naming more columns than this is refused before anything else is looked at.
+MAX_COLUMNS = 64
 FIELDS = ("ts", "array", "voltage_v", "current_a", "power_w", "voltage_adc", "current_adc")
+_FIELD_SET = frozenset(FIELDS)
+#: Column order of an emonCMS-style row ``[unix_s, array, voltage_v, current_a, power_w]``.
+EMONCMS_ROW = ("unix_s", "array", "voltage_v", "current_a", "power_w")
+#: Python types a JSON number column may hold (``bool`` is not a number).
+_JSON_NUMBERS = frozenset((float, int, type(None)))
+_CSV_CELLS = frozenset((str, type(None)))
+#: A CSV number: plain decimal notation only (Python's float() would also take ``1_0``,
+#: ``nan``, ``Infinity`` and non-ASCII digits).
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_NOT_NUMERIC = re.compile(r"[^0-9eE+\-.\n]")
+
+
+def _show(value: Any, limit: int = 40) -> str:
+    """``repr(value)`` cut to ``limit`` characters: an error message never echoes a whole input."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 @dataclass(frozen=True)
@@ -94,7 +116,7 @@ class Batch:
 
 
 class IngestError(Exception):
-    """A rejected batch: HTTP ``status`` and a list of ``{row, field, msg}`` entries."""
+    """A rejected batch: HTTP ``status`` and a list of ``{loc, msg, type, row, field}`` entries."""
 
     def __init__(self, status: int, errors: list[dict[str, Any]]) -> None:
         super().__init__(errors[0]["msg"] if errors else "invalid batch")
@@ -105,16 +127,33 @@ class IngestError(Exception):
         return (IngestError, (self.status, self.errors))
 
 
+def _body_error(status: int, field: str | None, kind: str, msg: str,
+                **extra: Any) -> IngestError:
+    loc = ["body"] if field is None else ["body", field]
+    return IngestError(status, [{"loc": loc, "row": None, "field": field, "type": kind,
+                                 "msg": msg, **extra}])
+
+
 class _Errors:
-    """Collects at most ``MAX_ERRORS`` row/field errors."""
+    """Collects row/field problems: at most ``MAX_ERRORS_PER_FIELD`` of a field and
+    ``MAX_ERRORS`` in all are listed, the others counted per field."""
 
     def __init__(self, csv_lines: bool) -> None:
         self.items: list[dict[str, Any]] = []
         self.csv_lines = csv_lines
+        self.listed: Counter[str] = Counter()
+        self.unlisted: Counter[str] = Counter()
+
+    def _room(self, field: str) -> int:
+        return max(0, min(MAX_ERRORS - len(self.items),
+                          MAX_ERRORS_PER_FIELD - self.listed[field]))
 
     def add(self, row: int | None, field: str | None, msg: str, kind: str) -> None:
-        if len(self.items) >= MAX_ERRORS:
+        key = field or "row"
+        if self._room(key) == 0:
+            self.unlisted[key] += 1
             return
+        self.listed[key] += 1
         loc: list[Any] = ["body"] if row is None else ["body", "readings", row]
         if field:
             loc.append(field)
@@ -123,13 +162,27 @@ class _Errors:
             item["line"] = row + 2  # 1-based, after the header line
         self.items.append(item)
 
-    def add_rows(self, rows: np.ndarray, field: str, msg_of: Any, kind: str) -> None:
-        for r in rows[: MAX_ERRORS].tolist():
+    def add_rows(self, mask: np.ndarray, field: str, msg_of: Any, kind: str) -> None:
+        """One problem for every row where ``mask`` is true (listed up to the caps)."""
+        if not mask.any():
+            return
+        rows = np.flatnonzero(mask)
+        room = self._room(field)
+        for r in rows[:room].tolist():
             self.add(int(r), field, msg_of(int(r)), kind)
+        if rows.size > room:
+            self.unlisted[field] += rows.size - room
 
     def raise_if_any(self, status: int = 422) -> None:
-        if self.items:
-            raise IngestError(status, self.items)
+        if not self.items:
+            return
+        items = list(self.items)
+        if self.unlisted:
+            counts = ", ".join(f"{k}: {n}" for k, n in self.unlisted.most_common())
+            items.append({"loc": ["body"], "row": None, "field": None, "type": "too_many_errors",
+                          "msg": f"{sum(self.unlisted.values())} more problems not listed "
+                                 f"({counts})"})
+        raise IngestError(status, items)
 
 
 # ---------------------------------------------------------------- timestamps
@@ -137,77 +190,167 @@ class _Errors:
 
 def parse_timestamps(values: Sequence[Any], errors: _Errors, field: str = "ts") -> np.ndarray:
     """Timestamps → UTC Unix seconds (int64) by :func:`backend.timestamps.parse_instants`;
-    naive, non-string and unparseable stamps are reported per row."""
+    naive, non-string and unparseable stamps are reported per row.
+
+    Anything but strings and ``None`` is reported here and never handed to NumPy (a
+    list as one value once made the vectorised path drop the whole column)."""
+    wrong: set[int] = set()
+    if not _CSV_CELLS.issuperset(map(type, values)):
+        wrong = {r for r, v in enumerate(values) if v is not None and type(v) is not str}
+        for r in sorted(wrong):
+            errors.add(r, field, f"timestamp is a {type(values[r]).__name__}; send ISO 8601 "
+                                 "with an offset", "type_error")
+        values = [None if r in wrong else v for r, v in enumerate(values)]
     ts, problems = parse_instants(values)
     for row, message, code in problems:
-        errors.add(row, field, message, code)
+        if row not in wrong:
+            errors.add(row, field, message, code)
+    return ts
+
+
+def _unix_seconds(values: list[Any], errors: _Errors) -> np.ndarray:
+    """emonCMS timestamps (Unix seconds, JSON numbers) → int64 seconds, fractions dropped."""
+    col, present, invalid = _floats(values, "ts", errors, text=False)
+    errors.add_rows(~present, "ts", lambda r: "unix_s is missing", "missing")
+    ts = np.full(len(values), READINGS_FROM_S, np.int64)
+    ok = present & ~invalid & np.isfinite(col)
+    ts[ok] = np.floor(np.clip(col[ok], -(2.0**62), 2.0**62)).astype(np.int64)
     return ts
 
 
 # ---------------------------------------------------------------- numbers
 
 
-def _floats(values: list[Any], field: str, errors: _Errors) -> tuple[np.ndarray, np.ndarray]:
-    """A float column and its 'present' mask; non-numbers and non-finite values are errors."""
+def _floats(values: list[Any], field: str, errors: _Errors, text: bool
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A float column, its 'present' mask and its 'already reported' mask.
+
+    JSON columns (``text`` false) take JSON numbers only; CSV cells (``text``) take
+    plain decimal notation only (:data:`_NUMBER`). Non-finite values are errors.
+    """
+    n = len(values)
     missing = values.count(None)
-    if missing == len(values):
-        return np.full(len(values), np.nan), np.zeros(len(values), bool)
+    if missing == n:
+        return np.full(n, np.nan), np.zeros(n, bool), np.zeros(n, bool)
     col = None
-    if _SCALARS.issuperset(map(type, values)):  # no bool, list, object: NumPy converts all
+    invalid = np.zeros(n, bool)
+    allowed = _CSV_CELLS if text else _JSON_NUMBERS
+    if allowed.issuperset(map(type, values)) and not (
+            text and _NOT_NUMERIC.search("\n".join(v for v in values if v is not None))):
         try:
-            col = np.array(values, dtype=np.float64)
-        except ValueError:  # a string that is not a number
+            col = np.array(values, dtype=np.float64)  # None → NaN
+        except (ValueError, OverflowError):  # malformed (CSV "1e", "+-"): per value below
             col = None
     if col is None:
-        col = np.empty(len(values), np.float64)
+        col = np.full(n, np.nan)
         for r, x in enumerate(values):
-            try:
-                if type(x) not in _SCALARS:
-                    raise TypeError
-                col[r] = np.nan if x is None else float(x)
-            except (TypeError, ValueError, OverflowError):
-                errors.add(r, field, f"not a number: {str(x)[:40]!r}", "type_error")
-                col[r] = 0.0
+            t = type(x)
+            if x is None:
+                continue
+            if (t is str and text and _NUMBER.fullmatch(x)) or (
+                    not text and (t is float or t is int)):
+                col[r] = float(x)
+                continue
+            invalid[r] = True
+            hint = " (send a JSON number)" if t is str and not text else ""
+            errors.add(r, field, f"not a number: {_show(x)}{hint}", "type_error")
     if missing == 0:
-        present = np.ones(len(values), bool)
-    elif missing == len(values):
-        present = np.zeros(len(values), bool)
+        present = np.ones(n, bool)
     else:
-        present = np.fromiter((x is not None for x in values), bool, len(values))
-    bad = present & ~np.isfinite(col)
-    if bad.any():
-        errors.add_rows(np.flatnonzero(bad), field, lambda r: f"not finite: {values[r]!r}",
-                        "value_error")
-    return col, present
+        present = np.fromiter((x is not None for x in values), bool, n)
+    errors.add_rows(present & ~invalid & ~np.isfinite(col), field,
+                    lambda r: f"not a finite number: {_show(values[r])}", "finite_number")
+    return col, present, invalid
 
 
-def _column(readings: list[Any], key: str, errors: _Errors) -> list[Any]:
+# ---------------------------------------------------------------- JSON documents
+
+
+def _check_repeated_keys(body: bytes, doc: dict[str, Any], columns: dict[str, list[Any]] | None,
+                         errors: _Errors) -> None:
+    """Report keys given twice in one object (orjson, like most readers, keeps the last).
+
+    Cheap proof first: each ``:`` of the body outside strings separates one key from its
+    value, so when the colons of the body are exactly the parsed pairs plus the colons
+    inside the ``ts`` and ``array`` strings, no key was repeated (a repeat, a nested
+    value or a colon in another string only adds colons; a body with escapes, which
+    could hide one, skips the proof). ``columns`` are the readings' columns when every
+    reading is a flat object with the same known keys (else ``None``). Anything
+    unproven is decided by a second, pair-keeping parse.
+    """
+    if columns is not None and len(doc) == 1 and b"\\" not in body:
+        inside = 0
+        for field in ("ts", "array"):
+            col = columns[field]
+            try:
+                inside += "".join(col).count(":")
+            except TypeError:  # not all strings (an error anyway)
+                inside += "".join(x for x in col if type(x) is str).count(":")
+        readings = doc["readings"]  # each with the first one's keys (the fast case)
+        if body.count(b":") == 1 + len(readings[0]) * len(readings) + inside:
+            return
     try:
-        return [r.get(key) for r in readings]
-    except AttributeError:
-        for r, item in enumerate(readings):
-            if not isinstance(item, dict):
-                errors.add(r, None, f"a reading must be an object, got {type(item).__name__}",
-                           "type_error")
-        errors.raise_if_any()
-        raise
+        again = load_json_pairs(body)
+    except (ValueError, RecursionError):  # 4300-digit integers, deep nesting: other errors
+        return
+    for path, key in repeated_keys(again):
+        if path[:1] == ("readings",) and len(path) == 2 and isinstance(path[1], int):
+            errors.add(path[1], key[:40], f"key {_show(key)} given twice in this reading",
+                       "duplicate_key")
+        else:
+            where = "the body object" if not path else f"body at {list(path)}"
+            errors.add(None, key[:40], f"key {_show(key)} given twice in {where}",
+                       "duplicate_key")
 
 
-def _columns(readings: list[Any], errors: _Errors) -> dict[str, list[Any]]:
-    """Every field as a column; fast when all readings have the keys of the first one."""
+def _columns(readings: list[Any], errors: _Errors) -> tuple[dict[str, list[Any]], bool]:
+    """Every field as a column, and whether every reading was a flat object with the
+    known keys of the first one (the fast case). Unknown keys are reported."""
     first = readings[0]
     n = len(readings)
-    if isinstance(first, dict):
-        keys = [k for k in first if k in FIELDS]
+    if type(first) is dict and _FIELD_SET.issuperset(first):
         try:
             # every reading has these keys (else KeyError) and no others (sum of sizes)
             if sum(map(len, readings)) == len(first) * n:
                 none = [None] * n
-                cols = {k: [r[k] for r in readings] for k in keys}
-                return {f: cols.get(f, none) for f in FIELDS}
+                cols = {k: [r[k] for r in readings] for k in first}
+                return {f: cols.get(f, none) for f in FIELDS}, True
         except (KeyError, TypeError):
             pass
-    return {f: _column(readings, f, errors) for f in FIELDS}
+    out: dict[str, list[Any]] = {f: [None] * n for f in FIELDS}
+    for r, item in enumerate(readings):
+        if type(item) is not dict:
+            errors.add(r, None, f"a reading must be an object, got {type(item).__name__}",
+                       "type_error")
+            continue
+        for k, v in item.items():
+            if k in _FIELD_SET:
+                out[k][r] = v
+            else:
+                errors.add(r, k[:40], f"unknown field {_show(k)}; a reading has "
+                                      f"{', '.join(FIELDS)}", "extra_forbidden")
+    return out, False
+
+
+def _emoncms_columns(rows: list[Any], errors: _Errors) -> dict[str, list[Any]]:
+    """Columns of emonCMS-style rows ``[unix_s, array, voltage_v, current_a, power_w]``
+    (``power_w`` may be left off); ``ts`` holds the Unix seconds."""
+    n = len(rows)
+    names = ("ts", "array", "voltage_v", "current_a", "power_w")
+    if set(map(type, rows)) == {list} and set(map(len, rows)) == {5}:
+        cols = [list(c) for c in zip(*rows, strict=True)]
+    else:
+        cols = [[None] * n for _ in names]
+        for r, row in enumerate(rows):
+            if type(row) is not list or len(row) not in (4, 5):
+                what = f"{len(row)} values" if type(row) is list else type(row).__name__
+                errors.add(r, None, f"a row must be [{', '.join(EMONCMS_ROW)}] (power_w may "
+                                    f"be left off), got {what}", "type_error")
+                continue
+            for j, x in enumerate(row):
+                cols[j][r] = x
+    out = dict(zip(names, cols, strict=True))
+    return {f: out.get(f, [None] * n) for f in FIELDS}
 
 
 # ---------------------------------------------------------------- batches
@@ -220,19 +363,22 @@ def build_batch(
     limits: Limits,
     errors: _Errors,
     now_s: float | None = None,
+    text: bool = False,
+    ts_s: np.ndarray | None = None,
 ) -> Batch:
-    """Validate columns (each a list of ``n`` values, ``None`` = absent) into a :class:`Batch`."""
-    ts = parse_timestamps(columns["ts"], errors)
+    """Validate columns (each a list of ``n`` values, ``None`` = absent) into a :class:`Batch`.
+
+    Every check runs on every row before the batch is refused, so one answer lists
+    all kinds of problems (bounded, see :class:`_Errors`). ``text``: the number
+    columns are CSV cells; ``ts_s``: timestamps already in Unix seconds (emonCMS).
+    """
+    ts = parse_timestamps(columns["ts"], errors) if ts_s is None else ts_s
     now_s = time.time() if now_s is None else now_s
-    late = ts > now_s + limits.future_tolerance_s
-    if late.any():
-        errors.add_rows(np.flatnonzero(late), "ts", lambda r: (
-            f"timestamp {columns['ts'][r]} is {int(ts[r] - now_s)} s after the server clock "
-            f"(tolerance {limits.future_tolerance_s} s)"), "value_error")
-    early = ts < READINGS_FROM_S
-    if early.any():
-        errors.add_rows(np.flatnonzero(early), "ts", lambda r: "timestamp before 1990",
-                        "value_error")
+    errors.add_rows(ts > now_s + limits.future_tolerance_s, "ts", lambda r: (
+        f"timestamp {_show(columns['ts'][r])} is {int(ts[r] - now_s)} s after the server "
+        f"clock (tolerance {limits.future_tolerance_s} s)"), "value_error")
+    errors.add_rows(ts < READINGS_FROM_S, "ts", lambda r: "timestamp before 1990",
+                    "value_error")
 
     names = columns["array"]
     known = list(arrays)
@@ -246,16 +392,16 @@ def build_batch(
             if isinstance(a, str) and a in index_by_name:
                 idx[r] = index_by_name[a]
             else:
-                what = "missing" if a is None else f"unknown array {str(a)[:40]!r}"
+                what = "missing" if a is None else f"unknown array {_show(a)}"
                 errors.add(r, "array", f"{what}; this site has {', '.join(known)}",
                            "missing" if a is None else "value_error")
     array_ids = np.array([ids_by_name[k] for k in known], np.int64)[idx] if known else idx
 
-    v, v_ok = _floats(columns["voltage_v"], "voltage_v", errors)
-    i, i_ok = _floats(columns["current_a"], "current_a", errors)
-    p, p_ok = _floats(columns["power_w"], "power_w", errors)
-    va, va_ok = _floats(columns["voltage_adc"], "voltage_adc", errors)
-    ia, ia_ok = _floats(columns["current_adc"], "current_adc", errors)
+    v, v_ok, _ = _floats(columns["voltage_v"], "voltage_v", errors, text)
+    i, i_ok, _ = _floats(columns["current_a"], "current_a", errors, text)
+    p, p_ok, _ = _floats(columns["power_w"], "power_w", errors, text)
+    va, va_ok, _ = _floats(columns["voltage_adc"], "voltage_adc", errors, text)
+    ia, ia_ok, _ = _floats(columns["current_adc"], "current_adc", errors, text)
 
     raw = va_ok | ia_ok
     both_raw = va_ok & ia_ok
@@ -263,11 +409,12 @@ def build_batch(
         (raw & ~both_raw, "voltage_adc", "a raw reading needs both voltage_adc and current_adc"),
         (raw & (v_ok | i_ok), "voltage_adc",
          "send either voltage_v/current_a or voltage_adc/current_adc, not both"),
-        (~raw & ~v_ok, "voltage_v", "voltage_v is missing"),
+        (~raw & ~v_ok & ~p_ok, "voltage_v", "voltage_v is missing"),
+        (~raw & ~v_ok & p_ok, "voltage_v",
+         "voltage_v is missing (power_w alone is not stored: send voltage_v and current_a)"),
         (~raw & v_ok & ~i_ok, "current_a", "current_a is missing"),
     ):
-        if mask.any():
-            errors.add_rows(np.flatnonzero(mask), field, lambda r, m=msg: m, "missing")
+        errors.add_rows(mask, field, lambda r, m=msg: m, "missing")
     if both_raw.any():
         rows = np.flatnonzero(both_raw)
         for j, name in enumerate(known):
@@ -276,61 +423,96 @@ def build_batch(
                 continue
             cal = arrays[name][1]
             for col, field in ((va, "voltage_adc"), (ia, "current_adc")):
-                bad = sel[(col[sel] < 0) | (col[sel] > cal.adc_max_counts)
-                          | (col[sel] != np.round(col[sel]))]
+                bad = np.zeros(n, bool)
+                bad[sel] = ((col[sel] < 0) | (col[sel] > cal.adc_max_counts)
+                            | (col[sel] != np.round(col[sel])))
                 errors.add_rows(bad, field, lambda r, c=col, cal=cal: (
                     f"ADC count {c[r]:g} is not an integer in 0..{cal.adc_max_counts}"),
                     "value_error")
             v[sel], i[sel] = adc_to_volts_amps(va[sel], ia[sel], cal)
-    errors.raise_if_any()
 
-    bad_v = (v < 0) | (v > limits.max_voltage_v)
-    errors.add_rows(np.flatnonzero(bad_v), "voltage_v", lambda r: (
+    # NaN (absent or already reported) compares false: no second error for a row
+    errors.add_rows((v < 0) | (v > limits.max_voltage_v), "voltage_v", lambda r: (
         f"voltage_v {v[r]:g} V outside 0..{limits.max_voltage_v:g} V"), "value_error")
-    bad_i = (i < limits.min_current_a) | (i > limits.max_current_a)
-    errors.add_rows(np.flatnonzero(bad_i), "current_a", lambda r: (
-        f"current_a {i[r]:g} A outside {limits.min_current_a:g}..{limits.max_current_a:g} A"),
-        "value_error")
+    errors.add_rows((i < limits.min_current_a) | (i > limits.max_current_a), "current_a",
+                    lambda r: (f"current_a {i[r]:g} A outside {limits.min_current_a:g}.."
+                               f"{limits.max_current_a:g} A"), "value_error")
     vi = v * i
     p = np.where(p_ok, p, vi)
-    bad_p = np.abs(p - vi) > 0.05 * np.abs(vi) + limits.power_tolerance_w
-    errors.add_rows(np.flatnonzero(bad_p & p_ok), "power_w", lambda r: (
-        f"power_w {p[r]:g} W disagrees with voltage_v·current_a = {vi[r]:g} W"), "value_error")
+    errors.add_rows(p_ok & (np.abs(p - vi) > 0.05 * np.abs(vi) + limits.power_tolerance_w),
+                    "power_w", lambda r: (f"power_w {p[r]:g} W disagrees with "
+                                          f"voltage_v·current_a = {vi[r]:g} W"), "value_error")
     errors.raise_if_any()
     return Batch(array_ids, ts, v, i, p)
 
 
 def _check_rows(n: int, limits: Limits) -> None:
     if n > limits.max_rows:
-        raise IngestError(413, [{
-            "loc": ["body", "readings"], "row": None, "field": "readings", "type": "too_large",
-            "msg": f"{n} readings in one request; the limit is {limits.max_rows}: split the batch",
-        }])
+        raise _body_error(413, "readings", "too_large",
+                          f"{n} readings in one request; the limit is {limits.max_rows}: "
+                          "split the batch")
     if n == 0:
-        raise IngestError(422, [{
-            "loc": ["body", "readings"], "row": None, "field": "readings", "type": "missing",
-            "msg": "no readings in the request",
-        }])
+        raise _body_error(422, "readings", "missing", "no readings in the request")
 
 
 def parse_json_batch(
     body: bytes, arrays: dict[str, tuple[int, Calibration]], limits: Limits
 ) -> Batch:
-    """Validate a JSON body ``{"readings": [{ts, array, voltage_v, current_a, ...}]}``."""
+    """Validate a JSON body: ``{"readings": [{ts, array, voltage_v, current_a, ...}]}``, or
+    emonCMS-style rows ``[[unix_s, array, voltage_v, current_a, power_w], ...]``."""
     errors = _Errors(csv_lines=False)
     try:
         doc = orjson.loads(body)
     except orjson.JSONDecodeError as exc:
-        raise IngestError(422, [{"loc": ["body"], "row": None, "field": None,
-                                 "type": "json_invalid", "msg": f"invalid JSON: {exc}"}]) from exc
+        raise _body_error(422, None, "json_invalid", f"invalid JSON: {exc}") from exc
+    if isinstance(doc, list):
+        _check_rows(len(doc), limits)
+        columns = _emoncms_columns(doc, errors)
+        ts = _unix_seconds(columns["ts"], errors)
+        return build_batch(columns, len(doc), arrays, limits, errors, ts_s=ts)
     readings = doc.get("readings") if isinstance(doc, dict) else None
     if not isinstance(readings, list):
-        raise IngestError(422, [{"loc": ["body", "readings"], "row": None, "field": "readings",
-                                 "type": "missing",
-                                 "msg": 'body must be {"readings": [ ... ]}'}])
+        raise _body_error(422, "readings", "missing",
+                          'body must be {"readings": [ ... ]} or [[unix_s, array, voltage_v, '
+                          'current_a, power_w], ...]')
+    for key in list(doc)[:MAX_ERRORS_PER_FIELD]:
+        if key != "readings":
+            errors.add(None, key[:40], f"unknown field {_show(key)}; the body has only "
+                                       "'readings'", "extra_forbidden")
+    if not readings:  # {"readings": [...], "readings": []}: say so, not "no readings"
+        _check_repeated_keys(body, doc, None, errors)
+        errors.raise_if_any()
     _check_rows(len(readings), limits)
-    columns = _columns(readings, errors)
+    columns, flat = _columns(readings, errors)
+    _check_repeated_keys(body, doc, columns if flat else None, errors)
     return build_batch(columns, len(readings), arrays, limits, errors)
+
+
+def _csv_rows(text: str) -> tuple[list[str], list[list[str]]]:
+    """Header and data rows; quoting errors name the line where the bad cell starts."""
+    reader = csv.reader(io.StringIO(text), strict=True)
+    rows: list[list[str]] = []
+    start = 1
+    try:
+        for row in reader:
+            rows.append(row)
+            if len(rows) == 1 and len(row) > MAX_COLUMNS:
+                raise _body_error(422, "header", "value_error",
+                                  f"CSV header has {len(row)} columns; it names at most "
+                                  f"{len(FIELDS)} ({', '.join(FIELDS)})", line=1)
+            start = reader.line_num + 1
+    except csv.Error as exc:
+        what = (f"a quoted cell opened on line {start} is never closed"
+                if "unexpected end of data" in str(exc) else f"bad quoting ({exc})")
+        if "field larger" in str(exc):
+            what = f"a cell is longer than {csv.field_size_limit()} characters"
+        raise _body_error(422, None, "value_error", f"CSV line {start}: {what}",
+                          line=start) from exc
+    while rows and not any(cell.strip() for cell in rows[-1]):
+        rows.pop()
+    if not rows:
+        raise _body_error(422, "readings", "missing", "no readings in the request")
+    return [h.strip() for h in rows[0]], rows[1:]
 
 
 def parse_csv_batch(
@@ -341,30 +523,21 @@ def parse_csv_batch(
     try:
         text = body.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise IngestError(422, [{"loc": ["body"], "row": None, "field": None,
-                                 "type": "value_error",
-                                 "msg": f"CSV is not UTF-8: {exc}"}]) from exc
-    reader = csv.reader(io.StringIO(text))
-    try:
-        rows = list(reader)
-    except csv.Error as exc:
-        raise IngestError(422, [{"loc": ["body"], "row": None, "field": None,
-                                 "type": "value_error", "line": reader.line_num,
-                                 "msg": f"CSV line {reader.line_num}: {exc}"}]) from exc
-    while rows and not any(cell.strip() for cell in rows[-1]):
-        rows.pop()
-    if not rows:
-        _check_rows(0, limits)
-    header = [h.strip() for h in rows[0]]
-    unknown = [h for h in header if h not in FIELDS]
-    unknown += sorted({f"{h} (twice)" for h in header if header.count(h) > 1})
-    if unknown or "ts" not in header or "array" not in header:
-        raise IngestError(422, [{"loc": ["body", "header"], "row": None, "field": "header",
-                                 "type": "value_error", "line": 1,
-                                 "msg": f"CSV header {header} must name ts, array and "
-                                        f"voltage_v,current_a[,power_w] or voltage_adc,"
-                                        f"current_adc; unknown: {unknown}"}])
-    data = rows[1:]
+        raise _body_error(422, None, "value_error", f"CSV is not UTF-8: {exc}") from exc
+    header, data = _csv_rows(text)
+    seen = Counter(header)  # linear in the header, whatever its length
+    unknown = [h for h in seen if h not in _FIELD_SET]
+    twice = [h for h, k in seen.items() if k > 1 and h in _FIELD_SET]
+    missing = [f for f in ("ts", "array") if f not in seen]
+    if unknown or twice or missing:
+        parts = []
+        for label, names in (("unknown", unknown), ("twice", twice), ("missing", missing)):
+            if names:
+                more = f" and {len(names) - 5} more" if len(names) > 5 else ""
+                parts.append(f"{label}: {', '.join(_show(h) for h in names[:5])}{more}")
+        raise _body_error(422, "header", "value_error",
+                          f"CSV header must name ts, array and voltage_v,current_a[,power_w] "
+                          f"or voltage_adc,current_adc; {'; '.join(parts)}", line=1)
     _check_rows(len(data), limits)
     width = len(header)
     for r, row in enumerate(data):
@@ -373,9 +546,9 @@ def parse_csv_batch(
     errors.raise_if_any()
     columns: dict[str, list[Any]] = {}
     for f in FIELDS:
-        if f in header:
+        if f in seen:
             k = header.index(f)
             columns[f] = [row[k].strip() or None for row in data]
         else:
             columns[f] = [None] * len(data)
-    return build_batch(columns, len(data), arrays, limits, errors)
+    return build_batch(columns, len(data), arrays, limits, errors, text=True)

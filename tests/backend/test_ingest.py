@@ -79,7 +79,10 @@ def test_errors_are_collected_per_row_and_capped() -> None:
     with pytest.raises(IngestError) as err:
         parse_json_batch(orjson.dumps({"readings": readings}), ARRAYS, Limits())
     assert err.value.status == 422
-    assert [e["row"] for e in err.value.errors] == list(range(20))
+    listed = err.value.errors
+    assert [e["row"] for e in listed[:-1]] == list(range(10))  # 10 per field ...
+    assert listed[-1]["type"] == "too_many_errors"  # ... and the rest counted
+    assert listed[-1]["msg"] == "40 more problems not listed (ts: 40)"
 
 
 def test_row_limit_is_413() -> None:
@@ -121,3 +124,111 @@ def test_malformed_csv_is_422(body: str, needle: str) -> None:
     with pytest.raises(IngestError) as err:
         parse_csv_batch(body.encode(), ARRAYS, Limits())
     assert err.value.status == 422 and needle in err.value.errors[0]["msg"]
+
+
+GOOD = {"ts": "2024-05-01T10:00:00Z", "array": "tracker", "voltage_v": 26.0, "current_a": 7.0}
+
+
+def _errors(body: bytes, csv: bool = False) -> list[dict]:
+    with pytest.raises(IngestError) as err:
+        (parse_csv_batch if csv else parse_json_batch)(body, ARRAYS, Limits())
+    assert err.value.status == 422
+    return err.value.errors
+
+
+def test_every_kind_of_problem_is_reported_at_once() -> None:
+    """Issue 14: a power mismatch is not held back until the other errors are fixed."""
+    rows = [dict(GOOD, ts="2024-05-01T10:00:00"), dict(GOOD, array="roof"),
+            dict(GOOD, power_w=999.0), dict(GOOD, voltage_v="x"), dict(GOOD, current_a=500.0)]
+    got = {(e["row"], e["field"]) for e in _errors(orjson.dumps({"readings": rows}))}
+    assert got == {(0, "ts"), (1, "array"), (2, "power_w"), (3, "voltage_v"), (4, "current_a")}
+
+
+def test_a_list_as_one_timestamp_in_a_long_batch_is_named() -> None:
+    """Issue 9: ≥ 32 rows go the vectorised way; a ragged value once emptied the column."""
+    rows = [GOOD] * 40 + [dict(GOOD, ts=["2024-05-01T10:00:00Z"])]
+    assert [(e["row"], e["field"]) for e in _errors(orjson.dumps({"readings": rows}))] == [
+        (40, "ts")]
+
+
+@pytest.mark.parametrize("cell", ["1_0", "١٢", "nan", "Infinity", "0x10", "1e", "--1"])
+def test_csv_numbers_are_plain_decimals_only(cell: str) -> None:
+    body = f"ts,array,voltage_v,current_a\n2024-05-01T10:00:00Z,tracker,{cell},1\n".encode()
+    (e,) = _errors(body, csv=True)
+    assert (e["row"], e["field"], e["line"]) == (0, "voltage_v", 2) and cell in e["msg"]
+
+
+def test_csv_accepts_every_plain_decimal_form() -> None:
+    cells = ["26", "26.", ".5", "+26.5", "-0.25", "2.65e1", "2650E-2"]
+    body = ("ts,array,voltage_v,current_a\n" + "".join(
+        f"2024-05-01T10:{m:02d}:00Z,tracker,1,{c}\n" for m, c in enumerate(cells))).encode()
+    batch = parse_csv_batch(body, ARRAYS, Limits())
+    assert batch.current_a.tolist() == [float(c) for c in cells]
+
+
+def test_unterminated_csv_quote_names_the_line_it_opens() -> None:
+    body = b'ts,array,voltage_v,current_a\n2024-05-01T10:00:00Z,tracker,1,1\n' \
+           b'2024-05-01T10:01:00Z,"tracker,1,1\n2024-05-01T10:02:00Z,tracker,1,1\n'
+    (e,) = _errors(body, csv=True)
+    assert e["msg"] == "CSV line 3: a quoted cell opened on line 3 is never closed"
+
+
+def test_a_huge_csv_header_gets_a_small_answer() -> None:
+    """Issue 9: 256k columns once cost O(n²) and echoed 2.5 MB; now one bounded message."""
+    header = ",".join(f"c{k}" for k in range(262_144))
+    (e,) = _errors(f"ts,array,{header}\n".encode(), csv=True)
+    assert "262146 columns" in e["msg"] and len(orjson.dumps(e)) < 500
+    (e,) = _errors(f"ts,array,voltage_v,current_a,{header[:200]}\n".encode(), csv=True)
+    assert "unknown: 'c0', 'c1', 'c2', 'c3', 'c4' and" in e["msg"] and len(e["msg"]) < 300
+
+
+def test_unknown_json_fields_are_422_like_unknown_csv_columns() -> None:
+    (e,) = _errors(orjson.dumps({"readings": [GOOD, dict(GOOD, volts=26.0)]}))
+    assert (e["row"], e["field"], e["type"]) == (1, "volts", "extra_forbidden")
+    (e,) = _errors(orjson.dumps({"readings": [GOOD], "site": "tehuantepec"}))
+    assert (e["row"], e["field"]) == (None, "site")
+
+
+def test_repeated_json_keys_are_422() -> None:
+    body = b'{"readings": [' + orjson.dumps(GOOD) + b', {"ts": "2024-05-01T10:01:00Z", ' \
+           b'"array": "tracker", "voltage_v": 26.0, "voltage_v": 0.0, "current_a": 7.0}]}'
+    (e,) = _errors(body)
+    assert (e["row"], e["field"], e["type"]) == (1, "voltage_v", "duplicate_key")
+    (e,) = _errors(b'{"readings": [' + orjson.dumps(GOOD) + b'], "readings": []}')
+    assert (e["row"], e["field"], e["type"]) == (None, "readings", "duplicate_key")
+
+
+def test_escaped_colons_are_not_taken_for_repeated_keys() -> None:
+    """The cheap colon count is inconclusive here; the pair-keeping parse clears it."""
+    body = b'{"readings": [{"ts": "2024-05-01T10\\u003a00\\u003a00Z", "array": "tracker", ' \
+           b'"voltage_v": 26.0, "current_a": 7.0}]}'
+    assert parse_json_batch(body, ARRAYS, Limits()).ts_s.tolist() == [1714557600]
+
+
+def test_emoncms_rows_give_the_same_batch_as_objects() -> None:
+    objs = [dict(GOOD, power_w=182.0), dict(GOOD, ts="2024-05-01T10:01:00Z", array="fixed")]
+    rows = [[1714557600, "tracker", 26.0, 7.0, 182.0], [1714557660.9, "fixed", 26.0, 7.0]]
+    a = parse_json_batch(orjson.dumps({"readings": objs}), ARRAYS, Limits())
+    b = parse_json_batch(orjson.dumps(rows), ARRAYS, Limits())
+    for f in ("array_ids", "ts_s", "voltage_v", "current_a", "power_w"):
+        assert getattr(a, f).tolist() == getattr(b, f).tolist()
+
+
+@pytest.mark.parametrize(("row", "field", "words"), [
+    ([1714557600, "tracker", 26.0], None, "got 3 values"),
+    ({"ts": 1714557600}, None, "got dict"),
+    (["2024-05-01T10:00:00Z", "tracker", 26.0, 7.0], "ts", "send a JSON number"),
+    ([None, "tracker", 26.0, 7.0], "ts", "unix_s is missing"),
+    ([1714557600, "roof", 26.0, 7.0], "array", "unknown array"),
+])
+def test_bad_emoncms_rows_are_named(row: object, field: str | None, words: str) -> None:
+    errors = _errors(orjson.dumps([[1714557600, "tracker", 26.0, 7.0], row]))
+    assert (errors[0]["row"], errors[0]["field"]) == (1, field) and words in errors[0]["msg"]
+
+
+def test_an_escape_cannot_hide_a_repeated_key() -> None:
+    """One escaped colon in ``ts`` would balance one repeated key in a bare colon count."""
+    body = b'{"readings": [{"ts": "2024-05-01T10\\u003a00:00Z", "array": "tracker", ' \
+           b'"voltage_v": 26.0, "voltage_v": 0.0, "current_a": 7.0}]}'
+    (e,) = _errors(body)
+    assert (e["row"], e["field"], e["type"]) == (0, "voltage_v", "duplicate_key")

@@ -59,7 +59,7 @@ def test_tokens_401_and_403(client: httpx.Client, live_server: LiveServer) -> No
 @pytest.mark.parametrize(("change", "field", "words"), [
     ({"ts": "2023-01-03T12:00:00"}, "ts", "no UTC offset"),
     ({"ts": "yesterday"}, "ts", "not an ISO 8601"),
-    ({"voltage_v": "NaN"}, "voltage_v", "not finite"),
+    ({"voltage_v": "NaN"}, "voltage_v", "send a JSON number"),  # a string is not a number
     ({"voltage_v": "twelve"}, "voltage_v", "not a number"),
     ({"voltage_v": -3.0}, "voltage_v", "outside"),
     ({"current_a": 5000.0}, "current_a", "outside"),
@@ -95,26 +95,36 @@ def test_missing_fields_and_bad_shapes(client: httpx.Client, live_server: LiveSe
     assert r.status_code == 422 and "JSON" in r.json()["detail"][0]["msg"]
 
 
+def counts(r: httpx.Response) -> dict[str, int]:
+    """``accepted`` and ``duplicates`` of an ingest answer."""
+    return {k: r.json()[k] for k in ("accepted", "duplicates")}
+
+
 def test_idempotent_resend_and_partial_overlap(client: httpx.Client,
                                                live_server: LiveServer) -> None:
     rd = day_readings(dt.date(2023, 1, 5), "tracker")
     tok = live_server.write_token
-    assert post(client, tok, {"readings": rd[:1000]}).json() == {"accepted": 1000,
+    assert counts(post(client, tok, {"readings": rd[:1000]})) == {"accepted": 1000,
                                                                  "duplicates": 0}
-    assert post(client, tok, {"readings": rd[:1000]}).json() == {"accepted": 0,
+    assert counts(post(client, tok, {"readings": rd[:1000]})) == {"accepted": 0,
                                                                  "duplicates": 1000}
-    assert post(client, tok, {"readings": rd[900:]}).json() == {"accepted": 440,
+    assert counts(post(client, tok, {"readings": rd[900:]})) == {"accepted": 440,
                                                                 "duplicates": 100}
+    # a logger resumes after stored_through: the batch's latest reading, in UTC
+    last = dt.datetime.fromisoformat(rd[999]["ts"]).astimezone(dt.UTC)
+    r = post(client, tok, {"readings": rd[:1000]})
+    assert r.json()["stored_through"] == last.strftime("%Y-%m-%dT%H:%M:%SZ")
+    assert r.json()["stored_through_unix_s"] == int(last.timestamp())
     # the same minute twice in one batch counts once
     dup = [rd[0], rd[0], rd[1]]
-    assert post(client, tok, {"readings": dup}).json() == {"accepted": 0, "duplicates": 3}
+    assert counts(post(client, tok, {"readings": dup})) == {"accepted": 0, "duplicates": 3}
     got = client.get(PATH, params={"array": "tracker", "start": "2023-01-05",
                                    "end": "2023-01-06", "max_points": 5000}).json()
     assert got["bucket_s"] == 0 and len(got["points"]) == 1440
     # a new second twice in one batch with other values: the first is stored, once
     one = {"ts": "2023-01-07T12:00:00-06:00", "array": "tracker", "voltage_v": 25.0,
            "current_a": 4.0}
-    assert post(client, tok, {"readings": [one, dict(one, current_a=8.0)]}).json() == {
+    assert counts(post(client, tok, {"readings": [one, dict(one, current_a=8.0)]})) == {
         "accepted": 1, "duplicates": 1}
     got = client.get(PATH, params={"array": "tracker", "start": "2023-01-07",
                                    "end": "2023-01-08"}).json()
@@ -127,7 +137,7 @@ def test_csv_ingest_and_csv_errors_name_the_line(client: httpx.Client,
     text = "ts,array,voltage_v,current_a,power_w\n" + "".join(
         f"{x['ts']},{x['array']},{x['voltage_v']},{x['current_a']},{x['power_w']}\n" for x in rd)
     r = post(client, live_server.write_token, text)
-    assert r.json() == {"accepted": len(rd), "duplicates": 0}
+    assert counts(r) == {"accepted": len(rd), "duplicates": 0}
     bad = "ts,array,voltage_v,current_a\n2023-01-07T10:00:00Z,fixed,25,3\n" \
           "2023-01-07T10:01:00Z,fixed,,3\n"
     r = post(client, live_server.write_token, bad)
@@ -215,8 +225,14 @@ def test_read_errors(client: httpx.Client) -> None:
     assert r.status_code == 422 and "offset" in r.json()["detail"]
     r = client.get(PATH, params={"array": "tracker", "start": "2023-01-03", "end": "2023-01-02"})
     assert r.status_code == 422
-    r = client.get("/api/v1/sites/atlantis/measurements")
+    r = client.get("/api/v1/sites/atlantis/measurements",
+                   params={"array": "tracker", "start": "2023-01-01", "end": "2023-01-02"})
     assert r.status_code == 404 and "tehuantepec" in r.json()["detail"]
+    # required and non-empty by the schema itself (the OpenAPI says so): each one named
+    r = client.get(PATH, params={"array": "", "start": "", "end": ""})
+    assert r.status_code == 422
+    assert [e["loc"] for e in r.json()["detail"]] == [["query", "array"], ["query", "start"],
+                                                      ["query", "end"]]
     r = client.get(PATH, params={"array": "tracker", "start": "0001-01-01", "end": "2023-01-02"})
     assert r.status_code == 422 and "start" in r.json()["detail"]
 

@@ -1,0 +1,199 @@
+"""Strict request input for every route: body encodings, repeated JSON keys, 405s, 422s.
+
+- :class:`StrictBodies` (ASGI middleware, ahead of everything): ``Content-Encoding``
+  ``identity`` passes through, ``gzip`` is decompressed (the decompressed body at
+  most ``HELIOTWIN_MAX_UPLOAD_BYTES``, else 413; a corrupt stream is a 400), any
+  other encoding is a 415. A JSON body of any route but logger ingest (which
+  checks its own, in bulk) with a key given twice in one object is a 422.
+- :func:`http_error`: FastAPI's HTTP-error answer, except that a 405 lists in
+  ``Allow`` every method of the path (Starlette names only the first route's).
+- :func:`document_errors`: the OpenAPI's 422 body says what the service sends
+  (``detail`` a message, or a list of ``{loc, msg, type}``).
+"""
+
+from __future__ import annotations
+
+import zlib
+from typing import Any
+
+import anyio
+import orjson
+from fastapi import Request
+from fastapi.exception_handlers import http_exception_handler
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.responses import Response
+from starlette.routing import compile_path
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from backend.api.routes.measurements import IngestFastPath
+from backend.errors import InputError, load_json_pairs, repeated_keys
+
+_BODY_METHODS = frozenset(("POST", "PUT", "PATCH"))
+_HTTP_METHODS = frozenset(("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"))
+_OFFLOAD_BYTES = 64 * 1024  # decompress bigger bodies in a worker thread
+
+
+def gunzip(data: bytes, limit: int) -> bytes:
+    """A gzip body (one or more members) decompressed, refused past ``limit`` bytes."""
+    out: list[bytes] = []
+    size = 0
+    while data:
+        d = zlib.decompressobj(wbits=31)
+        try:
+            part = d.decompress(data, limit + 1 - size)
+        except zlib.error as exc:
+            raise InputError(400, f"Content-Encoding gzip: the body is not gzip data ({exc})"
+                             ) from None
+        size += len(part)
+        if size > limit or d.unconsumed_tail:
+            raise InputError(413, f"body over {limit} bytes once decompressed "
+                                  "(HELIOTWIN_MAX_UPLOAD_BYTES): split the batch")
+        if not d.eof:
+            raise InputError(400, "Content-Encoding gzip: the gzip stream is truncated")
+        out.append(part)
+        data = d.unused_data
+    return b"".join(out)
+
+
+def _answer(status: int, detail: Any) -> tuple[Message, Message]:
+    body = orjson.dumps({"detail": detail})
+    return ({"type": "http.response.start", "status": status,
+             "headers": [(b"content-type", b"application/json"),
+                         (b"content-length", str(len(body)).encode())]},
+            {"type": "http.response.body", "body": body})
+
+
+class StrictBodies:
+    """ASGI middleware: request encodings and repeated JSON keys (see the module docstring).
+
+    A request with neither an encoding nor a JSON body to check passes untouched;
+    the others are read whole (bounded), checked and replayed to the app.
+    """
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope["method"] not in _BODY_METHODS:
+            await self.app(scope, receive, send)
+            return
+        encoding = b""
+        ctype = b""
+        for k, v in scope["headers"]:
+            if k == b"content-encoding":
+                encoding = v.strip().lower()
+            elif k == b"content-type":
+                ctype = v.split(b";")[0].strip().lower()
+        check_json = ((ctype == b"application/json" or ctype.endswith(b"+json"))
+                      and not IngestFastPath._PATH.match(scope["path"]))
+        if encoding in (b"", b"identity") and not check_json:
+            await self.app(scope, receive, send)
+            return
+        try:
+            body = await self._checked(scope, receive, encoding, check_json)
+        except InputError as exc:
+            for message in _answer(exc.status_code, exc.detail):
+                await send(message)
+            return
+        except _Repeated as exc:
+            for message in _answer(422, [{"loc": ["body", *exc.path], "type": "duplicate_key",
+                                          "msg": f"key {exc.key[:40]!r} given twice in one "
+                                                 "object"}]):
+                await send(message)
+            return
+        if body is None:  # the client hung up
+            return
+        headers = [(k, v) for k, v in scope["headers"]
+                   if k not in (b"content-encoding", b"content-length")]
+        headers.append((b"content-length", str(len(body)).encode()))
+        replayed = False
+
+        async def replay() -> Message:
+            nonlocal replayed
+            if not replayed:
+                replayed = True
+                return {"type": "http.request", "body": body, "more_body": False}
+            return await receive()
+
+        await self.app({**scope, "headers": headers}, replay, send)
+
+    @staticmethod
+    async def _checked(scope: Scope, receive: Receive, encoding: bytes, check_json: bool
+                       ) -> bytes | None:
+        if encoding not in (b"", b"identity", b"gzip"):
+            raise InputError(415, f"Content-Encoding {encoding.decode('latin-1')[:40]!r}: "
+                                  "send the body as is (identity) or gzip")
+        limit = int(scope["app"].state.settings.max_upload_bytes)
+        parts: list[bytes] = []
+        size = 0
+        more = True
+        while more:
+            message = await receive()
+            if message["type"] == "http.disconnect":
+                return None
+            chunk = message.get("body", b"")
+            size += len(chunk)
+            if size > limit:
+                raise InputError(413, f"body over {limit} bytes (HELIOTWIN_MAX_UPLOAD_BYTES)")
+            parts.append(chunk)
+            more = message.get("more_body", False)
+        body = b"".join(parts)
+        if encoding == b"gzip":
+            body = (await anyio.to_thread.run_sync(gunzip, body, limit)
+                    if len(body) > _OFFLOAD_BYTES else gunzip(body, limit))
+        if check_json and body:
+            try:
+                doc = load_json_pairs(body)
+            except RecursionError:
+                raise InputError(422, "body: JSON nested too deeply") from None
+            except UnicodeDecodeError as exc:  # FastAPI would answer a bare 400
+                raise InputError(422, f"body: JSON must be UTF-8 ({exc.reason} at byte "
+                                      f"{exc.start})") from None
+            except ValueError as exc:
+                if "digits" in str(exc):  # Python reads integers of at most 4300 digits
+                    raise InputError(422, "body: an integer of more than 4300 digits") from None
+                return body  # invalid JSON: FastAPI reports where
+            for path, key in repeated_keys(doc):
+                raise _Repeated(path, key)
+        return body
+
+
+class _Repeated(Exception):
+    def __init__(self, path: tuple[str | int, ...], key: str) -> None:
+        self.path, self.key = path, key
+
+
+def allowed_methods(request: Request, also: str = "") -> list[str]:
+    """Every method the OpenAPI document gives this request's path (the ingest fast path's
+    POST included), with HEAD beside GET, and those of ``also`` (an ``Allow`` value)."""
+    methods = {m.strip().upper() for m in also.split(",") if m.strip()}
+    for template, ops in request.app.openapi().get("paths", {}).items():
+        regex, _, _ = compile_path(template)
+        if regex.match(request.url.path):
+            methods |= {m.upper() for m in ops if m.upper() in _HTTP_METHODS}
+    if "GET" in methods:
+        methods.add("HEAD")
+    return sorted(methods)
+
+
+async def http_error(request: Request, exc: StarletteHTTPException) -> Response:
+    """FastAPI's answer to an HTTP error; a 405's ``Allow`` names every method of the path."""
+    if exc.status_code != 405:
+        return await http_exception_handler(request, exc)
+    allow = allowed_methods(request, (exc.headers or {}).get("Allow", ""))
+    body = orjson.dumps({"detail": f"method {request.method} is not allowed here; "
+                                   f"allowed: {', '.join(allow)}"})
+    return Response(body, status_code=405, media_type="application/json",
+                    headers={**(exc.headers or {}), "Allow": ", ".join(allow)})
+
+
+def document_errors(schema: dict[str, Any]) -> dict[str, Any]:
+    """Make the OpenAPI 422 body honest: ``detail`` is a message or a list of problems."""
+    comps = schema.get("components", {}).get("schemas", {})
+    hve = comps.get("HTTPValidationError")
+    if hve is not None:
+        listed = hve.get("properties", {}).get("detail", {"type": "array", "items": {
+            "$ref": "#/components/schemas/ValidationError"}})
+        hve["properties"]["detail"] = {"anyOf": [
+            {"type": "string", "description": "what was wrong, naming the field"}, listed]}
+    return schema
