@@ -13,6 +13,7 @@ COPY sim ./sim
 COPY vision ./vision
 COPY frontend ./frontend
 COPY data/sites ./data/sites
+COPY data/plants ./data/plants
 # editable: the service finds data/ and frontend/ beside its code in /app
 RUN pip install --no-cache-dir -e . \
     && useradd --create-home --uid 1000 heliotwin \

@@ -1,19 +1,26 @@
-"""Per-site write tokens for field loggers.
+"""Per-site write tokens for field loggers: create, check (cached), list, revoke.
 
 A token is 32 random bytes (``secrets.token_urlsafe``), shown once when made;
-the database keeps only its SHA-256 and a short prefix to recognise it by.
-:class:`TokenCache` answers the hot path from memory and asks the database only
-for a token it has not seen (one made by ``heliotwin token create`` while the
-service runs, say).
+the database keeps only its SHA-256 and a short prefix to recognise it by, an
+optional expiry and, once revoked, the time it was revoked (the row stays, so
+``token list`` shows it). :class:`TokenCache` answers the hot path from memory
+for at most ``ttl_s`` after it last asked the database about a token, so a
+token revoked by another process (``heliotwin token revoke``) is refused within
+that time; a revocation through this process's cache (the admin HTTP endpoint)
+is refused at once.
 """
 
 from __future__ import annotations
 
+import datetime as dt
 import hashlib
 import secrets
 import threading
+import time
+from dataclasses import dataclass
+from typing import Any
 
-from sqlalchemy import Connection, Engine, insert, select
+from sqlalchemy import Connection, Engine, insert, select, update
 
 from backend.storage.tables import LoggerToken, SiteRow, utcnow
 
@@ -22,47 +29,164 @@ class UnknownSite(LookupError):
     """No site with that id is in the database."""
 
 
+class UnknownToken(LookupError):
+    """No stored token matches that token or id."""
+
+
 def hash_token(token: str) -> str:
     """SHA-256 hex digest of a token (what the database stores)."""
     return hashlib.sha256(token.encode()).hexdigest()
 
 
-def create_token(conn: Connection, site_id: str, label: str = "") -> str:
-    """Make, store and return a new write token for ``site_id``."""
+def _aware(t: dt.datetime | None) -> dt.datetime | None:
+    """SQLite gives naive datetimes back: they were stored as UTC."""
+    if t is None or t.tzinfo is not None:
+        return t
+    return t.replace(tzinfo=dt.UTC)
+
+
+@dataclass(frozen=True)
+class TokenInfo:
+    """What ``token list`` and ``GET /api/v1/tokens`` show of a token (never the token)."""
+
+    id: int
+    site_id: str
+    token_prefix: str
+    label: str
+    created_at: dt.datetime
+    expires_at: dt.datetime | None
+    revoked_at: dt.datetime | None
+
+    def status(self, now: dt.datetime | None = None) -> str:
+        """``active``, ``expired`` or ``revoked``."""
+        if self.revoked_at is not None:
+            return "revoked"
+        if self.expires_at is not None and self.expires_at <= (now or utcnow()):
+            return "expired"
+        return "active"
+
+    def to_dict(self) -> dict[str, Any]:
+        def iso(t: dt.datetime | None) -> str | None:
+            return None if t is None else t.isoformat().replace("+00:00", "Z")
+
+        return {"id": self.id, "site_id": self.site_id, "token_prefix": self.token_prefix,
+                "label": self.label, "created_at": iso(self.created_at),
+                "expires_at": iso(self.expires_at), "revoked_at": iso(self.revoked_at),
+                "status": self.status()}
+
+
+_COLUMNS = select(*LoggerToken.__table__.columns)
+
+
+def _info(row: Any) -> TokenInfo:
+    created = _aware(row.created_at)
+    assert created is not None
+    return TokenInfo(row.id, row.site_id, row.token_prefix, row.label, created,
+                     _aware(row.expires_at), _aware(row.revoked_at))
+
+
+def create_token(conn: Connection, site_id: str, label: str = "",
+                 expires_at: dt.datetime | None = None) -> str:
+    """Make, store and return a new write token for ``site_id`` (refused from ``expires_at``)."""
     if conn.execute(select(SiteRow.site_id).where(SiteRow.site_id == site_id)).first() is None:
         known = ", ".join(conn.execute(select(SiteRow.site_id)).scalars()) or "none"
         raise UnknownSite(f"unknown site {site_id!r}; known sites: {known}")
+    if expires_at is not None and expires_at.tzinfo is None:
+        raise ValueError("expires_at must be timezone-aware")
     token = "ht_" + secrets.token_urlsafe(32)
     conn.execute(insert(LoggerToken).values(
         site_id=site_id, token_sha256=hash_token(token), token_prefix=token[:10],
-        label=label, created_at=utcnow(),
+        label=label, created_at=utcnow(), expires_at=expires_at,
     ))
     return token
 
 
-class TokenCache:
-    """Maps token hashes to their site, from memory, falling back to the database."""
+def list_tokens(conn: Connection, site_id: str | None = None) -> list[TokenInfo]:
+    """Every stored token (of one site when given), oldest first."""
+    q = _COLUMNS.order_by(LoggerToken.id)
+    if site_id is not None:
+        q = q.where(LoggerToken.site_id == site_id)
+    return [_info(row) for row in conn.execute(q)]
 
-    def __init__(self, engine: Engine) -> None:
+
+def find_token(conn: Connection, token_or_id: str | int) -> tuple[TokenInfo, str]:
+    """The stored token an id (digits) or the token itself names, and its hash."""
+    text = str(token_or_id).strip()
+    if text.isdigit():
+        what = f"id {text}"
+        q = _COLUMNS.where(LoggerToken.id == int(text)) if int(text) < 2**31 else None
+    else:
+        what = f"token {text[:10]}…"
+        q = _COLUMNS.where(LoggerToken.token_sha256 == hash_token(text))
+    row = None if q is None else conn.execute(q).first()
+    if row is None:
+        raise UnknownToken(f"no write token with {what} (see `heliotwin token list`)")
+    return _info(row), str(row.token_sha256)
+
+
+def revoke_token(conn: Connection, token_or_id: str | int) -> tuple[TokenInfo, str]:
+    """Revoke a token (by id or by the token); the row stays. Returns it and its hash.
+
+    Revoking a revoked token changes nothing (the first revocation time stays).
+    """
+    info, digest = find_token(conn, token_or_id)
+    if info.revoked_at is None:
+        conn.execute(update(LoggerToken).where(LoggerToken.id == info.id)
+                     .values(revoked_at=utcnow()))
+        info, digest = find_token(conn, info.id)
+    return info, digest
+
+
+@dataclass(frozen=True)
+class _Entry:
+    site_id: str
+    expires_s: float | None  # Unix seconds, or None
+    checked_s: float  # time.monotonic() of the database read
+
+
+class TokenCache:
+    """Maps token hashes to their site: from memory for ``ttl_s``, then from the database."""
+
+    def __init__(self, engine: Engine, ttl_s: float = 0.5) -> None:
         self._engine = engine
-        self._site_of: dict[str, str] = {}
+        self._ttl_s = ttl_s
+        self._entries: dict[str, _Entry] = {}
         self._lock = threading.Lock()
 
+    def _fresh(self, digest: str) -> str | None:
+        e = self._entries.get(digest)
+        if e is None or time.monotonic() - e.checked_s > self._ttl_s:
+            return None
+        if e.expires_s is not None and time.time() >= e.expires_s:
+            return None
+        return e.site_id
+
     def cached(self, token: str) -> str | None:
-        """The site of a token already seen, without touching the database."""
-        return self._site_of.get(hash_token(token))
+        """The site of a valid token checked less than ``ttl_s`` ago, without the database."""
+        return self._fresh(hash_token(token))
 
     def site_of(self, token: str) -> str | None:
-        """The site a token writes to, or None for an unknown token."""
+        """The site a token writes to; None for an unknown, expired or revoked token."""
         digest = hash_token(token)
-        site = self._site_of.get(digest)
+        site = self._fresh(digest)
         if site is not None:
             return site
         with self._engine.connect() as conn:
-            site = conn.execute(
-                select(LoggerToken.site_id).where(LoggerToken.token_sha256 == digest)
-            ).scalar_one_or_none()
-        if site is not None:
-            with self._lock:
-                self._site_of[digest] = site
-        return site
+            row = conn.execute(
+                select(LoggerToken.site_id, LoggerToken.expires_at, LoggerToken.revoked_at)
+                .where(LoggerToken.token_sha256 == digest)
+            ).first()
+        expires = _aware(row.expires_at) if row is not None else None
+        if row is None or row.revoked_at is not None or (
+                expires is not None and expires <= utcnow()):
+            self.forget(digest)
+            return None
+        with self._lock:
+            self._entries[digest] = _Entry(
+                row.site_id, None if expires is None else expires.timestamp(), time.monotonic())
+        return str(row.site_id)
+
+    def forget(self, digest: str) -> None:
+        """Drop a token (by its hash) from memory: the next check asks the database."""
+        with self._lock:
+            self._entries.pop(digest, None)

@@ -1,12 +1,21 @@
-"""``heliotwin token create --site ID``: a new write token for a site's field loggers.
+"""``heliotwin token create|list|revoke``: the write tokens of a site's field loggers.
 
-The token is printed once, alone on the last line; only its SHA-256 is stored.
+- ``create --site ID [--label TEXT] [--expires-in-days N | --expires ISO]`` prints the
+  new token once, alone on the last line; only its SHA-256 is stored.
+- ``list [--site ID] [--json]`` shows every token's id, site, prefix, label, times and
+  status (``active``, ``expired``, ``revoked``) — never the token.
+- ``revoke TOKEN_OR_ID`` revokes by the id ``list`` shows or by the token itself; a
+  running service refuses it within ``HELIOTWIN_TOKEN_CACHE_TTL_S`` (≤ 1 s).
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime as dt
+import json
 import sys
+from collections.abc import Callable
+from typing import Any
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -16,12 +25,38 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     c = sub.add_parser("create", help="make a new write token for a site (printed once)")
     c.add_argument("--site", required=True, help="site id, e.g. tehuantepec")
     c.add_argument("--label", default="", help="a note to recognise the token by")
+    exp = c.add_mutually_exclusive_group()
+    exp.add_argument("--expires-in-days", type=float, metavar="DAYS",
+                     help="refused after this many days (default: never expires)")
+    exp.add_argument("--expires", metavar="ISO",
+                     help="refused from this instant (ISO 8601 with offset)")
     c.set_defaults(func=create)
+    ls = sub.add_parser("list", help="show the tokens (ids, sites, status; never the tokens)")
+    ls.add_argument("--site", help="only this site's tokens")
+    ls.add_argument("--json", action="store_true", help="print JSON")
+    ls.set_defaults(func=list_)
+    r = sub.add_parser("revoke", help="revoke a token (by the id `list` shows, or the token)")
+    r.add_argument("token_or_id", metavar="TOKEN_OR_ID")
+    r.set_defaults(func=revoke)
 
 
-def create(args: argparse.Namespace) -> int:
-    """Migrate if needed, load the built-in sites, store and print a new token."""
-    from backend.auth import UnknownSite, create_token
+def _expiry(args: argparse.Namespace) -> dt.datetime | None:
+    from backend.timestamps import parse_instant
+
+    if args.expires_in_days is not None:
+        if not 0 < args.expires_in_days <= 36_600:
+            raise ValueError(f"--expires-in-days: {args.expires_in_days} is not in (0, 36600]")
+        return dt.datetime.now(dt.UTC) + dt.timedelta(days=args.expires_in_days)
+    if args.expires is not None:
+        t = parse_instant(args.expires, "--expires")
+        if t <= dt.datetime.now(dt.UTC):
+            raise ValueError(f"--expires: {args.expires} is in the past")
+        return t
+    return None
+
+
+def _with_db(work: Callable[[Any], Any]) -> Any:
+    """Migrate if needed, load the built-in sites, run ``work(conn)`` in one transaction."""
     from backend.settings import get_settings
     from backend.sites import Registry, sync_sites
     from backend.storage.engine import make_engine, run_migrations
@@ -33,13 +68,54 @@ def create(args: argparse.Namespace) -> int:
         registry = Registry.load_files(settings.sites_dir)
         with engine.begin() as conn:
             sync_sites(conn, [info.site for info in registry.sites.values()])
-            token = create_token(conn, args.site, args.label)
-    except UnknownSite as exc:
-        print(f"heliotwin token: {exc}", file=sys.stderr)
-        return 2
+            return work(conn)
     finally:
         engine.dispose()
-    print(f"write token for site {args.site} (shown once; send it as "
+
+
+def create(args: argparse.Namespace) -> int:
+    """Store and print a new token."""
+    from backend.auth import UnknownSite, create_token
+
+    try:
+        expires = _expiry(args)
+        token = _with_db(lambda conn: create_token(conn, args.site, args.label, expires))
+    except (UnknownSite, ValueError) as exc:
+        print(f"heliotwin token: {exc}", file=sys.stderr)
+        return 2
+    until = "" if expires is None else f", valid until {expires.isoformat()}"
+    print(f"write token for site {args.site} (shown once{until}; send it as "
           "'Authorization: Bearer <token>'):")
     print(token)
+    return 0
+
+
+def list_(args: argparse.Namespace) -> int:
+    """Print the stored tokens, as a table or JSON."""
+    from backend.auth import list_tokens
+
+    rows = [t.to_dict() for t in _with_db(lambda conn: list_tokens(conn, args.site))]
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    cols = ("id", "site_id", "token_prefix", "status", "created_at", "expires_at", "label")
+    table = [[str(r[c] if r[c] is not None else "-") for c in cols] for r in rows]
+    widths = [max([len(c), *(len(row[i]) for row in table)]) for i, c in enumerate(cols)]
+    for row in [list(cols), *table]:
+        print("  ".join(v.ljust(w) for v, w in zip(row, widths, strict=True)).rstrip())
+    return 0
+
+
+def revoke(args: argparse.Namespace) -> int:
+    """Revoke one token; exit 2 when none matches."""
+    from backend.auth import UnknownToken, revoke_token
+
+    try:
+        info, _ = _with_db(lambda conn: revoke_token(conn, args.token_or_id))
+    except UnknownToken as exc:
+        print(f"heliotwin token: {exc}", file=sys.stderr)
+        return 2
+    assert info.revoked_at is not None
+    print(f"revoked token {info.id} ({info.token_prefix}…, site {info.site_id}) at "
+          f"{info.revoked_at.isoformat()}")
     return 0

@@ -1,11 +1,21 @@
-"""Twin scenarios run from the API: synchronous, or in the background with progress.
+"""Twin scenarios run from the API: in worker processes, a bounded queue, stored results.
 
 A run is a :class:`backend.twin.scenario.Scenario` (site, range, step,
-controller, disturbances, receiver) through ``run_scenario``. Background runs
-execute one at a time on a worker thread; their status and progress live in
-memory while they run, and the finished run (its summary and its series as a
-compressed ``.npz``) is stored in ``simulation_runs``/``simulation_series``, so
-results survive a restart.
+controller, disturbances, receiver) through ``run_scenario``. Every run —
+synchronous or background — executes in its own worker process (forked from a
+``forkserver`` that has the simulation modules imported, so a start costs
+milliseconds), never in the web process's memory: a two-year run at one
+minute peaks at ≈ 400 MB there and gives it all back when the process exits.
+The worker stores the series (a compressed ``.npz``) in ``simulation_series``
+itself and sends only its progress and the summary back over a pipe; the web
+process records the run in ``simulation_runs`` through the writer.
+
+At most ``Settings.simulation_workers`` runs execute at once and
+``Settings.simulation_queue`` wait; past that :meth:`SimulationRunner.submit`
+raises :class:`backend.limits.Busy` (503 with ``Retry-After``, estimated from
+the queued steps and the speed of the last finished run). Runs asked without a
+token are marked ``anonymous``; only the newest
+``Settings.simulation_anonymous_keep_runs`` of them stay stored.
 """
 
 from __future__ import annotations
@@ -13,26 +23,37 @@ from __future__ import annotations
 import io
 import json
 import logging
+import multiprocessing
+import tempfile
 import threading
+import time
 import uuid
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future
 from dataclasses import dataclass, field
-from typing import Any
+from multiprocessing.connection import Connection as Pipe
+from typing import IO, Any
 
 import numpy as np
 import pandas as pd
 from sqlalchemy import Connection, Engine, insert, select, update
 
+from backend.limits import Busy, prune_anonymous
 from backend.measurements.writer import Writer
+from backend.settings import Settings
 from backend.sites import Registry
 from backend.storage.tables import SimulationRun, SimulationSeries, utcnow
 from backend.twin.scenario import Scenario, run_scenario
+from sim.sites import Site
 
 logger = logging.getLogger(__name__)
 
+#: Worker processes fork from one server process that has these imported.
+_MP = multiprocessing.get_context("forkserver")
+_PRELOAD = ["backend.twin.simulations"]
+
 
 class Cancelled(Exception):
-    """The service is stopping; a background run gives up."""
+    """The service is stopping; a run gives up."""
 
 
 @dataclass
@@ -46,6 +67,7 @@ class RunState:
     summary: dict[str, Any] | None = None
     error: str | None = None
     params: dict[str, Any] = field(default_factory=dict)
+    steps: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         return {"run_id": self.run_id, "site_id": self.site_id, "status": self.status,
@@ -53,97 +75,219 @@ class RunState:
                 "error": self.error, "params": self.params}
 
 
-def series_to_npz(series: pd.DataFrame) -> bytes:
-    """A run's series as compressed ``.npz`` bytes (``ts_s`` plus every column)."""
-    buf = io.BytesIO()
+def write_npz(series: pd.DataFrame, file: IO[bytes]) -> None:
+    """A run's series as a compressed ``.npz`` (``ts_s`` plus every column) into ``file``."""
     arrays = {c: series[c].to_numpy(np.float64) for c in series.columns}
-    np.savez_compressed(buf, ts_s=series.index.as_unit("s").asi8, **arrays)
-    return buf.getvalue()
+    np.savez_compressed(file, ts_s=series.index.as_unit("s").asi8, **arrays)
 
 
 def npz_to_series(blob: bytes) -> pd.DataFrame:
-    """Inverse of :func:`series_to_npz`."""
+    """Inverse of :func:`write_npz`."""
     with np.load(io.BytesIO(blob)) as z:
         cols = {k: z[k] for k in z.files if k != "ts_s"}
         index = pd.to_datetime(z["ts_s"], unit="s", utc=True)
     return pd.DataFrame(cols, index=index)
 
 
-class SimulationRunner:
-    """Runs scenarios and remembers them."""
+def _work(pipe: Pipe, database_url: str, site: Site, params: Scenario, run_id: str) -> None:
+    """The worker process: run, store the series, send ``("done", summary)`` or the error."""
+    from backend.settings import get_settings
+    from backend.storage.engine import make_engine
 
-    def __init__(self, registry: Registry, engine: Engine, writer: Writer) -> None:
+    last = [-1.0]
+
+    def progress(fraction: float) -> None:
+        if fraction - last[0] >= 0.005 or fraction >= 1.0:
+            last[0] = fraction
+            pipe.send(("progress", float(fraction)))
+
+    try:
+        result = run_scenario(site, params, progress=progress)
+        summary = result.summary()
+        summary["run_id"] = run_id
+        # through a file, so the series is freed before its packed bytes are read back:
+        # the peak stays the run's (≈ 400 MB for two years at one minute)
+        with tempfile.TemporaryFile() as f:
+            write_npz(result.series, f)
+            del result
+            f.seek(0)
+            blob = f.read()
+        engine = make_engine(get_settings(database_url=database_url))
+        try:
+            with engine.begin() as conn:
+                conn.execute(insert(SimulationSeries).values(run_id=run_id, npz=blob))
+        finally:
+            engine.dispose()
+        pipe.send(("done", summary))
+    except Exception as exc:  # noqa: BLE001 - reported to the web process as the run's error
+        pipe.send(("failed", str(exc) or type(exc).__name__))
+    finally:
+        pipe.close()
+
+
+class SimulationRunner:
+    """Runs scenarios in worker processes, a bounded number at a time, and remembers them."""
+
+    def __init__(self, registry: Registry, engine: Engine, writer: Writer,
+                 settings: Settings) -> None:
         self.registry = registry
         self.engine = engine
         self.writer = writer
+        self.settings = settings
         self._runs: dict[str, RunState] = {}
-        self._series: dict[str, pd.DataFrame] = {}
         self._lock = threading.Lock()
         self._stopping = threading.Event()
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="heliotwin-sim")
+        self._queue: list[tuple[RunState, Scenario, bool, Future[dict[str, Any]]]] = []
+        self._wake = threading.Condition(self._lock)
+        self._active = 0
+        self._steps_per_s = 300_000.0  # until a run is timed (2 years at 1 min: ≈ 3.5 s)
+        self._threads: list[threading.Thread] = []
+
+    def _start_threads(self) -> None:
+        if self._threads:
+            return
+        _MP.set_forkserver_preload(_PRELOAD)
+        for i in range(self.settings.simulation_workers):
+            t = threading.Thread(target=self._slot, name=f"heliotwin-sim-{i}", daemon=True)
+            t.start()
+            self._threads.append(t)
 
     def stop(self) -> None:
-        """Cancel queued and running background runs."""
+        """Fail queued runs, stop running ones (their worker processes are terminated)."""
         self._stopping.set()
-        self._pool.shutdown(wait=True, cancel_futures=True)
+        with self._lock:
+            queued, self._queue = self._queue, []
+            self._wake.notify_all()
+        for state, _, _, fut in queued:
+            state.status, state.error = "failed", "the service stopped before it ran"
+            fut.set_exception(Cancelled(state.error))
+        for t in self._threads:
+            t.join(30)
 
-    def _record(self, state: RunState, params: Scenario) -> None:
+    # ------------------------------------------------------------------ admission
+
+    def submit(self, params: Scenario, anonymous: bool) -> tuple[RunState,
+                                                                 Future[dict[str, Any]]]:
+        """Queue a run, or raise :class:`Busy` (503) when the queue is full."""
+        steps = (params.end - params.start).total_seconds() / params.step_s
+        with self._lock:
+            waiting = len(self._queue)
+            if self._active + waiting >= self.settings.simulation_workers + \
+                    self.settings.simulation_queue:
+                ahead = sum(s.steps * (1 - s.progress) for s in self._runs.values()
+                            if s.status in ("queued", "running"))
+                raise Busy(503, f"busy: {self._active} simulations running and {waiting} "
+                                f"waiting, the most this service queues "
+                                "(HELIOTWIN_SIMULATION_WORKERS, HELIOTWIN_SIMULATION_QUEUE)",
+                           ahead / self._steps_per_s / self.settings.simulation_workers)
+        state = RunState(uuid.uuid4().hex, params.site_id, "queued",
+                         params=json.loads(params.to_json()), steps=steps)
         self.writer.call(lambda conn: conn.execute(insert(SimulationRun).values(
             run_id=state.run_id, site_id=state.site_id, params_json=params.to_json(),
-            status=state.status, progress=0.0, created_at=utcnow()))).result()
-
-    def _execute(self, state: RunState, params: Scenario) -> dict[str, Any]:
-        info = self.registry.sites[params.site_id]
-
-        def progress(fraction: float) -> None:
-            state.progress = float(fraction)
-            if self._stopping.is_set():
-                raise Cancelled("service stopping")
-
-        state.status = "running"
-        try:
-            result = run_scenario(info.site, params, progress=progress)
-        except Exception as exc:
-            state.status, state.error = "failed", str(exc)
-            self.writer.call(lambda conn: _finish(conn, state, None)).result()
-            raise
-        summary = result.summary()
-        summary["run_id"] = state.run_id
-        blob = series_to_npz(result.series)
-        state.summary, state.progress = summary, 1.0
-        self.writer.call(lambda conn: _finish(conn, state, blob)).result()
-        state.status = "done"
-        with self._lock:
-            self._series[state.run_id] = result.series
-            while len(self._series) > 4:
-                self._series.pop(next(iter(self._series)))
-        return summary
-
-    def run_sync(self, params: Scenario) -> dict[str, Any]:
-        """Run now and return the summary (with ``run_id``)."""
-        state = RunState(uuid.uuid4().hex, params.site_id, "running",
-                         params=json.loads(params.to_json()))
-        self._record(state, params)
+            status="queued", progress=0.0, created_at=utcnow(), anonymous=anonymous))).result()
+        fut: Future[dict[str, Any]] = Future()
         with self._lock:
             self._runs[state.run_id] = state
-        return self._execute(state, params)
+            self._queue.append((state, params, anonymous, fut))
+            self._start_threads()
+            self._wake.notify()
+        return state, fut
 
-    def start_background(self, params: Scenario) -> RunState:
+    def run_sync(self, params: Scenario, anonymous: bool = False) -> dict[str, Any]:
+        """Queue a run and wait for its summary (with ``run_id``)."""
+        return self.submit(params, anonymous)[1].result()
+
+    def start_background(self, params: Scenario, anonymous: bool = False) -> RunState:
         """Queue a run; poll :meth:`get` for its progress."""
-        state = RunState(uuid.uuid4().hex, params.site_id, "queued",
-                         params=json.loads(params.to_json()))
-        self._record(state, params)
-        with self._lock:
-            self._runs[state.run_id] = state
+        return self.submit(params, anonymous)[0]
 
-        def job() -> None:
+    # ------------------------------------------------------------------ execution
+
+    def _slot(self) -> None:
+        while True:
+            with self._lock:
+                while not self._queue and not self._stopping.is_set():
+                    self._wake.wait()
+                if self._stopping.is_set():
+                    return
+                job = self._queue.pop(0)
+                self._active += 1
             try:
-                self._execute(state, params)
-            except Exception as exc:  # noqa: BLE001 - reported through the run's status
-                logger.warning("simulation %s failed: %s", state.run_id, exc)
+                self._execute(*job)
+            finally:
+                with self._lock:
+                    self._active -= 1
 
-        self._pool.submit(job)
-        return state
+    def _execute(self, state: RunState, params: Scenario, anonymous: bool,
+                 fut: Future[dict[str, Any]]) -> None:
+        state.status = "running"
+        t0 = time.monotonic()
+        try:
+            summary = self._in_worker(state, params)
+        except Exception as exc:  # noqa: BLE001 - reported through the run's status
+            state.status, state.error = "failed", str(exc)
+            logger.warning("simulation %s failed: %s", state.run_id, exc)
+            self.writer.call(lambda conn: _finish(conn, state)).result()
+            fut.set_exception(exc)
+            return
+        elapsed = time.monotonic() - t0
+        if elapsed > 0.5:
+            self._steps_per_s = state.steps / elapsed
+        state.summary, state.progress = summary, 1.0
+        keep = self.settings.simulation_anonymous_keep_runs
+
+        def finish(conn: Connection) -> int:
+            _finish(conn, state)
+            return prune_anonymous(conn, SimulationRun, keep) if anonymous else 0
+
+        if self.writer.call(finish).result():
+            self._forget_pruned()
+        state.status = "done"
+        fut.set_result(summary)
+
+    def _in_worker(self, state: RunState, params: Scenario) -> dict[str, Any]:
+        site = self.registry.sites[params.site_id].site
+        ours, theirs = _MP.Pipe(duplex=False)
+        proc = _MP.Process(target=_work, name=f"heliotwin-sim-{state.run_id[:8]}",
+                           args=(theirs, self.settings.database_url, site, params,
+                                 state.run_id), daemon=True)
+        proc.start()
+        theirs.close()
+        try:
+            while True:
+                if self._stopping.is_set():
+                    raise Cancelled("service stopping")
+                if not ours.poll(0.2):
+                    if not proc.is_alive() and not ours.poll(0):
+                        raise RuntimeError(f"the worker process ended (exit code "
+                                           f"{proc.exitcode}) without a result")
+                    continue
+                try:
+                    kind, value = ours.recv()
+                except EOFError:
+                    raise RuntimeError(f"the worker process ended (exit code "
+                                       f"{proc.exitcode}) without a result") from None
+                if kind == "progress":
+                    state.progress = max(state.progress, min(float(value), 0.999))
+                elif kind == "done":
+                    return dict(value)
+                else:
+                    raise ValueError(str(value))
+        finally:
+            ours.close()
+            if proc.is_alive():
+                proc.terminate()
+            proc.join(10)
+
+    def _forget_pruned(self) -> None:
+        with self.engine.connect() as conn:
+            kept = set(conn.execute(select(SimulationRun.run_id)).scalars())
+        with self._lock:
+            for run_id in [r for r, s in self._runs.items()
+                           if s.status == "done" and r not in kept]:
+                del self._runs[run_id]
+
+    # ------------------------------------------------------------------ reads
 
     def get(self, run_id: str) -> RunState | None:
         """A run's state: from memory, or as stored."""
@@ -154,7 +298,7 @@ class SimulationRunner:
         with self.engine.connect() as conn:
             row = conn.execute(
                 select(SimulationRun).where(SimulationRun.run_id == run_id)
-            ).scalars().first()
+            ).first()
         if row is None:
             return None
         return RunState(row.run_id, row.site_id, row.status, row.progress,
@@ -162,11 +306,10 @@ class SimulationRunner:
                         row.error, json.loads(row.params_json))
 
     def series(self, run_id: str) -> pd.DataFrame | None:
-        """A finished run's series, or None."""
-        with self._lock:
-            cached = self._series.get(run_id)
-        if cached is not None:
-            return cached
+        """A finished run's series (read from the database), or None."""
+        state = self.get(run_id)
+        if state is None or state.status != "done":
+            return None
         with self.engine.connect() as conn:
             blob = conn.execute(
                 select(SimulationSeries.npz).where(SimulationSeries.run_id == run_id)
@@ -174,10 +317,9 @@ class SimulationRunner:
         return None if blob is None else npz_to_series(blob)
 
 
-def _finish(conn: Connection, state: RunState, blob: bytes | None) -> None:
+def _finish(conn: Connection, state: RunState) -> None:
+    done = state.summary is not None
     conn.execute(update(SimulationRun).where(SimulationRun.run_id == state.run_id).values(
-        status="done" if blob is not None else "failed", progress=state.progress,
-        summary_json=json.dumps(state.summary) if state.summary else None,
+        status="done" if done else "failed", progress=state.progress,
+        summary_json=json.dumps(state.summary) if done else None,
         error=state.error, finished_at=utcnow()))
-    if blob is not None:
-        conn.execute(insert(SimulationSeries).values(run_id=state.run_id, npz=blob))

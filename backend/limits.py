@@ -1,0 +1,186 @@
+"""Bounds on anonymous work: per-client token buckets, a pixel budget, retention.
+
+- :class:`RateLimiter` — a token bucket per client address (``request.client.host``):
+  a request without a write token spends its cost (simulated steps, image
+  pixels) from a bucket that refills at ``per_min`` per minute up to one minute's
+  worth; an empty bucket is a 429 whose ``Retry-After`` says when it will hold
+  the cost again. Requests with a valid token are not rate-limited.
+- :class:`PixelBudget` — the pixels decoded at once across all vision requests.
+  A decoded frame costs about 6 bytes per pixel at its peak (measured: a
+  6300×6300 PNG peaks at 225 MB in ``cv2.imdecode``), so the budget bounds the
+  memory of decoding whatever the concurrency; a request waits its turn in a
+  bounded queue, and past it gets 503 with ``Retry-After``.
+- :func:`prune_anonymous` — the retention of rows stored for anonymous callers
+  (simulation runs and their series, vision detections): the newest ``keep``.
+
+:class:`Busy` is what these raise; the routes turn it into the 429/503 answer.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy import Connection, delete, select
+
+from backend.settings import Settings
+from backend.storage.tables import SimulationRun, SimulationSeries, VisionDetection
+
+
+class Busy(Exception):
+    """Refused for now: ``status_code`` 429 (this client) or 503 (the service), retry later."""
+
+    def __init__(self, status_code: int, message: str, retry_after_s: float) -> None:
+        super().__init__(message)
+        self.status_code = status_code
+        self.message = message
+        self.retry_after_s = max(1, math.ceil(retry_after_s))
+
+    @property
+    def headers(self) -> dict[str, str]:
+        return {"Retry-After": str(self.retry_after_s)}
+
+
+class RateLimiter:
+    """Token buckets keyed by client address: ``per_min`` cost units a minute, burst one minute.
+
+    A cost above one minute's worth is charged as one minute's worth (a full
+    bucket always admits one request the service accepts at all). At most
+    ``max_clients`` buckets are kept; the least recently used is forgotten
+    first (a forgotten client starts again with a full bucket).
+    """
+
+    def __init__(self, per_min: float, what: str, setting: str, max_clients: int = 10_000
+                 ) -> None:
+        self.capacity = float(per_min)
+        self.rate_per_s = per_min / 60.0
+        self.what = what
+        self.setting = setting
+        self.max_clients = max_clients
+        self._buckets: OrderedDict[str, tuple[float, float]] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def take(self, client: str, cost: float) -> None:
+        """Spend ``cost`` from ``client``'s bucket, or raise :class:`Busy` (429)."""
+        cost = min(float(cost), self.capacity)
+        now = time.monotonic()
+        with self._lock:
+            level, then = self._buckets.pop(client, (self.capacity, now))
+            level = min(self.capacity, level + (now - then) * self.rate_per_s)
+            if level < cost:
+                self._buckets[client] = (level, now)
+                wait_s = (cost - level) / self.rate_per_s
+                raise Busy(429, f"rate limit: without a write token a client may ask "
+                                f"{self.capacity:.0f} {self.what} per minute ({self.setting}); "
+                                f"send 'Authorization: Bearer <token>' or retry in "
+                                f"{math.ceil(wait_s)} s", wait_s)
+            self._buckets[client] = (level - cost, now)
+            while len(self._buckets) > self.max_clients:
+                self._buckets.popitem(last=False)
+
+
+class PixelBudget:
+    """At most ``capacity_px`` pixels decoded at once; up to ``max_waiting`` requests queue.
+
+    First come, first served: a request waits while an earlier one waits, so a
+    stream of small frames cannot starve a large one.
+    """
+
+    def __init__(self, capacity_px: int, max_waiting: int, px_per_s: float = 40e6) -> None:
+        self.capacity_px = capacity_px
+        self.max_waiting = max_waiting
+        self.px_per_s = px_per_s  # decode + analysis speed, for Retry-After (measured ≈ 38 Mpx/s)
+        self._held_px = 0
+        self._waiting: list[tuple[int, asyncio.Future[None]]] = []
+
+    @property
+    def held_px(self) -> int:
+        return self._held_px
+
+    def _retry_after_s(self) -> float:
+        queued = self._held_px + sum(px for px, _ in self._waiting)
+        return queued / self.px_per_s
+
+    @asynccontextmanager
+    async def hold(self, pixels: int) -> AsyncIterator[None]:
+        """Hold ``pixels`` of the budget (a frame larger than the budget holds all of it)."""
+        pixels = min(int(pixels), self.capacity_px)
+        if self._waiting or self._held_px + pixels > self.capacity_px:
+            if len(self._waiting) >= self.max_waiting:
+                raise Busy(503, f"busy: {len(self._waiting)} image requests are waiting for "
+                                f"the decode budget of {self.capacity_px} pixels "
+                                "(HELIOTWIN_VISION_DECODE_PIXELS, HELIOTWIN_VISION_QUEUE)",
+                           self._retry_after_s())
+            turn: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+            entry = (pixels, turn)
+            self._waiting.append(entry)
+            try:
+                await turn
+            except BaseException:
+                if entry in self._waiting:
+                    self._waiting.remove(entry)
+                elif not turn.cancelled():  # granted, then cancelled: give it back
+                    self._release(pixels)
+                raise
+        else:
+            self._held_px += pixels
+        try:
+            yield
+        finally:
+            self._release(pixels)
+
+    def _release(self, pixels: int) -> None:
+        self._held_px -= pixels
+        while self._waiting:
+            px, turn = self._waiting[0]
+            if self._held_px + px > self.capacity_px:
+                break
+            self._waiting.pop(0)
+            if not turn.done():
+                self._held_px += px
+                turn.set_result(None)
+
+
+def prune_anonymous(conn: Connection, table: Any, keep: int) -> int:
+    """Delete the anonymous rows of ``table`` beyond the newest ``keep``; returns how many.
+
+    ``table`` is :class:`SimulationRun` (its series go with it) or :class:`VisionDetection`.
+    """
+    key = SimulationRun.run_id if table is SimulationRun else VisionDetection.id
+    q = select(key).where(table.anonymous.is_(True))
+    if table is SimulationRun:  # never a run still queued or running
+        q = q.where(SimulationRun.status.in_(("done", "failed")))
+    old = [r[0] for r in conn.execute(
+        q.order_by(table.created_at.desc(), key.desc()).offset(keep))]
+    for i in range(0, len(old), 500):
+        chunk = old[i:i + 500]
+        if table is SimulationRun:
+            conn.execute(delete(SimulationSeries).where(SimulationSeries.run_id.in_(chunk)))
+        conn.execute(delete(table).where(key.in_(chunk)))
+    return len(old)
+
+
+@dataclass
+class Limits:
+    """The service's bounds on anonymous work (``ServiceContext.limits``)."""
+
+    simulation_steps: RateLimiter
+    vision_pixels: RateLimiter
+    decode: PixelBudget
+
+    @classmethod
+    def from_settings(cls, s: Settings) -> Limits:
+        return cls(
+            RateLimiter(s.anonymous_simulation_steps_per_min, "simulated time steps",
+                        "HELIOTWIN_ANONYMOUS_SIMULATION_STEPS_PER_MIN"),
+            RateLimiter(s.anonymous_vision_pixels_per_min, "image pixels",
+                        "HELIOTWIN_ANONYMOUS_VISION_PIXELS_PER_MIN"),
+            PixelBudget(s.vision_decode_pixels, s.vision_queue),
+        )
