@@ -34,10 +34,16 @@ def meta(request: Request, settings: SettingsDep) -> dict[str, Any]:
     """What the dashboard needs to know about this service.
 
     ``viser_port`` is the port the 3D scene really listens on: it moves to the next
-    free port when the configured one is busy.
+    free port when the configured one is busy. ``mqtt`` is ``disabled`` (no
+    ``HELIOTWIN_MQTT_URL``), ``connected`` or ``retrying``; ``mqtt_status`` adds the
+    broker and the message counters.
     """
     scene = getattr(request.app.state, "scene", None)
+    ctx = getattr(request.app.state, "ctx", None)
+    mqtt = None if ctx is None or ctx.mqtt is None else ctx.mqtt.status()
     return {
+        "mqtt": "disabled" if mqtt is None else mqtt["state"],
+        "mqtt_status": mqtt,
         "version": service_version(),
         "viser_port": scene.port if scene is not None else settings.viser_port,
         "viser_enabled": scene is not None,

@@ -1,0 +1,1 @@
+"""MQTT ingestion beside HTTP, and Home Assistant discovery (``docs/service.md``)."""

@@ -1,0 +1,103 @@
+"""OpenDTU-style single values (``…/{array}/voltage``, ``…/current``, ``…/power``) → readings.
+
+Loggers like OpenDTU, AhoyDTU, Tasmota or ESPHome publish each quantity on a
+topic of its own, as a bare number, without a timestamp, every few seconds.
+:class:`MinuteAssembler` turns them into one reading per array per minute:
+
+- a value belongs to the UTC minute in which the service receives it, and the
+  reading is stamped at that minute's start;
+- a minute closes as soon as it holds voltage, current *and* power: the first
+  complete set is its reading, later values in the same minute are superseded
+  samples of an already stored minute (counted, not stored, not errors);
+- a minute still open ``grace_s`` after it ended closes then: with voltage and
+  current it is a reading (``power_w`` left out, so the ingest rule makes it
+  voltage·current); without either it is rejected with the names of the
+  missing quantities;
+- :meth:`MinuteAssembler.flush` closes everything still open (at shutdown).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+
+#: topic quantity → reading field
+QUANTITIES = {"voltage": "voltage_v", "current": "current_a", "power": "power_w"}
+_NUMBER = re.compile(rb"^\s*[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?\s*$")
+
+
+def parse_value(payload: bytes) -> float:
+    """A bare decimal number (``26.1``, ``-0.02``, ``1e3``) → float; ValueError otherwise."""
+    if len(payload) > 64 or not _NUMBER.match(payload):
+        raise ValueError(f"payload {payload[:64]!r} is not a decimal number")
+    value = float(payload)
+    if not math.isfinite(value):
+        raise ValueError(f"payload {payload[:64]!r} is not a finite number")
+    return value
+
+
+@dataclass
+class Closed:
+    """A closed minute: a reading (``values`` has voltage_v and current_a) or a rejection."""
+
+    site_id: str
+    array: str
+    minute_s: int
+    values: dict[str, float]
+    missing: list[str]
+    topics: list[str]
+
+
+@dataclass
+class _Open:
+    minute_s: int
+    values: dict[str, float] = field(default_factory=dict)
+    topics: list[str] = field(default_factory=list)
+
+
+class MinuteAssembler:
+    """Open minutes per (site, array); see the module docstring for the rule."""
+
+    def __init__(self, grace_s: float) -> None:
+        self.grace_s = grace_s
+        self._open: dict[tuple[str, str], _Open] = {}
+        self._done: dict[tuple[str, str], int] = {}  # last minute closed complete
+        self.superseded = 0
+
+    def add(self, site_id: str, array: str, quantity: str, value: float, topic: str,
+            now_s: float) -> list[Closed]:
+        """Take one value received at ``now_s``; the minutes this closes."""
+        key = (site_id, array)
+        minute = int(now_s // 60 * 60)
+        out: list[Closed] = []
+        cur = self._open.get(key)
+        if cur is not None and cur.minute_s != minute:
+            out.append(self._close(key))
+            cur = None
+        if cur is None:
+            if self._done.get(key) == minute:
+                self.superseded += 1
+                return out
+            cur = self._open[key] = _Open(minute)
+        cur.values[QUANTITIES[quantity]] = value
+        cur.topics.append(topic)
+        if len(cur.values) == len(QUANTITIES):
+            out.append(self._close(key))
+        return out
+
+    def due(self, now_s: float) -> list[Closed]:
+        """Close the minutes that ended more than ``grace_s`` before ``now_s``."""
+        late = [k for k, o in self._open.items() if o.minute_s + 60 + self.grace_s <= now_s]
+        return [self._close(k) for k in late]
+
+    def flush(self) -> list[Closed]:
+        """Close every open minute."""
+        return [self._close(k) for k in list(self._open)]
+
+    def _close(self, key: tuple[str, str]) -> Closed:
+        o = self._open.pop(key)
+        missing = [q for q, f in QUANTITIES.items() if f not in o.values and f != "power_w"]
+        if not missing:
+            self._done[key] = o.minute_s
+        return Closed(key[0], key[1], o.minute_s, o.values, missing, o.topics)

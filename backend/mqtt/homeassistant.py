@@ -1,0 +1,115 @@
+"""Home Assistant MQTT discovery: retained sensor configs and their states.
+
+For every array of every site with arrays, five sensors under one device per
+site (``homeassistant/sensor/heliotwin_{site_id}_{array}_{sensor}/config``,
+retained, so Home Assistant finds them whenever it connects):
+
+===================== ====== ============ ================= =========================
+sensor                unit   device_class state_class       value
+===================== ====== ============ ================= =========================
+``energy``            kWh    energy       total_increasing  measured energy, all time
+``energy_today``      kWh    energy       total_increasing  measured, since local midnight
+``power``             W      power        measurement       last reading (≤ 5 min old)
+``twin_energy_today`` kWh    energy       total_increasing  the twin's, since midnight
+``twin_power``        W      power        measurement       the twin's now
+===================== ====== ============ ================= =========================
+
+Energies come from the hourly rollups (:mod:`backend.measurements.rollups`, the
+one energy rule) — all time as the sum of a series' rollups, today from
+:func:`backend.measurements.status.status`, which the dashboard's tiles use too.
+Each state is a bare number on its own topic (``Settings.mqtt_ha_state_topic``),
+retained; a value that is unknown (no readings today, a logger silent for more
+than ``FRESH_S``) is not published, and the power sensors' ``expire_after``
+makes Home Assistant show them unavailable when the logger stops.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from typing import TYPE_CHECKING, Any
+
+import orjson
+
+from backend.measurements.status import FRESH_S, status
+from backend.mqtt.topics import Topics
+from backend.sites import SiteInfo
+from backend.storage.sqlraw import fetch
+from backend.storage.tables import SOURCE_CODES
+
+if TYPE_CHECKING:
+    from backend.context import ServiceContext
+
+#: sensor → (name, unit, device_class, state_class)
+SENSORS: dict[str, tuple[str, str, str, str]] = {
+    "energy": ("energy", "kWh", "energy", "total_increasing"),
+    "energy_today": ("energy today", "kWh", "energy", "total_increasing"),
+    "power": ("power", "W", "power", "measurement"),
+    "twin_energy_today": ("twin energy today", "kWh", "energy", "total_increasing"),
+    "twin_power": ("twin power", "W", "power", "measurement"),
+}
+_TOTAL = ("SELECT COALESCE(SUM(energy_wh), 0), COALESCE(SUM(n), 0) FROM measurement_rollups "
+          "WHERE array_id = ? AND source = ?")
+
+
+def object_id(site_id: str, array: str, sensor: str) -> str:
+    """``heliotwin_{site_id}_{array}_{sensor}``, in the characters discovery allows."""
+    return re.sub(r"[^A-Za-z0-9_-]", "_", f"heliotwin_{site_id}_{array}_{sensor}")
+
+
+def discovery(topics: Topics, info: SiteInfo, version: str) -> list[tuple[str, bytes]]:
+    """``(config topic, JSON config)`` of every sensor of ``info``'s arrays."""
+    site_id = info.site_id
+    device = {
+        "identifiers": [object_id(site_id, "site", "device")],
+        "name": f"heliotwin {info.site.name}",
+        "manufacturer": "heliotwin", "model": "dual-axis tracker digital twin",
+        "sw_version": version,
+    }
+    out = []
+    for array in info.arrays:
+        for sensor, (name, unit, device_class, state_class) in SENSORS.items():
+            oid = object_id(site_id, array, sensor)
+            config: dict[str, Any] = {
+                "name": f"{array} {name}", "unique_id": oid, "object_id": oid,
+                "state_topic": topics.ha_state.format(site_id=site_id, array=array,
+                                                      sensor=sensor),
+                "unit_of_measurement": unit, "device_class": device_class,
+                "state_class": state_class, "device": device,
+                "suggested_display_precision": 3 if unit == "kWh" else 0,
+            }
+            if sensor == "power":
+                config["expire_after"] = FRESH_S
+            out.append((f"{topics.ha_prefix}/sensor/{oid}/config", orjson.dumps(config)))
+    return out
+
+
+def states(ctx: ServiceContext, info: SiteInfo, topics: Topics,
+           now_s: float | None = None) -> list[tuple[str, bytes]]:
+    """``(state topic, number)`` of every sensor of ``info`` with a known value now."""
+    now = time.time() if now_s is None else now_s
+    tiles = status(ctx, info, now)
+    values: dict[str, dict[str, float | None]] = {}
+    with ctx.engine.connect() as conn:
+        for name, arr in info.arrays.items():
+            tile = tiles["arrays"][name]
+            total_wh, n = fetch(conn, _TOTAL, (arr.array_id, SOURCE_CODES["measured"]))[0]
+            values[name] = {
+                "energy": float(total_wh) / 1000.0 if n else None,
+                "energy_today": _kwh(tile["energy_today_wh"]),
+                "power": tile["power_w"] if tile["logger"] == "reporting" else None,
+                "twin_energy_today": _kwh(tile["twin_energy_today_wh"]),
+                "twin_power": tile["twin_power_w"],
+            }
+    out = []
+    for name, sensors in values.items():
+        for sensor, value in sensors.items():
+            if value is not None:
+                topic = topics.ha_state.format(site_id=info.site_id, array=name, sensor=sensor)
+                digits = 4 if SENSORS[sensor][1] == "kWh" else 1
+                out.append((topic, f"{float(value):.{digits}f}".encode()))
+    return out
+
+
+def _kwh(wh: float | None) -> float | None:
+    return None if wh is None else wh / 1000.0

@@ -1,0 +1,355 @@
+"""The MQTT side of the service: readings in, rejections and Home Assistant out.
+
+:class:`MqttService` runs in a thread of its own with its own asyncio loop
+(``heliotwin-mqtt``), started and stopped by :class:`backend.context.ServiceContext`
+when ``Settings.mqtt_url`` is set. While connected (aiomqtt) it:
+
+- subscribes (QoS 1) to ``Settings.mqtt_state_topic`` (one JSON reading) and to
+  ``Settings.mqtt_value_topic`` for each quantity (``voltage``, ``current``,
+  ``power``: bare numbers, assembled per minute by :mod:`backend.mqtt.assemble`);
+- maps each topic to a known site and array, validates the reading with the
+  HTTP ingest validator (:mod:`backend.mqtt.ingest`) and stores it through the
+  writer (idempotent: one row per array per minute);
+- publishes every rejected message with its reason to
+  ``Settings.mqtt_errors_topic`` (``_unknown`` as site id for unknown sites),
+  through an outbox that keeps what could not be sent until the next connection;
+- publishes the retained Home Assistant discovery configs at every connection,
+  and the sensor states every ``Settings.mqtt_publish_interval_s``
+  (:mod:`backend.mqtt.homeassistant`).
+
+A lost or refused connection is retried with exponential backoff (1 s, 2 s, …,
+``Settings.mqtt_retry_max_s``), each retry logged; :attr:`MqttService.state` is
+``connected`` or ``retrying`` (``/api/v1/meta`` shows it).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import ssl
+import threading
+import time
+from collections import deque
+from concurrent.futures import Future
+from importlib.metadata import PackageNotFoundError, version
+from typing import TYPE_CHECKING, Any
+from urllib.parse import unquote, urlsplit
+
+import aiomqtt
+
+from backend.measurements.parse import Batch
+from backend.measurements.writer import MeasurementJob
+from backend.mqtt import homeassistant
+from backend.mqtt.assemble import QUANTITIES, Closed, MinuteAssembler, parse_value
+from backend.mqtt.ingest import Rejection, limits, minute_batch, state_batch
+from backend.mqtt.topics import Topics
+from backend.storage.tables import SOURCE_CODES
+
+if TYPE_CHECKING:
+    from backend.context import ServiceContext
+
+logger = logging.getLogger(__name__)
+
+UNKNOWN_SITE = "_unknown"
+#: Most rejections kept while the broker is away (the oldest go first, logged).
+OUTBOX_MAX = 10_000
+#: Most readings waiting for the writer before the receiver waits too.
+MAX_IN_FLIGHT = 512
+
+
+def _version() -> str:
+    try:
+        return version("heliotwin")
+    except PackageNotFoundError:
+        return "0+unknown"
+
+
+def broker_of(url: str) -> dict[str, Any]:
+    """``mqtt://[user:password@]host[:port]`` (or ``mqtts://``) → aiomqtt ``Client`` arguments."""
+    parts = urlsplit(url)
+    if parts.scheme not in ("mqtt", "mqtts") or not parts.hostname:
+        raise ValueError(f"HELIOTWIN_MQTT_URL {url!r}: expected mqtt://[user:password@]host[:port]"
+                         " or mqtts://…")
+    tls = parts.scheme == "mqtts"
+    return {
+        "hostname": parts.hostname, "port": parts.port or (8883 if tls else 1883),
+        "username": unquote(parts.username) if parts.username else None,
+        "password": unquote(parts.password) if parts.password else None,
+        "tls_context": ssl.create_default_context() if tls else None,
+    }
+
+
+def check_no_echo(topics: Topics) -> None:
+    """ValueError when a topic the service publishes would come back as a reading."""
+    published = [topics.errors.format(site_id="s")] + [
+        topics.ha_state.format(site_id="s", array="a", sensor=x) for x in homeassistant.SENSORS]
+    for topic in published:
+        value = topics.value.match(topic)
+        if topics.state.match(topic) is not None or (
+                value is not None and value["quantity"] in QUANTITIES):
+            raise ValueError(f"the service publishes to {topic!r}, which its reading templates "
+                             f"({topics.state.text}, {topics.value.text}) would take back in: "
+                             "change HELIOTWIN_MQTT_ERRORS_TOPIC or HELIOTWIN_MQTT_HA_STATE_TOPIC")
+
+
+class MqttService:
+    """MQTT ingestion and Home Assistant publishing (see the module docstring)."""
+
+    def __init__(self, ctx: ServiceContext) -> None:
+        s = ctx.settings
+        if s.mqtt_url is None:
+            raise ValueError("HELIOTWIN_MQTT_URL is not set")
+        self.ctx = ctx
+        self.broker = broker_of(s.mqtt_url)
+        self.where = f"{self.broker['hostname']}:{self.broker['port']}"
+        self.topics = Topics.from_settings(s.mqtt_state_topic, s.mqtt_value_topic,
+                                           s.mqtt_errors_topic, s.mqtt_ha_state_topic,
+                                           s.mqtt_ha_prefix)
+        check_no_echo(self.topics)
+        self.limits = limits(s)
+        self.assembler = MinuteAssembler(s.mqtt_minute_grace_s)
+        self.state = "retrying"
+        self.counts = {"received": 0, "stored": 0, "duplicates": 0, "rejected": 0,
+                       "retries": 0}
+        self._outbox: deque[tuple[str, bytes]] = deque()
+        self._in_flight: set[asyncio.Task[None]] = set()
+        self._thread: threading.Thread | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self._outbox_ready: asyncio.Event | None = None
+
+    # -- lifecycle (called from other threads) -------------------------------
+    def start(self) -> None:
+        """Start the MQTT thread; returns once its loop runs (connecting goes on there)."""
+        ready = threading.Event()
+        self._thread = threading.Thread(target=lambda: asyncio.run(self._run(ready)),
+                                        name="heliotwin-mqtt", daemon=True)
+        self._thread.start()
+        ready.wait(10.0)
+
+    def stop(self, timeout_s: float = 20.0) -> None:
+        """Close the open minutes, finish stores and rejections, disconnect, end the thread."""
+        if self._thread is None or self._loop is None or self._stop is None:
+            return
+        self._loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(timeout_s)
+        self._thread = None
+
+    def status(self) -> dict[str, Any]:
+        """State and counters for ``/api/v1/meta``."""
+        return {"state": self.state, "broker": self.where, **self.counts,
+                "superseded": self.assembler.superseded, "unsent_errors": len(self._outbox)}
+
+    # -- the loop --------------------------------------------------------------
+    async def _run(self, ready: threading.Event) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stop = asyncio.Event()
+        self._outbox_ready = asyncio.Event()
+        ready.set()
+        closer = asyncio.create_task(self._close_minutes())
+        delay = 1.0
+        s = self.ctx.settings
+        try:
+            while not self._stop.is_set():
+                try:
+                    client = aiomqtt.Client(
+                        **self.broker, identifier=s.mqtt_client_id,
+                        clean_session=None if s.mqtt_client_id is None else False,
+                        keepalive=30, timeout=10.0)
+                    async with client:
+                        delay = 1.0
+                        await self._session(client)
+                except Exception as exc:  # noqa: BLE001 - MqttError, or a bug: reconnect
+                    if self._stop.is_set():
+                        break
+                    if not isinstance(exc, aiomqtt.MqttError):
+                        logger.exception("MQTT session failed")
+                    self.state = "retrying"
+                    self.counts["retries"] += 1
+                    logger.warning("MQTT broker %s: %s; retry %d in %.0f s", self.where, exc,
+                                   self.counts["retries"], delay)
+                    try:
+                        await asyncio.wait_for(self._stop.wait(), delay)
+                    except TimeoutError:
+                        pass
+                    delay = min(2.0 * delay, s.mqtt_retry_max_s)
+        finally:
+            closer.cancel()
+            for closed in self.assembler.flush():  # not connected any more: logged below
+                self._take_minute(closed)
+            if self._in_flight:
+                await asyncio.wait(self._in_flight)
+            for topic, payload in self._outbox:
+                logger.warning("MQTT rejection not published (broker away) to %s: %s", topic,
+                               payload[:300].decode("utf-8", "replace"))
+            logger.info("MQTT stopped: %s", self.status())
+
+    async def _session(self, client: aiomqtt.Client) -> None:
+        assert self._stop is not None
+        filters = [(self.topics.state.filter(), 1)] + [
+            (self.topics.value.filter(quantity=q), 1) for q in QUANTITIES]
+        await client.subscribe(filters)
+        self.state = "connected"
+        logger.info("MQTT connected to %s; subscribed to %s", self.where,
+                    ", ".join(f for f, _ in filters))
+        tasks = [asyncio.create_task(c) for c in (
+            self._receive(client), self._send_outbox(client), self._publish_ha(client))]
+        stop = asyncio.create_task(self._stop.wait())
+        done, _ = await asyncio.wait([*tasks, stop], return_when=asyncio.FIRST_COMPLETED)
+        if stop in done:  # shutdown: last minutes and rejections out while still connected
+            tasks[0].cancel()
+            tasks[2].cancel()
+            await asyncio.gather(tasks[0], tasks[2], return_exceptions=True)
+            while len(client.messages):  # received (acknowledged) but not handled yet
+                self._take(await anext(client.messages))
+            for closed in self.assembler.flush():
+                self._take_minute(closed)
+            if self._in_flight:
+                await asyncio.wait(self._in_flight, timeout=10.0)
+            await self._drain(client, time.monotonic() + 5.0)
+            tasks[1].cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+            return
+        stop.cancel()
+        for t in tasks:
+            t.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        for finished in done:
+            finished.result()  # re-raise (MqttError → reconnect)
+        raise aiomqtt.MqttError("MQTT session ended")
+
+    # -- readings in -----------------------------------------------------------
+    async def _receive(self, client: aiomqtt.Client) -> None:
+        async for message in client.messages:
+            self._take(message)
+            if len(self._in_flight) >= MAX_IN_FLIGHT:
+                await asyncio.wait(self._in_flight, return_when=asyncio.FIRST_COMPLETED)
+
+    def _take(self, message: aiomqtt.Message) -> None:
+        payload = message.payload
+        raw = bytes(payload) if isinstance(payload, bytes | bytearray) else (
+            b"" if payload is None else str(payload).encode())
+        self.counts["received"] += 1
+        topic = message.topic.value
+        try:
+            self._handle(topic, raw, time.time())
+        except Exception as exc:  # a bug must not drop the message silently
+            logger.exception("MQTT message on %s not handled", topic)
+            self._reject(UNKNOWN_SITE, Rejection(
+                topic, f"internal error ({type(exc).__name__}); not stored", raw))
+
+    def _handle(self, topic: str, payload: bytes, now_s: float) -> None:
+        fields = self.topics.state.match(topic)
+        quantity = None
+        if fields is None:
+            fields = self.topics.value.match(topic)
+            quantity = None if fields is None else fields["quantity"]
+        if fields is None or (quantity is not None and quantity not in QUANTITIES):
+            self._reject(UNKNOWN_SITE, Rejection(topic, "topic matches no reading template "
+                                                        f"({self.topics.state.text}, "
+                                                        f"{self.topics.value.text})", payload))
+            return
+        site_id, array = fields["site_id"], fields["array"]
+        info = self.ctx.registry.get(site_id)
+        if info is None:
+            known = ", ".join(self.ctx.registry.sites) or "none"
+            self._reject(UNKNOWN_SITE, Rejection(
+                topic, f"unknown site {site_id[:64]!r}; known sites: {known}", payload))
+            return
+        if array not in info.arrays:
+            self._reject(site_id, Rejection(
+                topic, f"unknown array {array[:64]!r}; this site has "
+                       f"{', '.join(info.arrays) or 'no arrays'}", payload))
+            return
+        if quantity is None:
+            self._store(site_id, topic, state_batch(info, array, topic, payload, self.limits),
+                        payload)
+            return
+        try:
+            value = parse_value(payload)
+        except ValueError as exc:
+            self._reject(site_id, Rejection(topic, str(exc), payload))
+            return
+        for closed in self.assembler.add(site_id, array, quantity, value, topic, now_s):
+            self._take_minute(closed)
+
+    def _take_minute(self, closed: Closed) -> None:
+        info = self.ctx.registry.get(closed.site_id)
+        if info is not None:
+            self._store(closed.site_id, ", ".join(sorted(set(closed.topics))),
+                        minute_batch(info, closed, self.limits), b"")
+
+    async def _close_minutes(self) -> None:
+        while True:
+            await asyncio.sleep(1.0)
+            for closed in self.assembler.due(time.time()):
+                self._take_minute(closed)
+
+    def _store(self, site_id: str, topic: str, result: Batch | Rejection,
+               payload: bytes) -> None:
+        if isinstance(result, Rejection):
+            self._reject(site_id, result)
+            return
+        job = MeasurementJob(result.array_ids, SOURCE_CODES["measured"], result.ts_s,
+                             result.voltage_v, result.current_a, result.power_w)
+        task = asyncio.create_task(self._committed(site_id, topic, self.ctx.writer.submit(job),
+                                                   payload))
+        self._in_flight.add(task)
+        task.add_done_callback(self._in_flight.discard)
+
+    async def _committed(self, site_id: str, topic: str, future: Future[tuple[int, int]],
+                         payload: bytes) -> None:
+        try:
+            accepted, duplicates = await asyncio.wrap_future(future)
+        except Exception as exc:  # noqa: BLE001 - nothing stored: the logger must send again
+            logger.error("storing an MQTT reading of %s failed: %r", site_id, exc)
+            self._reject(site_id, Rejection(
+                topic, f"storage unavailable ({type(exc).__name__}); nothing "
+                                       "was stored, publish the reading again", payload))
+            return
+        self.counts["stored"] += accepted
+        self.counts["duplicates"] += duplicates
+
+    # -- rejections and Home Assistant out ---------------------------------------
+    def _reject(self, site_id: str, rejection: Rejection) -> None:
+        self.counts["rejected"] += 1
+        topic = self.topics.errors.format(site_id=site_id)
+        logger.info("MQTT message on %s rejected: %s", rejection.topic, rejection.reason)
+        if len(self._outbox) >= OUTBOX_MAX:
+            old_topic, old = self._outbox.popleft()
+            logger.warning("MQTT outbox full: rejection for %s dropped: %s", old_topic,
+                           old[:300].decode("utf-8", "replace"))
+        self._outbox.append((topic, rejection.message(time.time())))
+        if self._outbox_ready is not None:
+            self._outbox_ready.set()
+
+    async def _send_outbox(self, client: aiomqtt.Client) -> None:
+        assert self._outbox_ready is not None
+        while True:
+            await self._drain(client, None)
+            self._outbox_ready.clear()
+            if not self._outbox:
+                await self._outbox_ready.wait()
+
+    async def _drain(self, client: aiomqtt.Client, deadline: float | None) -> None:
+        while self._outbox and (deadline is None or time.monotonic() < deadline):
+            topic, payload = self._outbox[0]
+            await client.publish(topic, payload, qos=1)
+            self._outbox.popleft()  # only once the broker has it
+
+    async def _publish_ha(self, client: aiomqtt.Client) -> None:
+        sites = [i for i in self.ctx.registry.sites.values() if i.arrays]
+        for info in sites:
+            for topic, config in homeassistant.discovery(self.topics, info, _version()):
+                await client.publish(topic, config, qos=1, retain=True)
+        while True:
+            for info in sites:
+                try:
+                    pubs = await asyncio.to_thread(homeassistant.states, self.ctx, info,
+                                                   self.topics)
+                except Exception:  # a database hiccup: try again next period
+                    logger.exception("Home Assistant states of %s not computed", info.site_id)
+                    continue
+                for topic, value in pubs:
+                    await client.publish(topic, value, qos=1, retain=True)
+            await asyncio.sleep(self.ctx.settings.mqtt_publish_interval_s)

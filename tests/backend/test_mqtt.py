@@ -1,0 +1,462 @@
+"""MQTT ingestion and Home Assistant discovery against a real Mosquitto and a real server.
+
+A ``heliotwin serve`` subprocess with ``HELIOTWIN_MQTT_URL`` set talks to the
+Mosquitto at 127.0.0.1:1883 (``MQTT_TEST_URL`` to change it); the tests publish
+and subscribe with paho-mqtt, as a field logger or Home Assistant would, and
+read back over HTTP. Every run uses its own topic prefix (templates and
+discovery prefix), so parallel runs on one broker do not see each other; the
+retained messages it leaves are cleared at the end. The reconnection test runs
+its own Mosquitto process on a free port, started after the service and killed
+under it. Without a broker the tests skip, unless HELIOTWIN_REQUIRE_SERVICES=1.
+
+The pure parts (topic templates, the per-minute assembly) are tested without a
+broker at the top.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+import shutil
+import socket
+import subprocess
+import threading
+import time
+import uuid
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlsplit
+
+import httpx
+import paho.mqtt.client as mqtt
+import pytest
+from live_service import REQUIRE_SERVICES, ServerProcess, free_port, new_database
+
+from backend.mqtt.assemble import MinuteAssembler, parse_value
+from backend.mqtt.service import check_no_echo
+from backend.mqtt.topics import Template, Topics
+
+BROKER = urlsplit(os.environ.get("MQTT_TEST_URL", "mqtt://127.0.0.1:1883"))
+HOST, PORT = BROKER.hostname or "127.0.0.1", BROKER.port or 1883
+SITE = "tehuantepec"
+WAIT_S = 30.0  # how long a test waits for something to arrive (not a speed check)
+
+
+# ---------------------------------------------------------------- pure parts
+
+
+def test_templates_match_filter_and_format() -> None:
+    t = Template.parse("solar/{site_id}/{array}/{quantity}", ("site_id", "array", "quantity"))
+    assert t.match("solar/tehuantepec/fixed/power") == {
+        "site_id": "tehuantepec", "array": "fixed", "quantity": "power"}
+    assert t.match("solar/tehuantepec/fixed") is None
+    assert t.match("other/tehuantepec/fixed/power") is None
+    assert t.filter(quantity="voltage") == "solar/+/+/voltage"
+    assert t.format(site_id="a", array="b", quantity="c") == "solar/a/b/c"
+    with pytest.raises(ValueError, match="cannot be an MQTT topic level"):
+        t.format(site_id="a/b", array="b", quantity="c")
+    with pytest.raises(ValueError, match="whole level"):
+        Template.parse("x/site-{site_id}/{array}", ("site_id", "array"))
+    with pytest.raises(ValueError, match="HELIOTWIN_MQTT_STATE_TOPIC"):
+        Topics.from_settings("x/{site_id}/state", "x/{site_id}/{array}/{quantity}",
+                             "x/{site_id}/errors", "x/{site_id}/{array}/{sensor}", "ha")
+
+
+def test_published_topics_never_come_back_as_readings() -> None:
+    ok = Topics.from_settings("h/{site_id}/{array}/state", "h/{site_id}/{array}/{quantity}",
+                              "h/{site_id}/errors", "h/{site_id}/{array}/ha/{sensor}", "ha")
+    check_no_echo(ok)
+    echo = Topics.from_settings("h/{site_id}/{array}/state", "h/{site_id}/{array}/{quantity}",
+                                "h/{site_id}/errors", "h/{site_id}/{array}/{sensor}", "ha")
+    with pytest.raises(ValueError, match="HELIOTWIN_MQTT_HA_STATE_TOPIC"):
+        check_no_echo(echo)  # the HA "power" state would be read as a single value
+
+
+def test_single_values_are_assembled_per_minute() -> None:
+    a = MinuteAssembler(grace_s=5.0)
+    t = 1_710_525_600.0  # a minute start
+    assert a.add("s", "fixed", "voltage", 25.0, "v", t + 1) == []
+    assert a.add("s", "fixed", "current", 2.0, "c", t + 1.1) == []
+    closed = a.add("s", "fixed", "power", 50.0, "p", t + 1.2)  # complete: closes at once
+    assert len(closed) == 1 and closed[0].minute_s == int(t) and not closed[0].missing
+    assert closed[0].values == {"voltage_v": 25.0, "current_a": 2.0, "power_w": 50.0}
+    assert a.add("s", "fixed", "voltage", 26.0, "v", t + 30) == []  # same minute: superseded
+    assert a.superseded == 1
+    # voltage and current only: closes after the grace, power left to the ingest rule
+    a.add("s", "fixed", "voltage", 25.0, "v", t + 61)
+    a.add("s", "fixed", "current", 2.0, "c", t + 62)
+    assert a.due(t + 124) == []
+    (late,) = a.due(t + 125)
+    assert late.minute_s == int(t) + 60 and late.values == {"voltage_v": 25.0, "current_a": 2.0}
+    assert not late.missing
+    # voltage alone, then a value of the next minute: the first closes incomplete
+    a.add("s", "fixed", "voltage", 25.0, "v", t + 121)
+    (incomplete,) = a.add("s", "fixed", "power", 10.0, "p", t + 185)
+    assert incomplete.missing == ["current"]
+    assert [c.minute_s for c in a.flush()] == [int(t) + 180]
+
+
+def test_single_values_must_be_plain_numbers() -> None:
+    assert parse_value(b"26.1") == 26.1 and parse_value(b" -0.5\n") == -0.5
+    assert parse_value(b"1e3") == 1000.0
+    for bad in (b"1_0", b"nan", b"inf", b"0x10", b"", b"26,1", b"1e999"):
+        with pytest.raises(ValueError):
+            parse_value(bad)
+
+
+# ---------------------------------------------------------------- broker helpers
+
+
+def _broker_up(host: str, port: int) -> bool:
+    try:
+        with socket.create_connection((host, port), timeout=2.0):
+            return True
+    except OSError:
+        return False
+
+
+def need_broker() -> None:
+    """Skip (or fail under HELIOTWIN_REQUIRE_SERVICES=1) when Mosquitto does not answer."""
+    if _broker_up(HOST, PORT):
+        return
+    why = f"no MQTT broker at {HOST}:{PORT} (start Mosquitto: docs/service.md)"
+    if REQUIRE_SERVICES:
+        pytest.fail(why + " (HELIOTWIN_REQUIRE_SERVICES=1)")
+    pytest.skip(why)
+
+
+class Watcher:
+    """A paho-mqtt subscriber that keeps every message it gets."""
+
+    def __init__(self, *filters: str, host: str = HOST, port: int = PORT) -> None:
+        self.messages: list[mqtt.MQTTMessage] = []
+        self._cond = threading.Condition()
+        subscribed = threading.Event()
+        self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2,
+                                  client_id=f"ht-test-{uuid.uuid4().hex[:8]}")
+        self.client.on_connect = lambda c, *_: c.subscribe([(f, 1) for f in filters])
+        self.client.on_subscribe = lambda *_: subscribed.set()
+        self.client.on_message = self._on_message
+        self.client.connect(host, port)
+        self.client.loop_start()
+        assert subscribed.wait(WAIT_S), f"could not subscribe to {filters}"
+
+    def _on_message(self, client: Any, userdata: Any, msg: mqtt.MQTTMessage) -> None:
+        with self._cond:
+            self.messages.append(msg)
+            self._cond.notify_all()
+
+    def wait(self, pred: Callable[[mqtt.MQTTMessage], bool], what: str) -> mqtt.MQTTMessage:
+        """The first message for which ``pred`` holds (waiting up to WAIT_S for it)."""
+        deadline = time.monotonic() + WAIT_S
+        with self._cond:
+            while True:
+                hit = next((m for m in self.messages if pred(m)), None)
+                if hit is not None:
+                    return hit
+                left = deadline - time.monotonic()
+                assert left > 0, f"no {what}; got {[m.topic for m in self.messages]}"
+                self._cond.wait(left)
+
+    def close(self) -> None:
+        self.client.loop_stop()
+        self.client.disconnect()
+
+
+def publish_all(messages: list[tuple[str, str | bytes]], retain: bool = False,
+                host: str = HOST, port: int = PORT) -> None:
+    """Publish with QoS 1, one connection, waiting for each acknowledgement."""
+    c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=f"ht-pub-{uuid.uuid4().hex[:8]}")
+    c.connect(host, port)
+    c.loop_start()
+    try:
+        for topic, payload in messages:
+            c.publish(topic, payload, qos=1, retain=retain).wait_for_publish(WAIT_S)
+    finally:
+        c.loop_stop()
+        c.disconnect()
+
+
+def publish(topic: str, payload: str | bytes, host: str = HOST, port: int = PORT) -> None:
+    """Publish one message with QoS 1 and wait for the broker's acknowledgement."""
+    publish_all([(topic, payload)], host=host, port=port)
+
+
+def clear_retained(*filters: str) -> None:
+    """Remove the retained messages under ``filters`` (an empty retained payload each)."""
+    w = Watcher(*filters)
+    time.sleep(1.0)  # retained messages arrive right after the subscription
+    w.close()
+    topics = sorted({m.topic for m in w.messages if m.retain and m.payload})
+    publish_all([(t, b"") for t in topics], retain=True)
+
+
+def mqtt_env(prefix: str, url: str) -> dict[str, str]:
+    return {
+        "HELIOTWIN_MQTT_URL": url,
+        "HELIOTWIN_MQTT_STATE_TOPIC": prefix + "/{site_id}/{array}/state",
+        "HELIOTWIN_MQTT_VALUE_TOPIC": prefix + "/{site_id}/{array}/{quantity}",
+        "HELIOTWIN_MQTT_ERRORS_TOPIC": prefix + "/{site_id}/errors",
+        "HELIOTWIN_MQTT_HA_STATE_TOPIC": prefix + "/{site_id}/{array}/ha/{sensor}",
+        "HELIOTWIN_MQTT_HA_PREFIX": prefix + "_ha",
+        "HELIOTWIN_MQTT_PUBLISH_INTERVAL_S": "2",
+        "HELIOTWIN_MQTT_RETRY_MAX_S": "2",
+    }
+
+
+def meta(base_url: str) -> dict[str, Any]:
+    return httpx.get(base_url + "/api/v1/meta", timeout=30.0).json()  # type: ignore[no-any-return]
+
+
+def wait_state(base_url: str, state: str) -> dict[str, Any]:
+    deadline = time.monotonic() + WAIT_S
+    while True:
+        m = meta(base_url)
+        if m["mqtt"] == state:
+            return m
+        assert time.monotonic() < deadline, f"mqtt never {state}: {m['mqtt_status']}"
+        time.sleep(0.2)
+
+
+def stored(base_url: str, array: str, start: str, end: str, want: int) -> list[dict[str, Any]]:
+    """The readings of ``array`` in ``[start, end)``, once there are ``want`` of them."""
+    deadline = time.monotonic() + WAIT_S
+    while True:
+        r = httpx.get(f"{base_url}/api/v1/sites/{SITE}/measurements", timeout=30.0,
+                      params={"array": array, "start": start, "end": end})
+        assert r.status_code == 200, r.text
+        points: list[dict[str, Any]] = r.json()["points"]
+        if len(points) >= want:
+            return points
+        assert time.monotonic() < deadline, f"{len(points)} readings stored, not {want}"
+        time.sleep(0.2)
+
+
+def minute(offset_min: int) -> dt.datetime:
+    now = dt.datetime.now(dt.UTC).replace(second=0, microsecond=0)
+    return now + dt.timedelta(minutes=offset_min)
+
+
+def iso(t: dt.datetime) -> str:
+    return t.isoformat().replace("+00:00", "Z")
+
+
+# ---------------------------------------------------------------- against the shared broker
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, str]]:
+    """A running service on the shared broker: ``(base_url, topic prefix)``."""
+    need_broker()
+    prefix = f"httest{uuid.uuid4().hex[:10]}"
+    tmp = tmp_path_factory.mktemp("mqtt")
+    db = new_database("sqlite", tmp)
+    proc = ServerProcess(db.url, tmp / "server.log",
+                         extra_env=mqtt_env(prefix, f"mqtt://{HOST}:{PORT}")).start()
+    try:
+        wait_state(proc.base_url, "connected")
+        yield proc.base_url, prefix
+    finally:
+        proc.stop()
+        clear_retained(f"{prefix}/#", f"{prefix}_ha/#")
+
+
+def test_a_published_reading_is_stored_once(service: tuple[str, str]) -> None:
+    base_url, prefix = service
+    t0, t1 = minute(-12), minute(-11)
+    topic = f"{prefix}/{SITE}/tracker/state"
+    publish(topic, json.dumps({"ts": iso(t0), "voltage_v": 25.0, "current_a": 4.0,
+                               "power_w": 100.0}))
+    publish(topic, json.dumps({"ts": t1.isoformat(), "voltage_v": 25.0, "current_a": 8.0}))
+    points = stored(base_url, "tracker", iso(t0), iso(t1 + dt.timedelta(minutes=1)), 2)
+    assert [(p["ts"], p["voltage_v"], p["current_a"], p["power_w"]) for p in points] == [
+        (iso(t0), 25.0, 4.0, 100.0), (iso(t1), 25.0, 8.0, 200.0)]  # power: voltage·current
+    before = meta(base_url)["mqtt_status"]["duplicates"]
+    publish(topic, json.dumps({"ts": iso(t0), "voltage_v": 25.0, "current_a": 4.0}))
+    deadline = time.monotonic() + WAIT_S
+    while meta(base_url)["mqtt_status"]["duplicates"] == before:
+        assert time.monotonic() < deadline, "the repeated reading was never counted"
+        time.sleep(0.2)
+    assert len(stored(base_url, "tracker", iso(t0), iso(t1 + dt.timedelta(minutes=1)), 2)) == 2
+
+
+@pytest.mark.parametrize(("where", "payload", "reason"), [
+    ("tracker/state", '{"ts": "2024-03-15T12:00:00", "voltage_v"', "invalid JSON"),
+    ("tracker/state", '{"ts": "2024-03-15T12:00:00", "voltage_v": 26, "current_a": 1}',
+     "no UTC offset"),
+    ("tracker/state", '{"ts": "2024-03-15T12:00:00Z", "voltage_v": 26, "current_a": 1, '
+                      '"power_w": 500}', "disagrees"),
+    ("tracker/state", '{"ts": "2024-03-15T12:00:00Z", "voltage_v": 26, "current_a": 1, '
+                      '"array": "fixed"}', "not the topic's array"),
+    ("tracker/state", '[{"ts": "2024-03-15T12:00:00Z"}]', "one JSON object"),
+    ("roof/state", '{"ts": "2024-03-15T12:00:00Z", "voltage_v": 26, "current_a": 1}',
+     "unknown array 'roof'"),
+    ("fixed/voltage", "1_0", "not a decimal number"),
+])
+def test_a_rejected_message_is_reported_with_its_reason(
+        service: tuple[str, str], where: str, payload: str, reason: str) -> None:
+    base_url, prefix = service
+    errors = Watcher(f"{prefix}/{SITE}/errors")
+    try:
+        topic = f"{prefix}/{SITE}/{where}"
+        publish(topic, payload)
+        msg = errors.wait(lambda m: json.loads(m.payload)["topic"] == topic
+                          and json.loads(m.payload)["payload"] == payload, f"error on {topic}")
+    finally:
+        errors.close()
+    body = json.loads(msg.payload)
+    assert reason in body["reason"], body
+    assert body["received_at"].endswith("+00:00")
+    r = httpx.get(f"{base_url}/api/v1/sites/{SITE}/measurements", timeout=30.0,
+                  params={"array": "tracker", "start": "2024-03-15", "end": "2024-03-16"})
+    assert r.json()["points"] == []
+
+
+def test_an_unknown_site_is_reported_on_the_unknown_errors_topic(
+        service: tuple[str, str]) -> None:
+    _, prefix = service
+    errors = Watcher(f"{prefix}/_unknown/errors")
+    try:
+        publish(f"{prefix}/atlantis/tracker/state", '{"ts": "2024-03-15T12:00:00Z"}')
+        msg = errors.wait(lambda m: True, "error for the unknown site")
+    finally:
+        errors.close()
+    body = json.loads(msg.payload)
+    assert body["topic"] == f"{prefix}/atlantis/tracker/state"
+    assert "unknown site 'atlantis'" in body["reason"] and SITE in body["reason"]
+
+
+def test_opendtu_style_values_are_assembled_into_a_minute(service: tuple[str, str]) -> None:
+    base_url, prefix = service
+    while dt.datetime.now(dt.UTC).second >= 50:  # keep the three values in one minute
+        time.sleep(0.5)
+    now = minute(0)
+    for quantity, value in (("voltage", "25.5"), ("current", "2"), ("power", "51.0")):
+        publish(f"{prefix}/{SITE}/fixed/{quantity}", value)
+    points = stored(base_url, "fixed", iso(now), iso(now + dt.timedelta(minutes=2)), 1)
+    assert points[0]["ts"] == iso(now)
+    assert (points[0]["voltage_v"], points[0]["current_a"], points[0]["power_w"]) == (
+        25.5, 2.0, 51.0)
+
+
+def test_home_assistant_discovery_is_retained(service: tuple[str, str]) -> None:
+    base_url, prefix = service
+    # a reading pair of the fixed array: 100 W then 200 W a minute apart = 2.5 Wh
+    t0 = minute(-30)
+    topic = f"{prefix}/{SITE}/fixed/state"
+    for k, amps in enumerate((4.0, 8.0)):
+        publish(topic, json.dumps({"ts": iso(t0 + dt.timedelta(minutes=k)),
+                                   "voltage_v": 25.0, "current_a": amps}))
+    stored(base_url, "fixed", iso(t0), iso(t0 + dt.timedelta(minutes=2)), 2)
+    # a subscriber that comes later still gets every config (retained)
+    ha = Watcher(f"{prefix}_ha/sensor/+/config")
+    try:
+        configs = {}
+        for array in ("tracker", "fixed"):
+            for sensor in ("energy", "energy_today", "power", "twin_power",
+                           "twin_energy_today"):
+                oid = f"heliotwin_{SITE}_{array}_{sensor}"
+                msg = ha.wait(lambda m, o=oid: m.topic == f"{prefix}_ha/sensor/{o}/config",
+                              f"config of {oid}")
+                assert msg.retain
+                configs[oid] = json.loads(msg.payload)
+    finally:
+        ha.close()
+    energy = configs[f"heliotwin_{SITE}_fixed_energy"]
+    assert (energy["device_class"], energy["state_class"], energy["unit_of_measurement"]) == (
+        "energy", "total_increasing", "kWh")
+    power = configs[f"heliotwin_{SITE}_tracker_power"]
+    assert (power["device_class"], power["unit_of_measurement"]) == ("power", "W")
+    assert energy["device"]["identifiers"] == power["device"]["identifiers"]
+    assert energy["unique_id"] == f"heliotwin_{SITE}_fixed_energy"
+    # the state topic of the all-time energy carries the stored readings' energy
+    states = Watcher(energy["state_topic"])
+    try:
+        states.wait(lambda m: m.payload == b"0.0025", "fixed energy of 0.0025 kWh")
+    finally:
+        states.close()
+
+
+# ---------------------------------------------------------------- reconnection
+
+
+def _mosquitto(port: int, folder: Path) -> subprocess.Popen[bytes]:
+    exe = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
+    conf = folder / "mosquitto.conf"
+    conf.write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n")
+    proc = subprocess.Popen([exe, "-c", str(conf)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + WAIT_S
+    while not _broker_up("127.0.0.1", port):
+        assert proc.poll() is None and time.monotonic() < deadline, "mosquitto did not start"
+        time.sleep(0.1)
+    return proc
+
+
+def test_the_service_reconnects_with_backoff(tmp_path: Path) -> None:
+    if not (shutil.which("mosquitto") or Path("/usr/sbin/mosquitto").exists()):
+        if REQUIRE_SERVICES:
+            pytest.fail("no mosquitto executable (HELIOTWIN_REQUIRE_SERVICES=1)")
+        pytest.skip("no mosquitto executable to start a broker of the test's own")
+    port = free_port()
+    prefix = f"httest{uuid.uuid4().hex[:10]}"
+    db = new_database("sqlite", tmp_path)
+    log = tmp_path / "server.log"
+    proc = ServerProcess(db.url, log, extra_env=mqtt_env(prefix, f"mqtt://127.0.0.1:{port}"))
+    proc.start()  # the broker is not there yet
+    broker = None
+    try:
+        m = wait_state(proc.base_url, "retrying")
+        assert m["mqtt_status"]["broker"] == f"127.0.0.1:{port}"
+        broker = _mosquitto(port, tmp_path)
+        wait_state(proc.base_url, "connected")
+        topic = f"{prefix}/{SITE}/tracker/state"
+        t0 = minute(-20)
+        publish(topic, json.dumps({"ts": iso(t0), "voltage_v": 25.0, "current_a": 1.0}),
+                port=port)
+        stored(proc.base_url, "tracker", iso(t0), iso(minute(1)), 1)
+
+        broker.terminate()  # the connection drops under the service
+        broker.wait(10)
+        wait_state(proc.base_url, "retrying")
+        broker = _mosquitto(port, tmp_path)
+        m = wait_state(proc.base_url, "connected")
+        assert m["mqtt_status"]["retries"] >= 2
+        publish(topic, json.dumps({"ts": iso(t0 + dt.timedelta(minutes=1)), "voltage_v": 25.0,
+                                   "current_a": 2.0}), port=port)
+        stored(proc.base_url, "tracker", iso(t0), iso(minute(1)), 2)
+    finally:
+        proc.stop()
+        if broker is not None:
+            broker.terminate()
+            broker.wait(10)
+    retries = [line for line in log.read_text().splitlines() if "retry" in line]
+    assert any(f"127.0.0.1:{port}" in line for line in retries), retries
+
+
+def test_a_persistent_session_keeps_readings_while_the_service_is_away(
+        tmp_path: Path) -> None:
+    need_broker()
+    prefix = f"httest{uuid.uuid4().hex[:10]}"
+    client_id = f"heliotwin-test-{uuid.uuid4().hex[:8]}"
+    db = new_database("sqlite", tmp_path)
+    env = {**mqtt_env(prefix, f"mqtt://{HOST}:{PORT}"), "HELIOTWIN_MQTT_CLIENT_ID": client_id}
+    proc = ServerProcess(db.url, tmp_path / "server.log", extra_env=env).start()
+    t0 = minute(-40)
+    try:
+        wait_state(proc.base_url, "connected")  # the broker now knows the session
+        proc.stop()
+        publish(f"{prefix}/{SITE}/tracker/state",  # while no service is connected
+                json.dumps({"ts": iso(t0), "voltage_v": 25.0, "current_a": 3.0}))
+        proc.start()
+        points = stored(proc.base_url, "tracker", iso(t0), iso(t0 + dt.timedelta(minutes=1)), 1)
+        assert points[0]["power_w"] == 75.0
+    finally:
+        proc.stop()
+        gone = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=client_id,
+                           clean_session=True)  # end the session on the broker
+        gone.connect(HOST, PORT)
+        gone.disconnect()
+        clear_retained(f"{prefix}/#", f"{prefix}_ha/#")
