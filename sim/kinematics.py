@@ -252,20 +252,86 @@ def inverse_kinematics(
     return az_joint, el_joint
 
 
+_MORNING_MARGIN_S = 3 * 3600
+
+
+def morning_azimuth(
+    times: ArrayLike, latitude: float, longitude: float
+) -> NDArray[np.float64]:
+    """Sun azimuth at the coming sunrise of each of ``times`` [°] (clockwise from N).
+
+    Sunrise by NREL SPA (Reda & Andreas 2004, appendix A.2, through
+    ``pvlib.solarposition.sun_rise_set_transit_spa``: the topocentric sun's
+    upper limb at the horizon with standard refraction), its azimuth by
+    :func:`sim.sun.solar_position` (SPA). Solar days are the calendar days of
+    the zone whose offset is the longitude's nearest hour. "Coming" is the
+    first sunrise later than three hours before the time, so that the
+    minutes between SPA's sunrise and an apparent elevation of 0° still hold
+    that morning's azimuth. NaN where no sunrise follows within two days
+    (polar day or night).
+
+    Parameters
+    ----------
+    times : array_like of timezone-aware datetimes
+    latitude, longitude : float
+        [°].
+    """
+    import datetime as dt
+
+    import pandas as pd
+    from pvlib import solarposition
+
+    from sim import sun
+
+    t = pd.DatetimeIndex(times)
+    if t.tz is None:
+        raise ValueError("times must be timezone-aware")
+    if not len(t):
+        return np.zeros(0)
+    zone = dt.timezone(dt.timedelta(hours=round(longitude / 15.0)))
+    local = t.tz_convert(zone)
+    days = pd.date_range(local.min().normalize() - pd.Timedelta(days=1),
+                         local.max().normalize() + pd.Timedelta(days=2), freq="D")
+    rises = pd.DatetimeIndex(solarposition.sun_rise_set_transit_spa(
+        days + pd.Timedelta(hours=12), latitude, longitude)["sunrise"]).dropna()
+    out = np.full(len(t), np.nan)
+    if not len(rises):
+        return out
+    rises = rises.tz_convert("UTC").sort_values()
+    rise_s = rises.as_unit("s").asi8
+    t_s = t.tz_convert("UTC").as_unit("s").asi8
+    # the coming morning's sunrise: the first later than 3 h before t, so that the minutes
+    # between SPA's sunrise (upper limb on the horizon, −0.83°) and the apparent elevation
+    # reaching 0° still hold that morning's azimuth (days are longer than 3 h below ~65°)
+    k = np.searchsorted(rise_s, t_s - _MORNING_MARGIN_S, side="left")
+    ok = k < len(rise_s)
+    ok[ok] = rise_s[k[ok]] - t_s[ok] <= 2 * 86400
+    rise_az = sun.solar_position(rises, latitude, longitude)["azimuth"].to_numpy(float)
+    out[ok] = rise_az[k[ok]]
+    return out
+
+
 def tracking_angles(
     solar_azimuth: ArrayLike,
     solar_elevation: ArrayLike,
     geometry: TrackerGeometry,
     reference_azimuth: ArrayLike | None = None,
+    night_azimuth: ArrayLike | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Joint angles of ideal tracking with the night stow.
 
     While the sun is above the horizon this is :func:`inverse_kinematics`;
     with the sun at or below it the tracker is stowed flat (elevation joint at
     ``elevation_max_deg``, the panel facing the zenith as far as the joint
-    allows) with its azimuth joint where tracking would put it. The twin
-    (:mod:`sim.twin`) and the 3D scene both use this, so the pose they report
-    at night is the same.
+    allows) and its azimuth joint stays put all night at the *morning's*
+    azimuth, ``night_azimuth`` (the sun's azimuth at the next sunrise,
+    :func:`morning_azimuth`), wrapped into the joint range near
+    ``reference_azimuth``: the one return move happens at dusk, when no energy
+    is at stake, and at dawn the tracker already faces the rising sun — no
+    swing through the night and no move at the start of the day. Where
+    ``night_azimuth`` is not given (or NaN) the stowed azimuth is due east
+    (90°), the morning side at any latitude. The twin (:mod:`sim.twin`) and
+    the 3D scene both use this, so the pose they report at night is the same.
 
     Parameters
     ----------
@@ -274,6 +340,8 @@ def tracking_angles(
     geometry : TrackerGeometry
     reference_azimuth : array_like, optional
         Azimuth joint angle to stay near [°] (see :func:`inverse_kinematics`).
+    night_azimuth : array_like, optional
+        Azimuth to hold while stowed [°], e.g. :func:`morning_azimuth` of the times.
 
     Returns
     -------
@@ -283,7 +351,20 @@ def tracking_angles(
     az_joint, el_joint = inverse_kinematics(
         solar_azimuth, solar_elevation, geometry, reference_azimuth=reference_azimuth
     )
-    sun_down = np.broadcast_to(np.asarray(solar_elevation, dtype=float), el_joint.shape) <= 0.0
+    elevation = np.broadcast_to(np.asarray(solar_elevation, dtype=float), el_joint.shape)
+    sun_down = elevation <= 0.0
+    hold = np.broadcast_to(
+        np.asarray(90.0 if night_azimuth is None else night_azimuth, dtype=float), az_joint.shape
+    )
+    hold = np.where(np.isnan(hold), 90.0, hold)
+    ref = (
+        np.full(az_joint.shape, 0.5 * (geometry.azimuth_min_deg + geometry.azimuth_max_deg))
+        if reference_azimuth is None
+        else np.broadcast_to(np.asarray(reference_azimuth, dtype=float), az_joint.shape)
+    )
+    stow_az = _wrap_azimuth_into_range(hold, geometry.azimuth_min_deg,
+                                       geometry.azimuth_max_deg, ref)
+    az_joint = np.where(sun_down & ~np.isnan(elevation), stow_az, az_joint)
     el_joint = np.where(sun_down, geometry.elevation_max_deg, el_joint)
     return az_joint, el_joint
 

@@ -12,12 +12,18 @@ model choices the twin uses and names units:
 - incidence-angle modifier: the physical (Fresnel + Beer) model of De Soto et
   al. (2006, doi:10.1016/j.solener.2005.06.010), the one the CEC model was
   fitted with, ``pvlib.iam.physical``;
-- weather: TMY3 files through ``pvlib.iotools.read_tmy3``.
+- weather: TMY3 files through ``pvlib.iotools.read_tmy3``, EPW files through
+  ``pvlib.iotools.read_epw``; a typical year is mapped onto any run's years by
+  :func:`typical_year_on` (calendar hour of the station's standard time, wrapped
+  at the year's ends).
 """
 
 from __future__ import annotations
 
+import functools
+
 from pathlib import Path
+from typing import IO, Any
 
 import numpy as np
 import pandas as pd
@@ -52,6 +58,32 @@ def airmass(apparent_zenith: np.ndarray, altitude: float = 0.0) -> tuple[np.ndar
     return am_rel.astype(float), am_abs.astype(float)
 
 
+@functools.lru_cache(maxsize=64)
+def _daily_linke(latitude: float, longitude: float) -> np.ndarray:
+    """pvlib's Linke turbidity for every UTC day of year 1–366, leap and common years
+    (rows 0 and 1): ``lookup_linke_turbidity`` reads its HDF5 table on every call,
+    which dominated short requests such as ``/positions``."""
+    from pvlib import clearsky
+
+    out = np.empty((2, 366))
+    for row, year in enumerate((2016, 2015)):
+        days = pd.date_range(f"{year}-01-01 12:00", periods=366 if row == 0 else 365,
+                             freq="D", tz="UTC")
+        out[row, : len(days)] = np.asarray(clearsky.lookup_linke_turbidity(
+            days, latitude, longitude), dtype=float)
+    out[1, 365] = out[1, 364]
+    return out
+
+
+def linke_turbidity(times: pd.DatetimeIndex, latitude: float, longitude: float) -> np.ndarray:
+    """pvlib's ``lookup_linke_turbidity(times, latitude, longitude)`` (interpolated by UTC day
+    of year), from a per-place cache of its 366 daily values: identical numbers."""
+    utc = times.tz_convert("UTC") if times.tz is not None else times
+    table = _daily_linke(float(latitude), float(longitude))
+    row = np.where(utc.is_leap_year, 0, 1)
+    return table[row, np.asarray(utc.dayofyear) - 1]
+
+
 def clearsky_ineichen(
     times: pd.DatetimeIndex,
     apparent_zenith: np.ndarray,
@@ -84,7 +116,7 @@ def clearsky_ineichen(
     """
     from pvlib import clearsky
 
-    linke = np.asarray(clearsky.lookup_linke_turbidity(times, latitude, longitude), dtype=float)
+    linke = linke_turbidity(times, latitude, longitude)
     am_rel, am_abs = airmass(apparent_zenith, altitude)
     dni_extra = extra_radiation(times)
     cs = clearsky.ineichen(
@@ -219,3 +251,138 @@ def read_tmy3(path: str | Path, coerce_year: int | None = None) -> tuple[pd.Data
     weather = data[["ghi", "dni", "dhi", "temp_air", "wind_speed"]].astype(float)
     weather.index = (data.index - pd.Timedelta(minutes=30)).tz_convert("UTC")
     return weather, dict(meta)
+
+
+WEATHER_FORMATS = ("tmy3", "epw")
+WEATHER_COLUMNS = ("ghi", "dni", "dhi", "temp_air", "wind_speed")
+HOURS_PER_TYPICAL_YEAR = 8760
+#: Days before each month in a year of 365 days (a typical year has no 29 February).
+_DAYS_BEFORE_MONTH = np.cumsum([0, 31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30])
+
+
+def weather_format(first_line: str) -> str:
+    """``"epw"`` or ``"tmy3"`` from a weather file's first line.
+
+    An EPW file starts with its ``LOCATION,`` record (EnergyPlus Auxiliary
+    Programs, "EnergyPlus Weather File Data Dictionary"); a TMY3 file with the
+    station's USAF number, name, state, UTC offset, latitude, longitude and
+    elevation (Wilcox & Marion 2008, NREL/TP-581-43156, section 2.1).
+    """
+    line = first_line.lstrip("\ufeff").strip()
+    if line.upper().startswith("LOCATION,"):
+        return "epw"
+    head = line.split(",")
+    if len(head) >= 7 and head[0].strip().isdigit():
+        return "tmy3"
+    raise ValueError("neither TMY3 (first line: USAF number, name, state, UTC offset, latitude, "
+                     "longitude, elevation) nor EPW (first line: LOCATION,…)")
+
+
+def _calendar_hour(index: pd.DatetimeIndex) -> np.ndarray:
+    """Hour of a 365-day year [0, 8760) of mid-hour stamps; 29 February counts as the 28th."""
+    month = index.month.to_numpy()
+    day = np.where((month == 2) & (index.day.to_numpy() == 29), 28, index.day.to_numpy())
+    return (_DAYS_BEFORE_MONTH[month - 1] + day - 1) * 24 + index.hour.to_numpy()
+
+
+def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
+                      ) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """Read a typical year (TMY3 or EPW) with pvlib, in its station's standard time.
+
+    ``pvlib.iotools.read_tmy3`` labels each hour by its end, ``read_epw`` by its
+    start (hour − 1); both are moved to the middle of the hour, so interpolation
+    onto finer steps is centred. The months of a typical year come from
+    different years; only the calendar hour matters (:func:`typical_year_on`).
+
+    Parameters
+    ----------
+    source : path or text buffer
+    fmt : {"tmy3", "epw"}, optional
+        Default: read from the first line (:func:`weather_format`).
+
+    Returns
+    -------
+    weather : pandas.DataFrame
+        8760 rows in calendar order, indexed by the mid-hour time in the
+        station's standard time (fixed UTC offset); ``ghi``, ``dni``, ``dhi``
+        [W m⁻²], ``temp_air`` [°C], ``wind_speed`` [m s⁻¹].
+    station : dict
+        ``format``, ``name``, ``latitude``, ``longitude`` [°], ``altitude`` [m],
+        ``utc_offset_h`` [h].
+    """
+    from pvlib import iotools
+
+    if fmt is None:
+        if isinstance(source, (str, Path)):
+            with open(source, encoding="utf-8", errors="replace") as f:
+                fmt = weather_format(f.readline())
+        else:
+            start = source.tell()
+            fmt = weather_format(source.readline())
+            source.seek(start)
+    if fmt not in WEATHER_FORMATS:
+        raise ValueError(f"format must be one of {', '.join(WEATHER_FORMATS)}; got {fmt!r}")
+    src: Any = str(source) if isinstance(source, Path) else source
+    if fmt == "tmy3":
+        data, meta = iotools.read_tmy3(src, map_variables=True)
+        middle = data.index - pd.Timedelta(minutes=30)
+        name = str(meta.get("Name", "")).strip('"')
+        offset = float(meta["TZ"])
+    else:
+        data, meta = iotools.read_epw(src)
+        middle = data.index + pd.Timedelta(minutes=30)
+        name = ", ".join(str(meta.get(k, "")).strip() for k in ("city", "country")
+                         if str(meta.get(k, "")).strip())
+        offset = float(meta["TZ"])
+    hour = _calendar_hour(pd.DatetimeIndex(middle))
+    if len(data) != HOURS_PER_TYPICAL_YEAR or len(np.unique(hour)) != HOURS_PER_TYPICAL_YEAR:
+        raise ValueError(f"a typical year has {HOURS_PER_TYPICAL_YEAR} distinct hours; this "
+                         f"{fmt.upper()} file has {len(np.unique(hour))} of {len(data)} rows")
+    weather = data[list(WEATHER_COLUMNS)].astype(float)
+    weather.index = pd.DatetimeIndex(middle)
+    weather = weather.iloc[np.argsort(hour, kind="stable")]
+    if not np.isfinite(weather[["ghi", "dni", "dhi"]].to_numpy()).all():
+        raise ValueError(f"the {fmt.upper()} file has missing irradiance (ghi, dni or dhi)")
+    station = {"format": fmt, "name": name, "latitude": float(meta["latitude"]),
+               "longitude": float(meta["longitude"]), "altitude": float(meta["altitude"]),
+               "utc_offset_h": offset}
+    return weather, station
+
+
+def typical_year_on(weather: pd.DataFrame, utc_offset_h: float, start: pd.Timestamp,
+                    end: pd.Timestamp) -> pd.DataFrame:
+    """A typical year laid onto the calendar of a run ``[start, end)``, hourly, UTC.
+
+    A typical meteorological year is one year of calendar hours recorded in its
+    station's standard time (Wilcox & Marion 2008, NREL/TP-581-43156), so any
+    run's hour takes the typical year's value for the same month, day and hour
+    of the station's clock, whatever the run's year: the first and last hours
+    wrap around (31 December 23:30 is followed by 1 January 00:30), a run may
+    span years, and 29 February of a leap year repeats 28 February.
+
+    Parameters
+    ----------
+    weather : pandas.DataFrame
+        8760 rows in calendar order, as from :func:`read_typical_year`.
+    utc_offset_h : float
+        The station's standard-time offset from UTC [h].
+    start, end : pandas.Timestamp
+        The run's range (timezone-aware).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Mid-hour rows from an hour before ``start`` to an hour after ``end``,
+        UTC index, the columns of ``weather``.
+    """
+    if len(weather) != HOURS_PER_TYPICAL_YEAR:
+        raise ValueError(f"a typical year has {HOURS_PER_TYPICAL_YEAR} rows, not {len(weather)}")
+    if start.tzinfo is None or end.tzinfo is None:
+        raise ValueError("start and end must be timezone-aware")
+    zone = pd.Timedelta(hours=utc_offset_h)
+    first = (start.tz_convert("UTC") + zone).tz_localize(None).floor("h") - pd.Timedelta(hours=1)
+    last = (end.tz_convert("UTC") + zone).tz_localize(None).ceil("h") + pd.Timedelta(hours=1)
+    local = pd.date_range(first, last, freq="h") + pd.Timedelta(minutes=30)
+    rows = weather.to_numpy(float)[_calendar_hour(local)]
+    index = (local - zone).tz_localize("UTC")
+    return pd.DataFrame(rows, index=index, columns=weather.columns)

@@ -306,6 +306,7 @@ def _arrays_step(
         app_el,
         site.tracker,
         reference_azimuth=_noon_reference_azimuth(times, site),
+        night_azimuth=kinematics.morning_azimuth(times, site.latitude, site.longitude),
     )
     ideal_normal = kinematics.forward_kinematics(az_ideal, el_ideal, site.tracker)
     if pose is None:

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+UNIT_ENDINGS = ("_deg", "_mrad", "_w", "_w_m2", "_c", "_a", "_v")
 
 
 def heliotwin(*args: str) -> subprocess.CompletedProcess:
@@ -100,7 +101,12 @@ def test_simulate_one_day_json_and_csv(tmp_path) -> None:
     assert d["tracker_energy_wh"] > d["fixed_energy_wh"] > 0
     rows = list(csv.DictReader(out.open()))
     assert len(rows) == 1440
-    assert rows[0]["ts"] == "2024-03-15T06:00:00+00:00"
+    assert rows[0]["time_utc"] == "2024-03-15T06:00:00+00:00"
+    assert rows[0]["time_local"] == "2024-03-15T00:00:00-06:00"
+    assert {"solar_azimuth_deg", "solar_apparent_elevation_deg", "tracker_poa_global_w_m2",
+            "tracker_temp_cell_c", "fixed_aoi_deg"} <= set(rows[0])
+    for name in rows[0]:  # every column that holds a quantity names its unit
+        assert name in ("time_utc", "time_local") or name.endswith(UNIT_ENDINGS), name
     assert sum(float(r["tracker_power_w"]) for r in rows) / 60 == pytest.approx(
         d["tracker_energy_wh"], rel=1e-4
     )
@@ -163,3 +169,147 @@ def test_progress_bar_only_on_a_terminal() -> None:
     assert proc.returncode == 0
     assert b"simulating" in seen and b"%" in seen
     assert b"gain" in out
+
+
+# ------------------------------------------------------------------ issue 14: weather, pipes
+
+
+def _tmy3() -> Path:
+    from sim.sky import pvlib_tmy3_path
+
+    return pvlib_tmy3_path()
+
+
+def _greensboro_sites(tmp_path: Path) -> Path:
+    """A sites directory with a site at the TMY3 station (Greensboro, NC)."""
+    cfg = json.loads((ROOT / "data" / "sites" / "tehuantepec.json").read_text())
+    cfg.update(site_id="greensboro", name="Greensboro NC (at TMY3 station 723170)",
+               latitude_deg=36.1, longitude_deg=-79.95, altitude_m=273.0,
+               timezone="America/New_York")
+    cfg["arrays"]["fixed"]["surface_tilt_deg"] = 36.0
+    sites = tmp_path / "sites"
+    sites.mkdir()
+    (sites / "greensboro.json").write_text(json.dumps(cfg))
+    return sites
+
+
+def test_the_year_on_a_distant_tmy3_is_a_choice_then_runs_with_units_in_the_csv(
+        tmp_path: Path) -> None:
+    """The issue's command: a whole year on pvlib's Greensboro TMY3 at the Tehuantepec site.
+    The year wraps (no "weather covers"); the station 2,672 km away is refused without
+    --force; with it the run covers the leap year at 1 min and its CSV names every unit."""
+    args = ["simulate", "--site", "tehuantepec", "--start", "2024-01-01", "--end",
+            "2025-01-01", "--tmy3", str(_tmy3())]
+    p = heliotwin(*args, "--json")
+    assert p.returncode == 2 and p.stdout == ""
+    assert "--tmy3:" in p.stderr and "km from site tehuantepec" in p.stderr
+    assert "--force" in p.stderr and "weather covers" not in p.stderr
+    out = tmp_path / "year.csv"
+    p = heliotwin(*args, "--force", "--json", "--csv", str(out))
+    assert p.returncode == 0, p.stderr
+    d = json.loads(p.stdout)
+    assert d["sky"] == "weather" and d["steps"] == 366 * 1440
+    assert d["weather"]["format"] == "tmy3" and d["weather"]["forced"] is True
+    assert d["weather"]["distance_km"] == pytest.approx(2672, abs=5)  # haversine, R 6371 km
+    with out.open() as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        first = next(reader)
+        n = 1 + sum(1 for _ in reader)
+    assert n == 366 * 1440 and header[:2] == ["time_utc", "time_local"]
+    assert first[:2] == ["2024-01-01T06:00:00+00:00", "2024-01-01T00:00:00-06:00"]
+    assert all(h.endswith(UNIT_ENDINGS) for h in header[2:]), header
+
+
+def test_a_tmy3_at_its_station_needs_no_force_and_matches_pvlibs_own_year(
+        tmp_path: Path) -> None:
+    """A site at the station: no refusal; the energy equals the twin run on pvlib's
+    ``read_tmy3(coerce_year=2023)`` weather (pvlib's year coercion, not ours)."""
+    import pandas as pd
+
+    from sim.sites import load_site
+    from sim.sky import read_tmy3
+    from sim.twin import simulate
+
+    sites = _greensboro_sites(tmp_path)
+    p = heliotwin("simulate", "--site", "greensboro", "--sites-dir", str(sites), "--start",
+                  "2023-03-01", "--end", "2023-04-01", "--step-s", "300", "--tmy3",
+                  str(_tmy3()), "--json")
+    assert p.returncode == 0, p.stderr
+    d = json.loads(p.stdout)
+    assert d["weather"]["distance_km"] == 0.0 and d["weather"]["forced"] is False
+    site = load_site("greensboro", sites)
+    weather, _ = read_tmy3(_tmy3(), coerce_year=2023)
+    ref = simulate(site, pd.Timestamp("2023-03-01", tz=site.timezone),
+                   pd.Timestamp("2023-04-01", tz=site.timezone), step_s=300,
+                   weather=weather).summary()
+    assert d["tracker_energy_wh"] == pytest.approx(ref["tracker_energy_wh"], rel=1e-9)
+    assert d["fixed_energy_wh"] == pytest.approx(ref["fixed_energy_wh"], rel=1e-9)
+
+
+def test_an_epw_file_runs_as_its_tmy3_twin(tmp_path: Path) -> None:
+    """The same Greensboro hours written as EPW (tests/sim/test_sky.py ``write_epw``) give the
+    same run as the TMY3 file; --tmy3 and --epw exclude each other."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("sky_tests", ROOT / "tests/sim/test_sky.py")
+    assert spec is not None and spec.loader is not None
+    sky_tests = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(sky_tests)
+    epw = sky_tests.write_epw(tmp_path / "greensboro.epw")
+    sites = _greensboro_sites(tmp_path)
+    common = ["simulate", "--site", "greensboro", "--sites-dir", str(sites), "--start",
+              "2024-12-30", "--end", "2025-01-03", "--step-s", "600", "--json"]
+    by_epw = heliotwin(*common, "--epw", str(epw))
+    by_tmy3 = heliotwin(*common, "--tmy3", str(_tmy3()))
+    assert by_epw.returncode == 0 and by_tmy3.returncode == 0, by_epw.stderr + by_tmy3.stderr
+    e, t = json.loads(by_epw.stdout), json.loads(by_tmy3.stdout)
+    assert e["weather"]["format"] == "epw" and t["weather"]["format"] == "tmy3"
+    assert e["tracker_energy_wh"] == pytest.approx(t["tracker_energy_wh"], rel=1e-12)
+    assert e["tracker_energy_wh"] > 0  # the new year's days are on the typical year too
+    both = heliotwin(*common, "--epw", str(epw), "--tmy3", str(_tmy3()))
+    assert both.returncode == 2 and "not allowed with" in both.stderr
+    junk = tmp_path / "junk.epw"
+    junk.write_text("hello\n")
+    bad = heliotwin(*common, "--epw", str(junk))
+    assert bad.returncode == 2 and "--epw: cannot read" in bad.stderr
+
+
+@pytest.mark.parametrize("args", [
+    ["simulate", "--start", "2024-03-15", "--end", "2024-03-16", "--step-s", "3600", "--json"],
+    ["sun", "--site", "tehuantepec", "--time", "now", "--json"],
+])
+def test_a_closed_pipe_ends_quietly(args: list[str]) -> None:
+    """``heliotwin … | head``: the reader went away before the output — no traceback."""
+    proc = subprocess.Popen([sys.executable, "-m", "backend", *args], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()  # as `head` exiting before the command writes
+    err = proc.stderr.read().decode()
+    assert proc.wait(60) == 141  # 128 + SIGPIPE, as a command the signal ends
+    assert "Traceback" not in err and "BrokenPipe" not in err, err
+
+
+def test_sun_at_a_site_now() -> None:
+    """``--site`` gives latitude, longitude and altitude (and the altitude's pressure);
+    ``now`` is the current instant (checked against pvlib's SPA at the reported time)."""
+    import datetime as dt
+
+    import pandas as pd
+    import pvlib
+
+    before = dt.datetime.now(dt.UTC)
+    p = heliotwin("sun", "--site", "tehuantepec", "--time", "now", "--json")
+    assert p.returncode == 0, p.stderr
+    d = json.loads(p.stdout)
+    when = pd.Timestamp(d["time"])
+    assert before <= when <= dt.datetime.now(dt.UTC)
+    assert (d["site_id"], d["latitude_deg"], d["elevation_m"]) == ("tehuantepec", 16.28875, 50.0)
+    assert d["pressure_hpa"] == pytest.approx(pvlib.atmosphere.alt2pres(50.0) / 100)
+    ref = pvlib.solarposition.spa_python(pd.DatetimeIndex([when]), 16.28875, -95.240871, 50.0,
+                                         pressure=d["pressure_hpa"] * 100, temperature=12.0)
+    assert d["azimuth_deg"] == pytest.approx(float(ref["azimuth"].iloc[0]), abs=1e-6)
+    both = heliotwin("sun", "--site", "tehuantepec", "--lat", "1", "--lon", "2", "--time", "now")
+    assert both.returncode == 2 and "not both" in both.stderr
+    nowhere = heliotwin("sun", "--time", "now")
+    assert nowhere.returncode == 2 and "--site" in nowhere.stderr

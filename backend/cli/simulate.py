@@ -2,12 +2,18 @@
 
     heliotwin simulate --site tehuantepec --start 2024-03-15 --end 2024-03-16 --json
     heliotwin simulate --site tehuantepec --start 2024-01-01 --end 2025-01-01 --csv year.csv
+    heliotwin simulate --site tehuantepec --start 2024-01-01 --end 2025-01-01 --tmy3 FILE --force
 
 ``start`` is inclusive, ``end`` exclusive; a bare date means midnight in the
 site's time zone, a date-time must carry a UTC offset. A progress bar (tqdm)
 goes to stderr when stderr is a terminal and the run is long (≥ 20,000 steps).
 Bad input exits with status 2 and a message naming the problem. Heavy imports
 happen inside the command.
+
+``--tmy3``/``--epw``: a typical year is laid onto the run's calendar in its
+station's standard time, wrapping at the year's ends (:mod:`sim.sky`); a
+station more than 100 km from the site is refused unless ``--force``
+(:func:`backend.twin.scenario.check_station`).
 """
 
 from __future__ import annotations
@@ -61,14 +67,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "--" + param.name.replace("_", "-"), type=float, default=param.default,
             metavar="X", help=f"{param.help} (default {param.default:g})",
         )
+    weather = p.add_mutually_exclusive_group()
+    weather.add_argument(
+        "--tmy3", metavar="PATH", help="use the typical year of a TMY3 file instead of clear sky"
+    )
+    weather.add_argument(
+        "--epw", metavar="PATH", help="use the typical year of an EPW file instead of clear sky"
+    )
     p.add_argument(
-        "--tmy3", metavar="PATH", help="use the weather of a TMY3 file instead of clear sky"
+        "--force", action="store_true",
+        help="run on a weather file whose station is more than 100 km from the site",
     )
     p.add_argument(
         "--sites-dir",
         default=os.environ.get("HELIOTWIN_SITES_DIR"),
-        help="directory of site JSON files "
-        "(default $HELIOTWIN_SITES_DIR or the repository's data/sites)",
+        help="a folder of user site JSON files, added to the built-in data/sites "
+        "(default $HELIOTWIN_SITES_DIR or data/user-sites; docs/sites.md)",
     )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--csv", metavar="PATH", help="write the per-step series to PATH as CSV")
@@ -119,64 +133,60 @@ def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
         )
     if not args.step_s > 0:
         raise InputError(f"--step-s: must be positive, got {args.step_s}")
-    weather = None
-    if args.tmy3:
-        from sim.sky import read_tmy3
+    from backend.twin.scenario import (
+        MAX_STATION_DISTANCE_KM,
+        Scenario,
+        StationTooFar,
+        check_station,
+        run_scenario,
+    )
+
+    weather, station = None, None
+    flag, path = ("--tmy3", args.tmy3) if args.tmy3 else ("--epw", args.epw)
+    if path:
+        from sim.sky import read_typical_year
 
         try:
-            weather, meta = read_tmy3(args.tmy3, coerce_year=start.tz_convert("UTC").year)
-        except (OSError, ValueError) as exc:
-            raise InputError(f"--tmy3: cannot read {args.tmy3!r}: {exc}") from None
-        far = max(abs(meta["latitude"] - site.latitude), abs(meta["longitude"] - site.longitude))
-        if far > 1.0:
-            logging.getLogger(__name__).warning(
-                "--tmy3: the weather station (%.2f, %.2f) is %.1f deg from site %s (%.2f, %.2f); "
-                "its irradiance does not fit this site's sun",
-                meta["latitude"],
-                meta["longitude"],
-                far,
-                site.site_id,
-                site.latitude,
-                site.longitude,
-            )
-    from backend.twin.scenario import Scenario, run_scenario
-
+            weather, meta = read_typical_year(path, flag[2:])
+        except (OSError, ValueError, KeyError) as exc:
+            raise InputError(f"{flag}: cannot read {path!r}: {exc}") from None
+        try:
+            station = check_station(meta, site, args.force, "--force")
+        except StationTooFar as exc:
+            raise InputError(f"{flag}: {exc}") from None
+        if station["forced"] and station["distance_km"] > MAX_STATION_DISTANCE_KM:
+            logging.getLogger(__name__).warning("%s: station %s is %.0f km from site %s (--force)",
+                                                flag, station["name"], station["distance_km"],
+                                                site.site_id)
     machine = {p.name: getattr(args, p.name) for p in MACHINE_PARAMETERS
                if getattr(args, p.name) != p.default}
     try:
         scenario = Scenario(site.site_id, start, end, args.step_s, args.controller,
-                            args.receiver, machine)
+                            args.receiver, machine, weather=weather, station=station)
     except ValueError as exc:
         name, _, problem = str(exc).partition(":")
         raise InputError(f"--{name.replace('_', '-')}:{problem}") from None
     steps = (end - start).total_seconds() / args.step_s
     callback, bar = _progress_bar(not args.no_progress and steps >= _BAR_MIN_STEPS)
     try:
-        result = run_scenario(site, scenario, weather=weather, progress=callback)
+        result = run_scenario(site, scenario, progress=callback)
     except ValueError as exc:
         raise InputError(str(exc)) from None
     finally:
         if bar is not None:
             bar.close()
-    return result.summary(), result
+    summary = result.summary()
+    if station is not None:
+        summary["weather"] = {**station, "file": path}
+    return summary, result
 
 
-def write_csv(series: Any, path: str) -> None:
-    """Write the per-step series as CSV: ``ts`` (UTC, ISO 8601 with offset) and every column,
-    4 decimals. Timestamps are formatted by numpy in one vectorised call (a year of
-    minutes through ``strftime`` takes several seconds)."""
-    import numpy as np
-    import pandas as pd
+def write_csv(series: Any, timezone: str, path: str) -> None:
+    """Write the per-step series as CSV: ``time_utc``, ``time_local`` (the site's zone, with
+    offset) and every column with its unit in the name (:mod:`backend.twin.export`)."""
+    from backend.twin.export import series_csv
 
-    utc = series.index.tz_convert("UTC").tz_localize(None).to_numpy()
-    whole_seconds = (utc.astype("datetime64[ns]").astype(np.int64) % 1_000_000_000 == 0).all()
-    if whole_seconds:
-        text = np.datetime_as_string(utc, unit="s")
-    else:
-        text = np.datetime_as_string(utc, unit="ms")
-    out = series.round(4)
-    out.index = pd.Index(np.char.add(text, "+00:00"), name="ts")
-    out.to_csv(path)
+    series_csv(series, timezone, path)
 
 
 def _text(summary: dict[str, Any]) -> str:
@@ -194,6 +204,14 @@ def _text(summary: dict[str, Any]) -> str:
             if gain is not None
             else "gain:    n/a (no fixed-array energy)",
         ]
+        + (
+            [
+                f"weather: {w['format'].upper()} {w['name']} ({w['latitude_deg']:.2f}, "
+                f"{w['longitude_deg']:.2f}), {w['distance_km']:.0f} km from the site"
+            ]
+            if (w := summary.get("weather"))
+            else []
+        )
     )
 
 
@@ -206,7 +224,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if args.csv:
         try:
-            write_csv(result.series, args.csv)
+            write_csv(result.series, result.site.timezone, args.csv)
         except OSError as exc:
             print(
                 f"heliotwin simulate: error: --csv: cannot write {args.csv!r}: {exc}",

@@ -2,6 +2,11 @@
 
     heliotwin sun --lat 39.742476 --lon -105.1786 --time 2003-10-17T12:30:30-07:00 \\
         --elevation-m 1830.14 --pressure-hpa 820 --temperature-c 11 --delta-t-s 67 --json
+    heliotwin sun --site tehuantepec --time now
+
+``--site ID`` takes latitude, longitude and altitude from a configured site (and
+the pressure of that altitude, ``pvlib.atmosphere.alt2pres``, unless
+``--pressure-hpa`` is given); ``--time now`` is the current instant.
 
 Heavy imports (numpy, pandas, pvlib) happen inside the command so that the
 other subcommands do not pay for them.
@@ -11,15 +16,18 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
-from datetime import datetime
+from datetime import UTC, datetime
 from typing import Any
 
 
 def _parse_time(text: str) -> datetime:
-    """An ISO 8601 time that must carry a UTC offset (:mod:`backend.timestamps`)."""
+    """``now``, or an ISO 8601 time that must carry a UTC offset (:mod:`backend.timestamps`)."""
     from backend.timestamps import TimestampError, parse_instant
 
+    if text.strip().lower() == "now":
+        return datetime.now(UTC)
     try:
         return parse_instant(text, "--time")
     except TimestampError as exc:
@@ -34,12 +42,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Sun position for one place and time. Azimuth clockwise from north; "
         "apparent = with atmospheric refraction (SPA's topocentric zenith).",
     )
-    p.add_argument("--lat", type=float, required=True, help="latitude [deg], north positive")
-    p.add_argument("--lon", type=float, required=True, help="longitude [deg], east positive")
-    p.add_argument("--time", type=_parse_time, required=True, help="ISO 8601 time with offset")
-    p.add_argument("--elevation-m", type=float, default=0.0, help="site elevation [m] (default 0)")
+    p.add_argument("--site", metavar="ID",
+                   help="a configured site: its latitude, longitude and altitude")
+    p.add_argument("--sites-dir", default=os.environ.get("HELIOTWIN_SITES_DIR"),
+                   help="a folder of user site JSON files, added to the built-in data/sites "
+                        "(default $HELIOTWIN_SITES_DIR or data/user-sites; docs/sites.md)")
+    p.add_argument("--lat", type=float, help="latitude [deg], north positive")
+    p.add_argument("--lon", type=float, help="longitude [deg], east positive")
+    p.add_argument("--time", type=_parse_time, required=True,
+                   help="ISO 8601 time with offset, or now")
+    p.add_argument("--elevation-m", type=float, help="site elevation [m] (default 0, or the "
+                                                     "site's altitude)")
     p.add_argument(
-        "--pressure-hpa", type=float, default=1013.25, help="air pressure [hPa] (default 1013.25)"
+        "--pressure-hpa", type=float,
+        help="air pressure [hPa] (default 1013.25, or that of the site's altitude)",
     )
     p.add_argument(
         "--temperature-c", type=float, default=12.0, help="air temperature [C] (default 12)"
@@ -76,6 +92,9 @@ def compute(args: argparse.Namespace) -> dict[str, Any]:
         "method": args.method,
         "latitude_deg": args.lat,
         "longitude_deg": args.lon,
+        "elevation_m": args.elevation_m,
+        "pressure_hpa": args.pressure_hpa,
+        **({"site_id": args.site} if args.site else {}),
         "azimuth_deg": float(pos["azimuth"]),
         "zenith_deg": float(pos["zenith"]),
         "apparent_zenith_deg": float(pos["apparent_zenith"]),
@@ -83,6 +102,34 @@ def compute(args: argparse.Namespace) -> dict[str, Any]:
         "apparent_elevation_deg": float(pos["apparent_elevation"]),
         "sun_vector_enu": [east, north, up],
     }
+
+
+def _place(args: argparse.Namespace) -> str | None:
+    """Fill ``lat``/``lon``/``elevation_m``/``pressure_hpa`` from ``--site`` and the defaults;
+    an error message when the place is missing or given twice, else None."""
+    if args.site is not None:
+        if args.lat is not None or args.lon is not None:
+            return "--site: give either --site or --lat/--lon, not both"
+        from pvlib import atmosphere
+
+        from sim.sites import UnknownSiteError, load_site
+
+        try:
+            site = load_site(args.site, args.sites_dir)
+        except UnknownSiteError as exc:
+            return f"--site: {exc}"
+        args.lat, args.lon = site.latitude, site.longitude
+        if args.elevation_m is None:
+            args.elevation_m = site.altitude
+        if args.pressure_hpa is None:
+            args.pressure_hpa = float(atmosphere.alt2pres(args.elevation_m)) / 100.0
+    if args.lat is None or args.lon is None:
+        return "--lat and --lon (or --site) are required"
+    if args.elevation_m is None:
+        args.elevation_m = 0.0
+    if args.pressure_hpa is None:
+        args.pressure_hpa = 1013.25
+    return None
 
 
 def _check(args: argparse.Namespace) -> str | None:
@@ -98,7 +145,7 @@ def _check(args: argparse.Namespace) -> str | None:
 
 def run(args: argparse.Namespace) -> int:
     """Print the sun position; exit 2 on bad input."""
-    problem = _check(args)
+    problem = _place(args) or _check(args)
     if problem:
         print(f"heliotwin sun: error: {problem}", file=sys.stderr)
         return 2

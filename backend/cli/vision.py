@@ -3,11 +3,15 @@
     heliotwin vision detect sky.jpg --camera fisheye --px-per-deg 11.7 --cx-px 972 \\
         --cy-px 956 --timestamp 2016-06-15T08:39:00Z --lat 53.52 --lon 10.105 --json
     heliotwin vision detect frame.png --camera pinhole --fov-deg 67 --json
+    heliotwin vision detect sky.jpg --calibration-id 3 --timestamp 2016-06-15T08:39:00Z \\
+        --site guadalajara_fisheye
     heliotwin vision calibrate a.jpg b.jpg c.jpg --timestamps T1 T2 T3 --lat 53.52 \\
         --lon 10.105 --json
 
 The same library (``vision``) and ephemeris (``sim.sun``, SPA) as
-``POST /api/v1/vision/sun`` and ``/calibrations``; nothing is stored.
+``POST /api/v1/vision/sun`` and ``/calibrations``; nothing is stored
+(``--calibration-id`` reads a calibration the service stored, from the database
+of ``HELIOTWIN_DATABASE_URL``).
 Heavy imports happen inside the commands.
 """
 
@@ -15,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from datetime import datetime
 from pathlib import Path
@@ -47,7 +52,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     d = sub.add_parser("detect", help="find the sun in one image",
                        description="Find the sun in one PNG/JPEG image.")
     d.add_argument("image", type=Path)
-    d.add_argument("--camera", choices=("pinhole", "fisheye"), required=True)
+    d.add_argument("--camera", choices=("pinhole", "fisheye"),
+                   help="camera model (required unless --calibration-id)")
+    d.add_argument("--calibration-id", type=int, metavar="ID",
+                   help="a fisheye calibration stored by the service (POST "
+                        "/api/v1/vision/calibrations; database of HELIOTWIN_DATABASE_URL)")
     d.add_argument("--method", default="robust",
                    choices=("robust", "seed000_hsv", "seed003_gray240"))
     d.add_argument("--fov-deg", type=float, help="pinhole horizontal field of view (67)")
@@ -99,7 +108,7 @@ def _place(args: argparse.Namespace) -> Any:
     if args.site:
         from sim.sites import load_site
 
-        site = load_site(args.site)
+        site = load_site(args.site, os.environ.get("HELIOTWIN_SITES_DIR"))
         return Place(site.site_id, site.latitude, site.longitude, site.altitude,
                      ZoneInfo(site.timezone))
     if args.lat is None and args.lon is None:
@@ -126,9 +135,37 @@ def detect(args: argparse.Namespace) -> dict[str, Any]:
     params = {k: getattr(args, k) for k in ("fov_deg", "cx_px", "cy_px", "reference_x_px",
                                            "reference_y_px", "projection", "px_per_deg",
                                            "north_offset_deg", "east")}
-    cam = camera_from_params(args.camera, params, w, h)
-    return {"image": str(args.image), **analyse(img, cam, args.method, args.timestamp,
-                                                _place(args))}
+    if args.calibration_id is not None:
+        if args.camera not in (None, "fisheye"):
+            raise ValueError("--camera: a --calibration-id is a fisheye camera")
+        cam = _stored_camera(args.calibration_id)
+    elif args.camera is None:
+        raise ValueError("--camera: required (pinhole or fisheye), or give --calibration-id")
+    else:
+        cam = camera_from_params(args.camera, params, w, h)
+    out = {"image": str(args.image), **analyse(img, cam, args.method, args.timestamp,
+                                               _place(args))}
+    if args.calibration_id is not None:
+        out["calibration_id"] = args.calibration_id
+    return out
+
+
+def _stored_camera(calibration_id: int) -> Any:
+    """The fisheye camera of a stored calibration (``backend.vision.store``)."""
+    from backend.settings import get_settings
+    from backend.storage.engine import make_engine
+    from backend.vision.store import get_calibration
+    from vision.cameras import FisheyeCamera
+
+    engine = make_engine(get_settings())
+    try:
+        with engine.connect() as conn:
+            cal = get_calibration(conn, calibration_id)
+    finally:
+        engine.dispose()
+    if cal is None:
+        raise ValueError(f"--calibration-id: no calibration {calibration_id} in the database")
+    return FisheyeCamera.from_dict(cal["camera"])
 
 
 def calibrate(args: argparse.Namespace) -> dict[str, Any]:
@@ -183,6 +220,10 @@ def _summary(out: dict[str, Any]) -> str:
     if "ephemeris" in out:
         e = out["ephemeris"]
         text += f"; SPA {e['azimuth_deg']:.2f}/{e['elevation_deg']:.2f} deg"
+    if "error" in out:
+        err = out["error"]
+        text += (f"; error against SPA {err['separation_deg']:.3f} deg (azimuth "
+                 f"{err['azimuth_deg']:+.3f}, elevation {err['elevation_deg']:+.3f} deg)")
     return text
 
 

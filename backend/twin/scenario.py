@@ -5,11 +5,17 @@ machine's parameters beyond site, range and step — the controller's
 disturbances and the receiver — with their units, defaults and bounds; the CLI
 builds its flags from it and the HTTP schema its fields, so the two never
 drift apart. :func:`run_scenario` is the one call into ``sim.twin.simulate``.
+
+Weather: a scenario may carry a typical year (TMY3 or EPW, read by
+:func:`sim.sky.read_typical_year`); :func:`run_scenario` lays it onto the run's
+calendar (:func:`sim.sky.typical_year_on`). :func:`check_station` is the one
+rule for a station far from the site: refused unless forced.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -20,7 +26,45 @@ from backend.twin.parameters import DISTURBANCE_NAMES, MACHINE_PARAMETERS, RUN_P
 from sim.control import ControlSettings
 from sim.disturbances import Disturbances
 from sim.sites import Site
+from sim.sky import typical_year_on
 from sim.twin import CONTROLLERS, RECEIVERS, TwinResult, simulate
+
+#: A weather station farther than this from the site is refused unless forced [km]: its sun
+#: rises and sets at other times and its sky is another climate's (about 1° of latitude).
+MAX_STATION_DISTANCE_KM = 100.0
+_EARTH_RADIUS_KM = 6371.0
+
+
+class StationTooFar(ValueError):
+    """The weather file's station is farther from the site than :data:`MAX_STATION_DISTANCE_KM`."""
+
+
+def station_distance_km(station: dict[str, Any], site: Site) -> float:
+    """Great-circle (haversine) distance between a weather station and a site [km]."""
+    p1, p2 = math.radians(station["latitude"]), math.radians(site.latitude)
+    dp, dl = p2 - p1, math.radians(site.longitude - station["longitude"])
+    h = math.sin(dp / 2) ** 2 + math.cos(p1) * math.cos(p2) * math.sin(dl / 2) ** 2
+    return 2 * _EARTH_RADIUS_KM * math.asin(min(1.0, math.sqrt(h)))
+
+
+def check_station(station: dict[str, Any], site: Site, force: bool,
+                  force_name: str = "force") -> dict[str, Any]:
+    """The station's description with its distance to ``site`` (units in the keys); raises
+    :class:`StationTooFar` when it is farther than :data:`MAX_STATION_DISTANCE_KM` and not
+    ``force`` (the message names the flag or field ``force_name``)."""
+    distance = station_distance_km(station, site)
+    out = {"format": station["format"], "name": station["name"],
+           "latitude_deg": station["latitude"], "longitude_deg": station["longitude"],
+           "altitude_m": station["altitude"], "utc_offset_h": station["utc_offset_h"],
+           "distance_km": round(distance, 1), "forced": bool(force)}
+    if distance > MAX_STATION_DISTANCE_KM and not force:
+        raise StationTooFar(
+            f"the weather station {station['name'] or '?'} ({station['latitude']:.2f}, "
+            f"{station['longitude']:.2f}) is {distance:.0f} km from site {site.site_id} "
+            f"({site.latitude:.2f}, {site.longitude:.2f}), more than "
+            f"{MAX_STATION_DISTANCE_KM:.0f} km: its sky does not go with this site's sun; use "
+            f"weather from nearer the site, or set {force_name} to run on it anyway")
+    return out
 
 
 @dataclass(frozen=True)
@@ -34,6 +78,10 @@ class Scenario:
     controller: str = "ideal"
     receiver: str = "flat"
     machine: dict[str, float] = field(default_factory=dict)
+    #: a typical year (:func:`sim.sky.read_typical_year`) instead of clear sky, and its station
+    #: as :func:`check_station` describes it
+    weather: pd.DataFrame | None = field(default=None, compare=False, repr=False)
+    station: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
         if self.controller not in CONTROLLERS:
@@ -49,14 +97,19 @@ class Scenario:
             if (p.minimum is not None and value < p.minimum) or (
                     p.maximum is not None and value > p.maximum):
                 raise ValueError(f"{name}: {value} is outside [{p.minimum}, {p.maximum}]")
+        if (self.weather is None) != (self.station is None):
+            raise ValueError("weather: a typical year goes with its station")
 
     def disturbances(self) -> Disturbances:
         return disturbances_of(self.machine)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"site_id": self.site_id, "start": self.start.isoformat(),
-                "end": self.end.isoformat(), "step_s": self.step_s,
-                "controller": self.controller, "receiver": self.receiver, **self.machine}
+        out = {"site_id": self.site_id, "start": self.start.isoformat(),
+               "end": self.end.isoformat(), "step_s": self.step_s,
+               "controller": self.controller, "receiver": self.receiver, **self.machine}
+        if self.station is not None:
+            out["weather_station"] = self.station
+        return out
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict())
@@ -64,7 +117,14 @@ class Scenario:
 
 def run_scenario(site: Site, scenario: Scenario, weather: pd.DataFrame | None = None,
                  progress: Callable[[float], None] | None = None) -> TwinResult:
-    """``sim.twin.simulate`` for ``scenario`` (the one call the CLI and the API share)."""
+    """``sim.twin.simulate`` for ``scenario`` (the one call the CLI and the API share).
+
+    ``weather`` (already on the run's times) wins over the scenario's typical year, which is
+    laid onto the run's calendar here.
+    """
+    if weather is None and scenario.weather is not None and scenario.station is not None:
+        weather = typical_year_on(scenario.weather, scenario.station["utc_offset_h"],
+                                  scenario.start, scenario.end)
     defaults = {p.name: p.default for p in MACHINE_PARAMETERS}
     run = {k: scenario.machine.get(k, defaults[k]) for k in RUN_PARAMETERS}
     return simulate(

@@ -1,11 +1,16 @@
 // Simulation: run a twin scenario in the background, follow its progress, chart the result.
-import { api, pick, seriesRows } from "./api.js";
+import { ApiError, api, pick, seriesRows } from "./api.js";
 import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
-import { addDays, toLocalWall } from "./time.js";
+import { addDays, toLocalWall, zoneOffsetMs } from "./time.js";
+import { viewerKey } from "./twin.js";
 import { banner, energy, num, pct, tile } from "./ui.js";
 
 const POLL_MS = 400;
+// the series' columns as the API exports them (units in the names: backend/twin/export.py)
+const SUN_ELEVATION = "solar_apparent_elevation_deg";
+const SUN_AZIMUTH = "solar_azimuth_deg";
 const MAX_POINTS = 2000;
+const SERIES_RETRIES = 150; // × POLL_MS: a minute for a stored series to appear after "done"
 const DONE = new Set(["done", "succeeded", "success", "completed", "finished"]);
 const FAILED = new Set(["failed", "error", "cancelled", "canceled"]);
 
@@ -21,15 +26,25 @@ function colValue(row, name) {
   return typeof v === "number" ? v : null;
 }
 
-function firstKey(rows, ...names) {
-  return names.find((n) => rows.some((r) => colValue(r, n) !== null));
+/** ISO 8601 local time in `tz` with its offset ("2024-03-15T12:00:00-06:00"), for CSV files. */
+function localIso(tz, iso) {
+  const ms = Date.parse(iso);
+  const off = Math.round(zoneOffsetMs(tz, ms) / 60000);
+  const hhmm = `${String(Math.floor(Math.abs(off) / 60)).padStart(2, "0")}:${String(Math.abs(off) % 60).padStart(2, "0")}`;
+  return `${toLocalWall(tz, ms).replace(" ", "T")}${off < 0 ? "-" : "+"}${hhmm}`;
 }
 
-function summaryTiles(summary) {
+function skyTile(summary, station) {
+  if (!station) return tile("Sky", summary.sky === "weather" ? "weather" : "clear sky", "Ineichen clear sky with Linke turbidity");
+  return tile("Sky", `${station.format.toUpperCase()} typical year`,
+    `${station.name || "station"} (${num(station.latitude_deg, 2)}°, ${num(station.longitude_deg, 2)}°) · ${num(station.distance_km, 0)} km from the site`);
+}
+
+function summaryTiles(summary, station) {
   const box = $("sim-summary");
   box.innerHTML = "";
   if (!summary) return;
-  box.append(
+  box.append(skyTile(summary, station),
     tile("Tracker energy", energy(summary.tracker_energy_wh), `peak ${num(summary.tracker_peak_w, 0)} W`),
     tile("Fixed energy", energy(summary.fixed_energy_wh), `peak ${num(summary.fixed_peak_w, 0)} W`),
     tile("Tracking gain", pct(summary.gain_pct), "tracker over fixed, twin"),
@@ -121,8 +136,8 @@ async function drawResult(runId, allRows, stepS) {
     x, y: allRows.map((r) => colValue(r, c)), name: c.startsWith("tracker") ? "tracker" : "fixed", type: "scatter", mode: "lines",
     line: { color: c.startsWith("tracker") ? COLORS.tracker : COLORS.fixed, width: 1.8 }, hovertemplate: "%{y:.0f} W",
   })), baseLayout({ xaxis, yaxis: { title: { text: "Power [W]" }, rangemode: "tozero", gridcolor: "#e9edf1" } }), {
-    columns: ["ts_utc", "local_time", ...powerCols],
-    rows: allRows.map((r, i) => [r.ts, x[i], ...powerCols.map((c) => colValue(r, c))]),
+    columns: ["time_utc", "time_local", ...powerCols],
+    rows: allRows.map((r) => [r.ts, localIso(tz, r.ts), ...powerCols.map((c) => colValue(r, c))]),
     filename: `simulation_${runId}_power.csv`,
   });
   await drawDaily(runId, allRows, stepS);
@@ -132,8 +147,8 @@ async function drawResult(runId, allRows, stepS) {
   if (long) rows = allRows.filter((r) => toLocalWall(tz, r.ts).startsWith(firstDay));
   $("sim-angles-title").textContent = long ? `Sun and tracker angles on ${firstDay}, the run's first day` : "Sun and tracker angles";
   const xa = long ? rows.map((r) => toLocalWall(tz, r.ts)) : x;
-  const sunEl = firstKey(rows, "apparent_elevation", "sun_elevation_deg", "apparent_elevation_deg") || "apparent_elevation";
-  const sunAz = firstKey(rows, "solar_azimuth", "sun_azimuth_deg", "azimuth_deg") || "solar_azimuth";
+  const sunEl = SUN_ELEVATION;
+  const sunAz = SUN_AZIMUTH;
   const commanded = rows.some((r) => colValue(r, "elevation_command_deg") !== null);
   const angleCols = [
     [sunEl, "sun elevation", COLORS.sun, "solid", "y"],
@@ -152,8 +167,8 @@ async function drawResult(runId, allRows, stepS) {
     yaxis2: { title: { text: "Azimuth [°] (from N, clockwise)" }, overlaying: "y", side: "right", showgrid: false,
       tickmode: "linear", tick0: 0, dtick: 45 },
   }), {
-    columns: ["ts_utc", "local_time", ...angleCols.map((a) => a[0])],
-    rows: rows.map((r, i) => [r.ts, xa[i], ...angleCols.map((a) => colValue(r, a[0]))]),
+    columns: ["time_utc", "time_local", ...angleCols.map((a) => a[0])],
+    rows: rows.map((r) => [r.ts, localIso(tz, r.ts), ...angleCols.map((a) => colValue(r, a[0]))]),
     filename: `simulation_${runId}_angles.csv`,
   });
   await drawPointing(runId, rows, xa, long ? firstDay : "");
@@ -165,7 +180,7 @@ async function drawPointing(runId, rows, x, day) {
   $("sim-pointing-card").hidden = !has;
   if (!has) return;
   $("sim-pointing-title").textContent = day ? `Pointing error on ${day}, the run's first day` : "Pointing error";
-  const sunEl = (r) => colValue(r, "apparent_elevation");
+  const sunEl = (r) => colValue(r, SUN_ELEVATION);
   const y = rows.map((r) => (sunEl(r) > 0 ? colValue(r, "pointing_error_mrad") : null));
   await draw("chart-sim-pointing", [{
     x, y, name: "pointing error", type: "scatter", mode: "lines", line: { color: COLORS.tracker, width: 1.6 },
@@ -174,8 +189,8 @@ async function drawPointing(runId, rows, x, day) {
     xaxis: { type: "date", title: { text: `Local time (${st.tz})` }, gridcolor: "#e9edf1" },
     yaxis: { title: { text: "Panel normal to sun [mrad]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
   }), {
-    columns: ["ts_utc", "local_time", "pointing_error_mrad"],
-    rows: rows.map((r, i) => [r.ts, x[i], y[i]]),
+    columns: ["time_utc", "time_local", "pointing_error_mrad"],
+    rows: rows.map((r, i) => [r.ts, localIso(st.tz, r.ts), y[i]]),
     filename: `simulation_${runId}_pointing.csv`,
   });
 }
@@ -184,6 +199,49 @@ function setProgress(fraction, text) {
   $("sim-progress-wrap").hidden = false;
   $("sim-progress").value = Math.max(0, Math.min(1, fraction || 0));
   $("sim-progress-text").textContent = text;
+}
+
+const elapsed = (t0) => `${num((performance.now() - t0) / 1000, 1)} s`;
+
+/** Poll a background run until its status is final (not merely until a summary appears: the
+ * summary can be set while the series is still being stored). Throws on a failed run. */
+async function waitForRun(first, t0) {
+  let res = first;
+  const runId = res.run_id;
+  while (runId && !DONE.has(res.status) && !FAILED.has(res.status)) {
+    const frac = res.progress ?? 0;
+    const what = res.status === "queued" ? "queued" : frac >= 0.999 ? "storing the series" : "running";
+    setProgress(frac, `${what} · ${num(100 * frac, 0)} % · ${elapsed(t0)}`);
+    await sleep(POLL_MS);
+    res = await api(`/api/v1/simulations/${encodeURIComponent(runId)}`);
+  }
+  if (FAILED.has(res.status)) throw new Error(res.error || res.detail || `run ${runId} ${res.status}`);
+  return res;
+}
+
+/** The run's series; a 409 (series not stored yet) is waited out, a bounded number of times. */
+async function seriesWhenReady(url, t0) {
+  for (let attempt = 0; ; attempt += 1) {
+    try {
+      return await api(url, { params: { max_points: MAX_POINTS } });
+    } catch (err) {
+      if (!(err instanceof ApiError) || err.status !== 409 || attempt >= SERIES_RETRIES) throw err;
+      setProgress(1, `done · waiting for the series · ${elapsed(t0)}`);
+      await sleep(POLL_MS);
+    }
+  }
+}
+
+/** POST the scenario: as JSON, or as multipart with the chosen TMY3/EPW file (clear sky
+ * without one). */
+function submit(body) {
+  const file = $("sim-weather").files[0];
+  if (!file) return api("/api/v1/simulations", { method: "POST", json: body });
+  const form = new FormData();
+  for (const [k, v] of Object.entries(body)) form.append(k, String(v));
+  form.append("force", String($("sim-force").checked));
+  form.append("file", file, file.name);
+  return api("/api/v1/simulations/weather", { method: "POST", form });
 }
 
 async function run(ev) {
@@ -207,30 +265,24 @@ async function run(ev) {
       controller: $("sim-controller").value, receiver: $("sim-receiver").value,
       ...machineValues(), background: true,
     };
-    let res = await api("/api/v1/simulations", { method: "POST", json: body });
-    const runId = res.run_id;
     const t0 = performance.now();
-    while (runId && !DONE.has(res.status) && !FAILED.has(res.status) && !res.summary?.tracker_energy_wh) {
-      await sleep(POLL_MS);
-      res = await api(`/api/v1/simulations/${encodeURIComponent(runId)}`);
-      const frac = res.progress ?? 0;
-      setProgress(frac, `${res.status || "running"} · ${num(100 * frac, 0)} % · ${num((performance.now() - t0) / 1000, 1)} s`);
-    }
-    if (FAILED.has(res.status)) throw new Error(res.error || res.detail || `run ${runId} ${res.status}`);
+    const res = await waitForRun(await submit(body), t0);
+    const runId = res.run_id;
     const summary = res.summary || res;
-    summaryTiles(summary);
-    setProgress(1, `done in ${num((performance.now() - t0) / 1000, 1)} s`);
+    summaryTiles(summary, res.params?.weather_station);
     if (runId) {
       const seriesUrl = `/api/v1/simulations/${encodeURIComponent(runId)}/series`;
-      const series = await api(seriesUrl, { params: { max_points: MAX_POINTS } });
+      setProgress(1, `${summary.steps ? `${num(summary.steps, 0)} steps` : "run"} done · loading the series…`);
+      const series = await seriesWhenReady(seriesUrl, t0);
       await drawResult(runId, seriesRows(series), series?.bucket_s || summary.step_s || 60);
+      setProgress(1, `done in ${num((performance.now() - t0) / 1000, 1)} s`);
       const csv = $("sim-csv");
       csv.href = `${seriesUrl}?format=csv`;
       csv.setAttribute("download", `simulation_${runId}.csv`);
       csv.hidden = false;
       const show3d = $("sim-3d");
       show3d.dataset.runId = runId;
-      show3d.hidden = st.meta?.viser_enabled === false || body.site_id !== st.meta?.default_site;
+      show3d.hidden = st.meta?.viser_enabled === false; // each viewer shows the run's own site
     }
     document.body.dataset.simulationDone = runId || "sync";
   } catch (err) {
@@ -246,7 +298,7 @@ async function run(ev) {
 async function showIn3d() {
   const runId = $("sim-3d").dataset.runId;
   try {
-    await api("/api/v1/twin3d/replay", { method: "PUT", json: { run_id: runId } });
+    await api("/api/v1/twin3d/replay", { method: "PUT", json: { run_id: runId, viewer: viewerKey() } });
     location.hash = "#twin";
   } catch (err) {
     banner(`3D twin: ${err.message}`, "error");

@@ -6,6 +6,7 @@ and seed 002's printed product matrix (eq. 2).
 """
 
 import numpy as np
+import pandas as pd
 import pvlib
 import pytest
 from scipy.spatial.transform import Rotation
@@ -17,6 +18,7 @@ from sim.kinematics import (
     inverse_kinematics,
     joint_angles_from_dh,
     joint_transforms,
+    morning_azimuth,
     normal_to_tilt_azimuth,
     tracking_angles,
 )
@@ -236,8 +238,53 @@ def test_tracking_angles_stow_flat_at_night_and_track_by_day() -> None:
     geometry = TrackerGeometry()
     az, el = tracking_angles([100.0, 250.0, 300.0], [35.0, -0.5, -20.0], geometry)
     ik_az, ik_el = inverse_kinematics([100.0, 250.0, 300.0], [35.0, -0.5, -20.0], geometry)
-    np.testing.assert_allclose(az, ik_az)
+    assert az[0] == pytest.approx(ik_az[0])
+    np.testing.assert_allclose(az[1:], 90.0)  # no night azimuth given: held due east
     assert el[0] == pytest.approx(35.0)
     np.testing.assert_allclose(el[1:], geometry.elevation_max_deg)
     tilt, _ = normal_to_tilt_azimuth(forward_kinematics(az[1:], el[1:], geometry))
     np.testing.assert_allclose(tilt, 0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("latitude, longitude, zone", [
+    (16.28875, -95.240871, "America/Mexico_City"),  # Tehuantepec (seed 000)
+    (-33.45, -70.66, "America/Santiago"),  # a southern site, the noon sun to the north
+])
+def test_the_azimuth_joint_stays_put_all_night_at_the_mornings_azimuth(
+        latitude: float, longitude: float, zone: str) -> None:
+    """Stowed at night, the azimuth joint holds one angle from dusk to dawn — the sun's
+    azimuth at the next sunrise — so the dawn move is a fraction of a degree. The sun here is
+    pvlib's SPA (``spa_python``), sunrise its ``sun_rise_set_transit_spa``; day by day the
+    held angle is checked against pvlib's geometric sunrise azimuth (Spencer's
+    declination, an independent formula): cos A = −sin δ / cos φ … to within 1.5°."""
+    times = pd.date_range("2024-06-20", "2024-06-24", freq="5min", tz=zone, inclusive="left")
+    sp = pvlib.solarposition.spa_python(times, latitude, longitude)
+    el = sp["apparent_elevation"].to_numpy()
+    hold = morning_azimuth(times, latitude, longitude)
+    az_j, el_j = tracking_angles(sp["azimuth"].to_numpy(), el, GEOM,
+                                 reference_azimuth=np.full(len(times), 180.0),
+                                 night_azimuth=hold)
+    night = el <= 0
+    starts = np.flatnonzero(np.diff(night.astype(int)) == 1) + 1  # first night step
+    ends = np.flatnonzero(np.diff(night.astype(int)) == -1)  # last night step
+    assert len(starts) >= 3
+    for a, b in zip(starts, ends[ends > starts[0]], strict=False):
+        assert np.ptp(az_j[a:b + 1]) == 0.0, "the azimuth joint moved during the night"
+        assert np.all(el_j[a:b + 1] == GEOM.elevation_max_deg)
+        dawn_move = abs(az_j[b + 1] - az_j[b])
+        assert dawn_move < 1.5, f"{dawn_move:.2f}° at dawn"
+        # pvlib's geometric sunrise (hour angle −ω_s): azimuth from declination and latitude
+        day = times[b + 1].normalize()
+        decl = pvlib.solarposition.declination_spencer71(day.day_of_year)
+        cos_a = np.sin(decl) / np.cos(np.deg2rad(latitude))
+        assert az_j[b] == pytest.approx(np.rad2deg(np.arccos(cos_a)), abs=1.5)
+
+
+def test_morning_azimuth_needs_aware_times_and_polar_night_is_nan() -> None:
+    with pytest.raises(ValueError, match="timezone-aware"):
+        morning_azimuth(pd.date_range("2024-06-01", periods=3, freq="h"), 10.0, 0.0)
+    polar = morning_azimuth(pd.date_range("2024-12-21", periods=3, freq="h", tz="UTC"),
+                            85.0, 0.0)
+    assert np.isnan(polar).all()
+    az, _ = tracking_angles([10.0], [-30.0], GEOM, night_azimuth=polar[:1])
+    assert az[0] == pytest.approx(90.0)  # NaN (no sunrise): held due east

@@ -1,4 +1,7 @@
-"""Sky: clear sky, transposition, AOI/IAM vs pvlib recipes and closed forms; TMY3 reading."""
+"""Sky: clear sky, transposition, AOI/IAM vs pvlib recipes and closed forms; TMY3/EPW typical
+years laid onto a run's calendar."""
+
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -13,6 +16,8 @@ from sim.sky import (
     poa_irradiance,
     pvlib_tmy3_path,
     read_tmy3,
+    read_typical_year,
+    typical_year_on,
 )
 
 LAT, LON, ALT = 16.28875, -95.240871, 50.0
@@ -66,3 +71,104 @@ def test_reads_pvlib_shipped_tmy3() -> None:
     assert {"ghi", "dni", "dhi", "temp_air", "wind_speed"} <= set(weather.columns)
     # Greensboro NC: annual global horizontal irradiation of roughly 1.5-1.8 MWh/m2
     assert 1400 < weather["ghi"].sum() / 1000 < 1900
+
+
+def write_epw(path: Path, tmy3_path: Path | None = None) -> Path:
+    """An EnergyPlus weather file with the hours of a TMY3 file (EnergyPlus Auxiliary
+    Programs, "EnergyPlus Weather File Data Dictionary": 8 header records, then one record
+    of 35 fields per hour, hour 1 = 00:00-01:00 local standard time). pvlib ships no EPW, so
+    the real Greensboro year is written in the other format; pvlib's ``read_epw`` reads it."""
+    import pvlib
+
+    data, meta = pvlib.iotools.read_tmy3(str(tmy3_path or pvlib_tmy3_path()),
+                                         map_variables=True)
+    date = pd.to_datetime(data["Date (MM/DD/YYYY)"], format="%m/%d/%Y")
+    hour = data["Time (HH:MM)"].str.slice(0, 2).astype(int)
+    head = [f"LOCATION,Greensboro,NC,USA,TMY3,{meta['USAF']},{meta['latitude']},"
+            f"{meta['longitude']},{meta['TZ']},{meta['altitude']}",
+            "DESIGN CONDITIONS,0", "TYPICAL/EXTREME PERIODS,0", "GROUND TEMPERATURES,0",
+            "HOLIDAYS/DAYLIGHT SAVINGS,No,0,0,0", "COMMENTS 1,written from 723170TYA.CSV",
+            "COMMENTS 2,", "DATA PERIODS,1,1,Data,Sunday, 1/ 1,12/31"]
+    rows = []
+    for d, h, (_, r) in zip(date, hour, data.iterrows(), strict=True):
+        fields = [d.year, d.month, d.day, h, 60, "?", r["temp_air"], r["temp_dew"],
+                  r["relative_humidity"], r["pressure"] * 100, 0, 0, 300, r["ghi"], r["dni"],
+                  r["dhi"], 0, 0, 0, 0, r["wind_direction"], r["wind_speed"], 5, 5, 20, 3000,
+                  9, 999999999, 20, 0.1, 0, 88, 0.2, 0, 1]
+        rows.append(",".join(str(f) for f in fields))
+    path.write_text("\n".join(head + rows) + "\n")
+    return path
+
+
+def test_a_typical_year_lays_onto_any_year_in_its_station_clock() -> None:
+    """Cross-check with pvlib's own year coercion: for a non-leap year the mapped hours are
+    pvlib's ``read_tmy3(coerce_year=…)`` rows, moved to mid-hour; the year wraps at its ends;
+    29 February repeats the 28th."""
+    import pvlib
+
+    tmy, station = read_typical_year(pvlib_tmy3_path())
+    assert station["format"] == "tmy3" and station["utc_offset_h"] == -5.0
+    assert station["name"] == "GREENSBORO PIEDMONT TRIAD INT" and len(tmy) == 8760
+    raw, _ = pvlib.iotools.read_tmy3(str(pvlib_tmy3_path()), coerce_year=2023,
+                                     map_variables=True)
+    ref = raw[["ghi", "dni", "dhi", "temp_air", "wind_speed"]].astype(float)
+    ref.index = (raw.index - pd.Timedelta(minutes=30)).tz_convert("UTC")
+    start, end = pd.Timestamp("2023-01-01", tz="Etc/GMT+5"), pd.Timestamp("2024-01-01",
+                                                                         tz="Etc/GMT+5")
+    on = typical_year_on(tmy, station["utc_offset_h"], start, end)
+    assert on.index[0] <= start and on.index[-1] >= end
+    inside = on.loc[ref.index[0]:ref.index[-1]]
+    assert len(inside) == 8760
+    np.testing.assert_array_equal(inside.to_numpy(), ref.to_numpy())
+    # a run in a leap year and in another zone: Feb 29 repeats Feb 28, the year wraps
+    leap = typical_year_on(tmy, -5.0, pd.Timestamp("2024-01-01", tz="America/Mexico_City"),
+                           pd.Timestamp("2025-01-01", tz="America/Mexico_City"))
+
+    def at(stamp: str) -> np.ndarray:
+        return leap.loc[pd.Timestamp(stamp, tz="Etc/GMT+5").tz_convert("UTC")].to_numpy()
+
+    np.testing.assert_array_equal(at("2024-02-29 12:30"), at("2024-02-28 12:30"))
+    np.testing.assert_array_equal(at("2024-12-31 23:30"), ref.iloc[-1].to_numpy())
+    np.testing.assert_array_equal(at("2025-01-01 00:30"), ref.iloc[0].to_numpy())
+    assert (np.diff(leap.index.as_unit("s").asi8) == 3600).all()  # hourly, increasing
+
+
+def test_epw_reads_as_the_same_typical_year(tmp_path: Path) -> None:
+    """EPW labels hours by their start (pvlib: hour − 1), TMY3 by their end: the same
+    Greensboro hours in the two formats give the same typical year."""
+    tmy, station = read_typical_year(pvlib_tmy3_path())
+    epw, epw_station = read_typical_year(write_epw(tmp_path / "greensboro.epw"))
+    assert epw_station["format"] == "epw" and epw_station["latitude"] == station["latitude"]
+    assert epw_station["utc_offset_h"] == -5.0 and epw_station["name"] == "Greensboro, USA"
+    np.testing.assert_allclose(epw.to_numpy(), tmy.to_numpy())
+    # the same clock: the TMY3 hour ending 13:00 on 21 June is the EPW hour 13 (12:00-13:00)
+    assert tmy.index[171 * 24 + 12].strftime("%m-%d %H:%M") == "06-21 12:30"
+    assert epw.index[171 * 24 + 12].strftime("%m-%d %H:%M") == "06-21 12:30"
+
+
+def test_weather_files_that_are_not_a_typical_year(tmp_path: Path) -> None:
+    junk = tmp_path / "junk.csv"
+    junk.write_text("a,b,c\n1,2,3\n")
+    with pytest.raises(ValueError, match="neither TMY3"):
+        read_typical_year(junk)
+    lines = pvlib_tmy3_path().read_text().splitlines()
+    short = tmp_path / "short.csv"
+    short.write_text("\n".join(lines[:2] + lines[3:]) + "\n")  # one hour missing
+    with pytest.raises(ValueError, match="8760 distinct hours"):
+        read_typical_year(short)
+    with pytest.raises(ValueError, match="timezone-aware"):
+        typical_year_on(read_typical_year(pvlib_tmy3_path())[0], -5.0,
+                        pd.Timestamp("2024-01-01"), pd.Timestamp("2024-01-02"))
+
+
+def test_cached_linke_turbidity_is_pvlibs() -> None:
+    """The per-place daily cache gives exactly pvlib's interpolated lookup (leap and common
+    years, local-zone times crossing UTC midnight and the year's end)."""
+    import pvlib
+
+    from sim.sky import linke_turbidity
+
+    times = pd.date_range("2023-12-20", "2025-01-10", freq="53min", tz="Pacific/Auckland")
+    for lat, lon in [(16.29, -95.24), (38.3, -5.3), (-36.85, 174.76), (69.6, 18.9)]:
+        want = pvlib.clearsky.lookup_linke_turbidity(times, lat, lon).to_numpy()
+        assert np.array_equal(linke_turbidity(times, lat, lon), want)

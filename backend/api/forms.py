@@ -1,0 +1,60 @@
+"""Multipart uploads, read the one bounded way (the vision and weather-file routes).
+
+The body is read in chunks and refused (413) past ``limit`` bytes whatever
+Content-Length says; then starlette parses it with caps on files and fields,
+whose breach is a 422 naming ``files`` or ``form``; a malformed body is a 400.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import HTTPException, Request
+from starlette.datastructures import FormData
+
+_TRUE = {"1", "true", "yes", "on"}
+_FALSE = {"0", "false", "no", "off"}
+
+
+async def read_form(request: Request, limit: int, expected: str, max_files: int,
+                    max_fields: int = 256) -> FormData:
+    """The multipart form of ``request``; ``expected`` says what the 415 asks for."""
+    ctype = request.headers.get("content-type", "")
+    if not ctype.lower().startswith("multipart/form-data"):
+        raise HTTPException(415, f"send multipart/form-data ({expected})")
+    length = request.headers.get("content-length")
+    if length is not None and length.isdigit() and int(length) > limit:
+        raise HTTPException(413, f"body of {length} bytes; the limit is {limit} bytes "
+                                 "(HELIOTWIN_MAX_UPLOAD_BYTES)")
+    chunks: list[bytes] = []
+    size = 0
+    async for chunk in request.stream():
+        size += len(chunk)
+        if size > limit:
+            raise HTTPException(413, f"body over {limit} bytes (HELIOTWIN_MAX_UPLOAD_BYTES)")
+        chunks.append(chunk)
+    body = b"".join(chunks)
+
+    async def receive() -> dict[str, Any]:
+        return {"type": "http.request", "body": body, "more_body": False}
+
+    try:
+        return await Request(request.scope, receive).form(
+            max_files=max_files, max_fields=max_fields, max_part_size=limit)
+    except Exception as exc:  # starlette's HTTPException(400) for a malformed body or limits
+        text = str(getattr(exc, "detail", exc))
+        if "Too many files" in text:
+            raise HTTPException(422, f"files: at most {max_files} files per request") from None
+        if "Too many fields" in text:
+            raise HTTPException(422, f"form: at most {max_fields} fields per request") from None
+        raise HTTPException(400, f"malformed multipart body: {text}") from None
+
+
+def form_flag(value: str | None, name: str, default: bool = False) -> bool:
+    """A boolean form field (true/false, 1/0, yes/no, on/off); anything else a 422 naming it."""
+    if value is None or not value.strip():
+        return default
+    v = value.strip().lower()
+    if v in _TRUE | _FALSE:
+        return v in _TRUE
+    raise HTTPException(422, f"{name}: {value!r} is not a boolean (true or false)")

@@ -1,0 +1,71 @@
+"""``heliotwin vision detect --calibration-id``: a calibration stored over HTTP by the service,
+used by the CLI on the same database; the text answer states the error against SPA."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import httpx
+import pandas as pd
+import pvlib
+import pytest
+from live_service import ROOT, LiveServer
+
+from vision.cameras import FisheyeCamera
+from vision.synth import fisheye_frame
+
+TEHUANTEPEC = (16.288750, -95.240871, 50.0)
+TRUTH = FisheyeCamera(330.0, 238.0, 2.6, north_offset_deg=-20.0, east="left")
+
+
+def _sun(ts: str) -> tuple[float, float]:
+    """pvlib's SPA (not the product's ephemeris) at Tehuantepec."""
+    sp = pvlib.solarposition.spa_python(pd.DatetimeIndex([pd.Timestamp(ts)]), *TEHUANTEPEC)
+    return float(sp["azimuth"].iloc[0]), float(sp["apparent_elevation"].iloc[0])
+
+
+def _png(ts: str, seed: int) -> bytes:
+    ok, buf = cv2.imencode(".png", fisheye_frame(*_sun(ts), camera=TRUTH, seed=seed).image)
+    assert ok
+    return buf.tobytes()
+
+
+def test_detect_with_a_stored_calibration(live_server: LiveServer, client: httpx.Client,
+                                          tmp_path: Path) -> None:
+    times = [f"2024-04-10T{h:02d}:20:00-06:00" for h in (8, 10, 12, 14, 16)]
+    files = [("files", (f"c{i}.png", _png(ts, i), "image/png")) for i, ts in enumerate(times)]
+    r = client.post("/api/v1/vision/calibrations", files=files,
+                    data={"timestamps": times, "site_id": "tehuantepec"})
+    assert r.status_code == 201, r.text
+    cal_id = r.json()["calibration_id"]
+    held_out = "2024-04-10T11:05:00-06:00"  # not one of the calibration frames
+    frame = tmp_path / "held_out.png"
+    frame.write_bytes(_png(held_out, 42))
+
+    def detect(*extra: str) -> subprocess.CompletedProcess:
+        return subprocess.run(
+            [sys.executable, "-m", "backend", "vision", "detect", str(frame), "--timestamp",
+             held_out, "--site", "tehuantepec", *extra],
+            capture_output=True, text=True, cwd=ROOT, timeout=120, env=live_server.env)
+
+    p = detect("--calibration-id", str(cal_id), "--json")
+    assert p.returncode == 0, p.stderr
+    out = json.loads(p.stdout)
+    az, el = _sun(held_out)
+    assert out["calibration_id"] == cal_id and out["sun_found"]
+    assert out["azimuth_deg"] == pytest.approx(az, abs=0.5)
+    assert out["elevation_deg"] == pytest.approx(el, abs=0.5)
+    assert out["error"]["separation_deg"] < 0.5
+    text = detect("--calibration-id", str(cal_id))
+    assert text.returncode == 0, text.stderr
+    assert f"error against SPA {out['error']['separation_deg']:.3f} deg" in text.stdout
+    missing = detect("--calibration-id", "999999")
+    assert missing.returncode == 2 and "--calibration-id: no calibration 999999" in missing.stderr
+    pinhole = detect("--calibration-id", str(cal_id), "--camera", "pinhole")
+    assert pinhole.returncode == 2 and "fisheye" in pinhole.stderr
+    neither = detect()
+    assert neither.returncode == 2 and "--camera: required" in neither.stderr

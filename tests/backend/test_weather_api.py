@@ -1,0 +1,108 @@
+"""``POST /api/v1/simulations/weather``: a twin run on an uploaded TMY3/EPW file, over real
+HTTP against ``heliotwin serve`` (SQLite and PostgreSQL), checked against the CLI."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+from live_service import ROOT, ServerProcess
+
+from sim.sky import pvlib_tmy3_path
+
+RANGE = {"site_id": "tehuantepec", "start": "2023-05-01", "end": "2023-05-04",
+         "step_s": "600"}
+
+
+def _files(path: Path | None = None) -> dict:
+    path = path or pvlib_tmy3_path()
+    return {"file": (path.name, path.read_bytes(), "text/csv")}
+
+
+def test_a_distant_station_is_refused_unless_forced_and_then_runs_as_the_cli(
+        client: httpx.Client) -> None:
+    r = client.post("/api/v1/simulations/weather", data=RANGE, files=_files())
+    assert r.status_code == 422
+    detail = r.json()["detail"]
+    assert detail.startswith("force:") and "2672 km from site tehuantepec" in detail
+    r = client.post("/api/v1/simulations/weather", data={**RANGE, "force": "true"},
+                    files=_files())
+    assert r.status_code == 200, r.text
+    http = r.json()
+    cli = subprocess.run(
+        [sys.executable, "-m", "backend", "simulate", "--site", "tehuantepec", "--start",
+         RANGE["start"], "--end", RANGE["end"], "--step-s", RANGE["step_s"], "--tmy3",
+         str(pvlib_tmy3_path()), "--force", "--json"],
+        capture_output=True, text=True, cwd=ROOT, timeout=120, check=True)
+    ref = json.loads(cli.stdout)
+    assert http["sky"] == "weather" and http["steps"] == ref["steps"] == 432
+    assert http["tracker_energy_wh"] == pytest.approx(ref["tracker_energy_wh"], rel=1e-12)
+    assert http["fixed_energy_wh"] == pytest.approx(ref["fixed_energy_wh"], rel=1e-12)
+
+
+def test_a_background_run_on_weather_keeps_its_station_and_exports_units(
+        client: httpx.Client) -> None:
+    r = client.post("/api/v1/simulations/weather", files=_files(),
+                    data={**RANGE, "start": "2023-06-01", "end": "2023-06-02",
+                          "force": "on", "background": "true"})
+    assert r.status_code == 202, r.text
+    url = r.headers["Location"]
+    deadline = time.monotonic() + 120
+    while (run := client.get(url).json())["status"] not in ("done", "failed"):
+        assert time.monotonic() < deadline, run
+        time.sleep(0.3)
+    assert run["status"] == "done", run
+    station = run["params"]["weather_station"]
+    assert station["format"] == "tmy3" and station["name"] == "GREENSBORO PIEDMONT TRIAD INT"
+    assert station["forced"] is True and station["utc_offset_h"] == -5.0
+    rows = list(csv.DictReader(io.StringIO(client.get(f"{url}/series",
+                                                      params={"format": "csv"}).text)))
+    assert len(rows) == 144
+    assert rows[0]["time_utc"] == "2023-06-01T06:00:00+00:00"
+    assert rows[0]["time_local"] == "2023-06-01T00:00:00-06:00"  # Mexico: no DST since 2022
+    assert "tracker_poa_global_w_m2" in rows[0] and "tracker_temp_cell_c" in rows[0]
+    assert max(float(r["tracker_poa_global_w_m2"]) for r in rows) > 100
+    cols = client.get(f"{url}/series", params={"max_points": 10}).json()["columns"]
+    assert "solar_azimuth_deg" in cols and "solar_azimuth" not in cols
+
+
+@pytest.mark.parametrize("data, files, status, field", [
+    ({**RANGE, "force": "true"}, None, 422, "file:"),
+    ({**RANGE, "force": "true"}, {"file": ("x.csv", b"a,b\n1,2\n", "text/csv")}, 422, "file:"),
+    ({**RANGE, "step_s": "-5", "force": "true"}, "tmy3", 422, "step_s"),
+    ({**RANGE, "start": "2023-05-04T00:00", "force": "true"}, "tmy3", 422, "offset"),
+    ({**RANGE, "force": "maybe"}, "tmy3", 422, "force:"),
+    ({**RANGE, "site_id": "atlantis", "force": "true"}, "tmy3", 404, "atlantis"),
+])
+def test_bad_uploads_name_the_field(client: httpx.Client, data: dict, files: object,
+                                    status: int, field: str) -> None:
+    if files is None:  # a form without the file
+        r = client.post("/api/v1/simulations/weather", data=data,
+                        files={"note": ("n.txt", b"x", "text/plain")})
+    else:
+        r = client.post("/api/v1/simulations/weather", data=data,
+                        files=_files() if files == "tmy3" else files)
+    assert r.status_code == status, r.text
+    assert field in r.json()["detail"]
+
+
+def test_the_upload_is_bounded_and_must_be_multipart(tmp_path: Path) -> None:
+    """A TMY3 file (1.2 MB) over a 500 kB limit is a 413; JSON is a 415."""
+    server = ServerProcess(f"sqlite:///{tmp_path / 'w.sqlite'}", tmp_path / "server.log",
+                           extra_env={"HELIOTWIN_MAX_UPLOAD_BYTES": "500000"}).start()
+    try:
+        r = httpx.post(server.base_url + "/api/v1/simulations/weather",
+                       data={**RANGE, "force": "true"}, files=_files(), timeout=60)
+        assert r.status_code == 413 and "HELIOTWIN_MAX_UPLOAD_BYTES" in r.json()["detail"]
+        r = httpx.post(server.base_url + "/api/v1/simulations/weather", json=RANGE, timeout=60)
+        assert r.status_code == 415 and "multipart" in r.json()["detail"]
+        assert httpx.get(server.base_url + "/healthz", timeout=10).status_code == 200
+    finally:
+        server.stop()
