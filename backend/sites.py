@@ -1,10 +1,18 @@
 """Sites known to the service: loaded from ``data/sites/`` (``sim.sites``) into the database.
 
-At start-up the built-in site files are written to the ``sites`` and ``arrays``
-tables (inserted, or their config refreshed; a stored logger calibration is
-kept). :class:`Registry` keeps what the hot path needs in memory: for each site
-the ``sim.sites.Site``, its time zone, its rollup phase, and for each array its
-id, kind and calibration.
+At start-up the built-in site files, and the user's of ``HELIOTWIN_SITES_DIR``
+(which add to them, and win on a shared id), are written to the ``sites`` and
+``arrays`` tables (inserted, or their config refreshed; a stored logger
+calibration is kept). :class:`Registry` keeps what the hot path needs in memory:
+for each site the ``sim.sites.Site``, its time zone, its rollup phase, and for
+each array its id, kind and calibration.
+
+:func:`save_site` creates or edits a site while the service runs (the
+``PUT /api/v1/sites/{site_id}`` route): the config is validated
+(:mod:`sim.site_config`), written to the user's folder, synced to the database
+and the registry; :func:`sync_sites` drops the twin series cached for a site
+whose config changed (:func:`drop_twin_cache`), here and at start-up after a
+file was edited, so they are simulated again with the new config.
 """
 
 from __future__ import annotations
@@ -14,15 +22,29 @@ import logging
 import threading
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 from zoneinfo import ZoneInfo
 
-from sqlalchemy import Connection, select, update
+from sqlalchemy import Connection, delete, select, update
 from sqlalchemy.dialects import postgresql, sqlite
 
+from backend.errors import InputError
 from backend.measurements.buckets import bucket_phase_s
 from backend.measurements.parse import Calibration
-from backend.storage.tables import ArrayRow, SiteRow, utcnow
-from sim.sites import Site, list_sites
+from backend.storage.tables import (
+    SOURCE_CODES,
+    ArrayRow,
+    Measurement,
+    MeasurementRollup,
+    SiteRow,
+    TwinCoverage,
+    utcnow,
+)
+from sim.site_config import validate_site_config
+from sim.sites import Site, list_sites, site_from_dict
+
+if TYPE_CHECKING:
+    from backend.context import ServiceContext
 
 logger = logging.getLogger(__name__)
 
@@ -67,9 +89,28 @@ def _kind(cfg: object) -> str:
     return str(getattr(cfg, "mount", "fixed"))
 
 
-def sync_sites(conn: Connection, sites: list[Site]) -> None:
-    """Insert or refresh ``sites`` and ``arrays`` rows for ``sites`` (calibrations kept)."""
+def drop_twin_cache(conn: Connection, site_id: str) -> int:
+    """Delete the stored twin readings, twin rollups and twin coverage of ``site_id``
+    (its config changed: they were simulated with the old one). Returns readings dropped."""
+    arrays = select(ArrayRow.id).where(ArrayRow.site_id == site_id).scalar_subquery()
+    n = conn.execute(delete(Measurement).where(
+        Measurement.array_id.in_(arrays), Measurement.source == SOURCE_CODES["twin"])).rowcount
+    conn.execute(delete(MeasurementRollup).where(
+        MeasurementRollup.array_id.in_(arrays),
+        MeasurementRollup.source == SOURCE_CODES["twin"]))
+    conn.execute(delete(TwinCoverage).where(TwinCoverage.site_id == site_id))
+    return int(n or 0)
+
+
+def sync_sites(conn: Connection, sites: list[Site]) -> dict[str, int]:
+    """Insert or refresh ``sites`` and ``arrays`` rows for ``sites`` (calibrations kept).
+
+    A site whose stored config differs from its file has its cached twin dropped
+    (:func:`drop_twin_cache`); returns ``{site_id: twin readings dropped}`` for those.
+    """
     ins = postgresql.insert if conn.dialect.name == "postgresql" else sqlite.insert
+    stored = dict(conn.execute(select(SiteRow.site_id, SiteRow.config_json)).tuples().all())
+    changed: dict[str, int] = {}
     for site in sites:
         values = {
             "site_id": site.site_id, "name": site.name, "latitude_deg": site.latitude,
@@ -77,6 +118,10 @@ def sync_sites(conn: Connection, sites: list[Site]) -> None:
             "timezone": site.timezone, "bucket_phase_s": bucket_phase_s(site.timezone),
             "config_json": json.dumps(site.to_dict()), "updated_at": utcnow(),
         }
+        if site.site_id in stored and stored[site.site_id] != values["config_json"]:
+            changed[site.site_id] = drop_twin_cache(conn, site.site_id)
+            logger.info("site %s changed: %d cached twin readings dropped", site.site_id,
+                        changed[site.site_id])
         stmt = ins(SiteRow).values(**values)
         conn.execute(stmt.on_conflict_do_update(index_elements=["site_id"], set_={
             k: stmt.excluded[k] for k in values if k != "site_id"}))
@@ -91,6 +136,7 @@ def sync_sites(conn: Connection, sites: list[Site]) -> None:
                 index_elements=["site_id", "name"],
                 set_={"kind": stmt.excluded.kind, "config_json": stmt.excluded.config_json},
             ))
+    return changed
 
 
 class Registry:
@@ -117,11 +163,21 @@ class Registry:
         with self._lock:
             for row in rows:
                 info = self.sites.get(row.site_id)
-                if info is None:
-                    continue
+                if info is None or row.name not in info.site.arrays:
+                    continue  # an array no longer in the site's config takes no readings
                 cal = Calibration(**{f: getattr(row, f) for f in CALIBRATION_FIELDS})
                 info.arrays[row.name] = ArrayInfo(row.id, row.name, row.kind, cal)
                 self._phase_of_array[row.id] = info.phase_s
+
+    def put(self, site: Site) -> SiteInfo:
+        """Add or replace a site (its arrays come from the next :meth:`refresh_arrays`)."""
+        info = SiteInfo(site, ZoneInfo(site.timezone), bucket_phase_s(site.timezone))
+        with self._lock:
+            old = self.sites.get(site.site_id)
+            if old is not None:  # kept meanwhile, so ingest never sees the site without them
+                info.arrays = {n: a for n, a in old.arrays.items() if n in site.arrays}
+            self.sites[site.site_id] = info
+        return info
 
     def phase_of_array(self, array_id: int) -> int:
         """Rollup phase [s] of the site that owns ``array_id``."""
@@ -140,3 +196,51 @@ class Registry:
         )
         with self._lock:
             info.arrays[name] = replace(info.arrays[name], calibration=cal)
+
+
+def write_site_file(directory: Path, config: dict[str, Any]) -> Path:
+    """Write a validated config as ``<directory>/<site_id>.json`` (atomically)."""
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / f"{config['site_id']}.json"
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(config, indent=2, ensure_ascii=False) + "\n")
+    tmp.replace(path)
+    return path
+
+
+def save_site(ctx: ServiceContext, site_id: str, data: Any) -> tuple[SiteInfo, bool, int]:
+    """Create or replace site ``site_id`` from a config dict while the service runs.
+
+    Returns the new :class:`SiteInfo`, whether the site is new, and how many cached
+    twin readings were dropped. InputError 422 names the bad field; 409 when the
+    new time zone would move the hourly rollup grid under stored readings.
+    """
+    try:
+        cfg = validate_site_config(data, where="body")
+        config = cfg.model_dump(mode="json", by_alias=True, exclude_unset=True)
+        if cfg.site_id != site_id:
+            raise ValueError(f"body: site_id: {cfg.site_id!r} does not match the path's "
+                             f"{site_id!r}")
+        site = site_from_dict(config, where="body")
+    except ValueError as exc:
+        raise InputError(422, str(exc)) from None
+    old = ctx.registry.get(site_id)
+    if old is not None and bucket_phase_s(site.timezone) != old.phase_s:
+        raise InputError(409, f"body: timezone: {site.timezone!r} is offset from the hour "
+                              f"differently from {old.site.timezone!r}; the stored hourly "
+                              "rollups are phased to the old zone: make a new site instead")
+    config.pop("$schema", None)
+    write_site_file(ctx.settings.sites_dir, config)
+
+    def sync(conn: Connection) -> int:
+        return sync_sites(conn, [site]).get(site_id, 0)
+
+    with ctx.twin.site_lock(site_id):  # no on-demand twin of the old config meanwhile
+        dropped: int = ctx.writer.call(sync).result()
+        info = ctx.registry.put(site)
+        with ctx.engine.connect() as conn:
+            ctx.registry.refresh_arrays(conn)
+        ctx.twin.forget(site_id)
+    logger.info("site %s %s (%d cached twin readings dropped)", site_id,
+                "created" if old is None else "updated", dropped)
+    return info, old is None, dropped

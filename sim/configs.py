@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -13,17 +14,20 @@ CONFIG_ID = re.compile(r"^[a-z0-9][a-z0-9_-]{0,63}$")
 """Ids are lower-case file stems: no path can be smuggled in through one."""
 
 
-def read_config(kind: str, config_id: str, directory: Path,
+def read_config(kind: str, config_id: str, directory: Path | Sequence[Path],
                 unknown: type[ValueError]) -> tuple[Path, dict[str, Any]]:
     """The parsed JSON of ``<directory>/<config_id>.json`` and its path.
 
+    ``directory`` may be a list of folders: the first that holds the file wins.
     Raises ``unknown`` (listing the known ids) when there is no such file, and
     ValueError naming the file when it is not valid JSON.
     """
-    path = directory / f"{config_id}.json"
-    if not CONFIG_ID.match(config_id) or not path.is_file():
-        known = ", ".join(p.stem for p in sorted(directory.glob("*.json"))) or "none"
-        raise unknown(f"unknown {kind} {config_id!r}; known {kind}s: {known}")
+    folders = [directory] if isinstance(directory, Path) else list(directory)
+    found = [d / f"{config_id}.json" for d in folders if (d / f"{config_id}.json").is_file()]
+    if not CONFIG_ID.match(config_id) or not found:
+        ids = sorted({p.stem for d in folders if d.is_dir() for p in d.glob("*.json")})
+        raise unknown(f"unknown {kind} {config_id!r}; known {kind}s: {', '.join(ids) or 'none'}")
+    path = found[0]
     try:
         data = json.loads(path.read_text())
     except json.JSONDecodeError as exc:

@@ -12,13 +12,13 @@ import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from sim.configs import read_config
 from sim.dynamics import TrackerInertia
 from sim.kinematics import TrackerGeometry
 from sim.motors import AxisDrive
 from sim.pv import ArrayConfig, array_config_from_dict
+from sim.site_config import validate_site_config
 
 _TRACKER_KEYS = (
     "d1_m",
@@ -110,95 +110,111 @@ class Site:
         }
 
 
+    def to_config(self) -> dict[str, Any]:
+        """The site as a config file (:class:`sim.site_config.SiteConfig`): what
+        :func:`site_from_dict` reads back to an equal :class:`Site`."""
+        d = self.to_dict()
+        keys = ("mount", "module", "modules_in_series", "strings_in_parallel",
+                "surface_tilt_deg", "surface_azimuth_deg", "temperature_model", "albedo")
+        arrays = {}
+        for name, arr in self.arrays.items():
+            a = dataclasses.asdict(arr)
+            a["surface_tilt_deg"], a["surface_azimuth_deg"] = arr.surface_tilt, arr.surface_azimuth
+            arrays[name] = {k: a[k] for k in keys}
+        return {**d, "arrays": arrays}
+
+
 def site_from_dict(d: dict[str, Any], where: str = "site") -> Site:
-    """Build a :class:`Site` from the layout of ``data/sites/*.json``; ValueError names the key."""
+    """Build a :class:`Site` from the layout of ``data/sites/*.json``.
+
+    The layout is :class:`sim.site_config.SiteConfig` (``docs/site.schema.json``);
+    a ValueError names every bad field by its dotted path.
+    """
+    cfg = validate_site_config(d, where)
+    t = cfg.tracker
     try:
-        site_id = str(d["site_id"])
-        lat = float(d["latitude_deg"])
-        lon = float(d["longitude_deg"])
-        tz = str(d["timezone"])
-    except KeyError as exc:
-        raise ValueError(f"{where}: missing key {exc.args[0]!r}") from None
-    if not -90 <= lat <= 90:
-        raise ValueError(f"{where}: latitude_deg {lat} outside [-90, 90]")
-    if not -180 <= lon <= 180:
-        raise ValueError(f"{where}: longitude_deg {lon} outside [-180, 180]")
-    try:
-        ZoneInfo(tz)
-    except (ZoneInfoNotFoundError, ValueError):
-        raise ValueError(f"{where}: timezone {tz!r} is not an IANA time zone") from None
-    tracker_d = dict(d.get("tracker", {}))
-    drives = _drives_from_dict(tracker_d.pop("drives", {}), where)
-    inertia = _overrides(TrackerInertia.seed002(), tracker_d.pop("inertia", {}),
-                         f"{where}: tracker.inertia")
-    unknown = sorted(set(tracker_d) - set(_TRACKER_KEYS))
-    if unknown:
-        raise ValueError(f"{where}: tracker has unknown keys {unknown}")
-    arrays = {
-        name: array_config_from_dict(name, cfg) for name, cfg in (d.get("arrays") or {}).items()
-    }
+        tracker = TrackerGeometry(**{k: getattr(t, k) for k in _TRACKER_KEYS})
+        drives = {"azimuth": AxisDrive(**t.drives.azimuth.model_dump()),
+                  "elevation": AxisDrive(**t.drives.elevation.model_dump())}
+        inertia = TrackerInertia(**t.inertia.model_dump())
+        arrays = {name: array_config_from_dict(name, a.model_dump())
+                  for name, a in cfg.arrays.items()}
+    except ValueError as exc:
+        raise ValueError(f"{where}: tracker: {exc}") from None
     return Site(
-        site_id=site_id,
-        name=str(d.get("name", site_id)),
-        latitude=lat,
-        longitude=lon,
-        altitude=float(d.get("altitude_m", 0.0)),
-        timezone=tz,
+        site_id=cfg.site_id,
+        name=cfg.name or cfg.site_id,
+        latitude=cfg.latitude_deg,
+        longitude=cfg.longitude_deg,
+        altitude=cfg.altitude_m,
+        timezone=cfg.timezone,
         arrays=arrays,
-        tracker=TrackerGeometry(**{k: float(v) for k, v in tracker_d.items()}),
-        temp_air=float(d.get("temp_air_c", 25.0)),
-        wind_speed=float(d.get("wind_speed_m_s", 1.0)),
-        transposition_model=str(d.get("transposition_model", "haydavies")),
+        tracker=tracker,
+        temp_air=cfg.temp_air_c,
+        wind_speed=cfg.wind_speed_m_s,
+        transposition_model=cfg.transposition_model,
         drives=drives,
         inertia=inertia,
-        source=str(d.get("source", "")),
-        notes=str(d.get("notes", "")),
+        source=cfg.source,
+        notes=cfg.notes,
     )
 
 
-def _overrides(default: Any, values: Any, where: str) -> Any:
-    """``default`` (a frozen dataclass) with the fields of ``values`` replaced; unknown or
-    non-numeric fields and the dataclass's own checks are a ValueError naming them."""
-    if not isinstance(values, dict):
-        raise ValueError(f"{where}: must be an object of field: value")
-    names = {f.name for f in dataclasses.fields(default)}
-    unknown = sorted(set(values) - names)
-    if unknown:
-        raise ValueError(f"{where}: unknown keys {unknown}; known: {sorted(names)}")
-    try:
-        return dataclasses.replace(default, **{k: float(v) for k, v in values.items()})
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{where}: {exc}") from None
+def default_user_sites_dir() -> Path:
+    """The repository's ``data/user-sites/``: user sites when no folder is given (the
+    default of the service's ``HELIOTWIN_SITES_DIR`` too)."""
+    return default_sites_dir().parent / "user-sites"
 
 
-def _drives_from_dict(values: Any, where: str) -> dict[str, AxisDrive]:
-    defaults = {"azimuth": AxisDrive.azimuth_default(), "elevation": AxisDrive.elevation_default()}
-    if not isinstance(values, dict) or set(values) - set(defaults):
-        raise ValueError(f"{where}: tracker.drives must be an object with 'azimuth' and/or "
-                         "'elevation'")
-    return {axis: _overrides(d, values.get(axis, {}), f"{where}: tracker.drives.{axis}")
-            for axis, d in defaults.items()}
+def _dirs(sites_dir: str | Path | None) -> list[Path]:
+    """Where sites are looked up, first match winning: the user's folder (default
+    :func:`default_user_sites_dir`), then the built-ins."""
+    builtin = default_sites_dir()
+    user = default_user_sites_dir() if sites_dir is None else Path(sites_dir)
+    return [builtin] if user.resolve() == builtin else [user, builtin]
+
+
+def site_path(site_id: str, sites_dir: str | Path | None = None) -> Path:
+    """The file :func:`load_site` reads for ``site_id`` (UnknownSiteError when none)."""
+    return read_config("site", site_id, _dirs(sites_dir), UnknownSiteError)[0]
+
+
+def builtin_site_ids() -> set[str]:
+    """Ids of the repository's built-in sites (``data/sites/``)."""
+    return {p.stem for p in default_sites_dir().glob("*.json")}
+
+
+def is_builtin(path: Path) -> bool:
+    """Whether a site file is one of the repository's built-in sites."""
+    return path.resolve().parent == default_sites_dir()
 
 
 def load_site(site_id: str, sites_dir: str | Path | None = None) -> Site:
-    """Read ``<sites_dir>/<site_id>.json`` (default: :func:`default_sites_dir`).
+    """Read ``<site_id>.json`` from ``sites_dir`` (a user's folder) or the built-in sites.
+
+    ``sites_dir`` (default :func:`default_user_sites_dir`) adds to
+    :func:`default_sites_dir`: a user file with the id of a built-in site replaces
+    the built-in one.
 
     Raises
     ------
     UnknownSiteError
         No such site (the message lists the known ids).
     ValueError
-        The file is malformed (the message names the key).
+        The file is malformed (the message names the field).
     """
-    directory = Path(sites_dir) if sites_dir is not None else default_sites_dir()
-    path, data = read_config("site", site_id, directory, UnknownSiteError)
+    path, data = read_config("site", site_id, _dirs(sites_dir), UnknownSiteError)
     site = site_from_dict(data, where=str(path))
     if site.site_id != site_id:
         raise ValueError(f"{path}: site_id {site.site_id!r} does not match the file name")
     return site
 
 
+def site_ids(sites_dir: str | Path | None = None) -> list[str]:
+    """Ids of the built-in sites and those of ``sites_dir``, sorted."""
+    return sorted({p.stem for d in _dirs(sites_dir) if d.is_dir() for p in d.glob("*.json")})
+
+
 def list_sites(sites_dir: str | Path | None = None) -> list[Site]:
-    """All sites in ``sites_dir`` (default: :func:`default_sites_dir`), sorted by id."""
-    directory = Path(sites_dir) if sites_dir is not None else default_sites_dir()
-    return [load_site(p.stem, directory) for p in sorted(directory.glob("*.json"))]
+    """The built-in sites and those of ``sites_dir`` (which win on a shared id), by id."""
+    return [load_site(site_id, sites_dir) for site_id in site_ids(sites_dir)]

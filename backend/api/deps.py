@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import hmac
 from collections.abc import Iterator
 from typing import Annotated
 
@@ -72,6 +73,12 @@ def parse_bearer(header: str | None) -> str | None:
     if scheme.lower() != "bearer" or not token.strip():
         raise HTTPException(401, "Authorization must be 'Bearer <token>'", headers=_BEARER)
     return token.strip()
+
+
+def is_admin_token(settings: Settings, token: str | None) -> bool:
+    """Whether ``token`` is ``Settings.admin_token`` (constant-time; never when unset)."""
+    expected = settings.admin_token
+    return bool(token and expected and hmac.compare_digest(token.encode(), expected.encode()))
 
 
 async def token_site(request: Request, token: str) -> str | None:

@@ -4,7 +4,10 @@ Periods are the site's local calendar hours/days/months clipped to ``[start, end
 energy comes from the hourly rollups (:mod:`backend.measurements.queries`, the
 rule of :mod:`backend.measurements.rollups`), the twin's from series stored on
 demand (``TwinService.ensure``). ``gain_pct`` is ``100·(tracker/fixed − 1)`` from
-measured energy, null when either is missing; ``twin_gain_pct`` the same from the twin.
+measured energy, null when either is missing; ``twin_gain_pct`` the same from the twin,
+``twin_matched_gain_pct`` from the twin over the same minutes as the readings. A
+period whose readings miss part of the twin's energy (a half-day) is ``partial``
+and is compared with ``twin_matched_wh``, never with the whole-period twin.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from backend.errors import InputError
-from backend.measurements.queries import energy_table, period_edges
+from backend.measurements.queries import energy_table, matched_twin_wh, period_edges
 from backend.sites import SiteInfo
 
 if TYPE_CHECKING:
@@ -25,15 +28,64 @@ MAX_PERIODS = 50_000
 _SHORTEST_S = {"hour": 3600.0, "day": 82800.0, "month": 28 * 86400.0}  # DST days: 23 h
 
 
+#: A period whose readings cover less of the twin's energy than this is ``partial`` [%].
+PARTIAL_BELOW_PCT = 95.0
+
+
 def _gain(tracker: float | None, fixed: float | None) -> float | None:
     if tracker is None or fixed is None or fixed <= 0:
         return None
     return 100.0 * (tracker / fixed - 1.0)
 
 
+def _ratio(num: float | None, den: float | None) -> float | None:
+    return None if num is None or den is None or den <= 0 else num / den
+
+
+def compare(arrays: dict[str, dict[str, Any]], tracker: str | None,
+             fixed: str | None) -> dict[str, Any]:
+    """Per array: coverage and performance ratio; per period: partial flag and gains."""
+    for a in arrays.values():
+        a["performance_ratio"] = _ratio(a["measured_wh"], a["twin_matched_wh"])
+        cov = _ratio(a["twin_matched_wh"], a["twin_wh"]) if a["readings"] else None
+        a["coverage_pct"] = None if cov is None else min(100.0, 100.0 * cov)
+    covs = [a["coverage_pct"] for a in arrays.values()]
+    out: dict[str, Any] = {
+        "partial": None if not arrays or None in covs else min(covs) < PARTIAL_BELOW_PCT,
+        "gain_pct": None, "twin_gain_pct": None, "twin_matched_gain_pct": None}
+    if tracker is not None and fixed is not None:
+        tr, fx = arrays[tracker], arrays[fixed]
+        out["gain_pct"] = _gain(tr["measured_wh"], fx["measured_wh"])
+        out["twin_gain_pct"] = _gain(tr["twin_wh"], fx["twin_wh"])
+        out["twin_matched_gain_pct"] = _gain(tr["twin_matched_wh"], fx["twin_matched_wh"])
+    return out
+
+
+def _matched(conn: Any, table: Any, array_id: int, edges_s: np.ndarray, gap: int
+             ) -> np.ndarray:
+    """``twin_matched_wh`` per period: where the logger and the twin both have a reading
+    in every minute of the period the minutes are the same, and the matched twin is the
+    twin's energy from the rollups; raw minutes are read only for the other periods."""
+    m_n, t_n = table.readings[(array_id, 0)], table.readings[(array_id, 1)]
+    minutes = np.round(np.diff(edges_s) / 60.0).astype(np.int64)
+    complete = (m_n == minutes) & (t_n == minutes)
+    out = np.where(complete, table.energy_wh[(array_id, 1)], 0.0)
+    rest = np.flatnonzero(~complete & (m_n > 0) & (t_n > 0))
+    return out + matched_twin_wh(conn, array_id, edges_s, gap, rest)
+
+
 def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt.datetime,
                 interval: str) -> dict[str, Any]:
-    """The energy answer for a validated range (the energy endpoint and the status tiles)."""
+    """The energy answer for a validated range (the energy endpoint, status tiles, reports).
+
+    Per period and array: ``measured_wh``, ``twin_wh`` (the whole period),
+    ``twin_matched_wh`` (the twin over only the minutes with a measured reading,
+    :func:`backend.measurements.queries.matched_twin_wh`), ``coverage_pct`` (that
+    share of ``twin_wh``), ``performance_ratio`` (``measured_wh / twin_matched_wh``:
+    measured over the clear-sky twin's expectation, the same minutes). Per period:
+    ``partial`` (some array's coverage under :data:`PARTIAL_BELOW_PCT`),
+    ``twin_matched_gain_pct`` and ``twin_note`` (why there is no twin, or null).
+    """
     site_id = info.site_id
     at_least = (end - start).total_seconds() / _SHORTEST_S[interval]
     if at_least > MAX_PERIODS + 2:  # before building millions of period edges
@@ -47,13 +99,17 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
     ctx.twin.ensure(site_id, int(edges_s[0]), int(edges_s[-1]))
     names = list(info.arrays)
     ids = [info.arrays[n].array_id for n in names]
+    gap = ctx.settings.energy_max_gap_s
     with ctx.engine.connect() as conn:
-        table = energy_table(conn, ids, edges_s, info.phase_s, ctx.settings.energy_max_gap_s)
+        table = energy_table(conn, ids, edges_s, info.phase_s, gap)
+        matched = {aid: _matched(conn, table, aid, edges_s, gap) for aid in ids}
     tracker = info.array_of_kind("tracker")
     fixed = info.array_of_kind("fixed")
+    tr_name = tracker.name if tracker is not None else None
+    fx_name = fixed.name if fixed is not None else None
     rows = []
-    totals: dict[str, dict[str, Any]] = {
-        n: {"measured_wh": 0.0, "twin_wh": 0.0, "readings": 0} for n in names}
+    sums = {n: {"measured_wh": 0.0, "twin_wh": 0.0, "twin_matched_wh": 0.0, "readings": 0,
+                "twin_readings": 0} for n in names}
     for p in range(len(edges) - 1):
         arrays: dict[str, dict[str, Any]] = {}
         for n, aid in zip(names, ids, strict=True):
@@ -61,32 +117,31 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
             t_n = int(table.readings[(aid, 1)][p])
             m_wh = float(table.energy_wh[(aid, 0)][p])
             t_wh = float(table.energy_wh[(aid, 1)][p])
+            mt_wh = float(matched[aid][p])
             arrays[n] = {"measured_wh": m_wh if m_n else None,
-                         "twin_wh": t_wh if t_n else None, "readings": m_n}
-            totals[n]["measured_wh"] += m_wh
-            totals[n]["twin_wh"] += t_wh
-            totals[n]["readings"] += m_n
-        row: dict[str, Any] = {
+                         "twin_wh": t_wh if t_n else None,
+                         "twin_matched_wh": mt_wh if m_n and t_n else None, "readings": m_n}
+            for key, value in (("measured_wh", m_wh), ("twin_wh", t_wh),
+                               ("twin_matched_wh", mt_wh), ("readings", m_n),
+                               ("twin_readings", t_n)):
+                sums[n][key] += value
+        compared = compare(arrays, tr_name, fx_name)
+        no_twin = any(a["twin_wh"] is None for a in arrays.values()) or not arrays
+        rows.append({
             "period_start": edges[p].astimezone(info.zone).isoformat(),
             "period_end": edges[p + 1].astimezone(info.zone).isoformat(),
-            "arrays": arrays,
-            "gain_pct": None, "twin_gain_pct": None,
-        }
-        if tracker is not None and fixed is not None:
-            tr, fx = arrays[tracker.name], arrays[fixed.name]
-            row["gain_pct"] = _gain(tr["measured_wh"], fx["measured_wh"])
-            row["twin_gain_pct"] = _gain(tr["twin_wh"], fx["twin_wh"])
-        rows.append(row)
-    for n in names:
-        if not totals[n]["readings"]:
-            totals[n]["measured_wh"] = None
-    total_gain = None
-    if tracker is not None and fixed is not None:
-        tr_t, fx_t = totals[tracker.name], totals[fixed.name]
-        total_gain = _gain(tr_t["measured_wh"], fx_t["measured_wh"])
+            "arrays": arrays, **compared,
+            "twin_note": ctx.twin.no_twin_reason(site_id, int(edges_s[p]), int(edges_s[p + 1]))
+            if no_twin else None,
+        })
+    totals = {n: {"measured_wh": t["measured_wh"] if t["readings"] else None,
+                  "twin_wh": t["twin_wh"] if t["twin_readings"] else None,
+                  "twin_matched_wh": t["twin_matched_wh"]
+                  if t["readings"] and t["twin_readings"] else None,
+                  "readings": t["readings"]} for n, t in sums.items()}
     return {
         "site_id": site_id, "interval": interval, "timezone": info.site.timezone,
         "start": start.isoformat(), "end": end.isoformat(),
-        "max_gap_s": ctx.settings.energy_max_gap_s,
-        "rows": rows, "totals": {"arrays": totals, "gain_pct": total_gain},
+        "max_gap_s": gap, "partial_below_pct": PARTIAL_BELOW_PCT,
+        "rows": rows, "totals": {"arrays": totals, **compare(totals, tr_name, fx_name)},
     }

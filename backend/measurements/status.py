@@ -1,7 +1,9 @@
 """A site's state now: what the overview's tiles show.
 
 The sun and the tracker's joint angles from the twin's current minute
-(``TwinService.sample``), each array's last reading and whether its logger is
+(``TwinService.sample``); at a site the twin cannot simulate (a camera-only
+site, no PV arrays) the sun still comes from ``sim.sun.solar_position`` (NREL
+SPA through pvlib: the sun needs no array). Each array's last reading and whether its logger is
 reporting, the twin's power now, and today's measured and twin energy
 (:func:`backend.measurements.energy.energy_rows`).
 """
@@ -11,10 +13,14 @@ from __future__ import annotations
 import datetime as dt
 from typing import TYPE_CHECKING, Any
 
+import pandas as pd
+from pvlib import atmosphere
+
 from backend.measurements.energy import energy_rows
 from backend.measurements.queries import iso_utc
 from backend.sites import SiteInfo
 from backend.storage.sqlraw import fetch
+from sim.sun import solar_position
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -31,6 +37,13 @@ def status(ctx: ServiceContext, info: SiteInfo, now: float) -> dict[str, Any]:
     site_id = info.site_id
     sample = ctx.twin.sample(site_id, now)
     v = sample.values
+    if "solar_azimuth" not in v:  # nothing to simulate here, but the sun is still up there
+        s = info.site
+        when = pd.DatetimeIndex([pd.Timestamp(sample.ts_s, unit="s", tz="UTC")])
+        pos = solar_position(when, s.latitude, s.longitude, s.altitude,  # as sim/twin.py does
+                             float(atmosphere.alt2pres(s.altitude)), s.temp_air).iloc[0]
+        v = {**v, "solar_azimuth": float(pos["azimuth"]),
+             "apparent_elevation": float(pos["apparent_elevation"])}
     arrays: dict[str, Any] = {}
     with ctx.engine.connect() as conn:
         for name, arr in info.arrays.items():
@@ -68,5 +81,7 @@ def status(ctx: ServiceContext, info: SiteInfo, now: float) -> dict[str, Any]:
         "arrays": arrays,
         "gain_today_pct": row["gain_pct"],
         "twin_gain_today_pct": row["twin_gain_pct"],
+        "twin_matched_gain_today_pct": row["twin_matched_gain_pct"],
+        "partial_today": row["partial"],
         "fresh_s": FRESH_S,
     }

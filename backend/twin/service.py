@@ -12,6 +12,13 @@ Two ways the twin series gets into ``measurements``:
   far each day is stored.
 
 The twin uses clear sky (``sim.twin.simulate`` with ``weather=None``).
+
+A site whose config changed (edited from the dashboard, or its file changed
+between two starts) has its stored twin readings, their rollups and its
+``twin_coverage`` dropped (``backend.sites.drop_twin_cache``, under
+:meth:`TwinService.site_lock`), so the next read simulates them again.
+:meth:`TwinService.no_twin_reason` says why a period has no twin (a camera-only
+site, a day in the future, or one older than the on-demand window).
 """
 
 from __future__ import annotations
@@ -75,6 +82,9 @@ class TwinService:
         self.latest: dict[str, LiveSample] = {}
         self._locks = {sid: threading.Lock() for sid in registry.sites}
 
+    def _lock(self, site_id: str) -> threading.Lock:
+        return self._locks.setdefault(site_id, threading.Lock())  # a site added while running
+
     def simulable(self, site_id: str) -> bool:
         """Whether ``sim.twin.simulate`` can run the site (it has a tracker and a fixed array)."""
         info = self.registry.sites.get(site_id)
@@ -109,7 +119,7 @@ class TwinService:
         days = self._day_starts(info, start_s, min(end_s, now_minute + 1))
         if not days:
             return 0
-        with self._locks[site_id]:
+        with self._lock(site_id):
             with self.engine.connect() as conn:
                 covered = dict(conn.execute(
                     select(TwinCoverage.day_start_s, TwinCoverage.covered_until_s).where(
@@ -138,6 +148,30 @@ class TwinService:
             if marks:
                 self.writer.call(lambda conn: _mark_coverage(conn, site_id, marks)).result()
             return total
+
+    def site_lock(self, site_id: str) -> threading.Lock:
+        """The lock :meth:`ensure` holds while it simulates and stores a site's twin; a
+        config change (``backend.sites.save_site``) holds it while it drops the cache."""
+        return self._lock(site_id)
+
+    def forget(self, site_id: str) -> None:
+        """Drop the cached live sample of a site whose config changed."""
+        self.latest.pop(site_id, None)
+
+    def no_twin_reason(self, site_id: str, start_s: int, end_s: int,
+                       now_s: float | None = None) -> str | None:
+        """Why ``[start_s, end_s)`` has no on-demand twin, or None when it can have one."""
+        if not self.simulable(site_id):
+            return "no twin: the site has no tracker and fixed array pair to simulate"
+        now = int(time.time() if now_s is None else now_s)
+        if start_s >= now:
+            return "no twin yet: the period has not begun"
+        info = self.registry.sites[site_id]
+        floor = self._history_floor_s(info, now // 60 * 60)
+        if end_s <= floor:
+            return (f"no twin: older than the on-demand twin window ({self.history_days} days "
+                    "before now, HELIOTWIN_TWIN_HISTORY_DAYS, or the site's first reading)")
+        return None
 
     def _history_floor_s(self, info: SiteInfo, now_s: int) -> int:
         """Earliest time reads fill with the twin: ``history_days`` before now, or the

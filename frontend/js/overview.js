@@ -3,6 +3,7 @@ import { getEnergy, getMeasurements, getStatus, pick, seriesRows } from "./api.j
 import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
 import { addDays, fmtAge, fmtDate, fmtDateTime, fmtTime, localDate, toLocalWall } from "./time.js";
 import { banner, energy, h, num, pct, remember, tile } from "./ui.js";
+import * as report from "./report.js";
 
 let ARRAYS = []; // the selected site's array names, tracker first
 const SOURCES = ["measured", "twin"];
@@ -135,6 +136,11 @@ function gainOf(row, source) {
   return tr !== null && fx ? (100 * (tr - fx)) / fx : null;
 }
 
+/** Why a period has no twin ("—" alone says nothing): the service's note, or a generic one. */
+function twinNote(row) {
+  return row?.twin_note || "";
+}
+
 function drawDayEnergy(row) {
   const box = $("day-energy");
   box.innerHTML = "";
@@ -143,19 +149,32 @@ function drawDayEnergy(row) {
     box.append(h("p", { class: "muted" }, "No energy recorded for this day."));
     return;
   }
+  const partial = row.partial === true;
   const table = h("table", {}, h("tr", {}, h("th", {}, ""), h("th", {}, "Measured"), h("th", {}, "Twin"),
-    h("th", { title: "measured as a share of the twin's expectation" }, "of twin")));
+    h("th", { title: "the twin over only the minutes with a reading of this array" }, "Twin, same minutes"),
+    h("th", { title: "measured over the twin of the same minutes (performance ratio)" }, "of twin")));
   for (const arr of ARRAYS) {
     const m = energyOf(row, arr, "measured");
     const t = energyOf(row, arr, "twin");
+    const tm = pick(row, `arrays.${arr}.twin_matched_wh`);
+    const pr = pick(row, `arrays.${arr}.performance_ratio`);
     table.append(h("tr", {},
       h("td", {}, h("span", { class: "dot", style: `background:${colorOf(arr)}` }), arr),
-      h("td", {}, energy(m)), h("td", {}, energy(t)),
-      h("td", {}, m !== null && t ? `${num((100 * m) / t, 0)} %` : "—")));
+      h("td", {}, energy(m)), h("td", { title: twinNote(row) }, energy(t)), h("td", {}, energy(tm ?? null)),
+      h("td", {}, typeof pr === "number" ? `${num(100 * pr, 0)} %` : "—")));
   }
-  box.append(table,
+  box.append(table);
+  if (twinNote(row)) box.append(h("div", { class: "muted", "data-testid": "twin-note" }, `Twin “—”: ${twinNote(row)}.`));
+  if (partial) {
+    const cov = Math.min(...ARRAYS.map((a) => pick(row, `arrays.${a}.coverage_pct`) ?? 100));
+    box.append(h("div", { class: "banner partial", "data-testid": "partial-day" },
+      `Partial day: the readings cover ${num(cov, 0)} % of the twin's expected energy, so they are compared with the twin over the same minutes.`));
+  }
+  const expect = partial ? row.twin_matched_gain_pct : gainOf(row, "twin");
+  box.append(
     h("div", { class: "gain-big", "data-testid": "gain-day" }, pct(gainOf(row, "measured"))),
-    h("div", { class: "muted" }, `tracking gain measured (tracker over fixed); the twin expects ${pct(gainOf(row, "twin"))}`));
+    h("div", { class: "muted", "data-testid": "gain-day-twin" },
+      `tracking gain measured (tracker over fixed); the twin expects ${pct(expect)}${partial ? " over the same minutes" : ""}`));
 }
 
 /** A date axis with one tick per day (per week past ten days), labelled "18 Nov". */
@@ -165,15 +184,9 @@ function dayAxis(tz, dates) {
     dtick: dates.length > 10 ? 7 * day : day };
 }
 
-/** Days from the first one with a measured reading on (the window before it holds only the twin). */
-function fromFirstMeasured(rows) {
-  const first = rows.findIndex((r) => ARRAYS.some((a) => energyOf(r, a, "measured") !== null));
-  return first > 0 ? rows.slice(first) : rows;
-}
-
-async function drawHistory(allRows) {
+/** The whole window, always (days without readings show the twin alone, never a shorter axis). */
+async function drawHistory(rows) {
   const tz = st.tz;
-  const rows = fromFirstMeasured(allRows);
   const dates = rows.map((r) => localDate(tz, Date.parse(r.period_start)));
   if (!rows.length) {
     showEmpty("chart-daily", "No daily energy in the last 4 weeks.");
@@ -184,7 +197,8 @@ async function drawHistory(allRows) {
   const traces = [];
   for (const arr of ARRAYS) {
     traces.push({ x: dates, y: rows.map((r) => kwh(energyOf(r, arr, "measured"))), name: `${arr} measured`, type: "bar",
-      marker: { color: colorOf(arr) }, hovertemplate: "%{y:.2f} kWh" });
+      marker: { color: colorOf(arr), pattern: { shape: rows.map((r) => (r.partial ? "/" : "")) } },
+      customdata: rows.map((r) => (r.partial ? " (partial day)" : "")), hovertemplate: "%{y:.2f} kWh%{customdata}" });
   }
   for (const arr of ARRAYS) {
     traces.push({ x: dates, y: rows.map((r) => kwh(energyOf(r, arr, "twin"))), name: `${arr} twin`, type: "scatter",
@@ -202,9 +216,10 @@ async function drawHistory(allRows) {
   });
   const energyCols = ARRAYS.flatMap((a) => SOURCES.map((src) => [a, src]));
   const table = {
-    columns: ["date", ...energyCols.map(([a, src]) => `${a}_${src}_wh`), "gain_pct", "twin_gain_pct"],
+    columns: ["date", ...energyCols.map(([a, src]) => `${a}_${src}_wh`), "gain_pct", "twin_gain_pct",
+      "twin_matched_gain_pct", "partial", "twin_note"],
     rows: rows.map((r, i) => [dates[i], ...energyCols.map(([a, src]) => energyOf(r, a, src)),
-      gainOf(r, "measured"), gainOf(r, "twin")]),
+      gainOf(r, "measured"), gainOf(r, "twin"), r.twin_matched_gain_pct ?? null, r.partial ?? null, r.twin_note ?? ""]),
     filename: `daily_energy_${st.site.site_id}_${dates[0]}_${dates[dates.length - 1]}.csv`,
   };
   await draw("chart-daily", traces, layout, table);
@@ -277,7 +292,9 @@ function drawTiles(status) {
       powerTile("Fixed power now", fx),
       tile("Tracker energy today", energy(tr.energy_today_wh), `twin ${energy(tr.twin_energy_today_wh)}`),
       tile("Fixed energy today", energy(fx.energy_today_wh), `twin ${energy(fx.twin_energy_today_wh)}`),
-      tile("Gain today", pct(status.gain_today_pct), `tracker over fixed · twin ${pct(status.twin_gain_today_pct)}`),
+      tile("Gain today", pct(status.gain_today_pct), status.partial_today
+        ? `partial day · twin over the same minutes ${pct(status.twin_matched_gain_today_pct)}`
+        : `tracker over fixed · twin ${pct(status.twin_gain_today_pct)}`),
     );
   }
   box.append(
@@ -304,12 +321,13 @@ function drawLoggers(status, series) {
     const age = s.last_ts ? ageOf(s) : last ? (Date.now() - Date.parse(last)) / 1000 : null;
     const gaps = m ? m.gaps : [];
     const longest = gaps.reduce((a, g) => Math.max(a, g[2]), 0);
+    const gapText = !m ? "—" : !m.count ? "no readings" : gaps.length ? `${gaps.length} (longest ${num(longest, 0)} min)` : "none";
     table.append(h("tr", {},
       h("td", { title: s.logger || "" }, h("span", { class: `dot ${freshness(s, age)}` }), arr),
       h("td", { title: last ? fmtDateTime(st.tz, last) : "" }, last ? fmtAge(last) : "never"),
       h("td", {}, m ? num(m.count) : "—"),
-      h("td", { title: gaps.map((g) => `${fmtTime(st.tz, g[0])}–${fmtTime(st.tz, g[1])}`).join(", ") },
-        gaps.length ? `${gaps.length} (longest ${num(longest, 0)} min)` : "none")));
+      h("td", { "data-testid": `gaps-${arr}`, title: gaps.map((g) => `${fmtTime(st.tz, g[0])}–${fmtTime(st.tz, g[1])}`).join(", ") },
+        gapText)));
   }
   box.append(table, h("div", { class: "muted" }, "Readings and gaps (> 5 min) of the selected day; hover for times."));
 }
@@ -428,6 +446,22 @@ function setDay(day) {
   load();
 }
 
+/** The day of the address (#overview?site=…&day=YYYY-MM-DD), when it is a valid one. */
+function hashDay() {
+  const day = new URLSearchParams(location.hash.split("?")[1] || "").get("day");
+  return day && /^\d{4}-\d{2}-\d{2}$/.test(day) && !Number.isNaN(Date.parse(day)) ? day : null;
+}
+
+/** An edited address is followed, never overwritten by the day shown before. */
+function followHash() {
+  if (!location.hash.startsWith("#overview")) return false;
+  const day = hashDay();
+  if (!day || day === st.day) return false;
+  const today = localDate(st.tz);
+  st.day = day > today ? today : day;
+  return true;
+}
+
 export function init(state) {
   st = state;
   $("day-prev").addEventListener("click", () => setDay(addDays(st.day, -1)));
@@ -443,13 +477,14 @@ export function init(state) {
     if (ev.key === "ArrowLeft") setDay(addDays(st.day, -1));
     else if (ev.key === "ArrowRight" && st.day < localDate(st.tz)) setDay(addDays(st.day, 1));
   });
+  report.init(st);
   load();
   startLive();
 }
 
 export function show() {
   startLive();
-  load(true);
+  load(!followHash());
 }
 
 export function hide() {
@@ -458,6 +493,8 @@ export function hide() {
 
 export function siteChanged(state, visible) {
   st = state;
+  followHash();
+  report.siteChanged(st);
   for (const id of ["chart-power", "chart-daily", "chart-cumulative"]) showEmpty(id, "Loading…");
   if (visible) load();
 }

@@ -1,10 +1,19 @@
 """Sites: the built-in tehuantepec (seed 000), listing, errors."""
 
 import json
+import re
+from pathlib import Path
 
 import pytest
 
-from sim.sites import UnknownSiteError, default_sites_dir, list_sites, load_site
+from sim.sites import (
+    UnknownSiteError,
+    default_sites_dir,
+    list_sites,
+    load_site,
+    site_from_dict,
+    site_path,
+)
 
 
 def test_tehuantepec_is_seed_000_prototype() -> None:
@@ -92,10 +101,104 @@ def test_a_site_s_drives_set_the_actuator_energy(tmp_path) -> None:
 
 
 @pytest.mark.parametrize(("tracker", "words"), [
-    ({"drives": {"azimuth": {"gear_ratoi": 3.0}}}, "tracker.drives.azimuth: unknown keys"),
-    ({"drives": {"roll": {}}}, "tracker.drives must be"),
-    ({"inertia": {"m2_kg": "heavy"}}, "tracker.inertia"),
+    ({"drives": {"azimuth": {"gear_ratoi": 3.0}}},
+     "tracker.drives.azimuth.gear_ratoi: unknown key"),
+    ({"drives": {"roll": {}}}, "tracker.drives.roll: unknown key"),
+    ({"inertia": {"m2_kg": "heavy"}}, "tracker.inertia.m2_kg: Input should be a valid number"),
+    ({"azimuth_min_deg": 10.0, "azimuth_max_deg": 0.0}, "tracker: azimuth_min_deg"),
 ])
 def test_bad_drives_name_the_field(tmp_path, tracker: dict, words: str) -> None:
     with pytest.raises(ValueError, match=words):
         _with_tracker(tmp_path, tracker)
+
+
+# ------------------------------------------------ the documented format (issue 14, item 8)
+
+SCHEMA = Path(__file__).resolve().parents[2] / "docs" / "site.schema.json"
+
+
+def test_the_shipped_schema_is_the_model_s() -> None:
+    from sim.site_config import site_json_schema
+
+    assert json.loads(SCHEMA.read_text()) == site_json_schema(), (
+        "docs/site.schema.json is stale: regenerate it with `heliotwin site schema > "
+        "docs/site.schema.json`")
+
+
+def _leaves(schema: dict, defs: dict, path: str = "") -> list[tuple[str, dict]]:
+    """Every scalar field of the schema with its dotted path."""
+    out = []
+    for name, prop in schema.get("properties", {}).items():
+        ref = prop.get("$ref") or (prop.get("additionalProperties") or {}).get("$ref")
+        if ref:
+            out += _leaves(defs[ref.split("/")[-1]], defs, f"{path}{name}.")
+        else:
+            out.append((f"{path}{name}", prop))
+    return out
+
+
+def test_every_field_of_the_schema_says_its_unit_and_default() -> None:
+    schema = json.loads(SCHEMA.read_text())
+    leaves = _leaves(schema, schema["$defs"])
+    assert len(leaves) > 40  # site, tracker, two drives, inertia, array fields
+    for path, prop in leaves:
+        assert prop.get("description"), f"{path} has no description"
+        if prop.get("type") in ("number", "integer"):
+            assert prop["description"].startswith("["), f"{path}: no unit in {prop}"
+        if "default" in prop and prop["default"] not in ("", None):
+            assert "Default" in prop["description"], f"{path}: default not described"
+
+
+def test_a_site_written_by_hand_from_the_schema_loads_and_simulates(tmp_path) -> None:
+    """A second, independently written site (Greensboro NC, the pvlib TMY3 station):
+    only the required keys and two arrays, everything else from the documented defaults."""
+    import pandas as pd
+
+    from sim.twin import simulate
+
+    hand = {"$schema": "../docs/site.schema.json", "site_id": "my-roof", "latitude_deg": 36.1,
+            "longitude_deg": -79.95, "timezone": "America/New_York",
+            "arrays": {"tracker": {"mount": "tracker"},
+                       "fixed": {"surface_tilt_deg": 36, "surface_azimuth_deg": 180}}}
+    (tmp_path / "my-roof.json").write_text(json.dumps(hand))
+    site = load_site("my-roof", tmp_path)
+    assert site.name == "my-roof" and site.altitude == 0.0
+    assert site.arrays["fixed"].surface_tilt == 36.0 and site.arrays["fixed"].mount == "fixed"
+    summary = simulate(site, pd.Timestamp("2024-06-21", tz="America/New_York"),
+                       pd.Timestamp("2024-06-22", tz="America/New_York"), step_s=600).summary()
+    assert summary["tracker_energy_wh"] > summary["fixed_energy_wh"] > 0
+
+
+@pytest.mark.parametrize(("change", "words"), [
+    ({"latitude_deg": 91}, "latitude_deg: Input should be less than or equal to 90"),
+    ({"timezone": "UTC+5"}, "timezone: 'UTC+5' is not an IANA time zone"),
+    ({"site_id": "My Roof"}, "site_id: String should match pattern"),
+    ({"arrays": {"fixed": {"surface_tilt_deg": "steep"}}}, "arrays.fixed.surface_tilt_deg"),
+    ({"arrays": {"fixed": {"module": "Acme_9000"}}}, "arrays.fixed.module: module 'Acme_9000'"),
+    ({"arrays": {"fixed": {"mount": "roof"}}}, "arrays.fixed.mount: Input should be 'tracker'"),
+    ({"altitude": 10}, "altitude: unknown key"),
+])
+def test_a_malformed_site_names_the_field(change: dict, words: str) -> None:
+    from sim.site_config import validate_site_config
+
+    good = {"site_id": "ok", "latitude_deg": 10, "longitude_deg": 0, "timezone": "UTC"}
+    validate_site_config(good)
+    with pytest.raises(ValueError, match=re.escape(words)):
+        validate_site_config({**good, **change}, where="ok.json")
+
+
+def test_a_user_folder_adds_to_the_built_in_sites_and_wins_on_a_shared_id(tmp_path) -> None:
+    d = load_site("tehuantepec").to_config()
+    (tmp_path / "tehuantepec.json").write_text(json.dumps({**d, "altitude_m": 123.0}))
+    (tmp_path / "extra.json").write_text(json.dumps({**d, "site_id": "extra"}))
+    ids = [s.site_id for s in list_sites(tmp_path)]
+    assert ids == ["extra", "guadalajara_fisheye", "tehuantepec"]
+    assert load_site("tehuantepec", tmp_path).altitude == 123.0  # the user's file wins
+    assert load_site("tehuantepec").altitude == 50.0
+    assert load_site("guadalajara_fisheye", tmp_path).arrays == {}  # built-in still there
+    assert site_path("tehuantepec", tmp_path) == tmp_path / "tehuantepec.json"
+
+
+def test_to_config_round_trips() -> None:
+    for site in list_sites():
+        assert site_from_dict(json.loads(json.dumps(site.to_config()))) == site

@@ -7,20 +7,25 @@ days (``TwinService.ensure``). ``gain_pct`` is the tracking gain
 ``100·(tracker/fixed − 1)`` from measured energy, null when either is missing;
 ``twin_gain_pct`` the same from the twin. Energy does not bridge gaps longer
 than ``HELIOTWIN_ENERGY_MAX_GAP_S`` (see ``docs/service.md``).
+
+``/api/v1/sites/{site_id}/report`` (JSON), ``report.csv`` and ``report.png`` give the
+totals, daily, monthly and annual tables of a range (``backend/reports.py``).
 """
 
 from __future__ import annotations
 
 import csv
 import io
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import orjson
 from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import Response
 
 from backend.api.deps import ContextDep, site_or_404
+from backend.api.routes.health import service_version
 from backend.measurements.energy import energy_rows
+from backend.reports import report, report_csv, report_png
 from backend.timestamps import parse_range
 
 router = APIRouter(prefix="/api/v1/sites", tags=["energy"])
@@ -29,8 +34,10 @@ router = APIRouter(prefix="/api/v1/sites", tags=["energy"])
 def get_energy(
     site_id: str,
     ctx: ContextDep,
-    start: Annotated[str, Query(description="date (site midnight) or ISO date-time, inclusive")],
-    end: Annotated[str, Query(description="date or ISO date-time, exclusive")],
+    start: Annotated[str, Query(min_length=1, max_length=64,
+                                description="date (site midnight) or ISO date-time, inclusive")],
+    end: Annotated[str, Query(min_length=1, max_length=64,
+                              description="date or ISO date-time, exclusive")],
     interval: Literal["hour", "day", "month"] = "day",
     format: Literal["json", "csv"] = "json",
 ) -> Response:
@@ -45,13 +52,58 @@ def get_energy(
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         names = list(info.arrays)
-        w.writerow(["period_start", "period_end",
-                    *[f"{n}_{k}" for n in names for k in ("measured_wh", "twin_wh")],
-                    "gain_pct", "twin_gain_pct"])
+        keys = ("measured_wh", "twin_wh", "twin_matched_wh", "coverage_pct")
+        w.writerow(["period_start", "period_end", *[f"{n}_{k}" for n in names for k in keys],
+                    "gain_pct", "twin_gain_pct", "twin_matched_gain_pct", "partial",
+                    "twin_note"])
         for r in data["rows"]:
             w.writerow([r["period_start"], r["period_end"],
-                        *[r["arrays"][n][k] for n in names for k in ("measured_wh", "twin_wh")],
-                        r["gain_pct"], r["twin_gain_pct"]])
+                        *[r["arrays"][n][k] for n in names for k in keys],
+                        r["gain_pct"], r["twin_gain_pct"], r["twin_matched_gain_pct"],
+                        r["partial"], r["twin_note"]])
         return Response(buf.getvalue(), media_type="text/csv", headers={
             "Content-Disposition": f'attachment; filename="{site_id}_energy_{interval}.csv"'})
     return Response(orjson.dumps(data), media_type="application/json")
+
+
+_RANGE = {
+    "start": Query(description="date (site midnight) or ISO date-time, inclusive"),
+    "end": Query(description="date or ISO date-time, exclusive"),
+}
+
+
+def _report(ctx: ContextDep, site_id: str, start: str, end: str) -> dict[str, Any]:
+    info = site_or_404(ctx, site_id)
+    try:
+        t0, t1 = parse_range(start, end, info.zone)
+    except ValueError as exc:
+        raise HTTPException(422, str(exc)) from None
+    return report(ctx, info, t0, t1)
+
+
+@router.get("/{site_id}/report", responses={404: {}, 422: {}})
+def get_report(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
+               end: Annotated[str, _RANGE["end"]]) -> Response:
+    """Totals, daily, monthly and annual energy, gain and performance ratio of a range."""
+    return Response(orjson.dumps(_report(ctx, site_id, start, end)),
+                    media_type="application/json")
+
+
+@router.get("/{site_id}/report.csv", responses={404: {}, 422: {}})
+def get_report_csv(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
+                   end: Annotated[str, _RANGE["end"]]) -> Response:
+    """The report as one CSV table: day, month, year and total rows, units in the names."""
+    rep = _report(ctx, site_id, start, end)
+    name = f"{site_id}_report_{rep['start'][:10]}_{rep['end'][:10]}.csv"
+    return Response(report_csv(rep), media_type="text/csv",
+                    headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+
+@router.get("/{site_id}/report.png", responses={404: {}, 422: {}})
+def get_report_png(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
+                   end: Annotated[str, _RANGE["end"]]) -> Response:
+    """A one-page A4 PNG report of the range (matplotlib), for a paper or a logbook."""
+    rep = _report(ctx, site_id, start, end)
+    name = f"{site_id}_report_{rep['start'][:10]}_{rep['end'][:10]}.png"
+    return Response(report_png(rep, service_version()), media_type="image/png",
+                    headers={"Content-Disposition": f'inline; filename="{name}"'})

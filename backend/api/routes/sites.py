@@ -1,27 +1,45 @@
-"""``/api/v1/sites``: the sites, their arrays' logger calibration, and live status."""
+"""``/api/v1/sites``: the sites, their configs, their arrays' logger calibration, live status.
+
+``PUT /api/v1/sites/{site_id}`` creates or edits a site from a config of
+``docs/site.schema.json`` (``GET /api/v1/sites/schema.json``): it needs that
+site's write token, or the admin token (``HELIOTWIN_ADMIN_TOKEN``) — a new site
+has no write token yet, so only the admin can create one.
+"""
 
 from __future__ import annotations
 
 import asyncio
 import dataclasses
 import time
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import APIRouter, HTTPException
+from fastapi import APIRouter, Body, Header, HTTPException
+from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.api.deps import ContextDep, SiteTokenDep, site_or_404
+from backend.api.deps import (
+    ContextDep,
+    SiteTokenDep,
+    check_site_token,
+    is_admin_token,
+    parse_bearer,
+    site_or_404,
+)
 from backend.measurements.parse import Calibration
 from backend.measurements.status import status
+from backend.sites import save_site
+from sim.site_config import site_json_schema
+from sim.sites import builtin_site_ids, is_builtin, site_path
 
 router = APIRouter(prefix="/api/v1/sites", tags=["sites"])
 
 
 
 class CalibrationModel(BaseModel):
-    """Logger calibration of one array (seed 000, eqs. 16–19); NaN/Infinity are a 422."""
+    """Logger calibration of one array (seed 000, eqs. 16–19); NaN/Infinity, unknown
+    fields and numbers sent as strings or booleans are a 422."""
 
-    model_config = ConfigDict(allow_inf_nan=False)
+    model_config = ConfigDict(allow_inf_nan=False, extra="forbid", strict=True)
 
     adc_bits: int = Field(10, ge=8, le=24, description="ADC resolution [bit]")
     adc_vref_v: float = Field(5.0, gt=0, le=50, description="ADC reference voltage [V]")
@@ -33,8 +51,21 @@ class CalibrationModel(BaseModel):
                                  description="(R1+R2+R3)/Rx of the divider (eq. 19)")
 
 
-def _site_dict(info: Any) -> dict[str, Any]:
+def _origin(ctx: Any, site_id: str) -> dict[str, Any]:
+    """Where the site's config lives: a built-in file, or the user's folder (which wins)."""
+    try:
+        path = site_path(site_id, ctx.settings.sites_dir)
+    except ValueError:
+        return {"origin": "unknown", "overrides_builtin": False}
+    user = not is_builtin(path)
+    return {"origin": "user" if user else "builtin",
+            "overrides_builtin": user and site_id in builtin_site_ids()}
+
+
+def _site_dict(info: Any, ctx: Any = None) -> dict[str, Any]:
     d = info.site.to_dict()
+    if ctx is not None:
+        d.update(_origin(ctx, info.site_id))
     for name, arr in info.arrays.items():
         if name in d["arrays"]:
             d["arrays"][name]["kind"] = arr.kind
@@ -45,13 +76,58 @@ def _site_dict(info: Any) -> dict[str, Any]:
 @router.get("")
 def list_sites(ctx: ContextDep) -> list[dict[str, Any]]:
     """Every site with its arrays."""
-    return [_site_dict(info) for info in ctx.registry.sites.values()]
+    return [_site_dict(info, ctx) for info in ctx.registry.sites.values()]
+
+
+@router.get("/schema.json")
+def get_site_schema() -> dict[str, Any]:
+    """The JSON Schema of a site config (``docs/site.schema.json``): every field's unit,
+    default and source."""
+    return site_json_schema()
 
 
 @router.get("/{site_id}", responses={404: {}})
 def get_site(site_id: str, ctx: ContextDep) -> dict[str, Any]:
-    """One site with its arrays (geometry, modules, logger calibration)."""
-    return _site_dict(site_or_404(ctx, site_id))
+    """One site with its arrays (geometry, modules, logger calibration) and its origin."""
+    return _site_dict(site_or_404(ctx, site_id), ctx)
+
+
+@router.get("/{site_id}/config", responses={404: {}})
+def get_site_config(site_id: str, ctx: ContextDep) -> dict[str, Any]:
+    """The site as a config of ``docs/site.schema.json`` (what ``PUT`` takes back)."""
+    return site_or_404(ctx, site_id).site.to_config()
+
+
+async def _check_site_writer(ctx: Any, site_id: str, authorization: str | None) -> str:
+    """``"admin"`` for the admin token, else the site's write token is required."""
+    token = parse_bearer(authorization)
+    if is_admin_token(ctx.settings, token):
+        return "admin"
+    if ctx.registry.get(site_id) is None:
+        if token is None:
+            raise HTTPException(401, "creating a site needs the admin token "
+                                     "(HELIOTWIN_ADMIN_TOKEN): send 'Authorization: Bearer "
+                                     "<token>'", headers={"WWW-Authenticate": "Bearer"})
+        raise HTTPException(403, f"site {site_id!r} does not exist: only the admin token "
+                                 "(HELIOTWIN_ADMIN_TOKEN) can create a site")
+    return await check_site_token(ctx, site_id, authorization)
+
+
+@router.put("/{site_id}", responses={201: {}, 401: {}, 403: {}, 409: {}, 422: {}})
+async def put_site(site_id: str, ctx: ContextDep,
+                   config: Annotated[dict[str, Any], Body(description=(
+                       "a site config, docs/site.schema.json"))],
+                   authorization: Annotated[str | None, Header()] = None) -> JSONResponse:
+    """Create or edit a site (site write token, or the admin token for a new site).
+
+    The config is validated (422 names the field), written to ``HELIOTWIN_SITES_DIR``,
+    and the twin series cached for the site are dropped, to be simulated again.
+    """
+    who = await _check_site_writer(ctx, site_id, authorization)
+    info, created, dropped = await asyncio.to_thread(save_site, ctx, site_id, config)
+    body = {**_site_dict(info, ctx), "created": created, "twin_readings_dropped": dropped,
+            "written_by": who}
+    return JSONResponse(body, status_code=201 if created else 200)
 
 
 @router.get("/{site_id}/arrays/{array}/calibration", responses={404: {}})

@@ -1,0 +1,246 @@
+"""``heliotwin site create|show|validate|from-weather|schema``: sites you define.
+
+A site is a JSON file of the format in ``docs/sites.md`` (JSON Schema:
+``docs/site.schema.json``, generated from ``sim.site_config.SiteConfig``).
+User sites live in ``HELIOTWIN_SITES_DIR`` (default ``data/user-sites/``) and add
+to the built-in ``data/sites/``; a user file with a built-in id replaces it.
+
+- ``create --id ID --latitude-deg --longitude-deg --timezone [--like SITE]`` writes a
+  site at a new place with the tracker and arrays of ``--like`` (default
+  ``tehuantepec``); ``--from-file FILE`` writes a hand-written config after validating it.
+- ``from-weather FILE --id ID`` writes a site at a TMY3/EPW station's place and zone
+  (``pvlib.iotools.read_tmy3`` / ``read_epw`` metadata; the file's fixed UTC offset
+  becomes the ``Etc/GMT±N`` zone the typical year is recorded in; the clear-sky air
+  temperature and wind are the file's annual means).
+- ``show ID [--json]`` prints a site's config and which file it comes from.
+- ``validate FILE…`` checks files; a malformed one gets a message naming the field (exit 2).
+- ``schema`` prints the JSON Schema.
+
+A running service reads the folder at start-up; ``PUT /api/v1/sites/{site_id}``
+(the dashboard's Sites page) applies a config at once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``site`` subcommand."""
+    p = subparsers.add_parser("site", help="define sites: create, show, validate, from-weather")
+    sub = p.add_subparsers(dest="site_command", metavar="ACTION", required=True)
+    c = sub.add_parser("create", help="write a new site to HELIOTWIN_SITES_DIR")
+    c.add_argument("--id", dest="site_id", required=True, help="site id, e.g. my-roof")
+    c.add_argument("--name", help="name shown on the dashboard (default: the id)")
+    c.add_argument("--latitude-deg", type=float, help="latitude [°], north positive")
+    c.add_argument("--longitude-deg", type=float, help="longitude [°], east positive")
+    c.add_argument("--altitude-m", type=float, default=0.0, help="height above sea level [m]")
+    c.add_argument("--timezone", help="IANA zone, e.g. America/New_York")
+    c.add_argument("--like", default="tehuantepec",
+                   help="copy tracker, arrays and climate defaults from this site "
+                        "(default tehuantepec)")
+    c.add_argument("--from-file", type=Path, metavar="FILE",
+                   help="write this hand-written config instead (validated first)")
+    c.add_argument("--force", action="store_true",
+                   help="overwrite a user site, or replace a built-in one")
+    c.set_defaults(func=create)
+    w = sub.add_parser("from-weather", help="a site at a TMY3/EPW station's place and zone")
+    w.add_argument("file", type=Path, metavar="FILE", help="TMY3 (.csv) or EPW (.epw) file")
+    w.add_argument("--id", dest="site_id", required=True, help="site id to create")
+    w.add_argument("--format", choices=("tmy3", "epw"), help="default: from the file's suffix")
+    w.add_argument("--timezone", help="IANA zone instead of the file's fixed UTC offset")
+    w.add_argument("--like", default="tehuantepec",
+                   help="tracker and array modules like this site (default tehuantepec)")
+    w.add_argument("--force", action="store_true", help="overwrite an existing user site")
+    w.set_defaults(func=from_weather)
+    s = sub.add_parser("show", help="print a site's config and where it comes from")
+    s.add_argument("site_id", metavar="ID")
+    s.add_argument("--json", action="store_true", help="print only the config, as JSON")
+    s.set_defaults(func=show)
+    v = sub.add_parser("validate", help="check site files against the documented format")
+    v.add_argument("files", nargs="+", type=Path, metavar="FILE")
+    v.set_defaults(func=validate)
+    sc = sub.add_parser("schema", help="print the JSON Schema of a site file")
+    sc.set_defaults(func=schema)
+
+
+def _sites_dir() -> Path:
+    from backend.settings import get_settings
+
+    return get_settings().sites_dir
+
+
+def _fail(message: str) -> int:
+    print(f"heliotwin site: {message}", file=sys.stderr)
+    return 2
+
+
+def _write(config: dict[str, Any], force: bool) -> int:
+    """Validate, refuse to overwrite without ``force``, write, say where."""
+    from backend.sites import write_site_file
+    from sim.site_config import validate_site_config
+    from sim.sites import builtin_site_ids
+
+    try:
+        validate_site_config(config, where="site")
+    except ValueError as exc:
+        return _fail(str(exc))
+    directory = _sites_dir()
+    target = directory / f"{config['site_id']}.json"
+    builtin = config["site_id"] in builtin_site_ids()
+    if not force and (target.exists() or builtin):
+        what = "a built-in site" if builtin else f"a site in {directory}"
+        return _fail(f"--id {config['site_id']!r} is already {what}; --force replaces it "
+                     "(a user file wins over a built-in one)")
+    path = write_site_file(directory, config)
+    print(f"wrote {path}; `heliotwin simulate --site {config['site_id']}` runs it, and the "
+          "service shows it from its next start")
+    return 0
+
+
+def _template(like: str) -> dict[str, Any]:
+    from sim.sites import load_site
+
+    return load_site(like, _sites_dir()).to_config()
+
+
+def create(args: argparse.Namespace) -> int:
+    """Write a new site (from flags and a template, or from a file)."""
+    from sim.sites import UnknownSiteError
+
+    if args.from_file is not None:
+        try:
+            config = json.loads(args.from_file.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            return _fail(f"--from-file {args.from_file}: {exc}")
+        if isinstance(config, dict) and config.get("site_id") != args.site_id:
+            return _fail(f"--from-file: its site_id {config.get('site_id')!r} is not --id "
+                         f"{args.site_id!r}")
+        return _write(config, args.force)
+    missing = [f"--{n.replace('_', '-')}" for n in ("latitude_deg", "longitude_deg", "timezone")
+               if getattr(args, n) is None]
+    if missing:
+        return _fail(f"{', '.join(missing)} required (or --from-file FILE)")
+    try:
+        base = _template(args.like)
+    except UnknownSiteError as exc:
+        return _fail(f"--like: {exc}")
+    config = {**base, "site_id": args.site_id, "name": args.name or args.site_id,
+              "latitude_deg": args.latitude_deg, "longitude_deg": args.longitude_deg,
+              "altitude_m": args.altitude_m, "timezone": args.timezone,
+              "source": f"heliotwin site create (tracker and arrays as {args.like})",
+              "notes": ""}
+    return _write(config, args.force)
+
+
+def _station(path: Path, fmt: str) -> dict[str, Any]:
+    """Place, zone offset and name of a weather file (pvlib.iotools metadata)."""
+    from pvlib import iotools
+
+    if fmt == "epw":
+        data, meta = iotools.read_epw(str(path))
+        name = ", ".join(str(meta.get(k)) for k in ("city", "state-prov", "country")
+                         if meta.get(k) not in (None, "", "-"))
+        code = meta.get("WMO_code", "")
+    else:
+        data, meta = iotools.read_tmy3(str(path), map_variables=True)
+        name = ", ".join(str(meta.get(k)).strip('"') for k in ("Name", "State") if meta.get(k))
+        code = meta.get("USAF", "")
+    return {"latitude_deg": float(meta["latitude"]), "longitude_deg": float(meta["longitude"]),
+            "altitude_m": float(meta["altitude"]), "tz_h": float(meta["TZ"]),
+            "name": name, "code": str(code),
+            "temp_air_c": round(float(data["temp_air"].mean()), 1),
+            "wind_speed_m_s": round(float(data["wind_speed"].mean()), 1)}
+
+
+def fixed_offset_zone(tz_h: float) -> str:
+    """The IANA ``Etc/GMT±N`` zone of a whole-hour UTC offset [h] (POSIX sign: inverted)."""
+    if tz_h != int(tz_h) or not -14 <= tz_h <= 12:
+        raise ValueError(f"the file's UTC offset {tz_h} h has no Etc/GMT zone: pass --timezone")
+    n = -int(tz_h)
+    return "Etc/GMT" if n == 0 else f"Etc/GMT{n:+d}"
+
+
+def from_weather(args: argparse.Namespace) -> int:
+    """Write a site at the station of a TMY3/EPW file."""
+    from sim.sites import UnknownSiteError
+
+    fmt = args.format or ("epw" if args.file.suffix.lower() == ".epw" else "tmy3")
+    try:
+        st = _station(args.file, fmt)
+        zone = args.timezone or fixed_offset_zone(st["tz_h"])
+        base = _template(args.like)
+    except (OSError, ValueError, KeyError, UnknownSiteError) as exc:
+        return _fail(f"{args.file}: {exc}")
+    lat = st["latitude_deg"]
+    arrays = {}
+    for name, arr in base["arrays"].items():
+        arr = dict(arr)
+        if arr["mount"] == "fixed":  # rule of thumb: tilt = |latitude|, facing the equator
+            arr["surface_tilt_deg"] = round(min(abs(lat), 90.0), 1)
+            arr["surface_azimuth_deg"] = 180.0 if lat >= 0 else 0.0
+        arrays[name] = arr
+    config = {**base, "site_id": args.site_id, "name": st["name"] or args.site_id,
+              "latitude_deg": lat, "longitude_deg": st["longitude_deg"],
+              "altitude_m": st["altitude_m"], "timezone": zone, "arrays": arrays,
+              "temp_air_c": st["temp_air_c"], "wind_speed_m_s": st["wind_speed_m_s"],
+              "source": f"{fmt.upper()} station {st['code']} {st['name']} ({args.file.name}); "
+                        f"tracker and modules as {args.like}",
+              "notes": f"zone {zone}: the file's fixed UTC offset {st['tz_h']:+g} h (its typical "
+                       "year's clock); temp_air_c and wind_speed_m_s: the file's annual means; "
+                       "fixed arrays tilted at |latitude| facing the equator"}
+    return _write(config, args.force)
+
+
+def show(args: argparse.Namespace) -> int:
+    """Print one site's config and its file."""
+    from sim.sites import is_builtin, load_site, site_path
+
+    try:
+        path = site_path(args.site_id, _sites_dir())
+        site = load_site(args.site_id, _sites_dir())
+    except ValueError as exc:
+        return _fail(str(exc))
+    if not args.json:
+        origin = "built-in" if is_builtin(path) else "user"
+        from sim.sites import builtin_site_ids
+
+        if not is_builtin(path) and args.site_id in builtin_site_ids():
+            origin = "user, replacing the built-in site of the same id"
+        print(f"# {path} ({origin})")
+    print(json.dumps(site.to_config(), indent=2, ensure_ascii=False))
+    return 0
+
+
+def validate(args: argparse.Namespace) -> int:
+    """Check every file; exit 2 when one is malformed."""
+    from sim.sites import site_from_dict
+
+    bad = 0
+    for path in args.files:
+        try:
+            data = json.loads(path.read_text())
+            site = site_from_dict(data, where=str(path))
+            if path.stem != site.site_id:
+                raise ValueError(f"{path}: site_id {site.site_id!r} does not match the file name")
+        except (OSError, json.JSONDecodeError, ValueError) as exc:
+            print(f"{exc}" if isinstance(exc, ValueError) and str(path) in str(exc)
+                  else f"{path}: {exc}", file=sys.stderr)
+            bad += 1
+            continue
+        pair = {"tracker", "fixed"} <= set(site.arrays)
+        note = "" if pair else "; no arrays named tracker and fixed: the twin cannot simulate it"
+        print(f"{path}: ok (site {site.site_id}, {len(site.arrays)} arrays{note})")
+    return 2 if bad else 0
+
+
+def schema(args: argparse.Namespace) -> int:
+    """Print the JSON Schema (the content of docs/site.schema.json)."""
+    from sim.site_config import site_json_schema
+
+    print(json.dumps(site_json_schema(), indent=2, ensure_ascii=False))
+    return 0

@@ -1,0 +1,230 @@
+"""The site config format (``data/sites/*.json``): one pydantic model, the single definition.
+
+:class:`SiteConfig` validates a site file and is the source of
+``docs/site.schema.json`` (:func:`site_json_schema`; ``tests/sim/test_sites.py``
+checks the shipped file is what the model generates). Every field's description
+gives its unit, and where its default comes from; the defaults themselves are
+read from the dataclasses that use them (:class:`sim.pv.ArrayConfig`,
+:class:`sim.kinematics.TrackerGeometry`, :class:`sim.motors.AxisDrive`,
+:class:`sim.dynamics.TrackerInertia`), so they are declared once.
+:func:`validate_site_config` turns a validation failure into one ``ValueError``
+that names every bad field by its dotted path (``arrays.fixed.surface_tilt_deg``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING, Any, Literal
+from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator
+
+from sim.configs import CONFIG_ID
+from sim.dynamics import TrackerInertia
+from sim.kinematics import TrackerGeometry
+from sim.motors import AxisDrive
+from sim.pv import ArrayConfig, cec_module_parameters
+
+SCHEMA_ID = "https://heliotwin.example/docs/site.schema.json"
+_STRICT = ConfigDict(extra="forbid", allow_inf_nan=False)
+_ARRAY = ArrayConfig(name="default")
+_GEOMETRY = TrackerGeometry()
+
+#: AxisDrive field → (unit, what the default rests on); sim/motors.py has the reasoning.
+_DRIVE_DOCS = {
+    "supply_voltage_v": ("V", "motor bus; seed 000, section 2.4 (MD03 drivers at 24 V)"),
+    "torque_constant_nm_a": ("N m A⁻¹", "motor k_t = k_e; assumption, a ~40 W 24 V motor"),
+    "winding_resistance_ohm": ("Ω", "armature resistance; assumption"),
+    "no_load_current_a": ("A", "current spinning unloaded; assumption"),
+    "gear_ratio": ("-", "motor turns per output turn; assumption (worm train)"),
+    "gear_efficiency": ("-", "forward gearbox efficiency in (0, 1]; assumption, single-start worm"),
+    "max_output_torque_nm": ("N m", "gearbox output rating; assumption"),
+    "max_output_speed_rad_s": ("rad s⁻¹", "output speed limit; assumption"),
+    "driver_efficiency": ("-", "H-bridge efficiency in (0, 1]; assumption"),
+    "standby_power_w": ("W", "driver logic drawn all day; assumption (MD03 logic)"),
+}
+_INERTIA_DOCS = {
+    "m1_kg": ("kg", "mass of link 1 (azimuth carriage)"),
+    "m2_kg": ("kg", "mass of link 2 (elevation frame and panel)"),
+    "i11_kg_m2": ("kg m²", "link 1 principal inertia along x1"),
+    "i12_kg_m2": ("kg m²", "link 1 principal inertia along y1 (the azimuth axis)"),
+    "i13_kg_m2": ("kg m²", "link 1 principal inertia along z1"),
+    "i21_kg_m2": ("kg m²", "link 2 principal inertia along x2 (panel normal)"),
+    "i22_kg_m2": ("kg m²", "link 2 principal inertia along y2"),
+    "i23_kg_m2": ("kg m²", "link 2 principal inertia along z2 (the elevation axis)"),
+    "cg1_m": ("m", "centre of gravity of link 1 along y1"),
+    "cg2_m": ("m", "signed centre of gravity of link 2 along x2 from the elevation axis"),
+    "g_m_s2": ("m s⁻²", "gravitational acceleration (seed 002, eq. 17)"),
+}
+
+
+def _dataclass_model(name: str, default: Any, docs: dict[str, tuple[str, str]],
+                     source: str) -> type[BaseModel]:
+    """A strict model whose fields and defaults are those of the dataclass ``default``."""
+    fields: dict[str, Any] = {
+        f.name: (float, Field(getattr(default, f.name), description=(
+            f"[{docs[f.name][0]}] {docs[f.name][1]}. Default {getattr(default, f.name)} "
+            f"({source}).")))
+        for f in dataclasses.fields(default)}
+    return create_model(name, __config__=_STRICT, **fields)
+
+
+if TYPE_CHECKING:  # the classes below are built at run time from the dataclasses
+    class AzimuthDrive(BaseModel): ...
+    class ElevationDrive(BaseModel): ...
+    class Inertia(BaseModel): ...
+else:
+    AzimuthDrive = _dataclass_model("AzimuthDrive", AxisDrive.azimuth_default(), _DRIVE_DOCS,
+                                    "sim/motors.py AxisDrive.azimuth_default")
+    ElevationDrive = _dataclass_model("ElevationDrive", AxisDrive.elevation_default(),
+                                      _DRIVE_DOCS, "sim/motors.py AxisDrive.elevation_default")
+    Inertia = _dataclass_model("Inertia", TrackerInertia.seed002(), _INERTIA_DOCS,
+                               "seed 002, Table 1")
+
+
+class Drives(BaseModel):
+    """Each axis's DC motor and gearbox; a field left out keeps that axis's default."""
+
+    model_config = _STRICT
+    azimuth: AzimuthDrive = Field(default_factory=AzimuthDrive)
+    elevation: ElevationDrive = Field(default_factory=ElevationDrive)
+
+
+class Tracker(BaseModel):
+    """Geometry and joint limits of the dual-axis tracker (seed 000 Table 2, seed 002)."""
+
+    model_config = _STRICT
+    d1_m: float = Field(_GEOMETRY.d1_m, ge=0, le=20, description=(
+        f"[m] D–H offset of joint 1 along the azimuth axis. Default {_GEOMETRY.d1_m} "
+        "(seed 002, section II-A: 355 mm)."))
+    a2_m: float = Field(_GEOMETRY.a2_m, ge=0, le=20, description=(
+        f"[m] D–H length from the elevation axis to the panel plane. Default {_GEOMETRY.a2_m} "
+        "(seed 002, section II-A: 91 mm)."))
+    azimuth_min_deg: float = Field(_GEOMETRY.azimuth_min_deg, ge=-720, le=720, description=(
+        f"[°] lowest azimuth joint angle, clockwise from north. Default "
+        f"{_GEOMETRY.azimuth_min_deg} (assumption: cable wrap of sim/kinematics.py)."))
+    azimuth_max_deg: float = Field(_GEOMETRY.azimuth_max_deg, ge=-720, le=720, description=(
+        f"[°] highest azimuth joint angle; may span more than 360°. Default "
+        f"{_GEOMETRY.azimuth_max_deg} (assumption, sim/kinematics.py)."))
+    elevation_min_deg: float = Field(_GEOMETRY.elevation_min_deg, ge=0, le=90, description=(
+        f"[°] lowest elevation of the panel normal. Default {_GEOMETRY.elevation_min_deg} "
+        "(assumption, sim/kinematics.py)."))
+    elevation_max_deg: float = Field(_GEOMETRY.elevation_max_deg, ge=0, le=90, description=(
+        f"[°] highest elevation of the panel normal. Default {_GEOMETRY.elevation_max_deg} "
+        "(assumption, sim/kinematics.py)."))
+    drives: Drives = Field(default_factory=Drives, description="Axis drives (sim/motors.py).")
+    inertia: Inertia = Field(default_factory=Inertia,
+                             description="Link masses and inertias (sim/dynamics.py).")
+
+
+class Array(BaseModel):
+    """One PV array: identical modules in series/parallel on one mount (sim/pv.py)."""
+
+    model_config = _STRICT
+    mount: Literal["tracker", "fixed"] = Field(_ARRAY.mount, description=(  # type: ignore[arg-type]
+        f"On the dual-axis tracker or at a fixed tilt. Default {_ARRAY.mount!r}."))
+    module: str = Field(_ARRAY.module, description=(
+        f"Module name in pvlib's CEC table. Default {_ARRAY.module!r} (seed 000, section 2.2)."))
+    modules_in_series: int = Field(_ARRAY.modules_in_series, ge=1, le=1000, description=(
+        f"[-] modules per string. Default {_ARRAY.modules_in_series} (seed 000's wiring, "
+        "as read in data/sites/tehuantepec.json)."))
+    strings_in_parallel: int = Field(_ARRAY.strings_in_parallel, ge=1, le=1000, description=(
+        f"[-] strings in parallel. Default {_ARRAY.strings_in_parallel} (seed 000: four modules "
+        "per array)."))
+    surface_tilt_deg: float = Field(_ARRAY.surface_tilt, ge=0, le=90, description=(
+        f"[°] tilt of a fixed array from horizontal (ignored on a tracker). Default "
+        f"{_ARRAY.surface_tilt}: set it (seed 000's fixed array: 16°)."))
+    surface_azimuth_deg: float = Field(_ARRAY.surface_azimuth, ge=0, lt=360, description=(
+        f"[°] azimuth a fixed array faces, clockwise from north. Default "
+        f"{_ARRAY.surface_azimuth} (south)."))
+    temperature_model: Literal["open_rack_glass_glass", "close_mount_glass_glass",
+                               "open_rack_glass_polymer", "insulated_back_glass_polymer"] = Field(
+        _ARRAY.temperature_model, description=(  # type: ignore[arg-type]
+            "SAPM cell-temperature parameters, pvlib.temperature.TEMPERATURE_MODEL_PARAMETERS"
+            f"['sapm']. Default {_ARRAY.temperature_model!r}."))
+    albedo: float = Field(_ARRAY.albedo, ge=0, le=1, description=(
+        f"[-] ground reflectance. Default {_ARRAY.albedo} (pvlib's default)."))
+
+    @field_validator("module")
+    @classmethod
+    def _known_module(cls, value: str) -> str:
+        cec_module_parameters(value)  # ValueError: not in the table
+        return value
+
+
+class SiteConfig(BaseModel):
+    """A heliotwin site: a place, its climate defaults, a dual-axis tracker and its PV arrays.
+
+    Keys carry their unit (``latitude_deg``, ``altitude_m``); ``sim.sites.Site``
+    holds the same values under pvlib's names.
+    """
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, populate_by_name=True,
+                              json_schema_extra={"$id": SCHEMA_ID})
+    schema_ref: str | None = Field(None, alias="$schema",
+                                   description="Optional link to this schema, for editors.")
+    site_id: str = Field(pattern=CONFIG_ID.pattern, description=(
+        "Id: lower-case letters, digits, '_' and '-', at most 64; the file is <site_id>.json."))
+    name: str | None = Field(None, max_length=200,
+                             description="Name shown on the dashboard. Default: the site_id.")
+    latitude_deg: float = Field(ge=-90, le=90, description="[°] latitude, north positive.")
+    longitude_deg: float = Field(ge=-180, le=180, description="[°] longitude, east positive.")
+    altitude_m: float = Field(0.0, ge=-500, le=9000, description=(
+        "[m] height above sea level (air mass, pressure). Default 0."))
+    timezone: str = Field(description=(
+        "IANA time zone of the site (America/Mexico_City, Etc/GMT+5): local days and display."))
+    temp_air_c: float = Field(25.0, ge=-60, le=60, description=(
+        "[°C] air temperature of clear-sky runs. Default 25 (assumption)."))
+    wind_speed_m_s: float = Field(1.0, ge=0, le=60, description=(
+        "[m s⁻¹] wind speed of clear-sky runs. Default 1 (assumption)."))
+    transposition_model: Literal["haydavies", "perez", "isotropic"] = Field(
+        "haydavies", description="pvlib POA transposition model. Default 'haydavies'.")
+    tracker: Tracker = Field(default_factory=Tracker,  # type: ignore[arg-type]
+                             description="The dual-axis tracker.")
+    arrays: dict[str, Array] = Field(default_factory=dict, description=(
+        "PV arrays by name; the twin simulates a site with arrays named 'tracker' (mount "
+        "'tracker') and 'fixed' (mount 'fixed'). None: a camera-only site."))
+    source: str = Field("", description="Where the values come from (paper, survey, station).")
+    notes: str = Field("", description="Assumptions and remarks.")
+
+    @field_validator("timezone")
+    @classmethod
+    def _iana_zone(cls, value: str) -> str:
+        try:
+            ZoneInfo(value)
+        except (ZoneInfoNotFoundError, ValueError):
+            raise ValueError(f"{value!r} is not an IANA time zone") from None
+        return value
+
+    @field_validator("arrays")
+    @classmethod
+    def _array_names(cls, value: dict[str, Array]) -> dict[str, Array]:
+        bad = [name for name in value if not CONFIG_ID.match(name)]
+        if bad:
+            raise ValueError(f"array names {bad} must be lower-case letters, digits, '_' or '-'")
+        return value
+
+
+def _where(loc: tuple[int | str, ...]) -> str:
+    return ".".join(str(p) for p in loc) or "(top level)"
+
+
+def validate_site_config(data: Any, where: str = "site") -> SiteConfig:
+    """``data`` as a :class:`SiteConfig`; ValueError naming each bad field otherwise."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{where}: a site config must be a JSON object")
+    try:
+        return SiteConfig.model_validate(data)
+    except ValidationError as exc:
+        problems = []
+        for err in exc.errors()[:10]:
+            msg = "unknown key (docs/site.schema.json lists the keys)" if (
+                err["type"] == "extra_forbidden") else err["msg"].removeprefix("Value error, ")
+            problems.append(f"{_where(err['loc'])}: {msg}")
+        raise ValueError(f"{where}: " + "; ".join(problems)) from None
+
+
+def site_json_schema() -> dict[str, Any]:
+    """The JSON Schema of a site file (shipped as ``docs/site.schema.json``)."""
+    schema = SiteConfig.model_json_schema(by_alias=True)
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", **schema}

@@ -1,0 +1,179 @@
+"""Sites you define, over real HTTP (``PUT /api/v1/sites/{site_id}``, issue 14 item 8).
+
+A ``heliotwin serve`` of its own, with a temporary ``HELIOTWIN_SITES_DIR`` and an admin
+token, on a real SQLite file and a PostgreSQL schema. The twin energies after an edit are
+checked against the twin run by this test through ``sim.twin.simulate``, integrated with NumPy.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from zoneinfo import ZoneInfo
+
+import httpx
+import numpy as np
+import pandas as pd
+import pytest
+from live_service import BACKENDS, ROOT, ServerProcess, new_database
+
+ADMIN = "admin-secret-for-tests"
+TZ = ZoneInfo("America/Mexico_City")
+HAND_WRITTEN = {  # written from docs/site.schema.json: the required keys and two arrays
+    "$schema": "https://heliotwin.example/docs/site.schema.json",
+    "site_id": "my-roof", "name": "My roof, Greensboro NC",
+    "latitude_deg": 36.1, "longitude_deg": -79.95, "altitude_m": 273,
+    "timezone": "America/New_York",
+    "arrays": {"tracker": {"mount": "tracker", "strings_in_parallel": 2},
+               "fixed": {"mount": "fixed", "surface_tilt_deg": 36, "strings_in_parallel": 2}},
+}
+
+
+@pytest.fixture(scope="module", params=BACKENDS)
+def server(request: pytest.FixtureRequest,
+           tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+    tmp = tmp_path_factory.mktemp("sites-api")
+    db = new_database(request.param, tmp)
+    proc = ServerProcess(db.url, tmp / "server.log", extra_env={
+        "HELIOTWIN_SITES_DIR": str(tmp / "user-sites"), "HELIOTWIN_ADMIN_TOKEN": ADMIN})
+    proc.start()
+    try:
+        yield proc
+    finally:
+        proc.stop()
+        db.drop()
+
+
+@pytest.fixture()
+def client(server: ServerProcess) -> Iterator[httpx.Client]:
+    with httpx.Client(base_url=server.base_url, timeout=120) as c:
+        yield c
+
+
+def _sites_dir(server: ServerProcess) -> Path:
+    return Path(server.extra_env["HELIOTWIN_SITES_DIR"])
+
+
+def bearer(token: str) -> dict[str, str]:
+    return {"Authorization": f"Bearer {token}"}
+
+
+def test_the_schema_endpoint_serves_the_shipped_schema(client: httpx.Client) -> None:
+    r = client.get("/api/v1/sites/schema.json")
+    assert r.status_code == 200
+    assert r.json() == json.loads((ROOT / "docs" / "site.schema.json").read_text())
+
+
+def test_creating_a_site_needs_the_admin_token(client: httpx.Client,
+                                               server: ServerProcess) -> None:
+    url = "/api/v1/sites/my-roof"
+    r = client.put(url, json=HAND_WRITTEN)
+    assert r.status_code == 401 and "admin token" in r.json()["detail"]
+    r = client.put(url, json=HAND_WRITTEN, headers=bearer(server.token("tehuantepec")))
+    assert r.status_code == 403 and "only the admin token" in r.json()["detail"]
+    assert not (_sites_dir(server) / "my-roof.json").exists()
+    r = client.put(url, json=HAND_WRITTEN, headers=bearer(ADMIN))
+    assert r.status_code == 201, r.text
+    body = r.json()
+    assert body["created"] and body["origin"] == "user" and not body["overrides_builtin"]
+    assert body["arrays"]["fixed"]["surface_tilt_deg"] == 36.0
+    ids = [s["site_id"] for s in client.get("/api/v1/sites").json()]
+    assert sorted(ids) == ["guadalajara_fisheye", "my-roof", "tehuantepec"]
+    stored = json.loads((_sites_dir(server) / "my-roof.json").read_text())
+    assert stored["latitude_deg"] == 36.1 and "$schema" not in stored
+
+
+def test_the_new_site_takes_readings_and_has_a_twin(client: httpx.Client,
+                                                    server: ServerProcess) -> None:
+    token = server.token("my-roof")  # the CLI knows the site once the service made it
+    day = dt.date.today() - dt.timedelta(days=3)
+    ts = dt.datetime(day.year, day.month, day.day, 12, tzinfo=ZoneInfo("America/New_York"))
+    r = client.post("/api/v1/sites/my-roof/measurements", headers=bearer(token), json={
+        "readings": [{"ts": (ts + dt.timedelta(minutes=k)).isoformat(), "array": a,
+                      "voltage_v": 30.0, "current_a": 10.0} for k in range(5)
+                     for a in ("tracker", "fixed")]})
+    assert r.status_code == 200 and r.json()["accepted"] == 10, r.text
+    e = client.get("/api/v1/sites/my-roof/energy", params={
+        "start": day.isoformat(), "end": (day + dt.timedelta(days=1)).isoformat()}).json()
+    row = e["rows"][0]
+    assert row["arrays"]["tracker"]["twin_wh"] > row["arrays"]["fixed"]["twin_wh"] > 0
+    assert row["partial"] is True  # five minutes of a day
+
+
+@pytest.mark.parametrize(("change", "words"), [
+    ({"latitude_deg": 136.1}, "body: latitude_deg: Input should be less than or equal to 90"),
+    ({"arrays": {"fixed": {"surface_tilt_deg": 36, "tilt": 3}}}, "arrays.fixed.tilt: unknown key"),
+    ({"timezone": "Eastern"}, "timezone: 'Eastern' is not an IANA time zone"),
+    ({"site_id": "other"}, "site_id: 'other' does not match the path's 'my-roof'"),
+])
+def test_a_malformed_site_is_a_422_naming_the_field(client: httpx.Client, server: ServerProcess,
+                                                    change: dict, words: str) -> None:
+    before = (_sites_dir(server) / "my-roof.json").read_text()
+    r = client.put("/api/v1/sites/my-roof", json={**HAND_WRITTEN, **change}, headers=bearer(ADMIN))
+    assert r.status_code == 422
+    assert words in r.json()["detail"]
+    assert (_sites_dir(server) / "my-roof.json").read_text() == before  # nothing written
+
+
+def _twin_day_wh(site_config: dict, day: dt.date) -> dict[str, float]:
+    """The clear-sky twin of one local day, run here and integrated with numpy.trapezoid."""
+    from sim.sites import site_from_dict
+    from sim.twin import simulate
+
+    site = site_from_dict(site_config)
+    t0 = pd.Timestamp(day.isoformat(), tz=site.timezone)
+    series = simulate(site, t0, t0 + pd.Timedelta(days=1), step_s=60).series
+    t = series.index.as_unit("s").asi8.astype(float)
+    return {a: float(np.trapezoid(series[f"{a}_power_w"].to_numpy(), t)) / 3600
+            for a in ("tracker", "fixed")}
+
+
+def test_editing_a_site_drops_its_cached_twin(client: httpx.Client, server: ServerProcess) -> None:
+    day = dt.datetime.now(TZ).date() - dt.timedelta(days=5)
+    params = {"start": day.isoformat(), "end": (day + dt.timedelta(days=1)).isoformat()}
+    url = "/api/v1/sites/tehuantepec"
+    before = client.get(f"{url}/energy", params=params).json()["rows"][0]["arrays"]
+    config = client.get(f"{url}/config").json()
+    expected_before = _twin_day_wh(config, day)
+    assert before["fixed"]["twin_wh"] == pytest.approx(expected_before["fixed"], rel=1e-6)
+    config["arrays"]["fixed"]["surface_tilt_deg"] = 45.0  # from 16°: a winter tilt
+    r = client.put(url, json=config, headers=bearer(server.token("tehuantepec")))
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert body["twin_readings_dropped"] >= 2 * 1440  # the day read above, both arrays
+    assert body["origin"] == "user" and body["overrides_builtin"] is True
+    after = client.get(f"{url}/energy", params=params).json()["rows"][0]["arrays"]
+    expected_after = _twin_day_wh(config, day)
+    assert after["fixed"]["twin_wh"] == pytest.approx(expected_after["fixed"], rel=1e-6)
+    assert abs(after["fixed"]["twin_wh"] / before["fixed"]["twin_wh"] - 1) > 0.05  # not the cache
+    assert after["tracker"]["twin_wh"] == pytest.approx(before["tracker"]["twin_wh"], rel=1e-9)
+
+
+def test_a_zone_on_another_hour_grid_is_refused(client: httpx.Client,
+                                                server: ServerProcess) -> None:
+    config = client.get("/api/v1/sites/tehuantepec/config").json()
+    r = client.put("/api/v1/sites/tehuantepec", json={**config, "timezone": "Asia/Kolkata"},
+                   headers=bearer(server.token("tehuantepec")))
+    assert r.status_code == 409 and "timezone" in r.json()["detail"]
+
+
+def test_user_sites_are_there_after_a_restart_and_run_in_simulate(server: ServerProcess) -> None:
+    server.stop()
+    server.start()
+    with httpx.Client(base_url=server.base_url, timeout=60) as c:
+        sites = {s["site_id"]: s for s in c.get("/api/v1/sites").json()}
+    assert {"my-roof", "tehuantepec", "guadalajara_fisheye"} <= set(sites)
+    assert sites["tehuantepec"]["arrays"]["fixed"]["surface_tilt_deg"] == 45.0
+    assert sites["guadalajara_fisheye"]["origin"] == "builtin"
+    env = {**os.environ, **server.env}
+    run = subprocess.run([sys.executable, "-m", "backend", "simulate", "--site", "my-roof",
+                          "--start", "2024-06-21", "--end", "2024-06-22", "--step-s", "600",
+                          "--json"], capture_output=True, text=True, cwd=ROOT, env=env,
+                         timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout)["tracker_energy_wh"] > 0

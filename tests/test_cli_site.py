@@ -1,0 +1,152 @@
+"""``heliotwin site create|show|validate|from-weather|schema`` as a user runs them (subprocess).
+
+User sites go to a temporary ``HELIOTWIN_SITES_DIR``; the repository's ``data/`` is never
+written. Weather stations: pvlib's own TMY3 file (Greensboro NC, 723170) and an EPW file
+written here by hand for a southern-hemisphere station, so both readers and both
+hemispheres are exercised.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from sim.sky import pvlib_tmy3_path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def heliotwin(sites_dir: Path, *args: str) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("HELIOTWIN_")}
+    env["HELIOTWIN_SITES_DIR"] = str(sites_dir)
+    return subprocess.run([sys.executable, "-m", "backend", *args], capture_output=True,
+                          text=True, cwd=ROOT, timeout=120, env=env)
+
+
+def test_schema_prints_the_shipped_file(tmp_path: Path) -> None:
+    p = heliotwin(tmp_path, "site", "schema")
+    assert p.returncode == 0, p.stderr
+    assert json.loads(p.stdout) == json.loads((ROOT / "docs" / "site.schema.json").read_text())
+
+
+def test_create_writes_a_site_that_simulate_runs(tmp_path: Path) -> None:
+    p = heliotwin(tmp_path, "site", "create", "--id", "madrid-roof", "--latitude-deg", "40.45",
+                  "--longitude-deg", "-3.73", "--altitude-m", "667", "--timezone", "Europe/Madrid",
+                  "--name", "Madrid roof")
+    assert p.returncode == 0, p.stderr
+    written = json.loads((tmp_path / "madrid-roof.json").read_text())
+    assert (written["latitude_deg"], written["timezone"]) == (40.45, "Europe/Madrid")
+    assert set(written["arrays"]) == {"tracker", "fixed"}  # from --like tehuantepec
+    run = heliotwin(tmp_path, "simulate", "--site", "madrid-roof", "--start", "2024-06-21",
+                    "--end", "2024-06-22", "--step-s", "600", "--json")
+    assert run.returncode == 0, run.stderr
+    summary = json.loads(run.stdout)
+    assert summary["site_id"] == "madrid-roof"
+    assert summary["tracker_energy_wh"] > summary["fixed_energy_wh"] > 0
+    show = heliotwin(tmp_path, "site", "show", "madrid-roof")
+    assert show.returncode == 0 and f"{tmp_path / 'madrid-roof.json'} (user)" in show.stdout
+    again = heliotwin(tmp_path, "site", "create", "--id", "madrid-roof", "--latitude-deg", "40",
+                      "--longitude-deg", "-3", "--timezone", "Europe/Madrid")
+    assert again.returncode == 2 and "--force" in again.stderr
+
+
+def test_missing_place_flags_are_named(tmp_path: Path) -> None:
+    p = heliotwin(tmp_path, "site", "create", "--id", "nowhere", "--latitude-deg", "10")
+    assert p.returncode == 2
+    assert "--longitude-deg, --timezone required" in p.stderr
+    assert not (tmp_path / "nowhere.json").exists()
+
+
+def test_a_user_file_replaces_a_built_in_only_with_force(tmp_path: Path) -> None:
+    args = ("site", "create", "--id", "tehuantepec", "--latitude-deg", "16.3",
+            "--longitude-deg", "-95.24", "--altitude-m", "60", "--timezone",
+            "America/Mexico_City")
+    refused = heliotwin(tmp_path, *args)
+    assert refused.returncode == 2 and "already a built-in site" in refused.stderr
+    forced = heliotwin(tmp_path, *args, "--force")
+    assert forced.returncode == 0, forced.stderr
+    show = heliotwin(tmp_path, "site", "show", "tehuantepec")
+    assert "replacing the built-in site of the same id" in show.stdout
+    assert json.loads(show.stdout.split("\n", 1)[1])["altitude_m"] == 60.0
+
+
+def test_validate_names_the_bad_field(tmp_path: Path) -> None:
+    good = ROOT / "data" / "sites" / "tehuantepec.json"
+    bad = tmp_path / "broken.json"
+    bad.write_text(json.dumps({"site_id": "broken", "latitude_deg": 16, "longitude_deg": -95,
+                               "timezone": "America/Mexico_City",
+                               "arrays": {"fixed": {"surface_tilt_deg": 16, "modules": 4}}}))
+    p = heliotwin(tmp_path, "site", "validate", str(good), str(bad))
+    assert p.returncode == 2
+    assert f"{good}: ok (site tehuantepec, 2 arrays)" in p.stdout
+    assert "arrays.fixed.modules: unknown key" in p.stderr
+
+
+def test_from_weather_tmy3_puts_the_site_at_the_station(tmp_path: Path) -> None:
+    p = heliotwin(tmp_path, "site", "from-weather", str(pvlib_tmy3_path()), "--id", "greensboro")
+    assert p.returncode == 0, p.stderr
+    site = json.loads((tmp_path / "greensboro.json").read_text())
+    # the TMY3 header of 723170TYA.CSV: 36.1 N, 79.95 W, 273 m, UTC-5
+    assert (site["latitude_deg"], site["longitude_deg"], site["altitude_m"]) == (36.1, -79.95, 273)
+    assert site["timezone"] == "Etc/GMT+5"
+    assert site["arrays"]["fixed"]["surface_tilt_deg"] == 36.1
+    assert site["arrays"]["fixed"]["surface_azimuth_deg"] == 180.0
+    assert 10 < site["temp_air_c"] < 20  # Greensboro's annual mean, not Tehuantepec's 27 °C
+    run = heliotwin(tmp_path, "simulate", "--site", "greensboro", "--start", "1990-03-01",
+                    "--end", "1990-03-03", "--step-s", "900", "--json")
+    assert run.returncode == 0, run.stderr
+
+
+def _epw(path: Path) -> None:
+    """A one-day EPW file (EnergyPlus format) for a station at Santiago de Chile (UTC-4)."""
+    head = [
+        "LOCATION,Santiago,RM,CHL,hand-written,855740,-33.45,-70.67,-4.0,520.0",
+        "DESIGN CONDITIONS,0", "TYPICAL/EXTREME PERIODS,0", "GROUND TEMPERATURES,0",
+        "HOLIDAYS/DAYLIGHT SAVINGS,No,0,0,0", "COMMENTS 1,written by tests/test_cli_site.py",
+        "COMMENTS 2,", "DATA PERIODS,1,1,Data,Sunday, 1/ 1,12/31",
+    ]
+    rows = []
+    for hour in range(1, 25):
+        sun = max(0, 900 - 120 * abs(hour - 13))
+        fields = [2001, 1, 1, hour, 60, "?9?9?9?9E0?9?9?9?9*9?9?9?9?9?9?9?9?9*_*9*9*9?9?9",
+                  20.0 + hour / 4, 8.0, 45, 95500, 0, 1415, 350, sun, int(sun * 0.8),
+                  int(sun * 0.2), 0, 0, 0, 0, 200, 2.5, 5, 5, 20.0, 77777, 9, 999999999, 0,
+                  0.1, 0, 88, 0.2, 0.0, 0.0]
+        rows.append(",".join(str(f) for f in fields))
+    path.write_text("\n".join(head + rows) + "\n")
+
+
+def test_from_weather_epw_in_the_southern_hemisphere_faces_north(tmp_path: Path) -> None:
+    epw = tmp_path / "santiago.epw"
+    _epw(epw)
+    p = heliotwin(tmp_path, "site", "from-weather", str(epw), "--id", "santiago")
+    assert p.returncode == 0, p.stderr
+    site = json.loads((tmp_path / "santiago.json").read_text())
+    assert (site["latitude_deg"], site["longitude_deg"], site["altitude_m"]) == (-33.45, -70.67,
+                                                                                520.0)
+    assert site["timezone"] == "Etc/GMT+4"
+    assert site["arrays"]["fixed"]["surface_azimuth_deg"] == 0.0  # the equator is north
+    assert site["arrays"]["fixed"]["surface_tilt_deg"] == 33.5  # |latitude|, rounded
+    assert site["wind_speed_m_s"] == 2.5 and site["name"] == "Santiago, RM, CHL"
+
+
+@pytest.mark.parametrize("offset", [5.5, -3.5])
+def test_a_half_hour_offset_has_no_etc_zone(offset: float) -> None:
+    from backend.cli.site import fixed_offset_zone
+
+    with pytest.raises(ValueError, match="--timezone"):
+        fixed_offset_zone(offset)
+    assert fixed_offset_zone(-6) == "Etc/GMT+6" and fixed_offset_zone(1) == "Etc/GMT-1"
+
+
+def test_the_library_and_the_service_default_to_the_same_user_folder(monkeypatch) -> None:
+    from backend.settings import get_settings
+    from sim.sites import default_user_sites_dir
+
+    monkeypatch.delenv("HELIOTWIN_SITES_DIR", raising=False)
+    assert get_settings().sites_dir == default_user_sites_dir()
