@@ -2,8 +2,10 @@
 
 Node names are paths whose children inherit the parent's transform (viser):
 ``/tracker/azimuth/elevation/panels/module_i`` moves with the joints,
-``/fixed/panels/module_i`` stands still, ``/sun`` is re-posed each time. The
-scene logic (time, GUI, live mode) is :mod:`backend.twin.scene`.
+``/fixed/panels/module_i`` stands still, ``/sun`` is re-posed each time, the
+``/shadows/*`` meshes get new vertices. Every function
+takes a viser ``SceneApi``: ``client.scene`` for one viewer's own nodes. The
+per-viewer logic (time, GUI, readout) is :mod:`backend.twin.scene_view`.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import viser
 import viser.transforms as vtf
 from numpy.typing import NDArray
 
+from backend.twin.scene_shadow import fan_mesh
 from sim.kinematics import TrackerGeometry, joint_transforms
 
 # Kyocera KD205GX-LP outline from pvlib's CEC module table
@@ -47,6 +50,12 @@ _PANEL_BLUE = (28, 52, 110)
 _STEEL = (150, 150, 155)
 _SUN_YELLOW = (255, 200, 40)
 _GHOST_WHITE = (235, 240, 250)
+_SHADOW = (40, 44, 52)
+#: Dimensions of the bodies whose ground shadows are drawn (x, y, z in their frames) [m].
+COLLECTOR_BOX_M = (ARRAY_WIDTH_M, ARRAY_HEIGHT_M, MODULE_DEPTH_M)
+PEDESTAL_BOX_M = (0.22, 0.22, PEDESTAL_HEIGHT_M)
+#: Ground-shadow meshes: name → what casts it.
+SHADOW_NODES = ("/shadows/tracker_panels", "/shadows/tracker_pedestal", "/shadows/fixed_panels")
 
 
 def wxyz(rotation: NDArray[np.floating]) -> NDArray[np.float64]:
@@ -54,7 +63,18 @@ def wxyz(rotation: NDArray[np.floating]) -> NDArray[np.float64]:
     return np.asarray(vtf.SO3.from_matrix(rotation).wxyz, dtype=float)
 
 
-def _modules(server: viser.ViserServer, parent: str, color: tuple[int, int, int],
+def fixed_array_pose(geom: TrackerGeometry, fixed_tilt_deg: float,
+                     fixed_azimuth_deg: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Centre (ENU, m) and rotation (columns: width axis, height axis up-slope, normal) of
+    the fixed array: the D–H panel frame evaluated at the fixed normal (azimuth, 90° − tilt),
+    lower edge :data:`FIXED_LOWER_EDGE_M` above the ground at :data:`FIXED_ARRAY_ORIGIN_M`."""
+    rot = joint_transforms(fixed_azimuth_deg, 90.0 - fixed_tilt_deg, geom)[2][:3, :3]
+    half = ARRAY_HEIGHT_M / 2.0 * np.sin(np.radians(fixed_tilt_deg))
+    centre = np.array(FIXED_ARRAY_ORIGIN_M) + (0.0, 0.0, FIXED_LOWER_EDGE_M + half)
+    return centre, np.asarray(rot, dtype=float)
+
+
+def _modules(scene: viser.SceneApi, parent: str, color: tuple[int, int, int],
              opacity: float | None) -> dict[str, Any]:
     """The 2 × 2 modules of an array under ``parent`` (landscape, long side along x)."""
     out = {}
@@ -62,16 +82,15 @@ def _modules(server: viser.ViserServer, parent: str, color: tuple[int, int, int]
                                  sy * (MODULE_WIDTH_M + MODULE_GAP_M) / 2.0)
                                 for sy in (1, -1) for sx in (-1, 1)]):
         name = f"{parent}/module_{i}"
-        out[name] = server.scene.add_box(
+        out[name] = scene.add_box(
             name, color=color, dimensions=(MODULE_LENGTH_M, MODULE_WIDTH_M, MODULE_DEPTH_M),
             position=(x, y, 0.0), opacity=opacity, cast_shadow=opacity is None)
     return out
 
 
-def build_ghost(server: viser.ViserServer) -> dict[str, Any]:
+def build_ghost(scene: viser.SceneApi) -> dict[str, Any]:
     """The ideal pose's panels, translucent: ``/ghost/azimuth/elevation/panels`` with the
     tracker's joint frames (posed like them), hidden until the actual pose strays."""
-    scene = server.scene
     nodes: dict[str, Any] = {
         "/ghost": scene.add_frame("/ghost", show_axes=False, visible=False,
                                   position=(0.0, 0.0, PEDESTAL_HEIGHT_M)),
@@ -81,24 +100,48 @@ def build_ghost(server: viser.ViserServer) -> dict[str, Any]:
         "/ghost/azimuth/elevation/panels": scene.add_frame("/ghost/azimuth/elevation/panels",
                                                            show_axes=False),
     }
-    nodes.update(_modules(server, "/ghost/azimuth/elevation/panels", _GHOST_WHITE, 0.35))
+    nodes.update(_modules(scene, "/ghost/azimuth/elevation/panels", _GHOST_WHITE, 0.35))
     return nodes
 
 
-def build_static_scene(server: viser.ViserServer, geom: TrackerGeometry,
-                       fixed_tilt_deg: float, fixed_azimuth_deg: float) -> dict[str, Any]:
-    """Add every node that is not re-created later; returns the handles by path."""
+def build_shadows(scene: viser.SceneApi, with_fixed: bool) -> dict[str, Any]:
+    """The ground-shadow meshes (empty until posed) and, on the fixed array, the tracker's
+    shade (``/shadows/on_fixed``); all in world coordinates (``/shadows`` is the identity)."""
+    verts, faces = fan_mesh(np.zeros((0, 2)))
+    nodes: dict[str, Any] = {"/shadows": scene.add_frame("/shadows", show_axes=False)}
+    for name in SHADOW_NODES:
+        if name.startswith("/shadows/fixed") and not with_fixed:
+            continue
+        nodes[name] = scene.add_mesh_simple(name, verts, faces, color=_SHADOW, opacity=0.55,
+                                            side="double", cast_shadow=False,
+                                            receive_shadow=False)
+    if with_fixed:
+        nodes["/shadows/on_fixed"] = scene.add_mesh_simple(
+            "/shadows/on_fixed", verts, faces, color=(15, 15, 20), opacity=0.6, side="double",
+            cast_shadow=False, receive_shadow=False)
+    return nodes
+
+
+def build_static_scene(scene: viser.SceneApi, geom: TrackerGeometry,
+                       fixed: tuple[float, float] | None) -> dict[str, Any]:
+    """Add every node that is not re-created later; returns the handles by path.
+
+    ``fixed`` is the fixed array's (surface_tilt, surface_azimuth) [°], or None for a
+    site without one (a camera-only site shows the tracker alone).
+    """
     nodes: dict[str, Any] = {}
-    scene = server.scene
 
     def add(name: str, handle: Any) -> Any:
         nodes[name] = handle
         return handle
 
     def add_modules(parent: str) -> None:
-        nodes.update(_modules(server, parent, _PANEL_BLUE, None))
+        nodes.update(_modules(scene, parent, _PANEL_BLUE, None))
 
     scene.set_up_direction("+z")
+    # the only shadows are the ones cast from the sun (build_shadows): viser's default
+    # lights keep shading the faces but throw no fixed shadow of their own
+    scene.configure_default_lights(enabled=True, cast_shadow=False)
     add("/ground", scene.add_grid(
         "/ground", width=24.0, height=24.0, plane="xy", cell_size=1.0, section_size=5.0,
         plane_color=(200, 214, 180), plane_opacity=0.6, position=(0.0, 0.0, -0.002)))
@@ -112,7 +155,7 @@ def build_static_scene(server: viser.ViserServer, geom: TrackerGeometry,
     add("/tracker", scene.add_frame("/tracker", show_axes=False,
                                           position=(0.0, 0.0, PEDESTAL_HEIGHT_M)))
     add("/tracker/pedestal", scene.add_box(
-        "/tracker/pedestal", color=_STEEL, dimensions=(0.22, 0.22, PEDESTAL_HEIGHT_M),
+        "/tracker/pedestal", color=_STEEL, dimensions=PEDESTAL_BOX_M,
         position=(0.0, 0.0, -PEDESTAL_HEIGHT_M / 2.0)))
     add("/tracker/footing", scene.add_box(
         "/tracker/footing", color=(120, 120, 120), dimensions=(0.7, 0.7, 0.12),
@@ -149,24 +192,8 @@ def build_static_scene(server: viser.ViserServer, geom: TrackerGeometry,
         thickness=0.012, wxyz=(0.0, 0.0, 0.0, 1.0),
         position=(0.0, ARRAY_HEIGHT_M / 2.0 + 0.06, 0.03)))
 
-    # Fixed array: same panel-frame convention, orientation from the D–H
-    # model evaluated at the fixed normal (azimuth, 90° − tilt).
-    t0p = joint_transforms(fixed_azimuth_deg, 90.0 - fixed_tilt_deg, geom)[2]
-    rot = t0p[:3, :3]
-    half = ARRAY_HEIGHT_M / 2.0 * np.sin(np.radians(fixed_tilt_deg))
-    centre = np.array(FIXED_ARRAY_ORIGIN_M) + (0.0, 0.0, FIXED_LOWER_EDGE_M + half)
-    add("/fixed", scene.add_frame("/fixed", show_axes=False,
-                                        position=tuple(centre), wxyz=wxyz(rot)))
-    add("/fixed/panels", scene.add_frame("/fixed/panels", show_axes=False))
-    add_modules("/fixed/panels")
-    for i, (x, y) in enumerate([(sx * ARRAY_WIDTH_M * 0.42, sy * ARRAY_HEIGHT_M * 0.42)
-                                for sx in (-1, 1) for sy in (-1, 1)]):
-        foot = centre + rot @ np.array([x, y, 0.0])
-        name = f"/fixed_legs/leg_{i}"
-        add(name, scene.add_box(name, color=_STEEL,
-                                      dimensions=(0.05, 0.05, float(foot[2])),
-                                      position=(float(foot[0]), float(foot[1]),
-                                                float(foot[2]) / 2.0)))
+    if fixed is not None:
+        _add_fixed(scene, geom, *fixed, add, add_modules)
 
     # Sun: /sun's local z points at the sun, so the ray is a constant segment.
     add("/sun", scene.add_frame("/sun", show_axes=False))
@@ -177,8 +204,27 @@ def build_static_scene(server: viser.ViserServer, geom: TrackerGeometry,
         colors=_SUN_YELLOW, thickness=0.02))
     add("/sun_path", scene.add_line_segments(
         "/sun_path", points=np.zeros((1, 2, 3)), colors=(230, 150, 20), thickness=0.03))
-    # From the south-east, a little above the panels: tracker in front,
-    # fixed array to its right, the sun's arc behind.
-    server.initial_camera.position = (6.8, -8.4, 4.2)
-    server.initial_camera.look_at = (2.3, 1.2, 2.9)
     return nodes
+
+
+def _add_fixed(scene: viser.SceneApi, geom: TrackerGeometry, tilt_deg: float,
+               azimuth_deg: float, add: Any, add_modules: Any) -> None:
+    """Fixed array: same panel-frame convention as the tracker (:func:`fixed_array_pose`)."""
+    centre, rot = fixed_array_pose(geom, tilt_deg, azimuth_deg)
+    add("/fixed", scene.add_frame("/fixed", show_axes=False,
+                                  position=tuple(centre), wxyz=wxyz(rot)))
+    add("/fixed/panels", scene.add_frame("/fixed/panels", show_axes=False))
+    add_modules("/fixed/panels")
+    for i, (x, y) in enumerate([(sx * ARRAY_WIDTH_M * 0.42, sy * ARRAY_HEIGHT_M * 0.42)
+                                for sx in (-1, 1) for sy in (-1, 1)]):
+        foot = centre + rot @ np.array([x, y, 0.0])
+        name = f"/fixed_legs/leg_{i}"
+        add(name, scene.add_box(name, color=_STEEL, dimensions=(0.05, 0.05, float(foot[2])),
+                                position=(float(foot[0]), float(foot[1]),
+                                          float(foot[2]) / 2.0)))
+
+
+#: From the south-east, a little above the panels: tracker in front, fixed array to its
+#: right, the sun's arc behind (ENU, m).
+CAMERA_POSITION_M = (6.8, -8.4, 4.2)
+CAMERA_LOOK_AT_M = (2.3, 1.2, 2.9)

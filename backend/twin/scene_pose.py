@@ -3,7 +3,7 @@ replays (:class:`Replay`); the scene itself is :mod:`backend.twin.scene`."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -34,6 +34,9 @@ class ScenePose:
     #: Angle between the panel normal and the sun [mrad] in a replayed run (None when live).
     pointing_error_mrad: float | None = None
     replay_run_id: str | None = None
+    #: Share of the fixed array's area in the tracker collector's shadow [-] (None: no
+    #: fixed array at the site).
+    fixed_shaded_fraction: float | None = None
 
     @property
     def ghost_visible(self) -> bool:
@@ -54,19 +57,30 @@ class Replay:
     pointing_error_mrad: NDArray[np.float64]
     base_rotation: NDArray[np.float64]
     step_s: float
+    site_id: str = ""
+    #: The run's powers per step [W] (empty when its series has none).
+    tracker_power_w: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    fixed_power_w: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
 
     @classmethod
     def from_series(cls, run_id: str, series: pd.DataFrame, disturbances: Disturbances,
-                    step_s: float) -> Replay:
+                    step_s: float, site_id: str = "") -> Replay:
         missing = [c for c in ("azimuth_joint_deg", "elevation_joint_deg",
                                "pointing_error_mrad") if c not in series.columns]
         if missing:
             raise ValueError(f"run {run_id}: its series lacks {', '.join(missing)}")
+        if series.empty:
+            raise ValueError(f"run {run_id}: its series is empty")
+
+        def power(col: str) -> NDArray[np.float64]:
+            return series[col].to_numpy(float) if col in series.columns else np.zeros(0)
+
         return cls(run_id, series.index.as_unit("s").asi8.astype(np.int64),
                    series["azimuth_joint_deg"].to_numpy(float),
                    series["elevation_joint_deg"].to_numpy(float),
                    series["pointing_error_mrad"].to_numpy(float),
-                   np.asarray(base_rotation(disturbances)), float(step_s))
+                   np.asarray(base_rotation(disturbances)), float(step_s), site_id,
+                   power("tracker_power_w"), power("fixed_power_w"))
 
     @property
     def start(self) -> pd.Timestamp:

@@ -92,6 +92,8 @@ function drawSkyMap() {
   if (!d.times.length) { img.removeAttribute("src"); return; }
   const t = d.times[view.index];
   const strategy = $("plant-strategy").value;
+  // the 3D page's plant view at this instant and strategy (frontend/js/twin.js)
+  $("plant-3d").href = `#twin?plant=${enc(p.plant_id)}&strategy=${enc(strategy)}&time=${enc(t)}`;
   img.dataset.time = t;
   img.dataset.loaded = "";
   img.onload = () => { img.dataset.loaded = t; };

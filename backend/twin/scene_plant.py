@@ -1,0 +1,251 @@
+"""One viewer's 3D view of a plant of dual-axis trackers (seed 004), e.g. Peñarroya I.
+
+Every collector is posed at the common orientation the chosen strategy gives at
+the chosen instant (:func:`sim.plant.strategies.orientations`: ``sun``,
+``backtrack``, ``sky_scan``, clear sky from :func:`sim.plant.simulate.sky_conditions`),
+the shaded ones are coloured by their shaded fraction with the shade drawn on
+them (:func:`sim.plant.shading.plant_shade`: seed 004 §2.1, each neighbour's
+collector projected along the sun vector onto the collector's plane), and every
+collector casts its shadow on the ground (its rectangle projected along the sun
+vector onto z = 0, :mod:`backend.twin.scene_shadow`).
+
+The plant file gives pivot positions on flat ground (z = 0) with the collector
+centred on the pivot; the view lifts every pivot by :data:`PIVOT_HEIGHT_M` so a
+5 m collector clears the ground when vertical — the same lift for all, so the
+shading between collectors is unchanged. The scene is centred on the plant's
+centroid (ENU, m).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import threading
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import viser
+from numpy.typing import NDArray
+
+from backend.twin.scene_build import wxyz
+from backend.twin.scene_shadow import SHADOW_LIFT_M
+from sim.plant import Plant
+from sim.plant.shading import PlantShade, collector_axes, plant_shade
+from sim.plant.simulate import sky_conditions
+from sim.plant.strategies import STRATEGIES, orientations
+
+#: Pivot height above the ground in the view [m] (an assumption: the plant file has none).
+PIVOT_HEIGHT_M = 3.0
+COLLECTOR_DEPTH_M = 0.12
+#: Shade rectangles drawn per shaded collector (more neighbours than this are rare).
+MAX_SHADE_RECTS = 4
+_BLUE = (28, 52, 110)
+_SHADED = (214, 80, 40)
+_STEEL = (150, 150, 155)
+
+
+def _quads(corners: NDArray[np.float64]) -> tuple[NDArray[np.float32], NDArray[np.uint32]]:
+    """Quads (Q, 4, 3) as one mesh: 4 vertices and 2 triangles each."""
+    q = len(corners)
+    base = 4 * np.arange(q)[:, None]
+    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]], axis=0)
+    return corners.reshape(-1, 3).astype(np.float32), faces.astype(np.uint32)
+
+
+class PlantView:
+    """A plant of trackers as one viser client sees it: its own strategy and instant.
+
+    Parameters
+    ----------
+    client : viser.ClientHandle
+    plant : sim.plant.Plant
+    lock : threading.RLock
+        The scene's lock.
+    """
+
+    def __init__(self, client: viser.ClientHandle, plant: Plant, lock: threading.RLock) -> None:
+        self.client = client
+        self.plant = plant
+        self._lock = lock
+        self._tz = plant.timezone
+        self.centre = plant.positions.mean(axis=0) * (1.0, 1.0, 0.0)
+        self.pivots = plant.positions - self.centre + (0.0, 0.0, PIVOT_HEIGHT_M)
+        self.nodes: dict[str, Any] = {}
+        self.gui: dict[str, Any] = {}
+        self.strategy = "sun"
+        self.ts: pd.Timestamp | None = None
+        self.sun = (float("nan"), float("nan"))
+        self.orientation = (float("nan"), float("nan"))
+        self.fraction = np.zeros(plant.n_trackers)
+        self.shade: PlantShade | None = None
+        self.ground_shadows = np.zeros((0, 4, 3))
+        self._syncing = False
+
+    def build(self, start: pd.Timestamp, strategy: str = "sun") -> None:
+        """Add the plant's nodes and panel and show ``start`` under ``strategy``."""
+        if strategy not in STRATEGIES:
+            strategy = "sun"
+        scene, p = self.client.scene, self.plant
+        c = p.collector
+        span = float(np.ptp(self.pivots[:, :2], axis=0).max()) + 2 * c.width
+        with self._lock:
+            scene.set_up_direction("+z")
+            scene.configure_default_lights(enabled=True, cast_shadow=False)  # only sun shadows
+            self.nodes["/ground"] = scene.add_grid(
+                "/ground", width=span, height=span, plane="xy", cell_size=5.0,
+                section_size=25.0, plane_color=(200, 214, 180), plane_opacity=0.6,
+                position=(0.0, 0.0, -0.002))
+            for label, (lx, ly) in {"N": (0, 1), "E": (1, 0), "S": (0, -1),
+                                    "W": (-1, 0)}.items():
+                self.nodes[f"/compass/{label}"] = scene.add_label(
+                    f"/compass/{label}", label, position=(lx * span / 2.2, ly * span / 2.2, 0.1),
+                    anchor="center-center", font_screen_scale=1.6)
+            for k, tid in enumerate(p.tracker_ids):
+                x, y, z = self.pivots[k]
+                name = f"/plant/tracker_{tid}"
+                self.nodes[f"/plant/posts/post_{tid}"] = scene.add_box(
+                    f"/plant/posts/post_{tid}", color=_STEEL, dimensions=(0.3, 0.3, z),
+                    position=(x, y, z / 2))
+                self.nodes[name] = scene.add_frame(name, show_axes=False, position=(x, y, z))
+                self.nodes[f"{name}/collector"] = scene.add_box(
+                    f"{name}/collector", color=_BLUE,
+                    dimensions=(c.width, c.height, COLLECTOR_DEPTH_M))
+                self.nodes[f"/plant/labels/label_{tid}"] = scene.add_label(
+                    f"/plant/labels/label_{tid}", str(tid), position=(x, y, z + c.height / 2 + 1),
+                    anchor="bottom-center", font_screen_scale=0.9)
+            n = p.n_trackers
+            verts, faces = _quads(np.zeros((n, 4, 3)))
+            self.nodes["/plant/shadows"] = scene.add_mesh_simple(
+                "/plant/shadows", verts, faces, color=(40, 44, 52), opacity=0.5, side="double",
+                cast_shadow=False, receive_shadow=False)
+            verts, faces = _quads(np.zeros((n * MAX_SHADE_RECTS, 4, 3)))
+            self.nodes["/plant/shade_on_collectors"] = scene.add_mesh_simple(
+                "/plant/shade_on_collectors", verts, faces, color=(15, 15, 20), opacity=0.65,
+                side="double", cast_shadow=False, receive_shadow=False)
+            self.client.camera.position = (span * 0.45, -span * 0.75, span * 0.45)
+            self.client.camera.look_at = (0.0, 0.0, 0.0)
+            self._build_gui(strategy)
+            self.show(start, strategy)
+
+    def _build_gui(self, strategy: str) -> None:
+        gui, g, p = self.client.gui, self.gui, self.plant
+        gui.add_markdown(f"**{p.name}** — plant view  \n{p.n_trackers} trackers, collectors "
+                         f"{p.collector.width:g} m × {p.collector.height:g} m · {self._tz}")
+        g["strategy"] = gui.add_dropdown("Strategy", STRATEGIES, initial_value=strategy)
+        g["date"] = gui.add_text("Date (local)", initial_value="",
+                                 hint="YYYY-MM-DD, in the plant's time zone")
+        g["hours"] = gui.add_slider("Local time [h]", min=0.0, max=24.0, step=0.05,
+                                    initial_value=12.0,
+                                    marks=((0.0, "0"), (6.0, "6"), (12.0, "12"), (18.0, "18"),
+                                           (24.0, "24")))
+        g["readout"] = gui.add_markdown("")
+
+        def changed(_: Any) -> None:
+            if self._syncing:
+                return
+            try:
+                day = dt.date.fromisoformat(str(g["date"].value).strip())
+            except ValueError:
+                g["readout"].content = f"**Date {g['date'].value!r} is not YYYY-MM-DD**"
+                return
+            ts = pd.Timestamp(day).tz_localize(self._tz) + pd.Timedelta(
+                hours=float(g["hours"].value))
+            self.show(ts, str(g["strategy"].value))
+
+        for key in ("strategy", "date", "hours"):
+            g[key].on_update(changed)
+
+    def show(self, ts: pd.Timestamp, strategy: str) -> None:
+        """Pose every collector for ``strategy`` at ``ts`` (tz-aware), mark the shaded ones,
+        cast the shadows."""
+        stamp = pd.Timestamp(ts)
+        if stamp.tzinfo is None:
+            raise ValueError("ts must be timezone-aware")
+        if strategy not in STRATEGIES:
+            raise ValueError(f"strategy must be one of {', '.join(STRATEGIES)}")
+        p, c = self.plant, self.plant.collector
+        sky = sky_conditions(p, pd.DatetimeIndex([stamp.tz_convert("UTC")]))
+        saz, sel = orientations(strategy, p, sky)
+        sun_az, sun_el = float(sky["solar_azimuth"][0]), float(sky["apparent_elevation"][0])
+        shade = plant_shade(p.positions, sky["solar_azimuth"], sky["apparent_elevation"],
+                            saz, sel, c.width, c.height)
+        n_vec, u, v = (a[0] for a in collector_axes(saz, sel))
+        # the collector box's frame: x along its width (u), z the normal; y = z × x = −v
+        # (seed 004's v = u × n points up-slope, so (u, v, n) is left-handed)
+        rot = np.column_stack([u, -v, n_vec])
+        frac = np.nan_to_num(shade.fraction[0])
+        corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * (c.width / 2, c.height / 2)
+        outline = (self.pivots[:, None, :] + corners[None, :, :1] * u
+                   + corners[None, :, 1:] * v)  # (N, 4, 3)
+        sun = np.array([np.sin(np.radians(sun_az)) * np.cos(np.radians(sun_el)),
+                        np.cos(np.radians(sun_az)) * np.cos(np.radians(sun_el)),
+                        np.sin(np.radians(sun_el))])
+        if sun[2] > np.sin(np.radians(0.5)):
+            ground = outline - outline[..., 2:3] / sun[2] * sun  # on z = 0 …
+            ground[..., 2] = SHADOW_LIFT_M  # … drawn just above the grid
+        else:
+            ground = np.zeros_like(outline)
+        rects = np.zeros((p.n_trackers * MAX_SHADE_RECTS, 4, 3))
+        slot = 0
+        for g_i in range(len(shade.group_step)):
+            k = int(shade.group_tracker[g_i])
+            for r, by in zip(shade.group_rects[g_i], shade.group_by[g_i], strict=True):
+                if by < 0 or slot >= len(rects) or r[1] <= r[0] or r[3] <= r[2]:
+                    continue
+                uv = np.array([[r[0], r[2]], [r[1], r[2]], [r[1], r[3]], [r[0], r[3]]])
+                rects[slot] = (self.pivots[k] + uv[:, :1] * u + uv[:, 1:] * v
+                               + (COLLECTOR_DEPTH_M / 2 + 0.03) * n_vec)
+                slot += 1
+        with self._lock:
+            self.strategy, self.ts, self.shade = strategy, stamp.tz_convert("UTC"), shade
+            self.sun, self.orientation = (sun_az, sun_el), (float(saz[0]), float(sel[0]))
+            self.fraction, self.ground_shadows = frac, ground
+            with self.client.atomic():
+                for k, tid in enumerate(p.tracker_ids):
+                    self.nodes[f"/plant/tracker_{tid}"].wxyz = wxyz(rot)
+                    color = _SHADED if frac[k] > 0 else _BLUE
+                    self.nodes[f"/plant/tracker_{tid}/collector"].color = color
+                self.nodes["/plant/shadows"].vertices = _quads(ground)[0]
+                self.nodes["/plant/shade_on_collectors"].vertices = _quads(rects)[0]
+            self._sync_gui()
+            self._refresh_readout()
+
+    def shaded_ids(self) -> list[int]:
+        """Ids of the trackers shaded at the shown instant."""
+        return [tid for tid, f in zip(self.plant.tracker_ids, self.fraction, strict=True)
+                if f > 0]
+
+    def _sync_gui(self) -> None:
+        if self.ts is None or "hours" not in self.gui:
+            return
+        local = self.ts.tz_convert(self._tz)
+        self._syncing = True
+        try:
+            self.gui["strategy"].value = self.strategy
+            self.gui["date"].value = local.date().isoformat()
+            self.gui["hours"].value = round(local.hour + local.minute / 60.0, 2)
+        finally:
+            self._syncing = False
+
+    def _refresh_readout(self) -> None:
+        if self.ts is None or "readout" not in self.gui:
+            return
+        local = self.ts.tz_convert(self._tz)
+        p = self.plant
+        lines = [f"**{local:%Y-%m-%d %H:%M} {local.tzname()}** · strategy `{self.strategy}`", "",
+                 f"Sun: azimuth {self.sun[0]:.1f}°, elevation {self.sun[1]:.1f}°  ",
+                 f"Collectors: azimuth {self.orientation[0]:.1f}°, "
+                 f"elevation {self.orientation[1]:.1f}°", ""]
+        if self.sun[1] <= 0:
+            lines.append("Sun below the horizon: collectors stowed flat.")
+        else:
+            shaded = self.shaded_ids()
+            lines.append(f"Shaded: {len(shaded)} of {p.n_trackers} collectors, mean shaded "
+                         f"fraction {100 * float(self.fraction.mean()):.2f} %")
+            if shaded and self.shade is not None:
+                lines += ["", "| tracker | shaded | by |", "|---|---|---|"]
+                for k, tid in enumerate(p.tracker_ids):
+                    if self.fraction[k] > 0:
+                        by = ", ".join(str(p.tracker_ids[b]) for b in self.shade.shaded_by(0, k))
+                        lines.append(f"| {tid} | {100 * self.fraction[k]:.1f} % | {by} |")
+        self.gui["readout"].content = "\n".join(lines)
