@@ -350,6 +350,20 @@ FISHEYE_FIELDS: tuple[str, ...] = ("projection", "px_per_deg", "cx_px", "cy_px",
                                    "north_offset_deg", "east")
 
 
+def px_per_deg_for_horizon(horizon_radius_px: float, projection: str = "equidistant") -> float:
+    """The zenith scale [px/°] of a fisheye whose horizon (θ = 90°) lies at ``horizon_radius_px``.
+
+    Inverts ``r(90°) = f·g(90°)`` with ``f = px_per_deg·180/π`` (the projections of
+    :class:`FisheyeCamera`): equidistant gives ``r/90``, the others differ by
+    ``g(90°)/(π/2)``. For a camera whose scale nobody measured: the image
+    circle of a 180° lens is its horizon.
+    """
+    if projection not in PROJECTIONS:
+        raise ValueError(f"projection: must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
+    g90 = float(_project_rad(np.array([np.pi / 2]), projection)[0])
+    return float(horizon_radius_px) / (g90 * 180.0 / np.pi)
+
+
 def _number(params: dict[str, object], name: str, default: float | None = None,
             positive: bool = False, bounds: tuple[float, float] | None = None
             ) -> float | None:

@@ -86,3 +86,23 @@ def _fov_mask(shape: tuple[int, int], fov: FovCircle) -> NDArray[np.uint8]:
     mask = np.zeros(shape, np.uint8)
     cv2.circle(mask, (int(round(fov.cx_px)), int(round(fov.cy_px))), int(fov.radius_px), 255, -1)
     return mask
+
+
+def image_circle(gray: NDArray[np.uint8]) -> tuple[FovCircle, bool] | None:
+    """The lens's whole image circle (not shrunk) and whether it reaches the frame's edge.
+
+    :func:`estimate_fov` shrinks the circle by 2 % to keep the detector off the
+    dark rim; a camera whose scale is unknown wants the rim itself: the circle
+    a 180° lens draws is the horizon (θ = 90°). ``clipped`` is True when the
+    circle leaves the frame, so the frame's edge, not the lens, bounds what was
+    measured. None when the frame has no dark corners (no circle).
+    """
+    fov = estimate_fov(gray)
+    if fov is None:
+        return None
+    circle = FovCircle(fov.cx_px, fov.cy_px, fov.radius_px / 0.98)
+    h, w = gray.shape[:2]
+    clipped = (circle.cx_px - circle.radius_px < -0.5 or circle.cy_px - circle.radius_px < -0.5
+               or circle.cx_px + circle.radius_px > w - 0.5
+               or circle.cy_px + circle.radius_px > h - 0.5)
+    return circle, bool(clipped)

@@ -16,11 +16,12 @@ import datetime as dt
 import json
 from typing import Any
 
-from sqlalchemy import insert, select
+from sqlalchemy import delete, insert, select
 from sqlalchemy.engine import Connection
 from sqlalchemy.orm import Session
 
 from backend.storage.tables import VisionCalibration, VisionDetection, utcnow
+from backend.vision.checks import error_warnings
 
 _DETECTION_COLUMNS = [c.name for c in VisionDetection.__table__.columns]
 _CALIBRATION_COLUMNS = [c.name for c in VisionCalibration.__table__.columns]
@@ -51,6 +52,7 @@ def insert_calibration(conn: Connection, row: dict[str, Any]) -> int:
     values = {k: row.get(k) for k in _CALIBRATION_COLUMNS
               if k not in ("id", "radial_coeffs_json", "frames_json")}
     values["created_at"] = row.get("created_at") or utcnow()
+    values["name"] = row.get("name") or ""
     values["radial_coeffs_json"] = json.dumps(list(row.get("radial_coeffs") or []))
     values["frames_json"] = json.dumps(row.get("frames") or [])
     result = conn.execute(insert(VisionCalibration).values(**values))
@@ -88,6 +90,7 @@ def detection_to_dict(r: Any) -> dict[str, Any]:
                             "elevation_deg": r.ephemeris_elevation_deg}
     if r.error_deg is not None:
         out["error"] = {"separation_deg": r.error_deg}
+    out["warnings"] = error_warnings(out, None)
     return out
 
 
@@ -95,6 +98,7 @@ def calibration_to_dict(r: Any, full: bool = True) -> dict[str, Any]:
     """A stored calibration: ``camera`` holds the parameters by their public names."""
     out: dict[str, Any] = {
         "calibration_id": r.id,
+        "name": r.name,
         "created_at": _created(r.created_at),
         "site_id": r.site_id,
         "latitude_deg": r.latitude_deg,
@@ -138,6 +142,33 @@ def list_calibrations(db: Connection | Session, limit: int = 200) -> list[dict[s
     return [calibration_to_dict(r, full=False) for r in rows]
 
 
+def delete_calibration(conn: Connection, calibration_id: int) -> dict[str, int] | None:
+    """Delete a calibration and the detections made with it (their angles came from a
+    camera that no longer exists) → the counts, or None when there is no such calibration."""
+    if conn.execute(select(VisionCalibration.id)
+                    .where(VisionCalibration.id == calibration_id)).first() is None:
+        return None
+    n_det = conn.execute(delete(VisionDetection)
+                         .where(VisionDetection.calibration_id == calibration_id)).rowcount
+    conn.execute(delete(VisionCalibration).where(VisionCalibration.id == calibration_id))
+    return {"calibrations_deleted": 1, "detections_deleted": int(n_det or 0)}
+
+
+def delete_detections(conn: Connection, site_id: str | None, start_ms: int, end_ms: int,
+                      calibration_id: int | None = None, uncalibrated: bool = False) -> int:
+    """Delete the detections of a site (or of free places when ``site_id`` is None) in
+    [start, end), optionally only those of one calibration or only those made with typed
+    parameters (``uncalibrated``) → how many."""
+    t = VisionDetection
+    q = delete(t).where(t.ts_ms >= start_ms, t.ts_ms < end_ms)
+    q = q.where(t.site_id.is_(None) if site_id is None else t.site_id == site_id)
+    if calibration_id is not None:
+        q = q.where(t.calibration_id == calibration_id)
+    elif uncalibrated:
+        q = q.where(t.calibration_id.is_(None))
+    return int(conn.execute(q).rowcount or 0)
+
+
 def list_detections(db: Connection | Session, site_id: str | None, start_ms: int | None,
                     end_ms: int | None, limit: int = 10_000) -> list[dict[str, Any]]:
     """Detections of a site (or of any place when ``site_id`` is None) in [start, end), by time."""
@@ -160,6 +191,8 @@ __all__ = [
     "VisionCalibration",
     "VisionDetection",
     "calibration_to_dict",
+    "delete_calibration",
+    "delete_detections",
     "detection_to_dict",
     "get_calibration",
     "insert_calibration",

@@ -25,16 +25,34 @@ function offsetString(minutes) {
   return `${sign}${String(Math.floor(a / 60)).padStart(2, "0")}:${String(a % 60).padStart(2, "0")}`;
 }
 
+/** Where a row's zone comes from: its file name (which wins), or the "Times … are in" selector. */
+function rowZone(row) {
+  if (row.offsetH !== null && row.offsetH !== undefined && row.fromName) {
+    return { source: "name", label: `UTC${offsetString(row.offsetH * 60)}, from the file name` };
+  }
+  if ($("sky-name-tz").value === "site") return { source: "site", label: `the site's time (${st.tz})` };
+  return { source: "utc", label: "UTC" };
+}
+
 /** The ISO timestamp (with offset) a row's datetime-local input stands for. */
 function rowTimestamp(row) {
   const wall = row.input.value;
   if (!wall) return null;
   const full = wall.length === 16 ? `${wall}:00` : wall;
+  const zone = rowZone(row).source;
   let offMin;
-  if (row.offsetH !== null && row.offsetH !== undefined && row.fromName) offMin = row.offsetH * 60;
-  else if ($("sky-name-tz").value === "site") offMin = zoneOffsetMs(st.tz, Date.parse(`${full}Z`)) / 60000;
+  if (zone === "name") offMin = row.offsetH * 60;
+  else if (zone === "site") offMin = zoneOffsetMs(st.tz, Date.parse(`${full}Z`)) / 60000;
   else offMin = 0;
   return `${full}${offsetString(offMin)}`;
+}
+
+/** Each row says which zone its time is read in, and the UTC instant that makes. */
+function refreshZones() {
+  for (const row of files) {
+    const ts = rowTimestamp(row);
+    row.zone.textContent = `in ${rowZone(row).label}${ts ? ` → ${new Date(ts).toISOString().slice(0, 19)}Z` : ""}`;
+  }
 }
 
 function readSize(url) {
@@ -50,11 +68,12 @@ function renderFileList() {
   const box = $("sky-file-list");
   box.innerHTML = "";
   for (const row of files) {
-    row.input.addEventListener("input", () => { row.fromName = false; });
-    const zoneNote = row.offsetH !== null && row.fromName ? ` (UTC${offsetString(row.offsetH * 60)}, from the name)` : "";
-    box.append(h("div", { class: "row" }, h("span", { class: "name", title: row.file.name + zoneNote }, row.file.name + zoneNote), row.input));
+    row.input.addEventListener("input", () => { row.fromName = false; refreshZones(); });
+    row.zone = h("span", { class: "muted zone", "data-testid": "sky-row-zone" });
+    box.append(h("div", { class: "row" }, h("span", { class: "name", title: row.file.name }, row.file.name), row.input, row.zone));
   }
-  if (files.length) box.append(h("div", { class: "muted" }, "Time of each frame (needed for the ephemeris and for calibration)."));
+  refreshZones();
+  if (files.length) box.append(h("div", { class: "muted" }, "Time of each frame (needed for the ephemeris and for calibration). A time typed by hand is read in the selector's zone."));
 }
 
 function onFiles() {
@@ -172,7 +191,10 @@ function resultCard(row, img, res, params) {
   const pe = pick(res, "pointing_error_deg");
   if (pe) kv("Pointing error [°] (right, up)", `${num(pe[0], 3)}, ${num(pe[1], 3)}`);
   if (typeof res.pointing_error_mrad === "number") kv("Pointing error [mrad]", num(res.pointing_error_mrad, 2));
+  const derived = res.camera_derived;
+  if (derived) kv("Scale [px/°]", `${num(derived.px_per_deg, 3)} — derived: ${derived.how}; ${derived.warning}`);
   if (res.method) kv("Method", res.method);
+  const warnings = (res.warnings || []).map((w) => h("p", { class: "warning", "data-testid": "sky-warning" }, `⚠ ${w}`));
   const ts = rowTimestamp(row);
   const when = !ts ? "" : $("sky-place").value === "site" ? `  · ${fmtDateTime(st.tz, ts)} (${st.tz})` : `  · ${ts}`;
   return h("article", { class: "card sky-result", "data-testid": "sky-result", "data-sun-found": String(Boolean(res.sun_found)) },
@@ -180,6 +202,7 @@ function resultCard(row, img, res, params) {
     canvas,
     h("div", { class: "legend" }, h("span", { class: "det" }, "✛ detected sun"), "  ",
       h("span", { class: "eph" }, cam.camera === "pinhole" ? "┼ reference pixel (dashed)" : "○ ephemeris sun"), when),
+    warnings,
     h("table", { class: "kv" }, rows));
 }
 
@@ -241,6 +264,8 @@ async function calibrate() {
   const projection = document.querySelector('.cam-params[data-camera="fisheye"] [name="projection"]').value;
   form.append("projection", projection);
   form.append("east", "auto"); // fit the mirror too
+  const name = $("sky-calibration-name").value.trim();
+  if (name) form.append("name", name);
   $("sky-calibrate").disabled = true;
   $("sky-status").textContent = `fitting a ${projection} camera to ${timed.length} frames…`;
   const box = $("sky-calibration-result");
@@ -272,7 +297,8 @@ async function calibrate() {
           frames) : null)));
     if (res.calibration_id !== undefined) {
       const sel = $("sky-calibration");
-      sel.add(new Option(`#${res.calibration_id} ${fitted.projection ?? ""} · ${num(fitted.rms_px, 1)} px RMS (just fitted)`, res.calibration_id));
+      sel.add(new Option(`${calibrationLabel(res)} (just fitted)`, res.calibration_id));
+      calibrationNames.set(String(res.calibration_id), res.name);
       sel.value = String(res.calibration_id);
       sel.dispatchEvent(new Event("change"));
     }
@@ -354,10 +380,130 @@ async function loadTrajectory() {
       + Math.cos(d.elevation_deg * DEG) * Math.cos(e * DEG) * Math.cos((d.azimuth_deg - a) * DEG);
     return Math.acos(Math.max(-1, Math.min(1, c))) / DEG;
   });
-  await draw("chart-sky-error", [{ x: found.map((d) => toLocalWall(tz, ts(d))), y: errs, type: "scatter", mode: "markers",
-    name: "angular error", marker: { color: "#ff6b00", size: 7 }, hovertemplate: "%{y:.2f}°" }],
+  const groups = new Map(); // calibration → indices; doubtful ones (warnings) on their own
+  found.forEach((d, i) => {
+    const key = (d.warnings || []).length ? "doubtful" : calibrationLegend(d.calibration_id);
+    if (!groups.has(key)) groups.set(key, []);
+    groups.get(key).push(i);
+  });
+  const palette = ["#ff6b00", "#1971c2", "#2f9e44", "#9c36b5", "#e8590c", "#0c8599"];
+  const traces = [...groups].map(([key, idx], k) => ({
+    x: idx.map((i) => toLocalWall(tz, ts(found[i]))), y: idx.map((i) => errs[i]), type: "scatter", mode: "markers",
+    name: key === "doubtful" ? "doubtful (place or time?)" : key,
+    text: idx.map((i) => (found[i].warnings || []).join("; ")),
+    marker: key === "doubtful" ? { color: "#868e96", size: 8, symbol: "x" } : { color: palette[k % palette.length], size: 7 },
+    hovertemplate: "%{y:.2f}° %{text}" }));
+  await draw("chart-sky-error", traces,
   baseLayout({ xaxis: { type: "date", title: { text: `Time (${tz})` }, gridcolor: "#e9edf1", range: paddedRange(found.map(ts), tz) },
-    yaxis: { title: { text: "Detected − ephemeris [°]" }, rangemode: "tozero", gridcolor: "#e9edf1" } }));
+    yaxis: { title: { text: "Detected − ephemeris [°]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
+    showlegend: true, legend: { orientation: "h", y: 1.12 } }));
+}
+
+const calibrationNames = new Map(); // calibration id → its name, for the charts' legends
+
+function calibrationLabel(c) {
+  const id = c.calibration_id ?? c.id;
+  const when = c.created_at ? ` · ${fmtDateTime(st.tz, c.created_at)}` : "";
+  return `#${id} ${c.name || c.projection || ""} · ${num(c.rms_px, 1)} px RMS${when}`;
+}
+
+function calibrationLegend(id) {
+  if (id === null || id === undefined) return "typed parameters";
+  const name = calibrationNames.get(String(id));
+  return name ? `#${id} ${name}` : `#${id}`;
+}
+
+async function deleteCalibration() {
+  const sel = $("sky-calibration");
+  const id = sel.value;
+  if (!id) return;
+  if (!$("sky-token").value.trim()) {
+    $("sky-status").textContent = "Deleting needs a write token: paste one into “Write token” (heliotwin token create).";
+    return;
+  }
+  if (!confirm(`Delete calibration ${calibrationLegend(id)} and the detections made with it?`)) return;
+  try {
+    const res = await api(`/api/v1/vision/calibrations/${encodeURIComponent(id)}`, { method: "DELETE", token: $("sky-token").value.trim() });
+    sel.remove(sel.selectedIndex);
+    sel.value = "";
+    sel.dispatchEvent(new Event("change"));
+    storedCameras.delete(id);
+    $("sky-status").textContent = `Deleted calibration #${id} and ${res.detections_deleted} detection(s) made with it.`;
+    loadTrajectory();
+  } catch (err) {
+    $("sky-status").textContent = `Could not delete: ${err.message}`;
+  }
+}
+
+/** The selected calibration on the chosen frames against SPA; frames it was fitted on are marked. */
+async function evaluateCalibration() {
+  const id = $("sky-calibration").value;
+  const timed = files.filter((r) => rowTimestamp(r));
+  if (!id || !timed.length) {
+    $("sky-status").textContent = "Choose a calibration and images with their times first.";
+    return;
+  }
+  const cal = await api(`/api/v1/vision/calibrations/${encodeURIComponent(id)}`);
+  const fittedOn = new Set((cal.frames || []).map((f) => f.filename));
+  const form = new FormData();
+  for (const r of timed) {
+    form.append("files", r.file, r.file.name);
+    form.append("timestamps", rowTimestamp(r));
+  }
+  form.append("calibration_id", id);
+  form.append("methods", "robust");
+  placeParams(form);
+  $("sky-status").textContent = `evaluating ${calibrationLegend(id)} on ${timed.length} frames…`;
+  const box = $("sky-calibration-result");
+  box.innerHTML = "";
+  try {
+    const res = await api("/api/v1/vision/evaluate", { method: "POST", form, token: $("sky-token").value.trim() });
+    const rows = [];
+    const held = [];
+    for (const f of res.table2) {
+      const az = f.robust_azimuth_deg;
+      const el = f.robust_elevation_deg;
+      let sep = null;
+      if (typeof az === "number") {
+        const c = Math.sin(el * DEG) * Math.sin(f.ephemeris_elevation_deg * DEG)
+          + Math.cos(el * DEG) * Math.cos(f.ephemeris_elevation_deg * DEG) * Math.cos((az - f.ephemeris_azimuth_deg) * DEG);
+        sep = Math.acos(Math.max(-1, Math.min(1, c))) / DEG;
+      }
+      const heldOut = !fittedOn.has(f.filename);
+      if (heldOut && sep !== null) held.push(sep);
+      rows.push(h("tr", {}, h("td", { title: f.filename }, f.filename), h("td", {}, heldOut ? "held out" : "fitted on"),
+        h("td", {}, f.robust_sun_found ? "yes" : "no"), h("td", {}, num(sep, 2))));
+    }
+    const rms = held.length ? Math.sqrt(held.reduce((a, b) => a + b * b, 0) / held.length) : null;
+    box.append(h("article", { class: "card", "data-testid": "calibration-evaluation" },
+      h("header", {}, h("h2", {}, `${calibrationLegend(id)} on ${res.n_frames} frames`)),
+      h("p", {}, held.length ? `Held-out frames: ${held.length}, error RMS ${num(rms, 2)}°, worst ${num(Math.max(...held), 2)}°.`
+        : "Every frame here was used to fit this calibration: choose other frames for a held-out check."),
+      h("table", { class: "kv frames" }, h("tr", {}, h("th", {}, "Frame"), h("th", {}, "Role"), h("th", {}, "Sun"), h("th", {}, "Error [°]")), rows)));
+    $("sky-status").textContent = "";
+  } catch (err) {
+    box.append(h("article", { class: "card" }, h("p", { class: "error" }, `Evaluation failed: ${err.message}`)));
+    $("sky-status").textContent = "";
+  }
+}
+
+async function clearDetections() {
+  if (!$("sky-token").value.trim()) {
+    $("sky-status").textContent = "Clearing needs a write token: paste one into “Write token” (heliotwin token create).";
+    return;
+  }
+  const day = $("sky-day").value || st.day;
+  const tz = trajectoryZone();
+  const params = { start: new Date(localMidnightMs(tz, day)).toISOString(), end: new Date(localMidnightMs(tz, addDays(day, 1))).toISOString() };
+  if ($("sky-place").value === "site") params.site_id = st.site.site_id;
+  if ($("sky-clear-which").value === "uncalibrated") params.uncalibrated = "true";
+  try {
+    const res = await api("/api/v1/vision/detections", { method: "DELETE", params, token: $("sky-token").value.trim() });
+    $("sky-status").textContent = `Cleared ${res.detections_deleted} detection(s) of ${day}.`;
+  } catch (err) {
+    $("sky-status").textContent = `Could not clear: ${err.message}`;
+  }
+  loadTrajectory();
 }
 
 async function loadCalibrations() {
@@ -368,7 +514,8 @@ async function loadCalibrations() {
     for (const c of list) {
       const id = c.calibration_id ?? c.id;
       if (id !== undefined) {
-        sel.add(new Option(`#${id} ${c.projection ?? ""} · ${num(c.rms_px, 1)} px RMS · ${c.created_at ? fmtDateTime(st.tz, c.created_at) : ""}`, id));
+        sel.add(new Option(calibrationLabel(c), id));
+        calibrationNames.set(String(id), c.name);
       }
     }
   } catch (err) {
@@ -396,11 +543,15 @@ export function init(state) {
   });
   $("sky-form").addEventListener("submit", detectAll);
   $("sky-calibrate").addEventListener("click", calibrate);
-  $("sky-token-wrap").hidden = !st.meta?.vision_require_token;
+  if (st.meta?.vision_require_token) $("sky-token-why").textContent = "Write token (this service requires one for uploads and deletions)";
+  $("sky-name-tz").addEventListener("change", refreshZones);
+  $("sky-calibration").addEventListener("change", () => { $("sky-calibration-actions").hidden = !$("sky-calibration").value; });
+  $("sky-calibration-delete").addEventListener("click", deleteCalibration);
+  $("sky-evaluate").addEventListener("click", evaluateCalibration);
+  $("sky-clear").addEventListener("click", clearDetections);
   $("sky-day").value = st.day;
   $("sky-day").addEventListener("change", loadTrajectory);
-  loadCalibrations();
-  loadTrajectory();
+  loadCalibrations().finally(loadTrajectory); // the legends name the calibrations
 }
 
 export function siteChanged(state) {

@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import asyncio
 import datetime as dt
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from typing import Annotated, Any
 from zoneinfo import ZoneInfo
 
@@ -37,8 +39,19 @@ from fastapi import APIRouter, HTTPException, Path, Query, Request
 from fastapi.responses import Response
 from starlette.datastructures import FormData, UploadFile
 
-from backend.api.deps import ContextDep, SessionDep, VisionTokenDep
+from backend.api.deps import (
+    ContextDep,
+    SessionDep,
+    VisionTokenDep,
+    bearer_token,
+    check_site_token,
+    token_site,
+)
+from backend.api.forms import form_flag, read_form
+from backend.limits import Busy, prune_anonymous
+from backend.storage.tables import VisionDetection
 from backend.timestamps import TimestampError, parse_day_or_instant, parse_instant
+from backend.vision.checks import derive_fisheye_scale, error_warnings
 from backend.vision.service import (
     Frame,
     Place,
@@ -53,6 +66,8 @@ from backend.vision.service import (
     iso,
 )
 from backend.vision.store import (
+    delete_calibration,
+    delete_detections,
     get_calibration,
     insert_calibration,
     insert_detection,
@@ -84,36 +99,7 @@ def _json(data: Any, status: int = 200) -> Response:
 
 
 async def _read_form(request: Request, limit: int) -> FormData:
-    """The multipart form, read in chunks and refused past ``limit`` bytes (413)."""
-    ctype = request.headers.get("content-type", "")
-    if not ctype.lower().startswith("multipart/form-data"):
-        raise HTTPException(415, "send multipart/form-data (an image in the field 'file')")
-    length = request.headers.get("content-length")
-    if length is not None and length.isdigit() and int(length) > limit:
-        raise HTTPException(413, f"body of {length} bytes; the limit is {limit} bytes "
-                                 "(HELIOTWIN_MAX_UPLOAD_BYTES)")
-    chunks: list[bytes] = []
-    size = 0
-    async for chunk in request.stream():
-        size += len(chunk)
-        if size > limit:
-            raise HTTPException(413, f"body over {limit} bytes (HELIOTWIN_MAX_UPLOAD_BYTES)")
-        chunks.append(chunk)
-    body = b"".join(chunks)
-
-    async def receive() -> dict[str, Any]:
-        return {"type": "http.request", "body": body, "more_body": False}
-
-    try:
-        return await Request(request.scope, receive).form(
-            max_files=_MAX_FILES, max_fields=256, max_part_size=limit)
-    except Exception as exc:  # starlette's HTTPException(400) for a malformed body or limits
-        text = str(getattr(exc, "detail", exc))
-        if "Too many files" in text:
-            raise HTTPException(422, f"files: at most {_MAX_FILES} files per request") from None
-        if "Too many fields" in text:
-            raise HTTPException(422, "form: at most 256 fields per request") from None
-        raise HTTPException(400, f"malformed multipart body: {text}") from None
+    return await read_form(request, limit, "an image in the field 'file'", _MAX_FILES)
 
 
 def _text(form: FormData, name: str) -> str | None:
@@ -139,9 +125,33 @@ async def _upload(upload: Any, field: str, max_pixels: int) -> Upload:
     return check_image(await upload.read(), upload.filename or field, field, max_pixels)
 
 
-async def _image(upload: Any, field: str, max_pixels: int) -> np.ndarray:
-    up = await _upload(upload, field, max_pixels)
-    return await anyio.to_thread.run_sync(decode, up, max_pixels)
+@asynccontextmanager
+async def _admitted(ctx: Any, request: Request, token_site: str | None,
+                    frames: list[Upload]) -> AsyncIterator[None]:
+    """The bounds of ``backend/limits.py`` around decoding ``frames`` (one at a time):
+    without a token the client's per-minute pixel allowance (429), then one frame's
+    share of the decode budget, waited for in a bounded queue (503)."""
+    try:
+        if token_site is None:
+            ctx.limits.vision_pixels.take(request.client.host if request.client else "?",
+                                          sum(w * h for w, h in (f.size_px for f in frames)))
+        async with ctx.limits.decode.hold(max(w * h for w, h in (f.size_px for f in frames))):
+            yield
+    except Busy as exc:
+        raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
+
+
+async def _store_detection(ctx: Any, row: dict[str, Any], anonymous: bool) -> int:
+    """Insert a detection; an anonymous one keeps only the newest anonymous rows."""
+    keep = ctx.settings.vision_anonymous_keep_rows
+
+    def store(conn: Any) -> int:
+        det_id = insert_detection(conn, {**row, "anonymous": anonymous})
+        if anonymous:
+            prune_anonymous(conn, VisionDetection, keep)
+        return det_id
+
+    return int(await asyncio.wrap_future(ctx.writer.call(store)))
 
 
 def _timestamp(text: str | None, field: str = "timestamp") -> dt.datetime | None:
@@ -211,18 +221,30 @@ def _stored_camera(session: Any, form: FormData) -> tuple[FisheyeCamera | None, 
     return FisheyeCamera.from_dict(cal["camera"]), int(raw)
 
 
-def _camera(form: FormData, stored: FisheyeCamera | None, w: int, h: int
-            ) -> PinholeCamera | FisheyeCamera:
+def _calibration_max_deg(session: Any, cal_id: int) -> float | None:
+    cal = get_calibration(session, cal_id)
+    return None if cal is None else cal["max_deg"]
+
+
+def _camera(form: FormData, stored: FisheyeCamera | None, w: int, h: int,
+            image: np.ndarray | None = None
+            ) -> tuple[PinholeCamera | FisheyeCamera, dict[str, Any] | None]:
+    """The camera of a request, and what was derived for it: with ``image``, a fisheye
+    without ``px_per_deg`` gets the scale of its image circle
+    (``backend.vision.checks.derive_fisheye_scale``)."""
     kind = _text(form, "camera") or ("fisheye" if stored is not None else None)
     if stored is not None:
         if kind != "fisheye":
             raise HTTPException(422, "camera: a calibration_id is a fisheye camera")
-        return stored
+        return stored, None
     if kind is None:
         raise HTTPException(422, "camera: required ('pinhole' or 'fisheye'), or give "
                                  "calibration_id")
+    params, derived = _fields(form), None
+    if kind == "fisheye" and image is not None and _text(form, "px_per_deg") is None:
+        params, derived = derive_fisheye_scale(image, params)
     try:
-        return camera_from_params(kind, _fields(form), w, h)
+        return camera_from_params(kind, params, w, h), derived
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
 
@@ -232,7 +254,17 @@ def _camera(form: FormData, stored: FisheyeCamera | None, w: int, h: int
 
 # --------------------------------------------------------------------------- routes
 
+#: a write token is optional (required with HELIOTWIN_VISION_REQUIRE_TOKEN); without one
+#: the caller's address has a pixel allowance, and every upload waits for the decode budget
+_OPTIONAL_BEARER: list[dict[str, list[str]]] = [{}, {"bearerAuth": []}]
+_BUSY_DOC: dict[int | str, dict[str, Any]] = {
+    429: {"description": "rate limit of anonymous uploads (per client address); see "
+                         "Retry-After"},
+    503: {"description": "the decode budget's queue is full; see Retry-After"},
+}
+
 _SUN_DOC = {
+    "security": _OPTIONAL_BEARER,
     "requestBody": {"content": {"multipart/form-data": {"schema": {
         "type": "object", "required": ["file"],
         "properties": {
@@ -256,7 +288,8 @@ _SUN_DOC = {
 
 
 @router.post("/sun", openapi_extra=_SUN_DOC,
-             responses={401: {}, 404: {}, 413: {}, 415: {}, 422: {}})
+             responses={400: {"description": "a malformed multipart body"},
+                        401: {}, 404: {}, 413: {}, 415: {}, 422: {}, **_BUSY_DOC})
 async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
                    _token: VisionTokenDep) -> Response:
     """Find the sun in one frame; with time and place, compare with SPA. The result is stored."""
@@ -269,11 +302,20 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
     place = _place(ctx, form)
     method = _method(form)
     stored, cal_id = await anyio.to_thread.run_sync(_stored_camera, session, form)
-    img = await _image(uploads[0], "file", s.vision_max_pixels)
-    cam = _camera(form, stored, img.shape[1], img.shape[0])
-    res = await anyio.to_thread.run_sync(analyse, img, cam, method, ts, place)
+    up = await _upload(uploads[0], "file", s.vision_max_pixels)
+    async with _admitted(ctx, request, _token, [up]):
+        img = await anyio.to_thread.run_sync(decode, up, s.vision_max_pixels)
+        cam, derived = await anyio.to_thread.run_sync(_camera, form, stored, img.shape[1],
+                                                      img.shape[0], img)
+        res = await anyio.to_thread.run_sync(analyse, img, cam, method, ts, place)
+        del img
+    if derived is not None:
+        res["camera_derived"] = derived
+    res["warnings"] = error_warnings(res, None if cal_id is None else
+                                     await anyio.to_thread.run_sync(_calibration_max_deg,
+                                                                    session, cal_id))
     row = detection_row(res, ts, place, cal_id)
-    det_id = await asyncio.wrap_future(ctx.writer.call(lambda c: insert_detection(c, row)))
+    det_id = await _store_detection(ctx, row, anonymous=_token is None)
     res.update({"detection_id": det_id, "calibration_id": cal_id, "timestamp": iso(ts),
                 "site_id": place.site_id if place else None,
                 "latitude_deg": place.latitude_deg if place else None,
@@ -308,6 +350,7 @@ async def _timed_frames(ctx: Any, form: FormData, min_frames: int
 
 
 _CAL_DOC = {
+    "security": _OPTIONAL_BEARER,
     "requestBody": {"content": {"multipart/form-data": {"schema": {
         "type": "object", "required": ["files", "timestamps"],
         "properties": {
@@ -317,6 +360,9 @@ _CAL_DOC = {
             "projection": {"type": "string"}, "east": {"type": "string",
                                                       "enum": ["auto", "left", "right"]},
             "n_radial": {"type": "integer", "minimum": 0, "maximum": 2},
+            "name": {"type": "string", "maxLength": 100,
+                     "description": "a name for the calibration (default: projection, "
+                                    "frames, day)"},
             "fit_tilt": {"type": "boolean"},
             "site_id": {"type": "string"}, "latitude_deg": {"type": "number"},
             "longitude_deg": {"type": "number"}, "elevation_m": {"type": "number"},
@@ -325,7 +371,8 @@ _CAL_DOC = {
 
 
 @router.post("/calibrations", openapi_extra=_CAL_DOC, status_code=201,
-             responses={401: {}, 404: {}, 413: {}, 415: {}, 422: {}})
+             responses={400: {"description": "a malformed multipart body"},
+                        401: {}, 404: {}, 413: {}, 415: {}, 422: {}, **_BUSY_DOC})
 async def post_calibration(request: Request, ctx: ContextDep, _token: VisionTokenDep
                            ) -> Response:
     """Fit a fisheye camera (centre, scale, north offset, mirror) to timestamped frames."""
@@ -337,21 +384,24 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
     east = _text(form, "east") or "auto"
     if east not in ("auto", *EAST_SIDES):
         raise HTTPException(422, f"east: must be auto, left or right, got {east!r}")
-    tilt_text = (_text(form, "fit_tilt") or "false").lower()
-    if tilt_text not in ("1", "true", "yes", "on", "0", "false", "no", "off"):
-        raise HTTPException(422, f"fit_tilt: must be true or false, got {tilt_text!r}")
-    fit_tilt = tilt_text in ("1", "true", "yes", "on")
+    fit_tilt = form_flag(_text(form, "fit_tilt"), "fit_tilt")
     n_radial_text = _text(form, "n_radial") or "0"
     if n_radial_text not in ("0", "1", "2"):
         raise HTTPException(422, f"n_radial: must be 0, 1 or 2, got {n_radial_text!r}")
     method = _method(form)
+    name = _text(form, "name") or ""
+    if len(name) > 100:
+        raise HTTPException(422, f"name: at most 100 characters, got {len(name)}")
     frames, place = await _timed_frames(ctx, form, 3)
     try:
-        row = await anyio.to_thread.run_sync(
-            calibrate, frames, place, projection, east, int(n_radial_text), fit_tilt, method,
-            ctx.settings.vision_max_pixels)
+        async with _admitted(ctx, request, _token, [f[0] for f in frames]):
+            row = await anyio.to_thread.run_sync(
+                calibrate, frames, place, projection, east, int(n_radial_text), fit_tilt,
+                method, ctx.settings.vision_max_pixels)
     except ValueError as exc:
         raise HTTPException(422, f"files: {exc}") from None
+    row["name"] = name or (f"{projection}, {row['n_frames']} frames, "
+                           f"{frames[0][1].date().isoformat()}")
     cal_id = await asyncio.wrap_future(ctx.writer.call(lambda c: insert_calibration(c, row)))
     return _json({**calibration_answer(row), "calibration_id": cal_id}, 201)
 
@@ -373,12 +423,10 @@ def get_one_calibration(calibration_id: Annotated[int, Path(ge=1, le=_MAX_ID)],
     return _json(cal)
 
 
-@router.get("/detections", responses={404: {}, 422: {}})
-def get_detections(ctx: ContextDep, session: SessionDep,
-                   site_id: str | None = None, start: str | None = None,
-                   end: str | None = None,
-                   limit: Annotated[int, Query(gt=0, le=100_000)] = 10_000) -> Response:
-    """Stored detections in [start, end) (bare dates: the site's midnight, else UTC)."""
+def _detection_bounds(ctx: Any, site_id: str | None, start: str | None, end: str | None
+                      ) -> tuple[int | None, int | None]:
+    """[start, end) as Unix ms (bare dates: the site's midnight, else UTC's); 404 for an
+    unknown site, 422 naming a bad bound or an end not after the start."""
     zone = ZoneInfo("UTC")
     if site_id is not None:
         info = ctx.registry.get(site_id)
@@ -397,12 +445,23 @@ def get_detections(ctx: ContextDep, session: SessionDep,
         bounds.append(int(round(t.timestamp() * 1000)))
     if bounds[0] is not None and bounds[1] is not None and bounds[1] <= bounds[0]:
         raise HTTPException(422, f"end ({end}) must be after start ({start})")
-    rows = list_detections(session, site_id, bounds[0], bounds[1], limit)
+    return bounds[0], bounds[1]
+
+
+@router.get("/detections", responses={404: {}, 422: {}})
+def get_detections(ctx: ContextDep, session: SessionDep,
+                   site_id: str | None = None, start: str | None = None,
+                   end: str | None = None,
+                   limit: Annotated[int, Query(gt=0, le=100_000)] = 10_000) -> Response:
+    """Stored detections in [start, end) (bare dates: the site's midnight, else UTC)."""
+    lo, hi = _detection_bounds(ctx, site_id, start, end)
+    rows = list_detections(session, site_id, lo, hi, limit)
     return _json({"site_id": site_id, "start": start, "end": end, "detections": rows})
 
 
 @router.post("/evaluate", openapi_extra=_CAL_DOC,
-             responses={401: {}, 404: {}, 413: {}, 415: {}, 422: {}})
+             responses={400: {"description": "a malformed multipart body"},
+                        401: {}, 404: {}, 413: {}, 415: {}, 422: {}, **_BUSY_DOC})
 async def post_evaluate(request: Request, ctx: ContextDep, session: SessionDep,
                         _token: VisionTokenDep) -> Response:
     """Each method's angles against SPA on a batch: seed 003's Table 2 and Table 3."""
@@ -415,10 +474,59 @@ async def post_evaluate(request: Request, ctx: ContextDep, session: SessionDep,
     stored, _ = await anyio.to_thread.run_sync(_stored_camera, session, form)
     frames, place = await _timed_frames(ctx, form, 1)
     w, h = frames[0][0].size_px
-    cam = _camera(form, stored, w, h)
+    cam, _ = _camera(form, stored, w, h)
     if not isinstance(cam, FisheyeCamera):
         raise HTTPException(422, "camera: evaluate compares azimuth/elevation, which needs a "
                                  "fisheye camera")
-    out = await anyio.to_thread.run_sync(evaluate, frames, place, cam, methods,
-                                         ctx.settings.vision_max_pixels)
+    async with _admitted(ctx, request, _token, [f[0] for f in frames]):
+        out = await anyio.to_thread.run_sync(evaluate, frames, place, cam, methods,
+                                             ctx.settings.vision_max_pixels)
     return _json(out)
+
+
+async def _deleting_token(request: Request, ctx: Any, site_id: str | None) -> None:
+    """Deleting stored results changes what others see: a write token of the site, or of
+    any site for results of a free place (401/403 otherwise), whatever
+    ``vision_require_token`` says."""
+    if site_id is not None:
+        await check_site_token(ctx, site_id, request.headers.get("authorization"))
+        return
+    token = bearer_token(request)
+    if token is None or await token_site(request, token) is None:
+        raise HTTPException(401, "deleting needs a write token: send 'Authorization: Bearer "
+                                 "<token>'", headers={"WWW-Authenticate": "Bearer"})
+
+
+@router.delete("/calibrations/{calibration_id}", responses={401: {}, 403: {}, 404: {}})
+async def delete_one_calibration(calibration_id: Annotated[int, Path(ge=1, le=_MAX_ID)],
+                                 request: Request, ctx: ContextDep, session: SessionDep
+                                 ) -> Response:
+    """Delete a calibration and the detections made with it (a token of its site)."""
+    cal = await anyio.to_thread.run_sync(get_calibration, session, calibration_id)
+    if cal is None:
+        raise HTTPException(404, f"no calibration {calibration_id}")
+    await _deleting_token(request, ctx, cal["site_id"])
+    counts = await asyncio.wrap_future(
+        ctx.writer.call(lambda c: delete_calibration(c, calibration_id)))
+    if counts is None:
+        raise HTTPException(404, f"no calibration {calibration_id}")
+    return _json({"calibration_id": calibration_id, **counts})
+
+
+@router.delete("/detections", responses={401: {}, 403: {}, 404: {}, 422: {}})
+async def delete_some_detections(
+        request: Request, ctx: ContextDep, start: str, end: str,
+        site_id: str | None = None,
+        calibration_id: Annotated[int | None, Query(ge=1, le=_MAX_ID)] = None,
+        uncalibrated: bool = False) -> Response:
+    """Delete stored detections in [start, end) of a site (or of free places): all, or only
+    those of one ``calibration_id``, or only those made with typed parameters
+    (``uncalibrated=true``)."""
+    if calibration_id is not None and uncalibrated:
+        raise HTTPException(422, "give calibration_id or uncalibrated=true, not both")
+    lo_ms, hi_ms = _detection_bounds(ctx, site_id, start, end)
+    assert lo_ms is not None and hi_ms is not None
+    await _deleting_token(request, ctx, site_id)
+    n = await asyncio.wrap_future(ctx.writer.call(
+        lambda c: delete_detections(c, site_id, lo_ms, hi_ms, calibration_id, uncalibrated)))
+    return _json({"site_id": site_id, "start": start, "end": end, "detections_deleted": n})
