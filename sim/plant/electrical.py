@@ -19,31 +19,34 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.plant.layout import Collector
-from sim.plant.shading import PlantShade, union_area
+from sim.plant.shading import PlantShade, band_union_areas
 
 FloatArray = NDArray[np.float64]
 
 
-def _blocks_hit(rects: FloatArray, string: FloatArray, n_u: int, n_v: int) -> FloatArray:
-    """Blocks of one string (a regular n_u × n_v grid of cells) that some rectangle overlaps.
+def _block_index_rects(rects: FloatArray, collector: Collector) -> FloatArray:
+    """Shade rectangles in block-index units: u in [0, n_u), v in [0, strings × n_v).
 
-    Each rectangle covers an index rectangle of cells; the count of their union
-    is the union "area" of those index rectangles (exact on integers).
-    rects (G, K, 4) → count (G,).
+    Each rectangle covers an index rectangle of blocks (a block counts when the
+    shade overlaps it with positive area); the number of blocks of a string that
+    hold shade is the union "area" of those index rectangles inside the string's
+    rows (exact on integers). rects (..., 4) → (..., 4).
     """
-    u0, u1, v0, v1 = string
-    cu, cv = (u1 - u0) / n_u, (v1 - v0) / n_v
-    ru0 = np.clip(rects[..., 0], u0, u1)
-    ru1 = np.clip(rects[..., 1], u0, u1)
-    rv0 = np.clip(rects[..., 2], v0, v1)
-    rv1 = np.clip(rects[..., 3], v0, v1)
-    live = (ru1 - ru0 > 1e-12) & (rv1 - rv0 > 1e-12)
-    iu0 = np.floor((ru0 - u0) / cu + 1e-9)
-    iu1 = np.ceil((ru1 - u0) / cu - 1e-9)
-    iv0 = np.floor((rv0 - v0) / cv + 1e-9)
-    iv1 = np.ceil((rv1 - v0) / cv - 1e-9)
-    idx = np.stack([iu0, np.where(live, iu1, iu0), iv0, np.where(live, iv1, iv0)], axis=-1)
-    return union_area(idx)
+    n_u, n_v = collector.block_grid()
+    n_rows = n_v * collector.modules_high
+    u_min, v_min = -collector.width / 2, -collector.height / 2
+    cu, cv = collector.width / n_u, collector.height / n_rows
+    u0, u1, v0, v1 = (np.ascontiguousarray(rects[..., c]) for c in range(4))
+    live = (u1 - u0 > 1e-12) & (v1 - v0 > 1e-12)
+    out = np.empty(rects.shape)
+    out[..., 0] = np.floor((u0 - u_min) / cu + 1e-9)
+    out[..., 1] = np.where(live, np.ceil((u1 - u_min) / cu - 1e-9), out[..., 0])
+    out[..., 2] = np.floor((v0 - v_min) / cv + 1e-9)
+    out[..., 3] = np.where(live, np.ceil((v1 - v_min) / cv - 1e-9), out[..., 2])
+    np.maximum(out, 0.0, out=out)
+    out[..., :2] = np.minimum(out[..., :2], n_u)
+    out[..., 2:] = np.minimum(out[..., 2:], n_rows)
+    return out
 
 
 def beam_factors(shade: PlantShade, collector: Collector) -> tuple[FloatArray, FloatArray]:
@@ -69,17 +72,16 @@ def beam_factors(shade: PlantShade, collector: Collector) -> tuple[FloatArray, F
     electrical = area.copy()
     if not len(shade.group_step):
         return area, electrical
-    strings = collector.strings()
+    strings = collector.strings()                     # horizontal bands, bottom to top
     n_u, n_v = collector.block_grid()
+    edges = np.append(strings[:, 2], strings[-1, 3])
     string_area = (strings[:, 1] - strings[:, 0]) * (strings[:, 3] - strings[:, 2])
-    factor = np.zeros(len(shade.group_step))
-    for s in range(len(strings)):
-        f_s = union_area(shade.group_rects, clip=strings[s]) / string_area[s]
-        n_sb = np.zeros(len(factor))
-        for g0 in range(0, len(factor), 20_000):  # bounded memory: (20000, K, n_u, n_v)
-            n_sb[g0:g0 + 20_000] = _blocks_hit(shade.group_rects[g0:g0 + 20_000], strings[s],
-                                               n_u, n_v)
-        loss = direct_martinez(1.0, 1.0, np.minimum(f_s, 1.0), n_sb, float(n_u * n_v))
-        factor += (1.0 - np.asarray(loss, dtype=float)) / len(strings)
-    electrical[shade.group_step, shade.group_tracker] = factor
+    f_s = band_union_areas(shade.group_rects, edges) / string_area       # (G, S)
+    used = shade.group_by >= 0                        # the slots that hold a rectangle
+    index_rects = np.zeros(shade.group_rects.shape)
+    index_rects[used] = _block_index_rects(shade.group_rects[used], collector)
+    n_sb = band_union_areas(index_rects, n_v * np.arange(len(strings) + 1.0))
+    loss = direct_martinez(1.0, 1.0, np.minimum(f_s, 1.0), n_sb, float(n_u * n_v))
+    electrical[shade.group_step, shade.group_tracker] = np.mean(
+        1.0 - np.asarray(loss, dtype=float), axis=1)
     return area, electrical

@@ -14,12 +14,17 @@ hits j. With d = p_j − p_i, λ = (d·n)/(s·n) and j's rectangle, projected al
 s onto i's plane, is i's rectangle shifted by the in-plane coordinates of
 P = d − λ s: (P·u, P·v). The shade is the intersection of two axis-aligned
 rectangles in (u, v); the shade of several neighbours is their union, whose area
-is computed exactly on the grid of the rectangles' edges.
+is computed exactly (inclusion–exclusion, or the grid of the rectangles' edges).
 
-A necessary condition that does not depend on the orientation prunes the
-neighbour pairs first: the shifted rectangle can only overlap when |P| is
-below the collector's diagonal, and |P| ≥ |d⊥|, the distance of d from the
-sun ray (P and d differ by a multiple of s).
+Which pairs to look at. |P| < a² + b² (the diagonal D) is needed for an
+overlap, and |P| ≥ |d⊥|, the distance of d from the sun ray, whatever the
+orientation. The sky is cut into bins of 1° in azimuth × 0.5° in elevation; a
+pair is a candidate in a bin when some sun direction inside it can have
+|d⊥| < D (the bin's centre with its angular radius as margin). For collectors
+facing the sun (n = s) the test is the exact one, |d·u| < a and |d·v| < b, with
+a margin of |d| times the bin's largest change of u and v. Only the candidates
+of each step's bin are computed exactly; the table is built for the bins the
+steps fall in.
 
 Times where the sun is below the horizon give NaN fractions. A collector whose
 front faces away from the sun (s·n ≤ 0) receives no beam and counts as unshaded.
@@ -37,9 +42,11 @@ from vision.sphere import enu_from_sky
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-_CHUNK = 20_000
 _EPS_AREA_M2 = 1e-9
-_IE_MAX = 4  # inclusion–exclusion up to this many rectangles, edge grid beyond
+_IE_MAX = 8  # inclusion–exclusion up to this many rectangles, edge grid beyond
+_BIN_AZ_DEG, _BIN_EL_DEG = 1.0, 0.5
+_FACING_COS = 1 - 1e-12  # n·s above this: the collectors face the sun
+_CHUNK = 2_000_000  # candidates computed at once (bounded memory)
 
 
 def collector_axes(azimuth: ArrayLike, elevation: ArrayLike) -> tuple[FloatArray, ...]:
@@ -67,13 +74,106 @@ def collector_axes(azimuth: ArrayLike, elevation: ArrayLike) -> tuple[FloatArray
     return n, u, v
 
 
+def pair_vectors(positions: ArrayLike) -> tuple[IntArray, IntArray, FloatArray]:
+    """Unordered pairs i < j of a layout and their offsets d = p_j − p_i [m], shape (P, 3)."""
+    p = np.asarray(positions, dtype=float)
+    ii, jj = np.triu_indices(len(p), 1)
+    return ii.astype(np.int64), jj.astype(np.int64), p[jj] - p[ii]
+
+
+#: How a step's orientation is known to the bin test (:func:`pair_candidates`).
+GENERIC, FACING, FIXED = 0, 1, 2
+
+
+def _bin_table(d: FloatArray, az_c: FloatArray, el_c: FloatArray, mode: IntArray,
+               width: float, height: float, normal: FloatArray | None) -> NDArray[np.bool_]:
+    """Candidate pairs ``(B, P)`` of sun bins centred on (az_c, el_c) [°] (module docstring).
+
+    ``mode`` per bin: any orientation (|d⊥| < D); facing the sun (|d·u| < a,
+    |d·v| < b, u and v move by at most 2 h_a + h_e in the bin); or the constant
+    orientation ``normal`` = (n, u, v): (du, dv) at the bin's centre, which move
+    by at most |d·n|·ρ/(s·n)²_min (the gradient of (s·u)/(s·n) is ≤ 1/(s·n)²).
+    """
+    h_a, h_e = np.radians(_BIN_AZ_DEG / 2), np.radians(_BIN_EL_DEG / 2)
+    rho = h_a + h_e                   # angular radius of a bin (parallel, then meridian)
+    length = np.sqrt(np.einsum("pk,pk->p", d, d))
+    s_c = enu_from_sky(az_c, el_c)
+    cos_line = np.clip(np.abs(s_c @ d.T) / length, 0.0, 1.0)            # (B, P)
+    theta = np.maximum(np.arccos(cos_line) - rho, 0.0)
+    ok = length * np.sin(np.minimum(theta, np.pi / 2)) < np.hypot(width, height)
+    f = np.nonzero(mode == FACING)[0]
+    if len(f):
+        _, u, v = collector_axes(az_c[f], el_c[f])
+        slack = 1.5e-6  # n within arccos(_FACING_COS) of s
+        near_u = np.abs(u @ d.T) < width + length * (h_a + slack)
+        near_v = np.abs(v @ d.T) < height + length * (2 * h_a + h_e + 2 * slack)
+        ok[f] &= near_u & near_v
+    f = np.nonzero(mode == FIXED)[0]
+    if len(f) and normal is not None:
+        n, u, v = normal
+        sn = s_c[f] @ n
+        lower = sn - rho
+        bounded = lower > 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ru, rv = (s_c[f] @ u) / sn, (s_c[f] @ v) / sn
+            margin = np.abs(d @ n)[None, :] * (rho / lower**2)[:, None]
+        du = (d @ u)[None, :] - ru[:, None] * (d @ n)[None, :]
+        dv = (d @ v)[None, :] - rv[:, None] * (d @ n)[None, :]
+        near = (np.abs(du) < width + margin) & (np.abs(dv) < height + margin)
+        ok[f] &= near | ~bounded[:, None]
+        ok[f[sn + rho <= 0]] = False     # the sun behind the collectors in the whole bin
+    return ok
+
+
+def pair_candidates(d: FloatArray, sun: FloatArray, mode: IntArray, width: float,
+                height: float, normal: FloatArray | None = None
+                ) -> tuple[IntArray, IntArray]:
+    """(step, unordered pair) that may shade, from the table of the steps' sun bins.
+
+    ``d`` from :func:`pair_vectors`; ``sun`` (T, 3) unit vectors; ``mode`` (T,)
+    GENERIC (any orientation), FACING (collectors on the sun) or FIXED (the
+    constant orientation ``normal`` = stacked n, u, v). Returns (step, pair index).
+
+    Steps with the sun above the layout's bound are dropped first: no pair can
+    overlap when |d|·sin(elevation − steepest pair slope) ≥ D, and facing the
+    sun |dv| ≥ sin(elevation − slope)·√(|d|² − a²) must stay below b.
+    """
+    n_az = int(round(360 / _BIN_AZ_DEG))
+    d2 = np.einsum("pk,pk->p", d, d)
+    slope = float(np.max(np.abs(np.arcsin(np.clip(d[:, 2] / np.sqrt(d2), -1, 1)))))
+    d_min = float(np.sqrt(d2.min()))
+    ratio = np.hypot(width, height) / d_min
+    el_max = np.arcsin(ratio) + slope if ratio < 1 else np.pi
+    el_facing = (np.arcsin(min(1.0, height / np.sqrt(d_min**2 - width**2))) + slope
+                 if d_min > width else np.pi)
+    el_rad = np.arcsin(np.clip(sun[:, 2], -1, 1))
+    low = np.nonzero(el_rad < np.where(mode == FACING, min(el_facing, el_max), el_max))[0]
+    sun, mode = sun[low], mode[low]
+    az = np.degrees(np.arctan2(sun[:, 0], sun[:, 1])) % 360.0
+    el = np.degrees(el_rad[low])
+    ka = np.minimum((az / _BIN_AZ_DEG).astype(np.int64), n_az - 1)
+    ke = np.floor((el + 90.0) / _BIN_EL_DEG).astype(np.int64)
+    key = (ke * n_az + ka) * 3 + mode
+    ukey, inv = np.unique(key, return_inverse=True)
+    ub = ukey // 3
+    table = _bin_table(d, ((ub % n_az) + 0.5) * _BIN_AZ_DEG,
+                       ((ub // n_az) + 0.5) * _BIN_EL_DEG - 90.0, ukey % 3, width, height,
+                       normal)
+    b_of, q_of = np.nonzero(table)                                        # sorted by bin
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(b_of, minlength=len(ukey)))])
+    count = (ptr[1:] - ptr[:-1])[inv]
+    steps = np.repeat(low.astype(np.int64), count)
+    first = np.repeat(ptr[:-1][inv] - np.cumsum(count) + count, count)
+    return steps, q_of[first + np.arange(len(steps), dtype=np.int64)].astype(np.int64)
+
+
 def candidate_pairs(positions: ArrayLike, sun_enu: ArrayLike,
                     diagonal: float) -> tuple[IntArray, IntArray, IntArray]:
     """Pairs (step, i, j) where collector j may shade collector i, whatever the orientation.
 
-    Keeps the pairs with |d⊥| < diagonal (d = p_j − p_i, d⊥ its part
-    perpendicular to the sun vector) and d·s > −diagonal (j not behind i as
-    seen from the sun); every other pair is certainly unshaded (module docstring).
+    Keeps the pairs whose sun bin allows |d⊥| < diagonal (d = p_j − p_i, d⊥ its
+    part perpendicular to the sun vector; module docstring) and d·s > −diagonal
+    (j not behind i as seen from the sun); every other pair is certainly unshaded.
 
     Parameters
     ----------
@@ -89,41 +189,18 @@ def candidate_pairs(positions: ArrayLike, sun_enu: ArrayLike,
     step, i, j : numpy.ndarray of int
         Indices of the candidate pairs, sorted by step then i.
     """
-    p = np.asarray(positions, dtype=float)
     s = np.asarray(sun_enu, dtype=float).reshape(-1, 3)
-    n = len(p)
-    ii, jj = np.triu_indices(n, 1)
-    d = p[jj] - p[ii]                                   # (P, 3), i < j
-    d2 = np.einsum("pk,pk->p", d, d)
-    thr = d2 - diagonal**2
+    ii, jj, d = pair_vectors(positions)
     empty = np.zeros(0, dtype=np.int64)
-    if not len(d):
+    if not len(d) or not len(s):
         return empty, empty, empty
-    # |d⊥| ≥ |d| sin(angle(d, s)) ≥ |d| sin(elevation − steepest offset): skip high suns
-    slope = float(np.max(np.abs(np.arcsin(np.clip(d[:, 2] / np.sqrt(d2), -1, 1)))))
-    ratio = diagonal / float(np.sqrt(d2.min()))
-    el_max = np.arcsin(min(1.0, ratio)) + slope if ratio < 1 else np.pi
-    steps = np.nonzero(np.arcsin(np.clip(s[:, 2], -1, 1)) < el_max)[0]
-    out_t, out_i, out_j = [], [], []
-    for k0 in range(0, len(steps), _CHUNK):
-        st = steps[k0:k0 + _CHUNK]
-        ds = s[st] @ d.T                                # (T, P)
-        near = (ds * ds > thr) | (thr < 0)              # |d⊥| < diagonal, both directions
-        fwd = near & (ds > -diagonal)                   # j may shade i
-        bwd = near & (ds < diagonal)                    # i may shade j
-        t, q = np.nonzero(fwd)
-        out_t.append(st[t])
-        out_i.append(ii[q])
-        out_j.append(jj[q])
-        t, q = np.nonzero(bwd)
-        out_t.append(st[t])
-        out_i.append(jj[q])
-        out_j.append(ii[q])
-    if not out_t:
-        return empty, empty, empty
-    t_all = np.concatenate(out_t).astype(np.int64)
-    i_all = np.concatenate(out_i).astype(np.int64)
-    j_all = np.concatenate(out_j).astype(np.int64)
+    # the bin test with a square collector of the same diagonal is the |d⊥| test alone
+    t, q = pair_candidates(d, s, np.full(len(s), GENERIC), diagonal, 0.0)
+    ds = np.einsum("mk,mk->m", s[t], d[q])
+    fwd, bwd = ds > -diagonal, ds < diagonal
+    t_all = np.concatenate([t[fwd], t[bwd]])
+    i_all = np.concatenate([ii[q[fwd]], jj[q[bwd]]])
+    j_all = np.concatenate([jj[q[fwd]], ii[q[bwd]]])
     order = np.lexsort((j_all, i_all, t_all))
     return t_all[order], i_all[order], j_all[order]
 
@@ -131,60 +208,40 @@ def candidate_pairs(positions: ArrayLike, sun_enu: ArrayLike,
 def _direct_pairs(positions: FloatArray, sun: FloatArray, surface_az: FloatArray,
                   surface_el: FloatArray, width: float, height: float
                   ) -> tuple[IntArray, IntArray, IntArray, FloatArray]:
-    """Shading pairs and their rectangles for a common orientation, all pairs at once.
+    """Shading pairs and their rectangles for a common orientation per step.
 
-    With d = p_j − p_i: λ = (d·n)/(s·n) and (du, dv) = (d·u − λ s·u, d·v − λ s·v)
-    are linear in d, so three products (steps × 3)·(3 × pairs) give them for every
-    unordered pair; the reverse direction is (−du, −dv) with −λ, and the
-    direction with λ > 0 is the one that can shade. Only steps with the sun
-    below the layout's bound (see :func:`candidate_pairs`; tighter for collectors
-    facing the sun) are looked at.
+    With d = p_j − p_i: λ = (d·n)/(s·n) and (du, dv) = (d·u − λ s·u, d·v − λ s·v);
+    the reverse direction is (−du, −dv) with −λ, and the direction with λ > 0
+    is the one that can shade. Only each step's candidate pairs are computed.
     """
-    n_tr = len(positions)
-    ii, jj = np.triu_indices(n_tr, 1)
-    d64 = positions[jj] - positions[ii]
+    ii, jj, d = pair_vectors(positions)
     empty_i = np.zeros(0, dtype=np.int64)
-    if not len(d64):
+    if not len(d) or not len(sun):
         return empty_i, empty_i, empty_i, np.zeros((0, 4))
-    d2 = np.einsum("pk,pk->p", d64, d64)
-    slope = float(np.max(np.abs(np.arcsin(np.clip(d64[:, 2] / np.sqrt(d2), -1, 1)))))
-    ratio = np.hypot(width, height) / float(np.sqrt(d2.min()))
-    el_max = np.arcsin(ratio) + slope if ratio < 1 else np.pi
-    # facing the sun, |dv| = sin(elevation)·|d·ĥ| ≥ sin(elevation)·√(|d|² − a²): tighter
-    d_min = float(np.sqrt(d2.min()))
-    el_facing = (np.arcsin(min(1.0, height / np.sqrt(d_min**2 - width**2))) + slope
-                 if d_min > width else np.pi)
-    facing = np.einsum("tk,tk->t", sun, enu_from_sky(surface_az, surface_el)) > 1 - 1e-12
-    sun_el = np.arcsin(np.clip(sun[:, 2], -1, 1))
-    steps = np.nonzero(sun_el < np.where(facing, min(el_facing, el_max), el_max))[0]
-    d = d64.T.astype(np.float32)                                    # (3, P)
-    n, u, v = collector_axes(surface_az[steps], surface_el[steps])
-    s = sun[steps]
-    sn = np.einsum("tk,tk->t", s, n)
+    n, u, v = collector_axes(surface_az, surface_el)
+    sn = np.einsum("tk,tk->t", sun, n)
+    constant = bool(np.all(surface_az == surface_az[0]) and np.all(surface_el == surface_el[0]))
+    mode = np.where(sn > _FACING_COS, FACING, FIXED if constant else GENERIC)
+    t_c, q_c = pair_candidates(d, sun, mode, width, height,
+                           np.stack([n[0], u[0], v[0]]) if constant else None)
     with np.errstate(divide="ignore", invalid="ignore"):
-        ru = np.where(sn > 0, np.einsum("tk,tk->t", s, u) / sn, np.nan)
-        rv = np.where(sn > 0, np.einsum("tk,tk->t", s, v) / sn, np.nan)
+        ru = np.where(sn > 0, np.einsum("tk,tk->t", sun, u) / sn, np.nan)
+        rv = np.where(sn > 0, np.einsum("tk,tk->t", sun, v) / sn, np.nan)
     out: list[list[NDArray[np.generic]]] = [[], [], [], [], []]
-    for k0 in range(0, len(steps), _CHUNK):
-        sl = slice(k0, k0 + _CHUNK)
-        dn = n[sl].astype(np.float32) @ d                           # λ·(s·n)
-        du = u[sl].astype(np.float32) @ d - ru[sl, None].astype(np.float32) * dn
-        dv = v[sl].astype(np.float32) @ d - rv[sl, None].astype(np.float32) * dn
-        # float32 screen with a margin; the survivors are recomputed in float64
-        hit = (np.abs(du) < width + 1e-3) & (np.abs(dv) < height + 1e-3) & (dn != 0)
-        t, q = np.nonzero(hit)
-        tt = k0 + t
-        dq = d64[q]
-        lam_sign = np.einsum("mk,mk->m", dq, n[tt])
-        fwd = lam_sign > 0                    # j (at +d) is in front of i's plane: j shades i
-        dq = dq * np.where(fwd, 1.0, -1.0)[:, None]
-        lam = np.einsum("mk,mk->m", dq, n[tt]) / sn[tt]
-        proj = dq - lam[:, None] * s[tt]
-        out[0].append(steps[tt])
-        out[1].append(np.where(fwd, ii[q], jj[q]))
-        out[2].append(np.where(fwd, jj[q], ii[q]))
-        out[3].append(np.einsum("mk,mk->m", proj, u[tt]))
-        out[4].append(np.einsum("mk,mk->m", proj, v[tt]))
+    for m0 in range(0, len(t_c), _CHUNK):
+        t, q = t_c[m0:m0 + _CHUNK], q_c[m0:m0 + _CHUNK]
+        dq = d[q]
+        dn = np.einsum("mk,mk->m", dq, n[t])                       # λ·(s·n), sign picks i/j
+        du = np.einsum("mk,mk->m", dq, u[t]) - ru[t] * dn
+        dv = np.einsum("mk,mk->m", dq, v[t]) - rv[t] * dn
+        hit = (np.abs(du) < width) & (np.abs(dv) < height) & (dn != 0)
+        fwd = dn[hit] > 0                     # j (at +d) is in front of i's plane: j shades i
+        sign = np.where(fwd, 1.0, -1.0)
+        out[0].append(t[hit])
+        out[1].append(np.where(fwd, ii[q[hit]], jj[q[hit]]))
+        out[2].append(np.where(fwd, jj[q[hit]], ii[q[hit]]))
+        out[3].append(du[hit] * sign)
+        out[4].append(dv[hit] * sign)
     if not out[0]:
         return empty_i, empty_i, empty_i, np.zeros((0, 4))
     t_all, i_all, j_all, du_all, dv_all = (np.concatenate(x) for x in out)
@@ -193,9 +250,7 @@ def _direct_pairs(positions: FloatArray, sun: FloatArray, surface_az: FloatArray
                       np.maximum(-b2, dv_all - b2), np.minimum(b2, dv_all + b2)], axis=-1)
     keep = ((rects[:, 1] - rects[:, 0]) * (rects[:, 3] - rects[:, 2]) > _EPS_AREA_M2) \
         & (rects[:, 1] > rects[:, 0]) & (rects[:, 3] > rects[:, 2])
-    order = np.lexsort((j_all[keep], i_all[keep], t_all[keep]))
-    return (t_all[keep][order].astype(np.int64), i_all[keep][order].astype(np.int64),
-            j_all[keep][order].astype(np.int64), rects[keep][order])
+    return t_all[keep], i_all[keep], j_all[keep], rects[keep]
 
 
 def pair_shade_rects(positions: ArrayLike, sun_enu: ArrayLike, normal_az: ArrayLike,
@@ -266,47 +321,103 @@ def union_area(rects: ArrayLike, clip: ArrayLike | None = None) -> FloatArray:
         r[..., 1] = np.minimum(r[..., 1], c[..., 1])
         r[..., 2] = np.maximum(r[..., 2], c[..., 2])
         r[..., 3] = np.minimum(r[..., 3], c[..., 3])
+    return band_union_areas(r, np.array([-np.inf, np.inf]))[:, 0]
+
+
+def band_union_areas(rects: ArrayLike, v_edges: ArrayLike) -> FloatArray:
+    """Exact area of the union of rectangles inside each band v_edges[b] ≤ v < v_edges[b+1].
+
+    Parameters
+    ----------
+    rects : array_like, shape (G, K, 4)
+        (u0, u1, v0, v1); empty slots have u1 ≤ u0 or v1 ≤ v0.
+    v_edges : array_like, shape (B + 1,)
+        Increasing band edges (e.g. a collector's strings).
+
+    Returns
+    -------
+    numpy.ndarray, shape (G, B)
+
+        Inclusion–exclusion (subsets whose intersection is empty everywhere are not
+        followed) up to eight rectangles per group, the grid of their edges beyond.
+    """
+    r = np.asarray(rects, dtype=float)
+    edges = np.asarray(v_edges, dtype=float)
     valid = (r[..., 1] > r[..., 0]) & (r[..., 3] > r[..., 2])
     # bucket the groups by the slot of their last non-empty rectangle; empty rectangles
-    # before it add nothing to either union formula
+    # before it add nothing to any union formula
     last = np.where(valid.any(axis=1), r.shape[1] - np.argmax(valid[:, ::-1], axis=1), 0)
-    out = np.zeros(len(r))
+    out = np.zeros((len(r), len(edges) - 1))
     for k in np.unique(last):
         if k == 0:
             continue
         g = np.nonzero(last == k)[0]
-        sub = r[g, :k]
-        out[g] = (_union_inclusion_exclusion(sub) if k <= _IE_MAX
-                  else _union_grid(sub, valid[g, :k]))
+        out[g] = (_union_inclusion_exclusion(r[g, :k], edges) if k <= _IE_MAX
+                  else _union_grid(r[g, :k], valid[g, :k], edges))
     return out
 
 
-def _union_grid(r: FloatArray, valid: NDArray[np.bool_]) -> FloatArray:
-    """Union area of rectangles ``(G, K, 4)`` (``valid`` the non-empty ones) on their edge grid."""
-    xs = np.sort(r[..., :2].reshape(len(r), -1), axis=1)       # (G, 2K)
-    ys = np.sort(r[..., 2:].reshape(len(r), -1), axis=1)
-    cx = (xs[:, 1:] + xs[:, :-1]) / 2                           # (G, 2K−1)
+def _band_areas(u0: FloatArray, u1: FloatArray, v0: FloatArray, v1: FloatArray,
+                edges: FloatArray) -> FloatArray:
+    """Area of non-empty rectangles (G,) inside each band → ``(G, B)``."""
+    h = np.minimum(v1[:, None], edges[None, 1:]) - np.maximum(v0[:, None], edges[None, :-1])
+    return (u1 - u0)[:, None] * np.maximum(h, 0.0)
+
+
+def _union_inclusion_exclusion(r: FloatArray, edges: FloatArray) -> FloatArray:
+    """Union area per band of few rectangles per group: Σ over subsets (−1)^(|S|+1) |∩S|.
+
+    Depth-first over subsets; a branch is dropped for the groups where the
+    intersection so far is empty (every superset's is too).
+    """
+    g_all, k = r.shape[:2]
+    coords = np.ascontiguousarray(r.transpose(2, 1, 0))             # (4, K, G)
+    out = np.zeros((g_all, len(edges) - 1))
+
+    def follow(idx: IntArray, cur: tuple[FloatArray, ...], first: int, sign: float) -> None:
+        for m in range(first, k):
+            u0 = np.maximum(cur[0], coords[0, m, idx])
+            u1 = np.minimum(cur[1], coords[1, m, idx])
+            v0 = np.maximum(cur[2], coords[2, m, idx])
+            v1 = np.minimum(cur[3], coords[3, m, idx])
+            live = (u1 > u0) & (v1 > v0)
+            if not live.any():
+                continue
+            if live.all():
+                sub, nxt = idx, (u0, u1, v0, v1)
+            else:
+                sub, nxt = idx[live], (u0[live], u1[live], v0[live], v1[live])
+            out[sub] += sign * _band_areas(*nxt, edges)
+            if m + 1 < k:
+                follow(sub, nxt, m + 1, -sign)
+
+    inf = np.full(g_all, np.inf)
+    follow(np.arange(g_all), (-inf, inf, -inf, inf), 0, 1.0)
+    return out
+
+
+def _union_grid(r: FloatArray, valid: NDArray[np.bool_], edges: FloatArray) -> FloatArray:
+    """Union area per band of rectangles ``(G, K, 4)`` (``valid`` the non-empty ones) on their
+    edge grid (band edges added, so that no cell crosses one)."""
+    g = len(r)
+    inner = edges[np.isfinite(edges)]
+    xs = np.sort(r[..., :2].reshape(g, -1), axis=1)                  # (G, 2K)
+    ys = np.sort(np.concatenate([r[..., 2:].reshape(g, -1),
+                                 np.broadcast_to(inner, (g, len(inner)))], axis=1), axis=1)
+    cx = (xs[:, 1:] + xs[:, :-1]) / 2
     cy = (ys[:, 1:] + ys[:, :-1]) / 2
     dx = np.diff(xs, axis=1)
     dy = np.diff(ys, axis=1)
     inx = (cx[:, :, None] > r[:, None, :, 0]) & (cx[:, :, None] < r[:, None, :, 1]) \
-        & valid[:, None, :]                                     # (G, X, K)
+        & valid[:, None, :]                                         # (G, X, K)
     iny = (cy[:, :, None] > r[:, None, :, 2]) & (cy[:, :, None] < r[:, None, :, 3])
     covered = np.einsum("gxk,gyk->gxy", inx.astype(np.float64), iny.astype(np.float64)) > 0
-    return np.einsum("gxy,gx,gy->g", covered.astype(np.float64), dx, dy)
-
-
-def _union_inclusion_exclusion(r: FloatArray) -> FloatArray:
-    """Union area of few rectangles per group: Σ over subsets (−1)^(|S|+1) |∩S|."""
-    k = r.shape[1]
-    total = np.zeros(len(r))
-    for mask in range(1, 1 << k):
-        members = [m for m in range(k) if mask >> m & 1]
-        sub = r[:, members]
-        w = np.clip(sub[..., 1].min(axis=1) - sub[..., 0].max(axis=1), 0.0, None)
-        h = np.clip(sub[..., 3].min(axis=1) - sub[..., 2].max(axis=1), 0.0, None)
-        total += (1.0 if len(members) % 2 else -1.0) * w * h
-    return total
+    col = np.einsum("gxy,gx->gy", covered.astype(np.float64), dx) * dy   # (G, Y)
+    band = np.searchsorted(edges, cy, side="right") - 1                   # (G, Y)
+    out = np.zeros((g, len(edges) - 1))
+    for b in range(len(edges) - 1):
+        out[:, b] = np.where(band == b, col, 0.0).sum(axis=1)
+    return out
 
 
 @dataclass(frozen=True)
@@ -382,9 +493,8 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
     sun = enu_from_sky(az, el)
     upi = np.nonzero(up)[0]
     t, i, j, rects = _direct_pairs(p, sun[upi], saz[upi], sel[upi], width, height)
-    t = upi[t]
-    key = t * n + i
-    order = np.argsort(key, kind="stable")
+    key = upi[t] * n + i
+    order = np.argsort(key * n + j)
     key, j, rects = key[order], j[order], rects[order]
     gkey, start, count = np.unique(key, return_index=True, return_counts=True)
     kmax = int(count.max()) if len(count) else 1
@@ -394,10 +504,7 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
     gidx = np.repeat(np.arange(len(gkey)), count)
     g_rects[gidx, slot] = rects
     g_by[gidx, slot] = j
-    area = np.zeros(len(gkey))
-    for k in np.unique(count):
-        sel_g = count == k
-        area[sel_g] = union_area(g_rects[sel_g, :k])
+    area = band_union_areas(g_rects, np.array([-np.inf, np.inf]))[:, 0]
     g_step, g_tracker = gkey // n, gkey % n
     fraction[g_step, g_tracker] = np.minimum(area / (width * height), 1.0)
     return PlantShade(fraction, g_step.astype(np.int64), g_tracker.astype(np.int64),

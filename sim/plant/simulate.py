@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -33,7 +34,7 @@ from sim.sky import clearsky_ineichen, iam_physical, poa_irradiance
 from sim.sun import solar_position
 
 FloatArray = NDArray[np.float64]
-_CHUNK = 50_000
+_CHUNK = 100_000  # steps per chunk (bounded memory)
 _SAPM = {"a": -3.56, "b": -0.075, "deltaT": 3.0}
 #: Daily clearness index below which a day counts as cloudy [-].
 CLOUDY_KT = 0.4
@@ -159,6 +160,13 @@ def _power(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: Float
             "p_area": dc(g_area).sum(axis=1), "p_elec": dc(g_elec).sum(axis=1)}
 
 
+def _scatter(n: int, idx: NDArray[np.int64], x: FloatArray) -> FloatArray:
+    """x at ``idx`` of n zeros (night rows)."""
+    out = np.zeros(n)
+    out[idx] = x
+    return out
+
+
 def _enu(az: FloatArray, el: FloatArray) -> FloatArray:
     from vision.sphere import enu_from_sky
 
@@ -257,26 +265,31 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
         tt = times[k0:k0 + _CHUNK]
         sky = sky_conditions(plant, tt, weather)
         saz, sel = orientations(strategy, plant, sky)
-        run = _power(plant, sky, saz, sel)
-        fix_az = np.full(len(tt), plant.fixed_azimuth)
-        fix_el = np.full(len(tt), 90.0 - plant.fixed_tilt)
-        fixed = _power(plant, sky, fix_az, fix_el)
-        frac = run["shade"].fraction
         up = sky["apparent_elevation"] > 0
-        mean_f = np.where(up, np.nanmean(np.where(up[:, None], frac, 0.0), axis=1), np.nan)
-        n_sh = np.where(up, (np.nan_to_num(frac) > 0).sum(axis=1), 0)
-        any_shaded += int((n_sh[up] > 0).sum())
-        daylight += int(up.sum())
-        dni_f += float(np.sum(sky["dni"][up] * mean_f[up]))
-        dni_sum += float(np.sum(sky["dni"][up]))
+        day = np.nonzero(up)[0]              # shade and power are computed by day only
+        dsky = {k: v[day] for k, v in sky.items()}
+        run = _power(plant, dsky, saz[day], sel[day])
+        fixed = _power(plant, dsky, np.full(len(day), plant.fixed_azimuth),
+                       np.full(len(day), 90.0 - plant.fixed_tilt))
+        frac = run["shade"].fraction
+        mean_f = np.full(len(tt), np.nan)
+        mean_f[day] = frac.mean(axis=1)
+        n_sh = np.zeros(len(tt), dtype=np.int64)
+        n_sh[day] = (frac > 0).sum(axis=1)
+        any_shaded += int((n_sh > 0).sum())
+        daylight += len(day)
+        dni_f += float(np.sum(sky["dni"][day] * mean_f[day]))
+        dni_sum += float(np.sum(sky["dni"][day]))
+        at_day = partial(_scatter, len(tt), day)
         frames.append(pd.DataFrame({
             "solar_azimuth": sky["solar_azimuth"], "apparent_elevation": sky["apparent_elevation"],
             "dni": sky["dni"], "ghi": sky["ghi"],
             "ghi_extra": np.maximum(sky["dni_extra"] * np.cos(np.radians(sky["zenith"])), 0.0),
-            "surface_azimuth": saz, "surface_elevation": sel, "poa_global": run["poa_global"],
+            "surface_azimuth": saz, "surface_elevation": sel,
+            "poa_global": at_day(run["poa_global"]),
             "mean_shaded_fraction": mean_f, "trackers_shaded": n_sh,
-            "power_w": run["p_elec"], "power_area_w": run["p_area"],
-            "power_unshaded_w": run["p_unshaded"], "fixed_power_w": fixed["p_elec"],
+            "power_w": at_day(run["p_elec"]), "power_area_w": at_day(run["p_area"]),
+            "power_unshaded_w": at_day(run["p_unshaded"]), "fixed_power_w": at_day(fixed["p_elec"]),
         }, index=tt))
         if progress is not None:
             progress(min(1.0, (k0 + len(tt)) / len(times)))

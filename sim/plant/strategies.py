@@ -8,10 +8,11 @@ the common orientation (azimuth and elevation of the collector normal) that seed
 - ``backtrack`` — where pointing at the sun shades a collector, search the
   orientations that shade nobody (seed 004's Boolean, :mod:`sim.plant.shading`)
   for the one of maximum plane-of-array irradiance, not merely the closest to
-  the sun: for normal azimuths within ±45° of the sun's (5° steps) the lowest
-  shade-free elevation is found by bisection (0.02°), and the flat orientation
-  is added; the candidate of highest POA wins. Where the sun orientation shades
-  nobody, it is kept.
+  the sun: for normal azimuths within ±45° of the sun's (3° steps, then 0.5°
+  about the best) the lowest shade-free elevation at or above the sun's comes
+  in closed form (:func:`lowest_free_elevation`: each pair shades on one
+  interval of elevations), and the flat orientation is added; the candidate of
+  highest POA wins. Where the sun orientation shades nobody, it is kept.
 - ``sky_scan`` — seed 004's device (§2, Fig. 6): a scan of a hemispheric grid of
   orientations (5° in elevation, 10° in azimuth, plus the zenith, the sun and the
   backtracking candidates) with the shaded region excluded; the orientation of
@@ -28,7 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sim.plant.layout import Plant
-from sim.plant.shading import candidate_pairs, collector_axes
+from sim.plant.shading import GENERIC, IntArray, collector_axes, pair_candidates, pair_vectors
 from sim.sky import poa_irradiance
 from vision.sphere import enu_from_sky
 
@@ -38,10 +39,9 @@ STOW_AZIMUTH, STOW_ELEVATION = 180.0, 90.0
 
 _BT_AZ_OFFSETS = np.arange(-45.0, 45.1, 3.0)
 _BT_REFINE = np.arange(-2.5, 2.6, 0.5)
-_BT_ITER = 12
 _SCAN_EL = np.arange(0.0, 86.0, 5.0)
 _SCAN_AZ = np.arange(0.0, 360.0, 10.0)
-_PAIR_CHUNK = 4000
+_CAND_BLOCK = 1_000_000  # (pair, candidate) rows computed at once
 
 
 def scan_grid() -> tuple[FloatArray, FloatArray]:
@@ -77,24 +77,121 @@ def shade_free(plant: Plant, solar_azimuth: ArrayLike, solar_elevation: ArrayLik
         return ok
     sun = enu_from_sky(az, el)
     c = plant.collector
-    t, i, j = candidate_pairs(plant.positions, sun[up], c.diagonal)
+    _, _, d = pair_vectors(plant.positions)
+    t, q = pair_candidates(d, sun[up], np.full(len(up), GENERIC), c.width, c.height)
     t = up[t]
-    d_all = plant.positions[j] - plant.positions[i]
-    a_eps, b_eps = c.width - 1e-9, c.height - 1e-9
-    for m0 in range(0, len(t), _PAIR_CHUNK):
-        tm = t[m0:m0 + _PAIR_CHUNK]
-        d = d_all[m0:m0 + _PAIR_CHUNK][:, None, :]
-        n, u, v = collector_axes(caz[tm], cel[tm])                  # (M, C, 3)
+    steps, t_local = np.unique(t, return_inverse=True)
+    axes = collector_axes(caz[steps], cel[steps])                   # (S, C, 3) each, once
+    rows = max(1, _CAND_BLOCK // caz.shape[1])
+    for m0 in range(0, len(t), rows):
+        tm, dm = t[m0:m0 + rows], d[q[m0:m0 + rows]][:, None, :]
+        n, u, v = (x[t_local[m0:m0 + rows]] for x in axes)         # (M, C, 3)
         s = sun[tm][:, None, :]
         sn = np.sum(s * n, axis=-1)
+        dn = np.sum(dm * n, axis=-1)
         with np.errstate(divide="ignore", invalid="ignore"):
-            lam = np.sum(d * n, axis=-1) / sn
-        proj = d - lam[..., None] * s
-        shade = (sn > 0) & (lam > 0) & (np.abs(np.sum(proj * u, axis=-1)) < a_eps) \
-            & (np.abs(np.sum(proj * v, axis=-1)) < b_eps)
-        rows, cols = np.nonzero(shade)
-        ok[tm[rows], cols] = False
+            du = np.sum(dm * u, axis=-1) - np.sum(s * u, axis=-1) / sn * dn
+            dv = np.sum(dm * v, axis=-1) - np.sum(s * v, axis=-1) / sn * dn
+        # either direction of the pair: i shaded by j (dn > 0) or j by i (dn < 0)
+        shade = (sn > 0) & (dn != 0) & (np.abs(du) < c.width - 1e-9) \
+            & (np.abs(dv) < c.height - 1e-9)
+        r, k = np.nonzero(shade)
+        ok[tm[r], k] = False
     return ok
+
+
+def lowest_free_elevation(plant: Plant, solar_azimuth: ArrayLike, solar_elevation: ArrayLike,
+                          cand_azimuth: ArrayLike, from_elevation: ArrayLike) -> FloatArray:
+    """Lowest normal elevation ≥ ``from_elevation`` that shades nobody, per candidate azimuth.
+
+    Closed form (seed 004 §2.1 geometry, collectors parallel). With n(α) = cos α h
+    + sin α z for the normal azimuth γ (h horizontal towards γ), u = z × h and
+    v = u × n = sin α h − cos α z, and m = d × s for a pair offset d, the shade
+    offsets of :mod:`sim.plant.shading` times s·n are du (s·n) = m·v and
+    dv (s·n) = −m·u. A pair shades exactly where
+
+        |m·u| < b (s·n)   and   |m·v(α)| < a (s·n),
+
+    three conditions p cos α + q sin α = R cos(α − φ) > c ≥ 0 on α, each an arc
+    |α − φ| < arccos(c/R) ≤ 90° (φ = atan2(q, p) ∈ (−180°, 180°], so shifts by
+    ±360° cannot reach [0°, 90°]); their intersection with [0°, 90°] is one open
+    interval per pair. Walking up from
+    ``from_elevation`` over the intervals that contain the current elevation
+    gives the lowest shade-free one; flat (90°) shades nobody on level ground.
+
+    Parameters
+    ----------
+    plant : Plant
+    solar_azimuth, solar_elevation : array_like, shape (T,)
+        Sun direction [°].
+    cand_azimuth : array_like, shape (T, C)
+        Normal azimuths [°].
+    from_elevation : array_like, shape (T,)
+        Start of the search [°] (the sun's elevation for backtracking).
+
+    Returns
+    -------
+    numpy.ndarray, shape (T, C)
+        [°].
+    """
+    az = np.atleast_1d(np.asarray(solar_azimuth, dtype=float))
+    el = np.atleast_1d(np.asarray(solar_elevation, dtype=float))
+    caz = np.asarray(cand_azimuth, dtype=float).reshape(len(az), -1)
+    n_c = caz.shape[1]
+    alpha = np.repeat(np.radians(np.clip(np.asarray(from_elevation, dtype=float), 0, 90))
+                      .reshape(-1, 1), n_c, axis=1).ravel()
+    up = np.nonzero(el > 0)[0]
+    if not len(up):
+        return np.degrees(alpha).reshape(len(az), n_c)
+    sun = enu_from_sky(az, el)
+    col = plant.collector
+    _, _, d = pair_vectors(plant.positions)
+    t, q = pair_candidates(d, sun[up], np.full(len(up), GENERIC), col.width, col.height)
+    t = up[t]
+    m = np.cross(d[q], sun[t])                                         # (M, 3)
+    g = np.radians(caz)
+    sg, cg = np.sin(g), np.cos(g)                                      # (T, C)
+    sh = sun[:, 0, None] * sg + sun[:, 1, None] * cg                   # s·h
+    sz = np.broadcast_to(sun[:, 2, None], sh.shape)
+    r_b, phi_b = np.hypot(sh, sz), np.arctan2(sz, sh)                  # s·n = r_b cos(α − φ_b)
+    a_m, b_m = col.width, col.height
+    start = alpha.reshape(-1, n_c)
+    rows = max(1, _CAND_BLOCK // n_c)
+    edges = np.unique(np.append(np.searchsorted(t, t[::rows]), len(t)))  # whole steps
+    for m0, m1 in zip(edges[:-1], edges[1:], strict=True):
+        tm, mm = t[m0:m1], m[m0:m1]
+        me, mn, mz = mm[:, 0, None], mm[:, 1, None], mm[:, 2, None]
+        sgt, cgt, sht, szt = sg[tm], cg[tm], sh[tm], sz[tm]
+        mu = np.abs(mn * sgt - me * cgt)                               # |m·u|, u = z × h
+        mh = me * sgt + mn * cgt                                       # m·h
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w = np.arccos(np.minimum(mu / (b_m * r_b[tm]), 1.0))       # |m·u| < b s·n
+        lo = np.maximum(phi_b[tm] - w, 0.0)
+        hi = np.where(w > 0, np.minimum(phi_b[tm] + w, np.pi / 2), 0.0)
+        for pp, qq in ((a_m * sht + mz, a_m * szt - mh), (a_m * sht - mz, a_m * szt + mh)):
+            phi = np.arctan2(qq, pp)                                   # |m·v| < a s·n, halves
+            lo = np.maximum(lo, phi - np.pi / 2)
+            hi = np.where((pp == 0) & (qq == 0), 0.0, np.minimum(hi, phi + np.pi / 2))
+        r, k = np.nonzero(hi > np.maximum(lo, start[tm]))
+        _walk_up(alpha, tm[r] * n_c + k, lo[r, k], hi[r, k])
+    return np.degrees(np.minimum(alpha, np.pi / 2)).reshape(len(az), n_c)
+
+
+def _walk_up(alpha: FloatArray, grp: IntArray, lo: FloatArray, hi: FloatArray) -> None:
+    """Move each ``alpha[grp]`` up past the open intervals (lo, hi) of its group.
+
+    Each round lifts alpha to the highest hi of the intervals that contain it;
+    intervals wholly below alpha can no longer matter and are dropped. It ends
+    when alpha is in no interval (at most one round per interval of a group).
+    """
+    while len(grp):
+        a = alpha[grp]
+        inside = (lo < a) & (a < hi)
+        if not inside.any():
+            return
+        np.maximum.at(alpha, grp[inside], hi[inside] + 1e-9)
+        keep = hi > alpha[grp]
+        grp, lo, hi = grp[keep], lo[keep], hi[keep]
 
 
 def _poa(plant: Plant, cand_az: FloatArray, cand_el: FloatArray, sky: dict[str, FloatArray],
@@ -109,35 +206,17 @@ def _poa(plant: Plant, cand_az: FloatArray, cand_el: FloatArray, sky: dict[str, 
     return out["poa_global"].reshape(shape)
 
 
-def _lowest_free(plant: Plant, sky: dict[str, FloatArray], steps: NDArray[np.int64],
-                 caz: FloatArray) -> FloatArray:
-    """Lowest shade-free normal elevation above the sun's for each candidate azimuth (bisection).
-
-    The upper end (flat, 90°) shades nobody on level ground; where the shade-free
-    set is not an interval, the bisection still ends on a shade-free elevation.
-    """
-    az0 = sky["solar_azimuth"][steps]
-    el0 = sky["apparent_elevation"][steps]
-    lo = np.repeat(el0[:, None], caz.shape[1], axis=1)
-    hi = np.full_like(lo, 90.0)
-    for _ in range(_BT_ITER):
-        mid = (lo + hi) / 2
-        free = shade_free(plant, az0, el0, caz, mid)
-        hi = np.where(free, mid, hi)
-        lo = np.where(free, lo, mid)
-    return hi
-
-
 def _backtrack_candidates(plant: Plant, sky: dict[str, FloatArray],
                           steps: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:
     """Shade-free candidates ``(S, C)``: the lowest shade-free elevation on a 3° azimuth fan
     (±45° about the sun), refined at 0.5° about the best of the fan, plus flat."""
     az0 = sky["solar_azimuth"][steps]
+    el0 = sky["apparent_elevation"][steps]
     caz = (az0[:, None] + _BT_AZ_OFFSETS[None, :]) % 360.0
-    hi = _lowest_free(plant, sky, steps, caz)
+    hi = lowest_free_elevation(plant, az0, el0, caz, el0)
     a, _ = _best(plant, caz, hi, sky, steps, check=False)
     raz = (a[:, None] + _BT_REFINE[None, :]) % 360.0
-    rel = _lowest_free(plant, sky, steps, raz)
+    rel = lowest_free_elevation(plant, az0, el0, raz, el0)
     caz = np.concatenate([caz, raz], axis=1)
     hi = np.concatenate([hi, rel], axis=1)
     caz = np.concatenate([caz, np.full((len(steps), 1), STOW_AZIMUTH)], axis=1)

@@ -75,3 +75,32 @@ def utc_from_true_solar_time(day: str, hours: float, longitude: float) -> pd.Tim
     d = pd.Timestamp(day, tz="UTC")
     eot_min = float(equation_of_time_spencer71(d.day_of_year))
     return d + pd.Timedelta(hours=hours - longitude / 15.0) - pd.Timedelta(minutes=eot_min)
+
+
+def shapely_shades_anyone(positions, sun_az, sun_el, normal_az, normal_el, width, height):
+    """Does a common orientation shade any collector? Shapely polygons, every ordered pair.
+
+    Each neighbour's four corners are projected along the sun ray onto a
+    collector's plane (only when in front of it) and intersected with that
+    collector's rectangle; a shade of more than 1e-9 m² counts.
+    """
+    import shapely
+
+    p = np.asarray(positions, dtype=float)
+    n, u, v = _axes(normal_az, normal_el)
+    s = np.array([np.cos(np.radians(sun_el)) * np.sin(np.radians(sun_az)),
+                  np.cos(np.radians(sun_el)) * np.cos(np.radians(sun_az)),
+                  np.sin(np.radians(sun_el))])
+    if s @ n <= 0:
+        return False
+    corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [width / 2, height / 2]
+    own = shapely.box(-width / 2, -height / 2, width / 2, height / 2)
+    ii, jj = np.nonzero(~np.eye(len(p), dtype=bool))
+    d = p[jj] - p[ii]                                           # centre of j seen from i
+    pts = d[:, None, :] + corners[None, :, 0, None] * u + corners[None, :, 1, None] * v
+    lam = -(pts @ n) / (s @ n)                                  # move along s onto i's plane
+    front = (d @ n) / (s @ n) > 0                               # j between i and the sun
+    proj = pts + lam[..., None] * s
+    poly = shapely.polygons(np.stack([proj @ u, proj @ v], axis=-1))
+    area = shapely.area(shapely.intersection(poly, own))
+    return bool(np.any(front & (area > 1e-9)))

@@ -7,7 +7,7 @@ import pytest
 from plant_reference import sampled_fractions, twoaxistracking_fractions, utc_from_true_solar_time
 
 from sim.plant.layout import load_plant
-from sim.plant.shading import plant_shade, shades_anyone, union_area
+from sim.plant.shading import band_union_areas, plant_shade, shades_anyone, union_area
 from sim.sun import solar_position
 
 PLANT = load_plant("penarroya")
@@ -83,3 +83,46 @@ def test_night_is_nan_and_flat_collectors_never_shade() -> None:
     assert (shade.fraction[1] == 0).all()
     with pytest.raises(ValueError, match="shape"):
         plant_shade(PLANT.positions[:, :2], [1.0], [1.0], [1.0], [1.0], W, H)
+
+
+def test_sun_bin_edges_equal_twoaxistracking() -> None:
+    """Suns on the corners of the candidate table's bins (1° × 0.5°): no pair is missed."""
+    rng = np.random.default_rng(12)
+    az = rng.integers(60, 300, 50) + rng.choice([-1e-7, 1e-7], 50)
+    el = rng.integers(2, 50, 50) * 0.5 + rng.choice([-1e-7, 1e-7], 50)
+    ours = plant_shade(PLANT.positions, az, el, az, el, W, H).fraction
+    ref = twoaxistracking_fractions(PLANT.positions, az, el, W, H)
+    assert (ref > 0).any(axis=1).mean() > 0.3, "the sample must hold shaded steps"
+    np.testing.assert_allclose(ours, ref, atol=1e-9)
+
+
+@pytest.mark.parametrize(("az", "el"), [(120.0, 4.0), (135.0, 9.0), (240.0, 6.0), (180.0, 13.0),
+                                        (105.0, 5.0)])
+def test_fixed_tilt_plant_matches_ray_sampling(az: float, el: float) -> None:
+    """The fixed comparison plant (one constant orientation: its own candidate bound)."""
+    n_az, n_el = PLANT.fixed_azimuth, 90.0 - PLANT.fixed_tilt
+    ours = plant_shade(PLANT.positions, [az], [el], [n_az], [n_el], W, H).fraction[0]
+    sampled = sampled_fractions(PLANT.positions, az, el, n_az, n_el, W, H)
+    np.testing.assert_allclose(ours, sampled, atol=2e-3)
+    assert (ours > 0).any() == (sampled > 0).any()
+
+
+@pytest.mark.parametrize("k", [3, 6, 11])
+def test_band_union_areas_equal_shapely(k: int) -> None:
+    """Inclusion–exclusion (≤ 8 rectangles) and the edge grid (more) against shapely's union."""
+    import shapely
+
+    rng = np.random.default_rng(k)
+    lo = rng.uniform(-3, 2, (40, k, 2))
+    size = rng.uniform(0.1, 3, (40, k, 2))
+    rects = np.stack([lo[..., 0], lo[..., 0] + size[..., 0], lo[..., 1],
+                      lo[..., 1] + size[..., 1]], axis=-1)
+    rects[::7, -1] = 0.0                                    # some empty slots
+    edges = np.array([-2.5, -1.0, 0.5, 4.0])
+    ours = band_union_areas(rects, edges)
+    for g in range(len(rects)):
+        boxes = [shapely.box(r[0], r[2], r[1], r[3]) for r in rects[g] if r[1] > r[0]]
+        union = shapely.union_all(boxes)
+        for b in range(3):
+            band = shapely.box(-10, edges[b], 10, edges[b + 1])
+            assert ours[g, b] == pytest.approx(shapely.area(union & band), abs=1e-9)

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from plant_reference import sampled_fractions, utc_from_true_solar_time
+from plant_reference import sampled_fractions, shapely_shades_anyone, utc_from_true_solar_time
 
 from sim.plant.layout import load_plant
 from sim.plant.shading import shades_anyone
 from sim.plant.simulate import sky_conditions
-from sim.plant.strategies import orientations
+from sim.plant.strategies import lowest_free_elevation, orientations
 
 PLANT = load_plant("penarroya")
 W, H = PLANT.collector.width, PLANT.collector.height
@@ -80,3 +80,19 @@ def test_sky_scan_is_at_least_backtracking() -> None:
 def test_unknown_strategy() -> None:
     with pytest.raises(ValueError, match="strategy must be one of sun, backtrack, sky_scan"):
         orientations("moon", PLANT, _sky_at("2021-06-21", 10.0))
+
+
+@pytest.mark.parametrize(("day", "tst_h"), [("2021-12-21", 8.4), ("2021-12-21", 15.4),
+                                             ("2021-01-20", 16.2)])
+def test_lowest_free_elevation_is_the_lowest_by_shapely(day: str, tst_h: float) -> None:
+    """The closed form against an independent shapely check of every ordered pair."""
+    sky = _sky_at(day, tst_h)
+    az0, el0 = float(sky["solar_azimuth"][0]), float(sky["apparent_elevation"][0])
+    fan = az0 + np.array([-40.0, -21.0, 0.0, 12.0, 33.0])
+    alpha = lowest_free_elevation(PLANT, [az0], [el0], fan[None, :], [el0])[0]
+    assert alpha[2] > el0 + 1, "pointing at the sun shades someone at these instants"
+    for g, a in zip(fan, alpha, strict=True):
+        assert not shapely_shades_anyone(PLANT.positions, az0, el0, g, a, W, H)
+        # every elevation between the sun's and the answer shades someone (0.25° grid)
+        for e in np.arange(el0, a - 1e-6, 0.25):
+            assert shapely_shades_anyone(PLANT.positions, az0, el0, g, e, W, H), (g, e)
