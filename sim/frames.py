@@ -25,6 +25,7 @@ import math
 from dataclasses import dataclass
 from functools import lru_cache
 from statistics import NormalDist
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -135,27 +136,36 @@ def pointing_error_deg(camera: PinholeCamera, x_px: float, y_px: float) -> tuple
     return h - h0, v - v0
 
 
+class _Optics(NamedTuple):
+    """What every frame of one camera, lens and sky reuses (cached by :func:`_optics`)."""
+
+    f: float  #: focal length [px]
+    cx: float  #: optical centre [px]
+    cy: float
+    w: int  #: frame size [px]
+    h: int
+    dirs: NDArray[np.float32]  #: unit viewing direction of every pixel, H × W × 3
+    vig: NDArray[np.float32]  #: vignetting factor, H × W
+    vl: NDArray[np.float32]  #: vignetting × the grey full scale [DN], H × W
+    svl: NDArray[np.float32]  #: the clear sky's grey level [DN], H × W
+
+
 @lru_cache(maxsize=8)
-def _pixel_grid(
-    camera: PinholeCamera, vignetting: float
-) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    """Unit viewing direction of every pixel (float32 H × W × 3: right, up, forward, from
-    :meth:`vision.cameras.PinholeCamera.pixel_to_direction`) and the vignetting factor."""
+def _optics(camera: PinholeCamera, vignetting: float, sky_level: float) -> _Optics:
+    """The pixel grid of ``camera``: viewing directions (float32 right, up, forward, from
+    :meth:`vision.cameras.PinholeCamera.pixel_to_direction`), the vignetting factor
+    ``1 − vignetting r²`` (as ``vision.synth``) and the grey scales; read-only."""
     h, w = camera.height_px, camera.width_px
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
     dirs = camera.pixel_to_direction(xx, yy).astype(np.float32)
     cx, cy = camera.centre_px
     r2 = ((xx - cx) ** 2 + (yy - cy) ** 2) / (cx**2 + cy**2)
-    return dirs, (1.0 - vignetting * r2).astype(np.float32)
-
-
-@lru_cache(maxsize=8)
-def _grey_scale(camera: PinholeCamera, vignetting: float,
-                sky_level: float) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    """Vignetting × grey full scale, and the clear sky's grey level per pixel [DN]."""
-    _, vig = _pixel_grid(camera, vignetting)
+    vig = (1.0 - vignetting * r2).astype(np.float32)
     vl = vig * _LUMA_255
-    return vl, (np.float32(sky_level) * vl).astype(np.float32)
+    svl = (np.float32(sky_level) * vl).astype(np.float32)
+    for a in (dirs, vig, vl, svl):
+        a.setflags(write=False)
+    return _Optics(camera.focal_px, cx, cy, w, h, dirs, vig, vl, svl)
 
 
 @dataclass(frozen=True)
@@ -167,6 +177,10 @@ class SunRoi:
     y0_px: int
     sun_px: tuple[float, float]
     sun_in_frame: bool
+
+
+_R2_SUN = math.radians(SUN_RADIUS_DEG) ** 2  #: the disc's angular radius squared [rad²]
+_R2_SUN_F32 = np.float32(_R2_SUN)
 
 
 def render_sun_roi(
@@ -213,53 +227,47 @@ def render_sun_roi(
     """
     if half_px < 4:
         raise ValueError(f"half_px must be >= 4, got {half_px}")
-    s = np.asarray(sun_camera, dtype=float)
-    f, cx, cy, _, _ = _pinhole(camera)
-    w, h = camera.width_px, camera.height_px
-    if not s[2] > 1e-12:  # behind the camera
+    s0, s1, s2 = float(sun_camera[0]), float(sun_camera[1]), float(sun_camera[2])
+    o = _optics(camera, vignetting, sky_level)
+    if not s2 > 1e-12:  # behind the camera
         return SunRoi(np.zeros((0, 0, 3), np.uint8), 0, 0, (math.nan, math.nan), False)
     # PinholeCamera.direction_to_pixel, in scalars
-    sxf, syf = cx + f * float(s[0]) / float(s[2]), cy - f * float(s[1]) / float(s[2])
-    if not (0 <= sxf <= w - 1 and 0 <= syf <= h - 1):
+    sxf, syf = o.cx + o.f * s0 / s2, o.cy - o.f * s1 / s2
+    if not (0 <= sxf <= o.w - 1 and 0 <= syf <= o.h - 1):
         return SunRoi(np.zeros((0, 0, 3), np.uint8), 0, 0, (sxf, syf), False)
-    x0 = max(0, int(round(sxf)) - half_px)
-    y0 = max(0, int(round(syf)) - half_px)
-    x1 = min(w, int(round(sxf)) + half_px)
-    y1 = min(h, int(round(syf)) + half_px)
-    dirs, vig = _pixel_grid(camera, vignetting)
-    sl = (slice(y0, y1), slice(x0, x1))
+    xc, yc = int(round(sxf)), int(round(syf))
+    x0, y0 = max(0, xc - half_px), max(0, yc - half_px)
+    x1, y1 = min(o.w, xc + half_px), min(o.h, yc + half_px)
     # squared angle to the sun from the chord, θ² = |d − s|² = 2 − 2 d·s [rad²], in one
     # affine cv2.transform (to < 1e-3 relative inside a 5° ROI; no float32 arccos near 1)
-    m = np.array([[-2.0 * s[0], -2.0 * s[1], -2.0 * s[2], 2.0]], np.float32)
-    theta2 = cv2.transform(dirs[sl], m)
+    m = np.array([[-2.0 * s0, -2.0 * s1, -2.0 * s2, 2.0]], np.float32)
+    theta2 = cv2.transform(o.dirs[y0:y1, x0:x1], m)
     # vision.synth._sun_radiance: aureole (glare/θ)², the disc's plateau inside SUN_RADIUS
-    r2 = math.radians(SUN_RADIUS_DEG) ** 2
-    lum = np.float32(math.radians(glare_deg) ** 2) / np.maximum(theta2, np.float32(r2))
+    lum = np.maximum(theta2, _R2_SUN_F32)
+    np.divide(np.float32(math.radians(glare_deg) ** 2), lum, out=lum)
     cloudy = clouds is not None and clouds.cover > 0
     if cloudy or (glare_deg / SUN_RADIUS_DEG) ** 2 * (1.0 - vignetting) < 2.0:
         # the disc's plateau shows only through cloud or at a short exposure: otherwise
         # the aureole already saturates the disc many times over
-        lum[theta2 <= r2] += np.float32((glare_deg / SUN_RADIUS_DEG) ** 2 * 4)
-    sky = np.float32(sky_level)
+        lum[theta2 <= _R2_SUN] += np.float32((glare_deg / SUN_RADIUS_DEG) ** 2 * 4)
     if clouds is not None and cloudy:
+        sky = np.float32(sky_level)
         xx, yy = np.meshgrid(np.arange(x0, x1, dtype=float), np.arange(y0, y1, dtype=float))
-        c = clouds.density(np.degrees((xx - sxf) / f), np.degrees(-(yy - syf) / f), t_s)
+        c = clouds.density(np.degrees((xx - sxf) / o.f), np.degrees(-(yy - syf) / o.f), t_s)
         c = c.astype(np.float32)
         lum *= np.exp(-np.float32(clouds.optical_depth) * c)
         lum += sky * (1.0 + 1.2 * c * min(1.0, clouds.optical_depth))
-        lum *= vig[sl]
+        lum *= o.vig[y0:y1, x0:x1]
         img = lum[..., None] * _TINT_255 if colour else lum * _LUMA_255
     elif colour:
-        lum += sky
-        lum *= vig[sl]
+        lum += np.float32(sky_level)
+        lum *= o.vig[y0:y1, x0:x1]
         img = lum[..., None] * _TINT_255
     else:
         # (sun + sky) · vignetting · grey scale, with the constant sky term precomputed
-        vl, svl = _grey_scale(camera, vignetting, sky_level)
-        lum *= vl[sl]
-        lum += svl[sl]
+        lum *= o.vl[y0:y1, x0:x1]
+        lum += o.svl[y0:y1, x0:x1]
         img = lum
-    img = np.asarray(img, dtype=np.float32)
     if noise_dn > 0:
         gen = rng if rng is not None else np.random.default_rng(0)
         bank = _noise_bank()

@@ -82,6 +82,24 @@ def test_clouds_dim_the_sun_and_drift() -> None:
     assert CloudField(cover=0.0).at_sun(5.0) == 0.0
 
 
+def test_cached_optics_keep_cameras_apart_and_cannot_be_written() -> None:
+    # the renderer caches each camera's pixel grid: interleaving two cameras (and a sky
+    # level) must give each the frame it gets alone, and no caller may alter the cache
+    from sim.frames import _optics
+
+    narrow, wide = PinholeCamera(), PinholeCamera(fov_deg=90.0, width_px=320, height_px=240)
+    s = narrow.pixel_to_direction(*narrow.pixel_from_pointing_error(0.4, -0.3))
+    alone = [render_sun_roi(s, cam, 16, sky_level=sky, noise_dn=0.0).image
+             for cam, sky in ((narrow, 0.35), (wide, 0.35), (narrow, 0.6))]
+    mixed = [render_sun_roi(s, cam, 16, sky_level=sky, noise_dn=0.0).image
+             for cam, sky in ((wide, 0.35), (narrow, 0.6), (narrow, 0.35))]
+    assert (alone[0] == mixed[2]).all() and (alone[1] == mixed[0]).all()
+    assert (alone[2] == mixed[1]).all() and not (alone[0] == alone[2]).all()
+    o = _optics(narrow, 0.3, 0.35)
+    with pytest.raises(ValueError):
+        o.dirs[0, 0, 0] = 0.0
+
+
 # ---------------------------------------------------------------- moves (vs sim.dynamics/motors)
 
 
