@@ -118,6 +118,9 @@ class _Sql:
             f"WHERE array_id = {ph} AND source = {ph} AND ts_s >= {ph} AND ts_s <= {ph} "
             "ORDER BY ts_s"
         )
+        self.drop_diagnosis = (  # backend/diagnosis/service.py caches per local day
+            "DELETE FROM diagnosis_days WHERE site_id = (SELECT site_id FROM arrays WHERE id = "
+            f"{ph}) AND day_end_s > {ph} AND day_start_s <= {ph}")
         self.insert = (  # PostgreSQL; SQLite: _values_insert
             "INSERT INTO measurements (array_id, source, ts_s, voltage_v, current_a, power_w) "
             "SELECT * FROM unnest(%s::int[], %s::smallint[], %s::bigint[], "
@@ -323,6 +326,9 @@ class Writer:
             counts = [self._sql.insert_job(cur, job) for job in jobs]
             for key, parts in touched.items():
                 self._update_rollups(cur, key, parts, around[key])
+                if key[1] == 0:  # measured readings: that day's cached diagnosis is stale
+                    cur.execute(self._sql.drop_diagnosis, (key[0], int(min(
+                        p[0].min() for p in parts)), int(max(p[0].max() for p in parts))))
             if self._sql.pg:
                 dbapi.commit()
             else:

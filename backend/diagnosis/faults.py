@@ -1,0 +1,283 @@
+"""Tracker fault signatures from one day of measured vs weather-aware expected power.
+
+Per day (:func:`day_features`), on the well-posed daylight minutes with a tracker reading,
+four explanations of the measured tracker power ``m(t)`` are fitted, each with its own
+best scale ``s`` (least squares, ``s = Σ m·x / Σ x²``):
+
+- ``healthy``: ``m ≈ s · e(t)``, ``e`` the weather-aware twin's tracker power;
+- ``stuck``: ``m ≈ P(tilt, azimuth)``, the array at one fixed orientation under the
+  same sky, no free scale (the same modules); grid 0…90° of tilt by 5°, azimuth by
+  10°, then refined by 1°;
+- ``azimuth_offset``: the normal at the sun's elevation but ``δ`` away in azimuth
+  (cos AOI = sin²h + cos²h cos δ, even in δ: the sign is not observable from power);
+- ``clock_offset``: ``m(t) ≈ s · e(t − τ)``, the logger's clock ``τ`` ahead (±180 min).
+
+The residual of each is its RMS over the mean measured power; a fault is named when
+its residual is under :data:`FIT_RATIO` of the healthy one on a day with clearness
+≥ :data:`MIN_CLEARNESS` (under an overcast sky every orientation sees the same
+diffuse light and no shape fault can be told). Across days (:func:`faults_over_days`)
+a step in the healthy scale is a ``module_loss`` (largest two-sample t over all split
+days), a steady decline of it ``soiling`` (least-squares slope, %/day; whichever of step
+and hinge — flat, then a line from the day the decline starts — fits the daily scales
+better), daylight minutes without a reading are ``dropout``. pvanalytics is not used
+(not installed); its ``quality.time.shifts_ruptures`` and ``features.orientation``
+would be the published alternatives for the time shift and the stuck test.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from sim import pv, sky
+from sim.sites import Site
+
+MIN_CLEARNESS = 0.55  # days clearer than this can show a shape fault [-]
+FIT_RATIO = 0.6  # a fault's residual under this × the healthy residual names it
+HEALTHY_RESIDUAL = 0.05  # healthy residuals stay under this (1 % noise + sky errors) [-]
+STEP_MIN_DROP = 0.08  # a module_loss is a drop of the daily scale by at least 8 %
+STEP_MIN_T = 6.0  # … with a two-sample t of at least this
+SOILING_MIN_DAYS = 7  # a decline needs a week of days to be told from noise
+SOILING_MIN_PCT_PER_DAY = 0.1  # slower declines are not named [% per day]
+SOILING_MIN_T = 3.0  # slope over its standard error (seeds 3–4: 3.4 and 5.2 at 0.5 %/day)
+SOILING_MIN_TOTAL = 0.02  # … and at least 2 % lost over the declining days
+DROPOUT_MIN = 30  # daylight minutes without a tracker reading that make a dropout day
+CARRY_DECAY = 0.8  # a shape fault's confidence on each following day that cannot show it
+CARRIED = " (carried over: today's sky cannot show it)"
+
+
+def _fit(m: np.ndarray, x: np.ndarray) -> tuple[float, float]:
+    """Best scale and the relative RMS residual of ``m ≈ s·x``."""
+    den = float(np.dot(x, x))
+    s = float(np.dot(m, x) / den) if den > 0 else 0.0
+    mean = float(np.mean(m)) if m.size else 0.0
+    r = float(np.sqrt(np.mean((m - s * x) ** 2)) / mean) if mean > 0 else np.inf
+    return s, r
+
+
+def _power_at(site: Site, day: pd.DataFrame, tilt: np.ndarray, surf_az: np.ndarray
+              ) -> np.ndarray:
+    """Tracker-array power [W] at orientations (tilt, azimuth) [°], shape (k, n), under
+    the day's sky."""
+    arr = site.arrays["tracker"]
+    zen = 90.0 - day["apparent_elevation"].to_numpy()
+    az = day["solar_azimuth"].to_numpy()
+    shape = tilt.shape
+    zen_b, az_b = np.broadcast_to(zen, shape), np.broadcast_to(az, shape)
+    aoi = sky.angle_of_incidence(tilt, surf_az, zen_b, az_b)
+    dni_extra = np.broadcast_to(sky.extra_radiation(day.index), shape)
+    dni, ghi, dhi = (np.broadcast_to(day[k].to_numpy(), shape) for k in ("dni", "ghi", "dhi"))
+    poa = sky.poa_irradiance(tilt, surf_az, zen_b, az_b, dni, ghi, dhi, dni_extra,
+                             albedo=arr.albedo, model="haydavies")
+    e_eff = sky.effective_irradiance(poa["poa_direct"], poa["poa_diffuse"], aoi)
+    t_cell = pv.cell_temperature(poa["poa_global"], site.temp_air, site.wind_speed,
+                                 arr.temperature_model)
+    return pv.array_mpp(e_eff, t_cell, arr)["power_w"].reshape(shape)
+
+
+def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray) -> dict[str, Any]:
+    """The fitted explanations of one day (see the module docstring), JSON-ready.
+
+    ``day``: the day's rows of :func:`sim.sky_sensor.weather_aware_twin`;
+    ``measured_w``: the tracker's readings on the same minutes [W], NaN = none.
+    """
+    use = day["valid"].to_numpy(bool) & np.isfinite(measured_w) & (
+        day["apparent_elevation"].to_numpy() > 5.0)
+    daylight = day["apparent_elevation"].to_numpy() > 5.0
+    out: dict[str, Any] = {"minutes": int(use.sum()),
+                           "missing_daylight_min": int((daylight & ~np.isfinite(measured_w)).sum())}
+    if use.sum() < 60:
+        return out
+    m = measured_w[use]
+    e = day["tracker_power_w"].to_numpy()
+    s0, r0 = _fit(m, e[use])
+    clear = float(np.nanmean(day["clearness"].to_numpy()[daylight])) if daylight.any() else 0.0
+    out.update(scale=s0, residual=r0, clearness=clear)
+    if clear < MIN_CLEARNESS or r0 < HEALTHY_RESIDUAL:
+        return out
+    # the orientation fits on every 3rd used minute: the shape of a day needs no more
+    thin = use & (np.arange(use.size) % 3 == 0)
+    sub = day[thin]
+    m_thin = measured_w[thin]
+    # stuck: coarse grid, then 1° around the best
+    best = (np.inf, 0.0, 0.0, 0.0)
+    for step, span in ((0.0, 0.0), (1.0, 6.0)):
+        if step == 0.0:
+            tilts, azs = np.arange(0.0, 91.0, 5.0), np.arange(0.0, 360.0, 10.0)
+        else:
+            tilts = np.clip(np.arange(best[1] - span, best[1] + span + 0.1, step), 0, 90)
+            azs = np.arange(best[2] - 2 * span, best[2] + 2 * span + 0.1, step) % 360.0
+        tt, aa = np.meshgrid(tilts, azs, indexing="ij")
+        p = _power_at(site, sub, tt.reshape(-1, 1) + 0 * m_thin, aa.reshape(-1, 1) + 0 * m_thin)
+        mean = float(np.mean(m_thin))
+        res = np.sqrt(np.mean((p - m_thin) ** 2, axis=1)) / mean  # same modules: no free scale
+        k = int(np.argmin(res))
+        if res[k] < best[0]:
+            best = (float(res[k]), float(tt.ravel()[k]), float(aa.ravel()[k]), 1.0)
+    out["stuck"] = {"residual": best[0], "tilt_deg": best[1], "azimuth_deg": best[2],
+                    "scale": best[3]}
+    # azimuth offset
+    el = sub["apparent_elevation"].to_numpy()
+    deltas = np.arange(1.0, 40.01, 0.5)
+    tilt_t = np.broadcast_to(90.0 - el, (deltas.size, el.size))
+    az_t = (sub["solar_azimuth"].to_numpy()[None, :] + deltas[:, None]) % 360.0
+    p = _power_at(site, sub, tilt_t, az_t)
+    fits = [_fit(m_thin, p[k]) for k in range(deltas.size)]
+    k = int(np.argmin([f[1] for f in fits]))
+    out["azimuth_offset"] = {"residual": fits[k][1], "offset_deg": float(deltas[k]),
+                             "scale": fits[k][0]}
+    # clock offset: shift the expected series (1-min grid), compare on the used minutes
+    best_t = (np.inf, 0, 0.0)
+    idx = np.flatnonzero(use)
+    for tau in range(-180, 181):
+        j = idx - tau
+        ok = (j >= 0) & (j < e.size)
+        if ok.sum() < 60:
+            continue
+        s, r = _fit(measured_w[idx[ok]], e[j[ok]])
+        if r < best_t[0]:
+            best_t = (r, tau, s)
+    out["clock_offset"] = {"residual": best_t[0], "offset_s": 60.0 * best_t[1],
+                           "scale": best_t[2]}
+    return out
+
+
+def _shape_fault(f: dict[str, Any]) -> tuple[str, float] | None:
+    """The day's shape fault and its confidence, or None."""
+    if "stuck" not in f:
+        return None
+    r0 = f["residual"]
+    kind = min(("stuck", "azimuth_offset", "clock_offset"), key=lambda k: f[k]["residual"])
+    ratio = f[kind]["residual"] / r0
+    if ratio > FIT_RATIO:
+        return None
+    return kind, float(np.clip(1.0 - ratio, 0.0, 1.0))
+
+
+def _magnitude(kind: str, f: dict[str, Any]) -> tuple[float, str, str]:
+    if kind == "stuck":
+        tilt, az = f["stuck"]["tilt_deg"], f["stuck"]["azimuth_deg"]
+        return 90.0 - tilt, "deg", f"stuck at azimuth {az:.0f}°, elevation {90 - tilt:.0f}°"
+    if kind == "azimuth_offset":
+        d = f["azimuth_offset"]["offset_deg"]
+        return d, "deg", f"pointing {d:.1f}° off in azimuth (sign not observable from power)"
+    s = f["clock_offset"]["offset_s"]
+    return s, "s", f"logger clock {s / 60:+.0f} min from the sun's time"
+
+
+def faults_over_days(days: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
+    """Faults of each day from the per-day features (``days[i]["features"]``, ``"date"``).
+
+    A shape fault's ``since`` is the first day of its run of days; days too cloudy to
+    tell do not break a run and carry the fault with its confidence × :data:`CARRY_DECAY`
+    per day; a ``module_loss`` holds from its step day on.
+    """
+    out: list[list[dict[str, Any]]] = [[] for _ in days]
+    run: dict[str, str] = {}
+    carried: dict[str, dict[str, Any]] = {}
+    for i, d in enumerate(days):
+        f = d["features"]
+        found = _shape_fault(f)
+        told = "stuck" in f or ("residual" in f and f["residual"] < HEALTHY_RESIDUAL)
+        if found is None:
+            if told:
+                run.clear()
+                carried.clear()
+            else:  # today's sky cannot show a shape fault: an open one is carried, fading
+                for kind, fault in list(carried.items()):
+                    fault = {**fault, "confidence": round(fault["confidence"] * CARRY_DECAY, 3)}
+                    if not fault["detail"].endswith(CARRIED):
+                        fault["detail"] += CARRIED
+                    carried[kind] = fault
+                    out[i].append(fault)
+        else:
+            kind, conf = found
+            since = run.setdefault(kind, d["date"])
+            for other in [k for k in run if k != kind]:
+                del run[other]
+            mag, unit, detail = _magnitude(kind, f)
+            fault = {"kind": kind, "confidence": round(conf, 3), "since": since,
+                     "magnitude": round(mag, 2), "unit": unit, "detail": detail}
+            carried.clear()
+            carried[kind] = fault
+            out[i].append(fault)
+        if f.get("missing_daylight_min", 0) >= DROPOUT_MIN:
+            out[i].append({"kind": "dropout", "confidence": 1.0, "since": d["date"],
+                           "magnitude": float(f["missing_daylight_min"]), "unit": "min",
+                           "detail": f"{f['missing_daylight_min']} daylight minutes without a "
+                                     "tracker reading"})
+    _module_loss(days, out)
+    return out
+
+
+def _module_loss(days: list[dict[str, Any]], out: list[list[dict[str, Any]]]) -> None:
+    """A step down (``module_loss``) or a steady decline (``soiling``) of the daily healthy
+    scale, on the days without a shape fault; the one with the smaller squared error wins."""
+    idx = [i for i, d in enumerate(days) if "scale" in d["features"]
+           and not any(f["kind"] in ("stuck", "azimuth_offset", "clock_offset") for f in out[i])]
+    if len(idx) < 4:
+        return
+    s = np.array([days[i]["features"]["scale"] for i in idx])
+    x = np.array([_day_number(days[i]["date"]) for i in idx], dtype=float)
+    hinge = (np.inf, 0, 0.0, 0.0)  # sse, start index, slope, level
+    for h in range(0, len(s) - 3):
+        ramp = np.maximum(x - x[h], 0.0)
+        a = np.column_stack([np.ones_like(ramp), ramp])
+        (level, slope), *_ = np.linalg.lstsq(a, s, rcond=None)
+        sse = float(np.sum((s - a @ np.array([level, slope])) ** 2))
+        if sse < hinge[0]:
+            hinge = (sse, h, float(slope), float(level))
+    sse_line = hinge[0]
+    best = (0.0, -1)
+    for k in range(2, len(s) - 1):
+        a, b = s[:k], s[k:]
+        se = np.sqrt(a.var(ddof=1) / a.size + b.var(ddof=1) / b.size) + 1e-4
+        t = (a.mean() - b.mean()) / se
+        if t > best[0]:
+            best = (float(t), k)
+    t, k = best
+    sse_step = np.inf if k < 0 else float(np.sum((s[:k] - s[:k].mean()) ** 2)
+                                          + np.sum((s[k:] - s[k:].mean()) ** 2))
+    if sse_line < sse_step:
+        _soiling(days, out, idx[hinge[1]:], s[hinge[1]:], x[hinge[1]:], hinge[2], hinge[3],
+                 sse_line)
+        return
+    drop = 1.0 - s[k:].mean() / s[:k].mean()
+    if drop < STEP_MIN_DROP or t < STEP_MIN_T:
+        return
+    since = days[idx[k]]["date"]
+    conf = float(np.clip(t / (2 * STEP_MIN_T), 0.5, 1.0))
+    for i in range(idx[k], len(days)):
+        out[i].append({"kind": "module_loss", "confidence": round(conf, 3), "since": since,
+                       "magnitude": round(float(100.0 * drop), 1), "unit": "%",
+                       "detail": f"output {100 * drop:.0f} % below the twin since {since} "
+                                 "(a dead module or string)"})
+
+
+def _day_number(date: str) -> int:
+    return int(np.datetime64(date, "D").astype(int))
+
+
+def _soiling(days: list[dict[str, Any]], out: list[list[dict[str, Any]]], idx: list[int],
+             s: np.ndarray, x: np.ndarray, slope: float, level: float, sse: float) -> None:
+    """A steady decline of the daily scale from ``idx[0]`` on: ``soiling`` in % of the clean
+    level per day (the slope's standard error from the hinge fit's residuals)."""
+    n = s.size
+    if n < SOILING_MIN_DAYS - 1:
+        return
+    sx = float(np.sum((x - x.mean()) ** 2))
+    se = np.sqrt(sse / max(n - 2, 1) / sx) if sx > 0 else np.inf
+    rate_pct = -100.0 * slope / level
+    t = -slope / se
+    if (rate_pct < SOILING_MIN_PCT_PER_DAY or t < SOILING_MIN_T
+            or -slope * (x[-1] - x[0]) < SOILING_MIN_TOTAL * level):
+        return
+    conf = float(np.clip(t / (2 * SOILING_MIN_T), 0.5, 1.0))
+    since = days[idx[0]]["date"]
+    for i in idx:
+        out[i].append({"kind": "soiling", "confidence": round(conf, 3), "since": since,
+                       "magnitude": round(float(rate_pct), 2), "unit": "%/day",
+                       "detail": f"output falling {rate_pct:.2f} % a day against the twin "
+                                 "(dust on the tracker's modules?)"})

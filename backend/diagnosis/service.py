@@ -1,0 +1,166 @@
+"""The diagnosis endpoint's service: per local day, the tracker against the weather-aware twin.
+
+For each local day of ``[start, end)`` (``GET /api/v1/sites/{site_id}/diagnosis``):
+the measured readings of both arrays (:func:`backend.measurements.queries.raw_rows`)
+on a minute grid, the sky behind the fixed array's power and both arrays'
+expected power under it (:func:`sim.sky_sensor.weather_aware_twin`), then energy,
+performance ratio, gains and the day's fault features
+(:func:`backend.diagnosis.faults.day_features`). Each day's result is cached in
+``diagnosis_days`` (written through the one writer) and deleted by the writer when
+readings of that day arrive; the faults across days (``since``, steps) are
+recomputed from the cached days on every request.
+
+``expected_wh_low``/``expected_wh_high``: the spread of the two decompositions of the
+same POA (GTI-DIRINT, clear-sky ratio + Erbs) widened by :data:`INVERSION_UNCERTAINTY`
+(the POA inversion: temperature and wind unmeasured, 1 % logger noise).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import orjson
+import pandas as pd
+from sqlalchemy import Connection, delete, insert, select
+
+from backend.diagnosis.faults import day_features, faults_over_days
+from backend.errors import InputError
+from backend.measurements.queries import period_edges, raw_rows
+from backend.sites import SiteInfo
+from backend.storage.tables import DiagnosisDay
+from sim import sky_sensor
+
+if TYPE_CHECKING:
+    from backend.context import ServiceContext
+
+MAX_DAYS = 400
+INVERSION_UNCERTAINTY = 0.03  # relative, on the expected tracker energy [-]
+#: Share of the day's daylight minutes with a valid fixed-array inversion for
+#: ``sky.source`` to be ``fixed_array`` (else ``clear_sky``).
+MIN_SENSOR_SHARE = 0.5
+
+
+def _minute_grid(conn: Connection, array_id: int, t0: int, t1: int) -> np.ndarray:
+    """Measured power [W] on the minute grid of ``[t0, t1)``; NaN where no reading."""
+    out = np.full((t1 - t0) // 60, np.nan)
+    rows = raw_rows(conn, array_id, 0, t0, t1)
+    if rows.size:
+        k = ((rows[:, 0].astype(np.int64) - t0) // 60).clip(0, out.size - 1)
+        out[k] = rows[:, 3]
+    return out
+
+
+def _wh(p: np.ndarray) -> float | None:
+    ok = np.isfinite(p)
+    return float(p[ok].sum() / 60.0) if ok.any() else None
+
+
+def _gain(tr: float | None, fx: float | None) -> float | None:
+    return None if tr is None or fx is None or fx <= 0 else 100.0 * (tr / fx - 1.0)
+
+
+def _day_payload(info: SiteInfo, date: str, e: pd.DataFrame, tracker_w: np.ndarray,
+                 fixed_w: np.ndarray) -> dict[str, Any]:
+    """One day's answer (without faults) and its fault features."""
+    daylight = e["poa_clear"].to_numpy() > 20.0
+    valid = e["valid"].to_numpy(bool)
+    share = float(valid[daylight].mean()) if daylight.any() else 0.0
+    source = "fixed_array" if share >= MIN_SENSOR_SHARE else "clear_sky"
+    poa, clear = e["poa_global"].to_numpy(), e["poa_clear"].to_numpy()
+    k_t = float(poa[daylight].sum() / clear[daylight].sum()) if daylight.any() else None
+    exp_a = float(e["tracker_power_w"].sum() / 60.0)
+    exp_b = float(e["tracker_power_alt_w"].sum() / 60.0)
+    exp_fixed = float(e["fixed_power_w"].sum() / 60.0)
+    has = np.isfinite(tracker_w)
+    matched = float(e["tracker_power_w"].to_numpy()[has].sum() / 60.0)
+    measured_tr, measured_fx = _wh(tracker_w), _wh(fixed_w)
+    has_f = np.isfinite(fixed_w)
+    matched_f = float(e["fixed_power_w"].to_numpy()[has_f].sum() / 60.0)
+    return {
+        "date": date,
+        "sky": {"clearness_index": None if k_t is None else round(k_t, 4), "source": source,
+                "valid_minutes_pct": round(100.0 * share, 1)},
+        "tracker": {
+            "measured_wh": measured_tr, "expected_wh": exp_a,
+            "expected_wh_low": min(exp_a, exp_b) * (1 - INVERSION_UNCERTAINTY),
+            "expected_wh_high": max(exp_a, exp_b) * (1 + INVERSION_UNCERTAINTY),
+            "performance_ratio": None if measured_tr is None or matched <= 0
+            else measured_tr / matched},
+        "fixed": {"measured_wh": measured_fx, "expected_wh": exp_fixed,
+                  "performance_ratio": None if measured_fx is None or matched_f <= 0
+                  else measured_fx / matched_f},
+        "gain_measured_pct": _gain(measured_tr, measured_fx),
+        "gain_expected_pct": _gain(exp_a, exp_fixed),
+        "features": day_features(info.site, e, tracker_w) if source == "fixed_array"
+        else {"missing_daylight_min": int((daylight & ~has).sum())},
+    }
+
+
+def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
+             todo: list[int]) -> dict[int, dict[str, Any]]:
+    """Payloads of the days ``todo`` (indices into ``edges``), run by contiguous stretches."""
+    tracker, fixed = info.array_of_kind("tracker"), info.array_of_kind("fixed")
+    if tracker is None or fixed is None:
+        raise InputError(422, f"site {info.site_id!r} needs a tracker and a fixed array")
+    out: dict[int, dict[str, Any]] = {}
+    runs: list[list[int]] = []
+    for i in todo:
+        if runs and runs[-1][-1] == i - 1:
+            runs[-1].append(i)
+        else:
+            runs.append([i])
+    for run in runs:
+        t0, t1 = int(edges[run[0]].timestamp()), int(edges[run[-1] + 1].timestamp())
+        with ctx.engine.connect() as conn:
+            tr = _minute_grid(conn, tracker.array_id, t0, t1)
+            fx = _minute_grid(conn, fixed.array_id, t0, t1)
+        start = pd.Timestamp(t0, unit="s", tz="UTC")
+        e = sky_sensor.weather_aware_twin(info.site, start, start + pd.Timedelta(
+            seconds=(t1 - t0) // 60 * 60), fx)
+        for i in run:
+            a = (int(edges[i].timestamp()) - t0) // 60
+            b = (int(edges[i + 1].timestamp()) - t0) // 60
+            date = edges[i].astimezone(info.zone).date().isoformat()
+            out[i] = _day_payload(info, date, e.iloc[a:b], tr[a:b], fx[a:b])
+    return out
+
+
+def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
+              end: dt.datetime) -> dict[str, Any]:
+    """The diagnosis answer of DESIGN.md for a validated range."""
+    if (end - start).total_seconds() > (MAX_DAYS + 1) * 86400:
+        raise InputError(422, f"end: the range spans over {MAX_DAYS} days; ask for less")
+    edges = period_edges(start, end, "day", info.zone)
+    starts = [int(e.timestamp()) for e in edges[:-1]]
+    with ctx.engine.connect() as conn:
+        rows = conn.execute(select(DiagnosisDay.day_start_s, DiagnosisDay.day_end_s,
+                                   DiagnosisDay.payload_json).where(
+            DiagnosisDay.site_id == info.site_id,
+            DiagnosisDay.day_start_s.in_(starts))).all()
+    cached = {r[0]: orjson.loads(r[2]) for r in rows
+              if r[1] == int(edges[starts.index(r[0]) + 1].timestamp())}
+    todo = [i for i, s in enumerate(starts) if s not in cached]
+    fresh = _compute(ctx, info, edges, todo) if todo else {}
+    if fresh:
+        values = [{"site_id": info.site_id, "day_start_s": starts[i],
+                   "day_end_s": int(edges[i + 1].timestamp()),
+                   "payload_json": orjson.dumps(p).decode()} for i, p in fresh.items()]
+
+        def store(conn: Connection) -> None:
+            conn.execute(delete(DiagnosisDay).where(
+                DiagnosisDay.site_id == info.site_id,
+                DiagnosisDay.day_start_s.in_([v["day_start_s"] for v in values])))
+            conn.execute(insert(DiagnosisDay), values)
+
+        ctx.writer.call(store).result()
+    days = [fresh[i] if i in fresh else cached[s] for i, s in enumerate(starts)]
+    found = faults_over_days(days)
+    out_days = []
+    for d, f in zip(days, found, strict=True):
+        d = {k: v for k, v in d.items() if k != "features"}
+        d["faults"] = f
+        out_days.append(d)
+    return {"site_id": info.site_id, "timezone": info.site.timezone,
+            "start": start.isoformat(), "end": end.isoformat(), "days": out_days}

@@ -1,0 +1,103 @@
+"""The diagnosis endpoint over real HTTP: realistic logger days (tests/sim/realistic_sky.py:
+a cloud process independent of the inversion, both arrays through the twin) with one module
+of four lost from the fourth day, posted like a logger would; then the cache is invalidated
+by back-filled readings. Seeds here (21) are held out from the tuning seeds (1–3)."""
+
+from __future__ import annotations
+
+import datetime as dt
+
+import httpx
+import numpy as np
+import pandas as pd
+import pytest
+
+from sim.sites import load_site
+from tests.sim.realistic_sky import logger_days
+
+BASE = "/api/v1/sites/tehuantepec"
+FIRST = "2025-04-07"
+DAYS = 6
+FAULT_DAY = 3
+GAP = slice(1 * 1440 + 11 * 60, 1 * 1440 + 12 * 60 + 30)  # day 2, 11:00–12:30 local
+
+
+def _readings(times: pd.DatetimeIndex, power: np.ndarray, array: str) -> list[dict]:
+    out = []
+    for t, p in zip(times, power, strict=True):
+        if not np.isfinite(p):
+            continue
+        v = 26.0 if p > 0 else 0.0
+        out.append({"ts": t.isoformat(), "array": array, "voltage_v": v,
+                    "current_a": float(p) / v if v else 0.0, "power_w": float(p)})
+    return out
+
+
+def _post(client: httpx.Client, token: str, readings: list[dict]) -> None:
+    for k in range(0, len(readings), 5000):
+        r = client.post(f"{BASE}/measurements", json={"readings": readings[k:k + 5000]},
+                        headers={"Authorization": f"Bearer {token}"})
+        assert r.status_code == 200, r.text
+
+
+@pytest.fixture(scope="module")
+def logged():
+    site = load_site("tehuantepec")
+    first = pd.Timestamp(FIRST, tz=site.timezone)
+    return logger_days(site, first, DAYS, seed=21, fault="module_loss", fault_day=FAULT_DAY)
+
+
+def test_diagnosis_finds_module_loss_and_expects_the_healthy_energy(client, live_server,
+                                                                    logged) -> None:
+    tracker = logged.tracker_power_w.copy()
+    tracker[GAP] = np.nan  # the logger lost 90 daylight minutes of the tracker
+    _post(client, live_server.write_token, _readings(logged.times, logged.fixed_power_w, "fixed")
+          + _readings(logged.times, tracker, "tracker"))
+    end = (dt.date.fromisoformat(FIRST) + dt.timedelta(days=DAYS)).isoformat()
+    r = client.get(f"{BASE}/diagnosis", params={"start": FIRST, "end": end}, timeout=120)
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert body["site_id"] == "tehuantepec" and len(body["days"]) == DAYS
+    for k, day in enumerate(body["days"]):
+        assert day["sky"]["source"] == "fixed_array"
+        truth_wh = logged.healthy_tracker_power_w[k * 1440:(k + 1) * 1440].sum() / 60.0
+        expected = day["tracker"]["expected_wh"]
+        limit = 0.03 if logged.kinds[k] == "clear" else 0.08
+        assert abs(expected / truth_wh - 1) < limit, (k, logged.kinds[k], expected, truth_wh)
+        assert day["tracker"]["expected_wh_low"] <= truth_wh <= day["tracker"]["expected_wh_high"]
+        kinds = {f["kind"]: f for f in day["faults"]}
+        if k < FAULT_DAY:
+            assert not [f for f in day["faults"] if f["confidence"] >= 0.5
+                        and f["kind"] != "dropout"], day["faults"]
+            assert 0.95 < day["tracker"]["performance_ratio"] < 1.05
+        else:
+            loss = kinds["module_loss"]
+            assert abs(loss["magnitude"] - 25.0) < 5.0 and loss["unit"] == "%"
+            since = dt.date.fromisoformat(loss["since"])
+            assert abs((since - dt.date.fromisoformat(FIRST)).days - FAULT_DAY) <= 1
+            assert 0.70 < day["tracker"]["performance_ratio"] < 0.80
+    assert [f["kind"] for f in body["days"][1]["faults"]] == ["dropout"]
+    assert body["days"][1]["faults"][0]["magnitude"] == 90.0
+
+    # cached: the same answer; back-filled readings of day 2 drop that day from the cache
+    again = client.get(f"{BASE}/diagnosis", params={"start": FIRST, "end": end}).json()
+    assert again == body
+    fill = np.full(tracker.size, np.nan)
+    fill[GAP] = logged.tracker_power_w[GAP]
+    _post(client, live_server.write_token, _readings(logged.times, fill, "tracker"))
+    after = client.get(f"{BASE}/diagnosis", params={"start": FIRST, "end": end}).json()
+    assert after["days"][1]["faults"] == []
+    assert after["days"][0] == body["days"][0]
+
+
+def test_diagnosis_bad_input(client) -> None:
+    r = client.get(f"{BASE}/diagnosis", params={"start": "2025-01-01T00:00:00",
+                                                 "end": "2025-01-02"})
+    assert r.status_code == 422 and "start" in r.text
+    r = client.get(f"{BASE}/diagnosis", params={"start": "2025-01-03", "end": "2025-01-02"})
+    assert r.status_code == 422 and "end" in r.text
+    r = client.get(f"{BASE}/diagnosis", params={"start": "2024-01-01", "end": "2026-01-02"})
+    assert r.status_code == 422 and "400 days" in r.text
+    r = client.get("/api/v1/sites/nowhere/diagnosis", params={"start": "2025-01-01",
+                                                               "end": "2025-01-02"})
+    assert r.status_code == 404

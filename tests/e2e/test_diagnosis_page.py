@@ -1,0 +1,39 @@
+"""The Overview's diagnosis panel in Chromium: the range's days charted and the faults listed
+as the HTTP API answers them (the server's demo logger back-fills the days)."""
+
+from __future__ import annotations
+
+import datetime as dt
+
+import httpx
+
+from tests.e2e.conftest import BACKFILL_DAYS
+
+
+def test_diagnosis_panel_matches_the_api(page, server) -> None:
+    end = server.today()
+    start = end - dt.timedelta(days=min(BACKFILL_DAYS, 3))
+    body = httpx.get(f"{server.url}/api/v1/sites/{server.site['site_id']}/diagnosis",
+                     params={"start": start.isoformat(), "end": end.isoformat()},
+                     timeout=300).raise_for_status().json()
+    page.goto(f"{server.url}/#overview")
+    page.fill("#diag-start", start.isoformat())
+    page.fill("#diag-end", end.isoformat())
+    page.click("#diag-run")
+    chart = page.locator("[data-testid=chart-diagnosis]")
+    page.wait_for_function(
+        "() => document.querySelector('#chart-diagnosis').dataset.points !== undefined",
+        timeout=120_000)
+    prs = [d["tracker"]["performance_ratio"] for d in body["days"]]
+    gains = [d[k] for d in body["days"] for k in ("gain_measured_pct", "gain_expected_pct")]
+    expected_points = sum(v is not None for v in prs + gains)
+    assert int(chart.get_attribute("data-points")) == expected_points > 0
+    faults = {(f["kind"], f["since"]) for d in body["days"] for f in d["faults"]}
+    if faults:
+        assert page.locator("[data-testid=diag-fault]").count() == len(faults)
+        text = page.locator("[data-testid=diag-faults]").inner_text()
+        assert "confidence" in text
+    else:
+        assert page.locator("[data-testid=diag-none]").inner_text() == \
+            "No fault found in this range."
+    assert page.console_errors == []

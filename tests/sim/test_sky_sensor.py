@@ -1,0 +1,87 @@
+"""The fixed array as a sky sensor (sim/sky_sensor.py) on held-out realistic days.
+
+The days come from tests/sim/realistic_sky.py: a two-state cloud process on the clear
+sky (no decomposition model), varying air temperature and wind, both arrays through the
+twin, 1 % logger noise. Thresholds were set on seeds 1–3; these are seeds 11–14.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sim import pv, sky_sensor
+from sim.sites import load_site
+from tests.sim.realistic_sky import logger_days
+
+SITE = load_site("tehuantepec")
+FIRST = pd.Timestamp("2026-05-10", tz=SITE.timezone)
+DAYS = 6
+
+
+@pytest.fixture(scope="module", params=[11, 12, 13, 14])
+def held_out(request):
+    d = logger_days(SITE, FIRST, DAYS, seed=request.param)
+    e = sky_sensor.weather_aware_twin(SITE, FIRST, FIRST + pd.Timedelta(days=DAYS),
+                                      d.fixed_power_w)
+    return d, e
+
+
+def test_expected_tracker_energy_within_the_issue_limits(held_out) -> None:
+    d, e = held_out
+    for k in range(DAYS):
+        sl = slice(k * 1440, (k + 1) * 1440)
+        truth = d.healthy_tracker_power_w[sl].sum()
+        expected = e["tracker_power_w"].to_numpy()[sl].sum()
+        limit = 0.03 if d.kinds[k] == "clear" else 0.08
+        assert abs(expected / truth - 1) < limit, (k, d.kinds[k], expected / truth)
+        alt = e["tracker_power_alt_w"].to_numpy()[sl].sum()
+        lo, hi = min(expected, alt) * 0.97, max(expected, alt) * 1.03
+        assert lo <= truth <= hi
+        if d.kinds[k] == "clear":
+            fixed = d.fixed_power_w[sl].sum()
+            gain_true = 100 * (truth / fixed - 1)
+            gain_exp = 100 * (expected / e["fixed_power_w"].to_numpy()[sl].sum() - 1)
+            assert abs(gain_exp - gain_true) < 3.0
+
+
+def test_inversion_reproduces_the_fixed_array_it_came_from(held_out) -> None:
+    """Closure: the fixed array's twin power under the reconstructed sky ≈ its readings."""
+    d, e = held_out
+    for k in range(DAYS):
+        sl = slice(k * 1440, (k + 1) * 1440)
+        ratio = e["fixed_power_w"].to_numpy()[sl].sum() / d.fixed_power_w[sl].sum()
+        assert abs(ratio - 1) < 0.025  # held-out max 2.0 %, tuning seeds 1.1 %
+
+
+def test_invert_poa_recovers_the_model_irradiance_and_flags_ill_posed_minutes() -> None:
+    times = pd.date_range(FIRST.tz_convert("UTC") + pd.Timedelta(hours=13), periods=300,
+                          freq="60s")
+    clear = sky_sensor.fixed_clear_sky(SITE, times)
+    fixed = SITE.arrays["fixed"]
+    g = np.linspace(50, 1000, times.size)
+    # forward: the twin's model with the clear sky's beam share — the inversion's own model
+    # is checked for its root only; accuracy on independent data is the held-out test above
+    t_cell = pv.cell_temperature(g, 27.0, 1.0, fixed.temperature_model)
+    p = pv.array_mpp(g, t_cell, fixed)["power_w"]
+    p[10] = np.nan
+    p[20:27] = p[20]
+    p[40] = 0.0
+    p[50] = 5 * p[50]
+    inv = sky_sensor.invert_poa(p, clear.assign(beam_clear=0.0), fixed, 27.0, 1.0)
+    flags = inv["flag"].to_numpy()
+    assert flags[10] == sky_sensor.FLAGS["missing"]
+    assert (flags[20:27] == sky_sensor.FLAGS["stale"]).all()
+    assert flags[40] == sky_sensor.FLAGS["zero"]
+    assert flags[50] == sky_sensor.FLAGS["above_clear_sky"]
+    ok = flags == 0
+    assert np.abs(inv["poa_global"].to_numpy()[ok] - g[ok]).max() < 0.01
+    assert np.isnan(inv["poa_global"].to_numpy()[~ok]).all()
+
+
+def test_decompose_rejects_unknown_models() -> None:
+    times = pd.date_range("2026-05-10T18:00Z", periods=3, freq="60s")
+    clear = sky_sensor.fixed_clear_sky(SITE, times)
+    with pytest.raises(ValueError, match="model"):
+        sky_sensor.decompose(np.full(3, 500.0), clear, SITE, "perez")
