@@ -13,7 +13,12 @@ must never shadow the API), and two middlewares: gzip for answers of
 4. starts the demo logger thread when enabled (making its own token if none is
    configured);
 
-and on shutdown stops them in reverse order, the writer last, so everything
+Outermost of all, ``backend.api.security.SecurityHeaders`` adds the CSP and
+the other security headers to every response; ``/docs`` is served from local
+assets (``security.add_docs``) and the OpenAPI document declares the Bearer
+scheme (``security.declare_bearer``).
+
+On shutdown the lifespan stops them in reverse order, the writer last, so everything
 acknowledged is committed before the process exits.
 """
 
@@ -30,27 +35,32 @@ from typing import Any
 import anyio
 import orjson
 from fastapi import FastAPI, Request
-from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import Response
+from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.middleware.gzip import GZipMiddleware
 
+from backend.api import security, strict
 from backend.api.routes import (
     dashboard,
+    diagnosis,
     energy,
     health,
     measurements,
     plants,
     simulations,
     sites,
+    tokens,
     twin3d,
     vision,
+    weather,
 )
 from backend.auth import create_token
 from backend.context import ServiceContext, open_context
-from backend.errors import InputError
+from backend.errors import InputError, bounded_errors
 from backend.settings import Settings, get_settings
 from backend.twin.scene import TwinScene
+from sim.plant import load_plant
 
 logger = logging.getLogger(__name__)
 
@@ -61,7 +71,12 @@ def _start_scene(ctx: ServiceContext) -> TwinScene | None:
     if not s.viser or info is None:
         return None
     try:
-        scene = TwinScene(info.site, s.host, s.viser_port)
+        def site_of(site_id: str) -> Any:  # each viewer shows the site the dashboard selects
+            found = ctx.registry.get(site_id)
+            return None if found is None else found.site
+
+        scene = TwinScene(info.site, s.host, s.viser_port, sites=site_of,
+                          plants=lambda plant_id: load_plant(plant_id, s.plants_dir))
         scene.start()
     except Exception:  # the service runs without its 3D view rather than not at all
         logger.exception("3D scene did not start")
@@ -100,9 +115,9 @@ def _start_demo(ctx: ServiceContext, stop: threading.Event) -> threading.Thread 
 
 
 async def validation_error(request: Request, exc: RequestValidationError) -> Response:
-    """FastAPI's 422 body, written by orjson: an input of NaN or Infinity (Python's JSON
-    reader takes those literals) comes back as null instead of failing as a 500."""
-    body = orjson.dumps({"detail": jsonable_encoder(exc.errors())})
+    """FastAPI's 422 body, bounded and JSON-safe (:func:`backend.errors.bounded_errors`):
+    no input (NaN, an integer beyond 64 bits, a megabyte string) makes it fail or grow."""
+    body = orjson.dumps({"detail": bounded_errors(exc.errors())})
     return Response(body, status_code=422, media_type="application/json")
 
 
@@ -154,10 +169,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         summary="Digital twin and field dashboard for dual-axis solar trackers",
         version=health.service_version(),
         lifespan=lifespan,
+        docs_url=None,  # served from local assets by security.add_docs
+        redoc_url=None,
     )
     app.state.settings = settings
     app.add_exception_handler(RequestValidationError, validation_error)  # type: ignore[arg-type]
     app.add_exception_handler(InputError, input_error)  # type: ignore[arg-type]
+    app.add_exception_handler(StarletteHTTPException, strict.http_error)  # type: ignore[arg-type]
     # the last middleware added runs first: the ingest fast path answers loggers
     # before gzip looks at the request (its answers are small); gzip leaves
     # responses that already carry a Content-Encoding (the dashboard's Plotly) alone.
@@ -165,14 +183,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # 9 ms; level 9 (Starlette's default) saves 6 kB more for 25 ms.
     app.add_middleware(GZipMiddleware, minimum_size=2048, compresslevel=5)
     app.add_middleware(measurements.IngestFastPath)
-    for module in (health, sites, measurements, energy, simulations, twin3d, plants, vision,
-                   dashboard):
+    app.add_middleware(strict.StrictBodies)  # first of all: Content-Encoding, repeated keys
+    # outermost: CSP, X-Frame-Options, nosniff, Referrer-Policy on every response
+    app.add_middleware(security.SecurityHeaders, viser_port=settings.viser_port)
+    security.add_docs(app, settings.viser_port)
+    for module in (health, sites, measurements, energy, diagnosis, simulations, weather, twin3d,
+                   plants, vision, tokens, dashboard):
         app.include_router(module.router)
     generate_openapi = app.openapi
 
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:
-            app.openapi_schema = measurements.document_ingest(generate_openapi())
+            app.openapi_schema = security.declare_bearer(strict.document_errors(
+                measurements.document_ingest(generate_openapi())))
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]

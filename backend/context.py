@@ -21,7 +21,9 @@ from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
 from backend.auth import TokenCache
+from backend.limits import Limits
 from backend.measurements.writer import Writer
+from backend.mqtt.service import MqttService
 from backend.settings import Settings
 from backend.sites import Registry, sync_sites
 from backend.storage.engine import make_engine, make_sessionmaker, run_migrations
@@ -43,10 +45,14 @@ class ServiceContext:
     tokens: TokenCache
     twin: TwinService
     simulations: SimulationRunner
+    limits: Limits  # rate limits of anonymous work, the decode budget (backend/limits.py)
     parsers: ProcessPoolExecutor | None = None
+    mqtt: MqttService | None = None  # with Settings.mqtt_url (backend/mqtt/service.py)
 
     def close(self) -> None:
-        """Stop the background parts (parsers, runs, writer) and dispose of the engine."""
+        """Stop the background parts (MQTT, parsers, runs, writer) and dispose of the engine."""
+        if self.mqtt is not None:  # first: its last readings still reach the writer
+            self.mqtt.stop()
         if self.parsers is not None:
             self.parsers.shutdown(wait=True, cancel_futures=True)
         self.simulations.stop()
@@ -68,7 +74,7 @@ def _parser_init(ppid: int) -> None:
 
 
 def open_context(settings: Settings) -> ServiceContext:
-    """Start the parser processes, migrate, load sites, start the writer."""
+    """Start the parser processes, migrate, load sites, start the writer (and MQTT, if set)."""
     parsers = None
     if settings.parse_processes > 0:
         # Validating a big batch holds the GIL for ~1 ms per 1,000 readings; worker
@@ -93,8 +99,14 @@ def open_context(settings: Settings) -> ServiceContext:
     twin = TwinService(registry, engine, writer, settings.twin_on_demand_max_days,
                        scene_site=settings.default_site,
                        history_days=settings.twin_history_days)
-    return ServiceContext(
+    ctx = ServiceContext(
         settings=settings, engine=engine, sessions=make_sessionmaker(engine),
-        registry=registry, writer=writer, tokens=TokenCache(engine), twin=twin,
-        simulations=SimulationRunner(registry, engine, writer), parsers=parsers,
+        registry=registry, writer=writer,
+        tokens=TokenCache(engine, settings.token_cache_ttl_s), twin=twin,
+        simulations=SimulationRunner(registry, engine, writer, settings), parsers=parsers,
+        limits=Limits.from_settings(settings),
     )
+    if settings.mqtt_url:
+        ctx.mqtt = MqttService(ctx)
+        ctx.mqtt.start()
+    return ctx

@@ -35,7 +35,11 @@ class Settings(BaseSettings):
     port: int = Field(8000, ge=0, le=65535, description="Port of the API and dashboard.")
     viser_port: int = Field(8080, ge=0, le=65535, description="Port of the viser 3D twin.")
     viser: bool = Field(True, description="Start the viser 3D twin with the service.")
-    sites_dir: Path = Field(DATA_DIR / "sites", description="Folder of built-in site configs.")
+    sites_dir: Path = Field(
+        DATA_DIR / "user-sites",
+        description="Folder of your own site configs, added to the built-in data/sites/ (a file "
+                    "with a built-in id replaces it); the dashboard and `heliotwin site create` "
+                    "write here.")
     plants_dir: Path = Field(DATA_DIR / "plants",
                              description="Folder of plant layouts (seed 004), one JSON each.")
     default_site: str = Field(
@@ -105,6 +109,80 @@ class Settings(BaseSettings):
         False, description="Vision endpoints need a site write token."
     )
     access_log: bool = Field(False, description="Log every HTTP request (uvicorn access log).")
+    admin_token: str | None = Field(
+        None, description="Bearer token of the admin endpoints (`/api/v1/tokens`); unset: "
+                          "they answer 403."
+    )
+    token_cache_ttl_s: float = Field(
+        0.5, gt=0, le=1.0, description="How long a checked write token is trusted from "
+                                       "memory (a revocation by the CLI takes effect within it)."
+    )
+    simulation_workers: int = Field(
+        1, ge=1, le=8, description="Worker processes running simulations at once."
+    )
+    simulation_queue: int = Field(
+        2, ge=0, le=100, description="Simulations waiting for a worker; more → 503 with "
+                                     "Retry-After."
+    )
+    simulation_anonymous_keep_runs: int = Field(
+        10, ge=0, description="Runs asked without a token that stay stored (older ones are "
+                              "deleted with their series); runs with a token stay."
+    )
+    anonymous_simulation_steps_per_min: int = Field(
+        2_200_000, gt=0, description="Simulated time steps one client address may ask per "
+                                     "minute without a token (token bucket; more → 429)."
+    )
+    anonymous_vision_pixels_per_min: int = Field(
+        400_000_000, gt=0, description="Image pixels one client address may upload per minute "
+                                       "without a token (token bucket; more → 429)."
+    )
+    vision_decode_pixels: int = Field(
+        40_000_000, gt=0, description="Pixels decoded at once across all vision requests "
+                                      "(≈ 6 bytes each at the peak); others wait."
+    )
+    vision_queue: int = Field(
+        8, ge=0, le=1000, description="Vision requests waiting for the decode budget; more → "
+                                      "503 with Retry-After."
+    )
+    vision_anonymous_keep_rows: int = Field(
+        1000, ge=0, description="Detections uploaded without a token that stay stored (older "
+                                "ones are deleted); with a token they stay."
+    )
+    mqtt_url: str | None = Field(
+        None, description="`mqtt://[user:password@]host[:port]` of the broker; unset: no MQTT."
+    )
+    mqtt_client_id: str | None = Field(
+        None, description="MQTT client id; set: a persistent session (the broker keeps "
+                          "QoS 1 readings while the service is away); unset: a random id."
+    )
+    mqtt_state_topic: str = Field(
+        "heliotwin/{site_id}/{array}/state", description="Topic template of JSON readings."
+    )
+    mqtt_value_topic: str = Field(
+        "heliotwin/{site_id}/{array}/{quantity}",
+        description="Topic template of OpenDTU-style single values (quantity: voltage, "
+                    "current, power), assembled per minute.",
+    )
+    mqtt_errors_topic: str = Field(
+        "heliotwin/{site_id}/errors", description="Where rejected MQTT messages are reported."
+    )
+    mqtt_ha_prefix: str = Field(
+        "homeassistant", description="Home Assistant discovery prefix (retained configs)."
+    )
+    mqtt_ha_state_topic: str = Field(
+        "heliotwin/{site_id}/{array}/ha/{sensor}",
+        description="Topic template of the states published for Home Assistant.",
+    )
+    mqtt_publish_interval_s: float = Field(
+        60.0, gt=0, description="Period of the Home Assistant state publications."
+    )
+    mqtt_minute_grace_s: float = Field(
+        5.0, ge=0, le=55, description="Wait after a minute ends before closing its single "
+                                      "values without power_w (power = voltage·current).",
+    )
+    mqtt_retry_max_s: float = Field(
+        30.0, gt=0, description="Longest wait between MQTT reconnection attempts."
+    )
 
     @model_validator(mode="after")
     def _check(self) -> Settings:

@@ -3,7 +3,9 @@
 Each subcommand module in this package defines ``register(subparsers)``, which
 adds its parser and sets ``func`` (called with the parsed ``argparse.Namespace``
 and returning an exit code). Output to stdout is the CLI's job; everything else
-logs.
+logs, to stderr: at INFO for the long-running commands (:data:`SERVICE_COMMANDS`,
+whose log is their output), at WARNING for the one-shot ones (``token create``
+prints its token and nothing about migrations), at DEBUG with ``-v``.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 
 # Subcommand modules, in the order `heliotwin --help` lists them.
@@ -23,7 +26,11 @@ SUBCOMMAND_MODULES = (
     "backend.cli.vision",
     "backend.cli.dynamics",
     "backend.cli.plant",
+    "backend.cli.site",
 )
+
+#: Commands that run until stopped and report what they do by logging at INFO.
+SERVICE_COMMANDS = frozenset({"serve", "demo-logger"})
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -49,15 +56,30 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``heliotwin`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    quiet = logging.INFO if args.command in SERVICE_COMMANDS else logging.WARNING
     logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.INFO,
+        level=logging.DEBUG if args.verbose else quiet,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
         stream=sys.stderr,
     )
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
+        return code
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        return _stdout_closed()
+
+
+def _stdout_closed() -> int:
+    """The reader of stdout went away (``heliotwin simulate … | head``): no traceback; stdout
+    goes to /dev/null so the interpreter's final flush is quiet; 141 = 128 + SIGPIPE, as a
+    command killed by the signal."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+    return 141
 
 
 if __name__ == "__main__":

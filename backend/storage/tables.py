@@ -27,6 +27,7 @@ from sqlalchemy import (
     String,
     Text,
     UniqueConstraint,
+    false,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
@@ -99,6 +100,12 @@ class LoggerToken(Base):
     token_prefix: Mapped[str] = mapped_column(String(12))
     label: Mapped[str] = mapped_column(String(200), default="")
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    #: Refused from this instant on (None: never expires).
+    expires_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True),
+                                                           nullable=True)
+    #: When it was revoked (None: not revoked); the row stays, for ``token list``.
+    revoked_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True),
+                                                           nullable=True)
 
 
 class Measurement(Base):
@@ -163,10 +170,25 @@ class TwinCoverage(Base):
     covered_until_s: Mapped[int] = mapped_column(BigInteger)
 
 
+class DiagnosisDay(Base):
+    """The diagnosis of one local day of a site, cached (``backend/diagnosis/service.py``);
+    deleted by the writer when readings of that day arrive."""
+
+    __tablename__ = "diagnosis_days"
+
+    site_id: Mapped[str] = mapped_column(
+        ForeignKey("sites.site_id", ondelete="CASCADE"), primary_key=True
+    )
+    day_start_s: Mapped[int] = mapped_column(BigInteger, primary_key=True)
+    day_end_s: Mapped[int] = mapped_column(BigInteger)
+    payload_json: Mapped[str] = mapped_column(Text)
+
+
 class SimulationRun(Base):
     """A twin scenario run from the API (synchronous or in the background)."""
 
     __tablename__ = "simulation_runs"
+    __table_args__ = (Index("ix_simulation_runs_anonymous_created", "anonymous", "created_at"),)
 
     run_id: Mapped[str] = mapped_column(String(32), primary_key=True)
     site_id: Mapped[str] = mapped_column(ForeignKey("sites.site_id", ondelete="CASCADE"))
@@ -179,6 +201,8 @@ class SimulationRun(Base):
     finished_at: Mapped[dt.datetime | None] = mapped_column(
         DateTime(timezone=True), nullable=True
     )
+    #: Asked without a token: kept within ``Settings.simulation_anonymous_keep_runs``.
+    anonymous: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
 
 
 class SimulationSeries(Base):
@@ -199,6 +223,8 @@ class VisionCalibration(Base):
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True))
+    #: A person's name for it ("roof camera, June"); "" for calibrations made before names.
+    name: Mapped[str] = mapped_column(String(100), default="", server_default="")
     site_id: Mapped[str | None] = mapped_column(String(64), nullable=True)
     latitude_deg: Mapped[float] = mapped_column(Float)
     longitude_deg: Mapped[float] = mapped_column(Float)
@@ -226,7 +252,8 @@ class VisionDetection(Base):
     """One frame's detection, with the ephemeris when time and place were given."""
 
     __tablename__ = "vision_detections"
-    __table_args__ = (Index("ix_vision_detections_site_ts", "site_id", "ts_ms"),)
+    __table_args__ = (Index("ix_vision_detections_site_ts", "site_id", "ts_ms"),
+                      Index("ix_vision_detections_anonymous_created", "anonymous", "created_at"))
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True))
@@ -252,3 +279,5 @@ class VisionDetection(Base):
     ephemeris_azimuth_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     ephemeris_elevation_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     error_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    #: Uploaded without a token: kept within ``Settings.vision_anonymous_keep_rows``.
+    anonymous: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())

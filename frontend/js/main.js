@@ -8,8 +8,10 @@ import * as simulation from "./simulation.js";
 import * as sky from "./sky.js";
 import * as twin from "./twin.js";
 import * as plant from "./plant.js";
+import * as sites from "./sites.js";
+import * as diagnosis from "./diagnosis.js";
 
-const PAGES = { overview, simulation, sky, twin, plant };
+const PAGES = { overview, simulation, sky, twin, plant, sites };
 
 /** Shared state every page reads: the site, its zone, the selected day, server meta. */
 export const state = {
@@ -53,7 +55,7 @@ function setSite(siteId) {
   state.tz = state.site?.timezone || "UTC";
   state.day = localDate(state.tz);
   document.getElementById("site-tz").textContent = zoneLabel(state.tz);
-  document.getElementById("site-select").title = state.site?.name || "";
+  document.getElementById("site-select").title = state.site ? `site id ${state.site.site_id}` : "";
   document.getElementById("site-select").value = state.site?.site_id || "";
   localStorage.setItem("heliotwin.site", state.site?.site_id || "");
 }
@@ -73,8 +75,8 @@ async function boot() {
     return;
   }
   for (const s of state.sites) {
-    const opt = new Option(s.site_id, s.site_id);
-    opt.title = s.name || s.site_id;
+    const opt = new Option(s.name || s.site_id, s.site_id);
+    opt.title = s.site_id;
     select.add(opt);
   }
   const saved = hashParams().get("site") || localStorage.getItem("heliotwin.site");
@@ -86,8 +88,17 @@ async function boot() {
     setSite(select.value);
     for (const [name, m] of Object.entries(PAGES)) if (started.has(name)) m.siteChanged?.(state, name === state.page);
   });
-  window.addEventListener("hashchange", () => showPage(pageFromHash()));
+  window.addEventListener("hashchange", () => {
+    // an address edited in an open tab is followed: its site first, then its page
+    const site = hashParams().get("site");
+    if (site && site !== state.site?.site_id && known(site)) {
+      setSite(site);
+      for (const [name, m] of Object.entries(PAGES)) if (started.has(name)) m.siteChanged?.(state, false);
+    }
+    showPage(pageFromHash());
+  });
   showPage(pageFromHash());
+  diagnosis.init(state);
   loadPlotly(); // after the page has sent its requests: Plotly's start-up overlaps the answers
 }
 

@@ -1,8 +1,12 @@
 """``/api/v1/sites/{site_id}/measurements``: field-logger ingestion and read-back.
 
-POST takes ``{"readings": [...]}`` (JSON) or ``text/csv`` with a header row,
-validated in bulk by :mod:`backend.measurements.parse` and committed by the writer before
-the answer ``{"accepted": N, "duplicates": M}``. GET answers a range raw (when
+POST takes ``{"readings": [...]}`` (JSON), emonCMS-style rows
+``[[unix_s, array, voltage_v, current_a, power_w], ...]`` or ``text/csv`` with a
+header row, plain or ``Content-Encoding: gzip`` (decoded by
+:class:`backend.api.strict.StrictBodies`), validated in bulk by
+:mod:`backend.measurements.parse` and committed by the writer before the answer
+``{"accepted": N, "duplicates": M, "stored_through": ISO, "stored_through_unix_s": S}``
+(a logger that buffered offline resumes after ``stored_through``). GET answers a range raw (when
 it holds no more than ``max_points`` readings) or downsampled into buckets with
 min/mean/max, as JSON or CSV.
 """
@@ -30,6 +34,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from backend.api.deps import ContextDep, check_site_token, site_or_404
 from backend.context import ServiceContext
+from backend.measurements.export import influx_lines
 from backend.measurements.parse import Batch, IngestError, Limits, parse_csv_batch, parse_json_batch
 from backend.measurements.queries import (
     QUANTITIES,
@@ -48,27 +53,40 @@ router = APIRouter(prefix="/api/v1/sites", tags=["measurements"])
 _JSON = "application/json"
 _OFFLOAD_BYTES = 32 * 1024  # parse bigger bodies in a worker process (or thread)
 
+_READING: dict[str, Any] = {
+    "type": "object", "required": ["ts", "array"], "additionalProperties": False,
+    "oneOf": [{"required": ["voltage_v", "current_a"]},
+              {"required": ["voltage_adc", "current_adc"]}],
+    "properties": {
+        "ts": {"type": "string", "format": "date-time", "minLength": 1,
+               "description": "ISO 8601 with UTC offset"},
+        "array": {"type": "string", "minLength": 1, "example": "tracker"},
+        "voltage_v": {"type": "number"}, "current_a": {"type": "number"},
+        "power_w": {"type": "number", "description": "optional; voltage_v·current_a when absent"},
+        "voltage_adc": {"type": "integer",
+                        "description": "raw divider ADC count (seed 000 eq. 19)"},
+        "current_adc": {"type": "integer",
+                        "description": "raw ACS712 ADC count (seed 000 eq. 17)"},
+    },
+}
+_EMONCMS_ROW: dict[str, Any] = {
+    "type": "array", "minItems": 4, "maxItems": 5,
+    "description": "[unix_s, array, voltage_v, current_a, power_w]; power_w may be left off",
+    "prefixItems": [{"type": "number", "description": "Unix time [s]"},
+                    {"type": "string", "minLength": 1}, {"type": "number"}, {"type": "number"},
+                    {"type": "number"}],
+}
 _POST_DOC: dict[str, Any] = {
     "requestBody": {
         "required": True,
         "content": {
-            "application/json": {"schema": {
-                "type": "object", "required": ["readings"],
-                "properties": {"readings": {"type": "array", "items": {
-                    "type": "object", "required": ["ts", "array"],
-                    "properties": {
-                        "ts": {"type": "string", "format": "date-time",
-                               "description": "ISO 8601 with UTC offset"},
-                        "array": {"type": "string", "example": "tracker"},
-                        "voltage_v": {"type": "number"}, "current_a": {"type": "number"},
-                        "power_w": {"type": "number",
-                                    "description": "optional; voltage_v·current_a when absent"},
-                        "voltage_adc": {"type": "integer",
-                                        "description": "raw divider ADC count (seed 000 eq. 19)"},
-                        "current_adc": {"type": "integer",
-                                        "description": "raw ACS712 ADC count (seed 000 eq. 17)"},
-                    }}}},
-            }},
+            "application/json": {"schema": {"oneOf": [
+                {"type": "object", "required": ["readings"], "additionalProperties": False,
+                 "properties": {"readings": {"type": "array", "minItems": 1,
+                                             "items": _READING}}},
+                {"type": "array", "minItems": 1, "items": _EMONCMS_ROW,
+                 "description": "emonCMS-style bulk rows"},
+            ]}},
             "text/csv": {"schema": {"type": "string", "example":
                                     "ts,array,voltage_v,current_a,power_w\n"
                                     "2024-03-15T12:00:00-06:00,tracker,26.1,27.3,712.5\n"}},
@@ -150,7 +168,10 @@ async def ingest(ctx: ServiceContext, site_id: str, headers: Mapping[str, str],
         return 503, orjson.dumps({"detail": f"storage unavailable ({type(exc).__name__}); "
                                             "nothing was stored, send the batch again"}), {
             "Retry-After": "5"}
-    return 200, orjson.dumps({"accepted": accepted, "duplicates": duplicates}), {}
+    last_s = int(batch.ts_s.max())
+    return 200, orjson.dumps({"accepted": accepted, "duplicates": duplicates,
+                              "stored_through": iso_utc(np.array([last_s]))[0],
+                              "stored_through_unix_s": last_s}), {}
 
 
 def document_ingest(schema: dict[str, Any]) -> dict[str, Any]:
@@ -167,20 +188,34 @@ def document_ingest(schema: dict[str, Any]) -> dict[str, Any]:
         "description": (
             "`Authorization: Bearer <site write token>`. Answers `{\"accepted\": N, "
             "\"duplicates\": M}` once the readings are committed; a reading whose (array, ts) "
-            "is already stored counts as a duplicate. A batch is validated whole: any bad row "
-            "is a 4xx naming the row and the field, and nothing of the batch is stored."),
+            "is already stored counts as a duplicate; everything up to `stored_through` "
+            "(the batch's latest reading) is then stored, so a logger that buffered offline "
+            "resumes after it. A batch is validated whole: every problem is listed (up to "
+            "10 per field and 50 in all, the rest counted) naming the row and the field, and "
+            "nothing of the batch is stored. Bodies: JSON `{\"readings\": [...]}`, "
+            "emonCMS-style rows `[[unix_s, array, voltage_v, current_a, power_w], ...]`, or "
+            "CSV with a header row; unknown fields, keys given twice and CSV numbers other "
+            "than plain decimals are 422s. `Content-Encoding: gzip` is decoded (at most "
+            "HELIOTWIN_MAX_UPLOAD_BYTES once decompressed); other encodings are 415."),
         "operationId": "post_measurements",
         "parameters": [{"name": "site_id", "in": "path", "required": True,
                         "schema": {"type": "string"}}],
         **_POST_DOC,
         "responses": {
             "200": {"description": "stored", "content": {_JSON: {"schema": {
-                "type": "object", "properties": {"accepted": {"type": "integer"},
-                                                 "duplicates": {"type": "integer"}}}}}},
+                "type": "object",
+                "required": ["accepted", "duplicates", "stored_through", "stored_through_unix_s"],
+                "properties": {
+                    "accepted": {"type": "integer"}, "duplicates": {"type": "integer"},
+                    "stored_through": {"type": "string", "format": "date-time",
+                                       "description": "latest reading of the batch (UTC)"},
+                    "stored_through_unix_s": {"type": "integer"}}}}}},
             **{str(c): {"description": d} for c, d in (
+                (400, "a corrupt gzip body"),
                 (401, "no or unknown token"), (403, "the token is for another site"),
                 (404, "unknown site"), (413, "body too large"),
-                (415, "not JSON or CSV"), (422, "invalid rows (each named)"),
+                (415, "not JSON or CSV, or a Content-Encoding other than gzip"),
+                (422, "invalid rows (each named)"),
                 (503, "storage unavailable; nothing stored, send again"))},
         },
     }
@@ -231,10 +266,7 @@ class IngestFastPath:
         await send({"type": "http.response.body", "body": body})
 
 
-def _range(info: Any, start: str | None, end: str | None) -> tuple[int, int]:
-    if start is None or end is None:
-        raise HTTPException(422, "start and end are required (a date YYYY-MM-DD in the site's "
-                                 "time zone, or an ISO 8601 date-time with offset)")
+def _range(info: Any, start: str, end: str) -> tuple[int, int]:
     try:
         t0, t1 = parse_range(start, end, info.zone)
     except ValueError as exc:
@@ -258,26 +290,41 @@ def _csv_lines(header: list[str], cols: list[list[Any]], chunk_rows: int = 20_00
         yield buf.getvalue()
 
 
-@router.get("/{site_id}/measurements", responses={404: {}, 422: {}})
+_GET_TEXT: dict[int | str, dict[str, Any]] = {200: {"content": {
+    "text/csv": {"schema": {"type": "string"}},
+    "text/plain": {"schema": {"type": "string", "description": (
+        "format=influx: InfluxDB line protocol, measurement `heliotwin`, tags `array`, `site`, "
+        "`source`, fields `voltage_v`, `current_a`, `power_w` (buckets: also `_min`, `_max`, "
+        "`n`), nanosecond timestamps")},
+        "example": "heliotwin,array=tracker,site=tehuantepec,source=measured voltage_v=26.1,"
+                   "current_a=27.3,power_w=712.53 1710525600000000000\n"},
+}}}
+
+
+@router.get("/{site_id}/measurements", responses={**_GET_TEXT, 404: {}, 422: {}})
 def get_measurements(
     site_id: str,
     request: Request,
     ctx: ContextDep,
-    array: Annotated[str | None, Query(description="array name, e.g. tracker")] = None,
-    start: Annotated[str | None, Query(description="date or ISO date-time, inclusive")] = None,
-    end: Annotated[str | None, Query(description="date or ISO date-time, exclusive")] = None,
+    array: Annotated[str, Query(min_length=1, max_length=64,
+                                description="array name, e.g. tracker")],
+    start: Annotated[str, Query(min_length=1, max_length=64,
+                                description="date or ISO date-time, inclusive")],
+    end: Annotated[str, Query(min_length=1, max_length=64,
+                              description="date or ISO date-time, exclusive")],
     max_points: Annotated[int | None, Query(ge=1, le=1_000_000)] = None,
     source: Literal["measured", "twin"] = "measured",
-    format: Literal["json", "csv"] | None = None,
+    format: Literal["json", "csv", "influx"] | None = None,
 ) -> Response:
     """Readings of one array over a range: raw, or min/mean/max buckets past ``max_points``."""
     info = site_or_404(ctx, site_id)
-    if array is None or array not in info.arrays:
-        raise HTTPException(422, f"array: {'missing' if array is None else repr(array)}; "
+    if array not in info.arrays:
+        raise HTTPException(422, f"array: unknown array {array[:40]!r}; "
                                  f"this site has {', '.join(info.arrays)}")
     t0, t1 = _range(info, start, end)
     want_csv = format == "csv" or (format is None and "text/csv" in
                                    request.headers.get("accept", ""))
+    want_text = want_csv or format == "influx"  # streamed: no max_json_points
     if source == "twin":
         ctx.twin.ensure(site_id, t0, t1)
     arr = info.arrays[array]
@@ -285,10 +332,10 @@ def get_measurements(
     with ctx.engine.connect() as conn:
         n = count_rows(conn, arr.array_id, src, t0, t1, info.phase_s)
         limit = max_points if max_points is not None else (
-            None if want_csv else ctx.settings.max_json_points)
+            None if want_text else ctx.settings.max_json_points)
         if limit is not None and n > limit and max_points is None:
             raise HTTPException(422, f"{n} readings in the range; pass max_points (buckets) or "
-                                     "format=csv for all of them")
+                                     "format=csv or format=influx for all of them")
         if limit is None or n <= limit:
             rows = raw_rows(conn, arr.array_id, src, t0, t1)
             bucket_s = 0
@@ -299,6 +346,9 @@ def get_measurements(
             b = downsample(conn, arr.array_id, src, t0, t1, limit, info.phase_s)
             bucket_s = b.width_s
             cols = b.points()
+    if format == "influx":
+        return StreamingResponse(influx_lines(site_id, array, source, cols),
+                                 media_type="text/plain; charset=utf-8")
     if want_csv:
         name = f"{site_id}_{array}_{source}_{start}_{end}.csv".replace(":", "")
         return StreamingResponse(_csv_lines(list(cols), list(cols.values())),

@@ -3,21 +3,21 @@
 from __future__ import annotations
 
 import asyncio
-import csv
-import io
 import math
 from typing import Annotated, Any, Literal
 
 import numpy as np
 import orjson
 import pandas as pd
-from fastapi import APIRouter, HTTPException, Query
+from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field, create_model
 
-from backend.api.deps import ContextDep, site_or_404
+from backend.api.deps import ContextDep, bearer_token, site_or_404, token_site
+from backend.limits import Busy
 from backend.measurements.queries import iso_utc
 from backend.timestamps import parse_range
+from backend.twin.export import export_names, series_csv
 from backend.twin.parameters import MACHINE_PARAMETERS
 from backend.twin.scenario import Scenario
 from sim.twin import CONTROLLERS, RECEIVERS
@@ -28,12 +28,16 @@ router = APIRouter(prefix="/api/v1/simulations", tags=["simulations"])
 class _SimulationBase(BaseModel):
     """A twin scenario (DESIGN.md ``heliotwin simulate``)."""
 
-    model_config = ConfigDict(allow_inf_nan=False)
+    # strict: unknown fields are a 422 (as unknown CSV columns are), "background": 0 is not
+    # false and "60" or false is not a number
+    model_config = ConfigDict(allow_inf_nan=False, extra="forbid", strict=True)
 
-    site_id: str = Field("tehuantepec", examples=["tehuantepec"])
-    start: str = Field(..., description="date (site midnight) or ISO date-time with offset",
+    site_id: str = Field("tehuantepec", min_length=1, max_length=64, examples=["tehuantepec"])
+    start: str = Field(..., min_length=1, max_length=64,
+                       description="date (site midnight) or ISO date-time with offset",
                        examples=["2024-03-15"])
-    end: str = Field(..., description="exclusive", examples=["2024-03-16"])
+    end: str = Field(..., min_length=1, max_length=64, description="exclusive",
+                     examples=["2024-03-16"])
     step_s: float = Field(60.0, gt=0, le=86400, description="time step [s]")
     controller: Literal[CONTROLLERS] = Field(  # type: ignore[valid-type]
         "ideal", description="tracking controller")
@@ -70,22 +74,71 @@ def _params(ctx: Any, body: _SimulationBase) -> Scenario:
         raise HTTPException(422, str(exc)) from None
 
 
+async def _caller(request: Request) -> str | None:
+    """The site of the caller's write token; None without one; 401 for a bad one."""
+    token = bearer_token(request)
+    if token is None:
+        return None
+    owner = await token_site(request, token)
+    if owner is None:
+        raise HTTPException(401, "unknown, expired or revoked write token",
+                            headers={"WWW-Authenticate": "Bearer"})
+    return owner
+
+
+def _busy(exc: Busy) -> HTTPException:
+    return HTTPException(exc.status_code, exc.message, headers=exc.headers)
+
+
+_BUSY_DOC: dict[int | str, dict[str, Any]] = {
+    401: {"description": "a token was sent but is unknown, expired or revoked"},
+    429: {"description": "rate limit of anonymous work (per client address); see Retry-After"},
+    503: {"description": "the simulation queue is full; see Retry-After"},
+}
+
+
 @router.post("", responses={202: {"description": "accepted (background run)"}, 400: {},
-                                 404: {}, 422: {}})
+                                 404: {}, 422: {}, **_BUSY_DOC},
+             openapi_extra={"security": [{}, {"bearerAuth": []}]})
 async def create_simulation(body: SimulationCreate,  # type: ignore[valid-type]
-                            ctx: ContextDep) -> Response:
-    """Run a twin scenario; the summary, or 202 with a ``run_id`` to poll."""
-    params = _params(ctx, body)
-    if body.background:  # type: ignore[attr-defined]
-        state = await asyncio.to_thread(ctx.simulations.start_background, params)
+                            ctx: ContextDep, request: Request) -> Response:
+    """Run a twin scenario; the summary, or 202 with a ``run_id`` to poll.
+
+    Runs execute in worker processes, a bounded number at once (503 with
+    ``Retry-After`` past the queue). Without a write token the caller's address
+    spends simulated steps from a per-minute allowance (429 when spent), and
+    only the newest anonymous runs stay stored (``docs/service.md``, Limits).
+    """
+    return await submit_scenario(ctx, request, _params(ctx, body),
+                                 body.background)  # type: ignore[attr-defined]
+
+
+async def submit_scenario(ctx: Any, request: Request, params: Scenario,
+                          background: bool) -> Response:
+    """Queue a validated scenario for the caller: the anonymous allowance (429), the queue
+    (503), then 202 with the ``run_id`` or, waiting for it, the summary."""
+    owner = await _caller(request)
+    anonymous = owner is None
+    try:
+        if anonymous:
+            steps = (params.end - params.start).total_seconds() / params.step_s
+            ctx.limits.simulation_steps.take(request.client.host if request.client else "?",
+                                             steps)
+        state, done = await asyncio.to_thread(ctx.simulations.submit, params, anonymous)
+    except Busy as exc:
+        raise _busy(exc) from None
+    if background:
         return Response(orjson.dumps({"run_id": state.run_id, "status": state.status,
                                       "progress": state.progress}),
                         status_code=202, media_type="application/json",
                         headers={"Location": f"/api/v1/simulations/{state.run_id}"})
     try:
-        summary = await asyncio.to_thread(ctx.simulations.run_sync, params)
+        summary = await asyncio.wrap_future(done)
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
+    except Exception as exc:  # the worker died or the service is stopping
+        raise HTTPException(503, f"simulation {state.run_id} did not finish: {exc}",
+                            headers={"Retry-After": "10"}) from None
     return Response(orjson.dumps(summary), media_type="application/json")
 
 
@@ -125,15 +178,15 @@ def get_simulation_series(
         bucket_s = per * float(state.params.get("step_s", 60.0))
     cols = list(series.columns)
     times = iso_utc(ts)
-    if format == "csv":
-        buf = io.StringIO()
-        w = csv.writer(buf, lineterminator="\n")
-        w.writerow(["ts", *cols])
-        w.writerows([t, *row] for t, row in zip(times, data.tolist(), strict=True))
-        return Response(buf.getvalue(), media_type="text/csv", headers={
+    if format == "csv":  # units in the column names, UTC and local time (backend.twin.export)
+        info = ctx.registry.sites.get(state.site_id)
+        frame = pd.DataFrame(data, index=pd.to_datetime(ts, unit="s", utc=True), columns=cols)
+        text = series_csv(frame, info.site.timezone if info else "UTC")
+        return Response(text, media_type="text/csv", headers={
             "Content-Disposition": f'attachment; filename="simulation_{run_id}.csv"'})
-    points = [dict(zip(["ts", *cols], [t, *row], strict=True))
+    names = export_names(cols)
+    points = [dict(zip(["ts", *names], [t, *row], strict=True))
               for t, row in zip(times, data.tolist(), strict=True)]
-    return Response(orjson.dumps({"run_id": run_id, "bucket_s": bucket_s, "columns": cols,
+    return Response(orjson.dumps({"run_id": run_id, "bucket_s": bucket_s, "columns": names,
                                   "points": points}, option=orjson.OPT_SERIALIZE_NUMPY),
                     media_type="application/json")
