@@ -167,9 +167,15 @@ def allowed_methods(request: Request, also: str = "") -> list[str]:
     """Every method the OpenAPI document gives this request's path (the ingest fast path's
     POST included), with HEAD beside GET, and those of ``also`` (an ``Allow`` value)."""
     methods = {m.strip().upper() for m in also.split(",") if m.strip()}
-    for template, ops in request.app.openapi().get("paths", {}).items():
-        regex, _, _ = compile_path(template)
-        if regex.match(request.url.path):
+    matching = [(template.count("{"), ops)
+                for template, ops in request.app.openapi().get("paths", {}).items()
+                if compile_path(template)[0].match(request.url.path)]
+    # a literal path (``/simulations/weather``) is its own resource, not ``/simulations/{run_id}``
+    fewest = min((n for n, _ in matching), default=0)
+    if matching:  # the document is the authority; starlette's Allow names one route only
+        methods = set()
+    for n, ops in matching:
+        if n == fewest:
             methods |= {m.upper() for m in ops if m.upper() in _HTTP_METHODS}
     if "GET" in methods:
         methods.add("HEAD")

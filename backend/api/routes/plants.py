@@ -16,7 +16,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from fastapi.responses import Response
 
 from backend.plants import STRATEGIES, PlantService, UnknownPlantError, sky_map_png
-from backend.timestamps import TimestampError, parse_instant
+from backend.timestamps import FIRST_YEAR, LAST_YEAR, TimestampError, parse_instant
 
 router = APIRouter(prefix="/api/v1/plants", tags=["plants"])
 
@@ -104,9 +104,18 @@ async def sky_map(plant_id: str, request: Request, service: PlantServiceDep,
 
 
 @router.get("/{plant_id}/day", responses={404: {}, 422: {}})
-async def day(plant_id: str, service: PlantServiceDep, date: dt.date,
+async def day(plant_id: str, service: PlantServiceDep,
+              date: Annotated[str, Query(pattern=r"^\d{4}-\d{2}-\d{2}$",
+                                         description="local date, YYYY-MM-DD "
+                                                     f"({FIRST_YEAR}–{LAST_YEAR})")],
               step_s: Annotated[float, Query(ge=300, le=3600)] = 900) -> dict[str, Any]:
     """A clear-sky day (local date): each tracker's shade under sun tracking, and the plant
     energy of every strategy and of the fixed plant."""
+    try:
+        day_ = dt.date.fromisoformat(date)
+    except ValueError:
+        raise HTTPException(422, f"date: {date!r} is not a calendar date") from None
+    if not FIRST_YEAR <= day_.year <= LAST_YEAR:
+        raise HTTPException(422, f"date: {date!r} is outside the years {FIRST_YEAR}–{LAST_YEAR}")
     _plant_or_404(service, plant_id)
-    return await anyio.to_thread.run_sync(lambda: service.day(plant_id, date, step_s))
+    return await anyio.to_thread.run_sync(lambda: service.day(plant_id, day_, step_s))
