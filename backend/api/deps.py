@@ -17,7 +17,7 @@ from collections.abc import Iterator
 from typing import Annotated
 
 import anyio
-from fastapi import Depends, HTTPException, Request
+from fastapi import Depends, HTTPException, Query, Request
 from sqlalchemy.orm import Session
 
 from backend.context import ServiceContext
@@ -133,3 +133,11 @@ async def vision_token(request: Request) -> str | None:
 
 SiteTokenDep = Annotated[str, Depends(require_site_token)]
 VisionTokenDep = Annotated[str | None, Depends(vision_token)]
+
+
+RangeStart = Annotated[str, Query(min_length=1, max_length=64,
+                                  description="date (site midnight) or ISO date-time, inclusive")]
+"""The ``start`` of a site's range query (``backend.timestamps.parse_range`` reads it)."""
+RangeEnd = Annotated[str, Query(min_length=1, max_length=64,
+                                description="date or ISO date-time, exclusive")]
+"""The ``end`` of a site's range query."""

@@ -3,13 +3,11 @@ and the faults found (``backend/diagnosis``, ``docs/diagnosis.md``)."""
 
 from __future__ import annotations
 
-from typing import Annotated
-
 import orjson
-from fastapi import APIRouter, HTTPException, Query
+from fastapi import APIRouter, HTTPException
 from fastapi.responses import Response
 
-from backend.api.deps import ContextDep, site_or_404
+from backend.api.deps import ContextDep, RangeEnd, RangeStart, site_or_404
 from backend.diagnosis.service import diagnosis
 from backend.timestamps import parse_range
 
@@ -20,10 +18,8 @@ router = APIRouter(prefix="/api/v1/sites", tags=["diagnosis"])
 def get_diagnosis(
     site_id: str,
     ctx: ContextDep,
-    start: Annotated[str, Query(min_length=1, max_length=64,
-                                description="date (site midnight) or ISO date-time, inclusive")],
-    end: Annotated[str, Query(min_length=1, max_length=64,
-                              description="date or ISO date-time, exclusive")],
+    start: RangeStart,
+    end: RangeEnd,
 ) -> Response:
     """Per local day: sky, measured and expected energy, PR, gains and faults."""
     info = site_or_404(ctx, site_id)

@@ -22,7 +22,7 @@ import orjson
 from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import Response
 
-from backend.api.deps import ContextDep, site_or_404
+from backend.api.deps import ContextDep, RangeEnd, RangeStart, site_or_404
 from backend.api.routes.health import service_version
 from backend.measurements.energy import energy_rows
 from backend.reports import report, report_csv, report_png
@@ -34,10 +34,8 @@ router = APIRouter(prefix="/api/v1/sites", tags=["energy"])
 def get_energy(
     site_id: str,
     ctx: ContextDep,
-    start: Annotated[str, Query(min_length=1, max_length=64,
-                                description="date (site midnight) or ISO date-time, inclusive")],
-    end: Annotated[str, Query(min_length=1, max_length=64,
-                              description="date or ISO date-time, exclusive")],
+    start: RangeStart,
+    end: RangeEnd,
     interval: Literal["hour", "day", "month"] = "day",
     format: Literal["json", "csv"] = "json",
 ) -> Response:
