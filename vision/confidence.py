@@ -3,15 +3,12 @@
 Features of the winning candidate (:func:`features`) are combined by a
 logistic regression whose coefficients were fitted on the DEVELOPMENT split
 only (``benchmarks/bench_vision.py --fit-confidence``: synthetic frames of
-both renderers with development seeds and the development real frames;
-Newton–Raphson with an L2 penalty whose strength is chosen by 5-fold
-cross-validation grouped by frame, lowest held-out log loss — a calibrated
-probability is what a proper scoring rule rewards, Gneiting & Raftery 2007,
-JASA 102:359) and are stored in ``confidence.json`` beside this module. The
-held-out split's reliability table (confidence bins → fraction correct) is in
-``docs/validation-vision.md``. A candidate counts as correct when the sun is
-visible and the winning region's centroid lies within max(3 px, 1°, the
-region's own radius) of the truth.
+both renderers with development seeds and the development real frames; L2
+penalty, Newton–Raphson) and are stored in ``confidence.json`` beside this
+module. The held-out split's reliability table (confidence bins → fraction
+correct) is in ``docs/validation-vision.md``. A candidate counts as correct
+when the sun is visible and the answer lies within max(3 px, 0.5°) of the
+truth.
 
 Every "no sun" answer gets a reason a person can read (:func:`reason`): the
 feature that pulled the probability down the most.

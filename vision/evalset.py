@@ -12,9 +12,6 @@ the blind and the ephemeris-guided paths can be evaluated.
   frame (``overcast=True``: textured overcast, no sun).
 * :func:`synth_frames` — :func:`vision.synth.fisheye_frame` frames (the first
   renderer), clear and thin cloud, 640 × 480.
-* :func:`tracker_rois` — 48 × 48 px regions of :func:`vision.synth.tracker_frame`
-  frames around the predicted sun, clear and under drifting cloud: what the
-  control loop (``sim.tracking``) gives the detector.
 """
 
 from __future__ import annotations
@@ -23,11 +20,10 @@ from collections.abc import Iterator
 from dataclasses import dataclass, replace
 
 import numpy as np
-from numpy.typing import NDArray
 
-from vision.cameras import FisheyeCamera, PinholeCamera
+from vision.cameras import FisheyeCamera
 from vision.skyrender import SkyScene, random_scene, render
-from vision.synth import SynthFrame, fisheye_frame, tracker_frame
+from vision.synth import SynthFrame, fisheye_frame
 
 HELDOUT_SEED = 10_000
 
@@ -98,39 +94,3 @@ def synth_frames(split: str, n: int) -> Iterator[LabelledFrame]:
         if src == "synth/overcast":
             fr = replace(fr, sun_visible=fr.sun_visible and fr.truth["transmittance"] > 0.05)
         yield LabelledFrame(fr, cam, az, el, src, seed)
-
-
-@dataclass(frozen=True)
-class RoiFrame:
-    """A tracker-camera region of interest and its truth (``sun_px`` in ROI pixels)."""
-
-    image: NDArray[np.uint8]
-    sun_px: tuple[float, float]
-    sun_visible: bool
-    px_per_deg: float
-    source: str
-    seed: int
-
-
-def tracker_rois(split: str, n: int, half_px: int = 24) -> Iterator[RoiFrame]:
-    """``n`` ROIs of ``(2 half_px)²`` px cut from 640 × 480 / 67° tracker frames, centred a
-    few pixels off the true sun (the prediction's error); pointing errors up to ±3°, glare
-    0.5–1.2° (the control loop renders 0.8°), cloud (cover 0.3–0.9, τ 0.3–4) on odd seeds.
-    The sun counts as visible when the cloud passes more than 5 % of its light."""
-    for seed in _seeds(split, n, 7_000):
-        rng = np.random.default_rng(seed)
-        h, v = (float(a) for a in rng.uniform(-3.0, 3.0, 2))
-        kw: dict[str, float] = {"glare_deg": float(rng.uniform(0.5, 1.2))}
-        if seed % 2:
-            kw.update(cloud_cover=float(rng.uniform(0.3, 0.9)),
-                      cloud_optical_depth=float(rng.uniform(0.3, 4.0)))
-        fr = tracker_frame(h, v, seed=seed, **kw)  # type: ignore[arg-type]
-        sx, sy = fr.sun_px
-        rows, cols = fr.image.shape[:2]
-        x0 = int(np.clip(round(sx + rng.uniform(-4, 4)) - half_px, 0, cols - 2 * half_px))
-        y0 = int(np.clip(round(sy + rng.uniform(-4, 4)) - half_px, 0, rows - 2 * half_px))
-        img = np.ascontiguousarray(fr.image[y0:y0 + 2 * half_px, x0:x0 + 2 * half_px])
-        visible = fr.sun_visible and fr.truth["transmittance"] > 0.05
-        ppd = float(PinholeCamera().focal_px * np.pi / 180.0)
-        yield RoiFrame(img, (sx - x0, sy - y0), visible, ppd,
-                       "tracker-roi/" + ("cloud" if seed % 2 else "clear"), seed)
