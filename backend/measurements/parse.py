@@ -9,7 +9,9 @@ loggers send) and are stored as whole UTC seconds (a fractional part is dropped)
 
 Raw logger readings carry ADC counts instead of volts and amperes, as the
 Arduino logger of seed 000 produces them; they are converted with the array's
-stored calibration (:class:`Calibration`, seed 000 eqs. 16–19).
+stored calibration (:class:`Calibration`, seed 000 eqs. 16–19). A power-only
+reading (``power_w`` alone) keeps NaN voltage and current; the optional sensor
+fields are :data:`backend.measurements.fields.SENSOR_FIELDS`.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ import numpy as np
 import orjson
 
 from backend.errors import load_json_pairs, repeated_keys
+from backend.measurements.fields import SENSOR_FIELDS, SENSOR_NAMES, normalise_sensors
 from backend.timestamps import READINGS_FROM_S, parse_instants
 
 #: Problems listed per batch in all, and per field (a bounded answer that still shows
@@ -35,7 +38,8 @@ MAX_ERRORS = 50
 MAX_ERRORS_PER_FIELD = 10
 #: A CSV header naming more columns than this is refused before anything else is looked at.
 MAX_COLUMNS = 64
-FIELDS = ("ts", "array", "voltage_v", "current_a", "power_w", "voltage_adc", "current_adc")
+FIELDS = ("ts", "array", "voltage_v", "current_a", "power_w", "voltage_adc", "current_adc",
+          *SENSOR_NAMES)
 _FIELD_SET = frozenset(FIELDS)
 #: Column order of an emonCMS-style row ``[unix_s, array, voltage_v, current_a, power_w]``.
 EMONCMS_ROW = ("unix_s", "array", "voltage_v", "current_a", "power_w")
@@ -103,16 +107,27 @@ class Limits:
 
 @dataclass
 class Batch:
-    """A validated batch: one entry per reading, arrays of equal length."""
+    """A validated batch: one entry per reading, arrays of equal length.
+
+    ``voltage_v``/``current_a`` are NaN on power-only readings; ``sensors`` is
+    ``(n, len(SENSOR_FIELDS))`` with NaN where a field was not sent, or None when
+    no reading of the batch sent any.
+    """
 
     array_ids: np.ndarray  # int64
     ts_s: np.ndarray  # int64, UTC Unix seconds
     voltage_v: np.ndarray
     current_a: np.ndarray
     power_w: np.ndarray
+    sensors: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.ts_s.shape[0])
+
+    @property
+    def power_only(self) -> int:
+        """Readings that carry power_w without voltage and current."""
+        return int(np.count_nonzero(np.isnan(self.voltage_v)))
 
 
 class IngestError(Exception):
@@ -409,10 +424,12 @@ def build_batch(
         (raw & ~both_raw, "voltage_adc", "a raw reading needs both voltage_adc and current_adc"),
         (raw & (v_ok | i_ok), "voltage_adc",
          "send either voltage_v/current_a or voltage_adc/current_adc, not both"),
-        (~raw & ~v_ok & ~p_ok, "voltage_v", "voltage_v is missing"),
-        (~raw & ~v_ok & p_ok, "voltage_v",
-         "voltage_v is missing (power_w alone is not stored: send voltage_v and current_a)"),
-        (~raw & v_ok & ~i_ok, "current_a", "current_a is missing"),
+        (~raw & ~v_ok & ~i_ok & ~p_ok, "power_w",
+         "no electrical value: send voltage_v and current_a, or power_w alone"),
+        (~raw & ~v_ok & i_ok, "voltage_v",
+         "voltage_v is missing (send it with current_a, or power_w alone)"),
+        (~raw & v_ok & ~i_ok, "current_a",
+         "current_a is missing (send it with voltage_v, or power_w alone)"),
     ):
         errors.add_rows(mask, field, lambda r, m=msg: m, "missing")
     if both_raw.any():
@@ -442,8 +459,29 @@ def build_batch(
     errors.add_rows(p_ok & (np.abs(p - vi) > 0.05 * np.abs(vi) + limits.power_tolerance_w),
                     "power_w", lambda r: (f"power_w {p[r]:g} W disagrees with "
                                           f"voltage_v·current_a = {vi[r]:g} W"), "value_error")
+    p_low = limits.max_voltage_v * min(limits.min_current_a, 0.0) - limits.power_tolerance_w
+    p_high = limits.max_voltage_v * limits.max_current_a
+    errors.add_rows(p_ok & ((p < p_low) | (p > p_high)), "power_w", lambda r: (
+        f"power_w {p[r]:g} W outside {p_low:g}..{p_high:g} W (the voltage and current "
+        "limits)"), "value_error")
+    sensors = _sensor_columns(columns, n, errors, text)
     errors.raise_if_any()
-    return Batch(array_ids, ts, v, i, p)
+    return Batch(array_ids, ts, v, i, p, sensors)
+
+
+def _sensor_columns(columns: dict[str, list[Any]], n: int, errors: _Errors, text: bool
+                    ) -> np.ndarray | None:
+    """The optional sensor fields (:data:`SENSOR_FIELDS`) checked against their ranges,
+    as ``(n, k)`` columns with NaN where absent; None when the batch sends none."""
+    if all(columns[f.name].count(None) == n for f in SENSOR_FIELDS):
+        return None
+    out = np.full((n, len(SENSOR_FIELDS)), np.nan)
+    for j, f in enumerate(SENSOR_FIELDS):
+        col, _, _ = _floats(columns[f.name], f.name, errors, text)
+        errors.add_rows((col < f.low) | (col > f.high), f.name, lambda r, c=col, f=f: (
+            f"{f.name} {c[r]:g} outside {f.low:g}..{f.high:g}"), "value_error")
+        out[:, j] = np.where(np.isfinite(col), col, np.nan)
+    return normalise_sensors(out)
 
 
 def _check_rows(n: int, limits: Limits) -> None:
@@ -536,8 +574,9 @@ def parse_csv_batch(
                 more = f" and {len(names) - 5} more" if len(names) > 5 else ""
                 parts.append(f"{label}: {', '.join(_show(h) for h in names[:5])}{more}")
         raise _body_error(422, "header", "value_error",
-                          f"CSV header must name ts, array and voltage_v,current_a[,power_w] "
-                          f"or voltage_adc,current_adc; {'; '.join(parts)}", line=1)
+                          f"CSV header must name ts, array and voltage_v,current_a[,power_w], "
+                          f"power_w alone or voltage_adc,current_adc (optional: "
+                          f"{', '.join(SENSOR_NAMES)}); {'; '.join(parts)}", line=1)
     _check_rows(len(data), limits)
     width = len(header)
     for r, row in enumerate(data):

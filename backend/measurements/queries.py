@@ -17,10 +17,16 @@ import numpy as np
 from sqlalchemy import Connection
 
 from backend.measurements.buckets import ROLLUP_WIDTH_S, grid_ceil, grid_floor
+from backend.measurements.fields import ELECTRICAL, SENSOR_NAMES
 from backend.measurements.rollups import integrate_clipped_wh
 from backend.storage.sqlraw import fetch
 
-QUANTITIES = ("voltage_v", "current_a", "power_w")
+QUANTITIES = ELECTRICAL
+_NS = len(SENSOR_NAMES)
+_RAW_ALL = (
+    f"SELECT ts_s, voltage_v, current_a, power_w, {', '.join(SENSOR_NAMES)} FROM measurements "
+    "WHERE array_id = ? AND source = ? AND ts_s >= ? AND ts_s < ? ORDER BY ts_s"
+)
 
 _RAW = (
     "SELECT ts_s, voltage_v, current_a, power_w FROM measurements "
@@ -33,19 +39,25 @@ _ROLLUP_COUNT = (
     "SELECT COALESCE(SUM(n), 0) FROM measurement_rollups "
     "WHERE array_id = ? AND source = ? AND bucket_s >= ? AND bucket_s < ?"
 )
+# bucket aggregates: k, n, 3 sums, 3 minima, 3 maxima, n_vi, sensor sums, sensor counts
 _ROLLUP_BUCKETS = (
     "SELECT (bucket_s - ?) / ?, SUM(n), SUM(sum_voltage_v), SUM(sum_current_a), SUM(sum_power_w), "
     "MIN(min_voltage_v), MIN(min_current_a), MIN(min_power_w), "
-    "MAX(max_voltage_v), MAX(max_current_a), MAX(max_power_w) FROM measurement_rollups "
+    "MAX(max_voltage_v), MAX(max_current_a), MAX(max_power_w), SUM(n_vi), "
+    f"{', '.join(f'SUM(sum_{f})' for f in SENSOR_NAMES)}, "
+    f"{', '.join(f'SUM(n_{f})' for f in SENSOR_NAMES)} FROM measurement_rollups "
     "WHERE array_id = ? AND source = ? AND bucket_s >= ? AND bucket_s < ? "
     "GROUP BY 1 ORDER BY 1"
 )
 _RAW_BUCKETS = (
     "SELECT (ts_s - ?) / ?, COUNT(*), SUM(voltage_v), SUM(current_a), SUM(power_w), "
-    "MIN(voltage_v), MIN(current_a), MIN(power_w), MAX(voltage_v), MAX(current_a), MAX(power_w) "
+    "MIN(voltage_v), MIN(current_a), MIN(power_w), MAX(voltage_v), MAX(current_a), MAX(power_w), "
+    f"COUNT(voltage_v), {', '.join(f'COALESCE(SUM({f}), 0)' for f in SENSOR_NAMES)}, "
+    f"{', '.join(f'COUNT({f})' for f in SENSOR_NAMES)} "
     "FROM measurements WHERE array_id = ? AND source = ? AND ts_s >= ? AND ts_s < ? "
     "GROUP BY 1 ORDER BY 1"
 )
+_WIDTH = 12 + 2 * _NS  # columns of a bucket row
 _ROLLUP_ENERGY = (
     "SELECT array_id, source, bucket_s, energy_wh, n FROM measurement_rollups "
     "WHERE array_id IN ({ids}) AND bucket_s >= ? AND bucket_s < ? ORDER BY bucket_s"
@@ -72,10 +84,18 @@ def count_rows(conn: Connection, array_id: int, source: int, start: int, end: in
     return n
 
 
-def raw_rows(conn: Connection, array_id: int, source: int, start: int, end: int) -> np.ndarray:
-    """Stored readings ``(ts_s, voltage_v, current_a, power_w)`` in ``[start, end)``."""
-    rows = fetch(conn, _RAW, (array_id, source, start, end))
-    return np.array(rows, np.float64).reshape(-1, 4)
+def raw_rows(conn: Connection, array_id: int, source: int, start: int, end: int,
+             sensors: bool = False) -> np.ndarray:
+    """Stored readings ``(ts_s, voltage_v, current_a, power_w)`` in ``[start, end)``, with
+    the :data:`SENSOR_NAMES` columns after them when ``sensors``; NULL is NaN."""
+    rows = fetch(conn, _RAW_ALL if sensors else _RAW, (array_id, source, start, end))
+    return np.array(rows, np.float64).reshape(-1, 4 + _NS if sensors else 4)
+
+
+def sensor_columns(rows: np.ndarray) -> dict[str, list[object]]:
+    """The sensor columns of :func:`raw_rows` (``sensors=True``) that hold any value."""
+    return {f: rows[:, 4 + j].tolist() for j, f in enumerate(SENSOR_NAMES)
+            if not np.isnan(rows[:, 4 + j]).all()}
 
 
 @dataclass
@@ -87,45 +107,59 @@ class Buckets:
     k: np.ndarray
     n: np.ndarray
     sums: np.ndarray  # (m, 3)
-    mins: np.ndarray
+    mins: np.ndarray  # NaN: no reading of the bucket has the value
     maxs: np.ndarray
+    n_vi: np.ndarray  # readings with voltage and current
+    sensor_sums: np.ndarray  # (m, len(SENSOR_NAMES))
+    sensor_n: np.ndarray
 
     def points(self) -> dict[str, list[object]]:
-        """Columns of the answer: ts, n, mean/min/max per quantity."""
-        n = np.maximum(self.n, 1)
+        """Columns of the answer: ts, n, mean/min/max per quantity (means over the
+        readings that have the value; NaN, null in JSON, where none has it), and the
+        mean of every sensor field some reading of the range carried."""
         out: dict[str, list[object]] = {
             "ts": list(iso_utc(self.origin_s + self.k * self.width_s)), "n": self.n.tolist(),
         }
-        for j, q in enumerate(QUANTITIES):
-            out[q] = (self.sums[:, j] / n).tolist()
-            out[f"{q}_min"] = self.mins[:, j].tolist()
-            out[f"{q}_max"] = self.maxs[:, j].tolist()
+        with np.errstate(invalid="ignore", divide="ignore"):
+            for j, q in enumerate(QUANTITIES):
+                count = self.n if q == "power_w" else self.n_vi
+                out[q] = np.where(count > 0, self.sums[:, j] / count, np.nan).tolist()
+                out[f"{q}_min"] = self.mins[:, j].tolist()
+                out[f"{q}_max"] = self.maxs[:, j].tolist()
+            for j, f in enumerate(SENSOR_NAMES):
+                if self.sensor_n[:, j].any():
+                    c = self.sensor_n[:, j]
+                    out[f] = np.where(c > 0, self.sensor_sums[:, j] / c, np.nan).tolist()
         return out
 
 
 def _buckets_from_rows(rows: list[tuple[object, ...]], origin: int, width: int) -> Buckets:
-    a = np.array(rows, np.float64).reshape(-1, 11)
+    a = np.array(rows, np.float64).reshape(-1, _WIDTH)  # NULL → NaN
     return Buckets(origin, width, a[:, 0].astype(np.int64), a[:, 1].astype(np.int64),
-                   a[:, 2:5], a[:, 5:8], a[:, 8:11])
+                   a[:, 2:5], a[:, 5:8], a[:, 8:11], a[:, 11].astype(np.int64),
+                   a[:, 12:12 + _NS], a[:, 12 + _NS:].astype(np.int64))
 
 
 def _merge(parts: list[Buckets], origin: int, width: int) -> Buckets:
     parts = [p for p in parts if p.k.size]
     if not parts:
-        e = np.zeros((0, 3))
-        return Buckets(origin, width, np.zeros(0, np.int64), np.zeros(0, np.int64), e, e, e)
+        return _buckets_from_rows([], origin, width)
     k = np.concatenate([p.k for p in parts])
     uk, inv = np.unique(k, return_inverse=True)
     m = uk.size
-    n = np.bincount(inv, weights=np.concatenate([p.n for p in parts]), minlength=m)
-    sums = np.zeros((m, 3))
-    mins = np.full((m, 3), np.inf)
-    maxs = np.full((m, 3), -np.inf)
-    s_all = np.concatenate([p.sums for p in parts])
-    np.add.at(sums, inv, s_all)
-    np.minimum.at(mins, inv, np.concatenate([p.mins for p in parts]))
-    np.maximum.at(maxs, inv, np.concatenate([p.maxs for p in parts]))
-    return Buckets(origin, width, uk, n.astype(np.int64), sums, mins, maxs)
+
+    def total(name: str) -> np.ndarray:
+        cols = np.concatenate([getattr(p, name) for p in parts])
+        out = np.zeros((m, *cols.shape[1:]), cols.dtype)
+        np.add.at(out, inv, cols)
+        return out
+
+    mins = np.full((m, 3), np.nan)
+    maxs = np.full((m, 3), np.nan)
+    np.fmin.at(mins, inv, np.concatenate([p.mins for p in parts]))  # NaN: no value
+    np.fmax.at(maxs, inv, np.concatenate([p.maxs for p in parts]))
+    return Buckets(origin, width, uk, total("n"), total("sums"), mins, maxs, total("n_vi"),
+                   total("sensor_sums"), total("sensor_n"))
 
 
 def downsample(conn: Connection, array_id: int, source: int, start: int, end: int,

@@ -20,14 +20,23 @@ from typing import Any
 import numpy as np
 
 from backend.measurements.buckets import ROLLUP_WIDTH_S, bucket_index
+from backend.measurements.fields import SENSOR_NAMES
 
+#: A rollup row. ``n`` counts readings, ``n_vi`` those with voltage and current (the
+#: others are power-only), ``n_<sensor>`` those with that sensor field; sums over
+#: the readings that have the value, extremes NULL (NaN here) when none has it.
 ROLLUP_COLUMNS = (
     "bucket_s", "n", "energy_wh",
     "sum_voltage_v", "sum_current_a", "sum_power_w",
     "min_voltage_v", "min_current_a", "min_power_w",
     "max_voltage_v", "max_current_a", "max_power_w",
-    "first_ts_s", "last_ts_s",
+    "first_ts_s", "last_ts_s", "n_vi",
+    *(f"sum_{f}" for f in SENSOR_NAMES), *(f"n_{f}" for f in SENSOR_NAMES),
 )
+#: Columns a merge of increments adds up.
+ROLLUP_SUMMED = tuple(c for c in ROLLUP_COLUMNS[1:]
+                      if c.startswith(("n", "sum_")) or c == "energy_wh")
+_NS = len(SENSOR_NAMES)
 
 
 def affected_runs(
@@ -65,12 +74,14 @@ def trapezoid_wh(t0: Any, p0: Any, t1: Any, p1: Any, lo: Any, hi: Any) -> Any:
 
 @dataclass
 class SeriesWindow:
-    """Readings of one series over a window, sorted by time."""
+    """Readings of one series over a window, sorted by time (NaN: no value)."""
 
     ts_s: np.ndarray
     voltage_v: np.ndarray
     current_a: np.ndarray
     power_w: np.ndarray
+    #: ``(n, len(SENSOR_NAMES))`` sensor values, or None when no reading has any
+    sensors: np.ndarray | None = None
 
 
 def energy_per_bucket(
@@ -114,11 +125,23 @@ def _stats(
     uk, first = np.unique(ki, return_index=True)
     counts = np.diff(np.concatenate([first, [ki.size]]))
     last = first + counts - 1
+    has_vi = ~np.isnan(cols[0])
     out = [counts.tolist()]
-    out += [np.add.reduceat(c, first).tolist() for c in cols]
-    out += [np.minimum.reduceat(c, first).tolist() for c in cols]
-    out += [np.maximum.reduceat(c, first).tolist() for c in cols]
-    out += [ts[first].tolist(), ts[last].tolist()]
+    if has_vi.all():
+        out += [np.add.reduceat(c, first).tolist() for c in cols]
+    else:  # power-only readings: sums over the others, extremes NaN where none has a value
+        out += [np.add.reduceat(np.nan_to_num(c), first).tolist() for c in cols]
+    out += [np.fmin.reduceat(c, first).tolist() for c in cols]
+    out += [np.fmax.reduceat(c, first).tolist() for c in cols]
+    out += [ts[first].tolist(), ts[last].tolist(), np.add.reduceat(has_vi, first).tolist()]
+    if w.sensors is None:
+        out += [[0.0] * uk.size] * _NS + [[0] * uk.size] * _NS
+    else:
+        s = w.sensors[inside]
+        present = ~np.isnan(s)
+        sums = np.add.reduceat(np.where(present, s, 0.0), first, axis=0)
+        ns = np.add.reduceat(present.astype(np.int64), first, axis=0)
+        out += [sums[:, j].tolist() for j in range(_NS)] + [ns[:, j].tolist() for j in range(_NS)]
     return uk, out
 
 
@@ -193,9 +216,19 @@ def _energy_only_row(k: int, energy_wh: float, phase_s: int, width_s: int
                      ) -> list[float | int]:
     """A rollup increment for a bucket whose energy changes but that gains no reading:
     ``n = 0``, neutral sums and extremes, so merging it changes only the energy."""
-    inf = float("inf")
+    nan = float("nan")  # stored as NULL, which a merge ignores
     return [k * width_s + phase_s, 0, energy_wh, 0.0, 0.0, 0.0,
-            inf, inf, inf, -inf, -inf, -inf, 2**62, -(2**62)]
+            nan, nan, nan, nan, nan, nan, 2**62, -(2**62), 0, *[0.0] * _NS, *[0] * _NS]
+
+
+def _fmin(a: float, b: float) -> float:
+    """min ignoring NaN (no value) on either side, as the SQL merge."""
+    return b if a != a or b < a else a
+
+
+def _fmax(a: float, b: float) -> float:
+    """max ignoring NaN (no value) on either side, as the SQL merge."""
+    return b if a != a or b > a else a
 
 
 def _increment_rows_small(
@@ -214,19 +247,28 @@ def _increment_rows_small(
         for k, e in _interval_wh(prev[0], prev[1], nxt[0], nxt[1], phase_s, max_gap_s, width_s):
             energy[k] = energy.get(k, 0.0) - e
     rows: dict[int, list[float | int]] = {}
-    for t, v, c, p in zip(ts, vs, cs, ps, strict=True):
+    sensors = w.sensors.tolist() if w.sensors is not None else [None] * len(ts)
+    for t, v, c, p, sv in zip(ts, vs, cs, ps, sensors, strict=True):
         k = (t - phase_s) // width_s
         r = rows.get(k)
         if r is None:
-            rows[k] = [k * width_s + phase_s, 1, 0.0, v, c, p, v, c, p, v, c, p, t, t]
-            continue
+            r = rows[k] = [k * width_s + phase_s, 0, 0.0, 0.0, 0.0, 0.0, v, c, p, v, c, p, t, t,
+                           0, *[0.0] * _NS, *[0] * _NS]
+        else:
+            r[6], r[7], r[8] = _fmin(r[6], v), _fmin(r[7], c), min(r[8], p)
+            r[9], r[10], r[11] = _fmax(r[9], v), _fmax(r[10], c), max(r[11], p)
+            r[12], r[13] = min(r[12], t), max(r[13], t)
         r[1] += 1
-        r[3] += v
-        r[4] += c
         r[5] += p
-        r[6], r[7], r[8] = min(r[6], v), min(r[7], c), min(r[8], p)
-        r[9], r[10], r[11] = max(r[9], v), max(r[10], c), max(r[11], p)
-        r[12], r[13] = min(r[12], t), max(r[13], t)
+        if v == v:  # not a power-only reading
+            r[3] += v
+            r[4] += c
+            r[14] += 1
+        if sv is not None:
+            for j, x in enumerate(sv):
+                if x == x:
+                    r[15 + j] += x
+                    r[15 + _NS + j] += 1
     for k, e in energy.items():
         if e == 0.0:
             continue

@@ -30,8 +30,10 @@ import numpy as np
 from sqlalchemy import Connection, Engine
 
 from backend.measurements.buckets import ROLLUP_WIDTH_S
+from backend.measurements.fields import SENSOR_NAMES
 from backend.measurements.rollups import (
     ROLLUP_COLUMNS,
+    ROLLUP_SUMMED,
     SeriesWindow,
     affected_runs,
     increment_rows,
@@ -52,9 +54,11 @@ class MeasurementJob:
     array_ids: np.ndarray
     source: int
     ts_s: np.ndarray
-    voltage_v: np.ndarray
+    voltage_v: np.ndarray  # NaN: a power-only reading (stored as NULL)
     current_a: np.ndarray
     power_w: np.ndarray
+    #: ``(n, len(SENSOR_FIELDS))`` optional sensor values, NaN where absent; None: none at all
+    sensors: np.ndarray | None = None
     future: Future[tuple[int, int]] = field(default_factory=Future)
 
     def __len__(self) -> int:
@@ -72,6 +76,13 @@ class MeasurementJob:
             self.array_ids, self.ts_s = self.array_ids[order], self.ts_s[order]
             self.voltage_v, self.current_a = self.voltage_v[order], self.current_a[order]
             self.power_w = self.power_w[order]
+            if self.sensors is not None:
+                self.sensors = self.sensors[order]
+
+    def columns(self) -> tuple[np.ndarray, ...]:
+        """Value columns in storage order: voltage, current, power, then the sensors."""
+        base = (self.ts_s, self.voltage_v, self.current_a, self.power_w)
+        return base if self.sensors is None else (*base, *self.sensors.T)
 
 
 @dataclass
@@ -87,7 +98,7 @@ class _Sql:
 
     def __init__(self, dialect: str) -> None:
         self.pg = dialect == "postgresql"
-        self._values: dict[tuple[int, int], str] = {}
+        self._values: dict[tuple[int, int, int], str] = {}
         ph = "%s" if self.pg else "?"
         cols = ", ".join(ROLLUP_COLUMNS)
         updates = ", ".join(f"{c} = excluded.{c}" for c in ROLLUP_COLUMNS[1:])
@@ -98,10 +109,14 @@ class _Sql:
         )
         least, greatest = ("LEAST", "GREATEST") if self.pg else ("MIN", "MAX")
         t = "measurement_rollups"
+
+        def extreme(fn: str, c: str) -> str:  # NULL (no value yet) on either side is ignored
+            return f"{c} = {fn}(COALESCE({t}.{c}, excluded.{c}), COALESCE(excluded.{c}, {t}.{c}))"
+
         merge = ", ".join(
-            [f"{c} = {t}.{c} + excluded.{c}" for c in ROLLUP_COLUMNS[1:6]]
-            + [f"{c} = {least}({t}.{c}, excluded.{c})" for c in ROLLUP_COLUMNS[6:9]]
-            + [f"{c} = {greatest}({t}.{c}, excluded.{c})" for c in ROLLUP_COLUMNS[9:12]]
+            [f"{c} = {t}.{c} + excluded.{c}" for c in ROLLUP_SUMMED]
+            + [extreme(least, c) for c in ROLLUP_COLUMNS if c.startswith("min_")]
+            + [extreme(greatest, c) for c in ROLLUP_COLUMNS if c.startswith("max_")]
             + [f"first_ts_s = {least}({t}.first_ts_s, excluded.first_ts_s)",
                f"last_ts_s = {greatest}({t}.last_ts_s, excluded.last_ts_s)"]
         )
@@ -114,54 +129,81 @@ class _Sql:
         self.before = f"SELECT ts_s, power_w {series} AND ts_s < {ph} ORDER BY ts_s DESC LIMIT 1"
         self.after = f"SELECT ts_s, power_w {series} AND ts_s >= {ph} ORDER BY ts_s LIMIT 1"
         self.window = (
-            "SELECT ts_s, voltage_v, current_a, power_w FROM measurements "
+            f"SELECT ts_s, voltage_v, current_a, power_w, {', '.join(SENSOR_NAMES)} "
+            "FROM measurements "
             f"WHERE array_id = {ph} AND source = {ph} AND ts_s >= {ph} AND ts_s <= {ph} "
             "ORDER BY ts_s"
         )
         self.drop_diagnosis = (  # backend/diagnosis/service.py caches per local day
             "DELETE FROM diagnosis_days WHERE site_id = (SELECT site_id FROM arrays WHERE id = "
             f"{ph}) AND day_end_s > {ph} AND day_start_s <= {ph}")
-        self.insert = (  # PostgreSQL; SQLite: _values_insert
-            "INSERT INTO measurements (array_id, source, ts_s, voltage_v, current_a, power_w) "
-            "SELECT * FROM unnest(%s::int[], %s::smallint[], %s::bigint[], "
-            "%s::float8[], %s::float8[], %s::float8[]) ON CONFLICT DO NOTHING"
-        )
-
     def insert_job(self, cur: Any, job: MeasurementJob) -> int:
+        """Insert a job's readings (``ON CONFLICT DO NOTHING``); how many were new.
+
+        A job without sensor values names only the electrical columns (the others
+        default to NULL), so the common case binds 5 values a reading, not 11.
+        NaN is NULL at rest: SQLite stores a bound NaN as NULL itself, PostgreSQL
+        would keep a float NaN, so NaN is sent to it as None.
+        """
         n = len(job)
+        names = _INSERT_COLUMNS[:5] if job.sensors is None else _INSERT_COLUMNS
+        cols = (job.array_ids, *job.columns())
         if self.pg:
-            cur.execute(self.insert, (
-                job.array_ids.tolist(), [job.source] * n, job.ts_s.tolist(),
-                job.voltage_v.tolist(), job.current_a.tolist(), job.power_w.tolist(),
-            ))
+            types = ["int", "bigint", *["float8"] * (len(names) - 2)]
+            aliases = ", ".join(f"c{j}" for j in range(1, len(names)))
+            sql = (f"INSERT INTO measurements (array_id, source, {', '.join(names[1:])}) "
+                   f"SELECT a, {int(job.source)}, {aliases} "
+                   f"FROM unnest({', '.join(f'%s::{t}[]' for t in types)}) AS u(a, {aliases}) "
+                   "ON CONFLICT DO NOTHING")
+            cur.execute(sql, [_sql_list(c) for c in cols])
             return int(cur.rowcount)
         # SQLite: one multi-row INSERT per chunk, not executemany. executemany steps
         # (and releases the GIL) once per row, and each time the writer waits to get
         # the GIL back from the event loop (up to sys.getswitchinterval(), 5 ms): a
         # 3-4x slower insert under load. One statement steps once per chunk.
-        flat: list[Any] = [None] * (5 * n)
-        for j, col in enumerate((job.array_ids, job.ts_s, job.voltage_v, job.current_a,
-                                 job.power_w)):
-            flat[j::5] = col.tolist()
+        width = len(names)
+        flat: list[Any] = [None] * (width * n)
+        for j, col in enumerate(cols):
+            flat[j::width] = col.tolist()
+        chunk = SQLITE_CHUNK_ROWS if width == 5 else SQLITE_CHUNK_ROWS // 2
         inserted = 0
-        for k in range(0, n, SQLITE_CHUNK_ROWS):
-            rows = min(SQLITE_CHUNK_ROWS, n - k)
-            cur.execute(self._values_insert(rows, int(job.source)), flat[5 * k:5 * (k + rows)])
+        for k in range(0, n, chunk):
+            rows = min(chunk, n - k)
+            cur.execute(self._values_insert(rows, int(job.source), names),
+                        flat[width * k:width * (k + rows)])
             inserted += cur.rowcount
         return inserted
 
-    def _values_insert(self, rows: int, source: int) -> str:
+    def _values_insert(self, rows: int, source: int, names: tuple[str, ...]) -> str:
         """``INSERT … VALUES (…), (…) …`` of ``rows`` readings of one source (memoised)."""
-        key = (rows, source)
+        key = (rows, source, len(names))
         sql = self._values.get(key)
         if sql is None:
             if len(self._values) >= 64:  # odd batch sizes: keep the memo small
                 self._values.clear()
-            one = f"(?, {source}, ?, ?, ?, ?)"
+            one = f"(?, {source}, {', '.join(['?'] * (len(names) - 1))})"
             sql = self._values[key] = (
-                "INSERT INTO measurements (array_id, source, ts_s, voltage_v, current_a, "
-                f"power_w) VALUES {', '.join([one] * rows)} ON CONFLICT DO NOTHING")
+                f"INSERT INTO measurements (array_id, source, {', '.join(names[1:])}) "
+                f"VALUES {', '.join([one] * rows)} ON CONFLICT DO NOTHING")
         return sql
+
+
+#: Columns of an insert, ``array_id`` first (``source`` is a literal of the statement).
+_INSERT_COLUMNS = ("array_id", "ts_s", "voltage_v", "current_a", "power_w", *SENSOR_NAMES)
+
+
+def _sql_list(col: np.ndarray) -> list[Any]:
+    """A column as a Python list for the driver, NaN as None (NULL)."""
+    if col.dtype.kind == "f" and np.isnan(col).any():
+        out = col.astype(object)
+        out[np.isnan(col)] = None
+        return out.tolist()
+    return col.tolist()
+
+
+def _nan_to_none(rows: list[tuple[Any, ...]]) -> list[tuple[Any, ...]]:
+    """Rollup rows with NaN (an aggregate of no value) as None, for both drivers."""
+    return [tuple(None if type(x) is float and x != x else x for x in r) for r in rows]
 
 
 class Writer:
@@ -347,7 +389,7 @@ class Writer:
     def _note_touched(
         job: MeasurementJob, touched: dict[tuple[int, int], list[tuple[np.ndarray, ...]]]
     ) -> None:
-        cols = (job.ts_s, job.voltage_v, job.current_a, job.power_w)
+        cols = job.columns()
         ids = job.array_ids
         if ids.size and (ids == ids[0]).all():
             touched.setdefault((int(ids[0]), job.source), []).append(cols)
@@ -380,10 +422,16 @@ class Writer:
         ts = np.concatenate([p[0] for p in parts])
         if around is not None:
             uts, first = np.unique(ts, return_index=True)  # first write of a second wins
-            cols = [np.concatenate([p[j] for p in parts])[first] for j in (1, 2, 3)]
-            rows = increment_rows(around[0], around[1], SeriesWindow(uts, *cols),
+            v, i, p = (np.concatenate([part[j] for part in parts])[first] for j in (1, 2, 3))
+            sensors = None
+            if any(len(p) > 4 for p in parts):
+                sensors = np.concatenate([
+                    np.column_stack(part[4:]) if len(part) > 4
+                    else np.full((part[0].size, len(SENSOR_NAMES)), np.nan) for part in parts
+                ])[first]
+            rows = increment_rows(around[0], around[1], SeriesWindow(uts, v, i, p, sensors),
                                   self.phase_of_array(key[0]), self.max_gap_s)
-            cur.executemany(self._sql.merge_rollup, [(*key, *r) for r in rows])
+            cur.executemany(self._sql.merge_rollup, [(*key, *r) for r in _nan_to_none(rows)])
             return
         self.rollup_refreshes += 1
         self._refresh_rollups(cur, key[0], key[1], ts)
@@ -401,9 +449,10 @@ class Writer:
             fetched = cur.fetchall()
             if not fetched:
                 continue
-            data = np.array(fetched, dtype=np.float64)
-            window = SeriesWindow(data[:, 0].astype(np.int64), data[:, 1], data[:, 2], data[:, 3])
+            data = np.array(fetched, dtype=np.float64)  # NULL → NaN
+            window = SeriesWindow(data[:, 0].astype(np.int64), data[:, 1], data[:, 2], data[:, 3],
+                                  data[:, 4:])
             out.extend((array_id, source, *row)
                        for row in rollup_rows(window, k_first, k_last, phase, gap))
         if out:
-            cur.executemany(self._sql.upsert_rollup, out)
+            cur.executemany(self._sql.upsert_rollup, _nan_to_none(out))

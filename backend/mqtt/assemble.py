@@ -11,8 +11,9 @@ topic of its own, as a bare number, without a timestamp, every few seconds.
   samples of an already stored minute (counted, not stored, not errors);
 - a minute still open ``grace_s`` after it ended closes then: with voltage and
   current it is a reading (``power_w`` left out, so the ingest rule makes it
-  voltage·current); without either it is rejected with the names of the
-  missing quantities;
+  voltage·current); with power alone it is a power-only reading (a meter or an
+  inverter that publishes only power); with one of voltage and current but not
+  the other it is rejected with the name of the missing quantity;
 - :meth:`MinuteAssembler.flush` closes everything still open (at shutdown).
 """
 
@@ -39,7 +40,8 @@ def parse_value(payload: bytes) -> float:
 
 @dataclass
 class Closed:
-    """A closed minute: a reading (``values`` has voltage_v and current_a) or a rejection."""
+    """A closed minute: a reading (``values`` has voltage_v and current_a, or power_w
+    alone) or a rejection (``missing`` names what it lacks)."""
 
     site_id: str
     array: str
@@ -97,7 +99,10 @@ class MinuteAssembler:
 
     def _close(self, key: tuple[str, str]) -> Closed:
         o = self._open.pop(key)
-        missing = [q for q, f in QUANTITIES.items() if f not in o.values and f != "power_w"]
+        if set(o.values) == {"power_w"}:
+            missing = []  # power-only
+        else:
+            missing = [q for q, f in QUANTITIES.items() if f not in o.values and f != "power_w"]
         if not missing:
             self._done[key] = o.minute_s
         return Closed(key[0], key[1], o.minute_s, o.values, missing, o.topics)

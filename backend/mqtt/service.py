@@ -291,7 +291,8 @@ class MqttService:
             self._reject(site_id, result)
             return
         job = MeasurementJob(result.array_ids, SOURCE_CODES["measured"], result.ts_s,
-                             result.voltage_v, result.current_a, result.power_w)
+                             result.voltage_v, result.current_a, result.power_w,
+                             result.sensors)
         task = asyncio.create_task(self._committed(site_id, topic, self.ctx.writer.submit(job),
                                                    payload))
         self._in_flight.add(task)

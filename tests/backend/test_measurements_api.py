@@ -85,7 +85,9 @@ def test_422_names_row_and_field(client: httpx.Client, live_server: LiveServer,
 def test_missing_fields_and_bad_shapes(client: httpx.Client, live_server: LiveServer) -> None:
     tok = live_server.write_token
     r = post(client, tok, {"readings": [{"ts": "2023-01-04T12:00:00Z", "array": "fixed"}]})
-    assert r.status_code == 422 and r.json()["detail"][0]["field"] == "voltage_v"
+    first = r.json()["detail"][0]
+    assert r.status_code == 422 and first["field"] == "power_w"
+    assert "voltage_v and current_a, or power_w alone" in first["msg"]
     r = post(client, tok, {"readings": [1, 2]})
     assert r.status_code == 422 and "object" in r.json()["detail"][0]["msg"]
     r = post(client, tok, {"rows": []})

@@ -96,6 +96,10 @@ def test_single_values_are_assembled_per_minute() -> None:
     (incomplete,) = a.add("s", "fixed", "power", 10.0, "p", t + 185)
     assert incomplete.missing == ["current"]
     assert [c.minute_s for c in a.flush()] == [int(t) + 180]
+    # power alone (a meter, an inverter): after the grace a power-only reading
+    a.add("s", "fixed", "power", 80.0, "p", t + 241)
+    (power_only,) = a.due(t + 305)
+    assert power_only.values == {"power_w": 80.0} and not power_only.missing
 
 
 def test_single_values_must_be_plain_numbers() -> None:
@@ -280,6 +284,17 @@ def test_a_published_reading_is_stored_once(service: tuple[str, str]) -> None:
         assert time.monotonic() < deadline, "the repeated reading was never counted"
         time.sleep(0.2)
     assert len(stored(base_url, "tracker", iso(t0), iso(t1 + dt.timedelta(minutes=1)), 2)) == 2
+
+
+def test_a_power_only_reading_with_sensor_fields_is_stored(service: tuple[str, str]) -> None:
+    """MQTT takes what HTTP takes: power alone and the optional sensor fields."""
+    base_url, prefix = service
+    t0 = minute(-14)
+    publish(f"{prefix}/{SITE}/fixed/state", json.dumps({
+        "ts": iso(t0), "power_w": 310.5, "poa_irradiance_w_m2": 640.0, "temp_module_c": 41.5}))
+    (p,) = stored(base_url, "fixed", iso(t0), iso(t0 + dt.timedelta(minutes=1)), 1)
+    assert (p["voltage_v"], p["current_a"], p["power_w"]) == (None, None, 310.5)
+    assert (p["poa_irradiance_w_m2"], p["temp_module_c"]) == (640.0, 41.5)
 
 
 @pytest.mark.parametrize(("where", "payload", "reason"), [

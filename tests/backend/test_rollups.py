@@ -5,7 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from backend.measurements.fields import SENSOR_NAMES
 from backend.measurements.rollups import (
+    ROLLUP_COLUMNS,
+    ROLLUP_SUMMED,
     SeriesWindow,
     affected_runs,
     energy_per_bucket,
@@ -15,12 +18,21 @@ from backend.measurements.rollups import (
 )
 
 
-def _series(seed: int, n: int = 400) -> SeriesWindow:
+def _series(seed: int, n: int = 400, mixed: bool = False) -> SeriesWindow:
+    """A series with one long gap; ``mixed``: a third of the readings power-only and
+    sensor fields present on a random half of the readings, each field apart."""
     rng = np.random.default_rng(seed)
     ts = np.cumsum(rng.integers(20, 200, n)).astype(np.int64) + 1_000_000
     ts[150:] += 2000  # one long gap
     p = 500 * rng.random(n)
-    return SeriesWindow(ts, np.full(n, 25.0), p / 25.0, p)
+    v, i = np.full(n, 25.0) + rng.random(n), p / 25.0
+    if not mixed:
+        return SeriesWindow(ts, v, i, p)
+    power_only = rng.random(n) < 1 / 3
+    v[power_only] = i[power_only] = np.nan
+    sensors = 100 * rng.random((n, len(SENSOR_NAMES)))
+    sensors[rng.random(sensors.shape) < 0.5] = np.nan
+    return SeriesWindow(ts, v, i, p, sensors)
 
 
 def _dense_wh(w: SeriesWindow, t0: float, t1: float, max_gap_s: float) -> float:
@@ -51,31 +63,64 @@ def test_buckets_add_up_to_the_dense_integral(phase: int) -> None:
 
 
 def _merge(stored: dict, incs: list) -> None:
-    """Apply increments as the writer's SQL upsert does."""
+    """Apply increments as the writer's SQL upsert does (NaN: NULL, ignored by extremes)."""
+    col = {c: j for j, c in enumerate(ROLLUP_COLUMNS)}
     for inc in incs:
         b = inc[0]
         if b not in stored:
             stored[b] = list(inc)
             continue
         s = stored[b]
-        s[1:6] = [x + y for x, y in zip(s[1:6], inc[1:6], strict=True)]
-        s[6:9] = [min(x, y) for x, y in zip(s[6:9], inc[6:9], strict=True)]
-        s[9:12] = [max(x, y) for x, y in zip(s[9:12], inc[9:12], strict=True)]
-        s[12], s[13] = min(s[12], inc[12]), max(s[13], inc[13])
+        for c in ROLLUP_SUMMED:
+            s[col[c]] += inc[col[c]]
+        for c, j in col.items():
+            if c.startswith(("min_", "max_")):
+                s[j] = (np.fmin if c.startswith("min_") else np.fmax)(s[j], inc[j])
+        s[col["first_ts_s"]] = min(s[col["first_ts_s"]], inc[col["first_ts_s"]])
+        s[col["last_ts_s"]] = max(s[col["last_ts_s"]], inc[col["last_ts_s"]])
 
 
 def _part(w: SeriesWindow, sel: slice | np.ndarray) -> SeriesWindow:
-    return SeriesWindow(*(a[sel] for a in (w.ts_s, w.voltage_v, w.current_a, w.power_w)))
+    return SeriesWindow(*(a[sel] for a in (w.ts_s, w.voltage_v, w.current_a, w.power_w)),
+                        None if w.sensors is None else w.sensors[sel])
 
 
+def test_rollups_of_power_only_and_sensor_readings_match_direct_aggregates() -> None:
+    """Means over the readings that have a value: ``n_vi`` and per-sensor counts and sums,
+    extremes of voltage and current over the readings that have them, checked per hour."""
+    w = _series(4, mixed=True)
+    k0, k1 = int(w.ts_s[0]) // 3600, int(w.ts_s[-1]) // 3600
+    col = {c: j for j, c in enumerate(ROLLUP_COLUMNS)}
+    rows = rollup_rows(w, k0, k1, 0, 600)
+    assert rows
+    for r in rows:
+        sel = w.ts_s // 3600 * 3600 == r[0]
+        vi = sel & ~np.isnan(w.voltage_v)
+        assert r[col["n"]] == sel.sum() and r[col["n_vi"]] == vi.sum()
+        assert r[col["sum_voltage_v"]] == pytest.approx(w.voltage_v[vi].sum())
+        assert r[col["sum_power_w"]] == pytest.approx(w.power_w[sel].sum())
+        if vi.any():
+            assert r[col["min_current_a"]] == w.current_a[vi].min()
+            assert r[col["max_voltage_v"]] == w.voltage_v[vi].max()
+        else:
+            assert np.isnan(r[col["min_current_a"]]) and np.isnan(r[col["max_voltage_v"]])
+        for j, f in enumerate(SENSOR_NAMES):
+            has = sel & ~np.isnan(w.sensors[:, j])
+            assert r[col[f"n_{f}"]] == has.sum()
+            assert r[col[f"sum_{f}"]] == pytest.approx(w.sensors[has, j].sum())
+    assert sum(r[col["n_vi"]] for r in rows) < sum(r[col["n"]] for r in rows)  # some power-only
+
+
+@pytest.mark.parametrize("mixed", [False, True], ids=["vi", "power_only_and_sensors"])
 @pytest.mark.parametrize("hole", [(250, 400), (0, 120), (100, 103), (140, 160), (399, 400),
                                   (0, 1), (148, 152), (10, 15)])
-def test_increments_equal_a_recomputation(hole: tuple[int, int]) -> None:
+def test_increments_equal_a_recomputation(hole: tuple[int, int], mixed: bool) -> None:
     """Fill a hole (or the end, or the start) of a series: merged increments = recomputed.
 
-    Holes of up to ``SMALL`` readings take the plain-Python path, longer ones NumPy's.
+    Holes of up to ``SMALL`` readings take the plain-Python path, longer ones NumPy's;
+    ``mixed`` series hold power-only readings and sensor fields.
     """
-    w = _series(2)
+    w = _series(2, mixed=mixed)
     a, b = hole
     keep = np.r_[0:a, b:w.ts_s.size]
     have = _part(w, keep)
@@ -89,7 +134,7 @@ def test_increments_equal_a_recomputation(hole: tuple[int, int]) -> None:
     full = rollup_rows(w, k0, k1, 0, 600)
     assert sorted(stored) == [r[0] for r in full]
     for r in full:
-        assert stored[r[0]] == pytest.approx(list(r), rel=1e-9, abs=1e-9)
+        assert stored[r[0]] == pytest.approx(list(r), rel=1e-9, abs=1e-9, nan_ok=True)
 
 
 def test_affected_runs_cover_the_neighbours() -> None:

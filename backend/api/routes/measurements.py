@@ -35,6 +35,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 from backend.api.deps import ContextDep, check_site_token, site_or_404
 from backend.context import ServiceContext
 from backend.measurements.export import influx_lines
+from backend.measurements.fields import SENSOR_FIELDS
 from backend.measurements.parse import Batch, IngestError, Limits, parse_csv_batch, parse_json_batch
 from backend.measurements.queries import (
     QUANTITIES,
@@ -42,6 +43,7 @@ from backend.measurements.queries import (
     downsample,
     iso_utc,
     raw_rows,
+    sensor_columns,
 )
 from backend.measurements.writer import MeasurementJob
 from backend.storage.tables import SOURCE_CODES
@@ -53,28 +55,38 @@ router = APIRouter(prefix="/api/v1/sites", tags=["measurements"])
 _JSON = "application/json"
 _OFFLOAD_BYTES = 32 * 1024  # parse bigger bodies in a worker process (or thread)
 
+def _none_of(*names: str) -> dict[str, Any]:
+    return {"not": {"anyOf": [{"required": [n]} for n in names]}}
+
+
 _READING: dict[str, Any] = {
     "type": "object", "required": ["ts", "array"], "additionalProperties": False,
-    "oneOf": [{"required": ["voltage_v", "current_a"]},
-              {"required": ["voltage_adc", "current_adc"]}],
+    "oneOf": [{"required": ["voltage_v", "current_a"], **_none_of("voltage_adc", "current_adc")},
+              {"required": ["voltage_adc", "current_adc"], **_none_of("voltage_v", "current_a")},
+              {"required": ["power_w"], "description": "a power-only logger",
+               **_none_of("voltage_v", "current_a", "voltage_adc", "current_adc")}],
     "properties": {
         "ts": {"type": "string", "format": "date-time", "minLength": 1,
                "description": "ISO 8601 with UTC offset"},
         "array": {"type": "string", "minLength": 1, "example": "tracker"},
         "voltage_v": {"type": "number"}, "current_a": {"type": "number"},
-        "power_w": {"type": "number", "description": "optional; voltage_v·current_a when absent"},
+        "power_w": {"type": "number", "description": "voltage_v·current_a when absent; "
+                    "alone (no voltage and current) from a power-only logger"},
         "voltage_adc": {"type": "integer",
                         "description": "raw divider ADC count (seed 000 eq. 19)"},
         "current_adc": {"type": "integer",
                         "description": "raw ACS712 ADC count (seed 000 eq. 17)"},
+        **{f.name: {"type": "number", "minimum": f.low, "maximum": f.high,
+                    "description": f"optional: {f.meaning}"} for f in SENSOR_FIELDS},
     },
 }
 _EMONCMS_ROW: dict[str, Any] = {
     "type": "array", "minItems": 4, "maxItems": 5,
-    "description": "[unix_s, array, voltage_v, current_a, power_w]; power_w may be left off",
+    "description": "[unix_s, array, voltage_v, current_a, power_w]; power_w may be left off, "
+                   "or voltage_v and current_a null for a power-only logger",
     "prefixItems": [{"type": "number", "description": "Unix time [s]"},
-                    {"type": "string", "minLength": 1}, {"type": "number"}, {"type": "number"},
-                    {"type": "number"}],
+                    {"type": "string", "minLength": 1}, {"type": ["number", "null"]},
+                    {"type": ["number", "null"]}, {"type": "number"}],
 }
 _POST_DOC: dict[str, Any] = {
     "requestBody": {
@@ -160,7 +172,7 @@ async def ingest(ctx: ServiceContext, site_id: str, headers: Mapping[str, str],
     except IngestError as exc:
         return exc.status, orjson.dumps({"detail": exc.errors}), {}
     job = MeasurementJob(batch.array_ids, SOURCE_CODES["measured"], batch.ts_s,
-                         batch.voltage_v, batch.current_a, batch.power_w)
+                         batch.voltage_v, batch.current_a, batch.power_w, batch.sensors)
     try:
         accepted, duplicates = await asyncio.wrap_future(ctx.writer.submit(job))
     except Exception as exc:  # nothing was committed: the logger should send it again
@@ -169,9 +181,16 @@ async def ingest(ctx: ServiceContext, site_id: str, headers: Mapping[str, str],
                                             "nothing was stored, send the batch again"}), {
             "Retry-After": "5"}
     last_s = int(batch.ts_s.max())
-    return 200, orjson.dumps({"accepted": accepted, "duplicates": duplicates,
+    answer: dict[str, Any] = {"accepted": accepted, "duplicates": duplicates,
                               "stored_through": iso_utc(np.array([last_s]))[0],
-                              "stored_through_unix_s": last_s}), {}
+                              "stored_through_unix_s": last_s}
+    power_only = batch.power_only
+    if power_only:
+        answer["power_only"] = power_only
+        answer["note"] = (f"{power_only} of {len(batch)} readings carry power_w without voltage "
+                          "and current: their energy rests on the logger's power_w alone, "
+                          "unchecked against voltage·current")
+    return 200, orjson.dumps(answer), {}
 
 
 def document_ingest(schema: dict[str, Any]) -> dict[str, Any]:
@@ -209,7 +228,12 @@ def document_ingest(schema: dict[str, Any]) -> dict[str, Any]:
                     "accepted": {"type": "integer"}, "duplicates": {"type": "integer"},
                     "stored_through": {"type": "string", "format": "date-time",
                                        "description": "latest reading of the batch (UTC)"},
-                    "stored_through_unix_s": {"type": "integer"}}}}}},
+                    "stored_through_unix_s": {"type": "integer"},
+                    "power_only": {"type": "integer", "description": (
+                        "readings of the batch with power_w but no voltage and current "
+                        "(present only when there are some)")},
+                    "note": {"type": "string", "description": (
+                        "what the energy of power-only readings rests on")}}}}}},
             **{str(c): {"description": d} for c, d in (
                 (400, "a corrupt gzip body"),
                 (401, "no or unknown token"), (403, "the token is for another site"),
@@ -274,9 +298,19 @@ def _range(info: Any, start: str, end: str) -> tuple[int, int]:
     return int(t0.timestamp()), int(t1.timestamp())
 
 
+def _blank_nan(col: list[Any]) -> list[Any]:
+    if not col or type(col[0]) is str:
+        return col
+    if not np.isnan(np.asarray(col, np.float64)).any():
+        return col
+    return ["" if x != x else x for x in col]
+
+
 def _csv_lines(header: list[str], cols: list[list[Any]], chunk_rows: int = 20_000
                ) -> Iterator[str]:
-    """The CSV text in pieces of ``chunk_rows`` rows (a year is not one string in memory)."""
+    """The CSV text in pieces of ``chunk_rows`` rows (a year is not one string in memory);
+    a value that is not there (NaN: a power-only reading's voltage) is an empty cell."""
+    cols = [_blank_nan(c) for c in cols]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(header)
@@ -337,11 +371,14 @@ def get_measurements(
             raise HTTPException(422, f"{n} readings in the range; pass max_points (buckets) or "
                                      "format=csv or format=influx for all of them")
         if limit is None or n <= limit:
-            rows = raw_rows(conn, arr.array_id, src, t0, t1)
+            rows = raw_rows(conn, arr.array_id, src, t0, t1, sensors=src == SOURCE_CODES[
+                "measured"])
             bucket_s = 0
             cols: dict[str, list[Any]] = {"ts": iso_utc(rows[:, 0].astype(np.int64))}
             for j, q in enumerate(QUANTITIES):
                 cols[q] = rows[:, j + 1].tolist()
+            if rows.shape[1] > 4:
+                cols.update(sensor_columns(rows))
         else:
             b = downsample(conn, arr.array_id, src, t0, t1, limit, info.phase_s)
             bucket_s = b.width_s

@@ -1,0 +1,60 @@
+"""What a stored reading holds besides its time and array.
+
+- The electrical quantities ``voltage_v``, ``current_a`` and ``power_w``. ``power_w``
+  is always there (sent, or ``voltage_v·current_a``); voltage and current come
+  together or not at all: a *power-only* logger (most inverter and meter
+  loggers) sends ``power_w`` alone, and its energy then rests on that reported
+  power, unchecked against V·I.
+- Optional sensor fields (issue 13): what many loggers carry beside the arrays'
+  output — a pyranometer or reference cell in the array's plane, a horizontal
+  pyranometer, a module-temperature probe, an air-temperature probe and the
+  tracker's encoder angles. Each is stored as sent (NULL when absent); the
+  hourly rollups keep their sum and count, so bucket means are means of the
+  readings that carried the field.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+ELECTRICAL = ("voltage_v", "current_a", "power_w")
+
+
+@dataclass(frozen=True)
+class SensorField:
+    """An optional per-reading sensor value: its name (with unit), plausible range, meaning."""
+
+    name: str
+    low: float
+    high: float
+    meaning: str
+
+
+#: The optional sensor fields, in storage order. Ranges refuse only the impossible:
+#: a pyranometer reads a little below zero at night (thermal offset), encoder
+#: azimuths may come as −180…180 (stored as 0…360, clockwise from north).
+SENSOR_FIELDS = (
+    SensorField("poa_irradiance_w_m2", -50.0, 2000.0,
+                "irradiance in this array's plane, from a pyranometer or reference cell on it "
+                "[W/m²]"),
+    SensorField("ghi_w_m2", -50.0, 1600.0, "global horizontal irradiance at the site [W/m²]"),
+    SensorField("temp_module_c", -50.0, 120.0, "back-of-module temperature of this array [°C]"),
+    SensorField("temp_air_c", -60.0, 70.0, "ambient air temperature at the site [°C]"),
+    SensorField("azimuth_deg", -180.0, 360.0,
+                "the tracker's measured azimuth joint angle (encoder), degrees clockwise from "
+                "north; −180…0 is taken as 180…360"),
+    SensorField("elevation_deg", -90.0, 90.0,
+                "the tracker's measured elevation joint angle (encoder): elevation of the "
+                "collector's normal above the horizon [°]"),
+)
+SENSOR_NAMES = tuple(f.name for f in SENSOR_FIELDS)
+
+
+def normalise_sensors(values: np.ndarray) -> np.ndarray:
+    """Sensor columns ``(n, len(SENSOR_FIELDS))`` as stored: azimuths folded into [0, 360)."""
+    out = np.array(values, np.float64, copy=True)
+    k = SENSOR_NAMES.index("azimuth_deg")
+    out[:, k] = np.mod(out[:, k], 360.0)  # NaN (absent) stays NaN
+    return out
