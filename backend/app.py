@@ -42,6 +42,7 @@ from starlette.middleware.gzip import GZipMiddleware
 
 from backend.api import security, strict
 from backend.api.routes import (
+    alerts,
     dashboard,
     diagnosis,
     energy,
@@ -187,8 +188,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # outermost: CSP, X-Frame-Options, nosniff, Referrer-Policy on every response
     app.add_middleware(security.SecurityHeaders, viser_port=settings.viser_port)
     security.add_docs(app, settings.viser_port)
-    for module in (health, sites, measurements, energy, diagnosis, simulations, weather, twin3d,
-                   plants, vision, tokens, dashboard):
+    for module in (health, sites, measurements, energy, diagnosis, alerts, simulations, weather,
+                   twin3d, plants, vision, tokens, dashboard):
         app.include_router(module.router)
     generate_openapi = app.openapi
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
+from backend.alerts.service import AlertService
 from backend.auth import TokenCache
 from backend.limits import Limits
 from backend.measurements.writer import Writer
@@ -48,9 +49,12 @@ class ServiceContext:
     limits: Limits  # rate limits of anonymous work, the decode budget (backend/limits.py)
     parsers: ProcessPoolExecutor | None = None
     mqtt: MqttService | None = None  # with Settings.mqtt_url (backend/mqtt/service.py)
+    alerts: AlertService | None = None  # with Settings.alerts (backend/alerts/service.py)
 
     def close(self) -> None:
-        """Stop the background parts (MQTT, parsers, runs, writer) and dispose of the engine."""
+        """Stop alerts, MQTT, parsers, runs and the writer; dispose of the engine."""
+        if self.alerts is not None:  # it writes through the writer and reads the database
+            self.alerts.stop()
         if self.mqtt is not None:  # first: its last readings still reach the writer
             self.mqtt.stop()
         if self.parsers is not None:
@@ -74,7 +78,8 @@ def _parser_init(ppid: int) -> None:
 
 
 def open_context(settings: Settings) -> ServiceContext:
-    """Start the parser processes, migrate, load sites, start the writer (and MQTT, if set)."""
+    """Start the parser processes, migrate, load sites, start the writer (and MQTT, if set,
+    and the alert evaluator)."""
     parsers = None
     if settings.parse_processes > 0:
         # Validating a big batch holds the GIL for ~1 ms per 1,000 readings; worker
@@ -109,4 +114,7 @@ def open_context(settings: Settings) -> ServiceContext:
     if settings.mqtt_url:
         ctx.mqtt = MqttService(ctx)
         ctx.mqtt.start()
+    if settings.alerts:
+        ctx.alerts = AlertService(ctx)
+        ctx.alerts.start()
     return ctx

@@ -183,9 +183,57 @@ class Settings(BaseSettings):
     mqtt_retry_max_s: float = Field(
         30.0, gt=0, description="Longest wait between MQTT reconnection attempts."
     )
+    # alerts (backend/alerts/, docs/service.md "Alerts")
+    alerts: bool = Field(True, description="Evaluate alerts in the background (silent "
+                                           "loggers, diagnosis faults, low PR).")
+    alert_interval_s: float = Field(
+        60.0, gt=0, le=3600, description="Period of the alert evaluation (tests shorten it)."
+    )
+    alert_silent_min: float = Field(
+        30.0, gt=0, description="A logger with no reading for this many minutes (counted "
+                                "from the service's start at the earliest) raises "
+                                "`logger_silent`.")
+    alert_silent_daylight_only: bool = Field(
+        True, description="Count a logger's silence only while the sun is up at the site, "
+                          "so a logger that sleeps at night is not reported every night.")
+    alert_pr_below: float = Field(
+        0.8, ge=0, le=2, description="A tracker day whose performance ratio under the "
+                                     "measured sky is below this raises "
+                                     "`low_performance_ratio`.")
+    alert_fault_confidence_min: float = Field(
+        0.5, ge=0, le=1, description="Least confidence of a diagnosis fault that raises a "
+                                     "`fault` alert.")
+    alert_diagnosis_days: int = Field(
+        7, ge=0, le=400, description="Complete local days up to yesterday diagnosed for "
+                                     "fault and PR alerts (0: only `logger_silent`).")
+    alert_webhook_url: str | None = Field(
+        None, description="`http(s)://…` that each raised or cleared alert is POSTed to as "
+                          "JSON; unset: alerts are only stored and shown.")
+    alert_webhook_secret: str | None = Field(
+        None, description="Signs each webhook body: `X-Heliotwin-Signature: sha256=<HMAC-SHA256 "
+                          "hex>`; unset: unsigned.")
+    alert_webhook_timeout_s: float = Field(
+        5.0, gt=0, le=120, description="Timeout of one webhook POST (connect and answer).")
+    alert_webhook_retries: int = Field(
+        5, ge=0, le=30, description="Retries of a failed webhook POST (5xx, 408, 429, no "
+                                    "answer) before it is given up.")
+    alert_webhook_backoff_s: float = Field(
+        2.0, gt=0, description="Wait before the first retry; doubled at each next one.")
+    alert_webhook_backoff_max_s: float = Field(
+        300.0, gt=0, description="Longest wait between two webhook attempts (a 429's "
+                                 "Retry-After included).")
+    alert_webhook_queue: int = Field(
+        1000, ge=1, le=100_000, description="Webhook events waiting to be sent; more are "
+                                            "dropped (counted, the alert stays stored).")
 
     @model_validator(mode="after")
     def _check(self) -> Settings:
+        if not self.alert_webhook_url:
+            self.alert_webhook_url = None
+        elif not self.alert_webhook_url.startswith(("http://", "https://")) or \
+                not self.alert_webhook_url.split("://", 1)[1].split("/", 1)[0]:
+            raise ValueError("alert_webhook_url: not an http:// or https:// URL with a host "
+                             "(the value is not echoed: it may hold a secret)")
         if self.database_url.startswith("postgresql://"):
             self.database_url = "postgresql+psycopg://" + self.database_url[len("postgresql://"):]
         return self

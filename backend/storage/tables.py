@@ -304,3 +304,37 @@ class VisionDetection(Base):
     error_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     #: Uploaded without a token: kept within ``Settings.vision_anonymous_keep_rows``.
     anonymous: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
+
+
+class AlertRow(Base):
+    """An alert (``backend/alerts/``): one condition of a site's array — a silent logger, a
+    diagnosis fault, a low performance ratio — raised once when it starts and cleared once
+    when it ends (migration ``0007_alerts``). Times are UTC Unix seconds."""
+
+    __tablename__ = "alerts"
+    __table_args__ = (
+        CheckConstraint("state IN ('active', 'cleared')", name="ck_alerts_state"),
+        Index("ix_alerts_site_state", "site_id", "state"),
+        Index("ix_alerts_raised_at", "raised_at_s"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    site_id: Mapped[str] = mapped_column(ForeignKey("sites.site_id", ondelete="CASCADE"))
+    array_name: Mapped[str] = mapped_column(String(64))
+    #: ``logger_silent``, ``fault`` or ``low_performance_ratio``
+    kind: Mapped[str] = mapped_column(String(32))
+    #: the diagnosis fault's kind (``stuck``, ``module_loss``, …) for ``kind = 'fault'``
+    fault_kind: Mapped[str | None] = mapped_column(String(32), nullable=True)
+    state: Mapped[str] = mapped_column(String(16))
+    #: when the condition began (the last reading, the fault's first day, …)
+    since_s: Mapped[int] = mapped_column(BigInteger)
+    raised_at_s: Mapped[int] = mapped_column(BigInteger)
+    cleared_at_s: Mapped[int | None] = mapped_column(BigInteger, nullable=True)
+    detail: Mapped[str] = mapped_column(Text)
+    cleared_detail: Mapped[str | None] = mapped_column(Text, nullable=True)
+    #: the numbers behind the alert, units in the names (JSON object)
+    data_json: Mapped[str] = mapped_column(Text)
+    #: delivery of the latest event (raised or cleared) to the webhook: ``off`` (no URL),
+    #: ``queued``, ``delivered``, ``failed`` (retries spent or refused), ``dropped`` (queue full)
+    webhook_status: Mapped[str] = mapped_column(String(16))
+    webhook_attempts: Mapped[int] = mapped_column(Integer, default=0, server_default="0")

@@ -10,6 +10,7 @@ import * as twin from "./twin.js";
 import * as plant from "./plant.js";
 import * as sites from "./sites.js";
 import * as diagnosis from "./diagnosis.js";
+import * as alerts from "./alerts.js";
 
 const PAGES = { overview, simulation, sky, twin, plant, sites };
 
@@ -99,6 +100,7 @@ async function boot() {
   });
   showPage(pageFromHash());
   diagnosis.init(state);
+  alerts.init(state);
   loadPlotly(); // after the page has sent its requests: Plotly's start-up overlaps the answers
 }
 

@@ -1,0 +1,365 @@
+"""The alert evaluator and the read side of ``GET /api/v1/alerts``.
+
+:class:`AlertService` runs on a thread of its own (``heliotwin-alerts``), started and
+stopped by :class:`backend.context.ServiceContext` (``Settings.alerts``). Every
+``Settings.alert_interval_s`` (the first time one interval after start) it evaluates,
+for every site with arrays (:mod:`backend.alerts.rules`):
+
+- each array's last measured reading — one primary-key lookup per array, the same
+  reading the overview's logger tiles show (``backend/measurements/status.py``);
+- for a site with a tracker and a fixed array whose tracker reported within the last
+  ``Settings.alert_diagnosis_days`` complete local days: the diagnosis of those days
+  (:func:`backend.diagnosis.service.diagnosis`; cached per day in ``diagnosis_days``, so
+  a day is computed once, when it is complete, and again only if late readings of it
+  arrive) → faults and the performance ratio.
+
+A condition not yet active is inserted as an ``active`` alert (through the writer, the
+one module that commits) and its ``raised`` event offered to the webhook sender; an
+active alert whose rule was evaluated and no longer finds it is updated to ``cleared``
+(``cleared_at``, ``cleared_detail``) and its ``cleared`` event offered. Nothing is sent
+again while a condition lasts. The active alerts are read back from the database at
+start, so a restart neither repeats nor forgets them. Ingestion never waits for any of
+this: the evaluator only reads (its own pooled connections) and queues small writes,
+and the webhook has a thread and a bounded queue of its own (:mod:`backend.alerts.webhook`).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import logging
+import threading
+import time
+from importlib.metadata import PackageNotFoundError, version
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import orjson
+import pandas as pd
+from pvlib import atmosphere
+from sqlalchemy import Connection, Engine, func, insert, select, update
+
+from backend.alerts import rules
+from backend.alerts.webhook import Event, WebhookSender
+from backend.diagnosis.service import diagnosis
+from backend.sites import SiteInfo
+from backend.storage.tables import SOURCE_CODES, AlertRow, Measurement
+from sim.sun import solar_position
+
+if TYPE_CHECKING:
+    from backend.context import ServiceContext
+
+logger = logging.getLogger(__name__)
+
+MEASURED = SOURCE_CODES["measured"]
+_COLUMNS = ("id", "site_id", "array_name", "kind", "fault_kind", "state", "since_s",
+            "raised_at_s", "cleared_at_s", "detail", "cleared_detail", "data_json",
+            "webhook_status", "webhook_attempts")
+
+
+def _version() -> str:
+    try:
+        return version("heliotwin")
+    except PackageNotFoundError:
+        return "0+unknown"
+
+
+def iso(ts_s: int | float | None) -> str | None:
+    """UTC ISO 8601 with ``Z``, or None."""
+    if ts_s is None:
+        return None
+    return dt.datetime.fromtimestamp(int(ts_s), dt.UTC).isoformat().replace("+00:00", "Z")
+
+
+def alert_dict(row: Any) -> dict[str, Any]:
+    """An ``alerts`` row (a mapping of its columns) as the API and the webhook show it."""
+    return {
+        "id": row["id"], "site_id": row["site_id"], "array": row["array_name"],
+        "kind": row["kind"], "fault_kind": row["fault_kind"], "state": row["state"],
+        "since": iso(row["since_s"]), "raised_at": iso(row["raised_at_s"]),
+        "cleared_at": iso(row["cleared_at_s"]), "detail": row["detail"],
+        "cleared_detail": row["cleared_detail"], "data": orjson.loads(row["data_json"]),
+        "webhook_status": row["webhook_status"], "webhook_attempts": row["webhook_attempts"],
+    }
+
+
+def list_alerts(conn: Connection, site_id: str | None = None, state: str | None = None,
+                kind: str | None = None, limit: int = 100) -> dict[str, Any]:
+    """Stored alerts, newest raised first, and how many of each state match the filter."""
+    where = []
+    if site_id is not None:
+        where.append(AlertRow.site_id == site_id)
+    if kind is not None:
+        where.append(AlertRow.kind == kind)
+    counts = {"active": 0, "cleared": 0}
+    for st, n in conn.execute(select(AlertRow.state, func.count()).where(*where)
+                              .group_by(AlertRow.state)).all():
+        counts[st] = int(n)
+    if state is not None:
+        where.append(AlertRow.state == state)
+    cols = [getattr(AlertRow, c) for c in _COLUMNS]
+    rows = conn.execute(select(*cols).where(*where)
+                        .order_by(AlertRow.raised_at_s.desc(), AlertRow.id.desc())
+                        .limit(limit)).mappings().all()
+    return {"alerts": [alert_dict(r) for r in rows], "counts": counts}
+
+
+#: Daylight is sampled at this step [s], over at most the last ``DAYLIGHT_SPAN_S``.
+DAYLIGHT_STEP_S = 300
+DAYLIGHT_SPAN_S = 3 * 86400
+
+
+def daylight_seconds(info: SiteInfo, t0_s: float, t1_s: float) -> float:
+    """Seconds of ``[t0, t1]`` with the sun's apparent elevation above 0° at the site
+    (sampled every ``DAYLIGHT_STEP_S``; a span longer than ``DAYLIGHT_SPAN_S`` counts only
+    its last part, which holds more daylight than any silence threshold)."""
+    t0_s = max(t0_s, t1_s - DAYLIGHT_SPAN_S)
+    if t1_s <= t0_s:
+        return 0.0
+    n = max(1, int((t1_s - t0_s) // DAYLIGHT_STEP_S))
+    mid = t0_s + (np.arange(n) + 0.5) * (t1_s - t0_s) / n
+    s = info.site
+    when = pd.DatetimeIndex(pd.to_datetime(mid, unit="s", utc=True))
+    pos = solar_position(when, s.latitude, s.longitude, s.altitude,
+                         float(atmosphere.alt2pres(s.altitude)), s.temp_air)
+    return float(np.count_nonzero(pos["apparent_elevation"].to_numpy() > 0.0)) * (t1_s - t0_s) / n
+
+
+def _local_midnight(day: dt.date, zone: Any) -> dt.datetime:
+    return dt.datetime(day.year, day.month, day.day, tzinfo=zone)
+
+
+class AlertService:
+    """The evaluator thread and the webhook sender (see the module docstring)."""
+
+    def __init__(self, ctx: ServiceContext, now_s: float | None = None) -> None:
+        s = ctx.settings
+        self.ctx = ctx
+        self.engine: Engine = ctx.engine
+        self.interval_s = s.alert_interval_s
+        self.started_s = time.time() if now_s is None else now_s
+        self.sender: WebhookSender | None = None
+        if s.alert_webhook_url:
+            self.sender = WebhookSender(
+                s.alert_webhook_url, timeout_s=s.alert_webhook_timeout_s,
+                retries=s.alert_webhook_retries, backoff_s=s.alert_webhook_backoff_s,
+                backoff_max_s=s.alert_webhook_backoff_max_s, queue_size=s.alert_webhook_queue,
+                secret=s.alert_webhook_secret, user_agent=f"heliotwin/{_version()}",
+                on_result=self._delivered)
+        self._active: dict[rules.Key, dict[str, Any]] = {}
+        self._errors: dict[tuple[str, str], str] = {}
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.last_evaluated_s: float | None = None
+        self.last_evaluation_ms: float | None = None
+        self.max_evaluation_ms: float | None = None
+        self.evaluations = 0
+
+    # -- lifecycle -----------------------------------------------------------
+    def start(self) -> None:
+        """Read the active alerts back, re-offer unsent events, start the threads."""
+        with self.engine.connect() as conn:
+            cols = [getattr(AlertRow, c) for c in _COLUMNS]
+            active = conn.execute(select(*cols).where(AlertRow.state == "active")
+                                  .order_by(AlertRow.id)).mappings().all()
+            queued = conn.execute(select(*cols).where(AlertRow.webhook_status == "queued")
+                                  .order_by(AlertRow.id)).mappings().all()
+        for row in active:
+            a = alert_dict(row)
+            self._active[self._key(a)] = a
+        if self.sender is not None:
+            self.sender.start()
+            for row in queued:
+                a = alert_dict(row)
+                self._offer(a, "raised" if a["state"] == "active" else "cleared")
+        self._thread = threading.Thread(target=self._run, name="heliotwin-alerts", daemon=True)
+        self._thread.start()
+        logger.info("alerts: %d active; evaluated every %.3g s; webhook %s", len(self._active),
+                    self.interval_s, "off" if self.sender is None else self.sender.where)
+
+    def stop(self, timeout_s: float = 30.0) -> None:
+        """End the evaluator (after its current evaluation), then the sender."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+            self._thread = None
+        if self.sender is not None:
+            self.sender.stop()
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.interval_s):
+            try:
+                self.evaluate()
+            except Exception:  # noqa: BLE001 - the next round tries again
+                logger.exception("alert evaluation failed")
+
+    def status(self) -> dict[str, Any]:
+        """For ``GET /api/v1/alerts``: the evaluator, its thresholds and the webhook."""
+        s = self.ctx.settings
+        return {
+            "enabled": True, "interval_s": self.interval_s,
+            "last_evaluated_at": iso(self.last_evaluated_s),
+            "last_evaluation_ms": self.last_evaluation_ms,
+            "max_evaluation_ms": self.max_evaluation_ms, "evaluations": self.evaluations,
+            "active": len(self._active), "errors": sorted(self._errors.values()),
+            "silent_min": s.alert_silent_min, "pr_below": s.alert_pr_below,
+            "fault_confidence_min": s.alert_fault_confidence_min,
+            "diagnosis_days": s.alert_diagnosis_days,
+            "webhook": None if self.sender is None else self.sender.status(),
+        }
+
+    # -- evaluation ----------------------------------------------------------
+    def evaluate(self, now_s: float | None = None) -> None:
+        """One round: evaluate every rule of every site, raise and clear."""
+        t0 = time.perf_counter()
+        now = time.time() if now_s is None else now_s
+        found = rules.Evaluation()
+        for info in list(self.ctx.registry.sites.values()):
+            if not info.arrays:
+                continue
+            found.extend(self._guard("logger_silent", info, lambda i=info: self._silent(i, now)))
+            if self.ctx.settings.alert_diagnosis_days > 0 and info.array_of_kind("tracker") \
+                    and info.array_of_kind("fixed"):
+                found.extend(self._guard("diagnosis", info,
+                                         lambda i=info: self._diagnosed(i, now)))
+        self._reconcile(found, now)
+        self.evaluations += 1
+        self.last_evaluated_s = now
+        self.last_evaluation_ms = round(1000 * (time.perf_counter() - t0), 1)
+        self.max_evaluation_ms = max(self.max_evaluation_ms or 0.0, self.last_evaluation_ms)
+
+    def _guard(self, rule: str, info: SiteInfo, fn: Any) -> rules.Evaluation:
+        """A rule's evaluation, or an empty one (nothing cleared) when it fails; logged
+        once per distinct failure."""
+        key = (rule, info.site_id)
+        try:
+            out: rules.Evaluation = fn()
+        except Exception as exc:  # noqa: BLE001 - one site's failure must not stop the rest
+            msg = f"{rule} of {info.site_id}: {type(exc).__name__}: {exc}"
+            if self._errors.get(key) != msg:
+                logger.exception("alerts: %s", msg)
+            self._errors[key] = msg
+            return rules.Evaluation()
+        self._errors.pop(key, None)
+        return out
+
+    def _silent(self, info: SiteInfo, now: float) -> rules.Evaluation:
+        last: dict[str, int | None] = {}
+        with self.engine.connect() as conn:
+            for name, arr in info.arrays.items():
+                value = conn.execute(select(func.max(Measurement.ts_s)).where(
+                    Measurement.array_id == arr.array_id,
+                    Measurement.source == MEASURED)).scalar()
+                last[name] = None if value is None else int(value)
+        daylight = self.ctx.settings.alert_silent_daylight_only
+        return rules.silent_loggers(info.site_id, info.zone, last, now, self.started_s,
+                                    self.ctx.settings.alert_silent_min,
+                                    (lambda a, b: daylight_seconds(info, a, b)) if daylight
+                                    else None)
+
+    def _diagnosed(self, info: SiteInfo, now: float) -> rules.Evaluation:
+        s = self.ctx.settings
+        tracker = info.array_of_kind("tracker")
+        assert tracker is not None
+        today = dt.datetime.fromtimestamp(now, info.zone).date()
+        end = _local_midnight(today, info.zone)
+        start = _local_midnight(today - dt.timedelta(days=s.alert_diagnosis_days), info.zone)
+        with self.engine.connect() as conn:
+            first = conn.execute(select(func.min(Measurement.ts_s)).where(
+                Measurement.array_id == tracker.array_id, Measurement.source == MEASURED,
+                Measurement.ts_s >= int(start.timestamp()),
+                Measurement.ts_s < int(end.timestamp()))).scalar()
+        if first is None:  # no tracker readings in the window: nothing to tell
+            return rules.Evaluation()
+        first_day = dt.datetime.fromtimestamp(int(first), info.zone).date()
+        start = max(start, _local_midnight(first_day, info.zone))
+        answer = diagnosis(self.ctx, info, start, end)
+        return rules.diagnosed(info.site_id, info.zone, tracker.name, answer["days"],
+                               s.alert_pr_below, s.alert_fault_confidence_min)
+
+    @staticmethod
+    def _key(a: dict[str, Any]) -> rules.Key:
+        return (a["site_id"], a["array"], a["kind"], a["fault_kind"] or "")
+
+    def _reconcile(self, found: rules.Evaluation, now: float) -> None:
+        holding = {c.key: c for c in found.conditions}
+        for key, cond in holding.items():
+            if key not in self._active:
+                self._raise(cond, now)
+        for key, alert in list(self._active.items()):
+            if key in holding or key[:3] not in found.scopes:
+                continue
+            note = found.clear_notes.get(key) or found.clear_notes.get(key[:3]) \
+                or "the condition no longer holds"
+            self._clear(key, alert, note, now)
+
+    def _raise(self, cond: rules.Condition, now: float) -> None:
+        values = {
+            "site_id": cond.site_id, "array_name": cond.array, "kind": cond.kind,
+            "fault_kind": cond.fault_kind, "state": "active", "since_s": cond.since_s,
+            "raised_at_s": int(now), "cleared_at_s": None, "detail": cond.detail,
+            "cleared_detail": None, "data_json": orjson.dumps(cond.data).decode(),
+            "webhook_status": "off" if self.sender is None else "queued",
+            "webhook_attempts": 0,
+        }
+
+        def store(conn: Connection) -> int:
+            key = conn.execute(insert(AlertRow).values(**values)).inserted_primary_key
+            assert key is not None
+            return int(key[0])
+
+        try:
+            alert_id = self.ctx.writer.call(store).result(timeout=60)
+        except Exception:  # noqa: BLE001 - not raised now: the next round tries again
+            logger.exception("alerts: could not store %s", cond.key)
+            return
+        alert = alert_dict({**values, "id": alert_id})
+        self._active[cond.key] = alert
+        logger.warning("%s", rules.summary(cond.site_id, cond.kind, cond.array, cond.fault_kind,
+                                           "active", cond.detail))
+        self._offer(alert, "raised")
+
+    def _clear(self, key: rules.Key, alert: dict[str, Any], note: str, now: float) -> None:
+        changes = {"state": "cleared", "cleared_at_s": int(now), "cleared_detail": note,
+                   "webhook_status": "off" if self.sender is None else "queued",
+                   "webhook_attempts": 0}
+
+        def store(conn: Connection) -> None:
+            conn.execute(update(AlertRow).where(AlertRow.id == alert["id"]).values(**changes))
+
+        try:
+            self.ctx.writer.call(store).result(timeout=60)
+        except Exception:  # noqa: BLE001 - still active: the next round tries again
+            logger.exception("alerts: could not clear alert %s", alert["id"])
+            return
+        del self._active[key]
+        cleared = {**alert, "state": "cleared", "cleared_at": iso(now), "cleared_detail": note,
+                   "webhook_status": changes["webhook_status"], "webhook_attempts": 0}
+        logger.info("%s", rules.summary(alert["site_id"], alert["kind"], alert["array"],
+                                        alert["fault_kind"], "cleared", note))
+        self._offer(cleared, "cleared")
+
+    # -- the webhook -----------------------------------------------------------
+    def _offer(self, alert: dict[str, Any], event: str) -> None:
+        if self.sender is None:
+            return
+        text = rules.summary(alert["site_id"], alert["kind"], alert["array"],
+                             alert["fault_kind"], alert["state"],
+                             alert["cleared_detail"] if event == "cleared" else alert["detail"])
+        body = orjson.dumps({"event": event, "event_id": f"{alert['id']}:{event}",
+                             "text": text, "alert": alert, "service": "heliotwin"})
+        self.sender.offer(Event(alert["id"], event, body))
+
+    def _delivered(self, ev: Event, status: str, attempts: int) -> None:
+        """The sender's outcome of ``ev`` → the alert's ``webhook_status`` (unless the alert
+        has moved on to its next event meanwhile)."""
+        state = "active" if ev.event == "raised" else "cleared"
+
+        def store(conn: Connection) -> None:
+            conn.execute(update(AlertRow).where(AlertRow.id == ev.alert_id,
+                                                AlertRow.state == state)
+                         .values(webhook_status=status, webhook_attempts=attempts))
+
+        try:
+            self.ctx.writer.call(store)  # not waited for: the sender goes on at once
+        except RuntimeError:  # the writer has stopped (shutdown): the status stays queued
+            pass

@@ -1,0 +1,202 @@
+"""The Overview's alerts card in Chromium (issue 13, item 7), against a ``heliotwin serve`` of
+this module's own: yesterday's logger readings posted over HTTP, a stuck-tracker diagnosis of
+yesterday put in the diagnosis cache (as the service stores it), alerts evaluated every
+0.3 s with a 3 s silence threshold and a webhook receiver on a local port. The card must
+list what ``GET /api/v1/alerts`` answers — the silent loggers, the fault, the low PR, the
+cleared one under its fold — and follow a change of site.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import http.server
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from zoneinfo import ZoneInfo
+
+import httpx
+import orjson
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backend"))
+from live_service import ServerProcess, free_port, new_database  # noqa: E402
+
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
+TZ = ZoneInfo("America/Mexico_City")
+SITE = "tehuantepec"
+YESTERDAY = dt.datetime.now(TZ).date() - dt.timedelta(days=1)
+
+
+class _Hook(http.server.BaseHTTPRequestHandler):
+    received: list[dict] = []
+
+    def do_POST(self) -> None:  # noqa: N802 - http.server's name
+        body = self.rfile.read(int(self.headers.get("Content-Length", "0")))
+        _Hook.received.append(orjson.loads(body))
+        self.send_response(204)
+        self.end_headers()
+
+    def log_message(self, *args: object) -> None:
+        pass
+
+
+def _reading(ts: float, array: str) -> dict:
+    return {"ts": dt.datetime.fromtimestamp(int(ts), dt.UTC).isoformat(), "array": array,
+            "voltage_v": 26.0, "current_a": 5.0}
+
+
+def _stuck_day(day: dt.date) -> dict:
+    """A diagnosis payload of a stuck tracker (the features of backend/diagnosis/faults.py)."""
+    return {"date": day.isoformat(),
+            "sky": {"clearness_index": 0.74, "source": "fixed_array", "valid_minutes_pct": 98.0},
+            "tracker": {"measured_wh": 3650.0, "expected_wh": 5400.0, "expected_wh_low": 5150.0,
+                        "expected_wh_high": 5600.0, "performance_ratio": 0.676},
+            "fixed": {"measured_wh": 4300.0, "expected_wh": 4300.0, "performance_ratio": 1.0},
+            "gain_measured_pct": -15.1, "gain_expected_pct": 25.6,
+            "features": {"missing_daylight_min": 0, "residual": 0.31,
+                         "stuck": {"residual": 0.04, "tilt_deg": 55.0, "azimuth_deg": 181.0},
+                         "azimuth_offset": {"residual": 0.27, "offset_deg": 12.0},
+                         "clock_offset": {"residual": 0.29, "offset_s": 0.0, "scale": 1.0}}}
+
+
+def _inject(db_url: str, day: dt.date, payload: dict) -> None:
+    from sqlalchemy import insert
+
+    from backend.settings import get_settings
+    from backend.storage.engine import make_engine
+    from backend.storage.tables import DiagnosisDay
+
+    nxt = day + dt.timedelta(days=1)
+    start = dt.datetime(day.year, day.month, day.day, tzinfo=TZ)
+    end = dt.datetime(nxt.year, nxt.month, nxt.day, tzinfo=TZ)
+    engine = make_engine(get_settings(database_url=db_url))
+    try:
+        with engine.begin() as conn:
+            conn.execute(insert(DiagnosisDay).values(
+                site_id=SITE, day_start_s=int(start.timestamp()), day_end_s=int(end.timestamp()),
+                payload_json=orjson.dumps(payload).decode()))
+    finally:
+        engine.dispose()
+
+
+@pytest.fixture(scope="module")
+def alert_server(browser, tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+    tmp = tmp_path_factory.mktemp("alerts-page")
+    hook = http.server.ThreadingHTTPServer(("127.0.0.1", free_port()), _Hook)
+    threading.Thread(target=hook.serve_forever, daemon=True).start()
+    db = new_database("sqlite", tmp)
+    first = ServerProcess(db.url, tmp / "server.log", extra_env={"HELIOTWIN_ALERTS": "false"})
+    first.start()
+    try:
+        token = first.token(SITE)
+        noon = dt.datetime(YESTERDAY.year, YESTERDAY.month, YESTERDAY.day, 12, tzinfo=TZ)
+        rows = [_reading(noon.timestamp() + 60 * k, a) for k in range(30)
+                for a in ("tracker", "fixed")]
+        r = httpx.post(f"{first.base_url}/api/v1/sites/{SITE}/measurements",
+                       json={"readings": rows}, headers={"Authorization": f"Bearer {token}"})
+        assert r.status_code == 200, r.text
+    finally:
+        first.stop()
+    _inject(db.url, YESTERDAY, _stuck_day(YESTERDAY))
+    proc = ServerProcess(db.url, tmp / "server.log", extra_env={
+        "HELIOTWIN_ALERT_INTERVAL_S": "0.3", "HELIOTWIN_ALERT_SILENT_MIN": "0.05",
+        "HELIOTWIN_ALERT_SILENT_DAYLIGHT_ONLY": "false",  # the test runs at any hour
+        "HELIOTWIN_ALERT_WEBHOOK_URL": f"http://127.0.0.1:{hook.server_address[1]}/hook"})
+    proc.start()
+    proc.write_token = token  # type: ignore[attr-defined]
+    try:
+        deadline = time.monotonic() + 30
+        while len(_Hook.received) < 4:  # two silent loggers, the fault, the low PR
+            assert time.monotonic() < deadline, _Hook.received
+            time.sleep(0.1)
+        # the fixed logger reports again (stamped ahead, so it stays fresh): one cleared
+        r = httpx.post(f"{proc.base_url}/api/v1/sites/{SITE}/measurements",
+                       json={"readings": [_reading(time.time() + 300, "fixed")]},
+                       headers={"Authorization": f"Bearer {token}"})
+        assert r.status_code == 200, r.text
+        while len(_Hook.received) < 5:
+            assert time.monotonic() < deadline + 30, _Hook.received
+            time.sleep(0.1)
+        time.sleep(0.5)  # the webhook outcomes are stored
+        yield proc
+    finally:
+        proc.stop()
+        hook.shutdown()
+        hook.server_close()
+
+
+@pytest.fixture()
+def pg(browser, alert_server: ServerProcess, request: pytest.FixtureRequest) -> Iterator[object]:
+    """A fresh page on the module's server; no console error may occur."""
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    page = context.new_page()
+    errors: list[str] = []
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: errors.append(f"pageerror: {e}"))
+    page.set_default_timeout(30_000)
+    yield page
+    ARTIFACTS.mkdir(exist_ok=True)
+    with contextlib.suppress(Exception):
+        page.screenshot(path=str(ARTIFACTS / f"e2e-{request.node.name}.png"), full_page=True)
+    context.close()
+    assert not errors, "errors in the browser console:\n" + "\n".join(errors)
+
+
+def test_the_alerts_card_lists_what_the_api_answers(pg, alert_server: ServerProcess) -> None:
+    api = httpx.get(f"{alert_server.base_url}/api/v1/alerts", params={"site_id": SITE},
+                    timeout=30).json()
+    active = [a for a in api["alerts"] if a["state"] == "active"]
+    cleared = [a for a in api["alerts"] if a["state"] == "cleared"]
+    assert {(a["kind"], a["array"], a["fault_kind"]) for a in active} == {
+        ("logger_silent", "tracker", None), ("fault", "tracker", "stuck"),
+        ("low_performance_ratio", "tracker", None)}
+    assert [(a["kind"], a["array"]) for a in cleared] == [("logger_silent", "fixed")]
+    assert all(a["webhook_status"] == "delivered" for a in api["alerts"])
+
+    pg.goto(f"{alert_server.base_url}/#overview?site={SITE}&day={YESTERDAY.isoformat()}")
+    pg.wait_for_selector(f'body[data-alerts-loaded="{SITE}"]')
+    card = pg.locator("[data-testid=alerts-card]")
+    assert pg.locator("#alerts-title").inner_text() == "Alerts — 3 active"
+    shown = card.locator("[data-testid=alerts-active] [data-testid=alert]")
+    assert shown.count() == 3
+    text = card.locator("[data-testid=alerts-active]").inner_text()
+    for a in active:
+        assert a["detail"] in text
+    assert "Fault: tracker stuck" in text and "Logger silent" in text
+    assert "Low performance ratio" in text and "68 %" in text
+    assert "webhook: delivered" in text
+    rules = pg.locator("#alerts-rules").inner_text()
+    assert "logger silent 0 min" not in rules and "webhook http://127.0.0.1:" in rules
+    assert "/hook" not in rules  # only the scheme and host of the URL are shown
+    # the cleared one waits under its fold
+    assert pg.locator("#alerts-cleared-summary").inner_text() == "Recently cleared (1 of 1)"
+    pg.click("#alerts-cleared-summary")
+    folded = card.locator("[data-testid=alerts-cleared] [data-testid=alert]")
+    assert folded.count() == 1 and folded.get_attribute("data-state") == "cleared"
+    assert "the fixed logger reports again" in folded.inner_text()
+    ARTIFACTS.mkdir(exist_ok=True)
+    card.screenshot(path=str(ARTIFACTS / "e2e-alerts-card.png"))
+    pg.screenshot(path=str(ARTIFACTS / "e2e-alerts-overview.png"))
+
+    # another site has none; back on this one the list follows what happened meanwhile
+    pg.select_option("#site-select", "guadalajara_fisheye")
+    pg.wait_for_selector('body[data-alerts-loaded="guadalajara_fisheye"]')
+    assert card.locator("[data-testid=alerts-none]").inner_text() == "No active alerts."
+    assert pg.locator("#alerts-title").inner_text() == "Alerts"
+    r = httpx.post(f"{alert_server.base_url}/api/v1/sites/{SITE}/measurements",
+                   json={"readings": [_reading(time.time() + 300, "tracker")]},
+                   headers={"Authorization": f"Bearer {alert_server.write_token}"})
+    assert r.status_code == 200, r.text
+    deadline = time.monotonic() + 20
+    while httpx.get(f"{alert_server.base_url}/api/v1/alerts",
+                    params={"site_id": SITE, "state": "active"}).json()["counts"]["active"] != 2:
+        assert time.monotonic() < deadline
+        time.sleep(0.1)
+    pg.select_option("#site-select", SITE)
+    pg.wait_for_function("() => document.getElementById('alerts-title').textContent"
+                         " === 'Alerts — 2 active'")
+    assert pg.locator("#alerts-cleared-summary").inner_text() == "Recently cleared (2 of 2)"
