@@ -24,7 +24,7 @@ from zoneinfo import ZoneInfo
 import httpx
 import orjson
 import pytest
-from live_service import Database, ServerProcess, free_port
+from live_service import Database, ServerProcess, free_port, new_database
 
 from backend.alerts import rules
 from backend.alerts.webhook import Event, WebhookSender, retry_after_s
@@ -302,6 +302,16 @@ def _alerts(c: httpx.Client, **params: str) -> dict:
 
 
 @pytest.fixture
+def sqlite_database(tmp_path: Path) -> Iterator[Database]:
+    """One backend for the tests whose subject is not the database (the webhook, the
+    endpoint's errors, the diagnosis rules in the service); the alert rows themselves are
+    checked on both by the silent-logger test. CI time is part of the budget."""
+    db = new_database("sqlite", tmp_path)
+    yield db
+    db.drop()
+
+
+@pytest.fixture
 def rx() -> Iterator[Receiver]:
     with Receiver() as receiver:
         yield receiver
@@ -356,8 +366,8 @@ def test_silent_logger_raised_once_kept_over_a_restart_and_cleared_once(
         server.stop()
 
 
-def test_alerts_endpoint_names_the_bad_field(database: Database, tmp_path: Path) -> None:
-    server = _server(database, tmp_path, HELIOTWIN_ALERTS="false").start()
+def test_alerts_endpoint_names_the_bad_field(sqlite_database: Database, tmp_path: Path) -> None:
+    server = _server(sqlite_database, tmp_path, HELIOTWIN_ALERTS="false").start()
     try:
         with httpx.Client(base_url=server.base_url, timeout=30) as c:
             r = c.get("/api/v1/alerts", params={"site_id": "atlantis"})
@@ -419,19 +429,19 @@ def _payload(day: dt.date, pr: float, stuck: bool) -> dict:
 
 
 def test_fault_and_low_pr_from_an_injected_diagnosis_raised_then_cleared(
-        database: Database, tmp_path: Path, rx: Receiver) -> None:
+        sqlite_database: Database, tmp_path: Path, rx: Receiver) -> None:
     yesterday = dt.datetime.now(TZ).date() - dt.timedelta(days=1)
     noon = dt.datetime(yesterday.year, yesterday.month, yesterday.day, 12, tzinfo=TZ)
     env = {"HELIOTWIN_ALERT_DIAGNOSIS_DAYS": "7", "HELIOTWIN_ALERT_WEBHOOK_URL": rx.url}
-    server = _server(database, tmp_path, HELIOTWIN_ALERTS="false").start()
+    server = _server(sqlite_database, tmp_path, HELIOTWIN_ALERTS="false").start()
     try:  # a logger day to diagnose (its readings would drop a cached diagnosis of the day)
         with httpx.Client(base_url=server.base_url, timeout=30) as c:
             _post(c, server.token(), [_reading(noon.timestamp() + 60 * k, a)
                                       for k in range(10) for a in ("tracker", "fixed")])
     finally:
         server.stop()
-    _inject(database.url, yesterday, _payload(yesterday, 0.62, stuck=True))
-    server = _server(database, tmp_path, **env).start()
+    _inject(sqlite_database.url, yesterday, _payload(yesterday, 0.62, stuck=True))
+    server = _server(sqlite_database, tmp_path, **env).start()
     try:
         evs = rx.wait_for(lambda e: len(e) >= 2)
         time.sleep(1.5)
@@ -450,8 +460,8 @@ def test_fault_and_low_pr_from_an_injected_diagnosis_raised_then_cleared(
         assert low["data"]["performance_ratio"] == 0.62 and "62 %" in low["detail"]
     finally:
         server.stop()
-    _inject(database.url, yesterday, _payload(yesterday, 0.97, stuck=False))  # repaired
-    server = _server(database, tmp_path, **env).start()
+    _inject(sqlite_database.url, yesterday, _payload(yesterday, 0.97, stuck=False))  # repaired
+    server = _server(sqlite_database, tmp_path, **env).start()
     try:
         evs = rx.wait_for(lambda e: len(e) >= 4)
         time.sleep(1.0)
@@ -481,9 +491,10 @@ def _latencies(c: httpx.Client, token: str, t0: float, n: int) -> list[float]:
     return out
 
 
-def test_a_hanging_webhook_does_not_slow_ingestion(database: Database, tmp_path: Path) -> None:
+def test_a_hanging_webhook_does_not_slow_ingestion(sqlite_database: Database,
+                                                  tmp_path: Path) -> None:
     with Receiver(lambda n: None) as hang:
-        server = _server(database, tmp_path, HELIOTWIN_ALERT_SILENT_MIN="0.02",
+        server = _server(sqlite_database, tmp_path, HELIOTWIN_ALERT_SILENT_MIN="0.02",
                          HELIOTWIN_ALERT_INTERVAL_S="0.2", HELIOTWIN_ALERT_WEBHOOK_URL=hang.url,
                          HELIOTWIN_ALERT_WEBHOOK_TIMEOUT_S="3",
                          HELIOTWIN_ALERT_WEBHOOK_RETRIES="10",
