@@ -34,7 +34,8 @@ class SensorField:
 
 #: The optional sensor fields, in storage order. Ranges refuse only the impossible:
 #: a pyranometer reads a little below zero at night (thermal offset), encoder
-#: azimuths may come as −180…180 (stored as 0…360, clockwise from north).
+#: azimuths may come as −180…180 or past 360 on a cable wrap (stored in [0, 360),
+#: clockwise from north).
 SENSOR_FIELDS = (
     SensorField("poa_irradiance_w_m2", -50.0, 2000.0,
                 "irradiance in this array's plane, from a pyranometer or reference cell on it "
@@ -42,9 +43,9 @@ SENSOR_FIELDS = (
     SensorField("ghi_w_m2", -50.0, 1600.0, "global horizontal irradiance at the site [W/m²]"),
     SensorField("temp_module_c", -50.0, 120.0, "back-of-module temperature of this array [°C]"),
     SensorField("temp_air_c", -60.0, 70.0, "ambient air temperature at the site [°C]"),
-    SensorField("azimuth_deg", -180.0, 360.0,
+    SensorField("azimuth_deg", -360.0, 720.0,
                 "the tracker's measured azimuth joint angle (encoder), degrees clockwise from "
-                "north; −180…0 is taken as 180…360"),
+                "north; stored modulo 360 (a cable wrap's −90…450 as well as −180…180)"),
     SensorField("elevation_deg", -90.0, 90.0,
                 "the tracker's measured elevation joint angle (encoder): elevation of the "
                 "collector's normal above the horizon [°]"),

@@ -119,12 +119,25 @@ class DemoLogger:
             v = np.nan_to_num(s[f"{name}_voltage_v"].to_numpy()) * (0.97 + 0.03 * cloud) * noise_v
             v = np.where(i > 0, v, 0.0)
             i = np.maximum(i, 0.0)
+            encoder = self._encoder_angles(s, rng) if name == "tracker" else None
             for j in np.flatnonzero(~miss).tolist():
                 vv, ii = round(float(v[j]), 3), round(float(i[j]), 4)
-                out.append({"ts": iso[j], "array": name, "voltage_v": vv, "current_a": ii,
-                            "power_w": round(vv * ii, 3)})
+                reading = {"ts": iso[j], "array": name, "voltage_v": vv, "current_a": ii,
+                           "power_w": round(vv * ii, 3)}
+                if encoder is not None:
+                    reading["azimuth_deg"], reading["elevation_deg"] = encoder[j]
+                out.append(reading)
         out.sort(key=lambda r: r["ts"])
         return out
+
+    @staticmethod
+    def _encoder_angles(s: pd.DataFrame, rng: np.random.Generator) -> list[tuple[float, float]]:
+        """The tracker's joint angles as its encoders would report them: the twin's, with
+        0.02° of noise, to 0.01° (``backend/diagnosis/pointing.py`` charts them)."""
+        az = s["azimuth_joint_deg"].to_numpy() + 0.02 * rng.standard_normal(len(s))
+        el = s["elevation_joint_deg"].to_numpy() + 0.02 * rng.standard_normal(len(s))
+        return list(zip(np.round(az % 360.0, 2).tolist(),
+                        np.round(np.clip(el, -90.0, 90.0), 2).tolist(), strict=True))
 
     def post(self, readings: list[dict[str, Any]], attempts: int = 5) -> tuple[int, int]:
         """Post readings in batches of 1000, each retried (tenacity, exponential backoff up

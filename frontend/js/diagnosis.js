@@ -2,6 +2,7 @@
 // (GET /api/v1/sites/{id}/diagnosis), faults in plain words, a daily PR / gain chart.
 import { api } from "./api.js";
 import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
+import { toLocalWall } from "./time.js";
 import { h, num } from "./ui.js";
 
 const KIND_WORDS = {
@@ -62,6 +63,60 @@ async function load(state) {
     d.tracker.expected_wh_low, d.tracker.expected_wh_high, d.tracker.performance_ratio, d.gain_measured_pct,
     d.gain_expected_pct]),
   filename: `${state.site.site_id}_diagnosis_${start}_${end}.csv` });
+  await loadPointing(state, start, end);
+}
+
+/** The pointing error the tracker's own encoders report (GET …/pointing), beside the
+ * power-based diagnosis: every sunlit minute, split into azimuth and elevation. */
+async function loadPointing(state, start, end) {
+  const note = document.getElementById("pointing-note");
+  if (!note) return;
+  const tz = state.site.timezone;
+  let body;
+  try {
+    body = await api(`/api/v1/sites/${encodeURIComponent(state.site.site_id)}/pointing`, { params: { start, end } });
+  } catch (err) {
+    note.textContent = `Pointing error failed: ${err.message}`;
+    showEmpty("chart-pointing", "No pointing data");
+    return;
+  }
+  if (!body.minutes) {
+    note.textContent = body.array
+      ? "The tracker's logger reports no encoder angles (azimuth_deg, elevation_deg) while the sun is up in this range: send them with the readings to see the pointing error measured directly."
+      : "This site has no tracker.";
+    showEmpty("chart-pointing", "No encoder angles");
+    return;
+  }
+  const s = body.summary;
+  note.textContent = `${body.minutes} sunlit minutes: RMS ${num(s.rms_deg, 2)}°, 95 % under ${num(s.p95_deg, 2)}°, `
+    + `max ${num(s.max_deg, 2)}°; mean azimuth error ${num(s.mean_azimuth_error_deg, 2)}°, `
+    + `elevation ${num(s.mean_elevation_error_deg, 2)}°; cosine loss ${num(s.mean_cos_loss_pct, 2)} %`
+    + (body.points_step > 1 ? ` (chart: every ${body.points_step}th minute)` : "");
+  // a gap (night, a dropout) breaks the lines instead of bridging it
+  const gapMs = 10 * 60_000 * body.points_step;
+  const x = [];
+  const ys = { error_deg: [], azimuth_error_deg: [], elevation_error_deg: [] };
+  let last = null;
+  for (const p of body.points) {
+    const ms = Date.parse(p.ts);
+    if (last !== null && ms - last > gapMs) {
+      x.push(toLocalWall(tz, last + 60_000));
+      for (const k in ys) ys[k].push(null);
+    }
+    x.push(toLocalWall(tz, ms));
+    for (const k in ys) ys[k].push(p[k]);
+    last = ms;
+  }
+  await draw("chart-pointing", [
+    { x, y: ys.error_deg, name: "pointing error °", mode: "lines", line: { color: COLORS.tracker } },
+    { x, y: ys.azimuth_error_deg, name: "azimuth error °", mode: "lines", line: { color: COLORS.fixed, width: 1 } },
+    { x, y: ys.elevation_error_deg, name: "elevation error °", mode: "lines", line: { color: COLORS.sun, width: 1 } },
+  ], baseLayout({ yaxis: { title: "degrees", gridcolor: "#e9edf1", rangemode: "normal" } }),
+  { columns: ["time_utc", "azimuth_deg", "elevation_deg", "sun_azimuth_deg", "sun_elevation_deg", "error_deg",
+    "azimuth_error_deg", "elevation_error_deg"],
+  rows: body.points.map((p) => [p.ts, p.azimuth_deg, p.elevation_deg, p.sun_azimuth_deg, p.sun_elevation_deg,
+    p.error_deg, p.azimuth_error_deg, p.elevation_error_deg]),
+  filename: `${state.site.site_id}_pointing_${start}_${end}.csv` });
 }
 
 /** Wire the panel once; the range defaults to the 7 days up to the selected day. */

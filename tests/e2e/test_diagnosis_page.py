@@ -36,4 +36,17 @@ def test_diagnosis_panel_matches_the_api(page, server) -> None:
     else:
         assert page.locator("[data-testid=diag-none]").inner_text() == \
             "No fault found in this range."
+    # the demo logger reports the tracker's encoder angles: their pointing error is charted
+    pointing = httpx.get(f"{server.url}/api/v1/sites/{server.site['site_id']}/pointing",
+                         params={"start": start.isoformat(), "end": end.isoformat()},
+                         timeout=60).raise_for_status().json()
+    assert pointing["minutes"] > 0
+    page.wait_for_function(
+        "() => document.querySelector('#chart-pointing').dataset.points !== undefined",
+        timeout=60_000)
+    drawn = int(page.locator("[data-testid=chart-pointing]").get_attribute("data-points"))
+    assert drawn == 3 * len(pointing["points"])
+    note = page.locator("[data-testid=pointing-note]").inner_text()
+    assert f"RMS {pointing['summary']['rms_deg']:.2f}°" in note
+    page.locator("#chart-pointing").screenshot(path="test-artifacts/e2e-pointing-chart.png")
     assert page.console_errors == []

@@ -1,5 +1,6 @@
 """``/api/v1/sites/{site_id}/diagnosis``: per day, the tracker against the weather-aware twin
-and the faults found (``backend/diagnosis``, ``docs/diagnosis.md``)."""
+and the faults found; ``…/pointing``: the pointing error from the tracker's encoder angles
+(``backend/diagnosis``, ``docs/diagnosis.md``)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from fastapi import APIRouter, HTTPException
 from fastapi.responses import Response
 
 from backend.api.deps import ContextDep, RangeEnd, RangeStart, site_or_404
+from backend.diagnosis.pointing import pointing
 from backend.diagnosis.service import diagnosis
 from backend.timestamps import parse_range
 
@@ -28,3 +30,23 @@ def get_diagnosis(
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
     return Response(orjson.dumps(diagnosis(ctx, info, t0, t1)), media_type="application/json")
+
+
+@router.get("/{site_id}/pointing", responses={404: {}, 422: {}})
+def get_pointing(
+    site_id: str,
+    ctx: ContextDep,
+    start: RangeStart,
+    end: RangeEnd,
+) -> Response:
+    """The tracker's pointing error every minute the sun is up, from the encoder angles
+    its logger reports (``azimuth_deg``, ``elevation_deg``): summary, per day, and the
+    minutes (every k-th past ``HELIOTWIN_MAX_JSON_POINTS``, ``points_step`` = k)."""
+    info = site_or_404(ctx, site_id)
+    try:
+        t0, t1 = parse_range(start, end, info.zone)
+    except ValueError as exc:
+        raise HTTPException(422, str(exc)) from None
+    with ctx.engine.connect() as conn:
+        body = pointing(conn, info, t0, t1, ctx.settings.max_json_points)
+    return Response(orjson.dumps(body), media_type="application/json")
