@@ -85,8 +85,16 @@ function powerTraces(series) {
       traces.push({ x: m.x, y: m.y, name: `${arr} measured`, type: "scatter", mode: "lines", line: { color, width: 2 },
         hovertemplate: "%{y:.0f} W", connectgaps: false });
     }
+    const w = series[`${arr}-twin_weather`];
+    if (w && w.count) {
+      // the fixed array reported: the twin under that sky is the expectation, the clear-sky
+      // twin stays as a faint reference
+      traces.push({ x: w.x, y: w.y, name: `${arr} twin (measured sky)`, type: "scatter", mode: "lines",
+        line: { color, width: 1.5, dash: "dash" }, hovertemplate: "%{y:.0f} W", connectgaps: false });
+    }
     if (t && t.count) {
-      traces.push({ x: t.x, y: t.y, name: `${arr} twin`, type: "scatter", mode: "lines", line: { color, width: 1.5, dash: "dash" },
+      traces.push({ x: t.x, y: t.y, name: w && w.count ? `${arr} twin (clear sky)` : `${arr} twin`, type: "scatter",
+        mode: "lines", opacity: w && w.count ? 0.6 : 1, line: { color, width: w && w.count ? 1.2 : 1.5, dash: w && w.count ? "dot" : "dash" },
         hovertemplate: "%{y:.0f} W", connectgaps: false });
     }
   }
@@ -411,10 +419,32 @@ async function load(quiet = false) {
   }
   await statusJob;
   if (signal.aborted) return;
+  weatherTwin(site, day, end, series, signal); // redraws when it arrives; never blocks the page
   banner(errors.length ? `Some data could not be loaded: ${errors[0]}` : "");
   $("live-stamp").textContent = `updated ${fmtTime(st.tz, new Date().toISOString())}`;
   document.body.dataset.overviewLoaded = `${site}/${day}`;
   if (!performance.getEntriesByName("heliotwin:overview-loaded").length) performance.mark("heliotwin:overview-loaded");
+}
+
+/** The twin under the sky the fixed array measured (source=twin_weather), when the fixed
+ * array reported that day; the chart then shows it as the expectation. */
+async function weatherTwin(site, day, end, series, signal) {
+  const fixed = series[`${ARRAYS.find((a) => st.site.arrays?.[a]?.mount === "fixed")}-measured`];
+  const done = () => { document.body.dataset.overviewWeather = `${site}/${day}`; };
+  if (!fixed || !fixed.count) { done(); return; }
+  try {
+    const bodies = await Promise.all(ARRAYS.map((arr) =>
+      getMeasurements(site, { array: arr, source: "twin_weather", start: day, end, maxPoints: MAX_POINTS }, signal)));
+    if (signal.aborted) return;
+    bodies.forEach((body, k) => {
+      if (body.sky?.source === "fixed_array") series[`${ARRAYS[k]}-twin_weather`] = toSeries(body, st.tz);
+    });
+    await drawPower(series);
+  } catch (err) {
+    if (err.name === "AbortError") return;
+    banner(`The twin under the measured sky could not be computed: ${err.message}`);
+  }
+  done();
 }
 
 function tick() {

@@ -6,6 +6,7 @@ from __future__ import annotations
 import datetime as dt
 
 import httpx
+import pytest
 
 from tests.e2e.conftest import BACKFILL_DAYS
 
@@ -49,4 +50,26 @@ def test_diagnosis_panel_matches_the_api(page, server) -> None:
     note = page.locator("[data-testid=pointing-note]").inner_text()
     assert f"RMS {pointing['summary']['rms_deg']:.2f}°" in note
     page.locator("#chart-pointing").screenshot(path="test-artifacts/e2e-pointing-chart.png")
+    assert page.console_errors == []
+
+
+def test_the_overview_draws_the_twin_under_the_measured_sky(page, server) -> None:
+    """A past day the fixed array reported: the dashed twin is the weather-aware one
+    (source=twin_weather) and the clear-sky twin stays as a faint reference."""
+    day = server.today() - dt.timedelta(days=1)
+    site = server.site["site_id"]
+    body = httpx.get(f"{server.url}/api/v1/sites/{site}/measurements", timeout=60, params={
+        "array": "tracker", "source": "twin_weather", "start": day.isoformat(),
+        "end": (day + dt.timedelta(days=1)).isoformat()}).raise_for_status().json()
+    assert body["sky"]["source"] == "fixed_array"
+    page.goto(f"{server.url}/#overview?site={site}&day={day.isoformat()}")
+    page.wait_for_function(
+        f"() => document.body.dataset.overviewWeather === '{site}/{day.isoformat()}'",
+        timeout=60_000)
+    names = page.evaluate("() => document.getElementById('chart-power').data.map(t => t.name)")
+    assert "tracker twin (measured sky)" in names and "tracker twin (clear sky)" in names
+    drawn = page.evaluate("() => document.getElementById('chart-power').data.find("
+                          "t => t.name === 'tracker twin (measured sky)').y.filter(v => v !== null)")
+    assert drawn == pytest.approx([p["power_w"] for p in body["points"]], abs=1e-6)
+    page.locator("#chart-power").screenshot(path="test-artifacts/e2e-overview-weather-twin.png")
     assert page.console_errors == []

@@ -34,6 +34,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from backend.api.deps import ContextDep, check_site_token, site_or_404
 from backend.context import ServiceContext
+from backend.diagnosis.weather_twin import weather_twin_columns
 from backend.measurements.export import influx_lines
 from backend.measurements.fields import SENSOR_FIELDS
 from backend.measurements.parse import Batch, IngestError, Limits, parse_csv_batch, parse_json_batch
@@ -347,7 +348,10 @@ def get_measurements(
     end: Annotated[str, Query(min_length=1, max_length=64,
                               description="date or ISO date-time, exclusive")],
     max_points: Annotated[int | None, Query(ge=1, le=1_000_000)] = None,
-    source: Literal["measured", "twin"] = "measured",
+    source: Annotated[Literal["measured", "twin", "twin_weather"], Query(description=(
+        "measured: the logger's readings; twin: the clear-sky twin; twin_weather: the twin "
+        "under the sky the fixed array measured (power only, computed on request, at most "
+        "31 days; the answer's sky says what it rests on)"))] = "measured",
     format: Literal["json", "csv", "influx"] | None = None,
 ) -> Response:
     """Readings of one array over a range: raw, or min/mean/max buckets past ``max_points``."""
@@ -356,12 +360,20 @@ def get_measurements(
         raise HTTPException(422, f"array: unknown array {array[:40]!r}; "
                                  f"this site has {', '.join(info.arrays)}")
     t0, t1 = _range(info, start, end)
-    want_csv = format == "csv" or (format is None and "text/csv" in
-                                   request.headers.get("accept", ""))
-    want_text = want_csv or format == "influx"  # streamed: no max_json_points
+    want_text = format in ("csv", "influx") or (  # streamed: no max_json_points
+        format is None and "text/csv" in request.headers.get("accept", ""))
     if source == "twin":
         ctx.twin.ensure(site_id, t0, t1)
     arr = info.arrays[array]
+    cols: dict[str, list[Any]]
+    if source == "twin_weather":
+        cols, sky = weather_twin_columns(ctx, info, array, t0, t1)  # InputError: a 4xx
+        n = len(cols["ts"])
+        bucket_s = 0
+        if max_points is not None and n > max_points:
+            cols, bucket_s = _minute_buckets(cols, max_points)
+        return _answer(request, site_id, array, source, start, end, t0, t1, format, cols,
+                       bucket_s, n, sky)
     src = SOURCE_CODES[source]
     with ctx.engine.connect() as conn:
         n = count_rows(conn, arr.array_id, src, t0, t1, info.phase_s)
@@ -374,7 +386,7 @@ def get_measurements(
             rows = raw_rows(conn, arr.array_id, src, t0, t1, sensors=src == SOURCE_CODES[
                 "measured"])
             bucket_s = 0
-            cols: dict[str, list[Any]] = {"ts": iso_utc(rows[:, 0].astype(np.int64))}
+            cols = {"ts": iso_utc(rows[:, 0].astype(np.int64))}
             for j, q in enumerate(QUANTITIES):
                 cols[q] = rows[:, j + 1].tolist()
             if rows.shape[1] > 4:
@@ -383,6 +395,16 @@ def get_measurements(
             b = downsample(conn, arr.array_id, src, t0, t1, limit, info.phase_s)
             bucket_s = b.width_s
             cols = b.points()
+    return _answer(request, site_id, array, source, start, end, t0, t1, format, cols,
+                   bucket_s, n, None)
+
+
+def _answer(request: Request, site_id: str, array: str, source: str, start: str, end: str,
+            t0: int, t1: int, format: str | None, cols: dict[str, list[Any]], bucket_s: int,
+            n: int, sky: dict[str, Any] | None) -> Response:
+    """A measurements answer as JSON, CSV or line protocol."""
+    want_csv = format == "csv" or (format is None and "text/csv" in
+                                   request.headers.get("accept", ""))
     if format == "influx":
         return StreamingResponse(influx_lines(site_id, array, source, cols),
                                  media_type="text/plain; charset=utf-8")
@@ -393,6 +415,31 @@ def get_measurements(
                                  headers={"Content-Disposition": f'attachment; filename="{name}"'})
     keys = list(cols)
     points = [dict(zip(keys, vals, strict=True)) for vals in zip(*cols.values(), strict=True)]
-    return _json({"site_id": site_id, "array": array, "source": source,
-                  "start": iso_utc(np.array([t0]))[0], "end": iso_utc(np.array([t1]))[0],
-                  "bucket_s": bucket_s, "count": n, "points": points})
+    body: dict[str, Any] = {
+        "site_id": site_id, "array": array, "source": source,
+        "start": iso_utc(np.array([t0]))[0], "end": iso_utc(np.array([t1]))[0],
+        "bucket_s": bucket_s, "count": n, "points": points}
+    if sky is not None:
+        body["sky"] = sky
+    return _json(body)
+
+
+def _minute_buckets(cols: dict[str, list[Any]], max_points: int
+                    ) -> tuple[dict[str, list[Any]], int]:
+    """Minute columns of the weather-aware twin in at most ``max_points`` buckets of whole
+    minutes from the first: mean/min/max power, ``n`` minutes, ``sky_valid`` share."""
+    n = len(cols["ts"])
+    k = -(-n // max_points)
+    p = np.array(cols["power_w"], np.float64)
+    valid = np.array(cols["sky_valid"], np.float64)
+    first = np.arange(0, n, k)
+    counts = np.diff(np.append(first, n))
+    out: dict[str, list[Any]] = {
+        "ts": [cols["ts"][i] for i in first.tolist()], "n": counts.tolist(),
+        "voltage_v": [None] * first.size, "current_a": [None] * first.size,
+        "power_w": (np.add.reduceat(p, first) / counts).tolist(),
+        "power_w_min": np.minimum.reduceat(p, first).tolist(),
+        "power_w_max": np.maximum.reduceat(p, first).tolist(),
+        "sky_valid": (np.add.reduceat(valid, first) / counts).tolist(),
+    }
+    return out, 60 * k

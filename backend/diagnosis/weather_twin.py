@@ -1,0 +1,82 @@
+"""The weather-aware twin of a site over a range, minute by minute (issue 13, item 5).
+
+``GET …/measurements?source=twin_weather`` answers it: both arrays' expected power
+under the sky the fixed array's measured power says there was
+(:func:`sim.sky_sensor.weather_aware_twin`, the same pipeline as the clear-sky twin
+and as the diagnosis), beside ``measured`` and the clear-sky ``twin``. Computed on
+request (about 45 ms a day), so a range is at most :data:`MAX_DAYS` long; the
+per-day energies of the same twin are cached by the diagnosis
+(``backend/diagnosis/service.py``).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+from sqlalchemy import Connection
+
+from backend.diagnosis.service import MIN_SENSOR_SHARE
+from backend.errors import InputError
+from backend.measurements.queries import iso_utc, raw_rows
+from backend.sites import SiteInfo
+from sim import sky_sensor
+
+if TYPE_CHECKING:
+    from backend.context import ServiceContext
+
+MAX_DAYS = 31
+
+
+def minute_grid(conn: Connection, array_id: int, t0: int, t1: int) -> np.ndarray:
+    """Measured power [W] on the minute grid of ``[t0, t1)``; NaN where no reading."""
+    out = np.full((t1 - t0) // 60, np.nan)
+    rows = raw_rows(conn, array_id, 0, t0, t1)
+    if rows.size:
+        k = ((rows[:, 0].astype(np.int64) - t0) // 60).clip(0, out.size - 1)
+        out[k] = rows[:, 3]
+    return out
+
+
+def weather_twin(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int) -> pd.DataFrame:
+    """:func:`sim.sky_sensor.weather_aware_twin` over ``[t0, t1)`` (whole minutes), from
+    the fixed array's stored readings; 422 without a fixed array or past ``MAX_DAYS``."""
+    fixed = info.array_of_kind("fixed")
+    if fixed is None:
+        raise InputError(422, f"source: site {info.site_id!r} has no fixed array to read the "
+                              "sky from; use source=twin (clear sky)")
+    if t1 - t0 > MAX_DAYS * 86400:
+        raise InputError(422, f"source=twin_weather is computed on request: at most {MAX_DAYS} "
+                              "days (the diagnosis gives its daily energy for longer ranges)")
+    t0, t1 = t0 // 60 * 60, -(-t1 // 60) * 60
+    with ctx.engine.connect() as conn:
+        fx = minute_grid(conn, fixed.array_id, t0, t1)
+    start = pd.Timestamp(t0, unit="s", tz="UTC")
+    return sky_sensor.weather_aware_twin(info.site, start, pd.Timestamp(t1, unit="s", tz="UTC"),
+                                         fx)
+
+
+def weather_twin_columns(ctx: ServiceContext, info: SiteInfo, array: str, t0: int,
+                         t1: int) -> tuple[dict[str, list[Any]], dict[str, Any]]:
+    """Columns of a measurements answer (``ts``, ``power_w``, voltage and current null:
+    the weather-aware twin models power; ``sky_valid``: the fixed array's inversion held
+    that minute, else the clear-sky index was carried over from valid neighbours) and
+    what the sky rests on."""
+    e = weather_twin(ctx, info, t0, t1)
+    kind = info.arrays[array].kind
+    ts = e.index.as_unit("s").asi8
+    keep = (ts >= t0) & (ts < t1)
+    e = e[keep]
+    power = e[f"{kind}_power_w"].to_numpy()
+    daylight = e["apparent_elevation"].to_numpy() > 2.0
+    valid = e["valid"].to_numpy(bool)
+    share = float(valid[daylight].mean()) if daylight.any() else 0.0
+    cols: dict[str, list[Any]] = {
+        "ts": iso_utc(ts[keep]), "voltage_v": [None] * power.size,
+        "current_a": [None] * power.size, "power_w": np.round(power, 3).tolist(),
+        "sky_valid": valid.tolist(),
+    }
+    sky = {"source": "fixed_array" if share >= MIN_SENSOR_SHARE else "clear_sky",
+           "valid_daylight_minutes_pct": round(100.0 * share, 1)}
+    return cols, sky
