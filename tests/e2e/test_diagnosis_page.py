@@ -68,8 +68,9 @@ def test_the_overview_draws_the_twin_under_the_measured_sky(page, server) -> Non
         timeout=60_000)
     names = page.evaluate("() => document.getElementById('chart-power').data.map(t => t.name)")
     assert "tracker twin (measured sky)" in names and "tracker twin (clear sky)" in names
-    drawn = page.evaluate("() => document.getElementById('chart-power').data.find("
-                          "t => t.name === 'tracker twin (measured sky)').y.filter(v => v !== null)")
+    drawn = page.evaluate(
+        "() => document.getElementById('chart-power').data"
+        ".find(t => t.name === 'tracker twin (measured sky)').y.filter(v => v !== null)")
     assert drawn == pytest.approx([p["power_w"] for p in body["points"]], abs=1e-6)
     page.locator("#chart-power").screenshot(path="test-artifacts/e2e-overview-weather-twin.png")
     assert page.console_errors == []
