@@ -11,13 +11,13 @@ per-day energies of the same twin are cached by the diagnosis
 
 from __future__ import annotations
 
+import datetime as dt
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 from sqlalchemy import Connection
 
-from backend.diagnosis.service import MIN_SENSOR_SHARE
 from backend.errors import InputError
 from backend.measurements.queries import iso_utc, raw_rows
 from backend.sites import SiteInfo
@@ -77,6 +77,76 @@ def weather_twin_columns(ctx: ServiceContext, info: SiteInfo, array: str, t0: in
         "current_a": [None] * power.size, "power_w": np.round(power, 3).tolist(),
         "sky_valid": valid.tolist(),
     }
+    from backend.diagnosis.service import MIN_SENSOR_SHARE
+
     sky = {"source": "fixed_array" if share >= MIN_SENSOR_SHARE else "clear_sky",
            "valid_daylight_minutes_pct": round(100.0 * share, 1)}
     return cols, sky
+
+
+def weather_twin_energy(ctx: ServiceContext, info: SiteInfo, data: dict[str, Any]) -> None:
+    """Add the weather-aware twin's energy to an energy answer (``energy_rows``), in place:
+    ``twin_weather_wh`` per array and period (and in the totals), ``twin_weather_gain_pct``
+    and ``twin_weather_note`` per period.
+
+    Periods of whole local days take the diagnosis's per-day energies (cached in
+    ``diagnosis_days``, so a year costs one diagnosis of it); other periods (hours, a
+    range not starting at midnight) the minute twin, at most :data:`MAX_DAYS` days. A day
+    whose sky fell back to clear sky (under half its daylight minutes inverted) is
+    counted and named in the note.
+    """
+    from backend.diagnosis.service import diagnosis  # it imports this module's neighbours
+
+    rows = data["rows"]
+    edges = [dt.datetime.fromisoformat(r["period_start"]) for r in rows]
+    if not rows:
+        return
+    edges.append(dt.datetime.fromisoformat(rows[-1]["period_end"]))
+    kinds = {name: a.kind for name, a in info.arrays.items()}
+    per: list[dict[str, float]] = [dict.fromkeys(kinds, 0.0) for _ in rows]
+    notes: list[str | None] = [None] * len(rows)
+    midnights = all(e.astimezone(info.zone).time() == dt.time(0) for e in edges)
+    if midnights:
+        days = diagnosis(ctx, info, edges[0], edges[-1])["days"]
+        starts = [e.astimezone(info.zone).date().isoformat() for e in edges]
+        p = 0
+        clear = [0] * len(rows)
+        for d in days:
+            while p + 1 < len(starts) - 1 and d["date"] >= starts[p + 1]:
+                p += 1
+            for name, kind in kinds.items():
+                wh = d[kind]["expected_wh"] if kind in ("tracker", "fixed") else None
+                per[p][name] += wh or 0.0
+            clear[p] += d["sky"]["source"] == "clear_sky"
+        notes = [f"{c} day(s) without a measured sky: clear sky used" if c else None
+                 for c in clear]
+    else:
+        t0, t1 = int(edges[0].timestamp()), int(edges[-1].timestamp())
+        e = weather_twin(ctx, info, t0, t1)
+        ts = e.index.as_unit("s").asi8
+        k = np.searchsorted([int(x.timestamp()) for x in edges], ts, side="right") - 1
+        inside = (k >= 0) & (k < len(rows))
+        for name, kind in kinds.items():
+            col = f"{kind}_power_w"
+            if col in e:
+                wh = np.bincount(k[inside], weights=e[col].to_numpy()[inside] / 60.0,
+                                 minlength=len(rows))
+                for i in range(len(rows)):
+                    per[i][name] = float(wh[i])
+    tracker, fixed = info.array_of_kind("tracker"), info.array_of_kind("fixed")
+    totals = dict.fromkeys(kinds, 0.0)
+    for r, wh, note in zip(rows, per, notes, strict=True):
+        for name in kinds:
+            r["arrays"][name]["twin_weather_wh"] = wh[name]
+            totals[name] += wh[name]
+        r["twin_weather_gain_pct"] = _gain_pct(wh, tracker, fixed)
+        r["twin_weather_note"] = note
+    for name in kinds:
+        data["totals"]["arrays"][name]["twin_weather_wh"] = totals[name]
+    data["totals"]["twin_weather_gain_pct"] = _gain_pct(totals, tracker, fixed)
+
+
+def _gain_pct(wh: dict[str, float], tracker: Any, fixed: Any) -> float | None:
+    if tracker is None or fixed is None or wh[fixed.name] <= 0:
+        return None
+    return 100.0 * (wh[tracker.name] / wh[fixed.name] - 1.0)

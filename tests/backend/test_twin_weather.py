@@ -75,3 +75,41 @@ def test_twin_weather_without_a_sky_or_over_a_long_range_says_why(
     bad = client.get(PATH, params={"array": "tracker", "source": "weather",
                                    "start": "2023-04-20", "end": "2023-04-21"})
     assert bad.status_code == 422 and "twin_weather" in bad.text
+
+
+def test_energy_of_the_weather_aware_twin_by_day_and_by_hour_agree(
+        client: httpx.Client, live_server: LiveServer) -> None:
+    """The day's energy from the diagnosis's per-day cache and the hours' from the minute
+    twin are two paths to the same integral; both equal the minute power summed here."""
+    from sim import twin
+    from sim.sites import load_site
+
+    day = DAY + dt.timedelta(days=2)
+    site = load_site("tehuantepec")
+    t0 = pd.Timestamp(dt.datetime(day.year, day.month, day.day, tzinfo=TZ))
+    clear = twin.simulate(site, t0, t0 + pd.Timedelta(days=1)).series
+    fixed = 0.8 * clear["fixed_power_w"].fillna(0.0).to_numpy()
+    assert post(client, live_server.write_token, {"readings": [
+        {"ts": t.isoformat(), "array": "fixed", "power_w": round(float(p), 3)}
+        for t, p in zip(clear.index, fixed, strict=True)]}).status_code == 200
+    params = {"start": day.isoformat(), "end": (day + dt.timedelta(days=1)).isoformat()}
+    minutes = client.get(PATH, params={**params, "array": "tracker",
+                                       "source": "twin_weather"}).json()["points"]
+    expected_wh = sum(p["power_w"] for p in minutes) / 60.0
+    daily = client.get("/api/v1/sites/tehuantepec/energy",
+                       params={**params, "interval": "day", "source": "twin_weather"})
+    assert daily.status_code == 200, daily.text
+    (row,) = daily.json()["rows"]
+    assert row["arrays"]["tracker"]["twin_weather_wh"] == pytest.approx(expected_wh, rel=1e-4)
+    assert row["twin_weather_note"] is None
+    assert row["twin_weather_gain_pct"] == pytest.approx(100.0 * (
+        row["arrays"]["tracker"]["twin_weather_wh"] / row["arrays"]["fixed"]["twin_weather_wh"]
+        - 1.0))
+    hourly = client.get("/api/v1/sites/tehuantepec/energy",
+                        params={**params, "interval": "hour", "source": "twin_weather"}).json()
+    assert len(hourly["rows"]) == 24
+    assert sum(r["arrays"]["tracker"]["twin_weather_wh"] for r in hourly["rows"]) == \
+        pytest.approx(expected_wh, rel=1e-4)
+    plain = client.get("/api/v1/sites/tehuantepec/energy",
+                       params={**params, "interval": "day"}).json()
+    assert "twin_weather_wh" not in plain["rows"][0]["arrays"]["tracker"]

@@ -24,6 +24,7 @@ from fastapi.responses import Response
 
 from backend.api.deps import ContextDep, RangeEnd, RangeStart, site_or_404
 from backend.api.routes.health import service_version
+from backend.diagnosis.weather_twin import weather_twin_energy
 from backend.measurements.energy import energy_rows
 from backend.reports import report, report_csv, report_png
 from backend.timestamps import parse_range
@@ -38,6 +39,10 @@ def get_energy(
     end: RangeEnd,
     interval: Literal["hour", "day", "month"] = "day",
     format: Literal["json", "csv"] = "json",
+    source: Annotated[Literal["twin_weather"] | None, Query(description=(
+        "twin_weather: also the energy of the twin under the sky the fixed array measured "
+        "(twin_weather_wh, twin_weather_gain_pct), beside measured and the clear-sky twin"
+    ))] = None,
 ) -> Response:
     """Energy per period for every array, measured and twin, with the tracking gain."""
     info = site_or_404(ctx, site_id)
@@ -46,11 +51,15 @@ def get_energy(
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
     data = energy_rows(ctx, info, t0, t1, interval)
+    if source == "twin_weather":
+        weather_twin_energy(ctx, info, data)
     if format == "csv":
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         names = list(info.arrays)
-        keys = ("measured_wh", "twin_wh", "twin_matched_wh", "coverage_pct")
+        keys: tuple[str, ...] = ("measured_wh", "twin_wh", "twin_matched_wh", "coverage_pct")
+        if source == "twin_weather":
+            keys += ("twin_weather_wh",)
         w.writerow(["period_start", "period_end", *[f"{n}_{k}" for n in names for k in keys],
                     "gain_pct", "twin_gain_pct", "twin_matched_gain_pct", "partial",
                     "twin_note"])
