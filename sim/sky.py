@@ -21,7 +21,6 @@ model choices the twin uses and names units:
 from __future__ import annotations
 
 import functools
-
 from pathlib import Path
 from typing import IO, Any
 

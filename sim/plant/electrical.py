@@ -11,6 +11,15 @@ hold some shade and a shaded area fraction F, the beam is scaled by
 The area-proportional model scales the beam by (1 − F) only. Each row of
 modules of a collector is one string (:class:`sim.plant.layout.Collector`);
 strings are taken to work at their own maximum-power point.
+
+F per string is the union area of the shade rectangles inside the string's band
+(kept by :func:`sim.plant.shading.plant_shade` when it is given the strings'
+edges, computed here otherwise). N_SB is counted on the block grid: each shade
+rectangle covers a rectangle of block indices, and the blocks of a row of blocks
+that hold shade are the set bits of the OR of those rectangles' bit masks (one
+bit per block across the collector) — exact integer work, and much cheaper than
+a union of the index rectangles. A collector with more than
+:data:`_MASK_BITS` blocks across falls back to that union.
 """
 
 from __future__ import annotations
@@ -22,6 +31,11 @@ from sim.plant.layout import Collector
 from sim.plant.shading import PlantShade, band_union_areas
 
 FloatArray = NDArray[np.float64]
+
+#: Blocks across a collector that one uint64 bit mask per row of blocks can hold.
+_MASK_BITS = 63
+#: Set bits of every byte (popcount where numpy has no ``bitwise_count``, numpy < 2).
+_BYTE_BITS = np.array([bin(b).count("1") for b in range(256)], dtype=np.int64)
 
 
 def _block_index_rects(rects: FloatArray, collector: Collector) -> FloatArray:
@@ -46,6 +60,35 @@ def _block_index_rects(rects: FloatArray, collector: Collector) -> FloatArray:
     np.maximum(out, 0.0, out=out)
     out[..., :2] = np.minimum(out[..., :2], n_u)
     out[..., 2:] = np.minimum(out[..., 2:], n_rows)
+    return out
+
+
+def _popcount(x: NDArray[np.uint64]) -> NDArray[np.int64]:
+    """Number of set bits of each element."""
+    if hasattr(np, "bitwise_count"):                  # numpy >= 2.0
+        return np.bitwise_count(x).astype(np.int64)
+    return _BYTE_BITS[np.ascontiguousarray(x).view(np.uint8)].reshape(*x.shape, 8).sum(axis=-1)
+
+
+def _shaded_blocks(index_rects: FloatArray, group: NDArray[np.intp], n_groups: int, n_u: int,
+                   n_rows: int) -> NDArray[np.int64]:
+    """Blocks that hold shade in each row of blocks of each group → ``(n_groups, n_rows)``.
+
+    ``index_rects`` (M, 4) from :func:`_block_index_rects`, ``group`` (M,) the group of
+    each, non-decreasing. A rectangle covering block columns [c0, c1) of rows [r0, r1)
+    sets bits c0 … c1 − 1 of those rows' masks; a row's shaded blocks are the set bits
+    of the OR of its rectangles' masks (``n_u`` ≤ :data:`_MASK_BITS`).
+    """
+    out = np.zeros((n_groups, n_rows), dtype=np.int64)
+    if not len(group):
+        return out
+    c0, c1, r0, r1 = (index_rects[:, c].astype(np.uint64) for c in range(4))
+    one = np.uint64(1)
+    bits = (one << np.maximum(c1, c0)) - (one << c0)        # (M,); c1 < c0 would wrap
+    rows = np.arange(n_rows, dtype=np.uint64)
+    masks = np.where((r0[:, None] <= rows) & (rows < r1[:, None]), bits[:, None], np.uint64(0))
+    first = np.flatnonzero(np.concatenate([[True], group[1:] != group[:-1]]))
+    out[group[first]] = _popcount(np.bitwise_or.reduceat(masks, first, axis=0))
     return out
 
 
@@ -74,13 +117,24 @@ def beam_factors(shade: PlantShade, collector: Collector) -> tuple[FloatArray, F
         return area, electrical
     strings = collector.strings()                     # horizontal bands, bottom to top
     n_u, n_v = collector.block_grid()
-    edges = np.append(strings[:, 2], strings[-1, 3])
     string_area = (strings[:, 1] - strings[:, 0]) * (strings[:, 3] - strings[:, 2])
-    f_s = band_union_areas(shade.group_rects, edges) / string_area       # (G, S)
+    cuts = collector.string_boundaries()
+    if (shade.group_band_area is not None and shade.band_edges is not None
+            and np.array_equal(shade.band_edges, cuts)):
+        f_s = shade.group_band_area / string_area     # kept by plant_shade, (G, S)
+    else:
+        edges = np.concatenate([[-np.inf], cuts, [np.inf]])  # the rectangles lie inside
+        f_s = band_union_areas(shade.group_rects, edges) / string_area
     used = shade.group_by >= 0                        # the slots that hold a rectangle
-    index_rects = np.zeros(shade.group_rects.shape)
-    index_rects[used] = _block_index_rects(shade.group_rects[used], collector)
-    n_sb = band_union_areas(index_rects, n_v * np.arange(len(strings) + 1.0))
+    g_used, k_used = np.nonzero(used)                 # by group, then slot
+    index_rects = _block_index_rects(shade.group_rects[g_used, k_used], collector)
+    if n_u <= _MASK_BITS:
+        n_sb = _shaded_blocks(index_rects, g_used, len(shade.group_step), n_u,
+                              n_v * len(strings)).reshape(-1, len(strings), n_v).sum(axis=2)
+    else:
+        padded = np.zeros(shade.group_rects.shape)
+        padded[g_used, k_used] = index_rects
+        n_sb = band_union_areas(padded, n_v * np.arange(len(strings) + 1.0))
     loss = direct_martinez(1.0, 1.0, np.minimum(f_s, 1.0), n_sb, float(n_u * n_v))
     electrical[shade.group_step, shade.group_tracker] = np.mean(
         1.0 - np.asarray(loss, dtype=float), axis=1)

@@ -122,6 +122,11 @@ class Collector:
         return np.stack([np.full_like(v0, -self.width / 2), np.full_like(v0, self.width / 2),
                          v0, v0 + h], axis=-1)
 
+    def string_boundaries(self) -> FloatArray:
+        """v of the boundaries between strings [m], bottom to top, shape ``(S − 1,)``: the
+        band edges that :func:`sim.plant.shading.plant_shade` keeps string areas for."""
+        return self.strings()[1:, 2]
+
     def block_grid(self) -> tuple[int, int]:
         """Blocks of one string as a regular grid: (across the width, up the string's height)."""
         if self.module_orientation == "portrait":

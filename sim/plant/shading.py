@@ -24,7 +24,8 @@ pair is a candidate in a bin when some sun direction inside it can have
 facing the sun (n = s) the test is the exact one, |d·u| < a and |d·v| < b, with
 a margin of |d| times the bin's largest change of u and v. Only the candidates
 of each step's bin are computed exactly; the table is built for the bins the
-steps fall in.
+steps fall in, and a :class:`BinTable` keeps it for the next call (a long run
+in chunks of time meets the same bins every day).
 
 Times where the sun is below the horizon give NaN fractions. A collector whose
 front faces away from the sun (s·n ≤ 0) receives no beam and counts as unshaded.
@@ -46,7 +47,8 @@ _EPS_AREA_M2 = 1e-9
 _IE_MAX = 8  # inclusion–exclusion up to this many rectangles, edge grid beyond
 _BIN_AZ_DEG, _BIN_EL_DEG = 1.0, 0.5
 _FACING_COS = 1 - 1e-12  # n·s above this: the collectors face the sun
-_CHUNK = 2_000_000  # candidates computed at once (bounded memory)
+_CHUNK = 200_000  # candidates computed at once (bounded memory, temporaries in cache)
+_BIN_BLOCK = 128  # sun bins of the candidate table computed at once (in cache)
 
 
 def collector_axes(azimuth: ArrayLike, elevation: ArrayLike) -> tuple[FloatArray, ...]:
@@ -93,46 +95,115 @@ def _bin_table(d: FloatArray, az_c: FloatArray, el_c: FloatArray, mode: IntArray
     |d·v| < b, u and v move by at most 2 h_a + h_e in the bin); or the constant
     orientation ``normal`` = (n, u, v): (du, dv) at the bin's centre, which move
     by at most |d·n|·ρ/(s·n)²_min (the gradient of (s·u)/(s·n) is ≤ 1/(s·n)²).
+
+    The |d⊥| test needs no trigonometry per bin: with α the angle between the sun
+    and the line of d, |d⊥| = |d| sin α can drop below D somewhere in the bin
+    exactly when α < ρ + arcsin(min(1, D/|d|)) =: α_max, a bound of the pair alone,
+    i.e. when |s·d| > |d| cos α_max (every α passes when α_max ≥ 90°). Bins are
+    done in blocks, so that the (bins × pairs) temporaries stay in cache.
     """
     h_a, h_e = np.radians(_BIN_AZ_DEG / 2), np.radians(_BIN_EL_DEG / 2)
     rho = h_a + h_e                   # angular radius of a bin (parallel, then meridian)
     length = np.sqrt(np.einsum("pk,pk->p", d, d))
-    s_c = enu_from_sky(az_c, el_c)
-    cos_line = np.clip(np.abs(s_c @ d.T) / length, 0.0, 1.0)            # (B, P)
-    theta = np.maximum(np.arccos(cos_line) - rho, 0.0)
-    ok = length * np.sin(np.minimum(theta, np.pi / 2)) < np.hypot(width, height)
-    f = np.nonzero(mode == FACING)[0]
-    if len(f):
-        _, u, v = collector_axes(az_c[f], el_c[f])
-        slack = 1.5e-6  # n within arccos(_FACING_COS) of s
-        near_u = np.abs(u @ d.T) < width + length * (h_a + slack)
-        near_v = np.abs(v @ d.T) < height + length * (2 * h_a + h_e + 2 * slack)
-        ok[f] &= near_u & near_v
-    f = np.nonzero(mode == FIXED)[0]
-    if len(f) and normal is not None:
+    diag = np.hypot(width, height)
+    alpha_max = rho + np.arcsin(np.minimum(1.0, diag / length))
+    min_dot = np.where(alpha_max < np.pi / 2, length * np.cos(alpha_max), -1.0)   # (P,)
+    slack = 1.5e-6                    # facing: n within arccos(_FACING_COS) of s
+    lim_u = width + length * (h_a + slack)
+    lim_v = height + length * (2 * h_a + h_e + 2 * slack)
+    if normal is not None:
         n, u, v = normal
-        sn = s_c[f] @ n
-        lower = sn - rho
-        bounded = lower > 0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ru, rv = (s_c[f] @ u) / sn, (s_c[f] @ v) / sn
-            margin = np.abs(d @ n)[None, :] * (rho / lower**2)[:, None]
-        du = (d @ u)[None, :] - ru[:, None] * (d @ n)[None, :]
-        dv = (d @ v)[None, :] - rv[:, None] * (d @ n)[None, :]
-        near = (np.abs(du) < width + margin) & (np.abs(dv) < height + margin)
-        ok[f] &= near | ~bounded[:, None]
-        ok[f[sn + rho <= 0]] = False     # the sun behind the collectors in the whole bin
+        dn, du0, dv0 = d @ n, d @ u, d @ v                              # (P,)
+    ok = np.empty((len(az_c), len(d)), dtype=bool)
+    for b0 in range(0, len(az_c), _BIN_BLOCK):
+        blk = slice(b0, b0 + _BIN_BLOCK)
+        s_c = enu_from_sky(az_c[blk], el_c[blk])
+        out = np.abs(s_c @ d.T) > min_dot                               # |d⊥| < D
+        f = np.nonzero(mode[blk] == FACING)[0]
+        if len(f):
+            _, u_f, v_f = collector_axes(az_c[blk][f], el_c[blk][f])
+            out[f] &= (np.abs(u_f @ d.T) < lim_u) & (np.abs(v_f @ d.T) < lim_v)
+        f = np.nonzero(mode[blk] == FIXED)[0]
+        if len(f) and normal is not None:
+            sn = s_c[f] @ n
+            lower = sn - rho
+            bounded = lower > 0
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ru, rv = (s_c[f] @ u) / sn, (s_c[f] @ v) / sn
+                margin = np.abs(dn)[None, :] * (rho / lower**2)[:, None]
+            near = (np.abs(du0[None, :] - ru[:, None] * dn[None, :]) < width + margin) \
+                & (np.abs(dv0[None, :] - rv[:, None] * dn[None, :]) < height + margin)
+            out[f] &= near | ~bounded[:, None]
+            out[f[sn + rho <= 0]] = False   # the sun behind the collectors in the whole bin
+        ok[blk] = out
     return ok
 
 
+@dataclass
+class _BinRows:
+    """Candidate pairs of the bins built so far, for one layout, size and orientation:
+    bin ``key[b]`` (sorted) holds ``pairs[start[b]:start[b] + count[b]]``."""
+
+    key: IntArray
+    start: IntArray
+    count: IntArray
+    pairs: IntArray
+
+
+class BinTable:
+    """The candidate pairs of every sun bin built so far (:func:`pair_candidates`).
+
+    A run split into chunks of time (:func:`sim.plant.simulate.simulate_plant`)
+    meets the same sun bins again every day; with one ``BinTable`` passed to every
+    chunk each bin's candidates are worked out once. A bin keeps the indices of
+    its candidate pairs (a few per cent of all pairs), per layout, collector size
+    and constant orientation, so one table serves several orientation series
+    (the tracking plant and the fixed plant).
+    """
+
+    def __init__(self) -> None:
+        self._rows: dict[bytes, _BinRows] = {}
+
+    def lookup(self, key: IntArray, d: FloatArray, az_c: FloatArray, el_c: FloatArray,
+               mode: IntArray, width: float, height: float, normal: FloatArray | None
+               ) -> tuple[IntArray, IntArray, IntArray]:
+        """Candidates of the bins ``key`` (sorted, unique; centres ``az_c``, ``el_c`` [°],
+        ``mode`` as :func:`_bin_table`), building the bins not kept yet.
+
+        Returns ``start``, ``count`` (per bin) and ``pairs``: bin b's candidate pair
+        indices are ``pairs[start[b]:start[b] + count[b]]``, increasing.
+        """
+        tag = b"".join([d.tobytes(), np.array([width, height]).tobytes(),
+                        b"" if normal is None else np.asarray(normal, dtype=float).tobytes()])
+        empty = np.zeros(0, dtype=np.int64)
+        rows = self._rows.get(tag) or _BinRows(empty, empty, empty, empty)
+        pos = np.searchsorted(rows.key, key)
+        new = pos >= len(rows.key)
+        new[~new] = rows.key[pos[~new]] != key[~new]
+        if new.any():
+            b_of, q_of = np.nonzero(_bin_table(d, az_c[new], el_c[new], mode[new], width,
+                                               height, normal))           # sorted by bin
+            count = np.bincount(b_of, minlength=int(new.sum()))
+            start = len(rows.pairs) + np.cumsum(count) - count
+            order = np.argsort(np.concatenate([rows.key, key[new]]), kind="stable")
+            rows = _BinRows(np.concatenate([rows.key, key[new]])[order],
+                            np.concatenate([rows.start, start])[order],
+                            np.concatenate([rows.count, count])[order],
+                            np.concatenate([rows.pairs, q_of.astype(np.int64)]))
+            self._rows[tag] = rows
+            pos = np.searchsorted(rows.key, key)
+        return rows.start[pos], rows.count[pos], rows.pairs
+
+
 def pair_candidates(d: FloatArray, sun: FloatArray, mode: IntArray, width: float,
-                height: float, normal: FloatArray | None = None
-                ) -> tuple[IntArray, IntArray]:
+                height: float, normal: FloatArray | None = None,
+                table: BinTable | None = None) -> tuple[IntArray, IntArray]:
     """(step, unordered pair) that may shade, from the table of the steps' sun bins.
 
     ``d`` from :func:`pair_vectors`; ``sun`` (T, 3) unit vectors; ``mode`` (T,)
     GENERIC (any orientation), FACING (collectors on the sun) or FIXED (the
-    constant orientation ``normal`` = stacked n, u, v). Returns (step, pair index).
+    constant orientation ``normal`` = stacked n, u, v); ``table`` keeps the bins'
+    candidates for the next call. Returns (step, pair index), sorted by step.
 
     Steps with the sun above the layout's bound are dropped first: no pair can
     overlap when |d|·sin(elevation − steepest pair slope) ≥ D, and facing the
@@ -156,15 +227,13 @@ def pair_candidates(d: FloatArray, sun: FloatArray, mode: IntArray, width: float
     key = (ke * n_az + ka) * 3 + mode
     ukey, inv = np.unique(key, return_inverse=True)
     ub = ukey // 3
-    table = _bin_table(d, ((ub % n_az) + 0.5) * _BIN_AZ_DEG,
-                       ((ub // n_az) + 0.5) * _BIN_EL_DEG - 90.0, ukey % 3, width, height,
-                       normal)
-    b_of, q_of = np.nonzero(table)                                        # sorted by bin
-    ptr = np.concatenate([[0], np.cumsum(np.bincount(b_of, minlength=len(ukey)))])
-    count = (ptr[1:] - ptr[:-1])[inv]
+    start, count, pairs = (table if table is not None else BinTable()).lookup(
+        ukey, d, ((ub % n_az) + 0.5) * _BIN_AZ_DEG, ((ub // n_az) + 0.5) * _BIN_EL_DEG - 90.0,
+        ukey % 3, width, height, normal)
+    count, start = count[inv], start[inv]                                 # per step
     steps = np.repeat(low.astype(np.int64), count)
-    first = np.repeat(ptr[:-1][inv] - np.cumsum(count) + count, count)
-    return steps, q_of[first + np.arange(len(steps), dtype=np.int64)].astype(np.int64)
+    first = np.repeat(start - np.cumsum(count) + count, count)
+    return steps, pairs[first + np.arange(len(steps), dtype=np.int64)]
 
 
 def candidate_pairs(positions: ArrayLike, sun_enu: ArrayLike,
@@ -206,7 +275,8 @@ def candidate_pairs(positions: ArrayLike, sun_enu: ArrayLike,
 
 
 def _direct_pairs(positions: FloatArray, sun: FloatArray, surface_az: FloatArray,
-                  surface_el: FloatArray, width: float, height: float
+                  surface_el: FloatArray, width: float, height: float,
+                  table: BinTable | None = None
                   ) -> tuple[IntArray, IntArray, IntArray, FloatArray]:
     """Shading pairs and their rectangles for a common orientation per step.
 
@@ -223,17 +293,21 @@ def _direct_pairs(positions: FloatArray, sun: FloatArray, surface_az: FloatArray
     constant = bool(np.all(surface_az == surface_az[0]) and np.all(surface_el == surface_el[0]))
     mode = np.where(sn > _FACING_COS, FACING, FIXED if constant else GENERIC)
     t_c, q_c = pair_candidates(d, sun, mode, width, height,
-                           np.stack([n[0], u[0], v[0]]) if constant else None)
+                               np.stack([n[0], u[0], v[0]]) if constant else None, table)
     with np.errstate(divide="ignore", invalid="ignore"):
         ru = np.where(sn > 0, np.einsum("tk,tk->t", sun, u) / sn, np.nan)
         rv = np.where(sn > 0, np.einsum("tk,tk->t", sun, v) / sn, np.nan)
+    # (d·n, du, dv) = W d per step, W's rows n, u − (s·u/s·n) n, v − (s·v/s·n) n:
+    # one 3 × 3 gather per candidate (NaN rows where s·n ≤ 0: never a hit), laid out
+    # component-major so that the gathers and the products run over contiguous rows
+    w = np.ascontiguousarray(np.stack([n, u - ru[:, None] * n, v - rv[:, None] * n]
+                                      ).transpose(0, 2, 1))                  # (3, 3, T)
+    d_t = np.ascontiguousarray(d.T)                                          # (3, P)
     out: list[list[NDArray[np.generic]]] = [[], [], [], [], []]
     for m0 in range(0, len(t_c), _CHUNK):
         t, q = t_c[m0:m0 + _CHUNK], q_c[m0:m0 + _CHUNK]
-        dq = d[q]
-        dn = np.einsum("mk,mk->m", dq, n[t])                       # λ·(s·n), sign picks i/j
-        du = np.einsum("mk,mk->m", dq, u[t]) - ru[t] * dn
-        dv = np.einsum("mk,mk->m", dq, v[t]) - rv[t] * dn
+        dn, du, dv = np.einsum("jkm,km->jm", np.take(w, t, axis=2), np.take(d_t, q, axis=1))
+        # dn = λ·(s·n): its sign says whether j shades i or i shades j
         hit = (np.abs(du) < width) & (np.abs(dv) < height) & (dn != 0)
         fwd = dn[hit] > 0                     # j (at +d) is in front of i's plane: j shades i
         sign = np.where(fwd, 1.0, -1.0)
@@ -434,6 +508,12 @@ class PlantShade:
         The shade rectangles (u0, u1, v0, v1) [m] on that collector (padded with empties).
     group_by : numpy.ndarray of int, shape (G, K)
         Index of the shading tracker of each rectangle (−1 for padding).
+    group_band_area : numpy.ndarray, shape (G, B + 1), optional
+        Shaded area [m²] of each collector between consecutive ``band_edges`` (below
+        the first, between them, above the last): the strings' shaded areas that
+        :func:`sim.plant.electrical.beam_factors` needs, from the same union.
+    band_edges : numpy.ndarray, shape (B,), optional
+        Increasing v [m] that cut the collector into those bands.
     """
 
     fraction: FloatArray
@@ -441,6 +521,8 @@ class PlantShade:
     group_tracker: IntArray
     group_rects: FloatArray
     group_by: IntArray
+    group_band_area: FloatArray | None = None
+    band_edges: FloatArray | None = None
 
     @property
     def shaded(self) -> NDArray[np.bool_]:
@@ -457,7 +539,8 @@ class PlantShade:
 
 def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation: ArrayLike,
                 surface_azimuth: ArrayLike, surface_elevation: ArrayLike, width: float,
-                height: float) -> PlantShade:
+                height: float, band_edges: ArrayLike = (),
+                table: BinTable | None = None) -> PlantShade:
     """Shaded fraction of every collector of a plant at every step (seed 004 §2.1 geometry).
 
     Parameters
@@ -472,6 +555,13 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
         For sun tracking pass the sun's own angles.
     width, height : float
         Collector size [m] (seed 004: a, b).
+    band_edges : array_like, shape (B,), optional
+        Increasing v [m] across the collector (e.g. ``Collector.string_boundaries()``):
+        the shaded area of every band between them is kept
+        (``PlantShade.group_band_area``); the fraction is their sum, so the bands
+        cost one union, not two.
+    table : BinTable, optional
+        Keeps the sun bins' candidate pairs for the next call (a run in chunks).
 
     Returns
     -------
@@ -492,9 +582,9 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
     fraction[~up] = np.nan
     sun = enu_from_sky(az, el)
     upi = np.nonzero(up)[0]
-    t, i, j, rects = _direct_pairs(p, sun[upi], saz[upi], sel[upi], width, height)
+    t, i, j, rects = _direct_pairs(p, sun[upi], saz[upi], sel[upi], width, height, table)
     key = upi[t] * n + i
-    order = np.argsort(key * n + j)
+    order = np.argsort(key * n + j, kind="stable")  # already by step: the stable sort is fast
     key, j, rects = key[order], j[order], rects[order]
     gkey, start, count = np.unique(key, return_index=True, return_counts=True)
     kmax = int(count.max()) if len(count) else 1
@@ -504,11 +594,12 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
     gidx = np.repeat(np.arange(len(gkey)), count)
     g_rects[gidx, slot] = rects
     g_by[gidx, slot] = j
-    area = band_union_areas(g_rects, np.array([-np.inf, np.inf]))[:, 0]
+    cuts = np.asarray(band_edges, dtype=float).reshape(-1)
+    band_area = band_union_areas(g_rects, np.concatenate([[-np.inf], cuts, [np.inf]]))
     g_step, g_tracker = gkey // n, gkey % n
-    fraction[g_step, g_tracker] = np.minimum(area / (width * height), 1.0)
+    fraction[g_step, g_tracker] = np.minimum(band_area.sum(axis=1) / (width * height), 1.0)
     return PlantShade(fraction, g_step.astype(np.int64), g_tracker.astype(np.int64),
-                      g_rects, g_by)
+                      g_rects, g_by, band_area, cuts)
 
 
 def shades_anyone(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation: ArrayLike,

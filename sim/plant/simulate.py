@@ -28,13 +28,13 @@ from numpy.typing import NDArray
 
 from sim.plant.electrical import beam_factors
 from sim.plant.layout import Plant
-from sim.plant.shading import plant_shade
+from sim.plant.shading import BinTable, plant_shade
 from sim.plant.strategies import orientations
 from sim.sky import clearsky_ineichen, iam_physical, poa_irradiance
 from sim.sun import solar_position
 
 FloatArray = NDArray[np.float64]
-_CHUNK = 100_000  # steps per chunk (bounded memory)
+_CHUNK = 50_000  # steps per chunk (bounded memory; the temporaries stay small)
 _SAPM = {"a": -3.56, "b": -0.075, "deltaT": 3.0}
 #: Daily clearness index below which a day counts as cloudy [-].
 CLOUDY_KT = 0.4
@@ -127,15 +127,15 @@ def sky_conditions(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame 
     return sky
 
 
-def _power(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: FloatArray
-           ) -> dict[str, Any]:
+def _power(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: FloatArray,
+           table: BinTable | None = None) -> dict[str, Any]:
     """Shade, POA and DC power of every collector for one orientation series."""
     from pvlib.pvsystem import pvwatts_dc
     from pvlib.temperature import sapm_cell
 
     c = plant.collector
     shade = plant_shade(plant.positions, sky["solar_azimuth"], sky["apparent_elevation"],
-                        saz, sel, c.width, c.height)
+                        saz, sel, c.width, c.height, c.string_boundaries(), table)
     f_area, f_elec = beam_factors(shade, c)
     poa = poa_irradiance(90.0 - sel, saz, sky["apparent_zenith"], sky["solar_azimuth"],
                          sky["dni"], sky["ghi"], sky["dhi"], sky["dni_extra"],
@@ -149,15 +149,17 @@ def _power(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: Float
     pdc0 = c.power_stc
 
     def dc(g: FloatArray) -> FloatArray:
-        return np.asarray(pvwatts_dc(g, t_cell[:, None] if g.ndim == 2 else t_cell, pdc0,
-                                     c.gamma_pdc), dtype=float)
+        return np.asarray(pvwatts_dc(g, t_cell, pdc0, c.gamma_pdc), dtype=float)
 
-    g_unshaded = beam + diffuse
-    g_area = beam[:, None] * np.nan_to_num(f_area, nan=1.0) + diffuse[:, None]
-    g_elec = beam[:, None] * np.nan_to_num(f_elec, nan=1.0) + diffuse[:, None]
+    # PVWatts DC is linear in the irradiance and every collector of a step has the same
+    # cell temperature, so the plant's power is the power of the collectors' summed
+    # irradiance: one (T,) call per model instead of a (T, N) array of powers
+    n = plant.n_trackers
+    beam_area = beam * np.nan_to_num(f_area, nan=1.0).sum(axis=1)
+    beam_elec = beam * np.nan_to_num(f_elec, nan=1.0).sum(axis=1)
     return {"shade": shade, "poa_global": poa["poa_global"],
-            "p_unshaded": dc(g_unshaded) * plant.n_trackers,
-            "p_area": dc(g_area).sum(axis=1), "p_elec": dc(g_elec).sum(axis=1)}
+            "p_unshaded": dc(beam + diffuse) * n,
+            "p_area": dc(beam_area + n * diffuse), "p_elec": dc(beam_elec + n * diffuse)}
 
 
 def _scatter(n: int, idx: NDArray[np.int64], x: FloatArray) -> FloatArray:
@@ -261,6 +263,7 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
     times = pd.date_range(start.tz_convert("UTC"), end.tz_convert("UTC"),
                           freq=pd.Timedelta(seconds=step_s), inclusive="left")
     frames, any_shaded, daylight, dni_f, dni_sum = [], 0, 0, 0.0, 0.0
+    table = BinTable()                       # sun bins recur every day: build each once
     for k0 in range(0, len(times), _CHUNK):
         tt = times[k0:k0 + _CHUNK]
         sky = sky_conditions(plant, tt, weather)
@@ -268,9 +271,9 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
         up = sky["apparent_elevation"] > 0
         day = np.nonzero(up)[0]              # shade and power are computed by day only
         dsky = {k: v[day] for k, v in sky.items()}
-        run = _power(plant, dsky, saz[day], sel[day])
+        run = _power(plant, dsky, saz[day], sel[day], table)
         fixed = _power(plant, dsky, np.full(len(day), plant.fixed_azimuth),
-                       np.full(len(day), 90.0 - plant.fixed_tilt))
+                       np.full(len(day), 90.0 - plant.fixed_tilt), table)
         frac = run["shade"].fraction
         mean_f = np.full(len(tt), np.nan)
         mean_f[day] = frac.mean(axis=1)

@@ -3,12 +3,26 @@
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 from plant_reference import sampled_fractions, twoaxistracking_fractions, utc_from_true_solar_time
 
 from sim.plant.layout import load_plant
-from sim.plant.shading import band_union_areas, plant_shade, shades_anyone, union_area
+from sim.plant.shading import (
+    FACING,
+    FIXED,
+    GENERIC,
+    BinTable,
+    _bin_table,
+    band_union_areas,
+    collector_axes,
+    pair_vectors,
+    plant_shade,
+    shades_anyone,
+    union_area,
+)
 from sim.sun import solar_position
+from vision.sphere import enu_from_sky
 
 PLANT = load_plant("penarroya")
 W, H = PLANT.collector.width, PLANT.collector.height
@@ -126,3 +140,74 @@ def test_band_union_areas_equal_shapely(k: int) -> None:
         for b in range(3):
             band = shapely.box(-10, edges[b], 10, edges[b + 1])
             assert ours[g, b] == pytest.approx(shapely.area(union & band), abs=1e-9)
+
+
+def test_string_band_areas_equal_shapely_and_sum_to_the_fraction() -> None:
+    """``band_edges``: the strings' shaded areas, from the same union as the fraction."""
+    import shapely
+
+    rng = np.random.default_rng(21)
+    az, el = rng.uniform(60, 300, 40), rng.uniform(1, 30, 40)
+    cuts = PLANT.collector.string_boundaries()
+    shade = plant_shade(PLANT.positions, az, el, az, el, W, H, band_edges=cuts)
+    plain = plant_shade(PLANT.positions, az, el, az, el, W, H)
+    assert len(shade.group_step) > 50, "the sample must hold shaded collectors"
+    np.testing.assert_allclose(shade.fraction, plain.fraction, atol=1e-12)
+    np.testing.assert_array_equal(shade.band_edges, cuts)
+    assert shade.group_band_area is not None
+    edges = np.concatenate([[-H / 2], cuts, [H / 2]])
+    for g in range(0, len(shade.group_step), 7):
+        rects = shade.group_rects[g][shade.group_by[g] >= 0]
+        union = shapely.union_all([shapely.box(r[0], r[2], r[1], r[3]) for r in rects])
+        for s in range(len(edges) - 1):
+            band = shapely.box(-W / 2, edges[s], W / 2, edges[s + 1])
+            assert shade.group_band_area[g, s] == pytest.approx(
+                shapely.area(union & band), abs=1e-9)
+
+
+def test_a_bin_table_kept_across_calls_changes_nothing() -> None:
+    """A run in chunks with one BinTable: the same shade as each chunk on its own."""
+    times = pd.date_range("2021-12-20", periods=3 * 144, freq="600s", tz="UTC")
+    pos = solar_position(times, PLANT.latitude, PLANT.longitude, PLANT.altitude)
+    az, el = pos["azimuth"].to_numpy(), pos["apparent_elevation"].to_numpy()
+    fixed_az, fixed_el = PLANT.fixed_azimuth, 90.0 - PLANT.fixed_tilt
+    table = BinTable()
+    for part in np.array_split(np.arange(len(times)), 3):     # one day each: bins recur
+        a, e = az[part], el[part]
+        for n_az, n_el in ((a, e), (np.full_like(a, fixed_az), np.full_like(a, fixed_el))):
+            kept = plant_shade(PLANT.positions, a, e, n_az, n_el, W, H, table=table)
+            alone = plant_shade(PLANT.positions, a, e, n_az, n_el, W, H)
+            np.testing.assert_array_equal(kept.fraction, alone.fraction)
+            np.testing.assert_array_equal(kept.group_rects, alone.group_rects)
+
+
+@pytest.mark.parametrize("mode", [GENERIC, FACING, FIXED])
+def test_bin_table_keeps_every_pair_that_can_shade_inside_the_bin(mode: int) -> None:
+    """Sun directions sampled inside each bin: every pair whose collectors overlap there
+    (computed directly, per direction) is a candidate of the bin."""
+    rng = np.random.default_rng(30 + mode)
+    _, _, d = pair_vectors(PLANT.positions)
+    n_bins = 300
+    az0 = rng.integers(60, 300, n_bins).astype(np.float64)        # bin corners (1° × 0.5°)
+    el0 = (rng.integers(0, 80, n_bins) * 0.5).astype(np.float64)
+    fixed = collector_axes(PLANT.fixed_azimuth, 90.0 - PLANT.fixed_tilt)
+    table = _bin_table(d, az0 + 0.5, el0 + 0.25, np.full(n_bins, mode), W, H,
+                       np.stack(fixed) if mode == FIXED else None)
+    k = 40                                                        # suns per bin
+    az = az0[:, None] + rng.uniform(0, 1, (n_bins, k))
+    el = el0[:, None] + rng.uniform(0, 0.5, (n_bins, k))
+    s = enu_from_sky(az, el)                                      # (B, k, 3)
+    if mode == GENERIC:       # any orientation: the distance of d from the sun ray
+        ds = np.einsum("bkc,pc->bkp", s, d)
+        can = np.sqrt(np.maximum(np.einsum("pc,pc->p", d, d) - ds**2, 0)) < np.hypot(W, H)
+    else:
+        n, u, v = (np.broadcast_to(x, s.shape) for x in
+                   (collector_axes(az, el) if mode == FACING else fixed))
+        sn = np.sum(s * n, axis=-1)[..., None]
+        dn = np.einsum("bkc,pc->bkp", n, d)
+        du = np.einsum("bkc,pc->bkp", u, d) - np.sum(s * u, axis=-1)[..., None] / sn * dn
+        dv = np.einsum("bkc,pc->bkp", v, d) - np.sum(s * v, axis=-1)[..., None] / sn * dn
+        can = (sn > 0) & (np.abs(du) < W) & (np.abs(dv) < H)
+    assert can.any(axis=1).sum() > 100, "the sample must hold pairs that shade"
+    missed = can.any(axis=1) & ~table
+    assert not missed.any()

@@ -58,3 +58,21 @@ def test_tmy3_weather_moved_by_solar_time_and_bad_input() -> None:
         simulate_plant(PLANT, pd.Timestamp("2021-01-01"), pd.Timestamp("2021-01-02"))
     with pytest.raises(ValueError, match="step_s must be positive"):
         simulate_plant(PLANT, start, end, step_s=0)
+
+
+def test_chunks_of_time_change_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The run is done in chunks that share one candidate table (sim.plant.shading.BinTable):
+    chunks of 50 steps give the summary of a single chunk."""
+    import sim.plant.simulate as simulate
+
+    start = pd.Timestamp("2021-12-19", tz="Europe/Madrid")
+    end = start + pd.Timedelta(days=3)
+    whole = simulate_plant(PLANT, start, end, step_s=600, strategy="sun")
+    monkeypatch.setattr(simulate, "_CHUNK", 50)
+    parts = simulate_plant(PLANT, start, end, step_s=600, strategy="sun")
+    assert whole.any_shaded_steps > 0
+    a, b = whole.summary(), parts.summary()
+    assert a.keys() == b.keys()
+    for k, v in a.items():
+        assert b[k] == (pytest.approx(v, rel=1e-12) if isinstance(v, float) else v), k
+    pd.testing.assert_frame_equal(whole.series, parts.series, rtol=1e-12)
