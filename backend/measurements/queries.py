@@ -174,8 +174,8 @@ def downsample(conn: Connection, array_id: int, source: int, start: int, end: in
     if width < ROLLUP_WIDTH_S:
         rows = fetch(conn, _RAW_BUCKETS, (start, width, array_id, source, start, end))
         return _buckets_from_rows(rows, start, width)
-    width = ROLLUP_WIDTH_S * math.ceil(span / max(1, max_points - 1) / ROLLUP_WIDTH_S)
-    origin = grid_floor(start, phase)
+    origin = grid_floor(start, phase)  # buckets from here: at most max_points of them
+    width = ROLLUP_WIDTH_S * math.ceil((end - origin) / max_points / ROLLUP_WIDTH_S)
     a, b = grid_ceil(start, phase), grid_floor(end, phase)
     parts: list[Buckets] = []
     if a < b:
