@@ -24,10 +24,22 @@ def _ring_values(gray: NDArray[np.uint8], cx: float, cy: float, radius: float,
     xs = cx + radius * _RING_COS
     ys = cy + radius * _RING_SIN
     h, w = gray.shape
+    if cx - radius >= 0 and cy - radius >= 0 and cx + radius <= w - 1 \
+            and cy + radius <= h - 1 and (fov is None or np.hypot(
+                cx - fov.cx_px, cy - fov.cy_px) + radius < fov.radius_px):
+        # the whole circle is inside (the common case): no per-point test
+        return gray[(ys + 0.5).astype(np.intp), (xs + 0.5).astype(np.intp)].astype(float)
     ok = (xs >= 0) & (xs <= w - 1) & (ys >= 0) & (ys <= h - 1)
     if fov is not None:
         ok &= (xs - fov.cx_px) ** 2 + (ys - fov.cy_px) ** 2 < fov.radius_px**2
     return gray[(ys[ok] + 0.5).astype(np.intp), (xs[ok] + 0.5).astype(np.intp)].astype(float)
+
+
+def _median(v: NDArray[np.float64]) -> float:
+    """Median of a short vector (``np.median``'s value, without its overhead)."""
+    s = np.sort(v)
+    n = s.size
+    return float(0.5 * (s[(n - 1) // 2] + s[n // 2]))
 
 
 def _clamp(v: float, lo: float, hi: float) -> float:

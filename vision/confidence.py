@@ -3,12 +3,26 @@
 Features of the winning candidate (:func:`features`) are combined by a
 logistic regression whose coefficients were fitted on the DEVELOPMENT split
 only (``benchmarks/bench_vision.py --fit-confidence``: synthetic frames of
-both renderers with development seeds and the development real frames; L2
-penalty, Newton–Raphson) and are stored in ``confidence.json`` beside this
-module. The held-out split's reliability table (confidence bins → fraction
-correct) is in ``docs/validation-vision.md``. A candidate counts as correct
-when the sun is visible and the answer lies within max(3 px, 0.5°) of the
-truth.
+both renderers with development seeds, the development real frames, and frames
+whose ephemeris is wrong — :func:`vision.evalset.wrong_ephemeris_scenes`,
+:func:`vision.evalset.wrong_ephemeris_discs`, the development real frames with
+the clock three hours off; Newton–Raphson with an L2 penalty whose strength is
+chosen by 5-fold cross-validation grouped by frame, lowest held-out log loss —
+a calibrated probability is what a proper scoring rule rewards, Gneiting &
+Raftery 2007, JASA 102:359) and are stored in ``confidence.json`` beside this
+module. The reliability tables (confidence bins → fraction correct,
+development and held-out) are in ``docs/validation-vision.md``. A candidate
+counts as correct when the sun is visible and the winning region's centroid
+lies within max(3 px, 1°, the region's own radius) of the truth.
+
+The distance from the ephemeris prediction is a *feature*, never a veto: it
+enters as ``ephemeris_far_unclear`` = (distance, capped at 30°, / 10°) ×
+(1 − :func:`plain_disc`), so it can lower the probability of an ambiguous
+candidate (a cloud highlight, a fragment of glare) but not of a plainly
+visible, round, saturated disc with its glare — there a far prediction means
+the place, the time or the camera is wrong, and the answer says how far
+(``SunDetection.distance_from_ephemeris_px``; the service warns when no
+camera error can explain it).
 
 Every "no sun" answer gets a reason a person can read (:func:`reason`): the
 feature that pulled the probability down the most.
@@ -31,7 +45,8 @@ FEATURES: tuple[str, ...] = (
     "runner_up",         # heuristic score of the runner-up / the winner's
     "coherence",         # radial-symmetry coherence of the glare's gradients 0–1
     "ephemeris_known",   # 1 when a prediction from time, place and camera was given
-    "ephemeris_far",     # min(distance from the prediction [°], 30) / 10, 0 when unknown
+    "ephemeris_far_unclear",  # min(distance from the prediction [°], 30) / 10 × (1 − plain
+                              # disc), 0 when unknown: never counts against a plain disc
 )
 
 _PATH = Path(__file__).with_name("confidence.json")
@@ -55,6 +70,12 @@ def _model() -> tuple[NDArray[np.float64], float]:
     return _MODEL
 
 
+def plain_disc(shape: float, glare: float, saturated: float) -> float:
+    """How plainly a candidate is a visible sun, 0–1: round (``shape``) × glare falling
+    off around it or a sharp edge to the sky (``glare``) × saturated (0 or 1)."""
+    return float(min(max(shape, 0.0), 1.0) * min(max(glare, 0.0), 1.0) * saturated)
+
+
 def features(shape: float, glare: float, peak: float, bg: float, radius_deg: float,
              runner_up: float, coherence: float, ephemeris_deg: float | None
              ) -> NDArray[np.float64]:
@@ -62,12 +83,17 @@ def features(shape: float, glare: float, peak: float, bg: float, radius_deg: flo
 
     ``peak``, ``bg`` are grey levels; ``radius_deg`` the core's equivalent
     radius on the sky [°]; ``ephemeris_deg`` its distance from the predicted
-    sun [°] or None.
+    sun [°] or None. The distance is gated by ``1 −`` :func:`plain_disc`: it is
+    zero for a round, saturated disc with its glare, whatever the distance.
     """
     known = ephemeris_deg is not None
-    far = min(float(ephemeris_deg), 30.0) / 10.0 if ephemeris_deg is not None else 0.0
+    saturated = float(peak >= 250.0)
+    far = 0.0
+    if ephemeris_deg is not None:
+        far = min(float(ephemeris_deg), 30.0) / 10.0 * (1.0 - plain_disc(shape, glare,
+                                                                         saturated))
     return np.array([
-        shape, glare, float(peak >= 250.0), max(peak - bg, 0.0) / 255.0,
+        shape, glare, saturated, max(peak - bg, 0.0) / 255.0,
         abs(float(np.log(max(radius_deg, 1e-3) / 2.5))), runner_up, coherence,
         float(known), far], dtype=float)
 
@@ -113,8 +139,8 @@ _REASONS = {
     "coherence": "brightness around the brightest region is not radially symmetric "
                  "(coherence {coherence:.2f}): cloud",
     "ephemeris_known": "no region where the ephemeris puts the sun",
-    "ephemeris_far": "brightest round region is {ephemeris_deg:.1f}° from where the ephemeris "
-                     "puts the sun",
+    "ephemeris_far_unclear": "the brightest region is {ephemeris_deg:.1f}° from where the "
+                             "ephemeris puts the sun and does not look plainly like a sun",
 }
 
 

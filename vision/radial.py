@@ -60,15 +60,19 @@ class RadialFit:
 
 def _solve(px: NDArray[np.float64], py: NDArray[np.float64], nx: NDArray[np.float64],
            ny: NDArray[np.float64], w: NDArray[np.float64]) -> tuple[float, float] | None:
-    """Point nearest (weighted least squares) to the lines through (px, py) along (nx, ny)."""
-    a11 = float(np.sum(w * (1.0 - nx * nx)))
-    a22 = float(np.sum(w * (1.0 - ny * ny)))
-    a12 = float(-np.sum(w * nx * ny))
+    """Point nearest (weighted least squares) to the lines through (px, py) along (nx, ny):
+    ``Σ w (I − n nᵀ) c = Σ w (I − n nᵀ) p``, a 2 × 2 system (dot products only)."""
+    wnx, wny = w * nx, w * ny
+    sw = float(w.sum())
+    a11 = sw - float(wnx @ nx)
+    a22 = sw - float(wny @ ny)
+    a12 = -float(wnx @ ny)
     det = a11 * a22 - a12 * a12
     if not np.isfinite(det) or det <= 1e-9 * max(a11 * a22, 1e-30):
         return None
-    b1 = float(np.sum(w * ((1.0 - nx * nx) * px - nx * ny * py)))
-    b2 = float(np.sum(w * (-nx * ny * px + (1.0 - ny * ny) * py)))
+    q = nx * px + ny * py
+    b1 = float(w @ px) - float(wnx @ q)
+    b2 = float(w @ py) - float(wny @ q)
     return (a22 * b1 - a12 * b2) / det, (a11 * b2 - a12 * b1) / det
 
 
@@ -99,34 +103,38 @@ def gradient_lines(gray: NDArray[np.uint8], x0: int, y0: int, x1: int, y1: int,
     frame is glare + sky, and a radially symmetric glare's own gradient points
     at its centre. Returns ``(px, py, nx, ny, g2, clipped)``.
     """
-    win: NDArray[Any] = gray[y0:y1, x0:x1].astype(np.float32)
-    d_u: NDArray[Any] = win[:-1, 1:] - win[1:, :-1]  # along (+x, −y)
-    d_v: NDArray[Any] = win[:-1, :-1] - win[1:, 1:]  # along (−x, −y)
-    d_u = cv2.blur(d_u, (3, 3))
-    d_v = cv2.blur(d_v, (3, 3))
+    raw = gray[y0:y1, x0:x1]
+    win: NDArray[Any] = raw.astype(np.float32)
+    d_u: NDArray[Any] = cv2.blur(win[:-1, 1:] - win[1:, :-1], (3, 3))  # along (+x, −y)
+    d_v: NDArray[Any] = cv2.blur(win[:-1, :-1] - win[1:, 1:], (3, 3))  # along (−x, −y)
     gx = 0.5 * (d_u - d_v)
     gy = -0.5 * (d_u + d_v)
-    sat: NDArray[Any] = (win >= np.float32(saturated_level)).astype(np.uint8)
-    sat = np.asarray(cv2.dilate(sat, np.ones((3, 3), np.uint8)), np.uint8)  # the blur's reach
-    clip4 = (sat[:-1, :-1] | sat[1:, 1:] | sat[:-1, 1:] | sat[1:, :-1]) > 0
-    gx = np.where(clip4, gx, gx - np.float32(sky_gradient[0]))
-    gy = np.where(clip4, gy, gy - np.float32(sky_gradient[1]))
+    # a 2 × 2 erosion / dilation anchored at its first pixel: the four pixels of a corner
+    two = np.ones((2, 2), np.uint8)
+    if saturated_level <= 255.0:
+        sat = cv2.dilate((raw >= saturated_level).view(np.uint8), np.ones((3, 3), np.uint8))
+        clip4 = cv2.dilate(sat, two, anchor=(0, 0))[:-1, :-1] > 0  # the blur's reach
+        gx = np.where(clip4, gx, gx - np.float32(sky_gradient[0]))
+        gy = np.where(clip4, gy, gy - np.float32(sky_gradient[1]))
+    else:
+        clip4 = np.zeros(gx.shape, bool)
+        if sky_gradient != (0.0, 0.0):
+            gx -= np.float32(sky_gradient[0])
+            gy -= np.float32(sky_gradient[1])
     g2 = gx * gx + gy * gy
-    ok: NDArray[Any] = (win >= np.float32(dark_level)).astype(np.uint8)
-    ok = np.asarray(cv2.erode(ok, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE),
-                    np.uint8)
-    ok4 = ok[:-1, :-1] & ok[1:, 1:] & ok[:-1, 1:] & ok[1:, :-1]
+    ok = cv2.erode((raw >= dark_level).view(np.uint8), np.ones((3, 3), np.uint8),
+                   borderType=cv2.BORDER_REPLICATE)
+    ok4 = np.asarray(cv2.erode(ok, two, anchor=(0, 0))[:-1, :-1], np.uint8)
     if glare_level > 0:
-        hi = (win >= np.float32(glare_level)).astype(np.uint8)
-        ok4 &= hi[:-1, :-1] | hi[1:, 1:] | hi[:-1, 1:] | hi[1:, :-1]
+        hi = np.asarray(cv2.dilate((raw >= glare_level).view(np.uint8), two, anchor=(0, 0)),
+                        np.uint8)
+        ok4 &= hi[:-1, :-1]
     gmax = float(g2.max()) if g2.size else 0.0
-    sel = (ok4 > 0) & (g2 > 4e-4 * gmax) & (g2 > 1.0)
+    sel = (ok4 > 0) & (g2 > max(4e-4 * gmax, 1.0))
     iy, ix = np.nonzero(sel)
     g2s = g2[iy, ix].astype(np.float64)
     mag = np.sqrt(g2s)
-    nx = gx[iy, ix] / mag
-    ny = gy[iy, ix] / mag
-    return (ix + x0 + 0.5, iy + y0 + 0.5, nx.astype(np.float64), ny.astype(np.float64), g2s,
+    return (ix + (x0 + 0.5), iy + (y0 + 0.5), gx[iy, ix] / mag, gy[iy, ix] / mag, g2s,
             clip4[iy, ix])
 
 
@@ -199,6 +207,8 @@ def radial_symmetry_centre(gray: NDArray[np.uint8], start_px: tuple[float, float
         px, py, nx, ny, g2 = px[~clipped], py[~clipped], nx[~clipped], ny[~clipped], g2[~clipped]
     if px.size < 8:
         return None
+    if camera is None:
+        return _radial_flat(px, py, nx, ny, g2, float(cx), float(cy), n_iter)
     ux, uy, mx, my = px, py, nx, ny  # the solve's coordinates (image, or tangent plane)
     axis: Any = None
     e1: Any = None
@@ -206,6 +216,9 @@ def radial_symmetry_centre(gray: NDArray[np.uint8], start_px: tuple[float, float
     scale = 1.0  # tangent-plane units per pixel
     ex, ey = float(cx), float(cy)
     band = 1.0
+    base = g2
+    nux, nuy = ex, ey
+    perp_after: NDArray[np.float64] | None = None  # line distances from the new estimate
     for it in range(n_iter):
         if camera is not None and it in (0, 2):
             axis = camera.pixel_to_direction(np.array([ex]), np.array([ey]))[0]
@@ -233,14 +246,23 @@ def radial_symmetry_centre(gray: NDArray[np.uint8], start_px: tuple[float, float
             cux, cuy = ex, ey
         ddx, ddy = cux - ux, cuy - uy
         dist = np.hypot(ddx, ddy)
-        inward = (mx * ddx + my * ddy) / np.maximum(dist, 1e-9)
         perp = np.abs(ddx * my - ddy * mx)
+        if it > 0:
+            # the inlier band: the weighted median line distance from the last estimate
+            # (last pass's weights), at least 0.5 px
+            perp_b = perp if perp_after is None else perp_after
+            order = np.argsort(perp_b)
+            cw = np.cumsum(base[order])
+            med = float(perp_b[order][min(int(np.searchsorted(cw, 0.5 * cw[-1])),
+                                          len(order) - 1)])
+            band = max(0.5, 1.5 * med)
         cos_min = 0.3 if it == 0 else 0.7
-        base = g2 * (inward > cos_min) / np.maximum(dist, 2.0)
-        if it == 0:
-            wgt = base
-        else:
-            wgt = base / (1.0 + (perp / band) ** 2)
+        # inward: the gradient points at the estimate (the glare brightens toward it)
+        base = g2 * ((mx * ddx + my * ddy) > cos_min * np.maximum(dist, 1e-9)) \
+            / np.maximum(dist, 2.0)
+        if float(base.sum()) <= 0:
+            return None
+        wgt = base if it == 0 else base / (1.0 + (perp / band) ** 2)
         got = _solve(ux, uy, mx, my, wgt)
         if got is None:
             return None
@@ -253,16 +275,10 @@ def radial_symmetry_centre(gray: NDArray[np.uint8], start_px: tuple[float, float
             ex, ey = float(nux), float(nuy)
         if not (np.isfinite(ex) and np.isfinite(ey)):
             return None
-        ddx, ddy = nux - ux, nuy - uy
-        perp = np.abs(ddx * my - ddy * mx)
-        sw = float(base.sum())
-        if sw <= 0:
-            return None
-        # the inlier band: the weighted median line distance, at least 0.5 px
-        order = np.argsort(perp)
-        cw = np.cumsum(base[order])
-        med = float(perp[order][min(int(np.searchsorted(cw, 0.5 * cw[-1])), len(order) - 1)])
-        band = max(0.5, 1.5 * med)
+        if camera is not None:  # the tangent plane may move before the next pass
+            perp_after = np.abs((nux - ux) * my - (nuy - uy) * mx)
+    ddx, ddy = nux - ux, nuy - uy
+    perp = np.abs(ddx * my - ddy * mx)
     dist = np.hypot(ddx, ddy)
     inward = (mx * ddx + my * ddy) / np.maximum(dist, 1e-9)
     base = g2 * (inward > 0.0) / np.maximum(dist, 2.0)
@@ -280,3 +296,69 @@ def _tangent_of(camera: CameraModel, x: float, y: float, axis: NDArray[np.float6
                 ) -> tuple[float, float]:
     tx, ty = _tangent(camera, np.array([x]), np.array([y]), axis, e1, e2)
     return float(tx[0]) / scale, float(ty[0]) / scale
+
+
+def _radial_flat(px: NDArray[np.float64], py: NDArray[np.float64], nx: NDArray[np.float64],
+                 ny: NDArray[np.float64], g2: NDArray[np.float64], cx: float, cy: float,
+                 n_iter: int) -> RadialFit | None:
+    """:func:`radial_symmetry_centre` in the image plane (no camera model).
+
+    The same reweighting as the tangent-plane path, written with every per-line
+    quantity that does not depend on the estimate computed once: a line's
+    distance from the estimate c is ``|c × n − p × n|``, its inward dot product
+    ``n · c − n · p``, its squared distance ``|c|² − 2 p · c + |p|²``, all
+    linear in ``(cx, cy, 1)`` (one matrix product per pass), and the 2 × 2
+    normal equations of :func:`_solve` are ``w`` times a fixed n × 5 matrix.
+    """
+    n = px.size
+    q = nx * px + ny * py
+    # rows: the coefficients of (cx, cy, 1); columns: signed line distance, inward dot
+    # product, squared distance − |c|² of every line (contiguous rows: one product a pass)
+    lin = np.empty((3, 3 * n))
+    lin[0, :n], lin[1, :n], lin[2, :n] = ny, -nx, py * nx - px * ny
+    lin[0, n:2 * n], lin[1, n:2 * n], lin[2, n:2 * n] = nx, ny, -q
+    lin[0, 2 * n:], lin[1, 2 * n:], lin[2, 2 * n:] = -2.0 * px, -2.0 * py, px * px + py * py
+    normal = np.empty((5, n))
+    normal[0], normal[1], normal[2] = 1.0 - nx * nx, 1.0 - ny * ny, -nx * ny
+    normal[3], normal[4] = px - nx * q, py - ny * q
+
+    def at(ex: float, ey: float) -> tuple[NDArray[np.float64], ...]:
+        v = np.array([ex, ey, 1.0]) @ lin
+        perp = np.abs(v[:n])
+        dist = np.sqrt(np.maximum(v[2 * n:] + (ex * ex + ey * ey), 0.0))
+        return perp, v[n:2 * n], dist
+
+    ex, ey = cx, cy
+    band = 1.0
+    base = g2
+    for it in range(n_iter):
+        perp, inward, dist = at(ex, ey)
+        if it > 0:
+            # the inlier band: the weighted median line distance from the last estimate
+            # (last pass's weights), at least 0.5 px
+            order = np.argsort(perp)
+            cw = np.cumsum(base[order])
+            med = float(perp[order][min(int(np.searchsorted(cw, 0.5 * cw[-1])), n - 1)])
+            band = max(0.5, 1.5 * med)
+        cos_min = 0.3 if it == 0 else 0.7
+        base = g2 * (inward > cos_min * np.maximum(dist, 1e-9)) / np.maximum(dist, 2.0)
+        if float(base.sum()) <= 0:
+            return None
+        wgt = base if it == 0 else base / (1.0 + (perp / band) ** 2)
+        a11, a22, a12, b1, b2 = (normal @ wgt).tolist()
+        det = a11 * a22 - a12 * a12
+        if not np.isfinite(det) or det <= 1e-9 * max(a11 * a22, 1e-30):
+            return None
+        ex, ey = (a22 * b1 - a12 * b2) / det, (a11 * b2 - a12 * b1) / det
+        if not (np.isfinite(ex) and np.isfinite(ey)):
+            return None
+    perp, inward, dist = at(ex, ey)
+    d2 = np.maximum(dist, 2.0)
+    base = g2 * (inward > 0.0) / d2
+    inl = perp <= np.maximum(1.5, 0.08 * dist)
+    total = float((g2 / d2).sum())
+    coherence = float(base[inl].sum() / total) if total > 0 else 0.0
+    wi = base * inl
+    swi = float(wi.sum())
+    spread = float(np.sqrt(float(wi @ (perp * perp)) / swi)) if swi > 0 else float("inf")
+    return RadialFit(ex, ey, coherence, spread, int(n))

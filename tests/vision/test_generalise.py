@@ -16,7 +16,7 @@ import pytest
 from vision.calibrate import fit_fisheye
 from vision.cameras import FisheyeCamera
 from vision.detect import detect_robust, detect_sun
-from vision.evalset import LabelledFrame, fisheye_640_scenes
+from vision.evalset import LabelledFrame, fisheye_640_scenes, tracker_rois
 from vision.sphere import angular_separation_deg
 
 
@@ -76,8 +76,9 @@ def test_overcast_real_frames_no_sun_with_a_reason(real_sky, blind) -> None:
     assert len(rows) == 2
     for r in rows:
         d = blind[r["filename"]]
-        # target < 0.3; measured 0.34 on the 08:55 frame (reported as missed in the docs)
-        assert not d.sun_found and d.confidence < 0.4, (r["filename"], d.confidence)
+        # target < 0.3; measured 0.03 and 0.07 (the model refitted on the development split,
+        # L2 penalty chosen by cross-validation)
+        assert not d.sun_found and d.confidence < 0.3, (r["filename"], d.confidence)
         assert d.reason and len(d.reason) > 10
 
 
@@ -152,3 +153,24 @@ def test_every_no_sun_answer_has_a_reason() -> None:
     cam = FisheyeCamera(319.5, 239.5, 2.6)
     d = detect_robust(np.full((480, 640, 3), 90, np.uint8), camera=cam, expected_px=(300., 200.))
     assert not d.sun_found and d.reason and d.distance_from_ephemeris_px is None
+
+
+def test_heldout_tracker_rois_as_the_control_loop_sees_them() -> None:
+    """48 × 48 px ROIs around the predicted sun (no camera, no image circle, as
+    ``sim.tracking`` calls ``robust``). The sky's level is the ROI's border when the glare
+    lifts its median. Measured on the 30 clear and 28 visible cloudy held-out ROIs: 30/30
+    and 27/28 found, within 0.2 px (clear) / 2.3 px (cloud) of the truth."""
+    clear_missed, cloud_missed, errs = 0, 0, []
+    for rf in tracker_rois("heldout", 60):
+        if not rf.sun_visible:
+            continue
+        d = detect_robust(rf.image, auto_fov=False)
+        if d.sun_found and d.centroid_px is not None:
+            errs.append(np.hypot(d.centroid_px[0] - rf.sun_px[0],
+                                 d.centroid_px[1] - rf.sun_px[1]))
+        elif rf.source.endswith("clear"):
+            clear_missed += 1
+        else:
+            cloud_missed += 1
+    assert clear_missed == 0 and cloud_missed <= 2
+    assert len(errs) >= 56 and float(np.median(errs)) < 0.3 and max(errs) < 3.0

@@ -1,0 +1,184 @@
+"""Scoring a detector on labelled frames (issue 10): records, summaries, reliability, the fit.
+
+One *record* (a plain dict) per frame and run: whether the sun was found, the
+confidence, the error against the truth [px, °], the confidence's features,
+and whether the winning region *is* the visible sun (``cand_ok``: its centroid
+within max(3 px, 1°, the region's own radius) of the truth — the event the
+confidence is the probability of, found or not). ``benchmarks/bench_vision.py``
+builds the tables of ``docs/validation-vision.md`` from these records and
+fits ``vision/confidence.json`` on the development split's records only
+(:func:`fit_confidence`).
+
+References are never the detector: the synthetic truth (the camera model's
+projection of the sun a frame was drawn around) or, for real frames, the hand
+labels and pvlib's SPA (the caller's).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vision import confidence as conf
+from vision.cameras import FisheyeCamera
+from vision.detect import detect_sun
+from vision.detection import SunDetection
+from vision.evalset import LabelledFrame, RoiFrame
+from vision.sphere import angular_separation_deg
+
+Record = dict[str, Any]
+
+L2_GRID: tuple[float, ...] = (0.01, 0.03, 0.1, 0.3, 1.0)
+"""Penalties tried by :func:`fit_confidence` (5-fold cross-validation grouped by frame)."""
+
+RELIABILITY_EDGES: tuple[float, ...] = (0.0, 0.1, 0.3, 0.5, 0.7, 0.9, 1.0001)
+
+
+def correct_limit_px(px_per_deg: float, area_px: int) -> float:
+    """How far [px] the winning region's centroid may lie from the truth and still be the
+    sun: max(3 px, 1°, the region's equivalent radius)."""
+    return max(3.0, px_per_deg, float(np.sqrt(max(area_px, 1) / np.pi)))
+
+
+def record(d: SunDetection, truth_px: tuple[float, float], visible: bool,
+           camera: FisheyeCamera | None, azimuth_deg: float, elevation_deg: float,
+           px_per_deg: float) -> Record:
+    """One record of detection ``d`` against the truth (``camera`` None: no angles)."""
+    c = d.centroid_px
+    err_px = err_deg = float("nan")
+    if c is not None:
+        err_px = float(np.hypot(c[0] - truth_px[0], c[1] - truth_px[1]))
+        if camera is not None:
+            a2, e2 = camera.pixel_to_sky(*c)
+            err_deg = float(angular_separation_deg(a2, e2, azimuth_deg, elevation_deg))
+    cand_ok = False
+    cp = d.candidate_px
+    if visible and cp is not None and np.isfinite(truth_px[0]):
+        cand_ok = bool(np.hypot(cp[0] - truth_px[0], cp[1] - truth_px[1])
+                       <= correct_limit_px(px_per_deg, d.area_px))
+    return {"found": bool(d.sun_found), "confidence": float(d.confidence),
+            "visible": bool(visible), "err_px": err_px, "err_deg": err_deg,
+            "reason": d.reason, "features": dict(d.features), "cand_ok": cand_ok,
+            "ppd": float(px_per_deg), "distance_px": d.distance_from_ephemeris_px}
+
+
+def evaluate(frames: Iterable[LabelledFrame], use_ephemeris: bool, method: str = "robust"
+             ) -> list[Record]:
+    """Records of ``method`` on ``frames``, blind or given the ephemeris prediction
+    (``LabelledFrame.predicted_deg`` through the frame's camera — wrong on purpose for
+    the wrong-ephemeris sets). Every method gets the same camera model."""
+    out = []
+    for lf in frames:
+        cam = lf.camera
+        exp = None
+        if use_ephemeris:
+            ex, ey = cam.sky_to_pixel(*lf.predicted_deg)
+            exp = (float(ex), float(ey))
+        d = detect_sun(lf.frame.image, method=method, camera=cam if method == "robust" else None,
+                       expected_px=exp)
+        rec = record(d, lf.frame.sun_px, lf.frame.sun_visible, cam, lf.azimuth_deg,
+                     lf.elevation_deg, cam.px_per_deg)
+        rec.update(source=lf.source, frame=f"{lf.source}#{lf.seed}", ephemeris=use_ephemeris,
+                   wrong_ephemeris=use_ephemeris and lf.ephemeris_deg is not None)
+        out.append(rec)
+    return out
+
+
+def roi_records(rois: Iterable[RoiFrame], method: str = "robust") -> list[Record]:
+    """Records on tracker-camera ROIs, detected as the control loop does (``sim.tracking``:
+    no camera, no image circle); errors in ROI pixels only."""
+    out = []
+    for rf in rois:
+        kw: dict[str, Any] = {"auto_fov": False} if method == "robust" else {}
+        d = detect_sun(rf.image, method=method, **kw)
+        rec = record(d, rf.sun_px, rf.sun_visible, None, float("nan"), float("nan"),
+                     rf.px_per_deg)
+        rec.update(source=rf.source, frame=f"{rf.source}#{rf.seed}", ephemeris=False,
+                   wrong_ephemeris=False)
+        out.append(rec)
+    return out
+
+
+def summary(recs: list[Record]) -> str:
+    """``found/visible``, suns given on no-sun frames, RMS and worst error [°] (when the
+    camera is known), median and worst [px]."""
+    vis = [r for r in recs if r["visible"]]
+    inv = [r for r in recs if not r["visible"]]
+    found = [r for r in vis if r["found"]]
+    txt = f"{len(found)}/{len(vis)} found"
+    if inv:
+        txt += f", {sum(1 for r in inv if r['found'])}/{len(inv)} no-sun frames given a sun"
+    e = np.array([float(r["err_deg"]) for r in found])
+    p = np.array([float(r["err_px"]) for r in found])
+    if e.size and np.isfinite(e).all():
+        txt += f", {np.sqrt(np.mean(e**2)):.2f}° RMS (worst {e.max():.2f}°)"
+    if p.size and np.isfinite(p).all():
+        txt += f", median {np.median(p):.2f} px (worst {p.max():.1f} px)"
+    return txt
+
+
+def brier(recs: list[Record]) -> float:
+    """Mean squared difference between the confidence and the outcome (``cand_ok``)."""
+    c = np.array([float(r["confidence"]) for r in recs])
+    ok = np.array([float(r["cand_ok"]) for r in recs])
+    return float(np.mean((c - ok) ** 2)) if c.size else float("nan")
+
+
+def reliability_rows(recs: list[Record]) -> list[str]:
+    """Markdown table: confidence bin → runs, fraction whose winning region is the visible
+    sun, mean confidence; last row all runs with the Brier score."""
+    out = ["| confidence | runs | fraction correct | mean confidence |", "|---|---|---|---|"]
+    c = np.array([float(r["confidence"]) for r in recs])
+    ok = np.array([bool(r["cand_ok"]) for r in recs])
+    edges = RELIABILITY_EDGES
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        m = (c >= lo) & (c < hi)
+        label = f"{lo:.1f}–{min(hi, 1.0):.1f}"
+        if not m.any():
+            out.append(f"| {label} | 0 | — | — |")
+            continue
+        out.append(f"| {label} | {int(m.sum())} | {ok[m].mean():.2f} | {c[m].mean():.2f} |")
+    out.append(f"| all | {len(recs)} | {ok.mean():.2f} | {c.mean():.2f} (Brier "
+               f"{brier(recs):.3f}) |")
+    return out
+
+
+def design(recs: list[Record]) -> tuple[NDArray[np.float64], NDArray[np.float64], list[str]]:
+    """``(x, y, groups)`` of the records that have features (a candidate was found)."""
+    keep = [r for r in recs if r["features"]]
+    x = np.array([[r["features"][k] for k in conf.FEATURES] for r in keep], dtype=float)
+    y = np.array([float(r["cand_ok"]) for r in keep])
+    return x, y, [str(r["frame"]) for r in keep]
+
+
+def grouped_cv_log_loss(x: NDArray[np.float64], y: NDArray[np.float64], groups: list[str],
+                        l2: float, k: int = 5) -> float:
+    """Mean held-out log loss of the logistic fit over ``k`` folds of whole frames (a
+    frame's blind, guided and wrong-ephemeris runs stay in one fold)."""
+    g = np.array(groups)
+    ids = np.random.default_rng(0).permutation(np.unique(g))
+    loss = 0.0
+    for fold in np.array_split(ids, k):
+        te = np.isin(g, fold)
+        w, b = conf.fit_logistic(x[~te], y[~te], l2=l2)
+        p = np.clip(1.0 / (1.0 + np.exp(-(x[te] @ w + b))), 1e-6, 1 - 1e-6)
+        loss -= float(np.sum(y[te] * np.log(p) + (1 - y[te]) * np.log(1 - p)))
+    return loss / len(y)
+
+
+def fit_confidence(recs: list[Record], note: str, l2_grid: tuple[float, ...] = L2_GRID
+                   ) -> dict[str, Any]:
+    """The logistic confidence fitted on ``recs`` (development records only!), its L2
+    penalty chosen by grouped cross-validation; the JSON of ``confidence.json``."""
+    x, y, groups = design(recs)
+    scores = {l2: grouped_cv_log_loss(x, y, groups, l2) for l2 in l2_grid}
+    l2 = min(scores, key=lambda v: scores[v])
+    w, b = conf.fit_logistic(x, y, l2=l2)
+    return {"features": list(conf.FEATURES), "weights": [round(float(v), 5) for v in w],
+            "intercept": round(b, 5), "n_development": int(len(y)),
+            "n_positive": int(y.sum()), "n_frames": len(set(groups)), "l2": l2,
+            "cv_log_loss": {str(k): round(v, 4) for k, v in scores.items()},
+            "fitted_by": note}
