@@ -101,7 +101,8 @@ def baseline_executemany(n_rows: int) -> float:
             t = time.perf_counter()
             con.execute("BEGIN")
             for k in range(0, len(rows), 1000):
-                con.executemany("INSERT INTO measurements VALUES (?, ?, ?, ?, ?, ?)",
+                con.executemany("INSERT INTO measurements (array_id, source, ts_s, voltage_v, "
+                                "current_a, power_w) VALUES (?, ?, ?, ?, ?, ?)",
                                 rows[k:k + 1000])
             con.execute("COMMIT")
             rate = len(rows) / (time.perf_counter() - t)
