@@ -26,8 +26,9 @@ import pandas as pd
 from sqlalchemy import Connection, delete, insert, select
 
 from backend.diagnosis.faults import day_features, faults_over_days
+from backend.diagnosis.weather_twin import minute_grid
 from backend.errors import InputError
-from backend.measurements.queries import period_edges, raw_rows
+from backend.measurements.queries import period_edges
 from backend.sites import SiteInfo
 from backend.storage.tables import DiagnosisDay
 from sim import sky_sensor
@@ -40,16 +41,6 @@ INVERSION_UNCERTAINTY = 0.03  # relative, on the expected tracker energy [-]
 #: Share of the day's daylight minutes with a valid fixed-array inversion for
 #: ``sky.source`` to be ``fixed_array`` (else ``clear_sky``).
 MIN_SENSOR_SHARE = 0.5
-
-
-def _minute_grid(conn: Connection, array_id: int, t0: int, t1: int) -> np.ndarray:
-    """Measured power [W] on the minute grid of ``[t0, t1)``; NaN where no reading."""
-    out = np.full((t1 - t0) // 60, np.nan)
-    rows = raw_rows(conn, array_id, 0, t0, t1)
-    if rows.size:
-        k = ((rows[:, 0].astype(np.int64) - t0) // 60).clip(0, out.size - 1)
-        out[k] = rows[:, 3]
-    return out
 
 
 def _wh(p: np.ndarray) -> float | None:
@@ -114,8 +105,8 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
     for run in runs:
         t0, t1 = int(edges[run[0]].timestamp()), int(edges[run[-1] + 1].timestamp())
         with ctx.engine.connect() as conn:
-            tr = _minute_grid(conn, tracker.array_id, t0, t1)
-            fx = _minute_grid(conn, fixed.array_id, t0, t1)
+            tr = minute_grid(conn, tracker.array_id, t0, t1)
+            fx = minute_grid(conn, fixed.array_id, t0, t1)
         start = pd.Timestamp(t0, unit="s", tz="UTC")
         e = sky_sensor.weather_aware_twin(info.site, start, start + pd.Timedelta(
             seconds=(t1 - t0) // 60 * 60), fx)
