@@ -3,6 +3,7 @@
 // and what the service checks. Refreshed every 30 s while the overview is shown (not in a
 // hidden tab), at once when the site changes.
 import { api } from "./api.js";
+import { KIND_WORDS as FAULT_WORDS } from "./diagnosis.js";
 import { fmtDateTime } from "./time.js";
 import { h, num } from "./ui.js";
 
@@ -12,15 +13,6 @@ const KIND_WORDS = {
   logger_silent: "Logger silent",
   fault: "Fault",
   low_performance_ratio: "Low performance ratio",
-};
-const FAULT_WORDS = {
-  stuck: "tracker stuck",
-  azimuth_offset: "azimuth offset",
-  elevation_offset: "elevation offset",
-  clock_offset: "clock offset",
-  module_loss: "module or string lost",
-  soiling: "soiling",
-  dropout: "logger dropout",
 };
 const WEBHOOK_WORDS = { queued: "webhook: sending…", delivered: "webhook: delivered", failed: "webhook: failed",
   dropped: "webhook: dropped (queue full)" };

@@ -5,7 +5,8 @@ import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
 import { toLocalWall } from "./time.js";
 import { h, num } from "./ui.js";
 
-const KIND_WORDS = {
+/** A fault kind in plain words (the diagnosis panel and the alerts card). */
+export const KIND_WORDS = {
   stuck: "tracker stuck",
   azimuth_offset: "azimuth offset",
   elevation_offset: "elevation offset",
