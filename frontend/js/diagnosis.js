@@ -34,15 +34,20 @@ export function faultLines(days) {
     `${KIND_WORDS[f.kind] || f.kind} since ${shortDate(f.since)}: ${f.detail}; confidence ${num(f.confidence, 2)}`);
 }
 
+let requested = 0; // the latest load; an older one that answers later is dropped
+
 async function load(state) {
   const start = document.getElementById("diag-start").value;
   const end = document.getElementById("diag-end").value;
   const list = document.getElementById("diag-faults");
-  list.replaceChildren(h("li", { class: "muted" }, "Computing…"));
+  const mine = ++requested;
+  list.replaceChildren(h("li", { class: "muted" }, "Computing… (days not seen before take about a second each)"));
   let body;
   try {
     body = await api(`/api/v1/sites/${encodeURIComponent(state.site.site_id)}/diagnosis`, { params: { start, end } });
+    if (mine !== requested) return;
   } catch (err) {
+    if (mine !== requested) return;
     list.replaceChildren(h("li", { class: "error" }, `Diagnosis failed: ${err.message}`));
     showEmpty("chart-diagnosis", "No diagnosis");
     return;
@@ -64,7 +69,7 @@ async function load(state) {
     d.tracker.expected_wh_low, d.tracker.expected_wh_high, d.tracker.performance_ratio, d.gain_measured_pct,
     d.gain_expected_pct]),
   filename: `${state.site.site_id}_diagnosis_${start}_${end}.csv` });
-  await loadPointing(state, start, end);
+  if (mine === requested) await loadPointing(state, start, end);
 }
 
 /** The pointing error the tracker's own encoders report (GET …/pointing), beside the
@@ -127,4 +132,10 @@ export function init(state) {
   document.getElementById("diag-end").value = addDays(state.day, 1);
   document.getElementById("diag-start").value = addDays(state.day, -6);
   form.addEventListener("submit", (ev) => { ev.preventDefault(); load(state); });
+  // computed when the panel first scrolls into view, not on every page load
+  const card = document.getElementById("diagnosis-card");
+  const seen = new IntersectionObserver((entries) => {
+    if (entries.some((e) => e.isIntersecting)) { seen.disconnect(); load(state); }
+  });
+  seen.observe(card);
 }
