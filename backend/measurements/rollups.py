@@ -83,6 +83,11 @@ class SeriesWindow:
     #: ``(n, len(SENSOR_NAMES))`` sensor values, or None when no reading has any
     sensors: np.ndarray | None = None
 
+    def part(self, sel: slice) -> SeriesWindow:
+        """The readings ``sel`` of the window."""
+        return SeriesWindow(self.ts_s[sel], self.voltage_v[sel], self.current_a[sel],
+                            self.power_w[sel], None if self.sensors is None else self.sensors[sel])
+
 
 def energy_per_bucket(
     w: SeriesWindow, k_first: int, k_last: int, phase_s: int, max_gap_s: int,

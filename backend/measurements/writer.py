@@ -6,7 +6,8 @@ transaction) and await a future. The writer takes whatever is queued — up to
 ``Settings.writer_max_group_rows`` rows — into one transaction: each batch is
 inserted ``ON CONFLICT DO NOTHING`` (should the group fail, each batch is tried
 again alone, so one failing batch fails alone, all-or-nothing), the hourly
-rollups of every touched series are recomputed once for the whole group, and
+rollups of every touched series are updated once for the whole group (merged
+increments where the new readings fill holes, else recomputed), and
 one COMMIT (one fsync with
 SQLite ``synchronous=FULL``) makes the group durable. Only then are the futures
 resolved, so a 2xx answer means the rows are committed.
@@ -201,6 +202,28 @@ def _sql_list(col: np.ndarray) -> list[Any]:
     return col.tolist()
 
 
+def _series_window(parts: list[tuple[np.ndarray, ...]]) -> SeriesWindow:
+    """The new readings of one series (parts as :meth:`MeasurementJob.columns`, in
+    submission order) sorted by time; of a second sent twice the first write wins."""
+    ts, first = np.unique(np.concatenate([p[0] for p in parts]), return_index=True)
+    v, i, p = (np.concatenate([part[j] for part in parts])[first] for j in (1, 2, 3))
+    sensors = None
+    if any(len(part) > 4 for part in parts):
+        sensors = np.concatenate([
+            np.column_stack(part[4:]) if len(part) > 4
+            else np.full((part[0].size, len(SENSOR_NAMES)), np.nan) for part in parts
+        ])[first]
+    return SeriesWindow(ts, v, i, p, sensors)
+
+
+#: A run of new readings of a series (a slice of them) and the stored readings
+#: ``(ts_s, power_w)`` just before and after it.
+_Hole = tuple[slice, tuple[int, float] | None, tuple[int, float] | None]
+#: Most runs a group's new readings of one series are checked in for holes; past
+#: it their rollups are recomputed (a sparse batch: one window read is cheaper).
+MAX_RUNS = 256
+
+
 def _nan_to_none(rows: list[tuple[Any, ...]]) -> list[tuple[Any, ...]]:
     """Rollup rows with NaN (an aggregate of no value) as None, for both drivers."""
     return [tuple(None if type(x) is float and x != x else x for x in r) for r in rows]
@@ -364,13 +387,14 @@ class Writer:
             for job in jobs:
                 job.sort()
                 self._note_touched(job, touched)
-            around = {key: self._neighbours(cur, key, parts) for key, parts in touched.items()}
+            new = {key: _series_window(parts) for key, parts in touched.items()}
+            holes = {key: self._holes(cur, key, w.ts_s) for key, w in new.items()}
             counts = [self._sql.insert_job(cur, job) for job in jobs]
-            for key, parts in touched.items():
-                self._update_rollups(cur, key, parts, around[key])
+            for key, w in new.items():
+                self._update_rollups(cur, key, w, holes[key])
                 if key[1] == 0:  # measured readings: that day's cached diagnosis is stale
-                    cur.execute(self._sql.drop_diagnosis, (key[0], int(min(
-                        p[0].min() for p in parts)), int(max(p[0].max() for p in parts))))
+                    cur.execute(self._sql.drop_diagnosis,
+                                (key[0], int(w.ts_s[0]), int(w.ts_s[-1])))
             if self._sql.pg:
                 dbapi.commit()
             else:
@@ -398,12 +422,37 @@ class Writer:
         for a, b in zip(edges[:-1], edges[1:], strict=True):
             touched.setdefault((int(ids[a]), job.source), []).append(tuple(c[a:b] for c in cols))
 
-    def _neighbours(self, cur: Any, key: tuple[int, int], parts: list[tuple[np.ndarray, ...]]
+    def _holes(self, cur: Any, key: tuple[int, int], ts: np.ndarray) -> list[_Hole] | None:
+        """Where the new readings ``ts`` (sorted, unique) of a series go: runs of them, each
+        with the stored readings just before and after it, or None when a stored reading
+        lies among the new ones of a run (then the rollups are recomputed).
+
+        One run when no stored reading lies within their span (a live logger's append, a
+        back-fill). Else the readings are split where they are more than ``max_gap_s``
+        apart — a group commit holds readings of many loggers of one array, each
+        appending to its own stretch of time — and each run must fill a hole: an
+        interval between two runs is longer than the gap, so it carries no energy and
+        the runs' increments add up to the whole group's.
+        """
+        whole = self._neighbours(cur, key, int(ts[0]), int(ts[-1]))
+        if whole is not None:
+            return [(slice(None), *whole)]
+        cuts = np.flatnonzero(np.diff(ts) > self.max_gap_s) + 1
+        if cuts.size == 0 or cuts.size >= MAX_RUNS:
+            return None
+        edges = [0, *cuts.tolist(), ts.size]
+        runs: list[_Hole] = []
+        for a, b in zip(edges[:-1], edges[1:], strict=True):
+            around = self._neighbours(cur, key, int(ts[a]), int(ts[b - 1]))
+            if around is None:
+                return None
+            runs.append((slice(a, b), *around))
+        return runs
+
+    def _neighbours(self, cur: Any, key: tuple[int, int], lo: int, hi: int
                     ) -> tuple[tuple[int, float] | None, tuple[int, float] | None] | None:
-        """Stored readings just before and after the new ones, or None when stored
-        readings lie among them (then the rollups are recomputed)."""
-        lo = int(min(p[0].min() for p in parts))
-        hi = int(max(p[0].max() for p in parts))
+        """Stored readings just before ``lo`` and after ``hi``, or None when stored
+        readings lie within ``[lo, hi]``."""
         cur.execute(self._sql.after, (*key, lo))
         row = cur.fetchone()
         if row is not None and row[0] <= hi:
@@ -413,28 +462,18 @@ class Writer:
         row = cur.fetchone()
         return (None if row is None else (int(row[0]), float(row[1]))), nxt
 
-    def _update_rollups(
-        self, cur: Any, key: tuple[int, int], parts: list[tuple[np.ndarray, ...]],
-        around: tuple[tuple[int, float] | None, tuple[int, float] | None] | None,
-    ) -> None:
-        """Rollups after new readings: merged increments when they fill a hole of the
-        series (appends of live loggers, back-fills in any order), else recomputed."""
-        ts = np.concatenate([p[0] for p in parts])
-        if around is not None:
-            uts, first = np.unique(ts, return_index=True)  # first write of a second wins
-            v, i, p = (np.concatenate([part[j] for part in parts])[first] for j in (1, 2, 3))
-            sensors = None
-            if any(len(p) > 4 for p in parts):
-                sensors = np.concatenate([
-                    np.column_stack(part[4:]) if len(part) > 4
-                    else np.full((part[0].size, len(SENSOR_NAMES)), np.nan) for part in parts
-                ])[first]
-            rows = increment_rows(around[0], around[1], SeriesWindow(uts, v, i, p, sensors),
-                                  self.phase_of_array(key[0]), self.max_gap_s)
+    def _update_rollups(self, cur: Any, key: tuple[int, int], w: SeriesWindow,
+                        holes: list[_Hole] | None) -> None:
+        """Rollups after new readings ``w``: merged increments when they fill holes of
+        the series (appends of live loggers, back-fills in any order), else recomputed."""
+        if holes is not None:
+            phase = self.phase_of_array(key[0])
+            rows = [r for sel, prev, nxt in holes
+                    for r in increment_rows(prev, nxt, w.part(sel), phase, self.max_gap_s)]
             cur.executemany(self._sql.merge_rollup, [(*key, *r) for r in _nan_to_none(rows)])
             return
         self.rollup_refreshes += 1
-        self._refresh_rollups(cur, key[0], key[1], ts)
+        self._refresh_rollups(cur, key[0], key[1], w.ts_s)
 
     def _refresh_rollups(self, cur: Any, array_id: int, source: int, ts_s: np.ndarray) -> None:
         """Recompute the rollups of every bucket that new readings at ``ts_s`` can change."""

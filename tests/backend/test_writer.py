@@ -40,6 +40,34 @@ def _job(aid: int, ts: np.ndarray, seed: int) -> MeasurementJob:
     return MeasurementJob(np.full(ts.size, aid), 0, ts.astype(np.int64), v, i, v * i)
 
 
+def _assert_rollups_equal_direct_aggregates(ctx, aid: int, n: int) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """Every hourly rollup of ``aid`` against NumPy aggregates of its stored readings, and
+    the energy against a trapezoid per run of readings; returns where the runs break."""
+    with ctx.engine.connect() as conn:
+        rows = np.array(conn.execute(text(
+            "SELECT ts_s, voltage_v, current_a, power_w FROM measurements "
+            "WHERE array_id = :a AND source = 0 ORDER BY ts_s"), {"a": aid}).all(), float)
+        roll = np.array(conn.execute(text(
+            "SELECT bucket_s, n, energy_wh, sum_power_w, min_power_w, max_power_w, "
+            "first_ts_s, last_ts_s FROM measurement_rollups WHERE array_id = :a AND source = 0 "
+            "ORDER BY bucket_s"), {"a": aid}).all(), float)
+    assert rows.shape[0] == n
+    hour = (rows[:, 0] - T0) // 3600
+    for r in roll:
+        sel = hour == (r[0] - T0) // 3600
+        assert r[1] == sel.sum()
+        assert r[3] == pytest.approx(rows[sel, 3].sum(), rel=1e-12)
+        assert (r[4], r[5]) == (rows[sel, 3].min(), rows[sel, 3].max())
+        assert (r[6], r[7]) == (rows[sel, 0].min(), rows[sel, 0].max())
+    assert roll[:, 1].sum() == n
+    # energy: trapezoid per run of readings at most 600 s apart (the rule), independently
+    gaps = np.flatnonzero(np.diff(rows[:, 0]) > 600) + 1
+    expected = sum(float(np.trapezoid(p, t)) for t, p in zip(
+        np.split(rows[:, 0], gaps), np.split(rows[:, 3], gaps), strict=True)) / 3600
+    assert roll[:, 2].sum() == pytest.approx(expected, rel=1e-9)
+    return gaps
+
+
 def test_rollups_equal_direct_aggregates_in_any_order(ctx) -> None:  # type: ignore[no-untyped-def]
     aid = ctx.registry.sites["tehuantepec"].arrays["tracker"].array_id
     rng = np.random.default_rng(3)
@@ -55,28 +83,7 @@ def test_rollups_equal_direct_aggregates_in_any_order(ctx) -> None:  # type: ign
     assert sum(a for a, _ in results) == ts.size
     assert results[-1] == (0, 10)
 
-    with ctx.engine.connect() as conn:
-        rows = np.array(conn.execute(text(
-            "SELECT ts_s, voltage_v, current_a, power_w FROM measurements "
-            "WHERE array_id = :a AND source = 0 ORDER BY ts_s"), {"a": aid}).all(), float)
-        roll = np.array(conn.execute(text(
-            "SELECT bucket_s, n, energy_wh, sum_power_w, min_power_w, max_power_w, "
-            "first_ts_s, last_ts_s FROM measurement_rollups WHERE array_id = :a AND source = 0 "
-            "ORDER BY bucket_s"), {"a": aid}).all(), float)
-    assert rows.shape[0] == ts.size
-    hour = (rows[:, 0] - T0) // 3600
-    for r in roll:
-        sel = hour == (r[0] - T0) // 3600
-        assert r[1] == sel.sum()
-        assert r[3] == pytest.approx(rows[sel, 3].sum(), rel=1e-12)
-        assert (r[4], r[5]) == (rows[sel, 3].min(), rows[sel, 3].max())
-        assert (r[6], r[7]) == (rows[sel, 0].min(), rows[sel, 0].max())
-    assert roll[:, 1].sum() == ts.size
-    # energy: trapezoid per run of readings at most 600 s apart (the rule), independently
-    gaps = np.flatnonzero(np.diff(rows[:, 0]) > 600) + 1
-    expected = sum(float(np.trapezoid(p, t)) for t, p in zip(
-        np.split(rows[:, 0], gaps), np.split(rows[:, 3], gaps), strict=True)) / 3600
-    assert roll[:, 2].sum() == pytest.approx(expected, rel=1e-9)
+    gaps = _assert_rollups_equal_direct_aggregates(ctx, aid, ts.size)
     assert len(gaps) > 0  # the data did have gaps not bridged
 
 
@@ -137,3 +144,21 @@ def test_mixed_arrays_in_any_order_give_per_series_rollups(ctx) -> None:  # type
             assert s == pytest.approx(p.sum(), rel=1e-12)
             assert e == pytest.approx(float(np.trapezoid(p, 60.0 * np.arange(600))) / 3600,
                                       rel=1e-9)
+
+
+def test_single_readings_of_many_loggers_in_one_group_are_increments(ctx) -> None:  # type: ignore[no-untyped-def]
+    """Single readings filling holes far apart (the minutes 200 loggers of one array send
+    at once) merge as increments, whether or not the writer groups them: no recomputation,
+    and the rollups still equal the direct aggregates."""
+    aid = ctx.registry.sites["tehuantepec"].arrays["fixed"].array_id
+    minutes = np.arange(2 * 24 * 60)
+    holes = minutes[::30]  # 30 min apart: more than the energy gap between them
+    stored = T0 + 60 * np.setdiff1d(minutes, holes)
+    assert ctx.writer.submit(_job(aid, stored, 1)).result(timeout=60) == (stored.size, 0)
+    refreshes = ctx.writer.rollup_refreshes
+    rng = np.random.default_rng(5)
+    futures = [ctx.writer.submit(_job(aid, np.array([T0 + 60 * m]), int(m)))
+               for m in rng.permutation(holes)]
+    assert [f.result(timeout=60) for f in futures] == [(1, 0)] * holes.size
+    assert ctx.writer.rollup_refreshes == refreshes
+    _assert_rollups_equal_direct_aggregates(ctx, aid, minutes.size)
