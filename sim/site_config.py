@@ -17,8 +17,22 @@ import dataclasses
 from typing import TYPE_CHECKING, Any, Literal
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    create_model,
+    field_validator,
+)
 
+from sim.array_shade import (
+    FIXED_MOUNT_HEIGHT_M,
+    MODULE_GAP_M,
+    TRACKER_MOUNT_HEIGHT_M,
+    module_size_m,
+)
 from sim.configs import CONFIG_ID
 from sim.dynamics import TrackerInertia
 from sim.kinematics import TrackerGeometry
@@ -144,11 +158,52 @@ class Array(BaseModel):
             f"['sapm']. Default {_ARRAY.temperature_model!r}."))
     albedo: float = Field(_ARRAY.albedo, ge=0, le=1, description=(
         f"[-] ground reflectance. Default {_ARRAY.albedo} (pvlib's default)."))
+    # where it stands: only for the tracker's shade on the fixed array (sim/array_shade.py)
+    position_east_m: float | None = Field(None, ge=-100_000, le=100_000, description=(
+        "[m] east of the site's origin (any ground point, the same for every array): a "
+        "tracker's pedestal foot (its azimuth axis on the ground), a fixed array's ground "
+        "point below its collector's centre. Default none: with no position on 'tracker' "
+        "and 'fixed' the twin computes no mutual shading."))
+    position_north_m: float | None = Field(None, ge=-100_000, le=100_000,
+                                           validate_default=True, description=(
+        "[m] north of the site's origin; given with position_east_m. Default none."))
+    mount_height_m: float | None = Field(None, ge=0, le=100, validate_default=True,
+                                         description=(
+        "[m] a tracker's D–H base frame {0} (top of its pedestal) above the ground, default "
+        f"{TRACKER_MOUNT_HEIGHT_M}; a fixed array's lower edge above the ground, default "
+        f"{FIXED_MOUNT_HEIGHT_M} (assumptions: seed 000 gives neither). Only with a position."))
+    width_m: float | None = Field(None, gt=0, le=1000, validate_default=True, description=(
+        "[m] the collector's horizontal edge (a tracker's along its elevation axis). Default "
+        "from the modules: landscape, ceil(sqrt(N)) across, the module's Length x Width from "
+        f"pvlib's CEC table, {MODULE_GAP_M} m gaps (4 KD205GX-LP: 3.02 m); required for a "
+        "module the table gives no size. Only with a position."))
+    height_m: float | None = Field(None, gt=0, le=1000, validate_default=True, description=(
+        "[m] the collector's other edge (up its slope). Default from the modules as width_m "
+        "(4 KD205GX-LP: 2.00 m). Only with a position."))
 
     @field_validator("module")
     @classmethod
     def _known_module(cls, value: str) -> str:
         cec_module_parameters(value)  # ValueError: not in the table
+        return value
+
+    @field_validator("position_north_m", "mount_height_m", "width_m", "height_m")
+    @classmethod
+    def _placement(cls, value: float | None, info: ValidationInfo) -> float | None:
+        east, north = info.data.get("position_east_m"), info.data.get("position_north_m")
+        if info.field_name == "position_north_m":
+            if "position_east_m" in info.data and (east is None) != (value is None):
+                raise ValueError("give position_east_m and position_north_m together")
+            return value
+        if value is not None and (east is None or north is None):
+            raise ValueError("only used with position_east_m and position_north_m")
+        if (info.field_name == "height_m" and north is not None
+                and (value is None) != (info.data.get("width_m") is None)):
+            raise ValueError("give width_m and height_m together")
+        if (info.field_name == "width_m" and north is not None and value is None
+                and "module" in info.data and module_size_m(info.data["module"]) is None):
+            raise ValueError(f"module {info.data['module']!r} has no size in pvlib's CEC "
+                             "table: give width_m and height_m")
         return value
 
 
@@ -202,6 +257,13 @@ class SiteConfig(BaseModel):
         bad = [name for name in value if not CONFIG_ID.match(name)]
         if bad:
             raise ValueError(f"array names {bad} must be lower-case letters, digits, '_' or '-'")
+        placed = {name for name in ("tracker", "fixed")
+                  if name in value and value[name].position_east_m is not None}
+        if len(placed) == 1 and {"tracker", "fixed"} <= set(value):
+            other = ({"tracker", "fixed"} - placed).pop()
+            raise ValueError(f"arrays.{other}.position_east_m/position_north_m: needed as "
+                             f"arrays.{placed.pop()} has a position (the tracker's shade on "
+                             "the fixed array needs both)")
         return value
 
 

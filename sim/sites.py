@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sim.array_shade import PLACEMENT_KEYS, Placement
 from sim.configs import read_config
 from sim.dynamics import TrackerInertia
 from sim.kinematics import TrackerGeometry
@@ -68,6 +69,10 @@ class Site:
     inertia : TrackerInertia
         The two links' masses, inertias and centres of gravity (seed 002,
         Table 1 by default; the config's ``tracker.inertia`` overrides).
+    placements : dict of str to Placement
+        Where the arrays that have a configured position stand
+        (:class:`sim.array_shade.Placement`); with ``tracker`` and ``fixed`` placed, the
+        twin computes the tracker's shade on the fixed array. Empty by default.
     """
 
     site_id: str
@@ -84,6 +89,7 @@ class Site:
     drives: dict[str, AxisDrive] = field(default_factory=lambda: {
         "azimuth": AxisDrive.azimuth_default(), "elevation": AxisDrive.elevation_default()})
     inertia: TrackerInertia = field(default_factory=TrackerInertia.seed002)
+    placements: dict[str, Placement] = field(default_factory=dict)
     source: str = ""
     notes: str = ""
 
@@ -104,11 +110,17 @@ class Site:
                 "drives": {axis: dataclasses.asdict(d) for axis, d in self.drives.items()},
                 "inertia": dataclasses.asdict(self.inertia),
             },
-            "arrays": {name: arr.to_dict() for name, arr in self.arrays.items()},
+            "arrays": {name: {**arr.to_dict(), **self._placement(name)}
+                       for name, arr in self.arrays.items()},
             "source": self.source,
             "notes": self.notes,
         }
 
+    def _placement(self, array: str) -> dict[str, float]:
+        """The configured placement keys of ``array`` (none when it has no position)."""
+        p = self.placements.get(array)
+        return {} if p is None else {
+            k: v for k, v in dataclasses.asdict(p).items() if v is not None}
 
     def to_config(self) -> dict[str, Any]:
         """The site as a config file (:class:`sim.site_config.SiteConfig`): what
@@ -120,7 +132,7 @@ class Site:
         for name, arr in self.arrays.items():
             a = dataclasses.asdict(arr)
             a["surface_tilt_deg"], a["surface_azimuth_deg"] = arr.surface_tilt, arr.surface_azimuth
-            arrays[name] = {k: a[k] for k in keys}
+            arrays[name] = {**{k: a[k] for k in keys}, **self._placement(name)}
         return {**d, "arrays": arrays}
 
 
@@ -137,8 +149,10 @@ def site_from_dict(d: dict[str, Any], where: str = "site") -> Site:
         drives = {"azimuth": AxisDrive(**t.drives.azimuth.model_dump()),
                   "elevation": AxisDrive(**t.drives.elevation.model_dump())}
         inertia = TrackerInertia(**t.inertia.model_dump())
-        arrays = {name: array_config_from_dict(name, a.model_dump())
+        arrays = {name: array_config_from_dict(name, a.model_dump(exclude=set(PLACEMENT_KEYS)))
                   for name, a in cfg.arrays.items()}
+        placements = {name: Placement(**a.model_dump(include=set(PLACEMENT_KEYS)))
+                      for name, a in cfg.arrays.items() if a.position_east_m is not None}
     except ValueError as exc:
         raise ValueError(f"{where}: tracker: {exc}") from None
     return Site(
@@ -155,6 +169,7 @@ def site_from_dict(d: dict[str, Any], where: str = "site") -> Site:
         transposition_model=cfg.transposition_model,
         drives=drives,
         inertia=inertia,
+        placements=placements,
         source=cfg.source,
         notes=cfg.notes,
     )

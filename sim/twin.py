@@ -23,6 +23,15 @@ Speed: the sun is computed once for both arrays; the irradiance and electrics
 only for steps with the sun above the horizon; the single-diode model goes
 through :class:`sim.pv.MppTable`. Work is done in chunks so that a
 ``progress`` callback can report.
+
+The tracker's shade on the fixed array: when the site config places both
+arrays (``position_east_m``/``position_north_m``, :class:`sim.sites.Site`
+``placements``), the fixed array loses the shaded fraction of its area
+(:func:`sim.array_shade.fixed_shade`) from its plane-of-array beam —
+area-proportional, a lower bound (a shaded cell row drops its bypass-diode
+substring) — and the series gains ``fixed_shaded_fraction`` [-], the summary
+``fixed_shade_loss_wh`` (the fixed array's energy unshaded minus shaded, same
+PV model). Without positions nothing changes.
 """
 
 from __future__ import annotations
@@ -35,8 +44,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from sim import array_shade, kinematics, pv, sky, sun
 from sim import disturbances as dist
-from sim import kinematics, pv, sky, sun
 from sim.control import CONTROLLERS, ControlSettings, make_controller, noon_reference_azimuth
 from sim.sites import Site
 from sim.tracking import (
@@ -108,6 +117,7 @@ class TwinResult:
     camera_frames_used: int = 0
     normal_azimuth: np.ndarray = field(default_factory=lambda: np.zeros(0))
     normal_elevation: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    fixed_shade_loss_wh: float | None = None
 
     def energy_wh(self, array: str) -> float:
         """Energy of ``array`` (``"tracker"``/``"fixed"``) over the run [Wh]."""
@@ -142,6 +152,8 @@ class TwinResult:
         out["wiring"] = {k: a.wiring for k, a in self.site.arrays.items()}
         out["timezone"] = self.site.timezone
         out.update(self._pointing_summary(tracker_wh, fixed_wh))
+        if self.fixed_shade_loss_wh is not None:
+            out["fixed_shade_loss_wh"] = self.fixed_shade_loss_wh
         return out
 
     def _pointing_summary(self, tracker_wh: float, fixed_wh: float) -> dict[str, Any]:
@@ -283,13 +295,17 @@ def _arrays_step(
     pose: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     receiver: str = "flat",
     acceptance_angle_deg: float = 0.5,
+    layout: array_shade.Layout | None = None,
+    base: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """All series columns for one chunk of steps.
 
     ``pose`` = (azimuth joint, elevation joint [°], actual normal ENU) of a
     controlled tracker; None: ideal tracking (:func:`sim.kinematics.tracking_angles`).
     The extra key ``ideal_tracker_power_w`` is the ideal tracker's power when
-    a pose or the CPV receiver is given.
+    a pose or the CPV receiver is given. With a ``layout`` (the arrays' places,
+    :func:`sim.array_shade.layout_of`; ``base`` the tracker's disturbed base rotation)
+    the extra keys ``fixed_shaded_fraction`` [-] and ``fixed_shade_loss_w`` [W].
     """
     from pvlib import atmosphere
 
@@ -336,10 +352,19 @@ def _arrays_step(
     want_ideal = pose is not None or receiver == "cpv"
     if want_ideal:
         out["ideal_tracker_power_w"] = np.zeros(n)
+    if layout is not None:
+        out["fixed_shaded_fraction"], out["fixed_shade_loss_w"] = np.zeros(n), np.zeros(n)
 
     day = app_el > 0
     if not np.any(day):
         return out
+    shade = None
+    if layout is not None:
+        frames = array_shade.tracker_panel_frames(layout, site.tracker, az_joint[day],
+                                                  el_joint[day], base)
+        shade = array_shade.fixed_shade(
+            layout, frames, enu_from_sky(azimuth[day], app_el[day])).fraction
+        out["fixed_shaded_fraction"][day] = shade
     d_times = times[day]
     if weather is None:
         irr = sky.clearsky_ineichen(
@@ -359,6 +384,7 @@ def _arrays_step(
         i_tilt, i_az = kinematics.normal_to_tilt_azimuth(ideal_normal[day])
         i_aoi = sky.angle_of_incidence(i_tilt, i_az, app_zen[day], azimuth[day])
         orientation["ideal_tracker"] = (i_tilt, i_az, i_aoi)
+    unshaded_w = None
     for name, (s_tilt, s_az, aoi) in orientation.items():
         arr = site.arrays["tracker" if name == "ideal_tracker" else name]
         if name != "fixed" and receiver == "cpv":
@@ -381,8 +407,18 @@ def _arrays_step(
             )
             poa_global = poa["poa_global"]
             e_eff = sky.effective_irradiance(poa["poa_direct"], poa["poa_diffuse"], aoi)
+            if name == "fixed" and shade is not None and np.any(shade > 0):
+                # area-proportional: the shaded share of the array gets no beam
+                unshaded_w = _fixed_power_w(poa_global, e_eff, temp_air[day], wind[day], arr,
+                                            shade)
+                poa_global = poa["poa_global"] - shade * poa["poa_direct"]
+                e_eff = sky.effective_irradiance(poa["poa_direct"] * (1.0 - shade),
+                                                 poa["poa_diffuse"], aoi)
         t_cell = pv.cell_temperature(poa_global, temp_air[day], wind[day], arr.temperature_model)
         mpp = pv.array_mpp(e_eff, t_cell, arr)
+        if unshaded_w is not None and shade is not None:
+            out["fixed_shade_loss_w"][day] = np.where(shade > 0, unshaded_w - mpp["power_w"], 0)
+            unshaded_w = None
         if name == "ideal_tracker":
             out["ideal_tracker_power_w"][day] = mpp["power_w"]
             continue
@@ -390,6 +426,16 @@ def _arrays_step(
         out[f"{name}_temp_cell"][day] = t_cell
         for q in ("current_a", "voltage_v", "power_w"):
             out[f"{name}_{q}"][day] = mpp[q]
+    return out
+
+
+def _fixed_power_w(poa_global: np.ndarray, e_eff: np.ndarray, temp_air: np.ndarray,
+                   wind: np.ndarray, arr: pv.ArrayConfig, shade: np.ndarray) -> np.ndarray:
+    """The array's maximum power [W] at the steps with ``shade`` > 0 (0 elsewhere)."""
+    out = np.zeros(len(shade))
+    k = shade > 0
+    t_cell = pv.cell_temperature(poa_global[k], temp_air[k], wind[k], arr.temperature_model)
+    out[k] = pv.array_mpp(e_eff[k], t_cell, arr)["power_w"]
     return out
 
 
@@ -493,12 +539,17 @@ def simulate(
         ctl = make_controller(controller, site, settings, clock_offset_s=d.clock_offset_s)
         tick_s = _tick_s(controller, float(step_s), settings)
         every = int(round(step_s / tick_s))
+    layout = array_shade.layout_of(site)
+    base = dist.base_rotation(d) if ctl is not None and d.moves_base else None
     state: LoopState | None = None
     moves: list = []
     # one (column, step) block, filled chunk by chunk and handed to pandas without a copy
     block = np.empty((len(SERIES_COLUMNS), len(times)))
     extra = {k: np.zeros(len(times)) for k in ("ideal_tracker_power_w", "normal_azimuth",
                                               "normal_elevation")}
+    if layout is not None:
+        extra.update({k: np.zeros(len(times)) for k in ("fixed_shaded_fraction",
+                                                      "fixed_shade_loss_w")})
     chunk_steps = _CHUNK_STEPS if ctl is None else max(1, min(_CHUNK_STEPS, (1 << 17) // every))
     for i0 in range(0, len(times), chunk_steps):
         chunk = times[i0 : i0 + chunk_steps]
@@ -527,7 +578,8 @@ def simulate(
             moves.extend(res.moves)
             normal = dist.normal_enu(res.azimuth_joint_deg, res.elevation_joint_deg, d)
             pose = (res.azimuth_joint_deg, res.elevation_joint_deg, normal)
-        part = _arrays_step(site, chunk, pos, w, pose, receiver, acceptance_angle_deg)
+        part = _arrays_step(site, chunk, pos, w, pose, receiver, acceptance_angle_deg, layout,
+                            base)
         if ctl is not None:
             part["azimuth_command_deg"] = res.azimuth_command_deg
             part["elevation_command_deg"] = res.elevation_command_deg
@@ -542,6 +594,10 @@ def simulate(
         if progress is not None:
             progress(min(1.0, (i0 + len(chunk)) / len(times)))
     series = pd.DataFrame(block.T, index=times, columns=SERIES_COLUMNS, copy=False)
+    shade_loss_wh = None
+    if layout is not None:
+        series["fixed_shaded_fraction"] = extra["fixed_shaded_fraction"]
+        shade_loss_wh = float(extra["fixed_shade_loss_w"].sum() * step_s / 3600.0)
     move_wh = standby_wh = 0.0
     if ctl is not None:
         _, move_wh = move_energies_wh(
@@ -572,6 +628,7 @@ def simulate(
         camera_frames_used=0 if ctl is None else ctl.frames_used,
         normal_azimuth=extra["normal_azimuth"],
         normal_elevation=extra["normal_elevation"],
+        fixed_shade_loss_wh=shade_loss_wh,
     )
 
 

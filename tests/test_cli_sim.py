@@ -2,6 +2,7 @@
 
 import csv
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -313,3 +314,26 @@ def test_sun_at_a_site_now() -> None:
     assert both.returncode == 2 and "not both" in both.stderr
     nowhere = heliotwin("sun", "--time", "now")
     assert nowhere.returncode == 2 and "--site" in nowhere.stderr
+
+
+def test_a_site_with_placed_arrays_reports_the_shade_and_exports_it(tmp_path: Path) -> None:
+    """The fixed array 4.5 m east of the tracker (sim/array_shade.py): the summary names
+    the energy the tracker's shade costs it and the CSV carries the shaded fraction."""
+    site = json.loads((ROOT / "data/sites/tehuantepec.json").read_text())
+    site["site_id"] = "placed"
+    site["arrays"]["tracker"] |= {"position_east_m": 0.0, "position_north_m": 0.0}
+    site["arrays"]["fixed"] |= {"position_east_m": 4.5, "position_north_m": 0.0}
+    (tmp_path / "sites").mkdir()
+    (tmp_path / "sites" / "placed.json").write_text(json.dumps(site))
+    out = tmp_path / "day.csv"
+    p = subprocess.run(
+        [sys.executable, "-m", "backend", "simulate", "--site", "placed", "--start",
+         "2024-03-15", "--end", "2024-03-16", "--json", "--csv", str(out)],
+        capture_output=True, text=True, cwd=ROOT, timeout=60,
+        env={**os.environ, "HELIOTWIN_SITES_DIR": str(tmp_path / "sites")})
+    assert p.returncode == 0, p.stderr
+    assert json.loads(p.stdout)["fixed_shade_loss_wh"] == pytest.approx(114.5, abs=1.0)
+    with out.open() as f:
+        rows = list(csv.DictReader(f))
+    shaded = [float(r["fixed_shaded_frac"]) for r in rows]
+    assert max(shaded) > 0.9 and min(shaded) == 0.0

@@ -24,6 +24,7 @@ EXPORT_NAMES = {
     "fixed_poa_global": "fixed_poa_global_w_m2",
     "tracker_temp_cell": "tracker_temp_cell_c",
     "fixed_temp_cell": "fixed_temp_cell_c",
+    "fixed_shaded_fraction": "fixed_shaded_frac",  # sim/array_shade.py, placed sites only
 }
 #: Name endings that already state a unit (DESIGN.md: a quantity carries its unit in its name).
 UNIT_SUFFIXES = ("_deg", "_mrad", "_rad", "_w", "_wh", "_w_m2", "_c", "_a", "_v", "_m", "_s",

@@ -18,7 +18,8 @@ import viser.transforms as vtf
 from numpy.typing import NDArray
 
 from backend.twin.scene_shadow import fan_mesh
-from sim.kinematics import TrackerGeometry, joint_transforms
+from sim.array_shade import MODULE_GAP_M, TRACKER_MOUNT_HEIGHT_M
+from sim.kinematics import TrackerGeometry
 
 # Kyocera KD205GX-LP outline from pvlib's CEC module table
 # ('Kyocera_Solar_KD205GX_LP': Length 1.5 m, Width 0.99 m); frame depth 46 mm
@@ -26,18 +27,19 @@ from sim.kinematics import TrackerGeometry, joint_transforms
 MODULE_LENGTH_M = 1.50
 MODULE_WIDTH_M = 0.99
 MODULE_DEPTH_M = 0.046
-MODULE_GAP_M = 0.02
-#: Modules are mounted landscape, 2 x 2: long side along the elevation axis.
+#: Modules are mounted landscape, 2 x 2: long side along the elevation axis (gap:
+#: sim.array_shade.MODULE_GAP_M).
 ARRAY_WIDTH_M = 2 * MODULE_LENGTH_M + MODULE_GAP_M
 ARRAY_HEIGHT_M = 2 * MODULE_WIDTH_M + MODULE_GAP_M
 
-#: Height of the D–H base frame {0} above the ground [m]. Seed 000 gives no
-#: number; chosen so the 2 x 2 array clears the ground with the panel vertical
-#: (elevation axis at PEDESTAL_HEIGHT_M + d1 ≈ 1.66 m > ARRAY_HEIGHT_M / 2).
-PEDESTAL_HEIGHT_M = 1.30
-#: Where the fixed array stands (ENU, m): east of the tracker, clear of its swing.
+#: Default height of the D–H base frame {0} above the ground [m]: the site config's
+#: ``arrays.tracker.mount_height_m`` when it places the arrays, else this
+#: (sim.array_shade.TRACKER_MOUNT_HEIGHT_M: elevation axis at 1.30 + d1 ≈ 1.66 m >
+#: ARRAY_HEIGHT_M / 2, so the 2 x 2 array clears the ground with the panel vertical).
+PEDESTAL_HEIGHT_M = TRACKER_MOUNT_HEIGHT_M
+#: Where the fixed array is assumed to stand when the site config places no arrays (ENU,
+#: m; the ground point below its centre): east of the tracker, clear of its swing.
 FIXED_ARRAY_ORIGIN_M = (4.5, 0.0, 0.0)
-FIXED_LOWER_EDGE_M = 0.5
 #: Seed 000, section 2.2: camera 640 x 480 px, 67° field of view (taken as the
 #: horizontal field), at the top centre of the array, looking along the normal.
 CAMERA_WIDTH_PX = 640
@@ -53,7 +55,8 @@ _GHOST_WHITE = (235, 240, 250)
 _SHADOW = (40, 44, 52)
 #: Dimensions of the bodies whose ground shadows are drawn (x, y, z in their frames) [m].
 COLLECTOR_BOX_M = (ARRAY_WIDTH_M, ARRAY_HEIGHT_M, MODULE_DEPTH_M)
-PEDESTAL_BOX_M = (0.22, 0.22, PEDESTAL_HEIGHT_M)
+PEDESTAL_SIDE_M = 0.22
+PEDESTAL_BOX_M = (PEDESTAL_SIDE_M, PEDESTAL_SIDE_M, PEDESTAL_HEIGHT_M)
 #: Ground-shadow meshes: name → what casts it.
 SHADOW_NODES = ("/shadows/tracker_panels", "/shadows/tracker_pedestal", "/shadows/fixed_panels")
 
@@ -61,17 +64,6 @@ SHADOW_NODES = ("/shadows/tracker_panels", "/shadows/tracker_pedestal", "/shadow
 def wxyz(rotation: NDArray[np.floating]) -> NDArray[np.float64]:
     """A rotation matrix as viser's (w, x, y, z) quaternion."""
     return np.asarray(vtf.SO3.from_matrix(rotation).wxyz, dtype=float)
-
-
-def fixed_array_pose(geom: TrackerGeometry, fixed_tilt_deg: float,
-                     fixed_azimuth_deg: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Centre (ENU, m) and rotation (columns: width axis, height axis up-slope, normal) of
-    the fixed array: the D–H panel frame evaluated at the fixed normal (azimuth, 90° − tilt),
-    lower edge :data:`FIXED_LOWER_EDGE_M` above the ground at :data:`FIXED_ARRAY_ORIGIN_M`."""
-    rot = joint_transforms(fixed_azimuth_deg, 90.0 - fixed_tilt_deg, geom)[2][:3, :3]
-    half = ARRAY_HEIGHT_M / 2.0 * np.sin(np.radians(fixed_tilt_deg))
-    centre = np.array(FIXED_ARRAY_ORIGIN_M) + (0.0, 0.0, FIXED_LOWER_EDGE_M + half)
-    return centre, np.asarray(rot, dtype=float)
 
 
 def _modules(scene: viser.SceneApi, parent: str, color: tuple[int, int, int],
@@ -88,12 +80,13 @@ def _modules(scene: viser.SceneApi, parent: str, color: tuple[int, int, int],
     return out
 
 
-def build_ghost(scene: viser.SceneApi) -> dict[str, Any]:
+def build_ghost(scene: viser.SceneApi,
+                pedestal_height_m: float = PEDESTAL_HEIGHT_M) -> dict[str, Any]:
     """The ideal pose's panels, translucent: ``/ghost/azimuth/elevation/panels`` with the
     tracker's joint frames (posed like them), hidden until the actual pose strays."""
     nodes: dict[str, Any] = {
         "/ghost": scene.add_frame("/ghost", show_axes=False, visible=False,
-                                  position=(0.0, 0.0, PEDESTAL_HEIGHT_M)),
+                                  position=(0.0, 0.0, pedestal_height_m)),
         "/ghost/azimuth": scene.add_frame("/ghost/azimuth", show_axes=False),
         "/ghost/azimuth/elevation": scene.add_frame("/ghost/azimuth/elevation",
                                                     show_axes=False),
@@ -123,11 +116,13 @@ def build_shadows(scene: viser.SceneApi, with_fixed: bool) -> dict[str, Any]:
 
 
 def build_static_scene(scene: viser.SceneApi, geom: TrackerGeometry,
-                       fixed: tuple[float, float] | None) -> dict[str, Any]:
+                       fixed: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+                       pedestal_height_m: float = PEDESTAL_HEIGHT_M) -> dict[str, Any]:
     """Add every node that is not re-created later; returns the handles by path.
 
-    ``fixed`` is the fixed array's (surface_tilt, surface_azimuth) [°], or None for a
-    site without one (a camera-only site shows the tracker alone).
+    ``fixed`` is the fixed array's centre (ENU, m) and axes (columns: width, height up the
+    slope, normal; :func:`sim.array_shade.fixed_pose`), or None for a site without one (a
+    camera-only site shows the tracker alone). The tracker's pedestal foot is the origin.
     """
     nodes: dict[str, Any] = {}
 
@@ -152,14 +147,14 @@ def build_static_scene(scene: viser.SceneApi, geom: TrackerGeometry,
             font_screen_scale=1.6))
 
     # Tracker: base frame {0} on top of the pedestal.
-    add("/tracker", scene.add_frame("/tracker", show_axes=False,
-                                          position=(0.0, 0.0, PEDESTAL_HEIGHT_M)))
+    h = pedestal_height_m
+    add("/tracker", scene.add_frame("/tracker", show_axes=False, position=(0.0, 0.0, h)))
     add("/tracker/pedestal", scene.add_box(
-        "/tracker/pedestal", color=_STEEL, dimensions=PEDESTAL_BOX_M,
-        position=(0.0, 0.0, -PEDESTAL_HEIGHT_M / 2.0)))
+        "/tracker/pedestal", color=_STEEL, dimensions=(PEDESTAL_SIDE_M, PEDESTAL_SIDE_M, h),
+        position=(0.0, 0.0, -h / 2.0)))
     add("/tracker/footing", scene.add_box(
         "/tracker/footing", color=(120, 120, 120), dimensions=(0.7, 0.7, 0.12),
-        position=(0.0, 0.0, -PEDESTAL_HEIGHT_M + 0.06)))
+        position=(0.0, 0.0, -h + 0.06)))
     # Frame {1}: z1 is the (horizontal) elevation axis, y1 is up (alpha1 = 90°).
     add("/tracker/azimuth", scene.add_frame("/tracker/azimuth", show_axes=False))
     add("/tracker/azimuth/turret", scene.add_box(
@@ -193,7 +188,7 @@ def build_static_scene(scene: viser.SceneApi, geom: TrackerGeometry,
         position=(0.0, ARRAY_HEIGHT_M / 2.0 + 0.06, 0.03)))
 
     if fixed is not None:
-        _add_fixed(scene, geom, *fixed, add, add_modules)
+        _add_fixed(scene, *fixed, add, add_modules)
 
     # Sun: /sun's local z points at the sun, so the ray is a constant segment.
     add("/sun", scene.add_frame("/sun", show_axes=False))
@@ -207,10 +202,9 @@ def build_static_scene(scene: viser.SceneApi, geom: TrackerGeometry,
     return nodes
 
 
-def _add_fixed(scene: viser.SceneApi, geom: TrackerGeometry, tilt_deg: float,
-               azimuth_deg: float, add: Any, add_modules: Any) -> None:
-    """Fixed array: same panel-frame convention as the tracker (:func:`fixed_array_pose`)."""
-    centre, rot = fixed_array_pose(geom, tilt_deg, azimuth_deg)
+def _add_fixed(scene: viser.SceneApi, centre: NDArray[np.float64], rot: NDArray[np.float64],
+               add: Any, add_modules: Any) -> None:
+    """Fixed array: same panel-frame convention as the tracker."""
     add("/fixed", scene.add_frame("/fixed", show_axes=False,
                                   position=tuple(centre), wxyz=wxyz(rot)))
     add("/fixed/panels", scene.add_frame("/fixed/panels", show_axes=False))

@@ -1,13 +1,11 @@
-"""Shadows in the 3D twin: silhouettes cast along the sun vector onto the ground or a panel.
+"""Shadows in the 3D twin: silhouettes cast along the sun vector onto the ground.
 
 Pure geometry (no viser): the scene turns the polygons into flat meshes
 (:func:`fan_mesh`). A point X in sunlight casts its shadow where the ray
 X − λ s (s the unit vector towards the sun, λ > 0) meets a plane; for the
 ground z = 0 that is λ = X_z / s_z. A convex body's shadow is the convex hull
-of its projected corners; a flat collector's shadow on another plane is its
-projected outline clipped to that plane's rectangle (the same projection seed
-004 §2.1 uses between collectors, here between the tracker and the fixed
-array). The polygons are computed and clipped with shapely 2.
+of its projected corners (shapely 2). The tracker's shade on the fixed array
+is the twin's own, :func:`sim.array_shade.fixed_shade`.
 """
 
 from __future__ import annotations
@@ -50,68 +48,6 @@ def ground_shadow(points_enu: ArrayLike, sun_enu: ArrayLike) -> FloatArray:
         return np.zeros((0, 2))
     ring = np.asarray(shapely.orient_polygons(hull).exterior.coords)[:-1]
     return np.asarray(ring, dtype=float)
-
-
-def _clip_in_front(poly: FloatArray, origin: FloatArray, normal: FloatArray) -> FloatArray:
-    """The part of the planar polygon ``poly`` (K, 3) on the front side of the plane
-    (origin, normal): Sutherland–Hodgman against one plane."""
-    d = (poly - origin) @ normal
-    out = []
-    for k in range(len(poly)):
-        a, b, da, db = poly[k], poly[(k + 1) % len(poly)], d[k], d[(k + 1) % len(poly)]
-        if da > 0:
-            out.append(a)
-        if (da > 0) != (db > 0):
-            out.append(a + (b - a) * (da / (da - db)))
-    return np.asarray(out, dtype=float).reshape(-1, 3)
-
-
-def shade_on_rectangle(caster_enu: ArrayLike, sun_enu: ArrayLike, centre_enu: ArrayLike,
-                       u_enu: ArrayLike, v_enu: ArrayLike, width_m: float,
-                       height_m: float) -> tuple[float, FloatArray]:
-    """Shade that a flat caster polygon throws on a rectangle (a collector).
-
-    Parameters
-    ----------
-    caster_enu : array_like, shape (K, 3)
-        The caster's outline (e.g. the tracker's collector corners), ENU [m].
-    sun_enu : array_like, shape (3,)
-        Unit vector towards the sun.
-    centre_enu, u_enu, v_enu : array_like, shape (3,)
-        The receiving rectangle's centre and its in-plane unit axes (width along
-        u, height along v); its front normal is u × v.
-    width_m, height_m : float
-        The rectangle's size [m].
-
-    Returns
-    -------
-    fraction : float
-        Shaded fraction of the rectangle's area [-]: 0 with the sun behind the
-        rectangle (it gets no beam to lose) or below the horizon.
-    polygon : numpy.ndarray, shape (M, 3)
-        The shade on the rectangle, ENU [m] (empty when there is none).
-    """
-    s = np.asarray(sun_enu, dtype=float)
-    c = np.asarray(centre_enu, dtype=float)
-    u, v = np.asarray(u_enu, dtype=float), np.asarray(v_enu, dtype=float)
-    n = np.cross(u, v)
-    none = (0.0, np.zeros((0, 3)))
-    if s[2] <= 0.0 or s @ n <= 0.0:
-        return none
-    caster = _clip_in_front(np.asarray(caster_enu, dtype=float), c, n)  # only what is sunward
-    if len(caster) < 3:
-        return none
-    lam = ((caster - c) @ n) / (s @ n)  # X − λ s lies in the plane
-    hit = caster - lam[:, None] * s
-    uv = np.stack([(hit - c) @ u, (hit - c) @ v], axis=-1)
-    shade = shapely.Polygon(uv).buffer(0).intersection(
-        shapely.box(-width_m / 2, -height_m / 2, width_m / 2, height_m / 2))
-    if shade.is_empty or shade.area <= 0.0:
-        return none
-    hull = shapely.convex_hull(shade)  # a convex caster on a convex rectangle stays convex
-    ring = np.asarray(hull.exterior.coords)[:-1]
-    polygon = c + ring[:, :1] * u + ring[:, 1:2] * v
-    return float(shade.area / (width_m * height_m)), polygon
 
 
 def fan_mesh(polygon: ArrayLike, z_m: float = SHADOW_LIFT_M,

@@ -12,8 +12,12 @@ d1 and a2) and the sun comes from :func:`sim.sun.solar_position` (NREL SPA via
 pvlib). World coordinates are East-North-Up in metres, z up, origin on the
 ground at the foot of the tracker's pedestal. Shadows are cast along the sun
 vector (:mod:`backend.twin.scene_shadow`): on the ground from the tracker's
-collector and pedestal and the fixed array, and the tracker collector's shade
-on the fixed array, whose shaded fraction the readout reports as a loss.
+collector and pedestal and the fixed array. The tracker collector's shade on
+the fixed array, and its shaded fraction the readout reports as a loss, come
+from :func:`sim.array_shade.fixed_shade`, the function the twin's energy uses;
+the arrays stand where the site config places them, else the fixed array is
+assumed at :data:`backend.twin.scene_build.FIXED_ARRAY_ORIGIN_M` (said in the
+readout).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ import numpy as np
 import pandas as pd
 import viser
 from numpy.typing import NDArray
+from pvlib.atmosphere import alt2pres
 
 from backend.twin.scene_build import (
     ARRAY_HEIGHT_M,
@@ -35,19 +40,20 @@ from backend.twin.scene_build import (
     CAMERA_LOOK_AT_M,
     CAMERA_POSITION_M,
     COLLECTOR_BOX_M,
+    FIXED_ARRAY_ORIGIN_M,
     MODULE_DEPTH_M,
-    PEDESTAL_BOX_M,
     PEDESTAL_HEIGHT_M,
+    PEDESTAL_SIDE_M,
     SUN_DISTANCE_M,
     SUN_PATH_STEP_MIN,
     build_ghost,
     build_shadows,
     build_static_scene,
-    fixed_array_pose,
     wxyz,
 )
 from backend.twin.scene_pose import Replay, ScenePose
-from backend.twin.scene_shadow import box_corners, fan_mesh, ground_shadow, shade_on_rectangle
+from backend.twin.scene_shadow import box_corners, fan_mesh, ground_shadow
+from sim.array_shade import Layout, Placement, fixed_shade, layout_of
 from sim.kinematics import (
     forward_kinematics,
     joint_transforms,
@@ -70,46 +76,55 @@ def fixed_of(site: Site) -> tuple[float, float] | None:
     return None if fixed is None else (float(fixed.surface_tilt), float(fixed.surface_azimuth))
 
 
+def scene_layout(site: Site) -> Layout | None:
+    """Where the scene puts the arrays: as the site config places them
+    (:func:`sim.array_shade.layout_of`), else the tracker at the origin and the fixed array
+    at :data:`FIXED_ARRAY_ORIGIN_M` with the drawn 2 × 2 outline (``Layout.assumed``); None
+    without a tracker and a fixed array."""
+    w, h = ARRAY_WIDTH_M, ARRAY_HEIGHT_M
+    east, north = FIXED_ARRAY_ORIGIN_M[:2]
+    return layout_of(site, assumed=(Placement(0.0, 0.0, width_m=w, height_m=h),
+                                    Placement(east, north, width_m=w, height_m=h)))
+
+
 def tracker_world(azimuth_joint_deg: float, elevation_joint_deg: float, site: Site,
-                  base: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+                  base: NDArray[np.float64], pedestal_height_m: float = PEDESTAL_HEIGHT_M
+                  ) -> tuple[NDArray[np.float64], ...]:
     """World transforms (4 × 4) of the tracker's D–H frames {1}, {2} and its panel frame,
     with the base frame {0} on top of the pedestal turned by ``base`` (3 × 3)."""
     t_base = np.eye(4)
     t_base[:3, :3] = base
-    t_base[:3, 3] = (0.0, 0.0, PEDESTAL_HEIGHT_M)
+    t_base[:3, 3] = (0.0, 0.0, pedestal_height_m)
     return tuple(t_base @ t for t in joint_transforms(azimuth_joint_deg, elevation_joint_deg,
                                                       site.tracker))
 
 
-def shadows_at(site: Site, panels_world: NDArray[np.float64], base: NDArray[np.float64],
-               sun_enu: NDArray[np.float64]) -> tuple[dict[str, NDArray[np.float64]],
-                                                      float | None, NDArray[np.float64]]:
+def shadows_at(layout: Layout | None, panels_world: NDArray[np.float64],
+               base: NDArray[np.float64], sun_enu: NDArray[np.float64],
+               pedestal_height_m: float = PEDESTAL_HEIGHT_M
+               ) -> tuple[dict[str, NDArray[np.float64]], float | None, NDArray[np.float64]]:
     """Ground shadows by node name, the fixed array's shaded fraction (None without a fixed
     array) and the shade polygon on it (ENU), for the tracker's panel frame ``panels_world``."""
+    h = pedestal_height_m
     pedestal = np.eye(4)
     pedestal[:3, :3] = base
-    pedestal[:3, 3] = base @ (0.0, 0.0, -PEDESTAL_HEIGHT_M / 2.0) + (0, 0, PEDESTAL_HEIGHT_M)
+    pedestal[:3, 3] = base @ (0.0, 0.0, -h / 2.0) + (0, 0, h)
     out = {
         "/shadows/tracker_panels": ground_shadow(box_corners(panels_world, COLLECTOR_BOX_M),
                                                  sun_enu),
-        "/shadows/tracker_pedestal": ground_shadow(box_corners(pedestal, PEDESTAL_BOX_M),
-                                                   sun_enu),
+        "/shadows/tracker_pedestal": ground_shadow(
+            box_corners(pedestal, (PEDESTAL_SIDE_M, PEDESTAL_SIDE_M, h)), sun_enu),
     }
-    fixed = fixed_of(site)
-    if fixed is None:
+    if layout is None:
         return out, None, np.zeros((0, 3))
-    centre, rot = fixed_array_pose(site.tracker, *fixed)
     t_fixed = np.eye(4)
-    t_fixed[:3, :3], t_fixed[:3, 3] = rot, centre
-    out["/shadows/fixed_panels"] = ground_shadow(box_corners(t_fixed, COLLECTOR_BOX_M), sun_enu)
-    # the tracker's collector outline (its front face) cast on the fixed array's plane
-    w, h = ARRAY_WIDTH_M / 2.0, ARRAY_HEIGHT_M / 2.0
-    outline = np.array([[-w, -h, 0, 1], [w, -h, 0, 1], [w, h, 0, 1], [-w, h, 0, 1]])
-    caster = (outline @ panels_world.T)[:, :3]
-    fraction, polygon = shade_on_rectangle(caster, sun_enu, centre, rot[:, 0], rot[:, 1],
-                                           ARRAY_WIDTH_M, ARRAY_HEIGHT_M)
+    t_fixed[:3, :3], t_fixed[:3, 3] = layout.fixed_axes, layout.fixed_centre_enu
+    out["/shadows/fixed_panels"] = ground_shadow(
+        box_corners(t_fixed, (*layout.fixed_size_m, MODULE_DEPTH_M)), sun_enu)
+    shade = fixed_shade(layout, panels_world[None], sun_enu[None])
+    polygon = shade.polygon_enu[0, :shade.vertices[0]]
     lift = MODULE_DEPTH_M / 2.0 + 0.01  # drawn just above the modules' front faces
-    return out, fraction, polygon + lift * rot[:, 2] if len(polygon) else polygon
+    return out, float(shade.fraction[0]), polygon + lift * layout.fixed_axes[:, 2]
 
 
 class TwinView:
@@ -144,6 +159,9 @@ class TwinView:
         self._power_at = power_at
         self._note = note
         self._tz = site.timezone
+        self.layout = scene_layout(site)
+        self._pedestal_m = (PEDESTAL_HEIGHT_M if self.layout is None
+                            else self.layout.tracker_mount_height_m)
         self.nodes: dict[str, Any] = {}
         self.gui: dict[str, Any] = {}
         self.pose: ScenePose | None = None
@@ -163,9 +181,12 @@ class TwinView:
         """Add the viewer's scene and panel, then show ``start`` (scrubbed) or the live time."""
         scene = self.client.scene
         with self._lock:
-            self.nodes.update(build_static_scene(scene, self.site.tracker, fixed_of(self.site)))
-            self.nodes.update(build_ghost(scene))
-            self.nodes.update(build_shadows(scene, fixed_of(self.site) is not None))
+            lay = self.layout
+            fixed = None if lay is None else (lay.fixed_centre_enu, lay.fixed_axes)
+            self.nodes.update(build_static_scene(scene, self.site.tracker, fixed,
+                                                 self._pedestal_m))
+            self.nodes.update(build_ghost(scene, self._pedestal_m))
+            self.nodes.update(build_shadows(scene, lay is not None))
             self.client.camera.position = CAMERA_POSITION_M
             self.client.camera.look_at = CAMERA_LOOK_AT_M
             self._build_gui()
@@ -244,8 +265,7 @@ class TwinView:
             raise ValueError("ts must be timezone-aware")
         stamp = stamp.tz_convert("UTC")
         site = self.site
-        sp = solar_position(pd.DatetimeIndex([stamp]), site.latitude, site.longitude,
-                            site.altitude)
+        sp = self._sun(pd.DatetimeIndex([stamp]))
         sun_az = float(sp["azimuth"].iloc[0])
         sun_el = float(sp["apparent_elevation"].iloc[0])
         az_j, el_j = tracking_angles(
@@ -268,8 +288,9 @@ class TwinView:
         if fixed is not None:
             fixed_normal = enu_from_sky(fixed[1], 90.0 - fixed[0])
             fixed_aoi = float(np.degrees(np.arccos(np.clip(fixed_normal @ sun_vec, -1, 1))))
-        panels = tracker_world(az_joint, el_joint, site, base)[2]
-        shadows, shaded, shade_poly = shadows_at(site, panels, base, sun_vec)
+        panels = tracker_world(az_joint, el_joint, site, base, self._pedestal_m)[2]
+        shadows, shaded, shade_poly = shadows_at(self.layout, panels, base, sun_vec,
+                                                 self._pedestal_m)
         self.shadows = {**shadows, "/shadows/on_fixed": shade_poly}
         return ScenePose(
             ts=stamp, solar_azimuth_deg=sun_az, solar_elevation_deg=sun_el,
@@ -375,9 +396,16 @@ class TwinView:
         self._set_gui("hours", round(self._hours, 2))
         self._set_gui("date", local.date().isoformat())
 
+    def _sun(self, times: pd.DatetimeIndex) -> pd.DataFrame:
+        """Sun positions as the twin computes them (the site's pressure and air temperature
+        for the refraction, :func:`sim.twin.simulate`)."""
+        s = self.site
+        return solar_position(times, s.latitude, s.longitude, s.altitude,
+                              float(alt2pres(s.altitude)), s.temp_air)
+
     def _sun_centre(self) -> NDArray[np.float64]:
         """The point the sun marker and path are drawn around: the elevation axis."""
-        return np.array([0.0, 0.0, PEDESTAL_HEIGHT_M + self.site.tracker.d1_m])
+        return np.array([0.0, 0.0, self._pedestal_m + self.site.tracker.d1_m])
 
     def _set_day(self, day: dt.date) -> None:
         """Recompute the day's sun path (local calendar day of the site)."""
@@ -385,7 +413,7 @@ class TwinView:
         start = pd.Timestamp(day).tz_localize(self._tz)
         times = pd.date_range(start, start + pd.Timedelta(days=1),
                               freq=f"{SUN_PATH_STEP_MIN}min", inclusive="left")
-        sp = solar_position(times, self.site.latitude, self.site.longitude, self.site.altitude)
+        sp = self._sun(times)
         el = sp["apparent_elevation"].to_numpy()
         pts = self._sun_centre() + SUN_DISTANCE_M * enu_from_sky(sp["azimuth"].to_numpy(), el)
         up = (el[:-1] > 0.0) & (el[1:] > 0.0)
@@ -465,6 +493,14 @@ class TwinView:
                              "bypass diodes)" if np.isfinite(loss) else "")]
             else:
                 lines += ["", "Tracker's shadow on the fixed array: none"]
+            if self.layout is not None and self.layout.assumed:
+                east, north = FIXED_ARRAY_ORIGIN_M[:2]
+                lines.append(f"*Position assumed: the fixed array {east:g} m east, {north:g} m "
+                             "north of the tracker (the site config places no arrays); this "
+                             "shade is not in the twin's energy.*")
+            else:
+                lines.append("*Arrays placed by the site config; the twin's fixed power "
+                             "includes this shade.*")
         if p.replay_run_id is not None:
             lines += ["", f"Run {p.replay_run_id[:8]}: pointing error "
                           f"{p.pointing_error_mrad:.1f} mrad"

@@ -37,9 +37,10 @@ from backend.twin.scene import (
     TwinScene,
     parse_view_path,
 )
-from backend.twin.scene_build import COLLECTOR_BOX_M, PEDESTAL_BOX_M, fixed_array_pose
+from backend.twin.scene_build import COLLECTOR_BOX_M, PEDESTAL_BOX_M
 from backend.twin.scene_plant import PIVOT_HEIGHT_M, PlantView
 from backend.twin.scene_view import TwinView
+from sim.array_shade import Placement
 from sim.kinematics import forward_kinematics, inverse_kinematics
 from sim.plant import load_plant
 from sim.pv import ArrayConfig
@@ -55,7 +56,13 @@ OTHER = dataclasses.replace(
     timezone="Europe/Madrid",
     arrays={**SITE.arrays, "fixed": ArrayConfig("fixed", surface_tilt=35.0,
                                                  surface_azimuth=225.0)})
-SITES = {s.site_id: s for s in (SITE, CAMERA_SITE, OTHER)}
+#: Tehuantepec with its arrays placed by the config: the tracker's pedestal 10 m east, 5 m
+#: north of the site origin on a 2.0 m pedestal, the fixed array 3 m east and 1 m north of
+#: it (13, 6), its lower edge 0.3 m up.
+PLACED = dataclasses.replace(SITE, site_id="placed", placements={
+    "tracker": Placement(10.0, 5.0, mount_height_m=2.0),
+    "fixed": Placement(13.0, 6.0, mount_height_m=0.3)})
+SITES = {s.site_id: s for s in (SITE, CAMERA_SITE, OTHER, PLACED)}
 TZ = "America/Mexico_City"
 NAMED = [
     "/ground", "/tracker", "/tracker/pedestal", "/tracker/azimuth",
@@ -267,7 +274,8 @@ def _ray_cast_fraction(v: TwinView, n: int = 240) -> float:
                     np.cos(np.radians(v.pose.solar_azimuth_deg)), 0.0])
     sun = sun * np.cos(np.radians(v.pose.solar_elevation_deg))
     sun[2] = np.sin(np.radians(v.pose.solar_elevation_deg))
-    centre, rot = fixed_array_pose(SITE.tracker, 16.0, 180.0)
+    fixed = _world(v, "/fixed")  # the drawn fixed array
+    centre, rot = fixed[:3, 3], fixed[:3, :3]
     g = (np.arange(n) + 0.5) / n - 0.5
     uu, vv = np.meshgrid(g * ARRAY_WIDTH_M, g * ARRAY_HEIGHT_M)
     pts = centre + uu.reshape(-1, 1) * rot[:, 0] + vv.reshape(-1, 1) * rot[:, 1]
@@ -293,6 +301,34 @@ def test_tracker_shade_on_the_fixed_array_matches_ray_casting(view: TwinView,
         assert "W lost" in text
     else:
         assert "shadow on the fixed array: none" in text
+    # tehuantepec places no arrays: the scene assumes 4.5 m east and says so
+    np.testing.assert_allclose(_world(view, "/fixed")[:2, 3], [4.5, 0.0], atol=1e-9)
+    assert "Position assumed: the fixed array 4.5 m east" in text
+
+
+def test_arrays_placed_by_the_config_are_drawn_there_and_shade_as_the_twin_says(
+        scene: TwinScene) -> None:
+    client, v = _open(scene, "/site/placed/viewer/p1")
+    try:
+        assert isinstance(v, TwinView)
+        # drawn relative to the tracker's pedestal foot: 3 m east, 1 m north; lower edge 0.3 m
+        fixed = _world(v, "/fixed")
+        t = np.radians(16.0)
+        np.testing.assert_allclose(fixed[:3, 3], [3.0, 1.0, 0.3 + ARRAY_HEIGHT_M / 2 * np.sin(t)],
+                                   atol=1e-9)
+        np.testing.assert_allclose(_world(v, "/tracker")[:3, 3], [0.0, 0.0, 2.0], atol=1e-9)
+        start = pd.Timestamp("2024-03-15 15:00", tz=TZ)
+        twin = simulate(PLACED, start, start + pd.Timedelta(hours=3), step_s=900).series
+        fractions = twin["fixed_shaded_fraction"]
+        assert fractions.max() > 0.3  # the evening shade reaches this nearer array
+        for ts, f in fractions.items():
+            pose = v.show_time(ts)
+            assert pose.fixed_shaded_fraction == pytest.approx(f, abs=1e-7)  # one function
+            assert pose.fixed_shaded_fraction == pytest.approx(_ray_cast_fraction(v), abs=0.01)
+        text = v.gui["readout"].content
+        assert "Arrays placed by the site config" in text and "assumed" not in text
+    finally:
+        client.close()
 
 
 def test_readout_follows_the_scrubbed_time_not_the_live_power(scene: TwinScene,
