@@ -6,11 +6,12 @@ best scale ``s`` (least squares, ``s = Σ m·x / Σ x²``):
 
 - ``healthy``: ``m ≈ s · e(t)``, ``e`` the weather-aware twin's tracker power;
 - ``stuck``: ``m ≈ P(tilt, azimuth)``, the array at one fixed orientation under the
-  same sky, no free scale (the same modules); grid 0…90° of tilt by 5°, azimuth by
-  10°, then refined by 1°;
-- ``azimuth_offset``: the normal at the sun's elevation but ``δ`` away in azimuth
+  same sky, no free scale (the same modules); grid 0…90° of tilt by 10°, azimuth by
+  15° on every 10th minute, then refined by 2° and 1° on every 5th;
+- ``azimuth_offset``: the normal at the sun's elevation but ``δ`` (1…40° by 1°) away in azimuth
   (cos AOI = sin²h + cos²h cos δ, even in δ: the sign is not observable from power);
-- ``clock_offset``: ``m(t) ≈ s · e(t − τ)``, the logger's clock ``τ`` ahead (±180 min).
+- ``clock_offset``: ``m(t) ≈ s · e(t − τ)``, the logger's clock ``τ`` ahead (±180 min
+  in 5-min steps, then 1 min around the best).
 
 The residual of each is its RMS over the mean measured power; a fault is named when
 its residual is under :data:`FIT_RATIO` of the healthy one on a day with clearness
@@ -19,9 +20,12 @@ diffuse light and no shape fault can be told). Across days (:func:`faults_over_d
 a step in the healthy scale is a ``module_loss`` (largest two-sample t over all split
 days), a steady decline of it ``soiling`` (least-squares slope, %/day; whichever of step
 and hinge — flat, then a line from the day the decline starts — fits the daily scales
-better), daylight minutes without a reading are ``dropout``. pvanalytics is not used
-(not installed); its ``quality.time.shifts_ruptures`` and ``features.orientation``
-would be the published alternatives for the time shift and the stuck test.
+better), daylight minutes without a reading are ``dropout``. pvanalytics is the
+independent check, not a dependency of the service: its NREL day-profile tests
+(``features.orientation.tracking_nrel``/``fixed_nrel``) must agree with ``stuck`` on
+every day they classify (tests/backend/test_diagnosis_pvanalytics.py). Beyond them, the
+fits here estimate the stuck orientation, the offset and the clock shift in units, on
+one day, under the measured sky (docs/diagnosis.md, "pvanalytics").
 """
 
 from __future__ import annotations
@@ -67,7 +71,8 @@ def _power_at(site: Site, day: pd.DataFrame, tilt: np.ndarray, surf_az: np.ndarr
     shape = tilt.shape
     zen_b, az_b = np.broadcast_to(zen, shape), np.broadcast_to(az, shape)
     aoi = sky.angle_of_incidence(tilt, surf_az, zen_b, az_b)
-    dni_extra = np.broadcast_to(sky.extra_radiation(day.index), shape)
+    dni_extra = np.broadcast_to(day["dni_extra"].to_numpy() if "dni_extra" in day
+                                else sky.extra_radiation(day.index), shape)
     dni, ghi, dhi = (np.broadcast_to(day[k].to_numpy(), shape) for k in ("dni", "ghi", "dhi"))
     poa = sky.poa_irradiance(tilt, surf_az, zen_b, az_b, dni, ghi, dhi, dni_extra,
                              albedo=arr.albedo, model="haydavies")
@@ -97,30 +102,34 @@ def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray) -> dict[
     out.update(scale=s0, residual=r0, clearness=clear)
     if clear < MIN_CLEARNESS or r0 < HEALTHY_RESIDUAL:
         return out
-    # the orientation fits on every 3rd used minute: the shape of a day needs no more
-    thin = use & (np.arange(use.size) % 3 == 0)
+    # the orientation fits on every 5th minute: the shape of a day needs no more
+    thin = use & (np.arange(use.size) % 5 == 0)
     sub = day[thin]
     m_thin = measured_w[thin]
-    # stuck: coarse grid, then 1° around the best
-    best = (np.inf, 0.0, 0.0, 0.0)
-    for step, span in ((0.0, 0.0), (1.0, 6.0)):
+    # stuck: a 10° × 15° grid on every 10th minute (it only finds the basin), then 2° and
+    # 1° around the best on every 5th
+    best = (np.inf, 0.0, 0.0, 1.0)
+    for step, span in ((0.0, 0.0), (2.0, 8.0), (1.0, 2.0)):
         if step == 0.0:
-            tilts, azs = np.arange(0.0, 91.0, 5.0), np.arange(0.0, 360.0, 10.0)
+            tilts, azs = np.arange(0.0, 91.0, 10.0), np.arange(0.0, 360.0, 15.0)
         else:
             tilts = np.clip(np.arange(best[1] - span, best[1] + span + 0.1, step), 0, 90)
             azs = np.arange(best[2] - 2 * span, best[2] + 2 * span + 0.1, step) % 360.0
         tt, aa = np.meshgrid(tilts, azs, indexing="ij")
-        p = _power_at(site, sub, tt.reshape(-1, 1) + 0 * m_thin, aa.reshape(-1, 1) + 0 * m_thin)
-        mean = float(np.mean(m_thin))
-        res = np.sqrt(np.mean((p - m_thin) ** 2, axis=1)) / mean  # same modules: no free scale
+        k_sub = sub.iloc[::2] if step == 0.0 else sub
+        m_sub = m_thin[::2] if step == 0.0 else m_thin
+        shape = (tt.size, m_sub.size)
+        p = _power_at(site, k_sub, np.broadcast_to(tt.reshape(-1, 1), shape),
+                      np.broadcast_to(aa.reshape(-1, 1), shape))
+        res = np.sqrt(np.mean((p - m_sub) ** 2, axis=1)) / float(np.mean(m_sub))  # no scale
         k = int(np.argmin(res))
-        if res[k] < best[0]:
+        if step == 0.0 or res[k] < best[0]:  # the coarse residual is of other minutes
             best = (float(res[k]), float(tt.ravel()[k]), float(aa.ravel()[k]), 1.0)
     out["stuck"] = {"residual": best[0], "tilt_deg": best[1], "azimuth_deg": best[2],
                     "scale": best[3]}
     # azimuth offset
     el = sub["apparent_elevation"].to_numpy()
-    deltas = np.arange(1.0, 40.01, 0.5)
+    deltas = np.arange(1.0, 40.01, 1.0)
     tilt_t = np.broadcast_to(90.0 - el, (deltas.size, el.size))
     az_t = (sub["solar_azimuth"].to_numpy()[None, :] + deltas[:, None]) % 360.0
     p = _power_at(site, sub, tilt_t, az_t)
@@ -128,20 +137,35 @@ def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray) -> dict[
     k = int(np.argmin([f[1] for f in fits]))
     out["azimuth_offset"] = {"residual": fits[k][1], "offset_deg": float(deltas[k]),
                              "scale": fits[k][0]}
-    # clock offset: shift the expected series (1-min grid), compare on the used minutes
-    best_t = (np.inf, 0, 0.0)
+    # clock offset: shift the expected series (1-min grid), compare on the used minutes;
+    # 5-min steps over ±180 min, then 1 min around the best
     idx = np.flatnonzero(use)
-    for tau in range(-180, 181):
+
+    def shifted(tau: int) -> tuple[float, int, float]:
         j = idx - tau
         ok = (j >= 0) & (j < e.size)
         if ok.sum() < 60:
-            continue
+            return (np.inf, tau, 0.0)
         s, r = _fit(measured_w[idx[ok]], e[j[ok]])
-        if r < best_t[0]:
-            best_t = (r, tau, s)
+        return (r, tau, s)
+
+    best_t = min(shifted(tau) for tau in range(-180, 181, 5))
+    best_t = min(shifted(tau) for tau in range(best_t[1] - 4, best_t[1] + 5))
     out["clock_offset"] = {"residual": best_t[0], "offset_s": 60.0 * best_t[1],
                            "scale": best_t[2]}
     return out
+
+
+def features_by_day(site: Site, first_day: pd.Timestamp, e: pd.DataFrame,
+                    tracker_power_w: np.ndarray) -> list[dict[str, Any]]:
+    """``[{"date", "features"}]`` of consecutive days of 1440 minutes from ``first_day``
+    (local midnight; ``e`` from :func:`sim.sky_sensor.weather_aware_twin` on the same
+    minutes, ``tracker_power_w`` the readings [W]) — the input of :func:`faults_over_days`
+    for minute series that need no calendar (the service cuts local days by their edges)."""
+    return [{"date": (first_day + pd.Timedelta(days=k)).date().isoformat(),
+             "features": day_features(site, e.iloc[k * 1440:(k + 1) * 1440],
+                                      tracker_power_w[k * 1440:(k + 1) * 1440])}
+            for k in range(len(e) // 1440)]
 
 
 def _shape_fault(f: dict[str, Any]) -> tuple[str, float] | None:

@@ -38,9 +38,6 @@ if TYPE_CHECKING:
 
 MAX_DAYS = 400
 INVERSION_UNCERTAINTY = 0.03  # relative, on the expected tracker energy [-]
-#: Share of the day's daylight minutes with a valid fixed-array inversion for
-#: ``sky.source`` to be ``fixed_array`` (else ``clear_sky``).
-MIN_SENSOR_SHARE = 0.5
 
 
 def _wh(p: np.ndarray) -> float | None:
@@ -58,7 +55,9 @@ def _day_payload(info: SiteInfo, date: str, e: pd.DataFrame, tracker_w: np.ndarr
     daylight = e["poa_clear"].to_numpy() > 20.0
     valid = e["valid"].to_numpy(bool)
     share = float(valid[daylight].mean()) if daylight.any() else 0.0
-    source = "fixed_array" if share >= MIN_SENSOR_SHARE else "clear_sky"
+    # under sky_sensor.MIN_SENSOR_SHARE of the daylight inverted, the day's sky is the clear
+    # sky's own GHI/DNI/DHI: the expectation is the clear-sky twin's
+    source = "fixed_array" if bool(e["measured_sky"].any()) else "clear_sky"
     poa, clear = e["poa_global"].to_numpy(), e["poa_clear"].to_numpy()
     k_t = float(poa[daylight].sum() / clear[daylight].sum()) if daylight.any() else None
     exp_a = float(e["tracker_power_w"].sum() / 60.0)

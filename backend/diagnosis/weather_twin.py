@@ -61,25 +61,25 @@ def weather_twin_columns(ctx: ServiceContext, info: SiteInfo, array: str, t0: in
                          t1: int) -> tuple[dict[str, list[Any]], dict[str, Any]]:
     """Columns of a measurements answer (``ts``, ``power_w``, voltage and current null:
     the weather-aware twin models power; ``sky_valid``: the fixed array's inversion held
-    that minute, else the clear-sky index was carried over from valid neighbours) and
-    what the sky rests on."""
+    that minute, else the clear-sky index was carried over from valid neighbours, or on a
+    day without a measured sky the clear sky itself) and what the sky rests on."""
     e = weather_twin(ctx, info, t0, t1)
     kind = info.arrays[array].kind
     ts = e.index.as_unit("s").asi8
     keep = (ts >= t0) & (ts < t1)
     e = e[keep]
     power = e[f"{kind}_power_w"].to_numpy()
-    daylight = e["apparent_elevation"].to_numpy() > 2.0
+    daylight = e["poa_clear"].to_numpy() > 20.0
     valid = e["valid"].to_numpy(bool)
     share = float(valid[daylight].mean()) if daylight.any() else 0.0
+    measured = float(e["measured_sky"].to_numpy(bool)[daylight].mean()) if daylight.any() else 0.0
     cols: dict[str, list[Any]] = {
         "ts": iso_utc(ts[keep]), "voltage_v": [None] * power.size,
         "current_a": [None] * power.size, "power_w": np.round(power, 3).tolist(),
         "sky_valid": valid.tolist(),
     }
-    from backend.diagnosis.service import MIN_SENSOR_SHARE
-
-    sky = {"source": "fixed_array" if share >= MIN_SENSOR_SHARE else "clear_sky",
+    # most of the range's daylight under the fixed array's sky (sky_sensor.measured_sky)
+    sky = {"source": "fixed_array" if measured >= 0.5 else "clear_sky",
            "valid_daylight_minutes_pct": round(100.0 * share, 1)}
     return cols, sky
 

@@ -101,3 +101,25 @@ def test_diagnosis_bad_input(client) -> None:
     r = client.get("/api/v1/sites/nowhere/diagnosis", params={"start": "2025-01-01",
                                                                "end": "2025-01-02"})
     assert r.status_code == 404
+
+
+def test_a_day_without_readings_expects_the_clear_sky_twin(client, live_server,
+                                                             logged) -> None:
+    """A day without one fixed-array reading, right after a measured one, is expected under
+    the clear-sky twin's own weather (Ineichen GHI/DNI/DHI): neither a decomposition of a
+    clear-sky POA (its gain ran 13 points low) nor the measured neighbour's sky."""
+    last = dt.date.fromisoformat(FIRST) + dt.timedelta(days=DAYS - 1)
+    sl = slice((DAYS - 1) * 1440, DAYS * 1440)
+    _post(client, live_server.write_token,
+          _readings(logged.times[sl], logged.fixed_power_w[sl], "fixed"))
+    params = {"start": last.isoformat(), "end": (last + dt.timedelta(days=2)).isoformat()}
+    measured, empty = client.get(f"{BASE}/diagnosis", params=params, timeout=120).json()["days"]
+    assert measured["sky"]["source"] == "fixed_array" and empty["sky"]["source"] == "clear_sky"
+    assert empty["fixed"]["measured_wh"] is None
+    r = client.get(f"{BASE}/energy", params={**params, "interval": "day"})
+    assert r.status_code == 200, r.text
+    twin = r.json()["rows"][1]
+    for kind in ("tracker", "fixed"):
+        assert empty[kind]["expected_wh"] == pytest.approx(twin["arrays"][kind]["twin_wh"],
+                                                           rel=1e-3), kind
+    assert empty["gain_expected_pct"] == pytest.approx(twin["twin_gain_pct"], abs=0.1)

@@ -10,7 +10,7 @@ import datetime as dt
 import pandas as pd
 import pytest
 
-from backend.diagnosis.faults import day_features, faults_over_days
+from backend.diagnosis.faults import faults_over_days, features_by_day
 from sim import sky_sensor
 from sim.sites import load_site
 from tests.sim.realistic_sky import logger_days
@@ -24,11 +24,7 @@ def _diagnose(fault: str | None) -> list[list[dict]]:
     d = logger_days(SITE, FIRST, DAYS, SEED, fault=fault, fault_day=FAULT_DAY)
     e = sky_sensor.weather_aware_twin(SITE, FIRST, FIRST + pd.Timedelta(days=DAYS),
                                       d.fixed_power_w)
-    days = [{"date": (FIRST + pd.Timedelta(days=k)).date().isoformat(),
-             "features": day_features(SITE, e.iloc[k * 1440:(k + 1) * 1440],
-                                      d.tracker_power_w[k * 1440:(k + 1) * 1440])}
-            for k in range(DAYS)]
-    return faults_over_days(days)
+    return faults_over_days(features_by_day(SITE, FIRST, e, d.tracker_power_w))
 
 
 def _since_ok(f: dict) -> bool:
@@ -64,11 +60,7 @@ def test_soiling_found_as_a_slow_decline() -> None:
     d = logger_days(SITE, first, days, 41, fault="soiling", fault_day=start)
     e = sky_sensor.weather_aware_twin(SITE, first, first + pd.Timedelta(days=days),
                                       d.fixed_power_w)
-    feats = [{"date": (first + pd.Timedelta(days=k)).date().isoformat(),
-              "features": day_features(SITE, e.iloc[k * 1440:(k + 1) * 1440],
-                                       d.tracker_power_w[k * 1440:(k + 1) * 1440])}
-             for k in range(days)]
-    found = faults_over_days(feats)
+    found = faults_over_days(features_by_day(SITE, first, e, d.tracker_power_w))
     soil = [f for f in found[-1] if f["kind"] == "soiling"]
     assert len(soil) == 1 and soil[0]["unit"] == "%/day", found[-1]
     assert abs(soil[0]["magnitude"] - 0.5) <= 0.25
