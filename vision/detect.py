@@ -22,10 +22,15 @@ Three named methods, all returning a :class:`SunDetection`:
   veto: it cannot lower the probability of a plainly visible, round,
   saturated disc with its glare, so a wrong place or time gives the sun it
   sees and how far it is from the prediction (``distance_from_ephemeris_px``),
-  not "no sun". The sub-pixel centre is the intensity-weighted centroid of a
-  complete (point-symmetric) core, or a RANSAC + least-squares fit to the
-  saturated limb of a cut one (on the camera's sphere when a model is known;
-  :mod:`vision.limb`). A "no sun" answer says why (``reason``).
+  not "no sun". The sub-pixel centre: for a core with a glare around it and a
+  fisheye model (given, or the image circle's), the small circle on the
+  camera's sphere through most of the core's limb that leaves none of it
+  inside — the clear-sky disc, which thin cloud (adding light near the sun)
+  can only grow on one side (:func:`vision.limb.contained_limb_centre`,
+  RANSAC after Fischler & Bolles 1981); otherwise the intensity-weighted
+  centroid of a complete (point-symmetric) core, or a RANSAC + least-squares
+  fit to the saturated limb of a cut one (on the camera's sphere when a model
+  is known; :mod:`vision.limb`). A "no sun" answer says why (``reason``).
 * ``"seed000_hsv"`` and ``"seed003_gray240"`` — the seeds' pipelines
   (:mod:`vision.seeds`), kept for comparison.
 
@@ -58,7 +63,7 @@ from vision.candidates import (
 )
 from vision.detection import CameraModel, FovCircle, SunDetection
 from vision.fov import _fov_mask, _median_u8, _small, estimate_fov, to_gray
-from vision.limb import _robust_limb_centre
+from vision.limb import _robust_limb_centre, contained_limb_centre
 from vision.radial import radial_symmetry_centre
 from vision.seeds import detect_seed000, detect_seed003, threshold_moments
 
@@ -69,6 +74,9 @@ __all__ = ["METHODS", "CameraModel", "FovCircle", "SunDetection", "detect_robust
 METHODS: tuple[str, ...] = ("robust", "seed000_hsv", "seed003_gray240")
 
 _SMALL_AREA_PX = 30  # below: intensity-weighted centroid only; above: also a limb fit
+_HALO_DROP = 0.97  # a glare: (peak − ring at 1.6 R) < this × (peak − ring at 4 R)
+_CONTAINED_MIN_INLIERS = 0.3  # share of the limb on the contained circle to trust it
+_ROUND_SPREAD_PX = 1.5  # a core whose outline spans ≤ this + 5 % of R in radius is round
 _MAX_CANDIDATES = 12
 _SCORED = 4  # candidates whose glare is examined
 _SEARCH_DEG = 8.0  # radius of the first search around the ephemeris prediction [°]
@@ -81,6 +89,7 @@ class _Pick:
     """The winner of one search, with what the confidence and the answer need."""
 
     best: _Candidate
+    work: NDArray[np.uint8]  # the frame as searched (masked outside the window / image circle)
     labels: NDArray[Any]
     peak: float
     bg: float
@@ -175,7 +184,8 @@ def _search(gray: NDArray[np.uint8], work: NDArray[Any], small_bg: float,
     values = {"shape": best.shape, "peak": peak, "contrast": peak - bg,
               "radius_deg": radius_deg, "coherence": coherence,
               "ephemeris_deg": eph if eph is not None else float("nan")}
-    return _Pick(best, labels, peak, bg, thr, len(cands), ghosts, x, conf.probability(x), values)
+    return _Pick(best, work, labels, peak, bg, thr, len(cands), ghosts, x, conf.probability(x),
+                 values)
 
 
 def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
@@ -252,7 +262,8 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         if camera is None and fov is not None:
             # no model given: an equidistant 180° lens spanning the image circle
             fallback = FisheyeCamera(fov.cx_px, fov.cy_px, fov.radius_px / 0.98 / 90.0)
-        cx, cy, radius = _refine(gray, got.labels, got.best, got.peak, got.bg, camera, fallback)
+        cx, cy, radius = _refine(gray, got.work, got.labels, got.best, got.peak, got.bg,
+                                 got.thr, camera, fallback)
     dist = None
     if found and expected_px is not None:
         dist = float(np.hypot(cx - expected_px[0], cy - expected_px[1]))
@@ -274,38 +285,82 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
     )
 
 
-def _refine(gray: NDArray[np.uint8], labels: NDArray[Any], c: _Candidate, peak: float,
-            bg: float, camera: CameraModel | None, fallback: CameraModel | None = None
-            ) -> tuple[float, float, float]:
+def _limb_points(c: _Candidate, labels: NDArray[Any]) -> NDArray[np.float64]:
+    """The outline of the candidate's core in frame pixels ``[N, 2]``."""
+    contours, _ = cv2.findContours(c.mask(labels), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    pts = np.vstack(contours).reshape(-1, 2).astype(float)
+    pts[:, 0] += c.x
+    pts[:, 1] += c.y
+    return pts
+
+
+def _true_limb(gray: NDArray[np.uint8], work: NDArray[np.uint8], pts: NDArray[np.float64],
+               cx: float, cy: float, thr: float) -> NDArray[np.float64]:
+    """The outline points that are the sun's limb: not those where a mask (the search
+    window around the prediction, the image circle) cut the core — there the pixel 1.5 px
+    farther out from (cx, cy) is masked in ``work`` while the frame is still bright."""
+    h, w = gray.shape
+    f = 1.5 / np.maximum(np.hypot(pts[:, 0] - cx, pts[:, 1] - cy), 1e-9)
+    ox = np.clip(np.rint(pts[:, 0] + (pts[:, 0] - cx) * f), 0, w - 1).astype(np.intp)
+    oy = np.clip(np.rint(pts[:, 1] + (pts[:, 1] - cy) * f), 0, h - 1).astype(np.intp)
+    return pts[(work[oy, ox] > 0) | (gray[oy, ox] < thr)]
+
+
+def _refine(gray: NDArray[np.uint8], work: NDArray[np.uint8], labels: NDArray[Any],
+            c: _Candidate, peak: float, bg: float, thr: float, camera: CameraModel | None,
+            fallback: CameraModel | None = None) -> tuple[float, float, float]:
     """Sub-pixel centre of the winning cluster → (x, y, radius_px).
 
-    A complete blob — point-symmetric about its centroid (:func:`_symmetry`
-    ≥ 0.9): a disc, an oval, a disc with blooming or flare spikes on both
-    sides — gets the intensity-weighted centroid of a disc window above 80 %
-    of the way from the local background to the peak. A blob cut by the
-    horizon, a mast or an overlay, or merged with a cloud on one side, gets
-    the limb fit (:func:`_robust_limb_centre`): on the sphere of ``camera``
-    when one is given, else in the image — or on the sphere of ``fallback``
-    (an approximate lens model) when that puts more of the limb on one circle.
+    A core with a glare around it, given a fisheye model (or ``fallback``, an
+    approximate lens model): the small circle on the camera's sphere through
+    most of the core's limb that leaves none of it inside
+    (:func:`vision.limb.contained_limb_centre`; outline points where a mask —
+    the search window, the image circle — cut the core are left out) — robust
+    to thin cloud that grows the core on one side and to the fisheye's skew of a
+    wide glare — when
+    at least :data:`_CONTAINED_MIN_INLIERS` of the limb lies on it. Otherwise
+    (no glare: a plain disc, whose sharp edge centres it exactly; no fisheye
+    model — the tracker's narrow lens, where the 8-bit outline is noisier than
+    the centroid and a 1° glare has no skew; too little of the limb on one
+    circle) as before: a complete blob —
+    point-symmetric about its centroid (:func:`_symmetry` ≥ 0.9): a disc, an
+    oval, a disc with blooming or flare spikes on both sides — gets the
+    intensity-weighted centroid of a disc window above 80 % of the way from the
+    local background to the peak. A blob cut by the horizon, a mast or an
+    overlay, or merged with a cloud on one side, gets the limb fit
+    (:func:`_robust_limb_centre`): on the sphere of ``camera`` when one is
+    given, else in the image — or on the sphere of ``fallback`` when that puts
+    more of the limb on one circle.
     """
     r_eq = float(np.sqrt(c.area / np.pi))
+    model = camera if camera is not None else fallback
+    if isinstance(model, FisheyeCamera) and c.area >= _SMALL_AREA_PX:
+        near = _ring_values(gray, c.cx, c.cy, 1.6 * r_eq + 2.0, None)
+        far = _ring_values(gray, c.cx, c.cy, 4.0 * r_eq + 3.0, None)
+        # a glare: the ring just outside the core is still well above the far sky
+        if near.size >= 8 and far.size >= 8 and \
+                peak - _median(near) < _HALO_DROP * (peak - _median(far)):
+            pts = _true_limb(gray, work, _limb_points(c, labels), c.cx, c.cy, thr)
+            rad = np.hypot(pts[:, 0] - c.cx, pts[:, 1] - c.cy) if len(pts) else np.zeros(1)
+            # not already a circle about its centroid (a clear-sky core near the zenith:
+            # the centroid below is exact and cheaper)
+            if float(rad.max() - rad.min()) > _ROUND_SPREAD_PX + 0.05 * r_eq:
+                got = contained_limb_centre(pts, model)
+                if got is not None and got[2] >= _CONTAINED_MIN_INLIERS:
+                    return got[0], got[1], r_eq
     pad = max(3.0, 0.5 * r_eq + 2.0)
     ring = _ring_values(gray, c.cx, c.cy, r_eq + pad + 1.0, None)
     local_bg = _median(ring) if ring.size else bg
     level = local_bg + 0.8 * (peak - local_bg)
-    got = _weighted_centroid(gray, c.cx, c.cy, r_eq + pad, level)
-    wx, wy = got if got is not None else (c.cx, c.cy)
+    got_c = _weighted_centroid(gray, c.cx, c.cy, r_eq + pad, level)
+    wx, wy = got_c if got_c is not None else (c.cx, c.cy)
     if c.area < _SMALL_AREA_PX:
         return float(wx), float(wy), r_eq
-    mask = c.mask(labels)
-    if _symmetry(mask) >= 0.9:
+    if _symmetry(c.mask(labels)) >= 0.9:
         return float(wx), float(wy), r_eq
-    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    pts = np.vstack(contours).reshape(-1, 2).astype(float)
+    pts = _limb_points(c, labels)
     if len(pts) < 8:
         return float(wx), float(wy), r_eq
-    pts[:, 0] += c.x
-    pts[:, 1] += c.y
     if camera is not None:
         cx, cy, r, _ = _robust_limb_centre(pts, camera)
         return cx, cy, r

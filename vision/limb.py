@@ -1,7 +1,8 @@
 """Circle and sphere-cone fits to a glare's limb (Kåsa 1976 algebraic fit, RANSAC).
 
 Used for a glare cut by the horizon, a mast or an overlay, where the arc that
-is left is the only trustworthy part of the outline.
+is left is the only trustworthy part of the outline, and for a core that
+cloud has grown on one side (:func:`contained_limb_centre`).
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from vision.candidates import _median
 from vision.detection import CameraModel
 
 
@@ -70,46 +72,119 @@ def _ransac_circle(x: NDArray[np.float64], y: NDArray[np.float64], n_trials: int
     return np.abs(np.hypot(x - ux[best], y - uy[best]) - r[best]) <= tol[best]
 
 
+_CONTAINED_TRIALS = 96  # RANSAC triples of contained_limb_centre (a ≥ 30 % arc: P(miss) < 8 %)
+_CONTAINED_REL_TOL = 0.02  # tolerance on the limb: ≥ this share of the half-angle
+
+
 def _plane_axis(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Axis of the small circle through unit vectors ``[N, 3]`` (least-squares plane normal)."""
+    """Axis of the small circle through unit vectors ``[N, 3]`` (least-squares plane normal:
+    the eigenvector of the 3 × 3 scatter matrix with the least eigenvalue)."""
     m = v.mean(axis=0)
-    _, _, vt = np.linalg.svd(v - m, full_matrices=False)
-    return vt[2] if np.dot(vt[2], m) > 0 else -vt[2]
+    d = v - m
+    normal = np.linalg.eigh(d.T @ d)[1][:, 0]
+    return normal if np.dot(normal, m) > 0 else -normal
 
 
-def _ransac_cone(v: NDArray[np.float64], tol_rad: float, n_trials: int = 256
-                 ) -> NDArray[np.bool_]:
+def _ransac_cone(v: NDArray[np.float64], tol_rad: float, n_trials: int = 256,
+                 rel_tol: float = 0.05, inside_penalty: float = 0.0) -> NDArray[np.bool_]:
     """Inliers of the small circle on the sphere through most limb directions ``[N, 3]``.
 
     Three unit vectors fix a plane, hence a cone (axis, half-angle); the
-    residual is the angular distance of each point from that cone.
+    residual is the angular distance of each point from that cone, the
+    tolerance max(``tol_rad``, ``rel_tol`` × half-angle). A hypothesis scores its
+    inliers minus ``inside_penalty`` × the points *inside* its cone by more than
+    the tolerance (:func:`contained_limb_centre`). Residuals are compared as
+    cosines (no arc cosine per point and hypothesis).
     """
     n = len(v)
-    rng = np.random.default_rng(12345)
-    idx = rng.integers(0, n, size=(n_trials, 3))
+    idx = np.random.default_rng(12345).integers(0, n, size=(n_trials, 3))
     sub = np.linspace(0, n - 1, min(n, 120)).astype(int)
-    a, b, c = v[idx[:, 0]], v[idx[:, 1]], v[idx[:, 2]]
-    nrm = np.cross(b - a, c - a)
-    length = np.linalg.norm(nrm, axis=1)
-    ok = length > 1e-12
+    a = v[idx[:, 0]]
+    p, q = v[idx[:, 1]] - a, v[idx[:, 2]] - a
+    nrm = np.empty_like(p)  # p × q, written out (np.cross is slow on short arrays)
+    nrm[:, 0] = p[:, 1] * q[:, 2] - p[:, 2] * q[:, 1]
+    nrm[:, 1] = p[:, 2] * q[:, 0] - p[:, 0] * q[:, 2]
+    nrm[:, 2] = p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]
+    cos_half = np.einsum("ij,ij->i", nrm, a)
+    # unit normal, turned toward the points: cos(half-angle) = n · a ≥ 0
+    nrm *= (np.sign(cos_half) / np.maximum(np.sqrt(np.einsum("ij,ij->i", nrm, nrm)),
+                                           1e-300))[:, None]
+    cos_half = np.einsum("ij,ij->i", nrm, a)
+    mean_dir = v.mean(axis=0)
+    mean_dir /= np.linalg.norm(mean_dir)
+    # the axis must lie within the limb's spread (the sun is inside its glare), the cone
+    # no wider than 45° nor 1.2 × that spread
+    cos_spread = float(np.min(v @ mean_dir))
+    spread = float(np.arccos(np.clip(cos_spread, -1.0, 1.0)))
+    ok = (cos_half > max(np.cos(np.radians(45.0)), np.cos(min(1.2 * spread + 1e-6, np.pi)))) \
+        & (nrm @ mean_dir >= cos_spread) & (cos_half < 1.0)
     if not np.any(ok):
         return np.ones(n, bool)
-    nrm = nrm[ok] / length[ok, None]
-    nrm *= np.sign(np.sum(nrm * a[ok], axis=1))[:, None]
-    half = np.arccos(np.clip(np.sum(nrm * a[ok], axis=1), -1.0, 1.0))
-    mean_dir = v.mean(axis=0)
-    ok2 = (half < np.radians(45.0)) & (nrm @ mean_dir > 0)
-    # the axis must lie within the limb's spread (the sun is inside its glare)
-    spread = float(np.max(np.arccos(np.clip(v @ (mean_dir / np.linalg.norm(mean_dir)), -1, 1))))
-    axis_off = np.arccos(np.clip(nrm @ (mean_dir / np.linalg.norm(mean_dir)), -1.0, 1.0))
-    ok2 &= (axis_off <= spread) & (half <= 1.2 * spread + 1e-6)
-    if not np.any(ok2):
-        return np.ones(n, bool)
-    nrm, half = nrm[ok2], half[ok2]
-    res = np.abs(np.arccos(np.clip(v[sub] @ nrm.T, -1.0, 1.0)) - half[None, :])
-    tol = np.maximum(tol_rad, 0.05 * half)
-    best = int(np.argmax((res <= tol[None, :]).sum(axis=0)))
+    nrm = nrm[ok]
+    half = np.arccos(cos_half[ok])
+    tol = np.maximum(tol_rad, rel_tol * half)
+    dots = v[sub] @ nrm.T  # cos of each point's angle from each axis
+    lo, hi = np.cos(half + tol)[None, :], np.cos(np.maximum(half - tol, 0.0))[None, :]
+    score = ((dots >= lo) & (dots <= hi)).sum(axis=0).astype(float)
+    if inside_penalty:
+        score -= inside_penalty * (dots > hi).sum(axis=0)
+    best = int(np.argmax(score))
     return np.abs(np.arccos(np.clip(v @ nrm[best], -1.0, 1.0)) - half[best]) <= tol[best]
+
+
+def _refit_cone(v: NDArray[np.float64], keep: NDArray[np.bool_], tol_rad: float,
+                rel_tol: float) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Plane fit to the inliers, then inliers re-selected among all points around the fit
+    (at most three times) → (axis, inliers)."""
+    axis = _plane_axis(v[keep])
+    for _ in range(3):
+        ang = np.arccos(np.clip(v @ axis, -1.0, 1.0))
+        half = _median(ang[keep])
+        new = np.abs(ang - half) <= max(tol_rad, rel_tol * half)
+        if new.sum() < 6 or np.array_equal(new, keep):
+            break
+        keep = new
+        axis = _plane_axis(v[keep])
+    return axis, keep
+
+
+def contained_limb_centre(pts: NDArray[np.float64], camera: CameraModel, tol_px: float = 0.7
+                          ) -> tuple[float, float, float] | None:
+    """The sun's centre from the limb of its saturated core when cloud has grown the core
+    on one side: the small circle on the sphere (a cone about the sun's direction) that
+    passes through most limb points ``[N, 2]`` while leaving (almost) none *inside* it.
+
+    Why: thin cloud near the sun adds light (forward scattering) to part of the glare, so
+    the saturated region there reaches farther out, while it never hides the clear-sky
+    core — on a cloud-free arc the limb is the clear-sky circle, on the cloudy side it
+    bulges outward. A plain RANSAC circle (Fischler & Bolles 1981, CACM 24:381) may pick
+    the bulge; scoring each hypothesis by its inliers minus three times the limb points
+    lying inside it (the clear-sky disc is contained in the core) picks the clear arc.
+    The cone is fitted on the camera's sphere (a wide glare is an oval in a fisheye
+    image); its axis is the normal of the least-squares plane through the inliers. Tolerance:
+    max(``tol_px`` / px-per-radian, 2 % of the half-angle). Returns
+    ``(x, y, inlier_fraction)``, or None with too few usable points.
+    """
+    x, y = pts[:, 0], pts[:, 1]
+    v_all = camera.pixel_to_direction(x, y)
+    fin = np.all(np.isfinite(v_all), axis=1)
+    if fin.sum() < 12:
+        return None
+    v = v_all[fin]
+    # the angular size of a pixel here: the points' spread on the sphere over that in pixels
+    mean_dir = v.mean(axis=0)
+    cos_spread = float(np.min(v @ mean_dir)) / float(np.linalg.norm(mean_dir))
+    spread = float(np.arccos(min(1.0, cos_spread)))
+    tol = tol_px * spread / max(0.5 * max(float(np.ptp(x[fin])), float(np.ptp(y[fin]))), 1.0)
+    keep = _ransac_cone(v, tol, n_trials=_CONTAINED_TRIALS, rel_tol=_CONTAINED_REL_TOL,
+                        inside_penalty=3.0)
+    if keep.sum() < 6:
+        return None
+    axis = _plane_axis(v[keep])
+    px, py = camera.direction_to_pixel(axis)
+    if not (np.isfinite(px) and np.isfinite(py)):
+        return None
+    return float(px), float(py), float(keep.mean())
 
 
 def _robust_limb_centre(pts: NDArray[np.float64], camera: CameraModel | None
@@ -135,15 +210,7 @@ def _robust_limb_centre(pts: NDArray[np.float64], camera: CameraModel | None
             tol = 1.5 * ang_r / max(r_px, 1.0)
             keep = _ransac_cone(v, tol)
             if keep.sum() >= 6:
-                axis = _plane_axis(v[keep])
-                for _ in range(3):  # re-select inliers among all points around the fit
-                    ang = np.arccos(np.clip(v @ axis, -1.0, 1.0))
-                    half = float(np.median(ang[keep]))
-                    new = np.abs(ang - half) <= max(tol, 0.05 * half)
-                    if new.sum() < 6 or np.array_equal(new, keep):
-                        break
-                    keep = new
-                    axis = _plane_axis(v[keep])
+                axis, keep = _refit_cone(v, keep, tol, 0.05)
                 px, py = camera.direction_to_pixel(axis)
                 if np.isfinite(px) and np.isfinite(py):
                     return float(px), float(py), float(r_px), float(keep.mean())
