@@ -9,7 +9,11 @@ best scale ``s`` (least squares, ``s = Σ m·x / Σ x²``):
   same sky, no free scale (the same modules); grid 0…90° of tilt by 10°, azimuth by
   15° on every 10th minute, then refined by 2° and 1° on every 5th;
 - ``azimuth_offset``: the normal at the sun's elevation but ``δ`` (1…40° by 1°) away in azimuth
-  (cos AOI = sin²h + cos²h cos δ, even in δ: the sign is not observable from power);
+  (cos AOI = sin²h + cos²h cos δ, even in δ: the sign is not observable from power). Like
+  the others it runs only on days whose healthy residual is ≥ :data:`HEALTHY_RESIDUAL`,
+  which a yaw under about 30° does not reach: a 10° yaw (1.5 % × cos²h of the beam) is
+  inside the reconstructed sky's error at low sun (docs/diagnosis.md, "Why the azimuth
+  offset is not met"); ``elevation_offset`` (a flat 1 − cos δ) is not fitted;
 - ``clock_offset``: ``m(t) ≈ s · e(t − τ)``, the logger's clock ``τ`` ahead (±180 min
   in 5-min steps, then 1 min around the best).
 

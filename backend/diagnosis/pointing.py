@@ -9,9 +9,12 @@ with ``pvlib.irradiance.aoi`` (tilt = 90° − elevation), and split into an azi
 error (wrapped to ±180°) and an elevation error (measured − sun). The sun is the
 SPA apparent position of :func:`sim.sun.solar_position`, as in the twin.
 
-What this measures is the controller and the mechanism as the encoders see them:
-an encoder that is itself misaligned (a wrong zero) hides the offset from this
-chart; the power-based diagnosis (:mod:`backend.diagnosis.faults`) sees it.
+What this measures is the controller and the mechanism as the encoders see them (a
+controller clock 30 min ahead shows as a 45° azimuth error at its 95th percentile).
+Errors of the frame the encoders sit in are invisible here: a pedestal yaw or tilt, or
+an encoder with a wrong zero, leave the joint angles equal to the sun's. The power-based
+diagnosis (:mod:`backend.diagnosis.faults`) cannot see them either below about 25°
+(docs/diagnosis.md, "Why the azimuth offset is not met").
 """
 
 from __future__ import annotations
