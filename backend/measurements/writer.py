@@ -202,6 +202,18 @@ def _sql_list(col: np.ndarray) -> list[Any]:
     return col.tolist()
 
 
+def _all_duplicates(jobs: list[MeasurementJob], counts: list[int]) -> set[tuple[int, int]]:
+    """Series whose every job of the group is of that series alone and inserted nothing
+    (``ON CONFLICT DO NOTHING`` kept the stored rows), so their rollups stand as they are."""
+    seen: dict[tuple[int, int], bool] = {}
+    for job, inserted in zip(jobs, counts, strict=True):
+        ids = np.unique(job.array_ids)
+        for a in ids.tolist():
+            key = (int(a), job.source)
+            seen[key] = seen.get(key, True) and ids.size == 1 and inserted == 0
+    return {key for key, dup in seen.items() if dup}
+
+
 def _series_window(parts: list[tuple[np.ndarray, ...]]) -> SeriesWindow:
     """The new readings of one series (parts as :meth:`MeasurementJob.columns`, in
     submission order) sorted by time; of a second sent twice the first write wins."""
@@ -390,7 +402,10 @@ class Writer:
             new = {key: _series_window(parts) for key, parts in touched.items()}
             holes = {key: self._holes(cur, key, w.ts_s) for key, w in new.items()}
             counts = [self._sql.insert_job(cur, job) for job in jobs]
+            unchanged = _all_duplicates(jobs, counts)
             for key, w in new.items():
+                if key in unchanged:  # a re-sent batch: stored rows and rollups as they were
+                    continue
                 self._update_rollups(cur, key, w, holes[key])
                 if key[1] == 0:  # measured readings: that day's cached diagnosis is stale
                     cur.execute(self._sql.drop_diagnosis,

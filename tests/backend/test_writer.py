@@ -162,3 +162,23 @@ def test_single_readings_of_many_loggers_in_one_group_are_increments(ctx) -> Non
     assert [f.result(timeout=60) for f in futures] == [(1, 0)] * holes.size
     assert ctx.writer.rollup_refreshes == refreshes
     _assert_rollups_equal_direct_aggregates(ctx, aid, minutes.size)
+
+
+def test_a_re_sent_batch_leaves_the_rollups_untouched(ctx) -> None:  # type: ignore[no-untyped-def]
+    """A logger re-sending readings the service has (a retry after a lost answer): all
+    duplicates, so no rollup work at all, and the rollups still equal the readings."""
+    aid = ctx.registry.sites["tehuantepec"].arrays["tracker"].array_id
+    ts = T0 + 60 * np.arange(0, 600, 2)
+    assert ctx.writer.submit(_job(aid, ts, 1)).result(timeout=60) == (ts.size, 0)
+    with ctx.engine.connect() as conn:
+        before = conn.execute(text("SELECT * FROM measurement_rollups WHERE array_id = :a "
+                                   "ORDER BY bucket_s"), {"a": aid}).all()
+    refreshes = ctx.writer.rollup_refreshes
+    again = ctx.writer.submit(_job(aid, ts[50:250], 2))  # other values: first write wins
+    assert again.result(timeout=60) == (0, 200)
+    assert ctx.writer.rollup_refreshes == refreshes
+    with ctx.engine.connect() as conn:
+        after = conn.execute(text("SELECT * FROM measurement_rollups WHERE array_id = :a "
+                                  "ORDER BY bucket_s"), {"a": aid}).all()
+    assert after == before
+    _assert_rollups_equal_direct_aggregates(ctx, aid, ts.size)
