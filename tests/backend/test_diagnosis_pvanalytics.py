@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from backend.diagnosis.faults import day_features, faults_over_days
+from backend.diagnosis.faults import faults_over_days, features_by_day
 from sim import sky_sensor, sun
 from sim.sites import load_site
 from tests.sim.realistic_sky import logger_days
@@ -46,11 +46,7 @@ def test_stuck_days_agree_with_pvanalytics() -> None:
         d = logger_days(SITE, FIRST, DAYS, seed, fault="stuck", fault_day=FAULT_DAY)
         e = sky_sensor.weather_aware_twin(SITE, FIRST, FIRST + pd.Timedelta(days=DAYS),
                                           d.fixed_power_w)
-        ours = faults_over_days([
-            {"date": (FIRST + pd.Timedelta(days=k)).date().isoformat(),
-             "features": day_features(SITE, e.iloc[k * 1440:(k + 1) * 1440],
-                                      d.tracker_power_w[k * 1440:(k + 1) * 1440])}
-            for k in range(DAYS)])
+        ours = faults_over_days(features_by_day(SITE, FIRST, e, d.tracker_power_w))
         for k, theirs in enumerate(_pvanalytics_days(d.tracker_power_w, d.times)):
             if theirs is not None:
                 stuck = any(f["kind"] == "stuck" and f["confidence"] >= 0.5 for f in ours[k])
