@@ -51,16 +51,23 @@ def accuracy(site, fig: Figures) -> list[str]:
     """Held-out accuracy of the expected energy, the band, the gain and the faults."""
     first = pd.Timestamp("2026-06-01", tz=site.timezone)
     err = {"clear": [], "cloudy": []}
+    err_sensor = {"clear": [], "cloudy": []}  # the sky from a pyranometer instead
     inside, gain_err, false_alarms, healthy_days = [], [], 0, 0
     for seed in HELD_OUT_HEALTHY:
         log(f"healthy seed {seed}")
         d, e, found = _run(site, first, 6, seed)
+        e_sensor = sky_sensor.weather_aware_twin(site, first, first + pd.Timedelta(days=6),
+                                                 d.fixed_power_w,
+                                                 sensors=d.sensors("ghi_w_m2", "temp_air_c"))
         for k in range(6):
             sl = slice(k * 1440, (k + 1) * 1440)
             truth = d.healthy_tracker_power_w[sl].sum()
             a = e["tracker_power_w"].to_numpy()[sl].sum()
             b = e["tracker_power_alt_w"].to_numpy()[sl].sum()
-            err["clear" if d.kinds[k] == "clear" else "cloudy"].append(100 * abs(a / truth - 1))
+            kind = "clear" if d.kinds[k] == "clear" else "cloudy"
+            err[kind].append(100 * abs(a / truth - 1))
+            s = e_sensor["tracker_power_w"].to_numpy()[sl].sum()
+            err_sensor[kind].append(100 * abs(s / truth - 1))
             inside.append(min(a, b) * 0.97 <= truth <= max(a, b) * 1.03)
             if d.kinds[k] == "clear":
                 g_true = 100 * (truth / d.fixed_power_w[sl].sum() - 1)
@@ -76,6 +83,14 @@ def accuracy(site, fig: Figures) -> list[str]:
                                f"≤ {limit:.0f} %", v <= limit)
                      + f", median {np.median(err[kind]):.1f} % ("
                      + fig.verdict(f"energy_error_{kind}_max_pct") + ")")
+    for kind, limit in (("clear", 3.0), ("cloudy", 8.0)):
+        v = float(max(err_sensor[kind]))
+        lines.append(f"- the same, the sky from a GHI pyranometer and a thermometer (±2 % gain, "
+                     f"1 % noise; docs/diagnosis.md step 0), {kind} days: max error "
+                     + fig.add(f"energy_error_sensor_{kind}_max_pct", v, "%", f"{v:.1f} %",
+                               f"≤ {limit:.0f} %", v <= limit)
+                     + f", median {np.median(err_sensor[kind]):.1f} % ("
+                     + fig.verdict(f"energy_error_sensor_{kind}_max_pct") + ")")
     cov = 100 * float(np.mean(inside))
     cov_txt = fig.add("band_coverage_pct", cov, "%", f"{cov:.0f} %", "≥ 90 %", cov >= 90)
     lines.append(f"- truth inside the band: {cov_txt} of {len(inside)} days "

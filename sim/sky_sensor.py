@@ -29,7 +29,10 @@ Three steps, each a plain vectorised function:
    twin. Flagged minutes with the sun up take the clear-sky index interpolated in time
    from their valid neighbours (the answer's ``valid`` column says which); a local day
    with too few valid minutes (:func:`measured_sky`) takes the clear sky's own
-   GHI/DNI/DHI, so its expectation is the clear-sky twin's.
+   GHI/DNI/DHI, so its expectation is the clear-sky twin's. Where the logger reports an
+   irradiance sensor — a cell on the fixed plane, or a GHI pyranometer (a horizontal
+   plane: GTI-DIRINT is then DIRINT, Perez et al. 1992) — its readings replace the
+   inverted power on the days they cover, through the same two steps.
 
 Nothing here reads files or keeps state; seeds: the tracker/fixed pair of seed 000
 (Acosta-Banda et al. 2025), the small expected gain under diffuse skies of seed 004.
@@ -38,6 +41,7 @@ Nothing here reads files or keeps state; seeds: the tracker/fixed pair of seed 0
 from __future__ import annotations
 
 import warnings
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -45,7 +49,8 @@ import pandas as pd
 from sim import pv, sky, sun
 from sim.sites import Site
 
-__all__ = ["FLAGS", "decompose", "fixed_clear_sky", "invert_poa", "measured_sky",
+__all__ = ["FLAGS", "SENSOR_SKIES", "Plane", "decompose", "fixed_clear_sky", "fixed_plane",
+           "horizontal", "invert_poa", "measured_sky", "sensor_flags", "weather_aware_twin",
            "weather_from_fixed"]
 
 #: Flags of :func:`invert_poa` (bit values, combined with ``|``).
@@ -72,8 +77,29 @@ BEAM_SEEN_COS = 0.3
 STEADY_RANGE = 0.06
 
 
-def fixed_clear_sky(site: Site, times: pd.DatetimeIndex) -> pd.DataFrame:
-    """Sun position and clear sky (Ineichen, :func:`sim.sky.clearsky_ineichen`) on the fixed plane.
+class Plane(NamedTuple):
+    """The plane an irradiance is measured on: tilt, azimuth [°] and the ground's albedo."""
+
+    surface_tilt: float
+    surface_azimuth: float
+    albedo: float
+
+
+def fixed_plane(site: Site) -> Plane:
+    """The plane of the site's fixed array."""
+    a = site.arrays["fixed"]
+    return Plane(a.surface_tilt, a.surface_azimuth, a.albedo)
+
+
+def horizontal(site: Site) -> Plane:
+    """The plane of a pyranometer measuring GHI (the fixed array's albedo around it)."""
+    return Plane(0.0, 180.0, site.arrays["fixed"].albedo)
+
+
+def fixed_clear_sky(site: Site, times: pd.DatetimeIndex, plane: Plane | None = None
+                    ) -> pd.DataFrame:
+    """Sun position and clear sky (Ineichen, :func:`sim.sky.clearsky_ineichen`) on the fixed
+    plane (or on ``plane``).
 
     Returns
     -------
@@ -84,7 +110,7 @@ def fixed_clear_sky(site: Site, times: pd.DatetimeIndex) -> pd.DataFrame:
     """
     from pvlib import atmosphere
 
-    fixed = site.arrays["fixed"]
+    fixed = plane or fixed_plane(site)
     pos = sun.solar_position(times, site.latitude, site.longitude, site.altitude,
                              float(atmosphere.alt2pres(site.altitude)), site.temp_air)
     zen = pos["apparent_zenith"].to_numpy()
@@ -227,17 +253,16 @@ def _clear_beam(poa: np.ndarray, clear: pd.DataFrame
     return w, np.minimum(k, 1.0) * clear["dni_clear"].to_numpy(), steady & (k >= 0.75)
 
 
-def _closure(poa: np.ndarray, dni: np.ndarray, clear: pd.DataFrame, site: Site
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """GHI, DNI, DHI whose transposition onto the fixed plane by the site's own model (the
-    twin's, :func:`sim.sky.poa_irradiance`) gives back ``poa``: DHI solved for the given
+def _closure(poa: np.ndarray, dni: np.ndarray, clear: pd.DataFrame, site: Site,
+             fixed: Plane) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """GHI, DNI, DHI whose transposition onto the plane ``fixed`` by the site's own model
+    (the twin's, :func:`sim.sky.poa_irradiance`) gives back ``poa``: DHI solved for the given
     DNI (Hay-Davies and isotropic are linear in DHI at fixed DNI, so the secant step is
     exact; one more step for Perez); where the beam alone would exceed ``poa`` the DNI is
     scaled down to it and DHI is 0. Without this the twin's fixed array ran ~1 % below its
     own readings (GTI-DIRINT transposes with Perez, the twin with the site's model)."""
     from pvlib import atmosphere
 
-    fixed = site.arrays["fixed"]
     zen = clear["apparent_zenith"].to_numpy()
     cos_z = np.maximum(np.cos(np.radians(zen)), 0.0)
     am = np.asarray(atmosphere.get_relative_airmass(np.minimum(zen, 90.0)), dtype=float)
@@ -261,7 +286,8 @@ def _closure(poa: np.ndarray, dni: np.ndarray, clear: pd.DataFrame, site: Site
 
 
 def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
-              model: str = "gti_dirint", beam_seen: np.ndarray | None = None) -> pd.DataFrame:
+              model: str = "gti_dirint", beam_seen: np.ndarray | None = None,
+              plane: Plane | None = None) -> pd.DataFrame:
     """GHI, DNI, DHI [W m⁻²] behind a fixed plane's POA (no NaN in ``poa_global``).
 
     Parameters
@@ -277,12 +303,16 @@ def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
         in front of the plane); the others, when in a clear spell (:func:`_clear_beam`),
         take the beam's clear-sky index (DNI/DNI_clear) of the nearest such minutes of a
         clear spell in time. Default: every minute.
+    plane : Plane, optional
+        The plane ``poa_global`` is on (``clear`` computed for it); default the fixed
+        array's. On a horizontal plane GTI-DIRINT is plain DIRINT on a GHI.
 
     The result reproduces ``poa_global`` on the plane through the site's transposition
     model (:func:`_closure`).
     """
     from pvlib import atmosphere, irradiance
 
+    fixed = plane or fixed_plane(site)
     poa = np.asarray(poa_global, dtype=float)
     zen = clear["apparent_zenith"].to_numpy()
     day = (clear["apparent_elevation"].to_numpy() > 2.0) & (poa > 0)
@@ -295,7 +325,6 @@ def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
         e = irradiance.erbs(ghi[day], zen[day], clear.index[day])
         dni[day] = np.asarray(e["dni"], dtype=float)
     elif model == "gti_dirint":
-        fixed = site.arrays["fixed"]
         t = sun._unix_seconds(clear.index)
         # DIRINT sees the 10-min means of the minutes without the clear beam only: a mean
         # over clear and cloudy minutes would give the cloudy ones a beam they do not have
@@ -338,7 +367,7 @@ def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
         k_b = np.interp(t, t[source], dni[source] / dni_clear[source])
         dni = np.where(fill, k_b * dni_clear, dni)
     out = pd.DataFrame(0.0, index=clear.index, columns=["ghi", "dni", "dhi"])
-    out.loc[up, :] = np.column_stack(_closure(poa[up], dni[up], clear[up], site))
+    out.loc[up, :] = np.column_stack(_closure(poa[up], dni[up], clear[up], site, fixed))
     return out
 
 
@@ -355,65 +384,51 @@ def measured_sky(site: Site, times: pd.DatetimeIndex, valid: np.ndarray,
     return (share >= MIN_SENSOR_SHARE)[day_id]
 
 
-def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.ndarray,
-                       temp_air: np.ndarray | float | None = None,
-                       wind_speed: np.ndarray | float | None = None,
-                       models: tuple[str, ...] = ("gti_dirint", "clearsky_erbs"),
-                       saturation_power_w: float | None = None,
-                       ) -> tuple[dict[str, pd.DataFrame], pd.DataFrame]:
-    """The sky the fixed array saw, as twin weather frames, one per decomposition model.
+#: Sensor columns :func:`weather_from_fixed` reads from its ``sensors`` frame, in rising
+#: priority: a GHI pyranometer, then a reference cell or pyranometer on the fixed plane.
+SENSOR_SKIES = (("sensor_ghi", "ghi_w_m2"), ("sensor_poa", "fixed_poa_w_m2"))
 
-    Parameters
-    ----------
-    site : Site
-    times : pandas.DatetimeIndex
-        Tz-aware, regular (1 min) grid.
-    fixed_power_w : array_like
-        The fixed array's power on ``times`` [W]; NaN where no reading.
-    temp_air, wind_speed : optional
-        Measured [°C], [m s⁻¹]; default the site's.
 
-    Returns
-    -------
-    weather : dict
-        Model name → DataFrame (``ghi``, ``dni``, ``dhi`` [W m⁻²], ``temp_air``
-        [°C], ``wind_speed`` [m s⁻¹]) for :func:`sim.twin.simulate`.
-    sensor : pandas.DataFrame
-        ``poa_global`` (inverted, gaps filled) and ``poa_clear`` [W m⁻²], ``flag``,
-        ``valid`` (a measured, well-posed daylight minute), ``measured_sky``
-        (:func:`measured_sky`; where False the weather is the clear sky's Ineichen GHI,
-        DNI and DHI — the clear-sky twin's — and ``poa_global`` is ``poa_clear``),
-        ``clearness`` (POA / clear-sky POA [-]).
-    """
-    clear = fixed_clear_sky(site, times)
-    t_air = site.temp_air if temp_air is None else temp_air
-    wind = site.wind_speed if wind_speed is None else wind_speed
-    inv = invert_poa(fixed_power_w, clear, site.arrays["fixed"], t_air, wind,
-                     saturation_power_w)
-    flag = inv["flag"].to_numpy()
-    night = (flag & FLAGS["night"]) > 0
-    valid = flag == 0
+def sensor_flags(irradiance_w_m2: np.ndarray, clear: pd.DataFrame) -> np.ndarray:
+    """:data:`FLAGS` of a measured irradiance on the plane of ``clear``: night, missing,
+    zero (≤ 2 W m⁻² under a clear-sky 200), stale, above the clear sky (as
+    :func:`invert_poa` flags an inverted POA)."""
+    g = np.asarray(irradiance_w_m2, dtype=float)
     poa_clear = clear["poa_clear"].to_numpy()
-    k = np.divide(inv["poa_global"].to_numpy(), poa_clear, out=np.full(len(times), np.nan),
-                  where=valid)
+    flag = np.zeros(g.size, dtype=np.int64)
+    night = (clear["apparent_elevation"].to_numpy() < 2.0) | (poa_clear < 20.0)
+    flag[night] |= FLAGS["night"]
+    flag[~np.isfinite(g)] |= FLAGS["missing"]
+    flag[~night & np.isfinite(g) & (g <= 2.0) & (poa_clear > 200.0)] |= FLAGS["zero"]
+    flag[~night & _stale(np.nan_to_num(g))] |= FLAGS["stale"]
+    flag[np.isfinite(g) & (g > 1.25 * poa_clear + 50.0)] |= FLAGS["above_clear_sky"]
+    return flag
+
+
+def _sky_from_plane(site: Site, times: pd.DatetimeIndex, poa_measured: np.ndarray,
+                    flag: np.ndarray, clear: pd.DataFrame, plane: Plane,
+                    models: tuple[str, ...], extra: dict[str, np.ndarray]
+                    ) -> tuple[dict[str, pd.DataFrame], pd.DataFrame]:
+    """The weather frames and the sensor frame of :func:`weather_from_fixed` from one
+    plane's measured irradiance ``poa_measured`` (valid where ``flag`` is 0)."""
+    valid = flag == 0
+    night = (flag & FLAGS["night"]) > 0
+    poa_clear = clear["poa_clear"].to_numpy()
+    k = np.divide(poa_measured, poa_clear, out=np.full(len(times), np.nan), where=valid)
     measured = measured_sky(site, times, valid, poa_clear)
     src = valid & measured
     t = sun._unix_seconds(times)
-    # up but not invertible (low, or behind the plane, or a flagged reading): the clear-sky
+    # up but not usable (low, or behind the plane, or a flagged reading): the clear-sky
     # index of the valid neighbours; a day without a measured sky: the clear sky
     k_filled = np.where(measured, np.interp(t, t[src], k[src]) if src.any() else 1.0, 1.0)
     sun_down = clear["apparent_elevation"].to_numpy() <= 0.0
-    poa = np.where(sun_down, 0.0, np.where(src, inv["poa_global"].to_numpy(),
-                                           k_filled * poa_clear))
+    poa = np.where(sun_down, 0.0, np.where(src, poa_measured, k_filled * poa_clear))
     beam_seen = src & (np.cos(np.radians(clear["aoi"].to_numpy())) >= BEAM_SEEN_COS)
-    n = len(times)
-    extra = {"temp_air": np.broadcast_to(np.asarray(t_air, dtype=float), (n,)),
-             "wind_speed": np.broadcast_to(np.asarray(wind, dtype=float), (n,))}
     # the clear-sky twin's own weather (Ineichen GHI/DNI/DHI), not a decomposition of it
     clear_sky = clear[["ghi_clear", "dni_clear", "dhi_clear"]].to_numpy()[~measured]
     weather = {}
     for m in models:
-        w = decompose(poa, clear, site, m, beam_seen)
+        w = decompose(poa, clear, site, m, beam_seen, plane)
         w.loc[~measured, ["ghi", "dni", "dhi"]] = clear_sky
         for key, v in extra.items():
             w[key] = v
@@ -426,12 +441,102 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
     return weather, sensor
 
 
+def _measured_or(value: np.ndarray | float | None, sensors: pd.DataFrame | None,
+                 column: str, default: float, n: int) -> np.ndarray:
+    """``value`` (or the site's ``default``), replaced by the ``sensors[column]`` readings
+    where there are any."""
+    out = np.broadcast_to(np.asarray(default if value is None else value, dtype=float),
+                          (n,)).copy()
+    if sensors is not None and column in sensors:
+        m = sensors[column].to_numpy(dtype=float)
+        out = np.where(np.isfinite(m), m, out)
+    return out
+
+
+def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.ndarray,
+                       temp_air: np.ndarray | float | None = None,
+                       wind_speed: np.ndarray | float | None = None,
+                       models: tuple[str, ...] = ("gti_dirint", "clearsky_erbs"),
+                       saturation_power_w: float | None = None,
+                       sensors: pd.DataFrame | None = None,
+                       ) -> tuple[dict[str, pd.DataFrame], pd.DataFrame]:
+    """The sky the site's instruments saw, as twin weather frames, one per decomposition model.
+
+    Each local day's sky comes from the first of: a reference cell/pyranometer on the
+    fixed plane (``sensors["fixed_poa_w_m2"]``), a GHI pyranometer
+    (``sensors["ghi_w_m2"]``, decomposed on the horizontal plane), the fixed array's
+    power (inverted, :func:`invert_poa`), the clear sky — a source counts on a day when
+    :func:`measured_sky` says it covers that day. A sensor reads irradiance without the
+    PV model, its temperature or the array's faults in between, so it comes first; a
+    cell on the *tracker* is not a sky sensor here: it shares the tracker's pointing,
+    the thing the diagnosis checks.
+
+    Parameters
+    ----------
+    site : Site
+    times : pandas.DatetimeIndex
+        Tz-aware, regular (1 min) grid.
+    fixed_power_w : array_like
+        The fixed array's power on ``times`` [W]; NaN where no reading.
+    temp_air, wind_speed : optional
+        Air temperature [°C], wind speed [m s⁻¹]; default the site's.
+    sensors : pandas.DataFrame, optional
+        Measured on ``times`` (NaN where not): ``fixed_poa_w_m2``, ``ghi_w_m2`` [W m⁻²],
+        ``temp_air_c`` [°C] (replaces ``temp_air`` where it reads); any may be absent.
+
+    Returns
+    -------
+    weather : dict
+        Model name → DataFrame (``ghi``, ``dni``, ``dhi`` [W m⁻²], ``temp_air``
+        [°C], ``wind_speed`` [m s⁻¹]) for :func:`sim.twin.simulate`.
+    sensor : pandas.DataFrame
+        ``poa_global`` and ``poa_clear`` [W m⁻²]: the irradiance measured (or inverted,
+        gaps filled) and its clear-sky value on the plane of the day's source (the
+        fixed plane; horizontal for a GHI sensor); ``flag``, ``valid`` (a measured,
+        well-posed daylight minute), ``measured_sky`` (:func:`measured_sky`; where False
+        the weather is the clear sky's Ineichen GHI, DNI and DHI — the clear-sky twin's
+        — and ``poa_global`` is ``poa_clear``), ``clearness`` (``poa_global`` /
+        ``poa_clear`` [-]), ``sky_source`` (``"sensor_poa"``, ``"sensor_ghi"``,
+        ``"fixed_array"`` or ``"clear_sky"``).
+    """
+    n = len(times)
+    clear = fixed_clear_sky(site, times)
+    t_air = _measured_or(temp_air, sensors, "temp_air_c", site.temp_air, n)
+    wind = np.broadcast_to(np.asarray(site.wind_speed if wind_speed is None else wind_speed,
+                                      dtype=float), (n,))
+    inv = invert_poa(fixed_power_w, clear, site.arrays["fixed"], t_air, wind,
+                     saturation_power_w)
+    extra = {"temp_air": t_air, "wind_speed": wind}
+    weather, sensor = _sky_from_plane(site, times, inv["poa_global"].to_numpy(),
+                                      inv["flag"].to_numpy(), clear, fixed_plane(site),
+                                      models, extra)
+    source = np.where(sensor["measured_sky"].to_numpy(), "fixed_array", "clear_sky")
+    for name, column in SENSOR_SKIES:  # rising priority: a later one replaces
+        if sensors is None or column not in sensors or not sensors[column].notna().any():
+            continue
+        plane = horizontal(site) if column == "ghi_w_m2" else fixed_plane(site)
+        c = clear if column == "fixed_poa_w_m2" else fixed_clear_sky(site, times, plane)
+        g = sensors[column].to_numpy(dtype=float)
+        flag = sensor_flags(g, c)
+        w_s, s_s = _sky_from_plane(site, times, np.where(flag == 0, g, np.nan), flag, c,
+                                   plane, models, extra)
+        take = s_s["measured_sky"].to_numpy()
+        for m in models:
+            weather[m].loc[take] = w_s[m].loc[take]
+        sensor.loc[take] = s_s.loc[take]
+        source = np.where(take, name, source)
+    sensor["sky_source"] = source
+    return weather, sensor
+
+
 def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
                        fixed_power_w: np.ndarray,
                        temp_air: np.ndarray | float | None = None,
                        wind_speed: np.ndarray | float | None = None,
-                       saturation_power_w: float | None = None) -> pd.DataFrame:
-    """Both arrays' expected power per minute under the sky the fixed array saw.
+                       saturation_power_w: float | None = None,
+                       sensors: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Both arrays' expected power per minute under the sky the site's instruments saw
+    (irradiance sensors where they read, else the fixed array: :func:`weather_from_fixed`).
 
     The twin (:func:`sim.twin.simulate`, ideal tracking) is run once per
     decomposition model of :func:`weather_from_fixed`.
@@ -439,17 +544,17 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
     Parameters
     ----------
     start, end : pandas.Timestamp
-        Tz-aware, end exclusive; ``fixed_power_w`` holds one value per minute of it.
+        Tz-aware, end exclusive; ``fixed_power_w`` (and ``sensors``, if given) hold one
+        value per minute of it.
 
     Returns
     -------
     pandas.DataFrame
         UTC minute index: ``tracker_power_w`` and ``fixed_power_w`` (GTI-DIRINT sky),
         ``tracker_power_alt_w`` / ``fixed_power_alt_w`` (clear-sky-ratio + Erbs sky)
-        [W], ``tracker_clear_power_w`` (clear-sky twin) [W], ``solar_azimuth``,
-        ``apparent_elevation`` [°], ``ghi``, ``dni``, ``dhi``, ``poa_global``,
-        ``dni_extra`` [W m⁻²],
-        ``clearness`` [-], ``valid``, ``measured_sky``, ``flag``.
+        [W], ``solar_azimuth``, ``apparent_elevation`` [°], ``ghi``, ``dni``, ``dhi``,
+        ``poa_global``, ``poa_clear``, ``dni_extra`` [W m⁻²], ``clearness`` [-],
+        ``valid``, ``measured_sky``, ``flag``, ``sky_source``.
     """
     from sim import twin
 
@@ -458,8 +563,11 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
     p = np.asarray(fixed_power_w, dtype=float)
     if p.shape != (len(times),):
         raise ValueError(f"fixed_power_w has {p.size} values for {len(times)} minutes")
+    if sensors is not None and len(sensors) != len(times):
+        raise ValueError(f"sensors has {len(sensors)} rows for {len(times)} minutes")
     weather, sensor = weather_from_fixed(site, times, p, temp_air, wind_speed,
-                                         saturation_power_w=saturation_power_w)
+                                         saturation_power_w=saturation_power_w,
+                                         sensors=sensors)
     main = twin.simulate(site, start, end, weather=weather["gti_dirint"]).series
     alt = twin.simulate(site, start, end, weather=weather["clearsky_erbs"]).series
     out = pd.DataFrame({
@@ -473,6 +581,6 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
     for k in ("ghi", "dni", "dhi"):
         out[k] = weather["gti_dirint"][k].to_numpy()
     for k in ("poa_global", "poa_clear", "clearness", "valid", "measured_sky", "flag",
-              "dni_extra"):
+              "dni_extra", "sky_source"):
         out[k] = sensor[k].to_numpy()
     return out

@@ -2,12 +2,14 @@
 
 For each local day of ``[start, end)`` (``GET /api/v1/sites/{site_id}/diagnosis``):
 the measured readings of both arrays (:func:`backend.measurements.queries.raw_rows`)
-on a minute grid, the sky behind the fixed array's power and both arrays'
-expected power under it (:func:`sim.sky_sensor.weather_aware_twin`), then energy,
+on a minute grid, the sky behind the loggers' irradiance sensors or else the fixed
+array's power, and both arrays' expected power under it
+(:func:`sim.sky_sensor.weather_aware_twin`), then energy,
 performance ratio, gains and the day's fault features
 (:func:`backend.diagnosis.faults.day_features`). Each day's result is cached in
 ``diagnosis_days`` (written through the one writer) and deleted by the writer when
-readings of that day arrive; the faults across days (``since``, steps) are
+readings of that day arrive, and ignored when it was computed by another version of this
+code (:data:`CACHE_VERSION`); the faults across days (``since``, steps) are
 recomputed from the cached days on every request.
 
 ``expected_wh_low``/``expected_wh_high``: the spread of the two decompositions of the
@@ -26,7 +28,7 @@ import pandas as pd
 from sqlalchemy import Connection, delete, insert, select
 
 from backend.diagnosis.faults import day_features, faults_over_days
-from backend.diagnosis.weather_twin import minute_grid
+from backend.diagnosis.weather_twin import minute_grid, sky_sensors, sky_source
 from backend.errors import InputError
 from backend.measurements.queries import period_edges
 from backend.sites import SiteInfo
@@ -38,6 +40,9 @@ if TYPE_CHECKING:
 
 MAX_DAYS = 400
 INVERSION_UNCERTAINTY = 0.03  # relative, on the expected tracker energy [-]
+#: Raised whenever a day's payload or the way it is computed changes: cached days of
+#: another version are computed again (2: the sky from irradiance sensors).
+CACHE_VERSION = 2
 
 
 def _wh(p: np.ndarray) -> float | None:
@@ -55,9 +60,9 @@ def _day_payload(info: SiteInfo, date: str, e: pd.DataFrame, tracker_w: np.ndarr
     daylight = e["poa_clear"].to_numpy() > 20.0
     valid = e["valid"].to_numpy(bool)
     share = float(valid[daylight].mean()) if daylight.any() else 0.0
-    # under sky_sensor.MIN_SENSOR_SHARE of the daylight inverted, the day's sky is the clear
+    # under sky_sensor.MIN_SENSOR_SHARE of the daylight measured, the day's sky is the clear
     # sky's own GHI/DNI/DHI: the expectation is the clear-sky twin's
-    source = "fixed_array" if bool(e["measured_sky"].any()) else "clear_sky"
+    source, sensor = sky_source(e)
     poa, clear = e["poa_global"].to_numpy(), e["poa_clear"].to_numpy()
     k_t = float(poa[daylight].sum() / clear[daylight].sum()) if daylight.any() else None
     exp_a = float(e["tracker_power_w"].sum() / 60.0)
@@ -71,7 +76,7 @@ def _day_payload(info: SiteInfo, date: str, e: pd.DataFrame, tracker_w: np.ndarr
     return {
         "date": date,
         "sky": {"clearness_index": None if k_t is None else round(k_t, 4), "source": source,
-                "valid_minutes_pct": round(100.0 * share, 1)},
+                "sensor": sensor, "valid_minutes_pct": round(100.0 * share, 1)},
         "tracker": {
             "measured_wh": measured_tr, "expected_wh": exp_a,
             "expected_wh_low": min(exp_a, exp_b) * (1 - INVERSION_UNCERTAINTY),
@@ -83,7 +88,7 @@ def _day_payload(info: SiteInfo, date: str, e: pd.DataFrame, tracker_w: np.ndarr
                   else measured_fx / matched_f},
         "gain_measured_pct": _gain(measured_tr, measured_fx),
         "gain_expected_pct": _gain(exp_a, exp_fixed),
-        "features": day_features(info.site, e, tracker_w) if source == "fixed_array"
+        "features": day_features(info.site, e, tracker_w) if source != "clear_sky"
         else {"missing_daylight_min": int((daylight & ~has).sum())},
     }
 
@@ -104,11 +109,11 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
     for run in runs:
         t0, t1 = int(edges[run[0]].timestamp()), int(edges[run[-1] + 1].timestamp())
         with ctx.engine.connect() as conn:
-            tr = minute_grid(conn, tracker.array_id, t0, t1)
-            fx = minute_grid(conn, fixed.array_id, t0, t1)
+            tr, tr_s = minute_grid(conn, tracker.array_id, t0, t1)
+            fx, fx_s = minute_grid(conn, fixed.array_id, t0, t1)
         start = pd.Timestamp(t0, unit="s", tz="UTC")
         e = sky_sensor.weather_aware_twin(info.site, start, start + pd.Timedelta(
-            seconds=(t1 - t0) // 60 * 60), fx)
+            seconds=(t1 - t0) // 60 * 60), fx, sensors=sky_sensors(fx_s, tr_s))
         for i in run:
             a = (int(edges[i].timestamp()) - t0) // 60
             b = (int(edges[i + 1].timestamp()) - t0) // 60
@@ -129,14 +134,16 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
                                    DiagnosisDay.payload_json).where(
             DiagnosisDay.site_id == info.site_id,
             DiagnosisDay.day_start_s.in_(starts))).all()
-    cached = {r[0]: orjson.loads(r[2]) for r in rows
-              if r[1] == int(edges[starts.index(r[0]) + 1].timestamp())}
+    cached = {r[0]: p for r in rows
+              if r[1] == int(edges[starts.index(r[0]) + 1].timestamp())
+              and (p := orjson.loads(r[2])).get("cache_version") == CACHE_VERSION}
     todo = [i for i, s in enumerate(starts) if s not in cached]
     fresh = _compute(ctx, info, edges, todo) if todo else {}
     if fresh:
         values = [{"site_id": info.site_id, "day_start_s": starts[i],
                    "day_end_s": int(edges[i + 1].timestamp()),
-                   "payload_json": orjson.dumps(p).decode()} for i, p in fresh.items()]
+                   "payload_json": orjson.dumps({**p, "cache_version": CACHE_VERSION}).decode()}
+                  for i, p in fresh.items()]
 
         def store(conn: Connection) -> None:
             conn.execute(delete(DiagnosisDay).where(
@@ -149,7 +156,7 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
     found = faults_over_days(days)
     out_days = []
     for d, f in zip(days, found, strict=True):
-        d = {k: v for k, v in d.items() if k != "features"}
+        d = {k: v for k, v in d.items() if k not in ("features", "cache_version")}
         d["faults"] = f
         out_days.append(d)
     return {"site_id": info.site_id, "timezone": info.site.timezone,

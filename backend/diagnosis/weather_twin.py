@@ -19,6 +19,7 @@ import pandas as pd
 from sqlalchemy import Connection
 
 from backend.errors import InputError
+from backend.measurements.fields import SENSOR_NAMES
 from backend.measurements.queries import iso_utc, raw_rows
 from backend.sites import SiteInfo
 from sim import sky_sensor
@@ -29,19 +30,56 @@ if TYPE_CHECKING:
 MAX_DAYS = 31
 
 
-def minute_grid(conn: Connection, array_id: int, t0: int, t1: int) -> np.ndarray:
-    """Measured power [W] on the minute grid of ``[t0, t1)``; NaN where no reading."""
-    out = np.full((t1 - t0) // 60, np.nan)
-    rows = raw_rows(conn, array_id, 0, t0, t1)
+def minute_grid(conn: Connection, array_id: int, t0: int, t1: int
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Measured power [W], shape (n,), and the :data:`SENSOR_NAMES` columns, shape
+    (n, k), on the minute grid of ``[t0, t1)``; NaN where no reading."""
+    n = (t1 - t0) // 60
+    power, sensors = np.full(n, np.nan), np.full((n, len(SENSOR_NAMES)), np.nan)
+    rows = raw_rows(conn, array_id, 0, t0, t1, sensors=True)
     if rows.size:
-        k = ((rows[:, 0].astype(np.int64) - t0) // 60).clip(0, out.size - 1)
-        out[k] = rows[:, 3]
-    return out
+        k = ((rows[:, 0].astype(np.int64) - t0) // 60).clip(0, n - 1)
+        power[k] = rows[:, 3]
+        sensors[k] = rows[:, 4:]
+    return power, sensors
+
+
+def sky_sensors(fixed: np.ndarray, tracker: np.ndarray | None) -> pd.DataFrame | None:
+    """The ``sensors`` frame of :func:`sim.sky_sensor.weather_aware_twin` from the two
+    loggers' sensor columns (:func:`minute_grid`): ``fixed_poa_w_m2`` from the fixed
+    array's ``poa_irradiance_w_m2`` (a cell on the tracker shares its pointing: not a sky
+    sensor), ``ghi_w_m2`` and ``temp_air_c`` from either logger, the fixed one's first.
+    None when neither reports any of them."""
+    col = {name: j for j, name in enumerate(SENSOR_NAMES)}
+    out = {"fixed_poa_w_m2": fixed[:, col["poa_irradiance_w_m2"]]}
+    for name in ("ghi_w_m2", "temp_air_c"):
+        v = fixed[:, col[name]]
+        if tracker is not None:
+            v = np.where(np.isfinite(v), v, tracker[:, col[name]])
+        out[name] = v
+    if not any(np.isfinite(v).any() for v in out.values()):
+        return None
+    return pd.DataFrame(out)
+
+
+def sky_source(e: pd.DataFrame) -> tuple[str, str | None]:
+    """What most of the daylight minutes of ``e`` (:func:`weather_twin`) rest on:
+    ``"sensor"``, ``"fixed_array"`` or ``"clear_sky"``, and the sensor's reading
+    (``"poa_irradiance_w_m2"`` on the fixed plane, ``"ghi_w_m2"``) or None."""
+    daylight = e["poa_clear"].to_numpy() > 20.0
+    src = e["sky_source"].to_numpy()[daylight]
+    if src.size == 0:
+        return "clear_sky", None
+    names, counts = np.unique(src, return_counts=True)
+    top = str(names[np.argmax(counts)])
+    return {"sensor_poa": ("sensor", "poa_irradiance_w_m2"),
+            "sensor_ghi": ("sensor", "ghi_w_m2")}.get(top, (top, None))
 
 
 def weather_twin(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int) -> pd.DataFrame:
     """:func:`sim.sky_sensor.weather_aware_twin` over ``[t0, t1)`` (whole minutes), from
-    the fixed array's stored readings; 422 without a fixed array or past ``MAX_DAYS``."""
+    the fixed array's stored readings and the loggers' sky sensors; 422 without a fixed
+    array or past ``MAX_DAYS``."""
     fixed = info.array_of_kind("fixed")
     if fixed is None:
         raise InputError(422, f"source: site {info.site_id!r} has no fixed array to read the "
@@ -50,19 +88,22 @@ def weather_twin(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int) -> pd.Da
         raise InputError(422, f"source=twin_weather is computed on request: at most {MAX_DAYS} "
                               "days (the diagnosis gives its daily energy for longer ranges)")
     t0, t1 = t0 // 60 * 60, -(-t1 // 60) * 60
+    tracker = info.array_of_kind("tracker")
     with ctx.engine.connect() as conn:
-        fx = minute_grid(conn, fixed.array_id, t0, t1)
+        fx, fx_s = minute_grid(conn, fixed.array_id, t0, t1)
+        tr_s = None if tracker is None else minute_grid(conn, tracker.array_id, t0, t1)[1]
     start = pd.Timestamp(t0, unit="s", tz="UTC")
     return sky_sensor.weather_aware_twin(info.site, start, pd.Timestamp(t1, unit="s", tz="UTC"),
-                                         fx)
+                                         fx, sensors=sky_sensors(fx_s, tr_s))
 
 
 def weather_twin_columns(ctx: ServiceContext, info: SiteInfo, array: str, t0: int,
                          t1: int) -> tuple[dict[str, list[Any]], dict[str, Any]]:
     """Columns of a measurements answer (``ts``, ``power_w``, voltage and current null:
-    the weather-aware twin models power; ``sky_valid``: the fixed array's inversion held
-    that minute, else the clear-sky index was carried over from valid neighbours, or on a
-    day without a measured sky the clear sky itself) and what the sky rests on."""
+    the weather-aware twin models power; ``sky_valid``: the sky sensor's reading or the
+    fixed array's inversion held that minute, else the clear-sky index was carried over
+    from valid neighbours, or on a day without a measured sky the clear sky itself) and
+    what most of the range's sky rests on (:func:`sky_source`)."""
     e = weather_twin(ctx, info, t0, t1)
     kind = info.arrays[array].kind
     ts = e.index.as_unit("s").asi8
@@ -72,14 +113,13 @@ def weather_twin_columns(ctx: ServiceContext, info: SiteInfo, array: str, t0: in
     daylight = e["poa_clear"].to_numpy() > 20.0
     valid = e["valid"].to_numpy(bool)
     share = float(valid[daylight].mean()) if daylight.any() else 0.0
-    measured = float(e["measured_sky"].to_numpy(bool)[daylight].mean()) if daylight.any() else 0.0
     cols: dict[str, list[Any]] = {
         "ts": iso_utc(ts[keep]), "voltage_v": [None] * power.size,
         "current_a": [None] * power.size, "power_w": np.round(power, 3).tolist(),
         "sky_valid": valid.tolist(),
     }
-    # most of the range's daylight under the fixed array's sky (sky_sensor.measured_sky)
-    sky = {"source": "fixed_array" if measured >= 0.5 else "clear_sky",
+    source, sensor = sky_source(e)
+    sky = {"source": source, "sensor": sensor,
            "valid_daylight_minutes_pct": round(100.0 * share, 1)}
     return cols, sky
 

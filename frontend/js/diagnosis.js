@@ -34,6 +34,22 @@ export function faultLines(days) {
     `${KIND_WORDS[f.kind] || f.kind} since ${shortDate(f.since)}: ${f.detail}; confidence ${num(f.confidence, 2)}`);
 }
 
+const SKY_WORDS = {
+  sensor: "an irradiance sensor",
+  fixed_array: "the fixed array's power",
+  clear_sky: "the clear sky (too few readings)",
+};
+
+/** What the days' skies rest on, e.g. "Sky: 5 days from an irradiance sensor (ghi_w_m2), 2 from …". */
+export function skyLine(days) {
+  const count = new Map();
+  for (const d of days) {
+    const key = d.sky.source === "sensor" && d.sky.sensor ? `${SKY_WORDS.sensor} (${d.sky.sensor})` : SKY_WORDS[d.sky.source] || d.sky.source;
+    count.set(key, (count.get(key) || 0) + 1);
+  }
+  return `Sky: ${[...count].map(([k, n]) => `${n} day${n === 1 ? "" : "s"} from ${k}`).join(", ")}.`;
+}
+
 let requested = 0; // the latest load; an older one that answers later is dropped
 
 async function load(state) {
@@ -54,7 +70,8 @@ async function load(state) {
   }
   const lines = faultLines(body.days);
   list.replaceChildren(...(lines.length ? lines.map((t) => h("li", { "data-testid": "diag-fault" }, t))
-    : [h("li", { class: "muted", "data-testid": "diag-none" }, "No fault found in this range.")]));
+    : [h("li", { class: "muted", "data-testid": "diag-none" }, "No fault found in this range.")]),
+    h("li", { class: "muted", "data-testid": "diag-sky" }, skyLine(body.days)));
   const x = body.days.map((d) => d.date);
   const pr = body.days.map((d) => d.tracker.performance_ratio);
   await draw("chart-diagnosis", [
@@ -63,9 +80,9 @@ async function load(state) {
     { x, y: pr, name: "tracker PR", yaxis: "y2", mode: "lines+markers", line: { color: COLORS.tracker } },
   ], baseLayout({ barmode: "group", yaxis: { title: "gain %", gridcolor: "#e9edf1" },
     yaxis2: { title: "PR", overlaying: "y", side: "right", range: [0, 1.2] } }),
-  { columns: ["date", "clearness_index", "tracker_measured_wh", "tracker_expected_wh", "tracker_expected_wh_low",
+  { columns: ["date", "sky_source", "clearness_index", "tracker_measured_wh", "tracker_expected_wh", "tracker_expected_wh_low",
     "tracker_expected_wh_high", "performance_ratio", "gain_measured_pct", "gain_expected_pct"],
-  rows: body.days.map((d) => [d.date, d.sky.clearness_index, d.tracker.measured_wh, d.tracker.expected_wh,
+  rows: body.days.map((d) => [d.date, d.sky.sensor || d.sky.source, d.sky.clearness_index, d.tracker.measured_wh, d.tracker.expected_wh,
     d.tracker.expected_wh_low, d.tracker.expected_wh_high, d.tracker.performance_ratio, d.gain_measured_pct,
     d.gain_expected_pct]),
   filename: `${state.site.site_id}_diagnosis_${start}_${end}.csv` });

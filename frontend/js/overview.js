@@ -426,8 +426,8 @@ async function load(quiet = false) {
   if (!performance.getEntriesByName("heliotwin:overview-loaded").length) performance.mark("heliotwin:overview-loaded");
 }
 
-/** The twin under the sky the fixed array measured (source=twin_weather), when the fixed
- * array reported that day; the chart then shows it as the expectation. */
+/** The twin under the measured sky (source=twin_weather: an irradiance sensor's or the fixed
+ * array's), when the fixed array reported that day; the chart then shows it as the expectation. */
 async function weatherTwin(site, day, end, series, signal) {
   const fixed = series[`${ARRAYS.find((a) => st.site.arrays?.[a]?.mount === "fixed")}-measured`];
   const done = () => { document.body.dataset.overviewWeather = `${site}/${day}`; };
@@ -437,7 +437,7 @@ async function weatherTwin(site, day, end, series, signal) {
       getMeasurements(site, { array: arr, source: "twin_weather", start: day, end, maxPoints: MAX_POINTS }, signal)));
     if (signal.aborted) return;
     bodies.forEach((body, k) => {
-      if (body.sky?.source === "fixed_array") series[`${ARRAYS[k]}-twin_weather`] = toSeries(body, st.tz);
+      if (body.sky && body.sky.source !== "clear_sky") series[`${ARRAYS[k]}-twin_weather`] = toSeries(body, st.tz);
     });
     await drawPower(series);
   } catch (err) {

@@ -123,3 +123,70 @@ def test_a_day_without_readings_expects_the_clear_sky_twin(client, live_server,
         assert empty[kind]["expected_wh"] == pytest.approx(twin["arrays"][kind]["twin_wh"],
                                                            rel=1e-3), kind
     assert empty["gain_expected_pct"] == pytest.approx(twin["twin_gain_pct"], abs=0.1)
+
+
+def test_a_pyranometer_on_the_logger_is_the_days_sky(client, live_server) -> None:
+    """Readings that carry a GHI pyranometer and an air thermometer (the fixed array's
+    logger) over HTTP: those days' sky is the sensor's, named in the answer, on the
+    diagnosis and on ``source=twin_weather`` alike; held-out seed 23."""
+    site = load_site("tehuantepec")
+    first = "2025-08-04"
+    d = logger_days(site, pd.Timestamp(first, tz=site.timezone), 3, seed=23)
+    fixed = _readings(d.times, d.fixed_power_w, "fixed")
+    by_ts = {r["ts"]: r for r in fixed}
+    for t, g, temp in zip(d.times, d.ghi_w_m2, d.temp_air_c, strict=True):
+        if t.isoformat() in by_ts:
+            by_ts[t.isoformat()].update(ghi_w_m2=float(g), temp_air_c=float(temp))
+    _post(client, live_server.write_token,
+          fixed + _readings(d.times, d.tracker_power_w, "tracker"))
+    end = (dt.date.fromisoformat(first) + dt.timedelta(days=3)).isoformat()
+    body = client.get(f"{BASE}/diagnosis", params={"start": first, "end": end},
+                      timeout=120).json()
+    for k, day in enumerate(body["days"]):
+        assert day["sky"]["source"] == "sensor" and day["sky"]["sensor"] == "ghi_w_m2"
+        truth_wh = d.healthy_tracker_power_w[k * 1440:(k + 1) * 1440].sum() / 60.0
+        assert abs(day["tracker"]["expected_wh"] / truth_wh - 1) < 0.03, (k, d.kinds[k])
+        assert not [f for f in day["faults"] if f["confidence"] >= 0.5], day["faults"]
+    r = client.get(f"{BASE}/measurements", params={"start": first, "end": end,
+                                                    "source": "twin_weather",
+                                                    "array": "tracker"}, timeout=120)
+    assert r.status_code == 200, r.text
+    assert r.json()["sky"]["source"] == "sensor" and r.json()["sky"]["sensor"] == "ghi_w_m2"
+
+
+def test_a_cached_day_of_another_version_is_computed_again(client, live_server) -> None:
+    """A day cached by another version of the computation (``CACHE_VERSION``) is not
+    served; one of this version is, as stored."""
+    import orjson
+    import sqlalchemy as sa
+
+    from backend.diagnosis.service import CACHE_VERSION
+
+    site = load_site("tehuantepec")
+    first = "2025-09-15"
+    d = logger_days(site, pd.Timestamp(first, tz=site.timezone), 1, seed=24)
+    _post(client, live_server.write_token, _readings(d.times, d.fixed_power_w, "fixed")
+          + _readings(d.times, d.tracker_power_w, "tracker"))
+    params = {"start": first, "end": "2025-09-16"}
+    body = client.get(f"{BASE}/diagnosis", params=params, timeout=120).json()
+    engine = sa.create_engine(live_server.database_url)
+    table = sa.table("diagnosis_days", sa.column("site_id"), sa.column("payload_json"),
+                     sa.column("day_start_s"))
+    start_s = int(pd.Timestamp(first, tz=site.timezone).timestamp())
+    where = (table.c.site_id == "tehuantepec") & (table.c.day_start_s == start_s)
+
+    def cache(version: int) -> None:
+        day = {**body["days"][0], "features": {}, "cache_version": version}
+        day["tracker"] = {**day["tracker"], "expected_wh": -1.0}  # a marker
+        with engine.begin() as conn:
+            conn.execute(sa.update(table).where(where).values(
+                payload_json=orjson.dumps(day).decode()))
+
+    try:
+        cache(CACHE_VERSION - 1)
+        assert client.get(f"{BASE}/diagnosis", params=params).json() == body
+        cache(CACHE_VERSION)
+        again = client.get(f"{BASE}/diagnosis", params=params).json()
+        assert again["days"][0]["tracker"]["expected_wh"] == -1.0
+    finally:
+        engine.dispose()

@@ -37,6 +37,12 @@ def test_diagnosis_panel_matches_the_api(page, server) -> None:
     else:
         assert page.locator("[data-testid=diag-none]").inner_text() == \
             "No fault found in this range."
+    # what the skies rest on (the demo logger has no irradiance sensor)
+    n_fixed = sum(d["sky"]["source"] == "fixed_array" for d in body["days"])
+    sky = page.locator("[data-testid=diag-sky]").inner_text()
+    assert sky.startswith("Sky: ") and (
+        f"{n_fixed} day{'' if n_fixed == 1 else 's'} from the fixed array's power" in sky), sky
+    page.locator("#diagnosis-card").screenshot(path="test-artifacts/e2e-diagnosis-card.png")
     # the demo logger reports the tracker's encoder angles: their pointing error is charted
     pointing = httpx.get(f"{server.url}/api/v1/sites/{server.site['site_id']}/pointing",
                          params={"start": start.isoformat(), "end": end.isoformat()},

@@ -83,6 +83,14 @@ class LoggerDays:
     kinds: list[str]
     fault: str | None
     fault_day: int | None
+    ghi_w_m2: np.ndarray  # a pyranometer beside the arrays (±2 % gain of the seed, 1 % noise)
+    fixed_poa_w_m2: np.ndarray  # a reference cell on the fixed plane (the same errors)
+    temp_air_c: np.ndarray  # a shaded thermometer (±0.3 °C)
+
+    def sensors(self, *columns: str) -> pd.DataFrame:
+        """The named sensor columns as the ``sensors`` frame of
+        :func:`sim.sky_sensor.weather_aware_twin`."""
+        return pd.DataFrame({c: getattr(self, c) for c in columns}, index=self.times)
 
 
 def logger_days(site: Site, first_day: pd.Timestamp, days: int, seed: int,
@@ -139,7 +147,15 @@ def logger_days(site: Site, first_day: pd.Timestamp, days: int, seed: int,
         noisy = p * (1.0 + rng.normal(0.0, 0.01, p.size))
         return np.round(np.maximum(noisy, 0.0), 1)
 
+    def irradiance(g: np.ndarray) -> np.ndarray:  # a class-A instrument, 1 W m⁻² steps
+        noisy = g * rng.uniform(0.98, 1.02) * (1.0 + rng.normal(0.0, 0.01, g.size))
+        return np.round(np.maximum(noisy, 0.0))
+
     return LoggerDays(healthy.index, logged(tracker),
                       logged(healthy["fixed_power_w"].to_numpy()),
                       healthy["tracker_power_w"].to_numpy(), kinds, fault,
-                      None if fault is None else fault_day)
+                      None if fault is None else fault_day,
+                      irradiance(weather["ghi"].to_numpy()),
+                      irradiance(healthy["fixed_poa_global"].to_numpy()),
+                      np.round(weather["temp_air"].to_numpy()
+                               + rng.normal(0.0, 0.3, len(weather)), 1))
