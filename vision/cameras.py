@@ -159,9 +159,9 @@ def _project_rad(theta_rad: FloatArray, projection: str) -> FloatArray:
 
 def _unproject_rad(rho: FloatArray, projection: str) -> FloatArray:
     """Inverse of :func:`_project_rad` (NaN outside the lens's domain)."""
+    if projection == "equidistant":
+        return rho
     with np.errstate(invalid="ignore"):
-        if projection == "equidistant":
-            return rho
         if projection == "equisolid":
             return 2.0 * np.arcsin(np.where(rho <= 2.0, rho / 2.0, np.nan))
         if projection == "stereographic":

@@ -35,6 +35,23 @@ def _ring_values(gray: NDArray[np.uint8], cx: float, cy: float, radius: float,
     return gray[(ys[ok] + 0.5).astype(np.intp), (xs[ok] + 0.5).astype(np.intp)].astype(float)
 
 
+def _rings(gray: NDArray[np.uint8], cx: float, cy: float, radii: tuple[float, ...],
+           fov: FovCircle | None) -> list[NDArray[np.float64]]:
+    """:func:`_ring_values` for several radii about one centre, gathered together when
+    every circle lies inside the frame and the image circle (the common case)."""
+    h, w = gray.shape
+    r_max = max(radii)
+    if not (cx - r_max >= 0 and cy - r_max >= 0 and cx + r_max <= w - 1
+            and cy + r_max <= h - 1 and (fov is None or np.hypot(
+                cx - fov.cx_px, cy - fov.cy_px) + r_max < fov.radius_px)):
+        return [_ring_values(gray, cx, cy, r, fov) for r in radii]
+    rad = np.array(radii)[:, None]
+    xs = cx + rad * _RING_COS
+    ys = cy + rad * _RING_SIN
+    v = gray[(ys + 0.5).astype(np.intp), (xs + 0.5).astype(np.intp)].astype(float)
+    return list(v)
+
+
 def _median(v: NDArray[np.float64]) -> float:
     """Median of a short vector (``np.median``'s value, without its overhead)."""
     s = np.sort(v)
@@ -100,6 +117,12 @@ def _clusters(stats: NDArray[Any], cents: NDArray[Any], order: NDArray[np.int64]
               ox: int = 0, oy: int = 0) -> list[_Candidate]:
     """Group components whose boxes lie within a quarter radius (+3 px) of each other."""
     items = [int(i) for i in order]
+    if len(items) == 1:  # the common case: one component, the same sums written out
+        i = items[0]
+        x0, y0, w0, h0, area = (int(v) for v in stats[i])
+        cx0, cy0 = float(cents[i, 0]), float(cents[i, 1])
+        return [_Candidate(items, area, x0, y0, w0, h0, cx0 * area / area, cy0 * area / area,
+                           ox=ox, oy=oy)]
     parent = {i: i for i in items}
 
     def root(i: int) -> int:
@@ -242,8 +265,8 @@ def _score(c: _Candidate, gray: NDArray[np.uint8], shape: float, size: float, pe
     contrast = max(peak - bg, 1.0)
     iso = 1.0
     medians = []
-    for rad in (1.6 * r_eq + 2.0, 2.5 * r_eq + 3.0, max(4.0 * r_eq, 0.03 * diam)):
-        v = _ring_values(gray, c.cx, c.cy, rad, fov)
+    for v in _rings(gray, c.cx, c.cy,
+                    (1.6 * r_eq + 2.0, 2.5 * r_eq + 3.0, max(4.0 * r_eq, 0.03 * diam)), fov):
         if v.size < 8:
             iso *= 0.5
             medians.append(np.nan)

@@ -5,10 +5,13 @@ Three named methods, all returning a :class:`SunDetection`:
 * ``"robust"`` (default, :func:`detect_robust`) — candidates: field-of-view
   mask (the fisheye's image circle, found from the frame), a threshold that
   adapts to the brightest level (of the frame, or first of a window around
-  the ephemeris prediction when one is given, then of the whole frame ranked
-  by appearance alone), connected components grouped when a mast splits a
-  glare, streaks (blooming, smear) opened away, lens-flare ghosts rejected (on
-  the line through the optical centre, opposite a larger blob). Each
+  the ephemeris prediction when one is given — grown while the winning core
+  reaches the window's edge, so that a wide glare is never refined cut by it
+  — then of the whole frame ranked by appearance alone; the image circle and
+  the window are searched in their bounding boxes), connected components
+  grouped when a mast splits a glare, streaks (blooming, smear) opened away,
+  lens-flare ghosts rejected (on the line through the optical centre,
+  opposite a larger blob). Each
   candidate gets a shape term (second moments) and glare evidence (isotropic
   fall-off or a sharp drop to the sky); the winner's glare is tested for
   radial symmetry — the coherence of its gradient lines about one centre
@@ -42,6 +45,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import cv2
@@ -57,6 +61,7 @@ from vision.candidates import (
     _median,
     _prior,
     _ring_values,
+    _rings,
     _score,
     _symmetry,
     _weighted_centroid,
@@ -80,8 +85,55 @@ _ROUND_SPREAD_PX = 1.5  # a core whose outline spans ≤ this + 5 % of R in radi
 _MAX_CANDIDATES = 12
 _SCORED = 4  # candidates whose glare is examined
 _SEARCH_DEG = 8.0  # radius of the first search around the ephemeris prediction [°]
+_SEARCH_GROW = 1.5  # the window grows by this while the winning core touches its edge
 _COHERENCE_PASSES = 1  # solves of the radial-symmetry fit behind `coherence` (1, 2 and 3 give
 # the same cross-validated log loss on the development split: 0.0785, 0.0787, 0.0787)
+
+
+@dataclass(frozen=True)
+class _Region:
+    """The part of the frame a search looks at: ``pixels`` (masked to zero outside the
+    image circle / the window around the prediction), a crop of the frame starting at
+    pixel ``(x0, y0)``; everything outside the crop counts as masked. Searching the
+    circle's bounding box instead of the whole frame gives the same candidates."""
+
+    pixels: NDArray[np.uint8]
+    x0: int
+    y0: int
+
+    def value_at(self, x: NDArray[np.intp], y: NDArray[np.intp]) -> NDArray[np.uint8]:
+        """Grey levels at frame pixels ``(x, y)`` (0 outside the crop)."""
+        h, w = self.pixels.shape
+        xi, yi = x - self.x0, y - self.y0
+        if xi.size and xi.min() >= 0 and yi.min() >= 0 and xi.max() < w and yi.max() < h:
+            return self.pixels[yi, xi]  # all inside the crop (the common case)
+        inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+        out = np.zeros(x.shape, np.uint8)
+        out[inside] = self.pixels[yi[inside], xi[inside]]
+        return out
+
+
+@lru_cache(maxsize=32)
+def _disc_mask(h: int, w: int, cx: int, cy: int, radius: int) -> NDArray[np.uint8]:
+    """A filled disc drawn by ``cv2.circle`` on an ``h × w`` zero mask (cached: a fixed
+    camera's image circle is the same disc frame after frame; read-only)."""
+    mask = np.zeros((h, w), np.uint8)
+    cv2.circle(mask, (cx, cy), radius, 255, -1)
+    mask.flags.writeable = False
+    return mask
+
+
+def _disc_region(src: _Region, cx: int, cy: int, radius: int) -> _Region:
+    """``src`` masked to the filled disc of ``radius`` about pixel ``(cx, cy)`` (as
+    ``cv2.circle`` draws it), cropped to the disc's bounding box."""
+    h, w = src.pixels.shape
+    x0, y0 = max(0, cx - radius - 1 - src.x0), max(0, cy - radius - 1 - src.y0)
+    x1, y1 = min(w, cx + radius + 2 - src.x0), min(h, cy + radius + 2 - src.y0)
+    if x1 <= x0 or y1 <= y0:
+        return _Region(np.zeros((0, 0), np.uint8), src.x0, src.y0)
+    mask = _disc_mask(y1 - y0, x1 - x0, cx - src.x0 - x0, cy - src.y0 - y0, radius)
+    return _Region(np.asarray(cv2.bitwise_and(src.pixels[y0:y1, x0:x1], mask), np.uint8),
+                   src.x0 + x0, src.y0 + y0)
 
 
 @dataclass
@@ -89,7 +141,7 @@ class _Pick:
     """The winner of one search, with what the confidence and the answer need."""
 
     best: _Candidate
-    work: NDArray[np.uint8]  # the frame as searched (masked outside the window / image circle)
+    work: _Region  # the frame as searched (masked outside the window / image circle)
     labels: NDArray[Any]
     peak: float
     bg: float
@@ -113,29 +165,38 @@ def px_per_deg_of(camera: CameraModel | None, fov: FovCircle | None, width_px: i
     return width_px / 67.0
 
 
-def _search(gray: NDArray[np.uint8], work: NDArray[Any], small_bg: float,
+def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
             fov: FovCircle | None, diam: float, centre: tuple[float, float],
             ppd: float, expected_px: tuple[float, float] | None,
             prefer_near: bool = True) -> _Pick | str:
-    """Candidates in ``work`` (the frame, masked), the winner and its probability; or a reason.
+    """Candidates in ``work`` (the frame, masked and cropped), the winner and its probability;
+    or a reason.
 
     With ``prefer_near`` the candidates are ranked by their score weighted by their
     nearness to ``expected_px`` (the search around the prediction); without it by their
     score alone (the blind search), the distance entering only the confidence."""
     bg = small_bg
-    peak = float(cv2.minMaxLoc(work)[1])
+    # each row's brightest pixel: the peak, then the bright pixels' bounding box from it
+    row_max = work.pixels.max(axis=1) if work.pixels.size else np.zeros(1, np.uint8)
+    peak = float(row_max.max())
     contrast = peak - bg
     if contrast < 20.0:
         return f"no bright region: the brightest pixel is {max(contrast, 0):.0f} grey levels " \
                "above the sky"
     thr = peak - max(3.0, 0.04 * contrast)
-    binary = cv2.threshold(work, thr - 0.5, 255, cv2.THRESH_BINARY)[1]
-    # components only inside the bright pixels' bounding box (most frames: a small box)
-    ox, oy, bw, bh = cv2.boundingRect(binary)
-    if bw == 0 or bh == 0:
+    # components only inside the bright pixels' bounding box (most frames: a small box);
+    # an 8-bit threshold t keeps the pixels above ⌊t⌋
+    level = int(np.floor(thr - 0.5))
+    rows = np.flatnonzero(row_max > level)
+    if rows.size == 0:
         return "no bright region above the threshold"
-    n, labels, stats, cents = cv2.connectedComponentsWithStats(
-        binary[oy:oy + bh, ox:ox + bw], connectivity=8)
+    by, bh = int(rows[0]), int(rows[-1] - rows[0]) + 1
+    cols = np.flatnonzero(work.pixels[by:by + bh].max(axis=0) > level)
+    bx, bw = int(cols[0]), int(cols[-1] - cols[0]) + 1
+    binary = cv2.threshold(work.pixels[by:by + bh, bx:bx + bw], thr - 0.5, 255,
+                           cv2.THRESH_BINARY)[1]
+    ox, oy = bx + work.x0, by + work.y0  # the box's origin in the frame
+    n, labels, stats, cents = cv2.connectedComponentsWithStats(binary, connectivity=8)
     if n < 2:
         return "no bright region above the threshold"
     stats[:, 0] += ox
@@ -188,6 +249,30 @@ def _search(gray: NDArray[np.uint8], work: NDArray[Any], small_bg: float,
                  values)
 
 
+def _guided_search(gray: NDArray[np.uint8], work: _Region, bg: float, fov: FovCircle | None,
+                   diam: float, centre: tuple[float, float], ppd: float,
+                   expected_px: tuple[float, float]) -> _Pick | str:
+    """The search around the ephemeris prediction: within :data:`_SEARCH_DEG` of it, the
+    window grown (× :data:`_SEARCH_GROW`) while the winning core reaches the window's
+    edge — a wide glare cut by the window would leave the refinement a truncated core
+    — until the window holds the whole searched frame."""
+    ex, ey = int(round(expected_px[0])), int(round(expected_px[1]))
+    h, w = work.pixels.shape
+    # the window that holds all of `work`: the farthest corner of its crop
+    full = max(float(np.hypot(max(ex - work.x0, work.x0 + w - ex),
+                              max(ey - work.y0, work.y0 + h - ey))), 1.0)
+    radius = max(1, int(round(_SEARCH_DEG * ppd)))
+    while True:
+        got = _search(gray, _disc_region(work, ex, ey, radius), bg, fov, diam, centre, ppd,
+                      expected_px)
+        if not isinstance(got, _Pick) or radius >= full:
+            return got
+        pts = _limb_points(got.best, got.labels)
+        if float(np.max(np.hypot(pts[:, 0] - ex, pts[:, 1] - ey))) < radius - 1.5:
+            return got  # the core lies inside the window: not cut by it
+        radius = int(np.ceil(min(max(_SEARCH_GROW * radius, radius + 1.0), full)))
+
+
 def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
                   fov: FovCircle | None = None, auto_fov: bool = True,
                   min_confidence: float = 0.5,
@@ -203,20 +288,23 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         (``auto_fov=False`` to use the whole frame).
     min_confidence : probability at which a candidate is reported as the sun.
     expected_px : the sun's pixel predicted by the ephemeris through
-        ``camera`` (time and place known): searched first, within 8° of it;
+        ``camera`` (time and place known): searched first, within 8° of it (the
+        window grown × 1.5 while the winning core reaches its edge: a glare wider
+        than the window is refined whole, as the blind search would);
         when nothing there reaches ``min_confidence``, the whole frame is
         searched blind and the more probable answer kept. The answer carries
         its distance from the prediction, however far (a wrong place, time or
         zone moves the prediction, not the sun).
     """
     gray = to_gray(image)
-    h, w = gray.shape
     small, scale = _small(gray)
     if fov is None and auto_fov:
         fov = estimate_fov(gray, small, scale)
+    h, w = gray.shape
     if fov is not None:
-        mask = _fov_mask(gray.shape, fov)
-        work = cv2.bitwise_and(gray, mask)
+        # the image circle, cropped to its bounding box
+        work = _disc_region(_Region(gray, 0, 0), int(round(fov.cx_px)), int(round(fov.cy_px)),
+                            int(fov.radius_px))
         sm = _fov_mask(small.shape, FovCircle((fov.cx_px - scale // 2) / scale,
                                               (fov.cy_px - scale // 2) / scale,
                                               fov.radius_px / scale))
@@ -224,7 +312,7 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         diam = 2.0 * fov.radius_px
         centre = (fov.cx_px, fov.cy_px)
     else:
-        work = gray
+        work = _Region(gray, 0, 0)
         # the sky's level: the frame's median, or its border's when lower — in a small
         # region of interest around the sun (the control loop's) the glare fills the
         # middle and lifts the median, and the border is the sky farthest from the sun
@@ -238,11 +326,7 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         expected_px = None
     got: _Pick | str = "no search"
     if expected_px is not None:
-        win = np.zeros_like(gray)
-        cv2.circle(win, (int(round(expected_px[0])), int(round(expected_px[1]))),
-                   int(round(_SEARCH_DEG * ppd)), 255, -1)
-        got = _search(gray, cv2.bitwise_and(work, win), bg, fov, diam, centre, ppd,
-                      expected_px)
+        got = _guided_search(gray, work, bg, fov, diam, centre, ppd, expected_px)
     if not isinstance(got, _Pick) or got.p < min_confidence:
         # blind: ranked by appearance alone; the distance from the prediction is a
         # feature of the confidence, which cannot veto a plain disc (vision.confidence)
@@ -288,25 +372,26 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
 def _limb_points(c: _Candidate, labels: NDArray[Any]) -> NDArray[np.float64]:
     """The outline of the candidate's core in frame pixels ``[N, 2]``."""
     contours, _ = cv2.findContours(c.mask(labels), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    pts = np.vstack(contours).reshape(-1, 2).astype(float)
+    pts = (contours[0] if len(contours) == 1 else np.vstack(contours)).reshape(-1, 2).astype(float)
     pts[:, 0] += c.x
     pts[:, 1] += c.y
     return pts
 
 
-def _true_limb(gray: NDArray[np.uint8], work: NDArray[np.uint8], pts: NDArray[np.float64],
+def _true_limb(gray: NDArray[np.uint8], work: _Region, pts: NDArray[np.float64],
                cx: float, cy: float, thr: float) -> NDArray[np.float64]:
     """The outline points that are the sun's limb: not those where a mask (the search
     window around the prediction, the image circle) cut the core — there the pixel 1.5 px
     farther out from (cx, cy) is masked in ``work`` while the frame is still bright."""
     h, w = gray.shape
     f = 1.5 / np.maximum(np.hypot(pts[:, 0] - cx, pts[:, 1] - cy), 1e-9)
-    ox = np.clip(np.rint(pts[:, 0] + (pts[:, 0] - cx) * f), 0, w - 1).astype(np.intp)
-    oy = np.clip(np.rint(pts[:, 1] + (pts[:, 1] - cy) * f), 0, h - 1).astype(np.intp)
-    return pts[(work[oy, ox] > 0) | (gray[oy, ox] < thr)]
+    # np.clip's bounds, by minimum / maximum (the same values, less overhead)
+    ox = np.minimum(np.maximum(np.rint(pts[:, 0] + (pts[:, 0] - cx) * f), 0), w - 1).astype(np.intp)
+    oy = np.minimum(np.maximum(np.rint(pts[:, 1] + (pts[:, 1] - cy) * f), 0), h - 1).astype(np.intp)
+    return pts[(work.value_at(ox, oy) > 0) | (gray[oy, ox] < thr)]
 
 
-def _refine(gray: NDArray[np.uint8], work: NDArray[np.uint8], labels: NDArray[Any],
+def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
             c: _Candidate, peak: float, bg: float, thr: float, camera: CameraModel | None,
             fallback: CameraModel | None = None) -> tuple[float, float, float]:
     """Sub-pixel centre of the winning cluster → (x, y, radius_px).
@@ -335,8 +420,7 @@ def _refine(gray: NDArray[np.uint8], work: NDArray[np.uint8], labels: NDArray[An
     r_eq = float(np.sqrt(c.area / np.pi))
     model = camera if camera is not None else fallback
     if isinstance(model, FisheyeCamera) and c.area >= _SMALL_AREA_PX:
-        near = _ring_values(gray, c.cx, c.cy, 1.6 * r_eq + 2.0, None)
-        far = _ring_values(gray, c.cx, c.cy, 4.0 * r_eq + 3.0, None)
+        near, far = _rings(gray, c.cx, c.cy, (1.6 * r_eq + 2.0, 4.0 * r_eq + 3.0), None)
         # a glare: the ring just outside the core is still well above the far sky
         if near.size >= 8 and far.size >= 8 and \
                 peak - _median(near) < _HALO_DROP * (peak - _median(far)):

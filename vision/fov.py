@@ -45,7 +45,8 @@ def _small(gray: NDArray[np.uint8]) -> tuple[NDArray[np.uint8], int]:
 def _median_u8(a: NDArray[np.uint8], mask: NDArray[np.uint8] | None = None) -> float:
     """Median of 8-bit values (under ``mask``) from their histogram (cv2.calcHist)."""
     hist = cv2.calcHist([np.ascontiguousarray(a)], [0], mask, [256], [0, 256]).ravel()
-    total = hist.sum()
+    # the histogram's total, counted directly (exact: whole counts below 2**24)
+    total = a.size if mask is None else cv2.countNonZero(mask)
     if total <= 0:
         return 0.0
     return float(np.searchsorted(np.cumsum(hist), 0.5 * total))
@@ -70,7 +71,8 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
     if centre_level < 20.0 or corner_level > max(35.0, 0.25 * centre_level):
         return None
     level = corner_level + 0.3 * (centre_level - corner_level)
-    binary = (small > level).astype(np.uint8)
+    # small > level (an 8-bit threshold compares with ⌊level⌋: the same pixels)
+    binary = cv2.threshold(small, level, 1, cv2.THRESH_BINARY)[1]
     contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     if not contours:
         return None

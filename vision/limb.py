@@ -7,6 +7,8 @@ cloud has grown on one side (:func:`contained_limb_centre`).
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -33,6 +35,25 @@ def _circle_fit(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[float, 
     return mx + uc, my + vc, r
 
 
+@lru_cache(maxsize=256)
+def _triples(n: int, n_trials: int) -> NDArray[np.int64]:
+    """``n_trials`` random index triples into ``n`` points (``np.random.default_rng(12345)``:
+    a fixed seed, so the same for every fit with ``n`` points — cached per ``n``,
+    read-only)."""
+    idx = np.random.default_rng(12345).integers(0, n, size=(n_trials, 3))
+    idx.flags.writeable = False
+    return idx
+
+
+@lru_cache(maxsize=256)
+def _even_subset(n: int, m: int = 120) -> NDArray[np.intp]:
+    """``np.linspace(0, n - 1, min(n, m)).astype(int)``: at most ``m`` evenly spaced indices
+    (cached per ``n``; read-only)."""
+    sub = np.linspace(0, n - 1, min(n, m)).astype(int)
+    sub.flags.writeable = False
+    return sub
+
+
 def _ransac_circle(x: NDArray[np.float64], y: NDArray[np.float64], n_trials: int = 256
                    ) -> NDArray[np.bool_]:
     """Inliers of the circle through most limb points (RANSAC on point triples, fixed seed).
@@ -43,10 +64,9 @@ def _ransac_circle(x: NDArray[np.float64], y: NDArray[np.float64], n_trials: int
     whole of a limb that the fisheye projection has made slightly oval.
     """
     n = len(x)
-    rng = np.random.default_rng(12345)
-    idx = rng.integers(0, n, size=(n_trials, 3))
+    idx = _triples(n, n_trials)
     # hypotheses are scored on at most 120 evenly spaced points, the inliers on all
-    sub = np.linspace(0, n - 1, min(n, 120)).astype(int)
+    sub = _even_subset(n)
     x1, y1 = x[idx[:, 0]], y[idx[:, 0]]
     x2, y2 = x[idx[:, 1]], y[idx[:, 1]]
     x3, y3 = x[idx[:, 2]], y[idx[:, 2]]
@@ -72,6 +92,7 @@ def _ransac_circle(x: NDArray[np.float64], y: NDArray[np.float64], n_trials: int
     return np.abs(np.hypot(x - ux[best], y - uy[best]) - r[best]) <= tol[best]
 
 
+_COS_45 = float(np.cos(np.radians(45.0)))
 _CONTAINED_TRIALS = 96  # RANSAC triples of contained_limb_centre (a ≥ 30 % arc: P(miss) < 8 %)
 _CONTAINED_REL_TOL = 0.02  # tolerance on the limb: ≥ this share of the half-angle
 
@@ -79,14 +100,15 @@ _CONTAINED_REL_TOL = 0.02  # tolerance on the limb: ≥ this share of the half-a
 def _plane_axis(v: NDArray[np.float64]) -> NDArray[np.float64]:
     """Axis of the small circle through unit vectors ``[N, 3]`` (least-squares plane normal:
     the eigenvector of the 3 × 3 scatter matrix with the least eigenvalue)."""
-    m = v.mean(axis=0)
+    m = v.sum(axis=0) / len(v)  # v.mean(axis=0), without its overhead
     d = v - m
     normal = np.linalg.eigh(d.T @ d)[1][:, 0]
     return normal if np.dot(normal, m) > 0 else -normal
 
 
 def _ransac_cone(v: NDArray[np.float64], tol_rad: float, n_trials: int = 256,
-                 rel_tol: float = 0.05, inside_penalty: float = 0.0) -> NDArray[np.bool_]:
+                 rel_tol: float = 0.05, inside_penalty: float = 0.0,
+                 v_sum: NDArray[np.float64] | None = None) -> NDArray[np.bool_]:
     """Inliers of the small circle on the sphere through most limb directions ``[N, 3]``.
 
     Three unit vectors fix a plane, hence a cone (axis, half-angle); the
@@ -94,11 +116,12 @@ def _ransac_cone(v: NDArray[np.float64], tol_rad: float, n_trials: int = 256,
     tolerance max(``tol_rad``, ``rel_tol`` × half-angle). A hypothesis scores its
     inliers minus ``inside_penalty`` × the points *inside* its cone by more than
     the tolerance (:func:`contained_limb_centre`). Residuals are compared as
-    cosines (no arc cosine per point and hypothesis).
+    cosines (no arc cosine per point and hypothesis). ``v_sum``: ``v.sum(axis=0)`` when
+    the caller has it.
     """
     n = len(v)
-    idx = np.random.default_rng(12345).integers(0, n, size=(n_trials, 3))
-    sub = np.linspace(0, n - 1, min(n, 120)).astype(int)
+    idx = _triples(n, n_trials)
+    sub = _even_subset(n)
     a = v[idx[:, 0]]
     p, q = v[idx[:, 1]] - a, v[idx[:, 2]] - a
     nrm = np.empty_like(p)  # p × q, written out (np.cross is slow on short arrays)
@@ -110,15 +133,15 @@ def _ransac_cone(v: NDArray[np.float64], tol_rad: float, n_trials: int = 256,
     nrm *= (np.sign(cos_half) / np.maximum(np.sqrt(np.einsum("ij,ij->i", nrm, nrm)),
                                            1e-300))[:, None]
     cos_half = np.einsum("ij,ij->i", nrm, a)
-    mean_dir = v.mean(axis=0)
-    mean_dir /= np.linalg.norm(mean_dir)
+    mean_dir = (v.sum(axis=0) if v_sum is None else v_sum) / n  # v.mean(axis=0)
+    mean_dir /= np.sqrt(mean_dir @ mean_dir)  # np.linalg.norm's sum, without its overhead
     # the axis must lie within the limb's spread (the sun is inside its glare), the cone
     # no wider than 45° nor 1.2 × that spread
-    cos_spread = float(np.min(v @ mean_dir))
-    spread = float(np.arccos(np.clip(cos_spread, -1.0, 1.0)))
-    ok = (cos_half > max(np.cos(np.radians(45.0)), np.cos(min(1.2 * spread + 1e-6, np.pi)))) \
+    cos_spread = float((v @ mean_dir).min())
+    spread = float(np.arccos(min(max(cos_spread, -1.0), 1.0)))
+    ok = (cos_half > max(_COS_45, np.cos(min(1.2 * spread + 1e-6, np.pi)))) \
         & (nrm @ mean_dir >= cos_spread) & (cos_half < 1.0)
-    if not np.any(ok):
+    if not ok.any():
         return np.ones(n, bool)
     nrm = nrm[ok]
     half = np.arccos(cos_half[ok])
@@ -167,24 +190,30 @@ def contained_limb_centre(pts: NDArray[np.float64], camera: CameraModel, tol_px:
     """
     x, y = pts[:, 0], pts[:, 1]
     v_all = camera.pixel_to_direction(x, y)
-    fin = np.all(np.isfinite(v_all), axis=1)
-    if fin.sum() < 12:
+    fin = np.isfinite(v_all).all(axis=1)
+    n_fin = int(np.count_nonzero(fin))
+    if n_fin < 12:
         return None
-    v = v_all[fin]
+    if n_fin < fin.size:
+        v, x, y = v_all[fin], x[fin], y[fin]
+    else:
+        v = v_all
     # the angular size of a pixel here: the points' spread on the sphere over that in pixels
-    mean_dir = v.mean(axis=0)
-    cos_spread = float(np.min(v @ mean_dir)) / float(np.linalg.norm(mean_dir))
+    v_sum = v.sum(axis=0)
+    mean_dir = v_sum / n_fin  # v.mean(axis=0)
+    cos_spread = float((v @ mean_dir).min()) / float(np.sqrt(mean_dir @ mean_dir))
     spread = float(np.arccos(min(1.0, cos_spread)))
-    tol = tol_px * spread / max(0.5 * max(float(np.ptp(x[fin])), float(np.ptp(y[fin]))), 1.0)
+    ext = max(float(x.max() - x.min()), float(y.max() - y.min()))
+    tol = tol_px * spread / max(0.5 * ext, 1.0)
     keep = _ransac_cone(v, tol, n_trials=_CONTAINED_TRIALS, rel_tol=_CONTAINED_REL_TOL,
-                        inside_penalty=3.0)
+                        inside_penalty=3.0, v_sum=v_sum)
     if keep.sum() < 6:
         return None
     axis = _plane_axis(v[keep])
     px, py = camera.direction_to_pixel(axis)
     if not (np.isfinite(px) and np.isfinite(py)):
         return None
-    return float(px), float(py), float(keep.mean())
+    return float(px), float(py), int(np.count_nonzero(keep)) / keep.size
 
 
 def _robust_limb_centre(pts: NDArray[np.float64], camera: CameraModel | None

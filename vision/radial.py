@@ -86,6 +86,10 @@ def _tangent(camera: CameraModel, x: NDArray[np.float64], y: NDArray[np.float64]
     return (v @ e1) / d, (v @ e2) / d
 
 
+_TWO = np.ones((2, 2), np.uint8)
+_THREE = np.ones((3, 3), np.uint8)
+
+
 def gradient_lines(gray: NDArray[np.uint8], x0: int, y0: int, x1: int, y1: int,
                    dark_level: float, glare_level: float = 0.0, saturated_level: float = 256.0,
                    sky_gradient: tuple[float, float] = (0.0, 0.0)
@@ -110,20 +114,19 @@ def gradient_lines(gray: NDArray[np.uint8], x0: int, y0: int, x1: int, y1: int,
     gx = 0.5 * (d_u - d_v)
     gy = -0.5 * (d_u + d_v)
     # a 2 × 2 erosion / dilation anchored at its first pixel: the four pixels of a corner
-    two = np.ones((2, 2), np.uint8)
+    two = _TWO
     if saturated_level <= 255.0:
-        sat = cv2.dilate((raw >= saturated_level).view(np.uint8), np.ones((3, 3), np.uint8))
+        sat = cv2.dilate((raw >= saturated_level).view(np.uint8), _THREE)
         clip4 = cv2.dilate(sat, two, anchor=(0, 0))[:-1, :-1] > 0  # the blur's reach
         gx = np.where(clip4, gx, gx - np.float32(sky_gradient[0]))
         gy = np.where(clip4, gy, gy - np.float32(sky_gradient[1]))
     else:
-        clip4 = np.zeros(gx.shape, bool)
+        clip4 = None  # no saturated level: nothing clipped
         if sky_gradient != (0.0, 0.0):
             gx -= np.float32(sky_gradient[0])
             gy -= np.float32(sky_gradient[1])
     g2 = gx * gx + gy * gy
-    ok = cv2.erode((raw >= dark_level).view(np.uint8), np.ones((3, 3), np.uint8),
-                   borderType=cv2.BORDER_REPLICATE)
+    ok = cv2.erode((raw >= dark_level).view(np.uint8), _THREE, borderType=cv2.BORDER_REPLICATE)
     ok4 = np.asarray(cv2.erode(ok, two, anchor=(0, 0))[:-1, :-1], np.uint8)
     if glare_level > 0:
         hi = np.asarray(cv2.dilate((raw >= glare_level).view(np.uint8), two, anchor=(0, 0)),
@@ -131,11 +134,14 @@ def gradient_lines(gray: NDArray[np.uint8], x0: int, y0: int, x1: int, y1: int,
         ok4 &= hi[:-1, :-1]
     gmax = float(g2.max()) if g2.size else 0.0
     sel = (ok4 > 0) & (g2 > max(4e-4 * gmax, 1.0))
-    iy, ix = np.nonzero(sel)
-    g2s = g2[iy, ix].astype(np.float64)
+    # the selected corners by flat index (1-D gathers are cheaper than 2-D ones)
+    at = np.flatnonzero(sel)
+    iy = at // sel.shape[1]
+    ix = at - iy * sel.shape[1]
+    g2s = g2.ravel()[at].astype(np.float64)
     mag = np.sqrt(g2s)
-    return (ix + (x0 + 0.5), iy + (y0 + 0.5), gx[iy, ix] / mag, gy[iy, ix] / mag, g2s,
-            clip4[iy, ix])
+    return (ix + (x0 + 0.5), iy + (y0 + 0.5), gx.ravel()[at] / mag, gy.ravel()[at] / mag, g2s,
+            clip4.ravel()[at] if clip4 is not None else np.zeros(at.size, bool))
 
 
 def sky_plane_gradient(gray: NDArray[np.uint8], cx: float, cy: float, r_in: float,
@@ -203,7 +209,7 @@ def radial_symmetry_centre(gray: NDArray[np.uint8], start_px: tuple[float, float
         return None
     px, py, nx, ny, g2, clipped = gradient_lines(gray, x0, y0, x1, y1, dark_level, glare_level,
                                                  saturated_level, sky_gradient)
-    if int((~clipped).sum()) >= 30:
+    if clipped.any() and int((~clipped).sum()) >= 30:
         px, py, nx, ny, g2 = px[~clipped], py[~clipped], nx[~clipped], ny[~clipped], g2[~clipped]
     if px.size < 8:
         return None

@@ -18,15 +18,20 @@ def enu_from_sky(azimuth_deg: ArrayLike, elevation_deg: ArrayLike) -> FloatArray
     """Unit vectors ``[..., 3]`` (east, north, up) from azimuth/elevation [°]."""
     az = np.radians(np.asarray(azimuth_deg, dtype=float))
     el = np.radians(np.asarray(elevation_deg, dtype=float))
-    return np.stack([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], axis=-1)
+    cos_el = np.cos(el)
+    out = np.empty(np.broadcast_shapes(az.shape, el.shape) + (3,))  # np.stack's, cheaper
+    out[..., 0] = cos_el * np.sin(az)
+    out[..., 1] = cos_el * np.cos(az)
+    out[..., 2] = np.sin(el)
+    return out
 
 
 def sky_from_enu(v: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """Azimuth (clockwise from north, [0, 360)) and elevation [°] of ENU vectors."""
     v = np.asarray(v, dtype=float)
-    n = np.linalg.norm(v, axis=-1)
+    n = np.sqrt(np.add.reduce(v * v, axis=-1))  # np.linalg.norm(v, axis=-1), without its overhead
     az = np.degrees(np.arctan2(v[..., 0], v[..., 1])) % 360.0
-    el = np.degrees(np.arcsin(np.clip(v[..., 2] / n, -1.0, 1.0)))
+    el = np.degrees(np.arcsin(np.minimum(np.maximum(v[..., 2] / n, -1.0), 1.0)))
     return az, el
 
 

@@ -240,3 +240,22 @@ def test_large_glare_with_a_streak_uses_the_shrunk_opening() -> None:
     d = detect_sun(img)
     assert d.sun_found
     assert d.centroid_px == pytest.approx((820, 760), abs=1.0)
+
+
+@pytest.mark.parametrize("offset_deg", [0.0, 4.0])
+def test_guided_window_does_not_cut_a_wide_glare(offset_deg: float) -> None:
+    """A saturated core wider (12.9° in radius) than the 8° search window around the
+    ephemeris prediction: the window grows until the core no longer reaches its edge, so
+    the guided answer is the blind one — not a core cut around the prediction and so
+    pulled toward it (before: 1,373 of 3,539 px, 4.9 px off with a prediction 4° away,
+    where blind is 0.4 px off)."""
+    cam = FisheyeCamera(319.5, 239.5, 2.6)
+    fr = fisheye_frame(150.0, 50.0, glare_deg=10.0, seed=3)
+    blind = detect_sun(fr.image, camera=cam)
+    ex, ey = cam.sky_to_pixel(150.0, 50.0 - offset_deg)
+    guided = detect_sun(fr.image, camera=cam, expected_px=(float(ex), float(ey)))
+    assert blind.sun_found and guided.sun_found
+    assert guided.area_px == blind.area_px
+    assert guided.centroid_px == pytest.approx(blind.centroid_px, abs=1e-9)
+    assert np.hypot(guided.centroid_px[0] - fr.sun_px[0],
+                    guided.centroid_px[1] - fr.sun_px[1]) < 1.0
