@@ -20,7 +20,7 @@ Kinds:
   ``since``: the fault's first day (local midnight). Cleared when the latest day no
   longer shows it.
 - ``low_performance_ratio`` — the tracker's performance ratio under the measured sky
-  (``diagnosis``: measured / expected, ``sky.source`` = ``fixed_array``) of the latest
+  (``diagnosis``: measured / expected, ``sky.source`` ``sensor`` or ``fixed_array``) of the latest
   such day is below ``Settings.alert_pr_below``; ``since``: the first day of the run of
   low days. Days whose sky fell back to clear sky are not judged (a cloudy day would
   read as a fault).
@@ -177,7 +177,7 @@ def diagnosed(site_id: str, zone: ZoneInfo, tracker: str, days: list[dict[str, A
                 {"fault_kind": f["kind"], "confidence": f["confidence"],
                  "magnitude": f["magnitude"], "unit": f["unit"], "since_date": f["since"],
                  "day": latest["date"]}, fault_kind=f["kind"]))
-    judged = [d for d in days if d["sky"].get("source") == "fixed_array"
+    judged = [d for d in days if d["sky"].get("source") in ("sensor", "fixed_array")
               and d["tracker"].get("performance_ratio") is not None]
     if judged:
         scope = (site_id, tracker, "low_performance_ratio")

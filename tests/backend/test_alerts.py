@@ -154,7 +154,8 @@ def test_diagnosis_rule_latest_day_faults_and_the_low_pr_run() -> None:
     weak = {**stuck, "kind": "soiling", "confidence": 0.3}
     old = {**stuck, "kind": "clock_offset"}
     days = [_day("2026-11-26", 0.97, [old]), _day("2026-11-27", 0.95, []),
-            _day("2026-11-28", 0.62, [stuck]), _day("2026-11-29", 0.9, [], source="clear_sky"),
+            _day("2026-11-28", 0.62, [stuck], source="sensor"),
+            _day("2026-11-29", 0.9, [], source="clear_sky"),
             _day("2026-11-30", 0.61, [stuck, weak])]
     ev = rules.diagnosed(SITE, TZ, "tracker", days, pr_below=0.8, confidence_min=0.5)
     kinds = {(c.kind, c.fault_kind) for c in ev.conditions}
@@ -164,7 +165,7 @@ def test_diagnosis_rule_latest_day_faults_and_the_low_pr_run() -> None:
     assert fault.since_s == int(dt.datetime(2026, 11, 28, tzinfo=TZ).timestamp())
     assert fault.detail.startswith("tracker stuck since 2026-11-28: stuck at azimuth 181°")
     low = next(c for c in ev.conditions if c.kind == "low_performance_ratio")
-    # the clear-sky day is not judged, so the low run goes back to the 28th
+    # the clear-sky day is not judged, a sensor's is: the low run goes back to the 28th
     assert low.data["first_low_day"] == "2026-11-28" and low.data["performance_ratio"] == 0.61
     assert "61 %" in low.detail and "alert below 80 %" in low.detail
     healthy = rules.diagnosed(SITE, TZ, "tracker", days[:2], 0.8, 0.5)
