@@ -66,6 +66,7 @@ def _stuck_day(day: dt.date) -> dict:
 def _inject(db_url: str, day: dt.date, payload: dict) -> None:
     from sqlalchemy import insert
 
+    from backend.diagnosis.service import CACHE_VERSION
     from backend.settings import get_settings
     from backend.storage.engine import make_engine
     from backend.storage.tables import DiagnosisDay
@@ -78,7 +79,8 @@ def _inject(db_url: str, day: dt.date, payload: dict) -> None:
         with engine.begin() as conn:
             conn.execute(insert(DiagnosisDay).values(
                 site_id=SITE, day_start_s=int(start.timestamp()), day_end_s=int(end.timestamp()),
-                payload_json=orjson.dumps(payload).decode()))
+                payload_json=orjson.dumps({**payload,
+                                           "cache_version": CACHE_VERSION}).decode()))
     finally:
         engine.dispose()
 

@@ -177,7 +177,9 @@ def test_the_plant_page_opens_the_plant_in_3d(page, server) -> None:  # type: ig
     assert href.startswith("#twin?plant=penarroya&strategy=sun&time=2024-12-21")
     page.click("#plant-3d")
     page.wait_for_selector("#twin-frame[src*='plant']")
-    assert page.input_value("#twin-view") == "plant:penarroya"
+    # the view list fills after GET /plants answers, a moment after the frame's src is set
+    page.wait_for_function(
+        "() => document.getElementById('twin-view').value === 'plant:penarroya'")
     frame = page.frame_locator("#twin-frame")
     frame.locator("text=plant view").first.wait_for()
     text = frame.locator("text=Shaded:").first.inner_text()
