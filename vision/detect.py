@@ -30,7 +30,9 @@ Three named methods, all returning a :class:`SunDetection`:
   camera's sphere through most of the core's limb that leaves none of it
   inside — the clear-sky disc, which thin cloud (adding light near the sun)
   can only grow on one side (:func:`vision.limb.contained_limb_centre`,
-  RANSAC after Fischler & Bolles 1981); otherwise the intensity-weighted
+  RANSAC after Fischler & Bolles 1981; outline on the image circle's edge is
+  never limb, and a core the image circle cuts keeps that circle however
+  little of its outline lies on it); otherwise the intensity-weighted
   centroid of a complete (point-symmetric) core, or a RANSAC + least-squares
   fit to the saturated limb of a cut one (on the camera's sphere when a model
   is known; :mod:`vision.limb`). A "no sun" answer says why (``reason``).
@@ -81,6 +83,9 @@ METHODS: tuple[str, ...] = ("robust", "seed000_hsv", "seed003_gray240")
 _SMALL_AREA_PX = 30  # below: intensity-weighted centroid only; above: also a limb fit
 _HALO_DROP = 0.97  # a glare: (peak − ring at 1.6 R) < this × (peak − ring at 4 R)
 _CONTAINED_MIN_INLIERS = 0.3  # share of the limb on the contained circle to trust it
+_FOV_EDGE_PX = 2.5  # outline points this close to the image circle's edge lie on the edge
+_CUT_SHARE = 0.1  # a core with this share of its outline on the image circle's edge is cut
+_CUT_TRIALS = 512  # RANSAC triples of the contained fit of a cut core (a 20 % arc: P(miss) 2 %)
 _ROUND_SPREAD_PX = 1.5  # a core whose outline spans ≤ this + 5 % of R in radius is round
 _MAX_CANDIDATES = 12
 _SCORED = 4  # candidates whose glare is examined
@@ -347,7 +352,7 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
             # no model given: an equidistant 180° lens spanning the image circle
             fallback = FisheyeCamera(fov.cx_px, fov.cy_px, fov.radius_px / 0.98 / 90.0)
         cx, cy, radius = _refine(gray, got.work, got.labels, got.best, got.peak, got.bg,
-                                 got.thr, camera, fallback)
+                                 got.thr, camera, fallback, fov)
     dist = None
     if found and expected_px is not None:
         dist = float(np.hypot(cx - expected_px[0], cy - expected_px[1]))
@@ -379,21 +384,35 @@ def _limb_points(c: _Candidate, labels: NDArray[Any]) -> NDArray[np.float64]:
 
 
 def _true_limb(gray: NDArray[np.uint8], work: _Region, pts: NDArray[np.float64],
-               cx: float, cy: float, thr: float) -> NDArray[np.float64]:
-    """The outline points that are the sun's limb: not those where a mask (the search
-    window around the prediction, the image circle) cut the core — there the pixel 1.5 px
-    farther out from (cx, cy) is masked in ``work`` while the frame is still bright."""
+               cx: float, cy: float, thr: float, fov: FovCircle | None = None
+               ) -> tuple[NDArray[np.float64], float]:
+    """The outline points that are the sun's limb → (points, share of the outline on the
+    image circle's edge). Left out: points where a mask cut the core — the search window
+    around the prediction: the pixel 1.5 px farther out from (cx, cy) is masked in
+    ``work`` while the frame is still bright; the image circle ``fov``: any point within
+    :data:`_FOV_EDGE_PX` of its edge, bright beyond it or not (the edge of the image is
+    never the sun's limb; the step outward misses it where the outline runs nearly
+    radially from (cx, cy), and the lens's own fall-off can leave the frame just beyond
+    the mask below the threshold)."""
     h, w = gray.shape
     f = 1.5 / np.maximum(np.hypot(pts[:, 0] - cx, pts[:, 1] - cy), 1e-9)
     # np.clip's bounds, by minimum / maximum (the same values, less overhead)
     ox = np.minimum(np.maximum(np.rint(pts[:, 0] + (pts[:, 0] - cx) * f), 0), w - 1).astype(np.intp)
     oy = np.minimum(np.maximum(np.rint(pts[:, 1] + (pts[:, 1] - cy) * f), 0), h - 1).astype(np.intp)
-    return pts[(work.value_at(ox, oy) > 0) | (gray[oy, ox] < thr)]
+    keep = (work.value_at(ox, oy) > 0) | (gray[oy, ox] < thr)
+    edge_share = 0.0
+    if fov is not None:
+        on_edge = np.hypot(pts[:, 0] - fov.cx_px, pts[:, 1] - fov.cy_px) \
+            > fov.radius_px - _FOV_EDGE_PX
+        edge_share = float(np.count_nonzero(on_edge)) / max(len(pts), 1)
+        keep &= ~on_edge
+    return pts[keep], edge_share
 
 
 def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
             c: _Candidate, peak: float, bg: float, thr: float, camera: CameraModel | None,
-            fallback: CameraModel | None = None) -> tuple[float, float, float]:
+            fallback: CameraModel | None = None, fov: FovCircle | None = None
+            ) -> tuple[float, float, float]:
     """Sub-pixel centre of the winning cluster → (x, y, radius_px).
 
     A core with a glare around it, given a fisheye model (or ``fallback``, an
@@ -403,7 +422,12 @@ def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
     the search window, the image circle — cut the core are left out) — robust
     to thin cloud that grows the core on one side and to the fisheye's skew of a
     wide glare — when
-    at least :data:`_CONTAINED_MIN_INLIERS` of the limb lies on it. Otherwise
+    at least :data:`_CONTAINED_MIN_INLIERS` of the limb lies on it, or whatever its share
+    when the image circle ``fov`` cuts the core (≥ :data:`_CUT_SHARE` of the outline on
+    its edge: a low sun's wide glare, which cloud and the brighter sky near the horizon
+    stretch along the edge — a plain circle through the rest of the outline follows that
+    stretch; refitted with :data:`_CUT_TRIALS` triples, the clear arc being short; on the
+    development split 5.55° → 1.41° on such a frame, the only one). Otherwise
     (no glare: a plain disc, whose sharp edge centres it exactly; no fisheye
     model — the tracker's narrow lens, where the 8-bit outline is noisier than
     the centroid and a 1° glare has no skew; too little of the limb on one
@@ -424,7 +448,8 @@ def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
         # a glare: the ring just outside the core is still well above the far sky
         if near.size >= 8 and far.size >= 8 and \
                 peak - _median(near) < _HALO_DROP * (peak - _median(far)):
-            pts = _true_limb(gray, work, _limb_points(c, labels), c.cx, c.cy, thr)
+            pts, edge_share = _true_limb(gray, work, _limb_points(c, labels), c.cx, c.cy,
+                                         thr, fov)
             rad = np.hypot(pts[:, 0] - c.cx, pts[:, 1] - c.cy) if len(pts) else np.zeros(1)
             # not already a circle about its centroid (a clear-sky core near the zenith:
             # the centroid below is exact and cheaper)
@@ -432,6 +457,15 @@ def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
                 got = contained_limb_centre(pts, model)
                 if got is not None and got[2] >= _CONTAINED_MIN_INLIERS:
                     return got[0], got[1], r_eq
+                if edge_share >= _CUT_SHARE:
+                    # cut by the image circle (a low sun's wide glare): the arcs left are
+                    # the clear one and those cloud and the brighter sky near the horizon
+                    # have pushed outward; a plain circle through most of the outline
+                    # follows the bulge along the edge, so the contained circle is kept
+                    # whatever its share (more triples: the clear arc is short)
+                    got = contained_limb_centre(pts, model, n_trials=_CUT_TRIALS)
+                    if got is not None:
+                        return got[0], got[1], r_eq
     pad = max(3.0, 0.5 * r_eq + 2.0)
     ring = _ring_values(gray, c.cx, c.cy, r_eq + pad + 1.0, None)
     local_bg = _median(ring) if ring.size else bg

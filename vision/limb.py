@@ -171,7 +171,8 @@ def _refit_cone(v: NDArray[np.float64], keep: NDArray[np.bool_], tol_rad: float,
     return axis, keep
 
 
-def contained_limb_centre(pts: NDArray[np.float64], camera: CameraModel, tol_px: float = 0.7
+def contained_limb_centre(pts: NDArray[np.float64], camera: CameraModel, tol_px: float = 0.7,
+                          n_trials: int = _CONTAINED_TRIALS
                           ) -> tuple[float, float, float] | None:
     """The sun's centre from the limb of its saturated core when cloud has grown the core
     on one side: the small circle on the sphere (a cone about the sun's direction) that
@@ -185,7 +186,8 @@ def contained_limb_centre(pts: NDArray[np.float64], camera: CameraModel, tol_px:
     lying inside it (the clear-sky disc is contained in the core) picks the clear arc.
     The cone is fitted on the camera's sphere (a wide glare is an oval in a fisheye
     image); its axis is the normal of the least-squares plane through the inliers. Tolerance:
-    max(``tol_px`` / px-per-radian, 2 % of the half-angle). Returns
+    max(``tol_px`` / px-per-radian, 2 % of the half-angle); ``n_trials`` RANSAC triples.
+    Returns
     ``(x, y, inlier_fraction)``, or None with too few usable points.
     """
     x, y = pts[:, 0], pts[:, 1]
@@ -205,7 +207,7 @@ def contained_limb_centre(pts: NDArray[np.float64], camera: CameraModel, tol_px:
     spread = float(np.arccos(min(1.0, cos_spread)))
     ext = max(float(x.max() - x.min()), float(y.max() - y.min()))
     tol = tol_px * spread / max(0.5 * ext, 1.0)
-    keep = _ransac_cone(v, tol, n_trials=_CONTAINED_TRIALS, rel_tol=_CONTAINED_REL_TOL,
+    keep = _ransac_cone(v, tol, n_trials=n_trials, rel_tol=_CONTAINED_REL_TOL,
                         inside_penalty=3.0, v_sum=v_sum)
     if keep.sum() < 6:
         return None

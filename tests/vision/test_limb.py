@@ -53,3 +53,52 @@ def test_a_core_grown_by_cloud_is_centred_on_its_clear_arc() -> None:
     # ... while the circle through the clear arc that contains the core stays on the sun
     # (measured 0.08 px)
     assert np.hypot(got[0] - sx, got[1] - sy) < 0.3
+
+
+def test_outline_on_the_image_circle_edge_is_not_limb() -> None:
+    """A core running into the image circle: its outline along the circle's edge is the
+    edge, not the sun's limb — also where the frame just beyond the mask is below the
+    threshold (the lens's fall-off) and where the outline runs radially from the core's
+    centroid (there the step outward stays beside the cut)."""
+    from vision.detect import _disc_region, _Region, _true_limb
+    from vision.detection import FovCircle
+
+    fov = FovCircle(100.0, 100.0, 80.0)
+    gray = np.full((200, 200), 60, np.uint8)
+    cv2.circle(gray, (100, 100), 80, 120, -1)
+    cv2.circle(gray, (165, 100), 40, 255, -1)  # the core, cut by the image circle
+    cv2.circle(gray, (100, 100), 83, 200, 5)  # the lens's fall-off just beyond the mask
+    work = _disc_region(_Region(gray, 0, 0), 100, 100, 80)
+    core = (work.pixels >= 250).astype(np.uint8)
+    contours, _ = cv2.findContours(core, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    pts = max(contours, key=len).reshape(-1, 2).astype(float)
+    pts[:, 0] += work.x0
+    pts[:, 1] += work.y0
+    m = cv2.moments(core, True)
+    cx, cy = m["m10"] / m["m00"] + work.x0, m["m01"] / m["m00"] + work.y0
+    on_edge = np.hypot(pts[:, 0] - 100.0, pts[:, 1] - 100.0) > 80.0 - 2.5
+    assert on_edge.sum() > 20
+    limb, share = _true_limb(gray, work, pts, cx, cy, 249.5, fov)
+    # every point left is on the core's own circle (radius 40 about (165, 100)); before,
+    # every edge point was kept as limb (26 px off that circle)
+    assert len(limb) == int((~on_edge).sum())
+    assert np.all(np.abs(np.hypot(limb[:, 0] - 165.0, limb[:, 1] - 100.0) - 40.0) < 1.5)
+    assert abs(share - on_edge.mean()) < 1e-9
+
+
+def test_a_low_sun_glare_cut_by_the_image_circle() -> None:
+    """Development scene 17 of the second renderer (cirrus, the sun 9° high, 10 px/°): a
+    ~13° saturated core cut by the image circle, stretched along its edge by the cloud's
+    forward scattering. Before, the contained circle held 23 % of the outline, too little,
+    and the plain RANSAC circle through the outline slid along the edge: 5.55° (76 px).
+    Now a core cut by the image circle keeps the contained circle (measured 1.41°)."""
+    from vision.detect import detect_sun
+    from vision.skyrender import random_scene, render
+    from vision.sphere import angular_separation_deg
+
+    s = random_scene(17)
+    assert (s.sky, s.width_px, s.height_px) == ("cirrus", 2560, 1920)
+    d = detect_sun(render(s).image, camera=s.camera)
+    assert d.sun_found and d.centroid_px is not None
+    az, el = s.camera.pixel_to_sky(*d.centroid_px)
+    assert angular_separation_deg(az, el, s.azimuth_deg, s.elevation_deg) < 1.6
