@@ -51,6 +51,8 @@ def test_overview_shows_charts_with_data(page, server) -> None:
     # Today may be early morning in the site's zone: go to yesterday, a full back-filled day.
     page.click("#day-prev")
     page.wait_for_selector(f'body[data-overview-loaded="{server.site["site_id"]}/{yesterday}"]')
+    # the twin under the measured sky is drawn when it arrives, after the page is loaded
+    page.wait_for_selector(f'body[data-overview-weather="{server.site["site_id"]}/{yesterday}"]')
     assert _points(page, "chart-power") > 100, "power chart holds no points for a back-filled day"
     assert _points(page, "chart-daily") > 0
     assert _points(page, "chart-cumulative") > 0
