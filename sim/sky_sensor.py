@@ -172,12 +172,7 @@ def invert_poa(power_w: np.ndarray, clear: pd.DataFrame, array: pv.ArrayConfig,
     beam_clear = np.divide(clear["beam_clear"].to_numpy(), poa_clear,
                            out=np.zeros(n), where=poa_clear > 0)
     stc_w = float(pv.cec_module_parameters(array.module)["STC"]) * array.modules
-    flag = np.zeros(n, dtype=np.int64)
-    night = (clear["apparent_elevation"].to_numpy() < 2.0) | (poa_clear < 20.0)
-    flag[night] |= FLAGS["night"]
-    flag[~np.isfinite(p)] |= FLAGS["missing"]
-    flag[~night & np.isfinite(p) & (p <= 0.005 * stc_w) & (poa_clear > 200.0)] |= FLAGS["zero"]
-    flag[~night & _stale(p)] |= FLAGS["stale"]
+    flag = _reading_flags(p, clear, 0.005 * stc_w)
     if saturation_power_w is not None:
         flag[np.isfinite(p) & (p >= 0.995 * saturation_power_w)] |= FLAGS["saturated"]
     todo = flag == 0
@@ -202,6 +197,21 @@ def invert_poa(power_w: np.ndarray, clear: pd.DataFrame, array: pv.ArrayConfig,
     flag[too_high] |= FLAGS["above_clear_sky"]
     g[too_high] = np.nan
     return pd.DataFrame({"poa_global": g, "flag": flag}, index=clear.index)
+
+
+def _reading_flags(values: np.ndarray, clear: pd.DataFrame, zero_at: float) -> np.ndarray:
+    """:data:`FLAGS` a reading (power, or a measured irradiance) gets before any model:
+    night (sun below 2° or clear-sky POA below 20 W m⁻²), missing (NaN), zero (≤
+    ``zero_at`` while the clear sky gives > 200 W m⁻²), stale (:func:`_stale`)."""
+    poa_clear = clear["poa_clear"].to_numpy()
+    flag = np.zeros(values.size, dtype=np.int64)
+    night = (clear["apparent_elevation"].to_numpy() < 2.0) | (poa_clear < 20.0)
+    flag[night] |= FLAGS["night"]
+    flag[~np.isfinite(values)] |= FLAGS["missing"]
+    flag[~night & np.isfinite(values) & (values <= zero_at) & (poa_clear > 200.0)] |= \
+        FLAGS["zero"]
+    flag[~night & _stale(values)] |= FLAGS["stale"]
+    return flag
 
 
 def _stale(p: np.ndarray) -> np.ndarray:
@@ -390,18 +400,13 @@ SENSOR_SKIES = (("sensor_ghi", "ghi_w_m2"), ("sensor_poa", "fixed_poa_w_m2"))
 
 
 def sensor_flags(irradiance_w_m2: np.ndarray, clear: pd.DataFrame) -> np.ndarray:
-    """:data:`FLAGS` of a measured irradiance on the plane of ``clear``: night, missing,
-    zero (≤ 2 W m⁻² under a clear-sky 200), stale, above the clear sky (as
+    """:data:`FLAGS` of a measured irradiance on the plane of ``clear``: those of any
+    reading (:func:`_reading_flags`, zero at ≤ 2 W m⁻²) and above the clear sky (as
     :func:`invert_poa` flags an inverted POA)."""
     g = np.asarray(irradiance_w_m2, dtype=float)
-    poa_clear = clear["poa_clear"].to_numpy()
-    flag = np.zeros(g.size, dtype=np.int64)
-    night = (clear["apparent_elevation"].to_numpy() < 2.0) | (poa_clear < 20.0)
-    flag[night] |= FLAGS["night"]
-    flag[~np.isfinite(g)] |= FLAGS["missing"]
-    flag[~night & np.isfinite(g) & (g <= 2.0) & (poa_clear > 200.0)] |= FLAGS["zero"]
-    flag[~night & _stale(np.nan_to_num(g))] |= FLAGS["stale"]
-    flag[np.isfinite(g) & (g > 1.25 * poa_clear + 50.0)] |= FLAGS["above_clear_sky"]
+    flag = _reading_flags(g, clear, 2.0)
+    flag[np.isfinite(g) & (g > 1.25 * clear["poa_clear"].to_numpy() + 50.0)] |= \
+        FLAGS["above_clear_sky"]
     return flag
 
 
