@@ -28,7 +28,7 @@ import pandas as pd
 from sqlalchemy import Connection, delete, insert, select
 
 from backend.diagnosis.faults import day_features, faults_over_days
-from backend.diagnosis.weather_twin import minute_grid, sky_sensors, sky_source
+from backend.diagnosis.weather_twin import site_minutes, sky_source
 from backend.errors import InputError
 from backend.measurements.queries import period_edges
 from backend.sites import SiteInfo
@@ -108,12 +108,10 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
             runs.append([i])
     for run in runs:
         t0, t1 = int(edges[run[0]].timestamp()), int(edges[run[-1] + 1].timestamp())
-        with ctx.engine.connect() as conn:
-            tr, tr_s = minute_grid(conn, tracker.array_id, t0, t1)
-            fx, fx_s = minute_grid(conn, fixed.array_id, t0, t1)
+        tr, fx, sensors = site_minutes(ctx, info, t0, t1)
         start = pd.Timestamp(t0, unit="s", tz="UTC")
         e = sky_sensor.weather_aware_twin(info.site, start, start + pd.Timedelta(
-            seconds=(t1 - t0) // 60 * 60), fx, sensors=sky_sensors(fx_s, tr_s))
+            seconds=(t1 - t0) // 60 * 60), fx, sensors=sensors)
         for i in run:
             a = (int(edges[i].timestamp()) - t0) // 60
             b = (int(edges[i + 1].timestamp()) - t0) // 60

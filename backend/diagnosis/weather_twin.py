@@ -62,6 +62,20 @@ def sky_sensors(fixed: np.ndarray, tracker: np.ndarray | None) -> pd.DataFrame |
     return pd.DataFrame(out)
 
 
+def site_minutes(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int
+                 ) -> tuple[np.ndarray, np.ndarray, pd.DataFrame | None]:
+    """The tracker's and the fixed array's measured power [W] on the minute grid of
+    ``[t0, t1)`` (NaN where no reading; the tracker's all NaN on a site without one) and
+    the loggers' sky sensors (:func:`sky_sensors`). The site has a fixed array."""
+    tracker, fixed = info.array_of_kind("tracker"), info.array_of_kind("fixed")
+    assert fixed is not None
+    with ctx.engine.connect() as conn:
+        fx, fx_s = minute_grid(conn, fixed.array_id, t0, t1)
+        tr, tr_s = (np.full(fx.size, np.nan), None) if tracker is None \
+            else minute_grid(conn, tracker.array_id, t0, t1)
+    return tr, fx, sky_sensors(fx_s, tr_s)
+
+
 def sky_source(e: pd.DataFrame) -> tuple[str, str | None]:
     """What most of the daylight minutes of ``e`` (:func:`weather_twin`) rest on:
     ``"sensor"``, ``"fixed_array"`` or ``"clear_sky"``, and the sensor's reading
@@ -88,13 +102,10 @@ def weather_twin(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int) -> pd.Da
         raise InputError(422, f"source=twin_weather is computed on request: at most {MAX_DAYS} "
                               "days (the diagnosis gives its daily energy for longer ranges)")
     t0, t1 = t0 // 60 * 60, -(-t1 // 60) * 60
-    tracker = info.array_of_kind("tracker")
-    with ctx.engine.connect() as conn:
-        fx, fx_s = minute_grid(conn, fixed.array_id, t0, t1)
-        tr_s = None if tracker is None else minute_grid(conn, tracker.array_id, t0, t1)[1]
+    _, fx, sensors = site_minutes(ctx, info, t0, t1)
     start = pd.Timestamp(t0, unit="s", tz="UTC")
     return sky_sensor.weather_aware_twin(info.site, start, pd.Timestamp(t1, unit="s", tz="UTC"),
-                                         fx, sensors=sky_sensors(fx_s, tr_s))
+                                         fx, sensors=sensors)
 
 
 def weather_twin_columns(ctx: ServiceContext, info: SiteInfo, array: str, t0: int,
