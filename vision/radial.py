@@ -86,6 +86,7 @@ def _tangent(camera: CameraModel, x: NDArray[np.float64], y: NDArray[np.float64]
     return (v @ e1) / d, (v @ e2) / d
 
 
+# a 2 × 2 erosion / dilation anchored at its first pixel: the four pixels of a corner
 _TWO = np.ones((2, 2), np.uint8)
 _THREE = np.ones((3, 3), np.uint8)
 
@@ -113,11 +114,9 @@ def gradient_lines(gray: NDArray[np.uint8], x0: int, y0: int, x1: int, y1: int,
     d_v: NDArray[Any] = cv2.blur(win[:-1, :-1] - win[1:, 1:], (3, 3))  # along (−x, −y)
     gx = 0.5 * (d_u - d_v)
     gy = -0.5 * (d_u + d_v)
-    # a 2 × 2 erosion / dilation anchored at its first pixel: the four pixels of a corner
-    two = _TWO
     if saturated_level <= 255.0:
         sat = cv2.dilate((raw >= saturated_level).view(np.uint8), _THREE)
-        clip4 = cv2.dilate(sat, two, anchor=(0, 0))[:-1, :-1] > 0  # the blur's reach
+        clip4 = cv2.dilate(sat, _TWO, anchor=(0, 0))[:-1, :-1] > 0  # the blur's reach
         gx = np.where(clip4, gx, gx - np.float32(sky_gradient[0]))
         gy = np.where(clip4, gy, gy - np.float32(sky_gradient[1]))
     else:
@@ -127,9 +126,9 @@ def gradient_lines(gray: NDArray[np.uint8], x0: int, y0: int, x1: int, y1: int,
             gy -= np.float32(sky_gradient[1])
     g2 = gx * gx + gy * gy
     ok = cv2.erode((raw >= dark_level).view(np.uint8), _THREE, borderType=cv2.BORDER_REPLICATE)
-    ok4 = np.asarray(cv2.erode(ok, two, anchor=(0, 0))[:-1, :-1], np.uint8)
+    ok4 = np.asarray(cv2.erode(ok, _TWO, anchor=(0, 0))[:-1, :-1], np.uint8)
     if glare_level > 0:
-        hi = np.asarray(cv2.dilate((raw >= glare_level).view(np.uint8), two, anchor=(0, 0)),
+        hi = np.asarray(cv2.dilate((raw >= glare_level).view(np.uint8), _TWO, anchor=(0, 0)),
                         np.uint8)
         ok4 &= hi[:-1, :-1]
     gmax = float(g2.max()) if g2.size else 0.0
