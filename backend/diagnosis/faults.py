@@ -86,6 +86,16 @@ def _power_at(site: Site, day: pd.DataFrame, tilt: np.ndarray, surf_az: np.ndarr
     return pv.array_mpp(e_eff, t_cell, arr)["power_w"].reshape(shape)
 
 
+def missing_daylight_min(day: pd.DataFrame, measured_w: np.ndarray,
+                         elapsed_min: int | None = None) -> int:
+    """Minutes with the sun over 5° and no tracker reading; of a day not yet over, only
+    those of its first ``elapsed_min`` minutes (what is still to come is not missing)."""
+    gap = (day["apparent_elevation"].to_numpy() > 5.0) & ~np.isfinite(measured_w)
+    if elapsed_min is not None:
+        gap[elapsed_min:] = False
+    return int(gap.sum())
+
+
 def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray) -> dict[str, Any]:
     """The fitted explanations of one day (see the module docstring), JSON-ready.
 
@@ -96,7 +106,7 @@ def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray) -> dict[
         day["apparent_elevation"].to_numpy() > 5.0)
     daylight = day["apparent_elevation"].to_numpy() > 5.0
     out: dict[str, Any] = {"minutes": int(use.sum()),
-                           "missing_daylight_min": int((daylight & ~np.isfinite(measured_w)).sum())}
+                           "missing_daylight_min": missing_daylight_min(day, measured_w)}
     if use.sum() < 60:
         return out
     m = measured_w[use]

@@ -10,7 +10,10 @@ performance ratio, gains and the day's fault features
 ``diagnosis_days`` (written through the one writer) and deleted by the writer when
 readings of that day arrive, and ignored when it was computed by another version of this
 code (:data:`CACHE_VERSION`); the faults across days (``since``, steps) are
-recomputed from the cached days on every request.
+recomputed from the cached days on every request. A day not yet over (``complete``
+false: today, or a day to come) is judged on its minutes before now only — the
+minutes still to come are not missing readings — with no shape fault (half a day
+does not show one), and it is never cached.
 
 ``expected_wh_low``/``expected_wh_high``: the spread of the two decompositions of the
 same POA (GTI-DIRINT, clear-sky ratio + Erbs) widened by :data:`INVERSION_UNCERTAINTY`
@@ -20,6 +23,7 @@ same POA (GTI-DIRINT, clear-sky ratio + Erbs) widened by :data:`INVERSION_UNCERT
 from __future__ import annotations
 
 import datetime as dt
+import time
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -27,7 +31,7 @@ import orjson
 import pandas as pd
 from sqlalchemy import Connection, delete, insert, select
 
-from backend.diagnosis.faults import day_features, faults_over_days
+from backend.diagnosis.faults import day_features, faults_over_days, missing_daylight_min
 from backend.diagnosis.weather_twin import site_minutes, sky_source
 from backend.errors import InputError
 from backend.measurements.queries import period_edges
@@ -41,8 +45,9 @@ if TYPE_CHECKING:
 MAX_DAYS = 400
 INVERSION_UNCERTAINTY = 0.03  # relative, on the expected tracker energy [-]
 #: Raised whenever a day's payload or the way it is computed changes: cached days of
-#: another version are computed again (2: the sky from irradiance sensors).
-CACHE_VERSION = 2
+#: another version are computed again (2: the sky from irradiance sensors; 3: ``complete``,
+#: and a day not yet over judged up to now and never cached).
+CACHE_VERSION = 3
 
 
 def _wh(p: np.ndarray) -> float | None:
@@ -55,8 +60,9 @@ def _gain(tr: float | None, fx: float | None) -> float | None:
 
 
 def _day_payload(info: SiteInfo, date: str, e: pd.DataFrame, tracker_w: np.ndarray,
-                 fixed_w: np.ndarray) -> dict[str, Any]:
-    """One day's answer (without faults) and its fault features."""
+                 fixed_w: np.ndarray, elapsed_min: int | None = None) -> dict[str, Any]:
+    """One day's answer (without faults) and its fault features; ``elapsed_min``: the
+    minutes of a day not yet over that lie before now (None: the day is over)."""
     daylight = e["poa_clear"].to_numpy() > 20.0
     valid = e["valid"].to_numpy(bool)
     share = float(valid[daylight].mean()) if daylight.any() else 0.0
@@ -72,9 +78,14 @@ def _day_payload(info: SiteInfo, date: str, e: pd.DataFrame, tracker_w: np.ndarr
     matched = float(e["tracker_power_w"].to_numpy()[has].sum() / 60.0)
     measured_tr, measured_fx = _wh(tracker_w), _wh(fixed_w)
     has_f = np.isfinite(fixed_w)
+    # a shape fault needs a whole day with a measured sky; a dropout only the minutes so far
+    features = day_features(info.site, e, tracker_w) \
+        if elapsed_min is None and source != "clear_sky" \
+        else {"missing_daylight_min": missing_daylight_min(e, tracker_w, elapsed_min)}
     matched_f = float(e["fixed_power_w"].to_numpy()[has_f].sum() / 60.0)
     return {
         "date": date,
+        "complete": elapsed_min is None,
         "sky": {"clearness_index": None if k_t is None else round(k_t, 4), "source": source,
                 "sensor": sensor, "valid_minutes_pct": round(100.0 * share, 1)},
         "tracker": {
@@ -88,14 +99,14 @@ def _day_payload(info: SiteInfo, date: str, e: pd.DataFrame, tracker_w: np.ndarr
                   else measured_fx / matched_f},
         "gain_measured_pct": _gain(measured_tr, measured_fx),
         "gain_expected_pct": _gain(exp_a, exp_fixed),
-        "features": day_features(info.site, e, tracker_w) if source != "clear_sky"
-        else {"missing_daylight_min": int((daylight & ~has).sum())},
+        "features": features,
     }
 
 
 def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
-             todo: list[int]) -> dict[int, dict[str, Any]]:
-    """Payloads of the days ``todo`` (indices into ``edges``), run by contiguous stretches."""
+             todo: list[int], now_s: float) -> dict[int, dict[str, Any]]:
+    """Payloads of the days ``todo`` (indices into ``edges``), run by contiguous stretches;
+    days ending after ``now_s`` [s since the epoch] are judged up to it."""
     tracker, fixed = info.array_of_kind("tracker"), info.array_of_kind("fixed")
     if tracker is None or fixed is None:
         raise InputError(422, f"site {info.site_id!r} needs a tracker and a fixed array")
@@ -116,13 +127,18 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
             a = (int(edges[i].timestamp()) - t0) // 60
             b = (int(edges[i + 1].timestamp()) - t0) // 60
             date = edges[i].astimezone(info.zone).date().isoformat()
-            out[i] = _day_payload(info, date, e.iloc[a:b], tr[a:b], fx[a:b])
+            day_start_s = int(edges[i].timestamp())
+            elapsed = None if edges[i + 1].timestamp() <= now_s \
+                else max(0, int(now_s - day_start_s) // 60)
+            out[i] = _day_payload(info, date, e.iloc[a:b], tr[a:b], fx[a:b], elapsed)
     return out
 
 
 def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
-              end: dt.datetime) -> dict[str, Any]:
-    """The diagnosis answer of DESIGN.md for a validated range."""
+              end: dt.datetime, now_s: float | None = None) -> dict[str, Any]:
+    """The diagnosis answer of DESIGN.md for a validated range; ``now_s`` [s since the
+    epoch] (default: the clock) ends the days not yet over."""
+    now = time.time() if now_s is None else now_s
     if (end - start).total_seconds() > (MAX_DAYS + 1) * 86400:
         raise InputError(422, f"end: the range spans over {MAX_DAYS} days; ask for less")
     edges = period_edges(start, end, "day", info.zone)
@@ -135,13 +151,14 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
     cached = {r[0]: p for r in rows
               if r[1] == int(edges[starts.index(r[0]) + 1].timestamp())
               and (p := orjson.loads(r[2])).get("cache_version") == CACHE_VERSION}
-    todo = [i for i, s in enumerate(starts) if s not in cached]
-    fresh = _compute(ctx, info, edges, todo) if todo else {}
-    if fresh:
-        values = [{"site_id": info.site_id, "day_start_s": starts[i],
-                   "day_end_s": int(edges[i + 1].timestamp()),
-                   "payload_json": orjson.dumps({**p, "cache_version": CACHE_VERSION}).decode()}
-                  for i, p in fresh.items()]
+    over = [edges[i + 1].timestamp() <= now for i in range(len(starts))]
+    todo = [i for i, s in enumerate(starts) if s not in cached or not over[i]]
+    fresh = _compute(ctx, info, edges, todo, now) if todo else {}
+    values = [{"site_id": info.site_id, "day_start_s": starts[i],
+               "day_end_s": int(edges[i + 1].timestamp()),
+               "payload_json": orjson.dumps({**p, "cache_version": CACHE_VERSION}).decode()}
+              for i, p in fresh.items() if over[i]]
+    if values:
 
         def store(conn: Connection) -> None:
             conn.execute(delete(DiagnosisDay).where(

@@ -40,14 +40,17 @@ const SKY_WORDS = {
   clear_sky: "the clear sky (too few readings)",
 };
 
-/** What the days' skies rest on, e.g. "Sky: 5 days from an irradiance sensor (ghi_w_m2), 2 from …". */
+/** What the days' skies rest on, e.g. "Sky: 5 days from an irradiance sensor (ghi_w_m2), 2 from …",
+ * and which days are not over yet (judged on their minutes so far). */
 export function skyLine(days) {
   const count = new Map();
   for (const d of days) {
     const key = d.sky.source === "sensor" && d.sky.sensor ? `${SKY_WORDS.sensor} (${d.sky.sensor})` : SKY_WORDS[d.sky.source] || d.sky.source;
     count.set(key, (count.get(key) || 0) + 1);
   }
-  return `Sky: ${[...count].map(([k, n]) => `${n} day${n === 1 ? "" : "s"} from ${k}`).join(", ")}.`;
+  const open = days.filter((d) => d.complete === false).map((d) => shortDate(d.date));
+  const note = open.length ? ` Not over yet, judged on the minutes so far: ${open.join(", ")}.` : "";
+  return `Sky: ${[...count].map(([k, n]) => `${n} day${n === 1 ? "" : "s"} from ${k}`).join(", ")}.${note}`;
 }
 
 let requested = 0; // the latest load; an older one that answers later is dropped

@@ -26,9 +26,9 @@ export function h(tag, attrs = {}, ...children) {
 
 /** A number with fixed decimals, or an em dash when missing. */
 export function num(v, digits = 0) {
-  return typeof v === "number" && Number.isFinite(v)
-    ? v.toLocaleString(undefined, { minimumFractionDigits: digits, maximumFractionDigits: digits })
-    : "—";
+  if (typeof v !== "number" || !Number.isFinite(v)) return "—";
+  const shown = Math.abs(v) * 10 ** digits < 0.5 ? 0 : v; // what rounds to zero has no sign ("-0.00")
+  return shown.toLocaleString(undefined, { minimumFractionDigits: digits, maximumFractionDigits: digits });
 }
 
 /** Energy in Wh shown as kWh above 1 kWh. */

@@ -190,3 +190,48 @@ def test_a_cached_day_of_another_version_is_computed_again(client, live_server) 
         assert again["days"][0]["tracker"]["expected_wh"] == -1.0
     finally:
         engine.dispose()
+
+
+def test_a_day_not_yet_over_is_judged_up_to_now(client, live_server) -> None:
+    """At noon of a day (``now_s``), with the tracker's logger silent since 10:00 and the
+    fixed one reporting: a dropout of exactly the 120 daylight minutes 10:00–12:00 — the
+    afternoon still to come is not missing — the day marked not complete and not cached.
+    The same day asked once it is over counts the whole silent afternoon."""
+    import sqlalchemy as sa
+
+    from backend.context import open_context
+    from backend.diagnosis.service import diagnosis
+    from backend.settings import get_settings
+
+    site = load_site("tehuantepec")
+    first = "2025-10-06"
+    day0 = pd.Timestamp(first, tz=site.timezone)
+    d = logger_days(site, day0, 1, seed=25)
+    noon, ten = day0 + pd.Timedelta(hours=12), day0 + pd.Timedelta(hours=10)
+    before_noon, before_ten = d.times < noon, d.times < ten
+    _post(client, live_server.write_token,
+          _readings(d.times[before_noon], d.fixed_power_w[before_noon], "fixed")
+          + _readings(d.times[before_ten], d.tracker_power_w[before_ten], "tracker"))
+    ctx = open_context(get_settings(database_url=live_server.database_url,
+                                    sites_dir=get_settings().sites_dir))
+    try:
+        info = ctx.registry.sites["tehuantepec"]
+        end = (day0 + pd.Timedelta(days=1)).to_pydatetime()
+        body = diagnosis(ctx, info, day0.to_pydatetime(), end, now_s=noon.timestamp())
+        day = body["days"][0]
+        assert day["complete"] is False
+        assert [(f["kind"], f["magnitude"]) for f in day["faults"]] == [("dropout", 120.0)]
+        with ctx.engine.connect() as conn:
+            cached = conn.execute(sa.text(
+                "SELECT count(*) FROM diagnosis_days WHERE site_id = 'tehuantepec' "
+                "AND day_start_s = :s"), {"s": int(day0.timestamp())}).scalar_one()
+        assert cached == 0
+    finally:
+        ctx.close()
+    over = client.get(f"{BASE}/diagnosis", params={"start": first, "end": "2025-10-07"},
+                      timeout=120).json()["days"][0]
+    daylight_after_ten = int(((d.times >= ten) & (d.healthy_tracker_power_w > 0)).sum())
+    assert over["complete"] is True
+    silent = [f["magnitude"] for f in over["faults"] if f["kind"] == "dropout"]
+    assert silent and silent[0] > 300 and abs(silent[0] - daylight_after_ten) < 40, (
+        silent, daylight_after_ten)

@@ -12,7 +12,7 @@ from tests.e2e.conftest import BACKFILL_DAYS
 
 
 def test_diagnosis_panel_matches_the_api(page, server) -> None:
-    end = server.today()
+    end = server.today() + dt.timedelta(days=1)  # today too: a day not over yet
     start = end - dt.timedelta(days=min(BACKFILL_DAYS, 3))
     body = httpx.get(f"{server.url}/api/v1/sites/{server.site['site_id']}/diagnosis",
                      params={"start": start.isoformat(), "end": end.isoformat()},
@@ -42,6 +42,8 @@ def test_diagnosis_panel_matches_the_api(page, server) -> None:
     sky = page.locator("[data-testid=diag-sky]").inner_text()
     assert sky.startswith("Sky: ") and (
         f"{n_fixed} day{'' if n_fixed == 1 else 's'} from the fixed array's power" in sky), sky
+    assert [d["complete"] for d in body["days"]] == [True] * (len(body["days"]) - 1) + [False]
+    assert "Not over yet, judged on the minutes so far: " in sky, sky
     page.locator("#diagnosis-card").screenshot(path="test-artifacts/e2e-diagnosis-card.png")
     # the demo logger reports the tracker's encoder angles: their pointing error is charted
     pointing = httpx.get(f"{server.url}/api/v1/sites/{server.site['site_id']}/pointing",
