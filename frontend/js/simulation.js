@@ -182,12 +182,16 @@ async function drawPointing(runId, rows, x, day) {
   $("sim-pointing-title").textContent = day ? `Pointing error on ${day}, the run's first day` : "Pointing error";
   const sunEl = (r) => colValue(r, SUN_ELEVATION);
   const y = rows.map((r) => (sunEl(r) > 0 ? colValue(r, "pointing_error_mrad") : null));
+  // an ideal tracker's error is rounding noise (1e-13 mrad): drawn flat on a 0–1 mrad axis,
+  // not autoscaled into femto-units
+  const peak = y.reduce((m, v) => (v !== null && v > m ? v : m), 0);
+  const scale = peak < 0.05 ? { range: [0, 1], autorange: false } : { rangemode: "tozero" };
   await draw("chart-sim-pointing", [{
     x, y, name: "pointing error", type: "scatter", mode: "lines", line: { color: COLORS.tracker, width: 1.6 },
     hovertemplate: "%{y:.2f} mrad",
   }], baseLayout({
     xaxis: { type: "date", title: { text: `Local time (${st.tz})` }, gridcolor: "#e9edf1" },
-    yaxis: { title: { text: "Panel normal to sun [mrad]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
+    yaxis: { title: { text: "Panel normal to sun [mrad]" }, ...scale, gridcolor: "#e9edf1" },
   }), {
     columns: ["time_utc", "time_local", "pointing_error_mrad"],
     rows: rows.map((r, i) => [r.ts, localIso(st.tz, r.ts), y[i]]),
