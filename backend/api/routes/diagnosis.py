@@ -23,7 +23,8 @@ def get_diagnosis(
     start: RangeStart,
     end: RangeEnd,
 ) -> Response:
-    """Per local day: sky, measured and expected energy, PR, gains and faults."""
+    """Per local day: sky, measured and expected energy, PR, gains and faults; a day not
+    yet over (``complete`` false) is judged on its minutes before now."""
     info = site_or_404(ctx, site_id)
     try:
         t0, t1 = parse_range(start, end, info.zone)
