@@ -151,13 +151,12 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
     cached = {r[0]: p for r in rows
               if r[1] == int(edges[starts.index(r[0]) + 1].timestamp())
               and (p := orjson.loads(r[2])).get("cache_version") == CACHE_VERSION}
-    over = [edges[i + 1].timestamp() <= now for i in range(len(starts))]
-    todo = [i for i, s in enumerate(starts) if s not in cached or not over[i]]
+    todo = [i for i, s in enumerate(starts) if s not in cached]  # only days over are cached
     fresh = _compute(ctx, info, edges, todo, now) if todo else {}
     values = [{"site_id": info.site_id, "day_start_s": starts[i],
                "day_end_s": int(edges[i + 1].timestamp()),
                "payload_json": orjson.dumps({**p, "cache_version": CACHE_VERSION}).decode()}
-              for i, p in fresh.items() if over[i]]
+              for i, p in fresh.items() if p["complete"]]
     if values:
 
         def store(conn: Connection) -> None:
