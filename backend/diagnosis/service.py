@@ -124,12 +124,10 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
         e = sky_sensor.weather_aware_twin(info.site, start, start + pd.Timedelta(
             seconds=(t1 - t0) // 60 * 60), fx, sensors=sensors)
         for i in run:
-            a = (int(edges[i].timestamp()) - t0) // 60
-            b = (int(edges[i + 1].timestamp()) - t0) // 60
+            day_start_s, day_end_s = int(edges[i].timestamp()), int(edges[i + 1].timestamp())
+            a, b = (day_start_s - t0) // 60, (day_end_s - t0) // 60
             date = edges[i].astimezone(info.zone).date().isoformat()
-            day_start_s = int(edges[i].timestamp())
-            elapsed = None if edges[i + 1].timestamp() <= now_s \
-                else max(0, int(now_s - day_start_s) // 60)
+            elapsed = None if day_end_s <= now_s else max(0, int(now_s - day_start_s) // 60)
             out[i] = _day_payload(info, date, e.iloc[a:b], tr[a:b], fx[a:b], elapsed)
     return out
 
