@@ -19,7 +19,8 @@ from sim.plant.layout import (
 )
 from sim.sun import solar_position
 
-TABLE1 = Path(__file__).resolve().parents[4] / "shared" / "reference" / "seed004_penarroya.csv"
+# seed 004 Table 1, copied in from the shared reference folder (tests/data/reference/README.md)
+TABLE1 = Path(__file__).resolve().parents[2] / "data" / "reference" / "seed004_penarroya.csv"
 
 
 def test_penarroya_matches_seed_table_1() -> None:
