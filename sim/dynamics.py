@@ -89,6 +89,8 @@ __all__ = [
     "potential_energy",
     "forward_dynamics",
     "move_profile",
+    "trapezoid_motion",
+    "trapezoid_duration",
     "TorqueFn",
 ]
 
@@ -504,19 +506,77 @@ def move_profile(
             raise ValueError(f"{name} must be a positive number, got {value}")
     if not math.isfinite(delta_rad):
         raise ValueError(f"delta_rad must be finite, got {delta_rad}")
-    dist = abs(delta_rad)
-    sign = 1.0 if delta_rad >= 0 else -1.0
-    v = min(max_rate_rad_s, math.sqrt(dist * max_accel_rad_s2))
-    if v == 0.0:
+    total = float(trapezoid_duration(delta_rad, max_rate_rad_s, max_accel_rad_s2))
+    if total == 0.0:
         z = np.zeros(1)
         return z, z.copy(), z.copy(), z.copy()
-    ta = v / max_accel_rad_s2  # acceleration phase
-    tc = dist / v - ta  # cruise phase (0 for a triangle)
-    total = 2.0 * ta + tc
     n = math.ceil(total / dt_s - 1e-9)
     t = np.arange(n + 1, dtype=float) * dt_s
-    tt = np.minimum(t, total)
-    a = max_accel_rad_s2
+    q, qd, qdd = trapezoid_motion(delta_rad, max_rate_rad_s, max_accel_rad_s2, t)
+    return t, q, qd, qdd
+
+
+_TINY = float(np.finfo(float).tiny)
+_FloatOrArray = float | NDArray[np.float64]
+
+
+def _trapezoid_phases(
+    delta: ArrayLike, max_rate: _FloatOrArray, max_accel: _FloatOrArray
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Peak rate, acceleration time, cruise time and |Δ| of trapezoidal moves (broadcast).
+
+    The peak rate is ``min(max_rate, sqrt(|Δ| max_accel))`` (a triangle when the
+    move is too short to reach ``max_rate``); a zero move has all four zero.
+    """
+    dist: NDArray[np.float64] = np.abs(np.asarray(delta, dtype=float))
+    v: NDArray[np.float64] = np.minimum(max_rate, np.sqrt(dist * max_accel))
+    ta: NDArray[np.float64] = v / max_accel
+    # v = 0 only for a zero move (|Δ| = 0, so tc = 0); any v > 0 is far above _TINY
+    tc: NDArray[np.float64] = dist / np.maximum(v, _TINY) - ta
+    return v, ta, tc, dist
+
+
+def trapezoid_duration(delta: ArrayLike, max_rate: _FloatOrArray, max_accel: _FloatOrArray
+                       ) -> NDArray[np.float64]:
+    """Duration of trapezoidal moves [s] (broadcast; 0 for a zero move).
+
+    ``delta``, ``max_rate`` [per s] and ``max_accel`` [per s²] in one angle unit
+    (rad or °): the profile of :func:`trapezoid_motion`.
+    """
+    _, ta, tc, _ = _trapezoid_phases(delta, max_rate, max_accel)
+    return 2.0 * ta + tc
+
+
+def trapezoid_motion(
+    delta: ArrayLike, max_rate: _FloatOrArray, max_accel: _FloatOrArray, t_s: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Displacement, rate and acceleration of trapezoidal moves at ``t_s`` (the one profile).
+
+    Accelerate at ``max_accel`` to the peak rate (see :func:`trapezoid_duration`),
+    cruise, decelerate at ``max_accel`` to rest. Every caller — :func:`move_profile`,
+    the tracker's axes and the move energies in :mod:`sim.tracking` — evaluates
+    this function, so the three cannot drift apart. The rule is unit-agnostic:
+    ``delta`` (signed), ``max_rate`` [per s] and ``max_accel`` [per s²] in one
+    angle unit (rad or °); all arguments broadcast.
+
+    Parameters
+    ----------
+    t_s : array_like
+        Time since the move's start [s]; before 0 the move has not started
+        (rest at 0), at or after the end it is over (rest at ``delta``).
+
+    Returns
+    -------
+    q, qd, qdd : ndarray
+        Signed displacement from the start, rate and acceleration; ``|q|``
+        never exceeds ``|delta|``.
+    """
+    delta_ = np.asarray(delta, dtype=float)
+    v, ta, tc, dist = _trapezoid_phases(delta_, max_rate, max_accel)
+    a = np.asarray(max_accel, dtype=float)
+    t = np.asarray(t_s, dtype=float)
+    total = 2.0 * ta + tc
+    tt = np.minimum(np.maximum(t, 0.0), total)
     t3 = np.maximum(tt - ta - tc, 0.0)  # time into deceleration
     acc_phase = tt < ta
     dec_phase = tt > ta + tc
@@ -527,7 +587,8 @@ def move_profile(
     qd = np.where(acc_phase, a * tt, np.where(dec_phase, v - a * t3, v))
     qdd = np.where(acc_phase, a, np.where(dec_phase, -a, 0.0))
     done = t >= total
-    q = np.where(done, dist, q)
+    q = np.where(done, dist, np.minimum(q, dist))
     qd = np.where(done, 0.0, qd)
     qdd = np.where(done, 0.0, qdd)
-    return t, sign * q, sign * qd, sign * qdd
+    sign = np.where(delta_ < 0, -1.0, 1.0)
+    return sign * q, sign * qd, sign * qdd

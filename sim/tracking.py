@@ -7,7 +7,7 @@ encoder readings (with their drift) and, when it asked for one, a camera frame
 rendered from the true pose (:func:`sim.frames.render_sun_roi`) and detected by
 :func:`vision.detect.detect_sun`. A command moves an idle axis along a speed-
 and acceleration-limited profile (the trapezoid of
-:func:`sim.dynamics.move_profile`); while it moves, later commands to that
+:func:`sim.dynamics.trapezoid_motion`); while it moves, later commands to that
 axis wait. Nights are skipped in one step once the tracker is stowed.
 
 Each move is logged (:class:`Move`); :func:`move_energies_wh` costs them
@@ -99,32 +99,19 @@ class Move(NamedTuple):
 
 
 def trapezoid_duration_s(delta_deg: float, rate: float, accel: float) -> float:
-    """Duration of a trapezoidal move [s] (as :func:`sim.dynamics.move_profile`)."""
-    d = abs(delta_deg)
-    v = min(rate, math.sqrt(d * accel))
-    if v == 0.0:
-        return 0.0
-    ta = v / accel
-    return 2.0 * ta + (d / v - ta)
+    """Duration of a trapezoidal move [s]: :func:`sim.dynamics.trapezoid_duration` in degrees
+    (``rate`` [° s⁻¹], ``accel`` [° s⁻²])."""
+    from sim.dynamics import trapezoid_duration
+
+    return float(trapezoid_duration(delta_deg, rate, accel))
 
 
 def _trapezoid_position(delta_deg: float, rate: float, accel: float, tt: float) -> float:
-    """Displacement after ``tt`` seconds of a trapezoidal move [°]."""
-    d = abs(delta_deg)
-    v = min(rate, math.sqrt(d * accel))
-    if v == 0.0:
-        return 0.0
-    ta = v / accel
-    tc = d / v - ta
-    tt = min(max(tt, 0.0), 2 * ta + tc)
-    if tt < ta:
-        q = 0.5 * accel * tt * tt
-    elif tt <= ta + tc:
-        q = 0.5 * accel * ta * ta + v * (tt - ta)
-    else:
-        t3 = tt - ta - tc
-        q = 0.5 * accel * ta * ta + v * tc + v * t3 - 0.5 * accel * t3 * t3
-    return math.copysign(min(q, d), delta_deg)
+    """Displacement after ``tt`` seconds of a trapezoidal move [°]
+    (:func:`sim.dynamics.trapezoid_motion` in degrees)."""
+    from sim.dynamics import trapezoid_motion
+
+    return float(trapezoid_motion(delta_deg, rate, accel, tt)[0])
 
 
 class _Axis:
@@ -375,14 +362,15 @@ def move_energies_wh(moves: list[Move], limits: DriveLimits, dt_s: float = 0.01,
                      ) -> tuple[NDArray[np.float64], float]:
     """Electrical energy of each move [Wh] and the total [Wh].
 
-    Each move's trapezoid is sampled every ``dt_s`` (its samples before the end, as
-    :func:`sim.dynamics.move_profile`'s); the moving joint's torque is seed 002's eq.
-    24 along it with the other joint at rest — for an azimuth move τ1 = M11(q2) q̈1
-    (V1 ∝ q̇2 and G1 vanish), for an elevation move τ2 = M22 q̈2 + G2(q2(t)) (V2 ∝ q̇1²
-    vanishes), with M and G from :mod:`sim.dynamics` — minus the gust torque on the
-    axis; :func:`sim.motors.electrical_power_w` of that torque and rate, summed over
-    the samples (left Riemann sum; 0.01 s is within 0.5 % of 1 ms for 0.1°–1° moves,
-    tests/sim/test_control.py). All samples of all moves of one axis go through in one
+    Each move's trapezoid (:func:`sim.dynamics.trapezoid_motion`) is sampled every
+    ``dt_s`` (its samples before the end, as :func:`sim.dynamics.move_profile`'s); the
+    moving joint's torque is seed 002's eq. 24 along it with the other joint at rest —
+    for an azimuth move τ1 = M11(q2) q̈1 (V1 ∝ q̇2 and G1 vanish), for an elevation move
+    τ2 = M22 q̈2 + G2(q2(t)) (V2 ∝ q̇1² vanishes), with M and G from :mod:`sim.dynamics`
+    — minus the gust torque on the axis; :func:`sim.motors.electrical_power_w` of that
+    torque and rate, summed over the samples (left Riemann sum; 0.01 s is within 0.5 %
+    of 1 ms for 0.1°–1° moves, tests/sim/test_control.py). All samples of all moves of
+    one axis go through in one
     flat vectorised pass.
     """
     from sim import dynamics, motors
@@ -402,12 +390,8 @@ def move_energies_wh(moves: list[Move], limits: DriveLimits, dt_s: float = 0.01,
         delta = np.radians([moves[k].delta_deg for k in idx])
         q2 = np.radians([moves[k].elevation_deg for k in idx])
         gust = np.array([moves[k].gust_nm for k in idx])
-        dist_ = np.abs(delta)
-        v = np.minimum(rate, np.sqrt(dist_ * acc))
-        ta = v / acc
-        tc = np.where(v > 0, dist_ / np.where(v > 0, v, 1.0), 0.0) - ta
-        total = 2 * ta + tc
-        nsamp = np.ceil(total / dt_s - 1e-9).astype(np.int64)
+        nsamp = np.ceil(dynamics.trapezoid_duration(delta, rate, acc) / dt_s - 1e-9
+                        ).astype(np.int64)
         per_move = mass_terms(q2, axis, inertia)
         for lo in range(0, idx.size, 20_000):  # bounded memory
             sl = slice(lo, lo + 20_000)
@@ -415,15 +399,10 @@ def move_energies_wh(moves: list[Move], limits: DriveLimits, dt_s: float = 0.01,
             rep = np.repeat(np.arange(ns.size), ns)
             first = np.cumsum(ns) - ns
             tt = (np.arange(rep.size) - first[rep]) * dt_s
-            a_, c_, vv = ta[sl][rep], tc[sl][rep], v[sl][rep]
-            sgn = np.sign(delta[sl])[rep]
-            t3 = np.maximum(tt - a_ - c_, 0.0)
-            acc_phase, dec_phase = tt < a_, tt > a_ + c_
-            qd = sgn * np.where(acc_phase, acc * tt, np.where(dec_phase, vv - acc * t3, vv))
-            qdd = sgn * np.where(acc_phase, acc, np.where(dec_phase, -acc, 0.0))
+            q, qd, qdd = dynamics.trapezoid_motion(delta[sl][rep], rate, acc, tt)
             tau = per_move[sl][rep] * qdd
             if axis == 1:
-                q_el = q2[sl][rep] + sgn * _trapezoid_disp(tt, a_, c_, vv, acc)
+                q_el = q2[sl][rep] + q
                 tau = tau + dynamics.gravity(q_el, inertia)[..., 1]
             tau = tau - gust[sl][rep]
             p = np.asarray(motors.electrical_power_w(drives[axis], tau, qd), dtype=float)
@@ -438,12 +417,3 @@ def mass_terms(q2_rad: NDArray[Any], axis: int, inertia: Any) -> NDArray[np.floa
     m = dynamics.mass_matrix(np.asarray(q2_rad, dtype=float), inertia)
     return np.asarray(m[..., axis, axis], dtype=float)
 
-
-def _trapezoid_disp(tt: NDArray[Any], ta: NDArray[Any], tc: NDArray[Any],
-                    v: NDArray[Any], acc: float) -> NDArray[Any]:
-    """Unsigned displacement of trapezoids at times ``tt`` (broadcast) [rad]."""
-    t3 = np.maximum(tt - ta - tc, 0.0)
-    q_acc = 0.5 * acc * tt**2
-    q_cruise = 0.5 * acc * ta**2 + v * (tt - ta)
-    q_dec = 0.5 * acc * ta**2 + v * tc + v * t3 - 0.5 * acc * t3**2
-    return np.where(tt < ta, q_acc, np.where(tt > ta + tc, q_dec, q_cruise))

@@ -25,6 +25,8 @@ from sim.dynamics import (
     mass_matrix,
     move_profile,
     potential_energy,
+    trapezoid_duration,
+    trapezoid_motion,
 )
 
 # seed 002, section II-A and Table 1 (../shared/reference/seed002_dynamics.json)
@@ -256,3 +258,32 @@ def test_move_profile_zero_and_errors() -> None:
         move_profile(1.0, 0.0, 0.05, 1e-3)
     with pytest.raises(ValueError, match="delta"):
         move_profile(float("nan"), 0.1, 0.05, 1e-3)
+
+
+def test_trapezoid_motion_is_the_profile_of_every_caller() -> None:
+    """One profile for a batch of moves at arbitrary times: rest before 0 and at Δ from the
+    end on, the rate integrates to the displacement, and move_profile samples it exactly."""
+    rate, accel = 0.05, 0.1
+    deltas = np.array([-0.7, -0.01, 0.0, 1e-4, 0.02, 0.025, 0.3, 2.0])  # triangles and trapezoids
+    ends = trapezoid_duration(deltas, rate, accel)
+    peak = np.minimum(rate, np.sqrt(np.abs(deltas) * accel))
+    np.testing.assert_allclose(ends, np.where(peak > 0, np.abs(deltas) / np.where(peak > 0, peak, 1)
+                                              + peak / accel, 0.0), rtol=1e-15)
+    t = np.linspace(-1.0, ends.max() + 1.0, 200_001)
+    q, qd, qdd = trapezoid_motion(deltas[:, None], rate, accel, t[None, :])
+    assert q.shape == qd.shape == qdd.shape == (deltas.size, t.size)
+    np.testing.assert_array_equal(q[:, t < 0], 0.0)
+    after = t[None, :] >= ends[:, None]
+    np.testing.assert_array_equal(q[after], np.broadcast_to(deltas[:, None], q.shape)[after])
+    assert np.all(np.abs(q) <= np.abs(deltas)[:, None])
+    assert np.all(np.abs(qd) <= rate) and np.all(np.abs(qdd) <= accel)
+    dt = t[1] - t[0]
+    for k, d in enumerate(deltas):
+        # the rate's running integral is the displacement (to the trapezoid rule's error)
+        integral = np.concatenate([[0.0], np.cumsum(0.5 * (qd[k, 1:] + qd[k, :-1])) * dt])
+        np.testing.assert_allclose(integral, q[k], atol=accel * dt**2 + 1e-15)
+        tk, qk, qdk, qddk = move_profile(float(d), rate, accel, 0.01)
+        qq, qqd, qqdd = trapezoid_motion(float(d), rate, accel, tk)
+        np.testing.assert_array_equal(qq, qk)
+        np.testing.assert_array_equal(qqd, qdk)
+        np.testing.assert_array_equal(qqdd, qddk)
