@@ -1,0 +1,272 @@
+"""Hand-typed figures in the docs agree with the code and with the tests that guard them.
+
+A measured figure in ``docs/*.md`` either comes from a ``<!-- fig:NAME -->`` marker
+filled by ``make bench`` (tests/test_docs_figures.py) or is checked here: the
+number is read from the doc and compared with what the code computes now (to the
+precision the doc prints), or with the constant or tolerance the guarding test
+really uses (read from that test's source, so a tightened test and a stale doc
+cannot disagree silently).
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+NUMBER = re.compile(r"[−-]?\d[\d,]*(?:\.\d+)?(?:e[−-]?\d+)?")
+
+
+def doc(name: str) -> str:
+    """The text of ``docs/<name>``."""
+    return (ROOT / "docs" / name).read_text(encoding="utf-8")
+
+
+def numbers(text: str) -> list[float]:
+    """The numbers in ``text`` (typographic minus and thousands commas understood)."""
+    return [float(n.replace("−", "-").replace(",", "")) for n in NUMBER.findall(text)]
+
+
+def decimals(text: str) -> list[int]:
+    """How many decimals each number in ``text`` is printed with."""
+    return [len(n.split(".")[1]) if "." in n else 0 for n in NUMBER.findall(text)]
+
+
+def table_row(text: str, first_cell: str) -> list[str]:
+    """The cells after the first of the Markdown table row whose first cell is ``first_cell``."""
+    for line in text.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if line.startswith("|") and cells[0] == first_cell:
+            return cells[1:]
+    raise AssertionError(f"no table row {first_cell!r}")
+
+
+def sentence(text: str, pattern: str) -> re.Match[str]:
+    """The one match of ``pattern`` in ``text`` (whitespace in the doc may wrap)."""
+    found = list(re.finditer(pattern.replace(" ", r"\s+"), text))
+    assert len(found) == 1, f"{pattern!r} found {len(found)} times"
+    return found[0]
+
+
+def _function(path: Path, name: str) -> ast.FunctionDef:
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.FunctionDef) and node.name == name:
+            return node
+    raise AssertionError(f"no function {name} in {path}")
+
+
+def module_constant(path: str, name: str) -> Any:
+    """The literal value a test module assigns to ``name`` at its top level."""
+    for node in ast.parse((ROOT / path).read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.Assign) and any(
+            isinstance(t, ast.Name) and t.id == name for t in node.targets
+        ):
+            return ast.literal_eval(node.value)
+    raise AssertionError(f"no constant {name} in {path}")
+
+
+def approx_tolerances(path: str, function: str) -> list[tuple[str, float]]:
+    """The ``rel=``/``abs=`` of every ``pytest.approx`` in a test function, in order."""
+    out = []
+    for node in ast.walk(_function(ROOT / path, function)):
+        if isinstance(node, ast.Call) and ast.unparse(node.func) == "pytest.approx":
+            out += [(k.arg or "", ast.literal_eval(k.value)) for k in node.keywords]
+    return out
+
+
+def parametrize_count(path: str, function: str) -> int:
+    """How many cases the ``pytest.mark.parametrize`` of a test function gives it."""
+    for deco in _function(ROOT / path, function).decorator_list:
+        if isinstance(deco, ast.Call) and ast.unparse(deco.func).endswith("parametrize"):
+            return len(ast.literal_eval(deco.args[1]))
+    raise AssertionError(f"{function} is not parametrized")
+
+
+def assert_printed(doc_values: list[float], places: list[int], computed: list[float]) -> None:
+    """Each computed value, rounded as the doc prints it, is the doc's (to one unit in its
+    last place: the doc and a recomputation may round a value on the edge differently)."""
+    assert len(doc_values) == len(computed), (doc_values, computed)
+    for shown, n, value in zip(doc_values, places, computed, strict=True):
+        assert abs(round(value, n) - shown) <= 1.01 * 10.0**-n, (shown, value)
+
+
+def test_helpers_read_what_they_should() -> None:
+    assert numbers("−0.00058 %, 1,333 W and 2e-5") == [-0.00058, 1333.0, 2e-5]
+    assert decimals("1.166° (20.4 mrad) 17") == [3, 1, 0]
+    assert table_row("| a | b |\n| x | 1 | 2 |\n", "x") == ["1", "2"]
+    with pytest.raises(AssertionError):
+        assert_printed([13.5], [1], [13.3])
+
+
+# --- docs/validation.md -------------------------------------------------------------
+
+
+def test_validation_sun_tolerances_are_the_tests() -> None:
+    m = sentence(
+        doc("validation.md"), r"asserts max < ([\d.]+)° and a mean between ([\d.]+)° and ([\d.]+)°"
+    )
+    constants = "tests/sim/test_sun.py"
+    assert float(m.group(1)) == module_constant(constants, "MAX_DB_SEP_DEG")
+    assert (float(m.group(2)), float(m.group(3))) == module_constant(constants, "MEAN_DB_SEP_DEG")
+
+
+def test_validation_modelchain_tolerances_are_the_tests() -> None:
+    text = doc("validation.md")
+    m = sentence(text, r"\((\w+) days across the seasons, energies within ([\de.-]+) relative, "
+                       r"gain within ([\d.]+) points")
+    days = {"two": 2, "three": 3, "four": 4, "five": 5}[m.group(1)]
+    test = ("tests/sim/test_twin.py", "test_day_energy_agrees_with_pvlib_modelchain")
+    assert parametrize_count(*test) == days
+    tolerances = approx_tolerances(*test)
+    assert tolerances[:3] == [("rel", float(m.group(2)))] * 2 + [("abs", float(m.group(3)))]
+    m = sentence(text, r"matches ModelChain on that weather within ([\d.]+) %")
+    tmy = approx_tolerances("tests/sim/test_twin.py", "test_twin_on_pvlib_tmy3_weather")
+    assert tmy == [("rel", float(m.group(1)) / 100)] * 2
+
+
+def test_validation_mpp_fixed_plane_bound_is_twice_the_figure() -> None:
+    m = sentence(doc("validation.md"), r"10-min steps: ([−\d.]+) %, asserted within 2×")
+    measured = numbers(m.group(1))[0] / 100
+    src = _function(ROOT / "tests/sim/test_pv.py",
+                    "test_mpp_table_close_to_full_single_diode_over_a_clear_year")
+    bound = next(
+        ast.literal_eval(n.left)
+        for n in ast.walk(src)
+        if isinstance(n, ast.Compare) and isinstance(n.left, ast.UnaryOp)
+    )
+    assert bound == pytest.approx(2 * measured, rel=0.05)
+
+
+def test_validation_stc_table_is_the_cec_model() -> None:
+    from sim.pv import KD205GX_LP_DATASHEET_STC as SHEET
+    from sim.pv import module_mpp_exact
+
+    twin = module_mpp_exact(np.array([1000.0]), np.array([25.0]))
+    text = doc("validation.md")
+    for label, sheet_key, twin_key in [
+        ("P_mp", "pmax_w", "p_mp"),
+        ("V_mp", "vmp_v", "v_mp"),
+        ("I_mp", "imp_a", "i_mp"),
+        ("V_oc", "voc_v", "v_oc"),
+        ("I_sc", "isc_a", "i_sc"),
+    ]:
+        sheet_cell, twin_cell = table_row(text, label)
+        assert numbers(sheet_cell) == [SHEET[sheet_key]]
+        assert_printed(numbers(twin_cell), decimals(twin_cell), [float(twin[twin_key][0])])
+
+
+def _separations(lat: float, lon: float, start: str, end: str) -> list[float]:
+    """Duffie–Beckman vs SPA at 1 min with the sun up: (angle, |Δazimuth| below 80°
+    elevation, |Δelevation|), each max then mean [°] — the method of validation.md §1."""
+    from sim.sun import solar_position
+    from vision.sphere import angular_separation_deg
+
+    times = pd.date_range(start, end, freq="1min", inclusive="left", tz="UTC")
+    db = solar_position(times, lat, lon, method="duffie-beckman")
+    spa = solar_position(times, lat, lon)
+    up = spa["elevation"] > 0
+    sep = angular_separation_deg(db["azimuth"], 90 - db["zenith"], spa["azimuth"],
+                                 90 - spa["zenith"])[up]
+    d_az = np.abs((db["azimuth"] - spa["azimuth"] + 180) % 360 - 180)[up & (spa["elevation"] < 80)]
+    d_el = np.abs(db["zenith"] - spa["zenith"])[up]
+    return [float(f(x)) for x in (sep, d_az, d_el) for f in (np.max, np.mean)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("row", "place"),
+    [
+        ("Tehuantepec, all of 2024", (16.28875, -95.240871, "2024-01-01", "2025-01-01")),
+        (
+            "Hermosillo (≈ 29.0 N, 111.1 W; the paper gives no coordinates), 26–27 Sep 2022, "
+            "seed 001's test days",
+            (29.0, -111.1, "2022-09-26 07:00", "2022-09-28 07:00"),
+        ),
+        ("Hermosillo, all of 2022", (29.0, -111.1, "2022-01-01", "2023-01-01")),
+    ],
+    ids=["tehuantepec-2024", "hermosillo-days", "hermosillo-2022"],
+)
+def test_validation_duffie_beckman_table(row: str, place: tuple) -> None:
+    cells = table_row(doc("validation.md"), row)
+    degrees = [c.split("/") for c in cells]  # "1.166° (20.4 mrad) / 0.413° (7.2 mrad)"
+    shown = [numbers(part)[0] for pair in degrees for part in pair]
+    places = [decimals(part)[0] for pair in degrees for part in pair]
+    computed = _separations(*place)
+    assert_printed(shown, places, computed)
+    mrad = [numbers(part)[1] for pair in degrees for part in pair]
+    assert_printed(mrad, [1] * len(mrad), [float(np.radians(d)) * 1000 for d in computed])
+
+
+def _window_gain(series: pd.DataFrame, tz: str) -> float:
+    """Tracker over fixed energy [%] counting only 09:30–16:30 local time (both ends in)."""
+    hhmm = series.index.tz_convert(tz).strftime("%H:%M")
+    inside = (hhmm >= "09:30") & (hhmm <= "16:30")
+    return float(100 * (series.loc[inside, "tracker_power_w"].sum()
+                        / series.loc[inside, "fixed_power_w"].sum() - 1))
+
+
+@pytest.fixture(scope="module")
+def tehuantepec():  # noqa: ANN201
+    from sim.sites import load_site
+
+    return load_site("tehuantepec")
+
+
+@pytest.mark.parametrize("day", ["2024-03-15", "2024-04-25"])
+def test_validation_gain_table_days(tehuantepec, day: str) -> None:
+    from sim.twin import simulate
+
+    start = pd.Timestamp(day, tz=tehuantepec.timezone)
+    r = simulate(tehuantepec, start, start + pd.Timedelta(days=1))
+    s = r.summary()
+    tracker, fixed, gain, peaks, window = table_row(doc("validation.md"), day)
+    assert_printed(numbers(tracker) + numbers(fixed), [2, 2],
+                   [s["tracker_energy_wh"] / 1000, s["fixed_energy_wh"] / 1000])
+    assert_printed(numbers(gain), [1], [s["gain_pct"]])
+    peak_time = r.series["fixed_power_w"].idxmax().tz_convert(tehuantepec.timezone)
+    assert_printed(numbers(peaks), [1, 1, 0, 0],
+                   [s["tracker_peak_w"], s["fixed_peak_w"], peak_time.hour, peak_time.minute])
+    assert_printed(numbers(window), [1], [_window_gain(r.series, tehuantepec.timezone)])
+
+
+def test_validation_gain_table_alternative_dates(tehuantepec) -> None:
+    from sim.twin import simulate
+
+    cells = table_row(doc("validation.md"),
+                      "2024-04-15 / 2024-03-25 (the paper's alternative dates)")
+    gains, peaks, windows = [], [], []
+    for day in ("2024-04-15", "2024-03-25"):
+        start = pd.Timestamp(day, tz=tehuantepec.timezone)
+        r = simulate(tehuantepec, start, start + pd.Timedelta(days=1))
+        gains.append(r.summary()["gain_pct"])
+        peaks.append(r.summary()["fixed_peak_w"])
+        windows.append(_window_gain(r.series, tehuantepec.timezone))
+    assert_printed(numbers(cells[2]), [1, 1], gains)
+    assert_printed(numbers(cells[3]), [1, 1], peaks)
+    assert_printed(numbers(cells[4]), [1, 1], windows)
+
+
+@pytest.mark.slow
+def test_validation_gain_table_year(tehuantepec) -> None:
+    from sim.twin import simulate
+
+    tz = tehuantepec.timezone
+    r = simulate(tehuantepec, pd.Timestamp("2024-01-01", tz=tz), pd.Timestamp("2025-01-01", tz=tz))
+    s = r.summary()
+    month = r.series.index.tz_convert(tz).month
+    by_month = r.series.groupby(month)[["tracker_power_w", "fixed_power_w"]].sum()
+    monthly = 100 * (by_month["tracker_power_w"] / by_month["fixed_power_w"] - 1)
+    tracker, fixed, gain, peaks, window = table_row(doc("validation.md"), "year 2024")
+    assert_printed(numbers(tracker) + numbers(fixed), [0, 0],
+                   [s["tracker_energy_wh"] / 1000, s["fixed_energy_wh"] / 1000])
+    assert_printed(numbers(gain), [1, 1, 1], [s["gain_pct"], monthly.min(), monthly.max()])
+    assert_printed(numbers(peaks), [1, 1], [s["tracker_peak_w"], s["fixed_peak_w"]])
+    assert_printed(numbers(window), [1], [_window_gain(r.series, tz)])
+    m = sentence(doc("validation.md"), r"\*\*([\d.]+) % over the year\*\*")
+    assert float(m.group(1)) == numbers(window)[0]
