@@ -270,3 +270,35 @@ def test_validation_gain_table_year(tehuantepec) -> None:
     assert_printed(numbers(window), [1], [_window_gain(r.series, tz)])
     m = sentence(doc("validation.md"), r"\*\*([\d.]+) % over the year\*\*")
     assert float(m.group(1)) == numbers(window)[0]
+
+
+@pytest.mark.slow
+def test_validation_tmy3_year() -> None:
+    import sys
+
+    sys.path.insert(0, str(ROOT / "tests" / "sim"))
+    from test_mpp_year import greensboro_tmy3
+
+    from sim.sites import site_from_dict
+    from sim.twin import simulate
+
+    text = doc("validation.md")
+    m = sentence(text, r"a fixed array at (\d+)° south: tracker ([\d.]+) kWh, fixed ([\d.]+) kWh, "
+                       r"\*\*gain ([\d.]+) %\*\* \(clear-sky year at the same site: ([\d.]+) %\)")
+    site, weather, start, end = greensboro_tmy3()
+    tilted = site_from_dict({
+        "site_id": "greensboro", "latitude_deg": site.latitude, "longitude_deg": site.longitude,
+        "altitude_m": site.altitude, "timezone": "America/New_York",
+        "arrays": {"tracker": {"mount": "tracker"},
+                   "fixed": {"mount": "fixed", "surface_tilt_deg": float(m.group(1)),
+                             "surface_azimuth_deg": 180}},
+    })
+    tmy = simulate(tilted, start, end, weather=weather).summary()
+    clear = simulate(tilted, start, end).summary()
+    shown = [float(g) for g in m.groups()[1:]]
+    assert_printed(shown, [1, 1, 1, 1], [tmy["tracker_energy_wh"] / 1000,
+                                         tmy["fixed_energy_wh"] / 1000,
+                                         tmy["gain_pct"], clear["gain_pct"]])
+    # section 4 quotes the same two gains
+    m4 = sentence(text, r"the twin gives \*\*([\d.]+) %\*\*, against ([\d.]+) % for a clear-sky")
+    assert [float(g) for g in m4.groups()] == shown[2:]
