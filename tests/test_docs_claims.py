@@ -302,3 +302,76 @@ def test_validation_tmy3_year() -> None:
     # section 4 quotes the same two gains
     m4 = sentence(text, r"the twin gives \*\*([\d.]+) %\*\*, against ([\d.]+) % for a clear-sky")
     assert [float(g) for g in m4.groups()] == shown[2:]
+
+
+# --- docs/dynamics.md ---------------------------------------------------------------
+
+
+def test_dynamics_values_at_table_1() -> None:
+    from sim.dynamics import TrackerInertia, gravity, mass_matrix
+
+    p = TrackerInertia.seed002()
+    m = sentence(doc("dynamics.md"), r"M22 = ([\d.]+) kg m², M11\(9.9°\) = ([\d.]+) kg m², "
+                 r"M11 spans ([\d.]+) \(normal horizontal\) … ([\d.]+) kg m² \(normal vertical\), "
+                 r"G2\(0°\) = ([−\d.]+) N m, G2\(9.9°\) = ([−\d.]+) N m")
+    shown = numbers(" ".join(m.groups()))
+    q = np.radians([9.9, 0.0, 90.0])
+    computed = [mass_matrix(q[0], p)[1, 1], mass_matrix(q[0], p)[0, 0],
+                mass_matrix(q[1], p)[0, 0], mass_matrix(q[2], p)[0, 0],
+                gravity(q[1], p)[1], gravity(q[0], p)[1]]
+    assert_printed(shown, [4] * 6, [float(v) for v in computed])
+
+
+def test_dynamics_pd_sag_and_pid_bound() -> None:
+    from sim.dynamics import TrackerInertia
+    from sim.dynamics_check import KD_SEED002, KP_SEED002
+
+    p = TrackerInertia.seed002()
+    text = doc("dynamics.md")
+    m = sentence(text, r"m2 g \|cg2\| / Kp = ([\d.]+) rad = ([\d.]+)°")
+    sag = p.m2_kg * p.g_m_s2 * abs(p.cg2_m) / KP_SEED002
+    assert_printed(numbers(" ".join(m.groups())), [3, 1], [sag, float(np.degrees(sag))])
+    m = sentence(text, r"Ki < Kp Kd / M22 = ([\d.]+)")
+    assert_printed(numbers(m.group(1)), [1], [KP_SEED002 * KD_SEED002 / p.m22_kg_m2])
+
+
+@pytest.mark.slow
+def test_dynamics_pymunk_check_table() -> None:
+    from sim.dynamics_check import check
+
+    result = check(1e-3)
+    text = doc("dynamics.md")
+    rows = {
+        "seed002_azimuth_return": "seed 002 azimuth return −244° → −115.5° at 9.9°",
+        "elevation_slew_0_60": "elevation slew 0° → 60°",
+        "coupled_slew": "coupled slew: az 0° → 60°, el 10° → 40°",
+    }
+    for move in result["moves"]:
+        duration, peak, torque, angle = table_row(text, rows[move["name"]])
+        assert_printed(numbers(duration), [1], [move["duration_s"]])
+        peaks = [move["peak_torque_elevation_nm"]]
+        if "az" in peak:
+            peaks.append(move["peak_torque_azimuth_nm"])
+        assert_printed(numbers(peak), decimals(peak), peaks)
+        assert_printed(numbers(torque) + numbers(angle), decimals(torque) + decimals(angle),
+                       [move["torque_rms_diff_pct_of_peak"], move["angle_rms_diff_mrad"]])
+    worst = table_row(text, "**worst**")
+    assert_printed(numbers(" ".join(worst)), [4, 4],
+                   [result["torque_rms_diff_pct_of_peak"], result["angle_rms_diff_mrad"]])
+
+
+@pytest.mark.slow
+def test_dynamics_gravity_hold_table() -> None:
+    from sim.dynamics_check import gravity_hold_study
+
+    study = gravity_hold_study()
+    keys = ["pd_analytic", "pd_pymunk", "pd_equilibrium", "pd_gravity", "pid_30s", "pid_120s"]
+    for row in ("9.9", "60.0"):
+        cells = table_row(doc("dynamics.md"), f"{float(row):g}°")
+        assert len(cells) == len(keys)
+        for cell, key in zip(cells, keys, strict=True):
+            value = study[row][key]
+            if "e-" in cell:  # printed as an order of magnitude
+                assert cell.rstrip("°") == f"{value:.0e}".replace("e-0", "e-"), (cell, value)
+            else:
+                assert_printed(numbers(cell), decimals(cell), [value])
