@@ -375,3 +375,18 @@ def test_dynamics_gravity_hold_table() -> None:
                 assert cell.rstrip("°") == f"{value:.0e}".replace("e-0", "e-"), (cell, value)
             else:
                 assert_printed(numbers(cell), decimals(cell), [value])
+
+
+def test_validation_station_distance_rule(tehuantepec) -> None:
+    from backend.twin.scenario import MAX_STATION_DISTANCE_KM, station_distance_km
+    from sim.sky import pvlib_tmy3_path, read_tmy3
+
+    m = sentence(
+        doc("validation.md"),
+        r"A station more than (\d+) km \(great circle\) from the site is refused unless forced: "
+        r"Greensboro's year at Tehuantepec, ([\d,]+) km away",
+    )
+    limit, shown = numbers(" ".join(m.groups()))
+    assert limit == MAX_STATION_DISTANCE_KM
+    _, meta = read_tmy3(pvlib_tmy3_path())
+    assert_printed([shown], [0], [station_distance_km(meta, tehuantepec)])
