@@ -14,6 +14,8 @@ from pathlib import Path
 from pydantic import Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from sim.energy import DEFAULT_MAX_GAP_S
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DATA_DIR = REPO_ROOT / "data"
 
@@ -66,7 +68,9 @@ class Settings(BaseSettings):
         5.0, ge=0, description="Allowed gap between power_w and voltage_v·current_a, beyond 5 %."
     )
     energy_max_gap_s: int = Field(
-        600, gt=0, le=3600, description="Longest gap between readings that energy bridges."
+        DEFAULT_MAX_GAP_S, gt=0, le=3600,
+        description="Longest gap between readings that energy bridges (sim/energy.py: every "
+                    "logger cadence up to 15 min is bridged at the default)."
     )
     parse_processes: int = Field(
         1, ge=0, le=8, description="Worker processes validating large ingest batches (0: none)."

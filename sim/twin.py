@@ -47,6 +47,7 @@ import pandas as pd
 from sim import array_shade, kinematics, pv, sky, sun
 from sim import disturbances as dist
 from sim.control import CONTROLLERS, ControlSettings, make_controller, noon_reference_azimuth
+from sim.energy import gain_pct, sampled_energy_wh
 from sim.sites import Site
 from sim.tracking import (
     CameraSetup,
@@ -121,7 +122,7 @@ class TwinResult:
 
     def energy_wh(self, array: str) -> float:
         """Energy of ``array`` (``"tracker"``/``"fixed"``) over the run [Wh]."""
-        return float(self.series[f"{array}_power_w"].sum() * self.step_s / 3600.0)
+        return sampled_energy_wh(self.series[f"{array}_power_w"].to_numpy(), self.step_s)
 
     def summary(self) -> dict[str, Any]:
         """The CLI/HTTP summary (DESIGN.md ``heliotwin simulate`` contract), JSON-ready."""
@@ -138,7 +139,7 @@ class TwinResult:
             "steps": int(len(s)),
             "tracker_energy_wh": tracker_wh,
             "fixed_energy_wh": fixed_wh,
-            "gain_pct": 100.0 * (tracker_wh / fixed_wh - 1.0) if fixed_wh > 0 else None,
+            "gain_pct": gain_pct(tracker_wh, fixed_wh),
         }
         for name in ("tracker", "fixed"):
             p = s[f"{name}_power_w"]
@@ -184,9 +185,7 @@ class TwinResult:
             "actuator_energy_wh": actuator_wh,
             "actuator_move_energy_wh": self.actuator_move_energy_wh,
             "actuator_standby_energy_wh": self.actuator_standby_energy_wh,
-            "net_gain_pct": (
-                100.0 * ((tracker_wh - actuator_wh) / fixed_wh - 1.0) if fixed_wh > 0 else None
-            ),
+            "net_gain_pct": gain_pct(tracker_wh - actuator_wh, fixed_wh),
             "pointing_loss_wh": ideal_wh - tracker_wh,
             "receiver": self.receiver,
             "acceptance_angle_deg": self.acceptance_angle_deg if self.receiver == "cpv" else None,
@@ -597,7 +596,7 @@ def simulate(
     shade_loss_wh = None
     if layout is not None:
         series["fixed_shaded_fraction"] = extra["fixed_shaded_fraction"]
-        shade_loss_wh = float(extra["fixed_shade_loss_w"].sum() * step_s / 3600.0)
+        shade_loss_wh = sampled_energy_wh(extra["fixed_shade_loss_w"], step_s)
     move_wh = standby_wh = 0.0
     if ctl is not None:
         _, move_wh = move_energies_wh(
@@ -606,7 +605,7 @@ def simulate(
         standby_wh = _standby_energy_wh(site, len(times) * float(step_s))
     ideal_wh = None
     if ctl is not None or receiver == "cpv":
-        ideal_wh = float(extra["ideal_tracker_power_w"].sum() * step_s / 3600.0)
+        ideal_wh = sampled_energy_wh(extra["ideal_tracker_power_w"], step_s)
     return TwinResult(
         site=site,
         start=start,

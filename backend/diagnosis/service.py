@@ -34,10 +34,11 @@ from sqlalchemy import Connection, delete, insert, select
 from backend.diagnosis.faults import day_features, faults_over_days, missing_daylight_min
 from backend.diagnosis.weather_twin import site_minutes, sky_source
 from backend.errors import InputError
-from backend.measurements.queries import period_edges
+from backend.measurements.queries import energy_table, period_edges
 from backend.sites import SiteInfo
 from backend.storage.tables import DiagnosisDay
 from sim import sky_sensor
+from sim.energy import energy_wh, gain_pct
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -46,43 +47,51 @@ MAX_DAYS = 400
 INVERSION_UNCERTAINTY = 0.03  # relative, on the expected tracker energy [-]
 #: Raised whenever a day's payload or the way it is computed changes: cached days of
 #: another version are computed again (2: the sky from irradiance sensors; 3: ``complete``,
-#: and a day not yet over judged up to now and never cached).
-CACHE_VERSION = 3
+#: and a day not yet over judged up to now and never cached; 4: every energy by
+#: :mod:`sim.energy`'s rule and a logger's minutes interpolated within its gap rule).
+CACHE_VERSION = 4
 
 
-def _wh(p: np.ndarray) -> float | None:
-    ok = np.isfinite(p)
-    return float(p[ok].sum() / 60.0) if ok.any() else None
+def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFrame,
+                 tracker_w: np.ndarray, fixed_w: np.ndarray,
+                 measured_wh: dict[str, float | None],
+                 elapsed_min: int | None = None) -> dict[str, Any]:
+    """One day's answer (without faults) and its fault features.
 
-
-def _gain(tr: float | None, fx: float | None) -> float | None:
-    return None if tr is None or fx is None or fx <= 0 else 100.0 * (tr / fx - 1.0)
-
-
-def _day_payload(info: SiteInfo, date: str, e: pd.DataFrame, tracker_w: np.ndarray,
-                 fixed_w: np.ndarray, elapsed_min: int | None = None) -> dict[str, Any]:
-    """One day's answer (without faults) and its fault features; ``elapsed_min``: the
-    minutes of a day not yet over that lie before now (None: the day is over)."""
-    daylight = e["poa_clear"].to_numpy() > 20.0
-    valid = e["valid"].to_numpy(bool)
+    ``day_s``: the day's ``[start, end)`` [s since the epoch]; ``e``, ``tracker_w`` and
+    ``fixed_w`` hold its minutes and, when the run goes on, the next day's first minute,
+    so the day's last minute is integrated up to midnight. Every energy is
+    :mod:`sim.energy`'s rule: ``measured_wh`` (keyed ``tracker``/``fixed``, None without
+    readings) comes from :func:`backend.measurements.queries.energy_table`, the
+    ``/energy`` endpoint's own numbers; the expectations integrate the twin's minutes,
+    the matched ones only the minutes the measured series covers (the minute grid is
+    NaN where the gap rule bridges no reading). ``elapsed_min``: the minutes of a day not
+    yet over that lie before now (None: the day is over)."""
+    t0, t1 = day_s
+    ts = e.index.as_unit("s").asi8
+    day = ts < t1
+    daylight = e["poa_clear"].to_numpy()[day] > 20.0
+    valid = e["valid"].to_numpy(bool)[day]
     share = float(valid[daylight].mean()) if daylight.any() else 0.0
     # under sky_sensor.MIN_SENSOR_SHARE of the daylight measured, the day's sky is the clear
     # sky's own GHI/DNI/DHI: the expectation is the clear-sky twin's
-    source, sensor = sky_source(e)
-    poa, clear = e["poa_global"].to_numpy(), e["poa_clear"].to_numpy()
+    source, sensor = sky_source(e[day])
+    poa, clear = e["poa_global"].to_numpy()[day], e["poa_clear"].to_numpy()[day]
     k_t = float(poa[daylight].sum() / clear[daylight].sum()) if daylight.any() else None
-    exp_a = float(e["tracker_power_w"].sum() / 60.0)
-    exp_b = float(e["tracker_power_alt_w"].sum() / 60.0)
-    exp_fixed = float(e["fixed_power_w"].sum() / 60.0)
-    has = np.isfinite(tracker_w)
-    matched = float(e["tracker_power_w"].to_numpy()[has].sum() / 60.0)
-    measured_tr, measured_fx = _wh(tracker_w), _wh(fixed_w)
-    has_f = np.isfinite(fixed_w)
+
+    def wh(power_w: np.ndarray) -> float:
+        return energy_wh(ts, power_w, 60, t0, t1)
+
+    exp_a, exp_b = wh(e["tracker_power_w"].to_numpy()), wh(e["tracker_power_alt_w"].to_numpy())
+    exp_fixed = wh(e["fixed_power_w"].to_numpy())
+    matched = wh(np.where(np.isfinite(tracker_w), e["tracker_power_w"].to_numpy(), np.nan))
+    matched_f = wh(np.where(np.isfinite(fixed_w), e["fixed_power_w"].to_numpy(), np.nan))
+    measured_tr, measured_fx = measured_wh["tracker"], measured_wh["fixed"]
     # a shape fault needs a whole day with a measured sky; a dropout only the minutes so far
-    features = day_features(info.site, e, tracker_w) \
+    e_day, tr_day = e[day], tracker_w[day]
+    features = day_features(info.site, e_day, tr_day) \
         if elapsed_min is None and source != "clear_sky" \
-        else {"missing_daylight_min": missing_daylight_min(e, tracker_w, elapsed_min)}
-    matched_f = float(e["fixed_power_w"].to_numpy()[has_f].sum() / 60.0)
+        else {"missing_daylight_min": missing_daylight_min(e_day, tr_day, elapsed_min)}
     return {
         "date": date,
         "complete": elapsed_min is None,
@@ -97,8 +106,8 @@ def _day_payload(info: SiteInfo, date: str, e: pd.DataFrame, tracker_w: np.ndarr
         "fixed": {"measured_wh": measured_fx, "expected_wh": exp_fixed,
                   "performance_ratio": None if measured_fx is None or matched_f <= 0
                   else measured_fx / matched_f},
-        "gain_measured_pct": _gain(measured_tr, measured_fx),
-        "gain_expected_pct": _gain(exp_a, exp_fixed),
+        "gain_measured_pct": gain_pct(measured_tr, measured_fx),
+        "gain_expected_pct": gain_pct(exp_a, exp_fixed),
         "features": features,
     }
 
@@ -117,18 +126,28 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
             runs[-1].append(i)
         else:
             runs.append([i])
+    edges_s = np.array([int(x.timestamp()) for x in edges], np.int64)
     for run in runs:
-        t0, t1 = int(edges[run[0]].timestamp()), int(edges[run[-1] + 1].timestamp())
-        tr, fx, sensors = site_minutes(ctx, info, t0, t1)
+        t0, t1 = int(edges_s[run[0]]), int(edges_s[run[-1] + 1])
+        with ctx.engine.connect() as conn:
+            table = energy_table(conn, [tracker.array_id, fixed.array_id],
+                                 edges_s[run[0]:run[-1] + 2], info.phase_s,
+                                 ctx.settings.energy_max_gap_s)
+        # one minute past the run, so the last day's last minute reaches midnight
+        tr, fx, sensors = site_minutes(ctx, info, t0, t1 + 60)
         start = pd.Timestamp(t0, unit="s", tz="UTC")
         e = sky_sensor.weather_aware_twin(info.site, start, start + pd.Timedelta(
-            seconds=(t1 - t0) // 60 * 60), fx, sensors=sensors)
-        for i in run:
-            day_start_s, day_end_s = int(edges[i].timestamp()), int(edges[i + 1].timestamp())
-            a, b = (day_start_s - t0) // 60, (day_end_s - t0) // 60
+            seconds=(t1 + 60 - t0) // 60 * 60), fx, sensors=sensors)
+        for j, i in enumerate(run):
+            day_start_s, day_end_s = int(edges_s[i]), int(edges_s[i + 1])
+            a, b = (day_start_s - t0) // 60, (day_end_s - t0) // 60 + 1
+            measured = {kind: float(table.energy_wh[(arr.array_id, 0)][j])
+                        if table.readings[(arr.array_id, 0)][j] else None
+                        for kind, arr in (("tracker", tracker), ("fixed", fixed))}
             date = edges[i].astimezone(info.zone).date().isoformat()
             elapsed = None if day_end_s <= now_s else max(0, int(now_s - day_start_s) // 60)
-            out[i] = _day_payload(info, date, e.iloc[a:b], tr[a:b], fx[a:b], elapsed)
+            out[i] = _day_payload(info, date, (day_start_s, day_end_s), e.iloc[a:b], tr[a:b],
+                                  fx[a:b], measured, elapsed)
     return out
 
 

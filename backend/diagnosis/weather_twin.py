@@ -23,6 +23,7 @@ from backend.measurements.fields import SENSOR_NAMES
 from backend.measurements.queries import iso_utc, raw_rows
 from backend.sites import SiteInfo
 from sim import sky_sensor
+from sim.energy import energy_wh, gain_pct, on_grid
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -30,17 +31,18 @@ if TYPE_CHECKING:
 MAX_DAYS = 31
 
 
-def minute_grid(conn: Connection, array_id: int, t0: int, t1: int
+def minute_grid(conn: Connection, array_id: int, t0: int, t1: int, max_gap_s: int
                 ) -> tuple[np.ndarray, np.ndarray]:
     """Measured power [W], shape (n,), and the :data:`SENSOR_NAMES` columns, shape
-    (n, k), on the minute grid of ``[t0, t1)``; NaN where no reading."""
+    (n, k), on the minute grid of ``[t0, t1)`` by the energy rule's line
+    (:func:`sim.energy.on_grid`): linear between readings at most ``max_gap_s`` apart,
+    so a 5- or 15-minute logger's minutes between readings are interpolated, never
+    missing or zero; NaN outside the readings and inside a longer gap."""
     n = (t1 - t0) // 60
-    power, sensors = np.full(n, np.nan), np.full((n, len(SENSOR_NAMES)), np.nan)
-    rows = raw_rows(conn, array_id, 0, t0, t1, sensors=True)
-    if rows.size:
-        k = ((rows[:, 0].astype(np.int64) - t0) // 60).clip(0, n - 1)
-        power[k] = rows[:, 3]
-        sensors[k] = rows[:, 4:]
+    rows = raw_rows(conn, array_id, 0, t0 - max_gap_s, t1 + max_gap_s, sensors=True)
+    grid = t0 + 60 * np.arange(n, dtype=np.int64)
+    power = on_grid(rows[:, 0], rows[:, 3], grid, max_gap_s)
+    sensors = on_grid(rows[:, 0], rows[:, 4:], grid, max_gap_s)
     return power, sensors
 
 
@@ -65,14 +67,16 @@ def sky_sensors(fixed: np.ndarray, tracker: np.ndarray | None) -> pd.DataFrame |
 def site_minutes(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int
                  ) -> tuple[np.ndarray, np.ndarray, pd.DataFrame | None]:
     """The tracker's and the fixed array's measured power [W] on the minute grid of
-    ``[t0, t1)`` (NaN where no reading; the tracker's all NaN on a site without one) and
+    ``[t0, t1)`` (:func:`minute_grid`: NaN where the energy rule bridges no reading; the
+    tracker's all NaN on a site without one) and
     the loggers' sky sensors (:func:`sky_sensors`). The site has a fixed array."""
     tracker, fixed = info.array_of_kind("tracker"), info.array_of_kind("fixed")
     assert fixed is not None
+    gap = ctx.settings.energy_max_gap_s
     with ctx.engine.connect() as conn:
-        fx, fx_s = minute_grid(conn, fixed.array_id, t0, t1)
+        fx, fx_s = minute_grid(conn, fixed.array_id, t0, t1, gap)
         tr, tr_s = (np.full(fx.size, np.nan), None) if tracker is None \
-            else minute_grid(conn, tracker.array_id, t0, t1)
+            else minute_grid(conn, tracker.array_id, t0, t1, gap)
     return tr, fx, sky_sensors(fx_s, tr_s)
 
 
@@ -175,15 +179,13 @@ def weather_twin_energy(ctx: ServiceContext, info: SiteInfo, data: dict[str, Any
         t0, t1 = int(edges[0].timestamp()), int(edges[-1].timestamp())
         e = weather_twin(ctx, info, t0, t1)
         ts = e.index.as_unit("s").asi8
-        k = np.searchsorted([int(x.timestamp()) for x in edges], ts, side="right") - 1
-        inside = (k >= 0) & (k < len(rows))
+        edges_s = [int(x.timestamp()) for x in edges]
         for name, kind in kinds.items():
             col = f"{kind}_power_w"
             if col in e:
-                wh = np.bincount(k[inside], weights=e[col].to_numpy()[inside] / 60.0,
-                                 minlength=len(rows))
                 for i in range(len(rows)):
-                    per[i][name] = float(wh[i])
+                    per[i][name] = energy_wh(ts, e[col].to_numpy(), 60, edges_s[i],
+                                             edges_s[i + 1])
     tracker, fixed = info.array_of_kind("tracker"), info.array_of_kind("fixed")
     totals = dict.fromkeys(kinds, 0.0)
     for r, wh, note in zip(rows, per, notes, strict=True):
@@ -198,6 +200,7 @@ def weather_twin_energy(ctx: ServiceContext, info: SiteInfo, data: dict[str, Any
 
 
 def _gain_pct(wh: dict[str, float], tracker: Any, fixed: Any) -> float | None:
-    if tracker is None or fixed is None or wh[fixed.name] <= 0:
+    """:func:`sim.energy.gain_pct` of the tracker's and the fixed array's energies."""
+    if tracker is None or fixed is None:
         return None
-    return 100.0 * (wh[tracker.name] / wh[fixed.name] - 1.0)
+    return gain_pct(wh[tracker.name], wh[fixed.name])

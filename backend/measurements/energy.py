@@ -20,6 +20,7 @@ import numpy as np
 from backend.errors import InputError
 from backend.measurements.queries import energy_table, matched_twin_wh, period_edges
 from backend.sites import SiteInfo
+from sim.energy import gain_pct
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -30,12 +31,6 @@ _SHORTEST_S = {"hour": 3600.0, "day": 82800.0, "month": 28 * 86400.0}  # DST day
 
 #: A period whose readings cover less of the twin's energy than this is ``partial`` [%].
 PARTIAL_BELOW_PCT = 95.0
-
-
-def _gain(tracker: float | None, fixed: float | None) -> float | None:
-    if tracker is None or fixed is None or fixed <= 0:
-        return None
-    return 100.0 * (tracker / fixed - 1.0)
 
 
 def _ratio(num: float | None, den: float | None) -> float | None:
@@ -55,9 +50,9 @@ def compare(arrays: dict[str, dict[str, Any]], tracker: str | None,
         "gain_pct": None, "twin_gain_pct": None, "twin_matched_gain_pct": None}
     if tracker is not None and fixed is not None:
         tr, fx = arrays[tracker], arrays[fixed]
-        out["gain_pct"] = _gain(tr["measured_wh"], fx["measured_wh"])
-        out["twin_gain_pct"] = _gain(tr["twin_wh"], fx["twin_wh"])
-        out["twin_matched_gain_pct"] = _gain(tr["twin_matched_wh"], fx["twin_matched_wh"])
+        out["gain_pct"] = gain_pct(tr["measured_wh"], fx["measured_wh"])
+        out["twin_gain_pct"] = gain_pct(tr["twin_wh"], fx["twin_wh"])
+        out["twin_matched_gain_pct"] = gain_pct(tr["twin_matched_wh"], fx["twin_matched_wh"])
     return out
 
 

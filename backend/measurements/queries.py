@@ -18,8 +18,8 @@ from sqlalchemy import Connection
 
 from backend.measurements.buckets import ROLLUP_WIDTH_S, grid_ceil, grid_floor
 from backend.measurements.fields import ELECTRICAL, SENSOR_NAMES
-from backend.measurements.rollups import integrate_clipped_wh
 from backend.storage.sqlraw import fetch
+from sim.energy import energy_wh
 
 QUANTITIES = ELECTRICAL
 _NS = len(SENSOR_NAMES)
@@ -266,7 +266,7 @@ def energy_table(conn: Connection, array_ids: list[int], edges_s: np.ndarray, ph
             cuts = np.concatenate([[lo], inner, [hi]])
             for c0, c1 in zip(cuts[:-1], cuts[1:], strict=True):
                 p = int(np.searchsorted(edges_s, c0, side="right") - 1)
-                energy[key][p] += integrate_clipped_wh(r[:, 0], r[:, 3], c0, c1, max_gap_s)
+                energy[key][p] += energy_wh(r[:, 0], r[:, 3], max_gap_s, c0, c1)
                 counts[key][p] += int(np.count_nonzero((r[:, 0] >= c0) & (r[:, 0] < c1)))
     return EnergyTable(edges_s, energy, counts)
 
@@ -281,7 +281,7 @@ def matched_twin_wh(conn: Connection, array_id: int, edges_s: np.ndarray,
     """Twin energy [Wh] per period over only the minutes with a measured reading.
 
     The twin's minute readings that have a measured reading in the same minute,
-    integrated by the energy rule (:func:`integrate_clipped_wh`, gaps over
+    integrated by the energy rule (:func:`sim.energy.energy_wh`, gaps over
     ``max_gap_s`` not bridged, as the measured energy): the twin over the same
     minutes as the logger, so a half-day of readings meets a half-day of twin.
     Only the ``periods`` asked for (indices; all by default) are computed, each run
@@ -309,6 +309,6 @@ def matched_twin_wh(conn: Connection, array_id: int, edges_s: np.ndarray,
         for k, p in enumerate(run):
             if hi_i[k] - lo_i[k] >= 2:
                 part = r[lo_i[k]:hi_i[k]]
-                out[p] = integrate_clipped_wh(part[:, 0], part[:, 1], float(edges_s[p]),
-                                              float(edges_s[p + 1]), max_gap_s)
+                out[p] = energy_wh(part[:, 0], part[:, 1], max_gap_s, float(edges_s[p]),
+                                   float(edges_s[p + 1]))
     return out

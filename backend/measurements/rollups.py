@@ -8,19 +8,20 @@ crosses a bucket edge is split there, with the power at the edge interpolated
 linearly, so hourly buckets add up exactly to the integral over any range made
 of whole buckets.
 
-The rule itself is :func:`trapezoid_wh`, used by every path here and by
-queries; the bucket grid is :mod:`backend.measurements.buckets`.
+The rule itself is :mod:`sim.energy` (:func:`sim.energy.trapezoid_wh`, the one
+energy rule of the product), used by every path here and by queries; the bucket
+grid is :mod:`backend.measurements.buckets`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from backend.measurements.buckets import ROLLUP_WIDTH_S, bucket_index
 from backend.measurements.fields import SENSOR_NAMES
+from sim.energy import energy_per_period_wh, trapezoid_wh
 
 #: A rollup row. ``n`` counts readings, ``n_vi`` those with voltage and current (the
 #: others are power-only), ``n_<sensor>`` those with that sensor field; sums over
@@ -61,17 +62,6 @@ def affected_runs(
     return [(int(ks[a]), int(ks[b])) for a, b in zip(starts, ends, strict=True)]
 
 
-def trapezoid_wh(t0: Any, p0: Any, t1: Any, p1: Any, lo: Any, hi: Any) -> Any:
-    """THE energy rule [Wh]: the part ``[lo, hi]`` of the straight line from power
-    ``p0`` at ``t0`` to ``p1`` at ``t1`` (``t0 ≤ lo ≤ hi ≤ t1``), integrated.
-
-    Plain arithmetic, so it takes Python floats (the few-reading path) and NumPy
-    arrays (everything else) alike; callers drop intervals longer than the gap.
-    """
-    slope = (p1 - p0) / (t1 - t0)
-    return 0.5 * (2.0 * p0 + slope * (lo - t0 + hi - t0)) * (hi - lo) / 3600.0
-
-
 @dataclass
 class SeriesWindow:
     """Readings of one series over a window, sorted by time (NaN: no value)."""
@@ -97,23 +87,8 @@ def energy_per_bucket(
 
     ``w`` must hold every reading in ``[start(k_first) − max_gap_s, end(k_last) + max_gap_s]``.
     """
-    out = np.zeros(k_last - k_first + 1)
-    if w.ts_s.size < 2:
-        return out
-    t0, t1 = w.ts_s[:-1], w.ts_s[1:]
-    p0, p1 = w.power_w[:-1], w.power_w[1:]
-    keep = (t1 - t0) <= max_gap_s
-    t0, t1, p0, p1 = t0[keep], t1[keep], p0[keep], p1[keep]
-    k0 = bucket_index(t0, phase_s, width_s)
-    k1 = bucket_index(t1 - 1, phase_s, width_s)  # an interval ending on an edge stays left
-    edge = np.where(k1 > k0, (k0 + 1) * width_s + phase_s, t1)  # intervals span ≤ 2 buckets
-    left = trapezoid_wh(t0, p0, t1, p1, t0, edge)
-    right = trapezoid_wh(t0, p0, t1, p1, edge, t1)
-    n = out.size
-    for k, e in ((k0, left), (k0 + 1, right)):
-        sel = (k >= k_first) & (k <= k_last)
-        out += np.bincount(k[sel] - k_first, weights=e[sel], minlength=n)[:n]
-    return out
+    edges = phase_s + width_s * np.arange(k_first, k_last + 2, dtype=np.float64)
+    return energy_per_period_wh(w.ts_s, w.power_w, max_gap_s, edges)
 
 
 def _stats(
@@ -283,23 +258,3 @@ def _increment_rows_small(
         else:
             r[2] = e
     return [tuple(rows[k]) for k in sorted(rows)]
-
-
-def integrate_clipped_wh(
-    ts_s: np.ndarray, power_w: np.ndarray, t0: float, t1: float, max_gap_s: float
-) -> float:
-    """Energy [Wh] of a series over ``[t0, t1)`` by the same rule as the rollups.
-
-    ``ts_s`` must hold every reading within ``max_gap_s`` of the range. Each
-    interval no longer than ``max_gap_s`` is clipped to the range, with the power
-    at a clip point interpolated linearly.
-    """
-    if len(ts_s) < 2:
-        return 0.0
-    a = np.asarray(ts_s[:-1], np.float64)
-    b = np.asarray(ts_s[1:], np.float64)
-    pa = np.asarray(power_w[:-1], np.float64)
-    pb = np.asarray(power_w[1:], np.float64)
-    keep = ((b - a) <= max_gap_s) & (b > t0) & (a < t1)
-    a, b, pa, pb = a[keep], b[keep], pa[keep], pb[keep]
-    return float(np.sum(trapezoid_wh(a, pa, b, pb, np.maximum(a, t0), np.minimum(b, t1))))

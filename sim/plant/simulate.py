@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from sim.energy import energy_per_period_wh, gain_pct, sampled_energy_wh
 from sim.plant.electrical import beam_factors
 from sim.plant.layout import Plant
 from sim.plant.shading import BinTable, plant_shade
@@ -200,11 +201,13 @@ class PlantResult:
 
     def summary(self) -> dict[str, Any]:
         """The CLI/HTTP summary (DESIGN.md contract), units in the keys."""
-        s, h = self.series, self.step_s / 3600.0
-        e = float(s["power_w"].sum() * h)
-        e_area = float(s["power_area_w"].sum() * h)
-        e_un = float(s["power_unshaded_w"].sum() * h)
-        e_fix = float(s["fixed_power_w"].sum() * h)
+        s = self.series
+
+        def wh(column: str) -> float:
+            return sampled_energy_wh(s[column].to_numpy(), self.step_s)
+
+        e, e_area, e_un, e_fix = (wh("power_w"), wh("power_area_w"), wh("power_unshaded_w"),
+                                  wh("fixed_power_w"))
         day = s["apparent_elevation"] > 0
 
         def pct(x: float) -> float | None:
@@ -230,9 +233,9 @@ class PlantResult:
             "shading_loss_area_pct": pct(e_area),
             "shading_loss_electrical_pct": pct(e),
             "fixed_energy_wh": round(e_fix, 3),
-            "gain_vs_fixed_pct": round(100.0 * (e / e_fix - 1.0), 4) if e_fix > 0 else None,
+            "gain_vs_fixed_pct": None if (g := gain_pct(e, e_fix)) is None else round(g, 4),
             "plant_peak_w": round(float(s["power_w"].max()), 3),
-            "poa_insolation_wh_m2": round(float(s["poa_global"].sum() * h), 3),
+            "poa_insolation_wh_m2": round(wh("poa_global"), 3),
         }
 
 
@@ -297,16 +300,24 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
         if progress is not None:
             progress(min(1.0, (k0 + len(tt)) / len(times)))
     series = pd.concat(frames)
-    h = step_s / 3600.0
     local = series.index.tz_convert(plant.timezone)
     grp = series.groupby(local.date)
+    dates = sorted(grp.groups)
+    edges_s = pd.DatetimeIndex([pd.Timestamp(d, tz=plant.timezone) for d in
+                                [*dates, dates[-1] + pd.Timedelta(days=1)]]).as_unit("s").asi8
+    ts_s = series.index.as_unit("s").asi8
+
+    def per_day_wh(column: str) -> np.ndarray:  # sim/energy.py's rule, split at local midnights
+        return energy_per_period_wh(ts_s, series[column].to_numpy(), 1.5 * step_s, edges_s)
+
     daily = pd.DataFrame({
-        "energy_wh": grp["power_w"].sum() * h,
-        "energy_area_model_wh": grp["power_area_w"].sum() * h,
-        "energy_unshaded_wh": grp["power_unshaded_w"].sum() * h,
-        "fixed_energy_wh": grp["fixed_power_w"].sum() * h,
-        "clearness_index": grp["ghi"].sum() / grp["ghi_extra"].sum().replace(0, np.nan),
-    })
+        "energy_wh": per_day_wh("power_w"),
+        "energy_area_model_wh": per_day_wh("power_area_w"),
+        "energy_unshaded_wh": per_day_wh("power_unshaded_w"),
+        "fixed_energy_wh": per_day_wh("fixed_power_w"),
+        "clearness_index": (grp["ghi"].sum() / grp["ghi_extra"].sum().replace(0, np.nan)
+                            ).to_numpy(),
+    }, index=dates)
     return PlantResult(plant, start, end, float(step_s), strategy,
                        "clearsky-ineichen" if weather is None else "weather", series, daily,
                        any_shaded, daylight, dni_f / dni_sum if dni_sum > 0 else float("nan"))
@@ -337,8 +348,8 @@ def compare_strategies(plant: Plant, start: pd.Timestamp, end: pd.Timestamp,
         out["cloudy_days"] = int(cloudy.sum())
         e_sun = float(base.daily["energy_wh"][cloudy].sum())
         out["cloudy_gain_pct"] = {
-            s: (round(100.0 * (float(r.daily["energy_wh"][cloudy].sum()) / e_sun - 1.0), 3)
-                if e_sun > 0 else None)
+            s: (None if (g := gain_pct(float(r.daily["energy_wh"][cloudy].sum()), e_sun)) is None
+                else round(g, 3))
             for s, r in results.items()}
     out["fixed_energy_wh"] = next(iter(results.values())).summary()["fixed_energy_wh"]
     return out

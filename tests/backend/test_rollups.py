@@ -13,9 +13,9 @@ from backend.measurements.rollups import (
     affected_runs,
     energy_per_bucket,
     increment_rows,
-    integrate_clipped_wh,
     rollup_rows,
 )
+from sim.energy import energy_wh
 
 
 def _series(seed: int, n: int = 400, mixed: bool = False) -> SeriesWindow:
@@ -58,7 +58,7 @@ def test_buckets_add_up_to_the_dense_integral(phase: int) -> None:
     for j, k in enumerate(range(k0, k1 + 1)):
         lo, hi = k * 3600 + phase, (k + 1) * 3600 + phase
         assert e[j] == pytest.approx(_dense_wh(w, lo, hi, 600), rel=1e-9, abs=1e-9)
-    assert integrate_clipped_wh(w.ts_s, w.power_w, 1_003_000, 1_030_000, 600) == pytest.approx(
+    assert energy_wh(w.ts_s, w.power_w, 600, 1_003_000, 1_030_000) == pytest.approx(
         _dense_wh(w, 1_003_000, 1_030_000, 600), rel=1e-9)
 
 

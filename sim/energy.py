@@ -1,0 +1,149 @@
+"""The energy of a power series and the tracking gain: one rule for every consumer.
+
+**The energy rule.** The energy of a series of power readings (one array, one source)
+is the trapezoid integral of power over time between consecutive readings. An
+interval longer than ``max_gap_s`` is not bridged: it adds nothing, so a logger
+outage shows as missing energy — never as an invented straight line, never as zero
+power read into the gap. A range ``[start, end)`` clips the intervals that cross its
+edges, the power at an edge interpolated linearly, so the energies of adjacent
+ranges add up exactly to the energy of their union. Readings without a power value
+(NaN) are dropped before the intervals are formed.
+
+The rule does not depend on the logger's cadence: 1-, 5- or 15-minute loggers and
+irregular ones integrate the same way, so the energy of a day does not change when a
+logger reports less often (only its accuracy does). ``max_gap_s`` must be longer than
+the slowest logger's interval; the service's default (``energy_max_gap_s``,
+:data:`DEFAULT_MAX_GAP_S`) bridges every common cadence up to 15 minutes with room for
+jitter, and a 1-minute logger's outage of up to that long is bridged by a line.
+
+:func:`on_grid` puts a series on a regular grid by the same rule (linear between
+readings at most ``max_gap_s`` apart, NaN elsewhere): the diagnosis's minute grid,
+so a 5-minute logger's minutes are interpolated, not missing. :func:`gain_pct` is
+the one tracking-gain formula.
+
+Every consumer uses these functions: the hourly rollups and the energy endpoint
+(``backend/measurements``), the diagnosis and the weather-aware twin
+(``backend/diagnosis``), the alerts and reports through them, and the twin's own
+summaries (:mod:`sim.twin`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+#: The service's default longest interval between two readings that energy bridges [s]:
+#: a 15-minute logger (900 s) with a reading up to 5 minutes late is still bridged.
+DEFAULT_MAX_GAP_S = 1200
+
+
+def trapezoid_wh(t0: Any, p0: Any, t1: Any, p1: Any, lo: Any, hi: Any) -> Any:
+    """Energy [Wh] of the part ``[lo, hi]`` of the straight line from power ``p0`` [W]
+    at ``t0`` [s] to ``p1`` [W] at ``t1`` [s] (``t0 ≤ lo ≤ hi ≤ t1``).
+
+    Plain arithmetic, so it takes Python floats and NumPy arrays alike; callers drop
+    intervals longer than the gap (:func:`energy_wh` does).
+    """
+    slope = (p1 - p0) / (t1 - t0)
+    return 0.5 * (2.0 * p0 + slope * (lo - t0 + hi - t0)) * (hi - lo) / 3600.0
+
+
+def _finite(ts_s: Any, power_w: Any) -> tuple[np.ndarray, np.ndarray]:
+    ts = np.asarray(ts_s, np.float64).reshape(-1)
+    p = np.asarray(power_w, np.float64).reshape(-1)
+    if ts.shape != p.shape:
+        raise ValueError(f"ts_s and power_w differ in length ({ts.size} vs {p.size})")
+    ok = np.isfinite(p) & np.isfinite(ts)
+    return ts[ok], p[ok]
+
+
+def energy_per_period_wh(ts_s: Any, power_w: Any, max_gap_s: float, edges_s: Any
+                         ) -> np.ndarray:
+    """Energy [Wh] of a power series in each period ``[edges_s[i], edges_s[i+1])``.
+
+    Parameters
+    ----------
+    ts_s : array_like
+        Reading times [s], increasing (Unix seconds or any origin).
+    power_w : array_like
+        Power at those times [W]; NaN readings are dropped.
+    max_gap_s : float
+        Longest interval between consecutive readings that is integrated [s].
+    edges_s : array_like
+        Increasing period edges [s] (±inf allowed). An interval crossing an edge is
+        split there; ``ts_s`` must hold the readings within ``max_gap_s`` outside the
+        first and last edge, else the outer periods lose what reaches them.
+    """
+    edges = np.asarray(edges_s, np.float64).reshape(-1)
+    ts, p = _finite(ts_s, power_w)
+    if ts.size < 2 or edges.size < 2:
+        return np.zeros(max(edges.size - 1, 0))
+    a, b, pa, pb = ts[:-1], ts[1:], p[:-1], p[1:]
+    kept = (b - a) <= max_gap_s
+    whole = np.where(kept, trapezoid_wh(a, pa, b, pb, a, b), 0.0)
+    at_reading = np.concatenate([[0.0], np.cumsum(whole)])  # energy up to each reading
+    i = np.searchsorted(ts, edges, side="right") - 1  # the last reading at or before an edge
+    inside = (i >= 0) & (i < ts.size - 1)
+    upto = np.where(i < 0, 0.0, at_reading[np.clip(i, 0, ts.size - 1)])
+    j = i[inside]
+    part = trapezoid_wh(a[j], pa[j], b[j], pb[j], a[j], edges[inside])
+    upto[inside] += np.where(kept[j], part, 0.0)
+    return np.diff(upto)
+
+
+def energy_wh(ts_s: Any, power_w: Any, max_gap_s: float, start_s: float = -np.inf,
+              end_s: float = np.inf) -> float:
+    """Energy [Wh] of a power series over ``[start_s, end_s)``: :func:`energy_per_period_wh`
+    of that one period (whole series by default)."""
+    return float(energy_per_period_wh(ts_s, power_w, max_gap_s, [start_s, end_s])[0])
+
+
+def sampled_energy_wh(power_w: Any, step_s: float) -> float:
+    """Energy [Wh] of a simulation's power samples, one every ``step_s`` [s] with no gaps:
+    :func:`energy_wh` over the samples' span (the twin's and the plant's summaries, so a
+    simulated series integrates as the same series stored and read back would)."""
+    p = np.asarray(power_w, np.float64).reshape(-1)
+    return energy_wh(np.arange(p.size, dtype=np.float64) * float(step_s), p, 1.5 * float(step_s))
+
+
+def on_grid(ts_s: Any, values: Any, grid_s: Any, max_gap_s: float) -> np.ndarray:
+    """Values of a series at the times ``grid_s`` [s], by the energy rule's line.
+
+    Linear between consecutive readings at most ``max_gap_s`` apart (a grid time
+    equal to a reading's time takes that reading); NaN at grid times outside the
+    readings or inside a longer gap. ``values`` may be 1-D ``(n,)`` or 2-D ``(n, k)``
+    (each column its own series: a NaN reading of one column is dropped from that
+    column only). Integrating the result with :func:`energy_wh` on a grid that holds
+    every reading time gives the series' own energy exactly.
+    """
+    grid = np.asarray(grid_s, np.float64).reshape(-1)
+    v = np.asarray(values, np.float64)
+    if v.ndim == 2:
+        return np.column_stack([on_grid(ts_s, v[:, j], grid, max_gap_s)
+                                for j in range(v.shape[1])]) if v.shape[1] \
+            else np.empty((grid.size, 0))
+    ts, p = _finite(ts_s, v)
+    out = np.full(grid.size, np.nan)
+    if ts.size == 0:
+        return out
+    # the reading at or after each grid time, and the one before it
+    j = np.searchsorted(ts, grid, side="left")
+    exact = (j < ts.size) & (ts[np.minimum(j, ts.size - 1)] == grid)
+    out[exact] = p[j[exact]]
+    inner = ~exact & (j > 0) & (j < ts.size)
+    ji = j[inner]
+    t0, t1, p0, p1 = ts[ji - 1], ts[ji], p[ji - 1], p[ji]
+    bridged = (t1 - t0) <= max_gap_s
+    g = grid[inner]
+    out[np.flatnonzero(inner)[bridged]] = (p0 + (p1 - p0) * (g - t0) / (t1 - t0))[bridged]
+    return out
+
+
+def gain_pct(tracker_wh: float | None, fixed_wh: float | None) -> float | None:
+    """The tracking gain [%]: ``100 · (tracker / fixed − 1)``; None when either energy is
+    missing or the fixed array's is not positive (no gain is defined against nothing)."""
+    if tracker_wh is None or fixed_wh is None or not np.isfinite(tracker_wh) \
+            or not np.isfinite(fixed_wh) or fixed_wh <= 0:
+        return None
+    return 100.0 * (tracker_wh / fixed_wh - 1.0)
