@@ -9,6 +9,7 @@ from fastapi import APIRouter, HTTPException
 from fastapi.responses import Response
 
 from backend.api.deps import ContextDep, RangeEnd, RangeStart, site_or_404
+from backend.api.schemas.diagnosis import DiagnosisRead, PointingRead
 from backend.diagnosis.pointing import pointing
 from backend.diagnosis.service import diagnosis
 from backend.timestamps import parse_range
@@ -16,7 +17,7 @@ from backend.timestamps import parse_range
 router = APIRouter(prefix="/api/v1/sites", tags=["diagnosis"])
 
 
-@router.get("/{site_id}/diagnosis", responses={404: {}, 422: {}})
+@router.get("/{site_id}/diagnosis", response_model=DiagnosisRead, responses={404: {}, 422: {}})
 def get_diagnosis(
     site_id: str,
     ctx: ContextDep,
@@ -33,7 +34,7 @@ def get_diagnosis(
     return Response(orjson.dumps(diagnosis(ctx, info, t0, t1)), media_type="application/json")
 
 
-@router.get("/{site_id}/pointing", responses={404: {}, 422: {}})
+@router.get("/{site_id}/pointing", response_model=PointingRead, responses={404: {}, 422: {}})
 def get_pointing(
     site_id: str,
     ctx: ContextDep,

@@ -24,6 +24,8 @@ from fastapi.responses import Response
 
 from backend.api.deps import ContextDep, RangeEnd, RangeStart, site_or_404
 from backend.api.routes.health import service_version
+from backend.api.schemas.common import CSV_CONTENT, PNG_CONTENT
+from backend.api.schemas.energy import EnergyRead, ReportRead
 from backend.diagnosis.weather_twin import weather_twin_energy
 from backend.measurements.energy import energy_rows
 from backend.reports import report, report_csv, report_png
@@ -31,7 +33,9 @@ from backend.timestamps import parse_range
 
 router = APIRouter(prefix="/api/v1/sites", tags=["energy"])
 
-@router.get("/{site_id}/energy", responses={404: {}, 422: {}})
+
+@router.get("/{site_id}/energy", response_model=EnergyRead,
+            responses={200: {"content": CSV_CONTENT}, 404: {}, 422: {}})
 def get_energy(
     site_id: str,
     ctx: ContextDep,
@@ -88,7 +92,7 @@ def _report(ctx: ContextDep, site_id: str, start: str, end: str) -> dict[str, An
     return report(ctx, info, t0, t1)
 
 
-@router.get("/{site_id}/report", responses={404: {}, 422: {}})
+@router.get("/{site_id}/report", response_model=ReportRead, responses={404: {}, 422: {}})
 def get_report(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
                end: Annotated[str, _RANGE["end"]]) -> Response:
     """Totals, daily, monthly and annual energy, gain and performance ratio of a range."""
@@ -96,7 +100,9 @@ def get_report(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["star
                     media_type="application/json")
 
 
-@router.get("/{site_id}/report.csv", responses={404: {}, 422: {}})
+@router.get("/{site_id}/report.csv", response_class=Response,
+            responses={200: {"content": CSV_CONTENT, "description": "the report as CSV"},
+                       404: {}, 422: {}})
 def get_report_csv(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
                    end: Annotated[str, _RANGE["end"]]) -> Response:
     """The report as one CSV table: day, month, year and total rows, units in the names."""
@@ -106,7 +112,9 @@ def get_report_csv(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["
                     headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
 
-@router.get("/{site_id}/report.png", responses={404: {}, 422: {}})
+@router.get("/{site_id}/report.png", response_class=Response,
+            responses={200: {"content": PNG_CONTENT, "description": "an A4 PNG page"},
+                       404: {}, 422: {}})
 def get_report_png(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
                    end: Annotated[str, _RANGE["end"]]) -> Response:
     """A one-page A4 PNG report of the range (matplotlib), for a paper or a logbook."""

@@ -9,6 +9,7 @@ from typing import Any
 from fastapi import APIRouter, Request
 
 from backend.api.deps import SettingsDep
+from backend.api.schemas.service import HealthRead, MetaRead
 from backend.twin.parameters import MACHINE_PARAMETERS
 from sim.twin import CONTROLLERS, RECEIVERS
 
@@ -23,13 +24,13 @@ def service_version() -> str:
         return "0+unknown"
 
 
-@router.get("/healthz")
+@router.get("/healthz", response_model=HealthRead)
 def healthz() -> dict[str, str]:
     """Liveness: the service answers."""
     return {"status": "ok"}
 
 
-@router.get("/api/v1/meta")
+@router.get("/api/v1/meta", response_model=MetaRead)
 def meta(request: Request, settings: SettingsDep) -> dict[str, Any]:
     """What the dashboard needs to know about this service.
 

@@ -15,6 +15,14 @@ import anyio
 from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from fastapi.responses import Response
 
+from backend.api.schemas.common import PNG_CONTENT
+from backend.api.schemas.plants import (
+    PlantDayRead,
+    PlantRead,
+    PlantSummaryRead,
+    PositionsRead,
+    SkyMapRead,
+)
 from backend.plants import STRATEGIES, PlantService, UnknownPlantError, sky_map_png
 from backend.timestamps import FIRST_YEAR, LAST_YEAR, TimestampError, parse_instant
 
@@ -58,20 +66,20 @@ def _strategy(strategy: str) -> str:
     return strategy
 
 
-@router.get("")
+@router.get("", response_model=list[PlantSummaryRead])
 def list_plants(service: PlantServiceDep) -> list[dict[str, Any]]:
     """Every plant (id, name, number of trackers, place)."""
     return service.list()
 
 
-@router.get("/{plant_id}", responses={404: {}})
+@router.get("/{plant_id}", response_model=PlantRead, responses={404: {}})
 def get_plant(plant_id: str, service: PlantServiceDep) -> dict[str, Any]:
     """One plant: place, collector and electrical layout, trackers in ENU metres."""
     _plant_or_404(service, plant_id)
     return service.get(plant_id).to_dict()
 
 
-@router.get("/{plant_id}/positions", responses={404: {}, 422: {}})
+@router.get("/{plant_id}/positions", response_model=PositionsRead, responses={404: {}, 422: {}})
 def positions(plant_id: str, service: PlantServiceDep,
               time: Annotated[str, Query(description="ISO 8601 with offset")],
               strategy: Annotated[str, Query(description="sun | backtrack | sky_scan")] = "sun",
@@ -82,8 +90,8 @@ def positions(plant_id: str, service: PlantServiceDep,
     return service.positions(plant_id, when, _strategy(strategy))
 
 
-@router.get("/{plant_id}/sky-map", responses={404: {}, 422: {},
-                                              200: {"content": {"image/png": {}}}})
+@router.get("/{plant_id}/sky-map", response_model=SkyMapRead,
+            responses={404: {}, 422: {}, 200: {"content": PNG_CONTENT}})
 async def sky_map(plant_id: str, request: Request, service: PlantServiceDep,
                   time: Annotated[str, Query(description="ISO 8601 with offset")],
                   resolution_deg: Annotated[float, Query(ge=1.0, le=15.0)] = 3.0,
@@ -103,7 +111,8 @@ async def sky_map(plant_id: str, request: Request, service: PlantServiceDep,
     return m
 
 
-@router.get("/{plant_id}/day", responses={404: {}, 422: {}})
+@router.get("/{plant_id}/day", response_model=PlantDayRead, response_model_exclude_unset=True,
+            responses={404: {}, 422: {}})
 async def day(plant_id: str, service: PlantServiceDep,
               date: Annotated[str, Query(pattern=r"^\d{4}-\d{2}-\d{2}$",
                                          description="local date, YYYY-MM-DD "

@@ -14,6 +14,13 @@ from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field, create_model
 
 from backend.api.deps import ContextDep, bearer_token, site_or_404, token_site
+from backend.api.schemas.common import CSV_CONTENT
+from backend.api.schemas.simulations import (
+    SimulationAcceptedRead,
+    SimulationRunRead,
+    SimulationSeriesRead,
+    SimulationSummaryRead,
+)
 from backend.limits import Busy
 from backend.measurements.queries import iso_utc
 from backend.timestamps import parse_range
@@ -97,8 +104,13 @@ _BUSY_DOC: dict[int | str, dict[str, Any]] = {
 }
 
 
-@router.post("", responses={202: {"description": "accepted (background run)"}, 400: {},
-                                 404: {}, 422: {}, **_BUSY_DOC},
+#: the summary (200) or, for a background run, where to poll it (202)
+SUBMIT_RESPONSES: dict[int | str, dict[str, Any]] = {
+    202: {"model": SimulationAcceptedRead, "description": "accepted (background run)"}}
+
+
+@router.post("", response_model=SimulationSummaryRead,
+             responses={**SUBMIT_RESPONSES, 400: {}, 404: {}, 422: {}, **_BUSY_DOC},
              openapi_extra={"security": [{}, {"bearerAuth": []}]})
 async def create_simulation(body: SimulationCreate,  # type: ignore[valid-type]
                             ctx: ContextDep, request: Request) -> Response:
@@ -142,7 +154,8 @@ async def submit_scenario(ctx: Any, request: Request, params: Scenario,
     return Response(orjson.dumps(summary), media_type="application/json")
 
 
-@router.get("/{run_id}", responses={404: {}})
+@router.get("/{run_id}", response_model=SimulationRunRead, response_model_exclude_unset=True,
+            responses={404: {}})
 def get_simulation(run_id: str, ctx: ContextDep) -> dict[str, Any]:
     """Status, progress (0…1) and, when done, the summary of a run."""
     state = ctx.simulations.get(run_id)
@@ -151,7 +164,8 @@ def get_simulation(run_id: str, ctx: ContextDep) -> dict[str, Any]:
     return state.to_dict()
 
 
-@router.get("/{run_id}/series", responses={404: {}, 409: {}})
+@router.get("/{run_id}/series", response_model=SimulationSeriesRead,
+            responses={200: {"content": CSV_CONTENT}, 404: {}, 409: {}})
 def get_simulation_series(
     run_id: str,
     ctx: ContextDep,

@@ -25,15 +25,20 @@ from backend.api.deps import (
     parse_bearer,
     site_or_404,
 )
+from backend.api.schemas.sites import (
+    CalibrationRead,
+    JsonSchemaRead,
+    SiteRead,
+    SiteStatusRead,
+    SiteWrittenRead,
+)
 from backend.measurements.parse import Calibration
 from backend.measurements.status import status
 from backend.sites import save_site
-from sim.site_config import site_json_schema
+from sim.site_config import SiteConfig, site_json_schema
 from sim.sites import builtin_site_ids, is_builtin, site_path
 
 router = APIRouter(prefix="/api/v1/sites", tags=["sites"])
-
-
 
 class CalibrationModel(BaseModel):
     """Logger calibration of one array (seed 000, eqs. 16–19); NaN/Infinity, unknown
@@ -73,29 +78,33 @@ def _site_dict(info: Any, ctx: Any = None) -> dict[str, Any]:
     return d
 
 
-@router.get("")
+# response_model_exclude_unset: optional keys (a fixed mount's surface, an array's
+# placement) stay absent, as the site's to_dict leaves them, instead of null
+@router.get("", response_model=list[SiteRead], response_model_exclude_unset=True)
 def list_sites(ctx: ContextDep) -> list[dict[str, Any]]:
     """Every site with its arrays."""
     return [_site_dict(info, ctx) for info in ctx.registry.sites.values()]
 
 
-@router.get("/schema.json")
+@router.get("/schema.json", response_model=JsonSchemaRead)
 def get_site_schema() -> dict[str, Any]:
     """The JSON Schema of a site config (``docs/site.schema.json``): every field's unit,
     default and source."""
     return site_json_schema()
 
 
-@router.get("/{site_id}", responses={404: {}})
+@router.get("/{site_id}", response_model=SiteRead, response_model_exclude_unset=True,
+            responses={404: {}})
 def get_site(site_id: str, ctx: ContextDep) -> dict[str, Any]:
     """One site with its arrays (geometry, modules, logger calibration) and its origin."""
     return _site_dict(site_or_404(ctx, site_id), ctx)
 
 
-@router.get("/{site_id}/config", responses={404: {}})
-def get_site_config(site_id: str, ctx: ContextDep) -> dict[str, Any]:
-    """The site as a config of ``docs/site.schema.json`` (what ``PUT`` takes back)."""
-    return site_or_404(ctx, site_id).site.to_config()
+@router.get("/{site_id}/config", response_model=SiteConfig, responses={404: {}})
+def get_site_config(site_id: str, ctx: ContextDep) -> JSONResponse:
+    """The site as a config of ``docs/site.schema.json`` (what ``PUT`` takes back), as
+    written: the model documents it, without filling in defaults."""
+    return JSONResponse(site_or_404(ctx, site_id).site.to_config())
 
 
 async def _check_site_writer(ctx: Any, site_id: str, authorization: str | None) -> str:
@@ -113,7 +122,9 @@ async def _check_site_writer(ctx: Any, site_id: str, authorization: str | None) 
     return await check_site_token(ctx, site_id, authorization)
 
 
-@router.put("/{site_id}", responses={201: {}, 401: {}, 403: {}, 409: {}, 422: {}})
+@router.put("/{site_id}", response_model=SiteWrittenRead,
+            responses={201: {"model": SiteWrittenRead, "description": "created"}, 401: {}, 403: {},
+                       409: {}, 422: {}})
 async def put_site(site_id: str, ctx: ContextDep,
                    config: Annotated[dict[str, Any], Body(description=(
                        "a site config, docs/site.schema.json"))],
@@ -130,20 +141,21 @@ async def put_site(site_id: str, ctx: ContextDep,
     return JSONResponse(body, status_code=201 if created else 200)
 
 
-@router.get("/{site_id}/arrays/{array}/calibration", responses={404: {}})
-def get_calibration(site_id: str, array: str, ctx: ContextDep) -> CalibrationModel:
+@router.get("/{site_id}/arrays/{array}/calibration", response_model=CalibrationRead,
+            responses={404: {}})
+def get_calibration(site_id: str, array: str, ctx: ContextDep) -> CalibrationRead:
     """The calibration used to convert this array's raw ADC readings."""
     info = site_or_404(ctx, site_id)
     if array not in info.arrays:
         raise HTTPException(404, f"unknown array {array!r}; this site has "
                                  f"{', '.join(info.arrays)}")
-    return CalibrationModel(**dataclasses.asdict(info.arrays[array].calibration))
+    return CalibrationRead(**dataclasses.asdict(info.arrays[array].calibration))
 
 
-@router.put("/{site_id}/arrays/{array}/calibration", responses={400: {}, 401: {}, 403: {},
-                                                                      404: {}})
+@router.put("/{site_id}/arrays/{array}/calibration", response_model=CalibrationRead,
+            responses={400: {}, 401: {}, 403: {}, 404: {}})
 async def put_calibration(site_id: str, array: str, body: CalibrationModel, ctx: ContextDep,
-                          _token_site: SiteTokenDep) -> CalibrationModel:
+                          _token_site: SiteTokenDep) -> CalibrationRead:
     """Store the calibration of an array's logger (needs the site's write token)."""
     info = site_or_404(ctx, site_id)
     if array not in info.arrays:
@@ -152,10 +164,10 @@ async def put_calibration(site_id: str, array: str, body: CalibrationModel, ctx:
     cal = Calibration(**body.model_dump())
     await asyncio.wrap_future(ctx.writer.call(
         lambda conn: ctx.registry.set_calibration(conn, site_id, array, cal)))
-    return body
+    return CalibrationRead(**body.model_dump())
 
 
-@router.get("/{site_id}/status", responses={404: {}})
+@router.get("/{site_id}/status", response_model=SiteStatusRead, responses={404: {}})
 def site_status(site_id: str, ctx: ContextDep) -> dict[str, Any]:
     """The overview tiles: sun and tracker now, last readings, twin power, today's energy."""
     return status(ctx, site_or_404(ctx, site_id), time.time())

@@ -20,6 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from sqlalchemy import Connection
 
 from backend.api.deps import ContextDep, is_admin_token, parse_bearer, site_or_404
+from backend.api.schemas.tokens import TokenCreatedRead, TokenRead, TokensRead
 from backend.auth import UnknownToken, create_token, find_token, list_tokens, revoke_token
 from backend.timestamps import TimestampError, parse_instant
 
@@ -66,7 +67,7 @@ def _json(data: Any, status: int = 200) -> Response:
     return Response(orjson.dumps(data), status_code=status, media_type="application/json")
 
 
-@router.get("", openapi_extra=_ADMIN_DOC, responses=_RESPONSES)
+@router.get("", response_model=TokensRead, openapi_extra=_ADMIN_DOC, responses=_RESPONSES)
 async def get_tokens(ctx: ContextDep, _admin: AdminDep,
                      site_id: Annotated[str | None, Query(max_length=64)] = None) -> Response:
     """Every write token (of one site with ``site_id``): id, prefix, times, status."""
@@ -77,7 +78,7 @@ async def get_tokens(ctx: ContextDep, _admin: AdminDep,
     return _json({"tokens": await asyncio.to_thread(read)})
 
 
-@router.post("", status_code=201, openapi_extra=_ADMIN_DOC,
+@router.post("", status_code=201, response_model=TokenCreatedRead, openapi_extra=_ADMIN_DOC,
              responses={**_RESPONSES, 404: {"description": "unknown site"}, 422: {}})
 async def post_token(body: TokenCreate, ctx: ContextDep, _admin: AdminDep) -> Response:
     """Make a write token; the answer holds it once (``token``), with its ``id``."""
@@ -103,7 +104,7 @@ async def post_token(body: TokenCreate, ctx: ContextDep, _admin: AdminDep) -> Re
     return _json(await asyncio.wrap_future(ctx.writer.call(make)), 201)
 
 
-@router.delete("/{token_id}", openapi_extra=_ADMIN_DOC,
+@router.delete("/{token_id}", response_model=TokenRead, openapi_extra=_ADMIN_DOC,
                responses={**_RESPONSES, 404: {"description": "no such token"}})
 async def delete_token(token_id: _TOKEN_ID, ctx: ContextDep, _admin: AdminDep) -> Response:
     """Revoke a token (refused from now on); the answer is its row with ``revoked_at``."""

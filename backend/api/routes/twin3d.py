@@ -17,6 +17,7 @@ from fastapi import APIRouter, HTTPException, Query, Request
 from pydantic import BaseModel, ConfigDict, Field
 
 from backend.api.deps import ContextDep
+from backend.api.schemas.twin3d import ReplayClearedRead, ReplayRead, ViewersRead
 from backend.twin.scenario import disturbances_of
 from backend.twin.scene_pose import Replay
 
@@ -41,7 +42,7 @@ def _scene(request: Request) -> Any:
     return scene
 
 
-@router.get("", responses={503: {}})
+@router.get("", response_model=ViewersRead, responses={503: {}})
 def viewers(request: Request) -> dict[str, Any]:
     """The viser port actually bound, the default site and every connected site viewer: its
     key, site, mode, shown time, replay, the tracker's shade on the fixed array [-] and the
@@ -60,7 +61,7 @@ def viewers(request: Request) -> dict[str, Any]:
     return {"viser_port": scene.port, "default_site": scene.site.site_id, "viewers": rows}
 
 
-@router.put("/replay", responses={404: {}, 409: {}, 422: {}, 503: {}})
+@router.put("/replay", response_model=ReplayRead, responses={404: {}, 409: {}, 422: {}, 503: {}})
 def put_replay(body: ReplayRequest, request: Request, ctx: ContextDep) -> dict[str, Any]:
     """Show a finished simulation run in the 3D twin (its first instant)."""
     scene = _scene(request)
@@ -87,7 +88,7 @@ def put_replay(body: ReplayRequest, request: Request, ctx: ContextDep) -> dict[s
             "pointing_error_mrad": poses[0].pointing_error_mrad if poses else None}
 
 
-@router.delete("/replay", responses={422: {}, 503: {}})
+@router.delete("/replay", response_model=ReplayClearedRead, responses={422: {}, 503: {}})
 def delete_replay(request: Request, viewer: Annotated[str | None, Query(
         pattern=VIEWER_PATTERN, description="the viewer key; omitted: the shared replay")]
         = None) -> dict[str, Any]:

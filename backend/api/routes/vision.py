@@ -48,6 +48,16 @@ from backend.api.deps import (
     token_site,
 )
 from backend.api.forms import form_flag, read_form
+from backend.api.schemas.vision import (
+    CalibrationDeletedRead,
+    CalibrationsRead,
+    DetectionsDeletedRead,
+    DetectionsRead,
+    EvaluationRead,
+    FittedCalibrationRead,
+    StoredCalibrationRead,
+    SunDetectionRead,
+)
 from backend.limits import Busy, prune_anonymous
 from backend.storage.tables import VisionDetection
 from backend.timestamps import TimestampError, parse_day_or_instant, parse_instant
@@ -287,7 +297,7 @@ _SUN_DOC = {
 }
 
 
-@router.post("/sun", openapi_extra=_SUN_DOC,
+@router.post("/sun", response_model=SunDetectionRead, openapi_extra=_SUN_DOC,
              responses={400: {"description": "a malformed multipart body"},
                         401: {}, 404: {}, 413: {}, 415: {}, 422: {}, **_BUSY_DOC})
 async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
@@ -370,7 +380,8 @@ _CAL_DOC = {
 }
 
 
-@router.post("/calibrations", openapi_extra=_CAL_DOC, status_code=201,
+@router.post("/calibrations", response_model=FittedCalibrationRead, openapi_extra=_CAL_DOC,
+             status_code=201,
              responses={400: {"description": "a malformed multipart body"},
                         401: {}, 404: {}, 413: {}, 415: {}, 422: {}, **_BUSY_DOC})
 async def post_calibration(request: Request, ctx: ContextDep, _token: VisionTokenDep
@@ -406,14 +417,15 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
     return _json({**calibration_answer(row), "calibration_id": cal_id}, 201)
 
 
-@router.get("/calibrations")
+@router.get("/calibrations", response_model=CalibrationsRead)
 def get_calibrations(session: SessionDep,
                      limit: Annotated[int, Query(gt=0, le=1000)] = 200) -> Response:
     """Stored calibrations, newest first."""
     return _json({"calibrations": list_calibrations(session, limit)})
 
 
-@router.get("/calibrations/{calibration_id}", responses={404: {}})
+@router.get("/calibrations/{calibration_id}", response_model=StoredCalibrationRead,
+            responses={404: {}})
 def get_one_calibration(calibration_id: Annotated[int, Path(ge=1, le=_MAX_ID)],
                         session: SessionDep) -> Response:
     """One stored calibration with its per-frame residuals."""
@@ -448,7 +460,7 @@ def _detection_bounds(ctx: Any, site_id: str | None, start: str | None, end: str
     return bounds[0], bounds[1]
 
 
-@router.get("/detections", responses={404: {}, 422: {}})
+@router.get("/detections", response_model=DetectionsRead, responses={404: {}, 422: {}})
 def get_detections(ctx: ContextDep, session: SessionDep,
                    site_id: str | None = None, start: str | None = None,
                    end: str | None = None,
@@ -459,7 +471,7 @@ def get_detections(ctx: ContextDep, session: SessionDep,
     return _json({"site_id": site_id, "start": start, "end": end, "detections": rows})
 
 
-@router.post("/evaluate", openapi_extra=_CAL_DOC,
+@router.post("/evaluate", response_model=EvaluationRead, openapi_extra=_CAL_DOC,
              responses={400: {"description": "a malformed multipart body"},
                         401: {}, 404: {}, 413: {}, 415: {}, 422: {}, **_BUSY_DOC})
 async def post_evaluate(request: Request, ctx: ContextDep, session: SessionDep,
@@ -497,7 +509,8 @@ async def _deleting_token(request: Request, ctx: Any, site_id: str | None) -> No
                                  "<token>'", headers={"WWW-Authenticate": "Bearer"})
 
 
-@router.delete("/calibrations/{calibration_id}", responses={401: {}, 403: {}, 404: {}})
+@router.delete("/calibrations/{calibration_id}", response_model=CalibrationDeletedRead,
+               responses={401: {}, 403: {}, 404: {}})
 async def delete_one_calibration(calibration_id: Annotated[int, Path(ge=1, le=_MAX_ID)],
                                  request: Request, ctx: ContextDep, session: SessionDep
                                  ) -> Response:
@@ -513,7 +526,8 @@ async def delete_one_calibration(calibration_id: Annotated[int, Path(ge=1, le=_M
     return _json({"calibration_id": calibration_id, **counts})
 
 
-@router.delete("/detections", responses={401: {}, 403: {}, 404: {}, 422: {}})
+@router.delete("/detections", response_model=DetectionsDeletedRead,
+               responses={401: {}, 403: {}, 404: {}, 422: {}})
 async def delete_some_detections(
         request: Request, ctx: ContextDep, start: str, end: str,
         site_id: str | None = None,

@@ -26,10 +26,12 @@ from backend.api.deps import ContextDep, site_or_404
 from backend.api.forms import form_flag, read_form
 from backend.api.routes.simulations import (
     _BUSY_DOC,
+    SUBMIT_RESPONSES,
     SimulationCreate,
     _params,
     submit_scenario,
 )
+from backend.api.schemas.simulations import SimulationSummaryRead
 from backend.twin.scenario import StationTooFar, check_station
 from sim.sky import read_typical_year
 
@@ -56,8 +58,9 @@ async def _weather(upload: Any) -> tuple[Any, dict[str, Any]]:
                                  f"TMY3 or EPW typical year: {exc}") from None
 
 
-@router.post("/weather", responses={202: {"description": "accepted (background run)"},
-                                    400: {}, 404: {}, 413: {}, 415: {}, 422: {}, **_BUSY_DOC},
+@router.post("/weather", response_model=SimulationSummaryRead,
+             responses={**SUBMIT_RESPONSES, 400: {}, 404: {}, 413: {}, 415: {}, 422: {},
+                        **_BUSY_DOC},
              openapi_extra={"security": [{}, {"bearerAuth": []}]})
 async def create_simulation_on_weather(request: Request, ctx: ContextDep) -> Response:
     """Run a twin scenario on an uploaded TMY3/EPW typical year instead of clear sky."""

@@ -1,0 +1,76 @@
+"""``/api/v1/alerts``: stored alerts and the state of their evaluator and webhook."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, Field
+
+AlertKind = Literal["logger_silent", "fault", "low_performance_ratio"]
+AlertState = Literal["active", "cleared"]
+
+
+class AlertRead(BaseModel):
+    """One alert: raised once when its condition starts, cleared once when it ends."""
+
+    id: int
+    site_id: str
+    array: str = Field(description="the array the alert is about (`tracker`, `fixed`, …)")
+    kind: AlertKind
+    fault_kind: str | None = Field(description="for `fault`: the diagnosis' kind (`stuck`, "
+                                               "`module_loss`, `dropout`, …); else null")
+    state: AlertState
+    since: str = Field(description="when the condition began (UTC): the last reading, the "
+                                   "fault's first day, the first low-PR day")
+    raised_at: str = Field(description="when the service raised it (UTC)")
+    cleared_at: str | None = Field(description="when it was cleared (UTC); null while active")
+    detail: str = Field(description="what was found, in plain words")
+    cleared_detail: str | None = Field(description="why it was cleared, in plain words")
+    data: dict[str, Any] = Field(description="the numbers behind it, units in the names")
+    webhook_status: Literal["off", "queued", "delivered", "failed", "dropped"] = Field(
+        description="delivery of its latest event (raised or cleared) to the webhook")
+    webhook_attempts: int
+
+
+class WebhookRead(BaseModel):
+    """The webhook sender: where (scheme and host only) and its counters."""
+
+    url: str
+    queued: int
+    queue_size: int
+    offered: int
+    delivered: int
+    failed: int
+    dropped: int = Field(description="events refused because the queue was full")
+    retries: int
+    unsent: int = Field(description="events still waiting at a shutdown (sent at the next start)")
+    last_error: str | None
+    last_delivered_at: str | None
+
+
+class EvaluatorRead(BaseModel):
+    """The alert evaluator and its thresholds (the `HELIOTWIN_ALERT_*` settings)."""
+
+    enabled: bool
+    interval_s: float | None = None
+    last_evaluated_at: str | None = None
+    last_evaluation_ms: float | None = None
+    max_evaluation_ms: float | None = Field(None, description="the slowest round so far (the "
+                                                              "first of a day diagnoses it)")
+    evaluations: int = 0
+    active: int = 0
+    errors: list[str] = []
+    silent_min: float | None = None
+    pr_below: float | None = None
+    fault_confidence_min: float | None = None
+    diagnosis_days: int | None = None
+    webhook: WebhookRead | None = None
+
+
+class AlertsRead(BaseModel):
+    """The alerts matching the query, newest raised first."""
+
+    alerts: list[AlertRead]
+    counts: dict[str, int] = Field(description="`active` and `cleared` alerts matching "
+                                               "`site_id` and `kind` (whatever `state`)")
+    evaluator: EvaluatorRead

@@ -1,0 +1,122 @@
+"""``/api/v1/sites/{site_id}/diagnosis`` and ``…/pointing`` (``backend/diagnosis``,
+``docs/diagnosis.md``)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, Field
+
+
+class DaySkyRead(BaseModel):
+    """What the day's sky rests on."""
+
+    clearness_index: float | None = Field(description="measured over clear-sky POA in daylight")
+    source: str = Field(description="`sensor`, `fixed_array` or `clear_sky`")
+    sensor: str | None = Field(description="the sensor reading used (`poa_irradiance_w_m2`, "
+                                           "`ghi_w_m2`) or null")
+    valid_minutes_pct: float = Field(description="daylight minutes with a usable sky [%]")
+
+
+class TrackerDayRead(BaseModel):
+    """The tracker's day: measured against the weather-aware twin."""
+
+    measured_wh: float | None
+    expected_wh: float
+    expected_wh_low: float = Field(description="band of the sky inversion's uncertainty")
+    expected_wh_high: float
+    performance_ratio: float | None
+
+
+class FixedDayRead(BaseModel):
+    """The fixed array's day (it is the sky sensor)."""
+
+    measured_wh: float | None
+    expected_wh: float
+    performance_ratio: float | None
+
+
+class FaultRead(BaseModel):
+    """A named fault signature (``backend/diagnosis/faults.py``)."""
+
+    kind: Literal["stuck", "azimuth_offset", "elevation_offset", "clock_offset",
+                  "module_loss", "soiling", "dropout"]
+    confidence: float = Field(description="[0, 1]")
+    since: str = Field(description="the first day of its run of days (local date)")
+    magnitude: float = Field(description="in `unit`")
+    unit: str
+    detail: str
+
+
+class DiagnosisDayRead(BaseModel):
+    """One local day."""
+
+    date: str = Field(description="local date, YYYY-MM-DD")
+    complete: bool = Field(description="false: the day is not over; judged up to now")
+    sky: DaySkyRead
+    tracker: TrackerDayRead
+    fixed: FixedDayRead
+    gain_measured_pct: float | None
+    gain_expected_pct: float | None
+    faults: list[FaultRead]
+
+
+class DiagnosisRead(BaseModel):
+    """Per local day: sky, measured and expected energy, PR, gains and faults."""
+
+    site_id: str
+    timezone: str
+    start: str
+    end: str
+    days: list[DiagnosisDayRead]
+
+
+class PointingStatsRead(BaseModel):
+    """Statistics of the angle between the panel normal and the sun [°]."""
+
+    rms_deg: float
+    median_deg: float
+    p95_deg: float
+    max_deg: float
+
+
+class PointingSummaryRead(PointingStatsRead):
+    """Over the whole range, with the mean signed errors and the cosine loss."""
+
+    mean_azimuth_error_deg: float
+    mean_elevation_error_deg: float
+    mean_cos_loss_pct: float
+
+
+class PointingDayRead(PointingStatsRead):
+    """One local day."""
+
+    date: str
+    minutes: int
+
+
+class PointingPointRead(BaseModel):
+    """One minute: encoder angles, the sun, the error and its components [°]."""
+
+    ts: str
+    azimuth_deg: float
+    elevation_deg: float
+    sun_azimuth_deg: float
+    sun_elevation_deg: float
+    error_deg: float
+    azimuth_error_deg: float
+    elevation_error_deg: float
+
+
+class PointingRead(BaseModel):
+    """The tracker's pointing error from its logger's encoder angles."""
+
+    site_id: str
+    array: str | None = Field(description="the tracker array; null when the site has none")
+    start: str
+    end: str
+    minutes: int = Field(description="minutes with both angles and the sun up")
+    summary: PointingSummaryRead | None
+    days: list[PointingDayRead]
+    points: list[PointingPointRead]
+    points_step: int = Field(description="every k-th minute is in `points`")

@@ -1,0 +1,72 @@
+"""``/api/v1/sites/{site_id}/energy`` and ``…/report``: energy per period, measured beside the
+twin, with the tracking gain (``backend/measurements/energy.py``, ``backend/reports.py``)."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, Field
+
+
+class ArrayEnergyRead(BaseModel):
+    """One array's energy over a period."""
+
+    measured_wh: float | None = Field(description="null: no readings in the period")
+    twin_wh: float | None = Field(description="the clear-sky twin")
+    twin_matched_wh: float | None = Field(description="the twin over the minutes measured")
+    readings: int
+    performance_ratio: float | None = Field(description="measured_wh / twin_matched_wh")
+    coverage_pct: float | None = Field(description="twin_matched_wh / twin_wh [%]")
+    twin_weather_wh: float | None = Field(
+        None, description="with source=twin_weather: the twin under the measured sky")
+
+
+class EnergyTotalsRead(BaseModel):
+    """The whole range."""
+
+    arrays: dict[str, ArrayEnergyRead]
+    partial: bool | None = Field(description="an array covered under partial_below_pct")
+    gain_pct: float | None = Field(description="100·(tracker/fixed − 1), measured")
+    twin_gain_pct: float | None
+    twin_matched_gain_pct: float | None
+    twin_weather_gain_pct: float | None = None
+
+
+class EnergyRowRead(EnergyTotalsRead):
+    """One local hour, day or month, clipped to the range."""
+
+    period_start: str = Field(description="ISO 8601 in the site's zone")
+    period_end: str
+    twin_note: str | None = Field(description="why the twin has no value, if so")
+    twin_weather_note: str | None = None
+
+
+class EnergyRead(BaseModel):
+    """Energy per period for every array, measured and twin, with the tracking gain."""
+
+    site_id: str
+    interval: str = Field(description="`hour`, `day` or `month`")
+    timezone: str
+    start: str
+    end: str
+    max_gap_s: int = Field(description="longest gap the energy bridges [s]")
+    partial_below_pct: float
+    rows: list[EnergyRowRead]
+    totals: EnergyTotalsRead
+
+
+class ReportRead(BaseModel):
+    """Totals, daily, monthly and annual energy, gain and performance ratio of a range."""
+
+    site_id: str
+    name: str
+    timezone: str
+    latitude_deg: float
+    longitude_deg: float
+    start: str
+    end: str
+    arrays: list[str]
+    max_gap_s: int
+    partial_below_pct: float
+    totals: EnergyTotalsRead
+    days: list[EnergyRowRead]
+    months: list[EnergyRowRead]
+    years: list[EnergyRowRead]

@@ -1,0 +1,101 @@
+"""``/api/v1/simulations``: twin scenario summaries, background runs and their series."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import BaseModel, Field
+
+
+class SimulationAcceptedRead(BaseModel):
+    """A background run accepted (202): poll ``GET /api/v1/simulations/{run_id}``."""
+
+    run_id: str
+    status: str
+    progress: float = Field(description="0…1")
+
+
+class DisturbancesRead(BaseModel):
+    """The machine's disturbances of the run (``sim.disturbances.Disturbances``)."""
+
+    pedestal_yaw_deg: float
+    pedestal_tilt_deg: float
+    pedestal_tilt_azimuth_deg: float
+    encoder_drift_mrad_per_h: float
+    clock_offset_s: float
+    backlash_deg: float
+    gust_torque_nm: float
+    camera_offset_right_deg: float
+    camera_offset_up_deg: float
+
+
+class SimulationSummaryRead(BaseModel):
+    """A run's summary (DESIGN.md ``heliotwin simulate``, ``sim.twin.TwinResult.summary``)."""
+
+    run_id: str
+    site_id: str
+    start: str
+    end: str
+    step_s: float
+    controller: str
+    receiver: str
+    sky: str
+    timezone: str
+    steps: int
+    daylight_steps: int
+    tracker_energy_wh: float
+    fixed_energy_wh: float
+    gain_pct: float | None
+    net_gain_pct: float | None = Field(description="the gain after the actuators' energy")
+    tracker_peak_w: float
+    fixed_peak_w: float
+    tracker_peak_time: str | None
+    fixed_peak_time: str | None
+    tracker_modules: int
+    fixed_modules: int
+    wiring: dict[str, str]
+    pointing_error_rms_mrad: float | None
+    pointing_error_p95_mrad: float | None
+    pointing_error_max_mrad: float | None
+    azimuth_error_rms_mrad: float | None
+    elevation_error_rms_mrad: float | None
+    moves: int
+    actuator_energy_wh: float
+    actuator_move_energy_wh: float
+    actuator_standby_energy_wh: float
+    pointing_loss_wh: float
+    acceptance_angle_deg: float | None = Field(description="CPV receiver only")
+    spot_distance_m: float
+    spot_displacement_rms_m: float | None
+    spot_x_rms_m: float | None
+    spot_y_rms_m: float | None
+    camera_frames: int
+    camera_frames_found: int
+    camera_frames_used: int
+    disturbances: DisturbancesRead
+    fixed_shade_loss_wh: float | None = Field(None, description="when the site places both "
+                                                                "arrays")
+
+
+class SimulationRunRead(BaseModel):
+    """Status, progress and, when done, the summary of a run."""
+
+    run_id: str
+    site_id: str
+    status: str = Field(description="`queued`, `running`, `done` or `failed`")
+    progress: float = Field(description="0…1")
+    summary: SimulationSummaryRead | None
+    error: str | None
+    params: dict[str, Any] = Field(description="the scenario: site_id, start, end, step_s, "
+                                               "controller, receiver, machine parameters "
+                                               "changed, weather_station")
+
+
+class SimulationSeriesRead(BaseModel):
+    """A finished run's series, averaged into buckets when ``max_points`` asks."""
+
+    run_id: str
+    bucket_s: float = Field(description="0: every step as computed")
+    columns: list[str] = Field(description="the points' keys after `ts`, units in the names")
+    points: list[dict[str, float | str | None]] = Field(
+        description="`ts` (UTC, ISO 8601) and one number (or null) per column")

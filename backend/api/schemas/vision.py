@@ -1,0 +1,255 @@
+"""``/api/v1/vision``: the sun in uploaded frames, fisheye calibrations, seed 003's tables."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, Field
+
+
+class EphemerisRead(BaseModel):
+    """The ephemeris sun (SPA, apparent elevation) and, for a fisheye, its pixel."""
+
+    azimuth_deg: float
+    elevation_deg: float
+    centroid_px: list[float] | None = Field(
+        None, description="fisheye only: [x, y] through the camera model; null below the "
+                          "horizon")
+
+
+class SunErrorRead(BaseModel):
+    """Detected minus ephemeris."""
+
+    separation_deg: float = Field(description="angle between the two on the sphere [°]")
+    azimuth_deg: float | None = None
+    elevation_deg: float | None = None
+    distance_px: float | None = Field(None, description="fisheye: between the two pixels")
+
+
+class DerivedCameraRead(BaseModel):
+    """A fisheye scale derived from the image circle (no ``px_per_deg`` given)."""
+
+    cx_px: float
+    cy_px: float
+    px_per_deg: float
+    image_circle_radius_px: float
+    projection: str
+    how: str
+    warning: str | None = None
+
+
+class SunDetectionRead(BaseModel):
+    """One frame's sun (``vision.analyse.analyse_frame``) as stored.
+
+    A fisheye answers ``azimuth_deg``/``elevation_deg``; a pinhole
+    ``pointing_error_deg`` [right, up] and ``pointing_error_mrad``; with time and place
+    ``ephemeris`` and, when both suns are known, ``error``.
+    """
+
+    detection_id: int
+    sun_found: bool
+    confidence: float = Field(description="a calibrated probability [0, 1]")
+    reason: str | None = Field(description="why no sun was found; null otherwise")
+    centroid_px: list[float] | None = Field(description="[x, y]")
+    method: str
+    image_size_px: list[int] = Field(description="[width, height]")
+    distance_from_ephemeris_px: float | None
+    camera: str = Field(description="`fisheye` or `pinhole`")
+    azimuth_deg: float | None = None
+    elevation_deg: float | None = None
+    pointing_error_deg: list[float | None] | None = None
+    pointing_error_mrad: float | None = None
+    ephemeris: EphemerisRead | None = None
+    error: SunErrorRead | None = None
+    camera_derived: DerivedCameraRead | None = None
+    warnings: list[str]
+    calibration_id: int | None
+    timestamp: str | None = Field(description="UTC, ISO 8601")
+    site_id: str | None
+    latitude_deg: float | None
+    longitude_deg: float | None
+
+
+class FisheyeCameraRead(BaseModel):
+    """A fisheye camera model (``vision.cameras.FisheyeCamera``; seed 003, eqs. 9–11)."""
+
+    projection: str
+    cx_px: float
+    cy_px: float
+    px_per_deg: float
+    north_offset_deg: float
+    east: str = Field(description="`left` or `right`: the side east shows on")
+    radial_coeffs: list[float]
+    tilt_north_deg: float
+    tilt_east_deg: float
+
+
+class CalibrationFrameRead(BaseModel):
+    """One frame of a calibration and its residual."""
+
+    filename: str
+    timestamp: str
+    sun_found: bool
+    confidence: float
+    centroid_px: list[float] | None
+    used: bool
+    residual_px: float | None
+    residual_deg: float | None
+    ephemeris: EphemerisRead
+
+
+class CalibrationSummaryRead(BaseModel):
+    """A stored calibration in the list."""
+
+    calibration_id: int
+    name: str
+    created_at: str
+    site_id: str | None
+    latitude_deg: float
+    longitude_deg: float
+    elevation_m: float
+    projection: str
+    image_size_px: list[int]
+    n_frames: int
+    rms_px: float
+    max_px: float
+    rms_deg: float
+    max_deg: float
+    camera: FisheyeCameraRead
+
+
+class StoredCalibrationRead(CalibrationSummaryRead):
+    """One stored calibration with its per-frame residuals."""
+
+    frames: list[CalibrationFrameRead]
+
+
+class CalibrationsRead(BaseModel):
+    """Stored calibrations, newest first."""
+
+    calibrations: list[CalibrationSummaryRead]
+
+
+class FittedCalibrationRead(BaseModel):
+    """A calibration just fitted and stored (201)."""
+
+    calibration_id: int
+    name: str
+    site_id: str | None
+    latitude_deg: float
+    longitude_deg: float
+    elevation_m: float
+    projection: str
+    cx_px: float
+    cy_px: float
+    px_per_deg: float
+    north_offset_deg: float
+    east: str
+    tilt_north_deg: float
+    tilt_east_deg: float
+    image_width_px: int
+    image_height_px: int
+    n_frames: int
+    rms_px: float
+    max_px: float
+    rms_deg: float
+    max_deg: float
+    frames: list[CalibrationFrameRead]
+    camera: FisheyeCameraRead
+
+
+class StoredDetectionRead(BaseModel):
+    """A stored detection (fisheye: angles; pinhole: pointing error)."""
+
+    detection_id: int
+    timestamp: str | None
+    created_at: str
+    site_id: str | None
+    latitude_deg: float | None
+    longitude_deg: float | None
+    camera: str
+    calibration_id: int | None
+    method: str
+    image_size_px: list[int]
+    sun_found: bool
+    confidence: float
+    centroid_px: list[float] | None
+    azimuth_deg: float | None = None
+    elevation_deg: float | None = None
+    pointing_error_deg: list[float] | None = None
+    pointing_error_mrad: float | None = None
+    ephemeris: EphemerisRead | None = None
+    error: SunErrorRead | None = None
+    warnings: list[str]
+
+
+class DetectionsRead(BaseModel):
+    """Stored detections in [start, end)."""
+
+    site_id: str | None
+    start: str | None
+    end: str | None
+    detections: list[StoredDetectionRead]
+
+
+class DetectionsDeletedRead(BaseModel):
+    """How many stored detections were deleted."""
+
+    site_id: str | None
+    start: str
+    end: str
+    detections_deleted: int
+
+
+class CalibrationDeletedRead(BaseModel):
+    """A calibration deleted with the detections made with it."""
+
+    calibration_id: int
+    calibrations_deleted: int
+    detections_deleted: int
+
+
+class AxisErrorsRead(BaseModel):
+    """Seed 003's Table 3 for one axis [°] (MSE [°²], MAPE [%])."""
+
+    mad_deg: float
+    mse_deg2: float
+    rmse_deg: float
+    mape_pct: float | None
+
+
+class SeparationErrorsRead(BaseModel):
+    """The angle between detected and ephemeris suns [°]."""
+
+    mean_deg: float
+    rmse_deg: float
+    max_deg: float
+
+
+class MethodMetricsRead(BaseModel):
+    """Seed 003's Table 3 of one method."""
+
+    azimuth: AxisErrorsRead
+    elevation: AxisErrorsRead
+    separation: SeparationErrorsRead
+
+
+class MethodTableRead(BaseModel):
+    """One detection method over the batch."""
+
+    n_found: int
+    n_frames: int
+    metrics: MethodMetricsRead | None = Field(description="null when nothing was found")
+
+
+class EvaluationRead(BaseModel):
+    """Each method's angles against SPA: seed 003's Table 2 (per frame) and Table 3."""
+
+    n_frames: int
+    site_id: str | None
+    latitude_deg: float
+    longitude_deg: float
+    camera: FisheyeCameraRead
+    table2: list[dict[str, str | float | bool | None]] = Field(
+        description="per frame: filename, timestamp, ephemeris_azimuth_deg, "
+                    "ephemeris_elevation_deg and per method `<method>_sun_found`, "
+                    "`<method>_azimuth_deg`, `<method>_elevation_deg`")
+    table3: dict[str, MethodTableRead]
