@@ -390,3 +390,34 @@ def test_validation_station_distance_rule(tehuantepec) -> None:
     assert limit == MAX_STATION_DISTANCE_KM
     _, meta = read_tmy3(pvlib_tmy3_path())
     assert_printed([shown], [0], [station_distance_km(meta, tehuantepec)])
+
+
+# --- docs/control.md ----------------------------------------------------------------
+
+REFERENCE_COLUMNS = ["pointing_error_rms_mrad", "pointing_error_p95_mrad",
+                     "pointing_error_max_mrad", "azimuth_error_rms_mrad",
+                     "elevation_error_rms_mrad", "moves"]
+
+
+@pytest.mark.parametrize(
+    ("controller", "label"),
+    [
+        ("open_loop_spa", "`open_loop_spa`"),
+        ("open_loop_duffie_beckman", "`open_loop_duffie_beckman`"),
+        ("chronological", "`chronological` (30 min)"),
+        ("hybrid", "`hybrid`"),
+        pytest.param("closed_loop_camera", "`closed_loop_camera`", marks=pytest.mark.slow),
+    ],
+)
+def test_control_reference_case_table(tehuantepec, controller: str, label: str) -> None:
+    from sim.disturbances import Disturbances
+    from sim.twin import simulate
+
+    day = pd.Timestamp("2024-03-15", tz=tehuantepec.timezone)
+    s = simulate(tehuantepec, day, day + pd.Timedelta(days=1), controller=controller,
+                 disturbances=Disturbances(pedestal_yaw_deg=2.0)).summary()
+    section = doc("control.md").split("## The reference case")[1].split("\n## ")[0]
+    shown = " ".join(table_row(section, label))
+    computed = [float(s[k]) for k in REFERENCE_COLUMNS]
+    computed += [1000 * s["spot_x_rms_m"], 1000 * s["spot_y_rms_m"]]
+    assert_printed(numbers(shown), decimals(shown), computed)
