@@ -13,6 +13,7 @@ from __future__ import annotations
 import datetime as dt
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 import pandas as pd
 from pvlib import atmosphere
 
@@ -25,11 +26,24 @@ from sim.sun import solar_position
 if TYPE_CHECKING:
     from backend.context import ServiceContext
 
-#: A logger whose last reading is older than this is "stale" [s].
+#: A logger whose last reading is older than this is "stale" [s] — at the least: a slower
+#: logger is given :func:`fresh_for` its own cadence.
 FRESH_S = 300
 
+#: the latest readings of a series, newest first: the last one and the logger's cadence
 _LAST = ("SELECT ts_s, voltage_v, current_a, power_w FROM measurements "
-         "WHERE array_id = ? AND source = 0 ORDER BY ts_s DESC LIMIT 1")
+         "WHERE array_id = ? AND source = 0 ORDER BY ts_s DESC LIMIT 11")
+
+
+def fresh_for(ts_desc_s: list[float], max_gap_s: int) -> int:
+    """How old [s] a logger's last reading may be before it is stale: 2.5 of its own
+    cadence (the median interval of its latest readings ``ts_desc_s``, newest first),
+    at least :data:`FRESH_S` and at most the energy rule's ``max_gap_s`` (past it the next
+    reading would not be bridged: :mod:`sim.energy`). A 15-minute logger is not stale
+    between two of its readings; a 1-minute one is after five silent minutes."""
+    steps = -np.diff(np.asarray(ts_desc_s, np.float64))
+    cadence = float(np.median(steps)) if steps.size else 0.0
+    return int(min(max(FRESH_S, 2.5 * cadence), max(FRESH_S, max_gap_s)))
 
 
 def status(ctx: ServiceContext, info: SiteInfo, now: float) -> dict[str, Any]:
@@ -55,9 +69,10 @@ def status(ctx: ServiceContext, info: SiteInfo, now: float) -> dict[str, Any]:
             if last:
                 ts, volt, amp, pw = last[0]
                 age = now - ts
+                fresh = fresh_for([r[0] for r in last], ctx.settings.energy_max_gap_s)
                 entry.update(last_ts=iso_utc([int(ts)])[0], power_w=pw, voltage_v=volt,
                              current_a=amp, age_s=round(age, 1),
-                             logger="reporting" if age <= FRESH_S else "stale")
+                             logger="reporting" if age <= fresh else "stale")
             arrays[name] = entry
     local_now = dt.datetime.fromtimestamp(now, info.zone)
     today = local_now.replace(hour=0, minute=0, second=0, microsecond=0)

@@ -151,3 +151,34 @@ def test_every_endpoint_agrees_on_any_cadence(api: tuple[TestClient, str, str],
     assert dday["fixed"]["performance_ratio"] == pytest.approx(1.0, abs=0.05)
     assert dday["gain_expected_pct"] == pytest.approx(true_gain, abs=2.0)
     assert not [f for f in dday["faults"] if f["kind"] != "soiling"], dday["faults"]
+
+
+def test_a_slow_logger_is_not_stale_between_its_readings(api: tuple[TestClient, str, str]
+                                                          ) -> None:
+    """The overview's logger state on the logger's own cadence: a 15-minute logger ten
+    minutes after its last reading is reporting, a 1-minute one after ten silent minutes
+    is stale, and nothing is fresh past the energy rule's gap."""
+    client, token, backend = api
+    if backend == "postgresql":
+        pytest.skip("the rule is not in SQL")
+    from backend.measurements.status import FRESH_S, fresh_for, status
+
+    assert fresh_for([3600.0 - 900.0 * k for k in range(11)], 1200) == 1200
+    assert fresh_for([3600.0 - 60.0 * k for k in range(11)], 1200) == FRESH_S
+    assert fresh_for([3600.0 - 300.0 * k for k in range(11)], 1200) == 750
+    assert fresh_for([3600.0], 1200) == FRESH_S
+    ctx = client.app.state.ctx  # type: ignore[attr-defined]
+    info = ctx.registry.get(SITE)
+    start = pd.Timestamp("2024-05-20 09:00", tz=TZ)
+    for array, step_min in (("tracker", 1), ("fixed", 15)):
+        ts = [start + pd.Timedelta(minutes=step_min * k) for k in range(int(120 / step_min) + 1)]
+        body = "ts,array,voltage_v,current_a,power_w\n" + "".join(
+            f"{t.isoformat()},{array},30.0,10.0,300.0\n" for t in ts)
+        r = client.post(f"/api/v1/sites/{SITE}/measurements", content=body,
+                        headers={"Authorization": f"Bearer {token}", "Content-Type": "text/csv"})
+        assert r.status_code == 200, r.text
+    last = (start + pd.Timedelta(minutes=120)).timestamp()
+    arrays = status(ctx, info, last + 600)["arrays"]
+    assert arrays["fixed"]["logger"] == "reporting"
+    assert arrays["tracker"]["logger"] == "stale"
+    assert status(ctx, info, last + 1300)["arrays"]["fixed"]["logger"] == "stale"
