@@ -47,7 +47,7 @@ import pandas as pd
 from sim import array_shade, kinematics, pv, sky, sun
 from sim import disturbances as dist
 from sim.control import CONTROLLERS, ControlSettings, make_controller, noon_reference_azimuth
-from sim.energy import gain_pct, sampled_energy_wh
+from sim.energy import energy_per_period_wh, gain_pct, sampled_energy_wh
 from sim.sites import Site
 from sim.tracking import (
     CameraSetup,
@@ -124,6 +124,30 @@ class TwinResult:
         """Energy of ``array`` (``"tracker"``/``"fixed"``) over the run [Wh]."""
         return sampled_energy_wh(self.series[f"{array}_power_w"].to_numpy(), self.step_s)
 
+    def daily_energy(self) -> list[dict[str, Any]]:
+        """Energy [Wh] and gain [%] per local calendar day of the run (the site's zone), by
+        :mod:`sim.energy`'s rule split at local midnights: the days add up to the run's
+        totals. Days are ``date`` (local ISO date), ``tracker_energy_wh``,
+        ``fixed_energy_wh``, ``gain_pct``."""
+        s = self.series
+        if s.empty:
+            return []
+        zone = self.site.timezone
+        first = s.index[0].tz_convert(zone).normalize()
+        last = s.index[-1].tz_convert(zone).normalize()
+        dates = pd.date_range(first.date(), last.date(), freq="D")
+        edges = [pd.Timestamp(d.date(), tz=zone) for d in dates]
+        edges.append(pd.Timestamp((dates[-1] + pd.Timedelta(days=1)).date(), tz=zone))
+        edges_s = np.array([e.timestamp() for e in edges])
+        t = s.index.as_unit("s").asi8.astype(np.float64)
+        gap = 1.5 * self.step_s
+        per = {a: energy_per_period_wh(t, s[f"{a}_power_w"].to_numpy(), gap, edges_s)
+               for a in ("tracker", "fixed")}
+        return [{"date": d.date().isoformat(), "tracker_energy_wh": float(per["tracker"][k]),
+                 "fixed_energy_wh": float(per["fixed"][k]),
+                 "gain_pct": gain_pct(float(per["tracker"][k]), float(per["fixed"][k]))}
+                for k, d in enumerate(dates)]
+
     def summary(self) -> dict[str, Any]:
         """The CLI/HTTP summary (DESIGN.md ``heliotwin simulate`` contract), JSON-ready."""
         s = self.series
@@ -152,6 +176,7 @@ class TwinResult:
         out["fixed_modules"] = self.site.arrays["fixed"].modules
         out["wiring"] = {k: a.wiring for k, a in self.site.arrays.items()}
         out["timezone"] = self.site.timezone
+        out["days"] = self.daily_energy()
         out.update(self._pointing_summary(tracker_wh, fixed_wh))
         if self.fixed_shade_loss_wh is not None:
             out["fixed_shade_loss_wh"] = self.fixed_shade_loss_wh

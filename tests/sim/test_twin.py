@@ -177,3 +177,19 @@ def test_reference_case_closed_loop_camera_day(site) -> None:
     # ~43,000 frames at 1 frame/s; measured 1.3 mrad RMS, a 95 % reduction
     assert cl["camera_frames"] > 40_000
     assert 1 - cl["pointing_error_rms_mrad"] / ol["pointing_error_rms_mrad"] >= 0.90
+
+
+def test_daily_energies_add_up_and_match_one_day_runs(site) -> None:
+    """Two local days in one run: each day is the energy of that day run alone (split at
+    local midnight by the energy rule), and the days add up to the run's totals."""
+    start = pd.Timestamp("2024-03-15", tz=TZ)
+    both = simulate(site, start, start + pd.Timedelta(days=2)).summary()
+    assert [d["date"] for d in both["days"]] == ["2024-03-15", "2024-03-16"]
+    for k, d in enumerate(both["days"]):
+        alone = simulate(site, start + pd.Timedelta(days=k),
+                         start + pd.Timedelta(days=k + 1)).summary()
+        assert d["tracker_energy_wh"] == pytest.approx(alone["tracker_energy_wh"], rel=1e-9)
+        assert d["fixed_energy_wh"] == pytest.approx(alone["fixed_energy_wh"], rel=1e-9)
+        assert d["gain_pct"] == pytest.approx(alone["gain_pct"], abs=1e-7)
+    assert sum(d["tracker_energy_wh"] for d in both["days"]) == pytest.approx(
+        both["tracker_energy_wh"], rel=1e-12)
