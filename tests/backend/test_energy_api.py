@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 
 TZ = dt.timezone(dt.timedelta(hours=-6))
 BASE = "/api/v1/sites/tehuantepec"
-MAX_GAP_S = 600
+MAX_GAP_S = 1200  # the service default HELIOTWIN_ENERGY_MAX_GAP_S (sim/energy.py)
 
 
 def bell(day: dt.date, array: str, scale: float, minutes: list[int]) -> list[dict]:
