@@ -4,11 +4,18 @@ A run is a :class:`backend.twin.scenario.Scenario` (site, range, step,
 controller, disturbances, receiver) through ``run_scenario``. Every run —
 synchronous or background — executes in its own worker process (forked from a
 ``forkserver`` that has the simulation modules imported, so a start costs
-milliseconds), never in the web process's memory: a two-year run at one
-minute peaks at ≈ 400 MB there and gives it all back when the process exits.
-The worker stores the series (a compressed ``.npz``) in ``simulation_series``
-itself and sends only its progress and the summary back over a pipe; the web
-process records the run in ``simulation_runs`` through the writer.
+milliseconds), never in the web process's memory or under its GIL: a year at
+one minute peaks at ≈ 400 MB and, with a controller stepped in Python, holds
+the GIL for minutes; the process gives the memory back when it exits and
+leaves the web process's threads their interpreter (``docs/architecture.md``,
+"Threads and processes", has the measurement).
+
+The worker touches no database. It sends its progress, then the summary and
+the series packed as a compressed ``.npz`` (:func:`write_npz`: the bytes
+themselves, not a pickle of them) back over a pipe; the web process stores
+both through the one writer (``backend/measurements/writer.py``), in one
+transaction that also marks the run done, so a run is ``done`` exactly when
+its series is stored.
 
 At most ``Settings.simulation_workers`` runs execute at once and
 ``Settings.simulation_queue`` wait; past that :meth:`SimulationRunner.submit`
@@ -89,11 +96,9 @@ def npz_to_series(blob: bytes) -> pd.DataFrame:
     return pd.DataFrame(cols, index=index)
 
 
-def _work(pipe: Pipe, database_url: str, site: Site, params: Scenario, run_id: str) -> None:
-    """The worker process: run, store the series, send ``("done", summary)`` or the error."""
-    from backend.settings import get_settings
-    from backend.storage.engine import make_engine
-
+def _work(pipe: Pipe, site: Site, params: Scenario, run_id: str) -> None:
+    """The worker process: run, then send ``("done", summary)`` and the packed series
+    (:meth:`Connection.send_bytes`), or ``("failed", message)``; it writes nothing itself."""
     last = [-1.0]
 
     def progress(fraction: float) -> None:
@@ -112,17 +117,20 @@ def _work(pipe: Pipe, database_url: str, site: Site, params: Scenario, run_id: s
             del result
             f.seek(0)
             blob = f.read()
-        engine = make_engine(get_settings(database_url=database_url))
-        try:
-            with engine.begin() as conn:
-                conn.execute(insert(SimulationSeries).values(run_id=run_id, npz=blob))
-        finally:
-            engine.dispose()
         pipe.send(("done", summary))
+        pipe.send_bytes(blob)
     except Exception as exc:  # noqa: BLE001 - reported to the web process as the run's error
         pipe.send(("failed", str(exc) or type(exc).__name__))
     finally:
         pipe.close()
+
+
+@dataclass
+class _Result:
+    """A finished run as its worker sent it: the summary and the packed series."""
+
+    summary: dict[str, Any]
+    npz: bytes
 
 
 class SimulationRunner:
@@ -222,57 +230,66 @@ class SimulationRunner:
                  fut: Future[dict[str, Any]]) -> None:
         state.status = "running"
         t0 = time.monotonic()
+        keep = self.settings.simulation_anonymous_keep_runs
         try:
-            summary = self._in_worker(state, params)
+            result = self._in_worker(state, params)
+            elapsed = time.monotonic() - t0
+            state.summary, state.progress = result.summary, 1.0
+
+            def store(conn: Connection) -> int:
+                """The series, the run done, the anonymous runs pruned: one transaction."""
+                conn.execute(insert(SimulationSeries).values(run_id=state.run_id,
+                                                             npz=result.npz))
+                _finish(conn, state)
+                return prune_anonymous(conn, SimulationRun, keep) if anonymous else 0
+
+            pruned = self.writer.call(store).result()
         except Exception as exc:  # noqa: BLE001 - reported through the run's status
-            state.status, state.error = "failed", str(exc)
+            state.summary, state.status, state.error = None, "failed", str(exc)
             logger.warning("simulation %s failed: %s", state.run_id, exc)
-            self.writer.call(lambda conn: _finish(conn, state)).result()
+            try:
+                self.writer.call(lambda conn: _finish(conn, state)).result()
+            except Exception:  # noqa: BLE001 - the writer has stopped: the row stays running
+                logger.warning("simulation %s: its failure not stored", state.run_id)
             fut.set_exception(exc)
             return
-        elapsed = time.monotonic() - t0
         if elapsed > 0.5:
             self._steps_per_s = state.steps / elapsed
-        state.summary, state.progress = summary, 1.0
-        keep = self.settings.simulation_anonymous_keep_runs
-
-        def finish(conn: Connection) -> int:
-            _finish(conn, state)
-            return prune_anonymous(conn, SimulationRun, keep) if anonymous else 0
-
-        if self.writer.call(finish).result():
+        if pruned:
             self._forget_pruned()
         state.status = "done"
-        fut.set_result(summary)
+        fut.set_result(state.summary)
 
-    def _in_worker(self, state: RunState, params: Scenario) -> dict[str, Any]:
+    def _in_worker(self, state: RunState, params: Scenario) -> _Result:
+        """Run ``params`` in a worker process; its progress into ``state``; its result.
+
+        Polled every 0.2 s so a stopping service terminates the worker at once.
+        """
         site = self.registry.sites[params.site_id].site
         ours, theirs = _MP.Pipe(duplex=False)
         proc = _MP.Process(target=_work, name=f"heliotwin-sim-{state.run_id[:8]}",
-                           args=(theirs, self.settings.database_url, site, params,
-                                 state.run_id), daemon=True)
+                           args=(theirs, site, params, state.run_id), daemon=True)
         proc.start()
         theirs.close()
+        ended = "the worker process ended (exit code {}) without a result"
         try:
             while True:
                 if self._stopping.is_set():
                     raise Cancelled("service stopping")
                 if not ours.poll(0.2):
                     if not proc.is_alive() and not ours.poll(0):
-                        raise RuntimeError(f"the worker process ended (exit code "
-                                           f"{proc.exitcode}) without a result")
+                        raise RuntimeError(ended.format(proc.exitcode))
                     continue
                 try:
                     kind, value = ours.recv()
+                    if kind == "progress":
+                        state.progress = max(state.progress, min(float(value), 0.999))
+                    elif kind == "done":
+                        return _Result(dict(value), ours.recv_bytes())
+                    else:
+                        raise ValueError(str(value))
                 except EOFError:
-                    raise RuntimeError(f"the worker process ended (exit code "
-                                       f"{proc.exitcode}) without a result") from None
-                if kind == "progress":
-                    state.progress = max(state.progress, min(float(value), 0.999))
-                elif kind == "done":
-                    return dict(value)
-                else:
-                    raise ValueError(str(value))
+                    raise RuntimeError(ended.format(proc.exitcode)) from None
         finally:
             ours.close()
             if proc.is_alive():

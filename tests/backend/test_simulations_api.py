@@ -4,12 +4,23 @@ from __future__ import annotations
 
 import csv
 import io
+import os
+import re
+import threading
 import time
+from pathlib import Path
+from typing import Any
 
 import httpx
 import pandas as pd
 import pytest
+from fastapi.testclient import TestClient
+from sqlalchemy import event, select
 
+from backend.app import create_app
+from backend.settings import get_settings
+from backend.storage.tables import SimulationRun, SimulationSeries
+from backend.twin.simulations import npz_to_series
 from sim.sites import load_site
 from sim.twin import simulate
 
@@ -81,3 +92,33 @@ def test_sites_and_meta(client: httpx.Client) -> None:
     assert set(ingest) == {"get", "post"}  # POST is served by the middleware, documented once
     assert set(ingest["post"]["requestBody"]["content"]) == {"application/json", "text/csv"}
     assert {"401", "413", "422"} <= set(ingest["post"]["responses"])
+
+
+def test_results_are_written_by_the_writer(tmp_path: Path) -> None:
+    """A run's series and its summary reach the database through the one writer thread of
+    the web process (the worker process sends them back; it opens no database)."""
+    settings = get_settings(database_url=f"sqlite:///{tmp_path / 'sim.sqlite'}", viser=False,
+                            live_twin=False, demo_logger=False, alerts=False, mqtt_url=None)
+    writes: list[tuple[str, str, int]] = []
+    with TestClient(create_app(settings)) as client:
+        ctx = client.app.state.ctx  # type: ignore[attr-defined]
+
+        @event.listens_for(ctx.engine, "before_cursor_execute")
+        def note(_conn: Any, _cur: Any, statement: str, *_: Any) -> None:
+            table = re.search(r"\bsimulation_\w+", statement)
+            if statement.split()[0] in ("INSERT", "UPDATE", "DELETE") and table:
+                writes.append((table.group(), threading.current_thread().name, os.getpid()))
+
+        r = client.post("/api/v1/simulations", json={
+            "site_id": "tehuantepec", "start": "2024-03-15", "end": "2024-03-17"})
+        assert r.status_code == 200, r.text
+        run_id = r.json()["run_id"]
+        with ctx.engine.connect() as conn:
+            status = conn.execute(select(SimulationRun.status).where(
+                SimulationRun.run_id == run_id)).scalar_one()
+            blob = conn.execute(select(SimulationSeries.npz).where(
+                SimulationSeries.run_id == run_id)).scalar_one()
+    assert status == "done"
+    assert len(npz_to_series(blob)) == 2 * 1440
+    assert {table for table, _, _ in writes} == {"simulation_runs", "simulation_series"}
+    assert {(name, pid) for _, name, pid in writes} == {("heliotwin-writer", os.getpid())}
