@@ -2,9 +2,10 @@
 
 ``create_app(settings)`` includes the API routers (health/meta, sites,
 measurements, energy, simulations, vision) and, last, the dashboard (its ``/``
-must never shadow the API), and two middlewares: gzip for answers of
-2 KiB or more and, ahead of it, the ingest fast path
-(``backend.api.routes.measurements.IngestFastPath``). The lifespan:
+must never shadow the API), and the middlewares: gzip for answers of 2 KiB or
+more and, ahead of it, ``backend.api.strict.StrictBodies`` (request encodings and
+repeated JSON keys; logger ingest reads its own body after checking its token).
+The lifespan:
 
 1. runs the migrations, loads the built-in sites, starts the writer
    (:func:`backend.context.open_context`);
@@ -25,7 +26,6 @@ acknowledged is committed before the process exits.
 from __future__ import annotations
 
 import asyncio
-import gc
 import logging
 import threading
 from collections.abc import AsyncIterator
@@ -146,11 +146,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 ctx.twin.run_live(stop_live, settings.live_twin_interval_s), name="live-twin")
         stop_demo = threading.Event()
         demo_thread = _start_demo(ctx, stop_demo)
-        # everything loaded so far (pvlib, pandas, the app) lives as long as the
-        # process: keep it out of the collector's full passes, which would
-        # otherwise pause request handling for tens of milliseconds
-        gc.collect()
-        gc.freeze()
         try:
             yield
         finally:
@@ -177,14 +172,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_exception_handler(RequestValidationError, validation_error)  # type: ignore[arg-type]
     app.add_exception_handler(InputError, input_error)  # type: ignore[arg-type]
     app.add_exception_handler(StarletteHTTPException, strict.http_error)  # type: ignore[arg-type]
-    # the last middleware added runs first: the ingest fast path answers loggers
-    # before gzip looks at the request (its answers are small); gzip leaves
-    # responses that already carry a Content-Encoding (the dashboard's Plotly) alone.
+    # the last middleware added runs first; gzip leaves responses that already carry a
+    # Content-Encoding (the dashboard's Plotly) alone.
     # Level 5: a year downsampled to 2,000 points (480 kB of JSON) packs to 106 kB in
     # 9 ms; level 9 (Starlette's default) saves 6 kB more for 25 ms.
     app.add_middleware(GZipMiddleware, minimum_size=2048, compresslevel=5)
-    app.add_middleware(measurements.IngestFastPath)
-    app.add_middleware(strict.StrictBodies)  # first of all: Content-Encoding, repeated keys
+    # first of all: Content-Encoding, repeated keys (ingest checks its token, then its body)
+    app.add_middleware(strict.StrictBodies, own_body=measurements.INGEST_PATH)
     # outermost: CSP, X-Frame-Options, nosniff, Referrer-Policy on every response
     app.add_middleware(security.SecurityHeaders, viser_port=settings.viser_port)
     security.add_docs(app, settings.viser_port)
@@ -196,7 +190,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:
             app.openapi_schema = security.declare_bearer(strict.document_errors(
-                measurements.document_ingest(generate_openapi())))
+                generate_openapi()))
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]

@@ -9,12 +9,6 @@ dependencies in ``backend/api/deps.py`` hand its parts to the routes.
 from __future__ import annotations
 
 import logging
-import multiprocessing
-import os
-import signal
-import threading
-import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 from sqlalchemy import Engine
@@ -47,49 +41,22 @@ class ServiceContext:
     twin: TwinService
     simulations: SimulationRunner
     limits: Limits  # rate limits of anonymous work, the decode budget (backend/limits.py)
-    parsers: ProcessPoolExecutor | None = None
     mqtt: MqttService | None = None  # with Settings.mqtt_url (backend/mqtt/service.py)
     alerts: AlertService | None = None  # with Settings.alerts (backend/alerts/service.py)
 
     def close(self) -> None:
-        """Stop alerts, MQTT, parsers, runs and the writer; dispose of the engine."""
+        """Stop alerts, MQTT, runs and the writer; dispose of the engine."""
         if self.alerts is not None:  # it writes through the writer and reads the database
             self.alerts.stop()
         if self.mqtt is not None:  # first: its last readings still reach the writer
             self.mqtt.stop()
-        if self.parsers is not None:
-            self.parsers.shutdown(wait=True, cancel_futures=True)
         self.simulations.stop()
         self.writer.stop()
         self.engine.dispose()
 
 
-def _watch_parent(ppid: int) -> None:
-    while os.getppid() == ppid:
-        time.sleep(1.0)
-    os._exit(0)  # the service is gone (even by SIGKILL): no orphan parser stays behind
-
-
-def _parser_init(ppid: int) -> None:
-    """Set up a parser process: default signal handling, and exit with the service."""
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, signal.SIG_DFL)
-    threading.Thread(target=_watch_parent, args=(ppid,), daemon=True).start()
-
-
 def open_context(settings: Settings) -> ServiceContext:
-    """Start the parser processes, migrate, load sites, start the writer (and MQTT, if set,
-    and the alert evaluator)."""
-    parsers = None
-    if settings.parse_processes > 0:
-        # Validating a big batch holds the GIL for ~1 ms per 1,000 readings; worker
-        # processes let it run beside the writer instead of taking turns with it.
-        # Forked first, before this module starts any thread of its own; they only
-        # run ``backend.measurements.parse`` (NumPy, orjson) on the bytes they are sent.
-        parsers = ProcessPoolExecutor(settings.parse_processes,
-                                      mp_context=multiprocessing.get_context("fork"),
-                                      initializer=_parser_init, initargs=(os.getpid(),))
-        parsers.submit(int).result()
+    """Migrate, load sites, start the writer (and MQTT, if set, and the alert evaluator)."""
     engine = make_engine(settings)
     run_migrations(engine)
     registry = Registry.load_files(settings.sites_dir)
@@ -108,7 +75,7 @@ def open_context(settings: Settings) -> ServiceContext:
         settings=settings, engine=engine, sessions=make_sessionmaker(engine),
         registry=registry, writer=writer,
         tokens=TokenCache(engine, settings.token_cache_ttl_s), twin=twin,
-        simulations=SimulationRunner(registry, engine, writer, settings), parsers=parsers,
+        simulations=SimulationRunner(registry, engine, writer, settings),
         limits=Limits.from_settings(settings),
     )
     if settings.mqtt_url:

@@ -72,9 +72,6 @@ class Settings(BaseSettings):
         description="Longest gap between readings that energy bridges (sim/energy.py: every "
                     "logger cadence up to 15 min is bridged at the default)."
     )
-    parse_processes: int = Field(
-        1, ge=0, le=8, description="Worker processes validating large ingest batches (0: none)."
-    )
     writer_max_group_rows: int = Field(
         200_000, gt=0, description="Most rows the writer commits in one group commit."
     )

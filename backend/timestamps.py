@@ -11,10 +11,9 @@
   Readings from loggers must also be from :data:`READINGS_FROM_S` on.
 - Ranges are ``[start, end)``: ``end`` exclusive and after ``start``.
 
-Ingestion parses thousands of stamps a request; :func:`parse_instants` has a
-vectorised fast path for the one form loggers send (``YYYY-MM-DDTHH:MM:SS±HH:MM``
-or ``Z``) — it triples CSV ingest throughput (``benchmarks/bench_service.py``) —
-and falls back to :func:`parse_instant` row by row for every other form.
+Ingestion parses thousands of stamps a request: :func:`parse_instants` lets pandas
+parse a batch whose stamps share one offset (what a logger sends) and decides every
+other row by :func:`parse_instant`, so both follow the one rule above.
 """
 
 from __future__ import annotations
@@ -94,26 +93,30 @@ def _in_years(value: dt.datetime, text: str, field: str) -> dt.datetime:
     return value
 
 
-# ------------------------------------------------------------------ ingestion, vectorised
+# ------------------------------------------------------------------ ingestion, in bulk
+
+#: Below this many stamps the standard library row by row is quicker than pandas.
+_PANDAS_FROM_ROWS = 32
+_FIRST_S = int(dt.datetime(FIRST_YEAR, 1, 1, tzinfo=dt.UTC).timestamp())
+_LAST_S = int(dt.datetime(LAST_YEAR + 1, 1, 1, tzinfo=dt.UTC).timestamp())
 
 
 def parse_instants(values: Sequence[Any]) -> tuple[np.ndarray, list[tuple[int, str, str]]]:
     """Many instants → (UTC Unix seconds int64, errors ``[(row, message, code)]``).
 
-    Fractions of a second are dropped (readings are stored in whole seconds). A
-    rejected row's seconds are :data:`READINGS_FROM_S`, so it draws no second
-    error from later range checks.
+    pandas parses the column at once (``pd.to_datetime(format="ISO8601", utc=False)``)
+    when every stamp carries the same offset — what a logger sends; any other row
+    (naive, unparseable, another offset, outside the years) goes through
+    :func:`parse_instant` (``datetime.fromisoformat``), which decides and words its
+    error. Fractions of a second are dropped (readings are stored in whole seconds). A
+    rejected row's seconds are :data:`READINGS_FROM_S`, so it draws no second error
+    from later range checks.
     """
     n = len(values)
     ts = np.zeros(n, np.int64)
     ok = np.zeros(n, bool)
-    if n >= 32:  # numpy pays off past a few rows
-        try:
-            arr = np.asarray(values)
-        except ValueError:  # ragged input (a list as one value): per row below
-            arr = np.zeros(0, "U25")
-        if arr.dtype.kind == "U" and arr.ndim == 1:
-            ts, ok = _fast_instants(arr)
+    if n >= _PANDAS_FROM_ROWS:
+        ts, ok = _same_offset_instants(values)
     errors: list[tuple[int, str, str]] = []
     for r in np.flatnonzero(~ok).tolist():
         value = values[r]
@@ -133,60 +136,19 @@ def parse_instants(values: Sequence[Any]) -> tuple[np.ndarray, list[tuple[int, s
     return ts, errors
 
 
-def _days_from_civil(y: np.ndarray, m: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Days since 1970-01-01 of a proleptic Gregorian date (H. Hinnant's algorithm)."""
-    y = y - (m <= 2)
-    era = y // 400
-    yoe = y - era * 400
-    doy = (153 * (m + np.where(m > 2, -3, 9)) + 2) // 5 + d - 1
-    doe = yoe * 365 + yoe // 4 - yoe // 100 + doy
-    return era * 146097 + doe - 719468
-
-
-_DIGITS = np.array([0, 1, 2, 3, 5, 6, 8, 9, 11, 12, 14, 15, 17, 18])
-_MONTH_DAYS = np.array([0, 31, 29, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31])
-
-
-def _fast_instants(strings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vectorised ``YYYY-MM-DDTHH:MM:SS±HH:MM`` / ``…Z`` → (ts_s, ok); the rest is not ok."""
-    n = strings.shape[0]
-    width = strings.dtype.itemsize // 4
-    if width < 20:
-        return np.zeros(n, np.int64), np.zeros(n, bool)
-    raw = strings.view(np.uint32).reshape(n, width)
-    c = raw[:, :25].astype(np.int32)
-    if c.shape[1] < 25:
-        c = np.pad(c, ((0, 0), (0, 25 - c.shape[1])))
-    length = np.count_nonzero(raw, axis=1)
-    dig = c - 48
-    ok = np.all((dig[:, _DIGITS] >= 0) & (dig[:, _DIGITS] <= 9), axis=1)
-    ok &= (c[:, 4] == 45) & (c[:, 7] == 45) & (c[:, 13] == 58) & (c[:, 16] == 58)
-    ok &= (c[:, 10] == 84) | (c[:, 10] == 32) | (c[:, 10] == 116)
-    zulu = (length == 20) & ((c[:, 19] == 90) | (c[:, 19] == 122))
-    odig = dig[:, [20, 21, 23, 24]]
-    offset = (
-        (length == 25)
-        & ((c[:, 19] == 43) | (c[:, 19] == 45))
-        & (c[:, 22] == 58)
-        & np.all((odig >= 0) & (odig <= 9), axis=1)
-    )
-    ok &= zulu | offset
-    year = dig[:, 0] * 1000 + dig[:, 1] * 100 + dig[:, 2] * 10 + dig[:, 3]
-    month = dig[:, 5] * 10 + dig[:, 6]
-    day = dig[:, 8] * 10 + dig[:, 9]
-    hour = dig[:, 11] * 10 + dig[:, 12]
-    minute = dig[:, 14] * 10 + dig[:, 15]
-    second = dig[:, 17] * 10 + dig[:, 18]
-    leap = (year % 4 == 0) & ((year % 100 != 0) | (year % 400 == 0))
-    mdays = _MONTH_DAYS[np.clip(month, 0, 12)] - ((month == 2) & ~leap)
-    ok &= (month >= 1) & (month <= 12) & (day >= 1) & (day <= mdays)
-    ok &= (hour <= 23) & (minute <= 59) & (second <= 59)
-    ok &= (year >= FIRST_YEAR) & (year <= LAST_YEAR)
-    off_h = odig[:, 0] * 10 + odig[:, 1]
-    off_m = odig[:, 2] * 10 + odig[:, 3]
-    ok &= ~offset | ((off_h <= 23) & (off_m <= 59))
-    sign = np.where(c[:, 19] == 45, -1, 1)
-    off_s = np.where(offset, sign * (off_h * 3600 + off_m * 60), 0)
-    days = _days_from_civil(year.astype(np.int64), month, day)
-    ts = days * 86400 + hour * 3600 + minute * 60 + second - off_s
+def _same_offset_instants(values: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
+    """(UTC seconds, ok) by pandas when the parsed stamps share one offset; nothing is ok
+    when pandas meets naive stamps or several offsets (the caller decides row by row)."""
+    n = len(values)
+    none = np.zeros(n, np.int64), np.zeros(n, bool)
+    try:
+        parsed = pd.DatetimeIndex(pd.to_datetime(values, format="ISO8601", utc=False,
+                                                 errors="coerce"))
+    except (ValueError, TypeError, OverflowError):  # mixed offsets, naive beside aware
+        return none
+    if parsed.tz is None:  # naive stamps only (or none parsed)
+        return none
+    ok = ~np.asarray(parsed.isna())
+    ts = np.where(ok, parsed.as_unit("us").asi8, 0) // 1_000_000  # floor: fractions dropped
+    ok &= (ts >= _FIRST_S) & (ts < _LAST_S)
     return ts.astype(np.int64), ok

@@ -9,17 +9,19 @@ twin, no viser) and measures, in one run:
 - energy per day over that year and the year downsampled to 2,000 points
   (median of 7 after a first call), against a plain GROUP BY over the raw rows;
 - one keep-alive connection posting single readings back to back;
-- 200 loggers on their own connections, 5 paced requests/s each.
+- 200 loggers on their own connections, 5 paced requests/s each;
+- single readings with ``HELIOTWIN_SQLITE_SYNCHRONOUS=FULL`` against ``NORMAL``.
 
-Prints one Markdown section to stdout; progress on stderr.
+Prints one Markdown section to stdout; progress on stderr. ``--only single,loggers``
+measures some of these parts (the section then holds only their rows).
 """
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import datetime as dt
 import http.client
-import math
 import os
 import signal
 import sqlite3
@@ -265,96 +267,57 @@ def db_bytes(tmp: Path) -> int:
     return sum(p.stat().st_size for p in tmp.glob("bench.sqlite*"))
 
 
-def main() -> int:
+PARTS = ("backfill", "queries", "single", "loggers", "full")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--only", default=",".join(PARTS),
+                        help=f"comma-separated parts to measure, of {', '.join(PARTS)} "
+                             "(queries need backfill; default: all)")
+    parts = set(parser.parse_args(argv).only.split(","))
+    if unknown := parts - set(PARTS):
+        parser.error(f"unknown parts: {', '.join(sorted(unknown))}")
+    if "queries" in parts:
+        parts.add("backfill")
     load_start = os.getloadavg()[0]
-    log("baseline: raw sqlite3.executemany")
-    base_rate = baseline_executemany(400_000)
-    log(f"  {base_rate:,.0f} rows/s")
-    ts, p_tr, p_fx = year_readings()
-    log("encoding a year of readings")
-    payloads = bodies(ts, p_tr, p_fx, 1000)
-    n_rows = 2 * ts.size
+    fig = Figures("service")
+    rows: list[tuple[str, str, str]] = []
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        server = Server(tmp)
-        try:
-            log(f"back-fill: {n_rows:,} readings in {len(payloads)} requests")
-            secs = post_all(server.port, server.token, payloads, workers=8)
-            rate = n_rows / secs
-            log(f"  {rate:,.0f} rows/s")
-            log("energy per day for the year")
-            q = f"start={YEAR}-01-01&end={YEAR + 1}-01-01"
-            size0 = db_bytes(tmp)
-            e_first, e_times, e_body = timed_get(
-                server.port, f"/api/v1/sites/{SITE}/energy?{q}&interval=day")
-            twin_mb = (db_bytes(tmp) - size0) / 1e6
-            e_rows = len(orjson.loads(e_body)["rows"])
-            log("downsampled year")
-            _, m_times, m_body = timed_get(
-                server.port, f"{PATH}?array=tracker&{q}&max_points=2000")
-            m_pts = len(orjson.loads(m_body)["points"])
-            naive_s = naive_group_by(tmp / "bench.sqlite")
-        finally:
-            server.stop()
+        if "backfill" in parts:
+            rows += _backfill_and_queries(tmp, fig, "queries" in parts)
         # the live-logger figures on their own server, so that the year's back-fill
         # (and the WAL checkpoints it leaves behind) does not run under them
-        (tmp / "live").mkdir()
-        server = Server(tmp / "live")
-        try:
-            log("single readings on one connection")
-            single_rate, single_err = single_requests(server.port, server.token, 4.0)
-            log("200 loggers")
-            lat, lerr, sent, wall = asyncio.run(
-                many_loggers(server.port, server.token, 200, 5.0, 5.0))
-        finally:
-            server.stop()
-        log("single readings with HELIOTWIN_SQLITE_SYNCHRONOUS=FULL")
-        (tmp / "full").mkdir()
-        server = Server(tmp / "full", HELIOTWIN_SQLITE_SYNCHRONOUS="FULL")
-        try:
-            full_rate, _ = single_requests(server.port, server.token, 3.0)
-        finally:
-            server.stop()
-    lat_ms = np.array(lat) * 1000
-    e_med, m_med = statistics.median(e_times) * 1000, statistics.median(m_times) * 1000
-    p50, p99 = np.percentile(lat_ms, 50), np.percentile(lat_ms, 99)
-    fig = Figures("service")
-    share = 100 * rate / base_rate
-    fsync_ms = 1000 * (1 / full_rate - 1 / single_rate)
-    rows = [
-        ("baseline: raw `sqlite3.executemany`, same schema and pragmas (best of 3)",
-         fig.add("baseline_rows_per_s", base_rate, "rows/s", f"{base_rate:,.0f} rows/s"), "—"),
-        (f"back-fill over HTTP, 1,000 readings/request, 8 connections ({n_rows:,} rows)",
-         f"{rate:,.0f} rows/s = "
-         + fig.add("backfill_share_pct", share, "%", f"{share:.0f} %", "≥ 40 %", share >= 40)
-         + " of baseline", "backfill_share_pct"),
-        ("single-reading requests, one keep-alive connection",
-         fig.add("single_req_per_s", single_rate, "req/s", f"{single_rate:,.0f} req/s",
-                 "≥ 1,000 req/s", single_rate >= 1000) + f" ({single_err} errors)",
-         "single_req_per_s"),
-        (f"200 loggers × 5 req/s paced, {sent:,} requests in {wall:.1f} s",
-         f"{sent / wall:,.0f} req/s, p50 {p50:.1f} ms, p99 "
-         + fig.add("loggers_p99_ms", p99, "ms", f"{p99:.1f} ms", "all served, p99 ≤ 50 ms",
-                   bool(p99 <= 50 and lerr == 0 and sent == 200 * 25))
-         + f", max {lat_ms.max():.1f} ms, {lerr} errors", "loggers_p99_ms"),
-        (f"energy per day for a year ({e_rows} rows, both arrays, measured + twin)",
-         fig.add("energy_year_ms", e_med, "ms", f"{e_med:.1f} ms", "≤ 100 ms", e_med <= 100)
-         + " median of 7", "energy_year_ms"),
-        ("the first such call: simulates and stores the year's twin",
-         fig.add("twin_year_first_call_s", e_first, "s", f"{e_first:.1f} s") + ", "
-         + fig.add("twin_year_mb", twin_mb, "MB", f"{twin_mb:.0f} MB") + " of SQLite", "—"),
-        (f"a year of tracker readings downsampled to 2,000 points ({m_pts} buckets)",
-         fig.add("downsample_year_ms", m_med, "ms", f"{m_med:.1f} ms", "≤ 100 ms", m_med <= 100)
-         + " median of 7", "downsample_year_ms"),
-        ("for comparison: plain SQLite GROUP BY per day over the raw year",
-         f"{naive_s * 1000:.0f} ms ("
-         + fig.add("group_by_vs_energy", naive_s * 1000 / e_med, "×",
-                   f"{naive_s * 1000 / e_med:.0f}×") + " the energy query)", "—"),
-        ("single-reading requests, `HELIOTWIN_SQLITE_SYNCHRONOUS=FULL` (fsync per commit)",
-         fig.add("single_req_per_s_full", full_rate, "req/s", f"{full_rate:,.0f} req/s")
-         + " = " + fig.add("fsync_ms_per_commit", fsync_ms, "ms", f"{fsync_ms:.2f} ms")
-         + " more per request than `NORMAL`", "—"),
-    ]
+        if parts & {"single", "loggers"}:
+            (tmp / "live").mkdir()
+            server = Server(tmp / "live")
+            try:
+                if "single" in parts:
+                    log("single readings on one connection")
+                    single_rate, single_err = single_requests(server.port, server.token, 4.0)
+                    rows.append((
+                        "single-reading requests, one keep-alive connection",
+                        fig.add("single_req_per_s", single_rate, "req/s",
+                                f"{single_rate:,.0f} req/s", "≥ 500 req/s", single_rate >= 500)
+                        + f" ({single_err} errors)", "single_req_per_s"))
+                if "loggers" in parts:
+                    log("200 loggers")
+                    lat, lerr, sent, wall = asyncio.run(
+                        many_loggers(server.port, server.token, 200, 5.0, 5.0))
+                    lat_ms = np.array(lat) * 1000
+                    p50, p99 = np.percentile(lat_ms, 50), np.percentile(lat_ms, 99)
+                    rows.append((
+                        f"200 loggers × 5 req/s paced, {sent:,} requests in {wall:.1f} s",
+                        f"{sent / wall:,.0f} req/s, p50 {p50:.1f} ms, p99 "
+                        + fig.add("loggers_p99_ms", p99, "ms", f"{p99:.1f} ms",
+                                  "all served, p99 ≤ 50 ms",
+                                  bool(p99 <= 50 and lerr == 0 and sent == 200 * 25))
+                        + f", max {lat_ms.max():.1f} ms, {lerr} errors", "loggers_p99_ms"))
+            finally:
+                server.stop()
+        if "full" in parts:
+            rows += _synchronous_full(tmp, fig)
     rows = [(a, b, c if c == "—" else f"{fig.figures['service.' + c]['target']}: "
              + fig.verdict(c)) for a, b, c in rows]
     print("## service\n")
@@ -369,8 +332,85 @@ def main() -> int:
     for figure, value, target in rows:
         print(f"| {figure} | {value} | {target} |")
     fig.write()
-    ok = math.isfinite(rate)
-    return 0 if ok else 1
+    return 0
+
+
+def _backfill_and_queries(tmp: Path, fig: Figures, queries: bool) -> list[tuple[str, str, str]]:
+    """The baseline, a year's back-fill over HTTP and (``queries``) the year-long reads."""
+    log("baseline: raw sqlite3.executemany")
+    base_rate = baseline_executemany(400_000)
+    log(f"  {base_rate:,.0f} rows/s")
+    ts, p_tr, p_fx = year_readings()
+    log("encoding a year of readings")
+    payloads = bodies(ts, p_tr, p_fx, 1000)
+    n_rows = 2 * ts.size
+    server = Server(tmp)
+    try:
+        log(f"back-fill: {n_rows:,} readings in {len(payloads)} requests")
+        secs = post_all(server.port, server.token, payloads, workers=8)
+        rate = n_rows / secs
+        log(f"  {rate:,.0f} rows/s")
+        if queries:
+            log("energy per day for the year")
+            q = f"start={YEAR}-01-01&end={YEAR + 1}-01-01"
+            size0 = db_bytes(tmp)
+            e_first, e_times, e_body = timed_get(
+                server.port, f"/api/v1/sites/{SITE}/energy?{q}&interval=day")
+            twin_mb = (db_bytes(tmp) - size0) / 1e6
+            e_rows = len(orjson.loads(e_body)["rows"])
+            log("downsampled year")
+            _, m_times, m_body = timed_get(
+                server.port, f"{PATH}?array=tracker&{q}&max_points=2000")
+            m_pts = len(orjson.loads(m_body)["points"])
+            naive_s = naive_group_by(tmp / "bench.sqlite")
+    finally:
+        server.stop()
+    share = 100 * rate / base_rate
+    rows = [
+        ("baseline: raw `sqlite3.executemany`, same schema and pragmas (best of 3)",
+         fig.add("baseline_rows_per_s", base_rate, "rows/s", f"{base_rate:,.0f} rows/s"), "—"),
+        (f"back-fill over HTTP, 1,000 readings/request, 8 connections ({n_rows:,} rows)",
+         f"{rate:,.0f} rows/s = "
+         + fig.add("backfill_share_pct", share, "%", f"{share:.0f} %", "≥ 40 %", share >= 40)
+         + " of baseline", "backfill_share_pct"),
+    ]
+    if not queries:
+        return rows
+    e_med, m_med = statistics.median(e_times) * 1000, statistics.median(m_times) * 1000
+    return rows + [
+        (f"energy per day for a year ({e_rows} rows, both arrays, measured + twin)",
+         fig.add("energy_year_ms", e_med, "ms", f"{e_med:.1f} ms", "≤ 100 ms", e_med <= 100)
+         + " median of 7", "energy_year_ms"),
+        ("the first such call: simulates and stores the year's twin",
+         fig.add("twin_year_first_call_s", e_first, "s", f"{e_first:.1f} s") + ", "
+         + fig.add("twin_year_mb", twin_mb, "MB", f"{twin_mb:.0f} MB") + " of SQLite", "—"),
+        (f"a year of tracker readings downsampled to 2,000 points ({m_pts} buckets)",
+         fig.add("downsample_year_ms", m_med, "ms", f"{m_med:.1f} ms", "≤ 100 ms", m_med <= 100)
+         + " median of 7", "downsample_year_ms"),
+        ("for comparison: plain SQLite GROUP BY per day over the raw year",
+         f"{naive_s * 1000:.0f} ms ("
+         + fig.add("group_by_vs_energy", naive_s * 1000 / e_med, "×",
+                   f"{naive_s * 1000 / e_med:.0f}×") + " the energy query)", "—"),
+    ]
+
+
+def _synchronous_full(tmp: Path, fig: Figures) -> list[tuple[str, str, str]]:
+    """Single readings with an fsync per commit, beside one with ``NORMAL`` in the same run."""
+    log("single readings with HELIOTWIN_SQLITE_SYNCHRONOUS=NORMAL and FULL")
+    rates = {}
+    for mode in ("NORMAL", "FULL"):
+        (tmp / mode).mkdir()
+        server = Server(tmp / mode, HELIOTWIN_SQLITE_SYNCHRONOUS=mode)
+        try:
+            rates[mode], _ = single_requests(server.port, server.token, 3.0)
+        finally:
+            server.stop()
+    fsync_ms = 1000 * (1 / rates["FULL"] - 1 / rates["NORMAL"])
+    return [("single-reading requests, `HELIOTWIN_SQLITE_SYNCHRONOUS=FULL` (fsync per commit)",
+             fig.add("single_req_per_s_full", rates["FULL"], "req/s",
+                     f"{rates['FULL']:,.0f} req/s")
+             + " = " + fig.add("fsync_ms_per_commit", fsync_ms, "ms", f"{fsync_ms:.2f} ms")
+             + " more per request than `NORMAL`", "—")]
 
 
 if __name__ == "__main__":

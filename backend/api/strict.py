@@ -3,8 +3,10 @@
 - :class:`StrictBodies` (ASGI middleware, ahead of everything): ``Content-Encoding``
   ``identity`` passes through, ``gzip`` is decompressed (the decompressed body at
   most ``HELIOTWIN_MAX_UPLOAD_BYTES``, else 413; a corrupt stream is a 400), any
-  other encoding is a 415. A JSON body of any route but logger ingest (which
-  checks its own, in bulk) with a key given twice in one object is a 422.
+  other encoding is a 415. A JSON body with a key given twice in one object is a 422.
+  Paths given as ``own_body`` (logger ingest) pass untouched: their route checks the
+  write token first and then reads the body by :func:`read_body`, the same rules, and
+  checks repeated keys itself, in bulk.
 - :func:`http_error`: FastAPI's HTTP-error answer, except that a 405 lists in
   ``Allow`` every method of the path (Starlette names only the first route's).
 - :func:`document_errors`: the OpenAPI's 422 body says what the service sends
@@ -13,7 +15,9 @@
 
 from __future__ import annotations
 
+import re
 import zlib
+from collections.abc import AsyncIterator
 from typing import Any
 
 import anyio
@@ -21,11 +25,11 @@ import orjson
 from fastapi import Request
 from fastapi.exception_handlers import http_exception_handler
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.requests import ClientDisconnect
 from starlette.responses import Response
 from starlette.routing import compile_path
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from backend.api.routes.measurements import IngestFastPath
 from backend.errors import InputError, load_json_pairs, repeated_keys
 
 _BODY_METHODS = frozenset(("POST", "PUT", "PATCH"))
@@ -55,6 +59,49 @@ def gunzip(data: bytes, limit: int) -> bytes:
     return b"".join(out)
 
 
+def _check_encoding(encoding: str) -> None:
+    if encoding not in ("", "identity", "gzip"):
+        raise InputError(415, f"Content-Encoding {encoding[:40]!r}: send the body as is "
+                              "(identity) or gzip")
+
+
+async def _bounded(chunks: AsyncIterator[bytes], limit: int) -> bytes:
+    """The body's chunks joined; 413 as soon as they pass ``limit`` bytes."""
+    parts: list[bytes] = []
+    size = 0
+    async for chunk in chunks:
+        size += len(chunk)
+        if size > limit:
+            raise InputError(413, f"body over {limit} bytes (HELIOTWIN_MAX_UPLOAD_BYTES)")
+        parts.append(chunk)
+    return b"".join(parts)
+
+
+async def _decoded(body: bytes, encoding: str, limit: int) -> bytes:
+    if encoding != "gzip":
+        return body
+    if len(body) > _OFFLOAD_BYTES:
+        return await anyio.to_thread.run_sync(gunzip, body, limit)
+    return gunzip(body, limit)
+
+
+async def read_body(request: Request, limit: int) -> bytes:
+    """The body of a route that reads its own (``own_body`` of :class:`StrictBodies`),
+    by the middleware's rules: 415 for an encoding other than identity or gzip, 413 past
+    ``limit`` bytes (sent, announced or decompressed), 400 for corrupt gzip."""
+    encoding = request.headers.get("content-encoding", "").strip().lower()
+    _check_encoding(encoding)
+    length = request.headers.get("content-length", "")
+    if length.isdigit() and int(length) > limit:
+        raise InputError(413, f"body of {length} bytes; the limit is {limit} bytes "
+                              "(HELIOTWIN_MAX_UPLOAD_BYTES): split the batch")
+    try:
+        body = await _bounded(request.stream(), limit)
+    except ClientDisconnect:  # nobody is left to answer; nothing was stored
+        raise InputError(400, "the client hung up before the body ended") from None
+    return await _decoded(body, encoding, limit)
+
+
 def _answer(status: int, detail: Any) -> tuple[Message, Message]:
     body = orjson.dumps({"detail": detail})
     return ({"type": "http.response.start", "status": status,
@@ -70,11 +117,13 @@ class StrictBodies:
     the others are read whole (bounded), checked and replayed to the app.
     """
 
-    def __init__(self, app: ASGIApp) -> None:
+    def __init__(self, app: ASGIApp, own_body: re.Pattern[str] | None = None) -> None:
         self.app = app
+        self.own_body = own_body
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http" or scope["method"] not in _BODY_METHODS:
+        if (scope["type"] != "http" or scope["method"] not in _BODY_METHODS
+                or (self.own_body is not None and self.own_body.match(scope["path"]))):
             await self.app(scope, receive, send)
             return
         encoding = b""
@@ -84,8 +133,7 @@ class StrictBodies:
                 encoding = v.strip().lower()
             elif k == b"content-type":
                 ctype = v.split(b";")[0].strip().lower()
-        check_json = ((ctype == b"application/json" or ctype.endswith(b"+json"))
-                      and not IngestFastPath._PATH.match(scope["path"]))
+        check_json = ctype == b"application/json" or ctype.endswith(b"+json")
         if encoding in (b"", b"identity") and not check_json:
             await self.app(scope, receive, send)
             return
@@ -120,27 +168,23 @@ class StrictBodies:
     @staticmethod
     async def _checked(scope: Scope, receive: Receive, encoding: bytes, check_json: bool
                        ) -> bytes | None:
-        if encoding not in (b"", b"identity", b"gzip"):
-            raise InputError(415, f"Content-Encoding {encoding.decode('latin-1')[:40]!r}: "
-                                  "send the body as is (identity) or gzip")
+        text = encoding.decode("latin-1")
+        _check_encoding(text)
         limit = int(scope["app"].state.settings.max_upload_bytes)
-        parts: list[bytes] = []
-        size = 0
-        more = True
-        while more:
-            message = await receive()
-            if message["type"] == "http.disconnect":
-                return None
-            chunk = message.get("body", b"")
-            size += len(chunk)
-            if size > limit:
-                raise InputError(413, f"body over {limit} bytes (HELIOTWIN_MAX_UPLOAD_BYTES)")
-            parts.append(chunk)
-            more = message.get("more_body", False)
-        body = b"".join(parts)
-        if encoding == b"gzip":
-            body = (await anyio.to_thread.run_sync(gunzip, body, limit)
-                    if len(body) > _OFFLOAD_BYTES else gunzip(body, limit))
+
+        async def chunks() -> AsyncIterator[bytes]:
+            more = True
+            while more:
+                message = await receive()
+                if message["type"] == "http.disconnect":
+                    raise ClientDisconnect
+                more = message.get("more_body", False)
+                yield message.get("body", b"")
+
+        try:
+            body = await _decoded(await _bounded(chunks(), limit), text, limit)
+        except ClientDisconnect:
+            return None
         if check_json and body:
             try:
                 doc = load_json_pairs(body)
@@ -164,8 +208,8 @@ class _Repeated(Exception):
 
 
 def allowed_methods(request: Request, also: str = "") -> list[str]:
-    """Every method the OpenAPI document gives this request's path (the ingest fast path's
-    POST included), with HEAD beside GET, and those of ``also`` (an ``Allow`` value)."""
+    """Every method the OpenAPI document gives this request's path, with HEAD beside GET,
+    and those of ``also`` (an ``Allow`` value)."""
     methods = {m.strip().upper() for m in also.split(",") if m.strip()}
     matching = [(template.count("{"), ops)
                 for template, ops in request.app.openapi().get("paths", {}).items()

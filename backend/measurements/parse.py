@@ -30,6 +30,7 @@ import orjson
 
 from backend.errors import load_json_pairs, repeated_keys
 from backend.measurements.fields import SENSOR_FIELDS, SENSOR_NAMES, normalise_sensors
+from backend.settings import Settings
 from backend.timestamps import READINGS_FROM_S, parse_instants
 
 #: Problems listed per batch in all, and per field (a bounded answer that still shows
@@ -104,6 +105,12 @@ class Limits:
     min_current_a: float = -1.0
     power_tolerance_w: float = 5.0
 
+    @classmethod
+    def from_settings(cls, settings: Settings) -> Limits:
+        """The limits the service's settings set (HTTP and MQTT ingest alike)."""
+        return cls(settings.max_batch_rows, settings.future_tolerance_s, settings.max_voltage_v,
+                   settings.max_current_a, settings.min_current_a, settings.power_tolerance_w)
+
 
 @dataclass
 class Batch:
@@ -138,12 +145,11 @@ class IngestError(Exception):
         self.status = status
         self.errors = errors
 
-    def __reduce__(self) -> tuple[Any, ...]:  # crosses process boundaries (parser pool)
-        return (IngestError, (self.status, self.errors))
 
 
-def _body_error(status: int, field: str | None, kind: str, msg: str,
-                **extra: Any) -> IngestError:
+def body_error(status: int, field: str | None, kind: str, msg: str,
+               **extra: Any) -> IngestError:
+    """A rejection of the body as a whole (no row): its one entry names ``field`` if any."""
     loc = ["body"] if field is None else ["body", field]
     return IngestError(status, [{"loc": loc, "row": None, "field": field, "type": kind,
                                  "msg": msg, **extra}])
@@ -486,11 +492,11 @@ def _sensor_columns(columns: dict[str, list[Any]], n: int, errors: _Errors, text
 
 def _check_rows(n: int, limits: Limits) -> None:
     if n > limits.max_rows:
-        raise _body_error(413, "readings", "too_large",
+        raise body_error(413, "readings", "too_large",
                           f"{n} readings in one request; the limit is {limits.max_rows}: "
                           "split the batch")
     if n == 0:
-        raise _body_error(422, "readings", "missing", "no readings in the request")
+        raise body_error(422, "readings", "missing", "no readings in the request")
 
 
 def parse_json_batch(
@@ -502,7 +508,7 @@ def parse_json_batch(
     try:
         doc = orjson.loads(body)
     except orjson.JSONDecodeError as exc:
-        raise _body_error(422, None, "json_invalid", f"invalid JSON: {exc}") from exc
+        raise body_error(422, None, "json_invalid", f"invalid JSON: {exc}") from exc
     if isinstance(doc, list):
         _check_rows(len(doc), limits)
         columns = _emoncms_columns(doc, errors)
@@ -510,7 +516,7 @@ def parse_json_batch(
         return build_batch(columns, len(doc), arrays, limits, errors, ts_s=ts)
     readings = doc.get("readings") if isinstance(doc, dict) else None
     if not isinstance(readings, list):
-        raise _body_error(422, "readings", "missing",
+        raise body_error(422, "readings", "missing",
                           'body must be {"readings": [ ... ]} or [[unix_s, array, voltage_v, '
                           'current_a, power_w], ...]')
     for key in list(doc)[:MAX_ERRORS_PER_FIELD]:
@@ -535,7 +541,7 @@ def _csv_rows(text: str) -> tuple[list[str], list[list[str]]]:
         for row in reader:
             rows.append(row)
             if len(rows) == 1 and len(row) > MAX_COLUMNS:
-                raise _body_error(422, "header", "value_error",
+                raise body_error(422, "header", "value_error",
                                   f"CSV header has {len(row)} columns; it names at most "
                                   f"{len(FIELDS)} ({', '.join(FIELDS)})", line=1)
             start = reader.line_num + 1
@@ -544,12 +550,12 @@ def _csv_rows(text: str) -> tuple[list[str], list[list[str]]]:
                 if "unexpected end of data" in str(exc) else f"bad quoting ({exc})")
         if "field larger" in str(exc):
             what = f"a cell is longer than {csv.field_size_limit()} characters"
-        raise _body_error(422, None, "value_error", f"CSV line {start}: {what}",
+        raise body_error(422, None, "value_error", f"CSV line {start}: {what}",
                           line=start) from exc
     while rows and not any(cell.strip() for cell in rows[-1]):
         rows.pop()
     if not rows:
-        raise _body_error(422, "readings", "missing", "no readings in the request")
+        raise body_error(422, "readings", "missing", "no readings in the request")
     return [h.strip() for h in rows[0]], rows[1:]
 
 
@@ -561,7 +567,7 @@ def parse_csv_batch(
     try:
         text = body.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise _body_error(422, None, "value_error", f"CSV is not UTF-8: {exc}") from exc
+        raise body_error(422, None, "value_error", f"CSV is not UTF-8: {exc}") from exc
     header, data = _csv_rows(text)
     seen = Counter(header)  # linear in the header, whatever its length
     unknown = [h for h in seen if h not in _FIELD_SET]
@@ -573,7 +579,7 @@ def parse_csv_batch(
             if names:
                 more = f" and {len(names) - 5} more" if len(names) > 5 else ""
                 parts.append(f"{label}: {', '.join(_show(h) for h in names[:5])}{more}")
-        raise _body_error(422, "header", "value_error",
+        raise body_error(422, "header", "value_error",
                           f"CSV header must name ts, array and voltage_v,current_a[,power_w], "
                           f"power_w alone or voltage_adc,current_adc (optional: "
                           f"{', '.join(SENSOR_NAMES)}); {'; '.join(parts)}", line=1)

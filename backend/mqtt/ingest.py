@@ -13,7 +13,7 @@ array is rejected, never redirected.
 from __future__ import annotations
 
 import datetime as dt
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import orjson
@@ -48,9 +48,8 @@ class Rejection:
 
 
 def limits(settings: Settings) -> Limits:
-    """The plausibility limits of HTTP ingest, from the same settings."""
-    return Limits(1, settings.future_tolerance_s, settings.max_voltage_v,
-                  settings.max_current_a, settings.min_current_a, settings.power_tolerance_w)
+    """The plausibility limits of HTTP ingest, for one reading a message."""
+    return replace(Limits.from_settings(settings), max_rows=1)
 
 
 def _rejected(topic: str, payload: bytes, exc: IngestError) -> Rejection:

@@ -20,7 +20,8 @@ from backend.measurements.parse import (
 ARRAYS = {"tracker": (1, Calibration()), "fixed": (2, Calibration(divider_ratio=8.0))}
 
 
-def test_vectorised_timestamps_agree_with_fromisoformat() -> None:
+def test_bulk_timestamps_agree_with_fromisoformat() -> None:
+    """pandas (one offset per batch) and the standard library give the same seconds."""
     rng = np.random.default_rng(0)
     secs = rng.integers(700_000_000, 1_900_000_000, 400)
     offsets = rng.integers(-14 * 4, 14 * 4, 400) * 15
@@ -145,7 +146,7 @@ def test_every_kind_of_problem_is_reported_at_once() -> None:
 
 
 def test_a_list_as_one_timestamp_in_a_long_batch_is_named() -> None:
-    """Issue 9: ≥ 32 rows go the vectorised way; a ragged value once emptied the column."""
+    """Issue 9: ≥ 32 rows go to pandas; a ragged value once emptied the column."""
     rows = [GOOD] * 40 + [dict(GOOD, ts=["2024-05-01T10:00:00Z"])]
     assert [(e["row"], e["field"]) for e in _errors(orjson.dumps({"readings": rows}))] == [
         (40, "ts")]
@@ -232,3 +233,29 @@ def test_an_escape_cannot_hide_a_repeated_key() -> None:
            b'"voltage_v": 26.0, "voltage_v": 0.0, "current_a": 7.0}]}'
     (e,) = _errors(body)
     assert (e["row"], e["field"], e["type"]) == (0, "voltage_v", "duplicate_key")
+
+
+def test_a_batch_across_a_dst_change_is_parsed_row_by_row() -> None:
+    """Two offsets in one batch (a logger on local time across a DST change): pandas
+    refuses the mix, the standard library takes each row; the instants are the same."""
+    texts = [f"2024-03-10T01:{m:02d}:00-06:00" for m in range(40)] + [
+        f"2024-03-10T03:{m:02d}:00-05:00" for m in range(40)]
+    readings = [{"ts": t, "array": "tracker", "voltage_v": 1.0, "current_a": 1.0}
+                for t in texts]
+    batch = parse_json_batch(orjson.dumps({"readings": readings}), ARRAYS, Limits())
+    assert batch.ts_s.tolist() == [int(dt.datetime.fromisoformat(t).timestamp()) for t in texts]
+
+
+def test_a_naive_stamp_in_a_long_batch_is_named() -> None:
+    """A naive stamp among 40 with offsets: the one row, the field and why."""
+    rows = [GOOD] * 40 + [dict(GOOD, ts="2024-05-01T10:00:00")] + [GOOD] * 5
+    (e,) = _errors(orjson.dumps({"readings": rows}))
+    assert (e["row"], e["field"], e["type"]) == (40, "ts", "timezone_naive")
+    assert "no UTC offset" in e["msg"]
+
+
+def test_a_long_batch_of_naive_stamps_names_each_row() -> None:
+    rows = [dict(GOOD, ts=f"2024-05-01T10:{m:02d}:00") for m in range(40)]
+    errors = _errors(orjson.dumps({"readings": rows}))
+    assert [(e["row"], e["field"]) for e in errors[:10]] == [(r, "ts") for r in range(10)]
+    assert errors[-1]["msg"] == "30 more problems not listed (ts: 30)"

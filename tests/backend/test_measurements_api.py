@@ -249,3 +249,39 @@ def test_large_answers_are_gzipped(client: httpx.Client, live_server: LiveServer
         r = client.get(PATH, params={**params, **extra}, headers={"Accept-Encoding": "gzip"})
         assert r.headers.get("content-encoding") == "gzip"
         assert r.text.count("25.0") == 180  # httpx decoded the one gzip layer
+
+
+def test_the_token_is_checked_before_the_body_is_read(client: httpx.Client,
+                                                      live_server: LiveServer) -> None:
+    """Without a valid token neither a corrupt gzip stream nor an oversized body is
+    looked at: the answer is the 401/403, never the body's 400/413."""
+    gz = {"Content-Type": "application/json", "Content-Encoding": "gzip"}
+    assert client.post(PATH, content=b"not gzip", headers=gz).status_code == 401
+    other = live_server.token("guadalajara_fisheye")
+    r = client.post(PATH, content=b"not gzip", headers={**gz, "Authorization": f"Bearer {other}"})
+    assert r.status_code == 403
+    r = client.post(PATH, content=b"not gzip",
+                    headers={**gz, "Authorization": f"Bearer {live_server.write_token}"})
+    assert r.status_code == 400 and "not gzip data" in r.json()["detail"][0]["msg"]
+
+
+def test_openapi_declares_the_ingest_body_and_answer(client: httpx.Client) -> None:
+    """The plain route's OpenAPI: JSON readings (their fields those parse.py validates),
+    emonCMS rows or CSV in; IngestResult out; the GET's answer typed as well."""
+    from backend.measurements.parse import FIELDS
+
+    doc = client.get("/openapi.json").json()
+    ops = doc["paths"]["/api/v1/sites/{site_id}/measurements"]
+    body = ops["post"]["requestBody"]["content"]
+    assert set(body) == {"application/json", "text/csv"}
+    readings, rows = body["application/json"]["schema"]["oneOf"]
+    reading = readings["properties"]["readings"]["items"]
+    assert set(reading["properties"]) == set(FIELDS)
+    assert reading["additionalProperties"] is False and rows["type"] == "array"
+    answer = ops["post"]["responses"]["200"]["content"]["application/json"]["schema"]
+    assert answer == {"$ref": "#/components/schemas/IngestResult"}
+    assert set(doc["components"]["schemas"]["IngestResult"]["required"]) == {
+        "accepted", "duplicates", "stored_through", "stored_through_unix_s"}
+    got = ops["get"]["responses"]["200"]["content"]
+    assert got["application/json"]["schema"] == {"$ref": "#/components/schemas/MeasurementsRead"}
+    assert {"text/csv", "text/plain"} <= set(got)

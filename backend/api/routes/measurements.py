@@ -1,43 +1,37 @@
 """``/api/v1/sites/{site_id}/measurements``: field-logger ingestion and read-back.
 
-POST takes ``{"readings": [...]}`` (JSON), emonCMS-style rows
-``[[unix_s, array, voltage_v, current_a, power_w], ...]`` or ``text/csv`` with a
-header row, plain or ``Content-Encoding: gzip`` (decoded by
-:class:`backend.api.strict.StrictBodies`), validated in bulk by
-:mod:`backend.measurements.parse` and committed by the writer before the answer
-``{"accepted": N, "duplicates": M, "stored_through": ISO, "stored_through_unix_s": S}``
-(a logger that buffered offline resumes after ``stored_through``). GET answers a range raw (when
-it holds no more than ``max_points`` readings) or downsampled into buckets with
-min/mean/max, as JSON or CSV.
+POST (a plain route; the work is :func:`backend.measurements.ingest.ingest`) checks the
+site's write token, then reads the body — ``{"readings": [...]}`` (JSON), emonCMS-style
+rows ``[[unix_s, array, voltage_v, current_a, power_w], ...]`` or ``text/csv`` with a
+header row, plain or ``Content-Encoding: gzip`` (:func:`backend.api.strict.read_body`) —
+and answers :class:`~backend.api.schemas.measurements.IngestResult` once the writer has
+committed the batch. GET answers a range raw (when it holds no more than ``max_points``
+readings) or downsampled into buckets with min/mean/max, as JSON, CSV or line protocol.
 """
 
 from __future__ import annotations
 
-import asyncio
 import csv
 import io
 import itertools
 import logging
-import re
-from collections.abc import AsyncIterator, Iterator, Mapping
-from concurrent.futures.process import BrokenProcessPool
+from collections.abc import Iterator
 from typing import Annotated, Any, Literal
 
-import anyio
 import numpy as np
 import orjson
 from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.responses import Response, StreamingResponse
-from starlette.datastructures import Headers
-from starlette.requests import ClientDisconnect
-from starlette.types import ASGIApp, Receive, Scope, Send
+from starlette.routing import compile_path
 
-from backend.api.deps import ContextDep, check_site_token, site_or_404
-from backend.context import ServiceContext
+from backend.api import strict
+from backend.api.deps import ContextDep, SiteTokenDep, site_or_404
+from backend.api.schemas.measurements import IngestResult, MeasurementsRead, ingest_request_body
 from backend.diagnosis.weather_twin import weather_twin_columns
+from backend.errors import InputError
+from backend.measurements import ingest
 from backend.measurements.export import influx_lines
-from backend.measurements.fields import SENSOR_FIELDS
-from backend.measurements.parse import Batch, IngestError, Limits, parse_csv_batch, parse_json_batch
+from backend.measurements.parse import IngestError, Limits, body_error
 from backend.measurements.queries import (
     QUANTITIES,
     count_rows,
@@ -46,7 +40,6 @@ from backend.measurements.queries import (
     raw_rows,
     sensor_columns,
 )
-from backend.measurements.writer import MeasurementJob
 from backend.storage.tables import SOURCE_CODES
 from backend.timestamps import parse_range
 
@@ -54,241 +47,66 @@ logger = logging.getLogger(__name__)
 router = APIRouter(prefix="/api/v1/sites", tags=["measurements"])
 
 _JSON = "application/json"
-_OFFLOAD_BYTES = 32 * 1024  # parse bigger bodies in a worker process (or thread)
+#: The one path of the resource; POST is logger ingest, whose body the route reads itself.
+_PATH = "/{site_id}/measurements"
+#: Requests :class:`backend.api.strict.StrictBodies` leaves to the ingest route (it checks
+#: the token first, then reads, decodes and checks the body itself).
+INGEST_PATH = compile_path(router.prefix + _PATH)[0]
 
-def _none_of(*names: str) -> dict[str, Any]:
-    return {"not": {"anyOf": [{"required": [n]} for n in names]}}
-
-
-_READING: dict[str, Any] = {
-    "type": "object", "required": ["ts", "array"], "additionalProperties": False,
-    "oneOf": [{"required": ["voltage_v", "current_a"], **_none_of("voltage_adc", "current_adc")},
-              {"required": ["voltage_adc", "current_adc"], **_none_of("voltage_v", "current_a")},
-              {"required": ["power_w"], "description": "a power-only logger",
-               **_none_of("voltage_v", "current_a", "voltage_adc", "current_adc")}],
-    "properties": {
-        "ts": {"type": "string", "format": "date-time", "minLength": 1,
-               "description": "ISO 8601 with UTC offset"},
-        "array": {"type": "string", "minLength": 1, "example": "tracker"},
-        "voltage_v": {"type": "number"}, "current_a": {"type": "number"},
-        "power_w": {"type": "number", "description": "voltage_v·current_a when absent; "
-                    "alone (no voltage and current) from a power-only logger"},
-        "voltage_adc": {"type": "integer",
-                        "description": "raw divider ADC count (seed 000 eq. 19)"},
-        "current_adc": {"type": "integer",
-                        "description": "raw ACS712 ADC count (seed 000 eq. 17)"},
-        **{f.name: {"type": "number", "minimum": f.low, "maximum": f.high,
-                    "description": f"optional: {f.meaning}"} for f in SENSOR_FIELDS},
-    },
-}
-_EMONCMS_ROW: dict[str, Any] = {
-    "type": "array", "minItems": 4, "maxItems": 5,
-    "description": "[unix_s, array, voltage_v, current_a, power_w]; power_w may be left off, "
-                   "or voltage_v and current_a null for a power-only logger",
-    "prefixItems": [{"type": "number", "description": "Unix time [s]"},
-                    {"type": "string", "minLength": 1}, {"type": ["number", "null"]},
-                    {"type": ["number", "null"]}, {"type": "number"}],
-}
-_POST_DOC: dict[str, Any] = {
-    "requestBody": {
-        "required": True,
-        "content": {
-            "application/json": {"schema": {"oneOf": [
-                {"type": "object", "required": ["readings"], "additionalProperties": False,
-                 "properties": {"readings": {"type": "array", "minItems": 1,
-                                             "items": _READING}}},
-                {"type": "array", "minItems": 1, "items": _EMONCMS_ROW,
-                 "description": "emonCMS-style bulk rows"},
-            ]}},
-            "text/csv": {"schema": {"type": "string", "example":
-                                    "ts,array,voltage_v,current_a,power_w\n"
-                                    "2024-03-15T12:00:00-06:00,tracker,26.1,27.3,712.5\n"}},
-        },
-    },
-}
+_INGEST_DOC = (
+    "`Authorization: Bearer <site write token>`, checked before the body is read. Answers "
+    "once the readings are committed; a reading whose (array, ts) is already stored counts "
+    "as a duplicate; everything up to `stored_through` (the batch's latest reading) is then "
+    "stored, so a logger that buffered offline resumes after it. A batch is validated whole: "
+    "every problem is listed (up to 10 per field and 50 in all, the rest counted) naming the "
+    "row and the field, and nothing of the batch is stored. Bodies: JSON `{\"readings\": "
+    "[...]}`, emonCMS-style rows `[[unix_s, array, voltage_v, current_a, power_w], ...]`, or "
+    "CSV with a header row; unknown fields, keys given twice and CSV numbers other than plain "
+    "decimals are 422s. `Content-Encoding: gzip` is decoded (at most "
+    "HELIOTWIN_MAX_UPLOAD_BYTES once decompressed); other encodings are 415.")
 
 
-def _limits(ctx: Any) -> Limits:
-    s = ctx.settings
-    return Limits(s.max_batch_rows, s.future_tolerance_s, s.max_voltage_v, s.max_current_a,
-                  s.min_current_a, s.power_tolerance_w)
+def _rejected(status: int, entries: list[dict[str, Any]]) -> Response:
+    return Response(orjson.dumps({"detail": entries}), status_code=status, media_type=_JSON)
 
 
-def _json(data: Any, status: int = 200) -> Response:
-    return Response(orjson.dumps(data), status_code=status, media_type=_JSON)
-
-
-def _too_large(msg: str) -> IngestError:
-    return IngestError(413, [{"loc": ["body"], "row": None, "field": None, "type": "too_large",
-                              "msg": msg}])
-
-
-async def _read_body(chunks: AsyncIterator[bytes], length: str | None, limit: int) -> bytes:
-    if length is not None and length.isdigit() and int(length) > limit:
-        raise _too_large(f"body of {length} bytes; the limit is {limit} bytes "
-                         "(HELIOTWIN_MAX_UPLOAD_BYTES): split the batch")
-    parts: list[bytes] = []
-    size = 0
-    async for chunk in chunks:
-        size += len(chunk)
-        if size > limit:
-            raise _too_large(f"body over {limit} bytes: split the batch")
-        parts.append(chunk)
-    return b"".join(parts)
-
-
-async def ingest(ctx: ServiceContext, site_id: str, headers: Mapping[str, str],
-                 chunks: AsyncIterator[bytes]) -> tuple[int, bytes, dict[str, str]]:
-    """Authorise, read, validate and store one POST; ``(status, JSON body, headers)``."""
+@router.post(
+    _PATH, response_model=IngestResult, response_model_exclude_none=True,
+    summary="Store readings of a site's arrays", description=_INGEST_DOC,
+    operation_id="post_measurements", openapi_extra={"requestBody": ingest_request_body()},
+    responses={400: {"description": "a corrupt gzip body"},
+               401: {"description": "no or unknown token"},
+               403: {"description": "the token is for another site"},
+               404: {"description": "unknown site"}, 413: {"description": "body too large"},
+               415: {"description": "not JSON or CSV, or a Content-Encoding other than gzip"},
+               422: {"description": "invalid rows (each named)"},
+               503: {"description": "storage unavailable; nothing stored, send again"}})
+async def post_measurements(site_id: str, request: Request, ctx: ContextDep,
+                            _token_site: SiteTokenDep) -> IngestResult | Response:
+    """Store a logger's batch (JSON readings, emonCMS rows or CSV), all or nothing."""
+    info = site_or_404(ctx, site_id)
     try:
-        await check_site_token(ctx, site_id, headers.get("authorization"))
-        info = site_or_404(ctx, site_id)
-    except HTTPException as exc:
-        return exc.status_code, orjson.dumps({"detail": exc.detail}), dict(exc.headers or {})
-    ctype = headers.get("content-type", _JSON).split(";")[0].strip().lower()
-    try:
-        if ctype not in (_JSON, "text/csv", "application/csv", ""):
-            raise IngestError(415, [{"loc": ["header", "content-type"], "row": None,
-                                     "field": "content-type", "type": "unsupported",
-                                     "msg": f"Content-Type {ctype!r}: send application/json "
-                                            "or text/csv"}])
-        body = await _read_body(chunks, headers.get("content-length"),
-                                ctx.settings.max_upload_bytes)
-        parse = parse_csv_batch if ctype in ("text/csv", "application/csv") else parse_json_batch
-        arrays, limits = info.ingest_arrays(), _limits(ctx)
-        batch: Batch | None = None
-        if len(body) > _OFFLOAD_BYTES and ctx.parsers is not None:
-            try:
-                batch = await asyncio.get_running_loop().run_in_executor(
-                    ctx.parsers, parse, body, arrays, limits)
-            except BrokenProcessPool:  # a parser died (memory?): validate on threads from now
-                logger.exception("parser process pool broken; validating on threads instead")
-                broken, ctx.parsers = ctx.parsers, None
-                if broken is not None:
-                    broken.shutdown(wait=False, cancel_futures=True)
-        if batch is None and len(body) > _OFFLOAD_BYTES:
-            batch = await anyio.to_thread.run_sync(parse, body, arrays, limits)
-        elif batch is None:
-            batch = parse(body, arrays, limits)
-    except IngestError as exc:
-        return exc.status, orjson.dumps({"detail": exc.errors}), {}
-    job = MeasurementJob(batch.array_ids, SOURCE_CODES["measured"], batch.ts_s,
-                         batch.voltage_v, batch.current_a, batch.power_w, batch.sensors)
-    try:
-        accepted, duplicates = await asyncio.wrap_future(ctx.writer.submit(job))
-    except Exception as exc:  # nothing was committed: the logger should send it again
-        logger.error("storing %d readings failed: %r", len(job), exc)
-        return 503, orjson.dumps({"detail": f"storage unavailable ({type(exc).__name__}); "
-                                            "nothing was stored, send the batch again"}), {
-            "Retry-After": "5"}
-    last_s = int(batch.ts_s.max())
-    answer: dict[str, Any] = {"accepted": accepted, "duplicates": duplicates,
-                              "stored_through": iso_utc(np.array([last_s]))[0],
-                              "stored_through_unix_s": last_s}
-    power_only = batch.power_only
-    if power_only:
-        answer["power_only"] = power_only
-        answer["note"] = (f"{power_only} of {len(batch)} readings carry power_w without voltage "
-                          "and current: their energy rests on the logger's power_w alone, "
-                          "unchecked against voltage·current")
-    return 200, orjson.dumps(answer), {}
-
-
-def document_ingest(schema: dict[str, Any]) -> dict[str, Any]:
-    """Add ``POST /api/v1/sites/{site_id}/measurements`` to an OpenAPI ``schema``.
-
-    :class:`IngestFastPath` serves that request outside FastAPI's routing, so no
-    route declares it; this is its one honest description (what it accepts and
-    answers), merged beside the ``GET`` of the same path.
-    """
-    ops = schema.setdefault("paths", {}).setdefault("/api/v1/sites/{site_id}/measurements", {})
-    ops["post"] = {
-        "tags": ["measurements"],
-        "summary": "Store readings of a site's arrays",
-        "description": (
-            "`Authorization: Bearer <site write token>`. Answers `{\"accepted\": N, "
-            "\"duplicates\": M}` once the readings are committed; a reading whose (array, ts) "
-            "is already stored counts as a duplicate; everything up to `stored_through` "
-            "(the batch's latest reading) is then stored, so a logger that buffered offline "
-            "resumes after it. A batch is validated whole: every problem is listed (up to "
-            "10 per field and 50 in all, the rest counted) naming the row and the field, and "
-            "nothing of the batch is stored. Bodies: JSON `{\"readings\": [...]}`, "
-            "emonCMS-style rows `[[unix_s, array, voltage_v, current_a, power_w], ...]`, or "
-            "CSV with a header row; unknown fields, keys given twice and CSV numbers other "
-            "than plain decimals are 422s. `Content-Encoding: gzip` is decoded (at most "
-            "HELIOTWIN_MAX_UPLOAD_BYTES once decompressed); other encodings are 415."),
-        "operationId": "post_measurements",
-        "parameters": [{"name": "site_id", "in": "path", "required": True,
-                        "schema": {"type": "string"}}],
-        **_POST_DOC,
-        "responses": {
-            "200": {"description": "stored", "content": {_JSON: {"schema": {
-                "type": "object",
-                "required": ["accepted", "duplicates", "stored_through", "stored_through_unix_s"],
-                "properties": {
-                    "accepted": {"type": "integer"}, "duplicates": {"type": "integer"},
-                    "stored_through": {"type": "string", "format": "date-time",
-                                       "description": "latest reading of the batch (UTC)"},
-                    "stored_through_unix_s": {"type": "integer"},
-                    "power_only": {"type": "integer", "description": (
-                        "readings of the batch with power_w but no voltage and current "
-                        "(present only when there are some)")},
-                    "note": {"type": "string", "description": (
-                        "what the energy of power-only readings rests on")}}}}}},
-            **{str(c): {"description": d} for c, d in (
-                (400, "a corrupt gzip body"),
-                (401, "no or unknown token"), (403, "the token is for another site"),
-                (404, "unknown site"), (413, "body too large"),
-                (415, "not JSON or CSV, or a Content-Encoding other than gzip"),
-                (422, "invalid rows (each named)"),
-                (503, "storage unavailable; nothing stored, send again"))},
-        },
-    }
-    return schema
-
-
-class IngestFastPath:
-    """ASGI middleware serving ``POST /api/v1/sites/{site_id}/measurements`` directly.
-
-    Field loggers send this request more than all others together; FastAPI's
-    routing and dependency solving cost more per request than validating and
-    storing a reading, so the middleware hands it straight to :func:`ingest` —
-    the only code path for it; :func:`document_ingest` describes it in OpenAPI.
-    Everything else passes through untouched.
-    """
-
-    _PATH = re.compile(r"^/api/v1/sites/([^/]+)/measurements$")
-
-    def __init__(self, app: ASGIApp) -> None:
-        self.app = app
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        match = (self._PATH.match(scope["path"])
-                 if scope["type"] == "http" and scope["method"] == "POST" else None)
-        if match is None:
-            await self.app(scope, receive, send)
-            return
-        headers = Headers(scope=scope)  # what ``Request.headers`` gives the route
-
-        async def chunks() -> AsyncIterator[bytes]:
-            more = True
-            while more:
-                message = await receive()
-                if message["type"] == "http.disconnect":
-                    raise ClientDisconnect
-                more = message.get("more_body", False)
-                yield message.get("body", b"")
-
+        parse = ingest.parser_for(request.headers.get("content-type"))
         try:
-            status, body, extra = await ingest(scope["app"].state.ctx, match.group(1), headers,
-                                               chunks())
-        except ClientDisconnect:  # the logger hung up mid-body: nothing stored, no answer
-            return
-        out = [(b"content-type", b"application/json"),
-               (b"content-length", str(len(body)).encode())]
-        out += [(k.lower().encode(), v.encode()) for k, v in extra.items()]
-        await send({"type": "http.response.start", "status": status, "headers": out})
-        await send({"type": "http.response.body", "body": body})
+            body = await strict.read_body(request, ctx.settings.max_upload_bytes)
+        except InputError as exc:  # the transport's problems, in the shape of the others
+            kind = {413: "too_large", 415: "unsupported"}.get(exc.status_code, "value_error")
+            raise body_error(exc.status_code, None, kind, exc.detail) from None
+        stored = await ingest.ingest(ctx.writer, parse, body, info.ingest_arrays(),
+                                     Limits.from_settings(ctx.settings))
+    except IngestError as exc:
+        return _rejected(exc.status, exc.errors)
+    except ingest.StorageUnavailable as exc:
+        raise HTTPException(503, str(exc), headers={"Retry-After": "5"}) from None
+    answer = IngestResult(accepted=stored.accepted, duplicates=stored.duplicates,
+                          stored_through=iso_utc([stored.stored_through_s])[0],
+                          stored_through_unix_s=stored.stored_through_s)
+    if stored.power_only:
+        answer.power_only = stored.power_only
+        answer.note = (f"{stored.power_only} of {stored.readings} readings carry power_w "
+                       "without voltage and current: their energy rests on the logger's "
+                       "power_w alone, unchecked against voltage·current")
+    return answer
 
 
 def _range(info: Any, start: str, end: str) -> tuple[int, int]:
@@ -336,7 +154,8 @@ _GET_TEXT: dict[int | str, dict[str, Any]] = {200: {"content": {
 }}}
 
 
-@router.get("/{site_id}/measurements", responses={**_GET_TEXT, 404: {}, 422: {}})
+@router.get(_PATH, response_model=MeasurementsRead,
+            responses={**_GET_TEXT, 404: {}, 422: {}})
 def get_measurements(
     site_id: str,
     request: Request,
@@ -421,7 +240,7 @@ def _answer(request: Request, site_id: str, array: str, source: str, start: str,
         "bucket_s": bucket_s, "count": n, "points": points}
     if sky is not None:
         body["sky"] = sky
-    return _json(body)
+    return Response(orjson.dumps(body), media_type=_JSON)
 
 
 def _minute_buckets(cols: dict[str, list[Any]], max_points: int

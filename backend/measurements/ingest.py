@@ -1,0 +1,94 @@
+"""Logger ingest as a service: one request's bytes → a validated batch → the writer → counts.
+
+``POST /api/v1/sites/{site_id}/measurements`` (``backend/api/routes/measurements.py``)
+authorises, reads and decodes the body, then calls :func:`ingest`: the body is
+validated whole by :mod:`backend.measurements.parse` (JSON or CSV, chosen by its
+media type) and handed to the single writer; :func:`ingest` returns only once the
+writer has committed it, so an answered batch survives a killed process.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import anyio
+import numpy as np
+
+from backend.measurements.parse import (
+    Batch,
+    Calibration,
+    Limits,
+    body_error,
+    parse_csv_batch,
+    parse_json_batch,
+)
+from backend.measurements.writer import MeasurementJob, Writer
+from backend.storage.tables import SOURCE_CODES
+
+logger = logging.getLogger(__name__)
+
+JSON = "application/json"
+CSV_TYPES = frozenset(("text/csv", "application/csv"))
+#: Bodies bigger than this are validated on a worker thread: the event loop keeps
+#: answering the other loggers meanwhile (a 1,000-reading batch is ~100 kB).
+THREAD_FROM_BYTES = 32 * 1024
+
+Parser = Callable[[bytes, dict[str, tuple[int, Calibration]], Limits], Batch]
+
+
+class StorageUnavailable(Exception):
+    """The writer could not commit the batch: nothing of it is stored; send it again."""
+
+
+@dataclass(frozen=True)
+class Stored:
+    """What one committed batch did: readings new and already stored, its latest reading's
+    time (everything up to it is now stored) and how many carried power alone."""
+
+    accepted: int
+    duplicates: int
+    stored_through_s: int
+    power_only: int
+    readings: int
+
+
+def parser_for(content_type: str | None) -> Parser:
+    """The validator of a body of this ``Content-Type`` (none: JSON); 415 for any other."""
+    media = (content_type or JSON).split(";")[0].strip().lower()
+    if media in (JSON, ""):
+        return parse_json_batch
+    if media in CSV_TYPES:
+        return parse_csv_batch
+    raise body_error(415, "content-type", "unsupported",
+                     f"Content-Type {media[:60]!r}: send application/json or text/csv",
+                     loc=["header", "content-type"])
+
+
+def measured_job(batch: Batch) -> MeasurementJob:
+    """The writer's job for a validated batch of logger readings."""
+    return MeasurementJob(batch.array_ids, SOURCE_CODES["measured"], batch.ts_s,
+                          batch.voltage_v, batch.current_a, batch.power_w, batch.sensors)
+
+
+async def ingest(writer: Writer, parse: Parser, body: bytes,
+                 arrays: dict[str, tuple[int, Calibration]], limits: Limits) -> Stored:
+    """Validate ``body`` and store it; returns once the writer has committed it.
+
+    Raises :class:`backend.measurements.parse.IngestError` for a bad batch (nothing
+    stored) and :class:`StorageUnavailable` when the commit failed.
+    """
+    if len(body) > THREAD_FROM_BYTES:
+        batch = await anyio.to_thread.run_sync(parse, body, arrays, limits)
+    else:
+        batch = parse(body, arrays, limits)
+    job = measured_job(batch)
+    try:
+        accepted, duplicates = await asyncio.wrap_future(writer.submit(job))
+    except Exception as exc:  # nothing was committed: the logger should send it again
+        logger.error("storing %d readings failed: %r", len(job), exc)
+        raise StorageUnavailable(f"storage unavailable ({type(exc).__name__}); nothing was "
+                                 "stored, send the batch again") from exc
+    return Stored(accepted, duplicates, int(np.max(batch.ts_s)), batch.power_only, len(batch))
