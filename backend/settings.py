@@ -1,6 +1,6 @@
 """Service settings: one typed object from ``HELIOTWIN_*`` environment variables.
 
-Every field has a working default (SQLite under the repository's ``data/``,
+Every field has a working default (SQLite under ``sim.paths.user_data_dir()``,
 port 8000 for the API and dashboard, 8080 for viser). ``get_settings()`` builds
 the object; nothing is read from the environment at import time. The README's
 settings table (between ``<!-- settings:start -->`` and ``<!-- settings:end -->``)
@@ -15,13 +15,13 @@ from pydantic import Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from sim.energy import DEFAULT_MAX_GAP_S
-
-REPO_ROOT = Path(__file__).resolve().parents[1]
-DATA_DIR = REPO_ROOT / "data"
+from sim.paths import default_plants_dir, default_user_sites_dir, user_data_dir
 
 
 def _default_database_url() -> str:
-    return f"sqlite:///{DATA_DIR / 'heliotwin.sqlite'}"
+    """SQLite in :func:`sim.paths.user_data_dir`: a checkout's ``data/``, else the user's
+    data folder (an installed wheel has no repository to write into)."""
+    return f"sqlite:///{user_data_dir() / 'heliotwin.sqlite'}"
 
 
 class Settings(BaseSettings):
@@ -38,11 +38,11 @@ class Settings(BaseSettings):
     viser_port: int = Field(8080, ge=0, le=65535, description="Port of the viser 3D twin.")
     viser: bool = Field(True, description="Start the viser 3D twin with the service.")
     sites_dir: Path = Field(
-        DATA_DIR / "user-sites",
-        description="Folder of your own site configs, added to the built-in data/sites/ (a file "
+        default_factory=default_user_sites_dir,
+        description="Folder of your own site configs, added to the built-in sites (a file "
                     "with a built-in id replaces it); the dashboard and `heliotwin site create` "
                     "write here.")
-    plants_dir: Path = Field(DATA_DIR / "plants",
+    plants_dir: Path = Field(default_factory=default_plants_dir,
                              description="Folder of plant layouts (seed 004), one JSON each.")
     default_site: str = Field(
         "tehuantepec", description="Site of the 3D scene, the demo logger and the dashboard."

@@ -1,4 +1,4 @@
-"""Sites known to the service: loaded from ``data/sites/`` (``sim.sites``) into the database.
+"""Sites known to the service: loaded from ``sim/data/sites/`` (``sim.sites``) into the database.
 
 At start-up the built-in site files, and the user's of ``HELIOTWIN_SITES_DIR``
 (which add to them, and win on a shared id), are written to the ``sites`` and

@@ -1,5 +1,5 @@
-"""Config files by id: ``<directory>/<id>.json`` for sites (``data/sites``) and plants
-(``data/plants``) — one rule for what an id may be, what an unknown one says, and how a
+"""Config files by id: ``<directory>/<id>.json`` for sites (``sim/data/sites``) and plants
+(``sim/data/plants``) — one rule for what an id may be, what an unknown one says, and how a
 file that is not JSON is reported."""
 
 from __future__ import annotations

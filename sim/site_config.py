@@ -1,4 +1,4 @@
-"""The site config format (``data/sites/*.json``): one pydantic model, the single definition.
+"""The site config format (``sim/data/sites/*.json``): one pydantic model, the single definition.
 
 :class:`SiteConfig` validates a site file and is the source of
 ``docs/site.schema.json`` (:func:`site_json_schema`; ``tests/sim/test_sites.py``
@@ -141,7 +141,7 @@ class Array(BaseModel):
         f"Module name in pvlib's CEC table. Default {_ARRAY.module!r} (seed 000, section 2.2)."))
     modules_in_series: int = Field(_ARRAY.modules_in_series, ge=1, le=1000, description=(
         f"[-] modules per string. Default {_ARRAY.modules_in_series} (seed 000's wiring, "
-        "as read in data/sites/tehuantepec.json)."))
+        "as read in sim/data/sites/tehuantepec.json)."))
     strings_in_parallel: int = Field(_ARRAY.strings_in_parallel, ge=1, le=1000, description=(
         f"[-] strings in parallel. Default {_ARRAY.strings_in_parallel} (seed 000: four modules "
         "per array)."))

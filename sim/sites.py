@@ -1,4 +1,4 @@
-"""Sites: location, climate defaults, tracker geometry and PV arrays (``data/sites/*.json``).
+"""Sites: location, climate defaults, tracker geometry and PV arrays (``sim/data/sites/*.json``).
 
 A site file uses units in its keys (``latitude_deg``, ``altitude_m``,
 ``temp_air_c``, ``surface_tilt_deg`` …); the :class:`Site` dataclass holds the
@@ -18,6 +18,7 @@ from sim.configs import read_config
 from sim.dynamics import TrackerInertia
 from sim.kinematics import TrackerGeometry
 from sim.motors import AxisDrive
+from sim.paths import default_sites_dir, default_user_sites_dir
 from sim.pv import ArrayConfig, array_config_from_dict
 from sim.site_config import validate_site_config
 
@@ -33,11 +34,6 @@ _TRACKER_KEYS = (
 
 class UnknownSiteError(ValueError):
     """No site file with that id."""
-
-
-def default_sites_dir() -> Path:
-    """The repository's ``data/sites/`` (found relative to this package)."""
-    return Path(__file__).resolve().parent.parent / "data" / "sites"
 
 
 @dataclass(frozen=True)
@@ -137,7 +133,7 @@ class Site:
 
 
 def site_from_dict(d: dict[str, Any], where: str = "site") -> Site:
-    """Build a :class:`Site` from the layout of ``data/sites/*.json``.
+    """Build a :class:`Site` from the layout of ``sim/data/sites/*.json``.
 
     The layout is :class:`sim.site_config.SiteConfig` (``docs/site.schema.json``);
     a ValueError names every bad field by its dotted path.
@@ -175,12 +171,6 @@ def site_from_dict(d: dict[str, Any], where: str = "site") -> Site:
     )
 
 
-def default_user_sites_dir() -> Path:
-    """The repository's ``data/user-sites/``: user sites when no folder is given (the
-    default of the service's ``HELIOTWIN_SITES_DIR`` too)."""
-    return default_sites_dir().parent / "user-sites"
-
-
 def _dirs(sites_dir: str | Path | None) -> list[Path]:
     """Where sites are looked up, first match winning: the user's folder (default
     :func:`default_user_sites_dir`), then the built-ins."""
@@ -195,12 +185,12 @@ def site_path(site_id: str, sites_dir: str | Path | None = None) -> Path:
 
 
 def builtin_site_ids() -> set[str]:
-    """Ids of the repository's built-in sites (``data/sites/``)."""
+    """Ids of the built-in sites (``sim/data/sites/``)."""
     return {p.stem for p in default_sites_dir().glob("*.json")}
 
 
 def is_builtin(path: Path) -> bool:
-    """Whether a site file is one of the repository's built-in sites."""
+    """Whether a site file is one of the built-in sites."""
     return path.resolve().parent == default_sites_dir()
 
 

@@ -183,7 +183,7 @@ def _tmy3() -> Path:
 
 def _greensboro_sites(tmp_path: Path) -> Path:
     """A sites directory with a site at the TMY3 station (Greensboro, NC)."""
-    cfg = json.loads((ROOT / "data" / "sites" / "tehuantepec.json").read_text())
+    cfg = json.loads((ROOT / "sim" / "data" / "sites" / "tehuantepec.json").read_text())
     cfg.update(site_id="greensboro", name="Greensboro NC (at TMY3 station 723170)",
                latitude_deg=36.1, longitude_deg=-79.95, altitude_m=273.0,
                timezone="America/New_York")
@@ -319,7 +319,7 @@ def test_sun_at_a_site_now() -> None:
 def test_a_site_with_placed_arrays_reports_the_shade_and_exports_it(tmp_path: Path) -> None:
     """The fixed array 4.5 m east of the tracker (sim/array_shade.py): the summary names
     the energy the tracker's shade costs it and the CSV carries the shaded fraction."""
-    site = json.loads((ROOT / "data/sites/tehuantepec.json").read_text())
+    site = json.loads((ROOT / "sim/data/sites/tehuantepec.json").read_text())
     site["site_id"] = "placed"
     site["arrays"]["tracker"] |= {"position_east_m": 0.0, "position_north_m": 0.0}
     site["arrays"]["fixed"] |= {"position_east_m": 4.5, "position_north_m": 0.0}

@@ -76,7 +76,7 @@ def test_a_user_file_replaces_a_built_in_only_with_force(tmp_path: Path) -> None
 
 
 def test_validate_names_the_bad_field(tmp_path: Path) -> None:
-    good = ROOT / "data" / "sites" / "tehuantepec.json"
+    good = ROOT / "sim" / "data" / "sites" / "tehuantepec.json"
     bad = tmp_path / "broken.json"
     bad.write_text(json.dumps({"site_id": "broken", "latitude_deg": 16, "longitude_deg": -95,
                                "timezone": "America/Mexico_City",

@@ -34,7 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ls = sub.add_parser("list", help="list the plants")
     ls.add_argument("--plants-dir", default=plants_dir,
                     help="directory of plant JSON files (default $HELIOTWIN_PLANTS_DIR or "
-                    "the repository's data/plants)")
+                    "the built-in sim/data/plants)")
     ls.add_argument("--json", action="store_true", help="print JSON")
     ls.set_defaults(func=run_list)
 

@@ -81,7 +81,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--sites-dir",
         default=os.environ.get("HELIOTWIN_SITES_DIR"),
-        help="a folder of user site JSON files, added to the built-in data/sites "
+        help="a folder of user site JSON files, added to the built-in sim/data/sites "
         "(default $HELIOTWIN_SITES_DIR or data/user-sites; docs/sites.md)",
     )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")

@@ -3,7 +3,7 @@
 A site is a JSON file of the format in ``docs/sites.md`` (JSON Schema:
 ``docs/site.schema.json``, generated from ``sim.site_config.SiteConfig``).
 User sites live in ``HELIOTWIN_SITES_DIR`` (default ``data/user-sites/``) and add
-to the built-in ``data/sites/``; a user file with a built-in id replaces it.
+to the built-in ``sim/data/sites/``; a user file with a built-in id replaces it.
 
 - ``create --id ID --latitude-deg --longitude-deg --timezone [--like SITE]`` writes a
   site at a new place with the tracker and arrays of ``--like`` (default

@@ -45,7 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--site", metavar="ID",
                    help="a configured site: its latitude, longitude and altitude")
     p.add_argument("--sites-dir", default=os.environ.get("HELIOTWIN_SITES_DIR"),
-                   help="a folder of user site JSON files, added to the built-in data/sites "
+                   help="a folder of user site JSON files, added to the built-in sim/data/sites "
                         "(default $HELIOTWIN_SITES_DIR or data/user-sites; docs/sites.md)")
     p.add_argument("--lat", type=float, help="latitude [deg], north positive")
     p.add_argument("--lon", type=float, help="longitude [deg], east positive")

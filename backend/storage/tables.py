@@ -47,7 +47,7 @@ class Base(DeclarativeBase):
 
 
 class SiteRow(Base):
-    """A site: place, time zone and its config as loaded from ``data/sites/``."""
+    """A site: place, time zone and its config as loaded from ``sim/data/sites/``."""
 
     __tablename__ = "sites"
 

@@ -182,7 +182,7 @@ class TwinScene:
         registry); only the default site without it.
     plants : callable, optional
         ``plant_id → Plant`` (raises ``ValueError`` for an unknown or bad one); the
-        repository's ``data/plants/`` by default.
+        built-in ``sim/data/plants/`` by default.
     """
 
     def __init__(

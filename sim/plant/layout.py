@@ -1,4 +1,4 @@
-"""Plants of dual-axis trackers: layout, collector and wiring (``data/plants/*.json``).
+"""Plants of dual-axis trackers: layout, collector and wiring (``sim/data/plants/*.json``).
 
 A plant file names its keys with units (``latitude_deg``, ``width_m`` …). Tracker
 positions may be given in the plant's own east-north-up frame (``"frame": "enu"``)
@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sim.configs import read_config
+from sim.paths import default_plants_dir
 
 FloatArray = NDArray[np.float64]
 
@@ -30,11 +31,6 @@ MODULE_ORIENTATIONS = ("portrait", "landscape")
 
 class UnknownPlantError(ValueError):
     """No plant file with that id."""
-
-
-def default_plants_dir() -> Path:
-    """The repository's ``data/plants/`` (found relative to this package)."""
-    return Path(__file__).resolve().parents[2] / "data" / "plants"
 
 
 def enu_from_seed004(xyz_seed004: ArrayLike) -> FloatArray:
@@ -279,7 +275,7 @@ def _collector(d: Any, where: str) -> Collector:
 
 
 def plant_from_dict(d: dict[str, Any], where: str = "plant") -> Plant:
-    """A :class:`Plant` from the layout of ``data/plants/*.json``; ValueError names the field."""
+    """A :class:`Plant` from the layout of ``sim/data/plants/*.json``; ValueError names a field."""
     if not isinstance(d, dict):
         raise ValueError(f"{where}: a plant file must hold a JSON object")
     if "plant_id" not in d:
