@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pandas as pd
+import pvlib
 import pytest
 
 from sim import dynamics, motors
@@ -12,6 +13,7 @@ from sim.control import CONTROLLERS, ControlSettings, make_controller
 from sim.disturbances import Disturbances
 from sim.frames import CloudField, pointing_error_deg, render_sun_roi
 from sim.sites import load_site
+from sim.sun import solar_position
 from sim.tracking import (
     CameraSetup,
     DriveLimits,
@@ -69,8 +71,8 @@ def test_detected_error_from_roi_matches_the_truth_and_the_camera_model() -> Non
             eh, ev = pointing_error_deg(cam, x, y)
             ref = cam.pointing_error(x, y)
             assert (eh, ev) == pytest.approx((float(ref[0]), float(ref[1])), abs=1e-12)
-            # ~0.01 deg (0.1 px) measured; 0.03 deg allows the noise
-            assert eh == pytest.approx(h, abs=0.03) and ev == pytest.approx(v, abs=0.03)
+            # 0.008 deg (0.1 px) at most measured over these frames and both detectors
+            assert eh == pytest.approx(h, abs=0.02) and ev == pytest.approx(v, abs=0.02)
     off = cam.pixel_to_direction(-500.0, 10.0)  # outside the frame
     assert not render_sun_roi(off, cam).sun_in_frame
 
@@ -78,7 +80,9 @@ def test_detected_error_from_roi_matches_the_truth_and_the_camera_model() -> Non
 def test_clouds_dim_the_sun_and_drift() -> None:
     c = CloudField(cover=0.5, optical_depth=3.0, seed=2)
     seen = np.array([c.at_sun(t) for t in range(0, 2000, 10)])
-    assert 0.2 < np.mean(seen > 0.1) < 0.8 and seen.max() == pytest.approx(1.0)
+    # the share of the time the sun is dimmed follows the cover (measured 0.485 for 0.5)
+    assert np.mean(seen > 0.1) == pytest.approx(0.5, abs=0.04)
+    assert seen.max() == pytest.approx(1.0)
     assert CloudField(cover=0.0).at_sun(5.0) == 0.0
 
 
@@ -163,16 +167,32 @@ def test_open_loop_follows_the_sun_within_dead_band_and_lag(site) -> None:
     assert s["moves"] > 100 and s["actuator_move_energy_wh"] > 0
     cmd = r.series[["azimuth_command_deg", "elevation_command_deg"]]
     assert cmd.notna().all().all()
-    # 2 mrad cost next to nothing (the diffuse terms change to first order in the tilt: +-)
-    assert abs(s["pointing_loss_wh"]) < 1e-4 * s["tracker_energy_wh"]
+    # 2 mrad cost next to nothing (the diffuse terms change to first order in the tilt: +-;
+    # measured 2.4e-5 of the energy)
+    assert abs(s["pointing_loss_wh"]) < 6e-5 * s["tracker_energy_wh"]
+
+
+def _enu(zenith_deg: np.ndarray, azimuth_deg: np.ndarray) -> np.ndarray:
+    z, a = np.radians(zenith_deg), np.radians(azimuth_deg)
+    return np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z)], axis=-1)
 
 
 def test_duffie_beckman_open_loop_is_off_by_its_ephemeris_error(site) -> None:
-    # seed 001: D&B vs SPA differ by far less than its 100 mrad drift; here ~5-20 mrad
+    # seed 001: D&B vs SPA differ by far less than its 100 mrad drift
     db = _noon_window(site, 4.0, day="2024-09-26", controller="open_loop_duffie_beckman")
     spa = _noon_window(site, 4.0, day="2024-09-26", controller="open_loop_spa")
     e_db, e_spa = db.summary()["pointing_error_rms_mrad"], spa.summary()["pointing_error_rms_mrad"]
-    assert 4.0 < e_db < 30.0 and e_spa < 2.5
+    assert e_spa < 2.5
+    # the two ephemerides apart over the same minutes (16.5 mrad RMS here), the loop's own
+    # error beside it: measured 1.8 % above their quadrature sum
+    t = db.series.index
+    a = solar_position(t, site.latitude, site.longitude, site.altitude, method="spa")
+    b = solar_position(t, site.latitude, site.longitude, site.altitude, method="duffie-beckman")
+    cos_apart = (_enu(a["apparent_zenith"].to_numpy(), a["azimuth"].to_numpy())
+                 * _enu(b["apparent_zenith"].to_numpy(), b["azimuth"].to_numpy())).sum(-1)
+    apart = 1000 * np.arccos(np.clip(cos_apart, -1.0, 1.0))
+    assert e_db == pytest.approx(math.hypot(float(np.sqrt(np.mean(apart**2))), e_spa),
+                                 rel=0.05)
 
 
 @pytest.mark.parametrize("minutes", [5, 30, 60])
@@ -184,7 +204,8 @@ def test_chronological_steps_every_n_minutes(site, minutes: int) -> None:
     # both axes step at each mark after the start (the run starts on target)
     assert steps - 1 <= s["moves"] / 2 <= steps
     # the sun moves ~0.25 deg/min: pointing at mid-interval leaves <= N/2 minutes of it
-    assert s["pointing_error_max_mrad"] == pytest.approx(0.5 * minutes * 4.4, rel=0.35)
+    # (measured 0.9 % under, at 5, 30 and 60 min)
+    assert s["pointing_error_max_mrad"] == pytest.approx(0.5 * minutes * 4.4, rel=0.02)
 
 
 def test_dead_band_trades_moves_for_error(site) -> None:
@@ -203,8 +224,9 @@ def test_night_stow_and_morning_wake(site) -> None:
     night = s[s["apparent_elevation"] < -2]
     assert (night["elevation_joint_deg"] == site.tracker.elevation_max_deg).all()
     day = s[s["apparent_elevation"] > 0]
-    # woken before sunrise: facing the sun from the first daylight minute
-    assert day["pointing_error_mrad"].max() < 5.0
+    # woken before sunrise: facing the sun from the first daylight minute, within the open
+    # loop's own bound (test_open_loop_follows_the_sun_within_dead_band_and_lag; 2.0 measured)
+    assert day["pointing_error_mrad"].max() < 4.0
 
 
 # ---------------------------------------------------------------- disturbances' signatures
@@ -217,7 +239,7 @@ def test_clock_offset_shifts_the_hour_angle(site) -> None:
     err = s["pointing_error_mrad"].to_numpy()
     # at a sample the pose is the target set 30 s before for 15 s ahead, on a clock 240 s
     # fast: the sun 225 s ahead, 225 s x 15 deg/h x cos(dec -2.4 deg) = 0.937 deg = 16.35 mrad
-    assert np.median(err) == pytest.approx(16.35, abs=0.3)
+    assert np.median(err) == pytest.approx(16.35, abs=0.015)  # measured 16.354
 
 
 def test_encoder_drift_grows_linearly(site) -> None:
@@ -228,7 +250,8 @@ def test_encoder_drift_grows_linearly(site) -> None:
     hours = (s.index - s.index[0]) / pd.Timedelta(hours=1)
     d_el = 1000 * np.radians(s["elevation_joint_deg"] - s["elevation_command_deg"])
     # true joint = command - drift * t (the encoder reads ahead by the drift)
-    assert np.allclose(d_el[10:], -10.0 * np.asarray(hours)[10:], atol=0.5)
+    # (measured within 0.08 mrad)
+    assert np.allclose(d_el[10:], -10.0 * np.asarray(hours)[10:], atol=0.2)
 
 
 def test_backlash_offsets_the_output(site) -> None:
@@ -238,10 +261,10 @@ def test_backlash_offsets_the_output(site) -> None:
     s = r.series
     d_el = s["elevation_joint_deg"] - s["elevation_command_deg"]
     # gravity presses the elevation gear on one flank (seed 002: G2 < 0): +b/2 all the time
-    assert np.median(d_el) == pytest.approx(0.25, abs=0.02)
+    assert np.median(d_el) == pytest.approx(0.25, abs=1e-9)  # exactly: it rests on the flank
     d_az = s["azimuth_joint_deg"] - s["azimuth_command_deg"]
     # the afternoon azimuth sweep drives the + flank: the output trails by b/2
-    assert np.median(d_az) == pytest.approx(-0.25, abs=0.05)
+    assert np.median(d_az) == pytest.approx(-0.25, abs=1e-9)
 
 
 def test_gusts_cost_energy(site) -> None:
@@ -289,7 +312,8 @@ def test_hybrid_keeps_its_correction_through_clouds(site) -> None:
     r = _noon_window(site, 3.0, controller="hybrid", disturbances=d, camera=cloudy)
     clear = _noon_window(site, 3.0, controller="hybrid", disturbances=d).series
     s = r.summary()
-    assert s["camera_frames_used"] < 0.9 * s["camera_frames"]
+    # 60 % cover, optical depth 4: most frames go unused (measured 18 % used)
+    assert s["camera_frames_used"] < 0.4 * s["camera_frames"]
     # after the first correction (the run starts uncorrected, ~30 mrad off) the cloudy run
     # stays as close to the sun as the clear one
     late = r.series.index > r.series.index[0] + pd.Timedelta(minutes=30)
@@ -308,9 +332,10 @@ def test_cpv_loses_the_beam_outside_its_acceptance(site) -> None:
     assert narrow["tracker_energy_wh"] == pytest.approx(0.0, abs=1e-9)
     assert narrow["pointing_loss_wh"] == pytest.approx(wide["tracker_energy_wh"], rel=1e-9)
     assert wide["pointing_loss_wh"] == pytest.approx(0.0, abs=1e-9)
-    # the Fresnel spot at seed 001's 1.5 m: f tan(theta)
+    # the Fresnel spot at seed 001's 1.5 m: f tan(theta) (measured 0.14 % apart: the RMS of
+    # the tangents against the tangent of the RMS)
     assert wide["spot_displacement_rms_m"] == pytest.approx(
-        1.5 * math.tan(wide["pointing_error_rms_mrad"] / 1000), rel=0.01)
+        1.5 * math.tan(wide["pointing_error_rms_mrad"] / 1000), rel=0.004)
 
 
 def test_flat_pointing_loss_is_the_beam_cosine(site) -> None:
@@ -319,7 +344,14 @@ def test_flat_pointing_loss_is_the_beam_cosine(site) -> None:
     s, ser = r.summary(), r.series
     theta = ser["pointing_error_mrad"].to_numpy() / 1000.0  # ~130 mrad
     ideal = _noon_window(site, 2.0).series
-    # beam share of the ideal tracker's power times (1 - cos theta)
-    beam = ideal["tracker_power_w"] * (1.0 - np.cos(theta))
-    approx_wh = float(beam.sum() / 60.0) * 0.85  # DNI / POA on a clear day ~ 0.85
-    assert s["pointing_loss_wh"] == pytest.approx(approx_wh, rel=0.3)
+    # the plane of array loses the beam's (1 - cos theta), pvlib's clear-sky DNI; the diffuse
+    # terms (Hay-Davies) move to first order in the tilt, both ways: measured 9 % less
+    loc = pvlib.location.Location(site.latitude, site.longitude, altitude=site.altitude)
+    dni = loc.get_clearsky(ideal.index, model="ineichen")["dni"].to_numpy()
+    lost_poa = ideal["tracker_poa_global"].to_numpy() - ser["tracker_poa_global"].to_numpy()
+    assert lost_poa.sum() == pytest.approx((dni * (1.0 - np.cos(theta))).sum(), rel=0.2)
+    # the modules turn that share of their irradiance into a smaller share of their power
+    # (a cooler cell, the voltage's log of the irradiance): measured 0.79
+    lost_share = lost_poa / ideal["tracker_poa_global"].to_numpy()
+    by_share_wh = float((ideal["tracker_power_w"].to_numpy() * lost_share).sum() / 60.0)
+    assert 0.7 < s["pointing_loss_wh"] / by_share_wh < 0.9
