@@ -1,19 +1,39 @@
-"""Helpers of the backend tests: throw-away databases and ``heliotwin serve`` subprocesses.
+"""Helpers of the backend tests: throw-away databases, the service in this process, and
+``heliotwin serve`` subprocesses.
+
+- :class:`InProcessServer`: ``backend.app.create_app(settings)`` in the test process, its
+  lifespan running on an event loop of its own thread, requests through httpx's
+  ``ASGITransport`` (no socket), tokens made by ``backend.auth`` through the service's
+  writer. For the HTTP contract: starting it costs the migrations and the sites, not an
+  interpreter, and a token costs one insert instead of a CLI process.
+- :class:`ServerProcess`: a ``heliotwin serve`` subprocess on free ports, for the tests
+  whose subject is the process (SIGKILL, signals, the CLI, real sockets, the browser).
+
+Both read the same settings: the ``HELIOTWIN_*`` variables of :func:`service_env`
+(viser and the live twin loop off, the test's own variables on top); nothing else of the
+test run's environment reaches them.
 
 Imported by ``conftest.py`` (fixtures) and by tests that start their own servers.
 """
 
 from __future__ import annotations
 
+import asyncio
+import concurrent.futures
+import gc
 import os
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import uuid
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, ClassVar
+from unittest import mock
 
 import httpx
 import pytest
@@ -84,6 +104,220 @@ def new_database(backend: str, tmp_dir: Path) -> Database:
     return Database(f"{PG_URL}{sep}options=-csearch_path%3D{schema}", schema)
 
 
+def service_env(database_url: str, extra_env: Mapping[str, str] | None = None) -> dict[str, str]:
+    """The ``HELIOTWIN_*`` settings of a test service: its database, viser and the live
+    twin loop off (tests that want them turn them on in ``extra_env``)."""
+    return {"HELIOTWIN_DATABASE_URL": database_url, "HELIOTWIN_VISER": "false",
+            "HELIOTWIN_LIVE_TWIN": "false", **(extra_env or {})}
+
+
+def process_env(database_url: str, extra_env: Mapping[str, str] | None = None) -> dict[str, str]:
+    """The environment of a subprocess on that database (``heliotwin serve``, a CLI
+    command): this run's environment without its ``HELIOTWIN_*`` variables, plus
+    :func:`service_env`."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("HELIOTWIN_")}
+    return {**env, "PYTHONUNBUFFERED": "1", **service_env(database_url, extra_env)}
+
+
+def settings_from_env(env: Mapping[str, str]) -> Any:
+    """``backend.settings.get_settings()`` as a process started with ``env`` would read it
+    (no other ``HELIOTWIN_*`` variable of this run), so a test names its settings as a
+    user would: by their environment variables."""
+    from backend.settings import get_settings
+
+    with mock.patch.dict(os.environ):
+        for name in [k for k in os.environ if k.startswith("HELIOTWIN_")]:
+            del os.environ[name]
+        os.environ.update(env)
+        return get_settings()
+
+
+def make_token(database_url: str, site_id: str = "tehuantepec", label: str = "tests") -> str:
+    """A new write token of ``site_id`` stored in that database by ``backend.auth``, as
+    ``heliotwin token create`` would (migrated first, the built-in sites loaded)."""
+    from backend.auth import create_token
+    from backend.sites import Registry, sync_sites
+    from backend.storage.engine import make_engine, run_migrations
+
+    settings = settings_from_env(service_env(database_url))
+    engine = make_engine(settings)
+    try:
+        run_migrations(engine)
+        registry = Registry.load_files(settings.sites_dir)
+        with engine.begin() as conn:
+            sync_sites(conn, [info.site for info in registry.sites.values()])
+            return create_token(conn, site_id, label)
+    finally:
+        engine.dispose()
+
+
+class _Lifespan:
+    """The ASGI lifespan protocol of one app, driven as a server drives it."""
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+        self._task: asyncio.Task[None] | None = None
+
+    async def startup(self) -> None:
+        self._receive: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        self._send: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        scope = {"type": "lifespan", "asgi": {"version": "3.0", "spec_version": "2.0"},
+                 "state": {}}
+        self._task = asyncio.create_task(self.app(scope, self._receive.get, self._send.put))
+        await self._receive.put({"type": "lifespan.startup"})
+        await self._expect("lifespan.startup.complete")
+
+    async def shutdown(self) -> None:
+        await self._receive.put({"type": "lifespan.shutdown"})
+        await self._expect("lifespan.shutdown.complete")
+        assert self._task is not None
+        await self._task
+
+    async def _expect(self, want: str) -> None:
+        assert self._task is not None
+        message = asyncio.ensure_future(self._send.get())
+        await asyncio.wait({message, self._task}, return_when=asyncio.FIRST_COMPLETED)
+        if not message.done():  # the app returned or raised instead of answering
+            message.cancel()
+            self._task.result()
+            raise RuntimeError(f"the lifespan ended without {want}")
+        got = message.result()
+        if got["type"] != want:
+            raise RuntimeError(f"{got['type']}: {got.get('message', '')}")
+
+
+class _ASGIBridge(httpx.BaseTransport):
+    """A synchronous httpx transport onto ``httpx.ASGITransport`` run on the service's
+    event loop: a test's plain ``httpx.Client`` calls the app in this process. The request
+    body is read first (a generator body stays chunked: no Content-Length is added); the
+    response comes back whole, still encoded (the client decodes gzip as over a socket).
+    An exception in the app is a 500, as a server answers it; the client's read timeout
+    bounds the wait."""
+
+    def __init__(self, app: Any, loop: asyncio.AbstractEventLoop) -> None:
+        self._asgi = httpx.ASGITransport(app=app, raise_app_exceptions=False)
+        self._loop = loop
+
+    def handle_request(self, request: httpx.Request) -> httpx.Response:
+        body = request.read()
+        forwarded = httpx.Request(request.method, request.url, headers=request.headers,
+                                  stream=httpx.ByteStream(body))
+
+        async def send() -> tuple[int, httpx.Headers, bytes]:
+            response = await self._asgi.handle_async_request(forwarded)
+            raw = b"".join([part async for part in response.stream])  # type: ignore[union-attr]
+            return response.status_code, response.headers, raw
+
+        future = asyncio.run_coroutine_threadsafe(send(), self._loop)
+        timeout_s = request.extensions.get("timeout", {}).get("read")
+        try:
+            status, headers, raw = future.result(timeout_s)
+        except concurrent.futures.TimeoutError as exc:
+            future.cancel()
+            raise httpx.ReadTimeout(f"no answer in {timeout_s} s", request=request) from exc
+        return httpx.Response(status, headers=headers, stream=httpx.ByteStream(raw),
+                              request=request)
+
+
+@dataclass
+class InProcessServer:
+    """``backend.app.create_app(settings)`` in this process (see the module docstring).
+
+    The settings are those of ``heliotwin serve --no-demo`` started with
+    :func:`service_env` (``extra_env`` on top), with no parser processes (forking a test
+    run that has threads of its own is unsafe). :meth:`client` gives an ``httpx.Client``
+    on it with ``base_url`` :attr:`base_url`; no socket is opened, so the host is a name
+    nothing answers at (a request that misses the client fails instead of reaching a
+    stranger's server).
+    """
+
+    database_url: str
+    extra_env: dict[str, str] = field(default_factory=dict)
+    base_url: ClassVar[str] = "http://testserver"
+    app: Any = field(default=None, init=False)
+    _loop: asyncio.AbstractEventLoop | None = field(default=None, init=False, repr=False)
+    _thread: threading.Thread | None = field(default=None, init=False, repr=False)
+    _lifespan: _Lifespan | None = field(default=None, init=False, repr=False)
+
+    @property
+    def env(self) -> dict[str, str]:
+        """The environment of a CLI subprocess on the same database."""
+        return process_env(self.database_url, self.extra_env)
+
+    @property
+    def settings(self) -> Any:
+        return self.app.state.settings
+
+    @property
+    def ctx(self) -> Any:
+        """The running service's ``backend.context.ServiceContext``."""
+        return self.app.state.ctx
+
+    def start(self, timeout_s: float = 120.0) -> InProcessServer:
+        """Build the app and run its lifespan's startup (migrations, sites, the writer…)."""
+        from backend.app import create_app
+
+        env = {"HELIOTWIN_DEMO_LOGGER": "false", "HELIOTWIN_PARSE_PROCESSES": "0",
+               **service_env(self.database_url, self.extra_env)}
+        self.app = create_app(settings_from_env(env))
+        self._loop = asyncio.new_event_loop()
+        self._thread = threading.Thread(target=self._loop.run_forever, daemon=True,
+                                        name="in-process-service")
+        self._thread.start()
+        self._lifespan = _Lifespan(self.app)
+        try:
+            self._run(self._lifespan.startup(), timeout_s)
+        except BaseException:
+            self._close_loop()
+            raise
+        return self
+
+    def stop(self, timeout_s: float = 120.0) -> None:
+        """Run the lifespan's shutdown (everything acknowledged committed) and end the loop."""
+        if self._lifespan is None:
+            return
+        lifespan, self._lifespan = self._lifespan, None
+        try:
+            self._run(lifespan.shutdown(), timeout_s)
+        finally:
+            self._close_loop()
+            # the lifespan freezes what it loaded (gc.freeze); this app is gone, so let the
+            # collector see its cycles again instead of keeping every stopped app forever
+            gc.unfreeze()
+
+    def client(self, timeout_s: float = 60.0, **kwargs: Any) -> httpx.Client:
+        """An ``httpx.Client`` on the app (close it, or use it in a ``with``)."""
+        assert self._loop is not None, "start() first"
+        return httpx.Client(transport=_ASGIBridge(self.app, self._loop),
+                            base_url=self.base_url, timeout=timeout_s, **kwargs)
+
+    def token(self, site_id: str = "tehuantepec", label: str = "tests") -> str:
+        """A new write token of ``site_id``, stored through the service's writer."""
+        from backend.auth import create_token
+
+        future = self.ctx.writer.call(lambda conn: create_token(conn, site_id, label))
+        return str(future.result(60))
+
+    def __enter__(self) -> InProcessServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _run(self, coro: Any, timeout_s: float) -> Any:
+        assert self._loop is not None
+        return asyncio.run_coroutine_threadsafe(coro, self._loop).result(timeout_s)
+
+    def _close_loop(self) -> None:
+        loop, thread = self._loop, self._thread
+        if loop is None or thread is None:
+            return
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(30)
+        loop.close()
+        self._loop = self._thread = None
+
+
 @dataclass
 class ServerProcess:
     """A ``heliotwin serve`` subprocess on free ports."""
@@ -102,15 +336,7 @@ class ServerProcess:
 
     @property
     def env(self) -> dict[str, str]:
-        env = {k: v for k, v in os.environ.items() if not k.startswith("HELIOTWIN_")}
-        env.update({
-            "HELIOTWIN_DATABASE_URL": self.database_url,
-            "HELIOTWIN_VISER": "false",
-            "HELIOTWIN_LIVE_TWIN": "false",
-            "PYTHONUNBUFFERED": "1",
-        })
-        env.update(self.extra_env)
-        return env
+        return process_env(self.database_url, self.extra_env)
 
     def start(self, timeout_s: float = 60.0) -> ServerProcess:
         """Start and wait for ``/healthz``."""
@@ -156,26 +382,28 @@ class ServerProcess:
             self.proc.wait(10)
 
     def token(self, site_id: str = "tehuantepec") -> str:
-        """A new write token from ``heliotwin token create`` (its last word)."""
-        out = subprocess.run([*HELIOTWIN, "token", "create", "--site", site_id], cwd=ROOT,
-                             env=self.env, capture_output=True, text=True, timeout=60,
-                             check=True)
-        return out.stdout.strip().split()[-1]
+        """A new write token, stored in the server's database by ``backend.auth``."""
+        return make_token(self.database_url, site_id)
 
 
 @dataclass
 class LiveServer:
-    """What ``live_server`` yields."""
+    """What ``live_server`` yields: the service in this process (:class:`InProcessServer`)
+    and what the tests need to know about it."""
 
     base_url: str
     write_token: str
     database_url: str
     backend: str
-    process: ServerProcess
+    process: InProcessServer
 
     @property
     def env(self) -> dict[str, str]:
+        """The environment of a CLI subprocess on the same database."""
         return self.process.env
 
     def token(self, site_id: str = "tehuantepec") -> str:
         return self.process.token(site_id)
+
+    def client(self, timeout_s: float = 60.0, **kwargs: Any) -> httpx.Client:
+        return self.process.client(timeout_s, **kwargs)
