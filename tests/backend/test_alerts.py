@@ -1,10 +1,12 @@
 """Alerts (``backend/alerts/``, issue 13 item 7): the rules, the webhook sender against a real
-HTTP receiver, and the service over real HTTP — a silent logger raised once and cleared once
-(across a restart), a fault and a low PR from an injected diagnosis, and ingestion that stays
-fast while the webhook hangs.
+HTTP receiver, and the service over HTTP (in this process, ``live_service.InProcessServer``)
+— a silent logger raised once and cleared once (across a restart), a fault and a low PR
+from an injected diagnosis, and ingestion that never waits for a hanging webhook.
 
 The receiver is a ``http.server.ThreadingHTTPServer`` on a free port in a thread of this
-process; each test gives it a behaviour (answer 200, fail first, hang).
+process; each test gives it a behaviour (answer 200, fail first, hang). The waits of the
+sender are read from what it logs ("retry k of n in W s"), never from a clock, and "no
+repeat" is checked over a number of the evaluator's rounds, not over a sleep.
 """
 
 from __future__ import annotations
@@ -14,7 +16,8 @@ import hashlib
 import hmac
 import http.server
 import json
-import statistics
+import logging
+import re
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -24,7 +27,7 @@ from zoneinfo import ZoneInfo
 import httpx
 import orjson
 import pytest
-from live_service import Database, ServerProcess, free_port, new_database
+from live_service import Database, InProcessServer, free_port, new_database
 
 from backend.alerts import rules
 from backend.alerts.webhook import Event, WebhookSender, retry_after_s
@@ -134,7 +137,8 @@ def test_a_logger_that_sleeps_at_night_is_not_silent() -> None:
     assert daylight_seconds(info, at(5), at(7)) == pytest.approx(35 * 60, abs=6 * 60)
     # the tracker's logger slept from 18:50 yesterday (after sunset), the fixed one has been
     # quiet since 10:00 yesterday; at 06:40 only the fixed one has 30 min of daylight silence
-    last = {"tracker": int(at(18, 50) - 86400), "fixed": int(at(10) - 86400)}
+    last: dict[str, int | None] = {"tracker": int(at(18, 50) - 86400),
+                                   "fixed": int(at(10) - 86400)}
     ev = rules.silent_loggers(SITE, TZ, last, at(6, 40), at(6, 40) - 10 * 86400, 30,
                               lambda a, b: daylight_seconds(info, a, b))
     assert [c.array for c in ev.conditions] == ["fixed"]
@@ -214,7 +218,15 @@ def test_webhook_delivers_signed_json() -> None:
         assert sender.status()["url"] == f"http://127.0.0.1:{rx.server.server_address[1]}/…"
 
 
-def test_webhook_retries_with_backoff_then_delivers() -> None:
+def _waits(caplog: pytest.LogCaptureFixture) -> list[tuple[int, int, float]]:
+    """The sender's retries as it logs them: ``(k, of n, wait [s])`` in order."""
+    found = [re.search(r"retry (\d+) of (\d+) in ([\d.]+) s", r.getMessage())
+             for r in caplog.records if r.name == "backend.alerts.webhook"]
+    return [(int(m[1]), int(m[2]), float(m[3])) for m in found if m]
+
+
+def test_webhook_retries_with_backoff_then_delivers(caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.WARNING, logger="backend.alerts.webhook")
     with Receiver(lambda n: 503 if n < 2 else 200) as rx:
         sender, results = _sender(rx.url, backoff_s=0.3)
         try:
@@ -223,15 +235,15 @@ def test_webhook_retries_with_backoff_then_delivers() -> None:
         finally:
             sender.stop()
         assert results == [("1:raised", "delivered", 3)]
-        t = [r["t"] for r in rx.requests]
-        gaps = [b - a for a, b in zip(t, t[1:], strict=False)]
-        assert gaps[0] >= 0.28 and gaps[1] >= 0.58, gaps  # 0.3 s, then doubled
+        assert _waits(caplog) == [(1, 3, 0.3), (2, 3, 0.6)]  # 0.3 s, then doubled
         assert {r["headers"]["X-Heliotwin-Event-Id"] for r in rx.requests} == {"1:raised"}
         st = sender.status()
         assert (st["delivered"], st["retries"], st["failed"]) == (1, 2, 0)
 
 
-def test_webhook_429_waits_for_retry_after_and_400_is_not_retried() -> None:
+def test_webhook_429_waits_for_retry_after_and_400_is_not_retried(
+        caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.WARNING, logger="backend.alerts.webhook")
     assert retry_after_s("2") == 2.0 and retry_after_s("soon") is None
     with Receiver(lambda n: 429 if n == 0 else 400) as rx:
         sender, results = _sender(rx.url, backoff_s=0.05)
@@ -241,7 +253,7 @@ def test_webhook_429_waits_for_retry_after_and_400_is_not_retried() -> None:
         finally:
             sender.stop()
         assert results == [("1:raised", "failed", 2)]
-        assert rx.requests[1]["t"] - rx.requests[0]["t"] >= 0.95  # Retry-After: 1
+        assert _waits(caplog) == [(1, 3, 1.0)]  # Retry-After: 1, not the 0.05 s backoff
         assert "HTTP 400" in sender.status()["last_error"]
 
 
@@ -262,27 +274,27 @@ def test_a_hanging_webhook_never_blocks_offer_and_drops_beyond_the_queue() -> No
         try:
             sender.offer(_event(1))
             _until(lambda: len(rx.requests) == 1)  # the first is in flight, hanging
-            t0 = time.perf_counter()
+            # a blocking offer would wait for the queue to drain and accept them all
             accepted = [sender.offer(_event(i)) for i in range(2, 7)]
-            offer_ms = 1000 * (time.perf_counter() - t0)
             assert accepted == [True, True, False, False, False]
-            assert offer_ms < 20, offer_ms
             assert sender.status()["dropped"] == 3 and sender.status()["queued"] == 3
             assert [r for r in results if r[1] == "dropped"] == [
                 (f"{i}:raised", "dropped", 0) for i in (4, 5, 6)]
-            t0 = time.monotonic()
         finally:
             sender.stop()
-        assert time.monotonic() - t0 < 6.0  # the POST in flight ends at its timeout
-        assert sender.status()["unsent"] >= 2  # left in the queue, logged
+        # the POST in flight ended at its timeout, not at the hanging receiver's release;
+        # it and the two queued events are counted unsent (logged, offered at the next start)
+        st = sender.status()
+        assert "ReadTimeout" in st["last_error"] and st["unsent"] == 3, st
+        assert len(rx.requests) == 1 and not rx.released.is_set()
 
 
-# -- the service over real HTTP ----------------------------------------------------------------
-def _server(db: Database, tmp: Path, **env: str) -> ServerProcess:
+# -- the service over HTTP, in this process --------------------------------------------------
+def _server(db: Database, **env: str) -> InProcessServer:
     base = {"HELIOTWIN_ALERT_INTERVAL_S": "0.3", "HELIOTWIN_ALERT_WEBHOOK_BACKOFF_S": "0.2",
             "HELIOTWIN_ALERT_SILENT_DAYLIGHT_ONLY": "false",  # the tests run at any hour
-            "HELIOTWIN_ALERT_DIAGNOSIS_DAYS": "0", "HELIOTWIN_PARSE_PROCESSES": "0"}
-    return ServerProcess(db.url, tmp / "server.log", extra_env={**base, **env})
+            "HELIOTWIN_ALERT_DIAGNOSIS_DAYS": "0"}
+    return InProcessServer(db.url, extra_env={**base, **env})
 
 
 def _reading(ts: float, array: str = "tracker") -> dict:
@@ -302,6 +314,16 @@ def _alerts(c: httpx.Client, **params: str) -> dict:
     return r.json()
 
 
+def _rounds(c: httpx.Client, n: int, timeout_s: float = 60.0) -> dict:
+    """Wait until the evaluator has run ``n`` more rounds; its status then."""
+    want = _alerts(c)["evaluator"]["evaluations"] + n
+    deadline = time.monotonic() + timeout_s
+    while (ev := _alerts(c)["evaluator"])["evaluations"] < want:
+        assert time.monotonic() < deadline, f"the evaluator ran no {n} rounds: {ev}"
+        time.sleep(0.05)
+    return ev  # type: ignore[no-any-return]
+
+
 @pytest.fixture
 def sqlite_database(tmp_path: Path) -> Iterator[Database]:
     """One backend for the tests whose subject is not the database (the webhook, the
@@ -318,17 +340,25 @@ def rx() -> Iterator[Receiver]:
         yield receiver
 
 
+#: the silence threshold of the silent-logger tests [min] (1.2 s) and the evaluator's rounds
+#: that cover it from a start (0.3 s each, HELIOTWIN_ALERT_INTERVAL_S) with two to spare
+SILENT_MIN = 0.02
+ROUNDS_PAST_SILENCE = 6
+
+
 def test_silent_logger_raised_once_kept_over_a_restart_and_cleared_once(
-        database: Database, tmp_path: Path, rx: Receiver) -> None:
-    server = _server(database, tmp_path, HELIOTWIN_ALERT_SILENT_MIN="0.05",
+        database: Database, rx: Receiver, caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.INFO, logger="backend.app")
+    server = _server(database, HELIOTWIN_ALERT_SILENT_MIN=str(SILENT_MIN),
                      HELIOTWIN_ALERT_WEBHOOK_URL=rx.url).start()
     try:
         token = server.token()
-        with httpx.Client(base_url=server.base_url, timeout=30) as c:
+        with server.client(timeout_s=30) as c:
             last = time.time() - 1
             _post(c, token, [_reading(last)])  # the fixed array never reports: no alert
             evs = rx.wait_for(lambda e: len(e) >= 1)
-            time.sleep(2.0)  # ≈ 6 more evaluations: no repeat while the logger stays silent
+            # more rounds with the logger still silent raise nothing more
+            assert _rounds(c, ROUNDS_PAST_SILENCE)["webhook"]["offered"] == 1
             evs = rx.events()
             assert [(e["event"], e["alert"]["array"]) for e in evs] == [("raised", "tracker")]
             alert = evs[0]["alert"]
@@ -344,16 +374,18 @@ def test_silent_logger_raised_once_kept_over_a_restart_and_cleared_once(
             assert body["counts"] == {"active": 1, "cleared": 0}
             assert body["evaluator"]["webhook"]["delivered"] == 1
             assert "secret-path" not in json.dumps(body)  # the URL's path is never shown
-        assert server.stop() is not None  # graceful (None: it had to be killed)
+        server.stop()  # graceful: the lifespan's shutdown ran to its end
+        assert "service stopped" in caplog.messages
         server.start()  # the same database: the active alert is read back, not raised again
-        with httpx.Client(base_url=server.base_url, timeout=30) as c:
-            time.sleep(4.5)  # past the silence threshold counted from the new start
+        with server.client(timeout_s=30) as c:
+            # past the silence threshold counted from the new start: nothing offered
+            assert _rounds(c, ROUNDS_PAST_SILENCE)["webhook"]["offered"] == 0
             assert len(rx.events()) == 1
             assert [a["id"] for a in _alerts(c, state="active")["alerts"]] == [alert["id"]]
             # the logger reports again (stamped a minute ahead: it stays fresh for the test)
             _post(c, token, [_reading(time.time() + 60)])
             evs = rx.wait_for(lambda e: len(e) >= 2)
-            time.sleep(1.0)
+            assert _rounds(c, 3)["webhook"]["offered"] == 1  # cleared once
             evs = rx.events()
             assert [e["event"] for e in evs] == ["raised", "cleared"]
             cleared = evs[1]["alert"]
@@ -367,26 +399,23 @@ def test_silent_logger_raised_once_kept_over_a_restart_and_cleared_once(
         server.stop()
 
 
-def test_alerts_endpoint_names_the_bad_field(sqlite_database: Database, tmp_path: Path) -> None:
-    server = _server(sqlite_database, tmp_path, HELIOTWIN_ALERTS="false").start()
-    try:
-        with httpx.Client(base_url=server.base_url, timeout=30) as c:
-            r = c.get("/api/v1/alerts", params={"site_id": "atlantis"})
-            assert r.status_code == 404 and r.json()["detail"].startswith(
-                "site_id: unknown site 'atlantis'")
-            r = c.get("/api/v1/alerts", params={"state": "open"})
-            assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "state"]
-            r = c.get("/api/v1/alerts", params={"limit": "0"})
-            assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "limit"]
-            body = _alerts(c)
-            assert body == {"alerts": [], "counts": {"active": 0, "cleared": 0},
-                            "evaluator": {"enabled": False}}
-            doc = c.get("/openapi.json").json()
-            op = doc["paths"]["/api/v1/alerts"]["get"]
-            assert {p["name"] for p in op["parameters"]} == {"site_id", "state", "kind", "limit"}
-            assert "AlertRead" in doc["components"]["schemas"]
-    finally:
-        server.stop()
+def test_alerts_endpoint_names_the_bad_field(sqlite_database: Database) -> None:
+    with _server(sqlite_database, HELIOTWIN_ALERTS="false") as server, \
+            server.client(timeout_s=30) as c:
+        r = c.get("/api/v1/alerts", params={"site_id": "atlantis"})
+        assert r.status_code == 404 and r.json()["detail"].startswith(
+            "site_id: unknown site 'atlantis'")
+        r = c.get("/api/v1/alerts", params={"state": "open"})
+        assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "state"]
+        r = c.get("/api/v1/alerts", params={"limit": "0"})
+        assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "limit"]
+        body = _alerts(c)
+        assert body == {"alerts": [], "counts": {"active": 0, "cleared": 0},
+                        "evaluator": {"enabled": False}}
+        doc = c.get("/openapi.json").json()
+        op = doc["paths"]["/api/v1/alerts"]["get"]
+        assert {p["name"] for p in op["parameters"]} == {"site_id", "state", "kind", "limit"}
+        assert "AlertRead" in doc["components"]["schemas"]
 
 
 def _inject(db_url: str, day: dt.date, payload: dict) -> None:
@@ -432,22 +461,19 @@ def _payload(day: dt.date, pr: float, stuck: bool) -> dict:
 
 
 def test_fault_and_low_pr_from_an_injected_diagnosis_raised_then_cleared(
-        sqlite_database: Database, tmp_path: Path, rx: Receiver) -> None:
+        sqlite_database: Database, rx: Receiver) -> None:
     yesterday = dt.datetime.now(TZ).date() - dt.timedelta(days=1)
     noon = dt.datetime(yesterday.year, yesterday.month, yesterday.day, 12, tzinfo=TZ)
     env = {"HELIOTWIN_ALERT_DIAGNOSIS_DAYS": "7", "HELIOTWIN_ALERT_WEBHOOK_URL": rx.url}
-    server = _server(sqlite_database, tmp_path, HELIOTWIN_ALERTS="false").start()
-    try:  # a logger day to diagnose (its readings would drop a cached diagnosis of the day)
-        with httpx.Client(base_url=server.base_url, timeout=30) as c:
-            _post(c, server.token(), [_reading(noon.timestamp() + 60 * k, a)
-                                      for k in range(10) for a in ("tracker", "fixed")])
-    finally:
-        server.stop()
+    # a logger day to diagnose (its readings would drop a cached diagnosis of the day)
+    with _server(sqlite_database, HELIOTWIN_ALERTS="false") as server, \
+            server.client(timeout_s=30) as c:
+        _post(c, server.token(), [_reading(noon.timestamp() + 60 * k, a)
+                                  for k in range(10) for a in ("tracker", "fixed")])
     _inject(sqlite_database.url, yesterday, _payload(yesterday, 0.62, stuck=True))
-    server = _server(sqlite_database, tmp_path, **env).start()
-    try:
+    with _server(sqlite_database, **env) as server, server.client(timeout_s=30) as c:
         evs = rx.wait_for(lambda e: len(e) >= 2)
-        time.sleep(1.5)
+        assert _rounds(c, 3)["webhook"]["offered"] == 2  # nothing more in later rounds
         evs = rx.events()
         got = {(e["event"], e["alert"]["kind"], e["alert"]["fault_kind"]) for e in evs}
         assert got == {("raised", "fault", "stuck"), ("raised", "low_performance_ratio", None)}
@@ -461,13 +487,10 @@ def test_fault_and_low_pr_from_an_injected_diagnosis_raised_then_cleared(
         assert fault["data"]["confidence"] == pytest.approx(0.833, abs=1e-3)
         low = next(e["alert"] for e in evs if e["alert"]["kind"] == "low_performance_ratio")
         assert low["data"]["performance_ratio"] == 0.62 and "62 %" in low["detail"]
-    finally:
-        server.stop()
     _inject(sqlite_database.url, yesterday, _payload(yesterday, 0.97, stuck=False))  # repaired
-    server = _server(sqlite_database, tmp_path, **env).start()
-    try:
+    with _server(sqlite_database, **env) as server, server.client(timeout_s=30) as c:
         evs = rx.wait_for(lambda e: len(e) >= 4)
-        time.sleep(1.0)
+        assert _rounds(c, 3)["webhook"]["offered"] == 2  # each cleared once
         evs = rx.events()
         cleared = {e["alert"]["kind"]: e["alert"] for e in evs if e["event"] == "cleared"}
         assert set(cleared) == {"fault", "low_performance_ratio"} and len(evs) == 4
@@ -475,68 +498,48 @@ def test_fault_and_low_pr_from_an_injected_diagnosis_raised_then_cleared(
             f"not found in the diagnosis of {yesterday.isoformat()}"
         assert cleared["low_performance_ratio"]["cleared_detail"].startswith(
             "performance ratio 0.97")
-        with httpx.Client(base_url=server.base_url, timeout=30) as c:
-            assert _alerts(c, site_id=SITE, kind="fault")["counts"] == {"active": 0,
-                                                                        "cleared": 1}
-    finally:
-        server.stop()
+        assert _alerts(c, site_id=SITE, kind="fault")["counts"] == {"active": 0, "cleared": 1}
 
 
-def _latencies(c: httpx.Client, token: str, t0: float, n: int) -> list[float]:
-    out = []
-    for k in range(n):
-        body = orjson.dumps({"readings": [_reading(t0 + k, "fixed")]})
-        start = time.perf_counter()
-        r = c.post(INGEST, content=body, headers={"Authorization": f"Bearer {token}",
-                                                 "Content-Type": "application/json"})
-        out.append(1000 * (time.perf_counter() - start))
-        assert r.status_code == 200, r.text
-    return out
-
-
-def test_a_hanging_webhook_does_not_slow_ingestion(sqlite_database: Database,
-                                                  tmp_path: Path) -> None:
+def test_ingestion_never_waits_for_a_hanging_webhook(
+        sqlite_database: Database, caplog: pytest.LogCaptureFixture) -> None:
+    """The webhook's receiver takes every POST and never answers; the sender's timeout is
+    longer than the whole test's ingestion. Every reading posted meanwhile is acknowledged
+    and stored, the evaluator keeps its rounds and its events beyond the queue are dropped,
+    all while the webhook's first POST is still in flight; then the service stops."""
+    caplog.set_level(logging.INFO, logger="backend.app")
     with Receiver(lambda n: None) as hang:
-        server = _server(sqlite_database, tmp_path, HELIOTWIN_ALERT_SILENT_MIN="0.02",
+        server = _server(sqlite_database, HELIOTWIN_ALERT_SILENT_MIN=str(SILENT_MIN),
                          HELIOTWIN_ALERT_INTERVAL_S="0.2", HELIOTWIN_ALERT_WEBHOOK_URL=hang.url,
-                         HELIOTWIN_ALERT_WEBHOOK_TIMEOUT_S="3",
+                         HELIOTWIN_ALERT_WEBHOOK_TIMEOUT_S="120",
                          HELIOTWIN_ALERT_WEBHOOK_RETRIES="10",
                          HELIOTWIN_ALERT_WEBHOOK_QUEUE="3").start()
         try:
             token = server.token()
-            with httpx.Client(base_url=server.base_url, timeout=30) as c:
-                start_s = time.time() - 3600
-                baseline = _latencies(c, token, start_s, 200)
+            with server.client(timeout_s=30) as c:
                 # the tracker logger falls silent: its alert goes to the hanging webhook
                 _post(c, token, [_reading(time.time() - 1)])
-                deadline = time.monotonic() + 20
-                while not hang.requests:
-                    assert time.monotonic() < deadline, "no webhook request"
-                    time.sleep(0.05)
-                # flap the tracker (fresh, silent, fresh, …) to keep events coming, too
-                hanging = []
-                for burst in range(4):
-                    hanging += _latencies(c, token, start_s + 1000 + 200 * burst, 50)
+                _until(lambda: len(hang.requests) == 1)
+                start_s = int(time.time()) // 60 * 60 - 86400
+                for k in range(200):  # one minute a request, as a field logger posts
+                    _post(c, token, [_reading(start_s + 60 * k, "fixed")])
+                # flap the tracker (fresh, silent, fresh, …): more events for the webhook
+                before = _alerts(c)["evaluator"]["evaluations"]
+                for _ in range(3):
                     _post(c, token, [_reading(time.time() - 0.5)])
-                    time.sleep(0.7)
+                    _rounds(c, ROUNDS_PAST_SILENCE)
                 ev = _alerts(c)["evaluator"]
-                assert ev["webhook"]["delivered"] == 0 and ev["webhook"]["queued"] >= 1
-                assert ev["evaluations"] > 10
-            t0 = time.monotonic()
-            assert server.stop() is not None  # graceful (None: it had to be killed)
-            stop_s = time.monotonic() - t0
+                r = c.get(f"/api/v1/sites/{SITE}/measurements", params={
+                    "array": "fixed", "start": dt.datetime.fromtimestamp(start_s, dt.UTC)
+                    .isoformat(), "end": dt.datetime.fromtimestamp(start_s + 60 * 200, dt.UTC)
+                    .isoformat(), "max_points": "1000"})
+            assert r.status_code == 200 and len(r.json()["points"]) == 200
+            assert ev["evaluations"] >= before + 3 * ROUNDS_PAST_SILENCE
+            webhook = ev["webhook"]
+            assert (webhook["delivered"], webhook["retries"], webhook["failed"]) == (0, 0, 0)
+            assert webhook["queued"] >= 1 and webhook["dropped"] >= 1, webhook
+            assert len(hang.requests) == 1  # the first POST, still unanswered
+            hang.released.set()  # its connection now closes unanswered: the sender waits
         finally:
-            server.stop()
-    def p(xs: list[float], q: float) -> float:
-        return sorted(xs)[min(len(xs) - 1, int(q * len(xs)))]
-
-    figures = {"baseline_median_ms": statistics.median(baseline), "baseline_p99_ms":
-               p(baseline, 0.99), "hanging_median_ms": statistics.median(hanging),
-               "hanging_p99_ms": p(hanging, 0.99), "hanging_max_ms": max(hanging),
-               "stop_s": stop_s, "webhook_requests": len(hang.requests)}
-    print("alert webhook hanging:", {k: round(v, 2) for k, v in figures.items()})
-    # the webhook's 3 s timeout never shows in a POST; the median stays a few milliseconds
-    assert figures["hanging_max_ms"] < 1000, figures
-    assert figures["hanging_median_ms"] < 3 * figures["baseline_median_ms"] + 10, figures
-    assert stop_s < 10, figures  # shutdown waits at most for the POST in flight
-    assert "service stopped" in server.log_tail(5)
+            server.stop()  # and the shutdown ends that wait
+    assert "service stopped" in caplog.messages
