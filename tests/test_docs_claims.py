@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ast
 import re
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -397,6 +398,27 @@ def test_validation_station_distance_rule(tehuantepec) -> None:
 REFERENCE_COLUMNS = ["pointing_error_rms_mrad", "pointing_error_p95_mrad",
                      "pointing_error_max_mrad", "azimuth_error_rms_mrad",
                      "elevation_error_rms_mrad", "moves"]
+RMS = ["pointing_error_rms_mrad", "azimuth_error_rms_mrad", "elevation_error_rms_mrad"]
+YAW = (("pedestal_yaw_deg", 2.0),)
+YAW_TILT_EAST = (*YAW, ("pedestal_tilt_deg", 0.5), ("pedestal_tilt_azimuth_deg", 90.0))
+
+
+@cache
+def reference_day(controller: str, disturbances: tuple = ()) -> dict[str, Any]:
+    """The summary of control.md's reference day (2024-03-15 at Tehuantepec, 60 s steps)."""
+    from sim.disturbances import Disturbances
+    from sim.sites import load_site
+    from sim.twin import simulate
+
+    site = load_site("tehuantepec")
+    day = pd.Timestamp("2024-03-15", tz=site.timezone)
+    return simulate(site, day, day + pd.Timedelta(days=1), controller=controller,
+                    disturbances=Disturbances(**dict(disturbances))).summary()
+
+
+def control_section(heading: str) -> str:
+    """The text of one ``## heading…`` section of control.md."""
+    return doc("control.md").split(f"## {heading}")[1].split("\n## ")[0]
 
 
 @pytest.mark.parametrize(
@@ -409,15 +431,46 @@ REFERENCE_COLUMNS = ["pointing_error_rms_mrad", "pointing_error_p95_mrad",
         pytest.param("closed_loop_camera", "`closed_loop_camera`", marks=pytest.mark.slow),
     ],
 )
-def test_control_reference_case_table(tehuantepec, controller: str, label: str) -> None:
-    from sim.disturbances import Disturbances
-    from sim.twin import simulate
-
-    day = pd.Timestamp("2024-03-15", tz=tehuantepec.timezone)
-    s = simulate(tehuantepec, day, day + pd.Timedelta(days=1), controller=controller,
-                 disturbances=Disturbances(pedestal_yaw_deg=2.0)).summary()
-    section = doc("control.md").split("## The reference case")[1].split("\n## ")[0]
-    shown = " ".join(table_row(section, label))
+def test_control_reference_case_table(controller: str, label: str) -> None:
+    s = reference_day(controller, YAW)
+    shown = " ".join(table_row(control_section("The reference case"), label))
     computed = [float(s[k]) for k in REFERENCE_COLUMNS]
     computed += [1000 * s["spot_x_rms_m"], 1000 * s["spot_y_rms_m"]]
     assert_printed(numbers(shown), decimals(shown), computed)
+
+
+def test_control_example_and_undisturbed_open_loops() -> None:
+    m = sentence(doc("control.md"), r'r.summary\(\)\["pointing_error_rms_mrad"\] +# ([\d.]+)')
+    assert_printed([float(m.group(1))], [1], [reference_day("hybrid", YAW)[RMS[0]]])
+    m = sentence(control_section("The reference case"),
+                 r"Without disturbances `open_loop_spa` is at ([\d.]+) mrad RMS [\s\S]*? "
+                 r"`open_loop_duffie_beckman` at ([\d.]+) mrad")
+    undisturbed = [reference_day(c)[RMS[0]] for c in ("open_loop_spa", "open_loop_duffie_beckman")]
+    assert_printed(numbers(" ".join(m.groups())), [2, 2], undisturbed)
+
+
+@pytest.mark.parametrize(
+    ("label", "controller", "disturbances"),
+    [
+        ("ours, `hybrid`, 2° yaw", "hybrid", YAW),
+        pytest.param("ours, `closed_loop_camera`, 2° yaw", "closed_loop_camera", YAW,
+                     marks=pytest.mark.slow),
+        ("ours, `hybrid`, 2° yaw + 0.5° tilt towards east", "hybrid", YAW_TILT_EAST),
+    ],
+)
+def test_control_reduction_table(label: str, controller: str, disturbances: tuple) -> None:
+    ol, loop = reference_day("open_loop_spa", disturbances), reference_day(controller, disturbances)
+    shown = " ".join(table_row(control_section("The reference case"), label))
+    computed = [100 * (1 - loop[k] / ol[k]) for k in RMS] + [ol[RMS[2]], loop[RMS[2]]]
+    assert_printed(numbers(shown), decimals(shown), computed)
+
+
+def test_control_day_motion_and_standby_energy() -> None:
+    s = reference_day("open_loop_spa")
+    m = sentence(control_section("Motion and energy"),
+                 r"A clear day at Tehuantepec costs ([\d.]+) Wh of motion \(≈ ([\d,]+) moves "
+                 r"with the 0.1° dead band\) and (\d+) Wh of standby")
+    motion, moves, standby = numbers(" ".join(m.groups()))
+    assert_printed([motion, standby], [3, 0],
+                   [s["actuator_move_energy_wh"], s["actuator_standby_energy_wh"]])
+    assert moves == pytest.approx(s["moves"], rel=0.05)  # "≈"
