@@ -4,22 +4,24 @@ FROM python:3.11-slim
 ENV PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
     HELIOTWIN_HOST=0.0.0.0 \
-    HELIOTWIN_DATABASE_URL=sqlite:////data/heliotwin.sqlite
+    HELIOTWIN_DATABASE_URL=sqlite:////data/heliotwin.sqlite \
+    HELIOTWIN_SITES_DIR=/data/user-sites
 
-WORKDIR /app
-COPY pyproject.toml README.md ./
-COPY backend ./backend
-COPY sim ./sim
-COPY vision ./vision
-COPY frontend ./frontend
-COPY data/sites ./data/sites
-COPY data/plants ./data/plants
-# editable: the service finds data/ and frontend/ beside its code in /app
-RUN pip install --no-cache-dir -e . \
+# A regular (not editable) install with the versions CI tested: the built-in sites and
+# plants, the dashboard, the migrations and the vision model ship inside the package as
+# package data (pyproject.toml, setup.py), so the sources are not needed once installed.
+COPY pyproject.toml setup.py README.md constraints.txt /src/
+COPY backend /src/backend
+COPY sim /src/sim
+COPY vision /src/vision
+COPY frontend /src/frontend
+RUN pip install --no-cache-dir -c /src/constraints.txt /src \
+    && rm -rf /src \
     && useradd --create-home --uid 1000 heliotwin \
     && mkdir -p /data && chown heliotwin /data
 
 USER heliotwin
+WORKDIR /data
 VOLUME ["/data"]
 EXPOSE 8000 8080
 HEALTHCHECK --interval=15s --timeout=3s --start-period=30s --retries=3 \

@@ -33,12 +33,13 @@ lint: $(STAMP)  ## ruff and mypy, both clean on main
 	$(BIN)/mypy backend sim vision
 
 lock:  ## resolve pyproject.toml's ranges afresh in a scratch venv and pin them in constraints.txt
+	@# --all keeps setuptools (the packaging test builds the wheel with it, no network)
 	rm -rf build/lock-venv
 	$(PYTHON) -m venv build/lock-venv
 	build/lock-venv/bin/python -m pip install --quiet --upgrade pip
 	build/lock-venv/bin/python -m pip install --quiet -e '.[dev]'
 	( echo "# pip constraints: the versions CI tested (make lock writes this file)"; \
-	  build/lock-venv/bin/python -m pip freeze --exclude-editable ) > constraints.txt
+	  build/lock-venv/bin/python -m pip freeze --all --exclude pip --exclude-editable ) > constraints.txt
 	rm -rf build/lock-venv
 
 clean:

@@ -31,6 +31,7 @@ feature that pulled the probability down the most.
 from __future__ import annotations
 
 import json
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -49,14 +50,13 @@ FEATURES: tuple[str, ...] = (
                               # disc), 0 when unknown: never counts against a plain disc
 )
 
-_PATH = Path(__file__).with_name("confidence.json")
-
-
-def load_model(path: Path = _PATH) -> tuple[NDArray[np.float64], float]:
-    """``(weights over FEATURES, intercept)`` from ``confidence.json``."""
-    d = json.loads(path.read_text())
+def load_model(path: Path | None = None) -> tuple[NDArray[np.float64], float]:
+    """``(weights over FEATURES, intercept)`` from ``path``, by default the package data
+    ``vision/confidence.json`` (read through importlib.resources, so an installed wheel has it)."""
+    source = resources.files("vision") / "confidence.json" if path is None else path
+    d = json.loads(source.read_text(encoding="utf-8"))
     if tuple(d["features"]) != FEATURES:
-        raise ValueError(f"{path.name} was fitted on other features: {d['features']}")
+        raise ValueError(f"{source.name} was fitted on other features: {d['features']}")
     return np.asarray(d["weights"], dtype=float), float(d["intercept"])
 
 

@@ -23,9 +23,19 @@ from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import HTMLResponse, Response
 from fastapi.staticfiles import StaticFiles
 
+from sim.paths import checkout_root, package_dir
+
 logger = logging.getLogger(__name__)
 
-FRONTEND_DIR = Path(__file__).resolve().parents[3] / "frontend"
+
+def _frontend_dir() -> Path:
+    """The dashboard's files: package data ``backend/frontend/`` in an installed wheel (setup.py
+    maps the top-level ``frontend/`` there), the checkout's ``frontend/`` otherwise."""
+    root = checkout_root()
+    return package_dir("backend", "frontend") if root is None else root / "frontend"
+
+
+FRONTEND_DIR = _frontend_dir()
 PLOTLY_DIR = FRONTEND_DIR / "vendor" / "plotly"
 PLOTLY_JS = PLOTLY_DIR / "plotly.min.js"
 VERSION_TOKEN = "__PLOTLY_VERSION__"
