@@ -6,7 +6,7 @@ Prints one Markdown section to stdout (progress on stderr):
    second of ``detect_robust`` and of the seeds' pipelines, as a ratio to a
    bare grey + threshold + moments kernel timed on the same frames in the
    same run: 640 × 480 synthetic tracker and fisheye frames, 1920 × 1920 real
-   all-sky frames (``../shared/real-sky``; synthetic 1920 × 1920 frames when
+   all-sky frames (``tests/data/real-sky``; synthetic 1920 × 1920 frames when
    absent).
 2. Accuracy of the three methods side by side on the same sets: synthetic
    fisheye (clear, thin cloud), synthetic tracker, the six labelled real
