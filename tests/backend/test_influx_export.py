@@ -2,7 +2,7 @@
 
 The output is read back with an independent parser (the ``line-protocol-parser``
 package, a C implementation of InfluxDB's grammar) and compared with the JSON
-answer of the same query, over real HTTP against a running ``heliotwin serve``.
+answer of the same query, over HTTP against the service in this process.
 Site ids and array names are restricted to ``[a-z0-9_-]`` by the site config, so
 escaping is checked on the formatter alone, with the same parser.
 """
@@ -14,10 +14,9 @@ import json
 import math
 from collections.abc import Iterator
 
-import httpx
 import line_protocol_parser
 import pytest
-from live_service import ServerProcess, new_database
+from live_service import InProcessServer, new_database
 
 from backend.measurements.export import escape_key, escape_measurement, influx_lines
 
@@ -62,10 +61,10 @@ def test_lines_parse_back_with_an_independent_parser() -> None:
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[ServerProcess, str]]:
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[InProcessServer, str]]:
     tmp = tmp_path_factory.mktemp("influx")
     db = new_database("sqlite", tmp)
-    proc = ServerProcess(db.url, tmp / "server.log").start()
+    proc = InProcessServer(db.url).start()
     try:
         yield proc, proc.token(SITE)
     finally:
@@ -84,10 +83,10 @@ def _readings(day: dt.date) -> list[dict[str, object]]:
     return out
 
 
-def test_influx_matches_the_json_answer(server: tuple[ServerProcess, str]) -> None:
+def test_influx_matches_the_json_answer(server: tuple[InProcessServer, str]) -> None:
     proc, token = server
     day = dt.date(2024, 3, 15)
-    with httpx.Client(base_url=proc.base_url, timeout=60.0) as c:
+    with proc.client(timeout_s=60.0) as c:
         r = c.post(f"/api/v1/sites/{SITE}/measurements", json={"readings": _readings(day)},
                    headers={"Authorization": f"Bearer {token}"})
         assert r.status_code == 200, r.text
@@ -130,9 +129,10 @@ def test_influx_matches_the_json_answer(server: tuple[ServerProcess, str]) -> No
         assert r.status_code == 422 and "format" in r.text
 
 
-def test_openapi_documents_the_text_answer(server: tuple[ServerProcess, str]) -> None:
+def test_openapi_documents_the_text_answer(server: tuple[InProcessServer, str]) -> None:
     proc, _ = server
-    doc = httpx.get(proc.base_url + "/openapi.json", timeout=30.0).json()
+    with proc.client(timeout_s=30.0) as c:
+        doc = c.get("/openapi.json").json()
     op = doc["paths"]["/api/v1/sites/{site_id}/measurements"]["get"]
     assert "text/plain" in op["responses"]["200"]["content"]
     fmt = next(p for p in op["parameters"] if p["name"] == "format")

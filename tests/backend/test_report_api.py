@@ -1,4 +1,5 @@
-"""Partial days, the twin's reasons, the camera site's sun and range reports, over real HTTP.
+"""Partial days, the twin's reasons, the camera site's sun and range reports, over HTTP
+(the service in this process).
 
 Issue 14, items 3 and 9. Readings come from a generator of its own (a sine-power day,
 nothing like the twin's clear-sky model), stamped 17 s past each minute as a logger
@@ -19,7 +20,7 @@ from zoneinfo import ZoneInfo
 import httpx
 import numpy as np
 import pytest
-from live_service import BACKENDS, ServerProcess, new_database
+from live_service import BACKENDS, InProcessServer, new_database
 
 TZ = ZoneInfo("America/Mexico_City")
 BASE = "/api/v1/sites/tehuantepec"
@@ -27,10 +28,10 @@ BASE = "/api/v1/sites/tehuantepec"
 
 @pytest.fixture(scope="module", params=BACKENDS)
 def server(request: pytest.FixtureRequest,
-           tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+           tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
     tmp = tmp_path_factory.mktemp("report-api")
     db = new_database(request.param, tmp)
-    proc = ServerProcess(db.url, tmp / "server.log").start()
+    proc = InProcessServer(db.url).start()
     try:
         yield proc
     finally:
@@ -39,8 +40,8 @@ def server(request: pytest.FixtureRequest,
 
 
 @pytest.fixture(scope="module")
-def client(server: ServerProcess) -> Iterator[httpx.Client]:
-    with httpx.Client(base_url=server.base_url, timeout=120) as c:
+def client(server: InProcessServer) -> Iterator[httpx.Client]:
+    with server.client(timeout_s=120) as c:
         yield c
 
 
@@ -60,7 +61,7 @@ FULL = HALF - dt.timedelta(days=1)  # readings all day
 
 
 @pytest.fixture(scope="module")
-def posted(client: httpx.Client, server: ServerProcess) -> dict[str, list[dict]]:
+def posted(client: httpx.Client, server: InProcessServer) -> dict[str, list[dict]]:
     token = server.token("tehuantepec")
     out: dict[str, list[dict]] = {}
     for array, scale in (("tracker", 1.3), ("fixed", 1.0)):

@@ -1,8 +1,9 @@
-"""Sites you define, over real HTTP (``PUT /api/v1/sites/{site_id}``, issue 14 item 8).
+"""Sites you define, over HTTP (``PUT /api/v1/sites/{site_id}``, issue 14 item 8).
 
-A ``heliotwin serve`` of its own, with a temporary ``HELIOTWIN_SITES_DIR`` and an admin
-token, on a real SQLite file and a PostgreSQL schema. The twin energies after an edit are
-checked against the twin run by this test through ``sim.twin.simulate``, integrated with NumPy.
+A service of its own (in this process, ``live_service.InProcessServer``), with a temporary
+``HELIOTWIN_SITES_DIR`` and an admin token, on a real SQLite file and a PostgreSQL schema.
+The twin energies after an edit are checked against the twin run by this test through
+``sim.twin.simulate``, integrated with NumPy.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import httpx
 import numpy as np
 import pandas as pd
 import pytest
-from live_service import BACKENDS, ROOT, ServerProcess, new_database
+from live_service import BACKENDS, ROOT, InProcessServer, new_database
 
 ADMIN = "admin-secret-for-tests"
 TZ = ZoneInfo("America/Mexico_City")
@@ -36,10 +37,10 @@ HAND_WRITTEN = {  # written from docs/site.schema.json: the required keys and tw
 
 @pytest.fixture(scope="module", params=BACKENDS)
 def server(request: pytest.FixtureRequest,
-           tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+           tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
     tmp = tmp_path_factory.mktemp("sites-api")
     db = new_database(request.param, tmp)
-    proc = ServerProcess(db.url, tmp / "server.log", extra_env={
+    proc = InProcessServer(db.url, extra_env={
         "HELIOTWIN_SITES_DIR": str(tmp / "user-sites"), "HELIOTWIN_ADMIN_TOKEN": ADMIN})
     proc.start()
     try:
@@ -50,12 +51,12 @@ def server(request: pytest.FixtureRequest,
 
 
 @pytest.fixture()
-def client(server: ServerProcess) -> Iterator[httpx.Client]:
-    with httpx.Client(base_url=server.base_url, timeout=120) as c:
+def client(server: InProcessServer) -> Iterator[httpx.Client]:
+    with server.client(timeout_s=120) as c:
         yield c
 
 
-def _sites_dir(server: ServerProcess) -> Path:
+def _sites_dir(server: InProcessServer) -> Path:
     return Path(server.extra_env["HELIOTWIN_SITES_DIR"])
 
 
@@ -70,7 +71,7 @@ def test_the_schema_endpoint_serves_the_shipped_schema(client: httpx.Client) -> 
 
 
 def test_creating_a_site_needs_the_admin_token(client: httpx.Client,
-                                               server: ServerProcess) -> None:
+                                               server: InProcessServer) -> None:
     url = "/api/v1/sites/my-roof"
     r = client.put(url, json=HAND_WRITTEN)
     assert r.status_code == 401 and "admin token" in r.json()["detail"]
@@ -89,7 +90,7 @@ def test_creating_a_site_needs_the_admin_token(client: httpx.Client,
 
 
 def test_the_new_site_takes_readings_and_has_a_twin(client: httpx.Client,
-                                                    server: ServerProcess) -> None:
+                                                    server: InProcessServer) -> None:
     token = server.token("my-roof")  # the CLI knows the site once the service made it
     day = dt.date.today() - dt.timedelta(days=3)
     ts = dt.datetime(day.year, day.month, day.day, 12, tzinfo=ZoneInfo("America/New_York"))
@@ -111,7 +112,7 @@ def test_the_new_site_takes_readings_and_has_a_twin(client: httpx.Client,
     ({"timezone": "Eastern"}, "timezone: 'Eastern' is not an IANA time zone"),
     ({"site_id": "other"}, "site_id: 'other' does not match the path's 'my-roof'"),
 ])
-def test_a_malformed_site_is_a_422_naming_the_field(client: httpx.Client, server: ServerProcess,
+def test_a_malformed_site_is_a_422_naming_the_field(client: httpx.Client, server: InProcessServer,
                                                     change: dict, words: str) -> None:
     before = (_sites_dir(server) / "my-roof.json").read_text()
     r = client.put("/api/v1/sites/my-roof", json={**HAND_WRITTEN, **change}, headers=bearer(ADMIN))
@@ -133,7 +134,8 @@ def _twin_day_wh(site_config: dict, day: dt.date) -> dict[str, float]:
             for a in ("tracker", "fixed")}
 
 
-def test_editing_a_site_drops_its_cached_twin(client: httpx.Client, server: ServerProcess) -> None:
+def test_editing_a_site_drops_its_cached_twin(client: httpx.Client,
+                                              server: InProcessServer) -> None:
     day = dt.datetime.now(TZ).date() - dt.timedelta(days=5)
     params = {"start": day.isoformat(), "end": (day + dt.timedelta(days=1)).isoformat()}
     url = "/api/v1/sites/tehuantepec"
@@ -155,17 +157,17 @@ def test_editing_a_site_drops_its_cached_twin(client: httpx.Client, server: Serv
 
 
 def test_a_zone_on_another_hour_grid_is_refused(client: httpx.Client,
-                                                server: ServerProcess) -> None:
+                                                server: InProcessServer) -> None:
     config = client.get("/api/v1/sites/tehuantepec/config").json()
     r = client.put("/api/v1/sites/tehuantepec", json={**config, "timezone": "Asia/Kolkata"},
                    headers=bearer(server.token("tehuantepec")))
     assert r.status_code == 409 and "timezone" in r.json()["detail"]
 
 
-def test_user_sites_are_there_after_a_restart_and_run_in_simulate(server: ServerProcess) -> None:
+def test_user_sites_are_there_after_a_restart_and_run_in_simulate(server: InProcessServer) -> None:
     server.stop()
     server.start()
-    with httpx.Client(base_url=server.base_url, timeout=60) as c:
+    with server.client(timeout_s=60) as c:
         sites = {s["site_id"]: s for s in c.get("/api/v1/sites").json()}
     assert {"my-roof", "tehuantepec", "guadalajara_fisheye"} <= set(sites)
     assert sites["tehuantepec"]["arrays"]["fixed"]["surface_tilt_deg"] == 45.0
