@@ -42,7 +42,7 @@ from pvlib import (
 )
 
 LATITUDE, LONGITUDE, ALTITUDE = 16.28875, -95.240871, 50.0
-"""The tehuantepec site (data/sites/tehuantepec.json)."""
+"""The tehuantepec site (sim/data/sites/tehuantepec.json)."""
 MODULE = "Kyocera_Solar_KD205GX_LP"
 FIXED_TILT, FIXED_AZIMUTH = 16.0, 180.0
 ALBEDO = 0.2
