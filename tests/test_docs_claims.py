@@ -39,13 +39,13 @@ def decimals(text: str) -> list[int]:
     return [len(n.split(".")[1]) if "." in n else 0 for n in NUMBER.findall(text)]
 
 
-def table_row(text: str, first_cell: str) -> list[str]:
-    """The cells after the first of the Markdown table row whose first cell is ``first_cell``."""
+def table_row(text: str, *lead: str) -> list[str]:
+    """The cells after ``lead`` of the first Markdown table row whose first cells are ``lead``."""
     for line in text.splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if line.startswith("|") and cells[0] == first_cell:
-            return cells[1:]
-    raise AssertionError(f"no table row {first_cell!r}")
+        if line.startswith("|") and tuple(cells[: len(lead)]) == lead:
+            return cells[len(lead):]
+    raise AssertionError(f"no table row {lead!r}")
 
 
 def sentence(text: str, pattern: str) -> re.Match[str]:
@@ -393,6 +393,74 @@ def test_validation_station_distance_rule(tehuantepec) -> None:
     assert_printed([shown], [0], [station_distance_km(meta, tehuantepec)])
 
 
+def _tracking_day(day: str, step_min: int) -> tuple[np.ndarray, np.ndarray]:
+    """dynamics.md's day of joint targets: the sun-up targets every ``step_min`` (with the
+    daily-sweep reference) plus the evening return to the morning pose."""
+    from sim.control import noon_reference_azimuth
+    from sim.kinematics import tracking_angles
+    from sim.sites import load_site
+    from sim.sun import solar_position
+
+    site = load_site("tehuantepec")
+    times = pd.date_range(f"{day} 00:00", periods=1440 // step_min, freq=f"{step_min}min",
+                          tz=site.timezone)
+    sun = solar_position(times, site.latitude, site.longitude, altitude=site.altitude)
+    up = sun["apparent_elevation"].to_numpy() > 0
+    az, el = tracking_angles(
+        sun["azimuth"].to_numpy()[up], sun["apparent_elevation"].to_numpy()[up], site.tracker,
+        reference_azimuth=noon_reference_azimuth(times[up], site),
+    )
+    return np.append(az, az[0]), np.append(el, el[0])
+
+
+def test_dynamics_day_of_motion_energy_table() -> None:
+    import dataclasses
+
+    from sim.dynamics import TrackerInertia
+    from sim.motors import AxisDrive, tracking_motion_energy
+
+    text = doc("dynamics.md")
+    keys = ["moves", "azimuth_travel_deg", "elevation_travel_deg", "azimuth_motion_wh",
+            "elevation_motion_wh", "motion_wh"]
+    rows = {("21 Mar", "every 1 min"): ("2025-03-21", 1, 0.0),
+            ("21 Mar", "1 min, 0.5° dead band"): ("2025-03-21", 1, 0.5),
+            ("21 Jun", "every 1 min"): ("2025-06-21", 1, 0.0),
+            ("21 Dec", "every 1 min"): ("2025-12-21", 1, 0.0)}
+    out = {}
+    for lead, (day, step, band) in rows.items():
+        out[lead] = tracking_motion_energy(*_tracking_day(day, step), dead_band_deg=band)
+        shown = " ".join(table_row(text, *lead))
+        assert_printed(numbers(shown), decimals(shown), [out[lead][k] for k in keys])
+    by_interval = [tracking_motion_energy(*_tracking_day("2025-03-21", m)) for m in (5, 30, 60)]
+    cells = table_row(text, "21 Mar", "every 5 / 30 / 60 min")
+    for cell, key in zip(cells, keys, strict=True):
+        if cell:  # the per-axis energies are left blank
+            assert_printed(numbers(cell), decimals(cell), [o[key] for o in by_interval])
+
+    base, banded = out[("21 Mar", "every 1 min")], out[("21 Mar", "1 min, 0.5° dead band")]
+    m = sentence(text, r"\(5 vs 60 min\) cost little extra energy \(([\d.]+) vs ([\d.]+) Wh\)")
+    assert numbers(" ".join(m.groups())) == numbers(cells[-1])[::2]
+    m = sentence(text, r"a 0.5° dead band cuts the moves by (\d+) % and the energy by (\d+) %")
+    assert_printed(numbers(" ".join(m.groups())), [0, 0],
+                   [100 * (1 - banded[k] / base[k]) for k in ("moves", "motion_wh")])
+    m = sentence(text, r"0.5 W × 24 h = (\d+) Wh/day, some (\d+)× the motion")
+    standby, ratio = numbers(" ".join(m.groups()))
+    assert standby == base["standby_wh"]
+    assert ratio == pytest.approx(base["standby_wh"] / base["motion_wh"], rel=0.05)  # "some"
+
+    p = TrackerInertia.seed002()
+    heavy = dataclasses.replace(p, m2_kg=5 * p.m2_kg, cg2_m=3 * p.cg2_m)
+    drives = {f"{axis}_drive": dataclasses.replace(getattr(AxisDrive, f"{axis}_default")(),
+                                                    no_load_current_a=1.5)
+              for axis in ("azimuth", "elevation")}
+    day = _tracking_day("2025-03-21", 1)
+    m = sentence(text, r"5× the mass m2 with 3× the offset cg2 gives ([\d.]+) Wh/day\), or "
+                       r"lossier drives \(no-load current 1.5 A: ([\d.]+) Wh/day\)")
+    assert_printed(numbers(" ".join(m.groups())), [2, 2],
+                   [tracking_motion_energy(*day, p=heavy)["motion_wh"],
+                    tracking_motion_energy(*day, **drives)["motion_wh"]])
+
+
 # --- docs/control.md ----------------------------------------------------------------
 
 REFERENCE_COLUMNS = ["pointing_error_rms_mrad", "pointing_error_p95_mrad",
@@ -474,3 +542,17 @@ def test_control_day_motion_and_standby_energy() -> None:
     assert_printed([motion, standby], [3, 0],
                    [s["actuator_move_energy_wh"], s["actuator_standby_energy_wh"]])
     assert moves == pytest.approx(s["moves"], rel=0.05)  # "≈"
+
+
+def test_control_cloud_gate_bounds_are_the_tests() -> None:
+    m = sentence(
+        doc("control.md"),
+        r"the closed loop stays within ([\d.]+) mrad, as on a clear sky; "
+        r"with the gate off it wanders more than (\d+) times as far",
+    )
+    bound, factor = numbers(" ".join(m.groups()))
+    test = ast.unparse(_function(ROOT / "tests/sim/test_control.py",
+                                 "test_clouds_do_not_make_the_closed_loop_wander"))
+    assert f"err.max() < {bound}" in test
+    assert f"> {factor:g} * err.max()" in test
+    assert "cover=0.5" in test and "< 0.5 * s['camera_frames']" in test
