@@ -359,6 +359,10 @@ def test_dynamics_pymunk_check_table() -> None:
     worst = table_row(text, "**worst**")
     assert_printed(numbers(" ".join(worst)), [4, 4],
                    [result["torque_rms_diff_pct_of_peak"], result["angle_rms_diff_mrad"]])
+    m = sentence(text, r"at 5 ms and 10 ms the worst angle difference is ([\d.]+) and "
+                       r"([\d.]+) mrad")
+    assert_printed(numbers(" ".join(m.groups())), [3, 3],
+                   [check(dt)["angle_rms_diff_mrad"] for dt in (5e-3, 1e-2)])
 
 
 @pytest.mark.slow
