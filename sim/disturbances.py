@@ -54,6 +54,8 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sim.kinematics import panel_axes, panel_axes_from_trig
+
 __all__ = [
     "Disturbances",
     "base_rotation",
@@ -171,33 +173,19 @@ def base_rotation(d: Disturbances) -> NDArray[np.float64]:
     return r
 
 
-def _joint_triad(
-    azimuth_joint_deg: ArrayLike, elevation_joint_deg: ArrayLike
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Normal n, right r = ∂n/∂A / |…| and up u = ∂n/∂E of joint angles, base frame."""
-    az = np.radians(np.asarray(azimuth_joint_deg, dtype=float))
-    el = np.radians(np.asarray(elevation_joint_deg, dtype=float))
-    az, el = np.broadcast_arrays(az, el)
-    sa, ca, se, ce = np.sin(az), np.cos(az), np.sin(el), np.cos(el)
-    n = np.stack([sa * ce, ca * ce, se], axis=-1)
-    r = np.stack([ca, -sa, np.zeros_like(az)], axis=-1)
-    u = np.stack([-sa * se, -ca * se, ce], axis=-1)
-    return n, r, u
-
-
 def normal_enu(
     azimuth_joint_deg: ArrayLike, elevation_joint_deg: ArrayLike, d: Disturbances
 ) -> NDArray[np.float64]:
     """Panel unit normal in ENU for (true, output-side) joint angles on a disturbed base.
 
-    ``R · x2`` with ``x2`` the normal of seed 000 eq. 23 in the base frame
-    (:func:`sim.kinematics.forward_kinematics`) and ``R`` :func:`base_rotation`.
+    ``R · n`` with ``n`` the normal of seed 000 eq. 23 in the base frame
+    (:func:`sim.kinematics.panel_axes`) and ``R`` :func:`base_rotation`.
 
     Returns
     -------
     ndarray, shape ``S + (3,)``
     """
-    n, _, _ = _joint_triad(azimuth_joint_deg, elevation_joint_deg)
+    _, _, n = panel_axes(azimuth_joint_deg, elevation_joint_deg)
     if not d.moves_base:
         return n
     return n @ base_rotation(d).T
@@ -215,11 +203,10 @@ def camera_axes(
     (right, up, forward) convention of :class:`vision.cameras.PinholeCamera`.
     Scalar arithmetic: called once per camera frame.
     """
-    az, el = math.radians(azimuth_joint_deg), math.radians(elevation_joint_deg)
-    sa, ca, se, ce = math.sin(az), math.cos(az), math.sin(el), math.cos(el)
-    n: tuple[float, ...] = (sa * ce, ca * ce, se)
-    r: tuple[float, ...] = (ca, -sa, 0.0)
-    u: tuple[float, ...] = (-sa * se, -ca * se, ce)
+    x, y, normal = _panel_axes_scalar(azimuth_joint_deg, elevation_joint_deg)
+    n: tuple[float, ...] = normal
+    r: tuple[float, ...] = (-x[0], -x[1], -x[2])  # the camera's right, looking along n
+    u: tuple[float, ...] = y
     o_r, o_u = math.radians(d.camera_offset_right_deg), math.radians(d.camera_offset_up_deg)
     if o_r != 0.0 or o_u != 0.0:
         # turn right about u, then up about the new right axis
@@ -247,17 +234,23 @@ def sun_in_camera(
     if d.moves_base:
         r = _base_rotation_rows(d)  # s_base = Rᵀ s: the columns of R dotted with s
         e, n_, u_ = (r[0][k] * e + r[1][k] * n_ + r[2][k] * u_ for k in range(3))
-    az, el = math.radians(azimuth_joint_deg), math.radians(elevation_joint_deg)
-    sa, ca, se, ce = math.sin(az), math.cos(az), math.sin(el), math.cos(el)
-    x = ca * e - sa * n_  # on the right axis
-    y = -sa * se * e - ca * se * n_ + ce * u_  # on the up axis
-    z = sa * ce * e + ca * ce * n_ + se * u_  # on the normal
+    px, py, pn = _panel_axes_scalar(azimuth_joint_deg, elevation_joint_deg)
+    x = -(px[0] * e + px[1] * n_)  # on the camera's right axis, −x (x is horizontal)
+    y = py[0] * e + py[1] * n_ + py[2] * u_  # on the up axis
+    z = pn[0] * e + pn[1] * n_ + pn[2] * u_  # on the normal
     if d.camera_offset_right_deg or d.camera_offset_up_deg:
         o_r, o_u = math.radians(d.camera_offset_right_deg), math.radians(d.camera_offset_up_deg)
         cr, sr, cu, su = math.cos(o_r), math.sin(o_r), math.cos(o_u), math.sin(o_u)
         f1, x = cr * z + sr * x, cr * x - sr * z
         z, y = cu * f1 + su * y, cu * y - su * f1
     return np.array([x, y, z])
+
+
+def _panel_axes_scalar(azimuth_joint_deg: float, elevation_joint_deg: float
+                       ) -> tuple[tuple[float, float, float], ...]:
+    """:func:`sim.kinematics.panel_axes_from_trig` (x, y, n) in scalar arithmetic (per frame)."""
+    az, el = math.radians(azimuth_joint_deg), math.radians(elevation_joint_deg)
+    return panel_axes_from_trig(math.sin(az), math.cos(az), math.sin(el), math.cos(el))
 
 
 @lru_cache(maxsize=32)

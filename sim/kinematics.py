@@ -44,9 +44,12 @@ The defaults of :class:`TrackerGeometry` are assumptions, stated here:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+_T = TypeVar("_T", float, NDArray[np.float64])
 
 __all__ = [
     "TrackerGeometry",
@@ -55,6 +58,8 @@ __all__ = [
     "dh_transform",
     "inverse_kinematics",
     "forward_kinematics",
+    "panel_axes",
+    "panel_axes_from_trig",
     "normal_to_tilt_azimuth",
     "joint_transforms",
     "PANEL_IN_FRAME2",
@@ -396,6 +401,67 @@ def forward_kinematics(
     t1, t2 = np.broadcast_arrays(t1, t2)
     c1, s1, c2, s2 = np.cos(t1), np.sin(t1), np.cos(t2), np.sin(t2)
     return np.stack([c1 * c2, s1 * c2, s2], axis=-1)
+
+
+def panel_axes_from_trig(
+    sin_az: _T, cos_az: _T, sin_el: _T, cos_el: _T
+) -> tuple[tuple[_T, _T, float], tuple[_T, _T, _T], tuple[_T, _T, _T]]:
+    """The panel frame's axes from the sines and cosines of the public joint angles.
+
+    The one rule for the panel's axes (every caller goes through it, directly or via
+    :func:`panel_axes`): the columns of the rotation of :func:`joint_transforms`'s
+    base → panel transform (``A1 A2 PANEL_IN_FRAME2``, seed 000 eq. 23 with seed
+    002's D–H table), in closed form, with A the azimuth of the normal clockwise from
+    north and E its elevation:
+
+    * x = (−cos A, sin A, 0): horizontal, along the elevation axis and the
+      collector's width; to the right of someone facing the panel's front (a
+      camera looking along the normal has its right at −x);
+    * y = (−sin A sin E, −cos A sin E, cos E) = ∂n/∂E: in the panel's plane, up
+      its slope (the collector's height);
+    * n = (sin A cos E, cos A cos E, sin E): the normal, x × y = n.
+
+    Plain arithmetic on what it is given — floats or broadcastable arrays alike —
+    so scalar hot paths (one camera frame) can call it with :mod:`math`'s
+    results. Returns three (east, north, up) component triples; x's up component
+    is the float 0.
+    """
+    x = (-cos_az, sin_az, 0.0)
+    y = (-sin_az * sin_el, -cos_az * sin_el, cos_el)
+    n = (sin_az * cos_el, cos_az * cos_el, sin_el)
+    return x, y, n
+
+
+def panel_axes(
+    azimuth_joint_deg: ArrayLike, elevation_joint_deg: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Panel axes x (width, horizontal), y (up the slope) and n (normal) for joint angles.
+
+    :func:`panel_axes_from_trig` on arrays. The vectors are in the tracker's base
+    frame (ENU for a level pedestal); a plant's collectors (seed 004's u, v, n,
+    :func:`sim.plant.shading.collector_axes`) and the tracker camera
+    (:mod:`sim.disturbances`) use the same frame.
+
+    Parameters
+    ----------
+    azimuth_joint_deg, elevation_joint_deg : array_like
+        Public joint angles [°] (azimuth of the normal clockwise from north,
+        elevation above the horizon); broadcast together.
+
+    Returns
+    -------
+    x, y, n : ndarray, shape ``S + (3,)``
+        Unit vectors (east, north, up) [-].
+    """
+    az = np.radians(np.asarray(azimuth_joint_deg, dtype=float))
+    el = np.radians(np.asarray(elevation_joint_deg, dtype=float))
+    az, el = np.broadcast_arrays(az, el)
+    axes = panel_axes_from_trig(np.sin(az), np.cos(az), np.sin(el), np.cos(el))
+    out = np.empty((3,) + az.shape + (3,))
+    for k, triple in enumerate(axes):
+        for c in range(3):
+            out[k, ..., c] = triple[c]
+    return out[0], out[1], out[2]
 
 
 def normal_to_tilt_azimuth(

@@ -33,6 +33,7 @@ from sim.plant import Plant
 from sim.plant.shading import PlantShade, collector_axes, plant_shade
 from sim.plant.simulate import sky_conditions
 from sim.plant.strategies import STRATEGIES, orientations
+from vision.sphere import enu_from_sky
 
 #: Pivot height above the ground in the view [m] (an assumption: the plant file has none).
 PIVOT_HEIGHT_M = 3.0
@@ -170,16 +171,14 @@ class PlantView:
         shade = plant_shade(p.positions, sky["solar_azimuth"], sky["apparent_elevation"],
                             saz, sel, c.width, c.height)
         n_vec, u, v = (a[0] for a in collector_axes(saz, sel))
-        # the collector box's frame: x along its width (u), z the normal; y = z × x = −v
-        # (seed 004's v = u × n points up-slope, so (u, v, n) is left-handed)
-        rot = np.column_stack([u, -v, n_vec])
+        # the collector box's frame is the plant's: x along its width (u), y up its slope (v),
+        # z the normal (sim.kinematics.panel_axes, right-handed)
+        rot = np.column_stack([u, v, n_vec])
         frac = np.nan_to_num(shade.fraction[0])
         corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * (c.width / 2, c.height / 2)
         outline = (self.pivots[:, None, :] + corners[None, :, :1] * u
                    + corners[None, :, 1:] * v)  # (N, 4, 3)
-        sun = np.array([np.sin(np.radians(sun_az)) * np.cos(np.radians(sun_el)),
-                        np.cos(np.radians(sun_az)) * np.cos(np.radians(sun_el)),
-                        np.sin(np.radians(sun_el))])
+        sun = enu_from_sky(sun_az, sun_el)
         if sun[2] > np.sin(np.radians(0.5)):
             ground = outline - outline[..., 2:3] / sun[2] * sun  # on z = 0 …
             ground[..., 2] = SHADOW_LIFT_M  # … drawn just above the grid

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sim.kinematics import panel_axes
 from vision.sphere import enu_from_sky
 
 FloatArray = NDArray[np.float64]
@@ -54,6 +55,10 @@ _BIN_BLOCK = 128  # sun bins of the candidate table computed at once (in cache)
 def collector_axes(azimuth: ArrayLike, elevation: ArrayLike) -> tuple[FloatArray, ...]:
     """Collector normal n and in-plane unit vectors u, v in ENU (seed 004 eqs. 4–6).
 
+    The panel frame of :func:`sim.kinematics.panel_axes` — the frame the twin
+    (:func:`sim.array_shade.tracker_panel_frames`) and the 3D scene pose a collector
+    with — in seed 004's names.
+
     Parameters
     ----------
     azimuth : array_like
@@ -67,12 +72,12 @@ def collector_axes(azimuth: ArrayLike, elevation: ArrayLike) -> tuple[FloatArray
     n, u, v : numpy.ndarray, shape (..., 3)
         n the normal (eq. 4), u horizontal in the plane (eq. 5: the collector's
         width, pointing to the right when facing the collector's front),
-        v = u × n in the plane pointing up-slope (eq. 6: the collector's height).
+        v = n × u in the plane pointing up-slope (eq. 6: the collector's height),
+        so that (u, v, n) is right-handed and v grows from the collector's lower
+        edge to its upper edge (the strings of :class:`sim.plant.layout.Collector`,
+        bottom to top).
     """
-    az = np.radians(np.asarray(azimuth, dtype=float))
-    n = enu_from_sky(azimuth, elevation)
-    u = np.stack([-np.cos(az), np.sin(az), np.zeros_like(az)], axis=-1)
-    v = np.cross(u, n)
+    u, v, n = panel_axes(azimuth, elevation)
     return n, u, v
 
 

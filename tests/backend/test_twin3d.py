@@ -38,10 +38,10 @@ from backend.twin.scene import (
     parse_view_path,
 )
 from backend.twin.scene_build import COLLECTOR_BOX_M, PEDESTAL_BOX_M
-from backend.twin.scene_plant import PIVOT_HEIGHT_M, PlantView
+from backend.twin.scene_plant import COLLECTOR_DEPTH_M, PIVOT_HEIGHT_M, PlantView
 from backend.twin.scene_view import TwinView
-from sim.array_shade import Placement
-from sim.kinematics import forward_kinematics, inverse_kinematics
+from sim.array_shade import Layout, Placement, fixed_shade
+from sim.kinematics import TrackerGeometry, forward_kinematics, inverse_kinematics, joint_transforms
 from sim.plant import load_plant
 from sim.pv import ArrayConfig
 from sim.sites import Site, load_site
@@ -497,6 +497,59 @@ def test_plant_view_poses_every_collector_and_marks_the_shaded(
         expected = v.pivots[0][:2] - PIVOT_HEIGHT_M / np.tan(np.radians(el)) * np.array(
             [np.sin(np.radians(az)), np.cos(np.radians(az))])
         np.testing.assert_allclose(centroid, expected, atol=1e-3)
+    finally:
+        c.close()
+
+
+def test_plant_view_draws_the_shade_the_twin_casts_from_the_scene_boxes(
+        scene: TwinScene) -> None:
+    """Seed 004's 12 m × 5 m collectors, a low morning sun off every axis: each collector box
+    is posed in the twin's panel frame (D–H chain: width along x, height up the slope), and
+    the shade drawn on a collector is what the twin (sim.array_shade) casts from the posed
+    neighbour boxes — not a mirror image (a width/height or sign mix-up moves it)."""
+    plant = load_plant("penarroya")
+    c, v = _open(scene, f"/plant/penarroya/strategy/sun/time/{MORNING}")
+    try:
+        assert isinstance(v, PlantView) and v.shade is not None and v.shaded_ids()
+        w, h = plant.collector.width, plant.collector.height
+        assert (w, h) == (12.0, 5.0)
+        frames = []
+        twin_rot = joint_transforms(*v.orientation, TrackerGeometry())[2][:3, :3]
+        for tid in plant.tracker_ids:
+            node = v.nodes[f"/plant/tracker_{tid}"]
+            f = np.eye(4)
+            f[:3, :3] = vtf.SO3(np.asarray(node.wxyz)).as_matrix()
+            f[:3, 3] = node.position
+            np.testing.assert_allclose(f[:3, :3], twin_rot, atol=1e-6)  # wxyz in float32
+            assert tuple(v.nodes[f"/plant/tracker_{tid}/collector"].dimensions) == pytest.approx(
+                (w, h, COLLECTOR_DEPTH_M))
+            frames.append(f)
+        a_r, e_r = np.radians(v.sun[0]), np.radians(v.sun[1])
+        sun = np.array([np.sin(a_r) * np.cos(e_r), np.cos(a_r) * np.cos(e_r), np.sin(e_r)])
+        expected, offsets = [], []
+        for k in np.nonzero(v.fraction > 0)[0]:
+            layout = Layout(tracker_mount_height_m=0.0, tracker_size_m=(w, h),
+                            fixed_centre_enu=frames[k][:3, 3], fixed_axes=frames[k][:3, :3],
+                            fixed_size_m=(w, h))
+            for b in v.shade.shaded_by(0, int(k)):
+                cast = fixed_shade(layout, frames[b][None], sun[None])
+                poly = cast.polygon_enu[0, :cast.vertices[0]]
+                # up the slope from the receiver's centre [m]
+                offsets.append(float((poly.mean(axis=0) - frames[k][:3, 3]) @ frames[k][:3, 1]))
+                expected.append(poly + (COLLECTOR_DEPTH_M / 2 + 0.03) * frames[k][:3, 2])
+        drawn = np.asarray(v.nodes["/plant/shade_on_collectors"].vertices, dtype=float)
+        drawn = drawn.reshape(-1, 4, 3)
+        drawn = drawn[np.abs(drawn).sum(axis=(1, 2)) > 0]
+        assert len(expected) == len(drawn) > 0
+        # the shade sits off the collectors' centre lines (else a mirror image would pass):
+        # the low sun shades their lower parts
+        assert all(o < -0.5 for o in offsets), offsets
+        for quad in drawn:
+            centre = quad.mean(axis=0)
+            match = min(expected, key=lambda p: float(np.linalg.norm(p.mean(axis=0) - centre)))
+            got, want = shapely.Polygon(quad[:, :2]), shapely.Polygon(match[:, :2])
+            assert got.symmetric_difference(want).area < 1e-4 * want.area  # float32 vertices
+            np.testing.assert_allclose(centre, match.mean(axis=0), atol=1e-4)
     finally:
         c.close()
 

@@ -20,6 +20,8 @@ from sim.kinematics import (
     joint_transforms,
     morning_azimuth,
     normal_to_tilt_azimuth,
+    panel_axes,
+    panel_axes_from_trig,
     tracking_angles,
 )
 
@@ -288,3 +290,21 @@ def test_morning_azimuth_needs_aware_times_and_polar_night_is_nan() -> None:
     assert np.isnan(polar).all()
     az, _ = tracking_angles([10.0], [-30.0], GEOM, night_azimuth=polar[:1])
     assert az[0] == pytest.approx(90.0)  # NaN (no sunrise): held due east
+
+
+def test_panel_axes_are_the_panel_frame_of_the_dh_chain() -> None:
+    """The closed-form panel axes (the one rule every caller uses) against scipy's rotations
+    of the D–H chain and the panel's fixed turn: x along the width, y up the slope, n."""
+    rng = np.random.default_rng(RNG_SEED + 6)
+    az_j = rng.uniform(-90.0, 450.0, 200)
+    el_j = rng.uniform(0.0, 90.0, 200)
+    r2 = Rotation.from_euler("ZXZ", np.column_stack([np.radians(90.0 - az_j),
+                                                      np.full(200, np.pi / 2), np.radians(el_j)]))
+    rp = (r2 * Rotation.from_euler("y", np.pi / 2)).as_matrix()
+    x, y, n = panel_axes(az_j, el_j)
+    np.testing.assert_allclose(np.stack([x, y, n], axis=-1), rp, atol=1e-12)
+    assert np.all(x[:, 2] == 0.0) and np.all(y[:, 2] >= 0.0)
+    # scalar arithmetic (a camera frame) gives the same numbers as the arrays
+    a, e = np.radians(az_j[0]), np.radians(el_j[0])
+    scalar = panel_axes_from_trig(np.sin(a), np.cos(a), np.sin(e), np.cos(e))
+    np.testing.assert_array_equal(np.array(scalar, dtype=float), [x[0], y[0], n[0]])
