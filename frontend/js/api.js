@@ -1,4 +1,5 @@
-// Thin wrappers over the heliotwin HTTP API (contracts: DESIGN.md, docs/architecture.md).
+// Thin wrappers over the heliotwin HTTP API. The answers' shapes are the response models the
+// OpenAPI declares (/docs; backend/api/schemas/): pages read those fields directly.
 
 export class ApiError extends Error {
   constructor(status, message, body) {
@@ -56,41 +57,4 @@ export function getMeasurements(siteId, { array, source, start, end, maxPoints }
 
 export function getEnergy(siteId, { start, end, interval }, signal) {
   return api(`/api/v1/sites/${encodeURIComponent(siteId)}/energy`, { params: { start, end, interval }, signal });
-}
-
-/** Sites may come as a list or wrapped ({"sites": [...]}). */
-export function siteList(body) {
-  if (Array.isArray(body)) return body;
-  if (body && Array.isArray(body.sites)) return body.sites;
-  return [];
-}
-
-/** First defined value among dotted paths of an object (tolerates small shape differences). */
-export function pick(obj, ...paths) {
-  for (const path of paths) {
-    let v = obj;
-    for (const k of path.split(".")) {
-      if (v === null || v === undefined) break;
-      v = v[k];
-    }
-    if (v !== undefined && v !== null) return v;
-  }
-  return undefined;
-}
-
-/** Series in any of the shapes a table can travel in → list of row objects with `ts`. */
-export function seriesRows(body) {
-  if (!body) return [];
-  const list = Array.isArray(body) ? body : body.points || body.rows || body.series;
-  if (Array.isArray(list)) return list;
-  const cols = (list && typeof list === "object" ? list : null) || body.columns || body.data || body;
-  const ts = cols.ts || cols.index || cols.time;
-  if (Array.isArray(ts)) {
-    return ts.map((t, i) => {
-      const row = { ts: t };
-      for (const [k, v] of Object.entries(cols)) if (Array.isArray(v)) row[k] = v[i];
-      return row;
-    });
-  }
-  return [];
 }

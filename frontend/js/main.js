@@ -1,5 +1,5 @@
 // Dashboard shell: site picker, hash navigation between pages, shared state.
-import { getMeta, getSites, siteList } from "./api.js";
+import { getMeta, getSites } from "./api.js";
 import { loadPlotly, resizeVisible, wireCsvButtons } from "./charts.js";
 import { localDate, zoneLabel } from "./time.js";
 import { banner } from "./ui.js";
@@ -70,7 +70,7 @@ async function boot() {
     banner(`Could not load the sites: ${sitesRes.reason.message}`, "error");
     return;
   }
-  state.sites = siteList(sitesRes.value);
+  state.sites = sitesRes.value; // list[SiteRead]
   if (!state.sites.length) {
     banner("The service has no sites configured (data/sites/).", "error");
     return;

@@ -1,5 +1,5 @@
 // Overview: one site and one day — power (measured and twin), energies, gain, tiles, loggers.
-import { getEnergy, getMeasurements, getStatus, pick, seriesRows } from "./api.js";
+import { getEnergy, getMeasurements, getStatus } from "./api.js";
 import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
 import { addDays, fmtAge, fmtDate, fmtDateTime, fmtTime, localDate, toLocalWall } from "./time.js";
 import { banner, energy, h, num, pct, remember, tile } from "./ui.js";
@@ -34,21 +34,16 @@ function bandOf(arr) {
   return `rgba(${r},${g},${b},0.15)`;
 }
 
-/** The value of a field in a point, whether stored (number) or bucketed ({min, mean, max}). */
+/** A point's field (MeasurementsRead): the reading or the bucket's mean (`stat` "mean"), or a
+ * bucket's `<name>_min` / `<name>_max` (a stored reading is its own min and max). */
 function fieldOf(p, name, stat = "mean") {
-  const v = p[name];
-  if (typeof v === "number") {
-    if (stat === "mean") return v;
-    const alt = p[`${name}_${stat}`] ?? p[stat]?.[name];
-    return typeof alt === "number" ? alt : v;
-  }
-  if (v && typeof v === "object") return v[stat] ?? v.mean ?? null;
-  return null;
+  const v = stat === "mean" ? p[name] : p[`${name}_${stat}`] ?? p[name];
+  return typeof v === "number" ? v : null;
 }
 
 /** Points → {x, y, ymin, ymax, ts, gaps}; nulls inserted at gaps so lines do not bridge them. */
 function toSeries(body, tz) {
-  const pts = seriesRows(body);
+  const pts = body?.points ?? [];
   const bucket = body?.bucket_s || 0;
   const times = pts.map((p) => Date.parse(p.ts));
   const diffs = times.slice(1).map((t, i) => t - times[i]).sort((a, b) => a - b);
@@ -132,16 +127,13 @@ async function drawPower(series) {
 }
 
 function energyOf(row, arr, source) {
-  const v = pick(row, `arrays.${arr}.${source}_wh`);
+  const v = row.arrays[arr]?.[`${source}_wh`];
   return typeof v === "number" ? v : null;
 }
 
+/** The tracking gain the service computed (EnergyRowRead; one gain formula, server side). */
 function gainOf(row, source) {
-  const given = source === "measured" ? row.gain_pct : row.twin_gain_pct;
-  if (typeof given === "number") return given;
-  const tr = energyOf(row, "tracker", source);
-  const fx = energyOf(row, "fixed", source);
-  return tr !== null && fx ? (100 * (tr - fx)) / fx : null;
+  return (source === "measured" ? row.gain_pct : row.twin_gain_pct) ?? null;
 }
 
 /** Why a period has no twin ("—" alone says nothing): the service's note, or a generic one. */
@@ -164,8 +156,8 @@ function drawDayEnergy(row) {
   for (const arr of ARRAYS) {
     const m = energyOf(row, arr, "measured");
     const t = energyOf(row, arr, "twin");
-    const tm = pick(row, `arrays.${arr}.twin_matched_wh`);
-    const pr = pick(row, `arrays.${arr}.performance_ratio`);
+    const tm = row.arrays[arr]?.twin_matched_wh;
+    const pr = row.arrays[arr]?.performance_ratio;
     table.append(h("tr", {},
       h("td", {}, h("span", { class: "dot", style: `background:${colorOf(arr)}` }), arr),
       h("td", {}, energy(m)), h("td", { title: twinNote(row) }, energy(t)), h("td", {}, energy(tm ?? null)),
@@ -174,7 +166,7 @@ function drawDayEnergy(row) {
   box.append(table);
   if (twinNote(row)) box.append(h("div", { class: "muted", "data-testid": "twin-note" }, `Twin “—”: ${twinNote(row)}.`));
   if (partial) {
-    const cov = Math.min(...ARRAYS.map((a) => pick(row, `arrays.${a}.coverage_pct`) ?? 100));
+    const cov = Math.min(...ARRAYS.map((a) => row.arrays[a]?.coverage_pct ?? 100));
     box.append(h("div", { class: "banner partial", "data-testid": "partial-day" },
       `Partial day: the readings cover ${num(cov, 0)} % of the twin's expected energy, so they are compared with the twin over the same minutes.`));
   }
@@ -234,8 +226,8 @@ async function drawHistory(rows) {
 
   // Cumulative over complete logger days only (every array ≥ 90 % of its usual readings per
   // day), so measured and twin add up the same hours and compare like for like.
-  const usual = Object.fromEntries(ARRAYS.map((a) => [a, Math.max(0, ...rows.map((r) => pick(r, `arrays.${a}.readings`) || 0))]));
-  const complete = rows.map((r) => ARRAYS.every((a) => (pick(r, `arrays.${a}.readings`) || 0) >= 0.9 * usual[a] && usual[a] > 0));
+  const usual = Object.fromEntries(ARRAYS.map((a) => [a, Math.max(0, ...rows.map((r) => r.arrays[a]?.readings ?? 0))]));
+  const complete = rows.map((r) => ARRAYS.every((a) => (r.arrays[a]?.readings ?? 0) >= 0.9 * usual[a] && usual[a] > 0));
   const cumRows = rows.filter((_, i) => complete[i]);
   const cumDates = dates.filter((_, i) => complete[i]);
   if (!cumRows.length) {
@@ -276,13 +268,13 @@ function freshness(entry, ageS) {
   return ageS <= 12 * fresh ? "warn" : "bad";
 }
 
+/** One array's tile of the status (SiteStatusRead); {} while no status is loaded. */
 function arrayStatus(status, arr) {
-  return pick(status, `arrays.${arr}`) || {};
+  return status ? status.arrays[arr] ?? {} : {};
 }
 
 function ageOf(entry) {
-  if (typeof entry.age_s === "number") return entry.age_s;
-  return entry.last_ts ? (Date.now() - Date.parse(entry.last_ts)) / 1000 : null;
+  return entry.age_s ?? null;
 }
 
 function drawTiles(status) {
@@ -306,11 +298,11 @@ function drawTiles(status) {
     );
   }
   box.append(
-    tile("Sun now", `${num(pick(status, "sun.elevation_deg"), 1)}°`,
-      `elevation · azimuth ${num(pick(status, "sun.azimuth_deg"), 1)}° from N`),
-    tile("Tracker angles now", `${num(pick(status, "tracker.elevation_joint_deg"), 1)}°`,
-      `elevation · azimuth ${num(pick(status, "tracker.azimuth_joint_deg"), 1)}° (twin)`),
-    tile("Site time", fmtTime(tz, status.time_utc || status.time || new Date().toISOString()), tz),
+    tile("Sun now", `${num(status.sun.elevation_deg, 1)}°`,
+      `elevation · azimuth ${num(status.sun.azimuth_deg, 1)}° from N`),
+    tile("Tracker angles now", `${num(status.tracker.elevation_joint_deg, 1)}°`,
+      `elevation · azimuth ${num(status.tracker.azimuth_joint_deg, 1)}° (twin)`),
+    tile("Site time", fmtTime(tz, status.time_utc), tz),
   );
 }
 
@@ -323,7 +315,7 @@ function drawLoggers(status, series) {
   }
   const table = h("table", {}, h("tr", {}, h("th", {}, "Array"), h("th", {}, "Last reading"), h("th", {}, "Readings"), h("th", {}, "Gaps")));
   for (const arr of ARRAYS) {
-    const s = arrayStatus(status || {}, arr);
+    const s = arrayStatus(status, arr);
     const m = series[`${arr}-measured`];
     const last = s.last_ts || (m && m.rows.length ? m.rows[m.rows.length - 1][0] : null);
     const age = s.last_ts ? ageOf(s) : last ? (Date.now() - Date.parse(last)) / 1000 : null;

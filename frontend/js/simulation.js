@@ -1,5 +1,5 @@
 // Simulation: run a twin scenario in the background, follow its progress, chart the result.
-import { ApiError, api, pick, seriesRows } from "./api.js";
+import { ApiError, api } from "./api.js";
 import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
 import { addDays, toLocalWall, zoneOffsetMs } from "./time.js";
 import { viewerKey } from "./twin.js";
@@ -11,8 +11,8 @@ const SUN_ELEVATION = "solar_apparent_elevation_deg";
 const SUN_AZIMUTH = "solar_azimuth_deg";
 const MAX_POINTS = 2000;
 const SERIES_RETRIES = 150; // × POLL_MS: a minute for a stored series to appear after "done"
-const DONE = new Set(["done", "succeeded", "success", "completed", "finished"]);
-const FAILED = new Set(["failed", "error", "cancelled", "canceled"]);
+// a run's status (SimulationRunRead): queued → running → done | failed
+const FINAL = new Set(["done", "failed"]);
 
 let st = null;
 let running = false;
@@ -20,9 +20,9 @@ let running = false;
 const $ = (id) => document.getElementById(id);
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
+/** A series point's column (SimulationSeriesRead: a number, or null where undefined). */
 function colValue(row, name) {
   const v = row[name];
-  if (v && typeof v === "object") return v.mean ?? null;
   return typeof v === "number" ? v : null;
 }
 
@@ -49,13 +49,12 @@ function summaryTiles(summary, station) {
     tile("Fixed energy", energy(summary.fixed_energy_wh), `peak ${num(summary.fixed_peak_w, 0)} W`),
     tile("Tracking gain", pct(summary.gain_pct), "tracker over fixed, twin"),
     tile("Period", `${num((Date.parse(summary.end) - Date.parse(summary.start)) / 86400000, 1)} days`,
-      `${summary.start?.slice(0, 10) ?? "?"} → ${summary.end?.slice(0, 10) ?? "?"} · step ${num(summary.step_s)} s · ${summary.controller ?? "ideal"}`),
+      `${summary.start.slice(0, 10)} → ${summary.end.slice(0, 10)} · step ${num(summary.step_s)} s · ${summary.controller}`),
   );
-  if (summary.pointing_error_rms_mrad === undefined) return;
   box.append(
     tile("Pointing error", `${num(summary.pointing_error_rms_mrad, 1)} mrad`,
       `RMS over daylight · p95 ${num(summary.pointing_error_p95_mrad, 1)} · max ${num(summary.pointing_error_max_mrad, 1)} mrad`),
-    tile("Pointing loss", energy(summary.pointing_loss_wh), `against ideal pointing · ${summary.receiver ?? "flat"} receiver`),
+    tile("Pointing loss", energy(summary.pointing_loss_wh), `against ideal pointing · ${summary.receiver} receiver`),
     tile("Actuators", energy(summary.actuator_energy_wh), `${num(summary.moves, 0)} moves`),
     tile("Net gain", pct(summary.net_gain_pct), "tracking gain after the actuators' energy"),
   );
@@ -212,14 +211,14 @@ const elapsed = (t0) => `${num((performance.now() - t0) / 1000, 1)} s`;
 async function waitForRun(first, t0) {
   let res = first;
   const runId = res.run_id;
-  while (runId && !DONE.has(res.status) && !FAILED.has(res.status)) {
+  while (!FINAL.has(res.status)) {
     const frac = res.progress ?? 0;
     const what = res.status === "queued" ? "queued" : frac >= 0.999 ? "storing the series" : "running";
     setProgress(frac, `${what} · ${num(100 * frac, 0)} % · ${elapsed(t0)}`);
     await sleep(POLL_MS);
     res = await api(`/api/v1/simulations/${encodeURIComponent(runId)}`);
   }
-  if (FAILED.has(res.status)) throw new Error(res.error || res.detail || `run ${runId} ${res.status}`);
+  if (res.status === "failed") throw new Error(res.error || `run ${runId} failed`);
   return res;
 }
 
@@ -272,23 +271,21 @@ async function run(ev) {
     const t0 = performance.now();
     const res = await waitForRun(await submit(body), t0);
     const runId = res.run_id;
-    const summary = res.summary || res;
-    summaryTiles(summary, res.params?.weather_station);
-    if (runId) {
-      const seriesUrl = `/api/v1/simulations/${encodeURIComponent(runId)}/series`;
-      setProgress(1, `${summary.steps ? `${num(summary.steps, 0)} steps` : "run"} done · loading the series…`);
-      const series = await seriesWhenReady(seriesUrl, t0);
-      await drawResult(runId, seriesRows(series), series?.bucket_s || summary.step_s || 60);
-      setProgress(1, `done in ${num((performance.now() - t0) / 1000, 1)} s`);
-      const csv = $("sim-csv");
-      csv.href = `${seriesUrl}?format=csv`;
-      csv.setAttribute("download", `simulation_${runId}.csv`);
-      csv.hidden = false;
-      const show3d = $("sim-3d");
-      show3d.dataset.runId = runId;
-      show3d.hidden = st.meta?.viser_enabled === false; // each viewer shows the run's own site
-    }
-    document.body.dataset.simulationDone = runId || "sync";
+    const summary = res.summary;
+    summaryTiles(summary, res.params.weather_station);
+    const seriesUrl = `/api/v1/simulations/${encodeURIComponent(runId)}/series`;
+    setProgress(1, `${num(summary.steps, 0)} steps done · loading the series…`);
+    const series = await seriesWhenReady(seriesUrl, t0);
+    await drawResult(runId, series.points, series.bucket_s || summary.step_s); // bucket_s 0: as computed
+    setProgress(1, `done in ${num((performance.now() - t0) / 1000, 1)} s`);
+    const csv = $("sim-csv");
+    csv.href = `${seriesUrl}?format=csv`;
+    csv.setAttribute("download", `simulation_${runId}.csv`);
+    csv.hidden = false;
+    const show3d = $("sim-3d");
+    show3d.dataset.runId = runId;
+    show3d.hidden = st.meta?.viser_enabled === false; // each viewer shows the run's own site
+    document.body.dataset.simulationDone = runId;
   } catch (err) {
     setProgress(0, "failed");
     banner(`Simulation failed: ${err.message}`, "error");
@@ -320,19 +317,19 @@ function defaults() {
 export function init(state) {
   st = state;
   defaults();
-  const controllers = pick(st.meta, "controllers");
-  if (Array.isArray(controllers) && controllers.length) {
+  const controllers = st.meta?.controllers ?? []; // MetaRead; {} when /meta failed
+  if (controllers.length) {
     const sel = $("sim-controller");
     sel.innerHTML = "";
     for (const c of controllers) sel.add(new Option(c, c));
   }
-  const receivers = pick(st.meta, "receivers");
-  if (Array.isArray(receivers) && receivers.length) {
+  const receivers = st.meta?.receivers ?? [];
+  if (receivers.length) {
     const sel = $("sim-receiver");
     sel.innerHTML = "";
     for (const r of receivers) sel.add(new Option(r === "cpv" ? "CPV (acceptance angle)" : "flat PV", r));
   }
-  machineFields(pick(st.meta, "machine_parameters"));
+  machineFields(st.meta?.machine_parameters);
   $("sim-form").addEventListener("submit", run);
   $("sim-3d").addEventListener("click", showIn3d);
   showEmpty("chart-sim-power", "Run a simulation to see its power.");

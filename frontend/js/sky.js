@@ -1,5 +1,5 @@
 // Sky camera: upload frames, find the sun, compare with the ephemeris, calibrate a fisheye.
-import { api, pick } from "./api.js";
+import { api } from "./api.js";
 import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
 import { addDays, fmtDateTime, localDate, localMidnightMs, toLocalWall, zoneOffsetMs } from "./time.js";
 import { banner, h, num } from "./ui.js";
@@ -87,22 +87,12 @@ function onFiles() {
   renderFileList();
 }
 
-const storedCameras = new Map(); // calibration id → its camera parameters
-
-async function storedCamera(id) {
-  if (!storedCameras.has(id)) {
-    const cal = await api(`/api/v1/vision/calibrations/${encodeURIComponent(id)}`);
-    storedCameras.set(id, cal.camera || {});
-  }
-  return storedCameras.get(id);
-}
-
 async function cameraParams(form) {
   const cam = $("sky-camera").value;
   const calibration = $("sky-calibration").value;
   if (calibration) {
     form.append("calibration_id", calibration);
-    return { camera: "calibration", stored: await storedCamera(calibration) };
+    return { camera: "fisheye", calibration_id: calibration };
   }
   form.append("camera", cam);
   const box = document.querySelector(`.cam-params[data-camera="${cam}"]`);
@@ -124,19 +114,6 @@ function placeParams(form) {
     const el = document.querySelector(`#sky-coords [name="${name}"]`);
     if (el.value !== "") form.append(name, el.value);
   }
-}
-
-/** Fisheye projection az/el → pixel, for the ephemeris marker when the API gives no pixel. */
-export function fisheyePixel(p, azimuthDeg, elevationDeg, width, height) {
-  const k = p.px_per_deg || Math.min(width, height) / 180;
-  const f = k / DEG; // focal length [px/rad] equal to k near the centre
-  const theta = (90 - elevationDeg) * DEG;
-  const r = { equisolid: 2 * f * Math.sin(theta / 2), stereographic: 2 * f * Math.tan(theta / 2),
-    orthographic: f * Math.sin(theta) }[p.projection] ?? k * (90 - elevationDeg);
-  const phi = ((p.north_offset_deg || 0) + (p.east === "right" ? azimuthDeg : -azimuthDeg)) * DEG;
-  const cx = p.cx_px ?? (width - 1) / 2;
-  const cy = p.cy_px ?? (height - 1) / 2;
-  return [cx + r * Math.sin(phi), cy - r * Math.cos(phi)];
 }
 
 function drawMarker(ctx, x, y, color, radius, cross) {
@@ -163,16 +140,14 @@ function resultCard(row, img, res, params) {
   const ctx = canvas.getContext("2d");
   ctx.drawImage(img, 0, 0, canvas.width, canvas.height);
   const radius = Math.max(8, canvas.width / 28);
-  const centroid = pick(res, "centroid_px");
-  const eph = pick(res, "ephemeris");
-  let ephPx = pick(res, "ephemeris_px", "ephemeris.centroid_px", "ephemeris.pixel_px", "ephemeris.px");
-  const cam = params.camera === "calibration" ? { ...(params.stored || {}), camera: "fisheye" } : params;
-  if (!ephPx && eph && cam.camera === "fisheye" && typeof eph.elevation_deg === "number" && eph.elevation_deg > -5) {
-    ephPx = fisheyePixel(cam, eph.azimuth_deg, eph.elevation_deg, img.naturalWidth, img.naturalHeight);
-  }
-  if (cam.camera === "pinhole") {
-    const rx = pick(res, "reference_px.0") ?? cam.reference_x_px ?? (img.naturalWidth - 1) / 2;
-    const ry = pick(res, "reference_px.1") ?? cam.reference_y_px ?? (img.naturalHeight - 1) / 2;
+  // SunDetectionRead: the ephemeris (with time and place) and, for a fisheye, its pixel
+  // through the same camera model (null below the horizon)
+  const centroid = res.centroid_px;
+  const eph = res.ephemeris;
+  const ephPx = eph?.centroid_px ?? null;
+  if (res.camera === "pinhole") { // the reference pixel typed in the form, else the centre
+    const rx = params.reference_x_px ?? (img.naturalWidth - 1) / 2;
+    const ry = params.reference_y_px ?? (img.naturalHeight - 1) / 2;
     ctx.setLineDash([4, 4]);
     drawMarker(ctx, rx * scale, ry * scale, "#1971c2", radius * 0.6, true);
     ctx.setLineDash([]);
@@ -186,22 +161,22 @@ function resultCard(row, img, res, params) {
   if (centroid) kv("Centroid [px]", `${num(centroid[0], 1)}, ${num(centroid[1], 1)}`);
   if (typeof res.azimuth_deg === "number") kv("Detected az / el [°]", `${num(res.azimuth_deg, 2)} / ${num(res.elevation_deg, 2)}`);
   if (eph) kv("Ephemeris az / el [°]", `${num(eph.azimuth_deg, 2)} / ${num(eph.elevation_deg, 2)}`);
-  const sep = pick(res, "error.separation_deg", "error.angular_error_deg", "separation_deg", "angular_error_deg", "error_deg");
+  const sep = res.error?.separation_deg;
   if (typeof sep === "number") kv("Error vs ephemeris [°]", num(sep, 2));
-  const pe = pick(res, "pointing_error_deg");
+  const pe = res.pointing_error_deg;
   if (pe) kv("Pointing error [°] (right, up)", `${num(pe[0], 3)}, ${num(pe[1], 3)}`);
   if (typeof res.pointing_error_mrad === "number") kv("Pointing error [mrad]", num(res.pointing_error_mrad, 2));
   const derived = res.camera_derived;
   if (derived) kv("Scale [px/°]", `${num(derived.px_per_deg, 3)} — derived: ${derived.how}; ${derived.warning}`);
   if (res.method) kv("Method", res.method);
-  const warnings = (res.warnings || []).map((w) => h("p", { class: "warning", "data-testid": "sky-warning" }, `⚠ ${w}`));
+  const warnings = res.warnings.map((w) => h("p", { class: "warning", "data-testid": "sky-warning" }, `⚠ ${w}`));
   const ts = rowTimestamp(row);
   const when = !ts ? "" : $("sky-place").value === "site" ? `  · ${fmtDateTime(st.tz, ts)} (${st.tz})` : `  · ${ts}`;
   return h("article", { class: "card sky-result", "data-testid": "sky-result", "data-sun-found": String(Boolean(res.sun_found)) },
     h("header", {}, h("h2", { title: row.file.name }, row.file.name)),
     canvas,
     h("div", { class: "legend" }, h("span", { class: "det" }, "✛ detected sun"), "  ",
-      h("span", { class: "eph" }, cam.camera === "pinhole" ? "┼ reference pixel (dashed)" : "○ ephemeris sun"), when),
+      h("span", { class: "eph" }, res.camera === "pinhole" ? "┼ reference pixel (dashed)" : "○ ephemeris sun"), when),
     warnings,
     h("table", { class: "kv" }, rows));
 }
@@ -272,7 +247,7 @@ async function calibrate() {
   box.innerHTML = "";
   try {
     const res = await api("/api/v1/vision/calibrations", { method: "POST", form, token: $("sky-token").value.trim() });
-    const fitted = res.camera && typeof res.camera === "object" ? { ...res, ...res.camera } : res;
+    const fitted = res; // FittedCalibrationRead: the camera's fields at the top level too
     const show = [["calibration_id", "Calibration id", 0], ["projection", "Projection"], ["cx_px", "Centre x [px]", 1],
       ["cy_px", "Centre y [px]", 1], ["px_per_deg", "Scale [px/°]", 3], ["north_offset_deg", "North offset [°]", 2],
       ["east", "East"], ["n_frames", "Frames used", 0], ["rms_px", "Residual RMS [px]", 2], ["max_px", "Residual max [px]", 2],
@@ -285,7 +260,7 @@ async function calibrate() {
         field.value = typeof fitted[k] === "number" ? String(Number(fitted[k].toFixed(4))) : fitted[k];
       }
     }
-    const frames = (res.frames || []).map((f) => h("tr", {},
+    const frames = res.frames.map((f) => h("tr", {},
       h("td", { title: f.filename }, f.filename), h("td", {}, f.sun_found ? "yes" : "no"), h("td", {}, f.used ? "yes" : "no"),
       h("td", {}, num(f.residual_px, 1)), h("td", {}, num(f.residual_deg, 2))));
     box.append(h("article", { class: "card", "data-testid": "calibration-result" },
@@ -309,11 +284,6 @@ async function calibrate() {
   } finally {
     $("sky-calibrate").disabled = false;
   }
-}
-
-function detectionList(body) {
-  if (Array.isArray(body)) return body;
-  return body?.detections || body?.rows || body?.items || [];
 }
 
 /** The sky map's day runs midnight to midnight in the site's zone, or in UTC for a free place. */
@@ -340,22 +310,22 @@ async function loadTrajectory() {
   if ($("sky-place").value === "site") params.site_id = st.site.site_id;
   let list = [];
   try {
-    list = detectionList(await api("/api/v1/vision/detections", { params }));
+    list = (await api("/api/v1/vision/detections", { params })).detections;
   } catch (err) {
     showEmpty("chart-sky-track", `Detections unavailable: ${err.message}`);
     showEmpty("chart-sky-error", "");
     return;
   }
-  const found = list.filter((d) => d.camera !== "pinhole" && d.sun_found !== false && typeof d.azimuth_deg === "number"
-    && typeof pick(d, "timestamp", "ts") === "string");
+  const found = list.filter((d) => d.camera === "fisheye" && d.sun_found && typeof d.azimuth_deg === "number"
+    && typeof d.timestamp === "string");
   if (!found.length) {
     showEmpty("chart-sky-track", "No fisheye detections stored for this day.");
     showEmpty("chart-sky-error", "Upload timestamped all-sky frames to see the error through the day.");
     return;
   }
-  const ts = (d) => pick(d, "timestamp", "ts");
-  const ephAz = (d) => pick(d, "ephemeris.azimuth_deg", "ephemeris_azimuth_deg");
-  const ephEl = (d) => pick(d, "ephemeris.elevation_deg", "ephemeris_elevation_deg");
+  const ts = (d) => d.timestamp;
+  const ephAz = (d) => d.ephemeris?.azimuth_deg ?? null; // StoredDetectionRead: with time and place
+  const ephEl = (d) => d.ephemeris?.elevation_deg ?? null;
   const label = found.map((d) => toLocalWall(tz, ts(d)).slice(11, 16));
   await draw("chart-sky-track", [
     { type: "scatterpolar", r: found.map((d) => 90 - d.elevation_deg), theta: found.map((d) => d.azimuth_deg), text: label,
@@ -371,18 +341,10 @@ async function loadTrajectory() {
     rows: found.map((d) => [ts(d), toLocalWall(tz, ts(d)), d.azimuth_deg, d.elevation_deg, ephAz(d), ephEl(d)]),
     filename: `sky_detections_${day}.csv`,
   });
-  const errs = found.map((d) => {
-    if (typeof pick(d, "error.separation_deg") === "number") return d.error.separation_deg;
-    const a = ephAz(d);
-    const e = ephEl(d);
-    if (typeof a !== "number" || typeof e !== "number") return null;
-    const c = Math.sin(d.elevation_deg * DEG) * Math.sin(e * DEG)
-      + Math.cos(d.elevation_deg * DEG) * Math.cos(e * DEG) * Math.cos((d.azimuth_deg - a) * DEG);
-    return Math.acos(Math.max(-1, Math.min(1, c))) / DEG;
-  });
+  const errs = found.map((d) => d.error?.separation_deg ?? null); // the service's, on the sphere
   const groups = new Map(); // calibration → indices; doubtful ones (warnings) on their own
   found.forEach((d, i) => {
-    const key = (d.warnings || []).length ? "doubtful" : calibrationLegend(d.calibration_id);
+    const key = d.warnings.length ? "doubtful" : calibrationLegend(d.calibration_id);
     if (!groups.has(key)) groups.set(key, []);
     groups.get(key).push(i);
   });
@@ -390,7 +352,7 @@ async function loadTrajectory() {
   const traces = [...groups].map(([key, idx], k) => ({
     x: idx.map((i) => toLocalWall(tz, ts(found[i]))), y: idx.map((i) => errs[i]), type: "scatter", mode: "markers",
     name: key === "doubtful" ? "doubtful (place or time?)" : key,
-    text: idx.map((i) => (found[i].warnings || []).join("; ")),
+    text: idx.map((i) => found[i].warnings.join("; ")),
     marker: key === "doubtful" ? { color: "#868e96", size: 8, symbol: "x" } : { color: palette[k % palette.length], size: 7 },
     hovertemplate: "%{y:.2f}° %{text}" }));
   await draw("chart-sky-error", traces,
@@ -402,7 +364,7 @@ async function loadTrajectory() {
 const calibrationNames = new Map(); // calibration id → its name, for the charts' legends
 
 function calibrationLabel(c) {
-  const id = c.calibration_id ?? c.id;
+  const id = c.calibration_id;
   const when = c.created_at ? ` · ${fmtDateTime(st.tz, c.created_at)}` : "";
   return `#${id} ${c.name || c.projection || ""} · ${num(c.rms_px, 1)} px RMS${when}`;
 }
@@ -427,7 +389,6 @@ async function deleteCalibration() {
     sel.remove(sel.selectedIndex);
     sel.value = "";
     sel.dispatchEvent(new Event("change"));
-    storedCameras.delete(id);
     $("sky-status").textContent = `Deleted calibration #${id} and ${res.detections_deleted} detection(s) made with it.`;
     loadTrajectory();
   } catch (err) {
@@ -444,7 +405,7 @@ async function evaluateCalibration() {
     return;
   }
   const cal = await api(`/api/v1/vision/calibrations/${encodeURIComponent(id)}`);
-  const fittedOn = new Set((cal.frames || []).map((f) => f.filename));
+  const fittedOn = new Set(cal.frames.map((f) => f.filename));
   const form = new FormData();
   for (const r of timed) {
     form.append("files", r.file, r.file.name);
@@ -509,14 +470,10 @@ async function clearDetections() {
 async function loadCalibrations() {
   try {
     const body = await api("/api/v1/vision/calibrations");
-    const list = Array.isArray(body) ? body : body?.calibrations || [];
     const sel = $("sky-calibration");
-    for (const c of list) {
-      const id = c.calibration_id ?? c.id;
-      if (id !== undefined) {
-        sel.add(new Option(calibrationLabel(c), id));
-        calibrationNames.set(String(id), c.name);
-      }
+    for (const c of body.calibrations) {
+      sel.add(new Option(calibrationLabel(c), c.calibration_id));
+      calibrationNames.set(String(c.calibration_id), c.name);
     }
   } catch (err) {
     // Listing is optional: a service without it still takes a calibration id typed by hand.
