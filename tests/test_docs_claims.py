@@ -560,3 +560,13 @@ def test_control_cloud_gate_bounds_are_the_tests() -> None:
     assert f"err.max() < {bound}" in test
     assert f"> {factor:g} * err.max()" in test
     assert "cover=0.5" in test and "< 0.5 * s['camera_frames']" in test
+
+
+# --- docs/service.md ----------------------------------------------------------------
+
+
+def test_service_memory_bound_is_the_tests() -> None:
+    m = sentence(doc("service.md"), r"the peak summed PSS \(shared pages counted once\) "
+                                    r"stays within (\d+) GB")
+    assert float(m.group(1)) * 1e9 == module_constant("tests/backend/test_limits.py",
+                                                      "BUDGET_BYTES")
