@@ -1,8 +1,9 @@
-"""Write tokens: ``heliotwin token create|list|revoke`` and ``/api/v1/tokens`` on a running server.
+"""Write tokens: ``heliotwin token create|list|revoke`` and ``/api/v1/tokens`` on a running
+service (in this process, ``live_service.InProcessServer``; the CLI in processes of its own).
 
 A token revoked by the CLI (another process) is refused within the cache TTL
 (``HELIOTWIN_TOKEN_CACHE_TTL_S`` ≤ 1 s); one revoked over HTTP at once; an
-expired one from its expiry. Real server, real database (SQLite and PostgreSQL).
+expired one from its expiry. Real database (SQLite and PostgreSQL).
 """
 
 from __future__ import annotations
@@ -16,18 +17,17 @@ from pathlib import Path
 
 import httpx
 import pytest
-from live_service import BACKENDS, HELIOTWIN, ROOT, ServerProcess, new_database
+from live_service import BACKENDS, HELIOTWIN, ROOT, InProcessServer, new_database
 
 ADMIN = "admin-secret-for-tests"
 
 
 @pytest.fixture(scope="module", params=BACKENDS)
 def server(request: pytest.FixtureRequest,
-           tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+           tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
     tmp = tmp_path_factory.mktemp(f"tokens-{request.param}")
     db = new_database(request.param, tmp)
-    proc = ServerProcess(db.url, tmp / "server.log",
-                         extra_env={"HELIOTWIN_ADMIN_TOKEN": ADMIN}).start()
+    proc = InProcessServer(db.url, extra_env={"HELIOTWIN_ADMIN_TOKEN": ADMIN}).start()
     try:
         yield proc
     finally:
@@ -35,21 +35,27 @@ def server(request: pytest.FixtureRequest,
         db.drop()
 
 
-def _cli(server: ServerProcess, *args: str) -> subprocess.CompletedProcess[str]:
+@pytest.fixture
+def client(server: InProcessServer) -> Iterator[httpx.Client]:
+    with server.client(timeout_s=30) as c:
+        yield c
+
+
+def _cli(server: InProcessServer, *args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([*HELIOTWIN, "token", *args], cwd=ROOT, env=server.env,
                           capture_output=True, text=True, timeout=120)
 
 
-def _post(server: ServerProcess, token: str, minute: int) -> httpx.Response:
+def _post(client: httpx.Client, token: str, minute: int) -> httpx.Response:
     """One reading of the tracker, ``minute`` minutes after 2026-11-01 00:00 UTC."""
     ts = dt.datetime(2026, 11, 1, tzinfo=dt.UTC) + dt.timedelta(minutes=minute)
-    return httpx.post(f"{server.base_url}/api/v1/sites/tehuantepec/measurements",
-                      headers={"Authorization": f"Bearer {token}"}, timeout=30,
-                      json={"readings": [{"ts": ts.isoformat(), "array": "tracker",
-                                          "voltage_v": 30.0, "current_a": 2.0}]})
+    return client.post("/api/v1/sites/tehuantepec/measurements",
+                       headers={"Authorization": f"Bearer {token}"},
+                       json={"readings": [{"ts": ts.isoformat(), "array": "tracker",
+                                           "voltage_v": 30.0, "current_a": 2.0}]})
 
 
-def test_create_prints_only_the_token(server: ServerProcess) -> None:
+def test_create_prints_only_the_token(server: InProcessServer) -> None:
     out = _cli(server, "create", "--site", "tehuantepec", "--label", "quiet")
     assert out.returncode == 0, out.stderr
     lines = out.stdout.splitlines()
@@ -57,11 +63,12 @@ def test_create_prints_only_the_token(server: ServerProcess) -> None:
     assert out.stderr == ""  # no INFO lines about migrations or sites
 
 
-def test_cli_revocation_is_refused_within_a_second(server: ServerProcess) -> None:
+def test_cli_revocation_is_refused_within_a_second(server: InProcessServer,
+                                                   client: httpx.Client) -> None:
     token = _cli(server, "create", "--site", "tehuantepec", "--label", "to-revoke"
                  ).stdout.split()[-1]
-    assert _post(server, token, 0).status_code == 200
-    assert _post(server, token, 1).status_code == 200  # now cached by the server
+    assert _post(client, token, 0).status_code == 200
+    assert _post(client, token, 1).status_code == 200  # now cached by the server
     listed = json.loads(_cli(server, "list", "--site", "tehuantepec", "--json").stdout)
     mine = [t for t in listed if token.startswith(t["token_prefix"]) and
             t["label"] == "to-revoke"]
@@ -71,76 +78,72 @@ def test_cli_revocation_is_refused_within_a_second(server: ServerProcess) -> Non
     revoked = _cli(server, "revoke", str(mine[0]["id"]))
     assert revoked.returncode == 0, revoked.stderr
     time.sleep(1.0)
-    r = _post(server, token, 2)
+    r = _post(client, token, 2)
     assert r.status_code == 401, r.text
     after = json.loads(_cli(server, "list", "--json").stdout)
     assert [t["status"] for t in after if t["id"] == mine[0]["id"]] == ["revoked"]
 
 
-def test_cli_revoke_by_token_and_unknown(server: ServerProcess) -> None:
+def test_cli_revoke_by_token_and_unknown(server: InProcessServer, client: httpx.Client) -> None:
     token = _cli(server, "create", "--site", "tehuantepec").stdout.split()[-1]
     assert _cli(server, "revoke", token).returncode == 0
     time.sleep(1.0)
-    assert _post(server, token, 3).status_code == 401
+    assert _post(client, token, 3).status_code == 401
     missing = _cli(server, "revoke", "999999")
     assert missing.returncode == 2 and "no write token with id 999999" in missing.stderr
     bad = _cli(server, "create", "--site", "tehuantepec", "--expires", "2020-01-01T00:00Z")
     assert bad.returncode == 2 and "--expires" in bad.stderr
 
 
-def test_admin_endpoints(server: ServerProcess) -> None:
-    url = f"{server.base_url}/api/v1/tokens"
+def test_admin_endpoints(server: InProcessServer, client: httpx.Client) -> None:
+    url = "/api/v1/tokens"
     admin = {"Authorization": f"Bearer {ADMIN}"}
-    assert httpx.get(url).status_code == 401
-    assert httpx.get(url, headers={"Authorization": "Bearer wrong"}).status_code == 401
+    assert client.get(url).status_code == 401
+    assert client.get(url, headers={"Authorization": "Bearer wrong"}).status_code == 401
     site_token = _cli(server, "create", "--site", "tehuantepec").stdout.split()[-1]
-    assert httpx.get(url, headers={"Authorization": f"Bearer {site_token}"}
-                     ).status_code == 401  # a write token is not an admin token
+    assert client.get(url, headers={"Authorization": f"Bearer {site_token}"}
+                      ).status_code == 401  # a write token is not an admin token
 
-    r = httpx.post(url, headers=admin, json={"site_id": "tehuantepec", "label": "http"})
+    r = client.post(url, headers=admin, json={"site_id": "tehuantepec", "label": "http"})
     assert r.status_code == 201, r.text
     made = r.json()
     assert made["status"] == "active" and made["token"].startswith(made["token_prefix"])
-    assert _post(server, made["token"], 10).status_code == 200
-    listed = httpx.get(url, headers=admin, params={"site_id": "tehuantepec"}).json()["tokens"]
+    assert _post(client, made["token"], 10).status_code == 200
+    listed = client.get(url, headers=admin, params={"site_id": "tehuantepec"}).json()["tokens"]
     assert made["id"] in [t["id"] for t in listed]
     assert all("token" not in t for t in listed)
 
-    gone = httpx.delete(f"{url}/{made['id']}", headers=admin)
+    gone = client.delete(f"{url}/{made['id']}", headers=admin)
     assert gone.status_code == 200 and gone.json()["status"] == "revoked"
-    assert _post(server, made["token"], 11).status_code == 401  # at once: cache forgotten
-    assert httpx.delete(f"{url}/999999", headers=admin).status_code == 404
+    assert _post(client, made["token"], 11).status_code == 401  # at once: cache forgotten
+    assert client.delete(f"{url}/999999", headers=admin).status_code == 404
 
-    bad = httpx.post(url, headers=admin, json={"site_id": "mars"})
+    bad = client.post(url, headers=admin, json={"site_id": "mars"})
     assert bad.status_code == 404 and "mars" in bad.text
-    bad = httpx.post(url, headers=admin, json={"site_id": "tehuantepec",
-                                               "expires_at": "2020-01-01T00:00:00Z"})
+    bad = client.post(url, headers=admin, json={"site_id": "tehuantepec",
+                                                "expires_at": "2020-01-01T00:00:00Z"})
     assert bad.status_code == 422 and "expires_at" in bad.text
-    bad = httpx.post(url, headers=admin, json={"site_id": "tehuantepec",
-                                               "expires_in_days": -1})
+    bad = client.post(url, headers=admin, json={"site_id": "tehuantepec",
+                                                "expires_in_days": -1})
     assert bad.status_code == 422 and "expires_in_days" in bad.text
 
 
-def test_expired_token_is_refused(server: ServerProcess) -> None:
+def test_expired_token_is_refused(client: httpx.Client) -> None:
     admin = {"Authorization": f"Bearer {ADMIN}"}
     expires = dt.datetime.now(dt.UTC) + dt.timedelta(seconds=4)
-    r = httpx.post(f"{server.base_url}/api/v1/tokens", headers=admin,
-                   json={"site_id": "tehuantepec", "expires_at": expires.isoformat()})
+    r = client.post("/api/v1/tokens", headers=admin,
+                    json={"site_id": "tehuantepec", "expires_at": expires.isoformat()})
     assert r.status_code == 201, r.text
     token = r.json()["token"]
-    assert _post(server, token, 20).status_code == 200  # cached with its expiry
+    assert _post(client, token, 20).status_code == 200  # cached with its expiry
     time.sleep(max(0.0, (expires - dt.datetime.now(dt.UTC)).total_seconds()) + 0.2)
-    assert _post(server, token, 21).status_code == 401
-    listed = httpx.get(f"{server.base_url}/api/v1/tokens", headers=admin).json()["tokens"]
+    assert _post(client, token, 21).status_code == 401
+    listed = client.get("/api/v1/tokens", headers=admin).json()["tokens"]
     assert [t["status"] for t in listed if t["id"] == r.json()["id"]] == ["expired"]
 
 
 def test_admin_disabled_without_setting(tmp_path: Path) -> None:
     db = new_database("sqlite", tmp_path)
-    proc = ServerProcess(db.url, tmp_path / "server.log").start()
-    try:
-        r = httpx.get(f"{proc.base_url}/api/v1/tokens",
-                      headers={"Authorization": "Bearer anything"})
+    with InProcessServer(db.url) as proc, proc.client() as c:
+        r = c.get("/api/v1/tokens", headers={"Authorization": "Bearer anything"})
         assert r.status_code == 403 and "HELIOTWIN_ADMIN_TOKEN" in r.text
-    finally:
-        proc.stop()

@@ -1,4 +1,4 @@
-"""``/api/v1/vision`` over real HTTP (``backend/api/routes/vision.py``).
+"""``/api/v1/vision`` over HTTP (the service in this process) (``backend/api/routes/vision.py``).
 
 Expected sun positions come from pvlib's SPA (an independent implementation of
 the ephemeris the service takes from ``sim.sun``) and from synthetic frames
@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 import pvlib
 import pytest
-from live_service import ServerProcess
+from live_service import InProcessServer
 
 from vision.cameras import FisheyeCamera
 from vision.synth import fisheye_frame
@@ -317,19 +317,16 @@ def test_real_wettermast_calibration_over_http(client: httpx.Client) -> None:
 
 
 def test_vision_token_required_when_configured(tmp_path: Path) -> None:
-    server = ServerProcess(f"sqlite:///{tmp_path / 'v.sqlite'}", tmp_path / "server.log",
-                           {"HELIOTWIN_VISION_REQUIRE_TOKEN": "true"}).start()
-    try:
+    server = InProcessServer(f"sqlite:///{tmp_path / 'v.sqlite'}",
+                             {"HELIOTWIN_VISION_REQUIRE_TOKEN": "true"})
+    with server, server.client(timeout_s=60) as c:
         token = server.token()
-        with httpx.Client(base_url=server.base_url, timeout=60) as c:
-            files = {"file": ("f.jpg", _disc(), "image/jpeg")}
-            r = c.post(SUN, files=files, data={"camera": "pinhole"})
-            assert r.status_code == 401
-            r = c.post(SUN, files=files, data={"camera": "pinhole"},
-                       headers={"Authorization": f"Bearer {token}"})
-            assert r.status_code == 200, r.text
-    finally:
-        server.stop()
+        files = {"file": ("f.jpg", _disc(), "image/jpeg")}
+        r = c.post(SUN, files=files, data={"camera": "pinhole"})
+        assert r.status_code == 401
+        r = c.post(SUN, files=files, data={"camera": "pinhole"},
+                   headers={"Authorization": f"Bearer {token}"})
+        assert r.status_code == 200, r.text
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:

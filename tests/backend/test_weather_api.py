@@ -13,7 +13,7 @@ from pathlib import Path
 
 import httpx
 import pytest
-from live_service import ROOT, ServerProcess
+from live_service import ROOT, InProcessServer
 
 from sim.sky import pvlib_tmy3_path
 
@@ -95,14 +95,12 @@ def test_bad_uploads_name_the_field(client: httpx.Client, data: dict, files: obj
 
 def test_the_upload_is_bounded_and_must_be_multipart(tmp_path: Path) -> None:
     """A TMY3 file (1.2 MB) over a 500 kB limit is a 413; JSON is a 415."""
-    server = ServerProcess(f"sqlite:///{tmp_path / 'w.sqlite'}", tmp_path / "server.log",
-                           extra_env={"HELIOTWIN_MAX_UPLOAD_BYTES": "500000"}).start()
-    try:
-        r = httpx.post(server.base_url + "/api/v1/simulations/weather",
-                       data={**RANGE, "force": "true"}, files=_files(), timeout=60)
+    server = InProcessServer(f"sqlite:///{tmp_path / 'w.sqlite'}",
+                             extra_env={"HELIOTWIN_MAX_UPLOAD_BYTES": "500000"})
+    with server, server.client(timeout_s=60) as c:
+        r = c.post("/api/v1/simulations/weather", data={**RANGE, "force": "true"},
+                   files=_files())
         assert r.status_code == 413 and "HELIOTWIN_MAX_UPLOAD_BYTES" in r.json()["detail"]
-        r = httpx.post(server.base_url + "/api/v1/simulations/weather", json=RANGE, timeout=60)
+        r = c.post("/api/v1/simulations/weather", json=RANGE)
         assert r.status_code == 415 and "multipart" in r.json()["detail"]
-        assert httpx.get(server.base_url + "/healthz", timeout=10).status_code == 200
-    finally:
-        server.stop()
+        assert c.get("/healthz").status_code == 200
