@@ -305,6 +305,110 @@ def test_validation_tmy3_year() -> None:
     assert [float(g) for g in m4.groups()] == shown[2:]
 
 
+def test_validation_reading_of_the_duffie_beckman_table() -> None:
+    text = doc("validation.md")
+    mrad = [numbers(part)[1] for cell in table_row(
+        text, "Hermosillo (≈ 29.0 N, 111.1 W; the paper gives no coordinates), 26–27 Sep 2022, "
+              "seed 001's test days") for part in cell.split("/")]
+    # columns: angle max/mean, azimuth max/mean, elevation max/mean
+    m = sentence(text, r"Duffie–Beckman is about (\d+)–(\d+) mrad away from SPA in azimuth and "
+                       r"(\d+)–(\d+) mrad in elevation")
+    assert numbers(" ".join(m.groups())) == [round(mrad[3]), round(mrad[2]),
+                                             round(mrad[5]), round(mrad[4])]
+    m = sentence(text, r"in azimuth it accounts for at most ~(\d+) of")
+    assert float(m.group(1)) == round(mrad[2])
+    year = table_row(text, "Tehuantepec, all of 2024")[0]
+    m = sentence(text, r"The year-round maximum \(≈ (\d+) mrad at Tehuantepec\)")
+    assert float(m.group(1)) == round(numbers(year)[1])
+
+
+def test_validation_cooper_declination_against_spa() -> None:
+    from pvlib import solarposition, spa
+
+    from sim.sun import _unix_seconds
+
+    # local (standard) noon of every day of 2024 at Tehuantepec, UTC−6
+    noon = pd.date_range("2024-01-01 18:00", "2025-01-01", freq="1D", inclusive="left", tz="UTC")
+    delta = spa.solar_position_numpy(_unix_seconds(noon), 0.0, 0.0, 0.0, 1013.25, 12.0, 67.0,
+                                     0.5667, 1, sst=True)[2]
+    cooper = np.degrees(solarposition.declination_cooper69(noon.day_of_year.to_numpy()))
+    diff = np.abs(cooper - np.asarray(delta))
+    m = sentence(doc("validation.md"), r"off from SPA's declination at local noon by up to "
+                                       r"([\d.]+)° \(mid-October; ([\d.]+)° on average over 2024\)")
+    assert_printed(numbers(" ".join(m.groups())), [2, 2], [diff.max(), diff.mean()])
+    assert noon[diff.argmax()].month == 10 and 10 <= noon[diff.argmax()].day <= 20
+
+
+def test_validation_clear_sky_peaks_and_irradiation(tehuantepec) -> None:
+    import dataclasses
+
+    from sim.sky import clearsky_ineichen
+    from sim.sun import solar_position
+    from sim.twin import simulate
+
+    def day_run(day: str, **site: float) -> Any:
+        start = pd.Timestamp(day, tz=tehuantepec.timezone)
+        return simulate(dataclasses.replace(tehuantepec, **site), start,
+                        start + pd.Timedelta(days=1))
+
+    text = doc("validation.md")
+    days = ("2024-03-15", "2024-04-25")
+    runs = {d: day_run(d) for d in days}
+    peaks = [r.summary()["fixed_peak_w"] for r in runs.values()]
+    cells = [r.series.loc[r.series["fixed_power_w"].idxmax(), "fixed_temp_cell"]
+             for r in runs.values()]
+    m = sentence(text, r"noon power is (\d+)–(\d+) W with cells at\s+(\d+)–(\d+) °C")
+    assert_printed(numbers(" ".join(m.groups())), [0] * 4,
+                   [min(peaks), max(peaks), min(cells), max(cells)])
+    m = sentence(text, r"at (\d+) m/s wind the same sky gives (\d+) W \(15 March\) and (\d+) W "
+                       r"\(25 April\); cooler air \((\d+) °C\) gives (\d+) W / (\d+) W")
+    wind, w1, w2, air, a1, a2 = numbers(" ".join(m.groups()))
+    assert_printed([w1, w2, a1, a2], [0] * 4,
+                   [day_run(d, wind_speed=wind).summary()["fixed_peak_w"] for d in days]
+                   + [day_run(d, temp_air=air).summary()["fixed_peak_w"] for d in days])
+    # the seed's measured peaks (seed 000) against the twin's
+    m = sentence(text, r"The measured ([\d.]+) W lies (\d+) % above the\s+twin's 15 March value; "
+                       r"the measured ([\d.]+) W is (\d+)–(\d+) % above the twin's\s+April values "
+                       r"\(([\d.]+) W on 15 April, ([\d.]+) W on 25 April\)")
+    march, above, april, low, high, apr15, apr25 = numbers(" ".join(m.groups()))
+    april_peaks = [day_run("2024-04-15").summary()["fixed_peak_w"], peaks[1]]
+    assert_printed([apr15, apr25], [1, 1], april_peaks)
+    assert_printed([above, low, high], [0, 0, 0],
+                   [100 * (march / peaks[0] - 1), 100 * (april / april_peaks[0] - 1),
+                    100 * (april / april_peaks[1] - 1)])
+    m = sentence(text, r"vs the twin's (\d+):(\d+) \(solar noon")
+    at = runs["2024-04-25"].series["fixed_power_w"].idxmax().tz_convert(tehuantepec.timezone)
+    assert numbers(" ".join(m.groups())) == [at.hour, at.minute]
+    m = sentence(text, r"the clear-sky model's ([\d.]+) kWh/m²\s+\(15 March\) and ([\d.]+) kWh/m² "
+                       r"\(25 April\)")
+    ghi = []
+    for d in days:
+        times = pd.date_range(d, periods=1440, freq="1min", tz=tehuantepec.timezone)
+        sun = solar_position(times, tehuantepec.latitude, tehuantepec.longitude,
+                             altitude=tehuantepec.altitude)
+        with np.errstate(divide="ignore"):
+            cs = clearsky_ineichen(times, sun["apparent_zenith"].to_numpy(), tehuantepec.latitude,
+                                   tehuantepec.longitude, tehuantepec.altitude)
+        ghi.append(float(np.sum(cs["ghi"])) / 60 / 1000)
+    assert_printed(numbers(" ".join(m.groups())), [1, 1], ghi)
+
+
+@pytest.mark.slow
+def test_validation_forced_distant_station_run(tehuantepec) -> None:
+    from backend.twin.scenario import Scenario, check_station, run_scenario
+    from sim.sky import pvlib_tmy3_path, read_typical_year
+
+    weather, meta = read_typical_year(pvlib_tmy3_path(), "tmy3")
+    station = check_station(meta, tehuantepec, True)
+    tz = tehuantepec.timezone
+    start, end = pd.Timestamp("2024-01-01", tz=tz), pd.Timestamp("2025-01-01", tz=tz)
+    series = run_scenario(tehuantepec, Scenario(tehuantepec.site_id, start, end, weather=weather,
+                                                station=station)).series
+    m = sentence(doc("validation.md"), r"a tracker peak of ([\d,]+) W at dawn")
+    assert_printed(numbers(m.group(1)), [0], [series["tracker_power_w"].max()])
+    assert series["tracker_power_w"].idxmax().tz_convert(tz).hour < 7  # at dawn
+
+
 # --- docs/dynamics.md ---------------------------------------------------------------
 
 
