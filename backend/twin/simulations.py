@@ -35,7 +35,7 @@ import tempfile
 import threading
 import time
 import uuid
-from concurrent.futures import Future
+from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection as Pipe
 from typing import IO, Any
@@ -60,7 +60,11 @@ _PRELOAD = ["backend.twin.simulations"]
 
 
 class Cancelled(Exception):
-    """The service is stopping; a run gives up."""
+    """A run gives up: it was cancelled, or the service is stopping."""
+
+
+#: A cancelled run's ``error`` (its status is ``failed``).
+CANCELLED = "cancelled"
 
 
 @dataclass
@@ -150,6 +154,8 @@ class SimulationRunner:
         self._active = 0
         self._steps_per_s = 300_000.0  # until a run is timed (2 years at 1 min: ≈ 3.5 s)
         self._threads: list[threading.Thread] = []
+        self._futures: dict[str, Future[dict[str, Any]]] = {}  # runs queued or running
+        self._cancel: set[str] = set()  # running runs asked to stop
 
     def _start_threads(self) -> None:
         if self._threads:
@@ -167,8 +173,7 @@ class SimulationRunner:
             queued, self._queue = self._queue, []
             self._wake.notify_all()
         for state, _, _, fut in queued:
-            state.status, state.error = "failed", "the service stopped before it ran"
-            fut.set_exception(Cancelled(state.error))
+            self._fail(state, Cancelled("the service stopped before it ran"), fut)
         for t in self._threads:
             t.join(30)
 
@@ -196,10 +201,28 @@ class SimulationRunner:
         fut: Future[dict[str, Any]] = Future()
         with self._lock:
             self._runs[state.run_id] = state
+            self._futures[state.run_id] = fut
             self._queue.append((state, params, anonymous, fut))
             self._start_threads()
             self._wake.notify()
         return state, fut
+
+    def cancel(self, run_id: str, timeout_s: float = 30.0) -> RunState | None:
+        """Cancel a queued or running run and return its state once it has ended: ``failed``
+        with the error ``cancelled`` (a running run's worker is terminated), or as it was
+        when it had already ended. None for an unknown run."""
+        with self._lock:
+            fut = self._futures.get(run_id)
+            job = next((j for j in self._queue if j[0].run_id == run_id), None)
+            if job is not None:
+                self._queue.remove(job)
+            elif fut is not None:
+                self._cancel.add(run_id)
+        if job is not None:
+            self._fail(job[0], Cancelled(CANCELLED), job[3])
+        elif fut is not None:
+            wait([fut], timeout_s)
+        return self.get(run_id)
 
     def run_sync(self, params: Scenario, anonymous: bool = False) -> dict[str, Any]:
         """Queue a run and wait for its summary (with ``run_id``)."""
@@ -245,20 +268,31 @@ class SimulationRunner:
 
             pruned = self.writer.call(store).result()
         except Exception as exc:  # noqa: BLE001 - reported through the run's status
-            state.summary, state.status, state.error = None, "failed", str(exc)
-            logger.warning("simulation %s failed: %s", state.run_id, exc)
-            try:
-                self.writer.call(lambda conn: _finish(conn, state)).result()
-            except Exception:  # noqa: BLE001 - the writer has stopped: the row stays running
-                logger.warning("simulation %s: its failure not stored", state.run_id)
-            fut.set_exception(exc)
+            self._fail(state, exc, fut)
             return
         if elapsed > 0.5:
             self._steps_per_s = state.steps / elapsed
         if pruned:
             self._forget_pruned()
         state.status = "done"
+        self._ended(state)
         fut.set_result(state.summary)
+
+    def _fail(self, state: RunState, exc: Exception, fut: Future[dict[str, Any]]) -> None:
+        """A run ends without a result: ``failed`` with ``exc`` as its error, stored."""
+        state.summary, state.status, state.error = None, "failed", str(exc)
+        logger.warning("simulation %s failed: %s", state.run_id, exc)
+        try:
+            self.writer.call(lambda conn: _finish(conn, state)).result()
+        except Exception:  # noqa: BLE001 - the writer has stopped: the row stays running
+            logger.warning("simulation %s: its failure not stored", state.run_id)
+        self._ended(state)
+        fut.set_exception(exc)
+
+    def _ended(self, state: RunState) -> None:
+        with self._lock:
+            self._futures.pop(state.run_id, None)
+            self._cancel.discard(state.run_id)
 
     def _in_worker(self, state: RunState, params: Scenario) -> _Result:
         """Run ``params`` in a worker process; its progress into ``state``; its result.
@@ -276,6 +310,8 @@ class SimulationRunner:
             while True:
                 if self._stopping.is_set():
                     raise Cancelled("service stopping")
+                if state.run_id in self._cancel:
+                    raise Cancelled(CANCELLED)
                 if not ours.poll(0.2):
                     if not proc.is_alive() and not ours.poll(0):
                         raise RuntimeError(ended.format(proc.exitcode))

@@ -122,3 +122,26 @@ def test_results_are_written_by_the_writer(tmp_path: Path) -> None:
     assert len(npz_to_series(blob)) == 2 * 1440
     assert {table for table, _, _ in writes} == {"simulation_runs", "simulation_series"}
     assert {(name, pid) for _, name, pid in writes} == {("heliotwin-writer", os.getpid())}
+
+
+def test_cancel_queued_and_running_runs(client: httpx.Client) -> None:
+    """``DELETE /api/v1/simulations/{id}``: a running run's worker is stopped, a queued run
+    leaves the queue; both end ``failed`` with the error ``cancelled`` and no series."""
+    year = {"site_id": "tehuantepec", "start": "2023-01-01", "end": "2024-01-01",
+            "controller": "hybrid", "background": True}  # minutes of work: never done here
+    running = client.post("/api/v1/simulations", json=year).json()["run_id"]
+    queued = client.post("/api/v1/simulations", json=year).json()["run_id"]
+    deadline = time.monotonic() + 60
+    while client.get(f"/api/v1/simulations/{running}").json()["status"] == "queued":
+        assert time.monotonic() < deadline, "the first run never started"
+        time.sleep(0.05)
+    for run_id in (queued, running):
+        r = client.delete(f"/api/v1/simulations/{run_id}")
+        assert r.status_code == 200, r.text
+        assert (r.json()["status"], r.json()["error"]) == ("failed", "cancelled")
+        assert client.get(f"/api/v1/simulations/{run_id}").json()["error"] == "cancelled"
+        assert client.get(f"/api/v1/simulations/{run_id}/series").status_code == 409
+    assert client.delete("/api/v1/simulations/nope").status_code == 404
+    r = client.post("/api/v1/simulations", json={"site_id": "tehuantepec",
+                                                 "start": "2024-03-15", "end": "2024-03-16"})
+    assert r.status_code == 200, r.text  # the slot is free again

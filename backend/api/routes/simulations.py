@@ -164,6 +164,17 @@ def get_simulation(run_id: str, ctx: ContextDep) -> dict[str, Any]:
     return state.to_dict()
 
 
+@router.delete("/{run_id}", response_model=SimulationRunRead,
+               response_model_exclude_unset=True, responses={404: {}})
+async def cancel_simulation(run_id: str, ctx: ContextDep) -> dict[str, Any]:
+    """Cancel a queued or running run; its state once it has ended (``failed`` with the
+    error ``cancelled``, or as it was if it had already ended)."""
+    state = await asyncio.to_thread(ctx.simulations.cancel, run_id)
+    if state is None:
+        raise HTTPException(404, f"unknown simulation run {run_id!r}")
+    return state.to_dict()
+
+
 @router.get("/{run_id}/series", response_model=SimulationSeriesRead,
             responses={200: {"content": CSV_CONTENT}, 404: {}, 409: {}})
 def get_simulation_series(
