@@ -9,8 +9,8 @@ section. A document quotes a figure through a marker, never by hand::
 
 and this script replaces what stands between the markers with the figure's
 text. ``<!-- fig:NAME:verdict -->`` gives ``met`` / ``**not met**`` against its
-target, ``<!-- fig:NAME:target -->`` the target. It runs over ``docs/*.md`` and
-``benchmarks/RESULTS.md`` (whose sections carry the same markers).
+target, ``<!-- fig:NAME:target -->`` the target. It runs over ``docs/*.md``,
+``README.md`` and ``benchmarks/RESULTS.md`` (whose sections carry the same markers).
 
     python benchmarks/docs_figures.py          # rewrite
     python benchmarks/docs_figures.py --check  # exit 1 if a marker is unknown or stale
@@ -75,7 +75,8 @@ def rewrite(text: str, figures: dict[str, dict]) -> tuple[str, list[str]]:
 
 def documents(root: Path = ROOT) -> list[Path]:
     """The files whose markers are kept up to date."""
-    return sorted((root / "docs").glob("*.md")) + [root / "benchmarks" / "RESULTS.md"]
+    return [*sorted((root / "docs").glob("*.md")), root / "README.md",
+            root / "benchmarks" / "RESULTS.md"]
 
 
 def main(argv: list[str]) -> int:

@@ -674,3 +674,29 @@ def test_service_memory_bound_is_the_tests() -> None:
                                     r"stays within (\d+) GB")
     assert float(m.group(1)) * 1e9 == module_constant("tests/backend/test_limits.py",
                                                       "BUDGET_BYTES")
+
+
+# --- docs/dashboard.md, README.md ---------------------------------------------------
+
+
+def _bundle_mb(path: Path) -> tuple[float, float]:
+    """A JavaScript bundle's size and its gzip size (level 6, as the service serves it) [MB]."""
+    import gzip
+
+    raw = path.read_bytes()
+    return len(raw) / 1e6, len(gzip.compress(raw, 6, mtime=0)) / 1e6
+
+
+def test_plotly_bundle_sizes() -> None:
+    partial = _bundle_mb(ROOT / "frontend" / "vendor" / "plotly" / "plotly.min.js")
+    m = sentence(doc("dashboard.md"), r"The partial bundle is\s+([\d.]+) MB \(([\d.]+) MB gzip\)")
+    assert_printed(numbers(" ".join(m.groups())), [2, 2], list(partial))
+    m = sentence((ROOT / "README.md").read_text(encoding="utf-8"),
+                 r"The partial bundle is a quarter of the full one "
+                 r"\(([\d.]+) MB, ([\d.]+) MB\s+gzip")
+    assert_printed(numbers(" ".join(m.groups())), [1, 1], list(partial))
+    plotly = pytest.importorskip("plotly")
+    full = _bundle_mb(Path(plotly.__file__).parent / "package_data" / "plotly.min.js")
+    m = sentence(doc("dashboard.md"), r"the full bundle \(([\d.]+) MB, ([\d.]+) MB gzip")
+    assert_printed(numbers(" ".join(m.groups())), [1, 2], list(full))
+    assert round(full[0] / partial[0]) == 4  # "a quarter"
