@@ -85,29 +85,16 @@ function machineValues() {
   return out;
 }
 
-/** Energy per local day [Wh] from mean power over steps of `stepS` seconds (rectangle rule). */
-function dailyEnergy(rows, stepS) {
-  const days = new Map();
-  for (const r of rows) {
-    const d = toLocalWall(st.tz, r.ts).slice(0, 10);
-    const e = days.get(d) || { tracker: 0, fixed: 0 };
-    e.tracker += ((colValue(r, "tracker_power_w") || 0) * stepS) / 3600;
-    e.fixed += ((colValue(r, "fixed_power_w") || 0) * stepS) / 3600;
-    days.set(d, e);
-  }
-  return [...days.entries()];
-}
-
-async function drawDaily(runId, rows, stepS) {
-  const days = dailyEnergy(rows, stepS);
+/** The run's days (SimulationDayRead: the service's energy rule split at local midnights, so
+ * they add up to its totals, and its gain formula), as bars and a gain line. */
+async function drawDaily(runId, days) {
   $("sim-daily-card").hidden = days.length < 2;
   if (days.length < 2) return;
-  const x = days.map(([d]) => d);
-  const gain = days.map(([, e]) => (e.fixed > 0 ? (100 * (e.tracker - e.fixed)) / e.fixed : null));
+  const x = days.map((d) => d.date);
   await draw("chart-sim-daily", [
-    { x, y: days.map(([, e]) => e.tracker / 1000), name: "tracker", type: "bar", marker: { color: COLORS.tracker }, hovertemplate: "%{y:.2f} kWh" },
-    { x, y: days.map(([, e]) => e.fixed / 1000), name: "fixed", type: "bar", marker: { color: COLORS.fixed }, hovertemplate: "%{y:.2f} kWh" },
-    { x, y: gain, name: "gain", yaxis: "y2", type: "scatter", mode: "lines+markers", line: { color: COLORS.gain }, hovertemplate: "%{y:.1f} %" },
+    { x, y: days.map((d) => d.tracker_energy_wh / 1000), name: "tracker", type: "bar", marker: { color: COLORS.tracker }, hovertemplate: "%{y:.2f} kWh" },
+    { x, y: days.map((d) => d.fixed_energy_wh / 1000), name: "fixed", type: "bar", marker: { color: COLORS.fixed }, hovertemplate: "%{y:.2f} kWh" },
+    { x, y: days.map((d) => d.gain_pct), name: "gain", yaxis: "y2", type: "scatter", mode: "lines+markers", line: { color: COLORS.gain }, hovertemplate: "%{y:.1f} %" },
   ], baseLayout({
     barmode: "group",
     xaxis: { type: "date", title: { text: `Day (${st.tz})` }, tickformat: "%d %b", gridcolor: "#e9edf1" },
@@ -115,12 +102,12 @@ async function drawDaily(runId, rows, stepS) {
     yaxis2: { title: { text: "Tracking gain [%]" }, overlaying: "y", side: "right", showgrid: false, ticksuffix: " %", tickformat: ".1f" },
   }), {
     columns: ["date", "tracker_energy_wh", "fixed_energy_wh", "gain_pct"],
-    rows: days.map(([d, e], i) => [d, e.tracker, e.fixed, gain[i]]),
+    rows: days.map((d) => [d.date, d.tracker_energy_wh, d.fixed_energy_wh, d.gain_pct]),
     filename: `simulation_${runId}_daily_energy.csv`,
   });
 }
 
-async function drawResult(runId, allRows, stepS) {
+async function drawResult(runId, allRows, days) {
   const tz = st.tz;
   let rows = allRows;
   if (!rows.length) {
@@ -139,7 +126,7 @@ async function drawResult(runId, allRows, stepS) {
     rows: allRows.map((r) => [r.ts, localIso(tz, r.ts), ...powerCols.map((c) => colValue(r, c))]),
     filename: `simulation_${runId}_power.csv`,
   });
-  await drawDaily(runId, allRows, stepS);
+  await drawDaily(runId, days);
   const firstDay = allRows.length ? toLocalWall(tz, allRows[0].ts).slice(0, 10) : "";
   const lastDay = allRows.length ? toLocalWall(tz, allRows[allRows.length - 1].ts).slice(0, 10) : "";
   const long = firstDay && addDays(firstDay, 2) <= lastDay;
@@ -276,7 +263,7 @@ async function run(ev) {
     const seriesUrl = `/api/v1/simulations/${encodeURIComponent(runId)}/series`;
     setProgress(1, `${num(summary.steps, 0)} steps done · loading the series…`);
     const series = await seriesWhenReady(seriesUrl, t0);
-    await drawResult(runId, series.points, series.bucket_s || summary.step_s); // bucket_s 0: as computed
+    await drawResult(runId, series.points, summary.days);
     setProgress(1, `done in ${num((performance.now() - t0) / 1000, 1)} s`);
     const csv = $("sim-csv");
     csv.href = `${seriesUrl}?format=csv`;

@@ -154,14 +154,16 @@ async def submit_scenario(ctx: Any, request: Request, params: Scenario,
     return Response(orjson.dumps(summary), media_type="application/json")
 
 
-@router.get("/{run_id}", response_model=SimulationRunRead, response_model_exclude_unset=True,
-            responses={404: {}})
-def get_simulation(run_id: str, ctx: ContextDep) -> dict[str, Any]:
-    """Status, progress (0…1) and, when done, the summary of a run."""
+@router.get("/{run_id}", response_model=SimulationRunRead, responses={404: {}})
+def get_simulation(run_id: str, ctx: ContextDep) -> Response:
+    """Status, progress (0…1) and, when done, the summary of a run.
+
+    Answered as stored (not filtered through the model): a run stored by an older version
+    keeps the summary it had, without the keys added since."""
     state = ctx.simulations.get(run_id)
     if state is None:
         raise HTTPException(404, f"unknown simulation run {run_id!r}")
-    return state.to_dict()
+    return Response(orjson.dumps(state.to_dict()), media_type="application/json")
 
 
 @router.delete("/{run_id}", response_model=SimulationRunRead,

@@ -29,6 +29,16 @@ class DisturbancesRead(BaseModel):
     camera_offset_up_deg: float
 
 
+class SimulationDayRead(BaseModel):
+    """One local calendar day of a run, by the energy rule (``sim.energy``) split at the
+    site's midnights: the days add up to the run's totals."""
+
+    date: str = Field(description="local date, YYYY-MM-DD")
+    tracker_energy_wh: float
+    fixed_energy_wh: float
+    gain_pct: float | None
+
+
 class SimulationSummaryRead(BaseModel):
     """A run's summary (DESIGN.md ``heliotwin simulate``, ``sim.twin.TwinResult.summary``)."""
 
@@ -73,6 +83,7 @@ class SimulationSummaryRead(BaseModel):
     camera_frames_found: int
     camera_frames_used: int
     disturbances: DisturbancesRead
+    days: list[SimulationDayRead]
     fixed_shade_loss_wh: float | None = Field(None, description="when the site places both "
                                                                 "arrays")
 
