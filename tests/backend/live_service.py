@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
-import gc
 import os
 import signal
 import socket
@@ -224,8 +223,7 @@ class InProcessServer:
     """``backend.app.create_app(settings)`` in this process (see the module docstring).
 
     The settings are those of ``heliotwin serve --no-demo`` started with
-    :func:`service_env` (``extra_env`` on top), with no parser processes (forking a test
-    run that has threads of its own is unsafe). :meth:`client` gives an ``httpx.Client``
+    :func:`service_env` (``extra_env`` on top). :meth:`client` gives an ``httpx.Client``
     on it with ``base_url`` :attr:`base_url`; no socket is opened, so the host is a name
     nothing answers at (a request that misses the client fails instead of reaching a
     stranger's server).
@@ -257,7 +255,7 @@ class InProcessServer:
         """Build the app and run its lifespan's startup (migrations, sites, the writer…)."""
         from backend.app import create_app
 
-        env = {"HELIOTWIN_DEMO_LOGGER": "false", "HELIOTWIN_PARSE_PROCESSES": "0",
+        env = {"HELIOTWIN_DEMO_LOGGER": "false",
                **service_env(self.database_url, self.extra_env)}
         self.app = create_app(settings_from_env(env))
         self._loop = asyncio.new_event_loop()
@@ -281,9 +279,6 @@ class InProcessServer:
             self._run(lifespan.shutdown(), timeout_s)
         finally:
             self._close_loop()
-            # the lifespan freezes what it loaded (gc.freeze); this app is gone, so let the
-            # collector see its cycles again instead of keeping every stopped app forever
-            gc.unfreeze()
 
     def client(self, timeout_s: float = 60.0, **kwargs: Any) -> httpx.Client:
         """An ``httpx.Client`` on the app (close it, or use it in a ``with``)."""

@@ -193,9 +193,10 @@ def test_simulation_allowance_queue_and_retention(small_server: ServerProcess) -
         assert c.get(f"/api/v1/simulations/{first.json()['run_id']}").status_code == 404
         assert c.get(f"/api/v1/simulations/{second.json()['run_id']}").status_code == 200
 
-        # one worker, no queue: while a long run works, the next is refused with 503
+        # one worker, no queue: while a long run works, the next is refused with 503 (two
+        # months at 1 min: tens of thousands of steps, far longer than the next request takes)
         long = c.post("/api/v1/simulations", headers={"Authorization": f"Bearer {token}"},
-                      json={"start": "2024-01-01", "end": "2025-01-01", "step_s": 60,
+                      json={"start": "2024-01-01", "end": "2024-03-01", "step_s": 60,
                             "background": True})
         assert long.status_code == 202, long.text
         busy = _day(c, 10, token)

@@ -1,6 +1,7 @@
-"""MQTT ingestion and Home Assistant discovery against a real Mosquitto and a real server.
+"""MQTT ingestion and Home Assistant discovery against a real Mosquitto and the service.
 
-A ``heliotwin serve`` subprocess with ``HELIOTWIN_MQTT_URL`` set talks to the
+The service (in this process, ``live_service.InProcessServer``; MQTT on its own thread
+as in ``heliotwin serve``) with ``HELIOTWIN_MQTT_URL`` set talks to the
 Mosquitto at 127.0.0.1:1883 (``MQTT_TEST_URL`` to change it); the tests publish
 and subscribe with paho-mqtt, as a field logger or Home Assistant would, and
 read back over HTTP. Every run uses its own topic prefix (templates and
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import logging
 import os
 import shutil
 import socket
@@ -32,7 +34,13 @@ from urllib.parse import urlsplit
 import httpx
 import paho.mqtt.client as mqtt
 import pytest
-from live_service import REQUIRE_SERVICES, ServerProcess, free_port, new_database
+from live_service import (
+    REQUIRE_SERVICES,
+    InProcessServer,
+    ServerProcess,
+    free_port,
+    new_database,
+)
 
 from backend.mqtt.assemble import MinuteAssembler, parse_value
 from backend.mqtt.service import check_no_echo
@@ -161,7 +169,8 @@ class Watcher:
                 if hit is not None:
                     return hit
                 left = deadline - time.monotonic()
-                assert left > 0, f"no {what}; got {[m.topic for m in self.messages]}"
+                got = [(m.topic, m.payload[:80]) for m in self.messages]
+                assert left > 0, f"no {what}; got {got}"
                 self._cond.wait(left)
 
     def close(self) -> None:
@@ -210,26 +219,26 @@ def mqtt_env(prefix: str, url: str) -> dict[str, str]:
     }
 
 
-def meta(base_url: str) -> dict[str, Any]:
-    return httpx.get(base_url + "/api/v1/meta", timeout=30.0).json()  # type: ignore[no-any-return]
+def meta(c: httpx.Client) -> dict[str, Any]:
+    return c.get("/api/v1/meta").json()  # type: ignore[no-any-return]
 
 
-def wait_state(base_url: str, state: str) -> dict[str, Any]:
+def wait_state(c: httpx.Client, state: str) -> dict[str, Any]:
     deadline = time.monotonic() + WAIT_S
     while True:
-        m = meta(base_url)
+        m = meta(c)
         if m["mqtt"] == state:
             return m
         assert time.monotonic() < deadline, f"mqtt never {state}: {m['mqtt_status']}"
         time.sleep(0.2)
 
 
-def stored(base_url: str, array: str, start: str, end: str, want: int) -> list[dict[str, Any]]:
+def stored(c: httpx.Client, array: str, start: str, end: str, want: int) -> list[dict[str, Any]]:
     """The readings of ``array`` in ``[start, end)``, once there are ``want`` of them."""
     deadline = time.monotonic() + WAIT_S
     while True:
-        r = httpx.get(f"{base_url}/api/v1/sites/{SITE}/measurements", timeout=30.0,
-                      params={"array": array, "start": start, "end": end})
+        r = c.get(f"/api/v1/sites/{SITE}/measurements",
+                  params={"array": array, "start": start, "end": end})
         assert r.status_code == 200, r.text
         points: list[dict[str, Any]] = r.json()["points"]
         if len(points) >= want:
@@ -251,48 +260,48 @@ def iso(t: dt.datetime) -> str:
 
 
 @pytest.fixture(scope="module")
-def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, str]]:
-    """A running service on the shared broker: ``(base_url, topic prefix)``."""
+def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[httpx.Client, str]]:
+    """A running service on the shared broker: ``(an HTTP client on it, topic prefix)``."""
     need_broker()
     prefix = f"httest{uuid.uuid4().hex[:10]}"
     tmp = tmp_path_factory.mktemp("mqtt")
     db = new_database("sqlite", tmp)
-    proc = ServerProcess(db.url, tmp / "server.log",
-                         extra_env=mqtt_env(prefix, f"mqtt://{HOST}:{PORT}")).start()
+    proc = InProcessServer(db.url, extra_env=mqtt_env(prefix, f"mqtt://{HOST}:{PORT}"))
     try:
-        wait_state(proc.base_url, "connected")
-        yield proc.base_url, prefix
+        with proc, proc.client(timeout_s=30.0) as c:
+            wait_state(c, "connected")
+            yield c, prefix
     finally:
-        proc.stop()
         clear_retained(f"{prefix}/#", f"{prefix}_ha/#")
 
 
-def test_a_published_reading_is_stored_once(service: tuple[str, str]) -> None:
-    base_url, prefix = service
+def test_a_published_reading_is_stored_once(service: tuple[httpx.Client, str]) -> None:
+    c, prefix = service
     t0, t1 = minute(-12), minute(-11)
     topic = f"{prefix}/{SITE}/tracker/state"
     publish(topic, json.dumps({"ts": iso(t0), "voltage_v": 25.0, "current_a": 4.0,
                                "power_w": 100.0}))
     publish(topic, json.dumps({"ts": t1.isoformat(), "voltage_v": 25.0, "current_a": 8.0}))
-    points = stored(base_url, "tracker", iso(t0), iso(t1 + dt.timedelta(minutes=1)), 2)
+    points = stored(c, "tracker", iso(t0), iso(t1 + dt.timedelta(minutes=1)), 2)
     assert [(p["ts"], p["voltage_v"], p["current_a"], p["power_w"]) for p in points] == [
         (iso(t0), 25.0, 4.0, 100.0), (iso(t1), 25.0, 8.0, 200.0)]  # power: voltage·current
-    before = meta(base_url)["mqtt_status"]["duplicates"]
+    before = meta(c)["mqtt_status"]["duplicates"]
     publish(topic, json.dumps({"ts": iso(t0), "voltage_v": 25.0, "current_a": 4.0}))
     deadline = time.monotonic() + WAIT_S
-    while meta(base_url)["mqtt_status"]["duplicates"] == before:
+    while meta(c)["mqtt_status"]["duplicates"] == before:
         assert time.monotonic() < deadline, "the repeated reading was never counted"
         time.sleep(0.2)
-    assert len(stored(base_url, "tracker", iso(t0), iso(t1 + dt.timedelta(minutes=1)), 2)) == 2
+    assert len(stored(c, "tracker", iso(t0), iso(t1 + dt.timedelta(minutes=1)), 2)) == 2
 
 
-def test_a_power_only_reading_with_sensor_fields_is_stored(service: tuple[str, str]) -> None:
+def test_a_power_only_reading_with_sensor_fields_is_stored(
+        service: tuple[httpx.Client, str]) -> None:
     """MQTT takes what HTTP takes: power alone and the optional sensor fields."""
-    base_url, prefix = service
-    t0 = minute(-14)
+    c, prefix = service
+    t0 = minute(-60)  # over the energy's gap rule (20 min) from the module's other fixed readings
     publish(f"{prefix}/{SITE}/fixed/state", json.dumps({
         "ts": iso(t0), "power_w": 310.5, "poa_irradiance_w_m2": 640.0, "temp_module_c": 41.5}))
-    (p,) = stored(base_url, "fixed", iso(t0), iso(t0 + dt.timedelta(minutes=1)), 1)
+    (p,) = stored(c, "fixed", iso(t0), iso(t0 + dt.timedelta(minutes=1)), 1)
     assert (p["voltage_v"], p["current_a"], p["power_w"]) == (None, None, 310.5)
     assert (p["poa_irradiance_w_m2"], p["temp_module_c"]) == (640.0, 41.5)
 
@@ -311,8 +320,8 @@ def test_a_power_only_reading_with_sensor_fields_is_stored(service: tuple[str, s
     ("fixed/voltage", "1_0", "not a decimal number"),
 ])
 def test_a_rejected_message_is_reported_with_its_reason(
-        service: tuple[str, str], where: str, payload: str, reason: str) -> None:
-    base_url, prefix = service
+        service: tuple[httpx.Client, str], where: str, payload: str, reason: str) -> None:
+    c, prefix = service
     errors = Watcher(f"{prefix}/{SITE}/errors")
     try:
         topic = f"{prefix}/{SITE}/{where}"
@@ -324,13 +333,13 @@ def test_a_rejected_message_is_reported_with_its_reason(
     body = json.loads(msg.payload)
     assert reason in body["reason"], body
     assert body["received_at"].endswith("+00:00")
-    r = httpx.get(f"{base_url}/api/v1/sites/{SITE}/measurements", timeout=30.0,
-                  params={"array": "tracker", "start": "2024-03-15", "end": "2024-03-16"})
+    r = c.get(f"/api/v1/sites/{SITE}/measurements",
+              params={"array": "tracker", "start": "2024-03-15", "end": "2024-03-16"})
     assert r.json()["points"] == []
 
 
 def test_an_unknown_site_is_reported_on_the_unknown_errors_topic(
-        service: tuple[str, str]) -> None:
+        service: tuple[httpx.Client, str]) -> None:
     _, prefix = service
     errors = Watcher(f"{prefix}/_unknown/errors")
     try:
@@ -343,28 +352,31 @@ def test_an_unknown_site_is_reported_on_the_unknown_errors_topic(
     assert "unknown site 'atlantis'" in body["reason"] and SITE in body["reason"]
 
 
-def test_opendtu_style_values_are_assembled_into_a_minute(service: tuple[str, str]) -> None:
-    base_url, prefix = service
+def test_opendtu_style_values_are_assembled_into_a_minute(
+        service: tuple[httpx.Client, str]) -> None:
+    c, prefix = service
     while dt.datetime.now(dt.UTC).second >= 50:  # keep the three values in one minute
         time.sleep(0.5)
     now = minute(0)
     for quantity, value in (("voltage", "25.5"), ("current", "2"), ("power", "51.0")):
         publish(f"{prefix}/{SITE}/fixed/{quantity}", value)
-    points = stored(base_url, "fixed", iso(now), iso(now + dt.timedelta(minutes=2)), 1)
+    points = stored(c, "fixed", iso(now), iso(now + dt.timedelta(minutes=2)), 1)
     assert points[0]["ts"] == iso(now)
     assert (points[0]["voltage_v"], points[0]["current_a"], points[0]["power_w"]) == (
         25.5, 2.0, 51.0)
 
 
-def test_home_assistant_discovery_is_retained(service: tuple[str, str]) -> None:
-    base_url, prefix = service
-    # a reading pair of the fixed array: 100 W then 200 W a minute apart = 2.5 Wh
-    t0 = minute(-30)
+def test_home_assistant_discovery_is_retained(service: tuple[httpx.Client, str]) -> None:
+    c, prefix = service
+    # a reading pair of the fixed array: 100 W then 200 W a minute apart = 2.5 Wh, the fixed
+    # array's whole energy (its other readings in this module are single, each over the
+    # gap rule's 20 min from any other)
+    t0 = minute(-120)
     topic = f"{prefix}/{SITE}/fixed/state"
     for k, amps in enumerate((4.0, 8.0)):
         publish(topic, json.dumps({"ts": iso(t0 + dt.timedelta(minutes=k)),
                                    "voltage_v": 25.0, "current_a": amps}))
-    stored(base_url, "fixed", iso(t0), iso(t0 + dt.timedelta(minutes=2)), 2)
+    stored(c, "fixed", iso(t0), iso(t0 + dt.timedelta(minutes=2)), 2)
     # a subscriber that comes later still gets every config (retained)
     ha = Watcher(f"{prefix}_ha/sensor/+/config")
     try:
@@ -410,7 +422,8 @@ def _mosquitto(port: int, folder: Path) -> subprocess.Popen[bytes]:
     return proc
 
 
-def test_the_service_reconnects_with_backoff(tmp_path: Path) -> None:
+def test_the_service_reconnects_with_backoff(tmp_path: Path,
+                                            caplog: pytest.LogCaptureFixture) -> None:
     if not (shutil.which("mosquitto") or Path("/usr/sbin/mosquitto").exists()):
         if REQUIRE_SERVICES:
             pytest.fail("no mosquitto executable (HELIOTWIN_REQUIRE_SERVICES=1)")
@@ -418,36 +431,38 @@ def test_the_service_reconnects_with_backoff(tmp_path: Path) -> None:
     port = free_port()
     prefix = f"httest{uuid.uuid4().hex[:10]}"
     db = new_database("sqlite", tmp_path)
-    log = tmp_path / "server.log"
-    proc = ServerProcess(db.url, log, extra_env=mqtt_env(prefix, f"mqtt://127.0.0.1:{port}"))
+    caplog.set_level(logging.WARNING, logger="backend.mqtt.service")
+    proc = InProcessServer(db.url, extra_env=mqtt_env(prefix, f"mqtt://127.0.0.1:{port}"))
     proc.start()  # the broker is not there yet
     broker = None
+    c = proc.client(timeout_s=30.0)
     try:
-        m = wait_state(proc.base_url, "retrying")
+        m = wait_state(c, "retrying")
         assert m["mqtt_status"]["broker"] == f"127.0.0.1:{port}"
         broker = _mosquitto(port, tmp_path)
-        wait_state(proc.base_url, "connected")
+        wait_state(c, "connected")
         topic = f"{prefix}/{SITE}/tracker/state"
         t0 = minute(-20)
         publish(topic, json.dumps({"ts": iso(t0), "voltage_v": 25.0, "current_a": 1.0}),
                 port=port)
-        stored(proc.base_url, "tracker", iso(t0), iso(minute(1)), 1)
+        stored(c, "tracker", iso(t0), iso(minute(1)), 1)
 
         broker.terminate()  # the connection drops under the service
         broker.wait(10)
-        wait_state(proc.base_url, "retrying")
+        wait_state(c, "retrying")
         broker = _mosquitto(port, tmp_path)
-        m = wait_state(proc.base_url, "connected")
+        m = wait_state(c, "connected")
         assert m["mqtt_status"]["retries"] >= 2
         publish(topic, json.dumps({"ts": iso(t0 + dt.timedelta(minutes=1)), "voltage_v": 25.0,
                                    "current_a": 2.0}), port=port)
-        stored(proc.base_url, "tracker", iso(t0), iso(minute(1)), 2)
+        stored(c, "tracker", iso(t0), iso(minute(1)), 2)
     finally:
+        c.close()
         proc.stop()
         if broker is not None:
             broker.terminate()
             broker.wait(10)
-    retries = [line for line in log.read_text().splitlines() if "retry" in line]
+    retries = [line for line in caplog.messages if "retry" in line]
     assert any(f"127.0.0.1:{port}" in line for line in retries), retries
 
 
@@ -458,15 +473,19 @@ def test_a_persistent_session_keeps_readings_while_the_service_is_away(
     client_id = f"heliotwin-test-{uuid.uuid4().hex[:8]}"
     db = new_database("sqlite", tmp_path)
     env = {**mqtt_env(prefix, f"mqtt://{HOST}:{PORT}"), "HELIOTWIN_MQTT_CLIENT_ID": client_id}
+    # a real process: "away" is its process gone (in this process, a thread that outlived
+    # its service could still hold the session)
     proc = ServerProcess(db.url, tmp_path / "server.log", extra_env=env).start()
     t0 = minute(-40)
     try:
-        wait_state(proc.base_url, "connected")  # the broker now knows the session
+        with httpx.Client(base_url=proc.base_url, timeout=30.0) as c:
+            wait_state(c, "connected")  # the broker now knows the session
         proc.stop()
         publish(f"{prefix}/{SITE}/tracker/state",  # while no service is connected
                 json.dumps({"ts": iso(t0), "voltage_v": 25.0, "current_a": 3.0}))
         proc.start()
-        points = stored(proc.base_url, "tracker", iso(t0), iso(t0 + dt.timedelta(minutes=1)), 1)
+        with httpx.Client(base_url=proc.base_url, timeout=30.0) as c:
+            points = stored(c, "tracker", iso(t0), iso(t0 + dt.timedelta(minutes=1)), 1)
         assert points[0]["power_w"] == 75.0
     finally:
         proc.stop()

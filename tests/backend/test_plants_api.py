@@ -1,18 +1,15 @@
-"""``/api/v1/plants`` over real HTTP (uvicorn on a free port) and ``heliotwin plant`` as a process.
+"""``/api/v1/plants`` over HTTP (the service in this process, ``HELIOTWIN_PLANTS_DIR`` a
+folder of the test's own) and ``heliotwin plant`` as a process.
 
-Until ``backend/app.py`` registers the router, the server is a small FastAPI app that
-includes it; shaded trackers are checked against twoaxistracking, never the model itself.
+Shaded trackers are checked against twoaxistracking, never the model itself.
 """
 
 from __future__ import annotations
 
 import json
 import shutil
-import socket
 import subprocess
 import sys
-import threading
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -20,23 +17,14 @@ import cv2
 import httpx
 import numpy as np
 import pytest
-import uvicorn
-from fastapi import FastAPI
+from live_service import InProcessServer, new_database
 
-from backend.api.routes.plants import router
-from backend.plants import PlantService
 from sim.plant import default_plants_dir, load_plant
 
 ROOT = Path(__file__).resolve().parents[2]
 PLANT = load_plant("penarroya")
 # seed 004 Fig. 6a: 21 December 08:24 true solar time at Peñarroya
 DEC21_0824_TST = "2021-12-21T08:43:03Z"
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture(scope="module")
@@ -47,27 +35,15 @@ def plants_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def base_url(plants_dir: Path) -> Iterator[str]:
-    app = FastAPI()
-    app.include_router(router)
-    app.state.plants = PlantService(plants_dir)
-    port = _free_port()
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 20
-    while not server.started:
-        if time.monotonic() > deadline:
-            raise RuntimeError("uvicorn did not start")
-        time.sleep(0.05)
-    yield f"http://127.0.0.1:{port}"
-    server.should_exit = True
-    thread.join(timeout=10)
+def server(plants_dir: Path) -> Iterator[InProcessServer]:
+    db = new_database("sqlite", plants_dir.parent)
+    with InProcessServer(db.url, {"HELIOTWIN_PLANTS_DIR": str(plants_dir)}) as proc:
+        yield proc
 
 
 @pytest.fixture()
-def client(base_url: str) -> Iterator[httpx.Client]:
-    with httpx.Client(base_url=base_url, timeout=60) as c:
+def client(server: InProcessServer) -> Iterator[httpx.Client]:
+    with server.client(timeout_s=60) as c:
         yield c
 
 
