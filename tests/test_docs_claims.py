@@ -700,3 +700,65 @@ def test_plotly_bundle_sizes() -> None:
     m = sentence(doc("dashboard.md"), r"the full bundle \(([\d.]+) MB, ([\d.]+) MB gzip")
     assert_printed(numbers(" ".join(m.groups())), [1, 2], list(full))
     assert round(full[0] / partial[0]) == 4  # "a quarter"
+
+
+# --- docs/twin3d.md, docs/sites.md --------------------------------------------------
+
+
+def _placed(site: Any, fixed_east_m: float, drawn: bool = False) -> Any:
+    """``site`` with the tracker at the origin and the fixed array ``fixed_east_m`` east;
+    ``drawn``: with the 3D scene's 2 × 2 outlines, as the scene assumes them."""
+    import dataclasses
+
+    from backend.twin.scene_build import ARRAY_HEIGHT_M, ARRAY_WIDTH_M
+    from sim.array_shade import Placement
+
+    size = {"width_m": ARRAY_WIDTH_M, "height_m": ARRAY_HEIGHT_M} if drawn else {}
+    return dataclasses.replace(site, placements={"tracker": Placement(0.0, 0.0, **size),
+                                                 "fixed": Placement(fixed_east_m, 0.0, **size)})
+
+
+def test_twin3d_shadow_on_the_fixed_array(tehuantepec) -> None:
+    from backend.twin.scene_build import FIXED_ARRAY_ORIGIN_M
+    from sim.twin import simulate
+
+    assert FIXED_ARRAY_ORIGIN_M[1:] == (0.0, 0.0)
+    tz = tehuantepec.timezone
+    start = pd.Timestamp("2024-03-15 12:00", tz=tz)
+    shade = simulate(_placed(tehuantepec, FIXED_ARRAY_ORIGIN_M[0], drawn=True), start,
+                     start + pd.Timedelta(hours=7)).series["fixed_shaded_fraction"]
+    shade.index = shade.index.tz_convert(tz)
+    text = doc("twin3d.md")
+    m = sentence(text, r"the shade starts at (\d+):(\d+) local time on 15 March and covers the "
+                       r"whole array from about (\d+):(\d+) \((\d+) % at 16:00, (\d+) % at "
+                       r"16:45, (\d+) % at 17:15")
+    h0, m0, h1, m1, *pct = numbers(" ".join(m.groups()))
+    first, full = shade[shade > 0].index[0], shade[shade > 0.999].index[0]
+    assert (first.hour, first.minute) == (h0, m0)
+    assert abs((full.hour * 60 + full.minute) - (h1 * 60 + m1)) <= 5  # "about"
+    at = [shade[pd.Timestamp(f"2024-03-15 {t}", tz=tz)] for t in ("16:00", "16:45", "17:15")]
+    assert_printed(pct, [0, 0, 0], [100 * f for f in at])
+    # the screenshot's caption, in this doc and the README
+    for caption in (text, (ROOT / "README.md").read_text(encoding="utf-8")):
+        m = sentence(caption, r"!\[The [^\]]*?(\d+) % of the fixed array")
+        assert_printed(numbers(m.group(1)), [0], [100 * at[1]])
+
+
+@pytest.mark.slow
+def test_sites_shade_loss_of_a_year(tehuantepec) -> None:
+    from sim.twin import simulate
+
+    tz = tehuantepec.timezone
+    m = sentence(doc("sites.md"), r"a clear-sky 2023\s+at 1 min loses ([\d.]+) kWh of the fixed "
+                 r"array's ([\d,]+) kWh \(([\d.]+) %\) with the array\s+([\d.]+) m east, "
+                 r"(\d+) kWh \(([\d.]+) %\) at ([\d.]+) m east")
+    loss1, total, pct1, east1, loss2, pct2, east2 = numbers(" ".join(m.groups()))
+    computed = []
+    for east in (east1, east2):
+        s = simulate(_placed(tehuantepec, east), pd.Timestamp("2023-01-01", tz=tz),
+                     pd.Timestamp("2024-01-01", tz=tz)).summary()
+        unshaded = s["fixed_energy_wh"] + s["fixed_shade_loss_wh"]
+        computed.append((s["fixed_shade_loss_wh"] / 1000, unshaded / 1000,
+                         100 * s["fixed_shade_loss_wh"] / unshaded))
+    assert_printed([loss1, total, pct1, loss2, pct2], [1, 0, 1, 0, 1],
+                   [*computed[0], computed[1][0], computed[1][2]])
