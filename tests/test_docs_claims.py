@@ -762,3 +762,74 @@ def test_sites_shade_loss_of_a_year(tehuantepec) -> None:
                          100 * s["fixed_shade_loss_wh"] / unshaded))
     assert_printed([loss1, total, pct1, loss2, pct2], [1, 0, 1, 0, 1],
                    [*computed[0], computed[1][0], computed[1][2]])
+
+
+# --- docs/plants.md -----------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("label", "day", "tst_h"), [
+    ("21 Dec 08:24", "2021-12-21", 8.4), ("21 Dec 15:24", "2021-12-21", 15.4),
+    ("21 Jun 07:30", "2021-06-21", 7.5), ("21 Jun 15:48", "2021-06-21", 15.8),
+])
+def test_plants_seed_004_instants_table(label: str, day: str, tst_h: float) -> None:
+    import sys
+
+    sys.path.insert(0, str(ROOT / "tests" / "sim" / "plant"))
+    from plant_reference import utc_from_true_solar_time
+
+    from sim.plant.layout import load_plant
+    from sim.plant.shading import plant_shade
+    from sim.sun import solar_position
+
+    plant = load_plant("penarroya")
+    t = utc_from_true_solar_time(day, tst_h, plant.longitude)
+    sun = solar_position(t, plant.latitude, plant.longitude, plant.altitude)
+    az, el = float(sun["azimuth"].iloc[0]), float(sun["apparent_elevation"].iloc[0])
+    shade = plant_shade(plant.positions, [az], [el], [az], [el], plant.collector.width,
+                        plant.collector.height)
+    sky, count, mean = table_row(doc("plants.md"), label)
+    assert_printed(numbers(sky), [1, 1], [az, el])
+    shaded = shade.shaded[0]
+    assert numbers(count)[0] == int(shaded.sum())
+    if "all but" in count:  # "23 (all but 1–6)": the unshaded trackers, runs written a–b
+        spans = [numbers(s) for s in count.split("all but")[1].rstrip(")").split(",")]
+        unshaded = {i for s in spans for i in range(int(s[0]), int(abs(s[-1])) + 1)}
+        ids = plant.tracker_ids
+        assert unshaded == {ids[k] for k in np.flatnonzero(~shaded)}
+    assert_printed(numbers(mean), decimals(mean), [float(shade.fraction[0].mean())])
+
+
+def test_plants_backtracking_winner_at_dec_21_15_24() -> None:
+    import sys
+
+    from pvlib.irradiance import get_total_irradiance
+
+    sys.path.insert(0, str(ROOT / "tests" / "sim" / "plant"))
+    from plant_reference import utc_from_true_solar_time
+
+    from sim.plant.layout import load_plant
+    from sim.plant.simulate import sky_conditions
+    from sim.plant.strategies import lowest_free_elevation, orientations
+
+    plant = load_plant("penarroya")
+    sky = sky_conditions(plant, pd.DatetimeIndex(
+        [utc_from_true_solar_time("2021-12-21", 15.4, plant.longitude)]))
+
+    def poa(az: float, el: float) -> float:
+        return float(get_total_irradiance(
+            90 - el, az % 360, sky["apparent_zenith"][0], sky["solar_azimuth"][0],
+            sky["dni"][0], sky["ghi"][0], sky["dhi"][0], dni_extra=sky["dni_extra"][0],
+            airmass=sky["airmass_relative"][0], albedo=plant.albedo, model="perez",
+        )["poa_global"])
+
+    az_sun, el_sun = float(sky["solar_azimuth"][0]), float(sky["apparent_elevation"][0])
+    az, el = (float(v[0]) for v in orientations("backtrack", plant, sky))
+    raised = float(lowest_free_elevation(plant, [az_sun], [el_sun], np.array([[az_sun]]),
+                                         [el_sun])[0][0])
+    m = sentence(doc("plants.md"), r"On 21 Dec at 15:24 the winner turns the collectors ([\d.]+)° "
+                 r"off the sun's azimuth \(shadows fall between neighbours\) at ([\d.]+)° "
+                 r"elevation — (\d+) % more POA than raising the collectors at the sun's azimuth "
+                 r"until the shade clears \((\d+) W m⁻²\)")
+    assert_printed(numbers(" ".join(m.groups())), [1, 1, 0, 0],
+                   [abs((az - az_sun + 180) % 360 - 180), el,
+                    100 * (poa(az, el) / poa(az_sun, raised) - 1), poa(az_sun, raised)])
