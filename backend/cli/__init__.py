@@ -6,6 +6,11 @@ and returning an exit code). Output to stdout is the CLI's job; everything else
 logs, to stderr: at INFO for the long-running commands (:data:`SERVICE_COMMANDS`,
 whose log is their output), at WARNING for the one-shot ones (``token create``
 prints its token and nothing about migrations), at DEBUG with ``-v``.
+
+A subcommand that refuses (bad input, nothing to act on) calls :func:`fail` (or
+raises :class:`CliError`) from anywhere below its ``func``; :func:`main` alone prints
+``heliotwin <command>: error: <message>`` to stderr — argparse's own form — and
+exits with the error's code (2 by default, as argparse's usage errors).
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ import importlib
 import logging
 import os
 import sys
+from typing import NoReturn
 
 # Subcommand modules, in the order `heliotwin --help` lists them.
 SUBCOMMAND_MODULES = (
@@ -33,6 +39,29 @@ SUBCOMMAND_MODULES = (
 SERVICE_COMMANDS = frozenset({"serve", "demo-logger"})
 
 
+class CliError(Exception):
+    """A subcommand's refusal: ``message`` for stderr, ``code`` the exit status (2: bad input)."""
+
+    def __init__(self, message: str, code: int = 2) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+def fail(message: str, code: int = 2) -> NoReturn:
+    """Stop the subcommand: :func:`main` prints ``message`` as its error and exits ``code``."""
+    raise CliError(message, code)
+
+
+def _tag_commands(parser: argparse.ArgumentParser) -> None:
+    """Set ``cli_prog`` (e.g. ``heliotwin plant simulate``) on every subcommand's parser, for
+    :func:`main`'s error line; a nested subcommand's default overrides its parent's."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                sub.set_defaults(cli_prog=sub.prog)
+                _tag_commands(sub)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Build the top-level parser with every subcommand that is installed."""
     parser = argparse.ArgumentParser(
@@ -49,6 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
                 continue
             raise
         module.register(subparsers)
+    _tag_commands(parser)
     return parser
 
 
@@ -66,6 +96,9 @@ def main(argv: list[str] | None = None) -> int:
         code = int(args.func(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
         return code
+    except CliError as exc:
+        print(f"{getattr(args, 'cli_prog', parser.prog)}: error: {exc}", file=sys.stderr)
+        return exc.code
     except KeyboardInterrupt:
         return 130
     except BrokenPipeError:

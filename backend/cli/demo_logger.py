@@ -6,6 +6,8 @@ import argparse
 import signal
 import threading
 
+from backend.cli import fail
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``demo-logger`` subcommand."""
@@ -33,16 +35,14 @@ def run(args: argparse.Namespace) -> int:
     try:
         site = load_site(args.site, get_settings().sites_dir)
     except UnknownSiteError as exc:
-        print(f"heliotwin demo-logger: {exc}")
-        return 2
+        fail(str(exc))
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     demo = DemoLogger(site, args.url, args.token, seed=args.seed)
     try:
         if args.once:
             if not demo.wait_until_up(stop):
-                print(f"heliotwin demo-logger: {args.url} does not answer /healthz")
-                return 1
+                fail(f"{args.url} does not answer /healthz", code=1)
             accepted, duplicates = demo.backfill(args.backfill_days)
             print(f"posted: {accepted} accepted, {duplicates} duplicates")
             return 0

@@ -15,8 +15,9 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 from typing import Any
+
+from backend.cli import fail
 
 _RATE_FLAGS = (
     ("azimuth_rate_rad_s", "--azimuth-rate-rad-s", "azimuth joint rate [rad/s] (default 0)"),
@@ -101,8 +102,7 @@ def run_torque(args: argparse.Namespace) -> int:
     """Print the inverse-dynamics torques; exit 2 on bad input."""
     problem = _torque_problem(args)
     if problem:
-        print(f"heliotwin dynamics torque: error: {problem}", file=sys.stderr)
-        return 2
+        fail(problem)
     out = compute_torque(args)
     if args.json:
         print(json.dumps(out))
@@ -117,11 +117,7 @@ def run_torque(args: argparse.Namespace) -> int:
 def run_check(args: argparse.Namespace) -> int:
     """Print the analytic-vs-pymunk comparison; exit 2 on a bad step."""
     if not (math.isfinite(args.dt_s) and 0 < args.dt_s <= 0.05):
-        print(
-            f"heliotwin dynamics check: error: --dt-s {args.dt_s}: must be in (0, 0.05] s",
-            file=sys.stderr,
-        )
-        return 2
+        fail(f"--dt-s {args.dt_s}: must be in (0, 0.05] s")
     from sim.dynamics_check import check
 
     out: dict[str, Any] = check(dt_s=args.dt_s)

@@ -18,6 +18,7 @@ import os
 import sys
 from typing import Any
 
+from backend.cli import fail
 from backend.cli.simulate import InputError, parse_when
 
 STRATEGIES = ("sun", "backtrack", "sky_scan")
@@ -62,8 +63,7 @@ def run_list(args: argparse.Namespace) -> int:
     try:
         plants = list_plants(args.plants_dir)
     except ValueError as exc:
-        print(f"heliotwin plant list: error: {exc}", file=sys.stderr)
-        return 2
+        fail(str(exc))
     if args.json:
         print(json.dumps([{"plant_id": p.plant_id, "name": p.name, "trackers": p.n_trackers}
                           for p in plants]))
@@ -150,10 +150,6 @@ def _text(s: dict[str, Any]) -> str:
 
 def run_simulate(args: argparse.Namespace) -> int:
     """``heliotwin plant simulate``; exit 2 on bad input."""
-    try:
-        summary = execute(args)
-    except InputError as exc:
-        print(f"heliotwin plant simulate: error: {exc}", file=sys.stderr)
-        return 2
+    summary = execute(args)  # bad input: InputError, a CliError main reports
     print(json.dumps(summary) if args.json else _text(summary))
     return 0

@@ -25,13 +25,14 @@ import os
 import sys
 from typing import Any
 
+from backend.cli import CliError, fail
 from backend.twin.parameters import MACHINE_PARAMETERS
 
 _BAR_MIN_STEPS = 20_000  # a progress bar only for long runs (two weeks at 1 min and up)
 
 
-class InputError(ValueError):
-    """Bad command-line input (exit status 2)."""
+class InputError(CliError, ValueError):
+    """Bad command-line input: :func:`backend.cli.main` reports it and exits 2."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -217,20 +218,12 @@ def _text(summary: dict[str, Any]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``heliotwin simulate``; exit 2 on bad input."""
-    try:
-        summary, result = execute(args)
-    except InputError as exc:
-        print(f"heliotwin simulate: error: {exc}", file=sys.stderr)
-        return 2
+    summary, result = execute(args)  # bad input: InputError, a CliError main reports
     if args.csv:
         try:
             write_csv(result.series, result.site.timezone, args.csv)
         except OSError as exc:
-            print(
-                f"heliotwin simulate: error: --csv: cannot write {args.csv!r}: {exc}",
-                file=sys.stderr,
-            )
-            return 2
+            fail(f"--csv: cannot write {args.csv!r}: {exc}")
         summary["csv"] = args.csv
     print(json.dumps(summary) if args.json else _text(summary))
     return 0

@@ -28,6 +28,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from backend.cli import fail
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``site`` subcommand."""
@@ -74,11 +76,6 @@ def _sites_dir() -> Path:
     return get_settings().sites_dir
 
 
-def _fail(message: str) -> int:
-    print(f"heliotwin site: {message}", file=sys.stderr)
-    return 2
-
-
 def _write(config: dict[str, Any], force: bool) -> int:
     """Validate, refuse to overwrite without ``force``, write, say where."""
     from backend.sites import write_site_file
@@ -88,14 +85,14 @@ def _write(config: dict[str, Any], force: bool) -> int:
     try:
         validate_site_config(config, where="site")
     except ValueError as exc:
-        return _fail(str(exc))
+        fail(str(exc))
     directory = _sites_dir()
     target = directory / f"{config['site_id']}.json"
     builtin = config["site_id"] in builtin_site_ids()
     if not force and (target.exists() or builtin):
         what = "a built-in site" if builtin else f"a site in {directory}"
-        return _fail(f"--id {config['site_id']!r} is already {what}; --force replaces it "
-                     "(a user file wins over a built-in one)")
+        fail(f"--id {config['site_id']!r} is already {what}; --force replaces it "
+             "(a user file wins over a built-in one)")
     path = write_site_file(directory, config)
     print(f"wrote {path}; `heliotwin simulate --site {config['site_id']}` runs it, and the "
           "service shows it from its next start")
@@ -116,19 +113,19 @@ def create(args: argparse.Namespace) -> int:
         try:
             config = json.loads(args.from_file.read_text())
         except (OSError, json.JSONDecodeError) as exc:
-            return _fail(f"--from-file {args.from_file}: {exc}")
+            fail(f"--from-file {args.from_file}: {exc}")
         if isinstance(config, dict) and config.get("site_id") != args.site_id:
-            return _fail(f"--from-file: its site_id {config.get('site_id')!r} is not --id "
-                         f"{args.site_id!r}")
+            fail(f"--from-file: its site_id {config.get('site_id')!r} is not --id "
+                 f"{args.site_id!r}")
         return _write(config, args.force)
     missing = [f"--{n.replace('_', '-')}" for n in ("latitude_deg", "longitude_deg", "timezone")
                if getattr(args, n) is None]
     if missing:
-        return _fail(f"{', '.join(missing)} required (or --from-file FILE)")
+        fail(f"{', '.join(missing)} required (or --from-file FILE)")
     try:
         base = _template(args.like)
     except UnknownSiteError as exc:
-        return _fail(f"--like: {exc}")
+        fail(f"--like: {exc}")
     config = {**base, "site_id": args.site_id, "name": args.name or args.site_id,
               "latitude_deg": args.latitude_deg, "longitude_deg": args.longitude_deg,
               "altitude_m": args.altitude_m, "timezone": args.timezone,
@@ -175,7 +172,7 @@ def from_weather(args: argparse.Namespace) -> int:
         zone = args.timezone or fixed_offset_zone(st["tz_h"])
         base = _template(args.like)
     except (OSError, ValueError, KeyError, UnknownSiteError) as exc:
-        return _fail(f"{args.file}: {exc}")
+        fail(f"{args.file}: {exc}")
     lat = st["latitude_deg"]
     arrays = {}
     for name, arr in base["arrays"].items():
@@ -204,7 +201,7 @@ def show(args: argparse.Namespace) -> int:
         path = site_path(args.site_id, _sites_dir())
         site = load_site(args.site_id, _sites_dir())
     except ValueError as exc:
-        return _fail(str(exc))
+        fail(str(exc))
     if not args.json:
         origin = "built-in" if is_builtin(path) else "user"
         from sim.sites import builtin_site_ids

@@ -17,9 +17,10 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 from datetime import UTC, datetime
 from typing import Any
+
+from backend.cli import fail
 
 
 def _parse_time(text: str) -> datetime:
@@ -147,8 +148,7 @@ def run(args: argparse.Namespace) -> int:
     """Print the sun position; exit 2 on bad input."""
     problem = _place(args) or _check(args)
     if problem:
-        print(f"heliotwin sun: error: {problem}", file=sys.stderr)
-        return 2
+        fail(problem)
     out = compute(args)
     if args.json:
         print(json.dumps(out))

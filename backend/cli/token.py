@@ -13,9 +13,10 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
-import sys
 from collections.abc import Callable
 from typing import Any
+
+from backend.cli import fail
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -81,8 +82,7 @@ def create(args: argparse.Namespace) -> int:
         expires = _expiry(args)
         token = _with_db(lambda conn: create_token(conn, args.site, args.label, expires))
     except (UnknownSite, ValueError) as exc:
-        print(f"heliotwin token: {exc}", file=sys.stderr)
-        return 2
+        fail(str(exc))
     until = "" if expires is None else f", valid until {expires.isoformat()}"
     print(f"write token for site {args.site} (shown once{until}; send it as "
           "'Authorization: Bearer <token>'):")
@@ -113,8 +113,7 @@ def revoke(args: argparse.Namespace) -> int:
     try:
         info, _ = _with_db(lambda conn: revoke_token(conn, args.token_or_id))
     except UnknownToken as exc:
-        print(f"heliotwin token: {exc}", file=sys.stderr)
-        return 2
+        fail(str(exc))
     assert info.revoked_at is not None
     print(f"revoked token {info.id} ({info.token_prefix}…, site {info.site_id}) at "
           f"{info.revoked_at.isoformat()}")

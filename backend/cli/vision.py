@@ -20,10 +20,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 from datetime import datetime
 from pathlib import Path
 from typing import Any
+
+from backend.cli import fail
 
 
 def _time(text: str) -> datetime:
@@ -192,8 +193,7 @@ def _run(fn: Any, args: argparse.Namespace) -> int:
     try:
         out = fn(args)
     except (ValueError, ImageError, OSError) as exc:
-        print(f"heliotwin vision: {exc}", file=sys.stderr)
-        return 2
+        fail(str(exc))
     if args.json:
         print(json.dumps(out, indent=2))
     else:

@@ -1,0 +1,45 @@
+"""The CLI's one error path: a subcommand calls ``backend.cli.fail``; ``main`` alone prints
+``heliotwin <command>: error: <message>`` to stderr (nothing on stdout) and returns the code.
+
+In process (``main(argv)``): the error path is the dispatcher's, not a process's.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import pytest
+
+from backend import cli
+
+
+@pytest.mark.parametrize("argv,line", [
+    (["sun", "--lat", "100", "--lon", "0", "--time", "2025-01-01T12:00:00+00:00"],
+     "heliotwin sun: error: --lat 100.0: latitude must be within [-90, 90] deg"),
+    (["dynamics", "check", "--dt-s", "0"],
+     "heliotwin dynamics check: error: --dt-s 0.0: must be in (0, 0.05] s"),
+    (["plant", "simulate", "--plant", "penarroya", "--start", "2025-01-02", "--end",
+      "2025-01-01"], "heliotwin plant simulate: error: --end (2025-01-01) must be after"),
+    (["demo-logger", "--site", "no-such-site", "--token", "t"],
+     "heliotwin demo-logger: error: "),
+])
+def test_a_refusal_is_one_error_line_on_stderr_and_exit_2(
+        argv: list[str], line: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(argv) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err.startswith(line) and err.count("\n") == 1, err
+
+
+def test_fail_carries_its_exit_code(monkeypatch: pytest.MonkeyPatch,
+                                    capsys: pytest.CaptureFixture[str]) -> None:
+    import backend.cli.sun
+
+    def refuse(args: argparse.Namespace) -> int:
+        cli.fail("--url: the service does not answer", code=1)
+
+    monkeypatch.setattr(backend.cli.sun, "run", refuse)  # registered by the next main()
+    assert cli.main(["sun", "--lat", "0", "--lon", "0", "--time",
+                     "2025-01-01T12:00:00+00:00"]) == 1
+    assert capsys.readouterr() == ("", "heliotwin sun: error: --url: the service does not "
+                                       "answer\n")
