@@ -7,10 +7,11 @@ that finds the queue full is dropped and counted (its alert stays stored, its
 order they were raised (a receiver sees an alert's ``raised`` before its ``cleared``):
 
 - a 2xx answer delivers it;
-- no answer (refused, reset, ``Settings.alert_webhook_timeout_s`` passed), a 5xx, 408 or
-  429 is retried after ``alert_webhook_backoff_s`` · 2^k (k = 0, 1, …), at most
-  ``alert_webhook_backoff_max_s`` — and never sooner than a 429/503's ``Retry-After`` —
-  up to ``alert_webhook_retries`` times, then ``failed``;
+- no answer (refused, reset, ``Settings.alert_webhook_timeout_s`` passed), a 5xx, 408,
+  425 or 429 is retried after ``alert_webhook_backoff_s`` · 2^k (k = 0, 1, …), at most
+  ``alert_webhook_backoff_max_s`` (:func:`backend.retry.backoff`, tenacity) — and never
+  sooner than a 429/503's ``Retry-After``, itself capped at ``alert_webhook_backoff_max_s``
+  — up to ``alert_webhook_retries`` times, then ``failed``;
 - any other 4xx is ``failed`` at once (the receiver refuses this request; sending it
   again would change nothing).
 
@@ -37,10 +38,22 @@ from typing import Any
 from urllib.parse import urlsplit
 
 import httpx
+from tenacity import RetryCallState, Retrying, retry_if_exception_type, stop_after_attempt
+
+from backend.retry import Stopped, backoff, stoppable_sleep
 
 logger = logging.getLogger(__name__)
 
 RETRYABLE = {408, 425, 429, 500, 502, 503, 504}
+
+
+class _Retryable(Exception):
+    """An attempt worth repeating: no answer, or a status in :data:`RETRYABLE` (with the
+    answer's ``Retry-After`` [s], if any)."""
+
+    def __init__(self, why: str, after_s: float | None = None) -> None:
+        super().__init__(why)
+        self.after_s = after_s
 
 
 @dataclass
@@ -184,40 +197,57 @@ class WebhookSender:
         return headers
 
     def _deliver(self, client: httpx.Client, ev: Event) -> None:
+        """POST ``ev`` until delivered, refused, out of retries or stopped (module docstring);
+        the waits are :func:`backend.retry.backoff`'s, never sooner than a Retry-After."""
+        policy = backoff(self.backoff_s, self.backoff_max_s)
         attempts = 0
-        while True:
+        last_why = ""
+
+        def attempt() -> httpx.Response:
+            nonlocal attempts, last_why
             attempts += 1
-            wait_s = self.backoff_s * 2 ** (attempts - 1)
             try:
                 r = client.post(self.url, content=ev.body, headers=self._headers(ev))
             except httpx.HTTPError as exc:
-                why = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
-            else:
-                if 200 <= r.status_code < 300:
-                    self._count("delivered")
-                    self.last_delivered_s = time.time()
-                    self._report(ev, "delivered", attempts)
-                    return
-                why = f"HTTP {r.status_code}"
-                if r.status_code not in RETRYABLE:
-                    self._fail(ev, attempts, f"{why}: refused, not retried")
-                    return
-                after = retry_after_s(r.headers.get("retry-after"))
-                if after is not None:
-                    wait_s = max(wait_s, after)
-            if attempts > self.retries:
-                self._fail(ev, attempts, f"{why}; gave up after {attempts} attempts")
-                return
-            wait_s = min(wait_s, self.backoff_max_s)
-            self.last_error = f"{why} (event {ev.event_id}, attempt {attempts})"
-            logger.warning("alert webhook %s: %s; retry %d of %d in %.1f s", self.where, why,
-                           attempts, self.retries, wait_s)
+                last_why = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+                raise _Retryable(last_why) from exc
+            if r.status_code in RETRYABLE:
+                last_why = f"HTTP {r.status_code}"
+                raise _Retryable(last_why, retry_after_s(r.headers.get("retry-after")))
+            return r
+
+        def wait(state: RetryCallState) -> float:
+            exc = state.outcome.exception() if state.outcome is not None else None
+            after = exc.after_s if isinstance(exc, _Retryable) else None
+            return min(max(policy(state), after or 0.0), self.backoff_max_s)
+
+        def before_sleep(state: RetryCallState) -> None:
+            wait_s = state.next_action.sleep if state.next_action is not None else 0.0
+            self.last_error = f"{last_why} (event {ev.event_id}, attempt {attempts})"
+            logger.warning("alert webhook %s: %s; retry %d of %d in %.1f s", self.where,
+                           last_why, attempts, self.retries, wait_s)
             self._count("retries")
-            if self._stop.wait(wait_s):
-                self._count("unsent")
-                logger.warning("alert webhook: event %s not sent at shutdown (%s)",
-                               ev.event_id, why)
-                return
+
+        retrying = Retrying(stop=stop_after_attempt(self.retries + 1), wait=wait,
+                            retry=retry_if_exception_type(_Retryable),
+                            sleep=stoppable_sleep(self._stop), before_sleep=before_sleep,
+                            reraise=True)
+        try:
+            r = retrying(attempt)
+        except _Retryable:
+            self._fail(ev, attempts, f"{last_why}; gave up after {attempts} attempts")
+            return
+        except Stopped:
+            self._count("unsent")
+            logger.warning("alert webhook: event %s not sent at shutdown (%s)", ev.event_id,
+                           last_why)
+            return
+        if 200 <= r.status_code < 300:
+            self._count("delivered")
+            self.last_delivered_s = time.time()
+            self._report(ev, "delivered", attempts)
+            return
+        self._fail(ev, attempts, f"HTTP {r.status_code}: refused, not retried")
 
     def _fail(self, ev: Event, attempts: int, why: str) -> None:
         self._count("failed")

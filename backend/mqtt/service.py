@@ -17,9 +17,11 @@ when ``Settings.mqtt_url`` is set. While connected (aiomqtt) it:
   and the sensor states every ``Settings.mqtt_publish_interval_s``
   (:mod:`backend.mqtt.homeassistant`).
 
-A lost or refused connection is retried with exponential backoff (1 s, 2 s, …,
-``Settings.mqtt_retry_max_s``), each retry logged; :attr:`MqttService.state` is
-``connected`` or ``retrying`` (``/api/v1/meta`` shows it).
+A lost or refused connection is retried for as long as the service runs, with
+exponential backoff (:func:`backend.retry.backoff`, tenacity): 1 s, 2 s, 4 s, … at
+most ``Settings.mqtt_retry_max_s``, back to 1 s after each successful connection;
+each retry logged, a wait ended at once by the service's stop;
+:attr:`MqttService.state` is ``connected`` or ``retrying`` (``/api/v1/meta`` shows it).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from typing import TYPE_CHECKING, Any
 from urllib.parse import unquote, urlsplit
 
 import aiomqtt
+from tenacity import AsyncRetrying, RetryCallState, retry_if_exception
 
 from backend.measurements.parse import Batch
 from backend.measurements.writer import MeasurementJob
@@ -43,6 +46,7 @@ from backend.mqtt import homeassistant
 from backend.mqtt.assemble import QUANTITIES, Closed, MinuteAssembler, parse_value
 from backend.mqtt.ingest import Rejection, limits, minute_batch, state_batch
 from backend.mqtt.topics import Topics
+from backend.retry import Stopped, backoff, stoppable_async_sleep
 from backend.storage.tables import SOURCE_CODES
 
 if TYPE_CHECKING:
@@ -55,6 +59,8 @@ UNKNOWN_SITE = "_unknown"
 OUTBOX_MAX = 10_000
 #: Most readings waiting for the writer before the receiver waits too.
 MAX_IN_FLIGHT = 512
+#: The first wait before reconnecting [s]; it doubles up to ``Settings.mqtt_retry_max_s``.
+_FIRST_RETRY_S = 1.0
 
 
 def _version() -> str:
@@ -147,32 +153,49 @@ class MqttService:
         self._outbox_ready = asyncio.Event()
         ready.set()
         closer = asyncio.create_task(self._close_minutes())
-        delay = 1.0
         s = self.ctx.settings
+        policy = backoff(_FIRST_RETRY_S, s.mqtt_retry_max_s)
+        attempts = 0
+        connected_after = 0  # attempts made before the last connection came up
+
+        async def connect_and_serve() -> None:
+            """One connection: serve until stopped (returns) or lost (raises)."""
+            nonlocal attempts, connected_after
+            attempts += 1
+            client = aiomqtt.Client(
+                **self.broker, identifier=s.mqtt_client_id,
+                clean_session=None if s.mqtt_client_id is None else False,
+                keepalive=30, timeout=10.0)
+            async with client:
+                connected_after = attempts - 1
+                await self._session(client)
+
+        def wait(state: RetryCallState) -> float:  # k counts from the last connection
+            return policy.seconds(state.attempt_number - connected_after)
+
+        def before_sleep(state: RetryCallState) -> None:
+            exc = state.outcome.exception() if state.outcome is not None else None
+            if not isinstance(exc, aiomqtt.MqttError):
+                logger.error("MQTT session failed", exc_info=exc)
+            self.state = "retrying"
+            self.counts["retries"] += 1
+            wait_s = state.next_action.sleep if state.next_action is not None else 0.0
+            logger.warning("MQTT broker %s: %s; retry %d in %.0f s", self.where, exc,
+                           self.counts["retries"], wait_s)
+
+        stop = self._stop
+        retrying = AsyncRetrying(  # any failure but a cancellation, until stopped
+            wait=wait, retry=retry_if_exception(
+                lambda exc: isinstance(exc, Exception) and not stop.is_set()),
+            sleep=stoppable_async_sleep(stop), before_sleep=before_sleep, reraise=True)
         try:
-            while not self._stop.is_set():
-                try:
-                    client = aiomqtt.Client(
-                        **self.broker, identifier=s.mqtt_client_id,
-                        clean_session=None if s.mqtt_client_id is None else False,
-                        keepalive=30, timeout=10.0)
-                    async with client:
-                        delay = 1.0
-                        await self._session(client)
-                except Exception as exc:  # noqa: BLE001 - MqttError, or a bug: reconnect
-                    if self._stop.is_set():
-                        break
-                    if not isinstance(exc, aiomqtt.MqttError):
-                        logger.exception("MQTT session failed")
-                    self.state = "retrying"
-                    self.counts["retries"] += 1
-                    logger.warning("MQTT broker %s: %s; retry %d in %.0f s", self.where, exc,
-                                   self.counts["retries"], delay)
-                    try:
-                        await asyncio.wait_for(self._stop.wait(), delay)
-                    except TimeoutError:
-                        pass
-                    delay = min(2.0 * delay, s.mqtt_retry_max_s)
+            if not stop.is_set():
+                await retrying(connect_and_serve)
+        except Stopped:
+            pass
+        except Exception:  # noqa: BLE001 - failed while stopping: nothing to retry
+            if not stop.is_set():
+                raise
         finally:
             closer.cancel()
             for closed in self.assembler.flush():  # not connected any more: logged below

@@ -22,8 +22,9 @@ from typing import Any
 import httpx
 import numpy as np
 import pandas as pd
-from tenacity import Retrying, retry_if_exception_type, stop_after_attempt, wait_exponential
+from tenacity import Retrying, retry_if_exception_type, stop_after_attempt
 
+from backend.retry import Stopped, backoff, stoppable_sleep
 from sim.sites import Site
 from sim.twin import simulate
 
@@ -34,8 +35,6 @@ class _Retryable(Exception):
     """A failed post worth retrying: no connection, or a 5xx."""
 
 
-class _Stopped(Exception):
-    """The logger was stopped during a retry's wait."""
 
 
 logging.getLogger("httpx").setLevel(logging.WARNING)  # one line per post is noise
@@ -140,16 +139,17 @@ class DemoLogger:
                         np.round(np.clip(el, -90.0, 90.0), 2).tolist(), strict=True))
 
     def post(self, readings: list[dict[str, Any]], attempts: int = 5) -> tuple[int, int]:
-        """Post readings in batches of 1000, each retried (tenacity, exponential backoff up
-        to 10 s) on connection errors and 5xx; a batch that still fails, or is refused
-        with a 4xx, is dropped and logged with its size and time span."""
+        """Post readings in batches of 1000, each tried ``attempts`` times on connection errors
+        and 5xx, 1 s, 2 s, 4 s … (at most 10 s) apart (:func:`backend.retry.backoff`); a batch
+        that still fails, or is refused with a 4xx, is dropped and logged with its size and
+        time span; a stop during a wait drops the batch and ends the post."""
         accepted = duplicates = 0
         path = f"/api/v1/sites/{self.site.site_id}/measurements"
         retrying = Retrying(
             stop=stop_after_attempt(attempts),
-            wait=wait_exponential(multiplier=1.0, max=10.0),
+            wait=backoff(1.0, 10.0),
             retry=retry_if_exception_type(_Retryable),
-            sleep=self._sleep,
+            sleep=stoppable_sleep(self.stop),
             before_sleep=lambda state: logger.warning(
                 "demo logger: %s (attempt %d of %d)",
                 state.outcome.exception() if state.outcome else "?", state.attempt_number,
@@ -160,11 +160,11 @@ class DemoLogger:
             chunk = readings[k : k + BATCH]
             try:
                 r = retrying(self._post_once, path, chunk)
-            except (_Retryable, _Stopped) as exc:
+            except (_Retryable, Stopped) as exc:
                 self.readings_dropped += len(chunk)
                 logger.error("demo logger: dropped %d readings %s..%s: %s", len(chunk),
                              chunk[0]["ts"], chunk[-1]["ts"], exc)
-                if isinstance(exc, _Stopped):
+                if isinstance(exc, Stopped):
                     break
                 continue
             if r.status_code != 200:
@@ -186,11 +186,6 @@ class DemoLogger:
         if r.status_code >= 500:
             raise _Retryable(f"{r.status_code} {r.text[:200]}")
         return r
-
-    def _sleep(self, seconds: float) -> None:
-        """tenacity's sleep: wakes at once and gives up when the logger is stopped."""
-        if self.stop.wait(seconds):
-            raise _Stopped("stopped while retrying")
 
     def backfill(self, days: float, now_s: float | None = None) -> tuple[int, int]:
         """Post the last ``days`` days up to the current minute."""
