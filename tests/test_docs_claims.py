@@ -833,3 +833,27 @@ def test_plants_backtracking_winner_at_dec_21_15_24() -> None:
     assert_printed(numbers(" ".join(m.groups())), [1, 1, 0, 0],
                    [abs((az - az_sun + 180) % 360 - 180), el,
                     100 * (poa(az, el) / poa(az_sun, raised) - 1), poa(az_sun, raised)])
+
+
+def test_control_move_costing_step() -> None:
+    from sim.tracking import DriveLimits, Move, move_energies_wh
+
+    text = control_section("Motion and energy")
+    m = sentence(text, r"at (\d+) ms samples of the moving time only \(within\s+([\d.]+) % of "
+                       r"(\d+) ms samples; equal to `motors.tracking_motion_energy` to ([\de.-]+) "
+                       r"in the tests\)")
+    coarse_ms, within_pct, fine_ms, equal = numbers(" ".join(m.groups()))
+    rng = np.random.default_rng(0)
+    # the dead band's moves: 0.1°–1° on either axis, either way
+    moves = [Move(k % 2, float(k), float(rng.uniform(0.1, 1.0) * rng.choice([-1, 1])),
+                  40.0 if k % 2 else 120.0, 40.0, 0.0) for k in range(40)]
+    coarse = move_energies_wh(moves, DriveLimits(), dt_s=coarse_ms / 1000)[1]
+    fine = move_energies_wh(moves, DriveLimits(), dt_s=fine_ms / 1000)[1]
+    assert abs(coarse / fine - 1) < within_pct / 100
+    assert ("rel", equal) in approx_tolerances(
+        "tests/sim/test_control.py", "test_move_energies_match_motors_tracking_motion_energy")
+    m = sentence(text, r"reports ≈ ([\d.]+) Wh/day for a small\s+tracker's motion: our motion "
+                       r"energy is ~(\d+)× lower")
+    reference, lower = numbers(" ".join(m.groups()))
+    assert lower == pytest.approx(reference / reference_day("open_loop_spa")[
+        "actuator_move_energy_wh"], rel=0.1)  # "~"
