@@ -143,7 +143,7 @@ def _same_offset_instants(values: Sequence[Any]) -> tuple[np.ndarray, np.ndarray
     none = np.zeros(n, np.int64), np.zeros(n, bool)
     try:
         parsed = pd.DatetimeIndex(pd.to_datetime(values, format="ISO8601", utc=False,
-                                                 errors="coerce"))
+                                                 errors="coerce", cache=False))
     except (ValueError, TypeError, OverflowError):  # mixed offsets, naive beside aware
         return none
     if parsed.tz is None:  # naive stamps only (or none parsed)
