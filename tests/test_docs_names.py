@@ -329,3 +329,23 @@ def test_named_cli_commands_and_options_exist() -> None:
         if (problems := cli_problems(line, parser))
     ]
     assert_none_missing("CLI commands or options", missing)
+
+
+SETTING = re.compile(r"\bHELIOTWIN_[A-Z0-9_]*[A-Z0-9]\b")
+# environment variables of the tests and benchmarks, not of the service
+NOT_SETTINGS = {"HELIOTWIN_REQUIRE_SERVICES", "HELIOTWIN_TEST_PG_URL", "HELIOTWIN_BENCH_FIGURES"}
+
+
+def test_named_settings_are_in_the_readme_table() -> None:
+    """A setting a doc names is one the README's settings table lists (which
+    tests/backend/test_settings.py keeps equal to ``backend/settings.py``)."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    table = {m.group(1) for m in re.finditer(r"^\| `(HELIOTWIN_[A-Z0-9_]+)` \|", readme, re.M)}
+    assert len(table) > 20, "the README's settings table was not found"
+    missing = [
+        (doc, name, "(not in the README's settings table)")
+        for doc in DOCS
+        for name in sorted(set(SETTING.findall(doc.read_text(encoding="utf-8"))))
+        if name not in table | NOT_SETTINGS
+    ]
+    assert_none_missing("settings", missing)
