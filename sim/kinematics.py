@@ -49,6 +49,8 @@ from typing import TypeVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from vision.sphere import sky_from_enu
+
 _T = TypeVar("_T", float, NDArray[np.float64])
 
 __all__ = [
@@ -485,13 +487,10 @@ def normal_to_tilt_azimuth(
         [°].
     """
     n = np.asarray(normal_enu, dtype=float)
-    norm = np.linalg.norm(n, axis=-1)
-    e, north, up = n[..., 0] / norm, n[..., 1] / norm, n[..., 2] / norm
-    surface_tilt = np.degrees(np.arccos(np.clip(up, -1.0, 1.0)))
-    horizontal = np.hypot(e, north) < 1e-12
-    surface_azimuth = np.where(
-        horizontal, 180.0, np.mod(np.degrees(np.arctan2(e, north)), 360.0)
-    )
+    azimuth, elevation = sky_from_enu(n)  # the normal's sky direction; tilt = its zenith angle
+    surface_tilt = 90.0 - elevation
+    horizontal = np.hypot(n[..., 0], n[..., 1]) < 1e-12 * np.linalg.norm(n, axis=-1)
+    surface_azimuth = np.where(horizontal, 180.0, azimuth)
     return surface_tilt, surface_azimuth
 
 

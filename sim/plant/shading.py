@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sim.kinematics import panel_axes
-from vision.sphere import enu_from_sky
+from vision.sphere import enu_from_sky, sky_from_enu
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -225,8 +225,7 @@ def pair_candidates(d: FloatArray, sun: FloatArray, mode: IntArray, width: float
     el_rad = np.arcsin(np.clip(sun[:, 2], -1, 1))
     low = np.nonzero(el_rad < np.where(mode == FACING, min(el_facing, el_max), el_max))[0]
     sun, mode = sun[low], mode[low]
-    az = np.degrees(np.arctan2(sun[:, 0], sun[:, 1])) % 360.0
-    el = np.degrees(el_rad[low])
+    az, el = sky_from_enu(sun)
     ka = np.minimum((az / _BIN_AZ_DEG).astype(np.int64), n_az - 1)
     ke = np.floor((el + 90.0) / _BIN_EL_DEG).astype(np.int64)
     key = (ke * n_az + ka) * 3 + mode
