@@ -857,3 +857,26 @@ def test_control_move_costing_step() -> None:
     reference, lower = numbers(" ".join(m.groups()))
     assert lower == pytest.approx(reference / reference_day("open_loop_spa")[
         "actuator_move_energy_wh"], rel=0.1)  # "~"
+
+
+def test_control_why_ours_differ() -> None:
+    text = control_section("The reference case")
+    ol, hybrid = reference_day("open_loop_spa", YAW), reference_day("hybrid", YAW)
+    tilted = [reference_day(c, YAW_TILT_EAST) for c in ("open_loop_spa", "hybrid")]
+    m = sentence(text, r"our open loop's elevation error is just its update lag "
+                       r"\(([\d.]+) mrad RMS\)")
+    assert_printed(numbers(m.group(1)), [2], [ol[RMS[2]]])
+    m = sentence(text, r"the elevation error appears and is removed \((\d+) %, beside")
+    assert_printed(numbers(m.group(1)), [0], [100 * (1 - tilted[1][RMS[2]] / tilted[0][RMS[2]])])
+    m = sentence(text, r"= (\d+) mrad RMS,\s+not 87–100 mrad: with a similar residual floor the "
+                       r"percentage is lower \((\d+) % vs 96 %\)")
+    assert_printed(numbers(" ".join(m.groups())), [0, 0],
+                   [ol[RMS[1]], 100 * (1 - hybrid[RMS[1]] / ol[RMS[1]])])
+    m = sentence(text, r"before the hybrid has a correction \(the ([\d.]+) mrad max\)")
+    assert_printed(numbers(m.group(1)), [1], [hybrid["pointing_error_max_mrad"]])
+    from sim.control import ControlSettings
+
+    m = sentence(text, r"Ours is the ([\d.]+)° \(([\d.]+) mrad\) dead band")
+    band, band_mrad = numbers(" ".join(m.groups()))
+    assert band == ControlSettings().dead_band_deg
+    assert_printed([band_mrad], [2], [float(np.radians(band)) * 1000])
