@@ -880,3 +880,20 @@ def test_control_why_ours_differ() -> None:
     band, band_mrad = numbers(" ".join(m.groups()))
     assert band == ControlSettings().dead_band_deg
     assert_printed([band_mrad], [2], [float(np.radians(band)) * 1000])
+
+
+def test_dynamics_table_1_readings() -> None:
+    from sim.dynamics import TrackerInertia
+
+    p = TrackerInertia.seed002()
+    text = doc("dynamics.md")
+    m = sentence(text, r"I21 ≈ I22 \+ I23 \(([\d.]+) vs ([\d.]+) kg m²\)")
+    assert_printed(numbers(" ".join(m.groups())), [2, 2],
+                   [p.i21_kg_m2, p.i22_kg_m2 + p.i23_kg_m2])
+    m = sentence(text, r"balanced to (\d+) mm \(G2 ≤ ([\d.]+) N m\)")
+    assert_printed(numbers(" ".join(m.groups())), [0, 1],
+                   [1000 * abs(p.cg2_m), p.m2_kg * p.g_m_s2 * abs(p.cg2_m)])
+    m = sentence(text, r"make the engines differ by > (\d+) mrad in ([\d.]+) s \(tested")
+    mrad, seconds = numbers(" ".join(m.groups()))
+    test = (ROOT / "tests" / "sim" / "test_dynamics_check.py").read_text(encoding="utf-8")
+    assert f"> {mrad:g}e-3" in test and f"for {seconds:g} s" in test
