@@ -2,16 +2,20 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, Field
+
+#: A run's life: queued → running → done | failed (a cancelled run is failed, error
+#: ``cancelled``).
+RunStatus = Literal["queued", "running", "done", "failed"]
 
 
 class SimulationAcceptedRead(BaseModel):
     """A background run accepted (202): poll ``GET /api/v1/simulations/{run_id}``."""
 
     run_id: str
-    status: str
+    status: RunStatus
     progress: float = Field(description="0…1")
 
 
@@ -93,7 +97,7 @@ class SimulationRunRead(BaseModel):
 
     run_id: str
     site_id: str
-    status: str = Field(description="`queued`, `running`, `done` or `failed`")
+    status: RunStatus
     progress: float = Field(description="0…1")
     summary: SimulationSummaryRead | None
     error: str | None
