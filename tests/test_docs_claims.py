@@ -897,3 +897,30 @@ def test_dynamics_table_1_readings() -> None:
     mrad, seconds = numbers(" ".join(m.groups()))
     test = (ROOT / "tests" / "sim" / "test_dynamics_check.py").read_text(encoding="utf-8")
     assert f"> {mrad:g}e-3" in test and f"for {seconds:g} s" in test
+
+
+# --- docs/diagnosis.md --------------------------------------------------------------
+
+
+def test_diagnosis_held_out_bounds_are_the_tests() -> None:
+    text = doc("diagnosis.md")
+    m = sentence(text, r"the fixed array's own twin under its reconstructed sky\s+within (\d+) % "
+                       r"of its readings on every day \(`tests/sim/test_sky_sensor.py`, seeds "
+                       r"(\d+)–(\d+);")
+    pct, first, last = numbers(" ".join(m.groups()))
+    sky = (ROOT / "tests" / "sim" / "test_sky_sensor.py").read_text(encoding="utf-8")
+    assert f"abs(ratio - 1) < {pct / 100:g}" in sky
+    assert f"params={list(range(int(first), int(last) + 1))}" in sky
+    m = sentence(text, r"soiling of ([\d.]+) %/day found within ±([\d.]+) %/day of\s+output and "
+                       r"its start within ±(\d+) days \(`tests/backend/test_diagnosis_faults.py`, "
+                       r"seed (\d+)\)")
+    rate, tol, days, seed = numbers(" ".join(m.groups()))
+    faults = ast.unparse(_function(ROOT / "tests/backend/test_diagnosis_faults.py",
+                                   "test_soiling_found_as_a_slow_decline"))
+    assert f"abs(soil[0]['magnitude'] - {rate:g}) <= {tol:g}" in faults
+    assert f"abs(since - start) <= {days:g}" in faults and f", {seed:g}, " in faults
+    m = sentence(text, r"checks a\s+day without readings after a measured one against `/energy` "
+                       r"to ([\d.]+) %")
+    assert ("rel", float(m.group(1)) / 100) in approx_tolerances(
+        "tests/backend/test_diagnosis_api.py",
+        "test_a_day_without_readings_expects_the_clear_sky_twin")
