@@ -67,6 +67,7 @@ def test_detected_error_from_roi_matches_the_truth_and_the_camera_model() -> Non
         sx, sy = cam.pixel_from_pointing_error(h, v)
         roi = render_sun_roi(cam.pixel_to_direction(sx, sy), cam, 16, rng=rng)
         for det in (detect_seed003(roi.image), detect_seed000(roi.image)):
+            assert det.centroid_px is not None  # the sun is in the crop
             x, y = det.centroid_px[0] + roi.x0_px, det.centroid_px[1] + roi.y0_px
             eh, ev = pointing_error_deg(cam, x, y)
             ref = cam.pointing_error(x, y)
