@@ -65,7 +65,7 @@ async function drawShadeDay() {
 async function drawStrategies() {
   const s = view.day.strategies;
   const names = ["sun", "backtrack", "sky_scan", "fixed"];
-  const y = names.map((n) => s[n]?.plant_energy_wh ?? null);
+  const y = names.map((n) => s[n].plant_energy_wh); // PlantDayRead: every strategy and fixed
   await draw("chart-plant-strategies", [{
     type: "bar", x: names, y: y.map((v) => v / 1000), name: "plant energy",
     marker: { color: [COLORS.sun, COLORS.tracker, COLORS.gain, COLORS.fixed] },
@@ -76,12 +76,12 @@ async function drawStrategies() {
   });
   const box = $("plant-summary");
   box.innerHTML = "";
-  const sun = s.sun || {};
+  const sun = s.sun;
   box.append(
     tile("Trackers", String(view.plant.trackers.length), view.plant.name),
     tile("Shading loss (sun)", `${num(sun.shading_loss_electrical_pct, 2)} %`, `bypass diodes; ${num(sun.shading_loss_area_pct, 2)} % by area`),
-    tile("Daylight shaded", `${num(100 * (sun.fraction_of_daylight_any_shaded || 0), 1)} %`, "of steps, any collector"),
-    tile("Backtrack vs sun", `${num(100 * ((s.backtrack?.plant_energy_wh || 0) / (sun.plant_energy_wh || 1) - 1), 2)} %`, "clear sky"),
+    tile("Daylight shaded", `${num(100 * sun.fraction_of_daylight_any_shaded, 1)} %`, "of steps, any collector"),
+    tile("Backtrack vs sun", sun.plant_energy_wh > 0 ? `${num(100 * (s.backtrack.plant_energy_wh / sun.plant_energy_wh - 1), 2)} %` : "—", "clear sky"),
   );
 }
 
