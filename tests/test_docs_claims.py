@@ -924,3 +924,18 @@ def test_diagnosis_held_out_bounds_are_the_tests() -> None:
     assert ("rel", float(m.group(1)) / 100) in approx_tolerances(
         "tests/backend/test_diagnosis_api.py",
         "test_a_day_without_readings_expects_the_clear_sky_twin")
+
+
+def test_plants_backtracking_on_21_december() -> None:
+    from sim.plant.layout import load_plant
+    from sim.plant.simulate import simulate_plant
+
+    plant = load_plant("penarroya")
+    start = pd.Timestamp("2021-12-21", tz=plant.timezone)
+    energy = {s: simulate_plant(plant, start, start + pd.Timedelta(days=1), strategy=s)
+              .summary()["plant_energy_wh"] / 1e6 for s in ("sun", "backtrack")}
+    m = sentence(doc("plants.md"), r"On 21 December alone: sun ([\d.]+) MWh, backtrack ([\d.]+) "
+                                   r"MWh \(([−\d.]+) %\)")
+    assert_printed(numbers(" ".join(m.groups())), [3, 3, 2],
+                   [energy["sun"], energy["backtrack"],
+                    100 * (energy["backtrack"] / energy["sun"] - 1)])
