@@ -7,8 +7,8 @@ parser, simulation forkserver and workers) is sampled throughout as summed
 PSS (shared pages counted once) and must stay ≤ 1 GB; summed RSS (shared
 pages counted in each process) is printed beside it. Requests beyond the
 bounds get 429/503 with ``Retry-After``.
-A second server with small limits checks the rate limit, the queue and the
-retention one by one.
+A second service with small limits (in this process: its memory is not measured)
+checks the rate limit, the queue and the retention one by one.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ import httpx
 import numpy as np
 import psutil
 import pytest
-from live_service import ServerProcess, new_database
+from live_service import InProcessServer, ServerProcess, new_database
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 
@@ -155,10 +155,10 @@ def test_memory_stays_bounded_under_anonymous_load(default_server: ServerProcess
 
 
 @pytest.fixture(scope="module")
-def small_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+def small_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
     tmp = tmp_path_factory.mktemp("limits-small")
     db = new_database("sqlite", tmp)
-    proc = ServerProcess(db.url, tmp / "server.log", extra_env={
+    proc = InProcessServer(db.url, extra_env={
         "HELIOTWIN_ANONYMOUS_SIMULATION_STEPS_PER_MIN": "3000",  # two days at 1 min
         "HELIOTWIN_ANONYMOUS_VISION_PIXELS_PER_MIN": "2000000",
         "HELIOTWIN_SIMULATION_QUEUE": "0",
@@ -179,9 +179,9 @@ def _day(client: httpx.Client, day: int, token: str | None = None,
         "background": background})
 
 
-def test_simulation_allowance_queue_and_retention(small_server: ServerProcess) -> None:
+def test_simulation_allowance_queue_and_retention(small_server: InProcessServer) -> None:
     token = small_server.token()
-    with httpx.Client(base_url=small_server.base_url, timeout=300) as c:
+    with small_server.client(timeout_s=300) as c:
         first = _day(c, 1)
         second = _day(c, 2)
         assert first.status_code == 200 and second.status_code == 200, second.text
@@ -208,22 +208,23 @@ def test_simulation_allowance_queue_and_retention(small_server: ServerProcess) -
         assert _day(c, 10, token).status_code == 200  # the worker is free again
 
 
-def test_vision_allowance_and_retention(small_server: ServerProcess) -> None:
+def test_vision_allowance_and_retention(small_server: InProcessServer) -> None:
     token = small_server.token()
     png = _sky_png(800, (300, 500))  # 0.64 Mpx: three fit in 2 Mpx a minute
+    with small_server.client(timeout_s=120) as c:
 
-    def post(auth: bool) -> httpx.Response:
-        return httpx.post(f"{small_server.base_url}/api/v1/vision/sun", timeout=120,
+        def post(auth: bool) -> httpx.Response:
+            return c.post("/api/v1/vision/sun",
                           headers={"Authorization": f"Bearer {token}"} if auth else {},
                           data={"camera": "pinhole"},
                           files={"file": ("sky.png", png, "image/png")})
 
-    ids = [post(False).json()["detection_id"] for _ in range(3)]
-    refused = post(False)
-    assert refused.status_code == 429 and _busy_ok(refused), refused.text
-    authed = post(True)
-    assert authed.status_code == 200
-    listed = httpx.get(f"{small_server.base_url}/api/v1/vision/detections", timeout=60)
+        ids = [post(False).json()["detection_id"] for _ in range(3)]
+        refused = post(False)
+        assert refused.status_code == 429 and _busy_ok(refused), refused.text
+        authed = post(True)
+        assert authed.status_code == 200
+        listed = c.get("/api/v1/vision/detections")
     stored = {d["detection_id"] for d in listed.json()["detections"]}
     assert ids[0] not in stored and {ids[1], ids[2], authed.json()["detection_id"]} <= stored
 
