@@ -31,11 +31,15 @@ import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 from unittest import mock
 
 import httpx
 import pytest
+
+if TYPE_CHECKING:
+    from backend.context import ServiceContext
+    from backend.settings import Settings
 
 ROOT = Path(__file__).resolve().parents[2]
 HELIOTWIN = [sys.executable, "-m", "backend"]
@@ -118,7 +122,7 @@ def process_env(database_url: str, extra_env: Mapping[str, str] | None = None) -
     return {**env, "PYTHONUNBUFFERED": "1", **service_env(database_url, extra_env)}
 
 
-def settings_from_env(env: Mapping[str, str]) -> Any:
+def settings_from_env(env: Mapping[str, str]) -> Settings:
     """``backend.settings.get_settings()`` as a process started with ``env`` would read it
     (no other ``HELIOTWIN_*`` variable of this run), so a test names its settings as a
     user would: by their environment variables."""
@@ -243,11 +247,11 @@ class InProcessServer:
         return process_env(self.database_url, self.extra_env)
 
     @property
-    def settings(self) -> Any:
+    def settings(self) -> Settings:
         return self.app.state.settings
 
     @property
-    def ctx(self) -> Any:
+    def ctx(self) -> ServiceContext:
         """The running service's ``backend.context.ServiceContext``."""
         return self.app.state.ctx
 
