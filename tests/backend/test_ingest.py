@@ -1,13 +1,18 @@
-"""Bulk validation (``backend/measurements/parse.py``): timestamps, ADC, row/field errors."""
+"""Logger ingest without HTTP: bulk validation (``backend/measurements/parse.py``: timestamps,
+ADC, row/field errors) and the service around it (``backend/measurements/ingest.py``)."""
 
 from __future__ import annotations
 
+import asyncio
 import datetime as dt
+from concurrent.futures import Future
+from typing import Any
 
 import numpy as np
 import orjson
 import pytest
 
+from backend.measurements.ingest import THREAD_FROM_BYTES, StorageUnavailable, ingest, parser_for
 from backend.measurements.parse import (
     Calibration,
     IngestError,
@@ -259,3 +264,68 @@ def test_a_long_batch_of_naive_stamps_names_each_row() -> None:
     errors = _errors(orjson.dumps({"readings": rows}))
     assert [(e["row"], e["field"]) for e in errors[:10]] == [(r, "ts") for r in range(10)]
     assert errors[-1]["msg"] == "30 more problems not listed (ts: 30)"
+
+
+# ---------------------------------------------------------------- the service (ingest.py)
+
+
+class _Writer:
+    """A stand-in for the writer: a commit that gives ``result`` or raises ``error``."""
+
+    def __init__(self, result: tuple[int, int] = (0, 0), error: Exception | None = None) -> None:
+        self.result, self.error = result, error
+        self.jobs: list[Any] = []
+
+    def submit(self, job: Any) -> Future[tuple[int, int]]:
+        self.jobs.append(job)
+        done: Future[tuple[int, int]] = Future()
+        if self.error is not None:
+            done.set_exception(self.error)
+        else:
+            done.set_result(self.result)
+        return done
+
+
+def test_the_media_type_chooses_the_validator() -> None:
+    assert parser_for(None) is parse_json_batch
+    assert parser_for("application/json; charset=utf-8") is parse_json_batch
+    assert parser_for("Text/CSV; header=present") is parse_csv_batch
+    with pytest.raises(IngestError) as err:
+        parser_for("text/plain")
+    (e,) = err.value.errors
+    assert err.value.status == 415 and e["loc"] == ["header", "content-type"]
+    assert "send application/json or text/csv" in e["msg"]
+
+
+@pytest.mark.parametrize("rows", [1, 600], ids=["small", "over_32_kib_on_a_thread"])
+def test_ingest_answers_what_the_writer_committed(rows: int) -> None:
+    readings = [dict(GOOD, ts=f"2024-05-01T{10 + m // 60:02d}:{m % 60:02d}:00Z", power_w=182.0)
+                for m in range(rows)]
+    for r in readings[1::2]:  # every other one from a power-only logger
+        del r["voltage_v"], r["current_a"]
+    body = orjson.dumps({"readings": readings})
+    assert (len(body) > THREAD_FROM_BYTES) == (rows > 1)
+    writer = _Writer(result=(rows - 1, 1))
+    stored = asyncio.run(ingest(writer, parse_json_batch, body, ARRAYS, Limits()))  # type: ignore[arg-type]
+    assert (stored.accepted, stored.duplicates, stored.readings) == (rows - 1, 1, rows)
+    assert stored.power_only == rows // 2
+    last = dt.datetime.fromisoformat(readings[-1]["ts"].replace("Z", "+00:00"))
+    assert stored.stored_through_s == int(last.timestamp())
+    (job,) = writer.jobs
+    assert job.ts_s.tolist() == [int(dt.datetime.fromisoformat(r["ts"]).timestamp())
+                                 for r in readings]
+
+
+def test_a_failed_commit_is_storage_unavailable() -> None:
+    writer = _Writer(error=OSError("disk full"))
+    body = orjson.dumps({"readings": [GOOD]})
+    with pytest.raises(StorageUnavailable, match="OSError.*nothing was stored"):
+        asyncio.run(ingest(writer, parse_json_batch, body, ARRAYS, Limits()))  # type: ignore[arg-type]
+
+
+def test_a_bad_batch_never_reaches_the_writer() -> None:
+    writer = _Writer()
+    body = orjson.dumps({"readings": [dict(GOOD, ts="2024-05-01T10:00:00")]})
+    with pytest.raises(IngestError):
+        asyncio.run(ingest(writer, parse_json_batch, body, ARRAYS, Limits()))  # type: ignore[arg-type]
+    assert writer.jobs == []
