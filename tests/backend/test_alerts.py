@@ -501,6 +501,9 @@ def test_fault_and_low_pr_from_an_injected_diagnosis_raised_then_cleared(
         assert _alerts(c, site_id=SITE, kind="fault")["counts"] == {"active": 0, "cleared": 1}
 
 
+POSTED = 60  # readings posted while the webhook hangs
+
+
 def test_ingestion_never_waits_for_a_hanging_webhook(
         sqlite_database: Database, caplog: pytest.LogCaptureFixture) -> None:
     """The webhook's receiver takes every POST and never answers; the sender's timeout is
@@ -521,7 +524,7 @@ def test_ingestion_never_waits_for_a_hanging_webhook(
                 _post(c, token, [_reading(time.time() - 1)])
                 _until(lambda: len(hang.requests) == 1)
                 start_s = int(time.time()) // 60 * 60 - 86400
-                for k in range(200):  # one minute a request, as a field logger posts
+                for k in range(POSTED):  # one minute a request, as a field logger posts
                     _post(c, token, [_reading(start_s + 60 * k, "fixed")])
                 # flap the tracker (fresh, silent, fresh, …): more events for the webhook
                 before = _alerts(c)["evaluator"]["evaluations"]
@@ -531,9 +534,9 @@ def test_ingestion_never_waits_for_a_hanging_webhook(
                 ev = _alerts(c)["evaluator"]
                 r = c.get(f"/api/v1/sites/{SITE}/measurements", params={
                     "array": "fixed", "start": dt.datetime.fromtimestamp(start_s, dt.UTC)
-                    .isoformat(), "end": dt.datetime.fromtimestamp(start_s + 60 * 200, dt.UTC)
+                    .isoformat(), "end": dt.datetime.fromtimestamp(start_s + 60 * POSTED, dt.UTC)
                     .isoformat(), "max_points": "1000"})
-            assert r.status_code == 200 and len(r.json()["points"]) == 200
+            assert r.status_code == 200 and len(r.json()["points"]) == POSTED
             assert ev["evaluations"] >= before + 3 * ROUNDS_PAST_SILENCE
             webhook = ev["webhook"]
             assert (webhook["delivered"], webhook["retries"], webhook["failed"]) == (0, 0, 0)
