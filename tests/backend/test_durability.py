@@ -117,8 +117,8 @@ def test_sigkill_loses_nothing_acknowledged(database: Database, tmp_path: Path) 
                                       "format": "csv"}).text.splitlines()[1:]
             stored = {}
             for line in got:
-                t, _v, i, _p = line.split(",")
-                stored[int(dt.datetime.fromisoformat(t).timestamp())] = float(i)
+                stamp, _v, i, _p = line.split(",")
+                stored[int(dt.datetime.fromisoformat(stamp).timestamp())] = float(i)
             missing = [r["ts"] for r, t in zip(readings, ts, strict=True)
                        if int(t) not in stored]
             assert not missing, f"{len(missing)} acknowledged {array} readings lost"

@@ -39,10 +39,11 @@ def test_escaping_follows_the_line_protocol_reference() -> None:
 
 
 def test_lines_parse_back_with_an_independent_parser() -> None:
-    cols = {"ts": ["2024-03-15T18:00:00Z", "2024-03-15T18:01:00Z", "2024-03-15T18:02:00Z"],
-            "n": [60, 59, 1],
-            "voltage_v": [26.1, float("nan"), 1e-05],
-            "power_w": [712.53, 0.0, float("inf")]}
+    cols: dict[str, list] = {
+        "ts": ["2024-03-15T18:00:00Z", "2024-03-15T18:01:00Z", "2024-03-15T18:02:00Z"],
+        "n": [60, 59, 1],
+        "voltage_v": [26.1, float("nan"), 1e-05],
+        "power_w": [712.53, 0.0, float("inf")]}
     text = "".join(influx_lines("site a", ODD_ARRAY, "measured", cols, chunk_rows=2))
     lines = text.splitlines()
     assert len(lines) == 3

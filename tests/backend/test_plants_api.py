@@ -145,7 +145,7 @@ def test_sky_map_json_and_png(client: httpx.Client) -> None:
     png = client.get(url, params={"time": DEC21_0824_TST}, headers={"Accept": "image/png"})
     assert png.headers["content-type"] == "image/png"
     img = cv2.imdecode(np.frombuffer(png.content, np.uint8), cv2.IMREAD_COLOR)
-    assert img.shape == (420, 420, 3)
+    assert img is not None and img.shape == (420, 420, 3)
     grey = np.all(img == 150, axis=-1).mean()
     assert 0.01 < grey < 0.9, "the shading region is drawn grey"
     assert client.get(url, params={"time": "2021-12-21T08:00"}).status_code == 422
