@@ -385,8 +385,10 @@ def test_home_assistant_discovery_is_retained(service: tuple[httpx.Client, str])
             for sensor in ("energy", "energy_today", "power", "twin_power",
                            "twin_energy_today"):
                 oid = f"heliotwin_{SITE}_{array}_{sensor}"
-                msg = ha.wait(lambda m, o=oid: m.topic == f"{prefix}_ha/sensor/{o}/config",
-                              f"config of {oid}")
+                def is_config(m: mqtt.MQTTMessage, t: str = f"{prefix}_ha/sensor/{oid}/config"
+                              ) -> bool:
+                    return bool(m.topic == t)
+                msg = ha.wait(is_config, f"config of {oid}")
                 assert msg.retain
                 configs[oid] = json.loads(msg.payload)
     finally:

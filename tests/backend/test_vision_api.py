@@ -97,8 +97,8 @@ def test_fisheye_synthetic_frame_against_spa(client: httpx.Client) -> None:
     assert d["error"]["separation_deg"] < 0.2
     assert d["timestamp"] == "2024-02-10T16:30:00Z"
     # the ephemeris sun's pixel, by seed 003's eqs. 9-11 written out (east left: angle Δ − A)
-    r, phi = 2.6 * (90.0 - el), np.radians(12.0 - az)
-    want = [319.5 + r * np.sin(phi), 239.5 - r * np.cos(phi)]
+    rho, phi = 2.6 * (90.0 - el), np.radians(12.0 - az)
+    want = [319.5 + rho * np.sin(phi), 239.5 - rho * np.cos(phi)]
     assert d["ephemeris"]["centroid_px"] == pytest.approx(want, abs=0.05)
     assert d["error"]["distance_px"] == pytest.approx(
         float(np.hypot(d["centroid_px"][0] - want[0], d["centroid_px"][1] - want[1])), abs=0.1)
