@@ -309,10 +309,10 @@ def test_ingest_answers_what_the_writer_committed(rows: int) -> None:
     stored = asyncio.run(ingest(writer, parse_json_batch, body, ARRAYS, Limits()))  # type: ignore[arg-type]
     assert (stored.accepted, stored.duplicates, stored.readings) == (rows - 1, 1, rows)
     assert stored.power_only == rows // 2
-    last = dt.datetime.fromisoformat(readings[-1]["ts"].replace("Z", "+00:00"))
+    last = dt.datetime.fromisoformat(str(readings[-1]["ts"]))
     assert stored.stored_through_s == int(last.timestamp())
     (job,) = writer.jobs
-    assert job.ts_s.tolist() == [int(dt.datetime.fromisoformat(r["ts"]).timestamp())
+    assert job.ts_s.tolist() == [int(dt.datetime.fromisoformat(str(r["ts"])).timestamp())
                                  for r in readings]
 
 

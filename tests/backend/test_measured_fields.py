@@ -11,7 +11,7 @@ from __future__ import annotations
 import datetime as dt
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import httpx
 import numpy as np
@@ -91,8 +91,8 @@ def test_bucket_means_of_mixed_readings_count_only_readings_with_the_value(
             poa.append(900.0 + m)
     r = post(client, live_server.write_token, {"readings": rows})
     assert r.status_code == 200 and r.json()["power_only"] == 30
-    day = {"array": "tracker", "start": "2023-02-13T00:00:00-06:00",
-           "end": "2023-02-14T00:00:00-06:00", "max_points": 13}
+    day: dict[str, Any] = {"array": "tracker", "start": "2023-02-13T00:00:00-06:00",
+                           "end": "2023-02-14T00:00:00-06:00", "max_points": 13}
     (hour,) = [p for p in client.get(PATH, params=day).json()["points"] if p["n"]]
     assert hour["n"] == 60  # a 2-hour bucket of the rollups
     assert hour["voltage_v"] == pytest.approx(np.mean(volts), rel=1e-12)
@@ -100,8 +100,8 @@ def test_bucket_means_of_mixed_readings_count_only_readings_with_the_value(
     assert hour["poa_irradiance_w_m2"] == pytest.approx(np.mean(poa), rel=1e-12)
     assert "ghi_w_m2" not in hour  # no reading carried it
     # 4-minute buckets grouped from the raw rows: two readings with a voltage in each
-    hours = {"array": "tracker", "start": t0.isoformat(),
-             "end": (t0 + dt.timedelta(hours=1)).isoformat(), "max_points": 15}
+    hours: dict[str, Any] = {"array": "tracker", "start": t0.isoformat(),
+                             "end": (t0 + dt.timedelta(hours=1)).isoformat(), "max_points": 15}
     got = client.get(PATH, params=hours).json()
     assert got["bucket_s"] == 240 and [p["n"] for p in got["points"]] == [4] * 15
     assert [p["voltage_v"] for p in got["points"]] == pytest.approx(

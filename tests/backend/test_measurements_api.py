@@ -9,7 +9,7 @@ import csv
 import datetime as dt
 import io
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import httpx
 import numpy as np
@@ -38,7 +38,7 @@ def day_readings(day: dt.date, array: str, scale: float = 1.0, every_min: int = 
     return out
 
 
-def post(client: httpx.Client, token: str | None, body: object, **kw: object) -> httpx.Response:
+def post(client: httpx.Client, token: str | None, body: object, **kw: Any) -> httpx.Response:
     headers = {"Authorization": f"Bearer {token}"} if token else {}
     if isinstance(body, str):
         return client.post(PATH, content=body, headers={**headers, "Content-Type": "text/csv"})
@@ -177,8 +177,8 @@ def test_adc_readings_use_stored_calibration(client: httpx.Client,
         r = client.put(url, content=bad, headers=auth)
         assert r.status_code == 422, (bad, r.text)
     assert client.get(url).json() == cal
-    bad = {**reading, "ts": "2023-01-08T12:01:00-06:00", "current_adc": 1024}
-    r = post(client, tok, {"readings": [bad]})
+    raw = {**reading, "ts": "2023-01-08T12:01:00-06:00", "current_adc": 1024}
+    r = post(client, tok, {"readings": [raw]})
     assert r.status_code == 422 and r.json()["detail"][0]["field"] == "current_adc"
 
 
