@@ -106,9 +106,10 @@ def lowest_free_elevation(plant: Plant, solar_azimuth: ArrayLike, solar_elevatio
 
     Closed form (seed 004 §2.1 geometry, collectors parallel). With n(α) = cos α h
     + sin α z for the normal azimuth γ (h horizontal towards γ), u = z × h and
-    v = u × n = sin α h − cos α z, and m = d × s for a pair offset d, the shade
-    offsets of :mod:`sim.plant.shading` times s·n are du (s·n) = m·v and
-    dv (s·n) = −m·u. A pair shades exactly where
+    v = u × n = sin α h − cos α z (down the slope here; the collector's own frame,
+    :func:`sim.kinematics.panel_axes`, takes −v, up the slope — only |m·v| enters
+    below, so the sign does not matter), and m = d × s for a pair offset d, the shade
+    offsets times s·n are du (s·n) = m·v and dv (s·n) = −m·u. A pair shades exactly where
 
         |m·u| < b (s·n)   and   |m·v(α)| < a (s·n),
 

@@ -166,15 +166,15 @@ def get_simulation(run_id: str, ctx: ContextDep) -> Response:
     return Response(orjson.dumps(state.to_dict()), media_type="application/json")
 
 
-@router.delete("/{run_id}", response_model=SimulationRunRead,
-               response_model_exclude_unset=True, responses={404: {}})
-async def cancel_simulation(run_id: str, ctx: ContextDep) -> dict[str, Any]:
+@router.delete("/{run_id}", response_model=SimulationRunRead, responses={404: {}})
+async def cancel_simulation(run_id: str, ctx: ContextDep) -> Response:
     """Cancel a queued or running run; its state once it has ended (``failed`` with the
-    error ``cancelled``, or as it was if it had already ended)."""
+    error ``cancelled``, or as it was if it had already ended). Answered as stored, as
+    :func:`get_simulation` is (a run stored by an older version keeps its summary)."""
     state = await asyncio.to_thread(ctx.simulations.cancel, run_id)
     if state is None:
         raise HTTPException(404, f"unknown simulation run {run_id!r}")
-    return state.to_dict()
+    return Response(orjson.dumps(state.to_dict()), media_type="application/json")
 
 
 @router.get("/{run_id}/series", response_model=SimulationSeriesRead,
