@@ -40,14 +40,13 @@ from urllib.parse import unquote, urlsplit
 import aiomqtt
 from tenacity import AsyncRetrying, RetryCallState, retry_if_exception
 
+from backend.measurements.ingest import measured_job
 from backend.measurements.parse import Batch
-from backend.measurements.writer import MeasurementJob
 from backend.mqtt import homeassistant
 from backend.mqtt.assemble import QUANTITIES, Closed, MinuteAssembler, parse_value
 from backend.mqtt.ingest import Rejection, limits, minute_batch, state_batch
 from backend.mqtt.topics import Topics
 from backend.retry import Stopped, backoff, stoppable_async_sleep
-from backend.storage.tables import SOURCE_CODES
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -313,9 +312,7 @@ class MqttService:
         if isinstance(result, Rejection):
             self._reject(site_id, result)
             return
-        job = MeasurementJob(result.array_ids, SOURCE_CODES["measured"], result.ts_s,
-                             result.voltage_v, result.current_a, result.power_w,
-                             result.sensors)
+        job = measured_job(result)
         task = asyncio.create_task(self._committed(site_id, topic, self.ctx.writer.submit(job),
                                                    payload))
         self._in_flight.add(task)
