@@ -68,16 +68,16 @@ logger = logging.getLogger(__name__)
 
 def _start_scene(ctx: ServiceContext) -> TwinScene | None:
     s = ctx.settings
-    info = ctx.registry.get(s.default_site)
-    if not s.viser or info is None:
+    info = ctx.registry.get(s.sites.default_site)
+    if not s.server.viser or info is None:
         return None
     try:
         def site_of(site_id: str) -> Any:  # each viewer shows the site the dashboard selects
             found = ctx.registry.get(site_id)
             return None if found is None else found.site
 
-        scene = TwinScene(info.site, s.host, s.viser_port, sites=site_of,
-                          plants=lambda plant_id: load_plant(plant_id, s.plants_dir))
+        scene = TwinScene(info.site, s.server.host, s.server.viser_port, sites=site_of,
+                          plants=lambda plant_id: load_plant(plant_id, s.sites.plants_dir))
         scene.start()
     except Exception:  # the service runs without its 3D view rather than not at all
         logger.exception("3D scene did not start")
@@ -86,25 +86,25 @@ def _start_scene(ctx: ServiceContext) -> TwinScene | None:
 
 
 def _demo_base_url(settings: Settings) -> str:
-    host = "127.0.0.1" if settings.host in ("0.0.0.0", "::", "") else settings.host
-    return f"http://{host}:{settings.port}"
+    host = "127.0.0.1" if settings.server.host in ("0.0.0.0", "::", "") else settings.server.host
+    return f"http://{host}:{settings.server.port}"
 
 
 def _start_demo(ctx: ServiceContext, stop: threading.Event) -> threading.Thread | None:
     s = ctx.settings
-    info = ctx.registry.get(s.default_site)
-    if not s.demo_logger or info is None:
+    info = ctx.registry.get(s.sites.default_site)
+    if not s.demo.enabled or info is None:
         return None
     from backend.twin.demo_logger import DemoLogger
 
-    token = s.demo_token or ctx.writer.call(
-        lambda conn: create_token(conn, s.default_site, "demo-logger (heliotwin serve)")
+    token = s.demo.token.get_secret_value() if s.demo.token else ctx.writer.call(
+        lambda conn: create_token(conn, s.sites.default_site, "demo-logger (heliotwin serve)")
     ).result()
     demo = DemoLogger(info.site, _demo_base_url(s), token)
 
     def run() -> None:
         try:
-            demo.run(stop, backfill_days=s.demo_backfill_days)
+            demo.run(stop, backfill_days=s.demo.backfill_days)
         except Exception:
             logger.exception("demo logger stopped")
         finally:
@@ -141,9 +141,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.state.scene = scene
         stop_live = asyncio.Event()
         live_task = None
-        if settings.live_twin:
+        if settings.twin.live:
             live_task = asyncio.create_task(
-                ctx.twin.run_live(stop_live, settings.live_twin_interval_s), name="live-twin")
+                ctx.twin.run_live(stop_live, settings.twin.live_interval_s), name="live-twin")
         stop_demo = threading.Event()
         demo_thread = _start_demo(ctx, stop_demo)
         try:
@@ -180,8 +180,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # first of all: Content-Encoding, repeated keys (ingest checks its token, then its body)
     app.add_middleware(strict.StrictBodies, own_body=measurements.INGEST_PATH)
     # outermost: CSP, X-Frame-Options, nosniff, Referrer-Policy on every response
-    app.add_middleware(security.SecurityHeaders, viser_port=settings.viser_port)
-    security.add_docs(app, settings.viser_port)
+    app.add_middleware(security.SecurityHeaders, viser_port=settings.server.viser_port)
+    security.add_docs(app, settings.server.viser_port)
     for module in (health, sites, measurements, energy, diagnosis, alerts, simulations, weather,
                    twin3d, plants, vision, tokens, dashboard):
         app.include_router(module.router)

@@ -1,7 +1,7 @@
 """Everything the running service holds: built at start-up, closed at shutdown.
 
 :func:`open_context` runs the migrations, loads the built-in sites from
-``Settings.sites_dir`` into the database, and starts the writer; the FastAPI
+``Settings.sites.user_dir`` into the database, and starts the writer; the FastAPI
 lifespan (``backend/app.py``) keeps the result in ``app.state.ctx`` and the
 dependencies in ``backend/api/deps.py`` hand its parts to the routes.
 """
@@ -41,8 +41,8 @@ class ServiceContext:
     twin: TwinService
     simulations: SimulationRunner
     limits: Limits  # rate limits of anonymous work, the decode budget (backend/limits.py)
-    mqtt: MqttService | None = None  # with Settings.mqtt_url (backend/mqtt/service.py)
-    alerts: AlertService | None = None  # with Settings.alerts (backend/alerts/service.py)
+    mqtt: MqttService | None = None  # with Settings.mqtt.url (backend/mqtt/service.py)
+    alerts: AlertService | None = None  # with Settings.alerts.enabled (backend/alerts/service.py)
 
     def close(self) -> None:
         """Stop alerts, MQTT, runs and the writer; dispose of the engine."""
@@ -59,29 +59,29 @@ def open_context(settings: Settings) -> ServiceContext:
     """Migrate, load sites, start the writer (and MQTT, if set, and the alert evaluator)."""
     engine = make_engine(settings)
     run_migrations(engine)
-    registry = Registry.load_files(settings.sites_dir)
+    registry = Registry.load_files(settings.sites.user_dir)
     sites = [info.site for info in registry.sites.values()]
     with engine.begin() as conn:
         sync_sites(conn, sites)
         registry.refresh_arrays(conn)
     logger.info("sites loaded: %s", ", ".join(registry.sites) or "none")
-    writer = Writer(engine, registry.phase_of_array, settings.energy_max_gap_s,
-                    settings.writer_max_group_rows)
+    writer = Writer(engine, registry.phase_of_array, settings.ingest.energy_max_gap_s,
+                    settings.database.writer_max_group_rows)
     writer.start()
-    twin = TwinService(registry, engine, writer, settings.twin_on_demand_max_days,
-                       scene_site=settings.default_site,
-                       history_days=settings.twin_history_days)
+    twin = TwinService(registry, engine, writer, settings.twin.on_demand_max_days,
+                       scene_site=settings.sites.default_site,
+                       history_days=settings.twin.history_days)
     ctx = ServiceContext(
         settings=settings, engine=engine, sessions=make_sessionmaker(engine),
         registry=registry, writer=writer,
-        tokens=TokenCache(engine, settings.token_cache_ttl_s), twin=twin,
+        tokens=TokenCache(engine, settings.server.token_cache_ttl_s), twin=twin,
         simulations=SimulationRunner(registry, engine, writer, settings),
         limits=Limits.from_settings(settings),
     )
-    if settings.mqtt_url:
+    if settings.mqtt.url:
         ctx.mqtt = MqttService(ctx)
         ctx.mqtt.start()
-    if settings.alerts:
+    if settings.alerts.enabled:
         ctx.alerts = AlertService(ctx)
         ctx.alerts.start()
     return ctx

@@ -178,9 +178,9 @@ class Limits:
     @classmethod
     def from_settings(cls, s: Settings) -> Limits:
         return cls(
-            RateLimiter(s.anonymous_simulation_steps_per_min, "simulated time steps",
+            RateLimiter(s.simulations.anonymous_steps_per_min, "simulated time steps",
                         "HELIOTWIN_ANONYMOUS_SIMULATION_STEPS_PER_MIN"),
-            RateLimiter(s.anonymous_vision_pixels_per_min, "image pixels",
+            RateLimiter(s.vision.anonymous_pixels_per_min, "image pixels",
                         "HELIOTWIN_ANONYMOUS_VISION_PIXELS_PER_MIN"),
-            PixelBudget(s.vision_decode_pixels, s.vision_queue),
+            PixelBudget(s.vision.decode_pixels, s.vision.queue),
         )

@@ -1,21 +1,47 @@
-"""Service settings: one typed object from ``HELIOTWIN_*`` environment variables.
+"""Service settings: typed groups per concept, from ``HELIOTWIN_*`` environment variables.
 
 Every field has a working default (SQLite under ``sim.paths.user_data_dir()``,
 port 8000 for the API and dashboard, 8080 for viser). ``get_settings()`` builds
-the object; nothing is read from the environment at import time. The README's
-settings table (between ``<!-- settings:start -->`` and ``<!-- settings:end -->``)
-documents every field, and ``tests/backend/test_settings.py`` checks that it does.
+the object; nothing is read from the environment at import time.
+
+:class:`Settings` holds one group per concept (``settings.database.url``,
+``settings.alerts.interval_s``, …). The environment variables' names are a public
+contract and stayed as they were when the settings were grouped: a group reads its
+variables under its own prefix (``HELIOTWIN_MQTT_`` + ``url``), and a field whose
+name in its group is not its variable's suffix names the variable itself
+(``alerts.enabled`` ← ``HELIOTWIN_ALERTS``). Keyword overrides
+(``get_settings(database_url=…)``, ``Settings(port=0)``) use the variable's name
+without ``HELIOTWIN_``, lower-case; :func:`env_fields` lists every variable.
+Secrets (the admin and demo tokens, the webhook secret, the MQTT URL with its
+password) are ``SecretStr``: never in a repr, a log or an answer, and no
+invalid value is echoed in an error. The README's settings table (between
+``<!-- settings:start -->`` and ``<!-- settings:end -->``) documents every variable,
+and ``tests/backend/test_settings.py`` checks that it does.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
-from pydantic import Field, model_validator
+from pydantic import (
+    BaseModel,
+    Field,
+    HttpUrl,
+    SecretStr,
+    ValidationInfo,
+    field_validator,
+)
+from pydantic.fields import FieldInfo
 from pydantic_settings import BaseSettings, SettingsConfigDict
+from sqlalchemy.engine import make_url
+from sqlalchemy.exc import ArgumentError
 
 from sim.energy import DEFAULT_MAX_GAP_S
 from sim.paths import default_plants_dir, default_user_sites_dir, user_data_dir
+
+#: The prefix of every environment variable of the service.
+PREFIX = "HELIOTWIN_"
 
 
 def _default_database_url() -> str:
@@ -24,32 +50,112 @@ def _default_database_url() -> str:
     return f"sqlite:///{user_data_dir() / 'heliotwin.sqlite'}"
 
 
-class Settings(BaseSettings):
-    """All settings of the service and the ``heliotwin`` commands that use the database."""
+def _config(env_prefix: str) -> SettingsConfigDict:
+    """A group's config: its variables' prefix; fields set by name or by variable; no
+    input echoed in a validation error (a value may hold a secret)."""
+    return SettingsConfigDict(env_prefix=env_prefix, extra="ignore", validate_by_name=True,
+                              validate_by_alias=True, hide_input_in_errors=True)
 
-    model_config = SettingsConfigDict(env_prefix="HELIOTWIN_", extra="ignore")
 
-    database_url: str = Field(
-        default_factory=_default_database_url,
-        description="SQLAlchemy URL; `postgresql+psycopg://user@host:5432/db` for PostgreSQL.",
-    )
+def _env(name: str) -> str:
+    """The variable of a field whose name in its group is not its variable's suffix."""
+    return PREFIX + name.upper()
+
+
+class _Group(BaseSettings):
+    """A group of settings, read from the environment when it is built."""
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _blank_is_unset(cls, value: Any, info: ValidationInfo) -> Any:
+        """An empty variable leaves an optional setting (one unset by default) unset."""
+        field = cls.model_fields[info.field_name or ""]
+        unset_by_default = field.default is None and field.default_factory is None
+        return None if value == "" and unset_by_default else value
+
+
+class ServerSettings(_Group):
+    """What the service listens on and who may administer it."""
+
+    model_config = _config("HELIOTWIN_")
+
     host: str = Field("127.0.0.1", description="Interface the API and dashboard listen on.")
     port: int = Field(8000, ge=0, le=65535, description="Port of the API and dashboard.")
-    viser_port: int = Field(8080, ge=0, le=65535, description="Port of the viser 3D twin.")
     viser: bool = Field(True, description="Start the viser 3D twin with the service.")
-    sites_dir: Path = Field(
+    viser_port: int = Field(8080, ge=0, le=65535, description="Port of the viser 3D twin.")
+    access_log: bool = Field(False, description="Log every HTTP request (uvicorn access log).")
+    max_upload_bytes: int = Field(
+        10 * 1024 * 1024, gt=0, description="Largest request body accepted (ingest, images)."
+    )
+    admin_token: SecretStr | None = Field(
+        None, description="Bearer token of the admin endpoints (`/api/v1/tokens`); unset: "
+                          "they answer 403."
+    )
+    token_cache_ttl_s: float = Field(
+        0.5, gt=0, le=1.0, description="How long a checked write token is trusted from "
+                                       "memory (a revocation by the CLI takes effect within it)."
+    )
+
+
+class SiteSettings(_Group):
+    """Where site and plant configs are read, and the default site."""
+
+    model_config = _config("HELIOTWIN_")
+
+    user_dir: Path = Field(
         default_factory=default_user_sites_dir,
         description="Folder of your own site configs, added to the built-in sites (a file "
                     "with a built-in id replaces it); the dashboard and `heliotwin site create` "
-                    "write here.")
+                    "write here.", validation_alias=_env("sites_dir"))
     plants_dir: Path = Field(default_factory=default_plants_dir,
                              description="Folder of plant layouts (seed 004), one JSON each.")
     default_site: str = Field(
         "tehuantepec", description="Site of the 3D scene, the demo logger and the dashboard."
     )
-    max_upload_bytes: int = Field(
-        10 * 1024 * 1024, gt=0, description="Largest request body accepted (ingest, images)."
+
+
+class DatabaseSettings(_Group):
+    """Storage: the database and how the one writer commits."""
+
+    model_config = _config("HELIOTWIN_DATABASE_")
+
+    url: str = Field(
+        default_factory=_default_database_url,
+        description="SQLAlchemy URL; `postgresql+psycopg://user@host:5432/db` for PostgreSQL.",
     )
+    sqlite_synchronous: str = Field(
+        "NORMAL", pattern="^(NORMAL|FULL|EXTRA)$",
+        description="SQLite `synchronous`: NORMAL survives a killed process, FULL also "
+                    "a power cut (one fsync per group commit).",
+        validation_alias=_env("sqlite_synchronous"))
+    writer_max_group_rows: int = Field(
+        200_000, gt=0, description="Most rows the writer commits in one group commit.",
+        validation_alias=_env("writer_max_group_rows"))
+
+    @field_validator("url")
+    @classmethod
+    def _driver(cls, url: str) -> str:
+        """``postgresql://`` means the driver we ship (psycopg 3); a URL SQLAlchemy cannot
+        read is refused at start, not at the first connection."""
+        if url.startswith("postgresql://"):
+            url = "postgresql+psycopg://" + url[len("postgresql://"):]
+        try:
+            make_url(url)
+        except ArgumentError:
+            raise ValueError("not an SQLAlchemy database URL") from None
+        return url
+
+    @property
+    def is_sqlite(self) -> bool:
+        """Whether the database is SQLite."""
+        return self.url.startswith("sqlite")
+
+
+class IngestSettings(_Group):
+    """Bounds of logger batches and the energy rule's gap."""
+
+    model_config = _config("HELIOTWIN_")
+
     max_batch_rows: int = Field(
         100_000, gt=0, description="Most readings in one measurements POST (more → 413)."
     )
@@ -72,179 +178,245 @@ class Settings(BaseSettings):
         description="Longest gap between readings that energy bridges (sim/energy.py: every "
                     "logger cadence up to 15 min is bridged at the default)."
     )
-    writer_max_group_rows: int = Field(
-        200_000, gt=0, description="Most rows the writer commits in one group commit."
-    )
-    sqlite_synchronous: str = Field(
-        "NORMAL", pattern="^(NORMAL|FULL|EXTRA)$",
-        description="SQLite `synchronous`: NORMAL survives a killed process, FULL also "
-                    "a power cut (one fsync per group commit).",
-    )
-    live_twin: bool = Field(True, description="Write the twin's I/V/P every minute (source twin).")
-    live_twin_interval_s: float = Field(
-        60.0, gt=0, description="Period of the live twin loop (tests shorten it)."
-    )
-    twin_on_demand_max_days: int = Field(
+
+
+class TwinSettings(_Group):
+    """The live twin and the twin computed on demand."""
+
+    model_config = _config("HELIOTWIN_TWIN_")
+
+    live: bool = Field(True, description="Write the twin's I/V/P every minute (source twin).",
+        validation_alias=_env("live_twin"))
+    live_interval_s: float = Field(
+        60.0, gt=0, description="Period of the live twin loop (tests shorten it).",
+        validation_alias=_env("live_twin_interval_s"))
+    on_demand_max_days: int = Field(
         800, ge=0, description="Most days of twin series one query (energy, source=twin) computes."
     )
-    twin_history_days: int = Field(
+    history_days: int = Field(
         400,
         ge=0,
         description="Days before now that reads fill with the twin on demand; older days only "
         "where measured data exist.",
     )
-    demo_logger: bool = Field(True, description="`heliotwin serve` runs the demo field logger.")
-    demo_token: str | None = Field(
+
+
+class DemoSettings(_Group):
+    """The demo field logger of `heliotwin serve`."""
+
+    model_config = _config("HELIOTWIN_DEMO_")
+
+    enabled: bool = Field(True, description="`heliotwin serve` runs the demo field logger.",
+        validation_alias=_env("demo_logger"))
+    token: SecretStr | None = Field(
         None, description="Write token of the demo logger; created at start when unset."
     )
-    demo_backfill_days: int = Field(
+    backfill_days: int = Field(
         7, ge=0, le=366, description="Days of history the demo logger back-fills at start."
     )
-    max_simulation_steps: int = Field(
-        1_100_000, gt=0, description="Most time steps one simulation request may ask for."
-    )
-    vision_max_pixels: int = Field(
-        40_000_000, gt=0, description="Largest image (pixels) the vision endpoints decode."
-    )
-    vision_require_token: bool = Field(
-        False, description="Vision endpoints need a site write token."
-    )
-    access_log: bool = Field(False, description="Log every HTTP request (uvicorn access log).")
-    admin_token: str | None = Field(
-        None, description="Bearer token of the admin endpoints (`/api/v1/tokens`); unset: "
-                          "they answer 403."
-    )
-    token_cache_ttl_s: float = Field(
-        0.5, gt=0, le=1.0, description="How long a checked write token is trusted from "
-                                       "memory (a revocation by the CLI takes effect within it)."
-    )
-    simulation_workers: int = Field(
+
+
+class SimulationSettings(_Group):
+    """Simulations run from the API: size, workers, queue, anonymous allowance."""
+
+    model_config = _config("HELIOTWIN_SIMULATION_")
+
+    max_steps: int = Field(
+        1_100_000, gt=0, description="Most time steps one simulation request may ask for.",
+        validation_alias=_env("max_simulation_steps"))
+    workers: int = Field(
         1, ge=1, le=8, description="Worker processes running simulations at once."
     )
-    simulation_queue: int = Field(
+    queue: int = Field(
         2, ge=0, le=100, description="Simulations waiting for a worker; more → 503 with "
                                      "Retry-After."
     )
-    simulation_anonymous_keep_runs: int = Field(
+    anonymous_keep_runs: int = Field(
         10, ge=0, description="Runs asked without a token that stay stored (older ones are "
                               "deleted with their series); runs with a token stay."
     )
-    anonymous_simulation_steps_per_min: int = Field(
+    anonymous_steps_per_min: int = Field(
         2_200_000, gt=0, description="Simulated time steps one client address may ask per "
-                                     "minute without a token (token bucket; more → 429)."
+                                     "minute without a token (token bucket; more → 429).",
+        validation_alias=_env("anonymous_simulation_steps_per_min"))
+
+
+class VisionSettings(_Group):
+    """The vision endpoints: image sizes, decode budget, anonymous allowance."""
+
+    model_config = _config("HELIOTWIN_VISION_")
+
+    max_pixels: int = Field(
+        40_000_000, gt=0, description="Largest image (pixels) the vision endpoints decode."
     )
-    anonymous_vision_pixels_per_min: int = Field(
+    require_token: bool = Field(
+        False, description="Vision endpoints need a site write token."
+    )
+    anonymous_pixels_per_min: int = Field(
         400_000_000, gt=0, description="Image pixels one client address may upload per minute "
-                                       "without a token (token bucket; more → 429)."
-    )
-    vision_decode_pixels: int = Field(
+                                       "without a token (token bucket; more → 429).",
+        validation_alias=_env("anonymous_vision_pixels_per_min"))
+    decode_pixels: int = Field(
         40_000_000, gt=0, description="Pixels decoded at once across all vision requests "
                                       "(≈ 6 bytes each at the peak); others wait."
     )
-    vision_queue: int = Field(
+    queue: int = Field(
         8, ge=0, le=1000, description="Vision requests waiting for the decode budget; more → "
                                       "503 with Retry-After."
     )
-    vision_anonymous_keep_rows: int = Field(
+    anonymous_keep_rows: int = Field(
         1000, ge=0, description="Detections uploaded without a token that stay stored (older "
                                 "ones are deleted); with a token they stay."
     )
-    mqtt_url: str | None = Field(
+
+
+class MqttSettings(_Group):
+    """MQTT ingestion and Home Assistant (off without a broker URL)."""
+
+    model_config = _config("HELIOTWIN_MQTT_")
+
+    url: SecretStr | None = Field(
         None, description="`mqtt://[user:password@]host[:port]` of the broker; unset: no MQTT."
     )
-    mqtt_client_id: str | None = Field(
+    client_id: str | None = Field(
         None, description="MQTT client id; set: a persistent session (the broker keeps "
                           "QoS 1 readings while the service is away); unset: a random id."
     )
-    mqtt_state_topic: str = Field(
+    state_topic: str = Field(
         "heliotwin/{site_id}/{array}/state", description="Topic template of JSON readings."
     )
-    mqtt_value_topic: str = Field(
+    value_topic: str = Field(
         "heliotwin/{site_id}/{array}/{quantity}",
         description="Topic template of OpenDTU-style single values (quantity: voltage, "
                     "current, power), assembled per minute.",
     )
-    mqtt_errors_topic: str = Field(
+    errors_topic: str = Field(
         "heliotwin/{site_id}/errors", description="Where rejected MQTT messages are reported."
     )
-    mqtt_ha_prefix: str = Field(
+    ha_prefix: str = Field(
         "homeassistant", description="Home Assistant discovery prefix (retained configs)."
     )
-    mqtt_ha_state_topic: str = Field(
+    ha_state_topic: str = Field(
         "heliotwin/{site_id}/{array}/ha/{sensor}",
         description="Topic template of the states published for Home Assistant.",
     )
-    mqtt_publish_interval_s: float = Field(
+    publish_interval_s: float = Field(
         60.0, gt=0, description="Period of the Home Assistant state publications."
     )
-    mqtt_minute_grace_s: float = Field(
+    minute_grace_s: float = Field(
         5.0, ge=0, le=55, description="Wait after a minute ends before closing its single "
                                       "values without power_w (power = voltage·current).",
     )
-    mqtt_retry_max_s: float = Field(
+    retry_max_s: float = Field(
         30.0, gt=0, description="Longest wait between MQTT reconnection attempts."
     )
-    # alerts (backend/alerts/, docs/service.md "Alerts")
-    alerts: bool = Field(True, description="Evaluate alerts in the background (silent "
-                                           "loggers, diagnosis faults, low PR).")
-    alert_interval_s: float = Field(
+
+
+class AlertSettings(_Group):
+    """The alert evaluator and its webhook (backend/alerts/, docs/service.md "Alerts")."""
+
+    model_config = _config("HELIOTWIN_ALERT_")
+
+    enabled: bool = Field(True, description="Evaluate alerts in the background (silent "
+                                           "loggers, diagnosis faults, low PR).",
+        validation_alias=_env("alerts"))
+    interval_s: float = Field(
         60.0, gt=0, le=3600, description="Period of the alert evaluation (tests shorten it)."
     )
-    alert_silent_min: float = Field(
+    silent_min: float = Field(
         30.0, gt=0, description="A logger with no reading for this many minutes (counted "
                                 "from the service's start at the earliest) raises "
                                 "`logger_silent`.")
-    alert_silent_daylight_only: bool = Field(
+    silent_daylight_only: bool = Field(
         True, description="Count a logger's silence only while the sun is up at the site, "
                           "so a logger that sleeps at night is not reported every night.")
-    alert_pr_below: float = Field(
+    pr_below: float = Field(
         0.8, ge=0, le=2, description="A tracker day whose performance ratio under the "
                                      "measured sky is below this raises "
                                      "`low_performance_ratio`.")
-    alert_fault_confidence_min: float = Field(
+    fault_confidence_min: float = Field(
         0.5, ge=0, le=1, description="Least confidence of a diagnosis fault that raises a "
                                      "`fault` alert.")
-    alert_diagnosis_days: int = Field(
+    diagnosis_days: int = Field(
         7, ge=0, le=400, description="Complete local days up to yesterday diagnosed for "
                                      "fault and PR alerts (0: only `logger_silent`).")
-    alert_webhook_url: str | None = Field(
+    webhook_url: HttpUrl | None = Field(
         None, description="`http(s)://…` that each raised or cleared alert is POSTed to as "
                           "JSON; unset: alerts are only stored and shown.")
-    alert_webhook_secret: str | None = Field(
+    webhook_secret: SecretStr | None = Field(
         None, description="Signs each webhook body: `X-Heliotwin-Signature: sha256=<HMAC-SHA256 "
                           "hex>`; unset: unsigned.")
-    alert_webhook_timeout_s: float = Field(
+    webhook_timeout_s: float = Field(
         5.0, gt=0, le=120, description="Timeout of one webhook POST (connect and answer).")
-    alert_webhook_retries: int = Field(
+    webhook_retries: int = Field(
         5, ge=0, le=30, description="Retries of a failed webhook POST (5xx, 408, 429, no "
                                     "answer) before it is given up.")
-    alert_webhook_backoff_s: float = Field(
+    webhook_backoff_s: float = Field(
         2.0, gt=0, description="Wait before the first retry; doubled at each next one.")
-    alert_webhook_backoff_max_s: float = Field(
+    webhook_backoff_max_s: float = Field(
         300.0, gt=0, description="Longest wait between two webhook attempts (a 429's "
                                  "Retry-After included).")
-    alert_webhook_queue: int = Field(
+    webhook_queue: int = Field(
         1000, ge=1, le=100_000, description="Webhook events waiting to be sent; more are "
                                             "dropped (counted, the alert stays stored).")
 
-    @model_validator(mode="after")
-    def _check(self) -> Settings:
-        if not self.alert_webhook_url:
-            self.alert_webhook_url = None
-        elif not self.alert_webhook_url.startswith(("http://", "https://")) or \
-                not self.alert_webhook_url.split("://", 1)[1].split("/", 1)[0]:
-            raise ValueError("alert_webhook_url: not an http:// or https:// URL with a host "
-                             "(the value is not echoed: it may hold a secret)")
-        if self.database_url.startswith("postgresql://"):
-            self.database_url = "postgresql+psycopg://" + self.database_url[len("postgresql://"):]
-        return self
 
-    @property
-    def is_sqlite(self) -> bool:
-        """Whether the database is SQLite."""
-        return self.database_url.startswith("sqlite")
+class Settings(BaseModel):
+    """All settings of the service and the ``heliotwin`` commands that use the database."""
+
+    server: ServerSettings
+    sites: SiteSettings
+    database: DatabaseSettings
+    ingest: IngestSettings
+    twin: TwinSettings
+    demo: DemoSettings
+    simulations: SimulationSettings
+    vision: VisionSettings
+    mqtt: MqttSettings
+    alerts: AlertSettings
+
+    def __init__(self, **overrides: Any) -> None:
+        """Every group built, and so read from the environment, with the overrides on top:
+        flat names (a variable's name without the prefix, lower-case: ``database_url=…``)
+        or whole groups (``database=DatabaseSettings(…)`` or a dict). Other names are
+        ignored, as unknown variables are."""
+        routed: dict[str, dict[str, Any]] = {group: {} for group in _GROUPS}
+        whole: dict[str, Any] = {}
+        for key, value in overrides.items():
+            if key in _GROUPS and isinstance(value, dict | _Group):  # not alerts=False
+                whole[key] = value
+            elif key in _FLAT:
+                group, name = _FLAT[key]
+                routed[group][name] = value
+        for group, value in whole.items():
+            if routed[group]:
+                raise ValueError(f"{group}: given both whole and by its fields")
+            routed[group] = value if isinstance(value, dict) else value.model_dump()
+        super().__init__(**{group: _GROUPS[group](**values) for group, values in routed.items()})
+
+
+#: Each group's class by its name in :class:`Settings`.
+_GROUPS: dict[str, type[_Group]] = {
+    name: field.annotation for name, field in Settings.model_fields.items()  # type: ignore[misc]
+}
+
+
+def env_fields() -> dict[str, tuple[str, str, FieldInfo]]:
+    """Every environment variable → ``(group, field name, field)``."""
+    out = {}
+    for group, cls in _GROUPS.items():
+        prefix = cls.model_config.get("env_prefix", "")
+        for name, field in cls.model_fields.items():
+            alias = field.validation_alias
+            out[alias if isinstance(alias, str) else (prefix + name).upper()] = (group, name, field)
+    return out
+
+
+#: A flat override's name (the variable without the prefix, lower-case) → group and field.
+_FLAT = {env[len(PREFIX):].lower(): (group, name) for env, (group, name, _) in env_fields().items()}
 
 
 def get_settings(**overrides: object) -> Settings:
-    """Build the settings from the environment, with keyword overrides on top."""
-    return Settings(**overrides)  # type: ignore[arg-type]
+    """Build the settings from the environment, with keyword overrides (flat names, see the
+    module docstring) on top."""
+    return Settings(**overrides)

@@ -230,7 +230,7 @@ def save_site(ctx: ServiceContext, site_id: str, data: Any) -> tuple[SiteInfo, b
                               f"differently from {old.site.timezone!r}; the stored hourly "
                               "rollups are phased to the old zone: make a new site instead")
     config.pop("$schema", None)
-    write_site_file(ctx.settings.sites_dir, config)
+    write_site_file(ctx.settings.sites.user_dir, config)
 
     def sync(conn: Connection) -> int:
         return sync_sites(conn, [site]).get(site_id, 0)

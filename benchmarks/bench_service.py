@@ -84,7 +84,7 @@ def baseline_executemany(n_rows: int) -> float:
         url = f"sqlite:///{d}/base.sqlite"
         engine = make_engine(get_settings(database_url=url))
         run_migrations(engine)
-        reg = Registry.load_files(get_settings().sites_dir)
+        reg = Registry.load_files(get_settings().sites.user_dir)
         with engine.begin() as conn:
             sync_sites(conn, [i.site for i in reg.sites.values()])
         # a connection of the service's own engine: its pragmas (WAL, synchronous,

@@ -149,4 +149,4 @@ def test_the_library_and_the_service_default_to_the_same_user_folder(monkeypatch
     from sim.sites import default_user_sites_dir
 
     monkeypatch.delenv("HELIOTWIN_SITES_DIR", raising=False)
-    assert get_settings().sites_dir == default_user_sites_dir()
+    assert get_settings().sites.user_dir == default_user_sites_dir()

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from backend.settings import Settings
+from backend.settings import env_fields
 
 ROOT = Path(__file__).resolve().parents[1]
 COMPOSE = ROOT / "docker-compose.yml"
@@ -61,5 +61,5 @@ def test_compose_config_is_valid_for_every_profile() -> None:
 
 def test_every_setting_is_listed() -> None:
     listed = set(yaml.safe_load(COMPOSE.read_text())["x-settings"])
-    fields = {f"HELIOTWIN_{name.upper()}" for name in Settings.model_fields}
+    fields = set(env_fields())
     assert fields == listed, (sorted(fields - listed), sorted(listed - fields))

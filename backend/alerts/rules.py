@@ -11,17 +11,17 @@ diagnosis) is left as it is — "unknown" is never "all clear".
 Kinds:
 
 - ``logger_silent`` — an array whose logger has reported before has no reading for
-  ``Settings.alert_silent_min`` minutes; the silence is counted from the service's start
+  ``Settings.alerts.silent_min`` minutes; the silence is counted from the service's start
   at the earliest (a logger cannot report to a service that was down), and by default
-  only while the sun is up (``Settings.alert_silent_daylight_only``: many loggers
+  only while the sun is up (``Settings.alerts.silent_daylight_only``: many loggers
   sleep at night). ``since``: its last reading.
 - ``fault`` (``fault_kind`` = the diagnosis' kind) — a fault of confidence ≥
-  ``Settings.alert_fault_confidence_min`` on the latest diagnosed day (yesterday, local);
+  ``Settings.alerts.fault_confidence_min`` on the latest diagnosed day (yesterday, local);
   ``since``: the fault's first day (local midnight). Cleared when the latest day no
   longer shows it.
 - ``low_performance_ratio`` — the tracker's performance ratio under the measured sky
   (``diagnosis``: measured / expected, ``sky.source`` ``sensor`` or ``fixed_array``) of the latest
-  such day is below ``Settings.alert_pr_below``; ``since``: the first day of the run of
+  such day is below ``Settings.alerts.pr_below``; ``since``: the first day of the run of
   low days. Days whose sky fell back to clear sky are not judged (a cloudy day would
   read as a fault).
 """

@@ -1,14 +1,14 @@
 """The alert evaluator and the read side of ``GET /api/v1/alerts``.
 
 :class:`AlertService` runs on a thread of its own (``heliotwin-alerts``), started and
-stopped by :class:`backend.context.ServiceContext` (``Settings.alerts``). Every
-``Settings.alert_interval_s`` (the first time one interval after start) it evaluates,
+stopped by :class:`backend.context.ServiceContext` (``Settings.alerts.enabled``). Every
+``Settings.alerts.interval_s`` (the first time one interval after start) it evaluates,
 for every site with arrays (:mod:`backend.alerts.rules`):
 
 - each array's last measured reading — one primary-key lookup per array, the same
   reading the overview's logger tiles show (``backend/measurements/status.py``);
 - for a site with a tracker and a fixed array whose tracker reported within the last
-  ``Settings.alert_diagnosis_days`` complete local days: the diagnosis of those days
+  ``Settings.alerts.diagnosis_days`` complete local days: the diagnosis of those days
   (:func:`backend.diagnosis.service.diagnosis`; cached per day in ``diagnosis_days``, so
   a day is computed once, when it is complete, and again only if late readings of it
   arrive) → faults and the performance ratio.
@@ -135,16 +135,17 @@ class AlertService:
         s = ctx.settings
         self.ctx = ctx
         self.engine: Engine = ctx.engine
-        self.interval_s = s.alert_interval_s
+        self.interval_s = s.alerts.interval_s
         self.started_s = time.time() if now_s is None else now_s
         self.sender: WebhookSender | None = None
-        if s.alert_webhook_url:
+        a = s.alerts
+        if a.webhook_url:
             self.sender = WebhookSender(
-                s.alert_webhook_url, timeout_s=s.alert_webhook_timeout_s,
-                retries=s.alert_webhook_retries, backoff_s=s.alert_webhook_backoff_s,
-                backoff_max_s=s.alert_webhook_backoff_max_s, queue_size=s.alert_webhook_queue,
-                secret=s.alert_webhook_secret, user_agent=f"heliotwin/{_version()}",
-                on_result=self._delivered)
+                str(a.webhook_url), timeout_s=a.webhook_timeout_s, retries=a.webhook_retries,
+                backoff_s=a.webhook_backoff_s, backoff_max_s=a.webhook_backoff_max_s,
+                queue_size=a.webhook_queue,
+                secret=None if a.webhook_secret is None else a.webhook_secret.get_secret_value(),
+                user_agent=f"heliotwin/{_version()}", on_result=self._delivered)
         self._active: dict[rules.Key, dict[str, Any]] = {}
         self._errors: dict[tuple[str, str], str] = {}
         self._stop = threading.Event()
@@ -201,9 +202,9 @@ class AlertService:
             "last_evaluation_ms": self.last_evaluation_ms,
             "max_evaluation_ms": self.max_evaluation_ms, "evaluations": self.evaluations,
             "active": len(self._active), "errors": sorted(self._errors.values()),
-            "silent_min": s.alert_silent_min, "pr_below": s.alert_pr_below,
-            "fault_confidence_min": s.alert_fault_confidence_min,
-            "diagnosis_days": s.alert_diagnosis_days,
+            "silent_min": s.alerts.silent_min, "pr_below": s.alerts.pr_below,
+            "fault_confidence_min": s.alerts.fault_confidence_min,
+            "diagnosis_days": s.alerts.diagnosis_days,
             "webhook": None if self.sender is None else self.sender.status(),
         }
 
@@ -217,7 +218,7 @@ class AlertService:
             if not info.arrays:
                 continue
             found.extend(self._guard("logger_silent", info, lambda i=info: self._silent(i, now)))
-            if self.ctx.settings.alert_diagnosis_days > 0 and info.array_of_kind("tracker") \
+            if self.ctx.settings.alerts.diagnosis_days > 0 and info.array_of_kind("tracker") \
                     and info.array_of_kind("fixed"):
                 found.extend(self._guard("diagnosis", info,
                                          lambda i=info: self._diagnosed(i, now)))
@@ -250,9 +251,9 @@ class AlertService:
                     Measurement.array_id == arr.array_id,
                     Measurement.source == MEASURED)).scalar()
                 last[name] = None if value is None else int(value)
-        daylight = self.ctx.settings.alert_silent_daylight_only
+        daylight = self.ctx.settings.alerts.silent_daylight_only
         return rules.silent_loggers(info.site_id, info.zone, last, now, self.started_s,
-                                    self.ctx.settings.alert_silent_min,
+                                    self.ctx.settings.alerts.silent_min,
                                     (lambda a, b: daylight_seconds(info, a, b)) if daylight
                                     else None)
 
@@ -262,7 +263,7 @@ class AlertService:
         assert tracker is not None
         today = dt.datetime.fromtimestamp(now, info.zone).date()
         end = _local_midnight(today, info.zone)
-        start = _local_midnight(today - dt.timedelta(days=s.alert_diagnosis_days), info.zone)
+        start = _local_midnight(today - dt.timedelta(days=s.alerts.diagnosis_days), info.zone)
         with self.engine.connect() as conn:
             first = conn.execute(select(func.min(Measurement.ts_s)).where(
                 Measurement.array_id == tracker.array_id, Measurement.source == MEASURED,
@@ -274,7 +275,7 @@ class AlertService:
         start = max(start, _local_midnight(first_day, info.zone))
         answer = diagnosis(self.ctx, info, start, end)
         return rules.diagnosed(info.site_id, info.zone, tracker.name, answer["days"],
-                               s.alert_pr_below, s.alert_fault_confidence_min)
+                               s.alerts.pr_below, s.alerts.fault_confidence_min)
 
     @staticmethod
     def _key(a: dict[str, Any]) -> rules.Key:

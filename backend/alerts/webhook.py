@@ -1,13 +1,13 @@
 """The webhook sender: alert events POSTed as JSON, on a thread of their own.
 
-:class:`WebhookSender` owns a bounded queue (``Settings.alert_webhook_queue``) and one
+:class:`WebhookSender` owns a bounded queue (``Settings.alerts.webhook_queue``) and one
 thread (``heliotwin-alert-webhook``). :meth:`WebhookSender.offer` never waits: an event
 that finds the queue full is dropped and counted (its alert stays stored, its
 ``webhook_status`` says ``dropped``). The thread sends the events one at a time, in the
 order they were raised (a receiver sees an alert's ``raised`` before its ``cleared``):
 
 - a 2xx answer delivers it;
-- no answer (refused, reset, ``Settings.alert_webhook_timeout_s`` passed), a 5xx, 408,
+- no answer (refused, reset, ``Settings.alerts.webhook_timeout_s`` passed), a 5xx, 408,
   425 or 429 is retried after ``alert_webhook_backoff_s`` · 2^k (k = 0, 1, …), at most
   ``alert_webhook_backoff_max_s`` (:func:`backend.retry.backoff`, tenacity) — and never
   sooner than a 429/503's ``Retry-After``, itself capped at ``alert_webhook_backoff_max_s``
@@ -17,7 +17,7 @@ order they were raised (a receiver sees an alert's ``raised`` before its ``clear
 
 Each POST carries ``Content-Type: application/json``, ``User-Agent: heliotwin/<version>``,
 ``X-Heliotwin-Event`` (``raised``/``cleared``), ``X-Heliotwin-Event-Id`` (the same on every
-retry, so a receiver can drop a repeat) and, with ``Settings.alert_webhook_secret``,
+retry, so a receiver can drop a repeat) and, with ``Settings.alerts.webhook_secret``,
 ``X-Heliotwin-Signature: sha256=<hex HMAC-SHA256 of the body>``. Waits between retries
 end at once at shutdown; events still queued then are logged and counted ``unsent``
 (their alerts keep ``webhook_status = queued`` and are offered again at the next start).

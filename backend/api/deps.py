@@ -5,7 +5,7 @@
 
 - :data:`SiteTokenDep` (routes with a ``{site_id}`` path parameter): 401 without a
   token or with an unknown one, 403 with a token of another site; gives the site id.
-- :data:`VisionTokenDep`: when ``Settings.vision_require_token`` is set, a valid
+- :data:`VisionTokenDep`: when ``Settings.vision.require_token`` is set, a valid
   token of any site is needed (401 otherwise); gives that token's site id, or
   None when no token is needed and none was sent.
 """
@@ -76,9 +76,10 @@ def parse_bearer(header: str | None) -> str | None:
 
 
 def is_admin_token(settings: Settings, token: str | None) -> bool:
-    """Whether ``token`` is ``Settings.admin_token`` (constant-time; never when unset)."""
-    expected = settings.admin_token
-    return bool(token and expected and hmac.compare_digest(token.encode(), expected.encode()))
+    """Whether ``token`` is ``Settings.server.admin_token`` (constant-time; never when unset)."""
+    expected = settings.server.admin_token
+    return bool(token and expected and hmac.compare_digest(
+        token.encode(), expected.get_secret_value().encode()))
 
 
 async def token_site(request: Request, token: str) -> str | None:
@@ -120,7 +121,7 @@ async def vision_token(request: Request) -> str | None:
     settings: Settings = request.app.state.settings
     token = bearer_token(request)
     if token is None:
-        if settings.vision_require_token:
+        if settings.vision.require_token:
             raise HTTPException(401, "this service requires a site write token for vision "
                                      "requests: send 'Authorization: Bearer <token>'",
                                 headers=_BEARER)

@@ -170,7 +170,7 @@ class StrictBodies:
                        ) -> bytes | None:
         text = encoding.decode("latin-1")
         _check_encoding(text)
-        limit = int(scope["app"].state.settings.max_upload_bytes)
+        limit = int(scope["app"].state.settings.server.max_upload_bytes)
 
         async def chunks() -> AsyncIterator[bytes]:
             more = True

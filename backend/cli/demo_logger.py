@@ -33,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
     from sim.sites import UnknownSiteError, load_site
 
     try:
-        site = load_site(args.site, get_settings().sites_dir)
+        site = load_site(args.site, get_settings().sites.user_dir)
     except UnknownSiteError as exc:
         fail(str(exc))
     stop = threading.Event()

@@ -40,10 +40,11 @@ def run(args: argparse.Namespace) -> int:
         overrides["demo_logger"] = False
     settings = get_settings(**overrides)
     app = create_app(settings)
-    print(f"heliotwin: dashboard and API on http://{settings.host}:{settings.port}/ "
-          f"(OpenAPI at /docs), 3D twin on :{settings.viser_port}", flush=True)
+    server = settings.server
+    print(f"heliotwin: dashboard and API on http://{server.host}:{server.port}/ "
+          f"(OpenAPI at /docs), 3D twin on :{server.viser_port}", flush=True)
     uvicorn.run(
-        app, host=settings.host, port=settings.port, loop="uvloop", http="httptools",
-        access_log=settings.access_log, log_level="info", timeout_graceful_shutdown=10,
+        app, host=server.host, port=server.port, loop="uvloop", http="httptools",
+        access_log=server.access_log, log_level="info", timeout_graceful_shutdown=10,
     )
     return 0

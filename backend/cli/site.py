@@ -73,7 +73,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 def _sites_dir() -> Path:
     from backend.settings import get_settings
 
-    return get_settings().sites_dir
+    return get_settings().sites.user_dir
 
 
 def _write(config: dict[str, Any], force: bool) -> int:

@@ -66,7 +66,7 @@ def _with_db(work: Callable[[Any], Any]) -> Any:
     engine = make_engine(settings)
     try:
         run_migrations(engine)
-        registry = Registry.load_files(settings.sites_dir)
+        registry = Registry.load_files(settings.sites.user_dir)
         with engine.begin() as conn:
             sync_sites(conn, [info.site for info in registry.sites.values()])
             return work(conn)

@@ -132,7 +132,7 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
         with ctx.engine.connect() as conn:
             table = energy_table(conn, [tracker.array_id, fixed.array_id],
                                  edges_s[run[0]:run[-1] + 2], info.phase_s,
-                                 ctx.settings.energy_max_gap_s)
+                                 ctx.settings.ingest.energy_max_gap_s)
         # one minute past the run, so the last day's last minute reaches midnight
         tr, fx, sensors = site_minutes(ctx, info, t0, t1 + 60)
         start = pd.Timestamp(t0, unit="s", tz="UTC")

@@ -72,7 +72,7 @@ def site_minutes(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int
     the loggers' sky sensors (:func:`sky_sensors`). The site has a fixed array."""
     tracker, fixed = info.array_of_kind("tracker"), info.array_of_kind("fixed")
     assert fixed is not None
-    gap = ctx.settings.energy_max_gap_s
+    gap = ctx.settings.ingest.energy_max_gap_s
     with ctx.engine.connect() as conn:
         fx, fx_s = minute_grid(conn, fixed.array_id, t0, t1, gap)
         tr, tr_s = (np.full(fx.size, np.nan), None) if tracker is None \

@@ -94,7 +94,7 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
     ctx.twin.ensure(site_id, int(edges_s[0]), int(edges_s[-1]))
     names = list(info.arrays)
     ids = [info.arrays[n].array_id for n in names]
-    gap = ctx.settings.energy_max_gap_s
+    gap = ctx.settings.ingest.energy_max_gap_s
     with ctx.engine.connect() as conn:
         table = energy_table(conn, ids, edges_s, info.phase_s, gap)
         matched = {aid: _matched(conn, table, aid, edges_s, gap) for aid in ids}

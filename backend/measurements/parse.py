@@ -108,8 +108,9 @@ class Limits:
     @classmethod
     def from_settings(cls, settings: Settings) -> Limits:
         """The limits the service's settings set (HTTP and MQTT ingest alike)."""
-        return cls(settings.max_batch_rows, settings.future_tolerance_s, settings.max_voltage_v,
-                   settings.max_current_a, settings.min_current_a, settings.power_tolerance_w)
+        s = settings.ingest
+        return cls(s.max_batch_rows, s.future_tolerance_s, s.max_voltage_v, s.max_current_a,
+                   s.min_current_a, s.power_tolerance_w)
 
 
 @dataclass

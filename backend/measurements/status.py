@@ -69,7 +69,7 @@ def status(ctx: ServiceContext, info: SiteInfo, now: float) -> dict[str, Any]:
             if last:
                 ts, volt, amp, pw = last[0]
                 age = now - ts
-                fresh = fresh_for([r[0] for r in last], ctx.settings.energy_max_gap_s)
+                fresh = fresh_for([r[0] for r in last], ctx.settings.ingest.energy_max_gap_s)
                 entry.update(last_ts=iso_utc([int(ts)])[0], power_w=pw, voltage_v=volt,
                              current_a=amp, age_s=round(age, 1),
                              logger="reporting" if age <= fresh else "stale")

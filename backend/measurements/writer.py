@@ -3,7 +3,7 @@
 Every write of the running service goes through :class:`Writer`. Request
 handlers submit a measurement batch (or a function to run in the writer's
 transaction) and await a future. The writer takes whatever is queued — up to
-``Settings.writer_max_group_rows`` rows — into one transaction: each batch is
+``Settings.database.writer_max_group_rows`` rows — into one transaction: each batch is
 inserted ``ON CONFLICT DO NOTHING`` (should the group fail, each batch is tried
 again alone, so one failing batch fails alone, all-or-nothing), the hourly
 rollups of every touched series are updated once for the whole group (merged

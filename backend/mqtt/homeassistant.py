@@ -17,7 +17,7 @@ sensor                unit   device_class state_class       value
 Energies come from the hourly rollups (:mod:`backend.measurements.rollups`, the
 one energy rule) — all time as the sum of a series' rollups, today from
 :func:`backend.measurements.status.status`, which the dashboard's tiles use too.
-Each state is a bare number on its own topic (``Settings.mqtt_ha_state_topic``),
+Each state is a bare number on its own topic (``Settings.mqtt.ha_state_topic``),
 retained; a value that is unknown (no readings today, a logger silent for more
 than ``FRESH_S``) is not published, and the power sensors' ``expire_after``
 makes Home Assistant show them unavailable when the logger stops.

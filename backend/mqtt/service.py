@@ -2,24 +2,24 @@
 
 :class:`MqttService` runs in a thread of its own with its own asyncio loop
 (``heliotwin-mqtt``), started and stopped by :class:`backend.context.ServiceContext`
-when ``Settings.mqtt_url`` is set. While connected (aiomqtt) it:
+when ``Settings.mqtt.url`` is set. While connected (aiomqtt) it:
 
-- subscribes (QoS 1) to ``Settings.mqtt_state_topic`` (one JSON reading) and to
-  ``Settings.mqtt_value_topic`` for each quantity (``voltage``, ``current``,
+- subscribes (QoS 1) to ``Settings.mqtt.state_topic`` (one JSON reading) and to
+  ``Settings.mqtt.value_topic`` for each quantity (``voltage``, ``current``,
   ``power``: bare numbers, assembled per minute by :mod:`backend.mqtt.assemble`);
 - maps each topic to a known site and array, validates the reading with the
   HTTP ingest validator (:mod:`backend.mqtt.ingest`) and stores it through the
   writer (idempotent: one row per array per minute);
 - publishes every rejected message with its reason to
-  ``Settings.mqtt_errors_topic`` (``_unknown`` as site id for unknown sites),
+  ``Settings.mqtt.errors_topic`` (``_unknown`` as site id for unknown sites),
   through an outbox that keeps what could not be sent until the next connection;
 - publishes the retained Home Assistant discovery configs at every connection,
-  and the sensor states every ``Settings.mqtt_publish_interval_s``
+  and the sensor states every ``Settings.mqtt.publish_interval_s``
   (:mod:`backend.mqtt.homeassistant`).
 
 A lost or refused connection is retried for as long as the service runs, with
 exponential backoff (:func:`backend.retry.backoff`, tenacity): 1 s, 2 s, 4 s, … at
-most ``Settings.mqtt_retry_max_s``, back to 1 s after each successful connection;
+most ``Settings.mqtt.retry_max_s``, back to 1 s after each successful connection;
 each retry logged, a wait ended at once by the service's stop;
 :attr:`MqttService.state` is ``connected`` or ``retrying`` (``/api/v1/meta`` shows it).
 """
@@ -58,7 +58,7 @@ UNKNOWN_SITE = "_unknown"
 OUTBOX_MAX = 10_000
 #: Most readings waiting for the writer before the receiver waits too.
 MAX_IN_FLIGHT = 512
-#: The first wait before reconnecting [s]; it doubles up to ``Settings.mqtt_retry_max_s``.
+#: The first wait before reconnecting [s]; it doubles up to ``Settings.mqtt.retry_max_s``.
 _FIRST_RETRY_S = 1.0
 
 
@@ -73,7 +73,7 @@ def broker_of(url: str) -> dict[str, Any]:
     """``mqtt://[user:password@]host[:port]`` (or ``mqtts://``) → aiomqtt ``Client`` arguments."""
     parts = urlsplit(url)
     if parts.scheme not in ("mqtt", "mqtts") or not parts.hostname:
-        raise ValueError(f"HELIOTWIN_MQTT_URL {url!r}: expected mqtt://[user:password@]host[:port]"
+        raise ValueError("HELIOTWIN_MQTT_URL: expected mqtt://[user:password@]host[:port]"
                          " or mqtts://…")
     tls = parts.scheme == "mqtts"
     return {
@@ -102,17 +102,17 @@ class MqttService:
 
     def __init__(self, ctx: ServiceContext) -> None:
         s = ctx.settings
-        if s.mqtt_url is None:
+        if s.mqtt.url is None:
             raise ValueError("HELIOTWIN_MQTT_URL is not set")
         self.ctx = ctx
-        self.broker = broker_of(s.mqtt_url)
+        self.broker = broker_of(s.mqtt.url.get_secret_value())
         self.where = f"{self.broker['hostname']}:{self.broker['port']}"
-        self.topics = Topics.from_settings(s.mqtt_state_topic, s.mqtt_value_topic,
-                                           s.mqtt_errors_topic, s.mqtt_ha_state_topic,
-                                           s.mqtt_ha_prefix)
+        self.topics = Topics.from_settings(s.mqtt.state_topic, s.mqtt.value_topic,
+                                           s.mqtt.errors_topic, s.mqtt.ha_state_topic,
+                                           s.mqtt.ha_prefix)
         check_no_echo(self.topics)
         self.limits = limits(s)
-        self.assembler = MinuteAssembler(s.mqtt_minute_grace_s)
+        self.assembler = MinuteAssembler(s.mqtt.minute_grace_s)
         self.state = "retrying"
         self.counts = {"received": 0, "stored": 0, "duplicates": 0, "rejected": 0,
                        "retries": 0}
@@ -153,7 +153,7 @@ class MqttService:
         ready.set()
         closer = asyncio.create_task(self._close_minutes())
         s = self.ctx.settings
-        policy = backoff(_FIRST_RETRY_S, s.mqtt_retry_max_s)
+        policy = backoff(_FIRST_RETRY_S, s.mqtt.retry_max_s)
         attempts = 0
         connected_after = 0  # attempts made before the last connection came up
 
@@ -162,8 +162,8 @@ class MqttService:
             nonlocal attempts, connected_after
             attempts += 1
             client = aiomqtt.Client(
-                **self.broker, identifier=s.mqtt_client_id,
-                clean_session=None if s.mqtt_client_id is None else False,
+                **self.broker, identifier=s.mqtt.client_id,
+                clean_session=None if s.mqtt.client_id is None else False,
                 keepalive=30, timeout=10.0)
             async with client:
                 connected_after = attempts - 1
@@ -373,4 +373,4 @@ class MqttService:
                     continue
                 for topic, value in pubs:
                     await client.publish(topic, value, qos=1, retain=True)
-            await asyncio.sleep(self.ctx.settings.mqtt_publish_interval_s)
+            await asyncio.sleep(self.ctx.settings.mqtt.publish_interval_s)

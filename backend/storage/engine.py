@@ -3,7 +3,7 @@
 SQLite runs in WAL mode with foreign keys on and a busy timeout, so readers on
 the pool never block the one writer (``backend/measurements/writer.py``) and the writer never
 blocks them (SQLite docs, "Write-Ahead Logging"). ``synchronous`` comes from
-``Settings.sqlite_synchronous``: NORMAL by default, with which a commit in WAL
+``Settings.database.sqlite_synchronous``: NORMAL by default, with which a commit in WAL
 mode survives a crash or SIGKILL of the service (it is in the WAL file before
 the answer goes out) but the last commits may be lost in an OS crash or power
 cut; FULL also fsyncs the WAL at every group commit (SQLite docs, "PRAGMA
@@ -35,8 +35,8 @@ _migrate_lock = threading.Lock()
 
 
 def make_engine(settings: Settings) -> Engine:
-    """Create the engine for ``settings.database_url`` (SQLite pragmas set per connection)."""
-    url = make_url(settings.database_url)
+    """Create the engine for ``settings.database.url`` (SQLite pragmas set per connection)."""
+    url = make_url(settings.database.url)
     if url.get_backend_name() == "sqlite":
         pool: dict[str, int] = {}
         if url.database and url.database != ":memory:":
@@ -45,7 +45,7 @@ def make_engine(settings: Settings) -> Engine:
         engine = create_engine(
             url, connect_args={"check_same_thread": False, "timeout": 30.0}, **pool
         )
-        synchronous = settings.sqlite_synchronous
+        synchronous = settings.database.sqlite_synchronous
 
         @event.listens_for(engine, "connect")
         def _sqlite_pragmas(dbapi_conn: Any, _record: Any) -> None:

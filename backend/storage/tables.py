@@ -140,7 +140,7 @@ class MeasurementRollup(Base):
 
     ``energy_wh`` is the trapezoid integral of power over the part of the hour
     covered by consecutive readings no further apart than
-    ``Settings.energy_max_gap_s``, split exactly at the bucket edges.
+    ``Settings.ingest.energy_max_gap_s``, split exactly at the bucket edges.
     """
 
     __tablename__ = "measurement_rollups"
@@ -224,7 +224,7 @@ class SimulationRun(Base):
     finished_at: Mapped[dt.datetime | None] = mapped_column(
         DateTime(timezone=True), nullable=True
     )
-    #: Asked without a token: kept within ``Settings.simulation_anonymous_keep_runs``.
+    #: Asked without a token: kept within ``Settings.simulations.anonymous_keep_runs``.
     anonymous: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
 
 
@@ -302,7 +302,7 @@ class VisionDetection(Base):
     ephemeris_azimuth_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     ephemeris_elevation_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     error_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
-    #: Uploaded without a token: kept within ``Settings.vision_anonymous_keep_rows``.
+    #: Uploaded without a token: kept within ``Settings.vision.anonymous_keep_rows``.
     anonymous: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
 
 

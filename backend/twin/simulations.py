@@ -17,12 +17,12 @@ both through the one writer (``backend/measurements/writer.py``), in one
 transaction that also marks the run done, so a run is ``done`` exactly when
 its series is stored.
 
-At most ``Settings.simulation_workers`` runs execute at once and
-``Settings.simulation_queue`` wait; past that :meth:`SimulationRunner.submit`
+At most ``Settings.simulations.workers`` runs execute at once and
+``Settings.simulations.queue`` wait; past that :meth:`SimulationRunner.submit`
 raises :class:`backend.limits.Busy` (503 with ``Retry-After``, estimated from
 the queued steps and the speed of the last finished run). Runs asked without a
 token are marked ``anonymous``; only the newest
-``Settings.simulation_anonymous_keep_runs`` of them stay stored.
+``Settings.simulations.anonymous_keep_runs`` of them stay stored.
 """
 
 from __future__ import annotations
@@ -161,7 +161,7 @@ class SimulationRunner:
         if self._threads:
             return
         _MP.set_forkserver_preload(_PRELOAD)
-        for i in range(self.settings.simulation_workers):
+        for i in range(self.settings.simulations.workers):
             t = threading.Thread(target=self._slot, name=f"heliotwin-sim-{i}", daemon=True)
             t.start()
             self._threads.append(t)
@@ -185,14 +185,14 @@ class SimulationRunner:
         steps = (params.end - params.start).total_seconds() / params.step_s
         with self._lock:
             waiting = len(self._queue)
-            if self._active + waiting >= self.settings.simulation_workers + \
-                    self.settings.simulation_queue:
+            if self._active + waiting >= self.settings.simulations.workers + \
+                    self.settings.simulations.queue:
                 ahead = sum(s.steps * (1 - s.progress) for s in self._runs.values()
                             if s.status in ("queued", "running"))
                 raise Busy(503, f"busy: {self._active} simulations running and {waiting} "
                                 f"waiting, the most this service queues "
                                 "(HELIOTWIN_SIMULATION_WORKERS, HELIOTWIN_SIMULATION_QUEUE)",
-                           ahead / self._steps_per_s / self.settings.simulation_workers)
+                           ahead / self._steps_per_s / self.settings.simulations.workers)
         state = RunState(uuid.uuid4().hex, params.site_id, "queued",
                          params=json.loads(params.to_json()), steps=steps)
         self.writer.call(lambda conn: conn.execute(insert(SimulationRun).values(
@@ -253,7 +253,7 @@ class SimulationRunner:
                  fut: Future[dict[str, Any]]) -> None:
         state.status = "running"
         t0 = time.monotonic()
-        keep = self.settings.simulation_anonymous_keep_runs
+        keep = self.settings.simulations.anonymous_keep_runs
         try:
             result = self._in_worker(state, params)
             elapsed = time.monotonic() - t0

@@ -146,7 +146,7 @@ def make_token(database_url: str, site_id: str = "tehuantepec", label: str = "te
     engine = make_engine(settings)
     try:
         run_migrations(engine)
-        registry = Registry.load_files(settings.sites_dir)
+        registry = Registry.load_files(settings.sites.user_dir)
         with engine.begin() as conn:
             sync_sites(conn, [info.site for info in registry.sites.values()])
             return create_token(conn, site_id, label)

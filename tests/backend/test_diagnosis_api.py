@@ -214,7 +214,7 @@ def test_a_day_not_yet_over_is_judged_up_to_now(client, live_server) -> None:
           + _readings(d.times[before_ten], d.tracker_power_w[before_ten], "tracker"))
     # in process, beside the live server on its database: only the clock is set by the test
     ctx = open_context(get_settings(database_url=live_server.database_url,
-                                    sites_dir=get_settings().sites_dir, alerts=False))
+                                    sites_dir=get_settings().sites.user_dir, alerts=False))
     try:
         info = ctx.registry.sites["tehuantepec"]
         end = (day0 + pd.Timedelta(days=1)).to_pydatetime()

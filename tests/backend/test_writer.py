@@ -25,7 +25,8 @@ T0 = 1_700_000_000 // 3600 * 3600 - 3600  # on the UTC hour grid (phase 0 for UT
 @pytest.fixture(params=["sqlite", "postgresql"])
 def ctx(request: pytest.FixtureRequest, tmp_path: Path):  # type: ignore[no-untyped-def]
     db = new_database(request.param, tmp_path)
-    context = open_context(get_settings(database_url=db.url, sites_dir=get_settings().sites_dir))
+    context = open_context(get_settings(database_url=db.url,
+                                        sites_dir=get_settings().sites.user_dir))
     try:
         yield context
     finally:

@@ -50,5 +50,5 @@ def get_pointing(
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
     with ctx.engine.connect() as conn:
-        body = pointing(conn, info, t0, t1, ctx.settings.max_json_points)
+        body = pointing(conn, info, t0, t1, ctx.settings.ingest.max_json_points)
     return Response(orjson.dumps(body), media_type="application/json")

@@ -95,7 +95,7 @@ async def post_measurements(site_id: str, request: Request) -> IngestResult | Re
     try:
         parse = ingest.parser_for(request.headers.get("content-type"))
         try:
-            body = await strict.read_body(request, ctx.settings.max_upload_bytes)
+            body = await strict.read_body(request, ctx.settings.server.max_upload_bytes)
         except InputError as exc:  # the transport's problems, in the shape of the others
             kind = {413: "too_large", 415: "unsupported"}.get(exc.status_code, "value_error")
             raise body_error(exc.status_code, None, kind, exc.detail) from None
@@ -204,7 +204,7 @@ def get_measurements(
     with ctx.engine.connect() as conn:
         n = count_rows(conn, arr.array_id, src, t0, t1, info.phase_s)
         limit = max_points if max_points is not None else (
-            None if want_text else ctx.settings.max_json_points)
+            None if want_text else ctx.settings.ingest.max_json_points)
         if limit is not None and n > limit and max_points is None:
             raise HTTPException(422, f"{n} readings in the range; pass max_points (buckets) or "
                                      "format=csv or format=influx for all of them")

@@ -30,11 +30,11 @@ router = APIRouter(prefix="/api/v1/plants", tags=["plants"])
 
 
 def get_plant_service(request: Request) -> PlantService:
-    """The app's :class:`PlantService`, made on first use (``Settings.plants_dir`` if set)."""
+    """The app's :class:`PlantService`, made on first use (``Settings.sites.plants_dir`` if set)."""
     service = getattr(request.app.state, "plants", None)
     if service is None:
         settings = getattr(request.app.state, "settings", None)
-        service = PlantService(getattr(settings, "plants_dir", None))
+        service = PlantService(None if settings is None else settings.sites.plants_dir)
         request.app.state.plants = service
     return service  # type: ignore[no-any-return]
 

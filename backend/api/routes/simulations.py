@@ -68,9 +68,9 @@ def _params(ctx: Any, body: _SimulationBase) -> Scenario:
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
     steps = (t1 - t0).total_seconds() / body.step_s
-    if steps > ctx.settings.max_simulation_steps:
+    if steps > ctx.settings.simulations.max_steps:
         raise HTTPException(422, f"{steps:.4g} steps asked; the limit is "
-                                 f"{ctx.settings.max_simulation_steps}: use a larger step_s "
+                                 f"{ctx.settings.simulations.max_steps}: use a larger step_s "
                                  "or a shorter range")
     machine = {p.name: float(getattr(body, p.name)) for p in MACHINE_PARAMETERS
                if getattr(body, p.name) != p.default}

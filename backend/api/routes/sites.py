@@ -59,7 +59,7 @@ class CalibrationModel(BaseModel):
 def _origin(ctx: Any, site_id: str) -> dict[str, Any]:
     """Where the site's config lives: a built-in file, or the user's folder (which wins)."""
     try:
-        path = site_path(site_id, ctx.settings.sites_dir)
+        path = site_path(site_id, ctx.settings.sites.user_dir)
     except ValueError:
         return {"origin": "unknown", "overrides_builtin": False}
     user = not is_builtin(path)

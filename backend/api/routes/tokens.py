@@ -34,8 +34,8 @@ _RESPONSES: dict[int | str, dict[str, Any]] = {
 
 
 async def require_admin(request: Request) -> None:
-    """Dependency: ``Authorization: Bearer`` equal to ``Settings.admin_token``."""
-    expected = request.app.state.settings.admin_token
+    """Dependency: ``Authorization: Bearer`` equal to ``Settings.server.admin_token``."""
+    expected = request.app.state.settings.server.admin_token
     if not expected:
         raise HTTPException(403, "admin endpoints are disabled: set HELIOTWIN_ADMIN_TOKEN "
                                  "(or use `heliotwin token` on the server)")

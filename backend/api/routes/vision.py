@@ -153,7 +153,7 @@ async def _admitted(ctx: Any, request: Request, token_site: str | None,
 
 async def _store_detection(ctx: Any, row: dict[str, Any], anonymous: bool) -> int:
     """Insert a detection; an anonymous one keeps only the newest anonymous rows."""
-    keep = ctx.settings.vision_anonymous_keep_rows
+    keep = ctx.settings.vision.anonymous_keep_rows
 
     def store(conn: Any) -> int:
         det_id = insert_detection(conn, {**row, "anonymous": anonymous})
@@ -304,7 +304,7 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
                    _token: VisionTokenDep) -> Response:
     """Find the sun in one frame; with time and place, compare with SPA. The result is stored."""
     s = ctx.settings
-    form = await _read_form(request, s.max_upload_bytes)
+    form = await _read_form(request, s.server.max_upload_bytes)
     uploads = form.getlist("file")
     if len(uploads) != 1:
         raise HTTPException(422, f"file: exactly one image is needed, got {len(uploads)}")
@@ -312,9 +312,9 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
     place = _place(ctx, form)
     method = _method(form)
     stored, cal_id = await anyio.to_thread.run_sync(_stored_camera, session, form)
-    up = await _upload(uploads[0], "file", s.vision_max_pixels)
+    up = await _upload(uploads[0], "file", s.vision.max_pixels)
     async with _admitted(ctx, request, _token, [up]):
-        img = await anyio.to_thread.run_sync(decode, up, s.vision_max_pixels)
+        img = await anyio.to_thread.run_sync(decode, up, s.vision.max_pixels)
         cam, derived = await anyio.to_thread.run_sync(_camera, form, stored, img.shape[1],
                                                       img.shape[0], img)
         res = await anyio.to_thread.run_sync(analyse, img, cam, method, ts, place)
@@ -351,7 +351,7 @@ async def _timed_frames(ctx: Any, form: FormData, min_frames: int
     for i, (up, text) in enumerate(zip(uploads, stamps, strict=True)):
         ts = _timestamp(text, f"timestamps[{i}]")
         assert ts is not None
-        frames.append((await _upload(up, f"files[{i}]", ctx.settings.vision_max_pixels), ts))
+        frames.append((await _upload(up, f"files[{i}]", ctx.settings.vision.max_pixels), ts))
     sizes = {f[0].size_px for f in frames}
     if len(sizes) != 1:
         raise HTTPException(422, f"files: every frame must have the same size, got "
@@ -387,7 +387,7 @@ _CAL_DOC = {
 async def post_calibration(request: Request, ctx: ContextDep, _token: VisionTokenDep
                            ) -> Response:
     """Fit a fisheye camera (centre, scale, north offset, mirror) to timestamped frames."""
-    form = await _read_form(request, ctx.settings.max_upload_bytes)
+    form = await _read_form(request, ctx.settings.server.max_upload_bytes)
     projection = _text(form, "projection") or "equidistant"
     if projection not in PROJECTIONS:
         raise HTTPException(422, f"projection: must be one of {', '.join(PROJECTIONS)}, "
@@ -408,7 +408,7 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
         async with _admitted(ctx, request, _token, [f[0] for f in frames]):
             row = await anyio.to_thread.run_sync(
                 calibrate, frames, place, projection, east, int(n_radial_text), fit_tilt,
-                method, ctx.settings.vision_max_pixels)
+                method, ctx.settings.vision.max_pixels)
     except ValueError as exc:
         raise HTTPException(422, f"files: {exc}") from None
     row["name"] = name or (f"{projection}, {row['n_frames']} frames, "
@@ -477,7 +477,7 @@ def get_detections(ctx: ContextDep, session: SessionDep,
 async def post_evaluate(request: Request, ctx: ContextDep, session: SessionDep,
                         _token: VisionTokenDep) -> Response:
     """Each method's angles against SPA on a batch: seed 003's Table 2 and Table 3."""
-    form = await _read_form(request, ctx.settings.max_upload_bytes)
+    form = await _read_form(request, ctx.settings.server.max_upload_bytes)
     methods = _texts(form, "methods") or list(METHODS)
     bad = [m for m in methods if m not in METHODS]
     if bad:
@@ -492,7 +492,7 @@ async def post_evaluate(request: Request, ctx: ContextDep, session: SessionDep,
                                  "fisheye camera")
     async with _admitted(ctx, request, _token, [f[0] for f in frames]):
         out = await anyio.to_thread.run_sync(evaluate, frames, place, cam, methods,
-                                             ctx.settings.vision_max_pixels)
+                                             ctx.settings.vision.max_pixels)
     return _json(out)
 
 

@@ -64,7 +64,7 @@ async def _weather(upload: Any) -> tuple[Any, dict[str, Any]]:
              openapi_extra={"security": [{}, {"bearerAuth": []}]})
 async def create_simulation_on_weather(request: Request, ctx: ContextDep) -> Response:
     """Run a twin scenario on an uploaded TMY3/EPW typical year instead of clear sky."""
-    form = await read_form(request, ctx.settings.max_upload_bytes,
+    form = await read_form(request, ctx.settings.server.max_upload_bytes,
                            "the weather file in 'file'", max_files=1, max_fields=64)
     fields: dict[str, Any] = {k: v for k, v in form.multi_items()
                               if k not in ("file", "force", "background") and isinstance(v, str)}

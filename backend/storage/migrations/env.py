@@ -30,7 +30,7 @@ connection = context.config.attributes.get("connection")
 if connection is not None:
     _run(connection)
 else:
-    url = context.config.get_main_option("sqlalchemy.url") or get_settings().database_url
+    url = context.config.get_main_option("sqlalchemy.url") or get_settings().database.url
     engine = create_engine(url)
     with engine.begin() as conn:
         _run(conn)
