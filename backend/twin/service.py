@@ -31,6 +31,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+import anyio
 import numpy as np
 import pandas as pd
 from sqlalchemy import Connection, Engine, func, select
@@ -247,7 +248,7 @@ class TwinService:
         """Call :meth:`live_step` every ``interval_s`` until ``stop`` is set."""
         while not stop.is_set():
             try:
-                await asyncio.to_thread(self.live_step)
+                await anyio.to_thread.run_sync(self.live_step)
             except Exception:
                 logger.exception("live twin step failed")
             delay = interval_s - (time.time() % interval_s) if interval_s >= 60 else interval_s

@@ -4,9 +4,9 @@ ratio — and the state of their evaluator and webhook (``backend/alerts/``,
 
 from __future__ import annotations
 
-import asyncio
 from typing import Annotated, Any
 
+import anyio
 import orjson
 from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import Response
@@ -36,6 +36,6 @@ async def get_alerts(
         with ctx.engine.connect() as conn:
             return list_alerts(conn, site_id, state, kind, limit)
 
-    body = await asyncio.to_thread(read)
+    body = await anyio.to_thread.run_sync(read)
     body["evaluator"] = ctx.alerts.status() if ctx.alerts is not None else {"enabled": False}
     return Response(orjson.dumps(body), media_type="application/json")

@@ -6,6 +6,7 @@ import asyncio
 import math
 from typing import Annotated, Any, Literal
 
+import anyio
 import numpy as np
 import orjson
 import pandas as pd
@@ -136,7 +137,7 @@ async def submit_scenario(ctx: Any, request: Request, params: Scenario,
             steps = (params.end - params.start).total_seconds() / params.step_s
             ctx.limits.simulation_steps.take(request.client.host if request.client else "?",
                                              steps)
-        state, done = await asyncio.to_thread(ctx.simulations.submit, params, anonymous)
+        state, done = await anyio.to_thread.run_sync(ctx.simulations.submit, params, anonymous)
     except Busy as exc:
         raise _busy(exc) from None
     if background:
@@ -171,7 +172,7 @@ async def cancel_simulation(run_id: str, ctx: ContextDep) -> Response:
     """Cancel a queued or running run; its state once it has ended (``failed`` with the
     error ``cancelled``, or as it was if it had already ended). Answered as stored, as
     :func:`get_simulation` is (a run stored by an older version keeps its summary)."""
-    state = await asyncio.to_thread(ctx.simulations.cancel, run_id)
+    state = await anyio.to_thread.run_sync(ctx.simulations.cancel, run_id)
     if state is None:
         raise HTTPException(404, f"unknown simulation run {run_id!r}")
     return Response(orjson.dumps(state.to_dict()), media_type="application/json")

@@ -13,6 +13,7 @@ import dataclasses
 import time
 from typing import Annotated, Any
 
+import anyio
 from fastapi import APIRouter, Body, Header, HTTPException
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict, Field
@@ -135,7 +136,7 @@ async def put_site(site_id: str, ctx: ContextDep,
     and the twin series cached for the site are dropped, to be simulated again.
     """
     who = await _check_site_writer(ctx, site_id, authorization)
-    info, created, dropped = await asyncio.to_thread(save_site, ctx, site_id, config)
+    info, created, dropped = await anyio.to_thread.run_sync(save_site, ctx, site_id, config)
     body = {**_site_dict(info, ctx), "created": created, "twin_readings_dropped": dropped,
             "written_by": who}
     return JSONResponse(body, status_code=201 if created else 200)

@@ -13,6 +13,7 @@ import asyncio
 import datetime as dt
 from typing import Annotated, Any
 
+import anyio
 import orjson
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request
 from fastapi.responses import Response
@@ -75,7 +76,7 @@ async def get_tokens(ctx: ContextDep, _admin: AdminDep,
         with ctx.engine.connect() as conn:
             return [t.to_dict() for t in list_tokens(conn, site_id)]
 
-    return _json({"tokens": await asyncio.to_thread(read)})
+    return _json({"tokens": await anyio.to_thread.run_sync(read)})
 
 
 @router.post("", status_code=201, response_model=TokenCreatedRead, openapi_extra=_ADMIN_DOC,
