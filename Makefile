@@ -18,8 +18,12 @@ $(STAMP): pyproject.toml constraints.txt
 run: $(STAMP)  ## start the service: API + dashboard on :8000, 3D twin on :8080, demo logger
 	$(BIN)/heliotwin serve
 
+# the suite over both cores (pytest-xdist); a module's tests stay on one worker, so its
+# in-process service starts once. `make test PYTEST_WORKERS=0` runs it in one process.
+PYTEST_WORKERS ?= 2
+
 test: $(STAMP)  ## run the whole test suite
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(PYTEST_WORKERS) --dist loadfile
 
 bench: $(STAMP)  ## measure the speed figures and write benchmarks/RESULTS.md
 	$(BIN)/python benchmarks/run.py
