@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import threading
 
 import pytest
@@ -50,7 +51,10 @@ def test_a_set_stop_ends_the_async_wait_with_stopped() -> None:
         with pytest.raises(Stopped):
             await stoppable_async_sleep(stop)(3600.0)
 
-    asyncio.run(run())
+    # a loop of its own on a thread of its own: a test that ran before in this process (the
+    # browser tests' Playwright) may have left this thread's event loop running
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        pool.submit(asyncio.run, run()).result()
 
 
 def test_a_stop_during_the_retries_ends_them_with_stopped() -> None:

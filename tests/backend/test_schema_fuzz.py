@@ -33,6 +33,9 @@ from schemathesis.specs.openapi.checks import (
     status_code_conformance,
 )
 
+#: schemathesis' cases of one operation share a node id: xdist would run one of them
+pytestmark = pytest.mark.one_process
+
 EXAMPLES = int(os.environ.get("HELIOTWIN_FUZZ_EXAMPLES", "5"))
 #: schemathesis' coverage phase (boundary values of every field: hundreds of requests per
 #: operation, each valid simulation a real run) only in the long run, ``make fuzz``
