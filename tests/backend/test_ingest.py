@@ -4,6 +4,7 @@ ADC, row/field errors) and the service around it (``backend/measurements/ingest.
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import datetime as dt
 from concurrent.futures import Future
 from typing import Any
@@ -23,6 +24,13 @@ from backend.measurements.parse import (
 )
 
 ARRAYS = {"tracker": (1, Calibration()), "fixed": (2, Calibration(divider_ratio=8.0))}
+
+
+def _run(coro: Any) -> Any:
+    """``asyncio.run`` on a thread of its own: a test that ran before in this process (the
+    browser tests' Playwright, under xdist) may have left this thread's event loop running."""
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, coro).result()
 
 
 def test_bulk_timestamps_agree_with_fromisoformat() -> None:
@@ -306,7 +314,7 @@ def test_ingest_answers_what_the_writer_committed(rows: int) -> None:
     body = orjson.dumps({"readings": readings})
     assert (len(body) > THREAD_FROM_BYTES) == (rows > 1)
     writer = _Writer(result=(rows - 1, 1))
-    stored = asyncio.run(ingest(writer, parse_json_batch, body, ARRAYS, Limits()))  # type: ignore[arg-type]
+    stored = _run(ingest(writer, parse_json_batch, body, ARRAYS, Limits()))  # type: ignore[arg-type]
     assert (stored.accepted, stored.duplicates, stored.readings) == (rows - 1, 1, rows)
     assert stored.power_only == rows // 2
     last = dt.datetime.fromisoformat(str(readings[-1]["ts"]))
@@ -320,12 +328,12 @@ def test_a_failed_commit_is_storage_unavailable() -> None:
     writer = _Writer(error=OSError("disk full"))
     body = orjson.dumps({"readings": [GOOD]})
     with pytest.raises(StorageUnavailable, match="OSError.*nothing was stored"):
-        asyncio.run(ingest(writer, parse_json_batch, body, ARRAYS, Limits()))  # type: ignore[arg-type]
+        _run(ingest(writer, parse_json_batch, body, ARRAYS, Limits()))  # type: ignore[arg-type]
 
 
 def test_a_bad_batch_never_reaches_the_writer() -> None:
     writer = _Writer()
     body = orjson.dumps({"readings": [dict(GOOD, ts="2024-05-01T10:00:00")]})
     with pytest.raises(IngestError):
-        asyncio.run(ingest(writer, parse_json_batch, body, ARRAYS, Limits()))  # type: ignore[arg-type]
+        _run(ingest(writer, parse_json_batch, body, ARRAYS, Limits()))  # type: ignore[arg-type]
     assert writer.jobs == []
