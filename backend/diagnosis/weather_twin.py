@@ -23,7 +23,7 @@ from backend.measurements.fields import SENSOR_NAMES
 from backend.measurements.queries import iso_utc, raw_rows
 from backend.sites import SiteInfo
 from sim import sky_sensor
-from sim.energy import energy_wh, gain_pct, on_grid
+from sim.energy import energy_per_period_wh, gain_pct, on_grid
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -183,9 +183,9 @@ def weather_twin_energy(ctx: ServiceContext, info: SiteInfo, data: dict[str, Any
         for name, kind in kinds.items():
             col = f"{kind}_power_w"
             if col in e:
+                wh = energy_per_period_wh(ts, e[col].to_numpy(), 60, edges_s)
                 for i in range(len(rows)):
-                    per[i][name] = energy_wh(ts, e[col].to_numpy(), 60, edges_s[i],
-                                             edges_s[i + 1])
+                    per[i][name] = float(wh[i])
     tracker, fixed = info.array_of_kind("tracker"), info.array_of_kind("fixed")
     totals = dict.fromkeys(kinds, 0.0)
     for r, wh, note in zip(rows, per, notes, strict=True):
