@@ -69,7 +69,10 @@ def test_torque_text_output() -> None:
     ("args", "message"),
     [
         (["--elevation-deg", "nan"], "--elevation-deg nan: must be a finite number"),
-        (["--elevation-deg", "200"], "within [-180, 180]"),
+        (["--elevation-deg", "200"], "--elevation-deg 200: outside the elevation joint's "
+                                     "range [0, 90] deg"),
+        (["--elevation-deg", "130"], "--elevation-deg 130: outside"),  # issue 22 item 11
+        (["--elevation-deg", "-5"], "--elevation-deg -5: outside"),
         (["--elevation-deg", "10", "--azimuth-rate-rad-s", "inf"], "--azimuth-rate-rad-s inf"),
         (["--elevation-deg", "ten"], "invalid float value"),
         ([], "--elevation-deg"),

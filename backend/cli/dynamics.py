@@ -62,7 +62,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "with Table 1. tau_elevation > 0 raises the panel normal.",
     )
     t.add_argument(
-        "--elevation-deg", type=float, required=True, help="elevation joint angle [deg]"
+        "--elevation-deg", type=float, required=True,
+        help="elevation joint angle [deg], within the joint's range 0..90"
     )
     for dest, flag, text in _RATE_FLAGS:
         t.add_argument(flag, dest=dest, type=float, default=0.0, help=text)
@@ -93,8 +94,13 @@ def _torque_problem(args: argparse.Namespace) -> str | None:
     for flag, value in values:
         if not math.isfinite(value):
             return f"{flag} {value}: must be a finite number"
-    if not -180.0 <= args.elevation_deg <= 180.0:
-        return f"--elevation-deg {args.elevation_deg}: must be within [-180, 180] deg"
+    from sim.kinematics import TrackerGeometry
+
+    joint = TrackerGeometry()  # the elevation joint's range (sim/kinematics.py)
+    lo, hi = joint.elevation_min_deg, joint.elevation_max_deg
+    if not lo <= args.elevation_deg <= hi:
+        return (f"--elevation-deg {args.elevation_deg:g}: outside the elevation joint's range "
+                f"[{lo:g}, {hi:g}] deg (the panel normal from horizontal to the zenith)")
     return None
 
 
