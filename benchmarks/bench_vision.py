@@ -215,8 +215,53 @@ GROUPS = ("skyrender/clear", "skyrender/cirrus", "skyrender/cumulus", "skyrender
           "wrong-ephemeris/real-Wettermast", "tracker-roi/clear", "tracker-roi/cloud")
 
 
-def evaluation_report(quick: bool = False) -> list[str]:
-    """The generalisation tables of docs/validation-vision.md (development and held-out)."""
+def _key(split: str, group: str, eph: bool) -> str:
+    """A figure's name for one split, set and mode: ``heldout.skyrender.clear.blind``."""
+    return f"{split}.{group.replace('/', '.')}.{'guided' if eph else 'blind'}"
+
+
+ACCURACY_TARGETS = {"fisheye640/clear": (0.3, 0.8), "fisheye640/cirrus": (0.3, 0.8),
+                    "synth/thin-cloud": (0.3, 0.8), "skyrender/clear": (0.3, 0.8),
+                    "skyrender/cirrus": (0.3, 0.8)}
+"""Held-out targets of issue 10: RMS and worst separation [°] of ``robust``."""
+PX_TARGETS = {"real/Wettermast": (3.0, 10.0)}
+"""Held-out targets of issue 10: median and worst distance to the hand label [px]."""
+
+
+def record_group(fig: Figures, key: str, recs: list[ev.Record], targets: bool) -> None:
+    """The figures of one set (the numbers :func:`vision.evaluation.summary` prints):
+    suns found of the visible ones, no-sun frames given a sun, RMS and worst separation
+    [°] (camera known), median and worst distance [px]; ``targets``: the held-out targets."""
+    vis = [r for r in recs if r["visible"]]
+    inv = [r for r in recs if not r["visible"]]
+    found = [r for r in vis if r["found"]]
+    if vis:
+        fig.add(f"{key}.found", len(found), "frames", f"{len(found)}/{len(vis)}")
+    if inv:
+        given = sum(1 for r in inv if r["found"])
+        fig.add(f"{key}.no_sun_given", given, "frames", f"{given}/{len(inv)}")
+    e = np.array([float(r["err_deg"]) for r in found])
+    p = np.array([float(r["err_px"]) for r in found])
+    group = key.split(".", 1)[1].rsplit(".", 1)[0].replace(".", "/")
+    rms_t, worst_t = ACCURACY_TARGETS.get(group, (None, None)) if targets else (None, None)
+    if e.size and np.isfinite(e).all():
+        rms = float(np.sqrt(np.mean(e**2)))
+        fig.add(f"{key}.rms_deg", rms, "°", f"{rms:.2f}°", *(
+            (f"≤ {rms_t}°", rms <= rms_t) if rms_t else ()))
+        fig.add(f"{key}.worst_deg", e.max(), "°", f"{e.max():.2f}°", *(
+            (f"≤ {worst_t}°", e.max() <= worst_t) if worst_t else ()))
+    med_t, max_t = PX_TARGETS.get(group, (None, None)) if targets else (None, None)
+    if p.size and np.isfinite(p).all():
+        med = float(np.median(p))
+        fig.add(f"{key}.median_px", med, "px", f"{med:.2f} px", *(
+            (f"≤ {med_t:g} px", med <= med_t) if med_t else ()))
+        fig.add(f"{key}.worst_px", p.max(), "px", f"{p.max():.1f} px", *(
+            (f"≤ {max_t:g} px", p.max() <= max_t) if max_t else ()))
+
+
+def evaluation_report(quick: bool = False, fig: Figures | None = None) -> list[str]:
+    """The generalisation tables of docs/validation-vision.md (development and held-out);
+    with ``fig``, the figures the doc quotes are recorded in it too."""
     rows = real_rows()
     cal = _dev_calibration(rows)
     out: list[str] = []
@@ -252,6 +297,10 @@ def evaluation_report(quick: bool = False) -> list[str]:
                     for eph in (False, True))
             if n:
                 out.append(f"| {g} ({n}) | " + " | ".join(cells) + " |")
+            for eph in (False, True):
+                sel = [r for r in by[(split, "robust", eph)] if r["source"] == g]
+                if fig is not None and sel:
+                    record_group(fig, _key(split, g, eph), sel, split == "heldout")
     for split in ("development", "heldout"):
         pooled = by[(split, "robust", False)] + by[(split, "robust", True)]
         sky = [r for r in pooled if not str(r["source"]).startswith("tracker-roi")]
@@ -262,6 +311,10 @@ def evaluation_report(quick: bool = False) -> list[str]:
         roi = [r for r in pooled if str(r["source"]).startswith("tracker-roi")]
         out += ["", f"Same, {split} tracker-camera ROIs:", ""]
         out += ev.reliability_rows(roi)
+        if fig is not None:
+            for name, sel in (("all_sky", sky), ("tracker_roi", roi)):
+                fig.add(f"{split}.{name}.brier", ev.brier(sel), "", f"{ev.brier(sel):.3f}")
+                fig.add(f"{split}.{name}.runs", len(sel), "runs", f"{len(sel)}")
     out += ["", "A plainly visible sun with a wrong ephemeris (`robust+eph`, every "
             "`wrong-ephemeris/*` run): found, confidence, distance from the prediction "
             "(pixels over px/°)", "",
@@ -275,6 +328,16 @@ def evaluation_report(quick: bool = False) -> list[str]:
         dist = f"{dd.min():.0f}–{dd.max():.0f}°" if dd.size else "—"
         out.append(f"| {split} | {len(w)} | {sum(bool(r['found']) for r in w)} | "
                    f"{c.min():.2f} / {np.median(c):.2f} | {dist} |")
+        if fig is not None:
+            n_found = sum(bool(r["found"]) for r in w)
+            fig.add(f"{split}.wrong_ephemeris.found", n_found, "runs", f"{n_found}/{len(w)}",
+                    "every run", n_found == len(w))
+            fig.add(f"{split}.wrong_ephemeris.confidence_min", c.min(), "", f"{c.min():.2f}")
+            if dd.size:
+                fig.add(f"{split}.wrong_ephemeris.distance_min_deg", dd.min(), "°",
+                        f"{dd.min():.0f}°")
+                fig.add(f"{split}.wrong_ephemeris.distance_max_deg", dd.max(), "°",
+                        f"{dd.max():.0f}°")
     out += ["", "Overcast frames (no sun visible), `robust` blind and with the ephemeris: suns "
             "given and the highest confidence (target: no sun with confidence ≥ 0.3)", "",
             "| split | set | runs | suns given | highest confidence |", "|---|---|---|---|---|"]
@@ -283,8 +346,12 @@ def evaluation_report(quick: bool = False) -> list[str]:
         for g in ("skyrender/overcast", "fisheye640/overcast", "synth/overcast", "real/UCEEB"):
             sel = [r for r in pooled if r["source"] == g and not r["visible"]]
             if sel:
+                top = max(float(r["confidence"]) for r in sel)
                 out.append(f"| {split} | {g} | {len(sel)} | {sum(bool(r['found']) for r in sel)} "
-                           f"| {max(float(r['confidence']) for r in sel):.3f} |")
+                           f"| {top:.3f} |")
+                if fig is not None:
+                    fig.add(f"{split}.{g.replace('/', '.')}.highest_confidence", top, "",
+                            f"{top:.3f}", "< 0.3", top < 0.3)
     out += ["", "Centre estimate, development split only (the choice of the reported centre "
             "is made here): RMS error against the truth", ""]
     out += centre_comparison(synthetic_set("development", quick))
@@ -363,21 +430,29 @@ def _dev_calibration(rows: list[dict[str, object]]) -> FisheyeCamera | None:
 # --------------------------------------------------------------------------- accuracy
 
 
-def tracker_accuracy(frames: list[tuple[np.ndarray, float, float]], method: str) -> str:
+def tracker_errors_mrad(frames: list[tuple[np.ndarray, float, float]],
+                        method: str = "robust") -> np.ndarray:
+    """Pointing error [mrad] per whole tracker frame against the rendered truth (inf: none
+    found); ``robust`` is given the camera, the seeds' pipelines are not."""
     cam = PinholeCamera()
-    errs, missed = [], 0
+    errs = []
     for img, h, v in frames:
         d = detect_sun(img, method=method, camera=cam if method == "robust" else None)
         if d.centroid_px is None:
-            missed += 1
+            errs.append(np.inf)
             continue
         hh, vv, _ = cam.pointing_error(*d.centroid_px)
         errs.append(1000.0 * np.radians(np.hypot(float(hh) - h, float(vv) - v)))
-    if not errs:
+    return np.array(errs)
+
+
+def tracker_accuracy(frames: list[tuple[np.ndarray, float, float]], method: str) -> str:
+    e = tracker_errors_mrad(frames, method)
+    e = e[np.isfinite(e)]
+    if not e.size:
         return f"none found of {len(frames)}"
-    e = np.asarray(errs)
     return (f"{np.sqrt(np.mean(e**2)):.3f} mrad RMS (max {e.max():.3f}), "
-            f"{len(frames) - missed}/{len(frames)} found")
+            f"{e.size}/{len(frames)} found")
 
 
 def fisheye_accuracy(frames: list[tuple[np.ndarray, float, float]], method: str) -> str:

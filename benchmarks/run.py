@@ -10,7 +10,8 @@ progress goes to stderr. A script that records its figures with
 This runner stamps each section it ran with the date, the machine, the commit
 and the load average before and after, and replaces in RESULTS.md and
 results.json only the sections it ran: a partial run leaves the others, with
-their own stamps, as they were. A script that fails leaves its previous section
+their own stamps, as they were (both files are read after the scripts ran, so a
+section another run wrote meanwhile is kept). A script that fails leaves its previous section
 and figures in place (the exit status says it failed). Finally it runs
 ``docs_figures.py``, which rewrites the ``<!-- fig:NAME -->`` markers in
 ``docs/*.md`` and RESULTS.md from results.json.
@@ -122,10 +123,8 @@ def run_one(script: Path) -> tuple[str | None, dict, dict]:
     return proc.stdout.strip() + "\n", figures, stamp
 
 
-def main(argv: list[str]) -> int:
-    scripts = sorted(HERE.glob("bench_*.py"))
-    if argv:
-        scripts = [s for s in scripts if s.stem.removeprefix("bench_") in argv]
+def load_sections() -> dict[str, str]:
+    """The sections of RESULTS.md as it is now, each with its stamp."""
     old_text = RESULTS_MD.read_text() if RESULTS_MD.exists() else ""
     sections = split_sections(old_text)
     # sections written before per-section stamps carry the file's old global one
@@ -133,12 +132,22 @@ def main(argv: list[str]) -> int:
     for name, sec in sections.items():
         if legacy and not STAMP.search(sec):
             sections[name] = with_stamp(sec, f"_Measured {legacy.group(1).rstrip('.')}._")
-    store = (
-        json.loads(docs_figures.RESULTS_JSON.read_text())
-        if docs_figures.RESULTS_JSON.exists()
-        else {"sections": {}, "figures": {}}
-    )
+    return sections
+
+
+def load_store() -> dict:
+    """results.json as it is now."""
+    if docs_figures.RESULTS_JSON.exists():
+        return json.loads(docs_figures.RESULTS_JSON.read_text())
+    return {"sections": {}, "figures": {}}
+
+
+def main(argv: list[str]) -> int:
+    scripts = sorted(HERE.glob("bench_*.py"))
+    if argv:
+        scripts = [s for s in scripts if s.stem.removeprefix("bench_") in argv]
     failed = []
+    ran: dict[str, tuple[str, dict, dict]] = {}
     for script in scripts:
         name = script.stem.removeprefix("bench_")
         print(f"== {script.name}", file=sys.stderr, flush=True)
@@ -149,7 +158,11 @@ def main(argv: list[str]) -> int:
         if not section.startswith(f"## {name}"):
             section = f"## {name}\n\n" + section
         print(section)
-        sections[name] = with_stamp(section, stamp_text(stamp))
+        ran[name] = (with_stamp(section, stamp_text(stamp)), figures, stamp)
+    # read the files only now: other sessions may have run other sections meanwhile
+    sections, store = load_sections(), load_store()
+    for name, (section, figures, stamp) in ran.items():
+        sections[name] = section
         store["sections"][name] = stamp
         store["figures"] = {
             k: v for k, v in store["figures"].items() if v.get("section") != name
