@@ -8,7 +8,9 @@
     heliotwin vision calibrate a.jpg b.jpg c.jpg --timestamps T1 T2 T3 --lat 53.52 \\
         --lon 10.105 --json
 
-The same library (``vision``) and ephemeris (``sim.sun``, SPA) as
+The same library (``vision``), ephemeris (``sim.sun``, SPA) and frame rule
+(``backend.vision.frames.frame_inputs``: a fisheye without ``--px-per-deg`` takes the
+scale of its image circle, a frame without ``--timestamp`` the time in its file name) as
 ``POST /api/v1/vision/sun`` and ``/calibrations``; nothing is stored
 (``--calibration-id`` reads a calibration the service stored, from the database
 of ``HELIOTWIN_DATABASE_URL``).
@@ -67,12 +69,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument("--reference-y-px", type=float, help="pinhole reference pixel row")
     d.add_argument("--projection", default="equidistant",
                    choices=("equidistant", "equisolid", "stereographic", "orthographic"))
-    d.add_argument("--px-per-deg", type=float, help="fisheye radial scale [px/deg]")
+    d.add_argument("--px-per-deg", type=float,
+                   help="fisheye radial scale [px/deg] (default: from the image circle, "
+                        "taken as the horizon of a 180-degree lens, as the service does)")
     d.add_argument("--north-offset-deg", type=float, default=0.0,
                    help="where north lies, clockwise from image-up (0)")
     d.add_argument("--east", choices=("left", "right"), default="left",
                    help="east left of north (raw view from below, default) or right")
-    d.add_argument("--timestamp", type=_time, help="frame time, ISO 8601 with offset")
+    d.add_argument("--timestamp", type=_time,
+                   help="frame time, ISO 8601 with offset (default: the time in the file "
+                        "name, e.g. _20160615_093900UTCp1, read in the place's zone when the "
+                        "name states none; backend/vision/frames.py)")
     _place_args(d)
     d.add_argument("--json", action="store_true", help="print JSON")
     d.set_defaults(func=run_detect)
@@ -128,6 +135,8 @@ def _upload(path: Path, field: str) -> Any:
 def detect(args: argparse.Namespace) -> dict[str, Any]:
     """The answer of ``vision detect``: the service's analysis (``backend.vision.service``,
     the same as ``POST /api/v1/vision/sun`` without the stored ids)."""
+    from backend.errors import InputError
+    from backend.vision.frames import frame_inputs
     from backend.vision.service import analyse, decode
     from vision.cameras import camera_from_params
 
@@ -136,16 +145,26 @@ def detect(args: argparse.Namespace) -> dict[str, Any]:
     params = {k: getattr(args, k) for k in ("fov_deg", "cx_px", "cy_px", "reference_x_px",
                                            "reference_y_px", "projection", "px_per_deg",
                                            "north_offset_deg", "east")}
-    if args.calibration_id is not None:
-        if args.camera not in (None, "fisheye"):
-            raise ValueError("--camera: a --calibration-id is a fisheye camera")
-        cam = _stored_camera(args.calibration_id)
-    elif args.camera is None:
+    if args.calibration_id is not None and args.camera not in (None, "fisheye"):
+        raise ValueError("--camera: a --calibration-id is a fisheye camera")
+    if args.calibration_id is None and args.camera is None:
         raise ValueError("--camera: required (pinhole or fisheye), or give --calibration-id")
+    place = _place(args)
+    try:  # the service's rule (POST /api/v1/vision/sun): scale and time the frame implies
+        frame = frame_inputs(img, args.image.name,
+                             args.camera if args.calibration_id is None else None, params,
+                             args.timestamp, place.zone if place is not None else None)
+    except InputError as exc:
+        raise ValueError(str(exc).replace("px_per_deg:", "--px-per-deg:", 1)) from None
+    if args.calibration_id is not None:
+        cam = _stored_camera(args.calibration_id)
     else:
-        cam = camera_from_params(args.camera, params, w, h)
-    out = {"image": str(args.image), **analyse(img, cam, args.method, args.timestamp,
-                                               _place(args))}
+        cam = camera_from_params(args.camera, frame.params, w, h)
+    out = {"image": str(args.image), **analyse(img, cam, args.method, frame.timestamp, place)}
+    if frame.camera_derived is not None:
+        out["camera_derived"] = frame.camera_derived
+    out["timestamp"] = None if frame.timestamp is None else frame.timestamp.isoformat()
+    out["timestamp_source"] = frame.timestamp_source
     if args.calibration_id is not None:
         out["calibration_id"] = args.calibration_id
     return out

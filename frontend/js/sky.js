@@ -10,14 +10,7 @@ let files = []; // [{file, input (datetime-local), url, width, height}]
 const $ = (id) => document.getElementById(id);
 const DEG = Math.PI / 180;
 
-/** A time written in a file name: 20160615_093900, 20180321061000, optional "UTCp1"/"UTC+1" zone. */
-export function timeFromName(name) {
-  const m = name.match(/(20\d{2})(\d{2})(\d{2})[_T-]?(\d{2})(\d{2})(\d{2})/);
-  if (!m) return null;
-  const z = name.match(/UTC([pm+-])(\d{1,2})/i);
-  const offsetH = z ? (z[1] === "m" || z[1] === "-" ? -1 : 1) * Number(z[2]) : null;
-  return { wall: `${m[1]}-${m[2]}-${m[3]}T${m[4]}:${m[5]}:${m[6]}`, offsetH };
-}
+let namesRead = Promise.resolve(); // the file-name times being fetched for the chosen files
 
 function offsetString(minutes) {
   const sign = minutes < 0 ? "-" : "+";
@@ -76,15 +69,35 @@ function renderFileList() {
   if (files.length) box.append(h("div", { class: "muted" }, "Time of each frame (needed for the ephemeris and for calibration). A time typed by hand is read in the selector's zone."));
 }
 
+/** The times the chosen files' names carry, read by the server (GET /api/v1/vision/frame-times,
+ * backend/vision/frames.py: the rule detection and the CLI apply), written into each row. */
+async function readNameTimes(rows) {
+  if (!rows.length) return;
+  const q = new URLSearchParams();
+  for (const row of rows) q.append("filename", row.file.name);
+  try {
+    const res = await api(`/api/v1/vision/frame-times?${q}`);
+    res.frames.forEach((t, i) => {
+      const row = rows[i];
+      if (!t.wall_time || row.input.value) return; // a time typed meanwhile wins
+      row.input.value = t.wall_time;
+      row.offsetH = t.utc_offset_h;
+      row.fromName = true;
+    });
+  } catch (err) {
+    $("sky-status").textContent = `Could not read the times in the file names: ${err.message}`;
+  }
+  refreshZones();
+}
+
 function onFiles() {
   for (const f of files) URL.revokeObjectURL(f.url);
   files = [...$("sky-files").files].map((file) => {
-    const parsed = timeFromName(file.name);
     const input = h("input", { type: "datetime-local", step: "1", "aria-label": `time of ${file.name}` });
-    if (parsed) input.value = parsed.wall;
-    return { file, input, url: URL.createObjectURL(file), offsetH: parsed?.offsetH ?? null, fromName: Boolean(parsed) };
+    return { file, input, url: URL.createObjectURL(file), offsetH: null, fromName: false };
   });
   renderFileList();
+  namesRead = readNameTimes(files);
 }
 
 async function cameraParams(form) {
@@ -134,11 +147,13 @@ function drawMarker(ctx, x, y, color, radius, cross) {
 
 function resultCard(row, img, res, params) {
   const canvas = h("canvas", { "data-testid": "sky-canvas" });
-  const scale = Math.min(1, 900 / Math.max(img.naturalWidth, img.naturalHeight));
-  canvas.width = Math.round(img.naturalWidth * scale);
-  canvas.height = Math.round(img.naturalHeight * scale);
+  // the server's image size when this browser cannot draw the file (img null: no picture)
+  const [width, height] = img ? [img.naturalWidth, img.naturalHeight] : res.image_size_px;
+  const scale = Math.min(1, 900 / Math.max(width, height));
+  canvas.width = Math.round(width * scale);
+  canvas.height = Math.round(height * scale);
   const ctx = canvas.getContext("2d");
-  ctx.drawImage(img, 0, 0, canvas.width, canvas.height);
+  if (img) ctx.drawImage(img, 0, 0, canvas.width, canvas.height);
   const radius = Math.max(8, canvas.width / 28);
   // SunDetectionRead: the ephemeris (with time and place) and, for a fisheye, its pixel
   // through the same camera model (null below the horizon)
@@ -146,8 +161,8 @@ function resultCard(row, img, res, params) {
   const eph = res.ephemeris;
   const ephPx = eph?.centroid_px ?? null;
   if (res.camera === "pinhole") { // the reference pixel typed in the form, else the centre
-    const rx = params.reference_x_px ?? (img.naturalWidth - 1) / 2;
-    const ry = params.reference_y_px ?? (img.naturalHeight - 1) / 2;
+    const rx = params.reference_x_px ?? (width - 1) / 2;
+    const ry = params.reference_y_px ?? (height - 1) / 2;
     ctx.setLineDash([4, 4]);
     drawMarker(ctx, rx * scale, ry * scale, "#1971c2", radius * 0.6, true);
     ctx.setLineDash([]);
@@ -169,6 +184,8 @@ function resultCard(row, img, res, params) {
   const derived = res.camera_derived;
   if (derived) kv("Scale [px/°]", `${num(derived.px_per_deg, 3)} — derived: ${derived.how}; ${derived.warning}`);
   if (res.method) kv("Method", res.method);
+  if (res.timestamp_source && res.timestamp_source !== "given") kv("Time from", res.timestamp_source);
+  if (!img) kv("Picture", "this browser cannot draw the file; the markers are on a blank canvas");
   const warnings = res.warnings.map((w) => h("p", { class: "warning", "data-testid": "sky-warning" }, `⚠ ${w}`));
   const ts = rowTimestamp(row);
   const when = !ts ? "" : $("sky-place").value === "site" ? `  · ${fmtDateTime(st.tz, ts)} (${st.tz})` : `  · ${ts}`;
@@ -195,7 +212,9 @@ async function detectAll(ev) {
   const out = $("sky-results");
   out.innerHTML = "";
   $("sky-detect").disabled = true;
+  await namesRead;
   let done = 0;
+  let failed = 0;
   for (const row of files) {
     $("sky-status").textContent = `detecting ${++done} of ${files.length}…`;
     const form = new FormData();
@@ -205,19 +224,30 @@ async function detectAll(ev) {
       params = await cameraParams(form);
     } catch (err) {
       out.append(errorCard(row, `Calibration unavailable: ${err.message}`));
+      failed += 1;
       continue;
     }
     placeParams(form);
     const ts = rowTimestamp(row);
     if (ts) form.append("timestamp", ts);
-    try {
-      const [res, img] = await Promise.all([api("/api/v1/vision/sun", { method: "POST", form, token: $("sky-token").value.trim() }), readSize(row.url)]);
-      out.append(resultCard(row, img, res, params));
+    let res;
+    try { // the server's answer first: its 413/415/422 says what is wrong with the file
+      res = await api("/api/v1/vision/sun", { method: "POST", form, token: $("sky-token").value.trim() });
     } catch (err) {
-      out.append(errorCard(row, err.message));
+      out.append(errorCard(row, `Not analysed — ${err.message}`));
+      failed += 1;
+      continue;
     }
+    let img = null;
+    try {
+      img = await readSize(row.url);
+    } catch { /* analysed by the server, but this browser cannot draw it: the card says so */ }
+    out.append(resultCard(row, img, res, params));
   }
-  $("sky-status").textContent = `${files.length} image(s) done.`;
+  const ok = files.length - failed;
+  $("sky-status").textContent = failed
+    ? `${ok} of ${files.length} image(s) analysed, ${failed} failed (see the red cards).`
+    : `${ok} image(s) analysed.`;
   $("sky-detect").disabled = false;
   const first = files.map(rowTimestamp).find(Boolean);
   if (first) $("sky-day").value = localDate(trajectoryZone(), Date.parse(first));
@@ -225,6 +255,7 @@ async function detectAll(ev) {
 }
 
 async function calibrate() {
+  await namesRead;
   const timed = files.filter((r) => rowTimestamp(r));
   if (timed.length < 3) {
     $("sky-status").textContent = "Calibration needs at least 3 images, each with its time.";
@@ -398,6 +429,7 @@ async function deleteCalibration() {
 
 /** The selected calibration on the chosen frames against SPA; frames it was fitted on are marked. */
 async function evaluateCalibration() {
+  await namesRead;
   const id = $("sky-calibration").value;
   const timed = files.filter((r) => rowTimestamp(r));
   if (!id || !timed.length) {

@@ -55,13 +55,16 @@ from backend.api.schemas.vision import (
     DetectionsRead,
     EvaluationRead,
     FittedCalibrationRead,
+    FrameNameTimeRead,
+    FrameTimesRead,
     StoredCalibrationRead,
     SunDetectionRead,
 )
 from backend.limits import Busy, prune_anonymous
 from backend.storage.tables import VisionDetection
 from backend.timestamps import TimestampError, parse_day_or_instant, parse_instant
-from backend.vision.checks import derive_fisheye_scale, error_warnings
+from backend.vision.checks import error_warnings
+from backend.vision.frames import FrameInputs, frame_inputs, time_from_name
 from backend.vision.service import (
     Frame,
     Place,
@@ -237,24 +240,28 @@ def _calibration_max_deg(session: Any, cal_id: int) -> float | None:
 
 
 def _camera(form: FormData, stored: FisheyeCamera | None, w: int, h: int,
-            image: np.ndarray | None = None
-            ) -> tuple[PinholeCamera | FisheyeCamera, dict[str, Any] | None]:
-    """The camera of a request, and what was derived for it: with ``image``, a fisheye
-    without ``px_per_deg`` gets the scale of its image circle
-    (``backend.vision.checks.derive_fisheye_scale``)."""
+            frame: tuple[np.ndarray, str, dt.datetime | None, Place | None] | None = None
+            ) -> tuple[PinholeCamera | FisheyeCamera, FrameInputs | None]:
+    """The camera of a request; with ``frame`` (image, file name, time given, place) also
+    what :func:`backend.vision.frames.frame_inputs` completes, the CLI's rule: a fisheye
+    without ``px_per_deg`` gets the scale of its image circle, a frame without a time the
+    time of its file name."""
     kind = _text(form, "camera") or ("fisheye" if stored is not None else None)
-    if stored is not None:
-        if kind != "fisheye":
-            raise HTTPException(422, "camera: a calibration_id is a fisheye camera")
-        return stored, None
+    if stored is not None and kind != "fisheye":
+        raise HTTPException(422, "camera: a calibration_id is a fisheye camera")
     if kind is None:
         raise HTTPException(422, "camera: required ('pinhole' or 'fisheye'), or give "
                                  "calibration_id")
-    params, derived = _fields(form), None
-    if kind == "fisheye" and image is not None and _text(form, "px_per_deg") is None:
-        params, derived = derive_fisheye_scale(image, params)
+    params, completed = _fields(form), None
+    if frame is not None:
+        image, filename, ts, place = frame
+        completed = frame_inputs(image, filename, None if stored is not None else kind,
+                                 params, ts, place.zone if place is not None else None)
+        params = completed.params
+    if stored is not None:
+        return stored, completed
     try:
-        return camera_from_params(kind, params, w, h), derived
+        return camera_from_params(kind, params, w, h), completed
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
 
@@ -315,12 +322,15 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
     up = await _upload(uploads[0], "file", s.vision.max_pixels)
     async with _admitted(ctx, request, _token, [up]):
         img = await anyio.to_thread.run_sync(decode, up, s.vision.max_pixels)
-        cam, derived = await anyio.to_thread.run_sync(_camera, form, stored, img.shape[1],
-                                                      img.shape[0], img)
+        cam, frame = await anyio.to_thread.run_sync(_camera, form, stored, img.shape[1],
+                                                    img.shape[0], (img, up.filename, ts, place))
+        assert frame is not None
+        ts = frame.timestamp
         res = await anyio.to_thread.run_sync(analyse, img, cam, method, ts, place)
         del img
-    if derived is not None:
-        res["camera_derived"] = derived
+    if frame.camera_derived is not None:
+        res["camera_derived"] = frame.camera_derived
+    res["timestamp_source"] = frame.timestamp_source
     res["warnings"] = error_warnings(res, None if cal_id is None else
                                      await anyio.to_thread.run_sync(_calibration_max_deg,
                                                                     session, cal_id))
@@ -415,6 +425,22 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
                            f"{frames[0][1].date().isoformat()}")
     cal_id = await asyncio.wrap_future(ctx.writer.call(lambda c: insert_calibration(c, row)))
     return _json({**calibration_answer(row), "calibration_id": cal_id}, 201)
+
+
+@router.get("/frame-times", response_model=FrameTimesRead)
+def get_frame_times(filename: Annotated[list[str], Query(
+        min_length=1, max_length=_MAX_FILES,
+        description="a file name; repeat for several")]) -> FrameTimesRead:
+    """The time each file name carries, as detection and calibration read it when no time is
+    sent (``backend.vision.frames.time_from_name``): the dashboard shows these beside its
+    files rather than parsing names itself."""
+    out = []
+    for name in filename:
+        found = time_from_name(name[:1000])
+        out.append(FrameNameTimeRead(
+            filename=name, wall_time=None if found is None else found.wall_time.isoformat(),
+            utc_offset_h=None if found is None else found.utc_offset_h))
+    return FrameTimesRead(frames=out)
 
 
 @router.get("/calibrations", response_model=CalibrationsRead)

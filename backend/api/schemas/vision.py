@@ -63,6 +63,9 @@ class SunDetectionRead(BaseModel):
     warnings: list[str]
     calibration_id: int | None
     timestamp: str | None = Field(description="UTC, ISO 8601")
+    timestamp_source: str | None = Field(None, description=(
+        "where the time comes from: `given` (the `timestamp` field), `file name (…)` (the "
+        "time the file's name carries, backend/vision/frames.py), null: no time"))
     site_id: str | None
     latitude_deg: float | None
     longitude_deg: float | None
@@ -253,3 +256,19 @@ class EvaluationRead(BaseModel):
                     "ephemeris_elevation_deg and per method `<method>_sun_found`, "
                     "`<method>_azimuth_deg`, `<method>_elevation_deg`")
     table3: dict[str, MethodTableRead]
+
+
+class FrameNameTimeRead(BaseModel):
+    """The time a file name carries (``backend.vision.frames.time_from_name``)."""
+
+    filename: str
+    wall_time: str | None = Field(description="the name's date and time, ISO 8601 without "
+                                              "offset; null: the name carries none")
+    utc_offset_h: int | None = Field(description="the UTC offset the name states (`UTCp1` → "
+                                                 "1) [h]; null: none stated")
+
+
+class FrameTimesRead(BaseModel):
+    """``GET /api/v1/vision/frame-times``: one entry per file name, in order."""
+
+    frames: list[FrameNameTimeRead]

@@ -1,0 +1,110 @@
+"""One frame rule for the CLI, the service and the dashboard (issue 22 item 10).
+
+``heliotwin vision detect`` needed ``--px-per-deg`` for a fisheye whose scale the service
+derives from the image circle, and ignored the time in the file name that the dashboard
+read (in JavaScript of its own). Both now go through ``backend.vision.frames.frame_inputs``
+and the dashboard asks ``GET /api/v1/vision/frame-times``; the same file gives the same
+answer either way. Expected sun positions come from pvlib's SPA, not from the code.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import httpx
+import pandas as pd
+import pvlib
+import pytest
+
+from backend.cli import main
+from vision.synth import fisheye_frame
+
+TEHUANTEPEC = (16.288750, -95.240871)  # sim/data/sites/tehuantepec.json
+NAME = "sky_20240210_103000UTCm6.png"  # 10:30 at UTC-6 = 16:30 UTC
+UTC = "2024-02-10T16:30:00Z"
+
+
+def _spa(ts: str, lat: float, lon: float) -> tuple[float, float]:
+    sp = pvlib.solarposition.get_solarposition(pd.DatetimeIndex([pd.Timestamp(ts)]), lat, lon,
+                                               method="nrel_numpy")
+    return float(sp.azimuth.iloc[0]), float(sp.apparent_elevation.iloc[0])
+
+
+@pytest.fixture(scope="module")
+def frame_png() -> bytes:
+    az, el = _spa(UTC, *TEHUANTEPEC)
+    ok, buf = cv2.imencode(".png", fisheye_frame(az, el, seed=3).image)  # 2.6 px/deg, 180°
+    assert ok
+    return buf.tobytes()
+
+
+def test_frame_times_reads_the_names_the_dashboard_shows(client: httpx.Client) -> None:
+    names = ["Wettermast_20160615_093900UTCp1_sunrow1202_suncol535.jpg",
+             "UCEEB_20180321061000_11.jpg", "cam-20240210T103000-UTC-6.png",
+             "IMG_20241399_250000.jpg", "sky.png"]
+    r = client.get("/api/v1/vision/frame-times", params=[("filename", n) for n in names])
+    assert r.status_code == 200, r.text
+    got = [(f["filename"], f["wall_time"], f["utc_offset_h"]) for f in r.json()["frames"]]
+    assert got == [
+        (names[0], "2016-06-15T09:39:00", 1),
+        (names[1], "2018-03-21T06:10:00", None),  # no zone in the name
+        (names[2], "2024-02-10T10:30:00", -6),
+        (names[3], None, None),  # month 13, hour 25: not a time
+        (names[4], None, None),
+    ]
+    assert client.get("/api/v1/vision/frame-times").status_code == 422
+
+
+def test_service_takes_the_time_and_scale_from_the_frame(client: httpx.Client,
+                                                         frame_png: bytes) -> None:
+    r = client.post("/api/v1/vision/sun", files={"file": (NAME, frame_png, "image/png")},
+                    data={"camera": "fisheye", "site_id": "tehuantepec"})
+    assert r.status_code == 200, r.text
+    d = r.json()
+    assert d["timestamp"] == UTC
+    assert d["timestamp_source"].startswith("file name")
+    az, el = _spa(UTC, *TEHUANTEPEC)
+    assert d["ephemeris"]["azimuth_deg"] == pytest.approx(az, abs=0.02)
+    assert d["ephemeris"]["elevation_deg"] == pytest.approx(el, abs=0.02)
+    assert d["camera_derived"]["px_per_deg"] == pytest.approx(2.6, rel=0.03)
+    assert d["error"]["separation_deg"] < 1.5
+    # a time sent wins over the name's
+    r = client.post("/api/v1/vision/sun", files={"file": (NAME, frame_png, "image/png")},
+                    data={"camera": "fisheye", "site_id": "tehuantepec",
+                          "timestamp": "2024-02-10T17:30:00Z"})
+    assert r.json()["timestamp"] == "2024-02-10T17:30:00Z"
+    assert r.json()["timestamp_source"] == "given"
+
+
+def test_cli_gives_the_service_answer_without_px_per_deg_or_timestamp(
+        client: httpx.Client, frame_png: bytes, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / NAME
+    path.write_bytes(frame_png)
+    code = main(["vision", "detect", str(path), "--camera", "fisheye", "--site", "tehuantepec",
+                 "--json"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    cli = json.loads(captured.out)
+    api = client.post("/api/v1/vision/sun", files={"file": (NAME, frame_png, "image/png")},
+                      data={"camera": "fisheye", "site_id": "tehuantepec"}).json()
+    assert cli["timestamp"].replace("+00:00", "Z") == api["timestamp"] == UTC
+    assert cli["camera_derived"] == api["camera_derived"]
+    for key in ("azimuth_deg", "elevation_deg", "confidence"):
+        assert cli[key] == pytest.approx(api[key], abs=1e-9), key
+    for key in ("azimuth_deg", "elevation_deg"):
+        assert cli["ephemeris"][key] == pytest.approx(api["ephemeris"][key], abs=1e-9), key
+
+
+def test_cli_names_px_per_deg_when_the_frame_has_no_circle(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "flat.png"
+    ok, buf = cv2.imencode(".png", (fisheye_frame(120.0, 40.0, seed=1).image * 0 + 200))
+    assert ok
+    path.write_bytes(buf.tobytes())
+    code = main(["vision", "detect", str(path), "--camera", "fisheye", "--json"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "--px-per-deg: required" in err
