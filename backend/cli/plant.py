@@ -1,9 +1,12 @@
-"""``heliotwin plant``: plants of dual-axis trackers (seed 004) — list and simulate.
+"""``heliotwin plant``: plants of dual-axis trackers (seed 004) — list, simulate, sweep.
 
     heliotwin plant list
     heliotwin plant simulate --plant penarroya --start 2021-01-01 --end 2022-01-01 --json
     heliotwin plant simulate --plant penarroya --start 2021-01-01 --end 2021-02-01 \\
         --strategy sky_scan --tmy3 PATH --step-s 600
+    heliotwin plant sweep --collector-m 12x5 --lat 38.3 --lon -5.3 \\
+        --layouts square,diagonal --gcr 0.15:0.35:0.1 --start 2021-01-01 --end 2022-01-01 \\
+        [--strategy sun,backtrack] [--scheduler tcp://HOST:8786] --json|--csv
 
 ``start`` inclusive, ``end`` exclusive; a bare date is midnight in the plant's
 time zone, a date-time must carry an offset. A progress bar (tqdm) goes to
@@ -25,7 +28,7 @@ STRATEGIES = ("sun", "backtrack", "sky_scan")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``plant`` subcommand with ``list`` and ``simulate``."""
+    """Add the ``plant`` subcommand with ``list``, ``simulate`` and ``sweep``."""
     p = subparsers.add_parser("plant", help="plants of many trackers: shading and strategies",
                               description="Plants of dual-axis trackers (seed 004): "
                               "inter-shading, backtracking, the sky scan.")
@@ -55,6 +58,53 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sim.add_argument("--no-progress", action="store_true", help="never show a progress bar")
     sim.set_defaults(func=run_simulate)
 
+    sw = sub.add_parser(
+        "sweep", help="layouts × spacings × strategies of a field, as Dask tasks",
+        description="Plant design sweep (issue 26): for each layout, GCR and strategy, the "
+        "interior collector's and the field's share of beam lost to shade, the energy per "
+        "collector (bypass-diode model) and per hectare, and the land per collector. Each "
+        "case is one Dask task; --scheduler sends them to a running cluster, otherwise a "
+        "LocalCluster of one worker per core runs them (one case: in this process). Clear "
+        "sky unless --tmy3/--epw. With --lat/--lon a bare date is midnight UTC.")
+    sw.add_argument("--layouts", default="square",
+                    help="comma list of square, diagonal, hexagonal_n_s, hexagonal_e_w, custom "
+                    "(default square; ignored with --plant)")
+    sw.add_argument("--gcr", required=True,
+                    help="ground cover ratios: 0.15,0.25 or START:STOP:STEP (STOP included)")
+    sw.add_argument("--strategy", default="sun",
+                    help=f"comma list of {', '.join(STRATEGIES)} (default sun)")
+    sw.add_argument("--collector-m", help="collector WIDTHxHEIGHT [m], e.g. 12x5 (wired like "
+                    "Peñarroya's: its modules, as many as fit)")
+    sw.add_argument("--lat", type=float, help="latitude [°], north positive")
+    sw.add_argument("--lon", type=float, help="longitude [°], east positive")
+    sw.add_argument("--altitude-m", type=float, default=0.0, help="altitude [m] (default 0)")
+    sw.add_argument("--plant", help="an existing plant scaled in spacing to each GCR "
+                    "(instead of --layouts/--collector-m/--lat/--lon)")
+    sw.add_argument("--field", default="5x5",
+                    help="ROWSxCOLUMNS of the finite regular field around the interior "
+                    "collector (default 5x5: twoaxistracking's neighbor_order 2)")
+    sw.add_argument("--aspect-ratio", type=float, help="layout custom: aspect ratio")
+    sw.add_argument("--offset", type=float, help="layout custom: row offset [-0.5, 0.5)")
+    sw.add_argument("--rotation-deg", type=float, help="layout custom: rotation [0, 180)")
+    sw.add_argument("--slope-azimuth-deg", type=float, default=0.0,
+                    help="ground slope: azimuth of the downhill normal [°] (default 0)")
+    sw.add_argument("--slope-tilt-deg", type=float, default=0.0,
+                    help="ground slope: tilt [°] (default 0, flat)")
+    sw.add_argument("--start", required=True, help="YYYY-MM-DD or ISO date-time with offset")
+    sw.add_argument("--end", required=True, help="YYYY-MM-DD or ISO date-time (exclusive)")
+    sw.add_argument("--step-s", type=float, default=600.0, help="time step [s] (default 600)")
+    sw.add_argument("--tmy3", metavar="PATH", help="weather from a TMY3 file")
+    sw.add_argument("--epw", metavar="PATH", help="weather from an EPW file")
+    sw.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                    help="a running Dask scheduler (default: a LocalCluster on this machine)")
+    sw.add_argument("--workers", type=int, help="LocalCluster workers (default: the cores)")
+    sw.add_argument("--plants-dir", default=plants_dir, help="directory of plant JSON files")
+    out = sw.add_mutually_exclusive_group()
+    out.add_argument("--json", action="store_true", help="print JSON")
+    out.add_argument("--csv", action="store_true", help="print the rows as CSV")
+    sw.add_argument("--no-progress", action="store_true", help="never show a progress bar")
+    sw.set_defaults(func=run_sweep)
+
 
 def run_list(args: argparse.Namespace) -> int:
     """``heliotwin plant list``."""
@@ -73,19 +123,24 @@ def run_list(args: argparse.Namespace) -> int:
     return 0
 
 
-def execute(args: argparse.Namespace) -> dict[str, Any]:
-    """Run ``plant simulate``; returns the summary. Raises InputError on bad input."""
+def _plant_arg(args: argparse.Namespace) -> Any:
+    """The plant of ``--plant`` from ``--plants-dir``; InputError names the flag."""
     from sim.plant import UnknownPlantError, load_plant
 
-    if args.strategy not in STRATEGIES:
-        raise InputError(f"--strategy: must be one of {', '.join(STRATEGIES)}, "
-                         f"got {args.strategy!r}")
     try:
-        plant = load_plant(args.plant, args.plants_dir)
+        return load_plant(args.plant, args.plants_dir)
     except UnknownPlantError as exc:
         raise InputError(f"--plant: {exc}") from None
     except ValueError as exc:
         raise InputError(f"--plant: bad plant file: {exc}") from None
+
+
+def execute(args: argparse.Namespace) -> dict[str, Any]:
+    """Run ``plant simulate``; returns the summary. Raises InputError on bad input."""
+    if args.strategy not in STRATEGIES:
+        raise InputError(f"--strategy: must be one of {', '.join(STRATEGIES)}, "
+                         f"got {args.strategy!r}")
+    plant = _plant_arg(args)
     start = parse_when(args.start, plant.timezone, "start")
     end = parse_when(args.end, plant.timezone, "end")
     if not end > start:
@@ -152,4 +207,122 @@ def run_simulate(args: argparse.Namespace) -> int:
     """``heliotwin plant simulate``; exit 2 on bad input."""
     summary = execute(args)  # bad input: InputError, a CliError main reports
     print(json.dumps(summary) if args.json else _text(summary))
+    return 0
+
+
+def _flag(field: str) -> str:
+    return {"collector_m": "--collector-m", "step_s": "--step-s", "field": "--field",
+            "layouts": "--layouts"}.get(field, "--" + field.replace("_", "-"))
+
+
+def _sweep_weather(args: argparse.Namespace, spec: Any) -> tuple[Any, str]:
+    """(weather over the range, a token naming it) from --tmy3/--epw, or (None, "")."""
+    flag, path = ("--tmy3", args.tmy3) if args.tmy3 else ("--epw", args.epw)
+    if not path:
+        return None, ""
+    import hashlib
+
+    from sim.plant.simulate import weather_for_plant
+    from sim.plant.sweep import site_plant
+    from sim.sky import read_typical_year, typical_year_on
+
+    try:
+        typical, meta = read_typical_year(path, flag[2:])
+    except (OSError, ValueError, KeyError) as exc:
+        raise InputError(f"{flag}: cannot read {path!r}: {exc}") from None
+    on_range = typical_year_on(typical, meta["utc_offset_h"], spec.start, spec.end)
+    weather = weather_for_plant(on_range, meta["longitude"], site_plant(spec), spec.start,
+                                spec.end)
+    with open(path, "rb") as f:
+        token = f"{flag[2:]}:{hashlib.sha256(f.read()).hexdigest()[:16]}"
+    return weather, token
+
+
+def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
+    """(spec, cases, weather) of ``plant sweep``; InputError names the flag."""
+    from dataclasses import replace
+
+    from backend.plants.sweep import SweepInputError, parse_gcr, parse_size, prepare_sweep
+
+    if args.tmy3 and args.epw:
+        raise InputError("--tmy3 and --epw: give one weather file, not both")
+    plant = None
+    if args.plant:
+        plant = _plant_arg(args)
+    tz = plant.timezone if plant is not None else "UTC"
+    start = parse_when(args.start, tz, "start")
+    end = parse_when(args.end, tz, "end")
+    custom = None
+    if any(v is not None for v in (args.aspect_ratio, args.offset, args.rotation_deg)):
+        if None in (args.aspect_ratio, args.offset, args.rotation_deg):
+            raise InputError("--aspect-ratio, --offset, --rotation-deg: give all three "
+                             "for layout custom")
+        custom = (args.aspect_ratio, args.offset, args.rotation_deg)
+    try:
+        rows, columns = (int(v) for v in parse_size(args.field, "field"))
+        spec, cases = prepare_sweep(
+            layouts=[s.strip() for s in args.layouts.split(",") if s.strip()],
+            gcr=parse_gcr(args.gcr),
+            strategies=[s.strip() for s in args.strategy.split(",") if s.strip()],
+            start=start, end=end, step_s=args.step_s, latitude_deg=args.lat,
+            longitude_deg=args.lon, altitude_m=args.altitude_m,
+            collector_m=parse_size(args.collector_m, "collector_m") if args.collector_m
+            else None, plant=plant, field_size=(rows, columns), custom=custom,
+            slope_azimuth_deg=args.slope_azimuth_deg, slope_tilt_deg=args.slope_tilt_deg)
+    except SweepInputError as exc:
+        raise InputError(f"{_flag(exc.field)}: {exc.problem}") from None
+    weather, token = _sweep_weather(args, spec)
+    if weather is not None:
+        spec = replace(spec, weather_token=token)
+    return spec, cases, weather
+
+
+#: Sweep columns of the CSV and text output, in order.
+SWEEP_COLUMNS = ("layout", "gcr", "strategy", "interior_beam_shaded_pct", "field_beam_shaded_pct",
+                 "energy_kwh_per_collector", "interior_energy_kwh", "energy_mwh_per_ha",
+                 "land_m2_per_collector", "collectors", "shading_loss_electrical_pct")
+
+
+def run_sweep(args: argparse.Namespace) -> int:
+    """``heliotwin plant sweep``; exit 2 on bad input."""
+    from backend.plants.sweep import run_sweep as run
+
+    spec, cases, weather = sweep_from_args(args)
+    if not getattr(args, "verbose", False):   # distributed logs its cluster's life at INFO
+        import logging
+
+        logging.getLogger("distributed").setLevel(logging.WARNING)
+    bar, callback = None, None
+    if not args.no_progress and sys.stderr.isatty():
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(cases), unit="case", file=sys.stderr, desc="sweeping", leave=False)
+
+        def callback(done: int, total: int) -> None:
+            bar.update(done - bar.n)
+
+    try:
+        result = run(spec, cases, weather, scheduler=args.scheduler, n_workers=args.workers,
+                     progress=callback)
+    except OSError as exc:                    # no scheduler at that address
+        fail(f"--scheduler: cannot reach {args.scheduler!r}: {exc}")
+    finally:
+        if bar is not None:
+            bar.close()
+    if args.json:
+        print(json.dumps(result))
+    elif args.csv:
+        import csv
+
+        w = csv.DictWriter(sys.stdout, fieldnames=SWEEP_COLUMNS, extrasaction="ignore",
+                           lineterminator="\n")
+        w.writeheader()
+        w.writerows(result["rows"])
+    else:
+        print(f"{result['cases']} cases on {result['engine']} "
+              f"({result['workers']} workers, sky computed {result['sky_computations']}x) "
+              f"in {result['wall_s']:.1f} s")
+        print("\t".join(SWEEP_COLUMNS))
+        for r in result["rows"]:
+            print("\t".join(str(r[c]) for c in SWEEP_COLUMNS))
     return 0

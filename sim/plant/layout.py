@@ -169,6 +169,11 @@ class Plant:
         Clear-sky weather [°C], [m s⁻¹].
     fixed_tilt, fixed_azimuth : float
         Orientation of the fixed comparison plant [°].
+    slope_azimuth, slope_tilt : float
+        The plane ground the plant stands on, when it extends beyond the plant (a regular
+        field of :mod:`sim.plant.fields`): azimuth of its downhill normal and tilt [°]. With
+        the sun below the ground's horizon every collector is in shade
+        (:func:`sim.plant.fields.horizon_elevation`). 0: flat, no horizon.
     """
 
     plant_id: str
@@ -185,6 +190,8 @@ class Plant:
     wind_speed: float = 1.0
     fixed_tilt: float = 30.0
     fixed_azimuth: float = 180.0
+    slope_azimuth: float = 0.0
+    slope_tilt: float = 0.0
     source: str = ""
     notes: str = ""
 

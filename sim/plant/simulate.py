@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from sim.energy import energy_per_period_wh, gain_pct, sampled_energy_wh
 from sim.plant.electrical import beam_factors
+from sim.plant.fields import horizon_elevation
 from sim.plant.layout import Plant
 from sim.plant.shading import BinTable, plant_shade
 from sim.plant.strategies import orientations
@@ -129,8 +130,9 @@ def sky_conditions(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame 
 
 
 def _power(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: FloatArray,
-           table: BinTable | None = None) -> dict[str, Any]:
-    """Shade, POA and DC power of every collector for one orientation series."""
+           table: BinTable | None = None, tracker: int | None = None) -> dict[str, Any]:
+    """Shade, POA and DC power of every collector for one orientation series (and of
+    collector ``tracker`` alone, ``p_tracker``, when given)."""
     from pvlib.pvsystem import pvwatts_dc
     from pvlib.temperature import sapm_cell
 
@@ -138,6 +140,12 @@ def _power(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: Float
     shade = plant_shade(plant.positions, sky["solar_azimuth"], sky["apparent_elevation"],
                         saz, sel, c.width, c.height, c.string_boundaries(), table)
     f_area, f_elec = beam_factors(shade, c)
+    if plant.slope_tilt > 0:                # the ground beyond the plant hides the sun
+        behind = sky["apparent_elevation"] <= horizon_elevation(
+            sky["solar_azimuth"], plant.slope_azimuth, plant.slope_tilt)
+        shade.fraction[behind] = 1.0
+        f_area[behind] = 0.0
+        f_elec[behind] = 0.0
     poa = poa_irradiance(90.0 - sel, saz, sky["apparent_zenith"], sky["solar_azimuth"],
                          sky["dni"], sky["ghi"], sky["dhi"], sky["dni_extra"],
                          sky["airmass_relative"], albedo=plant.albedo, model="perez")
@@ -158,9 +166,12 @@ def _power(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: Float
     n = plant.n_trackers
     beam_area = beam * np.nan_to_num(f_area, nan=1.0).sum(axis=1)
     beam_elec = beam * np.nan_to_num(f_elec, nan=1.0).sum(axis=1)
-    return {"shade": shade, "poa_global": poa["poa_global"],
-            "p_unshaded": dc(beam + diffuse) * n,
-            "p_area": dc(beam_area + n * diffuse), "p_elec": dc(beam_elec + n * diffuse)}
+    out = {"shade": shade, "poa_global": poa["poa_global"],
+           "p_unshaded": dc(beam + diffuse) * n,
+           "p_area": dc(beam_area + n * diffuse), "p_elec": dc(beam_elec + n * diffuse)}
+    if tracker is not None:
+        out["p_tracker"] = dc(beam * np.nan_to_num(f_elec[:, tracker], nan=1.0) + diffuse)
+    return out
 
 
 def _scatter(n: int, idx: NDArray[np.int64], x: FloatArray) -> FloatArray:
@@ -198,6 +209,7 @@ class PlantResult:
     any_shaded_steps: int
     daylight_steps: int
     dni_weighted_shaded_fraction: float
+    tracker_dni_weighted_shaded_fraction: FloatArray | None = None
 
     def summary(self) -> dict[str, Any]:
         """The CLI/HTTP summary (DESIGN.md contract), units in the keys."""
@@ -241,7 +253,9 @@ class PlantResult:
 
 def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s: float = 60.0,
                    strategy: str = "sun", weather: pd.DataFrame | None = None,
-                   progress: Callable[[float], None] | None = None) -> PlantResult:
+                   progress: Callable[[float], None] | None = None,
+                   sky: dict[str, FloatArray] | None = None, with_fixed: bool = True,
+                   tracker: int | None = None) -> PlantResult:
     """Simulate a plant from ``start`` (inclusive) to ``end`` (exclusive).
 
     Parameters
@@ -256,6 +270,21 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
         Covering the range (see :func:`weather_for_plant`); clear sky when None.
     progress : callable, optional
         Called with the fraction done.
+    sky : dict, optional
+        :func:`sky_conditions` of the whole range at these steps, computed once by the
+        caller (a sweep of many layouts at one place); ``weather`` then only names the
+        sky (``sky_source``): pass the weather the sky was computed from.
+    with_fixed : bool
+        Simulate the fixed comparison plant too (``fixed_power_w``; zeros when False).
+    tracker : int, optional
+        Index of a collector whose own power is kept (series ``tracker_power_w``,
+        bypass-diode model; NaN when not asked).
+
+    Returns
+    -------
+    PlantResult
+        Its ``tracker_dni_weighted_shaded_fraction`` (N,) is Σ DNI · F_i / Σ DNI over the
+        daylight steps for each collector i.
     """
     if start.tz is None or end.tz is None:
         raise ValueError("start and end must be timezone-aware")
@@ -265,37 +294,46 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
         raise ValueError(f"step_s must be positive, got {step_s}")
     times = pd.date_range(start.tz_convert("UTC"), end.tz_convert("UTC"),
                           freq=pd.Timedelta(seconds=step_s), inclusive="left")
+    if sky is not None and any(len(v) != len(times) for v in sky.values()):
+        raise ValueError(f"sky must hold the range's {len(times)} steps")
     frames, any_shaded, daylight, dni_f, dni_sum = [], 0, 0, 0.0, 0.0
+    dni_f_tracker = np.zeros(plant.n_trackers)
     table = BinTable()                       # sun bins recur every day: build each once
     for k0 in range(0, len(times), _CHUNK):
         tt = times[k0:k0 + _CHUNK]
-        sky = sky_conditions(plant, tt, weather)
-        saz, sel = orientations(strategy, plant, sky)
-        up = sky["apparent_elevation"] > 0
+        csky = (sky_conditions(plant, tt, weather) if sky is None
+                else {k: v[k0:k0 + _CHUNK] for k, v in sky.items()})
+        saz, sel = orientations(strategy, plant, csky)
+        up = csky["apparent_elevation"] > 0
         day = np.nonzero(up)[0]              # shade and power are computed by day only
-        dsky = {k: v[day] for k, v in sky.items()}
-        run = _power(plant, dsky, saz[day], sel[day], table)
-        fixed = _power(plant, dsky, np.full(len(day), plant.fixed_azimuth),
-                       np.full(len(day), 90.0 - plant.fixed_tilt), table)
+        dsky = {k: v[day] for k, v in csky.items()}
+        run = _power(plant, dsky, saz[day], sel[day], table, tracker)
+        fixed_w = (_power(plant, dsky, np.full(len(day), plant.fixed_azimuth),
+                          np.full(len(day), 90.0 - plant.fixed_tilt), table)["p_elec"]
+                   if with_fixed else np.zeros(len(day)))
         frac = run["shade"].fraction
+        dni_f_tracker += dsky["dni"] @ frac
         mean_f = np.full(len(tt), np.nan)
         mean_f[day] = frac.mean(axis=1)
         n_sh = np.zeros(len(tt), dtype=np.int64)
         n_sh[day] = (frac > 0).sum(axis=1)
         any_shaded += int((n_sh > 0).sum())
         daylight += len(day)
-        dni_f += float(np.sum(sky["dni"][day] * mean_f[day]))
-        dni_sum += float(np.sum(sky["dni"][day]))
+        dni_f += float(np.sum(csky["dni"][day] * mean_f[day]))
+        dni_sum += float(np.sum(csky["dni"][day]))
         at_day = partial(_scatter, len(tt), day)
         frames.append(pd.DataFrame({
-            "solar_azimuth": sky["solar_azimuth"], "apparent_elevation": sky["apparent_elevation"],
-            "dni": sky["dni"], "ghi": sky["ghi"],
-            "ghi_extra": np.maximum(sky["dni_extra"] * np.cos(np.radians(sky["zenith"])), 0.0),
+            "solar_azimuth": csky["solar_azimuth"],
+            "apparent_elevation": csky["apparent_elevation"],
+            "dni": csky["dni"], "ghi": csky["ghi"],
+            "ghi_extra": np.maximum(csky["dni_extra"] * np.cos(np.radians(csky["zenith"])), 0.0),
             "surface_azimuth": saz, "surface_elevation": sel,
             "poa_global": at_day(run["poa_global"]),
             "mean_shaded_fraction": mean_f, "trackers_shaded": n_sh,
             "power_w": at_day(run["p_elec"]), "power_area_w": at_day(run["p_area"]),
-            "power_unshaded_w": at_day(run["p_unshaded"]), "fixed_power_w": at_day(fixed["p_elec"]),
+            "power_unshaded_w": at_day(run["p_unshaded"]), "fixed_power_w": at_day(fixed_w),
+            "tracker_power_w": (at_day(run["p_tracker"]) if tracker is not None
+                                else np.full(len(tt), np.nan)),
         }, index=tt))
         if progress is not None:
             progress(min(1.0, (k0 + len(tt)) / len(times)))
@@ -320,7 +358,8 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
     }, index=dates)
     return PlantResult(plant, start, end, float(step_s), strategy,
                        "clearsky-ineichen" if weather is None else "weather", series, daily,
-                       any_shaded, daylight, dni_f / dni_sum if dni_sum > 0 else float("nan"))
+                       any_shaded, daylight, dni_f / dni_sum if dni_sum > 0 else float("nan"),
+                       dni_f_tracker / dni_sum if dni_sum > 0 else None)
 
 
 

@@ -1,0 +1,269 @@
+"""Plant-design sweeps as Dask tasks (``dask.distributed``): one task per (layout, GCR,
+strategy) case over the whole range (issue 26).
+
+The physics of a case is :func:`sim.plant.sweep.run_case`; this module only schedules:
+
+- ``scheduler="tcp://HOST:PORT"``: the cases go to that running cluster (``Client``);
+- no scheduler and more than one case: a ``LocalCluster`` of one single-threaded worker
+  process per core (at most one per case), closed when the sweep ends;
+- one case and no scheduler: in this process, no cluster.
+
+The sky of the range (SPA sun positions and clear-sky or weather irradiance) depends on
+the place and the range only, not on the case: each worker process computes it at its
+first case and keeps it (:func:`sweep_task`'s per-process cache), so a sweep computes
+it at most once per worker. Weather goes to the workers once (``Client.scatter``).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from sim.plant.layout import Plant
+from sim.plant.sweep import SweepCase, SweepSpec, case_sky, run_case
+
+log = logging.getLogger(__name__)
+
+#: How long a client waits to reach the scheduler.
+CONNECT_TIMEOUT = "5s"
+
+#: This process's sky of the last sweep range it ran: (SweepSpec.sky_key(), sky).
+_SKY_CACHE: dict[tuple[Any, ...], dict[str, Any]] = {}
+_SKY_LOCK = threading.Lock()
+
+
+def _sky(spec: SweepSpec, weather: pd.DataFrame | None) -> tuple[dict[str, Any], bool]:
+    """The range's sky from this process's cache, or computed (and kept); True if computed."""
+    key = spec.sky_key()
+    with _SKY_LOCK:
+        sky = _SKY_CACHE.get(key)
+        if sky is not None:
+            return sky, False
+        sky = case_sky(spec, weather)
+        _SKY_CACHE.clear()                      # one range at a time: bounded memory
+        _SKY_CACHE[key] = sky
+        return sky, True
+
+
+def sweep_task(spec: SweepSpec, case: SweepCase, weather: pd.DataFrame | None = None
+               ) -> dict[str, Any]:
+    """One Dask task: the case's row, with ``_sky_computed`` (this task computed the sky)
+    and ``_pid`` (the worker process) for the sweep's account of the work."""
+    sky, computed = _sky(spec, weather)
+    row = run_case(spec, case, sky, weather)
+    row["_sky_computed"] = computed
+    row["_pid"] = os.getpid()
+    return row
+
+
+def _finish(rows: list[dict[str, Any]], engine: str, extra: dict[str, Any],
+            started: float) -> dict[str, Any]:
+    order = {id(r): k for k, r in enumerate(rows)}
+    rows = sorted(rows, key=lambda r: (r["layout"], r["strategy"], r["gcr"], order[id(r)]))
+    computed = sum(bool(r.pop("_sky_computed")) for r in rows)
+    pids = {r.pop("_pid") for r in rows}
+    return {"engine": engine, **extra, "worker_processes": len(pids),
+            "sky_computations": computed, "cases": len(rows),
+            "wall_s": round(time.perf_counter() - started, 3), "rows": rows}
+
+
+def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame | None = None,
+              scheduler: str | None = None, n_workers: int | None = None,
+              progress: Callable[[int, int], None] | None = None,
+              cancelled: Callable[[], bool] | None = None) -> dict[str, Any]:
+    """Run every case; rows sorted by layout, strategy and GCR.
+
+    Parameters
+    ----------
+    spec, cases
+        What the cases share, and the cases (see :mod:`sim.plant.sweep`).
+    weather : pandas.DataFrame, optional
+        Covering the range (clear sky when None); ``spec.weather_token`` must name it.
+    scheduler : str, optional
+        ``tcp://HOST:PORT`` of a running Dask scheduler.
+    n_workers : int, optional
+        Workers of the ``LocalCluster`` (default: the cores, at most one per case).
+    progress : callable, optional
+        Called with (cases done, cases) as each case finishes.
+    cancelled : callable, optional
+        Polled between cases; when it returns True the remaining tasks are cancelled and
+        :class:`SweepCancelled` is raised.
+
+    Returns
+    -------
+    dict
+        ``engine`` (``"dask"`` or ``"in-process"``), ``scheduler``, ``workers``,
+        ``worker_processes`` (that ran a case), ``sky_computations`` (sky computed that
+        many times: at most once per worker), ``cases``, ``wall_s``, ``rows``.
+    """
+    started = time.perf_counter()
+    if not cases:
+        raise ValueError("a sweep needs at least one case")
+    if scheduler is None and len(cases) == 1:
+        row = sweep_task(spec, cases[0], weather)
+        if progress is not None:
+            progress(1, 1)
+        return _finish([row], "in-process", {"scheduler": None, "workers": 1}, started)
+    from distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler is None:
+        n = n_workers or min(os.cpu_count() or 1, len(cases))
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                               dashboard_address=None, silence_logs=logging.WARNING)
+    try:
+        with Client(cluster if cluster is not None else scheduler,
+                    timeout=CONNECT_TIMEOUT) as client:
+            workers = len(client.scheduler_info(n_workers=-1)["workers"])
+            address = client.scheduler.address
+            log.info("plant sweep: %d cases on %s (%d workers)", len(cases), address, workers)
+            w = client.scatter(weather, broadcast=True) if weather is not None else None
+            futures = [client.submit(sweep_task, spec, c, w, pure=False) for c in cases]
+            rows: list[dict[str, Any]] = []
+            for fut in as_completed(futures):
+                rows.append(fut.result())
+                if progress is not None:
+                    progress(len(rows), len(cases))
+                if cancelled is not None and cancelled():
+                    client.cancel(futures)
+                    raise SweepCancelled(f"cancelled after {len(rows)} of {len(cases)} cases")
+    finally:
+        if cluster is not None:
+            cluster.close()
+    return _finish(rows, "dask", {"scheduler": None if cluster is not None else address,
+                                  "workers": workers}, started)
+
+
+class SweepCancelled(RuntimeError):
+    """A sweep stopped by its ``cancelled`` callback."""
+
+
+class SweepInputError(ValueError):
+    """A bad sweep parameter: ``field`` (the request's key; the CLI's flag is
+    ``--`` + it with dashes) and what is wrong."""
+
+    def __init__(self, field: str, problem: str) -> None:
+        super().__init__(f"{field}: {problem}")
+        self.field, self.problem = field, problem
+
+
+#: Largest number of cases × steps of one sweep (a bound on its cost).
+MAX_CASE_STEPS = 50_000_000
+
+
+def parse_gcr(text: str) -> list[float]:
+    """``"0.15,0.25"`` or a range ``"START:STOP:STEP"`` (STOP included) → GCRs."""
+    try:
+        if ":" in text:
+            lo, hi, step = (float(x) for x in text.split(":"))
+            if not step > 0 or hi < lo:
+                raise SweepInputError("gcr", f"range {text!r} needs STOP ≥ START and STEP > 0")
+            n = int(np.floor((hi - lo) / step + 1e-9)) + 1
+            values = [round(lo + k * step, 10) for k in range(n)]
+        else:
+            values = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError as exc:
+        if isinstance(exc, SweepInputError):
+            raise
+        raise SweepInputError("gcr", f"expected numbers like 0.15,0.25 or 0.1:0.5:0.05, "
+                              f"got {text!r}") from None
+    if not values:
+        raise SweepInputError("gcr", "no value given")
+    return values
+
+
+def parse_size(text: str, field: str) -> tuple[float, float]:
+    """``"12x5"`` → (12.0, 5.0)."""
+    try:
+        a, b = (float(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise SweepInputError(field, f"expected WIDTHxHEIGHT like 12x5, got {text!r}") from None
+    if not (a > 0 and b > 0 and np.isfinite(a) and np.isfinite(b)):
+        raise SweepInputError(field, f"both sizes must be positive, got {text!r}")
+    return a, b
+
+
+def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: Sequence[str],
+                  start: pd.Timestamp, end: pd.Timestamp, step_s: float,
+                  latitude_deg: float | None = None, longitude_deg: float | None = None,
+                  altitude_m: float = 0.0, collector_m: tuple[float, float] | None = None,
+                  plant: Plant | None = None, field_size: tuple[int, int] = (5, 5),
+                  custom: tuple[float, float, float] | None = None,
+                  slope_azimuth_deg: float = 0.0, slope_tilt_deg: float = 0.0,
+                  weather_token: str = "") -> tuple[SweepSpec, list[SweepCase]]:
+    """Check a sweep's parameters and build its spec and cases (every layout × GCR ×
+    strategy; an existing ``plant`` gives one layout, itself scaled). Every case's field is
+    built once here, so an infeasible GCR is refused before any task runs.
+    :class:`SweepInputError` names the parameter."""
+    from sim.paths import package_dir
+    from sim.plant.fields import LAYOUT_TYPES, collector_from_size
+    from sim.plant.layout import load_plant
+    from sim.plant.strategies import STRATEGIES
+    from sim.plant.sweep import PLANT_LAYOUT, case_plant
+
+    bad = [s for s in strategies if s not in STRATEGIES]
+    if bad or not strategies:
+        raise SweepInputError("strategy", f"must be one or more of {', '.join(STRATEGIES)}, "
+                              f"got {','.join(strategies) or 'nothing'}")
+    if not end > start:
+        raise SweepInputError("end", "must be after start (end is exclusive)")
+    if not (step_s > 0 and np.isfinite(step_s)):
+        raise SweepInputError("step_s", f"must be positive, got {step_s}")
+    if any(not (0 < g < 1) for g in gcr):
+        raise SweepInputError("gcr", f"every GCR must be in (0, 1), got {list(gcr)}")
+    rows, columns = field_size
+    if not (1 <= rows <= 15 and 1 <= columns <= 15):
+        raise SweepInputError("field", f"rows and columns must be 1 to 15, got {rows}x{columns}")
+    if plant is not None:
+        names = [PLANT_LAYOUT]
+        collector = plant.collector
+        lat, lon, alt, tz = plant.latitude, plant.longitude, plant.altitude, plant.timezone
+    else:
+        if latitude_deg is None or longitude_deg is None:
+            raise SweepInputError("lat", "give --lat and --lon (or --plant)")
+        if not (-90 <= latitude_deg <= 90):
+            raise SweepInputError("lat", f"must be in [-90, 90], got {latitude_deg}")
+        if not (-180 <= longitude_deg <= 180):
+            raise SweepInputError("lon", f"must be in [-180, 180], got {longitude_deg}")
+        if collector_m is None:
+            raise SweepInputError("collector_m", "give the collector size, e.g. 12x5")
+        template = load_plant("penarroya", package_dir("sim", "data", "plants")).collector
+        collector = collector_from_size(collector_m[0], collector_m[1], template)
+        names = list(layouts)
+        known = [*LAYOUT_TYPES, "custom"]
+        if not names or any(n not in known for n in names):
+            raise SweepInputError("layouts", f"must be one or more of {', '.join(known)}, "
+                                  f"got {','.join(names) or 'nothing'}")
+        if "custom" in names and custom is None:
+            raise SweepInputError("layouts", "layout custom needs --aspect-ratio, --offset "
+                                  "and --rotation-deg")
+        lat, lon, alt, tz = latitude_deg, longitude_deg, altitude_m, "UTC"
+    spec = SweepSpec(latitude=lat, longitude=lon, altitude=alt, start=start, end=end,
+                     step_s=float(step_s), collector=collector, rows=rows, columns=columns,
+                     slope_azimuth_deg=slope_azimuth_deg, slope_tilt_deg=slope_tilt_deg,
+                     custom=custom, plant=plant, timezone=tz, weather_token=weather_token,
+                     **({"albedo": plant.albedo, "temp_air": plant.temp_air,
+                         "wind_speed": plant.wind_speed} if plant is not None else {}))
+    cases = [SweepCase(n, float(g), s) for n in names for g in gcr for s in strategies]
+    steps = (end - start).total_seconds() / step_s
+    if steps * len(cases) > MAX_CASE_STEPS:
+        raise SweepInputError("step_s", f"{len(cases)} cases × {steps:.0f} steps is more than "
+                              f"{MAX_CASE_STEPS:,}: use a larger step or fewer cases")
+    for case in {SweepCase(c.layout, c.gcr, "sun") for c in cases}:
+        try:
+            case_plant(spec, case)
+        except ValueError as exc:
+            field = "gcr" if "gcr" in str(exc) else "layouts"
+            raise SweepInputError(field, f"{case.layout} at GCR {case.gcr:g}: {exc}") from None
+    return spec, cases
+
+
+__all__ = ["MAX_CASE_STEPS", "SweepCancelled", "SweepInputError", "parse_gcr", "parse_size",
+           "prepare_sweep", "run_sweep", "sweep_task"]

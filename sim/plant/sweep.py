@@ -1,0 +1,192 @@
+"""One case of a plant-design sweep: a layout at a GCR under a strategy, over a time range.
+
+A sweep asks which layout and which spacing (Cumpston & Pye 2014,
+doi:10.1016/j.solener.2014.06.012): how much beam each collector loses to its
+neighbours against how much land it needs. A case builds the field
+(:mod:`sim.plant.fields`: a regular field of ``rows × columns`` collectors around the
+interior one, or an existing plant scaled to the GCR) and runs
+:func:`sim.plant.simulate.simulate_plant` on a sky computed once for the whole range
+(:func:`case_sky`, shared by every case at the same place and range). The row:
+
+- ``interior_beam_shaded_pct``: the interior collector's Σ F · DNI / Σ DNI over daylight
+  steps [%] (twoaxistracking's interior collector when every collector faces the sun);
+- ``field_beam_shaded_pct``: the same averaged over the finite field's collectors;
+- ``energy_kwh_per_collector``: the field's DC energy per collector, bypass-diode model
+  (Martinez-Moreno 2010 via :mod:`sim.plant.electrical`); ``interior_energy_kwh`` the
+  interior collector's own;
+- ``land_m2_per_collector``: A / GCR; ``energy_mwh_per_ha``: energy per collector over
+  that land.
+
+No scheduling here: the backend runs cases as Dask tasks (``backend.plants.sweep``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from sim.energy import sampled_energy_wh
+from sim.plant.fields import (
+    FieldLayout,
+    interior_tracker,
+    plant_land_m2,
+    regular_field,
+    scaled_plant,
+)
+from sim.plant.layout import Collector, Plant
+from sim.plant.simulate import simulate_plant, sky_conditions
+from sim.plant.strategies import STRATEGIES
+
+FloatArray = NDArray[np.float64]
+
+#: Layout name of the cases of an existing plant scaled in spacing.
+PLANT_LAYOUT = "plant"
+
+
+@dataclass(frozen=True)
+class SweepCase:
+    """One task of a sweep: a layout name (or :data:`PLANT_LAYOUT`), a GCR, a strategy."""
+
+    layout: str
+    gcr: float
+    strategy: str
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """What every case of a sweep shares: place, range, collector and field.
+
+    Parameters
+    ----------
+    latitude, longitude, altitude : float
+        [°], [°], [m].
+    start, end : pandas.Timestamp
+        Tz-aware; end exclusive.
+    step_s : float
+        [s].
+    collector : Collector
+    rows, columns : int
+        Size of a regular field (5 × 5 holds twoaxistracking's ``neighbor_order=2``).
+    slope_azimuth_deg, slope_tilt_deg : float
+        Ground plane of the regular fields [°].
+    custom : tuple of float, optional
+        (aspect ratio, offset, rotation [°]) of the layout named ``custom``.
+    plant : Plant, optional
+        An existing plant: its cases (layout :data:`PLANT_LAYOUT`) scale its spacing.
+    timezone : str
+        Zone of the local days (the plant's, or UTC for a place given by coordinates).
+    albedo, temp_air, wind_speed : float
+        Ground reflectance [-], clear-sky air temperature [°C] and wind [m s⁻¹].
+    weather_token : str
+        Names the weather the sky comes from ("" for clear sky): part of :meth:`sky_key`.
+    """
+
+    latitude: float
+    longitude: float
+    start: pd.Timestamp
+    end: pd.Timestamp
+    step_s: float
+    collector: Collector
+    altitude: float = 0.0
+    rows: int = 5
+    columns: int = 5
+    slope_azimuth_deg: float = 0.0
+    slope_tilt_deg: float = 0.0
+    custom: tuple[float, float, float] | None = None
+    plant: Plant | None = field(default=None, compare=False)
+    timezone: str = "UTC"
+    albedo: float = 0.2
+    temp_air: float = 20.0
+    wind_speed: float = 1.0
+    weather_token: str = ""
+
+    def sky_key(self) -> tuple[Any, ...]:
+        """What the sky of the range depends on (equal keys: the same sky)."""
+        return (self.latitude, self.longitude, self.altitude, self.start.value, self.end.value,
+                self.step_s, self.temp_air, self.wind_speed, self.weather_token)
+
+    def times(self) -> pd.DatetimeIndex:
+        """The steps of the range (UTC)."""
+        return pd.date_range(self.start.tz_convert("UTC"), self.end.tz_convert("UTC"),
+                             freq=pd.Timedelta(seconds=self.step_s), inclusive="left")
+
+
+def case_layout(spec: SweepSpec, case: SweepCase) -> FieldLayout:
+    """The regular layout of a case (named, or ``custom`` from ``spec.custom``)."""
+    if case.layout == "custom":
+        if spec.custom is None:
+            raise ValueError("layout 'custom' needs aspect_ratio, offset and rotation_deg")
+        ar, off, rot = spec.custom
+        return FieldLayout("custom", case.gcr, ar, off, rot, spec.slope_azimuth_deg,
+                           spec.slope_tilt_deg)
+    return FieldLayout.named(case.layout, case.gcr, spec.slope_azimuth_deg, spec.slope_tilt_deg)
+
+
+def case_plant(spec: SweepSpec, case: SweepCase) -> tuple[Plant, int, float]:
+    """The field of a case, the index of its interior collector and its land per collector
+    [m²]. ``ValueError`` (naming the parameter) for an infeasible layout or GCR."""
+    if case.layout == PLANT_LAYOUT:
+        if spec.plant is None:
+            raise ValueError(f"layout {PLANT_LAYOUT!r} needs a plant")
+        plant = scaled_plant(spec.plant, case.gcr)
+        return plant, interior_tracker(plant), plant_land_m2(plant) / plant.n_trackers
+    layout = case_layout(spec, case)
+    plant, interior = regular_field(layout, spec.collector, spec.latitude, spec.longitude,
+                                    spec.altitude, spec.rows, spec.columns, spec.timezone,
+                                    spec.albedo)
+    return plant, interior, layout.land_m2_per_collector(spec.collector.area)
+
+
+def site_plant(spec: SweepSpec) -> Plant:
+    """A one-collector plant at the sweep's place: what :func:`sky_conditions` reads."""
+    return Plant(plant_id="site", name="site", latitude=spec.latitude, longitude=spec.longitude,
+                 altitude=spec.altitude, timezone=spec.timezone, tracker_ids=(1,),
+                 positions=np.zeros((1, 3)), collector=spec.collector, albedo=spec.albedo,
+                 temp_air=spec.temp_air, wind_speed=spec.wind_speed)
+
+
+def case_sky(spec: SweepSpec, weather: pd.DataFrame | None = None) -> dict[str, FloatArray]:
+    """Sun (SPA) and irradiance of the range, shared by every case of the sweep
+    (:func:`sim.plant.simulate.sky_conditions`; clear sky unless ``weather``)."""
+    return sky_conditions(site_plant(spec), spec.times(), weather)
+
+
+def run_case(spec: SweepSpec, case: SweepCase, sky: dict[str, FloatArray],
+             weather: pd.DataFrame | None = None) -> dict[str, Any]:
+    """The sweep row of one case (module docstring), on the range's ``sky``."""
+    if case.strategy not in STRATEGIES:
+        raise ValueError(f"strategy {case.strategy!r} is not one of {', '.join(STRATEGIES)}")
+    plant, interior, land_m2 = case_plant(spec, case)
+    r = simulate_plant(plant, spec.start, spec.end, spec.step_s, case.strategy, weather,
+                       sky=sky, with_fixed=False, tracker=interior)
+    s = r.summary()
+    n = plant.n_trackers
+    per_tracker = r.tracker_dni_weighted_shaded_fraction
+    e_kwh = s["plant_energy_wh"] / n / 1000.0
+    interior_kwh = sampled_energy_wh(r.series["tracker_power_w"].to_numpy(), spec.step_s) / 1000
+
+    def pct(x: float | None) -> float | None:
+        return None if x is None or not np.isfinite(x) else round(100.0 * x, 6)
+
+    return {
+        "layout": case.layout if case.layout != PLANT_LAYOUT else plant.plant_id.rsplit("-gcr")[0],
+        "gcr": case.gcr,
+        "strategy": case.strategy,
+        "interior_beam_shaded_pct": pct(None if per_tracker is None else
+                                        float(per_tracker[interior])),
+        "field_beam_shaded_pct": pct(r.dni_weighted_shaded_fraction),
+        "energy_kwh_per_collector": round(e_kwh, 4),
+        "interior_energy_kwh": round(interior_kwh, 4),
+        "energy_mwh_per_ha": round(e_kwh / land_m2 * 10.0, 4),   # kWh/m² · 10⁴ m²/ha / 10³
+        "land_m2_per_collector": round(land_m2, 4),
+        "collectors": n,
+        "shading_loss_electrical_pct": s["shading_loss_electrical_pct"],
+    }
+
+
+__all__ = ["PLANT_LAYOUT", "SweepCase", "SweepSpec", "case_layout", "case_plant", "case_sky",
+           "run_case", "site_plant"]

@@ -1,0 +1,122 @@
+"""``heliotwin plant sweep`` on a Dask cluster this test starts by hand on 127.0.0.1 (a
+scheduler and two single-threaded workers, as a user with a cluster would), and its
+refusals. The rows' physics is checked in tests/sim/plant/test_plant_fields.py."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from backend.cli import main
+
+BIN = Path(sys.executable).parent
+SWEEP = ["plant", "sweep", "--collector-m", "12x5", "--lat", "38.299224", "--lon", "-5.303114",
+         "--start", "2021-12-20", "--end", "2021-12-22", "--step-s", "1800", "--no-progress"]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def scheduler() -> Iterator[str]:
+    """``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1; their address."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    common = ["--no-dashboard"]
+    procs = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1",
+                               "--port", str(port), *common],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    procs += [subprocess.Popen([str(BIN / "dask"), "worker", address, "--nthreads", "1",
+                                "--no-nanny", "--host", "127.0.0.1", *common],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+              for _ in range(2)]
+    try:
+        from distributed import Client
+
+        with Client(address, timeout="60s") as client:
+            client.wait_for_workers(2, timeout=120)
+        yield address
+    finally:
+        for p in procs:          # throw-away processes of this test: no graceful close
+            p.kill()
+        for p in procs:
+            p.wait(20)
+
+
+def test_sweep_runs_on_the_given_cluster(scheduler: str, capsys: pytest.CaptureFixture[str]
+                                         ) -> None:
+    """Six cases as tasks on the two workers: both run cases, each computes the sky of the
+    range at most once (the reuse), and the rows carry the contract's columns."""
+    t0 = time.perf_counter()
+    code = main([*SWEEP, "--layouts", "square,hexagonal_e_w", "--gcr", "0.15:0.35:0.1",
+                 "--scheduler", scheduler, "--json"])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["engine"] == "dask" and out["scheduler"] == scheduler
+    assert out["workers"] == 2 and out["cases"] == 6
+    assert out["worker_processes"] == 2                       # both workers ran cases
+    assert out["sky_computations"] <= 2                       # once per worker, not per case
+    assert out["wall_s"] <= time.perf_counter() - t0
+    rows = out["rows"]
+    assert [(r["layout"], r["gcr"]) for r in rows] == [
+        (lay, g) for lay in ("hexagonal_e_w", "square") for g in (0.15, 0.25, 0.35)]
+    for r in rows:
+        assert set(r) >= {"layout", "gcr", "strategy", "interior_beam_shaded_pct",
+                          "field_beam_shaded_pct", "energy_kwh_per_collector",
+                          "energy_mwh_per_ha", "land_m2_per_collector"}
+        assert r["land_m2_per_collector"] == pytest.approx(60.0 / r["gcr"], rel=1e-6)
+        assert r["energy_mwh_per_ha"] == pytest.approx(
+            r["energy_kwh_per_collector"] / r["land_m2_per_collector"] * 10, rel=1e-3)
+    for lay in ("square", "hexagonal_e_w"):                  # denser: more shade, less each
+        mine = [r for r in rows if r["layout"] == lay]
+        assert [r["interior_beam_shaded_pct"] for r in mine] == sorted(
+            r["interior_beam_shaded_pct"] for r in mine)
+        assert [r["energy_kwh_per_collector"] for r in mine] == sorted(
+            (r["energy_kwh_per_collector"] for r in mine), reverse=True)
+
+
+def test_one_case_runs_in_process_as_csv(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([*SWEEP, "--gcr", "0.2", "--csv"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("layout,gcr,strategy,interior_beam_shaded_pct,")
+    assert len(lines) == 2 and lines[1].startswith("square,0.2,sun,")
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--gcr", "0.6"], "--gcr: square at GCR 0.6: gcr 0.6 outside (0, 0.3550]"),
+    (["--gcr", "0.2,x"], "--gcr: expected numbers"),
+    (["--gcr", "0.2", "--layouts", "triangle"], "--layouts: must be one or more of"),
+    (["--gcr", "0.2", "--strategy", "moon"], "--strategy: must be one or more of"),
+    (["--gcr", "0.2", "--field", "5"], "--field: expected WIDTHxHEIGHT"),
+    (["--gcr", "0.2", "--layouts", "custom"], "--layouts: layout custom needs"),
+    (["--gcr", "0.2", "--offset", "0.1"], "--aspect-ratio, --offset, --rotation-deg"),
+    (["--gcr", "0.2", "--step-s", "1"], "--step-s: 1 cases"),
+])
+def test_bad_input_names_the_flag(extra: list[str], message: str,
+                                  capsys: pytest.CaptureFixture[str]) -> None:
+    args = [*SWEEP, *extra]
+    if extra == ["--gcr", "0.2", "--step-s", "1"]:
+        args = [a if a != "2021-12-22" else "2023-12-22" for a in args]
+    with pytest.raises(SystemExit) as exc:
+        raise SystemExit(main(args))
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_unreachable_scheduler_is_an_error(capsys: pytest.CaptureFixture[str]) -> None:
+    port = _free_port()
+    with pytest.raises(SystemExit) as exc:
+        raise SystemExit(main([*SWEEP, "--gcr", "0.2,0.3", "--scheduler",
+                               f"tcp://127.0.0.1:{port}"]))
+    assert exc.value.code == 2
+    assert "--scheduler: cannot reach" in capsys.readouterr().err
