@@ -239,6 +239,19 @@ class SimulationSettings(_Group):
         2_200_000, gt=0, description="Simulated time steps one client address may ask per "
                                      "minute without a token (token bucket; more → 429).",
         validation_alias=_env("anonymous_simulation_steps_per_min"))
+    anonymous_run_max_s: float = Field(
+        60.0, gt=0, description="Most worker time one run asked without a token may take [s]: "
+                                "refused (422) when its estimate is more, stopped when it runs "
+                                "longer.")
+    anonymous_hour_max_s: float = Field(
+        300.0, gt=0, description="Worker time one client address may ask without a token in "
+                                 "any hour [s] (estimates, trued up to the time taken; more "
+                                 "→ 429).")
+    anonymous_series_cells_per_min: int = Field(
+        20_000_000, gt=0, description="Series values (rows × columns) one client address may "
+                                      "read per minute without a token (token bucket; more "
+                                      "→ 429).",
+        validation_alias=_env("anonymous_series_cells_per_min"))
 
 
 class VisionSettings(_Group):
