@@ -17,6 +17,16 @@ Targets (issue 12): ≤ 5 s for the 1-min year process, ≥ 10× twoaxistracking
 10 min, ``backtrack`` ≤ 30 s at 1 min, ``/positions`` ≤ 50 ms. A missed target
 is printed as "not met".
 
+The layout sweep (issue 26), measured first: 4 layout types × GCR 0.15, 0.25, 0.35, sun
+tracking, the 12 m × 5 m collector at Peñarroya, a clear-sky year at 10 min, as Dask tasks
+on a LocalCluster of 1 and then of 2 single-threaded workers (the same 12 cases, one run of
+this script). Throughput in plant-years per core-minute (a case over a year is a
+plant-year; core-minutes = workers × the time from the first task to the last result,
+the cluster's start left out); the scaling is the 1-worker time over the 2-worker time
+(target ≥ 1.8×). Each case's interior collector is compared with twoaxistracking's
+``TrackerField`` (neighbor_order 2, Ineichen DNI, the same sun positions) computed here
+(target: within 0.1 percentage points).
+
 Prints one Markdown section on stdout; progress on stderr.
 """
 
@@ -40,11 +50,6 @@ sys.path.insert(0, str(ROOT))
 
 YEAR_START, YEAR_END = "2021-01-01", "2022-01-01"
 TABLE_STEP_S = 1800  # the strategy table (sky_scan scans ~650 orientations per step)
-
-
-def gain_text(res: dict) -> str:
-    g = res.get("cloudy_gain_pct", {}).get("sky_scan")
-    return "no cloudy day" if g is None else f"{g:+.2f} % ({res['cloudy_days']} days)"
 
 
 def twoaxistracking_year(plant, az: np.ndarray, el: np.ndarray) -> tuple[float, np.ndarray]:  # type: ignore[no-untyped-def]
@@ -119,6 +124,91 @@ def positions_latency(strategy: str) -> list[float]:
     return lat
 
 
+SWEEP_LAYOUTS = ("square", "diagonal", "hexagonal_n_s", "hexagonal_e_w")
+SWEEP_GCRS = (0.15, 0.25, 0.35)
+
+
+def sweep_figures(fig: Figures) -> list[str]:
+    """The layout sweep on 1 and 2 workers, and twoaxistracking on its cases."""
+    from shapely import geometry
+    from twoaxistracking import TrackerField
+
+    from backend.plants.sweep import prepare_sweep, run_sweep
+    from sim.plant.sweep import case_sky
+
+    spec, cases = prepare_sweep(
+        layouts=SWEEP_LAYOUTS, gcr=SWEEP_GCRS, strategies=["sun"],
+        start=pd.Timestamp(YEAR_START, tz="UTC"), end=pd.Timestamp(YEAR_END, tz="UTC"),
+        step_s=600, latitude_deg=38.299224, longitude_deg=-5.303114, collector_m=(12.0, 5.0))
+    runs = {}
+    for n in (1, 2):
+        load = os.getloadavg()[0]
+        c0 = time.process_time()
+        res = run_sweep(spec, cases, n_workers=n)
+        runs[n] = res
+        log(f"  sweep on {n} worker(s): compute {res['compute_s']:.1f} s, wall {res['wall_s']:.1f}"
+            f" s, sky computed {res['sky_computations']}x, load average {load:.1f} before; "
+            f"client cpu {time.process_time() - c0:.1f} s")
+    years = (spec.end - spec.start) / pd.Timedelta(days=365)
+    thr = {n: len(cases) * years / (n * r["compute_s"] / 60) for n, r in runs.items()}
+    scaling = runs[1]["compute_s"] / runs[2]["compute_s"]
+    sky = case_sky(spec)
+    up = sky["apparent_elevation"] > 0
+    box = geometry.box(-6, -2.5, 6, 2.5)
+    t0 = time.perf_counter()
+    diffs, table = [], []
+    for row in runs[2]["rows"]:
+        tf = TrackerField(box, box, 2, row["gcr"], row["layout"])
+        f = np.asarray(tf.get_shaded_fraction(sky["apparent_elevation"][up],
+                                              sky["solar_azimuth"][up]), dtype=float)
+        ref = float(100 * np.sum(f * sky["dni"][up]) / np.sum(sky["dni"][up]))
+        diffs.append(abs(row["interior_beam_shaded_pct"] - ref))
+        table.append((row, ref))
+    t_ref = time.perf_counter() - t0
+    worst = max(diffs)
+    log(f"  twoaxistracking, {len(cases)} interior collectors over the year: {t_ref:.1f} s; "
+        f"largest difference {worst:.2e} percentage points")
+    f1 = fig.add("sweep_throughput_1_worker", thr[1], "plant-years/core-min", f"{thr[1]:.1f}")
+    f2 = fig.add("sweep_throughput_2_workers", thr[2], "plant-years/core-min", f"{thr[2]:.1f}")
+    fs = fig.add("sweep_scaling_2_vs_1_x", scaling, "x", f"{scaling:.2f}×", ">= 1.8x",
+                 scaling >= 1.8)
+    fd = fig.add("sweep_vs_twoaxistracking_max_pp", worst, "pp", f"{worst:.1e}", "<= 0.1 pp",
+                 worst <= 0.1)
+    lines = [
+        "",
+        f"Layout sweep (issue 26): {len(cases)} cases ({', '.join(SWEEP_LAYOUTS)} × GCR "
+        f"{', '.join(map(str, SWEEP_GCRS))}, sun), 12 m × 5 m collectors in a 5 × 5 field at "
+        "Peñarroya, clear-sky year at 10 min, Dask LocalCluster of single-threaded workers:",
+        "",
+        "| figure | measured | target | |",
+        "|---|---|---|---|",
+        f"| 1 worker: first task to last result | {runs[1]['compute_s']:.1f} s | | |",
+        f"| 2 workers: the same | {runs[2]['compute_s']:.1f} s | | |",
+        f"| throughput, plant-years per core-minute (1 / 2 workers) | {f1} / {f2} | | |",
+        f"| scaling, 2 workers over 1 | {fs} | ≥ 1.8× | "
+        f"{fig.verdict('sweep_scaling_2_vs_1_x')} |",
+        f"| interior collector vs twoaxistracking (`TrackerField`, {t_ref:.0f} s for the "
+        f"{len(cases)} cases), largest difference | {fd} pp | ≤ 0.1 pp | "
+        f"{fig.verdict('sweep_vs_twoaxistracking_max_pp')} |",
+        "",
+        "| layout | GCR | interior beam shaded, heliotwin | twoaxistracking | field average | "
+        "energy per collector | energy per hectare | land per collector |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for row, ref in sorted(table, key=lambda x: (x[0]["gcr"], x[0]["layout"])):
+        key = f"sweep.{row['layout']}.gcr{row['gcr']:g}"
+        pct, kwh, mwh = (row["interior_beam_shaded_pct"], row["energy_kwh_per_collector"],
+                         row["energy_mwh_per_ha"])
+        lines.append(
+            f"| {row['layout']} | {row['gcr']:g} | "
+            f"{fig.add(key + '.interior_pct', pct, '%', f'{pct:.3f} %')} | {ref:.3f} % | "
+            f"{row['field_beam_shaded_pct']:.3f} % | "
+            f"{fig.add(key + '.kwh_per_collector', kwh, 'kWh', f'{kwh:,.0f} kWh')} | "
+            f"{fig.add(key + '.mwh_per_ha', mwh, 'MWh/ha', f'{mwh:.1f} MWh/ha')} | "
+            f"{row['land_m2_per_collector']:.0f} m² |")
+    return lines
+
+
 def main() -> None:
     from sim.plant import load_plant
     from sim.plant.shading import plant_shade
@@ -126,6 +216,9 @@ def main() -> None:
     from sim.sky import pvlib_tmy3_path, read_tmy3
     from sim.sun import solar_position
 
+    fig = Figures("plant")
+    log("layout sweep on 1 and 2 Dask workers ...")
+    sweep_lines = sweep_figures(fig)
     plant = load_plant("penarroya")
     c = plant.collector
     times = pd.date_range(pd.Timestamp(YEAR_START, tz=plant.timezone),
@@ -174,7 +267,16 @@ def main() -> None:
     log(f"  tmy3: {json.dumps(cloudy)}")
 
     cpu = os.cpu_count()
-    fig = Figures("plant")
+
+    dni_w = s1["dni_weighted_shaded_fraction"]
+
+    def mwh(name: str, wh: float) -> str:
+        return fig.add(name, wh / 1e6, "MWh", f"{wh / 1e6:.2f} MWh")
+
+    def pct_fig(name: str, value: float | None) -> str:
+        v = 0.0 if value is None else value
+        return fig.add(name, v, "%", f"{v:.2f} %")
+
     r_ratio = fig.add("shade_vs_twoaxistracking_x", ratio, "x", f"{ratio:.0f}×", ">= 10x",
                       ratio >= 10)
     r_cli = fig.add("cli_year_1min_s", t_cli, "s", f"{t_cli:.1f} s", "<= 5 s", t_cli <= 5)
@@ -211,28 +313,47 @@ def main() -> None:
         f"{fig.verdict('backtrack_year_1min_s')} |",
         *pos_rows,
         "",
-        f"Year at 1 min, sun tracking: any collector shaded in "
-        f"{100 * s1['fraction_of_daylight_any_shaded']:.2f} % of daylight minutes "
-        f"(twoaxistracking at 10 min: {100 * any_ref:.2f} %), DNI-weighted shaded fraction "
-        f"{s1['dni_weighted_shaded_fraction']:.5f}; shading loss "
-        f"{s1['shading_loss_area_pct']:.2f} % by area, {s1['shading_loss_electrical_pct']:.2f} % "
-        f"with bypass diodes. Backtracking: {bt['plant_energy_wh'] / 1e6:.2f} MWh vs sun "
-        f"{s1['plant_energy_wh'] / 1e6:.2f} MWh.",
+        "Year at 1 min (the CLI runs above and the backtrack run):",
+        "",
+        "| | sun, bypass-diode model | sun, area model | backtrack | fixed (33° S) |",
+        "|---|---|---|---|---|",
+        f"| plant energy | {mwh('year_sun_mwh', s1['plant_energy_wh'])} | "
+        f"{mwh('year_sun_area_mwh', s1['plant_energy_area_model_wh'])} | "
+        f"{mwh('year_backtrack_mwh', bt['plant_energy_wh'])} | "
+        f"{mwh('year_fixed_mwh', s1['fixed_energy_wh'])} |",
+        f"| shading loss vs the same orientations unshaded | "
+        f"{pct_fig('year_sun_loss_electrical_pct', s1['shading_loss_electrical_pct'])} | "
+        f"{pct_fig('year_sun_loss_area_pct', s1['shading_loss_area_pct'])} | "
+        f"{pct_fig('year_backtrack_loss_electrical_pct', bt['shading_loss_electrical_pct'])} "
+        "| |",
+        "",
+        "Any collector shaded in "
+        f"{pct_fig('year_any_shaded_pct', 100 * s1['fraction_of_daylight_any_shaded'])} of "
+        "daylight minutes (twoaxistracking at 10 min: "
+        f"{pct_fig('any_shaded_twoaxistracking_10min_pct', 100 * any_ref)}), DNI-weighted "
+        "shaded fraction "
+        f"{fig.add('year_dni_weighted_shaded', dni_w, '', f'{dni_w:.5f}')}.",
         "",
         f"| year at {TABLE_STEP_S // 60} min | sun (electrical) | sun (area model) | backtrack "
         "| sky_scan | fixed | "
         "sky_scan over sun, cloudy days |",
         "|---|---|---|---|---|---|---|",
     ]
-    for name, res in (("clear sky", clear), ("TMY3 723170 (moved by solar time)", cloudy)):
+    for key, name, res in (("clear", "clear sky", clear),
+                           ("tmy3", "TMY3 723170 (moved by solar time)", cloudy)):
         s = res["summaries"]
+        g = res.get("cloudy_gain_pct", {}).get("sky_scan")
+        n_cloudy = res.get("cloudy_days", 0)
+        gain = "no cloudy day" if g is None else (
+            f"{fig.add(f'table_{key}_cloudy_gain_pct', g, '%', f'{g:+.2f} %')} "
+            f"({fig.add(f'table_{key}_cloudy_days', n_cloudy, 'days', str(n_cloudy))} days)")
         lines.append(
-            f"| {name} | {s['sun']['plant_energy_wh'] / 1e6:.2f} MWh | "
-            f"{s['sun']['plant_energy_area_model_wh'] / 1e6:.2f} MWh | "
-            f"{s['backtrack']['plant_energy_wh'] / 1e6:.2f} MWh | "
-            f"{s['sky_scan']['plant_energy_wh'] / 1e6:.2f} MWh | "
-            f"{res['fixed_energy_wh'] / 1e6:.2f} MWh | "
-            f"{gain_text(res)} |")
+            f"| {name} | {mwh(f'table_{key}_sun_mwh', s['sun']['plant_energy_wh'])} | "
+            f"{mwh(f'table_{key}_sun_area_mwh', s['sun']['plant_energy_area_model_wh'])} | "
+            f"{mwh(f'table_{key}_backtrack_mwh', s['backtrack']['plant_energy_wh'])} | "
+            f"{mwh(f'table_{key}_sky_scan_mwh', s['sky_scan']['plant_energy_wh'])} | "
+            f"{mwh(f'table_{key}_fixed_mwh', res['fixed_energy_wh'])} | {gain} |")
+    lines += sweep_lines
     print("\n".join(lines))
 
 
