@@ -254,6 +254,23 @@ class SimulationSettings(_Group):
         validation_alias=_env("anonymous_series_cells_per_min"))
 
 
+class PlantSettings(_Group):
+    """Plant-design sweeps run from the API (``POST /api/v1/plants/sweeps``, issue 26)."""
+
+    model_config = _config("HELIOTWIN_PLANTS_")
+
+    dask_scheduler: str | None = Field(
+        None, description="`tcp://HOST:PORT` of a running Dask scheduler for the sweeps; "
+                          "unset: a LocalCluster of one worker process per core for each sweep.")
+    sweep_queue: int = Field(
+        2, ge=0, le=100, description="Sweeps waiting while one runs; more → 503 with "
+                                     "Retry-After.")
+    anonymous_sweep_case_steps: int = Field(
+        1_000_000, gt=0, description="Most cases × time steps of one sweep asked without a "
+                                     "token (more → 422); the steps also come out of the "
+                                     "address's anonymous simulation allowance.")
+
+
 class VisionSettings(_Group):
     """The vision endpoints: image sizes, decode budget, anonymous allowance."""
 
@@ -384,6 +401,7 @@ class Settings(BaseModel):
     twin: TwinSettings
     demo: DemoSettings
     simulations: SimulationSettings
+    plants: PlantSettings
     vision: VisionSettings
     mqtt: MqttSettings
     alerts: AlertSettings
