@@ -20,12 +20,13 @@ from __future__ import annotations
 import json
 import logging
 import threading
+import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from zoneinfo import ZoneInfo
 
-from sqlalchemy import Connection, delete, select, update
+from sqlalchemy import Connection, Engine, delete, select, update
 from sqlalchemy.dialects import postgresql, sqlite
 
 from backend.errors import InputError
@@ -41,7 +42,7 @@ from backend.storage.tables import (
     utcnow,
 )
 from sim.site_config import validate_site_config
-from sim.sites import Site, list_sites, site_from_dict
+from sim.sites import Site, list_sites, load_site, place_defaults, site_from_dict
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -109,7 +110,7 @@ def sync_sites(conn: Connection, sites: list[Site]) -> dict[str, int]:
     (:func:`drop_twin_cache`); returns ``{site_id: twin readings dropped}`` for those.
     """
     ins = postgresql.insert if conn.dialect.name == "postgresql" else sqlite.insert
-    stored = dict(conn.execute(select(SiteRow.site_id, SiteRow.config_json)).tuples().all())
+    stored = {sid: cfg for sid, cfg in conn.execute(select(SiteRow.site_id, SiteRow.config_json))}
     changed: dict[str, int] = {}
     for site in sites:
         values = {
@@ -140,29 +141,125 @@ def sync_sites(conn: Connection, sites: list[Site]) -> dict[str, int]:
 
 
 class Registry:
-    """In-memory view of the sites and arrays (thread-safe for reads)."""
+    """In-memory view of the sites and arrays (thread-safe for reads).
 
-    def __init__(self, sites: list[Site]) -> None:
+    A site file that appears in (or changes in) the user's folder while the service runs
+    (``heliotwin site create``, which also writes the site's rows to the database) is read
+    at the next look at :attr:`sites` (at most once a second) or at a lookup of an unknown
+    id (:meth:`rescan`): no restart needed.
+    """
+
+    RESCAN_S = 1.0
+    """How often [s] a look at :attr:`sites` checks the user's folder for new files."""
+
+    def __init__(self, sites: list[Site], user_dir: Path | None = None) -> None:
         self._lock = threading.Lock()
-        self.sites: dict[str, SiteInfo] = {
+        self._sites: dict[str, SiteInfo] = {
             s.site_id: SiteInfo(s, ZoneInfo(s.timezone), bucket_phase_s(s.timezone))
             for s in sites
         }
         self._phase_of_array: dict[int, int] = {}
+        self._user_dir = user_dir
+        self._files = self._file_state()
+        self._checked = time.monotonic()
+        self._scan_lock = threading.Lock()
+        self._engine: Engine | None = None  # the database refresh_arrays read, for rescans
+
+    @property
+    def sites(self) -> dict[str, SiteInfo]:
+        """Every site by id, with any site file added since the last look (:meth:`rescan`)."""
+        self.rescan()
+        return self._sites
 
     @classmethod
     def load_files(cls, sites_dir: Path) -> Registry:
-        """Read every site file of ``sites_dir`` (``sim.sites.list_sites``)."""
-        return cls(list_sites(sites_dir))
+        """Read every site file of ``sites_dir`` (``sim.sites.list_sites``), and watch it."""
+        return cls(list_sites(sites_dir), sites_dir)
+
+    def _file_state(self) -> dict[str, tuple[int, int]]:
+        """``{file name: (mtime_ns, size)}`` of the user's site files."""
+        if self._user_dir is None or not self._user_dir.is_dir():
+            return {}
+        out = {}
+        for path in self._user_dir.glob("*.json"):
+            try:
+                st = path.stat()
+            except OSError:  # removed meanwhile
+                continue
+            out[path.name] = (st.st_mtime_ns, st.st_size)
+        return out
+
+    def note_file(self, path: Path) -> None:
+        """A site file this process wrote (and applied): not news to :meth:`rescan`."""
+        try:
+            st = path.stat()
+        except OSError:
+            return
+        with self._lock:
+            self._files[path.name] = (st.st_mtime_ns, st.st_size)
+
+    def rescan(self, force: bool = False) -> bool:
+        """Read the user's site files that are new or changed since the last look (at most
+        every :attr:`RESCAN_S` unless ``force``); returns whether a site was added or
+        replaced. Their arrays' ids come from the database (the CLI wrote the rows); a
+        malformed file is logged and skipped, a changed time zone that would move the
+        rollup grid too (``PUT`` refuses it with 409; restart to apply)."""
+        if self._user_dir is None or self._engine is None:
+            return False
+        now = time.monotonic()
+        if (not force and now - self._checked < self.RESCAN_S) or not self._scan_lock.acquire(
+                blocking=False):
+            return False
+        try:
+            self._checked = now
+            state = self._file_state()
+            changed = [name for name, sig in state.items() if self._files.get(name) != sig]
+            self._files = state
+            added = [site for name in sorted(changed)
+                     if (site := self._read_new(name.removesuffix(".json"))) is not None]
+            for site in added:
+                self.put(site)
+            if added:
+                with self._engine.connect() as conn:
+                    self.refresh_arrays(conn)
+                for site in added:
+                    missing = set(site.arrays) - set(self._sites[site.site_id].arrays)
+                    logger.info("site %s read from %s while running", site.site_id,
+                                self._user_dir)
+                    if missing:
+                        logger.warning("site %s: arrays %s are not in the database (was "
+                                       "`heliotwin site create` run with another "
+                                       "HELIOTWIN_DATABASE_URL?): restart the service to add "
+                                       "them", site.site_id, sorted(missing))
+            return bool(added)
+        finally:
+            self._scan_lock.release()
+
+    def _read_new(self, site_id: str) -> Site | None:
+        """The site of a new or changed file, or None (unchanged, malformed, or a new zone)."""
+        try:
+            site = load_site(site_id, self._user_dir)
+        except ValueError as exc:
+            logger.warning("site file %s.json in %s not read: %s", site_id, self._user_dir, exc)
+            return None
+        old = self._sites.get(site_id)
+        if old is not None and old.site == site:
+            return None
+        if old is not None and bucket_phase_s(site.timezone) != old.phase_s:
+            logger.warning("site %s: its file's time zone %s moves the hourly rollup grid: "
+                           "restart the service to apply it", site_id, site.timezone)
+            return None
+        return site
 
     def refresh_arrays(self, conn: Connection) -> None:
         """Read array ids and calibrations from the database."""
+        self._engine = conn.engine
         cols = [ArrayRow.id, ArrayRow.site_id, ArrayRow.name, ArrayRow.kind] + [
             getattr(ArrayRow, f) for f in CALIBRATION_FIELDS]
         rows = conn.execute(select(*cols)).all()
         with self._lock:
             for row in rows:
-                info = self.sites.get(row.site_id)
+                info = self._sites.get(row.site_id)
                 if info is None or row.name not in info.site.arrays:
                     continue  # an array no longer in the site's config takes no readings
                 cal = Calibration(**{f: getattr(row, f) for f in CALIBRATION_FIELDS})
@@ -173,10 +270,10 @@ class Registry:
         """Add or replace a site (its arrays come from the next :meth:`refresh_arrays`)."""
         info = SiteInfo(site, ZoneInfo(site.timezone), bucket_phase_s(site.timezone))
         with self._lock:
-            old = self.sites.get(site.site_id)
+            old = self._sites.get(site.site_id)
             if old is not None:  # kept meanwhile, so ingest never sees the site without them
                 info.arrays = {n: a for n, a in old.arrays.items() if n in site.arrays}
-            self.sites[site.site_id] = info
+            self._sites[site.site_id] = info
         return info
 
     def phase_of_array(self, array_id: int) -> int:
@@ -184,11 +281,15 @@ class Registry:
         return self._phase_of_array[array_id]
 
     def get(self, site_id: str) -> SiteInfo | None:
-        return self.sites.get(site_id)
+        """The site, or None; an unknown id first looks for a new site file (:meth:`rescan`)."""
+        info = self._sites.get(site_id)
+        if info is None and self.rescan(force=True):
+            info = self._sites.get(site_id)
+        return info
 
     def set_calibration(self, conn: Connection, site_id: str, name: str, cal: Calibration) -> None:
         """Store a new calibration for an array (called in the writer's transaction)."""
-        info = self.sites[site_id]
+        info = self._sites[site_id]
         conn.execute(
             update(ArrayRow)
             .where(ArrayRow.site_id == site_id, ArrayRow.name == name)
@@ -215,6 +316,11 @@ def save_site(ctx: ServiceContext, site_id: str, data: Any) -> tuple[SiteInfo, b
     twin readings were dropped. InputError 422 names the bad field; 409 when the
     new time zone would move the hourly rollup grid under stored readings.
     """
+    old = ctx.registry.get(site_id)
+    if isinstance(data, dict):  # what the body leaves out, its place decides (marked)
+        data = place_defaults(data)
+        if old is not None:
+            data = _settle_assumed(old.site.to_config(), data)
     try:
         cfg = validate_site_config(data, where="body")
         config = cfg.model_dump(mode="json", by_alias=True, exclude_unset=True)
@@ -224,13 +330,12 @@ def save_site(ctx: ServiceContext, site_id: str, data: Any) -> tuple[SiteInfo, b
         site = site_from_dict(config, where="body")
     except ValueError as exc:
         raise InputError(422, str(exc)) from None
-    old = ctx.registry.get(site_id)
     if old is not None and bucket_phase_s(site.timezone) != old.phase_s:
         raise InputError(409, f"body: timezone: {site.timezone!r} is offset from the hour "
                               f"differently from {old.site.timezone!r}; the stored hourly "
                               "rollups are phased to the old zone: make a new site instead")
     config.pop("$schema", None)
-    write_site_file(ctx.settings.sites.user_dir, config)
+    path = write_site_file(ctx.settings.sites.user_dir, config)
 
     def sync(conn: Connection) -> int:
         return sync_sites(conn, [site]).get(site_id, 0)
@@ -241,6 +346,26 @@ def save_site(ctx: ServiceContext, site_id: str, data: Any) -> tuple[SiteInfo, b
         with ctx.engine.connect() as conn:
             ctx.registry.refresh_arrays(conn)
         ctx.twin.forget(site_id)
+    ctx.registry.note_file(path)  # applied here: not news to the rescan
     logger.info("site %s %s (%d cached twin readings dropped)", site_id,
                 "created" if old is None else "updated", dropped)
     return info, old is None, dropped
+
+
+def _at(config: dict[str, Any], path: str) -> Any:
+    """The value at a dotted path of a config (None when absent)."""
+    value: Any = config
+    for part in path.split("."):
+        value = value.get(part) if isinstance(value, dict) else None
+    return value
+
+
+def _settle_assumed(old: dict[str, Any], new: dict[str, Any]) -> dict[str, Any]:
+    """``new`` without the ``assumed`` marks of values it changes from ``old``: a value the
+    user set is the site's own, no longer an assumption."""
+    marks = new.get("assumed")
+    if not isinstance(marks, dict):
+        return new
+    kept = {k: v for k, v in marks.items() if _at(new, k) == _at(old, k)}
+    out = {k: v for k, v in new.items() if k != "assumed"}
+    return {**out, "assumed": kept} if kept else out

@@ -14,6 +14,7 @@ that names every bad field by its dotted path (``arrays.fixed.surface_tilt_deg``
 from __future__ import annotations
 
 import dataclasses
+import re
 from typing import TYPE_CHECKING, Any, Literal
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
@@ -40,6 +41,7 @@ from sim.motors import AxisDrive
 from sim.pv import ArrayConfig, cec_module_parameters
 
 SCHEMA_ID = "https://heliotwin.example/docs/site.schema.json"
+_ASSUMED_KEY = re.compile(r"^[a-z0-9_-]{1,64}(\.[a-z0-9_-]{1,64}){0,3}$")
 _STRICT = ConfigDict(extra="forbid", allow_inf_nan=False)
 _ARRAY = ArrayConfig(name="default")
 _GEOMETRY = TrackerGeometry()
@@ -241,6 +243,12 @@ class SiteConfig(BaseModel):
         "'tracker') and 'fixed' (mount 'fixed'). None: a camera-only site."))
     source: str = Field("", description="Where the values come from (paper, survey, station).")
     notes: str = Field("", description="Assumptions and remarks.")
+    assumed: dict[str, str] = Field(default_factory=dict, description=(
+        "Keys (dotted paths, e.g. 'temp_air_c', 'arrays.fixed.surface_tilt_deg') whose values "
+        "were not given for this site but filled in from its place when it was created "
+        "(sim.sites.place_defaults), each with the rule or default it follows: check them. "
+        "Changing such a value through PUT /api/v1/sites/{site_id} drops its mark. Default "
+        "none."))
 
     @field_validator("timezone")
     @classmethod
@@ -249,6 +257,14 @@ class SiteConfig(BaseModel):
             ZoneInfo(value)
         except (ZoneInfoNotFoundError, ValueError):
             raise ValueError(f"{value!r} is not an IANA time zone") from None
+        return value
+
+    @field_validator("assumed")
+    @classmethod
+    def _assumed_keys(cls, value: dict[str, str]) -> dict[str, str]:
+        bad = [k for k in value if not _ASSUMED_KEY.match(k)]
+        if bad:
+            raise ValueError(f"keys {bad} are not dotted config paths")
         return value
 
     @field_validator("arrays")

@@ -69,6 +69,9 @@ class Site:
         Where the arrays that have a configured position stand
         (:class:`sim.array_shade.Placement`); with ``tracker`` and ``fixed`` placed, the
         twin computes the tracker's shade on the fixed array. Empty by default.
+    assumed : dict of str to str
+        Config keys filled in from the place when the site was made (:func:`place_defaults`),
+        each with the rule or default it follows.
     """
 
     site_id: str
@@ -88,6 +91,7 @@ class Site:
     placements: dict[str, Placement] = field(default_factory=dict)
     source: str = ""
     notes: str = ""
+    assumed: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready description with units in the keys."""
@@ -110,6 +114,8 @@ class Site:
                        for name, arr in self.arrays.items()},
             "source": self.source,
             "notes": self.notes,
+            # only when there is one: an unchanged site's stored config stays byte-identical
+            **({"assumed": dict(self.assumed)} if self.assumed else {}),
         }
 
     def _placement(self, array: str) -> dict[str, float]:
@@ -168,6 +174,7 @@ def site_from_dict(d: dict[str, Any], where: str = "site") -> Site:
         placements=placements,
         source=cfg.source,
         notes=cfg.notes,
+        assumed=dict(cfg.assumed),
     )
 
 
@@ -223,3 +230,90 @@ def site_ids(sites_dir: str | Path | None = None) -> list[str]:
 def list_sites(sites_dir: str | Path | None = None) -> list[Site]:
     """The built-in sites and those of ``sites_dir`` (which win on a shared id), by id."""
     return [load_site(site_id, sites_dir) for site_id in site_ids(sites_dir)]
+
+
+#: Config keys a site's place decides: a new site takes them from its place
+#: (:func:`place_defaults`), never from the site it was copied from.
+CLIMATE_KEYS = ("temp_air_c", "wind_speed_m_s")
+FIXED_SURFACE_KEYS = ("surface_tilt_deg", "surface_azimuth_deg")
+
+
+def fixed_tilt_from_latitude_deg(latitude_deg: float) -> float:
+    """Tilt [°] of a fixed array for the most yearly energy, from the latitude alone.
+
+    C. R. Landau's rule of thumb (solarpaneltilt.com, "Optimum tilt of solar panels"),
+    as GSEE implements it (``gsee.pv.optimal_tilt``; Pfenninger & Staffell, Energy 114
+    (2016) 1251–1265, doi:10.1016/j.energy.2016.08.060): 0.87 |φ| up to |φ| = 25°,
+    0.76 |φ| + 3.1° up to 50°, and 40° beyond (where the rule was not fitted). Facing
+    the equator (:func:`place_defaults`). A rule, not a site survey: the config marks it
+    as assumed.
+    """
+    lat = abs(float(latitude_deg))
+    if lat <= 25.0:
+        return round(0.87 * lat, 1)
+    if lat <= 50.0:
+        return round(0.76 * lat + 3.1, 1)
+    return 40.0
+
+
+def place_defaults(config: dict[str, Any], climate: dict[str, float] | None = None,
+                   climate_source: str = "") -> dict[str, Any]:
+    """``config`` with what its place decides filled in where it is left out, each marked.
+
+    A fixed array without ``surface_tilt_deg`` gets :func:`fixed_tilt_from_latitude_deg`,
+    without ``surface_azimuth_deg`` the equator (180° north of it, 0° south); a config
+    without ``temp_air_c``/``wind_speed_m_s`` gets ``climate``'s values (a weather file's
+    annual means, named by ``climate_source``) or the defaults the site format states
+    (:class:`sim.site_config.SiteConfig`). Each filled key is listed in ``assumed`` with
+    its rule; a key the config gives is left alone. A config without a numeric
+    ``latitude_deg`` is returned unchanged (its validation names the field).
+    """
+    from sim.site_config import Array, SiteConfig
+
+    lat = config.get("latitude_deg")
+    if not isinstance(lat, int | float) or isinstance(lat, bool):
+        return config
+    out = {**config}
+    assumed = dict(out.get("assumed") or {})
+    for key in CLIMATE_KEYS:
+        if key in out:
+            continue
+        if climate is not None and key in climate:
+            out[key], assumed[key] = climate[key], f"annual mean of {climate_source}"
+        else:
+            out[key] = SiteConfig.model_fields[key].default
+            assumed[key] = (f"the site format's default {out[key]:g} (sim/site_config.py), "
+                            "no weather file given: set the site's own value")
+    arrays = out.get("arrays")
+    if isinstance(arrays, dict):
+        out["arrays"] = arrays = {**arrays}
+        default_mount = Array.model_fields["mount"].default
+        for name, arr in arrays.items():
+            if not isinstance(arr, dict) or arr.get("mount", default_mount) != "fixed":
+                continue
+            arrays[name] = arr = {**arr}
+            if "surface_tilt_deg" not in arr:
+                arr["surface_tilt_deg"] = fixed_tilt_from_latitude_deg(lat)
+                assumed[f"arrays.{name}.surface_tilt_deg"] = (
+                    f"from latitude {lat:g}°: Landau's rule as GSEE's optimal_tilt "
+                    "(sim.sites.fixed_tilt_from_latitude_deg)")
+            if "surface_azimuth_deg" not in arr:
+                arr["surface_azimuth_deg"] = 180.0 if lat >= 0 else 0.0
+                assumed[f"arrays.{name}.surface_azimuth_deg"] = "facing the equator"
+    if assumed:
+        out["assumed"] = assumed
+    return out
+
+
+def relocated_config(template: dict[str, Any], place: dict[str, Any],
+                     climate: dict[str, float] | None = None,
+                     climate_source: str = "") -> dict[str, Any]:
+    """A config at a new place from ``template`` (a site's :meth:`Site.to_config`): its
+    tracker and arrays kept, what its place decided (:data:`CLIMATE_KEYS`, fixed arrays'
+    :data:`FIXED_SURFACE_KEYS`, its ``assumed`` marks) dropped and taken from the new
+    place (:func:`place_defaults`); ``place`` sets ``site_id``, ``latitude_deg`` … ."""
+    out = {k: v for k, v in template.items() if k not in (*CLIMATE_KEYS, "assumed")}
+    out["arrays"] = {name: ({k: v for k, v in arr.items() if k not in FIXED_SURFACE_KEYS}
+                            if arr.get("mount") == "fixed" else dict(arr))
+                     for name, arr in template.get("arrays", {}).items()}
+    return place_defaults({**out, **place}, climate, climate_source)

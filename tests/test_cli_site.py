@@ -24,6 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def heliotwin(sites_dir: Path, *args: str) -> subprocess.CompletedProcess:
     env = {k: v for k, v in os.environ.items() if not k.startswith("HELIOTWIN_")}
     env["HELIOTWIN_SITES_DIR"] = str(sites_dir)
+    env["HELIOTWIN_DATABASE_URL"] = f"sqlite:///{sites_dir / 'cli.sqlite'}"  # create syncs it
     return subprocess.run([sys.executable, "-m", "backend", *args], capture_output=True,
                           text=True, cwd=ROOT, timeout=120, env=env)
 
@@ -94,8 +95,11 @@ def test_from_weather_tmy3_puts_the_site_at_the_station(tmp_path: Path) -> None:
     # the TMY3 header of 723170TYA.CSV: 36.1 N, 79.95 W, 273 m, UTC-5
     assert (site["latitude_deg"], site["longitude_deg"], site["altitude_m"]) == (36.1, -79.95, 273)
     assert site["timezone"] == "Etc/GMT+5"
-    assert site["arrays"]["fixed"]["surface_tilt_deg"] == 36.1
+    # Landau's rule (GSEE optimal_tilt) for 25° < 36.1° <= 50°: 0.76 x 36.1 + 3.1 = 30.5°
+    assert site["arrays"]["fixed"]["surface_tilt_deg"] == 30.5
     assert site["arrays"]["fixed"]["surface_azimuth_deg"] == 180.0
+    assert site["assumed"]["temp_air_c"] == "annual mean of 723170TYA.CSV"
+    assert "Landau" in site["assumed"]["arrays.fixed.surface_tilt_deg"]
     assert 10 < site["temp_air_c"] < 20  # Greensboro's annual mean, not Tehuantepec's 27 °C
     run = heliotwin(tmp_path, "simulate", "--site", "greensboro", "--start", "1990-03-01",
                     "--end", "1990-03-03", "--step-s", "900", "--json")
@@ -131,7 +135,7 @@ def test_from_weather_epw_in_the_southern_hemisphere_faces_north(tmp_path: Path)
                                                                                 520.0)
     assert site["timezone"] == "Etc/GMT+4"
     assert site["arrays"]["fixed"]["surface_azimuth_deg"] == 0.0  # the equator is north
-    assert site["arrays"]["fixed"]["surface_tilt_deg"] == 33.5  # |latitude|, rounded
+    assert site["arrays"]["fixed"]["surface_tilt_deg"] == 28.5  # 0.76 x 33.45 + 3.1
     assert site["wind_speed_m_s"] == 2.5 and site["name"] == "Santiago, RM, CHL"
 
 

@@ -7,17 +7,24 @@ to the built-in ``sim/data/sites/``; a user file with a built-in id replaces it.
 
 - ``create --id ID --latitude-deg --longitude-deg --timezone [--like SITE]`` writes a
   site at a new place with the tracker and arrays of ``--like`` (default
-  ``tehuantepec``); ``--from-file FILE`` writes a hand-written config after validating it.
+  ``tehuantepec``); what the place decides is not copied but taken from the new place
+  and marked ``assumed`` (``sim.sites.relocated_config``: fixed tilt from the latitude,
+  facing the equator; air temperature and wind the site format's stated defaults);
+  ``--from-file FILE`` writes a hand-written config after validating it (keys it leaves
+  out that the place decides are filled in the same way).
 - ``from-weather FILE --id ID`` writes a site at a TMY3/EPW station's place and zone
   (``pvlib.iotools.read_tmy3`` / ``read_epw`` metadata; the file's fixed UTC offset
   becomes the ``Etc/GMT±N`` zone the typical year is recorded in; the clear-sky air
-  temperature and wind are the file's annual means).
+  temperature and wind are the file's annual means, the fixed tilt from the latitude;
+  each marked ``assumed``).
 - ``show ID [--json]`` prints a site's config and which file it comes from.
 - ``validate FILE…`` checks files; a malformed one gets a message naming the field (exit 2).
 - ``schema`` prints the JSON Schema.
 
-A running service reads the folder at start-up; ``PUT /api/v1/sites/{site_id}``
-(the dashboard's Sites page) applies a config at once.
+``create`` and ``from-weather`` also write the site's rows to the database of
+``HELIOTWIN_DATABASE_URL``: a running service on it shows the site within a second, no
+restart (``backend.sites.Registry.rescan``); ``PUT /api/v1/sites/{site_id}`` (the
+dashboard's Sites page) applies a config at once.
 """
 
 from __future__ import annotations
@@ -43,8 +50,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     c.add_argument("--altitude-m", type=float, default=0.0, help="height above sea level [m]")
     c.add_argument("--timezone", help="IANA zone, e.g. America/New_York")
     c.add_argument("--like", default="tehuantepec",
-                   help="copy tracker, arrays and climate defaults from this site "
-                        "(default tehuantepec)")
+                   help="copy tracker and arrays from this site (default tehuantepec); the "
+                        "fixed tilt, air temperature and wind come from the new place, "
+                        "marked as assumed")
     c.add_argument("--from-file", type=Path, metavar="FILE",
                    help="write this hand-written config instead (validated first)")
     c.add_argument("--force", action="store_true",
@@ -94,9 +102,42 @@ def _write(config: dict[str, Any], force: bool) -> int:
         fail(f"--id {config['site_id']!r} is already {what}; --force replaces it "
              "(a user file wins over a built-in one)")
     path = write_site_file(directory, config)
-    print(f"wrote {path}; `heliotwin simulate --site {config['site_id']}` runs it, and the "
-          "service shows it from its next start")
+    where = _sync_database(config)
+    print(f"wrote {path}; `heliotwin simulate --site {config['site_id']}` runs it; {where}")
+    for key, why in config.get("assumed", {}).items():
+        print(f"  assumed {key} = {_at(config, key)}: {why}")
     return 0
+
+
+def _at(config: dict[str, Any], path: str) -> Any:
+    value: Any = config
+    for part in path.split("."):
+        value = value[part]
+    return value
+
+
+def _sync_database(config: dict[str, Any]) -> str:
+    """Write the site's rows to the database of ``HELIOTWIN_DATABASE_URL`` (as the service
+    does at start-up), so a running service on it takes the site at once
+    (``backend.sites.Registry.rescan``); says what happened."""
+    from sqlalchemy.exc import SQLAlchemyError
+
+    from backend.settings import get_settings
+    from backend.sites import sync_sites
+    from backend.storage.engine import make_engine, run_migrations
+    from sim.sites import site_from_dict
+
+    engine = make_engine(get_settings())
+    try:
+        run_migrations(engine)
+        with engine.begin() as conn:
+            sync_sites(conn, [site_from_dict(config)])
+    except SQLAlchemyError as exc:
+        return (f"the database could not take it now ({type(exc).__name__}): the service "
+                "adds it at its next start")
+    finally:
+        engine.dispose()
+    return "a running service on the same database shows it within a second, no restart"
 
 
 def _template(like: str) -> dict[str, Any]:
@@ -107,7 +148,7 @@ def _template(like: str) -> dict[str, Any]:
 
 def create(args: argparse.Namespace) -> int:
     """Write a new site (from flags and a template, or from a file)."""
-    from sim.sites import UnknownSiteError
+    from sim.sites import UnknownSiteError, place_defaults, relocated_config
 
     if args.from_file is not None:
         try:
@@ -117,6 +158,8 @@ def create(args: argparse.Namespace) -> int:
         if isinstance(config, dict) and config.get("site_id") != args.site_id:
             fail(f"--from-file: its site_id {config.get('site_id')!r} is not --id "
                  f"{args.site_id!r}")
+        if isinstance(config, dict):
+            config = place_defaults(config)
         return _write(config, args.force)
     missing = [f"--{n.replace('_', '-')}" for n in ("latitude_deg", "longitude_deg", "timezone")
                if getattr(args, n) is None]
@@ -126,11 +169,11 @@ def create(args: argparse.Namespace) -> int:
         base = _template(args.like)
     except UnknownSiteError as exc:
         fail(f"--like: {exc}")
-    config = {**base, "site_id": args.site_id, "name": args.name or args.site_id,
-              "latitude_deg": args.latitude_deg, "longitude_deg": args.longitude_deg,
-              "altitude_m": args.altitude_m, "timezone": args.timezone,
-              "source": f"heliotwin site create (tracker and arrays as {args.like})",
-              "notes": ""}
+    config = relocated_config(base, {
+        "site_id": args.site_id, "name": args.name or args.site_id,
+        "latitude_deg": args.latitude_deg, "longitude_deg": args.longitude_deg,
+        "altitude_m": args.altitude_m, "timezone": args.timezone,
+        "source": f"heliotwin site create (tracker and arrays as {args.like})", "notes": ""})
     return _write(config, args.force)
 
 
@@ -164,7 +207,7 @@ def fixed_offset_zone(tz_h: float) -> str:
 
 def from_weather(args: argparse.Namespace) -> int:
     """Write a site at the station of a TMY3/EPW file."""
-    from sim.sites import UnknownSiteError
+    from sim.sites import CLIMATE_KEYS, UnknownSiteError, relocated_config
 
     fmt = args.format or ("epw" if args.file.suffix.lower() == ".epw" else "tmy3")
     try:
@@ -173,23 +216,15 @@ def from_weather(args: argparse.Namespace) -> int:
         base = _template(args.like)
     except (OSError, ValueError, KeyError, UnknownSiteError) as exc:
         fail(f"{args.file}: {exc}")
-    lat = st["latitude_deg"]
-    arrays = {}
-    for name, arr in base["arrays"].items():
-        arr = dict(arr)
-        if arr["mount"] == "fixed":  # rule of thumb: tilt = |latitude|, facing the equator
-            arr["surface_tilt_deg"] = round(min(abs(lat), 90.0), 1)
-            arr["surface_azimuth_deg"] = 180.0 if lat >= 0 else 0.0
-        arrays[name] = arr
-    config = {**base, "site_id": args.site_id, "name": st["name"] or args.site_id,
-              "latitude_deg": lat, "longitude_deg": st["longitude_deg"],
-              "altitude_m": st["altitude_m"], "timezone": zone, "arrays": arrays,
-              "temp_air_c": st["temp_air_c"], "wind_speed_m_s": st["wind_speed_m_s"],
-              "source": f"{fmt.upper()} station {st['code']} {st['name']} ({args.file.name}); "
-                        f"tracker and modules as {args.like}",
-              "notes": f"zone {zone}: the file's fixed UTC offset {st['tz_h']:+g} h (its typical "
-                       "year's clock); temp_air_c and wind_speed_m_s: the file's annual means; "
-                       "fixed arrays tilted at |latitude| facing the equator"}
+    config = relocated_config(base, {
+        "site_id": args.site_id, "name": st["name"] or args.site_id,
+        "latitude_deg": st["latitude_deg"], "longitude_deg": st["longitude_deg"],
+        "altitude_m": st["altitude_m"], "timezone": zone,
+        "source": f"{fmt.upper()} station {st['code']} {st['name']} ({args.file.name}); "
+                  f"tracker and modules as {args.like}",
+        "notes": f"zone {zone}: the file's fixed UTC offset {st['tz_h']:+g} h (its typical "
+                 "year's clock)"},
+        climate={k: st[k] for k in CLIMATE_KEYS}, climate_source=args.file.name)
     return _write(config, args.force)
 
 

@@ -11,9 +11,27 @@ function result(text, kind = "ok") {
   $("site-result").replaceChildren(h("p", { class: kind === "ok" ? "ok" : "error" }, text));
 }
 
-function fill(config) {
+// What a site's place decides (sim.sites.CLIMATE_KEYS, FIXED_SURFACE_KEYS): a new site does not
+// copy them; the service fills them in from its place when it is saved, marked "assumed".
+const CLIMATE_KEYS = ["temp_air_c", "wind_speed_m_s"];
+const FIXED_SURFACE_KEYS = ["surface_tilt_deg", "surface_azimuth_deg"];
+
+const valueAt = (config, path) => path.split(".").reduce((v, k) => (v == null ? v : v[k]), config);
+
+/** The config's "assumed" keys (SiteConfig.assumed): values the place gave, not a survey. */
+function showAssumed(config, pending = []) {
+  const marks = Object.entries(config.assumed || {});
+  const items = marks.map(([k, why]) => h("li", {}, h("code", {}, k), ` = ${valueAt(config, k)} — assumed: ${why}`));
+  for (const k of pending) items.push(h("li", {}, h("code", {}, k), " — from the place when saved (marked assumed)"));
+  $("site-assumed").replaceChildren(...(items.length
+    ? [h("p", { class: "warning" }, "Not measured at this site — check these and set the site's own values:"), h("ul", {}, items)]
+    : []));
+}
+
+function fill(config, pending = []) {
   for (const [id, key] of FIELDS) $(id).value = config[key] ?? "";
   $("site-json").value = JSON.stringify(config, null, 2);
+  showAssumed(config, pending);
 }
 
 async function loadSelected() {
@@ -36,10 +54,25 @@ function configFromForm() {
   }
   for (const [id, key] of FIELDS) {
     const el = $(id);
-    if (el.value === "") continue;
-    config[key] = el.type === "number" ? Number(el.value) : el.value;
+    if (el.value === "") delete config[key]; // the format's default (docs/site.schema.json)
+    else config[key] = el.type === "number" ? Number(el.value) : el.value;
   }
   return config;
+}
+
+/** The JSON box follows the form as it is typed in (a box that is not valid JSON is left alone). */
+function formToJson() {
+  try {
+    $("site-json").value = JSON.stringify(configFromForm(), null, 2);
+  } catch { /* the message comes on save */ }
+}
+
+/** The form follows the JSON box when it is edited. */
+function jsonToForm() {
+  try {
+    const config = JSON.parse($("site-json").value || "{}");
+    for (const [id, key] of FIELDS) $(id).value = config[key] ?? "";
+  } catch { /* the message comes on save */ }
 }
 
 async function save(ev) {
@@ -71,15 +104,25 @@ function newSite() {
   config.name = "";
   config.source = "";
   config.notes = "";
-  fill(config);
+  const pending = [...CLIMATE_KEYS];
+  for (const key of [...CLIMATE_KEYS, "assumed"]) delete config[key];
+  for (const [name, arr] of Object.entries(config.arrays || {})) {
+    if (arr.mount !== "fixed") continue;
+    for (const key of FIXED_SURFACE_KEYS) delete arr[key];
+    pending.push(...FIXED_SURFACE_KEYS.map((k) => `arrays.${name}.${k}`));
+  }
+  fill(config, pending);
   $("site-id").focus();
-  result("A copy of the selected site: give it an id and a place, then save with the admin token.");
+  result("A copy of the selected site's tracker and arrays: give it an id and a place, then save with the admin "
+    + "token (HELIOTWIN_ADMIN_TOKEN). Its fixed tilt, air temperature and wind come from the new place.");
 }
 
 export function init(state) {
   st = state;
   $("site-form").addEventListener("submit", save);
   $("site-new").addEventListener("click", newSite);
+  for (const [id] of FIELDS) $(id).addEventListener("input", formToJson);
+  $("site-json").addEventListener("change", jsonToForm);
   loadSelected();
 }
 

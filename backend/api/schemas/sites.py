@@ -106,6 +106,9 @@ class SiteRead(BaseModel):
     arrays: dict[str, ArrayRead]
     source: str
     notes: str
+    assumed: dict[str, str] = Field(default_factory=dict, description=(
+        "config keys (dotted paths) filled in from the place when the site was made, each "
+        "with its rule or default (sim.sites.place_defaults); absent: none"))
     origin: Literal["builtin", "user", "unknown"] = Field(
         description="a built-in file, or the user's folder (which wins)")
     overrides_builtin: bool

@@ -1,0 +1,116 @@
+"""A new site takes its place's defaults, marked as assumed, and a site made by the CLI
+reaches a running service without a restart (issue 22 item 9).
+
+"New site from the selected one" copied Tehuantepec's 27 °C air and 16° fixed tilt to a
+site at 53.5° N, and ``heliotwin site create`` told the user to restart the service. The
+expected tilts are Landau's rule written out here from GSEE's ``optimal_tilt``
+(renewables-ninja/gsee, gsee/pv.py), not read from the code under test.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import pytest
+from live_service import InProcessServer
+
+from backend.cli import main
+from sim.sites import fixed_tilt_from_latitude_deg
+
+ADMIN = "admin-secret-for-site-defaults"
+HAMBURG = {"latitude_deg": 53.5, "longitude_deg": 10.0, "altitude_m": 10.0,
+           "timezone": "Europe/Berlin"}
+
+
+def _gsee_optimal_tilt(lat: float) -> float:
+    """gsee.pv.optimal_tilt: 0.87|φ| to 25°, 0.76|φ| + 3.1 to 50°, else 40°."""
+    lat = abs(lat)
+    return lat * 0.87 if lat <= 25 else lat * 0.76 + 3.1 if lat <= 50 else 40.0
+
+
+@pytest.mark.parametrize("lat", [0.0, 16.28875, 25.0, 36.1, -33.45, 50.0, 53.5, -70.0])
+def test_fixed_tilt_is_landaus_rule(lat: float) -> None:
+    # rounded to 0.1°
+    assert fixed_tilt_from_latitude_deg(lat) == pytest.approx(_gsee_optimal_tilt(lat), abs=0.0501)
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
+    """A service of its own on SQLite, with a user-sites folder and an admin token."""
+    tmp = tmp_path_factory.mktemp("site-defaults")
+    env = {"HELIOTWIN_SITES_DIR": str(tmp / "user-sites"), "HELIOTWIN_ADMIN_TOKEN": ADMIN}
+    proc = InProcessServer(f"sqlite:///{tmp / 'sites.sqlite'}", extra_env=env).start()
+    yield proc
+    proc.stop()
+
+
+@pytest.fixture()
+def client(server: InProcessServer) -> Iterator[httpx.Client]:
+    with server.client(timeout_s=120) as c:
+        yield c
+
+
+def _copy_of_tehuantepec_elsewhere(client: httpx.Client, site_id: str) -> dict:
+    """What the Sites page sends for "New site from the selected one": the selected config
+    with a new id and place, without the keys the place decides (frontend/js/sites.js)."""
+    config = client.get("/api/v1/sites/tehuantepec/config").json()
+    assert config["temp_air_c"] == 27.0 and config["arrays"]["fixed"]["surface_tilt_deg"] == 16
+    for key in ("temp_air_c", "wind_speed_m_s", "assumed"):
+        config.pop(key, None)
+    for arr in config["arrays"].values():
+        if arr["mount"] == "fixed":
+            arr.pop("surface_tilt_deg"), arr.pop("surface_azimuth_deg")
+    return {**config, **HAMBURG, "site_id": site_id, "name": site_id, "source": "", "notes": ""}
+
+
+def test_a_new_site_takes_its_places_defaults_marked_as_assumed(client: httpx.Client) -> None:
+    auth = {"Authorization": f"Bearer {ADMIN}"}
+    r = client.put("/api/v1/sites/hamburg", json=_copy_of_tehuantepec_elsewhere(
+        client, "hamburg"), headers=auth)
+    assert r.status_code == 201, r.text
+    site = client.get("/api/v1/sites/hamburg").json()
+    assert site["arrays"]["fixed"]["surface_tilt_deg"] == 40.0  # not Tehuantepec's 16°
+    assert site["arrays"]["fixed"]["surface_azimuth_deg"] == 180.0
+    assert site["temp_air_c"] == 25.0  # the format's stated default, not 27 °C
+    assert set(site["assumed"]) == {"temp_air_c", "wind_speed_m_s",
+                                    "arrays.fixed.surface_tilt_deg",
+                                    "arrays.fixed.surface_azimuth_deg"}
+    assert "Landau" in site["assumed"]["arrays.fixed.surface_tilt_deg"]
+    assert "default" in site["assumed"]["temp_air_c"]
+    # setting a value makes it the site's own: its mark goes, the others stay
+    config = client.get("/api/v1/sites/hamburg/config").json()
+    config["temp_air_c"] = 9.5
+    r = client.put("/api/v1/sites/hamburg", json=config, headers=auth)
+    assert r.status_code == 200, r.text
+    assumed = client.get("/api/v1/sites/hamburg").json()["assumed"]
+    assert "temp_air_c" not in assumed and "arrays.fixed.surface_tilt_deg" in assumed
+    # the built-in site states its own values: nothing assumed
+    assert "assumed" not in client.get("/api/v1/sites/tehuantepec").json()
+
+
+def test_a_site_made_by_the_cli_appears_without_a_restart(
+        server: InProcessServer, client: httpx.Client, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    assert "kiel" not in [s["site_id"] for s in client.get("/api/v1/sites").json()]
+    for name, value in server.env.items():
+        if name.startswith("HELIOTWIN_"):
+            monkeypatch.setenv(name, value)
+    code = main(["site", "create", "--id", "kiel", "--latitude-deg", "54.32",
+                 "--longitude-deg", "10.14", "--timezone", "Europe/Berlin"])
+    out = capsys.readouterr().out
+    assert code == 0 and "no restart" in out
+    assert (Path(server.extra_env["HELIOTWIN_SITES_DIR"]) / "kiel.json").exists()
+    # a lookup by id sees it at once; the list within the rescan interval (1 s)
+    site = client.get("/api/v1/sites/kiel")
+    assert site.status_code == 200, site.text
+    assert site.json()["arrays"]["fixed"]["surface_tilt_deg"] == 40.0
+    deadline = time.monotonic() + 10
+    while "kiel" not in [s["site_id"] for s in client.get("/api/v1/sites").json()]:
+        assert time.monotonic() < deadline, "the new site never appeared in the list"
+        time.sleep(0.25)
+    # its arrays take readings: the service read their ids from the database the CLI wrote
+    ctx = server.ctx
+    assert set(ctx.registry.get("kiel").arrays) == {"tracker", "fixed"}
