@@ -1,9 +1,15 @@
-"""Per-site write tokens for field loggers: create, check (cached), list, revoke.
+"""Per-site write tokens: create, check (cached), list, revoke; each with a scope.
 
 A token is 32 random bytes (``secrets.token_urlsafe``), shown once when made;
-the database keeps only its SHA-256 and a short prefix to recognise it by, an
-optional expiry and, once revoked, the time it was revoked (the row stays, so
-``token list`` shows it). :class:`TokenCache` answers the hot path from memory
+the database keeps only its SHA-256 and a short prefix to recognise it by, its
+scope, an optional expiry and, once revoked, the time it was revoked (the row
+stays, so ``token list`` shows it).
+
+Scopes (:data:`SCOPES`): ``ingest`` — a field device: writes its site's readings
+and nothing else (the default, and what every token made before scopes became);
+``site`` — the site's operator: also edits the site's config, its calibrations
+and the 3D twin's shared replay. Above both is the admin token, a setting
+(``HELIOTWIN_ADMIN_TOKEN``), never stored here. :class:`TokenCache` answers the hot path from memory
 for at most ``ttl_s`` after it last asked the database about a token, so a
 token revoked by another process (``heliotwin token revoke``) is refused within
 that time; a revocation through this process's cache (the admin HTTP endpoint)
@@ -33,6 +39,39 @@ class UnknownToken(LookupError):
     """No stored token matches that token or id."""
 
 
+#: Token scopes, least first: what each may do is in the module docstring.
+SCOPES: tuple[str, ...] = ("ingest", "site")
+DEFAULT_SCOPE = "ingest"
+
+
+def check_scope(scope: str) -> str:
+    """``scope`` when it is one of :data:`SCOPES`; ValueError naming them otherwise."""
+    if scope not in SCOPES:
+        raise ValueError(f"scope: {scope[:20]!r} is not one of {', '.join(SCOPES)}")
+    return scope
+
+
+def scope_allows(held: str, needed: str) -> bool:
+    """Whether a token of scope ``held`` may do what needs ``needed`` (``site`` ⊇ ``ingest``)."""
+    return SCOPES.index(held) >= SCOPES.index(needed)
+
+
+@dataclass(frozen=True)
+class Grant:
+    """What a valid token may do: write to ``site_id`` within ``scope``."""
+
+    site_id: str
+    scope: str
+
+
+class TokenRefused(LookupError):
+    """A token that is not valid now; ``reason`` is ``unknown``, ``revoked`` or ``expired``."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(f"{reason} write token")
+        self.reason = reason
+
+
 def hash_token(token: str) -> str:
     """SHA-256 hex digest of a token (what the database stores)."""
     return hashlib.sha256(token.encode()).hexdigest()
@@ -53,6 +92,7 @@ class TokenInfo:
     site_id: str
     token_prefix: str
     label: str
+    scope: str
     created_at: dt.datetime
     expires_at: dt.datetime | None
     revoked_at: dt.datetime | None
@@ -70,7 +110,7 @@ class TokenInfo:
             return None if t is None else t.isoformat().replace("+00:00", "Z")
 
         return {"id": self.id, "site_id": self.site_id, "token_prefix": self.token_prefix,
-                "label": self.label, "created_at": iso(self.created_at),
+                "label": self.label, "scope": self.scope, "created_at": iso(self.created_at),
                 "expires_at": iso(self.expires_at), "revoked_at": iso(self.revoked_at),
                 "status": self.status()}
 
@@ -81,13 +121,15 @@ _COLUMNS = select(*LoggerToken.__table__.columns)
 def _info(row: Any) -> TokenInfo:
     created = _aware(row.created_at)
     assert created is not None
-    return TokenInfo(row.id, row.site_id, row.token_prefix, row.label, created,
+    return TokenInfo(row.id, row.site_id, row.token_prefix, row.label, row.scope, created,
                      _aware(row.expires_at), _aware(row.revoked_at))
 
 
 def create_token(conn: Connection, site_id: str, label: str = "",
-                 expires_at: dt.datetime | None = None) -> str:
-    """Make, store and return a new write token for ``site_id`` (refused from ``expires_at``)."""
+                 expires_at: dt.datetime | None = None, scope: str = DEFAULT_SCOPE) -> str:
+    """Make, store and return a new token of ``scope`` for ``site_id`` (refused from
+    ``expires_at``)."""
+    check_scope(scope)
     if conn.execute(select(SiteRow.site_id).where(SiteRow.site_id == site_id)).first() is None:
         known = ", ".join(conn.execute(select(SiteRow.site_id)).scalars()) or "none"
         raise UnknownSite(f"unknown site {site_id!r}; known sites: {known}")
@@ -96,7 +138,7 @@ def create_token(conn: Connection, site_id: str, label: str = "",
     token = "ht_" + secrets.token_urlsafe(32)
     conn.execute(insert(LoggerToken).values(
         site_id=site_id, token_sha256=hash_token(token), token_prefix=token[:10],
-        label=label, created_at=utcnow(), expires_at=expires_at,
+        label=label, scope=scope, created_at=utcnow(), expires_at=expires_at,
     ))
     return token
 
@@ -139,13 +181,13 @@ def revoke_token(conn: Connection, token_or_id: str | int) -> tuple[TokenInfo, s
 
 @dataclass(frozen=True)
 class _Entry:
-    site_id: str
+    grant: Grant
     expires_s: float | None  # Unix seconds, or None
     checked_s: float  # time.monotonic() of the database read
 
 
 class TokenCache:
-    """Maps token hashes to their site: from memory for ``ttl_s``, then from the database."""
+    """Maps token hashes to their grant: from memory for ``ttl_s``, then from the database."""
 
     def __init__(self, engine: Engine, ttl_s: float = 0.5) -> None:
         self._engine = engine
@@ -153,38 +195,49 @@ class TokenCache:
         self._entries: dict[str, _Entry] = {}
         self._lock = threading.Lock()
 
-    def _fresh(self, digest: str) -> str | None:
+    def _fresh(self, digest: str) -> Grant | None:
         e = self._entries.get(digest)
         if e is None or time.monotonic() - e.checked_s > self._ttl_s:
             return None
         if e.expires_s is not None and time.time() >= e.expires_s:
             return None
-        return e.site_id
+        return e.grant
 
-    def cached(self, token: str) -> str | None:
-        """The site of a valid token checked less than ``ttl_s`` ago, without the database."""
+    def cached(self, token: str) -> Grant | None:
+        """The grant of a valid token checked less than ``ttl_s`` ago, without the database."""
         return self._fresh(hash_token(token))
 
-    def site_of(self, token: str) -> str | None:
-        """The site a token writes to; None for an unknown, expired or revoked token."""
+    def grant(self, token: str) -> Grant:
+        """What a token may do; :class:`TokenRefused` (unknown, revoked, expired) otherwise."""
         digest = hash_token(token)
-        site = self._fresh(digest)
-        if site is not None:
-            return site
+        fresh = self._fresh(digest)
+        if fresh is not None:
+            return fresh
         with self._engine.connect() as conn:
             row = conn.execute(
-                select(LoggerToken.site_id, LoggerToken.expires_at, LoggerToken.revoked_at)
+                select(LoggerToken.site_id, LoggerToken.scope, LoggerToken.expires_at,
+                       LoggerToken.revoked_at)
                 .where(LoggerToken.token_sha256 == digest)
             ).first()
         expires = _aware(row.expires_at) if row is not None else None
-        if row is None or row.revoked_at is not None or (
-                expires is not None and expires <= utcnow()):
+        reason = ("unknown" if row is None else "revoked" if row.revoked_at is not None
+                  else "expired" if expires is not None and expires <= utcnow() else "")
+        if reason:
             self.forget(digest)
-            return None
+            raise TokenRefused(reason)
+        assert row is not None
+        grant = Grant(str(row.site_id), str(row.scope))
         with self._lock:
             self._entries[digest] = _Entry(
-                row.site_id, None if expires is None else expires.timestamp(), time.monotonic())
-        return str(row.site_id)
+                grant, None if expires is None else expires.timestamp(), time.monotonic())
+        return grant
+
+    def site_of(self, token: str) -> str | None:
+        """The site a token writes to; None for an unknown, expired or revoked token."""
+        try:
+            return self.grant(token).site_id
+        except TokenRefused:
+            return None
 
     def forget(self, digest: str) -> None:
         """Drop a token (by its hash) from memory: the next check asks the database."""

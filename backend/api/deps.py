@@ -4,7 +4,11 @@
 (``Annotated`` aliases). Write tokens come as ``Authorization: Bearer <token>``:
 
 - :data:`SiteTokenDep` (routes with a ``{site_id}`` path parameter): 401 without a
-  token or with an unknown one, 403 with a token of another site; gives the site id.
+  token or with an unknown, revoked or expired one (the message says which), 403
+  with a token of another site; gives the site id. Any scope may write readings.
+- :data:`SiteAdminDep`: the admin token or a ``site``-scope token of ``{site_id}``
+  (403 naming the scope for an ``ingest`` token); :data:`CallerDep` who called (or
+  None), for a route whose site is in its body, to :func:`authorize` there.
 - :data:`VisionTokenDep`: when ``Settings.vision.require_token`` is set, a valid
   token of any site is needed (401 otherwise); gives that token's site id, or
   None when no token is needed and none was sent.
@@ -14,12 +18,13 @@ from __future__ import annotations
 
 import hmac
 from collections.abc import Iterator
-from typing import Annotated
+from typing import Annotated, Literal
 
 import anyio
 from fastapi import Depends, HTTPException, Query, Request
 from sqlalchemy.orm import Session
 
+from backend.auth import Grant, TokenRefused, scope_allows
 from backend.context import ServiceContext
 from backend.settings import Settings
 from backend.sites import SiteInfo
@@ -83,16 +88,64 @@ def is_admin_token(settings: Settings, token: str | None) -> bool:
 
 
 async def token_site(request: Request, token: str) -> str | None:
-    """The site of a token (memory first, the database on a miss)."""
-    return await _token_site(request.app.state.ctx, token)
+    """The site of a valid token (memory first, the database on a miss), or None."""
+    try:
+        return (await token_grant(request.app.state.ctx, token)).site_id
+    except TokenRefused:
+        return None
 
 
-async def _token_site(ctx: ServiceContext, token: str) -> str | None:
+async def token_grant(ctx: ServiceContext, token: str) -> Grant:
+    """What a token may do (memory first); :class:`TokenRefused` for an invalid one."""
     cache = ctx.tokens
-    site = cache.cached(token)
-    if site is not None:
-        return site
-    return await anyio.to_thread.run_sync(cache.site_of, token)
+    grant = cache.cached(token)
+    if grant is not None:
+        return grant
+    return await anyio.to_thread.run_sync(cache.grant, token)
+
+
+async def _valid_grant(ctx: ServiceContext, token: str) -> Grant:
+    try:
+        return await token_grant(ctx, token)
+    except TokenRefused as exc:  # "unknown", "revoked" or "expired write token"
+        raise HTTPException(401, str(exc), headers=_BEARER) from None
+
+
+Caller = Grant | Literal["admin"] | None
+"""Who sent a request: the admin token, a valid site token's grant, or nobody (None)."""
+
+
+async def caller_of(ctx: ServiceContext, authorization: str | None,
+                    admin_ok: bool = True) -> Caller:
+    """The caller an ``Authorization`` header names (401 for an invalid token)."""
+    token = parse_bearer(authorization)
+    if token is None:
+        return None
+    if admin_ok and is_admin_token(ctx.settings, token):
+        return "admin"
+    return await _valid_grant(ctx, token)
+
+
+def authorize(caller: Caller, site_id: str, scope: str = "ingest", what: str = "this") -> str:
+    """``"admin"``, or the site of a token of ``site_id`` whose scope allows ``scope``:
+    401 without a token, 403 for another site's or too narrow a scope (naming it);
+    ``what`` names the action in that 403."""
+    if caller == "admin":
+        return "admin"
+    if caller is None:
+        raise HTTPException(401, "write token required: send 'Authorization: Bearer <token>' "
+                                 f"(make one with `heliotwin token create --site ID"
+                                 f"{'' if scope == 'ingest' else ' --scope ' + scope}`)",
+                            headers=_BEARER)
+    if caller.site_id != site_id:
+        raise HTTPException(403, f"this token writes to site {caller.site_id!r}, not "
+                                 f"{site_id!r}")
+    if not scope_allows(caller.scope, scope):
+        raise HTTPException(403, f"this token has scope {caller.scope!r}, which does not "
+                                 f"allow {what}: that needs a {scope!r} token of the site "
+                                 f"(`heliotwin token create --scope {scope}`) or the admin "
+                                 "token")
+    return caller.site_id
 
 
 async def require_site_token(request: Request, site_id: str) -> str:
@@ -101,19 +154,31 @@ async def require_site_token(request: Request, site_id: str) -> str:
                                   request.headers.get("authorization"))
 
 
-async def check_site_token(ctx: ServiceContext, site_id: str, authorization: str | None) -> str:
-    """The check behind :func:`require_site_token`, for callers without a ``Request``."""
-    token = parse_bearer(authorization)
-    if token is None:
-        raise HTTPException(401, "write token required: send 'Authorization: Bearer <token>' "
-                                 "(make one with `heliotwin token create --site ID`)",
-                            headers=_BEARER)
-    owner = await _token_site(ctx, token)
-    if owner is None:
-        raise HTTPException(401, "unknown write token", headers=_BEARER)
-    if owner != site_id:
-        raise HTTPException(403, f"this token writes to site {owner!r}, not {site_id!r}")
-    return owner
+async def check_site_token(ctx: ServiceContext, site_id: str, authorization: str | None,
+                           scope: str = "ingest", what: str = "this") -> str:
+    """The check behind :func:`require_site_token`, for callers without a ``Request``:
+    a token (not the admin's) of ``site_id`` whose scope allows ``scope``."""
+    return authorize(await caller_of(ctx, authorization, admin_ok=False), site_id, scope, what)
+
+
+async def check_site_admin(ctx: ServiceContext, site_id: str, authorization: str | None,
+                           what: str) -> str:
+    """``"admin"`` for the admin token, else a ``site``-scope token of ``site_id`` (its id);
+    ``what`` names the action in a 403 (an ``ingest`` token's)."""
+    return authorize(await caller_of(ctx, authorization), site_id, "site", what)
+
+
+async def require_site_admin(request: Request, site_id: str) -> str:
+    """Dependency: the admin token or a ``site``-scope token of ``site_id``."""
+    return await check_site_admin(request.app.state.ctx, site_id,
+                                  request.headers.get("authorization"),
+                                  f"changing site {site_id!r}")
+
+
+async def optional_caller(request: Request) -> Caller:
+    """Dependency: the caller, or None without a token (the route decides; 401 for an
+    invalid token)."""
+    return await caller_of(request.app.state.ctx, request.headers.get("authorization"))
 
 
 async def vision_token(request: Request) -> str | None:
@@ -126,14 +191,23 @@ async def vision_token(request: Request) -> str | None:
                                      "requests: send 'Authorization: Bearer <token>'",
                                 headers=_BEARER)
         return None
-    owner = await token_site(request, token)
-    if owner is None:
-        raise HTTPException(401, "unknown write token", headers=_BEARER)
-    return owner
+    return (await _valid_grant(request.app.state.ctx, token)).site_id
+
+
+async def authenticated_first(ctx: ServiceContext, authorization: str | None) -> None:
+    """The cheap check that comes before an expensive body (``StrictBodies``): 401 unless
+    ``authorization`` holds the admin token or a valid token of any scope and site (the
+    route checks the site and scope after)."""
+    if await caller_of(ctx, authorization) is None:
+        raise HTTPException(401, "this request needs a token: send 'Authorization: Bearer "
+                                 "<token>'", headers=_BEARER)
 
 
 SiteTokenDep = Annotated[str, Depends(require_site_token)]
+SiteAdminDep = Annotated[str, Depends(require_site_admin)]
+CallerDep = Annotated[Caller, Depends(optional_caller)]
 VisionTokenDep = Annotated[str | None, Depends(vision_token)]
+
 
 
 RangeStart = Annotated[str, Query(min_length=1, max_length=64,

@@ -3,7 +3,11 @@
 - :class:`StrictBodies` (ASGI middleware, ahead of everything): ``Content-Encoding``
   ``identity`` passes through, ``gzip`` is decompressed (the decompressed body at
   most ``HELIOTWIN_MAX_UPLOAD_BYTES``, else 413; a corrupt stream is a 400), any
-  other encoding is a 415. A JSON body with a key given twice in one object is a 422.
+  other encoding is a 415; a gzip body of more than :data:`GZIP_MAX_MEMBERS` members
+  is a 413, and a gzip body to an operation that needs a token (its OpenAPI
+  ``security``) is decompressed only after the token is found valid (401 first,
+  :func:`backend.api.deps.authenticated_first`).
+  A JSON body with a key given twice in one object is a 422.
   Paths given as ``own_body`` (logger ingest) pass untouched: their route checks the
   write token first and then reads the body by :func:`read_body`, the same rules, and
   checks repeated keys itself, in bulk.
@@ -15,6 +19,7 @@
 
 from __future__ import annotations
 
+import functools
 import re
 import zlib
 from collections.abc import AsyncIterator
@@ -22,7 +27,7 @@ from typing import Any
 
 import anyio
 import orjson
-from fastapi import Request
+from fastapi import HTTPException, Request
 from fastapi.exception_handlers import http_exception_handler
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.requests import ClientDisconnect
@@ -30,6 +35,7 @@ from starlette.responses import Response
 from starlette.routing import compile_path
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from backend.api.deps import authenticated_first
 from backend.errors import InputError, load_json_pairs, repeated_keys
 
 _BODY_METHODS = frozenset(("POST", "PUT", "PATCH"))
@@ -37,25 +43,48 @@ _HTTP_METHODS = frozenset(("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPT
 _OFFLOAD_BYTES = 64 * 1024  # decompress bigger bodies in a worker thread
 
 
-def gunzip(data: bytes, limit: int) -> bytes:
-    """A gzip body (one or more members) decompressed, refused past ``limit`` bytes."""
+#: Most gzip members one body may hold. Several members come from concatenated files
+#: (``cat a.gz b.gz``, a logger appending one member per batch): a week of one member
+#: a minute is 10,080. Each member costs a decompressor, a few µs, so 10,000 stay
+#: within tens of milliseconds; 400,000 empty ones (7.6 MiB) are an attack.
+GZIP_MAX_MEMBERS = 10_000
+_FEED_FIRST, _FEED_MAX = 256, 64 * 1024  # compressed bytes given to zlib at once
+
+
+def gunzip(data: bytes, limit: int, max_members: int = GZIP_MAX_MEMBERS) -> bytes:
+    """A gzip body (one or more members) decompressed: 413 past ``limit`` bytes out or past
+    ``max_members`` members, 400 for data that is not gzip or ends early.
+
+    Linear in the body: zlib gets a member's input in pieces that start at 256 bytes and
+    double, so a member's end copies (``unused_data``) at most about what the member
+    read, not the whole rest of the body as one ``decompress(rest)`` per member did.
+    """
+    view = memoryview(data)
     out: list[bytes] = []
-    size = 0
-    while data:
+    size = pos = members = 0
+    while pos < len(view):
+        members += 1
+        if members > max_members:
+            raise InputError(413, f"Content-Encoding gzip: more than {max_members} gzip "
+                                  "members in one body; send one member (or a few)")
         d = zlib.decompressobj(wbits=31)
-        try:
-            part = d.decompress(data, limit + 1 - size)
-        except zlib.error as exc:
-            raise InputError(400, f"Content-Encoding gzip: the body is not gzip data ({exc})"
-                             ) from None
-        size += len(part)
-        if size > limit or d.unconsumed_tail:
-            raise InputError(413, f"body over {limit} bytes once decompressed "
-                                  "(HELIOTWIN_MAX_UPLOAD_BYTES): split the batch")
-        if not d.eof:
-            raise InputError(400, "Content-Encoding gzip: the gzip stream is truncated")
-        out.append(part)
-        data = d.unused_data
+        feed = _FEED_FIRST
+        while not d.eof:
+            if pos >= len(view):
+                raise InputError(400, "Content-Encoding gzip: the gzip stream is truncated")
+            piece = view[pos:pos + feed]
+            feed = min(2 * feed, _FEED_MAX)
+            try:
+                part = d.decompress(piece, limit + 1 - size)
+            except zlib.error as exc:
+                raise InputError(400, f"Content-Encoding gzip: the body is not gzip data "
+                                      f"({exc})") from None
+            size += len(part)
+            if size > limit:  # also when zlib stopped at max_length with input left
+                raise InputError(413, f"body over {limit} bytes once decompressed "
+                                      "(HELIOTWIN_MAX_UPLOAD_BYTES): split the batch")
+            out.append(part)
+            pos += len(piece) - len(d.unused_data) - len(d.unconsumed_tail)
     return b"".join(out)
 
 
@@ -102,11 +131,13 @@ async def read_body(request: Request, limit: int) -> bytes:
     return await _decoded(body, encoding, limit)
 
 
-def _answer(status: int, detail: Any) -> tuple[Message, Message]:
+def _answer(status: int, detail: Any, headers: dict[str, str] | None = None
+            ) -> tuple[Message, Message]:
     body = orjson.dumps({"detail": detail})
+    extra = [(k.lower().encode(), v.encode()) for k, v in (headers or {}).items()]
     return ({"type": "http.response.start", "status": status,
              "headers": [(b"content-type", b"application/json"),
-                         (b"content-length", str(len(body)).encode())]},
+                         (b"content-length", str(len(body)).encode()), *extra]},
             {"type": "http.response.body", "body": body})
 
 
@@ -137,6 +168,13 @@ class StrictBodies:
         if encoding in (b"", b"identity") and not check_json:
             await self.app(scope, receive, send)
             return
+        if encoding == b"gzip" and _needs_token(scope):
+            try:  # the cheap check first: no anonymous caller makes us decompress
+                await authenticated_first(scope["app"].state.ctx, _header(scope, b"authorization"))
+            except HTTPException as exc:
+                for message in _answer(exc.status_code, exc.detail, exc.headers):
+                    await send(message)
+                return
         try:
             body = await self._checked(scope, receive, encoding, check_json)
         except InputError as exc:
@@ -200,6 +238,34 @@ class StrictBodies:
             for path, key in repeated_keys(doc):
                 raise _Repeated(path, key)
         return body
+
+
+def _header(scope: Scope, name: bytes) -> str | None:
+    for k, v in scope["headers"]:
+        if k == name:
+            return v.decode("latin-1")  # type: ignore[no-any-return]
+    return None
+
+
+_REQUIRED = [{"bearerAuth": []}]  # the OpenAPI security of an operation that needs a token
+
+
+def _needs_token(scope: Scope) -> bool:
+    """Whether the operation this request reaches needs a token: its OpenAPI ``security``
+    says so (``backend.api.security.declare_bearer``: one that answers 401 and does not
+    declare the token optional)."""
+    method = scope["method"].lower()
+    matching = [(template.count("{"), ops)
+                for template, ops in scope["app"].openapi().get("paths", {}).items()
+                if _compiled(template).match(scope["path"]) and method in ops]
+    fewest = min((n for n, _ in matching), default=0)
+    return any(n == fewest and ops[method].get("security") == _REQUIRED
+               for n, ops in matching)
+
+
+@functools.lru_cache(maxsize=512)
+def _compiled(template: str) -> re.Pattern[str]:
+    return compile_path(template)[0]
 
 
 class _Repeated(Exception):

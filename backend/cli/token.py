@@ -1,11 +1,16 @@
 """``heliotwin token create|list|revoke``: the write tokens of a site's field loggers.
 
-- ``create --site ID [--label TEXT] [--expires-in-days N | --expires ISO]`` prints the
-  new token once, alone on the last line; only its SHA-256 is stored.
-- ``list [--site ID] [--json]`` shows every token's id, site, prefix, label, times and
-  status (``active``, ``expired``, ``revoked``) — never the token.
+- ``create --site ID [--scope ingest|site] [--label TEXT] [--expires-in-days N |
+  --expires ISO]`` prints the new token once, alone on the last line; only its SHA-256
+  is stored. ``ingest`` (default): a field device, writes readings only; ``site``: also
+  edits the site, its calibrations and the shared 3D replay (``backend/auth.py``).
+- ``list [--site ID] [--json]`` shows every token's id, site, scope, prefix, label,
+  times and status (``active``, ``expired``, ``revoked``) — never the token.
 - ``revoke TOKEN_OR_ID`` revokes by the id ``list`` shows or by the token itself; a
   running service refuses it within ``HELIOTWIN_TOKEN_CACHE_TTL_S`` (≤ 1 s).
+
+Each command is one ``BEGIN IMMEDIATE`` transaction on SQLite, retried while the
+database stays locked (see :func:`_with_db`), so it works while loggers write.
 """
 
 from __future__ import annotations
@@ -26,6 +31,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     c = sub.add_parser("create", help="make a new write token for a site (printed once)")
     c.add_argument("--site", required=True, help="site id, e.g. tehuantepec")
     c.add_argument("--label", default="", help="a note to recognise the token by")
+    c.add_argument("--scope", default="ingest", metavar="ingest|site",
+                   help="ingest: a field device, writes readings only (default); site: "
+                        "also edits the site, its calibrations and the shared 3D replay")
     exp = c.add_mutually_exclusive_group()
     exp.add_argument("--expires-in-days", type=float, metavar="DAYS",
                      help="refused after this many days (default: never expires)")
@@ -56,35 +64,66 @@ def _expiry(args: argparse.Namespace) -> dt.datetime | None:
     return None
 
 
-def _with_db(work: Callable[[Any], Any]) -> Any:
-    """Migrate if needed, load the built-in sites, run ``work(conn)`` in one transaction."""
+def _locked(exc: BaseException) -> bool:
+    """SQLite's "database is locked"/"busy": another writer held the lock past the timeout."""
+    from sqlalchemy.exc import OperationalError
+
+    return isinstance(exc, OperationalError) and any(
+        w in str(exc.orig) for w in ("locked", "busy"))
+
+
+def _with_db(work: Callable[[Any], Any], site_id: str | None = None) -> Any:
+    """Migrate if needed, run ``work(conn)`` in one write transaction, retried while locked.
+
+    On SQLite the transaction is ``BEGIN IMMEDIATE``: it takes the write lock first (and
+    waits for it, ``busy_timeout``), where a deferred one that reads and then writes fails
+    at once with "database is locked" when a logger committed in between. ``sites`` is not
+    rewritten: only a ``site_id`` missing from the database is added from its file (a
+    token needs its site's row). Still locked after the timeout: retried 4 times with
+    backoff (:mod:`backend.retry`), then the error.
+    """
+    from sqlalchemy import select
+    from tenacity import Retrying, retry_if_exception, stop_after_attempt
+
+    from backend.retry import backoff
     from backend.settings import get_settings
     from backend.sites import Registry, sync_sites
     from backend.storage.engine import make_engine, run_migrations
+    from backend.storage.tables import SiteRow
 
     settings = get_settings()
     engine = make_engine(settings)
+
+    def attempt() -> Any:
+        with engine.connect().execution_options(sqlite_immediate=True) as conn, conn.begin():
+            if site_id is not None and conn.execute(
+                    select(SiteRow.site_id).where(SiteRow.site_id == site_id)).first() is None:
+                info = Registry.load_files(settings.sites.user_dir).get(site_id)
+                if info is not None:
+                    sync_sites(conn, [info.site])
+            return work(conn)
+
     try:
         run_migrations(engine)
-        registry = Registry.load_files(settings.sites.user_dir)
-        with engine.begin() as conn:
-            sync_sites(conn, [info.site for info in registry.sites.values()])
-            return work(conn)
+        return Retrying(stop=stop_after_attempt(5), wait=backoff(0.5, 4.0),
+                        retry=retry_if_exception(_locked), reraise=True)(attempt)
     finally:
         engine.dispose()
 
 
 def create(args: argparse.Namespace) -> int:
     """Store and print a new token."""
-    from backend.auth import UnknownSite, create_token
+    from backend.auth import UnknownSite, check_scope, create_token
 
     try:
+        check_scope(args.scope)
         expires = _expiry(args)
-        token = _with_db(lambda conn: create_token(conn, args.site, args.label, expires))
+        token = _with_db(lambda conn: create_token(conn, args.site, args.label, expires,
+                                                   args.scope), args.site)
     except (UnknownSite, ValueError) as exc:
         fail(str(exc))
     until = "" if expires is None else f", valid until {expires.isoformat()}"
-    print(f"write token for site {args.site} (shown once{until}; send it as "
+    print(f"{args.scope} token for site {args.site} (shown once{until}; send it as "
           "'Authorization: Bearer <token>'):")
     print(token)
     return 0
@@ -98,7 +137,8 @@ def list_(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(rows, indent=2))
         return 0
-    cols = ("id", "site_id", "token_prefix", "status", "created_at", "expires_at", "label")
+    cols = ("id", "site_id", "scope", "token_prefix", "status", "created_at", "expires_at",
+            "label")
     table = [[str(r[c] if r[c] is not None else "-") for c in cols] for r in rows]
     widths = [max([len(c), *(len(row[i]) for row in table)]) for i, c in enumerate(cols)]
     for row in [list(cols), *table]:

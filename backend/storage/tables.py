@@ -99,6 +99,8 @@ class LoggerToken(Base):
     token_sha256: Mapped[str] = mapped_column(String(64), unique=True)
     token_prefix: Mapped[str] = mapped_column(String(12))
     label: Mapped[str] = mapped_column(String(200), default="")
+    #: ``ingest`` (write readings) or ``site`` (also edit the site): ``backend/auth.py``.
+    scope: Mapped[str] = mapped_column(String(16), default="ingest", server_default="ingest")
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     #: Refused from this instant on (None: never expires).
     expires_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True),

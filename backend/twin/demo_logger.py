@@ -9,7 +9,8 @@ generator seeded by the day, so re-sending a minute sends the same values and
 the service counts it as a duplicate.
 
 ``heliotwin demo-logger`` runs it in the foreground; ``heliotwin serve`` runs it
-on a thread (with a token it makes for itself) unless ``--no-demo``.
+on a thread (with ``HELIOTWIN_DEMO_TOKEN``, or a token it makes for itself by
+:func:`demo_token`, which replaces the one of the previous start) unless ``--no-demo``.
 """
 
 from __future__ import annotations
@@ -22,8 +23,10 @@ from typing import Any
 import httpx
 import numpy as np
 import pandas as pd
+from sqlalchemy import Connection, delete
 from tenacity import Retrying, retry_if_exception_type, stop_after_attempt
 
+from backend.auth import create_token
 from backend.retry import Stopped, backoff, stoppable_sleep
 from sim.sites import Site
 from sim.twin import simulate
@@ -40,6 +43,22 @@ class _Retryable(Exception):
 logging.getLogger("httpx").setLevel(logging.WARNING)  # one line per post is noise
 
 BATCH = 1000
+#: The label of the token ``heliotwin serve`` makes for its demo logger.
+DEMO_TOKEN_LABEL = "demo-logger (heliotwin serve)"
+
+
+def demo_token(conn: Connection, site_id: str) -> str:
+    """A new ``ingest`` token for the demo logger of ``site_id``, replacing those earlier
+    starts made (their rows are deleted): one demo token is active, however many restarts.
+
+    The database keeps only hashes, so the previous token cannot be read back and
+    reused; set ``HELIOTWIN_DEMO_TOKEN`` to keep one token across restarts.
+    """
+    from backend.storage.tables import LoggerToken
+
+    conn.execute(delete(LoggerToken).where(LoggerToken.site_id == site_id,
+                                           LoggerToken.label == DEMO_TOKEN_LABEL))
+    return create_token(conn, site_id, DEMO_TOKEN_LABEL)
 
 
 def cloud_factor(day_number: int, minutes: np.ndarray, seed: int = 0) -> np.ndarray:

@@ -2,8 +2,9 @@
 
 ``PUT /api/v1/sites/{site_id}`` creates or edits a site from a config of
 ``docs/site.schema.json`` (``GET /api/v1/sites/schema.json``): it needs that
-site's write token, or the admin token (``HELIOTWIN_ADMIN_TOKEN``) — a new site
-has no write token yet, so only the admin can create one.
+site's ``site``-scope token, or the admin token (``HELIOTWIN_ADMIN_TOKEN``) — a
+new site has no token yet, so only the admin can create one. A field logger's
+``ingest`` token writes readings only: it gets a 403 naming its scope here.
 """
 
 from __future__ import annotations
@@ -14,14 +15,14 @@ import time
 from typing import Annotated, Any
 
 import anyio
-from fastapi import APIRouter, Body, Header, HTTPException
+from fastapi import APIRouter, Body, Depends, Header, HTTPException
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict, Field
 
 from backend.api.deps import (
     ContextDep,
-    SiteTokenDep,
-    check_site_token,
+    SiteAdminDep,
+    check_site_admin,
     is_admin_token,
     parse_bearer,
     site_or_404,
@@ -108,19 +109,18 @@ def get_site_config(site_id: str, ctx: ContextDep) -> JSONResponse:
     return JSONResponse(site_or_404(ctx, site_id).site.to_config())
 
 
-async def _check_site_writer(ctx: Any, site_id: str, authorization: str | None) -> str:
-    """``"admin"`` for the admin token, else the site's write token is required."""
-    token = parse_bearer(authorization)
-    if is_admin_token(ctx.settings, token):
-        return "admin"
-    if ctx.registry.get(site_id) is None:
+async def site_writer(site_id: str, ctx: ContextDep,
+                      authorization: Annotated[str | None, Header()] = None) -> str:
+    """``"admin"`` for the admin token, else a ``site``-scope token of the site."""
+    if ctx.registry.get(site_id) is None and not is_admin_token(
+            ctx.settings, token := parse_bearer(authorization)):
         if token is None:
             raise HTTPException(401, "creating a site needs the admin token "
                                      "(HELIOTWIN_ADMIN_TOKEN): send 'Authorization: Bearer "
                                      "<token>'", headers={"WWW-Authenticate": "Bearer"})
         raise HTTPException(403, f"site {site_id!r} does not exist: only the admin token "
                                  "(HELIOTWIN_ADMIN_TOKEN) can create a site")
-    return await check_site_token(ctx, site_id, authorization)
+    return await check_site_admin(ctx, site_id, authorization, f"editing site {site_id!r}")
 
 
 @router.put("/{site_id}", response_model=SiteWrittenRead,
@@ -129,13 +129,12 @@ async def _check_site_writer(ctx: Any, site_id: str, authorization: str | None) 
 async def put_site(site_id: str, ctx: ContextDep,
                    config: Annotated[dict[str, Any], Body(description=(
                        "a site config, docs/site.schema.json"))],
-                   authorization: Annotated[str | None, Header()] = None) -> JSONResponse:
-    """Create or edit a site (site write token, or the admin token for a new site).
+                   who: Annotated[str, Depends(site_writer)]) -> JSONResponse:
+    """Create or edit a site (a ``site``-scope token, or the admin token for a new site).
 
     The config is validated (422 names the field), written to ``HELIOTWIN_SITES_DIR``,
     and the twin series cached for the site are dropped, to be simulated again.
     """
-    who = await _check_site_writer(ctx, site_id, authorization)
     info, created, dropped = await anyio.to_thread.run_sync(save_site, ctx, site_id, config)
     body = {**_site_dict(info, ctx), "created": created, "twin_readings_dropped": dropped,
             "written_by": who}
@@ -156,8 +155,8 @@ def get_calibration(site_id: str, array: str, ctx: ContextDep) -> CalibrationRea
 @router.put("/{site_id}/arrays/{array}/calibration", response_model=CalibrationRead,
             responses={400: {}, 401: {}, 403: {}, 404: {}})
 async def put_calibration(site_id: str, array: str, body: CalibrationModel, ctx: ContextDep,
-                          _token_site: SiteTokenDep) -> CalibrationRead:
-    """Store the calibration of an array's logger (needs the site's write token)."""
+                          _who: SiteAdminDep) -> CalibrationRead:
+    """Store the calibration of an array's logger (a ``site``-scope token or the admin's)."""
     info = site_or_404(ctx, site_id)
     if array not in info.arrays:
         raise HTTPException(404, f"unknown array {array!r}; this site has "

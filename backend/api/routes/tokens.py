@@ -3,15 +3,16 @@
 The same operations as ``heliotwin token create|list|revoke`` (``backend/auth.py``),
 authenticated by ``Authorization: Bearer <admin token>`` where the admin token is
 the setting ``HELIOTWIN_ADMIN_TOKEN`` (unset: these endpoints answer 403). A
-site write token is not an admin token. A revocation here is refused by this
-service at once (its cache forgets the token); writes go through the writer.
+site's token (scope ``ingest`` or ``site``) is not an admin token. A revocation
+here is refused by this service at once (its cache forgets the token); writes go
+through the writer.
 """
 
 from __future__ import annotations
 
 import asyncio
 import datetime as dt
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import anyio
 import orjson
@@ -20,7 +21,12 @@ from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field
 from sqlalchemy import Connection
 
-from backend.api.deps import ContextDep, is_admin_token, parse_bearer, site_or_404
+from backend.api.deps import (
+    ContextDep,
+    is_admin_token,
+    parse_bearer,
+    site_or_404,
+)
 from backend.api.schemas.tokens import TokenCreatedRead, TokenRead, TokensRead
 from backend.auth import UnknownToken, create_token, find_token, list_tokens, revoke_token
 from backend.timestamps import TimestampError, parse_instant
@@ -58,6 +64,9 @@ class TokenCreate(BaseModel):
 
     site_id: str = Field(..., min_length=1, max_length=64, examples=["tehuantepec"])
     label: str = Field("", max_length=200, description="a note to recognise the token by")
+    scope: Literal["ingest", "site"] = Field(
+        "ingest", description="ingest: a field device, writes readings only; site: also "
+                              "edits the site, its calibrations and the shared 3D replay")
     expires_in_days: float | None = Field(None, gt=0, le=36_600,
                                           description="refused after this many days [d]")
     expires_at: str | None = Field(None, description="refused from this instant (ISO 8601 "
@@ -99,7 +108,7 @@ async def post_token(body: TokenCreate, ctx: ContextDep, _admin: AdminDep) -> Re
             raise HTTPException(422, f"expires_at: {body.expires_at} is in the past")
 
     def make(conn: Connection) -> dict[str, Any]:
-        token = create_token(conn, body.site_id, body.label, expires)
+        token = create_token(conn, body.site_id, body.label, expires, body.scope)
         return {**find_token(conn, token)[0].to_dict(), "token": token}
 
     return _json(await asyncio.wrap_future(ctx.writer.call(make)), 201)

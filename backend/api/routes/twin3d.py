@@ -6,7 +6,10 @@ tracker as a finished run did (its actual joint angles on its disturbed
 pedestal, with a translucent ghost of the ideal pose where they differ) in the
 viewers of one dashboard tab — the ``viewer`` key the dashboard puts in the
 viser page's URL — or, without a key, in every viewer of the run's site that
-has no replay of its own; ``DELETE /replay`` takes it back to live.
+has no replay of its own; ``DELETE /replay`` takes it back to live. A tab's own
+viewer key changes that tab alone, so it needs no token; the shared replay (no
+key) changes what every viewer of the site sees, so setting or clearing it needs
+a ``site``-scope token of the run's site, or the admin token.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, HTTPException, Query, Request
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.api.deps import ContextDep
+from backend.api.deps import CallerDep, ContextDep, authorize
 from backend.api.schemas.twin3d import ReplayClearedRead, ReplayRead, ViewersRead
 from backend.twin.scenario import disturbances_of
 from backend.twin.scene_pose import Replay
@@ -61,14 +64,24 @@ def viewers(request: Request) -> dict[str, Any]:
     return {"viser_port": scene.port, "default_site": scene.site.site_id, "viewers": rows}
 
 
-@router.put("/replay", response_model=ReplayRead, responses={404: {}, 409: {}, 422: {}, 503: {}})
-def put_replay(body: ReplayRequest, request: Request, ctx: ContextDep) -> dict[str, Any]:
-    """Show a finished simulation run in the 3D twin (its first instant)."""
+#: a token only for the shared replay (no viewer key)
+_OPTIONAL_TOKEN: dict[str, Any] = {"security": [{}, {"bearerAuth": []}]}
+
+
+@router.put("/replay", response_model=ReplayRead, openapi_extra=_OPTIONAL_TOKEN,
+            responses={401: {}, 403: {}, 404: {}, 409: {}, 422: {}, 503: {}})
+def put_replay(body: ReplayRequest, request: Request, ctx: ContextDep,
+               caller: CallerDep) -> dict[str, Any]:
+    """Show a finished simulation run in the 3D twin (its first instant): in one viewer,
+    or (a ``site`` token of the run's site, or the admin token) in all of the site's."""
     scene = _scene(request)
     state = ctx.simulations.get(body.run_id)
     if state is None:
         raise HTTPException(404, f"run_id: unknown simulation run {body.run_id!r}")
     viewer = body.viewer or ""
+    if not viewer:
+        authorize(caller, state.site_id, "site", "the shared replay (every viewer of site "
+                                                 f"{state.site_id!r}); give a viewer key")
     other = sorted({v.site.site_id for v in scene.site_views(viewer or None)} - {state.site_id})
     if viewer and other:
         raise HTTPException(422, f"viewer: the viewer shows site {other[0]!r}; run "
@@ -88,10 +101,18 @@ def put_replay(body: ReplayRequest, request: Request, ctx: ContextDep) -> dict[s
             "pointing_error_mrad": poses[0].pointing_error_mrad if poses else None}
 
 
-@router.delete("/replay", response_model=ReplayClearedRead, responses={422: {}, 503: {}})
-def delete_replay(request: Request, viewer: Annotated[str | None, Query(
+@router.delete("/replay", response_model=ReplayClearedRead, openapi_extra=_OPTIONAL_TOKEN,
+               responses={401: {}, 403: {}, 422: {}, 503: {}})
+def delete_replay(request: Request, caller: CallerDep, viewer: Annotated[str | None, Query(
         pattern=VIEWER_PATTERN, description="the viewer key; omitted: the shared replay")]
         = None) -> dict[str, Any]:
-    """Back to live ideal tracking."""
-    _scene(request).clear_replay(viewer or "")
+    """Back to live ideal tracking: one viewer, or (a ``site`` token of a site whose
+    viewers show it, or the admin token) the shared replay."""
+    scene = _scene(request)
+    if not viewer:
+        shared = scene.replays.get("")
+        if shared is not None:  # clearing nothing changes nothing: no token needed
+            authorize(caller, shared.site_id, "site",
+                      f"clearing the shared replay of site {shared.site_id!r}")
+    scene.clear_replay(viewer or "")
     return {"replay": None}

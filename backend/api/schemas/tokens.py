@@ -14,6 +14,9 @@ class TokenRead(BaseModel):
     site_id: str
     token_prefix: str
     label: str
+    scope: Literal["ingest", "site"] = Field(
+        description="ingest: writes readings only; site: also edits the site, its "
+                    "calibrations and the shared 3D replay")
     created_at: str = Field(description="UTC, ISO 8601")
     expires_at: str | None
     revoked_at: str | None
