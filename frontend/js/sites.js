@@ -123,6 +123,10 @@ export function init(state) {
   $("site-new").addEventListener("click", newSite);
   for (const [id] of FIELDS) $(id).addEventListener("input", formToJson);
   $("site-json").addEventListener("change", jsonToForm);
+  // which token scope edits a site (backend/auth.py): a logger's "ingest" token is refused
+  $("site-token").placeholder = "site-scope or admin token";
+  $("site-token").title = "A 'site'-scope token of this site (heliotwin token create --site ID --scope site) "
+    + "or the admin token (HELIOTWIN_ADMIN_TOKEN). A field logger's 'ingest' token writes readings only.";
   loadSelected();
 }
 
