@@ -15,7 +15,9 @@ model choices the twin uses and names units:
 - weather: TMY3 files through ``pvlib.iotools.read_tmy3``, EPW files through
   ``pvlib.iotools.read_epw``; a typical year is mapped onto any run's years by
   :func:`typical_year_on` (calendar hour of the station's standard time, wrapped
-  at the year's ends).
+  at the year's ends); :func:`typical_year_at_site` moves a distant station's sky to the
+  site (Perez et al. 1990 kt′ at the same solar time, Erbs et al. 1982 decomposition), and
+  :func:`limit_to_extraterrestrial` keeps any weather within the top of the atmosphere.
 """
 
 from __future__ import annotations
@@ -385,3 +387,122 @@ def typical_year_on(weather: pd.DataFrame, utc_offset_h: float, start: pd.Timest
     rows = weather.to_numpy(float)[_calendar_hour(local)]
     index = (local - zone).tz_localize("UTC")
     return pd.DataFrame(rows, index=index, columns=weather.columns)
+
+
+#: Two places whose verticals are at most this far apart [°] (great-circle angle; ≈ 111 km)
+#: see the sun within this angle of each other at every instant: a station this close is the
+#: site, and its measured hours are used as they are (:func:`typical_year_at_site`).
+SAME_SKY_DEG = 1.0
+#: The station's clearness is read only from hours with its sun at least this high [°]:
+#: below it an hourly mean over a rising or setting sun makes the ratio meaningless.
+TRANSFER_MIN_ELEVATION_DEG = 5.0
+
+
+def kt_prime_factor(airmass_relative: np.ndarray) -> np.ndarray:
+    """kt / kt′ [-]: Perez et al. (1990, doi:10.1016/0038-092X(90)90036-C), eq. 1,
+    1.031 exp(−1.4 / (0.9 + 9.4 / AM)) + 0.1 — the factor by which
+    ``pvlib.irradiance.clearness_index_zenith_independent`` divides the clearness index."""
+    am = np.asarray(airmass_relative, dtype=float)
+    return 1.031 * np.exp(-1.4 / (0.9 + 9.4 / am)) + 0.1
+
+
+def limit_to_extraterrestrial(ghi: np.ndarray, dni: np.ndarray, dhi: np.ndarray,
+                              apparent_zenith: np.ndarray, dni_extra: np.ndarray
+                              ) -> dict[str, np.ndarray]:
+    """GHI, DNI, DHI [W m⁻²] within what the top of the atmosphere allows at that sun position.
+
+    No horizontal irradiance can exceed the extraterrestrial horizontal irradiance
+    ``E₀ cos θz`` (clearness index ≤ 1, Duffie & Beckman, *Solar Engineering of Thermal
+    Processes*, 4th ed., eq. 2.9.3): GHI and DHI are capped there, and the beam takes at most
+    what the diffuse leaves of it, ``DNI cos θz ≤ E₀ cos θz − DHI`` (so ``DNI ≤ E₀``). Data
+    within these limits are returned unchanged — at its own station a TMY is touched only in
+    hours whose mean is laid onto a sun a degree or two above the horizon; an hour measured
+    under a high sun and laid onto a sun on the horizon (a distant station) loses its beam.
+    With the sun below the horizon all three are 0.
+    """
+    cos_z = np.maximum(np.cos(np.radians(np.asarray(apparent_zenith, dtype=float))), 0.0)
+    e0 = np.asarray(dni_extra, dtype=float)
+    top = e0 * cos_z
+    ghi = np.minimum(np.asarray(ghi, dtype=float), top)
+    dhi = np.minimum(np.asarray(dhi, dtype=float), top)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        beam_max = np.where(cos_z > 0, np.maximum(e0 - dhi / cos_z, 0.0), 0.0)
+    dni = np.minimum(np.asarray(dni, dtype=float), beam_max)
+    return {"ghi": ghi, "dni": dni, "dhi": dhi}
+
+
+def _nearest_valid(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """``values`` with each invalid entry replaced by its nearest valid neighbour in order."""
+    good = np.flatnonzero(valid)
+    k = np.arange(len(values))
+    right = np.searchsorted(good, k).clip(0, len(good) - 1)
+    left = (right - 1).clip(0, len(good) - 1)
+    pick = np.where(np.abs(good[left] - k) <= np.abs(good[right] - k), good[left], good[right])
+    return np.where(valid, values, values[pick])
+
+
+def typical_year_at_site(weather: pd.DataFrame, utc_offset_h: float, start: pd.Timestamp,
+                         end: pd.Timestamp, station_location: tuple[float, float, float],
+                         site_location: tuple[float, float, float]) -> pd.DataFrame:
+    """A typical year on the run ``[start, end)`` at a site, from a station anywhere.
+
+    Within :data:`SAME_SKY_DEG` of the site the station's hours are the site's
+    (:func:`typical_year_on`, unchanged). Farther away its GHI, DNI and DHI belong to another
+    sun and cannot be carried (a beam measured with the sun at 10° laid onto a sun at 1° gave
+    2,300 W m⁻² on a tracker): only the state of the sky is moved, as the zenith-independent
+    clearness index kt′ of Perez et al. (1990, doi:10.1016/0038-092X(90)90036-C, eq. 1), at
+    the same mean solar time (the station's hour whose sun stands where the site's does in
+    its day: shifted by the longitude difference / 15° h⁻¹). At the site kt′ gives back kt
+    at the site's air mass, GHI = kt · E₀ · cos θz, and the Erbs et al. (1982,
+    doi:10.1016/0038-092X(82)90302-4, eq. 1) decomposition (``pvlib.irradiance.erbs``) splits
+    it into DNI and DHI. Station hours with its sun below :data:`TRANSFER_MIN_ELEVATION_DEG`
+    take kt′ of the nearest hour that has it (a site whose day is longer than the station's).
+    The station's air temperature and wind belong to its climate, not the site's: they are
+    left out, so the twin takes the site's own (``Site.temp_air``, ``Site.wind_speed``).
+
+    Parameters
+    ----------
+    weather, utc_offset_h, start, end
+        As :func:`typical_year_on` (the typical year, its station's UTC offset [h], the run).
+    station_location, site_location : tuple
+        (latitude [°], longitude [°], altitude [m]).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Hourly rows covering the run (UTC index): the columns of ``weather`` at the station;
+        ``ghi``, ``dni``, ``dhi`` [W m⁻²] only, moved, elsewhere.
+    """
+    from pvlib import irradiance
+
+    from sim import sun
+    from vision.sphere import angular_separation_deg
+
+    s_lat, s_lon, s_alt = (float(v) for v in station_location)
+    lat, lon, alt = (float(v) for v in site_location)
+    if float(angular_separation_deg(s_lon, s_lat, lon, lat)) <= SAME_SKY_DEG:
+        return typical_year_on(weather, utc_offset_h, start, end)
+    shift_h = ((lon - s_lon + 180.0) % 360.0 - 180.0) / 15.0
+    on = typical_year_on(weather, utc_offset_h + shift_h, start, end)
+    at_station = on.index + pd.Timedelta(hours=shift_h)
+    pos = sun.solar_position(at_station, s_lat, s_lon, s_alt)
+    kt = irradiance.clearness_index(on["ghi"].to_numpy(), pos["zenith"].to_numpy(),
+                                    extra_radiation(at_station), max_clearness_index=1.0)
+    am = airmass(pos["apparent_zenith"].to_numpy(), s_alt)[0]
+    valid = pos["apparent_elevation"].to_numpy() >= TRANSFER_MIN_ELEVATION_DEG
+    if not valid.any():
+        raise ValueError(f"the station's sun stays below {TRANSFER_MIN_ELEVATION_DEG}° over "
+                         f"the run: its sky cannot be moved to the site")
+    with np.errstate(invalid="ignore"):
+        kt_prime = np.where(valid, np.asarray(kt) / kt_prime_factor(am), 0.0)
+    kt_prime = _nearest_valid(kt_prime, valid)
+    here = sun.solar_position(on.index, lat, lon, alt)
+    zenith = here["zenith"].to_numpy()
+    up = here["apparent_elevation"].to_numpy() > 0
+    am_here = np.nan_to_num(airmass(here["apparent_zenith"].to_numpy(), alt)[0], nan=40.0)
+    kt_here = np.minimum(kt_prime * kt_prime_factor(am_here), 1.0)
+    ghi = np.where(up, kt_here * extra_radiation(on.index) * np.maximum(np.cos(np.radians(
+        zenith)), 0.0), 0.0)
+    split = irradiance.erbs(ghi, zenith, on.index)
+    return pd.DataFrame({"ghi": ghi, "dni": np.asarray(split["dni"], dtype=float),
+                         "dhi": np.asarray(split["dhi"], dtype=float)}, index=on.index)

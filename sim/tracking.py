@@ -153,18 +153,23 @@ class LoopState:
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
     frames: int = 0
     frames_found: int = 0
+    #: the end of the slew from stow to the sun after the last wake-up [s since the run's start]
+    wake_until_s: float = -math.inf
 
 
 @dataclass
 class LoopResult:
     """Per-sample arrays of one chunk [°]: commands, true output-side joint angles (base
-    frame), the true panel normal (ENU); and the moves started in the chunk."""
+    frame), the true panel normal (ENU); the moves started in the chunk; and ``tracking``,
+    whether the tracker is tracking at the sample: the controller not stowed and its slew
+    from stow to the sun after waking over."""
 
     azimuth_command_deg: NDArray[np.float64]
     elevation_command_deg: NDArray[np.float64]
     azimuth_joint_deg: NDArray[np.float64]
     elevation_joint_deg: NDArray[np.float64]
     moves: list[Move]
+    tracking: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 def _detector(name: str):  # type: ignore[no-untyped-def]
@@ -230,6 +235,7 @@ def run_loop(
     inertia = controller.site.inertia
     n_samples = (n + sample_every - 1) // sample_every
     out = {k: np.empty(n_samples) for k in ("az_cmd", "el_cmd", "az", "el")}
+    tracking = np.zeros(n_samples, dtype=bool)  # False through the skipped nights
     moves: list[Move] = []
     night = np.asarray(controller.eph["night"], dtype=bool)
     # index of the next daylight tick from each tick (n when none): skips whole nights
@@ -290,6 +296,7 @@ def run_loop(
             k = i // sample_every
             out["az"][k], out["el"][k] = output(t, i)
             out["az_cmd"][k], out["el_cmd"][k] = controller.command_deg
+            tracking[k] = not controller.stowed and t >= state.wake_until_s
         enc = enc_rate * t
         r_az = (ax_az.position(t) if az_moving else ax_az.motor) + enc
         r_el = (ax_el.position(t) if el_moving else ax_el.motor) + enc
@@ -297,6 +304,7 @@ def run_loop(
         if detect is not None and not night_list[i] and t - state.last_frame_s >= interval - 1e-6:
             state.last_frame_s = t
             meas = _frame(output(t, i), sun_list[i], d, camera, cam, detect, state, t)
+        was_stowed = controller.stowed
         c_az, c_el = controller.command(i, Reading(t, r_az, r_el, az_moving, el_moving), meas)
         delta = c_az - r_az
         if not az_moving and abs(delta) > 1e-9 and math.isfinite(delta):
@@ -306,8 +314,10 @@ def run_loop(
         if not el_moving and abs(delta) > 1e-9 and math.isfinite(delta):
             moves.append(Move(1, t, delta, ax_el.motor, ax_el.motor, gust_list[i][1]))
             ax_el.start(t, delta)
+        if was_stowed and not controller.stowed:  # waking: tracking once the slew is over
+            state.wake_until_s = max(ax_az.t_end, ax_el.t_end)
         i += 1
-    res = LoopResult(out["az_cmd"], out["el_cmd"], out["az"], out["el"], moves)
+    res = LoopResult(out["az_cmd"], out["el_cmd"], out["az"], out["el"], moves, tracking)
     return res, state
 
 

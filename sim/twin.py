@@ -14,10 +14,13 @@ Controllers other than ``"ideal"`` (:mod:`sim.control`) run in
 step or 60 s otherwise): their joint commands go through the motors'
 profiles and the disturbances (:mod:`sim.disturbances`), and the tracker's
 power comes from the *actual* panel normal. The pointing error is the angle
-between that normal and the apparent sun; the pointing loss is the energy an
-ideal tracker makes minus the actual one (same PV model), or, with
-``receiver="cpv"``, a concentrator that converts only the beam inside its
-acceptance angle.
+between that normal and the apparent sun, defined only while the tracker means
+to track (the controller is not stowed) and the sun stands above
+:data:`POINTING_MIN_ELEVATION_DEG`; elsewhere the series holds NaN and the
+statistics leave the step out (a stowed panel is not "pointing" at a sun on the
+horizon). The pointing loss is the energy an ideal tracker makes minus the
+actual one (same PV model), or, with ``receiver="cpv"``, a concentrator that
+converts only the beam inside its acceptance angle.
 
 Speed: the sun is computed once for both arrays; the irradiance and electrics
 only for steps with the sun above the horizon; the single-diode model goes
@@ -59,7 +62,13 @@ from sim.tracking import (
 )
 from vision.sphere import angular_separation_deg, enu_from_sky, sky_from_enu
 
-__all__ = ["CONTROLLERS", "RECEIVERS", "SERIES_COLUMNS", "TwinResult", "simulate"]
+__all__ = ["CONTROLLERS", "POINTING_MIN_ELEVATION_DEG", "RECEIVERS", "SERIES_COLUMNS",
+           "TwinResult", "simulate"]
+
+#: The pointing error is stated only with the sun above this apparent elevation [°]: below it
+#: refraction and the horizon make the sun's place uncertain by tenths of a degree, the
+#: camera loops have no usable disc, and a tracker's energy is negligible.
+POINTING_MIN_ELEVATION_DEG = 5.0
 
 RECEIVERS = ("flat", "cpv")
 """Receivers: flat PV modules, or a concentrator (beam inside the acceptance angle only)."""
@@ -95,7 +104,9 @@ class TwinResult:
 
     ``series`` is indexed by UTC time with :data:`SERIES_COLUMNS` (angles [°],
     irradiance [W m⁻²], temperature [°C], current [A], voltage [V], power [W]);
-    night rows are present with zero power.
+    night rows are present with zero power; ``pointing_error_mrad`` is NaN where the
+    pointing error is not defined (stowed, or the sun below
+    :data:`POINTING_MIN_ELEVATION_DEG`).
     """
 
     site: Site
@@ -119,6 +130,9 @@ class TwinResult:
     normal_azimuth: np.ndarray = field(default_factory=lambda: np.zeros(0))
     normal_elevation: np.ndarray = field(default_factory=lambda: np.zeros(0))
     fixed_shade_loss_wh: float | None = None
+    #: the ideal tracker's plane-of-array irradiance per step [W m⁻²] (the beam for CPV):
+    #: the weight of the energy-weighted pointing error
+    ideal_poa_global: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def energy_wh(self, array: str) -> float:
         """Energy of ``array`` (``"tracker"``/``"fixed"``) over the run [Wh]."""
@@ -183,15 +197,30 @@ class TwinResult:
         return out
 
     def _pointing_summary(self, tracker_wh: float, fixed_wh: float) -> dict[str, Any]:
-        """Pointing statistics (IEC 62817-style, over the daylight steps), actuators, losses."""
+        """Pointing statistics, actuators, losses.
+
+        The pointing statistics cover the steps where the series states a pointing error
+        (the tracker meant to track, the sun above :data:`POINTING_MIN_ELEVATION_DEG`):
+        ``pointing_error_minutes`` says how long that is. Beside the plain RMS,
+        ``pointing_error_energy_weighted_rms_mrad`` weights each step by the ideal
+        tracker's plane-of-array irradiance (the beam for CPV) — the error when there is
+        energy to lose counts, the error at a dim low sun barely.
+        """
         s = self.series
         day = s["apparent_elevation"].to_numpy() > 0
-        err = s["pointing_error_mrad"].to_numpy()[day]
+        err_all = s["pointing_error_mrad"].to_numpy()
+        on = np.isfinite(err_all)
+        err = err_all[on]
         az_err, el_err = _error_components_mrad(s, self.normal_azimuth, self.normal_elevation)
-        az_err, el_err = az_err[day], el_err[day]
+        az_err, el_err = az_err[on], el_err[on]
+        weight = self.ideal_poa_global[on] if len(self.ideal_poa_global) == len(s) else (
+            np.zeros(0))
 
         def rms(x: np.ndarray) -> float | None:
             return float(np.sqrt(np.mean(x**2))) if x.size else None
+
+        weighted = (float(np.sqrt(np.sum(weight * err**2) / np.sum(weight)))
+                    if weight.size and np.sum(weight) > 0 else None)
 
         actuator_wh = self.actuator_move_energy_wh + self.actuator_standby_energy_wh
         ideal_wh = tracker_wh if self.ideal_tracker_energy_wh is None else (
@@ -204,6 +233,9 @@ class TwinResult:
             "pointing_error_rms_mrad": rms(err),
             "pointing_error_p95_mrad": float(np.percentile(err, 95)) if err.size else None,
             "pointing_error_max_mrad": float(err.max()) if err.size else None,
+            "pointing_error_energy_weighted_rms_mrad": weighted,
+            "pointing_error_minutes": int(round(err.size * self.step_s / 60.0)),
+            "pointing_min_elevation_deg": POINTING_MIN_ELEVATION_DEG,
             "azimuth_error_rms_mrad": rms(az_err),
             "elevation_error_rms_mrad": rms(el_err),
             "moves": int(self.moves),
@@ -376,6 +408,7 @@ def _arrays_step(
     want_ideal = pose is not None or receiver == "cpv"
     if want_ideal:
         out["ideal_tracker_power_w"] = np.zeros(n)
+        out["ideal_tracker_poa_global"] = np.zeros(n)
     if layout is not None:
         out["fixed_shaded_fraction"], out["fixed_shade_loss_w"] = np.zeros(n), np.zeros(n)
 
@@ -395,8 +428,10 @@ def _arrays_step(
             d_times, app_zen[day], site.latitude, site.longitude, site.altitude
         )
     else:
-        irr = {k: weather[k][day] for k in ("ghi", "dni", "dhi")}
-        irr["dni_extra"] = sky.extra_radiation(d_times)
+        dni_extra = sky.extra_radiation(d_times)
+        irr = sky.limit_to_extraterrestrial(weather["ghi"][day], weather["dni"][day],
+                                            weather["dhi"][day], app_zen[day], dni_extra)
+        irr["dni_extra"] = dni_extra
         irr["airmass_relative"] = np.asarray(
             atmosphere.get_relative_airmass(app_zen[day], "kastenyoung1989"), dtype=float
         )
@@ -445,6 +480,7 @@ def _arrays_step(
             unshaded_w = None
         if name == "ideal_tracker":
             out["ideal_tracker_power_w"][day] = mpp["power_w"]
+            out["ideal_tracker_poa_global"][day] = poa_global
             continue
         out[f"{name}_poa_global"][day] = poa_global
         out[f"{name}_temp_cell"][day] = t_cell
@@ -570,7 +606,8 @@ def simulate(
     # one (column, step) block, filled chunk by chunk and handed to pandas without a copy
     block = np.empty((len(SERIES_COLUMNS), len(times)))
     extra = {k: np.zeros(len(times)) for k in ("ideal_tracker_power_w", "normal_azimuth",
-                                              "normal_elevation")}
+                                              "normal_elevation", "ideal_tracker_poa_global")}
+    tracking = np.zeros(len(times), dtype=bool)
     if layout is not None:
         extra.update({k: np.zeros(len(times)) for k in ("fixed_shaded_fraction",
                                                       "fixed_shade_loss_w")})
@@ -607,9 +644,12 @@ def simulate(
         if ctl is not None:
             part["azimuth_command_deg"] = res.azimuth_command_deg
             part["elevation_command_deg"] = res.elevation_command_deg
+            tracking[i0 : i0 + len(chunk)] = res.tracking
         else:
             part["azimuth_command_deg"] = part["azimuth_joint_deg"]
             part["elevation_command_deg"] = part["elevation_joint_deg"]
+            # the ideal tracker tracks whenever the sun is up and lies flat otherwise
+            tracking[i0 : i0 + len(chunk)] = part["apparent_elevation"] > 0
         for k, c in enumerate(SERIES_COLUMNS):
             block[k, i0 : i0 + len(chunk)] = part[c]
         for name, arr in extra.items():
@@ -618,6 +658,8 @@ def simulate(
         if progress is not None:
             progress(min(1.0, (i0 + len(chunk)) / len(times)))
     series = pd.DataFrame(block.T, index=times, columns=SERIES_COLUMNS, copy=False)
+    pointing = tracking & (series["apparent_elevation"].to_numpy() > POINTING_MIN_ELEVATION_DEG)
+    series.loc[~pointing, "pointing_error_mrad"] = np.nan
     shade_loss_wh = None
     if layout is not None:
         series["fixed_shaded_fraction"] = extra["fixed_shaded_fraction"]
@@ -653,6 +695,8 @@ def simulate(
         normal_azimuth=extra["normal_azimuth"],
         normal_elevation=extra["normal_elevation"],
         fixed_shade_loss_wh=shade_loss_wh,
+        ideal_poa_global=(extra["ideal_tracker_poa_global"] if ideal_wh is not None
+                          else series["tracker_poa_global"].to_numpy()),
     )
 
 

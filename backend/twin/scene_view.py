@@ -280,7 +280,10 @@ class TwinView:
             r = self.replay
             az_joint = float(r.azimuth_joint_deg[row])
             el_joint = float(r.elevation_joint_deg[row])
-            error_mrad, run_id, base = float(r.pointing_error_mrad[row]), r.run_id, r.base_rotation
+            stated, run_id, base = float(r.pointing_error_mrad[row]), r.run_id, r.base_rotation
+            # defined only while tracking with the sun up (sim.twin): NaN or a stowed night
+            # step (a run stored before that rule) is no pointing error at all
+            error_mrad = stated if np.isfinite(stated) and sun_el > 0.0 else None
         normal = base @ forward_kinematics(az_joint, el_joint, site.tracker)
         sun_vec = enu_from_sky(sun_az, sun_el)
         fixed = fixed_of(site)
@@ -502,8 +505,9 @@ class TwinView:
                 lines.append("*Arrays placed by the site config; the twin's fixed power "
                              "includes this shade.*")
         if p.replay_run_id is not None:
-            lines += ["", f"Run {p.replay_run_id[:8]}: pointing error "
-                          f"{p.pointing_error_mrad:.1f} mrad"
+            shown = ("—" if p.pointing_error_mrad is None else
+                     f"{p.pointing_error_mrad:.1f} mrad")
+            lines += ["", f"Run {p.replay_run_id[:8]}: pointing error {shown}"
                       + (" (ideal pose shown translucent)" if p.ghost_visible else "")]
         if error:
             lines.append(f"\n**{error}**")

@@ -5,20 +5,27 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pvlib
 import pytest
 from pvlib import location
 
+from sim import sun
+from sim.sites import load_site
 from sim.sky import (
     angle_of_incidence,
     clearsky_ineichen,
     effective_irradiance,
+    extra_radiation,
     iam_physical,
+    limit_to_extraterrestrial,
     poa_irradiance,
     pvlib_tmy3_path,
     read_tmy3,
     read_typical_year,
+    typical_year_at_site,
     typical_year_on,
 )
+from sim.twin import simulate
 
 LAT, LON, ALT = 16.28875, -95.240871, 50.0
 
@@ -172,3 +179,84 @@ def test_cached_linke_turbidity_is_pvlibs() -> None:
     for lat, lon in [(16.29, -95.24), (38.3, -5.3), (-36.85, 174.76), (69.6, 18.9)]:
         want = pvlib.clearsky.lookup_linke_turbidity(times, lat, lon).to_numpy()
         assert np.array_equal(linke_turbidity(times, lat, lon), want)
+
+
+# -- a station's sky on another site (issue 22.1) -------------------------------------------
+
+GREENSBORO = (36.1, -79.95, 273.0)  # 723170TYA's header: latitude, longitude, elevation
+
+
+def test_the_top_of_the_atmosphere_limits_any_weather() -> None:
+    """GHI and DHI at most E0 cos(zenith), the beam at most what the diffuse leaves of it;
+    data inside the limits pass unchanged (Duffie & Beckman eq. 2.9.3, clearness ≤ 1)."""
+    e0 = np.full(4, 1400.0)
+    zen = np.array([30.0, 89.0, 89.0, 95.0])
+    top = 1400.0 * np.cos(np.radians(89.0))  # 24.4 W m-2
+    ghi, dni, dhi = np.array([800.0, 120.0, 20.0, 5.0]), np.array([800.0, 500.0, 150.0, 1.0]), \
+        np.array([107.0, 100.0, 10.0, 5.0])
+    out = limit_to_extraterrestrial(ghi, dni, dhi, zen, e0)
+    assert out["ghi"][0] == 800.0 and out["dni"][0] == 800.0 and out["dhi"][0] == 107.0
+    assert out["ghi"][1] == pytest.approx(top) and out["dhi"][1] == pytest.approx(top)
+    assert out["dni"][1] == 0.0  # the diffuse already fills the top of the atmosphere
+    # 10 W m-2 diffuse leaves (24.4 - 10) / cos(89°) = 826 W m-2 for the beam: 150 passes
+    assert out["dni"][2] == 150.0 and out["ghi"][2] == 20.0
+    assert all(out[k][3] == 0.0 for k in ("ghi", "dni", "dhi"))  # the sun below the horizon
+
+
+def test_a_station_at_the_site_keeps_its_hours() -> None:
+    """Within 1° (great circle) the typical year is laid on as it is."""
+    tmy, st = read_typical_year(pvlib_tmy3_path())
+    start, end = pd.Timestamp("2024-04-15", tz="UTC"), pd.Timestamp("2024-04-18", tz="UTC")
+    near = (st["latitude"] + 0.5, st["longitude"] - 0.5, 300.0)
+    same = typical_year_at_site(tmy, -5.0, start, end, GREENSBORO, near)
+    pd.testing.assert_frame_equal(same, typical_year_on(tmy, -5.0, start, end))
+
+
+def test_a_distant_station_lends_its_clearness_at_the_same_solar_time() -> None:
+    """Greensboro's sky moved 20° of longitude west on its own latitude: at the same mean
+    solar time the sun stands (almost) where it stood at the station, so the moved GHI is
+    the station's measured GHI, and DNI/DHI are pvlib's Erbs split of that GHI at the
+    station's sun (computed here from pvlib directly)."""
+    tmy, st = read_typical_year(pvlib_tmy3_path())
+    start, end = pd.Timestamp("2024-04-01", tz="UTC"), pd.Timestamp("2024-04-15", tz="UTC")
+    west = (GREENSBORO[0], GREENSBORO[1] - 20.0, GREENSBORO[2])
+    moved = typical_year_at_site(tmy, -5.0, start, end, GREENSBORO, west)
+    shift = pd.Timedelta(hours=20.0 / 15.0)  # the station's clock runs 1 h 20 min ahead
+    measured = typical_year_on(tmy, -5.0, start - 2 * shift, end)
+    at_station = moved.index - shift
+    station_ghi = np.interp(at_station.as_unit("s").asi8, measured.index.as_unit("s").asi8,
+                            measured["ghi"].to_numpy())
+    pos = sun.solar_position(at_station, *GREENSBORO)
+    high = pos["apparent_elevation"].to_numpy() > 10
+    assert high.sum() > 100
+    # measured: GHI within 0.12 % or 0.29 W m-2 (the sun's declination and the equation of
+    # time change a little over 1 h 20 min), DNI within 0.36 W m-2
+    np.testing.assert_allclose(moved["ghi"].to_numpy()[high], station_ghi[high], rtol=3e-3,
+                               atol=0.5)
+    ref = pvlib.irradiance.erbs(station_ghi, pos["zenith"].to_numpy(), at_station)
+    np.testing.assert_allclose(moved["dni"].to_numpy()[high], ref["dni"].to_numpy()[high],
+                               rtol=3e-3, atol=1.0)
+    assert list(moved.columns) == ["ghi", "dni", "dhi"]  # the station's air is not the site's
+
+
+def test_a_distant_station_gives_no_impossible_irradiance() -> None:
+    """Issue 22.1: Greensboro's year on Tehuantepec (2,672 km) put 2,300 W m-2 on the tracker
+    at sunrise. Whether the hours are carried (a caller's weather) or moved
+    (:func:`typical_year_at_site`), the plane of array stays below 1.1 x the extraterrestrial
+    normal irradiance, and the moved sky keeps its clearness (Greensboro's April, not a
+    clear sky)."""
+    site = load_site("tehuantepec")
+    tmy, st = read_typical_year(pvlib_tmy3_path())
+    start = pd.Timestamp("2024-04-15", tz=site.timezone)
+    end = start + pd.Timedelta(days=3)
+    here = (site.latitude, site.longitude, site.altitude)
+    carried = typical_year_on(tmy, -5.0, start, end)
+    moved = typical_year_at_site(tmy, -5.0, start, end, GREENSBORO, here)
+    clear = simulate(site, start, end).summary()["tracker_energy_wh"]
+    for weather in (carried, moved):
+        run = simulate(site, start, end, weather=weather)
+        ratio = run.series["tracker_poa_global"] / extra_radiation(run.series.index)
+        # measured: carried 0.80 (above 1.1 each day before the limit), moved 0.80; the
+        # energy 94 % and 88 % of the clear-sky days'
+        assert ratio.max() < 0.85
+        assert 0.8 * clear < run.summary()["tracker_energy_wh"] < clear
