@@ -30,7 +30,7 @@ from sim.energy import energy_per_period_wh, gain_pct, sampled_energy_wh
 from sim.plant.electrical import beam_factors
 from sim.plant.fields import horizon_elevation
 from sim.plant.layout import Plant
-from sim.plant.shading import BinTable, plant_shade
+from sim.plant.shading import BinTable, PlantShade, plant_shade
 from sim.plant.strategies import orientations
 from sim.sky import clearsky_ineichen, iam_physical, poa_irradiance
 from sim.sun import solar_position
@@ -129,6 +129,23 @@ def sky_conditions(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame 
     return sky
 
 
+def field_shade(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: FloatArray,
+                band_edges: Any = (), table: BinTable | None = None
+                ) -> tuple[PlantShade, NDArray[np.bool_]]:
+    """Every collector's shade (:func:`sim.plant.shading.plant_shade`), and the steps where
+    the plant's sloped ground hides the sun (:func:`sim.plant.fields.horizon_elevation`):
+    there every collector's fraction is 1."""
+    c = plant.collector
+    shade = plant_shade(plant.positions, sky["solar_azimuth"], sky["apparent_elevation"],
+                        saz, sel, c.width, c.height, band_edges, table)
+    behind = np.zeros(len(saz), dtype=bool)
+    if plant.slope_tilt > 0:                # the ground beyond the plant hides the sun
+        behind = sky["apparent_elevation"] <= horizon_elevation(
+            sky["solar_azimuth"], plant.slope_azimuth, plant.slope_tilt)
+        shade.fraction[behind] = 1.0
+    return shade, behind
+
+
 def _power(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: FloatArray,
            table: BinTable | None = None, tracker: int | None = None) -> dict[str, Any]:
     """Shade, POA and DC power of every collector for one orientation series (and of
@@ -137,15 +154,10 @@ def _power(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: Float
     from pvlib.temperature import sapm_cell
 
     c = plant.collector
-    shade = plant_shade(plant.positions, sky["solar_azimuth"], sky["apparent_elevation"],
-                        saz, sel, c.width, c.height, c.string_boundaries(), table)
+    shade, behind = field_shade(plant, sky, saz, sel, c.string_boundaries(), table)
     f_area, f_elec = beam_factors(shade, c)
-    if plant.slope_tilt > 0:                # the ground beyond the plant hides the sun
-        behind = sky["apparent_elevation"] <= horizon_elevation(
-            sky["solar_azimuth"], plant.slope_azimuth, plant.slope_tilt)
-        shade.fraction[behind] = 1.0
-        f_area[behind] = 0.0
-        f_elec[behind] = 0.0
+    f_area[behind] = 0.0
+    f_elec[behind] = 0.0
     poa = poa_irradiance(90.0 - sel, saz, sky["apparent_zenith"], sky["solar_azimuth"],
                          sky["dni"], sky["ghi"], sky["dhi"], sky["dni_extra"],
                          sky["airmass_relative"], albedo=plant.albedo, model="perez")
@@ -394,5 +406,6 @@ def compare_strategies(plant: Plant, start: pd.Timestamp, end: pd.Timestamp,
     return out
 
 
-__all__ = ["CLOUDY_KT", "PlantResult", "compare_strategies", "simulate_plant", "sky_conditions",
+__all__ = ["CLOUDY_KT", "PlantResult", "compare_strategies", "field_shade", "simulate_plant",
+           "sky_conditions",
            "weather_for_plant"]

@@ -188,5 +188,35 @@ def run_case(spec: SweepSpec, case: SweepCase, sky: dict[str, FloatArray],
     }
 
 
+def case_day_shade(spec: SweepSpec, case: SweepCase, date: str, step_s: float = 900.0
+                   ) -> dict[str, Any]:
+    """A case's field through one clear-sky day (local date in ``spec.timezone``): every
+    collector's shaded fraction at each daylight step under the case's strategy, the
+    interior collector's, and the pivots (east, north) [m] to draw it."""
+    from sim.plant.simulate import field_shade
+    from sim.plant.strategies import orientations
+
+    plant, interior, _ = case_plant(spec, case)
+    day0 = pd.Timestamp(date).tz_localize(spec.timezone)
+    times = pd.date_range(day0.tz_convert("UTC"), (day0 + pd.Timedelta(days=1)).tz_convert("UTC"),
+                          freq=pd.Timedelta(seconds=step_s), inclusive="left")
+    sky = sky_conditions(plant, times)
+    up = np.nonzero(sky["apparent_elevation"] > 0)[0]
+    dsky = {k: v[up] for k, v in sky.items()}
+    saz, sel = orientations(case.strategy, plant, dsky)
+    shade, _ = field_shade(plant, dsky, saz, sel)
+    frac = shade.fraction
+    return {"layout": case.layout, "gcr": case.gcr, "strategy": case.strategy, "date": date,
+            "step_s": step_s, "interior_index": interior,
+            "positions_m": [[round(float(x), 3), round(float(y), 3)]
+                            for x, y in plant.positions[:, :2]],
+            "times": [ts.isoformat() for ts in times[up]],
+            "sun_azimuth_deg": [float(a) for a in dsky["solar_azimuth"]],
+            "sun_elevation_deg": [float(e) for e in dsky["apparent_elevation"]],
+            "interior_shaded_fraction": [round(float(f), 5) for f in frac[:, interior]],
+            "field_mean_shaded_fraction": [round(float(f), 5) for f in frac.mean(axis=1)],
+            "shaded_fraction": [[round(float(f), 4) for f in row] for row in frac]}
+
+
 __all__ = ["PLANT_LAYOUT", "SweepCase", "SweepSpec", "case_layout", "case_plant", "case_sky",
-           "run_case", "site_plant"]
+           "case_day_shade", "run_case", "site_plant"]

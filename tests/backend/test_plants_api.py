@@ -181,3 +181,75 @@ def test_cli_simulate_and_list() -> None:
     assert bad.returncode == 2 and "--start" in bad.stderr
     assert _cli("simulate", "--plant", "x", "--start", "2021-12-21", "--end",
                 "2021-12-22").returncode == 2
+
+
+SWEEP = {"collector_m": "12x5", "latitude_deg": 38.299224, "longitude_deg": -5.303114,
+         "layouts": ["square"], "gcr": [0.3], "strategies": ["sun"],
+         "start": "2021-12-20", "end": "2021-12-22", "step_s": 1800}
+
+
+def _poll(client: httpx.Client, location: str) -> dict:
+    import time
+
+    for _ in range(600):                       # a bound on the polls, not a timing check
+        run = client.get(location).json()
+        if run["status"] in ("done", "failed"):
+            return run
+        time.sleep(0.1)
+    raise AssertionError(f"sweep still {run['status']}")
+
+
+def test_sweep_is_queued_polled_and_shows_a_day(client: httpx.Client) -> None:
+    """A one-case sweep (run in the service's process, no cluster): 202 with a Location,
+    polled to done; its row is the CLI's; the case's day of shade has the interior
+    collector as twoaxistracking shades it."""
+    r = client.post("/api/v1/plants/sweeps", json=SWEEP)
+    assert r.status_code == 202, r.text
+    acc = r.json()
+    assert acc["cases"] == 1 and acc["status"] == "queued"
+    run = _poll(client, r.headers["location"])
+    assert run["status"] == "done", run
+    assert run["progress"] == 1.0 and run["params"]["gcr"] == [0.3]
+    res = run["result"]
+    assert res["engine"] == "in-process" and res["sky_computations"] == 1
+    (row,) = res["rows"]
+    assert row["layout"] == "square" and row["land_m2_per_collector"] == pytest.approx(200.0)
+    assert 0 < row["field_beam_shaded_pct"] < row["interior_beam_shaded_pct"] < 100
+    day = client.get(f"/api/v1/plants/sweeps/{acc['sweep_id']}/shade",
+                     params={"layout": "square", "gcr": 0.3, "date": "2021-12-21"})
+    assert day.status_code == 200, day.text
+    d = day.json()
+    from shapely import geometry
+    from twoaxistracking import TrackerField
+
+    tf = TrackerField(geometry.box(-6, -2.5, 6, 2.5), geometry.box(-6, -2.5, 6, 2.5), 2, 0.3,
+                      "square")
+    ref = tf.get_shaded_fraction(np.asarray(d["sun_elevation_deg"]),
+                                 np.asarray(d["sun_azimuth_deg"]))
+    np.testing.assert_allclose(d["interior_shaded_fraction"], ref, atol=1e-5)  # 5 decimals
+    assert max(d["interior_shaded_fraction"]) > 0.5          # morning and evening shade
+    assert len(d["positions_m"]) == 25 and len(d["shaded_fraction"][0]) == 25
+
+
+@pytest.mark.parametrize(("change", "status", "message"), [
+    ({"gcr": [0.5]}, 422, "gcr: square at GCR 0.5"),
+    ({"layouts": ["triangle"]}, 422, "layouts: must be one or more of"),
+    ({"strategies": ["moon"]}, 422, "strategies: must be one or more of"),
+    ({"collector_m": None}, 422, "collector_m: give the collector size"),
+    ({"start": "2021-12-20T00:00:00"}, 422, "start"),
+    ({"plant_id": "nowhere"}, 404, "nowhere"),
+    ({"end": "2023-12-20", "step_s": 60}, 422, "without a write token"),
+])
+def test_sweep_refusals_name_the_field(client: httpx.Client, change: dict, status: int,
+                                       message: str) -> None:
+    r = client.post("/api/v1/plants/sweeps", json={**SWEEP, **change})
+    assert r.status_code == status, r.text
+    assert message in r.json()["detail"]
+
+
+def test_sweep_with_a_bad_token_is_401_and_unknown_sweep_404(client: httpx.Client) -> None:
+    r = client.post("/api/v1/plants/sweeps", json=SWEEP,
+                    headers={"Authorization": "Bearer not-a-token"})
+    assert r.status_code == 401
+    assert client.get("/api/v1/plants/sweeps/nope").status_code == 404
+    assert client.delete("/api/v1/plants/sweeps/nope").status_code == 404

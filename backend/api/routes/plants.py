@@ -12,9 +12,12 @@ import datetime as dt
 from typing import Annotated, Any
 
 import anyio
+import orjson
+import pandas as pd
 from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from fastapi.responses import Response
 
+from backend.api.deps import ContextDep, bearer_token, token_site
 from backend.api.schemas.common import PNG_CONTENT
 from backend.api.schemas.plants import (
     PlantDayRead,
@@ -22,9 +25,23 @@ from backend.api.schemas.plants import (
     PlantSummaryRead,
     PositionsRead,
     SkyMapRead,
+    SweepAcceptedRead,
+    SweepCreate,
+    SweepRunRead,
+    SweepShadeRead,
 )
+from backend.limits import Busy
 from backend.plants import STRATEGIES, PlantService, UnknownPlantError, sky_map_png
-from backend.timestamps import FIRST_YEAR, LAST_YEAR, TimestampError, parse_instant
+from backend.plants.sweep import SweepInputError, parse_size, prepare_sweep
+from backend.plants.sweep_runner import SweepRunner, SweepState
+from backend.timestamps import (
+    FIRST_YEAR,
+    LAST_YEAR,
+    TimestampError,
+    parse_day_or_instant,
+    parse_instant,
+)
+from sim.plant.sweep import PLANT_LAYOUT, SweepCase, case_day_shade
 
 router = APIRouter(prefix="/api/v1/plants", tags=["plants"])
 
@@ -64,6 +81,132 @@ def _strategy(strategy: str) -> str:
         raise HTTPException(422, f"strategy: must be one of {', '.join(STRATEGIES)}, "
                                  f"got {strategy!r}")
     return strategy
+
+
+def get_sweep_runner(request: Request) -> SweepRunner:
+    """The app's :class:`SweepRunner`, made on first use from ``Settings.plants``."""
+    runner = getattr(request.app.state, "sweeps", None)
+    if runner is None:
+        settings = request.app.state.ctx.settings.plants
+        runner = SweepRunner(settings.dask_scheduler, settings.sweep_queue)
+        request.app.state.sweeps = runner
+    return runner  # type: ignore[no-any-return]
+
+
+SweepRunnerDep = Annotated[SweepRunner, Depends(get_sweep_runner)]
+
+
+def _sweep_inputs(body: SweepCreate, service: PlantService) -> tuple[Any, list[Any]]:
+    """The checked spec and cases of a sweep request; 404/422 naming the field."""
+    plant = None
+    if body.plant_id is not None:
+        _plant_or_404(service, body.plant_id)
+        plant = service.get(body.plant_id)
+    zone = plant.timezone if plant is not None else "UTC"
+    try:
+        start = pd.Timestamp(parse_day_or_instant(body.start, zone, "start"))
+        end = pd.Timestamp(parse_day_or_instant(body.end, zone, "end"))
+        rows, columns = (int(v) for v in body.field_size.split("x"))
+        custom = (None if body.aspect_ratio is None or body.offset is None
+                  or body.rotation_deg is None
+                  else (body.aspect_ratio, body.offset, body.rotation_deg))
+        return prepare_sweep(
+            layouts=body.layouts, gcr=body.gcr, strategies=body.strategies, start=start,
+            end=end, step_s=body.step_s, latitude_deg=body.latitude_deg,
+            longitude_deg=body.longitude_deg, altitude_m=body.altitude_m,
+            collector_m=None if body.collector_m is None
+            else parse_size(body.collector_m, "collector_m"),
+            plant=plant, field_size=(rows, columns), custom=custom,
+            slope_azimuth_deg=body.slope_azimuth_deg, slope_tilt_deg=body.slope_tilt_deg)
+    except TimestampError as exc:
+        raise HTTPException(422, str(exc)) from None
+    except SweepInputError as exc:
+        field = {"lat": "latitude_deg", "lon": "longitude_deg", "field": "field_size",
+                 "strategy": "strategies"}.get(exc.field, exc.field)
+        raise HTTPException(422, f"{field}: {exc.problem}") from None
+
+
+@router.post("/sweeps", status_code=202, response_model=SweepAcceptedRead,
+             responses={401: {}, 404: {}, 422: {}, 429: {}, 503: {}},
+             openapi_extra={"security": [{}, {"bearerAuth": []}]})
+async def create_sweep(body: SweepCreate, request: Request, ctx: ContextDep,
+                       service: PlantServiceDep, runner: SweepRunnerDep) -> Response:
+    """Queue a plant-design sweep (layouts × GCRs × strategies, each case a Dask task);
+    202 with the ``sweep_id`` to poll. Without a write token a sweep may hold at most
+    ``HELIOTWIN_PLANTS_ANONYMOUS_SWEEP_CASE_STEPS`` cases × steps (422 beyond), spent from
+    the address's anonymous simulation allowance (429 when spent); one sweep runs at a time
+    (503 past the queue)."""
+    spec, cases = await anyio.to_thread.run_sync(_sweep_inputs, body, service)
+    case_steps = len(cases) * (spec.end - spec.start).total_seconds() / spec.step_s
+    token = bearer_token(request)
+    if token is not None and await token_site(request, token) is None:
+        raise HTTPException(401, "unknown, expired or revoked write token",
+                            headers={"WWW-Authenticate": "Bearer"})
+    try:
+        if token is None:
+            bound = ctx.settings.plants.anonymous_sweep_case_steps
+            if case_steps > bound:
+                raise HTTPException(422, f"step_s: {len(cases)} cases × "
+                                         f"{case_steps / len(cases):.0f} steps is more than "
+                                         f"{bound:,} without a write token: use a larger "
+                                         "step_s, a shorter range or fewer cases")
+            ctx.limits.simulation_steps.take(request.client.host if request.client else "?",
+                                             case_steps)
+        state = runner.submit(spec, cases, body.model_dump())
+    except Busy as exc:
+        raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
+    state.spec = spec
+    return Response(orjson.dumps({"sweep_id": state.sweep_id, "status": state.status,
+                                  "progress": 0.0, "cases": state.total}),
+                    status_code=202, media_type="application/json",
+                    headers={"Location": f"/api/v1/plants/sweeps/{state.sweep_id}"})
+
+
+def _sweep_or_404(runner: SweepRunner, sweep_id: str) -> SweepState:
+    state = runner.get(sweep_id)
+    if state is None:
+        raise HTTPException(404, f"unknown sweep {sweep_id!r}")
+    return state
+
+
+@router.get("/sweeps/{sweep_id}", response_model=SweepRunRead, responses={404: {}})
+def get_sweep(sweep_id: str, runner: SweepRunnerDep) -> dict[str, Any]:
+    """A sweep's status, progress (cases done over cases) and, when done, its rows."""
+    return _sweep_or_404(runner, sweep_id).to_dict()
+
+
+@router.delete("/sweeps/{sweep_id}", response_model=SweepRunRead, responses={404: {}})
+def cancel_sweep(sweep_id: str, runner: SweepRunnerDep) -> dict[str, Any]:
+    """Cancel a queued or running sweep (a running one stops after its current cases)."""
+    _sweep_or_404(runner, sweep_id)
+    state = runner.cancel(sweep_id)
+    assert state is not None
+    return state.to_dict()
+
+
+@router.get("/sweeps/{sweep_id}/shade", response_model=SweepShadeRead,
+            responses={404: {}, 422: {}})
+async def sweep_shade(sweep_id: str, runner: SweepRunnerDep,
+                      layout: Annotated[str, Query(max_length=100)],
+                      gcr: Annotated[float, Query(gt=0, lt=1)],
+                      strategy: Annotated[str, Query()] = "sun",
+                      date: Annotated[str, Query(pattern=r"^\d{4}-\d{2}-\d{2}$")] = "2021-12-21",
+                      step_s: Annotated[float, Query(ge=300, le=3600)] = 900) -> dict[str, Any]:
+    """One case of a sweep through a clear-sky day: every collector's shaded fraction."""
+    state = _sweep_or_404(runner, sweep_id)
+    spec = getattr(state, "spec", None)
+    if spec is None:
+        raise HTTPException(404, f"sweep {sweep_id!r} has no field to show")
+    try:
+        dt.date.fromisoformat(date)
+    except ValueError:
+        raise HTTPException(422, f"date: {date!r} is not a calendar date") from None
+    name = layout if spec.plant is None else PLANT_LAYOUT
+    case = SweepCase(name, gcr, _strategy(strategy))
+    try:
+        return await anyio.to_thread.run_sync(case_day_shade, spec, case, date, step_s)
+    except ValueError as exc:
+        raise HTTPException(422, f"layout/gcr: {exc}") from None
 
 
 @router.get("", response_model=list[PlantSummaryRead])

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from pydantic import BaseModel, Field
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field
 
 from backend.api.schemas.common import SunRead
 
@@ -132,3 +134,109 @@ class PlantDayRead(BaseModel):
     times: list[str] = Field(description="the daylight instants of `shaded_fraction`'s rows")
     shaded_fraction: list[list[float]] = Field(description="times × trackers [0, 1]")
     strategies: dict[str, StrategyEnergyRead]
+
+
+class SweepCreate(BaseModel):
+    """A plant-design sweep (issue 26): every layout × GCR × strategy, over a range.
+
+    A place and a collector (``latitude_deg``, ``longitude_deg``, ``collector_m``) for
+    regular fields, or ``plant_id`` for an existing plant scaled in spacing. ``start`` and
+    ``end``: a bare date is midnight UTC (the plant's zone with ``plant_id``).
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    layouts: list[str] = Field(["square"], min_length=1, max_length=5,
+                               description="square, diagonal, hexagonal_n_s, hexagonal_e_w, "
+                                           "custom (ignored with plant_id)")
+    gcr: list[float] = Field(min_length=1, max_length=40, description="ground cover ratios")
+    strategies: list[str] = Field(["sun"], min_length=1, max_length=3,
+                                  description="sun, backtrack, sky_scan")
+    collector_m: str | None = Field(None, pattern=r"^\d+(\.\d+)?x\d+(\.\d+)?$",
+                                    description="collector WIDTHxHEIGHT [m], e.g. 12x5")
+    latitude_deg: float | None = Field(None, ge=-90, le=90)
+    longitude_deg: float | None = Field(None, ge=-180, le=180)
+    altitude_m: float = Field(0.0, ge=-500, le=9000)
+    plant_id: str | None = Field(None, max_length=100)
+    field_size: str = Field("5x5", pattern=r"^\d{1,2}x\d{1,2}$",
+                            description="ROWSxCOLUMNS of the regular field")
+    aspect_ratio: float | None = Field(None, gt=0, le=10, description="layout custom")
+    offset: float | None = Field(None, ge=-0.5, lt=0.5, description="layout custom")
+    rotation_deg: float | None = Field(None, ge=0, lt=180, description="layout custom")
+    slope_azimuth_deg: float = Field(0.0, ge=0, lt=360)
+    slope_tilt_deg: float = Field(0.0, ge=0, lt=45)
+    start: str = Field(description="YYYY-MM-DD or ISO 8601 with offset")
+    end: str = Field(description="exclusive")
+    step_s: float = Field(3600.0, ge=60, le=86400)
+
+
+class SweepRowRead(BaseModel):
+    """One case of a sweep."""
+
+    layout: str
+    gcr: float
+    strategy: str
+    interior_beam_shaded_pct: float | None = Field(
+        description="interior collector: Σ shaded fraction × DNI / Σ DNI over daylight [%]")
+    field_beam_shaded_pct: float | None = Field(description="the same, field average [%]")
+    energy_kwh_per_collector: float = Field(description="field average, bypass-diode model")
+    interior_energy_kwh: float
+    energy_mwh_per_ha: float
+    land_m2_per_collector: float
+    collectors: int
+    shading_loss_electrical_pct: float | None
+
+
+class SweepResultRead(BaseModel):
+    """A finished sweep: where it ran and its rows (sorted by layout, strategy, GCR)."""
+
+    engine: str = Field(description="dask or in-process")
+    scheduler: str | None
+    workers: int
+    worker_processes: int
+    sky_computations: int = Field(description="the range's sky was computed this many times "
+                                              "(at most once per worker)")
+    cases: int
+    wall_s: float
+    compute_s: float
+    rows: list[SweepRowRead]
+
+
+class SweepAcceptedRead(BaseModel):
+    """A queued sweep: poll ``GET /api/v1/plants/sweeps/{sweep_id}``."""
+
+    sweep_id: str
+    status: str
+    progress: float = Field(description="0…1")
+    cases: int
+
+
+class SweepRunRead(BaseModel):
+    """A sweep's status, progress and, when done, its result."""
+
+    sweep_id: str
+    status: str = Field(description="queued, running, done or failed")
+    progress: float = Field(description="cases done / cases")
+    cases_done: int
+    cases: int
+    params: dict[str, Any]
+    result: SweepResultRead | None
+    error: str | None
+
+
+class SweepShadeRead(BaseModel):
+    """One case's field through a clear-sky day."""
+
+    layout: str
+    gcr: float
+    strategy: str
+    date: str
+    step_s: float
+    interior_index: int
+    positions_m: list[list[float]] = Field(description="pivots (east, north) [m]")
+    times: list[str] = Field(description="daylight steps, ISO 8601 UTC")
+    sun_azimuth_deg: list[float]
+    sun_elevation_deg: list[float] = Field(description="apparent (refracted)")
+    interior_shaded_fraction: list[float]
+    field_mean_shaded_fraction: list[float]
+    shaded_fraction: list[list[float]] = Field(description="times × collectors [0, 1]")
