@@ -18,7 +18,9 @@ Kinds:
 - ``fault`` (``fault_kind`` = the diagnosis' kind) — a fault of confidence ≥
   ``Settings.alerts.fault_confidence_min`` on the latest diagnosed day (yesterday, local);
   ``since``: the fault's first day (local midnight). Cleared when the latest day no
-  longer shows it.
+  longer shows it. This includes ``underperformance``: a day whose measured tracker
+  energy is below the lower edge of its expected band, with its size in Wh and %
+  (``data["shortfall_wh"]``), even when no multi-day signature names the cause.
 - ``low_performance_ratio`` — the tracker's performance ratio under the measured sky
   (``diagnosis``: measured / expected, ``sky.source`` ``sensor`` or ``fixed_array``) of the latest
   such day is below ``Settings.alerts.pr_below``; ``since``: the first day of the run of
@@ -45,6 +47,7 @@ FAULT_WORDS = {
     "module_loss": "module or string lost",
     "soiling": "soiling",
     "dropout": "logger dropout",
+    "underperformance": "underperformance (below the expected band)",
 }
 
 Key = tuple[str, str, str, str]
@@ -176,7 +179,9 @@ def diagnosed(site_id: str, zone: ZoneInfo, tracker: str, days: list[dict[str, A
                 f"diagnosis of {latest['date']})",
                 {"fault_kind": f["kind"], "confidence": f["confidence"],
                  "magnitude": f["magnitude"], "unit": f["unit"], "since_date": f["since"],
-                 "day": latest["date"]}, fault_kind=f["kind"]))
+                 "day": latest["date"],
+                 **({"shortfall_wh": f["shortfall_wh"]} if "shortfall_wh" in f else {})},
+                fault_kind=f["kind"]))
     judged = [d for d in days if d["sky"].get("source") in ("sensor", "fixed_array")
               and d["tracker"].get("performance_ratio") is not None]
     if judged:

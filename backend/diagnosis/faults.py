@@ -24,7 +24,11 @@ diffuse light and no shape fault can be told). Across days (:func:`faults_over_d
 a step in the healthy scale is a ``module_loss`` (largest two-sample t over all split
 days), a steady decline of it ``soiling`` (least-squares slope, %/day; whichever of step
 and hinge — flat, then a line from the day the decline starts — fits the daily scales
-better), daylight minutes without a reading are ``dropout``. pvanalytics is the
+better), daylight minutes without a reading are ``dropout`` (counted from the logger's
+first reading on: the days before its history have no data, not a dropout), and a day
+whose measured energy lies below the lower edge of its expected band (:func:`band_wh`) is
+an ``underperformance`` with its size (:func:`energy_features`), whether or not a
+multi-day signature names the cause. pvanalytics is the
 independent check, not a dependency of the service: its NREL day-profile tests
 (``features.orientation.tracking_nrel``/``fixed_nrel``) must agree with ``stuck`` on
 every day they classify (tests/backend/test_diagnosis_pvanalytics.py). Beyond them, the
@@ -40,6 +44,7 @@ import numpy as np
 import pandas as pd
 
 from sim import pv, sky
+from sim.energy import energy_wh
 from sim.sites import Site
 
 MIN_CLEARNESS = 0.55  # days clearer than this can show a shape fault [-]
@@ -52,6 +57,12 @@ SOILING_MIN_PCT_PER_DAY = 0.1  # slower declines are not named [% per day]
 SOILING_MIN_T = 3.0  # slope over its standard error (seeds 3–4: 3.4 and 5.2 at 0.5 %/day)
 SOILING_MIN_TOTAL = 0.02  # … and at least 2 % lost over the declining days
 DROPOUT_MIN = 30  # daylight minutes without a tracker reading that make a dropout day
+#: Relative widening of the expected band on each side: the POA inversion (temperature
+#: and wind unmeasured, 1 % logger noise) [-]
+INVERSION_UNCERTAINTY = 0.03
+#: A day is judged for underperformance when the tracker's readings cover at least this
+#: share of its expected energy (a dropout is its own finding)
+UNDER_MIN_COVERAGE = 0.5
 CARRY_DECAY = 0.8  # a shape fault's confidence on each following day that cannot show it
 CARRIED = " (carried over: today's sky cannot show it)"
 
@@ -86,27 +97,57 @@ def _power_at(site: Site, day: pd.DataFrame, tilt: np.ndarray, surf_az: np.ndarr
     return pv.array_mpp(e_eff, t_cell, arr)["power_w"].reshape(shape)
 
 
+def band_wh(expected_wh: float, expected_alt_wh: float) -> tuple[float, float]:
+    """The expected tracker energy's band [Wh]: the spread of the two decompositions of the
+    same sky (:func:`sim.sky_sensor.weather_aware_twin`'s ``tracker_power_w`` and
+    ``tracker_power_alt_w``) widened by :data:`INVERSION_UNCERTAINTY` on each side."""
+    return (min(expected_wh, expected_alt_wh) * (1.0 - INVERSION_UNCERTAINTY),
+            max(expected_wh, expected_alt_wh) * (1.0 + INVERSION_UNCERTAINTY))
+
+
+def energy_features(measured_wh: float, matched_wh: float, matched_alt_wh: float,
+                    expected_wh: float) -> dict[str, float] | None:
+    """The day's energy against its band, for ``underperformance`` (JSON-ready), or None
+    when the tracker's readings cover under :data:`UNDER_MIN_COVERAGE` of the expected
+    energy.
+
+    ``measured_wh``: the tracker's measured energy; ``matched_wh``/``matched_alt_wh``: the
+    two skies' expected energy over the minutes the readings cover (so a dropout does not
+    read as a loss); ``expected_wh``: the main sky's over the whole day [Wh]."""
+    if expected_wh <= 0 or matched_wh < UNDER_MIN_COVERAGE * expected_wh:
+        return None
+    low, _ = band_wh(matched_wh, matched_alt_wh)
+    return {"measured_wh": float(measured_wh), "expected_wh": float(matched_wh),
+            "low_wh": float(low)}
+
+
 def missing_daylight_min(day: pd.DataFrame, measured_w: np.ndarray,
-                         elapsed_min: int | None = None) -> int:
+                         elapsed_min: int | None = None, first_min: int = 0) -> int:
     """Minutes with the sun over 5° and no tracker reading; of a day not yet over, only
-    those of its first ``elapsed_min`` minutes (what is still to come is not missing)."""
+    those of its first ``elapsed_min`` minutes (what is still to come is not missing); of
+    the day the logger's history begins, only those from its minute ``first_min`` on (the
+    minutes before its first reading have no data, they are not a dropout)."""
     gap = (day["apparent_elevation"].to_numpy() > 5.0) & ~np.isfinite(measured_w)
     if elapsed_min is not None:
         gap[elapsed_min:] = False
+    gap[:max(first_min, 0)] = False
     return int(gap.sum())
 
 
-def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray) -> dict[str, Any]:
+def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
+                 first_min: int = 0) -> dict[str, Any]:
     """The fitted explanations of one day (see the module docstring), JSON-ready.
 
     ``day``: the day's rows of :func:`sim.sky_sensor.weather_aware_twin`;
-    ``measured_w``: the tracker's readings on the same minutes [W], NaN = none.
+    ``measured_w``: the tracker's readings on the same minutes [W], NaN = none;
+    ``first_min``: the day's minute of the logger's first reading ever (0: earlier).
     """
     use = day["valid"].to_numpy(bool) & np.isfinite(measured_w) & (
         day["apparent_elevation"].to_numpy() > 5.0)
     daylight = day["apparent_elevation"].to_numpy() > 5.0
     out: dict[str, Any] = {"minutes": int(use.sum()),
-                           "missing_daylight_min": missing_daylight_min(day, measured_w)}
+                           "missing_daylight_min": missing_daylight_min(day, measured_w,
+                                                                        first_min=first_min)}
     if use.sum() < 60:
         return out
     m = measured_w[use]
@@ -175,11 +216,29 @@ def features_by_day(site: Site, first_day: pd.Timestamp, e: pd.DataFrame,
     """``[{"date", "features"}]`` of consecutive days of 1440 minutes from ``first_day``
     (local midnight; ``e`` from :func:`sim.sky_sensor.weather_aware_twin` on the same
     minutes, ``tracker_power_w`` the readings [W]) — the input of :func:`faults_over_days`
-    for minute series that need no calendar (the service cuts local days by their edges)."""
-    return [{"date": (first_day + pd.Timedelta(days=k)).date().isoformat(),
-             "features": day_features(site, e.iloc[k * 1440:(k + 1) * 1440],
-                                      tracker_power_w[k * 1440:(k + 1) * 1440])}
-            for k in range(len(e) // 1440)]
+    for minute series that need no calendar (the service cuts local days by their edges).
+    Energies by :mod:`sim.energy`'s rule on the minutes, as the service's; the
+    underperformance is judged on days with a measured sky only."""
+    out = []
+    for k in range(len(e) // 1440):
+        sl = slice(k * 1440, (k + 1) * 1440)
+        day, m = e.iloc[sl], tracker_power_w[sl]
+        f = day_features(site, day, m)
+        if day["measured_sky"].to_numpy(bool).any() and np.isfinite(m).any():
+            ts = day.index.as_unit("s").asi8
+            cover = np.isfinite(m)
+
+            def wh(p: np.ndarray, ts: np.ndarray = ts) -> float:
+                return energy_wh(ts, p, 60.0, ts[0], ts[0] + 86400)
+
+            a, b = day["tracker_power_w"].to_numpy(), day["tracker_power_alt_w"].to_numpy()
+            energy = energy_features(wh(m), wh(np.where(cover, a, np.nan)),
+                                     wh(np.where(cover, b, np.nan)), wh(a))
+            if energy is not None:
+                f["energy"] = energy
+        out.append({"date": (first_day + pd.Timedelta(days=k)).date().isoformat(),
+                    "features": f})
+    return out
 
 
 def _shape_fault(f: dict[str, Any]) -> tuple[str, float] | None:
@@ -246,8 +305,35 @@ def faults_over_days(days: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
                            "magnitude": float(f["missing_daylight_min"]), "unit": "min",
                            "detail": f"{f['missing_daylight_min']} daylight minutes without a "
                                      "tracker reading"})
+    _underperformance(days, out)
     _module_loss(days, out)
     return out
+
+
+def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]]) -> None:
+    """``underperformance`` on each day whose measured energy is below its band's lower
+    edge (``features["energy"]``, :func:`energy_features`): magnitude the shortfall from
+    the expected energy [%], ``shortfall_wh`` in Wh; ``since`` the first day of its run of
+    such days; confidence 0.5 at the lower edge, rising to 1 one lower half-width of the
+    band (expected − lower edge) under it."""
+    since: str | None = None
+    for i, d in enumerate(days):
+        en = d["features"].get("energy")
+        if en is None or en["measured_wh"] >= en["low_wh"]:
+            since = None
+            continue
+        since = since or d["date"]
+        m, x, low = en["measured_wh"], en["expected_wh"], en["low_wh"]
+        short_wh = x - m
+        pct = 100.0 * short_wh / x
+        conf = float(np.clip(0.5 + 0.5 * (low - m) / max(x - low, 1e-9), 0.5, 1.0))
+        out[i].append({"kind": "underperformance", "confidence": round(conf, 3),
+                       "since": since, "magnitude": round(pct, 1), "unit": "%",
+                       "shortfall_wh": round(short_wh, 1),
+                       "detail": f"made {m / 1000:.2f} kWh, {short_wh / 1000:.2f} kWh "
+                                 f"({pct:.1f} %) less than the {x / 1000:.2f} kWh expected "
+                                 f"under the measured sky, below the band's lower edge "
+                                 f"{low / 1000:.2f} kWh"})
 
 
 def _module_loss(days: list[dict[str, Any]], out: list[list[dict[str, Any]]]) -> None:

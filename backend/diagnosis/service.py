@@ -16,8 +16,12 @@ minutes still to come are not missing readings — with no shape fault (half a d
 does not show one), and it is never cached.
 
 ``expected_wh_low``/``expected_wh_high``: the spread of the two decompositions of the
-same POA (GTI-DIRINT, clear-sky ratio + Erbs) widened by :data:`INVERSION_UNCERTAINTY`
-(the POA inversion: temperature and wind unmeasured, 1 % logger noise).
+same POA (GTI-DIRINT, clear-sky ratio + Erbs) widened by
+:data:`backend.diagnosis.faults.INVERSION_UNCERTAINTY` (:func:`~backend.diagnosis.faults.band_wh`).
+
+The tracker logger's history starts at its first reading ever (:func:`history_start_s`):
+minutes before it have no data and are no ``dropout``; a cached day computed with another
+history start that changes its answer is computed again.
 """
 
 from __future__ import annotations
@@ -29,14 +33,20 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import orjson
 import pandas as pd
-from sqlalchemy import Connection, delete, insert, select
+from sqlalchemy import Connection, delete, func, insert, select
 
-from backend.diagnosis.faults import day_features, faults_over_days, missing_daylight_min
+from backend.diagnosis.faults import (
+    band_wh,
+    day_features,
+    energy_features,
+    faults_over_days,
+    missing_daylight_min,
+)
 from backend.diagnosis.weather_twin import site_minutes, sky_source
 from backend.errors import InputError
 from backend.measurements.queries import energy_table, period_edges
 from backend.sites import SiteInfo
-from backend.storage.tables import DiagnosisDay
+from backend.storage.tables import SOURCE_CODES, DiagnosisDay, Measurement
 from sim import sky_sensor
 from sim.energy import energy_wh, gain_pct
 
@@ -44,18 +54,45 @@ if TYPE_CHECKING:
     from backend.context import ServiceContext
 
 MAX_DAYS = 400
-INVERSION_UNCERTAINTY = 0.03  # relative, on the expected tracker energy [-]
 #: Raised whenever a day's payload or the way it is computed changes: cached days of
 #: another version are computed again (2: the sky from irradiance sensors; 3: ``complete``,
 #: and a day not yet over judged up to now and never cached; 4: every energy by
-#: :mod:`sim.energy`'s rule and a logger's minutes interpolated within its gap rule).
-CACHE_VERSION = 4
+#: :mod:`sim.energy`'s rule and a logger's minutes interpolated within its gap rule;
+#: 5: no dropout before the logger's first reading, the energy against the band,
+#: ``partial``).
+CACHE_VERSION = 5
+#: A day is ``partial`` when an array's readings cover under this share of its expected
+#: energy (a logger that began or stopped that day, a dropout) [-]
+PARTIAL_COVERAGE = 0.99
+
+
+def history_start_s(conn: Connection, array_id: int) -> int | None:
+    """The array logger's first measured reading ever [Unix s], None without one: its
+    history starts there (DESIGN: sites state no commissioning date)."""
+    value = conn.execute(select(func.min(Measurement.ts_s)).where(
+        Measurement.array_id == array_id, Measurement.source == SOURCE_CODES["measured"])).scalar()
+    return None if value is None else int(value)
+
+
+def _cache_usable(payload: dict[str, Any], day_start_s: int, day_end_s: int,
+                  first_s: int | None) -> bool:
+    """A cached day is this version's and its history start gives the same answer: the
+    start it was computed with and today's lie on the same side of the whole day."""
+    if payload.get("cache_version") != CACHE_VERSION:
+        return False
+    if "history_start_s" not in payload:  # written without one (by hand): the version rules
+        return True
+    inf = float("inf")  # no reading yet: every day lies before the history
+    old, new = payload.get("history_start_s"), first_s
+    lo = min(inf if old is None else old, inf if new is None else new)
+    hi = max(inf if old is None else old, inf if new is None else new)
+    return lo == hi or day_end_s <= lo or day_start_s >= hi
 
 
 def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFrame,
                  tracker_w: np.ndarray, fixed_w: np.ndarray,
                  measured_wh: dict[str, float | None],
-                 elapsed_min: int | None = None) -> dict[str, Any]:
+                 elapsed_min: int | None = None, first_s: int | None = None) -> dict[str, Any]:
     """One day's answer (without faults) and its fault features.
 
     ``day_s``: the day's ``[start, end)`` [s since the epoch]; ``e``, ``tracker_w`` and
@@ -66,7 +103,8 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     ``/energy`` endpoint's own numbers; the expectations integrate the twin's minutes,
     the matched ones only the minutes the measured series covers (the minute grid is
     NaN where the gap rule bridges no reading). ``elapsed_min``: the minutes of a day not
-    yet over that lie before now (None: the day is over)."""
+    yet over that lie before now (None: the day is over); ``first_s``: the tracker
+    logger's first reading ever [Unix s] (None: it has none) — no dropout before it."""
     t0, t1 = day_s
     ts = e.index.as_unit("s").asi8
     day = ts < t1
@@ -85,22 +123,36 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     exp_a, exp_b = wh(e["tracker_power_w"].to_numpy()), wh(e["tracker_power_alt_w"].to_numpy())
     exp_fixed = wh(e["fixed_power_w"].to_numpy())
     matched = wh(np.where(np.isfinite(tracker_w), e["tracker_power_w"].to_numpy(), np.nan))
+    matched_b = wh(np.where(np.isfinite(tracker_w), e["tracker_power_alt_w"].to_numpy(),
+                            np.nan))
     matched_f = wh(np.where(np.isfinite(fixed_w), e["fixed_power_w"].to_numpy(), np.nan))
     measured_tr, measured_fx = measured_wh["tracker"], measured_wh["fixed"]
+    # the logger's history: its minutes before the first reading are not missing
+    first_min = 1440 if first_s is None else max(0, -(-(first_s - t0) // 60))
     # a shape fault needs a whole day with a measured sky; a dropout only the minutes so far
     e_day, tr_day = e[day], tracker_w[day]
-    features = day_features(info.site, e_day, tr_day) \
-        if elapsed_min is None and source != "clear_sky" \
-        else {"missing_daylight_min": missing_daylight_min(e_day, tr_day, elapsed_min)}
+    whole = elapsed_min is None and source != "clear_sky"
+    features: dict[str, Any] = day_features(info.site, e_day, tr_day, first_min) if whole \
+        else {"missing_daylight_min": missing_daylight_min(e_day, tr_day, elapsed_min,
+                                                           first_min)}
+    if whole and measured_tr is not None:
+        energy = energy_features(measured_tr, matched, matched_b, exp_a)
+        if energy is not None:
+            features["energy"] = energy
+    low, high = band_wh(exp_a, exp_b)
+    # readings that miss part of the day's expected energy: its gain is not the day's
+    short = any(m is not None and x > 0 and got < PARTIAL_COVERAGE * x
+                for m, got, x in ((measured_tr, matched, exp_a), (measured_fx, matched_f,
+                                                                  exp_fixed)))
     return {
         "date": date,
         "complete": elapsed_min is None,
+        "partial": elapsed_min is not None or short,
         "sky": {"clearness_index": None if k_t is None else round(k_t, 4), "source": source,
                 "sensor": sensor, "valid_minutes_pct": round(100.0 * share, 1)},
         "tracker": {
             "measured_wh": measured_tr, "expected_wh": exp_a,
-            "expected_wh_low": min(exp_a, exp_b) * (1 - INVERSION_UNCERTAINTY),
-            "expected_wh_high": max(exp_a, exp_b) * (1 + INVERSION_UNCERTAINTY),
+            "expected_wh_low": low, "expected_wh_high": high,
             "performance_ratio": None if measured_tr is None or matched <= 0
             else measured_tr / matched},
         "fixed": {"measured_wh": measured_fx, "expected_wh": exp_fixed,
@@ -109,13 +161,15 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
         "gain_measured_pct": gain_pct(measured_tr, measured_fx),
         "gain_expected_pct": gain_pct(exp_a, exp_fixed),
         "features": features,
+        "history_start_s": first_s,
     }
 
 
 def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
-             todo: list[int], now_s: float) -> dict[int, dict[str, Any]]:
+             todo: list[int], now_s: float, first_s: int | None) -> dict[int, dict[str, Any]]:
     """Payloads of the days ``todo`` (indices into ``edges``), run by contiguous stretches;
-    days ending after ``now_s`` [s since the epoch] are judged up to it."""
+    days ending after ``now_s`` [s since the epoch] are judged up to it; ``first_s``: the
+    tracker logger's first reading (:func:`history_start_s`)."""
     tracker, fixed = info.array_of_kind("tracker"), info.array_of_kind("fixed")
     if tracker is None or fixed is None:
         raise InputError(422, f"site {info.site_id!r} needs a tracker and a fixed array")
@@ -147,7 +201,7 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
             date = edges[i].astimezone(info.zone).date().isoformat()
             elapsed = None if day_end_s <= now_s else max(0, int(now_s - day_start_s) // 60)
             out[i] = _day_payload(info, date, (day_start_s, day_end_s), e.iloc[a:b], tr[a:b],
-                                  fx[a:b], measured, elapsed)
+                                  fx[a:b], measured, elapsed, first_s)
     return out
 
 
@@ -160,16 +214,18 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
         raise InputError(422, f"end: the range spans over {MAX_DAYS} days; ask for less")
     edges = period_edges(start, end, "day", info.zone)
     starts = [int(e.timestamp()) for e in edges[:-1]]
+    tracker = info.array_of_kind("tracker")
     with ctx.engine.connect() as conn:
         rows = conn.execute(select(DiagnosisDay.day_start_s, DiagnosisDay.day_end_s,
                                    DiagnosisDay.payload_json).where(
             DiagnosisDay.site_id == info.site_id,
             DiagnosisDay.day_start_s.in_(starts))).all()
+        first_s = None if tracker is None else history_start_s(conn, tracker.array_id)
     cached = {r[0]: p for r in rows
               if r[1] == int(edges[starts.index(r[0]) + 1].timestamp())
-              and (p := orjson.loads(r[2])).get("cache_version") == CACHE_VERSION}
+              and _cache_usable(p := orjson.loads(r[2]), r[0], r[1], first_s)}
     todo = [i for i, s in enumerate(starts) if s not in cached]  # only days over are cached
-    fresh = _compute(ctx, info, edges, todo, now) if todo else {}
+    fresh = _compute(ctx, info, edges, todo, now, first_s) if todo else {}
     values = [{"site_id": info.site_id, "day_start_s": starts[i],
                "day_end_s": int(edges[i + 1].timestamp()),
                "payload_json": orjson.dumps({**p, "cache_version": CACHE_VERSION}).decode()}
@@ -187,7 +243,9 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
     found = faults_over_days(days)
     out_days = []
     for d, f in zip(days, found, strict=True):
-        d = {k: v for k, v in d.items() if k not in ("features", "cache_version")}
+        d = {k: v for k, v in d.items()
+             if k not in ("features", "cache_version", "history_start_s")}
+        d.setdefault("partial", not d.get("complete", True))
         d["faults"] = f
         out_days.append(d)
     return {"site_id": info.site_id, "timezone": info.site.timezone,

@@ -40,12 +40,16 @@ class FaultRead(BaseModel):
     """A named fault signature (``backend/diagnosis/faults.py``)."""
 
     kind: Literal["stuck", "azimuth_offset", "elevation_offset", "clock_offset",
-                  "module_loss", "soiling", "dropout"]
+                  "module_loss", "soiling", "dropout", "underperformance"]
     confidence: float = Field(description="[0, 1]")
     since: str = Field(description="the first day of its run of days (local date)")
     magnitude: float = Field(description="in `unit`")
     unit: str
     detail: str
+    shortfall_wh: float | None = Field(
+        None, description="`underperformance`: the day's measured tracker energy short of "
+                          "the expected one [Wh] (`magnitude` the same in % of expected); "
+                          "null for the other kinds")
 
 
 class DiagnosisDayRead(BaseModel):
@@ -53,6 +57,10 @@ class DiagnosisDayRead(BaseModel):
 
     date: str = Field(description="local date, YYYY-MM-DD")
     complete: bool = Field(description="false: the day is not over; judged up to now")
+    partial: bool = Field(description="true: the day is not over, or an array's readings "
+                                      "cover under 99 % of its expected energy (a logger "
+                                      "that began or stopped that day, a dropout): its "
+                                      "measured gain is not the whole day's")
     sky: DaySkyRead
     tracker: TrackerDayRead
     fixed: FixedDayRead
