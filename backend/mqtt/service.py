@@ -13,6 +13,8 @@ when ``Settings.mqtt.url`` is set. While connected (aiomqtt) it:
 - publishes every rejected message with its reason to
   ``Settings.mqtt.errors_topic`` (``_unknown`` as site id for unknown sites),
   through an outbox that keeps what could not be sent until the next connection;
+- speaks MQTT 5 and tells the broker the largest packet it takes
+  (:data:`MAX_PACKET_BYTES`), so a huge message is dropped by the broker, never read;
 - publishes the retained Home Assistant discovery configs at every connection,
   and the sensor states every ``Settings.mqtt.publish_interval_s``
   (:mod:`backend.mqtt.homeassistant`).
@@ -38,13 +40,21 @@ from typing import TYPE_CHECKING, Any
 from urllib.parse import unquote, urlsplit
 
 import aiomqtt
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
 from tenacity import AsyncRetrying, RetryCallState, retry_if_exception
 
 from backend.measurements.ingest import measured_job
 from backend.measurements.parse import Batch
 from backend.mqtt import homeassistant
 from backend.mqtt.assemble import QUANTITIES, Closed, MinuteAssembler, parse_value
-from backend.mqtt.ingest import Rejection, limits, minute_batch, state_batch
+from backend.mqtt.ingest import (
+    MAX_PAYLOAD_BYTES,
+    Rejection,
+    limits,
+    minute_batch,
+    state_batch,
+)
 from backend.mqtt.topics import Topics
 from backend.retry import Stopped, backoff, stoppable_async_sleep
 
@@ -58,6 +68,27 @@ UNKNOWN_SITE = "_unknown"
 OUTBOX_MAX = 10_000
 #: Most readings waiting for the writer before the receiver waits too.
 MAX_IN_FLIGHT = 512
+#: Largest packet the broker may send us [bytes]: a reading's payload at most
+#: ``MAX_PAYLOAD_BYTES`` plus its topic, packet id and properties. MQTT 5's CONNECT
+#: property Maximum Packet Size: the broker drops a larger message for this client
+#: instead of sending it, so a 200 MiB publish is never read (paho itself reads any
+#: packet whole before the size of its payload can be checked).
+MAX_PACKET_BYTES = MAX_PAYLOAD_BYTES + 4096
+#: How long the broker keeps a persistent session (client id set) while we are away [s].
+SESSION_EXPIRY_S = 7 * 24 * 3600
+
+
+def connect_properties(persistent: bool) -> Properties:
+    """The MQTT 5 CONNECT properties: the packet size bound and, with a client id, a
+    session the broker keeps for :data:`SESSION_EXPIRY_S` (MQTT 5 ends it at disconnect
+    by default, where 3.1.1's ``clean_session=False`` kept it)."""
+    props = Properties(PacketTypes.CONNECT)
+    props.MaximumPacketSize = MAX_PACKET_BYTES
+    if persistent:
+        props.SessionExpiryInterval = SESSION_EXPIRY_S
+    return props
+
+
 #: The first wait before reconnecting [s]; it doubles up to ``Settings.mqtt.retry_max_s``.
 _FIRST_RETRY_S = 1.0
 
@@ -162,8 +193,9 @@ class MqttService:
             nonlocal attempts, connected_after
             attempts += 1
             client = aiomqtt.Client(
-                **self.broker, identifier=s.mqtt.client_id,
-                clean_session=None if s.mqtt.client_id is None else False,
+                **self.broker, identifier=s.mqtt.client_id, protocol=aiomqtt.ProtocolVersion.V5,
+                clean_start=s.mqtt.client_id is None,
+                properties=connect_properties(persistent=s.mqtt.client_id is not None),
                 keepalive=30, timeout=10.0)
             async with client:
                 connected_after = attempts - 1
