@@ -5,6 +5,10 @@
   pixels) from a bucket that refills at ``per_min`` per minute up to one minute's
   worth; an empty bucket is a 429 whose ``Retry-After`` says when it will hold
   the cost again. Requests with a valid token are not rate-limited.
+- :class:`WindowBudget` — a client's cost in any sliding window (an hour of simulation
+  worker time for a caller without a token): charged the estimate when a run is
+  admitted, trued up to the time the run took (:meth:`WindowBudget.settle`); past the
+  ceiling a 429 whose ``Retry-After`` says when enough of the window has passed.
 - :class:`PixelBudget` — the pixels decoded at once across all vision requests.
   A decoded frame costs about 6 bytes per pixel at its peak (measured: a
   6300×6300 PNG peaks at 225 MB in ``cv2.imdecode``), so the budget bounds the
@@ -84,6 +88,77 @@ class RateLimiter:
             self._buckets[client] = (level - cost, now)
             while len(self._buckets) > self.max_clients:
                 self._buckets.popitem(last=False)
+
+
+class Charge:
+    """One admitted cost in a :class:`WindowBudget`: when, and how much (settled later)."""
+
+    __slots__ = ("at", "cost")
+
+    def __init__(self, at: float, cost: float) -> None:
+        self.at = at
+        self.cost = cost
+
+
+class WindowBudget:
+    """At most ``capacity`` cost units per client in any ``window_s``; thread-safe.
+
+    A cost above the capacity is charged as the capacity (what the service admits at all,
+    a full window always admits). At most ``max_clients`` clients are remembered, the
+    least recently charged forgotten first.
+    """
+
+    def __init__(self, capacity: float, window_s: float, what: str, setting: str,
+                 max_clients: int = 10_000) -> None:
+        self.capacity = float(capacity)
+        self.window_s = float(window_s)
+        self.what = what
+        self.setting = setting
+        self.max_clients = max_clients
+        self._charges: OrderedDict[str, list[Charge]] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def used(self, client: str) -> float:
+        """The cost ``client`` has spent in the window ending now."""
+        with self._lock:
+            return sum(c.cost for c in self._live(client, time.monotonic()))
+
+    def _live(self, client: str, now: float) -> list[Charge]:
+        charges = [c for c in self._charges.get(client, []) if c.at > now - self.window_s]
+        if client in self._charges:
+            self._charges[client] = charges
+        return charges
+
+    def take(self, client: str, cost: float) -> Charge:
+        """Charge ``cost`` to ``client``, or raise :class:`Busy` (429)."""
+        cost = min(float(cost), self.capacity)
+        now = time.monotonic()
+        with self._lock:
+            charges = self._live(client, now)
+            used = sum(c.cost for c in charges)
+            if used + cost > self.capacity:
+                freed, wait_s = 0.0, self.window_s
+                for c in sorted(charges, key=lambda c: c.at):
+                    freed += c.cost
+                    if used - freed + cost <= self.capacity:
+                        wait_s = c.at + self.window_s - now
+                        break
+                raise Busy(429, f"rate limit: without a write token a client may ask "
+                                f"{self.capacity:.0f} {self.what} per "
+                                f"{self.window_s / 60:.0f} min ({self.setting}); {used:.0f} "
+                                f"spent, this asks {cost:.0f}: send 'Authorization: Bearer "
+                                f"<token>' or retry in {math.ceil(wait_s)} s", wait_s)
+            charge = Charge(now, cost)
+            self._charges[client] = [*charges, charge]
+            self._charges.move_to_end(client)
+            while len(self._charges) > self.max_clients:
+                self._charges.popitem(last=False)
+        return charge
+
+    def settle(self, charge: Charge, cost: float) -> None:
+        """The charged work cost ``cost`` after all (0: it never ran)."""
+        with self._lock:
+            charge.cost = max(0.0, float(cost))
 
 
 class PixelBudget:
@@ -172,6 +247,7 @@ class Limits:
     """The service's bounds on anonymous work (``ServiceContext.limits``)."""
 
     simulation_steps: RateLimiter
+    series_cells: RateLimiter
     vision_pixels: RateLimiter
     decode: PixelBudget
 
@@ -180,6 +256,9 @@ class Limits:
         return cls(
             RateLimiter(s.simulations.anonymous_steps_per_min, "simulated time steps",
                         "HELIOTWIN_ANONYMOUS_SIMULATION_STEPS_PER_MIN"),
+            RateLimiter(s.simulations.anonymous_series_cells_per_min,
+                        "simulation series values (rows × columns)",
+                        "HELIOTWIN_ANONYMOUS_SERIES_CELLS_PER_MIN"),
             RateLimiter(s.vision.anonymous_pixels_per_min, "image pixels",
                         "HELIOTWIN_ANONYMOUS_VISION_PIXELS_PER_MIN"),
             PixelBudget(s.vision.decode_pixels, s.vision.queue),

@@ -19,14 +19,29 @@ its series is stored.
 
 At most ``Settings.simulations.workers`` runs execute at once and
 ``Settings.simulations.queue`` wait; past that :meth:`SimulationRunner.submit`
-raises :class:`backend.limits.Busy` (503 with ``Retry-After``, estimated from
-the queued steps and the speed of the last finished run). Runs asked without a
-token are marked ``anonymous``; only the newest
+raises :class:`backend.limits.Busy` (503 with ``Retry-After``: when the next
+queued run is expected to start).
+
+The queue is priced in worker seconds (:mod:`backend.twin.cost`: the
+controller's loop and camera frames, not the step count) and fair between
+callers (a client is a token's site, or the address of a caller without one):
+a free worker takes the queued run with the least *client work*: the expected
+time its caller's running runs still need, plus its caller's runs queued before
+it, plus its own, minus the time it has waited. A caller's second long run thus
+waits behind others' short ones, and no run waits forever. The same order gives
+each queued run its expected wait (:meth:`SimulationRunner.schedule`).
+
+Without a token a run is refused (:class:`RunTooCostly`, 422) when its estimate
+exceeds ``anonymous_run_max_s`` and stopped when it runs longer than that; a
+client's estimates (trued up to the time taken) in any hour are bounded by
+``anonymous_hour_max_s`` (:class:`backend.limits.WindowBudget`, 429). Runs
+asked without a token are marked ``anonymous``; only the newest
 ``Settings.simulations.anonymous_keep_runs`` of them stay stored.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import logging
@@ -44,11 +59,12 @@ import numpy as np
 import pandas as pd
 from sqlalchemy import Connection, Engine, insert, select, update
 
-from backend.limits import Busy, prune_anonymous
+from backend.limits import Busy, Charge, WindowBudget, prune_anonymous
 from backend.measurements.writer import Writer
 from backend.settings import Settings
 from backend.sites import Registry
 from backend.storage.tables import SimulationRun, SimulationSeries, utcnow
+from backend.twin.cost import CostModel
 from backend.twin.scenario import Scenario, run_scenario
 from sim.sites import Site
 
@@ -61,6 +77,10 @@ _PRELOAD = ["backend.twin.simulations"]
 
 class Cancelled(Exception):
     """A run gives up: it was cancelled, or the service is stopping."""
+
+
+class RunTooCostly(ValueError):
+    """A run asked without a token is expected to take longer than its callers may."""
 
 
 #: A cancelled run's ``error`` (its status is ``failed``).
@@ -78,12 +98,61 @@ class RunState:
     summary: dict[str, Any] | None = None
     error: str | None = None
     params: dict[str, Any] = field(default_factory=dict)
-    steps: float = 0.0
+    estimated_run_s: float | None = None
+    started_at: str | None = None
+    finished_at: str | None = None
+    started_mono: float | None = None  # time.monotonic() at the start, while in memory
+    queue_position: int | None = None  # set by SimulationRunner.get while queued
+    estimated_wait_s: float | None = None  # likewise
 
     def to_dict(self) -> dict[str, Any]:
         return {"run_id": self.run_id, "site_id": self.site_id, "status": self.status,
                 "progress": round(self.progress, 4), "summary": self.summary,
-                "error": self.error, "params": self.params}
+                "error": self.error, "params": self.params,
+                "estimated_run_s": _round(self.estimated_run_s),
+                "estimated_wait_s": _round(self.estimated_wait_s),
+                "queue_position": self.queue_position,
+                "started_at": self.started_at, "finished_at": self.finished_at}
+
+    def remaining_s(self, now: float) -> float:
+        """Expected worker time left of a running run [s] (0 when it runs past its estimate)."""
+        if self.started_mono is None or self.estimated_run_s is None:
+            return self.estimated_run_s or 0.0
+        return max(0.0, self.estimated_run_s - (now - self.started_mono))
+
+
+def _round(x: float | None) -> float | None:
+    return None if x is None else round(x, 1)
+
+
+def _iso_now() -> str:
+    return utcnow().isoformat()
+
+
+@dataclass
+class _Job:
+    """A queued run: its state, scenario, caller and what it was charged."""
+
+    state: RunState
+    params: Scenario
+    client: str
+    anonymous: bool
+    fut: Future[dict[str, Any]]
+    cost_s: float
+    queued_mono: float
+    charge: Charge | None = None
+
+
+@dataclass
+class Estimate:
+    """What a run would cost and when it would start, asked before it is queued."""
+
+    estimated_run_s: float
+    estimated_wait_s: float
+    runs_ahead: int
+    anonymous_run_max_s: float | None
+    anonymous_hour_left_s: float | None
+    reason: str | None  # why it would be refused now; None: it would be accepted
 
 
 def write_npz(series: pd.DataFrame, file: IO[bytes]) -> None:
@@ -111,6 +180,7 @@ def _work(pipe: Pipe, site: Site, params: Scenario, run_id: str) -> None:
             pipe.send(("progress", float(fraction)))
 
     try:
+        pipe.send(("started", 0.0))
         result = run_scenario(site, params, progress=progress)
         summary = result.summary()
         summary["run_id"] = run_id
@@ -138,7 +208,8 @@ class _Result:
 
 
 class SimulationRunner:
-    """Runs scenarios in worker processes, a bounded number at a time, and remembers them."""
+    """Runs scenarios in worker processes, a bounded number at a time, fairly between
+    callers, and remembers them."""
 
     def __init__(self, registry: Registry, engine: Engine, writer: Writer,
                  settings: Settings) -> None:
@@ -146,13 +217,17 @@ class SimulationRunner:
         self.engine = engine
         self.writer = writer
         self.settings = settings
+        self.costs = CostModel()
+        s = settings.simulations
+        self.anonymous_hours = WindowBudget(
+            s.anonymous_hour_max_s, 3600.0, "s of simulation worker time",
+            "HELIOTWIN_SIMULATION_ANONYMOUS_HOUR_MAX_S")
         self._runs: dict[str, RunState] = {}
         self._lock = threading.Lock()
         self._stopping = threading.Event()
-        self._queue: list[tuple[RunState, Scenario, bool, Future[dict[str, Any]]]] = []
+        self._queue: list[_Job] = []
+        self._running: dict[str, _Job] = {}
         self._wake = threading.Condition(self._lock)
-        self._active = 0
-        self._steps_per_s = 300_000.0  # until a run is timed (2 years at 1 min: ≈ 3.5 s)
         self._threads: list[threading.Thread] = []
         self._futures: dict[str, Future[dict[str, Any]]] = {}  # runs queued or running
         self._cancel: set[str] = set()  # running runs asked to stop
@@ -172,40 +247,125 @@ class SimulationRunner:
         with self._lock:
             queued, self._queue = self._queue, []
             self._wake.notify_all()
-        for state, _, _, fut in queued:
-            self._fail(state, Cancelled("the service stopped before it ran"), fut)
+        for job in queued:
+            self._fail(job, Cancelled("the service stopped before it ran"))
         for t in self._threads:
             t.join(30)
 
+    # ------------------------------------------------------------------ the order
+
+    def _order(self, extra: _Job | None = None) -> list[tuple[_Job, float]]:
+        """The queued runs (and ``extra``) in the order free workers take them, each with
+        its expected wait [s]; call with the lock held.
+
+        The key of a run is its caller's *client work* (module docstring): the caller's
+        running runs' expected remaining time, its queued runs before this one and this
+        one, minus the time this one has waited. The waits come from handing the runs in
+        that order to the worker that frees first.
+        """
+        now = time.monotonic()
+        jobs = [*self._queue, *([extra] if extra is not None else [])]
+        ahead: dict[str, float] = {}
+        for job in self._running.values():
+            ahead[job.client] = ahead.get(job.client, 0.0) + job.state.remaining_s(now)
+        keyed = []
+        for i, job in enumerate(jobs):
+            ahead[job.client] = ahead.get(job.client, 0.0) + job.cost_s
+            keyed.append((ahead[job.client] - (now - job.queued_mono), i, job))
+        keyed.sort(key=lambda k: k[:2])
+        free = sorted(j.state.remaining_s(now) for j in self._running.values())
+        free += [0.0] * (self.settings.simulations.workers - len(free))
+        out = []
+        for _, _, job in keyed:
+            start = free.pop(0) if free else 0.0
+            out.append((job, start))
+            free.append(start + job.cost_s)
+            free.sort()
+        return out
+
+    def schedule(self) -> dict[str, tuple[int, float]]:
+        """Each queued run's place in the order (0: next) and expected wait [s]."""
+        with self._lock:
+            return {job.state.run_id: (i, wait)
+                    for i, (job, wait) in enumerate(self._order())}
+
     # ------------------------------------------------------------------ admission
 
-    def submit(self, params: Scenario, anonymous: bool) -> tuple[RunState,
-                                                                 Future[dict[str, Any]]]:
-        """Queue a run, or raise :class:`Busy` (503) when the queue is full."""
-        steps = (params.end - params.start).total_seconds() / params.step_s
+    def _check_cost(self, cost_s: float, anonymous: bool) -> None:
+        limit = self.settings.simulations.anonymous_run_max_s
+        if anonymous and cost_s > limit:
+            raise RunTooCostly(
+                f"end, step_s, controller: this run is expected to take {_duration(cost_s)} "
+                f"of the simulation worker; a run asked without a write token may take at "
+                f"most {_duration(limit)} (HELIOTWIN_SIMULATION_ANONYMOUS_RUN_MAX_S): use a "
+                "larger step_s, a shorter range or a cheaper controller, or send "
+                "'Authorization: Bearer <token>'")
+
+    def estimate(self, params: Scenario, client: str, anonymous: bool) -> Estimate:
+        """What ``params`` would cost and when it would start if queued now (nothing is
+        queued or charged)."""
+        cost = self.costs.estimate_s(params)
+        phantom = _Job(RunState("", params.site_id, "queued"), params, client, anonymous,
+                       Future(), cost, time.monotonic())
+        with self._lock:
+            order = self._order(phantom)
+            running, queued = len(self._running), len(self._queue)
+        place = next(i for i, (job, _) in enumerate(order) if job is phantom)
+        s = self.settings.simulations
+        left = (max(0.0, s.anonymous_hour_max_s - self.anonymous_hours.used(client))
+                if anonymous else None)
+        reason = None
+        try:
+            self._check_cost(cost, anonymous)
+        except RunTooCostly as exc:
+            reason = str(exc)
+        if reason is None and left is not None and min(cost, s.anonymous_hour_max_s) > left:
+            reason = (f"rate limit: {_duration(left)} of the {_duration(s.anonymous_hour_max_s)}"
+                      " of worker time an address may ask without a token in an hour are left "
+                      "(HELIOTWIN_SIMULATION_ANONYMOUS_HOUR_MAX_S)")
+        if reason is None and running + queued >= s.workers + s.queue:
+            reason = ("busy: the queue is full (HELIOTWIN_SIMULATION_WORKERS, "
+                      "HELIOTWIN_SIMULATION_QUEUE)")
+        return Estimate(cost, order[place][1], place + running,
+                        s.anonymous_run_max_s if anonymous else None, left, reason)
+
+    def submit(self, params: Scenario, anonymous: bool, client: str = "?"
+               ) -> tuple[RunState, Future[dict[str, Any]]]:
+        """Queue a run for ``client``; raise :class:`RunTooCostly` (422) when a run without
+        a token is expected to take longer than it may, :class:`Busy` when the queue is
+        full (503) or the caller's hour is spent (429)."""
+        cost = self.costs.estimate_s(params)
+        self._check_cost(cost, anonymous)
         with self._lock:
             waiting = len(self._queue)
-            if self._active + waiting >= self.settings.simulations.workers + \
+            if len(self._running) + waiting >= self.settings.simulations.workers + \
                     self.settings.simulations.queue:
-                ahead = sum(s.steps * (1 - s.progress) for s in self._runs.values()
-                            if s.status in ("queued", "running"))
-                raise Busy(503, f"busy: {self._active} simulations running and {waiting} "
-                                f"waiting, the most this service queues "
+                order = self._order()
+                raise Busy(503, f"busy: {len(self._running)} simulations running and "
+                                f"{waiting} waiting, the most this service queues "
                                 "(HELIOTWIN_SIMULATION_WORKERS, HELIOTWIN_SIMULATION_QUEUE)",
-                           ahead / self._steps_per_s / self.settings.simulations.workers)
+                           order[0][1] if order else 1.0)
+        charge = self.anonymous_hours.take(client, cost) if anonymous else None
         state = RunState(uuid.uuid4().hex, params.site_id, "queued",
-                         params=json.loads(params.to_json()), steps=steps)
-        self.writer.call(lambda conn: conn.execute(insert(SimulationRun).values(
-            run_id=state.run_id, site_id=state.site_id, params_json=params.to_json(),
-            status="queued", progress=0.0, created_at=utcnow(), anonymous=anonymous))).result()
+                         params=json.loads(params.to_json()), estimated_run_s=cost)
+        try:
+            self.writer.call(lambda conn: conn.execute(insert(SimulationRun).values(
+                run_id=state.run_id, site_id=state.site_id, params_json=params.to_json(),
+                status="queued", progress=0.0, created_at=utcnow(),
+                anonymous=anonymous))).result()
+        except Exception:
+            if charge is not None:
+                self.anonymous_hours.settle(charge, 0.0)
+            raise
         fut: Future[dict[str, Any]] = Future()
+        job = _Job(state, params, client, anonymous, fut, cost, time.monotonic(), charge)
         with self._lock:
             self._runs[state.run_id] = state
             self._futures[state.run_id] = fut
-            self._queue.append((state, params, anonymous, fut))
+            self._queue.append(job)
             self._start_threads()
             self._wake.notify()
-        return state, fut
+        return self.get(state.run_id) or state, fut
 
     def cancel(self, run_id: str, timeout_s: float = 30.0) -> RunState | None:
         """Cancel a queued or running run and return its state once it has ended: ``failed``
@@ -213,24 +373,26 @@ class SimulationRunner:
         when it had already ended. None for an unknown run."""
         with self._lock:
             fut = self._futures.get(run_id)
-            job = next((j for j in self._queue if j[0].run_id == run_id), None)
+            job = next((j for j in self._queue if j.state.run_id == run_id), None)
             if job is not None:
                 self._queue.remove(job)
             elif fut is not None:
                 self._cancel.add(run_id)
         if job is not None:
-            self._fail(job[0], Cancelled(CANCELLED), job[3])
+            self._fail(job, Cancelled(CANCELLED))
         elif fut is not None:
             wait([fut], timeout_s)
         return self.get(run_id)
 
-    def run_sync(self, params: Scenario, anonymous: bool = False) -> dict[str, Any]:
+    def run_sync(self, params: Scenario, anonymous: bool = False, client: str = "?"
+                 ) -> dict[str, Any]:
         """Queue a run and wait for its summary (with ``run_id``)."""
-        return self.submit(params, anonymous)[1].result()
+        return self.submit(params, anonymous, client)[1].result()
 
-    def start_background(self, params: Scenario, anonymous: bool = False) -> RunState:
+    def start_background(self, params: Scenario, anonymous: bool = False,
+                         client: str = "?") -> RunState:
         """Queue a run; poll :meth:`get` for its progress."""
-        return self.submit(params, anonymous)[0]
+        return self.submit(params, anonymous, client)[0]
 
     # ------------------------------------------------------------------ execution
 
@@ -241,70 +403,84 @@ class SimulationRunner:
                     self._wake.wait()
                 if self._stopping.is_set():
                     return
-                job = self._queue.pop(0)
-                self._active += 1
+                job = self._order()[0][0]
+                self._queue.remove(job)
+                self._running[job.state.run_id] = job
+                job.state.status = "running"
+                job.state.started_mono = time.monotonic()
+                job.state.started_at = _iso_now()
             try:
-                self._execute(*job)
+                self._execute(job)
             finally:
                 with self._lock:
-                    self._active -= 1
+                    self._running.pop(job.state.run_id, None)
 
-    def _execute(self, state: RunState, params: Scenario, anonymous: bool,
-                 fut: Future[dict[str, Any]]) -> None:
-        state.status = "running"
+    def _execute(self, job: _Job) -> None:
+        state = job.state
         t0 = time.monotonic()
         keep = self.settings.simulations.anonymous_keep_runs
         try:
-            result = self._in_worker(state, params)
+            result = self._in_worker(job)
             elapsed = time.monotonic() - t0
             state.summary, state.progress = result.summary, 1.0
+            state.finished_at = _iso_now()
 
             def store(conn: Connection) -> int:
                 """The series, the run done, the anonymous runs pruned: one transaction."""
                 conn.execute(insert(SimulationSeries).values(run_id=state.run_id,
                                                              npz=result.npz))
                 _finish(conn, state)
-                return prune_anonymous(conn, SimulationRun, keep) if anonymous else 0
+                return prune_anonymous(conn, SimulationRun, keep) if job.anonymous else 0
 
             pruned = self.writer.call(store).result()
         except Exception as exc:  # noqa: BLE001 - reported through the run's status
-            self._fail(state, exc, fut)
+            self._fail(job, exc, time.monotonic() - t0)
             return
-        if elapsed > 0.5:
-            self._steps_per_s = state.steps / elapsed
+        self.costs.learn(job.params, elapsed)
+        if job.charge is not None:
+            self.anonymous_hours.settle(job.charge, elapsed)
         if pruned:
             self._forget_pruned()
         state.status = "done"
         self._ended(state)
-        fut.set_result(state.summary)
+        job.fut.set_result(state.summary)
 
-    def _fail(self, state: RunState, exc: Exception, fut: Future[dict[str, Any]]) -> None:
-        """A run ends without a result: ``failed`` with ``exc`` as its error, stored."""
+    def _fail(self, job: _Job, exc: Exception, elapsed_s: float = 0.0) -> None:
+        """A run ends without a result: ``failed`` with ``exc`` as its error, stored; an
+        anonymous caller is charged the time it ran (nothing when it never started)."""
+        state = job.state
+        if job.charge is not None:
+            self.anonymous_hours.settle(job.charge, elapsed_s)
         state.summary, state.status, state.error = None, "failed", str(exc)
+        state.finished_at = _iso_now()
         logger.warning("simulation %s failed: %s", state.run_id, exc)
         try:
             self.writer.call(lambda conn: _finish(conn, state)).result()
         except Exception:  # noqa: BLE001 - the writer has stopped: the row stays running
             logger.warning("simulation %s: its failure not stored", state.run_id)
         self._ended(state)
-        fut.set_exception(exc)
+        job.fut.set_exception(exc)
 
     def _ended(self, state: RunState) -> None:
         with self._lock:
             self._futures.pop(state.run_id, None)
             self._cancel.discard(state.run_id)
 
-    def _in_worker(self, state: RunState, params: Scenario) -> _Result:
-        """Run ``params`` in a worker process; its progress into ``state``; its result.
+    def _in_worker(self, job: _Job) -> _Result:
+        """Run the job in a worker process; its progress into its state; its result.
 
-        Polled every 0.2 s so a stopping service terminates the worker at once.
+        Polled every 0.2 s so a stopping service, a cancel or an anonymous run past
+        ``anonymous_run_max_s`` terminates the worker at once.
         """
+        state, params = job.state, job.params
+        limit_s = self.settings.simulations.anonymous_run_max_s if job.anonymous else None
         site = self.registry.sites[params.site_id].site
         ours, theirs = _MP.Pipe(duplex=False)
         proc = _MP.Process(target=_work, name=f"heliotwin-sim-{state.run_id[:8]}",
                            args=(theirs, site, params, state.run_id), daemon=True)
         proc.start()
         theirs.close()
+        t0 = None  # when the worker began the run (not the forkserver's first start)
         ended = "the worker process ended (exit code {}) without a result"
         try:
             while True:
@@ -312,13 +488,20 @@ class SimulationRunner:
                     raise Cancelled("service stopping")
                 if state.run_id in self._cancel:
                     raise Cancelled(CANCELLED)
+                if limit_s is not None and t0 is not None and time.monotonic() - t0 > limit_s:
+                    raise Cancelled(
+                        f"stopped after {_duration(limit_s)}, the most a run asked without a "
+                        "write token may take (HELIOTWIN_SIMULATION_ANONYMOUS_RUN_MAX_S); it "
+                        f"was expected to take {_duration(state.estimated_run_s or 0.0)}")
                 if not ours.poll(0.2):
                     if not proc.is_alive() and not ours.poll(0):
                         raise RuntimeError(ended.format(proc.exitcode))
                     continue
                 try:
                     kind, value = ours.recv()
-                    if kind == "progress":
+                    if kind == "started":
+                        t0 = time.monotonic()
+                    elif kind == "progress":
                         state.progress = max(state.progress, min(float(value), 0.999))
                     elif kind == "done":
                         return _Result(dict(value), ours.recv_bytes())
@@ -343,9 +526,18 @@ class SimulationRunner:
     # ------------------------------------------------------------------ reads
 
     def get(self, run_id: str) -> RunState | None:
-        """A run's state: from memory, or as stored."""
+        """A run's state: from memory (a queued run with its place and expected wait, a
+        running one with its expected time left), or as stored."""
         with self._lock:
             state = self._runs.get(run_id)
+            if state is not None:
+                state = dataclasses.replace(state)
+                if state.status == "queued":
+                    for i, (job, wait_s) in enumerate(self._order()):
+                        if job.state.run_id == run_id:
+                            state.queue_position, state.estimated_wait_s = i, wait_s
+                elif state.status == "running":
+                    state.estimated_wait_s = 0.0
         if state is not None:
             return state
         with self.engine.connect() as conn:
@@ -356,18 +548,31 @@ class SimulationRunner:
             return None
         return RunState(row.run_id, row.site_id, row.status, row.progress,
                         json.loads(row.summary_json) if row.summary_json else None,
-                        row.error, json.loads(row.params_json))
+                        row.error, json.loads(row.params_json),
+                        finished_at=row.finished_at.isoformat() if row.finished_at else None)
 
-    def series(self, run_id: str) -> pd.DataFrame | None:
-        """A finished run's series (read from the database), or None."""
+    def series_blob(self, run_id: str) -> bytes | None:
+        """A finished run's packed series (:func:`write_npz`), or None."""
         state = self.get(run_id)
         if state is None or state.status != "done":
             return None
         with self.engine.connect() as conn:
-            blob = conn.execute(
+            return conn.execute(  # type: ignore[no-any-return]
                 select(SimulationSeries.npz).where(SimulationSeries.run_id == run_id)
             ).scalar_one_or_none()
+
+    def series(self, run_id: str) -> pd.DataFrame | None:
+        """A finished run's series (read from the database), or None."""
+        blob = self.series_blob(run_id)
         return None if blob is None else npz_to_series(blob)
+
+
+def _duration(seconds: float) -> str:
+    """A worker time for people: "45 s", "12 min", "1 h 13 min"."""
+    if seconds < 90:
+        return f"{max(seconds, 1):.0f} s"
+    minutes = round(seconds / 60)
+    return f"{minutes} min" if minutes < 60 else f"{minutes // 60} h {minutes % 60} min"
 
 
 def _finish(conn: Connection, state: RunState) -> None:

@@ -124,13 +124,14 @@ def test_results_are_written_by_the_writer(tmp_path: Path) -> None:
     assert {(name, pid) for _, name, pid in writes} == {("heliotwin-writer", os.getpid())}
 
 
-def test_cancel_queued_and_running_runs(client: httpx.Client) -> None:
+def test_cancel_queued_and_running_runs(client: httpx.Client, live_server: Any) -> None:
     """``DELETE /api/v1/simulations/{id}``: a running run's worker is stopped, a queued run
     leaves the queue; both end ``failed`` with the error ``cancelled`` and no series."""
     year = {"site_id": "tehuantepec", "start": "2023-01-01", "end": "2024-01-01",
             "controller": "hybrid", "background": True}  # minutes of work: never done here
-    running = client.post("/api/v1/simulations", json=year).json()["run_id"]
-    queued = client.post("/api/v1/simulations", json=year).json()["run_id"]
+    auth = {"Authorization": f"Bearer {live_server.write_token}"}  # beyond an anonymous run
+    running = client.post("/api/v1/simulations", json=year, headers=auth).json()["run_id"]
+    queued = client.post("/api/v1/simulations", json=year, headers=auth).json()["run_id"]
     deadline = time.monotonic() + 60
     while client.get(f"/api/v1/simulations/{running}").json()["status"] == "queued":
         assert time.monotonic() < deadline, "the first run never started"

@@ -4,30 +4,33 @@ from __future__ import annotations
 
 import asyncio
 import math
+from collections.abc import Iterator
 from typing import Annotated, Any, Literal
 
 import anyio
-import numpy as np
 import orjson
 import pandas as pd
 from fastapi import APIRouter, HTTPException, Query, Request
-from fastapi.responses import Response
+from fastapi.responses import Response, StreamingResponse
 from pydantic import BaseModel, ConfigDict, Field, create_model
 
 from backend.api.deps import ContextDep, bearer_token, site_or_404, token_site
 from backend.api.schemas.common import CSV_CONTENT
 from backend.api.schemas.simulations import (
     SimulationAcceptedRead,
+    SimulationEstimateRead,
     SimulationRunRead,
     SimulationSeriesRead,
     SimulationSummaryRead,
 )
 from backend.limits import Busy
 from backend.measurements.queries import iso_utc
-from backend.timestamps import parse_range
-from backend.twin.export import export_names, series_csv
+from backend.timestamps import TimestampError, parse_day_or_instant, parse_range
+from backend.twin.export import export_frame, export_names
 from backend.twin.parameters import MACHINE_PARAMETERS
 from backend.twin.scenario import Scenario
+from backend.twin.series_read import PackedSeries
+from backend.twin.simulations import RunTooCostly
 from sim.twin import CONTROLLERS, RECEIVERS
 
 router = APIRouter(prefix="/api/v1/simulations", tags=["simulations"])
@@ -94,13 +97,22 @@ async def _caller(request: Request) -> str | None:
     return owner
 
 
+def client_key(request: Request, owner: str | None) -> str:
+    """Who a run is queued for, for the queue's fairness and the anonymous bounds: a token's
+    site, or the address of a caller without one."""
+    if owner is not None:
+        return f"site:{owner}"
+    return f"addr:{request.client.host if request.client else '?'}"
+
+
 def _busy(exc: Busy) -> HTTPException:
     return HTTPException(exc.status_code, exc.message, headers=exc.headers)
 
 
 _BUSY_DOC: dict[int | str, dict[str, Any]] = {
     401: {"description": "a token was sent but is unknown, expired or revoked"},
-    429: {"description": "rate limit of anonymous work (per client address); see Retry-After"},
+    429: {"description": "rate limit of anonymous work (per client address: steps a minute, "
+                         "worker time an hour); see Retry-After"},
     503: {"description": "the simulation queue is full; see Retry-After"},
 }
 
@@ -117,13 +129,36 @@ async def create_simulation(body: SimulationCreate,  # type: ignore[valid-type]
                             ctx: ContextDep, request: Request) -> Response:
     """Run a twin scenario; the summary, or 202 with a ``run_id`` to poll.
 
-    Runs execute in worker processes, a bounded number at once (503 with
-    ``Retry-After`` past the queue). Without a write token the caller's address
-    spends simulated steps from a per-minute allowance (429 when spent), and
-    only the newest anonymous runs stay stored (``docs/service.md``, Limits).
+    Runs execute in worker processes, a bounded number at once, in a queue ordered
+    fairly between callers (503 with ``Retry-After`` past the queue). Without a write
+    token a run expected to take more than ``HELIOTWIN_SIMULATION_ANONYMOUS_RUN_MAX_S``
+    of worker time is a 422 (and is stopped if it runs longer), the caller's address
+    spends simulated steps a minute and worker time an hour (429 when spent), and only
+    the newest anonymous runs stay stored (``docs/service.md``, "The simulation queue").
     """
     return await submit_scenario(ctx, request, _params(ctx, body),
                                  body.background)  # type: ignore[attr-defined]
+
+
+@router.post("/estimate", response_model=SimulationEstimateRead,
+             responses={400: {}, 401: {}, 404: {}, 422: {}},
+             openapi_extra={"security": [{}, {"bearerAuth": []}]})
+async def estimate_simulation(body: SimulationCreate,  # type: ignore[valid-type]
+                              ctx: ContextDep, request: Request) -> SimulationEstimateRead:
+    """What the run of this body would cost the worker and when it would start, without
+    queueing it, and whether it would be accepted now (for "about 45 min: run anyway?")."""
+    params = _params(ctx, body)
+    owner = await _caller(request)
+    est = ctx.simulations.estimate(params, client_key(request, owner), owner is None)
+    return SimulationEstimateRead(
+        site_id=params.site_id, controller=params.controller,
+        steps=round((params.end - params.start).total_seconds() / params.step_s),
+        estimated_run_s=round(est.estimated_run_s, 1),
+        estimated_wait_s=round(est.estimated_wait_s, 1), runs_ahead=est.runs_ahead,
+        anonymous_run_max_s=est.anonymous_run_max_s,
+        anonymous_hour_left_s=None if est.anonymous_hour_left_s is None
+        else round(est.anonymous_hour_left_s, 1),
+        allowed=est.reason is None, reason=est.reason)
 
 
 async def submit_scenario(ctx: Any, request: Request, params: Scenario,
@@ -137,13 +172,16 @@ async def submit_scenario(ctx: Any, request: Request, params: Scenario,
             steps = (params.end - params.start).total_seconds() / params.step_s
             ctx.limits.simulation_steps.take(request.client.host if request.client else "?",
                                              steps)
-        state, done = await anyio.to_thread.run_sync(ctx.simulations.submit, params, anonymous)
+        state, done = await anyio.to_thread.run_sync(
+            ctx.simulations.submit, params, anonymous, client_key(request, owner))
     except Busy as exc:
         raise _busy(exc) from None
+    except RunTooCostly as exc:
+        raise HTTPException(422, str(exc)) from None
     if background:
-        return Response(orjson.dumps({"run_id": state.run_id, "status": state.status,
-                                      "progress": state.progress}),
-                        status_code=202, media_type="application/json",
+        accepted = {k: v for k, v in state.to_dict().items()
+                    if k in SimulationAcceptedRead.model_fields}
+        return Response(orjson.dumps(accepted), status_code=202, media_type="application/json",
                         headers={"Location": f"/api/v1/simulations/{state.run_id}"})
     try:
         summary = await asyncio.wrap_future(done)
@@ -178,43 +216,107 @@ async def cancel_simulation(run_id: str, ctx: ContextDep) -> Response:
     return Response(orjson.dumps(state.to_dict()), media_type="application/json")
 
 
+#: The series' JSON answer is written in these pieces (:class:`PackedSeries` blocks).
+_JSON_OPTIONS = orjson.OPT_SERIALIZE_NUMPY
+
+
+def _json_chunks(run_id: str, bucket_s: float, packed: PackedSeries, i0: int, i1: int,
+                 per: int) -> Iterator[bytes]:
+    """``SimulationSeriesRead`` written block by block: never the whole series at once."""
+    names = export_names(packed.columns)
+    keys = ["ts", *names]
+    head = orjson.dumps({"run_id": run_id, "bucket_s": bucket_s, "columns": names})
+    yield head[:-1] + b',"points":['
+    first = True
+    for ts, values in packed.blocks(i0, i1, per):
+        points = [dict(zip(keys, [t, *row], strict=True))
+                  for t, row in zip(iso_utc(ts), values.tolist(), strict=True)]
+        if points:  # NaN is written as null (orjson)
+            yield (b"" if first else b",") + orjson.dumps(points, option=_JSON_OPTIONS)[1:-1]
+            first = False
+    yield b"]}"
+
+
+def _csv_chunks(packed: PackedSeries, i0: int, i1: int, per: int, timezone: str
+                ) -> Iterator[bytes]:
+    """The series as CSV (``backend.twin.export``: UTC and local time, units in the
+    column names), written block by block."""
+    header = True
+    for ts, values in packed.blocks(i0, i1, per):
+        frame = pd.DataFrame(values, index=pd.to_datetime(ts, unit="s", utc=True),
+                             columns=packed.columns)
+        yield export_frame(frame, timezone).to_csv(index=False, header=header,
+                                                   lineterminator="\n").encode()
+        header = False
+    if header:  # no rows: the header alone
+        yield (",".join(["time_utc", "time_local", *export_names(packed.columns)])
+               + "\n").encode()
+
+
+def _instant_s(text: str | None, zone: str, name: str) -> int | None:
+    if text is None:
+        return None
+    try:
+        return int(parse_day_or_instant(text, zone, name).timestamp())
+    except TimestampError as exc:
+        raise HTTPException(422, str(exc)) from None
+
+
 @router.get("/{run_id}/series", response_model=SimulationSeriesRead,
-            responses={200: {"content": CSV_CONTENT}, 404: {}, 409: {}})
-def get_simulation_series(
+            responses={200: {"content": CSV_CONTENT}, 401: {}, 404: {}, 409: {}, 422: {},
+                       429: {"description": "rate limit of anonymous series reads (values a "
+                                            "minute per client address); see Retry-After"}})
+async def get_simulation_series(
     run_id: str,
     ctx: ContextDep,
+    request: Request,
+    start: Annotated[str | None, Query(max_length=64, description=(
+        "first time (inclusive): a date (site midnight) or ISO date-time with offset"))] = None,
+    end: Annotated[str | None, Query(max_length=64, description="exclusive")] = None,
+    step_s: Annotated[float | None, Query(gt=0, le=31 * 86400, description=(
+        "resolution [s]: means over this span, a whole multiple of the run's step"))] = None,
     max_points: Annotated[int | None, Query(ge=1, le=2_000_000)] = None,
     format: Literal["json", "csv"] = "json",
 ) -> Response:
-    """A finished run's series; averaged into at most ``max_points`` buckets when asked."""
+    """A finished run's series, streamed as it is written (JSON or CSV), within
+    ``start``/``end`` when given, averaged into buckets of ``step_s`` or into at most
+    ``max_points`` buckets when asked (the coarser of the two). Without a token a client
+    address reads at most ``HELIOTWIN_ANONYMOUS_SERIES_CELLS_PER_MIN`` values a minute."""
     state = ctx.simulations.get(run_id)
     if state is None:
         raise HTTPException(404, f"unknown simulation run {run_id!r}")
-    series = ctx.simulations.series(run_id)
-    if series is None:
+    owner = await _caller(request)
+    blob = await anyio.to_thread.run_sync(ctx.simulations.series_blob, run_id)
+    if blob is None:
         raise HTTPException(409, f"run {run_id} is {state.status}; its series is not ready")
-    ts = series.index.as_unit("s").asi8
-    data = series.to_numpy(np.float64)
-    bucket_s = 0.0
-    if max_points is not None and len(series) > max_points:
-        per = math.ceil(len(series) / max_points)
-        m = math.ceil(len(series) / per)
-        pad = m * per - len(series)
-        padded = np.vstack([data, np.full((pad, data.shape[1]), np.nan)])
-        data = np.nanmean(padded.reshape(m, per, -1), axis=1)
-        ts = ts[::per]
-        bucket_s = per * float(state.params.get("step_s", 60.0))
-    cols = list(series.columns)
-    times = iso_utc(ts)
-    if format == "csv":  # units in the column names, UTC and local time (backend.twin.export)
-        info = ctx.registry.sites.get(state.site_id)
-        frame = pd.DataFrame(data, index=pd.to_datetime(ts, unit="s", utc=True), columns=cols)
-        text = series_csv(frame, info.site.timezone if info else "UTC")
-        return Response(text, media_type="text/csv", headers={
-            "Content-Disposition": f'attachment; filename="simulation_{run_id}.csv"'})
-    names = export_names(cols)
-    points = [dict(zip(["ts", *names], [t, *row], strict=True))
-              for t, row in zip(times, data.tolist(), strict=True)]
-    return Response(orjson.dumps({"run_id": run_id, "bucket_s": bucket_s, "columns": names,
-                                  "points": points}, option=orjson.OPT_SERIALIZE_NUMPY),
-                    media_type="application/json")
+    info = ctx.registry.sites.get(state.site_id)
+    zone = info.site.timezone if info else "UTC"
+    start_s, end_s = _instant_s(start, zone, "start"), _instant_s(end, zone, "end")
+    if start_s is not None and end_s is not None and end_s <= start_s:
+        raise HTTPException(422, f"end ({end}) must be after start ({start}); end is exclusive")
+    packed = PackedSeries(blob)
+    i0, i1 = packed.index_range(start_s, end_s)
+    run_step_s = float(state.params.get("step_s", 60.0))
+    per = 1
+    if step_s is not None:
+        ratio = step_s / run_step_s
+        if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
+            raise HTTPException(422, f"step_s: {step_s:g} s is not a whole multiple of the "
+                                     f"run's step ({run_step_s:g} s)")
+        per = round(ratio)
+    if max_points is not None and i1 - i0 > max_points * per:
+        per = math.ceil((i1 - i0) / max_points)
+    cells = math.ceil((i1 - i0) / per) * (len(packed.columns) + 1)
+    if owner is None:
+        try:
+            ctx.limits.series_cells.take(request.client.host if request.client else "?",
+                                         cells)
+        except Busy as exc:
+            raise _busy(exc) from None
+    bucket_s = per * run_step_s if per > 1 else 0.0
+    if format == "csv":
+        return StreamingResponse(_csv_chunks(packed, i0, i1, per, zone), media_type="text/csv",
+                                 headers={"Content-Disposition":
+                                          f'attachment; filename="simulation_{run_id}.csv"'})
+    return StreamingResponse(_json_chunks(run_id, bucket_s, packed, i0, i1, per),
+                             media_type="application/json")

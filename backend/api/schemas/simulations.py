@@ -17,6 +17,29 @@ class SimulationAcceptedRead(BaseModel):
     run_id: str
     status: RunStatus
     progress: float = Field(description="0…1")
+    estimated_run_s: float | None = Field(
+        None, description="expected worker time of the run (backend/twin/cost.py) [s]")
+    estimated_wait_s: float | None = Field(
+        None, description="expected time before it starts, behind the queue's order [s]")
+    queue_position: int | None = Field(None, description="0: the next run to start")
+
+
+class SimulationEstimateRead(BaseModel):
+    """What a run would cost and when it would start if asked now (nothing is queued)."""
+
+    site_id: str
+    controller: str
+    steps: int
+    estimated_run_s: float = Field(description="expected worker time of the run [s]")
+    estimated_wait_s: float = Field(description="expected time before it would start [s]")
+    runs_ahead: int = Field(description="runs running or queued that would go before it")
+    anonymous_run_max_s: float | None = Field(
+        description="without a token: the most one run may take [s]; null with a token")
+    anonymous_hour_left_s: float | None = Field(
+        description="without a token: the worker time this address may still ask this hour "
+                    "[s]; null with a token")
+    allowed: bool = Field(description="whether the run would be accepted now")
+    reason: str | None = Field(description="why not, naming the limit")
 
 
 class DisturbancesRead(BaseModel):
@@ -71,6 +94,12 @@ class SimulationSummaryRead(BaseModel):
     pointing_error_rms_mrad: float | None
     pointing_error_p95_mrad: float | None
     pointing_error_max_mrad: float | None
+    pointing_error_energy_weighted_rms_mrad: float | None = Field(
+        None, description="RMS weighted by the tracker's clear-beam energy at each step")
+    pointing_error_minutes: int | None = Field(
+        None, description="tracking minutes the pointing statistics cover")
+    pointing_min_elevation_deg: float | None = Field(
+        None, description="sun elevation above which the pointing error is defined")
     azimuth_error_rms_mrad: float | None
     elevation_error_rms_mrad: float | None
     moves: int
@@ -104,10 +133,18 @@ class SimulationRunRead(BaseModel):
     params: dict[str, Any] = Field(description="the scenario: site_id, start, end, step_s, "
                                                "controller, receiver, machine parameters "
                                                "changed, weather_station")
+    estimated_run_s: float | None = Field(
+        None, description="expected worker time [s] (known while the service remembers it)")
+    estimated_wait_s: float | None = Field(
+        None, description="queued: expected time before it starts [s]; running: 0")
+    queue_position: int | None = Field(None, description="queued: 0 is the next to start")
+    started_at: str | None = Field(None, description="UTC, ISO 8601; null until it starts")
+    finished_at: str | None = Field(None, description="UTC, ISO 8601; null until it ends")
 
 
 class SimulationSeriesRead(BaseModel):
-    """A finished run's series, averaged into buckets when ``max_points`` asks."""
+    """A finished run's series (streamed as written), averaged into buckets when
+    ``max_points`` or ``step_s`` asks, within ``start``/``end`` when given."""
 
     run_id: str
     bucket_s: float = Field(description="0: every step as computed")

@@ -1,0 +1,158 @@
+"""The simulation queue (issue 22 item 8, issue 23 item 3): priced in worker time, fair
+between callers, bounded for callers without a token, with estimates and a cancel.
+
+One service in this process (SQLite, one worker) with small anonymous bounds: a run
+without a token may take 4 s of worker time, an address 6 s an hour. Where a test needs
+the estimate to be wrong (a run the table prices under the bound that takes longer), it
+swaps the runner's cost model for a fixed price; the order test uses the real one, and
+lifts the anonymous bounds (a day's run must not be stopped at 4 s on a loaded machine).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import httpx
+import pytest
+from live_service import InProcessServer, new_database
+
+from backend.limits import WindowBudget
+from backend.twin.cost import CostModel
+
+RUN_MAX_S = 4
+HOUR_MAX_S = 6
+YEAR_HYBRID = {"site_id": "tehuantepec", "start": "2023-01-01", "end": "2024-01-01",
+               "controller": "hybrid", "background": True}  # minutes of work here
+DAY = {"site_id": "tehuantepec", "start": "2024-05-01", "end": "2024-05-02", "step_s": 600,
+       "background": True}
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
+    db = new_database("sqlite", tmp_path_factory.mktemp("queue"))
+    proc = InProcessServer(db.url, extra_env={
+        "HELIOTWIN_SIMULATION_ANONYMOUS_RUN_MAX_S": str(RUN_MAX_S),
+        "HELIOTWIN_SIMULATION_ANONYMOUS_HOUR_MAX_S": str(HOUR_MAX_S),
+        "HELIOTWIN_SIMULATION_WORKERS": "1", "HELIOTWIN_SIMULATION_QUEUE": "2",
+    }).start()
+    try:
+        yield proc
+    finally:
+        proc.stop()
+
+
+class FixedPrice(CostModel):
+    """Prices every run at ``cost_s`` and learns nothing (an estimate that is wrong)."""
+
+    def __init__(self, cost_s: float) -> None:
+        super().__init__()
+        self.cost_s = cost_s
+
+    def estimate_s(self, params: Any) -> float:
+        return self.cost_s
+
+    def learn(self, params: Any, elapsed_s: float) -> None:
+        return None
+
+
+def _wait_final(c: httpx.Client, run_id: str, timeout_s: float = 120) -> dict[str, Any]:
+    deadline = time.monotonic() + timeout_s
+    while True:
+        state = c.get(f"/api/v1/simulations/{run_id}").json()
+        if state["status"] in ("done", "failed"):
+            return state
+        assert time.monotonic() < deadline, state
+        time.sleep(0.1)
+
+
+def _wait_running(c: httpx.Client, run_id: str, timeout_s: float = 60) -> None:
+    deadline = time.monotonic() + timeout_s
+    while c.get(f"/api/v1/simulations/{run_id}").json()["status"] == "queued":
+        assert time.monotonic() < deadline, "the run never started"
+        time.sleep(0.05)
+
+
+def test_priced_by_controller_not_steps(server: InProcessServer) -> None:
+    """A camera loop's year costs far more than the ideal controller's, at the same steps;
+    too much for a caller without a token: refused before it is queued, the limit named."""
+    runner = server.ctx.simulations
+    runner.costs = CostModel()
+    with server.client() as c:
+        ideal = c.post("/api/v1/simulations/estimate", json={**YEAR_HYBRID,
+                                                              "controller": "ideal"}).json()
+        camera = c.post("/api/v1/simulations/estimate",
+                        json={**YEAR_HYBRID, "controller": "closed_loop_camera"}).json()
+        assert ideal["steps"] == camera["steps"] == 525_600
+        # ≈ 12 s a simulated day of camera frames against ≈ 2 s for the whole ideal year
+        assert camera["estimated_run_s"] > 500 * ideal["estimated_run_s"]
+        assert camera["allowed"] is False and camera["anonymous_run_max_s"] == RUN_MAX_S
+        assert "HELIOTWIN_SIMULATION_ANONYMOUS_RUN_MAX_S" in camera["reason"]
+        r = c.post("/api/v1/simulations", json={**YEAR_HYBRID,
+                                                "controller": "closed_loop_camera"})
+        assert r.status_code == 422, r.text
+        assert "HELIOTWIN_SIMULATION_ANONYMOUS_RUN_MAX_S" in r.json()["detail"]
+        assert "step_s" in r.json()["detail"]
+
+
+def test_anonymous_caller_holds_the_worker_at_most_the_bound(server: InProcessServer) -> None:
+    """A run without a token that the estimate underprices is stopped at the per-run
+    bound; the address's hour is then spent (429 with Retry-After); a token's run is not
+    held to either."""
+    runner = server.ctx.simulations
+    runner.costs = FixedPrice(3.0)  # under RUN_MAX_S; the run takes far longer
+    token = server.token()
+    try:
+        with server.client() as c:
+            r = c.post("/api/v1/simulations", json=YEAR_HYBRID)
+            assert r.status_code == 202, r.text
+            assert r.json()["estimated_run_s"] == 3.0
+            state = _wait_final(c, r.json()["run_id"])
+            assert state["status"] == "failed", state
+            assert "HELIOTWIN_SIMULATION_ANONYMOUS_RUN_MAX_S" in state["error"]
+            assert state["started_at"] and state["finished_at"]
+            again = c.post("/api/v1/simulations", json=YEAR_HYBRID)
+            assert again.status_code == 429, again.text
+            assert "HELIOTWIN_SIMULATION_ANONYMOUS_HOUR_MAX_S" in again.json()["detail"]
+            assert 1 <= int(again.headers["retry-after"]) <= 3600
+            est = c.post("/api/v1/simulations/estimate", json=YEAR_HYBRID).json()
+            assert est["allowed"] is False and est["anonymous_hour_left_s"] < 3.0
+            authed = c.post("/api/v1/simulations", json=YEAR_HYBRID,
+                            headers={"Authorization": f"Bearer {token}"})
+            assert authed.status_code == 202, authed.text
+            gone = c.delete(f"/api/v1/simulations/{authed.json()['run_id']}").json()
+            assert (gone["status"], gone["error"]) == ("failed", "cancelled")
+    finally:
+        runner.costs = CostModel()
+        runner.anonymous_hours = WindowBudget(HOUR_MAX_S, 3600.0, "s", "the hour, spent here")
+
+
+def test_another_callers_day_starts_before_a_second_long_run(
+        server: InProcessServer) -> None:
+    """Caller A (a token) has a long run working and a second one queued; caller B (no
+    token, another client) then asks for a day. B's day is next in the order, is told a
+    shorter wait, and starts before A's second long run."""
+    runner = server.ctx.simulations
+    runner.costs = CostModel()
+    auth = {"Authorization": f"Bearer {server.token()}"}
+    bounds = runner.settings.simulations
+    bounds.anonymous_run_max_s = bounds.anonymous_hour_max_s = 600  # B's day on a busy machine
+    with server.client() as c:
+        long1 = c.post("/api/v1/simulations", json=YEAR_HYBRID, headers=auth).json()["run_id"]
+        _wait_running(c, long1)
+        long2 = c.post("/api/v1/simulations", json=YEAR_HYBRID, headers=auth).json()["run_id"]
+        day = c.post("/api/v1/simulations", json=DAY)
+        assert day.status_code == 202, day.text
+        assert day.json()["queue_position"] == 0
+        day_id = day.json()["run_id"]
+        queued = {r: c.get(f"/api/v1/simulations/{r}").json() for r in (long2, day_id)}
+        assert queued[long2]["queue_position"] == 1
+        assert queued[day_id]["estimated_wait_s"] < queued[long2]["estimated_wait_s"]
+        assert queued[long2]["estimated_wait_s"] >= queued[long2]["estimated_run_s"] / 2
+        c.delete(f"/api/v1/simulations/{long1}")
+        done = _wait_final(c, day_id)
+        assert done["status"] == "done", done
+        second = c.get(f"/api/v1/simulations/{long2}").json()
+        assert second["started_at"] is None or second["started_at"] > done["started_at"]
+        assert c.delete(f"/api/v1/simulations/{long2}").json()["error"] == "cancelled"
