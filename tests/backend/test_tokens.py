@@ -1,5 +1,6 @@
 """Write tokens: ``heliotwin token create|list|revoke`` and ``/api/v1/tokens`` on a running
-service (in this process, ``live_service.InProcessServer``; the CLI in processes of its own).
+service (in this process, ``live_service.InProcessServer``; the CLI in processes of its own,
+where the CLI is the subject: a token a test merely needs is made in process).
 
 A token revoked by the CLI (another process) is refused within the cache TTL
 (``HELIOTWIN_TOKEN_CACHE_TTL_S`` ≤ 1 s); one revoked over HTTP at once; an
@@ -65,8 +66,7 @@ def test_create_prints_only_the_token(server: InProcessServer) -> None:
 
 def test_cli_revocation_is_refused_within_a_second(server: InProcessServer,
                                                    client: httpx.Client) -> None:
-    token = _cli(server, "create", "--site", "tehuantepec", "--label", "to-revoke"
-                 ).stdout.split()[-1]
+    token = server.token("tehuantepec", "to-revoke")  # the CLI's revoke is the subject
     assert _post(client, token, 0).status_code == 200
     assert _post(client, token, 1).status_code == 200  # now cached by the server
     listed = json.loads(_cli(server, "list", "--site", "tehuantepec", "--json").stdout)
@@ -85,7 +85,7 @@ def test_cli_revocation_is_refused_within_a_second(server: InProcessServer,
 
 
 def test_cli_revoke_by_token_and_unknown(server: InProcessServer, client: httpx.Client) -> None:
-    token = _cli(server, "create", "--site", "tehuantepec").stdout.split()[-1]
+    token = server.token("tehuantepec")
     assert _cli(server, "revoke", token).returncode == 0
     time.sleep(1.0)
     assert _post(client, token, 3).status_code == 401
@@ -100,7 +100,7 @@ def test_admin_endpoints(server: InProcessServer, client: httpx.Client) -> None:
     admin = {"Authorization": f"Bearer {ADMIN}"}
     assert client.get(url).status_code == 401
     assert client.get(url, headers={"Authorization": "Bearer wrong"}).status_code == 401
-    site_token = _cli(server, "create", "--site", "tehuantepec").stdout.split()[-1]
+    site_token = server.token("tehuantepec")
     assert client.get(url, headers={"Authorization": f"Bearer {site_token}"}
                       ).status_code == 401  # a write token is not an admin token
 
