@@ -5,7 +5,8 @@
   scripts (``/static``, ``/vendor/plotly.min.js``), inline styles (Plotly and
   Swagger UI write ``style`` attributes), ``data:``/``blob:`` images (the
   favicon, Plotly's PNG export) and, as frame and fetch target, the viser 3D
-  twin on its own port (``frontend/js/twin.js``) — and nothing from elsewhere;
+  twin on its own port of the host the page was asked by (``frontend/js/twin.js``;
+  no other host) — and nothing from elsewhere;
   ``frame-ancestors 'none'`` with ``X-Frame-Options: DENY``,
   ``X-Content-Type-Options: nosniff``, ``Referrer-Policy: no-referrer``. A
   response that sets its own CSP (the docs pages) keeps it.
@@ -23,6 +24,7 @@
 from __future__ import annotations
 
 import base64
+import functools
 import hashlib
 import re
 from pathlib import Path
@@ -35,22 +37,32 @@ from fastapi.responses import HTMLResponse
 from fastapi.staticfiles import StaticFiles
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from backend.twin.viser_http import request_hostname
+
 DOCS_ASSETS = Path(fastapi_offline.__file__).parent / "static"
 DOCS_STATIC_URL = "/docs-static"
 
 
-def content_security_policy(viser_port: int, script_hashes: tuple[str, ...] = ()) -> str:
-    """The CSP of the service's pages (``script_hashes``: ``sha256-…`` of inline scripts)."""
-    viser = f"http://*:{viser_port} https://*:{viser_port}"
+def content_security_policy(viser_port: int, script_hashes: tuple[str, ...] = (),
+                            host: str | None = None) -> str:
+    """The CSP of the service's pages (``script_hashes``: ``sha256-…`` of inline scripts).
+
+    The viser 3D twin may be framed and fetched only on ``host`` (the host name the page
+    was asked by, which is where ``frontend/js/twin.js`` looks for it) at ``viser_port``;
+    without a host, not at all.
+    """
     scripts = " ".join(["'self'", *(f"'{h}'" for h in script_hashes)])
+    frames = "'none'" if host is None else f"http://{host}:{viser_port} https://{host}:{viser_port}"
+    viser = "" if host is None else f" http://{host}:{viser_port} https://{host}:{viser_port}"
+    sockets = "" if host is None else f" ws://{host}:{viser_port} wss://{host}:{viser_port}"
     return "; ".join([
         "default-src 'self'",
         f"script-src {scripts}",
         "style-src 'self' 'unsafe-inline'",
         "img-src 'self' data: blob:",
         "font-src 'self' data:",
-        f"connect-src 'self' {viser} ws://*:{viser_port} wss://*:{viser_port}",
-        f"frame-src {viser}",
+        f"connect-src 'self'{viser}{sockets}",
+        f"frame-src {frames}",
         "worker-src 'self' blob:",
         "object-src 'none'",
         "base-uri 'self'",
@@ -60,27 +72,36 @@ def content_security_policy(viser_port: int, script_hashes: tuple[str, ...] = ()
 
 
 class SecurityHeaders:
-    """ASGI middleware adding the security headers to every HTTP response."""
+    """ASGI middleware adding the security headers to every HTTP response (the CSP names
+    the request's own host for the viser port: :func:`content_security_policy`)."""
 
     def __init__(self, app: ASGIApp, viser_port: int) -> None:
         self.app = app
+        self.viser_port = viser_port
         self.headers = [
-            (b"content-security-policy", content_security_policy(viser_port).encode()),
             (b"x-frame-options", b"DENY"),
             (b"x-content-type-options", b"nosniff"),
             (b"referrer-policy", b"no-referrer"),
         ]
 
+    @functools.lru_cache(maxsize=64)  # noqa: B019 - one middleware per app, a few host names
+    def _csp(self, host: str | None) -> bytes:
+        return content_security_policy(self.viser_port, host=host).encode()
+
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
+        host_header = next((v.decode("latin-1") for k, v in scope["headers"] if k == b"host"),
+                           None)
+        ours = [(b"content-security-policy", self._csp(request_hostname(host_header))),
+                *self.headers]
 
         async def send_with_headers(message: Message) -> None:
             if message["type"] == "http.response.start":
                 headers = list(message.get("headers", []))
                 present = {k.lower() for k, _ in headers}
-                headers.extend(h for h in self.headers if h[0] not in present)
+                headers.extend(h for h in ours if h[0] not in present)
                 message = {**message, "headers": headers}
             await send(message)
 
