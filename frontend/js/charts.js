@@ -109,3 +109,43 @@ export function resizeVisible(root) {
   if (!window.Plotly) return;
   for (const el of root.querySelectorAll(".js-plotly-plot")) window.Plotly.Plots.resize(el);
 }
+
+/** A round tick step (1, 2, 2.5 or 5 × 10^k) that cuts `span` into about `target` intervals. */
+export function roundStep(span, target = 5) {
+  if (!(span > 0) || !Number.isFinite(span)) return 1;
+  const raw = span / target;
+  const p = 10 ** Math.floor(Math.log10(raw));
+  const m = raw / p;
+  return p * (m <= 1 ? 1 : m <= 2 ? 2 : m <= 2.5 ? 2.5 : m <= 5 ? 5 : 10);
+}
+
+/** Axis settings for `values` (nulls and non-finite ignored) from zero to a round value above
+ * the largest — below zero only when a value is negative — with round ticks (0, 10, 20 …,
+ * never 33.1, 33.6): a ±0.5 % wobble then looks like what it is. Spread into a Plotly axis. */
+export function zeroBasedAxis(values, target = 5) {
+  const v = values.filter((x) => typeof x === "number" && Number.isFinite(x));
+  let lo = Math.min(0, ...v);
+  let hi = Math.max(0, ...v);
+  if (hi - lo <= 0) hi = lo + 1;
+  const step = roundStep(hi - lo, target);
+  lo = Math.floor(lo / step + 1e-9) * step;
+  hi = Math.ceil(hi / step - 1e-9) * step;
+  let decimals = 0; // as many as the step needs: 0.25 → 2, 0.2 → 1, 5 → 0
+  while (decimals < 6 && Math.abs(Math.round(step * 10 ** decimals) - step * 10 ** decimals) > 1e-9) decimals += 1;
+  return { range: [lo, hi], tick0: 0, dtick: step, tickformat: `.${decimals}f`, autorange: false };
+}
+
+/** A per-period series split into whole periods and partial ones: `partial[i]` true moves
+ * point i out of `whole` (null there, so lines break) into `part`, whose values are clamped
+ * into `range` (the axis is set from whole periods only) — `part.value` keeps the true ones
+ * for the hover. Partial periods are then drawn apart, faint, and never set the axis. */
+export function splitPartial(x, y, partial, range = null) {
+  const whole = { x, y: y.map((v, i) => (partial[i] ? null : v)) };
+  const part = { x: [], y: [], value: [], clipped: [] };
+  y.forEach((v, i) => {
+    if (!partial[i] || v === null || v === undefined) return;
+    const c = range ? Math.min(Math.max(v, range[0]), range[1]) : v;
+    part.x.push(x[i]); part.y.push(c); part.value.push(v); part.clipped.push(c !== v);
+  });
+  return { whole, part };
+}

@@ -1,6 +1,6 @@
 // Overview: one site and one day — power (measured and twin), energies, gain, tiles, loggers.
 import { getEnergy, getMeasurements, getStatus } from "./api.js";
-import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
+import { COLORS, baseLayout, draw, showEmpty, splitPartial, zeroBasedAxis } from "./charts.js";
 import { addDays, fmtAge, fmtDate, fmtDateTime, fmtTime, localDate, toLocalWall } from "./time.js";
 import { banner, energy, h, num, pct, remember, tile } from "./ui.js";
 import * as report from "./report.js";
@@ -177,11 +177,12 @@ function drawDayEnergy(row) {
       `tracking gain measured (tracker over fixed); the twin expects ${pct(expect)}${partial ? " over the same minutes" : ""}`));
 }
 
-/** A date axis with one tick per day (per week past ten days), labelled "18 Nov". */
+/** A date axis with one tick per day (per week past ten days) at local midnight, labelled
+ * "18 Nov": never hourly ticks that repeat a day's label. */
 function dayAxis(tz, dates) {
   const day = 86400000;
   return { type: "date", title: { text: `Day (${tz})` }, tickformat: "%d %b", gridcolor: "#e9edf1",
-    dtick: dates.length > 10 ? 7 * day : day };
+    tick0: dates[0] || "2000-01-03", dtick: dates.length > 10 ? 7 * day : day, ticklabelmode: "instant" };
 }
 
 /** The whole window, always (days without readings show the twin alone, never a shorter axis). */
@@ -197,7 +198,7 @@ async function drawHistory(rows) {
   const traces = [];
   for (const arr of ARRAYS) {
     traces.push({ x: dates, y: rows.map((r) => kwh(energyOf(r, arr, "measured"))), name: `${arr} measured`, type: "bar",
-      marker: { color: colorOf(arr), pattern: { shape: rows.map((r) => (r.partial ? "/" : "")) } },
+      marker: { color: colorOf(arr), opacity: rows.map((r) => (r.partial ? 0.45 : 1)), pattern: { shape: rows.map((r) => (r.partial ? "/" : "")) } },
       customdata: rows.map((r) => (r.partial ? " (partial day)" : "")), hovertemplate: "%{y:.2f} kWh%{customdata}" });
   }
   for (const arr of ARRAYS) {
@@ -205,14 +206,27 @@ async function drawHistory(rows) {
       mode: "markers", marker: { color: colorOf(arr), symbol: "line-ew-open", size: 14, line: { width: 2, color: colorOf(arr) } },
       hovertemplate: "%{y:.2f} kWh" });
   }
-  traces.push({ x: dates, y: rows.map((r) => gainOf(r, "measured")), name: "gain", yaxis: "y2", type: "scatter",
+  // The gain axis is set by whole days only and starts at zero with round ticks: a partial
+  // day's gain (+220 % over an hour of morning) is drawn apart, faint, clamped to the axis.
+  const gains = rows.map((r) => gainOf(r, "measured"));
+  const partial = rows.map((r) => r.partial === true);
+  const wholeGains = gains.filter((g, i) => !partial[i] && g !== null);
+  const gainAxis = zeroBasedAxis(wholeGains.length ? wholeGains : gains);
+  const { whole, part } = splitPartial(dates, gains, partial, gainAxis.range);
+  traces.push({ x: whole.x, y: whole.y, name: "gain", yaxis: "y2", type: "scatter", connectgaps: false,
     mode: "lines+markers", line: { color: COLORS.gain, width: 1.5 }, marker: { size: 5 }, hovertemplate: "%{y:.1f} %" });
+  if (part.x.length) {
+    traces.push({ x: part.x, y: part.y, name: "gain, partial day", yaxis: "y2", type: "scatter", mode: "markers",
+      opacity: 0.5, marker: { color: COLORS.gain, size: 8, symbol: part.clipped.map((c) => (c ? "triangle-up-open" : "circle-open")) },
+      customdata: part.value.map((v, i) => [v, part.clipped[i] ? "partial day, off the axis" : "partial day"]),
+      hovertemplate: "%{customdata[0]:.1f} % (%{customdata[1]})" });
+  }
   const layout = baseLayout({
     barmode: "group", bargap: 0.25,
     xaxis: dayAxis(tz, dates),
     yaxis: { title: { text: "Energy [kWh]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
-    yaxis2: { title: { text: "Tracking gain [%]" }, overlaying: "y", side: "right", showgrid: false, zeroline: true,
-      zerolinecolor: "#c3e6cb", ticksuffix: " %", tickformat: ".1f" },
+    yaxis2: { title: { text: "Tracking gain [%] (whole days)" }, overlaying: "y", side: "right", showgrid: false, zeroline: true,
+      zerolinecolor: "#c3e6cb", ticksuffix: " %", ...gainAxis },
   });
   const energyCols = ARRAYS.flatMap((a) => SOURCES.map((src) => [a, src]));
   const table = {
