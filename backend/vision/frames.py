@@ -59,7 +59,8 @@ def time_from_name(name: str) -> NameTime | None:
     if m is None:
         return None
     try:
-        wall = dt.datetime(*(int(g) for g in m.groups()))
+        year, month, day, hour, minute, second = (int(g) for g in m.groups())
+        wall = dt.datetime(year, month, day, hour, minute, second)
     except ValueError:
         return None
     z = _NAME_ZONE.search(name)
