@@ -1,5 +1,6 @@
 // Plant: a plant of dual-axis trackers seen from above with each collector's shade through a
-// clear-sky day, the strategies compared, and seed 004's sky map with the chosen orientation.
+// clear-sky day, the strategies compared, and seed 004's sky map with the chosen orientation;
+// below, a sweep of regular layouts and spacings at the plant's place (issue 26).
 import { api } from "./api.js";
 import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
 import { fmtTime } from "./time.js";
@@ -137,6 +138,7 @@ async function selectPlant(id) {
 }
 
 export async function init() {
+  initSweep();
   $("plant-day").addEventListener("change", loadDay);
   $("plant-time").addEventListener("input", () => {
     view.index = Number($("plant-time").value);
@@ -156,4 +158,134 @@ export async function init() {
   const day = new URLSearchParams(location.hash.split("?")[1] || "").get("day");
   if (day && /^\d{4}-\d{2}-\d{2}$/.test(day)) $("plant-day").value = day;
   await selectPlant(view.plants[0].plant_id);
+}
+
+// ── the layout and spacing sweep (POST /api/v1/plants/sweeps, issue 26) ──
+const sweep = { id: null, rows: [], token: 0 };
+const DASH = { sun: "solid", backtrack: "dash", sky_scan: "dot" };
+const LAYOUT_COLORS = { square: COLORS.tracker, diagonal: COLORS.fixed, hexagonal_n_s: COLORS.gain,
+  hexagonal_e_w: COLORS.sun, custom: COLORS.grey, plant: COLORS.grey };
+
+function gcrList(text) {
+  const t = text.trim();
+  if (t.includes(":")) {
+    const [lo, hi, step] = t.split(":").map(Number);
+    const out = [];
+    for (let k = 0; lo + k * step <= hi + 1e-9 && k < 40; k++) out.push(Math.round((lo + k * step) * 1e6) / 1e6);
+    return out;
+  }
+  return t.split(",").map(Number).filter((v) => v > 0);
+}
+
+function curves() {
+  const groups = new Map();
+  for (const r of sweep.rows) {
+    const key = `${r.layout} · ${r.strategy}`;
+    if (!groups.has(key)) groups.set(key, []);
+    groups.get(key).push(r);
+  }
+  for (const rows of groups.values()) rows.sort((a, b) => a.gcr - b.gcr);
+  return groups;
+}
+
+async function drawSweep() {
+  const groups = curves();
+  const style = (rows) => ({ color: LAYOUT_COLORS[rows[0].layout] || COLORS.grey, dash: DASH[rows[0].strategy] || "solid" });
+  const perCollector = [...groups].map(([name, rows]) => ({
+    type: "scatter", mode: "lines+markers", name: `${name}, per collector`, x: rows.map((r) => r.gcr),
+    y: rows.map((r) => r.energy_kwh_per_collector / 1000), line: style(rows), legendgroup: name,
+  }));
+  const perHa = [...groups].map(([name, rows]) => ({
+    type: "scatter", mode: "lines", name: `${name}, per ha`, x: rows.map((r) => r.gcr), yaxis: "y2",
+    y: rows.map((r) => r.energy_mwh_per_ha), line: { ...style(rows), width: 1 }, legendgroup: name, showlegend: false,
+  }));
+  const columns = ["layout", "strategy", "gcr", "interior_beam_shaded_pct", "field_beam_shaded_pct",
+    "energy_kwh_per_collector", "energy_mwh_per_ha", "land_m2_per_collector"];
+  const table = { columns, rows: sweep.rows.map((r) => columns.map((c) => r[c])), filename: `sweep-${sweep.id}.csv` };
+  await draw("chart-sweep-energy", [...perCollector, ...perHa], baseLayout({
+    xaxis: { title: { text: "ground cover ratio [-]" }, gridcolor: "#e9edf1" },
+    yaxis: { title: { text: "per collector [MWh] (thick)" }, gridcolor: "#e9edf1" },
+    yaxis2: { title: { text: "per hectare [MWh] (thin)" }, overlaying: "y", side: "right", rangemode: "tozero" },
+    hovermode: "closest",
+  }), table);
+  await draw("chart-sweep-tradeoff", [...groups].map(([name, rows]) => ({
+    type: "scatter", mode: "lines+markers", name, x: rows.map((r) => r.energy_mwh_per_ha),
+    y: rows.map((r) => r.energy_kwh_per_collector / 1000), line: style(rows),
+    text: rows.map((r) => `GCR ${r.gcr}: ${num(r.land_m2_per_collector, 0)} m² per collector, interior ` +
+      `${num(r.interior_beam_shaded_pct, 2)} % of beam shaded`), hoverinfo: "text+name",
+  })), baseLayout({
+    xaxis: { title: { text: "energy per hectare [MWh/ha]" }, gridcolor: "#e9edf1" },
+    yaxis: { title: { text: "energy per collector [MWh]" }, gridcolor: "#e9edf1" },
+    hovermode: "closest",
+  }), table);
+  const select = $("sweep-case");
+  select.innerHTML = "";
+  for (const r of sweep.rows) select.add(new Option(`${r.layout} · GCR ${r.gcr} · ${r.strategy}`, JSON.stringify([r.layout, r.gcr, r.strategy])));
+  const densest = sweep.rows.reduce((a, r) => (r.gcr > a.gcr ? r : a), sweep.rows[0]);
+  select.value = JSON.stringify([densest.layout, densest.gcr, densest.strategy]);
+  await drawSweepShade();
+}
+
+async function drawSweepShade() {
+  if (!sweep.id || !$("sweep-case").value) return;
+  const [layout, gcr, strategy] = JSON.parse($("sweep-case").value);
+  const d = await api(`/api/v1/plants/sweeps/${enc(sweep.id)}/shade`, { params: { layout, gcr, strategy, date: `${$("sweep-year").value}-12-21` } });
+  const x = d.times.map((t) => new Date(t).toISOString().slice(11, 16));
+  await draw("chart-sweep-shade", [
+    { type: "scatter", mode: "lines+markers", x, y: d.interior_shaded_fraction.map((v) => 100 * v), name: "interior collector", line: { color: COLORS.tracker } },
+    { type: "scatter", mode: "lines", x, y: d.field_mean_shaded_fraction.map((v) => 100 * v), name: `field average (${d.positions_m.length} collectors)`, line: { color: COLORS.grey } },
+    { type: "scatter", mode: "lines", x, y: d.sun_elevation_deg, name: "sun elevation [°]", yaxis: "y2", line: { color: COLORS.sun, dash: "dot" } },
+  ], baseLayout({
+    xaxis: { title: { text: "time [UTC]" } },
+    yaxis: { title: { text: "shaded [%]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
+    yaxis2: { title: { text: "sun elevation [°]" }, overlaying: "y", side: "right", rangemode: "tozero" },
+  }), {
+    columns: ["time_utc", "interior_shaded_pct", "field_mean_shaded_pct", "sun_elevation_deg"],
+    rows: d.times.map((t, k) => [t, 100 * d.interior_shaded_fraction[k], 100 * d.field_mean_shaded_fraction[k], d.sun_elevation_deg[k]]),
+    filename: `sweep-${layout}-${gcr}-${strategy}-shade.csv`,
+  });
+}
+
+async function runSweep(ev) {
+  ev.preventDefault();
+  const p = view.plant;
+  if (!p) return;
+  const token = ++sweep.token;
+  const year = Number($("sweep-year").value);
+  const body = {
+    layouts: $("sweep-layouts").value.split(",").map((s) => s.trim()).filter(Boolean),
+    gcr: gcrList($("sweep-gcr").value), strategies: $("sweep-strategies").value.split(",").map((s) => s.trim()).filter(Boolean),
+    collector_m: $("sweep-collector").value.trim(), latitude_deg: p.latitude_deg, longitude_deg: p.longitude_deg,
+    altitude_m: p.altitude_m, start: `${year}-01-01`, end: `${year + 1}-01-01`, step_s: Number($("sweep-step").value),
+  };
+  const status = $("sweep-status");
+  document.body.removeAttribute("data-sweep-loaded");
+  try {
+    const acc = await api("/api/v1/plants/sweeps", { method: "POST", json: body });
+    sweep.id = acc.sweep_id;
+    status.textContent = `queued: ${acc.cases} cases`;
+    for (;;) {
+      await new Promise((r) => setTimeout(r, 1000));
+      if (token !== sweep.token) return;
+      const run = await api(`/api/v1/plants/sweeps/${enc(sweep.id)}`);
+      status.textContent = `${run.status}: ${run.cases_done} of ${run.cases} cases`;
+      if (run.status === "failed") { banner(`Sweep: ${run.error}`, "error"); return; }
+      if (run.status === "done") {
+        const res = run.result;
+        status.textContent = `${res.cases} cases on ${res.engine} (${res.workers} workers) in ${num(res.wall_s, 1)} s`;
+        sweep.rows = res.rows;
+        await drawSweep();
+        document.body.dataset.sweepLoaded = sweep.id;
+        return;
+      }
+    }
+  } catch (err) {
+    status.textContent = "";
+    banner(`Sweep: ${err.message}`, "error");
+  }
+}
+
+export function initSweep() {
+  $("sweep-form").addEventListener("submit", runSweep);
+  $("sweep-case").addEventListener("change", () => drawSweepShade().catch((err) => banner(`Sweep shade: ${err.message}`, "error")));
 }
