@@ -72,6 +72,7 @@ def test_simulation_errors(client: httpx.Client) -> None:
     r = client.post("/api/v1/simulations", json={"start": "2024-01-01", "end": "2030-01-01",
                                                  "step_s": 1})
     assert r.status_code == 422 and "limit" in r.json()["detail"]
+    assert "189,388,800 steps" in r.json()["detail"]  # a number a person reads, not 1.894e+08
     r = client.post("/api/v1/simulations", json={"site_id": "mars", "start": "2024-01-01",
                                                  "end": "2024-01-02"})
     assert r.status_code == 404

@@ -73,8 +73,9 @@ def _params(ctx: Any, body: _SimulationBase) -> Scenario:
         raise HTTPException(422, str(exc)) from None
     steps = (t1 - t0).total_seconds() / body.step_s
     if steps > ctx.settings.simulations.max_steps:
-        raise HTTPException(422, f"{steps:.4g} steps asked; the limit is "
-                                 f"{ctx.settings.simulations.max_steps}: use a larger step_s "
+        raise HTTPException(422, f"step_s, end: {steps:,.0f} steps asked; the limit is "
+                                 f"{ctx.settings.simulations.max_steps:,} "
+                                 "(HELIOTWIN_MAX_SIMULATION_STEPS): use a larger step_s "
                                  "or a shorter range")
     machine = {p.name: float(getattr(body, p.name)) for p in MACHINE_PARAMETERS
                if getattr(body, p.name) != p.default}
