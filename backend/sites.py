@@ -352,8 +352,9 @@ def save_site(ctx: ServiceContext, site_id: str, data: Any) -> tuple[SiteInfo, b
     return info, old is None, dropped
 
 
-def _at(config: dict[str, Any], path: str) -> Any:
-    """The value at a dotted path of a config (None when absent)."""
+def config_value(config: dict[str, Any], path: str) -> Any:
+    """The value at a dotted path of a config (``arrays.fixed.surface_tilt_deg``; None
+    when absent): the keys of ``assumed``."""
     value: Any = config
     for part in path.split("."):
         value = value.get(part) if isinstance(value, dict) else None
@@ -366,6 +367,6 @@ def _settle_assumed(old: dict[str, Any], new: dict[str, Any]) -> dict[str, Any]:
     marks = new.get("assumed")
     if not isinstance(marks, dict):
         return new
-    kept = {k: v for k, v in marks.items() if _at(new, k) == _at(old, k)}
+    kept = {k: v for k, v in marks.items() if config_value(new, k) == config_value(old, k)}
     out = {k: v for k, v in new.items() if k != "assumed"}
     return {**out, "assumed": kept} if kept else out

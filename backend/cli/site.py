@@ -86,7 +86,7 @@ def _sites_dir() -> Path:
 
 def _write(config: dict[str, Any], force: bool) -> int:
     """Validate, refuse to overwrite without ``force``, write, say where."""
-    from backend.sites import write_site_file
+    from backend.sites import config_value, write_site_file
     from sim.site_config import validate_site_config
     from sim.sites import builtin_site_ids
 
@@ -105,15 +105,8 @@ def _write(config: dict[str, Any], force: bool) -> int:
     where = _sync_database(config)
     print(f"wrote {path}; `heliotwin simulate --site {config['site_id']}` runs it; {where}")
     for key, why in config.get("assumed", {}).items():
-        print(f"  assumed {key} = {_at(config, key)}: {why}")
+        print(f"  assumed {key} = {config_value(config, key)}: {why}")
     return 0
-
-
-def _at(config: dict[str, Any], path: str) -> Any:
-    value: Any = config
-    for part in path.split("."):
-        value = value[part]
-    return value
 
 
 def _sync_database(config: dict[str, Any]) -> str:
