@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import datetime as dt
 import math
+import time
 from dataclasses import dataclass
 from zoneinfo import ZoneInfo
 
@@ -66,6 +67,8 @@ _ROLLUP_ENERGY = (
 
 def iso_utc(ts_s: np.ndarray | list[int]) -> list[str]:
     """ISO 8601 UTC strings (``…Z``) of Unix seconds."""
+    if len(ts_s) < 8:  # an ingest answer's one stamp: NumPy's call would cost more than it
+        return [time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(int(t))) for t in ts_s]
     return np.datetime_as_string(np.asarray(ts_s, "datetime64[s]"), unit="s",
                                  timezone="UTC").tolist()
 
