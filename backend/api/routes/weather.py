@@ -79,7 +79,8 @@ async def create_simulation_on_weather(request: Request, ctx: ContextDep) -> Res
     typical, meta = await _weather(form.get("file"))
     info = site_or_404(ctx, body.site_id)
     try:
-        station = check_station(meta, info.site, force, "force")
+        station = check_station(meta, info.site, force,
+                                'force (tick "distant station" on the simulation form)')
     except StationTooFar as exc:
         raise HTTPException(422, f"force: {exc}") from None
     params = dataclasses.replace(_params(ctx, body), weather=typical, station=station)
