@@ -1,7 +1,7 @@
 // Simulation: run a twin scenario in the background, follow its progress, chart the result.
 import { ApiError, api } from "./api.js";
-import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
-import { addDays, toLocalWall, zoneOffsetMs } from "./time.js";
+import { COLORS, baseLayout, draw, roundStep, showEmpty, splitPartial, zeroBasedAxis } from "./charts.js";
+import { addDays, localMidnightMs, toLocalWall, zoneOffsetMs } from "./time.js";
 import { viewerKey } from "./twin.js";
 import { banner, energy, num, pct, tile } from "./ui.js";
 
@@ -10,15 +10,39 @@ const POLL_MS = 400;
 const SUN_ELEVATION = "solar_apparent_elevation_deg";
 const SUN_AZIMUTH = "solar_azimuth_deg";
 const MAX_POINTS = 2000;
+const DAY_POINTS = 3000; // the first day's angles at full resolution (1 440 rows at 1 min)
+const CONFIRM_S = 60; // a run expected to take (or wait) longer than this asks first
 const SERIES_RETRIES = 150; // × POLL_MS: a minute for a stored series to appear after "done"
 // a run's status (SimulationRunRead): queued → running → done | failed
 const FINAL = new Set(["done", "failed"]);
 
 let st = null;
 let running = false;
+let currentRun = null; // the run_id being followed, for the Cancel button
 
 const $ = (id) => document.getElementById(id);
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+/** A worker time for people: "40 s", "12 min", "1 h 13 min". */
+function duration(seconds) {
+  if (!(seconds >= 0)) return "—";
+  if (seconds < 90) return `${num(Math.max(1, seconds), 0)} s`;
+  const min = Math.round(seconds / 60);
+  return min < 90 ? `${min} min` : `${Math.floor(min / 60)} h ${min % 60} min`;
+}
+
+/** Azimuths in 0–360° (the sun's convention, clockwise from north); the sample after a jump
+ * across north is left out, so the line breaks there instead of crossing the chart. */
+function azimuth360(values) {
+  let prev = null;
+  return values.map((v) => {
+    if (v === null) { prev = null; return null; }
+    const a = ((v % 360) + 360) % 360;
+    const jump = prev !== null && Math.abs(a - prev) > 180;
+    prev = a;
+    return jump ? null : a;
+  });
+}
 
 /** A series point's column (SimulationSeriesRead: a number, or null where undefined). */
 function colValue(row, name) {
@@ -51,9 +75,14 @@ function summaryTiles(summary, station) {
     tile("Period", `${num((Date.parse(summary.end) - Date.parse(summary.start)) / 86400000, 1)} days`,
       `${summary.start.slice(0, 10)} → ${summary.end.slice(0, 10)} · step ${num(summary.step_s)} s · ${summary.controller}`),
   );
+  // what the headline covers: the tracking minutes with the sun above the stated elevation
+  const minutes = summary.pointing_error_minutes;
+  const cover = typeof minutes === "number"
+    ? `RMS over ${num(minutes, 0)} tracking minutes with the sun ≥ ${num(summary.pointing_min_elevation_deg, 0)}°`
+    : "RMS while tracking";
   box.append(
     tile("Pointing error", `${num(summary.pointing_error_rms_mrad, 1)} mrad`,
-      `RMS over daylight · p95 ${num(summary.pointing_error_p95_mrad, 1)} · max ${num(summary.pointing_error_max_mrad, 1)} mrad`),
+      `${cover} · energy-weighted ${num(summary.pointing_error_energy_weighted_rms_mrad, 1)} · p95 ${num(summary.pointing_error_p95_mrad, 1)} · max ${num(summary.pointing_error_max_mrad, 1)} mrad`),
     tile("Pointing loss", energy(summary.pointing_loss_wh), `against ideal pointing · ${summary.receiver} receiver`),
     tile("Actuators", energy(summary.actuator_energy_wh), `${num(summary.moves, 0)} moves`),
     tile("Net gain", pct(summary.net_gain_pct), "tracking gain after the actuators' energy"),
@@ -86,31 +115,46 @@ function machineValues() {
 }
 
 /** The run's days (SimulationDayRead: the service's energy rule split at local midnights, so
- * they add up to its totals, and its gain formula), as bars and a gain line. */
-async function drawDaily(runId, days) {
+ * they add up to its totals, and its gain formula), as bars and a gain line. A day the run
+ * covers only in part (a start or end inside it) is drawn faint and sets no axis; the axes
+ * start at zero with round ticks, one label a day (or every few days on a long run). */
+async function drawDaily(runId, summary) {
+  const days = summary.days || [];
   $("sim-daily-card").hidden = days.length < 2;
   if (days.length < 2) return;
+  const tz = st.tz;
+  const t0 = Date.parse(summary.start);
+  const t1 = Date.parse(summary.end);
+  const partial = days.map((d) => localMidnightMs(tz, d.date) < t0 || localMidnightMs(tz, addDays(d.date, 1)) > t1);
   const x = days.map((d) => d.date);
+  const gain = days.map((d) => d.gain_pct);
+  const whole = (v) => v.filter((_, i) => !partial[i]);
+  const gainAxis = zeroBasedAxis(whole(gain));
+  const split = splitPartial(x, gain, partial, gainAxis.range);
+  const faint = partial.map((p) => (p ? 0.35 : 1));
+  const everyDays = Math.max(1, roundStep(days.length, 8));
+  const kwh = (k) => days.map((d) => d[k] / 1000);
   await draw("chart-sim-daily", [
-    { x, y: days.map((d) => d.tracker_energy_wh / 1000), name: "tracker", type: "bar", marker: { color: COLORS.tracker }, hovertemplate: "%{y:.2f} kWh" },
-    { x, y: days.map((d) => d.fixed_energy_wh / 1000), name: "fixed", type: "bar", marker: { color: COLORS.fixed }, hovertemplate: "%{y:.2f} kWh" },
-    { x, y: days.map((d) => d.gain_pct), name: "gain", yaxis: "y2", type: "scatter", mode: "lines+markers", line: { color: COLORS.gain }, hovertemplate: "%{y:.1f} %" },
+    { x, y: kwh("tracker_energy_wh"), name: "tracker", type: "bar", marker: { color: COLORS.tracker, opacity: faint }, hovertemplate: "%{y:.2f} kWh" },
+    { x, y: kwh("fixed_energy_wh"), name: "fixed", type: "bar", marker: { color: COLORS.fixed, opacity: faint }, hovertemplate: "%{y:.2f} kWh" },
+    { ...split.whole, name: "gain", yaxis: "y2", type: "scatter", mode: "lines+markers", line: { color: COLORS.gain }, hovertemplate: "%{y:.1f} %" },
+    ...(split.part.x.length ? [{ x: split.part.x, y: split.part.y, customdata: split.part.value, name: "gain (partial day)", yaxis: "y2", type: "scatter", mode: "markers",
+      marker: { color: COLORS.gain, opacity: 0.35, symbol: "circle-open" }, hovertemplate: "%{customdata:.1f} % (partial day)" }] : []),
   ], baseLayout({
     barmode: "group",
-    xaxis: { type: "date", title: { text: `Day (${st.tz})` }, tickformat: "%d %b", gridcolor: "#e9edf1" },
-    yaxis: { title: { text: "Energy [kWh]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
-    yaxis2: { title: { text: "Tracking gain [%]" }, overlaying: "y", side: "right", showgrid: false, ticksuffix: " %", tickformat: ".1f" },
+    xaxis: { type: "date", title: { text: `Day (${tz})` }, tickformat: "%d %b", dtick: everyDays * 86400000, gridcolor: "#e9edf1" },
+    yaxis: { title: { text: "Energy [kWh]" }, ...zeroBasedAxis(whole(kwh("tracker_energy_wh"))), gridcolor: "#e9edf1" },
+    yaxis2: { title: { text: "Tracking gain [%]" }, overlaying: "y", side: "right", showgrid: false, ticksuffix: " %", ...gainAxis },
   }), {
-    columns: ["date", "tracker_energy_wh", "fixed_energy_wh", "gain_pct"],
-    rows: days.map((d) => [d.date, d.tracker_energy_wh, d.fixed_energy_wh, d.gain_pct]),
+    columns: ["date", "tracker_energy_wh", "fixed_energy_wh", "gain_pct", "partial_day"],
+    rows: days.map((d, i) => [d.date, d.tracker_energy_wh, d.fixed_energy_wh, d.gain_pct, partial[i]]),
     filename: `simulation_${runId}_daily_energy.csv`,
   });
 }
 
-async function drawResult(runId, allRows, days) {
+async function drawResult(runId, summary, allRows, dayRows) {
   const tz = st.tz;
-  let rows = allRows;
-  if (!rows.length) {
+  if (!allRows.length) {
     showEmpty("chart-sim-power", "The run returned no series.");
     showEmpty("chart-sim-angles", "The run returned no series.");
     return;
@@ -126,48 +170,48 @@ async function drawResult(runId, allRows, days) {
     rows: allRows.map((r) => [r.ts, localIso(tz, r.ts), ...powerCols.map((c) => colValue(r, c))]),
     filename: `simulation_${runId}_power.csv`,
   });
-  await drawDaily(runId, days);
-  const firstDay = allRows.length ? toLocalWall(tz, allRows[0].ts).slice(0, 10) : "";
-  const lastDay = allRows.length ? toLocalWall(tz, allRows[allRows.length - 1].ts).slice(0, 10) : "";
-  const long = firstDay && addDays(firstDay, 2) <= lastDay;
-  if (long) rows = allRows.filter((r) => toLocalWall(tz, r.ts).startsWith(firstDay));
-  $("sim-angles-title").textContent = long ? `Sun and tracker angles on ${firstDay}, the run's first day` : "Sun and tracker angles";
-  const xa = long ? rows.map((r) => toLocalWall(tz, r.ts)) : x;
-  const sunEl = SUN_ELEVATION;
-  const sunAz = SUN_AZIMUTH;
+  await drawDaily(runId, summary);
+  const rows = dayRows.rows;
+  $("sim-angles-title").textContent = dayRows.day ? `Sun and tracker angles on ${dayRows.day}, the run's first day` : "Sun and tracker angles";
+  const xa = rows.map((r) => toLocalWall(tz, r.ts));
   const commanded = rows.some((r) => colValue(r, "elevation_command_deg") !== null);
+  // the sun only while it is up; both azimuths in 0–360°, clockwise from north
+  const up = rows.map((r) => colValue(r, SUN_ELEVATION) > 0);
+  const sunOnly = (c) => rows.map((r, i) => (up[i] ? colValue(r, c) : null));
+  const az = (c) => azimuth360(rows.map((r) => colValue(r, c)));
   const angleCols = [
-    [sunEl, "sun elevation", COLORS.sun, "solid", "y"],
-    ["elevation_joint_deg", "tracker elevation (actual)", COLORS.tracker, "dash", "y"],
-    ...(commanded ? [["elevation_command_deg", "elevation commanded", COLORS.tracker, "dot", "y"]] : []),
-    [sunAz, "sun azimuth", COLORS.sun, "dot", "y2"],
-    ["azimuth_joint_deg", "tracker azimuth (actual)", COLORS.fixed, "dash", "y2"],
-    ...(commanded ? [["azimuth_command_deg", "azimuth commanded", COLORS.fixed, "dot", "y2"]] : []),
+    [SUN_ELEVATION, "sun elevation", COLORS.sun, "solid", "y", sunOnly(SUN_ELEVATION)],
+    ["elevation_joint_deg", "tracker elevation (actual)", COLORS.tracker, "dash", "y", rows.map((r) => colValue(r, "elevation_joint_deg"))],
+    ...(commanded ? [["elevation_command_deg", "elevation commanded", COLORS.tracker, "dot", "y", rows.map((r) => colValue(r, "elevation_command_deg"))]] : []),
+    [SUN_AZIMUTH, "sun azimuth", COLORS.sun, "dot", "y2", azimuth360(sunOnly(SUN_AZIMUTH))],
+    ["azimuth_joint_deg", "tracker azimuth (actual)", COLORS.fixed, "dash", "y2", az("azimuth_joint_deg")],
+    ...(commanded ? [["azimuth_command_deg", "azimuth commanded", COLORS.fixed, "dot", "y2", az("azimuth_command_deg")]] : []),
   ];
-  await draw("chart-sim-angles", angleCols.map(([c, name, color, dash, yaxis]) => ({
-    x: xa, y: rows.map((r) => colValue(r, c)), name, yaxis, type: "scatter", mode: "lines",
+  await draw("chart-sim-angles", angleCols.map(([, name, color, dash, yaxis, y]) => ({
+    x: xa, y, name, yaxis, type: "scatter", mode: "lines",
     line: { color, dash, width: 1.6 }, hovertemplate: "%{y:.1f}°",
   })), baseLayout({
     xaxis,
-    yaxis: { title: { text: "Elevation [°]" }, gridcolor: "#e9edf1", range: [-10, 90], dtick: 30 },
-    yaxis2: { title: { text: "Azimuth [°] (from N, clockwise)" }, overlaying: "y", side: "right", showgrid: false,
-      tickmode: "linear", tick0: 0, dtick: 45 },
+    yaxis: { title: { text: "Elevation [°]" }, gridcolor: "#e9edf1", range: [0, 90], dtick: 30, autorange: false },
+    yaxis2: { title: { text: "Azimuth [°] (0–360, from N, clockwise)" }, overlaying: "y", side: "right", showgrid: false,
+      range: [0, 360], autorange: false, tickmode: "linear", tick0: 0, dtick: 45 },
   }), {
     columns: ["time_utc", "time_local", ...angleCols.map((a) => a[0])],
-    rows: rows.map((r) => [r.ts, localIso(tz, r.ts), ...angleCols.map((a) => colValue(r, a[0]))]),
+    rows: rows.map((r, i) => [r.ts, localIso(tz, r.ts), ...angleCols.map((a) => a[5][i])]),
     filename: `simulation_${runId}_angles.csv`,
   });
-  await drawPointing(runId, rows, xa, long ? firstDay : "");
+  await drawPointing(runId, rows, xa, dayRows.day);
 }
 
-/** The angle between panel normal and sun through the (first) day [mrad], daylight only. */
+/** The angle between panel normal and sun through the (first) day [mrad], while tracking. */
 async function drawPointing(runId, rows, x, day) {
   const has = rows.some((r) => colValue(r, "pointing_error_mrad") !== null);
   $("sim-pointing-card").hidden = !has;
   if (!has) return;
   $("sim-pointing-title").textContent = day ? `Pointing error on ${day}, the run's first day` : "Pointing error";
-  const sunEl = (r) => colValue(r, SUN_ELEVATION);
-  const y = rows.map((r) => (sunEl(r) > 0 ? colValue(r, "pointing_error_mrad") : null));
+  // null where the pointing error is not defined (night, stow, the sun low: the twin's
+  // rule, sim/twin.py): drawn as gaps
+  const y = rows.map((r) => colValue(r, "pointing_error_mrad"));
   // an ideal tracker's error is rounding noise (1e-13 mrad): drawn flat on a 0–1 mrad axis,
   // not autoscaled into femto-units
   const peak = y.reduce((m, v) => (v !== null && v > m ? v : m), 0);
@@ -193,33 +237,63 @@ function setProgress(fraction, text) {
 
 const elapsed = (t0) => `${num((performance.now() - t0) / 1000, 1)} s`;
 
+/** What a queued or running run is waiting for, in words (SimulationRunRead's estimates). */
+function progressText(res, t0) {
+  const frac = res.progress ?? 0;
+  if (res.status === "queued") {
+    const ahead = res.queue_position ?? 0;
+    const wait = res.estimated_wait_s;
+    return `queued · ${ahead === 0 ? "next" : `${ahead + 1}th in line`}${wait > 0 ? ` · starts in about ${duration(wait)}` : ""}`
+      + `${res.estimated_run_s ? ` · then about ${duration(res.estimated_run_s)} of work` : ""} · ${elapsed(t0)}`;
+  }
+  if (frac >= 0.999) return `storing the series · ${elapsed(t0)}`;
+  return `running · ${num(100 * frac, 0)} %${res.estimated_run_s ? ` of about ${duration(res.estimated_run_s)}` : ""} · ${elapsed(t0)}`;
+}
+
 /** Poll a background run until its status is final (not merely until a summary appears: the
  * summary can be set while the series is still being stored). Throws on a failed run. */
 async function waitForRun(first, t0) {
   let res = first;
   const runId = res.run_id;
-  while (!FINAL.has(res.status)) {
-    const frac = res.progress ?? 0;
-    const what = res.status === "queued" ? "queued" : frac >= 0.999 ? "storing the series" : "running";
-    setProgress(frac, `${what} · ${num(100 * frac, 0)} % · ${elapsed(t0)}`);
-    await sleep(POLL_MS);
-    res = await api(`/api/v1/simulations/${encodeURIComponent(runId)}`);
+  currentRun = runId;
+  $("sim-cancel").hidden = false;
+  try {
+    while (!FINAL.has(res.status)) {
+      setProgress(res.progress ?? 0, progressText(res, t0));
+      await sleep(POLL_MS);
+      res = await api(`/api/v1/simulations/${encodeURIComponent(runId)}`);
+    }
+  } finally {
+    currentRun = null;
+    $("sim-cancel").hidden = true;
   }
-  if (res.status === "failed") throw new Error(res.error || `run ${runId} failed`);
+  if (res.status === "failed") throw new Error(res.error === "cancelled" ? "cancelled" : res.error || `run ${runId} failed`);
   return res;
 }
 
-/** The run's series; a 409 (series not stored yet) is waited out, a bounded number of times. */
-async function seriesWhenReady(url, t0) {
+/** A series read (SimulationSeriesRead); a 409 (not stored yet) is waited out, a bounded
+ * number of times. */
+async function seriesWhenReady(url, params, t0) {
   for (let attempt = 0; ; attempt += 1) {
     try {
-      return await api(url, { params: { max_points: MAX_POINTS } });
+      return await api(url, { params });
     } catch (err) {
       if (!(err instanceof ApiError) || err.status !== 409 || attempt >= SERIES_RETRIES) throw err;
       setProgress(1, `done · waiting for the series · ${elapsed(t0)}`);
       await sleep(POLL_MS);
     }
   }
+}
+
+/** The rows the angle and pointing charts show: the run's first local day at full
+ * resolution (its own read with `start`/`end`, not the thinned whole) when the run is
+ * longer than a day, else the whole run. */
+async function firstDayRows(url, summary, t0) {
+  const first = toLocalWall(st.tz, summary.start).slice(0, 10);
+  const long = Date.parse(summary.end) - Date.parse(summary.start) > 86400000 + 1;
+  const params = long ? { start: first, end: addDays(first, 1), max_points: DAY_POINTS } : { max_points: DAY_POINTS };
+  const got = await seriesWhenReady(url, params, t0);
+  return { rows: got.points, day: long ? first : "" };
 }
 
 /** POST the scenario: as JSON, or as multipart with the chosen TMY3/EPW file (clear sky
@@ -234,6 +308,33 @@ function submit(body) {
   return api("/api/v1/simulations/weather", { method: "POST", form });
 }
 
+/** Ask the service what the run would cost (SimulationEstimateRead) and, when it would be
+ * refused or is long, tell the user first: false when the run should not be sent. */
+async function confirmCost(body) {
+  const est = await api("/api/v1/simulations/estimate", { method: "POST", json: body });
+  if (!est.allowed) {
+    banner(`Simulation not started: ${est.reason}`, "error");
+    return false;
+  }
+  const total = est.estimated_run_s + est.estimated_wait_s;
+  if (total <= CONFIRM_S) return true;
+  const wait = est.estimated_wait_s > 5 ? `, starting in about ${duration(est.estimated_wait_s)} (${est.runs_ahead} run${est.runs_ahead === 1 ? "" : "s"} ahead)` : "";
+  return window.confirm(`This run (${num(est.steps, 0)} steps, ${est.controller}) is expected to take about ${duration(est.estimated_run_s)}${wait}: run anyway?`);
+}
+
+/** Nothing of an earlier run stays on screen: tiles, charts, links. */
+function clearResults() {
+  $("sim-summary").innerHTML = "";
+  $("sim-csv").hidden = true;
+  $("sim-3d").hidden = true;
+  $("sim-daily-card").hidden = true;
+  $("sim-pointing-card").hidden = true;
+  $("sim-angles-title").textContent = "Sun and tracker angles";
+  showEmpty("chart-sim-power", "Run a simulation to see its power.");
+  showEmpty("chart-sim-angles", "Run a simulation to see the sun and tracker angles.");
+  delete document.body.dataset.simulationDone;
+}
+
 async function run(ev) {
   ev.preventDefault();
   if (running || !st.site) return;
@@ -246,15 +347,19 @@ async function run(ev) {
   running = true;
   $("sim-run").disabled = true;
   banner("");
-  $("sim-csv").hidden = true;
-  $("sim-3d").hidden = true;
-  setProgress(0, "starting…");
   try {
     const body = {
       site_id: st.site.site_id, start, end, step_s: Number($("sim-step").value),
       controller: $("sim-controller").value, receiver: $("sim-receiver").value,
       ...machineValues(), background: true,
     };
+    setProgress(0, "estimating…");
+    if (!(await confirmCost(body))) {
+      $("sim-progress-wrap").hidden = true;
+      return;
+    }
+    clearResults();
+    setProgress(0, "starting…");
     const t0 = performance.now();
     const res = await waitForRun(await submit(body), t0);
     const runId = res.run_id;
@@ -262,8 +367,9 @@ async function run(ev) {
     summaryTiles(summary, res.params.weather_station);
     const seriesUrl = `/api/v1/simulations/${encodeURIComponent(runId)}/series`;
     setProgress(1, `${num(summary.steps, 0)} steps done · loading the series…`);
-    const series = await seriesWhenReady(seriesUrl, t0);
-    await drawResult(runId, series.points, summary.days);
+    const series = await seriesWhenReady(seriesUrl, { max_points: MAX_POINTS }, t0);
+    const dayRows = await firstDayRows(seriesUrl, summary, t0);
+    await drawResult(runId, summary, series.points, dayRows);
     setProgress(1, `done in ${num((performance.now() - t0) / 1000, 1)} s`);
     const csv = $("sim-csv");
     csv.href = `${seriesUrl}?format=csv`;
@@ -274,11 +380,27 @@ async function run(ev) {
     show3d.hidden = st.meta?.viser_enabled === false; // each viewer shows the run's own site
     document.body.dataset.simulationDone = runId;
   } catch (err) {
-    setProgress(0, "failed");
-    banner(`Simulation failed: ${err.message}`, "error");
+    clearResults(); // the failure banner never sits above an earlier run's results
+    const cancelled = err.message === "cancelled";
+    setProgress(0, cancelled ? "cancelled" : "failed");
+    banner(cancelled ? "Simulation cancelled." : `Simulation failed: ${err.message}`, cancelled ? "warn" : "error");
   } finally {
     running = false;
     $("sim-run").disabled = false;
+  }
+}
+
+/** Cancel the run being followed (DELETE /api/v1/simulations/{id}); the poll then sees it
+ * end "failed" with the error "cancelled". */
+async function cancelRun() {
+  if (!currentRun) return;
+  $("sim-cancel").disabled = true;
+  try {
+    await api(`/api/v1/simulations/${encodeURIComponent(currentRun)}`, { method: "DELETE" });
+  } catch (err) {
+    banner(`Cancel: ${err.message}`, "error");
+  } finally {
+    $("sim-cancel").disabled = false;
   }
 }
 
@@ -319,6 +441,7 @@ export function init(state) {
   machineFields(st.meta?.machine_parameters);
   $("sim-form").addEventListener("submit", run);
   $("sim-3d").addEventListener("click", showIn3d);
+  $("sim-cancel").addEventListener("click", cancelRun);
   showEmpty("chart-sim-power", "Run a simulation to see its power.");
   showEmpty("chart-sim-angles", "Run a simulation to see the sun and tracker angles.");
 }
