@@ -22,7 +22,7 @@ from __future__ import annotations
 import functools
 import re
 import zlib
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Mapping
 from typing import Any
 
 import anyio
@@ -131,7 +131,7 @@ async def read_body(request: Request, limit: int) -> bytes:
     return await _decoded(body, encoding, limit)
 
 
-def _answer(status: int, detail: Any, headers: dict[str, str] | None = None
+def _answer(status: int, detail: Any, headers: Mapping[str, str] | None = None
             ) -> tuple[Message, Message]:
     body = orjson.dumps({"detail": detail})
     extra = [(k.lower().encode(), v.encode()) for k, v in (headers or {}).items()]
@@ -247,7 +247,8 @@ def _header(scope: Scope, name: bytes) -> str | None:
     return None
 
 
-_REQUIRED = [{"bearerAuth": []}]  # the OpenAPI security of an operation that needs a token
+#: the OpenAPI ``security`` of an operation that needs a token
+_REQUIRED: list[dict[str, list[str]]] = [{"bearerAuth": []}]
 
 
 def _needs_token(scope: Scope) -> bool:
