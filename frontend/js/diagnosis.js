@@ -1,7 +1,7 @@
 // Overview: the diagnosis panel — per day the tracker against the weather-aware twin
 // (GET /api/v1/sites/{id}/diagnosis), faults in plain words, a daily PR / gain chart.
 import { api } from "./api.js";
-import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
+import { COLORS, baseLayout, draw, showEmpty, zeroBasedAxis } from "./charts.js";
 import { toLocalWall } from "./time.js";
 import { h, num } from "./ui.js";
 
@@ -14,6 +14,7 @@ export const KIND_WORDS = {
   module_loss: "module or string lost",
   soiling: "soiling",
   dropout: "logger dropout",
+  underperformance: "underperformance (below the expected band)",
 };
 
 function addDays(iso, n) {
@@ -76,18 +77,32 @@ async function load(state) {
     : [h("li", { class: "muted", "data-testid": "diag-none" }, "No fault found in this range.")]),
     h("li", { class: "muted", "data-testid": "diag-sky" }, skyLine(body.days)));
   const x = body.days.map((d) => d.date);
+  const partial = body.days.map((d) => d.partial === true);
   const pr = body.days.map((d) => d.tracker.performance_ratio);
+  // the axes from the whole days only: a partial day's gain (readings over part of the day,
+  // e.g. +220 % at 07:30) is drawn apart — hatched, faint, clamped to the axis — and never
+  // sets the range; both axes from zero with round ticks
+  const gainAxis = zeroBasedAxis(body.days.filter((d, i) => !partial[i])
+    .flatMap((d) => [d.gain_measured_pct, d.gain_expected_pct]));
+  const prAxis = zeroBasedAxis([1.2, ...pr.filter((v, i) => !partial[i])]);
+  const clamp = (v) => (v === null || v === undefined ? v : Math.min(Math.max(v, gainAxis.range[0]), gainAxis.range[1]));
+  const measured = body.days.map((d, i) => (partial[i] ? clamp(d.gain_measured_pct) : d.gain_measured_pct));
   await draw("chart-diagnosis", [
-    { x, y: body.days.map((d) => d.gain_measured_pct), name: "gain measured %", type: "bar", marker: { color: COLORS.gain } },
+    { x, y: measured, name: "gain measured % (hatched: partial day)", type: "bar",
+      marker: { color: COLORS.gain, opacity: partial.map((p) => (p ? 0.4 : 1)), pattern: { shape: partial.map((p) => (p ? "/" : "")) } },
+      customdata: body.days.map((d, i) => (partial[i] ? ` (partial day: ${num(d.gain_measured_pct, 1)} %)` : "")),
+      hovertemplate: "%{y:.1f} %%{customdata}" },
     { x, y: body.days.map((d) => d.gain_expected_pct), name: "gain expected for that sky %", type: "bar", marker: { color: COLORS.grey } },
     { x, y: pr, name: "tracker PR", yaxis: "y2", mode: "lines+markers", line: { color: COLORS.tracker } },
-  ], baseLayout({ barmode: "group", yaxis: { title: "gain %", gridcolor: "#e9edf1" },
-    yaxis2: { title: "PR", overlaying: "y", side: "right", range: [0, 1.2] } }),
-  { columns: ["date", "sky_source", "clearness_index", "tracker_measured_wh", "tracker_expected_wh", "tracker_expected_wh_low",
-    "tracker_expected_wh_high", "performance_ratio", "gain_measured_pct", "gain_expected_pct"],
-  rows: body.days.map((d) => [d.date, d.sky.sensor || d.sky.source, d.sky.clearness_index, d.tracker.measured_wh, d.tracker.expected_wh,
-    d.tracker.expected_wh_low, d.tracker.expected_wh_high, d.tracker.performance_ratio, d.gain_measured_pct,
-    d.gain_expected_pct]),
+  ], baseLayout({ barmode: "group", margin: { l: 64, r: 84, t: 10, b: 52 },
+    xaxis: { title: { text: "local date" }, type: "category", gridcolor: "#e9edf1" },
+    yaxis: { title: { text: "tracking gain over the fixed array [%]" }, gridcolor: "#e9edf1", zeroline: true, ...gainAxis },
+    yaxis2: { title: { text: "performance ratio (measured / expected)" }, overlaying: "y", side: "right", showgrid: false, ...prAxis } }),
+  { columns: ["date", "complete", "partial", "sky_source", "clearness_index", "tracker_measured_wh", "tracker_expected_wh",
+    "tracker_expected_wh_low", "tracker_expected_wh_high", "performance_ratio", "gain_measured_pct", "gain_expected_pct"],
+  rows: body.days.map((d) => [d.date, d.complete, d.partial, d.sky.sensor || d.sky.source, d.sky.clearness_index,
+    d.tracker.measured_wh, d.tracker.expected_wh, d.tracker.expected_wh_low, d.tracker.expected_wh_high,
+    d.tracker.performance_ratio, d.gain_measured_pct, d.gain_expected_pct]),
   filename: `${state.site.site_id}_diagnosis_${start}_${end}.csv` });
   if (mine === requested) await loadPointing(state, start, end);
 }
