@@ -59,8 +59,8 @@ SOILING_MIN_TOTAL = 0.02  # … and at least 2 % lost over the declining days
 DROPOUT_MIN = 30  # daylight minutes without a tracker reading that make a dropout day
 #: Relative widening of the expected band on each side [-]: the sky's own error beyond the
 #: spread of the two decompositions. 3 % held every generated day (docs/diagnosis.md); on
-#: the real RMIS days (issue 27) a healthy tracker's truth lay up to 1.3 % above a 3 % band
-#: on two clear days (POA sensor), so 4.5 %: all eight real days inside (in-sample).
+#: the real RMIS days (issue 27) a healthy tracker's truth lay above a 3 % band on two clear
+#: days (POA sensor; 1.3 % above at most), so 4.5 %: all eight real days inside (in-sample).
 INVERSION_UNCERTAINTY = 0.045
 #: A day is judged for underperformance when the tracker's readings cover at least this
 #: share of its expected energy (a dropout is its own finding)
