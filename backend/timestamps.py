@@ -98,7 +98,8 @@ def _in_years(value: dt.datetime, text: str, field: str) -> dt.datetime:
 #: Below this many stamps the standard library row by row is quicker than pandas.
 _PANDAS_FROM_ROWS = 32
 _FIRST_S = int(dt.datetime(FIRST_YEAR, 1, 1, tzinfo=dt.UTC).timestamp())
-_LAST_S = int(dt.datetime(LAST_YEAR + 1, 1, 1, tzinfo=dt.UTC).timestamp())
+#: The first second after :data:`LAST_YEAR` (no instant the service accepts is from it on).
+LAST_S = int(dt.datetime(LAST_YEAR + 1, 1, 1, tzinfo=dt.UTC).timestamp())
 
 
 def parse_instants(values: Sequence[Any]) -> tuple[np.ndarray, list[tuple[int, str, str]]]:
@@ -150,5 +151,5 @@ def _same_offset_instants(values: Sequence[Any]) -> tuple[np.ndarray, np.ndarray
         return none
     ok = ~np.asarray(parsed.isna())
     ts = np.where(ok, parsed.as_unit("us").asi8, 0) // 1_000_000  # floor: fractions dropped
-    ok &= (ts >= _FIRST_S) & (ts < _LAST_S)
+    ok &= (ts >= _FIRST_S) & (ts < LAST_S)
     return ts.astype(np.int64), ok

@@ -31,7 +31,7 @@ import orjson
 from backend.errors import load_json_pairs, repeated_keys
 from backend.measurements.fields import SENSOR_FIELDS, SENSOR_NAMES, normalise_sensors
 from backend.settings import Settings
-from backend.timestamps import READINGS_FROM_S, parse_instants
+from backend.timestamps import LAST_S, LAST_YEAR, READINGS_FROM_S, parse_instants
 
 #: Problems listed per batch in all, and per field (a bounded answer that still shows
 #: every kind of problem at once); the rest are counted in one closing entry.
@@ -44,6 +44,7 @@ FIELDS = ("ts", "array", "voltage_v", "current_a", "power_w", "voltage_adc", "cu
 _FIELD_SET = frozenset(FIELDS)
 #: Column order of an emonCMS-style row ``[unix_s, array, voltage_v, current_a, power_w]``.
 EMONCMS_ROW = ("unix_s", "array", "voltage_v", "current_a", "power_w")
+_READINGS_FROM_YEAR = time.gmtime(READINGS_FROM_S).tm_year
 #: Python types a JSON number column may hold (``bool`` is not a number).
 _JSON_NUMBERS = frozenset((float, int, type(None)))
 _CSV_CELLS = frozenset((str, type(None)))
@@ -236,7 +237,14 @@ def _unix_seconds(values: list[Any], errors: _Errors) -> np.ndarray:
     errors.add_rows(~present, "ts", lambda r: "unix_s is missing", "missing")
     ts = np.full(len(values), READINGS_FROM_S, np.int64)
     ok = present & ~invalid & np.isfinite(col)
-    ts[ok] = np.floor(np.clip(col[ok], -(2.0**62), 2.0**62)).astype(np.int64)
+    # outside the years the service accepts (often milliseconds sent as seconds): one error
+    # naming the value as sent, not a clipped echo from the later range checks
+    far = ok & ((col < READINGS_FROM_S) | (col >= LAST_S))
+    errors.add_rows(far, "ts", lambda r: (
+        f"unix_s {_show(values[r])} is not in {_READINGS_FROM_YEAR}–{LAST_YEAR}"
+        + (" (milliseconds sent as seconds?)" if col[r] >= LAST_S else "")), "value_error")
+    ok &= ~far
+    ts[ok] = np.floor(col[ok]).astype(np.int64)
     return ts
 
 

@@ -234,6 +234,10 @@ def test_emoncms_rows_give_the_same_batch_as_objects() -> None:
     (["2024-05-01T10:00:00Z", "tracker", 26.0, 7.0], "ts", "send a JSON number"),
     ([None, "tracker", 26.0, 7.0], "ts", "unix_s is missing"),
     ([1714557600, "roof", 26.0, 7.0], "array", "unknown array"),
+    # seconds as sent, never a clipped echo ("4611686016631082496 s after the server clock")
+    ([2**63, "tracker", 26.0, 7.0], "ts", "unix_s 9223372036854775808 is not in 1990–2199"),
+    ([1714557600000, "tracker", 26.0, 7.0], "ts", "milliseconds sent as seconds?"),
+    ([599_616_000, "tracker", 26.0, 7.0], "ts", "unix_s 599616000 is not in 1990–2199"),
 ])
 def test_bad_emoncms_rows_are_named(row: object, field: str | None, words: str) -> None:
     errors = _errors(orjson.dumps([[1714557600, "tracker", 26.0, 7.0], row]))
