@@ -19,13 +19,17 @@ run: $(STAMP)  ## start the service: API + dashboard on :8000, 3D twin on :8080,
 	$(BIN)/heliotwin serve
 
 # the suite over both cores (pytest-xdist); a module's tests stay on one worker, so its
-# in-process service starts once. `make test PYTEST_WORKERS=0` runs it in one process.
+# in-process service starts once. Modules go out in collection order, which
+# tests/conftest.py starts with the modules holding slow or browser tests (xdist's own
+# reorder, by number of tests, would leave those long modules for last).
+# `make test PYTEST_WORKERS=0` runs it in one process.
 # The schema fuzzing (marker one_process) runs after it in a plain pytest: xdist would
 # run one case per operation group (schemathesis' cases share a node id).
 PYTEST_WORKERS ?= 2
 
 test: $(STAMP)  ## run the whole test suite
-	$(BIN)/python -m pytest -n $(PYTEST_WORKERS) --dist loadfile -m "not one_process"
+	$(BIN)/python -m pytest -n $(PYTEST_WORKERS) --dist loadfile --no-loadscope-reorder \
+		-m "not one_process"
 	$(BIN)/python -m pytest -m one_process
 
 bench: $(STAMP)  ## measure the speed figures and write benchmarks/RESULTS.md
