@@ -20,7 +20,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from zoneinfo import ZoneInfo
@@ -46,6 +46,12 @@ def _require_or_skip(reason: str) -> None:
     if os.environ.get("HELIOTWIN_REQUIRE_SERVICES") == "1":
         pytest.fail(f"{reason} (HELIOTWIN_REQUIRE_SERVICES=1)")
     pytest.skip(reason)
+
+
+def _need_chromium() -> None:
+    if not CHROMIUM.exists():
+        _require_or_skip(f"Chromium not found at {CHROMIUM}: browser tests skipped "
+                         "(apt-get install chromium, or set HELIOTWIN_CHROMIUM)")
 
 
 def _free_port() -> int:
@@ -108,12 +114,20 @@ def _wait_for_backfill(client: httpx.Client, server: Server) -> None:
     raise RuntimeError("the demo logger's back-fill did not reach the present in time")
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Every test that drives Chromium (the ``browser`` fixture) carries the ``browser``
+    marker, so ``-m "not browser"`` leaves them out and ``tests/conftest.py`` runs their
+    modules first."""
+    for item in items:
+        if "browser" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.browser)
+
+
 @pytest.fixture(scope="session")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     """``heliotwin serve`` on free ports with a temporary SQLite file and back-filled data."""
-    if not CHROMIUM.exists():
-        _require_or_skip(f"Chromium not found at {CHROMIUM}: browser tests skipped "
-                         "(apt-get install chromium, or set HELIOTWIN_CHROMIUM)")
+    _need_chromium()
     tmp = tmp_path_factory.mktemp("e2e")
     port, viser_port = _free_port(), _free_port()
     env = {
@@ -147,8 +161,10 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
 
 
 @pytest.fixture(scope="session")
-def browser(server: Server) -> Iterator[object]:
-    """Debian's Chromium under Playwright, shared by the session."""
+def browser() -> Iterator[object]:
+    """Debian's Chromium under Playwright, shared by the session (without the session's
+    server: the modules that start servers of their own need only the browser)."""
+    _need_chromium()
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as pw:
@@ -157,24 +173,47 @@ def browser(server: Server) -> Iterator[object]:
         b.close()
 
 
-@pytest.fixture()
-def page(browser, server: Server, request: pytest.FixtureRequest) -> Iterator[object]:
-    """A fresh page that records console errors and uncaught exceptions; none may occur."""
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> object:
+    """Keep each phase's report on its test (``item.report_call``…) for :func:`open_page`."""
+    report = yield
+    setattr(item, f"report_{report.when}", report)
+    return report
+
+
+@contextlib.contextmanager
+def open_page(browser, request: pytest.FixtureRequest, timeout_ms: float = 20_000,  # type: ignore[no-untyped-def]
+              ignore: Callable[[str], bool] = lambda text: False) -> Iterator[object]:
+    """A fresh page that records console errors (but those ``ignore`` accepts) and uncaught
+    exceptions in ``page.console_errors``; none may occur. A test that failed leaves a
+    full-page screenshot in ``test-artifacts/`` (a passing one costs no screenshot)."""
     context = browser.new_context(viewport={"width": 1400, "height": 1000})
     pg = context.new_page()
     errors: list[str] = []
 
     def on_console(msg) -> None:  # type: ignore[no-untyped-def]
-        if msg.type == "error":
+        if msg.type == "error" and not ignore(msg.text):
             errors.append(f"console.error: {msg.text} ({msg.location.get('url', '')})")
 
     pg.on("console", on_console)
     pg.on("pageerror", lambda e: errors.append(f"pageerror: {e}"))
-    pg.set_default_timeout(20_000)
+    pg.set_default_timeout(timeout_ms)
     pg.console_errors = errors  # type: ignore[attr-defined]
-    yield pg
-    ARTIFACTS.mkdir(exist_ok=True)
-    with contextlib.suppress(Exception):
-        pg.screenshot(path=str(ARTIFACTS / f"e2e-{request.node.name}-final.png"), full_page=True)
-    context.close()
+    try:
+        yield pg
+    finally:
+        call = getattr(request.node, "report_call", None)
+        if call is None or call.failed:
+            ARTIFACTS.mkdir(exist_ok=True)
+            with contextlib.suppress(Exception):
+                pg.screenshot(path=str(ARTIFACTS / f"e2e-{request.node.name}-final.png"),
+                              full_page=True)
+        context.close()
     assert not errors, "errors in the browser console:\n" + "\n".join(errors)
+
+
+@pytest.fixture()
+def page(browser, server: Server, request: pytest.FixtureRequest) -> Iterator[object]:
+    """A fresh page on the session's server (:func:`open_page`)."""
+    with open_page(browser, request) as pg:
+        yield pg

@@ -8,7 +8,6 @@ cleared one under its fold — and follow a change of site.
 
 from __future__ import annotations
 
-import contextlib
 import datetime as dt
 import http.server
 import sys
@@ -21,6 +20,8 @@ from zoneinfo import ZoneInfo
 import httpx
 import orjson
 import pytest
+
+from tests.e2e.conftest import open_page
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backend"))
 from live_service import ServerProcess, free_port, new_database  # noqa: E402
@@ -133,19 +134,9 @@ def alert_server(browser, tmp_path_factory: pytest.TempPathFactory) -> Iterator[
 
 @pytest.fixture()
 def pg(browser, alert_server: ServerProcess, request: pytest.FixtureRequest) -> Iterator[object]:
-    """A fresh page on the module's server; no console error may occur."""
-    context = browser.new_context(viewport={"width": 1400, "height": 1000})
-    page = context.new_page()
-    errors: list[str] = []
-    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-    page.on("pageerror", lambda e: errors.append(f"pageerror: {e}"))
-    page.set_default_timeout(30_000)
-    yield page
-    ARTIFACTS.mkdir(exist_ok=True)
-    with contextlib.suppress(Exception):
-        page.screenshot(path=str(ARTIFACTS / f"e2e-{request.node.name}.png"), full_page=True)
-    context.close()
-    assert not errors, "errors in the browser console:\n" + "\n".join(errors)
+    """A fresh page on the module's server (``conftest.open_page``)."""
+    with open_page(browser, request, timeout_ms=30_000) as page:
+        yield page
 
 
 def test_the_alerts_card_lists_what_the_api_answers(pg, alert_server: ServerProcess) -> None:

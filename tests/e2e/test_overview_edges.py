@@ -9,7 +9,6 @@ pvlib called directly.
 
 from __future__ import annotations
 
-import contextlib
 import datetime as dt
 import math
 import sys
@@ -20,10 +19,11 @@ from zoneinfo import ZoneInfo
 import httpx
 import pytest
 
+from tests.e2e.conftest import open_page
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backend"))
 from live_service import ServerProcess, new_database  # noqa: E402
 
-ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 ADMIN = "admin-token-e2e"
 TZ = ZoneInfo("America/Mexico_City")
 TODAY = dt.datetime.now(TZ).date()
@@ -65,20 +65,10 @@ def edge_server(browser, tmp_path_factory: pytest.TempPathFactory) -> Iterator[S
 
 @pytest.fixture()
 def pg(browser, edge_server: ServerProcess, request: pytest.FixtureRequest) -> Iterator[object]:
-    """A fresh page on the module's server; no console error may occur."""
-    context = browser.new_context(viewport={"width": 1400, "height": 1000})
-    page = context.new_page()
-    errors: list[str] = []
-    page.on("console", lambda m: errors.append(m.text) if m.type == "error" and (
-        "422" not in m.text) else None)  # the malformed-site test provokes a 422 on purpose
-    page.on("pageerror", lambda e: errors.append(f"pageerror: {e}"))
-    page.set_default_timeout(30_000)
-    yield page
-    ARTIFACTS.mkdir(exist_ok=True)
-    with contextlib.suppress(Exception):
-        page.screenshot(path=str(ARTIFACTS / f"e2e-{request.node.name}.png"), full_page=True)
-    context.close()
-    assert not errors, "errors in the browser console:\n" + "\n".join(errors)
+    """A fresh page on the module's server (``conftest.open_page``)."""
+    with open_page(browser, request, timeout_ms=30_000,
+                   ignore=lambda text: "422" in text) as page:  # the malformed-site test's 422
+        yield page
 
 
 def _open(page, server: ServerProcess, site: str, day: dt.date) -> None:
@@ -202,3 +192,33 @@ def test_a_site_made_in_the_form_joins_the_built_in_ones(pg, edge_server: Server
     assert pg.input_value("#site-select") == "hand-made"
     site = _api(edge_server, "/api/v1/sites/hand-made")
     assert (site["latitude_deg"], site["origin"]) == (19.43, "user")
+
+
+# -- the 4-week chart's gain axis (issue 22.4): from zero, round ticks, whole days only --
+
+def _round_step(step: float) -> bool:
+    """1, 2, 2.5 or 5 × 10^k."""
+    mantissa = step / 10 ** math.floor(math.log10(step))
+    return any(math.isclose(mantissa, m) for m in (1, 2, 2.5, 5))
+
+
+def test_gain_axis_starts_at_zero_and_ignores_partial_days(pg, edge_server) -> None:
+    _open(pg, edge_server, "tehuantepec", HALF)
+    chart = pg.evaluate("""() => { const el = document.getElementById('chart-daily');
+        return { axis: el.layout.yaxis2, traces: el.data.map((t) => ({ name: t.name,
+                 x: t.x, y: t.y, opacity: t.opacity, marker: t.marker })) }; }""")
+    rows = _api(edge_server, "/api/v1/sites/tehuantepec/energy", start=FULL.isoformat(),
+                end=HALF.isoformat(), interval="day")["rows"]
+    whole_gain = rows[0]["gain_pct"]
+    axis = chart["axis"]
+    assert axis["range"][0] == 0 and _round_step(axis["dtick"]) and axis["tick0"] == 0
+    # the whole day sets the axis: the next round tick above its gain
+    assert axis["range"][1] - axis["dtick"] < whole_gain <= axis["range"][1]
+    gain = next(t for t in chart["traces"] if t["name"] == "gain")
+    partial = next(t for t in chart["traces"] if t["name"] == "gain, partial day")
+    on_line = dict(zip(gain["x"], gain["y"], strict=True))
+    assert on_line[FULL.isoformat()] == whole_gain and on_line[HALF.isoformat()] is None
+    assert partial["x"] == [HALF.isoformat()] and partial["opacity"] < 1
+    bars = next(t for t in chart["traces"] if t["name"] == "tracker measured")
+    k = bars["x"].index(HALF.isoformat())
+    assert bars["marker"]["pattern"]["shape"][k] == "/" and bars["marker"]["opacity"][k] < 1
