@@ -194,6 +194,7 @@ def _greensboro_sites(tmp_path: Path) -> Path:
     return sites
 
 
+@pytest.mark.slow
 def test_the_year_on_a_distant_tmy3_is_a_choice_then_runs_with_units_in_the_csv(
         tmp_path: Path) -> None:
     """The issue's command: a whole year on pvlib's Greensboro TMY3 at the Tehuantepec site.
@@ -248,6 +249,7 @@ def test_a_tmy3_at_its_station_needs_no_force_and_matches_pvlibs_own_year(
     assert d["fixed_energy_wh"] == pytest.approx(ref["fixed_energy_wh"], rel=1e-9)
 
 
+@pytest.mark.slow
 def test_an_epw_file_runs_as_its_tmy3_twin(tmp_path: Path) -> None:
     """The same Greensboro hours written as EPW (tests/sim/test_sky.py ``write_epw``) give the
     same run as the TMY3 file; --tmy3 and --epw exclude each other."""

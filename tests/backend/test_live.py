@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import httpx
+import pytest
 from live_service import ServerProcess
 
 if TYPE_CHECKING:
@@ -24,6 +25,7 @@ def _wait(predicate, timeout_s: float = 60.0) -> bool:  # type: ignore[no-untype
     return False
 
 
+@pytest.mark.slow
 def test_serve_with_live_twin_and_demo_logger(database: Database, tmp_path: Path) -> None:
     server = ServerProcess(database.url, tmp_path / "server.log", demo=True, extra_env={
         "HELIOTWIN_LIVE_TWIN": "true", "HELIOTWIN_LIVE_TWIN_INTERVAL_S": "1",

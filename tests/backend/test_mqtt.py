@@ -468,6 +468,7 @@ def test_the_service_reconnects_with_backoff(tmp_path: Path,
     assert any(f"127.0.0.1:{port}" in line for line in retries), retries
 
 
+@pytest.mark.slow
 def test_a_persistent_session_keeps_readings_while_the_service_is_away(
         tmp_path: Path) -> None:
     need_broker()
