@@ -55,7 +55,7 @@ class Figures:
             "unit": unit,
             "text": text,
             "target": target,
-            "met": met,
+            "met": None if met is None else bool(met),  # a numpy bool is not JSON
         }
         return marked(full, text)
 

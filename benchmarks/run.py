@@ -116,8 +116,11 @@ def run_one(script: Path) -> tuple[str | None, dict, dict]:
             "load_1min_start": load0,
             "load_1min_end": os.getloadavg()[0],
         }
-        figures = json.loads(fig_path.read_text()) if fig_path.exists() else {}
-    if proc.returncode != 0:
+        try:
+            figures = json.loads(fig_path.read_text()) if fig_path.exists() else {}
+        except json.JSONDecodeError:  # the script died writing them: it failed
+            figures = None
+    if proc.returncode != 0 or figures is None:
         print(f"{script.name} FAILED (exit {proc.returncode})", file=sys.stderr)
         return None, {}, stamp
     return proc.stdout.strip() + "\n", figures, stamp
