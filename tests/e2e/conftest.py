@@ -175,10 +175,17 @@ def browser() -> Iterator[object]:
 
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> object:
-    """Keep each phase's report on its test (``item.report_call``…) for :func:`open_page`."""
+    """Keep each phase's report on its test (``item.report_call``…) for :func:`call_failed`."""
     report = yield
     setattr(item, f"report_{report.when}", report)
     return report
+
+
+def call_failed(request: pytest.FixtureRequest) -> bool:
+    """Whether the test of this fixture failed (or never ran its body), for teardowns that
+    keep evidence (screenshots) only then."""
+    call = getattr(request.node, "report_call", None)
+    return call is None or bool(call.failed)
 
 
 @contextlib.contextmanager
@@ -202,8 +209,7 @@ def open_page(browser, request: pytest.FixtureRequest, timeout_ms: float = 20_00
     try:
         yield pg
     finally:
-        call = getattr(request.node, "report_call", None)
-        if call is None or call.failed:
+        if call_failed(request):
             ARTIFACTS.mkdir(exist_ok=True)
             with contextlib.suppress(Exception):
                 pg.screenshot(path=str(ARTIFACTS / f"e2e-{request.node.name}-final.png"),

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import shapely
 
-from tests.e2e.conftest import ARTIFACTS
+from tests.e2e.conftest import ARTIFACTS, call_failed
 
 #: SwiftShader renders the viser iframe on the CPU: on a loaded machine a click on the
 #: dashboard beside it can wait this long for the page's main thread.
@@ -27,7 +27,8 @@ SLOW_MS = 60_000
 
 
 @pytest.fixture()
-def two_pages(browser, server) -> Iterator[tuple[object, object]]:  # type: ignore[no-untyped-def]
+def two_pages(browser, server, request) -> Iterator[tuple[object, object]]:  # type: ignore[no-untyped-def]
+    """Two users' pages; a failed test leaves their screenshots (as ``open_page``)."""
     contexts, pages, errors = [], [], []
     for _ in range(2):
         ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
@@ -37,10 +38,11 @@ def two_pages(browser, server) -> Iterator[tuple[object, object]]:  # type: igno
         contexts.append(ctx)
         pages.append(pg)
     yield pages[0], pages[1]
-    ARTIFACTS.mkdir(exist_ok=True)
-    for i, pg in enumerate(pages):
-        with contextlib.suppress(Exception):
-            pg.screenshot(path=str(ARTIFACTS / f"e2e-twin3d-two-viewers-{i}-final.png"))
+    if call_failed(request):
+        ARTIFACTS.mkdir(exist_ok=True)
+        for i, pg in enumerate(pages):
+            with contextlib.suppress(Exception):
+                pg.screenshot(path=str(ARTIFACTS / f"e2e-twin3d-two-viewers-{i}-final.png"))
     for ctx in contexts:
         with contextlib.suppress(Exception):
             ctx.close()
