@@ -6,7 +6,9 @@
 
 ``start`` is inclusive, ``end`` exclusive; a bare date means midnight in the
 site's time zone, a date-time must carry a UTC offset. A progress bar (tqdm)
-goes to stderr when stderr is a terminal and the run is long (≥ 20,000 steps).
+goes to stderr when stderr is a terminal and the run is long: 20,000 steps or more, or
+expected to take a few seconds (:func:`backend.twin.cost.table_cost_s`: a camera loop's
+few days, at few steps).
 Bad input exits with status 2 and a message naming the problem. Heavy imports
 happen inside the command.
 
@@ -28,7 +30,8 @@ from typing import Any
 from backend.cli import CliError, fail
 from backend.twin.parameters import MACHINE_PARAMETERS
 
-_BAR_MIN_STEPS = 20_000  # a progress bar only for long runs (two weeks at 1 min and up)
+_BAR_MIN_STEPS = 20_000  # a progress bar for long runs (two weeks at 1 min and up) …
+_BAR_MIN_S = 3.0  # … and for runs expected to take this long [s] (a camera loop's day)
 
 
 class InputError(CliError, ValueError):
@@ -167,8 +170,11 @@ def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
     except ValueError as exc:
         name, _, problem = str(exc).partition(":")
         raise InputError(f"--{name.replace('_', '-')}:{problem}") from None
+    from backend.twin.cost import table_cost_s
+
     steps = (end - start).total_seconds() / args.step_s
-    callback, bar = _progress_bar(not args.no_progress and steps >= _BAR_MIN_STEPS)
+    long = steps >= _BAR_MIN_STEPS or table_cost_s(scenario) >= _BAR_MIN_S
+    callback, bar = _progress_bar(not args.no_progress and long)
     try:
         result = run_scenario(site, scenario, progress=callback)
     except ValueError as exc:

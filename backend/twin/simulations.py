@@ -29,7 +29,7 @@ a free worker takes the queued run with the least *client work*: the expected
 time its caller's running runs still need, plus its caller's runs queued before
 it, plus its own, minus the time it has waited. A caller's second long run thus
 waits behind others' short ones, and no run waits forever. The same order gives
-each queued run its expected wait (:meth:`SimulationRunner.schedule`).
+each queued run its place and expected wait (:meth:`SimulationRunner.get`).
 
 Without a token a run is refused (:class:`RunTooCostly`, 422) when its estimate
 exceeds ``anonymous_run_max_s`` and stopped when it runs longer than that; a
@@ -282,12 +282,6 @@ class SimulationRunner:
             free.append(start + job.cost_s)
             free.sort()
         return out
-
-    def schedule(self) -> dict[str, tuple[int, float]]:
-        """Each queued run's place in the order (0: next) and expected wait [s]."""
-        with self._lock:
-            return {job.state.run_id: (i, wait)
-                    for i, (job, wait) in enumerate(self._order())}
 
     # ------------------------------------------------------------------ admission
 
