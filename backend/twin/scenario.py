@@ -8,7 +8,7 @@ drift apart. :func:`run_scenario` is the one call into ``sim.twin.simulate``.
 
 Weather: a scenario may carry a typical year (TMY3 or EPW, read by
 :func:`sim.sky.read_typical_year`); :func:`run_scenario` lays it onto the run's
-calendar (:func:`sim.sky.typical_year_on`). :func:`check_station` is the one
+calendar at the site (:func:`sim.sky.typical_year_at_site`). :func:`check_station` is the one
 rule for a station far from the site: refused unless forced.
 """
 
@@ -26,7 +26,7 @@ from backend.twin.parameters import DISTURBANCE_NAMES, MACHINE_PARAMETERS, RUN_P
 from sim.control import ControlSettings
 from sim.disturbances import Disturbances
 from sim.sites import Site
-from sim.sky import typical_year_on
+from sim.sky import typical_year_at_site
 from sim.twin import CONTROLLERS, RECEIVERS, TwinResult, simulate
 
 #: A weather station farther than this from the site is refused unless forced [km]: its sun
@@ -123,8 +123,11 @@ def run_scenario(site: Site, scenario: Scenario, weather: pd.DataFrame | None = 
     laid onto the run's calendar here.
     """
     if weather is None and scenario.weather is not None and scenario.station is not None:
-        weather = typical_year_on(scenario.weather, scenario.station["utc_offset_h"],
-                                  scenario.start, scenario.end)
+        st = scenario.station
+        weather = typical_year_at_site(
+            scenario.weather, st["utc_offset_h"], scenario.start, scenario.end,
+            (st["latitude_deg"], st["longitude_deg"], st["altitude_m"]),
+            (site.latitude, site.longitude, site.altitude))
     defaults = {p.name: p.default for p in MACHINE_PARAMETERS}
     run = {k: scenario.machine.get(k, defaults[k]) for k in RUN_PARAMETERS}
     return simulate(

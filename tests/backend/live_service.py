@@ -290,11 +290,13 @@ class InProcessServer:
         return httpx.Client(transport=_ASGIBridge(self.app, self._loop),
                             base_url=self.base_url, timeout=timeout_s, **kwargs)
 
-    def token(self, site_id: str = "tehuantepec", label: str = "tests") -> str:
-        """A new write token of ``site_id``, stored through the service's writer."""
+    def token(self, site_id: str = "tehuantepec", label: str = "tests",
+              scope: str = "ingest") -> str:
+        """A new token of ``site_id`` and ``scope``, stored through the service's writer."""
         from backend.auth import create_token
 
-        future = self.ctx.writer.call(lambda conn: create_token(conn, site_id, label))
+        future = self.ctx.writer.call(
+            lambda conn: create_token(conn, site_id, label, scope=scope))
         return str(future.result(60))
 
     def __enter__(self) -> InProcessServer:
@@ -401,8 +403,8 @@ class LiveServer:
         """The environment of a CLI subprocess on the same database."""
         return self.process.env
 
-    def token(self, site_id: str = "tehuantepec") -> str:
-        return self.process.token(site_id)
+    def token(self, site_id: str = "tehuantepec", scope: str = "ingest") -> str:
+        return self.process.token(site_id, scope=scope)
 
     def client(self, timeout_s: float = 60.0, **kwargs: Any) -> httpx.Client:
         return self.process.client(timeout_s, **kwargs)

@@ -3,7 +3,8 @@ input forms of issue 9 that must work: gzip back-fill, emonCMS rows, resuming.
 
 Each corpus case is one request (method, path, headers, body; ``repeat`` expands
 ``{{repeat}}`` in the body, ``encoding`` the body's bytes (UTF-8 unless said), ``gzip``
-compresses it, ``auth`` sends the site's write token) with the status it must
+compresses it, ``auth`` sends the site's write token — ``"site"``: one of scope
+``site``) with the status it must
 get — a 4xx, never a 5xx — and the words its answer must contain to name the
 problem. Every answer stays small, whatever was sent.
 """
@@ -24,7 +25,7 @@ PATH = "/api/v1/sites/tehuantepec/measurements"
 MAX_ANSWER_BYTES = 16 * 1024
 
 
-def _request(case: dict, token: str) -> tuple[str, str, dict[str, str], bytes]:
+def _request(case: dict, live_server: LiveServer) -> tuple[str, str, dict[str, str], bytes]:
     body = case.get("body", "")
     if "repeat" in case:
         text, times = case["repeat"]
@@ -33,8 +34,10 @@ def _request(case: dict, token: str) -> tuple[str, str, dict[str, str], bytes]:
     if case.get("gzip"):
         data = gzip.compress(data)
     headers = dict(case.get("headers", {}))
-    if case.get("auth"):
-        headers["Authorization"] = f"Bearer {token}"
+    if case.get("auth") == "site":
+        headers["Authorization"] = f"Bearer {live_server.process.token(scope='site')}"
+    elif case.get("auth"):
+        headers["Authorization"] = f"Bearer {live_server.write_token}"
     return case["method"], case["path"], headers, data
 
 
@@ -48,7 +51,7 @@ def test_the_corpus_covers_each_issue_item() -> None:
 def test_bad_input_gets_a_4xx_naming_the_problem(path: Path, client: httpx.Client,
                                                  live_server: LiveServer) -> None:
     case = json.loads(path.read_text())
-    method, url, headers, data = _request(case, live_server.write_token)
+    method, url, headers, data = _request(case, live_server)
     r = client.request(method, url, headers=headers, content=data)
     assert r.status_code == case["status"], r.text[:500]
     assert 400 <= r.status_code < 500

@@ -144,7 +144,7 @@ def test_editing_a_site_drops_its_cached_twin(client: httpx.Client,
     expected_before = _twin_day_wh(config, day)
     assert before["fixed"]["twin_wh"] == pytest.approx(expected_before["fixed"], rel=1e-6)
     config["arrays"]["fixed"]["surface_tilt_deg"] = 45.0  # from 16°: a winter tilt
-    r = client.put(url, json=config, headers=bearer(server.token("tehuantepec")))
+    r = client.put(url, json=config, headers=bearer(server.token("tehuantepec", scope="site")))
     assert r.status_code == 200, r.text
     body = r.json()
     assert body["twin_readings_dropped"] >= 2 * 1440  # the day read above, both arrays
@@ -160,7 +160,7 @@ def test_a_zone_on_another_hour_grid_is_refused(client: httpx.Client,
                                                 server: InProcessServer) -> None:
     config = client.get("/api/v1/sites/tehuantepec/config").json()
     r = client.put("/api/v1/sites/tehuantepec", json={**config, "timezone": "Asia/Kolkata"},
-                   headers=bearer(server.token("tehuantepec")))
+                   headers=bearer(server.token("tehuantepec", scope="site")))
     assert r.status_code == 409 and "timezone" in r.json()["detail"]
 
 

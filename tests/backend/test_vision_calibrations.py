@@ -136,7 +136,10 @@ def test_named_calibrations_deleted_with_their_detections(client: httpx.Client,
     assert client.delete(cal_path).status_code == 401
     other = {"Authorization": f"Bearer {live_server.token('guadalajara_fisheye')}"}
     assert client.delete(cal_path, headers=other).status_code == 403
-    auth = {"Authorization": f"Bearer {live_server.write_token}"}
+    logger = {"Authorization": f"Bearer {live_server.write_token}"}  # scope ingest
+    r = client.delete(cal_path, headers=logger)
+    assert r.status_code == 403 and "scope" in r.json()["detail"], r.text
+    auth = {"Authorization": f"Bearer {live_server.token('tehuantepec', scope='site')}"}
     r = client.delete(cal_path, headers=auth)
     assert r.status_code == 200, r.text
     assert r.json() == {"calibration_id": cal["calibration_id"], "calibrations_deleted": 1,

@@ -44,7 +44,7 @@ from backend.api.deps import (
     SessionDep,
     VisionTokenDep,
     bearer_token,
-    check_site_token,
+    check_site_admin,
     token_site,
 )
 from backend.api.forms import form_flag, read_form
@@ -523,11 +523,13 @@ async def post_evaluate(request: Request, ctx: ContextDep, session: SessionDep,
 
 
 async def _deleting_token(request: Request, ctx: Any, site_id: str | None) -> None:
-    """Deleting stored results changes what others see: a write token of the site, or of
-    any site for results of a free place (401/403 otherwise), whatever
-    ``vision_require_token`` says."""
+    """Deleting stored results changes what others see: the admin token or a ``site``-scope
+    token of the site (managing its calibrations is the site scope's; a logger's ``ingest``
+    token gets a 403), or a write token of any site for results of a free place (401/403
+    otherwise), whatever ``vision_require_token`` says."""
     if site_id is not None:
-        await check_site_token(ctx, site_id, request.headers.get("authorization"))
+        await check_site_admin(ctx, site_id, request.headers.get("authorization"),
+                               f"deleting vision results of site {site_id!r}")
         return
     token = bearer_token(request)
     if token is None or await token_site(request, token) is None:
