@@ -158,6 +158,9 @@ def test_adc_readings_use_stored_calibration(client: httpx.Client,
     url = "/api/v1/sites/tehuantepec/arrays/fixed/calibration"
     assert client.put(url, json=cal).status_code == 401
     r = client.put(url, json=cal, headers={"Authorization": f"Bearer {tok}"})
+    assert r.status_code == 403  # a logger's ingest token writes readings, not calibrations
+    site_tok = live_server.token("tehuantepec", scope="site")
+    r = client.put(url, json=cal, headers={"Authorization": f"Bearer {site_tok}"})
     assert r.status_code == 200
     assert client.get(url).json()["divider_ratio"] == 8.0
     reading = {"ts": "2023-01-08T12:00:00-06:00", "array": "fixed",
@@ -171,7 +174,7 @@ def test_adc_readings_use_stored_calibration(client: httpx.Client,
     assert p["current_a"] == pytest.approx(i_expected, rel=1e-12)
     assert p["power_w"] == pytest.approx(v_expected * i_expected, rel=1e-12)
     # NaN/Infinity literals (Python's JSON reads them) and absurd values: 422, nothing stored
-    auth = {"Authorization": f"Bearer {tok}", "Content-Type": "application/json"}
+    auth = {"Authorization": f"Bearer {site_tok}", "Content-Type": "application/json"}
     for bad in ('{"current_zero_v": NaN}', '{"adc_vref_v": Infinity}',
                 '{"divider_ratio": 1e308}'):
         r = client.put(url, content=bad, headers=auth)
