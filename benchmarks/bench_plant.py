@@ -290,7 +290,6 @@ def main() -> None:
         pos_rows.append(f"| `/positions?strategy={st}` over HTTP, median / p95 of 40 | "
                         f"{p50[st]:.1f} / {txt} | ≤ 50 ms | "
                         f"{fig.verdict(f'positions_{st}_p95_ms')} |")
-    fig.write()
     lines = [
         "## plant — shading, strategies and the position server",
         "",
@@ -354,6 +353,7 @@ def main() -> None:
             f"{mwh(f'table_{key}_sky_scan_mwh', s['sky_scan']['plant_energy_wh'])} | "
             f"{mwh(f'table_{key}_fixed_mwh', res['fixed_energy_wh'])} | {gain} |")
     lines += sweep_lines
+    fig.write()                        # after the tables, whose figures are added with them
     print("\n".join(lines))
 
 
