@@ -1,4 +1,5 @@
-"""The running service: live twin loop, demo logger, status tiles, meta, clean shutdown."""
+"""The running service: live twin loop, demo logger, status tiles, meta, clean shutdown (a
+``heliotwin serve`` process: its signals and exit are the subject), and the 3D twin's port."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import httpx
 import pytest
-from live_service import ServerProcess
+from live_service import InProcessServer, ServerProcess
 
 if TYPE_CHECKING:
     from live_service import Database
@@ -72,23 +73,21 @@ def test_serve_with_live_twin_and_demo_logger(database: Database, tmp_path: Path
     assert "service stopped" in server.log_path.read_text()
 
 
-def test_meta_reports_the_port_the_3d_twin_really_uses(database: Database,
-                                                       tmp_path: Path) -> None:
+def test_meta_reports_the_port_the_3d_twin_really_uses(database: Database) -> None:
     """With the configured viser port taken, the scene moves to a free one and
-    /api/v1/meta says which, so the dashboard's iframe finds it."""
+    /api/v1/meta says which, so the dashboard's iframe finds it. The service runs in this
+    process (the port is the subject, not the process); viser answers on a real socket."""
     import socket
 
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         taken = busy.getsockname()[1]
-        server = ServerProcess(database.url, tmp_path / "server.log", viser_port=taken,
-                               extra_env={"HELIOTWIN_VISER": "true"}).start()
-        try:
-            meta = httpx.get(server.base_url + "/api/v1/meta", timeout=30).json()
+        with InProcessServer(database.url, extra_env={
+                "HELIOTWIN_VISER": "true", "HELIOTWIN_VISER_PORT": str(taken)}) as server, \
+                server.client(timeout_s=30) as c:
+            meta = c.get("/api/v1/meta").json()
             assert meta["viser_enabled"] is True
             assert meta["viser_port"] != taken
             page = httpx.get(f"http://127.0.0.1:{meta['viser_port']}/", timeout=30)
-            assert page.status_code == 200, server.log_tail()
-        finally:
-            server.stop()
+            assert page.status_code == 200, page.text[:200]
