@@ -8,7 +8,8 @@
 - Optional sensor fields (issue 13): what many loggers carry beside the arrays'
   output — a pyranometer or reference cell in the array's plane, a horizontal
   pyranometer, a module-temperature probe, an air-temperature probe and the
-  tracker's encoder angles. Each is stored as sent (NULL when absent); the
+  tracker's encoder angles, and the sun's offset in the tracker's camera (issue
+  25, the pointing model's observations). Each is stored as sent (NULL when absent); the
   hourly rollups keep their sum and count, so bucket means are means of the
   readings that carried the field.
 """
@@ -49,6 +50,15 @@ SENSOR_FIELDS = (
     SensorField("elevation_deg", -90.0, 90.0,
                 "the tracker's measured elevation joint angle (encoder): elevation of the "
                 "collector's normal above the horizon [°]"),
+    # issue 25: the sun's offset in the tracker camera (docs/pointing-model.md); the limits
+    # are the half fields of seed 000's narrow camera, 640 x 480 px at 67° horizontal:
+    # 33.5° = 585 mrad across, atan(0.75·tan 33.5°) = 26.4° = 461 mrad up.
+    SensorField("sun_offset_x_mrad", -585.0, 585.0,
+                "the sun's offset in the tracker camera toward increasing azimuth, "
+                "1000·atan2(s·h, s·n) [mrad]"),
+    SensorField("sun_offset_y_mrad", -461.0, 461.0,
+                "the sun's offset in the tracker camera toward increasing elevation, "
+                "1000·atan2(s·u, s·n) [mrad]"),
 )
 SENSOR_NAMES = tuple(f.name for f in SENSOR_FIELDS)
 

@@ -135,6 +135,8 @@ class Measurement(Base):
     temp_air_c: Mapped[float | None] = mapped_column(Float, nullable=True)
     azimuth_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     elevation_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sun_offset_x_mrad: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sun_offset_y_mrad: Mapped[float | None] = mapped_column(Float, nullable=True)
 
 
 class MeasurementRollup(Base):
@@ -181,6 +183,10 @@ class MeasurementRollup(Base):
     n_temp_air_c: Mapped[int] = mapped_column(Integer)
     n_azimuth_deg: Mapped[int] = mapped_column(Integer)
     n_elevation_deg: Mapped[int] = mapped_column(Integer)
+    sum_sun_offset_x_mrad: Mapped[float] = mapped_column(Float)
+    sum_sun_offset_y_mrad: Mapped[float] = mapped_column(Float)
+    n_sun_offset_x_mrad: Mapped[int] = mapped_column(Integer)
+    n_sun_offset_y_mrad: Mapped[int] = mapped_column(Integer)
 
 
 class TwinCoverage(Base):
