@@ -280,6 +280,23 @@ def real_sky(fig: Figures) -> list[str]:
     return lines
 
 
+def yaw_loss(fig: Figures) -> list[str]:
+    """The beam lost to a 10° pedestal yaw with the normal at the sun's elevation h:
+    cos AOI = sin²h + cos²h·cos δ, so 1 − cos AOI = (1 − cos δ)·cos²h (docs/diagnosis.md,
+    "Why the azimuth offset is not met"; also 1 − cos δ of a 10° elevation offset).
+    Arithmetic of that formula, no simulation."""
+    c = 100 * (1 - np.cos(np.radians(10.0)))
+    low = float(np.mean(c * np.cos(np.radians(np.linspace(5.0, 10.0, 51))) ** 2))
+    at30, at60 = (c * np.cos(np.radians(h)) ** 2 for h in (30.0, 60.0))
+    return [
+        "- beam lost to a 10° yaw: "
+        + fig.add("yaw10_beam_loss_pct", c, "%", f"{c:.1f} %") + " × cos²h; "
+        + fig.add("yaw10_beam_loss_low_sun_pct", low, "%", f"{low:.1f} %") + " at 5–10° of sun, "
+        + fig.add("yaw10_beam_loss_30_pct", at30, "%", f"{at30:.1f} %") + " at 30°, "
+        + fig.add("yaw10_beam_loss_60_pct", at60, "%", f"{at60:.1f} %") + " at 60°",
+    ]
+
+
 def main() -> None:
     site = load_site("tehuantepec")
     first = pd.Timestamp("2025-01-01", tz=site.timezone)
@@ -318,6 +335,9 @@ def main() -> None:
     print("\nReal skies (issue 27; NREL RMIS, tests/data/rmis; nothing tuned on them but the "
           "band's width, whose coverage here is in-sample):\n")
     for line in real_sky(fig):
+        print(line)
+    print("\nWhy a 10° azimuth offset hides (the formula, docs/diagnosis.md):\n")
+    for line in yaw_loss(fig):
         print(line)
     fig.write()
 
