@@ -72,6 +72,10 @@ _ALL_TERMS = CORE_TERMS + OPTIONAL_TERMS
 CORRELATION_LIMIT = 0.98
 #: An observation whose residual exceeds this many robust sigmas is an outlier.
 OUTLIER_SIGMAS = 5.0
+#: An optional term is fitted when its value exceeds this many standard errors …
+SIGNIFICANCE_SIGMAS = 3.0
+#: … and this size [°] (0.005° ≈ 0.09 mrad: below any tracker camera's precision).
+MIN_TERM_DEG = 0.005
 #: Fewer observations than this cannot fit the four core terms with any redundancy.
 MIN_OBSERVATIONS = 10
 
@@ -205,6 +209,7 @@ def predict_offsets_mrad(model: PointingModel, sun_azimuth_deg: ArrayLike,
 
 def _residuals(params: NDArray, terms: tuple[str, ...], obs: _Observations) -> NDArray[np.float64]:
     """Predicted minus observed offsets [mrad], x then y."""
+    assert obs.offsets is not None, "observations without offsets have no residuals"
     x, y, z = _sun_in_camera(params, terms, obs)
     return 1000.0 * np.concatenate([np.arctan2(x, y), np.arctan2(z, y)]) - obs.offsets
 
@@ -242,6 +247,35 @@ def _solve(terms: tuple[str, ...], obs: _Observations, x0: NDArray, loss: str,
                          f_scale=f_scale, method="trf" if loss != "linear" else "lm").x
 
 
+def _select_terms(p_core: NDArray, obs: _Observations) -> tuple[str, ...]:
+    """Core terms plus the optional ones the data support, by forward selection (TPOINT's
+    practice: a term stays when it is significant).
+
+    Each round linearises all six terms at the current solution (one Jacobian), solves
+    each candidate set (current + one optional term) by linear least squares, and keeps
+    the candidate whose value is the most significant, if it exceeds
+    :data:`SIGNIFICANCE_SIGMAS` standard errors and :data:`MIN_TERM_DEG`.
+    """
+    p_full = np.concatenate([p_core, np.zeros(len(OPTIONAL_TERMS))])
+    jac = _jacobian(p_full, _ALL_TERMS, obs)
+    res = _residuals(p_full, _ALL_TERMS, obs)
+    chosen = list(CORE_TERMS)
+    while True:
+        best: tuple[float, str] | None = None
+        for cand in (t for t in OPTIONAL_TERMS if t not in chosen):
+            cols = [_ALL_TERMS.index(t) for t in (*chosen, cand)]
+            j = jac[:, cols]
+            step, *_ = np.linalg.lstsq(j, -res, rcond=None)
+            cov = _covariance(j, res + j @ step, len(cols))
+            value, std = abs(step[-1]), float(np.sqrt(cov[-1, -1]))
+            if value > max(SIGNIFICANCE_SIGMAS * std, MIN_TERM_DEG) and (
+                    best is None or value / std > best[0]):
+                best = (value / std, cand)
+        if best is None:
+            return tuple(chosen)
+        chosen.append(best[1])
+
+
 def fit_pointing_model_to_sun(
     sun_azimuth_deg: ArrayLike, sun_elevation_deg: ArrayLike,
     azimuth_deg: ArrayLike, elevation_deg: ArrayLike,
@@ -256,8 +290,9 @@ def fit_pointing_model_to_sun(
     are outliers (glints, a wrong blob); the reported terms are then a plain
     least-squares fit to the inliers, so the standard errors from the Jacobian
     (scaled by the residual variance) hold. ``terms=None`` fits
-    :data:`CORE_TERMS` plus each of :data:`OPTIONAL_TERMS` that the sky coverage
-    separates (no correlation above :data:`CORRELATION_LIMIT`).
+    :data:`CORE_TERMS` plus those of :data:`OPTIONAL_TERMS` the data support
+    (:func:`_select_terms`); ``identifiable`` then names the fitted terms that no
+    other fitted term correlates with beyond :data:`CORRELATION_LIMIT`.
     """
     az, el, ox, oy, saz, sel = (np.asarray(v, dtype=float).ravel() for v in (
         azimuth_deg, elevation_deg, sun_offset_x_mrad, sun_offset_y_mrad,
@@ -279,13 +314,8 @@ def fit_pointing_model_to_sun(
     outlier = np.hypot(res[:n], res[n:]) > OUTLIER_SIGMAS * sigma
     inliers = obs.subset(~outlier)
 
-    if terms is None:  # which optional terms does the sky coverage separate?
-        full = _ALL_TERMS
-        p_full = np.concatenate([p, np.zeros(len(OPTIONAL_TERMS))])
-        cov = _covariance(_jacobian(p_full, full, inliers), _residuals(p_full, full, inliers),
-                          len(full))
-        bad = {t for a, b, _ in _correlated_pairs(cov, full) for t in (a, b)}
-        fit_terms = core + tuple(t for t in OPTIONAL_TERMS if t not in bad)
+    if terms is None:
+        fit_terms = _select_terms(p, inliers)
     else:
         fit_terms = tuple(terms)
     x0 = np.array([p[core.index(t)] if t in core else 0.0 for t in fit_terms])
@@ -308,14 +338,17 @@ def fit_pointing_model(
     times: pd.DatetimeIndex, azimuth_deg: ArrayLike, elevation_deg: ArrayLike,
     sun_offset_x_mrad: ArrayLike, sun_offset_y_mrad: ArrayLike,
     latitude: float, longitude: float, altitude: float = 0.0,
+    pressure: float = 101325.0, temperature: float = 12.0,
     terms: tuple[str, ...] | None = None,
 ) -> PointingFit:
     """:func:`fit_pointing_model_to_sun` with the true sun at ``times`` (UTC) by SPA.
 
     The camera sees the refracted sun: SPA's apparent elevation
-    (:func:`sim.sun.solar_position`, ``method="spa"``) is the target.
+    (:func:`sim.sun.solar_position`, ``method="spa"``; ``pressure`` [Pa] and
+    ``temperature`` [°C] for the refraction) is the target.
     """
-    sun = solar_position(pd.DatetimeIndex(times), latitude, longitude, altitude)
+    sun = solar_position(pd.DatetimeIndex(times), latitude, longitude, altitude, pressure,
+                         temperature)
     return fit_pointing_model_to_sun(sun["azimuth"].to_numpy(),
                                      sun["apparent_elevation"].to_numpy(), azimuth_deg,
                                      elevation_deg, sun_offset_x_mrad, sun_offset_y_mrad,
