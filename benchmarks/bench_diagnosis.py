@@ -297,6 +297,42 @@ def yaw_loss(fig: Figures) -> list[str]:
     ]
 
 
+def encoder_view(fig: Figures) -> list[str]:
+    """What the encoder angles show of a frame error and of a controller error: one day
+    (tehuantepec, 2 Jun 2026, `open_loop_spa`) in the twin with a 10° pedestal yaw, then
+    with the controller's clock 30 min ahead; the joint angles against the sun over the
+    minutes with the sun up, as `backend/diagnosis/pointing.py` compares them (azimuth
+    wrapped to ±180°, elevation measured − sun). Two one-day runs: seconds."""
+    from sim import twin
+    from sim.disturbances import Disturbances
+
+    site = load_site("tehuantepec")
+    first = pd.Timestamp("2026-06-02", tz=site.timezone)
+    out = {}
+    for name, dist in (("yaw", Disturbances(pedestal_yaw_deg=10.0)),
+                       ("clock", Disturbances(clock_offset_s=1800.0))):
+        s = twin.simulate(site, first, first + pd.Timedelta(days=1), controller="open_loop_spa",
+                          disturbances=dist).series
+        up = s["apparent_elevation"].to_numpy() > 0.0
+        d_az = (s["azimuth_joint_deg"].to_numpy() - s["solar_azimuth"].to_numpy()
+                + 180.0) % 360.0 - 180.0
+        d_el = s["elevation_joint_deg"].to_numpy() - s["apparent_elevation"].to_numpy()
+        out[name] = (np.abs(d_az[up]), np.abs(d_el[up]))
+    (yaw_az, _), (clk_az, clk_el) = out["yaw"], out["clock"]
+    ym, yp = float(np.median(yaw_az)), float(np.percentile(yaw_az, 95))
+    cp, cm = float(np.percentile(clk_az, 95)), float(np.median(clk_el))
+    return [
+        "- encoders with a 10° pedestal yaw: azimuth against the sun's, median "
+        + fig.add("encoder_yaw10_azimuth_median_deg", ym, "deg", f"{ym:.2f}°")
+        + ", 95th percentile "
+        + fig.add("encoder_yaw10_azimuth_p95_deg", yp, "deg", f"{yp:.2f}°"),
+        "- encoders with the controller's clock 30 min ahead: azimuth 95th percentile "
+        + fig.add("encoder_clock30_azimuth_p95_deg", cp, "deg", f"{cp:.0f}°")
+        + ", elevation median "
+        + fig.add("encoder_clock30_elevation_median_deg", cm, "deg", f"{cm:.1f}°"),
+    ]
+
+
 def main() -> None:
     site = load_site("tehuantepec")
     first = pd.Timestamp("2025-01-01", tz=site.timezone)
@@ -338,6 +374,9 @@ def main() -> None:
         print(line)
     print("\nWhy a 10° azimuth offset hides (the formula, docs/diagnosis.md):\n")
     for line in yaw_loss(fig):
+        print(line)
+    print("\nWhat the encoder angles show (the twin, one day each):\n")
+    for line in encoder_view(fig):
         print(line)
     fig.write()
 
