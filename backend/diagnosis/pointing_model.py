@@ -1,0 +1,93 @@
+"""The tracker's pointing model fitted from its stored camera offsets (issue 25, items 2–3).
+
+Reads the tracker array's measured readings in a range that carry the encoder angles
+(``azimuth_deg``, ``elevation_deg``) and the sun's offset in the tracker camera
+(``sun_offset_x_mrad``, ``sun_offset_y_mrad``; ``backend/measurements/fields.py``),
+and fits the mount terms with :func:`sim.pointing_model.fit_pointing_model` (SPA's
+apparent sun with the site's pressure and air temperature, as
+:mod:`backend.diagnosis.pointing`). Definitions of the frames, offsets and terms:
+``docs/pointing-model.md``.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from pvlib import atmosphere
+from sqlalchemy import Connection
+
+from backend.measurements.fields import SENSOR_NAMES
+from backend.measurements.queries import raw_rows
+from backend.sites import SiteInfo
+from sim.pointing_model import (
+    CORE_TERMS,
+    MIN_OBSERVATIONS,
+    PointingFit,
+    command_angles,
+    fit_pointing_model,
+)
+from sim.sun import solar_position
+
+#: Columns of :func:`raw_rows` (ts, V, I, P, then the sensors) the fit reads.
+_COLS = tuple(4 + SENSOR_NAMES.index(n) for n in
+              ("azimuth_deg", "elevation_deg", "sun_offset_x_mrad", "sun_offset_y_mrad"))
+
+
+class TooFewObservations(ValueError):
+    """The range holds too few readings with sun offsets for a fit (a 422 at the API)."""
+
+
+def _refraction(info: SiteInfo) -> tuple[float, float]:
+    """The site's pressure [Pa] and air temperature [°C] for SPA's refraction."""
+    return float(atmosphere.alt2pres(info.site.altitude)), float(info.site.temp_air)
+
+
+def fit_site(conn: Connection, info: SiteInfo, t0: dt.datetime, t1: dt.datetime) -> PointingFit:
+    """Fit the site's tracker over ``[t0, t1)``; :class:`TooFewObservations` when it cannot."""
+    tracker = info.array_of_kind("tracker")
+    if tracker is None:
+        raise TooFewObservations(f"site {info.site_id!r} has no tracker array")
+    rows = raw_rows(conn, tracker.array_id, 0, int(t0.timestamp()), int(t1.timestamp()),
+                    sensors=True)
+    if rows.size:
+        rows = rows[np.isfinite(rows[:, _COLS]).all(axis=1)]
+    if rows.shape[0] < MIN_OBSERVATIONS:
+        raise TooFewObservations(
+            f"{rows.shape[0]} observations with sun offsets (sun_offset_x_mrad, "
+            f"sun_offset_y_mrad and the encoder angles) in the range; the fit needs at least "
+            f"{MIN_OBSERVATIONS}")
+    s = info.site
+    pressure, temperature = _refraction(info)
+    times = pd.DatetimeIndex(pd.to_datetime(rows[:, 0], unit="s", utc=True))
+    az, el, ox, oy = (rows[:, k] for k in _COLS)
+    return fit_pointing_model(times, az, el, ox, oy, s.latitude, s.longitude, s.altitude,
+                              pressure, temperature)
+
+
+def model_body(info: SiteInfo, fit: PointingFit) -> dict[str, Any]:
+    """The ``GET …/pointing-model`` answer: terms with standard errors, what the data separate."""
+    def finite(v: float | None) -> float | None:  # a singular fit's NaN is JSON null
+        return v if v is not None and np.isfinite(v) else None
+
+    terms = {t: {"value": getattr(fit.model, t), "std": finite(fit.std.get(t))}
+             for t in (*CORE_TERMS, *(t for t in fit.fitted_terms if t not in CORE_TERMS))}
+    return {"site_id": info.site_id, "n_observations": fit.n_observations,
+            "n_outliers": fit.n_outliers, "residual_rms_mrad": fit.residual_rms_mrad,
+            "terms": terms, "identifiable": list(fit.identifiable),
+            "correlated": [{"terms": [a, b], "correlation": r} for a, b, r in fit.correlated]}
+
+
+def command(info: SiteInfo, fit: PointingFit, when: dt.datetime) -> dict[str, float]:
+    """Encoder angles to command at ``when`` so the real optical axis points at the sun."""
+    s = info.site
+    pressure, temperature = _refraction(info)
+    sun = solar_position(pd.DatetimeIndex([when]), s.latitude, s.longitude, s.altitude,
+                         pressure, temperature)
+    az, el = command_angles(fit.model, sun["azimuth"].to_numpy(),
+                            sun["apparent_elevation"].to_numpy())
+    return {"azimuth_deg": float(np.mod(az[0], 360.0)), "elevation_deg": float(el[0]),
+            "sun_azimuth_deg": float(sun["azimuth"].iloc[0]),
+            "sun_elevation_deg": float(sun["apparent_elevation"].iloc[0])}
