@@ -12,6 +12,9 @@ apparent sun with the site's pressure and air temperature, as
 from __future__ import annotations
 
 import datetime as dt
+import hashlib
+import threading
+from collections import OrderedDict
 from typing import Any
 
 import numpy as np
@@ -34,6 +37,15 @@ from sim.sun import solar_position
 #: Columns of :func:`raw_rows` (ts, V, I, P, then the sensors) the fit reads.
 _COLS = tuple(4 + SENSOR_NAMES.index(n) for n in
               ("azimuth_deg", "elevation_deg", "sun_offset_x_mrad", "sun_offset_y_mrad"))
+
+
+#: Fits by the digest of the observations they were made from (and the site's place and
+#: refraction): a fit is a pure function of them, so a repeated range — every command
+#: of a day under one model — reads the rows again but does not refit; a new or changed
+#: reading changes the digest. Bounded, oldest out.
+_CACHE: OrderedDict[tuple[Any, ...], PointingFit] = OrderedDict()
+_CACHE_SIZE = 32
+_CACHE_LOCK = threading.Lock()
 
 
 class TooFewObservations(ValueError):
@@ -61,10 +73,21 @@ def fit_site(conn: Connection, info: SiteInfo, t0: dt.datetime, t1: dt.datetime)
             f"{MIN_OBSERVATIONS}")
     s = info.site
     pressure, temperature = _refraction(info)
-    times = pd.DatetimeIndex(pd.to_datetime(rows[:, 0], unit="s", utc=True))
-    az, el, ox, oy = (rows[:, k] for k in _COLS)
-    return fit_pointing_model(times, az, el, ox, oy, s.latitude, s.longitude, s.altitude,
-                              pressure, temperature)
+    obs = np.ascontiguousarray(rows[:, (0, *_COLS)])
+    key = (s.latitude, s.longitude, s.altitude, pressure, temperature,
+           hashlib.blake2b(obs.tobytes(), digest_size=16).digest())
+    with _CACHE_LOCK:
+        cached = _CACHE.get(key)
+    if cached is not None:
+        return cached
+    times = pd.DatetimeIndex(pd.to_datetime(obs[:, 0], unit="s", utc=True))
+    fit = fit_pointing_model(times, obs[:, 1], obs[:, 2], obs[:, 3], obs[:, 4], s.latitude,
+                             s.longitude, s.altitude, pressure, temperature)
+    with _CACHE_LOCK:
+        _CACHE[key] = fit
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    return fit
 
 
 def model_body(info: SiteInfo, fit: PointingFit) -> dict[str, Any]:
