@@ -14,7 +14,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from sim import disturbances as dist
-from sim.pointing_model import CORE_TERMS, PointingModel, command_angles, fit_pointing_model
+from sim.pointing_model import (
+    CORE_TERMS,
+    PointingModel,
+    command_angles,
+    fit_pointing_model,
+    predict_offsets_mrad,
+)
 from sim.sites import load_site
 from sim.sun import solar_position
 from vision.sphere import enu_from_sky
@@ -112,7 +118,6 @@ def test_command_angles_invert_the_forward_model_with_collimation_and_npae() -> 
                           collimation_deg=0.8, nonperpendicularity_deg=-0.6)
     saz = np.array([80.0, 130.0, 180.0, 250.0, 300.0])
     sel = np.array([10.0, 45.0, 70.0, 30.0, 8.0])
-    from sim.pointing_model import predict_offsets_mrad
     ox, oy = predict_offsets_mrad(model, saz, sel, *command_angles(model, saz, sel))
     assert np.abs(ox).max() < 1e-6 and np.abs(oy).max() < 1e-6
     # without the Newton steps the closed form alone would be off by ~ the collimation
