@@ -164,3 +164,26 @@ def test_the_twins_disturbances_mean_the_same_terms() -> None:
     assert expected["pedestal_tilt_east_deg"] == pytest.approx(1.2 * np.sin(np.radians(230)),
                                                                abs=0.01)
     assert expected["azimuth_zero_deg"] == pytest.approx(1.5, abs=0.02)
+
+
+def test_a_significant_nonperpendicularity_is_selected_and_recovered() -> None:
+    """NPAE built independently: the elevation turns about the axis (cos np, 0, sin np) of
+    the azimuth frame (scipy rotation vector), its +h end raised by np."""
+    rng = np.random.default_rng(3)
+    npae = 0.4
+    times, sun = _day("2026-06-02")
+    times, sun = times[::2], sun.iloc[::2]
+    az, el = sun["azimuth"].to_numpy(), sun["apparent_elevation"].to_numpy()
+    axis = np.array([np.cos(np.radians(npae)), 0.0, np.sin(np.radians(npae))])
+    mount = Rotation.from_euler("xy", [-TRUE["pedestal_tilt_north_deg"],
+                                       TRUE["pedestal_tilt_east_deg"]], degrees=True)
+    r = (mount * Rotation.from_euler("z", -(az + TRUE["azimuth_zero_deg"])[:, None], degrees=True)
+         * Rotation.from_rotvec(np.radians(el + TRUE["elevation_zero_deg"])[:, None] * axis))
+    h, n, u = (r.apply(v) for v in np.eye(3))
+    ox, oy = _offsets_mrad(enu_from_sky(az, el), h, n, u)
+    ox, oy = ox + rng.normal(0, 0.3, ox.size), oy + rng.normal(0, 0.3, oy.size)
+    fit = fit_pointing_model(times, az, el, ox, oy, SITE.latitude, SITE.longitude, SITE.altitude)
+    assert fit.fitted_terms == (*CORE_TERMS, "nonperpendicularity_deg")
+    for name, value in {**TRUE, "nonperpendicularity_deg": npae}.items():
+        got = getattr(fit.model, name)
+        assert abs(got - value) < 4 * fit.std[name], (name, got, value, fit.std[name])
