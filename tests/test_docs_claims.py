@@ -1050,6 +1050,13 @@ def _source_number(path: str, pattern: str) -> float:
     return _source_numbers(path, pattern)[0]
 
 
+def _installed_version(distribution: str) -> list[float]:
+    """The installed version of a distribution, as numbers."""
+    from importlib.metadata import version
+
+    return [float(v) for v in version(distribution).split(".") if v.isdigit()]
+
+
 def _twin_default(name: str) -> Any:
     return _default(_code("sim.twin", "simulate"), name)
 
@@ -1127,6 +1134,10 @@ QUOTED_CONSTANTS = [
     ("validation-vision.md", r"when less than\s+(\d+) % of its limb fits one circle",
      lambda: [100 * _source_number("vision/detect.py",
                                    r"fallback is not None and inliers < ([\d.]+)")]),
+    ("validation-vision.md", r"decode excluded, best of (\d+) passes",
+     lambda: [_source_number("benchmarks/bench_vision.py", r"passes: int = (\d+),")]),
+    ("twin3d.md", r"viser (\d+)\.(\d+) has no public accessor",
+     lambda: _installed_version("viser")[:2]),
     ("validation-vision.md", r"`ephemeris_far_unclear` = min\(distance, (\d+)°\)/(\d+)° ×",
      lambda: _source_numbers("vision/confidence.py",
                              r"min\(float\(ephemeris_deg\), ([\d.]+)\) / ([\d.]+) \*")),
