@@ -49,6 +49,7 @@ from backend.api.routes import (
     health,
     measurements,
     plants,
+    pointing_model,
     simulations,
     sites,
     tokens,
@@ -185,7 +186,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # ingest first: a request is matched against the routers in this order, and logger
     # ingest is the busiest request of the service (one match instead of ~12)
     for module in (measurements, health, sites, energy, diagnosis, alerts, simulations, weather,
-                   twin3d, plants, vision, tokens, dashboard):
+                   twin3d, plants, vision, tokens, dashboard, pointing_model):
         app.include_router(module.router)
     generate_openapi = app.openapi
 
