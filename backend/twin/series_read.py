@@ -38,7 +38,9 @@ def _array_start(f: IO[bytes]) -> tuple[np.dtype, int]:
 class PackedSeries:
     """The packed series of one run: its columns, its times, and its rows block by block."""
 
-    def __init__(self, blob: bytes) -> None:
+    def __init__(self, blob: bytes, keep: object = None) -> None:
+        """``keep``: an object to hold while this series is read (the owner of ``blob``)."""
+        self._keep = keep
         self._zip = zipfile.ZipFile(io.BytesIO(blob))
         names = [n.removesuffix(".npy") for n in self._zip.namelist()]
         self.columns = [n for n in names if n != "ts_s"]

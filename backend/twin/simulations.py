@@ -50,6 +50,7 @@ import tempfile
 import threading
 import time
 import uuid
+import weakref
 from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection as Pipe
@@ -127,6 +128,16 @@ def _round(x: float | None) -> float | None:
 
 def _iso_now() -> str:
     return utcnow().isoformat()
+
+
+class SharedBlob:
+    """A run's packed series bytes, shared by the readers holding this object (weakly
+    remembered by :meth:`SimulationRunner.series_blob`: gone when the last reader is)."""
+
+    __slots__ = ("data", "__weakref__")
+
+    def __init__(self, data: bytes) -> None:
+        self.data = data
 
 
 @dataclass
@@ -231,6 +242,9 @@ class SimulationRunner:
         self._threads: list[threading.Thread] = []
         self._futures: dict[str, Future[dict[str, Any]]] = {}  # runs queued or running
         self._cancel: set[str] = set()  # running runs asked to stop
+        self._blobs: weakref.WeakValueDictionary[str, SharedBlob] = (
+            weakref.WeakValueDictionary())  # packed series being read
+        self._blob_load = threading.Lock()
 
     def _start_threads(self) -> None:
         if self._threads:
@@ -545,20 +559,32 @@ class SimulationRunner:
                         row.error, json.loads(row.params_json),
                         finished_at=row.finished_at.isoformat() if row.finished_at else None)
 
-    def series_blob(self, run_id: str) -> bytes | None:
-        """A finished run's packed series (:func:`write_npz`), or None."""
+    def series_blob(self, run_id: str) -> SharedBlob | None:
+        """A finished run's packed series (:func:`write_npz`), or None; readers of one run
+        at the same time share one copy (a year's is 43 MB), held while any holds it."""
         state = self.get(run_id)
         if state is None or state.status != "done":
             return None
-        with self.engine.connect() as conn:
-            return conn.execute(  # type: ignore[no-any-return]
-                select(SimulationSeries.npz).where(SimulationSeries.run_id == run_id)
-            ).scalar_one_or_none()
+        with self._blob_load:  # one load at a time: readers arriving together share it
+            with self._lock:
+                held = self._blobs.get(run_id)
+            if held is not None:
+                return held
+            with self.engine.connect() as conn:
+                data = conn.execute(
+                    select(SimulationSeries.npz).where(SimulationSeries.run_id == run_id)
+                ).scalar_one_or_none()
+            if data is None:
+                return None
+            held = SharedBlob(bytes(data))
+            with self._lock:
+                self._blobs[run_id] = held
+            return held
 
     def series(self, run_id: str) -> pd.DataFrame | None:
         """A finished run's series (read from the database), or None."""
         blob = self.series_blob(run_id)
-        return None if blob is None else npz_to_series(blob)
+        return None if blob is None else npz_to_series(blob.data)
 
 
 def _duration(seconds: float) -> str:

@@ -295,7 +295,7 @@ async def get_simulation_series(
     start_s, end_s = _instant_s(start, zone, "start"), _instant_s(end, zone, "end")
     if start_s is not None and end_s is not None and end_s <= start_s:
         raise HTTPException(422, f"end ({end}) must be after start ({start}); end is exclusive")
-    packed = PackedSeries(blob)
+    packed = PackedSeries(blob.data, keep=blob)  # concurrent readers share the bytes
     i0, i1 = packed.index_range(start_s, end_s)
     run_step_s = float(state.params.get("step_s", 60.0))
     per = 1
