@@ -6,7 +6,7 @@ A long module handed out last keeps one worker busy while the other has nothing 
 do, so the modules holding a test marked ``slow`` (more than a few seconds) or ``browser``
 (a real Chromium) go first; the rest keep their order and fill in behind them. The order
 of the tests inside a module does not change. Every worker collects the same order, as
-xdist requires.
+xdist requires; a run without xdist is left in pytest's own order.
 """
 
 from __future__ import annotations
@@ -22,8 +22,10 @@ def _is_long(item: pytest.Item) -> bool:
 
 
 @pytest.hookimpl(trylast=True)  # after the hooks that add markers (tests/e2e/conftest.py)
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Move the modules that hold a long test to the front (a stable sort: otherwise in
-    collection order)."""
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """In an xdist worker, move the modules that hold a long test to the front (a stable
+    sort: otherwise in collection order). A plain pytest keeps its order (``--ff``…)."""
+    if not hasattr(config, "workerinput"):
+        return
     long_modules = {item.nodeid.split("::", 1)[0] for item in items if _is_long(item)}
     items.sort(key=lambda item: item.nodeid.split("::", 1)[0] not in long_modules)
