@@ -35,6 +35,7 @@ def test_schema_prints_the_shipped_file(tmp_path: Path) -> None:
     assert json.loads(p.stdout) == json.loads((ROOT / "docs" / "site.schema.json").read_text())
 
 
+@pytest.mark.slow
 def test_create_writes_a_site_that_simulate_runs(tmp_path: Path) -> None:
     p = heliotwin(tmp_path, "site", "create", "--id", "madrid-roof", "--latitude-deg", "40.45",
                   "--longitude-deg", "-3.73", "--altitude-m", "667", "--timezone", "Europe/Madrid",
@@ -63,6 +64,7 @@ def test_missing_place_flags_are_named(tmp_path: Path) -> None:
     assert not (tmp_path / "nowhere.json").exists()
 
 
+@pytest.mark.slow
 def test_a_user_file_replaces_a_built_in_only_with_force(tmp_path: Path) -> None:
     args = ("site", "create", "--id", "tehuantepec", "--latitude-deg", "16.3",
             "--longitude-deg", "-95.24", "--altitude-m", "60", "--timezone",

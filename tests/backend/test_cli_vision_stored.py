@@ -34,6 +34,7 @@ def _png(ts: str, seed: int) -> bytes:
     return buf.tobytes()
 
 
+@pytest.mark.slow
 def test_detect_with_a_stored_calibration(live_server: LiveServer, client: httpx.Client,
                                           tmp_path: Path) -> None:
     times = [f"2024-04-10T{h:02d}:20:00-06:00" for h in (8, 10, 12, 14, 16)]
