@@ -9,7 +9,7 @@ twin, no viser) and measures, in one run:
 - energy per day over that year and the year downsampled to 2,000 points
   (median of 7 after a first call), against a plain GROUP BY over the raw rows;
 - one keep-alive connection posting single readings back to back;
-- 200 loggers on their own connections, 5 paced requests/s each;
+- 200 loggers on their own connections, 5 paced requests/s each, then 1 each;
 - single readings with ``HELIOTWIN_SQLITE_SYNCHRONOUS=FULL`` against ``NORMAL``.
 
 Prints one Markdown section to stdout; progress on stderr. ``--only single,loggers``
@@ -302,18 +302,25 @@ def main(argv: list[str] | None = None) -> int:
                                 f"{single_rate:,.0f} req/s", "≥ 500 req/s", single_rate >= 500)
                         + f" ({single_err} errors)", "single_req_per_s"))
                 if "loggers" in parts:
-                    log("200 loggers")
-                    lat, lerr, sent, wall = asyncio.run(
-                        many_loggers(server.port, server.token, 200, 5.0, 5.0))
-                    lat_ms = np.array(lat) * 1000
-                    p50, p99 = np.percentile(lat_ms, 50), np.percentile(lat_ms, 99)
-                    rows.append((
-                        f"200 loggers × 5 req/s paced, {sent:,} requests in {wall:.1f} s",
-                        f"{sent / wall:,.0f} req/s, p50 {p50:.1f} ms, p99 "
-                        + fig.add("loggers_p99_ms", p99, "ms", f"{p99:.1f} ms",
-                                  "all served, p99 ≤ 50 ms",
-                                  bool(p99 <= 50 and lerr == 0 and sent == 200 * 25))
-                        + f", max {lat_ms.max():.1f} ms, {lerr} errors", "loggers_p99_ms"))
+                    # 5 req/s each: the figure kept since issue 9 (1,000 req/s in all); 1 req/s
+                    # each: above the field rate issue 21 names (10,000 trackers at a reading
+                    # a minute are 170 req/s), the same 200 connections
+                    for rate_hz, name, target in ((5.0, "loggers_p99_ms", 50.0),
+                                                  (1.0, "loggers_1hz_p99_ms", 50.0)):
+                        log(f"200 loggers at {rate_hz:g} req/s each")
+                        lat, lerr, sent, wall = asyncio.run(
+                            many_loggers(server.port, server.token, 200, rate_hz,
+                                         25.0 / rate_hz))
+                        lat_ms = np.array(lat) * 1000
+                        p50, p99 = np.percentile(lat_ms, 50), np.percentile(lat_ms, 99)
+                        rows.append((
+                            f"200 loggers × {rate_hz:g} req/s paced, {sent:,} requests in "
+                            f"{wall:.1f} s",
+                            f"{sent / wall:,.0f} req/s, p50 {p50:.1f} ms, p99 "
+                            + fig.add(name, p99, "ms", f"{p99:.1f} ms",
+                                      f"all served, p99 ≤ {target:g} ms",
+                                      bool(p99 <= target and lerr == 0 and sent == 200 * 25))
+                            + f", max {lat_ms.max():.1f} ms, {lerr} errors", name))
             finally:
                 server.stop()
         if "full" in parts:
