@@ -22,7 +22,7 @@ def test_the_connect_properties_bound_the_packet_size() -> None:
 
 
 def test_a_message_over_the_packet_size_never_reaches_the_service(
-        service: tuple[object, str]) -> None:
+        service: tuple[object, str]) -> None:  # noqa: F811 - the imported fixture
     _, prefix = service
     topic = f"{prefix}/{SITE}/tracker/state"
     errors = Watcher(f"{prefix}/{SITE}/errors")
