@@ -35,6 +35,9 @@ def test_zone_of_each_frame_is_said(page, server, tmp_path: Path) -> None:  # ty
     plain.write_bytes(named.read_bytes())
     page.set_input_files("#sky-files", [str(named), str(plain)])
     zones = page.locator("[data-testid=sky-row-zone]")
+    # the names' times come from the service (GET /api/v1/vision/frame-times)
+    page.wait_for_function("() => document.querySelector('[data-testid=sky-row-zone]')"
+                           ".textContent.includes('from the file name')")
     assert "UTC+01:00, from the file name → 2016-06-15T08:39:00Z" in zones.nth(0).text_content()
     assert zones.nth(1).text_content() == "in UTC"
     page.locator("#sky-file-list input").nth(1).fill("2024-03-01T12:00:00")
@@ -95,3 +98,28 @@ def test_named_calibration_held_out_evaluation_and_delete(page, server) -> None:
     assert re.search(r"Cleared [1-9][0-9]* detection", page.text_content("#sky-status"))
     page.wait_for_function("() => document.getElementById('chart-sky-error').textContent"
                            ".includes('Upload timestamped')")
+
+
+def test_a_refused_file_shows_the_services_reason(page, server, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """Issue 22 item 10: a non-image got the browser's "not an image the browser can show"
+    and the status "2 image(s) done"; the service's 415 and its reason are what count."""
+    notes = tmp_path / "notes.png"
+    notes.write_text("this is not an image")
+    page.goto(server.url + "/#sky")
+    page.wait_for_selector("#sky-form")
+    _wettermast_place(page)
+    page.select_option("#sky-camera", "fisheye")
+    frame = sorted(REAL_SKY.glob("Wettermast_*.jpg"))[0]
+    page.set_input_files("#sky-files", [str(notes), str(frame)])
+    page.click("#sky-detect")
+    page.wait_for_function("() => document.getElementById('sky-status').textContent"
+                           ".includes('failed')", timeout=60_000)
+    assert page.text_content("#sky-status").startswith("1 of 2 image(s) analysed, 1 failed")
+    refused = page.locator("[data-testid=sky-result]").nth(0).text_content()
+    assert "415" in refused and "not a PNG or JPEG image" in refused
+    assert "browser can show" not in refused
+    assert page.locator("[data-testid=sky-result][data-sun-found=true]").count() == 1
+    # the refusal is an answer, not a page error: Chromium logs the 415 as a failed resource
+    expected = [e for e in page.console_errors if "status of 415" in e]
+    assert len(expected) == 1, page.console_errors
+    page.console_errors.remove(expected[0])
