@@ -339,7 +339,7 @@ class ServerProcess:
     def env(self) -> dict[str, str]:
         return process_env(self.database_url, self.extra_env)
 
-    def start(self, timeout_s: float = 60.0) -> ServerProcess:
+    def start(self, timeout_s: float = 120.0) -> ServerProcess:
         """Start and wait for ``/healthz``."""
         self.port = free_port()
         log = self.log_path.open("ab")
