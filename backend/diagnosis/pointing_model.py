@@ -22,6 +22,7 @@ import pandas as pd
 from pvlib import atmosphere
 from sqlalchemy import Connection
 
+from backend.errors import InputError
 from backend.measurements.fields import SENSOR_NAMES
 from backend.measurements.queries import raw_rows
 from backend.sites import SiteInfo
@@ -57,15 +58,28 @@ def _refraction(info: SiteInfo) -> tuple[float, float]:
     return float(atmosphere.alt2pres(info.site.altitude)), float(info.site.temp_air)
 
 
-def fit_site(conn: Connection, info: SiteInfo, t0: dt.datetime, t1: dt.datetime) -> PointingFit:
-    """Fit the site's tracker over ``[t0, t1)``; :class:`TooFewObservations` when it cannot."""
+#: The longest range one request fits [days]: a year of minute observations and then some
+#: (the fit of a year's ~200,000 observations takes seconds; an anonymous read is bounded).
+MAX_DAYS = 400
+
+
+def observations(conn: Connection, info: SiteInfo, t0: dt.datetime, t1: dt.datetime
+                 ) -> np.ndarray:
+    """The tracker's readings in ``[t0, t1)`` that carry the encoder angles and both sun
+    offsets (the other readings dropped), as raw rows; at most :data:`MAX_DAYS` days."""
+    if t1 - t0 > dt.timedelta(days=MAX_DAYS):
+        raise InputError(422, f"end: the range spans over {MAX_DAYS} days; ask for less")
     tracker = info.array_of_kind("tracker")
     if tracker is None:
         raise TooFewObservations(f"site {info.site_id!r} has no tracker array")
     rows = raw_rows(conn, tracker.array_id, 0, int(t0.timestamp()), int(t1.timestamp()),
                     sensors=True)
-    if rows.size:
-        rows = rows[np.isfinite(rows[:, _COLS]).all(axis=1)]
+    return rows[np.isfinite(rows[:, _COLS]).all(axis=1)] if rows.size else rows
+
+
+def fit_site(rows: np.ndarray, info: SiteInfo) -> PointingFit:
+    """Fit the site's tracker to :func:`observations`' rows; :class:`TooFewObservations`
+    when there are too few."""
     if rows.shape[0] < MIN_OBSERVATIONS:
         raise TooFewObservations(
             f"{rows.shape[0]} observations with sun offsets (sun_offset_x_mrad, "

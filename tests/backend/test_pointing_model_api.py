@@ -145,3 +145,9 @@ def test_too_few_observations_and_a_naive_time_are_422s(client: httpx.Client) ->
     r = client.get(f"{MODEL}/command", params={"start": "2021-10-05", "end": "2021-10-06",
                                                "time": "2021-10-06T10:00:00"})
     assert r.status_code == 422 and "time" in r.text
+
+
+def test_a_range_over_the_bound_is_refused_before_it_is_read(client: httpx.Client) -> None:
+    """An anonymous read is bounded: 1990–2100 is a 422 naming end, not a scan of it all."""
+    r = client.get(MODEL, params={"start": "1990-01-01", "end": "2100-01-01"})
+    assert r.status_code == 422 and "end" in r.text and "400 days" in r.text

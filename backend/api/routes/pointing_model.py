@@ -12,7 +12,13 @@ from fastapi import APIRouter, HTTPException, Query
 from backend.api.deps import ContextDep, RangeEnd, RangeStart, site_or_404
 from backend.api.schemas.pointing_model import PointingCommandRead, PointingModelRead
 from backend.context import ServiceContext
-from backend.diagnosis.pointing_model import TooFewObservations, command, fit_site, model_body
+from backend.diagnosis.pointing_model import (
+    TooFewObservations,
+    command,
+    fit_site,
+    model_body,
+    observations,
+)
 from backend.sites import SiteInfo
 from backend.timestamps import parse_instant, parse_range
 from sim.pointing_model import PointingFit
@@ -25,11 +31,12 @@ def _fit(ctx: ServiceContext, info: SiteInfo, start: str, end: str) -> PointingF
         t0, t1 = parse_range(start, end, info.zone)
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
-    with ctx.engine.connect() as conn:
-        try:
-            return fit_site(conn, info, t0, t1)
-        except TooFewObservations as exc:
-            raise HTTPException(422, str(exc)) from None
+    try:
+        with ctx.engine.connect() as conn:  # closed before the fit: it holds no connection
+            rows = observations(conn, info, t0, t1)
+        return fit_site(rows, info)
+    except TooFewObservations as exc:
+        raise HTTPException(422, str(exc)) from None
 
 
 @router.get("/{site_id}/pointing-model", response_model=PointingModelRead,
