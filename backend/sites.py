@@ -151,6 +151,8 @@ class Registry:
 
     RESCAN_S = 1.0
     """How often [s] a look at :attr:`sites` checks the user's folder for new files."""
+    FORCED_RESCAN_S = 0.1
+    """How often [s], at most, a lookup of an unknown id checks it."""
 
     def __init__(self, sites: list[Site], user_dir: Path | None = None) -> None:
         self._lock = threading.Lock()
@@ -207,14 +209,17 @@ class Registry:
         if self._user_dir is None or self._engine is None:
             return False
         now = time.monotonic()
-        if (not force and now - self._checked < self.RESCAN_S) or not self._scan_lock.acquire(
-                blocking=False):
+        # forced (an unknown id) still at most every FORCED_RESCAN_S: anyone can ask for
+        # unknown ids (every site route's 404, MQTT topics), each would read the folder
+        gap = self.FORCED_RESCAN_S if force else self.RESCAN_S
+        if now - self._checked < gap or not self._scan_lock.acquire(blocking=False):
             return False
         try:
             self._checked = now
             state = self._file_state()
-            changed = [name for name, sig in state.items() if self._files.get(name) != sig]
-            self._files = state
+            with self._lock:  # note_file writes it too
+                changed = [name for name, sig in state.items() if self._files.get(name) != sig]
+                self._files = state
             added = [site for name in sorted(changed)
                      if (site := self._read_new(name.removesuffix(".json"))) is not None]
             for site in added:

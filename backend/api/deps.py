@@ -3,9 +3,10 @@
 ``SessionDep`` and ``SettingsDep`` follow the full-stack-fastapi-template style
 (``Annotated`` aliases). Write tokens come as ``Authorization: Bearer <token>``:
 
-- :data:`SiteTokenDep` (routes with a ``{site_id}`` path parameter): 401 without a
-  token or with an unknown, revoked or expired one (the message says which), 403
-  with a token of another site; gives the site id. Any scope may write readings.
+- :func:`check_site_token` (the ingest route, which checks its token before reading its
+  body): 401 without a token or with an unknown, revoked or expired one (the message
+  says which), 403 with a token of another site; gives the site id. Any scope may
+  write readings.
 - :data:`SiteAdminDep`: the admin token or a ``site``-scope token of ``{site_id}``
   (403 naming the scope for an ``ingest`` token); :data:`CallerDep` who called (or
   None), for a route whose site is in its body, to :func:`authorize` there.
@@ -148,16 +149,9 @@ def authorize(caller: Caller, site_id: str, scope: str = "ingest", what: str = "
     return caller.site_id
 
 
-async def require_site_token(request: Request, site_id: str) -> str:
-    """Dependency: a write token of ``site_id`` (401 none/unknown, 403 another site's)."""
-    return await check_site_token(request.app.state.ctx, site_id,
-                                  request.headers.get("authorization"))
-
-
 async def check_site_token(ctx: ServiceContext, site_id: str, authorization: str | None,
                            scope: str = "ingest", what: str = "this") -> str:
-    """The check behind :func:`require_site_token`, for callers without a ``Request``:
-    a token (not the admin's) of ``site_id`` whose scope allows ``scope``."""
+    """A token (not the admin's) of ``site_id`` whose scope allows ``scope``; its site id."""
     return authorize(await caller_of(ctx, authorization, admin_ok=False), site_id, scope, what)
 
 
@@ -203,7 +197,6 @@ async def authenticated_first(ctx: ServiceContext, authorization: str | None) ->
                                  "<token>'", headers=_BEARER)
 
 
-SiteTokenDep = Annotated[str, Depends(require_site_token)]
 SiteAdminDep = Annotated[str, Depends(require_site_admin)]
 CallerDep = Annotated[Caller, Depends(optional_caller)]
 VisionTokenDep = Annotated[str | None, Depends(vision_token)]

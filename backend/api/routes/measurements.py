@@ -86,7 +86,7 @@ async def post_measurements(site_id: str, request: Request) -> IngestResult | Re
     """Store a logger's batch (JSON readings, emonCMS rows or CSV), all or nothing.
 
     The busiest request of the service: the token is checked here, first (before the body
-    is read), rather than by the ``ContextDep``/``SiteTokenDep`` dependencies: in a profile
+    is read), rather than by dependencies (``ContextDep``, ``SiteAdminDep``): in a profile
     of single-reading requests, solving those cost as much as validating the reading.
     """
     ctx: ServiceContext = request.app.state.ctx

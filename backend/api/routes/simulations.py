@@ -283,19 +283,21 @@ async def get_simulation_series(
     ``start``/``end`` when given, averaged into buckets of ``step_s`` or into at most
     ``max_points`` buckets when asked (the coarser of the two). Without a token a client
     address reads at most ``HELIOTWIN_ANONYMOUS_SERIES_CELLS_PER_MIN`` values a minute."""
-    state = ctx.simulations.get(run_id)
+    # a run no longer in memory is read from the database: off the event loop
+    state = await anyio.to_thread.run_sync(ctx.simulations.get, run_id)
     if state is None:
         raise HTTPException(404, f"unknown simulation run {run_id!r}")
     owner = await _caller(request)
     blob = await anyio.to_thread.run_sync(ctx.simulations.series_blob, run_id)
     if blob is None:
         raise HTTPException(409, f"run {run_id} is {state.status}; its series is not ready")
-    info = ctx.registry.sites.get(state.site_id)
+    info = ctx.registry.get(state.site_id)
     zone = info.site.timezone if info else "UTC"
     start_s, end_s = _instant_s(start, zone, "start"), _instant_s(end, zone, "end")
     if start_s is not None and end_s is not None and end_s <= start_s:
         raise HTTPException(422, f"end ({end}) must be after start ({start}); end is exclusive")
-    packed = PackedSeries(blob.data, keep=blob)  # concurrent readers share the bytes
+    # concurrent readers share the bytes; unpacking the time column is off the loop too
+    packed = await anyio.to_thread.run_sync(lambda: PackedSeries(blob.data, keep=blob))
     i0, i1 = packed.index_range(start_s, end_s)
     run_step_s = float(state.params.get("step_s", 60.0))
     per = 1
