@@ -89,6 +89,14 @@ class RateLimiter:
             while len(self._buckets) > self.max_clients:
                 self._buckets.popitem(last=False)
 
+    def refund(self, client: str, cost: float) -> None:
+        """Give back what :meth:`take` spent on a request refused after it (nothing done)."""
+        cost = min(float(cost), self.capacity)
+        with self._lock:
+            if client in self._buckets:
+                level, then = self._buckets[client]
+                self._buckets[client] = (min(self.capacity, level + cost), then)
+
 
 class Charge:
     """One admitted cost in a :class:`WindowBudget`: when, and how much (settled later)."""

@@ -156,3 +156,20 @@ def test_another_callers_day_starts_before_a_second_long_run(
         second = c.get(f"/api/v1/simulations/{long2}").json()
         assert second["started_at"] is None or second["started_at"] > done["started_at"]
         assert c.delete(f"/api/v1/simulations/{long2}").json()["error"] == "cancelled"
+
+
+def test_a_refused_run_does_not_spend_the_anonymous_allowance(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A run refused as too costly (422) gives its steps back: five refusals in a row of a
+    240-step run under a 1,000-step allowance stay 422s (the fifth was a 429)."""
+    db = new_database("sqlite", tmp_path)
+    proc = InProcessServer(db.url, extra_env={
+        "HELIOTWIN_SIMULATION_ANONYMOUS_RUN_MAX_S": str(RUN_MAX_S),
+        "HELIOTWIN_ANONYMOUS_SIMULATION_STEPS_PER_MIN": "1000"}).start()
+    costly = {"site_id": "tehuantepec", "start": "2024-05-01", "end": "2024-05-11",
+              "step_s": 3600, "controller": "closed_loop_camera", "background": True}
+    try:
+        with proc.client() as c:
+            codes = [c.post("/api/v1/simulations", json=costly).status_code for _ in range(5)]
+    finally:
+        proc.stop()
+    assert codes == [422] * 5

@@ -139,6 +139,7 @@ async def create_sweep(body: SweepCreate, request: Request, ctx: ContextDep,
     spec, cases = await anyio.to_thread.run_sync(_sweep_inputs, body, service)
     case_steps = len(cases) * (spec.end - spec.start).total_seconds() / spec.step_s
     token = bearer_token(request)
+    host = request.client.host if request.client else "?"
     if token is not None and await token_site(request, token) is None:
         raise HTTPException(401, "unknown, expired or revoked write token",
                             headers={"WWW-Authenticate": "Bearer"})
@@ -150,10 +151,14 @@ async def create_sweep(body: SweepCreate, request: Request, ctx: ContextDep,
                                          f"{case_steps / len(cases):.0f} steps is more than "
                                          f"{bound:,} without a write token: use a larger "
                                          "step_s, a shorter range or fewer cases")
-            ctx.limits.simulation_steps.take(request.client.host if request.client else "?",
-                                             case_steps)
-        state = runner.submit(spec, cases, body.model_dump())
+            ctx.limits.simulation_steps.take(host, case_steps)
     except Busy as exc:
+        raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
+    try:
+        state = runner.submit(spec, cases, body.model_dump())
+    except Busy as exc:  # the queue is full: nothing runs, the allowance is given back
+        if token is None:
+            ctx.limits.simulation_steps.refund(host, case_steps)
         raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
     state.spec = spec
     return Response(orjson.dumps({"sweep_id": state.sweep_id, "status": state.status,

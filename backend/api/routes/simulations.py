@@ -168,16 +168,21 @@ async def submit_scenario(ctx: Any, request: Request, params: Scenario,
     (503), then 202 with the ``run_id`` or, waiting for it, the summary."""
     owner = await _caller(request)
     anonymous = owner is None
+    host = request.client.host if request.client else "?"
+    steps = (params.end - params.start).total_seconds() / params.step_s
     try:
         if anonymous:
-            steps = (params.end - params.start).total_seconds() / params.step_s
-            ctx.limits.simulation_steps.take(request.client.host if request.client else "?",
-                                             steps)
-        state, done = await anyio.to_thread.run_sync(
-            ctx.simulations.submit, params, anonymous, client_key(request, owner))
+            ctx.limits.simulation_steps.take(host, steps)
     except Busy as exc:
         raise _busy(exc) from None
-    except RunTooCostly as exc:
+    try:
+        state, done = await anyio.to_thread.run_sync(
+            ctx.simulations.submit, params, anonymous, client_key(request, owner))
+    except (Busy, RunTooCostly) as exc:
+        if anonymous:  # refused: nothing ran, the allowance is given back
+            ctx.limits.simulation_steps.refund(host, steps)
+        if isinstance(exc, Busy):
+            raise _busy(exc) from None
         raise HTTPException(422, str(exc)) from None
     if background:
         accepted = {k: v for k, v in state.to_dict().items()
