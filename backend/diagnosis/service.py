@@ -166,8 +166,10 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
 
 
 def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
-             todo: list[int], now_s: float, first_s: int | None) -> dict[int, dict[str, Any]]:
-    """Payloads of the days ``todo`` (indices into ``edges``), run by contiguous stretches;
+             uncached_days: list[int], now_s: float, first_s: int | None
+             ) -> dict[int, dict[str, Any]]:
+    """Payloads of the days ``uncached_days`` (indices into ``edges``), run by contiguous
+    stretches;
     days ending after ``now_s`` [s since the epoch] are judged up to it; ``first_s``: the
     tracker logger's first reading (:func:`history_start_s`)."""
     tracker, fixed = info.array_of_kind("tracker"), info.array_of_kind("fixed")
@@ -175,7 +177,7 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
         raise InputError(422, f"site {info.site_id!r} needs a tracker and a fixed array")
     out: dict[int, dict[str, Any]] = {}
     runs: list[list[int]] = []
-    for i in todo:
+    for i in uncached_days:
         if runs and runs[-1][-1] == i - 1:
             runs[-1].append(i)
         else:
@@ -224,8 +226,9 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
     cached = {r[0]: p for r in rows
               if r[1] == int(edges[starts.index(r[0]) + 1].timestamp())
               and _cache_usable(p := orjson.loads(r[2]), r[0], r[1], first_s)}
-    todo = [i for i, s in enumerate(starts) if s not in cached]  # only days over are cached
-    fresh = _compute(ctx, info, edges, todo, now, first_s) if todo else {}
+    # only days that are over are cached
+    uncached_days = [i for i, s in enumerate(starts) if s not in cached]
+    fresh = _compute(ctx, info, edges, uncached_days, now, first_s) if uncached_days else {}
     values = [{"site_id": info.site_id, "day_start_s": starts[i],
                "day_end_s": int(edges[i + 1].timestamp()),
                "payload_json": orjson.dumps({**p, "cache_version": CACHE_VERSION}).decode()}
