@@ -9,11 +9,15 @@
   worker time for a caller without a token): charged the estimate when a run is
   admitted, trued up to the time the run took (:meth:`WindowBudget.settle`); past the
   ceiling a 429 whose ``Retry-After`` says when enough of the window has passed.
-- :class:`PixelBudget` — the pixels decoded at once across all vision requests.
-  A decoded frame costs about 6 bytes per pixel at its peak (measured: a
-  6300×6300 PNG peaks at 225 MB in ``cv2.imdecode``), so the budget bounds the
-  memory of decoding whatever the concurrency; a request waits its turn in a
-  bounded queue, and past it gets 503 with ``Retry-After``.
+- :class:`HeldBudget` — what is worked on at once, whoever asks (with a token too):
+  ``decode``, the pixels decoded across all vision requests (a decoded frame costs
+  about 6 bytes per pixel at its peak — measured: a 6300×6300 PNG peaks at 225 MB
+  in ``cv2.imdecode`` — so the budget bounds the memory of decoding whatever the
+  concurrency), and ``plants``, the plant computations on request (a day, a sky
+  map, a sweep's shaded day: one at a time, :data:`PLANT_COMPUTATIONS`, so their
+  peak memory — up to ≈ 180 MB for a Peñarroya day at 300 s — is paid once, not
+  once per concurrent caller). A request waits its turn in a bounded queue, and
+  past it gets 503 with ``Retry-After``.
 - :func:`prune_anonymous` — the retention of rows stored for anonymous callers
   (simulation runs and their series, vision detections): the newest ``keep``.
 
@@ -36,6 +40,13 @@ from sqlalchemy import Connection, delete, select
 
 from backend.settings import Settings
 from backend.storage.tables import SimulationRun, SimulationSeries, VisionDetection
+
+#: Plant computations on request worked on at once: one (each ≤ ≈ 2 s of CPU for the
+#: built-in Peñarroya at the finest step; see ``backend/plants``), so their memory peaks
+#: do not add up across callers (32 concurrent days at 300 s held +2.4 GB, issue 23).
+PLANT_COMPUTATIONS = 1
+#: Plant computations waiting for their turn; more → 503 with ``Retry-After``.
+PLANT_QUEUE = 16
 
 
 class Busy(Exception):
@@ -169,40 +180,44 @@ class WindowBudget:
             charge.cost = max(0.0, float(cost))
 
 
-class PixelBudget:
-    """At most ``capacity_px`` pixels decoded at once; up to ``max_waiting`` requests queue.
+class HeldBudget:
+    """At most ``capacity`` units (pixels decoded, plant computations) held at once; up to
+    ``max_waiting`` requests queue, more get 503 with ``Retry-After``.
 
     First come, first served: a request waits while an earlier one waits, so a
-    stream of small frames cannot starve a large one.
+    stream of small requests cannot starve a large one. ``units_per_s`` is how fast
+    held units are done, for ``Retry-After``.
     """
 
-    def __init__(self, capacity_px: int, max_waiting: int, px_per_s: float = 40e6) -> None:
-        self.capacity_px = capacity_px
+    def __init__(self, capacity: int, max_waiting: int, units_per_s: float, what: str,
+                 setting: str) -> None:
+        self.capacity = capacity
         self.max_waiting = max_waiting
-        self.px_per_s = px_per_s  # decode + analysis speed, for Retry-After (measured ≈ 38 Mpx/s)
-        self._held_px = 0
+        self.units_per_s = units_per_s
+        self.what = what
+        self.setting = setting
+        self._held = 0
         self._waiting: list[tuple[int, asyncio.Future[None]]] = []
 
     @property
-    def held_px(self) -> int:
-        return self._held_px
+    def held(self) -> int:
+        return self._held
 
     def _retry_after_s(self) -> float:
-        queued = self._held_px + sum(px for px, _ in self._waiting)
-        return queued / self.px_per_s
+        queued = self._held + sum(units for units, _ in self._waiting)
+        return queued / self.units_per_s
 
     @asynccontextmanager
-    async def hold(self, pixels: int) -> AsyncIterator[None]:
-        """Hold ``pixels`` of the budget (a frame larger than the budget holds all of it)."""
-        pixels = min(int(pixels), self.capacity_px)
-        if self._waiting or self._held_px + pixels > self.capacity_px:
+    async def hold(self, units: int) -> AsyncIterator[None]:
+        """Hold ``units`` of the budget (more than the budget holds all of it)."""
+        units = min(int(units), self.capacity)
+        if self._waiting or self._held + units > self.capacity:
             if len(self._waiting) >= self.max_waiting:
-                raise Busy(503, f"busy: {len(self._waiting)} image requests are waiting for "
-                                f"the decode budget of {self.capacity_px} pixels "
-                                "(HELIOTWIN_VISION_DECODE_PIXELS, HELIOTWIN_VISION_QUEUE)",
-                           self._retry_after_s())
+                raise Busy(503, f"busy: {len(self._waiting)} requests are waiting for "
+                                f"the budget of {self.capacity} {self.what} held at once "
+                                f"({self.setting})", self._retry_after_s())
             turn: asyncio.Future[None] = asyncio.get_running_loop().create_future()
-            entry = (pixels, turn)
+            entry = (units, turn)
             self._waiting.append(entry)
             try:
                 await turn
@@ -210,24 +225,24 @@ class PixelBudget:
                 if entry in self._waiting:
                     self._waiting.remove(entry)
                 elif not turn.cancelled():  # granted, then cancelled: give it back
-                    self._release(pixels)
+                    self._release(units)
                 raise
         else:
-            self._held_px += pixels
+            self._held += units
         try:
             yield
         finally:
-            self._release(pixels)
+            self._release(units)
 
-    def _release(self, pixels: int) -> None:
-        self._held_px -= pixels
+    def _release(self, units: int) -> None:
+        self._held -= units
         while self._waiting:
-            px, turn = self._waiting[0]
-            if self._held_px + px > self.capacity_px:
+            n, turn = self._waiting[0]
+            if self._held + n > self.capacity:
                 break
             self._waiting.pop(0)
             if not turn.done():
-                self._held_px += px
+                self._held += n
                 turn.set_result(None)
 
 
@@ -257,7 +272,8 @@ class Limits:
     simulation_steps: RateLimiter
     series_cells: RateLimiter
     vision_pixels: RateLimiter
-    decode: PixelBudget
+    decode: HeldBudget
+    plants: HeldBudget
 
     @classmethod
     def from_settings(cls, s: Settings) -> Limits:
@@ -269,5 +285,9 @@ class Limits:
                         "HELIOTWIN_ANONYMOUS_SERIES_CELLS_PER_MIN"),
             RateLimiter(s.vision.anonymous_pixels_per_min, "image pixels",
                         "HELIOTWIN_ANONYMOUS_VISION_PIXELS_PER_MIN"),
-            PixelBudget(s.vision.decode_pixels, s.vision.queue),
+            # decode + analysis speed ≈ 38 Mpx/s (measured), for Retry-After
+            HeldBudget(s.vision.decode_pixels, s.vision.queue, 40e6, "pixels decoded",
+                       "HELIOTWIN_VISION_DECODE_PIXELS, HELIOTWIN_VISION_QUEUE"),
+            HeldBudget(PLANT_COMPUTATIONS, PLANT_QUEUE, 1.0, "plant computations",
+                       "one plant day, sky map or sweep shade at a time"),
         )

@@ -3,6 +3,21 @@ positions for a plant controller, the sky map and a day's shade (seed 004).
 
 The routes in ``backend/api/routes/plants.py`` are thin: they parse and call
 :class:`PlantService`. All physics is in :mod:`sim.plant`.
+
+What a computation costs, before it runs (the price an anonymous caller pays from the
+hourly allowance of ``backend/limits.py``, trued up to the CPU time it took) —
+measured on 2026-12-03 (load 0.2–1.7) with ``time.process_time()`` around
+:func:`sim.plant.simulate.simulate_plant` for the built-in Peñarroya (29 trackers) on
+21 March, 21 June and 21 December at 300, 900 and 3,600 s: ``sun`` and ``backtrack``
+0.06–0.09 s each at any step, ``sky_scan`` 0.13 s at 3,600 s to 0.52–0.81 s at 300 s
+(its hemisphere scan tests ≈ 650 orientations for shade at every daylight step); a
+whole day (three strategies, the fixed plant, the sun-tracking shade) 0.24 s at
+900 s, 0.7–1.0 s at 300 s. :func:`day_cost_s` is the fit
+
+    cost_s = DAY_OVERHEAD_S + DAY_STEP_TRACKER_S × (86,400 s / step_s) × trackers,
+
+linear in the trackers as the shade test is (each collector against its few
+candidate shaders). :func:`sky_map_cost_s`: 0.26 s at 1° (32,760 orientations).
 """
 
 from __future__ import annotations
@@ -10,6 +25,7 @@ from __future__ import annotations
 import datetime as dt
 import logging
 import threading
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +39,31 @@ from sim.plant.strategies import STRATEGIES, orientations, sky_map
 
 log = logging.getLogger(__name__)
 
-__all__ = ["STRATEGIES", "PlantService", "UnknownPlantError", "lambert_xy", "sky_map_png"]
+__all__ = ["STRATEGIES", "PlantService", "UnknownPlantError", "day_cost_s", "lambert_xy",
+           "sky_map_cost_s", "sky_map_png"]
+
+#: A plant day's fixed cost [s]: the sun, backtrack and fixed runs, the sun's ephemeris.
+DAY_OVERHEAD_S = 0.35
+#: A plant day's cost per step of the day and tracker [s] (``sky_scan``'s shade test).
+DAY_STEP_TRACKER_S = 8.5e-5
+#: A sky map's cost per orientation of its grid [s], and its fixed cost [s].
+SKY_MAP_ORIENTATION_S, SKY_MAP_OVERHEAD_S = 8e-6, 0.03
+#: Days kept (clear sky: a plant, date and step always give the same day); the cache holds
+#: at most this many shaded-fraction values in all (≈ 32 bytes each as Python floats in
+#: lists: ≈ 16 MB), the least recently used day is dropped first. A Peñarroya day at
+#: 300 s holds 5,162.
+DAY_CACHE_VALUES = 500_000
+
+
+def day_cost_s(n_trackers: int, step_s: float) -> float:
+    """The expected CPU time [s] of :meth:`PlantService.day` (module docstring)."""
+    return DAY_OVERHEAD_S + DAY_STEP_TRACKER_S * 86400.0 / step_s * n_trackers
+
+
+def sky_map_cost_s(resolution_deg: float) -> float:
+    """The expected CPU time [s] of :meth:`PlantService.sky_map` (module docstring)."""
+    orientations = (360.0 / resolution_deg) * (90.0 / resolution_deg + 1)
+    return SKY_MAP_OVERHEAD_S + SKY_MAP_ORIENTATION_S * orientations
 
 
 def lambert_xy(azimuth_deg: np.ndarray, elevation_deg: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -42,8 +82,48 @@ class PlantService:
 
     def __init__(self, plants_dir: str | Path | None = None) -> None:
         self.plants_dir = Path(plants_dir) if plants_dir is not None else default_plants_dir()
+        # one entry per plant file of the folder (the operator's files, not callers' input)
         self._cache: dict[str, tuple[float, Plant]] = {}
         self._lock = threading.Lock()
+        self._days: OrderedDict[tuple[str, float, str, float], dict[str, Any]] = OrderedDict()
+        self._day_values = 0
+
+    def _day_key(self, plant_id: str, date: dt.date, step_s: float
+                 ) -> tuple[str, float, str, float]:
+        path = self.plants_dir / f"{plant_id}.json"
+        try:
+            mtime = path.stat().st_mtime
+        except OSError:
+            mtime = -1.0
+        return plant_id, mtime, date.isoformat(), float(step_s)
+
+    def cached_day(self, plant_id: str, date: dt.date, step_s: float) -> dict[str, Any] | None:
+        """:meth:`day` when it was computed before (for this file of the plant), else None."""
+        key = self._day_key(plant_id, date, step_s)
+        with self._lock:
+            hit = self._days.get(key)
+            if hit is not None:
+                self._days.move_to_end(key)
+            return hit
+
+    def _keep_day(self, key: tuple[str, float, str, float], day: dict[str, Any]) -> None:
+        values = len(day["times"]) * len(day["tracker_ids"])
+        if values > DAY_CACHE_VALUES:
+            return
+        with self._lock:
+            old = self._days.pop(key, None)
+            if old is not None:
+                self._day_values -= len(old["times"]) * len(old["tracker_ids"])
+            self._days[key] = day
+            self._day_values += values
+            while self._day_values > DAY_CACHE_VALUES:
+                _, dropped = self._days.popitem(last=False)
+                self._day_values -= len(dropped["times"]) * len(dropped["tracker_ids"])
+
+    @property
+    def cached_day_values(self) -> int:
+        """Shaded-fraction values the day cache holds (≤ :data:`DAY_CACHE_VALUES`)."""
+        return self._day_values
 
     def ids(self) -> list[str]:
         """Plant ids (file stems), sorted."""
@@ -145,7 +225,9 @@ class PlantService:
         }
 
     def day(self, plant_id: str, date: dt.date, step_s: float = 600.0) -> dict[str, Any]:
-        """A clear-sky day: each tracker's shaded fraction (sun tracking) and strategy energies."""
+        """A clear-sky day: each tracker's shaded fraction (sun tracking) and strategy energies
+        (kept for the next caller: :meth:`cached_day`)."""
+        key = self._day_key(plant_id, date, step_s)
         plant = self.get(plant_id)
         start = pd.Timestamp(date.isoformat()).tz_localize(plant.timezone, ambiguous=True,
                                                             nonexistent="shift_forward")
@@ -174,9 +256,11 @@ class PlantService:
                 times = [t.isoformat() for t in ser.index]
                 fixed = s["fixed_energy_wh"]
         strategies["fixed"] = {"plant_energy_wh": fixed}
-        return {"plant_id": plant.plant_id, "date": date.isoformat(), "step_s": step_s,
-                "sky": "clearsky-ineichen", "tracker_ids": list(plant.tracker_ids),
-                "times": times, "shaded_fraction": shade_rows, "strategies": strategies}
+        out = {"plant_id": plant.plant_id, "date": date.isoformat(), "step_s": step_s,
+               "sky": "clearsky-ineichen", "tracker_ids": list(plant.tracker_ids),
+               "times": times, "shaded_fraction": shade_rows, "strategies": strategies}
+        self._keep_day(key, out)
+        return out
 
 
 def sky_map_png(m: dict[str, Any], size_px: int = 420) -> bytes:

@@ -231,7 +231,8 @@ class SimulationRunner:
         self.costs = CostModel()
         s = settings.simulations
         self.anonymous_hours = WindowBudget(
-            s.anonymous_hour_max_s, 3600.0, "s of simulation worker time",
+            s.anonymous_hour_max_s, 3600.0, "s of compute (simulation worker time and plant "
+            "computations, backend/api/routes/plants.py)",
             "HELIOTWIN_SIMULATION_ANONYMOUS_HOUR_MAX_S")
         self._runs: dict[str, RunState] = {}
         self._lock = threading.Lock()

@@ -4,12 +4,23 @@ A plant controller polls ``/positions`` every minute; ``/sky-map`` is seed 004's
 Fig. 6 (Lambert equal-area hemisphere of plane-of-array irradiance with the
 shading region), JSON or PNG (``Accept: image/png``); ``/day`` feeds the
 dashboard's Plant page.
+
+The computations on request (a day, a sky map, a sweep's shaded day) are priced in CPU
+seconds before they run (:func:`backend.plants.day_cost_s`, :func:`sky_map_cost_s`): a
+caller without a token pays the price from the hourly allowance the simulations use
+(``HELIOTWIN_SIMULATION_ANONYMOUS_HOUR_MAX_S``, trued up to the CPU time taken; 429
+with ``Retry-After`` when spent) and may not ask for more than one run's worth
+(``HELIOTWIN_SIMULATION_ANONYMOUS_RUN_MAX_S``, 422). Whoever asks, they run one at a
+time (``Limits.plants``: their memory peaks do not add up; 503 past its queue). A day
+already computed is answered from the bounded day cache for free.
 """
 
 from __future__ import annotations
 
 import datetime as dt
-from typing import Annotated, Any
+import time
+from collections.abc import Callable
+from typing import Annotated, Any, TypeVar
 
 import anyio
 import orjson
@@ -17,7 +28,7 @@ import pandas as pd
 from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from fastapi.responses import Response
 
-from backend.api.deps import ContextDep, bearer_token, token_site
+from backend.api.deps import CallerDep, ContextDep
 from backend.api.schemas.common import PNG_CONTENT
 from backend.api.schemas.plants import (
     PlantDayRead,
@@ -31,7 +42,14 @@ from backend.api.schemas.plants import (
     SweepShadeRead,
 )
 from backend.limits import Busy
-from backend.plants import STRATEGIES, PlantService, UnknownPlantError, sky_map_png
+from backend.plants import (
+    STRATEGIES,
+    PlantService,
+    UnknownPlantError,
+    day_cost_s,
+    sky_map_cost_s,
+    sky_map_png,
+)
 from backend.plants.sweep import SweepInputError, parse_size, prepare_sweep
 from backend.plants.sweep_runner import SweepRunner, SweepState
 from backend.timestamps import (
@@ -44,6 +62,13 @@ from backend.timestamps import (
 from sim.plant.sweep import PLANT_LAYOUT, SweepCase, case_day_shade
 
 router = APIRouter(prefix="/api/v1/plants", tags=["plants"])
+T = TypeVar("T")
+#: The answers of a priced computation (``_priced``), for the OpenAPI document.
+_PRICED_DOC: dict[int | str, dict[str, Any]] = {
+    401: {"description": "a token was sent but is unknown, expired or revoked"},
+    404: {}, 422: {},
+    429: {"description": "the caller's anonymous hourly allowance is spent (Retry-After)"},
+    503: {"description": "too many plant computations are waiting (Retry-After)"}}
 
 
 def get_plant_service(request: Request) -> PlantService:
@@ -96,6 +121,48 @@ def get_sweep_runner(request: Request) -> SweepRunner:
 SweepRunnerDep = Annotated[SweepRunner, Depends(get_sweep_runner)]
 
 
+def _client(request: Request) -> str:
+    """The anonymous allowance's key: the caller's address (as the simulations use)."""
+    return f"addr:{request.client.host if request.client else '?'}"
+
+
+async def _priced(request: Request, ctx: Any, caller: Any, cost_s: float,
+                  work: Callable[[], T]) -> T:
+    """Run a plant computation expected to take ``cost_s`` of CPU on a worker thread, one
+    at a time (``Limits.plants``, 503 past its queue). Without a token: 422 above one
+    run's worth, the price taken from the hourly allowance (429) and trued up to the CPU
+    time the work took (nothing when it never ran)."""
+    charge = None
+    if caller is None:
+        s = ctx.settings.simulations
+        if cost_s > s.anonymous_run_max_s:
+            raise HTTPException(422, f"step_s, resolution_deg: this computation is expected "
+                                     f"to take {cost_s:.0f} s of CPU; without a write token "
+                                     f"at most {s.anonymous_run_max_s:g} s "
+                                     "(HELIOTWIN_SIMULATION_ANONYMOUS_RUN_MAX_S)")
+        try:
+            charge = ctx.simulations.anonymous_hours.take(_client(request), cost_s)
+        except Busy as exc:
+            raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
+    spent = [0.0]
+
+    def timed() -> T:
+        t0 = time.thread_time()
+        try:
+            return work()
+        finally:
+            spent[0] = time.thread_time() - t0
+
+    try:
+        async with ctx.limits.plants.hold(1):
+            return await anyio.to_thread.run_sync(timed)
+    except Busy as exc:
+        raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
+    finally:
+        if charge is not None:
+            ctx.simulations.anonymous_hours.settle(charge, spent[0])
+
+
 def _sweep_inputs(body: SweepCreate, service: PlantService) -> tuple[Any, list[Any]]:
     """The checked spec and cases of a sweep request; 404/422 naming the field."""
     plant = None
@@ -130,7 +197,8 @@ def _sweep_inputs(body: SweepCreate, service: PlantService) -> tuple[Any, list[A
              responses={401: {}, 404: {}, 422: {}, 429: {}, 503: {}},
              openapi_extra={"security": [{}, {"bearerAuth": []}]})
 async def create_sweep(body: SweepCreate, request: Request, ctx: ContextDep,
-                       service: PlantServiceDep, runner: SweepRunnerDep) -> Response:
+                       caller: CallerDep, service: PlantServiceDep,
+                       runner: SweepRunnerDep) -> Response:
     """Queue a plant-design sweep (layouts × GCRs × strategies, each case a Dask task);
     202 with the ``sweep_id`` to poll. Without a write token a sweep may hold at most
     ``HELIOTWIN_PLANTS_ANONYMOUS_SWEEP_CASE_STEPS`` cases × steps (422 beyond), spent from
@@ -138,13 +206,10 @@ async def create_sweep(body: SweepCreate, request: Request, ctx: ContextDep,
     (503 past the queue)."""
     spec, cases = await anyio.to_thread.run_sync(_sweep_inputs, body, service)
     case_steps = len(cases) * (spec.end - spec.start).total_seconds() / spec.step_s
-    token = bearer_token(request)
+    anonymous = caller is None
     host = request.client.host if request.client else "?"
-    if token is not None and await token_site(request, token) is None:
-        raise HTTPException(401, "unknown, expired or revoked write token",
-                            headers={"WWW-Authenticate": "Bearer"})
     try:
-        if token is None:
+        if anonymous:
             bound = ctx.settings.plants.anonymous_sweep_case_steps
             if case_steps > bound:
                 raise HTTPException(422, f"step_s: {len(cases)} cases × "
@@ -157,7 +222,7 @@ async def create_sweep(body: SweepCreate, request: Request, ctx: ContextDep,
     try:
         state = runner.submit(spec, cases, body.model_dump())
     except Busy as exc:  # the queue is full: nothing runs, the allowance is given back
-        if token is None:
+        if anonymous:
             ctx.limits.simulation_steps.refund(host, case_steps)
         raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
     state.spec = spec
@@ -190,14 +255,16 @@ def cancel_sweep(sweep_id: str, runner: SweepRunnerDep) -> dict[str, Any]:
 
 
 @router.get("/sweeps/{sweep_id}/shade", response_model=SweepShadeRead,
-            responses={404: {}, 422: {}})
-async def sweep_shade(sweep_id: str, runner: SweepRunnerDep,
+            responses=_PRICED_DOC)
+async def sweep_shade(sweep_id: str, request: Request, ctx: ContextDep, caller: CallerDep,
+                      runner: SweepRunnerDep,
                       layout: Annotated[str, Query(max_length=100)],
                       gcr: Annotated[float, Query(gt=0, lt=1)],
                       strategy: Annotated[str, Query()] = "sun",
                       date: Annotated[str, Query(pattern=r"^\d{4}-\d{2}-\d{2}$")] = "2021-12-21",
                       step_s: Annotated[float, Query(ge=300, le=3600)] = 900) -> dict[str, Any]:
-    """One case of a sweep through a clear-sky day: every collector's shaded fraction."""
+    """One case of a sweep through a clear-sky day: every collector's shaded fraction
+    (priced as a plant day of its field; see the module docstring)."""
     state = _sweep_or_404(runner, sweep_id)
     spec = getattr(state, "spec", None)
     if spec is None:
@@ -208,8 +275,11 @@ async def sweep_shade(sweep_id: str, runner: SweepRunnerDep,
         raise HTTPException(422, f"date: {date!r} is not a calendar date") from None
     name = layout if spec.plant is None else PLANT_LAYOUT
     case = SweepCase(name, gcr, _strategy(strategy))
+    cost_s = day_cost_s(spec.rows * spec.columns if spec.plant is None
+                        else spec.plant.n_trackers, step_s)
     try:
-        return await anyio.to_thread.run_sync(case_day_shade, spec, case, date, step_s)
+        return await _priced(request, ctx, caller, cost_s,
+                             lambda: case_day_shade(spec, case, date, step_s))
     except ValueError as exc:
         raise HTTPException(422, f"layout/gcr: {exc}") from None
 
@@ -239,8 +309,9 @@ def positions(plant_id: str, service: PlantServiceDep,
 
 
 @router.get("/{plant_id}/sky-map", response_model=SkyMapRead,
-            responses={404: {}, 422: {}, 200: {"content": PNG_CONTENT}})
-async def sky_map(plant_id: str, request: Request, service: PlantServiceDep,
+            responses={**_PRICED_DOC, 200: {"content": PNG_CONTENT}})
+async def sky_map(plant_id: str, request: Request, ctx: ContextDep, caller: CallerDep,
+                  service: PlantServiceDep,
                   time: Annotated[str, Query(description="ISO 8601 with offset")],
                   resolution_deg: Annotated[float, Query(ge=1.0, le=15.0)] = 3.0,
                   strategy: Annotated[str, Query()] = "sky_scan",
@@ -250,8 +321,9 @@ async def sky_map(plant_id: str, request: Request, service: PlantServiceDep,
     an orientation would shade a collector; ``Accept: image/png`` (or ``format=png``) for PNG."""
     when = _time(time)
     _plant_or_404(service, plant_id)
-    m = await anyio.to_thread.run_sync(
-        lambda: service.sky_map(plant_id, when, resolution_deg, _strategy(strategy)))
+    strategy = _strategy(strategy)
+    m = await _priced(request, ctx, caller, sky_map_cost_s(resolution_deg),
+                      lambda: service.sky_map(plant_id, when, resolution_deg, strategy))
     want_png = format == "png" or (format is None and
                                    "image/png" in request.headers.get("accept", ""))
     if want_png:
@@ -260,14 +332,15 @@ async def sky_map(plant_id: str, request: Request, service: PlantServiceDep,
 
 
 @router.get("/{plant_id}/day", response_model=PlantDayRead, response_model_exclude_unset=True,
-            responses={404: {}, 422: {}})
-async def day(plant_id: str, service: PlantServiceDep,
+            responses=_PRICED_DOC)
+async def day(plant_id: str, request: Request, ctx: ContextDep, caller: CallerDep,
+              service: PlantServiceDep,
               date: Annotated[str, Query(pattern=r"^\d{4}-\d{2}-\d{2}$",
                                          description="local date, YYYY-MM-DD "
                                                      f"({FIRST_YEAR}–{LAST_YEAR})")],
               step_s: Annotated[float, Query(ge=300, le=3600)] = 900) -> dict[str, Any]:
     """A clear-sky day (local date): each tracker's shade under sun tracking, and the plant
-    energy of every strategy and of the fixed plant."""
+    energy of every strategy and of the fixed plant (priced: see the module docstring)."""
     try:
         day_ = dt.date.fromisoformat(date)
     except ValueError:
@@ -275,4 +348,9 @@ async def day(plant_id: str, service: PlantServiceDep,
     if not FIRST_YEAR <= day_.year <= LAST_YEAR:
         raise HTTPException(422, f"date: {date!r} is outside the years {FIRST_YEAR}–{LAST_YEAR}")
     _plant_or_404(service, plant_id)
-    return await anyio.to_thread.run_sync(lambda: service.day(plant_id, day_, step_s))
+    hit = service.cached_day(plant_id, day_, step_s)
+    if hit is not None:
+        return hit
+    cost_s = day_cost_s(service.get(plant_id).n_trackers, step_s)
+    return await _priced(request, ctx, caller, cost_s,
+                         lambda: service.day(plant_id, day_, step_s))
