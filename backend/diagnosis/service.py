@@ -27,6 +27,7 @@ history start that changes its answer is computed again.
 from __future__ import annotations
 
 import datetime as dt
+import math
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -42,6 +43,7 @@ from backend.diagnosis.faults import (
     faults_over_days,
     missing_daylight_min,
 )
+from backend.diagnosis.mount import mount_faults, read_observations
 from backend.diagnosis.weather_twin import site_minutes, sky_source
 from backend.errors import InputError
 from backend.measurements.queries import energy_table, period_edges
@@ -207,27 +209,63 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
     return out
 
 
+#: Without a token, a request computes at most this many days that are not cached yet
+#: (each a day of minutes of the sky inversion and the twin, 2 × 1,440 steps: about 0.2 s of
+#: CPU a day, docs/diagnosis.md "Speed"); more is a 422 naming ``end``. A month. Cached days
+#: and days to come cost nothing and do not count.
+ANONYMOUS_MAX_COMPUTED_DAYS = 31
+
+def _future_day(date: str) -> dict[str, Any]:
+    """The answer of a day still to come: nothing is computed (no reading can exist yet)."""
+    return {"date": date, "status": "future", "complete": False, "partial": True,
+            "sky": {"clearness_index": None, "source": "none", "sensor": None,
+                    "valid_minutes_pct": 0.0},
+            "tracker": {"measured_wh": None, "expected_wh": None, "expected_wh_low": None,
+                        "expected_wh_high": None, "performance_ratio": None},
+            "fixed": {"measured_wh": None, "expected_wh": None, "performance_ratio": None},
+            "gain_measured_pct": None, "gain_expected_pct": None, "faults": []}
+
+
 def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
-              end: dt.datetime, now_s: float | None = None) -> dict[str, Any]:
+              end: dt.datetime, now_s: float | None = None,
+              max_computed_days: int | None = None) -> dict[str, Any]:
     """The diagnosis answer of DESIGN.md for a validated range; ``now_s`` [s since the
-    epoch] (default: the clock) ends the days not yet over."""
+    epoch] (default: the clock) ends the days not yet over.
+
+    Each day has a ``status``: ``complete`` (over), ``in_progress`` (today: judged on its
+    minutes so far) or ``future`` (it starts after now: answered without computing anything,
+    its numbers null). ``max_computed_days``: the most days not cached yet this request may
+    compute (None: no bound), else :class:`InputError` 422 naming ``end``. ``mount``: the
+    mount faults from the tracker camera's offsets in the range
+    (:func:`backend.diagnosis.mount.mount_faults`), null without camera observations."""
     now = time.time() if now_s is None else now_s
     if (end - start).total_seconds() > (MAX_DAYS + 1) * 86400:
         raise InputError(422, f"end: the range spans over {MAX_DAYS} days; ask for less")
     edges = period_edges(start, end, "day", info.zone)
     starts = [int(e.timestamp()) for e in edges[:-1]]
+    edges_s = [int(e.timestamp()) for e in edges]
+    dates = [e.astimezone(info.zone).date().isoformat() for e in edges[:-1]]
+    future = [s >= now for s in starts]
+    past = [s for s, f in zip(starts, future, strict=True) if not f]
     tracker = info.array_of_kind("tracker")
     with ctx.engine.connect() as conn:
         rows = conn.execute(select(DiagnosisDay.day_start_s, DiagnosisDay.day_end_s,
                                    DiagnosisDay.payload_json).where(
             DiagnosisDay.site_id == info.site_id,
-            DiagnosisDay.day_start_s.in_(starts))).all()
-        first_s = None if tracker is None else history_start_s(conn, tracker.array_id)
+            DiagnosisDay.day_start_s.in_(past))).all() if past else []
+        first_s = None if tracker is None or not past else history_start_s(
+            conn, tracker.array_id)
+        obs = read_observations(conn, info, edges_s[0], min(edges_s[-1], math.ceil(now)))
     cached = {r[0]: p for r in rows
               if r[1] == int(edges[starts.index(r[0]) + 1].timestamp())
               and _cache_usable(p := orjson.loads(r[2]), r[0], r[1], first_s)}
-    # only days that are over are cached
-    uncached_days = [i for i, s in enumerate(starts) if s not in cached]
+    # only days that are over are cached; days to come are not computed
+    uncached_days = [i for i, s in enumerate(starts) if s not in cached and not future[i]]
+    if max_computed_days is not None and len(uncached_days) > max_computed_days:
+        raise InputError(422, f"end: the range holds {len(uncached_days)} days not computed "
+                              f"yet; without a token a request computes at most "
+                              f"{max_computed_days} (ask for less, or send 'Authorization: "
+                              "Bearer <token>')")
     fresh = _compute(ctx, info, edges, uncached_days, now, first_s) if uncached_days else {}
     values = [{"site_id": info.site_id, "day_start_s": starts[i],
                "day_end_s": int(edges[i + 1].timestamp()),
@@ -242,14 +280,18 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
             conn.execute(insert(DiagnosisDay), values)
 
         ctx.writer.call(store).result()
-    days = [fresh[i] if i in fresh else cached[s] for i, s in enumerate(starts)]
+    days = [fresh[i] if i in fresh else cached[s] for i, s in enumerate(starts)
+            if not future[i]]
     found = faults_over_days(days)
     out_days = []
     for d, f in zip(days, found, strict=True):
         d = {k: v for k, v in d.items()
              if k not in ("features", "cache_version", "history_start_s")}
         d.setdefault("partial", not d.get("complete", True))
+        d["status"] = "complete" if d.get("complete", True) else "in_progress"
         d["faults"] = f
         out_days.append(d)
+    out_days += [_future_day(dates[i]) for i in range(len(starts)) if future[i]]
     return {"site_id": info.site_id, "timezone": info.site.timezone,
-            "start": start.isoformat(), "end": end.isoformat(), "days": out_days}
+            "start": start.isoformat(), "end": end.isoformat(), "days": out_days,
+            "mount": mount_faults(obs, edges_s, dates)}

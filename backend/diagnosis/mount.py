@@ -1,0 +1,214 @@
+"""Mount faults named from the tracker camera's sun offsets (issue 25 item 5).
+
+Where the diagnosed range holds camera observations (tracker readings with the encoder
+angles ``azimuth_deg``/``elevation_deg`` and the sun's offset ``sun_offset_x_mrad``/
+``sun_offset_y_mrad``; frames, offsets and terms as defined in ``docs/pointing-model.md``),
+the mount terms are fitted with the existing pointing-model fit
+(:func:`sim.pointing_model.fit_pointing_model_to_sun`: robust least squares, standard
+errors from the Jacobian) against SPA's apparent sun with the site's refraction (as
+:mod:`backend.diagnosis.pointing_model`), and two kinds of finding are made:
+
+- ``mount_offset``: a term that is significant, |value| > max(:data:`SIGNIFICANCE_SIGMAS`
+  · std, :data:`MIN_TERM_DEG`). k = 5 rather than the fit's own 3 (its forward selection of
+  the optional terms): the standard errors are formal ones, from residuals assumed
+  independent, while a camera's residuals are correlated from minute to minute (a drifting
+  blob centre, a thin cloud), so the formal error is optimistic by up to √(correlation
+  length); and four to six terms are tested at once. The minimum, 1 mrad (0.057°) of
+  pointing, is what a term must reach to matter: above the fit's stated accuracy (every
+  term within 0.05° ≈ 0.87 mrad from a day of data, issue 25's check), and a sixth of the
+  ±0.3° (5 mrad) acceptance of a high-concentration module, while a flat plate loses
+  1 − cos(1 mrad) = 5·10⁻⁷ of its beam (nothing: it is named for a CPV tracker and for the
+  open loop, whose commands it corrects).
+- ``encoder_slip``: a term that changes from one local day to the next. Each day with at
+  least :data:`MIN_DAY_OBSERVATIONS` observations is fitted on its own; a step between
+  consecutive fitted days larger than max(:data:`SIGNIFICANCE_SIGMAS` · the combined
+  standard error √(σ₁² + σ₂²), :data:`MIN_SLIP_DEG`) is a slip starting on the later day.
+  The terms then named as ``mount_offset`` are those fitted from the last slip on (the
+  mount as it is now), not a blend of before and after.
+
+A term the data's sky coverage does not separate from another (``identifiable`` of the fit,
+correlation beyond :data:`sim.pointing_model.CORRELATION_LIMIT`) is named with that said.
+Pure functions of the observations, except :func:`read_observations` (one SQL select of
+the rows that carry all four values, so a range without a camera costs one index scan).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from sqlalchemy import Connection, select
+
+from backend.diagnosis.pointing_model import _refraction
+from backend.sites import SiteInfo
+from backend.storage.tables import SOURCE_CODES, Measurement
+from sim.pointing_model import CORE_TERMS, MIN_OBSERVATIONS, PointingFit, fit_pointing_model_to_sun
+from sim.sun import solar_position
+
+#: A term (or a step of one) is named when it exceeds this many standard errors (see the
+#: module docstring for why 5 and not 3).
+SIGNIFICANCE_SIGMAS = 5.0
+#: … and this size [°]: 1 mrad of pointing (module docstring).
+MIN_TERM_DEG = math.degrees(1e-3)
+#: The smallest day-to-day step of a term that is a slip [°] (the same 1 mrad).
+MIN_SLIP_DEG = MIN_TERM_DEG
+#: A day is fitted on its own (for slips) with at least this many observations: an hour of
+#: minutes, enough for the four core terms with a spread of the sun across the sky.
+MIN_DAY_OBSERVATIONS = 60
+
+#: The words for each term in a finding's sentence.
+TERM_WORDS = {
+    "azimuth_zero_deg": "pedestal yaw (azimuth zero)",
+    "elevation_zero_deg": "elevation zero",
+    "pedestal_tilt_north_deg": "pedestal tilt toward north",
+    "pedestal_tilt_east_deg": "pedestal tilt toward east",
+    "collimation_deg": "camera collimation",
+    "nonperpendicularity_deg": "axis non-perpendicularity",
+}
+
+
+@dataclass(frozen=True)
+class Observations:
+    """Camera observations: Unix times [s], the true (apparent) sun and the encoder angles
+    [°], the offsets [mrad]; sorted by time."""
+
+    ts_s: np.ndarray
+    sun_azimuth_deg: np.ndarray
+    sun_elevation_deg: np.ndarray
+    azimuth_deg: np.ndarray
+    elevation_deg: np.ndarray
+    offset_x_mrad: np.ndarray
+    offset_y_mrad: np.ndarray
+
+    def fit(self, part: slice = slice(None)) -> PointingFit:
+        """The pointing-model fit of the observations ``part`` (core and supported terms)."""
+        return fit_pointing_model_to_sun(
+            self.sun_azimuth_deg[part], self.sun_elevation_deg[part], self.azimuth_deg[part],
+            self.elevation_deg[part], self.offset_x_mrad[part], self.offset_y_mrad[part])
+
+
+def observations_from(info: SiteInfo, ts_s: np.ndarray, azimuth_deg: np.ndarray,
+                      elevation_deg: np.ndarray, offset_x_mrad: np.ndarray,
+                      offset_y_mrad: np.ndarray) -> Observations:
+    """:class:`Observations` with the sun by SPA (apparent elevation, the site's pressure
+    and air temperature: :func:`backend.diagnosis.pointing_model._refraction`)."""
+    s = info.site
+    pressure, temperature = _refraction(info)
+    times = pd.DatetimeIndex(pd.to_datetime(np.asarray(ts_s, np.int64), unit="s", utc=True))
+    sun = solar_position(times, s.latitude, s.longitude, s.altitude, pressure, temperature)
+    return Observations(np.asarray(ts_s, np.int64), sun["azimuth"].to_numpy(),
+                        sun["apparent_elevation"].to_numpy(), *(np.asarray(v, float) for v in (
+                            azimuth_deg, elevation_deg, offset_x_mrad, offset_y_mrad)))
+
+
+def read_observations(conn: Connection, info: SiteInfo, t0_s: int, t1_s: int
+                      ) -> Observations | None:
+    """The tracker's measured readings in ``[t0_s, t1_s)`` that carry both encoder angles
+    and both offsets, or None with fewer than :data:`sim.pointing_model.MIN_OBSERVATIONS`."""
+    tracker = info.array_of_kind("tracker")
+    if tracker is None or t1_s <= t0_s:
+        return None
+    m = Measurement
+    cols = (m.azimuth_deg, m.elevation_deg, m.sun_offset_x_mrad, m.sun_offset_y_mrad)
+    rows = conn.execute(select(m.ts_s, *cols).where(
+        m.array_id == tracker.array_id, m.source == SOURCE_CODES["measured"],
+        m.ts_s >= t0_s, m.ts_s < t1_s, *(c.is_not(None) for c in cols)).order_by(m.ts_s)).all()
+    if len(rows) < MIN_OBSERVATIONS:
+        return None
+    a = np.array(rows, np.float64)
+    return observations_from(info, a[:, 0].astype(np.int64), a[:, 1], a[:, 2], a[:, 3], a[:, 4])
+
+
+def _decimals(std_deg: float) -> int:
+    """Decimals that show a standard error to one significant figure (2 to 4)."""
+    if not np.isfinite(std_deg) or std_deg <= 0:
+        return 2
+    return int(np.clip(-math.floor(math.log10(std_deg)), 2, 4))
+
+
+def _significant(value: float, std: float, minimum: float) -> bool:
+    return bool(np.isfinite(std) and abs(value) > max(SIGNIFICANCE_SIGMAS * std, minimum))
+
+
+def _day_fits(obs: Observations, day_edges_s: list[int]
+              ) -> list[tuple[int, PointingFit]]:
+    """``(day index, fit)`` of each day with at least :data:`MIN_DAY_OBSERVATIONS`."""
+    cut = np.searchsorted(obs.ts_s, day_edges_s)
+    out = []
+    for i in range(len(day_edges_s) - 1):
+        a, b = int(cut[i]), int(cut[i + 1])
+        if b - a >= MIN_DAY_OBSERVATIONS:
+            out.append((i, obs.fit(slice(a, b))))
+    return out
+
+
+def slips(day_fits: list[tuple[int, PointingFit]], dates: list[str]) -> list[dict[str, Any]]:
+    """``encoder_slip`` findings: steps of a core term between consecutive fitted days
+    (module docstring); JSON-ready, oldest first."""
+    out = []
+    for (_, f1), (j, f2) in zip(day_fits, day_fits[1:], strict=False):
+        for term in CORE_TERMS:
+            v1, v2 = getattr(f1.model, term), getattr(f2.model, term)
+            s1, s2 = f1.std.get(term, np.nan), f2.std.get(term, np.nan)
+            step, std = v2 - v1, float(np.hypot(s1, s2))
+            if term not in f1.identifiable or term not in f2.identifiable \
+                    or not _significant(step, std, MIN_SLIP_DEG):
+                continue
+            d = _decimals(std)
+            out.append({
+                "kind": "encoder_slip", "term": term, "value_deg": round(step, 6),
+                "std_deg": round(std, 6), "since": dates[j],
+                "n_observations": f1.n_observations + f2.n_observations,
+                "detail": f"{TERM_WORDS[term]} stepped by {step:+.{d}f}° ± {std:.{d}f}° on "
+                          f"{dates[j]} (from {v1:+.{d}f}° to {v2:+.{d}f}°; "
+                          f"{f1.n_observations} and {f2.n_observations} camera observations "
+                          "on the days either side): an encoder that slipped"})
+    return out
+
+
+def offsets(fit: PointingFit, since: str) -> list[dict[str, Any]]:
+    """``mount_offset`` findings of the significant terms of ``fit`` (module docstring)."""
+    out = []
+    for term in fit.fitted_terms:
+        value, std = getattr(fit.model, term), fit.std.get(term, np.nan)
+        if not _significant(value, std, MIN_TERM_DEG):
+            continue
+        d = _decimals(std)
+        detail = (f"{TERM_WORDS[term]} {value:+.{d}f}° ± {std:.{d}f}° (from "
+                  f"{fit.n_observations} camera observations since {since})")
+        if term not in fit.identifiable:
+            others = sorted({b if a == term else a for a, b, _ in fit.correlated
+                             if term in (a, b)})
+            detail += (f"; not separated from {', '.join(others)} by these observations' "
+                       "sky coverage")
+        out.append({"kind": "mount_offset", "term": term, "value_deg": round(value, 6),
+                    "std_deg": round(std, 6), "since": since,
+                    "n_observations": fit.n_observations, "detail": detail})
+    return out
+
+
+def mount_faults(obs: Observations | None, day_edges_s: list[int], dates: list[str]
+                 ) -> dict[str, Any] | None:
+    """The diagnosis's ``mount`` answer for observations over local days (``day_edges_s``:
+    the days' edges [Unix s], one more than ``dates``), or None without observations.
+
+    Slips first (per-day fits); the offsets from the day of the last slip on (the whole
+    range without one). ``faults``: slips, oldest first, then offsets."""
+    if obs is None:
+        return None
+    found = slips(_day_fits(obs, day_edges_s), dates)
+    first = 0
+    if found:
+        k = dates.index(found[-1]["since"])
+        first = int(np.searchsorted(obs.ts_s, day_edges_s[k]))
+    if obs.ts_s.size - first < MIN_OBSERVATIONS:
+        first = 0
+    fit = obs.fit(slice(first, None))
+    day = int(np.searchsorted(day_edges_s, obs.ts_s[first], side="right")) - 1
+    since = dates[min(max(day, 0), len(dates) - 1)]
+    return {"n_observations": fit.n_observations, "n_outliers": fit.n_outliers,
+            "residual_rms_mrad": round(fit.residual_rms_mrad, 4), "since": since,
+            "faults": found + offsets(fit, since)}
