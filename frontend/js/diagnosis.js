@@ -35,6 +35,15 @@ export function faultLines(days) {
     `${KIND_WORDS[f.kind] || f.kind} since ${shortDate(f.since)}: ${f.detail}; confidence ${num(f.confidence, 2)}`);
 }
 
+/** The mount faults the tracker camera's sun offsets show (GET …/diagnosis `mount`): an
+ * encoder slip with its first day, then each significant term with its uncertainty. */
+export function mountLines(mount) {
+  if (!mount) return [];
+  return mount.faults.map((f) => (f.kind === "encoder_slip"
+    ? `Encoder slip since ${shortDate(f.since)}: ${f.detail}`
+    : `Mount (from the tracker camera): ${f.detail}`));
+}
+
 const SKY_WORDS = {
   sensor: "an irradiance sensor",
   fixed_array: "the fixed array's power",
@@ -45,13 +54,15 @@ const SKY_WORDS = {
  * and which days are not over yet (judged on their minutes so far). */
 export function skyLine(days) {
   const count = new Map();
-  for (const d of days) {
+  const future = days.filter((d) => d.status === "future").length;
+  for (const d of days.filter((x) => x.status !== "future")) {
     const key = d.sky.source === "sensor" && d.sky.sensor ? `${SKY_WORDS.sensor} (${d.sky.sensor})` : SKY_WORDS[d.sky.source] || d.sky.source;
     count.set(key, (count.get(key) || 0) + 1);
   }
-  const open = days.filter((d) => d.complete === false).map((d) => shortDate(d.date));
-  const note = open.length ? ` Not over yet, judged on the minutes so far: ${open.join(", ")}.` : "";
-  return `Sky: ${[...count].map(([k, n]) => `${n} day${n === 1 ? "" : "s"} from ${k}`).join(", ")}.${note}`;
+  const open = days.filter((d) => d.complete === false && d.status !== "future").map((d) => shortDate(d.date));
+  const note = (open.length ? ` Not over yet, judged on the minutes so far: ${open.join(", ")}.` : "")
+    + (future ? ` ${future} day${future === 1 ? "" : "s"} still to come: nothing to judge yet.` : "");
+  return `Sky: ${[...count].map(([k, n]) => `${n} day${n === 1 ? "" : "s"} from ${k}`).join(", ") || "no day judged"}.${note}`;
 }
 
 let requested = 0; // the latest load; an older one that answers later is dropped
@@ -73,8 +84,13 @@ async function load(state) {
     return;
   }
   const lines = faultLines(body.days);
-  list.replaceChildren(...(lines.length ? lines.map((t) => h("li", { "data-testid": "diag-fault" }, t))
-    : [h("li", { class: "muted", "data-testid": "diag-none" }, "No fault found in this range.")]),
+  const mount = mountLines(body.mount);
+  list.replaceChildren(...mount.map((t) => h("li", { "data-testid": "diag-mount-fault" }, t)),
+    ...(lines.length ? lines.map((t) => h("li", { "data-testid": "diag-fault" }, t))
+      : [h("li", { class: "muted", "data-testid": "diag-none" },
+        mount.length ? "No fault found from the power in this range." : "No fault found in this range.")]),
+    ...(body.mount && !mount.length ? [h("li", { class: "muted", "data-testid": "diag-mount-none" },
+      `Mount: no significant term in ${body.mount.n_observations} camera observations since ${shortDate(body.mount.since)} (residual ${num(body.mount.residual_rms_mrad, 2)} mrad RMS).`)] : []),
     h("li", { class: "muted", "data-testid": "diag-sky" }, skyLine(body.days)));
   const x = body.days.map((d) => d.date);
   const partial = body.days.map((d) => d.partial === true);

@@ -4,11 +4,12 @@ as the HTTP API answers them (the server's demo logger back-fills the days)."""
 from __future__ import annotations
 
 import datetime as dt
+import subprocess
 
 import httpx
 import pytest
 
-from tests.e2e.conftest import BACKFILL_DAYS
+from tests.e2e.conftest import BACKFILL_DAYS, ROOT, _heliotwin
 
 
 def test_diagnosis_panel_matches_the_api(page, server) -> None:
@@ -81,4 +82,39 @@ def test_the_overview_draws_the_twin_under_the_measured_sky(page, server) -> Non
         ".find(t => t.name === 'tracker twin (measured sky)').y.filter(v => v !== null)")
     assert drawn == pytest.approx([p["power_w"] for p in body["points"]], abs=1e-6)
     page.locator("#chart-power").screenshot(path="test-artifacts/e2e-overview-weather-twin.png")
+    assert page.console_errors == []
+
+
+def test_the_panel_shows_the_mount_faults_from_the_camera(page, server) -> None:
+    """A day of tracker-camera offsets of a misaligned mount (posted with a token, on a
+    date before the demo logger's days): the diagnosis panel lists each mount fault the
+    API names (``mount``), in its words."""
+    import numpy as np
+    import pandas as pd
+
+    from tests.backend.test_diagnosis_mount import MOUNT, camera_readings
+
+    day = dt.date(2022, 8, 9)
+    token = subprocess.run([*_heliotwin(), "token", "create", "--site", "tehuantepec"],
+                           cwd=ROOT, env=server.env, capture_output=True, text=True,
+                           timeout=120, check=True).stdout.split()[-1]
+    site = server.site["site_id"]
+    readings = camera_readings(pd.Timestamp(day.isoformat(), tz=server.site["timezone"]), MOUNT,
+                               np.random.default_rng(15))
+    httpx.post(f"{server.url}/api/v1/sites/{site}/measurements", json={"readings": readings},
+               headers={"Authorization": f"Bearer {token}"}, timeout=120).raise_for_status()
+    rng = {"start": day.isoformat(), "end": (day + dt.timedelta(days=1)).isoformat()}
+    body = httpx.get(f"{server.url}/api/v1/sites/{site}/diagnosis", params=rng,
+                     timeout=300).raise_for_status().json()
+    faults = body["mount"]["faults"]
+    assert {f["term"] for f in faults} == set(MOUNT)
+    page.goto(f"{server.url}/#overview")
+    page.fill("#diag-start", rng["start"])
+    page.fill("#diag-end", rng["end"])
+    page.click("#diag-run")
+    shown = page.locator("[data-testid=diag-mount-fault]")
+    shown.first.wait_for(timeout=120_000)
+    assert shown.all_inner_texts() == [
+        f"Mount (from the tracker camera): {f['detail']}" for f in faults]
+    page.locator("#diagnosis-card").screenshot(path="test-artifacts/e2e-diagnosis-mount.png")
     assert page.console_errors == []
