@@ -5,8 +5,12 @@ Reads the tracker array's measured readings in a range that carry the encoder an
 (``sun_offset_x_mrad``, ``sun_offset_y_mrad``; ``backend/measurements/fields.py``),
 and fits the mount terms with :func:`sim.pointing_model.fit_pointing_model` (SPA's
 apparent sun with the site's pressure and air temperature, as
-:mod:`backend.diagnosis.pointing`). Definitions of the frames, offsets and terms:
-``docs/pointing-model.md``.
+:mod:`backend.diagnosis.pointing`); the fit's residuals per observation for the
+dashboard's Pointing page (:func:`residual_points`). A tracker-camera frame becomes an
+observation by :func:`frame_offsets` (item 1b: the sun found by
+:func:`vision.analyse.analyse_frame` in the tracker's pinhole camera, its pixel turned
+into the offsets by :func:`offsets_from_pixel_mrad`). Definitions of the frames,
+offsets and terms: ``docs/pointing-model.md``.
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from sqlalchemy import Connection
 
 from backend.errors import InputError
 from backend.measurements.fields import SENSOR_NAMES
-from backend.measurements.queries import raw_rows
+from backend.measurements.queries import iso_utc, raw_rows
 from backend.sites import SiteInfo
 from sim.pointing_model import (
     CORE_TERMS,
@@ -32,8 +36,11 @@ from sim.pointing_model import (
     PointingFit,
     command_angles,
     fit_pointing_model,
+    predict_offsets_mrad,
 )
 from sim.sun import solar_position
+from vision.analyse import analyse_frame
+from vision.cameras import PinholeCamera
 
 #: Columns of :func:`raw_rows` (ts, V, I, P, then the sensors) the fit reads.
 _COLS = tuple(4 + SENSOR_NAMES.index(n) for n in
@@ -128,3 +135,80 @@ def command(info: SiteInfo, fit: PointingFit, when: dt.datetime) -> dict[str, fl
     return {"azimuth_deg": float(np.mod(az[0], 360.0)), "elevation_deg": float(el[0]),
             "sun_azimuth_deg": float(sun["azimuth"].iloc[0]),
             "sun_elevation_deg": float(sun["apparent_elevation"].iloc[0])}
+
+
+#: The most observations :func:`residual_points` returns (evenly spaced over the range).
+MAX_POINTS = 2000
+
+
+def residual_points(rows: np.ndarray, info: SiteInfo, fit: PointingFit,
+                    max_points: int = MAX_POINTS) -> dict[str, Any]:
+    """The observations behind ``fit`` with the model's residuals, for the dashboard.
+
+    Every ``stride``-th of :func:`observations`' rows (``stride`` = ⌈n / max_points⌉, so
+    at most ``max_points``): the time (UTC), the encoder angles, the offsets measured
+    (before the model: the pointing error of the mount as it is) and the residuals
+    ``residual_*_mrad`` = measured − :func:`sim.pointing_model.predict_offsets_mrad`
+    (after the model: what a command under the model still misses, to first order),
+    and whether the fit rejected the observation as an outlier.
+    """
+    n = int(rows.shape[0])
+    stride = max(1, -(-n // max(max_points, 1)))
+    pick = np.arange(0, n, stride)
+    obs = rows[pick][:, (0, *_COLS)]
+    s = info.site
+    pressure, temperature = _refraction(info)
+    sun = solar_position(pd.DatetimeIndex(pd.to_datetime(obs[:, 0], unit="s", utc=True)),
+                         s.latitude, s.longitude, s.altitude, pressure, temperature)
+    px, py = predict_offsets_mrad(fit.model, sun["azimuth"].to_numpy(),
+                                  sun["apparent_elevation"].to_numpy(), obs[:, 1], obs[:, 2])
+    rx, ry = obs[:, 3] - px, obs[:, 4] - py
+    return {"n_total": n, "stride": stride, "ts": iso_utc(obs[:, 0].astype(np.int64)),
+            "azimuth_deg": obs[:, 1].tolist(), "elevation_deg": obs[:, 2].tolist(),
+            "sun_offset_x_mrad": obs[:, 3].tolist(), "sun_offset_y_mrad": obs[:, 4].tolist(),
+            "residual_x_mrad": rx.tolist(), "residual_y_mrad": ry.tolist(),
+            "outlier": fit.outlier[pick].tolist()}
+
+
+def offsets_from_pixel_mrad(camera: PinholeCamera, x_px: float, y_px: float
+                            ) -> tuple[float, float]:
+    """The sun's offsets [mrad] (``sun_offset_x_mrad``, ``sun_offset_y_mrad``) of a sun
+    seen at pixel ``(x_px, y_px)`` of the tracker's pinhole camera.
+
+    Issue 25's definition (``docs/pointing-model.md``): x = 1000·atan2(s·h, s·n),
+    y = 1000·atan2(s·u, s·n), s the sun's direction in the camera frame
+    (:meth:`vision.cameras.PinholeCamera.pixel_to_direction`: right, up, forward) and
+    (n, h, u) the camera's axes: n the direction of its reference pixel (the optical
+    centre unless seed 001's fixed reference pixel is given) at angles (a, e) =
+    :meth:`~vision.cameras.PinholeCamera.pixel_angles_deg` — n = (sin a cos e, sin e,
+    cos a cos e), h = (cos a, 0, −sin a) toward the right (increasing azimuth), u =
+    (−sin a sin e, cos e, −cos a sin e) up (increasing elevation), the joint frame's
+    formulas with (a, e) for (az, el). With the reference at the centre, x = atan(X/Z)
+    and y = atan(Y/Z): the vertical offset is not the elevation-like angle
+    atan2(Y, √(X² + Z²)) of :meth:`~vision.cameras.PinholeCamera.pointing_error`.
+    """
+    d = camera.pixel_to_direction(x_px, y_px)
+    a, e = (np.radians(float(v)) for v in camera.pixel_angles_deg(*camera.reference_px))
+    n = np.array([np.sin(a) * np.cos(e), np.sin(e), np.cos(a) * np.cos(e)])
+    h = np.array([np.cos(a), 0.0, -np.sin(a)])
+    u = np.array([-np.sin(a) * np.sin(e), np.cos(e), -np.cos(a) * np.sin(e)])
+    dn = float(d @ n)
+    return 1000.0 * float(np.arctan2(d @ h, dn)), 1000.0 * float(np.arctan2(d @ u, dn))
+
+
+def frame_offsets(image: np.ndarray, camera: PinholeCamera) -> dict[str, Any]:
+    """Find the sun in a tracker-camera frame (:func:`vision.analyse.analyse_frame`, the
+    robust detector) and give its offsets: ``sun_offset_x_mrad``, ``sun_offset_y_mrad``,
+    ``confidence`` (the detector's calibrated probability) and ``centroid_px``.
+
+    No sun found (overcast, the sun outside the frame, a glare without a disc) is a 422
+    on ``file`` with the detector's reason: nothing is observed.
+    """
+    found = analyse_frame(image, camera, "robust")
+    if not found["sun_found"] or found["centroid_px"] is None:
+        raise InputError(422, f"file: no sun found in the frame ({found['reason']}); "
+                              "nothing was stored")
+    x, y = found["centroid_px"]
+    ox, oy = offsets_from_pixel_mrad(camera, x, y)
+    return {"sun_offset_x_mrad": ox, "sun_offset_y_mrad": oy,
+            "confidence": float(found["confidence"]), "centroid_px": [float(x), float(y)]}

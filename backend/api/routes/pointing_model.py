@@ -1,32 +1,92 @@
 """``/api/v1/sites/{site_id}/pointing-model``: the tracker's mount terms from its camera's
-sun offsets, and ``…/command``: the encoder angles to command under that model (issue 25;
-``backend/diagnosis/pointing_model.py``, ``docs/pointing-model.md``)."""
+sun offsets (with the observations' residuals before and after the model, for the
+dashboard), ``…/command``: the encoder angles to command under that model, and
+``POST …/observations``: a tracker-camera frame turned into an observation (issue 25
+items 1b and 3; ``backend/diagnosis/pointing_model.py``, ``docs/pointing-model.md``).
+"""
 
 from __future__ import annotations
 
 import datetime as dt
-from typing import Annotated
+import math
+from typing import Annotated, Any
 
-from fastapi import APIRouter, HTTPException, Query
+import anyio
+import numpy as np
+import orjson
+from fastapi import APIRouter, HTTPException, Query, Request
+from pydantic import BaseModel, Field
+from starlette.datastructures import FormData, UploadFile
 
-from backend.api.deps import ContextDep, RangeEnd, RangeStart, site_or_404
+from backend.api.deps import ContextDep, RangeEnd, RangeStart, check_site_token, site_or_404
+from backend.api.forms import read_form
 from backend.api.schemas.pointing_model import PointingCommandRead, PointingModelRead
 from backend.context import ServiceContext
 from backend.diagnosis.pointing_model import (
+    MAX_POINTS,
     TooFewObservations,
     command,
     fit_site,
+    frame_offsets,
     model_body,
     observations,
+    residual_points,
 )
+from backend.limits import Busy
+from backend.measurements import ingest
+from backend.measurements.parse import IngestError, Limits, parse_json_batch
+from backend.measurements.queries import iso_utc
 from backend.sites import SiteInfo
 from backend.timestamps import parse_instant, parse_range
+from backend.vision.service import check_image, decode
 from sim.pointing_model import PointingFit
+from vision.cameras import PinholeCamera, camera_from_params
 
 router = APIRouter(prefix="/api/v1/sites", tags=["pointing-model"])
 
 
-def _fit(ctx: ServiceContext, info: SiteInfo, start: str, end: str) -> PointingFit:
+class PointingPointsRead(BaseModel):
+    """Observations behind the fit (every ``stride``-th, at most 2,000), column by column:
+    the offsets measured (before the model) and the residuals (after it)."""
+
+    n_total: int = Field(description="observations in the range (the fit's n_observations)")
+    stride: int = Field(description="every stride-th observation is listed")
+    ts: list[str] = Field(description="times, ISO 8601 UTC")
+    azimuth_deg: list[float] = Field(description="encoder azimuth [°]")
+    elevation_deg: list[float] = Field(description="encoder elevation [°]")
+    sun_offset_x_mrad: list[float] = Field(description="offset measured, x [mrad]")
+    sun_offset_y_mrad: list[float] = Field(description="offset measured, y [mrad]")
+    residual_x_mrad: list[float] = Field(
+        description="measured − the model's predicted offset, x [mrad]: what a command under "
+                    "the model still misses")
+    residual_y_mrad: list[float] = Field(description="likewise, y [mrad]")
+    outlier: list[bool] = Field(description="rejected by the robust fit (a glint)")
+
+
+class PointingModelPointsRead(PointingModelRead):
+    """The mount terms and the observations' residuals before and after the model."""
+
+    points: PointingPointsRead
+
+
+class PointingObservationRead(BaseModel):
+    """A tracker-camera frame's observation, as stored: a reading of the tracker array."""
+
+    site_id: str
+    array: str = Field(description="the site's tracker array")
+    ts: str = Field(description="the frame's time, ISO 8601 UTC")
+    azimuth_deg: float = Field(description="encoder azimuth as stored [°], [0, 360)")
+    elevation_deg: float = Field(description="encoder elevation [°]")
+    sun_offset_x_mrad: float = Field(description="the sun's offset toward increasing azimuth")
+    sun_offset_y_mrad: float = Field(description="the sun's offset toward increasing "
+                                                 "elevation")
+    confidence: float = Field(description="the detector's calibrated probability that the "
+                                          "blob is the sun")
+    centroid_px: list[float] = Field(description="the sun's centroid [x, y] in the frame [px]")
+
+
+def _fit(ctx: ServiceContext, info: SiteInfo, start: str, end: str
+         ) -> tuple[np.ndarray, PointingFit]:
     try:
         t0, t1 = parse_range(start, end, info.zone)
     except ValueError as exc:
@@ -34,19 +94,25 @@ def _fit(ctx: ServiceContext, info: SiteInfo, start: str, end: str) -> PointingF
     try:
         with ctx.engine.connect() as conn:  # closed before the fit: it holds no connection
             rows = observations(conn, info, t0, t1)
-        return fit_site(rows, info)
+        return rows, fit_site(rows, info)
     except TooFewObservations as exc:
         raise HTTPException(422, str(exc)) from None
 
 
-@router.get("/{site_id}/pointing-model", response_model=PointingModelRead,
+@router.get("/{site_id}/pointing-model", response_model=PointingModelPointsRead,
             responses={404: {}, 422: {}})
-def get_pointing_model(site_id: str, ctx: ContextDep, start: RangeStart,
-                       end: RangeEnd) -> PointingModelRead:
+def get_pointing_model(
+    site_id: str, ctx: ContextDep, start: RangeStart, end: RangeEnd,
+    max_points: Annotated[int, Query(ge=1, le=MAX_POINTS, description=(
+        "at most this many observations in points (evenly spaced)"))] = MAX_POINTS,
+) -> PointingModelPointsRead:
     """Mount terms with standard errors from the tracker's readings with sun offsets in
-    ``[start, end)``; outliers (glints) rejected; which terms the sky coverage separates."""
+    ``[start, end)``; outliers (glints) rejected; which terms the sky coverage separates;
+    the observations' offsets and residuals (``points``, at most ``max_points``)."""
     info = site_or_404(ctx, site_id)
-    return PointingModelRead.model_validate(model_body(info, _fit(ctx, info, start, end)))
+    rows, fit = _fit(ctx, info, start, end)
+    return PointingModelPointsRead.model_validate(
+        {**model_body(info, fit), "points": residual_points(rows, info, fit, max_points)})
 
 
 @router.get("/{site_id}/pointing-model/command", response_model=PointingCommandRead,
@@ -63,4 +129,150 @@ def get_pointing_command(
         when: dt.datetime = parse_instant(time, "time")
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
-    return PointingCommandRead.model_validate(command(info, _fit(ctx, info, start, end), when))
+    return PointingCommandRead.model_validate(command(info, _fit(ctx, info, start, end)[1],
+                                                      when))
+
+
+#: The form fields of ``POST …/observations`` besides ``file``: the reading's (its time and
+#: electrical values as a logger sends them, the encoder angles) and the pinhole camera's.
+_READING_FIELDS = ("ts", "azimuth_deg", "elevation_deg", "power_w", "voltage_v", "current_a")
+_CAMERA_FIELDS = ("fov_deg", "cx_px", "cy_px", "reference_x_px", "reference_y_px")
+
+_OBSERVATION_DOC = {
+    "requestBody": {"content": {"multipart/form-data": {"schema": {
+        "type": "object", "required": ["file", "ts", "azimuth_deg", "elevation_deg"],
+        "properties": {
+            "file": {"type": "string", "format": "binary",
+                     "description": "PNG or JPEG frame of the tracker's narrow camera"},
+            "ts": {"type": "string", "description": "the frame's time, ISO 8601 with offset"},
+            "azimuth_deg": {"type": "number", "description": "encoder azimuth at ts [°]"},
+            "elevation_deg": {"type": "number", "description": "encoder elevation at ts [°]"},
+            "power_w": {"type": "number", "description": "the tracker's power at ts [W] (or "
+                                                         "voltage_v and current_a)"},
+            "voltage_v": {"type": "number"}, "current_a": {"type": "number"},
+            "fov_deg": {"type": "number", "description": "horizontal field of view [°] (67, "
+                                                         "seed 000)"},
+            "cx_px": {"type": "number"}, "cy_px": {"type": "number"},
+            "reference_x_px": {"type": "number",
+                               "description": "the pixel of the camera's axis (default the "
+                                              "optical centre)"},
+            "reference_y_px": {"type": "number"},
+        }}}}, "required": True},
+}
+
+
+def _form_reading(form: FormData, array: str) -> dict[str, Any]:
+    """The reading the form describes (offsets not yet known): 422 naming a field that is
+    unknown, given twice or not a finite number."""
+    unknown = sorted({k for k in form if k not in ("file", *_READING_FIELDS, *_CAMERA_FIELDS)})
+    if unknown:
+        raise HTTPException(422, f"{unknown[0]}: unknown field; known: file, "
+                                 f"{', '.join(_READING_FIELDS + _CAMERA_FIELDS)}")
+    reading: dict[str, Any] = {"array": array}
+    for name in _READING_FIELDS:
+        values = form.getlist(name)
+        if len(values) > 1:
+            raise HTTPException(422, f"{name}: given {len(values)} times")
+        if not values or not isinstance(values[0], str) or not values[0].strip():
+            continue
+        text = values[0].strip()
+        if name == "ts":
+            reading["ts"] = text
+            continue
+        try:
+            value = float(text)
+        except ValueError:
+            raise HTTPException(422, f"{name}: {text[:40]!r} is not a number") from None
+        if not math.isfinite(value):
+            raise HTTPException(422, f"{name}: {text[:40]!r} is not a finite number")
+        reading[name] = value
+    for name in ("ts", "azimuth_deg", "elevation_deg"):
+        if name not in reading:
+            raise HTTPException(422, f"{name}: required (the frame's time and the encoder "
+                                     "angles at it)")
+    return reading
+
+
+def _checked(reading: dict[str, Any], info: SiteInfo, limits: Limits) -> None:
+    """The ingest path's own validation of the reading (time, array, electrical values,
+    ranges), before the frame is decoded: a 422 naming the field, as for a logger."""
+    try:
+        parse_json_batch(orjson.dumps({"readings": [reading]}), info.ingest_arrays(), limits)
+    except IngestError as exc:
+        raise HTTPException(exc.status, "; ".join(
+            f"{e.get('field') or 'body'}: {e['msg']}" for e in exc.errors)) from None
+
+
+def _observe(data: Any, params: dict[str, object], max_pixels: int) -> dict[str, Any]:
+    """Decode the frame and find the sun's offsets in it (a worker thread's work)."""
+    image = decode(data, max_pixels)
+    try:
+        camera = camera_from_params("pinhole", params, image.shape[1], image.shape[0])
+    except ValueError as exc:
+        raise HTTPException(422, str(exc)) from None
+    assert isinstance(camera, PinholeCamera)
+    return frame_offsets(image, camera)
+
+
+@router.post("/{site_id}/pointing-model/observations", response_model=PointingObservationRead,
+             openapi_extra=_OBSERVATION_DOC,
+             responses={400: {"description": "a malformed multipart body"},
+                        401: {"description": "no or unknown token"},
+                        403: {"description": "a token of another site"},
+                        404: {"description": "unknown site"},
+                        409: {"description": "a reading of the tracker at ts is already stored"},
+                        413: {"description": "body or image too large"},
+                        415: {"description": "not multipart, or not a PNG or JPEG"},
+                        422: {"description": "a bad field (named), or no sun in the frame"},
+                        503: {"description": "decode budget full or storage unavailable; "
+                                             "see Retry-After"}})
+async def post_pointing_observation(site_id: str, request: Request, ctx: ContextDep
+                                    ) -> PointingObservationRead:
+    """A tracker-camera frame with its time and encoder angles → the sun's offsets in it,
+    stored as an observation (a reading of the tracker array, through the writer: answered
+    once committed). Needs a token of the site (``ingest`` scope or wider); the body is
+    bounded by ``HELIOTWIN_MAX_UPLOAD_BYTES``, the image by ``HELIOTWIN_VISION_MAX_PIXELS``.
+    A frame without a sun is a 422 saying why, and nothing is stored."""
+    await check_site_token(ctx, site_id, request.headers.get("authorization"), "ingest",
+                           "storing pointing observations")
+    info = site_or_404(ctx, site_id)
+    tracker = info.array_of_kind("tracker")
+    if tracker is None:
+        raise HTTPException(422, f"site {site_id!r} has no tracker array to observe")
+    s = ctx.settings
+    form = await read_form(request, s.server.max_upload_bytes,
+                           "a tracker-camera frame in the field 'file'", max_files=1,
+                           max_fields=len(_READING_FIELDS) + len(_CAMERA_FIELDS) + 1)
+    uploads = form.getlist("file")
+    if len(uploads) != 1 or not isinstance(uploads[0], UploadFile):
+        raise HTTPException(422, "file: exactly one image of the tracker's camera is needed")
+    reading = _form_reading(form, tracker.name)
+    limits = Limits.from_settings(s)
+    _checked({**reading, "sun_offset_x_mrad": 0.0, "sun_offset_y_mrad": 0.0}, info, limits)
+    params: dict[str, object] = {k: v for k, v in form.multi_items()
+                                 if k in _CAMERA_FIELDS and isinstance(v, str)}
+    up = check_image(await uploads[0].read(), uploads[0].filename or "file", "file",
+                     s.vision.max_pixels)
+    try:
+        async with ctx.limits.decode.hold(up.size_px[0] * up.size_px[1]):
+            found = await anyio.to_thread.run_sync(_observe, up, params, s.vision.max_pixels)
+    except Busy as exc:
+        raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
+    offsets = {k: found[k] for k in ("sun_offset_x_mrad", "sun_offset_y_mrad")}
+    _checked({**reading, **offsets}, info, limits)  # an offset beyond the camera's field
+    try:
+        stored = await ingest.ingest(ctx.writer, parse_json_batch,
+                                     orjson.dumps({"readings": [{**reading, **offsets}]}),
+                                     info.ingest_arrays(), limits)
+    except ingest.StorageUnavailable as exc:
+        raise HTTPException(503, str(exc), headers={"Retry-After": "5"}) from None
+    if stored.accepted == 0:
+        raise HTTPException(409, f"ts: a reading of {tracker.name!r} at "
+                                 f"{iso_utc([stored.stored_through_s])[0]} is already stored "
+                                 "(this observation sent before, or the logger's reading of "
+                                 "that second); the observation was not stored")
+    return PointingObservationRead(
+        site_id=site_id, array=tracker.name, ts=iso_utc([stored.stored_through_s])[0],
+        azimuth_deg=float(np.mod(reading["azimuth_deg"], 360.0)),
+        elevation_deg=reading["elevation_deg"], confidence=found["confidence"],
+        centroid_px=found["centroid_px"], **offsets)
