@@ -1,4 +1,4 @@
-"""Tracker controllers: one small interface, six controllers.
+"""Tracker controllers: one small interface, seven controllers.
 
 A controller sees what a real one sees — its own clock and ephemeris, the
 joint encoders' readings and, for the camera loops, the sun detected in the
@@ -27,6 +27,9 @@ beckman``               ``sim.sun.solar_position(method="duffie-beckman")``)
 ``hybrid``              seed 001 §2.3 (Fig. 4): SPA ephemeris plus the camera's correction
                         angles (sun's joint angles seen by the camera minus the ephemeris's),
                         a fixed reference pixel, a correction every N s (default 60)
+``open_loop_model``     issue 25: open loop on SPA through a fitted pointing model — the
+                        encoder angles that put the mount's real axis on the sun
+                        (:func:`sim.pointing_model.command_angles`); no camera
 ======================  ======================================================================
 
 Shared behaviour (:class:`ControlSettings`): a dead band (an axis moves only
@@ -53,6 +56,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from sim import kinematics, sun
+from sim.pointing_model import PointingModel, command_angles
 from sim.sites import Site
 
 __all__ = [
@@ -65,6 +69,7 @@ __all__ = [
     "Chronological",
     "ClosedLoopCamera",
     "Hybrid",
+    "OpenLoopModel",
     "make_controller",
     "noon_reference_azimuth",
     "ephemeris_joint_targets",
@@ -77,6 +82,7 @@ CONTROLLERS: tuple[str, ...] = (
     "chronological",
     "closed_loop_camera",
     "hybrid",
+    "open_loop_model",
 )
 
 
@@ -225,7 +231,8 @@ def noon_reference_azimuth(times: pd.DatetimeIndex, site: Site) -> NDArray[np.fl
 
 
 def ephemeris_joint_targets(
-    times: pd.DatetimeIndex, site: Site, method: str = "spa"
+    times: pd.DatetimeIndex, site: Site, method: str = "spa",
+    pointing_model: PointingModel | None = None,
 ) -> dict[str, NDArray[np.float64]]:
     """Ephemeris sun and the joint angles that face it, at ``times``.
 
@@ -233,7 +240,9 @@ def ephemeris_joint_targets(
     "elevation_deg"}`` [°]: the sun by :func:`sim.sun.solar_position`
     (``method`` "spa" or "duffie-beckman", the site's pressure and air
     temperature) and :func:`sim.kinematics.inverse_kinematics` with the daily
-    sweep reference of :func:`noon_reference_azimuth`.
+    sweep reference of :func:`noon_reference_azimuth`. With a ``pointing_model``
+    the joint angles are the encoder angles that put that mount's real optical axis
+    on the sun (:func:`sim.pointing_model.command_angles`, issue 25).
     """
     from pvlib import atmosphere
 
@@ -244,8 +253,10 @@ def ephemeris_joint_targets(
     )
     az = pos["azimuth"].to_numpy()
     el = pos["apparent_elevation"].to_numpy()
+    aim_az, aim_el = (az, el) if pointing_model is None else command_angles(
+        pointing_model, az, el)
     az_j, el_j = kinematics.inverse_kinematics(
-        az, el, site.tracker, reference_azimuth=noon_reference_azimuth(times, site)
+        aim_az, aim_el, site.tracker, reference_azimuth=noon_reference_azimuth(times, site)
     )
     return {"solar_azimuth": az, "apparent_elevation": el, "azimuth_deg": az_j,
             "elevation_deg": el_j}
@@ -266,6 +277,8 @@ class Controller:
 
     name = "controller"
     method = "spa"
+    #: the mount's pointing model the ephemeris targets go through (None: a perfect mount)
+    pointing_model: PointingModel | None = None
     gate: _CameraGate | None = None
     camera_interval_s: float | None = None
     detector: str | None = None
@@ -294,10 +307,10 @@ class Controller:
     def plan(self, times: pd.DatetimeIndex, tick_s: float) -> None:
         """Vectorised ephemeris for one chunk of ticks (on the controller's clock)."""
         clock = times + pd.Timedelta(seconds=self.clock_offset_s)
-        now = ephemeris_joint_targets(clock, self.site, self.method)
+        now = ephemeris_joint_targets(clock, self.site, self.method, self.pointing_model)
         ahead = ephemeris_joint_targets(
-            clock + pd.Timedelta(seconds=self.lead_s(tick_s)), self.site, self.method
-        )
+            clock + pd.Timedelta(seconds=self.lead_s(tick_s)), self.site, self.method,
+            self.pointing_model)
         self.eph = {"now_" + k: v for k, v in now.items()}
         self.eph.update({"ahead_" + k: v for k, v in ahead.items()})
         self._set_night(clock)
@@ -370,6 +383,24 @@ class OpenLoop(Controller):
             raise ValueError(f"method must be one of {sun.METHODS}, got {method!r}")
         self.method = method
         self.name = "open_loop_spa" if method == "spa" else "open_loop_duffie_beckman"
+
+
+class OpenLoopModel(OpenLoop):
+    """Open loop on SPA through a fitted pointing model (issue 25, item 4).
+
+    The ephemeris sun goes through :func:`sim.pointing_model.command_angles` — the
+    inverse the ``GET …/pointing-model/command`` route uses — so the commanded encoder
+    angles put the *real* optical axis of a mount with ``model``'s terms (pedestal yaw,
+    encoder zeros, pedestal tilts, collimation, non-perpendicularity) on the sun; with
+    all terms 0 it is ``open_loop_spa``. No camera: it holds the sun through clouds as
+    well as its model and clock do (``docs/control.md``).
+    """
+
+    def __init__(self, site: Site, settings: ControlSettings | None = None,
+                 clock_offset_s: float = 0.0, model: PointingModel | None = None) -> None:
+        super().__init__(site, settings, clock_offset_s, method="spa")
+        self.name = "open_loop_model"
+        self.pointing_model = model or PointingModel()
 
 
 class Chronological(Controller):
@@ -559,7 +590,13 @@ class Hybrid(Controller):
 
 def make_controller(name: str, site: Site, settings: ControlSettings | None = None,
                     clock_offset_s: float = 0.0, **kwargs: Any) -> Controller:
-    """A controller by name (:data:`CONTROLLERS` except ``ideal``, which has no loop)."""
+    """A controller by name (:data:`CONTROLLERS` except ``ideal``, which has no loop).
+
+    ``chronological`` takes ``interval_min``; ``open_loop_model`` takes
+    ``pointing_model_terms`` (:meth:`sim.pointing_model.PointingModel.from_terms`: the
+    ``terms`` of ``GET …/pointing-model`` as they come, or ``{name: degrees}``; none is
+    a perfect mount).
+    """
     if name == "open_loop_spa":
         return OpenLoop(site, settings, clock_offset_s, method="spa")
     if name == "open_loop_duffie_beckman":
@@ -573,6 +610,9 @@ def make_controller(name: str, site: Site, settings: ControlSettings | None = No
         return ClosedLoopCamera(site, settings, clock_offset_s)
     if name == "hybrid":
         return Hybrid(site, settings, clock_offset_s)
+    if name == "open_loop_model":
+        terms = kwargs.pop("pointing_model_terms", None) or {}
+        return OpenLoopModel(site, settings, clock_offset_s, PointingModel.from_terms(terms))
     if name == "ideal":
         raise ValueError("'ideal' has no control loop: the twin uses tracking_angles directly")
     raise ValueError(f"controller must be one of {', '.join(CONTROLLERS)}; got {name!r}")

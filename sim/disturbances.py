@@ -17,6 +17,12 @@ parameter                               enters the model as
 ``pedestal_tilt_deg``,                  rotation of the base frame about a horizontal axis: the
 ``pedestal_tilt_azimuth_deg``           pedestal's vertical leans ``tilt`` towards the azimuth
                                         ``tilt_azimuth`` (:func:`base_rotation`)
+``elevation_zero_deg``                  the elevation encoder's zero (issue 25's term of that
+                                        name): the real elevation joint is the angle on the
+                                        encoder's datum plus this — the motor side, the
+                                        controller's readings and commands are on the datum,
+                                        the panel and the camera at the real angle
+                                        (:func:`real_elevation_deg`)
 ``encoder_drift_mrad_per_h``            the joint encoders' reading error grows linearly with the
                                         time since the start of the run, the same on both axes:
                                         reading = true angle + drift·t; the controller positions
@@ -43,6 +49,16 @@ Frames: East-North-Up (ENU) for the world; the tracker's base frame is ENU
 rotated by :func:`base_rotation`; joint angles are those of
 ``docs/architecture.md`` (azimuth of the normal clockwise from north, elevation
 above the horizon) measured in the base frame.
+
+Issue 25's pointing-model terms (:mod:`sim.pointing_model`, ``docs/pointing-model.md``)
+in these disturbances: ``azimuth_zero_deg`` is ``pedestal_yaw_deg`` (a yaw turns the
+base about the vertical before the tilt, as the zero turns the azimuth joint: the
+same rotation); ``elevation_zero_deg`` is ``elevation_zero_deg``;
+``pedestal_tilt_north_deg`` and ``pedestal_tilt_east_deg`` are the Euler angles of
+the twin's lean (``pedestal_tilt_deg`` towards ``pedestal_tilt_azimuth_deg``), to
+first order ``tilt·cos(tilt_azimuth)`` and ``tilt·sin(tilt_azimuth)``; the camera's
+offset up is, to the camera, an elevation zero, and its offset right the collimation
+(``tests/sim/test_pointing_model.py`` fits the twin's mount back to these terms).
 """
 
 from __future__ import annotations
@@ -50,6 +66,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, fields
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -59,6 +76,7 @@ from sim.kinematics import panel_axes, panel_axes_from_trig
 __all__ = [
     "Disturbances",
     "base_rotation",
+    "real_elevation_deg",
     "normal_enu",
     "camera_axes",
     "sun_in_camera",
@@ -85,6 +103,9 @@ class Disturbances:
         Tilt of the pedestal's vertical axis from the zenith [°], ≥ 0.
     pedestal_tilt_azimuth_deg : float
         Azimuth the pedestal leans towards, clockwise from north [°].
+    elevation_zero_deg : float
+        The elevation encoder's zero error [°]: the real elevation joint angle is the
+        encoder's (drift-free) reading plus this (issue 25's ``elevation_zero_deg``).
     encoder_drift_mrad_per_h : float
         Growth rate of the joint-reading error, both axes [mrad h⁻¹].
     clock_offset_s : float
@@ -102,6 +123,7 @@ class Disturbances:
     pedestal_yaw_deg: float = 0.0
     pedestal_tilt_deg: float = 0.0
     pedestal_tilt_azimuth_deg: float = 0.0
+    elevation_zero_deg: float = 0.0
     encoder_drift_mrad_per_h: float = 0.0
     clock_offset_s: float = 0.0
     backlash_deg: float = 0.0
@@ -120,7 +142,7 @@ class Disturbances:
                 raise ValueError(f"Disturbances.{name} must be >= 0, got {getattr(self, name)}")
         if self.pedestal_tilt_deg > 45.0:
             raise ValueError(f"pedestal_tilt_deg must be <= 45, got {self.pedestal_tilt_deg}")
-        for name in ("camera_offset_right_deg", "camera_offset_up_deg"):
+        for name in ("elevation_zero_deg", "camera_offset_right_deg", "camera_offset_up_deg"):
             if abs(getattr(self, name)) > 30.0:
                 raise ValueError(f"|{name}| must be <= 30, got {getattr(self, name)}")
 
@@ -173,19 +195,30 @@ def base_rotation(d: Disturbances) -> NDArray[np.float64]:
     return r
 
 
+def real_elevation_deg(elevation_joint_deg: ArrayLike, d: Disturbances) -> Any:
+    """The real elevation joint angle [°] of an output-side angle on the encoder's datum:
+    ``elevation + elevation_zero_deg`` (a float for a float)."""
+    if d.elevation_zero_deg == 0.0:
+        return elevation_joint_deg
+    if isinstance(elevation_joint_deg, (int, float)):
+        return float(elevation_joint_deg) + d.elevation_zero_deg
+    return np.asarray(elevation_joint_deg, dtype=float) + d.elevation_zero_deg
+
+
 def normal_enu(
     azimuth_joint_deg: ArrayLike, elevation_joint_deg: ArrayLike, d: Disturbances
 ) -> NDArray[np.float64]:
     """Panel unit normal in ENU for (true, output-side) joint angles on a disturbed base.
 
     ``R · n`` with ``n`` the normal of seed 000 eq. 23 in the base frame
-    (:func:`sim.kinematics.panel_axes`) and ``R`` :func:`base_rotation`.
+    (:func:`sim.kinematics.panel_axes`) at the real elevation
+    (:func:`real_elevation_deg`) and ``R`` :func:`base_rotation`.
 
     Returns
     -------
     ndarray, shape ``S + (3,)``
     """
-    _, _, n = panel_axes(azimuth_joint_deg, elevation_joint_deg)
+    _, _, n = panel_axes(azimuth_joint_deg, real_elevation_deg(elevation_joint_deg, d))
     if not d.moves_base:
         return n
     return n @ base_rotation(d).T
@@ -203,7 +236,8 @@ def camera_axes(
     (right, up, forward) convention of :class:`vision.cameras.PinholeCamera`.
     Scalar arithmetic: called once per camera frame.
     """
-    x, y, normal = _panel_axes_scalar(azimuth_joint_deg, elevation_joint_deg)
+    x, y, normal = _panel_axes_scalar(azimuth_joint_deg,
+                                      real_elevation_deg(elevation_joint_deg, d))
     n: tuple[float, ...] = normal
     r: tuple[float, ...] = (-x[0], -x[1], -x[2])  # the camera's right, looking along n
     u: tuple[float, ...] = y
@@ -234,7 +268,7 @@ def sun_in_camera(
     if d.moves_base:
         r = _base_rotation_rows(d)  # s_base = Rᵀ s: the columns of R dotted with s
         e, n_, u_ = (r[0][k] * e + r[1][k] * n_ + r[2][k] * u_ for k in range(3))
-    px, py, pn = _panel_axes_scalar(azimuth_joint_deg, elevation_joint_deg)
+    px, py, pn = _panel_axes_scalar(azimuth_joint_deg, elevation_joint_deg + d.elevation_zero_deg)
     x = -(px[0] * e + px[1] * n_)  # on the camera's right axis, −x (x is horizontal)
     y = py[0] * e + py[1] * n_ + py[2] * u_  # on the up axis
     z = pn[0] * e + pn[1] * n_ + pn[2] * u_  # on the normal

@@ -39,7 +39,10 @@ Pure functions, vectorised over observations; no I/O.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -53,6 +56,7 @@ __all__ = [
     "CORE_TERMS",
     "MIN_OBSERVATIONS",
     "OPTIONAL_TERMS",
+    "MAX_TERM_DEG",
     "PointingModel",
     "PointingFit",
     "predict_offsets_mrad",
@@ -78,6 +82,9 @@ SIGNIFICANCE_SIGMAS = 3.0
 MIN_TERM_DEG = 0.005
 #: Fewer observations than this cannot fit the four core terms with any redundancy.
 MIN_OBSERVATIONS = 10
+#: A term given to :meth:`PointingModel.from_terms` is at most this large [°]: a mount
+#: further off is not tracking (the tracker camera's field is ±33°).
+MAX_TERM_DEG = 30.0
 
 
 @dataclass(frozen=True)
@@ -94,6 +101,27 @@ class PointingModel:
     def as_dict(self) -> dict[str, float]:
         """The terms by their boundary names."""
         return {k: float(getattr(self, k)) for k in _ALL_TERMS}
+
+    @classmethod
+    def from_terms(cls, terms: Mapping[str, Any]) -> PointingModel:
+        """The model of ``terms``: ``{name: value}`` or, as ``GET …/pointing-model`` answers
+        them, ``{name: {"value": v, "std": s}}`` (``std`` is ignored); a term not given is 0.
+
+        Raises ValueError naming the term for an unknown name or a value that is not a
+        finite number within ±:data:`MAX_TERM_DEG`.
+        """
+        values: dict[str, float] = {}
+        for name, given in terms.items():
+            if name not in _ALL_TERMS:
+                raise ValueError(f"{name}: not a pointing-model term; known: "
+                                 f"{', '.join(_ALL_TERMS)}")
+            raw = given.get("value") if isinstance(given, Mapping) else given
+            if isinstance(raw, bool) or not isinstance(raw, (int, float)) or not (
+                    math.isfinite(raw) and abs(raw) <= MAX_TERM_DEG):
+                raise ValueError(f"{name}: {raw!r} is not a number of degrees within "
+                                 f"±{MAX_TERM_DEG:g}")
+            values[name] = float(raw)
+        return cls(**values)
 
 
 @dataclass(frozen=True)

@@ -40,7 +40,7 @@ PV model). Without positions nothing changes.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -133,6 +133,8 @@ class TwinResult:
     #: the ideal tracker's plane-of-array irradiance per step [W m⁻²] (the beam for CPV):
     #: the weight of the energy-weighted pointing error
     ideal_poa_global: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: ``open_loop_model``'s mount terms [°] by name (None for the other controllers)
+    pointing_model_terms: dict[str, float] | None = None
 
     def energy_wh(self, array: str) -> float:
         """Energy of ``array`` (``"tracker"``/``"fixed"``) over the run [Wh]."""
@@ -192,6 +194,8 @@ class TwinResult:
         out["timezone"] = self.site.timezone
         out["days"] = self.daily_energy()
         out.update(self._pointing_summary(tracker_wh, fixed_wh))
+        if self.pointing_model_terms is not None:
+            out["pointing_model_terms"] = dict(self.pointing_model_terms)
         if self.fixed_shade_loss_wh is not None:
             out["fixed_shade_loss_wh"] = self.fixed_shade_loss_wh
         return out
@@ -528,6 +532,7 @@ def simulate(
     limits: DriveLimits | None = None,
     camera: CameraSetup | None = None,
     spot_distance_m: float = 1.5,
+    pointing_model_terms: Mapping[str, Any] | None = None,
 ) -> TwinResult:
     """Run the tracker and the fixed array side by side.
 
@@ -567,6 +572,11 @@ def simulate(
     spot_distance_m : float
         Distance from the optics to the receiver for the spot displacement
         ``f tan θ`` [m] (seed 001: the Fresnel concentrator's focal distance, 1.5 m).
+    pointing_model_terms : mapping, optional
+        ``open_loop_model`` only: the fitted mount terms its commands go through
+        (:meth:`sim.pointing_model.PointingModel.from_terms`: the ``terms`` object of
+        ``GET /api/v1/sites/{id}/pointing-model`` as it comes, or ``{name: degrees}``);
+        default none, a perfect mount.
 
     Returns
     -------
@@ -580,6 +590,9 @@ def simulate(
         raise ValueError(f"acceptance_angle_deg must be in (0, 90), got {acceptance_angle_deg}")
     if not spot_distance_m > 0:
         raise ValueError(f"spot_distance_m must be > 0, got {spot_distance_m}")
+    if pointing_model_terms is not None and controller != "open_loop_model":
+        raise ValueError(f"pointing_model_terms: only the open_loop_model controller uses "
+                         f"them, not {controller!r}")
     d = disturbances if disturbances is not None else dist.Disturbances()
     settings = settings or ControlSettings()
     limits = limits or DriveLimits()
@@ -596,7 +609,8 @@ def simulate(
             detector = settings.detector or (
                 "seed000_hsv" if controller == "closed_loop_camera" else "seed003_gray240")
             settings = replace(settings, reference_area_px=clear_sky_area_px(camera, detector))
-        ctl = make_controller(controller, site, settings, clock_offset_s=d.clock_offset_s)
+        ctl = make_controller(controller, site, settings, clock_offset_s=d.clock_offset_s,
+                              pointing_model_terms=pointing_model_terms)
         tick_s = _tick_s(controller, float(step_s), settings)
         every = int(round(step_s / tick_s))
     layout = array_shade.layout_of(site)
@@ -638,7 +652,9 @@ def simulate(
                                   state)
             moves.extend(res.moves)
             normal = dist.normal_enu(res.azimuth_joint_deg, res.elevation_joint_deg, d)
-            pose = (res.azimuth_joint_deg, res.elevation_joint_deg, normal)
+            # the series' joints are the real ones (an encoder zero moves the elevation)
+            pose = (res.azimuth_joint_deg,
+                    dist.real_elevation_deg(res.elevation_joint_deg, d), normal)
         part = _arrays_step(site, chunk, pos, w, pose, receiver, acceptance_angle_deg, layout,
                             base)
         if ctl is not None:
@@ -697,6 +713,8 @@ def simulate(
         fixed_shade_loss_wh=shade_loss_wh,
         ideal_poa_global=(extra["ideal_tracker_poa_global"] if ideal_wh is not None
                           else series["tracker_poa_global"].to_numpy()),
+        pointing_model_terms=(None if ctl is None or ctl.pointing_model is None
+                              else ctl.pointing_model.as_dict()),
     )
 
 

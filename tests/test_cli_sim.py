@@ -122,12 +122,35 @@ def test_simulate_one_day_json_and_csv(tmp_path) -> None:
         (["--start", "2024-02-30", "--end", "2024-03-15"], "--start"),
         (["--start", "2024-03-15T00:00", "--end", "2024-03-16"], "offset"),
         (["--start", "2024-03-15", "--end", "2024-03-16", "--controller", "pid"], "ideal"),
+        (["--start", "2024-03-15", "--end", "2024-03-16", "--controller", "open_loop_model",
+          "--pointing-model-terms", '{"yaw_deg": 2}'], "--pointing-model-terms: yaw_deg"),
     ],
 )
 def test_simulate_errors_exit_2(args, message) -> None:
     p = heliotwin("simulate", *args, "--json")
     assert p.returncode == 2
     assert message in p.stderr and p.stdout == ""
+
+
+def test_open_loop_model_reads_a_saved_pointing_model_answer(tmp_path: Path) -> None:
+    """``--pointing-model-terms FILE``: the answer of GET …/pointing-model saved as it came
+    (its ``terms`` with values and standard errors)."""
+    saved = tmp_path / "model.json"
+    saved.write_text(json.dumps({
+        "site_id": "tehuantepec", "n_observations": 380, "n_outliers": 2,
+        "residual_rms_mrad": 0.3, "identifiable": ["azimuth_zero_deg"], "correlated": [],
+        "terms": {"azimuth_zero_deg": {"value": 2.0, "std": 0.02},
+                  "elevation_zero_deg": {"value": 0.0, "std": 0.02}}}))
+    day = ["--start", "2024-03-15T10:00-06:00", "--end", "2024-03-15T14:00-06:00"]
+    p = heliotwin("simulate", *day, "--controller", "open_loop_model", "--pedestal-yaw-deg",
+                  "2", "--pointing-model-terms", str(saved), "--json")
+    assert p.returncode == 0, p.stderr
+    d = json.loads(p.stdout)
+    assert d["controller"] == "open_loop_model"
+    assert d["pointing_model_terms"]["azimuth_zero_deg"] == 2.0
+    # the model cancels the 2° yaw (open_loop_spa: 12-34 mrad off); the 0.1° dead band on
+    # each axis is left (measured 2.69 mrad at most)
+    assert d["pointing_error_max_mrad"] < 3.0
 
 
 def test_progress_bar_only_on_a_terminal() -> None:

@@ -25,6 +25,7 @@ import json
 import logging
 import os
 import sys
+from pathlib import Path
 from typing import Any
 
 from backend.cli import CliError, fail
@@ -58,7 +59,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--controller",
         default="ideal",
         help="tracking controller: ideal, open_loop_spa, open_loop_duffie_beckman, "
-        "chronological, closed_loop_camera, hybrid (default ideal)",
+        "chronological, closed_loop_camera, hybrid, open_loop_model (default ideal)",
+    )
+    p.add_argument(
+        "--pointing-model-terms", metavar="JSON_OR_PATH",
+        help="open_loop_model's mount terms: a JSON object or a file holding one — the answer "
+        "of GET /api/v1/sites/ID/pointing-model (its 'terms' are read) or {name: degrees}, "
+        'e.g. \'{"azimuth_zero_deg": 1.5, "elevation_zero_deg": -0.8}\' (default a perfect '
+        "mount)",
     )
     p.add_argument(
         "--receiver", default="flat",
@@ -105,6 +113,27 @@ def parse_when(text: str, timezone: str, field: str) -> Any:
         return pd.Timestamp(parse_day_or_instant(text, timezone, f"--{field}"))
     except TimestampError as exc:
         raise InputError(str(exc)) from None
+
+
+def read_pointing_model_terms(text: str) -> dict[str, Any]:
+    """``--pointing-model-terms``: a JSON object, inline or in a file; a saved answer of
+    ``GET …/pointing-model`` gives its ``terms``."""
+    source = text
+    if not text.lstrip().startswith("{"):
+        try:
+            source = Path(text).read_text(encoding="utf-8")
+        except OSError as exc:
+            raise InputError(f"--pointing-model-terms: cannot read {text!r}: "
+                             f"{exc.strerror or exc}") from None
+    try:
+        value = json.loads(source)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"--pointing-model-terms: not JSON ({exc})") from None
+    if isinstance(value, dict) and isinstance(value.get("terms"), dict):
+        value = value["terms"]
+    if not isinstance(value, dict):
+        raise InputError("--pointing-model-terms: expected a JSON object of terms")
+    return value
 
 
 def _progress_bar(enabled: bool) -> tuple[Any, Any]:
@@ -164,9 +193,13 @@ def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
                                                 site.site_id)
     machine = {p.name: getattr(args, p.name) for p in MACHINE_PARAMETERS
                if getattr(args, p.name) != p.default}
+    terms = None
+    if args.pointing_model_terms is not None:
+        terms = read_pointing_model_terms(args.pointing_model_terms)
     try:
         scenario = Scenario(site.site_id, start, end, args.step_s, args.controller,
-                            args.receiver, machine, weather=weather, station=station)
+                            args.receiver, machine, weather=weather, station=station,
+                            pointing_model_terms=terms)
     except ValueError as exc:
         name, _, problem = str(exc).partition(":")
         raise InputError(f"--{name.replace('_', '-')}:{problem}") from None

@@ -25,6 +25,7 @@ import pandas as pd
 from backend.twin.parameters import DISTURBANCE_NAMES, MACHINE_PARAMETERS, RUN_PARAMETERS
 from sim.control import ControlSettings
 from sim.disturbances import Disturbances
+from sim.pointing_model import PointingModel
 from sim.sites import Site
 from sim.sky import typical_year_at_site
 from sim.twin import CONTROLLERS, RECEIVERS, TwinResult, simulate
@@ -82,6 +83,9 @@ class Scenario:
     #: as :func:`check_station` describes it
     weather: pd.DataFrame | None = field(default=None, compare=False, repr=False)
     station: dict[str, Any] | None = None
+    #: ``open_loop_model``'s mount terms (``sim.pointing_model.PointingModel.from_terms``:
+    #: the ``terms`` of ``GET …/pointing-model`` as they come, or ``{name: degrees}``)
+    pointing_model_terms: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
         if self.controller not in CONTROLLERS:
@@ -97,6 +101,14 @@ class Scenario:
             if (p.minimum is not None and value < p.minimum) or (
                     p.maximum is not None and value > p.maximum):
                 raise ValueError(f"{name}: {value} is outside [{p.minimum}, {p.maximum}]")
+        if self.pointing_model_terms is not None:
+            if self.controller != "open_loop_model":
+                raise ValueError("pointing_model_terms: only the open_loop_model controller "
+                                 f"uses them, not {self.controller!r}")
+            try:
+                PointingModel.from_terms(self.pointing_model_terms)
+            except ValueError as exc:
+                raise ValueError(f"pointing_model_terms: {exc}") from None
         if (self.weather is None) != (self.station is None):
             raise ValueError("weather: a typical year goes with its station")
 
@@ -109,6 +121,9 @@ class Scenario:
                "controller": self.controller, "receiver": self.receiver, **self.machine}
         if self.station is not None:
             out["weather_station"] = self.station
+        if self.pointing_model_terms is not None:
+            out["pointing_model_terms"] = PointingModel.from_terms(
+                self.pointing_model_terms).as_dict()
         return out
 
     def to_json(self) -> str:
@@ -137,6 +152,7 @@ def run_scenario(site: Site, scenario: Scenario, weather: pd.DataFrame | None = 
         acceptance_angle_deg=run["acceptance_angle_deg"],
         spot_distance_m=run["spot_distance_m"],
         settings=ControlSettings(chronological_interval_min=run["chronological_interval_min"]),
+        pointing_model_terms=scenario.pointing_model_terms,
     )
 
 

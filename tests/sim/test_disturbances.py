@@ -38,6 +38,24 @@ def test_base_rotation_matches_scipy(tilt: float, tilt_az: float, yaw: float) ->
     assert a == pytest.approx(tilt_az % 360, abs=1e-9)
 
 
+def test_elevation_zero_raises_the_panel_and_its_camera_by_the_zero() -> None:
+    d = dist.Disturbances(elevation_zero_deg=-0.8, pedestal_yaw_deg=1.0, pedestal_tilt_deg=0.5)
+    moved = dist.Disturbances(pedestal_yaw_deg=1.0, pedestal_tilt_deg=0.5)
+    az = np.array([80.0, 135.0, 250.0])
+    el = np.array([10.0, 60.0, 35.0])
+    assert np.allclose(dist.normal_enu(az, el, d), dist.normal_enu(az, el - 0.8, moved),
+                       atol=1e-15)
+    sun = enu_from_sky(150.0, 55.0)
+    assert np.allclose(dist.camera_axes(160.0, 50.0, d), dist.camera_axes(160.0, 49.2, moved),
+                       atol=1e-15)
+    assert np.allclose(dist.sun_in_camera(160.0, 50.0, d, sun),
+                       dist.camera_axes(160.0, 50.0, d) @ sun, atol=1e-12)
+    assert dist.real_elevation_deg(50.0, d) == pytest.approx(49.2)
+    assert d.to_dict()["elevation_zero_deg"] == -0.8 and d.any
+    with pytest.raises(ValueError, match="elevation_zero_deg"):
+        dist.Disturbances(elevation_zero_deg=31.0)
+
+
 def test_no_disturbance_is_the_kinematics() -> None:
     az = np.linspace(-90, 450, 13)
     el = np.linspace(0, 90, 13)

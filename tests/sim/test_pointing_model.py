@@ -136,7 +136,7 @@ def test_the_twins_disturbances_mean_the_same_terms() -> None:
     """
     d = dist.Disturbances(pedestal_yaw_deg=1.5, pedestal_tilt_deg=1.2,
                           pedestal_tilt_azimuth_deg=230.0, camera_offset_up_deg=0.4,
-                          camera_offset_right_deg=0.6)
+                          camera_offset_right_deg=0.6, elevation_zero_deg=-0.3)
     times, sun = _day("2026-06-02")
     times, sun = times[::3], sun.iloc[::3]
     saz, sel = sun["azimuth"].to_numpy(), sun["apparent_elevation"].to_numpy()
@@ -151,7 +151,9 @@ def test_the_twins_disturbances_mean_the_same_terms() -> None:
     c = np.arcsin(np.sin(r) * np.cos(u))
     expected = {"azimuth_zero_deg": -minus_az0, "pedestal_tilt_north_deg": -minus_tn,
                 "pedestal_tilt_east_deg": te,
-                "elevation_zero_deg": np.degrees(np.arctan2(np.sin(u), np.cos(r) * np.cos(u))),
+                # the encoder's zero plus the camera's boresight above the panel's normal
+                "elevation_zero_deg": -0.3 + np.degrees(np.arctan2(np.sin(u),
+                                                                   np.cos(r) * np.cos(u))),
                 "collimation_deg": np.degrees(c)}
     assert fit.fitted_terms == (*CORE_TERMS, "collimation_deg")
     for name, value in expected.items():  # 1.2e-4° measured: the camera's roll
@@ -187,3 +189,20 @@ def test_a_significant_nonperpendicularity_is_selected_and_recovered() -> None:
     for name, value in {**TRUE, "nonperpendicularity_deg": npae}.items():
         got = getattr(fit.model, name)
         assert abs(got - value) < 4 * fit.std[name], (name, got, value, fit.std[name])
+
+
+def test_terms_are_read_as_the_route_answers_them_or_as_numbers() -> None:
+    answered = {"azimuth_zero_deg": {"value": 1.5, "std": 0.001},
+                "pedestal_tilt_east_deg": {"value": -0.4, "std": None}}
+    assert PointingModel.from_terms(answered) == PointingModel(azimuth_zero_deg=1.5,
+                                                               pedestal_tilt_east_deg=-0.4)
+    assert PointingModel.from_terms({"collimation_deg": 2}) == PointingModel(collimation_deg=2.0)
+    assert PointingModel.from_terms({}) == PointingModel()
+    for bad, match in (({"yaw_deg": 1.0}, "yaw_deg: not a pointing-model term"),
+                       ({"elevation_zero_deg": float("nan")}, "elevation_zero_deg: nan"),
+                       ({"elevation_zero_deg": 45.0}, "within"),
+                       ({"azimuth_zero_deg": {"std": 1.0}}, "azimuth_zero_deg: None"),
+                       ({"azimuth_zero_deg": "1.5"}, "azimuth_zero_deg: '1.5'"),
+                       ({"azimuth_zero_deg": True}, "azimuth_zero_deg: True")):
+        with pytest.raises(ValueError, match=match):
+            PointingModel.from_terms(bad)

@@ -54,6 +54,12 @@ class _SimulationBase(BaseModel):
         "ideal", description="tracking controller")
     receiver: Literal[RECEIVERS] = Field(  # type: ignore[valid-type]
         "flat", description="flat PV, or a CPV receiver with an acceptance angle")
+    pointing_model_terms: dict[str, float | dict[str, float | None]] | None = Field(
+        None, max_length=16,
+        description="open_loop_model only: the mount terms its commands go through — the "
+                    "'terms' of GET /api/v1/sites/{site_id}/pointing-model as they come, or "
+                    "{name: degrees}; default a perfect mount",
+        examples=[{"azimuth_zero_deg": {"value": 1.5, "std": 0.001}}])
     background: bool = Field(False, description="answer 202 at once and run in the background")
 
 
@@ -81,7 +87,8 @@ def _params(ctx: Any, body: _SimulationBase) -> Scenario:
                if getattr(body, p.name) != p.default}
     try:
         return Scenario(body.site_id, pd.Timestamp(t0), pd.Timestamp(t1), body.step_s,
-                        body.controller, body.receiver, machine)
+                        body.controller, body.receiver, machine,
+                        pointing_model_terms=body.pointing_model_terms)
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
 
