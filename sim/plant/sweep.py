@@ -33,6 +33,7 @@ from sim.energy import sampled_energy_wh
 from sim.plant.fields import (
     FieldLayout,
     interior_tracker,
+    lattice_positions,
     plant_land_m2,
     regular_field,
     scaled_plant,
@@ -218,5 +219,46 @@ def case_day_shade(spec: SweepSpec, case: SweepCase, date: str, step_s: float = 
             "shaded_fraction": [[round(float(f), 4) for f in row] for row in frac]}
 
 
+def interior_beam_shaded_pct(layout: FieldLayout, collector: Collector,
+                             sky: dict[str, FloatArray]) -> float:
+    """The interior collector's Σ F · DNI / Σ DNI [%] over the daylight steps of ``sky``,
+    every collector facing the sun (twoaxistracking's figure; a sweep case's
+    ``interior_beam_shaded_pct`` under ``sun`` without the electrical model): what a layout
+    search evaluates per candidate. ``sky`` as :func:`case_sky` returns it."""
+    from sim.plant.shading import plant_shade
+
+    up = sky["apparent_elevation"] > 0
+    az, el, dni = sky["solar_azimuth"][up], sky["apparent_elevation"][up], sky["dni"][up]
+    positions, interior = lattice_positions(layout, collector.area, 5, 5)
+    shade = plant_shade(positions, az, el, az, el, collector.width, collector.height)
+    return float(100.0 * np.sum(shade.fraction[:, interior] * dni) / np.sum(dni))
+
+
+def least_shaded_layout(collector: Collector, sky: dict[str, FloatArray], gcr: float,
+                        offset: float, aspect_ratios: FloatArray, rotations_deg: FloatArray
+                        ) -> tuple[FieldLayout, float]:
+    """The layout of one family (a row ``offset``: 0 rectangular, −0.5 diamond) at ``gcr``
+    whose interior collector loses the least beam to shade, by a grid search over aspect
+    ratio and rotation (Cumpston & Pye 2014 §3 optimise the same parameters at each GCR);
+    candidates outside the limits of :meth:`FieldLayout.check` are skipped. Returns the
+    layout and its :func:`interior_beam_shaded_pct`; ``ValueError`` when no candidate is
+    feasible."""
+    best: tuple[FieldLayout, float] | None = None
+    for ar in np.asarray(aspect_ratios, dtype=float):
+        for rot in np.asarray(rotations_deg, dtype=float):
+            layout = FieldLayout("custom", gcr, float(ar), offset, float(rot))
+            try:
+                layout.check(collector)
+            except ValueError:
+                continue
+            pct = interior_beam_shaded_pct(layout, collector, sky)
+            if best is None or pct < best[1]:
+                best = (layout, pct)
+    if best is None:
+        raise ValueError(f"no feasible layout with offset {offset} at gcr {gcr}")
+    return best
+
+
 __all__ = ["PLANT_LAYOUT", "SweepCase", "SweepSpec", "case_layout", "case_plant", "case_sky",
-           "case_day_shade", "run_case", "site_plant"]
+           "case_day_shade", "interior_beam_shaded_pct", "least_shaded_layout", "run_case",
+           "site_plant"]

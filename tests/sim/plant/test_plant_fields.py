@@ -23,7 +23,14 @@ from sim.plant.fields import (
     regular_field,
     scaled_plant,
 )
-from sim.plant.sweep import SweepCase, SweepSpec, case_plant, case_sky, run_case
+from sim.plant.sweep import (
+    SweepCase,
+    SweepSpec,
+    case_plant,
+    case_sky,
+    interior_beam_shaded_pct,
+    run_case,
+)
 
 PEN = load_plant("penarroya")
 COLLECTOR = collector_from_size(12.0, 5.0, PEN.collector)
@@ -93,6 +100,9 @@ def test_interior_collector_agrees_with_twoaxistracking() -> None:
             ref = _twoaxistracking_pct(spec, sky, name, gcr)
             assert ref > 1.0                                   # December: real shade
             assert row["interior_beam_shaded_pct"] == pytest.approx(ref, abs=2e-6), (name, gcr)
+            # the layout search's figure (no electrical model) is the same number
+            assert interior_beam_shaded_pct(FieldLayout.named(name, gcr), COLLECTOR, sky
+                                            ) == pytest.approx(ref, abs=2e-6)
             # the field's edge collectors have fewer neighbours: less shade on average
             assert row["field_beam_shaded_pct"] < row["interior_beam_shaded_pct"]
 
