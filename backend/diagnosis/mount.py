@@ -34,7 +34,10 @@ the rows that carry all four values, so a range without a camera costs one index
 
 from __future__ import annotations
 
+import hashlib
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
@@ -70,6 +73,14 @@ TERM_WORDS = {
 }
 
 
+#: Fits kept by the digest of what they were fitted from (the sun, encoder angles and
+#: offsets): a repeated diagnosis of a long range refits no day whose observations did not
+#: change (a day's fit takes tens of ms; 400 of them seconds). Bounded, oldest out.
+FITS_CACHED = 1024
+_FITS: OrderedDict[bytes, PointingFit] = OrderedDict()
+_FITS_LOCK = threading.Lock()
+
+
 @dataclass(frozen=True)
 class Observations:
     """Camera observations: Unix times [s], the true (apparent) sun and the encoder angles
@@ -84,10 +95,25 @@ class Observations:
     offset_y_mrad: np.ndarray
 
     def fit(self, part: slice = slice(None)) -> PointingFit:
-        """The pointing-model fit of the observations ``part`` (core and supported terms)."""
-        return fit_pointing_model_to_sun(
-            self.sun_azimuth_deg[part], self.sun_elevation_deg[part], self.azimuth_deg[part],
-            self.elevation_deg[part], self.offset_x_mrad[part], self.offset_y_mrad[part])
+        """The pointing-model fit of the observations ``part`` (core and supported terms);
+        a fit of the same observations is taken from :data:`_FITS`."""
+        cols = (self.sun_azimuth_deg[part], self.sun_elevation_deg[part],
+                self.azimuth_deg[part], self.elevation_deg[part], self.offset_x_mrad[part],
+                self.offset_y_mrad[part])
+        digest = hashlib.blake2b(digest_size=16)
+        for c in cols:
+            digest.update(np.ascontiguousarray(c).tobytes())
+        key = digest.digest()
+        with _FITS_LOCK:
+            if key in _FITS:
+                _FITS.move_to_end(key)
+                return _FITS[key]
+        fit = fit_pointing_model_to_sun(*cols)
+        with _FITS_LOCK:
+            _FITS[key] = fit
+            while len(_FITS) > FITS_CACHED:
+                _FITS.popitem(last=False)
+        return fit
 
 
 def observations_from(info: SiteInfo, ts_s: np.ndarray, azimuth_deg: np.ndarray,
