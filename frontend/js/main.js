@@ -11,8 +11,9 @@ import * as plant from "./plant.js";
 import * as sites from "./sites.js";
 import * as diagnosis from "./diagnosis.js";
 import * as alerts from "./alerts.js";
+import * as pointing from "./pointing.js";
 
-const PAGES = { overview, simulation, sky, twin, plant, sites };
+const PAGES = { overview, simulation, sky, twin, plant, pointing, sites };
 
 /** Shared state every page reads: the site, its zone, the selected day, server meta. */
 export const state = {
