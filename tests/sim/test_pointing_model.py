@@ -206,3 +206,20 @@ def test_terms_are_read_as_the_route_answers_them_or_as_numbers() -> None:
                        ({"azimuth_zero_deg": True}, "azimuth_zero_deg: True")):
         with pytest.raises(ValueError, match=match):
             PointingModel.from_terms(bad)
+
+
+def test_the_robust_pass_on_a_sample_finds_the_same_outliers_and_terms(
+        observed_day, fitted, monkeypatch) -> None:
+    """Above ROBUST_SAMPLE observations the robust pass runs on an evenly spaced sample; the
+    outliers are judged and the terms fitted on all of them, so nothing changes."""
+    import sim.pointing_model as pm
+
+    times, az, el, ox, oy, glint = observed_day
+    assert times.size > 200
+    monkeypatch.setattr(pm, "ROBUST_SAMPLE", 60)
+    sampled = fit_pointing_model(times, az, el, ox, oy, SITE.latitude, SITE.longitude,
+                                 SITE.altitude)
+    assert np.array_equal(sampled.outlier, glint)
+    for name in CORE_TERMS:  # the same inliers, the same least squares: 1e-10° apart
+        assert getattr(sampled.model, name) == pytest.approx(getattr(fitted.model, name),
+                                                             abs=1e-8)
