@@ -212,8 +212,8 @@ def sweep_figures(fig: Figures) -> list[str]:
 def main() -> None:
     from sim.plant import load_plant
     from sim.plant.shading import plant_shade
-    from sim.plant.simulate import compare_strategies, simulate_plant, weather_for_plant
-    from sim.sky import pvlib_tmy3_path, read_tmy3
+    from sim.plant.simulate import compare_strategies, simulate_plant
+    from sim.sky import pvlib_tmy3_path, read_typical_year, typical_year_at_site
     from sim.sun import solar_position
 
     fig = Figures("plant")
@@ -261,8 +261,10 @@ def main() -> None:
     end = pd.Timestamp(YEAR_END, tz=plant.timezone)
     clear = compare_strategies(plant, start, end, TABLE_STEP_S)
     log(f"  clear: {json.dumps(clear)}")
-    tmy, meta = read_tmy3(pvlib_tmy3_path(), coerce_year=2021)
-    w = weather_for_plant(tmy, float(meta["longitude"]), plant, start, end)
+    tmy, meta = read_typical_year(pvlib_tmy3_path(), "tmy3")   # `plant simulate --force`'s rule
+    w = typical_year_at_site(tmy, meta["utc_offset_h"], start, end,
+                             (meta["latitude"], meta["longitude"], meta["altitude"]),
+                             (plant.latitude, plant.longitude, plant.altitude))
     cloudy = compare_strategies(plant, start, end, TABLE_STEP_S, weather=w)
     log(f"  tmy3: {json.dumps(cloudy)}")
 
@@ -339,7 +341,7 @@ def main() -> None:
         "|---|---|---|---|---|---|---|",
     ]
     for key, name, res in (("clear", "clear sky", clear),
-                           ("tmy3", "TMY3 723170 (moved by solar time)", cloudy)):
+                           ("tmy3", "TMY3 723170 (its sky moved to Peñarroya)", cloudy)):
         s = res["summaries"]
         g = res.get("cloudy_gain_pct", {}).get("sky_scan")
         n_cloudy = res.get("cloudy_days", 0)

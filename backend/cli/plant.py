@@ -24,6 +24,9 @@ from typing import Any
 from backend.cli import fail
 from backend.cli.simulate import InputError, parse_when
 
+_FORCE_HELP = ("run on a weather station more than 100 km from the place anyway (only the "
+               "state of its sky is moved there)")
+
 STRATEGIES = ("sun", "backtrack", "sky_scan")
 
 
@@ -51,8 +54,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sim.add_argument("--end", required=True, help="YYYY-MM-DD or ISO date-time (exclusive)")
     sim.add_argument("--step-s", type=float, default=60.0, help="time step [s] (default 60)")
     sim.add_argument("--strategy", default="sun", help=f"one of {', '.join(STRATEGIES)}")
-    sim.add_argument("--tmy3", metavar="PATH",
-                     help="weather from a TMY3 file (moved to the plant by mean solar time)")
+    sim.add_argument("--tmy3", metavar="PATH", help="weather from a TMY3 file")
+    sim.add_argument("--epw", metavar="PATH", help="weather from an EPW file")
+    sim.add_argument("--force", action="store_true", help=_FORCE_HELP)
     sim.add_argument("--plants-dir", default=plants_dir, help="directory of plant JSON files")
     sim.add_argument("--json", action="store_true", help="print the summary as JSON")
     sim.add_argument("--no-progress", action="store_true", help="never show a progress bar")
@@ -95,6 +99,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sw.add_argument("--step-s", type=float, default=600.0, help="time step [s] (default 600)")
     sw.add_argument("--tmy3", metavar="PATH", help="weather from a TMY3 file")
     sw.add_argument("--epw", metavar="PATH", help="weather from an EPW file")
+    sw.add_argument("--force", action="store_true", help=_FORCE_HELP)
     sw.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                     help="a running Dask scheduler (default: a LocalCluster on this machine)")
     sw.add_argument("--workers", type=int, help="LocalCluster workers (default: the cores)")
@@ -150,16 +155,7 @@ def execute(args: argparse.Namespace) -> dict[str, Any]:
         raise InputError(f"--step-s: must be positive, got {args.step_s}")
     if (end - start).total_seconds() / args.step_s > 5_000_000:
         raise InputError("--step-s: too many steps (more than 5,000,000); use a larger step")
-    weather = None
-    if args.tmy3:
-        from sim.plant.simulate import weather_for_plant
-        from sim.sky import read_tmy3
-
-        try:
-            tmy, meta = read_tmy3(args.tmy3, coerce_year=start.year)
-        except (OSError, ValueError, KeyError) as exc:
-            raise InputError(f"--tmy3: cannot read {args.tmy3!r}: {exc}") from None
-        weather = weather_for_plant(tmy, float(meta["longitude"]), plant, start, end)
+    weather, station, _ = typical_weather(args, plant, start, end)
     from sim.plant.simulate import simulate_plant
 
     bar = None
@@ -181,8 +177,8 @@ def execute(args: argparse.Namespace) -> dict[str, Any]:
         if bar is not None:
             bar.close()
     summary = result.summary()
-    if args.tmy3:
-        summary["tmy3"] = args.tmy3
+    if station is not None:
+        summary["weather_station"] = station
     return summary
 
 
@@ -215,27 +211,40 @@ def _flag(field: str) -> str:
             "layouts": "--layouts"}.get(field, "--" + field.replace("_", "-"))
 
 
-def _sweep_weather(args: argparse.Namespace, spec: Any) -> tuple[Any, str]:
-    """(weather over the range, a token naming it) from --tmy3/--epw, or (None, "")."""
+def typical_weather(args: argparse.Namespace, place: Any, start: Any, end: Any
+                    ) -> tuple[Any, dict[str, Any] | None, str]:
+    """(weather on ``[start, end)``, its station, a token naming the file) from --tmy3/--epw,
+    or (None, None, ""): the twin's rule (:func:`backend.twin.scenario.check_station`, a
+    station more than 100 km away refused unless --force; :func:`sim.sky.typical_year_at_site`
+    lays the year on the range and, far away, moves only the state of the sky)."""
+    if getattr(args, "tmy3", None) and getattr(args, "epw", None):
+        raise InputError("--tmy3 and --epw: give one weather file, not both")
     flag, path = ("--tmy3", args.tmy3) if args.tmy3 else ("--epw", args.epw)
     if not path:
-        return None, ""
+        return None, None, ""
     import hashlib
 
-    from sim.plant.simulate import weather_for_plant
-    from sim.plant.sweep import site_plant
-    from sim.sky import read_typical_year, typical_year_on
+    from backend.twin.scenario import StationTooFar, check_station
+    from sim.sky import read_typical_year, typical_year_at_site
 
     try:
         typical, meta = read_typical_year(path, flag[2:])
     except (OSError, ValueError, KeyError) as exc:
         raise InputError(f"{flag}: cannot read {path!r}: {exc}") from None
-    on_range = typical_year_on(typical, meta["utc_offset_h"], spec.start, spec.end)
-    weather = weather_for_plant(on_range, meta["longitude"], site_plant(spec), spec.start,
-                                spec.end)
+    try:
+        station = check_station(meta, place, args.force, "--force")
+    except StationTooFar as exc:
+        raise InputError(f"{flag}: {exc}") from None
+    try:
+        weather = typical_year_at_site(
+            typical, meta["utc_offset_h"], start, end,
+            (meta["latitude"], meta["longitude"], meta["altitude"]),
+            (place.latitude, place.longitude, place.altitude))
+    except ValueError as exc:
+        raise InputError(f"{flag}: {exc}") from None
     with open(path, "rb") as f:
         token = f"{flag[2:]}:{hashlib.sha256(f.read()).hexdigest()[:16]}"
-    return weather, token
+    return weather, station, token
 
 
 def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
@@ -244,8 +253,6 @@ def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
 
     from backend.plants.sweep import SweepInputError, parse_gcr, parse_size, prepare_sweep
 
-    if args.tmy3 and args.epw:
-        raise InputError("--tmy3 and --epw: give one weather file, not both")
     plant = None
     if args.plant:
         plant = _plant_arg(args)
@@ -271,7 +278,10 @@ def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
             slope_azimuth_deg=args.slope_azimuth_deg, slope_tilt_deg=args.slope_tilt_deg)
     except SweepInputError as exc:
         raise InputError(f"{_flag(exc.field)}: {exc.problem}") from None
-    weather, token = _sweep_weather(args, spec)
+    from sim.plant.sweep import site_plant
+
+    weather, _, token = typical_weather(args, spec.plant or site_plant(spec), spec.start,
+                                        spec.end)
     if weather is not None:
         spec = replace(spec, weather_token=token)
     return spec, cases, weather

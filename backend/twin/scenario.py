@@ -25,6 +25,7 @@ import pandas as pd
 from backend.twin.parameters import DISTURBANCE_NAMES, MACHINE_PARAMETERS, RUN_PARAMETERS
 from sim.control import ControlSettings
 from sim.disturbances import Disturbances
+from sim.plant.layout import Plant
 from sim.pointing_model import PointingModel
 from sim.sites import Site
 from sim.sky import typical_year_at_site
@@ -40,20 +41,22 @@ class StationTooFar(ValueError):
     """The weather file's station is farther from the site than :data:`MAX_STATION_DISTANCE_KM`."""
 
 
-def station_distance_km(station: dict[str, Any], site: Site) -> float:
-    """Great-circle (haversine) distance between a weather station and a site [km]."""
+def station_distance_km(station: dict[str, Any], site: Site | Plant) -> float:
+    """Great-circle (haversine) distance between a weather station and a site or plant [km]."""
     p1, p2 = math.radians(station["latitude"]), math.radians(site.latitude)
     dp, dl = p2 - p1, math.radians(site.longitude - station["longitude"])
     h = math.sin(dp / 2) ** 2 + math.cos(p1) * math.cos(p2) * math.sin(dl / 2) ** 2
     return 2 * _EARTH_RADIUS_KM * math.asin(min(1.0, math.sqrt(h)))
 
 
-def check_station(station: dict[str, Any], site: Site, force: bool,
+def check_station(station: dict[str, Any], site: Site | Plant, force: bool,
                   force_name: str = "force") -> dict[str, Any]:
-    """The station's description with its distance to ``site`` (units in the keys); raises
-    :class:`StationTooFar` when it is farther than :data:`MAX_STATION_DISTANCE_KM` and not
-    ``force`` (the message names the flag or field ``force_name``)."""
+    """The station's description with its distance to ``site`` (a twin's site or a plant;
+    units in the keys); raises :class:`StationTooFar` when it is farther than
+    :data:`MAX_STATION_DISTANCE_KM` and not ``force`` (the message names the flag or field
+    ``force_name``)."""
     distance = station_distance_km(station, site)
+    place = (f"site {site.site_id}" if isinstance(site, Site) else f"plant {site.plant_id}")
     out = {"format": station["format"], "name": station["name"],
            "latitude_deg": station["latitude"], "longitude_deg": station["longitude"],
            "altitude_m": station["altitude"], "utc_offset_h": station["utc_offset_h"],
@@ -61,7 +64,7 @@ def check_station(station: dict[str, Any], site: Site, force: bool,
     if distance > MAX_STATION_DISTANCE_KM and not force:
         raise StationTooFar(
             f"the weather station {station['name'] or '?'} ({station['latitude']:.2f}, "
-            f"{station['longitude']:.2f}) is {distance:.0f} km from site {site.site_id} "
+            f"{station['longitude']:.2f}) is {distance:.0f} km from {place} "
             f"({site.latitude:.2f}, {site.longitude:.2f}), more than "
             f"{MAX_STATION_DISTANCE_KM:.0f} km: its sky does not go with this site's sun; use "
             f"weather from nearer the site, or set {force_name} to run on it anyway")

@@ -11,8 +11,8 @@ Martinez-Moreno factor (:mod:`sim.plant.electrical`); SAPM cell temperature
 the same collectors on the same pivots (``Plant.fixed_tilt``/``fixed_azimuth``),
 with its own shade, is simulated alongside.
 
-Weather from a TMY3 file of another place is moved by mean solar time
-(:func:`weather_for_plant`), so that its noon falls on the plant's noon.
+Weather comes on the run's times (a typical year is laid on them by
+:func:`sim.sky.typical_year_at_site`, the twin's rule for a station near or far).
 """
 
 from __future__ import annotations
@@ -40,47 +40,6 @@ _CHUNK = 50_000  # steps per chunk (bounded memory; the temporaries stay small)
 _SAPM = {"a": -3.56, "b": -0.075, "deltaT": 3.0}
 #: Daily clearness index below which a day counts as cloudy [-].
 CLOUDY_KT = 0.4
-
-
-def weather_for_plant(weather: pd.DataFrame, station_longitude: float, plant: Plant,
-                      start: pd.Timestamp, end: pd.Timestamp) -> pd.DataFrame:
-    """Move a typical-year weather series to the plant by mean solar time, repeating the year.
-
-    The series' UTC times are shifted by (station longitude − plant longitude)/15 h
-    so that each record keeps its mean solar time of day, then copies one year
-    earlier and later are added so that any range inside is covered.
-
-    Parameters
-    ----------
-    weather : pandas.DataFrame
-        Tz-aware index; ``ghi``, ``dni``, ``dhi`` [W m⁻²] (``temp_air`` [°C],
-        ``wind_speed`` [m s⁻¹] optional), e.g. from :func:`sim.sky.read_tmy3`.
-    station_longitude : float
-        [°] east positive.
-    plant : Plant
-    start, end : pandas.Timestamp
-        The range to cover.
-    """
-    if weather.index.tz is None:
-        raise ValueError("weather index must be timezone-aware")
-    missing = [c for c in ("ghi", "dni", "dhi") if c not in weather.columns]
-    if missing:
-        raise ValueError(f"weather lacks columns {missing}")
-    w = weather.copy()
-    w.index = w.index.tz_convert("UTC") + pd.Timedelta(
-        hours=(station_longitude - plant.longitude) / 15.0)
-    span = w.index[-1] - w.index[0] + (w.index[1] - w.index[0])
-    parts = [w]
-    k = 1
-    while parts[0].index[0] > start or parts[-1].index[-1] < end:
-        if k > 50:
-            raise ValueError("weather too short to cover the run")
-        before, after = w.copy(), w.copy()
-        before.index = before.index - k * span
-        after.index = after.index + k * span
-        parts = [before, *parts, after]
-        k += 1
-    return pd.concat(parts).sort_index()
 
 
 def _seconds(index: pd.DatetimeIndex) -> FloatArray:
@@ -279,7 +238,7 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
         [s].
     strategy : {"sun", "backtrack", "sky_scan"}
     weather : pandas.DataFrame, optional
-        Covering the range (see :func:`weather_for_plant`); clear sky when None.
+        Covering the range (e.g. :func:`sim.sky.typical_year_at_site`); clear sky when None.
     progress : callable, optional
         Called with the fraction done.
     sky : dict, optional
@@ -407,5 +366,4 @@ def compare_strategies(plant: Plant, start: pd.Timestamp, end: pd.Timestamp,
 
 
 __all__ = ["CLOUDY_KT", "PlantResult", "compare_strategies", "field_shade", "simulate_plant",
-           "sky_conditions",
-           "weather_for_plant"]
+           "sky_conditions"]

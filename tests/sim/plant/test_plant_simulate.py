@@ -8,7 +8,7 @@ import pytest
 from plant_reference import twoaxistracking_fractions
 
 from sim.plant.layout import load_plant
-from sim.plant.simulate import simulate_plant, weather_for_plant
+from sim.plant.simulate import simulate_plant
 
 PLANT = load_plant("penarroya")
 
@@ -44,14 +44,19 @@ def test_summer_day_nobody_shaded_and_tracker_beats_fixed() -> None:
     assert s["gain_vs_fixed_pct"] > 20
 
 
-def test_tmy3_weather_moved_by_solar_time_and_bad_input() -> None:
-    from sim.sky import pvlib_tmy3_path, read_tmy3
+def test_tmy3_weather_from_a_distant_station_and_bad_input() -> None:
+    """pvlib's TMY3 (Greensboro NC) laid on Peñarroya by the twin's rule: only the state of
+    the sky crosses the ocean, so no beam exceeds what the plant's own sun allows."""
+    from sim.sky import pvlib_tmy3_path, read_typical_year, typical_year_at_site
 
-    weather, meta = read_tmy3(pvlib_tmy3_path(), coerce_year=2021)
+    weather, meta = read_typical_year(pvlib_tmy3_path(), "tmy3")
     start = pd.Timestamp("2021-01-01", tz="Europe/Madrid")
     end = start + pd.Timedelta(days=2)
-    w = weather_for_plant(weather, meta["longitude"], PLANT, start, end)
+    w = typical_year_at_site(weather, meta["utc_offset_h"], start, end,
+                             (meta["latitude"], meta["longitude"], meta["altitude"]),
+                             (PLANT.latitude, PLANT.longitude, PLANT.altitude))
     assert w.index[0] <= start and w.index[-1] >= end
+    assert w["dni"].max() < 1100.0
     s = simulate_plant(PLANT, start, end, step_s=1800, weather=w).summary()
     assert s["sky"] == "weather" and s["plant_energy_wh"] > 0
     with pytest.raises(ValueError, match="timezone-aware"):
@@ -76,3 +81,26 @@ def test_chunks_of_time_change_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
     for k, v in a.items():
         assert b[k] == (pytest.approx(v, rel=1e-12) if isinstance(v, float) else v), k
     pd.testing.assert_frame_equal(whole.series, parts.series, rtol=1e-12)
+
+
+def test_cli_weather_from_a_distant_station_needs_force(capsys: pytest.CaptureFixture[str]
+                                                        ) -> None:
+    """``plant simulate --tmy3`` follows the twin's station rule (check_station): Greensboro
+    is 6,000+ km from Peñarroya — refused naming --force, then run with it, the summary
+    naming the station and its distance."""
+    import json
+
+    from backend import cli
+    from sim.sky import pvlib_tmy3_path
+
+    argv = ["plant", "simulate", "--plant", "penarroya", "--start", "2021-06-01",
+            "--end", "2021-06-02", "--step-s", "3600", "--tmy3", str(pvlib_tmy3_path()),
+            "--json", "--no-progress"]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--tmy3:" in err and "km from plant penarroya" in err and "--force" in err
+    assert cli.main([*argv, "--force"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["weather_station"]["forced"] is True
+    assert summary["weather_station"]["distance_km"] > 6000
+    assert summary["sky"] == "weather" and summary["plant_energy_wh"] > 0
