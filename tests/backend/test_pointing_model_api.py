@@ -145,6 +145,22 @@ def test_the_model_recovers_the_mount_and_its_command_holds_the_sun(
     assert miss_mrad(az[0], el[0]) > 10.0  # the plain open loop on SPA
 
 
+def test_a_command_follows_readings_added_to_its_range(
+        client: httpx.Client, live_server: LiveServer) -> None:
+    """The service remembers a range's fit for its commands (no rows read) until readings
+    land in the range: the command then comes from the refit."""
+    readings = [dict(r, ts=r["ts"].replace("2021-10-05", "2021-10-12"))
+                for r in _day_readings()[::10]]
+    day = {"start": "2021-10-12", "end": "2021-10-13", "time": "2021-10-13T12:00:00-06:00"}
+    assert post(client, live_server.write_token, {"readings": readings[::2]}).status_code == 200
+    first = client.get(MODEL + "/command", params=day).json()
+    assert client.get(MODEL + "/command", params=day).json() == first  # remembered
+    assert post(client, live_server.write_token, {"readings": readings[1::2]}).status_code == 200
+    again = client.get(MODEL + "/command", params=day).json()
+    # refitted on twice the observations: the noise moves the terms by ~0.003°
+    assert abs(again["azimuth_deg"] - first["azimuth_deg"]) > 1e-5
+
+
 def test_too_few_observations_and_a_naive_time_are_422s(client: httpx.Client) -> None:
     r = client.get(MODEL, params={"start": "2021-11-01", "end": "2021-11-02"})
     assert r.status_code == 422
@@ -242,7 +258,9 @@ def test_camera_frames_become_observations_the_model_is_fitted_from(
     assert body["array"] == "tracker" and body["site_id"] == "tehuantepec"
     assert body["ts"] == times[0].tz_convert("UTC").strftime("%Y-%m-%dT%H:%M:%SZ")
     png = np.frombuffer(_frame_png(float(true_x[0]), float(true_y[0]), seed=0), np.uint8)
-    detected = analyse_frame(cv2.imdecode(png, cv2.IMREAD_COLOR), CAMERA)
+    image = cv2.imdecode(png, cv2.IMREAD_COLOR)
+    assert image is not None
+    detected = analyse_frame(image, CAMERA)
     assert body["confidence"] == detected["confidence"] > 0  # the detector's own
     assert body["centroid_px"] == pytest.approx(detected["centroid_px"])
     assert body["azimuth_deg"] == pytest.approx(az[0]) and body["elevation_deg"] == el[0]
@@ -293,9 +311,16 @@ def test_a_frame_without_a_sun_or_with_a_bad_field_is_refused_and_not_stored(
     r = _post_frame(client, live_server.token("tehuantepec", scope="ingest"), b"not a png",
                     **fields)
     assert r.status_code == 415 and "file" in r.text
+    big = b"\x89PNG" + bytes(live_server.process.settings.server.max_upload_bytes)
+    r = _post_frame(client, ingest_token, big, **fields)
+    assert r.status_code == 413 and "HELIOTWIN_MAX_UPLOAD_BYTES" in r.text
     stored = client.get(PATH, params={"array": "tracker", "start": "2021-10-13",
                                       "end": "2021-10-14"}).json()["points"]
     assert stored == []
+    # a site-scope token may do what an ingest token may
+    r = _post_frame(client, live_server.token(scope="site"), clear,
+                    **{**fields, "ts": "2021-10-14T11:00:00-06:00"})
+    assert r.status_code == 200, r.text
 
 
 def test_a_pixel_off_the_reference_gives_the_offsets_of_the_definition() -> None:
