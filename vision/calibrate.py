@@ -8,12 +8,26 @@ tilt angles — are fitted by non-linear least squares on the pixel residuals
 detected sun centroids and the sun positions the caller provides from an
 ephemeris (SPA). Both mirrors are fitted and the one with the lower cost is
 kept. Residuals are reported in pixels and as the angle on the sky.
+
+:func:`self_calibrate` needs nothing but the frames, their times' sun positions
+and the image size — no centre, scale, rotation or mirror — after SuMo (Blum et
+al., "Geometric calibration of all-sky cameras using sun and moon positions",
+Solar Energy 2025, doi:10.1016/j.solener.2025.113476): detect the sun in each
+frame, reject the frames whose sun disagrees with the consensus (RANSAC over
+three-frame samples, MSAC scoring; Fischler & Bolles 1981, Torr & Zisserman
+2000), fit the camera to the rest, search each frame again where the fitted
+model and the ephemeris put the sun (the detector's ephemeris-guided path) and
+fit again. The equidistant model comes first; a radial polynomial term is kept
+only where it lowers the leave-one-out error on the sky (the frames the data
+hold, not the fit's own residual, decide).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from itertools import combinations
+from math import comb
 from typing import Any
 
 import numpy as np
@@ -21,7 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from vision.cameras import EAST_SIDES, PROJECTIONS, FisheyeCamera
-from vision.sphere import angular_separation_deg
+from vision.sphere import angular_separation_deg, enu_from_sky
 
 
 @dataclass(frozen=True)
@@ -56,6 +70,9 @@ class CalibrationResult:
             "residuals_px": [float(v) for v in self.residuals_px],
             "residuals_deg": [float(v) for v in self.residuals_deg],
         }
+
+
+_MIRROR_NFEV = 100  # evaluations each mirror gets before the better one is solved on
 
 
 def _camera(p: NDArray[np.float64], east: str, projection: str, n_radial: int,
@@ -94,6 +111,7 @@ def fit_fisheye(
     n_radial: int = 0,
     fit_tilt: bool = False,
     centre_guess_px: tuple[float, float] | None = None,
+    max_nfev: int = 2000,
 ) -> CalibrationResult:
     """Fit a :class:`FisheyeCamera` to sun centroids and their ephemeris positions.
 
@@ -107,6 +125,8 @@ def fit_fisheye(
     east : ``"left"``, ``"right"`` or ``"auto"`` (fit both, keep the better).
     n_radial : number of radial polynomial terms (0–2) to fit.
     fit_tilt : also fit the two tilt angles.
+    centre_guess_px : where the solver starts the centre (default the image centre).
+    max_nfev : evaluations allowed to each mirror's solve.
 
     Needs at least as many frames as half the number of parameters plus one
     (four parameters → three frames).
@@ -132,25 +152,34 @@ def fit_fisheye(
     cx0, cy0 = centre_guess_px if centre_guess_px is not None else ((w - 1) / 2, (h - 1) / 2)
     sides = EAST_SIDES if east == "auto" else (east,)
 
+    def resid_of(side: str) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
+        def resid(p: NDArray[np.float64]) -> NDArray[np.float64]:
+            cam = _camera(p, side, projection, n_radial, fit_tilt)
+            px, py = cam.sky_to_pixel(az, el)
+            r = np.concatenate([px - x, py - y])
+            return np.where(np.isfinite(r), r, 1e4)
+        return resid
+
+    # with both mirrors: each solved for at most _MIRROR_NFEV evaluations, the better one
+    # then to convergence (the wrong mirror's solve would grind to its limit)
+    first = min(max_nfev, _MIRROR_NFEV) if len(sides) > 1 else max_nfev
     best: tuple[float, Any, str] | None = None
     costs: dict[str, float] = {}
     for side in sides:
         k0, off0 = _initial(x, y, az, el, cx0, cy0, side, projection)
         p0 = np.concatenate([[cx0, cy0, k0, off0], np.zeros(n_radial),
                              np.zeros(2 if fit_tilt else 0)])
-
-        def resid(p: NDArray[np.float64], side: str = side) -> NDArray[np.float64]:
-            cam = _camera(p, side, projection, n_radial, fit_tilt)
-            px, py = cam.sky_to_pixel(az, el)
-            r = np.concatenate([px - x, py - y])
-            return np.where(np.isfinite(r), r, 1e4)
-
-        sol = least_squares(resid, p0, method="trf", x_scale="jac", max_nfev=2000)
+        sol = least_squares(resid_of(side), p0, method="trf", x_scale="jac", max_nfev=first)
         costs[side] = float(sol.cost)
         if best is None or sol.cost < best[0]:
-            best = (float(sol.cost), sol.x, side)
+            best = (float(sol.cost), sol, side)
     assert best is not None
-    _, p, side = best
+    _, sol, side = best
+    if sol.status == 0 and first < max_nfev:  # stopped at the evaluation limit: go on
+        sol = least_squares(resid_of(side), sol.x, method="trf", x_scale="jac",
+                            max_nfev=max_nfev - first)
+        costs[side] = float(sol.cost)
+    p = sol.x
     cam = _camera(p, side, projection, n_radial, fit_tilt)
     px, py = cam.sky_to_pixel(az, el)
     res_px = np.hypot(px - x, py - y)
@@ -164,60 +193,294 @@ def fit_fisheye(
                              other[0] if other else None, tuple(f for f in fitted if f))
 
 
-def calibrate_frames(
-    images: Iterable[NDArray[Any]],
-    azimuth_deg: ArrayLike,
-    elevation_deg: ArrayLike,
-    names: Sequence[str] | None = None,
-    method: str = "robust",
-    **fit_kwargs: Any,
-) -> tuple[CalibrationResult, list[dict[str, Any]]]:
-    """Detect the sun in each frame (:func:`vision.detect.detect_sun`) and fit a camera.
+# --------------------------------------------------------------------------- self-calibration
 
-    ``images`` may be a generator: each frame is dropped once its sun is found,
-    so a batch of large frames needs the memory of one. ``azimuth_deg``/
-    ``elevation_deg`` are the ephemeris sun at each frame's time; frames with
-    no sun found or the sun below the horizon are left out.
-    ``fit_kwargs`` go to :func:`fit_fisheye` (``projection``, ``east``,
-    ``n_radial``, ``fit_tilt``). Returns the fit and one report per frame
-    (``name``, ``sun_found``, ``confidence``, ``centroid_px``, ``used`` and, for
-    the used ones, ``residual_px`` and ``residual_deg``). A ValueError names the
-    frames without a sun when too few are left.
+#: detection passes of :func:`self_calibrate` (blind, then ephemeris-guided): each frame is
+#: decoded this many times, what a caller's cost bound counts
+CALIBRATION_PASSES = 2
+#: a frame whose sun lies farther than this from the consensus model is an outlier [°]
+OUTLIER_DEG = 1.0
+_RANSAC_SAMPLE = 3  # frames per sample: six equations for the four base parameters
+#: samples drawn (all of them when there are fewer triples): with 30 % of the frames
+#: outliers, 20 draws all miss a clean triple with probability (1 − 0.7³)²⁰ < 0.001
+_RANSAC_TRIALS = 20
+
+
+def sky_residuals_deg(camera: FisheyeCamera, x_px: ArrayLike, y_px: ArrayLike,
+                      azimuth_deg: ArrayLike, elevation_deg: ArrayLike) -> NDArray[np.float64]:
+    """Angle on the sky [°] between the direction a camera gives each pixel and the sun.
+
+    The angle through the centre of the camera's sphere, so a frame near the
+    horizon of a fisheye counts as much as one near the zenith (pixel residuals
+    do not: the px/° of a projection varies).
     """
+    v = camera.pixel_to_direction(x_px, y_px)
+    s = enu_from_sky(azimuth_deg, elevation_deg)
+    out = np.degrees(np.arccos(np.clip(np.sum(v * s, axis=-1), -1.0, 1.0)))
+    return np.where(np.isfinite(out), out, 180.0)
+
+
+@dataclass(frozen=True)
+class RobustFit:
+    """:func:`robust_fit`: the fit on the inliers and every frame's residual to it."""
+
+    result: CalibrationResult
+    inlier: NDArray[np.bool_]
+    residuals_deg: NDArray[np.float64]
+    residuals_px: NDArray[np.float64]
+
+
+def _residuals_all(cam: FisheyeCamera, x: NDArray[np.float64], y: NDArray[np.float64],
+                   az: NDArray[np.float64], el: NDArray[np.float64]
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    px, py = cam.sky_to_pixel(az, el)
+    res_px = np.hypot(px - x, py - y)
+    return sky_residuals_deg(cam, x, y, az, el), np.where(np.isfinite(res_px), res_px, np.inf)
+
+
+def robust_fit(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
+               elevation_deg: ArrayLike, image_size: tuple[int, int],
+               outlier_deg: float = OUTLIER_DEG, seed: int = 0, **fit_kwargs: Any) -> RobustFit:
+    """:func:`fit_fisheye` with the outlying frames left out.
+
+    RANSAC (Fischler & Bolles 1981) over samples of three frames, each fitted
+    with the four base parameters (centre, scale, north offset; both mirrors),
+    scored by MSAC (Torr & Zisserman 2000: the sum of the squared sky residuals
+    [°], each capped at ``outlier_deg``²); the best sample's inliers (within
+    ``outlier_deg``) are fitted with the full model (``fit_kwargs``), and the
+    inliers of that fit are fitted again until the set no longer changes (at
+    most five times; the refits keep the first one's mirror). A sample's solve stops
+    after 60 evaluations (a degenerate triple only has to lose). Every triple is tried
+    when there are at most :data:`_RANSAC_TRIALS`; otherwise that many random ones
+    (``seed``). Returns the fit and every
+    frame's residual to it, inlier or not.
+    """
+    x, y = np.asarray(x_px, float).ravel(), np.asarray(y_px, float).ravel()
+    az, el = np.asarray(azimuth_deg, float).ravel(), np.asarray(elevation_deg, float).ravel()
+    n = x.size
+    if not (n == y.size == az.size == el.size):
+        raise ValueError("x_px, y_px, azimuth_deg and elevation_deg must have the same length")
+    if not outlier_deg > 0:
+        raise ValueError(f"outlier_deg must be positive, got {outlier_deg}")
+    n_par = 4 + int(fit_kwargs.get("n_radial", 0)) + (2 if fit_kwargs.get("fit_tilt") else 0)
+    if 2 * n < n_par + 2:
+        raise ValueError(f"{n} frames are too few to fit {n_par} parameters")
+    base = {k: v for k, v in fit_kwargs.items() if k in ("projection", "east",
+                                                          "centre_guess_px")}
+    inlier = np.ones(n, bool)
+    if n > _RANSAC_SAMPLE + 1:
+        if comb(n, _RANSAC_SAMPLE) <= _RANSAC_TRIALS:
+            samples = [np.array(c) for c in combinations(range(n), _RANSAC_SAMPLE)]
+        else:
+            rng = np.random.default_rng(seed)
+            samples = [np.sort(rng.choice(n, _RANSAC_SAMPLE, replace=False))
+                       for _ in range(_RANSAC_TRIALS)]
+        best = np.inf
+        for s in samples:
+            try:
+                cand = fit_fisheye(x[s], y[s], az[s], el[s], image_size, max_nfev=60,
+                                   **base).camera
+            except ValueError:
+                continue
+            r = sky_residuals_deg(cand, x, y, az, el)
+            score = float(np.sum(np.minimum(r, outlier_deg) ** 2))
+            if score < best:
+                best, inlier = score, r <= outlier_deg
+        if 2 * int(inlier.sum()) < n_par + 2:
+            inlier = np.ones(n, bool)  # no consensus: everything, and say so in the residuals
+    first: CalibrationResult | None = None
+    for _ in range(5):
+        use = np.flatnonzero(inlier)
+        # the first fit tries both mirrors (unless one is given); the refits keep its mirror
+        kw = fit_kwargs if first is None else {**fit_kwargs, "east": first.camera.east}
+        res = fit_fisheye(x[use], y[use], az[use], el[use], image_size, **kw)
+        if first is None:
+            first = res
+        r_deg, r_px = _residuals_all(res.camera, x, y, az, el)
+        now = r_deg <= outlier_deg
+        if np.array_equal(now, inlier) or 2 * int(now.sum()) < n_par + 2:
+            break
+        inlier = now
+    assert first is not None
+    if res is not first and res.cost_other_mirror is None:
+        res = replace(res, cost_other_mirror=first.cost_other_mirror)
+    return RobustFit(res, inlier, r_deg, r_px)
+
+
+def leave_one_out_deg(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
+                      elevation_deg: ArrayLike, image_size: tuple[int, int],
+                      **fit_kwargs: Any) -> NDArray[np.float64]:
+    """Each frame's sky residual [°] to the camera fitted on all the others (held out)."""
+    x, y = np.asarray(x_px, float).ravel(), np.asarray(y_px, float).ravel()
+    az, el = np.asarray(azimuth_deg, float).ravel(), np.asarray(elevation_deg, float).ravel()
+    out = np.empty(x.size)
+    for i in range(x.size):
+        keep = np.arange(x.size) != i
+        cam = fit_fisheye(x[keep], y[keep], az[keep], el[keep], image_size,
+                          **fit_kwargs).camera
+        out[i] = sky_residuals_deg(cam, x[i:i + 1], y[i:i + 1], az[i:i + 1], el[i:i + 1])[0]
+    return out
+
+
+def choose_radial(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
+                  elevation_deg: ArrayLike, image_size: tuple[int, int],
+                  max_terms: int = 2, **fit_kwargs: Any) -> tuple[int, list[dict[str, Any]]]:
+    """How many radial polynomial terms the frames support: 0 (the plain projection) unless
+    a term lowers the leave-one-out RMS on the sky, one term at a time.
+
+    Returns the number of terms and, for each tried, ``n_radial`` and ``loo_rms_deg``. A
+    term needs frames enough for a leave-one-out fit with one frame to spare.
+    """
+    x = np.asarray(x_px, float).ravel()
+    tried: list[dict[str, Any]] = []
+    chosen, best = 0, np.inf
+    for k in range(max_terms + 1):
+        n_par = 4 + k + (2 if fit_kwargs.get("fit_tilt") else 0)
+        if 2 * (x.size - 1) < n_par + 4:
+            break
+        loo = leave_one_out_deg(x, y_px, azimuth_deg, elevation_deg, image_size,
+                                n_radial=k, **fit_kwargs)
+        rms = float(np.sqrt(np.mean(loo**2)))
+        tried.append({"n_radial": k, "loo_rms_deg": rms})
+        if rms < best:
+            chosen, best = k, rms
+        else:
+            break  # a term that does not help: the next one will not be tried
+    return chosen, tried
+
+
+@dataclass(frozen=True)
+class SelfCalibration:
+    """:func:`self_calibrate`'s answer.
+
+    ``fit`` is the camera fitted on the inlier frames; ``frames`` one report per
+    frame; ``loo_deg`` the leave-one-out residual of each inlier (in ``fit``'s
+    order; empty when too few frames); ``model_selection`` the radial terms tried.
+    """
+
+    fit: CalibrationResult
+    frames: list[dict[str, Any]]
+    loo_deg: NDArray[np.float64]
+    model_selection: list[dict[str, Any]]
+
+    @property
+    def n_outliers(self) -> int:
+        return sum(1 for f in self.frames if f.get("outlier"))
+
+    @property
+    def loo_rms_deg(self) -> float | None:
+        return float(np.sqrt(np.mean(self.loo_deg**2))) if self.loo_deg.size else None
+
+
+def _detect_all(load: Callable[[int], NDArray[Any]], n: int, method: str,
+                camera: FisheyeCamera | None, az: NDArray[np.float64],
+                el: NDArray[np.float64]) -> tuple[list[Any], tuple[int, int]]:
     from vision.detect import detect_sun
 
+    out: list[Any] = []
+    sizes: set[tuple[int, int]] = set()
+    for i in range(n):
+        img = load(i)
+        sizes.add((int(img.shape[1]), int(img.shape[0])))
+        if len(sizes) != 1:
+            raise ValueError(f"every frame must have the same size, got {sorted(sizes)}")
+        if camera is None or el[i] <= 0 or method != "robust":
+            out.append(detect_sun(img, method=method))
+        else:
+            px, py = camera.sky_to_pixel(az[i], el[i])
+            out.append(detect_sun(img, method=method, camera=camera,
+                                  expected_px=(float(px), float(py))))
+        del img
+    return out, sizes.pop()
+
+
+def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
+                   elevation_deg: ArrayLike, names: Sequence[str] | None = None,
+                   method: str = "robust", projection: str = "equidistant",
+                   east: str = "auto", n_radial: int | None = None, fit_tilt: bool = False,
+                   outlier_deg: float = OUTLIER_DEG, guided: bool = True) -> SelfCalibration:
+    """Fit a fisheye camera from frames, their sun positions and nothing else (SuMo-style).
+
+    ``load(i)`` decodes frame ``i`` (called once per pass, so a batch of large
+    frames needs the memory of one); ``azimuth_deg``/``elevation_deg`` are the
+    ephemeris sun at each frame's time. Steps (the module docstring): blind
+    detection (:func:`vision.detect.detect_sun`), :func:`robust_fit` of the four
+    base parameters, then — with ``guided`` and the ``robust`` method — each
+    frame searched again around the sun the fitted model predicts, and the model
+    fitted again; ``n_radial=None`` lets :func:`choose_radial` decide the radial
+    terms. Each frame's report: ``name``, ``sun_found``, ``confidence``,
+    ``centroid_px``, ``search`` (``blind`` or ``ephemeris-guided``), ``used``,
+    ``outlier`` and, when a sun was found above the horizon, ``residual_px`` and
+    ``residual_deg`` to the final model. A ValueError says why when too few
+    frames are left.
+    """
     az = np.asarray(azimuth_deg, float).ravel()
     el = np.asarray(elevation_deg, float).ravel()
     if az.size != el.size:
         raise ValueError(f"{az.size} azimuths but {el.size} elevations")
-    names = list(names) if names is not None else [f"frame {i}" for i in range(az.size)]
-    sizes: set[tuple[int, int]] = set()
+    n = az.size
+    names = list(names) if names is not None else [f"frame {i}" for i in range(n)]
+    if n_radial is not None and not 0 <= n_radial <= 2:
+        raise ValueError("n_radial must be 0, 1, 2 or None (chosen from the frames)")
+    fixed: dict[str, Any] = {"projection": projection, "east": east, "fit_tilt": fit_tilt}
+
+    def fit_from(dets: list[Any], size: tuple[int, int], k: int
+                 ) -> tuple[NDArray[np.intp], RobustFit]:
+        use = np.array([i for i, d in enumerate(dets)
+                        if d.sun_found and d.centroid_px is not None and el[i] > 0], int)
+        n_par = 4 + k + (2 if fit_tilt else 0)
+        if 2 * use.size < n_par + 2:
+            missing = [names[i] for i in range(n) if i not in set(use.tolist())]
+            raise ValueError(f"only {use.size} frames have a sun found above the horizon "
+                             f"(none in: {', '.join(missing) or 'none'}); {n_par} parameters "
+                             f"need at least {(n_par + 3) // 2}")
+        xy = np.array([dets[i].centroid_px for i in use], float)
+        fov = next((d.fov for d in dets if getattr(d, "fov", None) is not None), None)
+        guess = (fov.cx_px, fov.cy_px) if fov is not None else None
+        rf = robust_fit(xy[:, 0], xy[:, 1], az[use], el[use], size, outlier_deg,
+                        n_radial=k, centre_guess_px=guess, **fixed)
+        return use, rf
+
+    dets, size = _detect_all(load, n, method, None, az, el)
+    search = ["blind"] * n
+    use, rf = fit_from(dets, size, 0 if n_radial is None else n_radial)
+    if guided and method == "robust":
+        again, _ = _detect_all(load, n, method, rf.result.camera, az, el)
+        # keep the guided answer where it found a sun; a refusal keeps the blind one
+        for i, d in enumerate(again):
+            if d.sun_found and d.centroid_px is not None:
+                dets[i], search[i] = d, "ephemeris-guided"
+        use, rf = fit_from(dets, size, 0 if n_radial is None else n_radial)
+    selection: list[dict[str, Any]] = []
+    inl = use[rf.inlier]
+    xy = np.array([dets[i].centroid_px for i in inl], float).reshape(-1, 2)
+    # the mirror is the consensus's; held-out fits start from its centre (each mirror's
+    # solve costs as much again, and the wrong one's grinds to its limit)
+    known: dict[str, Any] = {**fixed, "east": rf.result.camera.east,
+                             "centre_guess_px": (rf.result.camera.cx_px,
+                                                 rf.result.camera.cy_px)}
+    if n_radial is None:
+        k, selection = choose_radial(xy[:, 0], xy[:, 1], az[inl], el[inl], size, **known)
+        if k:
+            use, rf = fit_from(dets, size, k)
+            inl = use[rf.inlier]
+            xy = np.array([dets[i].centroid_px for i in inl], float).reshape(-1, 2)
+    k = len(rf.result.camera.radial_coeffs)
+    loo_kwargs = {**known, "n_radial": k}
+    n_par = 4 + k + (2 if fit_tilt else 0)
+    loo = (leave_one_out_deg(xy[:, 0], xy[:, 1], az[inl], el[inl], size, **loo_kwargs)
+           if 2 * (inl.size - 1) >= n_par + 2 else np.empty(0))
+    at = {int(i): j for j, i in enumerate(use)}
     report: list[dict[str, Any]] = []
-    use: list[int] = []
-    for i, img in enumerate(images):
-        if i >= az.size:
-            raise ValueError(f"more frames than the {az.size} sun positions")
-        sizes.add((int(img.shape[1]), int(img.shape[0])))
-        if len(sizes) != 1:
-            raise ValueError(f"every frame must have the same size, got {sorted(sizes)}")
-        d = detect_sun(img, method=method)
-        ok = d.sun_found and d.centroid_px is not None and el[i] > 0
-        report.append({"name": names[i], "sun_found": d.sun_found, "confidence": d.confidence,
-                       "centroid_px": list(d.centroid_px) if d.centroid_px else None,
-                       "used": bool(ok)})
-        if ok:
-            use.append(i)
-    if len(report) != az.size:
-        raise ValueError(f"{len(report)} frames but {az.size} sun positions")
-    n_par = 4 + int(fit_kwargs.get("n_radial", 0)) + (2 if fit_kwargs.get("fit_tilt") else 0)
-    if 2 * len(use) < n_par + 2:
-        missing = [str(r["name"]) for r in report if not r["used"]]
-        raise ValueError(f"only {len(use)} frames have a sun found above the horizon "
-                         f"(none used: {', '.join(missing) or 'none'}); {n_par} parameters "
-                         f"need at least {(n_par + 3) // 2}")
-    xy = np.array([report[i]["centroid_px"] for i in use], float)
-    res = fit_fisheye(xy[:, 0], xy[:, 1], az[use], el[use], sizes.pop(), **fit_kwargs)
-    for k, i in enumerate(use):
-        report[i]["residual_px"] = float(res.residuals_px[k])
-        report[i]["residual_deg"] = float(res.residuals_deg[k])
-    return res, report
+    for i, d in enumerate(dets):
+        j = at.get(i)
+        r: dict[str, Any] = {
+            "name": names[i], "sun_found": bool(d.sun_found), "confidence": float(d.confidence),
+            "centroid_px": list(d.centroid_px) if d.centroid_px else None,
+            "search": search[i], "used": bool(j is not None and rf.inlier[j]),
+            "outlier": bool(j is not None and not rf.inlier[j])}
+        if j is not None:
+            r["residual_px"] = float(rf.residuals_px[j])
+            r["residual_deg"] = float(rf.residuals_deg[j])
+        report.append(r)
+    return SelfCalibration(rf.result, report, loo, selection)

@@ -21,7 +21,7 @@ import pandas as pd
 from backend.errors import InputError
 from sim.sun import solar_position
 from vision.analyse import analyse_frame
-from vision.calibrate import calibrate_frames
+from vision.calibrate import self_calibrate
 from vision.cameras import FisheyeCamera, PinholeCamera
 from vision.imageio import ImageError, decode_image, image_size
 from vision.metrics import error_table
@@ -122,17 +122,25 @@ def iso(ts: dt.datetime | None) -> str | None:
 
 
 def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
-               n_radial: int, fit_tilt: bool, method: str, max_pixels: int
-               ) -> dict[str, Any]:
-    """Ephemeris for each frame, then ``vision.calibrate.calibrate_frames``; a stored row."""
+              n_radial: int | None, fit_tilt: bool, method: str, max_pixels: int
+              ) -> dict[str, Any]:
+    """Ephemeris for each frame, then ``vision.calibrate.self_calibrate``; a stored row.
+
+    Needs nothing but the frames, their times and the place: the centre, scale,
+    north offset and mirror are fitted, frames whose sun disagrees with the
+    consensus are reported as outliers and left out, and ``n_radial=None`` lets
+    the frames decide the radial terms (leave-one-out). Each frame is decoded once
+    per detection pass (:data:`vision.calibrate.CALIBRATION_PASSES`), one at a time.
+    """
     sp = ephemeris([f[1] for f in frames], place)
     az, el = sp["azimuth"].to_numpy(), sp["apparent_elevation"].to_numpy()
-    res, frame_reports = calibrate_frames(
-        (decode(f[0], max_pixels) for f in frames), az, el,
-        names=[f[0].filename for f in frames], method=method,
-        projection=projection, east=east, n_radial=n_radial, fit_tilt=fit_tilt)
+    cal = self_calibrate(lambda i: decode(frames[i][0], max_pixels), az, el,
+                         names=[f[0].filename for f in frames], method=method,
+                         projection=projection, east=east, n_radial=n_radial,
+                         fit_tilt=fit_tilt)
+    res = cal.fit
     report = []
-    for i, (r, (up, ts)) in enumerate(zip(frame_reports, frames, strict=True)):
+    for i, (r, (up, ts)) in enumerate(zip(cal.frames, frames, strict=True)):
         r = {"filename": up.filename, "timestamp": iso(ts),
              **{k: v for k, v in r.items() if k != "name"}}
         r["ephemeris"] = {"azimuth_deg": float(az[i]), "elevation_deg": float(el[i])}
@@ -149,7 +157,9 @@ def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
         "tilt_north_deg": cam["tilt_north_deg"], "tilt_east_deg": cam["tilt_east_deg"],
         "image_width_px": w, "image_height_px": h, "n_frames": res.n_frames,
         "rms_px": out["rms_px"], "max_px": out["max_px"], "rms_deg": out["rms_deg"],
-        "max_deg": out["max_deg"], "frames": report,
+        "max_deg": out["max_deg"], "n_outliers": cal.n_outliers,
+        "loo_rms_deg": cal.loo_rms_deg, "model_selection": cal.model_selection,
+        "frames": report,
     }
 
 

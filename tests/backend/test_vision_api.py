@@ -296,17 +296,28 @@ def test_evaluate_gives_seed003_tables(client: httpx.Client) -> None:
 
 
 def test_real_wettermast_calibration_over_http(client: httpx.Client) -> None:
+    """Nothing but frames, times and a place: the six labelled Wettermast frames and a
+    seventh whose clock is two hours wrong, which is named as the outlier."""
     with (REAL_SKY / "metadata.csv").open(newline="") as fh:
-        rows = [r for r in csv.DictReader(fh) if r["sun_row_label"]]
+        rows = [r for r in csv.DictReader(fh) if r["filename"].startswith("Wettermast")]
     files = [("files", (r["filename"], (REAL_SKY / r["filename"]).read_bytes(), "image/jpeg"))
-             for r in rows]
-    stamps = [r["utc_time"] for r in rows]
+             for r in rows + rows[2:3]]
+    stamps = [r["utc_time"] for r in rows] + ["2016-06-15T12:24:30Z"]  # rows[2] is 10:24:30
     r = client.post("/api/v1/vision/calibrations", files=files,
                     data={"timestamps": stamps, "latitude_deg": rows[0]["lat"],
                           "longitude_deg": rows[0]["lon"]})
     assert r.status_code == 201, r.text
     cal = r.json()
     assert cal["n_frames"] == 6 and cal["rms_px"] <= 4.0
+    assert cal["n_outliers"] == 1 and [f["outlier"] for f in cal["frames"]] == [False] * 6 + [True]
+    # the wrong clock moves the sun 8° along its path
+    assert cal["frames"][-1]["residual_deg"] > 5 and not cal["frames"][-1]["used"]
+    assert all(f["residual_deg"] < 0.5 for f in cal["frames"][:6])
+    # the README's fit of the six labels: 11.7 px/°, centre near (972, 956), east left
+    assert cal["px_per_deg"] == pytest.approx(11.7, rel=0.03) and cal["east"] == "left"
+    assert cal["loo_rms_deg"] is not None and cal["loo_rms_deg"] < 0.6
+    stored = client.get(f"/api/v1/vision/calibrations/{cal['calibration_id']}").json()
+    assert [f["outlier"] for f in stored["frames"]] == [False] * 6 + [True]
     uceeb = REAL_SKY / "UCEEB_20180321085500_11.jpg"
     r = client.post(SUN, files={"file": (uceeb.name, uceeb.read_bytes(), "image/jpeg")},
                     data={"camera": "fisheye", "px_per_deg": "10", "timestamp":

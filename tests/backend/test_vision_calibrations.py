@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 import pvlib
 import pytest
-from live_service import LiveServer
+from live_service import InProcessServer, LiveServer
 
 from vision.cameras import FisheyeCamera, px_per_deg_for_horizon
 from vision.skyrender import SkyScene, render
@@ -158,3 +158,42 @@ def test_named_calibrations_deleted_with_their_detections(client: httpx.Client,
     r = client.delete("/api/v1/vision/detections", params={**params, "end": day},
                       headers=auth)
     assert r.status_code == 422 and "end" in r.json()["detail"]
+
+
+def test_anonymous_calibrations_pruned_and_bounded_by_cost(tmp_path: Path) -> None:
+    """Issue 23 item 4: calibrations fitted without a token are kept within
+    ``anonymous_keep_rows`` (as detections are; a token's stay), and a batch is priced
+    in pixels decoded (frames × pixels × two detection passes): more than the whole
+    per-minute allowance is a 413 naming ``files``, more than what is left a 429 with
+    Retry-After (a token's batches are bounded by the file count and frame size only)."""
+    cam = FisheyeCamera(318.0, 242.0, 2.45, north_offset_deg=40.0, east="right")
+    day = "2024-04-09"
+    times = [f"{day}T{h:02d}:20:00-06:00" for h in (8, 12, 16)]
+    frames = [_frame(ts, cam, 30 + i) for i, ts in enumerate(times)]
+    one = 2 * 3 * 640 * 480  # one three-frame calibration: two passes over 3 frames
+    env = {"HELIOTWIN_VISION_ANONYMOUS_KEEP_ROWS": "1",
+           "HELIOTWIN_ANONYMOUS_VISION_PIXELS_PER_MIN": str(2 * one)}
+
+    def post(c: httpx.Client, n: int, headers: dict[str, str] | None = None) -> httpx.Response:
+        files = [("files", (f"c{i}.png", frames[i % 3], "image/png")) for i in range(n)]
+        stamps = [times[i % 3] for i in range(n)]
+        return c.post("/api/v1/vision/calibrations", files=files, headers=headers or {},
+                      data={"timestamps": stamps, "site_id": "tehuantepec"})
+
+    server = InProcessServer(f"sqlite:///{tmp_path / 'v.sqlite'}", env)
+    with server, server.client(timeout_s=60) as c:
+        auth = {"Authorization": f"Bearer {server.token()}"}
+        r = post(c, 7)  # 7 frames × 2 passes: more than the whole allowance
+        assert r.status_code == 413 and r.json()["detail"].startswith("files:"), r.text
+        ids = []
+        for headers in (None, auth, None):
+            r = post(c, 3, headers)
+            assert r.status_code == 201, r.text
+            ids.append(r.json()["calibration_id"])
+        r = post(c, 3)  # the allowance held two: the third waits
+        assert r.status_code == 429 and int(r.headers["Retry-After"]) > 0, r.text
+        listed = [x["calibration_id"] for x in
+                  c.get("/api/v1/vision/calibrations").json()["calibrations"]]
+        # the older anonymous one is gone, the token's and the newest anonymous one stay
+        assert listed == [ids[2], ids[1]]
+        assert c.get(f"/api/v1/vision/calibrations/{ids[0]}").status_code == 404

@@ -7,8 +7,11 @@
   elevation; for a fisheye also its pixel ``ephemeris.centroid_px`` through
   the same camera model) and the error (``error.separation_deg`` on the
   sphere, ``error.distance_px``). Stored.
-- ``POST /calibrations`` — ``files`` with one ``timestamps`` each and a place →
-  a fitted fisheye camera (``vision.calibrate``), stored with its residuals.
+- ``POST /calibrations`` — ``files`` with one ``timestamps`` each and a place
+  (nothing else: no centre, scale, rotation or mirror) → a fitted fisheye camera
+  (``vision.calibrate.self_calibrate``: outlying frames named and left out), stored
+  with its per-frame residuals; a calibration made without a token is kept within
+  ``anonymous_keep_rows``, as detections are.
 - ``GET /calibrations``, ``GET /calibrations/{id}``.
 - ``POST /evaluate`` — a batch against SPA for each detection method: seed
   003's Table 2 (per frame) and Table 3 (MAD/MSE/RMSE/MAPE).
@@ -61,7 +64,7 @@ from backend.api.schemas.vision import (
     SunDetectionRead,
 )
 from backend.limits import Busy, prune_anonymous
-from backend.storage.tables import VisionDetection
+from backend.storage.tables import VisionCalibration, VisionDetection
 from backend.timestamps import TimestampError, parse_day_or_instant, parse_instant
 from backend.vision.checks import error_warnings
 from backend.vision.frames import FrameInputs, frame_inputs, time_from_name
@@ -87,6 +90,7 @@ from backend.vision.store import (
     list_calibrations,
     list_detections,
 )
+from vision.calibrate import CALIBRATION_PASSES
 from vision.cameras import (
     EAST_SIDES,
     PROJECTIONS,
@@ -140,31 +144,50 @@ async def _upload(upload: Any, field: str, max_pixels: int) -> Upload:
 
 @asynccontextmanager
 async def _admitted(ctx: Any, request: Request, token_site: str | None,
-                    frames: list[Upload]) -> AsyncIterator[None]:
-    """The bounds of ``backend/limits.py`` around decoding ``frames`` (one at a time):
-    without a token the client's per-minute pixel allowance (429), then one frame's
-    share of the decode budget, waited for in a bounded queue (503)."""
+                    frames: list[Upload], passes: int = 1) -> AsyncIterator[None]:
+    """The bounds of ``backend/limits.py`` around decoding ``frames`` (one at a time,
+    each ``passes`` times): without a token the client's per-minute pixel allowance
+    (429 with Retry-After), a batch costing more than the whole allowance refused
+    outright (413 naming ``files``: no wait would admit it), then one frame's share of
+    the decode budget, waited for in a bounded queue (503)."""
     try:
         if token_site is None:
-            ctx.limits.vision_pixels.take(request.client.host if request.client else "?",
-                                          sum(w * h for w, h in (f.size_px for f in frames)))
+            cost = passes * sum(w * h for w, h in (f.size_px for f in frames))
+            allowance = ctx.limits.vision_pixels.capacity
+            if len(frames) > 1 and cost > allowance:
+                raise HTTPException(413, f"files: {len(frames)} frames decoded {passes}× are "
+                                         f"{cost} pixels, more than a request without a token "
+                                         f"may cost ({allowance:.0f} pixels, "
+                                         f"HELIOTWIN_ANONYMOUS_VISION_PIXELS_PER_MIN); send "
+                                         f"fewer or smaller frames, or a write token")
+            ctx.limits.vision_pixels.take(request.client.host if request.client else "?", cost)
         async with ctx.limits.decode.hold(max(w * h for w, h in (f.size_px for f in frames))):
             yield
     except Busy as exc:
         raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
 
 
-async def _store_detection(ctx: Any, row: dict[str, Any], anonymous: bool) -> int:
-    """Insert a detection; an anonymous one keeps only the newest anonymous rows."""
+async def _store(ctx: Any, insert: Any, table: Any, row: dict[str, Any], anonymous: bool
+                 ) -> int:
+    """Insert a detection or a calibration; an anonymous one keeps only the newest
+    ``anonymous_keep_rows`` anonymous rows of its table (``prune_anonymous``)."""
     keep = ctx.settings.vision.anonymous_keep_rows
 
     def store(conn: Any) -> int:
-        det_id = insert_detection(conn, {**row, "anonymous": anonymous})
+        new_id = int(insert(conn, {**row, "anonymous": anonymous}))
         if anonymous:
-            prune_anonymous(conn, VisionDetection, keep)
-        return det_id
+            prune_anonymous(conn, table, keep)
+        return new_id
 
     return int(await asyncio.wrap_future(ctx.writer.call(store)))
+
+
+async def _store_detection(ctx: Any, row: dict[str, Any], anonymous: bool) -> int:
+    return await _store(ctx, insert_detection, VisionDetection, row, anonymous)
+
+
+async def _store_calibration(ctx: Any, row: dict[str, Any], anonymous: bool) -> int:
+    return await _store(ctx, insert_calibration, VisionCalibration, row, anonymous)
 
 
 def _timestamp(text: str | None, field: str = "timestamp") -> dt.datetime | None:
@@ -379,7 +402,9 @@ _CAL_DOC = {
                            "description": "ISO 8601 with offset, one per file, same order"},
             "projection": {"type": "string"}, "east": {"type": "string",
                                                       "enum": ["auto", "left", "right"]},
-            "n_radial": {"type": "integer", "minimum": 0, "maximum": 2},
+            "n_radial": {"type": "string", "enum": ["auto", "0", "1", "2"],
+                         "description": "radial polynomial terms; auto (default): as many "
+                                        "as lower the leave-one-out error"},
             "name": {"type": "string", "maxLength": 100,
                      "description": "a name for the calibration (default: projection, "
                                     "frames, day)"},
@@ -406,24 +431,25 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
     if east not in ("auto", *EAST_SIDES):
         raise HTTPException(422, f"east: must be auto, left or right, got {east!r}")
     fit_tilt = form_flag(_text(form, "fit_tilt"), "fit_tilt")
-    n_radial_text = _text(form, "n_radial") or "0"
-    if n_radial_text not in ("0", "1", "2"):
-        raise HTTPException(422, f"n_radial: must be 0, 1 or 2, got {n_radial_text!r}")
+    n_radial_text = _text(form, "n_radial") or "auto"
+    if n_radial_text not in ("auto", "0", "1", "2"):
+        raise HTTPException(422, f"n_radial: must be auto, 0, 1 or 2, got {n_radial_text!r}")
+    n_radial = None if n_radial_text == "auto" else int(n_radial_text)
     method = _method(form)
     name = _text(form, "name") or ""
     if len(name) > 100:
         raise HTTPException(422, f"name: at most 100 characters, got {len(name)}")
     frames, place = await _timed_frames(ctx, form, 3)
     try:
-        async with _admitted(ctx, request, _token, [f[0] for f in frames]):
+        async with _admitted(ctx, request, _token, [f[0] for f in frames], CALIBRATION_PASSES):
             row = await anyio.to_thread.run_sync(
-                calibrate, frames, place, projection, east, int(n_radial_text), fit_tilt,
+                calibrate, frames, place, projection, east, n_radial, fit_tilt,
                 method, ctx.settings.vision.max_pixels)
     except ValueError as exc:
         raise HTTPException(422, f"files: {exc}") from None
     row["name"] = name or (f"{projection}, {row['n_frames']} frames, "
                            f"{frames[0][1].date().isoformat()}")
-    cal_id = await asyncio.wrap_future(ctx.writer.call(lambda c: insert_calibration(c, row)))
+    cal_id = await _store_calibration(ctx, row, anonymous=_token is None)
     return _json({**calibration_answer(row), "calibration_id": cal_id}, 201)
 
 
