@@ -59,10 +59,18 @@ _RAW_BUCKETS = (
     "GROUP BY 1 ORDER BY 1"
 )
 _WIDTH = 12 + 2 * _NS  # columns of a bucket row
-_ROLLUP_ENERGY = (
-    "SELECT array_id, source, bucket_s, energy_wh, n FROM measurement_rollups "
-    "WHERE array_id IN ({ids}) AND bucket_s >= ? AND bucket_s < ? ORDER BY bucket_s"
+# energy and readings per (array, source, period), summed by the database: the periods
+# are a VALUES table (the first row typed for PostgreSQL), each joined to its rollups
+# by a primary-key range per series (source named, so the key's whole prefix is used)
+_ROLLUP_PERIODS = (
+    "WITH p(i, lo, hi) AS (VALUES (CAST(? AS INTEGER), CAST(? AS BIGINT), CAST(? AS BIGINT))"
+    "{more}) "
+    "SELECT r.array_id, r.source, p.i, SUM(r.energy_wh), SUM(r.n) "
+    "FROM p JOIN measurement_rollups r ON r.array_id IN ({ids}) AND r.source IN (0, 1) "
+    "AND r.bucket_s >= p.lo AND r.bucket_s < p.hi GROUP BY r.array_id, r.source, p.i"
 )
+#: Periods per statement of :data:`_ROLLUP_PERIODS` (3 parameters each; SQLite allows 32,766).
+PERIODS_PER_QUERY = 1000
 
 
 def iso_utc(ts_s: np.ndarray | list[int]) -> list[str]:
@@ -225,6 +233,29 @@ def period_edges(start: dt.datetime, end: dt.datetime, interval: str,
     return edges
 
 
+def _rollup_periods(conn: Connection, array_ids: list[int], edges_s: np.ndarray, a: int,
+                    b: int, energy: dict[tuple[int, int], np.ndarray],
+                    counts: dict[tuple[int, int], np.ndarray]) -> None:
+    """Add the whole rollup buckets in ``[a, b)`` to each period's energy and readings.
+
+    A bucket counts in the period its start lies in. The sums are the database's: one
+    row per series and period comes back (a month per day, two arrays: 120 rows, not
+    the 2,880 hourly rollups), so a read hands few rows through the driver, each of
+    which the reading thread takes the GIL back for.
+    """
+    lo = np.clip(edges_s[:-1], a, b)
+    hi = np.clip(edges_s[1:], a, b)
+    todo = np.flatnonzero(hi > lo)
+    ids = ", ".join("?" * len(array_ids))
+    for k in range(0, todo.size, PERIODS_PER_QUERY):
+        part = todo[k:k + PERIODS_PER_QUERY]
+        sql = _ROLLUP_PERIODS.format(more=", (?, ?, ?)" * (part.size - 1), ids=ids)
+        params = np.column_stack([part, lo[part], hi[part]]).ravel().tolist()
+        for array_id, source, p, wh, n in fetch(conn, sql, (*params, *array_ids)):
+            energy[(array_id, source)][p] += wh
+            counts[(array_id, source)][p] += n
+
+
 @dataclass
 class EnergyTable:
     """Energy [Wh] and reading counts per (array, source, period)."""
@@ -244,16 +275,7 @@ def energy_table(conn: Connection, array_ids: list[int], edges_s: np.ndarray, ph
     counts = {key: np.zeros(nper, np.int64) for key in keys}
     a, b = grid_ceil(start, phase), grid_floor(end, phase)
     if a < b and array_ids:  # a camera site has none (and "IN ()" is no SQL for PostgreSQL)
-        sql = _ROLLUP_ENERGY.format(ids=", ".join("?" * len(array_ids)))
-        rows = fetch(conn, sql, (*array_ids, a, b))
-        if rows:
-            r = np.array(rows, np.float64)
-            per = np.searchsorted(edges_s, r[:, 2], side="right") - 1
-            for key in keys:
-                sel = (r[:, 0] == key[0]) & (r[:, 1] == key[1])
-                energy[key] += np.bincount(per[sel], weights=r[sel, 3], minlength=nper)[:nper]
-                counts[key] += np.bincount(per[sel], weights=r[sel, 4],
-                                           minlength=nper)[:nper].astype(np.int64)
+        _rollup_periods(conn, array_ids, edges_s, a, b, energy, counts)
     # partial hours: before the first and after the last whole rollup bucket, and
     # periods whose edges are off the hour grid (only with an unaligned start/end)
     pieces = [(start, min(a, end)), (max(b, start), end)] if a < b else [(start, end)]

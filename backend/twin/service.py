@@ -28,22 +28,27 @@ import datetime as dt
 import logging
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import anyio
 import numpy as np
 import pandas as pd
-from sqlalchemy import Connection, Engine, func, select
+from sqlalchemy import Connection, Engine
 from sqlalchemy.dialects import postgresql, sqlite
 
 from backend.measurements.writer import MeasurementJob, Writer
 from backend.sites import Registry, SiteInfo
-from backend.storage.tables import SOURCE_CODES, MeasurementRollup, TwinCoverage
+from backend.storage.sqlraw import fetch
+from backend.storage.tables import SOURCE_CODES, TwinCoverage
 from sim.twin import simulate
 
 logger = logging.getLogger(__name__)
 TWIN = SOURCE_CODES["twin"]
+_COVERED = ("SELECT day_start_s, covered_until_s FROM twin_coverage "
+            "WHERE site_id = ? AND day_start_s >= ? AND day_start_s <= ?")
+_FIRST_READING = ("SELECT first_ts_s FROM measurement_rollups WHERE array_id = ? AND source = ? "
+                  "AND n > 0 ORDER BY bucket_s LIMIT 1")
 
 
 @dataclass
@@ -52,6 +57,58 @@ class LiveSample:
 
     ts_s: int
     values: dict[str, float]
+
+
+#: How far ahead the live twin simulates at once [s] (:meth:`TwinService._minute`).
+AHEAD_S = 3600
+#: Ticks of the live loop whose lag :meth:`LiveClock.status` takes the maximum of.
+LAG_WINDOW = 60
+
+
+@dataclass
+class LiveClock:
+    """When the live loop's ticks were due and when each one's minute was committed.
+
+    A tick is due on the grid of ``interval_s`` (minute boundaries by default); its lag
+    is how long after that its readings were committed. A tick that overruns the next
+    due time skips it (the next one is due at the next grid point after it ended), so
+    the loop never queues work it cannot do, and the overrun shows as that tick's lag.
+    """
+
+    interval_s: float
+    ticks: int = 0
+    running_due_s: float | None = None
+    last_minute_s: int | None = None
+    last_done_s: float | None = None
+    recent_lags_s: list[float] = field(default_factory=list)
+
+    def next_due(self, now_s: float) -> float:
+        """The first grid point after ``now_s``."""
+        return (now_s // self.interval_s + 1) * self.interval_s
+
+    def begin(self, due_s: float) -> None:
+        self.running_due_s = due_s
+
+    def end(self, due_s: float, done_s: float) -> None:
+        self.ticks += 1
+        self.running_due_s = None
+        self.last_minute_s = int(due_s // 60 * 60)
+        self.last_done_s = done_s
+        self.recent_lags_s = [*self.recent_lags_s[-(LAG_WINDOW - 1):], done_s - due_s]
+
+    def status(self, now_s: float | None = None) -> dict[str, Any]:
+        """The loop's lag: of a tick still running, now minus its due time; else the last
+        tick's; ``max_lag_s`` over the last :data:`LAG_WINDOW` ticks and the running one."""
+        now = time.time() if now_s is None else now_s
+        running = None if self.running_due_s is None else max(0.0, now - self.running_due_s)
+        lags = self.recent_lags_s + ([running] if running is not None else [])
+        return {
+            "interval_s": self.interval_s, "ticks": self.ticks,
+            "last_minute_s": self.last_minute_s, "last_done_s": self.last_done_s,
+            "lag_s": running if running is not None else
+            (self.recent_lags_s[-1] if self.recent_lags_s else None),
+            "max_lag_s": max(lags) if lags else None,
+        }
 
 
 def jobs_from_series(info: SiteInfo, series: pd.DataFrame) -> list[MeasurementJob]:
@@ -81,6 +138,10 @@ class TwinService:
         self.scene = scene
         self.scene_site = scene_site
         self.latest: dict[str, LiveSample] = {}
+        #: per site: its Site, the window [from, to) [s] and its minutes (see :meth:`_minute`)
+        self._ahead: dict[str, tuple[Any, int, int, pd.DataFrame]] = {}
+        #: the live loop's schedule and lag (None until :meth:`run_live` starts)
+        self.clock: LiveClock | None = None
         self._locks = {sid: threading.Lock() for sid in registry.sites}
 
     def _lock(self, site_id: str) -> threading.Lock:
@@ -110,45 +171,52 @@ class TwinService:
     def ensure(self, site_id: str, start_s: int, end_s: int, now_s: float | None = None) -> int:
         """Store the twin series of every local day touching ``[start_s, end_s)`` up to now.
 
-        Returns the number of readings simulated (0 when everything was stored).
+        Returns the number of readings simulated (0 when everything was stored). What is
+        stored is looked up first without the site's lock (a read of stored days, the
+        common case, waits for no other read); only missing days take the lock, look
+        again and simulate.
         """
         if not self.simulable(site_id):
             return 0
         info = self.registry.sites[site_id]
         now_minute = int((time.time() if now_s is None else now_s) // 60 * 60)
-        start_s = max(start_s, self._history_floor_s(info, now_minute))
-        days = self._day_starts(info, start_s, min(end_s, now_minute + 1))
-        if not days:
-            return 0
+        with self.engine.connect() as conn:
+            start_s = max(start_s, self._history_floor_s(info, now_minute, conn))
+            days = self._day_starts(info, start_s, min(end_s, now_minute + 1))
+            if not days or not self._missing(conn, info, days, now_minute)[1]:
+                return 0
         with self._lock(site_id):
             with self.engine.connect() as conn:
-                covered = dict(conn.execute(
-                    select(TwinCoverage.day_start_s, TwinCoverage.covered_until_s).where(
-                        TwinCoverage.site_id == site_id,
-                        TwinCoverage.day_start_s >= days[0],
-                        TwinCoverage.day_start_s <= days[-1],
-                    )).tuples().all())
-            spans: list[tuple[int, int]] = []  # (from, to) of missing pieces
-            marks: list[tuple[int, int]] = []
-            for j, day in enumerate(days):
-                day_end = days[j + 1] if j + 1 < len(days) else int(
-                    (dt.datetime.fromtimestamp(day, info.zone) + dt.timedelta(hours=36))
-                    .replace(hour=0, minute=0, second=0).timestamp())
-                want = min(day_end, now_minute)
-                have = covered.get(day, day)
-                if have >= want:
-                    continue
-                marks.append((day, want))
-                if spans and spans[-1][1] == have:
-                    spans[-1] = (spans[-1][0], want)
-                else:
-                    spans.append((have, want))
+                spans, marks = self._missing(conn, info, days, now_minute)
             total = 0
             for lo, hi in spans:
                 total += self._simulate_and_store(info, lo, hi)
             if marks:
                 self.writer.call(lambda conn: _mark_coverage(conn, site_id, marks)).result()
             return total
+
+    @staticmethod
+    def _missing(conn: Connection, info: SiteInfo, days: list[int], now_minute: int
+                 ) -> tuple[list[tuple[int, int]], list[tuple[int, int]]]:
+        """The pieces of ``days`` (local day starts) not stored yet, up to ``now_minute``:
+        ``(from, to)`` spans to simulate and ``(day, covered_until)`` marks to store."""
+        covered = dict(fetch(conn, _COVERED, (info.site_id, days[0], days[-1])))
+        spans: list[tuple[int, int]] = []
+        marks: list[tuple[int, int]] = []
+        for j, day in enumerate(days):
+            day_end = days[j + 1] if j + 1 < len(days) else int(
+                (dt.datetime.fromtimestamp(day, info.zone) + dt.timedelta(hours=36))
+                .replace(hour=0, minute=0, second=0).timestamp())
+            want = min(day_end, now_minute)
+            have = covered.get(day, day)
+            if have >= want:
+                continue
+            marks.append((day, want))
+            if spans and spans[-1][1] == have:
+                spans[-1] = (spans[-1][0], want)
+            else:
+                spans.append((have, want))
+        return spans, marks
 
     def site_lock(self, site_id: str) -> threading.Lock:
         """The lock :meth:`ensure` holds while it simulates and stores a site's twin; a
@@ -158,6 +226,7 @@ class TwinService:
     def forget(self, site_id: str) -> None:
         """Drop the cached live sample of a site whose config changed."""
         self.latest.pop(site_id, None)
+        self._ahead.pop(site_id, None)
 
     def no_twin_reason(self, site_id: str, start_s: int, end_s: int,
                        now_s: float | None = None) -> str | None:
@@ -174,25 +243,25 @@ class TwinService:
                     "before now, HELIOTWIN_TWIN_HISTORY_DAYS, or the site's first reading)")
         return None
 
-    def _history_floor_s(self, info: SiteInfo, now_s: int) -> int:
+    def _history_floor_s(self, info: SiteInfo, now_s: int, conn: Connection | None = None
+                         ) -> int:
         """Earliest time reads fill with the twin: ``history_days`` before now, or the
         first measured reading of the site if that is older.
 
         Reads need no token, so without this floor anyone could make the server
-        simulate and store twin series for any range of years.
+        simulate and store twin series for any range of years. The first reading is
+        each array's first measured rollup bucket with a reading (a primary-key seek).
         """
         floor = now_s - self.history_days * 86_400
         array_ids = [a.array_id for a in info.arrays.values()]
         if not array_ids:
             return floor
-        with self.engine.connect() as conn:
-            first = conn.execute(
-                select(func.min(MeasurementRollup.first_ts_s)).where(
-                    MeasurementRollup.array_id.in_(array_ids),
-                    MeasurementRollup.source == SOURCE_CODES["measured"],
-                )
-            ).scalar()
-        return floor if first is None else min(floor, int(first))
+        if conn is None:
+            with self.engine.connect() as own:
+                return self._history_floor_s(info, now_s, own)
+        firsts = [int(row[0][0]) for a in array_ids
+                  if (row := fetch(conn, _FIRST_READING, (a, SOURCE_CODES["measured"])))]
+        return min([floor, *firsts])
 
     def _simulate_and_store(self, info: SiteInfo, lo: int, hi: int) -> int:
         result = simulate(info.site, pd.Timestamp(lo, unit="s", tz="UTC"),
@@ -206,12 +275,25 @@ class TwinService:
 
     # -- live ---------------------------------------------------------------
     def _minute(self, info: SiteInfo, minute: int) -> tuple[LiveSample, pd.DataFrame]:
-        """The one-minute simulation both the tiles and the live loop use (cached)."""
-        result = simulate(info.site, pd.Timestamp(minute, unit="s", tz="UTC"),
-                          pd.Timestamp(minute + 60, unit="s", tz="UTC"), step_s=60)
-        sample = LiveSample(minute, {k: float(v) for k, v in result.series.iloc[0].items()})
+        """The one-minute row both the tiles and the live loop use.
+
+        Taken from the site's clear-sky window of the next :data:`AHEAD_S`, simulated
+        at once when ``minute`` leaves it (or the site's config changed): an hour of
+        minutes costs what one minute costs (~45 ms of CPU, most of it holding the GIL),
+        so a tick of the live loop is a lookup and a write, not a simulation. The rows
+        equal one-minute runs to 1e-5 (pvlib's vectorised solar position).
+        """
+        win = self._ahead.get(info.site_id)
+        if win is None or win[0] is not info.site or not win[1] <= minute < win[2]:
+            series = simulate(info.site, pd.Timestamp(minute, unit="s", tz="UTC"),
+                              pd.Timestamp(minute + AHEAD_S, unit="s", tz="UTC"),
+                              step_s=60).series
+            win = self._ahead[info.site_id] = (info.site, minute, minute + AHEAD_S, series)
+        k = (minute - win[1]) // 60
+        row = win[3].iloc[k:k + 1]
+        sample = LiveSample(minute, {c: float(v) for c, v in row.iloc[0].items()})
         self.latest[info.site_id] = sample
-        return sample, result.series
+        return sample, row
 
     def sample(self, site_id: str, now_s: float | None = None) -> LiveSample:
         """The twin at the current minute (computed, cached per minute; empty if not simulable)."""
@@ -245,15 +327,20 @@ class TwinService:
             f.result()
 
     async def run_live(self, stop: asyncio.Event, interval_s: float) -> None:
-        """Call :meth:`live_step` every ``interval_s`` until ``stop`` is set."""
+        """Run :meth:`live_step` on the grid of ``interval_s`` until ``stop`` is set; each
+        tick's lag is kept in :attr:`clock` (``GET /api/v1/live-twin``)."""
+        self.clock = clock = LiveClock(interval_s)
+        due = time.time()
         while not stop.is_set():
+            clock.begin(due)
             try:
-                await anyio.to_thread.run_sync(self.live_step)
+                await anyio.to_thread.run_sync(self.live_step, due)
             except Exception:
                 logger.exception("live twin step failed")
-            delay = interval_s - (time.time() % interval_s) if interval_s >= 60 else interval_s
+            clock.end(due, time.time())
+            due = clock.next_due(time.time())
             try:
-                await asyncio.wait_for(stop.wait(), timeout=delay)
+                await asyncio.wait_for(stop.wait(), timeout=max(0.0, due - time.time()))
             except TimeoutError:
                 pass
 

@@ -1,4 +1,4 @@
-"""``/healthz`` and ``/api/v1/meta``."""
+"""``/healthz``, ``/api/v1/meta`` and ``/api/v1/live-twin``."""
 
 from __future__ import annotations
 
@@ -7,9 +7,11 @@ from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 from fastapi import APIRouter, Request
+from pydantic import BaseModel, Field
 
-from backend.api.deps import SettingsDep
+from backend.api.deps import ContextDep, SettingsDep
 from backend.api.schemas.service import HealthRead, MetaRead
+from backend.measurements.queries import iso_utc
 from backend.twin.parameters import MACHINE_PARAMETERS
 from sim.twin import CONTROLLERS, RECEIVERS
 
@@ -55,4 +57,36 @@ def meta(request: Request, settings: SettingsDep) -> dict[str, Any]:
         "controllers": list(CONTROLLERS),
         "receivers": list(RECEIVERS),
         "machine_parameters": [dataclasses.asdict(p) for p in MACHINE_PARAMETERS],
+    }
+
+
+class LiveTwinRead(BaseModel):
+    """Whether the live twin keeps up (``backend.twin.service.LiveClock``)."""
+
+    enabled: bool = Field(description="the live loop runs (HELIOTWIN_LIVE_TWIN)")
+    interval_s: float | None = Field(description="its tick (HELIOTWIN_LIVE_TWIN_INTERVAL_S)")
+    ticks: int = Field(description="ticks finished since the service started")
+    last_minute_utc: str | None = Field(description="the minute the last tick stored")
+    last_done_utc: str | None = Field(description="when the last tick's readings were committed")
+    lag_s: float | None = Field(description=(
+        "how late the loop is [s]: of a tick still running, now minus when it was due; "
+        "else the last tick's commit minus when it was due"))
+    max_lag_s: float | None = Field(description="the largest lag of the last 60 ticks [s]")
+
+
+@router.get("/api/v1/live-twin", response_model=LiveTwinRead)
+async def live_twin(ctx: ContextDep) -> dict[str, Any]:
+    """The live twin loop's lag: how long after its due time each minute was stored."""
+    clock = ctx.twin.clock
+    if clock is None:
+        return {"enabled": False, "interval_s": None, "ticks": 0, "last_minute_utc": None,
+                "last_done_utc": None, "lag_s": None, "max_lag_s": None}
+    st = clock.status()
+    return {
+        "enabled": True, "interval_s": st["interval_s"], "ticks": st["ticks"],
+        "last_minute_utc": None if st["last_minute_s"] is None
+        else iso_utc([st["last_minute_s"]])[0],
+        "last_done_utc": None if st["last_done_s"] is None
+        else iso_utc([int(st["last_done_s"])])[0],
+        "lag_s": st["lag_s"], "max_lag_s": st["max_lag_s"],
     }
