@@ -22,6 +22,7 @@ import pandas as pd
 import pytest
 from pvlib import atmosphere, solarposition
 
+from backend.api.routes.diagnosis import DiagnosisMountRead, MountFaultRead
 from backend.diagnosis import mount
 from sim.sites import load_site
 
@@ -166,6 +167,9 @@ def test_the_diagnosis_names_the_mount_from_posted_offsets(client: httpx.Client,
     end = (MOUNT_DAY + dt.timedelta(days=1)).isoformat()
     body = client.get(f"{BASE}/diagnosis", params={"start": MOUNT_DAY.isoformat(),
                                                    "end": end}, timeout=120).json()
+    typed = DiagnosisMountRead.model_validate(body)  # the declared answer, every key of it
+    assert typed.mount is not None and all(set(f) == set(MountFaultRead.model_fields)
+                                           for f in body["mount"]["faults"])
     m = body["mount"]
     assert m["n_observations"] == len(readings) and m["since"] == MOUNT_DAY.isoformat()
     named = {f["term"]: f["value_deg"] for f in m["faults"] if f["kind"] == "mount_offset"}
@@ -207,6 +211,7 @@ def test_days_to_come_cost_nothing(client: httpx.Client, live_server: LiveServer
     r = client.get(f"{BASE}/diagnosis", params={"start": tomorrow.date().isoformat(),
                                                 "end": end.date().isoformat()})
     assert r.status_code == 200 and len(r.json()["days"]) == 400
+    assert {d.status for d in DiagnosisMountRead.model_validate(r.json()).days} == {"future"}
 
 
 def test_anonymous_diagnosis_has_a_ceiling_naming_end(client: httpx.Client) -> None:
