@@ -22,7 +22,8 @@ errors from the Jacobian) against SPA's apparent sun with the site's refraction 
 - ``encoder_slip``: a term that changes from one local day to the next. Each day with at
   least :data:`MIN_DAY_OBSERVATIONS` observations is fitted on its own; a step between
   consecutive fitted days larger than max(:data:`SIGNIFICANCE_SIGMAS` · the combined
-  standard error √(σ₁² + σ₂²), :data:`MIN_SLIP_DEG`) is a slip starting on the later day.
+  standard error √(σ₁² + σ₂²), :data:`MIN_SLIP_DEG`) is a slip starting on the later day
+  (the detail says so when days without enough observations lie between the two).
   The terms then named as ``mount_offset`` are those fitted from the last slip on (the
   mount as it is now), not a blend of before and after.
 
@@ -175,7 +176,9 @@ def slips(day_fits: list[tuple[int, PointingFit]], dates: list[str]) -> list[dic
     """``encoder_slip`` findings: steps of a core term between consecutive fitted days
     (module docstring); JSON-ready, oldest first."""
     out = []
-    for (_, f1), (j, f2) in zip(day_fits, day_fits[1:], strict=False):
+    for (i, f1), (j, f2) in zip(day_fits, day_fits[1:], strict=False):
+        gap = "" if j == i + 1 else (f"; no day between {dates[i]} and {dates[j]} had enough "
+                                     "observations, so it may have slipped on one of them")
         for term in CORE_TERMS:
             v1, v2 = getattr(f1.model, term), getattr(f2.model, term)
             s1, s2 = f1.std.get(term, np.nan), f2.std.get(term, np.nan)
@@ -191,7 +194,7 @@ def slips(day_fits: list[tuple[int, PointingFit]], dates: list[str]) -> list[dic
                 "detail": f"{TERM_WORDS[term]} stepped by {step:+.{d}f}° ± {std:.{d}f}° on "
                           f"{dates[j]} (from {v1:+.{d}f}° to {v2:+.{d}f}°; "
                           f"{f1.n_observations} and {f2.n_observations} camera observations "
-                          "on the days either side): an encoder that slipped"})
+                          f"on the days either side): an encoder that slipped{gap}"})
     return out
 
 

@@ -94,11 +94,12 @@ class _Info:
     site = SITE
 
 
-def _diagnose(per_day: list[dict[str, float]], seed: int, glints: float = 0.02
+def _diagnose(per_day: list[dict[str, float] | None], seed: int, glints: float = 0.02
               ) -> dict:
+    """The mount answer of days of observations (None: a day the camera never saw the sun)."""
     rng = np.random.default_rng(seed)
     days = [FIRST + pd.Timedelta(days=k) for k in range(len(per_day) + 1)]
-    parts = [camera_day(days[k], t, rng, glints) for k, t in enumerate(per_day)]
+    parts = [camera_day(days[k], t, rng, glints) for k, t in enumerate(per_day) if t]
     cols = [np.concatenate([p[i] for p in parts]) for i in range(5)]
     obs = mount.observations_from(_Info(), *cols)  # type: ignore[arg-type]
     return mount.mount_faults(obs, [int(d.timestamp()) for d in days],
@@ -138,6 +139,16 @@ def test_an_encoder_slip_is_found_with_its_start_day(slipped: dict) -> None:
     now = {f["term"]: f for f in slipped["faults"] if f["kind"] == "mount_offset"}
     assert slipped["since"] == "2026-03-04" and set(now) == set(MOUNT)
     assert abs(now["azimuth_zero_deg"]["value_deg"] - 3.0) < 0.01
+
+
+def test_a_slip_behind_an_overcast_day_says_it_may_be_earlier() -> None:
+    """The same slip on day 3, the camera clouded all of day 3: found on day 4, the detail
+    naming the days it may have happened on."""
+    body = _diagnose([MOUNT] * 2 + [None] + [{**MOUNT, "azimuth_zero_deg": 3.0}] * 2, seed=16)
+    slips = [f for f in body["faults"] if f["kind"] == "encoder_slip"]
+    assert [(f["term"], f["since"]) for f in slips] == [("azimuth_zero_deg", "2026-03-05")]
+    assert slips[0]["detail"].endswith("; no day between 2026-03-03 and 2026-03-05 had enough "
+                                       "observations, so it may have slipped on one of them")
 
 
 @pytest.mark.parametrize("terms", [MOUNT, dict.fromkeys(MOUNT, 0.0)],
