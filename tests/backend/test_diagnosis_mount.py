@@ -14,6 +14,7 @@ from __future__ import annotations
 import datetime as dt
 import re
 import tracemalloc
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import httpx
@@ -94,7 +95,7 @@ class _Info:
     site = SITE
 
 
-def _diagnose(per_day: list[dict[str, float] | None], seed: int, glints: float = 0.02
+def _diagnose(per_day: Sequence[dict[str, float] | None], seed: int, glints: float = 0.02
               ) -> dict:
     """The mount answer of days of observations (None: a day the camera never saw the sun)."""
     rng = np.random.default_rng(seed)
