@@ -20,7 +20,9 @@ keep-alive connection for the year's range (the first request fits; the next one
 the fit in the service's cache) and for one day's range; baseline in the same run:
 ``GET /healthz`` on the same connection (the floor of a request to this server). Where a
 command's time goes: the route's steps timed in this process against the same database
-(reading the range's observations, finding the fit, SPA and the inverse).
+(the range's key from the writer's hourly rollups and the fit remembered under it, SPA
+and the inverse; and what reading the range's observations costs, which a command under a
+remembered fit no longer does).
 
 Prints one Markdown section on stdout; progress on stderr.
 """
@@ -50,7 +52,7 @@ YEAR = ("2025-01-01", "2026-01-01")
 TRUE = {"azimuth_zero_deg": 1.7, "elevation_zero_deg": -0.8,
         "pedestal_tilt_north_deg": 0.6, "pedestal_tilt_east_deg": -1.3}
 COMMAND_AT = "2026-01-02T12:00:00-06:00"
-REPEATS = 10
+REPEATS = 40
 
 
 def year_observations() -> dict[str, np.ndarray]:
@@ -173,9 +175,12 @@ def get_times(port: int, path: str, n: int) -> tuple[float, list[float], bytes]:
 
 def route_steps(db_url: str) -> list[tuple[str, float]]:
     """The command route's steps in this process against the server's database [ms, median
-    of 5 after a first call that fills the fit cache]."""
+    of 5]: the range's key (the hourly rollups) and the fit remembered under it, what
+    reading the range's observations would cost (a command without a remembered fit), SPA
+    at the time and the inverse."""
     os.environ["HELIOTWIN_DATABASE_URL"] = db_url
     from backend.context import open_context
+    from backend.diagnosis import pointing_model as service
     from backend.diagnosis.pointing_model import command, fit_site, observations
     from backend.settings import get_settings
     from backend.timestamps import parse_instant, parse_range
@@ -186,19 +191,31 @@ def route_steps(db_url: str) -> list[tuple[str, float]]:
         assert info is not None
         t0, t1 = parse_range(*YEAR, info.zone)
         when = parse_instant(COMMAND_AT, "time")
+        if not hasattr(service, "range_key"):  # a service that reads the range every command
+            t = time.perf_counter()
+            with ctx.engine.connect() as conn:
+                observations(conn, info, t0, t1)
+            return [("reading the range's observations (this service has no range cache)",
+                     1000 * (time.perf_counter() - t))]
+        range_key, cached_range_fit = service.range_key, service.cached_range_fit
+        remember_range_fit = service.remember_range_fit
         with ctx.engine.connect() as conn:
-            fit_site(observations(conn, info, t0, t1), info)
-        steps: dict[str, list[float]] = {"read the range's observations": [],
-                                         "find the fit (digest of the rows, cache)": [],
-                                         "SPA at the time and the inverse": []}
+            key = range_key(conn, info, t0, t1)
+            remember_range_fit(key, fit_site(observations(conn, info, t0, t1), info))
+        steps: dict[str, list[float]] = {
+            "the range's key (hourly rollups) and its remembered fit": [],
+            "SPA at the time and the inverse": [],
+            "(without a remembered fit: reading the range's observations)": []}
         for _ in range(5):
             t = time.perf_counter()
             with ctx.engine.connect() as conn:
-                rows = observations(conn, info, t0, t1)
+                fit = cached_range_fit(range_key(conn, info, t0, t1))
             t2 = time.perf_counter()
-            fit = fit_site(rows, info)
-            t3 = time.perf_counter()
+            assert fit is not None
             command(info, fit, when)
+            t3 = time.perf_counter()
+            with ctx.engine.connect() as conn:
+                observations(conn, info, t0, t1)
             t4 = time.perf_counter()
             for name, seconds in zip(steps, (t2 - t, t3 - t2, t4 - t3), strict=True):
                 steps[name].append(1000 * seconds)
@@ -219,7 +236,9 @@ def command_figures(obs: dict[str, np.ndarray], fig: Figures, tmp: Path
         day = (f"/api/v1/sites/{SITE}/pointing-model/command?time={COMMAND_AT}"
                "&start=2025-06-01&end=2025-06-02")
         first, year_t, body = get_times(server.port, year, REPEATS)
-        _, day_t, _ = get_times(server.port, day, REPEATS)
+        day_first, day_t, _ = get_times(server.port, day, REPEATS)
+        log(f"  command day first {1000 * day_first:.1f} ms, then "
+            + ", ".join(f"{1000 * t:.1f}" for t in day_t) + " ms")
         _, health_t, _ = get_times(server.port, "/healthz", REPEATS)
         log(f"  command year first {first:.2f} s, then median "
             f"{1000 * statistics.median(year_t):.1f} ms")
@@ -232,13 +251,16 @@ def command_figures(obs: dict[str, np.ndarray], fig: Figures, tmp: Path
         ("posting the year (5,000 readings a request)", f"{post_s:.1f} s", "—"),
         ("command, a year's range, first request (reads and fits)",
          fig.add("command_year_first_s", first, "s", f"{first:.2f} s"), "—"),
-        (f"command, a year's range, the next {REPEATS}: median (p95)",
+        (f"command, a year's range, the next {REPEATS}: median (p95; fastest)",
          fig.add("command_year_ms", med, "ms", f"{med:.1f} ms", "≤ 10 ms", med <= 10.0)
-         + f" ({p95:.1f} ms)", "≤ 10 ms"),
-        (f"command, one day's range: median of {REPEATS}",
+         + f" ({p95:.1f} ms; "
+         + fig.add("command_year_fastest_ms", 1000 * min(year_t), "ms",
+                   f"{1000 * min(year_t):.1f} ms") + ")", "≤ 10 ms"),
+        (f"command, one day's range: median of {REPEATS} (fastest)",
          fig.add("command_day_ms", 1000 * statistics.median(day_t), "ms",
                  f"{1000 * statistics.median(day_t):.1f} ms", "≤ 10 ms",
-                 1000 * statistics.median(day_t) <= 10.0), "≤ 10 ms"),
+                 1000 * statistics.median(day_t) <= 10.0)
+         + f" ({1000 * min(day_t):.1f} ms)", "≤ 10 ms"),
         ("baseline: GET /healthz on the same connection, median",
          fig.add("healthz_ms", 1000 * statistics.median(health_t), "ms",
                  f"{1000 * statistics.median(health_t):.1f} ms"), "—"),
@@ -267,7 +289,7 @@ def main() -> int:
     for name, value, target in rows:
         print(f"| {name} | {value} | {target} |")
     print("\nWhere a command's time goes (the route's steps in the bench's process against "
-          "the same database, a year's range, median of 5 after the fit is cached):\n")
+          "the same database, a year's range, median of 5):\n")
     print("| step | ms |\n|---|---|")
     for name, ms in steps:
         print(f"| {name} | {ms:.1f} |")
