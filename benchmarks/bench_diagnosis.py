@@ -28,7 +28,12 @@ from _common import Figures, log  # noqa: E402  (bench scripts run from here)
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from backend.diagnosis.faults import band_wh, faults_over_days, features_by_day  # noqa: E402
+from backend.diagnosis.faults import (  # noqa: E402
+    INVERSION_UNCERTAINTY,
+    band_wh,
+    faults_over_days,
+    features_by_day,
+)
 from sim import sky_sensor  # noqa: E402
 from sim.sites import load_site  # noqa: E402
 from tests.sim.realistic_sky import logger_days  # noqa: E402
@@ -55,8 +60,9 @@ def _run(site, first, days, seed, fault=None):
 def accuracy(site, fig: Figures) -> list[str]:
     """Held-out accuracy of the expected energy, the band, the gain and the faults."""
     first = pd.Timestamp("2026-06-01", tz=site.timezone)
-    err = {"clear": [], "cloudy": []}
-    err_sensor = {"clear": [], "cloudy": []}  # the sky from a pyranometer instead
+    err: dict[str, list[float]] = {"clear": [], "cloudy": []}
+    # the sky from a pyranometer instead
+    err_sensor: dict[str, list[float]] = {"clear": [], "cloudy": []}
     inside, gain_err, false_alarms, healthy_days = [], [], 0, 0
     for seed in HELD_OUT_HEALTHY:
         log(f"healthy seed {seed}")
@@ -141,6 +147,156 @@ PATH_WORDS = {"poa_sensor": "fixed-plane POA sensor", "fixed_array": "fixed arra
               "ghi_sensor": "GHI pyranometer", "clear_sky": "clear sky (no instrument)"}
 
 
+def band_needed(expected_wh: float, expected_alt_wh: float, truth_wh: float) -> float:
+    """The half-width u [-] a day needs for its truth to lie inside the band
+    [min(a, b)·(1 − u), max(a, b)·(1 + u)] (:func:`backend.diagnosis.faults.band_wh`'s form)."""
+    low, high = min(expected_wh, expected_alt_wh), max(expected_wh, expected_alt_wh)
+    return max(0.0, 1.0 - truth_wh / low, truth_wh / high - 1.0)
+
+
+def covering(needed: list[float], share: float = 0.9) -> float:
+    """The smallest half-width that holds the truth on at least ``share`` of the days."""
+    v = np.sort(np.asarray(needed, dtype=float))
+    return float(v[int(np.ceil(share * v.size)) - 1])
+
+
+def generated_days(seeds: range = range(11, 15)) -> dict[str, list[tuple[float, float, float]]]:
+    """Generated held-out days (tests/sim/realistic_sky.py, 6 days a seed): the expected
+    tracker energy of the two skies and the truth [Wh], from the fixed plane's POA sensor
+    and from the fixed array's power."""
+    site = load_site("tehuantepec")
+    first = pd.Timestamp("2026-06-01", tz=site.timezone)
+    out: dict[str, list[tuple[float, float, float]]] = {"poa_sensor": [], "fixed_array": []}
+    for seed in seeds:
+        log(f"band on generated seed {seed}")
+        d = logger_days(site, first, 6, seed)
+        for path, sensors in (("poa_sensor", d.sensors("fixed_poa_w_m2", "temp_air_c")),
+                              ("fixed_array", None)):
+            e = sky_sensor.weather_aware_twin(site, first, first + pd.Timedelta(days=6),
+                                              d.fixed_power_w, sensors=sensors)
+            for k in range(6):
+                sl = slice(k * 1440, (k + 1) * 1440)
+                out[path].append((float(e["tracker_power_w"].to_numpy()[sl].sum()),
+                                  float(e["tracker_power_alt_w"].to_numpy()[sl].sum()),
+                                  float(d.healthy_tracker_power_w[sl].sum())))
+    return out
+
+
+def poa_sensor_errors(site, df: pd.DataFrame) -> dict[str, tuple[str, float]]:
+    """Per real day: its group (``clear``/``cloudy``) and the expected tracker energy's
+    error [%] from the fixed plane's POA sensor, as in :func:`real_sky`'s table."""
+    out = {}
+    for day in rmis_sky.local_days(site, df):
+        lg = rmis_sky.logged_day(site, df, day)
+        grid = rmis_sky.minutes(day).as_unit("s").asi8
+        ts = lg.times.as_unit("s").asi8
+        covered = np.isfinite(on_grid(ts, lg.data["gni"].to_numpy(), grid, 2 * rmis_sky.STEP_S))
+        truth = energy_wh(grid, np.where(covered, on_grid(ts, lg.tracker_power_w, grid,
+                                                          2 * rmis_sky.STEP_S), np.nan), 60)
+        e = rmis_sky.expectation(site, lg, day, "poa_sensor")
+        a = energy_wh(grid, np.where(covered, e["tracker_power_w"], np.nan), 60)
+        kind, _ = rmis_sky.sky_kind(site, lg)
+        out[lg.date] = ("clear" if kind == "clear" else "cloudy", 100 * (a / truth - 1))
+    return out
+
+
+def sensitivity_lines(fig: Figures, site, fit: dict[str, float]) -> list[str]:
+    """The clear-day error from the fixed plane's POA sensor under the candidates of issue 27
+    item 1, one at a time (none adopted: see docs/diagnosis.md, "Real skies"): the means
+    stamped at their middle, the ground's albedo of old snow (0.6; the site's 0.2 is the
+    default), Perez instead of Hay-Davies for both the fixed plane's inversion and the
+    tracker's plane (with Perez's own fitted tilt)."""
+    from dataclasses import replace
+
+    snow = replace(site, arrays={k: replace(a, albedo=0.6) for k, a in site.arrays.items()})
+    perez_fixed = replace(site.arrays["fixed"], surface_tilt=fit["perez_tilt_deg"],
+                          surface_azimuth=fit["perez_azimuth_deg"])
+    perez = replace(site, transposition_model="perez",
+                    arrays={**site.arrays, "fixed": perez_fixed})
+    variants = (("mid_interval", "the means stamped at their middle", site,
+                 rmis_sky.load(mid_interval=True)),
+                ("albedo_0.6", "albedo 0.6", snow, rmis_sky.load()),
+                ("perez", f"Perez at {fit['perez_tilt_deg']:.1f}°", perez, rmis_sky.load()))
+    lines = []
+    for name, words, s, df in variants:
+        log(f"real sky sensitivity {name}")
+        errs = poa_sensor_errors(s, df)
+        per_day = ", ".join(f"{d} " + fig.add(f"rmis_{d}_poa_sensor_{name}_energy_pct", v, "%",
+                                               f"{v:+.1f} %") for d, (g, v) in errs.items())
+        clear = max(abs(v) for g, v in errs.values() if g == "clear")
+        cloudy = max(abs(v) for g, v in errs.values() if g == "cloudy")
+        lines.append(f"- fixed-plane POA sensor, {words}: " + per_day + "; max error clear "
+                     + fig.add(f"rmis_poa_sensor_{name}_clear_max_pct", clear, "%",
+                               f"{clear:.1f} %")
+                     + ", cloudy " + fig.add(f"rmis_poa_sensor_{name}_cloudy_max_pct", cloudy,
+                                             "%", f"{cloudy:.1f} %"))
+    return lines
+
+
+OVERCAST_KC = (None, 0.3, 0.5)  # the beam → 0 rule's clear-sky index thresholds measured
+
+
+def ghi_rule_lines(fig: Figures, site, df: pd.DataFrame) -> list[str]:
+    """Issue 27 item 2: pvlib's GHI decompositions (as published), alone and with the beam set
+    to 0 below a clear-sky index (:data:`OVERCAST_KC`), by their daily sun-normal
+    irradiation error [%]: on the real days (not 1 Jan 2022: snow on the horizontal
+    instruments; the truth the measured GNI) and on generated held-out days (seeds 11–14 of
+    tests/sim/realistic_sky.py at tehuantepec; the truth the generated DNI and DHI through
+    the same transposition). The largest error per group."""
+    from tests.sim.realistic_sky import cloud_weather
+
+    gen_site = load_site("tehuantepec")
+    first = pd.Timestamp("2026-06-01", tz=gen_site.timezone)
+    err: dict[tuple[str, float | None, str], list[float]] = {}
+
+    def add(d: dict[str, float], truth: float, group: str, kc: float | None) -> None:
+        for name, v in d.items():
+            if name in rmis_sky.DECOMPOSITIONS:
+                err.setdefault((name, kc, group), []).append(abs(100 * (v / truth - 1)))
+
+    for day in rmis_sky.local_days(site, df):
+        lg = rmis_sky.logged_day(site, df, day)
+        if lg.date == "2022-01-01":
+            continue
+        kind, _ = rmis_sky.sky_kind(site, lg)
+        for kc in OVERCAST_KC:
+            d = rmis_sky.normal_by_decomposition(site, lg.times, lg.data["ghi"].to_numpy(),
+                                                 rmis_sky.STEP_S, overcast_kc=kc)
+            gni = rmis_sky.day_energy_wh(lg.times, lg.data["gni"].to_numpy(), rmis_sky.STEP_S)
+            add(d, gni, "real_clear" if kind == "clear" else "real_cloudy", kc)
+    for seed in range(11, 15):
+        log(f"GHI decompositions on generated seed {seed}")
+        w, kinds = cloud_weather(gen_site, first, 6, seed)
+        for k in range(6):
+            day = w.iloc[k * 1440:(k + 1) * 1440]
+            for kc in OVERCAST_KC:
+                d = rmis_sky.normal_by_decomposition(gen_site, day.index, day["ghi"].to_numpy(),
+                                                     60, dni_measured=day["dni"].to_numpy(),
+                                                     overcast_kc=kc)
+                add(d, d["measured_components"], "gen_clear" if kinds[k] == "clear"
+                    else "gen_cloudy", kc)
+    groups = ("real_clear", "real_cloudy", "gen_clear", "gen_cloudy")
+    lines = ["| GHI decomposition | beam → 0 below kc | real clear days | real cloudy days | "
+             "generated clear days | generated cloudy days |", "|---|---|---|---|---|---|"]
+    for name in rmis_sky.DECOMPOSITIONS:
+        if name == "gti_dirint":
+            continue
+        for kc in OVERCAST_KC:
+            cells = []
+            for g in groups:
+                v = float(max(err[(name, kc, g)]))
+                tag = "none" if kc is None else f"{kc:g}"
+                cells.append(fig.add(f"ghi_{name}_kc_{tag}_{g}_max_pct", v, "%", f"{v:.1f} %"))
+            lines.append(f"| {name} | {'—' if kc is None else f'{kc:g}'} | " + " | ".join(cells)
+                         + " |")
+    n = {g: len(err[("dirint", None, g)]) for g in groups}
+    lines.append("")
+    lines.append(f"(largest daily error of the sun-normal irradiation; days: real clear "
+                 f"{n['real_clear']}, real cloudy {n['real_cloudy']}, generated clear "
+                 f"{n['gen_clear']}, generated cloudy {n['gen_cloudy']})")
+    return lines
+
+
 def real_sky(fig: Figures) -> list[str]:
     """Issue 27 on NREL RMIS (tests/data/rmis): the tracker's expected irradiance and energy
     from one instrument at a time against the measured GNI, per day; pvlib's
@@ -179,6 +335,10 @@ def real_sky(fig: Figures) -> list[str]:
     width: dict[str, list[float]] = {"clear": [], "cloudy": []}
     dec: dict[str, dict[str, list[str]]] = {"clear": {}, "cloudy": {}}
     minute_rms: dict[str, list[float]] = {p: [] for p in rmis_sky.PATHS}
+    # date → (expected, expected by the second sky, truth) [Wh]
+    days_wh: dict[str, dict[str, tuple[float, float, float]]] = {p: {} for p in rmis_sky.PATHS}
+    wind_err: dict[str, list[float]] = {"clear": [], "cloudy": []}
+    wind_cells: list[str] = []
     for day in rmis_sky.local_days(site, df):
         log(f"real sky {day.date()}")
         lg = rmis_sky.logged_day(site, df, day)
@@ -208,6 +368,7 @@ def real_sky(fig: Figures) -> list[str]:
             e_err = 100 * (a / truth - 1)
             low, high = band_wh(a, b)
             inside[p].append(low <= truth <= high)
+            days_wh[p][tag] = (a, b, truth)
             err[p][group].append(abs(e_err))
             day_min = covered & (gni_min > 20)
             minute_rms[p].append(100 * float(np.sqrt(np.mean(
@@ -215,6 +376,13 @@ def real_sky(fig: Figures) -> list[str]:
             cells.append(fig.add(f"rmis_{tag}_{p}_gni_pct", g_err, "%", f"{g_err:+.1f} %") + ", "
                          + fig.add(f"rmis_{tag}_{p}_energy_pct", e_err, "%", f"{e_err:+.1f} %"))
             if p == "poa_sensor":
+                w_err = e_err
+                if lg.data["wind_speed"].notna().any():  # the station's anemometer
+                    ew = rmis_sky.expectation(site, lg, day, p, measured_wind=True)
+                    w_err = 100 * (wh(ew["tracker_power_w"]) / truth - 1)
+                    wind_cells.append(f"{tag} " + fig.add(
+                        f"rmis_{tag}_poa_sensor_wind_energy_pct", w_err, "%", f"{w_err:+.1f} %"))
+                wind_err[group].append(abs(w_err))
                 width[group].append(100 * (high - low) / a)
                 lo_pct, hi_pct = 100 * (low / truth - 1), 100 * (high / truth - 1)
                 band_cell = (fig.add(f"rmis_{tag}_band_low_pct", lo_pct, "%", f"{lo_pct:+.1f}")
@@ -253,6 +421,19 @@ def real_sky(fig: Figures) -> list[str]:
                      + fig.add(f"rmis_{p}_band_coverage_pct", c, "%", f"{c:.0f} %", "≥ 90 %",
                                c >= 90)
                      + f" of {len(inside[p])} days ({fig.verdict(f'rmis_{p}_band_coverage_pct')})")
+    lines.append("- fixed-plane POA sensor with the station's measured wind in the expectation "
+                 "(the service ingests no wind: it takes the site's 1 m s⁻¹), expected tracker "
+                 "energy: " + ", ".join(wind_cells) + "; max error over the days, clear "
+                 + fig.add("rmis_poa_sensor_wind_clear_max_pct", max(wind_err["clear"]), "%",
+                           f"{max(wind_err['clear']):.1f} %", "≤ 3 %",
+                           max(wind_err["clear"]) <= 3.0)
+                 + f" ({fig.verdict('rmis_poa_sensor_wind_clear_max_pct')}), cloudy "
+                 + fig.add("rmis_poa_sensor_wind_cloudy_max_pct", max(wind_err["cloudy"]), "%",
+                           f"{max(wind_err['cloudy']):.1f} %", "≤ 8 %",
+                           max(wind_err["cloudy"]) <= 8.0)
+                 + f" ({fig.verdict('rmis_poa_sensor_wind_cloudy_max_pct')})")
+    lines.extend(sensitivity_lines(fig, site, fit))
+    lines.extend(band_lines(fig, days_wh))
     for group in ("clear", "cloudy"):
         if width[group]:
             w = float(np.median(width[group]))
@@ -272,11 +453,57 @@ def real_sky(fig: Figures) -> list[str]:
     for name in ("measured_components", *rmis_sky.DECOMPOSITIONS):
         cells = []
         for group in ("clear", "cloudy"):
-            v = dec[group].get(name, [])
-            cells.append(", ".join(v) or "—")
+            texts = dec[group].get(name, [])
+            cells.append(", ".join(texts) or "—")
         label = "measured DNI and DHI (the transposition's floor)" \
             if name == "measured_components" else name
         lines.append(f"| {label} | {cells[0]} | {cells[1]} |")
+    lines.append("")
+    lines.append("The GHI path's decomposition with and without a beam → 0 rule (issue 27 item 2), "
+                 "on the real days and on generated held-out days:")
+    lines.append("")
+    lines.extend(ghi_rule_lines(fig, site, df))
+    return lines
+
+
+def band_lines(fig: Figures, days_wh: dict[str, dict[str, tuple[float, float, float]]]
+               ) -> list[str]:
+    """The band's half-width the days need, in the service's form (the two skies' envelope
+    widened by u, :func:`band_needed`) and around the main estimate alone (±u): the narrowest
+    holding the truth on ≥ 90 % of the real days (in-sample), one file's choice checked on
+    the other file's days (held out), and the same on generated held-out days."""
+    gen = generated_days()
+    forms = {"envelope": lambda a, b, t: band_needed(a, b, t),
+             "main": lambda a, b, t: abs(t / a - 1.0)}
+    lines = []
+    for p in ("poa_sensor", "fixed_array", "ghi_sensor"):
+        for form, need in forms.items():
+            u = {d: need(*v) for d, v in days_wh[p].items()}
+            all_u = covering(list(u.values()))
+            what = ("the two skies' envelope widened by" if form == "envelope"
+                    else "the main estimate ±")
+            cells = [f"{PATH_WORDS[p]}, {what} u: u holding the truth on ≥ 90 % of the "
+                     f"{len(u)} real days "
+                     + fig.add(f"rmis_{p}_band_{form}_u90_pct", 100 * all_u, "%",
+                               f"{100 * all_u:.1f} %") + " (in-sample)"]
+            for fit_on, check_on in (("2019", "2022"), ("2022", "2019")):
+                chosen = covering([v for d, v in u.items() if d.startswith(fit_on)])
+                held = [v for d, v in u.items() if d.startswith(check_on)]
+                cov = 100 * float(np.mean([v <= chosen for v in held]))
+                cells.append(f"chosen on the {fit_on} days " + fig.add(
+                    f"rmis_{p}_band_{form}_u90_{fit_on}_pct", 100 * chosen, "%",
+                    f"{100 * chosen:.1f} %") + f", truth inside on the {check_on} days "
+                    + fig.add(f"rmis_{p}_band_{form}_heldout_{check_on}_coverage_pct", cov,
+                              "%", f"{cov:.0f} %", "≥ 90 %", cov >= 90)
+                    + f" of {len(held)}")
+            if p in gen:
+                g = covering([need(*v) for v in gen[p]])
+                cells.append(f"on {len(gen[p])} generated held-out days (seeds 11–14) "
+                             + fig.add(f"generated_{p}_band_{form}_u90_pct", 100 * g, "%",
+                                       f"{100 * g:.1f} %"))
+            if form == "envelope":
+                cells.append(f"the service's u is {100 * INVERSION_UNCERTAINTY:.1f} %")
+            lines.append("- " + "; ".join(cells))
     return lines
 
 
@@ -368,8 +595,8 @@ def main() -> None:
     print("\nHeld-out accuracy (realistic days, tests/sim/realistic_sky.py):\n")
     for line in accuracy(site, fig):
         print(line)
-    print("\nReal skies (issue 27; NREL RMIS, tests/data/rmis; nothing tuned on them but the "
-          "band's width, whose coverage here is in-sample):\n")
+    print(f"\n{REAL_SKY_HEADING}; NREL RMIS, tests/data/rmis; nothing tuned on them but the "
+          "band's width, whose coverage here is in-sample unless marked held out):\n")
     for line in real_sky(fig):
         print(line)
     print("\nWhy a 10° azimuth offset hides (the formula, docs/diagnosis.md):\n")
@@ -381,9 +608,51 @@ def main() -> None:
     fig.write()
 
 
+REAL_SKY_HEADING = "Real skies (issue 27"
+
+
+def real_sky_only() -> None:
+    """The section with its real-sky part re-run (``HELIOTWIN_BENCH_DIAGNOSIS=real_sky`` under
+    ``benchmarks/run.py diagnosis``: the whole section takes many minutes on the shared
+    machine), and the two cheap parts after it (the yaw formula, the encoder view); the
+    timing and held-out lines before it are carried over, with their figures, from
+    RESULTS.md and benchmarks/results.json as the last full run left them, and the section
+    says so."""
+    import json
+
+    old_figs = json.loads((ROOT / "benchmarks" / "results.json").read_text())["figures"]
+    results = (ROOT / "benchmarks" / "RESULTS.md").read_text()
+    old = results.split("\n## diagnosis\n", 1)[1].split("\n## ", 1)[0]
+    stamp = next(line for line in old.split("\n") if line.startswith("_Measured"))
+    head = old.split(REAL_SKY_HEADING, 1)[0]
+    head = "\n".join(line for line in head.strip("\n").split("\n")
+                     if not line.startswith("_")).strip("\n")
+    fig = Figures("diagnosis")
+    new_lines = real_sky(fig)
+    yaw, encoder = yaw_loss(fig), encoder_view(fig)
+    fig.figures.update({k: v for k, v in old_figs.items()
+                        if v.get("section") == "diagnosis" and k not in fig.figures
+                        and not k.startswith("diagnosis.rmis_")})
+    print("## diagnosis\n")
+    print("_Only the real-sky part and the two after it were re-run here; the lines before "
+          "\"Real skies\" are carried over from the last full run (" + stamp.strip("_").strip()
+          + ")._\n")
+    print(head)
+    print(f"\n{REAL_SKY_HEADING}; NREL RMIS, tests/data/rmis; nothing tuned on them but the "
+          "band's width, whose coverage here is in-sample unless marked held out):\n")
+    print("\n".join(new_lines))
+    print("\nWhy a 10° azimuth offset hides (the formula, docs/diagnosis.md):\n")
+    print("\n".join(yaw))
+    print("\nWhat the encoder angles show (the twin, one day each):\n")
+    print("\n".join(encoder))
+    fig.write()
+
+
 if __name__ == "__main__":
     if sys.argv[1:] == ["--real-sky"]:  # that part alone, for development
         f = Figures("diagnosis")
         print("\n".join(real_sky(f)))
+    elif os.environ.get("HELIOTWIN_BENCH_DIAGNOSIS") == "real_sky":
+        real_sky_only()
     else:
         main()

@@ -49,12 +49,14 @@ def station_site() -> Site:
     return site_from_dict(json.loads((DATA / "rmis_golden.json").read_text()), "rmis_golden")
 
 
-def load() -> pd.DataFrame:
+def load(mid_interval: bool = False) -> pd.DataFrame:
     """Both files, 5-minute, UTC index: ``ghi, dni, dhi, gni, poa`` [W m⁻²] (negative
     night offsets set to 0), ``temp_air`` [°C] and ``wind_speed`` [m s⁻¹] (NaN where the
     file has none); rows without irradiance dropped. The stamps are taken as they are: on
     the clear days the GHI-weighted mean time lies within 3 min of solar noon (12:14 MST in
-    early February) after the 2.5 min of a 5-minute mean's end stamp."""
+    early February) after the 2.5 min of a 5-minute mean's end stamp. ``mid_interval``:
+    each mean stamped at its middle instead (the end stamp − 2.5 min), so that the sun is
+    taken where it was on average over the 5 minutes (a sensitivity check of the bench)."""
     frames = []
     for name, cols in FILES.items():
         df = pd.read_csv(DATA / name, index_col=0)
@@ -64,7 +66,10 @@ def load() -> pd.DataFrame:
         for k in ("ghi", "dni", "dhi", "gni", "poa"):
             df[k] = df[k].clip(lower=0.0)
         frames.append(df)
-    return pd.concat(frames).sort_index().tz_convert("UTC")
+    out = pd.concat(frames).sort_index().tz_convert("UTC")
+    if mid_interval:
+        out.index = out.index - pd.Timedelta(seconds=STEP_S / 2)
+    return out
 
 
 def local_days(site: Site, df: pd.DataFrame) -> list[pd.Timestamp]:
@@ -150,12 +155,15 @@ def minutes(day: pd.Timestamp) -> pd.DatetimeIndex:
                          freq="60s", inclusive="left")
 
 
-def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str) -> dict[str, np.ndarray]:
+def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str,
+                measured_wind: bool = False) -> dict[str, np.ndarray]:
     """The diagnosis' expectation of the day from one instrument (``path`` of :data:`PATHS`),
     on the minute grid: the 5-minute readings onto minutes by the energy rule's line
     (:func:`sim.energy.on_grid`, as the service's ``minute_grid``). Returns
     ``tracker_poa`` [W m⁻²] and ``tracker_power_w``/``tracker_power_alt_w`` [W] of the two
-    decompositions, and ``times``."""
+    decompositions, and ``times``. ``measured_wind``: the station's anemometer (where the
+    file has one) instead of the site's default wind — what the service cannot do, wind
+    not being a reading it ingests; the truth's cell temperature uses the measured wind."""
     times = minutes(day)
     ts = lg.times.as_unit("s").asi8
     grid = times.as_unit("s").asi8
@@ -170,7 +178,12 @@ def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str) -> dict[st
         sensors["fixed_poa_w_m2"] = minute(lg.data["poa"].to_numpy())
     if path == "ghi_sensor":
         sensors["ghi_w_m2"] = minute(lg.data["ghi"].to_numpy())
-    weather, _ = sky_sensor.weather_from_fixed(site, times, fixed_w, sensors=sensors)
+    wind = None
+    if measured_wind:
+        w = minute(lg.data["wind_speed"].to_numpy())
+        wind = np.where(np.isfinite(w), w, site.wind_speed)
+    weather, _ = sky_sensor.weather_from_fixed(site, times, fixed_w, wind_speed=wind,
+                                               sensors=sensors)
     end = day + pd.Timedelta(days=1)
     main = twin.simulate(site, day, end, weather=weather["gti_dirint"]).series
     alt = twin.simulate(site, day, end, weather=weather["clearsky_erbs"]).series
@@ -224,40 +237,59 @@ DECOMPOSITIONS = ("dirint", "dirindex", "erbs", "erbs_driesse", "boland", "louch
                   "gti_dirint")
 
 
-def decomposition_normal_wh_m2(site: Site, lg: Logged) -> dict[str, float]:
+def decomposition_normal_wh_m2(site: Site, lg: Logged, overcast_kc: float | None = None
+                               ) -> dict[str, float]:
     """The day's irradiation on the sun-normal plane [Wh m⁻²] (what the tracker receives)
     from each of pvlib's decompositions (:data:`DECOMPOSITIONS`, each as published, no
     constant refitted) of the measured GHI (GTI-DIRINT: of the fixed plane's POA), DHI =
     GHI − DNI·cos z, transposed by the site's model (Hay-Davies, :func:`sim.sky.poa_irradiance`);
     ``measured_components``: the measured DNI and DHI through the same transposition (the
     floor the transposition itself leaves); ``measured_gni``: the truth. On the 5-minute
-    stamps (the sun at each stamp)."""
+    stamps (the sun at each stamp). ``overcast_kc``: :func:`normal_by_decomposition`'s."""
+    out = {"measured_gni": day_energy_wh(lg.times, lg.data["gni"].to_numpy(), STEP_S)}
+    out.update(normal_by_decomposition(site, lg.times, lg.data["ghi"].to_numpy(), STEP_S,
+                                       lg.data["poa"].to_numpy(), lg.data["dni"].to_numpy(),
+                                       overcast_kc))
+    return out
+
+
+def normal_by_decomposition(site: Site, t: pd.DatetimeIndex, ghi: np.ndarray, step_s: int,
+                            poa: np.ndarray | None = None, dni_measured: np.ndarray | None = None,
+                            overcast_kc: float | None = None) -> dict[str, float]:
+    """The sun-normal plane's irradiation [Wh m⁻²] over ``t`` from each of
+    :data:`DECOMPOSITIONS` of ``ghi`` (GTI-DIRINT of the fixed plane's ``poa``, when given),
+    and ``measured_components`` from ``dni_measured`` (when given). ``overcast_kc``: the beam
+    set to 0 wherever the clear-sky index GHI/GHI_clear (Ineichen) is below it — the
+    "beam → 0 when overcast" rule of issue 27 item 2, measured, not adopted."""
     from pvlib import atmosphere, irradiance
 
-    t = lg.times
     clear = sky_sensor.fixed_clear_sky(site, t)
     zen = clear["apparent_zenith"].to_numpy()
     az = clear["azimuth"].to_numpy()
     up = zen < 90.0
-    ghi, poa = lg.data["ghi"].to_numpy(), lg.data["poa"].to_numpy()
     pressure = float(atmosphere.alt2pres(site.altitude))
     cos_z = np.maximum(np.cos(np.radians(zen)), 0.0)
     am = np.nan_to_num(np.asarray(atmosphere.get_relative_airmass(np.minimum(zen, 90.0)),
                                   dtype=float), nan=40.0)
     fixed = site.arrays["fixed"]
+    ghi_clear = clear["ghi_clear"].to_numpy()
+    overcast = np.zeros(len(t), dtype=bool) if overcast_kc is None else \
+        ghi < overcast_kc * ghi_clear
 
     def normal(dni: np.ndarray, g: np.ndarray) -> float:
         # a model's undefined points (NaN, ±inf: DIRINDEX where the clear sky is 0) carry no beam
         dni = np.clip(np.nan_to_num(np.asarray(dni, dtype=float), posinf=0.0, neginf=0.0),
                       0.0, None)
+        dni = np.where(overcast, 0.0, dni)
         dhi = np.maximum(g - dni * cos_z, 0.0)
         p = sky.poa_irradiance(np.minimum(zen, 90.0), az, zen, az, dni, g, dhi,
                                clear["dni_extra"].to_numpy(), am, albedo=fixed.albedo,
                                model=site.transposition_model)["poa_global"]
-        return day_energy_wh(t, np.where(up, np.nan_to_num(p), 0.0), STEP_S)
+        return day_energy_wh(t, np.where(up, np.nan_to_num(p), 0.0), step_s)
 
-    out: dict[str, float] = {"measured_gni": day_energy_wh(t, lg.data["gni"].to_numpy(), STEP_S)}
-    out["measured_components"] = normal(lg.data["dni"].to_numpy(), ghi)
+    out: dict[str, float] = {}
+    if dni_measured is not None:
+        out["measured_components"] = normal(dni_measured, ghi)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         s_ghi, s_zen = pd.Series(ghi, t), pd.Series(zen, t)
@@ -273,8 +305,9 @@ def decomposition_normal_wh_m2(site: Site, lg: Logged) -> dict[str, float]:
         }
         for name, v in dni.items():
             out[name] = normal(np.asarray(v, dtype=float), ghi)
-        g = irradiance.gti_dirint(pd.Series(poa, t), pd.Series(clear["aoi"].to_numpy(), t),
-                                  s_zen, pd.Series(az, t), t, fixed.surface_tilt,
-                                  fixed.surface_azimuth, pressure, albedo=fixed.albedo)
-        out["gti_dirint"] = normal(g["dni"].to_numpy(), np.nan_to_num(g["ghi"].to_numpy()))
+        if poa is not None:
+            g = irradiance.gti_dirint(pd.Series(poa, t), pd.Series(clear["aoi"].to_numpy(), t),
+                                      s_zen, pd.Series(az, t), t, fixed.surface_tilt,
+                                      fixed.surface_azimuth, pressure, albedo=fixed.albedo)
+            out["gti_dirint"] = normal(g["dni"].to_numpy(), np.nan_to_num(g["ghi"].to_numpy()))
     return out
