@@ -286,19 +286,25 @@ def _select_terms(p_core: NDArray, obs: _Observations) -> tuple[str, ...]:
     Each round linearises all six terms at the current solution (one Jacobian), solves
     each candidate set (current + one optional term) by linear least squares, and keeps
     the candidate whose value is the most significant, if it exceeds
-    :data:`SIGNIFICANCE_SIGMAS` standard errors and :data:`MIN_TERM_DEG`.
+    :data:`SIGNIFICANCE_SIGMAS` standard errors and :data:`MIN_TERM_DEG`. The candidates'
+    least squares come from the normal equations JᵀJ, Jᵀr (6 × 6, formed once), their
+    residual sums of squares from rᵀr + 2 δᵀJᵀr + δᵀJᵀJ δ: no candidate passes over the
+    observations again.
     """
     p_full = np.concatenate([p_core, np.zeros(len(OPTIONAL_TERMS))])
     jac = _jacobian(p_full, _ALL_TERMS, obs)
     res = _residuals(p_full, _ALL_TERMS, obs)
+    gram, grad, rr = jac.T @ jac, jac.T @ res, float(res @ res)
     chosen = list(CORE_TERMS)
     while True:
         best: tuple[float, str] | None = None
         for cand in (t for t in OPTIONAL_TERMS if t not in chosen):
             cols = [_ALL_TERMS.index(t) for t in (*chosen, cand)]
-            j = jac[:, cols]
-            step, *_ = np.linalg.lstsq(j, -res, rcond=None)
-            cov = _covariance(j, res + j @ step, len(cols))
+            inv = np.linalg.pinv(gram[np.ix_(cols, cols)])
+            step = -inv @ grad[cols]
+            ss = rr + 2.0 * float(step @ grad[cols]) + float(step @ gram[np.ix_(cols, cols)]
+                                                             @ step)
+            cov = max(ss, 0.0) / max(res.size - len(cols), 1) * inv
             value, std = abs(step[-1]), float(np.sqrt(cov[-1, -1]))
             if value > max(SIGNIFICANCE_SIGMAS * std, MIN_TERM_DEG) and (
                     best is None or value / std > best[0]):
