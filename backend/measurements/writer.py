@@ -46,6 +46,8 @@ logger = logging.getLogger(__name__)
 _STOP = object()
 #: Readings per multi-row INSERT on SQLite (5 parameters each; SQLite allows 32,766).
 SQLITE_CHUNK_ROWS = 1000
+#: Parameters of one statement the writer sends SQLite at most (SQLite allows 32,766).
+SQLITE_MAX_PARAMS = 30_000
 
 
 @dataclass
@@ -129,6 +131,10 @@ class _Sql:
         series = f"FROM measurements WHERE array_id = {ph} AND source = {ph}"
         self.before = f"SELECT ts_s, power_w {series} AND ts_s < {ph} ORDER BY ts_s DESC LIMIT 1"
         self.after = f"SELECT ts_s, power_w {series} AND ts_s >= {ph} ORDER BY ts_s LIMIT 1"
+        self._ph = ph
+        self._rollup_cols = cols
+        self._merge_set = merge
+        self._upsert_set = updates
         self.window = (
             f"SELECT ts_s, voltage_v, current_a, power_w, {', '.join(SENSOR_NAMES)} "
             "FROM measurements "
@@ -138,6 +144,53 @@ class _Sql:
         self.drop_diagnosis = (  # backend/diagnosis/service.py caches per local day
             "DELETE FROM diagnosis_days WHERE site_id = (SELECT site_id FROM arrays WHERE id = "
             f"{ph}) AND day_end_s > {ph} AND day_start_s <= {ph}")
+    def neighbours_of_runs(self, runs: int) -> str:
+        """One statement giving, for each of ``runs`` runs ``(i, lo, hi)`` (parameters: the
+        series' array and source, then the runs), the stored reading at or after ``lo``
+        and the one before it — primary-key seeks inside the database, so the writer
+        hands the GIL back once for all runs instead of twice per run."""
+        ph = self._ph
+        first = (f"(CAST({ph} AS INTEGER), CAST({ph} AS BIGINT), CAST({ph} AS BIGINT))")
+        rest = f", ({ph}, {ph}, {ph})" * (runs - 1)
+
+        def seek(col: str, where: str, order: str) -> str:
+            return (f"(SELECT {col} FROM measurements m WHERE m.array_id = k.a AND "
+                    f"m.source = k.s AND m.ts_s {where} ORDER BY m.ts_s {order} LIMIT 1)")
+
+        return (
+            f"WITH k(a, s) AS (VALUES (CAST({ph} AS INTEGER), CAST({ph} AS INTEGER))), "
+            f"r(i, lo, hi) AS (VALUES {first}{rest}) "
+            f"SELECT r.i, {seek('ts_s', '>= r.lo', 'ASC')}, {seek('power_w', '>= r.lo', 'ASC')}, "
+            f"{seek('ts_s', '< r.lo', 'DESC')}, {seek('power_w', '< r.lo', 'DESC')} "
+            "FROM r, k ORDER BY r.i")
+
+    def rollup_rows_sql(self, rows: int, merge: bool) -> str:
+        """SQLite: one ``INSERT … VALUES (…), (…) … ON CONFLICT DO UPDATE`` of ``rows``
+        rollup rows (merged increments or recomputed rows). SQLite applies the rows in
+        order, a later row of the same bucket merging into the earlier one as
+        ``executemany`` would, but steps once for all of them (see :meth:`insert_job`)."""
+        one = f"({', '.join(['?'] * (len(ROLLUP_COLUMNS) + 2))})"
+        return (f"INSERT INTO measurement_rollups (array_id, source, {self._rollup_cols}) "
+                f"VALUES {', '.join([one] * rows)} ON CONFLICT (array_id, source, bucket_s) "
+                f"DO UPDATE SET {self._merge_set if merge else self._upsert_set}")
+
+    def upsert_rollups(self, cur: Any, rows: list[tuple[Any, ...]], merge: bool) -> None:
+        """Write rollup rows ``(array_id, source, *ROLLUP_COLUMNS)``: merged into the stored
+        ones (increments) or replacing them. PostgreSQL: ``executemany`` (one statement
+        may not update a row twice there; psycopg pipelines it)."""
+        if not rows:
+            return
+        rows = _nan_to_none(rows)
+        if self.pg:
+            cur.executemany(self.merge_rollup if merge else self.upsert_rollup, rows)
+            return
+        width = len(ROLLUP_COLUMNS) + 2
+        chunk = SQLITE_MAX_PARAMS // width
+        for k in range(0, len(rows), chunk):
+            part = rows[k:k + chunk]
+            cur.execute(self.rollup_rows_sql(len(part), merge),
+                        [x for row in part for x in row])
+
     def insert_job(self, cur: Any, job: MeasurementJob) -> int:
         """Insert a job's readings (``ON CONFLICT DO NOTHING``); how many were new.
 
@@ -456,13 +509,32 @@ class Writer:
         if cuts.size == 0 or cuts.size >= MAX_RUNS:
             return None
         edges = [0, *cuts.tolist(), ts.size]
-        runs: list[_Hole] = []
-        for a, b in zip(edges[:-1], edges[1:], strict=True):
-            around = self._neighbours(cur, key, int(ts[a]), int(ts[b - 1]))
-            if around is None:
-                return None
-            runs.append((slice(a, b), *around))
-        return runs
+        bounds = [(int(ts[a]), int(ts[b - 1])) for a, b in zip(edges[:-1], edges[1:],
+                                                                strict=True)]
+        found = self._neighbours_of_runs(cur, key, bounds)
+        if found is None:
+            return None
+        return [(slice(a, b), *around)
+                for a, b, around in zip(edges[:-1], edges[1:], found, strict=True)]
+
+    def _neighbours_of_runs(self, cur: Any, key: tuple[int, int], bounds: list[tuple[int, int]]
+                            ) -> list[tuple[tuple[int, float] | None, tuple[int, float] | None]
+                                      ] | None:
+        """:meth:`_neighbours` of every run ``(lo, hi)`` in one statement (see
+        :meth:`_Sql.neighbours_of_runs`); None when a stored reading lies within a run."""
+        out = []
+        per = SQLITE_MAX_PARAMS // 3 - 1
+        for k in range(0, len(bounds), per):
+            part = bounds[k:k + per]
+            params = [*key, *(x for j, (lo, hi) in enumerate(part, k) for x in (j, lo, hi))]
+            cur.execute(self._sql.neighbours_of_runs(len(part)), params)
+            for (_, after_ts, after_p, before_ts, before_p), (_, hi) in zip(
+                    cur.fetchall(), part, strict=True):
+                if after_ts is not None and after_ts <= hi:
+                    return None
+                out.append((None if before_ts is None else (int(before_ts), float(before_p)),
+                            None if after_ts is None else (int(after_ts), float(after_p))))
+        return out
 
     def _neighbours(self, cur: Any, key: tuple[int, int], lo: int, hi: int
                     ) -> tuple[tuple[int, float] | None, tuple[int, float] | None] | None:
@@ -485,7 +557,7 @@ class Writer:
             phase = self.phase_of_array(key[0])
             rows = [r for sel, prev, nxt in holes
                     for r in increment_rows(prev, nxt, w.part(sel), phase, self.max_gap_s)]
-            cur.executemany(self._sql.merge_rollup, [(*key, *r) for r in _nan_to_none(rows)])
+            self._sql.upsert_rollups(cur, [(*key, *r) for r in rows], merge=True)
             return
         self.rollup_refreshes += 1
         self._refresh_rollups(cur, key[0], key[1], w.ts_s)
@@ -508,5 +580,4 @@ class Writer:
                                   data[:, 4:])
             out.extend((array_id, source, *row)
                        for row in rollup_rows(window, k_first, k_last, phase, gap))
-        if out:
-            cur.executemany(self._sql.upsert_rollup, _nan_to_none(out))
+        self._sql.upsert_rollups(cur, out, merge=False)

@@ -8,6 +8,7 @@ with NumPy, and energy must equal an independent trapezoid integration.
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -183,3 +184,42 @@ def test_a_re_sent_batch_leaves_the_rollups_untouched(ctx) -> None:  # type: ign
                                   "ORDER BY bucket_s"), {"a": aid}).all()
     assert after == before
     _assert_rollups_equal_direct_aggregates(ctx, aid, ts.size)
+
+
+def test_a_group_of_many_loggers_costs_few_statements(tmp_path: Path) -> None:
+    """SQLite: the writer hands the GIL back at every statement (and at every row of an
+    ``executemany``), and waits to get it back from the event loop each time. 100 loggers'
+    single readings far apart in one group: the stored readings around every run are
+    found by one statement, the rollup increments written by another, so the group costs
+    about a statement per job (each job's INSERT counts its duplicates), not 2 per run
+    and one per rollup row (454 here before)."""
+    db = new_database("sqlite", tmp_path)
+    ctx = open_context(get_settings(database_url=db.url, alerts=False,
+                                    sites_dir=get_settings().sites.user_dir))
+    try:
+        aid = ctx.registry.sites["tehuantepec"].arrays["fixed"].array_id
+        minutes = np.arange(0, 100 * 30, 30)
+        stored = T0 + 60 * np.setdiff1d(np.arange(minutes[-1] + 1), minutes)
+        assert ctx.writer.submit(_job(aid, stored, 1)).result(timeout=60)[0] == stored.size
+        statements: list[str] = []
+        ctx.writer.call(lambda conn: conn.connection.driver_connection.set_trace_callback(
+            statements.append)).result(timeout=60)
+        holding, gate = threading.Event(), threading.Event()
+
+        def hold(_conn: object) -> None:  # the writer waits here: the jobs queue up
+            holding.set()
+            gate.wait(60)
+
+        ctx.writer.call(hold)
+        assert holding.wait(60)
+        futures = [ctx.writer.submit(_job(aid, np.array([T0 + 60 * m]), int(m)))
+                   for m in minutes]
+        statements.clear()
+        gate.set()
+        assert [f.result(timeout=60) for f in futures] == [(1, 0)] * minutes.size
+        assert ctx.writer.rollup_refreshes == 0
+        others = [s[:60] for s in statements if not s.startswith("INSERT INTO measurements ")]
+        assert len(statements) <= minutes.size + 8, others
+        _assert_rollups_equal_direct_aggregates(ctx, aid, stored.size + minutes.size)
+    finally:
+        ctx.close()
