@@ -193,7 +193,7 @@ def poa_sensor_errors(site, df: pd.DataFrame) -> dict[str, tuple[str, float]]:
         covered = np.isfinite(on_grid(ts, lg.data["gni"].to_numpy(), grid, 2 * rmis_sky.STEP_S))
         truth = energy_wh(grid, np.where(covered, on_grid(ts, lg.tracker_power_w, grid,
                                                           2 * rmis_sky.STEP_S), np.nan), 60)
-        e = rmis_sky.expectation(site, lg, day, "poa_sensor")
+        e = rmis_sky.expectation(site, lg, day, "poa_sensor", second_sky=False)
         a = energy_wh(grid, np.where(covered, e["tracker_power_w"], np.nan), 60)
         kind, _ = rmis_sky.sky_kind(site, lg)
         out[lg.date] = ("clear" if kind == "clear" else "cloudy", 100 * (a / truth - 1))
@@ -378,7 +378,8 @@ def real_sky(fig: Figures) -> list[str]:
             if p == "poa_sensor":
                 w_err = e_err
                 if lg.data["wind_speed"].notna().any():  # the station's anemometer
-                    ew = rmis_sky.expectation(site, lg, day, p, measured_wind=True)
+                    ew = rmis_sky.expectation(site, lg, day, p, measured_wind=True,
+                                              second_sky=False)
                     w_err = 100 * (wh(ew["tracker_power_w"]) / truth - 1)
                     wind_cells.append(f"{tag} " + fig.add(
                         f"rmis_{tag}_poa_sensor_wind_energy_pct", w_err, "%", f"{w_err:+.1f} %"))

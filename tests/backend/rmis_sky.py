@@ -156,14 +156,16 @@ def minutes(day: pd.Timestamp) -> pd.DatetimeIndex:
 
 
 def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str,
-                measured_wind: bool = False) -> dict[str, np.ndarray]:
+                measured_wind: bool = False, second_sky: bool = True
+                ) -> dict[str, np.ndarray]:
     """The diagnosis' expectation of the day from one instrument (``path`` of :data:`PATHS`),
     on the minute grid: the 5-minute readings onto minutes by the energy rule's line
     (:func:`sim.energy.on_grid`, as the service's ``minute_grid``). Returns
     ``tracker_poa`` [W m⁻²] and ``tracker_power_w``/``tracker_power_alt_w`` [W] of the two
     decompositions, and ``times``. ``measured_wind``: the station's anemometer (where the
     file has one) instead of the site's default wind — what the service cannot do, wind
-    not being a reading it ingests; the truth's cell temperature uses the measured wind."""
+    not being a reading it ingests; the truth's cell temperature uses the measured wind.
+    ``second_sky=False``: the main decomposition only (no ``tracker_power_alt_w``)."""
     times = minutes(day)
     ts = lg.times.as_unit("s").asi8
     grid = times.as_unit("s").asi8
@@ -182,14 +184,17 @@ def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str,
     if measured_wind:
         w = minute(lg.data["wind_speed"].to_numpy())
         wind = np.where(np.isfinite(w), w, site.wind_speed)
+    models = ("gti_dirint", "clearsky_erbs") if second_sky else ("gti_dirint",)
     weather, _ = sky_sensor.weather_from_fixed(site, times, fixed_w, wind_speed=wind,
-                                               sensors=sensors)
+                                               models=models, sensors=sensors)
     end = day + pd.Timedelta(days=1)
     main = twin.simulate(site, day, end, weather=weather["gti_dirint"]).series
-    alt = twin.simulate(site, day, end, weather=weather["clearsky_erbs"]).series
-    return {"times": times, "tracker_poa": np.nan_to_num(main["tracker_poa_global"].to_numpy()),
-            "tracker_power_w": main["tracker_power_w"].to_numpy(),
-            "tracker_power_alt_w": alt["tracker_power_w"].to_numpy()}
+    out = {"times": times, "tracker_poa": np.nan_to_num(main["tracker_poa_global"].to_numpy()),
+           "tracker_power_w": main["tracker_power_w"].to_numpy()}
+    if second_sky:
+        alt = twin.simulate(site, day, end, weather=weather["clearsky_erbs"]).series
+        out["tracker_power_alt_w"] = alt["tracker_power_w"].to_numpy()
+    return out
 
 
 def day_energy_wh(times: pd.DatetimeIndex, power_w: np.ndarray, step_s: int) -> float:
