@@ -2,9 +2,10 @@
 
 Two ways the twin series gets into ``measurements``:
 
-- the live loop (:meth:`TwinService.run_live`): every minute while the service
-  runs, ``sim.twin.simulate(site, t, t + 60 s)`` for each site, written through
-  the writer, and handed to the 3D scene (``update_live``);
+- the live loop (:meth:`TwinService.run_live`, its own thread): every minute while
+  the service runs, the minute's row of each site (``sim.twin.simulate`` run an hour
+  ahead at once, :meth:`TwinService._minute`), written through the writer, and handed
+  to the 3D scene (``update_live``);
 - on demand (:meth:`TwinService.ensure`): before a query reads twin data of past
   days, the missing part of each local day up to now is simulated in one
   vectorised run and stored, so ``twin_wh`` exists for any day, not only for the
@@ -80,6 +81,10 @@ class LiveClock:
     running_due_s: float | None = None
     last_minute_s: int | None = None
     last_done_s: float | None = None
+    #: of the last tick: from its due time until its step began (the live thread's
+    #: wake-up), and from then until its readings were committed [s]
+    last_start_delay_s: float | None = None
+    last_step_s: float | None = None
     recent_lags_s: list[float] = field(default_factory=list)
 
     def next_due(self, now_s: float) -> float:
@@ -89,8 +94,11 @@ class LiveClock:
     def begin(self, due_s: float) -> None:
         self.running_due_s = due_s
 
-    def end(self, due_s: float, done_s: float) -> None:
+    def end(self, due_s: float, done_s: float, started_s: float | None = None) -> None:
         self.ticks += 1
+        if started_s is not None:
+            self.last_start_delay_s = started_s - due_s
+            self.last_step_s = done_s - started_s
         self.running_due_s = None
         self.last_minute_s = int(due_s // 60 * 60)
         self.last_done_s = done_s
@@ -108,6 +116,7 @@ class LiveClock:
             "lag_s": running if running is not None else
             (self.recent_lags_s[-1] if self.recent_lags_s else None),
             "max_lag_s": max(lags) if lags else None,
+            "last_start_delay_s": self.last_start_delay_s, "last_step_s": self.last_step_s,
         }
 
 
@@ -327,22 +336,38 @@ class TwinService:
             f.result()
 
     async def run_live(self, stop: asyncio.Event, interval_s: float) -> None:
-        """Run :meth:`live_step` on the grid of ``interval_s`` until ``stop`` is set; each
-        tick's lag is kept in :attr:`clock` (``GET /api/v1/live-twin``)."""
+        """Run the live loop on its own thread (``heliotwin-live``) until ``stop`` is set.
+
+        Not an asyncio task stepping on AnyIO's pool: under load the event loop fires a
+        timer only after the callbacks ready before it (every pending request), and the
+        pool's threads are shared with the reads, so a tick was late by seconds before
+        its step began. The thread waits on an event; each tick's lag is kept in
+        :attr:`clock` (``GET /api/v1/live-twin``).
+        """
         self.clock = clock = LiveClock(interval_s)
+        halt = threading.Event()
+        thread = threading.Thread(target=self._live_loop, args=(clock, halt),
+                                  name="heliotwin-live", daemon=True)
+        thread.start()
+        try:
+            await stop.wait()
+        finally:
+            halt.set()
+            await anyio.to_thread.run_sync(thread.join, 30.0)
+
+    def _live_loop(self, clock: LiveClock, halt: threading.Event) -> None:
+        """:meth:`live_step` on the grid of ``clock.interval_s`` until ``halt`` is set."""
         due = time.time()
-        while not stop.is_set():
+        while not halt.is_set():
             clock.begin(due)
+            started = time.time()
             try:
-                await anyio.to_thread.run_sync(self.live_step, due)
+                self.live_step(due)
             except Exception:
                 logger.exception("live twin step failed")
-            clock.end(due, time.time())
+            clock.end(due, time.time(), started)
             due = clock.next_due(time.time())
-            try:
-                await asyncio.wait_for(stop.wait(), timeout=max(0.0, due - time.time()))
-            except TimeoutError:
-                pass
+            halt.wait(max(0.0, due - time.time()))
 
 
 def _mark_coverage(conn: Connection, site_id: str, marks: list[tuple[int, int]]) -> None:

@@ -176,6 +176,7 @@ def test_the_live_loop_reports_its_lag(server: InProcessServer) -> None:
             time.sleep(0.2)
     assert live["enabled"] and live["interval_s"] == 0.5
     assert live["lag_s"] is not None and 0 <= live["lag_s"] <= live["max_lag_s"]
+    assert live["last_start_delay_s"] >= 0 and live["last_step_s"] >= 0
     last = dt.datetime.fromisoformat(live["last_minute_utc"].replace("Z", "+00:00"))
     done = dt.datetime.fromisoformat(live["last_done_utc"].replace("Z", "+00:00"))
     assert last.second == 0 and dt.timedelta(0) <= done - last < dt.timedelta(minutes=2)
@@ -186,7 +187,8 @@ def test_live_twin_route_without_the_loop(tmp_path: Path) -> None:
     with InProcessServer(db.url) as srv, srv.client() as c:
         assert c.get("/api/v1/live-twin").json() == {
             "enabled": False, "interval_s": None, "ticks": 0, "last_minute_utc": None,
-            "last_done_utc": None, "lag_s": None, "max_lag_s": None}
+            "last_done_utc": None, "lag_s": None, "max_lag_s": None,
+            "last_start_delay_s": None, "last_step_s": None}
 
 
 def test_live_clock_lag_grid_and_window() -> None:
@@ -195,9 +197,10 @@ def test_live_clock_lag_grid_and_window() -> None:
     assert clock.status(100.0)["lag_s"] is None
     clock.begin(120.0)
     assert clock.status(123.0)["lag_s"] == 3.0  # a tick still running: now − due
-    clock.end(120.0, 125.5)
+    clock.end(120.0, 125.5, started_s=121.0)
     st = clock.status(200.0)
     assert (st["lag_s"], st["max_lag_s"], st["ticks"], st["last_minute_s"]) == (5.5, 5.5, 1, 120)
+    assert (st["last_start_delay_s"], st["last_step_s"]) == (1.0, 4.5)
     # a tick that overran the next due time: the next one is due after it ended
     clock.begin(180.0)
     clock.end(180.0, 250.0)

@@ -72,6 +72,12 @@ class LiveTwinRead(BaseModel):
         "how late the loop is [s]: of a tick still running, now minus when it was due; "
         "else the last tick's commit minus when it was due"))
     max_lag_s: float | None = Field(description="the largest lag of the last 60 ticks [s]")
+    last_start_delay_s: float | None = Field(description=(
+        "of the last tick: from when it was due until its step began (the live thread's "
+        "wake-up: the CPU and the GIL) [s]"))
+    last_step_s: float | None = Field(description=(
+        "of the last tick: from when its step began until its readings were committed "
+        "(the twin's minute, the writer's queue and commit) [s]"))
 
 
 @router.get("/api/v1/live-twin", response_model=LiveTwinRead)
@@ -80,7 +86,8 @@ async def live_twin(ctx: ContextDep) -> dict[str, Any]:
     clock = ctx.twin.clock
     if clock is None:
         return {"enabled": False, "interval_s": None, "ticks": 0, "last_minute_utc": None,
-                "last_done_utc": None, "lag_s": None, "max_lag_s": None}
+                "last_done_utc": None, "lag_s": None, "max_lag_s": None,
+                "last_start_delay_s": None, "last_step_s": None}
     st = clock.status()
     return {
         "enabled": True, "interval_s": st["interval_s"], "ticks": st["ticks"],
@@ -89,4 +96,5 @@ async def live_twin(ctx: ContextDep) -> dict[str, Any]:
         "last_done_utc": None if st["last_done_s"] is None
         else iso_utc([int(st["last_done_s"])])[0],
         "lag_s": st["lag_s"], "max_lag_s": st["max_lag_s"],
+        "last_start_delay_s": st["last_start_delay_s"], "last_step_s": st["last_step_s"],
     }
