@@ -242,19 +242,17 @@ DECOMPOSITIONS = ("dirint", "dirindex", "erbs", "erbs_driesse", "boland", "louch
                   "gti_dirint")
 
 
-def decomposition_normal_wh_m2(site: Site, lg: Logged, overcast_kc: float | None = None
-                               ) -> dict[str, float]:
+def decomposition_normal_wh_m2(site: Site, lg: Logged) -> dict[str, float]:
     """The day's irradiation on the sun-normal plane [Wh m⁻²] (what the tracker receives)
     from each of pvlib's decompositions (:data:`DECOMPOSITIONS`, each as published, no
     constant refitted) of the measured GHI (GTI-DIRINT: of the fixed plane's POA), DHI =
     GHI − DNI·cos z, transposed by the site's model (Hay-Davies, :func:`sim.sky.poa_irradiance`);
     ``measured_components``: the measured DNI and DHI through the same transposition (the
     floor the transposition itself leaves); ``measured_gni``: the truth. On the 5-minute
-    stamps (the sun at each stamp). ``overcast_kc``: :func:`normal_by_decomposition`'s."""
+    stamps (the sun at each stamp)."""
     out = {"measured_gni": day_energy_wh(lg.times, lg.data["gni"].to_numpy(), STEP_S)}
     out.update(normal_by_decomposition(site, lg.times, lg.data["ghi"].to_numpy(), STEP_S,
-                                       lg.data["poa"].to_numpy(), lg.data["dni"].to_numpy(),
-                                       overcast_kc))
+                                       lg.data["poa"].to_numpy(), lg.data["dni"].to_numpy()))
     return out
 
 
