@@ -24,9 +24,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from pvlib import atmosphere
-from sqlalchemy import Connection
+from sqlalchemy import Connection, text
 
 from backend.errors import InputError
+from backend.measurements.buckets import ROLLUP_WIDTH_S
 from backend.measurements.fields import SENSOR_NAMES
 from backend.measurements.queries import iso_utc, raw_rows
 from backend.sites import SiteInfo
@@ -82,6 +83,53 @@ def observations(conn: Connection, info: SiteInfo, t0: dt.datetime, t1: dt.datet
     rows = raw_rows(conn, tracker.array_id, 0, int(t0.timestamp()), int(t1.timestamp()),
                     sensors=True)
     return rows[np.isfinite(rows[:, _COLS]).all(axis=1)] if rows.size else rows
+
+
+#: Fits by their range and what the writer's hourly rollups say of the range's readings
+#: (:func:`range_key`), so that a command under a cached fit reads no observations: a
+#: year's rows take seconds to read, the rollups' sums over its 8,760 hours a millisecond.
+_RANGE_FITS: OrderedDict[tuple[Any, ...], PointingFit] = OrderedDict()
+
+
+def range_key(conn: Connection, info: SiteInfo, t0: dt.datetime, t1: dt.datetime
+              ) -> tuple[Any, ...] | None:
+    """What fixes the fit of ``[t0, t1)`` without reading its observations: the site's place
+    and refraction, the tracker array, the range, and the count, power sum and last time of
+    its measured readings by the hourly rollups (the writer updates them in the transaction
+    that stores a reading, a reading is never changed in place, and deleting readings drops
+    their rollups); whole hours around the range, so a reading next to it also counts. None
+    without a tracker array."""
+    tracker = info.array_of_kind("tracker")
+    if tracker is None:
+        return None
+    a, b = int(t0.timestamp()), int(t1.timestamp())
+    width = ROLLUP_WIDTH_S
+    marker = conn.execute(text(
+        "SELECT count(*), coalesce(sum(n), 0), coalesce(max(last_ts_s), 0), "
+        "coalesce(sum(sum_power_w), 0) FROM measurement_rollups WHERE array_id = :a AND "
+        "source = 0 AND bucket_s >= :b0 AND bucket_s < :b1"),
+        {"a": tracker.array_id, "b0": a // width * width, "b1": b}).one()
+    s = info.site
+    return (info.site_id, tracker.array_id, s.latitude, s.longitude, s.altitude,
+            *_refraction(info), a, b, *marker)
+
+
+def cached_range_fit(key: tuple[Any, ...] | None) -> PointingFit | None:
+    """The fit remembered under :func:`range_key`'s ``key`` (None if none)."""
+    if key is None:
+        return None
+    with _CACHE_LOCK:
+        return _RANGE_FITS.get(key)
+
+
+def remember_range_fit(key: tuple[Any, ...] | None, fit: PointingFit) -> None:
+    """Remember ``fit`` under ``key`` (bounded as the digest cache, oldest out)."""
+    if key is None:
+        return
+    with _CACHE_LOCK:
+        _RANGE_FITS[key] = fit
+        while len(_RANGE_FITS) > _CACHE_SIZE:
+            _RANGE_FITS.popitem(last=False)
 
 
 def fit_site(rows: np.ndarray, info: SiteInfo) -> PointingFit:

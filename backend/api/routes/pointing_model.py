@@ -25,11 +25,14 @@ from backend.context import ServiceContext
 from backend.diagnosis.pointing_model import (
     MAX_POINTS,
     TooFewObservations,
+    cached_range_fit,
     command,
     fit_site,
     frame_offsets,
     model_body,
     observations,
+    range_key,
+    remember_range_fit,
     residual_points,
 )
 from backend.limits import Busy
@@ -127,10 +130,23 @@ def get_pointing_command(
     info = site_or_404(ctx, site_id)
     try:
         when: dt.datetime = parse_instant(time, "time")
+        t0, t1 = parse_range(start, end, info.zone)
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
-    return PointingCommandRead.model_validate(command(info, _fit(ctx, info, start, end)[1],
-                                                      when))
+    # a command under a remembered fit reads no rows; the key and the rows are read in one
+    # transaction (one snapshot), and the fit runs after the connection is closed
+    try:
+        with ctx.engine.connect() as conn:
+            key = range_key(conn, info, t0, t1)
+            fit = cached_range_fit(key)
+            if fit is None:
+                rows = observations(conn, info, t0, t1)
+        if fit is None:
+            fit = fit_site(rows, info)
+            remember_range_fit(key, fit)
+    except TooFewObservations as exc:
+        raise HTTPException(422, str(exc)) from None
+    return PointingCommandRead.model_validate(command(info, fit, when))
 
 
 #: The form fields of ``POST …/observations`` besides ``file``: the reading's (its time and
