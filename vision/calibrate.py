@@ -350,6 +350,51 @@ def choose_radial(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
 
 
 @dataclass(frozen=True)
+class PositionFit:
+    """:func:`calibrate_positions`: the robust fit, the radial terms tried and the
+    leave-one-out residual [°] of each inlier (empty when too few)."""
+
+    fit: RobustFit
+    model_selection: list[dict[str, Any]]
+    loo_deg: NDArray[np.float64]
+
+
+def calibrate_positions(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
+                        elevation_deg: ArrayLike, image_size: tuple[int, int],
+                        projection: str = "equidistant", east: str = "auto",
+                        n_radial: int | None = None, fit_tilt: bool = False,
+                        outlier_deg: float = OUTLIER_DEG,
+                        centre_guess_px: tuple[float, float] | None = None) -> PositionFit:
+    """The fit of :func:`self_calibrate` on sun positions already found: :func:`robust_fit`
+    of the base model, the radial terms from :func:`choose_radial` when ``n_radial`` is
+    None (on the inliers), the fit again with them, and each inlier held out in turn."""
+    x, y = np.asarray(x_px, float).ravel(), np.asarray(y_px, float).ravel()
+    az, el = np.asarray(azimuth_deg, float).ravel(), np.asarray(elevation_deg, float).ravel()
+    fixed: dict[str, Any] = {"projection": projection, "east": east, "fit_tilt": fit_tilt}
+    rf = robust_fit(x, y, az, el, image_size, outlier_deg, n_radial=n_radial or 0,
+                    centre_guess_px=centre_guess_px, **fixed)
+    # the mirror is the consensus's; held-out fits start from its centre (each mirror's
+    # solve costs as much again, and the wrong one's grinds to its limit)
+    known: dict[str, Any] = {**fixed, "east": rf.result.camera.east,
+                             "centre_guess_px": (rf.result.camera.cx_px,
+                                                 rf.result.camera.cy_px)}
+    selection: list[dict[str, Any]] = []
+    if n_radial is None:
+        inl = rf.inlier
+        k, selection = choose_radial(x[inl], y[inl], az[inl], el[inl], image_size, **known)
+        if k:
+            rf = robust_fit(x, y, az, el, image_size, outlier_deg, n_radial=k,
+                            centre_guess_px=centre_guess_px, **fixed)
+    k = len(rf.result.camera.radial_coeffs)
+    inl = rf.inlier
+    n_par = 4 + k + (2 if fit_tilt else 0)
+    loo = (leave_one_out_deg(x[inl], y[inl], az[inl], el[inl], image_size,
+                             **{**known, "n_radial": k})
+           if 2 * (int(inl.sum()) - 1) >= n_par + 2 else np.empty(0))
+    return PositionFit(rf, selection, loo)
+
+
+@dataclass(frozen=True)
 class SelfCalibration:
     """:func:`self_calibrate`'s answer.
 
@@ -424,8 +469,9 @@ def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
         raise ValueError("n_radial must be 0, 1, 2 or None (chosen from the frames)")
     fixed: dict[str, Any] = {"projection": projection, "east": east, "fit_tilt": fit_tilt}
 
-    def fit_from(dets: list[Any], size: tuple[int, int], k: int
-                 ) -> tuple[NDArray[np.intp], RobustFit]:
+    def found(dets: list[Any], k: int
+              ) -> tuple[NDArray[np.intp], NDArray[np.float64], tuple[float, float] | None]:
+        """The frames with a sun above the horizon, its pixels, the image circle's centre."""
         use = np.array([i for i, d in enumerate(dets)
                         if d.sun_found and d.centroid_px is not None and el[i] > 0], int)
         n_par = 4 + k + (2 if fit_tilt else 0)
@@ -436,40 +482,24 @@ def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
                              f"need at least {(n_par + 3) // 2}")
         xy = np.array([dets[i].centroid_px for i in use], float)
         fov = next((d.fov for d in dets if getattr(d, "fov", None) is not None), None)
-        guess = (fov.cx_px, fov.cy_px) if fov is not None else None
-        rf = robust_fit(xy[:, 0], xy[:, 1], az[use], el[use], size, outlier_deg,
-                        n_radial=k, centre_guess_px=guess, **fixed)
-        return use, rf
+        return use, xy, (fov.cx_px, fov.cy_px) if fov is not None else None
 
     dets, size = _detect_all(load, n, method, None, az, el)
     search = ["blind"] * n
-    use, rf = fit_from(dets, size, 0 if n_radial is None else n_radial)
     if guided and method == "robust":
-        again, _ = _detect_all(load, n, method, rf.result.camera, az, el)
+        # the first fit only guides the second search: the base model is enough
+        use, xy, guess = found(dets, n_radial or 0)
+        first = robust_fit(xy[:, 0], xy[:, 1], az[use], el[use], size, outlier_deg,
+                           n_radial=n_radial or 0, centre_guess_px=guess, **fixed)
+        again, _ = _detect_all(load, n, method, first.result.camera, az, el)
         # keep the guided answer where it found a sun; a refusal keeps the blind one
         for i, d in enumerate(again):
             if d.sun_found and d.centroid_px is not None:
                 dets[i], search[i] = d, "ephemeris-guided"
-        use, rf = fit_from(dets, size, 0 if n_radial is None else n_radial)
-    selection: list[dict[str, Any]] = []
-    inl = use[rf.inlier]
-    xy = np.array([dets[i].centroid_px for i in inl], float).reshape(-1, 2)
-    # the mirror is the consensus's; held-out fits start from its centre (each mirror's
-    # solve costs as much again, and the wrong one's grinds to its limit)
-    known: dict[str, Any] = {**fixed, "east": rf.result.camera.east,
-                             "centre_guess_px": (rf.result.camera.cx_px,
-                                                 rf.result.camera.cy_px)}
-    if n_radial is None:
-        k, selection = choose_radial(xy[:, 0], xy[:, 1], az[inl], el[inl], size, **known)
-        if k:
-            use, rf = fit_from(dets, size, k)
-            inl = use[rf.inlier]
-            xy = np.array([dets[i].centroid_px for i in inl], float).reshape(-1, 2)
-    k = len(rf.result.camera.radial_coeffs)
-    loo_kwargs = {**known, "n_radial": k}
-    n_par = 4 + k + (2 if fit_tilt else 0)
-    loo = (leave_one_out_deg(xy[:, 0], xy[:, 1], az[inl], el[inl], size, **loo_kwargs)
-           if 2 * (inl.size - 1) >= n_par + 2 else np.empty(0))
+    use, xy, guess = found(dets, n_radial or 0)
+    pf = calibrate_positions(xy[:, 0], xy[:, 1], az[use], el[use], size, n_radial=n_radial,
+                             outlier_deg=outlier_deg, centre_guess_px=guess, **fixed)
+    rf = pf.fit
     at = {int(i): j for j, i in enumerate(use)}
     report: list[dict[str, Any]] = []
     for i, d in enumerate(dets):
@@ -483,4 +513,4 @@ def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
             r["residual_px"] = float(rf.residuals_px[j])
             r["residual_deg"] = float(rf.residuals_deg[j])
         report.append(r)
-    return SelfCalibration(rf.result, report, loo, selection)
+    return SelfCalibration(rf.result, report, pf.loo_deg, pf.model_selection)

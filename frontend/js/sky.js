@@ -282,7 +282,8 @@ async function calibrate() {
     const show = [["calibration_id", "Calibration id", 0], ["projection", "Projection"], ["cx_px", "Centre x [px]", 1],
       ["cy_px", "Centre y [px]", 1], ["px_per_deg", "Scale [px/°]", 3], ["north_offset_deg", "North offset [°]", 2],
       ["east", "East"], ["n_frames", "Frames used", 0], ["rms_px", "Residual RMS [px]", 2], ["max_px", "Residual max [px]", 2],
-      ["rms_deg", "Residual RMS [°]", 3]];
+      ["rms_deg", "Residual RMS, in-sample [°]", 3], ["n_outliers", "Outlier frames (left out)", 0],
+      ["loo_rms_deg", "Each frame held out in turn, RMS [°]", 3]];
     const rows = show.filter(([k]) => fitted[k] !== undefined && fitted[k] !== null)
       .map(([k, label, d]) => h("tr", {}, h("th", {}, label), h("td", {}, typeof fitted[k] === "number" ? num(fitted[k], d ?? 3) : String(fitted[k]))));
     for (const k of ["projection", "px_per_deg", "cx_px", "cy_px", "north_offset_deg", "east"]) {
@@ -292,7 +293,7 @@ async function calibrate() {
       }
     }
     const frames = res.frames.map((f) => h("tr", {},
-      h("td", { title: f.filename }, f.filename), h("td", {}, f.sun_found ? "yes" : "no"), h("td", {}, f.used ? "yes" : "no"),
+      h("td", { title: f.filename }, f.filename), h("td", {}, f.sun_found ? "yes" : "no"), h("td", {}, f.used ? "yes" : (f.outlier ? "outlier" : "no")),
       h("td", {}, num(f.residual_px, 1)), h("td", {}, num(f.residual_deg, 2))));
     box.append(h("article", { class: "card", "data-testid": "calibration-result" },
       h("header", {}, h("h2", {}, `Fitted ${fitted.projection ?? ""} camera`)),
