@@ -18,8 +18,8 @@ three-frame samples, MSAC scoring; Fischler & Bolles 1981, Torr & Zisserman
 2000), fit the camera to the rest, search each frame again where the fitted
 model and the ephemeris put the sun (the detector's ephemeris-guided path) and
 fit again. The equidistant model comes first; a radial polynomial term is kept
-only where it lowers the leave-one-out error on the sky (the frames the data
-hold, not the fit's own residual, decide).
+only where it lowers the leave-one-out error on the sky by more than one standard
+error (the frames the data hold, not the fit's own residual, decide).
 """
 
 from __future__ import annotations
@@ -325,27 +325,33 @@ def leave_one_out_deg(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
 def choose_radial(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
                   elevation_deg: ArrayLike, image_size: tuple[int, int],
                   max_terms: int = 2, **fit_kwargs: Any) -> tuple[int, list[dict[str, Any]]]:
-    """How many radial polynomial terms the frames support: 0 (the plain projection) unless
-    a term lowers the leave-one-out RMS on the sky, one term at a time.
+    """How many radial polynomial terms the frames support (0: the plain projection).
 
-    Returns the number of terms and, for each tried, ``n_radial`` and ``loo_rms_deg``. A
-    term needs frames enough for a leave-one-out fit with one frame to spare.
+    Each model (0 … ``max_terms`` terms) is scored by its leave-one-out mean squared
+    error on the sky; the one kept is the simplest within one standard error of the
+    best (the one-standard-error rule, Hastie, Tibshirani & Friedman, *The Elements of
+    Statistical Learning*, 2nd ed., §7.10): a term must lower the held-out error by more
+    than the frames can tell apart from noise. Returns the number of terms and, for each
+    tried, ``n_radial`` and ``loo_rms_deg``. A model needs frames enough for a
+    leave-one-out fit with one frame to spare.
     """
     x = np.asarray(x_px, float).ravel()
     tried: list[dict[str, Any]] = []
-    chosen, best = 0, np.inf
+    mse: list[float] = []
+    se: list[float] = []
     for k in range(max_terms + 1):
         n_par = 4 + k + (2 if fit_kwargs.get("fit_tilt") else 0)
         if 2 * (x.size - 1) < n_par + 4:
             break
-        loo = leave_one_out_deg(x, y_px, azimuth_deg, elevation_deg, image_size,
-                                n_radial=k, **fit_kwargs)
-        rms = float(np.sqrt(np.mean(loo**2)))
-        tried.append({"n_radial": k, "loo_rms_deg": rms})
-        if rms < best:
-            chosen, best = k, rms
-        else:
-            break  # a term that does not help: the next one will not be tried
+        sq = leave_one_out_deg(x, y_px, azimuth_deg, elevation_deg, image_size,
+                               n_radial=k, **fit_kwargs) ** 2
+        mse.append(float(np.mean(sq)))
+        se.append(float(np.std(sq, ddof=1) / np.sqrt(sq.size)))
+        tried.append({"n_radial": k, "loo_rms_deg": float(np.sqrt(mse[-1]))})
+    if not mse:
+        return 0, tried
+    best = int(np.argmin(mse))
+    chosen = next(k for k in range(len(mse)) if mse[k] <= mse[best] + se[best])
     return chosen, tried
 
 
