@@ -318,6 +318,15 @@ def test_real_wettermast_calibration_over_http(client: httpx.Client) -> None:
     assert cal["loo_rms_deg"] is not None and cal["loo_rms_deg"] < 0.6
     stored = client.get(f"/api/v1/vision/calibrations/{cal['calibration_id']}").json()
     assert [f["outlier"] for f in stored["frames"]] == [False] * 6 + [True]
+    # the fitted camera on the ephemeris-guided path: the sun where the model puts it
+    r = client.post(SUN, files={"file": files[0][1]},
+                    data={"calibration_id": str(cal["calibration_id"]),
+                          "timestamp": stamps[0], "latitude_deg": rows[0]["lat"],
+                          "longitude_deg": rows[0]["lon"]})
+    assert r.status_code == 200, r.text
+    d = r.json()
+    # measured 0.08° (the frame is one of the six fitted: an in-sample check of the path)
+    assert d["sun_found"] and d["error"]["separation_deg"] < 0.2 and d["warnings"] == []
     uceeb = REAL_SKY / "UCEEB_20180321085500_11.jpg"
     r = client.post(SUN, files={"file": (uceeb.name, uceeb.read_bytes(), "image/jpeg")},
                     data={"camera": "fisheye", "px_per_deg": "10", "timestamp":
