@@ -122,8 +122,6 @@ def test_simulate_one_day_json_and_csv(tmp_path) -> None:
         (["--start", "2024-02-30", "--end", "2024-03-15"], "--start"),
         (["--start", "2024-03-15T00:00", "--end", "2024-03-16"], "offset"),
         (["--start", "2024-03-15", "--end", "2024-03-16", "--controller", "pid"], "ideal"),
-        (["--start", "2024-03-15", "--end", "2024-03-16", "--controller", "open_loop_model",
-          "--pointing-model-terms", '{"yaw_deg": 2}'], "--pointing-model-terms: yaw_deg"),
     ],
 )
 def test_simulate_errors_exit_2(args, message) -> None:
@@ -151,6 +149,21 @@ def test_open_loop_model_reads_a_saved_pointing_model_answer(tmp_path: Path) -> 
     # the model cancels the 2° yaw (open_loop_spa: 12-34 mrad off); the 0.1° dead band on
     # each axis is left (measured 2.69 mrad at most)
     assert d["pointing_error_max_mrad"] < 3.0
+
+
+@pytest.mark.parametrize(("terms", "message"), [
+    ('{"yaw_deg": 2}', "--pointing-model-terms: yaw_deg: not a pointing-model term"),
+    ('{"azimuth_zero_deg": 2', "--pointing-model-terms: not JSON"),
+    ("no/such/model.json", "--pointing-model-terms: cannot read"),
+])
+def test_bad_pointing_model_terms_exit_2_naming_the_flag(terms: str, message: str,
+                                                         capsys) -> None:
+    from backend.cli import main  # in process: the parse fails before anything runs
+
+    code = main(["simulate", "--start", "2024-03-15", "--end", "2024-03-16", "--controller",
+                 "open_loop_model", "--pointing-model-terms", terms, "--json"])
+    out = capsys.readouterr()
+    assert code == 2 and message in out.err and out.out == ""
 
 
 def test_progress_bar_only_on_a_terminal() -> None:
