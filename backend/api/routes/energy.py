@@ -14,10 +14,14 @@ totals, daily, monthly and annual tables of a range (``backend/reports.py``).
 
 from __future__ import annotations
 
+import asyncio
 import csv
 import io
+import weakref
+from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
+import anyio
 import orjson
 from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import Response
@@ -34,9 +38,28 @@ from backend.timestamps import parse_range
 router = APIRouter(prefix="/api/v1/sites", tags=["energy"])
 
 
+#: Energy and report reads served at once; more wait their turn on the event loop. Each
+#: read's Python work holds the GIL, which the event loop (every logger's request) and
+#: the writer need as well: 10 readers back to back on 10 threads took the GIL from them
+#: ten times as often as one (benchmarks/bench_load.py). Two: a read's SQLite part gives
+#: the GIL away, so two keep both cores of the target machine busy.
+READS_AT_ONCE = 2
+_read_limiters: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, anyio.CapacityLimiter] = (
+    weakref.WeakKeyDictionary())
+
+
+def read_limiter() -> anyio.CapacityLimiter:
+    """The running event loop's limiter of :data:`READS_AT_ONCE` reads."""
+    loop = asyncio.get_running_loop()
+    limiter = _read_limiters.get(loop)
+    if limiter is None:
+        limiter = _read_limiters[loop] = anyio.CapacityLimiter(READS_AT_ONCE)
+    return limiter
+
+
 @router.get("/{site_id}/energy", response_model=EnergyRead,
             responses={200: {"content": CSV_CONTENT}, 404: {}, 422: {}})
-def get_energy(
+async def get_energy(
     site_id: str,
     ctx: ContextDep,
     start: RangeStart,
@@ -49,6 +72,12 @@ def get_energy(
     ))] = None,
 ) -> Response:
     """Energy per period for every array, measured and twin, with the tracking gain."""
+    return await anyio.to_thread.run_sync(_energy, site_id, ctx, start, end, interval, format,
+                                          source, limiter=read_limiter())
+
+
+def _energy(site_id: str, ctx: ContextDep, start: str, end: str, interval: str, format: str,
+            source: str | None) -> Response:
     info = site_or_404(ctx, site_id)
     try:
         t0, t1 = parse_range(start, end, info.zone)
@@ -83,42 +112,49 @@ _RANGE = {
 }
 
 
-def _report(ctx: ContextDep, site_id: str, start: str, end: str) -> dict[str, Any]:
-    info = site_or_404(ctx, site_id)
-    try:
-        t0, t1 = parse_range(start, end, info.zone)
-    except ValueError as exc:
-        raise HTTPException(422, str(exc)) from None
-    return report(ctx, info, t0, t1)
+async def _report(ctx: ContextDep, site_id: str, start: str, end: str,
+                  shape: Callable[[dict[str, Any]], Any] = lambda rep: rep) -> Any:
+    """``shape`` of the report of a range, on AnyIO's pool under :func:`read_limiter`."""
+    def work() -> Any:
+        info = site_or_404(ctx, site_id)
+        try:
+            t0, t1 = parse_range(start, end, info.zone)
+        except ValueError as exc:
+            raise HTTPException(422, str(exc)) from None
+        return shape(report(ctx, info, t0, t1))
+
+    return await anyio.to_thread.run_sync(work, limiter=read_limiter())
 
 
 @router.get("/{site_id}/report", response_model=ReportRead, responses={404: {}, 422: {}})
-def get_report(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
-               end: Annotated[str, _RANGE["end"]]) -> Response:
+async def get_report(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
+                     end: Annotated[str, _RANGE["end"]]) -> Response:
     """Totals, daily, monthly and annual energy, gain and performance ratio of a range."""
-    return Response(orjson.dumps(_report(ctx, site_id, start, end)),
-                    media_type="application/json")
+    body = await _report(ctx, site_id, start, end, orjson.dumps)
+    return Response(body, media_type="application/json")
 
 
 @router.get("/{site_id}/report.csv", response_class=Response,
             responses={200: {"content": CSV_CONTENT, "description": "the report as CSV"},
                        404: {}, 422: {}})
-def get_report_csv(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
-                   end: Annotated[str, _RANGE["end"]]) -> Response:
+async def get_report_csv(site_id: str, ctx: ContextDep,
+                         start: Annotated[str, _RANGE["start"]],
+                         end: Annotated[str, _RANGE["end"]]) -> Response:
     """The report as one CSV table: day, month, year and total rows, units in the names."""
-    rep = _report(ctx, site_id, start, end)
-    name = f"{site_id}_report_{rep['start'][:10]}_{rep['end'][:10]}.csv"
-    return Response(report_csv(rep), media_type="text/csv",
+    name, body = await _report(ctx, site_id, start, end, lambda rep: (
+        f"{site_id}_report_{rep['start'][:10]}_{rep['end'][:10]}.csv", report_csv(rep)))
+    return Response(body, media_type="text/csv",
                     headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
 
 @router.get("/{site_id}/report.png", response_class=Response,
             responses={200: {"content": PNG_CONTENT, "description": "an A4 PNG page"},
                        404: {}, 422: {}})
-def get_report_png(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
-                   end: Annotated[str, _RANGE["end"]]) -> Response:
+async def get_report_png(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
+                         end: Annotated[str, _RANGE["end"]]) -> Response:
     """A one-page A4 PNG report of the range (matplotlib), for a paper or a logbook."""
-    rep = _report(ctx, site_id, start, end)
-    name = f"{site_id}_report_{rep['start'][:10]}_{rep['end'][:10]}.png"
-    return Response(report_png(rep, service_version()), media_type="image/png",
+    name, body = await _report(ctx, site_id, start, end, lambda rep: (
+        f"{site_id}_report_{rep['start'][:10]}_{rep['end'][:10]}.png",
+        report_png(rep, service_version())))
+    return Response(body, media_type="image/png",
                     headers={"Content-Disposition": f'inline; filename="{name}"'})
