@@ -45,7 +45,13 @@ from vision import metrics  # noqa: E402
 from vision.calibrate import fit_fisheye  # noqa: E402
 from vision.cameras import FisheyeCamera, PinholeCamera  # noqa: E402
 from vision.candidates import _ring_values  # noqa: E402
-from vision.detect import METHODS, detect_sun, threshold_moments, to_gray  # noqa: E402
+from vision.detect import (  # noqa: E402
+    METHODS,
+    detect_sun,
+    px_per_deg_of,
+    threshold_moments,
+    to_gray,
+)
 from vision.evalset import (  # noqa: E402
     LabelledFrame,
     RoiFrame,
@@ -113,9 +119,11 @@ def real_rows() -> list[dict[str, object]]:
         rows: list[dict[str, object]] = list(csv.DictReader(fh))
     with (REAL_SKY / "split.csv").open(newline="") as fh:
         split = {r["filename"]: r for r in csv.DictReader(fh)}
+    maps = eurocontrol_maps()
     for r in rows:
         r["image"] = cv2.imread(str(REAL_SKY / str(r["filename"])))
         r["split"] = split[str(r["filename"])]["split"]
+        r["camera"] = split[str(r["filename"])]["camera"]
         r["sun_visible"] = split[str(r["filename"])]["sun_visible"] == "1"
         t = pd.Timestamp(str(r["utc_time"]))
         sp = pvlib.solarposition.get_solarposition(
@@ -123,7 +131,54 @@ def real_rows() -> list[dict[str, object]]:
             float(str(r["lon"])), method="nrel_numpy")
         r["sun_az"], r["wrong_az"] = (float(v) for v in sp.azimuth)
         r["sun_el"], r["wrong_el"] = (float(v) for v in sp.apparent_elevation)
+        if r["sun_row_label"]:
+            r["truth_px"] = (float(str(r["sun_col_label"])), float(str(r["sun_row_label"])))
+        elif r["camera"] == "EUROCONTROL" and r["sun_visible"]:
+            x, y, _ = ev.nearest_direction_px(*maps, float(r["sun_az"]),
+                                              90.0 - float(r["sun_el"]))
+            r["truth_px"] = (x, y)
+        else:
+            r["truth_px"] = (float("nan"), float("nan"))
     return rows
+
+
+def eurocontrol_maps() -> tuple[np.ndarray, np.ndarray]:
+    """EUROCONTROL's per-pixel sky directions (azimuth clockwise from north, zenith angle)
+    [°] from its 16-bit JPEG 2000 maps (README: 360 × raw / 64000 and 90 × raw / 64000;
+    NaN where the zenith map says more than 90°: no sky)."""
+    folder = REAL_SKY / "eurocontrol"
+    az = cv2.imread(str(folder / "azimuth_visible.jp2"), cv2.IMREAD_UNCHANGED).astype(float)
+    ze = cv2.imread(str(folder / "zenith_visible.jp2"), cv2.IMREAD_UNCHANGED).astype(float)
+    zen = 90.0 * ze / 64000.0
+    zen[ze > 64000] = np.nan
+    return 360.0 * az / 64000.0, zen
+
+
+def camera_records(rows: list[dict[str, object]]) -> list[ev.Record]:
+    """Every real frame, ``robust`` blind (``camera=fisheye``, nothing else: as a new user
+    would) with ``min_confidence=0`` (the refined centre of every winner, so that a
+    confidence fitted without the camera can decide ``found``:
+    :func:`vision.evaluation.rescore`); truth: the hand labels, EUROCONTROL's direction
+    maps with SPA."""
+    out = []
+    for r in rows:
+        d = detect_sun(r["image"], "robust", min_confidence=0.0)
+        rec = ev.record(d, r["truth_px"], bool(r["sun_visible"]), None,  # type: ignore[arg-type]
+                        float("nan"), float("nan"), px_per_deg_of(None, d.fov,
+                                                                 r["image"].shape[1]))
+        rec.update(source=f"real/{r['camera']}", camera=r["camera"], frame=str(r["filename"]),
+                   filename=r["filename"], width_px=int(r["image"].shape[1]), ephemeris=False,
+                   wrong_ephemeris=False)
+        out.append(rec)
+    # the development Wettermast frames also guided, by a calibration fitted on them, with
+    # the right clock and one 3 h off (a camera of its own: left out with Wettermast)
+    cal = _dev_calibration(rows)
+    for mode in ("ephemeris", "wrong-clock"):
+        for rec in real_records(rows, "development", mode, cal):
+            if str(rec["filename"]).startswith("Wettermast") and rec["ephemeris"]:
+                rec.update(camera="Wettermast", width_px=1920, guided=True)
+                out.append(rec)
+    return out
 
 
 # --------------------------------------------------------------------------- evaluation
@@ -182,17 +237,21 @@ def real_records(rows: list[dict[str, object]], split: str | None, mode: str,
 def development_records(rows: list[dict[str, object]] | None = None,
                         frames: list[LabelledFrame] | None = None,
                         rois: list[RoiFrame] | None = None) -> list[ev.Record]:
-    """Every development run the confidence is fitted on: synthetic frames blind and with
-    the (right or wrong) ephemeris, tracker-camera ROIs, real frames blind, with the
-    ephemeris and with a wrong clock."""
+    """Every run the shipped confidence is fitted on: synthetic development frames blind and
+    with the (right or wrong) ephemeris, tracker-camera ROIs, every real camera's frames
+    blind (the leave-one-camera-out figures refit without the camera tested:
+    :func:`vision.evaluation.leave_one_camera_out`)."""
     rows = rows if rows is not None else real_rows()
+    return synthetic_development_records(frames, rois) + camera_records(rows)
+
+
+def synthetic_development_records(frames: list[LabelledFrame] | None = None,
+                                  rois: list[RoiFrame] | None = None) -> list[ev.Record]:
+    """The synthetic development runs: frames blind and with the (right or wrong)
+    ephemeris, tracker-camera ROIs."""
     frames = frames if frames is not None else synthetic_set("development")
     rois = rois if rois is not None else list(tracker_rois("development", 60))
-    cal = _dev_calibration(rows)
-    recs = ev.evaluate(frames, False) + ev.evaluate(frames, True) + ev.roi_records(rois)
-    for mode in ("blind", "ephemeris", "wrong-clock"):
-        recs += real_records(rows, "development", mode, cal)
-    return recs
+    return ev.evaluate(frames, False) + ev.evaluate(frames, True) + ev.roi_records(rois)
 
 
 def fit_confidence() -> dict[str, object]:
@@ -200,11 +259,11 @@ def fit_confidence() -> dict[str, object]:
     cv2.setNumThreads(2)
     return ev.fit_confidence(
         development_records(),
-        "benchmarks/bench_vision.py --fit-confidence (development split only: synthetic "
-        "frames of both renderers, wrong-ephemeris frames, tracker-camera ROIs, the "
-        "development real frames "
-        "blind, guided and with the clock 3 h off; L2 penalty chosen by 5-fold "
-        "cross-validation grouped by frame)")
+        "benchmarks/bench_vision.py --fit-confidence (synthetic frames of the development "
+        "split only — both renderers, blind and guided, wrong-ephemeris frames, tracker-camera "
+        "ROIs — and every real camera's frames blind; L2 penalty chosen by 5-fold "
+        "cross-validation grouped by frame; the figures per real camera come from refits "
+        "without that camera)")
 
 
 GROUPS = ("skyrender/clear", "skyrender/cirrus", "skyrender/cumulus", "skyrender/overcast",
@@ -412,8 +471,10 @@ def centre_comparison(frames: list[LabelledFrame]) -> list[str]:
 
 
 def _dev_calibration(rows: list[dict[str, object]]) -> FisheyeCamera | None:
-    """Equidistant calibration from the blind detections on the development real frames."""
-    dev = [r for r in rows if r["split"] == "development" and r["sun_row_label"]]
+    """Equidistant calibration from the blind detections on the development Wettermast
+    frames."""
+    dev = [r for r in rows if r["split"] == "development" and r["sun_row_label"]
+           and r["camera"] == "Wettermast"]
     xy, az, el = [], [], []
     for r in dev:
         d = detect_sun(r["image"], "robust")
@@ -476,7 +537,8 @@ def fisheye_accuracy(frames: list[tuple[np.ndarray, float, float]], method: str)
 
 
 def real_accuracy(rows: list[dict[str, object]], method: str) -> tuple[str, str, str]:
-    lab = [r for r in rows if r["sun_row_label"]]
+    """The six labelled Wettermast frames (one camera, so that one calibration fits them)."""
+    lab = [r for r in rows if r["sun_row_label"] and r["camera"] == "Wettermast"]
     dists, xy = [], []
     for r in lab:
         d = detect_sun(r["image"], method=method)
@@ -576,7 +638,7 @@ def main() -> int:
     fe_cloud = fisheye_set(cloud_cover=0.4, cloud_optical_depth=0.6)
     rows = real_rows()
     big = [r["image"] for r in rows if r["image"] is not None and r["image"].shape[0] == 1920]
-    big_note = f"{len(big)} real all-sky frames (Wettermast, FE3)"
+    big_note = f"{len(big)} real all-sky frames (Wettermast, Wolf, FE3)"
     if not big:
         cam = FisheyeCamera(959.5, 959.5, 10.4)
         big = [fisheye_frame(a, 40.0, camera=cam, width_px=1920, height_px=1920, seed=i,

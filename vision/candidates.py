@@ -248,8 +248,11 @@ def _prior(c: _Candidate, labels: NDArray[Any], diam: float) -> tuple[float, flo
     return shape, _clamp(c.area / min_area, 0.25, 1.0)
 
 
+_GLARE_CORE_DEG = (1.0, 3.0)  # a saturated core this wide in radius [°] is a glare (0 → 1)
+
+
 def _score(c: _Candidate, gray: NDArray[np.uint8], shape: float, size: float, peak: float,
-           bg: float, fov: FovCircle | None, diam: float) -> float:
+           bg: float, fov: FovCircle | None, diam: float, ppd: float) -> float:
     """Sun-likeness 0–1 of one bright cluster.
 
     ``shape²`` (a sun's saturated core is a clean disc; cloud highlights are
@@ -259,7 +262,11 @@ def _score(c: _Candidate, gray: NDArray[np.uint8], shape: float, size: float, pe
     inter-quartile spread is small and whose medians decline by ≥ 15 % of the
     frame's contrast — and (b) a sharp drop right outside the disc to no less
     than the sky's level (a clear-sky sun next to a cloud; not white text on a
-    dark overlay box). A bright cloud highlight passes neither.
+    dark overlay box) — and (c) the saturated core itself, when it is several
+    degrees wide (:data:`_GLARE_CORE_DEG`, at ``ppd`` px/°): the sun's disc is 0.27° in
+    radius, so a core 3° wide is its glare, saturated out to where a clear blue sky
+    around it leaves no ring of fall-off inside the rings (the Wolf frames of issue 24).
+    A bright cloud highlight passes none of them.
     """
     r_eq = np.sqrt(c.area / np.pi)
     contrast = max(peak - bg, 1.0)
@@ -283,9 +290,16 @@ def _score(c: _Candidate, gray: NDArray[np.uint8], shape: float, size: float, pe
     sharp = _clamp((drop - 0.3) / 0.3, 0.0, 1.0)
     if np.isfinite(m1) and m1 < bg - 0.15 * contrast:
         sharp = 0.0  # ringed by something darker than the sky: white text on a dark box
-    glare = max(iso_glare, sharp)
+    glare = max(iso_glare, sharp, _wide_core(r_eq, ppd))
     c.glare = float(glare)
     return float(shape**2 * (0.25 + 0.75 * glare) * size)
+
+
+def _wide_core(r_eq: float, ppd: float) -> float:
+    """0–1: how plainly a saturated core of equivalent radius ``r_eq`` [px] at ``ppd`` px/° is
+    a glare by its width alone (:data:`_GLARE_CORE_DEG`: the sun's disc is 0.27° in radius)."""
+    lo, hi = _GLARE_CORE_DEG
+    return _clamp((r_eq / max(ppd, 1e-9) - lo) / (hi - lo), 0.0, 1.0)
 
 
 def _mark_ghosts(cands: list[_Candidate], centre: tuple[float, float]) -> int:

@@ -38,17 +38,34 @@ import numpy as np
 from numpy.typing import NDArray
 
 FEATURES: tuple[str, ...] = (
-    "shape",             # circularity of the bright core 0–1 (second moments)
-    "glare",             # glare evidence 0–1: isotropic fall-off or sharp drop to the sky
-    "saturated",         # 1 when the core reaches the sensor's top (≥ 250)
-    "contrast",          # (peak − sky median) / 255
-    "size_misfit",       # |ln(equivalent radius [°] / 2.5°)|: disc + glare against its usual size
-    "runner_up",         # heuristic score of the runner-up / the winner's
-    "coherence",         # radial-symmetry coherence of the glare's gradients 0–1
+    "shape",             # circularity of the bright core 0–1 (second moments): round
+    "glare",             # glare evidence 0–1: fall-off, a sharp drop to the sky, or a core
+                         # degrees wide (vision.candidates._score): never needed by a wide
+                         # round saturated core, which is its own glare
+    "saturated",         # 1 when the core is clipped (≥ 250, or a flat top at any level)
+    "contrast",          # 1 − sky median / peak: brighter than its surroundings, any gain
+    "too_small",         # max(0, ln(0.5° / equivalent radius)): smaller than a sun's core
+    "too_large",         # max(0, ln(equivalent radius / 15°)): wider than any sun's glare
+    "runner_up",         # heuristic score of the runner-up / the winner's: ambiguous
+    "coherence",         # radial-symmetry coherence of the glare's gradients 0–1, or the
+                         # core's width alone when it is degrees wide (no gradient inside)
     "ephemeris_known",   # 1 when a prediction from time, place and camera was given
     "ephemeris_far_unclear",  # min(distance from the prediction [°], 30) / 10 × (1 − plain
                               # disc), 0 when unknown: never counts against a plain disc
 )
+"""What the logistic model sees (issue 24 item 2): the sun is a region at or near
+saturation, round (allowing for the projection: the second moments of an oval fisheye disc
+stay near 1), brighter than the sky, of a size a sun with its glare can have at this px/°.
+A saturated core degrees wide counts as glare and as radially symmetric by its width alone
+(``glare``, ``coherence``): on the Wolf frames a round saturated core on a bright clear
+sky has no ring-shaped fall-off, and the model before issue 24 (fitted without a Wolf
+frame) found 9 of the 23 suns, refusing the rest as "no glare falling off" or "not
+radially symmetric". The glare's ring-shaped fall-off and the coherence remain evidence *for*
+a sun, no longer needed by a wide round core."""
+
+_SMALLEST_DEG = 0.5  # equivalent radius of the smallest saturated sun core [°]
+_LARGEST_DEG = 15.0  # … of the widest saturated glare (the M12 fisheye of issue 24: ≈ 14°)
+
 
 def load_model(path: Path | None = None) -> tuple[NDArray[np.float64], float]:
     """``(weights over FEATURES, intercept)`` from ``path``, by default the package data
@@ -71,36 +88,52 @@ def _model() -> tuple[NDArray[np.float64], float]:
 
 
 def plain_disc(shape: float, glare: float, saturated: float) -> float:
-    """How plainly a candidate is a visible sun, 0–1: round (``shape``) × glare falling
-    off around it or a sharp edge to the sky (``glare``) × saturated (0 or 1)."""
+    """How plainly a candidate is a visible sun, 0–1: round (``shape``) × glare evidence
+    (``glare``) × saturated (0 or 1)."""
     return float(min(max(shape, 0.0), 1.0) * min(max(glare, 0.0), 1.0) * saturated)
 
 
-def features(shape: float, glare: float, peak: float, bg: float, radius_deg: float,
-             runner_up: float, coherence: float, ephemeris_deg: float | None
-             ) -> NDArray[np.float64]:
+def features(shape: float, glare: float, saturated: float, peak: float, bg: float,
+             radius_deg: float, runner_up: float, coherence: float,
+             ephemeris_deg: float | None) -> NDArray[np.float64]:
     """The feature vector (order of :data:`FEATURES`) of one candidate.
 
-    ``peak``, ``bg`` are grey levels; ``radius_deg`` the core's equivalent
-    radius on the sky [°]; ``ephemeris_deg`` its distance from the predicted
-    sun [°] or None. The distance is gated by ``1 −`` :func:`plain_disc`: it is
-    zero for a round, saturated disc with its glare, whatever the distance.
+    ``glare`` 0–1 (:func:`vision.candidates._score`); ``saturated`` 0 or 1 (the core
+    clipped); ``peak``, ``bg`` grey levels; ``radius_deg`` the core's equivalent radius on
+    the sky [°]; ``ephemeris_deg`` its distance from the
+    predicted sun [°] or None. The distance is gated by ``1 −`` :func:`plain_disc`: it is
+    zero for a round, saturated core with its glare, whatever the distance.
     """
     known = ephemeris_deg is not None
-    saturated = float(peak >= 250.0)
     far = 0.0
     if ephemeris_deg is not None:
         far = min(float(ephemeris_deg), 30.0) / 10.0 * (1.0 - plain_disc(shape, glare,
                                                                          saturated))
+    r = max(radius_deg, 1e-3)
     return np.array([
-        shape, glare, saturated, max(peak - bg, 0.0) / 255.0,
-        abs(float(np.log(max(radius_deg, 1e-3) / 2.5))), runner_up, coherence,
-        float(known), far], dtype=float)
+        shape, glare, saturated, max(peak - bg, 0.0) / max(peak, 1.0),
+        max(0.0, float(np.log(_SMALLEST_DEG / r))), max(0.0, float(np.log(r / _LARGEST_DEG))),
+        runner_up, coherence, float(known), far], dtype=float)
+
+
+_GATE_SAT = True
+_MIN_SHAPE = 0.2  # below: a shape no sun has, cut by the horizon or not
+
+
+def admissible(x: NDArray[np.float64]) -> bool:
+    """Whether a candidate can be the sun at all: its core clipped (the sun saturates any
+    camera exposed for the sky: it is some 10⁵ times brighter) and not of a shape no sun
+    has (``shape`` ≥ :data:`_MIN_SHAPE`; a half disc cut by the horizon scores ≈ 0.75).
+    The positive evidence against a candidate of issue 24 item 2, applied before the
+    model: a candidate that fails it gets probability 0 and is never fitted on."""
+    return bool((x[2] >= 0.5 or not _GATE_SAT) and x[0] >= _MIN_SHAPE)
 
 
 def probability(x: NDArray[np.float64], model: tuple[NDArray[np.float64], float] | None = None
                 ) -> float:
-    """P(candidate is the sun) = σ(w·x + b)."""
+    """P(candidate is the sun) = σ(w·x + b) for an :func:`admissible` candidate, else 0."""
+    if not admissible(x):
+        return 0.0
     w, b = model if model is not None else _model()
     return float(1.0 / (1.0 + np.exp(-(float(w @ x) + b))))
 
@@ -130,11 +163,11 @@ def fit_logistic(x: NDArray[np.float64], y: NDArray[np.float64], l2: float = 1.0
 
 _REASONS = {
     "shape": "brightest region is not round (circularity {shape:.2f}): cloud edge or highlight",
-    "glare": "no glare falling off around the brightest region: bright cloud, not the sun",
+    "glare": "no glare around the brightest region and too small to be one: bright cloud",
     "saturated": "brightest region is not saturated (peak {peak:.0f}): sun hidden or overcast",
     "contrast": "too little contrast ({contrast:.0f} grey levels above the sky): overcast",
-    "size_misfit": "brightest region is {radius_deg:.1f}° in radius, not the size of a sun's "
-                   "disc and glare",
+    "too_small": "brightest region is {radius_deg:.2f}° in radius, smaller than a sun's core",
+    "too_large": "brightest region is {radius_deg:.1f}° in radius, wider than a sun's glare",
     "runner_up": "two regions look equally like the sun: ambiguous",
     "coherence": "brightness around the brightest region is not radially symmetric "
                  "(coherence {coherence:.2f}): cloud",
@@ -148,8 +181,12 @@ def reason(x: NDArray[np.float64], values: dict[str, float],
            model: tuple[NDArray[np.float64], float] | None = None) -> str:
     """Why the probability is low: the feature whose term lowers the logit the most,
     measured against an ideal sun's value of that feature."""
+    if x[2] < 0.5 and _GATE_SAT:
+        return _REASONS["saturated"].format(**values)
+    if x[0] < _MIN_SHAPE:
+        return _REASONS["shape"].format(**values)
     w, _ = model if model is not None else _model()
-    ideal = np.array([1.0, 1.0, 1.0, 0.6, 0.0, 0.0, 1.0, x[7], 0.0])
+    ideal = np.array([1.0, 1.0, 1.0, 0.6, 0.0, 0.0, 0.0, 1.0, x[8], 0.0])
     loss = w * (ideal - x)
     i = int(np.argmax(loss))
     return _REASONS[FEATURES[i]].format(**values)

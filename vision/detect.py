@@ -13,19 +13,23 @@ Three named methods, all returning a :class:`SunDetection`:
   lens-flare ghosts rejected (on the line through the optical centre,
   opposite a larger blob). Each
   candidate gets a shape term (second moments) and glare evidence (isotropic
-  fall-off or a sharp drop to the sky); the winner's glare is tested for
-  radial symmetry — the coherence of its gradient lines about one centre
-  (Parthasarathy 2012, Nat. Methods 9:724; :mod:`vision.radial`, one weighted
-  least-squares solve from the core's centroid). ``confidence`` is a
-  probability: a logistic model of those features, the core's size against a
-  sun's disc-plus-glare for this camera's px/°, contrast against the sky (the
-  frame's median, or its border's when lower: a small ROI around the sun),
-  saturation and the distance from the ephemeris (:mod:`vision.confidence`,
-  fitted on the development split only). The distance is a feature, never a
-  veto: it cannot lower the probability of a plainly visible, round,
-  saturated disc with its glare, so a wrong place or time gives the sun it
+  fall-off, a sharp drop to the sky, or a saturated core degrees wide — the
+  glare itself). What a sun is (issue 24 item 2): a region at or near
+  saturation (≥ 250, or a flat clipped top at any level: a darkened frame),
+  round, brighter than the sky. A candidate that is not saturated or has a
+  shape no sun has gets probability 0 (:func:`vision.confidence.admissible`);
+  the others get ``confidence``, a probability: a logistic model of shape,
+  glare evidence, contrast against the sky (the frame's median, or its
+  border's when lower: a small ROI around the sun), a size below a sun's core
+  or above any glare, the runner-up's score and the distance from the
+  ephemeris (:mod:`vision.confidence`, fitted on the synthetic development
+  split and the real cameras, and evaluated leave-one-camera-out). The distance is
+  a feature, never a veto: it cannot lower the probability of a round,
+  saturated core with its glare, so a wrong place or time gives the sun it
   sees and how far it is from the prediction (``distance_from_ephemeris_px``),
-  not "no sun". The sub-pixel centre: for a core with a glare around it and a
+  not "no sun". The sub-pixel centre: for a colour frame whose white core (every
+  channel saturated) is at least 3° in radius, the centroid of that core opened
+  by a disc (:func:`_white_core_centre`); for a core with a glare around it and a
   fisheye model (given, or the image circle's), the small circle on the
   camera's sphere through most of the core's limb that leaves none of it
   inside — the clear-sky disc, which thin cloud (adding light near the sun)
@@ -67,6 +71,7 @@ from vision.candidates import (
     _score,
     _symmetry,
     _weighted_centroid,
+    _wide_core,
 )
 from vision.detection import CameraModel, FovCircle, SunDetection
 from vision.fov import _fov_mask, _median_u8, _small, estimate_fov, to_gray
@@ -91,8 +96,19 @@ _MAX_CANDIDATES = 12
 _SCORED = 4  # candidates whose glare is examined
 _SEARCH_DEG = 8.0  # radius of the first search around the ephemeris prediction [°]
 _SEARCH_GROW = 1.5  # the window grows by this while the winning core touches its edge
-_COHERENCE_PASSES = 1  # solves of the radial-symmetry fit behind `coherence` (1, 2 and 3 give
-# the same cross-validated log loss on the development split: 0.0785, 0.0787, 0.0787)
+_WHITE_MIN_DEG = 3.0  # a white (every channel saturated) core at least this wide in radius
+# is centred by the centroid of its opening (issue 24 item 3; chosen on the Wettermast and
+# Wolf labels)
+_WHITE_MIN_PX = 25.0  # … and this many pixels: JPEG keeps colour at half resolution in
+# 16 px blocks (4:2:0), so a colour outline is good to a pixel or two only
+_WHITE_OPEN = 0.5  # the opening's disc: this share of the white core's inscribed radius
+_WHITE_OPEN_MAX_PX = 24.0  # … worked on a mask shrunk until the disc is at most this wide
+_WHITE_CUT_STEP_PX = 3.0  # the outline's outward neighbours looked at, this far out
+_WHITE_CUT_SHARE = 0.05  # a white core with more of its outline next to darker-than-sky is cut
+_COHERENCE_PASSES = 1  # solves of the radial-symmetry fit behind `coherence`
+_SATURATED = 250.0  # grey level of a saturated core
+_PLATEAU_SHARE = 0.3  # a core with this share of its pixels at its peak is clipped (flat)
+_PLATEAU_MIN_PX = 20  # … tested on cores of at least this many pixels
 
 
 @dataclass(frozen=True)
@@ -229,29 +245,48 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
     for c in cands:
         c.shape = priors[id(c)][0]
         if id(c) in ranked:
-            c.score = _score(c, gray, *priors[id(c)], peak, bg, fov, diam)
+            c.score = _score(c, gray, *priors[id(c)], peak, bg, fov, diam, ppd)
     cands.sort(key=lambda c: -c.score * near(c))
     best = cands[0]
     runner = max((c.score for c in cands[1:]), default=0.0) / max(best.score, 1e-9)
     r_eq = float(np.sqrt(best.area / np.pi))
+    eph = None
+    if expected_px is not None:
+        eph = float(np.hypot(best.cx - expected_px[0], best.cy - expected_px[1])) / ppd
+    radius_deg = r_eq / ppd
+    saturated = float(peak >= _SATURATED or (best.area >= _PLATEAU_MIN_PX
+                                              and _clipped(gray, best, labels, peak)))
     ring = _ring_values(gray, best.cx, best.cy, 2.0 * r_eq + 3.0, fov)
     local_bg = _median(ring) if ring.size else bg
     fit = radial_symmetry_centre(gray, (best.cx, best.cy), 2.0 * r_eq + 4.0,
                                  dark_level=0.6 * local_bg,
                                  glare_level=local_bg + 0.3 * (peak - local_bg),
                                  n_iter=_COHERENCE_PASSES)
-    coherence = fit.coherence if fit is not None else 0.0
-    eph = None
-    if expected_px is not None:
-        eph = float(np.hypot(best.cx - expected_px[0], best.cy - expected_px[1])) / ppd
-    radius_deg = r_eq / ppd
-    x = conf.features(best.shape, best.glare, peak, bg, radius_deg, min(runner, 1.0),
-                      coherence, eph)
+    # a saturated core degrees wide is its own evidence (it has no gradient inside the
+    # window: the Wolf frames' coherence is 0.02–0.06)
+    coherence = max(fit.coherence if fit is not None else 0.0, _wide_core(r_eq, ppd))
+    x = conf.features(best.shape, best.glare, saturated, peak, bg, radius_deg,
+                      min(runner, 1.0), coherence, eph)
     values = {"shape": best.shape, "peak": peak, "contrast": peak - bg,
               "radius_deg": radius_deg, "coherence": coherence,
               "ephemeris_deg": eph if eph is not None else float("nan")}
     return _Pick(best, work, labels, peak, bg, thr, len(cands), ghosts, x, conf.probability(x),
                  values)
+
+
+def _clipped(gray: NDArray[np.uint8], c: _Candidate, labels: NDArray[Any], peak: float) -> bool:
+    """Whether a core below :data:`_SATURATED` is clipped (a frame darkened after the sensor
+    clipped it has its flat top below 255): at least :data:`_PLATEAU_SHARE` of the core's
+    pixels sit exactly at the peak — a flat top. A bright cloud's highlight is a rounded
+    one whose top few pixels alone reach the peak (the real UCEEB, FE3 and EUROCONTROL
+    overcast frames: under 16 %; the suns of Wettermast, Wolf and EUROCONTROL: 41–74 %,
+    darkened or not)."""
+    roi = gray[c.y:c.y + c.h, c.x:c.x + c.w]
+    mask = c.mask(labels)
+    if roi.shape != mask.shape:
+        return False
+    top = cv2.countNonZero(cv2.bitwise_and(mask, (roi >= peak).astype(np.uint8)))
+    return top >= _PLATEAU_SHARE * max(cv2.countNonZero(mask), 1)
 
 
 def _guided_search(gray: NDArray[np.uint8], work: _Region, bg: float, fov: FovCircle | None,
@@ -278,6 +313,17 @@ def _guided_search(gray: NDArray[np.uint8], work: _Region, bg: float, fov: FovCi
         radius = int(np.ceil(min(max(_SEARCH_GROW * radius, radius + 1.0), full)))
 
 
+_WHITE_SEARCH = False
+
+
+def _white(image: NDArray[Any]) -> NDArray[np.uint8]:
+    """min(B, G, R) of an 8-bit colour frame (grey: itself)."""
+    img = np.asarray(image)
+    if img.ndim == 3 and img.shape[2] >= 3 and img.dtype == np.uint8:
+        return np.asarray(cv2.min(cv2.min(img[:, :, 0], img[:, :, 1]), img[:, :, 2]), np.uint8)
+    return to_gray(image)
+
+
 def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
                   fov: FovCircle | None = None, auto_fov: bool = True,
                   min_confidence: float = 0.5,
@@ -301,7 +347,7 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         its distance from the prediction, however far (a wrong place, time or
         zone moves the prediction, not the sun).
     """
-    gray = to_gray(image)
+    gray = _white(image) if _WHITE_SEARCH else to_gray(image)
     small, scale = _small(gray)
     if fov is None and auto_fov:
         fov = estimate_fov(gray, small, scale)
@@ -351,8 +397,12 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         if camera is None and fov is not None:
             # no model given: an equidistant 180° lens spanning the image circle
             fallback = FisheyeCamera(fov.cx_px, fov.cy_px, fov.radius_px / 0.98 / 90.0)
-        cx, cy, radius = _refine(gray, got.work, got.labels, got.best, got.peak, got.bg,
-                                 got.thr, camera, fallback, fov)
+        white = _white_core_centre(image, gray, got.best, ppd, fov, got.bg, got.peak)
+        if white is not None:
+            cx, cy, radius = white
+        else:
+            cx, cy, radius = _refine(gray, got.work, got.labels, got.best, got.peak, got.bg,
+                                     got.thr, camera, fallback, fov)
     dist = None
     if found and expected_px is not None:
         dist = float(np.hypot(cx - expected_px[0], cy - expected_px[1]))
@@ -372,6 +422,88 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         features=dict(zip(conf.FEATURES, (float(v) for v in got.x), strict=True)),
         candidate_px=(float(got.best.cx), float(got.best.cy)),
     )
+
+
+def _white_core_centre(image: NDArray[Any], gray: NDArray[np.uint8], c: _Candidate,
+                       ppd: float, fov: FovCircle | None, bg: float, peak: float
+                       ) -> tuple[float, float, float] | None:
+    """The centre of a large glare: the centroid of its *white* core → (x, y, radius_px),
+    or None (grey frame, no white core, a core under :data:`_WHITE_MIN_DEG` or
+    :data:`_WHITE_MIN_PX` in radius, or one the image circle or an obstacle cuts).
+
+    The sun saturates every colour channel; the sky's glare around it is blue and
+    saturates the blue channel (and so the grey level) much farther out, raggedly, with
+    the lens's rays. The white core — pixels within 3 grey levels of the top of
+    min(B, G, R) in the winning region's box, holes filled — is the part of the glare
+    no colour of the sky reaches; opened (Serra 1982: erosion then dilation) by a disc of
+    :data:`_WHITE_OPEN` × its largest inscribed radius, which takes off the rays and
+    lobes narrower than that, its centroid (first moments; Hu 1962) is where a person
+    puts the sun on a glare hundreds of pixels wide (the hand labels of Wettermast and
+    Wolf: ``docs/validation-vision.md``, *The centre of a large glare*).
+    A core that is visibly cut keeps :func:`_refine` (its arc fits): one that reaches the
+    image circle's edge, or one with more than :data:`_WHITE_CUT_SHARE` of its outline
+    next to pixels darker than the sky (``bg``: a glare fades into the sky, so darker
+    means a mast, the horizon, an overlay); so does a small one (there the limb and the
+    weighted centroid are sub-pixel)."""
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] < 3 or img.dtype != np.uint8:
+        return None
+    h, w = img.shape[:2]
+    x0, y0 = max(0, c.x - 2), max(0, c.y - 2)
+    x1, y1 = min(w, c.x + c.w + 2), min(h, c.y + c.h + 2)
+    crop = img[y0:y1, x0:x1]
+    white = cv2.min(cv2.min(crop[:, :, 0], crop[:, :, 1]), crop[:, :, 2])
+    top = float(white.max()) if white.size else 0.0
+    if top < min(_SATURATED, peak - 1.0):  # no pixel white up to the grey core's top
+        return None
+    binary = cv2.threshold(white, top - 3.5, 1, cv2.THRESH_BINARY)[1]
+    contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return None
+    big = max(contours, key=cv2.contourArea)
+    area = cv2.contourArea(big)
+    r_eq = float(np.sqrt(area / np.pi))
+    if r_eq < max(_WHITE_MIN_DEG * ppd, _WHITE_MIN_PX):
+        return None
+    pts = big.reshape(-1, 2)
+    if fov is not None and float(np.max(np.hypot(pts[:, 0] + x0 - fov.cx_px,
+                                                 pts[:, 1] + y0 - fov.cy_px))) \
+            > fov.radius_px - _FOV_EDGE_PX:
+        return None
+    # a glare fades into the sky: an outline next to something darker is cut by it
+    ctr = pts.mean(axis=0)
+    out = pts - ctr
+    out = pts + _WHITE_CUT_STEP_PX * out / np.maximum(np.hypot(out[:, 0], out[:, 1]),
+                                                        1e-9)[:, None]
+    ox = np.clip(np.rint(out[:, 0] + x0), 0, w - 1).astype(np.intp)
+    oy = np.clip(np.rint(out[:, 1] + y0), 0, h - 1).astype(np.intp)
+    if float(np.mean(gray[oy, ox] < bg)) > _WHITE_CUT_SHARE:
+        return None
+    filled = np.zeros(binary.shape, np.uint8)
+    cv2.drawContours(filled, [big], -1, 1, -1)
+    # the opening: a disc of half the largest inscribed radius, on a mask shrunk so that
+    # the disc is at most _WHITE_OPEN_MAX_PX in radius (its cost grows with its area)
+    inscribed = float(cv2.distanceTransform(
+        cv2.copyMakeBorder(filled, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0),
+        cv2.DIST_L2, 3).max())
+    k = _WHITE_OPEN * inscribed
+    f = min(1.0, _WHITE_OPEN_MAX_PX / max(k, 1e-9))
+    kr = max(1, int(round(k * f)))
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * kr + 1, 2 * kr + 1))
+    if f < 1.0:
+        # opened on the shrunk mask, brought back to full size and cut to the core's own
+        # outline (as vision.candidates._core does)
+        fh, fw = y1 - y0, x1 - x0  # the crop: filled.shape
+        small = cv2.resize(filled, None, fx=f, fy=f, interpolation=cv2.INTER_AREA)
+        opened = cv2.bitwise_and(cv2.resize(
+            cv2.morphologyEx(small, cv2.MORPH_OPEN, kernel), (fw, fh),
+            interpolation=cv2.INTER_NEAREST), filled)
+    else:
+        opened = cv2.morphologyEx(filled, cv2.MORPH_OPEN, kernel)
+    m = cv2.moments(opened, True)
+    if m["m00"] <= 0:
+        m = cv2.moments(big)
+    return x0 + m["m10"] / m["m00"], y0 + m["m01"] / m["m00"], r_eq
 
 
 def _limb_points(c: _Candidate, labels: NDArray[Any]) -> NDArray[np.float64]:

@@ -147,8 +147,10 @@ def reliability_rows(recs: list[Record]) -> list[str]:
 
 
 def design(recs: list[Record]) -> tuple[NDArray[np.float64], NDArray[np.float64], list[str]]:
-    """``(x, y, groups)`` of the records that have features (a candidate was found)."""
-    keep = [r for r in recs if r["features"]]
+    """``(x, y, groups)`` of the records whose candidate is :func:`vision.confidence.admissible`
+    (the model is fitted on those only: the others get probability 0)."""
+    keep = [r for r in recs if r["features"] and conf.admissible(
+        np.array([r["features"][k] for k in conf.FEATURES], dtype=float))]
     x = np.array([[r["features"][k] for k in conf.FEATURES] for r in keep], dtype=float)
     y = np.array([float(r["cand_ok"]) for r in keep])
     return x, y, [str(r["frame"]) for r in keep]
@@ -182,3 +184,69 @@ def fit_confidence(recs: list[Record], note: str, l2_grid: tuple[float, ...] = L
             "n_positive": int(y.sum()), "n_frames": len(set(groups)), "l2": l2,
             "cv_log_loss": {str(k): round(v, 4) for k, v in scores.items()},
             "fitted_by": note}
+
+
+CAMERAS: tuple[str, ...] = ("Wettermast", "Wolf", "FE3", "UCEEB", "EUROCONTROL")
+"""The real cameras of ``tests/data/real-sky`` (``split.csv``'s ``camera``): the folds of
+the leave-one-camera-out evaluation (issue 24 item 1)."""
+
+
+def nearest_direction_px(azimuth_deg: NDArray[np.float64], zenith_deg: NDArray[np.float64],
+                         sun_azimuth_deg: float, sun_zenith_deg: float
+                         ) -> tuple[float, float, float]:
+    """The pixel ``(x, y)`` whose sky direction — per-pixel maps of azimuth (clockwise from
+    north) and zenith angle [°], NaN where the camera sees no sky — is nearest the sun's,
+    and that nearest separation [°]: the truth of a camera that ships its own direction
+    maps (EUROCONTROL's), the sun's direction from pvlib's SPA (the caller's)."""
+    sep = angular_separation_deg(azimuth_deg, 90.0 - zenith_deg, sun_azimuth_deg,
+                                 90.0 - sun_zenith_deg)
+    sep = np.where(np.isfinite(sep), sep, np.inf)
+    iy, ix = np.unravel_index(int(np.argmin(sep)), sep.shape)
+    return float(ix), float(iy), float(sep[iy, ix])
+
+
+def rescore(recs: list[Record], model: tuple[NDArray[np.float64], float],
+            min_confidence: float = 0.5) -> list[Record]:
+    """``recs`` (of detections run with ``min_confidence=0``, so every candidate has its
+    refined centre) with the confidence of ``model`` and ``found`` at ``min_confidence``."""
+    out = []
+    for r in recs:
+        new = dict(r)
+        if r["features"]:
+            x = np.array([r["features"][k] for k in conf.FEATURES], dtype=float)
+            new["confidence"] = conf.probability(x, model)
+        new["found"] = bool(r["features"]) and new["confidence"] >= min_confidence
+        if not new["found"]:
+            new["err_px"] = new["err_deg"] = float("nan")
+        out.append(new)
+    return out
+
+
+def leave_one_camera_out(common: list[Record], real: list[Record], l2: float
+                         ) -> dict[str, list[Record]]:
+    """Per real camera (``record["camera"]``), its records scored by a confidence fitted on
+    ``common`` (the synthetic development runs) and every *other* camera's records: nothing
+    tuned on the camera it is tested on."""
+    out = {}
+    for cam in sorted({str(r["camera"]) for r in real}):
+        train = common + [r for r in real if r["camera"] != cam]
+        x, y, _ = design(train)
+        model = conf.fit_logistic(x, y, l2=l2)
+        out[cam] = rescore([r for r in real if r["camera"] == cam], model)
+    return out
+
+
+def per_camera_row(cam: str, recs: list[Record], width_px: int) -> dict[str, Any]:
+    """The figures of one held-out camera: suns found of the visible ones, median and worst
+    distance to the truth [px] and as a share of the image width [%], the highest confidence
+    on a frame without a sun."""
+    vis = [r for r in recs if r["visible"]]
+    found = [r for r in vis if r["found"]]
+    p = np.array([float(r["err_px"]) for r in found])
+    nosun = [float(r["confidence"]) for r in recs if not r["visible"]]
+    return {"camera": cam, "visible": len(vis), "found": len(found),
+            "median_px": float(np.median(p)) if p.size else float("nan"),
+            "worst_px": float(p.max()) if p.size else float("nan"),
+            "worst_pct": float(100.0 * p.max() / width_px) if p.size else float("nan"),
+            "no_sun": len(nosun), "no_sun_max_conf": max(nosun) if nosun else float("nan"),
+            "min_conf_visible": min((float(r["confidence"]) for r in vis), default=float("nan"))}

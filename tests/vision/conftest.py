@@ -20,10 +20,11 @@ def read_real_sky() -> list[dict[str, str]]:
         r["path"] = str(REAL_SKY / r["filename"])
         r["split"] = split[r["filename"]]["split"]
         r["sun_visible"] = split[r["filename"]]["sun_visible"]
+        r["camera"] = split[r["filename"]]["camera"]
     return rows
 
 
 @pytest.fixture(scope="session")
 def real_sky() -> list[dict[str, str]]:
-    """The nine real frames (never skipped: they are part of the repository)."""
+    """The real frames of five cameras (never skipped: they are part of the repository)."""
     return read_real_sky()

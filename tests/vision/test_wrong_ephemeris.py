@@ -106,7 +106,8 @@ def test_wrong_ephemeris_scenes_held_out() -> None:
 def test_real_frame_with_the_clock_three_hours_off(real_sky) -> None:
     """A development Wettermast frame, the camera calibrated on the development frames, the
     ephemeris for a clock 3 h fast (the sun ~40° away): the sun found at its label."""
-    dev = [r for r in real_sky if r["sun_row_label"] and r["split"] == "development"]
+    dev = [r for r in real_sky if r["sun_row_label"] and r["split"] == "development"
+           and r["camera"] == "Wettermast"]
     times = pd.DatetimeIndex([pd.Timestamp(r["utc_time"]) for r in dev])
     sp = pvlib.solarposition.get_solarposition(times, float(dev[0]["lat"]),
                                                float(dev[0]["lon"]), method="nrel_numpy")
@@ -120,6 +121,12 @@ def test_real_frame_with_the_clock_three_hours_off(real_sky) -> None:
     for r, img, a, e in zip(dev, imgs, wrong.azimuth, wrong.apparent_elevation, strict=True):
         ex, ey = cam.sky_to_pixel(float(a), float(e))
         d = detect_robust(img, camera=cam, expected_px=(float(ex), float(ey)))
+        if d.features["ephemeris_far_unclear"] > 0.0:
+            # not a plain disc (the 83 px² hazy core of 11:24: plain_disc 0.84): the distance
+            # from a calibrated camera's ephemeris counts against it in proportion (issue 24
+            # item 2); refused, it must say so
+            assert d.sun_found or "ephemeris" in str(d.reason), (r["filename"], d.reason)
+            continue
         assert d.sun_found, (r["filename"], d.confidence, d.reason)
         lx, ly = float(r["sun_col_label"]), float(r["sun_row_label"])
         assert np.hypot(d.centroid_px[0] - lx, d.centroid_px[1] - ly) <= 10.0
@@ -127,12 +134,12 @@ def test_real_frame_with_the_clock_three_hours_off(real_sky) -> None:
 
 
 def test_distance_cannot_count_against_a_plain_disc() -> None:
-    """The feature is gated: a round, saturated disc with its glare gets the same probability
+    """The feature is gated: a round, saturated core with its glare gets the same probability
     at any distance from the prediction; an ambiguous candidate loses some."""
-    plain = [conf.features(1.0, 1.0, 255.0, 60.0, 2.0, 0.0, 0.9, d) for d in (0.5, 20.0, 90.0)]
+    plain = [conf.features(1.0, 1.0, 1.0, 255.0, 60.0, 2.0, 0.0, 0.9, d) for d in (0.5, 20.0, 90.0)]
     assert all(x[conf.FEATURES.index("ephemeris_far_unclear")] == 0.0 for x in plain)
     p = [conf.probability(x) for x in plain]
     assert max(p) - min(p) < 1e-12 and p[0] > 0.9
-    vague = [conf.features(0.5, 0.4, 255.0, 60.0, 2.0, 0.0, 0.3, d) for d in (0.5, 30.0)]
+    vague = [conf.features(0.5, 0.4, 1.0, 255.0, 60.0, 2.0, 0.0, 0.3, d) for d in (0.5, 30.0)]
     assert vague[1][conf.FEATURES.index("ephemeris_far_unclear")] > 2.0
     assert conf.probability(vague[1]) <= conf.probability(vague[0])
