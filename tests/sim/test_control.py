@@ -296,22 +296,27 @@ def test_camera_offset_misleads_the_camera_loop_not_the_ephemeris(site) -> None:
 
 def test_clouds_do_not_make_the_closed_loop_wander(site) -> None:
     cloudy = CameraSetup(clouds=CloudField(cover=0.5, optical_depth=3.0, seed=1))
-    r = _noon_window(site, 0.5, controller="closed_loop_camera", camera=cloudy)
+    # a quarter of an hour at a frame a second (half an hour gave the same figures, 2x slower)
+    r = _noon_window(site, 0.25, controller="closed_loop_camera", camera=cloudy)
     s = r.summary()
-    # the clouds hid or cut the sun in over half of the 1,800 frames: those were not used
-    assert s["camera_frames"] == 1800 and s["camera_frames_used"] < 0.5 * s["camera_frames"]
+    # the clouds hid or cut the sun in over half of the 900 frames (388 used): those were not
+    # used
+    assert s["camera_frames"] == 900 and s["camera_frames_used"] < 0.5 * s["camera_frames"]
     # ... the loop fell back to the ephemeris and stayed as close as on a clear sky
-    # (measured: 2.45 mrad max, 1.4 RMS; clear sky 2.44 max, 1.7 RMS)
+    # (measured: 2.45 mrad max, 1.5 RMS; clear sky 2.26 max)
     err = r.series["pointing_error_mrad"]
     assert err.max() < 3.0
-    # without the gate that ignores dimmed or cut suns it chases the clouds' edges (9.8 mrad)
+    # without the gate that ignores dimmed or cut suns it chases the clouds' edges (9.6 mrad)
     loose = ControlSettings(min_peak_dn=0, area_tolerance=1e9, max_jump_deg=1e9,
                             min_confidence=0.0)
-    r2 = _noon_window(site, 0.5, controller="closed_loop_camera", camera=cloudy, settings=loose)
+    r2 = _noon_window(site, 0.25, controller="closed_loop_camera", camera=cloudy,
+                      settings=loose)
     assert r2.series["pointing_error_mrad"].max() > 3 * err.max()
-    # with a 2 deg pedestal yaw it never goes beyond the ephemeris's own error (~12 mrad)
+    # with a 2 deg pedestal yaw it never goes beyond the ephemeris's own error (~12 mrad;
+    # measured 11.6)
     d = Disturbances(pedestal_yaw_deg=2.0)
-    r3 = _noon_window(site, 0.5, controller="closed_loop_camera", camera=cloudy, disturbances=d)
+    r3 = _noon_window(site, 0.25, controller="closed_loop_camera", camera=cloudy,
+                      disturbances=d)
     assert r3.series["pointing_error_mrad"].max() < 12.5
 
 
