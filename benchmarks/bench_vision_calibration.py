@@ -37,6 +37,7 @@ from vision.calibrate import (  # noqa: E402
 )
 from vision.cameras import FisheyeCamera  # noqa: E402
 from vision.detect import detect_sun  # noqa: E402
+from vision.sphere import angular_separation_deg  # noqa: E402
 
 REAL = ROOT / "tests" / "data" / "real-sky"
 SIZE = (1920, 1920)
@@ -223,6 +224,23 @@ def eurocontrol(fig: Figures) -> list[str]:
                    + fig.add(f"eurocontrol.map.radial{k}.rms_deg", _rms(sep), "°",
                              f"{_rms(sep):.4f}°")
                    + f" | {sep.max():.4f}° | {cam.east} |")
+    # the one frame with a visible sun (≈ 10° elevation): the map's direction at the
+    # detected sun against SPA — the maps, the frame's time and the detector together
+    ts = pd.Timestamp("2025-02-15T08:08:30Z")
+    sp = solar_position(pd.DatetimeIndex([ts]), 48.600518, 2.346795)
+    s_az, s_el = float(sp["azimuth"].iloc[0]), float(sp["apparent_elevation"].iloc[0])
+    det = detect_sun(read(d / "image_20250215080830.jpg"))
+    sep0 = float("nan")
+    if det.sun_found and det.centroid_px is not None:
+        xi, yi = (int(round(v)) for v in det.centroid_px)
+        m_az = az_raw[yi, xi] * (360.0 / 64000.0)
+        m_el = 90.0 - zen_raw[yi, xi] * (90.0 / 64000.0)
+        sep0 = float(angular_separation_deg(m_az, m_el, s_az, s_el))
+    out += ["", f"The sun frame of {ts:%Y-%m-%d %H:%M:%S} UTC ({s_el:.1f}° elevation), "
+            "detected blind: the makers' map gives that pixel a direction "
+            + fig.add("eurocontrol.sun_frame.map_vs_spa_deg", sep0, "°",
+                      f"{sep0:.2f}°" if np.isfinite(sep0) else "(no sun found)")
+            + " from SPA (map, frame time and detector together; one frame)."]
     return out
 
 
