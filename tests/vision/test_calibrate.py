@@ -171,3 +171,27 @@ def test_self_calibration_of_wolf_from_twelve_frames(real_sky: list[dict[str, st
     y = np.array([float(rows[i]["sun_row_label"]) for i in test_rows])
     held = sky_residuals_deg(cam, x, y, az[test_rows], el[test_rows])
     assert float(np.sqrt(np.mean(held**2))) < 0.5
+
+
+def test_a_mirrored_camera_is_found_mirrored(real_sky: list[dict[str, str]]) -> None:
+    """The 23 Wolf hand labels as a camera seeing the sky mirrored would put them
+    (x → W − 1 − x): the same scale, the centre mirrored, east on the right and the north
+    offset negated (φ = Δ − A becomes −φ = −Δ + A)."""
+    rows = [r for r in real_sky if r["filename"].startswith("Wolf")]
+    times = pd.DatetimeIndex([pd.Timestamp(r["utc_time"]) for r in rows])
+    sp = pvlib.solarposition.get_solarposition(times, float(rows[0]["lat"]),
+                                               float(rows[0]["lon"]), method="nrel_numpy")
+    az, el = sp.azimuth.values, sp.apparent_elevation.values
+    x = np.array([float(r["sun_col_label"]) for r in rows])
+    y = np.array([float(r["sun_row_label"]) for r in rows])
+    plain = robust_fit(x, y, az, el, (1920, 1920)).result
+    mirrored = robust_fit(1919.0 - x, y, az, el, (1920, 1920)).result
+    assert (plain.camera.east, mirrored.camera.east) == ("left", "right")
+    assert mirrored.camera.px_per_deg == pytest.approx(plain.camera.px_per_deg, rel=1e-4)
+    assert mirrored.camera.cx_px == pytest.approx(1919.0 - plain.camera.cx_px, abs=0.05)
+    total = mirrored.camera.north_offset_deg + plain.camera.north_offset_deg
+    assert (total + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=0.01)
+    assert mirrored.rms_deg == pytest.approx(plain.rms_deg, rel=1e-3)
+    # the other mirror explains the labels 100 times worse (sum of squares)
+    assert plain.cost_other_mirror is not None
+    assert plain.cost_other_mirror > 100 * 0.5 * plain.rms_px**2 * plain.n_frames
