@@ -29,7 +29,10 @@ computes no shape fault on a day whose sky is the clear sky (``_day_payload`` in
 :func:`~backend.diagnosis.faults.day_features` fits only minutes with a measured sky
 (``valid``), of which the clear-sky twin has none. That row is stated, not simulated.
 
-About 70 s of CPU (4–6 min of wall time at load averages of 10–12 on 2 cores); prints
+Beside it, the same question with the tracker's camera (:func:`camera_limit`): the share of
+single days of camera observations on which the diagnosis's ``mount`` names a yaw.
+
+About 70 s of CPU (2–6 min of wall time at load averages of 7–12 on 2 cores); prints
 one Markdown section on stdout.
 """
 
@@ -66,6 +69,10 @@ ALL_YAWS_DEG = YAWS_DEG + BEYOND_DEG
 SKIES = {"clear": ["clear"] * DAYS, "mixed": None}
 PROBABILITY = 0.9
 MIN_CONFIDENCE = 0.5
+#: The same question with the tracker's camera: yaws [°] a day of its observations is asked
+#: to name (the others terms zero), seeds 81–100 (one day each, from 1 March 2026).
+CAMERA_YAWS_DEG = (0.0, 0.02, 0.04, 0.06, 0.08, 0.1, 0.2, 0.5)
+CAMERA_SEEDS = range(81, 101)
 
 
 def _true_sky(site, first: pd.Timestamp, seed: int, kinds: list[str] | None) -> pd.DataFrame:
@@ -154,11 +161,40 @@ def twin_check(site) -> float:
     return float(100 * np.max(np.abs(twin_loss - ours)))
 
 
+def camera_limit(site) -> dict[float, float]:
+    """Share of single days on which the diagnosis's ``mount`` names the yaw
+    (``mount_offset`` of ``azimuth_zero_deg``), per yaw of :data:`CAMERA_YAWS_DEG`: one day
+    of observations each from the mount simulator of ``tests/backend/test_diagnosis_mount.py``
+    (open loop on SPA, 0.3 mrad noise, 40 % of the sunlit minutes clouded, 2 % glints)."""
+    from types import SimpleNamespace
+
+    from backend.diagnosis.mount import mount_faults, observations_from
+    from tests.backend.test_diagnosis_mount import camera_day
+
+    info = SimpleNamespace(site=site)
+    terms = dict.fromkeys(("azimuth_zero_deg", "elevation_zero_deg", "pedestal_tilt_north_deg",
+                           "pedestal_tilt_east_deg"), 0.0)
+    out = {}
+    for yaw in CAMERA_YAWS_DEG:
+        named = 0
+        for seed in CAMERA_SEEDS:
+            day = pd.Timestamp("2026-03-01", tz=site.timezone) + pd.Timedelta(days=seed - 81)
+            cols = camera_day(day, {**terms, "azimuth_zero_deg": yaw}, np.random.default_rng(seed))
+            edges = [int(day.timestamp()), int((day + pd.Timedelta(days=1)).timestamp())]
+            body = mount_faults(observations_from(info, *cols),  # type: ignore[arg-type]
+                                edges, [day.date().isoformat()]) or {"faults": []}
+            named += any(f["kind"] == "mount_offset" and f["term"] == "azimuth_zero_deg"
+                         for f in body["faults"])
+        out[yaw] = named / len(CAMERA_SEEDS)
+    return out
+
+
 def main() -> None:
     site = load_site("tehuantepec")
     t0, c0 = time.perf_counter(), time.process_time()
     hits, others, fitted = run(site)
     check_pct = twin_check(site)
+    camera = camera_limit(site)
     fig = Figures("mount_detection")
     print("## mount_detection\n")
     print(f"Power only, Tehuantepec, 30 days from 1 Mar 2026 per seed, seeds "
@@ -214,6 +250,19 @@ def main() -> None:
         for what, table in (("shape fits ran", fitted), ("another fault named", others)):
             print(f"| {sky_name} | {what} | "
                   + " | ".join(str(table[(sky_name, y)]) for y in ALL_YAWS_DEG) + " |")
+    cam = next((y for y in CAMERA_YAWS_DEG[1:] if camera[y] >= PROBABILITY), None)
+    cam_text = f"> {CAMERA_YAWS_DEG[-1]:g}°" if cam is None else f"{cam:g}°"
+    print(f"\nWith the tracker's camera instead (the diagnosis's `mount`, one day of "
+          f"observations each, seeds {CAMERA_SEEDS[0]}–{CAMERA_SEEDS[-1]}; open loop on SPA, "
+          "0.3 mrad noise, 40 % of the sunlit minutes clouded, 2 % glints): the smallest yaw "
+          "named with ≥ 90 % probability from one day is "
+          + fig.add("camera_1d_yaw_deg", CAMERA_YAWS_DEG[-1] if cam is None else cam,
+                    "deg" if cam is not None else "deg (lower bound)", cam_text)
+          + " (the naming rule's minimum is 1 mrad = 0.057°); the share of days named "
+          "per yaw:\n")
+    print("| " + " | ".join(f"{y:g}°" for y in CAMERA_YAWS_DEG) + " |")
+    print("|" + "---|" * len(CAMERA_YAWS_DEG))
+    print("| " + " | ".join(f"{100 * camera[y]:.0f} %" for y in CAMERA_YAWS_DEG) + " |")
     print(f"\nThe yaw model against the twin's own disturbance (10°, 7 mixed days, seed 61): "
           f"daily loss within "
           f"{fig.add('twin_check_pct', check_pct, '%', f'{check_pct:.2f} %')} of the healthy "
