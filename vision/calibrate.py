@@ -290,21 +290,21 @@ def robust_fit(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
             inlier = np.ones(n, bool)  # no consensus: everything, and say so in the residuals
     first: CalibrationResult | None = None
     for _ in range(5):
-        use = np.flatnonzero(inlier)
+        fitted_on = inlier
+        use = np.flatnonzero(fitted_on)
         # the first fit tries both mirrors (unless one is given); the refits keep its mirror
         kw = fit_kwargs if first is None else {**fit_kwargs, "east": first.camera.east}
         res = fit_fisheye(x[use], y[use], az[use], el[use], image_size, **kw)
         if first is None:
             first = res
         r_deg, r_px = _residuals_all(res.camera, x, y, az, el)
-        now = r_deg <= outlier_deg
-        if np.array_equal(now, inlier) or 2 * int(now.sum()) < n_par + 2:
+        inlier = r_deg <= outlier_deg
+        if np.array_equal(inlier, fitted_on) or 2 * int(inlier.sum()) < n_par + 2:
             break
-        inlier = now
     assert first is not None
-    if res is not first and res.cost_other_mirror is None:
-        res = replace(res, cost_other_mirror=first.cost_other_mirror)
-    return RobustFit(res, inlier, r_deg, r_px)
+    if res is not first:  # what the first fit decided (the mirror) stays said
+        res = replace(res, cost_other_mirror=first.cost_other_mirror, fitted=first.fitted)
+    return RobustFit(res, fitted_on, r_deg, r_px)
 
 
 def leave_one_out_deg(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
