@@ -13,6 +13,10 @@ The lifespan:
 3. starts the live twin loop (an asyncio task, every minute);
 4. starts the demo logger thread when enabled (making its own token if none is
    configured);
+5. gives freed heap memory back to the system every ``TRIM_INTERVAL_S``
+   (:func:`backend.limits.release_memory`: after big requests glibc keeps the pages);
+6. owns the plant sweeps' runner (``app.state.sweeps``, made on first use): on
+   shutdown its sweeps are cancelled and its Dask cluster closed;
 
 Outermost of all, ``backend.api.security.SecurityHeaders`` adds the CSP and
 the other security headers to every response; ``/docs`` is served from local
@@ -59,6 +63,7 @@ from backend.api.routes import (
 )
 from backend.context import ServiceContext, open_context
 from backend.errors import InputError, bounded_errors
+from backend.limits import TRIM_INTERVAL_S, release_memory
 from backend.settings import Settings, get_settings
 from backend.twin import viser_http
 from backend.twin.scene import TwinScene
@@ -116,6 +121,16 @@ def _start_demo(ctx: ServiceContext, stop: threading.Event) -> threading.Thread 
     return thread
 
 
+async def _trim_memory(stop: asyncio.Event) -> None:
+    """Every ``TRIM_INTERVAL_S`` until ``stop``: :func:`release_memory` on a worker thread
+    (it takes ≈ 4 ms; the heap is locked meanwhile, the event loop is not)."""
+    while not stop.is_set():
+        try:
+            await asyncio.wait_for(stop.wait(), TRIM_INTERVAL_S)
+        except TimeoutError:
+            await anyio.to_thread.run_sync(release_memory)
+
+
 async def validation_error(request: Request, exc: RequestValidationError) -> Response:
     """FastAPI's 422 body, bounded and JSON-safe (:func:`backend.errors.bounded_errors`):
     no input (NaN, an integer beyond 64 bits, a megabyte string) makes it fail or grow."""
@@ -147,11 +162,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 ctx.twin.run_live(stop_live, settings.twin.live_interval_s), name="live-twin")
         stop_demo = threading.Event()
         demo_thread = _start_demo(ctx, stop_demo)
+        trim_task = asyncio.create_task(_trim_memory(stop_live), name="trim-memory")
         try:
             yield
         finally:
             stop_demo.set()
             stop_live.set()
+            await trim_task
+            sweeps = getattr(app.state, "sweeps", None)
+            if sweeps is not None:
+                await sweeps.close()
             if live_task is not None:
                 await live_task
             if demo_thread is not None:

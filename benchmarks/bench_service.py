@@ -267,7 +267,7 @@ def db_bytes(tmp: Path) -> int:
     return sum(p.stat().st_size for p in tmp.glob("bench.sqlite*"))
 
 
-PARTS = ("backfill", "queries", "single", "loggers", "full")
+PARTS = ("backfill", "queries", "single", "loggers", "full", "memory")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -325,6 +325,8 @@ def main(argv: list[str] | None = None) -> int:
                 server.stop()
         if "full" in parts:
             rows += _synchronous_full(tmp, fig)
+        if "memory" in parts:
+            rows += _idle_memory(tmp, fig)
     rows = [(a, b, c if c == "—" else f"{fig.figures['service.' + c]['target']}: "
              + fig.verdict(c)) for a, b, c in rows]
     print("## service\n")
@@ -418,6 +420,83 @@ def _synchronous_full(tmp: Path, fig: Figures) -> list[tuple[str, str, str]]:
                      f"{rates['FULL']:,.0f} req/s")
              + " = " + fig.add("fsync_ms_per_commit", fsync_ms, "ms", f"{fsync_ms:.2f} ms")
              + " more per request than `NORMAL`", "—")]
+
+
+def _rss_bytes(pid: int) -> int:
+    """The resident set of one process (``/proc/PID/statm``, pages × page size)."""
+    with open(f"/proc/{pid}/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+def _get_all(port: int, token: str, paths: list[str], workers: int) -> list[int]:
+    """GET every path (``workers`` at once, a token on each); the statuses; bodies dropped."""
+    def one(path: str) -> int:
+        c = http.client.HTTPConnection("127.0.0.1", port, timeout=600)
+        c.request("GET", path, headers={"Authorization": f"Bearer {token}"})
+        r = c.getresponse()
+        while r.read(1 << 20):
+            pass
+        c.close()
+        return r.status
+
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(workers) as pool:
+        return list(pool.map(one, paths))
+
+
+def _idle_memory(tmp: Path, fig: Figures, idle_s: float = 20.0) -> list[tuple[str, str, str]]:
+    """Issue 23 item 5: the server's RSS at start, its peak through a sequence of big reads
+    (a year's series as JSON and as CSV, four at once each; 32 plant days at 300 s, 8 at
+    once; a year of diagnosis; a year-long simulation), and ``idle_s`` after the last
+    answer (with a token: the allowances do not refuse them)."""
+    log("memory: start, peak through big reads, idle after")
+    (tmp / "memory").mkdir()
+    server = Server(tmp / "memory")
+    try:
+        time.sleep(2.0)
+        start = _rss_bytes(server.proc.pid)
+        peak = [start]
+        stop = threading.Event()
+
+        def sample() -> None:
+            while not stop.wait(0.05):
+                peak[0] = max(peak[0], _rss_bytes(server.proc.pid))
+
+        sampler = threading.Thread(target=sample, daemon=True)
+        sampler.start()
+        c = http.client.HTTPConnection("127.0.0.1", server.port, timeout=600)
+        body = orjson.dumps({"site_id": SITE, "start": "2024-01-01", "end": "2025-01-01",
+                             "step_s": 60})
+        c.request("POST", "/api/v1/simulations", body=body, headers={
+            "Authorization": f"Bearer {server.token}", "Content-Type": "application/json"})
+        r = c.getresponse()
+        run_id = orjson.loads(r.read())["run_id"]
+        c.close()
+        series = f"/api/v1/simulations/{run_id}/series?max_points=2000000"
+        statuses = _get_all(server.port, server.token, [series] * 4, 4)
+        statuses += _get_all(server.port, server.token, [series + "&format=csv"] * 4, 4)
+        days = [f"/api/v1/plants/penarroya/day?date=2024-{m:02d}-{d:02d}&step_s=300"
+                for m in range(1, 9) for d in (1, 8, 15, 22)]
+        statuses += _get_all(server.port, server.token, days, 8)
+        statuses += _get_all(server.port, server.token, [
+            f"/api/v1/sites/{SITE}/diagnosis?start=2024-01-01&end=2025-01-01"], 1)
+        busy_end = time.monotonic()
+        time.sleep(idle_s)
+        stop.set()
+        sampler.join()
+        idle = _rss_bytes(server.proc.pid)
+    finally:
+        server.stop()
+    bad = [s for s in statuses if s != 200]
+    ratio = idle / start
+    return [(f"server RSS at start, peak through {len(statuses)} big reads (a year's series "
+             "× 4 JSON + 4 CSV, 32 plant days, a year of diagnosis) and "
+             f"{idle_s:.0f} s after the last ({len(bad)} not 200: {bad[:5]})",
+             f"{start / 1e6:.0f} MB, peak {peak[0] / 1e6:.0f} MB, idle "
+             + fig.add("idle_rss_ratio", ratio, "×", f"{idle / 1e6:.0f} MB = {ratio:.2f}×",
+                       "≤ 2× start", ratio <= 2.0) + " the start"
+             + f" ({time.monotonic() - busy_end:.0f} s idle)", "idle_rss_ratio")]
 
 
 if __name__ == "__main__":

@@ -28,7 +28,12 @@ def run(args: argparse.Namespace) -> int:
     import uvicorn
 
     from backend.app import create_app
+    from backend.limits import tune_malloc
     from backend.settings import get_settings
+
+    # before any thread starts: two glibc heaps and large arrays unmapped when freed, so
+    # an idle server gives back what its big requests used (backend/limits.py)
+    tune_malloc()
 
     overrides: dict[str, object] = {}
     if args.host is not None:

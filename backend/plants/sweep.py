@@ -33,6 +33,8 @@ log = logging.getLogger(__name__)
 
 #: How long a client waits to reach the scheduler.
 CONNECT_TIMEOUT = "5s"
+#: How often a running sweep looks at its ``cancelled`` callback [s].
+CANCEL_POLL_S = 0.2
 
 #: This process's sky of the last sweep range it ran: (SweepSpec.sky_key(), sky).
 _SKY_CACHE: dict[tuple[Any, ...], dict[str, Any]] = {}
@@ -104,7 +106,8 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
     progress : callable, optional
         Called with (cases done, cases) as each case finishes.
     cancelled : callable, optional
-        Polled between cases; when it returns True the remaining tasks are cancelled and
+        Polled every :data:`CANCEL_POLL_S` while cases run; when it returns True the
+        remaining tasks are cancelled and
         :class:`SweepCancelled` is raised.
 
     Returns
@@ -143,13 +146,17 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
             w = client.scatter(weather, broadcast=True) if weather is not None else None
             futures = [client.submit(sweep_task, spec, c, w, pure=False) for c in cases]
             rows: list[dict[str, Any]] = []
-            for fut in as_completed(futures):
-                rows.append(fut.result())
-                if progress is not None:
-                    progress(len(rows), len(cases))
+            done = as_completed(futures)
+            while not done.is_empty():    # polled, so a cancel does not wait for a case
+                for fut in done.next_batch(block=False) if done.has_ready() else ():
+                    rows.append(fut.result())
+                    if progress is not None:
+                        progress(len(rows), len(cases))
                 if cancelled is not None and cancelled():
                     client.cancel(futures)
                     raise SweepCancelled(f"cancelled after {len(rows)} of {len(cases)} cases")
+                if not done.has_ready():
+                    time.sleep(CANCEL_POLL_S)
             compute_s = time.perf_counter() - submitted
     finally:
         if cluster is not None:

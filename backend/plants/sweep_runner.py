@@ -83,6 +83,21 @@ class SweepRunner:
         task.add_done_callback(self._tasks.discard)
         return state
 
+    async def close(self, timeout_s: float = 30.0) -> None:
+        """The service stops: every queued or running sweep is cancelled and waited for up
+        to ``timeout_s`` (a running one stops within a poll of :func:`run_sweep`, closing
+        the Dask cluster it made); past that the tasks are cancelled."""
+        for state in self._states.values():
+            if state.status in ("queued", "running"):
+                state.cancel = True
+        tasks = list(self._tasks)
+        if not tasks:
+            return
+        _, late = await asyncio.wait(tasks, timeout=timeout_s)
+        for task in late:
+            task.cancel()
+        await asyncio.gather(*late, return_exceptions=True)
+
     def cancel(self, sweep_id: str) -> SweepState | None:
         """Stop a queued or running sweep (a running one after its current cases)."""
         state = self._states.get(sweep_id)

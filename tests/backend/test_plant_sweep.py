@@ -11,10 +11,12 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any, cast
 
 import pytest
 
 from backend.cli import main
+from sim.plant.sweep import SweepCase, SweepSpec
 
 BIN = Path(sys.executable).parent
 SWEEP = ["plant", "sweep", "--collector-m", "12x5", "--lat", "38.299224", "--lon", "-5.303114",
@@ -120,3 +122,37 @@ def test_unreachable_scheduler_is_an_error(capsys: pytest.CaptureFixture[str]) -
                                f"tcp://127.0.0.1:{port}"]))
     assert exc.value.code == 2
     assert "--scheduler: cannot reach" in capsys.readouterr().err
+
+
+def test_runner_close_cancels_a_running_sweep(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The service's shutdown (``SweepRunner.close``, from the app's lifespan) stops a
+    running sweep through its ``cancelled`` callback (where run_sweep closes the cluster it
+    made) and fails the queued one, instead of leaving them to outlive the service."""
+    import asyncio
+    import threading
+
+    from backend.plants import sweep_runner
+    from backend.plants.sweep import SweepCancelled
+
+    polled = threading.Event()
+
+    def fake_run_sweep(spec: Any, cases: Any, scheduler: Any = None, progress: Any = None,
+                       cancelled: Any = None) -> dict[str, Any]:
+        while not cancelled():           # a case that would take minutes
+            polled.set()
+            time.sleep(0.01)
+        raise SweepCancelled("cancelled after 0 of 1 cases")
+
+    monkeypatch.setattr(sweep_runner, "run_sweep", fake_run_sweep)
+
+    async def main() -> tuple[str, str | None, str, str | None]:
+        runner = sweep_runner.SweepRunner(None, 2)
+        spec, case = cast(SweepSpec, None), cast(SweepCase, None)   # the fake never reads them
+        running = runner.submit(spec, [case], {})
+        queued = runner.submit(spec, [case], {})
+        while not polled.is_set():
+            await asyncio.sleep(0.01)
+        await runner.close(timeout_s=20)
+        return running.status, running.error, queued.status, queued.error
+
+    assert asyncio.run(main()) == ("failed", "cancelled", "failed", "cancelled")

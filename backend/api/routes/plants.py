@@ -69,6 +69,8 @@ _PRICED_DOC: dict[int | str, dict[str, Any]] = {
     404: {}, 422: {},
     429: {"description": "the caller's anonymous hourly allowance is spent (Retry-After)"},
     503: {"description": "too many plant computations are waiting (Retry-After)"}}
+#: A token is optional on these routes (without one the work is priced).
+_OPTIONAL_TOKEN: dict[str, Any] = {"security": [{}, {"bearerAuth": []}]}
 
 
 def get_plant_service(request: Request) -> PlantService:
@@ -255,7 +257,7 @@ def cancel_sweep(sweep_id: str, runner: SweepRunnerDep) -> dict[str, Any]:
 
 
 @router.get("/sweeps/{sweep_id}/shade", response_model=SweepShadeRead,
-            responses=_PRICED_DOC)
+            responses=_PRICED_DOC, openapi_extra=_OPTIONAL_TOKEN)
 async def sweep_shade(sweep_id: str, request: Request, ctx: ContextDep, caller: CallerDep,
                       runner: SweepRunnerDep,
                       layout: Annotated[str, Query(max_length=100)],
@@ -309,7 +311,7 @@ def positions(plant_id: str, service: PlantServiceDep,
 
 
 @router.get("/{plant_id}/sky-map", response_model=SkyMapRead,
-            responses={**_PRICED_DOC, 200: {"content": PNG_CONTENT}})
+            responses={**_PRICED_DOC, 200: {"content": PNG_CONTENT}}, openapi_extra=_OPTIONAL_TOKEN)
 async def sky_map(plant_id: str, request: Request, ctx: ContextDep, caller: CallerDep,
                   service: PlantServiceDep,
                   time: Annotated[str, Query(description="ISO 8601 with offset")],
@@ -332,7 +334,7 @@ async def sky_map(plant_id: str, request: Request, ctx: ContextDep, caller: Call
 
 
 @router.get("/{plant_id}/day", response_model=PlantDayRead, response_model_exclude_unset=True,
-            responses=_PRICED_DOC)
+            responses=_PRICED_DOC, openapi_extra=_OPTIONAL_TOKEN)
 async def day(plant_id: str, request: Request, ctx: ContextDep, caller: CallerDep,
               service: PlantServiceDep,
               date: Annotated[str, Query(pattern=r"^\d{4}-\d{2}-\d{2}$",

@@ -278,7 +278,8 @@ def _instant_s(text: str | None, zone: str, name: str) -> int | None:
 @router.get("/{run_id}/series", response_model=SimulationSeriesRead,
             responses={200: {"content": CSV_CONTENT}, 401: {}, 404: {}, 409: {}, 422: {},
                        429: {"description": "rate limit of anonymous series reads (values a "
-                                            "minute per client address); see Retry-After"}})
+                                            "minute per client address); see Retry-After"}},
+            openapi_extra={"security": [{}, {"bearerAuth": []}]})
 async def get_simulation_series(
     run_id: str,
     ctx: ContextDep,
