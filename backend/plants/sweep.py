@@ -36,7 +36,9 @@ CONNECT_TIMEOUT = "5s"
 #: How often a running sweep looks at its ``cancelled`` callback [s].
 CANCEL_POLL_S = 0.2
 
-#: This process's sky of the last sweep range it ran: (SweepSpec.sky_key(), sky).
+#: This process's sky of the last sweep range it ran: (SweepSpec.sky_key(), sky); one range
+#: (a Dask worker's, reused by the cases it runs); a one-case sweep run in the caller's
+#: process (the service's) drops it when done.
 _SKY_CACHE: dict[tuple[Any, ...], dict[str, Any]] = {}
 _SKY_LOCK = threading.Lock()
 
@@ -124,6 +126,8 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
         raise ValueError("a sweep needs at least one case")
     if scheduler is None and len(cases) == 1:
         row = sweep_task(spec, cases[0], weather)
+        with _SKY_LOCK:  # in the caller's process (the service): not kept after the sweep
+            _SKY_CACHE.clear()
         if progress is not None:
             progress(1, 1)
         return _finish([row], "in-process", {"scheduler": None, "workers": 1}, started,

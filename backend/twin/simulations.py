@@ -180,6 +180,10 @@ def npz_to_series(blob: bytes) -> pd.DataFrame:
     return pd.DataFrame(cols, index=index)
 
 
+#: Ended runs a :class:`SimulationRunner` remembers in memory (the newest; a bound on it).
+KEEP_ENDED = 100
+
+
 def shrink_page_cache(conn: Connection) -> None:
     """SQLite: free the connection's unused cached pages (``PRAGMA shrink_memory``).
 
@@ -491,6 +495,11 @@ class SimulationRunner:
         with self._lock:
             self._futures.pop(state.run_id, None)
             self._cancel.discard(state.run_id)
+            # the newest KEEP_ENDED ended runs stay in memory; older ones are read back
+            # from the database (:meth:`get`): runs with a token were kept forever
+            ended = [r for r, st in self._runs.items() if st.status in ("done", "failed")]
+            for run_id in ended[:max(0, len(ended) - KEEP_ENDED)]:
+                del self._runs[run_id]
 
     def _in_worker(self, job: _Job) -> _Result:
         """Run the job in a worker process; its progress into its state; its result.

@@ -93,3 +93,20 @@ def test_reads_without_a_token_are_bounded(run: dict[str, Any]) -> None:
     assert "HELIOTWIN_ANONYMOUS_SERIES_CELLS_PER_MIN" in second.json()["detail"]
     assert int(second.headers["retry-after"]) >= 1
     assert thin.status_code == 200 and len(thin.json()["points"]) <= 100
+
+
+def test_ended_runs_in_memory_are_bounded(run: dict[str, Any]) -> None:
+    """The runner remembers the newest ``KEEP_ENDED`` ended runs (issue 23 item 5: runs
+    with a token stayed in memory forever); an older one is still read from the
+    database."""
+    from backend.twin.simulations import KEEP_ENDED, RunState
+
+    runner = run["server"].ctx.simulations
+    with runner._lock:
+        for k in range(KEEP_ENDED + 50):
+            runner._runs[f"old-{k}"] = RunState(f"old-{k}", "tehuantepec", "done")
+    runner._ended(RunState("old-0", "tehuantepec", "done"))
+    assert sum(s.status in ("done", "failed") for s in runner._runs.values()) == KEEP_ENDED
+    assert run["run_id"] not in runner._runs and "old-0" not in runner._runs
+    state = runner.get(run["run_id"])            # the real run, from its row
+    assert state is not None and state.status == "done" and state.summary
