@@ -284,6 +284,9 @@ def test_anonymous_plant_days_are_priced_from_the_hourly_allowance(
     sky = client.get("/api/v1/plants/penarroya/sky-map", params={"time": DEC21_0824_TST})
     assert sky.status_code == 200 and len(charges) + 1 == len(    # the same allowance
         next(iter(small_allowance._charges.values())))
+    pos = client.get("/api/v1/plants/penarroya/positions", params={"time": DEC21_0824_TST})
+    assert pos.status_code == 200 and len(charges) + 2 == len(    # an instant: ≈ 9 ms
+        next(iter(small_allowance._charges.values())))
     second = client.get(url, params={"date": "2022-06-22", "step_s": 900})
     assert second.status_code == 429, second.text[:300]
     assert int(second.headers["retry-after"]) >= 1

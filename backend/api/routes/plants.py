@@ -47,6 +47,7 @@ from backend.plants import (
     PlantService,
     UnknownPlantError,
     day_cost_s,
+    positions_cost_s,
     sky_map_cost_s,
     sky_map_png,
 )
@@ -129,11 +130,12 @@ def _client(request: Request) -> str:
 
 
 async def _priced(request: Request, ctx: Any, caller: Any, cost_s: float,
-                  work: Callable[[], T]) -> T:
+                  work: Callable[[], T], one_at_a_time: bool = True) -> T:
     """Run a plant computation expected to take ``cost_s`` of CPU on a worker thread, one
-    at a time (``Limits.plants``, 503 past its queue). Without a token: 422 above one
-    run's worth, the price taken from the hourly allowance (429) and trued up to the CPU
-    time the work took (nothing when it never ran)."""
+    at a time (``Limits.plants``, 503 past its queue; not for the few milliseconds of an
+    instant's positions, which a plant controller must not wait behind a day for).
+    Without a token: 422 above one run's worth, the price taken from the hourly allowance
+    (429) and trued up to the CPU time the work took (nothing when it never ran)."""
     charge = None
     if caller is None:
         s = ctx.settings.simulations
@@ -156,6 +158,8 @@ async def _priced(request: Request, ctx: Any, caller: Any, cost_s: float,
             spent[0] = time.thread_time() - t0
 
     try:
+        if not one_at_a_time:
+            return await anyio.to_thread.run_sync(timed)
         async with ctx.limits.plants.hold(1):
             return await anyio.to_thread.run_sync(timed)
     except Busy as exc:
@@ -299,15 +303,23 @@ def get_plant(plant_id: str, service: PlantServiceDep) -> dict[str, Any]:
     return service.get(plant_id).to_dict()
 
 
-@router.get("/{plant_id}/positions", response_model=PositionsRead, responses={404: {}, 422: {}})
-def positions(plant_id: str, service: PlantServiceDep,
-              time: Annotated[str, Query(description="ISO 8601 with offset")],
-              strategy: Annotated[str, Query(description="sun | backtrack | sky_scan")] = "sun",
-              ) -> dict[str, Any]:
-    """Every tracker's orientation under a strategy, its shaded fraction and who shades it."""
+@router.get("/{plant_id}/positions", response_model=PositionsRead, responses=_PRICED_DOC,
+            openapi_extra=_OPTIONAL_TOKEN)
+async def positions(plant_id: str, request: Request, ctx: ContextDep, caller: CallerDep,
+                    service: PlantServiceDep,
+                    time: Annotated[str, Query(description="ISO 8601 with offset")],
+                    strategy: Annotated[str, Query(
+                        description="sun | backtrack | sky_scan")] = "sun",
+                    ) -> dict[str, Any]:
+    """Every tracker's orientation under a strategy, its shaded fraction and who shades it
+    (priced, without waiting for other plant computations: see the module docstring)."""
     when = _time(time)
     _plant_or_404(service, plant_id)
-    return service.positions(plant_id, when, _strategy(strategy))
+    strategy = _strategy(strategy)
+    cost_s = positions_cost_s(service.get(plant_id).n_trackers)
+    return await _priced(request, ctx, caller, cost_s,
+                         lambda: service.positions(plant_id, when, strategy),
+                         one_at_a_time=False)
 
 
 @router.get("/{plant_id}/sky-map", response_model=SkyMapRead,
