@@ -28,7 +28,8 @@ Three named methods, all returning a :class:`SunDetection`:
   saturated core with its glare, so a wrong place or time gives the sun it
   sees and how far it is from the prediction (``distance_from_ephemeris_px``),
   not "no sun". The sub-pixel centre: for a colour frame whose white core (every
-  channel saturated) is at least 3° in radius, the centroid of that core opened
+  channel saturated) is at least 3° in radius while the grey core, saturated by
+  the blue sky's glare, reaches well beyond it, the centroid of that core opened
   by a disc (:func:`_white_core_centre`); for a core with a glare around it and a
   fisheye model (given, or the image circle's), the small circle on the
   camera's sphere through most of the core's limb that leaves none of it
@@ -101,6 +102,8 @@ _WHITE_MIN_DEG = 3.0  # a white (every channel saturated) core at least this wid
 # Wolf labels)
 _WHITE_MIN_PX = 25.0  # … and this many pixels: JPEG keeps colour at half resolution in
 # 16 px blocks (4:2:0), so a colour outline is good to a pixel or two only
+_WHITE_BLUE_EXCESS = 1.3  # … and the grey core this many times its area: a blue sky's glare
+# saturating beyond the white core (Wolf: 1.8-2.2; Wettermast's haze: 1.0-1.1)
 _WHITE_OPEN = 0.5  # the opening's disc: this share of the white core's inscribed radius
 _WHITE_OPEN_MAX_PX = 24.0  # … worked on a mask shrunk until the disc is at most this wide
 _WHITE_CUT_STEP_PX = 3.0  # the outline's outward neighbours looked at, this far out
@@ -429,7 +432,9 @@ def _white_core_centre(image: NDArray[Any], gray: NDArray[np.uint8], c: _Candida
                        ) -> tuple[float, float, float] | None:
     """The centre of a large glare: the centroid of its *white* core → (x, y, radius_px),
     or None (grey frame, no white core, a core under :data:`_WHITE_MIN_DEG` or
-    :data:`_WHITE_MIN_PX` in radius, or one the image circle or an obstacle cuts).
+    :data:`_WHITE_MIN_PX` in radius, a grey core less than :data:`_WHITE_BLUE_EXCESS` times
+    the white one — no blue glare beyond it to leave out — or one the image circle or an
+    obstacle cuts).
 
     The sun saturates every colour channel; the sky's glare around it is blue and
     saturates the blue channel (and so the grey level) much farther out, raggedly, with
@@ -463,7 +468,7 @@ def _white_core_centre(image: NDArray[Any], gray: NDArray[np.uint8], c: _Candida
     big = max(contours, key=cv2.contourArea)
     area = cv2.contourArea(big)
     r_eq = float(np.sqrt(area / np.pi))
-    if r_eq < max(_WHITE_MIN_DEG * ppd, _WHITE_MIN_PX):
+    if r_eq < max(_WHITE_MIN_DEG * ppd, _WHITE_MIN_PX) or c.area < _WHITE_BLUE_EXCESS * area:
         return None
     pts = big.reshape(-1, 2)
     if fov is not None and float(np.max(np.hypot(pts[:, 0] + x0 - fov.cx_px,
