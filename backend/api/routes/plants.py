@@ -74,8 +74,9 @@ _PRICED_DOC: dict[int | str, dict[str, Any]] = {
 _OPTIONAL_TOKEN: dict[str, Any] = {"security": [{}, {"bearerAuth": []}]}
 
 
-def get_plant_service(request: Request) -> PlantService:
-    """The app's :class:`PlantService`, made on first use (``Settings.sites.plants_dir`` if set)."""
+async def get_plant_service(request: Request) -> PlantService:
+    """The app's :class:`PlantService`, made on first use (``Settings.sites.plants_dir`` if set;
+    on the event loop, so two first requests cannot make two)."""
     service = getattr(request.app.state, "plants", None)
     if service is None:
         settings = getattr(request.app.state, "settings", None)
@@ -111,8 +112,9 @@ def _strategy(strategy: str) -> str:
     return strategy
 
 
-def get_sweep_runner(request: Request) -> SweepRunner:
-    """The app's :class:`SweepRunner`, made on first use from ``Settings.plants``."""
+async def get_sweep_runner(request: Request) -> SweepRunner:
+    """The app's :class:`SweepRunner`, made on first use from ``Settings.plants`` (on the
+    event loop: one runner; the app's lifespan closes it on shutdown)."""
     runner = getattr(request.app.state, "sweeps", None)
     if runner is None:
         settings = request.app.state.ctx.settings.plants
