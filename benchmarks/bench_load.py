@@ -309,7 +309,7 @@ def main(argv: list[str] | None = None) -> int:
             c.close()
             runs = {}
             for phase, readers in enumerate((0, args.readers)):
-                label = "with readers" if readers else "writes alone"
+                label = "with readers" if phase else "writes alone"
                 load = os.getloadavg()[0]
                 log(f"{label} for {args.seconds:g} s (load {load:.1f})")
                 mix = Mix(server.port, server.token, args.seconds)
