@@ -31,6 +31,8 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
+#: How long a SQLite connection waits for a lock before it answers "database is locked".
+SQLITE_BUSY_TIMEOUT_MS = 30_000
 _migrate_lock = threading.Lock()
 
 
@@ -43,7 +45,8 @@ def make_engine(settings: Settings) -> Engine:
             Path(url.database).parent.mkdir(parents=True, exist_ok=True)
             pool = {"pool_size": 16, "max_overflow": 16}
         engine = create_engine(
-            url, connect_args={"check_same_thread": False, "timeout": 30.0}, **pool
+            url, connect_args={"check_same_thread": False,
+                               "timeout": SQLITE_BUSY_TIMEOUT_MS / 1000}, **pool
         )
         synchronous = settings.database.sqlite_synchronous
 
@@ -53,7 +56,7 @@ def make_engine(settings: Settings) -> Engine:
             cur.execute("PRAGMA journal_mode=WAL")
             cur.execute("PRAGMA foreign_keys=ON")
             cur.execute(f"PRAGMA synchronous={synchronous}")
-            cur.execute("PRAGMA busy_timeout=30000")
+            cur.execute(f"PRAGMA busy_timeout={SQLITE_BUSY_TIMEOUT_MS}")
             cur.execute("PRAGMA cache_size=-65536")
             cur.close()
 

@@ -223,3 +223,35 @@ def test_a_group_of_many_loggers_costs_few_statements(tmp_path: Path) -> None:
         _assert_rollups_equal_direct_aggregates(ctx, aid, stored.size + minutes.size)
     finally:
         ctx.close()
+
+
+def test_the_writer_truncates_a_grown_wal_without_waiting_for_a_long_reader(
+        tmp_path: Path) -> None:
+    """SQLite: the WAL of back-to-back commits is checkpointed and truncated between two
+    groups once past the writer's bound; a reader that keeps the WAL makes it give up at
+    once (the commit is not held) and try again later."""
+    db = new_database("sqlite", tmp_path)
+    ctx = open_context(get_settings(database_url=db.url, alerts=False,
+                                    sites_dir=get_settings().sites.user_dir))
+    try:
+        writer = ctx.writer
+        wal = Path(f"{ctx.engine.url.database}-wal")
+        writer.wal_truncate_bytes = 256 * 1024
+        aid = ctx.registry.sites["tehuantepec"].arrays["fixed"].array_id
+        reader = ctx.engine.connect()
+        reader.execute(text("SELECT COUNT(*) FROM measurements")).all()  # a snapshot, kept
+        for k in range(4):
+            ts = T0 + 60 * np.arange(k * 3000, (k + 1) * 3000)
+            assert writer.submit(_job(aid, ts, k)).result(timeout=60) == (ts.size, 0)
+        assert writer.wal_truncations == 0 and wal.stat().st_size > writer.wal_truncate_bytes
+        reader.close()
+        for k in range(50):  # the checkpointer thread may hold the WAL a moment: retry
+            writer._wal_next_try = 0.0  # the retry's wait, skipped
+            ts = np.array([T0 + 60 * (12_000 + k)])
+            assert writer.submit(_job(aid, ts, 9)).result(timeout=60) == (1, 0)
+            if writer.wal_truncations:
+                break
+        assert writer.wal_truncations == 1 and wal.stat().st_size <= writer.wal_truncate_bytes
+        _assert_rollups_equal_direct_aggregates(ctx, aid, 12_001 + k)
+    finally:
+        ctx.close()
