@@ -41,9 +41,10 @@ router = APIRouter(prefix="/api/v1/sites", tags=["energy"])
 #: Energy and report reads served at once; more wait their turn on the event loop. Each
 #: read's Python work holds the GIL, which the event loop (every logger's request) and
 #: the writer need as well: 10 readers back to back on 10 threads took the GIL from them
-#: ten times as often as one (benchmarks/bench_load.py). Two: a read's SQLite part gives
-#: the GIL away, so two keep both cores of the target machine busy.
-READS_AT_ONCE = 2
+#: ten times as often as one. bench_load (15 s runs in turn, load 2-4): writes beside 10
+#: month readers p99 98 and 40 ms with one at once (75 and 115 reads/s), 165 and 174 ms
+#: with two (68 and 98 reads/s): one also reads more, with less GIL hand-over.
+READS_AT_ONCE = 1
 _read_limiters: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, anyio.CapacityLimiter] = (
     weakref.WeakKeyDictionary())
 
