@@ -295,8 +295,8 @@ class VisionSettings(_Group):
                                       "503 with Retry-After."
     )
     anonymous_keep_rows: int = Field(
-        1000, ge=0, description="Detections uploaded without a token that stay stored (older "
-                                "ones are deleted); with a token they stay."
+        1000, ge=0, description="Detections and calibrations made without a token that stay "
+                                "stored, each (older ones are deleted); with a token they stay."
     )
 
 

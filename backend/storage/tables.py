@@ -251,6 +251,8 @@ class VisionCalibration(Base):
     """A fisheye camera fitted from timestamped frames (``vision.calibrate``)."""
 
     __tablename__ = "vision_calibrations"
+    __table_args__ = (Index("ix_vision_calibrations_anonymous_created", "anonymous",
+                            "created_at"),)
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True))
@@ -277,6 +279,8 @@ class VisionCalibration(Base):
     rms_deg: Mapped[float] = mapped_column(Float)
     max_deg: Mapped[float] = mapped_column(Float)
     frames_json: Mapped[str] = mapped_column(Text)
+    #: Fitted without a token: kept within ``Settings.vision.anonymous_keep_rows``.
+    anonymous: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
 
 
 class VisionDetection(Base):

@@ -22,6 +22,8 @@ class Parameter:
 MACHINE_PARAMETERS: tuple[Parameter, ...] = (
     Parameter("pedestal_yaw_deg", 0.0, "azimuth misalignment of the pedestal [deg]",
               -180.0, 180.0),
+    Parameter("elevation_zero_deg", 0.0, "elevation encoder's zero: real joint = encoder + "
+              "this [deg]", -30.0, 30.0),
     Parameter("pedestal_tilt_deg", 0.0, "tilt of the pedestal axis from vertical [deg]",
               0.0, 45.0),
     Parameter("pedestal_tilt_azimuth_deg", 0.0, "azimuth the pedestal leans to [deg]",

@@ -147,3 +147,22 @@ def test_cancel_queued_and_running_runs(client: httpx.Client, live_server: Any) 
     r = client.post("/api/v1/simulations", json={"site_id": "tehuantepec",
                                                  "start": "2024-03-15", "end": "2024-03-16"})
     assert r.status_code == 200, r.text  # the slot is free again
+
+
+def test_open_loop_model_takes_the_pointing_model_answers_terms(client: httpx.Client) -> None:
+    """POST with the terms as GET …/pointing-model answers them: the model cancels the
+    pedestal yaw; the terms are kept in the run's params; misuse is a 422 naming the field."""
+    body = {"site_id": "tehuantepec", "start": "2024-03-15T10:00-06:00",
+            "end": "2024-03-15T12:00-06:00", "controller": "open_loop_model",
+            "pedestal_yaw_deg": 2.0,
+            "pointing_model_terms": {"azimuth_zero_deg": {"value": 2.0, "std": None}}}
+    r = client.post("/api/v1/simulations", json=body)
+    assert r.status_code == 200, r.text
+    assert r.json()["controller"] == "open_loop_model"
+    assert r.json()["pointing_error_max_mrad"] < 3.0  # measured 2.69 (the dead band's)
+    run = client.get(f"/api/v1/simulations/{r.json()['run_id']}").json()
+    assert run["params"]["pointing_model_terms"]["azimuth_zero_deg"] == 2.0
+    for change in ({"controller": "hybrid"}, {"pointing_model_terms": {"yaw_deg": 1.0}},
+                   {"pointing_model_terms": {"azimuth_zero_deg": 45.0}}):
+        bad = client.post("/api/v1/simulations", json={**body, **change})
+        assert bad.status_code == 422 and "pointing_model_terms" in bad.text, bad.text

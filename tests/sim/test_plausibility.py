@@ -155,6 +155,7 @@ CONTROLLER_CASES = [
     ("chronological", "quito", None, "2024-09-22", "flat"),
     ("hybrid", "tehuantepec", "tmy3", "2024-04-15", "cpv"),
     ("closed_loop_camera", "tehuantepec", None, "2024-03-14", "flat"),
+    ("open_loop_model", "quito", "tmy3_sand_point", "2024-12-20", "cpv"),
 ]
 
 

@@ -143,7 +143,7 @@ def test_ideal_summary_has_the_pointing_keys_and_zero_error(site) -> None:
     start = pd.Timestamp("2024-03-15", tz=TZ)
     r = simulate(site, start, start + pd.Timedelta(days=1))
     s = r.summary()
-    assert TWIN_CONTROLLERS == CONTROLLERS and len(CONTROLLERS) == 6
+    assert TWIN_CONTROLLERS == CONTROLLERS and len(CONTROLLERS) == 7
     for key in ("pointing_error_rms_mrad", "pointing_error_p95_mrad", "pointing_error_max_mrad",
                 "azimuth_error_rms_mrad", "elevation_error_rms_mrad", "moves",
                 "actuator_energy_wh", "net_gain_pct", "pointing_loss_wh",

@@ -46,6 +46,7 @@ class DisturbancesRead(BaseModel):
     """The machine's disturbances of the run (``sim.disturbances.Disturbances``)."""
 
     pedestal_yaw_deg: float
+    elevation_zero_deg: float
     pedestal_tilt_deg: float
     pedestal_tilt_azimuth_deg: float
     encoder_drift_mrad_per_h: float

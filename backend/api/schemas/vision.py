@@ -94,6 +94,10 @@ class CalibrationFrameRead(BaseModel):
     confidence: float
     centroid_px: list[float] | None
     used: bool
+    outlier: bool = Field(False, description="a sun found, but farther than 1° from the "
+                                             "consensus of the others: left out of the fit")
+    search: str | None = Field(None, description="`blind`, or `ephemeris-guided` (searched "
+                                                 "where the first fit put the sun)")
     residual_px: float | None
     residual_deg: float | None
     ephemeris: EphemerisRead
@@ -131,6 +135,13 @@ class CalibrationsRead(BaseModel):
     calibrations: list[CalibrationSummaryRead]
 
 
+class RadialChoiceRead(BaseModel):
+    """A radial model tried on the inlier frames and its leave-one-out error."""
+
+    n_radial: int
+    loo_rms_deg: float
+
+
 class FittedCalibrationRead(BaseModel):
     """A calibration just fitted and stored (201)."""
 
@@ -155,6 +166,10 @@ class FittedCalibrationRead(BaseModel):
     max_px: float
     rms_deg: float
     max_deg: float
+    n_outliers: int = Field(description="frames whose sun disagreed with the consensus")
+    loo_rms_deg: float | None = Field(description="each inlier frame against the model "
+                                                  "fitted without it (held out) [°]")
+    model_selection: list[RadialChoiceRead]
     frames: list[CalibrationFrameRead]
     camera: FisheyeCameraRead
 
