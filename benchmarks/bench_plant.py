@@ -10,8 +10,8 @@ steps (and the largest difference between the two). Then the whole
 two: on a shared machine the other carries other people's load; wall-clock and
 the CPU time of the process, which load from others inflates less), ``backtrack``
 for a year at 1 min in-process (wall and CPU), and ``/positions`` request
-latency over HTTP for each strategy (uvicorn, 40 requests, one minute apart in
-plant time).
+latency over HTTP for each strategy (a real ``heliotwin serve``, no token, 40
+requests, one minute apart in plant time).
 
 Targets (issue 12): ≤ 5 s for the 1-min year process, ≥ 10× twoaxistracking at
 10 min, ``backtrack`` ≤ 30 s at 1 min, ``/positions`` ≤ 50 ms. A missed target
@@ -37,13 +37,12 @@ import os
 import statistics
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from _common import Figures, free_port, log  # noqa: E402  (bench scripts run from here)
+from _common import Figures, log  # noqa: E402  (bench scripts run from here)
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -93,34 +92,29 @@ def cli_year(strategy: str, step_s: int) -> tuple[float, float, dict]:
 
 
 def positions_latency(strategy: str) -> list[float]:
+    """``/positions`` over HTTP from a real ``heliotwin serve`` (bench_service.Server: a
+    fresh SQLite file, no viser, no live loop), without a token, as a user asks."""
+    import tempfile
+
     import httpx
-    import uvicorn
-    from fastapi import FastAPI
+    from bench_service import Server
 
-    from backend.api.routes.plants import router
-    from backend.plants import PlantService
-
-    app = FastAPI()
-    app.include_router(router)
-    app.state.plants = PlantService()
-    port = free_port()
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
-    th = threading.Thread(target=server.run, daemon=True)
-    th.start()
-    while not server.started:
-        time.sleep(0.05)
     lat = []
     t = pd.Timestamp("2021-12-21T08:00:00Z")
-    with httpx.Client(base_url=f"http://127.0.0.1:{port}") as c:
-        c.get("/api/v1/plants/penarroya/positions",
-              params={"time": t.isoformat(), "strategy": strategy})  # warm
-        for k in range(40):
-            q = {"time": (t + pd.Timedelta(minutes=k)).isoformat(), "strategy": strategy}
-            t0 = time.perf_counter()
-            c.get("/api/v1/plants/penarroya/positions", params=q).raise_for_status()
-            lat.append(1000 * (time.perf_counter() - t0))
-    server.should_exit = True
-    th.join(timeout=10)
+    with tempfile.TemporaryDirectory() as tmp:
+        server = Server(Path(tmp))
+        try:
+            with httpx.Client(base_url=f"http://127.0.0.1:{server.port}") as c:
+                c.get("/api/v1/plants/penarroya/positions",
+                      params={"time": t.isoformat(), "strategy": strategy})  # warm
+                for k in range(40):
+                    q = {"time": (t + pd.Timedelta(minutes=k)).isoformat(),
+                         "strategy": strategy}
+                    t0 = time.perf_counter()
+                    c.get("/api/v1/plants/penarroya/positions", params=q).raise_for_status()
+                    lat.append(1000 * (time.perf_counter() - t0))
+        finally:
+            server.stop()
     return lat
 
 
