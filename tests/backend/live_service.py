@@ -408,3 +408,11 @@ class LiveServer:
 
     def client(self, timeout_s: float = 60.0, **kwargs: Any) -> httpx.Client:
         return self.process.client(timeout_s, **kwargs)
+
+
+def run_in_own_thread(coro: Any) -> Any:
+    """``asyncio.run(coro)`` on a thread of its own: on an xdist worker that ran a browser
+    test first, sync Playwright (session-scoped) keeps an event loop running on the main
+    thread, where ``asyncio.run`` refuses to start."""
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, coro).result()

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from live_service import run_in_own_thread
 
 import backend.plants as plants_mod
 from backend.limits import Busy, HeldBudget, Limits
@@ -57,7 +58,7 @@ def test_held_budget_one_at_a_time_then_503() -> None:
         await asyncio.gather(t1, t2)
         return refused
 
-    refused = asyncio.run(main())
+    refused = run_in_own_thread(main())
     assert order == ["first in", "first out", "second in"]
     assert budget.held == 0
     assert refused.status_code == 503 and "SETTING" in refused.message

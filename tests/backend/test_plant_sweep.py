@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any, cast
 
 import pytest
+from live_service import run_in_own_thread
 
 from backend.cli import main
 from sim.plant.sweep import SweepCase, SweepSpec
@@ -155,4 +156,4 @@ def test_runner_close_cancels_a_running_sweep(monkeypatch: pytest.MonkeyPatch) -
         await runner.close(timeout_s=20)
         return running.status, running.error, queued.status, queued.error
 
-    assert asyncio.run(main()) == ("failed", "cancelled", "failed", "cancelled")
+    assert run_in_own_thread(main()) == ("failed", "cancelled", "failed", "cancelled")

@@ -51,7 +51,8 @@ class _SimulationBase(BaseModel):
                      examples=["2024-03-16"])
     step_s: float = Field(60.0, gt=0, le=86400, description="time step [s]")
     controller: Literal[CONTROLLERS] = Field(  # type: ignore[valid-type]
-        "ideal", description="tracking controller")
+        "ideal", description="tracking controller",
+        examples=["open_loop_model"])   # the example body's terms go with this controller
     receiver: Literal[RECEIVERS] = Field(  # type: ignore[valid-type]
         "flat", description="flat PV, or a CPV receiver with an acceptance angle")
     pointing_model_terms: dict[str, float | dict[str, float | None]] | None = Field(
