@@ -232,16 +232,20 @@ def _greensboro_sites(tmp_path: Path) -> Path:
 
 @pytest.mark.slow
 def test_the_year_on_a_distant_tmy3_is_a_choice_then_runs_with_units_in_the_csv(
-        tmp_path: Path) -> None:
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The issue's command: a whole year on pvlib's Greensboro TMY3 at the Tehuantepec site.
     The year wraps (no "weather covers"); the station 2,672 km away is refused without
-    --force; with it the run covers the leap year at 1 min and its CSV names every unit."""
+    --force (in process: the refusal comes before any run); with it the run covers the
+    leap year at 1 min and its CSV names every unit."""
+    from backend.cli import main
+
     args = ["simulate", "--site", "tehuantepec", "--start", "2024-01-01", "--end",
             "2025-01-01", "--tmy3", str(_tmy3())]
-    p = heliotwin(*args, "--json")
-    assert p.returncode == 2 and p.stdout == ""
-    assert "--tmy3:" in p.stderr and "km from site tehuantepec" in p.stderr
-    assert "--force" in p.stderr and "weather covers" not in p.stderr
+    assert main([*args, "--json"]) == 2
+    refused = capsys.readouterr()
+    assert refused.out == ""
+    assert "--tmy3:" in refused.err and "km from site tehuantepec" in refused.err
+    assert "--force" in refused.err and "weather covers" not in refused.err
     out = tmp_path / "year.csv"
     p = heliotwin(*args, "--force", "--json", "--csv", str(out))
     assert p.returncode == 0, p.stderr
