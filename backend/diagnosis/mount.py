@@ -46,7 +46,7 @@ import numpy as np
 import pandas as pd
 from sqlalchemy import Connection, select
 
-from backend.diagnosis.pointing_model import _refraction
+from backend.diagnosis.pointing_model import refraction_of
 from backend.sites import SiteInfo
 from backend.storage.tables import SOURCE_CODES, Measurement
 from sim.pointing_model import CORE_TERMS, MIN_OBSERVATIONS, PointingFit, fit_pointing_model_to_sun
@@ -121,9 +121,9 @@ def observations_from(info: SiteInfo, ts_s: np.ndarray, azimuth_deg: np.ndarray,
                       elevation_deg: np.ndarray, offset_x_mrad: np.ndarray,
                       offset_y_mrad: np.ndarray) -> Observations:
     """:class:`Observations` with the sun by SPA (apparent elevation, the site's pressure
-    and air temperature: :func:`backend.diagnosis.pointing_model._refraction`)."""
+    and air temperature: :func:`backend.diagnosis.pointing_model.refraction_of`)."""
     s = info.site
-    pressure, temperature = _refraction(info)
+    pressure, temperature = refraction_of(info)
     times = pd.DatetimeIndex(pd.to_datetime(np.asarray(ts_s, np.int64), unit="s", utc=True))
     sun = solar_position(times, s.latitude, s.longitude, s.altitude, pressure, temperature)
     return Observations(np.asarray(ts_s, np.int64), sun["azimuth"].to_numpy(),

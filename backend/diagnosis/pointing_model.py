@@ -61,7 +61,7 @@ class TooFewObservations(ValueError):
     """The range holds too few readings with sun offsets for a fit (a 422 at the API)."""
 
 
-def _refraction(info: SiteInfo) -> tuple[float, float]:
+def refraction_of(info: SiteInfo) -> tuple[float, float]:
     """The site's pressure [Pa] and air temperature [°C] for SPA's refraction."""
     return float(atmosphere.alt2pres(info.site.altitude)), float(info.site.temp_air)
 
@@ -111,7 +111,7 @@ def range_key(conn: Connection, info: SiteInfo, t0: dt.datetime, t1: dt.datetime
         {"a": tracker.array_id, "b0": a // width * width, "b1": b}).one()
     s = info.site
     return (info.site_id, tracker.array_id, s.latitude, s.longitude, s.altitude,
-            *_refraction(info), a, b, *marker)
+            *refraction_of(info), a, b, *marker)
 
 
 def cached_range_fit(key: tuple[Any, ...] | None) -> PointingFit | None:
@@ -141,7 +141,7 @@ def fit_site(rows: np.ndarray, info: SiteInfo) -> PointingFit:
             f"sun_offset_y_mrad and the encoder angles) in the range; the fit needs at least "
             f"{MIN_OBSERVATIONS}")
     s = info.site
-    pressure, temperature = _refraction(info)
+    pressure, temperature = refraction_of(info)
     obs = np.ascontiguousarray(rows[:, (0, *_COLS)])
     key = (s.latitude, s.longitude, s.altitude, pressure, temperature,
            hashlib.blake2b(obs.tobytes(), digest_size=16).digest())
@@ -175,7 +175,7 @@ def model_body(info: SiteInfo, fit: PointingFit) -> dict[str, Any]:
 def command(info: SiteInfo, fit: PointingFit, when: dt.datetime) -> dict[str, float]:
     """Encoder angles to command at ``when`` so the real optical axis points at the sun."""
     s = info.site
-    pressure, temperature = _refraction(info)
+    pressure, temperature = refraction_of(info)
     sun = solar_position(pd.DatetimeIndex([when]), s.latitude, s.longitude, s.altitude,
                          pressure, temperature)
     az, el = command_angles(fit.model, sun["azimuth"].to_numpy(),
@@ -205,7 +205,7 @@ def residual_points(rows: np.ndarray, info: SiteInfo, fit: PointingFit,
     pick = np.arange(0, n, stride)
     obs = rows[pick][:, (0, *_COLS)]
     s = info.site
-    pressure, temperature = _refraction(info)
+    pressure, temperature = refraction_of(info)
     sun = solar_position(pd.DatetimeIndex(pd.to_datetime(obs[:, 0], unit="s", utc=True)),
                          s.latitude, s.longitude, s.altitude, pressure, temperature)
     px, py = predict_offsets_mrad(fit.model, sun["azimuth"].to_numpy(),
