@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 import orjson
 from _common import Figures, log  # noqa: E402  (bench scripts run from this folder)
-from bench_service import Server, bodies, post_all  # noqa: E402
+from bench_service import Server, bodies, exchange, post_all  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -76,21 +76,6 @@ def backfill_payloads(writers: int, count: int) -> list[list[bytes]]:
     return out
 
 
-async def _exchange(reader: asyncio.StreamReader, writer: asyncio.StreamWriter,
-                    request: bytes) -> tuple[int, bytes, float]:
-    """Send one HTTP/1.1 request on a keep-alive connection: status, body, seconds."""
-    t = time.perf_counter()
-    writer.write(request)
-    status_line = await reader.readline()
-    length = 0
-    while (line := await reader.readline()) not in (b"\r\n", b""):
-        if line.lower().startswith(b"content-length:"):
-            length = int(line.split(b":")[1])
-    body = await reader.readexactly(length)
-    parts = status_line.split()
-    return (int(parts[1]) if len(parts) > 1 else 0), body, time.perf_counter() - t
-
-
 def _request(method: str, path: str, token: str | None = None, body: bytes = b"") -> bytes:
     head = f"{method} {path} HTTP/1.1\r\nHost: 127.0.0.1\r\n"
     if token:
@@ -123,21 +108,21 @@ class Mix:
             delay = start + j - time.perf_counter()
             if delay > 0:
                 await asyncio.sleep(delay)
-            self._note(kind, *await _exchange(reader, writer, req))
+            self._note(kind, *await exchange(reader, writer, req))
         writer.close()
 
     async def reader(self, end: float) -> None:
         reader, writer = await asyncio.open_connection("127.0.0.1", self.port)
         req = _request("GET", ENERGY)
         while time.perf_counter() < end:
-            self._note("read", *await _exchange(reader, writer, req))
+            self._note("read", *await exchange(reader, writer, req))
         writer.close()
 
     async def probe(self, end: float) -> None:
         reader, writer = await asyncio.open_connection("127.0.0.1", self.port)
         req = _request("GET", LIVE)
         while time.perf_counter() < end:
-            status, body, _ = await _exchange(reader, writer, req)
+            status, body, _ = await exchange(reader, writer, req)
             if status == 404:  # a service from before the route (a baseline run)
                 break
             if status != 200:

@@ -145,6 +145,21 @@ class Server:
         self.proc.wait(30)
 
 
+async def exchange(reader: asyncio.StreamReader, writer: asyncio.StreamWriter,
+                   request: bytes) -> tuple[int, bytes, float]:
+    """Send one HTTP/1.1 request on a keep-alive connection: status, body, seconds."""
+    t = time.perf_counter()
+    writer.write(request)
+    status_line = await reader.readline()
+    length = 0
+    while (line := await reader.readline()) not in (b"\r\n", b""):
+        if line.lower().startswith(b"content-length:"):
+            length = int(line.split(b":")[1])
+    body = await reader.readexactly(length)
+    parts = status_line.split()
+    return (int(parts[1]) if len(parts) > 1 else 0), body, time.perf_counter() - t
+
+
 def post_all(port: int, token: str, payloads: list[bytes], workers: int) -> float:
     """Post every payload over ``workers`` keep-alive connections; seconds taken."""
     nxt = iter(range(len(payloads)))
@@ -231,17 +246,10 @@ async def many_loggers(port: int, token: str, loggers: int, rate_hz: float,
             req = (f"POST {PATH} HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer {token}"
                    f"\r\nContent-Type: application/json\r\nContent-Length: {len(body)}\r\n\r\n"
                    ).encode() + body
-            t = time.perf_counter()
-            writer.write(req)
-            status_line = await reader.readline()
-            length = 0
-            while (line := await reader.readline()) not in (b"\r\n", b""):
-                if line.lower().startswith(b"content-length:"):
-                    length = int(line.split(b":")[1])
-            await reader.readexactly(length)
-            latencies.append(time.perf_counter() - t)
+            status, _, took_s = await exchange(reader, writer, req)
+            latencies.append(took_s)
             sent += 1
-            if b" 200 " not in status_line:
+            if status != 200:
                 errors += 1
         writer.close()
 
