@@ -23,7 +23,7 @@ import pandas as pd
 import pytest
 from pvlib import atmosphere, solarposition
 
-from backend.api.routes.diagnosis import DiagnosisMountRead, MountFaultRead
+from backend.api.schemas.diagnosis import DiagnosisMountRead, MountFaultRead
 from backend.diagnosis import mount
 from sim.sites import load_site
 

@@ -15,12 +15,15 @@ import anyio
 import numpy as np
 import orjson
 from fastapi import APIRouter, HTTPException, Query, Request
-from pydantic import BaseModel, Field
 from starlette.datastructures import FormData, UploadFile
 
 from backend.api.deps import ContextDep, RangeEnd, RangeStart, check_site_token, site_or_404
 from backend.api.forms import read_form
-from backend.api.schemas.pointing_model import PointingCommandRead, PointingModelRead
+from backend.api.schemas.pointing_model import (
+    PointingCommandRead,
+    PointingModelPointsRead,
+    PointingObservationRead,
+)
 from backend.context import ServiceContext
 from backend.diagnosis.pointing_model import (
     MAX_POINTS,
@@ -46,46 +49,6 @@ from sim.pointing_model import PointingFit
 from vision.cameras import PinholeCamera, camera_from_params
 
 router = APIRouter(prefix="/api/v1/sites", tags=["pointing-model"])
-
-
-class PointingPointsRead(BaseModel):
-    """Observations behind the fit (every ``stride``-th, at most 2,000), column by column:
-    the offsets measured (before the model) and the residuals (after it)."""
-
-    n_total: int = Field(description="observations in the range (the fit's n_observations)")
-    stride: int = Field(description="every stride-th observation is listed")
-    ts: list[str] = Field(description="times, ISO 8601 UTC")
-    azimuth_deg: list[float] = Field(description="encoder azimuth [°]")
-    elevation_deg: list[float] = Field(description="encoder elevation [°]")
-    sun_offset_x_mrad: list[float] = Field(description="offset measured, x [mrad]")
-    sun_offset_y_mrad: list[float] = Field(description="offset measured, y [mrad]")
-    residual_x_mrad: list[float] = Field(
-        description="measured − the model's predicted offset, x [mrad]: what a command under "
-                    "the model still misses")
-    residual_y_mrad: list[float] = Field(description="likewise, y [mrad]")
-    outlier: list[bool] = Field(description="rejected by the robust fit (a glint)")
-
-
-class PointingModelPointsRead(PointingModelRead):
-    """The mount terms and the observations' residuals before and after the model."""
-
-    points: PointingPointsRead
-
-
-class PointingObservationRead(BaseModel):
-    """A tracker-camera frame's observation, as stored: a reading of the tracker array."""
-
-    site_id: str
-    array: str = Field(description="the site's tracker array")
-    ts: str = Field(description="the frame's time, ISO 8601 UTC")
-    azimuth_deg: float = Field(description="encoder azimuth as stored [°], [0, 360)")
-    elevation_deg: float = Field(description="encoder elevation [°]")
-    sun_offset_x_mrad: float = Field(description="the sun's offset toward increasing azimuth")
-    sun_offset_y_mrad: float = Field(description="the sun's offset toward increasing "
-                                                 "elevation")
-    confidence: float = Field(description="the detector's calibrated probability that the "
-                                          "blob is the sun")
-    centroid_px: list[float] = Field(description="the sun's centroid [x, y] in the frame [px]")
 
 
 def _fit(ctx: ServiceContext, info: SiteInfo, start: str, end: str

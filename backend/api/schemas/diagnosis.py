@@ -128,3 +128,69 @@ class PointingRead(BaseModel):
     days: list[PointingDayRead]
     points: list[PointingPointRead]
     points_step: int = Field(description="every k-th minute is in `points`")
+
+
+MountTerm = Literal["azimuth_zero_deg", "elevation_zero_deg", "pedestal_tilt_north_deg",
+                    "pedestal_tilt_east_deg", "collimation_deg", "nonperpendicularity_deg"]
+
+
+class MountFaultRead(BaseModel):
+    """A mount fault from the tracker camera's offsets (``backend/diagnosis/mount.py``)."""
+
+    kind: Literal["mount_offset", "encoder_slip"] = Field(
+        description="`mount_offset`: a significant term of the pointing model; "
+                    "`encoder_slip`: a term that stepped from one day to the next")
+    term: MountTerm = Field(description="the pointing model's term (docs/pointing-model.md)")
+    value_deg: float = Field(description="`mount_offset`: the term's value; "
+                                         "`encoder_slip`: the step (after − before) [°]")
+    std_deg: float = Field(description="its standard error [°] (a step: both days' combined)")
+    n_observations: int = Field(description="camera observations it was fitted from")
+    since: str = Field(description="local date: the slip's first day, or the first day of "
+                                   "the observations the offset was fitted from")
+    detail: str = Field(description="the finding in words, e.g. 'pedestal yaw (azimuth "
+                                    "zero) +2.00° ± 0.01° (from 380 camera observations …)'")
+
+
+class MountRead(BaseModel):
+    """The mount as the tracker camera measured it in the range."""
+
+    n_observations: int = Field(description="observations of the fit of the offsets (those "
+                                            "since the last slip, if any)")
+    n_outliers: int
+    residual_rms_mrad: float
+    since: str = Field(description="local date of the first of those observations")
+    faults: list[MountFaultRead] = Field(description="slips (oldest first), then offsets")
+
+
+class DiagnosisTrackerDayRead(TrackerDayRead):
+    """The tracker's day (null numbers on a day still to come)."""
+
+    expected_wh: float | None  # type: ignore[assignment]
+    expected_wh_low: float | None = Field(  # type: ignore[assignment]
+        description="band of the sky inversion's uncertainty")
+    expected_wh_high: float | None  # type: ignore[assignment]
+
+
+class DiagnosisFixedDayRead(FixedDayRead):
+    """The fixed array's day (null numbers on a day still to come)."""
+
+    expected_wh: float | None  # type: ignore[assignment]
+
+
+class DiagnosisDayStatusRead(DiagnosisDayRead):
+    """One local day, with its status."""
+
+    status: Literal["complete", "in_progress", "future"] = Field(
+        description="`complete`: the day is over; `in_progress`: judged up to now; "
+                    "`future`: it starts after now, nothing computed (its numbers null, "
+                    "sky source `none`)")
+    tracker: DiagnosisTrackerDayRead  # type: ignore[assignment]
+    fixed: DiagnosisFixedDayRead  # type: ignore[assignment]
+
+
+class DiagnosisMountRead(DiagnosisRead):
+    """Per local day: sky, energy, PR, gains and faults; the mount faults from the camera."""
+
+    days: list[DiagnosisDayStatusRead]  # type: ignore[assignment]
+    mount: MountRead | None = Field(description="null: no camera observations (sun offsets "
+                                                "with the encoder angles) in the range")
