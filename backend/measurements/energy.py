@@ -103,7 +103,7 @@ def _matched(conn: Any, table: Any, array_id: int, edges_s: np.ndarray, gap: int
     rest = np.flatnonzero(~complete & (m_n > 0) & (t_n > 0)).tolist()
     last = edges_s.size - 2
     keys: dict[int, tuple[Any, ...]] = {}
-    todo = []
+    uncached = []
     for p in rest:
         if 0 < p < last:
             around = slice(p - 1, p + 2)
@@ -113,9 +113,9 @@ def _matched(conn: Any, table: Any, array_id: int, edges_s: np.ndarray, gap: int
             if (hit := _MATCHED.get(keys[p])) is not None:
                 out[p] = hit
                 continue
-        todo.append(p)
-    computed = matched_twin_wh(conn, array_id, edges_s, gap, np.array(todo, np.int64))
-    for p in todo:
+        uncached.append(p)
+    computed = matched_twin_wh(conn, array_id, edges_s, gap, np.array(uncached, np.int64))
+    for p in uncached:
         out[p] = computed[p]
         if p in keys:
             _MATCHED.put(keys[p], float(computed[p]))

@@ -245,10 +245,10 @@ def _rollup_periods(conn: Connection, array_ids: list[int], edges_s: np.ndarray,
     """
     lo = np.clip(edges_s[:-1], a, b)
     hi = np.clip(edges_s[1:], a, b)
-    todo = np.flatnonzero(hi > lo)
+    in_range = np.flatnonzero(hi > lo)
     ids = ", ".join("?" * len(array_ids))
-    for k in range(0, todo.size, PERIODS_PER_QUERY):
-        part = todo[k:k + PERIODS_PER_QUERY]
+    for k in range(0, in_range.size, PERIODS_PER_QUERY):
+        part = in_range[k:k + PERIODS_PER_QUERY]
         sql = _ROLLUP_PERIODS.format(more=", (?, ?, ?)" * (part.size - 1), ids=ids)
         params = np.column_stack([part, lo[part], hi[part]]).ravel().tolist()
         for array_id, source, p, wh, n in fetch(conn, sql, (*params, *array_ids)):
@@ -315,11 +315,11 @@ def matched_twin_wh(conn: Connection, array_id: int, edges_s: np.ndarray,
     others are 0.
     """
     out = np.zeros(edges_s.size - 1)
-    todo = np.arange(out.size) if periods is None else np.asarray(periods, np.int64)
-    if todo.size == 0:
+    asked = np.arange(out.size) if periods is None else np.asarray(periods, np.int64)
+    if asked.size == 0:
         return out
-    breaks = np.flatnonzero(np.diff(todo) > 1) + 1
-    for run in np.split(todo, breaks):
+    breaks = np.flatnonzero(np.diff(asked) > 1) + 1
+    for run in np.split(asked, breaks):
         first, last = int(run[0]), int(run[-1])
         lo, hi = int(edges_s[first]) - max_gap_s, int(edges_s[last + 1]) + max_gap_s
         measured = np.array(fetch(conn, _TS, (array_id, 0, lo, hi + 60)), np.int64).reshape(-1)
