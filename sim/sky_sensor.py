@@ -487,7 +487,9 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
         Air temperature [°C], wind speed [m s⁻¹]; default the site's.
     sensors : pandas.DataFrame, optional
         Measured on ``times`` (NaN where not): ``fixed_poa_w_m2``, ``ghi_w_m2`` [W m⁻²],
-        ``temp_air_c`` [°C] (replaces ``temp_air`` where it reads); any may be absent.
+        ``temp_air_c`` [°C] and ``wind_speed_m_s`` [m s⁻¹] (replace ``temp_air`` and
+        ``wind_speed`` where they read: the cells' temperature, SAPM, in the inversion
+        and the twin); any may be absent.
 
     Returns
     -------
@@ -507,8 +509,7 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
     n = len(times)
     clear = fixed_clear_sky(site, times)
     t_air = _measured_or(temp_air, sensors, "temp_air_c", site.temp_air, n)
-    wind = np.broadcast_to(np.asarray(site.wind_speed if wind_speed is None else wind_speed,
-                                      dtype=float), (n,))
+    wind = _measured_or(wind_speed, sensors, "wind_speed_m_s", site.wind_speed, n)
     inv = invert_poa(fixed_power_w, clear, site.arrays["fixed"], t_air, wind,
                      saturation_power_w)
     extra = {"temp_air": t_air, "wind_speed": wind}
@@ -558,8 +559,9 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
         UTC minute index: ``tracker_power_w`` and ``fixed_power_w`` (GTI-DIRINT sky),
         ``tracker_power_alt_w`` / ``fixed_power_alt_w`` (clear-sky-ratio + Erbs sky)
         [W], ``solar_azimuth``, ``apparent_elevation`` [°], ``ghi``, ``dni``, ``dhi``,
-        ``poa_global``, ``poa_clear``, ``dni_extra`` [W m⁻²], ``clearness`` [-],
-        ``valid``, ``measured_sky``, ``flag``, ``sky_source``.
+        ``poa_global``, ``poa_clear``, ``dni_extra`` [W m⁻²], ``temp_air`` [°C] and
+        ``wind_speed`` [m s⁻¹] (measured where the loggers read them, else the site's),
+        ``clearness`` [-], ``valid``, ``measured_sky``, ``flag``, ``sky_source``.
     """
     from sim import twin
 
@@ -583,7 +585,7 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
         "solar_azimuth": main["solar_azimuth"].to_numpy(),
         "apparent_elevation": main["apparent_elevation"].to_numpy(),
     }, index=times)
-    for k in ("ghi", "dni", "dhi"):
+    for k in ("ghi", "dni", "dhi", "temp_air", "wind_speed"):
         out[k] = weather["gti_dirint"][k].to_numpy()
     for k in ("poa_global", "poa_clear", "clearness", "valid", "measured_sky", "flag",
               "dni_extra", "sky_source"):

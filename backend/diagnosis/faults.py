@@ -94,8 +94,11 @@ def _power_at(site: Site, day: pd.DataFrame, tilt: np.ndarray, surf_az: np.ndarr
     poa = sky.poa_irradiance(tilt, surf_az, zen_b, az_b, dni, ghi, dhi, dni_extra,
                              albedo=arr.albedo, model="haydavies")
     e_eff = sky.effective_irradiance(poa["poa_direct"], poa["poa_diffuse"], aoi)
-    t_cell = pv.cell_temperature(poa["poa_global"], site.temp_air, site.wind_speed,
-                                 arr.temperature_model)
+    # the air and wind the expectation had (measured where a logger reads them)
+    t_air, wind = ((np.broadcast_to(day[k].to_numpy(), shape) if k in day else default)
+                   for k, default in (("temp_air", site.temp_air),
+                                      ("wind_speed", site.wind_speed)))
+    t_cell = pv.cell_temperature(poa["poa_global"], t_air, wind, arr.temperature_model)
     return pv.array_mpp(e_eff, t_cell, arr)["power_w"].reshape(shape)
 
 

@@ -61,8 +61,9 @@ MAX_DAYS = 400
 #: and a day not yet over judged up to now and never cached; 4: every energy by
 #: :mod:`sim.energy`'s rule and a logger's minutes interpolated within its gap rule;
 #: 5: no dropout before the logger's first reading, the energy against the band,
-#: ``partial``; 6: the band ±4.5 % beyond the two skies, from the real-sky days).
-CACHE_VERSION = 6
+#: ``partial``; 6: the band ±4.5 % beyond the two skies, from the real-sky days; 7: the
+#: measured wind speed, where a logger reads one, in the cells' temperature).
+CACHE_VERSION = 7
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99

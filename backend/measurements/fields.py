@@ -7,11 +7,11 @@
   power, unchecked against V·I.
 - Optional sensor fields (issue 13): what many loggers carry beside the arrays'
   output — a pyranometer or reference cell in the array's plane, a horizontal
-  pyranometer, a module-temperature probe, an air-temperature probe and the
-  tracker's encoder angles, and the sun's offset in the tracker's camera (issue
-  25, the pointing model's observations). Each is stored as sent (NULL when absent); the
-  hourly rollups keep their sum and count, so bucket means are means of the
-  readings that carried the field.
+  pyranometer, a module-temperature probe, an air-temperature probe, an anemometer
+  (issue 27: the wind cools the cells), the tracker's encoder angles, and the sun's
+  offset in the tracker's camera (issue 25, the pointing model's observations). Each
+  is stored as sent (NULL when absent); the hourly rollups keep their sum and count,
+  so bucket means are means of the readings that carried the field.
 """
 
 from __future__ import annotations
@@ -59,6 +59,13 @@ SENSOR_FIELDS = (
     SensorField("sun_offset_y_mrad", -461.0, 461.0,
                 "the sun's offset in the tracker camera toward increasing elevation, "
                 "1000·atan2(s·u, s·n) [mrad]"),
+    # issue 27: the wind speed cools the cells (SAPM cell temperature, King et al. 2004
+    # eqs. 11–12); the bound is the highest surface wind ever measured, a 113.3 m/s
+    # 3-second gust (Barrow Island, 10 Apr 1996; WMO's verified record, Courtney et al.
+    # 2012, Aust. Met. Oceanogr. J. 62, 1–9): a mean above it is a faulty instrument
+    SensorField("wind_speed_m_s", 0.0, 113.3,
+                "wind speed at the site, the anemometer's mean over the reading's interval "
+                "[m/s]"),
 )
 SENSOR_NAMES = tuple(f.name for f in SENSOR_FIELDS)
 

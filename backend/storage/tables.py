@@ -137,6 +137,7 @@ class Measurement(Base):
     elevation_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     sun_offset_x_mrad: Mapped[float | None] = mapped_column(Float, nullable=True)
     sun_offset_y_mrad: Mapped[float | None] = mapped_column(Float, nullable=True)
+    wind_speed_m_s: Mapped[float | None] = mapped_column(Float, nullable=True)
 
 
 class MeasurementRollup(Base):
@@ -187,6 +188,8 @@ class MeasurementRollup(Base):
     sum_sun_offset_y_mrad: Mapped[float] = mapped_column(Float)
     n_sun_offset_x_mrad: Mapped[int] = mapped_column(Integer)
     n_sun_offset_y_mrad: Mapped[int] = mapped_column(Integer)
+    sum_wind_speed_m_s: Mapped[float] = mapped_column(Float)
+    n_wind_speed_m_s: Mapped[int] = mapped_column(Integer)
 
 
 class TwinCoverage(Base):

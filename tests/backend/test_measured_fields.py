@@ -114,20 +114,21 @@ def test_sensor_fields_over_json_and_csv_are_stored_as_sent(
     r = post(client, live_server.write_token, {"readings": [{
         "ts": t.isoformat(), "array": "tracker", "voltage_v": 30.0, "current_a": 10.0,
         "poa_irradiance_w_m2": 870.5, "ghi_w_m2": 610.0, "temp_module_c": 47.25,
-        "temp_air_c": 29.0, "azimuth_deg": -170.0, "elevation_deg": 61.5}]})
+        "temp_air_c": 29.0, "azimuth_deg": -170.0, "elevation_deg": 61.5,
+        "wind_speed_m_s": 3.4}]})
     assert r.status_code == 200, r.text
     assert "power_only" not in r.json()
-    csv_body = ("ts,array,power_w,temp_air_c,elevation_deg\n"
-                f"{(t + dt.timedelta(minutes=1)).isoformat()},tracker,250.5,29.5,\n")
+    csv_body = ("ts,array,power_w,temp_air_c,elevation_deg,wind_speed_m_s\n"
+                f"{(t + dt.timedelta(minutes=1)).isoformat()},tracker,250.5,29.5,,0.8\n")
     assert post(client, live_server.write_token, csv_body).status_code == 200
     got = client.get(PATH, params={"array": "tracker", "start": t.isoformat(),
                                    "end": (t + dt.timedelta(minutes=2)).isoformat()}).json()
     a, b = got["points"]
     assert (a["poa_irradiance_w_m2"], a["ghi_w_m2"], a["temp_module_c"], a["temp_air_c"],
-            a["elevation_deg"]) == (870.5, 610.0, 47.25, 29.0, 61.5)
+            a["elevation_deg"], a["wind_speed_m_s"]) == (870.5, 610.0, 47.25, 29.0, 61.5, 3.4)
     assert a["azimuth_deg"] == pytest.approx(190.0)  # −170° clockwise from north
     assert (b["voltage_v"], b["power_w"], b["temp_air_c"], b["poa_irradiance_w_m2"],
-            b["elevation_deg"]) == (None, 250.5, 29.5, None, None)
+            b["elevation_deg"], b["wind_speed_m_s"]) == (None, 250.5, 29.5, None, None, 0.8)
     as_csv = client.get(PATH, params={"array": "tracker", "start": t.isoformat(),
                                       "end": (t + dt.timedelta(minutes=2)).isoformat(),
                                       "format": "csv"}).text.splitlines()
@@ -135,6 +136,7 @@ def test_sensor_fields_over_json_and_csv_are_stored_as_sent(
     assert "poa_irradiance_w_m2" in header
     second = dict(zip(header, as_csv[2].split(","), strict=True))
     assert second["voltage_v"] == "" and second["power_w"] == "250.5"
+    assert second["wind_speed_m_s"] == "0.8"
 
 
 def test_emoncms_rows_with_null_voltage_are_power_only(
@@ -152,6 +154,8 @@ def test_emoncms_rows_with_null_voltage_are_power_only(
     ({"power_w": 10.0, "poa_irradiance_w_m2": 2500.0}, "poa_irradiance_w_m2", "outside"),
     ({"power_w": 10.0, "elevation_deg": 95.0}, "elevation_deg", "outside"),
     ({"power_w": 10.0, "temp_module_c": "hot"}, "temp_module_c", "not a number"),
+    ({"power_w": 10.0, "wind_speed_m_s": -0.5}, "wind_speed_m_s", "outside"),
+    ({"power_w": 10.0, "wind_speed_m_s": 120.0}, "wind_speed_m_s", "outside"),
 ])
 def test_bad_power_only_and_sensor_values_name_the_field(
         client: httpx.Client, live_server: LiveServer, reading: dict, field: str,
@@ -166,7 +170,8 @@ def test_bad_power_only_and_sensor_values_name_the_field(
 @pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
 def test_migration_0006_keeps_stored_readings_and_rollups(backend: str, tmp_path: Path) -> None:
     """A database at 0005 with readings and rollups (one an energy-only bucket with the
-    ±inf extremes 0005 wrote) upgrades with every value kept."""
+    ±inf extremes 0005 wrote) upgrades with every value kept (0006's and 0011's rollup
+    sums and counts of the sensor fields 0 for the hours stored before)."""
     from alembic import command
 
     db = new_database(backend, tmp_path)
@@ -195,11 +200,12 @@ def test_migration_0006_keeps_stored_readings_and_rollups(backend: str, tmp_path
             m = conn.execute(text("SELECT ts_s, voltage_v, current_a, power_w, azimuth_deg "
                                   "FROM measurements")).all()
             r = conn.execute(text("SELECT bucket_s, n, energy_wh, min_voltage_v, max_power_w, "
-                                  "n_vi, sum_ghi_w_m2, n_ghi_w_m2 FROM measurement_rollups "
+                                  "n_vi, sum_ghi_w_m2, n_ghi_w_m2, sum_wind_speed_m_s, "
+                                  "n_wind_speed_m_s FROM measurement_rollups "
                                   "ORDER BY bucket_s")).all()
         assert [tuple(x) for x in m] == [(3600, 25.0, 4.0, 100.0, None)]
-        assert [tuple(x) for x in r] == [(3600, 1, 0.5, 25.0, 100.0, 1, 0.0, 0),
-                                         (7200, 0, 0.25, None, None, 0, 0.0, 0)]
+        assert [tuple(x) for x in r] == [(3600, 1, 0.5, 25.0, 100.0, 1, 0.0, 0, 0.0, 0),
+                                         (7200, 0, 0.25, None, None, 0, 0.0, 0, 0.0, 0)]
         if backend == "sqlite":  # still clustered on the primary key
             with engine.connect() as conn:
                 ddl = conn.execute(text("SELECT sql FROM sqlite_master WHERE name IN "
