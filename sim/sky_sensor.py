@@ -509,7 +509,9 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
     n = len(times)
     clear = fixed_clear_sky(site, times)
     t_air = _measured_or(temp_air, sensors, "temp_air_c", site.temp_air, n)
-    wind = _measured_or(wind_speed, sensors, "wind_speed_m_s", site.wind_speed, n)
+    # an anemometer's zero offset reads a calm a little below 0: a calm
+    wind = np.maximum(_measured_or(wind_speed, sensors, "wind_speed_m_s", site.wind_speed, n),
+                      0.0)
     inv = invert_poa(fixed_power_w, clear, site.arrays["fixed"], t_air, wind,
                      saturation_power_w)
     extra = {"temp_air": t_air, "wind_speed": wind}

@@ -60,10 +60,12 @@ SENSOR_FIELDS = (
                 "the sun's offset in the tracker camera toward increasing elevation, "
                 "1000·atan2(s·u, s·n) [mrad]"),
     # issue 27: the wind speed cools the cells (SAPM cell temperature, King et al. 2004
-    # eqs. 11–12); the bound is the highest surface wind ever measured, a 113.3 m/s
+    # eqs. 11–12). The upper bound is the highest surface wind ever measured, a 113.3 m/s
     # 3-second gust (Barrow Island, 10 Apr 1996; WMO's verified record, Courtney et al.
-    # 2012, Aust. Met. Oceanogr. J. 62, 1–9): a mean above it is a faulty instrument
-    SensorField("wind_speed_m_s", 0.0, 113.3,
+    # 2012, Aust. Met. Oceanogr. J. 62, 1–9): a mean above it is a faulty instrument. An
+    # anemometer's zero offset reads a calm a little below 0 (NREL RMIS's, 2022: down to
+    # −0.07 m/s), so the lower bound is −1 m/s; the diagnosis takes such a reading as calm.
+    SensorField("wind_speed_m_s", -1.0, 113.3,
                 "wind speed at the site, the anemometer's mean over the reading's interval "
                 "[m/s]"),
 )

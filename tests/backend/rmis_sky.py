@@ -156,15 +156,16 @@ def minutes(day: pd.Timestamp) -> pd.DatetimeIndex:
 
 
 def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str,
-                measured_wind: bool = False, second_sky: bool = True
+                anemometer: bool = True, second_sky: bool = True
                 ) -> dict[str, np.ndarray]:
     """The diagnosis' expectation of the day from one instrument (``path`` of :data:`PATHS`),
     on the minute grid: the 5-minute readings onto minutes by the energy rule's line
     (:func:`sim.energy.on_grid`, as the service's ``minute_grid``). Returns
     ``tracker_poa`` [W m⁻²] and ``tracker_power_w``/``tracker_power_alt_w`` [W] of the two
-    decompositions, and ``times``. ``measured_wind``: the station's anemometer (where the
-    file has one) instead of the site's default wind — what the service cannot do, wind
-    not being a reading it ingests; the truth's cell temperature uses the measured wind.
+    decompositions, and ``times``. The air temperature is posted, and the station's wind
+    speed where the file has one (``wind_speed_m_s``, as a logger with an anemometer sends
+    it); ``anemometer=False``: no wind posted, the expectation takes the site's default
+    (a logger without one; the truth's cells keep the measured wind).
     ``second_sky=False``: the main decomposition only (no ``tracker_power_alt_w``)."""
     times = minutes(day)
     ts = lg.times.as_unit("s").asi8
@@ -176,17 +177,15 @@ def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str,
     n = len(times)
     fixed_w = minute(lg.fixed_power_w) if path == "fixed_array" else np.full(n, np.nan)
     sensors = pd.DataFrame({"temp_air_c": minute(lg.temp_air)}, index=times)
+    if anemometer:
+        sensors["wind_speed_m_s"] = minute(lg.data["wind_speed"].to_numpy())
     if path == "poa_sensor":
         sensors["fixed_poa_w_m2"] = minute(lg.data["poa"].to_numpy())
     if path == "ghi_sensor":
         sensors["ghi_w_m2"] = minute(lg.data["ghi"].to_numpy())
-    wind = None
-    if measured_wind:
-        w = minute(lg.data["wind_speed"].to_numpy())
-        wind = np.where(np.isfinite(w), w, site.wind_speed)
     models = ("gti_dirint", "clearsky_erbs") if second_sky else ("gti_dirint",)
-    weather, _ = sky_sensor.weather_from_fixed(site, times, fixed_w, wind_speed=wind,
-                                               models=models, sensors=sensors)
+    weather, _ = sky_sensor.weather_from_fixed(site, times, fixed_w, models=models,
+                                               sensors=sensors)
     end = day + pd.Timedelta(days=1)
     main = twin.simulate(site, day, end, weather=weather["gti_dirint"]).series
     out = {"times": times, "tracker_poa": np.nan_to_num(main["tracker_poa_global"].to_numpy()),

@@ -154,7 +154,7 @@ def test_emoncms_rows_with_null_voltage_are_power_only(
     ({"power_w": 10.0, "poa_irradiance_w_m2": 2500.0}, "poa_irradiance_w_m2", "outside"),
     ({"power_w": 10.0, "elevation_deg": 95.0}, "elevation_deg", "outside"),
     ({"power_w": 10.0, "temp_module_c": "hot"}, "temp_module_c", "not a number"),
-    ({"power_w": 10.0, "wind_speed_m_s": -0.5}, "wind_speed_m_s", "outside"),
+    ({"power_w": 10.0, "wind_speed_m_s": -1.5}, "wind_speed_m_s", "outside"),
     ({"power_w": 10.0, "wind_speed_m_s": 120.0}, "wind_speed_m_s", "outside"),
 ])
 def test_bad_power_only_and_sensor_values_name_the_field(
