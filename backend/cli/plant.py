@@ -79,6 +79,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     help=f"comma list of {', '.join(STRATEGIES)} (default sun)")
     sw.add_argument("--collector-m", help="collector WIDTHxHEIGHT [m], e.g. 12x5 (wired like "
                     "Peñarroya's: its modules, as many as fit)")
+    sw.add_argument("--collector-polygon", metavar="U,V;U,V;…",
+                    help="any collector outline instead of --collector-m: its vertices [m] "
+                    "about the pivot in the collector plane (u right, v up when facing it), "
+                    "e.g. --collector-polygon=-6,-2.5;6,-2.5;6,0;0,0;0,2.5;-6,2.5 for an L "
+                    "(the = form when it starts with a minus), or a file of them (the same "
+                    "text or JSON [[u, v], ...]); strategy sun only")
     sw.add_argument("--lat", type=float, help="latitude [°], north positive")
     sw.add_argument("--lon", type=float, help="longitude [°], east positive")
     sw.add_argument("--altitude-m", type=float, default=0.0, help="altitude [m] (default 0)")
@@ -208,7 +214,8 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 def _flag(field: str) -> str:
     return {"collector_m": "--collector-m", "step_s": "--step-s", "field": "--field",
-            "layouts": "--layouts"}.get(field, "--" + field.replace("_", "-"))
+            "layouts": "--layouts", "collector_polygon_m": "--collector-polygon"
+            }.get(field, "--" + field.replace("_", "-"))
 
 
 def typical_weather(args: argparse.Namespace, place: Any, start: Any, end: Any
@@ -251,7 +258,13 @@ def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
     """(spec, cases, weather) of ``plant sweep``; InputError names the flag."""
     from dataclasses import replace
 
-    from backend.plants.sweep import SweepInputError, parse_gcr, parse_size, prepare_sweep
+    from backend.plants.sweep import (
+        SweepInputError,
+        parse_gcr,
+        parse_polygon,
+        parse_size,
+        prepare_sweep,
+    )
 
     plant = None
     if args.plant:
@@ -274,7 +287,10 @@ def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
             start=start, end=end, step_s=args.step_s, latitude_deg=args.lat,
             longitude_deg=args.lon, altitude_m=args.altitude_m,
             collector_m=parse_size(args.collector_m, "collector_m") if args.collector_m
-            else None, plant=plant, field_size=(rows, columns), custom=custom,
+            else None,
+            collector_polygon_m=parse_polygon(args.collector_polygon, "collector_polygon_m")
+            if args.collector_polygon else None, plant=plant, field_size=(rows, columns),
+            custom=custom,
             slope_azimuth_deg=args.slope_azimuth_deg, slope_tilt_deg=args.slope_tilt_deg)
     except SweepInputError as exc:
         raise InputError(f"{_flag(exc.field)}: {exc.problem}") from None

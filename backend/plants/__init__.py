@@ -35,8 +35,7 @@ import numpy as np
 import pandas as pd
 
 from sim.plant import Plant, UnknownPlantError, default_plants_dir, load_plant
-from sim.plant.shading import plant_shade
-from sim.plant.simulate import simulate_plant, sky_conditions
+from sim.plant.simulate import field_shade, simulate_plant, sky_conditions
 from sim.plant.strategies import STRATEGIES, orientations, sky_map
 
 log = logging.getLogger(__name__)
@@ -175,9 +174,7 @@ class PlantService:
         ts = pd.Timestamp(time).tz_convert("UTC")
         sky = sky_conditions(plant, pd.DatetimeIndex([ts]))
         saz, sel = orientations(strategy, plant, sky)
-        c = plant.collector
-        shade = plant_shade(plant.positions, sky["solar_azimuth"], sky["apparent_elevation"],
-                            saz, sel, c.width, c.height)
+        shade, _ = field_shade(plant, sky, saz, sel)
         up = bool(sky["apparent_elevation"][0] > 0)
         trackers = []
         for k, tid in enumerate(plant.tracker_ids):
@@ -246,7 +243,8 @@ class PlantService:
         strategies: dict[str, Any] = {}
         shade_rows: list[list[float]] = []
         times: list[str] = []
-        for strategy in STRATEGIES:
+        # a polygon collector takes sun tracking only (sim.plant.strategies)
+        for strategy in STRATEGIES if plant.collector.is_rectangle else ("sun",):
             r = simulate_plant(plant, start, end, step_s=step_s, strategy=strategy)
             s = r.summary()
             strategies[strategy] = {k: s[k] for k in (
@@ -257,10 +255,8 @@ class PlantService:
                 day = r.series["apparent_elevation"] > 0
                 ser = r.series[day]
                 sky = sky_conditions(plant, pd.DatetimeIndex(ser.index))
-                c = plant.collector
-                sh = plant_shade(plant.positions, sky["solar_azimuth"],
-                                 sky["apparent_elevation"], sky["solar_azimuth"],
-                                 sky["apparent_elevation"], c.width, c.height)
+                sh, _ = field_shade(plant, sky, sky["solar_azimuth"],
+                                    sky["apparent_elevation"])
                 shade_rows = [[round(float(v), 5) for v in row] for row in sh.fraction]
                 times = [t.isoformat() for t in ser.index]
                 fixed = s["fixed_energy_wh"]

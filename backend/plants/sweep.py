@@ -218,20 +218,46 @@ def parse_size(text: str, field: str) -> tuple[float, float]:
     return a, b
 
 
+def parse_polygon(text: str, field: str) -> list[tuple[float, float]]:
+    """``"u1,v1;u2,v2;…"`` [m], or the path of a file holding that text or a JSON list of
+    ``[u, v]`` pairs → the vertices (checked later by
+    :func:`sim.plant.layout.check_outline`)."""
+    import json
+    from pathlib import Path
+
+    body = text
+    if ";" not in text and Path(text).is_file():
+        body = Path(text).read_text(encoding="utf-8")
+    try:
+        if body.lstrip().startswith("["):
+            pairs = [(float(u), float(v)) for u, v in json.loads(body)]
+        else:
+            pairs = [(float(a), float(b)) for a, b in
+                     (p.split(",") for p in body.replace("\n", ";").split(";") if p.strip())]
+    except (ValueError, TypeError):
+        raise SweepInputError(field, "expected vertices u,v [m] about the pivot separated by "
+                              f"';' (e.g. -6,-2.5;6,-2.5;0,2.5) or such a file, got "
+                              f"{text[:80]!r}") from None
+    return pairs
+
+
 def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: Sequence[str],
                   start: pd.Timestamp, end: pd.Timestamp, step_s: float,
                   latitude_deg: float | None = None, longitude_deg: float | None = None,
                   altitude_m: float = 0.0, collector_m: tuple[float, float] | None = None,
+                  collector_polygon_m: Sequence[Sequence[float]] | None = None,
                   plant: Plant | None = None, field_size: tuple[int, int] = (5, 5),
                   custom: tuple[float, float, float] | None = None,
                   slope_azimuth_deg: float = 0.0, slope_tilt_deg: float = 0.0,
                   weather_token: str = "") -> tuple[SweepSpec, list[SweepCase]]:
     """Check a sweep's parameters and build its spec and cases (every layout × GCR ×
-    strategy; an existing ``plant`` gives one layout, itself scaled). Every case's field is
-    built once here, so an infeasible GCR is refused before any task runs.
-    :class:`SweepInputError` names the parameter."""
+    strategy; an existing ``plant`` gives one layout, itself scaled). The collector is
+    ``collector_m`` (a rectangle) or ``collector_polygon_m`` ((u, v) vertices [m] about
+    the pivot), wired like Peñarroya's. Every case's field is built once here, so an
+    infeasible GCR is refused before any task runs. :class:`SweepInputError` names the
+    parameter."""
     from sim.paths import package_dir
-    from sim.plant.fields import LAYOUT_TYPES, collector_from_size
+    from sim.plant.fields import LAYOUT_TYPES, collector_from_outline, collector_from_size
     from sim.plant.layout import load_plant
     from sim.plant.strategies import STRATEGIES
     from sim.plant.sweep import PLANT_LAYOUT, case_plant
@@ -260,10 +286,17 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
             raise SweepInputError("lat", f"must be in [-90, 90], got {latitude_deg}")
         if not (-180 <= longitude_deg <= 180):
             raise SweepInputError("lon", f"must be in [-180, 180], got {longitude_deg}")
-        if collector_m is None:
-            raise SweepInputError("collector_m", "give the collector size, e.g. 12x5")
+        if (collector_m is None) == (collector_polygon_m is None):
+            raise SweepInputError("collector_m", "give the collector size, e.g. 12x5, or "
+                                  "its polygon (collector_polygon_m), one of the two")
         template = load_plant("penarroya", package_dir("sim", "data", "plants")).collector
-        collector = collector_from_size(collector_m[0], collector_m[1], template)
+        if collector_m is not None:
+            collector = collector_from_size(collector_m[0], collector_m[1], template)
+        else:
+            try:
+                collector = collector_from_outline(collector_polygon_m, template)
+            except ValueError as exc:
+                raise SweepInputError("collector_polygon_m", str(exc)) from None
         names = list(layouts)
         known = [*LAYOUT_TYPES, "custom"]
         if not names or any(n not in known for n in names):
@@ -279,6 +312,9 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
                      custom=custom, plant=plant, timezone=tz, weather_token=weather_token,
                      **({"albedo": plant.albedo, "temp_air": plant.temp_air,
                          "wind_speed": plant.wind_speed} if plant is not None else {}))
+    if not collector.is_rectangle and any(s != "sun" for s in strategies):
+        raise SweepInputError("strategy", "a polygon collector takes strategy sun only (the "
+                              "backtrack and sky_scan shade-free tests are the rectangle's)")
     cases = [SweepCase(n, float(g), s) for n in names for g in gcr for s in strategies]
     steps = (end - start).total_seconds() / step_s
     if steps * len(cases) > MAX_CASE_STEPS:
@@ -293,5 +329,5 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
     return spec, cases
 
 
-__all__ = ["MAX_CASE_STEPS", "SweepCancelled", "SweepInputError", "parse_gcr", "parse_size",
-           "prepare_sweep", "run_sweep", "sweep_task"]
+__all__ = ["MAX_CASE_STEPS", "SweepCancelled", "SweepInputError", "parse_gcr", "parse_polygon",
+           "parse_size", "prepare_sweep", "run_sweep", "sweep_task"]

@@ -20,6 +20,18 @@ that hold shade are the set bits of the OR of those rectangles' bit masks (one
 bit per block across the collector) — exact integer work, and much cheaper than
 a union of the index rectangles. A collector with more than
 :data:`_MASK_BITS` blocks across falls back to that union.
+
+A polygon collector (``Collector.outline``) is modelled with what the rectangle's
+model says of a module grid, on the polygon: the module grid lies over the outline's
+bounding box, each module row is one string, and a string is the part of the polygon
+inside its row's band (modules cut to the outline: the polygon is all active area).
+A string's blocks are the cells of the block grid that hold some of the polygon
+(N_TB counts them, so a string cut short by the outline has fewer blocks), F_s is the
+shaded share of the string's polygon area, N_SB the cells whose polygon part holds
+shade (their interiors meet, shapely), and the collector's beam factor is the strings'
+factors weighted by their areas (each string at its own maximum-power point, its
+power in proportion to its area). A real collector of that outline carries whole
+rectangular modules; this is the idealisation, stated, not a wiring of any plant.
 """
 
 from __future__ import annotations
@@ -28,10 +40,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.plant.layout import Collector
-from sim.plant.shading import PlantShade, band_union_areas
+from sim.plant.shading import PlantShade, band_union_areas, polygon_band_areas
 
 FloatArray = NDArray[np.float64]
 
+_EPS_AREA_M2 = 1e-9
 #: Blocks across a collector that one uint64 bit mask per row of blocks can hold.
 _MASK_BITS = 63
 #: Set bits of every byte (popcount where numpy has no ``bitwise_count``, numpy < 2).
@@ -115,6 +128,12 @@ def beam_factors(shade: PlantShade, collector: Collector) -> tuple[FloatArray, F
     electrical = area.copy()
     if not len(shade.group_step):
         return area, electrical
+    if not collector.is_rectangle:
+        f_s, n_sb, n_tb, weight = _polygon_strings(shade, collector)
+        loss = direct_martinez(1.0, 1.0, np.minimum(f_s, 1.0), n_sb, n_tb)
+        electrical[shade.group_step, shade.group_tracker] = (
+            (1.0 - np.asarray(loss, dtype=float)) @ weight)
+        return area, electrical
     strings = collector.strings()                     # horizontal bands, bottom to top
     n_u, n_v = collector.block_grid()
     string_area = (strings[:, 1] - strings[:, 0]) * (strings[:, 3] - strings[:, 2])
@@ -139,3 +158,47 @@ def beam_factors(shade: PlantShade, collector: Collector) -> tuple[FloatArray, F
     electrical[shade.group_step, shade.group_tracker] = np.mean(
         1.0 - np.asarray(loss, dtype=float), axis=1)
     return area, electrical
+
+
+def _polygon_strings(shade: PlantShade, collector: Collector
+                     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """A polygon collector's strings (module docstring): per group and string the shaded
+    fraction F_s and shaded blocks N_SB ``(G, S)``, and per string its blocks N_TB and its
+    share of the collector's area ``(S,)`` (strings without polygon area get weight 0)."""
+    import shapely
+
+    if shade.group_shade is None:
+        raise ValueError("a polygon collector's shade must come from plant_shade(..., "
+                         "outline=collector.outline_m())")
+    own = shapely.Polygon(collector.outline_m())
+    strings = collector.strings()
+    n_s = len(strings)
+    string_area = shapely.area(shapely.intersection(own, shapely.box(
+        strings[:, 0], strings[:, 2], strings[:, 1], strings[:, 3])))
+    cuts = collector.string_boundaries()
+    if shade.group_band_area is not None and shade.band_edges is not None \
+            and np.array_equal(shade.band_edges, cuts):
+        shaded = shade.group_band_area
+    else:
+        shaded = polygon_band_areas(shade.group_shade, collector.bounds,
+                                    np.concatenate([[-np.inf], cuts, [np.inf]]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f_s = np.where(string_area > 0, shaded / string_area, 0.0)
+    # the block grid over the bounding box: string s holds rows s·n_v … (s + 1)·n_v − 1
+    n_u, n_v = collector.block_grid()
+    u_lo, u_hi, v_lo, v_hi = collector.bounds
+    cu, cv = (u_hi - u_lo) / n_u, (v_hi - v_lo) / (n_v * n_s)
+    col, row = np.meshgrid(np.arange(n_u), np.arange(n_v * n_s))
+    cells = shapely.box(u_lo + col.ravel() * cu, v_lo + row.ravel() * cv,
+                        u_lo + (col.ravel() + 1) * cu, v_lo + (row.ravel() + 1) * cv)
+    live = np.flatnonzero(shapely.area(shapely.intersection(own, cells)) > _EPS_AREA_M2)
+    cell_string = row.ravel()[live] // n_v
+    n_tb = np.bincount(cell_string, minlength=n_s).astype(float)
+    # a cell holds shade where its interior meets the shade's (which lies inside the
+    # polygon): intersecting, not only touching
+    cells = cells[live]
+    g, c = shapely.STRtree(cells).query(shade.group_shade, predicate="intersects")
+    holds = ~shapely.touches(cells[c], shade.group_shade[g])
+    n_sb = np.zeros((len(shade.group_step), n_s))
+    np.add.at(n_sb, (g[holds], cell_string[c[holds]]), 1.0)
+    return f_s, n_sb, n_tb, string_area / string_area.sum()

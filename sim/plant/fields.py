@@ -24,11 +24,12 @@ stretches an existing plant's spacing to a target GCR.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.plant.layout import Collector, Plant
+from sim.plant.layout import Collector, Plant, check_outline
 
 FloatArray = NDArray[np.float64]
 
@@ -86,9 +87,10 @@ class FieldLayout:
 
     def check(self, collector: Collector) -> None:
         """The limits of Cumpston & Pye 2014 §2 (as twoaxistracking checks them), with the
-        collector diagonal as the least distance between pivots; ``ValueError`` names the
-        parameter."""
-        area, spacing = collector.area, collector.diagonal
+        collector's swept diameter (twoaxistracking's ``min_tracker_spacing``; a
+        rectangle's diagonal) as the least distance between pivots; ``ValueError`` names
+        the parameter."""
+        area, spacing = collector.area, collector.swept_diameter
         if not -0.5 <= self.offset < 0.5:
             raise ValueError(f"offset must be in [-0.5, 0.5), got {self.offset}")
         if not 0 <= self.rotation_deg < 180:
@@ -100,15 +102,16 @@ class FieldLayout:
         gcr_max = area / (spacing ** 2 * np.sqrt(1 - self.offset ** 2))
         if not 0 < self.gcr <= gcr_max:
             raise ValueError(f"gcr {self.gcr} outside (0, {gcr_max:.4f}]: above it the "
-                             f"{collector.width:g} m × {collector.height:g} m collectors, "
-                             f"{spacing:.2f} m across, would collide")
+                             f"collectors of {area:g} m², sweeping {spacing:.2f} m across, "
+                             "would collide")
         if self.aspect_ratio < np.sqrt(1 - self.offset ** 2) - 1e-12:
             raise ValueError(f"aspect_ratio {self.aspect_ratio:.4f} below "
                              f"√(1 − offset²) = {np.sqrt(1 - self.offset ** 2):.4f}")
         if self.aspect_ratio > area / (self.gcr * spacing ** 2) + 1e-12:
             raise ValueError(f"aspect_ratio {self.aspect_ratio:.4f} too high for gcr "
                              f"{self.gcr}: the secondary spacing would be below the "
-                             f"collector diagonal (at most {area / (self.gcr * spacing ** 2):.4f})")
+                             f"collector's swept diameter (at most "
+                             f"{area / (self.gcr * spacing ** 2):.4f})")
 
 
 def lattice_positions(layout: FieldLayout, collector_area_m2: float, rows: int, columns: int
@@ -192,10 +195,10 @@ def scaled_plant(plant: Plant, gcr: float) -> Plant:
     positions = centre + (plant.positions - centre) * k
     gaps = np.linalg.norm(positions[:, None, :2] - positions[None, :, :2], axis=-1)
     np.fill_diagonal(gaps, np.inf)
-    if gaps.min() < plant.collector.diagonal:
+    if gaps.min() < plant.collector.swept_diameter:
         raise ValueError(f"gcr {gcr} too high for plant {plant.plant_id!r}: trackers would be "
-                         f"{gaps.min():.2f} m apart, less than the collector diagonal "
-                         f"{plant.collector.diagonal:.2f} m")
+                         f"{gaps.min():.2f} m apart, less than the collector diagonal (its "
+                         f"swept diameter) {plant.collector.swept_diameter:.2f} m")
     return replace(plant, positions=positions, plant_id=f"{plant.plant_id}-gcr{gcr:g}")
 
 
@@ -218,6 +221,22 @@ def collector_from_size(width_m: float, height_m: float, template: Collector) ->
                    modules_high=high, module_power=module_power)
 
 
+def collector_from_outline(outline_m: Any, template: Collector) -> Collector:
+    """A polygon collector (``outline_m``: (u, v) vertices [m] about the pivot,
+    :func:`sim.plant.layout.check_outline`) wired like ``template``: the template's module
+    size laid over the outline's bounding box (as many modules as fit across and up, as
+    :func:`collector_from_size`), each module row one string, the module power scaled so
+    that the collector keeps the template's power per m² of its own (polygon) area."""
+    outline = check_outline(outline_m, "collector outline")
+    xy = np.asarray(outline)
+    box = collector_from_size(float(np.ptp(xy[:, 0])), float(np.ptp(xy[:, 1])), template)
+    collector = replace(box, outline=outline)
+    if collector.bounds == (-box.width / 2, box.width / 2, -box.height / 2, box.height / 2) \
+            and len(outline) == 4 and abs(collector.area - box.area) < 1e-9 * box.area:
+        return box                              # a centred rectangle: the fast path
+    return replace(collector, module_power=box.module_power * collector.area / box.area)
+
+
 def horizon_elevation(solar_azimuth: NDArray[np.float64] | float, slope_azimuth_deg: float,
                       slope_tilt_deg: float) -> FloatArray:
     """Elevation of a plane ground's horizon in the sun's azimuth [°], at least 0.
@@ -232,6 +251,7 @@ def horizon_elevation(solar_azimuth: NDArray[np.float64] | float, slope_azimuth_
     return np.maximum(h, 0.0)
 
 
-__all__ = ["LAYOUT_TYPES", "FieldLayout", "collector_from_size", "horizon_elevation",
+__all__ = ["LAYOUT_TYPES", "FieldLayout", "collector_from_outline", "collector_from_size",
+           "horizon_elevation",
            "interior_tracker", "lattice_positions", "plant_gcr", "plant_land_m2",
            "regular_field", "scaled_plant"]

@@ -58,6 +58,46 @@ def enu_from_seed004(xyz_seed004: ArrayLike) -> FloatArray:
     return np.stack([-v[..., 0], -v[..., 1], v[..., 2]], axis=-1)
 
 
+def polygon_area(xy: ArrayLike) -> float:
+    """Signed area [m²] of a polygon's vertices ``(V, 2)`` (shoelace; positive
+    counter-clockwise)."""
+    p = np.asarray(xy, dtype=float)
+    x, y = p[:, 0], p[:, 1]
+    return float(0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+
+def check_outline(vertices: ArrayLike, where: str = "outline"
+                  ) -> tuple[tuple[float, float], ...]:
+    """A collector outline as :class:`Collector` keeps it: at least 3 finite (u, v) vertices
+    [m] of a simple polygon (no self-crossing) with positive area, counter-clockwise, the
+    closing vertex dropped when it repeats the first. ``ValueError`` starting with ``where``
+    says what is wrong."""
+    import shapely
+
+    try:
+        p = np.asarray(vertices, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: expected a list of [u, v] pairs in metres") from None
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise ValueError(f"{where}: expected a list of [u, v] pairs in metres, got shape "
+                         f"{p.shape}")
+    if len(p) > 1 and np.array_equal(p[0], p[-1]):
+        p = p[:-1]
+    if len(p) < 3 or not np.all(np.isfinite(p)):
+        raise ValueError(f"{where}: need at least 3 finite vertices, got {len(p)}")
+    if len(p) > 256:
+        raise ValueError(f"{where}: at most 256 vertices, got {len(p)}")
+    area = polygon_area(p)
+    if not abs(area) > 1e-6:
+        raise ValueError(f"{where}: the polygon has no area")
+    if not shapely.Polygon(p).is_valid:
+        raise ValueError(f"{where}: the polygon crosses itself (give its vertices in order "
+                         "around it)")
+    if area < 0:
+        p = p[::-1]
+    return tuple((float(u), float(v)) for u, v in p)
+
+
 @dataclass(frozen=True)
 class Collector:
     """A tracker's collector and its electrical layout.
@@ -67,6 +107,13 @@ class Collector:
     in-plane vector v (eq. 6). It carries ``modules_across × modules_high``
     modules; each module has ``bypass_diodes`` substrings (Martinez-Moreno's
     "blocks"); each row of modules is one series string.
+
+    Any other shape is an ``outline``: a simple polygon in the collector plane, (u, v)
+    [m] about the pivot (u along the width, v up the height: twoaxistracking's
+    ``collector_geometry`` frame, x right and y up when facing the collector). Its
+    ``width × height`` is then the outline's bounding box, over which the module grid
+    lies; a module row is still one string, the polygon's band of that row
+    (:mod:`sim.plant.electrical` states what that assumes).
 
     Parameters
     ----------
@@ -84,6 +131,9 @@ class Collector:
     gamma_pdc : float
         Power temperature coefficient [1/°C].
     module_name : str
+    outline : tuple of (u, v), optional
+        Polygon vertices [m] about the pivot (:func:`check_outline`); None: the
+        ``width × height`` rectangle centred on the pivot.
     """
 
     width: float
@@ -95,16 +145,52 @@ class Collector:
     module_power: float
     gamma_pdc: float
     module_name: str = ""
+    outline: tuple[tuple[float, float], ...] | None = None
+
+    @property
+    def is_rectangle(self) -> bool:
+        """The ``width × height`` rectangle centred on the pivot (the shade engine's fast
+        path), not an outline."""
+        return self.outline is None
+
+    def outline_m(self) -> FloatArray:
+        """Vertices ``(V, 2)`` (u, v) [m] about the pivot, counter-clockwise (the rectangle's
+        four corners when there is no outline)."""
+        if self.outline is not None:
+            return np.asarray(self.outline, dtype=float)
+        a, b = self.width / 2, self.height / 2
+        return np.array([[-a, -b], [a, -b], [a, b], [-a, b]])
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """Bounding box (u0, u1, v0, v1) [m] in collector coordinates."""
+        if self.outline is None:
+            return -self.width / 2, self.width / 2, -self.height / 2, self.height / 2
+        xy = self.outline_m()
+        return (float(xy[:, 0].min()), float(xy[:, 0].max()), float(xy[:, 1].min()),
+                float(xy[:, 1].max()))
 
     @property
     def area(self) -> float:
-        """Collector area [m²]."""
-        return self.width * self.height
+        """Collector area [m²] (the outline's, by the shoelace formula)."""
+        if self.outline is None:
+            return self.width * self.height
+        return polygon_area(self.outline_m())
 
     @property
     def diagonal(self) -> float:
-        """Collector diagonal [m]."""
+        """Diagonal of the collector's bounding box [m]: no two translates of the collector
+        overlap farther apart than this (the shade engine's bound)."""
         return float(np.hypot(self.width, self.height))
+
+    @property
+    def swept_diameter(self) -> float:
+        """Diameter of the circle the collector sweeps about its pivot [m]: twice its
+        farthest vertex (twoaxistracking's ``min_tracker_spacing``; the rectangle's
+        diagonal). Pivots closer than this can collide."""
+        if self.outline is None:
+            return self.diagonal
+        return float(2 * np.max(np.hypot(*self.outline_m().T)))
 
     @property
     def power_stc(self) -> float:
@@ -112,11 +198,12 @@ class Collector:
         return self.module_power * self.modules_across * self.modules_high
 
     def strings(self) -> FloatArray:
-        """String rectangles ``(S, 4)`` = (u0, u1, v0, v1) [m] in collector coordinates."""
+        """String rectangles ``(S, 4)`` = (u0, u1, v0, v1) [m] in collector coordinates (for
+        an outline, the bands of its bounding box that hold each string)."""
+        u_lo, u_hi, v_lo, _ = self.bounds
         h = self.height / self.modules_high
-        v0 = -self.height / 2 + h * np.arange(self.modules_high)
-        return np.stack([np.full_like(v0, -self.width / 2), np.full_like(v0, self.width / 2),
-                         v0, v0 + h], axis=-1)
+        v0 = v_lo + h * np.arange(self.modules_high)
+        return np.stack([np.full_like(v0, u_lo), np.full_like(v0, u_hi), v0, v0 + h], axis=-1)
 
     def string_boundaries(self) -> FloatArray:
         """v of the boundaries between strings [m], bottom to top, shape ``(S − 1,)``: the
@@ -133,10 +220,11 @@ class Collector:
         """Bypass-diode blocks: rectangles ``(B, 4)`` (u0, u1, v0, v1) [m], their string index."""
         mw, mh = self.width / self.modules_across, self.height / self.modules_high
         n = self.bypass_diodes
+        u_lo, _, v_lo, _ = self.bounds
         rects, owner = [], []
         for r in range(self.modules_high):
             for c in range(self.modules_across):
-                u0, v0 = -self.width / 2 + c * mw, -self.height / 2 + r * mh
+                u0, v0 = u_lo + c * mw, v_lo + r * mh
                 for k in range(n):
                     if self.module_orientation == "portrait":
                         rects.append((u0 + k * mw / n, u0 + (k + 1) * mw / n, v0, v0 + mh))
@@ -221,6 +309,7 @@ class Plant:
                 "module_orientation": c.module_orientation, "bypass_diodes": c.bypass_diodes,
                 "module_power_w": c.module_power, "gamma_pdc_per_c": c.gamma_pdc,
                 "module_name": c.module_name, "power_stc_w": c.power_stc,
+                **({"outline_m": [list(p) for p in c.outline]} if c.outline else {}),
             },
             "trackers": [
                 {"tracker_id": tid, "east_m": float(p[0]), "north_m": float(p[1]),
@@ -268,9 +357,21 @@ def _collector(d: Any, where: str) -> Collector:
     if orient not in MODULE_ORIENTATIONS:
         raise ValueError(f"{w}: field 'module_orientation' must be one of "
                          f"{', '.join(MODULE_ORIENTATIONS)}, got {orient!r}")
+    outline = None
+    if "outline_m" in d:
+        if "width_m" in d or "height_m" in d:
+            raise ValueError(f"{w}: give 'width_m' and 'height_m' (a rectangle) or "
+                             "'outline_m' (a polygon), not both")
+        outline = check_outline(d["outline_m"], f"{w}: field 'outline_m'")
+        xy = np.asarray(outline)
+        width, height = (float(np.ptp(xy[:, 0])), float(np.ptp(xy[:, 1])))
+    else:
+        width = _num(d, "width_m", w, positive=True)
+        height = _num(d, "height_m", w, positive=True)
     return Collector(
-        width=_num(d, "width_m", w, positive=True),
-        height=_num(d, "height_m", w, positive=True),
+        width=width,
+        height=height,
+        outline=outline,
         modules_across=_int(d, "modules_across", w),
         modules_high=_int(d, "modules_high", w),
         module_orientation=orient,
@@ -325,11 +426,11 @@ def plant_from_dict(d: dict[str, Any], where: str = "plant") -> Plant:
         gaps = np.linalg.norm(positions[:, None, :2] - positions[None, :, :2], axis=-1)
         np.fill_diagonal(gaps, np.inf)
         i, j = np.unravel_index(np.argmin(gaps), gaps.shape)
-        if gaps[i, j] < collector.diagonal:
+        if gaps[i, j] < collector.swept_diameter:
             raise ValueError(
                 f"{where}: field 'trackers': trackers {ids[i]} and {ids[j]} are "
-                f"{gaps[i, j]:.2f} m apart, less than the collector diagonal "
-                f"{collector.diagonal:.2f} m (their collectors would collide)")
+                f"{gaps[i, j]:.2f} m apart, less than the collector's swept diameter "
+                f"{collector.swept_diameter:.2f} m (their collectors would collide)")
     fixed = d.get("fixed", {})
     if not isinstance(fixed, dict):
         raise ValueError(f"{where}: field 'fixed' must be an object")

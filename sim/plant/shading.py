@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sim.kinematics import panel_axes
+from sim.plant.layout import polygon_area
 from vision.sphere import enu_from_sky, sky_from_enu
 
 FloatArray = NDArray[np.float64]
@@ -279,19 +280,23 @@ def candidate_pairs(positions: ArrayLike, sun_enu: ArrayLike,
 
 
 def _direct_pairs(positions: FloatArray, sun: FloatArray, surface_az: FloatArray,
-                  surface_el: FloatArray, width: float, height: float,
+                  surface_el: FloatArray, bounds: tuple[float, float, float, float],
                   table: BinTable | None = None
-                  ) -> tuple[IntArray, IntArray, IntArray, FloatArray]:
-    """Shading pairs and their rectangles for a common orientation per step.
+                  ) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]:
+    """Shading pairs for a common orientation per step: (step, i, j), the rectangle
+    (u0, u1, v0, v1) where the two collectors' bounding boxes ``bounds`` overlap on i (the
+    shade itself for a rectangle), and the shift (du, dv) of j's projection on i's plane.
 
     With d = p_j − p_i: λ = (d·n)/(s·n) and (du, dv) = (d·u − λ s·u, d·v − λ s·v);
     the reverse direction is (−du, −dv) with −λ, and the direction with λ > 0
     is the one that can shade. Only each step's candidate pairs are computed.
     """
+    u_lo, u_hi, v_lo, v_hi = bounds
+    width, height = u_hi - u_lo, v_hi - v_lo
     ii, jj, d = pair_vectors(positions)
     empty_i = np.zeros(0, dtype=np.int64)
     if not len(d) or not len(sun):
-        return empty_i, empty_i, empty_i, np.zeros((0, 4))
+        return empty_i, empty_i, empty_i, np.zeros((0, 4)), np.zeros((0, 2))
     n, u, v = collector_axes(surface_az, surface_el)
     sn = np.einsum("tk,tk->t", sun, n)
     constant = bool(np.all(surface_az == surface_az[0]) and np.all(surface_el == surface_el[0]))
@@ -321,14 +326,14 @@ def _direct_pairs(positions: FloatArray, sun: FloatArray, surface_az: FloatArray
         out[3].append(du[hit] * sign)
         out[4].append(dv[hit] * sign)
     if not out[0]:
-        return empty_i, empty_i, empty_i, np.zeros((0, 4))
+        return empty_i, empty_i, empty_i, np.zeros((0, 4)), np.zeros((0, 2))
     t_all, i_all, j_all, du_all, dv_all = (np.concatenate(x) for x in out)
-    a2, b2 = width / 2, height / 2
-    rects = np.stack([np.maximum(-a2, du_all - a2), np.minimum(a2, du_all + a2),
-                      np.maximum(-b2, dv_all - b2), np.minimum(b2, dv_all + b2)], axis=-1)
+    rects = np.stack([np.maximum(u_lo, du_all + u_lo), np.minimum(u_hi, du_all + u_hi),
+                      np.maximum(v_lo, dv_all + v_lo), np.minimum(v_hi, dv_all + v_hi)], axis=-1)
     keep = ((rects[:, 1] - rects[:, 0]) * (rects[:, 3] - rects[:, 2]) > _EPS_AREA_M2) \
         & (rects[:, 1] > rects[:, 0]) & (rects[:, 3] > rects[:, 2])
-    return t_all[keep], i_all[keep], j_all[keep], rects[keep]
+    return (t_all[keep], i_all[keep], j_all[keep], rects[keep],
+            np.stack([du_all[keep], dv_all[keep]], axis=-1))
 
 
 def pair_shade_rects(positions: ArrayLike, sun_enu: ArrayLike, normal_az: ArrayLike,
@@ -518,6 +523,12 @@ class PlantShade:
         :func:`sim.plant.electrical.beam_factors` needs, from the same union.
     band_edges : numpy.ndarray, shape (B,), optional
         Increasing v [m] that cut the collector into those bands.
+    outline : numpy.ndarray, shape (V, 2), optional
+        A polygon collector's vertices (u, v) [m] (None: the rectangle). Then
+        ``group_rects`` holds where the two collectors' bounding boxes overlap (a rectangle
+        that contains that neighbour's shade), ``group_offsets`` the shift (du, dv) [m] of
+        each shading neighbour's outline on the collector, and ``group_shade`` the shaded
+        part of the collector (shapely polygons, one per group).
     """
 
     fraction: FloatArray
@@ -527,6 +538,9 @@ class PlantShade:
     group_by: IntArray
     group_band_area: FloatArray | None = None
     band_edges: FloatArray | None = None
+    outline: FloatArray | None = None
+    group_offsets: FloatArray | None = None
+    group_shade: NDArray[np.object_] | None = None
 
     @property
     def shaded(self) -> NDArray[np.bool_]:
@@ -541,10 +555,46 @@ class PlantShade:
         return sorted(int(b) for b in self.group_by[g[0]] if b >= 0)
 
 
+def polygon_shade(outline: FloatArray, offsets: FloatArray, used: NDArray[np.bool_]
+                  ) -> NDArray[np.object_]:
+    """The shaded part of a polygon collector P per group: P ∩ ∪_k (P + offsets[g, k]) over
+    the ``used`` slots, as shapely polygons ``(G,)`` — exact polygon clipping (GEOS),
+    convex or not. ``offsets`` ``(G, K, 2)`` [m]."""
+    import shapely
+
+    own = shapely.Polygon(outline)
+    slots = np.full(used.shape, None, dtype=object)
+    slots[used] = shapely.polygons(outline[None] + offsets[used][:, None, :])
+    return np.asarray(shapely.intersection(shapely.union_all(slots, axis=1), own), dtype=object)
+
+
+def polygon_band_areas(shade: NDArray[np.object_], bounds: tuple[float, float, float, float],
+                       band_edges: FloatArray) -> FloatArray:
+    """Area [m²] of each shaded polygon ``(G,)`` between consecutive ``band_edges`` in v
+    (±inf allowed) → ``(G, B)``."""
+    import shapely
+
+    u_lo, u_hi, v_lo, v_hi = bounds
+    edges = np.clip(band_edges, v_lo - 1.0, v_hi + 1.0)
+    boxes = shapely.box(u_lo - 1.0, edges[:-1], u_hi + 1.0, edges[1:])
+    return np.asarray(shapely.area(shapely.intersection(shade[:, None], boxes[None, :])),
+                      dtype=float)
+
+
+def _polygon_pairs(outline: FloatArray, offsets: FloatArray) -> NDArray[np.bool_]:
+    """Which (du, dv) shifts ``(M, 2)`` make a polygon overlap its own translate with
+    positive area (exact; the bounding boxes' overlap only bounds it)."""
+    import shapely
+
+    own = shapely.Polygon(outline)
+    moved = shapely.polygons(outline[None] + offsets[:, None, :])
+    return np.asarray(shapely.area(shapely.intersection(moved, own)), dtype=float) > _EPS_AREA_M2
+
+
 def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation: ArrayLike,
                 surface_azimuth: ArrayLike, surface_elevation: ArrayLike, width: float,
                 height: float, band_edges: ArrayLike = (),
-                table: BinTable | None = None) -> PlantShade:
+                table: BinTable | None = None, outline: ArrayLike | None = None) -> PlantShade:
     """Shaded fraction of every collector of a plant at every step (seed 004 §2.1 geometry).
 
     Parameters
@@ -566,11 +616,24 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
         cost one union, not two.
     table : BinTable, optional
         Keeps the sun bins' candidate pairs for the next call (a run in chunks).
+    outline : array_like, shape (V, 2), optional
+        A polygon collector's vertices (u, v) [m] about the pivot
+        (:attr:`sim.plant.layout.Collector.outline`); ``width`` and ``height`` are then
+        its bounding box's. The pairs come from the bounding boxes as for a rectangle;
+        each shade is the exact polygon clip of :func:`polygon_shade` (shapely), slower
+        than the rectangles' unions.
 
     Returns
     -------
     PlantShade
     """
+    poly = None if outline is None else np.asarray(outline, dtype=float)
+    if poly is None:
+        bounds = (-width / 2, width / 2, -height / 2, height / 2)
+    else:
+        bounds = (float(poly[:, 0].min()), float(poly[:, 0].max()),
+                  float(poly[:, 1].min()), float(poly[:, 1].max()))
+        width, height = bounds[1] - bounds[0], bounds[3] - bounds[2]
     p = np.asarray(positions, dtype=float)
     if p.ndim != 2 or p.shape[1] != 3:
         raise ValueError(f"positions must have shape (N, 3), got {p.shape}")
@@ -586,10 +649,13 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
     fraction[~up] = np.nan
     sun = enu_from_sky(az, el)
     upi = np.nonzero(up)[0]
-    t, i, j, rects = _direct_pairs(p, sun[upi], saz[upi], sel[upi], width, height, table)
+    t, i, j, rects, offsets = _direct_pairs(p, sun[upi], saz[upi], sel[upi], bounds, table)
+    if poly is not None:
+        hit = _polygon_pairs(poly, offsets)
+        t, i, j, rects, offsets = t[hit], i[hit], j[hit], rects[hit], offsets[hit]
     key = upi[t] * n + i
     order = np.argsort(key * n + j, kind="stable")  # already by step: the stable sort is fast
-    key, j, rects = key[order], j[order], rects[order]
+    key, j, rects, offsets = key[order], j[order], rects[order], offsets[order]
     gkey, start, count = np.unique(key, return_index=True, return_counts=True)
     kmax = int(count.max()) if len(count) else 1
     g_rects = np.zeros((len(gkey), kmax, 4))
@@ -599,11 +665,20 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
     g_rects[gidx, slot] = rects
     g_by[gidx, slot] = j
     cuts = np.asarray(band_edges, dtype=float).reshape(-1)
-    band_area = band_union_areas(g_rects, np.concatenate([[-np.inf], cuts, [np.inf]]))
+    edges = np.concatenate([[-np.inf], cuts, [np.inf]])
     g_step, g_tracker = gkey // n, gkey % n
-    fraction[g_step, g_tracker] = np.minimum(band_area.sum(axis=1) / (width * height), 1.0)
+    if poly is None:
+        band_area = band_union_areas(g_rects, edges)
+        fraction[g_step, g_tracker] = np.minimum(band_area.sum(axis=1) / (width * height), 1.0)
+        return PlantShade(fraction, g_step.astype(np.int64), g_tracker.astype(np.int64),
+                          g_rects, g_by, band_area, cuts)
+    g_offsets = np.zeros((len(gkey), kmax, 2))
+    g_offsets[gidx, slot] = offsets
+    g_shade = polygon_shade(poly, g_offsets, g_by >= 0)
+    band_area = polygon_band_areas(g_shade, bounds, edges)
+    fraction[g_step, g_tracker] = np.minimum(band_area.sum(axis=1) / polygon_area(poly), 1.0)
     return PlantShade(fraction, g_step.astype(np.int64), g_tracker.astype(np.int64),
-                      g_rects, g_by, band_area, cuts)
+                      g_rects, g_by, band_area, cuts, poly, g_offsets, g_shade)
 
 
 def shades_anyone(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation: ArrayLike,

@@ -96,7 +96,8 @@ def field_shade(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: 
     there every collector's fraction is 1."""
     c = plant.collector
     shade = plant_shade(plant.positions, sky["solar_azimuth"], sky["apparent_elevation"],
-                        saz, sel, c.width, c.height, band_edges, table)
+                        saz, sel, c.width, c.height, band_edges, table,
+                        None if c.is_rectangle else c.outline_m())
     behind = np.zeros(len(saz), dtype=bool)
     if plant.slope_tilt > 0:                # the ground beyond the plant hides the sun
         behind = sky["apparent_elevation"] <= horizon_elevation(

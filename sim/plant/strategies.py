@@ -239,6 +239,17 @@ def _best(plant: Plant, caz: FloatArray, cel: FloatArray, sky: dict[str, FloatAr
     return caz[rows, k], cel[rows, k]
 
 
+def check_strategy_collector(strategy: str, plant: Plant) -> None:
+    """``backtrack`` and ``sky_scan`` decide "shades nobody" by the closed form of the
+    rectangle (:func:`lowest_free_elevation`, :func:`shade_free`); for a polygon collector
+    they would answer for its bounding box, not for it, so they refuse it (``ValueError``
+    naming the strategy). ``sun`` takes any polygon."""
+    if strategy != "sun" and not plant.collector.is_rectangle:
+        raise ValueError(f"strategy {strategy!r} needs a rectangular collector (its shade-free "
+                         "test is the rectangle's closed form); a polygon collector takes "
+                         "strategy 'sun'")
+
+
 def orientations(strategy: str, plant: Plant, sky: dict[str, FloatArray]
                  ) -> tuple[FloatArray, FloatArray]:
     """Common collector orientation at each step for a strategy.
@@ -265,6 +276,7 @@ def orientations(strategy: str, plant: Plant, sky: dict[str, FloatArray]
     sel = np.where(up, el, STOW_ELEVATION)
     if strategy == "sun":
         return saz, sel
+    check_strategy_collector(strategy, plant)
     free_sun = shade_free(plant, az, el, saz[:, None], sel[:, None])[:, 0]
     if strategy == "backtrack":
         steps = np.nonzero(up & ~free_sun)[0]

@@ -230,7 +230,8 @@ def interior_beam_shaded_pct(layout: FieldLayout, collector: Collector,
     up = sky["apparent_elevation"] > 0
     az, el, dni = sky["solar_azimuth"][up], sky["apparent_elevation"][up], sky["dni"][up]
     positions, interior = lattice_positions(layout, collector.area, 5, 5)
-    shade = plant_shade(positions, az, el, az, el, collector.width, collector.height)
+    shade = plant_shade(positions, az, el, az, el, collector.width, collector.height,
+                        outline=None if collector.is_rectangle else collector.outline_m())
     return float(100.0 * np.sum(shade.fraction[:, interior] * dni) / np.sum(dni))
 
 

@@ -116,6 +116,43 @@ def test_bad_input_names_the_flag(extra: list[str], message: str,
     assert message in capsys.readouterr().err
 
 
+L_TEXT = "-6,-2.5;6,-2.5;6,0;0,0;0,2.5;-6,2.5"
+POLY_SWEEP = [a for a in SWEEP if a not in ("--collector-m", "12x5")]
+
+
+def test_a_polygon_collector_from_text_or_file(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """``--collector-polygon`` as text and as a JSON file give the same row: the L's land
+    per collector is its 45 m² over the GCR."""
+    # a first vertex with a minus reads as a flag to argparse: the = form
+    assert main([*POLY_SWEEP, f"--collector-polygon={L_TEXT}", "--gcr", "0.2", "--json"]) == 0
+    (row,) = json.loads(capsys.readouterr().out)["rows"]
+    assert row["land_m2_per_collector"] == pytest.approx(225.0)
+    assert row["interior_beam_shaded_pct"] > 0
+    path = tmp_path / "l.json"
+    path.write_text(json.dumps([[float(x) for x in p.split(",")] for p in L_TEXT.split(";")]))
+    assert main([*POLY_SWEEP, "--collector-polygon", str(path), "--gcr", "0.2", "--json"]) == 0
+    (again,) = json.loads(capsys.readouterr().out)["rows"]
+    assert again == row
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--collector-polygon", "0,0;2,2;2,0;0,1"], "--collector-polygon: collector outline: "
+     "the polygon crosses itself"),
+    (["--collector-polygon", "0,0;2"], "--collector-polygon: expected vertices u,v"),
+    ([f"--collector-polygon={L_TEXT}", "--strategy", "sun,backtrack"],
+     "--strategy: a polygon collector takes strategy sun only"),
+    ([f"--collector-polygon={L_TEXT}", "--collector-m", "12x5"], "--collector-m: give the "
+     "collector size, e.g. 12x5, or its polygon"),
+])
+def test_bad_polygon_names_the_flag(extra: list[str], message: str,
+                                    capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        raise SystemExit(main([*POLY_SWEEP, "--gcr", "0.2", *extra]))
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err
+
+
 def test_unreachable_scheduler_is_an_error(capsys: pytest.CaptureFixture[str]) -> None:
     port = _free_port()
     with pytest.raises(SystemExit) as exc:

@@ -233,6 +233,24 @@ def test_sweep_is_queued_polled_and_shows_a_day(client: httpx.Client) -> None:
     assert len(d["positions_m"]) == 25 and len(d["shaded_fraction"][0]) == 25
 
 
+#: An L-shaped collector outline [m] about the pivot (12 m × 5 m less a 6 m × 2.5 m corner).
+L_SHAPE = [[-6, -2.5], [6, -2.5], [6, 0], [0, 0], [0, 2.5], [-6, 2.5]]
+
+
+def test_sweep_takes_a_polygon_collector(client: httpx.Client) -> None:
+    """``collector_polygon_m``: the L's land per collector is its 45 m² over the GCR, and its
+    row is the CLI's (tests/backend/test_plant_sweep.py) physics: shade and energy."""
+    r = client.post("/api/v1/plants/sweeps", json={**SWEEP, "collector_m": None, "gcr": [0.2],
+                                                   "collector_polygon_m": L_SHAPE})
+    assert r.status_code == 202, r.text
+    run = _poll(client, r.headers["location"])
+    assert run["status"] == "done", run
+    (row,) = run["result"]["rows"]
+    assert row["land_m2_per_collector"] == pytest.approx(45.0 / 0.2)
+    assert 0 < row["field_beam_shaded_pct"] < row["interior_beam_shaded_pct"] < 100
+    assert row["energy_kwh_per_collector"] > 0
+
+
 @pytest.mark.parametrize(("change", "status", "message"), [
     ({"gcr": [0.5]}, 422, "gcr: square at GCR 0.5"),
     ({"layouts": ["triangle"]}, 422, "layouts: must be one or more of"),
@@ -241,6 +259,11 @@ def test_sweep_is_queued_polled_and_shows_a_day(client: httpx.Client) -> None:
     ({"start": "2021-12-20T00:00:00"}, 422, "start"),
     ({"plant_id": "nowhere"}, 404, "nowhere"),
     ({"end": "2023-12-20", "step_s": 60}, 422, "without a write token"),
+    ({"collector_m": None, "collector_polygon_m": [[0, 0], [2, 2], [2, 0], [0, 1]]}, 422,
+     "collector_polygon_m: collector outline: the polygon crosses itself"),
+    ({"collector_polygon_m": L_SHAPE}, 422, "collector_m: give the collector size"),
+    ({"collector_m": None, "collector_polygon_m": L_SHAPE, "strategies": ["backtrack"]}, 422,
+     "strategies: a polygon collector takes strategy sun only"),
 ])
 def test_sweep_refusals_name_the_field(client: httpx.Client, change: dict, status: int,
                                        message: str) -> None:

@@ -60,6 +60,8 @@ from backend.timestamps import (
     parse_day_or_instant,
     parse_instant,
 )
+from sim.plant.layout import Plant
+from sim.plant.strategies import check_strategy_collector
 from sim.plant.sweep import PLANT_LAYOUT, SweepCase, case_day_shade
 
 router = APIRouter(prefix="/api/v1/plants", tags=["plants"])
@@ -105,10 +107,16 @@ def _plant_or_404(service: PlantService, plant_id: str) -> None:
         raise HTTPException(500, f"plant {plant_id!r} has a bad config: {exc}") from None
 
 
-def _strategy(strategy: str) -> str:
+def _strategy(strategy: str, plant: Plant | None = None) -> str:
+    """A known strategy, that ``plant``'s collector takes (a polygon: ``sun`` only); 422."""
     if strategy not in STRATEGIES:
         raise HTTPException(422, f"strategy: must be one of {', '.join(STRATEGIES)}, "
                                  f"got {strategy!r}")
+    if plant is not None:
+        try:
+            check_strategy_collector(strategy, plant)
+        except ValueError as exc:
+            raise HTTPException(422, f"strategy: {exc}") from None
     return strategy
 
 
@@ -191,7 +199,8 @@ def _sweep_inputs(body: SweepCreate, service: PlantService) -> tuple[Any, list[A
             longitude_deg=body.longitude_deg, altitude_m=body.altitude_m,
             collector_m=None if body.collector_m is None
             else parse_size(body.collector_m, "collector_m"),
-            plant=plant, field_size=(rows, columns), custom=custom,
+            collector_polygon_m=body.collector_polygon_m, plant=plant,
+            field_size=(rows, columns), custom=custom,
             slope_azimuth_deg=body.slope_azimuth_deg, slope_tilt_deg=body.slope_tilt_deg)
     except TimestampError as exc:
         raise HTTPException(422, str(exc)) from None
@@ -317,7 +326,7 @@ async def positions(plant_id: str, request: Request, ctx: ContextDep, caller: Ca
     (priced, without waiting for other plant computations: see the module docstring)."""
     when = _time(time)
     _plant_or_404(service, plant_id)
-    strategy = _strategy(strategy)
+    strategy = _strategy(strategy, service.get(plant_id))
     cost_s = positions_cost_s(service.get(plant_id).n_trackers)
     return await _priced(request, ctx, caller, cost_s,
                          lambda: service.positions(plant_id, when, strategy),
@@ -338,6 +347,9 @@ async def sky_map(plant_id: str, request: Request, ctx: ContextDep, caller: Call
     when = _time(time)
     _plant_or_404(service, plant_id)
     strategy = _strategy(strategy)
+    if not service.get(plant_id).collector.is_rectangle:
+        raise HTTPException(422, f"plant_id: {plant_id}'s collector is a polygon; the sky "
+                                 "map's shaded region is the rectangle's shade-free test")
     m = await _priced(request, ctx, caller, sky_map_cost_s(resolution_deg),
                       lambda: service.sky_map(plant_id, when, resolution_deg, strategy))
     want_png = format == "png" or (format is None and

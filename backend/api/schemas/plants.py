@@ -139,9 +139,10 @@ class PlantDayRead(BaseModel):
 class SweepCreate(BaseModel):
     """A plant-design sweep (issue 26): every layout × GCR × strategy, over a range.
 
-    A place and a collector (``latitude_deg``, ``longitude_deg``, ``collector_m``) for
-    regular fields, or ``plant_id`` for an existing plant scaled in spacing. ``start`` and
-    ``end``: a bare date is midnight UTC (the plant's zone with ``plant_id``).
+    A place and a collector (``latitude_deg``, ``longitude_deg``, ``collector_m`` or
+    ``collector_polygon_m``) for regular fields, or ``plant_id`` for an existing plant
+    scaled in spacing. ``start`` and ``end``: a bare date is midnight UTC (the plant's zone
+    with ``plant_id``).
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -154,6 +155,11 @@ class SweepCreate(BaseModel):
                                   description="sun, backtrack, sky_scan")
     collector_m: str | None = Field(None, pattern=r"^\d+(\.\d+)?x\d+(\.\d+)?$",
                                     description="collector WIDTHxHEIGHT [m], e.g. 12x5")
+    collector_polygon_m: list[tuple[float, float]] | None = Field(
+        None, min_length=3, max_length=256,
+        description="any collector outline instead of collector_m: [u, v] vertices [m] about "
+                    "the pivot in the collector plane (u right, v up when facing it); "
+                    "strategy sun only")
     latitude_deg: float | None = Field(None, ge=-90, le=90)
     longitude_deg: float | None = Field(None, ge=-180, le=180)
     altitude_m: float = Field(0.0, ge=-500, le=9000)
