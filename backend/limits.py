@@ -9,6 +9,10 @@
   worker time for a caller without a token): charged the estimate when a run is
   admitted, trued up to the time the run took (:meth:`WindowBudget.settle`); past the
   ceiling a 429 whose ``Retry-After`` says when enough of the window has passed.
+- :func:`metered`, :func:`metered_iter` and :class:`ReadMeter` — the CPU time a read
+  without a token really cost (its handler's and its streamed body's threads), which
+  ``backend.api.deps.anonymous_read`` charges to the caller's :class:`WindowBudget`
+  ``Limits.reads``.
 - :class:`HeldBudget` — what is worked on at once, whoever asks (with a token too):
   ``decode``, the pixels decoded across all vision requests (a decoded frame costs
   about 6 bytes per pixel at its peak — measured: a 6300×6300 PNG peaks at 225 MB
@@ -44,10 +48,11 @@ import math
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
+from collections.abc import AsyncIterator, Callable, Iterable, Iterator
+from contextlib import asynccontextmanager, contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 from sqlalchemy import Connection, delete, select
 
@@ -65,6 +70,13 @@ from backend.storage.tables import (
 PLANT_COMPUTATIONS = 1
 #: Plant computations waiting for their turn; more → 503 with ``Retry-After``.
 PLANT_QUEUE = 16
+#: The window of the anonymous read allowance (``HELIOTWIN_ANONYMOUS_READ_CPU_S_PER_MIN``) [s].
+READ_WINDOW_S = 60.0
+#: Reads a caller without a token may have in flight with its allowance untouched: each
+#: holds 1/16 of the allowance from its admission until it is settled to the CPU time it
+#: took, so a burst of slow reads cannot all be admitted before the first is charged (the
+#: dashboard's overview asks five at once: four series and the daily energy).
+READS_IN_FLIGHT = 16
 
 
 #: How often the service gives freed heap pages back (:func:`release_memory`) [s].
@@ -185,19 +197,22 @@ class WindowBudget:
     """
 
     def __init__(self, capacity: float, window_s: float, what: str, setting: str,
-                 max_clients: int = 10_000) -> None:
+                 max_clients: int = 10_000, clock: Callable[[], float] = time.monotonic
+                 ) -> None:
         self.capacity = float(capacity)
         self.window_s = float(window_s)
         self.what = what
         self.setting = setting
         self.max_clients = max_clients
+        #: Seconds on a monotonic clock (a test moves it on to see the window pass).
+        self.clock = clock
         self._charges: OrderedDict[str, list[Charge]] = OrderedDict()
         self._lock = threading.Lock()
 
     def used(self, client: str) -> float:
         """The cost ``client`` has spent in the window ending now."""
         with self._lock:
-            return sum(c.cost for c in self._live(client, time.monotonic()))
+            return sum(c.cost for c in self._live(client, self.clock()))
 
     def _live(self, client: str, now: float) -> list[Charge]:
         charges = [c for c in self._charges.get(client, []) if c.at > now - self.window_s]
@@ -208,7 +223,7 @@ class WindowBudget:
     def take(self, client: str, cost: float) -> Charge:
         """Charge ``cost`` to ``client``, or raise :class:`Busy` (429)."""
         cost = min(float(cost), self.capacity)
-        now = time.monotonic()
+        now = self.clock()
         with self._lock:
             charges = self._live(client, now)
             used = sum(c.cost for c in charges)
@@ -220,10 +235,11 @@ class WindowBudget:
                         wait_s = c.at + self.window_s - now
                         break
                 raise Busy(429, f"rate limit: without a write token a client may ask "
-                                f"{self.capacity:.0f} {self.what} per "
-                                f"{self.window_s / 60:.0f} min ({self.setting}); {used:.0f} "
-                                f"spent, this asks {cost:.0f}: send 'Authorization: Bearer "
-                                f"<token>' or retry in {math.ceil(wait_s)} s", wait_s)
+                                f"{_amount(self.capacity)} {self.what} per "
+                                f"{self.window_s / 60:.0f} min ({self.setting}); "
+                                f"{_amount(used)} spent, this asks {_amount(cost)}: send "
+                                f"'Authorization: Bearer <token>' or retry in "
+                                f"{math.ceil(wait_s)} s", wait_s)
             charge = Charge(now, cost)
             self._charges[client] = [*charges, charge]
             self._charges.move_to_end(client)
@@ -235,6 +251,76 @@ class WindowBudget:
         """The charged work cost ``cost`` after all (0: it never ran)."""
         with self._lock:
             charge.cost = max(0.0, float(cost))
+
+
+def _amount(x: float) -> str:
+    """A cost for a message: whole units from 10 up (``300``), else three digits (``0.125``)."""
+    return f"{x:,.0f}" if abs(x) >= 10 else f"{x:.3g}"
+
+
+class ReadMeter:
+    """The CPU time [s] the threads of one request spent in :func:`metered` work."""
+
+    def __init__(self) -> None:
+        self.cpu_s = 0.0
+        self._lock = threading.Lock()
+
+    def add(self, cpu_s: float) -> None:
+        with self._lock:
+            self.cpu_s += cpu_s
+
+
+#: The meter of the request being served (set by ``backend.api.deps.anonymous_read`` for a
+#: caller without a token): the request's task and the worker threads it hands work to
+#: (AnyIO copies the context into them) all see it.
+_READ_METER: ContextVar[ReadMeter | None] = ContextVar("heliotwin_read_meter", default=None)
+_metering = threading.local()
+_T = TypeVar("_T")
+
+
+def start_meter() -> ReadMeter:
+    """A new meter for the request being served: what :func:`metered` blocks then cost."""
+    meter = ReadMeter()
+    _READ_METER.set(meter)
+    return meter
+
+
+@contextmanager
+def metered() -> Iterator[None]:
+    """Count this block's CPU time on this thread (``time.thread_time``: the time the
+    thread ran, not the time it waited for the GIL, a lock or another request) to the
+    request's meter; nothing to count without one (a caller with a token). A block inside
+    another is counted once."""
+    meter = _READ_METER.get()
+    if meter is None or getattr(_metering, "active", False):
+        yield
+        return
+    _metering.active = True
+    start_s = time.thread_time()
+    try:
+        yield
+    finally:
+        meter.add(time.thread_time() - start_s)
+        _metering.active = False
+
+
+def run_metered(work: Callable[..., _T], *args: Any) -> _T:
+    """``work(*args)`` inside :func:`metered` (for ``anyio.to_thread.run_sync``)."""
+    with metered():
+        return work(*args)
+
+
+def metered_iter(parts: Iterable[_T]) -> Iterator[_T]:
+    """A streamed body whose pieces are each made inside :func:`metered` (a body of a sync
+    iterator is made piece by piece on worker threads, after the handler has returned)."""
+    it = iter(parts)
+    while True:
+        with metered():
+            try:
+                part = next(it)
+            except StopIteration:
+                return
+        yield part
 
 
 class HeldBudget:
@@ -335,6 +421,12 @@ class Limits:
     vision_pixels: RateLimiter
     decode: HeldBudget
     plants: HeldBudget
+    reads: WindowBudget
+
+    def admit_read(self, client: str) -> Charge:
+        """Admit a read without a token from ``client`` (:class:`Busy` 429 when its allowance
+        is spent), charged its in-flight share (:data:`READS_IN_FLIGHT`) until settled."""
+        return self.reads.take(client, self.reads.capacity / READS_IN_FLIGHT)
 
     @classmethod
     def from_settings(cls, s: Settings) -> Limits:
@@ -351,4 +443,7 @@ class Limits:
                        "HELIOTWIN_VISION_DECODE_PIXELS, HELIOTWIN_VISION_QUEUE"),
             HeldBudget(PLANT_COMPUTATIONS, PLANT_QUEUE, 1.0, "plant computations",
                        "one plant day, sky map or sweep shade at a time"),
+            WindowBudget(s.ingest.anonymous_read_cpu_s_per_min, READ_WINDOW_S,
+                         "CPU seconds of reads (measurements, energy, reports, diagnosis, "
+                         "pointing, pointing model)", "HELIOTWIN_ANONYMOUS_READ_CPU_S_PER_MIN"),
         )

@@ -152,7 +152,7 @@ class DatabaseSettings(_Group):
 
 
 class IngestSettings(_Group):
-    """Bounds of logger batches and the energy rule's gap."""
+    """Bounds of logger batches and of reads of a site's data, and the energy rule's gap."""
 
     model_config = _config("HELIOTWIN_")
 
@@ -162,6 +162,12 @@ class IngestSettings(_Group):
     max_json_points: int = Field(
         200_000, gt=0, description="Most raw points one JSON measurements answer holds."
     )
+    anonymous_read_cpu_s_per_min: float = Field(
+        20.0, gt=0, description="CPU time [s] one client address may spend without a token "
+                                "in any minute on reads of a site's data (measurements, "
+                                "energy, reports, diagnosis, pointing, pointing model): each "
+                                "read charged the CPU time it took, its streamed body "
+                                "included; more → 429.")
     future_tolerance_s: int = Field(
         900, ge=0, description="How far past the server clock a reading may be stamped."
     )

@@ -13,13 +13,19 @@
 - :data:`VisionTokenDep`: when ``Settings.vision.require_token`` is set, a valid
   token of any site is needed (401 otherwise); gives that token's site id, or
   None when no token is needed and none was sent.
+
+:func:`anonymous_read` (a read route's ``**anonymous_read_route(responses)``) is the one
+rule of the reads of a site's data without a token: 429 with ``Retry-After`` when the
+caller's address has spent ``HELIOTWIN_ANONYMOUS_READ_CPU_S_PER_MIN``, then charged the
+CPU time the read took.
 """
 
 from __future__ import annotations
 
+import datetime as dt
 import hmac
-from collections.abc import Iterator
-from typing import Annotated, Literal
+from collections.abc import AsyncIterator, Iterator
+from typing import Annotated, Any, Literal
 
 import anyio
 from fastapi import Depends, HTTPException, Query, Request
@@ -27,8 +33,10 @@ from sqlalchemy.orm import Session
 
 from backend.auth import Grant, TokenRefused, scope_allows
 from backend.context import ServiceContext
+from backend.limits import Busy, start_meter
 from backend.settings import Settings
 from backend.sites import SiteInfo
+from backend.timestamps import parse_range
 
 _BEARER = {"WWW-Authenticate": "Bearer"}
 
@@ -64,6 +72,18 @@ def site_or_404(ctx: ServiceContext, site_id: str) -> SiteInfo:
         known = ", ".join(ctx.registry.sites) or "none"
         raise HTTPException(404, f"unknown site {site_id!r}; known sites: {known}")
     return info
+
+
+def site_range(ctx: ServiceContext, site_id: str, start: str, end: str
+               ) -> tuple[SiteInfo, dt.datetime, dt.datetime]:
+    """The site of a read (404, :func:`site_or_404`) and its ``[start, end)`` in the site's
+    zone (``backend.timestamps.parse_range``: 422 naming the field that is wrong)."""
+    info = site_or_404(ctx, site_id)
+    try:
+        t0, t1 = parse_range(start, end, info.zone)
+    except ValueError as exc:
+        raise HTTPException(422, str(exc)) from None
+    return info, t0, t1
 
 
 def bearer_token(request: Request) -> str | None:
@@ -202,6 +222,49 @@ CallerDep = Annotated[Caller, Depends(optional_caller)]
 VisionTokenDep = Annotated[str | None, Depends(vision_token)]
 
 
+def client_address(request: Request) -> str:
+    """The caller's address (``request.client.host``; behind a proxy, uvicorn's
+    ``--forwarded-allow-ips`` makes it the client's), by which anonymous work is counted."""
+    return request.client.host if request.client else "?"
+
+
+async def anonymous_read(request: Request, caller: CallerDep) -> AsyncIterator[None]:
+    """Dependency of a read of a site's data: without a token, 429 with ``Retry-After``
+    when the caller's address has spent its allowance in the last minute
+    (``HELIOTWIN_ANONYMOUS_READ_CPU_S_PER_MIN``); the read is then charged the CPU time
+    its :func:`backend.limits.metered` work took — the handler's and, as the exit code of
+    this dependency runs once the response is sent, its streamed body's. A caller with a
+    valid token is not limited (a bad token is a 401)."""
+    if caller is not None:
+        yield
+        return
+    limits = request.app.state.ctx.limits
+    try:
+        charge = limits.admit_read(client_address(request))
+    except Busy as exc:
+        raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
+    meter = start_meter()
+    try:
+        yield
+    finally:
+        limits.reads.settle(charge, meter.cpu_s)
+
+
+#: The answers :func:`anonymous_read` adds to a route's OpenAPI ``responses``.
+_ANONYMOUS_READ_RESPONSES: dict[int | str, dict[str, Any]] = {
+    401: {"description": "a token was sent but is unknown, expired or revoked"},
+    429: {"description": "without a token, this address's CPU time of reads in the last "
+                         "minute is spent (HELIOTWIN_ANONYMOUS_READ_CPU_S_PER_MIN); see "
+                         "Retry-After"}}
+
+
+def anonymous_read_route(responses: dict[int | str, dict[str, Any]]) -> dict[str, Any]:
+    """The arguments of a read route (``@router.get(path, **anonymous_read_route({...}))``):
+    :func:`anonymous_read` as a dependency, its 401 and 429 beside the route's ``responses``,
+    and a ``security`` of anonymous or a bearer token (not limited)."""
+    return {"dependencies": [Depends(anonymous_read)],
+            "responses": {**responses, **_ANONYMOUS_READ_RESPONSES},
+            "openapi_extra": {"security": [{}, {"bearerAuth": []}]}}
 
 RangeStart = Annotated[str, Query(min_length=1, max_length=64,
                                   description="date (site midnight) or ISO date-time, inclusive")]

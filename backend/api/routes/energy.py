@@ -10,6 +10,9 @@ than ``HELIOTWIN_ENERGY_MAX_GAP_S`` (see ``docs/service.md``).
 
 ``/api/v1/sites/{site_id}/report`` (JSON), ``report.csv`` and ``report.png`` give the
 totals, daily, monthly and annual tables of a range (``backend/reports.py``).
+
+Without a token each of these reads is charged the CPU time it took to the address's
+``HELIOTWIN_ANONYMOUS_READ_CPU_S_PER_MIN`` (``backend.api.deps.anonymous_read``).
 """
 
 from __future__ import annotations
@@ -23,17 +26,23 @@ from typing import Annotated, Any, Literal
 
 import anyio
 import orjson
-from fastapi import APIRouter, HTTPException, Query
+from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
-from backend.api.deps import ContextDep, RangeEnd, RangeStart, site_or_404
+from backend.api.deps import (
+    ContextDep,
+    RangeEnd,
+    RangeStart,
+    anonymous_read_route,
+    site_range,
+)
 from backend.api.routes.health import service_version
 from backend.api.schemas.common import CSV_CONTENT, PNG_CONTENT
 from backend.api.schemas.energy import EnergyRead, ReportRead
 from backend.diagnosis.weather_twin import weather_twin_energy
+from backend.limits import run_metered
 from backend.measurements.energy import energy_rows
 from backend.reports import report, report_csv, report_png
-from backend.timestamps import parse_range
 
 router = APIRouter(prefix="/api/v1/sites", tags=["energy"])
 
@@ -59,7 +68,7 @@ def read_limiter() -> anyio.CapacityLimiter:
 
 
 @router.get("/{site_id}/energy", response_model=EnergyRead,
-            responses={200: {"content": CSV_CONTENT}, 404: {}, 422: {}})
+            **anonymous_read_route({200: {"content": CSV_CONTENT}, 404: {}, 422: {}}))
 async def get_energy(
     site_id: str,
     ctx: ContextDep,
@@ -73,17 +82,13 @@ async def get_energy(
     ))] = None,
 ) -> Response:
     """Energy per period for every array, measured and twin, with the tracking gain."""
-    return await anyio.to_thread.run_sync(_energy, site_id, ctx, start, end, interval, format,
-                                          source, limiter=read_limiter())
+    return await anyio.to_thread.run_sync(run_metered, _energy, site_id, ctx, start, end,
+                                          interval, format, source, limiter=read_limiter())
 
 
 def _energy(site_id: str, ctx: ContextDep, start: str, end: str, interval: str, format: str,
             source: str | None) -> Response:
-    info = site_or_404(ctx, site_id)
-    try:
-        t0, t1 = parse_range(start, end, info.zone)
-    except ValueError as exc:
-        raise HTTPException(422, str(exc)) from None
+    info, t0, t1 = site_range(ctx, site_id, start, end)
     data = energy_rows(ctx, info, t0, t1, interval)
     if source == "twin_weather":
         weather_twin_energy(ctx, info, data)
@@ -117,17 +122,14 @@ async def _report(ctx: ContextDep, site_id: str, start: str, end: str,
                   shape: Callable[[dict[str, Any]], Any] = lambda rep: rep) -> Any:
     """``shape`` of the report of a range, on AnyIO's pool under :func:`read_limiter`."""
     def work() -> Any:
-        info = site_or_404(ctx, site_id)
-        try:
-            t0, t1 = parse_range(start, end, info.zone)
-        except ValueError as exc:
-            raise HTTPException(422, str(exc)) from None
+        info, t0, t1 = site_range(ctx, site_id, start, end)
         return shape(report(ctx, info, t0, t1))
 
-    return await anyio.to_thread.run_sync(work, limiter=read_limiter())
+    return await anyio.to_thread.run_sync(run_metered, work, limiter=read_limiter())
 
 
-@router.get("/{site_id}/report", response_model=ReportRead, responses={404: {}, 422: {}})
+@router.get("/{site_id}/report", response_model=ReportRead,
+            **anonymous_read_route({404: {}, 422: {}}))
 async def get_report(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
                      end: Annotated[str, _RANGE["end"]]) -> Response:
     """Totals, daily, monthly and annual energy, gain and performance ratio of a range."""
@@ -135,9 +137,8 @@ async def get_report(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE
     return Response(body, media_type="application/json")
 
 
-@router.get("/{site_id}/report.csv", response_class=Response,
-            responses={200: {"content": CSV_CONTENT, "description": "the report as CSV"},
-                       404: {}, 422: {}})
+@router.get("/{site_id}/report.csv", response_class=Response, **anonymous_read_route(
+    {200: {"content": CSV_CONTENT, "description": "the report as CSV"}, 404: {}, 422: {}}))
 async def get_report_csv(site_id: str, ctx: ContextDep,
                          start: Annotated[str, _RANGE["start"]],
                          end: Annotated[str, _RANGE["end"]]) -> Response:
@@ -148,9 +149,8 @@ async def get_report_csv(site_id: str, ctx: ContextDep,
                     headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
 
-@router.get("/{site_id}/report.png", response_class=Response,
-            responses={200: {"content": PNG_CONTENT, "description": "an A4 PNG page"},
-                       404: {}, 422: {}})
+@router.get("/{site_id}/report.png", response_class=Response, **anonymous_read_route(
+    {200: {"content": PNG_CONTENT, "description": "an A4 PNG page"}, 404: {}, 422: {}}))
 async def get_report_png(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
                          end: Annotated[str, _RANGE["end"]]) -> Response:
     """A one-page A4 PNG report of the range (matplotlib), for a paper or a logbook."""

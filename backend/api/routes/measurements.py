@@ -25,11 +25,18 @@ from fastapi.responses import Response, StreamingResponse
 from starlette.routing import compile_path
 
 from backend.api import strict
-from backend.api.deps import ContextDep, check_site_token, site_or_404
+from backend.api.deps import (
+    ContextDep,
+    anonymous_read_route,
+    check_site_token,
+    site_or_404,
+    site_range,
+)
 from backend.api.schemas.measurements import IngestResult, MeasurementsRead, ingest_request_body
 from backend.context import ServiceContext
 from backend.diagnosis.weather_twin import weather_twin_columns
 from backend.errors import InputError
+from backend.limits import metered, metered_iter
 from backend.measurements import ingest
 from backend.measurements.export import influx_lines
 from backend.measurements.parse import IngestError, Limits, body_error
@@ -42,7 +49,6 @@ from backend.measurements.queries import (
     sensor_columns,
 )
 from backend.storage.tables import SOURCE_CODES
-from backend.timestamps import parse_range
 
 logger = logging.getLogger(__name__)
 router = APIRouter(prefix="/api/v1/sites", tags=["measurements"])
@@ -116,14 +122,6 @@ async def post_measurements(site_id: str, request: Request) -> IngestResult | Re
     return answer
 
 
-def _range(info: Any, start: str, end: str) -> tuple[int, int]:
-    try:
-        t0, t1 = parse_range(start, end, info.zone)
-    except ValueError as exc:
-        raise HTTPException(422, str(exc)) from None
-    return int(t0.timestamp()), int(t1.timestamp())
-
-
 def _blank_nan(col: list[Any]) -> list[Any]:
     if not col or type(col[0]) is str:
         return col
@@ -162,7 +160,7 @@ _GET_TEXT: dict[int | str, dict[str, Any]] = {200: {"content": {
 
 
 @router.get(_PATH, response_model=MeasurementsRead,
-            responses={**_GET_TEXT, 404: {}, 422: {}})
+            **anonymous_read_route({**_GET_TEXT, 404: {}, 422: {}}))
 def get_measurements(
     site_id: str,
     request: Request,
@@ -180,49 +178,52 @@ def get_measurements(
         "31 days; the answer's sky says what it rests on)"))] = "measured",
     format: Literal["json", "csv", "influx"] | None = None,
 ) -> Response:
-    """Readings of one array over a range: raw, or min/mean/max buckets past ``max_points``."""
-    info = site_or_404(ctx, site_id)
-    if array not in info.arrays:
-        raise HTTPException(422, f"array: unknown array {array[:40]!r}; "
-                                 f"this site has {', '.join(info.arrays)}")
-    t0, t1 = _range(info, start, end)
-    want_text = format in ("csv", "influx") or (  # streamed: no max_json_points
-        format is None and "text/csv" in request.headers.get("accept", ""))
-    if source == "twin":
-        ctx.twin.ensure(site_id, t0, t1)
-    arr = info.arrays[array]
-    cols: dict[str, list[Any]]
-    if source == "twin_weather":
-        cols, sky = weather_twin_columns(ctx, info, array, t0, t1)  # InputError: a 4xx
-        n = len(cols["ts"])
-        bucket_s = 0
-        if max_points is not None and n > max_points:
-            cols, bucket_s = _minute_buckets(cols, max_points)
-        return _answer(request, site_id, array, source, start, end, t0, t1, format, cols,
-                       bucket_s, n, sky)
-    src = SOURCE_CODES[source]
-    with ctx.engine.connect() as conn:
-        n = count_rows(conn, arr.array_id, src, t0, t1, info.phase_s)
-        limit = max_points if max_points is not None else (
-            None if want_text else ctx.settings.ingest.max_json_points)
-        if limit is not None and n > limit and max_points is None:
-            raise HTTPException(422, f"{n} readings in the range; pass max_points (buckets) or "
-                                     "format=csv or format=influx for all of them")
-        if limit is None or n <= limit:
-            rows = raw_rows(conn, arr.array_id, src, t0, t1, sensors=src == SOURCE_CODES[
-                "measured"])
+    """Readings of one array over a range: raw, or min/mean/max buckets past ``max_points``.
+    Without a token the CPU time of the read (a streamed CSV or line protocol body
+    included) comes out of the address's ``HELIOTWIN_ANONYMOUS_READ_CPU_S_PER_MIN``."""
+    with metered():
+        info, start_dt, end_dt = site_range(ctx, site_id, start, end)
+        if array not in info.arrays:
+            raise HTTPException(422, f"array: unknown array {array[:40]!r}; "
+                                     f"this site has {', '.join(info.arrays)}")
+        t0, t1 = int(start_dt.timestamp()), int(end_dt.timestamp())
+        want_text = format in ("csv", "influx") or (  # streamed: no max_json_points
+            format is None and "text/csv" in request.headers.get("accept", ""))
+        if source == "twin":
+            ctx.twin.ensure(site_id, t0, t1)
+        arr = info.arrays[array]
+        cols: dict[str, list[Any]]
+        if source == "twin_weather":
+            cols, sky = weather_twin_columns(ctx, info, array, t0, t1)  # InputError: a 4xx
+            n = len(cols["ts"])
             bucket_s = 0
-            cols = {"ts": iso_utc(rows[:, 0].astype(np.int64))}
-            for j, q in enumerate(QUANTITIES):
-                cols[q] = rows[:, j + 1].tolist()
-            if rows.shape[1] > 4:
-                cols.update(sensor_columns(rows))
-        else:
-            b = downsample(conn, arr.array_id, src, t0, t1, limit, info.phase_s)
-            bucket_s = b.width_s
-            cols = b.points()
-    return _answer(request, site_id, array, source, start, end, t0, t1, format, cols,
-                   bucket_s, n, None)
+            if max_points is not None and n > max_points:
+                cols, bucket_s = _minute_buckets(cols, max_points)
+            return _answer(request, site_id, array, source, start, end, t0, t1, format, cols,
+                           bucket_s, n, sky)
+        src = SOURCE_CODES[source]
+        with ctx.engine.connect() as conn:
+            n = count_rows(conn, arr.array_id, src, t0, t1, info.phase_s)
+            limit = max_points if max_points is not None else (
+                None if want_text else ctx.settings.ingest.max_json_points)
+            if limit is not None and n > limit and max_points is None:
+                raise HTTPException(422, f"{n} readings in the range; pass max_points (buckets) or "
+                                         "format=csv or format=influx for all of them")
+            if limit is None or n <= limit:
+                rows = raw_rows(conn, arr.array_id, src, t0, t1, sensors=src == SOURCE_CODES[
+                    "measured"])
+                bucket_s = 0
+                cols = {"ts": iso_utc(rows[:, 0].astype(np.int64))}
+                for j, q in enumerate(QUANTITIES):
+                    cols[q] = rows[:, j + 1].tolist()
+                if rows.shape[1] > 4:
+                    cols.update(sensor_columns(rows))
+            else:
+                b = downsample(conn, arr.array_id, src, t0, t1, limit, info.phase_s)
+                bucket_s = b.width_s
+                cols = b.points()
+        return _answer(request, site_id, array, source, start, end, t0, t1, format, cols,
+                       bucket_s, n, None)
 
 
 def _answer(request: Request, site_id: str, array: str, source: str, start: str, end: str,
@@ -232,11 +233,11 @@ def _answer(request: Request, site_id: str, array: str, source: str, start: str,
     want_csv = format == "csv" or (format is None and "text/csv" in
                                    request.headers.get("accept", ""))
     if format == "influx":
-        return StreamingResponse(influx_lines(site_id, array, source, cols),
+        return StreamingResponse(metered_iter(influx_lines(site_id, array, source, cols)),
                                  media_type="text/plain; charset=utf-8")
     if want_csv:
         name = f"{site_id}_{array}_{source}_{start}_{end}.csv".replace(":", "")
-        return StreamingResponse(_csv_lines(list(cols), list(cols.values())),
+        return StreamingResponse(metered_iter(_csv_lines(list(cols), list(cols.values()))),
                                  media_type="text/csv",
                                  headers={"Content-Disposition": f'attachment; filename="{name}"'})
     keys = list(cols)

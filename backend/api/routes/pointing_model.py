@@ -17,7 +17,15 @@ import orjson
 from fastapi import APIRouter, HTTPException, Query, Request
 from starlette.datastructures import FormData, UploadFile
 
-from backend.api.deps import ContextDep, RangeEnd, RangeStart, check_site_token, site_or_404
+from backend.api.deps import (
+    ContextDep,
+    RangeEnd,
+    RangeStart,
+    anonymous_read_route,
+    check_site_token,
+    site_or_404,
+    site_range,
+)
 from backend.api.forms import read_form
 from backend.api.schemas.pointing_model import (
     PointingCommandRead,
@@ -38,7 +46,7 @@ from backend.diagnosis.pointing_model import (
     remember_range_fit,
     residual_points,
 )
-from backend.limits import Busy
+from backend.limits import Busy, metered
 from backend.measurements import ingest
 from backend.measurements.parse import IngestError, Limits, parse_json_batch
 from backend.measurements.queries import iso_utc
@@ -51,12 +59,8 @@ from vision.cameras import PinholeCamera, camera_from_params
 router = APIRouter(prefix="/api/v1/sites", tags=["pointing-model"])
 
 
-def _fit(ctx: ServiceContext, info: SiteInfo, start: str, end: str
+def _fit(ctx: ServiceContext, info: SiteInfo, t0: dt.datetime, t1: dt.datetime
          ) -> tuple[np.ndarray, PointingFit]:
-    try:
-        t0, t1 = parse_range(start, end, info.zone)
-    except ValueError as exc:
-        raise HTTPException(422, str(exc)) from None
     try:
         with ctx.engine.connect() as conn:  # closed before the fit: it holds no connection
             rows = observations(conn, info, t0, t1)
@@ -66,7 +70,7 @@ def _fit(ctx: ServiceContext, info: SiteInfo, start: str, end: str
 
 
 @router.get("/{site_id}/pointing-model", response_model=PointingModelPointsRead,
-            responses={404: {}, 422: {}})
+            **anonymous_read_route({404: {}, 422: {}}))
 def get_pointing_model(
     site_id: str, ctx: ContextDep, start: RangeStart, end: RangeEnd,
     max_points: Annotated[int, Query(ge=1, le=MAX_POINTS, description=(
@@ -74,23 +78,33 @@ def get_pointing_model(
 ) -> PointingModelPointsRead:
     """Mount terms with standard errors from the tracker's readings with sun offsets in
     ``[start, end)``; outliers (glints) rejected; which terms the sky coverage separates;
-    the observations' offsets and residuals (``points``, at most ``max_points``)."""
-    info = site_or_404(ctx, site_id)
-    rows, fit = _fit(ctx, info, start, end)
-    return PointingModelPointsRead.model_validate(
-        {**model_body(info, fit), "points": residual_points(rows, info, fit, max_points)})
+    the observations' offsets and residuals (``points``, at most ``max_points``). Without a
+    token its CPU time comes out of the address's ``HELIOTWIN_ANONYMOUS_READ_CPU_S_PER_MIN``."""
+    with metered():
+        info, t0, t1 = site_range(ctx, site_id, start, end)
+        rows, fit = _fit(ctx, info, t0, t1)
+        return PointingModelPointsRead.model_validate(
+            {**model_body(info, fit), "points": residual_points(rows, info, fit, max_points)})
 
 
 @router.get("/{site_id}/pointing-model/command", response_model=PointingCommandRead,
-            responses={404: {}, 422: {}})
+            **anonymous_read_route({404: {}, 422: {}}))
 def get_pointing_command(
     site_id: str, ctx: ContextDep, start: RangeStart, end: RangeEnd,
     time: Annotated[str, Query(min_length=1, max_length=64,
                                description="ISO date-time with offset")],
 ) -> PointingCommandRead:
     """Encoder angles to command at ``time`` so the real optical axis points at the sun,
-    under the model fitted from ``[start, end)``."""
-    info = site_or_404(ctx, site_id)
+    under the model fitted from ``[start, end)`` (remembered for the range's observations
+    as they are: a command under it reads no rows). Without a token its CPU time comes out
+    of the address's ``HELIOTWIN_ANONYMOUS_READ_CPU_S_PER_MIN``."""
+    with metered():
+        return _command(ctx, site_or_404(ctx, site_id), start, end, time)
+
+
+def _command(ctx: ServiceContext, info: SiteInfo, start: str, end: str, time: str
+             ) -> PointingCommandRead:
+    """The answer of :func:`get_pointing_command` for a known site."""
     try:
         when: dt.datetime = parse_instant(time, "time")
         t0, t1 = parse_range(start, end, info.zone)
