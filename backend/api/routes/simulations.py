@@ -223,7 +223,11 @@ def get_simulation(run_id: str, ctx: ContextDep) -> Response:
 async def cancel_simulation(run_id: str, ctx: ContextDep) -> Response:
     """Cancel a queued or running run; its state once it has ended (``failed`` with the
     error ``cancelled``, or as it was if it had already ended). Answered as stored, as
-    :func:`get_simulation` is (a run stored by an older version keeps its summary)."""
+    :func:`get_simulation` is (a run stored by an older version keeps its summary).
+
+    No token is needed, for a run made with one too: the ``run_id`` is the capability (a
+    uuid4, 122 random bits, returned only to the caller that started the run and listed
+    nowhere), as for ``GET``; share it as a private link (``docs/service.md``, "Limits")."""
     state = await anyio.to_thread.run_sync(ctx.simulations.cancel, run_id)
     if state is None:
         raise HTTPException(404, f"unknown simulation run {run_id!r}")
