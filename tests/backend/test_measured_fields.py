@@ -139,6 +139,21 @@ def test_sensor_fields_over_json_and_csv_are_stored_as_sent(
     assert second["wind_speed_m_s"] == "0.8"
 
 
+def test_the_readings_schema_lists_every_sensor_field_with_its_range(
+        client: httpx.Client) -> None:
+    """The OpenAPI schema of a reading shows each optional sensor field (one list:
+    ``SENSOR_FIELDS``) with its bounds, the wind speed of issue 27 among them."""
+    from backend.measurements.fields import SENSOR_FIELDS
+
+    ops = client.get("/openapi.json").json()["paths"]["/api/v1/sites/{site_id}/measurements"]
+    readings = ops["post"]["requestBody"]["content"]["application/json"]["schema"]["oneOf"][0]
+    props = readings["properties"]["readings"]["items"]["properties"]
+    for f in SENSOR_FIELDS:
+        number = next(x for x in props[f.name]["anyOf"] if x.get("type") == "number")
+        assert (number["minimum"], number["maximum"]) == (f.low, f.high), f.name
+    assert props["wind_speed_m_s"]["anyOf"][0]["maximum"] == 113.3
+
+
 def test_emoncms_rows_with_null_voltage_are_power_only(
         client: httpx.Client, live_server: LiveServer) -> None:
     t = int(dt.datetime(2023, 2, 6, 12, tzinfo=TZ).timestamp())
