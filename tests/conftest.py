@@ -1,4 +1,5 @@
-"""The order of the suite: the modules that hold a long test run first.
+"""The order of the suite (the modules that hold a long test run first), and the
+``heliotwin_cli`` fixture (a CLI command run in this process).
 
 ``make test`` spreads the modules over two pytest-xdist workers (``--dist loadfile``), each
 module whole on one worker, handed out in collection order (``--no-loadscope-reorder``).
@@ -10,6 +11,10 @@ xdist requires; a run without xdist is left in pytest's own order.
 """
 
 from __future__ import annotations
+
+import os
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 
 import pytest
 
@@ -29,3 +34,42 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         return
     long_modules = {item.nodeid.split("::", 1)[0] for item in items if _is_long(item)}
     items.sort(key=lambda item: item.nodeid.split("::", 1)[0] not in long_modules)
+
+
+@dataclass
+class CliRun:
+    """What a ``heliotwin`` command left: its exit code and what it printed."""
+
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+@pytest.fixture
+def heliotwin_cli(capsys: pytest.CaptureFixture[str],
+                  monkeypatch: pytest.MonkeyPatch) -> Callable[..., CliRun]:
+    """``heliotwin ARGS`` in this process: ``backend.cli.main`` (the console script's
+    function: same parser, dispatch, error line and exit code), its stdout and stderr
+    captured. ``env`` gives the ``HELIOTWIN_*`` settings the command sees (none of this
+    run's others), as the environment of a subprocess would. A process costs about a
+    second of imports, so the CLI tests keep one or two real processes (the entry point, a
+    terminal, a closed pipe) and run the rest here."""
+    from backend.cli import main
+
+    def run(*args: str, env: Mapping[str, str] | None = None) -> CliRun:
+        with monkeypatch.context() as m:
+            if env is not None:
+                for name in [k for k in os.environ if k.startswith("HELIOTWIN_")]:
+                    m.delenv(name)
+                for name, value in env.items():
+                    if name.startswith("HELIOTWIN_"):
+                        m.setenv(name, value)
+            capsys.readouterr()  # what the test printed before is not the command's
+            try:
+                code = main(list(args))
+            except SystemExit as exc:  # argparse's usage errors exit 2
+                code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+            out = capsys.readouterr()
+        return CliRun(code, out.out, out.err)
+
+    return run

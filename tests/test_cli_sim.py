@@ -1,4 +1,10 @@
-"""``heliotwin sun`` and ``heliotwin simulate`` as a user runs them (subprocess)."""
+"""``heliotwin sun`` and ``heliotwin simulate`` as a user runs them.
+
+Through a real process where the process is the point: the entry point itself (``python -m
+backend``: the NREL SPA case), a terminal for the progress bar, a closed pipe. The others run
+``backend.cli.main`` in this process (``heliotwin_cli``: the same parser, dispatch, output and
+exit code, without a second of imports per command).
+"""
 
 import csv
 import json
@@ -51,8 +57,8 @@ def test_sun_reproduces_nrel_spa_reference() -> None:
     assert d["apparent_elevation_deg"] == pytest.approx(90 - d["apparent_zenith_deg"])
 
 
-def test_sun_duffie_beckman_and_naive_time() -> None:
-    p = heliotwin(
+def test_sun_duffie_beckman_and_naive_time(heliotwin_cli) -> None:
+    p = heliotwin_cli(
         "sun",
         "--lat",
         "16.28875",
@@ -66,13 +72,14 @@ def test_sun_duffie_beckman_and_naive_time() -> None:
     )
     assert p.returncode == 0, p.stderr
     assert json.loads(p.stdout)["method"] == "duffie-beckman"
-    p = heliotwin("sun", "--lat", "16", "--lon", "-95", "--time", "2024-03-15T12:00:00", "--json")
+    p = heliotwin_cli("sun", "--lat", "16", "--lon", "-95", "--time", "2024-03-15T12:00:00",
+                      "--json")
     assert p.returncode == 2 and "offset" in p.stderr
 
 
-def test_simulate_one_day_json_and_csv(tmp_path) -> None:
+def test_simulate_one_day_json_and_csv(tmp_path, heliotwin_cli) -> None:
     out = tmp_path / "day.csv"
-    p = heliotwin(
+    p = heliotwin_cli(
         "simulate",
         "--site",
         "tehuantepec",
@@ -124,13 +131,14 @@ def test_simulate_one_day_json_and_csv(tmp_path) -> None:
         (["--start", "2024-03-15", "--end", "2024-03-16", "--controller", "pid"], "ideal"),
     ],
 )
-def test_simulate_errors_exit_2(args, message) -> None:
-    p = heliotwin("simulate", *args, "--json")
+def test_simulate_errors_exit_2(args, message, heliotwin_cli) -> None:
+    p = heliotwin_cli("simulate", *args, "--json")
     assert p.returncode == 2
     assert message in p.stderr and p.stdout == ""
 
 
-def test_open_loop_model_reads_a_saved_pointing_model_answer(tmp_path: Path) -> None:
+def test_open_loop_model_reads_a_saved_pointing_model_answer(tmp_path: Path,
+                                                             heliotwin_cli) -> None:
     """``--pointing-model-terms FILE``: the answer of GET …/pointing-model saved as it came
     (its ``terms`` with values and standard errors)."""
     saved = tmp_path / "model.json"
@@ -140,8 +148,8 @@ def test_open_loop_model_reads_a_saved_pointing_model_answer(tmp_path: Path) -> 
         "terms": {"azimuth_zero_deg": {"value": 2.0, "std": 0.02},
                   "elevation_zero_deg": {"value": 0.0, "std": 0.02}}}))
     day = ["--start", "2024-03-15T10:00-06:00", "--end", "2024-03-15T14:00-06:00"]
-    p = heliotwin("simulate", *day, "--controller", "open_loop_model", "--pedestal-yaw-deg",
-                  "2", "--pointing-model-terms", str(saved), "--json")
+    p = heliotwin_cli("simulate", *day, "--controller", "open_loop_model",
+                      "--pedestal-yaw-deg", "2", "--pointing-model-terms", str(saved), "--json")
     assert p.returncode == 0, p.stderr
     d = json.loads(p.stdout)
     assert d["controller"] == "open_loop_model"
@@ -157,18 +165,14 @@ def test_open_loop_model_reads_a_saved_pointing_model_answer(tmp_path: Path) -> 
     ("no/such/model.json", "--pointing-model-terms: cannot read"),
 ])
 def test_bad_pointing_model_terms_exit_2_naming_the_flag(terms: str, message: str,
-                                                         capsys) -> None:
-    from backend.cli import main  # in process: the parse fails before anything runs
-
-    code = main(["simulate", "--start", "2024-03-15", "--end", "2024-03-16", "--controller",
-                 "open_loop_model", "--pointing-model-terms", terms, "--json"])
-    out = capsys.readouterr()
-    assert code == 2 and message in out.err and out.out == ""
+                                                         heliotwin_cli) -> None:
+    p = heliotwin_cli("simulate", "--start", "2024-03-15", "--end", "2024-03-16",
+                      "--controller", "open_loop_model", "--pointing-model-terms", terms, "--json")
+    assert p.returncode == 2 and message in p.stderr and p.stdout == ""
 
 
 def test_progress_bar_only_on_a_terminal() -> None:
     import fcntl
-    import os
     import pty
     import struct
     import termios
@@ -185,7 +189,7 @@ def test_progress_bar_only_on_a_terminal() -> None:
             "--start",
             "2024-01-01",
             "--end",
-            "2024-03-01",
+            "2024-01-16",  # 21,600 steps: over the bar's 20,000 (backend/cli/simulate.py)
         ],
         stdout=subprocess.PIPE,
         stderr=slave,
@@ -231,42 +235,32 @@ def _greensboro_sites(tmp_path: Path) -> Path:
 
 
 @pytest.mark.slow
-def test_the_year_on_a_distant_tmy3_is_a_choice_then_runs_with_units_in_the_csv(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_the_year_on_a_distant_tmy3_is_a_choice_then_runs(heliotwin_cli) -> None:
     """The issue's command: a whole year on pvlib's Greensboro TMY3 at the Tehuantepec site.
     The year wraps (no "weather covers"); the station 2,672 km away is refused without
-    --force (in process: the refusal comes before any run); with it the run covers the
-    leap year at 1 min and its CSV names every unit."""
-    from backend.cli import main
-
+    --force; with it the run covers the leap year at 1 min. (The CSV of a weather run is
+    checked on a month below: one ``to_csv`` writes a month as a year, and a year's 93 MB
+    cost 6 s of this test's 8.)"""
     args = ["simulate", "--site", "tehuantepec", "--start", "2024-01-01", "--end",
             "2025-01-01", "--tmy3", str(_tmy3())]
-    assert main([*args, "--json"]) == 2
-    refused = capsys.readouterr()
-    assert refused.out == ""
-    assert "--tmy3:" in refused.err and "km from site tehuantepec" in refused.err
-    assert "--force" in refused.err and "weather covers" not in refused.err
-    out = tmp_path / "year.csv"
-    p = heliotwin(*args, "--force", "--json", "--csv", str(out))
+    refused = heliotwin_cli(*args, "--json")
+    assert refused.returncode == 2 and refused.stdout == ""
+    assert "--tmy3:" in refused.stderr and "km from site tehuantepec" in refused.stderr
+    assert "--force" in refused.stderr and "weather covers" not in refused.stderr
+    p = heliotwin_cli(*args, "--force", "--json")
     assert p.returncode == 0, p.stderr
     d = json.loads(p.stdout)
     assert d["sky"] == "weather" and d["steps"] == 366 * 1440
+    assert d["start"] == "2024-01-01T00:00:00-06:00" and d["tracker_energy_wh"] > 0
     assert d["weather"]["format"] == "tmy3" and d["weather"]["forced"] is True
     assert d["weather"]["distance_km"] == pytest.approx(2672, abs=5)  # haversine, R 6371 km
-    with out.open() as f:
-        reader = csv.reader(f)
-        header = next(reader)
-        first = next(reader)
-        n = 1 + sum(1 for _ in reader)
-    assert n == 366 * 1440 and header[:2] == ["time_utc", "time_local"]
-    assert first[:2] == ["2024-01-01T06:00:00+00:00", "2024-01-01T00:00:00-06:00"]
-    assert all(h.endswith(UNIT_ENDINGS) for h in header[2:]), header
 
 
 def test_a_tmy3_at_its_station_needs_no_force_and_matches_pvlibs_own_year(
-        tmp_path: Path) -> None:
+        tmp_path: Path, heliotwin_cli) -> None:
     """A site at the station: no refusal; the energy equals the twin run on pvlib's
-    ``read_tmy3(coerce_year=2023)`` weather (pvlib's year coercion, not ours)."""
+    ``read_tmy3(coerce_year=2023)`` weather (pvlib's year coercion, not ours); the CSV of
+    the weather run names every unit and the local time (EST in March, before DST)."""
     import pandas as pd
 
     from sim.sites import load_site
@@ -274,12 +268,22 @@ def test_a_tmy3_at_its_station_needs_no_force_and_matches_pvlibs_own_year(
     from sim.twin import simulate
 
     sites = _greensboro_sites(tmp_path)
-    p = heliotwin("simulate", "--site", "greensboro", "--sites-dir", str(sites), "--start",
-                  "2023-03-01", "--end", "2023-04-01", "--step-s", "300", "--tmy3",
-                  str(_tmy3()), "--json")
+    out = tmp_path / "march.csv"
+    p = heliotwin_cli("simulate", "--site", "greensboro", "--sites-dir", str(sites), "--start",
+                      "2023-03-01", "--end", "2023-04-01", "--step-s", "300", "--tmy3",
+                      str(_tmy3()), "--json", "--csv", str(out))
     assert p.returncode == 0, p.stderr
     d = json.loads(p.stdout)
     assert d["weather"]["distance_km"] == 0.0 and d["weather"]["forced"] is False
+    with out.open() as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        first = next(reader)
+        n = 1 + sum(1 for _ in reader)
+    # local midnight to local midnight: 12 March springs forward, an hour (12 steps) fewer
+    assert n == d["steps"] == 31 * 288 - 12 and header[:2] == ["time_utc", "time_local"]
+    assert first[:2] == ["2023-03-01T05:00:00+00:00", "2023-03-01T00:00:00-05:00"]
+    assert all(h.endswith(UNIT_ENDINGS) for h in header[2:]), header
     site = load_site("greensboro", sites)
     weather, _ = read_tmy3(_tmy3(), coerce_year=2023)
     ref = simulate(site, pd.Timestamp("2023-03-01", tz=site.timezone),
@@ -290,7 +294,7 @@ def test_a_tmy3_at_its_station_needs_no_force_and_matches_pvlibs_own_year(
 
 
 @pytest.mark.slow
-def test_an_epw_file_runs_as_its_tmy3_twin(tmp_path: Path) -> None:
+def test_an_epw_file_runs_as_its_tmy3_twin(tmp_path: Path, heliotwin_cli) -> None:
     """The same Greensboro hours written as EPW (tests/sim/test_sky.py ``write_epw``) give the
     same run as the TMY3 file; --tmy3 and --epw exclude each other."""
     import importlib.util
@@ -303,18 +307,18 @@ def test_an_epw_file_runs_as_its_tmy3_twin(tmp_path: Path) -> None:
     sites = _greensboro_sites(tmp_path)
     common = ["simulate", "--site", "greensboro", "--sites-dir", str(sites), "--start",
               "2024-12-30", "--end", "2025-01-03", "--step-s", "600", "--json"]
-    by_epw = heliotwin(*common, "--epw", str(epw))
-    by_tmy3 = heliotwin(*common, "--tmy3", str(_tmy3()))
+    by_epw = heliotwin_cli(*common, "--epw", str(epw))
+    by_tmy3 = heliotwin_cli(*common, "--tmy3", str(_tmy3()))
     assert by_epw.returncode == 0 and by_tmy3.returncode == 0, by_epw.stderr + by_tmy3.stderr
     e, t = json.loads(by_epw.stdout), json.loads(by_tmy3.stdout)
     assert e["weather"]["format"] == "epw" and t["weather"]["format"] == "tmy3"
     assert e["tracker_energy_wh"] == pytest.approx(t["tracker_energy_wh"], rel=1e-12)
     assert e["tracker_energy_wh"] > 0  # the new year's days are on the typical year too
-    both = heliotwin(*common, "--epw", str(epw), "--tmy3", str(_tmy3()))
+    both = heliotwin_cli(*common, "--epw", str(epw), "--tmy3", str(_tmy3()))
     assert both.returncode == 2 and "not allowed with" in both.stderr
     junk = tmp_path / "junk.epw"
     junk.write_text("hello\n")
-    bad = heliotwin(*common, "--epw", str(junk))
+    bad = heliotwin_cli(*common, "--epw", str(junk))
     assert bad.returncode == 2 and "--epw: cannot read" in bad.stderr
 
 
@@ -333,7 +337,7 @@ def test_a_closed_pipe_ends_quietly(args: list[str]) -> None:
     assert "Traceback" not in err and "BrokenPipe" not in err, err
 
 
-def test_sun_at_a_site_now() -> None:
+def test_sun_at_a_site_now(heliotwin_cli) -> None:
     """``--site`` gives latitude, longitude and altitude (and the altitude's pressure);
     ``now`` is the current instant (checked against pvlib's SPA at the reported time)."""
     import datetime as dt
@@ -342,7 +346,7 @@ def test_sun_at_a_site_now() -> None:
     import pvlib
 
     before = dt.datetime.now(dt.UTC)
-    p = heliotwin("sun", "--site", "tehuantepec", "--time", "now", "--json")
+    p = heliotwin_cli("sun", "--site", "tehuantepec", "--time", "now", "--json")
     assert p.returncode == 0, p.stderr
     d = json.loads(p.stdout)
     when = pd.Timestamp(d["time"])
@@ -352,13 +356,15 @@ def test_sun_at_a_site_now() -> None:
     ref = pvlib.solarposition.spa_python(pd.DatetimeIndex([when]), 16.28875, -95.240871, 50.0,
                                          pressure=d["pressure_hpa"] * 100, temperature=12.0)
     assert d["azimuth_deg"] == pytest.approx(float(ref["azimuth"].iloc[0]), abs=1e-6)
-    both = heliotwin("sun", "--site", "tehuantepec", "--lat", "1", "--lon", "2", "--time", "now")
+    both = heliotwin_cli("sun", "--site", "tehuantepec", "--lat", "1", "--lon", "2", "--time",
+                         "now")
     assert both.returncode == 2 and "not both" in both.stderr
-    nowhere = heliotwin("sun", "--time", "now")
+    nowhere = heliotwin_cli("sun", "--time", "now")
     assert nowhere.returncode == 2 and "--site" in nowhere.stderr
 
 
-def test_a_site_with_placed_arrays_reports_the_shade_and_exports_it(tmp_path: Path) -> None:
+def test_a_site_with_placed_arrays_reports_the_shade_and_exports_it(tmp_path: Path,
+                                                                   heliotwin_cli) -> None:
     """The fixed array 4.5 m east of the tracker (sim/array_shade.py): the summary names
     the energy the tracker's shade costs it and the CSV carries the shaded fraction."""
     site = json.loads((ROOT / "sim/data/sites/tehuantepec.json").read_text())
@@ -368,11 +374,9 @@ def test_a_site_with_placed_arrays_reports_the_shade_and_exports_it(tmp_path: Pa
     (tmp_path / "sites").mkdir()
     (tmp_path / "sites" / "placed.json").write_text(json.dumps(site))
     out = tmp_path / "day.csv"
-    p = subprocess.run(
-        [sys.executable, "-m", "backend", "simulate", "--site", "placed", "--start",
-         "2024-03-15", "--end", "2024-03-16", "--json", "--csv", str(out)],
-        capture_output=True, text=True, cwd=ROOT, timeout=60,
-        env={**os.environ, "HELIOTWIN_SITES_DIR": str(tmp_path / "sites")})
+    p = heliotwin_cli("simulate", "--site", "placed", "--start", "2024-03-15", "--end",
+                      "2024-03-16", "--json", "--csv", str(out),
+                      env={"HELIOTWIN_SITES_DIR": str(tmp_path / "sites")})
     assert p.returncode == 0, p.stderr
     assert json.loads(p.stdout)["fixed_shade_loss_wh"] == pytest.approx(114.5, abs=1.0)
     with out.open() as f:
