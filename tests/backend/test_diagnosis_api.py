@@ -251,8 +251,8 @@ def test_a_measured_wind_cools_the_expected_cells() -> None:
     from sim import sky_sensor, twin
 
     site = load_site("tehuantepec")
-    start = pd.Timestamp("2025-03-10", tz=site.timezone)
-    end = start + pd.Timedelta(days=1)
+    start = pd.Timestamp("2025-03-10 06:00", tz=site.timezone)  # the daylight hours only
+    end = start + pd.Timedelta(hours=13)
     clear = twin.simulate(site, start, end).series
     fixed_w = clear["fixed_power_w"].to_numpy()
     n, w = fixed_w.size, SENSOR_NAMES.index("wind_speed_m_s")
