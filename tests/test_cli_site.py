@@ -1,4 +1,6 @@
-"""``heliotwin site create|show|validate|from-weather|schema`` as a user runs them (subprocess).
+"""``heliotwin site create|show|validate|from-weather|schema`` as a user runs them: ``site
+schema`` as a real process (the entry point), the others through ``backend.cli.main`` in this
+process (``heliotwin_cli``: the same parser, output and exit code, a second of imports less).
 
 User sites go to a temporary ``HELIOTWIN_SITES_DIR``; the repository's ``data/`` is never
 written. Weather stations: pvlib's own TMY3 file (Greensboro NC, 723170) and an EPW file
@@ -12,7 +14,9 @@ import json
 import os
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -21,22 +25,27 @@ from sim.sky import pvlib_tmy3_path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def heliotwin(sites_dir: Path, *args: str) -> subprocess.CompletedProcess:
-    env = {k: v for k, v in os.environ.items() if not k.startswith("HELIOTWIN_")}
-    env["HELIOTWIN_SITES_DIR"] = str(sites_dir)
-    env["HELIOTWIN_DATABASE_URL"] = f"sqlite:///{sites_dir / 'cli.sqlite'}"  # create syncs it
-    return subprocess.run([sys.executable, "-m", "backend", *args], capture_output=True,
-                          text=True, cwd=ROOT, timeout=120, env=env)
+def _env(sites_dir: Path) -> dict[str, str]:
+    """The user sites in ``sites_dir``, and a database there (``site create`` syncs it)."""
+    return {"HELIOTWIN_SITES_DIR": str(sites_dir),
+            "HELIOTWIN_DATABASE_URL": f"sqlite:///{sites_dir / 'cli.sqlite'}"}
+
+
+@pytest.fixture
+def heliotwin(heliotwin_cli: Callable[..., Any]) -> Callable[..., Any]:
+    """``heliotwin ARGS`` in process with the user sites of ``sites_dir``."""
+    return lambda sites_dir, *args: heliotwin_cli(*args, env=_env(sites_dir))
 
 
 def test_schema_prints_the_shipped_file(tmp_path: Path) -> None:
-    p = heliotwin(tmp_path, "site", "schema")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("HELIOTWIN_")}
+    p = subprocess.run([sys.executable, "-m", "backend", "site", "schema"], capture_output=True,
+                       text=True, cwd=ROOT, timeout=120, env={**env, **_env(tmp_path)})
     assert p.returncode == 0, p.stderr
     assert json.loads(p.stdout) == json.loads((ROOT / "docs" / "site.schema.json").read_text())
 
 
-@pytest.mark.slow
-def test_create_writes_a_site_that_simulate_runs(tmp_path: Path) -> None:
+def test_create_writes_a_site_that_simulate_runs(tmp_path: Path, heliotwin) -> None:
     p = heliotwin(tmp_path, "site", "create", "--id", "madrid-roof", "--latitude-deg", "40.45",
                   "--longitude-deg", "-3.73", "--altitude-m", "667", "--timezone", "Europe/Madrid",
                   "--name", "Madrid roof")
@@ -57,15 +66,14 @@ def test_create_writes_a_site_that_simulate_runs(tmp_path: Path) -> None:
     assert again.returncode == 2 and "--force" in again.stderr
 
 
-def test_missing_place_flags_are_named(tmp_path: Path) -> None:
+def test_missing_place_flags_are_named(tmp_path: Path, heliotwin) -> None:
     p = heliotwin(tmp_path, "site", "create", "--id", "nowhere", "--latitude-deg", "10")
     assert p.returncode == 2
     assert "--longitude-deg, --timezone required" in p.stderr
     assert not (tmp_path / "nowhere.json").exists()
 
 
-@pytest.mark.slow
-def test_a_user_file_replaces_a_built_in_only_with_force(tmp_path: Path) -> None:
+def test_a_user_file_replaces_a_built_in_only_with_force(tmp_path: Path, heliotwin) -> None:
     args = ("site", "create", "--id", "tehuantepec", "--latitude-deg", "16.3",
             "--longitude-deg", "-95.24", "--altitude-m", "60", "--timezone",
             "America/Mexico_City")
@@ -78,7 +86,7 @@ def test_a_user_file_replaces_a_built_in_only_with_force(tmp_path: Path) -> None
     assert json.loads(show.stdout.split("\n", 1)[1])["altitude_m"] == 60.0
 
 
-def test_validate_names_the_bad_field(tmp_path: Path) -> None:
+def test_validate_names_the_bad_field(tmp_path: Path, heliotwin) -> None:
     good = ROOT / "sim" / "data" / "sites" / "tehuantepec.json"
     bad = tmp_path / "broken.json"
     bad.write_text(json.dumps({"site_id": "broken", "latitude_deg": 16, "longitude_deg": -95,
@@ -90,7 +98,7 @@ def test_validate_names_the_bad_field(tmp_path: Path) -> None:
     assert "arrays.fixed.modules: unknown key" in p.stderr
 
 
-def test_from_weather_tmy3_puts_the_site_at_the_station(tmp_path: Path) -> None:
+def test_from_weather_tmy3_puts_the_site_at_the_station(tmp_path: Path, heliotwin) -> None:
     p = heliotwin(tmp_path, "site", "from-weather", str(pvlib_tmy3_path()), "--id", "greensboro")
     assert p.returncode == 0, p.stderr
     site = json.loads((tmp_path / "greensboro.json").read_text())
@@ -127,7 +135,7 @@ def _epw(path: Path) -> None:
     path.write_text("\n".join(head + rows) + "\n")
 
 
-def test_from_weather_epw_in_the_southern_hemisphere_faces_north(tmp_path: Path) -> None:
+def test_from_weather_epw_in_the_southern_hemisphere_faces_north(tmp_path: Path, heliotwin) -> None:
     epw = tmp_path / "santiago.epw"
     _epw(epw)
     p = heliotwin(tmp_path, "site", "from-weather", str(epw), "--id", "santiago")
