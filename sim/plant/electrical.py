@@ -105,6 +105,21 @@ def _shaded_blocks(index_rects: FloatArray, group: NDArray[np.intp], n_groups: i
     return out
 
 
+def _block_counts(index_rects: FloatArray, group: NDArray[np.intp], n_groups: int, n_u: int,
+                  n_v: int, n_strings: int) -> FloatArray:
+    """Shaded blocks per group and string ``(n_groups, n_strings)`` from block-index
+    rectangles ``(M, 4)`` of groups ``group`` (non-decreasing): the bit masks of
+    :func:`_shaded_blocks`, or the union of the index rectangles beyond
+    :data:`_MASK_BITS` blocks across."""
+    if n_u <= _MASK_BITS:
+        return _shaded_blocks(index_rects, group, n_groups, n_u, n_v * n_strings
+                              ).reshape(-1, n_strings, n_v).sum(axis=2).astype(float)
+    slot = np.arange(len(group)) - np.searchsorted(group, group)
+    padded = np.zeros((n_groups, int(slot.max()) + 1 if len(slot) else 1, 4))
+    padded[group, slot] = index_rects
+    return band_union_areas(padded, n_v * np.arange(n_strings + 1.0))
+
+
 def beam_factors(shade: PlantShade, collector: Collector) -> tuple[FloatArray, FloatArray]:
     """Fraction of the plane-of-array beam each collector converts, under the two models.
 
@@ -147,13 +162,7 @@ def beam_factors(shade: PlantShade, collector: Collector) -> tuple[FloatArray, F
     used = shade.group_by >= 0                        # the slots that hold a rectangle
     g_used, k_used = np.nonzero(used)                 # by group, then slot
     index_rects = _block_index_rects(shade.group_rects[g_used, k_used], collector)
-    if n_u <= _MASK_BITS:
-        n_sb = _shaded_blocks(index_rects, g_used, len(shade.group_step), n_u,
-                              n_v * len(strings)).reshape(-1, len(strings), n_v).sum(axis=2)
-    else:
-        padded = np.zeros(shade.group_rects.shape)
-        padded[g_used, k_used] = index_rects
-        n_sb = band_union_areas(padded, n_v * np.arange(len(strings) + 1.0))
+    n_sb = _block_counts(index_rects, g_used, len(shade.group_step), n_u, n_v, len(strings))
     loss = direct_martinez(1.0, 1.0, np.minimum(f_s, 1.0), n_sb, float(n_u * n_v))
     electrical[shade.group_step, shade.group_tracker] = np.mean(
         1.0 - np.asarray(loss, dtype=float), axis=1)
@@ -186,19 +195,33 @@ def _polygon_strings(shade: PlantShade, collector: Collector
         f_s = np.where(string_area > 0, shaded / string_area, 0.0)
     # the block grid over the bounding box: string s holds rows s·n_v … (s + 1)·n_v − 1
     n_u, n_v = collector.block_grid()
+    n_rows = n_v * n_s
     u_lo, u_hi, v_lo, v_hi = collector.bounds
-    cu, cv = (u_hi - u_lo) / n_u, (v_hi - v_lo) / (n_v * n_s)
-    col, row = np.meshgrid(np.arange(n_u), np.arange(n_v * n_s))
+    cu, cv = (u_hi - u_lo) / n_u, (v_hi - v_lo) / n_rows
+    col, row = np.meshgrid(np.arange(n_u), np.arange(n_rows))
     cells = shapely.box(u_lo + col.ravel() * cu, v_lo + row.ravel() * cv,
                         u_lo + (col.ravel() + 1) * cu, v_lo + (row.ravel() + 1) * cv)
-    live = np.flatnonzero(shapely.area(shapely.intersection(own, cells)) > _EPS_AREA_M2)
-    cell_string = row.ravel()[live] // n_v
-    n_tb = np.bincount(cell_string, minlength=n_s).astype(float)
-    # a cell holds shade where its interior meets the shade's (which lies inside the
-    # polygon): intersecting, not only touching
-    cells = cells[live]
-    g, c = shapely.STRtree(cells).query(shade.group_shade, predicate="intersects")
-    holds = ~shapely.touches(cells[c], shade.group_shade[g])
-    n_sb = np.zeros((len(shade.group_step), n_s))
-    np.add.at(n_sb, (g[holds], cell_string[c[holds]]), 1.0)
+    live = shapely.area(shapely.intersection(own, cells)) > _EPS_AREA_M2
+    n_tb = live.reshape(n_s, n_v * n_u).sum(axis=1).astype(float)
+    # a cell holds shade where the shade's interior meets it: clipped to a row of cells,
+    # each connected piece of shade spans the open interval of its u bounds, so it holds
+    # the row's cells that interval overlaps — index rectangles for the bit-mask count
+    pieces, rows_of, groups_of = [], [], []
+    for r in range(n_rows):
+        clipped = shapely.clip_by_rect(shade.group_shade, u_lo - 1.0, v_lo + r * cv,
+                                       u_hi + 1.0, v_lo + (r + 1) * cv)
+        parts, g = shapely.get_parts(clipped, return_index=True)
+        keep = shapely.area(parts) > _EPS_AREA_M2
+        pieces.append(shapely.bounds(parts[keep]))
+        groups_of.append(g[keep])
+        rows_of.append(np.full(int(keep.sum()), r))
+    box = np.concatenate(pieces)
+    group = np.concatenate(groups_of)
+    rr = np.concatenate(rows_of).astype(float)
+    index_rects = np.stack([np.floor((box[:, 0] - u_lo) / cu + 1e-9),
+                            np.ceil((box[:, 2] - u_lo) / cu - 1e-9), rr, rr + 1], axis=-1)
+    index_rects[:, :2] = np.clip(index_rects[:, :2], 0, n_u)
+    order = np.argsort(group, kind="stable")
+    n_sb = _block_counts(index_rects[order], group[order], len(shade.group_step), n_u, n_v,
+                         n_s)
     return f_s, n_sb, n_tb, string_area / string_area.sum()

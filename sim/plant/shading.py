@@ -33,7 +33,9 @@ front faces away from the sun (s·n ≤ 0) receives no beam and counts as unshad
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -571,24 +573,48 @@ def polygon_shade(outline: FloatArray, offsets: FloatArray, used: NDArray[np.boo
 def polygon_band_areas(shade: NDArray[np.object_], bounds: tuple[float, float, float, float],
                        band_edges: FloatArray) -> FloatArray:
     """Area [m²] of each shaded polygon ``(G,)`` between consecutive ``band_edges`` in v
-    (±inf allowed) → ``(G, B)``."""
+    (±inf allowed) → ``(G, B)``: one rectangle clip per band (GEOS ``clip_by_rect``)."""
     import shapely
 
     u_lo, u_hi, v_lo, v_hi = bounds
     edges = np.clip(band_edges, v_lo - 1.0, v_hi + 1.0)
-    boxes = shapely.box(u_lo - 1.0, edges[:-1], u_hi + 1.0, edges[1:])
-    return np.asarray(shapely.area(shapely.intersection(shade[:, None], boxes[None, :])),
-                      dtype=float)
+    out = np.empty((len(shade), len(edges) - 1))
+    for b in range(len(edges) - 1):
+        out[:, b] = shapely.area(shapely.clip_by_rect(shade, u_lo - 1.0, edges[b], u_hi + 1.0,
+                                                      edges[b + 1]))
+    return out
+
+
+@functools.lru_cache(maxsize=16)
+def _overlap_region(outline: tuple[tuple[float, float], ...]) -> Any:
+    """The shifts t for which a polygon P and P + t overlap with positive area: the interior
+    of the Minkowski difference P ⊕ (−P), the union over pairs of P's triangles (Ti, Tj) of
+    the convex hulls of their vertex differences (P itself when convex: one hull). Prepared
+    for many point tests."""
+    import shapely
+
+    own = shapely.Polygon(outline)
+    if own.convex_hull.area - own.area <= _EPS_AREA_M2:
+        pieces = [np.asarray(outline, dtype=float)]
+    else:
+        tri = shapely.get_parts(shapely.constrained_delaunay_triangles(own))
+        pieces = [np.asarray(t.exterior.coords)[:3] for t in tri]
+    verts = np.stack(pieces)                                   # (pieces, vertices, 2)
+    diff = (verts[:, None, :, None, :] - verts[None, :, None, :, :]).reshape(
+        len(verts) ** 2, -1, 2)
+    region = shapely.union_all(shapely.convex_hull(shapely.multipoints(diff)))
+    shapely.prepare(region)
+    return region
 
 
 def _polygon_pairs(outline: FloatArray, offsets: FloatArray) -> NDArray[np.bool_]:
     """Which (du, dv) shifts ``(M, 2)`` make a polygon overlap its own translate with
-    positive area (exact; the bounding boxes' overlap only bounds it)."""
+    positive area: the shift inside :func:`_overlap_region` (exact, a point test each; the
+    bounding boxes' overlap only bounds it)."""
     import shapely
 
-    own = shapely.Polygon(outline)
-    moved = shapely.polygons(outline[None] + offsets[:, None, :])
-    return np.asarray(shapely.area(shapely.intersection(moved, own)), dtype=float) > _EPS_AREA_M2
+    region = _overlap_region(tuple(map(tuple, np.asarray(outline, dtype=float).tolist())))
+    return np.asarray(shapely.contains_properly(region, shapely.points(offsets)), dtype=bool)
 
 
 def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation: ArrayLike,

@@ -4,6 +4,7 @@ collector, plant files and the strategies that refuse a polygon."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -114,14 +115,16 @@ def test_sweep_case_agrees_with_twoaxistracking(shape: str) -> None:
     assert row["energy_kwh_per_collector"] > 0
 
 
-def test_a_rectangle_given_as_a_polygon_matches_the_rectangle_path() -> None:
+@pytest.mark.parametrize("modules", ["portrait", "landscape"])
+def test_a_rectangle_given_as_a_polygon_matches_the_rectangle_path(modules: str) -> None:
     """The 12 m × 5 m rectangle with a fifth (collinear) vertex takes the polygon path:
     shaded fractions and both beam factors equal the rectangle engine's (unions of
-    rectangles, bit-mask block counts) to 1e-12 on a December day at 10 min — the strings
-    of a polygon reduce to the rectangle's."""
-    rect = collector_from_size(12.0, 5.0, PEN.collector)
+    rectangles, bit-mask block counts) to 1e-12 over four December days at 20 min — the
+    strings of a polygon reduce to the rectangle's (landscape: 3 rows of blocks a string)."""
+    template = dataclasses.replace(PEN.collector, module_orientation=modules)
+    rect = collector_from_size(12.0, 5.0, template)
     five = collector_from_outline([[-6, -2.5], [0, -2.5], [6, -2.5], [6, 2.5], [-6, 2.5]],
-                                  PEN.collector)
+                                  template)
     assert rect.is_rectangle and not five.is_rectangle
     assert five.power_stc == pytest.approx(rect.power_stc, rel=1e-12)
     plant, _, _ = case_plant(_days_spec(rect), SweepCase("square", 0.3, "sun"))
