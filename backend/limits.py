@@ -72,10 +72,10 @@ PLANT_COMPUTATIONS = 1
 PLANT_QUEUE = 16
 #: The window of the anonymous read allowance (``HELIOTWIN_ANONYMOUS_READ_CPU_S_PER_MIN``) [s].
 READ_WINDOW_S = 60.0
-#: Reads a caller without a token may have in flight with its allowance untouched: each
-#: holds 1/16 of the allowance from its admission until it is settled to the CPU time it
-#: took, so a burst of slow reads cannot all be admitted before the first is charged (the
-#: dashboard's overview asks five at once: four series and the daily energy).
+#: Reads a caller without a token may have in flight at once (a read is charged once it
+#: has run, so a burst of slow reads would otherwise all be admitted before the first is
+#: charged); more → 429. The dashboard's overview asks five at once (four series and the
+#: daily energy), bench_load's mix ten.
 READS_IN_FLIGHT = 16
 
 
@@ -179,13 +179,15 @@ class RateLimiter:
 
 
 class Charge:
-    """One admitted cost in a :class:`WindowBudget`: when, and how much (settled later)."""
+    """One admitted cost in a :class:`WindowBudget`: when, how much, and whether the work
+    is still going (``open``: not yet settled)."""
 
-    __slots__ = ("at", "cost")
+    __slots__ = ("at", "cost", "open")
 
     def __init__(self, at: float, cost: float) -> None:
         self.at = at
         self.cost = cost
+        self.open = True
 
 
 class WindowBudget:
@@ -220,12 +222,18 @@ class WindowBudget:
             self._charges[client] = charges
         return charges
 
-    def take(self, client: str, cost: float) -> Charge:
-        """Charge ``cost`` to ``client``, or raise :class:`Busy` (429)."""
+    def take(self, client: str, cost: float, max_open: int | None = None) -> Charge:
+        """Charge ``cost`` to ``client``, or raise :class:`Busy` (429); with ``max_open``,
+        also when ``client`` has that many charges not yet settled (work in flight)."""
         cost = min(float(cost), self.capacity)
         now = self.clock()
         with self._lock:
             charges = self._live(client, now)
+            if max_open is not None and sum(c.open for c in charges) >= max_open:
+                raise Busy(429, f"rate limit: without a write token a client may have "
+                                f"{max_open} requests in flight at once here ({self.setting} "
+                                "counts what they cost): send 'Authorization: Bearer "
+                                "<token>' or retry in 1 s", 1.0)
             used = sum(c.cost for c in charges)
             if used + cost > self.capacity:
                 freed, wait_s = 0.0, self.window_s
@@ -237,7 +245,8 @@ class WindowBudget:
                 raise Busy(429, f"rate limit: without a write token a client may ask "
                                 f"{_amount(self.capacity)} {self.what} per "
                                 f"{self.window_s / 60:.0f} min ({self.setting}); "
-                                f"{_amount(used)} spent, this asks {_amount(cost)}: send "
+                                f"{_amount(used)} spent"
+                                f"{f', this asks {_amount(cost)}' if cost else ''}: send "
                                 f"'Authorization: Bearer <token>' or retry in "
                                 f"{math.ceil(wait_s)} s", wait_s)
             charge = Charge(now, cost)
@@ -251,11 +260,13 @@ class WindowBudget:
         """The charged work cost ``cost`` after all (0: it never ran)."""
         with self._lock:
             charge.cost = max(0.0, float(cost))
+            charge.open = False
 
 
 def _amount(x: float) -> str:
-    """A cost for a message: whole units from 10 up (``300``), else three digits (``0.125``)."""
-    return f"{x:,.0f}" if abs(x) >= 10 else f"{x:.3g}"
+    """A cost for a message: whole units from 100 up (``2,200,000``), else three digits
+    (``16.5``, ``0.125``)."""
+    return f"{x:,.0f}" if abs(x) >= 100 else f"{x:.3g}"
 
 
 class ReadMeter:
@@ -424,9 +435,10 @@ class Limits:
     reads: WindowBudget
 
     def admit_read(self, client: str) -> Charge:
-        """Admit a read without a token from ``client`` (:class:`Busy` 429 when its allowance
-        is spent), charged its in-flight share (:data:`READS_IN_FLIGHT`) until settled."""
-        return self.reads.take(client, self.reads.capacity / READS_IN_FLIGHT)
+        """Admit a read without a token from ``client`` — :class:`Busy` 429 when its
+        allowance is spent or :data:`READS_IN_FLIGHT` of its reads are in flight — to be
+        settled to the CPU time it took."""
+        return self.reads.take(client, 0.0, max_open=READS_IN_FLIGHT)
 
     @classmethod
     def from_settings(cls, s: Settings) -> Limits:

@@ -163,7 +163,7 @@ class IngestSettings(_Group):
         200_000, gt=0, description="Most raw points one JSON measurements answer holds."
     )
     anonymous_read_cpu_s_per_min: float = Field(
-        20.0, gt=0, description="CPU time [s] one client address may spend without a token "
+        30.0, gt=0, description="CPU time [s] one client address may spend without a token "
                                 "in any minute on reads of a site's data (measurements, "
                                 "energy, reports, diagnosis, pointing, pointing model): each "
                                 "read charged the CPU time it took, its streamed body "

@@ -147,9 +147,10 @@ def test_a_bad_token_is_a_401_not_an_anonymous_read(server: InProcessServer) -> 
     assert server.ctx.limits.reads.used("10.24.0.1") == 0.0
 
 
-def test_reads_in_flight_hold_a_share_of_the_allowance_until_settled() -> None:
-    """A burst of slow reads is not all admitted before the first is charged: each holds
-    1/READS_IN_FLIGHT of the allowance; settled to what it cost, the rest is free again."""
+def test_an_address_has_at_most_reads_in_flight_and_spends_what_they_cost() -> None:
+    """A burst of slow reads is not all admitted before the first is charged: at most
+    READS_IN_FLIGHT of an address are in flight; each settled read frees its place and
+    is charged its CPU time, and past the allowance the address is refused."""
     limits = Limits.from_settings(Settings(anonymous_read_cpu_s_per_min=16.0))
     held = [limits.admit_read("10.25.0.1") for _ in range(READS_IN_FLIGHT)]
     with pytest.raises(Busy) as refused:
@@ -157,11 +158,15 @@ def test_reads_in_flight_hold_a_share_of_the_allowance_until_settled() -> None:
     assert refused.value.status_code == 429 and SETTING in refused.value.message
     limits.admit_read("10.25.0.2")  # another address
     for charge in held[:4]:
-        limits.reads.settle(charge, 0.25)  # 4 × 0.25 s: three shares of 1 s back
-    for _ in range(3):
-        limits.admit_read("10.25.0.1")
+        limits.reads.settle(charge, 3.0)  # 12 s of the 16 s spent; four places free
+    assert limits.reads.used("10.25.0.1") == 12.0
+    held[4:] = [limits.admit_read("10.25.0.1") for _ in range(4)]
     with pytest.raises(Busy):
         limits.admit_read("10.25.0.1")
+    limits.reads.settle(held[4], 4.5)  # 16.5 s: over the allowance
+    with pytest.raises(Busy) as spent:
+        limits.admit_read("10.25.0.1")
+    assert "16.5 spent" in spent.value.message and spent.value.retry_after_s >= 1
 
 
 def _busy_work(n: int) -> int:
