@@ -107,9 +107,10 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer
 
 
 def _client(server: InProcessServer, host: str) -> httpx.Client:
-    """A client on the service in this process whose requests come from ``host``."""
-    bridge = _ASGIBridge(server.app, server._loop)  # noqa: SLF001 (the in-process bridge)
-    bridge._asgi = httpx.ASGITransport(app=server.app, raise_app_exceptions=False,  # noqa: SLF001
+    """A client on the service in this process whose requests come from ``host``: the
+    bridge of ``InProcessServer.client`` onto an ASGI transport that says so."""
+    bridge = _ASGIBridge(server.app, server._loop)
+    bridge._asgi = httpx.ASGITransport(app=server.app, raise_app_exceptions=False,
                                        client=(host, 40000))
     return httpx.Client(transport=bridge, base_url=server.base_url, timeout=60.0)
 
