@@ -1,5 +1,7 @@
 """``heliotwin vision detect|calibrate`` as a user runs them, on frames rendered with the sun
-where pvlib's SPA puts it (the ephemeris here is pvlib's own, not the product's)."""
+where pvlib's SPA puts it (the ephemeris here is pvlib's own, not the product's). ``calibrate``
+runs as a real process (the entry point); the others through ``backend.cli.main`` in this
+process (``heliotwin_cli``: the same parser, output and exit code)."""
 
 from __future__ import annotations
 
@@ -51,8 +53,9 @@ def test_calibrate_recovers_the_camera(frames: list[Path]) -> None:
     assert out["rms_deg"] < 0.3 and len(out["frames"]) == 6
 
 
-def test_detect_with_time_and_place_reports_the_ephemeris_error(frames: list[Path]) -> None:
-    p = heliotwin("vision", "detect", str(frames[2]), "--camera", "fisheye", "--px-per-deg",
+def test_detect_with_time_and_place_reports_the_ephemeris_error(frames: list[Path],
+                                                                heliotwin_cli) -> None:
+    p = heliotwin_cli("vision", "detect", str(frames[2]), "--camera", "fisheye", "--px-per-deg",
                   "2.6", "--cx-px", "320.4", "--cy-px", "238.7", "--north-offset-deg", "7",
                   "--timestamp", TIMES[2].isoformat(), "--lat", str(LAT), "--lon", str(LON),
                   "--json")
@@ -60,16 +63,16 @@ def test_detect_with_time_and_place_reports_the_ephemeris_error(frames: list[Pat
     out = json.loads(p.stdout)
     assert out["sun_found"]
     assert out["error"]["separation_deg"] < 0.5
-    text = heliotwin("vision", "detect", str(frames[2]), "--camera", "fisheye",
-                     "--px-per-deg", "2.6")
+    text = heliotwin_cli("vision", "detect", str(frames[2]), "--camera", "fisheye",
+                         "--px-per-deg", "2.6")
     assert text.returncode == 0 and text.stdout.startswith("sun at (")
 
 
-def test_bad_input_exits_2_naming_the_problem(tmp_path: Path) -> None:
+def test_bad_input_exits_2_naming_the_problem(tmp_path: Path, heliotwin_cli) -> None:
     junk = tmp_path / "junk.png"
     junk.write_bytes(b"not an image")
-    p = heliotwin("vision", "detect", str(junk), "--camera", "fisheye")
+    p = heliotwin_cli("vision", "detect", str(junk), "--camera", "fisheye")
     assert p.returncode == 2 and "image" in p.stderr and "PNG or JPEG" in p.stderr
-    p = heliotwin("vision", "calibrate", str(junk), "--timestamps", "2018-03-02T15:00",
-                  "--lat", "20")
+    p = heliotwin_cli("vision", "calibrate", str(junk), "--timestamps", "2018-03-02T15:00",
+                      "--lat", "20")
     assert p.returncode == 2 and "no UTC offset" in p.stderr

@@ -1,11 +1,12 @@
 """``heliotwin vision detect --calibration-id``: a calibration stored over HTTP by the service,
-used by the CLI on the same database; the text answer states the error against SPA."""
+used by the CLI on the same database; the text answer states the error against SPA. The CLI
+runs in this process (``heliotwin_cli``) with the service's ``HELIOTWIN_*`` settings: the
+database is the point, not the process (tests/test_cli_vision.py runs a real one)."""
 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -13,7 +14,7 @@ import httpx
 import pandas as pd
 import pvlib
 import pytest
-from live_service import ROOT, LiveServer
+from live_service import LiveServer
 
 from vision.cameras import FisheyeCamera
 from vision.synth import fisheye_frame
@@ -34,9 +35,8 @@ def _png(ts: str, seed: int) -> bytes:
     return buf.tobytes()
 
 
-@pytest.mark.slow
 def test_detect_with_a_stored_calibration(live_server: LiveServer, client: httpx.Client,
-                                          tmp_path: Path) -> None:
+                                          tmp_path: Path, heliotwin_cli: Callable) -> None:
     times = [f"2024-04-10T{h:02d}:20:00-06:00" for h in (8, 10, 12, 14, 16)]
     files = [("files", (f"c{i}.png", _png(ts, i), "image/png")) for i, ts in enumerate(times)]
     r = client.post("/api/v1/vision/calibrations", files=files,
@@ -47,11 +47,9 @@ def test_detect_with_a_stored_calibration(live_server: LiveServer, client: httpx
     frame = tmp_path / "held_out.png"
     frame.write_bytes(_png(held_out, 42))
 
-    def detect(*extra: str) -> subprocess.CompletedProcess:
-        return subprocess.run(
-            [sys.executable, "-m", "backend", "vision", "detect", str(frame), "--timestamp",
-             held_out, "--site", "tehuantepec", *extra],
-            capture_output=True, text=True, cwd=ROOT, timeout=120, env=live_server.env)
+    def detect(*extra: str):  # type: ignore[no-untyped-def]
+        return heliotwin_cli("vision", "detect", str(frame), "--timestamp", held_out, "--site",
+                             "tehuantepec", *extra, env=live_server.env)
 
     p = detect("--calibration-id", str(cal_id), "--json")
     assert p.returncode == 0, p.stderr
