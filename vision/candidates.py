@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 from vision.detection import FovCircle
 
 _CORE_MAX_RADIUS_PX = 64.0  # above: the core's opening runs on a shrunk mask
+_SATURATED = 250.0  # grey level of a saturated core
 
 
 _RING_COS = np.cos(np.linspace(0.0, 2 * np.pi, 24, endpoint=False))
@@ -96,6 +97,7 @@ class _Candidate:
     cy: float
     score: float = 0.0
     glare: float = 0.0  # set by _score(): the glare evidence 0–1
+    wide: float = 0.0  # set by _score(): a wide core's own glare credit 0–1
     shape: float = 0.0  # set by the detector: the shape term 0–1
     ghost: bool = False
     ox: int = 0  # where the label image (a region of interest) starts in the frame
@@ -249,10 +251,12 @@ def _prior(c: _Candidate, labels: NDArray[Any], diam: float) -> tuple[float, flo
 
 
 _GLARE_CORE_DEG = (1.0, 3.0)  # a saturated core this wide in radius [°] is a glare (0 → 1)
+_TAIL = (0.0, 0.1)  # share of the contrast the glare keeps at 4 R: no credit → full credit
 
 
 def _score(c: _Candidate, gray: NDArray[np.uint8], shape: float, size: float, peak: float,
-           bg: float, fov: FovCircle | None, diam: float, ppd: float) -> float:
+           bg: float, fov: FovCircle | None, diam: float, ppd: float,
+           scale_known: bool = True, image: NDArray[Any] | None = None) -> float:
     """Sun-likeness 0–1 of one bright cluster.
 
     ``shape²`` (a sun's saturated core is a clean disc; cloud highlights are
@@ -263,10 +267,13 @@ def _score(c: _Candidate, gray: NDArray[np.uint8], shape: float, size: float, pe
     frame's contrast — and (b) a sharp drop right outside the disc to no less
     than the sky's level (a clear-sky sun next to a cloud; not white text on a
     dark overlay box) — and (c) the saturated core itself, when it is several
-    degrees wide (:data:`_GLARE_CORE_DEG`, at ``ppd`` px/°): the sun's disc is 0.27° in
-    radius, so a core 3° wide is its glare, saturated out to where a clear blue sky
-    around it leaves no ring of fall-off inside the rings (the Wolf frames of issue 24).
-    A bright cloud highlight passes none of them.
+    degrees wide (:data:`_GLARE_CORE_DEG`, at ``ppd`` px/°) and its glare still lights
+    the sky at 4 R (:func:`_tail`): the sun's disc is 0.27° in radius, so a core
+    3° wide is its glare, saturated out to where a clear blue sky around it leaves no
+    ring of fall-off inside the rings (the Wolf frames of issue 24); only when the frame's
+    scale is known (``scale_known``: a camera model or an image circle — a crop of a frame,
+    such as the tracker's region of interest, has neither, and its px/° guessed from its
+    width is wrong by the crop's ratio). A bright cloud highlight passes none of them.
     """
     r_eq = np.sqrt(c.area / np.pi)
     contrast = max(peak - bg, 1.0)
@@ -290,7 +297,12 @@ def _score(c: _Candidate, gray: NDArray[np.uint8], shape: float, size: float, pe
     sharp = _clamp((drop - 0.3) / 0.3, 0.0, 1.0)
     if np.isfinite(m1) and m1 < bg - 0.15 * contrast:
         sharp = 0.0  # ringed by something darker than the sky: white text on a dark box
-    glare = max(iso_glare, sharp, _wide_core(r_eq, ppd))
+    # a wide core is a glare when its limb drops sharply to the sky or its glare lights
+    # the sky out to 4 R (c.wide also stands in for the coherence: vision.detect._search)
+    c.wide = _wide_core(r_eq, ppd) if scale_known else 0.0
+    if c.wide > 0.0 and sharp < 1.0:
+        c.wide *= max(_tail(gray, c, r_eq, m3, bg, contrast, peak, fov, image), sharp)
+    glare = max(iso_glare, sharp, c.wide)
     c.glare = float(glare)
     return float(shape**2 * (0.25 + 0.75 * glare) * size)
 
@@ -300,6 +312,69 @@ def _wide_core(r_eq: float, ppd: float) -> float:
     a glare by its width alone (:data:`_GLARE_CORE_DEG`: the sun's disc is 0.27° in radius)."""
     lo, hi = _GLARE_CORE_DEG
     return _clamp((r_eq / max(ppd, 1e-9) - lo) / (hi - lo), 0.0, 1.0)
+
+
+def _tail(gray: NDArray[np.uint8], c: _Candidate, r_eq: float, m4: float, bg: float,
+          contrast: float, peak: float, fov: FovCircle | None, image: NDArray[Any] | None
+          ) -> float:
+    """0–1: whether the glare around a core still lights the sky at 4 core radii — the
+    condition for a wide saturated core to count as its own glare (issue 24).
+
+    A point source bright enough to saturate a core degrees wide has a glare — its
+    aureole and the lens's scattered light, falling off as a power of the angle from it
+    (the aureole: Moffat 1969, A&A 3:455; a lens's veiling glare: ISO 9358) — still well
+    above the sky at 4 R: the real suns keep 54–68 % (Wolf), 41–51 % (Wettermast) and 17 %
+    (EUROCONTROL's low sun) of their contrast there (median grey level of the ring against
+    the sky's level ``bg``). The brightest patch of an overcast deck — its overexposed zenith,
+    the second renderer's held-out overcast frames — is back at the sky's median by then
+    (−13 to +4 %). ``m4`` is that ring's median about the grey core (equivalent radius
+    ``r_eq``); on a colour frame with a white core (:func:`_white_core`) the ring is drawn
+    4 × the white core's radius about its centre instead — the sun's own core, not the
+    blue sky saturated in grey around it, which a longer exposure grows by tens of degrees
+    (the Wolf frames brightened ×1.1–1.15 in ``tests/vision/test_real_sky.py``) and pushes
+    the ring past the horizon. Full credit from ``_TAIL[1]`` of the contrast; a ring
+    with no sky to read (under 8 points inside the frame and image circle) is no evidence
+    either way (1)."""
+    core = _white_core(image, c, min(_SATURATED, peak - 1.0))
+    if core is not None:
+        m = cv2.moments(core[0])
+        if m["m00"] > 0 and m["m00"] < c.area:
+            v = _ring_values(gray, core[1] + m["m10"] / m["m00"], core[2] + m["m01"] / m["m00"],
+                             4.0 * float(np.sqrt(m["m00"] / np.pi)), fov)
+            m4 = _median(v) if v.size >= 8 else float("nan")
+    if not np.isfinite(m4):
+        return 1.0
+    lo, hi = _TAIL
+    return _clamp(((m4 - bg) / contrast - lo) / (hi - lo), 0.0, 1.0)
+
+
+def _white_core(image: NDArray[Any] | None, c: _Candidate, level: float
+                ) -> tuple[NDArray[Any], int, int, NDArray[np.uint8]] | None:
+    """The *white* core of a candidate on an 8-bit colour frame → (its outline as OpenCV
+    returns it, in the crop; the crop's origin x0, y0 in the frame; the crop's mask), or
+    None (a grey frame, or no pixel of min(B, G, R) up to ``level`` in the candidate's box).
+
+    The sun saturates every colour channel; a blue sky's glare around it saturates the
+    blue channel, and so the grey level, much farther out. The white core — pixels within
+    3 levels of the top of min(B, G, R) in the candidate's box, its largest outline — is
+    the part of the glare no colour of the sky reaches: the sun's own core
+    (``vision.detect._white_core_centre`` centres a large glare on it)."""
+    img = np.asarray(image) if image is not None else None
+    if img is None or img.ndim != 3 or img.shape[2] < 3 or img.dtype != np.uint8:
+        return None
+    h, w = img.shape[:2]
+    x0, y0 = max(0, c.x - 2), max(0, c.y - 2)
+    x1, y1 = min(w, c.x + c.w + 2), min(h, c.y + c.h + 2)
+    crop = img[y0:y1, x0:x1]
+    white = cv2.min(cv2.min(crop[:, :, 0], crop[:, :, 1]), crop[:, :, 2])
+    top = float(white.max()) if white.size else 0.0
+    if top < level:  # no pixel white up to the grey core's top
+        return None
+    binary = np.asarray(cv2.threshold(white, top - 3.5, 1, cv2.THRESH_BINARY)[1], np.uint8)
+    contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return None
+    return max(contours, key=cv2.contourArea), x0, y0, binary
 
 
 def _mark_ghosts(cands: list[_Candidate], centre: tuple[float, float]) -> int:

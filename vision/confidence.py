@@ -40,8 +40,8 @@ from numpy.typing import NDArray
 FEATURES: tuple[str, ...] = (
     "shape",             # circularity of the bright core 0–1 (second moments): round
     "glare",             # glare evidence 0–1: fall-off, a sharp drop to the sky, or a core
-                         # degrees wide (vision.candidates._score): never needed by a wide
-                         # round saturated core, which is its own glare
+                         # degrees wide whose glare lights the sky at 4 R
+                         # (vision.candidates._score, _tail): such a core is its own glare
     "saturated",         # 1 when the core is clipped (≥ 250, or a flat top at any level)
     "contrast",          # 1 − sky median / peak: brighter than its surroundings, any gain
     "too_small",         # max(0, ln(0.5° / equivalent radius)): smaller than a sun's core
@@ -94,13 +94,14 @@ def plain_disc(shape: float, glare: float, saturated: float) -> float:
 
 
 def features(shape: float, glare: float, saturated: float, peak: float, bg: float,
-             radius_deg: float, runner_up: float, coherence: float,
+             radius_deg: float | None, runner_up: float, coherence: float,
              ephemeris_deg: float | None) -> NDArray[np.float64]:
     """The feature vector (order of :data:`FEATURES`) of one candidate.
 
     ``glare`` 0–1 (:func:`vision.candidates._score`); ``saturated`` 0 or 1 (the core
     clipped); ``peak``, ``bg`` grey levels; ``radius_deg`` the core's equivalent radius on
-    the sky [°]; ``ephemeris_deg`` its distance from the
+    the sky [°], None when the frame's scale is unknown (a crop without a camera: no size
+    evidence either way); ``ephemeris_deg`` its distance from the
     predicted sun [°] or None. The distance is gated by ``1 −`` :func:`plain_disc`: it is
     zero for a round, saturated core with its glare, whatever the distance.
     """
@@ -109,10 +110,13 @@ def features(shape: float, glare: float, saturated: float, peak: float, bg: floa
     if ephemeris_deg is not None:
         far = min(float(ephemeris_deg), 30.0) / 10.0 * (1.0 - plain_disc(shape, glare,
                                                                          saturated))
-    r = max(radius_deg, 1e-3)
+    small = large = 0.0
+    if radius_deg is not None:
+        r = max(radius_deg, 1e-3)
+        small = max(0.0, float(np.log(_SMALLEST_DEG / r)))
+        large = max(0.0, float(np.log(r / _LARGEST_DEG)))
     return np.array([
-        shape, glare, saturated, max(peak - bg, 0.0) / max(peak, 1.0),
-        max(0.0, float(np.log(_SMALLEST_DEG / r))), max(0.0, float(np.log(r / _LARGEST_DEG))),
+        shape, glare, saturated, max(peak - bg, 0.0) / max(peak, 1.0), small, large,
         runner_up, coherence, float(known), far], dtype=float)
 
 

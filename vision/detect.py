@@ -14,7 +14,8 @@ Three named methods, all returning a :class:`SunDetection`:
   opposite a larger blob). Each
   candidate gets a shape term (second moments) and glare evidence (isotropic
   fall-off, a sharp drop to the sky, or a saturated core degrees wide — the
-  glare itself). What a sun is (issue 24 item 2): a region at or near
+  glare itself, when it still lights the sky at 4 core radii:
+  :func:`vision.candidates._tail`). What a sun is (issue 24 item 2): a region at or near
   saturation (≥ 250, or a flat clipped top at any level: a darkened frame),
   round, brighter than the sky. A candidate that is not saturated or has a
   shape no sun has gets probability 0 (:func:`vision.confidence.admissible`);
@@ -62,6 +63,7 @@ from numpy.typing import NDArray
 from vision import confidence as conf
 from vision.cameras import FisheyeCamera, PinholeCamera
 from vision.candidates import (
+    _SATURATED,
     _Candidate,
     _clusters,
     _mark_ghosts,
@@ -72,7 +74,7 @@ from vision.candidates import (
     _score,
     _symmetry,
     _weighted_centroid,
-    _wide_core,
+    _white_core,
 )
 from vision.detection import CameraModel, FovCircle, SunDetection
 from vision.fov import _fov_mask, _median_u8, _small, estimate_fov, to_gray
@@ -109,7 +111,6 @@ _WHITE_OPEN_MAX_PX = 24.0  # … worked on a mask shrunk until the disc is at mo
 _WHITE_CUT_STEP_PX = 3.0  # the outline's outward neighbours looked at, this far out
 _WHITE_CUT_SHARE = 0.05  # a white core with more of its outline next to darker-than-sky is cut
 _COHERENCE_PASSES = 1  # solves of the radial-symmetry fit behind `coherence`
-_SATURATED = 250.0  # grey level of a saturated core
 _PLATEAU_SHARE = 0.3  # a core with this share of its pixels at its peak is clipped (flat)
 _PLATEAU_MIN_PX = 20  # … tested on cores of at least this many pixels
 
@@ -192,13 +193,15 @@ def px_per_deg_of(camera: CameraModel | None, fov: FovCircle | None, width_px: i
 def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
             fov: FovCircle | None, diam: float, centre: tuple[float, float],
             ppd: float, expected_px: tuple[float, float] | None,
-            prefer_near: bool = True) -> _Pick | str:
+            prefer_near: bool = True, scale_known: bool = True,
+            image: NDArray[Any] | None = None) -> _Pick | str:
     """Candidates in ``work`` (the frame, masked and cropped), the winner and its probability;
     or a reason.
 
     With ``prefer_near`` the candidates are ranked by their score weighted by their
     nearness to ``expected_px`` (the search around the prediction); without it by their
-    score alone (the blind search), the distance entering only the confidence."""
+    score alone (the blind search), the distance entering only the confidence. ``image``:
+    the frame in colour, for the white core of a wide glare (:func:`_score`)."""
     bg = small_bg
     # each row's brightest pixel: the peak, then the bright pixels' bounding box from it
     row_max = work.pixels.max(axis=1) if work.pixels.size else np.zeros(1, np.uint8)
@@ -248,7 +251,8 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
     for c in cands:
         c.shape = priors[id(c)][0]
         if id(c) in ranked:
-            c.score = _score(c, gray, *priors[id(c)], peak, bg, fov, diam, ppd)
+            c.score = _score(c, gray, *priors[id(c)], peak, bg, fov, diam, ppd, scale_known,
+                             image)
     cands.sort(key=lambda c: -c.score * near(c))
     best = cands[0]
     runner = max((c.score for c in cands[1:]), default=0.0) / max(best.score, 1e-9)
@@ -265,10 +269,14 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
                                  dark_level=0.6 * local_bg,
                                  glare_level=local_bg + 0.3 * (peak - local_bg),
                                  n_iter=_COHERENCE_PASSES)
-    # a saturated core degrees wide is its own evidence (it has no gradient inside the
-    # window: the Wolf frames' coherence is 0.02–0.06)
-    coherence = max(fit.coherence if fit is not None else 0.0, _wide_core(r_eq, ppd))
-    x = conf.features(best.shape, best.glare, saturated, peak, bg, radius_deg,
+    # a saturated core degrees wide that is a glare (vision.candidates._score: `wide`) has
+    # no gradient inside the window (the Wolf frames' coherence is 0.02–0.06): its width
+    # stands for the symmetry
+    coherence = max(fit.coherence if fit is not None else 0.0, best.wide)
+    # a crop without a camera (the tracker's region of interest) has no known scale: its
+    # px/° guessed from its width is wrong by the crop's ratio, so its size is no evidence
+    x = conf.features(best.shape, best.glare, saturated, peak, bg,
+                      radius_deg if scale_known else None,
                       min(runner, 1.0), coherence, eph)
     values = {"shape": best.shape, "peak": peak, "contrast": peak - bg,
               "radius_deg": radius_deg, "coherence": coherence,
@@ -294,7 +302,8 @@ def _clipped(gray: NDArray[np.uint8], c: _Candidate, labels: NDArray[Any], peak:
 
 def _guided_search(gray: NDArray[np.uint8], work: _Region, bg: float, fov: FovCircle | None,
                    diam: float, centre: tuple[float, float], ppd: float,
-                   expected_px: tuple[float, float]) -> _Pick | str:
+                   expected_px: tuple[float, float], image: NDArray[Any] | None = None
+                   ) -> _Pick | str:
     """The search around the ephemeris prediction: within :data:`_SEARCH_DEG` of it, the
     window grown (× :data:`_SEARCH_GROW`) while the winning core reaches the window's
     edge — a wide glare cut by the window would leave the refinement a truncated core
@@ -307,7 +316,7 @@ def _guided_search(gray: NDArray[np.uint8], work: _Region, bg: float, fov: FovCi
     radius = max(1, int(round(_SEARCH_DEG * ppd)))
     while True:
         got = _search(gray, _disc_region(work, ex, ey, radius), bg, fov, diam, centre, ppd,
-                      expected_px)
+                      expected_px, image=image)
         if not isinstance(got, _Pick) or radius >= full:
             return got
         pts = _limb_points(got.best, got.labels)
@@ -380,12 +389,13 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         expected_px = None
     got: _Pick | str = "no search"
     if expected_px is not None:
-        got = _guided_search(gray, work, bg, fov, diam, centre, ppd, expected_px)
+        got = _guided_search(gray, work, bg, fov, diam, centre, ppd, expected_px, image)
     if not isinstance(got, _Pick) or got.p < min_confidence:
         # blind: ranked by appearance alone; the distance from the prediction is a
         # feature of the confidence, which cannot veto a plain disc (vision.confidence)
         blind = _search(gray, work, bg, fov, diam, centre, ppd, expected_px,
-                        prefer_near=False)
+                        prefer_near=False, scale_known=camera is not None or fov is not None,
+                        image=image)
         if isinstance(blind, _Pick) and (not isinstance(got, _Pick) or blind.p > got.p):
             got = blind
         elif not isinstance(got, _Pick):
@@ -450,22 +460,12 @@ def _white_core_centre(image: NDArray[Any], gray: NDArray[np.uint8], c: _Candida
     next to pixels darker than the sky (``bg``: a glare fades into the sky, so darker
     means a mast, the horizon, an overlay); so does a small one (there the limb and the
     weighted centroid are sub-pixel)."""
-    img = np.asarray(image)
-    if img.ndim != 3 or img.shape[2] < 3 or img.dtype != np.uint8:
+    core = _white_core(image, c, min(_SATURATED, peak - 1.0))
+    if core is None:
         return None
-    h, w = img.shape[:2]
-    x0, y0 = max(0, c.x - 2), max(0, c.y - 2)
-    x1, y1 = min(w, c.x + c.w + 2), min(h, c.y + c.h + 2)
-    crop = img[y0:y1, x0:x1]
-    white = cv2.min(cv2.min(crop[:, :, 0], crop[:, :, 1]), crop[:, :, 2])
-    top = float(white.max()) if white.size else 0.0
-    if top < min(_SATURATED, peak - 1.0):  # no pixel white up to the grey core's top
-        return None
-    binary = cv2.threshold(white, top - 3.5, 1, cv2.THRESH_BINARY)[1]
-    contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    if not contours:
-        return None
-    big = max(contours, key=cv2.contourArea)
+    big, x0, y0, binary = core
+    h, w = gray.shape
+    x1, y1 = x0 + binary.shape[1], y0 + binary.shape[0]
     area = cv2.contourArea(big)
     r_eq = float(np.sqrt(area / np.pi))
     if r_eq < max(_WHITE_MIN_DEG * ppd, _WHITE_MIN_PX) or c.area < _WHITE_BLUE_EXCESS * area:

@@ -118,7 +118,7 @@ def test_heldout_synthetic_fisheye_640(heldout_640, ephemeris: bool) -> None:
 @pytest.mark.slow
 def test_heldout_synthetic_fisheye_640_full() -> None:
     """All 24 held-out frames. "Every sun found" is not met since issue 24's refit: seed
-    12022 (a clear sky, the core's circularity term 0.71, coherence 0.54) gets 0.14."""
+    12022 (a clear sky, the core's circularity term 0.71, coherence 0.54) gets 0.46."""
     frames = [lf for lf in fisheye_640_scenes("heldout", 24) if lf.frame.sun_visible]
     seps, missed = _errors(frames, False)
     assert missed <= 1
@@ -127,15 +127,14 @@ def test_heldout_synthetic_fisheye_640_full() -> None:
 
 
 def test_heldout_synthetic_overcast_no_confident_sun() -> None:
-    """Target: no sun with confidence ≥ 0.3. Not met since issue 24's refit on one of the
-    four frames (seed 15001: a round saturated core 3° wide with a symmetric glare under the
-    overcast, 0.67); the other three stay under 0.3."""
+    """Target: no sun with confidence ≥ 0.3 (measured at most 0.008; 0.67 on seed 15000
+    before the glare tail of a wide core was required: vision.candidates._tail)."""
     confs = []
     for lf in fisheye_640_scenes("heldout", 4, overcast=True):
         d = detect_robust(lf.frame.image, camera=lf.camera)
         confs.append(d.confidence)
         assert d.sun_found or d.reason
-    assert sum(c >= 0.3 for c in confs) <= 1 and max(confs) < 0.7
+    assert max(confs) < 0.3
 
 
 def test_ephemeris_first_beats_a_brighter_decoy() -> None:
@@ -170,8 +169,9 @@ def test_heldout_tracker_rois_as_the_control_loop_sees_them() -> None:
     """48 × 48 px ROIs around the predicted sun (no camera, no image circle, as
     ``sim.tracking`` calls ``robust``). The sky's level is the ROI's border when the glare
     lifts its median. Measured on the 30 clear and 28 visible cloudy held-out ROIs: 30/30
-    and 24/28 found (27/28 before issue 24's refit: the cloud-dimmed glare fills the ROI,
-    contrast ≈ 0.25), within 0.2 px (clear) / 2.3 px (cloud) of the truth."""
+    and 25/28 found (27/28 before issue 24's refit: the cloud-dimmed glare fills the ROI,
+    contrast ≈ 0.25, where visible and hidden suns have the same features), within 0.2 px
+    (clear) / 2.3 px (cloud) of the truth."""
     clear_missed, cloud_missed, errs = 0, 0, []
     for rf in tracker_rois("heldout", 60):
         if not rf.sun_visible:
@@ -184,5 +184,5 @@ def test_heldout_tracker_rois_as_the_control_loop_sees_them() -> None:
             clear_missed += 1
         else:
             cloud_missed += 1
-    assert clear_missed == 0 and cloud_missed <= 4
+    assert clear_missed == 0 and cloud_missed <= 3
     assert len(errs) >= 54 and float(np.median(errs)) < 0.3 and max(errs) < 3.0
