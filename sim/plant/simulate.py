@@ -46,68 +46,29 @@ def _seconds(index: pd.DatetimeIndex) -> FloatArray:
     return np.asarray((index - pd.Timestamp(0, tz="UTC")) / pd.Timedelta(seconds=1), dtype=float)
 
 
-#: Below this geometric elevation by Spencer's formulas the sun is down by any model [°]:
-#: their error against SPA (≤ 0.35° over 2021 at 38° N, 69.6° N and 54.8° S, a test) and the
-#: refraction at the horizon (≈ 0.57°) leave a margin of a degree.
-NIGHT_SCREEN_DEG = -2.0
-
-
-def screening_sun(times: pd.DatetimeIndex, latitude: float, longitude: float
-                  ) -> tuple[FloatArray, FloatArray]:
-    """Geometric sun azimuth and elevation [°] from Spencer's (1971) declination and
-    equation of time (``pvlib.solarposition``) and the hour angle of UTC + 4 min/° of
-    longitude (the day's fraction in the day of year): numpy over the steps, far cheaper
-    than SPA, good to 0.35° — enough to tell the steps where the sun is surely down
-    (:data:`NIGHT_SCREEN_DEG`)."""
-    from pvlib import solarposition
-
-    utc = times.tz_convert("UTC")
-    minutes = np.asarray((utc - utc.normalize()) / pd.Timedelta(minutes=1), dtype=float)
-    doy = np.asarray(utc.day_of_year, dtype=float) + minutes / 1440.0   # the day's fraction
-    dec = np.asarray(solarposition.declination_spencer71(doy))
-    eot_min = np.asarray(solarposition.equation_of_time_spencer71(doy))
-    ha = np.radians((minutes + eot_min + 4.0 * longitude) / 4.0 - 180.0)
-    lat = np.radians(latitude)
-    sin_el = np.sin(lat) * np.sin(dec) + np.cos(lat) * np.cos(dec) * np.cos(ha)
-    az = np.degrees(np.arctan2(np.sin(ha), np.cos(ha) * np.sin(lat) - np.tan(dec) * np.cos(lat)))
-    return np.mod(az + 180.0, 360.0), np.degrees(np.arcsin(np.clip(sin_el, -1.0, 1.0)))
-
-
-def sky_conditions(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame | None = None,
-                   daylight_only: bool = False) -> dict[str, FloatArray]:
+def sky_conditions(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame | None = None
+                   ) -> dict[str, FloatArray]:
     """Sun (SPA) and irradiance at ``times``: the ``sky`` dict of :mod:`sim.plant.strategies`.
 
     Clear sky (Ineichen–Perez) unless ``weather`` (covering ``times``) is given;
-    irradiance is zero with the sun down. ``daylight_only``: SPA and the clear sky only at
-    the steps where the sun may be up (:func:`screening_sun` above
-    :data:`NIGHT_SCREEN_DEG`, about half of a year's); the others keep the screening
-    position (geometric, no refraction: night by any model), no light and no
-    ``dni_extra``/``airmass_relative`` — what a run over a long range needs, for half the
-    SPA.
+    irradiance is zero with the sun down.
     """
-    n = len(times)
-    if daylight_only:
-        az, el = screening_sun(times, plant.latitude, plant.longitude)
-        may = np.flatnonzero(el > NIGHT_SCREEN_DEG)
-        sub = times[may]
-    else:
-        az, el, may, sub = np.zeros(n), np.zeros(n), np.arange(n), times
-    pos = solar_position(sub, plant.latitude, plant.longitude, plant.altitude)
-    sky: dict[str, FloatArray] = {"solar_azimuth": az, "apparent_elevation": el,
-                                  "apparent_zenith": 90.0 - el, "zenith": 90.0 - el}
-    for key, column in (("solar_azimuth", "azimuth"), ("apparent_elevation",
-                        "apparent_elevation"), ("apparent_zenith", "apparent_zenith"),
-                        ("zenith", "zenith")):
-        sky[key][may] = pos[column].to_numpy()
+    pos = solar_position(times, plant.latitude, plant.longitude, plant.altitude)
+    sky: dict[str, FloatArray] = {
+        "solar_azimuth": pos["azimuth"].to_numpy(),
+        "apparent_elevation": pos["apparent_elevation"].to_numpy(),
+        "apparent_zenith": pos["apparent_zenith"].to_numpy(),
+        "zenith": pos["zenith"].to_numpy(),
+    }
     with np.errstate(divide="ignore", invalid="ignore"):  # pvlib's Ineichen at night
-        cs = clearsky_ineichen(sub, sky["apparent_zenith"][may], plant.latitude,
-                               plant.longitude, plant.altitude)
-    for k in ("dni_extra", "airmass_relative", "ghi", "dni", "dhi"):
-        sky[k] = np.full(n, np.nan if k == "airmass_relative" else 0.0)
-        sky[k][may] = cs[k]
+        cs = clearsky_ineichen(times, sky["apparent_zenith"], plant.latitude, plant.longitude,
+                               plant.altitude)
+    sky["dni_extra"], sky["airmass_relative"] = cs["dni_extra"], cs["airmass_relative"]
     if weather is None:
-        sky["temp_air"] = np.full(n, plant.temp_air)
-        sky["wind_speed"] = np.full(n, plant.wind_speed)
+        for k in ("ghi", "dni", "dhi"):
+            sky[k] = cs[k]
+        sky["temp_air"] = np.full(len(times), plant.temp_air)
+        sky["wind_speed"] = np.full(len(times), plant.wind_speed)
     else:
         t_w = _seconds(weather.index)
         t = _seconds(times)
@@ -312,7 +273,7 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
     table = BinTable()                       # sun bins recur every day: build each once
     for k0 in range(0, len(times), _CHUNK):
         tt = times[k0:k0 + _CHUNK]
-        csky = (sky_conditions(plant, tt, weather, daylight_only=True) if sky is None
+        csky = (sky_conditions(plant, tt, weather) if sky is None
                 else {k: v[k0:k0 + _CHUNK] for k, v in sky.items()})
         saz, sel = orientations(strategy, plant, csky)
         up = csky["apparent_elevation"] > 0
@@ -405,5 +366,5 @@ def compare_strategies(plant: Plant, start: pd.Timestamp, end: pd.Timestamp,
     return out
 
 
-__all__ = ["CLOUDY_KT", "NIGHT_SCREEN_DEG", "PlantResult", "compare_strategies", "field_shade",
-           "screening_sun", "simulate_plant", "sky_conditions"]
+__all__ = ["CLOUDY_KT", "PlantResult", "compare_strategies", "field_shade", "simulate_plant",
+           "sky_conditions"]

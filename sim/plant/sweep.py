@@ -152,9 +152,8 @@ def site_plant(spec: SweepSpec) -> Plant:
 
 def case_sky(spec: SweepSpec, weather: pd.DataFrame | None = None) -> dict[str, FloatArray]:
     """Sun (SPA) and irradiance of the range, shared by every case of the sweep
-    (:func:`sim.plant.simulate.sky_conditions` where the sun may be up; clear sky unless
-    ``weather``)."""
-    return sky_conditions(site_plant(spec), spec.times(), weather, daylight_only=True)
+    (:func:`sim.plant.simulate.sky_conditions`; clear sky unless ``weather``)."""
+    return sky_conditions(site_plant(spec), spec.times(), weather)
 
 
 def run_case(spec: SweepSpec, case: SweepCase, sky: dict[str, FloatArray],
