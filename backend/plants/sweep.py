@@ -147,7 +147,7 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
             progress(1, 1)
         return _finish([row], "in-process", {"scheduler": None, "workers": 1}, started,
                        time.perf_counter() - started)
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import Client, LocalCluster, wait
 
     cluster = None
     if scheduler is None:
@@ -168,17 +168,23 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
             futures = [client.submit(sweep_task, spec, c, w, pure=False, priority=-rank)
                        for rank, c in enumerate(sorted(cases, key=expected_cost, reverse=True))]
             rows: list[dict[str, Any]] = []
-            done = as_completed(futures)
-            while not done.is_empty():    # polled, so a cancel does not wait for a case
-                for fut in done.next_batch(block=False) if done.has_ready() else ():
+            pending = set(futures)
+            while pending:
+                # woken by the next result (not by a poll's sleep: the last case's result is
+                # taken when it lands), or after CANCEL_POLL_S to look at `cancelled`
+                try:
+                    finished = wait(list(pending), timeout=CANCEL_POLL_S,
+                                    return_when="FIRST_COMPLETED").done
+                except TimeoutError:
+                    finished = set()
+                for fut in finished:
+                    pending.discard(fut)
                     rows.append(fut.result())
                     if progress is not None:
                         progress(len(rows), len(cases))
-                if cancelled is not None and cancelled():
+                if pending and cancelled is not None and cancelled():
                     client.cancel(futures)
                     raise SweepCancelled(f"cancelled after {len(rows)} of {len(cases)} cases")
-                if not done.has_ready():
-                    time.sleep(CANCEL_POLL_S)
             compute_s = time.perf_counter() - submitted
     finally:
         if cluster is not None:
