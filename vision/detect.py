@@ -194,14 +194,17 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
             fov: FovCircle | None, diam: float, centre: tuple[float, float],
             ppd: float, expected_px: tuple[float, float] | None,
             prefer_near: bool = True, scale_known: bool = True,
-            image: NDArray[Any] | None = None) -> _Pick | str:
+            image: NDArray[Any] | None = None, model: CameraModel | None = None
+            ) -> _Pick | str:
     """Candidates in ``work`` (the frame, masked and cropped), the winner and its probability;
     or a reason.
 
     With ``prefer_near`` the candidates are ranked by their score weighted by their
     nearness to ``expected_px`` (the search around the prediction); without it by their
     score alone (the blind search), the distance entering only the confidence. ``image``:
-    the frame in colour, for the white core of a wide glare (:func:`_score`)."""
+    the frame in colour, for the white core of a wide glare (:func:`_score`); ``model``:
+    the camera, or the image circle's approximate one, for the arc of a cut core
+    (:func:`_cut_shape`)."""
     bg = small_bg
     # each row's brightest pixel: the peak, then the bright pixels' bounding box from it
     row_max = work.pixels.max(axis=1) if work.pixels.size else np.zeros(1, np.uint8)
@@ -251,8 +254,10 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
     for c in cands:
         c.shape = priors[id(c)][0]
         if id(c) in ranked:
-            c.score = _score(c, gray, *priors[id(c)], peak, bg, fov, diam, ppd, scale_known,
-                             image)
+            if c.shape < 1.0 and c.area >= _SMALL_AREA_PX:
+                c.shape = max(c.shape, _cut_shape(c, labels, gray, bg, model))
+            c.score = _score(c, gray, c.shape, priors[id(c)][1], peak, bg, fov, diam, ppd,
+                             scale_known, image)
     cands.sort(key=lambda c: -c.score * near(c))
     best = cands[0]
     runner = max((c.score for c in cands[1:]), default=0.0) / max(best.score, 1e-9)
@@ -302,8 +307,8 @@ def _clipped(gray: NDArray[np.uint8], c: _Candidate, labels: NDArray[Any], peak:
 
 def _guided_search(gray: NDArray[np.uint8], work: _Region, bg: float, fov: FovCircle | None,
                    diam: float, centre: tuple[float, float], ppd: float,
-                   expected_px: tuple[float, float], image: NDArray[Any] | None = None
-                   ) -> _Pick | str:
+                   expected_px: tuple[float, float], image: NDArray[Any] | None = None,
+                   model: CameraModel | None = None) -> _Pick | str:
     """The search around the ephemeris prediction: within :data:`_SEARCH_DEG` of it, the
     window grown (× :data:`_SEARCH_GROW`) while the winning core reaches the window's
     edge — a wide glare cut by the window would leave the refinement a truncated core
@@ -316,7 +321,7 @@ def _guided_search(gray: NDArray[np.uint8], work: _Region, bg: float, fov: FovCi
     radius = max(1, int(round(_SEARCH_DEG * ppd)))
     while True:
         got = _search(gray, _disc_region(work, ex, ey, radius), bg, fov, diam, centre, ppd,
-                      expected_px, image=image)
+                      expected_px, image=image, model=model)
         if not isinstance(got, _Pick) or radius >= full:
             return got
         pts = _limb_points(got.best, got.labels)
@@ -387,15 +392,20 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
     if expected_px is not None and not (np.isfinite(expected_px[0])
                                         and np.isfinite(expected_px[1])):
         expected_px = None
+    # no model given: an equidistant 180° lens spanning the image circle
+    fallback = None
+    if camera is None and fov is not None:
+        fallback = FisheyeCamera(fov.cx_px, fov.cy_px, fov.radius_px / 0.98 / 90.0)
+    model = camera if camera is not None else fallback
     got: _Pick | str = "no search"
     if expected_px is not None:
-        got = _guided_search(gray, work, bg, fov, diam, centre, ppd, expected_px, image)
+        got = _guided_search(gray, work, bg, fov, diam, centre, ppd, expected_px, image, model)
     if not isinstance(got, _Pick) or got.p < min_confidence:
         # blind: ranked by appearance alone; the distance from the prediction is a
         # feature of the confidence, which cannot veto a plain disc (vision.confidence)
         blind = _search(gray, work, bg, fov, diam, centre, ppd, expected_px,
                         prefer_near=False, scale_known=camera is not None or fov is not None,
-                        image=image)
+                        image=image, model=model)
         if isinstance(blind, _Pick) and (not isinstance(got, _Pick) or blind.p > got.p):
             got = blind
         elif not isinstance(got, _Pick):
@@ -406,10 +416,6 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
     reason = None if found else conf.reason(got.x, got.values)
     cx = cy = radius = 0.0
     if found:
-        fallback = None
-        if camera is None and fov is not None:
-            # no model given: an equidistant 180° lens spanning the image circle
-            fallback = FisheyeCamera(fov.cx_px, fov.cy_px, fov.radius_px / 0.98 / 90.0)
         white = _white_core_centre(image, gray, got.best, ppd, fov, got.bg, got.peak)
         if white is not None:
             cx, cy, radius = white
@@ -476,13 +482,7 @@ def _white_core_centre(image: NDArray[Any], gray: NDArray[np.uint8], c: _Candida
             > fov.radius_px - _FOV_EDGE_PX:
         return None
     # a glare fades into the sky: an outline next to something darker is cut by it
-    ctr = pts.mean(axis=0)
-    out = pts - ctr
-    out = pts + _WHITE_CUT_STEP_PX * out / np.maximum(np.hypot(out[:, 0], out[:, 1]),
-                                                        1e-9)[:, None]
-    ox = np.clip(np.rint(out[:, 0] + x0), 0, w - 1).astype(np.intp)
-    oy = np.clip(np.rint(out[:, 1] + y0), 0, h - 1).astype(np.intp)
-    if float(np.mean(gray[oy, ox] < bg)) > _WHITE_CUT_SHARE:
+    if float(np.mean(_next_to_dark(gray, pts + (x0, y0), bg))) > _WHITE_CUT_SHARE:
         return None
     filled = np.zeros(binary.shape, np.uint8)
     cv2.drawContours(filled, [big], -1, 1, -1)
@@ -509,6 +509,52 @@ def _white_core_centre(image: NDArray[Any], gray: NDArray[np.uint8], c: _Candida
     if m["m00"] <= 0:
         m = cv2.moments(big)
     return x0 + m["m10"] / m["m00"], y0 + m["m01"] / m["m00"], r_eq
+
+
+def _next_to_dark(gray: NDArray[np.uint8], pts: NDArray[Any], bg: float,
+                  reach_px: float = _WHITE_CUT_STEP_PX) -> NDArray[np.bool_]:
+    """Which outline points ``[N, 2]`` (frame pixels) of a core have, within ``reach_px``
+    farther out from the outline's mean (every :data:`_WHITE_CUT_STEP_PX`), a pixel darker
+    than the sky's level ``bg``: a glare fades into the sky, so darker there means the core
+    is cut — by a mast, trees, the horizon, an overlay."""
+    h, w = gray.shape
+    p = np.asarray(pts, dtype=float)
+    out = p - p.mean(axis=0)
+    out /= np.maximum(np.hypot(out[:, 0], out[:, 1]), 1e-9)[:, None]
+    dark = np.zeros(len(p), bool)
+    for step in np.arange(_WHITE_CUT_STEP_PX, reach_px + 1e-9, _WHITE_CUT_STEP_PX):
+        ox = np.clip(np.rint(p[:, 0] + step * out[:, 0]), 0, w - 1).astype(np.intp)
+        oy = np.clip(np.rint(p[:, 1] + step * out[:, 1]), 0, h - 1).astype(np.intp)
+        dark |= gray[oy, ox] < bg
+    return dark
+
+
+def _cut_shape(c: _Candidate, labels: NDArray[Any], gray: NDArray[np.uint8], bg: float,
+               model: CameraModel | None = None) -> float:
+    """The shape term 0–1 of a core cut by an obstacle (issue 24 item 2: round *allowing
+    for the horizon cutting it*): when at least :data:`_CUT_SHARE` of its outline lies next
+    to something darker than the sky (:func:`_next_to_dark`, within a quarter of the core's
+    radius), the share of the rest of the
+    outline on one circle — on the sphere of ``model`` when given, where a fisheye's oval of
+    a low sun is a circle (RANSAC, Fischler & Bolles 1981;
+    :func:`vision.limb._robust_limb_centre`) — on the scale of the circularity term
+    (:func:`vision.candidates._prior`); else 0. A sun low behind trees keeps a round arc
+    above them; a cloud highlight cut by a tree top does not."""
+    # the whole cluster's outline (not the core it was narrowed to: vision.candidates._prior)
+    full = (labels == c.labels[0]) if len(c.labels) == 1 else np.isin(labels, c.labels)
+    contours, _ = cv2.findContours(full.astype(np.uint8), cv2.RETR_EXTERNAL,
+                                   cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return 0.0
+    pts = np.vstack(contours).reshape(-1, 2).astype(float) + (c.ox, c.oy)
+    if len(pts) < 24:
+        return 0.0
+    # a saturated core fades over a few pixels of glare before the obstacle's edge
+    cut = _next_to_dark(gray, pts, bg, max(_WHITE_CUT_STEP_PX, 0.25 * np.sqrt(c.area / np.pi)))
+    if float(np.mean(cut)) < _CUT_SHARE or int(np.count_nonzero(~cut)) < 12:
+        return 0.0
+    *_, share = _robust_limb_centre(pts[~cut], model)
+    return float(min(max((share - 0.45) / 0.4, 0.0), 1.0))
 
 
 def _limb_points(c: _Candidate, labels: NDArray[Any]) -> NDArray[np.float64]:
