@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.plant.layout import Collector
-from sim.plant.shading import PlantShade, band_union_areas, polygon_band_areas
+from sim.plant.shading import PlantShade, band_union_areas
 
 FloatArray = NDArray[np.float64]
 
@@ -184,15 +184,6 @@ def _polygon_strings(shade: PlantShade, collector: Collector
     n_s = len(strings)
     string_area = shapely.area(shapely.intersection(own, shapely.box(
         strings[:, 0], strings[:, 2], strings[:, 1], strings[:, 3])))
-    cuts = collector.string_boundaries()
-    if shade.group_band_area is not None and shade.band_edges is not None \
-            and np.array_equal(shade.band_edges, cuts):
-        shaded = shade.group_band_area
-    else:
-        shaded = polygon_band_areas(shade.group_shade, collector.bounds,
-                                    np.concatenate([[-np.inf], cuts, [np.inf]]))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        f_s = np.where(string_area > 0, shaded / string_area, 0.0)
     # the block grid over the bounding box: string s holds rows s·n_v … (s + 1)·n_v − 1
     n_u, n_v = collector.block_grid()
     n_rows = n_v * n_s
@@ -203,18 +194,24 @@ def _polygon_strings(shade: PlantShade, collector: Collector
                         u_lo + (col.ravel() + 1) * cu, v_lo + (row.ravel() + 1) * cv)
     live = shapely.area(shapely.intersection(own, cells)) > _EPS_AREA_M2
     n_tb = live.reshape(n_s, n_v * n_u).sum(axis=1).astype(float)
-    # a cell holds shade where the shade's interior meets it: clipped to a row of cells,
-    # each connected piece of shade spans the open interval of its u bounds, so it holds
-    # the row's cells that interval overlaps — index rectangles for the bit-mask count
+    # the shade clipped to each row of cells (GEOS clip_by_rect): its area per string gives
+    # F_s; a cell holds shade where the shade's interior meets it, and each connected piece
+    # of a row's shade spans the open interval of its u bounds, so it holds the row's cells
+    # that interval overlaps — index rectangles for the bit-mask count
     pieces, rows_of, groups_of = [], [], []
+    shaded = np.zeros((len(shade.group_step), n_s))
     for r in range(n_rows):
         clipped = shapely.clip_by_rect(shade.group_shade, u_lo - 1.0, v_lo + r * cv,
                                        u_hi + 1.0, v_lo + (r + 1) * cv)
         parts, g = shapely.get_parts(clipped, return_index=True)
-        keep = shapely.area(parts) > _EPS_AREA_M2
+        part_area = shapely.area(parts)
+        keep = part_area > _EPS_AREA_M2
+        np.add.at(shaded[:, r // n_v], g[keep], part_area[keep])
         pieces.append(shapely.bounds(parts[keep]))
         groups_of.append(g[keep])
         rows_of.append(np.full(int(keep.sum()), r))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f_s = np.where(string_area > 0, shaded / string_area, 0.0)
     box = np.concatenate(pieces)
     group = np.concatenate(groups_of)
     rr = np.concatenate(rows_of).astype(float)

@@ -93,11 +93,12 @@ def field_shade(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: 
                 ) -> tuple[PlantShade, NDArray[np.bool_]]:
     """Every collector's shade (:func:`sim.plant.shading.plant_shade`), and the steps where
     the plant's sloped ground hides the sun (:func:`sim.plant.fields.horizon_elevation`):
-    there every collector's fraction is 1."""
+    there every collector's fraction is 1. ``band_edges`` are kept for a rectangle; a
+    polygon's strings are clipped by :func:`sim.plant.electrical.beam_factors` itself."""
     c = plant.collector
     shade = plant_shade(plant.positions, sky["solar_azimuth"], sky["apparent_elevation"],
-                        saz, sel, c.width, c.height, band_edges, table,
-                        None if c.is_rectangle else c.outline_m())
+                        saz, sel, c.width, c.height, band_edges if c.is_rectangle else (),
+                        table, None if c.is_rectangle else c.outline_m())
     behind = np.zeros(len(saz), dtype=bool)
     if plant.slope_tilt > 0:                # the ground beyond the plant hides the sun
         behind = sky["apparent_elevation"] <= horizon_elevation(
