@@ -650,16 +650,17 @@ class _PortOnly:
 
 
 def test_service_keys_replays_by_viewer_over_http(tmp_path) -> None:  # type: ignore[no-untyped-def]
-    """A real ``heliotwin serve`` with viser on: viewers follow the site of their URL through
-    the service's registry, and PUT/DELETE /api/v1/twin3d/replay reach one viewer key."""
-    from tests.backend.live_service import ServerProcess, new_database
+    """The service with viser on (its app and lifespan in this process, viser on a real
+    port): viewers follow the site of their URL through the service's registry, and
+    PUT/DELETE /api/v1/twin3d/replay reach one viewer key."""
+    from tests.backend.live_service import InProcessServer, new_database
 
     db = new_database("sqlite", tmp_path)
-    server = ServerProcess(db.url, tmp_path / "server.log",
-                           extra_env={"HELIOTWIN_VISER": "true"}).start()
+    server = InProcessServer(db.url, extra_env={"HELIOTWIN_VISER": "true",
+                                                "HELIOTWIN_VISER_PORT": "0"}).start()
     viewers: list[Viewer] = []
     try:
-        with httpx.Client(base_url=server.base_url, timeout=60) as http:
+        with server.client() as http:
             port = http.get("/api/v1/meta").json()["viser_port"]
             for path in ("/site/tehuantepec/viewer/k1", "/site/tehuantepec/viewer/k2",
                          "/site/guadalajara_fisheye/viewer/k3"):
