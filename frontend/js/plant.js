@@ -252,10 +252,16 @@ async function runSweep(ev) {
   if (!p) return;
   const token = ++sweep.token;
   const year = Number($("sweep-year").value);
+  // the collector: WIDTHxHEIGHT, or a polygon "u,v;u,v;…" [m] about the pivot (the CLI's --collector-polygon)
+  const collector = $("sweep-collector").value.trim();
+  const polygon = collector.includes(";")
+    ? collector.split(";").map((s) => s.trim()).filter(Boolean).map((pair) => pair.split(",").map(Number))
+    : null;
   const body = {
     layouts: $("sweep-layouts").value.split(",").map((s) => s.trim()).filter(Boolean),
     gcr: gcrList($("sweep-gcr").value), strategies: $("sweep-strategies").value.split(",").map((s) => s.trim()).filter(Boolean),
-    collector_m: $("sweep-collector").value.trim(), latitude_deg: p.latitude_deg, longitude_deg: p.longitude_deg,
+    ...(polygon ? { collector_polygon_m: polygon } : { collector_m: collector }),
+    latitude_deg: p.latitude_deg, longitude_deg: p.longitude_deg,
     altitude_m: p.altitude_m, start: `${year}-01-01`, end: `${year + 1}-01-01`, step_s: Number($("sweep-step").value),
   };
   const status = $("sweep-status");
