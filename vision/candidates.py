@@ -298,13 +298,15 @@ def _score(c: _Candidate, gray: NDArray[np.uint8], shape: float, size: float, pe
     if np.isfinite(m1) and m1 < bg - 0.15 * contrast:
         sharp = 0.0  # ringed by something darker than the sky: white text on a dark box
     # a wide core is a glare when its limb drops sharply to the sky or its glare lights
-    # the sky out to 4 R (c.wide also stands in for the coherence: vision.detect._search)
-    c.wide = _wide_core(r_eq, ppd) if scale_known else 0.0
-    if c.wide > 0.0 and sharp < 1.0:
+    # the sky out to 4 R (c.wide also stands in for the coherence: vision.detect._search);
+    # the ranking takes its width alone — the most sun-like region of the frame — and the
+    # confidence weighs whether its glare is a sun's
+    wide = _wide_core(r_eq, ppd) if scale_known else 0.0
+    c.wide = wide
+    if wide > 0.0 and sharp < 1.0:
         c.wide *= max(_tail(gray, c, r_eq, m3, bg, contrast, peak, fov, image), sharp)
-    glare = max(iso_glare, sharp, c.wide)
-    c.glare = float(glare)
-    return float(shape**2 * (0.25 + 0.75 * glare) * size)
+    c.glare = float(max(iso_glare, sharp, c.wide))
+    return float(shape**2 * (0.25 + 0.75 * max(iso_glare, sharp, wide)) * size)
 
 
 def _wide_core(r_eq: float, ppd: float) -> float:

@@ -132,3 +132,17 @@ def test_calibration_from_the_labelled_frames(real_sky, detections) -> None:
     # the README's 4-parameter fit to the labels: ~11.7 px/deg, centre near (972, 956)
     assert res.camera.px_per_deg == pytest.approx(11.7, abs=0.3)
     assert abs(res.camera.cx_px - 972) < 10 and abs(res.camera.cy_px - 956) < 10
+
+
+def test_a_washed_out_sun_outranks_a_bright_roof(real_sky) -> None:
+    """Wolf 10:01 brightened × 1.1: the blue sky saturates around the sun into a core 20°
+    wide whose glare tail reaches the trees, so its confidence is low; it still ranks above
+    the sunlit roof at the horizon (a small round saturated patch 480 px away), which was
+    reported as the sun with confidence 0.59 when the ranking weighed the tail too."""
+    (r,) = [r for r in _labelled(real_sky, "Wolf") if "_100100_" in r["filename"]]
+    d = detect_robust(_exposed(cv2.imread(r["path"]), 1.1, 1.0), min_confidence=0.0)
+    # the winning region holds the sun (its centroid 98 px from the label, its equivalent
+    # radius 237 px; the roof was 476 px away), and is not reported as found
+    assert np.hypot(d.candidate_px[0] - float(r["sun_col_label"]),
+                    d.candidate_px[1] - float(r["sun_row_label"])) < np.sqrt(d.area_px / np.pi)
+    assert d.confidence < 0.5
