@@ -174,8 +174,8 @@ class Watcher:
                 self._cond.wait(left)
 
     def close(self) -> None:
+        self.client.disconnect()  # first: the network thread ends with it, not on its 1 s poll
         self.client.loop_stop()
-        self.client.disconnect()
 
 
 def publish_all(messages: list[tuple[str, str | bytes]], retain: bool = False,
@@ -188,8 +188,8 @@ def publish_all(messages: list[tuple[str, str | bytes]], retain: bool = False,
         for topic, payload in messages:
             c.publish(topic, payload, qos=1, retain=retain).wait_for_publish(WAIT_S)
     finally:
+        c.disconnect()  # before loop_stop, as Watcher.close
         c.loop_stop()
-        c.disconnect()
 
 
 def publish(topic: str, payload: str | bytes, host: str = HOST, port: int = PORT) -> None:
@@ -198,10 +198,17 @@ def publish(topic: str, payload: str | bytes, host: str = HOST, port: int = PORT
 
 
 def clear_retained(*filters: str) -> None:
-    """Remove the retained messages under ``filters`` (an empty retained payload each)."""
+    """Remove the retained messages under ``filters`` (``prefix/#`` first; an empty retained
+    payload each). The broker queues a subscription's retained messages as it acknowledges
+    it, so a message published after the acknowledgement arrives behind all of them."""
+    assert filters[0].endswith("/#"), filters
     w = Watcher(*filters)
-    time.sleep(1.0)  # retained messages arrive right after the subscription
-    w.close()
+    try:
+        marker = f"{filters[0][:-1]}retained-read-{uuid.uuid4().hex[:8]}"
+        publish(marker, b"")
+        w.wait(lambda m: m.topic == marker, "the message published after the retained ones")
+    finally:
+        w.close()
     topics = sorted({m.topic for m in w.messages if m.retain and m.payload})
     publish_all([(t, b"") for t in topics], retain=True)
 
