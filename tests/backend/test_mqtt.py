@@ -483,9 +483,11 @@ def test_a_persistent_session_keeps_readings_while_the_service_is_away(
     client_id = f"heliotwin-test-{uuid.uuid4().hex[:8]}"
     db = new_database("sqlite", tmp_path)
     env = {**mqtt_env(prefix, f"mqtt://{HOST}:{PORT}"), "HELIOTWIN_MQTT_CLIENT_ID": client_id}
-    # a real process: "away" is its process gone (in this process, a thread that outlived
-    # its service could still hold the session)
+    # the first service a real process: "away" is its process gone (in this process, a
+    # thread that outlived its service could still hold the session and store the reading);
+    # the one that comes back may run here
     proc = ServerProcess(db.url, tmp_path / "server.log", extra_env=env).start()
+    back = InProcessServer(db.url, extra_env=env)
     t0 = minute(-40)
     try:
         with httpx.Client(base_url=proc.base_url, timeout=30.0) as c:
@@ -493,12 +495,12 @@ def test_a_persistent_session_keeps_readings_while_the_service_is_away(
         proc.stop()
         publish(f"{prefix}/{SITE}/tracker/state",  # while no service is connected
                 json.dumps({"ts": iso(t0), "voltage_v": 25.0, "current_a": 3.0}))
-        proc.start()
-        with httpx.Client(base_url=proc.base_url, timeout=30.0) as c:
+        with back.start().client(timeout_s=30.0) as c:
             points = stored(c, "tracker", iso(t0), iso(t0 + dt.timedelta(minutes=1)), 1)
         assert points[0]["power_w"] == 75.0
     finally:
         proc.stop()
+        back.stop()
         gone = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=client_id,
                            clean_session=True)  # end the session on the broker
         gone.connect(HOST, PORT)
