@@ -217,7 +217,8 @@ class Collector:
         return self.modules_across, self.bypass_diodes
 
     def blocks(self) -> tuple[FloatArray, NDArray[np.int64]]:
-        """Bypass-diode blocks: rectangles ``(B, 4)`` (u0, u1, v0, v1) [m], their string index."""
+        """Bypass-diode blocks: rectangles ``(B, 4)`` (u0, u1, v0, v1) [m], their string index
+        (over the bounding box of an outline, blocks outside it included)."""
         mw, mh = self.width / self.modules_across, self.height / self.modules_high
         n = self.bypass_diodes
         u_lo, _, v_lo, _ = self.bounds

@@ -86,6 +86,45 @@ def test_dropped_in_plant_appears(client: httpx.Client, plants_dir: Path) -> Non
         (plants_dir / "pair.json").unlink()
 
 
+def test_a_plant_file_with_a_polygon_collector(client: httpx.Client, plants_dir: Path) -> None:
+    """Peñarroya's pivots with an L-shaped collector (``outline_m``): the plant shows its
+    outline, ``/positions`` under sun tracking shades each collector as twoaxistracking does
+    with the L as its geometry, and the strategies and the sky map that test the rectangle
+    refuse it by name."""
+    from shapely import geometry
+    from twoaxistracking.shading import shaded_fraction
+
+    d = json.loads((plants_dir / "penarroya.json").read_text())
+    del d["collector"]["width_m"], d["collector"]["height_m"]
+    d["plant_id"], d["collector"]["outline_m"] = "penarroya-l", L_SHAPE
+    (plants_dir / "penarroya-l.json").write_text(json.dumps(d))
+    try:
+        p = client.get("/api/v1/plants/penarroya-l").raise_for_status().json()
+        assert p["collector"]["outline_m"] == [list(v) for v in L_SHAPE]
+        assert p["collector"]["area_m2"] == pytest.approx(45.0)
+        r = client.get("/api/v1/plants/penarroya-l/positions",
+                       params={"time": DEC21_0824_TST}).raise_for_status().json()
+        geom = geometry.Polygon(L_SHAPE)
+        sun = r["sun"]
+        got = {t["tracker_id"]: t["shaded_fraction"] for t in r["trackers"]}
+        for i, tid in enumerate(PLANT.tracker_ids):
+            q = np.delete(PLANT.positions - PLANT.positions[i], i, axis=0)
+            dist = np.hypot(q[:, 0], q[:, 1])
+            raz = np.degrees(np.arctan2(q[:, 0], q[:, 1])) % 360
+            ref = shaded_fraction(sun["elevation_deg"], sun["azimuth_deg"], geom, geom, 13.0,
+                                  dist, raz, np.zeros_like(dist))
+            assert got[tid] == pytest.approx(ref, abs=2e-6), tid
+        assert sum(f > 0 for f in got.values()) > 10
+        r = client.get("/api/v1/plants/penarroya-l/positions",
+                       params={"time": DEC21_0824_TST, "strategy": "backtrack"})
+        assert r.status_code == 422 and r.json()["detail"].startswith(
+            "strategy: strategy 'backtrack' needs a rectangular collector")
+        r = client.get("/api/v1/plants/penarroya-l/sky-map", params={"time": DEC21_0824_TST})
+        assert r.status_code == 422 and r.json()["detail"].startswith("plant_id: penarroya-l")
+    finally:
+        (plants_dir / "penarroya-l.json").unlink()
+
+
 def test_positions_at_seed_004_instant_match_twoaxistracking(client: httpx.Client) -> None:
     r = client.get("/api/v1/plants/penarroya/positions",
                    params={"time": DEC21_0824_TST, "strategy": "sun"}).raise_for_status().json()

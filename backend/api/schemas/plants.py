@@ -28,7 +28,8 @@ class PlantFixedRead(BaseModel):
 
 
 class CollectorRead(BaseModel):
-    """One tracker's collector (its modules and their electrics)."""
+    """One tracker's collector (its modules and their electrics; its outline when it is a
+    polygon)."""
 
     width_m: float
     height_m: float
@@ -41,6 +42,10 @@ class CollectorRead(BaseModel):
     gamma_pdc_per_c: float = Field(description="power temperature coefficient [1/°C]")
     module_name: str | None
     power_stc_w: float
+    outline_m: list[tuple[float, float]] | None = Field(
+        None, description="a polygon collector's [u, v] vertices [m] about the pivot "
+                          "(width_m × height_m is then its bounding box); null for the "
+                          "rectangle")
 
 
 class PlantTrackerRead(BaseModel):
