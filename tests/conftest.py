@@ -3,11 +3,13 @@
 
 ``make test`` spreads the modules over two pytest-xdist workers (``--dist loadfile``), each
 module whole on one worker, handed out in collection order (``--no-loadscope-reorder``).
-A long module handed out last keeps one worker busy while the other has nothing left to
-do, so the modules holding a test marked ``slow`` (more than a few seconds) or ``browser``
-(a real Chromium) go first; the rest keep their order and fill in behind them. The order
-of the tests inside a module does not change. Every worker collects the same order, as
-xdist requires; a run without xdist is left in pytest's own order.
+The browser modules (``tests/e2e/``) go out together, as one unit, to one worker: their
+session fixtures (a ``heliotwin serve`` back-filled with three days, Chromium) then start
+once, not once per worker. A long unit handed out last keeps one worker busy while the
+other has nothing left to do, so the browser unit goes first, then the modules holding a
+test marked ``slow`` (more than a few seconds); the rest keep their order and fill in
+behind them. The order of the tests inside a module does not change. Every worker collects
+the same order, as xdist requires; a run without xdist is left in pytest's own order.
 """
 
 from __future__ import annotations
@@ -15,25 +17,47 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import pytest
 
 #: the markers of a test that takes long
 LONG = ("slow", "browser")
+#: the browser modules' folder: one xdist work unit
+BROWSER_UNIT = "tests/e2e/"
 
 
 def _is_long(item: pytest.Item) -> bool:
     return any(item.get_closest_marker(name) is not None for name in LONG)
 
 
+def _module(nodeid: str) -> str:
+    return nodeid.split("::", 1)[0]
+
+
 @pytest.hookimpl(trylast=True)  # after the hooks that add markers (tests/e2e/conftest.py)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """In an xdist worker, move the modules that hold a long test to the front (a stable
-    sort: otherwise in collection order). A plain pytest keeps its order (``--ff``…)."""
+    """In an xdist worker, move the browser unit to the front, then the modules that hold a
+    long test (a stable sort: otherwise in collection order). A plain pytest keeps its
+    order (``--ff``…)."""
     if not hasattr(config, "workerinput"):
         return
-    long_modules = {item.nodeid.split("::", 1)[0] for item in items if _is_long(item)}
-    items.sort(key=lambda item: item.nodeid.split("::", 1)[0] not in long_modules)
+    long_modules = {_module(item.nodeid) for item in items if _is_long(item)}
+    items.sort(key=lambda item: (not item.nodeid.startswith(BROWSER_UNIT),
+                                 _module(item.nodeid) not in long_modules))
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """Under ``--dist loadfile``, xdist's file scheduling with ``tests/e2e/`` as one unit."""
+    if config.getoption("dist", None) != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class BrowserUnitScheduling(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return BROWSER_UNIT if nodeid.startswith(BROWSER_UNIT) else _module(nodeid)
+
+    return BrowserUnitScheduling(config, log)
 
 
 @dataclass
