@@ -19,9 +19,10 @@ run: $(STAMP)  ## start the service: API + dashboard on :8000, 3D twin on :8080,
 	$(BIN)/heliotwin serve
 
 # the suite over both cores (pytest-xdist); a module's tests stay on one worker, so its
-# in-process service starts once. Modules go out in collection order, which
-# tests/conftest.py starts with the modules holding slow or browser tests (xdist's own
-# reorder, by number of tests, would leave those long modules for last).
+# in-process service starts once, and the browser modules (tests/e2e/) stay together, so
+# their served dashboard and Chromium start once. Modules go out in collection order, which
+# tests/conftest.py starts with the browser modules, then those holding slow tests (xdist's
+# own reorder, by number of tests, would leave those long modules for last).
 # `make test PYTEST_WORKERS=0` runs it in one process.
 # The schema fuzzing (marker one_process) runs after it in a plain pytest: xdist would
 # run one case per operation group (schemathesis' cases share a node id).
