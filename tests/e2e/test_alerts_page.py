@@ -24,7 +24,7 @@ import pytest
 from tests.e2e.conftest import open_page
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backend"))
-from live_service import ServerProcess, free_port, new_database  # noqa: E402
+from live_service import InProcessServer, ServerProcess, free_port, new_database  # noqa: E402
 
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 TZ = ZoneInfo("America/Mexico_City")
@@ -92,18 +92,17 @@ def alert_server(browser, tmp_path_factory: pytest.TempPathFactory) -> Iterator[
     hook = http.server.ThreadingHTTPServer(("127.0.0.1", free_port()), _Hook)
     threading.Thread(target=hook.serve_forever, daemon=True).start()
     db = new_database("sqlite", tmp)
-    first = ServerProcess(db.url, tmp / "server.log", extra_env={"HELIOTWIN_ALERTS": "false"})
-    first.start()
-    try:
+    # yesterday's readings, stored by the service (in this process: only the served one
+    # below is the browser's)
+    with InProcessServer(db.url, extra_env={"HELIOTWIN_ALERTS": "false"}) as first, \
+            first.client() as c:
         token = first.token(SITE)
         noon = dt.datetime(YESTERDAY.year, YESTERDAY.month, YESTERDAY.day, 12, tzinfo=TZ)
         rows = [_reading(noon.timestamp() + 60 * k, a) for k in range(30)
                 for a in ("tracker", "fixed")]
-        r = httpx.post(f"{first.base_url}/api/v1/sites/{SITE}/measurements",
-                       json={"readings": rows}, headers={"Authorization": f"Bearer {token}"})
+        r = c.post(f"/api/v1/sites/{SITE}/measurements", json={"readings": rows},
+                   headers={"Authorization": f"Bearer {token}"})
         assert r.status_code == 200, r.text
-    finally:
-        first.stop()
     _inject(db.url, YESTERDAY, _stuck_day(YESTERDAY))
     proc = ServerProcess(db.url, tmp / "server.log", extra_env={
         "HELIOTWIN_ALERT_INTERVAL_S": "0.3", "HELIOTWIN_ALERT_SILENT_MIN": "0.05",
