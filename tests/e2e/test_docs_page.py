@@ -9,13 +9,11 @@ the CSP; the ``page`` fixture fails on any console error, a CSP violation includ
 
 from __future__ import annotations
 
-import subprocess
 from pathlib import Path
 from urllib.parse import urlsplit
 
 import httpx
 import pytest
-from conftest import _heliotwin
 
 ROOT = Path(__file__).resolve().parents[2]
 ARTIFACTS = ROOT / "test-artifacts"
@@ -40,7 +38,7 @@ def _offline(page) -> list[str]:  # type: ignore[no-untyped-def]
     return aborted
 
 
-def test_docs_render_offline_and_send_the_token(page, server) -> None:
+def test_docs_render_offline_and_send_the_token(page, server, heliotwin_cli) -> None:
     aborted = _offline(page)
     page.goto(server.url + "/docs")
     page.wait_for_selector(".swagger-ui .info .title", timeout=30_000)
@@ -51,9 +49,9 @@ def test_docs_render_offline_and_send_the_token(page, server) -> None:
     ARTIFACTS.mkdir(exist_ok=True)
     page.screenshot(path=str(ARTIFACTS / "docs-offline.png"))
 
-    token = subprocess.run([*_heliotwin(), "token", "create", "--site", "tehuantepec"],
-                           cwd=ROOT, env=server.env, capture_output=True, text=True,
-                           timeout=120, check=True).stdout.split()[-1]
+    made = heliotwin_cli("token", "create", "--site", "tehuantepec", env=server.env)
+    assert made.returncode == 0, made.stderr
+    token = made.stdout.split()[-1]
     page.click("button.authorize")
     page.fill(".auth-container input", token)
     page.click(".auth-btn-wrapper button.authorize")

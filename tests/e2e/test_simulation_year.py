@@ -5,8 +5,6 @@ a distant station only when the user says so (item 10)."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import httpx
@@ -59,7 +57,8 @@ def _run_with_file(page, force: bool) -> None:
     page.click("#sim-run")
 
 
-def test_a_tmy3_file_uploaded_on_the_page_runs_on_its_weather(page, server) -> None:
+def test_a_tmy3_file_uploaded_on_the_page_runs_on_its_weather(page, server,
+                                                             heliotwin_cli) -> None:
     """Greensboro's TMY3 at the Tehuantepec site: refused (the station is 2,672 km away) until
     "distant station" is ticked; then the run is the CLI's on the same file, to the Wh."""
     page.goto(server.url + "/#simulation")
@@ -84,11 +83,10 @@ def test_a_tmy3_file_uploaded_on_the_page_runs_on_its_weather(page, server) -> N
     assert _points(page, "chart-sim-power") > 0 and _points(page, "chart-sim-angles") > 0
     run_id = page.get_attribute("body", "data-simulation-done")
     summary = httpx.get(f"{server.url}/api/v1/simulations/{run_id}", timeout=30).json()
-    cli = subprocess.run(
-        [sys.executable, "-m", "backend", "simulate", "--site", "tehuantepec", "--start",
-         "2024-02-28", "--end", "2024-03-02", "--step-s", "300", "--tmy3",
-         str(pvlib_tmy3_path()), "--force", "--json"],
-        capture_output=True, text=True, cwd=ROOT, timeout=120, check=True)
+    cli = heliotwin_cli("simulate", "--site", "tehuantepec", "--start", "2024-02-28", "--end",
+                        "2024-03-02", "--step-s", "300", "--tmy3", str(pvlib_tmy3_path()),
+                        "--force", "--json")
+    assert cli.returncode == 0, cli.stderr
     ref = json.loads(cli.stdout)
     assert summary["summary"]["sky"] == "weather"
     assert summary["summary"]["tracker_energy_wh"] == pytest.approx(ref["tracker_energy_wh"],

@@ -5,8 +5,6 @@ evaluated on the two held out, deleting it, and clearing the day's detections.""
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -14,10 +12,10 @@ REAL_SKY = ROOT / "tests" / "data" / "real-sky"
 ARTIFACTS = ROOT / "build" / "e2e"
 
 
-def _token(server, site_id: str = "tehuantepec") -> str:  # type: ignore[no-untyped-def]
-    out = subprocess.run([sys.executable, "-m", "backend", "token", "create", "--site", site_id],
-                         cwd=ROOT, env=server.env, capture_output=True, text=True, timeout=60,
-                         check=True)
+def _token(server, heliotwin_cli, site_id: str = "tehuantepec") -> str:  # type: ignore[no-untyped-def]
+    """A write token from ``heliotwin token create`` (in process) on the server's database."""
+    out = heliotwin_cli("token", "create", "--site", site_id, env=server.env)
+    assert out.returncode == 0, out.stderr
     return out.stdout.strip().split()[-1]
 
 
@@ -48,7 +46,7 @@ def test_zone_of_each_frame_is_said(page, server, tmp_path: Path) -> None:  # ty
     assert "from the file name → 2016-06-15T08:39:00Z" in zones.nth(0).text_content()
 
 
-def test_named_calibration_held_out_evaluation_and_delete(page, server) -> None:  # type: ignore[no-untyped-def]
+def test_named_calibration_held_out_evaluation_and_delete(page, server, heliotwin_cli) -> None:  # type: ignore[no-untyped-def]
     frames = sorted(REAL_SKY.glob("Wettermast_*.jpg"))
     fit, held = frames[::2] + frames[1:2], frames[3::2]  # four to fit, two held out
     page.on("dialog", lambda d: d.accept())
@@ -78,7 +76,7 @@ def test_named_calibration_held_out_evaluation_and_delete(page, server) -> None:
 
     page.click("#sky-calibration-delete")  # no token: says so, nothing deleted
     assert "needs a write token" in page.text_content("#sky-status")
-    page.fill("#sky-token", _token(server))
+    page.fill("#sky-token", _token(server, heliotwin_cli))
     page.click("#sky-calibration-delete")
     page.wait_for_function("() => document.getElementById('sky-status').textContent"
                            ".startsWith('Deleted calibration')")
