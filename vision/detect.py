@@ -330,17 +330,6 @@ def _guided_search(gray: NDArray[np.uint8], work: _Region, bg: float, fov: FovCi
         radius = int(np.ceil(min(max(_SEARCH_GROW * radius, radius + 1.0), full)))
 
 
-_WHITE_SEARCH = False
-
-
-def _white(image: NDArray[Any]) -> NDArray[np.uint8]:
-    """min(B, G, R) of an 8-bit colour frame (grey: itself)."""
-    img = np.asarray(image)
-    if img.ndim == 3 and img.shape[2] >= 3 and img.dtype == np.uint8:
-        return np.asarray(cv2.min(cv2.min(img[:, :, 0], img[:, :, 1]), img[:, :, 2]), np.uint8)
-    return to_gray(image)
-
-
 def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
                   fov: FovCircle | None = None, auto_fov: bool = True,
                   min_confidence: float = 0.5,
@@ -364,7 +353,7 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         its distance from the prediction, however far (a wrong place, time or
         zone moves the prediction, not the sun).
     """
-    gray = _white(image) if _WHITE_SEARCH else to_gray(image)
+    gray = to_gray(image)
     small, scale = _small(gray)
     if fov is None and auto_fov:
         fov = estimate_fov(gray, small, scale)
