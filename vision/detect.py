@@ -12,7 +12,8 @@ Three named methods, all returning a :class:`SunDetection`:
   grouped when a mast splits a glare, streaks (blooming, smear) opened away,
   lens-flare ghosts rejected (on the line through the optical centre,
   opposite a larger blob). Each
-  candidate gets a shape term (second moments) and glare evidence (isotropic
+  candidate gets a shape term (second moments; a core cut by trees, the ground or a mast:
+  the roundness of its free arc, :func:`_cut_shape`) and glare evidence (isotropic
   fall-off, a sharp drop to the sky, or a saturated core degrees wide — the
   glare itself, when it still lights the sky at 4 core radii:
   :func:`vision.candidates._tail`). What a sun is (issue 24 item 2): a region at or near
