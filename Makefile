@@ -26,13 +26,15 @@ run: $(STAMP)  ## start the service: API + dashboard on :8000, 3D twin on :8080,
 # `make test PYTEST_WORKERS=0` runs it in one process.
 # The schema fuzzing (marker one_process) runs after it in a plain pytest: xdist would
 # run one case per operation group (schemathesis' cases share a node id). That run collects
-# only the test modules naming the marker (collecting the whole suite again cost 10 s).
+# only the test modules naming the marker (collecting the whole suite again cost 10 s); the
+# xdist run does not import the modules marked one_process whole (schemathesis: 4 s a worker).
 PYTEST_WORKERS ?= 2
 ONE_PROCESS_MODULES = $(shell grep -rl --include='test_*.py' one_process tests)
+ONE_PROCESS_ONLY = $(shell grep -rlx --include='test_*.py' 'pytestmark = pytest.mark.one_process' tests)
 
 test: $(STAMP)  ## run the whole test suite
 	$(BIN)/python -m pytest -n $(PYTEST_WORKERS) --dist loadfile --no-loadscope-reorder \
-		-m "not one_process"
+		-m "not one_process" $(addprefix --ignore=,$(ONE_PROCESS_ONLY))
 	$(BIN)/python -m pytest -m one_process $(ONE_PROCESS_MODULES)
 
 bench: $(STAMP)  ## measure the speed figures and write benchmarks/RESULTS.md
