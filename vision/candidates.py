@@ -304,7 +304,7 @@ def _score(c: _Candidate, gray: NDArray[np.uint8], shape: float, size: float, pe
     wide = _wide_core(r_eq, ppd) if scale_known else 0.0
     c.wide = wide
     if wide > 0.0 and sharp < 1.0:
-        c.wide *= max(_tail(gray, c, r_eq, m3, bg, contrast, peak, fov, image), sharp)
+        c.wide *= max(_tail(gray, c, m3, bg, contrast, peak, fov, image), sharp)
     c.glare = float(max(iso_glare, sharp, c.wide))
     return float(shape**2 * (0.25 + 0.75 * max(iso_glare, sharp, wide)) * size)
 
@@ -316,9 +316,8 @@ def _wide_core(r_eq: float, ppd: float) -> float:
     return _clamp((r_eq / max(ppd, 1e-9) - lo) / (hi - lo), 0.0, 1.0)
 
 
-def _tail(gray: NDArray[np.uint8], c: _Candidate, r_eq: float, m4: float, bg: float,
-          contrast: float, peak: float, fov: FovCircle | None, image: NDArray[Any] | None
-          ) -> float:
+def _tail(gray: NDArray[np.uint8], c: _Candidate, m4: float, bg: float, contrast: float,
+          peak: float, fov: FovCircle | None, image: NDArray[Any] | None) -> float:
     """0–1: whether the glare around a core still lights the sky at 4 core radii — the
     condition for a wide saturated core to count as its own glare (issue 24).
 
@@ -329,14 +328,13 @@ def _tail(gray: NDArray[np.uint8], c: _Candidate, r_eq: float, m4: float, bg: fl
     (EUROCONTROL's low sun) of their contrast there (median grey level of the ring against
     the sky's level ``bg``). The brightest patch of an overcast deck — its overexposed zenith,
     the second renderer's held-out overcast frames — is back at the sky's median by then
-    (−13 to +4 %). ``m4`` is that ring's median about the grey core (equivalent radius
-    ``r_eq``); on a colour frame with a white core (:func:`_white_core`) the ring is drawn
-    4 × the white core's radius about its centre instead — the sun's own core, not the
-    blue sky saturated in grey around it, which a longer exposure grows by tens of degrees
-    (the Wolf frames brightened ×1.1–1.15 in ``tests/vision/test_real_sky.py``) and pushes
-    the ring past the horizon. Full credit from ``_TAIL[1]`` of the contrast; a ring
-    with no sky to read (under 8 points inside the frame and image circle) is no evidence
-    either way (1)."""
+    (−13 to +4 %). ``m4`` is that ring's median about the grey core ``c``; on a colour
+    frame with a white core (:func:`_white_core`) the ring is drawn 4 × the white core's
+    radius about its centre instead — the sun's own core, not the blue sky saturated in
+    grey around it, which a longer exposure grows by tens of degrees (the Wolf frames
+    brightened ×1.1–1.15 in ``tests/vision/test_real_sky.py``) and pushes the ring past
+    the horizon. Full credit from ``_TAIL[1]`` of the contrast; a ring with no sky to read
+    (under 8 points inside the frame and image circle) is no evidence either way (1)."""
     core = _white_core(image, c, min(_SATURATED, peak - 1.0))
     if core is not None:
         m = cv2.moments(core[0])

@@ -55,16 +55,16 @@ def test_the_tail_of_a_point_source_and_of_a_bright_patch(profile: str, expected
     xs = np.clip(np.rint(c.cx + ring * np.cos(t)), 0, 959).astype(int)
     ys = np.clip(np.rint(c.cy + ring * np.sin(t)), 0, 959).astype(int)
     m4 = float(np.median(gray[ys, xs]))
-    assert _tail(gray, c, r_eq, m4, _SKY, 255 - _SKY, 255.0, None, None) == expected
+    assert _tail(gray, c, m4, _SKY, 255 - _SKY, 255.0, None, None) == expected
     # a colour frame: the ring is drawn about the white core (here the same core)
     colour = cv2.merge([gray, gray, gray])
-    assert _tail(gray, c, r_eq, m4, _SKY, 255 - _SKY, 255.0, None, colour) == expected
+    assert _tail(gray, c, m4, _SKY, 255 - _SKY, 255.0, None, colour) == expected
 
 
 def test_an_unreadable_ring_is_no_evidence() -> None:
     gray, _ = _frame("patch")
     c = _core(gray)
-    assert _tail(gray, c, 10.0, float("nan"), _SKY, 145.0, 255.0, None, None) == 1.0
+    assert _tail(gray, c, float("nan"), _SKY, 145.0, 255.0, None, None) == 1.0
 
 
 @pytest.mark.parametrize("seed", [10001, 10058])
