@@ -47,6 +47,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
                                  _module(item.nodeid) not in long_modules))
 
 
+@pytest.hookimpl(optionalhook=True)  # a run with -p no:xdist has no such hook
 def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
     """Under ``--dist loadfile``, xdist's file scheduling with ``tests/e2e/`` as one unit."""
     if config.getoption("dist", None) != "loadfile":
