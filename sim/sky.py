@@ -82,7 +82,7 @@ def linke_turbidity(times: pd.DatetimeIndex, latitude: float, longitude: float) 
     utc = times.tz_convert("UTC") if times.tz is not None else times
     table = _daily_linke(float(latitude), float(longitude))
     row = np.where(utc.is_leap_year, 0, 1)
-    return table[row, np.asarray(utc.dayofyear) - 1]
+    return table[row, np.asarray(utc.day_of_year) - 1]
 
 
 def clearsky_ineichen(

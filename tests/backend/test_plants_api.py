@@ -8,10 +8,9 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
-import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import cv2
 import httpx
@@ -200,12 +199,10 @@ def test_day_compares_strategies(client: httpx.Client) -> None:
     assert d["strategies"]["backtrack"]["fraction_of_daylight_any_shaded"] == 0
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "backend", "plant", *args], cwd=ROOT,
-                          capture_output=True, text=True, timeout=120)
+def test_cli_simulate_and_list(heliotwin_cli: Callable) -> None:
+    def _cli(*args: str) -> Any:
+        return heliotwin_cli("plant", *args)
 
-
-def test_cli_simulate_and_list() -> None:
     out = _cli("simulate", "--plant", "penarroya", "--start", "2021-12-21", "--end",
                "2021-12-22", "--step-s", "900", "--json")
     assert out.returncode == 0, out.stderr

@@ -10,10 +10,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-import os
-import subprocess
-import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
@@ -164,7 +161,8 @@ def test_a_zone_on_another_hour_grid_is_refused(client: httpx.Client,
     assert r.status_code == 409 and "timezone" in r.json()["detail"]
 
 
-def test_user_sites_are_there_after_a_restart_and_run_in_simulate(server: InProcessServer) -> None:
+def test_user_sites_are_there_after_a_restart_and_run_in_simulate(
+        server: InProcessServer, heliotwin_cli: Callable) -> None:
     server.stop()
     server.start()
     with server.client(timeout_s=60) as c:
@@ -172,10 +170,7 @@ def test_user_sites_are_there_after_a_restart_and_run_in_simulate(server: InProc
     assert {"my-roof", "tehuantepec", "guadalajara_fisheye"} <= set(sites)
     assert sites["tehuantepec"]["arrays"]["fixed"]["surface_tilt_deg"] == 45.0
     assert sites["guadalajara_fisheye"]["origin"] == "builtin"
-    env = {**os.environ, **server.env}
-    run = subprocess.run([sys.executable, "-m", "backend", "simulate", "--site", "my-roof",
-                          "--start", "2024-06-21", "--end", "2024-06-22", "--step-s", "600",
-                          "--json"], capture_output=True, text=True, cwd=ROOT, env=env,
-                         timeout=120)
+    run = heliotwin_cli("simulate", "--site", "my-roof", "--start", "2024-06-21", "--end",
+                        "2024-06-22", "--step-s", "600", "--json", env=server.env)
     assert run.returncode == 0, run.stderr
     assert json.loads(run.stdout)["tracker_energy_wh"] > 0

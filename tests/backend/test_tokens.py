@@ -1,9 +1,10 @@
 """Write tokens: ``heliotwin token create|list|revoke`` and ``/api/v1/tokens`` on a running
-service (in this process, ``live_service.InProcessServer``; the CLI in processes of its own,
-where the CLI is the subject: a token a test merely needs is made in process).
+service (in this process, ``live_service.InProcessServer``); the CLI runs as ``backend.cli.main``
+in this process (``heliotwin_cli``) with its own database connection, and once as a real
+process, where what the process prints is the subject.
 
-A token revoked by the CLI (another process) is refused within the cache TTL
-(``HELIOTWIN_TOKEN_CACHE_TTL_S`` ≤ 1 s); one revoked over HTTP at once; an
+A token revoked by the CLI (another connection, outside the server's token cache) is refused
+within the cache TTL (``HELIOTWIN_TOKEN_CACHE_TTL_S`` ≤ 1 s); one revoked over HTTP at once; an
 expired one from its expiry. Real database (SQLite and PostgreSQL).
 """
 
@@ -13,7 +14,7 @@ import datetime as dt
 import json
 import subprocess
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import httpx
@@ -65,33 +66,37 @@ def test_create_prints_only_the_token(server: InProcessServer) -> None:
 
 
 def test_cli_revocation_is_refused_within_a_second(server: InProcessServer,
-                                                   client: httpx.Client) -> None:
+                                                   client: httpx.Client,
+                                                   heliotwin_cli: Callable) -> None:
     token = server.token("tehuantepec", "to-revoke")  # the CLI's revoke is the subject
     assert _post(client, token, 0).status_code == 200
     assert _post(client, token, 1).status_code == 200  # now cached by the server
-    listed = json.loads(_cli(server, "list", "--site", "tehuantepec", "--json").stdout)
+    listed = json.loads(heliotwin_cli("token", "list", "--site", "tehuantepec", "--json",
+                                     env=server.env).stdout)
     mine = [t for t in listed if token.startswith(t["token_prefix"]) and
             t["label"] == "to-revoke"]
     assert len(mine) == 1 and mine[0]["status"] == "active"
     assert token not in json.dumps(listed)  # list never shows a token
 
-    revoked = _cli(server, "revoke", str(mine[0]["id"]))
+    revoked = heliotwin_cli("token", "revoke", str(mine[0]["id"]), env=server.env)
     assert revoked.returncode == 0, revoked.stderr
     time.sleep(1.0)
     r = _post(client, token, 2)
     assert r.status_code == 401, r.text
-    after = json.loads(_cli(server, "list", "--json").stdout)
+    after = json.loads(heliotwin_cli("token", "list", "--json", env=server.env).stdout)
     assert [t["status"] for t in after if t["id"] == mine[0]["id"]] == ["revoked"]
 
 
-def test_cli_revoke_by_token_and_unknown(server: InProcessServer, client: httpx.Client) -> None:
+def test_cli_revoke_by_token_and_unknown(server: InProcessServer, client: httpx.Client,
+                                         heliotwin_cli: Callable) -> None:
     token = server.token("tehuantepec")
-    assert _cli(server, "revoke", token).returncode == 0
+    assert heliotwin_cli("token", "revoke", token, env=server.env).returncode == 0
     time.sleep(1.0)
     assert _post(client, token, 3).status_code == 401
-    missing = _cli(server, "revoke", "999999")
+    missing = heliotwin_cli("token", "revoke", "999999", env=server.env)
     assert missing.returncode == 2 and "no write token with id 999999" in missing.stderr
-    bad = _cli(server, "create", "--site", "tehuantepec", "--expires", "2020-01-01T00:00Z")
+    bad = heliotwin_cli("token", "create", "--site", "tehuantepec", "--expires",
+                        "2020-01-01T00:00Z", env=server.env)
     assert bad.returncode == 2 and "--expires" in bad.stderr
 
 

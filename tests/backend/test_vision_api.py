@@ -12,9 +12,8 @@ import csv
 import datetime as dt
 import json
 import struct
-import subprocess
-import sys
 import zlib
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -349,17 +348,12 @@ def test_vision_token_required_when_configured(tmp_path: Path) -> None:
         assert r.status_code == 200, r.text
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "backend", "vision", *args], cwd=ROOT,
-                          capture_output=True, text=True, timeout=120)
-
-
-def test_cli_detect_fisheye_json(tmp_path: Path) -> None:
+def test_cli_detect_fisheye_json(tmp_path: Path, heliotwin_cli: Callable) -> None:
     ts = "2024-02-10T10:30:00-06:00"
     az, el = _spa(ts, *TEHUANTEPEC)
     path = tmp_path / "sky.png"
     path.write_bytes(_png(fisheye_frame(az, el, seed=4).image))
-    out = _cli("detect", str(path), "--camera", "fisheye", "--px-per-deg", "2.6",
+    out = heliotwin_cli("vision", "detect", str(path), "--camera", "fisheye", "--px-per-deg", "2.6",
                "--timestamp", ts, "--site", "tehuantepec", "--json")
     assert out.returncode == 0, out.stderr
     d = json.loads(out.stdout)
@@ -367,7 +361,7 @@ def test_cli_detect_fisheye_json(tmp_path: Path) -> None:
     assert d["ephemeris"]["azimuth_deg"] == pytest.approx(az, abs=0.02)
 
 
-def test_cli_calibrate_and_bad_file(tmp_path: Path) -> None:
+def test_cli_calibrate_and_bad_file(tmp_path: Path, heliotwin_cli: Callable) -> None:
     truth = FisheyeCamera(322.0, 241.0, 2.6, north_offset_deg=-15.0)
     paths, stamps = [], []
     for i, hour in enumerate((8, 11, 14, 16)):
@@ -377,11 +371,12 @@ def test_cli_calibrate_and_bad_file(tmp_path: Path) -> None:
         p.write_bytes(_png(fisheye_frame(az, el, camera=truth, seed=i).image))
         paths.append(str(p))
         stamps.append(ts)
-    out = _cli("calibrate", *paths, "--timestamps", *stamps, "--site", "tehuantepec", "--json")
+    out = heliotwin_cli("vision", "calibrate", *paths, "--timestamps", *stamps, "--site",
+                        "tehuantepec", "--json")
     assert out.returncode == 0, out.stderr
     d = json.loads(out.stdout)
     assert d["camera"]["px_per_deg"] == pytest.approx(2.6, rel=0.02) and d["rms_px"] < 0.5
     bad = tmp_path / "bad.jpg"
     bad.write_bytes(b"hello")
-    out = _cli("detect", str(bad), "--camera", "pinhole")
+    out = heliotwin_cli("vision", "detect", str(bad), "--camera", "pinhole")
     assert out.returncode == 2 and "not a PNG or JPEG" in out.stderr

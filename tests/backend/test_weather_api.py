@@ -6,14 +6,13 @@ from __future__ import annotations
 import csv
 import io
 import json
-import subprocess
-import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import httpx
 import pytest
-from live_service import ROOT, InProcessServer
+from live_service import InProcessServer
 
 from sim.sky import pvlib_tmy3_path
 
@@ -27,7 +26,7 @@ def _files(path: Path | None = None) -> dict:
 
 
 def test_a_distant_station_is_refused_unless_forced_and_then_runs_as_the_cli(
-        client: httpx.Client) -> None:
+        client: httpx.Client, heliotwin_cli: Callable) -> None:
     r = client.post("/api/v1/simulations/weather", data=RANGE, files=_files())
     assert r.status_code == 422
     detail = r.json()["detail"]
@@ -36,11 +35,10 @@ def test_a_distant_station_is_refused_unless_forced_and_then_runs_as_the_cli(
                     files=_files())
     assert r.status_code == 200, r.text
     http = r.json()
-    cli = subprocess.run(
-        [sys.executable, "-m", "backend", "simulate", "--site", "tehuantepec", "--start",
-         RANGE["start"], "--end", RANGE["end"], "--step-s", RANGE["step_s"], "--tmy3",
-         str(pvlib_tmy3_path()), "--force", "--json"],
-        capture_output=True, text=True, cwd=ROOT, timeout=120, check=True)
+    cli = heliotwin_cli("simulate", "--site", "tehuantepec", "--start", RANGE["start"],
+                        "--end", RANGE["end"], "--step-s", RANGE["step_s"], "--tmy3",
+                        str(pvlib_tmy3_path()), "--force", "--json")
+    assert cli.returncode == 0, cli.stderr
     ref = json.loads(cli.stdout)
     assert http["sky"] == "weather" and http["steps"] == ref["steps"] == 432
     assert http["tracker_energy_wh"] == pytest.approx(ref["tracker_energy_wh"], rel=1e-12)
