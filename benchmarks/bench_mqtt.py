@@ -94,8 +94,8 @@ def mqtt_publish(port: int, prefix: str, t0: int, n: int) -> float:
                 raise RuntimeError("the service did not store every MQTT reading in 600 s")
             time.sleep(0.01)
     secs = time.perf_counter() - start
+    c.disconnect()  # first: the network thread ends with it, not on its 1 s poll
     c.loop_stop()
-    c.disconnect()
     return secs
 
 
@@ -112,8 +112,8 @@ def clear_retained(prefix: str) -> None:
     time.sleep(2.0)  # retained messages come right after the subscription
     for t in sorted(topics):
         c.publish(t, b"", qos=1, retain=True).wait_for_publish(30)
-    c.loop_stop()
     c.disconnect()
+    c.loop_stop()
 
 
 def backfill(port: int, token: str, t0: int, days: int) -> int:

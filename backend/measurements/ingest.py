@@ -12,9 +12,9 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
-import anyio
 import numpy as np
 
 from backend.measurements.parse import (
@@ -32,9 +32,15 @@ logger = logging.getLogger(__name__)
 
 JSON = "application/json"
 CSV_TYPES = frozenset(("text/csv", "application/csv"))
-#: Bodies bigger than this are validated on a worker thread: the event loop keeps
+#: Bodies bigger than this are validated on the parse thread: the event loop keeps
 #: answering the other loggers meanwhile (a 1,000-reading batch is ~100 kB).
 THREAD_FROM_BYTES = 32 * 1024
+#: One thread validates the big bodies, one after another. Parsing holds the GIL almost
+#: throughout, so more threads (anyio's default pool has 40) only convoy on it with the
+#: event loop and the writer: a back-fill over HTTP stored 112–114k rows/s (35 % of raw
+#: executemany) with the default pool and 122–134k (39–42 %) with this one thread
+#: (benchmarks/bench_service.py --only backfill, same machine, 2026-12-04).
+_PARSE_THREAD = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ingest-parse")
 
 Parser = Callable[[bytes, dict[str, tuple[int, Calibration]], Limits], Batch]
 
@@ -81,7 +87,8 @@ async def ingest(writer: Writer, parse: Parser, body: bytes,
     stored) and :class:`StorageUnavailable` when the commit failed.
     """
     if len(body) > THREAD_FROM_BYTES:
-        batch = await anyio.to_thread.run_sync(parse, body, arrays, limits)
+        batch = await asyncio.get_running_loop().run_in_executor(
+            _PARSE_THREAD, parse, body, arrays, limits)
     else:
         batch = parse(body, arrays, limits)
     job = measured_job(batch)
