@@ -4,10 +4,12 @@ Every collector is posed at the common orientation the chosen strategy gives at
 the chosen instant (:func:`sim.plant.strategies.orientations`: ``sun``,
 ``backtrack``, ``sky_scan``, clear sky from :func:`sim.plant.simulate.sky_conditions`),
 the shaded ones are coloured by their shaded fraction with the shade drawn on
-them (:func:`sim.plant.shading.plant_shade`: seed 004 §2.1, each neighbour's
-collector projected along the sun vector onto the collector's plane), and every
-collector casts its shadow on the ground (its rectangle projected along the sun
-vector onto z = 0, :mod:`backend.twin.scene_shadow`).
+them (:func:`sim.plant.simulate.field_shade`, the twin's own shade: seed 004 §2.1, each
+neighbour's collector projected along the sun vector onto the collector's plane), and
+every collector casts its shadow on the ground (its outline projected along the sun
+vector onto z = 0, :mod:`backend.twin.scene_shadow`). A rectangular collector is a box
+and its shade rectangles; a polygon collector (``outline_m``) is drawn as its polygon,
+and its shade as the exact clipped polygons the twin computed.
 
 The plant file gives pivot positions on flat ground (z = 0) with the collector
 centred on the pivot; the view lifts every pivot by :data:`PIVOT_HEIGHT_M` so a
@@ -30,8 +32,8 @@ from numpy.typing import NDArray
 from backend.twin.scene_build import wxyz
 from backend.twin.scene_shadow import SHADOW_LIFT_M
 from sim.plant import Plant
-from sim.plant.shading import PlantShade, collector_axes, plant_shade
-from sim.plant.simulate import sky_conditions
+from sim.plant.shading import PlantShade, collector_axes
+from sim.plant.simulate import field_shade, sky_conditions
 from sim.plant.strategies import STRATEGIES, orientations
 from vision.sphere import enu_from_sky
 
@@ -40,6 +42,8 @@ PIVOT_HEIGHT_M = 3.0
 COLLECTOR_DEPTH_M = 0.12
 #: Shade rectangles drawn per shaded collector (more neighbours than this are rare).
 MAX_SHADE_RECTS = 4
+#: Triangles of shade drawn per shaded polygon collector (its clipped shade, triangulated).
+MAX_SHADE_TRIANGLES = 32
 _BLUE = (28, 52, 110)
 _SHADED = (214, 80, 40)
 _STEEL = (150, 150, 155)
@@ -51,6 +55,25 @@ def _quads(corners: NDArray[np.float64]) -> tuple[NDArray[np.float32], NDArray[n
     base = 4 * np.arange(q)[:, None]
     faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]], axis=0)
     return corners.reshape(-1, 3).astype(np.float32), faces.astype(np.uint32)
+
+
+def _triangle_mesh(triangles: NDArray[np.float64]
+                   ) -> tuple[NDArray[np.float32], NDArray[np.uint32]]:
+    """Triangles (M, 3, 3) as one mesh: 3 vertices and 1 face each."""
+    faces = np.arange(3 * len(triangles)).reshape(-1, 3)
+    return triangles.reshape(-1, 3).astype(np.float32), faces.astype(np.uint32)
+
+
+def _triangulate(geometry: Any) -> NDArray[np.float64]:
+    """A shapely (multi)polygon in the collector plane as triangles (M, 3, 2) [m]
+    (constrained Delaunay: its edges kept, non-convex shapes and holes too)."""
+    import shapely
+
+    if geometry is None or geometry.is_empty:
+        return np.zeros((0, 3, 2))
+    parts = shapely.get_parts(shapely.constrained_delaunay_triangles(geometry))
+    return np.asarray([np.asarray(t.exterior.coords)[:3] for t in parts], dtype=float
+                      ).reshape(-1, 3, 2)
 
 
 class PlantView:
@@ -80,6 +103,12 @@ class PlantView:
         self.fraction = np.zeros(plant.n_trackers)
         self.shade: PlantShade | None = None
         self.ground_shadows = np.zeros((0, 4, 3))
+        #: a polygon collector's triangles (F, 3, 2) (u, v) [m]; None for the rectangle
+        self.triangles_uv: NDArray[np.float64] | None = None
+        if not plant.collector.is_rectangle:
+            import shapely
+
+            self.triangles_uv = _triangulate(shapely.Polygon(plant.collector.outline_m()))
         self._syncing = False
 
     def build(self, start: pd.Timestamp, strategy: str = "sun") -> None:
@@ -108,18 +137,30 @@ class PlantView:
                     f"/plant/posts/post_{tid}", color=_STEEL, dimensions=(0.3, 0.3, z),
                     position=(x, y, z / 2))
                 self.nodes[name] = scene.add_frame(name, show_axes=False, position=(x, y, z))
-                self.nodes[f"{name}/collector"] = scene.add_box(
-                    f"{name}/collector", color=_BLUE,
-                    dimensions=(c.width, c.height, COLLECTOR_DEPTH_M))
+                if self.triangles_uv is None:
+                    self.nodes[f"{name}/collector"] = scene.add_box(
+                        f"{name}/collector", color=_BLUE,
+                        dimensions=(c.width, c.height, COLLECTOR_DEPTH_M))
+                else:  # the polygon in the frame's (u, v) plane, both faces lit
+                    flat = np.concatenate([self.triangles_uv,
+                                           np.zeros((*self.triangles_uv.shape[:2], 1))], axis=2)
+                    self.nodes[f"{name}/collector"] = scene.add_mesh_simple(
+                        f"{name}/collector", *_triangle_mesh(flat), color=_BLUE, side="double")
                 self.nodes[f"/plant/labels/label_{tid}"] = scene.add_label(
                     f"/plant/labels/label_{tid}", str(tid), position=(x, y, z + c.height / 2 + 1),
                     anchor="bottom-center", font_screen_scale=0.9)
             n = p.n_trackers
-            verts, faces = _quads(np.zeros((n, 4, 3)))
+            if self.triangles_uv is None:
+                verts, faces = _quads(np.zeros((n, 4, 3)))
+            else:
+                verts, faces = _triangle_mesh(np.zeros((n * len(self.triangles_uv), 3, 3)))
             self.nodes["/plant/shadows"] = scene.add_mesh_simple(
                 "/plant/shadows", verts, faces, color=(40, 44, 52), opacity=0.5, side="double",
                 cast_shadow=False, receive_shadow=False)
-            verts, faces = _quads(np.zeros((n * MAX_SHADE_RECTS, 4, 3)))
+            if self.triangles_uv is None:
+                verts, faces = _quads(np.zeros((n * MAX_SHADE_RECTS, 4, 3)))
+            else:
+                verts, faces = _triangle_mesh(np.zeros((n * MAX_SHADE_TRIANGLES, 3, 3)))
             self.nodes["/plant/shade_on_collectors"] = scene.add_mesh_simple(
                 "/plant/shade_on_collectors", verts, faces, color=(15, 15, 20), opacity=0.65,
                 side="double", cast_shadow=False, receive_shadow=False)
@@ -168,33 +209,54 @@ class PlantView:
         sky = sky_conditions(p, pd.DatetimeIndex([stamp.tz_convert("UTC")]))
         saz, sel = orientations(strategy, p, sky)
         sun_az, sun_el = float(sky["solar_azimuth"][0]), float(sky["apparent_elevation"][0])
-        shade = plant_shade(p.positions, sky["solar_azimuth"], sky["apparent_elevation"],
-                            saz, sel, c.width, c.height)
+        shade, _ = field_shade(p, sky, saz, sel)
         n_vec, u, v = (a[0] for a in collector_axes(saz, sel))
         # the collector box's frame is the plant's: x along its width (u), y up its slope (v),
         # z the normal (sim.kinematics.panel_axes, right-handed)
         rot = np.column_stack([u, v, n_vec])
         frac = np.nan_to_num(shade.fraction[0])
-        corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * (c.width / 2, c.height / 2)
-        outline = (self.pivots[:, None, :] + corners[None, :, :1] * u
-                   + corners[None, :, 1:] * v)  # (N, 4, 3)
         sun = enu_from_sky(sun_az, sun_el)
-        if sun[2] > np.sin(np.radians(0.5)):
-            ground = outline - outline[..., 2:3] / sun[2] * sun  # on z = 0 …
-            ground[..., 2] = SHADOW_LIFT_M  # … drawn just above the grid
+        lift = (COLLECTOR_DEPTH_M / 2 + 0.03) if self.triangles_uv is None else 0.03
+
+        def on_collector(k: Any, uv: NDArray[np.float64]) -> NDArray[np.float64]:
+            """Points (…, 2) (u, v) [m] of collector(s) ``k`` in the scene (ENU, m)."""
+            return np.asarray(self.pivots[k])[..., None, :] + uv[..., :1] * u + uv[..., 1:] * v
+
+        def on_ground(points: NDArray[np.float64]) -> NDArray[np.float64]:
+            """Points cast along the sun onto z = 0, drawn just above the grid."""
+            if sun[2] <= np.sin(np.radians(0.5)):
+                return np.zeros_like(points)
+            cast = points - points[..., 2:3] / sun[2] * sun
+            cast[..., 2] = SHADOW_LIFT_M
+            return cast
+
+        idx = np.arange(p.n_trackers)
+        ground = on_ground(on_collector(idx, c.outline_m()[None]))  # (N, V, 3)
+        if self.triangles_uv is None:
+            shadow_mesh = _quads(ground)[0]
+            rects = np.zeros((p.n_trackers * MAX_SHADE_RECTS, 4, 3))
+            slot = 0
+            for g_i in range(len(shade.group_step)):
+                k = int(shade.group_tracker[g_i])
+                for r, by in zip(shade.group_rects[g_i], shade.group_by[g_i], strict=True):
+                    if by < 0 or slot >= len(rects) or r[1] <= r[0] or r[3] <= r[2]:
+                        continue
+                    uv = np.array([[r[0], r[2]], [r[1], r[2]], [r[1], r[3]], [r[0], r[3]]])
+                    rects[slot] = on_collector(k, uv) + lift * n_vec
+                    slot += 1
+            shade_mesh = _quads(rects)[0]
         else:
-            ground = np.zeros_like(outline)
-        rects = np.zeros((p.n_trackers * MAX_SHADE_RECTS, 4, 3))
-        slot = 0
-        for g_i in range(len(shade.group_step)):
-            k = int(shade.group_tracker[g_i])
-            for r, by in zip(shade.group_rects[g_i], shade.group_by[g_i], strict=True):
-                if by < 0 or slot >= len(rects) or r[1] <= r[0] or r[3] <= r[2]:
-                    continue
-                uv = np.array([[r[0], r[2]], [r[1], r[2]], [r[1], r[3]], [r[0], r[3]]])
-                rects[slot] = (self.pivots[k] + uv[:, :1] * u + uv[:, 1:] * v
-                               + (COLLECTOR_DEPTH_M / 2 + 0.03) * n_vec)
-                slot += 1
+            tris = on_collector(idx[:, None], self.triangles_uv[None])  # (N, F, 3, 3)
+            shadow_mesh = _triangle_mesh(on_ground(tris).reshape(-1, 3, 3))[0]
+            drawn = np.zeros((p.n_trackers * MAX_SHADE_TRIANGLES, 3, 3))
+            slot = 0
+            for g_i, geometry in enumerate(shade.group_shade if shade.group_shade is not None
+                                           else ()):
+                k = int(shade.group_tracker[g_i])
+                part = _triangulate(geometry)[:len(drawn) - slot]
+                drawn[slot:slot + len(part)] = on_collector(k, part) + lift * n_vec
+                slot += len(part)
+            shade_mesh = _triangle_mesh(drawn)[0]
         with self._lock:
             self.strategy, self.ts, self.shade = strategy, stamp.tz_convert("UTC"), shade
             self.sun, self.orientation = (sun_az, sun_el), (float(saz[0]), float(sel[0]))
@@ -204,8 +266,8 @@ class PlantView:
                     self.nodes[f"/plant/tracker_{tid}"].wxyz = wxyz(rot)
                     color = _SHADED if frac[k] > 0 else _BLUE
                     self.nodes[f"/plant/tracker_{tid}/collector"].color = color
-                self.nodes["/plant/shadows"].vertices = _quads(ground)[0]
-                self.nodes["/plant/shade_on_collectors"].vertices = _quads(rects)[0]
+                self.nodes["/plant/shadows"].vertices = shadow_mesh
+                self.nodes["/plant/shade_on_collectors"].vertices = shade_mesh
             self._sync_gui()
             self._refresh_readout()
 

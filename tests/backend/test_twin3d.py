@@ -43,6 +43,8 @@ from backend.twin.scene_view import TwinView
 from sim.array_shade import Layout, Placement, fixed_shade
 from sim.kinematics import TrackerGeometry, forward_kinematics, inverse_kinematics, joint_transforms
 from sim.plant import load_plant
+from sim.plant.fields import collector_from_outline
+from sim.plant.shading import plant_shade
 from sim.pv import ArrayConfig
 from sim.sites import Site, load_site
 from sim.twin import simulate
@@ -552,6 +554,64 @@ def test_plant_view_draws_the_shade_the_twin_casts_from_the_scene_boxes(
             np.testing.assert_allclose(centre, match.mean(axis=0), atol=1e-4)
     finally:
         c.close()
+
+
+#: An L-shaped collector [m] about the pivot: 12 m × 5 m less its upper right 6 m × 2.5 m.
+L_SHAPE = [(-6.0, -2.5), (6.0, -2.5), (6.0, 0.0), (0.0, 0.0), (0.0, 2.5), (-6.0, 2.5)]
+
+
+def test_plant_view_of_a_polygon_collector_draws_and_shades_the_polygon() -> None:
+    """Peñarroya's pivots with an L-shaped collector, the low morning sun: each collector is
+    drawn as the L (45 m², not the 60 m² box), its shaded fraction is what shapely gives when
+    every neighbour's L, posed as drawn, is cast along the sun onto it (an independent
+    projection; the bounding boxes would give other fractions), the shade drawn on the
+    collectors covers that area, and each ground shadow is the L's area × |n·s| / s_z."""
+    base = load_plant("penarroya")
+    plant = dataclasses.replace(base, collector=collector_from_outline(L_SHAPE, base.collector))
+    scene = TwinScene(SITE, "127.0.0.1", 0, sites=SITES.get, plants=lambda _id: plant)
+    scene.start()
+    try:
+        c, v = _open(scene, f"/plant/penarroya/strategy/sun/time/{MORNING}")
+        try:
+            assert isinstance(v, PlantView) and v.shade is not None
+            own = shapely.Polygon(L_SHAPE)
+            node = v.nodes[f"/plant/tracker_{plant.tracker_ids[0]}"]
+            rot = vtf.SO3(np.asarray(node.wxyz)).as_matrix()
+            u, w, n = rot[:, 0], rot[:, 1], rot[:, 2]
+            mesh = np.asarray(v.nodes[f"/plant/tracker_{plant.tracker_ids[0]}/collector"]
+                              .vertices, dtype=float).reshape(-1, 3, 3)
+            assert np.abs(mesh[..., 2]).max() == 0.0  # flat in the frame's (u, v) plane
+            assert sum(shapely.Polygon(t[:, :2]).area for t in mesh) == pytest.approx(45.0)
+            a_r, e_r = np.radians(v.sun[0]), np.radians(v.sun[1])
+            sun = np.array([np.sin(a_r) * np.cos(e_r), np.cos(a_r) * np.cos(e_r), np.sin(e_r)])
+            expected = np.zeros(plant.n_trackers)
+            for k, pk in enumerate(v.pivots):
+                cast = []
+                for b, pb in enumerate(v.pivots):
+                    t = -float((pb - pk) @ n) / float(sun @ n)  # along the sun onto k's plane
+                    if b == k or t >= 0:                       # b must lie towards the sun
+                        continue
+                    uv = [(float((pb + x * u + y * w + t * sun - pk) @ u),
+                           float((pb + x * u + y * w + t * sun - pk) @ w)) for x, y in L_SHAPE]
+                    cast.append(shapely.Polygon(uv))
+                expected[k] = shapely.union_all(cast).intersection(own).area / own.area
+            assert expected.max() > 0.05
+            np.testing.assert_allclose(v.fraction, expected, atol=1e-9)
+            box = plant_shade(plant.positions, *v.sun, *v.orientation, 12.0, 5.0).fraction[0]
+            assert np.abs(np.nan_to_num(box) - expected).max() > 0.05  # not the bounding box
+            drawn = np.asarray(v.nodes["/plant/shade_on_collectors"].vertices,
+                               dtype=float).reshape(-1, 3, 3)
+            drawn = drawn[np.abs(drawn).sum(axis=(1, 2)) > 0]
+            area = sum(shapely.Polygon((t - t.mean(axis=0)) @ np.column_stack([u, w])).area
+                       for t in drawn)
+            assert area == pytest.approx(45.0 * expected.sum(), rel=1e-4)  # float32 vertices
+            for quad in v.ground_shadows:
+                assert shapely.Polygon(quad[:, :2]).area == pytest.approx(
+                    45.0 * abs(n @ sun) / sun[2], rel=1e-6)
+        finally:
+            c.close()
+    finally:
+        scene.stop()
 
 
 def test_plant_view_strategy_control_reposes(scene: TwinScene) -> None:
