@@ -23,7 +23,8 @@ run: $(STAMP)  ## start the service: API + dashboard on :8000, 3D twin on :8080,
 # their served dashboard and Chromium start once. Modules go out in collection order, which
 # tests/conftest.py starts with the browser modules, then those holding slow tests (xdist's
 # own reorder, by number of tests, would leave those long modules for last).
-# `make test PYTEST_WORKERS=0` runs it in one process.
+# `make test PYTEST_WORKERS=0` runs it in one process. --durations prints the 15 slowest
+# steps, so a CI log says where the 8-minute budget goes.
 # The schema fuzzing (marker one_process) runs after it in a plain pytest: xdist would
 # run one case per operation group (schemathesis' cases share a node id). That run collects
 # only the test modules naming the marker (collecting the whole suite again cost 10 s); the
@@ -34,7 +35,7 @@ ONE_PROCESS_ONLY = $(shell grep -rlx --include='test_*.py' 'pytestmark = pytest.
 
 test: $(STAMP)  ## run the whole test suite
 	$(BIN)/python -m pytest -n $(PYTEST_WORKERS) --dist loadfile --no-loadscope-reorder \
-		-m "not one_process" $(addprefix --ignore=,$(ONE_PROCESS_ONLY))
+		--durations=15 -m "not one_process" $(addprefix --ignore=,$(ONE_PROCESS_ONLY))
 	$(BIN)/python -m pytest -m one_process $(ONE_PROCESS_MODULES)
 
 bench: $(STAMP)  ## measure the speed figures and write benchmarks/RESULTS.md
