@@ -62,12 +62,17 @@ _WIDTH = 12 + 2 * _NS  # columns of a bucket row
 # energy and readings per (array, source, period), summed by the database: the periods
 # are a VALUES table (the first row typed for PostgreSQL), each joined to its rollups
 # by a primary-key range per series (source named, so the key's whole prefix is used)
+#: The periods are the outer loop (SQLite keeps a CROSS JOIN's order): each period is then
+#: a range search on the primary key. With a plain JOIN SQLite's planner put the rollups
+#: outside past some 300 periods and scanned every period for each rollup row: a year's
+#: energy per day took 1.41 s instead of 0.04 s (bench_service, a year back-filled).
 _ROLLUP_PERIODS = (
     "WITH p(i, lo, hi) AS (VALUES (CAST(? AS INTEGER), CAST(? AS BIGINT), CAST(? AS BIGINT))"
     "{more}) "
     "SELECT r.array_id, r.source, p.i, SUM(r.energy_wh), SUM(r.n) "
-    "FROM p JOIN measurement_rollups r ON r.array_id IN ({ids}) AND r.source IN (0, 1) "
-    "AND r.bucket_s >= p.lo AND r.bucket_s < p.hi GROUP BY r.array_id, r.source, p.i"
+    "FROM p CROSS JOIN measurement_rollups r WHERE r.array_id IN ({ids}) "
+    "AND r.source IN (0, 1) AND r.bucket_s >= p.lo AND r.bucket_s < p.hi "
+    "GROUP BY r.array_id, r.source, p.i"
 )
 #: Periods per statement of :data:`_ROLLUP_PERIODS` (3 parameters each; SQLite allows 32,766).
 PERIODS_PER_QUERY = 1000
