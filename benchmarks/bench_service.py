@@ -271,7 +271,12 @@ def naive_group_by(db: Path) -> float:
 
 
 def db_bytes(tmp: Path) -> int:
-    """Size of the SQLite database with its WAL [bytes]."""
+    """Size of the SQLite database [bytes], its WAL checkpointed into it first: the WAL
+    keeps its size until the writer truncates it past 64 MB, so counting it would count a
+    fresh write twice (the year's twin: 45 MB counted, 22 MB stored)."""
+    with sqlite3.connect(tmp / "bench.sqlite") as conn:
+        conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    conn.close()
     return sum(p.stat().st_size for p in tmp.glob("bench.sqlite*"))
 
 
