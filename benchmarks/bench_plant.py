@@ -20,7 +20,9 @@ is printed as "not met".
 The layout sweep (issue 26), measured first: 4 layout types × GCR 0.15, 0.25, 0.35, sun
 tracking, the 12 m × 5 m collector at Peñarroya, a clear-sky year at 10 min, as Dask tasks
 on a LocalCluster of 1 and then of 2 single-threaded workers (the same 12 cases, one run of
-this script). Throughput in plant-years per core-minute (a case over a year is a
+this script; 1, 2, 1, 2 workers, the best of the two runs of each: the client and its
+scheduler share the 2 cores with the workers, and one run's noise moved the ratio by 0.2).
+Throughput in plant-years per core-minute (a case over a year is a
 plant-year; core-minutes = workers × the time from the first task to the last result,
 the cluster's start left out); the scaling is the 1-worker time over the 2-worker time
 (target ≥ 1.8×). Each case's interior collector is compared with twoaxistracking's
@@ -134,12 +136,13 @@ def sweep_figures(fig: Figures) -> list[str]:
         layouts=SWEEP_LAYOUTS, gcr=SWEEP_GCRS, strategies=["sun"],
         start=pd.Timestamp(YEAR_START, tz="UTC"), end=pd.Timestamp(YEAR_END, tz="UTC"),
         step_s=600, latitude_deg=38.299224, longitude_deg=-5.303114, collector_m=(12.0, 5.0))
-    runs = {}
-    for n in (1, 2):
+    runs: dict[int, dict] = {}
+    for n in (1, 2, 1, 2):  # alternated, best of 2 each: one run's noise swung the ratio ±0.2
         load = os.getloadavg()[0]
         c0 = time.process_time()
         res = run_sweep(spec, cases, n_workers=n)
-        runs[n] = res
+        if n not in runs or res["compute_s"] < runs[n]["compute_s"]:
+            runs[n] = res
         log(f"  sweep on {n} worker(s): compute {res['compute_s']:.1f} s, wall {res['wall_s']:.1f}"
             f" s, sky computed {res['sky_computations']}x, load average {load:.1f} before; "
             f"client cpu {time.process_time() - c0:.1f} s")
@@ -164,7 +167,7 @@ def sweep_figures(fig: Figures) -> list[str]:
         f"largest difference {worst:.2e} percentage points")
     f1 = fig.add("sweep_throughput_1_worker", thr[1], "plant-years/core-min", f"{thr[1]:.1f}")
     f2 = fig.add("sweep_throughput_2_workers", thr[2], "plant-years/core-min", f"{thr[2]:.1f}")
-    fs = fig.add("sweep_scaling_2_vs_1_x", scaling, "x", f"{scaling:.2f}×", ">= 1.8x",
+    fs = fig.add("sweep_scaling_2_vs_1_x", scaling, "x", f"{scaling:.3f}×", ">= 1.8x",
                  scaling >= 1.8)
     fd = fig.add("sweep_vs_twoaxistracking_max_pp", worst, "pp", f"{worst:.1e}", "<= 0.1 pp",
                  worst <= 0.1)
@@ -176,7 +179,8 @@ def sweep_figures(fig: Figures) -> list[str]:
         "",
         "| figure | measured | target | |",
         "|---|---|---|---|",
-        f"| 1 worker: first task to last result | {runs[1]['compute_s']:.1f} s | | |",
+        f"| 1 worker: first task to last result (best of 2, alternated with the 2-worker runs)"
+        f" | {runs[1]['compute_s']:.1f} s | | |",
         f"| 2 workers: the same | {runs[2]['compute_s']:.1f} s | | |",
         f"| throughput, plant-years per core-minute (1 / 2 workers) | {f1} / {f2} | | |",
         f"| scaling, 2 workers over 1 | {fs} | ≥ 1.8× | "
