@@ -139,7 +139,8 @@ def weather_twin_columns(ctx: ServiceContext, info: SiteInfo, array: str, t0: in
     return cols, sky
 
 
-def weather_twin_energy(ctx: ServiceContext, info: SiteInfo, data: dict[str, Any]) -> None:
+def weather_twin_energy(ctx: ServiceContext, info: SiteInfo, data: dict[str, Any],
+                        max_computed_days: int | None = None) -> None:
     """Add the weather-aware twin's energy to an energy answer (``energy_rows``), in place:
     ``twin_weather_wh`` per array and period (and in the totals), ``twin_weather_gain_pct``
     and ``twin_weather_note`` per period.
@@ -148,7 +149,9 @@ def weather_twin_energy(ctx: ServiceContext, info: SiteInfo, data: dict[str, Any
     ``diagnosis_days``, so a year costs one diagnosis of it); other periods (hours, a
     range not starting at midnight) the minute twin, at most :data:`MAX_DAYS` days. A day
     whose sky fell back to clear sky (under half its daylight minutes inverted) is
-    counted and named in the note.
+    counted and named in the note. ``max_computed_days``: the most of those days not
+    cached yet the request may diagnose (:func:`backend.diagnosis.service.diagnosis`:
+    422 naming ``end`` past it; None: no bound).
     """
     from backend.diagnosis.service import diagnosis  # it imports this module's neighbours
 
@@ -162,7 +165,8 @@ def weather_twin_energy(ctx: ServiceContext, info: SiteInfo, data: dict[str, Any
     notes: list[str | None] = [None] * len(rows)
     midnights = all(e.astimezone(info.zone).time() == dt.time(0) for e in edges)
     if midnights:
-        days = diagnosis(ctx, info, edges[0], edges[-1])["days"]
+        days = diagnosis(ctx, info, edges[0], edges[-1],
+                         max_computed_days=max_computed_days)["days"]
         starts = [e.astimezone(info.zone).date().isoformat() for e in edges]
         p = 0
         clear = [0] * len(rows)

@@ -113,3 +113,21 @@ def test_energy_of_the_weather_aware_twin_by_day_and_by_hour_agree(
     plain = client.get("/api/v1/sites/tehuantepec/energy",
                        params={**params, "interval": "day"}).json()
     assert "twin_weather_wh" not in plain["rows"][0]["arrays"]["tracker"]
+
+
+def test_the_energy_under_the_measured_sky_computes_a_month_without_a_token(
+        client: httpx.Client, live_server: LiveServer) -> None:
+    """``energy?source=twin_weather`` diagnoses the days it sums: without a token, as the
+    diagnosis itself, at most 31 days not diagnosed yet (a 422 naming ``end``), so that no
+    anonymous request costs a year of diagnosis; with a token the same range is served."""
+    params = {"start": "2022-02-01", "end": "2022-03-15", "interval": "day",
+              "source": "twin_weather"}
+    url = "/api/v1/sites/tehuantepec/energy"
+    refused = client.get(url, params=params)
+    assert refused.status_code == 422 and "end" in refused.text and "31" in refused.text
+    served = client.get(url, params=params,
+                        headers={"Authorization": f"Bearer {live_server.write_token}"})
+    assert served.status_code == 200, served.text
+    assert len(served.json()["rows"]) == 42
+    month = client.get(url, params={**params, "end": "2022-03-04"})  # 31 days, now cached
+    assert month.status_code == 200, month.text

@@ -30,6 +30,7 @@ from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
 from backend.api.deps import (
+    CallerDep,
     ContextDep,
     RangeEnd,
     RangeStart,
@@ -39,6 +40,7 @@ from backend.api.deps import (
 from backend.api.routes.health import service_version
 from backend.api.schemas.common import CSV_CONTENT, PNG_CONTENT
 from backend.api.schemas.energy import EnergyRead, ReportRead
+from backend.diagnosis.service import ANONYMOUS_MAX_COMPUTED_DAYS
 from backend.diagnosis.weather_twin import weather_twin_energy
 from backend.limits import run_metered
 from backend.measurements.energy import energy_rows
@@ -74,24 +76,30 @@ async def get_energy(
     ctx: ContextDep,
     start: RangeStart,
     end: RangeEnd,
+    caller: CallerDep,
     interval: Literal["hour", "day", "month"] = "day",
     format: Literal["json", "csv"] = "json",
     source: Annotated[Literal["twin_weather"] | None, Query(description=(
         "twin_weather: also the energy of the twin under the sky the fixed array measured "
-        "(twin_weather_wh, twin_weather_gain_pct), beside measured and the clear-sky twin"
+        "(twin_weather_wh, twin_weather_gain_pct), beside measured and the clear-sky twin; "
+        "without a token at most 31 days not diagnosed yet (422 naming end)"
     ))] = None,
 ) -> Response:
-    """Energy per period for every array, measured and twin, with the tracking gain."""
+    """Energy per period for every array, measured and twin, with the tracking gain.
+    ``source=twin_weather`` diagnoses the days it needs: without a token, as the
+    diagnosis, at most ``ANONYMOUS_MAX_COMPUTED_DAYS`` (31) not cached yet."""
+    most = None if caller is not None else ANONYMOUS_MAX_COMPUTED_DAYS
     return await anyio.to_thread.run_sync(run_metered, _energy, site_id, ctx, start, end,
-                                          interval, format, source, limiter=read_limiter())
+                                          interval, format, source, most,
+                                          limiter=read_limiter())
 
 
 def _energy(site_id: str, ctx: ContextDep, start: str, end: str, interval: str, format: str,
-            source: str | None) -> Response:
+            source: str | None, max_computed_days: int | None) -> Response:
     info, t0, t1 = site_range(ctx, site_id, start, end)
     data = energy_rows(ctx, info, t0, t1, interval)
     if source == "twin_weather":
-        weather_twin_energy(ctx, info, data)
+        weather_twin_energy(ctx, info, data, max_computed_days)
     if format == "csv":
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
