@@ -179,23 +179,28 @@ class RateLimiter:
 
 
 class Charge:
-    """One admitted cost in a :class:`WindowBudget`: when, how much, and whether the work
-    is still going (``open``: not yet settled)."""
+    """One admitted cost in a :class:`WindowBudget`: when, how much, whether the work is
+    still going (``open``: not yet settled) and whether it is counted while it goes
+    (``held``: taken with ``max_open``)."""
 
-    __slots__ = ("at", "cost", "open")
+    __slots__ = ("at", "cost", "held", "open")
 
-    def __init__(self, at: float, cost: float) -> None:
+    def __init__(self, at: float, cost: float, held: bool = False) -> None:
         self.at = at
         self.cost = cost
+        self.held = held
         self.open = True
 
 
 class WindowBudget:
     """At most ``capacity`` cost units per client in any ``window_s``; thread-safe.
 
-    A cost above the capacity is charged as the capacity (what the service admits at all,
-    a full window always admits). At most ``max_clients`` clients are remembered, the
-    least recently charged forgotten first.
+    A cost above the capacity is admitted as the capacity (what the service admits at all,
+    a full window always admits). A charge taken with ``max_open`` (work counted while in
+    flight: the reads) stays in the window while its work runs, however long, and counts
+    from its settling once done (:meth:`settle`): a read streamed for longer than the
+    window stays in flight and is charged when it ends. At most ``max_clients`` clients
+    are remembered, the least recently charged forgotten first.
     """
 
     def __init__(self, capacity: float, window_s: float, what: str, setting: str,
@@ -217,7 +222,8 @@ class WindowBudget:
             return sum(c.cost for c in self._live(client, self.clock()))
 
     def _live(self, client: str, now: float) -> list[Charge]:
-        charges = [c for c in self._charges.get(client, []) if c.at > now - self.window_s]
+        charges = [c for c in self._charges.get(client, [])
+                   if (c.held and c.open) or c.at > now - self.window_s]
         if client in self._charges:
             self._charges[client] = charges
         return charges
@@ -237,10 +243,11 @@ class WindowBudget:
             used = sum(c.cost for c in charges)
             if used + cost > self.capacity:
                 freed, wait_s = 0.0, self.window_s
-                for c in sorted(charges, key=lambda c: c.at):
-                    freed += c.cost
+                for c in sorted((c for c in charges if not (c.held and c.open)),
+                                key=lambda c: c.at):
+                    freed += c.cost    # a read still running frees nothing by waiting
                     if used - freed + cost <= self.capacity:
-                        wait_s = c.at + self.window_s - now
+                        wait_s = max(1.0, c.at + self.window_s - now)
                         break
                 raise Busy(429, f"rate limit: without a write token a client may ask "
                                 f"{_amount(self.capacity)} {self.what} per "
@@ -249,7 +256,7 @@ class WindowBudget:
                                 f"{f', this asks {_amount(cost)}' if cost else ''}: send "
                                 f"'Authorization: Bearer <token>' or retry in "
                                 f"{math.ceil(wait_s)} s", wait_s)
-            charge = Charge(now, cost)
+            charge = Charge(now, cost, held=max_open is not None)
             self._charges[client] = [*charges, charge]
             self._charges.move_to_end(client)
             while len(self._charges) > self.max_clients:
@@ -257,9 +264,12 @@ class WindowBudget:
         return charge
 
     def settle(self, charge: Charge, cost: float) -> None:
-        """The charged work cost ``cost`` after all (0: it never ran)."""
+        """The charged work cost ``cost`` after all (0: it never ran); a held charge counts
+        from now, when its work ended."""
         with self._lock:
             charge.cost = max(0.0, float(cost))
+            if charge.held:
+                charge.at = self.clock()
             charge.open = False
 
 

@@ -170,6 +170,27 @@ def test_an_address_has_at_most_reads_in_flight_and_spends_what_they_cost() -> N
     assert "16.5 spent" in spent.value.message and spent.value.retry_after_s >= 1
 
 
+def test_a_read_longer_than_the_window_stays_in_flight_and_is_charged_when_it_ends() -> None:
+    """A read streamed slowly for more than the minute does not drop out of the window
+    while it runs (it still holds its place in flight) and its CPU time is charged from
+    when it ended, not from its admission a minute before."""
+    clock = _Clock()
+    limits = Limits.from_settings(Settings(anonymous_read_cpu_s_per_min=16.0))
+    limits.reads.clock = clock
+    held = [limits.admit_read("10.25.0.3") for _ in range(READS_IN_FLIGHT)]
+    clock.ahead_s += 120.0  # two minutes of slow streaming
+    with pytest.raises(Busy):
+        limits.admit_read("10.25.0.3")  # all 16 are still in flight
+    for charge in held:
+        limits.reads.settle(charge, 1.5)  # 24 s of CPU, over the 16 s allowance
+    assert limits.reads.used("10.25.0.3") == 24.0
+    with pytest.raises(Busy) as spent:
+        limits.admit_read("10.25.0.3")
+    assert 59 <= spent.value.retry_after_s <= 60
+    clock.ahead_s += 61.0
+    limits.admit_read("10.25.0.3")
+
+
 def _busy_work(n: int) -> int:
     return sum(i * i for i in range(n))
 
