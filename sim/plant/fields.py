@@ -197,8 +197,9 @@ def scaled_plant(plant: Plant, gcr: float) -> Plant:
     np.fill_diagonal(gaps, np.inf)
     if gaps.min() < plant.collector.swept_diameter:
         raise ValueError(f"gcr {gcr} too high for plant {plant.plant_id!r}: trackers would be "
-                         f"{gaps.min():.2f} m apart, less than the collector diagonal (its "
-                         f"swept diameter) {plant.collector.swept_diameter:.2f} m")
+                         f"{gaps.min():.2f} m apart, less than the collector's swept "
+                         f"diameter {plant.collector.swept_diameter:.2f} m (twice its farthest "
+                         "vertex from the pivot: the rectangle's diagonal)")
     return replace(plant, positions=positions, plant_id=f"{plant.plant_id}-gcr{gcr:g}")
 
 
@@ -225,8 +226,9 @@ def collector_from_outline(outline_m: Any, template: Collector) -> Collector:
     """A polygon collector (``outline_m``: (u, v) vertices [m] about the pivot,
     :func:`sim.plant.layout.check_outline`) wired like ``template``: the template's module
     size laid over the outline's bounding box (as many modules as fit across and up, as
-    :func:`collector_from_size`), each module row one string, the module power scaled so
-    that the collector keeps the template's power per m² of its own (polygon) area."""
+    :func:`collector_from_size`), each module row one string; its rated power is the
+    grid's share the polygon covers (:attr:`sim.plant.layout.Collector.power_stc`), so the
+    collector keeps the template's power per m²."""
     outline = check_outline(outline_m, "collector outline")
     xy = np.asarray(outline)
     box = collector_from_size(float(np.ptp(xy[:, 0])), float(np.ptp(xy[:, 1])), template)
@@ -234,7 +236,7 @@ def collector_from_outline(outline_m: Any, template: Collector) -> Collector:
     if collector.bounds == (-box.width / 2, box.width / 2, -box.height / 2, box.height / 2) \
             and len(outline) == 4 and abs(collector.area - box.area) < 1e-9 * box.area:
         return box                              # a centred rectangle: the fast path
-    return replace(collector, module_power=box.module_power * collector.area / box.area)
+    return collector
 
 
 def horizon_elevation(solar_azimuth: NDArray[np.float64] | float, slope_azimuth_deg: float,

@@ -12,6 +12,7 @@ a malformed file raises ``ValueError`` naming the file and the field.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -194,8 +195,13 @@ class Collector:
 
     @property
     def power_stc(self) -> float:
-        """Collector DC power at STC [W]."""
-        return self.module_power * self.modules_across * self.modules_high
+        """Collector DC power at STC [W]: the module grid's, and for an outline the grid's
+        share the polygon covers (its modules cut to the outline, all of it active: the
+        power per m² of the grid kept)."""
+        grid_w = self.module_power * self.modules_across * self.modules_high
+        if self.outline is None:
+            return grid_w
+        return grid_w * self.area / (self.width * self.height)
 
     def strings(self) -> FloatArray:
         """String rectangles ``(S, 4)`` = (u0, u1, v0, v1) [m] in collector coordinates (for
@@ -360,12 +366,14 @@ def _collector(d: Any, where: str) -> Collector:
                          f"{', '.join(MODULE_ORIENTATIONS)}, got {orient!r}")
     outline = None
     if "outline_m" in d:
-        if "width_m" in d or "height_m" in d:
-            raise ValueError(f"{w}: give 'width_m' and 'height_m' (a rectangle) or "
-                             "'outline_m' (a polygon), not both")
         outline = check_outline(d["outline_m"], f"{w}: field 'outline_m'")
         xy = np.asarray(outline)
         width, height = (float(np.ptp(xy[:, 0])), float(np.ptp(xy[:, 1])))
+        for key, box in (("width_m", width), ("height_m", height)):  # Plant.to_dict writes
+            if key in d and not math.isclose(_num(d, key, w), box, rel_tol=1e-9):  # them
+                raise ValueError(f"{w}: give 'width_m' and 'height_m' (a rectangle) or "
+                                 f"'outline_m' (a polygon): with an outline '{key}' is its "
+                                 f"bounding box's, {box:g} m")
     else:
         width = _num(d, "width_m", w, positive=True)
         height = _num(d, "height_m", w, positive=True)

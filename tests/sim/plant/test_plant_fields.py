@@ -151,7 +151,7 @@ def test_scaled_plant_keeps_its_shape_and_reaches_the_gcr() -> None:
     d0 = np.linalg.norm(PEN.positions[1:] - PEN.positions[0], axis=1)
     d1 = np.linalg.norm(half.positions[1:] - half.positions[0], axis=1)
     np.testing.assert_allclose(d1 / d0, np.sqrt(2), rtol=1e-12)
-    with pytest.raises(ValueError, match="collector diagonal"):
+    with pytest.raises(ValueError, match="swept diameter"):
         scaled_plant(PEN, 0.9)
 
 

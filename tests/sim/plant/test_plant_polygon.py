@@ -178,21 +178,28 @@ def test_polygon_strings_count_blocks_by_hand() -> None:
 
 
 def test_plant_file_declares_an_outline(tmp_path: Path) -> None:
-    """A plant file's collector may be ``outline_m`` (then no width/height); a bad outline
-    names the field."""
+    """A plant file's collector may be ``outline_m`` (width/height then its bounding box's,
+    or left out); it is rated as the CLI's polygon of the same template (the grid's power
+    per m², on 45 of the box's 60 m²); what ``to_dict`` writes loads back to the same
+    collector; a bad outline names the field."""
     d = json.loads(Path("sim/data/plants/penarroya.json").read_text())
+    rect = plant_from_dict(d).collector
     del d["collector"]["width_m"], d["collector"]["height_m"]
     d["collector"]["outline_m"] = L_SHAPE.tolist()
     p = plant_from_dict(d)
     assert not p.collector.is_rectangle
     assert (p.collector.width, p.collector.height) == pytest.approx((12.0, 5.0))
     assert p.collector.area == pytest.approx(45.0)
+    assert p.collector.power_stc == pytest.approx(rect.power_stc * 45.0 / 60.0, rel=1e-12)
+    assert p.collector.power_stc == pytest.approx(
+        collector_from_outline(L_SHAPE, rect).power_stc, rel=1e-12)
     assert p.to_dict()["collector"]["outline_m"][0] == pytest.approx(list(L_SHAPE[0]))
+    assert plant_from_dict(p.to_dict()).collector == p.collector  # it round-trips
     d["collector"]["outline_m"] = [[0, 0], [2, 2], [2, 0], [0, 1]]       # a bow tie
     with pytest.raises(ValueError, match="outline_m'.*crosses itself"):
         plant_from_dict(d)
-    d["collector"]["width_m"] = 12
-    with pytest.raises(ValueError, match="not both"):
+    d["collector"]["outline_m"], d["collector"]["width_m"] = L_SHAPE.tolist(), 11
+    with pytest.raises(ValueError, match="'width_m' is its bounding box's, 12 m"):
         plant_from_dict(d)
 
 
