@@ -36,7 +36,7 @@ import pandas as pd
 
 from sim.plant import Plant, UnknownPlantError, default_plants_dir, load_plant
 from sim.plant.simulate import field_shade, simulate_plant, sky_conditions
-from sim.plant.strategies import STRATEGIES, orientations, sky_map
+from sim.plant.strategies import STRATEGIES, orientations, sky_map, strategies_for
 
 log = logging.getLogger(__name__)
 
@@ -243,8 +243,7 @@ class PlantService:
         strategies: dict[str, Any] = {}
         shade_rows: list[list[float]] = []
         times: list[str] = []
-        # a polygon collector takes sun tracking only (sim.plant.strategies)
-        for strategy in STRATEGIES if plant.collector.is_rectangle else ("sun",):
+        for strategy in strategies_for(plant.collector):
             r = simulate_plant(plant, start, end, step_s=step_s, strategy=strategy)
             s = r.summary()
             strategies[strategy] = {k: s[k] for k in (

@@ -298,7 +298,7 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
     from sim.paths import package_dir
     from sim.plant.fields import LAYOUT_TYPES, collector_from_outline, collector_from_size
     from sim.plant.layout import load_plant
-    from sim.plant.strategies import STRATEGIES
+    from sim.plant.strategies import STRATEGIES, strategies_for
     from sim.plant.sweep import PLANT_LAYOUT, case_plant
 
     bad = [s for s in strategies if s not in STRATEGIES]
@@ -351,7 +351,7 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
                      custom=custom, plant=plant, timezone=tz, weather_token=weather_token,
                      **({"albedo": plant.albedo, "temp_air": plant.temp_air,
                          "wind_speed": plant.wind_speed} if plant is not None else {}))
-    if not collector.is_rectangle and any(s != "sun" for s in strategies):
+    if any(s not in strategies_for(collector) for s in strategies):
         raise SweepInputError("strategy", "a polygon collector takes strategy sun only (the "
                               "backtrack and sky_scan shade-free tests are the rectangle's)")
     cases = [SweepCase(n, float(g), s) for n in names for g in gcr for s in strategies]

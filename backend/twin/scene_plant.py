@@ -34,7 +34,7 @@ from backend.twin.scene_shadow import SHADOW_LIFT_M
 from sim.plant import Plant
 from sim.plant.shading import PlantShade, collector_axes
 from sim.plant.simulate import field_shade, sky_conditions
-from sim.plant.strategies import STRATEGIES, orientations
+from sim.plant.strategies import orientations, strategies_for
 from vision.sphere import enu_from_sky
 
 #: Pivot height above the ground in the view [m] (an assumption: the plant file has none).
@@ -113,8 +113,8 @@ class PlantView:
 
     def build(self, start: pd.Timestamp, strategy: str = "sun") -> None:
         """Add the plant's nodes and panel and show ``start`` under ``strategy``."""
-        if strategy not in STRATEGIES:
-            strategy = "sun"
+        if strategy not in strategies_for(self.plant.collector):
+            strategy = "sun"  # an unknown name, or one a polygon collector cannot take
         scene, p = self.client.scene, self.plant
         c = p.collector
         span = float(np.ptp(self.pivots[:, :2], axis=0).max()) + 2 * c.width
@@ -171,9 +171,14 @@ class PlantView:
 
     def _build_gui(self, strategy: str) -> None:
         gui, g, p = self.client.gui, self.gui, self.plant
+        c = p.collector
+        shape = (f"{c.width:g} m × {c.height:g} m" if c.is_rectangle else
+                 f"polygons of {len(c.outline_m())} vertices, {c.area:.3g} m² "
+                 f"(in {c.width:g} m × {c.height:g} m)")
         gui.add_markdown(f"**{p.name}** — plant view  \n{p.n_trackers} trackers, collectors "
-                         f"{p.collector.width:g} m × {p.collector.height:g} m · {self._tz}")
-        g["strategy"] = gui.add_dropdown("Strategy", STRATEGIES, initial_value=strategy)
+                         f"{shape} · {self._tz}")
+        g["strategy"] = gui.add_dropdown("Strategy", strategies_for(p.collector),
+                                         initial_value=strategy)
         g["date"] = gui.add_text("Date (local)", initial_value="",
                                  hint="YYYY-MM-DD, in the plant's time zone")
         g["hours"] = gui.add_slider("Local time [h]", min=0.0, max=24.0, step=0.05,
@@ -203,8 +208,9 @@ class PlantView:
         stamp = pd.Timestamp(ts)
         if stamp.tzinfo is None:
             raise ValueError("ts must be timezone-aware")
-        if strategy not in STRATEGIES:
-            raise ValueError(f"strategy must be one of {', '.join(STRATEGIES)}")
+        allowed = strategies_for(self.plant.collector)
+        if strategy not in allowed:
+            raise ValueError(f"strategy must be one of {', '.join(allowed)}")
         p, c = self.plant, self.plant.collector
         sky = sky_conditions(p, pd.DatetimeIndex([stamp.tz_convert("UTC")]))
         saz, sel = orientations(strategy, p, sky)

@@ -65,11 +65,13 @@ async function drawShadeDay() {
 
 async function drawStrategies() {
   const s = view.day.strategies;
-  const names = ["sun", "backtrack", "sky_scan", "fixed"];
-  const y = names.map((n) => s[n].plant_energy_wh); // PlantDayRead: every strategy and fixed
+  // PlantDayRead: the strategies the plant can take (PlantRead.strategies) and fixed
+  const names = [...view.plant.strategies, "fixed"].filter((n) => s[n]);
+  const y = names.map((n) => s[n].plant_energy_wh);
+  const color = { sun: COLORS.sun, backtrack: COLORS.tracker, sky_scan: COLORS.gain, fixed: COLORS.fixed };
   await draw("chart-plant-strategies", [{
     type: "bar", x: names, y: y.map((v) => v / 1000), name: "plant energy",
-    marker: { color: [COLORS.sun, COLORS.tracker, COLORS.gain, COLORS.fixed] },
+    marker: { color: names.map((n) => color[n]) },
     text: y.map((v) => energy(v)), textposition: "auto",
   }], baseLayout({ hovermode: "closest", showlegend: false, yaxis: { title: { text: "plant energy [kWh]" }, rangemode: "tozero" } }), {
     columns: ["strategy", "plant_energy_wh"], rows: names.map((n, k) => [n, y[k]]),
@@ -82,7 +84,9 @@ async function drawStrategies() {
     tile("Trackers", String(view.plant.trackers.length), view.plant.name),
     tile("Shading loss (sun)", `${num(sun.shading_loss_electrical_pct, 2)} %`, `bypass diodes; ${num(sun.shading_loss_area_pct, 2)} % by area`),
     tile("Daylight shaded", `${num(100 * sun.fraction_of_daylight_any_shaded, 1)} %`, "of steps, any collector"),
-    tile("Backtrack vs sun", sun.plant_energy_wh > 0 ? `${num(100 * (s.backtrack.plant_energy_wh / sun.plant_energy_wh - 1), 2)} %` : "—", "clear sky"),
+    s.backtrack
+      ? tile("Backtrack vs sun", sun.plant_energy_wh > 0 ? `${num(100 * (s.backtrack.plant_energy_wh / sun.plant_energy_wh - 1), 2)} %` : "—", "clear sky")
+      : tile("Backtrack vs sun", "—", "a polygon collector takes sun tracking only"),
   );
 }
 
@@ -98,11 +102,15 @@ function drawSkyMap() {
   img.dataset.time = t;
   img.dataset.loaded = "";
   img.onload = () => { img.dataset.loaded = t; };
-  img.src = `/api/v1/plants/${enc(p.plant_id)}/sky-map?time=${enc(t)}&strategy=${enc(strategy)}&format=png`;
+  // PlantRead.strategies: the sky map's grey region is the rectangle's shade-free test
+  img.hidden = !p.strategies.includes("sky_scan");
+  if (img.hidden) img.removeAttribute("src");
+  else img.src = `/api/v1/plants/${enc(p.plant_id)}/sky-map?time=${enc(t)}&strategy=${enc(strategy)}&format=png`;
   api(`/api/v1/plants/${enc(p.plant_id)}/positions`, { params: { time: t, strategy } }).then((pos) => {
     const tr = pos.trackers[0];
     $("plant-chosen").textContent = `${strategy}: azimuth ${num(tr.azimuth_deg, 1)}°, elevation ${num(tr.elevation_deg, 1)}° · ` +
-      `sun ${num(pos.sun.azimuth_deg, 1)}°, ${num(pos.sun.elevation_deg, 1)}° · ${pos.trackers_shaded} collectors shaded`;
+      `sun ${num(pos.sun.azimuth_deg, 1)}°, ${num(pos.sun.elevation_deg, 1)}° · ${pos.trackers_shaded} collectors shaded` +
+      (img.hidden ? " · no sky map: its grey region is the shade-free test of a rectangular collector, and this one is a polygon" : "");
   }).catch((err) => banner(`Positions: ${err.message}`, "error"));
 }
 
@@ -133,6 +141,11 @@ async function loadDay() {
 
 async function selectPlant(id) {
   view.plant = await api(`/api/v1/plants/${enc(id)}`);
+  // the strategies this plant's collector can take (sun alone for a polygon)
+  const select = $("plant-strategy");
+  const keep = select.value;
+  select.replaceChildren(...view.plant.strategies.map((s) => new Option(s, s)));
+  select.value = view.plant.strategies.includes(keep) ? keep : view.plant.strategies.at(-1);
   if (!$("plant-day").value) $("plant-day").value = localDateIn(view.plant.timezone);
   await loadDay();
 }

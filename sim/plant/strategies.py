@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sim.plant.layout import Plant
+from sim.plant.layout import Collector, Plant
 from sim.plant.shading import GENERIC, IntArray, collector_axes, pair_candidates, pair_vectors
 from sim.sky import poa_irradiance
 from vision.sphere import enu_from_sky
@@ -239,12 +239,18 @@ def _best(plant: Plant, caz: FloatArray, cel: FloatArray, sky: dict[str, FloatAr
     return caz[rows, k], cel[rows, k]
 
 
+def strategies_for(collector: Collector) -> tuple[str, ...]:
+    """The strategies a collector can take: all of :data:`STRATEGIES` for the rectangle;
+    ``sun`` alone for a polygon, since ``backtrack`` and ``sky_scan`` (and the sky map)
+    decide "shades nobody" by the rectangle's closed form (:func:`lowest_free_elevation`,
+    :func:`shade_free`), which would answer for the polygon's bounding box."""
+    return tuple(STRATEGIES) if collector.is_rectangle else ("sun",)
+
+
 def check_strategy_collector(strategy: str, plant: Plant) -> None:
-    """``backtrack`` and ``sky_scan`` decide "shades nobody" by the closed form of the
-    rectangle (:func:`lowest_free_elevation`, :func:`shade_free`); for a polygon collector
-    they would answer for its bounding box, not for it, so they refuse it (``ValueError``
-    naming the strategy). ``sun`` takes any polygon."""
-    if strategy != "sun" and not plant.collector.is_rectangle:
+    """``ValueError`` naming the strategy when ``plant``'s collector cannot take it
+    (:func:`strategies_for`)."""
+    if strategy not in strategies_for(plant.collector):
         raise ValueError(f"strategy {strategy!r} needs a rectangular collector (its shade-free "
                          "test is the rectangle's closed form); a polygon collector takes "
                          "strategy 'sun'")

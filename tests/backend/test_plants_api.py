@@ -101,6 +101,9 @@ def test_a_plant_file_with_a_polygon_collector(client: httpx.Client, plants_dir:
         p = client.get("/api/v1/plants/penarroya-l").raise_for_status().json()
         assert p["collector"]["outline_m"] == [list(v) for v in L_SHAPE]
         assert p["collector"]["area_m2"] == pytest.approx(45.0)
+        assert p["strategies"] == ["sun"]
+        assert client.get("/api/v1/plants/penarroya").json()["strategies"] == [
+            "sun", "backtrack", "sky_scan"]
         r = client.get("/api/v1/plants/penarroya-l/positions",
                        params={"time": DEC21_0824_TST}).raise_for_status().json()
         geom = geometry.Polygon(L_SHAPE)

@@ -561,8 +561,8 @@ L_SHAPE = [(-6.0, -2.5), (6.0, -2.5), (6.0, 0.0), (0.0, 0.0), (0.0, 2.5), (-6.0,
 
 
 def test_plant_view_of_a_polygon_collector_draws_and_shades_the_polygon() -> None:
-    """Peñarroya's pivots with an L-shaped collector, the low morning sun: each collector is
-    drawn as the L (45 m², not the 60 m² box), its shaded fraction is what shapely gives when
+    """Peñarroya's pivots with an L-shaped collector, the low morning sun, sun tracking (all
+    it can take): each collector is drawn as the L (45 m², not the 60 m² box), its shaded fraction is what shapely gives when
     every neighbour's L, posed as drawn, is cast along the sun onto it (an independent
     projection; the bounding boxes would give other fractions), the shade drawn on the
     collectors covers that area, and each ground shadow is the L's area × |n·s| / s_z."""
@@ -571,9 +571,11 @@ def test_plant_view_of_a_polygon_collector_draws_and_shades_the_polygon() -> Non
     scene = TwinScene(SITE, "127.0.0.1", 0, sites=SITES.get, plants=lambda _id: plant)
     scene.start()
     try:
-        c, v = _open(scene, f"/plant/penarroya/strategy/sun/time/{MORNING}")
+        # asked for backtracking, which a polygon cannot take: the view shows sun tracking
+        c, v = _open(scene, f"/plant/penarroya/strategy/backtrack/time/{MORNING}")
         try:
-            assert isinstance(v, PlantView) and v.shade is not None
+            assert isinstance(v, PlantView) and v.shade is not None and v.strategy == "sun"
+            assert tuple(v.gui["strategy"].options) == ("sun",)
             own = shapely.Polygon(L_SHAPE)
             node = v.nodes[f"/plant/tracker_{plant.tracker_ids[0]}"]
             rot = vtf.SO3(np.asarray(node.wxyz)).as_matrix()

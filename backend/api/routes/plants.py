@@ -61,7 +61,7 @@ from backend.timestamps import (
     parse_instant,
 )
 from sim.plant.layout import Plant
-from sim.plant.strategies import check_strategy_collector
+from sim.plant.strategies import check_strategy_collector, strategies_for
 from sim.plant.sweep import PLANT_LAYOUT, SweepCase, case_day_shade
 
 router = APIRouter(prefix="/api/v1/plants", tags=["plants"])
@@ -312,9 +312,11 @@ def list_plants(service: PlantServiceDep) -> list[dict[str, Any]]:
 
 @router.get("/{plant_id}", response_model=PlantRead, responses={404: {}})
 def get_plant(plant_id: str, service: PlantServiceDep) -> dict[str, Any]:
-    """One plant: place, collector and electrical layout, trackers in ENU metres."""
+    """One plant: place, collector and electrical layout, trackers in ENU metres, and the
+    strategies its collector can take (``sun`` alone for a polygon)."""
     _plant_or_404(service, plant_id)
-    return service.get(plant_id).to_dict()
+    plant = service.get(plant_id)
+    return {**plant.to_dict(), "strategies": list(strategies_for(plant.collector))}
 
 
 @router.get("/{plant_id}/positions", response_model=PositionsRead, responses=_PRICED_DOC,
@@ -350,7 +352,7 @@ async def sky_map(plant_id: str, request: Request, ctx: ContextDep, caller: Call
     when = _time(time)
     _plant_or_404(service, plant_id)
     strategy = _strategy(strategy)
-    if not service.get(plant_id).collector.is_rectangle:
+    if "sky_scan" not in strategies_for(service.get(plant_id).collector):
         raise HTTPException(422, f"plant_id: {plant_id}'s collector is a polygon; the sky "
                                  "map's shaded region is the rectangle's shade-free test")
     m = await _priced(request, ctx, caller, sky_map_cost_s(resolution_deg),

@@ -74,6 +74,8 @@ class PlantRead(BaseModel):
     trackers: list[PlantTrackerRead]
     source: str
     notes: str
+    strategies: list[str] = Field(description="the strategies its collector can take: sun, "
+                                              "backtrack and sky_scan; sun alone for a polygon")
 
 
 class TrackerPositionRead(BaseModel):
