@@ -34,14 +34,15 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from sim.plant import Plant, UnknownPlantError, default_plants_dir, load_plant
+from sim.plant import Collector, Plant, UnknownPlantError, default_plants_dir, load_plant
 from sim.plant.simulate import field_shade, simulate_plant, sky_conditions
 from sim.plant.strategies import STRATEGIES, orientations, sky_map, strategies_for
 
 log = logging.getLogger(__name__)
 
-__all__ = ["STRATEGIES", "PlantService", "UnknownPlantError", "day_cost_s", "lambert_xy",
-           "positions_cost_s", "sky_map_cost_s", "sky_map_png"]
+__all__ = ["POLYGON_COST_FACTOR", "STRATEGIES", "PlantService", "UnknownPlantError",
+           "cost_factor", "day_cost_s", "lambert_xy", "positions_cost_s", "sky_map_cost_s",
+           "sky_map_png"]
 
 #: A plant day's fixed cost [s]: the sun, backtrack and fixed runs, the sun's ephemeris.
 DAY_OVERHEAD_S = 0.35
@@ -49,6 +50,11 @@ DAY_OVERHEAD_S = 0.35
 DAY_STEP_TRACKER_S = 8.5e-5
 #: The positions of one instant: fixed cost and cost per tracker [s].
 POSITIONS_OVERHEAD_S, POSITIONS_TRACKER_S = 0.002, 2.5e-4
+#: How many times a rectangle's shade a polygon collector's costs per step and tracker, for
+#: pricing work without a token: the worst of benchmarks/bench_plant_polygon.py (a 32-gon
+#: field's year took up to 97 s where a 12 m x 5 m rectangle's takes about 1 s; the L 7-14 s:
+#: GEOS clipping per shaded collector, RESULTS.md "plant_polygon").
+POLYGON_COST_FACTOR = 100.0
 #: A sky map's cost per orientation of its grid [s], and its fixed cost [s].
 SKY_MAP_ORIENTATION_S, SKY_MAP_OVERHEAD_S = 8e-6, 0.03
 #: Days kept (clear sky: a plant, date and step always give the same day); the cache holds
@@ -58,14 +64,21 @@ SKY_MAP_ORIENTATION_S, SKY_MAP_OVERHEAD_S = 8e-6, 0.03
 DAY_CACHE_VALUES = 500_000
 
 
-def day_cost_s(n_trackers: int, step_s: float) -> float:
-    """The expected CPU time [s] of :meth:`PlantService.day` (module docstring)."""
-    return DAY_OVERHEAD_S + DAY_STEP_TRACKER_S * 86400.0 / step_s * n_trackers
+def cost_factor(collector: Collector) -> float:
+    """How many times the rectangle's the shade of ``collector`` costs (1 or
+    :data:`POLYGON_COST_FACTOR`): what the prices below are multiplied by."""
+    return 1.0 if collector.is_rectangle else POLYGON_COST_FACTOR
 
 
-def positions_cost_s(n_trackers: int) -> float:
+def day_cost_s(n_trackers: int, step_s: float, factor: float = 1.0) -> float:
+    """The expected CPU time [s] of :meth:`PlantService.day` (module docstring); ``factor``:
+    :func:`cost_factor` of the collector."""
+    return DAY_OVERHEAD_S + factor * DAY_STEP_TRACKER_S * 86400.0 / step_s * n_trackers
+
+
+def positions_cost_s(n_trackers: int, factor: float = 1.0) -> float:
     """The expected CPU time [s] of :meth:`PlantService.positions` (module docstring)."""
-    return POSITIONS_OVERHEAD_S + POSITIONS_TRACKER_S * n_trackers
+    return POSITIONS_OVERHEAD_S + factor * POSITIONS_TRACKER_S * n_trackers
 
 
 def sky_map_cost_s(resolution_deg: float) -> float:

@@ -303,6 +303,9 @@ def test_sweep_takes_a_polygon_collector(client: httpx.Client) -> None:
     ({"collector_polygon_m": L_SHAPE}, 422, "collector_m: give the collector size"),
     ({"collector_m": None, "collector_polygon_m": L_SHAPE, "strategies": ["backtrack"]}, 422,
      "strategies: a polygon collector takes strategy sun only"),
+    # a year at 10 min: 52,560 steps, within the bound for the rectangle, not for a polygon
+    ({"collector_m": None, "collector_polygon_m": L_SHAPE, "gcr": [0.2], "end": "2022-12-20",
+      "step_s": 600}, 422, "(a polygon collector's steps count 100×)"),
 ])
 def test_sweep_refusals_name_the_field(client: httpx.Client, change: dict, status: int,
                                        message: str) -> None:

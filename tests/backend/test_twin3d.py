@@ -562,10 +562,11 @@ L_SHAPE = [(-6.0, -2.5), (6.0, -2.5), (6.0, 0.0), (0.0, 0.0), (0.0, 2.5), (-6.0,
 
 def test_plant_view_of_a_polygon_collector_draws_and_shades_the_polygon() -> None:
     """Peñarroya's pivots with an L-shaped collector, the low morning sun, sun tracking (all
-    it can take): each collector is drawn as the L (45 m², not the 60 m² box), its shaded fraction is what shapely gives when
-    every neighbour's L, posed as drawn, is cast along the sun onto it (an independent
-    projection; the bounding boxes would give other fractions), the shade drawn on the
-    collectors covers that area, and each ground shadow is the L's area × |n·s| / s_z."""
+    it can take): each collector is drawn as the L (45 m², not the 60 m² box), its shaded
+    fraction is what shapely gives when every neighbour's L, posed as drawn, is cast along
+    the sun onto it (an independent projection; the bounding boxes would give other
+    fractions), the shade drawn on the collectors covers that area, and each ground shadow
+    is the L's area × |n·s| / s_z."""
     base = load_plant("penarroya")
     plant = dataclasses.replace(base, collector=collector_from_outline(L_SHAPE, base.collector))
     scene = TwinScene(SITE, "127.0.0.1", 0, sites=SITES.get, plants=lambda _id: plant)

@@ -46,6 +46,7 @@ from backend.plants import (
     STRATEGIES,
     PlantService,
     UnknownPlantError,
+    cost_factor,
     day_cost_s,
     positions_cost_s,
     sky_map_cost_s,
@@ -222,16 +223,19 @@ async def create_sweep(body: SweepCreate, request: Request, ctx: ContextDep,
     the address's anonymous simulation allowance (429 when spent); one sweep runs at a time
     (503 past the queue)."""
     spec, cases = await anyio.to_thread.run_sync(_sweep_inputs, body, service)
-    case_steps = len(cases) * (spec.end - spec.start).total_seconds() / spec.step_s
+    # a polygon's case-steps weigh POLYGON_COST_FACTOR (its shade costs that much more)
+    factor = cost_factor(spec.collector)
+    case_steps = len(cases) * (spec.end - spec.start).total_seconds() / spec.step_s * factor
     anonymous = caller is None
     host = request.client.host if request.client else "?"
     try:
         if anonymous:
             bound = ctx.settings.plants.anonymous_sweep_case_steps
             if case_steps > bound:
+                weight = f" (a polygon collector's steps count {factor:g}×)" if factor > 1 else ""
                 raise HTTPException(422, f"step_s: {len(cases)} cases × "
-                                         f"{case_steps / len(cases):.0f} steps is more than "
-                                         f"{bound:,} without a write token: use a larger "
+                                         f"{case_steps / len(cases):.0f} steps{weight} is more "
+                                         f"than {bound:,} without a write token: use a larger "
                                          "step_s, a shorter range or fewer cases")
             ctx.limits.simulation_steps.take(host, case_steps)
     except Busy as exc:
@@ -296,7 +300,7 @@ async def sweep_shade(sweep_id: str, request: Request, ctx: ContextDep, caller: 
     name = layout if spec.plant is None else PLANT_LAYOUT
     case = SweepCase(name, gcr, _strategy(strategy))
     cost_s = day_cost_s(spec.rows * spec.columns if spec.plant is None
-                        else spec.plant.n_trackers, step_s)
+                        else spec.plant.n_trackers, step_s, cost_factor(spec.collector))
     try:
         return await _priced(request, ctx, caller, cost_s,
                              lambda: case_day_shade(spec, case, date, step_s))
@@ -332,7 +336,8 @@ async def positions(plant_id: str, request: Request, ctx: ContextDep, caller: Ca
     when = _time(time)
     _plant_or_404(service, plant_id)
     strategy = _strategy(strategy, service.get(plant_id))
-    cost_s = positions_cost_s(service.get(plant_id).n_trackers)
+    plant = service.get(plant_id)
+    cost_s = positions_cost_s(plant.n_trackers, cost_factor(plant.collector))
     return await _priced(request, ctx, caller, cost_s,
                          lambda: service.positions(plant_id, when, strategy),
                          one_at_a_time=False)
@@ -384,6 +389,7 @@ async def day(plant_id: str, request: Request, ctx: ContextDep, caller: CallerDe
     hit = service.cached_day(plant_id, day_, step_s)
     if hit is not None:
         return hit
-    cost_s = day_cost_s(service.get(plant_id).n_trackers, step_s)
+    plant = service.get(plant_id)
+    cost_s = day_cost_s(plant.n_trackers, step_s, cost_factor(plant.collector))
     return await _priced(request, ctx, caller, cost_s,
                          lambda: service.day(plant_id, day_, step_s))
