@@ -91,8 +91,11 @@ def _power_at(site: Site, day: pd.DataFrame, tilt: np.ndarray, surf_az: np.ndarr
     dni_extra = np.broadcast_to(day["dni_extra"].to_numpy() if "dni_extra" in day
                                 else sky.extra_radiation(day.index), shape)
     dni, ghi, dhi = (np.broadcast_to(day[k].to_numpy(), shape) for k in ("dni", "ghi", "dhi"))
-    poa = sky.poa_irradiance(tilt, surf_az, zen_b, az_b, dni, ghi, dhi, dni_extra,
-                             albedo=arr.albedo, model="haydavies")
+    # the site's transposition model, as the twin and the inversion use it (Perez: air mass)
+    airmass = (np.broadcast_to(sky.airmass(zen)[0], shape)
+               if site.transposition_model == "perez" else None)
+    poa = sky.poa_irradiance(tilt, surf_az, zen_b, az_b, dni, ghi, dhi, dni_extra, airmass,
+                             albedo=arr.albedo, model=site.transposition_model)
     e_eff = sky.effective_irradiance(poa["poa_direct"], poa["poa_diffuse"], aoi)
     # the air and wind the expectation had (measured where a logger reads them)
     t_air, wind = ((np.broadcast_to(day[k].to_numpy(), shape) if k in day else default)

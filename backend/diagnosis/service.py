@@ -62,8 +62,9 @@ MAX_DAYS = 400
 #: :mod:`sim.energy`'s rule and a logger's minutes interpolated within its gap rule;
 #: 5: no dropout before the logger's first reading, the energy against the band,
 #: ``partial``; 6: the band ±4.5 % beyond the two skies, from the real-sky days; 7: the
-#: measured wind speed, where a logger reads one, in the cells' temperature).
-CACHE_VERSION = 7
+#: measured wind speed, where a logger reads one, in the cells' temperature; 8: the stuck
+#: fit's power under the site's transposition model, not Hay-Davies always).
+CACHE_VERSION = 8
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
@@ -217,6 +218,12 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
 #: twin: 0.8 s, 42 MB; load 7-9), far under issue 23's minute of CPU and gigabyte. Cached
 #: days and days to come cost nothing and do not count.
 ANONYMOUS_MAX_COMPUTED_DAYS = 31
+
+
+def computed_days_cap(caller: object | None) -> int | None:
+    """The most uncached days a request may diagnose: :data:`ANONYMOUS_MAX_COMPUTED_DAYS`
+    without a token (``caller`` None), no bound with one."""
+    return None if caller is not None else ANONYMOUS_MAX_COMPUTED_DAYS
 
 def _future_day(date: str) -> dict[str, Any]:
     """The answer of a day still to come: nothing is computed (no reading can exist yet)."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import uuid
+import secrets
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any
@@ -73,7 +73,7 @@ class SweepRunner:
         if waiting > self.queue:
             raise Busy(503, f"{waiting} sweeps are queued or running (the queue holds "
                             f"{self.queue} behind the running one); retry later", 30)
-        state = SweepState(uuid.uuid4().hex[:16], params, len(cases))
+        state = SweepState(secrets.token_hex(8), params, len(cases))  # 64 random bits
         self._states[state.sweep_id] = state
         ended = [k for k, s in self._states.items() if s.status in ("done", "failed")]
         for k in ended[:max(0, len(self._states) - KEEP)]:

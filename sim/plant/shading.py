@@ -705,7 +705,10 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
     g_shade = polygon_shade(poly, g_offsets, g_by >= 0)
     band_area = (polygon_band_areas(g_shade, bounds, edges) if len(cuts)
                  else np.asarray(shapely.area(g_shade), dtype=float)[:, None])
-    fraction[g_step, g_tracker] = np.minimum(band_area.sum(axis=1) / polygon_area(poly), 1.0)
+    # the outline's area whichever way round its vertices go (check_outline makes them
+    # counter-clockwise; a caller of this function may not have)
+    fraction[g_step, g_tracker] = np.minimum(band_area.sum(axis=1) / abs(polygon_area(poly)),
+                                             1.0)
     return PlantShade(fraction, g_step.astype(np.int64), g_tracker.astype(np.int64),
                       g_rects, g_by, band_area, cuts, poly, g_offsets, g_shade)
 

@@ -88,3 +88,24 @@ def test_azimuth_offset_is_not_named_as_another_fault() -> None:
     wrong = [f for day in found for f in day
              if f["confidence"] >= 0.5 and f["kind"] != "azimuth_offset"]
     assert wrong == [], wrong
+
+
+@pytest.mark.parametrize("model", ["haydavies", "perez"])
+def test_the_stuck_fit_prices_orientations_with_the_sites_sky_model(model: str) -> None:
+    """The stuck fit's power at an orientation (faults._power_at) is the expected twin's at
+    the tracker's own orientation (the sun's), whichever transposition model the site
+    names: with Hay-Davies hard-coded a Perez site's fit was 1.5 % low on a clear day."""
+    import dataclasses
+
+    from backend.diagnosis.faults import _power_at
+    from sim import twin
+
+    site = dataclasses.replace(SITE, transposition_model=model)
+    first = pd.Timestamp("2026-02-03", tz=site.timezone)
+    end = first + pd.Timedelta(days=1)
+    fixed = twin.simulate(site, first, end).series["fixed_power_w"].fillna(0.0).to_numpy()
+    e = sky_sensor.weather_aware_twin(site, first, end, fixed)
+    day = e[e["apparent_elevation"] > 10.0]
+    tilt = (90.0 - day["apparent_elevation"].to_numpy())[None]
+    power = _power_at(site, day, tilt, day["solar_azimuth"].to_numpy()[None])[0]
+    np.testing.assert_allclose(power, day["tracker_power_w"].to_numpy(), rtol=1e-6)

@@ -18,7 +18,7 @@ from backend.api.deps import (
 )
 from backend.api.schemas.diagnosis import DiagnosisMountRead, PointingRead
 from backend.diagnosis.pointing import pointing
-from backend.diagnosis.service import ANONYMOUS_MAX_COMPUTED_DAYS, diagnosis
+from backend.diagnosis.service import computed_days_cap, diagnosis
 from backend.limits import metered
 
 router = APIRouter(prefix="/api/v1/sites", tags=["diagnosis"])
@@ -40,8 +40,7 @@ def get_diagnosis(
     address's ``HELIOTWIN_ANONYMOUS_READ_CPU_S_PER_MIN``."""
     with metered():
         info, t0, t1 = site_range(ctx, site_id, start, end)
-        body = diagnosis(ctx, info, t0, t1, max_computed_days=None if caller is not None
-                         else ANONYMOUS_MAX_COMPUTED_DAYS)
+        body = diagnosis(ctx, info, t0, t1, max_computed_days=computed_days_cap(caller))
         return Response(orjson.dumps(body), media_type="application/json")
 
 

@@ -40,7 +40,7 @@ from backend.api.deps import (
 from backend.api.routes.health import service_version
 from backend.api.schemas.common import CSV_CONTENT, PNG_CONTENT
 from backend.api.schemas.energy import EnergyRead, ReportRead
-from backend.diagnosis.service import ANONYMOUS_MAX_COMPUTED_DAYS
+from backend.diagnosis.service import ANONYMOUS_MAX_COMPUTED_DAYS, computed_days_cap
 from backend.diagnosis.weather_twin import weather_twin_energy
 from backend.limits import run_metered
 from backend.measurements.energy import energy_rows
@@ -82,15 +82,15 @@ async def get_energy(
     source: Annotated[Literal["twin_weather"] | None, Query(description=(
         "twin_weather: also the energy of the twin under the sky the fixed array measured "
         "(twin_weather_wh, twin_weather_gain_pct), beside measured and the clear-sky twin; "
-        "without a token at most 31 days not diagnosed yet (422 naming end)"
+        f"without a token at most {ANONYMOUS_MAX_COMPUTED_DAYS} days not diagnosed yet "
+        "(422 naming end)"
     ))] = None,
 ) -> Response:
     """Energy per period for every array, measured and twin, with the tracking gain.
     ``source=twin_weather`` diagnoses the days it needs: without a token, as the
     diagnosis, at most ``ANONYMOUS_MAX_COMPUTED_DAYS`` (31) not cached yet."""
-    most = None if caller is not None else ANONYMOUS_MAX_COMPUTED_DAYS
     return await anyio.to_thread.run_sync(run_metered, _energy, site_id, ctx, start, end,
-                                          interval, format, source, most,
+                                          interval, format, source, computed_days_cap(caller),
                                           limiter=read_limiter())
 
 

@@ -56,6 +56,9 @@ def test_interior_shade_is_twoaxistrackings(shape: str, name: str) -> None:
     ref = np.asarray(_tracker_field(poly, name, gcr).get_shaded_fraction(el, az))
     assert np.count_nonzero(ref > 0.01) > 20
     np.testing.assert_allclose(ours, ref, atol=1e-9)
+    # the same outline given clockwise (plant_shade takes it as it comes)
+    clockwise = plant_shade(pos, az, el, az, el, 0.0, 0.0, outline=poly[::-1]).fraction[:, k]
+    np.testing.assert_allclose(clockwise, ours, atol=1e-12)
 
 
 def test_the_l_shapes_frame_matters() -> None:
