@@ -225,6 +225,7 @@ def computed_days_cap(caller: object | None) -> int | None:
     without a token (``caller`` None), no bound with one."""
     return None if caller is not None else ANONYMOUS_MAX_COMPUTED_DAYS
 
+
 def _future_day(date: str) -> dict[str, Any]:
     """The answer of a day still to come: nothing is computed (no reading can exist yet)."""
     return {"date": date, "status": "future", "complete": False, "partial": True,

@@ -59,13 +59,12 @@ _RAW_BUCKETS = (
     "GROUP BY 1 ORDER BY 1"
 )
 _WIDTH = 12 + 2 * _NS  # columns of a bucket row
-# energy and readings per (array, source, period), summed by the database: the periods
-# are a VALUES table (the first row typed for PostgreSQL), each joined to its rollups
-# by a primary-key range per series (source named, so the key's whole prefix is used)
-#: The periods are the outer loop (SQLite keeps a CROSS JOIN's order): each period is then
-#: a range search on the primary key. With a plain JOIN SQLite's planner put the rollups
-#: outside past some 300 periods and scanned every period for each rollup row: a year's
-#: energy per day took 1.41 s instead of 0.04 s (bench_service, a year back-filled).
+#: Energy and readings per (array, source, period), summed by the database: the periods
+#: are a VALUES table (the first row typed for PostgreSQL), each joined to its rollups by a
+#: primary-key range per series (source named, so the key's whole prefix is used). The
+#: periods are the outer loop (SQLite keeps a CROSS JOIN's order): with a plain JOIN its
+#: planner put the rollups outside past some 300 periods and compared every rollup row with
+#: every period: a year's energy per day took 1.41 s instead of 0.04 s (bench_service).
 _ROLLUP_PERIODS = (
     "WITH p(i, lo, hi) AS (VALUES (CAST(? AS INTEGER), CAST(? AS BIGINT), CAST(? AS BIGINT))"
     "{more}) "

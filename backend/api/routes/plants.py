@@ -335,8 +335,8 @@ async def positions(plant_id: str, request: Request, ctx: ContextDep, caller: Ca
     (priced, without waiting for other plant computations: see the module docstring)."""
     when = _time(time)
     _plant_or_404(service, plant_id)
-    strategy = _strategy(strategy, service.get(plant_id))
     plant = service.get(plant_id)
+    strategy = _strategy(strategy, plant)
     cost_s = positions_cost_s(plant.n_trackers, cost_factor(plant.collector))
     return await _priced(request, ctx, caller, cost_s,
                          lambda: service.positions(plant_id, when, strategy),
