@@ -191,6 +191,11 @@ class Charge:
         self.held = held
         self.open = True
 
+    @property
+    def in_flight(self) -> bool:
+        """A held charge whose work still runs: it stays in the window until settled."""
+        return self.held and self.open
+
 
 class WindowBudget:
     """At most ``capacity`` cost units per client in any ``window_s``; thread-safe.
@@ -223,7 +228,7 @@ class WindowBudget:
 
     def _live(self, client: str, now: float) -> list[Charge]:
         charges = [c for c in self._charges.get(client, [])
-                   if (c.held and c.open) or c.at > now - self.window_s]
+                   if c.in_flight or c.at > now - self.window_s]
         if client in self._charges:
             self._charges[client] = charges
         return charges
@@ -243,8 +248,7 @@ class WindowBudget:
             used = sum(c.cost for c in charges)
             if used + cost > self.capacity:
                 freed, wait_s = 0.0, self.window_s
-                for c in sorted((c for c in charges if not (c.held and c.open)),
-                                key=lambda c: c.at):
+                for c in sorted((c for c in charges if not c.in_flight), key=lambda c: c.at):
                     freed += c.cost    # a read still running frees nothing by waiting
                     if used - freed + cost <= self.capacity:
                         wait_s = max(1.0, c.at + self.window_s - now)
