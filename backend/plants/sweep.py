@@ -112,11 +112,14 @@ def local_cluster(n_workers: int) -> Any:
     afresh, and the bench's 12 cases took 11.5 s instead of 7.1 s (one process, each
     setting). The cluster lives for one sweep, so its workers keep glibc's defaults. (A
     cluster of your own: set ``distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_``
-    to null in its Dask config for the same speed.)"""
+    to null in its Dask config for the same speed.) Nor do they run Dask's statistical
+    profiler, which samples each worker's stack every 10 ms under the GIL: its profiles are
+    read only on the Dask dashboard, which this cluster does not serve."""
     import dask
     from distributed import LocalCluster
 
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+                          "distributed.worker.profile.enabled": False}):
         return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                             dashboard_address=None, silence_logs=logging.WARNING)
 

@@ -199,9 +199,11 @@ def test_runner_close_cancels_a_running_sweep(monkeypatch: pytest.MonkeyPatch) -
 def test_the_local_cluster_keeps_glibc_malloc_defaults() -> None:
     """The sweep's own LocalCluster starts its workers without Dask's
     MALLOC_TRIM_THRESHOLD_ (set, it also fixes glibc's mmap threshold, and the bench's cases
-    ran 1.5x slower); Dask's other worker settings (one BLAS thread) stay."""
+    ran 1.5x slower); Dask's other worker settings (one BLAS thread) stay. Nor do they run
+    the statistical profiler (its profiles are read on a dashboard the cluster does not serve)."""
     import os
 
+    import dask
     from distributed import Client
 
     from backend.plants.sweep import local_cluster
@@ -209,4 +211,6 @@ def test_the_local_cluster_keeps_glibc_malloc_defaults() -> None:
     with local_cluster(1) as cluster, Client(cluster) as client:
         env = client.run(lambda: {k: os.environ.get(k) for k in
                                   ("MALLOC_TRIM_THRESHOLD_", "OMP_NUM_THREADS")})
+        profiling = client.run(lambda: dask.config.get("distributed.worker.profile.enabled"))
     assert list(env.values()) == [{"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1"}]
+    assert list(profiling.values()) == [False]
