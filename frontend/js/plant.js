@@ -16,6 +16,23 @@ function localDateIn(tz) {
     .format(new Date());
 }
 
+// the layout's colour scale of the shaded fraction: [0, 1] of [0, cmax]
+const SHADE_SCALE = ["#d3f9d8", "#343a40"];
+
+/** The colour Plotly gives `f` on SHADE_SCALE from 0 to `cmax` (RGB interpolation): the fill
+ * of a collector's outline, which is a shape and not part of the trace's colour scale. */
+function shadeColor(f, cmax) {
+  const s = Math.min(1, Math.max(0, f / cmax));
+  const [a, b] = SHADE_SCALE.map((hex) => [1, 3, 5].map((i) => parseInt(hex.slice(i, i + 2), 16)));
+  return `rgb(${a.map((v, i) => Math.round(v + s * (b[i] - v))).join(",")})`;
+}
+
+/** A polygon collector's outline (PlantRead.collector.outline_m, [u, v] m about the pivot)
+ * laid flat at its pivot, u east and v north, as an SVG path in the chart's metres. */
+function outlinePath(outline, t) {
+  return `M${outline.map(([u, v]) => `${t.east_m + u},${t.north_m + v}`).join("L")}Z`;
+}
+
 async function drawLayout() {
   const p = view.plant;
   const d = view.day;
@@ -24,15 +41,26 @@ async function drawLayout() {
   const east = p.trackers.map((t) => t.east_m);
   const north = p.trackers.map((t) => t.north_m);
   const f = row.map((v) => (v > 0 ? v : 0));
+  const cmax = Math.max(0.05, ...f);
   const text = p.trackers.map((t, k) => `tracker ${t.tracker_id}<br>shaded ${num(100 * (row[k] || 0), 1)} %`);
-  await draw("chart-plant-layout", [{
-    type: "scatter", mode: "markers+text", x: east, y: north, text: p.trackers.map((t) => String(t.tracker_id)),
-    textposition: "top center", hovertext: text, hoverinfo: "text", name: "shaded fraction",
-    marker: { symbol: "square", size: 22, color: f, cmin: 0, cmax: Math.max(0.05, ...f),
-      colorscale: [[0, "#d3f9d8"], [1, "#343a40"]], line: { color: "#495057", width: 1 },
-      colorbar: { title: { text: "shaded [-]" }, thickness: 12 } },
-  }], baseLayout({
-    hovermode: "closest", showlegend: false,
+  const ids = p.trackers.map((t) => String(t.tracker_id));
+  const marker = { color: f, cmin: 0, cmax, colorscale: [[0, SHADE_SCALE[0]], [1, SHADE_SCALE[1]]],
+    line: { color: "#495057", width: 1 }, colorbar: { title: { text: "shaded [-]" }, thickness: 12 } };
+  const pivots = { type: "scatter", x: east, y: north, hovertext: text, hoverinfo: "text", name: "shaded fraction" };
+  // a rectangle: a square marker per collector; a polygon: its outline to scale, filled with
+  // the shade's colour (shapes), a dot at the pivot and the id above the outline
+  const outline = p.collector.outline_m;
+  const top = outline ? Math.max(...outline.map(([, v]) => v)) : 0;
+  const traces = outline ? [
+    { ...pivots, mode: "markers", marker: { ...marker, symbol: "circle", size: 5 } },
+    { type: "scatter", mode: "text", x: east, y: north.map((n) => n + top), text: ids, textposition: "top center", hoverinfo: "skip" },
+  ] : [{ ...pivots, mode: "markers+text", text: ids, textposition: "top center", marker: { ...marker, symbol: "square", size: 22 } }];
+  const shapes = outline ? p.trackers.map((t, k) => ({
+    type: "path", layer: "between", path: outlinePath(outline, t),
+    fillcolor: shadeColor(f[k], cmax), line: { color: "#495057", width: 1 },
+  })) : [];
+  await draw("chart-plant-layout", traces, baseLayout({
+    hovermode: "closest", showlegend: false, shapes,
     xaxis: { title: { text: "east [m]" }, gridcolor: "#e9edf1", zeroline: false, scaleanchor: "y" },
     yaxis: { title: { text: "north [m]" }, gridcolor: "#e9edf1", zeroline: false },
     margin: { l: 60, r: 20, t: 10, b: 46 },
