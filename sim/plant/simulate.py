@@ -285,7 +285,7 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
                           np.full(len(day), 90.0 - plant.fixed_tilt), table)["p_elec"]
                    if with_fixed else np.zeros(len(day)))
         frac = run["shade"].fraction
-        dni_f_tracker += dsky["dni"] @ frac
+        dni_f_tracker += np.einsum("t,tn->n", dsky["dni"], frac)  # not BLAS: see shading._dots
         mean_f = np.full(len(tt), np.nan)
         mean_f[day] = frac.mean(axis=1)
         n_sh = np.zeros(len(tt), dtype=np.int64)
