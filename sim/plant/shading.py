@@ -687,16 +687,19 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
         hit = _polygon_pairs(poly, offsets)
         t, i, j, rects, offsets = t[hit], i[hit], j[hit], rects[hit], offsets[hit]
     key = upi[t] * n + i
-    order = np.argsort(key * n + j, kind="stable")  # already by step: the stable sort is fast
-    key, j, rects, offsets = key[order], j[order], rects[order], offsets[order]
-    gkey, start, count = np.unique(key, return_index=True, return_counts=True)
+    by_pair = key * n + j
+    if np.any(by_pair[1:] < by_pair[:-1]):          # by step already, often by (i, j) too
+        order = np.argsort(by_pair, kind="stable")
+        key, j, rects, offsets = key[order], j[order], rects[order], offsets[order]
+    start = np.flatnonzero(np.diff(key, prepend=-1))  # each group's first row (key ≥ 0)
+    gkey, count = key[start], np.diff(start, append=len(key))
     kmax = int(count.max()) if len(count) else 1
+    # row r of group g goes to slot r − start[g], at g·kmax + slot of the flattened padding
+    flat = np.arange(len(key)) + np.repeat(np.arange(len(gkey)) * kmax - start, count)
     g_rects = np.zeros((len(gkey), kmax, 4))
     g_by = np.full((len(gkey), kmax), -1, dtype=np.int64)
-    slot = np.arange(len(key)) - np.repeat(start, count)
-    gidx = np.repeat(np.arange(len(gkey)), count)
-    g_rects[gidx, slot] = rects
-    g_by[gidx, slot] = j
+    g_rects.reshape(-1, 4)[flat] = rects
+    g_by.reshape(-1)[flat] = j
     cuts = np.asarray(band_edges, dtype=float).reshape(-1)
     edges = np.concatenate([[-np.inf], cuts, [np.inf]])
     g_step, g_tracker = gkey // n, gkey % n
@@ -708,7 +711,7 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
     import shapely
 
     g_offsets = np.zeros((len(gkey), kmax, 2))
-    g_offsets[gidx, slot] = offsets
+    g_offsets.reshape(-1, 2)[flat] = offsets
     g_shade = polygon_shade(poly, g_offsets, g_by >= 0)
     band_area = (polygon_band_areas(g_shade, bounds, edges) if len(cuts)
                  else np.asarray(shapely.area(g_shade), dtype=float)[:, None])

@@ -154,6 +154,12 @@ def _scatter(n: int, idx: NDArray[np.int64], x: FloatArray) -> FloatArray:
     return out
 
 
+def _ratio(a: FloatArray, b: FloatArray) -> FloatArray:
+    """a / b, NaN where b is 0 (a day without extraterrestrial light)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(b != 0, a / b, np.nan)
+
+
 def _enu(az: FloatArray, el: FloatArray) -> FloatArray:
     from vision.sphere import enu_from_sky
 
@@ -311,9 +317,11 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
         if progress is not None:
             progress(min(1.0, (k0 + len(tt)) / len(times)))
     series = pd.concat(frames)
-    local = series.index.tz_convert(plant.timezone)
-    grp = series.groupby(local.date)
-    dates = sorted(grp.groups)
+    # local days as integers (days since 1970-01-01 on the local calendar), summed with
+    # bincount: pandas' groupby on ``.date`` made 525,600 date objects for a 1-min year
+    local_day = series.index.tz_convert(plant.timezone).tz_localize(None).as_unit("s").asi8
+    day_nums, day_of = np.unique(local_day // 86_400, return_inverse=True)
+    dates = list(pd.to_datetime(day_nums, unit="D").date)
     edges_s = pd.DatetimeIndex([pd.Timestamp(d, tz=plant.timezone) for d in
                                 [*dates, dates[-1] + pd.Timedelta(days=1)]]).as_unit("s").asi8
     ts_s = series.index.as_unit("s").asi8
@@ -326,8 +334,8 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
         "energy_area_model_wh": per_day_wh("power_area_w"),
         "energy_unshaded_wh": per_day_wh("power_unshaded_w"),
         "fixed_energy_wh": per_day_wh("fixed_power_w"),
-        "clearness_index": (grp["ghi"].sum() / grp["ghi_extra"].sum().replace(0, np.nan)
-                            ).to_numpy(),
+        "clearness_index": _ratio(np.bincount(day_of, series["ghi"].to_numpy()),
+                                  np.bincount(day_of, series["ghi_extra"].to_numpy())),
     }, index=dates)
     return PlantResult(plant, start, end, float(step_s), strategy,
                        "clearsky-ineichen" if weather is None else "weather", series, daily,
