@@ -64,7 +64,7 @@ radially symmetric". The glare's ring-shaped fall-off and the coherence remain e
 a sun, no longer needed by a wide round core."""
 
 _SMALLEST_DEG = 0.5  # equivalent radius of the smallest saturated sun core [°]
-_LARGEST_DEG = 15.0  # … of the widest saturated glare (the M12 fisheye of issue 24: ≈ 14°)
+LARGEST_DEG = 15.0  # … of the widest saturated glare (the M12 fisheye of issue 24: ≈ 14°)
 
 
 def load_model(path: Path | None = None) -> tuple[NDArray[np.float64], float]:
@@ -114,7 +114,7 @@ def features(shape: float, glare: float, saturated: float, peak: float, bg: floa
     if radius_deg is not None:
         r = max(radius_deg, 1e-3)
         small = max(0.0, float(np.log(_SMALLEST_DEG / r)))
-        large = max(0.0, float(np.log(r / _LARGEST_DEG)))
+        large = max(0.0, float(np.log(r / LARGEST_DEG)))
     return np.array([
         shape, glare, saturated, max(peak - bg, 0.0) / max(peak, 1.0), small, large,
         runner_up, coherence, float(known), far], dtype=float)

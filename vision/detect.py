@@ -29,7 +29,10 @@ Three named methods, all returning a :class:`SunDetection`:
   a feature, never a veto: it cannot lower the probability of a round,
   saturated core with its glare, so a wrong place or time gives the sun it
   sees and how far it is from the prediction (``distance_from_ephemeris_px``),
-  not "no sun". The sub-pixel centre: for a colour frame whose white core (every
+  not "no sun". The sub-pixel centre: for a core wider than any sun's glare at a
+  normal exposure (15° in radius, with a known scale: the sky saturated around the sun,
+  a long exposure), a censored fit of a power-law glare on a plane of sky to the light
+  around it (:func:`vision.glare.censored_glare_centre`); for a colour frame whose white core (every
   channel saturated) is at least 3° in radius while the grey core, saturated by
   the blue sky's glare, reaches well beyond it, the centroid of that core opened
   by a disc (:func:`_white_core_centre`); for a core with a glare around it and a
@@ -79,6 +82,7 @@ from vision.candidates import (
 )
 from vision.detection import CameraModel, FovCircle, SunDetection
 from vision.fov import _fov_mask, _median_u8, _small, estimate_fov, to_gray
+from vision.glare import censored_glare_centre
 from vision.limb import _robust_limb_centre, contained_limb_centre
 from vision.radial import radial_symmetry_centre
 from vision.seeds import detect_seed000, detect_seed003, threshold_moments
@@ -407,6 +411,12 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
     cx = cy = radius = 0.0
     if found:
         white = _white_core_centre(image, gray, got.best, ppd, fov, got.bg, got.peak)
+        r_eq = float(np.sqrt(got.best.area / np.pi))
+        if r_eq > conf.LARGEST_DEG * ppd and (camera is not None or fov is not None):
+            # wider than any sun's glare: the sky saturated around it (a long exposure)
+            fit = censored_glare_centre(image, got.best.cx, got.best.cy, r_eq, fov)
+            if fit is not None:
+                white = (fit[0], fit[1], r_eq)
         if white is not None:
             cx, cy, radius = white
         else:

@@ -105,17 +105,19 @@ def _exposed(img: np.ndarray, gain: float, gamma: float) -> np.ndarray:
 @pytest.mark.parametrize(("gain", "gamma"), [(0.55, 1.0), (0.7, 1.4), (1.0, 0.85), (1.1, 1.0)])
 def test_the_same_code_on_shorter_and_longer_exposures(real_sky, gain, gamma) -> None:
     """Issue 24 item 4: darkened (a flat clipped core below 255, a dark sky) and brightened
-    (a washed-out sky, a larger saturated region) real frames: every sun found, ≤ 20 px from
-    its label (measured: worst 19.5 px, the hazy Wolf frames and gain 1.1). Left out: the
+    (a washed-out sky, a larger saturated region) real frames: every sun found, ≤ 22 px from
+    its label (measured: worst 21.3 px, Wolf 13:20 at gain 1.1, its core over 15° wide
+    centred by the censored glare fit, vision.glare — 14.7 px with the clipped core's limb
+    before, whose worst over all 23 Wolf frames was 48 px against 21.3 now). Left out: the
     one Wettermast sun whose saturated core is under 20 px (83 px², hazy), which has no
     plateau to test once darkened below 250 (a limit in docs/validation-vision.md); gains
-    of 1.15 and more are not met (the sky around the sun saturates and joins the core)."""
+    of 1.15 and more are not met (the confidence of a core wider than 15°)."""
     rows = _labelled(real_sky, "Wolf")[::6] + [
         r for r in _labelled(real_sky, "Wettermast")[::2] if "112430" not in r["filename"]]
     for r in rows:
         d = detect_robust(_exposed(cv2.imread(r["path"]), gain, gamma))
         assert d.sun_found and d.confidence >= 0.5, (r["filename"], d.confidence, d.reason)
-        assert _label_distance(d, r) <= 20.0, r["filename"]
+        assert _label_distance(d, r) <= 22.0, r["filename"]
 
 
 def test_calibration_from_the_labelled_frames(real_sky, detections) -> None:
