@@ -63,17 +63,13 @@ def _block_index_rects(rects: FloatArray, collector: Collector) -> FloatArray:
     n_rows = n_v * collector.modules_high
     u_min, v_min = -collector.width / 2, -collector.height / 2
     cu, cv = collector.width / n_u, collector.height / n_rows
-    u0, u1, v0, v1 = (np.ascontiguousarray(rects[..., c]) for c in range(4))
+    u0, u1, v0, v1 = (rects[..., c] for c in range(4))
     live = (u1 - u0 > 1e-12) & (v1 - v0 > 1e-12)
-    out = np.empty(rects.shape)
-    out[..., 0] = np.floor((u0 - u_min) / cu + 1e-9)
-    out[..., 1] = np.where(live, np.ceil((u1 - u_min) / cu - 1e-9), out[..., 0])
-    out[..., 2] = np.floor((v0 - v_min) / cv + 1e-9)
-    out[..., 3] = np.where(live, np.ceil((v1 - v_min) / cv - 1e-9), out[..., 2])
-    np.maximum(out, 0.0, out=out)
-    out[..., :2] = np.minimum(out[..., :2], n_u)
-    out[..., 2:] = np.minimum(out[..., 2:], n_rows)
-    return out
+    c0 = np.clip(np.floor((u0 - u_min) / cu + 1e-9), 0, n_u)
+    r0 = np.clip(np.floor((v0 - v_min) / cv + 1e-9), 0, n_rows)
+    c1 = np.where(live, np.clip(np.ceil((u1 - u_min) / cu - 1e-9), 0, n_u), c0)
+    r1 = np.where(live, np.clip(np.ceil((v1 - v_min) / cv - 1e-9), 0, n_rows), r0)
+    return np.stack([c0, c1, r0, r1], axis=-1)
 
 
 def _popcount(x: NDArray[np.uint64]) -> NDArray[np.int64]:
@@ -98,10 +94,11 @@ def _shaded_blocks(index_rects: FloatArray, group: NDArray[np.intp], n_groups: i
     c0, c1, r0, r1 = (index_rects[:, c].astype(np.uint64) for c in range(4))
     one = np.uint64(1)
     bits = (one << np.maximum(c1, c0)) - (one << c0)        # (M,); c1 < c0 would wrap
-    rows = np.arange(n_rows, dtype=np.uint64)
-    masks = np.where((r0[:, None] <= rows) & (rows < r1[:, None]), bits[:, None], np.uint64(0))
     first = np.flatnonzero(np.concatenate([[True], group[1:] != group[:-1]]))
-    out[group[first]] = _popcount(np.bitwise_or.reduceat(masks, first, axis=0))
+    zero = np.uint64(0)
+    for row in range(n_rows):                               # a few rows: 1-D passes
+        masks = np.where((r0 <= row) & (r1 > row), bits, zero)
+        out[group[first], row] = _popcount(np.bitwise_or.reduceat(masks, first))
     return out
 
 
@@ -159,9 +156,9 @@ def beam_factors(shade: PlantShade, collector: Collector) -> tuple[FloatArray, F
     else:
         edges = np.concatenate([[-np.inf], cuts, [np.inf]])  # the rectangles lie inside
         f_s = band_union_areas(shade.group_rects, edges) / string_area
-    used = shade.group_by >= 0                        # the slots that hold a rectangle
-    g_used, k_used = np.nonzero(used)                 # by group, then slot
-    index_rects = _block_index_rects(shade.group_rects[g_used, k_used], collector)
+    used = np.flatnonzero(shade.group_by >= 0)        # the slots that hold a rectangle
+    g_used = used // shade.group_by.shape[1]          # by group, then slot
+    index_rects = _block_index_rects(shade.group_rects.reshape(-1, 4)[used], collector)
     n_sb = _block_counts(index_rects, g_used, len(shade.group_step), n_u, n_v, len(strings))
     loss = direct_martinez(1.0, 1.0, np.minimum(f_s, 1.0), n_sb, float(n_u * n_v))
     electrical[shade.group_step, shade.group_tracker] = np.mean(

@@ -91,13 +91,6 @@ def pair_vectors(positions: ArrayLike) -> tuple[IntArray, IntArray, FloatArray]:
     return ii.astype(np.int64), jj.astype(np.int64), p[jj] - p[ii]
 
 
-def _dots(a: FloatArray, b: FloatArray) -> FloatArray:
-    """``a @ b.T`` for (M, 3) and (P, 3), without BLAS: a matrix product this size wakes
-    OpenBLAS's threads, which then spin on the other core (measured: ~0.3 s of CPU in
-    a 1-min plant year, from a few calls; numpy's own loop is as fast here)."""
-    return np.einsum("mk,pk->mp", a, b)
-
-
 #: How a step's orientation is known to the bin test (:func:`pair_candidates`).
 GENERIC, FACING, FIXED = 0, 1, 2
 
@@ -133,11 +126,11 @@ def _bin_table(d: FloatArray, az_c: FloatArray, el_c: FloatArray, mode: IntArray
     for b0 in range(0, len(az_c), _BIN_BLOCK):
         blk = slice(b0, b0 + _BIN_BLOCK)
         s_c = enu_from_sky(az_c[blk], el_c[blk])
-        out = np.abs(_dots(s_c, d)) > min_dot                           # |d⊥| < D
+        out = np.abs(s_c @ d.T) > min_dot                               # |d⊥| < D
         f = np.nonzero(mode[blk] == FACING)[0]
         if len(f):
             _, u_f, v_f = collector_axes(az_c[blk][f], el_c[blk][f])
-            out[f] &= (np.abs(_dots(u_f, d)) < lim_u) & (np.abs(_dots(v_f, d)) < lim_v)
+            out[f] &= (np.abs(u_f @ d.T) < lim_u) & (np.abs(v_f @ d.T) < lim_v)
         f = np.nonzero(mode[blk] == FIXED)[0]
         if len(f) and normal is not None:
             sn = s_c[f] @ n
@@ -460,31 +453,46 @@ def _union_inclusion_exclusion(r: FloatArray, edges: FloatArray) -> FloatArray:
     """Union area per band of few rectangles per group: Σ over subsets (−1)^(|S|+1) |∩S|.
 
     Depth-first over subsets; a branch is dropped for the groups where the
-    intersection so far is empty (every superset's is too).
+    intersection so far is empty (every superset's is too). The terms are summed per
+    group at the end (bincount, in the order they were found), not scattered into the
+    result at every subset.
     """
     g_all, k = r.shape[:2]
     coords = np.ascontiguousarray(r.transpose(2, 1, 0))             # (4, K, G)
-    out = np.zeros((g_all, len(edges) - 1))
+    rows: list[IntArray] = []
+    terms: list[FloatArray] = []
 
-    def follow(idx: IntArray, cur: tuple[FloatArray, ...], first: int, sign: float) -> None:
+    def follow(idx: IntArray | None, cur: tuple[FloatArray, ...] | None, first: int,
+               sign: float) -> None:
+        """Subsets that add rectangles ``first`` … to ``cur`` on groups ``idx`` (None: all
+        groups; ``cur`` None: the empty subset)."""
         for m in range(first, k):
-            u0 = np.maximum(cur[0], coords[0, m, idx])
-            u1 = np.minimum(cur[1], coords[1, m, idx])
-            v0 = np.maximum(cur[2], coords[2, m, idx])
-            v1 = np.minimum(cur[3], coords[3, m, idx])
+            c = coords[:, m] if idx is None else coords[:, m, idx]
+            if cur is None:
+                u0, u1, v0, v1 = c
+            else:
+                u0, u1 = np.maximum(cur[0], c[0]), np.minimum(cur[1], c[1])
+                v0, v1 = np.maximum(cur[2], c[2]), np.minimum(cur[3], c[3])
             live = (u1 > u0) & (v1 > v0)
-            if not live.any():
-                continue
             if live.all():
                 sub, nxt = idx, (u0, u1, v0, v1)
             else:
-                sub, nxt = idx[live], (u0[live], u1[live], v0[live], v1[live])
-            out[sub] += sign * _band_areas(*nxt, edges)
+                keep = np.flatnonzero(live)
+                if not len(keep):
+                    continue
+                sub = keep if idx is None else idx[keep]
+                nxt = (u0[keep], u1[keep], v0[keep], v1[keep])
+            rows.append(np.arange(g_all) if sub is None else sub)
+            terms.append(sign * _band_areas(*nxt, edges))
             if m + 1 < k:
                 follow(sub, nxt, m + 1, -sign)
 
-    inf = np.full(g_all, np.inf)
-    follow(np.arange(g_all), (-inf, inf, -inf, inf), 0, 1.0)
+    follow(None, None, 0, 1.0)
+    out = np.zeros((g_all, len(edges) - 1))
+    if rows:
+        at, term = np.concatenate(rows), np.concatenate(terms)
+        for b in range(out.shape[1]):
+            out[:, b] = np.bincount(at, term[:, b], minlength=g_all)
     return out
 
 
