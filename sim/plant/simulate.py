@@ -331,13 +331,15 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
     def per_day_wh(column: str) -> np.ndarray:  # sim/energy.py's rule, split at local midnights
         return energy_per_period_wh(ts_s, series[column].to_numpy(), 1.5 * step_s, edges_s)
 
+    def per_day_sum(column: str) -> FloatArray:
+        return np.bincount(day_of, series[column].to_numpy()).astype(float)
+
     daily = pd.DataFrame({
         "energy_wh": per_day_wh("power_w"),
         "energy_area_model_wh": per_day_wh("power_area_w"),
         "energy_unshaded_wh": per_day_wh("power_unshaded_w"),
         "fixed_energy_wh": per_day_wh("fixed_power_w"),
-        "clearness_index": _ratio(np.bincount(day_of, series["ghi"].to_numpy()),
-                                  np.bincount(day_of, series["ghi_extra"].to_numpy())),
+        "clearness_index": _ratio(per_day_sum("ghi"), per_day_sum("ghi_extra")),
     }, index=dates)
     return PlantResult(plant, start, end, float(step_s), strategy,
                        "clearsky-ineichen" if weather is None else "weather", series, daily,
