@@ -330,11 +330,12 @@ def _direct_pairs(positions: FloatArray, sun: FloatArray, surface_az: FloatArray
     if not out[0]:
         return empty_i, empty_i, empty_i, np.zeros((0, 4)), np.zeros((0, 2))
     t_all, i_all, j_all, du_all, dv_all = (np.concatenate(x) for x in out)
-    rects = np.stack([np.maximum(u_lo, du_all + u_lo), np.minimum(u_hi, du_all + u_hi),
-                      np.maximum(v_lo, dv_all + v_lo), np.minimum(v_hi, dv_all + v_hi)], axis=-1)
-    keep = ((rects[:, 1] - rects[:, 0]) * (rects[:, 3] - rects[:, 2]) > _EPS_AREA_M2) \
-        & (rects[:, 1] > rects[:, 0]) & (rects[:, 3] > rects[:, 2])
-    return (t_all[keep], i_all[keep], j_all[keep], rects[keep],
+    u0, u1 = np.maximum(u_lo, du_all + u_lo), np.minimum(u_hi, du_all + u_hi)
+    v0, v1 = np.maximum(v_lo, dv_all + v_lo), np.minimum(v_hi, dv_all + v_hi)
+    keep = np.flatnonzero(((u1 - u0) * (v1 - v0) > _EPS_AREA_M2) & (u1 > u0) & (v1 > v0))
+    # filtered column by column (1-D gathers; numpy's row gathers of (M, 4) are slow)
+    return (t_all[keep], i_all[keep], j_all[keep],
+            np.stack([u0[keep], u1[keep], v0[keep], v1[keep]], axis=-1),
             np.stack([du_all[keep], dv_all[keep]], axis=-1))
 
 
@@ -433,12 +434,11 @@ def band_union_areas(rects: ArrayLike, v_edges: ArrayLike) -> FloatArray:
     # before it add nothing to any union formula
     last = np.where(valid.any(axis=1), r.shape[1] - np.argmax(valid[:, ::-1], axis=1), 0)
     out = np.zeros((len(r), len(edges) - 1))
-    for k in np.unique(last):
-        if k == 0:
-            continue
-        g = np.nonzero(last == k)[0]
-        out[g] = (_union_inclusion_exclusion(r[g, :k], edges) if k <= _IE_MAX
-                  else _union_grid(r[g, :k], valid[g, :k], edges))
+    for k in np.flatnonzero(np.bincount(last, minlength=1)[1:]) + 1:  # non-empty buckets
+        g = np.flatnonzero(last == k)
+        rk = np.take(r, g, axis=0)[:, :k]            # np.take: numpy's fast row gather
+        out[g] = (_union_inclusion_exclusion(rk, edges) if k <= _IE_MAX
+                  else _union_grid(rk, valid[g, :k], edges))
     return out
 
 
@@ -632,6 +632,14 @@ def _polygon_pairs(outline: FloatArray, offsets: FloatArray) -> NDArray[np.bool_
     return np.asarray(shapely.contains_properly(region, shapely.points(offsets)), dtype=bool)
 
 
+def _put_rows(out: FloatArray, at: IntArray, rows: FloatArray) -> None:
+    """``out[at] = rows`` for 2-D float arrays, each row copied whole (as one opaque item):
+    numpy's fancy assignment of rows goes element by element, twice as slow here."""
+    item = f"V{out.shape[1] * out.itemsize}"
+    np.put(out.view(item).reshape(-1), at, np.ascontiguousarray(rows, dtype=out.dtype)
+           .view(item).reshape(-1))
+
+
 def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation: ArrayLike,
                 surface_azimuth: ArrayLike, surface_elevation: ArrayLike, width: float,
                 height: float, band_edges: ArrayLike = (),
@@ -698,7 +706,8 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
     by_pair = key * n + j
     if np.any(by_pair[1:] < by_pair[:-1]):          # by step already, often by (i, j) too
         order = np.argsort(by_pair, kind="stable")
-        key, j, rects, offsets = key[order], j[order], rects[order], offsets[order]
+        key, j = key[order], j[order]
+        rects, offsets = np.take(rects, order, axis=0), np.take(offsets, order, axis=0)
     start = np.flatnonzero(np.diff(key, prepend=-1))  # each group's first row (key ≥ 0)
     gkey, count = key[start], np.diff(start, append=len(key))
     kmax = int(count.max()) if len(count) else 1
@@ -706,7 +715,7 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
     flat = np.arange(len(key)) + np.repeat(np.arange(len(gkey)) * kmax - start, count)
     g_rects = np.zeros((len(gkey), kmax, 4))
     g_by = np.full((len(gkey), kmax), -1, dtype=np.int64)
-    g_rects.reshape(-1, 4)[flat] = rects
+    _put_rows(g_rects.reshape(-1, 4), flat, rects)
     g_by.reshape(-1)[flat] = j
     cuts = np.asarray(band_edges, dtype=float).reshape(-1)
     edges = np.concatenate([[-np.inf], cuts, [np.inf]])
@@ -719,7 +728,7 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
     import shapely
 
     g_offsets = np.zeros((len(gkey), kmax, 2))
-    g_offsets.reshape(-1, 2)[flat] = offsets
+    _put_rows(g_offsets.reshape(-1, 2), flat, offsets)
     g_shade = polygon_shade(poly, g_offsets, g_by >= 0)
     band_area = (polygon_band_areas(g_shade, bounds, edges) if len(cuts)
                  else np.asarray(shapely.area(g_shade), dtype=float)[:, None])
