@@ -19,7 +19,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import partial
 from typing import Any
 
 import numpy as np
@@ -40,6 +39,11 @@ _CHUNK = 50_000  # steps per chunk (bounded memory; the temporaries stay small)
 _SAPM = {"a": -3.56, "b": -0.075, "deltaT": 3.0}
 #: Daily clearness index below which a day counts as cloudy [-].
 CLOUDY_KT = 0.4
+#: :attr:`PlantResult.series`' columns, in order.
+_SERIES_COLUMNS = ("solar_azimuth", "apparent_elevation", "dni", "ghi", "ghi_extra",
+                   "surface_azimuth", "surface_elevation", "poa_global",
+                   "mean_shaded_fraction", "trackers_shaded", "power_w", "power_area_w",
+                   "power_unshaded_w", "fixed_power_w", "tracker_power_w")
 
 
 def _seconds(index: pd.DatetimeIndex) -> FloatArray:
@@ -144,13 +148,6 @@ def _power(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: Float
            "p_area": dc(beam_area + n * diffuse), "p_elec": dc(beam_elec + n * diffuse)}
     if tracker is not None:
         out["p_tracker"] = dc(beam * np.nan_to_num(f_elec[:, tracker], nan=1.0) + diffuse)
-    return out
-
-
-def _scatter(n: int, idx: NDArray[np.int64], x: FloatArray) -> FloatArray:
-    """x at ``idx`` of n zeros (night rows)."""
-    out = np.zeros(n)
-    out[idx] = x
     return out
 
 
@@ -275,7 +272,14 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
                           freq=pd.Timedelta(seconds=step_s), inclusive="left")
     if sky is not None and any(len(v) != len(times) for v in sky.values()):
         raise ValueError(f"sky must hold the range's {len(times)} steps")
-    frames, any_shaded, daylight, dni_f, dni_sum = [], 0, 0, 0.0, 0.0
+    any_shaded, daylight, dni_f, dni_sum = 0, 0, 0.0, 0.0
+    # the whole range's columns, filled chunk by chunk (night rows stay 0; NaN for the
+    # shaded fraction, and for a tracker not asked for): no per-chunk frames, no concat
+    col = {name: np.zeros(len(times)) for name in _SERIES_COLUMNS}
+    col["trackers_shaded"] = np.zeros(len(times), dtype=np.int64)
+    col["mean_shaded_fraction"][:] = np.nan
+    if tracker is None:
+        col["tracker_power_w"][:] = np.nan
     dni_f_tracker = np.zeros(plant.n_trackers)
     table = BinTable()                       # sun bins recur every day: build each once
     for k0 in range(0, len(times), _CHUNK):
@@ -294,31 +298,27 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
         # not BLAS: a product this size wakes OpenBLAS's threads, which then spin on the
         # other core (~0.35 s of CPU in a 1-min year, from these few calls)
         dni_f_tracker += np.einsum("t,tn->n", dsky["dni"], frac)
-        mean_f = np.full(len(tt), np.nan)
-        mean_f[day] = frac.mean(axis=1)
-        n_sh = np.zeros(len(tt), dtype=np.int64)
-        n_sh[day] = (frac > 0).sum(axis=1)
+        mean_f = frac.mean(axis=1)
+        n_sh = (frac > 0).sum(axis=1)
         any_shaded += int((n_sh > 0).sum())
         daylight += len(day)
-        dni_f += float(np.sum(csky["dni"][day] * mean_f[day]))
-        dni_sum += float(np.sum(csky["dni"][day]))
-        at_day = partial(_scatter, len(tt), day)
-        frames.append(pd.DataFrame({
-            "solar_azimuth": csky["solar_azimuth"],
-            "apparent_elevation": csky["apparent_elevation"],
-            "dni": csky["dni"], "ghi": csky["ghi"],
-            "ghi_extra": np.maximum(csky["dni_extra"] * np.cos(np.radians(csky["zenith"])), 0.0),
-            "surface_azimuth": saz, "surface_elevation": sel,
-            "poa_global": at_day(run["poa_global"]),
-            "mean_shaded_fraction": mean_f, "trackers_shaded": n_sh,
-            "power_w": at_day(run["p_elec"]), "power_area_w": at_day(run["p_area"]),
-            "power_unshaded_w": at_day(run["p_unshaded"]), "fixed_power_w": at_day(fixed_w),
-            "tracker_power_w": (at_day(run["p_tracker"]) if tracker is not None
-                                else np.full(len(tt), np.nan)),
-        }, index=tt))
+        dni_f += float(np.sum(dsky["dni"] * mean_f))
+        dni_sum += float(np.sum(dsky["dni"]))
+        rows, at = slice(k0, k0 + len(tt)), k0 + day
+        for name in ("solar_azimuth", "apparent_elevation", "dni", "ghi"):
+            col[name][rows] = csky[name]
+        col["ghi_extra"][rows] = np.maximum(csky["dni_extra"] * np.cos(np.radians(csky["zenith"])),
+                                            0.0)
+        col["surface_azimuth"][rows], col["surface_elevation"][rows] = saz, sel
+        col["mean_shaded_fraction"][at], col["trackers_shaded"][at] = mean_f, n_sh
+        col["poa_global"][at], col["fixed_power_w"][at] = run["poa_global"], fixed_w
+        col["power_w"][at], col["power_area_w"][at] = run["p_elec"], run["p_area"]
+        col["power_unshaded_w"][at] = run["p_unshaded"]
+        if tracker is not None:
+            col["tracker_power_w"][at] = run["p_tracker"]
         if progress is not None:
             progress(min(1.0, (k0 + len(tt)) / len(times)))
-    series = pd.concat(frames)
+    series = pd.DataFrame(col, index=times, copy=False)
     # local days as integers (days since 1970-01-01 on the local calendar), summed with
     # bincount: pandas' groupby on ``.date`` made 525,600 date objects for a 1-min year
     local_day = series.index.tz_convert(plant.timezone).tz_localize(None).as_unit("s").asi8
