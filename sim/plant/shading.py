@@ -34,6 +34,7 @@ front faces away from the sun (s·n ≤ 0) receives no beam and counts as unshad
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -299,9 +300,13 @@ def _direct_pairs(positions: FloatArray, sun: FloatArray, surface_az: FloatArray
     empty_i = np.zeros(0, dtype=np.int64)
     if not len(d) or not len(sun):
         return empty_i, empty_i, empty_i, np.zeros((0, 4)), np.zeros((0, 2))
-    n, u, v = collector_axes(surface_az, surface_el)
-    sn = np.einsum("tk,tk->t", sun, n)
     constant = bool(np.all(surface_az == surface_az[0]) and np.all(surface_el == surface_el[0]))
+    if constant:                            # one orientation: its axes once, broadcast
+        axes = collector_axes(surface_az[:1], surface_el[:1])
+        n, u, v = (np.broadcast_to(a, sun.shape) for a in axes)
+    else:
+        n, u, v = collector_axes(surface_az, surface_el)
+    sn = np.einsum("tk,tk->t", sun, n)
     mode = np.where(sn > _FACING_COS, FACING, FIXED if constant else GENERIC)
     t_c, q_c = pair_candidates(d, sun, mode, width, height,
                                np.stack([n[0], u[0], v[0]]) if constant else None, table)
@@ -433,12 +438,21 @@ def band_union_areas(rects: ArrayLike, v_edges: ArrayLike) -> FloatArray:
     # bucket the groups by the slot of their last non-empty rectangle; empty rectangles
     # before it add nothing to any union formula
     last = np.where(valid.any(axis=1), r.shape[1] - np.argmax(valid[:, ::-1], axis=1), 0)
-    out = np.zeros((len(r), len(edges) - 1))
-    for k in np.flatnonzero(np.bincount(last, minlength=1)[1:]) + 1:  # non-empty buckets
-        g = np.flatnonzero(last == k)
-        rk = np.take(r, g, axis=0)[:, :k]            # np.take: numpy's fast row gather
-        out[g] = (_union_inclusion_exclusion(rk, edges) if k <= _IE_MAX
-                  else _union_grid(rk, valid[g, :k], edges))
+    return _union_by_count(last, lambda g, k: np.take(r, g, axis=0)[:, :k], edges)
+
+
+def _union_by_count(count: IntArray, rects_of: Callable[[IntArray, int], FloatArray],
+                    edges: FloatArray) -> FloatArray:
+    """:func:`band_union_areas` of groups bucketed by ``count`` ``(G,)``, the number of
+    rectangles that matter in each: ``rects_of(g, k)`` gives groups g's first k ``(len(g),
+    k, 4)`` (np.take: numpy's fast row gather). :func:`plant_shade` calls it with its rows
+    by group, without reading them back from the padded ``(G, K, 4)``."""
+    out = np.zeros((len(count), len(edges) - 1))
+    for k in np.flatnonzero(np.bincount(count, minlength=1)[1:]) + 1:  # non-empty buckets
+        g = np.flatnonzero(count == k)
+        rk = rects_of(g, int(k))
+        out[g] = (_union_inclusion_exclusion(rk, edges) if k <= _IE_MAX else _union_grid(
+            rk, (rk[..., 1] > rk[..., 0]) & (rk[..., 3] > rk[..., 2]), edges))
     return out
 
 
@@ -721,7 +735,8 @@ def plant_shade(positions: ArrayLike, solar_azimuth: ArrayLike, solar_elevation:
     edges = np.concatenate([[-np.inf], cuts, [np.inf]])
     g_step, g_tracker = gkey // n, gkey % n
     if poly is None:
-        band_area = band_union_areas(g_rects, edges)
+        band_area = _union_by_count(count, lambda g, k: np.take(
+            rects, (start[g, None] + np.arange(k)).reshape(-1), axis=0).reshape(-1, k, 4), edges)
         fraction[g_step, g_tracker] = np.minimum(band_area.sum(axis=1) / (width * height), 1.0)
         return PlantShade(fraction, g_step.astype(np.int64), g_tracker.astype(np.int64),
                           g_rects, g_by, band_area, cuts)

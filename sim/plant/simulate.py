@@ -141,14 +141,20 @@ def _power(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: Float
     # cell temperature, so the plant's power is the power of the collectors' summed
     # irradiance: one (T,) call per model instead of a (T, N) array of powers
     n = plant.n_trackers
-    beam_area = beam * np.nan_to_num(f_area, nan=1.0).sum(axis=1)
-    beam_elec = beam * np.nan_to_num(f_elec, nan=1.0).sum(axis=1)
+    beam_area = beam * _beam_sum(f_area)
+    beam_elec = beam * _beam_sum(f_elec)
     out = {"shade": shade, "poa_global": poa["poa_global"],
            "p_unshaded": dc(beam + diffuse) * n,
            "p_area": dc(beam_area + n * diffuse), "p_elec": dc(beam_elec + n * diffuse)}
     if tracker is not None:
         out["p_tracker"] = dc(beam * np.nan_to_num(f_elec[:, tracker], nan=1.0) + diffuse)
     return out
+
+
+def _beam_sum(factors: FloatArray) -> FloatArray:
+    """Σ of the collectors' beam factors ``(T, N)`` per step, NaN (sun down) counted as 1;
+    copied without NaN only when there is one (a run's daylight steps have none)."""
+    return (np.nan_to_num(factors, nan=1.0) if np.isnan(factors).any() else factors).sum(axis=1)
 
 
 def _ratio(a: FloatArray, b: FloatArray) -> FloatArray:
