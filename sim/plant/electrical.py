@@ -158,7 +158,8 @@ def beam_factors(shade: PlantShade, collector: Collector) -> tuple[FloatArray, F
         f_s = band_union_areas(shade.group_rects, edges) / string_area
     used = np.flatnonzero(shade.group_by >= 0)        # the slots that hold a rectangle
     g_used = used // shade.group_by.shape[1]          # by group, then slot
-    index_rects = _block_index_rects(shade.group_rects.reshape(-1, 4)[used], collector)
+    index_rects = _block_index_rects(np.take(shade.group_rects.reshape(-1, 4), used, axis=0),
+                                     collector)
     n_sb = _block_counts(index_rects, g_used, len(shade.group_step), n_u, n_v, len(strings))
     loss = direct_martinez(1.0, 1.0, np.minimum(f_s, 1.0), n_sb, float(n_u * n_v))
     electrical[shade.group_step, shade.group_tracker] = np.mean(

@@ -502,6 +502,8 @@ def _union_inclusion_exclusion(r: FloatArray, edges: FloatArray) -> FloatArray:
                 follow(sub, nxt, m + 1, -sign)
 
     follow(None, None, 0, 1.0)
+    if len(rows) == 1 and len(rows[0]) == g_all:    # one rectangle each: its own areas
+        return terms[0]
     out = np.zeros((g_all, len(edges) - 1))
     if rows:
         at, term = np.concatenate(rows), np.concatenate(terms)
