@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.plant.layout import Collector
-from sim.plant.shading import PlantShade, band_union_areas
+from sim.plant.shading import PlantShade, band_union_areas, sum_columns
 
 FloatArray = NDArray[np.float64]
 
@@ -109,8 +109,8 @@ def _block_counts(index_rects: FloatArray, group: NDArray[np.intp], n_groups: in
     :func:`_shaded_blocks`, or the union of the index rectangles beyond
     :data:`_MASK_BITS` blocks across."""
     if n_u <= _MASK_BITS:
-        return _shaded_blocks(index_rects, group, n_groups, n_u, n_v * n_strings
-                              ).reshape(-1, n_strings, n_v).sum(axis=2).astype(float)
+        rows = _shaded_blocks(index_rects, group, n_groups, n_u, n_v * n_strings)
+        return sum_columns(rows.reshape(-1, n_v).astype(float)).reshape(-1, n_strings)
     slot = np.arange(len(group)) - np.searchsorted(group, group)
     padded = np.zeros((n_groups, int(slot.max()) + 1 if len(slot) else 1, 4))
     padded[group, slot] = index_rects
@@ -162,8 +162,9 @@ def beam_factors(shade: PlantShade, collector: Collector) -> tuple[FloatArray, F
                                      collector)
     n_sb = _block_counts(index_rects, g_used, len(shade.group_step), n_u, n_v, len(strings))
     loss = direct_martinez(1.0, 1.0, np.minimum(f_s, 1.0), n_sb, float(n_u * n_v))
-    electrical[shade.group_step, shade.group_tracker] = np.mean(
-        1.0 - np.asarray(loss, dtype=float), axis=1)
+    n = electrical.shape[1]
+    electrical.reshape(-1)[shade.group_step * n + shade.group_tracker] = sum_columns(
+        1.0 - np.asarray(loss, dtype=float)) / len(strings)        # the strings' mean
     return area, electrical
 
 
