@@ -29,7 +29,7 @@ from sim.energy import energy_per_period_wh, gain_pct, sampled_energy_wh
 from sim.plant.electrical import beam_factors
 from sim.plant.fields import horizon_elevation
 from sim.plant.layout import Plant
-from sim.plant.shading import BinTable, PlantShade, plant_shade
+from sim.plant.shading import BinTable, PlantShade, plant_shade, sum_columns
 from sim.plant.strategies import orientations
 from sim.sky import clearsky_ineichen, iam_physical, poa_irradiance
 from sim.sun import solar_position
@@ -126,9 +126,8 @@ def _power(plant: Plant, sky: dict[str, FloatArray], saz: FloatArray, sel: Float
     poa = poa_irradiance(90.0 - sel, saz, sky["apparent_zenith"], sky["solar_azimuth"],
                          sky["dni"], sky["ghi"], sky["dhi"], sky["dni_extra"],
                          sky["airmass_relative"], albedo=plant.albedo, model="perez")
-    aoi = np.degrees(np.arccos(np.clip(np.sum(
-        _enu(saz, sel) * _enu(sky["solar_azimuth"], sky["apparent_elevation"]), axis=-1),
-        -1, 1)))
+    cos_aoi = sum_columns(_enu(saz, sel) * _enu(sky["solar_azimuth"], sky["apparent_elevation"]))
+    aoi = np.degrees(np.arccos(np.clip(cos_aoi, -1, 1)))
     beam = poa["poa_direct"] * np.where(aoi < 90, iam_physical(np.minimum(aoi, 89.999)), 0.0)
     diffuse = poa["poa_diffuse"]
     t_cell = sapm_cell(poa["poa_global"], sky["temp_air"], sky["wind_speed"], **_SAPM)
