@@ -56,7 +56,8 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
                  scale: int = 1) -> FovCircle | None:
     """The fisheye image circle: the bright disc surrounded by dark corners, or None.
 
-    A frame whose four corners are not dark (a pinhole frame) has no circle.
+    A frame whose four corners are not dark (their median pixels; a pinhole frame) has no
+    circle.
     Works on a ~96 px thumbnail; the circle is the minimum enclosing circle of
     the largest bright region, shrunk by 2 %.
     """
@@ -68,7 +69,16 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
     means = sorted(cv2.mean(c)[0] for c in corners)
     corner_level = 0.5 * (means[1] + means[2])  # the median of four
     centre_level = _median_u8(small[h // 3: 2 * h // 3, w // 3: 2 * w // 3])
-    if centre_level < 20.0 or corner_level > max(35.0, 0.25 * centre_level):
+    dark_max = max(35.0, 0.25 * centre_level)
+    if corner_level > dark_max:
+        # or dark by their median pixels: the overlay text a station prints there (its
+        # name, the time) lifts the corners' mean past the dark level on a brighter exposure
+        px = np.stack([c.ravel() for c in corners])
+        meds = np.sort(np.partition(px, px.shape[1] // 2, axis=1)[:, px.shape[1] // 2])
+        corner_dark = 0.5 * (float(meds[1]) + float(meds[2]))  # the median of four
+    else:
+        corner_dark = corner_level
+    if centre_level < 20.0 or corner_dark > dark_max:
         return None
     level = corner_level + 0.3 * (centre_level - corner_level)
     # small > level (an 8-bit threshold compares with ⌊level⌋: the same pixels)

@@ -76,7 +76,7 @@ def censored_glare_centre(image: NDArray[Any], cx: float, cy: float, radius_px: 
 
     def residuals(q: NDArray[np.float64]) -> NDArray[np.float64]:
         r = np.hypot(xs - q[0], ys - q[1]) / radius_px
-        m = q[4] + q[5] * dx + q[6] * dy + np.exp(q[2]) * np.maximum(r, 0.05) ** (-q[3])
+        m = q[4] + q[5] * dx + q[6] * dy + np.exp(min(q[2], 20.0)) * np.maximum(r, 0.05) ** (-q[3])
         out = m - vs
         out[sat] = np.minimum(m[sat] - clip, 0.0)  # censored: only the shortfall counts
         return np.asarray(out, float)
