@@ -76,7 +76,9 @@ def censored_glare_centre(image: NDArray[Any], cx: float, cy: float, radius_px: 
 
     def residuals(q: NDArray[np.float64]) -> NDArray[np.float64]:
         r = np.hypot(xs - q[0], ys - q[1]) / radius_px
-        m = q[4] + q[5] * dx + q[6] * dy + np.exp(min(q[2], 20.0)) * np.maximum(r, 0.05) ** (-q[3])
+        glare = np.exp(min(q[2], 20.0)) * np.maximum(r, 0.05) ** (-q[3])
+        # a glare term past 10⁴ grey levels (a wild step of the solver) is as wrong as 10⁴
+        m = q[4] + q[5] * dx + q[6] * dy + np.minimum(glare, 1e4)
         out = m - vs
         out[sat] = np.minimum(m[sat] - clip, 0.0)  # censored: only the shortfall counts
         return np.asarray(out, float)
