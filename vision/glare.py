@@ -15,7 +15,10 @@ a lens's veiling glare likewise, ISO 9358), fitted to the frame's unsaturated sk
 within a few core radii and *censored* at the clip level: a saturated pixel says only that
 the model reaches the clip there (censored regression, Tobin 1958, Econometrica 26:24).
 Robust (soft-L1) loss, so trees' edges, a roof or a lens ray cost little
-(``scipy.optimize.least_squares``; Triggs et al. 2000 on robust bundle-type fits).
+(``scipy.optimize.least_squares``; Triggs et al. 2000 on robust bundle-type fits). The power
+is kept in [0.3, 6] and the sky's level at or above 0: unbounded, the two trade off into a
+logarithmic profile (a power near 0, a huge amplitude and a negative sky) that fits clear
+glare and overcast alike.
 """
 
 from __future__ import annotations
@@ -85,7 +88,11 @@ def censored_glare_centre(image: NDArray[Any], cx: float, cy: float, radius_px: 
 
     q0 = np.array([cx, cy, np.log(max(clip - s_lo, 1.0)), 2.0, s_lo, 0.0, 0.0])
     try:
-        sol = least_squares(residuals, q0, loss="soft_l1", f_scale=_LOSS_SCALE, max_nfev=150)
+        lo = [-np.inf, -np.inf, -np.inf, 0.3, 0.0, -np.inf, -np.inf]
+        hi = [np.inf, np.inf, np.inf, 6.0, np.inf, np.inf, np.inf]
+        q0[4] = max(q0[4], 0.0)
+        sol = least_squares(residuals, q0, bounds=(lo, hi), loss="soft_l1", f_scale=_LOSS_SCALE,
+                            max_nfev=150)
     except (ValueError, np.linalg.LinAlgError):
         return None
     x, y = float(sol.x[0]), float(sol.x[1])
