@@ -17,11 +17,14 @@ Targets (issue 12): ≤ 5 s for the 1-min year process, ≥ 10× twoaxistracking
 10 min, ``backtrack`` ≤ 30 s at 1 min, ``/positions`` ≤ 50 ms. A missed target
 is printed as "not met".
 
-The layout sweep (issue 26), measured first: 4 layout types × GCR 0.15, 0.25, 0.35, sun
-tracking, the 12 m × 5 m collector at Peñarroya, a clear-sky year at 10 min, as Dask tasks
-on a LocalCluster of 1 and then of 2 single-threaded workers (the same 12 cases, one run of
-this script; 1, 2, 1, 2 workers, the best of the two runs of each: the client and its
-scheduler share the 2 cores with the workers, and one run's noise moved the ratio by 0.2).
+The layout sweep (issue 26), measured first: 4 layout types × GCR 0.15, 0.25, 0.35 × sun
+tracking and backtracking (24 cases), the 12 m × 5 m collector at Peñarroya, a clear-sky
+year at 10 min, as Dask tasks on a LocalCluster of 1 and then of 2 single-threaded workers
+(the same cases, one run of this script; 1, 2, 1, 2 workers, the best of the two runs of
+each: the client and its scheduler share the 2 cores with the workers, and one run's noise
+moved the ratio by 0.2). The 12 sun cases alone are timed the same way beside it: they take
+about 3 s on one worker, and there the cluster's fixed costs (each worker's sky, the
+scheduler's round trips, the client) weigh on the ratio.
 Throughput in plant-years per core-minute (a case over a year is a
 plant-year; core-minutes = workers × the time from the first task to the last result,
 the cluster's start left out); the scaling is the 1-worker time over the 2-worker time
@@ -130,31 +133,40 @@ def sweep_figures(fig: Figures) -> list[str]:
     from twoaxistracking import TrackerField
 
     from backend.plants.sweep import prepare_sweep, run_sweep
-    from sim.plant.sweep import case_sky
+    from sim.plant.sweep import SweepSpec, case_sky
 
-    spec, cases = prepare_sweep(
-        layouts=SWEEP_LAYOUTS, gcr=SWEEP_GCRS, strategies=["sun"],
-        start=pd.Timestamp(YEAR_START, tz="UTC"), end=pd.Timestamp(YEAR_END, tz="UTC"),
-        step_s=600, latitude_deg=38.299224, longitude_deg=-5.303114, collector_m=(12.0, 5.0))
-    runs: dict[int, dict] = {}
-    for n in (1, 2, 1, 2):  # alternated, best of 2 each: one run's noise swung the ratio ±0.2
-        load = os.getloadavg()[0]
-        c0 = time.process_time()
-        res = run_sweep(spec, cases, n_workers=n)
-        if n not in runs or res["compute_s"] < runs[n]["compute_s"]:
-            runs[n] = res
-        log(f"  sweep on {n} worker(s): compute {res['compute_s']:.1f} s, wall {res['wall_s']:.1f}"
-            f" s, sky computed {res['sky_computations']}x, load average {load:.1f} before; "
-            f"client cpu {time.process_time() - c0:.1f} s")
+    def timed(strategies: list[str]) -> tuple[SweepSpec, list, dict[int, dict]]:
+        spec, cases = prepare_sweep(
+            layouts=SWEEP_LAYOUTS, gcr=SWEEP_GCRS, strategies=strategies,
+            start=pd.Timestamp(YEAR_START, tz="UTC"), end=pd.Timestamp(YEAR_END, tz="UTC"),
+            step_s=600, latitude_deg=38.299224, longitude_deg=-5.303114,
+            collector_m=(12.0, 5.0))
+        runs: dict[int, dict] = {}
+        for n in (1, 2, 1, 2):  # alternated, best of 2 each: one run's noise swung it ±0.2
+            load = os.getloadavg()[0]
+            c0 = time.process_time()
+            res = run_sweep(spec, cases, n_workers=n)
+            if n not in runs or res["compute_s"] < runs[n]["compute_s"]:
+                runs[n] = res
+            log(f"  {len(cases)} cases on {n} worker(s): compute {res['compute_s']:.1f} s, wall "
+                f"{res['wall_s']:.1f} s, sky computed {res['sky_computations']}x, load average "
+                f"{load:.1f} before; client cpu {time.process_time() - c0:.1f} s")
+        return spec, cases, runs
+
+    spec, cases, runs = timed(["sun", "backtrack"])
+    _, sun_cases, sun_runs = timed(["sun"])
     years = (spec.end - spec.start) / pd.Timedelta(days=365)
     thr = {n: len(cases) * years / (n * r["compute_s"] / 60) for n, r in runs.items()}
     scaling = runs[1]["compute_s"] / runs[2]["compute_s"]
+    sun_scaling = sun_runs[1]["compute_s"] / sun_runs[2]["compute_s"]
     sky = case_sky(spec)
     up = sky["apparent_elevation"] > 0
     box = geometry.box(-6, -2.5, 6, 2.5)
+    backtrack_kwh = {(r["layout"], r["gcr"]): r["energy_kwh_per_collector"]
+                     for r in runs[2]["rows"] if r["strategy"] == "backtrack"}
     t0 = time.perf_counter()
     diffs, table = [], []
-    for row in runs[2]["rows"]:
+    for row in (r for r in runs[2]["rows"] if r["strategy"] == "sun"):
         tf = TrackerField(box, box, 2, row["gcr"], row["layout"])
         f = np.asarray(tf.get_shaded_fraction(sky["apparent_elevation"][up],
                                               sky["solar_azimuth"][up]), dtype=float)
@@ -163,19 +175,21 @@ def sweep_figures(fig: Figures) -> list[str]:
         table.append((row, ref))
     t_ref = time.perf_counter() - t0
     worst = max(diffs)
-    log(f"  twoaxistracking, {len(cases)} interior collectors over the year: {t_ref:.1f} s; "
+    log(f"  twoaxistracking, {len(table)} interior collectors over the year: {t_ref:.1f} s; "
         f"largest difference {worst:.2e} percentage points")
     f1 = fig.add("sweep_throughput_1_worker", thr[1], "plant-years/core-min", f"{thr[1]:.1f}")
     f2 = fig.add("sweep_throughput_2_workers", thr[2], "plant-years/core-min", f"{thr[2]:.1f}")
     fs = fig.add("sweep_scaling_2_vs_1_x", scaling, "x", f"{scaling:.3f}×", ">= 1.8x",
                  scaling >= 1.8)
+    fss = fig.add("sweep_sun_scaling_2_vs_1_x", sun_scaling, "x", f"{sun_scaling:.3f}×")
     fd = fig.add("sweep_vs_twoaxistracking_max_pp", worst, "pp", f"{worst:.1e}", "<= 0.1 pp",
                  worst <= 0.1)
     lines = [
         "",
         f"Layout sweep (issue 26): {len(cases)} cases ({', '.join(SWEEP_LAYOUTS)} × GCR "
-        f"{', '.join(map(str, SWEEP_GCRS))}, sun), 12 m × 5 m collectors in a 5 × 5 field at "
-        "Peñarroya, clear-sky year at 10 min, Dask LocalCluster of single-threaded workers:",
+        f"{', '.join(map(str, SWEEP_GCRS))} × sun, backtrack), 12 m × 5 m collectors in a "
+        "5 × 5 field at Peñarroya, clear-sky year at 10 min, Dask LocalCluster of "
+        "single-threaded workers:",
         "",
         "| figure | measured | target | |",
         "|---|---|---|---|",
@@ -185,13 +199,15 @@ def sweep_figures(fig: Figures) -> list[str]:
         f"| throughput, plant-years per core-minute (1 / 2 workers) | {f1} / {f2} | | |",
         f"| scaling, 2 workers over 1 | {fs} | ≥ 1.8× | "
         f"{fig.verdict('sweep_scaling_2_vs_1_x')} |",
+        f"| the {len(sun_cases)} sun cases alone: 1 / 2 workers, scaling | "
+        f"{sun_runs[1]['compute_s']:.1f} / {sun_runs[2]['compute_s']:.1f} s, {fss} | | |",
         f"| interior collector vs twoaxistracking (`TrackerField`, {t_ref:.0f} s for the "
-        f"{len(cases)} cases), largest difference | {fd} pp | ≤ 0.1 pp | "
+        f"{len(table)} sun cases), largest difference | {fd} pp | ≤ 0.1 pp | "
         f"{fig.verdict('sweep_vs_twoaxistracking_max_pp')} |",
         "",
         "| layout | GCR | interior beam shaded, heliotwin | twoaxistracking | field average | "
-        "energy per collector | energy per hectare | land per collector |",
-        "|---|---|---|---|---|---|---|---|",
+        "energy per collector | backtracking | energy per hectare | land per collector |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for row, ref in sorted(table, key=lambda x: (x[0]["gcr"], x[0]["layout"])):
         key = f"sweep.{row['layout']}.gcr{row['gcr']:g}"
@@ -202,6 +218,7 @@ def sweep_figures(fig: Figures) -> list[str]:
             f"{fig.add(key + '.interior_pct', pct, '%', f'{pct:.3f} %')} | {ref:.3f} % | "
             f"{row['field_beam_shaded_pct']:.3f} % | "
             f"{fig.add(key + '.kwh_per_collector', kwh, 'kWh', f'{kwh:,.0f} kWh')} | "
+            f"{backtrack_kwh[row['layout'], row['gcr']]:,.0f} kWh | "
             f"{fig.add(key + '.mwh_per_ha', mwh, 'MWh/ha', f'{mwh:.1f} MWh/ha')} | "
             f"{row['land_m2_per_collector']:.0f} m² |")
     return lines
