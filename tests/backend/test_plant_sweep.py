@@ -200,7 +200,8 @@ def test_the_local_cluster_keeps_glibc_malloc_defaults() -> None:
     """The sweep's own LocalCluster starts its workers without Dask's
     MALLOC_TRIM_THRESHOLD_ (set, it also fixes glibc's mmap threshold, and the bench's cases
     ran 1.5x slower); Dask's other worker settings (one BLAS thread) stay. Nor do they run
-    the statistical profiler (its profiles are read on a dashboard the cluster does not serve)."""
+    the dashboard's monitors at their rates (the profiler, the 20 ms tick; the memory check
+    every second)."""
     import os
 
     import dask
@@ -211,6 +212,7 @@ def test_the_local_cluster_keeps_glibc_malloc_defaults() -> None:
     with local_cluster(1) as cluster, Client(cluster) as client:
         env = client.run(lambda: {k: os.environ.get(k) for k in
                                   ("MALLOC_TRIM_THRESHOLD_", "OMP_NUM_THREADS")})
-        profiling = client.run(lambda: dask.config.get("distributed.worker.profile.enabled"))
+        monitors = client.run(lambda: [dask.config.get(f"distributed.{k}") for k in (
+            "worker.profile.enabled", "admin.tick.interval", "worker.memory.monitor-interval")])
     assert list(env.values()) == [{"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1"}]
-    assert list(profiling.values()) == [False]
+    assert list(monitors.values()) == [[False, "1s", "1s"]]
