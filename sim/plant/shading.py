@@ -218,6 +218,8 @@ def pair_candidates(d: FloatArray, sun: FloatArray, mode: IntArray, width: float
     overlap when |d|·sin(elevation − steepest pair slope) ≥ D, and facing the
     sun |dv| ≥ sin(elevation − slope)·√(|d|² − a²) must stay below b.
     """
+    if not len(d):                           # one collector: no pair to shade
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     n_az = int(round(360 / _BIN_AZ_DEG))
     d2 = np.einsum("pk,pk->p", d, d)
     slope = float(np.max(np.abs(np.arcsin(np.clip(d[:, 2] / np.sqrt(d2), -1, 1)))))
@@ -459,6 +461,8 @@ def _union_by_count(count: IntArray, rects_of: Callable[[IntArray, int], FloatAr
 def sum_columns(a: FloatArray) -> FloatArray:
     """``a.sum(axis=1)`` of a ``(G, B)`` array of a few columns, added left to right (numpy's
     order for fewer than 8): its reduction along a short last axis is ~20× slower."""
+    if a.shape[1] >= 8:                      # numpy sums pairwise from 8 on: its own order
+        return np.asarray(a.sum(axis=1), dtype=float)
     out = a[:, 0].copy()
     for b in range(1, a.shape[1]):
         out += a[:, b]

@@ -96,3 +96,18 @@ def test_lowest_free_elevation_is_the_lowest_by_shapely(day: str, tst_h: float) 
         # every elevation between the sun's and the answer shades someone (0.25° grid)
         for e in np.arange(el0, a - 1e-6, 0.25):
             assert shapely_shades_anyone(PLANT.positions, az0, el0, g, e, W, H), (g, e)
+
+
+@pytest.mark.parametrize("strategy", ["sun", "backtrack", "sky_scan"])
+def test_a_plant_of_one_tracker_has_no_neighbour_to_avoid(strategy: str) -> None:
+    """One collector shades nobody: every strategy answers (backtracking raised on the empty
+    pair list, a 500 on the Plant page of a one-tracker plant file)."""
+    from dataclasses import replace
+
+    one = replace(PLANT, tracker_ids=PLANT.tracker_ids[:1], positions=PLANT.positions[:1])
+    sky = _sky_at("2021-12-21", 8.4)
+    az, el = orientations(strategy, one, sky)
+    if strategy != "sky_scan":  # the sun's own orientation (sky_scan may find a brighter one)
+        assert (az[0], el[0]) == (sky["solar_azimuth"][0], sky["apparent_elevation"][0])
+    assert not shades_anyone(one.positions, sky["solar_azimuth"], sky["apparent_elevation"],
+                             az, el, W, H)[0]
