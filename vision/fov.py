@@ -56,8 +56,8 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
                  scale: int = 1) -> FovCircle | None:
     """The fisheye image circle: the bright disc surrounded by dark corners, or None.
 
-    A frame whose four corners are not dark (their median pixels; a pinhole frame) has no
-    circle.
+    A frame whose four corners are not dark (by their mean, or on 90 % of their pixels; a
+    pinhole frame) has no circle.
     Works on a ~96 px thumbnail; the circle is the minimum enclosing circle of
     the largest bright region, shrunk by 2 %.
     """
@@ -71,11 +71,14 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
     centre_level = _median_u8(small[h // 3: 2 * h // 3, w // 3: 2 * w // 3])
     dark_max = max(35.0, 0.25 * centre_level)
     if corner_level > dark_max:
-        # or dark by their median pixels: the overlay text a station prints there (its
-        # name, the time) lifts the corners' mean past the dark level on a brighter exposure
+        # or dark on 90 % of their pixels: the overlay text a station prints there (its name,
+        # the time) lifts the corners' mean past the dark level on a brighter exposure; a
+        # pinhole view with something dark across part of its corners (a window frame,
+        # foliage) stays without a circle
         px = np.stack([c.ravel() for c in corners])
-        meds = np.sort(np.partition(px, px.shape[1] // 2, axis=1)[:, px.shape[1] // 2])
-        corner_dark = 0.5 * (float(meds[1]) + float(meds[2]))  # the median of four
+        k = (9 * px.shape[1]) // 10
+        p90 = np.sort(np.partition(px, k, axis=1)[:, k])
+        corner_dark = 0.5 * (float(p90[1]) + float(p90[2]))  # the median of four
     else:
         corner_dark = corner_level
     if centre_level < 20.0 or corner_dark > dark_max:

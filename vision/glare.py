@@ -3,7 +3,7 @@
 A longer exposure saturates the sky around the sun as well as the sun's glare: the clipped
 region grows by tens of degrees, mostly toward the brighter sky (the horizon), and its
 outline no longer tells where the sun is (issue 24 item 4: the Wolf frames brightened × 1.15
-put its centroid 28 px off at the median and 150 px at worst, × 1.3 104 / 181 px). What
+put its centroid 36 px off at the median and 159 px at worst, × 1.3 100 / 181 px). What
 survives is the light around it: a radially symmetric glare on a smooth sky. The model of
 the frame near the core is
 
@@ -48,8 +48,9 @@ def censored_glare_centre(image: NDArray[Any], cx: float, cy: float, radius_px: 
     a blue sky adds least to the glare (its red is some 0.6 of its grey level) and the
     glare's own excess is largest; ``(cx, cy)``, ``radius_px``: the clipped core's
     centroid and equivalent radius (the fit's start and scale). A pixel is clipped from
-    3 levels under the plane's top; the sky's level is the plane's median in the image
-    circle (pixels under :data:`_DARK` × it are left out)."""
+    3 levels under the top of the pixels fitted; the sky's level is the median of the
+    fitted channel in the image circle (every 16th pixel; pixels under :data:`_DARK` × it
+    are left out)."""
     img = np.asarray(image)
     gray = img if img.ndim == 2 else cv2.min(cv2.min(img[:, :, 0], img[:, :, 1]), img[:, :, 2])
     h, w = gray.shape
@@ -90,7 +91,6 @@ def censored_glare_centre(image: NDArray[Any], cx: float, cy: float, radius_px: 
     try:
         lo = [-np.inf, -np.inf, -np.inf, 0.3, 0.0, -np.inf, -np.inf]
         hi = [np.inf, np.inf, np.inf, 6.0, np.inf, np.inf, np.inf]
-        q0[4] = max(q0[4], 0.0)
         sol = least_squares(residuals, q0, bounds=(lo, hi), loss="soft_l1", f_scale=_LOSS_SCALE,
                             max_nfev=150)
     except (ValueError, np.linalg.LinAlgError):

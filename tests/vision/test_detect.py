@@ -288,3 +288,18 @@ def test_a_sun_cut_by_the_ground_is_round_on_its_free_arc() -> None:
     lobes = 40.0 * (1.0 + 0.35 * np.sin(np.radians(5 * np.arange(360))))
     d = detect_robust(_cut_frame(lobes), camera=cam)
     assert d.features["shape"] < 0.4, d.features
+
+
+@pytest.mark.parametrize("dark_share", [0.3, 0.6])
+def test_a_pinhole_view_framed_by_something_dark_has_no_image_circle(dark_share: float) -> None:
+    """The corners are dark by their mean, or on 90 % of their pixels (a station's overlay
+    text lifts the mean only): a pinhole view with dark edges across part of each corner (a
+    window frame, foliage) is not taken for a fisheye, whose circle would set a false scale.
+    Checked to fail when the corners' median pixels sufficed (0.6)."""
+    h, w = 480, 640
+    img = np.full((h, w), 170, np.uint8)
+    border = int(dark_share * w / 12)  # the corner patches are 1/12 of the side
+    img[:, :border] = 20
+    img[:, -border:] = 20
+    cv2.circle(img, (400, 150), 12, 255, -1)
+    assert estimate_fov(img) is None
