@@ -23,7 +23,7 @@ year at 10 min, as Dask tasks on a LocalCluster of 1 and then of 2 single-thread
 (the same cases, one run of this script; 1, 2, 1, 2 workers, the best of the two runs of
 each: the client and its scheduler share the 2 cores with the workers, and one run's noise
 moved the ratio by 0.2). The 12 sun cases alone are timed the same way beside it: they take
-about 3 s on one worker, and there the cluster's fixed costs (each worker's sky, the
+2.5–3 s on one worker, and there the cluster's fixed costs (each worker's sky, the
 scheduler's round trips, the client) weigh on the ratio.
 Throughput in plant-years per core-minute (a case over a year is a
 plant-year; core-minutes = workers × the time from the first task to the last result,

@@ -196,7 +196,7 @@ def test_runner_close_cancels_a_running_sweep(monkeypatch: pytest.MonkeyPatch) -
     assert run_in_own_thread(main()) == ("failed", "cancelled", "failed", "cancelled")
 
 
-def test_the_local_cluster_keeps_glibc_malloc_defaults() -> None:
+def test_the_local_clusters_workers_keep_glibc_malloc_and_slow_dask_monitors() -> None:
     """The sweep's own LocalCluster starts its workers without Dask's
     MALLOC_TRIM_THRESHOLD_ (set, it also fixes glibc's mmap threshold, and the bench's cases
     ran 1.5x slower); Dask's other worker settings (one BLAS thread) stay. Nor do they run
@@ -213,6 +213,7 @@ def test_the_local_cluster_keeps_glibc_malloc_defaults() -> None:
         env = client.run(lambda: {k: os.environ.get(k) for k in
                                   ("MALLOC_TRIM_THRESHOLD_", "OMP_NUM_THREADS")})
         monitors = client.run(lambda: [dask.config.get(f"distributed.{k}") for k in (
-            "worker.profile.enabled", "admin.tick.interval", "worker.memory.monitor-interval")])
+            "worker.profile.enabled", "admin.tick.interval", "admin.system-monitor.interval",
+            "worker.memory.monitor-interval")])
     assert list(env.values()) == [{"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1"}]
-    assert list(monitors.values()) == [[False, "1s", "1s"]]
+    assert list(monitors.values()) == [[False, "1s", "5s", "1s"]]
