@@ -163,6 +163,7 @@ class Registry:
         self._phase_of_array: dict[int, int] = {}
         self._user_dir = user_dir
         self._files = self._file_state()
+        self._dir_mtime_ns = self._folder_mtime_ns()
         self._checked = time.monotonic()
         self._scan_lock = threading.Lock()
         self._engine: Engine | None = None  # the database refresh_arrays read, for rescans
@@ -191,6 +192,13 @@ class Registry:
             out[path.name] = (st.st_mtime_ns, st.st_size)
         return out
 
+    def _folder_mtime_ns(self) -> int:
+        """The user's folder's mtime (a file added, removed or renamed in it moves it), or -1."""
+        try:
+            return self._user_dir.stat().st_mtime_ns if self._user_dir is not None else -1
+        except OSError:
+            return -1
+
     def note_file(self, path: Path) -> None:
         """A site file this process wrote (and applied): not news to :meth:`rescan`."""
         try:
@@ -210,12 +218,17 @@ class Registry:
             return False
         now = time.monotonic()
         # forced (an unknown id) still at most every FORCED_RESCAN_S: anyone can ask for
-        # unknown ids (every site route's 404, MQTT topics), each would read the folder
+        # unknown ids (every site route's 404, MQTT topics), each would read the folder;
+        # sooner only when a file was added to it since (one stat: a site created just after
+        # a look is found by its id at once)
         gap = self.FORCED_RESCAN_S if force else self.RESCAN_S
-        if now - self._checked < gap or not self._scan_lock.acquire(blocking=False):
+        folder_moved = force and self._folder_mtime_ns() != self._dir_mtime_ns
+        if (now - self._checked < gap and not folder_moved) \
+                or not self._scan_lock.acquire(blocking=False):
             return False
         try:
             self._checked = now
+            self._dir_mtime_ns = self._folder_mtime_ns()
             state = self._file_state()
             with self._lock:  # note_file writes it too
                 changed = [name for name, sig in state.items() if self._files.get(name) != sig]

@@ -18,6 +18,7 @@ import pytest
 from live_service import InProcessServer
 
 from backend.cli import main
+from backend.sites import Registry
 from sim.sites import fixed_tilt_from_latitude_deg
 
 ADMIN = "admin-secret-for-site-defaults"
@@ -94,6 +95,10 @@ def test_a_new_site_takes_its_places_defaults_marked_as_assumed(client: httpx.Cl
 def test_a_site_made_by_the_cli_appears_without_a_restart(
         server: InProcessServer, client: httpx.Client, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
+    # the lookup by id below must not wait for the throttle of forced rescans: a file added
+    # to the folder since the last look is read at once (it failed when the CLI took
+    # under FORCED_RESCAN_S after the list's look)
+    monkeypatch.setattr(Registry, "FORCED_RESCAN_S", 60.0)
     assert "kiel" not in [s["site_id"] for s in client.get("/api/v1/sites").json()]
     for name, value in server.env.items():
         if name.startswith("HELIOTWIN_"):
