@@ -126,13 +126,19 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 
 @pytest.fixture(scope="session")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
-    """``heliotwin serve`` on free ports with a temporary SQLite file and back-filled data."""
+    """``heliotwin serve`` on free ports with a temporary SQLite file and back-filled data,
+    and a copy of the built-in plants folder (``HELIOTWIN_PLANTS_DIR``) that a test may add
+    a plant file to, as a user would."""
+    from sim.paths import default_plants_dir
+
     _need_chromium()
     tmp = tmp_path_factory.mktemp("e2e")
     port, viser_port = _free_port(), _free_port()
+    shutil.copytree(default_plants_dir(), tmp / "plants")
     env = {
         **os.environ,
         "HELIOTWIN_DATABASE_URL": f"sqlite:///{tmp / 'heliotwin.sqlite'}",
+        "HELIOTWIN_PLANTS_DIR": str(tmp / "plants"),
         "HELIOTWIN_DEMO_BACKFILL_DAYS": str(BACKFILL_DAYS),
         "PYTHONUNBUFFERED": "1",
     }

@@ -1,15 +1,13 @@
 """The Plant page in a real headless Chromium against a running ``heliotwin serve``
 (the e2e fixtures of ``conftest.py``); any console error fails the test.
 
-A plant is a file of the service's plants folder (no route writes one). For a polygon
-plant the page comes from the session's server, and its ``/api/v1/plants`` requests are
-answered by the service in this process (``InProcessServer``: 0.3 s to start where a
-second ``heliotwin serve`` takes 3-6 s) whose ``HELIOTWIN_PLANTS_DIR`` holds the plant."""
+A plant is a file of the service's plants folder (no route writes one): the polygon plant
+is written into the session server's folder (``HELIOTWIN_PLANTS_DIR``, a copy of the
+built-in one) while it runs, and removed after, as a user would add one."""
 
 from __future__ import annotations
 
 import json
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -18,9 +16,6 @@ import numpy as np
 import pytest
 
 from sim.plant import default_plants_dir
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backend"))
-from live_service import InProcessServer, new_database  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 ARTIFACTS = ROOT / "test-artifacts"
@@ -73,37 +68,31 @@ def test_plant_page_shows_layout_shade_strategies_and_sky_map(page, server) -> N
     page.screenshot(path=str(ARTIFACTS / "plant.png"), full_page=True)
 
 
-@pytest.fixture(scope="module")
-def polygon_plants(browser, tmp_path_factory: pytest.TempPathFactory) -> Iterator[httpx.Client]:
-    """A client of the service in this process whose only plant is Peñarroya with the L."""
-    tmp = tmp_path_factory.mktemp("plant-polygon")
+@pytest.fixture
+def polygon_plant(server) -> Iterator[str]:  # type: ignore[no-untyped-def]
+    """Peñarroya's pivots with the L collector, a file in the server's plants folder for the
+    test (its id)."""
     plant = json.loads((default_plants_dir() / "penarroya.json").read_text())
     del plant["collector"]["width_m"], plant["collector"]["height_m"]
     plant["plant_id"], plant["collector"]["outline_m"] = "penarroya-l", L_SHAPE
-    (tmp / "plants").mkdir()
-    (tmp / "plants" / "penarroya-l.json").write_text(json.dumps(plant))
-    with InProcessServer(new_database("sqlite", tmp).url,
-                         {"HELIOTWIN_PLANTS_DIR": str(tmp / "plants")}) as service, \
-            service.client(timeout_s=60) as client:
-        yield client
+    path = Path(server.env["HELIOTWIN_PLANTS_DIR"]) / "penarroya-l.json"
+    path.write_text(json.dumps(plant))
+    try:
+        yield plant["plant_id"]
+    finally:
+        path.unlink()
 
 
 def test_plant_page_draws_a_polygon_collector_outline(page, server,  # type: ignore[no-untyped-def]
-                                                      polygon_plants: httpx.Client) -> None:
+                                                      polygon_plant: str) -> None:
     """Each collector's outline is drawn to scale at its pivot (u east, v north), filled
     with its shade's colour; the strategies offered are ``sun`` alone, no sky map."""
-
-    def answer(route) -> None:  # type: ignore[no-untyped-def]
-        req = route.request
-        r = polygon_plants.request(req.method, req.url.removeprefix(server.url),
-                                   headers={"accept": req.headers.get("accept", "*/*")})
-        route.fulfill(status=r.status_code, body=r.content,
-                      headers={"content-type": r.headers["content-type"]})
-
-    page.route(server.url + "/api/v1/plants**", answer)
     page.goto(server.url + "/#plant?day=2021-12-21")
+    page.wait_for_selector('body[data-plant-loaded="penarroya/2021-12-21"]', timeout=60_000)
+    page.select_option("#plant-select", polygon_plant)
     page.wait_for_selector('body[data-plant-loaded="penarroya-l/2021-12-21"]')
-    trackers = polygon_plants.get("/api/v1/plants/penarroya-l").json()["trackers"]
+    trackers = httpx.get(f"{server.url}/api/v1/plants/{polygon_plant}", timeout=30
+                         ).json()["trackers"]
     # the drawn SVG paths, in pixels: one per collector, the L at its pivot under one
     # scale for east and north (px = a·east + b, py = −a·north + c)
     paths = page.eval_on_selector_all(
