@@ -391,6 +391,7 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
     if camera is None and fov is not None:
         fallback = FisheyeCamera(fov.cx_px, fov.cy_px, fov.radius_px / 0.98 / 90.0)
     model = camera if camera is not None else fallback
+    scale_known = model is not None  # a camera, or the image circle's equidistant guess
     got: _Pick | str = "no search"
     if expected_px is not None:
         got = _guided_search(gray, work, bg, fov, diam, centre, ppd, expected_px, image, model)
@@ -398,7 +399,7 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         # blind: ranked by appearance alone; the distance from the prediction is a
         # feature of the confidence, which cannot veto a plain disc (vision.confidence)
         blind = _search(gray, work, bg, fov, diam, centre, ppd, expected_px,
-                        prefer_near=False, scale_known=camera is not None or fov is not None,
+                        prefer_near=False, scale_known=scale_known,
                         image=image, model=model)
         if isinstance(blind, _Pick) and (not isinstance(got, _Pick) or blind.p > got.p):
             got = blind
@@ -410,13 +411,15 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
     reason = None if found else conf.reason(got.x, got.values)
     cx = cy = radius = 0.0
     if found:
-        white = _white_core_centre(image, gray, got.best, ppd, fov, got.bg, got.peak)
+        white = None
         r_eq = float(np.sqrt(got.best.area / np.pi))
-        if r_eq > conf.LARGEST_DEG * ppd and (camera is not None or fov is not None):
+        if r_eq > conf.LARGEST_DEG * ppd and scale_known:
             # wider than any sun's glare: the sky saturated around it (a long exposure)
             fit = censored_glare_centre(image, got.best.cx, got.best.cy, r_eq, fov)
             if fit is not None:
                 white = (fit[0], fit[1], r_eq)
+        if white is None:
+            white = _white_core_centre(image, gray, got.best, ppd, fov, got.bg, got.peak)
         if white is not None:
             cx, cy, radius = white
         else:
