@@ -507,6 +507,9 @@ class SimulationRunner:
 
     def _ended(self, state: RunState) -> None:
         with self._lock:
+            # the slot is free before the caller hears the run ended: a client that
+            # sends its next run on the answer must not find this one still running
+            self._running.pop(state.run_id, None)
             self._futures.pop(state.run_id, None)
             self._cancel.discard(state.run_id)
             # the newest KEEP_ENDED ended runs stay in memory; older ones are read back

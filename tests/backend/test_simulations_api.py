@@ -166,3 +166,24 @@ def test_open_loop_model_takes_the_pointing_model_answers_terms(client: httpx.Cl
                    {"pointing_model_terms": {"azimuth_zero_deg": 45.0}}):
         bad = client.post("/api/v1/simulations", json={**body, **change})
         assert bad.status_code == 422 and "pointing_model_terms" in bad.text, bad.text
+
+
+def test_a_run_frees_its_worker_before_its_caller_hears_it_ended(tmp_path: Path) -> None:
+    """With one worker and no queue, a caller that sends its next run on the answer of the
+    last one is never refused as busy: the slot is free before the run's future resolves
+    (CI once got a 503 there). The future's callback runs in the worker's thread as the
+    result is set, so it sees exactly what the next request would see."""
+    from backend.twin.scenario import Scenario
+
+    settings = get_settings(database_url=f"sqlite:///{tmp_path / 'sim.sqlite'}", viser=False,
+                            live_twin=False, demo_logger=False, alerts=False, mqtt_url=None,
+                            simulation_workers=1, simulation_queue=0)
+    with TestClient(create_app(settings)) as client:
+        runner = client.app.state.ctx.simulations  # type: ignore[attr-defined]
+        running_when_answered: list[int] = []
+        _, fut = runner.submit(Scenario("tehuantepec", pd.Timestamp("2024-03-15", tz="UTC"),
+                                        pd.Timestamp("2024-03-15 02:00", tz="UTC"), step_s=600.0),
+                                False)
+        fut.add_done_callback(lambda _: running_when_answered.append(len(runner._running)))
+        fut.result(timeout=120)
+    assert running_when_answered == [0]
