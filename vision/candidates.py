@@ -267,8 +267,10 @@ def _score(c: _Candidate, gray: NDArray[np.uint8], shape: float, size: float, pe
     frame's contrast — and (b) a sharp drop right outside the disc to no less
     than the sky's level (a clear-sky sun next to a cloud; not white text on a
     dark overlay box) — and (c) the saturated core itself, when it is several
-    degrees wide (:data:`_GLARE_CORE_DEG`, at ``ppd`` px/°) and its glare still lights
-    the sky at 4 R (:func:`_tail`): the sun's disc is 0.27° in radius, so a core
+    degrees wide (:data:`_GLARE_CORE_DEG`, at ``ppd`` px/°), its glare still lights
+    the sky at 4 R (:func:`_tail`) and it is solid (:func:`_solid`: no gaps inside its
+    star-shaped hull, as a cloud field's lit elements have): the sun's disc is 0.27° in
+    radius, so a core
     3° wide is its glare, saturated out to where a clear blue sky around it leaves no
     ring of fall-off inside the rings (the Wolf frames of issue 24); only when the frame's
     scale is known (``scale_known``: a camera model or an image circle — a crop of a frame,
@@ -305,6 +307,8 @@ def _score(c: _Candidate, gray: NDArray[np.uint8], shape: float, size: float, pe
     c.wide = wide
     if wide > 0.0 and sharp < 1.0:
         c.wide *= max(_tail(gray, c, m3, bg, contrast, peak, fov, image), sharp)
+    if c.wide > 0.0:
+        c.wide *= _solid(gray, c, peak - max(3.0, 0.04 * (peak - bg)))
     c.glare = float(max(iso_glare, sharp, c.wide))
     return float(shape**2 * (0.25 + 0.75 * max(iso_glare, sharp, wide)) * size)
 
@@ -314,6 +318,57 @@ def _wide_core(r_eq: float, ppd: float) -> float:
     a glare by its width alone (:data:`_GLARE_CORE_DEG`: the sun's disc is 0.27° in radius)."""
     lo, hi = _GLARE_CORE_DEG
     return _clamp((r_eq / max(ppd, 1e-9) - lo) / (hi - lo), 0.0, 1.0)
+
+
+_SOLID = (0.5, 0.8)  # share of a core's star-shaped hull that is clipped: no credit → full
+_RAY_COS = np.cos(np.linspace(0.0, 2 * np.pi, 72, endpoint=False))
+_RAY_SIN = np.sin(np.linspace(0.0, 2 * np.pi, 72, endpoint=False))
+
+
+def star_fill(gray: NDArray[np.uint8], c: _Candidate, level: float) -> float:
+    """The share of a candidate's star-shaped hull about its centroid that is at or above
+    ``level`` (the threshold its region was cut at), 0–1.
+
+    Along 72 rays from the centroid, every pixel out to the farthest one at ``level`` in the
+    candidate's box is counted, weighted by its distance (the area a ray stands for grows
+    with it). A region that is star-shaped about its centroid without holes — a disc, an
+    oval, a disc cut by the horizon or notched by trees — fills its hull: 1. Gaps inside
+    the hull (darker sky between bright cloud elements) lower it."""
+    x0, y0 = c.x, c.y
+    box = gray[y0:y0 + c.h, x0:x0 + c.w] >= level
+    cx, cy = c.cx - x0, c.cy - y0
+    n = int(np.ceil(np.hypot(max(cx, c.w - cx), max(cy, c.h - cy)))) + 1
+    t = np.arange(n, dtype=np.float64)
+    xs = np.rint(cx + t[None, :] * _RAY_COS[:, None]).astype(np.intp)
+    ys = np.rint(cy + t[None, :] * _RAY_SIN[:, None]).astype(np.intp)
+    inside = (xs >= 0) & (xs < c.w) & (ys >= 0) & (ys < c.h)
+    hit = np.zeros(xs.shape, bool)
+    hit[inside] = box[ys[inside], xs[inside]]
+    last = np.where(hit.any(axis=1), n - 1 - np.argmax(hit[:, ::-1], axis=1), -1)
+    weight = (t[None, :] + 0.5) * (t[None, :] <= last[:, None])
+    total = float(weight.sum())
+    return float((weight * hit).sum()) / total if total > 0.0 else 1.0
+
+
+def _solid(gray: NDArray[np.uint8], c: _Candidate, level: float) -> float:
+    """0–1: whether a wide core is solid, as the clipped glare of one point source is — the
+    second condition (after :func:`_tail`) for a wide saturated core to count as its own
+    glare (issue 24).
+
+    The sun's glare — its aureole (a power law of the angle from it: Deepak et al. 1982)
+    and the lens's veiling glare (its glare spread function, ISO 9358) — falls off
+    monotonically from the sun, so the set of pixels where it clips is a level set of a
+    radially decreasing function: star-shaped about the sun and without holes; what stands
+    in front of it (a mast, wires, tree tops) takes a small share. A broken cloud field lit
+    from behind by a hidden sun (altocumulus in its aureole, brightened: FE3 × 1.1–1.3) clips
+    on its bright elements and not on the darker gaps between them, a region degrees wide
+    with holes. :func:`star_fill` measures it: the real suns fill 0.85–1.00 of their hull at
+    every exposure tried (Wolf, Wettermast, EUROCONTROL, gains 1–1.3, gamma 0.7), the
+    brightened cloud fields 0.47–0.64. No credit at a fill of 0.5 (:data:`_SOLID`: half
+    the hull unclipped, as much gap as core), full credit from 0.8 (a fifth of the hull may
+    be lost to what stands in front of the glare)."""
+    lo, hi = _SOLID
+    return _clamp((star_fill(gray, c, level) - lo) / (hi - lo), 0.0, 1.0)
 
 
 def _tail(gray: NDArray[np.uint8], c: _Candidate, m4: float, bg: float, contrast: float,

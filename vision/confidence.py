@@ -40,8 +40,9 @@ from numpy.typing import NDArray
 FEATURES: tuple[str, ...] = (
     "shape",             # circularity of the bright core 0–1 (second moments): round
     "glare",             # glare evidence 0–1: fall-off, a sharp drop to the sky, or a core
-                         # degrees wide whose glare lights the sky at 4 R
-                         # (vision.candidates._score, _tail): such a core is its own glare
+                         # degrees wide whose glare lights the sky at 4 R and that fills
+                         # its star-shaped hull (vision.candidates._score, _tail, _solid):
+                         # such a core is its own glare
     "saturated",         # 1 when the core is clipped (≥ 250, or a flat top at any level)
     "contrast",          # 1 − sky median / peak: brighter than its surroundings, any gain
     "too_small",         # max(0, ln(0.5° / equivalent radius)): smaller than a sun's core

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from vision.candidates import _Candidate, _tail
+from vision.candidates import _Candidate, _solid, _tail, star_fill
 from vision.detect import detect_robust
 from vision.skyrender import random_scene, render
 
@@ -77,3 +77,31 @@ def test_the_overexposed_zenith_of_an_overcast_deck_is_no_sun(seed: int) -> None
     fr = render(s)
     d = detect_robust(fr.image, camera=s.camera)
     assert not fr.sun_visible and d.confidence < 0.3, d.features
+
+
+def _cells(holes: bool) -> tuple[np.ndarray, _Candidate]:
+    """A 960² grey frame: a disc 60 px in radius at the clip (a point source's clipped glare),
+    or the same disc broken into bright cells 10 px wide with darker gaps 10 px wide between
+    them (a cloud field's lit elements: a quarter of the disc lit)."""
+    yy, xx = np.mgrid[0:960, 0:960]
+    disc = np.hypot(xx - 500.0, yy - 420.0) <= 60.0
+    gray = np.full((960, 960), 140, np.uint8)
+    lit = disc & ((xx % 20 < 10) & (yy % 20 < 10)) if holes else disc
+    gray[lit] = 255
+    ys, xs = np.nonzero(lit)
+    c = _Candidate([1], int(lit.sum()), int(xs.min()), int(ys.min()),
+                   int(xs.max() - xs.min() + 1), int(ys.max() - ys.min() + 1),
+                   float(xs.mean()), float(ys.mean()))
+    return gray, c
+
+
+def test_a_clipped_glare_fills_its_star_shaped_hull_and_a_cloud_field_does_not() -> None:
+    """The level set of a radially decreasing glare is solid: star_fill 1 and full credit;
+    bright cells with gaps between them get none: a quarter of the disc is lit, a little more
+    of the star-shaped hull (it ends at the outermost lit pixel of each ray)."""
+    gray, c = _cells(False)
+    assert star_fill(gray, c, 250.0) == 1.0
+    assert _solid(gray, c, 250.0) == 1.0
+    gray, c = _cells(True)
+    assert 0.25 <= star_fill(gray, c, 250.0) <= 0.5
+    assert _solid(gray, c, 250.0) == 0.0
