@@ -345,7 +345,9 @@ def test_anonymous_plant_days_are_priced_from_the_hourly_allowance(
     assert first.status_code == 200, first.text
     assert list(small_allowance._charges) == ["addr:127.0.0.1"]    # the caller's address
     (charges,) = small_allowance._charges.values()
-    assert 0.05 < sum(c.cost for c in charges) < 0.5     # measured 0.24 s of CPU
+    # trued up to the CPU the day took (0.046 s in a run of this file, 0.24 s before the
+    # plant-year was made faster), below its 0.59 s price
+    assert 0.02 < sum(c.cost for c in charges) < 0.5
     sky = client.get("/api/v1/plants/penarroya/sky-map", params={"time": DEC21_0824_TST})
     assert sky.status_code == 200 and len(charges) + 1 == len(    # the same allowance
         next(iter(small_allowance._charges.values())))
