@@ -83,19 +83,26 @@ def shade_free(plant: Plant, solar_azimuth: ArrayLike, solar_elevation: ArrayLik
     t, q = pair_candidates(d, sun[up], np.full(len(up), GENERIC), c.width, c.height)
     t = up[t]
     steps, t_local = np.unique(t, return_inverse=True)
-    axes = collector_axes(caz[steps], cel[steps])                   # (S, C, 3) each, once
+    # the sun's and the candidates' frames are per step: the products that need no pair
+    # are made once per step, and each (S, C) component is its own array, so that a pair
+    # row gathers plain 2-D arrays (a sum along a last axis of 3 is ~20× slower than
+    # adding its components, sim.plant.shading.sum_columns)
+    n, u, v = (np.moveaxis(x, -1, 0).copy() for x in collector_axes(caz[steps], cel[steps]))
+    s = sun[steps].T[:, :, None]                                    # (3, S, 1)
+    sn = n[0] * s[0] + n[1] * s[1] + n[2] * s[2]                     # (S, C)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        su_sn = (u[0] * s[0] + u[1] * s[1] + u[2] * s[2]) / sn
+        sv_sn = (v[0] * s[0] + v[1] * s[1] + v[2] * s[2]) / sn
+    lit = sn > 0
     rows = max(1, _CAND_BLOCK // caz.shape[1])
     for m0 in range(0, len(t), rows):
-        tm, dm = t[m0:m0 + rows], d[q[m0:m0 + rows]][:, None, :]
-        n, u, v = (x[t_local[m0:m0 + rows]] for x in axes)         # (M, C, 3)
-        s = sun[tm][:, None, :]
-        sn = np.sum(s * n, axis=-1)
-        dn = np.sum(dm * n, axis=-1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            du = np.sum(dm * u, axis=-1) - np.sum(s * u, axis=-1) / sn * dn
-            dv = np.sum(dm * v, axis=-1) - np.sum(s * v, axis=-1) / sn * dn
+        tm, tl = t[m0:m0 + rows], t_local[m0:m0 + rows]
+        dm = d[q[m0:m0 + rows]].T[:, :, None]                       # (3, M, 1)
+        dn = dm[0] * n[0][tl] + dm[1] * n[1][tl] + dm[2] * n[2][tl]
+        du = dm[0] * u[0][tl] + dm[1] * u[1][tl] + dm[2] * u[2][tl] - su_sn[tl] * dn
+        dv = dm[0] * v[0][tl] + dm[1] * v[1][tl] + dm[2] * v[2][tl] - sv_sn[tl] * dn
         # either direction of the pair: i shaded by j (dn > 0) or j by i (dn < 0)
-        shade = (sn > 0) & (dn != 0) & (np.abs(du) < c.width - 1e-9) \
+        shade = lit[tl] & (dn != 0) & (np.abs(du) < c.width - 1e-9) \
             & (np.abs(dv) < c.height - 1e-9)
         r, k = np.nonzero(shade)
         ok[tm[r], k] = False
