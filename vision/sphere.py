@@ -29,9 +29,11 @@ def enu_from_sky(azimuth_deg: ArrayLike, elevation_deg: ArrayLike) -> FloatArray
 def sky_from_enu(v: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """Azimuth (clockwise from north, [0, 360)) and elevation [°] of ENU vectors."""
     v = np.asarray(v, dtype=float)
-    n = np.sqrt(np.add.reduce(v * v, axis=-1))  # np.linalg.norm(v, axis=-1), without its overhead
-    az = np.degrees(np.arctan2(v[..., 0], v[..., 1])) % 360.0
-    el = np.degrees(np.arcsin(np.minimum(np.maximum(v[..., 2] / n, -1.0), 1.0)))
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    n = np.sqrt(x * x + y * y + z * z)  # the components added: a sum along a last axis of 3
+    # is ~20x slower (sim.plant.shading.sum_columns), np.linalg.norm slower still
+    az = np.degrees(np.arctan2(x, y)) % 360.0
+    el = np.degrees(np.arcsin(np.minimum(np.maximum(z / n, -1.0), 1.0)))
     return az, el
 
 
