@@ -57,7 +57,10 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
     """The fisheye image circle: the bright disc surrounded by dark corners, or None.
 
     A frame whose four corners are not dark (by their mean, or on 90 % of their pixels; a
-    pinhole frame) has no circle.
+    pinhole frame) has no circle — unless they are a lifted black: at most half the centre's
+    level with the frame just outside the circle at their level, a sharp rim
+    (:func:`_sharp_rim`; a brighter exposure or gamma lifts the unlit corners past the dark
+    level).
     Works on a ~96 px thumbnail; the circle is the minimum enclosing circle of
     the largest bright region, shrunk by 2 %.
     """
@@ -81,8 +84,13 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
         corner_dark = 0.5 * (float(p90[1]) + float(p90[2]))  # the median of four
     else:
         corner_dark = corner_level
-    if centre_level < 20.0 or corner_dark > dark_max:
+    lifted = False  # the corners passed only as a lifted black behind a sharp rim
+    if centre_level < 20.0:
         return None
+    if corner_dark > dark_max:
+        if min(corner_level, corner_dark) > _LIFTED_MAX * centre_level:
+            return None
+        lifted = True
     level = corner_level + 0.3 * (centre_level - corner_level)
     # small > level (an 8-bit threshold compares with ⌊level⌋: the same pixels)
     binary = cv2.threshold(small, level, 1, cv2.THRESH_BINARY)[1]
@@ -93,8 +101,55 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
     if cv2.contourArea(big) < 0.2 * h * w:
         return None
     (cx, cy), r = cv2.minEnclosingCircle(big)
+    if lifted and not _sharp_rim(small, cx, cy, r, corner_level, centre_level):
+        return None
     off = float(scale // 2)  # thumbnail pixel i is full-res pixel i·s + s//2
     return FovCircle(cx * scale + off, cy * scale + off, 0.98 * r * scale)
+
+
+_LIFTED_MAX = 0.5  # a lifted black: corners at most this share of the centre's level
+_RIM_OUT = 1.1  # the ring just outside the image circle [× its radius]
+_RIM_TOL = 0.15  # … within this share of the step from the corners' level: unlit
+_RIM_IN = 0.9  # the ring just inside it [× its radius]
+_RIM_LIT = 0.5  # … at least this share of the way up the step: lit to the rim
+_RIM_MIN_POINTS = 8  # … read on at least this many of its 96 points inside the frame
+_RIM_COS = np.cos(np.linspace(0.0, 2 * np.pi, 96, endpoint=False))
+_RIM_SIN = np.sin(np.linspace(0.0, 2 * np.pi, 96, endpoint=False))
+
+
+def _sharp_rim(small: NDArray[np.uint8], cx: float, cy: float, r: float, corner: float,
+               centre: float) -> bool:
+    """Whether the frame just outside a candidate image circle (thumbnail pixels: centre
+    ``cx, cy``, radius ``r``) is at the unlit corners' level — the circle's edge a step.
+
+    A fisheye's image circle is the shadow of its field stop (Ray 2002, *Applied
+    Photographic Optics*, 3rd ed., ch. 24: the field stop bounds the image sharply): outside
+    it the sensor sees nothing, whatever the tone curve. A brighter exposure or a lifted
+    gamma raises that unlit level (UCEEB and Wolf at gamma 0.7: 16–19 → 36–41 grey levels,
+    past the dark level of :func:`estimate_fov`), but the ring at :data:`_RIM_OUT` × the
+    radius stays within :data:`_RIM_TOL` of the step from the corners' level (the real suns'
+    and UCEEB's frames that reach this test at gammas 0.5 and 0.7: −0.10 to +0.08), and the
+    sky inside is lit to the rim: the ring at :data:`_RIM_IN` × the radius at least
+    :data:`_RIM_LIT` of the way up the step (at gamma 0.7: 0.66–1.45 on 7 frames; Wolf 09:44
+    at 0.50 and, at gamma 0.5, seven Wolf frames at 0.33–0.46 stay without a circle). A
+    pinhole view's vignetting falls off gradually; a
+    glare filling a small crop (the tracker's region of interest, whose corners are sky)
+    falls off inside its ring (0.23–0.34 of the way up; the tracker's whole frames
+    0.32–0.37); and a view framed by something dark (a window frame) has its dark edges
+    inside the frame's corners, not on a ring about a bright disc: the ring lies past the
+    frame's corners and has too few points to read (:data:`_RIM_MIN_POINTS`)."""
+    h, w = small.shape
+    step = centre - corner
+    for k in (_RIM_OUT, _RIM_IN):
+        xs = np.rint(cx + k * r * _RIM_COS).astype(np.intp)
+        ys = np.rint(cy + k * r * _RIM_SIN).astype(np.intp)
+        ok = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
+        if int(ok.sum()) < _RIM_MIN_POINTS:
+            return False
+        level = (float(np.median(small[ys[ok], xs[ok]])) - corner) / step
+        if (k > 1.0 and abs(level) > _RIM_TOL) or (k < 1.0 and level < _RIM_LIT):
+            return False
+    return True
 
 
 def _fov_mask(shape: tuple[int, int], fov: FovCircle) -> NDArray[np.uint8]:

@@ -178,6 +178,26 @@ def test_the_image_circle_of_a_brighter_exposure(real_sky) -> None:
     assert abs(got.radius_px - base.radius_px) < 0.02 * base.radius_px
 
 
+def test_the_image_circle_of_a_lifted_black(real_sky) -> None:
+    """Gamma 0.7 lifts UCEEB's unlit corners from 16–19 to 36–41 grey levels, past the dark
+    level: the circle was lost, the frame had no scale and its sky level came from the dark
+    border, and a cloud-edge highlight got 0.39 (0.50 with the model before the solid-core
+    refit). The frame just outside the circle is still at the corners' level and the sky
+    inside is lit to the rim (vision.fov._sharp_rim): the circle is found within 5 % of its
+    radius of the gain-1 one (measured 4.0 % for the centre, 3.3 % for the radius) and no sun
+    is given (measured 0.000)."""
+    (r,) = [r for r in real_sky if "085500" in r["filename"]]
+    img = cv2.imread(r["path"])
+    base = estimate_fov(to_gray(img))
+    lifted = _exposed(img, 1.0, 0.7)
+    got = estimate_fov(to_gray(lifted))
+    assert base is not None and got is not None
+    assert np.hypot(got.cx_px - base.cx_px, got.cy_px - base.cy_px) < 0.05 * base.radius_px
+    assert abs(got.radius_px - base.radius_px) < 0.05 * base.radius_px
+    d = detect_robust(lifted, min_confidence=0.0)
+    assert d.confidence < 0.1, (d.confidence, d.features)
+
+
 def test_a_long_exposure_is_centred_by_the_glare_around_it(real_sky) -> None:
     """Issue 24 items 3-4: Wolf brightened × 1.15 (every sixth frame), the blue sky around
     the sun saturated into a core over 15° in radius, pushed toward the horizon: the
