@@ -188,7 +188,10 @@ def symmetric_glare_centre(image: NDArray[Any], cx: float, cy: float, radius_px:
     yy, xx = np.mgrid[0:ny, 0:nx]
     xx = x0 + (xx + 0.5) * step - 0.5
     yy = y0 + (yy + 0.5) * step - 0.5
-    keep = (np.hypot(xx - cx, yy - cy) < reach) & (v >= _DARK * sky)
+    # not sky: a block under _DARK × the sky's level (trees, the ground) and its neighbours
+    # (a block partly over a tree is darker than the glare there without being dark)
+    dark = cv2.dilate((v < _DARK * sky).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    keep = (np.hypot(xx - cx, yy - cy) < reach) & ~dark
     if fov is not None:
         keep &= np.hypot(xx - fov.cx_px, yy - fov.cy_px) \
             < fov.radius_px - _FOV_MARGIN_PX - 0.5 * step
