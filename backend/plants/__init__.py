@@ -6,20 +6,19 @@ The routes in ``backend/api/routes/plants.py`` are thin: they parse and call
 
 What a computation costs, before it runs (the price an anonymous caller pays from the
 hourly allowance of ``backend/limits.py``, trued up to the CPU time it took) —
-measured on 2026-12-03 (load 0.2–1.7) with ``time.process_time()`` around
-:func:`sim.plant.simulate.simulate_plant` for the built-in Peñarroya (29 trackers) on
-21 March, 21 June and 21 December at 300, 900 and 3,600 s: ``sun`` and ``backtrack``
-0.06–0.09 s each at any step, ``sky_scan`` 0.13 s at 3,600 s to 0.52–0.81 s at 300 s
-(its hemisphere scan tests ≈ 650 orientations for shade at every daylight step); a
-whole day (three strategies, the fixed plant, the sun-tracking shade) 0.24 s at
-900 s, 0.7–1.0 s at 300 s. :func:`day_cost_s` is the fit
+measured on 2026-12-04 (after the plant-year and sky-scan speed-ups; best of three, with
+``time.process_time()`` around :meth:`PlantService.day` for the built-in Peñarroya, 29
+trackers, on 21 March, 21 June and 21 December at 300, 900 and 3,600 s): a whole day
+(three strategies, the fixed plant, the sun-tracking shade) 0.034–0.038 s at 3,600 s,
+0.053–0.064 s at 900 s, 0.105–0.128 s at 300 s. :func:`day_cost_s` is the least-squares
+fit (the largest day 1.09 × its price)
 
     cost_s = DAY_OVERHEAD_S + DAY_STEP_TRACKER_S × (86,400 s / step_s) × trackers,
 
 linear in the trackers as the shade test is (each collector against its few
-candidate shaders). :func:`sky_map_cost_s`: 0.26 s at 1° (32,760 orientations).
-:func:`positions_cost_s`: one instant, 5.3–5.5 ms (``sun``, ``backtrack``) and 8.8 ms
-(``sky_scan``) of CPU for Peñarroya.
+candidate shaders). :func:`sky_map_cost_s`: 0.044 s at 1° (32,760 orientations), 0.008 s
+at 3° (3,720), the line through them. :func:`positions_cost_s`: one instant, 2.4–2.9 ms
+of CPU for Peñarroya (5.3–8.8 ms on 2026-12-03, when its price was set; kept).
 """
 
 from __future__ import annotations
@@ -45,9 +44,9 @@ __all__ = ["POLYGON_COST_FACTOR", "STRATEGIES", "PlantService", "UnknownPlantErr
            "sky_map_png"]
 
 #: A plant day's fixed cost [s]: the sun, backtrack and fixed runs, the sun's ephemeris.
-DAY_OVERHEAD_S = 0.35
+DAY_OVERHEAD_S = 0.03
 #: A plant day's cost per step of the day and tracker [s] (``sky_scan``'s shade test).
-DAY_STEP_TRACKER_S = 8.5e-5
+DAY_STEP_TRACKER_S = 1.05e-5
 #: The positions of one instant: fixed cost and cost per tracker [s].
 POSITIONS_OVERHEAD_S, POSITIONS_TRACKER_S = 0.002, 2.5e-4
 #: How many times a rectangle's shade a polygon collector's costs per step and tracker, for
@@ -56,7 +55,7 @@ POSITIONS_OVERHEAD_S, POSITIONS_TRACKER_S = 0.002, 2.5e-4
 #: GEOS clipping per shaded collector, RESULTS.md "plant_polygon").
 POLYGON_COST_FACTOR = 100.0
 #: A sky map's cost per orientation of its grid [s], and its fixed cost [s].
-SKY_MAP_ORIENTATION_S, SKY_MAP_OVERHEAD_S = 8e-6, 0.03
+SKY_MAP_ORIENTATION_S, SKY_MAP_OVERHEAD_S = 1.24e-6, 0.0034
 #: Days kept (clear sky: a plant, date and step always give the same day); the cache holds
 #: at most this many shaded-fraction values in all (≈ 32 bytes each as Python floats in
 #: lists: ≈ 16 MB), the least recently used day is dropped first. A Peñarroya day at
