@@ -35,8 +35,9 @@ Three named methods, all returning a :class:`SunDetection`:
   around it (:func:`vision.glare.censored_glare_centre`); for a colour frame whose white core (every
   channel saturated) is at least 3° in radius while the grey core, saturated by
   the blue sky's glare, reaches well beyond it, the centroid of that core opened
-  by a disc (:func:`_white_core_centre`) — with a fisheye camera given, moved across
-  the radius from its optical centre to the centre of the symmetric glare around it
+  by a disc (:func:`_white_core_centre`) — moved across the radius from the optical
+  centre (a fisheye camera's given, else the image circle's: the field stop's edge,
+  :func:`vision.fov.estimate_fov`) to the centre of the symmetric glare around it
   (:func:`_across_from_glare`, :func:`vision.glare.symmetric_glare_centre`); for a core
   with a glare around it and a fisheye model (given, or the image circle's), the small
   circle on the camera's sphere through most of the core's limb that leaves none of it
@@ -422,8 +423,8 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
                 white = (fit[0], fit[1], r_eq)
         if white is None:
             white = _white_core_centre(image, gray, got.best, ppd, fov, got.bg, got.peak)
-            if white is not None and isinstance(camera, FisheyeCamera):
-                white = _across_from_glare(image, got.best, r_eq, fov, white, camera)
+            if white is not None and isinstance(model, FisheyeCamera):
+                white = _across_from_glare(image, got.best, r_eq, fov, white, model)
         if white is not None:
             cx, cy, radius = white
         else:
@@ -539,9 +540,13 @@ def _across_from_glare(image: NDArray[Any], c: _Candidate, r_eq: float, fov: Fov
     """The white core's centre ``white`` (x, y, radius) moved *across* the radius from the
     optical centre (``model``'s centre) to the centre of the symmetric glare around the
     core (:func:`vision.glare.symmetric_glare_centre`); its position *along* that radius
-    stays the core's. Only with a camera given (the ephemeris-guided search, a calibrated
-    camera; blind, the image circle's centre is all there is, 90 px from the fitted centre
-    on Wolf, and the blind answer stays the white core's).
+    stays the core's. ``model`` is the camera given (the ephemeris-guided search, a
+    calibrated camera) or, blind, the equidistant guess about the image circle, whose centre
+    is the field stop's edge fitted behind what cuts the bright disc at the rim
+    (:func:`vision.fov.estimate_fov`; Wolf: 6–10 px from the labels' optical centre, where the
+    bright region's enclosing circle was 37–111 px off: an 8 px error in the centre turns the
+    radius through 8 / D rad, D the sun's distance from it — 400–700 px on Wolf — which
+    moves a correction of a few pixels by a tenth of a pixel).
 
     A rotationally symmetric lens images a point source symmetrically about the meridional
     plane — the line from the optical centre through the image point (Born & Wolf,

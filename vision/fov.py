@@ -62,7 +62,10 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
     (:func:`_sharp_rim`; a brighter exposure or gamma lifts the unlit corners past the dark
     level).
     Works on a ~96 px thumbnail; the circle is the minimum enclosing circle of
-    the largest bright region, shrunk by 2 %.
+    the largest bright region, shrunk by 2 % — unless that region fills less than
+    :data:`_FILLED` of the circle (trees, buildings, masts or the frame cut the disc and pull
+    the enclosing circle off: Wolf 37–111 px), when the field stop's edge is fitted on the
+    full-resolution frame where it is seen (:func:`_rim_circle`).
     """
     if small is None:
         small, scale = _small(gray)
@@ -104,7 +107,13 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
     if lifted and not _sharp_rim(small, cx, cy, r, corner_level, centre_level):
         return None
     off = float(scale // 2)  # thumbnail pixel i is full-res pixel i·s + s//2
-    return FovCircle(cx * scale + off, cy * scale + off, 0.98 * r * scale)
+    cx, cy, r = cx * scale + off, cy * scale + off, r * scale
+    if cv2.contourArea(big) >= _FILLED * np.pi * (r / scale) ** 2:
+        return FovCircle(cx, cy, 0.98 * r)  # a disc nothing cuts: its enclosing circle
+    rim = _rim_circle(gray, cx, cy, r, corner_level, centre_level)
+    if rim is not None:
+        cx, cy, r = rim
+    return FovCircle(cx, cy, 0.98 * r)
 
 
 _LIFTED_MAX = 0.5  # a lifted black: corners at most this share of the centre's level
@@ -150,6 +159,145 @@ def _sharp_rim(small: NDArray[np.uint8], cx: float, cy: float, r: float, corner:
         if (k > 1.0 and abs(level) > _RIM_TOL) or (k < 1.0 and level < _RIM_LIT):
             return False
     return True
+
+
+# a bright region filling this share of its enclosing circle is the whole disc: a tenth of it
+# missing is something cutting it (measured on the thumbnail: an uncut rendered disc 0.97–0.98,
+# Wettermast and FE3 with their masts 0.95–0.96, Wolf behind its trees 0.82–0.87)
+_FILLED = 0.9
+_RIM_RAYS = 120  # rays from the coarse centre, 3° apart
+_RIM_SAMPLES = 96  # samples along each, from _RIM_BAND[0] to _RIM_BAND[1] × the coarse radius
+_RIM_BAND = (0.8, 1.25)
+_RIM_STEP_WIDTH = 0.015  # the step's drop is read across this share of the radius
+_RIM_STEP_MIN = 0.06  # … and is sharp from this share of the centre's level above the corners'
+_RIM_STEP_MIN_DN = 6.0  # … or this many grey levels, whichever is more
+_RIM_TAIL = 6  # the ray's last samples in the frame: the unlit level outside the rim
+_RIM_BEYOND = 4  # samples just outside the drop …
+_RIM_FLAT_DN = 3.0  # … within this many grey levels of the ray's unlit tail
+_RIM_RANSAC = 64  # RANSAC samples of three rim points (Fischler & Bolles 1981)
+_RIM_INLIER = 0.005  # an inlier lies within this share of the radius of the circle (≥ 2 px)
+_RIM_MIN_INLIERS = 24  # … at least this many rays (a 72° arc in all) …
+_RIM_MAX_GAP_DEG = 180.0  # … on more than half the circle: no gap between them wider than this
+_RIM_ANG = np.linspace(0.0, 2 * np.pi, _RIM_RAYS, endpoint=False)
+_RIM_RCOS = np.cos(_RIM_ANG).astype(np.float32)
+_RIM_RSIN = np.sin(_RIM_ANG).astype(np.float32)
+_RIM_RNG_IDX = np.random.default_rng(0).random((_RIM_RANSAC, 3))  # fixed: deterministic
+
+
+def _rim_points(gray: NDArray[np.uint8], cx: float, cy: float, r: float, corner: float,
+                centre: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Points of the field stop's edge (full-resolution pixels) on rays from a coarse centre
+    ``cx, cy`` (a coarse radius ``r``): on each ray, the outermost sharp step down to the
+    unlit level, where the ray leaves the frame unlit.
+
+    The image circle is the shadow of the field stop (Ray 2002, ch. 24): a step from the lit
+    image to the unlit frame, as sharp as the lens draws it, wherever the scene reaches the
+    rim — sky, or trees and buildings brighter than the unlit sensor. What stands in front of
+    the rim darker than that, or a frame edge that cuts the circle, leaves a ray without such
+    a step or with a step elsewhere (a tree line, the glare): outliers for the robust fit.
+    A ray counts when its last :data:`_RIM_TAIL` samples in the frame are within 0.15 of the
+    step from the corners' level (as :func:`_sharp_rim`); its edge is the outermost place
+    where the level drops by :data:`_RIM_STEP_MIN` of the step (at least
+    :data:`_RIM_STEP_MIN_DN`) across :data:`_RIM_STEP_WIDTH` of the radius — a gradual glow
+    outside the circle (a lens barrel lit by the sky) drops by less — at the steepest point
+    of that drop (a parabola through the drop's three largest samples), and only when just
+    outside the drop (:data:`_RIM_BEYOND` samples) the ray is already within
+    :data:`_RIM_FLAT_DN` of its unlit tail: trees as dark as the unlit frame (the second
+    renderer's, 3–6 grey levels above it) leave the skyline as the outermost sharp drop, with
+    the faint rim beyond it. That test also refuses EUROCONTROL's rim, whose frame glows
+    unevenly just outside it: its circle stays the enclosing one."""
+    h, w = gray.shape
+    rs = np.linspace(_RIM_BAND[0] * r, _RIM_BAND[1] * r, _RIM_SAMPLES, dtype=np.float32)
+    ds = float(rs[1] - rs[0])
+    mx = np.float32(cx) + _RIM_RCOS[:, None] * rs[None, :]
+    my = np.float32(cy) + _RIM_RSIN[:, None] * rs[None, :]
+    prof = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    prof = cv2.GaussianBlur(prof.astype(np.float32), (0, 0), 0.7, sigmaY=0.7)
+    n_in = np.count_nonzero((mx >= 0) & (mx <= w - 1) & (my >= 0) & (my <= h - 1), axis=1)
+    m = max(1, int(round(_RIM_STEP_WIDTH * r / ds)))
+    drop = prof[:, :-m] - prof[:, m:]  # the fall from sample k to k + m (outward)
+    nd = drop.shape[1]
+    step = centre - corner
+    cand = (drop > max(_RIM_STEP_MIN_DN, _RIM_STEP_MIN * step)) \
+        & (np.arange(nd)[None, :] + m < n_in[:, None] - 1)
+    last = nd - 1 - np.argmax(cand[:, ::-1], axis=1)  # the outermost sharp drop
+    tail = np.clip(n_in[:, None] - 1 - np.arange(_RIM_TAIL)[None, :], 0, _RIM_SAMPLES - 1)
+    unlit = np.median(np.take_along_axis(prof, tail, axis=1), axis=1)
+    # just outside the drop the ray is already at its unlit level: a skyline of trees as dark
+    # as the unlit frame leaves a second, smaller step (the rim) beyond it
+    beyond = np.clip(last[:, None] + m + 1 + np.arange(_RIM_BEYOND)[None, :], 0,
+                     n_in[:, None] - 1)
+    outside = np.median(np.take_along_axis(prof, beyond, axis=1), axis=1)
+    ok = (cand.any(axis=1) & (n_in >= _RIM_TAIL + m + 2) & (unlit <= corner + _RIM_TOL * step)
+          & (np.abs(outside - unlit) <= _RIM_FLAT_DN))
+    rows = np.arange(_RIM_RAYS)
+    win = np.clip(last[:, None] - np.arange(m + 1)[None, :], 0, nd - 1)
+    k = win[rows, np.argmax(np.take_along_axis(drop, win, axis=1), axis=1)]
+    k = np.clip(k, 1, nd - 2)
+    a, b, c = drop[rows, k - 1], drop[rows, k], drop[rows, k + 1]
+    den = a - 2.0 * b + c
+    sub = np.clip(np.where(den < 0, 0.5 * (a - c) / np.where(den < 0, den, -1.0), 0.0), -1, 1)
+    rr = rs[0] + (k + sub + 0.5 * m) * ds
+    return ((cx + _RIM_RCOS * rr)[ok].astype(np.float64),
+            (cy + _RIM_RSIN * rr)[ok].astype(np.float64))
+
+
+def _kasa(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[float, float, float]:
+    """The algebraic least-squares circle through points (Kåsa 1976): x² + y² = 2a x + 2b y + c,
+    linear in (a, b, c); centre (a, b), radius √(c + a² + b²)."""
+    sol = np.linalg.lstsq(np.column_stack([x, y, np.ones_like(x)]), x * x + y * y,
+                          rcond=None)[0]
+    a, b = 0.5 * float(sol[0]), 0.5 * float(sol[1])
+    return a, b, float(np.sqrt(max(float(sol[2]) + a * a + b * b, 0.0)))
+
+
+def _rim_circle(gray: NDArray[np.uint8], cx: float, cy: float, r: float, corner: float,
+                centre: float) -> tuple[float, float, float] | None:
+    """The image circle fitted to the field stop's edge (full-resolution pixels) → (x, y,
+    radius), or None when the edge is not seen on enough of the rim (keep the coarse circle).
+
+    The coarse circle (the bright region's minimum enclosing circle) is pulled off by
+    whatever cuts the bright disc at the rim — trees, buildings, masts (Wolf: 90 px from the
+    optical centre) — and by a frame that crops the circle. The edge points of
+    :func:`_rim_points` are fitted by RANSAC (Fischler & Bolles 1981: circles through three
+    points, the one most points lie within :data:`_RIM_INLIER` of the radius) and refined by
+    Kåsa's least squares on its inliers (Kåsa 1976). Accepted when at least
+    :data:`_RIM_MIN_INLIERS` rays agree and no gap between them exceeds
+    :data:`_RIM_MAX_GAP_DEG` (an arc on one side alone leaves the centre free along it), and
+    the circle lies within the band the rays searched."""
+    x, y = _rim_points(gray, cx, cy, r, corner, centre)
+    n = x.size
+    if n < _RIM_MIN_INLIERS:
+        return None
+    idx = np.minimum((_RIM_RNG_IDX * n).astype(np.intp), n - 1)
+    x1, y1, x2, y2, x3, y3 = (x[idx[:, 0]], y[idx[:, 0]], x[idx[:, 1]], y[idx[:, 1]],
+                              x[idx[:, 2]], y[idx[:, 2]])
+    d = 2.0 * (x1 * (y2 - y3) + x2 * (y3 - y1) + x3 * (y1 - y2))
+    good = np.abs(d) > 1e-6 * r * r
+    d = np.where(good, d, 1.0)
+    s1, s2, s3 = x1 * x1 + y1 * y1, x2 * x2 + y2 * y2, x3 * x3 + y3 * y3
+    ux = (s1 * (y2 - y3) + s2 * (y3 - y1) + s3 * (y1 - y2)) / d
+    uy = (s1 * (x3 - x2) + s2 * (x1 - x3) + s3 * (x2 - x1)) / d
+    ur = np.hypot(x1 - ux, y1 - uy)
+    tol = max(2.0, _RIM_INLIER * r)
+    res = np.abs(np.hypot(x[None, :] - ux[:, None], y[None, :] - uy[:, None]) - ur[:, None])
+    count = np.where(good, np.count_nonzero(res < tol, axis=1), -1)
+    inl = res[int(np.argmax(count))] < tol
+    fx, fy, fr = cx, cy, r
+    for _ in range(3):  # Kåsa on the inliers, the inliers again
+        if int(inl.sum()) < _RIM_MIN_INLIERS:
+            return None
+        fx, fy, fr = _kasa(x[inl], y[inl])
+        inl = np.abs(np.hypot(x - fx, y - fy) - fr) < tol
+    if int(inl.sum()) < _RIM_MIN_INLIERS:
+        return None
+    ang = np.sort(np.arctan2(y[inl] - fy, x[inl] - fx))
+    gap = float(np.max(np.diff(np.concatenate([ang, ang[:1] + 2 * np.pi]))))
+    if np.degrees(gap) > _RIM_MAX_GAP_DEG:
+        return None
+    if not (_RIM_BAND[0] * r < fr < _RIM_BAND[1] * r) or np.hypot(fx - cx, fy - cy) > 0.25 * r:
+        return None
+    return fx, fy, fr
 
 
 def _fov_mask(shape: tuple[int, int], fov: FovCircle) -> NDArray[np.uint8]:
