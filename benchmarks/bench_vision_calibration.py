@@ -194,11 +194,16 @@ def _along_across(cam: FisheyeCamera, x: np.ndarray, y: np.ndarray, tx: np.ndarr
     return dx * ux + dy * uy, -dx * uy + dy * ux
 
 
+BLIND = "detector, blind (core along, glare across the image circle's radius)"
+
+
 def centre_study(fig: Figures) -> list[str]:
     """The centre of a large glare (issue 24 item 3), against SPA and not the hand labels:
     every Wolf position fitted by one equidistant camera (in-sample, four parameters for
     46 coordinates), its residual split along and across the radius from the fitted
-    optical centre. Blind: the detector without a camera (the white core's centre);
+    optical centre. Blind: the detector without a camera (the white core's centre, moved
+    across the radius from the image circle's centre — the field stop's edge,
+    ``vision.fov.estimate_fov`` — to its symmetric glare's centre);
     guided: the detector with the camera ``self_calibrate`` fits on all 23 frames (times
     and site only), which moves a wide white core across the radius to its symmetric
     glare's centre (``vision.detect._across_from_glare``). And the second renderer, whose
@@ -215,15 +220,14 @@ def centre_study(fig: Figures) -> list[str]:
            "radius | across it | median / worst distance from the hand label |",
            "|---|---|---|---|---|"]
     for name, xy in (("hand labels", np.column_stack([lx, ly])),
-                     ("detector, blind (white core)", blind),
+                     (BLIND, blind),
                      ("detector, guided by its self-calibration (core along, glare across)",
                       guided)):
         res = fit_fisheye(xy[:, 0], xy[:, 1], az, el, SIZE)
         cam = res.camera
         px, py = cam.sky_to_pixel(az, el)
         along, across = _along_across(cam, xy[:, 0], xy[:, 1], px, py)
-        key = {"hand labels": "labels", "detector, blind (white core)": "blind"}.get(
-            name, "guided")
+        key = {"hand labels": "labels", BLIND: "blind"}.get(name, "guided")
         dist = np.hypot(xy[:, 0] - lx, xy[:, 1] - ly)
         to_label = "—" if key == "labels" else f"{np.median(dist):.1f} / {dist.max():.1f} px"
         out.append(f"| {name} | "
