@@ -254,10 +254,10 @@ class WindowBudget:
                         wait_s = max(1.0, c.at + self.window_s - now)
                         break
                 raise Busy(429, f"rate limit: without a write token a client may ask "
-                                f"{_amount(self.capacity)} {self.what} per "
+                                f"{amount(self.capacity)} {self.what} per "
                                 f"{self.window_s / 60:.0f} min ({self.setting}); "
-                                f"{_amount(used)} spent"
-                                f"{f', this asks {_amount(cost)}' if cost else ''}: send "
+                                f"{amount(used)} spent"
+                                f"{f', this asks {amount(cost)}' if cost else ''}: send "
                                 f"'Authorization: Bearer <token>' or retry in "
                                 f"{math.ceil(wait_s)} s", wait_s)
             charge = Charge(now, cost, held=max_open is not None)
@@ -277,7 +277,7 @@ class WindowBudget:
             charge.open = False
 
 
-def _amount(x: float) -> str:
+def amount(x: float) -> str:
     """A cost for a message: whole units from 100 up (``2,200,000``), else three digits
     (``16.5``, ``0.125``)."""
     return f"{x:,.0f}" if abs(x) >= 100 else f"{x:.3g}"

@@ -18,7 +18,8 @@ fit (the largest day 1.09 × its price)
 linear in the trackers as the shade test is (each collector against its few
 candidate shaders). :func:`sky_map_cost_s`: 0.044 s at 1° (32,760 orientations), 0.008 s
 at 3° (3,720), the line through them. :func:`positions_cost_s`: one instant, 2.4–2.9 ms
-of CPU for Peñarroya (5.3–8.8 ms on 2026-12-03, when its price was set; kept).
+of CPU for Peñarroya (5.3–8.8 ms on 2026-12-03, when its price was set; kept, as its
+per-tracker part was not measured again on a larger plant).
 """
 
 from __future__ import annotations

@@ -450,9 +450,11 @@ class SimulationRunner:
                 job.state.started_at = _iso_now()
             try:
                 self._execute(job)
-            finally:
-                with self._lock:
-                    self._running.pop(job.state.run_id, None)
+            except Exception as exc:  # noqa: BLE001 - a bug past _execute's own handling:
+                # the run still ends (its caller would wait forever) and the slot lives on
+                logger.exception("simulation %s: the slot failed", job.state.run_id)
+                if not job.fut.done():
+                    self._fail(job, exc)
 
     def _execute(self, job: _Job) -> None:
         state = job.state
@@ -480,11 +482,14 @@ class SimulationRunner:
         except Exception as exc:  # noqa: BLE001 - reported through the run's status
             self._fail(job, exc, time.monotonic() - t0)
             return
-        self.costs.learn(job.params, elapsed)
-        if job.charge is not None:
-            self.anonymous_hours.settle(job.charge, elapsed)
-        if pruned:
-            self._forget_pruned()
+        try:  # bookkeeping: the run is stored and done whatever happens here
+            self.costs.learn(job.params, elapsed)
+            if job.charge is not None:
+                self.anonymous_hours.settle(job.charge, elapsed)
+            if pruned:
+                self._forget_pruned()
+        except Exception:  # noqa: BLE001
+            logger.exception("simulation %s: its bookkeeping failed", state.run_id)
         state.status = "done"
         self._ended(state)
         job.fut.set_result(state.summary)

@@ -42,7 +42,8 @@ _BT_REFINE = np.arange(-2.5, 2.6, 0.5)
 _SCAN_EL = np.arange(0.0, 86.0, 5.0)
 _SCAN_AZ = np.arange(0.0, 360.0, 10.0)
 # (pair, candidate) rows computed at once: 1,000,000 peaked at 181 MB (a Peñarroya sky_scan
-# day at 300 s), 100,000 at 24 MB in the same CPU time (0.52-0.55 s)
+# day at 300 s), 100,000 at 24 MB in the same CPU time (0.52-0.55 s, measured before
+# shade_free made its products per step)
 _CAND_BLOCK = 100_000
 
 

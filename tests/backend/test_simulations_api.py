@@ -180,10 +180,35 @@ def test_a_run_frees_its_worker_before_its_caller_hears_it_ended(tmp_path: Path)
                             simulation_workers=1, simulation_queue=0)
     with TestClient(create_app(settings)) as client:
         runner = client.app.state.ctx.simulations  # type: ignore[attr-defined]
-        running_when_answered: list[int] = []
+        running_when_answered: list[tuple[str, int]] = []
         _, fut = runner.submit(Scenario("tehuantepec", pd.Timestamp("2024-03-15", tz="UTC"),
                                         pd.Timestamp("2024-03-15 02:00", tz="UTC"), step_s=600.0),
                                 False)
-        fut.add_done_callback(lambda _: running_when_answered.append(len(runner._running)))
+        assert not fut.done()  # the worker process takes a second to start: the callback
+        # below runs in the slot's thread as it sets the result, not later in this one
+        fut.add_done_callback(lambda _: running_when_answered.append(
+            (threading.current_thread().name, len(runner._running))))
         fut.result(timeout=120)
-    assert running_when_answered == [0]
+    assert running_when_answered == [("heliotwin-sim-0", 0)]
+
+
+def test_a_failure_in_the_bookkeeping_after_a_run_still_ends_it(tmp_path: Path) -> None:
+    """The cost model, the allowance or the pruning raising after a run was stored does not
+    leave its caller waiting forever nor kill the slot: the run is done and the next runs."""
+    from backend.twin.scenario import Scenario
+
+    settings = get_settings(database_url=f"sqlite:///{tmp_path / 'sim.sqlite'}", viser=False,
+                            live_twin=False, demo_logger=False, alerts=False, mqtt_url=None,
+                            simulation_workers=1, simulation_queue=0)
+    with TestClient(create_app(settings)) as client:
+        runner = client.app.state.ctx.simulations  # type: ignore[attr-defined]
+
+        def broken(*_: Any) -> None:
+            raise RuntimeError("a bug in the cost model")
+
+        runner.costs.learn = broken
+        day = (pd.Timestamp("2024-03-15", tz="UTC"), pd.Timestamp("2024-03-15 02:00", tz="UTC"))
+        first = runner.run_sync(Scenario("tehuantepec", *day, step_s=600.0))
+        second = runner.run_sync(Scenario("tehuantepec", *day, step_s=300.0))
+        assert runner.get(first["run_id"]).status == "done"
+        assert runner.get(second["run_id"]).status == "done"

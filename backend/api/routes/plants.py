@@ -41,7 +41,7 @@ from backend.api.schemas.plants import (
     SweepRunRead,
     SweepShadeRead,
 )
-from backend.limits import Busy
+from backend.limits import Busy, amount
 from backend.plants import (
     STRATEGIES,
     PlantService,
@@ -152,7 +152,7 @@ async def _priced(request: Request, ctx: Any, caller: Any, cost_s: float,
         s = ctx.settings.simulations
         if cost_s > s.anonymous_run_max_s:
             raise HTTPException(422, f"step_s, resolution_deg: this computation is expected "
-                                     f"to take {cost_s:.3g} s of CPU; without a write token "
+                                     f"to take {amount(cost_s)} s of CPU; without a write token "
                                      f"at most {s.anonymous_run_max_s:g} s "
                                      "(HELIOTWIN_SIMULATION_ANONYMOUS_RUN_MAX_S)")
         try:
