@@ -117,6 +117,8 @@ _WHITE_BLUE_EXCESS = 1.3  # … and the grey core this many times its area: a bl
 _WHITE_OPEN = 0.5  # the opening's disc: this share of the white core's inscribed radius
 _WHITE_OPEN_MAX_PX = 24.0  # … worked on a mask shrunk until the disc is at most this wide
 _WHITE_CUT_STEP_PX = 3.0  # the outline's outward neighbours looked at, this far out
+_ACROSS_MAX_DEG = 1.1  # a glare fit moving the centre farther across is not taken (3 × the
+# white core's own scatter across the radius on Wolf, 4.24 px RMS = 0.36° at 11.8 px/°)
 _WHITE_CUT_SHARE = 0.05  # a white core with more of its outline next to darker-than-sky is cut
 _COHERENCE_PASSES = 1  # solves of the radial-symmetry fit behind `coherence`
 _PLATEAU_SHARE = 0.3  # a core with this share of its pixels at its peak is clipped (flat)
@@ -524,7 +526,8 @@ def _open_disc(mask: NDArray[np.uint8], radius: float) -> NDArray[np.uint8]:
     ``DIST_MASK_PRECISE``): the erosion keeps the pixels farther than ``radius`` from the
     background, the dilation brings back every pixel within ``radius`` of what is kept. Its
     cost does not grow with the disc, where ``cv2.morphologyEx`` with an elliptic kernel of
-    49 px took 3–4 ms on a Wolf core (the same centres within 0.3 px)."""
+    49 px took 5 ms on a Wolf core and this 1.5 ms (the same centres within 0.3 px; by hand,
+    ``docs/vision-calibration.md``, *The centre of a large glare*)."""
     pad = cv2.copyMakeBorder(mask, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
     inner = cv2.distanceTransform(pad, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) > radius
     if not inner.any():
@@ -554,15 +557,24 @@ def _across_from_glare(image: NDArray[Any], c: _Candidate, r_eq: float, fov: Fov
     position only through its distance from the axis) — and vignetting, the lens's radial
     fall-off, is symmetric about it too; so is a clear sky about the sun's vertical, which
     for a level camera is that line. Across the line the glare's centre is therefore
-    unbiased (the second renderer, whose truth is known: within 0.2 px) and, fitted to
+    unbiased (the second renderer, whose truth is known: 0.26 px RMS across) and, fitted to
     hundreds of blocks of glare, less noisy than the ragged outline of the core (Wolf,
-    against SPA through an equidistant fit of all 23 frames: 2.2 px RMS across the radius
-    against the core's 4.2 px). Along it the glare's centre is biased toward the optical
-    centre — vignetting dims its outer side, and a sky brightening toward the horizon is no
-    plane (the second renderer: 2–7 px in, where the core is 0.2–2.7 px in; Wolf: 7.7 px
-    inside the hand labels, 0.66 px more for each degree the sun is lower) — and noisier
-    than the core there (Wolf: 3.4 px RMS against the core's 2.9 px), so the core is kept.
-    Measured in ``docs/vision-calibration.md``, *The centre of a large glare*."""
+    against SPA through an equidistant fit of all 23 frames: the detector's positions
+    2.40 px RMS across the radius blind, 2.42 px guided, against the white core's 4.24 px).
+    Along it the glare's centre is biased toward the optical centre — vignetting dims its
+    outer side, and a sky brightening toward the horizon is no plane (the second renderer:
+    −8.25 px along the radius at the mean, where the core is −2.68 px; Wolf: 7.7 px inside
+    the hand labels, 0.66 px more for each degree the sun is lower) — and noisier than the
+    core there (Wolf: 3.4 px RMS against the core's 2.9 px, by hand), so the core is kept.
+    The renderer's and the RMS figures are ``benchmarks/bench_vision_calibration.py``'s
+    centre study (``docs/vision-calibration.md``, *The centre of a large glare*).
+
+    A fit that moves the centre more than :data:`_ACROSS_MAX_DEG` across (at ``model``'s
+    scale) is not taken: the core it corrects scatters 0.36° RMS across the radius on Wolf
+    (4.24 px at 11.8 px/°), so a move of three times that is the fit's failure — on the
+    Wolf frames brightened × 1.1 its window reaches the brighter sky near the horizon and
+    moved one sun 16.2 px across (21.9 → 7.6 px from its label); the largest move on the
+    native frames, 10.6 px (0.97° at the blind model's 10.9 px/°), is kept."""
     fit = symmetric_glare_centre(image, c.cx, c.cy, r_eq, fov, start=(white[0], white[1]))
     if fit is None:
         return white
@@ -573,6 +585,8 @@ def _across_from_glare(image: NDArray[Any], c: _Candidate, r_eq: float, fov: Fov
         return white
     tx, ty = -uy / norm, ux / norm
     across = (fit[0] - white[0]) * tx + (fit[1] - white[1]) * ty
+    if abs(across) > _ACROSS_MAX_DEG * model.px_per_deg:  # the fit's failure, not the core's
+        return white
     return white[0] + across * tx, white[1] + across * ty, white[2]
 
 
