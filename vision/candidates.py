@@ -308,9 +308,20 @@ def _score(c: _Candidate, gray: NDArray[np.uint8], shape: float, size: float, pe
     if wide > 0.0 and sharp < 1.0:
         c.wide *= max(_tail(gray, c, m3, bg, contrast, peak, fov, image), sharp)
     if c.wide > 0.0:
-        c.wide *= _solid(gray, c, peak - max(3.0, 0.04 * (peak - bg)))
+        c.wide *= _solid(gray, c, region_threshold(peak, bg)[1])
     c.glare = float(max(iso_glare, sharp, c.wide))
     return float(shape**2 * (0.25 + 0.75 * max(iso_glare, sharp, wide)) * size)
+
+
+def region_threshold(peak: float, bg: float) -> tuple[float, int]:
+    """The threshold the bright regions are cut at → ``(thr, level)``: ``thr`` = the peak less
+    the larger of 3 grey levels and 4 % of the contrast ``peak − bg``, and ``level`` the
+    8-bit grey level it comes to — a region keeps the pixels *above* ``level`` (⌊thr − 0.5⌋,
+    as ``cv2.threshold`` at ``thr − 0.5`` on 8-bit pixels). The only place of the rule:
+    ``vision.detect._search`` cuts the regions with it, :func:`_score` measures a wide core's
+    solidity (:func:`star_fill`) on the same pixels."""
+    thr = peak - max(3.0, 0.04 * (peak - bg))
+    return thr, int(np.floor(thr - 0.5))
 
 
 def _wide_core(r_eq: float, ppd: float) -> float:
@@ -326,16 +337,17 @@ _RAY_SIN = np.sin(np.linspace(0.0, 2 * np.pi, 72, endpoint=False))
 
 
 def star_fill(gray: NDArray[np.uint8], c: _Candidate, level: float) -> float:
-    """The share of a candidate's star-shaped hull about its centroid that is at or above
-    ``level`` (the threshold its region was cut at), 0–1.
+    """The share of a candidate's star-shaped hull about its centroid that is above
+    ``level`` (the grey level its region was cut at, :func:`region_threshold`: the region
+    kept the pixels above it), 0–1.
 
-    Along 72 rays from the centroid, every pixel out to the farthest one at ``level`` in the
+    Along 72 rays from the centroid, every pixel out to the farthest one above ``level`` in the
     candidate's box is counted, weighted by its distance (the area a ray stands for grows
     with it). A region that is star-shaped about its centroid without holes — a disc, an
     oval, a disc cut by the horizon or notched by trees — fills its hull: 1. Gaps inside
     the hull (darker sky between bright cloud elements) lower it."""
     x0, y0 = c.x, c.y
-    box = gray[y0:y0 + c.h, x0:x0 + c.w] >= level
+    box = gray[y0:y0 + c.h, x0:x0 + c.w] > level
     cx, cy = c.cx - x0, c.cy - y0
     n = int(np.ceil(np.hypot(max(cx, c.w - cx), max(cy, c.h - cy)))) + 1
     t = np.arange(n, dtype=np.float64)

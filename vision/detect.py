@@ -82,6 +82,7 @@ from vision.candidates import (
     _symmetry,
     _weighted_centroid,
     _white_core,
+    region_threshold,
 )
 from vision.detection import CameraModel, FovCircle, SunDetection
 from vision.fov import _fov_mask, _median_u8, _small, estimate_fov, to_gray
@@ -223,17 +224,16 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
     if contrast < 20.0:
         return f"no bright region: the brightest pixel is {max(contrast, 0):.0f} grey levels " \
                "above the sky"
-    thr = peak - max(3.0, 0.04 * contrast)
     # components only inside the bright pixels' bounding box (most frames: a small box);
-    # an 8-bit threshold t keeps the pixels above ⌊t⌋
-    level = int(np.floor(thr - 0.5))
+    # the region keeps the pixels above ``level`` (vision.candidates.region_threshold)
+    thr, level = region_threshold(peak, bg)
     rows = np.flatnonzero(row_max > level)
     if rows.size == 0:
         return "no bright region above the threshold"
     by, bh = int(rows[0]), int(rows[-1] - rows[0]) + 1
     cols = np.flatnonzero(work.pixels[by:by + bh].max(axis=0) > level)
     bx, bw = int(cols[0]), int(cols[-1] - cols[0]) + 1
-    binary = cv2.threshold(work.pixels[by:by + bh, bx:bx + bw], thr - 0.5, 255,
+    binary = cv2.threshold(work.pixels[by:by + bh, bx:bx + bw], float(level), 255,
                            cv2.THRESH_BINARY)[1]
     ox, oy = bx + work.x0, by + work.y0  # the box's origin in the frame
     n, labels, stats, cents = cv2.connectedComponentsWithStats(binary, connectivity=8)
