@@ -90,8 +90,11 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
     lifted = False  # the corners passed only as a lifted black behind a sharp rim
     if centre_level < 20.0:
         return None
+    # the unlit level the lifted-black test reads: the corners' mean, or their 90th
+    # percentile when overlay text lifts the mean
+    unlit = min(corner_level, corner_dark)
     if corner_dark > dark_max:
-        if min(corner_level, corner_dark) > _LIFTED_MAX * centre_level:
+        if unlit > _LIFTED_MAX * centre_level:
             return None
         lifted = True
     level = corner_level + 0.3 * (centre_level - corner_level)
@@ -104,7 +107,7 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
     if cv2.contourArea(big) < 0.2 * h * w:
         return None
     (cx, cy), r = cv2.minEnclosingCircle(big)
-    if lifted and not _sharp_rim(small, cx, cy, r, corner_level, centre_level):
+    if lifted and not _sharp_rim(small, cx, cy, r, unlit, centre_level):
         return None
     off = float(scale // 2)  # thumbnail pixel i is full-res pixel i·s + s//2
     cx, cy, r = cx * scale + off, cy * scale + off, r * scale
@@ -121,7 +124,9 @@ _RIM_OUT = 1.1  # the ring just outside the image circle [× its radius]
 _RIM_TOL = 0.15  # … within this share of the step from the corners' level: unlit
 _RIM_IN = 0.9  # the ring just inside it [× its radius]
 _RIM_LIT = 0.5  # … at least this share of the way up the step: lit to the rim
-_RIM_MIN_POINTS = 8  # … read on at least this many of its 96 points inside the frame
+_RIM_MIN_POINTS = 8  # … read on at least this many of its 96 points inside the frame: a
+# median that three stray pixels (overlay text, a branch) cannot decide; not tuned — the real
+# frames that reach the test read 26–79 points on the outer ring
 _RIM_COS = np.cos(np.linspace(0.0, 2 * np.pi, 96, endpoint=False))
 _RIM_SIN = np.sin(np.linspace(0.0, 2 * np.pi, 96, endpoint=False))
 
@@ -139,14 +144,18 @@ def _sharp_rim(small: NDArray[np.uint8], cx: float, cy: float, r: float, corner:
     radius stays within :data:`_RIM_TOL` of the step from the corners' level (the real suns'
     and UCEEB's frames that reach this test at gammas 0.5 and 0.7: −0.10 to +0.08), and the
     sky inside is lit to the rim: the ring at :data:`_RIM_IN` × the radius at least
-    :data:`_RIM_LIT` of the way up the step (at gamma 0.7: 0.66–1.45 on 7 frames; Wolf 09:44
-    at 0.50 and, at gamma 0.5, seven Wolf frames at 0.33–0.46 stay without a circle). A
-    pinhole view's vignetting falls off gradually; a
-    glare filling a small crop (the tracker's region of interest, whose corners are sky)
-    falls off inside its ring (0.23–0.34 of the way up; the tracker's whole frames
-    0.32–0.37); and a view framed by something dark (a window frame) has its dark edges
-    inside the frame's corners, not on a ring about a bright disc: the ring lies past the
-    frame's corners and has too few points to read (:data:`_RIM_MIN_POINTS`)."""
+    :data:`_RIM_LIT` of the way up the step (at gamma 0.7: 0.66–1.45 on 7 frames, and Wolf
+    09:44 at 0.506, just on the limit — it keeps its circle by 0.006; at gamma 0.5 seven Wolf
+    frames at 0.31–0.46 stay without a circle). A pinhole view's vignetting falls off
+    gradually; a glare filling a small crop (the tracker's region of interest, whose corners
+    are sky) falls off inside its ring (0.23–0.34 of the way up); the tracker's whole frames
+    never reach this test — their corners are 0.74 of the centre's level, past
+    :data:`_LIFTED_MAX` (their inner ring would read 0.32–0.37); and a view framed by
+    something dark (a window frame) has its dark edges inside the frame's corners, not on a
+    ring about a bright disc: the ring lies past the frame's corners and has too few points
+    to read (:data:`_RIM_MIN_POINTS`). ``corner``: the unlit level that passed the
+    lifted-black test (:func:`estimate_fov`: the corners' mean, or their 90th percentile
+    when overlay text lifts the mean), from which the step is measured."""
     h, w = small.shape
     step = centre - corner
     for k in (_RIM_OUT, _RIM_IN):
