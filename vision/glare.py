@@ -39,6 +39,32 @@ _LOSS_SCALE = 4.0  # grey levels: the soft-L1 loss is quadratic within this
 _FOV_MARGIN_PX = 3.0  # pixels this close to the image circle's edge are left out
 
 
+def _window(cx: float, cy: float, radius_px: float, w: int, h: int
+            ) -> tuple[float, int, int, int, int] | None:
+    """The glare fits' window about a core centred at ``(cx, cy)`` of ``radius_px`` in a
+    ``w`` × ``h`` frame → ``(reach, x0, y0, x1, y1)``: :data:`_REACH` core radii + 10 px,
+    cut to the frame; None when under 8 px on a side."""
+    reach = _REACH * radius_px + 10.0
+    x0, y0 = max(0, int(cx - reach)), max(0, int(cy - reach))
+    x1, y1 = min(w, int(cx + reach) + 1), min(h, int(cy + reach) + 1)
+    if x1 - x0 < 8 or y1 - y0 < 8:
+        return None
+    return reach, x0, y0, x1, y1
+
+
+def _sky_level(img: NDArray[Any], fov: FovCircle | None, every: int) -> float:
+    """The sky's level for the glare fits' dark test: the median of min(B, G, R) (or the
+    grey level) of every ``every``-th pixel on both axes, inside the image circle when one
+    is given (0 when none is)."""
+    grid = img[::every, ::every]
+    grid = grid if grid.ndim == 2 else grid.min(axis=2)
+    if fov is not None:
+        h, w = img.shape[:2]
+        gy, gx = np.mgrid[0:h:every, 0:w:every]
+        grid = grid[np.hypot(gx - fov.cx_px, gy - fov.cy_px) < fov.radius_px]
+    return float(np.median(grid)) if grid.size else 0.0
+
+
 def censored_glare_centre(image: NDArray[Any], cx: float, cy: float, radius_px: float,
                           fov: FovCircle | None = None) -> tuple[float, float] | None:
     """The sun's pixel ``(x, y)`` from the glare around a clipped core (see the module
@@ -49,21 +75,20 @@ def censored_glare_centre(image: NDArray[Any], cx: float, cy: float, radius_px: 
     glare's own excess is largest; ``(cx, cy)``, ``radius_px``: the clipped core's
     centroid and equivalent radius (the fit's start and scale). A pixel is clipped from
     3 levels under the top of the pixels fitted; the sky's level is the median of the
-    fitted channel in the image circle (every 16th pixel; pixels under :data:`_DARK` × it
-    are left out)."""
+    fitted channel in the image circle (every 16th pixel, :func:`_sky_level`; pixels under
+    :data:`_DARK` × it are left out, one by one, and those within :data:`_FOV_MARGIN_PX` of
+    the image circle's edge). The window (:func:`_window`) is
+    :func:`symmetric_glare_centre`'s; its sky is sampled twice as densely (that fit's every
+    32nd pixel here moves no Wolf frame's answer, but every 16th there moves Wolf 13:41
+    brightened × 1.15 by 1.8 px, so each keeps the sampling it was measured with)."""
     img = np.asarray(image)
     gray = img if img.ndim == 2 else cv2.min(cv2.min(img[:, :, 0], img[:, :, 1]), img[:, :, 2])
     h, w = gray.shape
-    grid = gray[::16, ::16]
-    if fov is not None:
-        gy, gx = np.mgrid[0:h:16, 0:w:16]
-        grid = grid[np.hypot(gx - fov.cx_px, gy - fov.cy_px) < fov.radius_px]
-    sky = float(np.median(grid)) if grid.size else 0.0
-    reach = _REACH * radius_px + 10.0
-    x0, y0 = max(0, int(cx - reach)), max(0, int(cy - reach))
-    x1, y1 = min(w, int(cx + reach) + 1), min(h, int(cy + reach) + 1)
-    if x1 - x0 < 8 or y1 - y0 < 8:
+    sky = _sky_level(gray, fov, 16)
+    win = _window(cx, cy, radius_px, w, h)
+    if win is None:
         return None
+    reach, x0, y0, x1, y1 = win
     step = max(1, int(np.sqrt((x1 - x0) * (y1 - y0) / _SAMPLES)))
     yy, xx = np.mgrid[y0:y1:step, x0:x1:step]
     v = gray[y0:y1:step, x0:x1:step].astype(float)
@@ -148,32 +173,35 @@ def symmetric_glare_centre(image: NDArray[Any], cx: float, cy: float, radius_px:
     normal equations, at most :data:`_SYM_ITER` steps.
 
     ``(cx, cy)``, ``radius_px``: the clipped core's centroid and equivalent radius (the
-    window and the scale of the knots). Pixels under 0.6 × the sky's median (trees, the
-    ground) and within 3 px of the image circle's edge are left out.
+    window and the scale of the knots). Left out: every block whose mean is under
+    :data:`_DARK` (0.6) × the sky's level (trees, the ground), *and its 8 neighbours* (a
+    block partly over a tree is darker than the glare without being dark), and every block
+    whose centre lies within :data:`_FOV_MARGIN_PX` (3 px) + half a block of the image
+    circle's edge.
 
     Why (issue 24 item 3): on the Wolf camera the white core's outline is ragged (lens
-    rays, 16-px JPEG colour blocks) and its centre scatters 4.2 px RMS across the radius
-    from the optical centre (against SPA through an equidistant fit); the glare's centre
-    2.2 px. Along that radius it is biased inward (vignetting, a sky that is no plane:
-    7.7 px inside the hand labels on Wolf), which is why :func:`vision.detect.detect_robust`
-    takes only its component *across* the radius (:func:`vision.detect._across_from_glare`).
+    rays, 16-px JPEG colour blocks) and its centre scatters 4.24 px RMS across the radius
+    from the optical centre (against SPA through an equidistant fit, by hand); the
+    detector's positions, which take the glare's centre across, 2.40 px blind and 2.42 px
+    guided (``benchmarks/bench_vision_calibration.py``, centre study). Along that radius
+    the glare's centre is biased inward (vignetting, a sky that is no plane: 7.7 px inside
+    the hand labels on Wolf), which is why :func:`vision.detect.detect_robust` takes only its
+    component *across* the radius (:func:`vision.detect._across_from_glare`).
     Samples are block means (about :data:`_SYM_SAMPLES` blocks: one pixel per sample
     aliases with the JPEG blocks), each colour's, then their minimum; a block within 3
     levels of the top is clipped, censored at its mean. The sky's level for the dark test
-    is the median of every 32nd pixel in the image circle."""
+    is the median of every 32nd pixel in the image circle (:func:`_sky_level`; the window is
+    :func:`_window`, both shared with :func:`censored_glare_centre`, which samples the sky
+    at every 16th pixel: taken here, that moves Wolf 13:41 brightened × 1.15 by 1.8 px, so
+    each keeps the sampling it was measured with; its dark test is per pixel, this one per
+    block with the neighbours)."""
     img = np.asarray(image)
     h, w = img.shape[:2]
-    reach = _REACH * radius_px + 10.0
-    x0, y0 = max(0, int(cx - reach)), max(0, int(cy - reach))
-    x1, y1 = min(w, int(cx + reach) + 1), min(h, int(cy + reach) + 1)
-    if x1 - x0 < 8 or y1 - y0 < 8:
+    win = _window(cx, cy, radius_px, w, h)
+    if win is None:
         return None
-    grid = img[::32, ::32]
-    grid = grid if grid.ndim == 2 else grid.min(axis=2)
-    if fov is not None:
-        gy, gx = np.mgrid[0:h:32, 0:w:32]
-        grid = grid[np.hypot(gx - fov.cx_px, gy - fov.cy_px) < fov.radius_px]
-    sky = float(np.median(grid)) if grid.size else 0.0
+    reach, x0, y0, x1, y1 = win
+    sky = _sky_level(img, fov, 32)
     # block means (step × step pixels each; one pixel per sample aliases with the 16-px
     # JPEG blocks), each channel's, then their minimum; a block within 3 levels of the
     # top is clipped (censored at its mean: the truth is at least that)
