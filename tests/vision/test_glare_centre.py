@@ -69,24 +69,6 @@ def test_only_the_component_across_the_radius_is_taken(monkeypatch) -> None:
     assert (x, y, r) == pytest.approx((800.0, 503.0, 60.0))
 
 
-def test_a_glare_fit_moving_the_centre_far_across_is_not_taken(monkeypatch) -> None:
-    """A fit 20 px across (2° at 10 px/°, past vision.detect._ACROSS_MAX_DEG = 1.1°: three
-    times the white core's own scatter across the radius on Wolf) is the fit's failure:
-    the core's centre is kept; 10 px (1°) is taken."""
-    import vision.detect as detect
-
-    camera = FisheyeCamera(500.0, 500.0, 10.0)
-
-    class Core:
-        cx, cy = 800.0, 500.0
-
-    for fit, want in (((795.0, 520.0), (800.0, 500.0)), ((795.0, 510.0), (800.0, 510.0))):
-        monkeypatch.setattr(detect, "symmetric_glare_centre", lambda *a, fit=fit, **k: fit)
-        x, y, _ = _across_from_glare(np.zeros((4, 4, 3), np.uint8), Core(), 60.0, None,
-                                     (800.0, 500.0, 60.0), camera)  # type: ignore[arg-type]
-        assert (x, y) == pytest.approx(want)
-
-
 def _wolf() -> tuple[list[np.ndarray], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     with (REAL_SKY / "metadata.csv").open(newline="") as fh:
         rows = [r for r in csv.DictReader(fh) if r["filename"].startswith("Wolf")]
