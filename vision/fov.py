@@ -142,11 +142,12 @@ def _sharp_rim(small: NDArray[np.uint8], cx: float, cy: float, r: float, corner:
     gamma raises that unlit level (UCEEB and Wolf at gamma 0.7: 16–19 → 36–41 grey levels,
     past the dark level of :func:`estimate_fov`), but the ring at :data:`_RIM_OUT` × the
     radius stays within :data:`_RIM_TOL` of the step from the corners' level (the real suns'
-    and UCEEB's frames that reach this test at gammas 0.5 and 0.7: −0.10 to +0.08), and the
-    sky inside is lit to the rim: the ring at :data:`_RIM_IN` × the radius at least
-    :data:`_RIM_LIT` of the way up the step (at gamma 0.7: 0.66–1.45 on 7 frames, and Wolf
-    09:44 at 0.506, just on the limit — it keeps its circle by 0.006; at gamma 0.5 seven Wolf
-    frames at 0.31–0.46 stay without a circle). A pinhole view's vignetting falls off
+    and UCEEB's frames that reach this test at gammas 0.5 and 0.7, the gamma on the colour
+    frame: −0.05 to +0.08), and the sky inside is lit to the rim: the ring at
+    :data:`_RIM_IN` × the radius at least :data:`_RIM_LIT` of the way up the step (at gamma
+    0.7: 0.54–1.45 on 8 frames, Wolf 09:44 the lowest; at gamma 0.5 Wolf 10:59 reads 0.500,
+    exactly on the limit, and keeps its circle because the test is ``< _RIM_LIT``, while six
+    Wolf frames at 0.38–0.45 stay without one). A pinhole view's vignetting falls off
     gradually; a glare filling a small crop (the tracker's region of interest, whose corners
     are sky) falls off inside its ring (0.23–0.34 of the way up); the tracker's whole frames
     never reach this test — their corners are 0.74 of the centre's level, past
