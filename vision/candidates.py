@@ -376,7 +376,8 @@ def _solid(gray: NDArray[np.uint8], c: _Candidate, level: float) -> float:
     on its bright elements and not on the darker gaps between them, a region degrees wide
     with holes. :func:`star_fill` measures it: the real suns fill 0.85–1.00 of their hull at
     every exposure tried (Wolf, Wettermast, EUROCONTROL, gains 1–1.3, gamma 0.7), the
-    brightened cloud fields 0.47–0.64. No credit at a fill of 0.5 (:data:`_SOLID`: half
+    brightened cloud fields 0.47–0.65 (FE3 × 1.3 0.64 → 0.65 when star_fill came to count
+    the pixels the region kept). No credit at a fill of 0.5 (:data:`_SOLID`: half
     the hull unclipped, as much gap as core), full credit from 0.8 (a fifth of the hull may
     be lost to what stands in front of the glare)."""
     lo, hi = _SOLID
