@@ -197,3 +197,26 @@ def test_anonymous_calibrations_pruned_and_bounded_by_cost(tmp_path: Path) -> No
         # the older anonymous one is gone, the token's and the newest anonymous one stay
         assert listed == [ids[2], ids[1]]
         assert c.get(f"/api/v1/vision/calibrations/{ids[0]}").status_code == 404
+
+
+def test_a_frame_whose_rim_trees_hide_gets_its_centre_from_the_field_stop(
+        client: httpx.Client) -> None:
+    """A Wolf frame sent as a fisheye without a camera: the derived optical centre is the
+    field stop's circle fitted behind the trees (vision.fov), 6.5–10.3 px from the centre the
+    23 hand labels fit (959, 956; docs/vision-calibration.md), where the bright disc's
+    enclosing circle was 37–111 px off; the sun found within 1 % of the width of its label."""
+    with (REAL_SKY / "metadata.csv").open(newline="") as fh:
+        row = next(r for r in csv.DictReader(fh)
+                   if r["sun_row_label"] and r["filename"].startswith("Wolf_20160530_12"))
+    data = (REAL_SKY / row["filename"]).read_bytes()
+    r = client.post(SUN, files={"file": (row["filename"], data, "image/jpeg")},
+                    data={"camera": "fisheye", "timestamp": row["utc_time"],
+                          "latitude_deg": row["lat"], "longitude_deg": row["lon"]})
+    assert r.status_code == 200, r.text
+    d = r.json()
+    derived = d["camera_derived"]
+    # measured 8.1 px (40.5 px with the enclosing circle)
+    assert np.hypot(derived["cx_px"] - 959.0, derived["cy_px"] - 956.0) < 12.0, derived
+    x, y = d["centroid_px"]
+    assert np.hypot(x - float(row["sun_col_label"]), y - float(row["sun_row_label"])) < 19.2
+    assert d["sun_found"] and d["confidence"] >= 0.5
