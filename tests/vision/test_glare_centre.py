@@ -96,12 +96,19 @@ def test_wolf_centres_with_a_camera_agree_with_the_ephemeris() -> None:
         d = detect_sun(img, camera=cam, expected_px=(float(px), float(py)))
         assert d.sun_found
         xy.append(d.centroid_px)
-    got = np.array(xy)
-    assert fit_fisheye(got[:, 0], got[:, 1], az, el, size).rms_px < 3.9
-    dist = np.hypot(got[:, 0] - lx, got[:, 1] - ly)
+    _wolf_centres_hold(np.array(xy), az, el, lx, ly, size)
+
+
+
+def _wolf_centres_hold(xy: np.ndarray, az: np.ndarray, el: np.ndarray, lx: np.ndarray,
+                       ly: np.ndarray, size: tuple[int, int]) -> None:
+    """The 23 Wolf centres ``xy`` on one equidistant camera through SPA's suns within
+    3.9 px RMS, ≤ 3.0 px from their labels at the median and ≤ 9.5 px at worst (both paths
+    measured 3.62–3.67, 2.7–2.84 and 8.6 px)."""
+    assert fit_fisheye(xy[:, 0], xy[:, 1], az, el, size).rms_px < 3.9
+    dist = np.hypot(xy[:, 0] - lx, xy[:, 1] - ly)
     assert float(np.median(dist)) <= 3.0
     assert float(dist.max()) <= 9.5
-
 
 def test_second_renderer_glare_centre_is_unbiased_across_the_radius() -> None:
     """The second renderer's sun (a Moffat aureole, symmetric on the sphere) on a CIE clear
@@ -145,8 +152,4 @@ def test_wolf_centres_blind_agree_with_the_ephemeris() -> None:
         d = detect_sun(img)
         assert d.sun_found
         got.append(d.centroid_px)
-    xy = np.array(got)
-    assert fit_fisheye(xy[:, 0], xy[:, 1], az, el, size).rms_px < 3.9
-    dist = np.hypot(xy[:, 0] - lx, xy[:, 1] - ly)
-    assert float(np.median(dist)) <= 3.0
-    assert float(dist.max()) <= 9.5
+    _wolf_centres_hold(np.array(got), az, el, lx, ly, size)
