@@ -53,6 +53,12 @@ def scan_grid() -> tuple[FloatArray, FloatArray]:
     return np.append(az.ravel(), 180.0), np.append(el.ravel(), 90.0)
 
 
+def _dot3(a: FloatArray, b: FloatArray) -> FloatArray:
+    """The dot product of vectors stored component-first (``a[0..2]``, broadcasting), their
+    components added left to right, as numpy sums three."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
 def shade_free(plant: Plant, solar_azimuth: ArrayLike, solar_elevation: ArrayLike,
                cand_azimuth: ArrayLike, cand_elevation: ArrayLike) -> NDArray[np.bool_]:
     """Seed 004's Boolean, negated, for C candidate orientations at each of T steps.
@@ -90,18 +96,17 @@ def shade_free(plant: Plant, solar_azimuth: ArrayLike, solar_elevation: ArrayLik
     # adding its components, sim.plant.shading.sum_columns)
     n, u, v = (np.moveaxis(x, -1, 0).copy() for x in collector_axes(caz[steps], cel[steps]))
     s = sun[steps].T[:, :, None]                                    # (3, S, 1)
-    sn = n[0] * s[0] + n[1] * s[1] + n[2] * s[2]                     # (S, C)
+    sn = _dot3(n, s)                                                # (S, C)
     with np.errstate(divide="ignore", invalid="ignore"):
-        su_sn = (u[0] * s[0] + u[1] * s[1] + u[2] * s[2]) / sn
-        sv_sn = (v[0] * s[0] + v[1] * s[1] + v[2] * s[2]) / sn
+        su_sn, sv_sn = _dot3(u, s) / sn, _dot3(v, s) / sn
     lit = sn > 0
     rows = max(1, _CAND_BLOCK // caz.shape[1])
     for m0 in range(0, len(t), rows):
         tm, tl = t[m0:m0 + rows], t_local[m0:m0 + rows]
         dm = d[q[m0:m0 + rows]].T[:, :, None]                       # (3, M, 1)
-        dn = dm[0] * n[0][tl] + dm[1] * n[1][tl] + dm[2] * n[2][tl]
-        du = dm[0] * u[0][tl] + dm[1] * u[1][tl] + dm[2] * u[2][tl] - su_sn[tl] * dn
-        dv = dm[0] * v[0][tl] + dm[1] * v[1][tl] + dm[2] * v[2][tl] - sv_sn[tl] * dn
+        dn = _dot3(dm, n[:, tl])                                    # (M, C)
+        du = _dot3(dm, u[:, tl]) - su_sn[tl] * dn
+        dv = _dot3(dm, v[:, tl]) - sv_sn[tl] * dn
         # either direction of the pair: i shaded by j (dn > 0) or j by i (dn < 0)
         shade = lit[tl] & (dn != 0) & (np.abs(du) < c.width - 1e-9) \
             & (np.abs(dv) < c.height - 1e-9)
