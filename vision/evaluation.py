@@ -19,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -250,3 +251,48 @@ def per_camera_row(cam: str, recs: list[Record], width_px: int) -> dict[str, Any
             "worst_pct": float(100.0 * p.max() / width_px) if p.size else float("nan"),
             "no_sun": len(nosun), "no_sun_max_conf": max(nosun) if nosun else float("nan"),
             "min_conf_visible": min((float(r["confidence"]) for r in vis), default=float("nan"))}
+
+
+FORMATS: dict[str, str] = {
+    "880": "880 px wide, colour (a small webcam)",
+    "mono": "monochrome, native size (an industrial camera without a colour filter)",
+    "mono2840": "monochrome, 2840 px (an M12 fisheye on a large sensor)",
+    "dslr6000": "6000 × 4000, the circle on a 3:2 sensor (a DSLR's circular fisheye)",
+}
+"""What users vary that the real frames do not (issue 24: "several makes, resolutions from
+880 to 6000 px"): each labelled real frame made into another camera's format by
+:func:`as_format`."""
+
+
+def as_format(image: NDArray[np.uint8], truth_px: tuple[float, float], name: str
+              ) -> tuple[NDArray[np.uint8], tuple[float, float]]:
+    """A real frame (BGR) and its sun's truth (x, y) as camera format ``name`` of
+    :data:`FORMATS`: resampled (area-averaged down, bicubic up, as a sensor of that size
+    would sample the same optics, up to its own noise), converted to one channel (OpenCV's
+    BT.601 luma: a monochrome sensor's broad response), or put in the middle of a 3:2
+    sensor's black frame and scaled to 6000 × 4000. The truth moves with the pixels
+    (pixel centres: x' = (x + 0.5)·s − 0.5)."""
+    h, w = image.shape[:2]
+    x, y = truth_px
+
+    def scaled(img: NDArray[np.uint8], s: float) -> NDArray[np.uint8]:
+        how = cv2.INTER_AREA if s < 1.0 else cv2.INTER_CUBIC
+        return np.asarray(cv2.resize(img, None, fx=s, fy=s, interpolation=how), np.uint8)
+
+    def moved(sx: float, dx: float = 0.0, sy: float | None = None) -> tuple[float, float]:
+        return (x + dx + 0.5) * sx - 0.5, (y + 0.5) * (sx if sy is None else sy) - 0.5
+
+    if name == "880":
+        return scaled(image, 880 / w), moved(880 / w)
+    grey = np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
+    if name == "mono":
+        return grey, (x, y)
+    if name == "mono2840":
+        return scaled(grey, 2840 / w), moved(2840 / w)
+    if name == "dslr6000":
+        canvas = np.zeros((h, max(w, int(round(1.5 * h))), 3), np.uint8)
+        off = (canvas.shape[1] - w) // 2
+        canvas[:, off:off + w] = image
+        big = cv2.resize(canvas, (6000, 4000), interpolation=cv2.INTER_CUBIC)
+        return np.asarray(big, np.uint8), moved(6000 / canvas.shape[1], off, 4000 / h)
+    raise ValueError(f"format must be one of {sorted(FORMATS)}; got {name!r}")

@@ -17,7 +17,7 @@ import pytest
 
 from vision.calibrate import fit_fisheye
 from vision.detect import detect_robust
-from vision.evaluation import nearest_direction_px
+from vision.evaluation import FORMATS, as_format, nearest_direction_px
 from vision.fov import estimate_fov, to_gray
 
 REAL_SKY = Path(__file__).resolve().parents[1] / "data" / "real-sky"
@@ -51,10 +51,10 @@ def test_wettermast_within_label_tolerance(real_sky, detections) -> None:
 
 
 def test_every_wolf_sun_found_at_the_centre_of_its_glare(real_sky, detections) -> None:
-    """Issue 24: all 23 clear-sky suns found (the old detector: 9), median ≤ 3 px from the
-    hand label (measured 2.8). Worst measured 15.5 px (the issue's 10 px is not met: thin
-    haze whitens the halo on one side at 12:04 and 12:07 local); the bound is that
-    measurement."""
+    """Issue 24: all 23 clear-sky suns found (the old detector: 9), median ≤ 3 px and worst
+    ≤ 10 px from the hand label, the issue's bounds (measured 2.8 / 8.6 px since the glare's
+    centre across the radius; 15.5 px before it, where thin haze whitens the halo on one
+    side at 12:04 and 12:07 local)."""
     rows = _labelled(real_sky, "Wolf")
     assert len(rows) == 23
     dists = []
@@ -63,7 +63,7 @@ def test_every_wolf_sun_found_at_the_centre_of_its_glare(real_sky, detections) -
         assert d.sun_found and d.confidence >= 0.5, (r["filename"], d.confidence, d.reason)
         dists.append(_label_distance(d, r))
     assert float(np.median(dists)) <= 3.0
-    assert max(dists) <= 16.0
+    assert max(dists) <= 10.0
 
 
 def test_eurocontrol_low_sun_at_the_direction_maps_truth(real_sky, detections) -> None:
@@ -119,6 +119,35 @@ def test_the_same_code_on_shorter_and_longer_exposures(real_sky, gain, gamma) ->
         d = detect_robust(_exposed(cv2.imread(r["path"]), gain, gamma))
         assert d.sun_found and d.confidence >= 0.5, (r["filename"], d.confidence, d.reason)
         assert _label_distance(d, r) <= 22.0, r["filename"]
+
+
+#: Per camera format of vision.evaluation.FORMATS: the largest and the median distance from
+#: the label allowed [% of the width] over the 29 labelled frames (measured blind 0.44 / 0.14,
+#: 1.06 / 0.23, 1.07 / 0.28, 0.29 / 0.10; benchmarks/bench_vision_accuracy.py's by_format
+#: adds EUROCONTROL's frame).
+FORMAT_BOUNDS_PCT = {"880": (0.5, 0.2), "mono": (1.1, 0.3), "mono2840": (1.1, 0.3),
+                     "dslr6000": (0.35, 0.15)}
+
+
+@pytest.mark.parametrize("name", sorted(FORMATS))
+def test_the_labelled_suns_in_other_cameras_formats(real_sky, name) -> None:
+    """What users vary (issue 24: resolutions from 880 to 6000 px, monochrome cameras, a
+    circular fisheye on a 3:2 sensor): every labelled Wettermast and Wolf sun, made into
+    ``name``'s format, is found blind with confidence ≥ 0.5 near its label. The monochrome
+    frames' worst is over the issue's 1 % (1.06 %: without colour the saturated core takes in
+    the blue sky's glare, docs/validation-vision.md)."""
+    worst_pct, median_pct = FORMAT_BOUNDS_PCT[name]
+    rows = _labelled(real_sky, "Wettermast") + _labelled(real_sky, "Wolf")
+    pct = []
+    for r in rows:
+        img, (x, y) = as_format(cv2.imread(r["path"]), (float(r["sun_col_label"]),
+                                                         float(r["sun_row_label"])), name)
+        d = detect_robust(img)
+        assert d.sun_found and d.confidence >= 0.5, (r["filename"], d.confidence, d.reason)
+        cx, cy = d.centroid_px
+        pct.append(100.0 * float(np.hypot(cx - x, cy - y)) / img.shape[1])
+    assert max(pct) <= worst_pct
+    assert float(np.median(pct)) <= median_pct
 
 
 @pytest.mark.parametrize("gain", [1.1, 1.15])
