@@ -17,7 +17,9 @@ does not show one), and it is never cached.
 
 ``expected_wh_low``/``expected_wh_high``: the spread of the two decompositions of the
 same POA (GTI-DIRINT, clear-sky ratio + Erbs) widened by
-:data:`backend.diagnosis.faults.INVERSION_UNCERTAINTY` (:func:`~backend.diagnosis.faults.band_wh`).
+:data:`backend.diagnosis.faults.INVERSION_UNCERTAINTY`, or by
+:data:`~backend.diagnosis.faults.GHI_UNCERTAINTY` on a day whose sky rests on a GHI
+pyranometer (:func:`~backend.diagnosis.faults.band_wh`, ``band_uncertainty``).
 
 The tracker logger's history starts at its first reading ever (:func:`history_start_s`):
 minutes before it have no data and are no ``dropout``; a cached day computed with another
@@ -37,6 +39,7 @@ import pandas as pd
 from sqlalchemy import Connection, delete, func, insert, select
 
 from backend.diagnosis.faults import (
+    band_uncertainty,
     band_wh,
     day_features,
     energy_features,
@@ -63,8 +66,9 @@ MAX_DAYS = 400
 #: 5: no dropout before the logger's first reading, the energy against the band,
 #: ``partial``; 6: the band ±4.5 % beyond the two skies, from the real-sky days; 7: the
 #: measured wind speed, where a logger reads one, in the cells' temperature; 8: the stuck
-#: fit's power under the site's transposition model, not Hay-Davies always).
-CACHE_VERSION = 8
+#: fit's power under the site's transposition model, not Hay-Davies always; 9: a sky from a
+#: GHI pyranometer alone gets its own, wider band, faults.GHI_UNCERTAINTY).
+CACHE_VERSION = 9
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
@@ -139,11 +143,12 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     features: dict[str, Any] = day_features(info.site, e_day, tr_day, first_min) if whole \
         else {"missing_daylight_min": missing_daylight_min(e_day, tr_day, elapsed_min,
                                                            first_min)}
+    u = band_uncertainty(e_day)
     if whole and measured_tr is not None:
-        energy = energy_features(measured_tr, matched, matched_b, exp_a)
+        energy = energy_features(measured_tr, matched, matched_b, exp_a, u)
         if energy is not None:
             features["energy"] = energy
-    low, high = band_wh(exp_a, exp_b)
+    low, high = band_wh(exp_a, exp_b, u)
     # readings that miss part of the day's expected energy: its gain is not the day's
     short = any(m is not None and x > 0 and got < PARTIAL_COVERAGE * x
                 for m, got, x in ((measured_tr, matched, exp_a), (measured_fx, matched_f,

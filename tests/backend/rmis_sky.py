@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import json
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -114,6 +114,30 @@ def fit_fixed_plane(site: Site, df: pd.DataFrame) -> dict[str, float]:
     return out
 
 
+def at_plane(site: Site, df: pd.DataFrame, tilt_deg: float, model: str
+             ) -> tuple[Site, pd.DataFrame]:
+    """The site with its fixed array at ``tilt_deg`` facing south and the rows with that
+    plane's ``poa`` made from the *measured* GHI/DNI/DHI by pvlib's transposition ``model``
+    (albedo 0.2, 0 with the sun down): what a fixed array of another tilt would have seen
+    there, for a checker that builds it so (issue 27: "a 16° fixed array"). Only the days
+    whose components close (:func:`closes`) give it as the sky gave it."""
+    from pvlib import atmosphere, irradiance, solarposition
+
+    fixed = replace(site.arrays["fixed"], surface_tilt=tilt_deg, surface_azimuth=180.0)
+    sp = solarposition.get_solarposition(df.index, site.latitude, site.longitude,
+                                         site.altitude)
+    zen = sp["apparent_zenith"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        poa = irradiance.get_total_irradiance(
+            tilt_deg, 180.0, zen, sp["azimuth"], df["dni"], df["ghi"], df["dhi"],
+            dni_extra=irradiance.get_extra_radiation(df.index), albedo=0.2, model=model,
+            airmass=atmosphere.get_relative_airmass(zen))["poa_global"]
+    out = df.copy()
+    out["poa"] = np.where(sp["apparent_elevation"] > 0, np.nan_to_num(poa.to_numpy()), 0.0)
+    return replace(site, arrays={**site.arrays, "fixed": fixed}), out
+
+
 @dataclass
 class Logged:
     """One local day as loggers would report it, and the truth."""
@@ -162,10 +186,11 @@ def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str,
     on the minute grid: the 5-minute readings onto minutes by the energy rule's line
     (:func:`sim.energy.on_grid`, as the service's ``minute_grid``). Returns
     ``tracker_poa`` [W m⁻²] and ``tracker_power_w``/``tracker_power_alt_w`` [W] of the two
-    decompositions, and ``times``. The air temperature is posted, and the station's wind
-    speed where the file has one (``wind_speed_m_s``, as a logger with an anemometer sends
-    it); ``anemometer=False``: no wind posted, the expectation takes the site's default
-    (a logger without one; the truth's cells keep the measured wind).
+    decompositions, ``times``, and ``sky``: the sky's sensor frame (its ``sky_source`` per
+    minute, :func:`sim.sky_sensor.weather_from_fixed`). The air temperature is posted, and
+    the station's wind speed where the file has one (``wind_speed_m_s``, as a logger with
+    an anemometer sends it); ``anemometer=False``: no wind posted, the expectation takes
+    the site's default (a logger without one; the truth's cells keep the measured wind).
     ``second_sky=False``: the main decomposition only (no ``tracker_power_alt_w``)."""
     times = minutes(day)
     ts = lg.times.as_unit("s").asi8
@@ -184,12 +209,12 @@ def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str,
     if path == "ghi_sensor":
         sensors["ghi_w_m2"] = minute(lg.data["ghi"].to_numpy())
     models = ("gti_dirint", "clearsky_erbs") if second_sky else ("gti_dirint",)
-    weather, _ = sky_sensor.weather_from_fixed(site, times, fixed_w, models=models,
-                                               sensors=sensors)
+    weather, sky_frame = sky_sensor.weather_from_fixed(site, times, fixed_w, models=models,
+                                                       sensors=sensors)
     end = day + pd.Timedelta(days=1)
     main = twin.simulate(site, day, end, weather=weather["gti_dirint"]).series
     out = {"times": times, "tracker_poa": np.nan_to_num(main["tracker_poa_global"].to_numpy()),
-           "tracker_power_w": main["tracker_power_w"].to_numpy()}
+           "tracker_power_w": main["tracker_power_w"].to_numpy(), "sky": sky_frame}
     if second_sky:
         alt = twin.simulate(site, day, end, weather=weather["clearsky_erbs"]).series
         out["tracker_power_alt_w"] = alt["tracker_power_w"].to_numpy()

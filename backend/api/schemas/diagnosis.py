@@ -7,6 +7,8 @@ from typing import Literal
 
 from pydantic import BaseModel, Field
 
+from backend.diagnosis.faults import GHI_UNCERTAINTY, INVERSION_UNCERTAINTY
+
 
 class DaySkyRead(BaseModel):
     """What the day's sky rests on."""
@@ -18,12 +20,17 @@ class DaySkyRead(BaseModel):
     valid_minutes_pct: float = Field(description="daylight minutes with a usable sky [%]")
 
 
+BAND = ("lower edge of the expected energy's band [Wh]: the two sky decompositions' spread "
+        f"widened by the sky instrument's uncertainty, {100 * INVERSION_UNCERTAINTY:g} % from the "
+        f"fixed plane, {100 * GHI_UNCERTAINTY:g} % from a GHI pyranometer alone")
+
+
 class TrackerDayRead(BaseModel):
     """The tracker's day: measured against the weather-aware twin."""
 
     measured_wh: float | None
     expected_wh: float
-    expected_wh_low: float = Field(description="band of the sky inversion's uncertainty")
+    expected_wh_low: float = Field(description=BAND)
     expected_wh_high: float
     performance_ratio: float | None
 
@@ -166,8 +173,7 @@ class DiagnosisTrackerDayRead(TrackerDayRead):
     """The tracker's day (null numbers on a day still to come)."""
 
     expected_wh: float | None  # type: ignore[assignment]
-    expected_wh_low: float | None = Field(  # type: ignore[assignment]
-        description="band of the sky inversion's uncertainty")
+    expected_wh_low: float | None = Field(description=BAND)  # type: ignore[assignment]
     expected_wh_high: float | None  # type: ignore[assignment]
 
 
