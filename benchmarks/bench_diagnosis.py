@@ -373,6 +373,45 @@ def low_plane_lines(fig: Figures, site, df: pd.DataFrame) -> list[str]:
     return lines
 
 
+CADENCES_S = (300, 900, 1800, 3600)
+"""The logger cadences the real days are posted at (:func:`cadence_lines`)."""
+
+
+def cadence_lines(fig: Figures, site, df: pd.DataFrame) -> list[str]:
+    """The POA-sensor path with the real days' readings averaged to each of
+    :data:`CADENCES_S` (:func:`rmis_sky.coarser`: end-stamped means, as a logger of that
+    cadence sends them), the expectation and the truth over the minutes the readings
+    cover (:mod:`sim.energy`'s rule, as the service's ``matched``): the expected tracker
+    energy's error per day [%] and the largest on clear and on cloudy days."""
+    lines = ["| cadence | " + " | ".join(d.date().isoformat()[2:]
+                                          for d in rmis_sky.local_days(site, df))
+             + " | clear days, largest | cloudy days, largest |",
+             "|---|" + "---|" * (len(rmis_sky.local_days(site, df)) + 2)]
+    for step in CADENCES_S:
+        log(f"real sky at {step // 60} min")
+        cells, worst = [], {"clear": 0.0, "cloudy": 0.0}
+        for day in rmis_sky.local_days(site, df):
+            lg = rmis_sky.logged_day(site, df, day)
+            kind, _ = rmis_sky.sky_kind(site, lg)
+            lg = rmis_sky.coarser(lg, step) if step != rmis_sky.STEP_S else lg
+            e = rmis_sky.expectation(site, lg, day, "poa_sensor", second_sky=False)
+            grid = e["times"].as_unit("s").asi8
+            tracker = on_grid(lg.times.as_unit("s").asi8, lg.tracker_power_w, grid, 2 * step)
+            covered = np.isfinite(tracker)
+            truth = energy_wh(grid, tracker, 60)
+            x = 100 * (energy_wh(grid, np.where(covered, e["tracker_power_w"], np.nan), 60)
+                       / truth - 1)
+            group = "clear" if kind == "clear" else "cloudy"
+            worst[group] = max(worst[group], abs(x))
+            cells.append(fig.add(f"rmis_{lg.date}_cadence_{step // 60}min_energy_pct", x, "%",
+                                 f"{x:+.1f} %"))
+        lines.append(f"| {step // 60} min | " + " | ".join(cells) + " | " + " | ".join(
+            fig.add(f"rmis_cadence_{step // 60}min_{g}_max_pct", worst[g], "%",
+                    f"{worst[g]:.1f} %", f"≤ {limit:.0f} %", worst[g] <= limit)
+            for g, limit in (("clear", 3.0), ("cloudy", 8.0))) + " |")
+    return lines
+
+
 def real_sky(fig: Figures) -> list[str]:
     """Issue 27 on NREL RMIS (tests/data/rmis): the tracker's expected irradiance and energy
     from one instrument at a time against the measured GNI, per day; pvlib's
@@ -516,6 +555,13 @@ def real_sky(fig: Figures) -> list[str]:
                  "station's, its POA made from the measured components (the truth still the "
                  "measured GNI), POA-sensor path, expected tracker energy:")
     lines.extend(low_plane_lines(fig, site, df))
+    lines.append("")
+    lines.append("The POA-sensor path at other logger cadences (end-stamped means of the "
+                 "5-minute files; expected tracker energy against the truth, over the minutes "
+                 "the readings cover):")
+    lines.append("")
+    lines.extend(cadence_lines(fig, site, df))
+    lines.append("")
     lines.append("- a bright diffuse beside a clear beam (DNI ≥ 0.9 × clear, DHI > 3 × clear, "
                  "sun > 5°): the sun-normal plane's measured diffuse (GNI − DNI) and the "
                  "transpositions' of the measured components, mean per day:")

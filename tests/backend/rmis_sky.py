@@ -143,11 +143,29 @@ class Logged:
     """One local day as loggers would report it, and the truth."""
 
     date: str
-    times: pd.DatetimeIndex  # the 5-minute stamps (UTC)
+    times: pd.DatetimeIndex  # the stamps (UTC) at the end of each mean
     tracker_power_w: np.ndarray  # a healthy tracker: the PV model at the measured GNI
     fixed_power_w: np.ndarray  # the fixed array: the PV model at the measured POA
     data: pd.DataFrame  # the measured rows (load())
     temp_air: np.ndarray  # [°C] measured where the file has it, else the site's default
+    step_s: int = STEP_S  # the readings' cadence
+
+
+def coarser(lg: Logged, step_s: int) -> Logged:
+    """The day as a logger of cadence ``step_s`` (a multiple of 5 minutes) would send it:
+    the means of the 5-minute means (power, irradiance, temperature, wind) over each
+    ``step_s``, stamped at its end as the files stamp theirs; a mean needs every one of its
+    5-minute readings (a gap stays a gap). Energy is kept: the truth of the day is the
+    same."""
+    k = step_s // STEP_S
+    frame = pd.concat([pd.DataFrame({"tracker": lg.tracker_power_w, "fixed": lg.fixed_power_w,
+                                     "temp_air_logged": lg.temp_air}, index=lg.times),
+                       lg.data], axis=1)
+    bins = frame.resample(f"{step_s}s", label="right", closed="right")
+    m = bins.mean()[bins["tracker"].count() == k]
+    return Logged(lg.date, pd.DatetimeIndex(m.index), m["tracker"].to_numpy(),
+                  m["fixed"].to_numpy(), m[list(lg.data.columns)],
+                  m["temp_air_logged"].to_numpy(), step_s)
 
 
 def logged_day(site: Site, df: pd.DataFrame, day: pd.Timestamp) -> Logged:
@@ -197,7 +215,7 @@ def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str,
     grid = times.as_unit("s").asi8
 
     def minute(v: np.ndarray) -> np.ndarray:
-        return on_grid(ts, v, grid, 2 * STEP_S)
+        return on_grid(ts, v, grid, 2 * lg.step_s)
 
     n = len(times)
     fixed_w = minute(lg.fixed_power_w) if path == "fixed_array" else np.full(n, np.nan)
