@@ -84,6 +84,18 @@ def varied_scenes(split: str, n: int, max_size_px: int = 3000) -> Iterator[Label
         yield _from_scene(s, f"skyrender/{s.sky}")
 
 
+def hdr_scenes(split: str, n: int, max_size_px: int = 1920) -> Iterator[LabelledFrame]:
+    """``n`` random :mod:`vision.skyrender` scenes of ``split`` from an HDR camera: the merge
+    tone-mapped into 8 bits (``tone="reinhard"``), so the sun is the frame's brightest
+    point rather than a clipped disc and the sky lies close under it (issue 24: "rooftop
+    HDR cameras"); their own seeds, short side ≤ ``max_size_px``."""
+    for seed in _seeds(split, n, 3_000):
+        s = random_scene(seed)
+        if min(s.width_px, s.height_px) > max_size_px:
+            s = random_scene(seed, width_px=int(max_size_px * 4 / 3), height_px=max_size_px)
+        yield _from_scene(replace(s, tone="reinhard"), f"skyrender-hdr/{s.sky}")
+
+
 def fisheye_640_scenes(split: str, n: int, overcast: bool = False) -> Iterator[LabelledFrame]:
     """640 × 480 frames at ≈ 2.6 px/° with a ghost and JPEG; thin cirrus on odd seeds."""
     for k, seed in enumerate(_seeds(split, n, 5_000 if overcast else 2_000)):

@@ -19,7 +19,13 @@ renderer the detector grew up on. Differences from :func:`vision.synth.fisheye_f
   (the red and blue planes radially scaled by ± ``fringe_px`` at the image
   circle's edge), Poisson–Gaussian sensor noise, JPEG at a given quality;
 * trees at the horizon (a ragged dark skyline with crowns) and a lens-flare
-  ghost on the line through the optical centre, opposite the sun.
+  ghost on the line through the optical centre, opposite the sun;
+* two tone curves: a sensor clipping at its full well (``tone="clip"``, the default), or
+  an HDR camera's merge tone-mapped into 8 bits (``tone="reinhard"``: Reinhard et al.
+  2002's global operator ``L(1 + L/L_w²)/(1 + L)`` per channel, the key 0.18 over the
+  log-average of the sky inside the horizon, the white point ``L_w`` the frame's
+  brightest value, then a display gamma of 1/2.2) — the sun is no larger clipped disc
+  there, only the frame's brightest point, and the sky lies close under it.
 
 The truth is the camera model's projection of the sun's direction
 (:meth:`vision.cameras.FisheyeCamera.sky_to_pixel`); every pixel's radiance is
@@ -71,6 +77,7 @@ class SkyScene:
     trees_deg: float = 8.0
     ghost: bool = True
     seed: int = 0
+    tone: str = "clip"  # or "reinhard": an HDR merge tone-mapped (module docstring)
 
 
 def _cie_gradation(cos_z: NDArray[np.float32], a: float, b: float) -> NDArray[np.float32]:
@@ -270,6 +277,10 @@ def render(s: SkyScene) -> SynthFrame:
     if s.noise_dn > 0:
         sd = np.sqrt(np.float32(s.noise_dn) ** 2 + np.float32(0.08) * np.clip(img, 0, 255))
         img += rng.standard_normal(img.shape, dtype=np.float32) * sd
+    if s.tone == "reinhard":
+        img = _reinhard(img / np.float32(255.0), inside & ~ground) * np.float32(255.0)
+    elif s.tone != "clip":
+        raise ValueError(f"tone must be 'clip' or 'reinhard', got {s.tone!r}")
     out = np.clip(np.rint(img), 0, 255).astype(np.uint8)
     if s.jpeg_quality < 100:
         ok, buf = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(s.jpeg_quality)])
@@ -279,6 +290,19 @@ def render(s: SkyScene) -> SynthFrame:
              "transmittance": float(trans), "glare_deg": float(s.glare_deg),
              "px_per_deg": float(cam.px_per_deg)}
     return SynthFrame(out, (sx, sy), visible, truth)
+
+
+def _reinhard(x: NDArray[np.float32], sky: NDArray[np.bool_]) -> NDArray[np.float32]:
+    """An HDR frame (linear, 1 = a clipping sensor's full well; any range) tone-mapped to
+    [0, 1]: Reinhard, Stark, Shirley & Ferwerda 2002 ("Photographic tone reproduction for
+    digital images", eq. 4), per channel, the key 0.18 over the log-average of the ``sky``
+    pixels, the white point the frame's brightest value, display gamma 1/2.2."""
+    x = np.maximum(x, np.float32(0.0))
+    log_avg = float(np.exp(np.mean(np.log(x[sky] + 1e-4)))) if sky.any() else 1.0
+    scaled = x * np.float32(0.18 / log_avg)
+    white = float(scaled.max())
+    mapped = scaled * (1.0 + scaled / np.float32(white * white)) / (1.0 + scaled)
+    return (np.clip(mapped, 0.0, 1.0) ** np.float32(1.0 / 2.2)).astype(np.float32)
 
 
 def random_scene(seed: int, sky: str | None = None, width_px: int | None = None,

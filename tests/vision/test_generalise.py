@@ -16,7 +16,7 @@ import pytest
 from vision.calibrate import fit_fisheye
 from vision.cameras import FisheyeCamera
 from vision.detect import detect_robust, detect_sun
-from vision.evalset import LabelledFrame, fisheye_640_scenes, tracker_rois
+from vision.evalset import LabelledFrame, fisheye_640_scenes, hdr_scenes, tracker_rois
 from vision.sphere import angular_separation_deg
 
 
@@ -135,6 +135,29 @@ def test_heldout_synthetic_overcast_no_confident_sun() -> None:
         confs.append(d.confidence)
         assert d.sun_found or d.reason
     assert max(confs) < 0.3
+
+
+def test_an_hdr_cameras_suns_held_out() -> None:
+    """Issue 24 ("rooftop HDR cameras"): held-out second-renderer scenes from an HDR camera
+    (the merge tone-mapped into 8 bits, vision.skyrender ``tone="reinhard"``: the sun is the
+    frame's brightest point, no clipped disc; the confidence was never fitted on such a
+    frame), short side ≤ 960 px, blind. Measured: 12 of 13 visible suns found, 0.084° RMS,
+    worst 0.235°; the miss is a small sun whose peak JPEG left at 231, under the saturation
+    gate (docs/validation-vision.md); the 7 overcast frames at most 0.001."""
+    vis, errs, no_sun = 0, [], []
+    for lf in hdr_scenes("heldout", 20, max_size_px=960):
+        d = detect_sun(lf.frame.image, "robust")
+        if not lf.frame.sun_visible:
+            no_sun.append(d.confidence)
+            continue
+        vis += 1
+        if d.sun_found:
+            az, el = lf.camera.pixel_to_sky(*d.centroid_px)
+            errs.append(float(angular_separation_deg(az, el, lf.azimuth_deg, lf.elevation_deg)))
+    e = np.array(errs)
+    assert vis == 13 and e.size >= 12
+    assert float(np.sqrt(np.mean(e**2))) <= 0.1 and e.max() <= 0.3
+    assert len(no_sun) == 7 and max(no_sun) < 0.3
 
 
 def test_ephemeris_first_beats_a_brighter_decoy() -> None:

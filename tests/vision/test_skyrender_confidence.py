@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from vision.confidence import FEATURES, fit_logistic, load_model
@@ -20,6 +22,24 @@ def test_sun_is_drawn_at_the_camera_models_pixel() -> None:
     assert np.hypot(xs[near].mean() - x, ys[near].mean() - y) < 2.0
     # deterministic by seed
     assert np.array_equal(render(s).image, fr.image)
+
+
+def test_an_hdr_tone_map_keeps_the_sun_the_brightest_point_unclipped_around_it() -> None:
+    """``tone="reinhard"`` (Reinhard et al. 2002, eq. 4, white point the frame's maximum):
+    the frame's brightest pixel is at the sun and reaches the top, where the clipping
+    sensor's frame of the same scene saturates a disc of hundreds of pixels; the sky keeps
+    its order (the pixel nearer the sun brighter, as in the linear frame)."""
+    s = replace(random_scene(3, sky="clear", width_px=640, height_px=480), noise_dn=0.0,
+                jpeg_quality=100)
+    clipped, hdr = render(s).image, render(replace(s, tone="reinhard")).image
+    x, y = render(s).sun_px
+    g = hdr.astype(float).mean(axis=2)
+    yy, xx = np.unravel_index(int(np.argmax(g)), g.shape)
+    assert np.hypot(xx - x, yy - y) <= 1.5 and g.max() >= 254
+    assert int((g >= 250).sum()) < 0.1 * int((clipped.mean(axis=2) >= 250).sum())
+    step = 3 * s.glare_deg * s.camera.px_per_deg
+    near, far = g[int(y), int(x + step)], g[int(y), int(x + 2 * step)]
+    assert near > far
 
 
 def test_overcast_hides_the_sun_and_sizes_follow_the_seed() -> None:
