@@ -151,6 +151,10 @@ class DatabaseSettings(_Group):
         return self.url.startswith("sqlite")
 
 
+#: The longest gap energy may be set to bridge [s]: an hourly logger's step.
+MAX_ENERGY_GAP_S = 3600
+
+
 class IngestSettings(_Group):
     """Bounds of logger batches and of reads of a site's data, and the energy rule's gap."""
 
@@ -180,7 +184,7 @@ class IngestSettings(_Group):
         5.0, ge=0, description="Allowed gap between power_w and voltage_v·current_a, beyond 5 %."
     )
     energy_max_gap_s: int = Field(
-        DEFAULT_MAX_GAP_S, gt=0, le=3600,
+        DEFAULT_MAX_GAP_S, gt=0, le=MAX_ENERGY_GAP_S,
         description="Longest gap between readings that energy bridges (sim/energy.py: every "
                     "logger cadence up to 15 min is bridged at the default)."
     )

@@ -396,7 +396,8 @@ def cadence_lines(fig: Figures, site, df: pd.DataFrame) -> list[str]:
             lg = rmis_sky.coarser(lg, step) if step != rmis_sky.STEP_S else lg
             e = rmis_sky.expectation(site, lg, day, "poa_sensor", second_sky=False)
             grid = e["times"].as_unit("s").asi8
-            tracker = on_grid(lg.times.as_unit("s").asi8, lg.tracker_power_w, grid, 2 * step)
+            tracker = on_grid(lg.times.as_unit("s").asi8, lg.tracker_power_w, grid,
+                              rmis_sky.bridged_gap_s(step))
             covered = np.isfinite(tracker)
             truth = energy_wh(grid, tracker, 60)
             x = 100 * (energy_wh(grid, np.where(covered, e["tracker_power_w"], np.nan), 60)

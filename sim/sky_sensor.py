@@ -394,6 +394,20 @@ def measured_sky(site: Site, times: pd.DatetimeIndex, valid: np.ndarray,
     return (share >= MIN_SENSOR_SHARE)[day_id]
 
 
+def main_sky_source(sky: pd.DataFrame) -> str:
+    """What most of the daylight minutes (clear-sky ``poa_clear`` > 20 W m⁻²) of a frame of
+    :func:`weather_from_fixed`'s sensor columns rest on: the most common ``sky_source``
+    (``"sensor_poa"``, ``"sensor_ghi"``, ``"fixed_array"`` or ``"clear_sky"``);
+    ``"clear_sky"`` without daylight. The one rule for a day's source: the diagnosis reports
+    it and widens the day's band by it."""
+    daylight = sky["poa_clear"].to_numpy() > 20.0
+    src = sky["sky_source"].to_numpy()[daylight]
+    if src.size == 0:
+        return "clear_sky"
+    names, counts = np.unique(src, return_counts=True)
+    return str(names[np.argmax(counts)])
+
+
 #: Sensor columns :func:`weather_from_fixed` reads from its ``sensors`` frame, in rising
 #: priority: a GHI pyranometer, then a reference cell or pyranometer on the fixed plane.
 SENSOR_SKIES = (("sensor_ghi", "ghi_w_m2"), ("sensor_poa", "fixed_poa_w_m2"))

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from sim import pv, sky
+from sim import pv, sky, sky_sensor
 from sim.energy import energy_wh
 from sim.sites import Site
 
@@ -114,12 +114,11 @@ def _power_at(site: Site, day: pd.DataFrame, tilt: np.ndarray, surf_az: np.ndarr
 
 def band_uncertainty(day: pd.DataFrame) -> float:
     """The band's widening u [-] for a day of :func:`sim.sky_sensor.weather_aware_twin`'s
-    minutes: :data:`GHI_UNCERTAINTY` when most of its daylight minutes' sky rests on a GHI
-    pyranometer (``sky_source`` ``"sensor_ghi"``), else :data:`INVERSION_UNCERTAINTY` (a
-    fixed plane's POA sensor or power, or the clear sky)."""
-    daylight = day["poa_clear"].to_numpy() > 20.0
-    ghi = day["sky_source"].to_numpy()[daylight] == "sensor_ghi"
-    return GHI_UNCERTAINTY if ghi.size and 2 * int(ghi.sum()) > ghi.size \
+    minutes: :data:`GHI_UNCERTAINTY` when its sky rests on a GHI pyranometer
+    (:func:`sim.sky_sensor.main_sky_source` ``"sensor_ghi"``, the source the diagnosis
+    reports), else :data:`INVERSION_UNCERTAINTY` (a fixed plane's POA sensor or power, or
+    the clear sky)."""
+    return GHI_UNCERTAINTY if sky_sensor.main_sky_source(day) == "sensor_ghi" \
         else INVERSION_UNCERTAINTY
 
 

@@ -84,12 +84,7 @@ def sky_source(e: pd.DataFrame) -> tuple[str, str | None]:
     """What most of the daylight minutes of ``e`` (:func:`weather_twin`) rest on:
     ``"sensor"``, ``"fixed_array"`` or ``"clear_sky"``, and the sensor's reading
     (``"poa_irradiance_w_m2"`` on the fixed plane, ``"ghi_w_m2"``) or None."""
-    daylight = e["poa_clear"].to_numpy() > 20.0
-    src = e["sky_source"].to_numpy()[daylight]
-    if src.size == 0:
-        return "clear_sky", None
-    names, counts = np.unique(src, return_counts=True)
-    top = str(names[np.argmax(counts)])
+    top = sky_sensor.main_sky_source(e)
     return {"sensor_poa": ("sensor", "poa_irradiance_w_m2"),
             "sensor_ghi": ("sensor", "ghi_w_m2")}.get(top, (top, None))
 

@@ -134,7 +134,8 @@ def at_plane(site: Site, df: pd.DataFrame, tilt_deg: float, model: str
             dni_extra=irradiance.get_extra_radiation(df.index), albedo=0.2, model=model,
             airmass=atmosphere.get_relative_airmass(zen))["poa_global"]
     out = df.copy()
-    out["poa"] = np.where(sp["apparent_elevation"] > 0, np.nan_to_num(poa.to_numpy()), 0.0)
+    # a missing component leaves the plane's reading missing (NaN), never a dark 0
+    out["poa"] = np.where(sp["apparent_elevation"] > 0, poa.to_numpy(), 0.0)
     return replace(site, arrays={**site.arrays, "fixed": fixed}), out
 
 
@@ -149,6 +150,15 @@ class Logged:
     data: pd.DataFrame  # the measured rows (load())
     temp_air: np.ndarray  # [°C] measured where the file has it, else the site's default
     step_s: int = STEP_S  # the readings' cadence
+
+
+def bridged_gap_s(step_s: int) -> int:
+    """The longest gap between readings bridged for a logger of cadence ``step_s``: two
+    steps, as far as the service can be set to bridge (``energy_max_gap_s`` ≤ 3600 s,
+    backend/settings.py): an hourly logger bridges its own step and no missing hour."""
+    from backend.settings import MAX_ENERGY_GAP_S
+
+    return min(2 * step_s, MAX_ENERGY_GAP_S)
 
 
 def coarser(lg: Logged, step_s: int) -> Logged:
@@ -215,7 +225,7 @@ def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str,
     grid = times.as_unit("s").asi8
 
     def minute(v: np.ndarray) -> np.ndarray:
-        return on_grid(ts, v, grid, 2 * lg.step_s)
+        return on_grid(ts, v, grid, bridged_gap_s(lg.step_s))
 
     n = len(times)
     fixed_w = minute(lg.fixed_power_w) if path == "fixed_array" else np.full(n, np.nan)

@@ -12,7 +12,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from backend.diagnosis.faults import faults_over_days, features_by_day
+from backend.diagnosis.faults import (
+    GHI_UNCERTAINTY,
+    INVERSION_UNCERTAINTY,
+    band_uncertainty,
+    faults_over_days,
+    features_by_day,
+)
 from sim import sky_sensor
 from sim.sites import load_site
 from tests.sim.realistic_sky import logger_days
@@ -109,3 +115,24 @@ def test_the_stuck_fit_prices_orientations_with_the_sites_sky_model(model: str) 
     tilt = (90.0 - day["apparent_elevation"].to_numpy())[None]
     power = _power_at(site, day, tilt, day["solar_azimuth"].to_numpy()[None])[0]
     np.testing.assert_allclose(power, day["tracker_power_w"].to_numpy(), rtol=1e-6)
+
+
+def test_the_band_widens_by_the_instrument_the_days_sky_rests_on() -> None:
+    """faults.band_uncertainty: a day whose daylight sky rests mostly on a GHI pyranometer
+    gets GHI_UNCERTAINTY, any other day INVERSION_UNCERTAINTY — by the same rule the
+    diagnosis reports the day's source with (sim.sky_sensor.main_sky_source), so the two
+    never disagree; the night's minutes do not count."""
+    def day(sources: list[str], night: int = 0) -> pd.DataFrame:
+        return pd.DataFrame({"poa_clear": [0.0] * night + [500.0] * len(sources),
+                             "sky_source": ["sensor_ghi"] * night + sources})
+
+    assert band_uncertainty(day(["sensor_ghi"] * 6 + ["fixed_array"] * 4)) == GHI_UNCERTAINTY
+    assert band_uncertainty(day(["sensor_poa"] * 6 + ["sensor_ghi"] * 4)) \
+        == INVERSION_UNCERTAINTY
+    # three sources: the most common one, as the reported source
+    mixed = day(["sensor_ghi"] * 4 + ["fixed_array"] * 3 + ["clear_sky"] * 3)
+    assert sky_sensor.main_sky_source(mixed) == "sensor_ghi"
+    assert band_uncertainty(mixed) == GHI_UNCERTAINTY
+    # a GHI night before a POA-sensor day
+    assert band_uncertainty(day(["sensor_poa"] * 5, night=20)) == INVERSION_UNCERTAINTY
+    assert GHI_UNCERTAINTY > INVERSION_UNCERTAINTY

@@ -143,7 +143,8 @@ def test_an_hdr_cameras_suns_held_out() -> None:
     frame's brightest point, no clipped disc; the confidence was never fitted on such a
     frame), short side ≤ 960 px, blind. Measured: 12 of 13 visible suns found, 0.084° RMS,
     worst 0.235°; the miss is a small sun whose peak JPEG left at 231, under the saturation
-    gate (docs/validation-vision.md); the 7 overcast frames at most 0.001."""
+    gate (docs/validation-vision.md); the 7 frames without a visible sun (5 overcast, 2 with
+    the sun behind cumulus) at most 0.001."""
     vis, errs, no_sun = 0, [], []
     for lf in hdr_scenes("heldout", 20, max_size_px=960):
         d = detect_sun(lf.frame.image, "robust")
