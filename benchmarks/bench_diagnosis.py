@@ -18,6 +18,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -210,8 +211,6 @@ def sensitivity_lines(fig: Figures, site, fit: dict[str, float]) -> list[str]:
     stamped at their middle, the ground's albedo of old snow (0.6; the site's 0.2 is the
     default), Perez instead of Hay-Davies for both the fixed plane's inversion and the
     tracker's plane (with Perez's own fitted tilt)."""
-    from dataclasses import replace
-
     snow = replace(site, arrays={k: replace(a, albedo=0.6) for k, a in site.arrays.items()})
     perez_fixed = replace(site.arrays["fixed"], surface_tilt=fit["perez_tilt_deg"],
                           surface_azimuth=fit["perez_azimuth_deg"])
@@ -642,6 +641,60 @@ def band_lines(fig: Figures, days_wh: dict[str, dict[str, tuple[float, float, fl
     return lines
 
 
+#: Sites where the sun rises and sets behind the fixed plane in their summer (issue 27:
+#: "any site"): (name, latitude, longitude, time zone, altitude [m], fixed tilt and
+#: azimuth [°], first day); tehuantepec's arrays otherwise.
+ANY_SITES = (
+    ("Golden, Colorado (the RMIS station), June", 39.74, -105.18, "America/Denver", 1828.0,
+     39.0, 180.0, "2026-06-10"),
+    ("Madrid, July", 40.4, -3.7, "Europe/Madrid", 650.0, 30.0, 180.0, "2026-07-01"),
+    ("Freiburg, June", 48.0, 7.85, "Europe/Berlin", 280.0, 30.0, 180.0, "2026-06-10"),
+    ("Alice Springs, December (facing north)", -23.7, 133.88, "Australia/Darwin", 545.0,
+     24.0, 0.0, "2026-12-01"),
+    ("Tehuantepec, May", None, None, None, None, None, None, "2026-05-10"),
+)
+
+
+def any_site_lines(fig: Figures, seeds: range = range(11, 15)) -> list[str]:
+    """The expectation from the fixed array's power on generated held-out days (seeds
+    11–14, 6 days each) at :data:`ANY_SITES`: the largest error of the expected tracker
+    energy on clear and on cloudy days, the cloudy days' RMS, and the days a healthy
+    tracker got a finding of confidence ≥ 0.5."""
+    base = load_site("tehuantepec")
+    lines = ["| site | clear days, largest | cloudy days, largest | cloudy days, RMS | "
+             "healthy days with a finding |", "|---|---|---|---|---|"]
+    for k, (name, lat, lon, tz, alt, tilt, az, first_day) in enumerate(ANY_SITES):
+        site = base if lat is None else replace(
+            base, latitude=lat, longitude=lon, timezone=tz, altitude=alt,
+            arrays={**base.arrays, "fixed": replace(base.arrays["fixed"], surface_tilt=tilt,
+                                                     surface_azimuth=az)})
+        first = pd.Timestamp(first_day, tz=site.timezone)
+        err: dict[str, list[float]] = {"clear": [], "cloudy": []}
+        flagged = 0
+        for seed in seeds:
+            log(f"any site: {name}, seed {seed}")
+            d, e, found = _run(site, first, 6, seed)
+            for j in range(6):
+                sl = slice(j * 1440, (j + 1) * 1440)
+                x = 100 * (e["tracker_power_w"].to_numpy()[sl].sum()
+                           / d.healthy_tracker_power_w[sl].sum() - 1)
+                err["clear" if d.kinds[j] == "clear" else "cloudy"].append(x)
+                flagged += any(f["confidence"] >= 0.5 for f in found[j])
+        c, o = np.abs(err["clear"]), np.abs(err["cloudy"])
+        n = len(seeds) * 6
+        lines.append(
+            f"| {name} | "
+            + fig.add(f"any_site_{k}_clear_max_pct", float(c.max()), "%", f"{c.max():.1f} %",
+                      "≤ 3 %", bool(c.max() <= 3.0)) + " | "
+            + fig.add(f"any_site_{k}_cloudy_max_pct", float(o.max()), "%", f"{o.max():.1f} %",
+                      "≤ 8 %", bool(o.max() <= 8.0)) + " | "
+            + fig.add(f"any_site_{k}_cloudy_rms_pct", float(np.sqrt(np.mean(o**2))), "%",
+                      f"{np.sqrt(np.mean(o**2)):.1f} %") + " | "
+            + fig.add(f"any_site_{k}_flagged_days", flagged, "days", f"{flagged} of {n}",
+                      "none", flagged == 0) + " |")
+    return lines
+
+
 def yaw_loss(fig: Figures) -> list[str]:
     """The beam lost to a 10° pedestal yaw with the normal at the sun's elevation h:
     cos AOI = sin²h + cos²h·cos δ, so 1 − cos AOI = (1 − cos δ)·cos²h (docs/diagnosis.md,
@@ -734,6 +787,10 @@ def main() -> None:
           "band's width, whose coverage here is in-sample unless marked held out):\n")
     for line in real_sky(fig):
         print(line)
+    print("\nAny site: the sun behind the fixed plane at summer dawns and dusks (generated "
+          "held-out skies, seeds 11–14, the fixed array's power):\n")
+    for line in any_site_lines(fig):
+        print(line)
     print("\nWhy a 10° azimuth offset hides (the formula, docs/diagnosis.md):\n")
     for line in yaw_loss(fig):
         print(line)
@@ -750,7 +807,7 @@ CARRIED_NOTE = "_Only the real-sky part"
 def real_sky_only() -> None:
     """The section with its real-sky part re-run (``HELIOTWIN_BENCH_DIAGNOSIS=real_sky`` under
     ``benchmarks/run.py diagnosis``: the whole section takes many minutes on the shared
-    machine), and the two cheap parts after it (the yaw formula, the encoder view); the
+    machine), and the cheap parts after it (any site, the yaw formula, the encoder view); the
     timing and held-out lines before it are carried over, with their figures, from
     RESULTS.md and benchmarks/results.json as the last full run left them, and the section
     says so."""
@@ -769,17 +826,21 @@ def real_sky_only() -> None:
                      if not line.startswith("_")).strip("\n")
     fig = Figures("diagnosis")
     new_lines = real_sky(fig)
+    any_site = any_site_lines(fig)
     yaw, encoder = yaw_loss(fig), encoder_view(fig)
     fig.figures.update({k: v for k, v in old_figs.items()
                         if v.get("section") == "diagnosis" and k not in fig.figures
                         and not k.startswith("diagnosis.rmis_")})
     print("## diagnosis\n")
-    print(CARRIED_NOTE + " and the two after it were re-run here; the lines before "
+    print(CARRIED_NOTE + " and the three after it were re-run here; the lines before "
           "\"Real skies\" are carried over from the last full run (" + full_run + ")._\n")
     print(head)
     print(f"\n{REAL_SKY_HEADING}; NREL RMIS, tests/data/rmis; nothing tuned on them but the "
           "band's width, whose coverage here is in-sample unless marked held out):\n")
     print("\n".join(new_lines))
+    print("\nAny site: the sun behind the fixed plane at summer dawns and dusks (generated "
+          "held-out skies, seeds 11–14, the fixed array's power):\n")
+    print("\n".join(any_site))
     print("\nWhy a 10° azimuth offset hides (the formula, docs/diagnosis.md):\n")
     print("\n".join(yaw))
     print("\nWhat the encoder angles show (the twin, one day each):\n")

@@ -67,8 +67,10 @@ MAX_DAYS = 400
 #: ``partial``; 6: the band ±4.5 % beyond the two skies, from the real-sky days; 7: the
 #: measured wind speed, where a logger reads one, in the cells' temperature; 8: the stuck
 #: fit's power under the site's transposition model, not Hay-Davies always; 9: a sky from a
-#: GHI pyranometer alone gets its own, wider band, faults.GHI_UNCERTAINTY).
-CACHE_VERSION = 9
+#: GHI pyranometer alone gets its own, wider band, faults.GHI_UNCERTAINTY; 10: the beam where
+#: the sun is behind or grazing the fixed plane capped by the minutes around,
+#: sky_sensor._unseen_beam_capped).
+CACHE_VERSION = 10
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
