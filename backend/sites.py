@@ -35,6 +35,7 @@ from backend.measurements.parse import Calibration
 from backend.storage.tables import (
     SOURCE_CODES,
     ArrayRow,
+    DiagnosisDay,
     Measurement,
     MeasurementRollup,
     SiteRow,
@@ -91,8 +92,9 @@ def _kind(cfg: object) -> str:
 
 
 def drop_twin_cache(conn: Connection, site_id: str) -> int:
-    """Delete the stored twin readings, twin rollups and twin coverage of ``site_id``
-    (its config changed: they were simulated with the old one). Returns readings dropped."""
+    """Delete the stored twin readings, twin rollups and twin coverage of ``site_id``, and
+    its cached diagnosis days (its config changed: they were computed with the old one — a
+    tilt, a module, ``readings_stamped``). Returns twin readings dropped."""
     arrays = select(ArrayRow.id).where(ArrayRow.site_id == site_id).scalar_subquery()
     n = conn.execute(delete(Measurement).where(
         Measurement.array_id.in_(arrays), Measurement.source == SOURCE_CODES["twin"])).rowcount
@@ -100,6 +102,7 @@ def drop_twin_cache(conn: Connection, site_id: str) -> int:
         MeasurementRollup.array_id.in_(arrays),
         MeasurementRollup.source == SOURCE_CODES["twin"]))
     conn.execute(delete(TwinCoverage).where(TwinCoverage.site_id == site_id))
+    conn.execute(delete(DiagnosisDay).where(DiagnosisDay.site_id == site_id))
     return int(n or 0)
 
 

@@ -107,6 +107,32 @@ def sampled_energy_wh(power_w: Any, step_s: float) -> float:
     return energy_wh(np.arange(p.size, dtype=np.float64) * float(step_s), p, 1.5 * float(step_s))
 
 
+#: What a reading's timestamp marks (a site's ``readings_stamped``): the instant its value
+#: belongs to, or the end / the start of the interval it averages.
+READING_STAMPS = ("instant", "interval_end", "interval_start")
+
+
+def interval_middles(ts_s: Any, stamped: str, max_gap_s: float) -> np.ndarray:
+    """The instants [s] the readings stamped ``ts_s`` (sorted) stand for: as stamped for
+    ``"instant"``; for a mean stamped at the end (start) of its interval, the interval's
+    middle — half the spacing to the reading before (after) earlier (later), the series'
+    median spacing where that spacing is over ``max_gap_s`` (the first reading after a
+    gap). Where the sun was while a logger averaged is the middle of its interval: an
+    hourly mean stamped at its end sits 30 minutes after the sun it saw, and the diagnosis
+    matched the morning's sky to a higher sun (docs/diagnosis.md, "Cadence")."""
+    ts = np.asarray(ts_s, np.float64).reshape(-1)
+    if stamped not in READING_STAMPS:
+        raise ValueError(f"stamped must be one of {READING_STAMPS}; got {stamped!r}")
+    if stamped == "instant" or ts.size < 2:
+        return ts
+    step = np.diff(ts)
+    typical = float(np.median(step[step <= max_gap_s])) if (step <= max_gap_s).any() else 0.0
+    step = np.where(step <= max_gap_s, step, typical)
+    if stamped == "interval_end":
+        return ts - 0.5 * np.concatenate(([typical], step))
+    return ts + 0.5 * np.concatenate((step, [typical]))
+
+
 def on_grid(ts_s: Any, values: Any, grid_s: Any, max_gap_s: float) -> np.ndarray:
     """Values of a series at the times ``grid_s`` [s], by the energy rule's line.
 

@@ -236,6 +236,12 @@ class SiteConfig(BaseModel):
         "[m s⁻¹] wind speed of clear-sky runs. Default 1 (assumption)."))
     transposition_model: Literal["haydavies", "perez", "isotropic"] = Field(
         "haydavies", description="pvlib POA transposition model. Default 'haydavies'.")
+    readings_stamped: Literal["instant", "interval_end", "interval_start"] = Field(
+        "instant", description=(
+            "What the loggers' timestamps mark: the instant of the value, or the end or the "
+            "start of the interval a value averages (a logger storing hourly means at the "
+            "end of each hour: 'interval_end'). The diagnosis matches each reading to the "
+            "sun at its interval's middle. Default 'instant'."))
     tracker: Tracker = Field(default_factory=Tracker,  # type: ignore[arg-type]
                              description="The dual-axis tracker.")
     arrays: dict[str, Array] = Field(default_factory=dict, description=(

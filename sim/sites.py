@@ -85,6 +85,7 @@ class Site:
     temp_air: float = 25.0
     wind_speed: float = 1.0
     transposition_model: str = "haydavies"
+    readings_stamped: str = "instant"  # sim.energy.READING_STAMPS
     drives: dict[str, AxisDrive] = field(default_factory=lambda: {
         "azimuth": AxisDrive.azimuth_default(), "elevation": AxisDrive.elevation_default()})
     inertia: TrackerInertia = field(default_factory=TrackerInertia.seed002)
@@ -105,6 +106,7 @@ class Site:
             "temp_air_c": self.temp_air,
             "wind_speed_m_s": self.wind_speed,
             "transposition_model": self.transposition_model,
+            "readings_stamped": self.readings_stamped,
             "tracker": {
                 **{k: getattr(self.tracker, k) for k in _TRACKER_KEYS},
                 "drives": {axis: dataclasses.asdict(d) for axis, d in self.drives.items()},
@@ -169,6 +171,7 @@ def site_from_dict(d: dict[str, Any], where: str = "site") -> Site:
         temp_air=cfg.temp_air_c,
         wind_speed=cfg.wind_speed_m_s,
         transposition_model=cfg.transposition_model,
+        readings_stamped=cfg.readings_stamped,
         drives=drives,
         inertia=inertia,
         placements=placements,

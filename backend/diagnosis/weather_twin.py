@@ -23,7 +23,7 @@ from backend.measurements.fields import SENSOR_NAMES
 from backend.measurements.queries import iso_utc, raw_rows
 from backend.sites import SiteInfo
 from sim import sky_sensor
-from sim.energy import energy_per_period_wh, gain_pct, on_grid
+from sim.energy import energy_per_period_wh, gain_pct, interval_middles, on_grid
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -31,18 +31,21 @@ if TYPE_CHECKING:
 MAX_DAYS = 31
 
 
-def minute_grid(conn: Connection, array_id: int, t0: int, t1: int, max_gap_s: int
-                ) -> tuple[np.ndarray, np.ndarray]:
+def minute_grid(conn: Connection, array_id: int, t0: int, t1: int, max_gap_s: int,
+                stamped: str = "instant") -> tuple[np.ndarray, np.ndarray]:
     """Measured power [W], shape (n,), and the :data:`SENSOR_NAMES` columns, shape
     (n, k), on the minute grid of ``[t0, t1)`` by the energy rule's line
     (:func:`sim.energy.on_grid`): linear between readings at most ``max_gap_s`` apart,
     so a 5- or 15-minute logger's minutes between readings are interpolated, never
-    missing or zero; NaN outside the readings and inside a longer gap."""
+    missing or zero; NaN outside the readings and inside a longer gap. Each reading
+    stands at its interval's middle when the site's readings are means stamped at an
+    interval's end or start (``stamped``, :func:`sim.energy.interval_middles`)."""
     n = (t1 - t0) // 60
     rows = raw_rows(conn, array_id, 0, t0 - max_gap_s, t1 + max_gap_s, sensors=True)
     grid = t0 + 60 * np.arange(n, dtype=np.int64)
-    power = on_grid(rows[:, 0], rows[:, 3], grid, max_gap_s)
-    sensors = on_grid(rows[:, 0], rows[:, 4:], grid, max_gap_s)
+    ts = interval_middles(rows[:, 0], stamped, max_gap_s)
+    power = on_grid(ts, rows[:, 3], grid, max_gap_s)
+    sensors = on_grid(ts, rows[:, 4:], grid, max_gap_s)
     return power, sensors
 
 
@@ -73,10 +76,11 @@ def site_minutes(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int
     tracker, fixed = info.array_of_kind("tracker"), info.array_of_kind("fixed")
     assert fixed is not None
     gap = ctx.settings.ingest.energy_max_gap_s
+    stamped = info.site.readings_stamped
     with ctx.engine.connect() as conn:
-        fx, fx_s = minute_grid(conn, fixed.array_id, t0, t1, gap)
+        fx, fx_s = minute_grid(conn, fixed.array_id, t0, t1, gap, stamped)
         tr, tr_s = (np.full(fx.size, np.nan), None) if tracker is None \
-            else minute_grid(conn, tracker.array_id, t0, t1, gap)
+            else minute_grid(conn, tracker.array_id, t0, t1, gap, stamped)
     return tr, fx, sky_sensors(fx_s, tr_s)
 
 

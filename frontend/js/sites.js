@@ -5,7 +5,8 @@ import { h } from "./ui.js";
 let st = null;
 const $ = (id) => document.getElementById(id);
 const FIELDS = [["site-id", "site_id"], ["site-name", "name"], ["site-lat", "latitude_deg"],
-  ["site-lon", "longitude_deg"], ["site-alt", "altitude_m"], ["site-tz-input", "timezone"]];
+  ["site-lon", "longitude_deg"], ["site-alt", "altitude_m"], ["site-tz-input", "timezone"],
+  ["site-stamped", "readings_stamped"]];
 
 function result(text, kind = "ok") {
   $("site-result").replaceChildren(h("p", { class: kind === "ok" ? "ok" : "error" }, text));

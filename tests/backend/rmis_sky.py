@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 from sim import pv, sky, sky_sensor, twin
-from sim.energy import energy_wh, on_grid
+from sim.energy import energy_wh, interval_middles, on_grid
 from sim.sites import Site, site_from_dict
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "rmis"
@@ -221,7 +221,9 @@ def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str,
     the site's default (a logger without one; the truth's cells keep the measured wind).
     ``second_sky=False``: the main decomposition only (no ``tracker_power_alt_w``)."""
     times = minutes(day)
-    ts = lg.times.as_unit("s").asi8
+    # each reading where the site's stamp convention puts it (sim.energy.interval_middles)
+    ts = interval_middles(lg.times.as_unit("s").asi8, site.readings_stamped,
+                          bridged_gap_s(lg.step_s))
     grid = times.as_unit("s").asi8
 
     def minute(v: np.ndarray) -> np.ndarray:

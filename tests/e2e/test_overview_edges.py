@@ -179,6 +179,9 @@ def test_a_site_made_in_the_form_joins_the_built_in_ones(pg, edge_server: Server
     pg.fill("#site-lat", "100")
     pg.fill("#site-lon", "-99.13")
     pg.fill("#site-tz-input", "America/Mexico_City")
+    assert pg.input_value("#site-stamped") == "instant"  # the selected site's, filled in
+    pg.select_option("#site-stamped", "interval_end")  # an hourly logger's means
+    assert '"readings_stamped": "interval_end"' in pg.input_value("#site-json")
     pg.fill("#site-token", ADMIN)
     pg.click("#site-save")
     error = pg.locator("[data-testid=site-result] .error")
@@ -192,6 +195,7 @@ def test_a_site_made_in_the_form_joins_the_built_in_ones(pg, edge_server: Server
     assert pg.input_value("#site-select") == "hand-made"
     site = _api(edge_server, "/api/v1/sites/hand-made")
     assert (site["latitude_deg"], site["origin"]) == (19.43, "user")
+    assert site["readings_stamped"] == "interval_end"
 
 
 # -- the 4-week chart's gain axis (issue 22.4): from zero, round ticks, whole days only --

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.energy import energy_wh, gain_pct, on_grid
+from sim.energy import energy_wh, gain_pct, interval_middles, on_grid
 
 
 def _irregular(seed: int, n: int = 300) -> tuple[np.ndarray, np.ndarray]:
@@ -103,3 +103,19 @@ def test_gain() -> None:
     assert gain_pct(None, 1000.0) is None
     assert gain_pct(1000.0, 0.0) is None
     assert gain_pct(1000.0, float("nan")) is None
+
+
+def test_interval_middles_put_each_mean_at_its_intervals_middle() -> None:
+    """sim.energy.interval_middles: instants stay; a mean stamped at its interval's end
+    moves back half the spacing to the reading before, one stamped at the start forward
+    half the spacing to the one after; across a gap longer than max_gap_s (and for the
+    first or last reading) the series' median spacing stands in."""
+    ts = np.array([0.0, 3600.0, 7200.0, 10800.0, 30000.0, 33600.0])
+    assert np.array_equal(interval_middles(ts, "instant", 3600), ts)
+    np.testing.assert_allclose(interval_middles(ts, "interval_end", 3600),
+                               [-1800, 1800, 5400, 9000, 28200, 31800])
+    np.testing.assert_allclose(interval_middles(ts, "interval_start", 3600),
+                               [1800, 5400, 9000, 12600, 31800, 35400])
+    assert interval_middles(ts[:1], "interval_end", 3600).tolist() == [0.0]
+    with pytest.raises(ValueError, match="stamped"):
+        interval_middles(ts, "middle", 3600)

@@ -102,6 +102,8 @@ class SiteRead(BaseModel):
     temp_air_c: float
     wind_speed_m_s: float
     transposition_model: str
+    readings_stamped: str = Field("instant", description=(
+        "what the loggers' timestamps mark: 'instant', 'interval_end' or 'interval_start'"))
     tracker: TrackerGeometryRead
     arrays: dict[str, ArrayRead]
     source: str
