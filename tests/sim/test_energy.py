@@ -119,3 +119,10 @@ def test_interval_middles_put_each_mean_at_its_intervals_middle() -> None:
     assert interval_middles(ts[:1], "interval_end", 3600).tolist() == [0.0]
     with pytest.raises(ValueError, match="stamped"):
         interval_middles(ts, "middle", 3600)
+    # the site format offers exactly these (sim.site_config.SiteConfig.readings_stamped)
+    from typing import get_args
+
+    from sim.energy import READING_STAMPS
+    from sim.site_config import SiteConfig
+
+    assert get_args(SiteConfig.model_fields["readings_stamped"].annotation) == READING_STAMPS
