@@ -116,18 +116,20 @@ def interval_middles(ts_s: Any, stamped: str, max_gap_s: float) -> np.ndarray:
     """The instants [s] the readings stamped ``ts_s`` (sorted) stand for: as stamped for
     ``"instant"``; for a mean stamped at the end (start) of its interval, the interval's
     middle — half the spacing to the reading before (after) earlier (later), the series'
-    median spacing where that spacing is over ``max_gap_s`` (the first reading after a
-    gap). Where the sun was while a logger averaged is the middle of its interval: an
-    hourly mean stamped at its end sits 30 minutes after the sun it saw, and the diagnosis
-    matched the morning's sky to a higher sun (docs/diagnosis.md, "Cadence")."""
+    median bridged spacing where that spacing is over ``max_gap_s`` (the first reading
+    after a gap; the median of all spacings when none is bridged). Where the sun was while
+    a logger averaged is the middle of its interval: an hourly mean stamped at its end sits
+    30 minutes after the sun it saw, and the diagnosis matched the morning's sky to a
+    higher sun (docs/diagnosis.md, "Cadence")."""
     ts = np.asarray(ts_s, np.float64).reshape(-1)
     if stamped not in READING_STAMPS:
         raise ValueError(f"stamped must be one of {READING_STAMPS}; got {stamped!r}")
     if stamped == "instant" or ts.size < 2:
         return ts
     step = np.diff(ts)
-    typical = float(np.median(step[step <= max_gap_s])) if (step <= max_gap_s).any() else 0.0
-    step = np.where(step <= max_gap_s, step, typical)
+    bridged = step <= max_gap_s
+    typical = float(np.median(step[bridged] if bridged.any() else step))
+    step = np.where(bridged, step, typical)
     if stamped == "interval_end":
         return ts - 0.5 * np.concatenate(([typical], step))
     return ts + 0.5 * np.concatenate((step, [typical]))

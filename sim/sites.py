@@ -106,7 +106,10 @@ class Site:
             "temp_air_c": self.temp_air,
             "wind_speed_m_s": self.wind_speed,
             "transposition_model": self.transposition_model,
-            "readings_stamped": self.readings_stamped,
+            # only when set: the configs stored before the key are unchanged by it (a
+            # changed config drops the site's cached twin, backend.sites.sync_sites)
+            **({"readings_stamped": self.readings_stamped}
+               if self.readings_stamped != "instant" else {}),
             "tracker": {
                 **{k: getattr(self.tracker, k) for k in _TRACKER_KEYS},
                 "drives": {axis: dataclasses.asdict(d) for axis, d in self.drives.items()},

@@ -295,7 +295,7 @@ def _unseen_beam_capped(dni: np.ndarray, clear: pd.DataFrame, seen: np.ndarray,
     k_b = np.divide(dni, dni_clear, out=np.zeros(dni.size), where=dni_clear > 0)
     around = pd.Series(np.where(seen, k_b, np.nan)).rolling(61, center=True, min_periods=1)
     cap = around.mean().to_numpy()[near] * dni_clear
-    return np.where(up & (share < BEAM_SHARE_SPLIT), np.minimum(dni, cap), dni)
+    return np.where(up & ~seen & (share < BEAM_SHARE_SPLIT), np.minimum(dni, cap), dni)
 
 
 def _closure(poa: np.ndarray, dni: np.ndarray, clear: pd.DataFrame, site: Site,

@@ -9,11 +9,11 @@ performance ratio, gains and the day's fault features
 (:func:`backend.diagnosis.faults.day_features`). Each day's result is cached in
 ``diagnosis_days`` (written through the one writer) and deleted by the writer when
 readings of that day arrive, and ignored when it was computed by another version of this
-code (:data:`CACHE_VERSION`); the faults across days (``since``, steps) are
-recomputed from the cached days on every request. A day not yet over (``complete``
-false: today, or a day to come) is judged on its minutes before now only — the
-minutes still to come are not missing readings — with no shape fault (half a day
-does not show one), and it is never cached.
+code (:data:`CACHE_VERSION`) or under another config of the site (:func:`site_key`); the
+faults across days (``since``, steps) are recomputed from the cached days on every
+request. A day not yet over (``complete`` false: today, or a day to come) is judged on its
+minutes before now only — the minutes still to come are not missing readings — with no
+shape fault (half a day does not show one), and it is never cached.
 
 ``expected_wh_low``/``expected_wh_high``: the spread of the two decompositions of the
 same POA (GTI-DIRINT, clear-sky ratio + Erbs) widened by
@@ -29,6 +29,7 @@ history start that changes its answer is computed again.
 from __future__ import annotations
 
 import datetime as dt
+import hashlib
 import math
 import time
 from typing import TYPE_CHECKING, Any
@@ -54,6 +55,7 @@ from backend.sites import SiteInfo
 from backend.storage.tables import SOURCE_CODES, DiagnosisDay, Measurement
 from sim import sky_sensor
 from sim.energy import energy_wh, gain_pct
+from sim.sites import Site
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -69,8 +71,9 @@ MAX_DAYS = 400
 #: fit's power under the site's transposition model, not Hay-Davies always; 9: a sky from a
 #: GHI pyranometer alone gets its own, wider band, faults.GHI_UNCERTAINTY; 10: the beam where
 #: the sun is behind or grazing the fixed plane capped by the minutes around,
-#: sky_sensor._unseen_beam_capped).
-CACHE_VERSION = 10
+#: sky_sensor._unseen_beam_capped; 11: each cached day keeps its site config's digest,
+#: site_key).
+CACHE_VERSION = 11
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
@@ -84,11 +87,22 @@ def history_start_s(conn: Connection, array_id: int) -> int | None:
     return None if value is None else int(value)
 
 
+def site_key(site: Site) -> str:
+    """A digest of the site's whole config (``Site.to_dict``), kept with each cached day: a
+    day computed under another config is computed again. ``backend.sites.drop_twin_cache``
+    deletes a changed site's cached days, but a request that began under the old config can
+    store its days after that, and a site file edited while the service runs is read again
+    without it."""
+    return hashlib.sha256(orjson.dumps(site.to_dict(),
+                                       option=orjson.OPT_SORT_KEYS)).hexdigest()[:16]
+
+
 def _cache_usable(payload: dict[str, Any], day_start_s: int, day_end_s: int,
-                  first_s: int | None) -> bool:
-    """A cached day is this version's and its history start gives the same answer: the
-    start it was computed with and today's lie on the same side of the whole day."""
-    if payload.get("cache_version") != CACHE_VERSION:
+                  first_s: int | None, site: str) -> bool:
+    """A cached day is this version's, of the site's config as it is now (``site``,
+    :func:`site_key`), and its history start gives the same answer: the start it was
+    computed with and today's lie on the same side of the whole day."""
+    if payload.get("cache_version") != CACHE_VERSION or payload.get("site_key") != site:
         return False
     if "history_start_s" not in payload:  # written without one (by hand): the version rules
         return True
@@ -274,9 +288,10 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
         first_s = None if tracker is None or not past else history_start_s(
             conn, tracker.array_id)
         obs = read_observations(conn, info, edges_s[0], min(edges_s[-1], math.ceil(now)))
+    key = site_key(info.site)
     cached = {r[0]: p for r in rows
               if r[1] == int(edges[starts.index(r[0]) + 1].timestamp())
-              and _cache_usable(p := orjson.loads(r[2]), r[0], r[1], first_s)}
+              and _cache_usable(p := orjson.loads(r[2]), r[0], r[1], first_s, key)}
     # only days that are over are cached; days to come are not computed
     uncached_days = [i for i, s in enumerate(starts) if s not in cached and not future[i]]
     if max_computed_days is not None and len(uncached_days) > max_computed_days:
@@ -287,7 +302,8 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
     fresh = _compute(ctx, info, edges, uncached_days, now, first_s) if uncached_days else {}
     values = [{"site_id": info.site_id, "day_start_s": starts[i],
                "day_end_s": int(edges[i + 1].timestamp()),
-               "payload_json": orjson.dumps({**p, "cache_version": CACHE_VERSION}).decode()}
+               "payload_json": orjson.dumps({**p, "cache_version": CACHE_VERSION,
+                                             "site_key": key}).decode()}
               for i, p in fresh.items() if p["complete"]]
     if values:
 
@@ -304,7 +320,7 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
     out_days = []
     for d, f in zip(days, found, strict=True):
         d = {k: v for k, v in d.items()
-             if k not in ("features", "cache_version", "history_start_s")}
+             if k not in ("features", "cache_version", "site_key", "history_start_s")}
         d.setdefault("partial", not d.get("complete", True))
         d["status"] = "complete" if d.get("complete", True) else "in_progress"
         d["faults"] = f

@@ -41,7 +41,9 @@ def minute_grid(conn: Connection, array_id: int, t0: int, t1: int, max_gap_s: in
     stands at its interval's middle when the site's readings are means stamped at an
     interval's end or start (``stamped``, :func:`sim.energy.interval_middles`)."""
     n = (t1 - t0) // 60
-    rows = raw_rows(conn, array_id, 0, t0 - max_gap_s, t1 + max_gap_s, sensors=True)
+    # a mean stamped at an interval's edge stands up to half an interval from its stamp
+    reach = max_gap_s if stamped == "instant" else 2 * max_gap_s
+    rows = raw_rows(conn, array_id, 0, t0 - reach, t1 + reach, sensors=True)
     grid = t0 + 60 * np.arange(n, dtype=np.int64)
     ts = interval_middles(rows[:, 0], stamped, max_gap_s)
     power = on_grid(ts, rows[:, 3], grid, max_gap_s)

@@ -422,10 +422,11 @@ def _inject(db_url: str, day: dt.date, payload: dict) -> None:
     """Store a diagnosis of ``day`` in the cache as the service would (diagnosis_days)."""
     from sqlalchemy import delete, insert
 
-    from backend.diagnosis.service import CACHE_VERSION
+    from backend.diagnosis.service import CACHE_VERSION, site_key
     from backend.settings import get_settings
     from backend.storage.engine import make_engine
     from backend.storage.tables import DiagnosisDay
+    from sim.sites import load_site
 
     start = dt.datetime(day.year, day.month, day.day, tzinfo=TZ)
     nxt = day + dt.timedelta(days=1)
@@ -436,8 +437,8 @@ def _inject(db_url: str, day: dt.date, payload: dict) -> None:
             conn.execute(delete(DiagnosisDay).where(DiagnosisDay.site_id == SITE))
             conn.execute(insert(DiagnosisDay).values(
                 site_id=SITE, day_start_s=int(start.timestamp()), day_end_s=int(end.timestamp()),
-                payload_json=orjson.dumps({**payload,
-                                           "cache_version": CACHE_VERSION}).decode()))
+                payload_json=orjson.dumps({**payload, "cache_version": CACHE_VERSION,
+                                           "site_key": site_key(load_site(SITE))}).decode()))
     finally:
         engine.dispose()
 

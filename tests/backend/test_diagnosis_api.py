@@ -160,7 +160,7 @@ def test_a_cached_day_of_another_version_is_computed_again(client, live_server) 
     import orjson
     import sqlalchemy as sa
 
-    from backend.diagnosis.service import CACHE_VERSION
+    from backend.diagnosis.service import CACHE_VERSION, site_key
 
     site = load_site("tehuantepec")
     first = "2025-09-15"
@@ -176,7 +176,8 @@ def test_a_cached_day_of_another_version_is_computed_again(client, live_server) 
     where = (table.c.site_id == "tehuantepec") & (table.c.day_start_s == start_s)
 
     def cache(version: int) -> None:
-        day = {**body["days"][0], "features": {}, "cache_version": version}
+        day = {**body["days"][0], "features": {}, "cache_version": version,
+               "site_key": site_key(site)}
         day["tracker"] = {**day["tracker"], "expected_wh": -1.0}  # a marker
         with engine.begin() as conn:
             conn.execute(sa.update(table).where(where).values(

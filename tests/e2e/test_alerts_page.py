@@ -67,10 +67,11 @@ def _stuck_day(day: dt.date) -> dict:
 def _inject(db_url: str, day: dt.date, payload: dict) -> None:
     from sqlalchemy import insert
 
-    from backend.diagnosis.service import CACHE_VERSION
+    from backend.diagnosis.service import CACHE_VERSION, site_key
     from backend.settings import get_settings
     from backend.storage.engine import make_engine
     from backend.storage.tables import DiagnosisDay
+    from sim.sites import load_site
 
     nxt = day + dt.timedelta(days=1)
     start = dt.datetime(day.year, day.month, day.day, tzinfo=TZ)
@@ -80,8 +81,8 @@ def _inject(db_url: str, day: dt.date, payload: dict) -> None:
         with engine.begin() as conn:
             conn.execute(insert(DiagnosisDay).values(
                 site_id=SITE, day_start_s=int(start.timestamp()), day_end_s=int(end.timestamp()),
-                payload_json=orjson.dumps({**payload,
-                                           "cache_version": CACHE_VERSION}).decode()))
+                payload_json=orjson.dumps({**payload, "cache_version": CACHE_VERSION,
+                                           "site_key": site_key(load_site(SITE))}).decode()))
     finally:
         engine.dispose()
 

@@ -179,7 +179,7 @@ def test_a_site_made_in_the_form_joins_the_built_in_ones(pg, edge_server: Server
     pg.fill("#site-lat", "100")
     pg.fill("#site-lon", "-99.13")
     pg.fill("#site-tz-input", "America/Mexico_City")
-    assert pg.input_value("#site-stamped") == "instant"  # the selected site's, filled in
+    assert pg.input_value("#site-stamped") == ""  # the selected site's: the default
     pg.select_option("#site-stamped", "interval_end")  # an hourly logger's means
     assert '"readings_stamped": "interval_end"' in pg.input_value("#site-json")
     pg.fill("#site-token", ADMIN)
