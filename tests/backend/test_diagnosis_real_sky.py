@@ -35,6 +35,25 @@ DAYS = ("2022-01-03", "2022-01-04")
 LIMITS = {"poa_irradiance_w_m2": (0.015, 0.025), "ghi_w_m2": (0.245, 0.01)}
 
 
+def _readings(lg: rmis_sky.Logged, sensor: str) -> list[dict]:
+    """What the two loggers post of a logged day: the tracker's power; the fixed array's
+    power, the sky instrument ``sensor`` (the reading's field: the fixed plane's POA or the
+    GHI), the air temperature and, where the file has one, the station's wind speed."""
+    column = "poa" if sensor == "poa_irradiance_w_m2" else "ghi"
+    wind = lg.data["wind_speed"].to_numpy()
+    out = []
+    for k, t in enumerate(lg.times):
+        out.append({"ts": t.isoformat(), "array": "tracker",
+                    "power_w": round(float(lg.tracker_power_w[k]), 2)})
+        out.append({"ts": t.isoformat(), "array": "fixed",
+                    "power_w": round(float(lg.fixed_power_w[k]), 2),
+                    sensor: round(float(lg.data[column].iloc[k]), 2),
+                    "temp_air_c": round(float(lg.temp_air[k]), 2)})
+        if np.isfinite(wind[k]):  # the station's anemometer, where the file has it
+            out[-1]["wind_speed_m_s"] = round(float(wind[k]), 2)
+    return out
+
+
 @pytest.fixture(scope="module", params=sorted(LIMITS))
 def diagnosed(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
               ) -> Iterator[tuple[dict, dict, str]]:
@@ -52,21 +71,8 @@ def diagnosed(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathF
         r = client.put(BASE, json=config, headers={"Authorization": f"Bearer {ADMIN}"})
         assert r.status_code == 201, r.text
         token = server.token(SITE)
-        readings = []
-        for date in DAYS:
-            lg = rmis_sky.logged_day(site, df, pd.Timestamp(date, tz=site.timezone))
-            wind = lg.data["wind_speed"].to_numpy()
-            for k, t in enumerate(lg.times):
-                ts = t.isoformat()
-                readings.append({"ts": ts, "array": "tracker",
-                                 "power_w": round(float(lg.tracker_power_w[k]), 2)})
-                sky = lg.data["poa" if sensor == "poa_irradiance_w_m2" else "ghi"].iloc[k]
-                readings.append({"ts": ts, "array": "fixed",
-                                 "power_w": round(float(lg.fixed_power_w[k]), 2),
-                                 sensor: round(float(sky), 2),
-                                 "temp_air_c": round(float(lg.temp_air[k]), 2)})
-                if np.isfinite(wind[k]):  # the station's anemometer, where the file has it
-                    readings[-1]["wind_speed_m_s"] = round(float(wind[k]), 2)
+        readings = [reading for date in DAYS for reading in _readings(
+            rmis_sky.logged_day(site, df, pd.Timestamp(date, tz=site.timezone)), sensor)]
         r = client.post(f"{BASE}/measurements", json={"readings": readings},
                         headers={"Authorization": f"Bearer {token}"})
         assert r.status_code == 200, r.text
@@ -172,14 +178,7 @@ def test_an_hourly_loggers_end_stamped_means_with_the_sites_stamp_convention(
     site = rmis_sky.station_site()
     day = pd.Timestamp("2019-02-01", tz=site.timezone)
     lg = rmis_sky.coarser(rmis_sky.logged_day(site, rmis_sky.load(), day), 3600)
-    readings = []
-    for k, t in enumerate(lg.times):
-        readings.append({"ts": t.isoformat(), "array": "tracker",
-                         "power_w": round(float(lg.tracker_power_w[k]), 2)})
-        readings.append({"ts": t.isoformat(), "array": "fixed",
-                         "power_w": round(float(lg.fixed_power_w[k]), 2),
-                         "poa_irradiance_w_m2": round(float(lg.data["poa"].iloc[k]), 2),
-                         "temp_air_c": round(float(lg.temp_air[k]), 2)})
+    readings = _readings(lg, "poa_irradiance_w_m2")  # the 2019 file has no wind
     config = json.loads((rmis_sky.DATA / "rmis_golden.json").read_text())
     err = {}
     with InProcessServer(db.url, extra_env={"HELIOTWIN_SITES_DIR": str(tmp_path / "sites"),
