@@ -383,19 +383,19 @@ def cadence_lines(fig: Figures, site, df: pd.DataFrame) -> list[str]:
     set to ``interval_end``; the expectation and the truth over the minutes the readings
     cover (:mod:`sim.energy`'s rule, as the service's ``matched``): the expected tracker
     energy's error per day [%] and the largest on clear and on cloudy days."""
-    lines = ["| cadence | " + " | ".join(d.date().isoformat()[2:]
-                                          for d in rmis_sky.local_days(site, df))
+    # each day logged once (the PV model at the measured irradiance), for every cadence
+    days = [(day, lg, rmis_sky.sky_kind(site, lg)[0]) for day in rmis_sky.local_days(site, df)
+            for lg in (rmis_sky.logged_day(site, df, day),)]
+    lines = ["| cadence | " + " | ".join(d.date().isoformat()[2:] for d, _, _ in days)
              + " | clear days, largest | cloudy days, largest |",
-             "|---|" + "---|" * (len(rmis_sky.local_days(site, df)) + 2)]
+             "|---|" + "---|" * (len(days) + 2)]
     for step, stamped in [(s, "instant") for s in CADENCES_S] + [(3600, "interval_end")]:
         log(f"real sky at {step // 60} min, readings stamped {stamped}")
         at = replace(site, readings_stamped=stamped)
         tag = f"{step // 60}min" + ("" if stamped == "instant" else f"_{stamped}")
         cells, worst = [], {"clear": 0.0, "cloudy": 0.0}
-        for day in rmis_sky.local_days(site, df):
-            lg = rmis_sky.logged_day(site, df, day)
-            kind, _ = rmis_sky.sky_kind(site, lg)
-            lg = rmis_sky.coarser(lg, step) if step != rmis_sky.STEP_S else lg
+        for day, logged, kind in days:
+            lg = rmis_sky.coarser(logged, step) if step != rmis_sky.STEP_S else logged
             e = rmis_sky.expectation(at, lg, day, "poa_sensor", second_sky=False)
             # as the service's performance ratio: the tracker's energy by the energy rule
             # (its /energy figure) against the expectation over the minutes its readings
