@@ -56,6 +56,9 @@ SOILING_MIN_DAYS = 7  # a decline needs a week of days to be told from noise
 SOILING_MIN_PCT_PER_DAY = 0.1  # slower declines are not named [% per day]
 SOILING_MIN_T = 3.0  # slope over its standard error (seeds 3–4: 3.4 and 5.2 at 0.5 %/day)
 SOILING_MIN_TOTAL = 0.02  # … and at least 2 % lost over the declining days
+#: A tracker whose mean power is under this share of the expected has no day shape to fit
+#: (the residuals divide by its mean): its day is judged by its energy alone [-]
+DEAD_SHARE = 0.02
 DROPOUT_MIN = 30  # daylight minutes without a tracker reading that make a dropout day
 #: Relative widening of the expected band on each side [-]: the sky's own error beyond the
 #: spread of the two decompositions. 3 % held every generated day (docs/diagnosis.md); on
@@ -182,6 +185,11 @@ def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
     m = measured_w[use]
     e = day["tracker_power_w"].to_numpy()
     s0, r0 = _fit(m, e[use])
+    if not float(np.mean(m)) > DEAD_SHARE * float(np.mean(e[use])):
+        # a tracker making (next to) nothing — a tripped breaker or inverter, the logger
+        # still reading 0 W — has no shape to fit; its day is an underperformance alone
+        out["scale"] = s0
+        return out
     clear = float(np.nanmean(day["clearness"].to_numpy()[daylight])) if daylight.any() else 0.0
     out.update(scale=s0, residual=r0, clearness=clear)
     if clear < MIN_CLEARNESS or r0 < HEALTHY_RESIDUAL:
@@ -276,7 +284,12 @@ def _shape_fault(f: dict[str, Any]) -> tuple[str, float] | None:
     if "stuck" not in f:
         return None
     r0 = f["residual"]
-    kind = min(("stuck", "azimuth_offset", "clock_offset"), key=lambda k: f[k]["residual"])
+    # an explanation without a residual (a cached JSON null: inf, nothing to fit) is out
+    fitted = [k for k in ("stuck", "azimuth_offset", "clock_offset")
+              if f[k]["residual"] is not None and np.isfinite(f[k]["residual"])]
+    if not fitted:
+        return None
+    kind = min(fitted, key=lambda k: f[k]["residual"])
     ratio = f[kind]["residual"] / r0
     if ratio > FIT_RATIO:
         return None

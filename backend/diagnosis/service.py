@@ -72,8 +72,8 @@ MAX_DAYS = 400
 #: GHI pyranometer alone gets its own, wider band, faults.GHI_UNCERTAINTY; 10: the beam where
 #: the sun is behind or grazing the fixed plane capped by the minutes around,
 #: sky_sensor._unseen_beam_capped; 11: each cached day keeps its site config's digest,
-#: site_key).
-CACHE_VERSION = 11
+#: site_key; 12: a tracker making next to nothing gets no shape fits, faults.DEAD_SHARE).
+CACHE_VERSION = 12
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99

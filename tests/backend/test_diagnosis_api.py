@@ -193,6 +193,26 @@ def test_a_cached_day_of_another_version_is_computed_again(client, live_server) 
         engine.dispose()
 
 
+def test_a_tracker_reading_0_w_all_day_is_an_underperformance(client, live_server) -> None:
+    """A tripped breaker, the logger still reading 0 W: the day is an underperformance of
+    its whole expected energy, with no shape fault (there is no shape to fit: its residual
+    divided by a mean of 0 was inf, a NaN confidence, then a JSON null in the cache that
+    made every later request of the day a 500)."""
+    site = load_site("tehuantepec")
+    first = "2025-06-10"
+    d = logger_days(site, pd.Timestamp(first, tz=site.timezone), 1, seed=26, kinds=["clear"])
+    _post(client, live_server.write_token, _readings(d.times, d.fixed_power_w, "fixed")
+          + _readings(d.times, np.zeros(d.times.size), "tracker"))
+    params = {"start": first, "end": "2025-06-11"}
+    for _ in range(2):  # computed, then from the cache
+        r = client.get(f"{BASE}/diagnosis", params=params, timeout=120)
+        assert r.status_code == 200, r.text
+        day = r.json()["days"][0]
+        assert [f["kind"] for f in day["faults"]] == ["underperformance"], day["faults"]
+        assert day["tracker"]["performance_ratio"] == 0.0
+        assert day["faults"][0]["confidence"] is not None
+
+
 def test_a_day_not_yet_over_is_judged_up_to_now(client, live_server) -> None:
     """At noon of a day (``now_s``), with the tracker's logger silent since 10:00 and the
     fixed one reporting: a dropout of exactly the 120 daylight minutes 10:00–12:00 — the
