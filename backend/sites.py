@@ -86,6 +86,13 @@ class SiteInfo:
         """The first array whose kind (mount) is ``kind``."""
         return next((a for a in self.arrays.values() if a.kind == kind), None)
 
+    def has_twin(self) -> bool:
+        """Whether the twin can simulate the site: arrays named ``tracker`` and ``fixed`` with
+        those mounts (:func:`sim.twin.simulate`'s rule). A site may store readings of arrays
+        named otherwise; it has no twin, diagnosis or sky from its fixed array."""
+        return all(name in self.arrays and self.arrays[name].kind == name
+                   for name in ("tracker", "fixed"))
+
 
 def _kind(cfg: object) -> str:
     return str(getattr(cfg, "mount", "fixed"))

@@ -218,8 +218,7 @@ class AlertService:
             if not info.arrays:
                 continue
             found.extend(self._guard("logger_silent", info, lambda i=info: self._silent(i, now)))
-            if self.ctx.settings.alerts.diagnosis_days > 0 and info.array_of_kind("tracker") \
-                    and info.array_of_kind("fixed"):
+            if self.ctx.settings.alerts.diagnosis_days > 0 and info.has_twin():
                 found.extend(self._guard("diagnosis", info,
                                          lambda i=info: self._diagnosed(i, now)))
         self._reconcile(found, now)

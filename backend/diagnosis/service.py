@@ -197,9 +197,10 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
     stretches;
     days ending after ``now_s`` [s since the epoch] are judged up to it; ``first_s``: the
     tracker logger's first reading (:func:`history_start_s`)."""
-    tracker, fixed = info.array_of_kind("tracker"), info.array_of_kind("fixed")
-    if tracker is None or fixed is None:
-        raise InputError(422, f"site {info.site_id!r} needs a tracker and a fixed array")
+    if not info.has_twin():
+        raise InputError(422, f"site {info.site_id!r}: the diagnosis needs arrays named "
+                              "'tracker' (mount tracker) and 'fixed' (mount fixed), the ones "
+                              f"the twin simulates; it has {sorted(info.arrays)}")
     out: dict[int, dict[str, Any]] = {}
     runs: list[list[int]] = []
     for i in uncached_days:

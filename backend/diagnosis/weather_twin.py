@@ -95,14 +95,19 @@ def sky_source(e: pd.DataFrame) -> tuple[str, str | None]:
             "sensor_ghi": ("sensor", "ghi_w_m2")}.get(top, (top, None))
 
 
+def _need_twin(info: SiteInfo) -> None:
+    """422 naming ``source`` for a site the twin cannot simulate (:meth:`SiteInfo.has_twin`)."""
+    if not info.has_twin():
+        raise InputError(422, f"source: site {info.site_id!r} has no arrays named 'tracker' "
+                              "and 'fixed' (mounts tracker and fixed) for the twin to read the "
+                              "sky from and simulate; use source=twin (clear sky)")
+
+
 def weather_twin(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int) -> pd.DataFrame:
     """:func:`sim.sky_sensor.weather_aware_twin` over ``[t0, t1)`` (whole minutes), from
     the fixed array's stored readings and the loggers' sky sensors; 422 without a fixed
     array or past ``MAX_DAYS``."""
-    fixed = info.array_of_kind("fixed")
-    if fixed is None:
-        raise InputError(422, f"source: site {info.site_id!r} has no fixed array to read the "
-                              "sky from; use source=twin (clear sky)")
+    _need_twin(info)
     if t1 - t0 > MAX_DAYS * 86400:
         raise InputError(422, f"source=twin_weather is computed on request: at most {MAX_DAYS} "
                               "days (the diagnosis gives its daily energy for longer ranges)")
@@ -156,6 +161,7 @@ def weather_twin_energy(ctx: ServiceContext, info: SiteInfo, data: dict[str, Any
     """
     from backend.diagnosis.service import diagnosis  # it imports this module's neighbours
 
+    _need_twin(info)
     rows = data["rows"]
     edges = [dt.datetime.fromisoformat(r["period_start"]) for r in rows]
     if not rows:

@@ -103,6 +103,34 @@ def test_the_new_site_takes_readings_and_has_a_twin(client: httpx.Client,
     assert row["partial"] is True  # five minutes of a day
 
 
+def test_a_site_whose_arrays_the_twin_does_not_know_stores_readings_but_has_no_diagnosis(
+        client: httpx.Client, server: InProcessServer) -> None:
+    """Arrays named otherwise than ``tracker`` and ``fixed`` take readings and energies,
+    but the twin does not simulate them: the diagnosis and the weather-aware twin answer a
+    422 naming the arrays it needs (a KeyError in the sky's inversion, a 500, before)."""
+    config = {**HAND_WRITTEN, "site_id": "named-arrays",
+              "arrays": {"trk": {"mount": "tracker"},
+                         "ref": {"mount": "fixed", "surface_tilt_deg": 36}}}
+    r = client.put("/api/v1/sites/named-arrays", json=config, headers=bearer(ADMIN))
+    assert r.status_code == 201, r.text
+    day = dt.date.today() - dt.timedelta(days=3)
+    ts = dt.datetime(day.year, day.month, day.day, 12, tzinfo=ZoneInfo("America/New_York"))
+    r = client.post("/api/v1/sites/named-arrays/measurements",
+                    headers=bearer(server.token("named-arrays")), json={
+                        "readings": [{"ts": (ts + dt.timedelta(minutes=k)).isoformat(),
+                                      "array": a, "voltage_v": 30.0, "current_a": 10.0}
+                                     for k in range(5) for a in ("trk", "ref")]})
+    assert r.status_code == 200 and r.json()["accepted"] == 10, r.text
+    span = {"start": day.isoformat(), "end": (day + dt.timedelta(days=1)).isoformat()}
+    r = client.get("/api/v1/sites/named-arrays/energy", params=span)
+    assert r.status_code == 200 and r.json()["totals"]["arrays"]["trk"]["measured_wh"] > 0
+    r = client.get("/api/v1/sites/named-arrays/diagnosis", params=span)
+    assert r.status_code == 422 and "named 'tracker'" in r.json()["detail"], r.text
+    r = client.get("/api/v1/sites/named-arrays/energy", params={**span,
+                                                                "source": "twin_weather"})
+    assert r.status_code == 422 and "source:" in r.json()["detail"], r.text
+
+
 @pytest.mark.parametrize(("change", "words"), [
     ({"latitude_deg": 136.1}, "body: latitude_deg: Input should be less than or equal to 90"),
     ({"arrays": {"fixed": {"surface_tilt_deg": 36, "tilt": 3}}}, "arrays.fixed.tilt: unknown key"),
