@@ -418,12 +418,16 @@ def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
 
 
 def measured_sky(site: Site, times: pd.DatetimeIndex, valid: np.ndarray,
-                 poa_clear: np.ndarray) -> np.ndarray:
+                 poa_clear: np.ndarray, now: pd.Timestamp | None = None) -> np.ndarray:
     """Per minute: True where its local day (the site's time zone) has a measured sky, at
     least :data:`MIN_SENSOR_SHARE` of the day's daylight minutes (``poa_clear`` > 20 W m⁻²)
-    ``valid``; a day without one takes the clear sky (:func:`weather_from_fixed`)."""
+    ``valid``; a day without one takes the clear sky (:func:`weather_from_fixed`). Minutes
+    from ``now`` on are still to come: not missing, so not counted (a day in progress is
+    judged on its minutes so far)."""
     day_id = pd.factorize(times.tz_convert(site.timezone).normalize())[0]
     daylight = np.asarray(poa_clear) > 20.0
+    if now is not None:
+        daylight &= np.asarray(times < now)
     n_day = np.bincount(day_id, weights=daylight.astype(float))
     n_ok = np.bincount(day_id, weights=(daylight & np.asarray(valid, bool)).astype(float))
     share = np.divide(n_ok, n_day, out=np.zeros(n_day.size), where=n_day > 0)
@@ -462,7 +466,8 @@ def sensor_flags(irradiance_w_m2: np.ndarray, clear: pd.DataFrame) -> np.ndarray
 
 def _sky_from_plane(site: Site, times: pd.DatetimeIndex, poa_measured: np.ndarray,
                     flag: np.ndarray, clear: pd.DataFrame, plane: Plane,
-                    models: tuple[str, ...], extra: dict[str, np.ndarray]
+                    models: tuple[str, ...], extra: dict[str, np.ndarray],
+                    now: pd.Timestamp | None = None
                     ) -> tuple[dict[str, pd.DataFrame], pd.DataFrame]:
     """The weather frames and the sensor frame of :func:`weather_from_fixed` from one
     plane's measured irradiance ``poa_measured`` (valid where ``flag`` is 0)."""
@@ -470,7 +475,7 @@ def _sky_from_plane(site: Site, times: pd.DatetimeIndex, poa_measured: np.ndarra
     night = (flag & FLAGS["night"]) > 0
     poa_clear = clear["poa_clear"].to_numpy()
     k = np.divide(poa_measured, poa_clear, out=np.full(len(times), np.nan), where=valid)
-    measured = measured_sky(site, times, valid, poa_clear)
+    measured = measured_sky(site, times, valid, poa_clear, now)
     src = valid & measured
     t = sun._unix_seconds(times)
     # up but not usable (low, or behind the plane, or a flagged reading): the clear-sky
@@ -514,6 +519,7 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
                        models: tuple[str, ...] = ("gti_dirint", "clearsky_erbs"),
                        saturation_power_w: float | None = None,
                        sensors: pd.DataFrame | None = None,
+                       now: pd.Timestamp | None = None,
                        ) -> tuple[dict[str, pd.DataFrame], pd.DataFrame]:
     """The sky the site's instruments saw, as twin weather frames, one per decomposition model.
 
@@ -540,6 +546,9 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
         ``temp_air_c`` [°C] and ``wind_speed_m_s`` [m s⁻¹] (replace ``temp_air`` and
         ``wind_speed`` where they read: the cells' temperature, SAPM, in the inversion
         and the twin); any may be absent.
+    now : pandas.Timestamp, optional
+        The minutes from it on are still to come (a day in progress): a day's share of
+        measured minutes (:func:`measured_sky`) is of its minutes before it.
 
     Returns
     -------
@@ -567,7 +576,7 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
     extra = {"temp_air": t_air, "wind_speed": wind}
     weather, sensor = _sky_from_plane(site, times, inv["poa_global"].to_numpy(),
                                       inv["flag"].to_numpy(), clear, fixed_plane(site),
-                                      models, extra)
+                                      models, extra, now)
     source = np.where(sensor["measured_sky"].to_numpy(), "fixed_array", "clear_sky")
     for name, column in SENSOR_SKIES:  # rising priority: a later one replaces
         if sensors is None or column not in sensors or not sensors[column].notna().any():
@@ -577,7 +586,7 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
         g = sensors[column].to_numpy(dtype=float)
         flag = sensor_flags(g, c)
         w_s, s_s = _sky_from_plane(site, times, np.where(flag == 0, g, np.nan), flag, c,
-                                   plane, models, extra)
+                                   plane, models, extra, now)
         take = s_s["measured_sky"].to_numpy()
         for m in models:
             weather[m].loc[take] = w_s[m].loc[take]
@@ -592,7 +601,8 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
                        temp_air: np.ndarray | float | None = None,
                        wind_speed: np.ndarray | float | None = None,
                        saturation_power_w: float | None = None,
-                       sensors: pd.DataFrame | None = None) -> pd.DataFrame:
+                       sensors: pd.DataFrame | None = None,
+                       now: pd.Timestamp | None = None) -> pd.DataFrame:
     """Both arrays' expected power per minute under the sky the site's instruments saw
     (irradiance sensors where they read, else the fixed array: :func:`weather_from_fixed`).
 
@@ -604,6 +614,8 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
     start, end : pandas.Timestamp
         Tz-aware, end exclusive; ``fixed_power_w`` (and ``sensors``, if given) hold one
         value per minute of it.
+    now : pandas.Timestamp, optional
+        Minutes from it on are still to come (:func:`weather_from_fixed`).
 
     Returns
     -------
@@ -626,7 +638,7 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
         raise ValueError(f"sensors has {len(sensors)} rows for {len(times)} minutes")
     weather, sensor = weather_from_fixed(site, times, p, temp_air, wind_speed,
                                          saturation_power_w=saturation_power_w,
-                                         sensors=sensors)
+                                         sensors=sensors, now=now)
     main = twin.simulate(site, start, end, weather=weather["gti_dirint"]).series
     alt = twin.simulate(site, start, end, weather=weather["clearsky_erbs"]).series
     out = pd.DataFrame({

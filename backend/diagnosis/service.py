@@ -72,7 +72,8 @@ MAX_DAYS = 400
 #: GHI pyranometer alone gets its own, wider band, faults.GHI_UNCERTAINTY; 10: the beam where
 #: the sun is behind or grazing the fixed plane capped by the minutes around,
 #: sky_sensor._unseen_beam_capped; 11: each cached day keeps its site config's digest,
-#: site_key; 12: a tracker making next to nothing gets no shape fits, faults.DEAD_SHARE).
+#: site_key; 12: a tracker making next to nothing gets no shape fits, faults.DEAD_SHARE; a day
+#: in progress judged on its minutes so far for its measured sky too).
 CACHE_VERSION = 12
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
@@ -133,6 +134,8 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     ts = e.index.as_unit("s").asi8
     day = ts < t1
     daylight = e["poa_clear"].to_numpy()[day] > 20.0
+    if elapsed_min is not None:  # the minutes still to come are not missing readings
+        daylight[elapsed_min:] = False
     valid = e["valid"].to_numpy(bool)[day]
     share = float(valid[daylight].mean()) if daylight.any() else 0.0
     # under sky_sensor.MIN_SENSOR_SHARE of the daylight measured, the day's sky is the clear
@@ -201,6 +204,7 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
         raise InputError(422, f"site {info.site_id!r}: the diagnosis needs arrays named "
                               "'tracker' (mount tracker) and 'fixed' (mount fixed), the ones "
                               f"the twin simulates; it has {sorted(info.arrays)}")
+    tracker, fixed = info.arrays["tracker"], info.arrays["fixed"]
     out: dict[int, dict[str, Any]] = {}
     runs: list[list[int]] = []
     for i in uncached_days:
@@ -219,7 +223,8 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
         tr, fx, sensors = site_minutes(ctx, info, t0, t1 + 60)
         start = pd.Timestamp(t0, unit="s", tz="UTC")
         e = sky_sensor.weather_aware_twin(info.site, start, start + pd.Timedelta(
-            seconds=(t1 + 60 - t0) // 60 * 60), fx, sensors=sensors)
+            seconds=(t1 + 60 - t0) // 60 * 60), fx, sensors=sensors,
+            now=pd.Timestamp(now_s, unit="s", tz="UTC") if t1 > now_s else None)
         for j, i in enumerate(run):
             day_start_s, day_end_s = int(edges_s[i]), int(edges_s[i + 1])
             a, b = (day_start_s - t0) // 60, (day_end_s - t0) // 60 + 1

@@ -113,9 +113,10 @@ def weather_twin(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int) -> pd.Da
                               "days (the diagnosis gives its daily energy for longer ranges)")
     t0, t1 = t0 // 60 * 60, -(-t1 // 60) * 60
     _, fx, sensors = site_minutes(ctx, info, t0, t1)
-    start = pd.Timestamp(t0, unit="s", tz="UTC")
-    return sky_sensor.weather_aware_twin(info.site, start, pd.Timestamp(t1, unit="s", tz="UTC"),
-                                         fx, sensors=sensors)
+    start, now = pd.Timestamp(t0, unit="s", tz="UTC"), pd.Timestamp.now(tz="UTC")
+    end = pd.Timestamp(t1, unit="s", tz="UTC")
+    return sky_sensor.weather_aware_twin(info.site, start, end, fx, sensors=sensors,
+                                         now=now if end > now else None)
 
 
 def weather_twin_columns(ctx: ServiceContext, info: SiteInfo, array: str, t0: int,

@@ -216,7 +216,8 @@ def test_a_tracker_reading_0_w_all_day_is_an_underperformance(client, live_serve
 def test_a_day_not_yet_over_is_judged_up_to_now(client, live_server) -> None:
     """At noon of a day (``now_s``), with the tracker's logger silent since 10:00 and the
     fixed one reporting: a dropout of exactly the 120 daylight minutes 10:00–12:00 — the
-    afternoon still to come is not missing — the day marked not complete and not cached.
+    afternoon still to come is not missing — the day marked not complete and not cached;
+    at 10:00 its sky is measured (the minutes to come are not missing readings either).
     The same day asked once it is over counts the whole silent afternoon."""
     import sqlalchemy as sa
 
@@ -248,6 +249,12 @@ def test_a_day_not_yet_over_is_judged_up_to_now(client, live_server) -> None:
                 "SELECT count(*) FROM diagnosis_days WHERE site_id = 'tehuantepec' "
                 "AND day_start_s = :s"), {"s": int(day0.timestamp())}).scalar_one()
         assert cached == 0
+        # at 10:00 the day's sky is the fixed array's: the minutes still to come are not
+        # missing readings (they were: 29 % of the daylight valid, the clear sky taken)
+        early = diagnosis(ctx, info, day0.to_pydatetime(), end,
+                          now_s=ten.timestamp())["days"][0]
+        assert early["sky"]["source"] == "fixed_array", early["sky"]
+        assert early["sky"]["valid_minutes_pct"] > 90.0, early["sky"]
     finally:
         ctx.close()
     over = client.get(f"{BASE}/diagnosis", params={"start": first, "end": "2025-10-07"},
