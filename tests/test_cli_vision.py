@@ -6,8 +6,10 @@ process (``heliotwin_cli``: the same parser, output and exit code)."""
 from __future__ import annotations
 
 import json
+import struct
 import subprocess
 import sys
+import zlib
 from pathlib import Path
 
 import cv2
@@ -76,3 +78,46 @@ def test_bad_input_exits_2_naming_the_problem(tmp_path: Path, heliotwin_cli) -> 
     p = heliotwin_cli("vision", "calibrate", str(junk), "--timestamps", "2018-03-02T15:00",
                       "--lat", "20")
     assert p.returncode == 2 and "no UTC offset" in p.stderr
+
+
+def test_detect_checks_the_place_and_warns_as_the_service(frames: list[Path], tmp_path: Path,
+                                                          heliotwin_cli) -> None:
+    """The place is checked by the service's function (an impossible or NaN latitude is
+    refused, naming the flag), the answer carries the service's ``warnings``, and a frame
+    over the pixel bound names the bound the command applies."""
+    base = ("vision", "detect", str(frames[2]), "--camera", "fisheye", "--px-per-deg", "2.6",
+            "--timestamp", TIMES[2].isoformat())
+    for lat, lon, flag in (("100", "10", "--lat"), ("nan", "10", "--lat"),
+                           ("20", "500", "--lon")):
+        p = heliotwin_cli(*base, "--lat", lat, "--lon", lon, "--json")
+        assert p.returncode == 2 and p.stderr.count(f"{flag}:") == 1, p.stderr
+        assert p.stdout == ""
+    # Sydney at this UTC time is night: a sun found, the ephemeris far below the horizon
+    p = heliotwin_cli(*base, "--lat", "-33.9", "--lon", "151.2", "--json")
+    assert p.returncode == 0, p.stderr
+    out = json.loads(p.stdout)
+    assert out["sun_found"] and any("below the horizon" in w for w in out["warnings"])
+    text = heliotwin_cli(*base, "--lat", "-33.9", "--lon", "151.2")
+    assert "\nwarning: a sun was found" in text.stdout
+    # a PNG header claiming 30000 × 30000 px: refused before decoding, naming the CLI's bound
+    ihdr = struct.pack(">IIBBBBB", 30000, 30000, 8, 2, 0, 0, 0)
+    bomb = tmp_path / "bomb.png"
+    bomb.write_bytes(b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + ihdr
+                     + struct.pack(">I", zlib.crc32(b"IHDR" + ihdr)))
+    p = heliotwin_cli("vision", "detect", str(bomb), "--camera", "fisheye")
+    assert p.returncode == 2 and "command line" in p.stderr, p.stderr
+    assert "HELIOTWIN_VISION_MAX_PIXELS" not in p.stderr
+
+
+def test_calibrate_chooses_the_radial_terms_as_the_service(frames: list[Path],
+                                                           heliotwin_cli) -> None:
+    """``--n-radial`` defaults to ``auto``, the service's default: the frames decide."""
+    args = ("vision", "calibrate", *map(str, frames[:5]), "--timestamps",
+            *[t.isoformat() for t in TIMES[:5]], "--lat", str(LAT), "--lon", str(LON), "--json")
+    p = heliotwin_cli(*args)
+    assert p.returncode == 0, p.stderr
+    out = json.loads(p.stdout)
+    assert [m["n_radial"] for m in out["model_selection"]][:1] == [0]
+    assert heliotwin_cli(*args, "--n-radial", "auto").stdout == p.stdout
+    p = heliotwin_cli(*args, "--n-radial", "3")
+    assert p.returncode == 2 and "--n-radial" in p.stderr

@@ -51,7 +51,8 @@ def ephemeris_block(cam: PinholeCamera | FisheyeCamera, azimuth_deg: float,
 
 def analyse_frame(image: NDArray[Any], cam: PinholeCamera | FisheyeCamera,
                   method: str = "robust",
-                  ephemeris_deg: tuple[float, float] | None = None) -> dict[str, Any]:
+                  ephemeris_deg: tuple[float, float] | None = None,
+                  oriented: bool = True) -> dict[str, Any]:
     """Detect the sun in ``image`` and express it in ``cam``'s terms.
 
     Returns ``sun_found``, ``confidence`` (a calibrated probability), ``reason``
@@ -65,9 +66,17 @@ def analyse_frame(image: NDArray[Any], cam: PinholeCamera | FisheyeCamera,
     angle between them on the sphere (``separation_deg``), the azimuth
     (wrapped) and elevation differences, detected − ephemeris, and for a
     fisheye the pixel distance between the two (``distance_px``).
+
+    ``oriented``: whether the fisheye's north offset is known (a calibration, or given).
+    Only then does the ephemeris's pixel guide the search and count in the confidence
+    (issue 24: evidence against a sun is "the ephemeris of a *calibrated* camera puts
+    the sun far away"); a camera sent without one is searched blind and the ephemeris
+    only compared — its default north offset of 0 is a guess that put a plain sun of
+    EUROCONTROL 128° from its prediction, refused at confidence 0.02.
     """
     expected = None
-    if ephemeris_deg is not None and isinstance(cam, FisheyeCamera) and ephemeris_deg[1] >= 0:
+    if ephemeris_deg is not None and isinstance(cam, FisheyeCamera) and oriented \
+            and ephemeris_deg[1] >= 0:
         ex, ey = (finite(v) for v in cam.sky_to_pixel(*(float(v) for v in ephemeris_deg)))
         expected = (ex, ey) if ex is not None and ey is not None else None
     d = detect_sun(image, method=method, camera=cam if method == "robust" else None,

@@ -72,6 +72,52 @@ class CalibrationResult:
         }
 
 
+#: two sun directions closer than this [°] are one point to a fit: its outlier tolerance
+#: (:data:`OUTLIER_DEG`) lets a frame lie anywhere within it, so frames there add no
+#: geometry (the sun moves 1° in about four minutes)
+DISTINCT_DEG = 1.0
+#: distinct sun directions a fit needs: six equations for the four base parameters
+MIN_DIRECTIONS = 3
+
+
+def direction_groups(azimuth_deg: ArrayLike, elevation_deg: ArrayLike,
+                     min_separation_deg: float = DISTINCT_DEG) -> NDArray[np.intp]:
+    """A group number per sun position: positions within ``min_separation_deg`` of a group's
+    first position share its number (greedy, in order).
+
+    Frames of the same sun direction (a frame sent twice, times a few seconds apart, one
+    time given to several frames) constrain a fit no more than one of them does; the fits
+    count groups, not frames, and hold a whole group out together.
+    """
+    az = np.asarray(azimuth_deg, float).ravel()
+    el = np.asarray(elevation_deg, float).ravel()
+    groups = np.full(az.size, -1, np.intp)
+    firsts: list[int] = []
+    for i in range(az.size):
+        if firsts:
+            f = np.array(firsts)
+            sep = angular_separation_deg(az[f], el[f], az[i], el[i])
+            near = np.flatnonzero(np.asarray(sep) <= min_separation_deg)
+            if near.size:
+                groups[i] = groups[f[near[0]]]
+                continue
+        groups[i] = len(firsts)
+        firsts.append(i)
+    return groups
+
+
+def n_directions(azimuth_deg: ArrayLike, elevation_deg: ArrayLike) -> int:
+    """How many distinct sun directions (:func:`direction_groups`) the positions hold."""
+    g = direction_groups(azimuth_deg, elevation_deg)
+    return int(g.max()) + 1 if g.size else 0
+
+
+def _too_few(n_dirs: int, n_par: int) -> bool:
+    """Fewer distinct directions than ``n_par`` parameters need (two equations each, two
+    to spare: four parameters need three)."""
+    return 2 * n_dirs < n_par + 2
+
+
 _MIRROR_NFEV = 100  # evaluations each mirror gets before the better one is solved on
 
 
@@ -128,8 +174,9 @@ def fit_fisheye(
     centre_guess_px : where the solver starts the centre (default the image centre).
     max_nfev : evaluations allowed to each mirror's solve.
 
-    Needs at least as many frames as half the number of parameters plus one
-    (four parameters → three frames).
+    Needs at least as many distinct sun directions (:func:`direction_groups`) as half
+    the number of parameters plus one (four parameters → three): copies of one direction
+    add no equations, and a fit to fewer would leave a residual of zero and mean nothing.
     """
     x, y = np.asarray(x_px, float).ravel(), np.asarray(y_px, float).ravel()
     az, el = np.asarray(azimuth_deg, float).ravel(), np.asarray(elevation_deg, float).ravel()
@@ -148,6 +195,10 @@ def fit_fisheye(
     n_par = 4 + n_radial + (2 if fit_tilt else 0)
     if 2 * x.size < n_par + 2:
         raise ValueError(f"{x.size} frames are too few to fit {n_par} parameters")
+    n_dirs = n_directions(az, el)
+    if _too_few(n_dirs, n_par):
+        raise ValueError(f"{x.size} frames hold only {n_dirs} distinct sun directions (more "
+                         f"than {DISTINCT_DEG:g}° apart), too few to fit {n_par} parameters")
     w, h = image_size
     cx0, cy0 = centre_guess_px if centre_guess_px is not None else ((w - 1) / 2, (h - 1) / 2)
     sides = EAST_SIDES if east == "auto" else (east,)
@@ -252,8 +303,9 @@ def robust_fit(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
     most five times; the refits keep the first one's mirror). A sample's solve stops
     after 60 evaluations (a degenerate triple only has to lose). Every triple is tried
     when there are at most :data:`_RANSAC_TRIALS`; otherwise that many random ones
-    (``seed``). Returns the fit and every
-    frame's residual to it, inlier or not.
+    (``seed``); a sample of fewer than three distinct sun directions is no sample.
+    Frames count by distinct sun direction (:func:`direction_groups`). Returns the fit
+    and every frame's residual to it, inlier or not.
     """
     x, y = np.asarray(x_px, float).ravel(), np.asarray(y_px, float).ravel()
     az, el = np.asarray(azimuth_deg, float).ravel(), np.asarray(elevation_deg, float).ravel()
@@ -263,8 +315,14 @@ def robust_fit(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
     if not outlier_deg > 0:
         raise ValueError(f"outlier_deg must be positive, got {outlier_deg}")
     n_par = 4 + int(fit_kwargs.get("n_radial", 0)) + (2 if fit_kwargs.get("fit_tilt") else 0)
-    if 2 * n < n_par + 2:
-        raise ValueError(f"{n} frames are too few to fit {n_par} parameters")
+    groups = direction_groups(az, el)
+
+    def too_few(use: NDArray[np.bool_]) -> bool:
+        return _too_few(np.unique(groups[use]).size, n_par)
+
+    if too_few(np.ones(n, bool)):
+        raise ValueError(f"{n} frames holding {np.unique(groups).size} distinct sun directions "
+                         f"are too few to fit {n_par} parameters")
     base = {k: v for k, v in fit_kwargs.items() if k in ("projection", "east",
                                                           "centre_guess_px")}
     inlier = np.ones(n, bool)
@@ -286,7 +344,7 @@ def robust_fit(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
             score = float(np.sum(np.minimum(r, outlier_deg) ** 2))
             if score < best:
                 best, inlier = score, r <= outlier_deg
-        if 2 * int(inlier.sum()) < n_par + 2:
+        if too_few(inlier):
             inlier = np.ones(n, bool)  # no consensus: everything, and say so in the residuals
     first: CalibrationResult | None = None
     for _ in range(5):
@@ -299,7 +357,7 @@ def robust_fit(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
             first = res
         r_deg, r_px = _residuals_all(res.camera, x, y, az, el)
         inlier = r_deg <= outlier_deg
-        if np.array_equal(inlier, fitted_on) or 2 * int(inlier.sum()) < n_par + 2:
+        if np.array_equal(inlier, fitted_on) or too_few(inlier):
             break
     assert first is not None
     if res is not first:  # what the first fit decided (the mirror) stays said
@@ -310,12 +368,17 @@ def robust_fit(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
 def leave_one_out_deg(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
                       elevation_deg: ArrayLike, image_size: tuple[int, int],
                       **fit_kwargs: Any) -> NDArray[np.float64]:
-    """Each frame's sky residual [°] to the camera fitted on all the others (held out)."""
+    """Each frame's sky residual [°] to the camera fitted on all the others (held out).
+
+    The frames of the held-out frame's sun direction (:func:`direction_groups`) are held
+    out with it: a copy left in the fit would predict the frame from itself.
+    """
     x, y = np.asarray(x_px, float).ravel(), np.asarray(y_px, float).ravel()
     az, el = np.asarray(azimuth_deg, float).ravel(), np.asarray(elevation_deg, float).ravel()
+    groups = direction_groups(az, el)
     out = np.empty(x.size)
     for i in range(x.size):
-        keep = np.arange(x.size) != i
+        keep = groups != groups[i]
         cam = fit_fisheye(x[keep], y[keep], az[keep], el[keep], image_size,
                           **fit_kwargs).camera
         out[i] = sky_residuals_deg(cam, x[i:i + 1], y[i:i + 1], az[i:i + 1], el[i:i + 1])[0]
@@ -332,16 +395,17 @@ def choose_radial(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
     best (the one-standard-error rule, Hastie, Tibshirani & Friedman, *The Elements of
     Statistical Learning*, 2nd ed., §7.10): a term must lower the held-out error by more
     than the frames can tell apart from noise. Returns the number of terms and, for each
-    tried, ``n_radial`` and ``loo_rms_deg``. A model needs frames enough for a
-    leave-one-out fit with one frame to spare.
+    tried, ``n_radial`` and ``loo_rms_deg``. A model needs distinct sun directions
+    enough for a leave-one-out fit with one to spare.
     """
     x = np.asarray(x_px, float).ravel()
+    n_dirs = n_directions(azimuth_deg, elevation_deg)
     tried: list[dict[str, Any]] = []
     mse: list[float] = []
     se: list[float] = []
     for k in range(max_terms + 1):
         n_par = 4 + k + (2 if fit_kwargs.get("fit_tilt") else 0)
-        if 2 * (x.size - 1) < n_par + 4:
+        if 2 * (n_dirs - 1) < n_par + 4:
             break
         sq = leave_one_out_deg(x, y_px, azimuth_deg, elevation_deg, image_size,
                                n_radial=k, **fit_kwargs) ** 2
@@ -396,7 +460,7 @@ def calibrate_positions(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike
     n_par = 4 + k + (2 if fit_tilt else 0)
     loo = (leave_one_out_deg(x[inl], y[inl], az[inl], el[inl], image_size,
                              **{**known, "n_radial": k})
-           if 2 * (int(inl.sum()) - 1) >= n_par + 2 else np.empty(0))
+           if not _too_few(n_directions(az[inl], el[inl]) - 1, n_par) else np.empty(0))
     return PositionFit(rf, selection, loo)
 
 
@@ -406,13 +470,16 @@ class SelfCalibration:
 
     ``fit`` is the camera fitted on the inlier frames; ``frames`` one report per
     frame; ``loo_deg`` the leave-one-out residual of each inlier (in ``fit``'s
-    order; empty when too few frames); ``model_selection`` the radial terms tried.
+    order; empty when too few frames); ``model_selection`` the radial terms tried;
+    ``image_size_px`` the size the frames decode to (orientation applied), the size
+    the camera is valid for.
     """
 
     fit: CalibrationResult
     frames: list[dict[str, Any]]
     loo_deg: NDArray[np.float64]
     model_selection: list[dict[str, Any]]
+    image_size_px: tuple[int, int]  # (width, height) of the decoded frames
 
     @property
     def n_outliers(self) -> int:
@@ -421,6 +488,21 @@ class SelfCalibration:
     @property
     def loo_rms_deg(self) -> float | None:
         return float(np.sqrt(np.mean(self.loo_deg**2))) if self.loo_deg.size else None
+
+
+#: a fit leaving an RMS above this on the sky [°] is refused: it is the radius of the
+#: ephemeris-guided search around the predicted sun (``vision.detect._SEARCH_DEG``), so a
+#: camera that misplaces its own frames' suns by more cannot even guide that search
+MAX_RMS_DEG = 8.0
+
+
+class CalibrationFailed(ValueError):
+    """A fit that explains its frames too badly to be a calibration (:data:`MAX_RMS_DEG`);
+    ``frames`` holds each frame's report with its residual."""
+
+    def __init__(self, message: str, frames: list[dict[str, Any]]) -> None:
+        super().__init__(message)
+        self.frames = frames
 
 
 def _detect_all(load: Callable[[int], NDArray[Any]], n: int, method: str,
@@ -463,7 +545,10 @@ def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
     ``centroid_px``, ``search`` (``blind`` or ``ephemeris-guided``), ``used``,
     ``outlier`` and, when a sun was found above the horizon, ``residual_px`` and
     ``residual_deg`` to the final model. A ValueError says why when too few
-    frames are left.
+    distinct sun directions (:func:`direction_groups`: frames of one direction count
+    once) are given or left with a sun found; :class:`CalibrationFailed` (a ValueError)
+    when the fit's RMS on the sky exceeds :data:`MAX_RMS_DEG`, with every frame's
+    residual.
     """
     az = np.asarray(azimuth_deg, float).ravel()
     el = np.asarray(elevation_deg, float).ravel()
@@ -474,6 +559,13 @@ def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
     if n_radial is not None and not 0 <= n_radial <= 2:
         raise ValueError("n_radial must be 0, 1, 2 or None (chosen from the frames)")
     fixed: dict[str, Any] = {"projection": projection, "east": east, "fit_tilt": fit_tilt}
+    up = el > 0
+    given = n_directions(az[up], el[up])
+    if given < MIN_DIRECTIONS:
+        raise ValueError(f"the {n} frames' times put the sun above the horizon in only "
+                         f"{given} distinct directions (more than {DISTINCT_DEG:g}° apart; "
+                         f"frames of one direction count once); a calibration needs at "
+                         f"least {MIN_DIRECTIONS}")
 
     def found(dets: list[Any], k: int
               ) -> tuple[NDArray[np.intp], NDArray[np.float64], tuple[float, float] | None]:
@@ -481,11 +573,13 @@ def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
         use = np.array([i for i, d in enumerate(dets)
                         if d.sun_found and d.centroid_px is not None and el[i] > 0], int)
         n_par = 4 + k + (2 if fit_tilt else 0)
-        if 2 * use.size < n_par + 2:
+        dirs = n_directions(az[use], el[use])
+        if _too_few(dirs, n_par):
             missing = [names[i] for i in range(n) if i not in set(use.tolist())]
-            raise ValueError(f"only {use.size} frames have a sun found above the horizon "
-                             f"(none in: {', '.join(missing) or 'none'}); {n_par} parameters "
-                             f"need at least {(n_par + 3) // 2}")
+            raise ValueError(f"only {use.size} frames have a sun found above the horizon, in "
+                             f"{dirs} distinct directions (none in: "
+                             f"{', '.join(missing) or 'none'}); {n_par} parameters need at "
+                             f"least {(n_par + 3) // 2} directions")
         xy = np.array([dets[i].centroid_px for i in use], float)
         fov = next((d.fov for d in dets if getattr(d, "fov", None) is not None), None)
         return use, xy, (fov.cx_px, fov.cy_px) if fov is not None else None
@@ -519,4 +613,14 @@ def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
             r["residual_px"] = float(rf.residuals_px[j])
             r["residual_deg"] = float(rf.residuals_deg[j])
         report.append(r)
-    return SelfCalibration(rf.result, report, pf.loo_deg, pf.model_selection)
+    if rf.result.rms_deg > MAX_RMS_DEG:
+        worst = sorted((r for r in report if "residual_deg" in r),
+                       key=lambda r: -r["residual_deg"])
+        listed = ", ".join(f"{r['name']} {r['residual_deg']:.1f}°" for r in worst)
+        raise CalibrationFailed(
+            f"no camera explains these frames: the best fit leaves {rf.result.rms_deg:.1f}° "
+            f"RMS on the sky (worst {rf.result.residuals_deg.max():.1f}°), more than the "
+            f"{MAX_RMS_DEG:g}° within which detection searches around a calibration's "
+            f"prediction; check the frames' times (their zone) and the place. Residuals: "
+            f"{listed}", report)
+    return SelfCalibration(rf.result, report, pf.loo_deg, pf.model_selection, size)

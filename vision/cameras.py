@@ -419,7 +419,7 @@ def camera_from_params(camera: str, params: dict[str, object], width_px: int,
             raise ValueError(f"east: must be 'left' or 'right', got {east!r}")
         cx = _number(params, "cx_px", (width_px - 1) / 2.0, bounds=xs)
         cy = _number(params, "cy_px", (height_px - 1) / 2.0, bounds=ys)
-        off = _number(params, "north_offset_deg", 0.0)
+        off = _number(params, "north_offset_deg", 0.0, bounds=(-360.0, 360.0))
         return FisheyeCamera(float(cx), float(cy), float(k), float(off), east,  # type: ignore[arg-type]
                              projection)
     raise ValueError(f"camera: must be 'pinhole' or 'fisheye', got {camera!r}")

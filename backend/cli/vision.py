@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from backend.cli import fail
+from backend.vision.options import N_RADIAL_CHOICES, N_RADIAL_DEFAULT
 
 
 def _time(text: str) -> datetime:
@@ -72,8 +73,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument("--px-per-deg", type=float,
                    help="fisheye radial scale [px/deg] (default: from the image circle, "
                         "taken as the horizon of a 180-degree lens, as the service does)")
-    d.add_argument("--north-offset-deg", type=float, default=0.0,
-                   help="where north lies, clockwise from image-up (0)")
+    d.add_argument("--north-offset-deg", type=float,
+                   help="where north lies, clockwise from image-up (default 0, a guess: "
+                        "the ephemeris then does not guide the detection)")
     d.add_argument("--east", choices=("left", "right"), default="left",
                    help="east left of north (raw view from below, default) or right")
     d.add_argument("--timestamp", type=_time,
@@ -93,8 +95,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--projection", default="equidistant",
                    choices=("equidistant", "equisolid", "stereographic", "orthographic"))
     c.add_argument("--east", choices=("auto", "left", "right"), default="auto")
-    c.add_argument("--n-radial", type=int, choices=(0, 1, 2), default=0,
-                   help="radial polynomial terms to fit (0)")
+    c.add_argument("--n-radial", choices=N_RADIAL_CHOICES, default=N_RADIAL_DEFAULT,
+                   help="radial polynomial terms to fit; auto (default, as the service): as "
+                        "many as lower the leave-one-out error")
     c.add_argument("--fit-tilt", action="store_true", help="also fit two tilt angles")
     c.add_argument("--method", default="robust",
                    choices=("robust", "seed000_hsv", "seed003_gray240"))
@@ -103,15 +106,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.set_defaults(func=run_calibrate)
 
 
-#: The CLI reads local files: a bigger frame than the service accepts is fine.
+#: The CLI reads local files: a bigger frame than the service accepts is fine (not the
+#: service's HELIOTWIN_VISION_MAX_PIXELS; a refusal names this bound, not that setting).
 _MAX_PIXELS = 400_000_000
+_LIMIT_NAME = "the command line's fixed bound on a decoded frame"
 
 
 def _place(args: argparse.Namespace) -> Any:
-    """The ``Place`` of ``--site`` or ``--lat/--lon`` (None when neither is given)."""
+    """The ``Place`` of ``--site`` or ``--lat/--lon`` (None when neither is given), checked
+    as the service checks ``latitude_deg``/``longitude_deg``/``elevation_m``
+    (``backend.vision.service.free_place``: an impossible or NaN place is refused)."""
     from zoneinfo import ZoneInfo
 
-    from backend.vision.service import Place
+    from backend.vision.service import Place, free_place
 
     if args.site:
         from sim.sites import load_site
@@ -123,23 +130,26 @@ def _place(args: argparse.Namespace) -> Any:
         return None
     if args.lat is None or args.lon is None:
         raise ValueError("--lat and --lon go together")
-    return Place(None, args.lat, args.lon, args.elevation_m, ZoneInfo("UTC"))
+    return free_place(args.lat, args.lon, args.elevation_m, ("--lat", "--lon", "--elevation-m"))
 
 
 def _upload(path: Path, field: str) -> Any:
     from backend.vision.service import check_image
 
-    return check_image(path.read_bytes(), str(path), field, _MAX_PIXELS)
+    return check_image(path.read_bytes(), str(path), field, _MAX_PIXELS, _LIMIT_NAME)
 
 
 def detect(args: argparse.Namespace) -> dict[str, Any]:
     """The answer of ``vision detect``: the service's analysis (``backend.vision.service``,
-    the same as ``POST /api/v1/vision/sun`` without the stored ids)."""
+    the same as ``POST /api/v1/vision/sun`` without the stored ids): the same checks of
+    the place and of a stored calibration's size, and the same ``warnings``."""
     from backend.errors import InputError
+    from backend.vision.checks import error_warnings
     from backend.vision.frames import frame_inputs
-    from backend.vision.service import analyse, decode
-    from vision.cameras import camera_from_params
+    from backend.vision.service import analyse, check_calibration_size, decode, is_oriented
+    from vision.cameras import FisheyeCamera, PinholeCamera, camera_from_params
 
+    place = _place(args)  # refused before the frame is read, as the service does
     img = decode(_upload(args.image, "image"), _MAX_PIXELS)
     h, w = img.shape[:2]
     params = {k: getattr(args, k) for k in ("fov_deg", "cx_px", "cy_px", "reference_x_px",
@@ -149,33 +159,41 @@ def detect(args: argparse.Namespace) -> dict[str, Any]:
         raise ValueError("--camera: a --calibration-id is a fisheye camera")
     if args.calibration_id is None and args.camera is None:
         raise ValueError("--camera: required (pinhole or fisheye), or give --calibration-id")
-    place = _place(args)
+    cal = None
+    if args.calibration_id is not None:  # as the service: only on frames of its size
+        cal = _stored_calibration(args.calibration_id)
+        check_calibration_size(cal, (w, h), "--calibration-id")
     try:  # the service's rule (POST /api/v1/vision/sun): scale and time the frame implies
         frame = frame_inputs(img, args.image.name,
                              args.camera if args.calibration_id is None else None, params,
                              args.timestamp, place.zone if place is not None else None)
     except InputError as exc:
-        raise ValueError(str(exc).replace("px_per_deg:", "--px-per-deg:", 1)) from None
-    if args.calibration_id is not None:
-        cam = _stored_camera(args.calibration_id)
+        raise ValueError(str(exc).replace("px_per_deg:", "--px-per-deg:", 1)
+                         .replace("timestamp:", "--timestamp:", 1)) from None
+    cam: PinholeCamera | FisheyeCamera
+    if cal is not None:
+        cam = FisheyeCamera.from_dict(cal["camera"])
     else:
         cam = camera_from_params(args.camera, frame.params, w, h)
-    out = {"image": str(args.image), **analyse(img, cam, args.method, frame.timestamp, place)}
+    oriented = is_oriented(cal is not None, args.north_offset_deg)
+    out = {"image": str(args.image), **analyse(img, cam, args.method, frame.timestamp, place,
+                                               oriented)}
     if frame.camera_derived is not None:
         out["camera_derived"] = frame.camera_derived
     out["timestamp"] = None if frame.timestamp is None else frame.timestamp.isoformat()
     out["timestamp_source"] = frame.timestamp_source
+    out["warnings"] = error_warnings(out, None if cal is None else cal["max_deg"])
     if args.calibration_id is not None:
         out["calibration_id"] = args.calibration_id
     return out
 
 
-def _stored_camera(calibration_id: int) -> Any:
-    """The fisheye camera of a stored calibration (``backend.vision.store``)."""
+def _stored_calibration(calibration_id: int) -> dict[str, Any]:
+    """A calibration stored by the service (``backend.vision.store``): camera, size,
+    residuals."""
     from backend.settings import get_settings
     from backend.storage.engine import make_engine
     from backend.vision.store import get_calibration
-    from vision.cameras import FisheyeCamera
 
     engine = make_engine(get_settings())
     try:
@@ -185,12 +203,13 @@ def _stored_camera(calibration_id: int) -> Any:
         engine.dispose()
     if cal is None:
         raise ValueError(f"--calibration-id: no calibration {calibration_id} in the database")
-    return FisheyeCamera.from_dict(cal["camera"])
+    return cal
 
 
 def calibrate(args: argparse.Namespace) -> dict[str, Any]:
     """The answer of ``vision calibrate``: the service's calibration against SPA
     (``backend.vision.service.calibrate``, as ``POST /api/v1/vision/calibrations``)."""
+    from backend.vision.options import parse_n_radial
     from backend.vision.service import calibrate as fit
     from backend.vision.service import calibration_answer
 
@@ -202,8 +221,9 @@ def calibrate(args: argparse.Namespace) -> dict[str, Any]:
         raise ValueError("a place is needed: --site, or --lat and --lon")
     frames = [(_upload(p, f"images[{i}]"), t)
               for i, (p, t) in enumerate(zip(args.images, args.timestamps, strict=True))]
-    return calibration_answer(fit(frames, place, args.projection, args.east, args.n_radial,
-                                  args.fit_tilt, args.method, _MAX_PIXELS))
+    return calibration_answer(fit(frames, place, args.projection, args.east,
+                                  parse_n_radial(args.n_radial, "--n-radial"), args.fit_tilt,
+                                  args.method, _MAX_PIXELS))
 
 
 def _run(fn: Any, args: argparse.Namespace) -> int:
@@ -243,6 +263,8 @@ def _summary(out: dict[str, Any]) -> str:
         err = out["error"]
         text += (f"; error against SPA {err['separation_deg']:.3f} deg (azimuth "
                  f"{err['azimuth_deg']:+.3f}, elevation {err['elevation_deg']:+.3f} deg)")
+    for warning in out.get("warnings") or []:
+        text += f"\nwarning: {warning}"
     return text
 
 

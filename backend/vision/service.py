@@ -11,6 +11,7 @@ raises :class:`backend.errors.InputError` naming the field.
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 from zoneinfo import ZoneInfo
@@ -21,34 +22,49 @@ import pandas as pd
 from backend.errors import InputError
 from sim.sun import solar_position
 from vision.analyse import analyse_frame
-from vision.calibrate import self_calibrate
+from vision.calibrate import DISTINCT_DEG, MIN_DIRECTIONS, n_directions, self_calibrate
 from vision.cameras import FisheyeCamera, PinholeCamera
 from vision.imageio import ImageError, decode_image, image_size
 from vision.metrics import error_table
 
+#: what names the pixel limit in a refusal: the service's setting (the CLI passes its own)
+SERVICE_PIXEL_LIMIT = "HELIOTWIN_VISION_MAX_PIXELS"
+
 
 @dataclass(frozen=True)
 class Upload:
-    """An uploaded image whose header has been checked, not yet decoded."""
+    """An uploaded image whose header has been checked, not yet decoded.
+
+    ``size_px`` is the header's (width, height): its pixel count bounds the decode before
+    anything is allocated. It is not always the decoded size — a JPEG's EXIF orientation
+    5–8 swaps width and height (:func:`vision.imageio.decode_image`) — so anything that
+    depends on the shape (a calibration's size, a camera's centre) takes the decoded one.
+    """
 
     field: str
     filename: str
     data: bytes
     size_px: tuple[int, int]
+    limit_name: str = SERVICE_PIXEL_LIMIT
 
 
 Frame = tuple[Upload, dt.datetime]
 """A checked upload and its UTC time."""
 
 
-def _image_error(field: str, name: str, exc: ImageError) -> InputError:
+def _image_error(field: str, name: str, exc: ImageError, limit_name: str) -> InputError:
     status = 413 if exc.too_large else (415 if "not a PNG or JPEG" in str(exc) else 422)
-    extra = " (HELIOTWIN_VISION_MAX_PIXELS)" if exc.too_large else ""
+    extra = f" ({limit_name})" if exc.too_large else ""
     return InputError(status, f"{field} {name!r}: {exc}{extra}")
 
 
-def check_image(data: bytes, filename: str, field: str, max_pixels: int) -> Upload:
-    """The file's PNG/JPEG header read and its pixel count checked (nothing decoded)."""
+def check_image(data: bytes, filename: str, field: str, max_pixels: int,
+                limit_name: str = SERVICE_PIXEL_LIMIT) -> Upload:
+    """The file's PNG/JPEG header read and its pixel count checked (nothing decoded).
+
+    ``limit_name`` says in a refusal where ``max_pixels`` comes from (the service's
+    setting, or the CLI's own bound), so the message names what to change.
+    """
     if not data:
         raise InputError(422, f"{field}: the file {filename!r} is empty")
     try:
@@ -57,8 +73,8 @@ def check_image(data: bytes, filename: str, field: str, max_pixels: int) -> Uplo
             raise ImageError(f"{fmt.upper()} image of {w}×{h} = {w * h} pixels exceeds the "
                              f"limit of {max_pixels} pixels", too_large=True)
     except ImageError as exc:
-        raise _image_error(field, filename, exc) from None
-    return Upload(field, filename, data, (w, h))
+        raise _image_error(field, filename, exc, limit_name) from None
+    return Upload(field, filename, data, (w, h), limit_name)
 
 
 def decode(up: Upload, max_pixels: int) -> np.ndarray:
@@ -66,7 +82,7 @@ def decode(up: Upload, max_pixels: int) -> np.ndarray:
     try:
         return decode_image(up.data, max_pixels)
     except ImageError as exc:
-        raise _image_error(up.field, up.filename, exc) from None
+        raise _image_error(up.field, up.filename, exc, up.limit_name) from None
 
 
 @dataclass(frozen=True)
@@ -78,6 +94,38 @@ class Place:
     zone: ZoneInfo
 
 
+def free_place(latitude_deg: float, longitude_deg: float, elevation_m: float,
+               fields: tuple[str, str, str] = ("latitude_deg", "longitude_deg", "elevation_m")
+               ) -> Place:
+    """A place given by latitude, longitude and altitude (times read in UTC), checked the one
+    way HTTP and the CLI do: latitude in [-90, 90], longitude in [-180, 180], altitude in
+    [-500, 9000] m, all finite (a NaN fails every bound), else a 422 naming the field as the
+    caller spells it (``fields``: ``latitude_deg`` over HTTP, ``--lat`` on the CLI)."""
+    lat_f, lon_f, el_f = fields
+    if not -90.0 <= latitude_deg <= 90.0:
+        raise InputError(422, f"{lat_f}: {latitude_deg} is outside [-90, 90]")
+    if not -180.0 <= longitude_deg <= 180.0:
+        raise InputError(422, f"{lon_f}: {longitude_deg} is outside [-180, 180]")
+    if not -500.0 <= elevation_m <= 9000.0:
+        raise InputError(422, f"{el_f}: {elevation_m} is outside [-500, 9000]")
+    return Place(None, latitude_deg, longitude_deg, elevation_m, ZoneInfo("UTC"))
+
+
+def check_calibration_size(calibration: dict[str, Any], size_px: tuple[int, int],
+                           field: str = "calibration_id") -> None:
+    """Refuse (422 naming ``field``) a frame whose decoded size is not the size the stored
+    ``calibration`` was fitted on: its centre and scale are pixels of that size, so on a
+    rescaled or cropped frame every angle is wrong (a 4000-px rescale of a 1920-px camera's
+    frame gave the sun at −70°)."""
+    w, h = calibration["image_size_px"]
+    cal_size = (int(w), int(h))
+    if tuple(size_px) != cal_size:
+        raise InputError(422, f"{field}: the frame decodes to {size_px[0]}×{size_px[1]} px, "
+                              f"but calibration {calibration['calibration_id']} was fitted on "
+                              f"{cal_size[0]}×{cal_size[1]} px frames: send the camera's "
+                              f"frames at their own size, or calibrate this size")
+
+
 def ephemeris(times: list[dt.datetime], place: Place) -> pd.DataFrame:
     """SPA sun positions (``sim.sun.solar_position``): apparent elevation, azimuth."""
     return solar_position(pd.DatetimeIndex(times), place.latitude_deg, place.longitude_deg,
@@ -85,13 +133,21 @@ def ephemeris(times: list[dt.datetime], place: Place) -> pd.DataFrame:
 
 
 def analyse(img: np.ndarray, cam: PinholeCamera | FisheyeCamera, method: str,
-             ts: dt.datetime | None, place: Place | None) -> dict[str, Any]:
-    """Ephemeris (when time and place are known) and analysis, in one worker-thread hop."""
+             ts: dt.datetime | None, place: Place | None, oriented: bool) -> dict[str, Any]:
+    """Ephemeris (when time and place are known) and analysis, in one worker-thread hop.
+    ``oriented``: the camera's north is known (:func:`is_oriented`); only then does the
+    ephemeris guide the detection (:func:`vision.analyse.analyse_frame`)."""
     eph = None
     if ts is not None and place is not None:
         sp = ephemeris([ts], place)
         eph = (float(sp["azimuth"].iloc[0]), float(sp["apparent_elevation"].iloc[0]))
-    return analyse_frame(img, cam, method, eph)
+    return analyse_frame(img, cam, method, eph, oriented)
+
+
+def is_oriented(calibrated: bool, north_offset_deg: object) -> bool:
+    """Whether a request's fisheye has a known north: a stored calibration, or a north
+    offset the caller gave (the default 0 is a guess, not a measurement)."""
+    return calibrated or north_offset_deg is not None
 
 
 def detection_row(res: dict[str, Any], ts: dt.datetime | None, place: Place | None,
@@ -131,13 +187,34 @@ def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
     consensus are reported as outliers and left out, and ``n_radial=None`` lets
     the frames decide the radial terms (leave-one-out). Each frame is decoded once
     per detection pass (:data:`vision.calibrate.CALIBRATION_PASSES`), one at a time.
+
+    Refused before decoding (422): times that put the sun in fewer than three distinct
+    directions (``timestamps``; frames closer than :data:`vision.calibrate.DISTINCT_DEG`
+    count once, so an image sent twice with its time adds nothing; sent with another
+    time it is a frame whose clock is wrong, an outlier); after the fit, a camera that
+    leaves more than :data:`vision.calibrate.MAX_RMS_DEG` RMS (``files``, with every
+    frame's residual) — such a fit is no calibration, so nothing is stored. The stored
+    size is the frames' decoded size (EXIF orientation applied), the size detection
+    with this calibration must match.
     """
     sp = ephemeris([f[1] for f in frames], place)
     az, el = sp["azimuth"].to_numpy(), sp["apparent_elevation"].to_numpy()
-    cal = self_calibrate(lambda i: decode(frames[i][0], max_pixels), az, el,
-                         names=[f[0].filename for f in frames], method=method,
-                         projection=projection, east=east, n_radial=n_radial,
-                         fit_tilt=fit_tilt)
+    above = el > 0
+    if n_directions(az[above], el[above]) < MIN_DIRECTIONS:
+        raise InputError(422, f"timestamps: the {len(frames)} times put the sun above the "
+                              f"horizon in only {n_directions(az[above], el[above])} distinct "
+                              f"directions (more than {DISTINCT_DEG:g}° apart; frames of one "
+                              f"direction count once): a calibration needs at least "
+                              f"{MIN_DIRECTIONS}, from frames taken at different times")
+    try:
+        cal = self_calibrate(lambda i: decode(frames[i][0], max_pixels), az, el,
+                             names=[f[0].filename for f in frames], method=method,
+                             projection=projection, east=east, n_radial=n_radial,
+                             fit_tilt=fit_tilt)
+    except InputError:
+        raise
+    except ValueError as exc:  # too few suns found, sizes that differ, a failed fit
+        raise InputError(422, f"files: {exc}") from None
     res = cal.fit
     report = []
     for i, (r, (up, ts)) in enumerate(zip(cal.frames, frames, strict=True)):
@@ -147,7 +224,7 @@ def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
         report.append(r)
     out = res.to_dict()
     cam = out["camera"]
-    w, h = frames[0][0].size_px
+    w, h = cal.image_size_px
     return {
         "site_id": place.site_id, "latitude_deg": place.latitude_deg,
         "longitude_deg": place.longitude_deg, "elevation_m": place.elevation_m,
@@ -163,16 +240,31 @@ def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
     }
 
 
-def evaluate(frames: list[Frame], place: Place, cam: FisheyeCamera, methods: list[str],
-              max_pixels: int) -> dict[str, Any]:
-    """Each method on each frame (decoded one at a time) against SPA: seed 003's Tables 2, 3."""
+def evaluate(frames: list[Frame], place: Place,
+             camera: Callable[[int, int], FisheyeCamera], methods: list[str],
+             max_pixels: int) -> dict[str, Any]:
+    """Each method on each frame (decoded one at a time) against SPA: seed 003's Tables 2, 3.
+
+    ``camera(width, height)`` gives the camera for the first frame's decoded size (its
+    default centre is that image's; a stored calibration checks the size); every other
+    frame must decode to the same size (422 naming it).
+    """
     sp = ephemeris([f[1] for f in frames], place)
     az, el = sp["azimuth"].to_numpy(), sp["apparent_elevation"].to_numpy()
     rows: list[dict[str, Any]] = []
     per: dict[str, dict[str, list[float]]] = {m: {"ra": [], "re": [], "a": [], "e": []}
                                               for m in methods}
+    cam: FisheyeCamera | None = None
+    size: tuple[int, int] | None = None
     for i, (up, ts) in enumerate(frames):
         img = decode(up, max_pixels)
+        if cam is None or size is None:
+            size = (int(img.shape[1]), int(img.shape[0]))
+            cam = camera(*size)
+        elif (img.shape[1], img.shape[0]) != size:
+            raise InputError(422, f"files: every frame must have the same size; {up.field} "
+                                  f"{up.filename!r} decodes to {img.shape[1]}×{img.shape[0]}"
+                                  f" px, the first to {size[0]}×{size[1]} px")
         row: dict[str, Any] = {"filename": up.filename, "timestamp": iso(ts),
                                "ephemeris_azimuth_deg": float(az[i]),
                                "ephemeris_elevation_deg": float(el[i])}
@@ -193,7 +285,8 @@ def evaluate(frames: list[Frame], place: Place, cam: FisheyeCamera, methods: lis
                      "metrics": error_table(v["ra"], v["re"], v["a"], v["e"]) if v["a"] else None}
     return {"n_frames": len(frames), "site_id": place.site_id,
             "latitude_deg": place.latitude_deg, "longitude_deg": place.longitude_deg,
-            "camera": cam.to_dict(), "table2": rows, "table3": table3}
+            "camera": cam.to_dict() if cam is not None else None, "table2": rows,
+            "table3": table3}
 
 
 CAMERA_FIELDS = ("projection", "cx_px", "cy_px", "px_per_deg", "north_offset_deg", "east",

@@ -58,7 +58,15 @@ def test_detect_with_a_stored_calibration(live_server: LiveServer, client: httpx
     assert out["calibration_id"] == cal_id and out["sun_found"]
     assert out["azimuth_deg"] == pytest.approx(az, abs=0.5)
     assert out["elevation_deg"] == pytest.approx(el, abs=0.5)
-    assert out["error"]["separation_deg"] < 0.5
+    assert out["error"]["separation_deg"] < 0.5 and out["warnings"] == []
+    # a frame of another size than the calibration's is refused, as over HTTP
+    bigger = tmp_path / "bigger.png"
+    bigger.write_bytes(cv2.imencode(".png", cv2.resize(cv2.imread(str(frame)), (800, 600)))[1]
+                       .tobytes())
+    p = heliotwin_cli("vision", "detect", str(bigger), "--timestamp", held_out, "--site",
+                      "tehuantepec", "--calibration-id", str(cal_id), env=live_server.env)
+    assert p.returncode == 2 and "--calibration-id:" in p.stderr, p.stderr
+    assert "800×600" in p.stderr and "640×480" in p.stderr
     text = detect("--calibration-id", str(cal_id))
     assert text.returncode == 0, text.stderr
     assert f"error against SPA {out['error']['separation_deg']:.3f} deg" in text.stdout

@@ -108,3 +108,92 @@ def test_cli_names_px_per_deg_when_the_frame_has_no_circle(
     err = capsys.readouterr().err
     assert code == 2
     assert "--px-per-deg: required" in err
+
+
+def test_zones_in_names_read_to_the_minute_or_refused(client: httpx.Client,
+                                                      frame_png: bytes) -> None:
+    """Minute offsets, ISO ``Z``/``±hhmm`` suffixes and bare ``UTC`` are read exactly; a zone
+    the reader cannot read is refused with the reason, never truncated to whole hours."""
+    names = {
+        "sky_20240315_180000_UTC+05:30.jpg": ("2024-03-15T18:00:00", 5.5),
+        "sky_20240315_180000_UTC+0530.jpg": ("2024-03-15T18:00:00", 5.5),
+        "sky_20240315_180000_UTCp5.5.jpg": ("2024-03-15T18:00:00", 5.5),
+        "sky_20240315_180000_UTCm3.75.jpg": ("2024-03-15T18:00:00", -3.75),
+        "sky_20240315T180000Z.jpg": ("2024-03-15T18:00:00", 0),
+        "sky_20240315T120000+0100.jpg": ("2024-03-15T12:00:00", 1),
+        "sky_20240315T120000-04:30.jpg": ("2024-03-15T12:00:00", -4.5),
+        "sky_20240315_120000_UTC.jpg": ("2024-03-15T12:00:00", 0),
+        "Wolf_20160530_094400_UTCp1__o6.jpg": ("2016-05-30T09:44:00", 1),
+        "sky_20240315_120000-01.jpg": ("2024-03-15T12:00:00", None),  # a sequence number
+    }
+    r = client.get("/api/v1/vision/frame-times", params=[("filename", n) for n in names])
+    assert r.status_code == 200, r.text
+    got = {f["filename"]: (f["wall_time"], f["utc_offset_h"]) for f in r.json()["frames"]}
+    assert got == names
+    bad = ["sky_20240315_180000_UTC+5:3.jpg", "sky_20240315_180000_UTC+25.jpg",
+           "sky_20240315_180000_UTCp5.33.jpg", "sky_20240315_180000_UTC+05:30x.jpg",
+           "sky_20240315T180000Z_UTCp1.jpg"]
+    r = client.get("/api/v1/vision/frame-times", params=[("filename", n) for n in bad])
+    for f in r.json()["frames"]:
+        assert f["wall_time"] is None and f["utc_offset_h"] is None, f
+        assert "send the frame's time" in f["zone_error"], f
+    # detection reads the minutes (10:30 at UTC-06:00 written as UTC-0600) …
+    named = "sky_20240210T103000-0600.png"
+    d = client.post("/api/v1/vision/sun", files={"file": (named, frame_png, "image/png")},
+                    data={"camera": "fisheye", "site_id": "tehuantepec"}).json()
+    assert d["timestamp"] == UTC and "UTC-06:00" in d["timestamp_source"]
+    # … and refuses a zone it cannot read unless the time is sent
+    named = "sky_20240210_103000_UTC-6:3.png"
+    r = client.post("/api/v1/vision/sun", files={"file": (named, frame_png, "image/png")},
+                    data={"camera": "fisheye", "site_id": "tehuantepec"})
+    assert r.status_code == 422 and r.json()["detail"].startswith("timestamp:"), r.text
+    r = client.post("/api/v1/vision/sun", files={"file": (named, frame_png, "image/png")},
+                    data={"camera": "fisheye", "site_id": "tehuantepec", "timestamp": UTC})
+    assert r.status_code == 200 and r.json()["timestamp_source"] == "given"
+
+
+def test_cli_and_service_calibrate_the_same_frames_alike(client: httpx.Client, tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]
+                                                          ) -> None:
+    """No ``n_radial`` given: both let the frames decide (``auto``), so one camera."""
+    times = [f"2024-02-11T{h:02d}:10:00-06:00" for h in (8, 10, 12, 14, 16)]
+    paths = []
+    for i, ts in enumerate(times):
+        az, el = _spa(ts, *TEHUANTEPEC)
+        paths.append(tmp_path / f"c{i}.png")
+        cv2.imwrite(str(paths[-1]), fisheye_frame(az, el, seed=i).image)
+    r = client.post("/api/v1/vision/calibrations",
+                    files=[("files", (p.name, p.read_bytes(), "image/png")) for p in paths],
+                    data={"timestamps": times, "site_id": "tehuantepec"})
+    assert r.status_code == 201, r.text
+    code = main(["vision", "calibrate", *map(str, paths), "--timestamps", *times, "--site",
+                 "tehuantepec", "--json"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    cli, api = json.loads(captured.out), r.json()
+    assert cli["model_selection"] == api["model_selection"] != []
+    for key, value in api["camera"].items():
+        assert cli["camera"][key] == (pytest.approx(value, abs=1e-9)
+                                      if isinstance(value, float) else value), key
+
+
+def test_a_camera_without_a_known_north_is_searched_blind(client: httpx.Client) -> None:
+    """A place without the camera's north (no calibration, no ``north_offset_deg``): the
+    default north of 0 is a guess, so the ephemeris does not guide the search nor count
+    against a sun (issue 24: only "the ephemeris of a calibrated camera"). EUROCONTROL's
+    plain sun was refused at confidence 0.018, 128° from the guessed prediction; the
+    answer still compares with the ephemeris. A north offset that is no angle is a 422."""
+    path = Path(__file__).parents[1] / "data" / "real-sky" / "eurocontrol" \
+        / "image_20250215080830.jpg"
+    place = {"camera": "fisheye", "latitude_deg": "48.600518", "longitude_deg": "2.346795"}
+    with path.open("rb") as fh:
+        r = client.post("/api/v1/vision/sun", data=place, files={"file": (path.name, fh)})
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert body["sun_found"] and body["confidence"] >= 0.5, body
+    assert body["distance_from_ephemeris_px"] is None and body["ephemeris"] is not None
+    blind = client.post("/api/v1/vision/sun", data={"camera": "fisheye"},
+                        files={"file": (path.name, path.read_bytes())}).json()
+    assert body["centroid_px"] == blind["centroid_px"]
+    assert client.post("/api/v1/vision/sun", data={**place, "north_offset_deg": "1e308"},
+                       files={"file": (path.name, path.read_bytes())}).status_code == 422

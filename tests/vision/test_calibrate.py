@@ -13,14 +13,20 @@ import pvlib
 import pytest
 
 from vision.calibrate import (
+    MAX_RMS_DEG,
+    CalibrationFailed,
     choose_radial,
+    direction_groups,
     fit_fisheye,
+    leave_one_out_deg,
+    n_directions,
     robust_fit,
     self_calibrate,
     sky_residuals_deg,
 )
 from vision.cameras import FisheyeCamera
 from vision.detect import detect_sun
+from vision.synth import fisheye_frame
 
 EUROCONTROL = Path(__file__).resolve().parents[1] / "data" / "real-sky" / "eurocontrol"
 
@@ -206,3 +212,52 @@ def test_a_mirrored_camera_is_found_mirrored(real_sky: list[dict[str, str]]) -> 
     # the other mirror explains the labels 100 times worse (sum of squares)
     assert plain.cost_other_mirror is not None
     assert plain.cost_other_mirror > 100 * 0.5 * plain.rms_px**2 * plain.n_frames
+
+
+def test_copies_of_one_sun_direction_count_once() -> None:
+    """A frame sent twice, or times seconds apart, give one sun direction: the fits count
+    directions, not frames, and hold a direction's frames out together."""
+    sp = _sun_track(20.8667, -103.05, "2018-03-02", "Etc/GMT+6").iloc[::3]
+    az, el = sp.azimuth.to_numpy(), sp.apparent_elevation.to_numpy()
+    truth = FisheyeCamera(327.0, 236.0, 2.7, 25.0, "left")
+    x, y = truth.sky_to_pixel(az, el)
+    rng = np.random.default_rng(1)
+    x, y = x + rng.normal(0, 2.0, x.size), y + rng.normal(0, 2.0, y.size)
+    # a copy of frame 0 and a frame 0.2° from frame 1 (the sun moves 1° in 4 min)
+    az2, el2 = np.append(az, [az[0], az[1] + 0.2]), np.append(el, [el[0], el[1]])
+    x2, y2 = np.append(x, [x[0], x[1] + 0.5]), np.append(y, [y[0], y[1]])
+    groups = direction_groups(az2, el2)
+    assert groups[-2] == groups[0] and groups[-1] == groups[1]
+    assert n_directions(az2, el2) == az.size
+    # frame 0 held out with its copy: predicted from the others alone, as without the copy
+    no_copy = np.arange(az2.size) != az.size
+    alone = leave_one_out_deg(x2[no_copy], y2[no_copy], az2[no_copy], el2[no_copy], (640, 480))
+    with_copy = leave_one_out_deg(x2, y2, az2, el2, (640, 480))
+    assert with_copy[0] == pytest.approx(alone[0], rel=1e-6) and alone[0] > 0.05
+    # three copies of one position (and two of another) are not three frames
+    with pytest.raises(ValueError, match="distinct sun directions"):
+        fit_fisheye(x[[0, 0, 0, 1, 1]], y[[0, 0, 0, 1, 1]], az[[0, 0, 0, 1, 1]],
+                    el[[0, 0, 0, 1, 1]], (640, 480))
+    with pytest.raises(ValueError, match="distinct directions"):
+        self_calibrate(lambda i: np.zeros((480, 640, 3), np.uint8), az[[0, 0, 0, 0]],
+                       el[[0, 0, 0, 0]])
+
+
+def test_a_fit_no_camera_explains_is_refused_with_each_frame_residual() -> None:
+    """Frames of a day given each other's times (a shuffled list): no fisheye maps those
+    suns, and the best fit's tens of degrees are a refusal naming every frame, not a
+    calibration."""
+    times = pd.DatetimeIndex([f"2024-04-10T{h:02d}:20:00-06:00" for h in (8, 10, 12, 14, 16)])
+    sp = pvlib.solarposition.spa_python(times, 16.28875, -95.240871)
+    az, el = sp.azimuth.to_numpy(), sp.apparent_elevation.to_numpy()
+    cam = FisheyeCamera(330.0, 238.0, 2.6, north_offset_deg=-20.0, east="left")
+    images = [fisheye_frame(a, e, camera=cam, seed=i).image
+              for i, (a, e) in enumerate(zip(az, el, strict=True))]
+    shuffled = [2, 0, 4, 1, 3]
+    with pytest.raises(CalibrationFailed, match=r"RMS on the sky") as err:
+        self_calibrate(lambda i: images[shuffled[i]], az, el,
+                       names=[f"f{i}.png" for i in range(5)])
+    assert all(f"f{i}.png" in str(err.value) for i in range(5))
+    assert max(f["residual_deg"] for f in err.value.frames) > MAX_RMS_DEG
+    # in their own order the same frames calibrate
+    assert self_calibrate(lambda i: images[i], az, el).fit.rms_deg < 0.5

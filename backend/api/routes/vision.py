@@ -6,11 +6,14 @@
   detection (``vision.analyse.analyse_frame``), the ephemeris (SPA, apparent
   elevation; for a fisheye also its pixel ``ephemeris.centroid_px`` through
   the same camera model) and the error (``error.separation_deg`` on the
-  sphere, ``error.distance_px``). Stored.
+  sphere, ``error.distance_px``). Stored. A ``calibration_id`` is only valid on a frame
+  that decodes to the calibration's size (422 naming it otherwise).
 - ``POST /calibrations`` — ``files`` with one ``timestamps`` each and a place
   (nothing else: no centre, scale, rotation or mirror) → a fitted fisheye camera
   (``vision.calibrate.self_calibrate``: outlying frames named and left out), stored
-  with its per-frame residuals; a calibration made without a token is kept within
+  with its per-frame residuals and the frames' decoded size; fewer than three distinct
+  sun directions (422 ``timestamps``) or a fit beyond ``vision.calibrate.MAX_RMS_DEG``
+  (422 ``files``) is refused; a calibration made without a token is kept within
   ``anonymous_keep_rows``, as detections are.
 - ``GET /calibrations``, ``GET /calibrations/{id}``.
 - ``POST /evaluate`` — a batch against SPA for each detection method: seed
@@ -67,7 +70,8 @@ from backend.limits import Busy, prune_anonymous
 from backend.storage.tables import VisionCalibration, VisionDetection
 from backend.timestamps import TimestampError, parse_day_or_instant, parse_instant
 from backend.vision.checks import error_warnings
-from backend.vision.frames import FrameInputs, frame_inputs, time_from_name
+from backend.vision.frames import FrameInputs, NameZoneError, frame_inputs, time_from_name
+from backend.vision.options import N_RADIAL_CHOICES, N_RADIAL_DEFAULT, parse_n_radial
 from backend.vision.service import (
     Frame,
     Place,
@@ -75,10 +79,13 @@ from backend.vision.service import (
     analyse,
     calibrate,
     calibration_answer,
+    check_calibration_size,
     check_image,
     decode,
     detection_row,
     evaluate,
+    free_place,
+    is_oriented,
     iso,
 )
 from backend.vision.store import (
@@ -220,13 +227,7 @@ def _place(ctx: Any, form: FormData, required: bool = False) -> Place | None:
         raise HTTPException(422, "latitude_deg and longitude_deg go together")
     la, lo = _float(lat, "latitude_deg"), _float(lon, "longitude_deg")
     el = _float(_text(form, "elevation_m") or "0", "elevation_m")
-    if not -90.0 <= la <= 90.0:
-        raise HTTPException(422, f"latitude_deg: {la} is outside [-90, 90]")
-    if not -180.0 <= lo <= 180.0:
-        raise HTTPException(422, f"longitude_deg: {lo} is outside [-180, 180]")
-    if not (np.isfinite(el) and -500.0 <= el <= 9000.0):
-        raise HTTPException(422, f"elevation_m: {el} is outside [-500, 9000]")
-    return Place(None, la, lo, el, ZoneInfo("UTC"))
+    return free_place(la, lo, el)
 
 
 def _float(text: str, field: str) -> float:
@@ -243,7 +244,10 @@ def _method(form: FormData) -> str:
     return method
 
 
-def _stored_camera(session: Any, form: FormData) -> tuple[FisheyeCamera | None, int | None]:
+def _stored_camera(session: Any, form: FormData
+                   ) -> tuple[FisheyeCamera | None, dict[str, Any] | None]:
+    """The camera of ``calibration_id`` and the stored calibration (its size, its residuals),
+    or (None, None) when none is given; 422/404 naming ``calibration_id``."""
     raw = _text(form, "calibration_id")
     if raw is None:
         return None, None
@@ -254,21 +258,21 @@ def _stored_camera(session: Any, form: FormData) -> tuple[FisheyeCamera | None, 
     cal = get_calibration(session, int(raw))
     if cal is None:
         raise HTTPException(404, f"calibration_id: no calibration {raw}")
-    return FisheyeCamera.from_dict(cal["camera"]), int(raw)
+    return FisheyeCamera.from_dict(cal["camera"]), cal
 
 
-def _calibration_max_deg(session: Any, cal_id: int) -> float | None:
-    cal = get_calibration(session, cal_id)
-    return None if cal is None else cal["max_deg"]
-
-
-def _camera(form: FormData, stored: FisheyeCamera | None, w: int, h: int,
+def _camera(form: FormData, stored: FisheyeCamera | None, cal: dict[str, Any] | None,
+            w: int, h: int,
             frame: tuple[np.ndarray, str, dt.datetime | None, Place | None] | None = None
             ) -> tuple[PinholeCamera | FisheyeCamera, FrameInputs | None]:
-    """The camera of a request; with ``frame`` (image, file name, time given, place) also
-    what :func:`backend.vision.frames.frame_inputs` completes, the CLI's rule: a fisheye
+    """The camera of a request for a frame of ``w``×``h`` px as decoded; with ``frame``
+    (image, file name, time given, place) also what
+    :func:`backend.vision.frames.frame_inputs` completes, the CLI's rule: a fisheye
     without ``px_per_deg`` gets the scale of its image circle, a frame without a time the
-    time of its file name."""
+    time of its file name. A stored calibration (``cal``) is only valid on frames of the
+    size it was fitted on (422 naming ``calibration_id``)."""
+    if cal is not None:
+        check_calibration_size(cal, (w, h))
     kind = _text(form, "camera") or ("fisheye" if stored is not None else None)
     if stored is not None and kind != "fisheye":
         raise HTTPException(422, "camera: a calibration_id is a fisheye camera")
@@ -341,22 +345,22 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
     ts = _timestamp(_text(form, "timestamp"))
     place = _place(ctx, form)
     method = _method(form)
-    stored, cal_id = await anyio.to_thread.run_sync(_stored_camera, session, form)
+    stored, cal = await anyio.to_thread.run_sync(_stored_camera, session, form)
+    cal_id = None if cal is None else int(cal["calibration_id"])
     up = await _upload(uploads[0], "file", s.vision.max_pixels)
     async with _admitted(ctx, request, _token, [up]):
         img = await anyio.to_thread.run_sync(decode, up, s.vision.max_pixels)
-        cam, frame = await anyio.to_thread.run_sync(_camera, form, stored, img.shape[1],
+        cam, frame = await anyio.to_thread.run_sync(_camera, form, stored, cal, img.shape[1],
                                                     img.shape[0], (img, up.filename, ts, place))
         assert frame is not None
         ts = frame.timestamp
-        res = await anyio.to_thread.run_sync(analyse, img, cam, method, ts, place)
+        oriented = is_oriented(stored is not None, _text(form, "north_offset_deg"))
+        res = await anyio.to_thread.run_sync(analyse, img, cam, method, ts, place, oriented)
         del img
     if frame.camera_derived is not None:
         res["camera_derived"] = frame.camera_derived
     res["timestamp_source"] = frame.timestamp_source
-    res["warnings"] = error_warnings(res, None if cal_id is None else
-                                     await anyio.to_thread.run_sync(_calibration_max_deg,
-                                                                    session, cal_id))
+    res["warnings"] = error_warnings(res, None if cal is None else cal["max_deg"])
     row = detection_row(res, ts, place, cal_id)
     det_id = await _store_detection(ctx, row, anonymous=_token is None)
     res.update({"detection_id": det_id, "calibration_id": cal_id, "timestamp": iso(ts),
@@ -385,10 +389,12 @@ async def _timed_frames(ctx: Any, form: FormData, min_frames: int
         ts = _timestamp(text, f"timestamps[{i}]")
         assert ts is not None
         frames.append((await _upload(up, f"files[{i}]", ctx.settings.vision.max_pixels), ts))
-    sizes = {f[0].size_px for f in frames}
+    # the headers' sizes, either way round (EXIF orientation may turn a frame when it is
+    # decoded); the decoded sizes are compared as each frame is decoded
+    sizes = {tuple(sorted(f[0].size_px)) for f in frames}
     if len(sizes) != 1:
         raise HTTPException(422, f"files: every frame must have the same size, got "
-                                 f"{sorted(sizes)}")
+                                 f"{sorted({f[0].size_px for f in frames})}")
     return frames, place
 
 
@@ -402,7 +408,7 @@ _CAL_DOC = {
                            "description": "ISO 8601 with offset, one per file, same order"},
             "projection": {"type": "string"}, "east": {"type": "string",
                                                       "enum": ["auto", "left", "right"]},
-            "n_radial": {"type": "string", "enum": ["auto", "0", "1", "2"],
+            "n_radial": {"type": "string", "enum": list(N_RADIAL_CHOICES),
                          "description": "radial polynomial terms; auto (default): as many "
                                         "as lower the leave-one-out error"},
             "name": {"type": "string", "maxLength": 100,
@@ -431,22 +437,17 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
     if east not in ("auto", *EAST_SIDES):
         raise HTTPException(422, f"east: must be auto, left or right, got {east!r}")
     fit_tilt = form_flag(_text(form, "fit_tilt"), "fit_tilt")
-    n_radial_text = _text(form, "n_radial") or "auto"
-    if n_radial_text not in ("auto", "0", "1", "2"):
-        raise HTTPException(422, f"n_radial: must be auto, 0, 1 or 2, got {n_radial_text!r}")
-    n_radial = None if n_radial_text == "auto" else int(n_radial_text)
+    n_radial = parse_n_radial(_text(form, "n_radial") or N_RADIAL_DEFAULT)
     method = _method(form)
     name = _text(form, "name") or ""
     if len(name) > 100:
         raise HTTPException(422, f"name: at most 100 characters, got {len(name)}")
     frames, place = await _timed_frames(ctx, form, 3)
-    try:
-        async with _admitted(ctx, request, _token, [f[0] for f in frames], CALIBRATION_PASSES):
-            row = await anyio.to_thread.run_sync(
-                calibrate, frames, place, projection, east, n_radial, fit_tilt,
-                method, ctx.settings.vision.max_pixels)
-    except ValueError as exc:
-        raise HTTPException(422, f"files: {exc}") from None
+    # a bad series is refused by the service (InputError: 422 naming files or timestamps)
+    async with _admitted(ctx, request, _token, [f[0] for f in frames], CALIBRATION_PASSES):
+        row = await anyio.to_thread.run_sync(
+            calibrate, frames, place, projection, east, n_radial, fit_tilt,
+            method, ctx.settings.vision.max_pixels)
     row["name"] = name or (f"{projection}, {row['n_frames']} frames, "
                            f"{frames[0][1].date().isoformat()}")
     cal_id = await _store_calibration(ctx, row, anonymous=_token is None)
@@ -459,13 +460,17 @@ def get_frame_times(filename: Annotated[list[str], Query(
         description="a file name; repeat for several")]) -> FrameTimesRead:
     """The time each file name carries, as detection and calibration read it when no time is
     sent (``backend.vision.frames.time_from_name``): the dashboard shows these beside its
-    files rather than parsing names itself."""
+    files rather than parsing names itself. A name whose zone cannot be read exactly gets
+    no time and a ``zone_error`` (detection refuses it without a ``timestamp``)."""
     out = []
     for name in filename:
-        found = time_from_name(name[:1000])
+        try:
+            found, error = time_from_name(name[:1000]), None
+        except NameZoneError as exc:  # a zone it cannot read: no time, and why
+            found, error = None, str(exc)
         out.append(FrameNameTimeRead(
             filename=name, wall_time=None if found is None else found.wall_time.isoformat(),
-            utc_offset_h=None if found is None else found.utc_offset_h))
+            utc_offset_h=None if found is None else found.utc_offset_h, zone_error=error))
     return FrameTimesRead(frames=out)
 
 
@@ -535,15 +540,21 @@ async def post_evaluate(request: Request, ctx: ContextDep, session: SessionDep,
     if bad:
         raise HTTPException(422, f"methods: unknown {', '.join(bad)}; known: "
                                  f"{', '.join(METHODS)}")
-    stored, _ = await anyio.to_thread.run_sync(_stored_camera, session, form)
+    stored, cal = await anyio.to_thread.run_sync(_stored_camera, session, form)
     frames, place = await _timed_frames(ctx, form, 1)
-    w, h = frames[0][0].size_px
-    cam, _ = _camera(form, stored, w, h)
-    if not isinstance(cam, FisheyeCamera):
-        raise HTTPException(422, "camera: evaluate compares azimuth/elevation, which needs a "
-                                 "fisheye camera")
+
+    def camera(w: int, h: int) -> FisheyeCamera:
+        """The camera for the frames' decoded size (size and parameters checked)."""
+        cam, _ = _camera(form, stored, cal, w, h)
+        if not isinstance(cam, FisheyeCamera):
+            raise HTTPException(422, "camera: evaluate compares azimuth/elevation, which "
+                                     "needs a fisheye camera")
+        return cam
+
+    if cal is None:  # parameters refused before anything is decoded (the size is not used)
+        camera(*frames[0][0].size_px)
     async with _admitted(ctx, request, _token, [f[0] for f in frames]):
-        out = await anyio.to_thread.run_sync(evaluate, frames, place, cam, methods,
+        out = await anyio.to_thread.run_sync(evaluate, frames, place, camera, methods,
                                              ctx.settings.vision.max_pixels)
     return _json(out)
 

@@ -279,8 +279,12 @@ class FrameNameTimeRead(BaseModel):
     filename: str
     wall_time: str | None = Field(description="the name's date and time, ISO 8601 without "
                                               "offset; null: the name carries none")
-    utc_offset_h: int | None = Field(description="the UTC offset the name states (`UTCp1` → "
-                                                 "1) [h]; null: none stated")
+    utc_offset_h: float | None = Field(description="the UTC offset the name states (`UTCp1` "
+                                                   "→ 1, `UTC+05:30` → 5.5) [h]; null: none "
+                                                   "stated")
+    zone_error: str | None = Field(default=None, description="why the zone the name states "
+                                   "cannot be read (then `wall_time` is null too: the frame "
+                                   "needs its time sent); null: no problem")
 
 
 class FrameTimesRead(BaseModel):

@@ -1,0 +1,138 @@
+"""A stored calibration is a camera of one frame size, fitted from distinct sun directions
+(``backend/api/routes/vision.py``, ``backend/vision/service.py``), over HTTP in process.
+
+- A frame of another decoded size than the calibration's is refused (422 naming
+  ``calibration_id``): a rescaled frame read through the stored centre and scale gave the
+  sun at −70°.
+- Sizes are the decoded ones: a JPEG whose EXIF orientation turns it (tag 6) is the size
+  it decodes to, so plain and turned frames of one camera calibrate together, and the
+  stored size is what detection compares.
+- A series with fewer than three distinct sun directions (a frame sent three times, one
+  time given to every frame) is refused (422 naming ``timestamps``), not stored with an
+  RMS of zero.
+
+Frames come from ``vision.synth`` with the sun where pvlib's SPA puts it (not the
+product's ephemeris).
+"""
+
+from __future__ import annotations
+
+import struct
+
+import cv2
+import httpx
+import numpy as np
+import pandas as pd
+import pvlib
+import pytest
+
+from vision.cameras import FisheyeCamera
+from vision.synth import fisheye_frame
+
+CAL = "/api/v1/vision/calibrations"
+SUN = "/api/v1/vision/sun"
+TEHUANTEPEC = (16.288750, -95.240871, 50.0)
+TRUTH = FisheyeCamera(330.0, 238.0, 2.6, north_offset_deg=-20.0, east="left")
+DAY = "2024-04-12"  # this module's day (the live server's database is shared)
+TIMES = [f"{DAY}T{h:02d}:20:00-06:00" for h in (8, 10, 12, 14, 16)]
+HELD_OUT = f"{DAY}T11:05:00-06:00"
+
+
+def _image(ts: str, seed: int) -> np.ndarray:
+    sp = pvlib.solarposition.spa_python(pd.DatetimeIndex([pd.Timestamp(ts)]), *TEHUANTEPEC)
+    az, el = float(sp["azimuth"].iloc[0]), float(sp["apparent_elevation"].iloc[0])
+    return fisheye_frame(az, el, camera=TRUTH, seed=seed).image
+
+
+def _encode(img: np.ndarray, ext: str = ".png") -> bytes:
+    ok, buf = cv2.imencode(ext, img, [cv2.IMWRITE_JPEG_QUALITY, 95] if ext == ".jpg" else [])
+    assert ok
+    return buf.tobytes()
+
+
+def _turned_jpeg(img: np.ndarray) -> bytes:
+    """The frame stored turned a quarter left with EXIF orientation 6 (turn right to show):
+    its header says 480×640, it decodes (and shows) 640×480."""
+    jpeg = _encode(cv2.rotate(img, cv2.ROTATE_90_COUNTERCLOCKWISE), ".jpg")
+    ifd = struct.pack(">H", 1) + struct.pack(">HHIHH", 0x0112, 3, 1, 6, 0)
+    app1 = b"Exif\x00\x00" + b"MM\x00\x2a\x00\x00\x00\x08" + ifd + struct.pack(">I", 0)
+    return jpeg[:2] + b"\xff\xe1" + struct.pack(">H", len(app1) + 2) + app1 + jpeg[2:]
+
+
+def _calibrate(client: httpx.Client, files: list[tuple[str, bytes]], times: list[str]
+               ) -> httpx.Response:
+    return client.post(CAL, files=[("files", (n, b, "image/png")) for n, b in files],
+                       data={"timestamps": times, "site_id": "tehuantepec", "n_radial": "0"})
+
+
+@pytest.fixture(scope="module")
+def images() -> list[np.ndarray]:
+    return [_image(ts, i) for i, ts in enumerate(TIMES)]
+
+
+def test_a_calibration_refuses_a_frame_of_another_size(client: httpx.Client,
+                                                       images: list[np.ndarray]) -> None:
+    r = _calibrate(client, [(f"c{i}.png", _encode(im)) for i, im in enumerate(images)], TIMES)
+    assert r.status_code == 201, r.text
+    cal_id = r.json()["calibration_id"]
+    assert r.json()["image_width_px"] == 640 and r.json()["image_height_px"] == 480
+    frame = _image(HELD_OUT, 42)
+    data = {"calibration_id": str(cal_id), "timestamp": HELD_OUT, "site_id": "tehuantepec"}
+    ok = client.post(SUN, files={"file": ("f.png", _encode(frame), "image/png")}, data=data)
+    assert ok.status_code == 200 and ok.json()["error"]["separation_deg"] < 0.5, ok.text
+    bigger = cv2.resize(frame, (800, 600), interpolation=cv2.INTER_AREA)
+    r = client.post(SUN, files={"file": ("f.png", _encode(bigger), "image/png")}, data=data)
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert detail.startswith("calibration_id:") and "800×600" in detail and "640×480" in detail
+    # evaluate with the calibration: the same rule
+    r = client.post("/api/v1/vision/evaluate",
+                    files=[("files", ("f.png", _encode(bigger), "image/png"))],
+                    data={"calibration_id": str(cal_id), "timestamps": [HELD_OUT],
+                          "site_id": "tehuantepec"})
+    assert r.status_code == 422 and r.json()["detail"].startswith("calibration_id:"), r.text
+
+
+def test_exif_turned_frames_are_their_decoded_size(client: httpx.Client,
+                                                   images: list[np.ndarray]) -> None:
+    """Plain and EXIF-turned JPEGs of one camera: one size (640×480, as decoded), stored so;
+    a turned frame is then detected with the calibration."""
+    files = [(f"t{i}.jpg", _turned_jpeg(im) if i % 2 else _encode(im, ".jpg"))
+             for i, im in enumerate(images)]
+    r = _calibrate(client, files, TIMES)
+    assert r.status_code == 201, r.text
+    cal = r.json()
+    assert (cal["image_width_px"], cal["image_height_px"]) == (640, 480)
+    assert cal["camera"]["px_per_deg"] == pytest.approx(2.6, rel=0.02)
+    assert cal["rms_deg"] < 0.5 and cal["n_outliers"] == 0
+    turned = _turned_jpeg(_image(HELD_OUT, 43))
+    r = client.post(SUN, files={"file": ("h.jpg", turned, "image/jpeg")},
+                    data={"calibration_id": str(cal["calibration_id"]), "timestamp": HELD_OUT,
+                          "site_id": "tehuantepec"})
+    assert r.status_code == 200, r.text
+    assert r.json()["image_size_px"] == [640, 480] and r.json()["error"]["separation_deg"] < 0.5
+    # every frame turned: the stored size is still the decoded one, not the headers' 480×640
+    r = _calibrate(client, [(f"u{i}.jpg", _turned_jpeg(im)) for i, im in enumerate(images)],
+                   TIMES)
+    assert r.status_code == 201, r.text
+    assert (r.json()["image_width_px"], r.json()["image_height_px"]) == (640, 480)
+
+
+def test_series_of_fewer_than_three_sun_directions_are_refused(
+        client: httpx.Client, images: list[np.ndarray]) -> None:
+    one = _encode(images[1])
+    series = {
+        "one frame three times": ([("a.png", one)] * 3, [TIMES[1]] * 3),
+        "two frames three times each": ([("a.png", one)] * 3 + [("b.png", _encode(images[3]))]
+                                        * 3, [TIMES[1]] * 3 + [TIMES[3]] * 3),
+        "five frames at one time": ([(f"c{i}.png", _encode(im)) for i, im in enumerate(images)],
+                                    [TIMES[2]] * 5),
+        "times 20 s apart": ([(f"d{i}.png", _encode(im)) for i, im in enumerate(images)],
+                             [f"{DAY}T12:20:{20 * i:02d}-06:00" for i in range(3)]
+                             + [TIMES[0], TIMES[0]]),
+    }
+    for what, (files, times) in series.items():
+        r = _calibrate(client, files, times)
+        assert r.status_code == 422, (what, r.text)
+        detail = r.json()["detail"]
+        assert detail.startswith("timestamps:") and "distinct directions" in detail, what
