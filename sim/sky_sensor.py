@@ -58,7 +58,7 @@ FLAGS = {
     "night": 1,  # sun below 2° or clear-sky POA below 20 W m⁻²
     "missing": 2,  # no reading (NaN)
     "zero": 4,  # ≤ 0.5 % of STC power while the clear sky gives > 200 W m⁻²
-    "stale": 8,  # the same value ≥ 5 minutes running in daylight
+    "stale": 8,  # the same value ≥ 5 readings (a coarse logger: an hour) running (_stale)
     "saturated": 16,  # at the logger's saturation power
     "above_clear_sky": 32,  # inverted POA > 1.25 × clear-sky POA + 50 W m⁻²
 }
@@ -66,6 +66,13 @@ FLAGS = {
 G_MAX = 1500.0  # upper end of the bisection [W m⁻²]
 _BISECTIONS = 16  # 1500 / 2**16 = 0.023 W m⁻² (the logger's 0.1 W: 0.12 W m⁻²)
 _STALE_MIN = 5
+#: … of a logger that holds its value from one minute to the next on at least
+#: :data:`_HELD_SHARE` of its live minutes (a coarse resolution: 10 W or 0.01 kW steps, a
+#: slow logger's equal readings): only a run this long is a frozen logger [min]
+_STALE_COARSE_MIN = 60
+#: A live 1-minute reading at a fine resolution changes on nearly every minute (the sun
+#: moves, the sensor has noise); a share of held minutes above this is the resolution's
+_HELD_SHARE = 0.1
 #: A local day's sky is the fixed array's when at least this share of its daylight minutes
 #: (clear-sky POA > 20 W m⁻²) inverted; else it is the clear sky of the clear-sky twin.
 MIN_SENSOR_SHARE = 0.5
@@ -219,13 +226,26 @@ def _reading_flags(values: np.ndarray, clear: pd.DataFrame, zero_at: float) -> n
 
 
 def _stale(p: np.ndarray) -> np.ndarray:
-    """True inside runs of ≥ 5 identical non-zero readings (a frozen logger)."""
+    """True inside runs of identical non-zero values that only a frozen logger makes:
+    :data:`_STALE_MIN` of its readings running (a slower logger's minutes are interpolated
+    between readings, :func:`sim.energy.on_grid`: its cadence is the median spacing of the
+    grid's kinks), and at least :data:`_STALE_COARSE_MIN` minutes of a logger that often
+    holds its value — a coarse resolution holds a live value for minutes (10 W steps at
+    300 W: a tester's overcast day lost 30 % of its minutes as stale, and with 50 W steps
+    every day fell back to the clear sky; two equal readings of a 15-minute logger made
+    16 equal minutes)."""
     if p.size == 0:
         return np.zeros(0, dtype=bool)
     new_run = np.r_[True, p[1:] != p[:-1]]
     run_id = np.cumsum(new_run) - 1
     length = np.bincount(run_id)[run_id]
-    return (length >= _STALE_MIN) & (p > 0)
+    live = (p[1:] > 0) & (p[:-1] > 0)  # NaN compares False: only read minutes
+    held = float(np.mean(p[1:][live] == p[:-1][live])) if live.any() else 0.0
+    d2 = np.abs(p[2:] - 2.0 * p[1:-1] + p[:-2])
+    kinks = np.flatnonzero(d2 > 1e-9 * max(float(np.nanmax(np.abs(p), initial=0.0)), 1.0))
+    cadence = max(1, int(round(float(np.median(np.diff(kinks)))))) if kinks.size > 2 else 1
+    need = max(_STALE_MIN * cadence, _STALE_COARSE_MIN if held >= _HELD_SHARE else 0)
+    return (length >= need) & (p > 0)
 
 
 def _bound(ghi: np.ndarray, dni: np.ndarray, clear: pd.DataFrame

@@ -73,8 +73,9 @@ MAX_DAYS = 400
 #: the sun is behind or grazing the fixed plane capped by the minutes around,
 #: sky_sensor._unseen_beam_capped; 11: each cached day keeps its site config's digest,
 #: site_key; 12: a tracker making next to nothing gets no shape fits, faults.DEAD_SHARE; a day
-#: in progress judged on its minutes so far for its measured sky too).
-CACHE_VERSION = 12
+#: in progress judged on its minutes so far for its measured sky too; 13: a coarse or slow
+#: logger's held values are not a frozen logger, sky_sensor._stale).
+CACHE_VERSION = 13
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
