@@ -155,7 +155,7 @@ class TwinResult:
         edges = [pd.Timestamp(d.date(), tz=zone) for d in dates]
         edges.append(pd.Timestamp((dates[-1] + pd.Timedelta(days=1)).date(), tz=zone))
         edges_s = np.array([e.timestamp() for e in edges])
-        t = s.index.as_unit("s").asi8.astype(np.float64)
+        t = s.index.as_unit("ns").asi8 / 1e9  # not whole seconds: a step may be 0.5 s
         gap = 1.5 * self.step_s
         per = {a: energy_per_period_wh(t, s[f"{a}_power_w"].to_numpy(), gap, edges_s)
                for a in ("tracker", "fixed")}
