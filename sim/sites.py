@@ -242,6 +242,32 @@ def list_sites(sites_dir: str | Path | None = None) -> list[Site]:
 #: (:func:`place_defaults`), never from the site it was copied from.
 CLIMATE_KEYS = ("temp_air_c", "wind_speed_m_s")
 FIXED_SURFACE_KEYS = ("surface_tilt_deg", "surface_azimuth_deg")
+#: The tracker's azimuth joint range: its span is the machine's (cable wrap), its centre
+#: the place's (:func:`tracker_azimuth_range_deg`).
+TRACKER_PLACE_KEYS = ("azimuth_min_deg", "azimuth_max_deg")
+_AZIMUTH_JOINT_BOUND_DEG = 720.0  # the site format's limit (sim.site_config.Tracker)
+
+
+def tracker_azimuth_range_deg(latitude_deg: float,
+                              span_deg: float | None = None) -> tuple[float, float]:
+    """Azimuth joint limits [°] of a tracker at ``latitude_deg``: ``span_deg`` (default
+    :class:`sim.kinematics.TrackerGeometry`'s 540°) centred on the equator-facing direction
+    (180° north of the equator, 0° south of it), within the format's ±720°.
+
+    The twin sweeps each day around the side of its noon sun
+    (:func:`sim.control.noon_reference_azimuth`). On a day whose noon sun is on the
+    equator side the sun stays within ±180° of it; in the tropics, on a day whose noon sun
+    is on the pole side, within ±90° of the pole. 540° centred on the equator side holds
+    both, so no day's sun path needs an unwind while the sun is up; under a midnight sun
+    the one unwind per day falls at the lowest sun, towards the pole. A range centred on
+    the wrong side (a northern tracker copied south) unwinds in the afternoon.
+    """
+    geometry = TrackerGeometry()
+    span = (geometry.azimuth_max_deg - geometry.azimuth_min_deg
+            if span_deg is None else float(span_deg))
+    centre = 180.0 if latitude_deg >= 0 else 0.0
+    return (max(centre - span / 2.0, -_AZIMUTH_JOINT_BOUND_DEG),
+            min(centre + span / 2.0, _AZIMUTH_JOINT_BOUND_DEG))
 
 
 def fixed_tilt_from_latitude_deg(latitude_deg: float) -> float:
@@ -263,11 +289,14 @@ def fixed_tilt_from_latitude_deg(latitude_deg: float) -> float:
 
 
 def place_defaults(config: dict[str, Any], climate: dict[str, float] | None = None,
-                   climate_source: str = "") -> dict[str, Any]:
+                   climate_source: str = "",
+                   azimuth_span_deg: float | None = None) -> dict[str, Any]:
     """``config`` with what its place decides filled in where it is left out, each marked.
 
     A fixed array without ``surface_tilt_deg`` gets :func:`fixed_tilt_from_latitude_deg`,
-    without ``surface_azimuth_deg`` the equator (180° north of it, 0° south); a config
+    without ``surface_azimuth_deg`` the equator (180° north of it, 0° south); a site with a
+    tracker array whose ``tracker`` gives neither of :data:`TRACKER_PLACE_KEYS` gets
+    :func:`tracker_azimuth_range_deg` (``azimuth_span_deg`` wide, default 540°); a config
     without ``temp_air_c``/``wind_speed_m_s`` gets ``climate``'s values (a weather file's
     annual means, named by ``climate_source``) or the defaults the site format states
     (:class:`sim.site_config.SiteConfig`). Each filled key is listed in ``assumed`` with
@@ -306,6 +335,19 @@ def place_defaults(config: dict[str, Any], climate: dict[str, float] | None = No
             if "surface_azimuth_deg" not in arr:
                 arr["surface_azimuth_deg"] = 180.0 if lat >= 0 else 0.0
                 assumed[f"arrays.{name}.surface_azimuth_deg"] = "facing the equator"
+        tracker = out.get("tracker", {})
+        has_tracker = any(isinstance(a, dict) and a.get("mount", default_mount) == "tracker"
+                          for a in arrays.values())
+        if (has_tracker and isinstance(tracker, dict)
+                and not any(k in tracker for k in TRACKER_PLACE_KEYS)):
+            lo, hi = tracker_azimuth_range_deg(lat, azimuth_span_deg)
+            out["tracker"] = {**tracker, "azimuth_min_deg": lo, "azimuth_max_deg": hi}
+            why = (f"{hi - lo:g}° of azimuth centred on the equator side "
+                   f"({'south' if lat >= 0 else 'north'}) at latitude {lat:g}°: every day's "
+                   "sun path without an unwind in daylight "
+                   "(sim.sites.tracker_azimuth_range_deg)")
+            for key in TRACKER_PLACE_KEYS:
+                assumed[f"tracker.{key}"] = why
     if assumed:
         out["assumed"] = assumed
     return out
@@ -316,10 +358,16 @@ def relocated_config(template: dict[str, Any], place: dict[str, Any],
                      climate_source: str = "") -> dict[str, Any]:
     """A config at a new place from ``template`` (a site's :meth:`Site.to_config`): its
     tracker and arrays kept, what its place decided (:data:`CLIMATE_KEYS`, fixed arrays'
-    :data:`FIXED_SURFACE_KEYS`, its ``assumed`` marks) dropped and taken from the new
-    place (:func:`place_defaults`); ``place`` sets ``site_id``, ``latitude_deg`` … ."""
+    :data:`FIXED_SURFACE_KEYS`, the tracker's :data:`TRACKER_PLACE_KEYS`, its ``assumed``
+    marks) dropped and taken from the new place (:func:`place_defaults`; the tracker keeps
+    its azimuth span, centred anew); ``place`` sets ``site_id``, ``latitude_deg`` … ."""
     out = {k: v for k, v in template.items() if k not in (*CLIMATE_KEYS, "assumed")}
     out["arrays"] = {name: ({k: v for k, v in arr.items() if k not in FIXED_SURFACE_KEYS}
                             if arr.get("mount") == "fixed" else dict(arr))
                      for name, arr in template.get("arrays", {}).items()}
-    return place_defaults({**out, **place}, climate, climate_source)
+    tracker = template.get("tracker", {})
+    span = None
+    if all(k in tracker for k in TRACKER_PLACE_KEYS):
+        span = float(tracker["azimuth_max_deg"]) - float(tracker["azimuth_min_deg"])
+    out["tracker"] = {k: v for k, v in tracker.items() if k not in TRACKER_PLACE_KEYS}
+    return place_defaults({**out, **place}, climate, climate_source, azimuth_span_deg=span)

@@ -13,7 +13,8 @@ model choices the twin uses and names units:
   al. (2006, doi:10.1016/j.solener.2005.06.010), the one the CEC model was
   fitted with, ``pvlib.iam.physical``;
 - weather: TMY3 files through ``pvlib.iotools.read_tmy3``, EPW files through
-  ``pvlib.iotools.read_epw``; a typical year is mapped onto any run's years by
+  ``pvlib.iotools.read_epw``, told apart by their first line (:func:`sniff_weather_format`;
+  any other file is refused saying what is read); a typical year is mapped onto any run's years by
   :func:`typical_year_on` (calendar hour of the station's standard time, wrapped
   at the year's ends); :func:`typical_year_at_site` moves a distant station's sky to the
   site (Perez et al. 1990 kt′ at the same solar time, Erbs et al. 1982 decomposition), and
@@ -275,8 +276,35 @@ def weather_format(first_line: str) -> str:
     head = line.split(",")
     if len(head) >= 7 and head[0].strip().isdigit():
         return "tmy3"
-    raise ValueError("neither TMY3 (first line: USAF number, name, state, UTC offset, latitude, "
-                     "longitude, elevation) nor EPW (first line: LOCATION,…)")
+    shown = " ".join(line.split())
+    shown = shown if len(shown) <= 60 else shown[:57] + "…"
+    raise ValueError(f"neither TMY3 nor EPW: its first line {shown!r} is not a TMY3 CSV's "
+                     "(USAF number, name, state, UTC offset, latitude, longitude, elevation) "
+                     "nor an EPW file's (LOCATION,…); only those two formats are read "
+                     "(not TMY2 .tm2 files)")
+
+
+def sniff_weather_format(source: str | Path | IO[str], fmt: str | None = None) -> str:
+    """The format of a weather file (path or text buffer) read from its first line
+    (:func:`weather_format`); a buffer is left where it was.
+
+    ``fmt`` (``"tmy3"`` or ``"epw"``), when given, is what the caller was told the file
+    is: a file whose content says otherwise is refused naming both, as reading it with
+    the other format's reader fails with pvlib's bare KeyError.
+    """
+    if fmt is not None and fmt not in WEATHER_FORMATS:
+        raise ValueError(f"format must be one of {', '.join(WEATHER_FORMATS)}; got {fmt!r}")
+    if isinstance(source, (str, Path)):
+        with open(source, encoding="utf-8", errors="replace") as f:
+            first = f.readline()
+    else:
+        start = source.tell()
+        first = source.readline()
+        source.seek(start)
+    found = weather_format(first)
+    if fmt is not None and found != fmt:
+        raise ValueError(f"the file is {found.upper()} (by its first line), not {fmt.upper()}")
+    return found
 
 
 def _calendar_hour(index: pd.DatetimeIndex) -> np.ndarray:
@@ -299,7 +327,8 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
     ----------
     source : path or text buffer
     fmt : {"tmy3", "epw"}, optional
-        Default: read from the first line (:func:`weather_format`).
+        What the caller was told the file is; a file whose first line says otherwise is
+        refused (:func:`sniff_weather_format`). Default: read from the first line.
 
     Returns
     -------
@@ -313,40 +342,35 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
     """
     from pvlib import iotools
 
-    if fmt is None:
-        if isinstance(source, (str, Path)):
-            with open(source, encoding="utf-8", errors="replace") as f:
-                fmt = weather_format(f.readline())
-        else:
-            start = source.tell()
-            fmt = weather_format(source.readline())
-            source.seek(start)
-    if fmt not in WEATHER_FORMATS:
-        raise ValueError(f"format must be one of {', '.join(WEATHER_FORMATS)}; got {fmt!r}")
+    fmt = sniff_weather_format(source, fmt)
     src: Any = str(source) if isinstance(source, Path) else source
-    if fmt == "tmy3":
-        data, meta = iotools.read_tmy3(src, map_variables=True)
-        middle = data.index - pd.Timedelta(minutes=30)
-        name = str(meta.get("Name", "")).strip('"')
+    try:
+        if fmt == "tmy3":
+            data, meta = iotools.read_tmy3(src, map_variables=True)
+            middle = data.index - pd.Timedelta(minutes=30)
+            name = str(meta.get("Name", "")).strip('"')
+        else:
+            data, meta = iotools.read_epw(src)
+            middle = data.index + pd.Timedelta(minutes=30)
+            name = ", ".join(str(meta.get(k, "")).strip() for k in ("city", "country")
+                             if str(meta.get(k, "")).strip())
         offset = float(meta["TZ"])
-    else:
-        data, meta = iotools.read_epw(src)
-        middle = data.index + pd.Timedelta(minutes=30)
-        name = ", ".join(str(meta.get(k, "")).strip() for k in ("city", "country")
-                         if str(meta.get(k, "")).strip())
-        offset = float(meta["TZ"])
+        place = {k: float(meta[k]) for k in ("latitude", "longitude", "altitude")}
+    except (KeyError, IndexError) as exc:  # pvlib's bare KeyError of a missing column
+        raise ValueError(f"not a readable {fmt.upper()} file: no {exc} in it") from None
     hour = _calendar_hour(pd.DatetimeIndex(middle))
     if len(data) != HOURS_PER_TYPICAL_YEAR or len(np.unique(hour)) != HOURS_PER_TYPICAL_YEAR:
         raise ValueError(f"a typical year has {HOURS_PER_TYPICAL_YEAR} distinct hours; this "
                          f"{fmt.upper()} file has {len(np.unique(hour))} of {len(data)} rows")
-    weather = data[list(WEATHER_COLUMNS)].astype(float)
+    try:
+        weather = data[list(WEATHER_COLUMNS)].astype(float)
+    except KeyError as exc:
+        raise ValueError(f"not a readable {fmt.upper()} file: no {exc} in it") from None
     weather.index = pd.DatetimeIndex(middle)
     weather = weather.iloc[np.argsort(hour, kind="stable")]
     if not np.isfinite(weather[["ghi", "dni", "dhi"]].to_numpy()).all():
         raise ValueError(f"the {fmt.upper()} file has missing irradiance (ghi, dni or dhi)")
-    station = {"format": fmt, "name": name, "latitude": float(meta["latitude"]),
-               "longitude": float(meta["longitude"]), "altitude": float(meta["altitude"]),
-               "utc_offset_h": offset}
+    station = {"format": fmt, "name": name, **place, "utc_offset_h": offset}
     return weather, station
 
 

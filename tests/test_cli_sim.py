@@ -137,6 +137,46 @@ def test_simulate_errors_exit_2(args, message, heliotwin_cli) -> None:
     assert message in p.stderr and p.stdout == ""
 
 
+def test_a_run_of_more_steps_than_the_service_allows_is_refused(heliotwin_cli) -> None:
+    """``--step-s 0.001`` over a day ran 86.4 M steps for six minutes: the CLI now refuses
+    what the service refuses one request (HELIOTWIN_MAX_SIMULATION_STEPS, default from
+    backend.settings), naming the flag, the bound and how to raise it."""
+    from backend.settings import SimulationSettings
+
+    day = ["simulate", "--start", "2024-06-01", "--end", "2024-06-02", "--json"]
+    small = {"HELIOTWIN_MAX_SIMULATION_STEPS": "100"}  # 144 steps of 600 s are over it
+    over = heliotwin_cli(*day, "--step-s", "600", env=small)
+    assert over.returncode == 2 and over.stdout == ""
+    assert "--step-s" in over.stderr and "144 steps" in over.stderr
+    assert "limit is 100" in over.stderr and "HELIOTWIN_MAX_SIMULATION_STEPS" in over.stderr
+    raised = heliotwin_cli(*day, "--step-s", "600", env={"HELIOTWIN_MAX_SIMULATION_STEPS": "144"})
+    assert raised.returncode == 0, raised.stderr
+    tiny = heliotwin_cli(*day, "--step-s", "0.001", env={})
+    default = SimulationSettings.model_fields["max_steps"].default
+    assert tiny.returncode == 2 and f"limit is {default:,}" in tiny.stderr
+    assert "86,400,000 steps" in tiny.stderr
+    endless = heliotwin_cli(*day, "--step-s", "inf", env={})
+    assert endless.returncode == 2 and "--step-s: must be positive and finite" in endless.stderr
+
+
+def test_a_weather_file_of_the_other_format_names_the_flag_that_reads_it(
+        tmp_path: Path, heliotwin_cli) -> None:
+    """A TMY3 CSV given as ``--epw``, and pvlib's TMY2 file as ``--tmy3``, were refused
+    with pvlib's bare KeyError ``'altitude'``; the file's first line now says which it is."""
+    from sim.sky import pvlib_tmy3_path
+
+    day = ["simulate", "--start", "2024-06-01", "--end", "2024-06-02", "--force", "--json"]
+    tmy3 = str(pvlib_tmy3_path())
+    as_epw = heliotwin_cli(*day, "--epw", tmy3)
+    assert as_epw.returncode == 2 and "'altitude'" not in as_epw.stderr
+    assert "--epw" in as_epw.stderr and "is a TMY3 file" in as_epw.stderr
+    assert "pass it as --tmy3" in as_epw.stderr
+    tmy2 = str(pvlib_tmy3_path().with_name("12839.tm2"))
+    as_tmy3 = heliotwin_cli(*day, "--tmy3", tmy2)
+    assert as_tmy3.returncode == 2 and "'altitude'" not in as_tmy3.stderr
+    assert "--tmy3: cannot read" in as_tmy3.stderr and "neither TMY3 nor EPW" in as_tmy3.stderr
+
+
 def test_open_loop_model_reads_a_saved_pointing_model_answer(tmp_path: Path,
                                                              heliotwin_cli) -> None:
     """``--pointing-model-terms FILE``: the answer of GET …/pointing-model saved as it came

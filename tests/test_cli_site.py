@@ -147,6 +147,48 @@ def test_from_weather_epw_in_the_southern_hemisphere_faces_north(tmp_path: Path,
     assert site["arrays"]["fixed"]["surface_azimuth_deg"] == 0.0  # the equator is north
     assert site["arrays"]["fixed"]["surface_tilt_deg"] == 28.5  # 0.76 x 33.45 + 3.1
     assert site["wind_speed_m_s"] == 2.5 and site["name"] == "Santiago, RM, CHL"
+    # the tracker's azimuth range is the place's too: centred on the equator (north)
+    assert (site["tracker"]["azimuth_min_deg"], site["tracker"]["azimuth_max_deg"]) == (-270, 270)
+    assert "tracker.azimuth_min_deg" in site["assumed"]
+
+
+def test_a_southern_site_s_tracker_faces_the_sun_all_afternoon(tmp_path: Path, heliotwin) -> None:
+    """A tracker copied from Tehuantepec to 45° S kept its azimuth range centred on south
+    (−90°…450°); the December sun there runs east → north → west, so the joint unwound
+    from −5° to 167° at 17:54 with the sun 34° up: a perfect machine 1,406 mrad off (a
+    tester's finding). The range now comes from the place, marked as assumed."""
+    p = heliotwin(tmp_path, "site", "create", "--id", "south45", "--latitude-deg", "-45",
+                  "--longitude-deg", "170.5", "--timezone", "Pacific/Auckland")
+    assert p.returncode == 0, p.stderr
+    assert "assumed tracker.azimuth_min_deg = -270.0" in p.stdout
+    site = json.loads((tmp_path / "south45.json").read_text())
+    assert (site["tracker"]["azimuth_min_deg"], site["tracker"]["azimuth_max_deg"]) == (-270, 270)
+    assert site["tracker"]["d1_m"] == 0.355  # the rest of the machine is --like's
+    run = heliotwin(tmp_path, "simulate", "--site", "south45", "--start", "2024-12-21",
+                    "--end", "2024-12-22", "--step-s", "300", "--controller", "open_loop_spa",
+                    "--json")
+    assert run.returncode == 0, run.stderr
+    # as a northern site in June (north60: 2.9 mrad rms, 4.4 at most): the dead band's few
+    assert json.loads(run.stdout)["pointing_error_max_mrad"] < 5.0
+
+
+def test_a_weather_file_is_known_by_its_content(tmp_path: Path, heliotwin) -> None:
+    """pvlib's TMY2 file (12839.tm2) was read as TMY3 for its suffix and refused with
+    pvlib's bare KeyError, ``'altitude'``; the first line now decides, and a file of
+    another format is refused saying what is read."""
+    tmy2 = Path(pvlib_tmy3_path()).with_name("12839.tm2")
+    p = heliotwin(tmp_path, "site", "from-weather", str(tmy2), "--id", "miami")
+    assert p.returncode == 2 and "'altitude'" not in p.stderr
+    assert "neither TMY3 nor EPW" in p.stderr and "TMY2" in p.stderr
+    wrong = heliotwin(tmp_path, "site", "from-weather", str(pvlib_tmy3_path()), "--id", "gb",
+                      "--format", "epw")
+    assert wrong.returncode == 2 and "--format epw" in wrong.stderr
+    assert "is a TMY3 file" in wrong.stderr
+    renamed = tmp_path / "greensboro.epw"  # a TMY3 CSV under an EPW name: read as TMY3
+    renamed.write_bytes(pvlib_tmy3_path().read_bytes())
+    ok = heliotwin(tmp_path, "site", "from-weather", str(renamed), "--id", "greensboro")
+    assert ok.returncode == 0, ok.stderr
+    assert json.loads((tmp_path / "greensboro.json").read_text())["source"].startswith("TMY3")
 
 
 @pytest.mark.parametrize("offset", [5.5, -3.5])

@@ -12,7 +12,11 @@ few days, at few steps).
 Bad input exits with status 2 and a message naming the problem. Heavy imports
 happen inside the command.
 
-``--tmy3``/``--epw``: a typical year is laid onto the run's calendar in its
+A run of more steps than the service allows one request
+(``HELIOTWIN_MAX_SIMULATION_STEPS``) is refused (:func:`check_step_count`).
+
+``--tmy3``/``--epw``: a file whose first line is of the other format is refused naming
+the flag that reads it. A typical year is laid onto the run's calendar in its
 station's standard time, wrapping at the year's ends (:mod:`sim.sky`); a
 station more than 100 km from the site is refused unless ``--force``
 (:func:`backend.twin.scenario.check_station`).
@@ -23,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 import sys
 from pathlib import Path
@@ -54,7 +59,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--end", required=True, help="YYYY-MM-DD or ISO date-time with offset (exclusive)"
     )
-    p.add_argument("--step-s", type=float, default=60.0, help="time step [s] (default 60)")
+    p.add_argument("--step-s", type=float, default=60.0,
+                   help="time step [s] (default 60; a run has at most "
+                        "HELIOTWIN_MAX_SIMULATION_STEPS steps, 1,100,000 by default)")
     p.add_argument(
         "--controller",
         default="ideal",
@@ -150,6 +157,27 @@ def _progress_bar(enabled: bool) -> tuple[Any, Any]:
     return callback, bar
 
 
+def check_step_count(start: Any, end: Any, step_s: float) -> None:
+    """Refuse a run of more steps than the service allows one request
+    (``HELIOTWIN_MAX_SIMULATION_STEPS``, read as the service reads it:
+    ``backend.settings.get_settings``): a mistyped ``--step-s 0.001`` would otherwise run
+    for hours. The variable raises the bound for the CLI as for the service."""
+    from pydantic import ValidationError
+
+    from backend.settings import get_settings
+
+    try:
+        limit = get_settings().simulations.max_steps
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        raise InputError(f"{'.'.join(str(p) for p in err['loc'])}: {err['msg']}") from None
+    steps = (end - start).total_seconds() / step_s
+    if steps > limit:
+        raise InputError(f"--step-s: {step_s:g} s from --start to --end is {steps:,.0f} steps; "
+                         f"the limit is {limit:,}: use a larger --step-s or a shorter range, "
+                         "or raise the limit with HELIOTWIN_MAX_SIMULATION_STEPS=N")
+
+
 def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
     """Run the simulation; returns (summary, TwinResult). Raises InputError on bad input."""
     from sim.sites import UnknownSiteError, load_site
@@ -164,8 +192,9 @@ def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
         raise InputError(
             f"--end ({args.end}) must be after --start ({args.start}); end is exclusive"
         )
-    if not args.step_s > 0:
-        raise InputError(f"--step-s: must be positive, got {args.step_s}")
+    if not (args.step_s > 0 and math.isfinite(args.step_s)):
+        raise InputError(f"--step-s: must be positive and finite, got {args.step_s}")
+    check_step_count(start, end, args.step_s)
     from backend.twin.scenario import (
         MAX_STATION_DISTANCE_KM,
         Scenario,
@@ -177,10 +206,17 @@ def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
     weather, station = None, None
     flag, path = ("--tmy3", args.tmy3) if args.tmy3 else ("--epw", args.epw)
     if path:
-        from sim.sky import read_typical_year
+        from sim.sky import read_typical_year, sniff_weather_format
 
         try:
-            weather, meta = read_typical_year(path, flag[2:])
+            found = sniff_weather_format(path)
+        except (OSError, ValueError) as exc:
+            raise InputError(f"{flag}: cannot read {path!r}: {exc}") from None
+        if found != flag[2:]:  # the content decides: name the flag that reads it
+            raise InputError(f"{flag}: {path!r} is a {found.upper()} file (by its first "
+                             f"line), not {flag[2:].upper()}: pass it as --{found}")
+        try:
+            weather, meta = read_typical_year(path, found)
         except (OSError, ValueError, KeyError) as exc:
             raise InputError(f"{flag}: cannot read {path!r}: {exc}") from None
         try:

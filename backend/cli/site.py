@@ -9,11 +9,14 @@ to the built-in ``sim/data/sites/``; a user file with a built-in id replaces it.
   site at a new place with the tracker and arrays of ``--like`` (default
   ``tehuantepec``); what the place decides is not copied but taken from the new place
   and marked ``assumed`` (``sim.sites.relocated_config``: fixed tilt from the latitude,
-  facing the equator; air temperature and wind the site format's stated defaults);
+  facing the equator; the tracker's azimuth range, ``--like``'s span, centred on the
+  equator side; air temperature and wind the site format's stated defaults);
   ``--from-file FILE`` writes a hand-written config after validating it (keys it leaves
   out that the place decides are filled in the same way).
 - ``from-weather FILE --id ID`` writes a site at a TMY3/EPW station's place and zone
-  (``pvlib.iotools.read_tmy3`` / ``read_epw`` metadata; the file's fixed UTC offset
+  (the format read from the file's first line, ``sim.sky.sniff_weather_format``; any
+  other file refused saying so; ``pvlib.iotools.read_tmy3`` / ``read_epw`` metadata; the
+  file's fixed UTC offset
   becomes the ``Etc/GMT±N`` zone the typical year is recorded in; the clear-sky air
   temperature and wind are the file's annual means, the fixed tilt from the latitude;
   each marked ``assumed``).
@@ -59,9 +62,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                    help="overwrite a user site, or replace a built-in one")
     c.set_defaults(func=create)
     w = sub.add_parser("from-weather", help="a site at a TMY3/EPW station's place and zone")
-    w.add_argument("file", type=Path, metavar="FILE", help="TMY3 (.csv) or EPW (.epw) file")
+    w.add_argument("file", type=Path, metavar="FILE",
+                   help="TMY3 CSV or EPW file (told apart by its first line)")
     w.add_argument("--id", dest="site_id", required=True, help="site id to create")
-    w.add_argument("--format", choices=("tmy3", "epw"), help="default: from the file's suffix")
+    w.add_argument("--format", choices=("tmy3", "epw"),
+                   help="default: from the file's first line; given, the file must be it")
     w.add_argument("--timezone", help="IANA zone instead of the file's fixed UTC offset")
     w.add_argument("--like", default="tehuantepec",
                    help="tracker and array modules like this site (default tehuantepec)")
@@ -171,23 +176,30 @@ def create(args: argparse.Namespace) -> int:
 
 
 def _station(path: Path, fmt: str) -> dict[str, Any]:
-    """Place, zone offset and name of a weather file (pvlib.iotools metadata)."""
+    """Place, zone offset and name of a weather file of format ``fmt`` (pvlib.iotools
+    metadata); a file lacking a field is refused saying so, not with pvlib's bare
+    KeyError of the field."""
     from pvlib import iotools
 
-    if fmt == "epw":
-        data, meta = iotools.read_epw(str(path))
-        name = ", ".join(str(meta.get(k)) for k in ("city", "state-prov", "country")
-                         if meta.get(k) not in (None, "", "-"))
-        code = meta.get("WMO_code", "")
-    else:
-        data, meta = iotools.read_tmy3(str(path), map_variables=True)
-        name = ", ".join(str(meta.get(k)).strip('"') for k in ("Name", "State") if meta.get(k))
-        code = meta.get("USAF", "")
-    return {"latitude_deg": float(meta["latitude"]), "longitude_deg": float(meta["longitude"]),
+    try:
+        if fmt == "epw":
+            data, meta = iotools.read_epw(str(path))
+            name = ", ".join(str(meta.get(k)) for k in ("city", "state-prov", "country")
+                             if meta.get(k) not in (None, "", "-"))
+            code = meta.get("WMO_code", "")
+        else:
+            data, meta = iotools.read_tmy3(str(path), map_variables=True)
+            name = ", ".join(str(meta.get(k)).strip('"') for k in ("Name", "State")
+                             if meta.get(k))
+            code = meta.get("USAF", "")
+        return {
+            "latitude_deg": float(meta["latitude"]), "longitude_deg": float(meta["longitude"]),
             "altitude_m": float(meta["altitude"]), "tz_h": float(meta["TZ"]),
             "name": name, "code": str(code),
             "temp_air_c": round(float(data["temp_air"].mean()), 1),
             "wind_speed_m_s": round(float(data["wind_speed"].mean()), 1)}
+    except (KeyError, IndexError) as exc:
+        raise ValueError(f"not a readable {fmt.upper()} file: no {exc} in it") from None
 
 
 def fixed_offset_zone(tz_h: float) -> str:
@@ -201,8 +213,15 @@ def fixed_offset_zone(tz_h: float) -> str:
 def from_weather(args: argparse.Namespace) -> int:
     """Write a site at the station of a TMY3/EPW file."""
     from sim.sites import CLIMATE_KEYS, UnknownSiteError, relocated_config
+    from sim.sky import sniff_weather_format
 
-    fmt = args.format or ("epw" if args.file.suffix.lower() == ".epw" else "tmy3")
+    try:  # the content decides: a TMY2 file named .csv is not read as TMY3
+        fmt = sniff_weather_format(args.file)
+    except (OSError, ValueError) as exc:
+        fail(f"{args.file}: {exc}")
+    if args.format is not None and args.format != fmt:
+        fail(f"--format {args.format}: {args.file} is a {fmt.upper()} file (by its first "
+             "line); leave --format out")
     try:
         st = _station(args.file, fmt)
         zone = args.timezone or fixed_offset_zone(st["tz_h"])

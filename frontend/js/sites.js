@@ -16,6 +16,7 @@ function result(text, kind = "ok") {
 // copy them; the service fills them in from its place when it is saved, marked "assumed".
 const CLIMATE_KEYS = ["temp_air_c", "wind_speed_m_s"];
 const FIXED_SURFACE_KEYS = ["surface_tilt_deg", "surface_azimuth_deg"];
+const TRACKER_PLACE_KEYS = ["azimuth_min_deg", "azimuth_max_deg"];
 
 const valueAt = (config, path) => path.split(".").reduce((v, k) => (v == null ? v : v[k]), config);
 
@@ -112,10 +113,14 @@ function newSite() {
     for (const key of FIXED_SURFACE_KEYS) delete arr[key];
     pending.push(...FIXED_SURFACE_KEYS.map((k) => `arrays.${name}.${k}`));
   }
+  // the azimuth joint's range faces the new place's equator (sim.sites.TRACKER_PLACE_KEYS)
+  for (const key of TRACKER_PLACE_KEYS) if (config.tracker) delete config.tracker[key];
+  pending.push(...TRACKER_PLACE_KEYS.map((k) => `tracker.${k}`));
   fill(config, pending);
   $("site-id").focus();
   result("A copy of the selected site's tracker and arrays: give it an id and a place, then save with the admin "
-    + "token (HELIOTWIN_ADMIN_TOKEN). Its fixed tilt, air temperature and wind come from the new place.");
+    + "token (HELIOTWIN_ADMIN_TOKEN). Its fixed tilt, the tracker's azimuth range, air temperature and wind "
+    + "come from the new place.");
 }
 
 export function init(state) {

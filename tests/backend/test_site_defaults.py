@@ -92,6 +92,31 @@ def test_a_new_site_takes_its_places_defaults_marked_as_assumed(client: httpx.Cl
     assert "assumed" not in client.get("/api/v1/sites/tehuantepec").json()
 
 
+def test_a_southern_site_put_without_a_tracker_range_gets_one_facing_north(
+        client: httpx.Client) -> None:
+    """``PUT`` fills a left-out tracker azimuth range from the place as ``site create``
+    does (``sim.sites.place_defaults``): at 45° S centred on north, where the December sun
+    runs east → north → west, not the format's default centred on south, which unwound
+    the tracker in the afternoon sun (a tester's finding); a range the body gives stays."""
+    auth = {"Authorization": f"Bearer {ADMIN}"}
+    body = {"site_id": "dunedin", "latitude_deg": -45.87, "longitude_deg": 170.5,
+            "timezone": "Pacific/Auckland",
+            "arrays": {"tracker": {"mount": "tracker"}, "fixed": {"mount": "fixed"}}}
+    r = client.put("/api/v1/sites/dunedin", json=body, headers=auth)
+    assert r.status_code == 201, r.text
+    site = client.get("/api/v1/sites/dunedin").json()
+    assert (site["tracker"]["azimuth_min_deg"], site["tracker"]["azimuth_max_deg"]) == (-270, 270)
+    assert "north" in site["assumed"]["tracker.azimuth_max_deg"]
+    assert site["arrays"]["fixed"]["surface_azimuth_deg"] == 0.0
+    stated = {**body, "site_id": "dunedin2", "tracker": {"azimuth_min_deg": -180.0,
+                                                       "azimuth_max_deg": 360.0}}
+    r = client.put("/api/v1/sites/dunedin2", json=stated, headers=auth)
+    assert r.status_code == 201, r.text
+    site = client.get("/api/v1/sites/dunedin2").json()
+    assert (site["tracker"]["azimuth_min_deg"], site["tracker"]["azimuth_max_deg"]) == (-180, 360)
+    assert not any(k.startswith("tracker.") for k in site.get("assumed", {}))
+
+
 def test_a_site_made_by_the_cli_appears_without_a_restart(
         server: InProcessServer, client: httpx.Client, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:

@@ -179,6 +179,7 @@ def test_a_site_made_in_the_form_joins_the_built_in_ones(pg, edge_server: Server
     pg.fill("#site-lat", "100")
     pg.fill("#site-lon", "-99.13")
     pg.fill("#site-tz-input", "America/Mexico_City")
+    assert "azimuth_min_deg" not in pg.input_value("#site-json")  # the new place's, not a copy
     assert pg.input_value("#site-stamped") == ""  # the selected site's: the default
     pg.select_option("#site-stamped", "interval_end")  # an hourly logger's means
     assert '"readings_stamped": "interval_end"' in pg.input_value("#site-json")
@@ -196,6 +197,8 @@ def test_a_site_made_in_the_form_joins_the_built_in_ones(pg, edge_server: Server
     site = _api(edge_server, "/api/v1/sites/hand-made")
     assert (site["latitude_deg"], site["origin"]) == (19.43, "user")
     assert site["readings_stamped"] == "interval_end"
+    config = _api(edge_server, "/api/v1/sites/hand-made/config")
+    assert "tracker.azimuth_min_deg" in config["assumed"], config.get("assumed")
 
 
 # -- the 4-week chart's gain axis (issue 22.4): from zero, round ticks, whole days only --

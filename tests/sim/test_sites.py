@@ -202,3 +202,41 @@ def test_a_user_folder_adds_to_the_built_in_sites_and_wins_on_a_shared_id(tmp_pa
 def test_to_config_round_trips() -> None:
     for site in list_sites():
         assert site_from_dict(json.loads(json.dumps(site.to_config()))) == site
+
+
+@pytest.mark.parametrize("latitude", [16.29, -23.5, -45.0, 69.65, -69.0, 0.0, 52.0])
+def test_a_relocated_tracker_follows_every_day_without_unwinding_in_daylight(
+        latitude: float) -> None:
+    """A tracker copied to a new place takes its azimuth range from the place
+    (``sim.sites.tracker_azimuth_range_deg``): the twin's joint angles over a year
+    (``sim.kinematics.inverse_kinematics`` with the twin's daily reference) then move with
+    the sun's own azimuth, the short way, at every step while the sun is up. The sun is
+    pvlib's SPA; the one exception is a midnight sun's daily unwind, at its lowest (below
+    5°, the twin's pointing-error floor). Copied from Tehuantepec unchanged (range centred
+    on south), a tracker at 45° S unwound 170° in the afternoon sun (a tester's finding)."""
+    import numpy as np
+    import pandas as pd
+    from pvlib import solarposition
+
+    from sim.control import noon_reference_azimuth
+    from sim.kinematics import inverse_kinematics
+    from sim.sites import relocated_config
+
+    template = load_site("tehuantepec").to_config()
+    config = relocated_config(template, {"site_id": "here", "latitude_deg": latitude,
+                                         "longitude_deg": 10.0, "timezone": "UTC"})
+    site = site_from_dict(config)
+    lo, hi = site.tracker.azimuth_min_deg, site.tracker.azimuth_max_deg
+    assert hi - lo == 540.0  # Tehuantepec's span: the machine's, kept
+    assert (lo + hi) / 2 == (180.0 if latitude >= 0 else 0.0)  # centred on the equator side
+    assert {"tracker.azimuth_min_deg", "tracker.azimuth_max_deg"} <= set(config["assumed"])
+    times = pd.date_range("2023-01-01", "2024-01-01", freq="20min", tz="UTC", inclusive="left")
+    sun = solarposition.get_solarposition(times, latitude, 10.0, method="nrel_numpy")
+    az_sun = sun["azimuth"].to_numpy()
+    elevation = sun["apparent_elevation"].to_numpy()
+    joint, _ = inverse_kinematics(az_sun, elevation, site.tracker,
+                                  reference_azimuth=noon_reference_azimuth(times, site))
+    up = (elevation[1:] > 5.0) & (elevation[:-1] > 5.0)
+    sun_step = (np.diff(az_sun) + 180.0) % 360.0 - 180.0  # the sun's move, the short way
+    off = np.abs(np.diff(joint) - sun_step)[up]
+    assert up.any() and off.max() < 1e-6, f"unwound {off.max():.0f}° with the sun up"
