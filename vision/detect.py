@@ -338,6 +338,25 @@ def _guided_search(gray: NDArray[np.uint8], work: _Region, bg: float, fov: FovCi
         radius = int(np.ceil(min(max(_SEARCH_GROW * radius, radius + 1.0), full)))
 
 
+#: How far a sun's glare reaches [its core's radii]: the ring where the confidence reads
+#: the glare's tail (``vision.candidates._tail``, 4 R)
+_GLARE_REACH_RADII = 4.0
+
+
+def _outshines(blind: _Pick, guided: _Pick, min_confidence: float) -> bool:
+    """Whether the guided pick lies in the glare of the blind winner — a sun itself, a
+    larger saturated core, beside it but not the same core — and so is a piece of that
+    glare: a patch near a wrong prediction (a clock an hour off, a guessed north), the edge
+    of the sun's own glare or a streak in it, scored 0.53–1.00 inside its window while the
+    sun lay 160–315 px away (11 of 92 Wolf frames with the clock 1–2 h off). A larger
+    saturated patch *beyond* the glare's reach (a reflection) does not displace the sun the
+    ephemeris found (``tests/vision/test_generalise.py``)."""
+    r_blind = np.sqrt(blind.best.area / np.pi)
+    apart = np.hypot(blind.best.cx - guided.best.cx, blind.best.cy - guided.best.cy)
+    return (blind.p >= min_confidence and blind.best.area > guided.best.area
+            and r_blind < apart <= _GLARE_REACH_RADII * r_blind)
+
+
 def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
                   fov: FovCircle | None = None, auto_fov: bool = True,
                   min_confidence: float = 0.5,
@@ -356,8 +375,10 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         ``camera`` (time and place known): searched first, within 8° of it (the
         window grown × 1.5 while the winning core reaches its edge: a glare wider
         than the window is refined whole, as the blind search would);
-        when nothing there reaches ``min_confidence``, the whole frame is
-        searched blind and the more probable answer kept. The answer carries
+        the whole frame is searched blind as well, and its winner kept when
+        nothing near the prediction reaches ``min_confidence`` and it is more
+        probable, or when the guided pick lies in its glare (:func:`_outshines`).
+        The answer carries
         its distance from the prediction, however far (a wrong place, time or
         zone moves the prediction, not the sun).
     """
@@ -398,16 +419,15 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
     got: _Pick | str = "no search"
     if expected_px is not None:
         got = _guided_search(gray, work, bg, fov, diam, centre, ppd, expected_px, image, model)
-    if not isinstance(got, _Pick) or got.p < min_confidence:
-        # blind: ranked by appearance alone; the distance from the prediction is a
-        # feature of the confidence, which cannot veto a plain disc (vision.confidence)
-        blind = _search(gray, work, bg, fov, diam, centre, ppd, expected_px,
-                        prefer_near=False, scale_known=scale_known,
-                        image=image, model=model)
-        if isinstance(blind, _Pick) and (not isinstance(got, _Pick) or blind.p > got.p):
-            got = blind
-        elif not isinstance(got, _Pick):
-            got = blind
+    # blind: ranked by appearance alone; the distance from the prediction is a feature of
+    # the confidence, which cannot veto a plain disc (vision.confidence)
+    blind = _search(gray, work, bg, fov, diam, centre, ppd, expected_px,
+                    prefer_near=False, scale_known=scale_known, image=image, model=model)
+    if not isinstance(got, _Pick):
+        got = blind
+    elif isinstance(blind, _Pick) and (blind.p > got.p if got.p < min_confidence
+                                       else _outshines(blind, got, min_confidence)):
+        got = blind
     if isinstance(got, str):
         return SunDetection(False, 0.0, None, "robust", fov=fov, reason=got)
     found = got.p >= min_confidence
