@@ -5,8 +5,8 @@
 
 - :func:`check_site_token` (the ingest route, which checks its token before reading its
   body): 401 without a token or with an unknown, revoked or expired one (the message
-  says which), 403 with a token of another site; gives the site id. Any scope may
-  write readings.
+  says which), 403 with a token of another site or with the admin token (a logger
+  sends a site's token); gives the site id. Any scope may write readings.
 - :data:`SiteAdminDep`: the admin token or a ``site``-scope token of ``{site_id}``
   (403 naming the scope for an ``ingest`` token); :data:`CallerDep` who called (or
   None), for a route whose site is in its body, to :func:`authorize` there.
@@ -142,8 +142,11 @@ async def caller_of(ctx: ServiceContext, authorization: str | None,
     token = parse_bearer(authorization)
     if token is None:
         return None
-    if admin_ok and is_admin_token(ctx.settings, token):
-        return "admin"
+    if is_admin_token(ctx.settings, token):
+        if admin_ok:
+            return "admin"
+        raise HTTPException(403, "the admin token does not write a site's data: a logger sends a "
+                                 "site's 'ingest' token (`heliotwin token create --site ID`)")
     return await _valid_grant(ctx, token)
 
 

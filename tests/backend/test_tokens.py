@@ -114,6 +114,8 @@ def test_admin_endpoints(server: InProcessServer, client: httpx.Client) -> None:
     made = r.json()
     assert made["status"] == "active" and made["token"].startswith(made["token_prefix"])
     assert _post(client, made["token"], 10).status_code == 200
+    refused = _post(client, ADMIN, 12)  # the admin token is not a logger's: said so, 403
+    assert refused.status_code == 403 and "ingest" in refused.json()["detail"], refused.text
     listed = client.get(url, headers=admin, params={"site_id": "tehuantepec"}).json()["tokens"]
     assert made["id"] in [t["id"] for t in listed]
     assert all("token" not in t for t in listed)
