@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 from typing import Any
@@ -28,6 +29,21 @@ _FORCE_HELP = ("run on a weather station more than 100 km from the place anyway 
                "state of its sky is moved there)")
 
 STRATEGIES = ("sun", "backtrack", "sky_scan")
+
+
+def json_text(value: Any) -> str:
+    """``value`` as strict JSON: a non-finite float (NaN, ±inf: no JSON value) written as
+    null, as the service's JSON answers it (orjson), so a parser never meets ``NaN``."""
+    def clean(v: Any) -> Any:
+        if isinstance(v, float) and not math.isfinite(v):
+            return None
+        if isinstance(v, dict):
+            return {k: clean(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [clean(x) for x in v]
+        return v
+
+    return json.dumps(clean(value), allow_nan=False)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -126,7 +142,7 @@ def run_list(args: argparse.Namespace) -> int:
     except ValueError as exc:
         fail(str(exc))
     if args.json:
-        print(json.dumps([{"plant_id": p.plant_id, "name": p.name, "trackers": p.n_trackers}
+        print(json_text([{"plant_id": p.plant_id, "name": p.name, "trackers": p.n_trackers}
                           for p in plants]))
     else:
         for p in plants:
@@ -192,12 +208,13 @@ def _text(s: dict[str, Any]) -> str:
     def pct(v: float | None) -> str:
         return "n/a" if v is None else f"{v:.2f} %"
 
+    dni_f = s["dni_weighted_shaded_fraction"]    # None: no beam in the range (polar night)
     return "\n".join([
         f"plant {s['plant_id']} ({s['trackers']} trackers)  {s['start']} .. {s['end']}  "
         f"step {s['step_s']:g} s  strategy {s['strategy']}  sky {s['sky']}",
         f"daylight steps {s['daylight_steps']}, any collector shaded in "
         f"{100 * (s['fraction_of_daylight_any_shaded'] or 0):.2f} % of them; "
-        f"DNI-weighted shaded fraction {s['dni_weighted_shaded_fraction']:.4f}",
+        f"DNI-weighted shaded fraction {'n/a (no beam)' if dni_f is None else f'{dni_f:.4f}'}",
         f"plant energy {s['plant_energy_wh'] / 1000:.1f} kWh (bypass-diode model); "
         f"shading loss {pct(s['shading_loss_electrical_pct'])} electrical, "
         f"{pct(s['shading_loss_area_pct'])} by area",
@@ -208,14 +225,20 @@ def _text(s: dict[str, Any]) -> str:
 def run_simulate(args: argparse.Namespace) -> int:
     """``heliotwin plant simulate``; exit 2 on bad input."""
     summary = execute(args)  # bad input: InputError, a CliError main reports
-    print(json.dumps(summary) if args.json else _text(summary))
+    print(json_text(summary) if args.json else _text(summary))
     return 0
 
 
-def _flag(field: str) -> str:
-    return {"collector_m": "--collector-m", "step_s": "--step-s", "field": "--field",
-            "layouts": "--layouts", "collector_polygon_m": "--collector-polygon"
-            }.get(field, "--" + field.replace("_", "-"))
+#: ``plant sweep``'s flags by the request keys a :class:`backend.plants.sweep.SweepInputError`
+#: names (the rest: ``--`` and the key with dashes, e.g. ``--step-s``).
+SWEEP_FLAGS = {"strategies": "--strategy", "collector_polygon_m": "--collector-polygon",
+               "latitude_deg": "--lat", "longitude_deg": "--lon", "plant_id": "--plant",
+               "field_size": "--field"}
+
+
+def sweep_flag(field: str) -> str:
+    """The ``plant sweep`` flag of a sweep parameter (its request key)."""
+    return SWEEP_FLAGS.get(field, "--" + field.replace("_", "-"))
 
 
 def typical_weather(args: argparse.Namespace, place: Any, start: Any, end: Any
@@ -272,14 +295,9 @@ def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
     tz = plant.timezone if plant is not None else "UTC"
     start = parse_when(args.start, tz, "start")
     end = parse_when(args.end, tz, "end")
-    custom = None
-    if any(v is not None for v in (args.aspect_ratio, args.offset, args.rotation_deg)):
-        if None in (args.aspect_ratio, args.offset, args.rotation_deg):
-            raise InputError("--aspect-ratio, --offset, --rotation-deg: give all three "
-                             "for layout custom")
-        custom = (args.aspect_ratio, args.offset, args.rotation_deg)
+    custom = (args.aspect_ratio, args.offset, args.rotation_deg)
     try:
-        rows, columns = (int(v) for v in parse_size(args.field, "field"))
+        rows, columns = (int(v) for v in parse_size(args.field, "field_size"))
         spec, cases = prepare_sweep(
             layouts=[s.strip() for s in args.layouts.split(",") if s.strip()],
             gcr=parse_gcr(args.gcr),
@@ -290,10 +308,10 @@ def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
             else None,
             collector_polygon_m=parse_polygon(args.collector_polygon, "collector_polygon_m")
             if args.collector_polygon else None, plant=plant, field_size=(rows, columns),
-            custom=custom,
+            custom=None if custom == (None, None, None) else custom,
             slope_azimuth_deg=args.slope_azimuth_deg, slope_tilt_deg=args.slope_tilt_deg)
     except SweepInputError as exc:
-        raise InputError(f"{_flag(exc.field)}: {exc.problem}") from None
+        raise InputError(exc.message(sweep_flag)) from None
     from sim.plant.sweep import site_plant
 
     weather, _, token = typical_weather(args, spec.plant or site_plant(spec), spec.start,
@@ -336,7 +354,7 @@ def run_sweep(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     if args.json:
-        print(json.dumps(result))
+        print(json_text(result))
     elif args.csv:
         import csv
 

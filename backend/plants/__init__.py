@@ -35,7 +35,7 @@ import numpy as np
 import pandas as pd
 
 from sim.plant import Collector, Plant, UnknownPlantError, default_plants_dir, load_plant
-from sim.plant.simulate import field_shade, simulate_plant, sky_conditions
+from sim.plant.simulate import field_shade, local_day, simulate_plant, sky_conditions
 from sim.plant.strategies import STRATEGIES, orientations, sky_map, strategies_for
 
 log = logging.getLogger(__name__)
@@ -248,11 +248,7 @@ class PlantService:
         (kept for the next caller: :meth:`cached_day`)."""
         key = self._day_key(plant_id, date, step_s)
         plant = self.get(plant_id)
-        start = pd.Timestamp(date.isoformat()).tz_localize(plant.timezone, ambiguous=True,
-                                                            nonexistent="shift_forward")
-        end = (start + pd.Timedelta(days=1)).normalize()
-        end = pd.Timestamp(end.date().isoformat()).tz_localize(
-            plant.timezone, ambiguous=True, nonexistent="shift_forward")
+        start, end = local_day(date, plant.timezone)     # 23 or 25 h on a DST change day
         strategies: dict[str, Any] = {}
         shade_rows: list[list[float]] = []
         times: list[str] = []

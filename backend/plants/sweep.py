@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -224,17 +225,41 @@ class SweepCancelled(RuntimeError):
     """A sweep stopped by its ``cancelled`` callback."""
 
 
+#: The parameters of a sweep by their request keys (``SweepCreate``'s fields), which a
+#: :class:`SweepInputError` names: the CLI maps each to its flag
+#: (``backend.cli.plant.SWEEP_FLAGS``), the HTTP route answers it as it is.
+SWEEP_FIELDS = ("layouts", "gcr", "strategies", "collector_m", "collector_polygon_m",
+                "latitude_deg", "longitude_deg", "altitude_m", "plant_id", "field_size",
+                "aspect_ratio", "offset", "rotation_deg", "slope_azimuth_deg", "slope_tilt_deg",
+                "start", "end", "step_s")
+_REF = re.compile(r"\{(\w+)\}")
+
+
 class SweepInputError(ValueError):
-    """A bad sweep parameter: ``field`` (the request's key; the CLI's flag is
-    ``--`` + it with dashes) and what is wrong."""
+    """A bad sweep parameter: ``field`` (a request key of :data:`SWEEP_FIELDS`) and what is
+    wrong. ``problem`` may name other parameters as ``{key}``; :meth:`message` writes every
+    name as the caller spells it (the CLI its flags, the API its JSON keys), so each rule
+    has one message."""
 
     def __init__(self, field: str, problem: str) -> None:
-        super().__init__(f"{field}: {problem}")
         self.field, self.problem = field, problem
+        super().__init__(self.message())
+
+    def message(self, name: Callable[[str], str] = str) -> str:
+        """``field: problem`` with the parameters' names given by ``name`` (a request key →
+        the caller's name for it; the keys themselves by default)."""
+        def ref(m: re.Match[str]) -> str:
+            return name(m[1]) if m[1] in SWEEP_FIELDS else m[0]
+
+        return f"{name(self.field)}: {_REF.sub(ref, self.problem)}"
 
 
 #: Largest number of cases × steps of one sweep (a bound on its cost).
 MAX_CASE_STEPS = 50_000_000
+#: Most layouts, GCRs and strategies one sweep may list (``SweepCreate``'s list bounds too),
+#: and so most cases: a bound on the Dask tasks it schedules, whatever the step.
+MAX_LAYOUTS, MAX_GCRS, MAX_STRATEGIES = 5, 40, 3
+MAX_CASES = MAX_LAYOUTS * MAX_GCRS * MAX_STRATEGIES
 
 
 def parse_gcr(text: str) -> list[float]:
@@ -242,9 +267,13 @@ def parse_gcr(text: str) -> list[float]:
     try:
         if ":" in text:
             lo, hi, step = (float(x) for x in text.split(":"))
-            if not step > 0 or hi < lo:
-                raise SweepInputError("gcr", f"range {text!r} needs STOP ≥ START and STEP > 0")
+            if not (step > 0 and hi >= lo and np.isfinite([lo, hi, step]).all()):
+                raise SweepInputError("gcr", f"range {text!r} needs finite numbers, STOP ≥ START "
+                                      "and STEP > 0")
             n = int(np.floor((hi - lo) / step + 1e-9)) + 1
+            if n > MAX_GCRS:                   # before making the list: 0.1:0.3:1e-12
+                raise SweepInputError("gcr", f"range {text!r} holds {n:,} values, more than "
+                                      f"{MAX_GCRS}: use a larger STEP")
             values = [round(lo + k * step, 10) for k in range(n)]
         else:
             values = [float(x) for x in text.split(",") if x.strip()]
@@ -298,15 +327,16 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
                   altitude_m: float = 0.0, collector_m: tuple[float, float] | None = None,
                   collector_polygon_m: Sequence[Sequence[float]] | None = None,
                   plant: Plant | None = None, field_size: tuple[int, int] = (5, 5),
-                  custom: tuple[float, float, float] | None = None,
+                  custom: tuple[float | None, float | None, float | None] | None = None,
                   slope_azimuth_deg: float = 0.0, slope_tilt_deg: float = 0.0,
                   weather_token: str = "") -> tuple[SweepSpec, list[SweepCase]]:
     """Check a sweep's parameters and build its spec and cases (every layout × GCR ×
     strategy; an existing ``plant`` gives one layout, itself scaled). The collector is
     ``collector_m`` (a rectangle) or ``collector_polygon_m`` ((u, v) vertices [m] about
     the pivot), wired like Peñarroya's. Every case's field is built once here, so an
-    infeasible GCR is refused before any task runs. :class:`SweepInputError` names the
-    parameter."""
+    infeasible GCR is refused before any task runs. ``custom``: layout custom's (aspect
+    ratio, offset, rotation [°]), all three or none. :class:`SweepInputError` names the
+    parameter (its request key, :data:`SWEEP_FIELDS`)."""
     from sim.paths import package_dir
     from sim.plant.fields import LAYOUT_TYPES, collector_from_outline, collector_from_size
     from sim.plant.layout import load_plant
@@ -315,31 +345,44 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
 
     bad = [s for s in strategies if s not in STRATEGIES]
     if bad or not strategies:
-        raise SweepInputError("strategy", f"must be one or more of {', '.join(STRATEGIES)}, "
+        raise SweepInputError("strategies", f"must be one or more of {', '.join(STRATEGIES)}, "
                               f"got {','.join(strategies) or 'nothing'}")
     if not end > start:
         raise SweepInputError("end", "must be after start (end is exclusive)")
     if not (step_s > 0 and np.isfinite(step_s)):
         raise SweepInputError("step_s", f"must be positive, got {step_s}")
+    if len(gcr) > MAX_GCRS:
+        raise SweepInputError("gcr", f"{len(gcr):,} values, more than {MAX_GCRS}")
     if any(not (0 < g < 1) for g in gcr):
         raise SweepInputError("gcr", f"every GCR must be in (0, 1), got {list(gcr)}")
     rows, columns = field_size
     if not (1 <= rows <= 15 and 1 <= columns <= 15):
-        raise SweepInputError("field", f"rows and columns must be 1 to 15, got {rows}x{columns}")
+        raise SweepInputError("field_size", f"rows and columns must be 1 to 15, "
+                              f"got {rows}x{columns}")
+    layout_custom: tuple[float, float, float] | None = None
+    if custom is not None:
+        a, o, r = custom
+        if a is None or o is None or r is None:
+            missing = [k for k, v in zip(("aspect_ratio", "offset", "rotation_deg"), custom,
+                                         strict=True) if v is None]
+            raise SweepInputError(missing[0], "layout custom takes {aspect_ratio}, {offset} "
+                                  "and {rotation_deg} together: give all three")
+        layout_custom = (a, o, r)
     if plant is not None:
         names = [PLANT_LAYOUT]
         collector = plant.collector
         lat, lon, alt, tz = plant.latitude, plant.longitude, plant.altitude, plant.timezone
     else:
         if latitude_deg is None or longitude_deg is None:
-            raise SweepInputError("lat", "give --lat and --lon (or --plant)")
+            raise SweepInputError("latitude_deg" if latitude_deg is None else "longitude_deg",
+                                  "give {latitude_deg} and {longitude_deg} (or {plant_id})")
         if not (-90 <= latitude_deg <= 90):
-            raise SweepInputError("lat", f"must be in [-90, 90], got {latitude_deg}")
+            raise SweepInputError("latitude_deg", f"must be in [-90, 90], got {latitude_deg}")
         if not (-180 <= longitude_deg <= 180):
-            raise SweepInputError("lon", f"must be in [-180, 180], got {longitude_deg}")
+            raise SweepInputError("longitude_deg", f"must be in [-180, 180], got {longitude_deg}")
         if (collector_m is None) == (collector_polygon_m is None):
             raise SweepInputError("collector_m", "give the collector size, e.g. 12x5, or "
-                                  "its polygon (collector_polygon_m), one of the two")
+                                  "its polygon ({collector_polygon_m}), one of the two")
         template = load_plant("penarroya", package_dir("sim", "data", "plants")).collector
         if collector_m is not None:
             collector = collector_from_size(collector_m[0], collector_m[1], template)
@@ -353,19 +396,24 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
         if not names or any(n not in known for n in names):
             raise SweepInputError("layouts", f"must be one or more of {', '.join(known)}, "
                                   f"got {','.join(names) or 'nothing'}")
-        if "custom" in names and custom is None:
-            raise SweepInputError("layouts", "layout custom needs --aspect-ratio, --offset "
-                                  "and --rotation-deg")
+        if "custom" in names and layout_custom is None:
+            raise SweepInputError("layouts", "layout custom needs {aspect_ratio}, {offset} "
+                                  "and {rotation_deg}")
         lat, lon, alt, tz = latitude_deg, longitude_deg, altitude_m, "UTC"
     spec = SweepSpec(latitude=lat, longitude=lon, altitude=alt, start=start, end=end,
                      step_s=float(step_s), collector=collector, rows=rows, columns=columns,
                      slope_azimuth_deg=slope_azimuth_deg, slope_tilt_deg=slope_tilt_deg,
-                     custom=custom, plant=plant, timezone=tz, weather_token=weather_token,
+                     custom=layout_custom, plant=plant, timezone=tz, weather_token=weather_token,
                      **({"albedo": plant.albedo, "temp_air": plant.temp_air,
                          "wind_speed": plant.wind_speed} if plant is not None else {}))
     if any(s not in strategies_for(collector) for s in strategies):
-        raise SweepInputError("strategy", "a polygon collector takes strategy sun only (the "
+        raise SweepInputError("strategies", "a polygon collector takes strategy sun only (the "
                               "backtrack and sky_scan shade-free tests are the rectangle's)")
+    n_cases = len(names) * len(gcr) * len(strategies)
+    if n_cases > MAX_CASES:
+        raise SweepInputError("gcr", f"{len(names)} layouts × {len(gcr)} GCRs × "
+                              f"{len(strategies)} strategies is {n_cases:,} cases, more than "
+                              f"{MAX_CASES}: fewer GCRs, layouts or strategies")
     cases = [SweepCase(n, float(g), s) for n in names for g in gcr for s in strategies]
     steps = (end - start).total_seconds() / step_s
     if steps * len(cases) > MAX_CASE_STEPS:
@@ -375,10 +423,26 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
         try:
             case_plant(spec, case)
         except ValueError as exc:
-            field = "gcr" if "gcr" in str(exc) else "layouts"
-            raise SweepInputError(field, f"{case.layout} at GCR {case.gcr:g}: {exc}") from None
+            field = _case_field(str(exc), case.layout, plant is not None)
+            what = case.layout if plant is None else f"plant {plant.plant_id}"
+            raise SweepInputError(field, f"{what} at GCR {case.gcr:g}: {exc}") from None
     return spec, cases
 
 
-__all__ = ["MAX_CASE_STEPS", "SweepCancelled", "SweepInputError", "expected_cost", "parse_gcr",
+def _case_field(problem: str, layout: str, from_plant: bool) -> str:
+    """The parameter a case's field refuses (:mod:`sim.plant.fields` names it first: ``gcr
+    0.6 outside …``, ``offset must be …``; layout custom's own three only for that layout),
+    else the one the problem mentions (gcr), else the plant (too few trackers to scale it)
+    or the layouts."""
+    first = problem.split(" ", 1)[0]
+    if first in SWEEP_FIELDS and (layout == "custom" or first not in
+                                  ("aspect_ratio", "offset", "rotation_deg")):
+        return first
+    if "gcr" in problem:
+        return "gcr"
+    return "plant_id" if from_plant else "layouts"
+
+
+__all__ = ["MAX_CASES", "MAX_CASE_STEPS", "MAX_GCRS", "MAX_LAYOUTS", "MAX_STRATEGIES",
+           "SWEEP_FIELDS", "SweepCancelled", "SweepInputError", "expected_cost", "parse_gcr",
            "parse_polygon", "parse_size", "prepare_sweep", "run_sweep", "sweep_task"]

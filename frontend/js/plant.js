@@ -36,7 +36,8 @@ function outlinePath(outline, t) {
 async function drawLayout() {
   const p = view.plant;
   const d = view.day;
-  if (!p || !d || !d.times.length) { showEmpty("chart-plant-layout", "No daylight on this day."); return; }
+  if (!p || !d) return;                 // no day loaded (clearDay said why)
+  if (!d.times.length) { showEmpty("chart-plant-layout", "No daylight on this day."); return; }
   const row = d.shaded_fraction[view.index] || [];
   const east = p.trackers.map((t) => t.east_m);
   const north = p.trackers.map((t) => t.north_m);
@@ -122,7 +123,7 @@ function drawSkyMap() {
   const p = view.plant;
   const d = view.day;
   const img = $("plant-sky-map");
-  if (!d.times.length) { img.removeAttribute("src"); return; }
+  if (!d || !d.times.length) { img.removeAttribute("src"); return; }
   const t = d.times[view.index];
   const strategy = $("plant-strategy").value;
   // the 3D page's plant view at this instant and strategy (frontend/js/twin.js)
@@ -163,8 +164,24 @@ async function loadDay() {
     drawSkyMap();
     document.body.dataset.plantLoaded = `${p.plant_id}/${date}`;
   } catch (err) {
+    if (token !== view.token) return;
+    clearDay(`No day: ${err.message}`);
     banner(`Plant day: ${err.message}`, "error");
   }
+}
+
+/** Empty the day's tiles, charts and sky map (a day that failed to load must not leave the
+ * previous day's figures under the new date). */
+function clearDay(message) {
+  view.day = null;
+  view.index = 0;
+  $("plant-time").max = "0";
+  $("plant-time").value = "0";
+  $("plant-time-label").textContent = "";
+  $("plant-summary").replaceChildren();
+  for (const id of ["chart-plant-layout", "chart-plant-shade", "chart-plant-strategies"]) showEmpty(id, message);
+  $("plant-sky-map").removeAttribute("src");
+  $("plant-chosen").textContent = "";
 }
 
 async function selectPlant(id) {

@@ -17,6 +17,7 @@ Weather comes on the run's times (a typical year is laid on them by
 
 from __future__ import annotations
 
+import datetime as dt
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -48,6 +49,18 @@ _SERIES_COLUMNS = ("solar_azimuth", "apparent_elevation", "dni", "ghi", "ghi_ext
 
 def _seconds(index: pd.DatetimeIndex) -> FloatArray:
     return np.asarray((index - pd.Timestamp(0, tz="UTC")) / pd.Timedelta(seconds=1), dtype=float)
+
+
+def local_day(date: dt.date, timezone: str) -> tuple[pd.Timestamp, pd.Timestamp]:
+    """``[start, end)`` of the local calendar ``date`` in ``timezone``: its midnight and the
+    next date's, so a DST change day lasts 23 or 25 hours (midnight + 24 h on the autumn day
+    is 23:00 of the same date). A midnight the clocks skip is the first instant after it,
+    a repeated one its first occurrence."""
+    def midnight(d: dt.date) -> pd.Timestamp:
+        return pd.Timestamp(d.isoformat()).tz_localize(timezone, ambiguous=True,
+                                                       nonexistent="shift_forward")
+
+    return midnight(date), midnight(date + dt.timedelta(days=1))
 
 
 def sky_conditions(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame | None = None
@@ -189,7 +202,9 @@ class PlantResult:
     daily: pd.DataFrame
     any_shaded_steps: int
     daylight_steps: int
-    dni_weighted_shaded_fraction: float
+    #: Σ DNI · mean F / Σ DNI over the daylight steps; None without beam (a polar night), as
+    #: the other fractions of an empty denominator (JSON has no NaN)
+    dni_weighted_shaded_fraction: float | None
     tracker_dni_weighted_shaded_fraction: FloatArray | None = None
 
     def summary(self) -> dict[str, Any]:
@@ -348,7 +363,7 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
     }, index=dates)
     return PlantResult(plant, start, end, float(step_s), strategy,
                        "clearsky-ineichen" if weather is None else "weather", series, daily,
-                       any_shaded, daylight, dni_f / dni_sum if dni_sum > 0 else float("nan"),
+                       any_shaded, daylight, dni_f / dni_sum if dni_sum > 0 else None,
                        dni_f_tracker / dni_sum if dni_sum > 0 else None)
 
 
@@ -384,5 +399,5 @@ def compare_strategies(plant: Plant, start: pd.Timestamp, end: pd.Timestamp,
     return out
 
 
-__all__ = ["CLOUDY_KT", "PlantResult", "compare_strategies", "field_shade", "simulate_plant",
-           "sky_conditions"]
+__all__ = ["CLOUDY_KT", "PlantResult", "compare_strategies", "field_shade", "local_day",
+           "simulate_plant", "sky_conditions"]

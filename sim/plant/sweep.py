@@ -22,6 +22,7 @@ No scheduling here: the backend runs cases as Dask tasks (``backend.plants.sweep
 
 from __future__ import annotations
 
+import datetime as dt
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,7 +40,7 @@ from sim.plant.fields import (
     scaled_plant,
 )
 from sim.plant.layout import Collector, Plant
-from sim.plant.simulate import simulate_plant, sky_conditions
+from sim.plant.simulate import local_day, simulate_plant, sky_conditions
 from sim.plant.strategies import STRATEGIES
 
 FloatArray = NDArray[np.float64]
@@ -198,8 +199,8 @@ def case_day_shade(spec: SweepSpec, case: SweepCase, date: str, step_s: float = 
     from sim.plant.strategies import orientations
 
     plant, interior, _ = case_plant(spec, case)
-    day0 = pd.Timestamp(date).tz_localize(spec.timezone)
-    times = pd.date_range(day0.tz_convert("UTC"), (day0 + pd.Timedelta(days=1)).tz_convert("UTC"),
+    day0, day1 = local_day(dt.date.fromisoformat(date), spec.timezone)  # 23 or 25 h at DST
+    times = pd.date_range(day0.tz_convert("UTC"), day1.tz_convert("UTC"),
                           freq=pd.Timedelta(seconds=step_s), inclusive="left")
     sky = sky_conditions(plant, times)
     up = np.nonzero(sky["apparent_elevation"] > 0)[0]

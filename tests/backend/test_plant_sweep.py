@@ -101,9 +101,21 @@ def test_one_case_runs_in_process_as_csv(capsys: pytest.CaptureFixture[str]) -> 
     (["--gcr", "0.2", "--layouts", "triangle"], "--layouts: must be one or more of"),
     (["--gcr", "0.2", "--strategy", "moon"], "--strategy: must be one or more of"),
     (["--gcr", "0.2", "--field", "5"], "--field: expected WIDTHxHEIGHT"),
-    (["--gcr", "0.2", "--layouts", "custom"], "--layouts: layout custom needs"),
-    (["--gcr", "0.2", "--offset", "0.1"], "--aspect-ratio, --offset, --rotation-deg"),
+    (["--gcr", "0.2", "--layouts", "custom"], "--layouts: layout custom needs --aspect-ratio, "
+     "--offset and --rotation-deg"),
+    (["--gcr", "0.2", "--offset", "0.1"], "--aspect-ratio: layout custom takes --aspect-ratio, "
+     "--offset and --rotation-deg together"),
+    (["--gcr", "0.2", "--layouts", "custom", "--aspect-ratio", "1", "--offset", "0.7",
+      "--rotation-deg", "0"], "--offset: custom at GCR 0.2: offset must be in [-0.5, 0.5)"),
     (["--gcr", "0.2", "--step-s", "1"], "--step-s: 1 cases"),
+    # a range of 200,001 GCRs: refused before any list or Dask task is made
+    (["--gcr", "0.1:0.3:0.000001"], "--gcr: range '0.1:0.3:0.000001' holds 200,001 values, "
+     "more than 40"),
+    (["--gcr", "0.1:0.3:1e-15"], "more than 40"),
+    (["--gcr", ",".join(["0.2"] * 41)], "--gcr: 41 values, more than 40"),
+    (["--gcr", "0.1:0.3:0.01", "--layouts", "square,diagonal,hexagonal_n_s,hexagonal_e_w,"
+      "square", "--strategy", "sun,backtrack,sky_scan,sun,backtrack,sky_scan"],
+     "--gcr: 5 layouts × 21 GCRs × 6 strategies is 630 cases, more than 600"),
 ])
 def test_bad_input_names_the_flag(extra: list[str], message: str,
                                   capsys: pytest.CaptureFixture[str]) -> None:
@@ -114,6 +126,25 @@ def test_bad_input_names_the_flag(extra: list[str], message: str,
         raise SystemExit(main(args))
     assert exc.value.code == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_plant_too_small_to_scale_names_the_plant(tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """A one-tracker plant has no ground area to scale to a GCR: the refusal names --plant
+    (it named --layouts, which a plant's sweep ignores)."""
+    from sim.plant import default_plants_dir
+
+    d = json.loads((default_plants_dir() / "penarroya.json").read_text())
+    d.update(plant_id="solo", frame="enu", trackers=[{"tracker_id": 1, "east_m": 0,
+                                                      "north_m": 0}])
+    (tmp_path / "solo.json").write_text(json.dumps(d))
+    with pytest.raises(SystemExit) as exc:
+        raise SystemExit(main(["plant", "sweep", "--plant", "solo", "--plants-dir",
+                               str(tmp_path), "--gcr", "0.2", "--start", "2024-06-21",
+                               "--end", "2024-06-22"]))
+    assert exc.value.code == 2
+    assert ("--plant: plant solo at GCR 0.2: a plant needs at least 3 trackers"
+            in capsys.readouterr().err)
 
 
 L_TEXT = "-6,-2.5;6,-2.5;6,0;0,0;0,2.5;-6,2.5"

@@ -6,6 +6,7 @@ Shaded trackers are checked against twoaxistracking, never the model itself.
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import shutil
 from collections.abc import Callable, Iterator
@@ -203,6 +204,47 @@ def test_day_compares_strategies(client: httpx.Client) -> None:
     assert d["strategies"]["backtrack"]["fraction_of_daylight_any_shaded"] == 0
 
 
+@pytest.mark.parametrize("date", ["2024-10-27", "2024-03-31"])
+def test_day_of_a_clock_change(client: httpx.Client, date: str) -> None:
+    """The days Madrid's clocks go back (25 h) and forward (23 h): the local date from its
+    midnight to the next (the autumn day answered 500: midnight + 24 h is 23:00 the same
+    date, and the range came out empty). Every daylight step lies on that local date."""
+    from zoneinfo import ZoneInfo
+
+    d = client.get("/api/v1/plants/penarroya/day", params={"date": date, "step_s": 3600})
+    assert d.status_code == 200, d.text
+    body = d.json()
+    assert body["date"] == date and len(body["times"]) > 8
+    madrid = ZoneInfo("Europe/Madrid")
+    assert {dt.datetime.fromisoformat(t).astimezone(madrid).date().isoformat()
+            for t in body["times"]} == {date}
+    assert body["strategies"]["sun"]["plant_energy_wh"] > body["strategies"]["fixed"][
+        "plant_energy_wh"] > 0
+
+
+def test_cli_json_of_a_polar_night_is_strict_json(heliotwin_cli: Callable,
+                                                 tmp_path: Path) -> None:
+    """A plant at 69.6° N on 21 December: no beam, so the DNI-weighted fraction is null like
+    the other fractions (it was printed as NaN, which no JSON parser takes)."""
+    d = json.loads((default_plants_dir() / "penarroya.json").read_text())
+    d.update(plant_id="tromso", latitude_deg=69.6, longitude_deg=18.9, timezone="Europe/Oslo")
+    (tmp_path / "tromso.json").write_text(json.dumps(d))
+    out = heliotwin_cli("plant", "simulate", "--plant", "tromso", "--start", "2024-12-21",
+                        "--end", "2024-12-22", "--step-s", "1800", "--json",
+                        env={"HELIOTWIN_PLANTS_DIR": str(tmp_path)})
+    assert out.returncode == 0, out.stderr
+
+    def no_constant(name: str) -> None:
+        raise AssertionError(f"{name} in the CLI's JSON")
+
+    s = json.loads(out.stdout, parse_constant=no_constant)
+    assert s["daylight_steps"] == 0 and s["dni_weighted_shaded_fraction"] is None
+    text = heliotwin_cli("plant", "simulate", "--plant", "tromso", "--start", "2024-12-21",
+                         "--end", "2024-12-22", "--step-s", "1800",
+                         env={"HELIOTWIN_PLANTS_DIR": str(tmp_path)})
+    assert text.returncode == 0 and "DNI-weighted shaded fraction n/a" in text.stdout
+
+
 def test_cli_simulate_and_list(heliotwin_cli: Callable) -> None:
     def _cli(*args: str) -> Any:
         return heliotwin_cli("plant", *args)
@@ -307,12 +349,59 @@ def test_sweep_takes_a_polygon_collector(client: httpx.Client) -> None:
     # a year at 10 min: 52,560 steps, within the bound for the rectangle, not for a polygon
     ({"collector_m": None, "collector_polygon_m": L_SHAPE, "gcr": [0.2], "end": "2022-12-20",
       "step_s": 600}, 422, "(a polygon collector's steps count 100×)"),
+    # the request's keys, not the CLI's flags (one message each, the names mapped)
+    ({"latitude_deg": None}, 422, "latitude_deg: give latitude_deg and longitude_deg (or "
+     "plant_id)"),
+    ({"layouts": ["custom"]}, 422, "layouts: layout custom needs aspect_ratio, offset and "
+     "rotation_deg"),
+    ({"offset": 0.1}, 422, "aspect_ratio: layout custom takes aspect_ratio, offset and "
+     "rotation_deg together"),
 ])
 def test_sweep_refusals_name_the_field(client: httpx.Client, change: dict, status: int,
                                        message: str) -> None:
     r = client.post("/api/v1/plants/sweeps", json={**SWEEP, **change})
     assert r.status_code == status, r.text
     assert message in r.json()["detail"]
+
+
+def test_sweep_list_bounds_are_the_clis() -> None:
+    """The request's lists are bounded by the constants the CLI's sweep is refused by
+    (``backend.plants.sweep``: at most 600 cases, whatever the step), and the names a
+    refusal gives are the request's keys."""
+    from backend.api.schemas.plants import SweepCreate
+    from backend.plants.sweep import (
+        MAX_CASES,
+        MAX_GCRS,
+        MAX_LAYOUTS,
+        MAX_STRATEGIES,
+        SWEEP_FIELDS,
+    )
+
+    assert set(SWEEP_FIELDS) == set(SweepCreate.model_fields)
+
+    bounds = {name: next(m.max_length for m in SweepCreate.model_fields[name].metadata
+                         if hasattr(m, "max_length"))
+              for name in ("layouts", "gcr", "strategies")}
+    assert bounds == {"layouts": MAX_LAYOUTS, "gcr": MAX_GCRS, "strategies": MAX_STRATEGIES}
+    assert MAX_LAYOUTS * MAX_GCRS * MAX_STRATEGIES == MAX_CASES == 600
+
+
+def test_sweep_refusal_of_a_plant_names_plant_id(client: httpx.Client, plants_dir: Path
+                                                 ) -> None:
+    """A plant of two trackers has no ground area to scale: the refusal names ``plant_id``
+    (it named the layouts, which a plant's sweep does not take)."""
+    d = json.loads((plants_dir / "penarroya.json").read_text())
+    d.update(plant_id="duo", frame="enu", trackers=[
+        {"tracker_id": 1, "east_m": 0, "north_m": 0}, {"tracker_id": 2, "east_m": 0,
+                                                        "north_m": 20}])
+    (plants_dir / "duo.json").write_text(json.dumps(d))
+    try:
+        r = client.post("/api/v1/plants/sweeps", json={**SWEEP, "plant_id": "duo"})
+        assert r.status_code == 422, r.text
+        assert r.json()["detail"] == ("plant_id: plant duo at GCR 0.3: a plant needs at least "
+                                      "3 trackers to have a ground area")
+    finally:
+        (plants_dir / "duo.json").unlink()
 
 
 def test_sweep_with_a_bad_token_is_401_and_unknown_sweep_404(client: httpx.Client) -> None:
@@ -350,9 +439,10 @@ def test_anonymous_plant_days_are_priced_from_the_hourly_allowance(
     assert first.status_code == 200, first.text
     assert list(small_allowance._charges) == ["addr:127.0.0.1"]    # the caller's address
     (charges,) = small_allowance._charges.values()
-    # trued up to the CPU the day took (0.046–0.064 s measured), not left at its price
+    # trued up to the CPU the day took, not left at its price: 0.046–0.064 s measured on one
+    # machine, 0.19–0.29 s on another (the process's first day; the same code, 49a0571)
     charged_s = sum(c.cost for c in charges)
-    assert 0.02 < charged_s < 0.11 and charged_s != pytest.approx(day_cost_s(29, 900), abs=1e-9)
+    assert 0.02 < charged_s < 0.6 and charged_s != pytest.approx(day_cost_s(29, 900), abs=1e-9)
     sky = client.get("/api/v1/plants/penarroya/sky-map", params={"time": DEC21_0824_TST})
     assert sky.status_code == 200 and len(charges) + 1 == len(    # the same allowance
         next(iter(small_allowance._charges.values())))

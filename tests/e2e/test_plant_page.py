@@ -130,3 +130,25 @@ def test_plant_page_draws_a_polygon_collector_outline(page, server,  # type: ign
         "() => document.getElementById('plant-chosen').textContent.includes('no sky map')")
     ARTIFACTS.mkdir(exist_ok=True)
     page.locator("#page-plant .grid").first.screenshot(path=str(ARTIFACTS / "plant-polygon.png"))
+
+
+def test_a_day_the_service_refuses_leaves_none_of_the_previous_days_figures(  # type: ignore[no-untyped-def]
+        browser, server, request) -> None:
+    """A day that fails to load (here a date the service refuses, 422) empties the tiles,
+    the charts and the sky map: they kept the previous day's figures under the new date."""
+    from tests.e2e.conftest import open_page
+
+    with open_page(browser, request, ignore=lambda text: "422" in text) as page:
+        page.goto(server.url + "/#plant?day=2021-12-21")
+        page.wait_for_selector('body[data-plant-loaded="penarroya/2021-12-21"]', timeout=60_000)
+        assert page.locator("#plant-summary .tile").count() == 4
+        page.fill("#plant-day", "1899-12-31")
+        page.wait_for_function(
+            "() => document.getElementById('banner').textContent.startsWith('Plant day:')")
+        assert page.locator("#plant-summary .tile").count() == 0
+        for chart in ("chart-plant-layout", "chart-plant-shade", "chart-plant-strategies"):
+            assert page.get_attribute(f"#{chart}", "data-points") == "0"
+            assert "1900" in page.text_content(f"#{chart} .empty")   # the service's reason
+        assert page.get_attribute("#plant-sky-map", "src") is None
+        assert page.text_content("#plant-chosen") == ""
+        assert page.get_attribute("body", "data-plant-loaded") is None

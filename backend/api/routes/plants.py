@@ -191,9 +191,7 @@ def _sweep_inputs(body: SweepCreate, service: PlantService) -> tuple[Any, list[A
         start = pd.Timestamp(parse_day_or_instant(body.start, zone, "start"))
         end = pd.Timestamp(parse_day_or_instant(body.end, zone, "end"))
         rows, columns = (int(v) for v in body.field_size.split("x"))
-        custom = (None if body.aspect_ratio is None or body.offset is None
-                  or body.rotation_deg is None
-                  else (body.aspect_ratio, body.offset, body.rotation_deg))
+        custom = (body.aspect_ratio, body.offset, body.rotation_deg)
         return prepare_sweep(
             layouts=body.layouts, gcr=body.gcr, strategies=body.strategies, start=start,
             end=end, step_s=body.step_s, latitude_deg=body.latitude_deg,
@@ -201,14 +199,12 @@ def _sweep_inputs(body: SweepCreate, service: PlantService) -> tuple[Any, list[A
             collector_m=None if body.collector_m is None
             else parse_size(body.collector_m, "collector_m"),
             collector_polygon_m=body.collector_polygon_m, plant=plant,
-            field_size=(rows, columns), custom=custom,
+            field_size=(rows, columns), custom=None if custom == (None, None, None) else custom,
             slope_azimuth_deg=body.slope_azimuth_deg, slope_tilt_deg=body.slope_tilt_deg)
     except TimestampError as exc:
         raise HTTPException(422, str(exc)) from None
-    except SweepInputError as exc:
-        field = {"lat": "latitude_deg", "lon": "longitude_deg", "field": "field_size",
-                 "strategy": "strategies"}.get(exc.field, exc.field)
-        raise HTTPException(422, f"{field}: {exc.problem}") from None
+    except SweepInputError as exc:     # names the request's keys (the CLI maps them to flags)
+        raise HTTPException(422, exc.message()) from None
 
 
 @router.post("/sweeps", status_code=202, response_model=SweepAcceptedRead,

@@ -7,6 +7,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from backend.api.schemas.common import SunRead
+from backend.plants.sweep import MAX_GCRS, MAX_LAYOUTS, MAX_STRATEGIES
 
 
 class PlantSummaryRead(BaseModel):
@@ -154,11 +155,11 @@ class SweepCreate(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    layouts: list[str] = Field(["square"], min_length=1, max_length=5,
+    layouts: list[str] = Field(["square"], min_length=1, max_length=MAX_LAYOUTS,
                                description="square, diagonal, hexagonal_n_s, hexagonal_e_w, "
                                            "custom (ignored with plant_id)")
-    gcr: list[float] = Field(min_length=1, max_length=40, description="ground cover ratios")
-    strategies: list[str] = Field(["sun"], min_length=1, max_length=3,
+    gcr: list[float] = Field(min_length=1, max_length=MAX_GCRS, description="ground cover ratios")
+    strategies: list[str] = Field(["sun"], min_length=1, max_length=MAX_STRATEGIES,
                                   description="sun, backtrack, sky_scan")
     collector_m: str | None = Field(None, pattern=r"^\d+(\.\d+)?x\d+(\.\d+)?$",
                                     description="collector WIDTHxHEIGHT [m], e.g. 12x5")

@@ -8,7 +8,7 @@ import pytest
 from plant_reference import twoaxistracking_fractions
 
 from sim.plant.layout import load_plant
-from sim.plant.simulate import simulate_plant
+from sim.plant.simulate import local_day, simulate_plant
 
 PLANT = load_plant("penarroya")
 
@@ -104,3 +104,46 @@ def test_cli_weather_from_a_distant_station_needs_force(capsys: pytest.CaptureFi
     assert summary["weather_station"]["forced"] is True
     assert summary["weather_station"]["distance_km"] > 6000
     assert summary["sky"] == "weather" and summary["plant_energy_wh"] > 0
+
+
+@pytest.mark.parametrize(("date", "zone", "hours"), [
+    ("2024-10-27", "Europe/Madrid", 25),       # autumn: 02:00+02 → 02:00+01 (hour repeated)
+    ("2024-03-31", "Europe/Madrid", 23),       # spring: 02:00+01 → 03:00+02
+    ("2024-06-21", "Europe/Madrid", 24),
+    ("2024-04-06", "America/Santiago", 25),    # back at midnight: 24:00-03 → 23:00-04
+    ("2024-09-08", "America/Santiago", 23),    # its midnight does not exist (00:00 → 01:00)
+])
+def test_a_local_day_runs_midnight_to_midnight(date: str, zone: str, hours: int) -> None:
+    """``local_day``: the date's midnight to the next date's, as zoneinfo counts them (not
+    midnight + 24 h: on the autumn day that is 23:00 of the same date)."""
+    import datetime as dt
+    from zoneinfo import ZoneInfo
+
+    day = dt.date.fromisoformat(date)
+
+    def midnight_utc(d: dt.date) -> dt.datetime:
+        return dt.datetime(d.year, d.month, d.day, tzinfo=ZoneInfo(zone)).astimezone(dt.UTC)
+
+    start, end = local_day(day, zone)
+    assert start == midnight_utc(day)
+    assert end == midnight_utc(day + dt.timedelta(days=1))
+    assert (end - start) == pd.Timedelta(hours=hours)
+    assert end.tz_convert(zone).date() == day + dt.timedelta(days=1)
+
+
+def test_a_polar_night_has_no_dni_weighted_fraction() -> None:
+    """At 69.6° N on 21 December the sun stays below the horizon: no daylight step, no beam,
+    so every fraction of the summary is None (it was NaN for the DNI-weighted one, which no
+    JSON holds) and the summary is strict JSON."""
+    import dataclasses
+    import json
+
+    polar = dataclasses.replace(PLANT, plant_id="polar", latitude=69.6, longitude=18.9,
+                                timezone="Europe/Oslo")
+    start = pd.Timestamp("2024-12-21", tz="Europe/Oslo")
+    s = simulate_plant(polar, start, start + pd.Timedelta(days=1), step_s=1800).summary()
+    assert s["daylight_steps"] == 0 and s["plant_energy_wh"] == 0
+    for key in ("fraction_of_daylight_any_shaded", "dni_weighted_shaded_fraction",
+                "mean_shaded_fraction", "shading_loss_electrical_pct", "gain_vs_fixed_pct"):
+        assert s[key] is None, key
+    json.dumps(s, allow_nan=False)

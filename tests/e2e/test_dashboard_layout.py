@@ -1,0 +1,54 @@
+"""The dashboard's layout at phone width in a real headless Chromium against the session's
+``heliotwin serve`` (``conftest.py``): no page is wider than the viewport.
+
+At 390 px (a phone held upright) the header's site picker, holding a long site name, made
+every page scroll sideways (``scrollWidth`` 718-736 px); docs/dashboard.md, "Phone width".
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.e2e.conftest import open_page
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(180)]
+
+PHONE = {"width": 390, "height": 844}
+#: What a page sets on <body> once it has drawn its data (the others draw forms, or wait for
+#: the network to go quiet).
+LOADED = {"overview": "body[data-overview-loaded][data-report-loaded]",
+          "twin": "body[data-twin-view]", "plant": "body[data-plant-loaded]",
+          "pointing": "body[data-pointing], [data-testid=pointing-empty]:not([hidden])"}
+
+
+def _pointing_empty_state(text: str) -> bool:
+    """The Pointing page's empty state (too few observations) answers 422, which Chromium
+    logs as a failed load (tests/e2e/test_pointing_page.py); no other page asks for one."""
+    return "the server responded with a status of 422" in text
+
+
+def test_no_page_scrolls_sideways_at_phone_width(browser, server, request) -> None:  # type: ignore[no-untyped-def]
+    """Every page of the tab bar, its data drawn: the document is no wider than the
+    viewport (the elements that stick out are named when it is)."""
+    with open_page(browser, request, timeout_ms=60_000, ignore=_pointing_empty_state) as page:
+        page.set_viewport_size(PHONE)
+        page.goto(server.url + "/#overview")
+        names = page.eval_on_selector_all("nav.tabs a[data-page]",
+                                          "links => links.map(a => a.dataset.page)")
+        assert len(names) >= 7
+        too_wide = {}
+        for name in names:
+            page.goto(f"{server.url}/#{name}")
+            page.wait_for_selector(f'section.page[data-page="{name}"]:not([hidden])')
+            if name in LOADED:
+                page.wait_for_selector(LOADED[name], state="attached")
+            else:
+                page.wait_for_load_state("networkidle")
+            width = page.evaluate("() => document.documentElement.scrollWidth")
+            if width > PHONE["width"]:
+                too_wide[name] = (width, page.evaluate(
+                    """() => [...document.querySelectorAll('body *')]
+                         .filter(el => el.offsetParent !== null
+                                 && el.getBoundingClientRect().right > innerWidth + 0.5)
+                         .slice(0, 5).map(el => `${el.tagName}#${el.id}.${el.className}`)"""))
+        assert not too_wide, f"pages wider than {PHONE['width']} px: {too_wide}"
