@@ -74,17 +74,24 @@ def test_list_and_get(client: httpx.Client) -> None:
     assert r.status_code == 404 and "known plants: penarroya" in r.json()["detail"]
 
 
-def test_dropped_in_plant_appears(client: httpx.Client, plants_dir: Path) -> None:
+def _two_tracker_plant(plants_dir: Path, plant_id: str) -> Path:
+    """Peñarroya's collectors as a plant of two trackers 20 m apart, dropped in as a file."""
     d = json.loads((plants_dir / "penarroya.json").read_text())
-    d.update(plant_id="pair", frame="enu", trackers=[
+    d.update(plant_id=plant_id, frame="enu", trackers=[
         {"tracker_id": 1, "east_m": 0, "north_m": 0}, {"tracker_id": 2, "east_m": 0,
                                                         "north_m": 20}])
-    (plants_dir / "pair.json").write_text(json.dumps(d))
+    path = plants_dir / f"{plant_id}.json"
+    path.write_text(json.dumps(d))
+    return path
+
+
+def test_dropped_in_plant_appears(client: httpx.Client, plants_dir: Path) -> None:
+    path = _two_tracker_plant(plants_dir, "pair")
     try:
         ids = [p["plant_id"] for p in client.get("/api/v1/plants").json()]
         assert ids == ["pair", "penarroya"]
     finally:
-        (plants_dir / "pair.json").unlink()
+        path.unlink()
 
 
 def test_a_plant_file_with_a_polygon_collector(client: httpx.Client, plants_dir: Path) -> None:
@@ -390,18 +397,14 @@ def test_sweep_refusal_of_a_plant_names_plant_id(client: httpx.Client, plants_di
                                                  ) -> None:
     """A plant of two trackers has no ground area to scale: the refusal names ``plant_id``
     (it named the layouts, which a plant's sweep does not take)."""
-    d = json.loads((plants_dir / "penarroya.json").read_text())
-    d.update(plant_id="duo", frame="enu", trackers=[
-        {"tracker_id": 1, "east_m": 0, "north_m": 0}, {"tracker_id": 2, "east_m": 0,
-                                                        "north_m": 20}])
-    (plants_dir / "duo.json").write_text(json.dumps(d))
+    path = _two_tracker_plant(plants_dir, "duo")
     try:
         r = client.post("/api/v1/plants/sweeps", json={**SWEEP, "plant_id": "duo"})
         assert r.status_code == 422, r.text
         assert r.json()["detail"] == ("plant_id: plant duo at GCR 0.3: a plant needs at least "
                                       "3 trackers to have a ground area")
     finally:
-        (plants_dir / "duo.json").unlink()
+        path.unlink()
 
 
 def test_sweep_with_a_bad_token_is_401_and_unknown_sweep_404(client: httpx.Client) -> None:
