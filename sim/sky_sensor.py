@@ -66,9 +66,9 @@ FLAGS = {
 G_MAX = 1500.0  # upper end of the bisection [W m⁻²]
 _BISECTIONS = 16  # 1500 / 2**16 = 0.023 W m⁻² (the logger's 0.1 W: 0.12 W m⁻²)
 _STALE_MIN = 5
-#: … of a logger that holds its value from one minute to the next on at least
-#: :data:`_HELD_SHARE` of its live minutes (a coarse resolution: 10 W or 0.01 kW steps, a
-#: slow logger's equal readings): only a run this long is a frozen logger [min]
+#: How long [min] a run of one value must last to be a frozen logger when the logger holds
+#: its value from one minute to the next on at least :data:`_HELD_SHARE` of its live
+#: minutes (a coarse resolution: 10 W or 0.01 kW steps; :func:`_stale`)
 _STALE_COARSE_MIN = 60
 #: A live 1-minute reading at a fine resolution changes on nearly every minute (the sun
 #: moves, the sensor has noise); a share of held minutes above this is the resolution's

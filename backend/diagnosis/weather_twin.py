@@ -72,17 +72,16 @@ def sky_sensors(fixed: np.ndarray, tracker: np.ndarray | None) -> pd.DataFrame |
 def site_minutes(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int
                  ) -> tuple[np.ndarray, np.ndarray, pd.DataFrame | None]:
     """The tracker's and the fixed array's measured power [W] on the minute grid of
-    ``[t0, t1)`` (:func:`minute_grid`: NaN where the energy rule bridges no reading; the
-    tracker's all NaN on a site without one) and
-    the loggers' sky sensors (:func:`sky_sensors`). The site has a fixed array."""
-    tracker, fixed = info.array_of_kind("tracker"), info.array_of_kind("fixed")
-    assert fixed is not None
+    ``[t0, t1)`` (:func:`minute_grid`: NaN where the energy rule bridges no reading) and
+    the loggers' sky sensors (:func:`sky_sensors`). The site has the twin's arrays
+    (:meth:`SiteInfo.has_twin`)."""
+    # the arrays the twin simulates (SiteInfo.has_twin), not merely the first of each mount
+    tracker, fixed = info.arrays["tracker"], info.arrays["fixed"]
     gap = ctx.settings.ingest.energy_max_gap_s
     stamped = info.site.readings_stamped
     with ctx.engine.connect() as conn:
         fx, fx_s = minute_grid(conn, fixed.array_id, t0, t1, gap, stamped)
-        tr, tr_s = (np.full(fx.size, np.nan), None) if tracker is None \
-            else minute_grid(conn, tracker.array_id, t0, t1, gap, stamped)
+        tr, tr_s = minute_grid(conn, tracker.array_id, t0, t1, gap, stamped)
     return tr, fx, sky_sensors(fx_s, tr_s)
 
 
