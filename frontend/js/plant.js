@@ -136,6 +136,7 @@ function drawSkyMap() {
   if (img.hidden) img.removeAttribute("src");
   else img.src = `/api/v1/plants/${enc(p.plant_id)}/sky-map?time=${enc(t)}&strategy=${enc(strategy)}&format=png`;
   api(`/api/v1/plants/${enc(p.plant_id)}/positions`, { params: { time: t, strategy } }).then((pos) => {
+    if (view.day !== d) return;   // another day (or none) was loaded meanwhile: not its instant
     const tr = pos.trackers[0];
     $("plant-chosen").textContent = `${strategy}: azimuth ${num(tr.azimuth_deg, 1)}°, elevation ${num(tr.elevation_deg, 1)}° · ` +
       `sun ${num(pos.sun.azimuth_deg, 1)}°, ${num(pos.sun.elevation_deg, 1)}° · ${pos.trackers_shaded} collectors shaded` +

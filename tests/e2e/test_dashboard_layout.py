@@ -8,6 +8,7 @@ every page scroll sideways (``scrollWidth`` 718-736 px); docs/dashboard.md, "Pho
 from __future__ import annotations
 
 import pytest
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from tests.e2e.conftest import open_page
 
@@ -42,8 +43,11 @@ def test_no_page_scrolls_sideways_at_phone_width(browser, server, request) -> No
             page.wait_for_selector(f'section.page[data-page="{name}"]:not([hidden])')
             if name in LOADED:
                 page.wait_for_selector(LOADED[name], state="attached")
-            else:
-                page.wait_for_load_state("networkidle")
+            else:  # the network quiet, or 10 s for a page that keeps polling
+                try:
+                    page.wait_for_load_state("networkidle", timeout=10_000)
+                except PlaywrightTimeout:
+                    pass
             width = page.evaluate("() => document.documentElement.scrollWidth")
             if width > PHONE["width"]:
                 too_wide[name] = (width, page.evaluate(
