@@ -99,12 +99,32 @@ def energy_wh(ts_s: Any, power_w: Any, max_gap_s: float, start_s: float = -np.in
     return float(energy_per_period_wh(ts_s, power_w, max_gap_s, [start_s, end_s])[0])
 
 
-def sampled_energy_wh(power_w: Any, step_s: float) -> float:
-    """Energy [Wh] of a simulation's power samples, one every ``step_s`` [s] with no gaps:
-    :func:`energy_wh` over the samples' span (the twin's and the plant's summaries, so a
-    simulated series integrates as the same series stored and read back would)."""
+def simulation_times(start: Any, end: Any, step_s: float) -> Any:
+    """The instants [UTC] a simulation of ``[start, end)`` computes: its steps, one every
+    ``step_s`` [s] from ``start`` (the rows it shows), and one more, the first instant of
+    the grid at or after ``end``. That last instant closes the last step: the energy of
+    the range (:func:`run_energy_wh`) then integrates every step as a stored series that
+    goes on past ``end`` would, so a one-step run is not 0 Wh and a range that ends in
+    daylight keeps its last step (a sweep at hourly steps ending at noon lost an hour)."""
+    import pandas as pd
+
+    step = pd.Timedelta(seconds=float(step_s))
+    steps = pd.date_range(pd.Timestamp(start).tz_convert("UTC"),
+                          pd.Timestamp(end).tz_convert("UTC"), freq=step, inclusive="left")
+    return pd.date_range(steps[0], periods=len(steps) + 1, freq=step)
+
+
+def run_energy_wh(power_w: Any, step_s: float, duration_s: float) -> float:
+    """Energy [Wh] of a simulation over its range ``[0, duration_s)`` [s]: its power at
+    :func:`simulation_times` (one sample every ``step_s`` [s] from the range's start, the
+    last at or after its end), by :func:`energy_wh` clipped at the end — the twin's and
+    the plant's summaries integrate as the same series stored and read back would."""
     p = np.asarray(power_w, np.float64).reshape(-1)
-    return energy_wh(np.arange(p.size, dtype=np.float64) * float(step_s), p, 1.5 * float(step_s))
+    t = np.arange(p.size, dtype=np.float64) * float(step_s)
+    if p.size < 2 or t[-1] < float(duration_s) - 1e-6 * float(step_s):
+        raise ValueError(f"{p.size} samples every {step_s} s do not reach the range's end "
+                         f"({duration_s} s): simulate at simulation_times()")
+    return energy_wh(t, p, 1.5 * float(step_s), 0.0, float(duration_s))
 
 
 #: What a reading's timestamp marks (a site's ``readings_stamped``): the instant its value

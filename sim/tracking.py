@@ -195,6 +195,7 @@ def run_loop(
     limits: DriveLimits,
     camera: CameraSetup,
     state: LoopState | None,
+    act_ticks: int | None = None,
 ) -> tuple[LoopResult, LoopState]:
     """Run ``controller`` over one chunk of ``ticks`` (UTC, uniform ``tick_s``).
 
@@ -210,6 +211,10 @@ def run_loop(
         True (apparent) sun direction at the ticks, ENU.
     state : LoopState, optional
         From the previous chunk; None to start with the tracker stowed.
+    act_ticks : int, optional
+        The ticks from this index on are only sampled: the controller neither looks nor
+        acts (the instant closing a run's last step, :func:`sim.energy.simulation_times`:
+        what would happen at it belongs to the next range). Default: every tick acts.
 
     Returns
     -------
@@ -297,6 +302,9 @@ def run_loop(
             out["az"][k], out["el"][k] = output(t, i)
             out["az_cmd"][k], out["el_cmd"][k] = controller.command_deg
             tracking[k] = not controller.stowed and t >= state.wake_until_s
+        if act_ticks is not None and i >= act_ticks:
+            i += 1
+            continue
         enc = enc_rate * t
         r_az = (ax_az.position(t) if az_moving else ax_az.motor) + enc
         r_el = (ax_el.position(t) if el_moving else ax_el.motor) + enc

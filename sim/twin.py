@@ -6,8 +6,9 @@ tracker joint angles (ideal tracking within the joint limits,
 pvlib orientation, then for both arrays the angle of incidence, plane-of-array
 irradiance (clear sky or given weather, :mod:`sim.sky`), cell temperature and
 the current, voltage and power at the maximum power point (CEC single-diode,
-:mod:`sim.pv`). Energies are left Riemann sums of the power samples (each
-sample stands for one step).
+:mod:`sim.pv`). The instant that closes the last step is computed too
+(:func:`sim.energy.simulation_times`) but not shown: energies are
+:mod:`sim.energy`'s rule over every step of the range (:func:`sim.energy.run_energy_wh`).
 
 Controllers other than ``"ideal"`` (:mod:`sim.control`) run in
 :func:`sim.tracking.run_loop` on a tick grid (1 s for the camera loop, the
@@ -50,7 +51,7 @@ import pandas as pd
 from sim import array_shade, kinematics, pv, sky, sun
 from sim import disturbances as dist
 from sim.control import CONTROLLERS, ControlSettings, make_controller, noon_reference_azimuth
-from sim.energy import energy_per_period_wh, gain_pct, sampled_energy_wh
+from sim.energy import energy_per_period_wh, gain_pct, run_energy_wh, simulation_times
 from sim.sites import Site
 from sim.tracking import (
     CameraSetup,
@@ -135,10 +136,19 @@ class TwinResult:
     ideal_poa_global: np.ndarray = field(default_factory=lambda: np.zeros(0))
     #: ``open_loop_model``'s mount terms [°] by name (None for the other controllers)
     pointing_model_terms: dict[str, float] | None = None
+    #: each array's power [W] at the instant closing the last step (one step after the
+    #: series' last row, :func:`sim.energy.simulation_times`), by array name
+    closing_power_w: dict[str, float] = field(default_factory=dict)
+
+    def _power_to_close(self, array: str) -> np.ndarray:
+        """``array``'s power [W] at every step and at the instant closing the last."""
+        return np.append(self.series[f"{array}_power_w"].to_numpy(),
+                         self.closing_power_w[array])
 
     def energy_wh(self, array: str) -> float:
         """Energy of ``array`` (``"tracker"``/``"fixed"``) over the run [Wh]."""
-        return sampled_energy_wh(self.series[f"{array}_power_w"].to_numpy(), self.step_s)
+        return run_energy_wh(self._power_to_close(array), self.step_s,
+                             (self.end - self.start).total_seconds())
 
     def daily_energy(self) -> list[dict[str, Any]]:
         """Energy [Wh] and gain [%] per local calendar day of the run (the site's zone), by
@@ -153,11 +163,13 @@ class TwinResult:
         last = s.index[-1].tz_convert(zone).normalize()
         dates = pd.date_range(first.date(), last.date(), freq="D")
         edges = [pd.Timestamp(d.date(), tz=zone) for d in dates]
-        edges.append(pd.Timestamp((dates[-1] + pd.Timedelta(days=1)).date(), tz=zone))
+        edges.append(min(pd.Timestamp((dates[-1] + pd.Timedelta(days=1)).date(), tz=zone),
+                         self.end))
         edges_s = np.array([e.timestamp() for e in edges])
         t = s.index.as_unit("ns").asi8 / 1e9  # not whole seconds: a step may be 0.5 s
+        t = np.append(t, t[-1] + self.step_s)  # the instant closing the last step
         gap = 1.5 * self.step_s
-        per = {a: energy_per_period_wh(t, s[f"{a}_power_w"].to_numpy(), gap, edges_s)
+        per = {a: energy_per_period_wh(t, self._power_to_close(a), gap, edges_s)
                for a in ("tracker", "fixed")}
         return [{"date": d.date().isoformat(), "tracker_energy_wh": float(per["tracker"][k]),
                  "fixed_energy_wh": float(per["fixed"][k]),
@@ -307,7 +319,11 @@ def _check_inputs(
 def _weather_on(
     times: pd.DatetimeIndex, weather: pd.DataFrame, site: Site
 ) -> dict[str, np.ndarray]:
-    """Weather interpolated (linear in time) onto ``times``; must cover them."""
+    """Weather interpolated (linear in time) onto ``times`` (:func:`sim.energy.simulation_times`).
+
+    It must cover the range's steps; the instant closing the last step, where it lies past
+    the weather's last row, takes that row (a weather file that ends with the range).
+    """
     missing = [c for c in ("ghi", "dni", "dhi") if c not in weather.columns]
     if missing:
         raise ValueError(f"weather lacks columns {missing}")
@@ -315,10 +331,11 @@ def _weather_on(
         raise ValueError("weather index must be timezone-aware")
     w = weather.copy()
     w.index = w.index.tz_convert("UTC")
-    if times[0] < w.index[0] or times[-1] > w.index[-1]:
+    last_step = times[-2] if len(times) > 1 else times[-1]
+    if times[0] < w.index[0] or last_step > w.index[-1]:
         raise ValueError(
             f"weather covers {w.index[0].isoformat()}..{w.index[-1].isoformat()}, "
-            f"not the run {times[0].isoformat()}..{times[-1].isoformat()}"
+            f"not the run {times[0].isoformat()}..{last_step.isoformat()}"
         )
     t_w = sun._unix_seconds(w.index)
     t = sun._unix_seconds(times)
@@ -600,8 +617,9 @@ def simulate(
     from pvlib import atmosphere
 
     start_utc, end_utc = start.tz_convert("UTC"), end.tz_convert("UTC")
-    times = pd.date_range(start_utc, end_utc, freq=pd.Timedelta(seconds=step_s), inclusive="left")
-    weather_on = None if weather is None else _weather_on(times, weather, site)
+    grid = simulation_times(start_utc, end_utc, step_s)
+    n_steps = len(grid) - 1  # the range's steps (the series); grid[n_steps] closes the last
+    weather_on = None if weather is None else _weather_on(grid, weather, site)
     pressure = float(atmosphere.alt2pres(site.altitude))
     ctl = None
     if controller != "ideal":
@@ -618,16 +636,16 @@ def simulate(
     state: LoopState | None = None
     moves: list = []
     # one (column, step) block, filled chunk by chunk and handed to pandas without a copy
-    block = np.empty((len(SERIES_COLUMNS), len(times)))
-    extra = {k: np.zeros(len(times)) for k in ("ideal_tracker_power_w", "normal_azimuth",
-                                              "normal_elevation", "ideal_tracker_poa_global")}
-    tracking = np.zeros(len(times), dtype=bool)
+    block = np.empty((len(SERIES_COLUMNS), len(grid)))
+    extra = {k: np.zeros(len(grid)) for k in ("ideal_tracker_power_w", "normal_azimuth",
+                                             "normal_elevation", "ideal_tracker_poa_global")}
+    tracking = np.zeros(len(grid), dtype=bool)
     if layout is not None:
-        extra.update({k: np.zeros(len(times)) for k in ("fixed_shaded_fraction",
-                                                      "fixed_shade_loss_w")})
+        extra.update({k: np.zeros(len(grid)) for k in ("fixed_shaded_fraction",
+                                                     "fixed_shade_loss_w")})
     chunk_steps = _CHUNK_STEPS if ctl is None else max(1, min(_CHUNK_STEPS, (1 << 17) // every))
-    for i0 in range(0, len(times), chunk_steps):
-        chunk = times[i0 : i0 + chunk_steps]
+    for i0 in range(0, len(grid), chunk_steps):
+        chunk = grid[i0 : i0 + chunk_steps]
         pos = sun.solar_position(
             chunk, site.latitude, site.longitude, site.altitude, pressure, site.temp_air
         )
@@ -638,7 +656,10 @@ def simulate(
         )
         pose = None
         if ctl is not None:
-            ticks = pd.date_range(chunk[0], periods=len(chunk) * every,
+            # the closing instant is one tick, sampled only: nothing at it is the run's
+            closes = i0 + len(chunk) == len(grid)
+            act_ticks = (len(chunk) - 1) * every if closes else None
+            ticks = pd.date_range(chunk[0], periods=(len(chunk) - closes) * every + closes,
                                   freq=pd.Timedelta(seconds=tick_s))
             if every == 1:
                 t_pos = pos
@@ -647,9 +668,9 @@ def simulate(
                                            pressure, site.temp_air)
             sun_enu = enu_from_sky(t_pos["azimuth"].to_numpy(),
                                    t_pos["apparent_elevation"].to_numpy())
-            t0_s = (chunk[0] - times[0]).total_seconds()
+            t0_s = (chunk[0] - grid[0]).total_seconds()
             res, state = run_loop(ctl, ticks, t0_s, tick_s, every, sun_enu, d, limits, camera,
-                                  state)
+                                  state, act_ticks)
             moves.extend(res.moves)
             normal = dist.normal_enu(res.azimuth_joint_deg, res.elevation_joint_deg, d)
             # the series' joints are the real ones (an encoder zero moves the elevation)
@@ -672,23 +693,28 @@ def simulate(
             if name in part:
                 arr[i0 : i0 + len(chunk)] = part[name]
         if progress is not None:
-            progress(min(1.0, (i0 + len(chunk)) / len(times)))
-    series = pd.DataFrame(block.T, index=times, columns=SERIES_COLUMNS, copy=False)
+            progress(min(1.0, (i0 + len(chunk)) / len(grid)))
+    series = pd.DataFrame(block[:, :n_steps].T, index=grid[:n_steps], columns=SERIES_COLUMNS,
+                          copy=False)
+    closing_power_w = {a: float(block[SERIES_COLUMNS.index(f"{a}_power_w"), n_steps])
+                       for a in ("tracker", "fixed")}
+    duration_s = (end - start).total_seconds()
+    tracking = tracking[:n_steps]
     pointing = tracking & (series["apparent_elevation"].to_numpy() > POINTING_MIN_ELEVATION_DEG)
     series.loc[~pointing, "pointing_error_mrad"] = np.nan
     shade_loss_wh = None
     if layout is not None:
-        series["fixed_shaded_fraction"] = extra["fixed_shaded_fraction"]
-        shade_loss_wh = sampled_energy_wh(extra["fixed_shade_loss_w"], step_s)
+        series["fixed_shaded_fraction"] = extra["fixed_shaded_fraction"][:n_steps]
+        shade_loss_wh = run_energy_wh(extra["fixed_shade_loss_w"], step_s, duration_s)
     move_wh = standby_wh = 0.0
     if ctl is not None:
         _, move_wh = move_energies_wh(
             moves, limits, drives=(site.drives["azimuth"], site.drives["elevation"]),
             inertia=site.inertia)
-        standby_wh = _standby_energy_wh(site, len(times) * float(step_s))
+        standby_wh = _standby_energy_wh(site, n_steps * float(step_s))
     ideal_wh = None
     if ctl is not None or receiver == "cpv":
-        ideal_wh = sampled_energy_wh(extra["ideal_tracker_power_w"], step_s)
+        ideal_wh = run_energy_wh(extra["ideal_tracker_power_w"], step_s, duration_s)
     return TwinResult(
         site=site,
         start=start,
@@ -708,13 +734,14 @@ def simulate(
         camera_frames=0 if state is None else state.frames,
         camera_frames_found=0 if state is None else state.frames_found,
         camera_frames_used=0 if ctl is None else ctl.frames_used,
-        normal_azimuth=extra["normal_azimuth"],
-        normal_elevation=extra["normal_elevation"],
+        normal_azimuth=extra["normal_azimuth"][:n_steps],
+        normal_elevation=extra["normal_elevation"][:n_steps],
         fixed_shade_loss_wh=shade_loss_wh,
-        ideal_poa_global=(extra["ideal_tracker_poa_global"] if ideal_wh is not None
+        ideal_poa_global=(extra["ideal_tracker_poa_global"][:n_steps] if ideal_wh is not None
                           else series["tracker_poa_global"].to_numpy()),
         pointing_model_terms=(None if ctl is None or ctl.pointing_model is None
                               else ctl.pointing_model.as_dict()),
+        closing_power_w=closing_power_w,
     )
 
 

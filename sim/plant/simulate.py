@@ -19,14 +19,14 @@ from __future__ import annotations
 
 import datetime as dt
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from sim.energy import energy_per_period_wh, gain_pct, sampled_energy_wh
+from sim.energy import energy_per_period_wh, gain_pct, run_energy_wh, simulation_times
 from sim.plant.electrical import beam_factors
 from sim.plant.fields import horizon_elevation
 from sim.plant.layout import Plant
@@ -63,12 +63,14 @@ def local_day(date: dt.date, timezone: str) -> tuple[pd.Timestamp, pd.Timestamp]
     return midnight(date), midnight(date + dt.timedelta(days=1))
 
 
-def sky_conditions(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame | None = None
-                   ) -> dict[str, FloatArray]:
+def sky_conditions(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame | None = None,
+                   closing: bool = False) -> dict[str, FloatArray]:
     """Sun (SPA) and irradiance at ``times``: the ``sky`` dict of :mod:`sim.plant.strategies`.
 
     Clear sky (Ineichen–Perez) unless ``weather`` (covering ``times``) is given;
-    irradiance is zero with the sun down.
+    irradiance is zero with the sun down. ``closing``: the last of ``times`` closes a
+    run's last step (:func:`sim.energy.simulation_times`); past the weather's last row it
+    takes that row, as the twin's does.
     """
     pos = solar_position(times, plant.latitude, plant.longitude, plant.altitude)
     sky: dict[str, FloatArray] = {
@@ -89,9 +91,10 @@ def sky_conditions(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame 
     else:
         t_w = _seconds(weather.index)
         t = _seconds(times)
-        if t[0] < t_w[0] or t[-1] > t_w[-1]:
+        last = len(t) - 2 if closing and len(t) > 1 else len(t) - 1
+        if t[0] < t_w[0] or t[last] > t_w[-1]:
             raise ValueError(f"weather covers {weather.index[0]}..{weather.index[-1]}, "
-                             f"not {times[0]}..{times[-1]}")
+                             f"not {times[0]}..{times[last]}")
         for k in ("ghi", "dni", "dhi"):
             sky[k] = np.interp(t, t_w, weather[k].to_numpy(float))
         sky["temp_air"] = (np.interp(t, t_w, weather["temp_air"].to_numpy(float))
@@ -206,13 +209,20 @@ class PlantResult:
     #: the other fractions of an empty denominator (JSON has no NaN)
     dni_weighted_shaded_fraction: float | None
     tracker_dni_weighted_shaded_fraction: FloatArray | None = None
+    #: the series' values at the instant closing the last step (one step after its last
+    #: row, :func:`sim.energy.simulation_times`), by column
+    closing: dict[str, float] = field(default_factory=dict)
+
+    def energy_wh(self, column: str) -> float:
+        """The run's integral of a power column [Wh] (irradiance: [Wh m⁻²]) over
+        ``[start, end)``, by :mod:`sim.energy`'s rule (:func:`sim.energy.run_energy_wh`)."""
+        return run_energy_wh(np.append(self.series[column].to_numpy(), self.closing[column]),
+                             self.step_s, (self.end - self.start).total_seconds())
 
     def summary(self) -> dict[str, Any]:
         """The CLI/HTTP summary (DESIGN.md contract), units in the keys."""
         s = self.series
-
-        def wh(column: str) -> float:
-            return sampled_energy_wh(s[column].to_numpy(), self.step_s)
+        wh = self.energy_wh
 
         e, e_area, e_un, e_fix = (wh("power_w"), wh("power_area_w"), wh("power_unshaded_w"),
                                   wh("fixed_power_w"))
@@ -288,10 +298,11 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
         raise ValueError("end must be after start (end is exclusive)")
     if not step_s > 0:
         raise ValueError(f"step_s must be positive, got {step_s}")
-    times = pd.date_range(start.tz_convert("UTC"), end.tz_convert("UTC"),
-                          freq=pd.Timedelta(seconds=step_s), inclusive="left")
+    times = simulation_times(start, end, step_s)  # the series' steps and the closing instant
+    n_steps = len(times) - 1
     if sky is not None and any(len(v) != len(times) for v in sky.values()):
-        raise ValueError(f"sky must hold the range's {len(times)} steps")
+        raise ValueError(f"sky must hold the range's {len(times)} instants "
+                         f"(sim.energy.simulation_times)")
     any_shaded, daylight, dni_f, dni_sum = 0, 0, 0.0, 0.0
     # the whole range's columns, filled chunk by chunk (night rows stay 0; NaN for the
     # shaded fraction, and for a tracker not asked for): no per-chunk frames, no concat
@@ -304,8 +315,8 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
     table = BinTable()                       # sun bins recur every day: build each once
     for k0 in range(0, len(times), _CHUNK):
         tt = times[k0:k0 + _CHUNK]
-        csky = (sky_conditions(plant, tt, weather) if sky is None
-                else {k: v[k0:k0 + _CHUNK] for k, v in sky.items()})
+        csky = (sky_conditions(plant, tt, weather, closing=k0 + len(tt) == len(times))
+                if sky is None else {k: v[k0:k0 + _CHUNK] for k, v in sky.items()})
         saz, sel = orientations(strategy, plant, csky)
         up = csky["apparent_elevation"] > 0
         day = np.nonzero(up)[0]              # shade and power are computed by day only
@@ -317,13 +328,14 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
         frac = run["shade"].fraction
         # not BLAS: a product this size wakes OpenBLAS's threads, which then spin on the
         # other core (~0.35 s of CPU in a 1-min year, from these few calls)
-        dni_f_tracker += np.einsum("t,tn->n", dsky["dni"], frac)
         mean_f = frac.mean(axis=1)
         n_sh = (frac > 0).sum(axis=1)
-        any_shaded += int((n_sh > 0).sum())
-        daylight += len(day)
-        dni_f += float(np.sum(dsky["dni"] * mean_f))
-        dni_sum += float(np.sum(dsky["dni"]))
+        step = k0 + day < n_steps            # the statistics leave out the closing instant
+        dni_f_tracker += np.einsum("t,tn->n", dsky["dni"][step], frac[step])
+        any_shaded += int((n_sh[step] > 0).sum())
+        daylight += int(step.sum())
+        dni_f += float(np.sum(dsky["dni"][step] * mean_f[step]))
+        dni_sum += float(np.sum(dsky["dni"][step]))
         rows, at = slice(k0, k0 + len(tt)), k0 + day
         for name in ("solar_azimuth", "apparent_elevation", "dni", "ghi"):
             col[name][rows] = csky[name]
@@ -338,18 +350,21 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
             col["tracker_power_w"][at] = run["p_tracker"]
         if progress is not None:
             progress(min(1.0, (k0 + len(tt)) / len(times)))
-    series = pd.DataFrame(col, index=times, copy=False)
+    closing = {name: float(v[n_steps]) for name, v in col.items()}
+    series = pd.DataFrame({name: v[:n_steps] for name, v in col.items()}, index=times[:n_steps],
+                          copy=False)
     # local days as integers (days since 1970-01-01 on the local calendar), summed with
     # bincount: pandas' groupby on ``.date`` made 525,600 date objects for a 1-min year
     local_day = series.index.tz_convert(plant.timezone).tz_localize(None).as_unit("s").asi8
     day_nums, day_of = np.unique(local_day // 86_400, return_inverse=True)
     dates = list(pd.to_datetime(day_nums, unit="D").date)
-    edges_s = pd.DatetimeIndex([pd.Timestamp(d, tz=plant.timezone) for d in
-                                [*dates, dates[-1] + pd.Timedelta(days=1)]]).as_unit("s").asi8
-    ts_s = series.index.as_unit("s").asi8
+    edges = pd.DatetimeIndex([pd.Timestamp(d, tz=plant.timezone) for d in
+                              [*dates, dates[-1] + pd.Timedelta(days=1)]])
+    edges_s = np.minimum(edges.as_unit("ns").asi8, end.as_unit("ns").value) / 1e9
+    ts_s = times.as_unit("ns").asi8 / 1e9  # the steps and the closing instant; steps < 1 s too
 
     def per_day_wh(column: str) -> np.ndarray:  # sim/energy.py's rule, split at local midnights
-        return energy_per_period_wh(ts_s, series[column].to_numpy(), 1.5 * step_s, edges_s)
+        return energy_per_period_wh(ts_s, col[column], 1.5 * step_s, edges_s)
 
     def per_day_sum(column: str) -> FloatArray:
         return np.bincount(day_of, series[column].to_numpy()).astype(float)
@@ -364,7 +379,7 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
     return PlantResult(plant, start, end, float(step_s), strategy,
                        "clearsky-ineichen" if weather is None else "weather", series, daily,
                        any_shaded, daylight, dni_f / dni_sum if dni_sum > 0 else None,
-                       dni_f_tracker / dni_sum if dni_sum > 0 else None)
+                       dni_f_tracker / dni_sum if dni_sum > 0 else None, closing)
 
 
 

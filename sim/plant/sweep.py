@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from sim.energy import sampled_energy_wh
+from sim.energy import simulation_times
 from sim.plant.fields import (
     FieldLayout,
     interior_tracker,
@@ -112,9 +112,9 @@ class SweepSpec:
                 self.step_s, self.temp_air, self.wind_speed, self.weather_token)
 
     def times(self) -> pd.DatetimeIndex:
-        """The steps of the range (UTC)."""
-        return pd.date_range(self.start.tz_convert("UTC"), self.end.tz_convert("UTC"),
-                             freq=pd.Timedelta(seconds=self.step_s), inclusive="left")
+        """The instants the range is simulated at (UTC): its steps and the instant closing
+        the last (:func:`sim.energy.simulation_times`)."""
+        return simulation_times(self.start, self.end, self.step_s)
 
 
 def case_layout(spec: SweepSpec, case: SweepCase) -> FieldLayout:
@@ -154,7 +154,7 @@ def site_plant(spec: SweepSpec) -> Plant:
 def case_sky(spec: SweepSpec, weather: pd.DataFrame | None = None) -> dict[str, FloatArray]:
     """Sun (SPA) and irradiance of the range, shared by every case of the sweep
     (:func:`sim.plant.simulate.sky_conditions`; clear sky unless ``weather``)."""
-    return sky_conditions(site_plant(spec), spec.times(), weather)
+    return sky_conditions(site_plant(spec), spec.times(), weather, closing=True)
 
 
 def run_case(spec: SweepSpec, case: SweepCase, sky: dict[str, FloatArray],
@@ -169,7 +169,7 @@ def run_case(spec: SweepSpec, case: SweepCase, sky: dict[str, FloatArray],
     n = plant.n_trackers
     per_tracker = r.tracker_dni_weighted_shaded_fraction
     e_kwh = s["plant_energy_wh"] / n / 1000.0
-    interior_kwh = sampled_energy_wh(r.series["tracker_power_w"].to_numpy(), spec.step_s) / 1000
+    interior_kwh = r.energy_wh("tracker_power_w") / 1000
 
     def pct(x: float | None) -> float | None:
         return None if x is None or not np.isfinite(x) else round(100.0 * x, 6)
