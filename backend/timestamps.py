@@ -1,8 +1,11 @@
 """One rule set for every timestamp the service and the command line accept.
 
 - An **instant** is ISO 8601 with a UTC offset (``2024-03-15T12:00:00-06:00``,
-  ``…Z``); the standard library's ``datetime.fromisoformat`` parses it. A naive
-  time (no offset) is refused: its meaning would depend on the reader.
+  ``…Z``; RFC 3339's lower-case ``t`` and ``z`` too), as the standard library's
+  ``datetime.fromisoformat`` or pandas' ISO 8601 parser reads it (pandas also takes
+  fields without their leading zero, ``2026-1-5T12:00Z``: ingestion parses big batches
+  with pandas, so every path takes what it takes). A naive time (no offset) is refused:
+  its meaning would depend on the reader.
 - A **day or instant** (query ranges, ``simulate --start``) may also be a bare
   date ``YYYY-MM-DD``: midnight in the site's zone (where midnight falls in a DST
   gap, the first valid instant after it — pandas' ``shift_forward``).
@@ -42,13 +45,27 @@ def parse_instant(text: str, field: str) -> dt.datetime:
     """An ISO 8601 instant with offset → aware ``datetime`` in UTC."""
     text = text.strip()
     try:
-        value = dt.datetime.fromisoformat(text)
+        value = _from_iso(text.upper())  # RFC 3339 allows 't' and 'z'
     except ValueError:
         raise TimestampError(f"{field}: {text[:40]!r} is not an ISO 8601 date-time") from None
     if value.tzinfo is None or value.utcoffset() is None:
         raise TimestampError(f"{field}: {text[:40]!r} has no UTC offset; add one "
                              "(e.g. Z, +00:00 or -06:00)")
     return _in_years(value.astimezone(dt.UTC) if _year_ok(value) else value, text, field)
+
+
+def _from_iso(text: str) -> dt.datetime:
+    """``datetime.fromisoformat``, else pandas' ISO 8601 parser (the bulk path's)."""
+    try:
+        return dt.datetime.fromisoformat(text)
+    except ValueError:
+        try:
+            stamp = pd.to_datetime(text, format="ISO8601")
+        except (ValueError, TypeError, OverflowError):
+            raise ValueError(text) from None
+        if not isinstance(stamp, pd.Timestamp) or pd.isna(stamp):
+            raise ValueError(text) from None
+        return stamp.to_pydatetime()
 
 
 def parse_day_or_instant(text: str, zone: ZoneInfo | str, field: str) -> dt.datetime:

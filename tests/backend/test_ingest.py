@@ -52,6 +52,24 @@ def test_bulk_timestamps_agree_with_fromisoformat() -> None:
     assert batch.ts_s.tolist() == expected
 
 
+@pytest.mark.parametrize("rows", [5, 40])
+def test_a_batch_of_any_length_reads_a_stamp_alike(rows: int) -> None:
+    """Short batches go row by row, long ones through pandas: the same stamps are taken
+    either way (``2026-1-5T12:00:00Z`` was refused in 31 rows and taken in 32), RFC 3339's
+    lower-case ``z`` included; a stamp without offset is refused either way."""
+    good = {"ts": "2026-01-05T11:00:00Z", "array": "tracker", "voltage_v": 1, "current_a": 1}
+    odd = ["2026-1-5T12:00:00Z", "2026-01-05t12:01:00z", "2026-01-05T12:02:00,5+00:00"]
+    readings = [good] * (rows - len(odd)) + [dict(good, ts=t) for t in odd]
+    batch = parse_json_batch(orjson.dumps({"readings": readings}), ARRAYS,
+                             Limits(future_tolerance_s=10**10))
+    noon = int(dt.datetime(2026, 1, 5, 12, tzinfo=dt.UTC).timestamp())
+    assert batch.ts_s[-3:].tolist() == [noon, noon + 60, noon + 120]
+    naive = readings[:-1] + [dict(good, ts="2026-1-5T12:00:00")]
+    with pytest.raises(IngestError) as err:
+        parse_json_batch(orjson.dumps({"readings": naive}), ARRAYS, Limits())
+    assert err.value.errors[0]["row"] == rows - 1 and "offset" in err.value.errors[0]["msg"]
+
+
 @pytest.mark.parametrize("bad", ["2024-02-30T00:00:00Z", "2023-02-29T00:00:00Z",
                                  "2024-13-01T00:00:00Z", "2024-01-01T24:00:00Z",
                                  "2024-01-01T00:00:00+25:00"])
