@@ -9,6 +9,7 @@ the frame size sits in the first SOFn segment) are accepted.
 from __future__ import annotations
 
 import struct
+from typing import Any
 
 import cv2
 import numpy as np
@@ -69,10 +70,51 @@ def _jpeg_size(data: bytes) -> tuple[int, int]:
     raise ImageError("corrupt JPEG: no frame header (SOF) found")
 
 
+def _png_sample_bits(data: bytes) -> int | None:
+    """The significant bits per sample an ``sBIT`` chunk states (the most of its channels),
+    None without one; chunks are walked from the IHDR up to the first IDAT."""
+    i = 8
+    while i + 8 <= len(data):
+        (length,) = struct.unpack(">I", data[i:i + 4])
+        kind = data[i + 4:i + 8]
+        if kind == b"IDAT":
+            return None
+        if kind == b"sBIT" and length and i + 8 + length <= len(data):
+            return max(data[i + 8:i + 8 + length])
+        i += 12 + length
+    return None
+
+
+def _to_bgr8(raw: NDArray[Any], sample_bits: int | None) -> NDArray[np.uint8]:
+    """A PNG decoded as stored (8/16 bits, grey or colour, with or without alpha) → 8-bit
+    BGR. A 16-bit sample holds ``sample_bits`` significant bits (the ``sBIT`` chunk), else
+    as many as its brightest value needs, rounded up to an even depth of 8–16: a 12-bit
+    camera's data stored in 16 bits saturate at 4095, and that is 255 here (its top byte
+    alone made the frame almost black). Alpha is composited onto black: a transparent
+    corner outside a fisheye's image circle is no light, not the white its colour says."""
+    arr = raw if raw.ndim == 3 else raw[..., None]
+    alpha = arr[..., -1] if arr.shape[2] in (2, 4) else None
+    colour = arr[..., :-1] if alpha is not None else arr
+    if colour.shape[2] == 1:
+        colour = cv2.cvtColor(np.ascontiguousarray(colour), cv2.COLOR_GRAY2BGR)
+    full = 65535 if raw.dtype == np.uint16 else 255
+    if alpha is not None:
+        a = cv2.merge([alpha] * 3)
+        colour = cv2.multiply(np.ascontiguousarray(colour), a, scale=1.0 / full)
+    if raw.dtype == np.uint16:
+        bits = sample_bits or int(colour.max()).bit_length()
+        bits = min(16, max(8, bits + bits % 2))
+        colour = np.ascontiguousarray(colour)  # shifted in place: 16-bit frames are large
+        np.right_shift(colour, bits - 8, out=colour)
+        np.minimum(colour, 255, out=colour)
+    return np.ascontiguousarray(colour, dtype=np.uint8)
+
+
 def decode_image(data: bytes, max_pixels: int) -> NDArray[np.uint8]:
     """Decode a PNG/JPEG to 8-bit BGR after checking its header size against ``max_pixels``.
 
-    16-bit and grey images become 8-bit BGR; a JPEG's EXIF orientation is applied
+    Grey images become BGR; a 16-bit PNG keeps its significant bits and an alpha channel
+    is composited onto black (:func:`_to_bgr8`); a JPEG's EXIF orientation is applied
     (``cv2.IMREAD_COLOR``), so pixel coordinates are those of the image as a
     browser shows it.
     """
@@ -82,9 +124,14 @@ def decode_image(data: bytes, max_pixels: int) -> NDArray[np.uint8]:
     if w * h > max_pixels:
         raise ImageError(f"{fmt.upper()} image of {w}×{h} = {w * h} pixels exceeds the limit "
                          f"of {max_pixels} pixels", too_large=True)
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    # a PNG of 16 bits (IHDR bit depth) or with alpha (colour type 4 or 6) is read as stored
+    as_stored = fmt == "png" and len(data) > 25 and (data[24] == 16 or data[25] in (4, 6))
+    buf = np.frombuffer(data, np.uint8)
+    img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED if as_stored else cv2.IMREAD_COLOR)
     if img is None:
         raise ImageError(f"corrupt or truncated {fmt.upper()} image")
+    if as_stored:
+        img = _to_bgr8(img, _png_sample_bits(data))
     # IMREAD_COLOR applies a JPEG's EXIF orientation (as browsers do when they show it),
     # so an orientation of 5-8 swaps the header's width and height
     if (img.shape[1], img.shape[0]) not in ((w, h), (h, w)):

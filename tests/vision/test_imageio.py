@@ -87,3 +87,39 @@ def test_odd_pngs_decode_to_8bit_bgr(shape: tuple[int, ...], dtype: type) -> Non
     out = decode_image(buf.tobytes(), 10_000)
     assert out.dtype == np.uint8 and out.shape == (shape[0], shape[1], 3)
     assert out.min() == 255
+
+
+def _real_frame() -> np.ndarray:
+    from pathlib import Path
+
+    path = (Path(__file__).parents[1] / "data" / "real-sky"
+            / "Wettermast_20160615_125430UTCp1_sunrow1306_suncol1076.jpg")
+    return cv2.imread(str(path), cv2.IMREAD_COLOR)
+
+
+def test_a_12_bit_png_and_a_transparent_border_find_the_same_sun() -> None:
+    """A camera's 12-bit samples stored in a 16-bit PNG, and a frame whose outside of the
+    image circle is transparent white: the sun is found where the 8-bit JPEG puts it
+    (before, the 12-bit frame decoded to its top byte, 0–15, and found no sun; the white
+    corners hid the image circle)."""
+    from vision.detect import detect_robust
+
+    frame = _real_frame()
+    ref = detect_robust(frame)
+    assert ref.sun_found and ref.centroid_px is not None
+    twelve = (frame.astype(np.int64) * 4095 // 255).astype(np.uint16)
+    ok, png12 = cv2.imencode(".png", twelve)
+    out12 = decode_image(png12.tobytes(), 10**8)
+    assert np.abs(out12.astype(int) - frame).max() <= 1
+    h, w = frame.shape[:2]
+    yy, xx = np.mgrid[:h, :w]
+    outside = (xx - w / 2) ** 2 + (yy - h / 2) ** 2 > (0.5 * min(h, w) - 2) ** 2
+    rgba = np.dstack([frame, np.full((h, w), 255, np.uint8)])
+    rgba[outside] = (255, 255, 255, 0)
+    ok, png_a = cv2.imencode(".png", rgba)
+    out_a = decode_image(png_a.tobytes(), 10**8)
+    assert out_a[0, 0].max() == 0 and (out_a[~outside] == frame[~outside]).all()
+    for out in (out12, out_a):
+        got = detect_robust(out)
+        assert got.sun_found and got.centroid_px is not None
+        assert np.hypot(*np.subtract(got.centroid_px, ref.centroid_px)) < 1.0
