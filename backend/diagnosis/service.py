@@ -74,8 +74,9 @@ MAX_DAYS = 400
 #: sky_sensor._unseen_beam_capped; 11: each cached day keeps its site config's digest,
 #: site_key; 12: a tracker making next to nothing gets no shape fits, faults.DEAD_SHARE; a day
 #: in progress judged on its minutes so far for its measured sky too; 13: a coarse or slow
-#: logger's held values are not a frozen logger, sky_sensor._stale).
-CACHE_VERSION = 13
+#: logger's held values are not a frozen logger, sky_sensor._stale; 14: a range that cuts
+#: a day makes it ``partial``, without shape fits, and is not cached).
+CACHE_VERSION = 14
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
@@ -118,10 +119,13 @@ def _cache_usable(payload: dict[str, Any], day_start_s: int, day_end_s: int,
 def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFrame,
                  tracker_w: np.ndarray, fixed_w: np.ndarray,
                  measured_wh: dict[str, float | None],
-                 elapsed_min: int | None = None, first_s: int | None = None) -> dict[str, Any]:
+                 elapsed_min: int | None = None, first_s: int | None = None,
+                 cut: bool = False) -> dict[str, Any]:
     """One day's answer (without faults) and its fault features.
 
-    ``day_s``: the day's ``[start, end)`` [s since the epoch]; ``e``, ``tracker_w`` and
+    ``day_s``: the day's ``[start, end)`` [s since the epoch] (``cut``: the range asked
+    for covers only part of the day: it is ``partial`` and gets no shape fits, which
+    need a whole day); ``e``, ``tracker_w`` and
     ``fixed_w`` hold its minutes and, when the run goes on, the next day's first minute,
     so the day's last minute is integrated up to midnight. Every energy is
     :mod:`sim.energy`'s rule: ``measured_wh`` (keyed ``tracker``/``fixed``, None without
@@ -159,7 +163,7 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     first_min = 1440 if first_s is None else max(0, -(-(first_s - t0) // 60))
     # a shape fault needs a whole day with a measured sky; a dropout only the minutes so far
     e_day, tr_day = e[day], tracker_w[day]
-    whole = elapsed_min is None and source != "clear_sky"
+    whole = elapsed_min is None and source != "clear_sky" and not cut
     features: dict[str, Any] = day_features(info.site, e_day, tr_day, first_min) if whole \
         else {"missing_daylight_min": missing_daylight_min(e_day, tr_day, elapsed_min,
                                                            first_min)}
@@ -176,7 +180,7 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     return {
         "date": date,
         "complete": elapsed_min is None,
-        "partial": elapsed_min is not None or short,
+        "partial": elapsed_min is not None or short or cut,
         "sky": {"clearness_index": None if k_t is None else round(k_t, 4), "source": source,
                 "sensor": sensor, "valid_minutes_pct": round(100.0 * share, 1)},
         "tracker": {
@@ -235,7 +239,8 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
             date = edges[i].astimezone(info.zone).date().isoformat()
             elapsed = None if day_end_s <= now_s else max(0, int(now_s - day_start_s) // 60)
             out[i] = _day_payload(info, date, (day_start_s, day_end_s), e.iloc[a:b], tr[a:b],
-                                  fx[a:b], measured, elapsed, first_s)
+                                  fx[a:b], measured, elapsed, first_s,
+                                  cut=not _whole_day(edges[i], edges[i + 1], info.zone))
     return out
 
 
@@ -252,6 +257,16 @@ def computed_days_cap(caller: object | None) -> int | None:
     """The most uncached days a request may diagnose: :data:`ANONYMOUS_MAX_COMPUTED_DAYS`
     without a token (``caller`` None), no bound with one."""
     return None if caller is not None else ANONYMOUS_MAX_COMPUTED_DAYS
+
+
+def _whole_day(start: dt.datetime, end: dt.datetime, zone: dt.tzinfo) -> bool:
+    """Whether ``[start, end)`` is a whole local day: from a midnight to the next."""
+    def midnight(d: dt.date) -> float:  # as period_edges makes it (a missing one too)
+        return dt.datetime(d.year, d.month, d.day, tzinfo=zone).timestamp()
+
+    day = start.astimezone(zone).date()
+    return (start.timestamp() == midnight(day)
+            and end.timestamp() == midnight(day + dt.timedelta(days=1)))
 
 
 def _future_day(date: str) -> dict[str, Any]:
@@ -311,7 +326,8 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
                "day_end_s": int(edges[i + 1].timestamp()),
                "payload_json": orjson.dumps({**p, "cache_version": CACHE_VERSION,
                                              "site_key": key}).decode()}
-              for i, p in fresh.items() if p["complete"]]
+              for i, p in fresh.items()
+              if p["complete"] and _whole_day(edges[i], edges[i + 1], info.zone)]
     if values:
 
         def store(conn: Connection) -> None:

@@ -90,6 +90,30 @@ def test_diagnosis_finds_module_loss_and_expects_the_healthy_energy(client, live
     assert after["days"][0] == body["days"][0]
 
 
+def test_a_range_that_cuts_a_day_makes_it_partial(client, live_server, logged) -> None:
+    """A range from noon to noon: its first and last days are cut — ``partial``, without the
+    shape and energy fits a whole day needs, and not cached over the whole days (before,
+    they were answered as whole days: ``partial`` false, a fault fitted on half a day)."""
+    sl = slice(3 * 1440, 6 * 1440)
+    _post(client, live_server.write_token,
+          _readings(logged.times[sl], logged.fixed_power_w[sl], "fixed")
+          + _readings(logged.times[sl], logged.tracker_power_w[sl], "tracker"))
+    day3 = dt.date.fromisoformat(FIRST) + dt.timedelta(days=3)
+    whole = {"start": day3.isoformat(), "end": (day3 + dt.timedelta(days=3)).isoformat()}
+    before = client.get(f"{BASE}/diagnosis", params=whole, timeout=120).json()["days"]
+    assert [d["partial"] for d in before] == [False] * 3
+    noon = {"start": f"{day3}T12:00:00-06:00",
+            "end": f"{day3 + dt.timedelta(days=2)}T12:00:00-06:00"}
+    cut = client.get(f"{BASE}/diagnosis", params=noon, timeout=120).json()["days"]
+    assert [d["partial"] for d in cut] == [True, False, True]
+    assert [d["status"] for d in cut] == ["complete"] * 3
+    assert cut[0]["faults"] == [] and cut[2]["faults"] == []
+    # the whole day between is the same day (a fault's ``since`` is within the range asked)
+    assert {**cut[1], "faults": None} == {**before[1], "faults": None}
+    assert [f["kind"] for f in cut[1]["faults"]] == [f["kind"] for f in before[1]["faults"]]
+    assert client.get(f"{BASE}/diagnosis", params=whole).json()["days"] == before
+
+
 def test_diagnosis_bad_input(client) -> None:
     r = client.get(f"{BASE}/diagnosis", params={"start": "2025-01-01T00:00:00",
                                                  "end": "2025-01-02"})

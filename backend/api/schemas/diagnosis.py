@@ -64,7 +64,8 @@ class DiagnosisDayRead(BaseModel):
 
     date: str = Field(description="local date, YYYY-MM-DD")
     complete: bool = Field(description="false: the day is not over; judged up to now")
-    partial: bool = Field(description="true: the day is not over, or an array's readings "
+    partial: bool = Field(description="true: the day is not over, the range asked for "
+                                      "covers only part of it, or an array's readings "
                                       "cover under 99 % of its expected energy (a logger "
                                       "that began or stopped that day, a dropout): its "
                                       "measured gain is not the whole day's")
