@@ -121,13 +121,15 @@ def clearsky_ineichen(
     linke = linke_turbidity(times, latitude, longitude)
     am_rel, am_abs = airmass(apparent_zenith, altitude)
     dni_extra = extra_radiation(times)
-    cs = clearsky.ineichen(
-        np.asarray(apparent_zenith, dtype=float),
-        am_abs,
-        linke,
-        altitude=altitude,
-        dni_extra=dni_extra,
-    )
+    # with the sun down pvlib divides by an infinite air mass: those NaNs become 0 below
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cs = clearsky.ineichen(
+            np.asarray(apparent_zenith, dtype=float),
+            am_abs,
+            linke,
+            altitude=altitude,
+            dni_extra=dni_extra,
+        )
     out = {k: np.nan_to_num(np.asarray(cs[k], dtype=float)) for k in ("ghi", "dni", "dhi")}
     out["dni_extra"] = dni_extra
     out["airmass_relative"] = am_rel

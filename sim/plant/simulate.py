@@ -79,9 +79,8 @@ def sky_conditions(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame 
         "apparent_zenith": pos["apparent_zenith"].to_numpy(),
         "zenith": pos["zenith"].to_numpy(),
     }
-    with np.errstate(divide="ignore", invalid="ignore"):  # pvlib's Ineichen at night
-        cs = clearsky_ineichen(times, sky["apparent_zenith"], plant.latitude, plant.longitude,
-                               plant.altitude)
+    cs = clearsky_ineichen(times, sky["apparent_zenith"], plant.latitude, plant.longitude,
+                           plant.altitude)
     sky["dni_extra"], sky["airmass_relative"] = cs["dni_extra"], cs["airmass_relative"]
     if weather is None:
         for k in ("ghi", "dni", "dhi"):
