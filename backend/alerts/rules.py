@@ -44,6 +44,7 @@ FAULT_WORDS = {
     "azimuth_offset": "azimuth offset",
     "elevation_offset": "elevation offset",
     "clock_offset": "clock offset",
+    "sky_clock_offset": "clock of the sky's readings (fixed array or sensor) off",
     "module_loss": "module or string lost",
     "soiling": "soiling",
     "dropout": "logger dropout",

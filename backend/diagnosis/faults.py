@@ -17,6 +17,14 @@ best scale ``s`` (least squares, ``s = Σ m·x / Σ x²``):
 - ``clock_offset``: ``m(t) ≈ s · e(t − τ)``, the logger's clock ``τ`` ahead (±180 min
   in 5-min steps, then 1 min around the best).
 
+The clock of the readings the sky itself comes from (the fixed array's, or an irradiance
+sensor's) is checked apart (:func:`sky_clock`): the fixed plane's measured POA against its
+clear-sky POA, ``poa(t) ≈ s · poa_clear(t − τ)``. The expectation assumes that clock is
+right; a logger that stamps summer-time wall clocks with the winter offset shifts both
+arrays and the sky alike, and the tracker then read a PR of 1.2–1.3 with no finding. A
+clear day whose shift is at least :data:`SKY_CLOCK_MIN_S` and fits far better than none is a
+``sky_clock_offset``.
+
 The residual of each is its RMS over the mean measured power; a fault is named when
 its residual is under :data:`FIT_RATIO` of the healthy one on a day with clearness
 ≥ :data:`MIN_CLEARNESS` (under an overcast sky every orientation sees the same
@@ -75,6 +83,9 @@ GHI_UNCERTAINTY = 0.155
 #: A day is judged for underperformance when the tracker's readings cover at least this
 #: share of its expected energy (a dropout is its own finding)
 UNDER_MIN_COVERAGE = 0.5
+#: A sky whose readings run this far from the sun's time [s] is named ``sky_clock_offset``
+#: (healthy generated clear days: 1–3 min; a DST or UTC-offset mistake: 30–60 min)
+SKY_CLOCK_MIN_S = 900.0
 CARRY_DECAY = 0.8  # a shape fault's confidence on each following day that cannot show it
 CARRIED = " (carried over: today's sky cannot show it)"
 
@@ -166,6 +177,31 @@ def missing_daylight_min(day: pd.DataFrame, measured_w: np.ndarray,
     return int(gap.sum())
 
 
+def sky_clock(day: pd.DataFrame) -> dict[str, float] | None:
+    """The shift ``τ`` [s] of the day's measured fixed-plane POA (``poa_global`` where the
+    sky is measured) against its clear-sky POA: ``poa(t) ≈ s · poa_clear(t − τ)``, τ over
+    ±180 min (5-min steps, then 1 min around the best) — the clock of the readings the sky
+    comes from, ``τ`` ahead. ``residual`` at ``τ``, ``residual_at_0`` unshifted (relative
+    RMS, :func:`_fit`); None without an hour of measured daylight minutes."""
+    poa, clear = day["poa_global"].to_numpy(), day["poa_clear"].to_numpy()
+    ok = day["valid"].to_numpy(bool) & day["measured_sky"].to_numpy(bool) & (clear > 50.0) \
+        & np.isfinite(poa)
+    idx = np.flatnonzero(ok)
+    if idx.size < 60:
+        return None
+
+    def shifted(tau: int) -> tuple[float, int]:
+        j = idx - tau
+        inside = (j >= 0) & (j < clear.size)
+        if inside.sum() < 60:
+            return (np.inf, tau)
+        return (_fit(poa[idx[inside]], clear[j[inside]])[1], tau)
+
+    best = min(shifted(tau) for tau in range(-180, 181, 5))
+    best = min(shifted(tau) for tau in range(best[1] - 4, best[1] + 5))
+    return {"offset_s": 60.0 * best[1], "residual": best[0], "residual_at_0": shifted(0)[0]}
+
+
 def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
                  first_min: int = 0) -> dict[str, Any]:
     """The fitted explanations of one day (see the module docstring), JSON-ready.
@@ -179,7 +215,8 @@ def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
     daylight = day["apparent_elevation"].to_numpy() > 5.0
     out: dict[str, Any] = {"minutes": int(use.sum()),
                            "missing_daylight_min": missing_daylight_min(day, measured_w,
-                                                                        first_min=first_min)}
+                                                                        first_min=first_min),
+                           "sky_clock": sky_clock(day)}
     if use.sum() < 60:
         return out
     m = measured_w[use]
@@ -350,7 +387,49 @@ def faults_over_days(days: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
                                      "tracker reading"})
     _underperformance(days, out)
     _module_loss(days, out)
+    for i in _sky_clock_offset(days, out):  # the tracker judged under a shifted sky: not at all
+        out[i] = [f for f in out[i] if f["kind"] in ("sky_clock_offset", "dropout")]
     return out
+
+
+def _sky_clock_offset(days: list[dict[str, Any]], out: list[list[dict[str, Any]]]
+                      ) -> list[int]:
+    """``sky_clock_offset`` on each day whose sky's readings follow the clear sky's shape
+    (residual under :data:`HEALTHY_RESIDUAL`) shifted by at least :data:`SKY_CLOCK_MIN_S`,
+    that shift fitting under :data:`FIT_RATIO` of the unshifted residual (:func:`sky_clock`);
+    confidence 1 − the ratio; ``since`` the first day of its run. Days too cloudy to show
+    the shape do not break the run and carry it (× :data:`CARRY_DECAY` a day), as a shape
+    fault; a clear day without the shift ends it. Returns the days of the runs: their
+    expectation rests on a shifted sky, so the tracker is not judged on them (a tracker
+    logged on the same clock read as its own clock −67 min and underperforming)."""
+    since: str | None = None
+    fault: dict[str, Any] | None = None
+    shifted: list[int] = []
+    for i, d in enumerate(days):
+        c = d["features"].get("sky_clock")
+        if c is None or c["residual"] is None or not c["residual"] < HEALTHY_RESIDUAL:
+            if fault is not None:  # no measured sky, or too cloudy to show its clock
+                fault = {**fault, "confidence": round(fault["confidence"] * CARRY_DECAY, 3),
+                         "detail": fault["detail"].removesuffix(CARRIED) + CARRIED}
+                out[i].append(fault)
+                shifted.append(i)
+            continue
+        r0 = c["residual_at_0"]
+        ratio = c["residual"] / r0 if r0 and np.isfinite(r0) else 1.0
+        if abs(c["offset_s"]) < SKY_CLOCK_MIN_S or ratio > FIT_RATIO:
+            since, fault = None, None
+            continue
+        since = since or d["date"]
+        minutes = c["offset_s"] / 60.0
+        fault = {"kind": "sky_clock_offset", "confidence": round(1.0 - ratio, 3),
+                 "since": since, "magnitude": round(c["offset_s"], 1), "unit": "s",
+                 "detail": f"the readings the sky comes from (the fixed array's or its "
+                           f"sensor's) run {minutes:+.0f} min from the sun's time: the "
+                           f"logger's clock or its UTC offset (summer time stamped with the "
+                           f"winter offset?); the tracker is not judged under that sky"}
+        out[i].append(fault)
+        shifted.append(i)
+    return shifted
 
 
 def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]]) -> None:

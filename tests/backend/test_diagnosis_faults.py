@@ -86,6 +86,38 @@ def test_soiling_found_as_a_slow_decline() -> None:
     assert all(f["kind"] != "module_loss" for day in found for f in day)
 
 
+@pytest.mark.parametrize("shift_min", [0, 60, -30])
+def test_a_sky_an_hour_late_is_named(shift_min: int) -> None:
+    """A logger that stamps summer-time wall clocks with the winter offset: both arrays'
+    readings an hour late (and a clock half an hour behind). The sky comes from the same
+    readings, so the tracker's own clock fit cannot see it; the fixed plane against its
+    clear sky does. Held out: seed 34 in July (the 15-min threshold was read off seeds 31
+    and 32 in April: 1–3 min on healthy clear days, 30 and 60 min found within 7)."""
+    first = pd.Timestamp("2026-07-10", tz=SITE.timezone)
+    d = logger_days(SITE, first, 5, 34)
+    fixed, tracker = (np.roll(a, shift_min) for a in (d.fixed_power_w, d.tracker_power_w))
+    e = sky_sensor.weather_aware_twin(SITE, first, first + pd.Timedelta(days=5), fixed)
+    days = features_by_day(SITE, first, e, tracker)
+    found = faults_over_days(days)
+    clear = [k for k, day in enumerate(days)
+             if (c := day["features"]["sky_clock"]) and c["residual"] < 0.05]
+    assert len(clear) >= 2, [day["features"]["sky_clock"] for day in days]
+    for k, day in enumerate(found):
+        mine = [f for f in day if f["kind"] == "sky_clock_offset"]
+        if shift_min == 0 or k < clear[0]:
+            assert mine == [], (k, mine)
+        elif k not in clear:  # a cloudy day in the run carries it
+            assert len(mine) == 1 and mine[0]["detail"].endswith("cannot show it)"), (k, day)
+        else:
+            # the tracker is not judged under the shifted sky (its own clock fit read the
+            # shift with the other sign, -67 min)
+            assert [f["kind"] for f in day] == ["sky_clock_offset"], (k, day)
+            assert mine[0]["confidence"] >= 0.5, (k, day)
+            assert abs(mine[0]["magnitude"] - 60 * shift_min) <= 8 * 60, mine[0]
+            # the cloudy days between do not break the run
+            assert mine[0]["since"] == days[clear[0]]["date"], mine[0]
+
+
 def test_azimuth_offset_is_not_named_as_another_fault() -> None:
     """A 10° pedestal yaw (open-loop SPA) from day 3 is not found from power (its 1.5 % ×
     cos²h of the beam is inside the sky's error at low sun, docs/diagnosis.md), but it must
