@@ -130,6 +130,9 @@ def create_token(conn: Connection, site_id: str, label: str = "",
     """Make, store and return a new token of ``scope`` for ``site_id`` (refused from
     ``expires_at``)."""
     check_scope(scope)
+    if any(ord(c) < 32 or ord(c) == 127 for c in label):
+        raise ValueError("label: holds a control character (a NUL, a tab, a newline…); "
+                         "write it without")
     if conn.execute(select(SiteRow.site_id).where(SiteRow.site_id == site_id)).first() is None:
         known = ", ".join(conn.execute(select(SiteRow.site_id)).scalars()) or "none"
         raise UnknownSite(f"unknown site {site_id!r}; known sites: {known}")

@@ -24,6 +24,7 @@ from backend.sites import Registry, sync_sites
 from backend.storage.engine import make_engine, make_sessionmaker, run_migrations
 from backend.twin.service import TwinService
 from backend.twin.simulations import SimulationRunner
+from sim.sites import Site
 
 logger = logging.getLogger(__name__)
 
@@ -68,6 +69,11 @@ def open_context(settings: Settings) -> ServiceContext:
     writer = Writer(engine, registry.phase_of_array, settings.ingest.energy_max_gap_s,
                     settings.database.writer_max_group_rows)
     writer.start()
+
+    def store_sites(new: list[Site]) -> None:  # a site file read while running: its rows
+        writer.call(lambda conn: sync_sites(conn, new)).result()
+
+    registry.store_through(store_sites)
     twin = TwinService(registry, engine, writer, settings.twin.on_demand_max_days,
                        scene_site=settings.sites.default_site,
                        history_days=settings.twin.history_days)

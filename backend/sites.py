@@ -21,6 +21,7 @@ import json
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -77,6 +78,11 @@ class SiteInfo:
     @property
     def site_id(self) -> str:
         return self.site.site_id
+
+    def ready(self) -> bool:
+        """Whether every array of the config has its database row (id, kind, calibration):
+        a site file read while running has none until they are written (:class:`Registry`)."""
+        return set(self.site.arrays) <= set(self.arrays)
 
     def ingest_arrays(self) -> dict[str, tuple[int, Calibration]]:
         """``{name: (array_id, calibration)}`` for :mod:`backend.measurements.parse`."""
@@ -177,6 +183,7 @@ class Registry:
         self._checked = time.monotonic()
         self._scan_lock = threading.Lock()
         self._engine: Engine | None = None  # the database refresh_arrays read, for rescans
+        self._store: Callable[[list[Site]], object] | None = None  # see store_through
 
     @property
     def sites(self) -> dict[str, SiteInfo]:
@@ -245,6 +252,12 @@ class Registry:
                 self._files = state
             added = [site for name in sorted(changed)
                      if (site := self._read_new(name.removesuffix(".json"))) is not None]
+            if added and self._store is not None:
+                try:  # idempotent beside the rows the CLI writes
+                    self._store(added)
+                except Exception:  # the writer stopped (shutdown), the database refused
+                    logger.exception("sites %s: their rows were not written",
+                                     [s.site_id for s in added])
             for site in added:
                 self.put(site)
             if added:
@@ -255,10 +268,9 @@ class Registry:
                     logger.info("site %s read from %s while running", site.site_id,
                                 self._user_dir)
                     if missing:
-                        logger.warning("site %s: arrays %s are not in the database (was "
-                                       "`heliotwin site create` run with another "
-                                       "HELIOTWIN_DATABASE_URL?): restart the service to add "
-                                       "them", site.site_id, sorted(missing))
+                        logger.warning("site %s: arrays %s have no rows in the database: it "
+                                       "answers 503 until a restart adds them", site.site_id,
+                                       sorted(missing))
             return bool(added)
         finally:
             self._scan_lock.release()
@@ -278,6 +290,14 @@ class Registry:
                            "restart the service to apply it", site_id, site.timezone)
             return None
         return site
+
+    def store_through(self, store: Callable[[list[Site]], object]) -> None:
+        """How a site file read while running gets its rows: ``store(sites)`` writes them
+        (the service's writer running :func:`sync_sites`). Without it, the rows had to be
+        there already: a file the service read between ``site create``'s file and its
+        rows, or made against another database, kept a site without arrays — and every
+        ``GET /sites`` answered 500 until a restart."""
+        self._store = store
 
     def refresh_arrays(self, conn: Connection) -> None:
         """Read array ids and calibrations from the database."""
@@ -363,13 +383,14 @@ def save_site(ctx: ServiceContext, site_id: str, data: Any) -> tuple[SiteInfo, b
                               f"differently from {old.site.timezone!r}; the stored hourly "
                               "rollups are phased to the old zone: make a new site instead")
     config.pop("$schema", None)
-    path = write_site_file(ctx.settings.sites.user_dir, config)
 
     def sync(conn: Connection) -> int:
         return sync_sites(conn, [site]).get(site_id, 0)
 
     with ctx.twin.site_lock(site_id):  # no on-demand twin of the old config meanwhile
+        # the database first: a config it refuses leaves no file behind for the next start
         dropped: int = ctx.writer.call(sync).result()
+        path = write_site_file(ctx.settings.sites.user_dir, config)
         info = ctx.registry.put(site)
         with ctx.engine.connect() as conn:
             ctx.registry.refresh_arrays(conn)

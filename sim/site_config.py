@@ -293,10 +293,30 @@ def _where(loc: tuple[int | str, ...]) -> str:
     return ".".join(str(p) for p in loc) or "(top level)"
 
 
+def _control_characters(value: Any, path: str = "") -> str | None:
+    """The dotted path of the first string (key or value) holding a control character
+    (U+0000–U+001F, U+007F), None when there is none: PostgreSQL refuses a NUL in text, and
+    a config it refused made the service unable to start."""
+    if isinstance(value, str):
+        return path if any(ord(c) < 32 or ord(c) == 127 for c in value) else None
+    items = value.items() if isinstance(value, dict) else (
+        enumerate(value) if isinstance(value, list) else ())
+    for key, item in items:
+        here = f"{path}.{key}" if path else str(key)
+        if isinstance(key, str) and _control_characters(key) is not None:
+            return here
+        if (found := _control_characters(item, here)) is not None:
+            return found
+    return None
+
+
 def validate_site_config(data: Any, where: str = "site") -> SiteConfig:
     """``data`` as a :class:`SiteConfig`; ValueError naming each bad field otherwise."""
     if not isinstance(data, dict):
         raise ValueError(f"{where}: a site config must be a JSON object")
+    if (path := _control_characters(data)) is not None:
+        raise ValueError(f"{where}: {path}: holds a control character (a NUL, a tab, a "
+                         "newline…); write it without")
     try:
         return SiteConfig.model_validate(data)
     except ValidationError as exc:

@@ -66,11 +66,18 @@ SessionDep = Annotated[Session, Depends(get_session)]
 
 
 def site_or_404(ctx: ServiceContext, site_id: str) -> SiteInfo:
-    """The site, or 404 naming the known ones."""
+    """The site, or 404 naming the known ones; 503 while its arrays have no database rows
+    (:meth:`backend.sites.SiteInfo.ready`)."""
     info = ctx.registry.get(site_id)
     if info is None:
         known = ", ".join(ctx.registry.sites) or "none"
         raise HTTPException(404, f"unknown site {site_id!r}; known sites: {known}")
+    if not info.ready():
+        missing = sorted(set(info.site.arrays) - set(info.arrays))
+        raise HTTPException(503, f"site {site_id!r}: arrays {missing} have no rows in the "
+                                 "database yet (its file was read while the service runs); "
+                                 "retry, or restart the service",
+                            headers={"Retry-After": "5"})
     return info
 
 

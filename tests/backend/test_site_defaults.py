@@ -144,3 +144,27 @@ def test_a_site_made_by_the_cli_appears_without_a_restart(
     # its arrays take readings: the service read their ids from the database the CLI wrote
     ctx = server.ctx
     assert set(ctx.registry.get("kiel").arrays) == {"tracker", "fixed"}
+
+
+def test_a_site_file_without_rows_in_this_database_gets_them(
+        server: InProcessServer, client: httpx.Client, monkeypatch: pytest.MonkeyPatch,
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``site create`` run against another database (or read by the service between the
+    CLI's file and its rows): the service writes the rows itself. Before, the site had no
+    arrays and every ``GET /api/v1/sites`` answered 500 until a restart."""
+    for name, value in server.env.items():
+        if name.startswith("HELIOTWIN_"):
+            monkeypatch.setenv(name, value)
+    monkeypatch.setenv("HELIOTWIN_DATABASE_URL", f"sqlite:///{tmp_path / 'other.sqlite'}")
+    code = main(["site", "create", "--id", "lubeck", "--latitude-deg", "53.87",
+                 "--longitude-deg", "10.69", "--timezone", "Europe/Berlin"])
+    capsys.readouterr()
+    assert code == 0
+    site = client.get("/api/v1/sites/lubeck")
+    assert site.status_code == 200, site.text
+    assert {a["kind"] for a in site.json()["arrays"].values()} == {"tracker", "fixed"}
+    listed = client.get("/api/v1/sites")
+    assert listed.status_code == 200 and "lubeck" in [s["site_id"] for s in listed.json()]
+    assert server.ctx.registry.get("lubeck").ready()
+    r = client.get("/api/v1/sites/lubeck/status")
+    assert r.status_code == 200, r.text

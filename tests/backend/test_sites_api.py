@@ -136,6 +136,9 @@ def test_a_site_whose_arrays_the_twin_does_not_know_stores_readings_but_has_no_d
     ({"arrays": {"fixed": {"surface_tilt_deg": 36, "tilt": 3}}}, "arrays.fixed.tilt: unknown key"),
     ({"timezone": "Eastern"}, "timezone: 'Eastern' is not an IANA time zone"),
     ({"site_id": "other"}, "site_id: 'other' does not match the path's 'my-roof'"),
+    # PostgreSQL refused the NUL with a 500 after the file was written: the service then
+    # could not start
+    ({"name": "my\u0000roof"}, "body: name: holds a control character"),
 ])
 def test_a_malformed_site_is_a_422_naming_the_field(client: httpx.Client, server: InProcessServer,
                                                     change: dict, words: str) -> None:

@@ -133,6 +133,9 @@ def test_admin_endpoints(server: InProcessServer, client: httpx.Client) -> None:
     bad = client.post(url, headers=admin, json={"site_id": "tehuantepec",
                                                 "expires_in_days": -1})
     assert bad.status_code == 422 and "expires_in_days" in bad.text
+    # a NUL: PostgreSQL answered 500
+    bad = client.post(url, headers=admin, json={"site_id": "tehuantepec", "label": "a\u0000b"})
+    assert bad.status_code == 422 and "label" in bad.text, bad.text
 
 
 def test_expired_token_is_refused(client: httpx.Client) -> None:

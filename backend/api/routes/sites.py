@@ -85,8 +85,9 @@ def _site_dict(info: Any, ctx: Any = None) -> dict[str, Any]:
 # placement) stay absent, as the site's to_dict leaves them, instead of null
 @router.get("", response_model=list[SiteRead], response_model_exclude_unset=True)
 def list_sites(ctx: ContextDep) -> list[dict[str, Any]]:
-    """Every site with its arrays."""
-    return [_site_dict(info, ctx) for info in ctx.registry.sites.values()]
+    """Every site with its arrays (a site whose arrays have no database rows yet is left
+    out: it answers 503 by its id)."""
+    return [_site_dict(info, ctx) for info in ctx.registry.sites.values() if info.ready()]
 
 
 @router.get("/schema.json", response_model=JsonSchemaRead)

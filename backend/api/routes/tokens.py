@@ -63,7 +63,9 @@ class TokenCreate(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     site_id: str = Field(..., min_length=1, max_length=64, examples=["tehuantepec"])
-    label: str = Field("", max_length=200, description="a note to recognise the token by")
+    label: str = Field("", max_length=200, pattern=r"^[^\x00-\x1f\x7f]*$",
+                       description="a note to recognise the token by (no control characters: "
+                                   "PostgreSQL refuses a NUL)")
     scope: Literal["ingest", "site"] = Field(
         "ingest", description="ingest: a field device, writes readings only; site: also "
                               "edits the site, its calibrations and the shared 3D replay")
