@@ -146,7 +146,7 @@ class MqttService:
         self.assembler = MinuteAssembler(s.mqtt.minute_grace_s)
         self.state = "retrying"
         self.counts = {"received": 0, "stored": 0, "duplicates": 0, "rejected": 0,
-                       "retries": 0}
+                       "ignored": 0, "retries": 0}
         self._outbox: deque[tuple[str, bytes]] = deque()
         self._in_flight: set[asyncio.Task[None]] = set()
         self._thread: threading.Thread | None = None
@@ -285,6 +285,14 @@ class MqttService:
             b"" if payload is None else str(payload).encode())
         self.counts["received"] += 1
         topic = message.topic.value
+        # no reading, and not an error: an empty payload (how a retained message is
+        # deleted), and a retained single value — it has no time of its own and would be
+        # stored again as the minute of every (re)connection; a retained JSON reading
+        # carries its ``ts`` and is a duplicate then
+        if not raw or (message.retain and self.topics.value.match(topic) is not None
+                       and self.topics.state.match(topic) is None):
+            self.counts["ignored"] += 1
+            return
         try:
             self._handle(topic, raw, time.time())
         except Exception as exc:  # a bug must not drop the message silently

@@ -373,6 +373,42 @@ def test_opendtu_style_values_are_assembled_into_a_minute(
         25.5, 2.0, 51.0)
 
 
+def test_retained_single_values_are_not_stored_again_at_a_connection(
+        tmp_path: Path) -> None:
+    """A logger's last values left retained on the broker reach every new subscription:
+    stored as the minute the service connected, a restart invented a reading (and a silent
+    logger looked alive). They are counted as ignored; so is an empty payload, how a
+    retained message is deleted."""
+    need_broker()
+    prefix = f"httest{uuid.uuid4().hex[:10]}"
+    publish_all([(f"{prefix}/{SITE}/tracker/{q}", v)
+                 for q, v in (("voltage", "30"), ("current", "2"), ("power", "60"))],
+                retain=True)
+    db = new_database("sqlite", tmp_path)
+    try:
+        with InProcessServer(db.url, extra_env=mqtt_env(prefix, f"mqtt://{HOST}:{PORT}")) as p, \
+                p.client(timeout_s=30.0) as c:
+            wait_state(c, "connected")
+            deadline = time.monotonic() + WAIT_S
+            while meta(c)["mqtt_status"]["ignored"] < 3:
+                assert time.monotonic() < deadline, meta(c)["mqtt_status"]
+                time.sleep(0.2)
+            publish(f"{prefix}/{SITE}/tracker/power", b"")  # not an error
+            while meta(c)["mqtt_status"]["ignored"] < 4:
+                assert time.monotonic() < deadline, meta(c)["mqtt_status"]
+                time.sleep(0.2)
+            time.sleep(6.0)  # past the minute's grace: an assembled minute would be stored
+            status = meta(c)["mqtt_status"]
+            assert status["stored"] == 0 and status["rejected"] == 0, status
+            r = c.get(f"/api/v1/sites/{SITE}/measurements",
+                      params={"array": "tracker", "start": iso(minute(-5)),
+                              "end": iso(minute(5))})
+            assert r.json()["points"] == []
+    finally:
+        clear_retained(f"{prefix}/#")
+        db.drop()
+
+
 def test_home_assistant_discovery_is_retained(service: tuple[httpx.Client, str]) -> None:
     c, prefix = service
     # a reading pair of the fixed array: 100 W then 200 W a minute apart = 2.5 Wh, the fixed
