@@ -283,6 +283,13 @@ class AlertService:
     def _reconcile(self, found: rules.Evaluation, now: float) -> None:
         holding = {c.key: c for c in found.conditions}
         for key, cond in holding.items():
+            old = self._active.get(key)
+            if old is not None and cond.kind == "logger_silent" \
+                    and old["since"] != iso(cond.since_s):
+                # a newer reading was stored (late, or back-filled) and the logger is silent
+                # again since it: that silence ended, this one is new (docs/service.md)
+                self._clear(key, old, f"a newer reading was stored (last one "
+                                      f"{cond.data['last_reading_ts']})", now)
             if key not in self._active:
                 self._raise(cond, now)
         for key, alert in list(self._active.items()):

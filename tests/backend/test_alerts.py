@@ -399,6 +399,35 @@ def test_silent_logger_raised_once_kept_over_a_restart_and_cleared_once(
         server.stop()
 
 
+def test_a_newer_reading_still_old_ends_one_silence_and_starts_another(
+        sqlite_database: Database, rx: Receiver) -> None:
+    """A reading stored late (a back-fill) that is newer than the alert's last one but
+    itself older than the threshold: that silence ended — the alert is cleared — and the
+    logger is silent again since the new reading. Before, the alert stayed active with its
+    old ``since`` and detail, beside a ``/status`` showing the newer reading."""
+    server = _server(sqlite_database, HELIOTWIN_ALERT_SILENT_MIN=str(SILENT_MIN),
+                     HELIOTWIN_ALERT_WEBHOOK_URL=rx.url).start()
+    try:
+        token = server.token()
+        with server.client(timeout_s=30) as c:
+            first = time.time() - 30
+            _post(c, token, [_reading(first)])
+            rx.wait_for(lambda e: len(e) >= 1)
+            newer = time.time() - 10
+            _post(c, token, [_reading(newer)])
+            evs = rx.wait_for(lambda e: len(e) >= 3)
+            assert [e["event"] for e in evs] == ["raised", "cleared", "raised"]
+            assert evs[1]["alert"]["cleared_detail"].startswith("a newer reading was stored")
+            stamp = [dt.datetime.fromtimestamp(int(t), dt.UTC).isoformat().replace(
+                "+00:00", "Z") for t in (first, newer)]
+            assert [evs[0]["alert"]["since"], evs[2]["alert"]["since"]] == stamp
+            assert _rounds(c, 3)["webhook"]["offered"] == 3  # and no more
+            active = _alerts(c, state="active")["alerts"]
+            assert [a["since"] for a in active] == [stamp[1]]
+    finally:
+        server.stop()
+
+
 def test_alerts_endpoint_names_the_bad_field(sqlite_database: Database) -> None:
     with _server(sqlite_database, HELIOTWIN_ALERTS="false") as server, \
             server.client(timeout_s=30) as c:
