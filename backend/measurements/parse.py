@@ -521,8 +521,8 @@ def parse_json_batch(
     """Validate a JSON body: ``{"readings": [{ts, array, voltage_v, current_a, ...}]}``, or
     emonCMS-style rows ``[[unix_s, array, voltage_v, current_a, power_w], ...]``."""
     errors = _Errors(csv_lines=False)
-    try:
-        doc = orjson.loads(body)
+    try:  # a byte order mark (Windows tools write one) is not JSON but no reason to refuse
+        doc = orjson.loads(body.removeprefix(b"\xef\xbb\xbf"))
     except orjson.JSONDecodeError as exc:
         raise body_error(422, None, "json_invalid", f"invalid JSON: {exc}") from exc
     if isinstance(doc, list):
@@ -550,7 +550,8 @@ def parse_json_batch(
 
 def _csv_rows(text: str) -> tuple[list[str], list[list[str]]]:
     """Header and data rows; quoting errors name the line where the bad cell starts."""
-    reader = csv.reader(io.StringIO(text), strict=True)
+    # universal newlines: a file of classic Mac line ends (CR alone) reads as lines too
+    reader = csv.reader(io.StringIO(text, newline=None), strict=True)
     rows: list[list[str]] = []
     start = 1
     try:
@@ -602,7 +603,10 @@ def parse_csv_batch(
     _check_rows(len(data), limits)
     width = len(header)
     for r, row in enumerate(data):
-        if len(row) != width:
+        if not any(cell.strip() for cell in row):
+            errors.add(r, None, "an empty line between readings; remove it (empty lines "
+                                "are taken only at the end)", "value_error")
+        elif len(row) != width:
             errors.add(r, None, f"{len(row)} cells, the header has {width}", "value_error")
     errors.raise_if_any()
     columns: dict[str, list[Any]] = {}

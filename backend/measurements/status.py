@@ -64,14 +64,14 @@ def status(ctx: ServiceContext, info: SiteInfo, now: float) -> dict[str, Any]:
             last = fetch(conn, _LAST, (arr.array_id,))
             entry: dict[str, Any] = {"kind": arr.kind, "last_ts": None, "power_w": None,
                                      "voltage_v": None, "current_a": None, "age_s": None,
-                                     "logger": "never",
+                                     "logger": "never", "fresh_s": None,
                                      "twin_power_w": v.get(f"{name}_power_w")}
             if last:
                 ts, volt, amp, pw = last[0]
                 age = now - ts
                 fresh = fresh_for([r[0] for r in last], ctx.settings.ingest.energy_max_gap_s)
                 entry.update(last_ts=iso_utc([int(ts)])[0], power_w=pw, voltage_v=volt,
-                             current_a=amp, age_s=round(age, 1),
+                             current_a=amp, age_s=round(age, 1), fresh_s=fresh,
                              logger="reporting" if age <= fresh else "stale")
             arrays[name] = entry
     local_now = dt.datetime.fromtimestamp(now, info.zone)

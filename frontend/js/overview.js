@@ -277,7 +277,7 @@ function freshness(entry, ageS) {
   if (entry?.logger === "reporting") return "ok";
   if (entry?.logger === "never") return "bad";
   if (ageS === null || ageS === undefined) return "bad";
-  const fresh = lastDay.status?.fresh_s || 300;
+  const fresh = entry?.fresh_s || lastDay.status?.fresh_s || 300;
   if (ageS <= fresh) return "ok";
   return ageS <= 12 * fresh ? "warn" : "bad";
 }

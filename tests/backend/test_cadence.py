@@ -176,4 +176,6 @@ def test_a_slow_logger_is_not_stale_between_its_readings(api: Api) -> None:
     arrays = status(ctx, info, last + 600)["arrays"]
     assert arrays["fixed"]["logger"] == "reporting"
     assert arrays["tracker"]["logger"] == "stale"
+    # each says the threshold it was judged by (the answer said 300 s for both)
+    assert (arrays["fixed"]["fresh_s"], arrays["tracker"]["fresh_s"]) == (1200, FRESH_S)
     assert status(ctx, info, last + 1300)["arrays"]["fixed"]["logger"] == "stale"

@@ -366,3 +366,23 @@ def test_a_bad_batch_never_reaches_the_writer() -> None:
     with pytest.raises(IngestError):
         _run(ingest(writer, parse_json_batch, body, ARRAYS, Limits()))  # type: ignore[arg-type]
     assert writer.jobs == []
+
+
+def test_classic_mac_line_ends_and_a_json_byte_order_mark_are_read() -> None:
+    """CR-only line ends gave Python's own "universal-newline mode" message; a JSON body
+    with a byte order mark a 422, while a CSV with one was read."""
+    limits = Limits(future_tolerance_s=10**10)
+    cr = (b"ts,array,voltage_v,current_a\r2026-01-05T12:00:00Z,tracker,26,4\r"
+          b"2026-01-05T12:01:00Z,tracker,26,5\r")
+    assert parse_csv_batch(cr, ARRAYS, limits).ts_s.size == 2
+    body = orjson.dumps({"readings": [{"ts": "2026-01-05T12:00:00Z", "array": "tracker",
+                                       "voltage_v": 26, "current_a": 4}]})
+    assert parse_json_batch(b"\xef\xbb\xbf" + body, ARRAYS, limits).ts_s.size == 1
+
+
+def test_an_empty_line_between_readings_is_named_as_such() -> None:
+    body = (b"ts,array,voltage_v,current_a\n2026-01-05T12:00:00Z,tracker,26,4\n\n"
+            b"2026-01-05T12:01:00Z,tracker,26,5\n\n")
+    with pytest.raises(IngestError) as err:
+        parse_csv_batch(body, ARRAYS, Limits(future_tolerance_s=10**10))
+    assert [(e["line"], "empty line" in e["msg"]) for e in err.value.errors] == [(3, True)]

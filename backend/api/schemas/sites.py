@@ -135,6 +135,10 @@ class ArrayStatusRead(BaseModel):
     current_a: float | None
     age_s: float | None = Field(description="age of the last reading [s]")
     logger: Literal["never", "reporting", "stale"]
+    fresh_s: int | None = Field(
+        None, description="this logger's last reading is stale past this age [s]: 2.5 of its "
+                          "own cadence, from the site's fresh_s up to the energy rule's gap "
+                          "(null: never reported)")
     twin_power_w: float | None
     energy_today_wh: float | None
     twin_energy_today_wh: float | None
@@ -162,7 +166,8 @@ class SiteStatusRead(BaseModel):
     twin_gain_today_pct: float | None
     twin_matched_gain_today_pct: float | None
     partial_today: bool | None
-    fresh_s: int = Field(description="a last reading older than this is stale [s]")
+    fresh_s: int = Field(description="the least age [s] at which a last reading is stale; "
+                                     "each array's own fresh_s follows its cadence")
 
 
 class JsonSchemaRead(BaseModel):
