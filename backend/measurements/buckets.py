@@ -9,6 +9,7 @@ so energy per day or month adds stored hourly buckets only.
 from __future__ import annotations
 
 import datetime as dt
+from typing import Any
 from zoneinfo import ZoneInfo
 
 import numpy as np
@@ -33,11 +34,11 @@ def bucket_start_s(k: int, phase_s: int, width_s: int = ROLLUP_WIDTH_S) -> int:
     return k * width_s + phase_s
 
 
-def grid_ceil(t_s: int, phase_s: int, width_s: int = ROLLUP_WIDTH_S) -> int:
-    """First bucket edge at or after ``t_s``."""
+def grid_ceil(t_s: Any, phase_s: int, width_s: int = ROLLUP_WIDTH_S) -> Any:
+    """First bucket edge at or after ``t_s`` (an int, or each of an integer array)."""
     return -((phase_s - t_s) // width_s) * width_s + phase_s
 
 
-def grid_floor(t_s: int, phase_s: int, width_s: int = ROLLUP_WIDTH_S) -> int:
-    """Last bucket edge at or before ``t_s``."""
+def grid_floor(t_s: Any, phase_s: int, width_s: int = ROLLUP_WIDTH_S) -> Any:
+    """Last bucket edge at or before ``t_s`` (an int, or each of an integer array)."""
     return ((t_s - phase_s) // width_s) * width_s + phase_s

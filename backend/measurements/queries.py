@@ -237,18 +237,21 @@ def period_edges(start: dt.datetime, end: dt.datetime, interval: str,
     return edges
 
 
-def _rollup_periods(conn: Connection, array_ids: list[int], edges_s: np.ndarray, a: int,
-                    b: int, energy: dict[tuple[int, int], np.ndarray],
+def _rollup_periods(conn: Connection, array_ids: list[int], edges_s: np.ndarray, phase: int,
+                    a: int, b: int, energy: dict[tuple[int, int], np.ndarray],
                     counts: dict[tuple[int, int], np.ndarray]) -> None:
     """Add the whole rollup buckets in ``[a, b)`` to each period's energy and readings.
 
-    A bucket counts in the period its start lies in. The sums are the database's: one
+    A bucket counts in the period that holds all of it: one that a period edge off the
+    bucket grid cuts is left to the raw readings (:func:`energy_table`). The sums are the
+    database's: one
     row per series and period comes back (a month per day, two arrays: 120 rows, not
     the 2,880 hourly rollups), so a read hands few rows through the driver, each of
     which the reading thread takes the GIL back for.
     """
-    lo = np.clip(edges_s[:-1], a, b)
-    hi = np.clip(edges_s[1:], a, b)
+    edges = np.asarray(edges_s, np.int64)
+    lo = np.clip(grid_ceil(edges[:-1], phase), a, b)
+    hi = np.clip(grid_floor(edges[1:], phase), a, b)
     in_range = np.flatnonzero(hi > lo)
     ids = ", ".join("?" * len(array_ids))
     for k in range(0, in_range.size, PERIODS_PER_QUERY):
@@ -279,10 +282,21 @@ def energy_table(conn: Connection, array_ids: list[int], edges_s: np.ndarray, ph
     counts = {key: np.zeros(nper, np.int64) for key in keys}
     a, b = grid_ceil(start, phase), grid_floor(end, phase)
     if a < b and array_ids:  # a camera site has none (and "IN ()" is no SQL for PostgreSQL)
-        _rollup_periods(conn, array_ids, edges_s, a, b, energy, counts)
-    # partial hours: before the first and after the last whole rollup bucket, and
-    # periods whose edges are off the hour grid (only with an unaligned start/end)
-    pieces = [(start, min(a, end)), (max(b, start), end)] if a < b else [(start, end)]
+        _rollup_periods(conn, array_ids, edges_s, phase, a, b, energy, counts)
+    # partial hours: before the first and after the last whole rollup bucket, and the
+    # bucket around each period edge off the bucket grid (an unaligned start or end; the
+    # local midnight of a zone whose offset from the hour moved since the grid was set,
+    # Lord Howe's 30-minute DST or Caracas before 2016: its days were split at the hour)
+    ends = [(start, min(a, end)), (max(b, start), end)] if a < b else [(start, end)]
+    inner = np.asarray(edges_s[1:-1], np.int64)
+    off = inner[(inner - phase) % ROLLUP_WIDTH_S != 0]
+    pieces: list[tuple[int, int]] = []
+    for lo, hi in sorted(ends + [(max(start, int(grid_floor(e, phase))),
+                                  min(end, int(grid_ceil(e, phase)))) for e in off]):
+        if pieces and lo <= pieces[-1][1]:  # overlapping or touching: one piece
+            pieces[-1] = (pieces[-1][0], max(pieces[-1][1], hi))
+        else:
+            pieces.append((lo, hi))
     for lo, hi in pieces:
         if lo >= hi:
             continue

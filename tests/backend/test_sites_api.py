@@ -205,3 +205,32 @@ def test_user_sites_are_there_after_a_restart_and_run_in_simulate(
                         "2024-06-22", "--step-s", "600", "--json", env=server.env)
     assert run.returncode == 0, run.stderr
     assert json.loads(run.stdout)["tracker_energy_wh"] > 0
+
+
+def test_days_split_at_a_midnight_off_the_rollup_grid(client: httpx.Client,
+                                                      server: InProcessServer) -> None:
+    """Caracas was UTC−04:30 until 2016 and is −04:00 since: the hourly rollups are phased
+    to today's offset, so a 2010 midnight cuts a rollup bucket. Readings at 100 W up to
+    23:59 and 300 W from 00:00 to 01:00 (trapezoids: 59 minutes of 100 W, the minute to
+    midnight at 200 W mean, then 60 minutes of 300 W). Before, the bucket was given whole
+    to one day: 251.67 and 150 Wh."""
+    body = {**HAND_WRITTEN, "site_id": "caracas", "name": "Caracas",
+            "latitude_deg": 10.5, "longitude_deg": -66.9, "timezone": "America/Caracas"}
+    r = client.put("/api/v1/sites/caracas", json=body, headers=bearer(ADMIN))
+    assert r.status_code == 201, r.text
+    zone = dt.timezone(-dt.timedelta(hours=4, minutes=30))
+    t0 = dt.datetime(2010, 6, 1, 23, 0, tzinfo=zone)
+    readings = [{"ts": (t0 + dt.timedelta(minutes=k)).isoformat(), "array": "fixed",
+                 "power_w": 100.0 if k < 60 else 300.0} for k in range(121)]
+    r = client.post("/api/v1/sites/caracas/measurements", json={"readings": readings},
+                    headers=bearer(server.token("caracas")))
+    assert r.status_code == 200 and r.json()["accepted"] == 121, r.text
+    e = client.get("/api/v1/sites/caracas/energy", params={
+        "start": "2010-06-01", "end": "2010-06-03", "interval": "day"}).json()
+    got = [row["arrays"]["fixed"]["measured_wh"] for row in e["rows"]]
+    assert got == pytest.approx([59 * 100 / 60 + 200 / 60, 300.0], rel=1e-9)
+    hours = client.get("/api/v1/sites/caracas/energy", params={
+        "start": "2010-06-01T23:00:00-04:30", "end": "2010-06-02T01:00:00-04:30",
+        "interval": "hour"}).json()
+    assert [row["arrays"]["fixed"]["measured_wh"] for row in hours["rows"]] == pytest.approx(
+        [59 * 100 / 60 + 200 / 60, 300.0], rel=1e-9)
