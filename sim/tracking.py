@@ -303,7 +303,7 @@ def run_loop(
             out["az_cmd"][k], out["el_cmd"][k] = controller.command_deg
             tracking[k] = not controller.stowed and t >= state.wake_until_s
         if act_ticks is not None and i >= act_ticks:
-            i += 1
+            i = (i // sample_every + 1) * sample_every  # on to the next sample's tick
             continue
         enc = enc_rate * t
         r_az = (ax_az.position(t) if az_moving else ax_az.motor) + enc

@@ -64,7 +64,7 @@ from sim.tracking import (
 from vision.sphere import angular_separation_deg, enu_from_sky, sky_from_enu
 
 __all__ = ["CONTROLLERS", "POINTING_MIN_ELEVATION_DEG", "RECEIVERS", "SERIES_COLUMNS",
-           "TwinResult", "simulate"]
+           "TwinResult", "check_step", "simulate"]
 
 #: The pointing error is stated only with the sun above this apparent elevation [°]: below it
 #: refraction and the horizon make the sun's place uncertain by tenths of a degree, the
@@ -294,6 +294,18 @@ def _as_timestamp(value: Any) -> Any:
         return value
 
 
+def check_step(start: pd.Timestamp, end: pd.Timestamp, step_s: float) -> None:
+    """A run's range and step: ``end`` after ``start``, ``step_s`` positive and no longer
+    than the run (a step of 10⁹ s made a day's control loop tick through 31 years)."""
+    if not end > start:
+        raise ValueError(f"end ({end.isoformat()}) must be after start ({start.isoformat()})")
+    if not step_s > 0:
+        raise ValueError(f"step_s must be positive, got {step_s}")
+    if step_s > (end - start).total_seconds():
+        raise ValueError(f"step_s: {step_s:g} s is longer than the run "
+                         f"({(end - start).total_seconds():g} s from start to end)")
+
+
 def _check_inputs(
     site: Site, start: pd.Timestamp, end: pd.Timestamp, step_s: float, controller: str
 ) -> None:
@@ -302,10 +314,7 @@ def _check_inputs(
     for name, t in (("start", start), ("end", end)):
         if not isinstance(t, pd.Timestamp) or t.tz is None:
             raise ValueError(f"{name} must be a timezone-aware pandas.Timestamp, got {t!r}")
-    if not end > start:
-        raise ValueError(f"end ({end.isoformat()}) must be after start ({start.isoformat()})")
-    if not step_s > 0:
-        raise ValueError(f"step_s must be positive, got {step_s}")
+    check_step(start, end, step_s)
     for name in ("tracker", "fixed"):
         arr = site.arrays.get(name)
         if arr is None:
@@ -658,9 +667,12 @@ def simulate(
         if ctl is not None:
             # the closing instant is one tick, sampled only: nothing at it is the run's
             closes = i0 + len(chunk) == len(grid)
-            act_ticks = (len(chunk) - 1) * every if closes else None
             ticks = pd.date_range(chunk[0], periods=(len(chunk) - closes) * every + closes,
                                   freq=pd.Timedelta(seconds=tick_s))
+            # only the ticks before the run's end act: a last step that the end cuts (a
+            # step not dividing the range) ran the controller and the motors past it
+            act = int(np.searchsorted(ticks.as_unit("ns").asi8, end_utc.as_unit("ns").value))
+            act_ticks = act if act < len(ticks) else None
             if every == 1:
                 t_pos = pos
             else:
@@ -711,7 +723,7 @@ def simulate(
         _, move_wh = move_energies_wh(
             moves, limits, drives=(site.drives["azimuth"], site.drives["elevation"]),
             inertia=site.inertia)
-        standby_wh = _standby_energy_wh(site, n_steps * float(step_s))
+        standby_wh = _standby_energy_wh(site, duration_s)
     ideal_wh = None
     if ctl is not None or receiver == "cpv":
         ideal_wh = run_energy_wh(extra["ideal_tracker_power_w"], step_s, duration_s)

@@ -29,7 +29,7 @@ from sim.plant.layout import Plant
 from sim.pointing_model import PointingModel
 from sim.sites import Site
 from sim.sky import typical_year_at_site
-from sim.twin import CONTROLLERS, RECEIVERS, TwinResult, simulate
+from sim.twin import CONTROLLERS, RECEIVERS, TwinResult, check_step, simulate
 
 #: A weather station farther than this from the site is refused unless forced [km]: its sun
 #: rises and sets at other times and its sky is another climate's (about 1° of latitude).
@@ -91,6 +91,7 @@ class Scenario:
     pointing_model_terms: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
+        check_step(self.start, self.end, self.step_s)
         if self.controller not in CONTROLLERS:
             raise ValueError(f"controller: {self.controller!r} is not one of "
                              f"{', '.join(CONTROLLERS)}")

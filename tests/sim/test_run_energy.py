@@ -98,3 +98,20 @@ def test_plant_ranges_add_up_and_an_hourly_step_keeps_its_last_hour() -> None:
     # measured -1.0 %; with the last hour left out it was -29 %
     assert hourly.summary()["plant_energy_wh"] == pytest.approx(
         fine.summary()["plant_energy_wh"], rel=0.02)
+
+
+def test_the_controller_and_motors_stop_at_the_end_whatever_the_step() -> None:
+    """A step that does not divide the run (7 h into a day) ran the control loop and the
+    motors' standby to the grid's next instant past the end: 28 h of standby (14.0 Wh)
+    for a day of 12.0; a step longer than the run is refused (1e9 s ran for minutes)."""
+    site = load_site("tehuantepec")
+    day = (_t("00:00"), _t("00:00", "2024-03-16"))
+    by_minute = simulate(site, *day, step_s=60, controller="open_loop_spa")
+    by_7h = simulate(site, *day, step_s=25200, controller="open_loop_spa")
+    assert by_7h.moves == by_minute.moves
+    assert by_7h.actuator_standby_energy_wh == pytest.approx(
+        by_minute.actuator_standby_energy_wh, rel=1e-12)
+    assert by_7h.summary()["actuator_energy_wh"] == pytest.approx(
+        by_minute.summary()["actuator_energy_wh"], rel=1e-9)
+    with pytest.raises(ValueError, match="step_s: 86400 s is longer than the run"):
+        simulate(site, _t("12:00"), _t("12:01"), step_s=86400, controller="open_loop_spa")
