@@ -329,6 +329,7 @@ SWEEP_COLUMNS = ("layout", "gcr", "strategy", "interior_beam_shaded_pct", "field
 
 def run_sweep(args: argparse.Namespace) -> int:
     """``heliotwin plant sweep``; exit 2 on bad input."""
+    from backend.plants.sweep import SweepSetupError
     from backend.plants.sweep import run_sweep as run
 
     spec, cases, weather = sweep_from_args(args)
@@ -350,6 +351,8 @@ def run_sweep(args: argparse.Namespace) -> int:
                      progress=callback)
     except OSError as exc:                    # no scheduler at that address
         fail(f"--scheduler: cannot reach {args.scheduler!r}: {exc}")
+    except SweepSetupError as exc:            # --scheduler unreadable, --workers out of bounds
+        fail(f"--{exc}")
     finally:
         if bar is not None:
             bar.close()

@@ -40,6 +40,18 @@ log = logging.getLogger(__name__)
 CONNECT_TIMEOUT = "5s"
 #: How often a running sweep looks at its ``cancelled`` callback [s].
 CANCEL_POLL_S = 0.2
+#: A sweep whose scheduler has had no worker this long fails [s]: every worker killed, its
+#: tasks waited for one to come back, and the sweep showed "running" for ever.
+NO_WORKERS_S = 60.0
+#: How often a sweep waiting for results asks its scheduler for the workers [s].
+WORKERS_LOOK_S = 5.0
+#: Most workers of a LocalCluster per core (each a process: 1,000 on 2 cores hung).
+MAX_WORKERS_PER_CORE = 4
+
+
+class SweepSetupError(ValueError):
+    """A scheduler address Dask cannot read, or a worker count out of bounds; the message
+    starts with the parameter's name (``scheduler:``, ``workers:``)."""
 
 #: This process's sky of the last sweep range it ran: (SweepSpec.sky_key(), sky); one range
 #: (a Dask worker's, reused by the cases it runs); a one-case sweep run in the caller's
@@ -179,12 +191,22 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
                        time.perf_counter() - started)
     from distributed import Client, wait
 
+    cores = os.cpu_count() or 1
+    if n_workers is not None and not 1 <= n_workers <= MAX_WORKERS_PER_CORE * cores:
+        raise SweepSetupError(f"workers: {n_workers} is not in "
+                              f"[1, {MAX_WORKERS_PER_CORE * cores}] ({MAX_WORKERS_PER_CORE} "
+                              f"processes a core, {cores} cores)")
     cluster = None
     if scheduler is None:
-        cluster = local_cluster(n_workers or min(os.cpu_count() or 1, len(cases)))
+        cluster = local_cluster(n_workers or min(cores, len(cases)))
     try:
-        with Client(cluster if cluster is not None else scheduler,
-                    timeout=CONNECT_TIMEOUT) as client:
+        try:
+            client_cm = Client(cluster if cluster is not None else scheduler,
+                               timeout=CONNECT_TIMEOUT)
+        except ValueError as exc:  # distributed's own words: "unknown address scheme" …
+            raise SweepSetupError(f"scheduler: {scheduler!r} is no Dask scheduler address "
+                                  f"(tcp://HOST:PORT): {exc}") from None
+        with client_cm as client:
             workers = len(client.scheduler_info(n_workers=-1)["workers"])
             address = client.scheduler.address
             log.info("plant sweep: %d cases on %s (%d workers)", len(cases), address, workers)
@@ -197,6 +219,8 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
                        for rank, c in enumerate(sorted(cases, key=expected_cost, reverse=True))]
             rows: list[dict[str, Any]] = []
             pending = set(futures)
+            no_workers_since: float | None = None
+            next_look = time.monotonic() + WORKERS_LOOK_S
             while pending:
                 # woken by the next result (not by a poll's sleep: the last case's result is
                 # taken when it lands), or after CANCEL_POLL_S to look at `cancelled`
@@ -213,6 +237,18 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
                 if pending and cancelled is not None and cancelled():
                     client.cancel(futures)
                     raise SweepCancelled(f"cancelled after {len(rows)} of {len(cases)} cases")
+                if pending and not finished and time.monotonic() >= next_look:
+                    next_look = time.monotonic() + WORKERS_LOOK_S
+                    if client.nthreads():
+                        no_workers_since = None
+                    elif no_workers_since is None:
+                        no_workers_since = time.monotonic()
+                    elif time.monotonic() - no_workers_since > NO_WORKERS_S:
+                        client.cancel(futures)
+                        raise RuntimeError(
+                            f"the Dask scheduler at {address} has had no worker for "
+                            f"{NO_WORKERS_S:.0f} s ({len(rows)} of {len(cases)} cases done): "
+                            "start workers (dask worker tcp://…) and run the sweep again")
             compute_s = time.perf_counter() - submitted
     finally:
         if cluster is not None:

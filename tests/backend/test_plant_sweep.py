@@ -116,6 +116,12 @@ def test_one_case_runs_in_process_as_csv(capsys: pytest.CaptureFixture[str]) -> 
     (["--gcr", "0.1:0.3:0.01", "--layouts", "square,diagonal,hexagonal_n_s,hexagonal_e_w,"
       "square", "--strategy", "sun,backtrack,sky_scan,sun,backtrack,sky_scan"],
      "--gcr: 5 layouts × 21 GCRs × 6 strategies is 630 cases, more than 600"),
+    # a thousand worker processes on two cores hung; -1 hung; 0 was the default
+    (["--gcr", "0.2,0.3", "--workers", "1000"], "--workers: 1000 is not in [1, "),
+    (["--gcr", "0.2,0.3", "--workers", "0"], "--workers: 0 is not in [1, "),
+    # distributed's own ValueError came out as a traceback
+    (["--gcr", "0.2,0.3", "--scheduler", "http://127.0.0.1:8786"],
+     "--scheduler: 'http://127.0.0.1:8786' is no Dask scheduler address (tcp://HOST:PORT)"),
 ])
 def test_bad_input_names_the_flag(extra: list[str], message: str,
                                   capsys: pytest.CaptureFixture[str]) -> None:
@@ -191,6 +197,32 @@ def test_unreachable_scheduler_is_an_error(capsys: pytest.CaptureFixture[str]) -
                                f"tcp://127.0.0.1:{port}"]))
     assert exc.value.code == 2
     assert "--scheduler: cannot reach" in capsys.readouterr().err
+
+
+def test_a_scheduler_without_workers_fails_the_sweep(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every worker gone (killed, or never started): the tasks would wait for one for ever
+    and the service showed the sweep "running"; after NO_WORKERS_S it fails, saying so."""
+    import pandas as pd
+
+    from backend.plants import sweep as sweep_mod
+
+    port = _free_port()
+    proc = subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port",
+                             str(port), "--no-dashboard"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        monkeypatch.setattr(sweep_mod, "NO_WORKERS_S", 1.0)
+        monkeypatch.setattr(sweep_mod, "WORKERS_LOOK_S", 0.5)
+        monkeypatch.setattr(sweep_mod, "CONNECT_TIMEOUT", "30s")
+        spec, cases = sweep_mod.prepare_sweep(
+            layouts=["square"], gcr=[0.2, 0.3], strategies=["sun"],
+            start=pd.Timestamp("2021-12-20", tz="UTC"), end=pd.Timestamp("2021-12-21", tz="UTC"),
+            step_s=3600.0, latitude_deg=38.3, longitude_deg=-5.3, collector_m=(12.0, 5.0))
+        with pytest.raises(RuntimeError, match="has had no worker for 1 s"):
+            sweep_mod.run_sweep(spec, cases, scheduler=f"tcp://127.0.0.1:{port}")
+    finally:
+        proc.kill()
+        proc.wait(20)
 
 
 def test_runner_close_cancels_a_running_sweep(monkeypatch: pytest.MonkeyPatch) -> None:
