@@ -71,6 +71,8 @@ def test_torque_text_output(heliotwin_cli) -> None:
         (["--elevation-deg", "130"], "--elevation-deg 130: outside"),  # issue 22 item 11
         (["--elevation-deg", "-5"], "--elevation-deg -5: outside"),
         (["--elevation-deg", "10", "--azimuth-rate-rad-s", "inf"], "--azimuth-rate-rad-s inf"),
+        # finite but overflowing: printed -Infinity, which is no JSON
+        (["--elevation-deg", "30", "--azimuth-rate-rad-s", "1e200"], "the torques overflow"),
         (["--elevation-deg", "ten"], "invalid float value"),
         ([], "--elevation-deg"),
     ],

@@ -73,16 +73,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def compute_torque(args: argparse.Namespace) -> dict[str, float]:
     """``{"tau_azimuth_nm", "tau_elevation_nm"}`` for the state in ``args``."""
+    import numpy as np
+
     from sim.dynamics import TrackerInertia, inverse_dynamics
 
-    tau1, tau2 = inverse_dynamics(
-        math.radians(args.elevation_deg),
-        args.azimuth_rate_rad_s,
-        args.elevation_rate_rad_s,
-        args.azimuth_accel_rad_s2,
-        args.elevation_accel_rad_s2,
-        TrackerInertia.seed002(),
-    )
+    with np.errstate(over="ignore", invalid="ignore"):  # a finite check follows
+        tau1, tau2 = inverse_dynamics(
+            math.radians(args.elevation_deg),
+            args.azimuth_rate_rad_s,
+            args.elevation_rate_rad_s,
+            args.azimuth_accel_rad_s2,
+            args.elevation_accel_rad_s2,
+            TrackerInertia.seed002(),
+        )
     return {"tau_azimuth_nm": float(tau1), "tau_elevation_nm": float(tau2)}
 
 
@@ -110,6 +113,10 @@ def run_torque(args: argparse.Namespace) -> int:
     if problem:
         fail(problem)
     out = compute_torque(args)
+    if not all(math.isfinite(v) for v in out.values()):
+        fail("the torques overflow a float for these rates and accelerations "
+             f"({', '.join(flag for _, flag, _ in _RATE_FLAGS)}): give physical ones "
+             "(a tracker's drives reach hundredths of a rad/s)")
     if args.json:
         print(json.dumps(out))
     else:
