@@ -405,6 +405,15 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
                                   "and {rotation_deg} together: give all three")
         layout_custom = (a, o, r)
     if plant is not None:
+        given = [name for name, value in (("latitude_deg", latitude_deg),
+                                          ("longitude_deg", longitude_deg),
+                                          ("collector_m", collector_m),
+                                          ("collector_polygon_m", collector_polygon_m))
+                 if value is not None]
+        if given:  # the plant's were used and the others echoed back as if they had been
+            raise SweepInputError(given[0], "the plant ({plant_id}) sets the place and the "
+                                  "collector: give it or {latitude_deg}, {longitude_deg} and "
+                                  "{collector_m}, not both")
         names = [PLANT_LAYOUT]
         collector = plant.collector
         lat, lon, alt, tz = plant.latitude, plant.longitude, plant.altitude, plant.timezone

@@ -399,10 +399,17 @@ def test_sweep_refusal_of_a_plant_names_plant_id(client: httpx.Client, plants_di
     (it named the layouts, which a plant's sweep does not take)."""
     path = _two_tracker_plant(plants_dir, "duo")
     try:
-        r = client.post("/api/v1/plants/sweeps", json={**SWEEP, "plant_id": "duo"})
+        own = {k: v for k, v in SWEEP.items()
+               if k not in ("collector_m", "latitude_deg", "longitude_deg")}
+        r = client.post("/api/v1/plants/sweeps", json={**own, "plant_id": "duo"})
         assert r.status_code == 422, r.text
         assert r.json()["detail"] == ("plant_id: plant duo at GCR 0.3: a plant needs at least "
                                       "3 trackers to have a ground area")
+        # the plant's place and collector were used and the body's echoed back as if not
+        r = client.post("/api/v1/plants/sweeps", json={**SWEEP, "plant_id": "duo"})
+        assert r.status_code == 422, r.text
+        assert r.json()["detail"].startswith("latitude_deg: the plant (plant_id) sets the "
+                                             "place and the collector")
     finally:
         path.unlink()
 
