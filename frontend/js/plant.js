@@ -2,7 +2,7 @@
 // clear-sky day, the strategies compared, and seed 004's sky map with the chosen orientation;
 // below, a sweep of regular layouts and spacings at the plant's place (issue 26).
 import { api } from "./api.js";
-import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
+import { COLORS, baseLayout, draw, showEmpty, zeroBasedAxis } from "./charts.js";
 import { fmtTime } from "./time.js";
 import { banner, energy, num, tile } from "./ui.js";
 
@@ -288,16 +288,20 @@ async function drawSweep() {
 async function drawSweepShade() {
   if (!sweep.id || !$("sweep-case").value) return;
   const [layout, gcr, strategy] = JSON.parse($("sweep-case").value);
-  const d = await api(`/api/v1/plants/sweeps/${enc(sweep.id)}/shade`, { params: { layout, gcr, strategy, date: `${$("sweep-year").value}-12-21` } });
-  const x = d.times.map((t) => new Date(t).toISOString().slice(11, 16));
+  // the winter solstice of the plant's hemisphere: the day of the longest shadows
+  const tz = view.plant.timezone;
+  const solstice = view.plant.latitude_deg < 0 ? "06-21" : "12-21";
+  const d = await api(`/api/v1/plants/sweeps/${enc(sweep.id)}/shade`, { params: { layout, gcr, strategy, date: `${$("sweep-year").value}-${solstice}` } });
+  const x = d.times.map((t) => fmtTime(tz, t));
   await draw("chart-sweep-shade", [
     { type: "scatter", mode: "lines+markers", x, y: d.interior_shaded_fraction.map((v) => 100 * v), name: "interior collector", line: { color: COLORS.tracker } },
     { type: "scatter", mode: "lines", x, y: d.field_mean_shaded_fraction.map((v) => 100 * v), name: `field average (${d.positions_m.length} collectors)`, line: { color: COLORS.grey } },
     { type: "scatter", mode: "lines", x, y: d.sun_elevation_deg, name: "sun elevation [°]", yaxis: "y2", line: { color: COLORS.sun, dash: "dot" } },
   ], baseLayout({
-    xaxis: { title: { text: "time [UTC]" } },
-    yaxis: { title: { text: "shaded [%]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
-    yaxis2: { title: { text: "sun elevation [°]" }, overlaying: "y", side: "right", rangemode: "tozero" },
+    xaxis: { title: { text: `time (${tz})` }, type: "category" },
+    // a share is 0–100 % (an unshaded case drew 0–1 "%"); round ticks on the sun's axis
+    yaxis: { title: { text: "shaded [%]" }, range: [0, 100], dtick: 20, autorange: false, gridcolor: "#e9edf1" },
+    yaxis2: { title: { text: "sun elevation [°]" }, overlaying: "y", side: "right", showgrid: false, ...zeroBasedAxis(d.sun_elevation_deg) },
   }), {
     columns: ["time_utc", "interior_shaded_pct", "field_mean_shaded_pct", "sun_elevation_deg"],
     rows: d.times.map((t, k) => [t, 100 * d.interior_shaded_fraction[k], 100 * d.field_mean_shaded_fraction[k], d.sun_elevation_deg[k]]),

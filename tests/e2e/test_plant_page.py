@@ -152,3 +152,32 @@ def test_a_day_the_service_refuses_leaves_none_of_the_previous_days_figures(  # 
         assert page.get_attribute("#plant-sky-map", "src") is None
         assert page.text_content("#plant-chosen") == ""
         assert page.get_attribute("body", "data-plant-loaded") is None
+
+
+def test_the_sweep_panel_runs_a_sweep_and_draws_its_shade_in_the_plants_time(
+        page, server) -> None:  # type: ignore[no-untyped-def]
+    """The layout sweep from the Plant page (POST /api/v1/plants/sweeps on the service's
+    own LocalCluster): its energy charts, and the densest case's shade through the winter
+    solstice with times in the plant's zone (the axis said UTC; no browser test ran it)."""
+    page.goto(server.url + "/#plant?day=2021-12-21")
+    page.wait_for_selector('body[data-plant-loaded="penarroya/2021-12-21"]', timeout=60_000)
+    page.fill("#sweep-layouts", "square")
+    page.fill("#sweep-gcr", "0.2,0.3")
+    page.fill("#sweep-strategies", "sun")
+    page.fill("#sweep-step", "3600")
+    page.click("#sweep-run")
+    page.wait_for_selector("body[data-sweep-loaded]", timeout=150_000)
+    assert "2 cases on" in page.text_content("#sweep-status")
+    energy = page.evaluate("() => document.getElementById('chart-sweep-energy').data"
+                           ".map(t => t.x.length)")
+    assert energy and all(n == 2 for n in energy)
+    page.wait_for_function("() => (document.getElementById('chart-sweep-shade').data || [])"
+                           ".length === 3")
+    shade = page.evaluate("() => { const c = document.getElementById('chart-sweep-shade');"
+                          " return [c.layout.xaxis.title.text, c.data[0].x, c.data[0].y]; }")
+    title, times, shaded = shade
+    assert title == "time (Europe/Madrid)"
+    assert all(len(t) == 5 and t[2] == ":" for t in times)  # local wall clock, HH:MM
+    assert max(shaded) > 0  # GCR 0.3 at the solstice: the interior collector is shaded
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.locator("#chart-sweep-shade").screenshot(path=str(ARTIFACTS / "plant-sweep-shade.png"))
