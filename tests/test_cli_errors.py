@@ -22,6 +22,19 @@ from backend import cli
       "2025-01-01"], "heliotwin plant simulate: error: --end (2025-01-01) must be after"),
     (["demo-logger", "--site", "no-such-site", "--token", "t"],
      "heliotwin demo-logger: error: "),
+    # a tester's findings: each named something else than the flag and its problem
+    (["simulate", "--start", "2024-03-15", "--end", "2024-03-16", "--controller",
+      "open_loop_spa", "--pedestal-yaw-deg", "nan"],
+     "heliotwin simulate: error: --pedestal-yaw-deg: nan is not a finite number"),
+    (["simulate", "--start", "2024-03-15", "--end", "2024-03-16", "--controller",
+      "open_loop_model", "--pointing-model-terms", "[]"],
+     "heliotwin simulate: error: --pointing-model-terms: '[]' is not a JSON object"),
+    (["plant", "sweep", "--collector-m", "12x5", "--lat", "38.3", "--lon", "-5.3", "--gcr",
+      "0.2", "--start", "2021-06-01", "--end", "2021-06-02", "--field", "5"],
+     "heliotwin plant sweep: error: --field: expected ROWSxCOLUMNS like 5x5, got '5'"),
+    (["plant", "sweep", "--collector-polygon", "0,0;1,nan;1,1", "--lat", "38.3", "--lon",
+      "-5.3", "--gcr", "0.2", "--start", "2021-06-01", "--end", "2021-06-02"],
+     "heliotwin plant sweep: error: --collector-polygon: "),
 ])
 def test_a_refusal_is_one_error_line_on_stderr_and_exit_2(
         argv: list[str], line: str, capsys: pytest.CaptureFixture[str]) -> None:

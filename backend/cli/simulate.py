@@ -126,6 +126,9 @@ def read_pointing_model_terms(text: str) -> dict[str, Any]:
     """``--pointing-model-terms``: a JSON object, inline or in a file; a saved answer of
     ``GET …/pointing-model`` gives its ``terms``."""
     source = text
+    if text.lstrip()[:1] in ("[", '"') or text.strip() in ("", "null", "true", "false"):
+        raise InputError(f"--pointing-model-terms: {text!r} is not a JSON object of terms "
+                         "(or the file of one)")
     if not text.lstrip().startswith("{"):
         try:
             source = Path(text).read_text(encoding="utf-8")

@@ -324,11 +324,12 @@ def parse_gcr(text: str) -> list[float]:
 
 
 def parse_size(text: str, field: str) -> tuple[float, float]:
-    """``"12x5"`` → (12.0, 5.0)."""
+    """``"12x5"`` → (12.0, 5.0): a collector's WIDTHxHEIGHT, a field's ROWSxCOLUMNS."""
     try:
         a, b = (float(x) for x in text.lower().split("x"))
     except ValueError:
-        raise SweepInputError(field, f"expected WIDTHxHEIGHT like 12x5, got {text!r}") from None
+        shape = "ROWSxCOLUMNS like 5x5" if field == "field_size" else "WIDTHxHEIGHT like 12x5"
+        raise SweepInputError(field, f"expected {shape}, got {text!r}") from None
     if not (a > 0 and b > 0 and np.isfinite(a) and np.isfinite(b)):
         raise SweepInputError(field, f"both sizes must be positive, got {text!r}")
     return a, b

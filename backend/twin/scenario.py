@@ -102,6 +102,8 @@ class Scenario:
             p = known.get(name)
             if p is None:
                 raise ValueError(f"{name}: not a machine parameter")
+            if not math.isfinite(value):  # NaN passed the bounds below and the
+                raise ValueError(f"{name}: {value} is not a finite number")  # dataclass named it
             if (p.minimum is not None and value < p.minimum) or (
                     p.maximum is not None and value > p.maximum):
                 raise ValueError(f"{name}: {value} is outside [{p.minimum}, {p.maximum}]")

@@ -84,8 +84,11 @@ def check_outline(vertices: ArrayLike, where: str = "outline"
                          f"{p.shape}")
     if len(p) > 1 and np.array_equal(p[0], p[-1]):
         p = p[:-1]
-    if len(p) < 3 or not np.all(np.isfinite(p)):
-        raise ValueError(f"{where}: need at least 3 finite vertices, got {len(p)}")
+    if not np.all(np.isfinite(p)):
+        bad = int(np.flatnonzero(~np.isfinite(p).all(axis=1))[0])
+        raise ValueError(f"{where}: vertex {bad} is not a pair of finite numbers")
+    if len(p) < 3:
+        raise ValueError(f"{where}: need at least 3 vertices, got {len(p)}")
     if len(p) > 256:
         raise ValueError(f"{where}: at most 256 vertices, got {len(p)}")
     area = polygon_area(p)

@@ -100,7 +100,7 @@ def test_one_case_runs_in_process_as_csv(capsys: pytest.CaptureFixture[str]) -> 
     (["--gcr", "0.2,x"], "--gcr: expected numbers"),
     (["--gcr", "0.2", "--layouts", "triangle"], "--layouts: must be one or more of"),
     (["--gcr", "0.2", "--strategy", "moon"], "--strategy: must be one or more of"),
-    (["--gcr", "0.2", "--field", "5"], "--field: expected WIDTHxHEIGHT"),
+    (["--gcr", "0.2", "--field", "5"], "--field: expected ROWSxCOLUMNS like 5x5"),
     (["--gcr", "0.2", "--layouts", "custom"], "--layouts: layout custom needs --aspect-ratio, "
      "--offset and --rotation-deg"),
     (["--gcr", "0.2", "--offset", "0.1"], "--aspect-ratio: layout custom takes --aspect-ratio, "

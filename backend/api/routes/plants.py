@@ -279,10 +279,11 @@ def cancel_sweep(sweep_id: str, runner: SweepRunnerDep) -> dict[str, Any]:
 async def sweep_shade(sweep_id: str, request: Request, ctx: ContextDep, caller: CallerDep,
                       runner: SweepRunnerDep,
                       layout: Annotated[str, Query(max_length=100)],
-                      gcr: Annotated[float, Query(gt=0, lt=1)],
+                      gcr: Annotated[float, Query(gt=0, lt=1, allow_inf_nan=False)],
                       strategy: Annotated[str, Query()] = "sun",
                       date: Annotated[str, Query(pattern=r"^\d{4}-\d{2}-\d{2}$")] = "2021-12-21",
-                      step_s: Annotated[float, Query(ge=300, le=3600)] = 900) -> dict[str, Any]:
+                      step_s: Annotated[float, Query(ge=300, le=3600, allow_inf_nan=False)] = 900
+                      ) -> dict[str, Any]:
     """One case of a sweep through a clear-sky day: every collector's shaded fraction
     (priced as a plant day of its field; see the module docstring)."""
     state = _sweep_or_404(runner, sweep_id)
@@ -294,14 +295,17 @@ async def sweep_shade(sweep_id: str, request: Request, ctx: ContextDep, caller: 
     except ValueError:
         raise HTTPException(422, f"date: {date!r} is not a calendar date") from None
     name = layout if spec.plant is None else PLANT_LAYOUT
+    if strategy in STRATEGIES and strategy not in strategies_for(spec.collector):
+        raise HTTPException(422, f"strategy: {strategy!r} needs a rectangular collector; this "
+                                 "sweep's polygon takes 'sun'")
     case = SweepCase(name, gcr, _strategy(strategy))
     cost_s = day_cost_s(spec.rows * spec.columns if spec.plant is None
                         else spec.plant.n_trackers, step_s, cost_factor(spec.collector))
     try:
         return await _priced(request, ctx, caller, cost_s,
                              lambda: case_day_shade(spec, case, date, step_s))
-    except ValueError as exc:
-        raise HTTPException(422, f"layout/gcr: {exc}") from None
+    except ValueError as exc:  # the case's field: an unknown layout or a GCR it cannot take
+        raise HTTPException(422, f"layout, gcr: {exc}") from None
 
 
 @router.get("", response_model=list[PlantSummaryRead])
@@ -344,7 +348,8 @@ async def positions(plant_id: str, request: Request, ctx: ContextDep, caller: Ca
 async def sky_map(plant_id: str, request: Request, ctx: ContextDep, caller: CallerDep,
                   service: PlantServiceDep,
                   time: Annotated[str, Query(description="ISO 8601 with offset")],
-                  resolution_deg: Annotated[float, Query(ge=1.0, le=15.0)] = 3.0,
+                  resolution_deg: Annotated[float, Query(ge=1.0, le=15.0,
+                                                         allow_inf_nan=False)] = 3.0,
                   strategy: Annotated[str, Query()] = "sky_scan",
                   format: Annotated[str | None, Query(pattern="^(json|png)$")] = None,
                   ) -> Any:
@@ -372,7 +377,8 @@ async def day(plant_id: str, request: Request, ctx: ContextDep, caller: CallerDe
               date: Annotated[str, Query(pattern=r"^\d{4}-\d{2}-\d{2}$",
                                          description="local date, YYYY-MM-DD "
                                                      f"({FIRST_YEAR}–{LAST_YEAR})")],
-              step_s: Annotated[float, Query(ge=300, le=3600)] = 900) -> dict[str, Any]:
+              step_s: Annotated[float, Query(ge=300, le=3600, allow_inf_nan=False)] = 900
+              ) -> dict[str, Any]:
     """A clear-sky day (local date): each tracker's shade under sun tracking, and the plant
     energy of every strategy and of the fixed plant (priced: see the module docstring)."""
     try:

@@ -292,7 +292,7 @@ async def get_simulation_series(
     start: Annotated[str | None, Query(max_length=64, description=(
         "first time (inclusive): a date (site midnight) or ISO date-time with offset"))] = None,
     end: Annotated[str | None, Query(max_length=64, description="exclusive")] = None,
-    step_s: Annotated[float | None, Query(gt=0, le=31 * 86400, description=(
+    step_s: Annotated[float | None, Query(gt=0, le=31 * 86400, allow_inf_nan=False, description=(
         "resolution [s]: means over this span, a whole multiple of the run's step"))] = None,
     max_points: Annotated[int | None, Query(ge=1, le=2_000_000)] = None,
     format: Literal["json", "csv"] = "json",
