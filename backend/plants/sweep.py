@@ -236,7 +236,11 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
                         progress(len(rows), len(cases))
                 if pending and cancelled is not None and cancelled():
                     client.cancel(futures)
-                    raise SweepCancelled(f"cancelled after {len(rows)} of {len(cases)} cases")
+                    done = _finish(rows, "dask", {"scheduler": None if cluster is not None
+                                                  else address, "workers": workers},
+                                   started, time.perf_counter() - submitted)
+                    raise SweepCancelled(f"cancelled after {len(rows)} of {len(cases)} cases",
+                                         done)
                 if pending and not finished and time.monotonic() >= next_look:
                     next_look = time.monotonic() + WORKERS_LOOK_S
                     if client.nthreads():
@@ -258,7 +262,12 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
 
 
 class SweepCancelled(RuntimeError):
-    """A sweep stopped by its ``cancelled`` callback."""
+    """A sweep stopped by its ``cancelled`` callback; ``result`` holds the cases finished
+    before it (as :func:`run_sweep` returns them), not thrown away."""
+
+    def __init__(self, message: str, result: dict[str, Any] | None = None) -> None:
+        super().__init__(message)
+        self.result = result
 
 
 #: The parameters of a sweep by their request keys (``SweepCreate``'s fields), which a

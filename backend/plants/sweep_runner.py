@@ -121,8 +121,9 @@ class SweepRunner:
                                       cancelled=lambda: state.cancel),
                     abandon_on_cancel=True)
                 state.status = "done"
-            except SweepCancelled:
+            except SweepCancelled as exc:  # the cases done stay to be read
                 state.status, state.error = "failed", "cancelled"
+                state.result = exc.result
             except asyncio.CancelledError:          # the service stops: the thread stops too
                 state.cancel = True
                 state.status, state.error = "failed", "the service stopped"

@@ -199,6 +199,30 @@ def test_unreachable_scheduler_is_an_error(capsys: pytest.CaptureFixture[str]) -
     assert "--scheduler: cannot reach" in capsys.readouterr().err
 
 
+def test_a_cancelled_sweep_keeps_the_cases_it_finished(scheduler: str) -> None:
+    """Cancelled after its first result: the cases done come with the cancellation (they
+    were thrown away: a tester's finding), the rest are not run."""
+    import pandas as pd
+
+    from backend.plants import sweep as sweep_mod
+
+    spec, cases = sweep_mod.prepare_sweep(
+        layouts=["square", "diagonal"], gcr=[0.2, 0.25, 0.3], strategies=["sun"],
+        start=pd.Timestamp("2021-12-20", tz="UTC"), end=pd.Timestamp("2021-12-21", tz="UTC"),
+        step_s=1800.0, latitude_deg=38.3, longitude_deg=-5.3, collector_m=(12.0, 5.0))
+    done = [0]
+
+    def progress(n: int, total: int) -> None:
+        done[0] = n
+
+    with pytest.raises(sweep_mod.SweepCancelled) as stopped:
+        sweep_mod.run_sweep(spec, cases, scheduler=scheduler, progress=progress,
+                            cancelled=lambda: done[0] >= 1)
+    result = stopped.value.result
+    assert result is not None and 1 <= result["cases"] < len(cases)
+    assert len(result["rows"]) == result["cases"] and result["rows"][0]["energy_kwh_per_collector"]
+
+
 def test_a_scheduler_without_workers_fails_the_sweep(monkeypatch: pytest.MonkeyPatch) -> None:
     """Every worker gone (killed, or never started): the tasks would wait for one for ever
     and the service showed the sweep "running"; after NO_WORKERS_S it fails, saying so."""

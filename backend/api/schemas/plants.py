@@ -226,7 +226,8 @@ class SweepAcceptedRead(BaseModel):
 
 
 class SweepRunRead(BaseModel):
-    """A sweep's status, progress and, when done, its result."""
+    """A sweep's status, progress and, when done, its result (a cancelled one's: the cases
+    finished before it)."""
 
     sweep_id: str
     status: str = Field(description="queued, running, done or failed")
