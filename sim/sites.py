@@ -342,9 +342,13 @@ def place_defaults(config: dict[str, Any], climate: dict[str, float] | None = No
                 and not any(k in tracker for k in TRACKER_PLACE_KEYS)):
             lo, hi = tracker_azimuth_range_deg(lat, azimuth_span_deg)
             out["tracker"] = {**tracker, "azimuth_min_deg": lo, "azimuth_max_deg": hi}
+            # beyond a polar circle the midnight sun goes round the whole sky each day: no
+            # finite range follows it, the tracker unwinds once a day (a tester's finding)
+            unwind = ("every day's sun path without an unwind in daylight" if abs(lat) < 66.5
+                      else "under the midnight sun, which goes round the sky each day, one "
+                           "unwind a day at its lowest")
             why = (f"{hi - lo:g}° of azimuth centred on the equator side "
-                   f"({'south' if lat >= 0 else 'north'}) at latitude {lat:g}°: every day's "
-                   "sun path without an unwind in daylight "
+                   f"({'south' if lat >= 0 else 'north'}) at latitude {lat:g}°: {unwind} "
                    "(sim.sites.tracker_azimuth_range_deg)")
             for key in TRACKER_PLACE_KEYS:
                 assumed[f"tracker.{key}"] = why
