@@ -147,9 +147,15 @@ def create_token(conn: Connection, site_id: str, label: str = "",
 
 
 def list_tokens(conn: Connection, site_id: str | None = None) -> list[TokenInfo]:
-    """Every stored token (of one site when given), oldest first."""
+    """Every stored token (of one site when given: :class:`UnknownSite` for a site the
+    database does not hold, as :func:`create_token`; it answered an empty list), oldest
+    first."""
     q = _COLUMNS.order_by(LoggerToken.id)
     if site_id is not None:
+        if conn.execute(select(SiteRow.site_id).where(SiteRow.site_id == site_id)).first() \
+                is None:
+            known = ", ".join(conn.execute(select(SiteRow.site_id)).scalars()) or "none"
+            raise UnknownSite(f"unknown site {site_id!r}; known sites: {known}")
         q = q.where(LoggerToken.site_id == site_id)
     return [_info(row) for row in conn.execute(q)]
 

@@ -131,9 +131,12 @@ def create(args: argparse.Namespace) -> int:
 
 def list_(args: argparse.Namespace) -> int:
     """Print the stored tokens, as a table or JSON."""
-    from backend.auth import list_tokens
+    from backend.auth import UnknownSite, list_tokens
 
-    rows = [t.to_dict() for t in _with_db(lambda conn: list_tokens(conn, args.site))]
+    try:
+        rows = [t.to_dict() for t in _with_db(lambda conn: list_tokens(conn, args.site))]
+    except UnknownSite as exc:
+        fail(f"--site: {exc}")
     if args.json:
         print(json.dumps(rows, indent=2))
         return 0

@@ -176,9 +176,13 @@ def test_adc_readings_use_stored_calibration(client: httpx.Client,
     # NaN/Infinity literals (Python's JSON reads them) and absurd values: 422, nothing stored
     auth = {"Authorization": f"Bearer {site_tok}", "Content-Type": "application/json"}
     for bad in ('{"current_zero_v": NaN}', '{"adc_vref_v": Infinity}',
-                '{"divider_ratio": 1e308}'):
+                '{"divider_ratio": 1e308}',
+                # zero current above the ADC's full scale: every reading refused after
+                '{"current_zero_v": 6.0, "adc_vref_v": 5.0}'):
         r = client.put(url, content=bad, headers=auth)
         assert r.status_code == 422, (bad, r.text)
+    r = client.put(url, content='{"current_zero_v": 6.0, "adc_vref_v": 5.0}', headers=auth)
+    assert "current_zero_v" in r.text and "adc_vref_v" in r.text, r.text
     assert client.get(url).json() == cal
     raw = {**reading, "ts": "2023-01-08T12:01:00-06:00", "current_adc": 1024}
     r = post(client, tok, {"readings": [raw]})

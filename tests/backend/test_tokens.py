@@ -127,6 +127,8 @@ def test_admin_endpoints(server: InProcessServer, client: httpx.Client) -> None:
 
     bad = client.post(url, headers=admin, json={"site_id": "mars"})
     assert bad.status_code == 404 and "mars" in bad.text
+    bad = client.get(url, headers=admin, params={"site_id": "mars"})  # was an empty list
+    assert bad.status_code == 404 and "mars" in bad.text
     bad = client.post(url, headers=admin, json={"site_id": "tehuantepec",
                                                 "expires_at": "2020-01-01T00:00:00Z"})
     assert bad.status_code == 422 and "expires_at" in bad.text

@@ -17,7 +17,7 @@ from typing import Annotated, Any
 import anyio
 from fastapi import APIRouter, Body, Depends, Header, HTTPException
 from fastapi.responses import JSONResponse
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from backend.api.deps import (
     ContextDep,
@@ -56,6 +56,15 @@ class CalibrationModel(BaseModel):
         100.0, gt=0, le=10_000, description="ACS712 sensitivity [mV/A] (eq. 16)")
     divider_ratio: float = Field(10.0, ge=1, le=10_000,
                                  description="(R1+R2+R3)/Rx of the divider (eq. 19)")
+
+    @model_validator(mode="after")
+    def _zero_within_the_reference(self) -> CalibrationModel:
+        # the ADC reads 0 … adc_vref_v: a zero-current output above it makes every later
+        # reading out of range (accepted before, a tester's finding)
+        if self.current_zero_v >= self.adc_vref_v:
+            raise ValueError(f"current_zero_v: {self.current_zero_v:g} V is not below "
+                             f"adc_vref_v {self.adc_vref_v:g} V, the ADC's full scale")
+        return self
 
 
 def _origin(ctx: Any, site_id: str) -> dict[str, Any]:

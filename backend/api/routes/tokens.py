@@ -79,10 +79,14 @@ def _json(data: Any, status: int = 200) -> Response:
     return Response(orjson.dumps(data), status_code=status, media_type="application/json")
 
 
-@router.get("", response_model=TokensRead, openapi_extra=_ADMIN_DOC, responses=_RESPONSES)
+@router.get("", response_model=TokensRead, openapi_extra=_ADMIN_DOC,
+            responses={**_RESPONSES, 404: {"description": "unknown site"}})
 async def get_tokens(ctx: ContextDep, _admin: AdminDep,
                      site_id: Annotated[str | None, Query(max_length=64)] = None) -> Response:
     """Every write token (of one site with ``site_id``): id, prefix, times, status."""
+    if site_id is not None:
+        site_or_404(ctx, site_id)
+
     def read() -> list[dict[str, Any]]:
         with ctx.engine.connect() as conn:
             return [t.to_dict() for t in list_tokens(conn, site_id)]
