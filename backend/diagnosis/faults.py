@@ -83,9 +83,11 @@ GHI_UNCERTAINTY = 0.155
 #: A day is judged for underperformance when the tracker's readings cover at least this
 #: share of its expected energy (a dropout is its own finding)
 UNDER_MIN_COVERAGE = 0.5
-#: A sky whose readings run this far from the sun's time [s] is named ``sky_clock_offset``
-#: (healthy generated clear days: 1–3 min; a DST or UTC-offset mistake: 30–60 min)
-SKY_CLOCK_MIN_S = 900.0
+#: A sky whose readings run this far from the sun's time [s] is named ``sky_clock_offset``:
+#: healthy generated clear days 1–3 min, a DST or UTC-offset mistake 30–60 min; a fixed
+#: plane set in the config 10, 20 or 30° off its real azimuth (16° tilt) shifts its shape
+#: by 8, 16 and 23 min, which is not a clock
+SKY_CLOCK_MIN_S = 1500.0
 CARRY_DECAY = 0.8  # a shape fault's confidence on each following day that cannot show it
 CARRIED = " (carried over: today's sky cannot show it)"
 
@@ -426,7 +428,8 @@ def _sky_clock_offset(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
                  "detail": f"the readings the sky comes from (the fixed array's or its "
                            f"sensor's) run {minutes:+.0f} min from the sun's time: the "
                            f"logger's clock or its UTC offset (summer time stamped with the "
-                           f"winter offset?); the tracker is not judged under that sky"}
+                           f"winter offset?), or the plane's azimuth in the site's config; "
+                           f"the tracker is not judged under that sky"}
         out[i].append(fault)
         shifted.append(i)
     return shifted

@@ -91,8 +91,9 @@ def test_a_sky_an_hour_late_is_named(shift_min: int) -> None:
     """A logger that stamps summer-time wall clocks with the winter offset: both arrays'
     readings an hour late (and a clock half an hour behind). The sky comes from the same
     readings, so the tracker's own clock fit cannot see it; the fixed plane against its
-    clear sky does. Held out: seed 34 in July (the 15-min threshold was read off seeds 31
-    and 32 in April: 1–3 min on healthy clear days, 30 and 60 min found within 7)."""
+    clear sky does. Held out: seed 34 in July (the 25-min threshold was read off seeds 31
+    and 32 in April: 1–3 min on healthy clear days, 30 and 60 min found within 7; a plane
+    mis-set 30° in azimuth shifts by 23)."""
     first = pd.Timestamp("2026-07-10", tz=SITE.timezone)
     d = logger_days(SITE, first, 5, 34)
     fixed, tracker = (np.roll(a, shift_min) for a in (d.fixed_power_w, d.tracker_power_w))
