@@ -29,6 +29,7 @@ from pydantic import (
     Field,
     HttpUrl,
     SecretStr,
+    ValidationError,
     ValidationInfo,
     field_validator,
 )
@@ -461,3 +462,13 @@ def get_settings(**overrides: object) -> Settings:
     """Build the settings from the environment, with keyword overrides (flat names, see the
     module docstring) on top."""
     return Settings(**overrides)
+
+
+def settings_error_text(exc: ValidationError) -> str:
+    """A settings error in one line naming the variable, its value and the problem
+    (``HELIOTWIN_ENERGY_MAX_GAP_S=3601: Input should be less than or equal to 3600``):
+    ``serve`` printed pydantic's traceback."""
+    err = exc.errors()[0]
+    name = "_".join(str(p) for p in err["loc"]).upper()
+    name = name if name.startswith(PREFIX) else PREFIX + name  # an alias is the variable
+    return f"{name}={err.get('input')!s}: {err['msg']}"

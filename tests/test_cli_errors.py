@@ -44,6 +44,17 @@ def test_a_refusal_is_one_error_line_on_stderr_and_exit_2(
     assert err.startswith(line) and err.count("\n") == 1, err
 
 
+def test_serve_names_a_bad_setting_in_one_line(monkeypatch: pytest.MonkeyPatch,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """A bad environment value stops ``serve`` with the variable, its value and the
+    problem (it printed pydantic's traceback)."""
+    monkeypatch.setenv("HELIOTWIN_ENERGY_MAX_GAP_S", "3601")
+    assert cli.main(["serve", "--no-demo"]) == 2
+    out, err = capsys.readouterr()
+    assert err == ("heliotwin serve: error: HELIOTWIN_ENERGY_MAX_GAP_S=3601: Input should be "
+                   "less than or equal to 3600\n")
+
+
 def test_fail_carries_its_exit_code(monkeypatch: pytest.MonkeyPatch,
                                     capsys: pytest.CaptureFixture[str]) -> None:
     import backend.cli.sun

@@ -6,6 +6,8 @@ import argparse
 import gc
 import logging
 
+from backend.cli import fail
+
 logger = logging.getLogger(__name__)
 
 
@@ -26,10 +28,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 def run(args: argparse.Namespace) -> int:
     """Start uvicorn with :func:`backend.app.create_app` until interrupted."""
     import uvicorn
+    from pydantic import ValidationError
 
     from backend.app import create_app
     from backend.limits import tune_malloc
-    from backend.settings import get_settings
+    from backend.settings import get_settings, settings_error_text
 
     # before any thread starts: two glibc heaps and large arrays unmapped when freed, so
     # an idle server gives back what its big requests used (backend/limits.py)
@@ -44,7 +47,10 @@ def run(args: argparse.Namespace) -> int:
         overrides["viser_port"] = args.viser_port
     if args.no_demo:
         overrides["demo_logger"] = False
-    settings = get_settings(**overrides)
+    try:
+        settings = get_settings(**overrides)
+    except ValidationError as exc:
+        fail(settings_error_text(exc))
     app = create_app(settings)
     # The ~200,000 objects of the libraries loaded by now live as long as the process:
     # moved out of the collector's reach, a full collection (~80-140 ms with the event

@@ -167,13 +167,12 @@ def check_step_count(start: Any, end: Any, step_s: float) -> None:
     for hours. The variable raises the bound for the CLI as for the service."""
     from pydantic import ValidationError
 
-    from backend.settings import get_settings
+    from backend.settings import get_settings, settings_error_text
 
     try:
         limit = get_settings().simulations.max_steps
     except ValidationError as exc:
-        err = exc.errors()[0]
-        raise InputError(f"{'.'.join(str(p) for p in err['loc'])}: {err['msg']}") from None
+        raise InputError(settings_error_text(exc)) from None
     steps = (end - start).total_seconds() / step_s
     if steps > limit:
         raise InputError(f"--step-s: {step_s:g} s from --start to --end is {steps:,.0f} steps; "
