@@ -209,11 +209,12 @@ def _text(s: dict[str, Any]) -> str:
         return "n/a" if v is None else f"{v:.2f} %"
 
     dni_f = s["dni_weighted_shaded_fraction"]    # None: no beam in the range (polar night)
+    any_f = s["fraction_of_daylight_any_shaded"]  # None: no daylight step
     return "\n".join([
         f"plant {s['plant_id']} ({s['trackers']} trackers)  {s['start']} .. {s['end']}  "
         f"step {s['step_s']:g} s  strategy {s['strategy']}  sky {s['sky']}",
         f"daylight steps {s['daylight_steps']}, any collector shaded in "
-        f"{100 * (s['fraction_of_daylight_any_shaded'] or 0):.2f} % of them; "
+        f"{pct(None if any_f is None else 100 * any_f)} of them; "
         f"DNI-weighted shaded fraction {'n/a (no beam)' if dni_f is None else f'{dni_f:.4f}'}",
         f"plant energy {s['plant_energy_wh'] / 1000:.1f} kWh (bypass-diode model); "
         f"shading loss {pct(s['shading_loss_electrical_pct'])} electrical, "
@@ -335,6 +336,8 @@ def run_sweep(args: argparse.Namespace) -> int:
     spec, cases, weather = sweep_from_args(args)
     if not getattr(args, "verbose", False):   # distributed logs its cluster's life at INFO
         import logging
+
+        import distributed  # noqa: F401 - first: its import sets its loggers to INFO again
 
         logging.getLogger("distributed").setLevel(logging.WARNING)
     bar, callback = None, None

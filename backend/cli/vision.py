@@ -146,7 +146,13 @@ def detect(args: argparse.Namespace) -> dict[str, Any]:
     from backend.errors import InputError
     from backend.vision.checks import error_warnings
     from backend.vision.frames import frame_inputs
-    from backend.vision.service import analyse, check_calibration_size, decode, is_oriented
+    from backend.vision.service import (
+        analyse,
+        check_calibration_size,
+        decode,
+        is_oriented,
+        name_zone,
+    )
     from vision.cameras import FisheyeCamera, PinholeCamera, camera_from_params
 
     place = _place(args)  # refused before the frame is read, as the service does
@@ -166,7 +172,7 @@ def detect(args: argparse.Namespace) -> dict[str, Any]:
     try:  # the service's rule (POST /api/v1/vision/sun): scale and time the frame implies
         frame = frame_inputs(img, args.image.name,
                              args.camera if args.calibration_id is None else None, params,
-                             args.timestamp, place.zone if place is not None else None)
+                             args.timestamp, name_zone(place))
     except InputError as exc:
         raise ValueError(str(exc).replace("px_per_deg:", "--px-per-deg:", 1)
                          .replace("timestamp:", "--timestamp:", 1)) from None

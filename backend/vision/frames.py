@@ -69,10 +69,15 @@ class NameTime:
             dt.timedelta(minutes=self.utc_offset_min))
         return self.wall_time.replace(tzinfo=tz).astimezone(dt.UTC)
 
-    def source(self) -> str:
-        """``timestamp_source`` of a time read from the name."""
+    def source(self, zone: dt.tzinfo | None = None) -> str:
+        """``timestamp_source`` of a time read from the name (``zone``: the place's, that a
+        name without one is read in; None: there is none, UTC)."""
         if self.utc_offset_min is None:
-            return "file name (no zone in the name: read in the place's zone)"
+            if zone is None:  # a bare latitude and longitude: no zone is known
+                return ("file name (no zone in the name and none known for a bare latitude "
+                        "and longitude: read as UTC; give a site, a zone in the name or the "
+                        "timestamp)")
+            return f"file name (no zone in the name: read in the place's zone, {zone})"
         sign = "-" if self.utc_offset_min < 0 else "+"
         hours, minutes = divmod(abs(self.utc_offset_min), 60)
         return f"file name (UTC{sign}{hours:02d}:{minutes:02d}, stated in the name)"
@@ -174,5 +179,5 @@ def frame_inputs(image: np.ndarray, filename: str, camera: str | None,
             raise InputError(422, f"timestamp: {exc}") from None
         if found is not None:
             timestamp = found.instant(zone or ZoneInfo("UTC"))
-            source = found.source()
+            source = found.source(zone)
     return FrameInputs(params, derived, timestamp, source)

@@ -94,6 +94,12 @@ class Place:
     zone: ZoneInfo
 
 
+def name_zone(place: Place | None) -> ZoneInfo | None:
+    """The zone a frame's file name without one is read in: a site's; None (UTC, said so)
+    at a bare latitude and longitude, whose zone is not known."""
+    return place.zone if place is not None and place.site_id is not None else None
+
+
 def free_place(latitude_deg: float, longitude_deg: float, elevation_m: float,
                fields: tuple[str, str, str] = ("latitude_deg", "longitude_deg", "elevation_m")
                ) -> Place:

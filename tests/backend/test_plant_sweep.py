@@ -88,6 +88,16 @@ def test_sweep_runs_on_the_given_cluster(scheduler: str, capsys: pytest.CaptureF
             (r["energy_kwh_per_collector"] for r in mine), reverse=True)
 
 
+def test_a_sweep_on_its_own_cluster_logs_nothing_below_warning() -> None:
+    """The one-shot command's LocalCluster: distributed's import set its loggers back to
+    INFO after the CLI quieted them (33 lines a run, its dashboard's address among them)."""
+    p = subprocess.run([str(BIN / "heliotwin"), *SWEEP, "--gcr", "0.2,0.3", "--workers", "1",
+                        "--json"], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert json.loads(p.stdout)["cases"] == 2
+    assert " INFO " not in p.stderr, p.stderr[:2000]
+
+
 def test_one_case_runs_in_process_as_csv(capsys: pytest.CaptureFixture[str]) -> None:
     assert main([*SWEEP, "--gcr", "0.2", "--csv"]) == 0
     lines = capsys.readouterr().out.splitlines()

@@ -250,6 +250,8 @@ def test_cli_json_of_a_polar_night_is_strict_json(heliotwin_cli: Callable,
                          "--end", "2024-12-22", "--step-s", "1800",
                          env={"HELIOTWIN_PLANTS_DIR": str(tmp_path)})
     assert text.returncode == 0 and "DNI-weighted shaded fraction n/a" in text.stdout
+    # no daylight step: no share of them (it said 0.00 %)
+    assert "any collector shaded in n/a of them" in text.stdout, text.stdout
 
 
 def test_cli_simulate_and_list(heliotwin_cli: Callable) -> None:

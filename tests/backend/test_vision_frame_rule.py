@@ -142,6 +142,16 @@ def test_zones_in_names_read_to_the_minute_or_refused(client: httpx.Client,
     d = client.post("/api/v1/vision/sun", files={"file": (named, frame_png, "image/png")},
                     data={"camera": "fisheye", "site_id": "tehuantepec"}).json()
     assert d["timestamp"] == UTC and "UTC-06:00" in d["timestamp_source"]
+    # a name without a zone: the site's zone, or UTC at a bare place — and the source says
+    # which (it said "the place's zone" for both)
+    bare = "sky_20240210_103000.png"
+    d = client.post("/api/v1/vision/sun", files={"file": (bare, frame_png, "image/png")},
+                    data={"camera": "fisheye", "site_id": "tehuantepec"}).json()
+    assert d["timestamp"] == UTC and "America/Mexico_City" in d["timestamp_source"]
+    d = client.post("/api/v1/vision/sun", files={"file": (bare, frame_png, "image/png")},
+                    data={"camera": "fisheye", "latitude_deg": "16.28875",
+                          "longitude_deg": "-95.240871"}).json()
+    assert d["timestamp"] == "2024-02-10T10:30:00Z" and "read as UTC" in d["timestamp_source"]
     # … and refuses a zone it cannot read unless the time is sent
     named = "sky_20240210_103000_UTC-6:3.png"
     r = client.post("/api/v1/vision/sun", files={"file": (named, frame_png, "image/png")},

@@ -87,6 +87,7 @@ from backend.vision.service import (
     free_place,
     is_oriented,
     iso,
+    name_zone,
 )
 from backend.vision.store import (
     delete_calibration,
@@ -283,7 +284,7 @@ def _camera(form: FormData, stored: FisheyeCamera | None, cal: dict[str, Any] | 
     if frame is not None:
         image, filename, ts, place = frame
         completed = frame_inputs(image, filename, None if stored is not None else kind,
-                                 params, ts, place.zone if place is not None else None)
+                                 params, ts, name_zone(place))
         params = completed.params
     if stored is not None:
         return stored, completed
