@@ -29,7 +29,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 def run(args: argparse.Namespace) -> int:
     """Run until interrupted (or, with ``--once``, until the back-fill is posted)."""
     from backend.settings import get_settings
-    from backend.twin.demo_logger import DemoLogger
+    from backend.twin.demo_logger import DemoLogger, TokenRefused
     from sim.sites import UnknownSiteError, load_site
 
     try:
@@ -43,7 +43,10 @@ def run(args: argparse.Namespace) -> int:
         if args.once:
             if not demo.wait_until_up(stop):
                 fail(f"{args.url} does not answer /healthz", code=1)
-            accepted, duplicates = demo.backfill(args.backfill_days)
+            try:
+                accepted, duplicates = demo.backfill(args.backfill_days)
+            except TokenRefused as exc:
+                fail(f"--token: the service refuses it ({exc})", code=1)
             print(f"posted: {accepted} accepted, {duplicates} duplicates")
             return 0
         demo.run(stop, backfill_days=args.backfill_days)

@@ -38,6 +38,10 @@ class _Retryable(Exception):
     """A failed post worth retrying: no connection, or a 5xx."""
 
 
+class TokenRefused(Exception):
+    """The service refused the token (401/403): no later batch would be taken either."""
+
+
 
 
 logging.getLogger("httpx").setLevel(logging.WARNING)  # one line per post is noise
@@ -186,6 +190,9 @@ class DemoLogger:
                 if isinstance(exc, Stopped):
                     break
                 continue
+            if r.status_code in (401, 403):
+                self.readings_dropped += len(readings) - k
+                raise TokenRefused(f"{r.status_code} {r.json().get('detail', r.text[:200])}")
             if r.status_code != 200:
                 self.readings_dropped += len(chunk)
                 logger.error("demo logger: dropped %d readings %s..%s: %s %s", len(chunk),
@@ -219,14 +226,19 @@ class DemoLogger:
         return total
 
     def wait_until_up(self, stop: threading.Event, timeout_s: float = 120.0) -> bool:
-        """Wait for ``/healthz`` to answer (bounded)."""
+        """Wait for ``/healthz`` to answer (bounded; said once when it does not at once)."""
         deadline = time.monotonic() + timeout_s
+        said = False
         while time.monotonic() < deadline and not stop.is_set():
             try:
                 if self.client.get("/healthz").status_code == 200:
                     return True
             except httpx.HTTPError:
                 pass
+            if not said:
+                logger.warning("demo logger: waiting up to %.0f s for %s to answer /healthz",
+                               timeout_s, self.base_url)
+                said = True
             stop.wait(0.25)
         return False
 
@@ -237,14 +249,17 @@ class DemoLogger:
         if not self.wait_until_up(stop):
             logger.error("demo logger: %s did not come up", self.base_url)
             return
-        if backfill_days > 0:
-            self.backfill(backfill_days)
-        last = int(time.time() // 60 * 60)
-        while not stop.wait(max(0.5, interval_s - time.time() % interval_s + 1.0)):
-            now_min = int(time.time() // 60 * 60)
-            if now_min <= last:
-                continue
-            lo = max(last + 60, now_min - 86400)
-            self.post(self.readings(lo, now_min + 60))
-            last = now_min
+        try:
+            if backfill_days > 0:
+                self.backfill(backfill_days)
+            last = int(time.time() // 60 * 60)
+            while not stop.wait(max(0.5, interval_s - time.time() % interval_s + 1.0)):
+                now_min = int(time.time() // 60 * 60)
+                if now_min <= last:
+                    continue
+                lo = max(last + 60, now_min - 86400)
+                self.post(self.readings(lo, now_min + 60))
+                last = now_min
+        except TokenRefused as exc:  # no reading would be taken: said once, not every minute
+            logger.error("demo logger: the service refuses its token (%s); stopped", exc)
 

@@ -66,3 +66,21 @@ def test_a_4xx_is_dropped_at_once_and_logged(caplog: pytest.LogCaptureFixture) -
         demo.post(_readings(2))
     assert len(calls) == 1 and demo.readings_dropped == 2
     assert "422" in caplog.records[-1].getMessage()
+
+
+def test_a_refused_token_stops_the_posting() -> None:
+    """A 401 is the token, not the batch: no later batch would be taken, so the logger
+    stops and says so (``demo-logger --once`` logged a 401 per day of back-fill, then
+    printed 'posted: 0 accepted' and exited 0)."""
+    from backend.twin.demo_logger import TokenRefused
+
+    calls = []
+
+    def handle(request: httpx.Request) -> httpx.Response:
+        calls.append(request)
+        return httpx.Response(401, json={"detail": "unknown write token"})
+
+    demo = _logger_with(httpx.MockTransport(handle))
+    with pytest.raises(TokenRefused, match="401 unknown write token"):
+        demo.post(_readings(2500))  # three batches of 1000: the first refused, no more asked
+    assert len(calls) == 1 and demo.readings_dropped == 2500
