@@ -64,6 +64,13 @@ def test_create_writes_a_site_that_simulate_runs(tmp_path: Path, heliotwin) -> N
     again = heliotwin(tmp_path, "site", "create", "--id", "madrid-roof", "--latitude-deg", "40",
                       "--longitude-deg", "-3", "--timezone", "Europe/Madrid")
     assert again.returncode == 2 and "--force" in again.stderr
+    assert "`heliotwin simulate --site madrid-roof` runs it" in p.stdout
+    # a camera site has no twin: the command it suggested then failed
+    cam = heliotwin(tmp_path, "site", "create", "--id", "cam", "--like", "guadalajara_fisheye",
+                    "--latitude-deg", "20.7", "--longitude-deg", "-103.4", "--timezone",
+                    "America/Mexico_City")
+    assert cam.returncode == 0 and "simulate --site" not in cam.stdout
+    assert "no twin to simulate" in cam.stdout
 
 
 def test_missing_place_flags_are_named(tmp_path: Path, heliotwin) -> None:

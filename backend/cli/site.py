@@ -108,7 +108,14 @@ def _write(config: dict[str, Any], force: bool) -> int:
              "(a user file wins over a built-in one)")
     path = write_site_file(directory, config)
     where = _sync_database(config)
-    print(f"wrote {path}; `heliotwin simulate --site {config['site_id']}` runs it; {where}")
+    arrays = config.get("arrays") or {}
+    # the twin's rule (sim.twin, SiteInfo.has_twin): arrays named tracker and fixed, so mounted
+    runs = all(isinstance(arrays.get(n), dict) and arrays[n].get("mount") == n
+               for n in ("tracker", "fixed"))
+    what = (f"`heliotwin simulate --site {config['site_id']}` runs it" if runs else
+            "it has no arrays named tracker and fixed, so no twin to simulate (a camera "
+            "site: it takes sky frames)")
+    print(f"wrote {path}; {what}; {where}")
     for key, why in config.get("assumed", {}).items():
         print(f"  assumed {key} = {config_value(config, key)}: {why}")
     return 0
