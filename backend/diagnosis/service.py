@@ -173,7 +173,8 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
         if energy is not None:
             features["energy"] = energy
     low, high = band_wh(exp_a, exp_b, u)
-    # readings that miss part of the day's expected energy: its gain is not the day's
+    # readings that miss part of the day's expected energy: its gain is not the day's (a
+    # day without any reading has no measured gain at all: not partial, no data)
     short = any(m is not None and x > 0 and got < PARTIAL_COVERAGE * x
                 for m, got, x in ((measured_tr, matched, exp_a), (measured_fx, matched_f,
                                                                   exp_fixed)))
@@ -349,6 +350,7 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
         d["faults"] = f
         out_days.append(d)
     out_days += [_future_day(dates[i]) for i in range(len(starts)) if future[i]]
-    return {"site_id": info.site_id, "timezone": info.site.timezone,
-            "start": start.isoformat(), "end": end.isoformat(), "days": out_days,
+    return {"site_id": info.site_id, "timezone": info.site.timezone,  # both in the site's
+            "start": start.astimezone(info.zone).isoformat(),  # zone (start came back in UTC)
+            "end": end.astimezone(info.zone).isoformat(), "days": out_days,
             "mount": mount_faults(obs, edges_s, dates)}
