@@ -20,6 +20,9 @@ from backend import cli
      "heliotwin dynamics check: error: --dt-s 0.0: must be in (0, 0.05] s"),
     (["plant", "simulate", "--plant", "penarroya", "--start", "2025-01-02", "--end",
       "2025-01-01"], "heliotwin plant simulate: error: --end (2025-01-01) must be after"),
+    (["plant", "list", "--plants-dir", "/no/such/folder"],  # listed nothing, exit 0
+     "heliotwin plant list: error: --plants-dir: plants folder '/no/such/folder' does not "
+     "exist"),
     (["demo-logger", "--site", "no-such-site", "--token", "t"],
      "heliotwin demo-logger: error: "),
     # a tester's findings: each named something else than the flag and its problem

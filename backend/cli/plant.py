@@ -140,7 +140,7 @@ def run_list(args: argparse.Namespace) -> int:
     try:
         plants = list_plants(args.plants_dir)
     except ValueError as exc:
-        fail(str(exc))
+        fail(f"--plants-dir: {exc}")
     if args.json:
         print(json_text([{"plant_id": p.plant_id, "name": p.name, "trackers": p.n_trackers}
                           for p in plants]))

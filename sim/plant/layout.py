@@ -489,4 +489,6 @@ def load_plant(plant_id: str, plants_dir: str | Path | None = None) -> Plant:
 def list_plants(plants_dir: str | Path | None = None) -> list[Plant]:
     """All plants in ``plants_dir`` (default: :func:`default_plants_dir`), sorted by id."""
     directory = Path(plants_dir) if plants_dir is not None else default_plants_dir()
+    if not directory.is_dir():  # a mistyped folder listed nothing, as an empty one
+        raise ValueError(f"plants folder {str(directory)!r} does not exist")
     return [load_plant(p.stem, directory) for p in sorted(directory.glob("*.json"))]
