@@ -86,6 +86,10 @@ def _start_scene(ctx: ServiceContext) -> TwinScene | None:
         scene = TwinScene(info.site, s.server.host, s.server.viser_port, sites=site_of,
                           plants=lambda plant_id: load_plant(plant_id, s.sites.plants_dir))
         scene.start()
+    except OSError as exc:  # a port taken, a host not of this machine: said in one line
+        logger.error("3D scene did not start on %s:%s: %s", s.server.host, s.server.viser_port,
+                     exc)
+        return None
     except Exception:  # the service runs without its 3D view rather than not at all
         logger.exception("3D scene did not start")
         return None

@@ -81,7 +81,9 @@ def put_replay(body: ReplayRequest, request: Request, ctx: ContextDep,
     viewer = body.viewer or ""
     if not viewer:
         authorize(caller, state.site_id, "site", "the shared replay (every viewer of site "
-                                                 f"{state.site_id!r}); give a viewer key")
+                                                 f"{state.site_id!r}; a viewer key of your "
+                                                 "own replays in that tab alone, no token "
+                                                 "needed)")
     other = sorted({v.site.site_id for v in scene.site_views(viewer or None)} - {state.site_id})
     if viewer and other:
         raise HTTPException(422, f"viewer: the viewer shows site {other[0]!r}; run "
