@@ -254,8 +254,9 @@ class VisionCalibration(Base):
     """A fisheye camera fitted from timestamped frames (``vision.calibrate``)."""
 
     __tablename__ = "vision_calibrations"
+    # AUTOINCREMENT: a deleted calibration's id is never given to the next (migration 0012)
     __table_args__ = (Index("ix_vision_calibrations_anonymous_created", "anonymous",
-                            "created_at"),)
+                            "created_at"), {"sqlite_autoincrement": True})
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True))

@@ -146,6 +146,13 @@ def test_named_calibrations_deleted_with_their_detections(client: httpx.Client,
                         "detections_deleted": 1}
     assert client.get(cal_path).status_code == 404
     assert client.delete(cal_path, headers=auth).status_code == 404
+    # the newest calibration's id is never handed out again once deleted (SQLite reused the
+    # highest id: a tab still listing it ran detection with another camera)
+    last = _calibrate(client, cam, day, "the newest")["calibration_id"]
+    gone = client.delete(f"/api/v1/vision/calibrations/{last}", headers=auth)
+    assert gone.status_code == 200, gone.text
+    assert _calibrate(client, cam, day, "after the delete")["calibration_id"] > last
+    assert client.get(f"/api/v1/vision/calibrations/{last}").status_code == 404
     names = [c["name"] for c in client.get("/api/v1/vision/calibrations").json()["calibrations"]]
     assert unnamed["name"] in names and cal["name"] not in names
     params = {"site_id": "tehuantepec", "start": day, "end": "2024-04-10"}
