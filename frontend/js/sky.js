@@ -1,7 +1,7 @@
 // Sky camera: upload frames, find the sun, compare with the ephemeris, calibrate a fisheye.
 import { api } from "./api.js";
 import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
-import { addDays, fmtDateTime, localDate, localMidnightMs, toLocalWall, zoneOffsetMs } from "./time.js";
+import { addDays, fmtDateTime, localDate, localMidnightMs, localWallMs, toLocalWall } from "./time.js";
 import { banner, h, num } from "./ui.js";
 
 let st = null;
@@ -35,7 +35,7 @@ function rowTimestamp(row) {
   const zone = rowZone(row).source;
   let offMin;
   if (zone === "name") offMin = row.offsetH * 60;
-  else if (zone === "site") offMin = zoneOffsetMs(st.tz, Date.parse(`${full}Z`)) / 60000;
+  else if (zone === "site") offMin = (Date.parse(`${full}Z`) - localWallMs(st.tz, full)) / 60000;
   else offMin = 0;
   return `${full}${offsetString(offMin)}`;
 }

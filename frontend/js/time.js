@@ -47,13 +47,19 @@ export function addDays(date, n) {
   return new Date(Date.UTC(y, m - 1, d + n)).toISOString().slice(0, 10);
 }
 
-/** UTC instant (ms) of local midnight starting `date` in `tz`. */
-export function localMidnightMs(tz, date) {
-  const [y, m, d] = date.split("-").map(Number);
-  const guess = Date.UTC(y, m - 1, d);
+/** UTC instant (ms) of the wall-clock time "YYYY-MM-DDTHH:MM[:SS]" in `tz`: the offset
+ * taken at the instant itself, not at the wall time read as UTC (one pass put a frame an
+ * hour off when a DST change lay between the two). */
+export function localWallMs(tz, wall) {
+  const guess = Date.parse(`${wall.length === 16 ? `${wall}:00` : wall}Z`);
   let ms = guess - zoneOffsetMs(tz, guess);
   ms = guess - zoneOffsetMs(tz, ms); // second pass settles DST edges
   return ms;
+}
+
+/** UTC instant (ms) of local midnight starting `date` in `tz`. */
+export function localMidnightMs(tz, date) {
+  return localWallMs(tz, `${date}T00:00:00`);
 }
 
 const displayFormatters = new Map();

@@ -43,6 +43,10 @@ def test_zone_of_each_frame_is_said(page, server, tmp_path: Path) -> None:  # ty
     page.select_option("#sky-name-tz", "site")  # Tehuantepec, UTC−6; the name's zone still wins
     assert "the site's time" in zones.nth(1).text_content()
     assert zones.nth(1).text_content().endswith("→ 2024-03-01T18:00:00Z")
+    # three hours after Mexico's summer time began (3 April 2016, 02:00 → 03:00): 05:00
+    # CDT is 10:00Z; the offset taken at the wall time read as UTC made it 11:00Z
+    page.locator("#sky-file-list input").nth(1).fill("2016-04-03T05:00:00")
+    assert zones.nth(1).text_content().endswith("→ 2016-04-03T10:00:00Z")
     assert "from the file name → 2016-06-15T08:39:00Z" in zones.nth(0).text_content()
 
 
