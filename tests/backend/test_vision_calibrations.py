@@ -227,3 +227,25 @@ def test_a_frame_whose_rim_trees_hide_gets_its_centre_from_the_field_stop(
     x, y = d["centroid_px"]
     assert np.hypot(x - float(row["sun_col_label"]), y - float(row["sun_row_label"])) < 19.2
     assert d["sun_found"] and d["confidence"] >= 0.5
+
+
+def test_the_admin_token_deletes_a_free_places_results(tmp_path: Path) -> None:
+    """Results at a typed latitude/longitude: the admin token deletes them (it was told
+    'deleting needs a write token' although it sent one); no token is a 401 saying what."""
+    cam = FisheyeCamera(318.0, 242.0, 2.45, north_offset_deg=40.0, east="right")
+    ts = "2024-04-09T11:40:00-06:00"
+    admin = "admin-of-the-vision-test"
+    server = InProcessServer(f"sqlite:///{tmp_path / 'v.sqlite'}",
+                             {"HELIOTWIN_ADMIN_TOKEN": admin})
+    with server, server.client(timeout_s=60) as c:
+        r = c.post(SUN, files={"file": ("f.png", _frame(ts, cam, 3), "image/png")},
+                   data={"camera": "fisheye", "px_per_deg": "2.45", "timestamp": ts,
+                         "latitude_deg": str(TEHUANTEPEC[0]),
+                         "longitude_deg": str(TEHUANTEPEC[1])})
+        assert r.status_code == 200, r.text
+        day = {"start": "2024-04-09", "end": "2024-04-10"}
+        r = c.delete("/api/v1/vision/detections", params=day)
+        assert r.status_code == 401 and "admin token" in r.json()["detail"], r.text
+        r = c.delete("/api/v1/vision/detections", params=day,
+                     headers={"Authorization": f"Bearer {admin}"})
+        assert r.status_code == 200 and r.json()["detections_deleted"] == 1, r.text
