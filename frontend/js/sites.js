@@ -3,6 +3,9 @@ import { api } from "./api.js";
 import { h } from "./ui.js";
 
 let st = null;
+// a new site is being written ("New site from the selected one"): saving it must not
+// replace a site that has its id (PUT creates or replaces; the page overwrote one unasked)
+let creating = false;
 const $ = (id) => document.getElementById(id);
 const FIELDS = [["site-id", "site_id"], ["site-name", "name"], ["site-lat", "latitude_deg"],
   ["site-lon", "longitude_deg"], ["site-alt", "altitude_m"], ["site-tz-input", "timezone"],
@@ -38,6 +41,7 @@ function fill(config, pending = []) {
 
 async function loadSelected() {
   if (!st.site) return;
+  creating = false;  // editing the selected site: saving replaces it, as asked
   try {
     fill(await api(`/api/v1/sites/${encodeURIComponent(st.site.site_id)}/config`));
     $("site-result").replaceChildren();
@@ -87,6 +91,11 @@ async function save(ev) {
     return;
   }
   const siteId = config.site_id || "";
+  if (creating && st.sites.some((s) => s.site_id === siteId)) {
+    result(`Not saved: a site with id ${siteId} exists already; give the new site another id `
+      + "(or select that site in the header to edit it).", "error");
+    return;
+  }
   try {
     const body = await api(`/api/v1/sites/${encodeURIComponent(siteId)}`, {
       method: "PUT", json: config, token: $("site-token").value.trim() || undefined,
@@ -101,7 +110,14 @@ async function save(ev) {
 }
 
 function newSite() {
-  const config = configFromForm();
+  let config;
+  try {
+    config = configFromForm();
+  } catch (err) {  // the JSON box: said here, not as an uncaught error
+    result(err.message, "error");
+    return;
+  }
+  creating = true;
   config.site_id = "";
   config.name = "";
   config.source = "";

@@ -184,9 +184,17 @@ def test_a_site_made_in_the_form_joins_the_built_in_ones(pg, edge_server: Server
     pg.select_option("#site-stamped", "interval_end")  # an hourly logger's means
     assert '"readings_stamped": "interval_end"' in pg.input_value("#site-json")
     pg.fill("#site-token", ADMIN)
+    # the id of a site that exists: refused on the page (a PUT would have replaced it)
+    pg.fill("#site-id", "guadalajara_fisheye")
     pg.click("#site-save")
     error = pg.locator("[data-testid=site-result] .error")
     error.wait_for()
+    assert "exists already" in error.inner_text(), error.inner_text()
+    pg.fill("#site-id", "hand-made")
+    pg.click("#site-save")
+    pg.wait_for_function("() => document.querySelector('[data-testid=site-result] .error')"
+                         ".innerText.includes('latitude_deg')")
+    error = pg.locator("[data-testid=site-result] .error")
     assert "latitude_deg" in error.inner_text() and "90" in error.inner_text()
     pg.fill("#site-lat", "19.43")
     pg.click("#site-save")
