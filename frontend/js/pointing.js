@@ -103,6 +103,7 @@ async function load() {
     }
     status.textContent = `Pointing model failed: ${err.message}`;
     for (const id of CHARTS) showEmpty(id, "No pointing model");
+    $("pointing-results").hidden = true;  // the previous range's fit is not this one's
     return;
   }
   if (mine !== requested) return;

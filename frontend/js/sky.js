@@ -20,6 +20,7 @@ function offsetString(minutes) {
 
 /** Where a row's zone comes from: its file name (which wins), or the "Times … are in" selector. */
 function rowZone(row) {
+  if (row.zoneError && !row.input.value) return { source: "none", label: `no time: ${row.zoneError}` };
   if (row.offsetH !== null && row.offsetH !== undefined && row.fromName) {
     return { source: "name", label: `UTC${offsetString(row.offsetH * 60)}, from the file name` };
   }
@@ -79,6 +80,7 @@ async function readNameTimes(rows) {
     const res = await api(`/api/v1/vision/frame-times?${q}`);
     res.frames.forEach((t, i) => {
       const row = rows[i];
+      row.zoneError = t.zone_error || null;  // a zone the name states but cannot be read exactly
       if (!t.wall_time || row.input.value) return; // a time typed meanwhile wins
       row.input.value = t.wall_time;
       row.offsetH = t.utc_offset_h;
@@ -173,6 +175,7 @@ function resultCard(row, img, res, params) {
   const rows = [];
   const kv = (k, v) => rows.push(h("tr", {}, h("th", {}, k), h("td", {}, v)));
   kv("Sun found", res.sun_found ? `yes (confidence ${num(res.confidence, 2)})` : `no (confidence ${num(res.confidence, 2)})`);
+  if (!res.sun_found && res.reason) kv("Why not", res.reason);  // the service's words
   if (centroid) kv("Centroid [px]", `${num(centroid[0], 1)}, ${num(centroid[1], 1)}`);
   if (typeof res.azimuth_deg === "number") kv("Detected az / el [°]", `${num(res.azimuth_deg, 2)} / ${num(res.elevation_deg, 2)}`);
   if (eph) kv("Ephemeris az / el [°]", `${num(eph.azimuth_deg, 2)} / ${num(eph.elevation_deg, 2)}`);
@@ -215,6 +218,7 @@ async function detectAll(ev) {
   await namesRead;
   let done = 0;
   let failed = 0;
+  let firstAnalysed = null;  // the day the map shows: of a frame the service took
   for (const row of files) {
     $("sky-status").textContent = `detecting ${++done} of ${files.length}…`;
     const form = new FormData();
@@ -243,14 +247,14 @@ async function detectAll(ev) {
       img = await readSize(row.url);
     } catch { /* analysed by the server, but this browser cannot draw it: the card says so */ }
     out.append(resultCard(row, img, res, params));
+    firstAnalysed = firstAnalysed || res.timestamp || null;
   }
   const ok = files.length - failed;
   $("sky-status").textContent = failed
     ? `${ok} of ${files.length} image(s) analysed, ${failed} failed (see the red cards).`
     : `${ok} image(s) analysed.`;
   $("sky-detect").disabled = false;
-  const first = files.map(rowTimestamp).find(Boolean);
-  if (first) $("sky-day").value = localDate(trajectoryZone(), Date.parse(first));
+  if (firstAnalysed) $("sky-day").value = localDate(trajectoryZone(), Date.parse(firstAnalysed));
   loadTrajectory();
 }
 
@@ -412,7 +416,8 @@ async function deleteCalibration() {
   const id = sel.value;
   if (!id) return;
   if (!$("sky-token").value.trim()) {
-    $("sky-status").textContent = "Deleting needs a write token: paste one into “Write token” (heliotwin token create).";
+    $("sky-status").textContent = "Deleting needs a token: paste into “Write token” a site-scope token of the site "
+      + "(heliotwin token create --site ID --scope site), any site's write token for a free place, or the admin token.";
     return;
   }
   if (!confirm(`Delete calibration ${calibrationLegend(id)} and the detections made with it?`)) return;
@@ -437,7 +442,15 @@ async function evaluateCalibration() {
     $("sky-status").textContent = "Choose a calibration and images with their times first.";
     return;
   }
-  const cal = await api(`/api/v1/vision/calibrations/${encodeURIComponent(id)}`);
+  const box = $("sky-calibration-result");
+  let cal;
+  try {  // deleted meanwhile (another tab, the API): said, and the old evaluation cleared
+    cal = await api(`/api/v1/vision/calibrations/${encodeURIComponent(id)}`);
+  } catch (err) {
+    box.innerHTML = "";
+    $("sky-status").textContent = `Calibration #${id}: ${err.message}`;
+    return;
+  }
   const fittedOn = new Set(cal.frames.map((f) => f.filename));
   const form = new FormData();
   for (const r of timed) {
@@ -448,7 +461,6 @@ async function evaluateCalibration() {
   form.append("methods", "robust");
   placeParams(form);
   $("sky-status").textContent = `evaluating ${calibrationLegend(id)} on ${timed.length} frames…`;
-  const box = $("sky-calibration-result");
   box.innerHTML = "";
   try {
     const res = await api("/api/v1/vision/evaluate", { method: "POST", form, token: $("sky-token").value.trim() });
@@ -483,7 +495,8 @@ async function evaluateCalibration() {
 
 async function clearDetections() {
   if (!$("sky-token").value.trim()) {
-    $("sky-status").textContent = "Clearing needs a write token: paste one into “Write token” (heliotwin token create).";
+    $("sky-status").textContent = "Clearing needs a token: paste into “Write token” a site-scope token of the site "
+      + "(heliotwin token create --site ID --scope site), any site's write token for a free place, or the admin token.";
     return;
   }
   const day = $("sky-day").value || st.day;
@@ -533,6 +546,12 @@ export function init(state) {
   });
   $("sky-form").addEventListener("submit", detectAll);
   $("sky-calibrate").addEventListener("click", calibrate);
+  // Enter in the calibration's name calibrates (it submitted the form: a detection run)
+  $("sky-calibration-name").addEventListener("keydown", (ev) => {
+    if (ev.key !== "Enter") return;
+    ev.preventDefault();
+    if (!$("sky-calibrate").disabled) calibrate();
+  });
   if (st.meta?.vision_require_token) $("sky-token-why").textContent = "Write token (this service requires one for uploads and deletions)";
   $("sky-name-tz").addEventListener("change", refreshZones);
   $("sky-calibration").addEventListener("change", () => { $("sky-calibration-actions").hidden = !$("sky-calibration").value; });

@@ -79,7 +79,7 @@ def test_named_calibration_held_out_evaluation_and_delete(page, server, heliotwi
     page.screenshot(path=str(ARTIFACTS / "sky-calibrations.png"), full_page=True)
 
     page.click("#sky-calibration-delete")  # no token: says so, nothing deleted
-    assert "needs a write token" in page.text_content("#sky-status")
+    assert "needs a token" in page.text_content("#sky-status")
     page.fill("#sky-token", _token(server, heliotwin_cli))
     page.click("#sky-calibration-delete")
     page.wait_for_function("() => document.getElementById('sky-status').textContent"
