@@ -88,6 +88,11 @@ async function boot() {
   if (day && /^\d{4}-\d{2}-\d{2}$/.test(day) && day <= state.day) state.day = day;
   select.addEventListener("change", () => {
     setSite(select.value);
+    // the address follows on every page (only the Overview's said the new site: a reload
+    // of #sky?site=old went back to the old one)
+    const q = hashParams();
+    q.set("site", select.value);
+    history.replaceState(null, "", `#${state.page}?${q}`);
     for (const [name, m] of Object.entries(PAGES)) if (started.has(name)) m.siteChanged?.(state, name === state.page);
   });
   window.addEventListener("hashchange", () => {

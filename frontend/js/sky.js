@@ -347,6 +347,9 @@ async function loadTrajectory() {
   let list = [];
   try {
     list = (await api("/api/v1/vision/detections", { params })).detections;
+    // a typed place shows the free places' detections: what its Clear deletes (without
+    // a site_id the service lists every place's, and the sites' stayed drawn after Clear)
+    if (!params.site_id) list = list.filter((d) => d.site_id === null);
   } catch (err) {
     showEmpty("chart-sky-track", `Detections unavailable: ${err.message}`);
     showEmpty("chart-sky-error", "");

@@ -257,3 +257,16 @@ def test_twin_iframe_is_a_viser_canvas_of_its_own_viewer(page, server) -> None:
     assert "/site/tehuantepec/viewer/" in urllib.parse.unquote(frame_el.get_attribute("src"))
     assert page.get_attribute("#twin-open", "href").startswith(server.viser_url)
     frame_el.content_frame().wait_for_selector("canvas", timeout=30_000)
+
+
+def test_the_address_follows_the_site_picker_on_every_page(page, server) -> None:  # type: ignore[no-untyped-def]
+    """Picking a site on the Sky page puts it in the address, so a reload stays on it (only
+    the Overview wrote it: a reload of #sky?site=old went back to the old site)."""
+    page.goto(server.url + "/#sky?site=tehuantepec")
+    page.wait_for_selector("#sky-form")
+    page.select_option("#site-select", "guadalajara_fisheye")
+    page.wait_for_function("() => location.hash.includes('site=guadalajara_fisheye')")
+    assert page.evaluate("() => location.hash").startswith("#sky?")
+    page.reload()
+    page.wait_for_selector("#sky-form")
+    assert page.input_value("#site-select") == "guadalajara_fisheye"

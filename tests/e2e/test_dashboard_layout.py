@@ -37,7 +37,7 @@ def test_no_page_scrolls_sideways_at_phone_width(browser, server, request) -> No
         names = page.eval_on_selector_all("nav.tabs a[data-page]",
                                           "links => links.map(a => a.dataset.page)")
         assert len(names) >= 7
-        too_wide = {}
+        too_wide, squeezed = {}, {}
         for name in names:
             page.goto(f"{server.url}/#{name}")
             page.wait_for_selector(f'section.page[data-page="{name}"]:not([hidden])')
@@ -48,6 +48,13 @@ def test_no_page_scrolls_sideways_at_phone_width(browser, server, request) -> No
                     page.wait_for_load_state("networkidle", timeout=10_000)
                 except PlaywrightTimeout:
                     pass
+            # a visible card title keeps some width (they shrank to 0 px beside a select)
+            titles = page.evaluate(
+                f"""() => [...document.querySelectorAll('section.page[data-page="{name}"] '
+                       + '.card > header h2')].filter(h => h.offsetParent !== null
+                       && h.getBoundingClientRect().width < 40).map(h => h.textContent)""")
+            if titles:
+                squeezed[name] = titles
             width = page.evaluate("() => document.documentElement.scrollWidth")
             if width > PHONE["width"]:
                 too_wide[name] = (width, page.evaluate(
@@ -56,3 +63,4 @@ def test_no_page_scrolls_sideways_at_phone_width(browser, server, request) -> No
                                  && el.getBoundingClientRect().right > innerWidth + 0.5)
                          .slice(0, 5).map(el => `${el.tagName}#${el.id}.${el.className}`)"""))
         assert not too_wide, f"pages wider than {PHONE['width']} px: {too_wide}"
+        assert not squeezed, f"card titles squeezed under 40 px: {squeezed}"
