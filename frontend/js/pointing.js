@@ -125,9 +125,9 @@ async function load() {
   const tz = state.site.timezone;
   const when = p.ts.map((t) => toLocalWall(tz, t));
   const table = (filename) => ({
-    columns: ["time_utc", "azimuth_deg", "elevation_deg", "sun_offset_x_mrad", "sun_offset_y_mrad",
+    columns: ["time_utc", "time_local", "azimuth_deg", "elevation_deg", "sun_offset_x_mrad", "sun_offset_y_mrad",
       "residual_x_mrad", "residual_y_mrad", "outlier"],
-    rows: all.map((i) => [p.ts[i], p.azimuth_deg[i], p.elevation_deg[i], p.sun_offset_x_mrad[i],
+    rows: all.map((i) => [p.ts[i], when[i], p.azimuth_deg[i], p.elevation_deg[i], p.sun_offset_x_mrad[i],
       p.sun_offset_y_mrad[i], p.residual_x_mrad[i], p.residual_y_mrad[i], p.outlier[i]]),
     filename: `${state.site.site_id}_pointing_model_${start}_${end}_${filename}.csv`,
   });
@@ -140,7 +140,7 @@ async function load() {
     { x: pick(when, out), y: out.map((i) => Math.hypot(p.sun_offset_x_mrad[i], p.sun_offset_y_mrad[i])),
       name: "outliers (glints), left out", mode: "markers", type: "scatter", marker: { color: COLORS.sun, size: 6, symbol: "x" } },
   ], baseLayout({ hovermode: "closest",
-    xaxis: { title: { text: "site time" }, gridcolor: "#e9edf1" },
+    xaxis: { title: { text: `site time (${tz})` }, gridcolor: "#e9edf1" },
     yaxis: { title: { text: "pointing error [mrad] (log)" }, type: "log", dtick: 1, gridcolor: "#e9edf1" } }), table("day"));
   await draw("chart-pointing-azimuth", offsetTraces(p.azimuth_deg, p, inl, out), offsetLayout("encoder azimuth [°]"), table("azimuth"));
   await draw("chart-pointing-elevation", offsetTraces(p.elevation_deg, p, inl, out), offsetLayout("encoder elevation [°]"), table("elevation"));
