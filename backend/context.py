@@ -71,7 +71,7 @@ def open_context(settings: Settings) -> ServiceContext:
     writer.start()
 
     def store_sites(new: list[Site]) -> None:  # a site file read while running: its rows
-        writer.call(lambda conn: sync_sites(conn, new)).result()
+        writer.call(lambda conn: sync_sites(conn, new)).result(timeout=60)  # not for ever
 
     registry.store_through(store_sites)
     twin = TwinService(registry, engine, writer, settings.twin.on_demand_max_days,

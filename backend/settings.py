@@ -469,6 +469,18 @@ def settings_error_text(exc: ValidationError) -> str:
     (``HELIOTWIN_ENERGY_MAX_GAP_S=3601: Input should be less than or equal to 3600``):
     ``serve`` printed pydantic's traceback."""
     err = exc.errors()[0]
-    name = "_".join(str(p) for p in err["loc"]).upper()
-    name = name if name.startswith(PREFIX) else PREFIX + name  # an alias is the variable
-    return f"{name}={err.get('input')!s}: {err['msg']}"
+    loc = str(err["loc"][0]) if err["loc"] else ""
+    # the variable from the group that raised (exc.title, its class) and the field: a group's
+    # prefix (HELIOTWIN_TWIN_…) is not in the error's location
+    name = next((env for env, (group, field_name, field) in env_fields().items()
+                 if _GROUPS[group].__name__ == exc.title
+                 and loc in (field_name, field.validation_alias)), None)
+    if name is None:
+        name = loc.upper() if loc.upper().startswith(PREFIX) else PREFIX + loc.upper()
+    msg = str(err["msg"]).removeprefix("Value error, ")
+    value = err.get("input")
+    if any(word in name for word in ("URL", "TOKEN", "SECRET", "PASSWORD")):
+        # the value may hold a password: neither it nor a message quoting it is shown
+        quoted = isinstance(value, str) and value and value in msg
+        return f"{name} (value not shown): {'not valid' if quoted else msg}"
+    return f"{name}={value!s}: {msg}"

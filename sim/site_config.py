@@ -294,11 +294,13 @@ def _where(loc: tuple[int | str, ...]) -> str:
 
 
 def _control_characters(value: Any, path: str = "") -> str | None:
-    """The dotted path of the first string (key or value) holding a control character
-    (U+0000–U+001F, U+007F), None when there is none: PostgreSQL refuses a NUL in text, and
-    a config it refused made the service unable to start."""
+    """The dotted path of the first string (key or value) holding a control character other
+    than a tab or a line end (U+0000–U+001F but those, U+007F), None when there is none:
+    PostgreSQL refuses a NUL in text, and a config it refused made the service unable to
+    start; a note may span lines."""
     if isinstance(value, str):
-        return path if any(ord(c) < 32 or ord(c) == 127 for c in value) else None
+        return path if any((ord(c) < 32 and c not in "\t\n\r") or ord(c) == 127
+                           for c in value) else None
     items = value.items() if isinstance(value, dict) else (
         enumerate(value) if isinstance(value, list) else ())
     for key, item in items:
@@ -315,8 +317,8 @@ def validate_site_config(data: Any, where: str = "site") -> SiteConfig:
     if not isinstance(data, dict):
         raise ValueError(f"{where}: a site config must be a JSON object")
     if (path := _control_characters(data)) is not None:
-        raise ValueError(f"{where}: {path}: holds a control character (a NUL, a tab, a "
-                         "newline…); write it without")
+        raise ValueError(f"{where}: {path}: holds a control character (a NUL, an escape…); "
+                         "write it without")
     try:
         return SiteConfig.model_validate(data)
     except ValidationError as exc:

@@ -159,12 +159,16 @@ class TwinResult:
         if s.empty:
             return []
         zone = self.site.timezone
-        first = s.index[0].tz_convert(zone).normalize()
-        last = s.index[-1].tz_convert(zone).normalize()
-        dates = pd.date_range(first.date(), last.date(), freq="D")
-        edges = [pd.Timestamp(d.date(), tz=zone) for d in dates]
-        edges.append(min(pd.Timestamp((dates[-1] + pd.Timedelta(days=1)).date(), tz=zone),
-                         self.end))
+
+        def midnight(day: pd.Timestamp) -> pd.Timestamp:  # a missing one: the first instant
+            return pd.Timestamp(day.date()).tz_localize(  # after (Santiago, Havana: normalize
+                zone, ambiguous=True, nonexistent="shift_forward")  # raised on those days)
+
+        first = s.index[0].tz_convert(zone).date()
+        last = s.index[-1].tz_convert(zone).date()
+        dates = pd.date_range(first, last, freq="D")
+        edges = [midnight(d) for d in dates]
+        edges.append(min(midnight(dates[-1] + pd.Timedelta(days=1)), self.end))
         edges_s = np.array([e.timestamp() for e in edges])
         t = s.index.as_unit("ns").asi8 / 1e9  # not whole seconds: a step may be 0.5 s
         t = np.append(t, t[-1] + self.step_s)  # the instant closing the last step

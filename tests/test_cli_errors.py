@@ -47,15 +47,26 @@ def test_a_refusal_is_one_error_line_on_stderr_and_exit_2(
     assert err.startswith(line) and err.count("\n") == 1, err
 
 
-def test_serve_names_a_bad_setting_in_one_line(monkeypatch: pytest.MonkeyPatch,
+@pytest.mark.parametrize("name,value,line", [
+    ("HELIOTWIN_ENERGY_MAX_GAP_S", "3601",
+     "HELIOTWIN_ENERGY_MAX_GAP_S=3601: Input should be less than or equal to 3600"),
+    # a group's own prefix is the variable's (it said HELIOTWIN_HISTORY_DAYS)
+    ("HELIOTWIN_TWIN_HISTORY_DAYS", "-5",
+     "HELIOTWIN_TWIN_HISTORY_DAYS=-5: Input should be greater than or equal to 0"),
+    # a URL may hold a password: not printed
+    ("HELIOTWIN_DATABASE_URL", "postgresql+psycopg://u:s3cret@h:notaport/db",
+     "HELIOTWIN_DATABASE_URL (value not shown): "),
+])
+def test_serve_names_a_bad_setting_in_one_line(name: str, value: str, line: str,
+                                               monkeypatch: pytest.MonkeyPatch,
                                                capsys: pytest.CaptureFixture[str]) -> None:
     """A bad environment value stops ``serve`` with the variable, its value and the
     problem (it printed pydantic's traceback)."""
-    monkeypatch.setenv("HELIOTWIN_ENERGY_MAX_GAP_S", "3601")
+    monkeypatch.setenv(name, value)
     assert cli.main(["serve", "--no-demo"]) == 2
     out, err = capsys.readouterr()
-    assert err == ("heliotwin serve: error: HELIOTWIN_ENERGY_MAX_GAP_S=3601: Input should be "
-                   "less than or equal to 3600\n")
+    assert err.startswith(f"heliotwin serve: error: {line}") and err.count("\n") == 1, err
+    assert "s3cret" not in err
 
 
 def test_fail_carries_its_exit_code(monkeypatch: pytest.MonkeyPatch,

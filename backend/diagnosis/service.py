@@ -75,8 +75,9 @@ MAX_DAYS = 400
 #: site_key; 12: a tracker making next to nothing gets no shape fits, faults.DEAD_SHARE; a day
 #: in progress judged on its minutes so far for its measured sky too; 13: a coarse or slow
 #: logger's held values are not a frozen logger, sky_sensor._stale; 14: a range that cuts
-#: a day makes it ``partial``, without shape fits, and is not cached).
-CACHE_VERSION = 14
+#: a day makes it ``partial``, without shape fits, and is not cached; 15: the sky's clock,
+#: faults.sky_clock).
+CACHE_VERSION = 15
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99

@@ -192,7 +192,11 @@ class DemoLogger:
                 continue
             if r.status_code in (401, 403):
                 self.readings_dropped += len(readings) - k
-                raise TokenRefused(f"{r.status_code} {r.json().get('detail', r.text[:200])}")
+                try:  # a proxy's own 401/403 page is not JSON
+                    detail = r.json().get("detail", r.text[:200])
+                except ValueError:
+                    detail = r.text[:200]
+                raise TokenRefused(f"{r.status_code} {detail}")
             if r.status_code != 200:
                 self.readings_dropped += len(chunk)
                 logger.error("demo logger: dropped %d readings %s..%s: %s %s", len(chunk),
@@ -216,7 +220,7 @@ class DemoLogger:
     def backfill(self, days: float, now_s: float | None = None) -> tuple[int, int]:
         """Post the last ``days`` days up to the current minute."""
         now_min = int((time.time() if now_s is None else now_s) // 60 * 60)
-        start = now_min - int(days * 86400)
+        start = now_min - int(days * 86400) // 60 * 60  # whole minutes: no piece under a step
         total = (0, 0)
         for lo in range(start, now_min, 86400):
             a, d = self.post(self.readings(lo, min(lo + 86400, now_min)))

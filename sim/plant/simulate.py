@@ -90,10 +90,11 @@ def sky_conditions(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame 
     else:
         t_w = _seconds(weather.index)
         t = _seconds(times)
-        last = len(t) - 2 if closing and len(t) > 1 else len(t) - 1
-        if t[0] < t_w[0] or t[last] > t_w[-1]:
+        # the closing instant may lie past the weather (even alone in a run's last chunk)
+        steps = t[:-1] if closing else t
+        if steps.size and (steps[0] < t_w[0] or steps[-1] > t_w[-1]):
             raise ValueError(f"weather covers {weather.index[0]}..{weather.index[-1]}, "
-                             f"not {times[0]}..{times[last]}")
+                             f"not {times[0]}..{times[steps.size - 1]}")
         for k in ("ghi", "dni", "dhi"):
             sky[k] = np.interp(t, t_w, weather[k].to_numpy(float))
         sky["temp_air"] = (np.interp(t, t_w, weather["temp_air"].to_numpy(float))

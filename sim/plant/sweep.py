@@ -225,9 +225,11 @@ def interior_beam_shaded_pct(layout: FieldLayout, collector: Collector,
     """The interior collector's Σ F · DNI / Σ DNI [%] over the daylight steps of ``sky``,
     every collector facing the sun (twoaxistracking's figure; a sweep case's
     ``interior_beam_shaded_pct`` under ``sun`` without the electrical model): what a layout
-    search evaluates per candidate. ``sky`` as :func:`case_sky` returns it."""
+    search evaluates per candidate. ``sky`` as :func:`case_sky` returns it: the range's
+    steps and the instant closing the last, which is left out (as the sweep's cases do)."""
     from sim.plant.shading import plant_shade
 
+    sky = {k: v[:-1] for k, v in sky.items()}
     up = sky["apparent_elevation"] > 0
     az, el, dni = sky["solar_azimuth"][up], sky["apparent_elevation"][up], sky["dni"][up]
     positions, interior = lattice_positions(layout, collector.area, 5, 5)

@@ -115,3 +115,36 @@ def test_the_controller_and_motors_stop_at_the_end_whatever_the_step() -> None:
         by_minute.summary()["actuator_energy_wh"], rel=1e-9)
     with pytest.raises(ValueError, match="step_s: 86400 s is longer than the run"):
         simulate(site, _t("12:00"), _t("12:01"), step_s=86400, controller="open_loop_spa")
+
+
+def test_a_last_chunk_holding_only_the_closing_instant_takes_the_weathers_last_row(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A plant run whose steps are a whole number of chunks: its last chunk is the closing
+    instant alone, which may lie past the weather as in any other chunk (it was refused)."""
+    import sim.plant.simulate as plant_simulate
+
+    plant = load_plant("penarroya")
+    t = lambda hhmm: _t(hhmm, "2021-06-01", plant.timezone)  # noqa: E731
+    steps = pd.date_range(t("09:00"), t("13:00"), freq="3600s", inclusive="left")
+    weather = pd.DataFrame({"ghi": 800.0, "dni": 700.0, "dhi": 100.0}, index=steps)
+    whole = simulate_plant(plant, t("09:00"), t("13:00"), 3600, weather=weather)
+    monkeypatch.setattr(plant_simulate, "_CHUNK", 4)  # 4 steps: the closing instant alone
+    chunked = simulate_plant(plant, t("09:00"), t("13:00"), 3600, weather=weather)
+    assert chunked.energy_wh("power_w") == pytest.approx(whole.energy_wh("power_w"),
+                                                         rel=1e-12)
+
+
+@pytest.mark.parametrize("zone,start", [("America/Santiago", "2022-09-11 12:00"),
+                                        ("America/Havana", "2022-11-06 12:00")])
+def test_the_days_of_a_run_over_a_missing_or_repeated_midnight(zone: str, start: str) -> None:
+    """Santiago's clocks skip 00:00 on 11 Sep 2022, Havana's repeat it on 6 Nov: the days'
+    edges take the first instant of each day (the summary raised 'nonexistent time')."""
+    from dataclasses import replace
+
+    site = replace(load_site("tehuantepec"), timezone=zone)
+    t0 = pd.Timestamp(start, tz=zone)
+    r = simulate(site, t0, t0 + pd.Timedelta(days=2), step_s=600)
+    days = r.summary()["days"]
+    assert len(days) == 3
+    assert sum(d["tracker_energy_wh"] for d in days) == pytest.approx(
+        r.energy_wh("tracker"), rel=1e-12)

@@ -240,3 +240,15 @@ def test_a_relocated_tracker_follows_every_day_without_unwinding_in_daylight(
     sun_step = (np.diff(az_sun) + 180.0) % 360.0 - 180.0  # the sun's move, the short way
     off = np.abs(np.diff(joint) - sun_step)[up]
     assert up.any() and off.max() < 1e-6, f"unwound {off.max():.0f}° with the sun up"
+
+
+def test_a_note_may_span_lines_but_holds_no_nul() -> None:
+    """Tabs and line ends are text; a NUL (PostgreSQL refuses it) or an escape is not."""
+    from sim.site_config import validate_site_config
+    from sim.sites import load_site
+
+    config = load_site("tehuantepec").to_config()
+    validate_site_config({**config, "notes": "line one\n\tline two\r\n"})
+    for bad in ("a\x00b", "a\x1bb"):
+        with pytest.raises(ValueError, match="notes: holds a control character"):
+            validate_site_config({**config, "notes": bad})
