@@ -70,28 +70,46 @@ def _jpeg_size(data: bytes) -> tuple[int, int]:
     raise ImageError("corrupt JPEG: no frame header (SOF) found")
 
 
-def _png_sample_bits(data: bytes) -> int | None:
-    """The significant bits per sample an ``sBIT`` chunk states (the most of its channels),
-    None without one; chunks are walked from the IHDR up to the first IDAT."""
-    i = 8
+def _png_chunks_before_data(data: bytes) -> dict[bytes, bytes]:
+    """The chunks from the IHDR up to the first IDAT (``sBIT``, ``tRNS`` …) by kind."""
+    chunks, i = {}, 8
     while i + 8 <= len(data):
         (length,) = struct.unpack(">I", data[i:i + 4])
         kind = data[i + 4:i + 8]
         if kind == b"IDAT":
-            return None
-        if kind == b"sBIT" and length and i + 8 + length <= len(data):
-            return max(data[i + 8:i + 8 + length])
+            break
+        chunks[kind] = data[i + 8:i + 8 + length]
         i += 12 + length
-    return None
+    return chunks
 
 
-def _to_bgr8(raw: NDArray[Any], sample_bits: int | None) -> NDArray[np.uint8]:
+def _transparent_colour(raw: NDArray[Any], colour_type: int, trns: bytes) -> NDArray[Any]:
+    """A grey or RGB PNG's ``tRNS`` colour (one value, transparent) as an alpha channel
+    (the decoder expands a palette's itself, not these): ``raw`` with alpha appended."""
+    if raw.ndim == 3 and raw.shape[2] in (2, 4):
+        return raw  # expanded already
+    full = 65535 if raw.dtype == np.uint16 else 255
+    if colour_type == 0 and len(trns) >= 2:
+        clear = raw == struct.unpack(">H", trns[:2])[0]
+    elif colour_type == 2 and len(trns) >= 6 and raw.ndim == 3:
+        r, g, b = struct.unpack(">HHH", trns[:6])
+        clear = (raw[..., 2] == r) & (raw[..., 1] == g) & (raw[..., 0] == b)  # BGR order
+    else:
+        return raw
+    alpha = np.where(clear, 0, full).astype(raw.dtype)
+    return np.dstack([raw if raw.ndim == 3 else raw[..., None], alpha])
+
+
+def _to_bgr8(raw: NDArray[Any], scaled: bool) -> NDArray[np.uint8]:
     """A PNG decoded as stored (8/16 bits, grey or colour, with or without alpha) → 8-bit
-    BGR. A 16-bit sample holds ``sample_bits`` significant bits (the ``sBIT`` chunk), else
-    as many as its brightest value needs, rounded up to an even depth of 8–16: a 12-bit
-    camera's data stored in 16 bits saturate at 4095, and that is 255 here (its top byte
-    alone made the frame almost black). Alpha is composited onto black: a transparent
-    corner outside a fisheye's image circle is no light, not the white its colour says."""
+    BGR. A 16-bit PNG holds its samples scaled to the full 16 bits, as the format asks
+    (``scaled``: an ``sBIT`` chunk says the camera's depth): its top byte. Without ``sBIT``
+    a frame whose brightest value fits 10 or 12 bits is taken as such a camera's unscaled
+    data (common in industrial cameras' files), its saturation 255 here (its top byte alone
+    made the frame almost black); a brighter one as scaled — a real 16-bit frame is not
+    stretched by a guess from its content. Alpha (a channel, or ``tRNS`` expanded by the
+    decoder) is composited onto black: a transparent corner outside a fisheye's image
+    circle is no light, not the white its colour says."""
     arr = raw if raw.ndim == 3 else raw[..., None]
     alpha = arr[..., -1] if arr.shape[2] in (2, 4) else None
     colour = arr[..., :-1] if alpha is not None else arr
@@ -102,8 +120,8 @@ def _to_bgr8(raw: NDArray[Any], sample_bits: int | None) -> NDArray[np.uint8]:
         a = cv2.merge([alpha] * 3)
         colour = cv2.multiply(np.ascontiguousarray(colour), a, scale=1.0 / full)
     if raw.dtype == np.uint16:
-        bits = sample_bits or int(colour.max()).bit_length()
-        bits = min(16, max(8, bits + bits % 2))
+        brightest = int(colour.max()).bit_length()
+        bits = 16 if scaled or brightest > 12 else max(10, brightest + brightest % 2)
         colour = np.ascontiguousarray(colour)  # shifted in place: 16-bit frames are large
         np.right_shift(colour, bits - 8, out=colour)
         np.minimum(colour, 255, out=colour)
@@ -124,14 +142,19 @@ def decode_image(data: bytes, max_pixels: int) -> NDArray[np.uint8]:
     if w * h > max_pixels:
         raise ImageError(f"{fmt.upper()} image of {w}×{h} = {w * h} pixels exceeds the limit "
                          f"of {max_pixels} pixels", too_large=True)
-    # a PNG of 16 bits (IHDR bit depth) or with alpha (colour type 4 or 6) is read as stored
-    as_stored = fmt == "png" and len(data) > 25 and (data[24] == 16 or data[25] in (4, 6))
+    # a PNG of 16 bits (IHDR bit depth), with alpha (colour type 4 or 6) or a transparent
+    # colour (tRNS: a palette's or a grey/RGB value) is read as stored
+    chunks = _png_chunks_before_data(data) if fmt == "png" else {}
+    as_stored = fmt == "png" and len(data) > 25 and (
+        data[24] == 16 or data[25] in (4, 6) or b"tRNS" in chunks)
     buf = np.frombuffer(data, np.uint8)
     img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED if as_stored else cv2.IMREAD_COLOR)
     if img is None:
         raise ImageError(f"corrupt or truncated {fmt.upper()} image")
     if as_stored:
-        img = _to_bgr8(img, _png_sample_bits(data))
+        if b"tRNS" in chunks:
+            img = _transparent_colour(img, data[25], chunks[b"tRNS"])
+        img = _to_bgr8(img, b"sBIT" in chunks)
     # IMREAD_COLOR applies a JPEG's EXIF orientation (as browsers do when they show it),
     # so an orientation of 5-8 swaps the header's width and height
     if (img.shape[1], img.shape[0]) not in ((w, h), (h, w)):

@@ -123,3 +123,41 @@ def test_a_12_bit_png_and_a_transparent_border_find_the_same_sun() -> None:
         got = detect_robust(out)
         assert got.sun_found and got.centroid_px is not None
         assert np.hypot(*np.subtract(got.centroid_px, ref.centroid_px)) < 1.0
+
+
+def _chunk(kind: bytes, body: bytes) -> bytes:
+    return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+
+def _png_of(w: int, depth: int, colour_type: int, row: bytes, extra: bytes = b"") -> bytes:
+    """A one-row PNG written by hand (the chunks cv2.imencode does not write)."""
+    ihdr = struct.pack(">IIBBBBB", w, 1, depth, colour_type, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", ihdr) + extra
+            + _chunk(b"IDAT", zlib.compress(b"\x00" + row)) + _chunk(b"IEND", b""))
+
+
+def test_a_16_bit_png_is_its_top_byte_unless_its_data_fit_12_bits() -> None:
+    """The format scales a 12-bit camera's samples to 16 bits and says so in sBIT: the top
+    byte (a reviewer's repro: sBIT read as a shift made it 16× too bright); unscaled 12-bit
+    data (no sBIT, brightest ≤ 4095) saturate at 4095; a real 16-bit frame is not stretched
+    by its brightest value (3000 of 65535 is 11, not 187)."""
+    vals = (100, 1000, 2000, 4095)
+    scaled = b"".join(struct.pack(">H", (v << 4) | (v >> 8)) for v in vals)
+    out = decode_image(_png_of(4, 16, 0, scaled, _chunk(b"sBIT", b"\x0c")), 100)
+    assert out[0, :, 0].tolist() == [6, 62, 125, 255]
+    raw12 = b"".join(struct.pack(">H", v) for v in vals)
+    assert decode_image(_png_of(4, 16, 0, raw12), 100)[0, :, 0].tolist() == [6, 62, 125, 255]
+    real16 = b"".join(struct.pack(">H", v) for v in (3000, 20000, 65535, 0))
+    assert decode_image(_png_of(4, 16, 0, real16), 100)[0, :, 0].tolist() == [11, 78, 255, 0]
+
+
+@pytest.mark.parametrize("colour_type,row,extra", [
+    (3, b"\x00\x01", _chunk(b"PLTE", b"\xff\xff\xff\xff\x00\x00") + _chunk(b"tRNS", b"\x00")),
+    (0, b"\xff\x80", _chunk(b"tRNS", b"\x00\xff")),
+    (2, b"\xff\xff\xff\x10\x20\x30", _chunk(b"tRNS", b"\x00\xff\x00\xff\x00\xff")),
+])
+def test_a_transparent_colour_is_no_light(colour_type: int, row: bytes, extra: bytes) -> None:
+    """tRNS (a palette's transparent entry, a grey or RGB value) is composited onto black,
+    as an alpha channel is: transparent white corners read as white sky."""
+    out = decode_image(_png_of(2, 8, colour_type, row, extra), 100)
+    assert out[0, 0].tolist() == [0, 0, 0] and out[0, 1].max() > 0
