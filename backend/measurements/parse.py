@@ -443,7 +443,9 @@ def build_batch(
     # can apply: the common batch skips building their masks
     checks = np.count_nonzero(raw) or np.count_nonzero(v_ok & i_ok) < n
     for mask, field, msg in () if not checks else (
-        (raw & ~both_raw, "voltage_adc", "a raw reading needs both voltage_adc and current_adc"),
+        # the missing one named (a row without current_adc was reported on voltage_adc)
+        (va_ok & ~ia_ok, "current_adc", "a raw reading needs both voltage_adc and current_adc"),
+        (ia_ok & ~va_ok, "voltage_adc", "a raw reading needs both voltage_adc and current_adc"),
         (raw & (v_ok | i_ok), "voltage_adc",
          "send either voltage_v/current_a or voltage_adc/current_adc, not both"),
         (~raw & ~v_ok & ~i_ok & ~p_ok, "power_w",

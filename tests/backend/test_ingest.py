@@ -386,3 +386,14 @@ def test_an_empty_line_between_readings_is_named_as_such() -> None:
     with pytest.raises(IngestError) as err:
         parse_csv_batch(body, ARRAYS, Limits(future_tolerance_s=10**10))
     assert [(e["line"], "empty line" in e["msg"]) for e in err.value.errors] == [(3, True)]
+
+
+@pytest.mark.parametrize("sent,missing", [("voltage_adc", "current_adc"),
+                                          ("current_adc", "voltage_adc")])
+def test_a_raw_reading_names_the_adc_value_it_lacks(sent: str, missing: str) -> None:
+    """A row without current_adc was reported on voltage_adc."""
+    row = {"ts": "2026-01-05T12:00:00Z", "array": "tracker", sent: 512}
+    with pytest.raises(IngestError) as err:
+        parse_json_batch(orjson.dumps({"readings": [row]}), ARRAYS,
+                         Limits(future_tolerance_s=10**10))
+    assert [e["field"] for e in err.value.errors] == [missing]
