@@ -380,8 +380,9 @@ def _emoncms_columns(rows: list[Any], errors: _Errors) -> dict[str, list[Any]]:
                 what = f"{len(row)} values" if type(row) is list else type(row).__name__
                 errors.add(r, None, f"a row must be [{', '.join(EMONCMS_ROW)}] (power_w may "
                                     f"be left off), got {what}", "type_error")
-                continue
-            for j, x in enumerate(row):
+                if type(row) is not list:
+                    continue
+            for j, x in enumerate(row[:len(names)]):  # what a short row holds is not "missing"
                 cols[j][r] = x
     out = dict(zip(names, cols, strict=True))
     return {f: out.get(f, [None] * n) for f in FIELDS}

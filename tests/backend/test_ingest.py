@@ -397,3 +397,12 @@ def test_a_raw_reading_names_the_adc_value_it_lacks(sent: str, missing: str) -> 
         parse_json_batch(orjson.dumps({"readings": [row]}), ARRAYS,
                          Limits(future_tolerance_s=10**10))
     assert [e["field"] for e in err.value.errors] == [missing]
+
+
+def test_a_short_emoncms_row_is_not_said_to_lack_what_it_sent() -> None:
+    """[unix_s, array, voltage_v]: its length, and the current it lacks — not 'unix_s is
+    missing' and 'array missing' beside it (both were sent)."""
+    errors = _errors(orjson.dumps([[1714557600, "tracker", 26.0]]))
+    assert [(e["field"], e["msg"].split(" (")[0]) for e in errors] == [
+        (None, "a row must be [unix_s, array, voltage_v, current_a, power_w]"),
+        ("current_a", "current_a is missing")]
