@@ -242,6 +242,11 @@ class TwinResult:
         weighted = (float(np.sqrt(np.sum(weight * err**2) / np.sum(weight)))
                     if weight.size and np.sum(weight) > 0 else None)
 
+        # each sample stands for its step; the last only up to the run's end (a step that
+        # does not divide the run is cut there: it counted whole)
+        step_s = np.full(len(s), self.step_s)
+        if len(s):
+            step_s[-1] = min(self.step_s, (self.end - s.index[-1]).total_seconds())
         actuator_wh = self.actuator_move_energy_wh + self.actuator_standby_energy_wh
         ideal_wh = tracker_wh if self.ideal_tracker_energy_wh is None else (
             self.ideal_tracker_energy_wh)
@@ -254,7 +259,7 @@ class TwinResult:
             "pointing_error_p95_mrad": float(np.percentile(err, 95)) if err.size else None,
             "pointing_error_max_mrad": float(err.max()) if err.size else None,
             "pointing_error_energy_weighted_rms_mrad": weighted,
-            "pointing_error_minutes": int(round(err.size * self.step_s / 60.0)),
+            "pointing_error_minutes": int(round(float(step_s[on].sum()) / 60.0)),
             "pointing_min_elevation_deg": POINTING_MIN_ELEVATION_DEG,
             "azimuth_error_rms_mrad": rms(az_err),
             "elevation_error_rms_mrad": rms(el_err),

@@ -148,3 +148,12 @@ def test_the_days_of_a_run_over_a_missing_or_repeated_midnight(zone: str, start:
     assert len(days) == 3
     assert sum(d["tracker_energy_wh"] for d in days) == pytest.approx(
         r.energy_wh("tracker"), rel=1e-12)
+
+
+def test_the_pointing_minutes_end_with_the_run() -> None:
+    """08:00–15:00 at 90-minute steps: the last step is cut at 15:00 (it counted whole:
+    450 minutes against 420)."""
+    site = load_site("tehuantepec")
+    for step in (60, 5400):
+        r = simulate(site, _t("08:00"), _t("15:00"), step_s=step, controller="open_loop_spa")
+        assert r.summary()["pointing_error_minutes"] == 420, step
