@@ -96,8 +96,9 @@ class SiteInfo:
         """Whether the twin can simulate the site: arrays named ``tracker`` and ``fixed`` with
         those mounts (:func:`sim.twin.simulate`'s rule). A site may store readings of arrays
         named otherwise; it has no twin, diagnosis or sky from its fixed array."""
-        return all(name in self.arrays and self.arrays[name].kind == name
-                   for name in ("tracker", "fixed"))
+        from sim.twin import has_twin_arrays
+
+        return has_twin_arrays({name: a.kind for name, a in self.arrays.items()})
 
 
 def _kind(cfg: object) -> str:

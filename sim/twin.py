@@ -64,7 +64,7 @@ from sim.tracking import (
 from vision.sphere import angular_separation_deg, enu_from_sky, sky_from_enu
 
 __all__ = ["CONTROLLERS", "POINTING_MIN_ELEVATION_DEG", "RECEIVERS", "SERIES_COLUMNS",
-           "TwinResult", "check_step", "simulate"]
+           "TwinResult", "check_step", "has_twin_arrays", "simulate"]
 
 #: The pointing error is stated only with the sun above this apparent elevation [°]: below it
 #: refraction and the horizon make the sun's place uncertain by tenths of a degree, the
@@ -301,6 +301,12 @@ def _as_timestamp(value: Any) -> Any:
         return pd.Timestamp(value)
     except (TypeError, ValueError):
         return value
+
+
+def has_twin_arrays(mounts: Mapping[str, Any]) -> bool:
+    """Whether a site of these arrays (name → mount) can be simulated: arrays named
+    ``tracker`` and ``fixed``, so mounted (the rule :func:`_check_inputs` enforces)."""
+    return all(mounts.get(name) == name for name in ("tracker", "fixed"))
 
 
 def check_step(start: pd.Timestamp, end: pd.Timestamp, step_s: float) -> None:

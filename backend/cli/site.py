@@ -109,9 +109,10 @@ def _write(config: dict[str, Any], force: bool) -> int:
     path = write_site_file(directory, config)
     where = _sync_database(config)
     arrays = config.get("arrays") or {}
-    # the twin's rule (sim.twin, SiteInfo.has_twin): arrays named tracker and fixed, so mounted
-    runs = all(isinstance(arrays.get(n), dict) and arrays[n].get("mount") == n
-               for n in ("tracker", "fixed"))
+    from sim.twin import has_twin_arrays
+
+    runs = has_twin_arrays({n: a.get("mount") for n, a in arrays.items()
+                            if isinstance(a, dict)})
     what = (f"`heliotwin simulate --site {config['site_id']}` runs it" if runs else
             "it has no arrays named tracker and fixed, so no twin to simulate (a camera "
             "site: it takes sky frames)")
