@@ -104,6 +104,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sw.add_argument("--lat", type=float, help="latitude [°], north positive")
     sw.add_argument("--lon", type=float, help="longitude [°], east positive")
     sw.add_argument("--altitude-m", type=float, default=0.0, help="altitude [m] (default 0)")
+    sw.add_argument("--timezone", help="IANA zone of the local days at --lat/--lon (bare "
+                    "--start/--end dates; default UTC; a --plant has its own)")
     sw.add_argument("--plant", help="an existing plant scaled in spacing to each GCR "
                     "(instead of --layouts/--collector-m/--lat/--lon)")
     sw.add_argument("--field", default="5x5",
@@ -288,12 +290,16 @@ def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
         parse_polygon,
         parse_size,
         prepare_sweep,
+        sweep_zone,
     )
 
     plant = None
     if args.plant:
         plant = _plant_arg(args)
-    tz = plant.timezone if plant is not None else "UTC"
+    try:
+        tz = sweep_zone(plant, args.timezone)
+    except SweepInputError as exc:
+        raise InputError(exc.message(sweep_flag)) from None
     start = parse_when(args.start, tz, "start")
     end = parse_when(args.end, tz, "end")
     custom = (args.aspect_ratio, args.offset, args.rotation_deg)
@@ -310,7 +316,8 @@ def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
             collector_polygon_m=parse_polygon(args.collector_polygon, "collector_polygon_m")
             if args.collector_polygon else None, plant=plant, field_size=(rows, columns),
             custom=None if custom == (None, None, None) else custom,
-            slope_azimuth_deg=args.slope_azimuth_deg, slope_tilt_deg=args.slope_tilt_deg)
+            slope_azimuth_deg=args.slope_azimuth_deg, slope_tilt_deg=args.slope_tilt_deg,
+            timezone=args.timezone)
     except SweepInputError as exc:
         raise InputError(exc.message(sweep_flag)) from None
     from sim.plant.sweep import site_plant

@@ -276,7 +276,7 @@ class SweepCancelled(RuntimeError):
 SWEEP_FIELDS = ("layouts", "gcr", "strategies", "collector_m", "collector_polygon_m",
                 "latitude_deg", "longitude_deg", "altitude_m", "plant_id", "field_size",
                 "aspect_ratio", "offset", "rotation_deg", "slope_azimuth_deg", "slope_tilt_deg",
-                "start", "end", "step_s")
+                "start", "end", "step_s", "timezone")
 _REF = re.compile(r"\{(\w+)\}")
 
 
@@ -297,6 +297,28 @@ class SweepInputError(ValueError):
             return name(m[1]) if m[1] in SWEEP_FIELDS else m[0]
 
         return f"{name(self.field)}: {_REF.sub(ref, self.problem)}"
+
+
+def sweep_zone(plant: Plant | None, timezone: str | None) -> str:
+    """The zone of a sweep's local days: the plant's, else ``timezone`` (an IANA name:
+    a bare latitude/longitude has no zone of its own), else UTC. Its dates (``start``,
+    ``end``) and the shade chart's day are read in it. :class:`SweepInputError` names
+    ``timezone``."""
+    from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
+
+    if plant is not None:
+        if timezone is not None:
+            raise SweepInputError("timezone", "the plant ({plant_id}) has its own zone "
+                                  f"({plant.timezone}): give it or {{timezone}}, not both")
+        return plant.timezone
+    if timezone is None:
+        return "UTC"
+    try:
+        ZoneInfo(timezone)
+    except (ZoneInfoNotFoundError, ValueError):
+        raise SweepInputError("timezone", f"{timezone!r} is not an IANA time zone "
+                              "(e.g. Europe/Madrid, Etc/GMT+5)") from None
+    return timezone
 
 
 #: Largest number of cases × steps of one sweep (a bound on its cost).
@@ -375,14 +397,15 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
                   plant: Plant | None = None, field_size: tuple[int, int] = (5, 5),
                   custom: tuple[float | None, float | None, float | None] | None = None,
                   slope_azimuth_deg: float = 0.0, slope_tilt_deg: float = 0.0,
+                  timezone: str | None = None,
                   weather_token: str = "") -> tuple[SweepSpec, list[SweepCase]]:
     """Check a sweep's parameters and build its spec and cases (every layout × GCR ×
     strategy; an existing ``plant`` gives one layout, itself scaled). The collector is
     ``collector_m`` (a rectangle) or ``collector_polygon_m`` ((u, v) vertices [m] about
     the pivot), wired like Peñarroya's. Every case's field is built once here, so an
     infeasible GCR is refused before any task runs. ``custom``: layout custom's (aspect
-    ratio, offset, rotation [°]), all three or none. :class:`SweepInputError` names the
-    parameter (its request key, :data:`SWEEP_FIELDS`)."""
+    ratio, offset, rotation [°]), all three or none; ``timezone``: :func:`sweep_zone`.
+    :class:`SweepInputError` names the parameter (its request key, :data:`SWEEP_FIELDS`)."""
     from sim.paths import package_dir
     from sim.plant.fields import LAYOUT_TYPES, collector_from_outline, collector_from_size
     from sim.plant.layout import load_plant
@@ -426,7 +449,7 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
                                   "{collector_m}, not both")
         names = [PLANT_LAYOUT]
         collector = plant.collector
-        lat, lon, alt, tz = plant.latitude, plant.longitude, plant.altitude, plant.timezone
+        lat, lon, alt = plant.latitude, plant.longitude, plant.altitude
     else:
         if latitude_deg is None or longitude_deg is None:
             raise SweepInputError("latitude_deg" if latitude_deg is None else "longitude_deg",
@@ -454,7 +477,8 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
         if "custom" in names and layout_custom is None:
             raise SweepInputError("layouts", "layout custom needs {aspect_ratio}, {offset} "
                                   "and {rotation_deg}")
-        lat, lon, alt, tz = latitude_deg, longitude_deg, altitude_m, "UTC"
+        lat, lon, alt = latitude_deg, longitude_deg, altitude_m
+    tz = sweep_zone(plant, timezone)
     spec = SweepSpec(latitude=lat, longitude=lon, altitude=alt, start=start, end=end,
                      step_s=float(step_s), collector=collector, rows=rows, columns=columns,
                      slope_azimuth_deg=slope_azimuth_deg, slope_tilt_deg=slope_tilt_deg,

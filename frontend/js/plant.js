@@ -324,7 +324,7 @@ async function runSweep(ev) {
     layouts: $("sweep-layouts").value.split(",").map((s) => s.trim()).filter(Boolean),
     gcr: gcrList($("sweep-gcr").value), strategies: $("sweep-strategies").value.split(",").map((s) => s.trim()).filter(Boolean),
     ...(polygon ? { collector_polygon_m: polygon } : { collector_m: collector }),
-    latitude_deg: p.latitude_deg, longitude_deg: p.longitude_deg,
+    latitude_deg: p.latitude_deg, longitude_deg: p.longitude_deg, timezone: p.timezone,
     altitude_m: p.altitude_m, start: `${year}-01-01`, end: `${year + 1}-01-01`, step_s: Number($("sweep-step").value),
   };
   const status = $("sweep-status");

@@ -129,6 +129,8 @@ def test_one_case_runs_in_process_as_csv(capsys: pytest.CaptureFixture[str]) -> 
     # a thousand worker processes on two cores hung; -1 hung; 0 was the default
     (["--gcr", "0.2,0.3", "--workers", "1000"], "--workers: 1000 is not in [1, "),
     (["--gcr", "0.2,0.3", "--workers", "0"], "--workers: 0 is not in [1, "),
+    (["--gcr", "0.2", "--timezone", "Europe/Penarroya"], "--timezone: 'Europe/Penarroya' is "
+     "not an IANA time zone"),
     # distributed's own ValueError came out as a traceback
     (["--gcr", "0.2,0.3", "--scheduler", "http://127.0.0.1:8786"],
      "--scheduler: 'http://127.0.0.1:8786' is no Dask scheduler address (tcp://HOST:PORT)"),

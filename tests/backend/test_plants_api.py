@@ -16,6 +16,7 @@ from typing import Any
 import cv2
 import httpx
 import numpy as np
+import pandas as pd
 import pytest
 from live_service import InProcessServer, new_database
 
@@ -342,7 +343,35 @@ def test_sweep_takes_a_polygon_collector(client: httpx.Client) -> None:
     assert row["energy_kwh_per_collector"] > 0
 
 
+def test_a_sweep_at_a_coordinate_runs_on_the_local_days_of_its_timezone(
+        client: httpx.Client) -> None:
+    """At Tokyo a UTC day is one local afternoon and the next local morning: with
+    ``timezone`` the dates and the shade chart's day are Tokyo's (its daylight steps all
+    inside 21 Dec JST, one morning-to-evening arc); without it they are UTC's."""
+    tokyo = {**SWEEP, "latitude_deg": 35.68, "longitude_deg": 139.69, "gcr": [0.2],
+             "start": "2021-12-21", "end": "2021-12-22"}
+    days = {}
+    for zone in ("Asia/Tokyo", None):
+        r = client.post("/api/v1/plants/sweeps", json={**tokyo, "timezone": zone})
+        assert r.status_code == 202, r.text
+        run = _poll(client, r.headers["location"])
+        assert run["status"] == "done" and run["params"]["timezone"] == zone, run
+        day = client.get(f"/api/v1/plants/sweeps/{run['sweep_id']}/shade",
+                         params={"layout": "square", "gcr": 0.2, "date": "2021-12-21"})
+        assert day.status_code == 200, day.text
+        days[zone] = pd.to_datetime(day.json()["times"])
+    jst = days["Asia/Tokyo"].tz_convert("Asia/Tokyo")
+    assert (jst.date == dt.date(2021, 12, 21)).all()
+    assert 6 <= jst[0].hour <= 7 and 16 <= jst[-1].hour <= 17       # sunrise … sunset
+    utc = days[None]
+    assert (utc.date == dt.date(2021, 12, 21)).all()                # the UTC day …
+    assert len(set(utc.tz_convert("Asia/Tokyo").date)) == 2         # … is two local days
+
+
 @pytest.mark.parametrize(("change", "status", "message"), [
+    ({"timezone": "Mars/Olympus"}, 422, "timezone: 'Mars/Olympus' is not an IANA time zone"),
+    ({"timezone": "../etc/passwd"}, 422, "timezone: '../etc/passwd' is not an IANA time "
+     "zone"),
     ({"gcr": [0.5]}, 422, "gcr: square at GCR 0.5"),
     ({"layouts": ["triangle"]}, 422, "layouts: must be one or more of"),
     ({"strategies": ["moon"]}, 422, "strategies: must be one or more of"),
@@ -412,6 +441,10 @@ def test_sweep_refusal_of_a_plant_names_plant_id(client: httpx.Client, plants_di
         assert r.status_code == 422, r.text
         assert r.json()["detail"].startswith("latitude_deg: the plant (plant_id) sets the "
                                              "place and the collector")
+        r = client.post("/api/v1/plants/sweeps", json={**own, "plant_id": "duo",
+                                                       "timezone": "UTC"})
+        assert r.status_code == 422, r.text
+        assert r.json()["detail"].startswith("timezone: the plant (plant_id) has its own zone")
     finally:
         path.unlink()
 

@@ -179,5 +179,9 @@ def test_the_sweep_panel_runs_a_sweep_and_draws_its_shade_in_the_plants_time(
     assert title == "time (Europe/Madrid)"
     assert all(len(t) == 5 and t[2] == ":" for t in times)  # local wall clock, HH:MM
     assert max(shaded) > 0  # GCR 0.3 at the solstice: the interior collector is shaded
+    # the year and the shade's day are the plant's local days (they were UTC's)
+    sweep_id = page.get_attribute("body", "data-sweep-loaded")
+    params = httpx.get(f"{server.url}/api/v1/plants/sweeps/{sweep_id}").json()["params"]
+    assert params["timezone"] == "Europe/Madrid"
     ARTIFACTS.mkdir(exist_ok=True)
     page.locator("#chart-sweep-shade").screenshot(path=str(ARTIFACTS / "plant-sweep-shade.png"))

@@ -52,7 +52,7 @@ from backend.plants import (
     sky_map_cost_s,
     sky_map_png,
 )
-from backend.plants.sweep import SweepInputError, parse_size, prepare_sweep
+from backend.plants.sweep import SweepInputError, parse_size, prepare_sweep, sweep_zone
 from backend.plants.sweep_runner import SweepRunner, SweepState
 from backend.timestamps import (
     FIRST_YEAR,
@@ -186,8 +186,8 @@ def _sweep_inputs(body: SweepCreate, service: PlantService) -> tuple[Any, list[A
     if body.plant_id is not None:
         _plant_or_404(service, body.plant_id)
         plant = service.get(body.plant_id)
-    zone = plant.timezone if plant is not None else "UTC"
     try:
+        zone = sweep_zone(plant, body.timezone)
         start = pd.Timestamp(parse_day_or_instant(body.start, zone, "start"))
         end = pd.Timestamp(parse_day_or_instant(body.end, zone, "end"))
         rows, columns = (int(v) for v in body.field_size.split("x"))
@@ -200,7 +200,8 @@ def _sweep_inputs(body: SweepCreate, service: PlantService) -> tuple[Any, list[A
             else parse_size(body.collector_m, "collector_m"),
             collector_polygon_m=body.collector_polygon_m, plant=plant,
             field_size=(rows, columns), custom=None if custom == (None, None, None) else custom,
-            slope_azimuth_deg=body.slope_azimuth_deg, slope_tilt_deg=body.slope_tilt_deg)
+            slope_azimuth_deg=body.slope_azimuth_deg, slope_tilt_deg=body.slope_tilt_deg,
+            timezone=body.timezone)
     except TimestampError as exc:
         raise HTTPException(422, str(exc)) from None
     except SweepInputError as exc:     # names the request's keys (the CLI maps them to flags)

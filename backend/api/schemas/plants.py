@@ -150,7 +150,7 @@ class SweepCreate(BaseModel):
     A place and a collector (``latitude_deg``, ``longitude_deg``, ``collector_m`` or
     ``collector_polygon_m``) for regular fields, or ``plant_id`` for an existing plant
     scaled in spacing. ``start`` and ``end``: a bare date is midnight UTC (the plant's zone
-    with ``plant_id``).
+    with ``plant_id``), or ``timezone``'s.
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -172,6 +172,10 @@ class SweepCreate(BaseModel):
     longitude_deg: float | None = Field(None, ge=-180, le=180)
     altitude_m: float = Field(0.0, ge=-500, le=9000)
     plant_id: str | None = Field(None, max_length=100)
+    timezone: str | None = Field(
+        None, max_length=64,
+        description="IANA zone of the local days at a latitude/longitude (the dates, the "
+                    "shade chart's day); default UTC; with plant_id the plant's own")
     field_size: str = Field("5x5", pattern=r"^\d{1,2}x\d{1,2}$",
                             description="ROWSxCOLUMNS of the regular field")
     aspect_ratio: float | None = Field(None, gt=0, le=10, description="layout custom")
