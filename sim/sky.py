@@ -30,6 +30,8 @@ from typing import IO, Any
 import numpy as np
 import pandas as pd
 
+from sim import sun
+
 TRANSPOSITION_MODELS = ("haydavies", "perez", "isotropic")
 
 
@@ -422,6 +424,37 @@ SAME_SKY_DEG = 1.0
 #: The station's clearness is read only from hours with its sun at least this high [°]:
 #: below it an hourly mean over a rising or setting sun makes the ratio meaningless.
 TRANSFER_MIN_ELEVATION_DEG = 5.0
+
+
+def weather_at(times: pd.DatetimeIndex, weather: pd.DataFrame, temp_air_c: float,
+               wind_speed_m_s: float, closing: bool = False) -> dict[str, np.ndarray]:
+    """``ghi``, ``dni``, ``dhi`` [W m⁻²], ``temp_air`` [°C] and ``wind_speed`` [m s⁻¹] of
+    ``weather`` (a timezone-aware index) interpolated linearly onto ``times``; a column of
+    air temperature or wind it lacks is the constant given.
+
+    The weather must cover ``times``. ``closing``: the last of ``times`` closes a run's last
+    step (:func:`sim.energy.simulation_times`) and, past the weather's last row, takes that
+    row (a weather file that ends with the range; even alone in a run's last chunk).
+    ValueError says what is missing or which range is not covered.
+    """
+    missing = [c for c in ("ghi", "dni", "dhi") if c not in weather.columns]
+    if missing:
+        raise ValueError(f"weather lacks columns {missing}")
+    if weather.index.tz is None:
+        raise ValueError("weather index must be timezone-aware")
+    t_w = sun._unix_seconds(weather.index)
+    t = sun._unix_seconds(times)
+    steps = t[:-1] if closing else t
+    if steps.size and (steps[0] < t_w[0] or steps[-1] > t_w[-1]):
+        raise ValueError(f"weather covers {weather.index[0].tz_convert('UTC').isoformat()}.."
+                         f"{weather.index[-1].tz_convert('UTC').isoformat()}, not the run "
+                         f"{times[0].tz_convert('UTC').isoformat()}.."
+                         f"{times[steps.size - 1].tz_convert('UTC').isoformat()}")
+    out = {c: np.interp(t, t_w, weather[c].to_numpy(float)) for c in ("ghi", "dni", "dhi")}
+    for column, constant in (("temp_air", temp_air_c), ("wind_speed", wind_speed_m_s)):
+        out[column] = (np.interp(t, t_w, weather[column].to_numpy(float))
+                       if column in weather else np.full(len(t), float(constant)))
+    return out
 
 
 def kt_prime_factor(airmass_relative: np.ndarray) -> np.ndarray:

@@ -340,43 +340,6 @@ def _check_inputs(
         )
 
 
-def _weather_on(
-    times: pd.DatetimeIndex, weather: pd.DataFrame, site: Site
-) -> dict[str, np.ndarray]:
-    """Weather interpolated (linear in time) onto ``times`` (:func:`sim.energy.simulation_times`).
-
-    It must cover the range's steps; the instant closing the last step, where it lies past
-    the weather's last row, takes that row (a weather file that ends with the range).
-    """
-    missing = [c for c in ("ghi", "dni", "dhi") if c not in weather.columns]
-    if missing:
-        raise ValueError(f"weather lacks columns {missing}")
-    if weather.index.tz is None:
-        raise ValueError("weather index must be timezone-aware")
-    w = weather.copy()
-    w.index = w.index.tz_convert("UTC")
-    last_step = times[-2] if len(times) > 1 else times[-1]
-    if times[0] < w.index[0] or last_step > w.index[-1]:
-        raise ValueError(
-            f"weather covers {w.index[0].isoformat()}..{w.index[-1].isoformat()}, "
-            f"not the run {times[0].isoformat()}..{last_step.isoformat()}"
-        )
-    t_w = sun._unix_seconds(w.index)
-    t = sun._unix_seconds(times)
-    out = {c: np.interp(t, t_w, w[c].to_numpy(float)) for c in ("ghi", "dni", "dhi")}
-    out["temp_air"] = (
-        np.interp(t, t_w, w["temp_air"].to_numpy(float))
-        if "temp_air" in w
-        else np.full(len(t), site.temp_air)
-    )
-    out["wind_speed"] = (
-        np.interp(t, t_w, w["wind_speed"].to_numpy(float))
-        if "wind_speed" in w
-        else np.full(len(t), site.wind_speed)
-    )
-    return out
-
-
 def _noon_reference_azimuth(times: pd.DatetimeIndex, site: Site) -> np.ndarray:
     """Azimuth joint reference for a continuous daily sweep [°] (see
     :func:`sim.control.noon_reference_azimuth`)."""
@@ -643,7 +606,8 @@ def simulate(
     start_utc, end_utc = start.tz_convert("UTC"), end.tz_convert("UTC")
     grid = simulation_times(start_utc, end_utc, step_s)
     n_steps = len(grid) - 1  # the range's steps (the series); grid[n_steps] closes the last
-    weather_on = None if weather is None else _weather_on(grid, weather, site)
+    weather_on = (None if weather is None else
+                  sky.weather_at(grid, weather, site.temp_air, site.wind_speed, closing=True))
     pressure = float(atmosphere.alt2pres(site.altitude))
     ctl = None
     if controller != "ideal":

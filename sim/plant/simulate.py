@@ -32,7 +32,7 @@ from sim.plant.fields import horizon_elevation
 from sim.plant.layout import Plant
 from sim.plant.shading import BinTable, PlantShade, plant_shade, sum_columns
 from sim.plant.strategies import orientations
-from sim.sky import clearsky_ineichen, iam_physical, poa_irradiance
+from sim.sky import clearsky_ineichen, iam_physical, poa_irradiance, weather_at
 from sim.sun import solar_position
 
 FloatArray = NDArray[np.float64]
@@ -45,10 +45,6 @@ _SERIES_COLUMNS = ("solar_azimuth", "apparent_elevation", "dni", "ghi", "ghi_ext
                    "surface_azimuth", "surface_elevation", "poa_global",
                    "mean_shaded_fraction", "trackers_shaded", "power_w", "power_area_w",
                    "power_unshaded_w", "fixed_power_w", "tracker_power_w")
-
-
-def _seconds(index: pd.DatetimeIndex) -> FloatArray:
-    return np.asarray((index - pd.Timestamp(0, tz="UTC")) / pd.Timedelta(seconds=1), dtype=float)
 
 
 def local_day(date: dt.date, timezone: str) -> tuple[pd.Timestamp, pd.Timestamp]:
@@ -88,19 +84,7 @@ def sky_conditions(plant: Plant, times: pd.DatetimeIndex, weather: pd.DataFrame 
         sky["temp_air"] = np.full(len(times), plant.temp_air)
         sky["wind_speed"] = np.full(len(times), plant.wind_speed)
     else:
-        t_w = _seconds(weather.index)
-        t = _seconds(times)
-        # the closing instant may lie past the weather (even alone in a run's last chunk)
-        steps = t[:-1] if closing else t
-        if steps.size and (steps[0] < t_w[0] or steps[-1] > t_w[-1]):
-            raise ValueError(f"weather covers {weather.index[0]}..{weather.index[-1]}, "
-                             f"not {times[0]}..{times[steps.size - 1]}")
-        for k in ("ghi", "dni", "dhi"):
-            sky[k] = np.interp(t, t_w, weather[k].to_numpy(float))
-        sky["temp_air"] = (np.interp(t, t_w, weather["temp_air"].to_numpy(float))
-                           if "temp_air" in weather else np.full(len(t), plant.temp_air))
-        sky["wind_speed"] = (np.interp(t, t_w, weather["wind_speed"].to_numpy(float))
-                             if "wind_speed" in weather else np.full(len(t), plant.wind_speed))
+        sky.update(weather_at(times, weather, plant.temp_air, plant.wind_speed, closing))
     night = sky["apparent_elevation"] <= 0
     sky["dni"] = np.where(night, 0.0, sky["dni"])
     for k in ("ghi", "dhi"):

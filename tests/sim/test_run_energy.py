@@ -82,6 +82,20 @@ def test_a_weather_file_ending_with_the_range_still_runs() -> None:
         simulate(site, _t("06:00"), _t("18:01"), weather=weather)
 
 
+def test_a_plants_weather_ending_with_the_range_runs_and_a_shorter_one_is_refused() -> None:
+    """The plant reads its weather by the twin's rule (``sim.sky.weather_at``), chunk by
+    chunk: the closing instant past the last row takes it; a step past it is refused."""
+    plant = load_plant("penarroya")
+    t = lambda hhmm: _t(hhmm, "2021-06-01", plant.timezone)  # noqa: E731
+    steps = pd.date_range(t("08:00"), t("12:00"), freq="600s", inclusive="left")
+    weather = pd.DataFrame({"ghi": 700.0, "dni": 800.0, "dhi": 100.0, "temp_air": 30.0},
+                           index=steps)
+    r = simulate_plant(plant, t("08:00"), t("12:00"), 600, weather=weather)
+    assert r.energy_wh("power_w") > 0
+    with pytest.raises(ValueError, match="weather covers .*, not the run"):
+        simulate_plant(plant, t("08:00"), t("12:10"), 600, weather=weather)
+
+
 def test_plant_ranges_add_up_and_an_hourly_step_keeps_its_last_hour() -> None:
     plant = load_plant("penarroya")
     t = lambda hhmm: _t(hhmm, "2021-06-01", plant.timezone)  # noqa: E731
