@@ -133,7 +133,10 @@ class ArrayStatusRead(BaseModel):
     power_w: float | None
     voltage_v: float | None
     current_a: float | None
-    age_s: float | None = Field(description="age of the last reading [s]")
+    age_s: float | None = Field(description="age of the last reading [s]: the service's "
+                                            "clock minus its stamp; negative when the "
+                                            "logger's clock runs ahead (readings up to the "
+                                            "ingest's future tolerance are taken)")
     logger: Literal["never", "reporting", "stale"]
     fresh_s: int | None = Field(
         None, description="this logger's last reading is stale past this age [s]: 2.5 of its "
