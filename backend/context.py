@@ -69,6 +69,9 @@ def open_context(settings: Settings) -> ServiceContext:
     writer = Writer(engine, registry.phase_of_array, settings.ingest.energy_max_gap_s,
                     settings.database.writer_max_group_rows)
     writer.start()
+    # before serving: hours stored under another energy gap are recomputed (no time bound:
+    # a large history takes what it takes, and the service must not answer from stale hours)
+    writer.call(writer.match_rollups_to_gap).result()
 
     def store_sites(new: list[Site]) -> None:  # a site file read while running: its rows
         writer.call(lambda conn: sync_sites(conn, new)).result(timeout=60)  # not for ever

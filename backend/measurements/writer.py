@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sqlalchemy import Connection, Engine
+from sqlalchemy import Connection, Engine, delete, insert, select, text
 
 from backend.measurements.buckets import ROLLUP_WIDTH_S
 from backend.measurements.fields import SENSOR_NAMES
@@ -43,6 +43,7 @@ from backend.measurements.rollups import (
     rollup_rows,
 )
 from backend.storage.engine import SQLITE_BUSY_TIMEOUT_MS
+from backend.storage.tables import DiagnosisDay, ServiceState
 
 logger = logging.getLogger(__name__)
 
@@ -631,3 +632,56 @@ class Writer:
             out.extend((array_id, source, *row)
                        for row in rollup_rows(window, k_first, k_last, phase, gap))
         self._sql.upsert_rollups(cur, out, merge=False)
+
+    #: hours of one series recomputed at a time when the energy gap changes (a month)
+    GAP_REBUILD_BUCKETS = 720
+
+    def match_rollups_to_gap(self, conn: Connection) -> int:
+        """Recompute every stored hour's rollup when the energy gap is not the one they were
+        built with (``service_state.rollup_energy_max_gap_s``; unrecorded on a database
+        from before migration 0013), drop the cached diagnosis days (computed with the old
+        gap too) and record the gap. Raising ``HELIOTWIN_ENERGY_MAX_GAP_S`` for an hourly
+        logger left its stored hours at 0 Wh shown as full coverage. Series of arrays no
+        loaded site owns are left (their site's phase is unknown) and said so. Run in a
+        writer transaction (:meth:`call`) before the service serves; the series it
+        recomputed."""
+        key = "rollup_energy_max_gap_s"
+        stored = conn.execute(select(ServiceState.value).where(ServiceState.key == key)
+                              ).scalar()
+        if stored == str(self.max_gap_s):
+            return 0
+        series = conn.execute(text("SELECT DISTINCT array_id, source FROM measurement_rollups"
+                                   " ORDER BY array_id, source")).all()
+        if series:
+            logger.warning("the energy gap is %d s, the stored hourly energies bridged %s: "
+                           "recomputing %d series", self.max_gap_s,
+                           f"{stored} s" if stored is not None else "an unrecorded one",
+                           len(series))
+        cur = conn.connection.driver_connection.cursor()  # type: ignore[union-attr]
+        done, skipped = 0, []
+        half = ROLLUP_WIDTH_S // 2
+        try:
+            for array_id, source in series:
+                try:
+                    self.phase_of_array(array_id)
+                except KeyError:
+                    skipped.append(array_id)
+                    continue
+                buckets = np.array(conn.execute(text(
+                    "SELECT bucket_s FROM measurement_rollups WHERE array_id = :a AND "
+                    "source = :s ORDER BY bucket_s"), {"a": array_id, "s": source}
+                    ).scalars().all(), dtype=np.int64)
+                for lo in range(0, buckets.size, self.GAP_REBUILD_BUCKETS):
+                    # an hour's middle: the hours it and its readings' intervals can change
+                    self._refresh_rollups(cur, array_id, source,
+                                          buckets[lo:lo + self.GAP_REBUILD_BUCKETS] + half)
+                done += 1
+        finally:
+            cur.close()
+        if skipped:
+            logger.warning("arrays %s belong to no loaded site: their hourly energies keep "
+                           "the old gap", sorted(set(skipped)))
+        conn.execute(delete(DiagnosisDay))
+        conn.execute(delete(ServiceState).where(ServiceState.key == key))
+        conn.execute(insert(ServiceState).values(key=key, value=str(self.max_gap_s)))
+        return done

@@ -218,6 +218,17 @@ class DiagnosisDay(Base):
     payload_json: Mapped[str] = mapped_column(Text)
 
 
+class ServiceState(Base):
+    """What the stored data was computed under, by name: ``rollup_energy_max_gap_s``, the
+    energy gap the hourly rollups' ``energy_wh`` bridged (``backend.measurements.writer.
+    Writer.match_rollups_to_gap``)."""
+
+    __tablename__ = "service_state"
+
+    key: Mapped[str] = mapped_column(String(64), primary_key=True)
+    value: Mapped[str] = mapped_column(Text)
+
+
 class SimulationRun(Base):
     """A twin scenario run from the API (synchronous or in the background)."""
 

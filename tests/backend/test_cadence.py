@@ -179,3 +179,56 @@ def test_a_slow_logger_is_not_stale_between_its_readings(api: Api) -> None:
     # each says the threshold it was judged by (the answer said 300 s for both)
     assert (arrays["fixed"]["fresh_s"], arrays["tracker"]["fresh_s"]) == (1200, FRESH_S)
     assert status(ctx, info, last + 1300)["arrays"]["fixed"]["logger"] == "stale"
+
+
+@pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
+def test_raising_the_energy_gap_recomputes_the_hours_stored_before(
+        backend: str, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """An hourly logger under the default gap (1,200 s) bridges nothing; the docs tell its
+    user to raise ``HELIOTWIN_ENERGY_MAX_GAP_S``. After the restart the readings stored
+    before give the day's energy (their hours read 0 Wh with full coverage, a tester's
+    finding), a range cut mid-morning agrees with the whole-hour one, the diagnosis cached
+    under the old gap is recomputed, and a restart under the same gap recomputes nothing."""
+    db = new_database(backend, tmp_path)
+    day, nxt = "2024-03-20", "2024-03-21"
+    hourly = _sample(_twin_day(day), 60, seed=0)
+    truth = {a: _posted_wh(hourly, a) for a in ("tracker", "fixed")}
+    rng = {"start": day, "end": nxt, "interval": "day"}
+    wide = {"start": f"{day}T10:00:00-06:00", "end": f"{day}T12:00:00-06:00"}
+    narrow = {"start": f"{day}T10:30:00-06:00", "end": f"{day}T11:30:00-06:00"}
+
+    def measured(client: httpx.Client, params: dict[str, str]) -> float:
+        r = client.get(f"/api/v1/sites/{SITE}/energy", params=params)
+        assert r.status_code == 200, r.text
+        return float(sum(row["arrays"]["tracker"]["measured_wh"] for row in r.json()["rows"]))
+
+    gap_3600 = {"HELIOTWIN_ENERGY_MAX_GAP_S": "3600"}
+    try:
+        with InProcessServer(db.url) as server, server.client() as client:
+            token = server.token(SITE, "gap test")
+            for array in ("tracker", "fixed"):
+                r = client.post(f"/api/v1/sites/{SITE}/measurements",
+                                content=_csv_body(hourly, array),
+                                headers={"Authorization": f"Bearer {token}",
+                                         "Content-Type": "text/csv"})
+                assert r.status_code == 200, r.text
+            assert measured(client, rng) == 0.0  # readings an hour apart: nothing bridged
+            r = client.get(f"/api/v1/sites/{SITE}/diagnosis", params={"start": day, "end": nxt})
+            assert r.status_code == 200 and r.json()["days"][0]["tracker"]["measured_wh"] == 0
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="backend.measurements.writer"), \
+                InProcessServer(db.url, gap_3600) as server, server.client() as client:
+            assert "recomputing" in caplog.text
+            assert measured(client, rng) == pytest.approx(truth["tracker"], rel=0.01)
+            assert measured(client, wide) > measured(client, narrow) > 0   # was 0 and 701 Wh
+            r = client.get(f"/api/v1/sites/{SITE}/diagnosis", params={"start": day, "end": nxt})
+            dday = r.json()["days"][0]
+            assert dday["tracker"]["measured_wh"] == pytest.approx(truth["tracker"], rel=0.01)
+            assert "dropout" not in [f["kind"] for f in dday["faults"]], dday["faults"]
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="backend.measurements.writer"), \
+                InProcessServer(db.url, gap_3600) as server, server.client() as client:
+            assert "recomputing" not in caplog.text
+            assert measured(client, rng) == pytest.approx(truth["tracker"], rel=0.01)
+    finally:
+        db.drop()
