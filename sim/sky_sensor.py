@@ -444,7 +444,9 @@ def measured_sky(site: Site, times: pd.DatetimeIndex, valid: np.ndarray,
     ``valid``; a day without one takes the clear sky (:func:`weather_from_fixed`). Minutes
     from ``now`` on are still to come: not missing, so not counted (a day in progress is
     judged on its minutes so far)."""
-    day_id = pd.factorize(times.tz_convert(site.timezone).normalize())[0]
+    # the local wall clock's dates (normalize() on the zone raises where a change of
+    # clock skips midnight: Santiago, the Azores)
+    day_id = pd.factorize(times.tz_convert(site.timezone).tz_localize(None).normalize())[0]
     daylight = np.asarray(poa_clear) > 20.0
     if now is not None:
         daylight &= np.asarray(times < now)

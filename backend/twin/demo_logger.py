@@ -121,7 +121,7 @@ class DemoLogger:
         s = res.series
         ts = s.index.as_unit("s").asi8
         local = s.index.tz_convert(self.site.timezone)
-        day_number = (local.normalize().tz_localize(None).as_unit("s").asi8 // 86400)
+        day_number = (local.tz_localize(None).normalize().as_unit("s").asi8 // 86400)
         minute_of_day = (local.hour * 60 + local.minute).to_numpy()
         cloud = np.ones(len(s))
         miss = np.zeros(len(s), bool)
