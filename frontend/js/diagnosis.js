@@ -73,6 +73,12 @@ async function load(state) {
   const end = document.getElementById("diag-end").value;
   const list = document.getElementById("diag-faults");
   const mine = ++requested;
+  if (!state.site.has_twin) { // a camera site, or arrays not named tracker and fixed
+    list.replaceChildren(h("li", { class: "muted", "data-testid": "diag-no-twin" },
+      "This site has no tracker and fixed arrays to diagnose (a camera site): nothing to compare."));
+    showEmpty("chart-diagnosis", "No diagnosis for this site");
+    return;
+  }
   list.replaceChildren(h("li", { class: "muted" }, "Computing… (days not seen before take about a second each)"));
   let body;
   try {
@@ -177,17 +183,36 @@ async function loadPointing(state, start, end) {
   filename: `${state.site.site_id}_pointing_${start}_${end}.csv` });
 }
 
+let seen = false; // the panel has scrolled into view once: later changes reload it at once
+let shownFor = ""; // the site and day its range was set for
+
+function setRange(state) {
+  document.getElementById("diag-end").value = addDays(state.day, 1);
+  document.getElementById("diag-start").value = addDays(state.day, -6);
+  shownFor = `${state.site?.site_id}/${state.day}`;
+}
+
+/** Another site, or another day in an edited address: the 7 days up to it, loaded again (the
+ * panel kept the previous site's days under the new site's name). */
+function follow(state) {
+  if (!state.site || `${state.site.site_id}/${state.day}` === shownFor) return;
+  setRange(state);
+  if (seen) load(state);
+}
+
 /** Wire the panel once; the range defaults to the 7 days up to the selected day. */
 export function init(state) {
   const form = document.getElementById("diag-form");
   if (!form || !state.site) return;
-  document.getElementById("diag-end").value = addDays(state.day, 1);
-  document.getElementById("diag-start").value = addDays(state.day, -6);
+  setRange(state);
   form.addEventListener("submit", (ev) => { ev.preventDefault(); load(state); });
+  // main.js and the Overview update the shared state in their listeners, registered first
+  document.getElementById("site-select").addEventListener("change", () => follow(state));
+  window.addEventListener("hashchange", () => { if (state.page === "overview") follow(state); });
   // computed when the panel first scrolls into view, not on every page load
   const card = document.getElementById("diagnosis-card");
-  const seen = new IntersectionObserver((entries) => {
-    if (entries.some((e) => e.isIntersecting)) { seen.disconnect(); load(state); }
+  const observer = new IntersectionObserver((entries) => {
+    if (entries.some((e) => e.isIntersecting)) { observer.disconnect(); seen = true; load(state); }
   });
-  seen.observe(card);
+  observer.observe(card);
 }

@@ -121,3 +121,31 @@ def test_the_panel_shows_the_mount_faults_from_the_camera(page, server) -> None:
         f"Mount (from the tracker camera): {f['detail']}" for f in faults]
     page.locator("#diagnosis-card").screenshot(path="test-artifacts/e2e-diagnosis-mount.png")
     assert page.console_errors == []
+
+
+def test_the_panel_follows_the_site_picker_and_an_edited_address(page, server) -> None:
+    """The panel is loaded once it scrolls into view; picking another site shows that
+    site's seven days (a camera site: that there is nothing to diagnose, no request that
+    would be refused), and an address edited to another site and day loads those (it kept
+    the previous site's days under the new site's name: a tester's finding)."""
+    site = server.site["site_id"]
+    sites = page.context.request.get(f"{server.url}/api/v1/sites").json()
+    assert server.site["has_twin"] is True
+    camera = next(o for o in sites if not o["has_twin"])["site_id"]
+    page.goto(f"{server.url}/#overview?site={site}")
+    with page.expect_request(lambda r: f"/sites/{site}/diagnosis" in r.url, timeout=60_000):
+        page.locator("#diagnosis-card").scroll_into_view_if_needed()
+    page.wait_for_selector("[data-testid=diag-sky]", timeout=120_000)
+    page.select_option("#site-select", camera)
+    page.wait_for_selector("[data-testid=diag-no-twin]", timeout=10_000)
+    assert page.locator("[data-testid=diag-sky]").count() == 0   # the old site's days gone
+    today = server.today()
+    assert (page.input_value("#diag-start"), page.input_value("#diag-end")) == (
+        (today - dt.timedelta(days=6)).isoformat(), (today + dt.timedelta(days=1)).isoformat())
+    day = today - dt.timedelta(days=10)
+    with page.expect_request(lambda r: f"/sites/{site}/diagnosis" in r.url
+                             and f"start={(day - dt.timedelta(days=6)).isoformat()}" in r.url,
+                             timeout=60_000):
+        page.evaluate(f"() => {{ location.hash = '#overview?site={site}&day={day}'; }}")
+    assert page.input_value("#diag-end") == (day + dt.timedelta(days=1)).isoformat()
+    assert page.console_errors == []

@@ -80,7 +80,8 @@ def _origin(ctx: Any, site_id: str) -> dict[str, Any]:
 
 def _site_dict(info: Any, ctx: Any = None) -> dict[str, Any]:
     # the stamp convention always shown (the config leaves out its default)
-    d = {**info.site.to_dict(), "readings_stamped": info.site.readings_stamped}
+    d = {**info.site.to_dict(), "readings_stamped": info.site.readings_stamped,
+         "has_twin": info.has_twin()}
     if ctx is not None:
         d.update(_origin(ctx, info.site_id))
     for name, arr in info.arrays.items():

@@ -111,6 +111,10 @@ class SiteRead(BaseModel):
     assumed: dict[str, str] = Field(default_factory=dict, description=(
         "config keys (dotted paths) filled in from the place when the site was made, each "
         "with its rule or default (sim.sites.place_defaults); absent: none"))
+    has_twin: bool = Field(False, description=(
+        "whether the twin simulates the site, and so the diagnosis, its energies and the "
+        "sky from its fixed array exist: arrays named 'tracker' and 'fixed' so mounted "
+        "(sim.twin.has_twin_arrays); false: a camera site or other arrays"))
     origin: Literal["builtin", "user", "unknown"] = Field(
         description="a built-in file, or the user's folder (which wins)")
     overrides_builtin: bool
