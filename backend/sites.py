@@ -44,7 +44,14 @@ from backend.storage.tables import (
     utcnow,
 )
 from sim.site_config import validate_site_config
-from sim.sites import Site, list_sites, load_site, place_defaults, site_from_dict
+from sim.sites import (
+    Site,
+    builtin_site_ids,
+    list_sites,
+    load_site,
+    place_defaults,
+    site_from_dict,
+)
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -250,9 +257,11 @@ class Registry:
             state = self._file_state()
             with self._lock:  # note_file writes it too
                 changed = [name for name, sig in state.items() if self._files.get(name) != sig]
+                removed = [name for name in self._files if name not in state]
                 self._files = state
             added = [site for name in sorted(changed)
                      if (site := self._read_new(name.removesuffix(".json"))) is not None]
+            added += self._forget(sorted(name.removesuffix(".json") for name in removed))
             if added and self._store is not None:
                 try:  # idempotent beside the rows the CLI writes
                     self._store(added)
@@ -275,6 +284,28 @@ class Registry:
             return bool(added)
         finally:
             self._scan_lock.release()
+
+    def _forget(self, site_ids: list[str]) -> list[Site]:
+        """The sites whose user file was deleted: a built-in one of that id comes back (the
+        running service kept the deleted override's config, labelled built-in; a tester's
+        finding) and is returned to be put; a site of the user's alone leaves the service,
+        as a restart would (its stored readings stay in the database)."""
+        back = []
+        builtin = builtin_site_ids()
+        for site_id in site_ids:
+            if site_id not in self._sites:
+                continue
+            if site_id in builtin:
+                if (site := self._read_new(site_id)) is not None:
+                    logger.info("site %s: its file was deleted from %s; the built-in one "
+                                "again", site_id, self._user_dir)
+                    back.append(site)
+                continue
+            with self._lock:
+                self._sites.pop(site_id, None)
+            logger.warning("site %s: its file was deleted from %s; the service no longer has "
+                           "it (its readings stay stored)", site_id, self._user_dir)
+        return back
 
     def _read_new(self, site_id: str) -> Site | None:
         """The site of a new or changed file, or None (unchanged, malformed, or a new zone)."""
@@ -330,7 +361,10 @@ class Registry:
         return self._phase_of_array[array_id]
 
     def get(self, site_id: str) -> SiteInfo | None:
-        """The site, or None; an unknown id first looks for a new site file (:meth:`rescan`)."""
+        """The site, or None; with any change of the user's files since the last look
+        (:meth:`rescan`: a lookup by id saw an edited file only after some request had
+        listed every site, 44 s later), an unknown id first looking for a new one."""
+        self.rescan()
         info = self._sites.get(site_id)
         if info is None and self.rescan(force=True):
             info = self._sites.get(site_id)

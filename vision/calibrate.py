@@ -563,7 +563,8 @@ def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
     given = n_directions(az[up], el[up])
     if given < MIN_DIRECTIONS:
         raise ValueError(f"the {n} frames' times put the sun above the horizon in only "
-                         f"{given} distinct directions (more than {DISTINCT_DEG:g}° apart; "
+                         f"{given} distinct direction{'' if given == 1 else 's'} (more than "
+                         f"{DISTINCT_DEG:g}° apart; "
                          f"frames of one direction count once); a calibration needs at "
                          f"least {MIN_DIRECTIONS}")
 
@@ -577,7 +578,7 @@ def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
         if _too_few(dirs, n_par):
             missing = [names[i] for i in range(n) if i not in set(use.tolist())]
             raise ValueError(f"only {use.size} frames have a sun found above the horizon, in "
-                             f"{dirs} distinct directions (none in: "
+                             f"{dirs} distinct direction{'' if dirs == 1 else 's'} (none in: "
                              f"{', '.join(missing) or 'none'}); {n_par} parameters need at "
                              f"least {(n_par + 3) // 2} directions")
         xy = np.array([dets[i].centroid_px for i in use], float)

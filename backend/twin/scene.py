@@ -63,7 +63,7 @@ from backend.twin.scene_build import (
 from backend.twin.scene_plant import PlantView
 from backend.twin.scene_pose import Replay, ScenePose
 from backend.twin.scene_view import TwinView
-from sim.plant import Plant, load_plant
+from sim.plant import Plant, UnknownPlantError, load_plant
 from sim.sites import Site
 from sim.sky import clearsky_ineichen
 from sim.sun import solar_position
@@ -278,6 +278,10 @@ class TwinScene:
         try:
             view: View = (self._plant_view(client, want, start) if "plant" in want
                           else self._site_view(client, want, start))
+        except UnknownPlantError as exc:  # the viewer's address, not a fault of the service
+            logger.info("3D twin: viewer %d asked for %s", client.client_id, exc)
+            client.gui.add_markdown(f"**No such plant**: {exc}.")
+            return
         except Exception:
             logger.exception("3D twin: viewer %d (%s) could not be built", client.client_id,
                              want)

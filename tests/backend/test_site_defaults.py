@@ -9,8 +9,9 @@ expected tilts are Landau's rule written out here from GSEE's ``optimal_tilt``
 
 from __future__ import annotations
 
+import json
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import httpx
@@ -168,3 +169,41 @@ def test_a_site_file_without_rows_in_this_database_gets_them(
     assert server.ctx.registry.get("lubeck").ready()
     r = client.get("/api/v1/sites/lubeck/status")
     assert r.status_code == 200, r.text
+
+
+def _lookup_until(client: httpx.Client, site_id: str, done: Callable[[httpx.Response], bool]
+                  ) -> httpx.Response:
+    """``GET /api/v1/sites/{site_id}`` alone (never the list) until ``done``; 10 s at most."""
+    deadline = time.monotonic() + 10
+    while not done(r := client.get(f"/api/v1/sites/{site_id}")):
+        assert time.monotonic() < deadline, r.text
+        time.sleep(0.25)
+    return r
+
+
+def test_an_edited_or_deleted_site_file_reaches_a_lookup_by_id(
+        server: InProcessServer, client: httpx.Client) -> None:
+    """A lookup by id sees an edited file within the rescan interval (it waited for a
+    request of the whole list: 44 s); deleting an override gives the built-in site back
+    (the deleted file's config stayed, labelled built-in), deleting a site of the user's
+    alone takes it out, as a restart would (a tester's findings)."""
+    folder = Path(server.extra_env["HELIOTWIN_SITES_DIR"])
+    folder.mkdir(parents=True, exist_ok=True)
+    builtin = client.get("/api/v1/sites/tehuantepec/config").json()
+    override = folder / "tehuantepec.json"
+    mine = folder / "rostock.json"
+    try:
+        override.write_text(json.dumps({**builtin, "temp_air_c": 26.0}))
+        r = _lookup_until(client, "tehuantepec", lambda r: r.json()["temp_air_c"] == 26.0)
+        assert (r.json()["origin"], r.json()["overrides_builtin"]) == ("user", True)
+        mine.write_text(json.dumps({**builtin, "site_id": "rostock", "name": "Rostock"}))
+        _lookup_until(client, "rostock", lambda r: r.status_code == 200)
+        override.unlink()
+        mine.unlink()
+        r = _lookup_until(client, "tehuantepec", lambda r: r.json()["temp_air_c"] == 27.0)
+        assert (r.json()["origin"], r.json()["overrides_builtin"]) == ("builtin", False)
+        _lookup_until(client, "rostock", lambda r: r.status_code == 404)
+        assert "rostock" not in [s["site_id"] for s in client.get("/api/v1/sites").json()]
+    finally:
+        override.unlink(missing_ok=True)
+        mine.unlink(missing_ok=True)

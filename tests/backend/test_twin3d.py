@@ -629,6 +629,23 @@ def test_plant_view_strategy_control_reposes(scene: TwinScene) -> None:
         c.close()
 
 
+def test_an_unknown_plant_is_said_to_the_viewer_not_logged_as_a_fault(
+        scene: TwinScene, caplog: pytest.LogCaptureFixture) -> None:
+    """A viewer's address naming no plant gets "No such plant" in its panel; the service
+    logged an ERROR with a traceback and showed "could not build this view"."""
+    with caplog.at_level("INFO", logger="backend.twin.scene"):
+        v = Viewer(scene, "/plant/atlantis")
+        try:
+            deadline = time.monotonic() + 15
+            while "atlantis" not in caplog.text:
+                assert time.monotonic() < deadline, "the viewer was never answered"
+                time.sleep(0.05)
+        finally:
+            v.close()
+    assert not [r for r in caplog.records if r.levelname in ("ERROR", "WARNING")], caplog.text
+    assert "could not be built" not in caplog.text
+
+
 def _port_is_free(port: int) -> bool:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)

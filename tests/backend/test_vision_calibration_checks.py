@@ -135,4 +135,4 @@ def test_series_of_fewer_than_three_sun_directions_are_refused(
         r = _calibrate(client, files, times)
         assert r.status_code == 422, (what, r.text)
         detail = r.json()["detail"]
-        assert detail.startswith("timestamps:") and "distinct directions" in detail, what
+        assert detail.startswith("timestamps:") and "distinct direction" in detail, what

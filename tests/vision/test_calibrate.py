@@ -238,7 +238,7 @@ def test_copies_of_one_sun_direction_count_once() -> None:
     with pytest.raises(ValueError, match="distinct sun directions"):
         fit_fisheye(x[[0, 0, 0, 1, 1]], y[[0, 0, 0, 1, 1]], az[[0, 0, 0, 1, 1]],
                     el[[0, 0, 0, 1, 1]], (640, 480))
-    with pytest.raises(ValueError, match="distinct directions"):
+    with pytest.raises(ValueError, match="1 distinct direction "):
         self_calibrate(lambda i: np.zeros((480, 640, 3), np.uint8), az[[0, 0, 0, 0]],
                        el[[0, 0, 0, 0]])
 
