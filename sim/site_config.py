@@ -14,6 +14,8 @@ that names every bad field by its dotted path (``arrays.fixed.surface_tilt_deg``
 from __future__ import annotations
 
 import dataclasses
+import functools
+import importlib.resources
 import re
 from typing import TYPE_CHECKING, Any, Literal
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
@@ -209,6 +211,26 @@ class Array(BaseModel):
         return value
 
 
+@functools.cache
+def _iana_zone_names() -> frozenset[str]:
+    """The tz database's zone names, as the ``tzdata`` package lists them."""
+    return frozenset(importlib.resources.files("tzdata").joinpath("zones").read_text().split())
+
+
+def check_iana_zone(name: str) -> str:
+    """``name`` if it names a zone of the IANA tz database (``Europe/Berlin``, ``Etc/GMT+5``,
+    ``UTC``), else ValueError. A machine's zoneinfo folder also answers ``localtime`` (a
+    link to its own zone: a site's days would move with the machine); the ``tzdata``
+    package's list is the database's names. The one rule of sites, plants and sweeps."""
+    if name not in _iana_zone_names():
+        raise ValueError(f"{name!r} is not an IANA time zone (e.g. Europe/Berlin, Etc/GMT+5)")
+    try:
+        ZoneInfo(name)
+    except (ZoneInfoNotFoundError, ValueError):
+        raise ValueError(f"{name!r} is not an IANA time zone this machine can read") from None
+    return name
+
+
 class SiteConfig(BaseModel):
     """A heliotwin site: a place, its climate defaults, a dual-axis tracker and its PV arrays.
 
@@ -259,11 +281,7 @@ class SiteConfig(BaseModel):
     @field_validator("timezone")
     @classmethod
     def _iana_zone(cls, value: str) -> str:
-        try:
-            ZoneInfo(value)
-        except (ZoneInfoNotFoundError, ValueError):
-            raise ValueError(f"{value!r} is not an IANA time zone") from None
-        return value
+        return check_iana_zone(value)
 
     @field_validator("assumed")
     @classmethod

@@ -304,7 +304,7 @@ def sweep_zone(plant: Plant | None, timezone: str | None) -> str:
     a bare latitude/longitude has no zone of its own), else UTC. Its dates (``start``,
     ``end``) and the shade chart's day are read in it. :class:`SweepInputError` names
     ``timezone``."""
-    from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
+    from sim.site_config import check_iana_zone
 
     if plant is not None:
         if timezone is not None:
@@ -314,11 +314,9 @@ def sweep_zone(plant: Plant | None, timezone: str | None) -> str:
     if timezone is None:
         return "UTC"
     try:
-        ZoneInfo(timezone)
-    except (ZoneInfoNotFoundError, ValueError):
-        raise SweepInputError("timezone", f"{timezone!r} is not an IANA time zone "
-                              "(e.g. Europe/Madrid, Etc/GMT+5)") from None
-    return timezone
+        return check_iana_zone(timezone)
+    except ValueError as exc:
+        raise SweepInputError("timezone", str(exc)) from None
 
 
 #: Largest number of cases × steps of one sweep (a bound on its cost).

@@ -16,13 +16,13 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sim.configs import read_config
 from sim.paths import default_plants_dir
+from sim.site_config import check_iana_zone
 
 FloatArray = NDArray[np.float64]
 
@@ -407,9 +407,9 @@ def plant_from_dict(d: dict[str, Any], where: str = "plant") -> Plant:
     if not isinstance(tz, str):
         raise ValueError(f"{where}: missing field 'timezone' (an IANA zone name)")
     try:
-        ZoneInfo(tz)
-    except (ZoneInfoNotFoundError, ValueError):
-        raise ValueError(f"{where}: field 'timezone' {tz!r} is not an IANA time zone") from None
+        check_iana_zone(tz)
+    except ValueError as exc:
+        raise ValueError(f"{where}: field 'timezone' {exc}") from None
     frame = d.get("frame", "enu")
     if frame not in FRAMES:
         raise ValueError(f"{where}: field 'frame' must be one of {', '.join(FRAMES)}, "

@@ -135,6 +135,7 @@ def test_a_site_whose_arrays_the_twin_does_not_know_stores_readings_but_has_no_d
     ({"latitude_deg": 136.1}, "body: latitude_deg: Input should be less than or equal to 90"),
     ({"arrays": {"fixed": {"surface_tilt_deg": 36, "tilt": 3}}}, "arrays.fixed.tilt: unknown key"),
     ({"timezone": "Eastern"}, "timezone: 'Eastern' is not an IANA time zone"),
+    ({"timezone": "localtime"}, "timezone: 'localtime' is not an IANA time zone"),
     ({"site_id": "other"}, "site_id: 'other' does not match the path's 'my-roof'"),
     # PostgreSQL refused the NUL with a 500 after the file was written: the service then
     # could not start

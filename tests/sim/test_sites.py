@@ -172,6 +172,8 @@ def test_a_site_written_by_hand_from_the_schema_loads_and_simulates(tmp_path) ->
 @pytest.mark.parametrize(("change", "words"), [
     ({"latitude_deg": 91}, "latitude_deg: Input should be less than or equal to 90"),
     ({"timezone": "UTC+5"}, "timezone: 'UTC+5' is not an IANA time zone"),
+    # the machine's own zone, a file beside the names: the days would move with the machine
+    ({"timezone": "localtime"}, "timezone: 'localtime' is not an IANA time zone"),
     ({"site_id": "My Roof"}, "site_id: String should match pattern"),
     ({"arrays": {"fixed": {"surface_tilt_deg": "steep"}}}, "arrays.fixed.surface_tilt_deg"),
     ({"arrays": {"fixed": {"module": "Acme_9000"}}}, "arrays.fixed.module: module 'Acme_9000'"),
