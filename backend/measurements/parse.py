@@ -166,12 +166,22 @@ class _Errors:
         self.csv_lines = csv_lines
         self.listed: Counter[str] = Counter()
         self.unlisted: Counter[str] = Counter()
+        #: rows refused whole for their shape: what their fields lack is not said again
+        self.shapeless: set[int] = set()
+
+    def refuse_row(self, row: int, msg: str) -> None:
+        """A row that is not a reading at all (a string where an object is due, an object
+        where an emonCMS list is): said once; its fields are not checked."""
+        self.add(row, None, msg, "type_error")
+        self.shapeless.add(row)
 
     def _room(self, field: str) -> int:
         return max(0, min(MAX_ERRORS - len(self.items),
                           MAX_ERRORS_PER_FIELD - self.listed[field]))
 
     def add(self, row: int | None, field: str | None, msg: str, kind: str) -> None:
+        if field is not None and row in self.shapeless:
+            return
         key = field or "row"
         if self._room(key) == 0:
             self.unlisted[key] += 1
@@ -190,6 +200,8 @@ class _Errors:
         if not np.count_nonzero(mask):  # a fifth of mask.any()'s cost on a small batch
             return
         rows = np.flatnonzero(mask)
+        if self.shapeless:
+            rows = rows[~np.isin(rows, list(self.shapeless))]
         room = self._room(field)
         for r in rows[:room].tolist():
             self.add(int(r), field, msg_of(int(r)), kind)
@@ -354,8 +366,7 @@ def _columns(readings: list[Any], errors: _Errors) -> tuple[dict[str, list[Any]]
     out: dict[str, list[Any]] = {f: [None] * n for f in FIELDS}
     for r, item in enumerate(readings):
         if type(item) is not dict:
-            errors.add(r, None, f"a reading must be an object, got {type(item).__name__}",
-                       "type_error")
+            errors.refuse_row(r, f"a reading must be an object, got {type(item).__name__}")
             continue
         for k, v in item.items():
             if k in _FIELD_SET:
@@ -378,10 +389,12 @@ def _emoncms_columns(rows: list[Any], errors: _Errors) -> dict[str, list[Any]]:
         for r, row in enumerate(rows):
             if type(row) is not list or len(row) not in (4, 5):
                 what = f"{len(row)} values" if type(row) is list else type(row).__name__
-                errors.add(r, None, f"a row must be [{', '.join(EMONCMS_ROW)}] (power_w may "
-                                    f"be left off), got {what}", "type_error")
+                msg = (f"a row must be [{', '.join(EMONCMS_ROW)}] (power_w may be left off), "
+                       f"got {what}")
                 if type(row) is not list:
+                    errors.refuse_row(r, msg)
                     continue
+                errors.add(r, None, msg, "type_error")
             for j, x in enumerate(row[:len(names)]):  # what a short row holds is not "missing"
                 cols[j][r] = x
     out = dict(zip(names, cols, strict=True))

@@ -269,6 +269,17 @@ def test_bad_emoncms_rows_are_named(row: object, field: str | None, words: str) 
     assert (errors[0]["row"], errors[0]["field"]) == (1, field) and words in errors[0]["msg"]
 
 
+@pytest.mark.parametrize("body", [
+    [{"ts": "2026-11-20T18:36:00Z", "array": "tracker", "power_w": 1}],   # an object as a row
+    {"readings": [[1714557600, "tracker", 26.0, 7.0]]},                   # a row as a reading
+])
+def test_a_row_of_the_wrong_shape_is_refused_once(body: object) -> None:
+    """Its shape is the one problem: not also 'unix_s is missing', 'array: missing' and 'no
+    electrical value' for what it did send (a tester's finding)."""
+    (e,) = _errors(orjson.dumps(body))
+    assert (e["row"], e["field"], e["type"]) == (0, None, "type_error"), e
+
+
 def test_an_escape_cannot_hide_a_repeated_key() -> None:
     """One escaped colon in ``ts`` would balance one repeated key in a bare colon count."""
     body = b'{"readings": [{"ts": "2024-05-01T10\\u003a00:00Z", "array": "tracker", ' \
