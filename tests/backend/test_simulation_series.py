@@ -110,3 +110,27 @@ def test_ended_runs_in_memory_are_bounded(run: dict[str, Any]) -> None:
     assert run["run_id"] not in runner._runs and "old-0" not in runner._runs
     state = runner.get(run["run_id"])            # the real run, from its row
     assert state is not None and state.status == "done" and state.summary
+
+
+def test_the_suns_azimuth_is_averaged_as_a_direction(run: dict[str, Any]) -> None:
+    """At Tehuantepec in June the noon sun passes north of the zenith: its azimuth crosses
+    360° → 0° inside a bucket. The bucket's azimuth is the circular mean of its minutes
+    (scipy's circmean, an independent implementation), not the plain one (≈ 180°, south;
+    the midnight sun's hour read 272° at Tromsø: a tester's finding); a joint angle, which
+    winds on past 360°, keeps its plain mean."""
+    from scipy.stats import circmean
+
+    ref = run["series"]
+    with run["server"].client(headers=run["auth"]) as c:
+        got = c.get(run["url"], params={"step_s": 3600}).json()
+    served = np.array([np.nan if p["solar_azimuth_deg"] is None else p["solar_azimuth_deg"]
+                       for p in got["points"]])
+    az = ref["solar_azimuth"].to_numpy().reshape(-1, 60)
+    crossing = [k for k in range(len(az)) if az[k].max() - az[k].min() > 180]
+    assert crossing, "no hour of the run has the sun cross north"
+    for k in crossing:
+        assert served[k] == pytest.approx(circmean(az[k], high=360.0), abs=1e-6)
+        assert min(served[k], 360.0 - served[k]) < 45.0            # north, not south
+    joint = np.array([p["azimuth_joint_deg"] for p in got["points"]])
+    np.testing.assert_allclose(
+        joint, ref["azimuth_joint_deg"].to_numpy().reshape(-1, 60).mean(axis=1), rtol=1e-9)
