@@ -11,6 +11,7 @@ repeat" is checked over a number of the evaluator's rounds, not over a sleep.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import hashlib
 import hmac
@@ -26,6 +27,7 @@ from zoneinfo import ZoneInfo
 
 import httpx
 import orjson
+import pandas as pd
 import pytest
 from live_service import Database, InProcessServer, free_port, new_database
 
@@ -143,6 +145,34 @@ def test_a_logger_that_sleeps_at_night_is_not_silent() -> None:
                               lambda a, b: daylight_seconds(info, a, b))
     assert [c.array for c in ev.conditions] == ["fixed"]
     assert "of daylight" in ev.conditions[0].detail
+
+
+def test_a_logger_silent_since_summer_is_silent_in_the_polar_night() -> None:
+    """Tromsø (69.65° N) on 5 Dec, the sun down all day, a logger quiet since 23 Jun: all
+    the daylight since counts (only the last three days did: none, so no alert, and an
+    active one would clear as "reports again"; a tester's finding), to within 0.5 % of
+    pvlib's sun every 10 minutes."""
+    import pvlib
+
+    from backend.alerts.service import daylight_seconds
+    from backend.sites import SiteInfo
+    from sim.sites import load_site
+
+    site = dataclasses.replace(load_site("tehuantepec"), latitude=69.65, longitude=18.96,
+                               altitude=10.0, timezone="Europe/Oslo")
+    info = SiteInfo(site, ZoneInfo(site.timezone), 0)
+    last = dt.datetime(2026, 6, 23, 21, 59, tzinfo=dt.UTC).timestamp()
+    now = dt.datetime(2026, 12, 5, 12, 0, tzinfo=dt.UTC).timestamp()
+    counted = daylight_seconds(info, last, now)
+    when = pd.date_range(pd.Timestamp(last, unit="s", tz="UTC"),
+                         pd.Timestamp(now, unit="s", tz="UTC"), freq="600s")
+    up = pvlib.solarposition.get_solarposition(when, 69.65, 18.96, 10.0)["apparent_elevation"]
+    assert counted == pytest.approx(float((up > 0).sum()) * 600.0, rel=0.005)
+    assert daylight_seconds(info, now - 3 * 86400, now) == 0.0   # the polar night itself
+    ev = rules.silent_loggers(SITE, TZ, {"tracker": int(last)}, now, now - 200 * 86400, 60,
+                              lambda a, b: daylight_seconds(info, a, b))
+    assert [c.array for c in ev.conditions] == ["tracker"]
+    assert ev.conditions[0].data["silent_min"] > 100_000
 
 
 def _day(date: str, pr: float | None, faults: list[dict], source: str = "fixed_array") -> dict:
