@@ -188,6 +188,28 @@ def on_grid(ts_s: Any, values: Any, grid_s: Any, max_gap_s: float) -> np.ndarray
     return out
 
 
+#: Readings of the two arrays give a measured gain only over the same minutes: one expected
+#: energy over each array's minutes alike within this share [-]
+SAME_MINUTES = 0.01
+
+
+def measured_gain_pct(tracker_wh: float | None, fixed_wh: float | None,
+                      over_tracker_minutes_wh: float | None,
+                      over_fixed_minutes_wh: float | None) -> float | None:
+    """:func:`gain_pct` of the measured energies when the two loggers' readings cover the
+    same minutes: ``over_*_minutes_wh`` is one expected energy (the tracker twin's) over the
+    minutes each array's readings cover, alike within :data:`SAME_MINUTES` of the larger;
+    None otherwise. Energies over different minutes give no gain: a fixed-array logger
+    that began at 15:30 beside a tracker's whole day read +1,540 % (a tester's finding);
+    both loggers over the same half-day still give one. Without the expected energies
+    (no twin) the minutes cannot be compared and the plain gain is given."""
+    if over_tracker_minutes_wh is not None and over_fixed_minutes_wh is not None:
+        larger = max(over_tracker_minutes_wh, over_fixed_minutes_wh)
+        if abs(over_tracker_minutes_wh - over_fixed_minutes_wh) > SAME_MINUTES * larger:
+            return None
+    return gain_pct(tracker_wh, fixed_wh)
+
+
 def gain_pct(tracker_wh: float | None, fixed_wh: float | None) -> float | None:
     """The tracking gain [%]: ``100 · (tracker / fixed − 1)``; None when either energy is
     missing or the fixed array's is not positive (no gain is defined against nothing)."""

@@ -4,7 +4,8 @@ Periods are the site's local calendar hours/days/months clipped to ``[start, end
 energy comes from the hourly rollups (:mod:`backend.measurements.queries`, the
 rule of :mod:`backend.measurements.rollups`), the twin's from series stored on
 demand (``TwinService.ensure``). ``gain_pct`` is ``100·(tracker/fixed − 1)`` from
-measured energy, null when either is missing; ``twin_gain_pct`` the same from the twin,
+measured energy, null when either is missing or their readings cover the period unalike
+(:func:`sim.energy.measured_gain_pct`); ``twin_gain_pct`` the same from the twin,
 ``twin_matched_gain_pct`` from the twin over the same minutes as the readings. A
 period whose readings miss part of the twin's energy (a half-day) is ``partial``
 and is compared with ``twin_matched_wh``, never with the whole-period twin.
@@ -22,7 +23,7 @@ import numpy as np
 from backend.errors import InputError
 from backend.measurements.queries import energy_table, matched_twin_wh, period_edges
 from backend.sites import SiteInfo
-from sim.energy import gain_pct
+from sim.energy import SAME_MINUTES, gain_pct, measured_gain_pct
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -33,6 +34,10 @@ _SHORTEST_S = {"hour": 3600.0, "day": 82800.0, "month": 28 * 86400.0}  # DST day
 
 #: A period whose readings cover less of the twin's energy than this is ``partial`` [%].
 PARTIAL_BELOW_PCT = 95.0
+#: The tracker twin's energy over the fixed array's minutes, in the tracker's entry of a
+#: period (summed like its energies; not in the answer): whether the two loggers read the
+#: same minutes (:func:`sim.energy.measured_gain_pct`)
+OVER_FIXED_MINUTES = "twin_over_fixed_minutes_wh"
 
 
 def _ratio(num: float | None, den: float | None) -> float | None:
@@ -52,9 +57,32 @@ def compare(arrays: dict[str, dict[str, Any]], tracker: str | None,
         "gain_pct": None, "twin_gain_pct": None, "twin_matched_gain_pct": None}
     if tracker is not None and fixed is not None:
         tr, fx = arrays[tracker], arrays[fixed]
-        out["gain_pct"] = gain_pct(tr["measured_wh"], fx["measured_wh"])
+        out["gain_pct"] = measured_gain_pct(tr["measured_wh"], fx["measured_wh"],
+                                            tr["twin_matched_wh"], tr.get(OVER_FIXED_MINUTES))
         out["twin_gain_pct"] = gain_pct(tr["twin_wh"], fx["twin_wh"])
         out["twin_matched_gain_pct"] = gain_pct(tr["twin_matched_wh"], fx["twin_matched_wh"])
+    return out
+
+
+def _over_fixed_minutes(conn: Any, table: Any, matched: dict[int, np.ndarray],
+                        tracker_id: int, fixed_id: int, edges_s: np.ndarray,
+                        gap: int) -> np.ndarray:
+    """Per period, the tracker twin's energy over the fixed array's minutes. Where both
+    arrays' readings hold all but :data:`sim.energy.SAME_MINUTES` of their twin's energy
+    their minutes are taken as the same (the tracker's own: no raw minutes read); the
+    others are read (:func:`backend.measurements.queries.matched_twin_wh`)."""
+    out = np.array(matched[tracker_id], dtype=float)
+    full = np.ones(out.size, bool)
+    for aid in (tracker_id, fixed_id):
+        twin = np.asarray(table.energy_wh[(aid, 1)], float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            share = np.where(twin > 0, np.asarray(matched[aid], float) / twin, 1.0)
+        full &= share >= 1.0 - SAME_MINUTES
+        full &= np.asarray(table.readings[(aid, 0)]) > 0
+    ask = np.flatnonzero(~full)
+    if ask.size:
+        cross = matched_twin_wh(conn, tracker_id, edges_s, gap, ask, minutes_of=fixed_id)
+        out[ask] = cross[ask]
     return out
 
 
@@ -148,17 +176,21 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
     names = list(info.arrays)
     ids = [info.arrays[n].array_id for n in names]
     gap = ctx.settings.ingest.energy_max_gap_s
-    with ctx.engine.connect() as conn:
-        table = energy_table(conn, ids, edges_s, info.phase_s, gap)
-        database = ctx.engine.url.render_as_string(hide_password=True)
-        matched = {aid: _matched(conn, table, aid, edges_s, gap, database) for aid in ids}
     tracker = info.array_of_kind("tracker")
     fixed = info.array_of_kind("fixed")
     tr_name = tracker.name if tracker is not None else None
     fx_name = fixed.name if fixed is not None else None
+    with ctx.engine.connect() as conn:
+        table = energy_table(conn, ids, edges_s, info.phase_s, gap)
+        database = ctx.engine.url.render_as_string(hide_password=True)
+        matched = {aid: _matched(conn, table, aid, edges_s, gap, database) for aid in ids}
+        over_fixed = (None if tracker is None or fixed is None else
+                      _over_fixed_minutes(conn, table, matched, tracker.array_id,
+                                          fixed.array_id, edges_s, gap))
     rows = []
     sums = {n: {"measured_wh": 0.0, "twin_wh": 0.0, "twin_matched_wh": 0.0, "readings": 0,
                 "twin_readings": 0} for n in names}
+    cross_sum = 0.0
     for p in range(len(edges) - 1):
         arrays: dict[str, dict[str, Any]] = {}
         for n, aid in zip(names, ids, strict=True):
@@ -174,6 +206,10 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
                                ("twin_matched_wh", mt_wh), ("readings", m_n),
                                ("twin_readings", t_n)):
                 sums[n][key] += value
+        if over_fixed is not None and tr_name is not None \
+                and arrays[tr_name]["twin_wh"] is not None:
+            arrays[tr_name][OVER_FIXED_MINUTES] = float(over_fixed[p])
+            cross_sum += float(over_fixed[p])
         compared = compare(arrays, tr_name, fx_name)
         no_twin = any(a["twin_wh"] is None for a in arrays.values()) or not arrays
         rows.append({
@@ -188,6 +224,9 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
                   "twin_matched_wh": t["twin_matched_wh"]
                   if t["readings"] and t["twin_readings"] else None,
                   "readings": t["readings"]} for n, t in sums.items()}
+    if over_fixed is not None and tr_name is not None \
+            and totals[tr_name]["twin_wh"] is not None:
+        totals[tr_name][OVER_FIXED_MINUTES] = cross_sum
     return {
         "site_id": site_id, "interval": interval, "timezone": info.site.timezone,
         "start": start.isoformat(), "end": end.isoformat(),

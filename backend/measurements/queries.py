@@ -320,8 +320,11 @@ _TS_POWER = ("SELECT ts_s, power_w FROM measurements WHERE array_id = ? AND sour
 
 
 def matched_twin_wh(conn: Connection, array_id: int, edges_s: np.ndarray,
-                    max_gap_s: int, periods: np.ndarray | None = None) -> np.ndarray:
-    """Twin energy [Wh] per period over only the minutes with a measured reading.
+                    max_gap_s: int, periods: np.ndarray | None = None,
+                    minutes_of: int | None = None) -> np.ndarray:
+    """Twin energy [Wh] per period over only the minutes with a measured reading
+    (of ``minutes_of``'s logger when given: the array's twin over another array's minutes,
+    one measure of two loggers' minutes, :func:`sim.energy.measured_gain_pct`).
 
     The twin's minute readings that have a measured reading in the same minute,
     integrated by the energy rule (:func:`sim.energy.energy_wh`, gaps over
@@ -340,7 +343,8 @@ def matched_twin_wh(conn: Connection, array_id: int, edges_s: np.ndarray,
     for run in np.split(asked, breaks):
         first, last = int(run[0]), int(run[-1])
         lo, hi = int(edges_s[first]) - max_gap_s, int(edges_s[last + 1]) + max_gap_s
-        measured = np.array(fetch(conn, _TS, (array_id, 0, lo, hi + 60)), np.int64).reshape(-1)
+        measured = np.array(fetch(conn, _TS, (array_id if minutes_of is None else minutes_of,
+                                              0, lo, hi + 60)), np.int64).reshape(-1)
         if measured.size < 2:
             continue
         twin = np.array(fetch(conn, _TS_POWER, (array_id, 1, lo, hi)), np.float64).reshape(-1, 2)

@@ -232,3 +232,52 @@ def test_raising_the_energy_gap_recomputes_the_hours_stored_before(
             assert measured(client, rng) == pytest.approx(truth["tracker"], rel=0.01)
     finally:
         db.drop()
+
+
+@pytest.mark.parametrize("api", ["sqlite"], indirect=True)
+def test_arrays_read_over_different_minutes_give_no_gain(api: Api) -> None:
+    """A fixed-array logger that began at 15:30 beside a tracker logger's whole day (5-min,
+    power only): its day's energies are over different minutes, so no measured gain in
+    /energy, its totals, the report or the diagnosis (they said +1,540 %, the report's
+    two-day total +323 %: a tester's finding); the next day, both whole, has its gain."""
+    client, token, _ = api
+    day, nxt, after = "2024-07-08", "2024-07-09", "2024-07-10"
+    twin = pd.concat([_twin_day(day), _twin_day(nxt)])
+    five = twin.iloc[::5]
+    fixed = five[five.index >= pd.Timestamp(f"{day} 15:30", tz=TZ)]
+    for array, rows in (("tracker", five), ("fixed", fixed)):
+        body = "ts,array,power_w\n" + "".join(
+            f"{t.isoformat()},{array},{r[f'{array}_power_w']:.3f}\n" for t, r in rows.iterrows())
+        r = client.post(f"/api/v1/sites/{SITE}/measurements", content=body,
+                        headers={"Authorization": f"Bearer {token}", "Content-Type": "text/csv"})
+        assert r.status_code == 200, r.text
+    rng = {"start": day, "end": after}
+    energy = client.get(f"/api/v1/sites/{SITE}/energy", params={**rng, "interval": "day"}).json()
+    first, second = energy["rows"]
+    assert first["arrays"]["fixed"]["coverage_pct"] < 50 < first["arrays"]["tracker"][
+        "coverage_pct"]
+    assert first["gain_pct"] is None and energy["totals"]["gain_pct"] is None
+    true_gain = 100.0 * (_posted_wh(five.loc[nxt], "tracker") / _posted_wh(five.loc[nxt], "fixed")
+                         - 1.0)
+    assert second["gain_pct"] == pytest.approx(true_gain, abs=1.0) and 15 < true_gain < 60
+    report = client.get(f"/api/v1/sites/{SITE}/report", params=rng).json()
+    assert report["totals"]["gain_pct"] is None
+    days = client.get(f"/api/v1/sites/{SITE}/diagnosis", params=rng).json()["days"]
+    assert days[0]["gain_measured_pct"] is None
+    assert days[1]["gain_measured_pct"] == pytest.approx(true_gain, abs=1.0)
+    # both loggers over the same afternoon: a partial day, but a gain of the same minutes
+    late = _twin_day("2024-07-12").iloc[::5]
+    late = late[late.index >= pd.Timestamp("2024-07-12 15:30", tz=TZ)]
+    for array in ("tracker", "fixed"):
+        body = "ts,array,power_w\n" + "".join(
+            f"{t.isoformat()},{array},{r[f'{array}_power_w']:.3f}\n" for t, r in late.iterrows())
+        r = client.post(f"/api/v1/sites/{SITE}/measurements", content=body,
+                        headers={"Authorization": f"Bearer {token}", "Content-Type": "text/csv"})
+        assert r.status_code == 200, r.text
+    (row,) = client.get(f"/api/v1/sites/{SITE}/energy", params={
+        "start": "2024-07-12", "end": "2024-07-13", "interval": "day"}).json()["rows"]
+    # the two planes' shares of their days differ (19.5 and 12.9 %): not what decides
+    assert row["partial"] and abs(row["arrays"]["tracker"]["coverage_pct"]
+                                  - row["arrays"]["fixed"]["coverage_pct"]) > 3
+    same = 100.0 * (_posted_wh(late, "tracker") / _posted_wh(late, "fixed") - 1.0)
+    assert row["gain_pct"] == pytest.approx(same, abs=1.0)

@@ -30,6 +30,7 @@ TODAY = dt.datetime.now(TZ).date()
 HALF = TODAY - dt.timedelta(days=4)
 FULL = HALF - dt.timedelta(days=1)
 EMPTY = HALF + dt.timedelta(days=1)  # no readings at all
+UNALIKE = FULL - dt.timedelta(days=2)  # the tracker all day, the fixed array 12:00–18:00
 OLD = TODAY - dt.timedelta(days=700)  # before the on-demand twin window
 
 
@@ -54,7 +55,8 @@ def edge_server(browser, tmp_path_factory: pytest.TempPathFactory) -> Iterator[S
         with httpx.Client(base_url=proc.base_url, timeout=120) as c:
             for array, scale in (("tracker", 1.3), ("fixed", 1.0)):
                 rows = _sine(FULL, array, scale, range(1440)) + _sine(
-                    HALF, array, scale, range(360, 720))
+                    HALF, array, scale, range(360, 720)) + _sine(
+                    UNALIKE, array, scale, range(1440) if array == "tracker" else range(720, 1080))
                 r = c.post("/api/v1/sites/tehuantepec/measurements", json={"readings": rows},
                            headers={"Authorization": f"Bearer {token}"})
                 assert r.status_code == 200, r.text
@@ -125,6 +127,23 @@ def test_a_half_day_is_flagged_and_compared_over_the_same_minutes(
     assert pg.locator("[data-testid=gain-day]").inner_text() == f"{row['gain_pct']:+.1f} %"
     _open(pg, edge_server, "tehuantepec", FULL)
     assert pg.locator("[data-testid=partial-day]").count() == 0
+
+
+def test_loggers_over_different_minutes_show_no_gain_and_say_why(
+        pg, edge_server: ServerProcess) -> None:
+    """The tracker's logger all day, the fixed array's from noon: no measured gain (their
+    energies over different minutes would read a gain of the tracker's morning), and the page
+    says why."""
+    _open(pg, edge_server, "tehuantepec", UNALIKE)
+    row = _api(edge_server, "/api/v1/sites/tehuantepec/energy", start=UNALIKE.isoformat(),
+               end=(UNALIKE + dt.timedelta(days=1)).isoformat())["rows"][0]
+    assert row["gain_pct"] is None
+    assert pg.locator("[data-testid=gain-day]").inner_text() == "—"
+    note = pg.locator("[data-testid=gain-unalike]").inner_text()
+    assert "different minutes" in note
+    assert f"fixed array's {round(row['arrays']['fixed']['coverage_pct'])} %" in note
+    _open(pg, edge_server, "tehuantepec", FULL)
+    assert pg.locator("[data-testid=gain-unalike]").count() == 0
 
 
 def test_a_day_without_readings_does_not_say_no_gaps(pg, edge_server: ServerProcess) -> None:

@@ -17,6 +17,11 @@ class ArrayEnergyRead(BaseModel):
     coverage_pct: float | None = Field(description="twin_matched_wh / twin_wh [%]")
     twin_weather_wh: float | None = Field(
         None, description="with source=twin_weather: the twin under the measured sky")
+    twin_over_fixed_minutes_wh: float | None = Field(
+        None, description="the tracker's only: its twin over the fixed array's measured "
+                          "minutes; equal to twin_matched_wh when both loggers read the same "
+                          "minutes, and only then is there a measured gain_pct "
+                          "(sim.energy.measured_gain_pct)")
 
 
 class EnergyTotalsRead(BaseModel):
@@ -24,7 +29,8 @@ class EnergyTotalsRead(BaseModel):
 
     arrays: dict[str, ArrayEnergyRead]
     partial: bool | None = Field(description="an array covered under partial_below_pct")
-    gain_pct: float | None = Field(description="100·(tracker/fixed − 1), measured")
+    gain_pct: float | None = Field(description="100·(tracker/fixed − 1), measured; null when "
+                                              "the two loggers read different minutes")
     twin_gain_pct: float | None
     twin_matched_gain_pct: float | None
     twin_weather_gain_pct: float | None = None
