@@ -383,10 +383,15 @@ def faults_over_days(days: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
             carried[kind] = fault
             out[i].append(fault)
         if f.get("missing_daylight_min", 0) >= DROPOUT_MIN:
+            detail = f"{f['missing_daylight_min']} daylight minutes without a tracker reading"
+            if slow := f.get("slow_logger"):  # readings came, too far apart to bridge
+                detail += (f" the energy rule bridges: the tracker's readings are "
+                           f"{slow['spacing_s']:.0f} s apart, more than its gap "
+                           f"(HELIOTWIN_ENERGY_MAX_GAP_S, {slow['max_gap_s']} s); raise it to "
+                           f"the logger's interval (at most 3,600 s) and restart")
             out[i].append({"kind": "dropout", "confidence": 1.0, "since": d["date"],
                            "magnitude": float(f["missing_daylight_min"]), "unit": "min",
-                           "detail": f"{f['missing_daylight_min']} daylight minutes without a "
-                                     "tracker reading"})
+                           "detail": detail})
     _underperformance(days, out)
     _module_loss(days, out)
     for i in _sky_clock_offset(days, out):  # the tracker judged under a shifted sky: not at all

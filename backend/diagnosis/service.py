@@ -229,7 +229,8 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
                                  edges_s[run[0]:run[-1] + 2], info.phase_s,
                                  ctx.settings.ingest.energy_max_gap_s)
         # one minute past the run, so the last day's last minute reaches midnight
-        tr, fx, sensors = site_minutes(ctx, info, t0, t1 + 60)
+        tr, fx, sensors, tr_spacing = site_minutes(ctx, info, t0, t1 + 60)
+        gap = ctx.settings.ingest.energy_max_gap_s
         start = pd.Timestamp(t0, unit="s", tz="UTC")
         e = sky_sensor.weather_aware_twin(info.site, start, start + pd.Timedelta(
             seconds=(t1 + 60 - t0) // 60 * 60), fx, sensors=sensors,
@@ -245,6 +246,8 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
             out[i] = _day_payload(info, date, (day_start_s, day_end_s), e.iloc[a:b], tr[a:b],
                                   fx[a:b], measured, elapsed, first_s,
                                   cut=not _whole_day(edges[i], edges[i + 1], info.zone))
+            if tr_spacing is not None and tr_spacing > gap:  # its readings bridge nothing
+                out[i]["features"]["slow_logger"] = {"spacing_s": tr_spacing, "max_gap_s": gap}
     return out
 
 

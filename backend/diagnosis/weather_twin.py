@@ -32,9 +32,11 @@ MAX_DAYS = 31
 
 
 def minute_grid(conn: Connection, array_id: int, t0: int, t1: int, max_gap_s: int,
-                stamped: str = "instant") -> tuple[np.ndarray, np.ndarray]:
-    """Measured power [W], shape (n,), and the :data:`SENSOR_NAMES` columns, shape
-    (n, k), on the minute grid of ``[t0, t1)`` by the energy rule's line
+                stamped: str = "instant") -> tuple[np.ndarray, np.ndarray, float | None]:
+    """Measured power [W], shape (n,), the :data:`SENSOR_NAMES` columns, shape (n, k), and
+    the readings' median spacing [s] (None under two readings: a logger slower than the
+    energy rule's gap leaves every minute NaN), on the minute grid of ``[t0, t1)`` by the
+    energy rule's line
     (:func:`sim.energy.on_grid`): linear between readings at most ``max_gap_s`` apart,
     so a 5- or 15-minute logger's minutes between readings are interpolated, never
     missing or zero; NaN outside the readings and inside a longer gap. Each reading
@@ -48,7 +50,8 @@ def minute_grid(conn: Connection, array_id: int, t0: int, t1: int, max_gap_s: in
     ts = interval_middles(rows[:, 0], stamped, max_gap_s)
     power = on_grid(ts, rows[:, 3], grid, max_gap_s)
     sensors = on_grid(ts, rows[:, 4:], grid, max_gap_s)
-    return power, sensors
+    spacing = float(np.median(np.diff(rows[:, 0]))) if len(rows) > 1 else None
+    return power, sensors, spacing
 
 
 def sky_sensors(fixed: np.ndarray, tracker: np.ndarray | None) -> pd.DataFrame | None:
@@ -70,19 +73,19 @@ def sky_sensors(fixed: np.ndarray, tracker: np.ndarray | None) -> pd.DataFrame |
 
 
 def site_minutes(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int
-                 ) -> tuple[np.ndarray, np.ndarray, pd.DataFrame | None]:
+                 ) -> tuple[np.ndarray, np.ndarray, pd.DataFrame | None, float | None]:
     """The tracker's and the fixed array's measured power [W] on the minute grid of
-    ``[t0, t1)`` (:func:`minute_grid`: NaN where the energy rule bridges no reading) and
-    the loggers' sky sensors (:func:`sky_sensors`). The site has the twin's arrays
-    (:meth:`SiteInfo.has_twin`)."""
+    ``[t0, t1)`` (:func:`minute_grid`: NaN where the energy rule bridges no reading), the
+    loggers' sky sensors (:func:`sky_sensors`) and the tracker's readings' median spacing
+    [s]. The site has the twin's arrays (:meth:`SiteInfo.has_twin`)."""
     # the arrays the twin simulates (SiteInfo.has_twin), not merely the first of each mount
     tracker, fixed = info.arrays["tracker"], info.arrays["fixed"]
     gap = ctx.settings.ingest.energy_max_gap_s
     stamped = info.site.readings_stamped
     with ctx.engine.connect() as conn:
-        fx, fx_s = minute_grid(conn, fixed.array_id, t0, t1, gap, stamped)
-        tr, tr_s = minute_grid(conn, tracker.array_id, t0, t1, gap, stamped)
-    return tr, fx, sky_sensors(fx_s, tr_s)
+        fx, fx_s, _ = minute_grid(conn, fixed.array_id, t0, t1, gap, stamped)
+        tr, tr_s, tr_spacing = minute_grid(conn, tracker.array_id, t0, t1, gap, stamped)
+    return tr, fx, sky_sensors(fx_s, tr_s), tr_spacing
 
 
 def sky_source(e: pd.DataFrame) -> tuple[str, str | None]:
@@ -111,7 +114,7 @@ def weather_twin(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int) -> pd.Da
         raise InputError(422, f"source=twin_weather is computed on request: at most {MAX_DAYS} "
                               "days (the diagnosis gives its daily energy for longer ranges)")
     t0, t1 = t0 // 60 * 60, -(-t1 // 60) * 60
-    _, fx, sensors = site_minutes(ctx, info, t0, t1)
+    _, fx, sensors, _ = site_minutes(ctx, info, t0, t1)
     start, now = pd.Timestamp(t0, unit="s", tz="UTC"), pd.Timestamp.now(tz="UTC")
     end = pd.Timestamp(t1, unit="s", tz="UTC")
     return sky_sensor.weather_aware_twin(info.site, start, end, fx, sensors=sensors,

@@ -215,6 +215,10 @@ def test_raising_the_energy_gap_recomputes_the_hours_stored_before(
             assert measured(client, rng) == 0.0  # readings an hour apart: nothing bridged
             r = client.get(f"/api/v1/sites/{SITE}/diagnosis", params={"start": day, "end": nxt})
             assert r.status_code == 200 and r.json()["days"][0]["tracker"]["measured_wh"] == 0
+            # the readings came: the finding names their spacing and the setting to raise
+            (drop,) = [f for f in r.json()["days"][0]["faults"] if f["kind"] == "dropout"]
+            assert "readings are 3600 s apart" in drop["detail"]
+            assert "HELIOTWIN_ENERGY_MAX_GAP_S, 1200 s" in drop["detail"]
         caplog.clear()
         with caplog.at_level("WARNING", logger="backend.measurements.writer"), \
                 InProcessServer(db.url, gap_3600) as server, server.client() as client:
