@@ -206,6 +206,13 @@ def downsample(conn: Connection, array_id: int, source: int, start: int, end: in
 # ---------------------------------------------------------------- energy
 
 
+def _first_instant(wall: dt.datetime) -> dt.datetime:
+    """A local midnight (or o'clock) as the instant it is, in the wall clock's own terms:
+    where a clock change skips it (Santiago, 6 Sep 2026) the day begins at 01:00−03:00,
+    which is how it is labelled (it read 00:00−04:00, a time that does not exist there)."""
+    return wall.astimezone(dt.UTC).astimezone(wall.tzinfo)
+
+
 def period_edges(start: dt.datetime, end: dt.datetime, interval: str,
                  zone: ZoneInfo) -> list[dt.datetime]:
     """Edges of local calendar hours, days or months that cover ``[start, end)``, clipped."""
@@ -221,14 +228,20 @@ def period_edges(start: dt.datetime, end: dt.datetime, interval: str,
     while guard < 200_000:
         guard += 1
         if interval == "hour":
+            # the next local o'clock: an hour on, floored to the wall clock's hour (after
+            # Lord Howe's 30-minute change every hour fell on :30, one across midnight);
+            # a floor that falls back to where it started (a repeated half hour) keeps
+            # the hour on
             utc = cur.astimezone(dt.UTC) + dt.timedelta(hours=1)
-            cur = utc.astimezone(zone)
+            nxt = utc.astimezone(zone)
+            floor = _first_instant(nxt.replace(minute=0, second=0, microsecond=0))
+            cur = floor if floor.astimezone(dt.UTC) > cur.astimezone(dt.UTC) else nxt
         elif interval == "day":
             d = cur.date() + dt.timedelta(days=1)
-            cur = dt.datetime(d.year, d.month, d.day, tzinfo=zone)
+            cur = _first_instant(dt.datetime(d.year, d.month, d.day, tzinfo=zone))
         else:
             y, m = (cur.year + 1, 1) if cur.month == 12 else (cur.year, cur.month + 1)
-            cur = dt.datetime(y, m, 1, tzinfo=zone)
+            cur = _first_instant(dt.datetime(y, m, 1, tzinfo=zone))
         if cur >= end:
             break
         if cur > start:

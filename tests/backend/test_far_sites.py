@@ -34,6 +34,16 @@ def client(server: InProcessServer) -> Iterator[httpx.Client]:
         yield c
 
 
+@pytest.fixture(scope="module")
+def far(server: InProcessServer) -> None:
+    """The module's sites: Santiago (its clocks skip midnight) and Lord Howe (30 minutes)."""
+    with server.client(timeout_s=120) as c:
+        _new_site(c, "santiago", latitude_deg=-33.45, longitude_deg=-70.66,
+                  altitude_m=520.0, timezone="America/Santiago")
+        _new_site(c, "lordhowe", latitude_deg=-31.55, longitude_deg=159.08,
+                  timezone="Australia/Lord_Howe")
+
+
 def _new_site(client: httpx.Client, site_id: str, **place: object) -> dict:
     """Tehuantepec's tracker and arrays at ``place``; the place decides the fixed plane."""
     config = client.get("/api/v1/sites/tehuantepec/config").json()
@@ -62,12 +72,10 @@ def _post_twin_days(client: httpx.Client, server: InProcessServer, site: Site,
 
 
 def test_a_clock_change_that_skips_midnight_is_an_ordinary_day(
-        client: httpx.Client, server: InProcessServer) -> None:
+        client: httpx.Client, server: InProcessServer, far: None) -> None:
     """Santiago's clocks go from 23:59:59 on 5 Sep 2026 to 01:00 on 6 Sep: the diagnosis
     and the weather twin's series and energy answered 500 ('nonexistent time', the days'
     grouping of the sky's minutes), on days with readings or without."""
-    _new_site(client, "santiago", latitude_deg=-33.45, longitude_deg=-70.66,
-              altitude_m=520.0, timezone="America/Santiago")
     site = server.ctx.registry.sites["santiago"].site
     zone = "America/Santiago"
     _post_twin_days(client, server, site, pd.Timestamp("2026-09-05", tz=zone),
@@ -89,3 +97,35 @@ def test_a_clock_change_that_skips_midnight_is_an_ordinary_day(
         "array": "tracker", "start": "2026-09-06", "end": "2026-09-07",
         "source": "twin_weather", "max_points": 10})
     assert r.status_code == 200, r.text
+
+
+def test_local_hours_and_days_across_half_hour_and_midnight_clock_changes(
+        client: httpx.Client, far: None) -> None:
+    """Lord Howe moves its clocks by 30 minutes: every hour after the change fell on :30,
+    one across local midnight, and the same hour had other edges when asked alone (a
+    tester's finding); the local o'clock hours add up to the days. Santiago's 6 Sep 2026
+    begins at 01:00−03:00, and says so (it read 00:00−04:00, a time that did not exist)."""
+    base = "/api/v1/sites/lordhowe/energy"
+    rng = {"start": "2026-10-03", "end": "2026-10-06"}
+    hours = client.get(base, params={**rng, "interval": "hour"}).json()["rows"]
+    days = client.get(base, params={**rng, "interval": "day"}).json()["rows"]
+    starts = [pd.Timestamp(r["period_start"]) for r in hours]
+    lengths = [(pd.Timestamp(r["period_end"]) - pd.Timestamp(r["period_start"])).seconds
+               for r in hours]
+    assert len(hours) == 72 and sum(t.minute != 0 for t in starts) == 1
+    assert sum(lengths) == 71.5 * 3600 and sorted(set(lengths)) == [1800, 3600]
+    assert [r["period_start"][11:16] for r in hours if r["period_start"][11:13] == "02"] == [
+        "02:00", "02:30", "02:00"]                   # 02:00–02:30 on the 4th does not exist
+    for d in days:
+        own = [r for r in hours if r["period_start"][:10] == d["period_start"][:10]]
+        assert own[0]["period_start"] == d["period_start"]
+        assert own[-1]["period_end"] == d["period_end"]               # none across midnight
+        assert sum(r["arrays"]["tracker"]["twin_wh"] for r in own) == pytest.approx(
+            d["arrays"]["tracker"]["twin_wh"], rel=1e-9)
+    alone = client.get(base, params={"start": "2026-10-05", "end": "2026-10-06",
+                                     "interval": "hour"}).json()["rows"]
+    assert [r["period_start"] for r in alone] == [r["period_start"] for r in hours[-24:]]
+    santiago = client.get("/api/v1/sites/santiago/energy", params={
+        "start": "2026-09-05", "end": "2026-09-08", "interval": "day"}).json()["rows"]
+    assert [r["period_start"] for r in santiago] == [
+        "2026-09-05T00:00:00-04:00", "2026-09-06T01:00:00-03:00", "2026-09-07T00:00:00-03:00"]
