@@ -188,9 +188,16 @@ def _duffie_beckman(
     latitude_rad = np.deg2rad(latitude)
     zenith_rad = np.asarray(solarposition.solar_zenith_analytical(
         latitude_rad, hour_angle_rad, declination_rad))
+    # eq. 4 divides by cos(latitude): at a pole it gave 180° at every hour (a tester's
+    # finding); a thousandth of a degree off the pole, with that place's zenith, it is
+    # the azimuth's limit there (to 0.001°)
+    azimuth_latitude_rad = np.deg2rad(np.clip(latitude, -90.0 + 1e-3, 90.0 - 1e-3))
+    azimuth_zenith_rad = zenith_rad if azimuth_latitude_rad == latitude_rad else np.asarray(
+        solarposition.solar_zenith_analytical(azimuth_latitude_rad, hour_angle_rad,
+                                              declination_rad))
     with np.errstate(invalid="ignore", divide="ignore"):
         azimuth_rad = np.asarray(solarposition.solar_azimuth_analytical(
-            latitude_rad, hour_angle_rad, declination_rad, zenith_rad))
+            azimuth_latitude_rad, hour_angle_rad, declination_rad, azimuth_zenith_rad))
     elevation = 90.0 - np.rad2deg(zenith_rad)
     delta_e = spa.atmospheric_refraction_correction(
         pressure / 100.0, temperature, elevation, 0.5667

@@ -88,6 +88,17 @@ def test_duffie_beckman_within_its_accuracy_of_spa_over_a_year() -> None:
     assert MEAN_DB_SEP_DEG[0] < np.mean(sep) < MEAN_DB_SEP_DEG[1]
 
 
+@pytest.mark.parametrize(("latitude", "day"), [(90.0, "2024-06-21"), (-90.0, "2024-12-21")])
+def test_duffie_beckman_at_a_pole_follows_the_sun_round(latitude: float, day: str) -> None:
+    """At a pole eq. 4's cos(latitude) is zero: the azimuth read 180° at every hour and the
+    tracker never moved (a tester's finding). Now within 1° of pvlib's SPA round the day."""
+    times = pd.date_range(f"{day}T00:00Z", periods=24, freq="1h")
+    db = solar_position(times, latitude, 0.0, method="duffie-beckman")["azimuth"].to_numpy()
+    ref = pvlib.solarposition.get_solarposition(times, latitude, 0.0)["azimuth"].to_numpy()
+    diff = np.abs((db - ref + 180.0) % 360.0 - 180.0)
+    assert diff.max() < 1.0, diff
+
+
 def test_pvlib_in_the_range_its_spa_internals_are_tested_on() -> None:
     # sim.sun calls undocumented pvlib.spa functions: the installed pvlib must be in
     # the range pyproject.toml pins, and every function must still be there.
