@@ -42,9 +42,10 @@ def derive_fisheye_scale(image: np.ndarray, params: dict[str, object]
                               f"got {projection!r}")
     found = image_circle(to_gray(image))
     if found is None:
-        raise InputError(422, "px_per_deg: required for this frame — it has no dark corners "
-                              "around an image circle to derive the scale from (or give "
-                              "calibration_id)")
+        h, w = image.shape[:2]
+        raise InputError(422, f"px_per_deg: required for this {w}×{h} px frame — it has no "
+                              "dark corners around an image circle to derive the scale from "
+                              "(or give calibration_id)")
     circle, clipped = found
     out = dict(params)
     derived: dict[str, Any] = {

@@ -188,6 +188,16 @@ def test_odd_but_valid_images_are_answered(client: httpx.Client, img: np.ndarray
         assert r.json()["sun_found"] is False and r.json()["centroid_px"] is None
 
 
+def test_a_fisheye_frame_without_a_circle_says_its_size(client: httpx.Client) -> None:
+    """A strip or a tiny frame sent as a fisheye without a scale: the refusal names
+    ``px_per_deg`` and the frame's size (it said only 'no dark corners', a tester's
+    finding: the file's shape is the news)."""
+    r = client.post(SUN, files={"file": ("strip.png", _png(np.full((10, 2000, 3), 90, np.uint8)),
+                                         "image/png")}, data={"camera": "fisheye"})
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"].startswith("px_per_deg: required for this 2000×10 px frame")
+
+
 def test_too_many_files_is_a_422_naming_files(client: httpx.Client) -> None:
     f = ("files", ("a.jpg", b"\xff\xd8", "image/jpeg"))
     r = client.post("/api/v1/vision/calibrations", files=[f] * 65,
