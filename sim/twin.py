@@ -187,8 +187,10 @@ class TwinResult:
         fixed_wh = self.energy_wh("fixed")
         out: dict[str, Any] = {
             "site_id": self.site.site_id,
-            "start": self.start.isoformat(),
-            "end": self.end.isoformat(),
+            # in the site's zone, both (an instant given with an offset came back in UTC
+            # beside a bare end date in local time)
+            "start": self.start.tz_convert(self.site.timezone).isoformat(),
+            "end": self.end.tz_convert(self.site.timezone).isoformat(),
             "step_s": self.step_s,
             "controller": self.controller,
             "sky": self.sky,

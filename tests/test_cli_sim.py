@@ -121,6 +121,16 @@ def test_simulate_one_day_json_and_csv(tmp_path, heliotwin_cli) -> None:
     assert "\r" not in p.stderr  # no progress bar when stderr is not a terminal
 
 
+def test_the_range_is_echoed_in_the_sites_zone(heliotwin_cli) -> None:
+    """An instant given with an offset and a bare end date: both said in the site's zone
+    (the start came back in UTC beside a local end; a tester's finding)."""
+    p = heliotwin_cli("simulate", "--site", "tehuantepec", "--start",
+                      "2024-03-15T14:30:00Z", "--end", "2024-03-16", "--step-s", "600", "--json")
+    assert p.returncode == 0, p.stderr
+    d = json.loads(p.stdout)
+    assert (d["start"], d["end"]) == ("2024-03-15T08:30:00-06:00", "2024-03-16T00:00:00-06:00")
+
+
 @pytest.mark.parametrize(
     "args, message",
     [
