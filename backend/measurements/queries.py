@@ -20,7 +20,7 @@ from sqlalchemy import Connection
 from backend.measurements.buckets import ROLLUP_WIDTH_S, grid_ceil, grid_floor
 from backend.measurements.fields import ELECTRICAL, SENSOR_NAMES
 from backend.storage.sqlraw import fetch
-from sim.energy import energy_wh
+from sim.energy import energy_per_period_wh, energy_wh
 
 QUANTITIES = ELECTRICAL
 _NS = len(SENSOR_NAMES)
@@ -320,10 +320,12 @@ def energy_table(conn: Connection, array_ids: list[int], edges_s: np.ndarray, ph
             r = np.array(rows, np.float64)
             inner = edges_s[(edges_s > lo) & (edges_s < hi)]
             cuts = np.concatenate([[lo], inner, [hi]])
-            for c0, c1 in zip(cuts[:-1], cuts[1:], strict=True):
-                p = int(np.searchsorted(edges_s, c0, side="right") - 1)
-                energy[key][p] += energy_wh(r[:, 0], r[:, 3], max_gap_s, c0, c1)
-                counts[key][p] += int(np.count_nonzero((r[:, 0] >= c0) & (r[:, 0] < c1)))
+            # every cut in one pass (a piece of months cut at every hour cost rows × cuts:
+            # 73 s for Lord Howe's standard-time half year of hours, the reviewer measured)
+            period = np.searchsorted(edges_s, cuts[:-1], side="right") - 1
+            np.add.at(energy[key], period,
+                      energy_per_period_wh(r[:, 0], r[:, 3], max_gap_s, cuts))
+            np.add.at(counts[key], period, np.diff(np.searchsorted(r[:, 0], cuts, "left")))
     return EnergyTable(edges_s, energy, counts)
 
 
