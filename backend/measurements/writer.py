@@ -613,9 +613,11 @@ class Writer:
         self.rollup_refreshes += 1
         self._refresh_rollups(cur, key[0], key[1], w.ts_s)
 
-    def _refresh_rollups(self, cur: Any, array_id: int, source: int, ts_s: np.ndarray) -> None:
-        """Recompute the rollups of every bucket that new readings at ``ts_s`` can change."""
-        phase = self.phase_of_array(array_id)
+    def _refresh_rollups(self, cur: Any, array_id: int, source: int, ts_s: np.ndarray,
+                         phase: int | None = None) -> None:
+        """Recompute the rollups of every bucket that new readings at ``ts_s`` can change
+        (``phase``: the site's rollup phase, by default the registry's)."""
+        phase = self.phase_of_array(array_id) if phase is None else phase
         gap = self.max_gap_s
         width = ROLLUP_WIDTH_S
         out: list[tuple[Any, ...]] = []
@@ -639,34 +641,35 @@ class Writer:
     def match_rollups_to_gap(self, conn: Connection) -> int:
         """Recompute every stored hour's rollup when the energy gap is not the one they were
         built with (``service_state.rollup_energy_max_gap_s``; unrecorded on a database
-        from before migration 0013), drop the cached diagnosis days (computed with the old
-        gap too) and record the gap. Raising ``HELIOTWIN_ENERGY_MAX_GAP_S`` for an hourly
-        logger left its stored hours at 0 Wh shown as full coverage. Series of arrays no
-        loaded site owns are left (their site's phase is unknown) and said so. Run in a
-        writer transaction (:meth:`call`) before the service serves; the series it
+        from before migration 0013: once, whatever the gap), drop the cached diagnosis days
+        (computed with the old gap too) and record the gap. Raising
+        ``HELIOTWIN_ENERGY_MAX_GAP_S`` for an hourly logger left its stored hours at 0 Wh
+        shown as full coverage. Every series is recomputed, with its site's phase as stored
+        (``sites.bucket_phase_s``: a site whose file is gone keeps right hours should it come
+        back); the twin's, stored at 60 s steps, only when a gap under 60 s is involved.
+        Run in a writer transaction (:meth:`call`) before the service serves; the series it
         recomputed."""
         key = "rollup_energy_max_gap_s"
         stored = conn.execute(select(ServiceState.value).where(ServiceState.key == key)
                               ).scalar()
         if stored == str(self.max_gap_s):
             return 0
-        series = conn.execute(text("SELECT DISTINCT array_id, source FROM measurement_rollups"
-                                   " ORDER BY array_id, source")).all()
+        twin_too = stored is None or min(int(stored), self.max_gap_s) < 60
+        series = conn.execute(text(
+            "SELECT DISTINCT r.array_id, r.source, s.bucket_phase_s FROM measurement_rollups r "
+            "JOIN arrays a ON a.id = r.array_id JOIN sites s ON s.site_id = a.site_id "
+            "ORDER BY r.array_id, r.source")).all()
+        series = [x for x in series if twin_too or x[1] == 0]
         if series:
             logger.warning("the energy gap is %d s, the stored hourly energies bridged %s: "
-                           "recomputing %d series", self.max_gap_s,
+                           "recomputing %d series before serving", self.max_gap_s,
                            f"{stored} s" if stored is not None else "an unrecorded one",
                            len(series))
         cur = conn.connection.driver_connection.cursor()  # type: ignore[union-attr]
-        done, skipped = 0, []
         half = ROLLUP_WIDTH_S // 2
+        started = time.monotonic()
         try:
-            for array_id, source in series:
-                try:
-                    self.phase_of_array(array_id)
-                except KeyError:
-                    skipped.append(array_id)
-                    continue
+            for k, (array_id, source, phase) in enumerate(series, 1):
                 buckets = np.array(conn.execute(text(
                     "SELECT bucket_s FROM measurement_rollups WHERE array_id = :a AND "
                     "source = :s ORDER BY bucket_s"), {"a": array_id, "s": source}
@@ -674,14 +677,13 @@ class Writer:
                 for lo in range(0, buckets.size, self.GAP_REBUILD_BUCKETS):
                     # an hour's middle: the hours it and its readings' intervals can change
                     self._refresh_rollups(cur, array_id, source,
-                                          buckets[lo:lo + self.GAP_REBUILD_BUCKETS] + half)
-                done += 1
+                                          buckets[lo:lo + self.GAP_REBUILD_BUCKETS] + half,
+                                          int(phase or 0))
+                logger.info("energy gap: series %d of %d recomputed (%d hours, %.0f s so far)",
+                            k, len(series), buckets.size, time.monotonic() - started)
         finally:
             cur.close()
-        if skipped:
-            logger.warning("arrays %s belong to no loaded site: their hourly energies keep "
-                           "the old gap", sorted(set(skipped)))
         conn.execute(delete(DiagnosisDay))
         conn.execute(delete(ServiceState).where(ServiceState.key == key))
         conn.execute(insert(ServiceState).values(key=key, value=str(self.max_gap_s)))
-        return done
+        return len(series)
