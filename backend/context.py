@@ -52,6 +52,7 @@ class ServiceContext:
         if self.mqtt is not None:  # first: its last readings still reach the writer
             self.mqtt.stop()
         self.simulations.stop()
+        self.registry.stop_watching()  # it may apply a site through the writer
         self.writer.stop()
         self.engine.dispose()
 
@@ -77,6 +78,7 @@ def open_context(settings: Settings) -> ServiceContext:
         writer.call(lambda conn: sync_sites(conn, new)).result(timeout=60)  # not for ever
 
     registry.store_through(store_sites)
+    registry.start_watching()
     twin = TwinService(registry, engine, writer, settings.twin.on_demand_max_days,
                        scene_site=settings.sites.default_site,
                        history_days=settings.twin.history_days)

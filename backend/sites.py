@@ -186,12 +186,14 @@ class Registry:
         }
         self._phase_of_array: dict[int, int] = {}
         self._user_dir = user_dir
-        self._files = self._file_state()
+        self._files = self._file_state() or {}
         self._dir_mtime_ns = self._folder_mtime_ns()
         self._checked = time.monotonic()
         self._scan_lock = threading.Lock()
         self._engine: Engine | None = None  # the database refresh_arrays read, for rescans
         self._store: Callable[[list[Site]], object] | None = None  # see store_through
+        self._watcher: threading.Thread | None = None  # see start_watching
+        self._stop_watching = threading.Event()
 
     @property
     def sites(self) -> dict[str, SiteInfo]:
@@ -204,10 +206,14 @@ class Registry:
         """Read every site file of ``sites_dir`` (``sim.sites.list_sites``), and watch it."""
         return cls(list_sites(sites_dir), sites_dir)
 
-    def _file_state(self) -> dict[str, tuple[int, int]]:
-        """``{file name: (mtime_ns, size)}`` of the user's site files."""
-        if self._user_dir is None or not self._user_dir.is_dir():
+    def _file_state(self) -> dict[str, tuple[int, int]] | None:
+        """``{file name: (mtime_ns, size)}`` of the user's site files; None when the folder
+        cannot be read now (swapped in a deploy, a network file system's hiccup): not a
+        reason to forget every site in it."""
+        if self._user_dir is None:
             return {}
+        if not self._user_dir.is_dir():
+            return None
         out = {}
         for path in self._user_dir.glob("*.json"):
             try:
@@ -223,6 +229,30 @@ class Registry:
             return self._user_dir.stat().st_mtime_ns if self._user_dir is not None else -1
         except OSError:
             return -1
+
+    def start_watching(self) -> None:
+        """Look at the user's folder every :attr:`RESCAN_S` in a thread of its own: a file
+        edited or deleted reaches lookups by id within that (:meth:`get` stays a dict
+        read: a rescan applies a changed site through the writer, which must not hold up
+        the event loop of an ingest request)."""
+        self._stop_watching.clear()
+
+        def watch() -> None:
+            while not self._stop_watching.wait(self.RESCAN_S):
+                try:
+                    self.rescan()
+                except Exception:  # a bad moment must not end the watching
+                    logger.exception("site folder %s: rescan failed", self._user_dir)
+
+        self._watcher = threading.Thread(target=watch, name="heliotwin-sites", daemon=True)
+        self._watcher.start()
+
+    def stop_watching(self) -> None:
+        """Stop :meth:`start_watching`'s thread (before the writer stops)."""
+        if self._watcher is not None:
+            self._stop_watching.set()
+            self._watcher.join(timeout=10)
+            self._watcher = None
 
     def note_file(self, path: Path) -> None:
         """A site file this process wrote (and applied): not news to :meth:`rescan`."""
@@ -255,6 +285,8 @@ class Registry:
             self._checked = now
             self._dir_mtime_ns = self._folder_mtime_ns()
             state = self._file_state()
+            if state is None:
+                return False
             with self._lock:  # note_file writes it too
                 changed = [name for name, sig in state.items() if self._files.get(name) != sig]
                 removed = [name for name in self._files if name not in state]
@@ -361,10 +393,10 @@ class Registry:
         return self._phase_of_array[array_id]
 
     def get(self, site_id: str) -> SiteInfo | None:
-        """The site, or None; with any change of the user's files since the last look
-        (:meth:`rescan`: a lookup by id saw an edited file only after some request had
-        listed every site, 44 s later), an unknown id first looking for a new one."""
-        self.rescan()
+        """The site, or None; an unknown id first looks for a new site file (:meth:`rescan`).
+        Edited and deleted files reach a known id through :meth:`start_watching` (a lookup
+        by id saw an edited file only after some request had listed every site, 44 s later;
+        a rescan here ran on the event loop of every ingest request)."""
         info = self._sites.get(site_id)
         if info is None and self.rescan(force=True):
             info = self._sites.get(site_id)

@@ -207,3 +207,25 @@ def test_an_edited_or_deleted_site_file_reaches_a_lookup_by_id(
     finally:
         override.unlink(missing_ok=True)
         mine.unlink(missing_ok=True)
+
+
+def test_a_folder_gone_for_a_moment_forgets_no_site(
+        server: InProcessServer, client: httpx.Client) -> None:
+    """The user's folder swapped out for a moment (a deploy, a network file system's
+    hiccup) is no reason to forget every site in it (its files read as all deleted)."""
+    folder = Path(server.extra_env["HELIOTWIN_SITES_DIR"])
+    folder.mkdir(parents=True, exist_ok=True)
+    builtin = client.get("/api/v1/sites/tehuantepec/config").json()
+    mine = folder / "wismar.json"
+    aside = folder.with_name(folder.name + "-aside")
+    try:
+        mine.write_text(json.dumps({**builtin, "site_id": "wismar", "name": "Wismar"}))
+        _lookup_until(client, "wismar", lambda r: r.status_code == 200)
+        folder.rename(aside)
+        time.sleep(3 * Registry.RESCAN_S)          # the watcher looks several times
+        assert client.get("/api/v1/sites/wismar").status_code == 200
+        aside.rename(folder)
+    finally:
+        if aside.exists():
+            aside.rename(folder)
+        mine.unlink(missing_ok=True)
