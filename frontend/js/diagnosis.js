@@ -74,9 +74,12 @@ async function load(state) {
   const list = document.getElementById("diag-faults");
   const mine = ++requested;
   if (!state.site.has_twin) { // a camera site, or arrays not named tracker and fixed
+    const camera = !Object.keys(state.site.arrays || {}).length;
     list.replaceChildren(h("li", { class: "muted", "data-testid": "diag-no-twin" },
-      "This site has no tracker and fixed arrays to diagnose (a camera site): nothing to compare."));
+      camera ? "This site has no PV arrays (a camera site): nothing to diagnose."
+        : "This site has no pair of arrays named tracker and fixed for the twin: no diagnosis from the power."));
     showEmpty("chart-diagnosis", "No diagnosis for this site");
+    await loadPointing(state, start, end, mine); // a tracker's encoders still say where it points
     return;
   }
   list.replaceChildren(h("li", { class: "muted" }, "Computing… (days not seen before take about a second each)"));
@@ -127,19 +130,23 @@ async function load(state) {
     d.tracker.measured_wh, d.tracker.expected_wh, d.tracker.expected_wh_low, d.tracker.expected_wh_high,
     d.tracker.performance_ratio, d.gain_measured_pct, d.gain_expected_pct]),
   filename: `${state.site.site_id}_diagnosis_${start}_${end}.csv` });
-  if (mine === requested) await loadPointing(state, start, end);
+  if (mine === requested) await loadPointing(state, start, end, mine);
 }
 
 /** The pointing error the tracker's own encoders report (GET …/pointing), beside the
  * power-based diagnosis: every sunlit minute, split into azimuth and elevation. */
-async function loadPointing(state, start, end) {
+async function loadPointing(state, start, end, mine) {
   const note = document.getElementById("pointing-note");
   if (!note) return;
   const tz = state.site.timezone;
+  note.textContent = "Loading the pointing error…";
+  showEmpty("chart-pointing", "Loading…"); // never the previous site's under this one's name
   let body;
   try {
     body = await api(`/api/v1/sites/${encodeURIComponent(state.site.site_id)}/pointing`, { params: { start, end } });
+    if (mine !== requested) return; // a later load (another site, range) draws instead
   } catch (err) {
+    if (mine !== requested) return;
     note.textContent = `Pointing error failed: ${err.message}`;
     showEmpty("chart-pointing", "No pointing data");
     return;
