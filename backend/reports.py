@@ -21,7 +21,7 @@ import io
 from typing import TYPE_CHECKING, Any
 
 from backend.errors import InputError
-from backend.measurements.energy import OVER_FIXED_MINUTES, compare, energy_rows
+from backend.measurements.energy import COVERED, SHARED, compare, energy_rows
 from backend.sites import SiteInfo
 
 if TYPE_CHECKING:
@@ -29,7 +29,7 @@ if TYPE_CHECKING:
 
 #: Longest range a report covers [days] (its daily chart has one bar per day).
 MAX_REPORT_DAYS = 3700
-_SUMMED = ("measured_wh", "twin_wh", "twin_matched_wh", "readings", OVER_FIXED_MINUTES)
+_SUMMED = ("measured_wh", "twin_wh", "twin_matched_wh", "readings", COVERED, SHARED)
 
 
 def _by_year(months: list[dict[str, Any]], names: list[str], tracker: str | None,

@@ -29,6 +29,7 @@ summaries (:mod:`sim.twin`).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -188,26 +189,30 @@ def on_grid(ts_s: Any, values: Any, grid_s: Any, max_gap_s: float) -> np.ndarray
     return out
 
 
-#: Readings of the two arrays give a measured gain only over the same minutes: one expected
-#: energy over each array's minutes alike within this share [-]
+#: Two loggers read the same minutes when each array's expected energy over the minutes both
+#: read is at least this share short of its expected energy over its own [-]
 SAME_MINUTES = 0.01
 
 
+def same_minutes(own_wh: Sequence[float | None], shared_wh: Sequence[float | None]
+                 ) -> bool | None:
+    """Whether two loggers read the same minutes: for each array, its expected energy over
+    the minutes *both* loggers read (``shared_wh``) within :data:`SAME_MINUTES` of it over
+    its own (``own_wh``). None when an energy is unknown (no twin). Amounts over each
+    logger's own minutes alone would pass a morning beside an afternoon of equal energy."""
+    if any(v is None for v in (*own_wh, *shared_wh)):
+        return None
+    return all(shared >= (1.0 - SAME_MINUTES) * own  # type: ignore[operator]
+               for own, shared in zip(own_wh, shared_wh, strict=True))
+
+
 def measured_gain_pct(tracker_wh: float | None, fixed_wh: float | None,
-                      over_tracker_minutes_wh: float | None,
-                      over_fixed_minutes_wh: float | None) -> float | None:
-    """:func:`gain_pct` of the measured energies when the two loggers' readings cover the
-    same minutes: ``over_*_minutes_wh`` is one expected energy (the tracker twin's) over the
-    minutes each array's readings cover, alike within :data:`SAME_MINUTES` of the larger;
-    None otherwise. Energies over different minutes give no gain: a fixed-array logger
-    that began at 15:30 beside a tracker's whole day read +1,540 % (a tester's finding);
-    both loggers over the same half-day still give one. Without the expected energies
-    (no twin) the minutes cannot be compared and the plain gain is given."""
-    if over_tracker_minutes_wh is not None and over_fixed_minutes_wh is not None:
-        larger = max(over_tracker_minutes_wh, over_fixed_minutes_wh)
-        if abs(over_tracker_minutes_wh - over_fixed_minutes_wh) > SAME_MINUTES * larger:
-            return None
-    return gain_pct(tracker_wh, fixed_wh)
+                      same: bool | None) -> float | None:
+    """:func:`gain_pct` of measured energies, None when the two loggers read different
+    minutes (``same`` False, :func:`same_minutes`): a fixed-array logger that began at
+    15:30 beside a tracker's whole day read +1,540 % (a tester's finding); both over the
+    same half-day still give one, and so does an unknown ``same`` (no twin to tell)."""
+    return None if same is False else gain_pct(tracker_wh, fixed_wh)
 
 
 def gain_pct(tracker_wh: float | None, fixed_wh: float | None) -> float | None:

@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from backend.settings import MAX_ENERGY_GAP_S
 from sim import pv, sky, sky_sensor
 from sim.energy import energy_wh
 from sim.sites import Site
@@ -387,8 +388,11 @@ def faults_over_days(days: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
             if slow := f.get("slow_logger"):  # readings came, too far apart to bridge
                 detail += (f" the energy rule bridges: the tracker's readings are "
                            f"{slow['spacing_s']:.0f} s apart, more than its gap "
-                           f"(HELIOTWIN_ENERGY_MAX_GAP_S, {slow['max_gap_s']} s); raise it to "
-                           f"the logger's interval (at most 3,600 s) and restart")
+                           f"(HELIOTWIN_ENERGY_MAX_GAP_S, {slow['max_gap_s']} s); ")
+                detail += ("raise it to the logger's interval and restart"
+                           if slow["spacing_s"] <= MAX_ENERGY_GAP_S else
+                           f"the rule bridges at most {MAX_ENERGY_GAP_S:,} s: send readings "
+                           f"at least that often")
             out[i].append({"kind": "dropout", "confidence": 1.0, "since": d["date"],
                            "magnitude": float(f["missing_daylight_min"]), "unit": "min",
                            "detail": detail})

@@ -54,7 +54,7 @@ from backend.measurements.queries import energy_table, period_edges
 from backend.sites import SiteInfo
 from backend.storage.tables import SOURCE_CODES, DiagnosisDay, Measurement
 from sim import sky_sensor
-from sim.energy import energy_wh, gain_pct, measured_gain_pct
+from sim.energy import energy_wh, gain_pct, measured_gain_pct, same_minutes
 from sim.sites import Site
 
 if TYPE_CHECKING:
@@ -77,7 +77,7 @@ MAX_DAYS = 400
 #: logger's held values are not a frozen logger, sky_sensor._stale; 14: a range that cuts
 #: a day makes it ``partial``, without shape fits, and is not cached; 15: the sky's clock,
 #: faults.sky_clock).
-CACHE_VERSION = 16
+CACHE_VERSION = 17
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
@@ -160,6 +160,7 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
                             np.nan))
     matched_f = wh(np.where(np.isfinite(fixed_w), e["fixed_power_w"].to_numpy(), np.nan))
     measured_tr, measured_fx = measured_wh["tracker"], measured_wh["fixed"]
+    both = np.isfinite(tracker_w) & np.isfinite(fixed_w)  # the minutes both loggers cover
     # the logger's history: its minutes before the first reading are not missing
     first_min = 1440 if first_s is None else max(0, -(-(first_s - t0) // 60))
     # a shape fault needs a whole day with a measured sky; a dropout only the minutes so far
@@ -193,9 +194,10 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
         "fixed": {"measured_wh": measured_fx, "expected_wh": exp_fixed,
                   "performance_ratio": None if measured_fx is None or matched_f <= 0
                   else measured_fx / matched_f},
-        "gain_measured_pct": measured_gain_pct(
-            measured_tr, measured_fx, matched,
-            wh(np.where(np.isfinite(fixed_w), e["tracker_power_w"].to_numpy(), np.nan))),
+        "gain_measured_pct": measured_gain_pct(measured_tr, measured_fx, same_minutes(
+            [matched, matched_f],
+            [wh(np.where(both, e[c].to_numpy(), np.nan)) for c in ("tracker_power_w",
+                                                                    "fixed_power_w")])),
         "gain_expected_pct": gain_pct(exp_a, exp_fixed),
         "features": features,
         "history_start_s": first_s,

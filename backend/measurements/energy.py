@@ -21,9 +21,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from backend.errors import InputError
-from backend.measurements.queries import energy_table, matched_twin_wh, period_edges
+from backend.measurements.queries import (
+    energy_table,
+    matched_twin_wh,
+    period_edges,
+    shared_minutes_wh,
+)
 from backend.sites import SiteInfo
-from sim.energy import SAME_MINUTES, gain_pct, measured_gain_pct
+from sim.energy import SAME_MINUTES, gain_pct, measured_gain_pct, same_minutes
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -34,10 +39,11 @@ _SHORTEST_S = {"hour": 3600.0, "day": 82800.0, "month": 28 * 86400.0}  # DST day
 
 #: A period whose readings cover less of the twin's energy than this is ``partial`` [%].
 PARTIAL_BELOW_PCT = 95.0
-#: The tracker twin's energy over the fixed array's minutes, in the tracker's entry of a
-#: period (summed like its energies; not in the answer): whether the two loggers read the
-#: same minutes (:func:`sim.energy.measured_gain_pct`)
-OVER_FIXED_MINUTES = "twin_over_fixed_minutes_wh"
+#: Per array of a period: its twin over the minutes its own readings cover, and over those
+#: both loggers' readings cover (:func:`backend.measurements.queries.shared_minutes_wh`);
+#: summed like the energies. Whether the two read the same minutes:
+#: :func:`sim.energy.same_minutes`
+COVERED, SHARED = "twin_covered_wh", "twin_shared_wh"
 
 
 def _ratio(num: float | None, den: float | None) -> float | None:
@@ -55,34 +61,53 @@ def compare(arrays: dict[str, dict[str, Any]], tracker: str | None,
     out: dict[str, Any] = {
         "partial": None if not arrays or None in covs else min(covs) < PARTIAL_BELOW_PCT,
         "gain_pct": None, "twin_gain_pct": None, "twin_matched_gain_pct": None}
+    out["gain_note"] = None
     if tracker is not None and fixed is not None:
         tr, fx = arrays[tracker], arrays[fixed]
-        out["gain_pct"] = measured_gain_pct(tr["measured_wh"], fx["measured_wh"],
-                                            tr["twin_matched_wh"], tr.get(OVER_FIXED_MINUTES))
+        same = same_minutes([tr.get(COVERED), fx.get(COVERED)],
+                            [tr.get(SHARED), fx.get(SHARED)])
+        out["gain_pct"] = measured_gain_pct(tr["measured_wh"], fx["measured_wh"], same)
         out["twin_gain_pct"] = gain_pct(tr["twin_wh"], fx["twin_wh"])
         out["twin_matched_gain_pct"] = gain_pct(tr["twin_matched_wh"], fx["twin_matched_wh"])
+        if tr["measured_wh"] is not None and fx["measured_wh"] is not None \
+                and out["gain_pct"] is None:
+            out["gain_note"] = (
+                f"the two loggers read different minutes: of the minutes each covers, both "
+                f"cover {_share(tr)} of the tracker's expected energy and {_share(fx)} of the "
+                f"fixed array's" if same is False else "the fixed array measured no energy")
     return out
 
 
-def _over_fixed_minutes(conn: Any, table: Any, matched: dict[int, np.ndarray],
-                        tracker_id: int, fixed_id: int, edges_s: np.ndarray,
-                        gap: int) -> np.ndarray:
-    """Per period, the tracker twin's energy over the fixed array's minutes. Where both
-    arrays' readings hold all but :data:`sim.energy.SAME_MINUTES` of their twin's energy
-    their minutes are taken as the same (the tracker's own: no raw minutes read); the
-    others are read (:func:`backend.measurements.queries.matched_twin_wh`)."""
-    out = np.array(matched[tracker_id], dtype=float)
-    full = np.ones(out.size, bool)
-    for aid in (tracker_id, fixed_id):
+def _share(a: dict[str, Any]) -> str:
+    covered = a.get(COVERED) or 0.0
+    return "all" if covered <= 0 else f"{100.0 * (a.get(SHARED) or 0.0) / covered:.0f} %"
+
+
+def _coverage(conn: Any, table: Any, matched: dict[int, np.ndarray], tracker_id: int,
+              fixed_id: int, edges_s: np.ndarray, gap: int
+              ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Per array, its twin over the minutes its readings cover and over those both cover,
+    per period (:func:`backend.measurements.queries.shared_minutes_wh`). Read only where it
+    can tell: a period where both loggers hold all but :data:`sim.energy.SAME_MINUTES` of
+    their twin's energy has the same minutes (both: ``twin_matched_wh``), one where a
+    logger has no reading none in common (a gain is not measured there anyway)."""
+    ids = (tracker_id, fixed_id)
+    has = {aid: np.asarray(table.readings[(aid, 0)]) > 0 for aid in ids}
+    full = np.ones(edges_s.size - 1, bool)
+    for aid in ids:
         twin = np.asarray(table.energy_wh[(aid, 1)], float)
         with np.errstate(divide="ignore", invalid="ignore"):
             share = np.where(twin > 0, np.asarray(matched[aid], float) / twin, 1.0)
         full &= share >= 1.0 - SAME_MINUTES
-        full &= np.asarray(table.readings[(aid, 0)]) > 0
-    ask = np.flatnonzero(~full)
+    both = has[tracker_id] & has[fixed_id]
+    out = {aid: (np.array(matched[aid], float), np.where(both, matched[aid], 0.0))
+           for aid in ids}
+    ask = np.flatnonzero(both & ~full)
     if ask.size:
-        cross = matched_twin_wh(conn, tracker_id, edges_s, gap, ask, minutes_of=fixed_id)
-        out[ask] = cross[ask]
+        read = shared_minutes_wh(conn, ids, edges_s, gap, ask)
+        for aid in ids:
+            for k in (0, 1):
+                out[aid][k][ask] = read[aid][k][ask]
     return out
 
 
@@ -184,13 +209,13 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
         table = energy_table(conn, ids, edges_s, info.phase_s, gap)
         database = ctx.engine.url.render_as_string(hide_password=True)
         matched = {aid: _matched(conn, table, aid, edges_s, gap, database) for aid in ids}
-        over_fixed = (None if tracker is None or fixed is None else
-                      _over_fixed_minutes(conn, table, matched, tracker.array_id,
-                                          fixed.array_id, edges_s, gap))
+        coverage = (None if tracker is None or fixed is None else
+                    _coverage(conn, table, matched, tracker.array_id, fixed.array_id,
+                              edges_s, gap))
     rows = []
     sums = {n: {"measured_wh": 0.0, "twin_wh": 0.0, "twin_matched_wh": 0.0, "readings": 0,
                 "twin_readings": 0} for n in names}
-    cross_sum = 0.0
+    cover_sums = {n: [0.0, 0.0] for n in names}
     for p in range(len(edges) - 1):
         arrays: dict[str, dict[str, Any]] = {}
         for n, aid in zip(names, ids, strict=True):
@@ -206,10 +231,12 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
                                ("twin_matched_wh", mt_wh), ("readings", m_n),
                                ("twin_readings", t_n)):
                 sums[n][key] += value
-        if over_fixed is not None and tr_name is not None \
-                and arrays[tr_name]["twin_wh"] is not None:
-            arrays[tr_name][OVER_FIXED_MINUTES] = float(over_fixed[p])
-            cross_sum += float(over_fixed[p])
+        if coverage is not None:
+            for n, aid in zip(names, ids, strict=True):
+                if aid in coverage and arrays[n]["twin_wh"] is not None:
+                    for k, key in enumerate((COVERED, SHARED)):
+                        arrays[n][key] = float(coverage[aid][k][p])
+                        cover_sums[n][k] += arrays[n][key]
         compared = compare(arrays, tr_name, fx_name)
         no_twin = any(a["twin_wh"] is None for a in arrays.values()) or not arrays
         rows.append({
@@ -224,9 +251,10 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
                   "twin_matched_wh": t["twin_matched_wh"]
                   if t["readings"] and t["twin_readings"] else None,
                   "readings": t["readings"]} for n, t in sums.items()}
-    if over_fixed is not None and tr_name is not None \
-            and totals[tr_name]["twin_wh"] is not None:
-        totals[tr_name][OVER_FIXED_MINUTES] = cross_sum
+    if coverage is not None:
+        for n, aid in zip(names, ids, strict=True):
+            if aid in coverage and totals[n]["twin_wh"] is not None:
+                totals[n][COVERED], totals[n][SHARED] = cover_sums[n]
     return {
         "site_id": site_id, "interval": interval, "timezone": info.site.timezone,
         "start": start.isoformat(), "end": end.isoformat(),

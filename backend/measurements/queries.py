@@ -11,6 +11,7 @@ from __future__ import annotations
 import datetime as dt
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from zoneinfo import ZoneInfo
 
@@ -335,11 +336,8 @@ _TS_POWER = ("SELECT ts_s, power_w FROM measurements WHERE array_id = ? AND sour
 
 
 def matched_twin_wh(conn: Connection, array_id: int, edges_s: np.ndarray,
-                    max_gap_s: int, periods: np.ndarray | None = None,
-                    minutes_of: int | None = None) -> np.ndarray:
-    """Twin energy [Wh] per period over only the minutes with a measured reading
-    (of ``minutes_of``'s logger when given: the array's twin over another array's minutes,
-    one measure of two loggers' minutes, :func:`sim.energy.measured_gain_pct`).
+                    max_gap_s: int, periods: np.ndarray | None = None) -> np.ndarray:
+    """Twin energy [Wh] per period over only the minutes with a measured reading.
 
     The twin's minute readings that have a measured reading in the same minute,
     integrated by the energy rule (:func:`sim.energy.energy_wh`, gaps over
@@ -358,8 +356,7 @@ def matched_twin_wh(conn: Connection, array_id: int, edges_s: np.ndarray,
     for run in np.split(asked, breaks):
         first, last = int(run[0]), int(run[-1])
         lo, hi = int(edges_s[first]) - max_gap_s, int(edges_s[last + 1]) + max_gap_s
-        measured = np.array(fetch(conn, _TS, (array_id if minutes_of is None else minutes_of,
-                                              0, lo, hi + 60)), np.int64).reshape(-1)
+        measured = np.array(fetch(conn, _TS, (array_id, 0, lo, hi + 60)), np.int64).reshape(-1)
         if measured.size < 2:
             continue
         twin = np.array(fetch(conn, _TS_POWER, (array_id, 1, lo, hi)), np.float64).reshape(-1, 2)
@@ -373,4 +370,51 @@ def matched_twin_wh(conn: Connection, array_id: int, edges_s: np.ndarray,
                 part = r[lo_i[k]:hi_i[k]]
                 out[p] = energy_wh(part[:, 0], part[:, 1], max_gap_s, float(edges_s[p]),
                                    float(edges_s[p + 1]))
+    return out
+
+
+def _covered(reading_s: np.ndarray, t_s: np.ndarray, max_gap_s: int) -> np.ndarray:
+    """Which instants ``t_s`` a logger's readings (sorted) cover by the energy rule: at a
+    reading, or between two readings at most ``max_gap_s`` apart."""
+    if reading_s.size == 0:
+        return np.zeros(t_s.size, bool)
+    i = np.searchsorted(reading_s, t_s, side="right")  # the first reading after each instant
+    before = reading_s[np.maximum(i - 1, 0)]
+    after = reading_s[np.minimum(i, reading_s.size - 1)]
+    at = (i > 0) & (before == t_s)
+    between = (i > 0) & (i < reading_s.size) & (after - before <= max_gap_s)
+    return at | between
+
+
+def shared_minutes_wh(conn: Connection, array_ids: Sequence[int], edges_s: np.ndarray,
+                      max_gap_s: int, periods: np.ndarray
+                      ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Per array of ``array_ids`` (two loggers) and period: its twin's energy [Wh] over the
+    minutes its own readings cover, and over the minutes *every* logger's readings cover
+    (covered: by the energy rule, :func:`_covered`). Equal for each array when the loggers
+    read the same minutes (:func:`sim.energy.same_minutes`), whatever their cadences or
+    phases. Only ``periods`` (indices) are computed, each run of consecutive ones with a
+    range read of each series; the others are 0."""
+    out = {aid: (np.zeros(edges_s.size - 1), np.zeros(edges_s.size - 1)) for aid in array_ids}
+    periods = np.asarray(periods, np.int64)
+    if periods.size == 0:
+        return out
+    for run in np.split(periods, np.flatnonzero(np.diff(periods) > 1) + 1):
+        first, last = int(run[0]), int(run[-1])
+        lo, hi = int(edges_s[first]) - max_gap_s, int(edges_s[last + 1]) + max_gap_s
+        readings = {aid: np.sort(np.array(fetch(conn, _TS, (aid, 0, lo, hi + 60)),
+                                          np.int64).reshape(-1)) for aid in array_ids}
+        edges = edges_s[first:last + 2]
+        for aid in array_ids:
+            twin = np.array(fetch(conn, _TS_POWER, (aid, 1, lo, hi)), np.float64).reshape(-1, 2)
+            if len(twin) < 2:
+                continue
+            t = twin[:, 0].astype(np.int64)
+            covered = {a: _covered(r, t, max_gap_s) for a, r in readings.items()}
+            shared = np.logical_and.reduce(list(covered.values()))
+            # the twin's minutes kept are integrated minute to minute (60 s: a hole in the
+            # coverage is no gap to bridge)
+            for k, mask in enumerate((covered[aid], shared)):
+                out[aid][k][first:last + 1] = energy_per_period_wh(
+                    twin[:, 0], np.where(mask, twin[:, 1], np.nan), 60, edges)
     return out

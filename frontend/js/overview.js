@@ -171,11 +171,8 @@ function drawDayEnergy(row) {
       `Partial day: the readings cover ${num(cov, 0)} % of the twin's expected energy, so they are compared with the twin over the same minutes.`));
   }
   const expect = partial ? row.twin_matched_gain_pct : gainOf(row, "twin");
-  const [tr, fx] = ["tracker", "fixed"].map((a) => row.arrays[a]);
-  if (gainOf(row, "measured") === null && typeof tr?.measured_wh === "number" && typeof fx?.measured_wh === "number") {
-    // the service gives no gain from energies over different minutes (sim.energy.measured_gain_pct)
-    box.append(h("div", { class: "muted", "data-testid": "gain-unalike" },
-      `No measured gain: the two loggers read different minutes (the tracker's readings cover ${num(tr.coverage_pct, 0)} % of its expected energy, the fixed array's ${num(fx.coverage_pct, 0)} %).`));
+  if (row.gain_note) { // why there is no measured gain, in the service's words
+    box.append(h("div", { class: "muted", "data-testid": "gain-unalike" }, `No measured gain: ${row.gain_note}.`));
   }
   box.append(
     h("div", { class: "gain-big", "data-testid": "gain-day" }, pct(gainOf(row, "measured"))),

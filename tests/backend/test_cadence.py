@@ -284,4 +284,25 @@ def test_arrays_read_over_different_minutes_give_no_gain(api: Api) -> None:
     assert row["partial"] and abs(row["arrays"]["tracker"]["coverage_pct"]
                                   - row["arrays"]["fixed"]["coverage_pct"]) > 3
     same = 100.0 * (_posted_wh(late, "tracker") / _posted_wh(late, "fixed") - 1.0)
-    assert row["gain_pct"] == pytest.approx(same, abs=1.0)
+    assert row["gain_pct"] == pytest.approx(same, abs=1.0) and row["gain_note"] is None
+    # the tracker's logger the morning, the fixed one's the afternoon: equal shares of
+    # their days, different minutes (amounts alone passed it; the reviewer's case); and two
+    # 5-min loggers two minutes apart all day: the same minutes, whatever their phase
+    split = _twin_day("2024-07-14")
+    noon = pd.Timestamp("2024-07-14 12:20", tz=TZ)
+    whole = _twin_day("2024-07-16")
+    posts = {("tracker", "2024-07-14"): split[split.index < noon].iloc[::5],
+             ("fixed", "2024-07-14"): split[split.index >= noon].iloc[::5],
+             ("tracker", "2024-07-16"): whole.iloc[::5], ("fixed", "2024-07-16"): whole.iloc[2::5]}
+    for (array, _), rows in posts.items():
+        body = "ts,array,power_w\n" + "".join(
+            f"{t.isoformat()},{array},{r[f'{array}_power_w']:.3f}\n" for t, r in rows.iterrows())
+        r = client.post(f"/api/v1/sites/{SITE}/measurements", content=body,
+                        headers={"Authorization": f"Bearer {token}", "Content-Type": "text/csv"})
+        assert r.status_code == 200, r.text
+    morning, _, offset = client.get(f"/api/v1/sites/{SITE}/energy", params={
+        "start": "2024-07-14", "end": "2024-07-17", "interval": "day"}).json()["rows"]
+    assert morning["gain_pct"] is None and "different minutes" in morning["gain_note"]
+    phased = 100.0 * (_posted_wh(posts[("tracker", "2024-07-16")], "tracker")
+                      / _posted_wh(posts[("fixed", "2024-07-16")], "fixed") - 1.0)
+    assert offset["gain_pct"] == pytest.approx(phased, abs=1.0)

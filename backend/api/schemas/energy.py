@@ -17,12 +17,15 @@ class ArrayEnergyRead(BaseModel):
     coverage_pct: float | None = Field(description="twin_matched_wh / twin_wh [%]")
     twin_weather_wh: float | None = Field(
         None, description="with source=twin_weather: the twin under the measured sky")
-    twin_over_fixed_minutes_wh: float | None = Field(
-        None, description="the tracker's only: its twin over the fixed array's measured "
-                          "minutes; equal to twin_matched_wh when both loggers read the same "
-                          "minutes, and only then is there a measured gain_pct "
-                          "(sim.energy.measured_gain_pct)")
-
+    twin_covered_wh: float | None = Field(
+        None, description="the twin over the minutes this array's readings cover (the energy "
+                          "rule's bridging; twin_matched_wh where both loggers cover all but "
+                          "1 % of their twin's energy)")
+    twin_shared_wh: float | None = Field(
+        None, description="the twin over the minutes both the tracker's and the fixed "
+                          "array's readings cover; equal (within 1 %) to twin_covered_wh for "
+                          "both arrays when the loggers read the same minutes, and only then "
+                          "is there a measured gain_pct (sim.energy.same_minutes)")
 
 class EnergyTotalsRead(BaseModel):
     """The whole range."""
@@ -30,7 +33,10 @@ class EnergyTotalsRead(BaseModel):
     arrays: dict[str, ArrayEnergyRead]
     partial: bool | None = Field(description="an array covered under partial_below_pct")
     gain_pct: float | None = Field(description="100·(tracker/fixed − 1), measured; null when "
-                                              "the two loggers read different minutes")
+                                              "either is missing, the fixed array's is not "
+                                              "positive or the loggers read different minutes")
+    gain_note: str | None = Field(None, description="why gain_pct is null though both arrays "
+                                                    "measured, else null")
     twin_gain_pct: float | None
     twin_matched_gain_pct: float | None
     twin_weather_gain_pct: float | None = None
