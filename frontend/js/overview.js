@@ -150,7 +150,11 @@ function drawDayEnergy(row) {
     return;
   }
   const partial = row.partial === true;
-  const table = h("table", {}, h("tr", {}, h("th", {}, ""), h("th", {}, "Measured"), h("th", {}, "Twin"),
+  // today's twin is stored up to the current minute (the live twin): say so, or 0 Wh at
+  // 01:10 reads as a day expected to give nothing
+  const today = st.day === localDate(st.tz);
+  const table = h("table", {}, h("tr", {}, h("th", {}, ""), h("th", {}, "Measured"),
+    h("th", today ? { title: "the twin up to the current minute (the whole day once it is over)" } : {}, today ? "Twin so far" : "Twin"),
     h("th", { title: "the twin over only the minutes with a reading of this array" }, "Twin, same minutes"),
     h("th", { title: "measured over the twin of the same minutes (performance ratio)" }, "of twin")));
   for (const arr of ARRAYS) {
@@ -307,8 +311,8 @@ function drawTiles(status) {
     box.append(
       powerTile("Tracker power now", tr),
       powerTile("Fixed power now", fx),
-      tile("Tracker energy today", energy(tr.energy_today_wh), `twin ${energy(tr.twin_energy_today_wh)}`),
-      tile("Fixed energy today", energy(fx.energy_today_wh), `twin ${energy(fx.twin_energy_today_wh)}`),
+      tile("Tracker energy today", energy(tr.energy_today_wh), `twin so far ${energy(tr.twin_energy_today_wh)}`),
+      tile("Fixed energy today", energy(fx.energy_today_wh), `twin so far ${energy(fx.twin_energy_today_wh)}`),
       tile("Gain today", pct(status.gain_today_pct), status.partial_today
         ? `partial day · twin over the same minutes ${pct(status.twin_matched_gain_today_pct)}`
         : `tracker over fixed · twin ${pct(status.twin_gain_today_pct)}`),

@@ -64,3 +64,25 @@ def test_no_page_scrolls_sideways_at_phone_width(browser, server, request) -> No
                          .slice(0, 5).map(el => `${el.tagName}#${el.id}.${el.className}`)"""))
         assert not too_wide, f"pages wider than {PHONE['width']} px: {too_wide}"
         assert not squeezed, f"card titles squeezed under 40 px: {squeezed}"
+
+
+def test_the_header_scrolls_away_on_a_phone_and_the_days_energy_fits_a_desktop(
+        browser, server, request) -> None:  # type: ignore[no-untyped-def]
+    """On a phone the header (two rows of tabs, the site picker: ~220 px) scrolls away with
+    the page: stuck to the top it hid a quarter of the screen and the Sites form's message
+    under it. On a desktop the day's energy table is not cut (its last column lost 10 px
+    at 1280–1920 px; a tester's findings)."""
+    with open_page(browser, request, timeout_ms=60_000) as page:
+        page.set_viewport_size(PHONE)
+        page.goto(server.url + "/#overview")
+        page.wait_for_selector(LOADED["overview"], state="attached")
+        page.evaluate("() => window.scrollTo(0, document.body.scrollHeight)")
+        bottom = page.evaluate("() => document.querySelector('.topbar')"
+                               ".getBoundingClientRect().bottom")
+        assert bottom <= 0, f"the header still covers {bottom:.0f} px of the screen"
+        for width in (1280, 1440, 1920):
+            page.set_viewport_size({"width": width, "height": 900})
+            page.evaluate("() => window.scrollTo(0, 0)")
+            cut = page.evaluate("() => { const b = document.getElementById('day-energy');"
+                                " return b.scrollWidth - b.clientWidth; }")
+            assert cut <= 0, f"the day's energy table is cut by {cut} px at {width} px"
