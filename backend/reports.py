@@ -125,10 +125,18 @@ def _pr(v: float | None) -> str:
 
 def report_png(rep: dict[str, Any], version: str) -> bytes:
     """A one-page A4 PNG of the report (matplotlib, Agg)."""
+    buf = io.BytesIO()
+    report_figure(rep, version).savefig(buf, format="png")
+    return buf.getvalue()
+
+
+def report_figure(rep: dict[str, Any], version: str) -> Any:
+    """The report's A4 matplotlib ``Figure`` (:func:`report_png` draws it)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.dates as mdates
+    import matplotlib.ticker as mticker
     from matplotlib.figure import Figure
 
     names = rep["arrays"]
@@ -163,7 +171,9 @@ def report_png(rep: dict[str, Any], version: str) -> bytes:
 
     days = rep["days"]
     ax = fig.add_axes((0.09, 0.5, 0.8, 0.27))
-    x = [dt.datetime.fromisoformat(r["period_start"][:10]) for r in days]
+    # each day's bars about its noon: centred on midnight they straddled two dates
+    x = [dt.datetime.fromisoformat(r["period_start"][:10]) + dt.timedelta(hours=12)
+         for r in days]
     width = 0.8 / max(1, len(names))
     colors = {"tracker": "#f5a400", "fixed": "#3b7dd8"}
     for i, n in enumerate(names):
@@ -177,6 +187,10 @@ def report_png(rep: dict[str, Any], version: str) -> bytes:
         ax.plot(xs, [float("nan") if v is None else v for v in tw], "_", ms=9, mew=2,
                 color=color, label=f"{n} twin (clear sky)")
     ax.set_ylabel("Energy per day [kWh]")
+    if len(days) <= 31:  # a label per day (or every few), under its bars: the automatic
+        # ticks of a short range fell every 12 hours and repeated each date
+        ticks = [mdates.date2num(v) for v in x][::max(1, len(days) // 10)]
+        ax.xaxis.set_major_locator(mticker.FixedLocator(ticks))
     ax.xaxis.set_major_formatter(mdates.DateFormatter("%d %b %Y" if len(days) > 60 else "%d %b"))
     ax.tick_params(axis="x", labelsize=7, rotation=30)
     partial = [mdates.date2num(v) for v, r in zip(x, days, strict=True) if r.get("partial")]
@@ -217,6 +231,4 @@ def report_png(rep: dict[str, Any], version: str) -> bytes:
         f"< {rep['partial_below_pct']:.0f} % of\nthe twin's energy. Energy: trapezoids, gaps over "
         f"{rep['max_gap_s']} s not bridged. Generated {dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} "
         f"UTC by heliotwin {version}."), fontsize=6.5, va="bottom")
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    return buf.getvalue()
+    return fig

@@ -193,6 +193,34 @@ def test_report_csv_names_its_units_and_png_is_one_a4_page(client: httpx.Client,
     assert (width, height) == (1240, 1753)  # A4 (8.27 in × 11.69 in) at 150 dpi
 
 
+@pytest.mark.parametrize("n_days", [1, 2, 5, 31])
+def test_the_pngs_daily_chart_labels_each_day_under_its_bars(client: httpx.Client,
+                                                             n_days: int) -> None:
+    """A short range's daily chart: one label per day (every few past ten), each under the
+    middle of its day's bars (the automatic ticks fell every 12 hours, repeated each date,
+    and a bar straddled two: a new user's finding)."""
+    import matplotlib.dates as mdates
+
+    from backend.reports import report_figure
+
+    start = FULL - dt.timedelta(days=n_days - 1)
+    rep = client.get(f"{BASE}/report", params={
+        "start": start.isoformat(), "end": (FULL + dt.timedelta(days=1)).isoformat()}).json()
+    fig = report_figure(rep, "test")
+    (ax,) = [a for a in fig.axes if a.get_title().startswith("Daily energy")]
+    fig.canvas.draw()
+    labels = [t.get_text() for t in ax.get_xticklabels()]
+    dates = [start + dt.timedelta(days=k) for k in range(n_days)][::max(1, n_days // 10)]
+    assert labels == [d.strftime("%d %b") for d in dates]
+    noon = [mdates.date2num(dt.datetime.combine(start + dt.timedelta(days=k), dt.time(12)))
+            for k in range(n_days)]
+    assert list(ax.get_xticks()) == pytest.approx(noon[::max(1, n_days // 10)])
+    # the bars: one per array and day, drawn array by array; a day's centred on its noon
+    centres = np.array([p.get_x() + p.get_width() / 2 for p in ax.patches])
+    assert centres.size == n_days * len(rep["arrays"])
+    np.testing.assert_allclose(centres.reshape(len(rep["arrays"]), n_days).mean(axis=0), noon)
+
+
 @pytest.mark.parametrize(("params", "words"), [
     ({"start": "2026-11-10", "end": "2026-11-01"}, "end"),
     ({"start": "2010-01-01", "end": "2026-01-01"}, "at most 3700 days"),
