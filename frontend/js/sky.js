@@ -277,7 +277,7 @@ async function calibrate() {
   const name = $("sky-calibration-name").value.trim();
   if (name) form.append("name", name);
   $("sky-calibrate").disabled = true;
-  $("sky-status").textContent = `fitting a ${projection} camera to ${timed.length} frames…`;
+  $("sky-status").textContent = `fitting ${/^[aeiou]/i.test(projection) ? "an" : "a"} ${projection} camera to ${timed.length} frames…`;
   const box = $("sky-calibration-result");
   box.innerHTML = "";
   try {
