@@ -16,6 +16,7 @@ from __future__ import annotations
 import datetime as dt
 import threading
 from collections import OrderedDict
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -28,7 +29,7 @@ from backend.measurements.queries import (
     shared_minutes_wh,
 )
 from backend.sites import SiteInfo
-from sim.energy import SAME_MINUTES, gain_pct, measured_gain_pct, same_minutes
+from sim.energy import gain_pct, measured_gain_pct, same_minutes
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -84,13 +85,16 @@ def _share(a: dict[str, Any]) -> str:
 
 
 def _coverage(conn: Any, table: Any, matched: dict[int, np.ndarray], tracker_id: int,
-              fixed_id: int, edges_s: np.ndarray, gap: int
+              fixed_id: int, edges_s: np.ndarray, gap: int, database: str
               ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """Per array, its twin over the minutes its readings cover and over those both cover,
-    per period (:func:`backend.measurements.queries.shared_minutes_wh`). Read only where it
-    can tell: a period where both loggers hold all but :data:`sim.energy.SAME_MINUTES` of
-    their twin's energy has the same minutes (both: ``twin_matched_wh``), one where a
-    logger has no reading none in common (a gain is not measured there anyway)."""
+    per period (:func:`backend.measurements.queries.shared_minutes_wh`). Read only for a
+    ``partial`` period (an array's readings under :data:`PARTIAL_BELOW_PCT` of its twin's
+    energy): in any other both loggers read all but a few minutes, taken as the same
+    (both: ``twin_matched_wh``; reading a year of gappy months at 1 % cost 15× the
+    year's answer, a tester measured); one where a logger has no reading has none in
+    common (a gain is not measured there anyway). Read periods are cached like
+    :func:`_matched`'s."""
     ids = (tracker_id, fixed_id)
     has = {aid: np.asarray(table.readings[(aid, 0)]) > 0 for aid in ids}
     full = np.ones(edges_s.size - 1, bool)
@@ -98,17 +102,43 @@ def _coverage(conn: Any, table: Any, matched: dict[int, np.ndarray], tracker_id:
         twin = np.asarray(table.energy_wh[(aid, 1)], float)
         with np.errstate(divide="ignore", invalid="ignore"):
             share = np.where(twin > 0, np.asarray(matched[aid], float) / twin, 1.0)
-        full &= share >= 1.0 - SAME_MINUTES
+        full &= share >= PARTIAL_BELOW_PCT / 100.0
     both = has[tracker_id] & has[fixed_id]
     out = {aid: (np.array(matched[aid], float), np.where(both, matched[aid], 0.0))
            for aid in ids}
-    ask = np.flatnonzero(both & ~full)
-    if ask.size:
-        read = shared_minutes_wh(conn, ids, edges_s, gap, ask)
-        for aid in ids:
-            for k in (0, 1):
-                out[aid][k][ask] = read[aid][k][ask]
+    uncached, keys = [], {}
+    for p in np.flatnonzero(both & ~full).tolist():  # read once, then cached like _matched
+        key = _period_key(table, ids, edges_s, p, gap, database, "shared")
+        if key is not None and (hit := _MATCHED.get(key)) is not None:
+            for j, aid in enumerate(ids):
+                out[aid][0][p], out[aid][1][p] = hit[2 * j], hit[2 * j + 1]
+            continue
+        keys[p] = key
+        uncached.append(p)
+    if uncached:
+        read = shared_minutes_wh(conn, ids, edges_s, gap, np.array(uncached, np.int64))
+        for p in uncached:
+            for aid in ids:
+                for k in (0, 1):
+                    out[aid][k][p] = read[aid][k][p]
+            if (key := keys[p]) is not None:
+                _MATCHED.put(key, tuple(float(out[aid][k][p]) for aid in ids for k in (0, 1)))
     return out
+
+
+def _period_key(table: Any, array_ids: Sequence[int], edges_s: np.ndarray, p: int, gap: int,
+                database: str, what: str) -> tuple[Any, ...] | None:
+    """What decides a period's values read from raw minutes (:class:`_MatchedCache`): the
+    database, the arrays, the period's edges, the gap, and the readings and energy of both
+    sources of each array in the period and the periods on either side; None for the first
+    and last period, whose outer neighbours are unknown."""
+    if not 0 < p < edges_s.size - 2:
+        return None
+    around = slice(p - 1, p + 2)
+    return (what, database, *array_ids, int(edges_s[p]), int(edges_s[p + 1]), gap,
+            *(v for aid in array_ids for src in (0, 1)
+              for v in (*table.readings[(aid, src)][around].tolist(),
+                        *table.energy_wh[(aid, src)][around].tolist())))
 
 
 class _MatchedCache:
@@ -122,17 +152,17 @@ class _MatchedCache:
 
     def __init__(self, size: int = 20_000) -> None:
         self.size = size
-        self._data: OrderedDict[tuple[Any, ...], float] = OrderedDict()
+        self._data: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
         self._lock = threading.Lock()
 
-    def get(self, key: tuple[Any, ...]) -> float | None:
+    def get(self, key: tuple[Any, ...]) -> Any:
         with self._lock:
             value = self._data.get(key)
             if value is not None:
                 self._data.move_to_end(key)
             return value
 
-    def put(self, key: tuple[Any, ...], value: float) -> None:
+    def put(self, key: tuple[Any, ...], value: Any) -> None:
         with self._lock:
             self._data[key] = value
             while len(self._data) > self.size:
@@ -149,21 +179,18 @@ def _matched(conn: Any, table: Any, array_id: int, edges_s: np.ndarray, gap: int
     twin's energy from the rollups; raw minutes are read only for the other periods not
     in :data:`_MATCHED` (and for the first and last, whose outer neighbours are unknown)."""
     m_n, t_n = table.readings[(array_id, 0)], table.readings[(array_id, 1)]
-    m_wh, t_wh = table.energy_wh[(array_id, 0)], table.energy_wh[(array_id, 1)]
+    t_wh = table.energy_wh[(array_id, 1)]
     minutes = np.round(np.diff(edges_s) / 60.0).astype(np.int64)
     complete = (m_n == minutes) & (t_n == minutes)
     out = np.where(complete, t_wh, 0.0)
     rest = np.flatnonzero(~complete & (m_n > 0) & (t_n > 0)).tolist()
-    last = edges_s.size - 2
     keys: dict[int, tuple[Any, ...]] = {}
     uncached = []
     for p in rest:
-        if 0 < p < last:
-            around = slice(p - 1, p + 2)
-            keys[p] = (database, array_id, int(edges_s[p]), int(edges_s[p + 1]), gap,
-                       *m_n[around].tolist(), *t_n[around].tolist(),
-                       *m_wh[around].tolist(), *t_wh[around].tolist())
-            if (hit := _MATCHED.get(keys[p])) is not None:
+        key = _period_key(table, (array_id,), edges_s, p, gap, database, "matched")
+        if key is not None:
+            keys[p] = key
+            if (hit := _MATCHED.get(key)) is not None:
                 out[p] = hit
                 continue
         uncached.append(p)
@@ -211,7 +238,7 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
         matched = {aid: _matched(conn, table, aid, edges_s, gap, database) for aid in ids}
         coverage = (None if tracker is None or fixed is None else
                     _coverage(conn, table, matched, tracker.array_id, fixed.array_id,
-                              edges_s, gap))
+                              edges_s, gap, database))
     rows = []
     sums = {n: {"measured_wh": 0.0, "twin_wh": 0.0, "twin_matched_wh": 0.0, "readings": 0,
                 "twin_readings": 0} for n in names}
