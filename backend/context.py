@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
-from sqlalchemy import Engine
+from sqlalchemy import Engine, text
 from sqlalchemy.orm import Session, sessionmaker
 
 from backend.alerts.service import AlertService
@@ -57,6 +57,25 @@ class ServiceContext:
         self.engine.dispose()
 
 
+def _statistics(engine: Engine) -> None:
+    """PostgreSQL: ANALYZE the readings' tables that have never been analysed. Without
+    statistics (a back-fill on a server whose autovacuum is off or has not come round) the
+    planner joined a year of hourly periods to the rollups in a nested loop: 3 s a
+    statement, 12-15 s a year of hours; 154 ms with them (a tester's measurement)."""
+    if engine.dialect.name != "postgresql":
+        return
+    with engine.connect() as conn:
+        stale = conn.execute(text(
+            "SELECT relname FROM pg_stat_user_tables WHERE schemaname = current_schema() "
+            "AND relname IN ('measurements', 'measurement_rollups') "
+            "AND last_analyze IS NULL AND last_autoanalyze IS NULL")).scalars().all()
+    if stale:
+        with engine.connect().execution_options(isolation_level="AUTOCOMMIT") as conn:
+            for table in stale:
+                conn.execute(text(f'ANALYZE "{table}"'))
+        logger.info("tables %s analysed (they had no planner statistics)", ", ".join(stale))
+
+
 def open_context(settings: Settings) -> ServiceContext:
     """Migrate, load sites, start the writer (and MQTT, if set, and the alert evaluator)."""
     engine = make_engine(settings)
@@ -73,6 +92,7 @@ def open_context(settings: Settings) -> ServiceContext:
     # before serving: hours stored under another energy gap are recomputed (no time bound:
     # a large history takes what it takes, and the service must not answer from stale hours)
     writer.call(writer.match_rollups_to_gap).result()
+    _statistics(engine)
 
     def store_sites(new: list[Site]) -> None:  # a site file read while running: its rows
         writer.call(lambda conn: sync_sites(conn, new)).result(timeout=60)  # not for ever

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sqlalchemy import Connection, Engine, delete, insert, select, text
+from sqlalchemy import Connection, Engine, delete, insert, select, text, update
 
 from backend.measurements.buckets import ROLLUP_WIDTH_S
 from backend.measurements.fields import SENSOR_NAMES
@@ -418,6 +418,7 @@ class Writer:
                     group.append(nxt)
                     rows += len(nxt) if isinstance(nxt, MeasurementJob) else 0
                 self._commit_group(conn, group)
+                self._check_gap(conn)
                 if self._wal_path is not None:
                     self._bound_wal(conn)
                 if stop_after:
@@ -637,6 +638,38 @@ class Writer:
 
     #: hours of one series recomputed at a time when the energy gap changes (a month)
     GAP_REBUILD_BUCKETS = 720
+    #: how often [s], at most, the writer looks whether another service on the database
+    #: recorded another energy gap (:meth:`_check_gap`)
+    GAP_CHECK_S = 30.0
+    _gap_checked = 0.0
+
+    def _check_gap(self, conn: Connection) -> None:
+        """Another service on this database that started with another energy gap recomputed
+        the hours and recorded its gap; the hours this one writes bridge its own (a rolling
+        restart that changes ``HELIOTWIN_ENERGY_MAX_GAP_S``: both kept writing, and the
+        next start saw its gap recorded and recomputed nothing; a tester's finding). Seen
+        here, the record is marked mixed, so the next start of any service recomputes every
+        hour under its gap, and an error says to restart this one."""
+        now = time.monotonic()
+        if now - self._gap_checked < self.GAP_CHECK_S:
+            return
+        self._gap_checked = now
+        key = "rollup_energy_max_gap_s"
+        try:
+            with conn.begin():
+                stored = conn.execute(select(ServiceState.value)
+                                      .where(ServiceState.key == key)).scalar()
+                if stored is None or stored == str(self.max_gap_s) or stored.startswith("mixed"):
+                    return
+                conn.execute(update(ServiceState).where(ServiceState.key == key)
+                             .values(value=f"mixed {stored} and {self.max_gap_s}"))
+        except Exception:  # noqa: BLE001 - a look, not a write of readings
+            logger.warning("energy gap check failed", exc_info=True)
+            return
+        logger.error("another service on this database bridges energy gaps of %s s, this one "
+                     "%d s (HELIOTWIN_ENERGY_MAX_GAP_S): the hours are marked to be "
+                     "recomputed at the next start; restart every service with one gap",
+                     stored, self.max_gap_s)
 
     def match_rollups_to_gap(self, conn: Connection) -> int:
         """Recompute every stored hour's rollup when the energy gap is not the one they were
@@ -654,7 +687,7 @@ class Writer:
                               ).scalar()
         if stored == str(self.max_gap_s):
             return 0
-        twin_too = stored is None or min(int(stored), self.max_gap_s) < 60
+        twin_too = stored is None or not stored.isdigit() or min(int(stored), self.max_gap_s) < 60
         series = conn.execute(text(
             "SELECT DISTINCT r.array_id, r.source, s.bucket_phase_s FROM measurement_rollups r "
             "JOIN arrays a ON a.id = r.array_id JOIN sites s ON s.site_id = a.site_id "

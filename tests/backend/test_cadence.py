@@ -306,3 +306,43 @@ def test_arrays_read_over_different_minutes_give_no_gain(api: Api) -> None:
     phased = 100.0 * (_posted_wh(posts[("tracker", "2024-07-16")], "tracker")
                       / _posted_wh(posts[("fixed", "2024-07-16")], "fixed") - 1.0)
     assert offset["gain_pct"] == pytest.approx(phased, abs=1.0)
+
+
+def test_a_service_that_finds_another_gap_recorded_marks_the_hours_mixed(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+        ) -> None:
+    """A second service with another gap recomputed the hours and recorded its gap while
+    this one kept writing with its own (a rolling restart; a tester's finding): this one's
+    writer marks the record mixed and says so, and the next start recomputes."""
+    from sqlalchemy import update
+
+    from backend.measurements.writer import Writer
+    from backend.storage.tables import ServiceState
+
+    monkeypatch.setattr(Writer, "GAP_CHECK_S", 0.0)
+    db = new_database("sqlite", tmp_path)
+    with InProcessServer(db.url) as server, server.client() as client:
+        with server.ctx.engine.begin() as conn:          # what the other service recorded
+            conn.execute(update(ServiceState).values(value="3600"))
+        token = server.token(SITE, "gap mix")
+        with caplog.at_level("ERROR", logger="backend.measurements.writer"):
+            r = client.post(f"/api/v1/sites/{SITE}/measurements", content=(
+                "ts,array,power_w\n2024-03-20T12:00:00-06:00,tracker,500\n"),
+                headers={"Authorization": f"Bearer {token}", "Content-Type": "text/csv"})
+            assert r.status_code == 200, r.text
+        assert "another service on this database" in caplog.text
+        with server.ctx.engine.connect() as conn:
+            assert conn.execute(_gap_state()).scalar() == "mixed 3600 and 1200"
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="backend.measurements.writer"), \
+            InProcessServer(db.url):
+        assert "recomputing" in caplog.text
+
+
+def _gap_state() -> object:
+    """The query of the recorded energy gap."""
+    from sqlalchemy import select
+
+    from backend.storage.tables import ServiceState
+
+    return select(ServiceState.value).where(ServiceState.key == "rollup_energy_max_gap_s")
