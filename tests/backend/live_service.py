@@ -416,3 +416,16 @@ def run_in_own_thread(coro: Any) -> Any:
     thread, where ``asyncio.run`` refuses to start."""
     with concurrent.futures.ThreadPoolExecutor(1) as pool:
         return pool.submit(asyncio.run, coro).result()
+
+
+def tehuantepec_elsewhere(client: httpx.Client, site_id: str, **place: object) -> dict:
+    """What the Sites page sends for "New site from the selected one" with Tehuantepec
+    selected: its config with a new id and ``place``, without the keys the place decides
+    (frontend/js/sites.js)."""
+    config = client.get("/api/v1/sites/tehuantepec/config").json()
+    for key in ("temp_air_c", "wind_speed_m_s", "assumed"):
+        config.pop(key, None)
+    for arr in config["arrays"].values():
+        if arr["mount"] == "fixed":
+            arr.pop("surface_tilt_deg"), arr.pop("surface_azimuth_deg")
+    return {**config, **place, "site_id": site_id, "name": site_id, "source": "", "notes": ""}

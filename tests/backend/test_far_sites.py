@@ -11,7 +11,7 @@ from collections.abc import Iterator
 import httpx
 import pandas as pd
 import pytest
-from live_service import InProcessServer
+from live_service import InProcessServer, tehuantepec_elsewhere
 
 from sim.sites import Site
 from sim.twin import simulate
@@ -46,14 +46,7 @@ def far(server: InProcessServer) -> None:
 
 def _new_site(client: httpx.Client, site_id: str, **place: object) -> dict:
     """Tehuantepec's tracker and arrays at ``place``; the place decides the fixed plane."""
-    config = client.get("/api/v1/sites/tehuantepec/config").json()
-    for key in ("temp_air_c", "wind_speed_m_s", "assumed"):
-        config.pop(key, None)
-    for arr in config["arrays"].values():
-        if arr["mount"] == "fixed":
-            arr.pop("surface_tilt_deg"), arr.pop("surface_azimuth_deg")
-    body = {**config, **place, "site_id": site_id, "name": site_id, "source": "", "notes": ""}
-    r = client.put(f"/api/v1/sites/{site_id}", json=body,
+    r = client.put(f"/api/v1/sites/{site_id}", json=tehuantepec_elsewhere(client, site_id, **place),
                    headers={"Authorization": f"Bearer {ADMIN}"})
     assert r.status_code in (200, 201), r.text
     return r.json()

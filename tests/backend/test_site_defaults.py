@@ -16,7 +16,7 @@ from pathlib import Path
 
 import httpx
 import pytest
-from live_service import InProcessServer
+from live_service import InProcessServer, tehuantepec_elsewhere
 
 from backend.cli import main
 from backend.sites import Registry
@@ -56,16 +56,10 @@ def client(server: InProcessServer) -> Iterator[httpx.Client]:
 
 
 def _copy_of_tehuantepec_elsewhere(client: httpx.Client, site_id: str) -> dict:
-    """What the Sites page sends for "New site from the selected one": the selected config
-    with a new id and place, without the keys the place decides (frontend/js/sites.js)."""
+    """The Sites page's new site from Tehuantepec (its 27 °C and 16° tilt) at Hamburg."""
     config = client.get("/api/v1/sites/tehuantepec/config").json()
     assert config["temp_air_c"] == 27.0 and config["arrays"]["fixed"]["surface_tilt_deg"] == 16
-    for key in ("temp_air_c", "wind_speed_m_s", "assumed"):
-        config.pop(key, None)
-    for arr in config["arrays"].values():
-        if arr["mount"] == "fixed":
-            arr.pop("surface_tilt_deg"), arr.pop("surface_azimuth_deg")
-    return {**config, **HAMBURG, "site_id": site_id, "name": site_id, "source": "", "notes": ""}
+    return tehuantepec_elsewhere(client, site_id, **HAMBURG)
 
 
 def test_a_new_site_takes_its_places_defaults_marked_as_assumed(client: httpx.Client) -> None:
