@@ -142,9 +142,10 @@ def _period_key(table: Any, array_ids: Sequence[int], edges_s: np.ndarray, p: in
 
 
 class _MatchedCache:
-    """``twin_matched_wh`` of periods already computed from raw minutes, by what decides
-    it: the database, the array, the period's edges, and the readings and energy of
-    both sources in the period and in the periods on either side (the energy rule reaches
+    """``twin_matched_wh`` (and the two loggers' shared minutes, :func:`_coverage`) of
+    periods already computed from raw minutes, by what decides it (:func:`_period_key`):
+    the database, the arrays, the period's edges, and the readings and energy of both
+    sources in the period and in the periods on either side (the energy rule reaches
     ``max_gap_s`` ≤ an hour past a period's edges). Stored readings never change (a
     re-sent one is a duplicate), they are only added or deleted, and either changes a
     count or an energy of the key: a period read again unchanged costs no raw minutes.
