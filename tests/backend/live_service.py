@@ -429,3 +429,11 @@ def tehuantepec_elsewhere(client: httpx.Client, site_id: str, **place: object) -
         if arr["mount"] == "fixed":
             arr.pop("surface_tilt_deg"), arr.pop("surface_azimuth_deg")
     return {**config, **place, "site_id": site_id, "name": site_id, "source": "", "notes": ""}
+
+
+def sites_service(tmp_dir: Path, admin_token: str) -> InProcessServer:
+    """A started service of its own on a SQLite file in ``tmp_dir``, with a user-sites
+    folder there (``user-sites``, not yet made) and ``admin_token`` as its admin token."""
+    env = {"HELIOTWIN_SITES_DIR": str(tmp_dir / "user-sites"),
+           "HELIOTWIN_ADMIN_TOKEN": admin_token}
+    return InProcessServer(f"sqlite:///{tmp_dir / 'sites.sqlite'}", extra_env=env).start()

@@ -11,7 +11,7 @@ from collections.abc import Iterator
 import httpx
 import pandas as pd
 import pytest
-from live_service import InProcessServer, tehuantepec_elsewhere
+from live_service import InProcessServer, sites_service, tehuantepec_elsewhere
 
 from sim.sites import Site
 from sim.twin import simulate
@@ -21,9 +21,8 @@ ADMIN = "admin-secret-for-far-sites"
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
-    tmp = tmp_path_factory.mktemp("far-sites")
-    env = {"HELIOTWIN_SITES_DIR": str(tmp / "user-sites"), "HELIOTWIN_ADMIN_TOKEN": ADMIN}
-    proc = InProcessServer(f"sqlite:///{tmp / 'far.sqlite'}", extra_env=env).start()
+    """A service of its own on SQLite, with a user-sites folder and an admin token."""
+    proc = sites_service(tmp_path_factory.mktemp("far-sites"), ADMIN)
     yield proc
     proc.stop()
 

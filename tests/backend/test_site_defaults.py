@@ -16,7 +16,7 @@ from pathlib import Path
 
 import httpx
 import pytest
-from live_service import InProcessServer, tehuantepec_elsewhere
+from live_service import InProcessServer, sites_service, tehuantepec_elsewhere
 
 from backend.cli import main
 from backend.sites import Registry
@@ -42,9 +42,7 @@ def test_fixed_tilt_is_landaus_rule(lat: float) -> None:
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InProcessServer]:
     """A service of its own on SQLite, with a user-sites folder and an admin token."""
-    tmp = tmp_path_factory.mktemp("site-defaults")
-    env = {"HELIOTWIN_SITES_DIR": str(tmp / "user-sites"), "HELIOTWIN_ADMIN_TOKEN": ADMIN}
-    proc = InProcessServer(f"sqlite:///{tmp / 'sites.sqlite'}", extra_env=env).start()
+    proc = sites_service(tmp_path_factory.mktemp("site-defaults"), ADMIN)
     yield proc
     proc.stop()
 
