@@ -10,6 +10,8 @@ when ``Settings.mqtt.url`` is set. While connected (aiomqtt) it:
 - maps each topic to a known site and array, validates the reading with the
   HTTP ingest validator (:mod:`backend.mqtt.ingest`) and stores it through the
   writer (idempotent: one row per array per minute);
+- acknowledges a QoS 1 JSON reading only once it is committed (:class:`OrderedAcks`), so
+  with a persistent session a service killed in between gets it again from the broker;
 - publishes every rejected message with its reason to
   ``Settings.mqtt.errors_topic`` (``_unknown`` as site id for unknown sites),
   through an outbox that keeps what could not be sent until the next connection;
@@ -34,6 +36,7 @@ import ssl
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from concurrent.futures import Future
 from importlib.metadata import PackageNotFoundError, version
 from typing import TYPE_CHECKING, Any
@@ -128,6 +131,49 @@ def check_no_echo(topics: Topics) -> None:
                              "change HELIOTWIN_MQTT_ERRORS_TOPIC or HELIOTWIN_MQTT_HA_STATE_TOPIC")
 
 
+class OrderedAcks:
+    """Acknowledges the QoS 1 messages of one connection once each is handled, in the
+    order they came: MQTT 5.0 §4.6 has a client send its PUBACKs in the order of the
+    PUBLISHes. Paho's automatic acknowledgement goes out as a message is received; a
+    reading still waiting for the writer's commit would then be lost to a SIGKILL although
+    the broker holds it as delivered. ``send(mid, qos)`` is paho's ``Client.ack`` (with
+    ``manual_ack`` on), called on the connection's event loop like every paho call here."""
+
+    def __init__(self, send: Callable[[int, int], object]) -> None:
+        self._send = send
+        self._waiting: deque[list[Any]] = deque()  # [mid, qos, handled], in order received
+
+    def received(self, mid: int, qos: int) -> Callable[[], None]:
+        """Note a message; call what this returns once it is handled (stored, a
+        duplicate, rejected or assembled). QoS 0 has no acknowledgement."""
+        if qos == 0:
+            return lambda: None
+        entry: list[Any] = [mid, qos, False]
+        self._waiting.append(entry)
+
+        def handled() -> None:
+            entry[2] = True
+            while self._waiting and self._waiting[0][2]:
+                m, q, _ = self._waiting.popleft()
+                self._send(m, q)
+        return handled
+
+    @property
+    def waiting(self) -> int:
+        """Messages received and not acknowledged yet."""
+        return len(self._waiting)
+
+
+def _manual_acks(client: aiomqtt.Client) -> OrderedAcks:
+    """Turn paho's automatic acknowledgement off for ``client`` (before it connects: a
+    persistent session's queued messages come right after the CONNACK) and acknowledge
+    through :class:`OrderedAcks`. aiomqtt 2.5 has no option for it, so its paho client is
+    reached directly, as aiomqtt's maintainers suggest (empicano/aiomqtt#345)."""
+    paho = client._client  # noqa: SLF001
+    paho.manual_ack_set(True)
+    return OrderedAcks(paho.ack)
+
+
 class MqttService:
     """MQTT ingestion and Home Assistant publishing (see the module docstring)."""
 
@@ -197,9 +243,10 @@ class MqttService:
                 clean_start=s.mqtt.client_id is None,
                 properties=connect_properties(persistent=s.mqtt.client_id is not None),
                 keepalive=30, timeout=10.0)
+            acks = _manual_acks(client)
             async with client:
                 connected_after = attempts - 1
-                await self._session(client)
+                await self._session(client, acks)
 
         def wait(state: RetryCallState) -> float:  # k counts from the last connection
             return policy.seconds(state.attempt_number - connected_after)
@@ -238,7 +285,7 @@ class MqttService:
                                payload[:300].decode("utf-8", "replace"))
             logger.info("MQTT stopped: %s", self.status())
 
-    async def _session(self, client: aiomqtt.Client) -> None:
+    async def _session(self, client: aiomqtt.Client, acks: OrderedAcks) -> None:
         assert self._stop is not None
         filters = [(self.topics.state.filter(), 1)] + [
             (self.topics.value.filter(quantity=q), 1) for q in QUANTITIES]
@@ -247,15 +294,15 @@ class MqttService:
         logger.info("MQTT connected to %s; subscribed to %s", self.where,
                     ", ".join(f for f, _ in filters))
         tasks = [asyncio.create_task(c) for c in (
-            self._receive(client), self._send_outbox(client), self._publish_ha(client))]
+            self._receive(client, acks), self._send_outbox(client), self._publish_ha(client))]
         stop = asyncio.create_task(self._stop.wait())
         done, _ = await asyncio.wait([*tasks, stop], return_when=asyncio.FIRST_COMPLETED)
         if stop in done:  # shutdown: last minutes and rejections out while still connected
             tasks[0].cancel()
             tasks[2].cancel()
             await asyncio.gather(tasks[0], tasks[2], return_exceptions=True)
-            while len(client.messages):  # received (acknowledged) but not handled yet
-                self._take(await anext(client.messages))
+            while len(client.messages):  # received but not handled yet
+                self._take(await anext(client.messages), acks)
             for closed in self.assembler.flush():
                 self._take_minute(closed)
             if self._in_flight:
@@ -273,13 +320,15 @@ class MqttService:
         raise aiomqtt.MqttError("MQTT session ended")
 
     # -- readings in -----------------------------------------------------------
-    async def _receive(self, client: aiomqtt.Client) -> None:
+    async def _receive(self, client: aiomqtt.Client, acks: OrderedAcks) -> None:
         async for message in client.messages:
-            self._take(message)
+            self._take(message, acks)
             if len(self._in_flight) >= MAX_IN_FLIGHT:
                 await asyncio.wait(self._in_flight, return_when=asyncio.FIRST_COMPLETED)
 
-    def _take(self, message: aiomqtt.Message) -> None:
+    def _take(self, message: aiomqtt.Message, acks: OrderedAcks) -> None:
+        """Handle one message; acknowledge it once handled (a JSON reading: committed)."""
+        handled = acks.received(message.mid, message.qos)
         payload = message.payload
         raw = bytes(payload) if isinstance(payload, bytes | bytearray) else (
             b"" if payload is None else str(payload).encode())
@@ -292,15 +341,24 @@ class MqttService:
         if not raw or (message.retain and self.topics.value.match(topic) is not None
                        and self.topics.state.match(topic) is None):
             self.counts["ignored"] += 1
+            handled()
             return
         try:
-            self._handle(topic, raw, time.time())
+            storing = self._handle(topic, raw, time.time(), handled)
         except Exception as exc:  # a bug must not drop the message silently
             logger.exception("MQTT message on %s not handled", topic)
             self._reject(UNKNOWN_SITE, Rejection(
                 topic, f"internal error ({type(exc).__name__}); not stored", raw))
+            storing = False
+        if not storing:
+            handled()
 
-    def _handle(self, topic: str, payload: bytes, now_s: float) -> None:
+    def _handle(self, topic: str, payload: bytes, now_s: float,
+                handled: Callable[[], None]) -> bool:
+        """Store or reject one message. True when a JSON reading went to the writer, which
+        calls ``handled`` once committed; else the caller calls it at once (a single value
+        once added to its minute: the minute is written when it closes, and holding the
+        acknowledgements that long would stall the broker's in-flight window)."""
         fields = self.topics.state.match(topic)
         quantity = None
         if fields is None:
@@ -310,30 +368,31 @@ class MqttService:
             self._reject(UNKNOWN_SITE, Rejection(topic, "topic matches no reading template "
                                                         f"({self.topics.state.text}, "
                                                         f"{self.topics.value.text})", payload))
-            return
+            return False
         site_id, array = fields["site_id"], fields["array"]
         info = self.ctx.registry.get(site_id)
         if info is None:
             known = ", ".join(self.ctx.registry.sites) or "none"
             self._reject(UNKNOWN_SITE, Rejection(
                 topic, f"unknown site {site_id[:64]!r}; known sites: {known}", payload))
-            return
+            return False
         if array not in info.arrays:
             self._reject(site_id, Rejection(
                 topic, f"unknown array {array[:64]!r}; this site has "
                        f"{', '.join(info.arrays) or 'no arrays'}", payload))
-            return
+            return False
         if quantity is None:
-            self._store(site_id, topic, state_batch(info, array, topic, payload, self.limits),
-                        payload)
-            return
+            return self._store(site_id, topic,
+                               state_batch(info, array, topic, payload, self.limits), payload,
+                               handled)
         try:
             value = parse_value(payload)
         except ValueError as exc:
             self._reject(site_id, Rejection(topic, str(exc), payload))
-            return
+            return False
         for closed in self.assembler.add(site_id, array, quantity, value, topic, now_s):
             self._take_minute(closed)
+        return False
 
     def _take_minute(self, closed: Closed) -> None:
         info = self.ctx.registry.get(closed.site_id)
@@ -347,19 +406,22 @@ class MqttService:
             for closed in self.assembler.due(time.time()):
                 self._take_minute(closed)
 
-    def _store(self, site_id: str, topic: str, result: Batch | Rejection,
-               payload: bytes) -> None:
+    def _store(self, site_id: str, topic: str, result: Batch | Rejection, payload: bytes,
+               handled: Callable[[], None] = lambda: None) -> bool:
+        """Hand ``result`` to the writer (True; ``handled`` is called once it is
+        committed or failed) or reject it (False)."""
         if isinstance(result, Rejection):
             self._reject(site_id, result)
-            return
+            return False
         job = measured_job(result)
         task = asyncio.create_task(self._committed(site_id, topic, self.ctx.writer.submit(job),
-                                                   payload))
+                                                   payload, handled))
         self._in_flight.add(task)
         task.add_done_callback(self._in_flight.discard)
+        return True
 
     async def _committed(self, site_id: str, topic: str, future: Future[tuple[int, int]],
-                         payload: bytes) -> None:
+                         payload: bytes, handled: Callable[[], None]) -> None:
         try:
             accepted, duplicates = await asyncio.wrap_future(future)
         except Exception as exc:  # noqa: BLE001 - nothing stored: the logger must send again
@@ -367,9 +429,10 @@ class MqttService:
             self._reject(site_id, Rejection(
                 topic, f"storage unavailable ({type(exc).__name__}); nothing "
                                        "was stored, publish the reading again", payload))
-            return
-        self.counts["stored"] += accepted
-        self.counts["duplicates"] += duplicates
+        else:
+            self.counts["stored"] += accepted
+            self.counts["duplicates"] += duplicates
+        handled()
 
     # -- rejections and Home Assistant out ---------------------------------------
     def _reject(self, site_id: str, rejection: Rejection) -> None:

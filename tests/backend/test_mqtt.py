@@ -16,12 +16,15 @@ broker at the top.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import datetime as dt
 import json
 import logging
 import os
 import shutil
 import socket
+import sqlite3
 import subprocess
 import threading
 import time
@@ -43,7 +46,7 @@ from live_service import (
 )
 
 from backend.mqtt.assemble import MinuteAssembler, parse_value
-from backend.mqtt.service import check_no_echo
+from backend.mqtt.service import OrderedAcks, check_no_echo
 from backend.mqtt.topics import Template, Topics
 
 BROKER = urlsplit(os.environ.get("MQTT_TEST_URL", "mqtt://127.0.0.1:1883"))
@@ -108,6 +111,18 @@ def test_single_values_are_assembled_per_minute() -> None:
     a.add("s", "fixed", "power", 80.0, "p", t + 241)
     (power_only,) = a.due(t + 305)
     assert power_only.values == {"power_w": 80.0} and not power_only.missing
+
+
+def test_acknowledgements_go_out_in_the_order_the_messages_came() -> None:
+    sent: list[tuple[int, int]] = []
+    acks = OrderedAcks(lambda mid, qos: sent.append((mid, qos)))
+    first, second, third = acks.received(1, 1), acks.received(2, 1), acks.received(3, 1)
+    assert acks.received(0, 0) is not None and acks.waiting == 3  # QoS 0: nothing to send
+    second()  # handled (a rejection) while the first still waits for its commit
+    third()
+    assert sent == []
+    first()
+    assert sent == [(1, 1), (2, 1), (3, 1)] and acks.waiting == 0
 
 
 def test_single_values_must_be_plain_numbers() -> None:
@@ -511,34 +526,84 @@ def test_the_service_reconnects_with_backoff(tmp_path: Path,
     assert any(f"127.0.0.1:{port}" in line for line in retries), retries
 
 
-@pytest.mark.slow
-def test_a_persistent_session_keeps_readings_while_the_service_is_away(
-        tmp_path: Path) -> None:
+@dataclasses.dataclass
+class Session:
+    """A service's persistent MQTT session on the shared broker, for a service that goes
+    away and one that comes back: the first a real process (in this process, a thread that
+    outlived its service could still hold the session and store the reading), the other
+    in this process."""
+
+    first: ServerProcess
+    back: InProcessServer
+    prefix: str
+
+    def publish_reading(self, t: dt.datetime, current_a: float) -> None:
+        publish(f"{self.prefix}/{SITE}/tracker/state",
+                json.dumps({"ts": iso(t), "voltage_v": 25.0, "current_a": current_a}))
+
+    def stored_power_w(self, t: dt.datetime) -> float:
+        """The power of the reading at ``t``, as the service that came back stored it."""
+        with self.back.start().client(timeout_s=30.0) as c:
+            points = stored(c, "tracker", iso(t), iso(t + dt.timedelta(minutes=1)), 1)
+        return float(points[0]["power_w"])
+
+
+@contextlib.contextmanager
+def persistent_session(tmp_path: Path) -> Iterator[tuple[Session, Path]]:
+    """A :class:`Session` on a fresh SQLite file (its path the second item); ended on the
+    broker, with its retained messages, afterwards."""
     need_broker()
     prefix = f"httest{uuid.uuid4().hex[:10]}"
     client_id = f"heliotwin-test-{uuid.uuid4().hex[:8]}"
     db = new_database("sqlite", tmp_path)
     env = {**mqtt_env(prefix, f"mqtt://{HOST}:{PORT}"), "HELIOTWIN_MQTT_CLIENT_ID": client_id}
-    # the first service a real process: "away" is its process gone (in this process, a
-    # thread that outlived its service could still hold the session and store the reading);
-    # the one that comes back may run here
-    proc = ServerProcess(db.url, tmp_path / "server.log", extra_env=env).start()
-    back = InProcessServer(db.url, extra_env=env)
-    t0 = minute(-40)
+    session = Session(ServerProcess(db.url, tmp_path / "server.log", extra_env=env).start(),
+                      InProcessServer(db.url, extra_env=env), prefix)
     try:
-        with httpx.Client(base_url=proc.base_url, timeout=30.0) as c:
-            wait_state(c, "connected")  # the broker now knows the session
-        proc.stop()
-        publish(f"{prefix}/{SITE}/tracker/state",  # while no service is connected
-                json.dumps({"ts": iso(t0), "voltage_v": 25.0, "current_a": 3.0}))
-        with back.start().client(timeout_s=30.0) as c:
-            points = stored(c, "tracker", iso(t0), iso(t0 + dt.timedelta(minutes=1)), 1)
-        assert points[0]["power_w"] == 75.0
+        yield session, Path(db.url.removeprefix("sqlite:///"))
     finally:
-        proc.stop()
-        back.stop()
+        session.first.kill()
+        session.back.stop()
         gone = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=client_id,
                            clean_session=True)  # end the session on the broker
         gone.connect(HOST, PORT)
         gone.disconnect()
         clear_retained(f"{prefix}/#", f"{prefix}_ha/#")
+
+
+@pytest.mark.slow
+def test_a_reading_received_but_not_committed_comes_again_after_a_sigkill(
+        tmp_path: Path) -> None:
+    """A reading the service has received but not stored when it is killed is not lost:
+    the acknowledgement waits for the commit, so the broker hands the reading over again to
+    the persistent session. The commit is held back by the test's own write lock on the
+    SQLite file (WAL: the service's reads go on; its writer waits on the busy timeout)."""
+    t0 = minute(-30)
+    with persistent_session(tmp_path) as (session, sqlite_file):
+        lock = sqlite3.connect(sqlite_file, isolation_level=None)
+        try:
+            with httpx.Client(base_url=session.first.base_url, timeout=30.0) as c:
+                wait_state(c, "connected")
+                lock.execute("BEGIN IMMEDIATE")  # the service's next commit waits
+                session.publish_reading(t0, 5.0)
+                deadline = time.monotonic() + WAIT_S
+                while meta(c)["mqtt_status"]["received"] < 1:
+                    assert time.monotonic() < deadline, "the service never got the reading"
+                    time.sleep(0.1)
+                assert meta(c)["mqtt_status"]["stored"] == 0
+            session.first.kill()
+        finally:
+            lock.close()  # its transaction rolled back
+        assert session.stored_power_w(t0) == 125.0
+
+
+@pytest.mark.slow
+def test_a_persistent_session_keeps_readings_while_the_service_is_away(
+        tmp_path: Path) -> None:
+    t0 = minute(-40)
+    with persistent_session(tmp_path) as (session, _):
+        with httpx.Client(base_url=session.first.base_url, timeout=30.0) as c:
+            wait_state(c, "connected")  # the broker now knows the session
+        session.first.stop()
+        session.publish_reading(t0, 3.0)  # while no service is connected
+        assert session.stored_power_w(t0) == 75.0
