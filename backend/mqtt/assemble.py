@@ -6,9 +6,11 @@ topic of its own, as a bare number, without a timestamp, every few seconds.
 
 - a value belongs to the UTC minute in which the service receives it, and the
   reading is stamped at that minute's start;
-- a minute closes as soon as it holds voltage, current *and* power: the first
-  complete set is its reading, later values in the same minute are superseded
-  samples of an already stored minute (counted, not stored, not errors);
+- a minute's reading holds the first value of each quantity received in it (the
+  samples nearest its stamp); a quantity's later values in the same minute are
+  superseded samples (counted, not stored, not errors), whether the minute is still
+  open or already closed;
+- a minute closes as soon as it holds voltage, current *and* power;
 - a minute still open ``grace_s`` after it ended closes then: with voltage and
   current it is a reading (``power_w`` left out, so the ingest rule makes it
   voltage·current); with power alone it is a power-only reading (a meter or an
@@ -82,6 +84,9 @@ class MinuteAssembler:
                 self.superseded += 1
                 return out
             cur = self._open[key] = _Open(minute)
+        if QUANTITIES[quantity] in cur.values:
+            self.superseded += 1
+            return out
         cur.values[QUANTITIES[quantity]] = value
         cur.topics.append(topic)
         if len(cur.values) == len(QUANTITIES):

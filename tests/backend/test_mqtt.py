@@ -89,12 +89,13 @@ def test_single_values_are_assembled_per_minute() -> None:
     a = MinuteAssembler(grace_s=5.0)
     t = 1_710_525_600.0  # a minute start
     assert a.add("s", "fixed", "voltage", 25.0, "v", t + 1) == []
+    assert a.add("s", "fixed", "voltage", 25.5, "v", t + 1.05) == []  # a later sample
     assert a.add("s", "fixed", "current", 2.0, "c", t + 1.1) == []
     closed = a.add("s", "fixed", "power", 50.0, "p", t + 1.2)  # complete: closes at once
     assert len(closed) == 1 and closed[0].minute_s == int(t) and not closed[0].missing
     assert closed[0].values == {"voltage_v": 25.0, "current_a": 2.0, "power_w": 50.0}
     assert a.add("s", "fixed", "voltage", 26.0, "v", t + 30) == []  # same minute: superseded
-    assert a.superseded == 1
+    assert a.superseded == 2  # the first value of each quantity is kept, open or closed
     # voltage and current only: closes after the grace, power left to the ingest rule
     a.add("s", "fixed", "voltage", 25.0, "v", t + 61)
     a.add("s", "fixed", "current", 2.0, "c", t + 62)
