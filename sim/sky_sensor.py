@@ -677,3 +677,91 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
               "dni_extra", "sky_source"):
         out[k] = sensor[k].to_numpy()
     return out
+
+
+#: A logger whose readings are this far apart [s] or farther has what its stamps mark read
+#: from its readings (:func:`inferred_stamped`) when the site leaves it at ``"instant"``: half
+#: its interval (10 min) lies well beyond a healthy day's shape against the clear sky (1–3 min,
+#: :func:`backend.diagnosis.faults.sky_clock`), and under it the stamp moves a day's expected
+#: energy by little (docs/diagnosis.md, "Cadence")
+STAMP_INFER_MIN_SPACING_S = 1200.0
+#: A day shows its readings' stamp when the best convention fits the clear sky's shape this
+#: well (relative RMS) [-]: clear days; a cloudy day's shape is the clouds'
+STAMP_CLEAR_RESIDUAL = 0.08
+
+
+def inferred_stamped(site: Site, ts_s: np.ndarray, values: np.ndarray, max_gap_s: float,
+                     stamped: str = "instant") -> str:
+    """What the stamps ``ts_s`` [s] of a logger's readings ``values`` (the fixed array's
+    power, or its plane's POA: any reading proportional to the fixed plane's irradiance on a
+    clear day) mark, read from the readings: ``stamped`` (the site's word) unless the
+    readings are at least :data:`STAMP_INFER_MIN_SPACING_S` apart (the median bridged
+    spacing) and ``stamped`` is ``"instant"``, the default a site may never have set.
+
+    Each convention of :data:`sim.energy.READING_STAMPS` is tried as the readings' meaning:
+    the fixed plane's clear-sky POA at the instant, or its mean over the interval the
+    reading would average (:func:`sim.energy.interval_middles`: ending, or starting, at the
+    stamp), fitted to the readings with a free scale per local day. On the days whose best
+    fit is under :data:`STAMP_CLEAR_RESIDUAL` (clear days) the convention with the smallest
+    sum of residuals is the answer; without such a day, or when instants a whole interval
+    early or late fit better still (a clock off), ``stamped``. An hourly mean stamped
+    at its hour's end and an hourly sample from a clock 30 minutes late are the same
+    readings and get the same answer (``"interval_end"``); a clock an hour off is none of
+    them and stays the sky clock's finding (docs/diagnosis.md, "Cadence")."""
+    from sim.energy import READING_STAMPS, interval_middles
+
+    if stamped != "instant":
+        return stamped
+    ts = np.asarray(ts_s, np.float64).reshape(-1)
+    v = np.asarray(values, np.float64).reshape(-1)
+    ok = np.isfinite(ts) & np.isfinite(v)
+    ts, v = ts[ok], v[ok]
+    if ts.size < 8:
+        return stamped
+    step = np.diff(ts)
+    bridged = step <= max_gap_s
+    if not bridged.any() or float(np.median(step[bridged])) < STAMP_INFER_MIN_SPACING_S:
+        return stamped
+    # the clear sky on the fixed plane, minute by minute over the readings and an interval
+    # around them, and its running integral: the mean over any interval is a difference
+    reach = float(np.median(step[bridged])) + max_gap_s
+    t0, t1 = np.floor((ts[0] - reach) / 60.0) * 60.0, np.ceil((ts[-1] + reach) / 60.0) * 60.0
+    grid = np.arange(t0, t1 + 60.0, 60.0)
+    clear = fixed_clear_sky(site, pd.DatetimeIndex(pd.to_datetime(grid, unit="s", utc=True))
+                            )["poa_clear"].to_numpy()
+    clear = np.nan_to_num(np.maximum(clear, 0.0))
+    cum = np.concatenate(([0.0], np.cumsum(0.5 * (clear[1:] + clear[:-1]) * 60.0)))
+
+    def mean_over(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        ca, cb = np.interp(a, grid, cum), np.interp(b, grid, cum)
+        return np.where(b > a, (cb - ca) / np.maximum(b - a, 1e-9), np.interp(a, grid, clear))
+
+    shapes = {}
+    for conv in READING_STAMPS:
+        mid = interval_middles(ts, conv, max_gap_s)
+        shapes[conv] = mean_over(np.minimum(ts, 2 * mid - ts), np.maximum(ts, 2 * mid - ts))
+    # a whole interval early or late: a clock off, not a convention (a 30-minute logger's
+    # samples 30 minutes late are nearer its end-stamped means than its instants)
+    typical = float(np.median(step[bridged]))
+    for sign in (-1.0, 1.0):
+        shapes[f"clock{sign:+.0f}"] = np.interp(ts + sign * typical, grid, clear)
+    lit = np.max(np.column_stack(list(shapes.values())), axis=1) > 50.0
+    local = pd.to_datetime(ts, unit="s", utc=True).tz_convert(site.timezone)
+    day = np.asarray(local.normalize().asi8)
+    total = dict.fromkeys(shapes, 0.0)
+    clear_days = 0
+    for d in np.unique(day[lit]):
+        sel = lit & (day == d)
+        if sel.sum() < 4 or float(np.mean(v[sel])) <= 0:
+            continue
+        res = {}
+        for conv, x in shapes.items():
+            xs, m = x[sel], v[sel]
+            s = float(np.dot(m, xs) / np.dot(xs, xs)) if np.dot(xs, xs) > 0 else 0.0
+            res[conv] = float(np.sqrt(np.mean((m - s * xs) ** 2)) / np.mean(m))
+        if min(res.values()) < STAMP_CLEAR_RESIDUAL:
+            clear_days += 1
+            for conv in shapes:
+                total[conv] += res[conv]
+    best = min(shapes, key=lambda c: total[c]) if clear_days else stamped
+    return best if best in READING_STAMPS else stamped

@@ -76,8 +76,9 @@ MAX_DAYS = 400
 #: in progress judged on its minutes so far for its measured sky too; 13: a coarse or slow
 #: logger's held values are not a frozen logger, sky_sensor._stale; 14: a range that cuts
 #: a day makes it ``partial``, without shape fits, and is not cached; 15: the sky's clock,
-#: faults.sky_clock).
-CACHE_VERSION = 17
+#: faults.sky_clock; 18: a slow logger's stamp convention read from its readings where the
+#: site leaves the default, weather_twin.readings_stamped).
+CACHE_VERSION = 18
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99

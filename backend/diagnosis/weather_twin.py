@@ -31,7 +31,13 @@ if TYPE_CHECKING:
 MAX_DAYS = 31
 
 
-def minute_grid(conn: Connection, array_id: int, t0: int, t1: int, max_gap_s: int,
+def _rows(conn: Connection, array_id: int, t0: int, t1: int, max_gap_s: int) -> np.ndarray:
+    """The array's stored readings with their sensor columns around ``[t0, t1)``: two gaps
+    beyond each end, as far as a mean stamped at an interval's edge may stand from it."""
+    return raw_rows(conn, array_id, 0, t0 - 2 * max_gap_s, t1 + 2 * max_gap_s, sensors=True)
+
+
+def minute_grid(rows: np.ndarray, t0: int, t1: int, max_gap_s: int,
                 stamped: str = "instant") -> tuple[np.ndarray, np.ndarray, float | None]:
     """Measured power [W], shape (n,), the :data:`SENSOR_NAMES` columns, shape (n, k), and
     the readings' median spacing [s] (None under two readings: a logger slower than the
@@ -39,13 +45,11 @@ def minute_grid(conn: Connection, array_id: int, t0: int, t1: int, max_gap_s: in
     energy rule's line
     (:func:`sim.energy.on_grid`): linear between readings at most ``max_gap_s`` apart,
     so a 5- or 15-minute logger's minutes between readings are interpolated, never
-    missing or zero; NaN outside the readings and inside a longer gap. Each reading
-    stands at its interval's middle when the site's readings are means stamped at an
+    missing or zero; NaN outside the readings and inside a longer gap. ``rows``: the
+    array's readings (:func:`_rows`). Each reading
+    stands at its interval's middle when the readings are means stamped at an
     interval's end or start (``stamped``, :func:`sim.energy.interval_middles`)."""
     n = (t1 - t0) // 60
-    # a mean stamped at an interval's edge stands up to half an interval from its stamp
-    reach = max_gap_s if stamped == "instant" else 2 * max_gap_s
-    rows = raw_rows(conn, array_id, 0, t0 - reach, t1 + reach, sensors=True)
     grid = t0 + 60 * np.arange(n, dtype=np.int64)
     ts = interval_middles(rows[:, 0], stamped, max_gap_s)
     power = on_grid(ts, rows[:, 3], grid, max_gap_s)
@@ -81,11 +85,28 @@ def site_minutes(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int
     # the arrays the twin simulates (SiteInfo.has_twin), not merely the first of each mount
     tracker, fixed = info.arrays["tracker"], info.arrays["fixed"]
     gap = ctx.settings.ingest.energy_max_gap_s
-    stamped = info.site.readings_stamped
     with ctx.engine.connect() as conn:
-        fx, fx_s, _ = minute_grid(conn, fixed.array_id, t0, t1, gap, stamped)
-        tr, tr_s, tr_spacing = minute_grid(conn, tracker.array_id, t0, t1, gap, stamped)
+        fx_rows = _rows(conn, fixed.array_id, t0, t1, gap)
+        tr_rows = _rows(conn, tracker.array_id, t0, t1, gap)
+    stamped = readings_stamped(info, fx_rows, gap)
+    fx, fx_s, _ = minute_grid(fx_rows, t0, t1, gap, stamped)
+    tr, tr_s, tr_spacing = minute_grid(tr_rows, t0, t1, gap, stamped)
     return tr, fx, sky_sensors(fx_s, tr_s), tr_spacing
+
+
+def readings_stamped(info: SiteInfo, fixed_rows: np.ndarray, max_gap_s: int) -> str:
+    """What the loggers' stamps mark for the diagnosis: the site's ``readings_stamped``, or
+    where the site leaves the default ``"instant"`` and the fixed array's readings are
+    20 minutes or more apart, what their clear days' shape says
+    (:func:`sim.sky_sensor.inferred_stamped`: an hourly logger's means stamped at the end
+    of their hour read as instants matched the sky to the sun half an hour later, and every
+    clear day was a ``sky_clock_offset``). The fixed plane's sensor where the logger reads
+    one, else its power."""
+    col = 4 + SENSOR_NAMES.index("poa_irradiance_w_m2")
+    poa = fixed_rows[:, col] if fixed_rows.shape[1] > col else np.full(len(fixed_rows), np.nan)
+    values = poa if np.isfinite(poa).sum() * 2 > len(fixed_rows) else fixed_rows[:, 3]
+    return sky_sensor.inferred_stamped(info.site, fixed_rows[:, 0], values, max_gap_s,
+                                       info.site.readings_stamped)
 
 
 def sky_source(e: pd.DataFrame) -> tuple[str, str | None]:
