@@ -746,7 +746,8 @@ def inferred_stamped(site: Site, ts_s: np.ndarray, values: np.ndarray, max_gap_s
     for sign in (-1.0, 1.0):
         shapes[f"clock{sign:+.0f}"] = np.interp(ts + sign * typical, grid, clear)
     lit = np.max(np.column_stack(list(shapes.values())), axis=1) > 50.0
-    local = pd.to_datetime(ts, unit="s", utc=True).tz_convert(site.timezone)
+    # local wall dates (normalize() on the zone raises where a clock change skips midnight)
+    local = pd.to_datetime(ts, unit="s", utc=True).tz_convert(site.timezone).tz_localize(None)
     day = np.asarray(local.normalize().asi8)
     total = dict.fromkeys(shapes, 0.0)
     clear_days = 0
