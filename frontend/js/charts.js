@@ -42,17 +42,114 @@ export function baseLayout(extra = {}) {
   };
 }
 
+/** Below this width [px] a chart is drawn for a phone (docs/dashboard.md, "Phone width"). */
+export const NARROW_PX = 560;
+const APPROX_CHAR_PX = 6.5; // an 11 px sans-serif character, on average
+const layouts = new Map(); // chart element id → the layout its page asked for, before fitWidth
+
+/** Break a title into lines of at most `maxChars` at spaces (Plotly's <br>); a word longer
+ * than that stays whole. */
+export function wrapTitle(text, maxChars) {
+  if (typeof text !== "string" || text.length <= maxChars || text.includes("<br>")) return text;
+  const lines = [];
+  let line = "";
+  for (const word of text.split(" ")) {
+    if (line && line.length + 1 + word.length > maxChars) { lines.push(line); line = word; }
+    else line = line ? `${line} ${word}` : word;
+  }
+  lines.push(line);
+  return lines.join("<br>");
+}
+
+/** The page's layout fitted to a chart `width` × `height` px wide: every axis grows the margins
+ * for its tick labels and title (`automargin`: they were cut at the card's edge, or drawn over
+ * each other); narrower than NARROW_PX (a phone) the margins start small, an x axis of numbers
+ * or dates has a tick every ~48 px at most (`nticks`; a category axis keeps every category),
+ * its labels level or turned upright (`autotickangles`), never slanted over each other, the fonts are a size smaller and a title longer than its axis
+ * is broken into lines. */
+export function fitWidth(layout, width, height, traces = []) {
+  const out = { ...layout };
+  const narrow = width > 0 && width < NARROW_PX;
+  const m = layout.margin || {};
+  if (narrow && !layout.polar) { // a polar chart's labels grow no margin: it keeps its own
+    out.margin = { ...m, l: Math.min(m.l ?? 60, 8), r: Math.min(m.r ?? 60, 8), b: Math.min(m.b ?? 46, 8) };
+  }
+  if (narrow) {
+    out.font = { ...layout.font, size: 11 };
+    if (layout.legend) out.legend = { ...layout.legend, font: { ...layout.legend.font, size: 10 } };
+  }
+  const plotW = Math.max(width - 70, 100);
+  for (const key of Object.keys(out)) {
+    if (!/^[xy]axis\d*$/.test(key) || !out[key]) continue;
+    const ax = { automargin: true, ...out[key] };
+    if (narrow) {
+      const span = ax.domain ? ax.domain[1] - ax.domain[0] : 1;
+      const length = key[0] === "x" ? plotW * span : Math.max(height - 130, 80) * span;
+      if (ax.title?.text) ax.title = { ...ax.title, text: wrapTitle(ax.title.text, Math.floor(length / APPROX_CHAR_PX)) };
+      ax.tickfont = { size: 10, ...ax.tickfont };
+      if (key[0] === "x") {
+        if (!isCategoryAxis(key, ax, traces)) { // nticks would drop categories
+          ax.nticks = Math.min(ax.nticks || Infinity, Math.max(3, Math.floor(plotW * span / 48)));
+        }
+        ax.autotickangles = ax.autotickangles || [0, 90];
+      }
+    }
+    out[key] = ax;
+  }
+  return out;
+}
+
+/** Whether Plotly makes x axis `key` a category axis: its `type`, else the first value of
+ * its first trace (a string that is neither a number nor a date, as Plotly's autotype). */
+function isCategoryAxis(key, ax, traces) {
+  if (ax.type) return ax.type === "category" || ax.type === "multicategory";
+  const id = key === "xaxis" ? "x" : `x${key.slice(5)}`;
+  const trace = traces.find((t) => (t.xaxis || "x") === id && Array.isArray(t.x) && t.x.length);
+  const v = trace?.x.find((x) => x !== null && x !== undefined);
+  return typeof v === "string" && v.trim() !== "" && !Number.isFinite(Number(v)) && !/^\d{4}-\d{2}/.test(v);
+}
+
+function sizeOf(el) {
+  const w = el.clientWidth || el.closest("main")?.clientWidth || window.innerWidth;
+  return [w, el.clientHeight || 320];
+}
+
 /** Draw (or redraw in place) a chart; `table` is what its CSV button downloads. */
 export async function draw(id, traces, layout, table) {
   const Plotly = await loadPlotly();
   const el = document.getElementById(id);
   if (!el) return;
   el.querySelector(":scope > .empty")?.remove();
-  await Plotly.react(el, traces, layout, CONFIG);
+  layouts.set(id, layout);
+  const [w, hgt] = sizeOf(el);
+  el.dataset.fitWidth = String(w < NARROW_PX);
+  await Plotly.react(el, traces, fitWidth(layout, w, hgt, traces), CONFIG);
   if (!performance.getEntriesByName("heliotwin:first-chart").length) performance.mark("heliotwin:first-chart", { detail: id });
   if (table) chartData.set(id, table);
   el.dataset.points = String(traces.reduce((n, t) => n + (t.y || t.r || []).filter((v) => v != null).length, 0));
 }
+
+/** Fit a drawn chart again to its width when it crossed NARROW_PX (a phone turned, a window
+ * resized, a chart drawn on a hidden page and then shown); else only resize it. */
+function refit(el) {
+  const layout = layouts.get(el.id);
+  const [w, hgt] = sizeOf(el);
+  if (layout && el.clientWidth && el.dataset.fitWidth !== String(w < NARROW_PX)) {
+    el.dataset.fitWidth = String(w < NARROW_PX);
+    window.Plotly.react(el, el.data, fitWidth(layout, w, hgt, el.data), CONFIG);
+  } else {
+    window.Plotly.Plots.resize(el);
+  }
+}
+
+let resizeTimer = null;
+window.addEventListener("resize", () => {
+  clearTimeout(resizeTimer);
+  resizeTimer = setTimeout(() => {
+    if (!window.Plotly) return;
+    for (const el of document.querySelectorAll(".js-plotly-plot")) if (el.offsetParent !== null) refit(el);
+  }, 150);
+});
 
 /** Replace a chart with a short message (no data, or an error). */
 export function showEmpty(id, message) {
@@ -66,6 +163,7 @@ export function showEmpty(id, message) {
   el.appendChild(div);
   el.dataset.points = "0";
   chartData.delete(id);
+  layouts.delete(id);
 }
 
 function csvCell(v) {
@@ -107,7 +205,7 @@ export function wireCsvButtons(root = document) {
 /** Keep charts sized to their cards when a hidden page becomes visible. */
 export function resizeVisible(root) {
   if (!window.Plotly) return;
-  for (const el of root.querySelectorAll(".js-plotly-plot")) window.Plotly.Plots.resize(el);
+  for (const el of root.querySelectorAll(".js-plotly-plot")) refit(el);
 }
 
 /** A round tick step (1, 2, 2.5 or 5 × 10^k) that cuts `span` into about `target` intervals. */

@@ -7,10 +7,12 @@ every page scroll sideways (``scrollWidth`` 718-736 px); docs/dashboard.md, "Pho
 
 from __future__ import annotations
 
+import datetime as dt
+
 import pytest
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
-from tests.e2e.conftest import open_page
+from tests.e2e.conftest import ARTIFACTS, open_page
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(180)]
 
@@ -86,3 +88,71 @@ def test_the_header_scrolls_away_on_a_phone_and_the_days_energy_fits_a_desktop(
             cut = page.evaluate("() => { const b = document.getElementById('day-energy');"
                                 " return b.scrollWidth - b.clientWidth; }")
             assert cut <= 0, f"the day's energy table is cut by {cut} px at {width} px"
+
+
+#: Per visible chart: the x tick labels of each x axis that touch or overlap their neighbour
+#: (closer than 2 px, "07 Nov14 Nov"), and the axis titles whose box leaves the chart's SVG.
+_CHART_DEFECTS = """() => [...document.querySelectorAll('.js-plotly-plot')]
+  .filter(el => el.offsetParent !== null && el.querySelector('.cartesianlayer .xtick'))
+  .map(el => {
+    const svg = el.querySelector('svg.main-svg').getBoundingClientRect();
+    const cut = [...el.querySelectorAll('.infolayer text[class$=title]')]
+      .filter(t => t.textContent)
+      .filter(t => { const r = t.getBoundingClientRect();
+        return r.left < svg.left - 0.5 || r.right > svg.right + 0.5
+          || r.top < svg.top - 0.5 || r.bottom > svg.bottom + 0.5; })
+      .map(t => t.textContent);
+    const overlaps = [];
+    for (const axis of el.querySelectorAll('.cartesianlayer g[class$=axislayer-above]')) {
+      if (!/^x/.test(axis.getAttribute('class'))) continue;
+      const boxes = [...axis.querySelectorAll('text')]
+        .map(t => [t.textContent, t.getBoundingClientRect()])
+        .filter(([, r]) => r.width > 0).sort((a, b) => a[1].left - b[1].left);
+      for (let i = 1; i < boxes.length; i++)
+        if (boxes[i][1].left < boxes[i - 1][1].right + 2)
+          overlaps.push(`${boxes[i - 1][0]} | ${boxes[i][0]}`);
+    }
+    return { id: el.id, cut, overlaps };
+  })"""
+
+
+def test_charts_are_readable_at_phone_width(browser, server, request) -> None:  # type: ignore[no-untyped-def]
+    """At 390 px no two x tick labels of a chart touch or overlap and every axis title lies
+    inside its chart: the Overview's (yesterday's power, the daily bars with the gain on a
+    second axis, the diagnosis's dates), the Plant page's and a simulation's (its angles'
+    second axis has a title longer than the axis). Drawn with the desktop's fixed margins
+    and every tick, the titles were cut at the chart's edge and the dates' labels slanted
+    over each other (docs/dashboard.md, "Phone width")."""
+    with open_page(browser, request, timeout_ms=90_000, ignore=_pointing_empty_state) as page:
+        page.set_viewport_size(PHONE)
+        found: dict[str, dict] = {}
+
+        def collect(where: str) -> None:
+            for chart in page.evaluate(_CHART_DEFECTS):
+                found[chart["id"]] = {"page": where, **chart}
+
+        yesterday = (server.today() - dt.timedelta(days=1)).isoformat()
+        page.goto(f"{server.url}/#overview?day={yesterday}")
+        page.wait_for_selector(LOADED["overview"], state="attached")
+        page.locator("#diag-form").scroll_into_view_if_needed()  # the diagnosis draws in view
+        page.wait_for_function("() => Number(document.getElementById('chart-diagnosis')"
+                               ".dataset.points || 0) > 0")
+        collect("overview")
+        page.goto(f"{server.url}/#plant")
+        page.wait_for_selector(LOADED["plant"], state="attached")
+        collect("plant")
+        page.goto(f"{server.url}/#simulation")
+        page.fill("#sim-start", yesterday)
+        page.fill("#sim-end", server.today().isoformat())
+        page.select_option("#sim-step", "300")
+        page.click("#sim-run")
+        page.wait_for_selector("body[data-simulation-done]", timeout=90_000)
+        collect("simulation")
+        page.screenshot(path=str(ARTIFACTS / "phone-simulation.png"), full_page=True)
+
+        expected = {"chart-power", "chart-daily", "chart-cumulative", "chart-diagnosis",
+                    "chart-plant-shade", "chart-plant-strategies", "chart-sim-power",
+                    "chart-sim-angles"}
+        assert expected <= set(found), f"charts not drawn: {expected - set(found)}"
+        bad = {k: v for k, v in found.items() if v["cut"] or v["overlaps"]}
+        assert not bad, f"charts unreadable at {PHONE['width']} px: {bad}"
