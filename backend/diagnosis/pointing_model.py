@@ -85,6 +85,26 @@ def observations(conn: Connection, info: SiteInfo, t0: dt.datetime, t1: dt.datet
     return rows[np.isfinite(rows[:, _COLS]).all(axis=1)] if rows.size else rows
 
 
+def count_observations(conn: Connection, info: SiteInfo, t0: dt.datetime, t1: dt.datetime
+                       ) -> int | None:
+    """How many of the tracker's measured readings in ``[t0, t1)`` :func:`observations` would
+    return (encoder angles and both sun offsets), counted by the database without reading
+    them; None without a tracker array. The dashboard asks this before a fit, so a range
+    without camera offsets is an empty state, not a failed request."""
+    if t1 - t0 > dt.timedelta(days=MAX_DAYS):
+        raise InputError(422, f"end: the range spans over {MAX_DAYS} days; ask for less")
+    tracker = info.array_of_kind("tracker")
+    if tracker is None:
+        return None
+    return int(conn.execute(text(
+        "SELECT count(*) FROM measurements WHERE array_id = :a AND source = 0 "
+        "AND ts_s >= :t0 AND ts_s < :t1 AND azimuth_deg IS NOT NULL "
+        "AND elevation_deg IS NOT NULL AND sun_offset_x_mrad IS NOT NULL "
+        "AND sun_offset_y_mrad IS NOT NULL"),
+        {"a": tracker.array_id, "t0": int(t0.timestamp()), "t1": int(t1.timestamp())}
+    ).scalar_one())
+
+
 #: Fits by their range and what the writer's hourly rollups say of the range's readings
 #: (:func:`range_key`), so that a command under a cached fit reads no observations: a
 #: year's rows take seconds to read, the rollups' sums over its 8,760 hours a millisecond.

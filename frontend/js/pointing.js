@@ -47,17 +47,22 @@ export function termsTable(body) {
   return [head, ...rows];
 }
 
-function emptyState(message) {
-  $("pointing-empty").replaceChildren(h("p", {}, message),
-    h("p", { class: "muted" }, "The model is fitted from the tracker's readings that carry the sun's offset in its "
-      + "camera: send sun_offset_x_mrad and sun_offset_y_mrad with azimuth_deg and elevation_deg (the encoder angles) "
-      + "in the readings (POST /api/v1/sites/{id}/measurements, JSON, CSV or MQTT), or post the tracker camera's "
-      + "frames with their time and encoder angles to POST /api/v1/sites/{id}/pointing-model/observations; "
-      + "at least 10 observations, best over a whole day of sky (docs/pointing-model.md)."));
+const HOW_TO_SEND = "The model is fitted from the tracker's readings that carry the sun's offset in its "
+  + "camera: send sun_offset_x_mrad and sun_offset_y_mrad with azimuth_deg and elevation_deg (the encoder angles) "
+  + "in the readings (POST /api/v1/sites/{id}/measurements, JSON, CSV or MQTT), or post the tracker camera's "
+  + "frames with their time and encoder angles to POST /api/v1/sites/{id}/pointing-model/observations; "
+  + "at least 10 observations, best over a whole day of sky (docs/pointing-model.md).";
+
+/** The page without a fit: `message` says why, then what to send (`hint`). */
+function emptyState(message, hint = HOW_TO_SEND, chartText = "No camera offsets") {
+  $("pointing-empty").replaceChildren(h("p", {}, message), h("p", { class: "muted" }, hint));
   $("pointing-empty").hidden = false;
   $("pointing-results").hidden = true;
-  for (const id of CHARTS) showEmpty(id, "No camera offsets");
+  for (const id of CHARTS) showEmpty(id, chartText);
 }
+
+/** Whether the site has a tracker array to fit (the site list's arrays, `kind`). */
+const hasTracker = (site) => Object.values(site.arrays || {}).some((a) => a.kind === "tracker");
 
 /** Two panels on one x axis: the offsets before the model (top) and after it (bottom),
  * x (toward increasing azimuth) and y (toward increasing elevation) in each. */
@@ -90,19 +95,39 @@ async function load() {
   const end = $("pointing-end").value;
   const status = $("pointing-status");
   const mine = ++requested;
+  const siteId = encodeURIComponent(state.site.site_id);
+  // an empty state asks for no fit that must fail (a 422 in the console): a site without a
+  // tracker asks nothing, a range is first counted (…/coverage), and a range the service
+  // would refuse is said here
+  if (!hasTracker(state.site)) {
+    status.textContent = "";
+    emptyState(`${state.site.name || state.site.site_id} has no tracker array (a camera site, or fixed arrays `
+      + "only): there is no mount to fit.", "The Pointing page fits a tracker's mount from the sun's offsets in "
+      + "the tracker's own camera; choose a site with a tracker in the header.", "No tracker at this site");
+    return;
+  }
+  if (!start || !end || end <= start) {
+    status.textContent = !start || !end ? "Give the range's start and end." : "The end must come after the start.";
+    return;
+  }
   status.textContent = "Fitting…";
   let body;
   try {
-    body = await api(`/api/v1/sites/${encodeURIComponent(state.site.site_id)}/pointing-model`, { params: { start, end } });
-  } catch (err) {
+    const cover = await api(`/api/v1/sites/${siteId}/pointing-model/coverage`, { params: { start, end } });
     if (mine !== requested) return;
-    status.textContent = "";
-    if (err.status === 422 && /observations with sun offsets|no tracker array/.test(err.message)) {
-      emptyState(`No pointing model for ${start} to ${end}: ${err.body?.detail || err.message}.`);
+    if (cover.n_observations < cover.min_observations) {
+      status.textContent = "";
+      emptyState(`No pointing model for ${start} to ${end}: ${cover.n_observations} observations with sun offsets `
+        + `(sun_offset_x_mrad, sun_offset_y_mrad and the encoder angles) in the range; the fit needs at least `
+        + `${cover.min_observations}.`);
       return;
     }
+    body = await api(`/api/v1/sites/${siteId}/pointing-model`, { params: { start, end } });
+  } catch (err) {
+    if (mine !== requested) return;
     status.textContent = `Pointing model failed: ${err.message}`;
     for (const id of CHARTS) showEmpty(id, "No pointing model");
+    $("pointing-empty").hidden = true;
     $("pointing-results").hidden = true;  // the previous range's fit is not this one's
     return;
   }

@@ -170,6 +170,26 @@ def test_too_few_observations_and_a_naive_time_are_422s(client: httpx.Client) ->
     assert r.status_code == 422 and "time" in r.text
 
 
+def test_the_coverage_counts_what_a_fit_would_read_without_failing(
+        client: httpx.Client, posted_day: list[dict]) -> None:
+    """``…/coverage`` answers 200 where the fit answers 422 (the dashboard's empty state
+    asks it first), with the count the fit reads; a site without a tracker says so."""
+    day = {"start": DAY.isoformat(), "end": (DAY + dt.timedelta(days=1)).isoformat()}
+    r = client.get(f"{MODEL}/coverage", params=day)
+    assert r.status_code == 200, r.text
+    assert r.json() == {"site_id": "tehuantepec", "has_tracker": True,
+                        "n_observations": len(posted_day), "min_observations": 10}
+    assert client.get(MODEL, params=day).json()["n_observations"] == len(posted_day)
+    empty = {"start": "2021-11-01", "end": "2021-11-02"}
+    assert client.get(f"{MODEL}/coverage", params=empty).json()["n_observations"] == 0
+    assert client.get(MODEL, params=empty).status_code == 422
+    camera = client.get("/api/v1/sites/guadalajara_fisheye/pointing-model/coverage",
+                        params=empty)
+    assert camera.status_code == 200 and camera.json()["has_tracker"] is False
+    r = client.get(f"{MODEL}/coverage", params={"start": "1990-01-01", "end": "2100-01-01"})
+    assert r.status_code == 422 and "400 days" in r.text
+
+
 def test_a_range_over_the_bound_is_refused_before_it_is_read(client: httpx.Client) -> None:
     """An anonymous read is bounded: 1990–2100 is a 422 naming end, not a scan of it all."""
     r = client.get(MODEL, params={"start": "1990-01-01", "end": "2100-01-01"})

@@ -59,6 +59,7 @@ READS = {
     "diagnosis": f"{_SITE}/diagnosis?{_RANGE}",
     "pointing": f"{_SITE}/pointing?{_RANGE}",
     "pointing_model": f"{_SITE}/pointing-model?{_RANGE}",
+    "pointing_model_coverage": f"{_SITE}/pointing-model/coverage?{_RANGE}",
     "pointing_model_command": f"{_SITE}/pointing-model/command?{_RANGE}"
                               f"&time={NEXT}T12:00:00-06:00",
 }

@@ -24,16 +24,10 @@ LOADED = {"overview": "body[data-overview-loaded][data-report-loaded]",
           "pointing": "body[data-pointing], [data-testid=pointing-empty]:not([hidden])"}
 
 
-def _pointing_empty_state(text: str) -> bool:
-    """The Pointing page's empty state (too few observations) answers 422, which Chromium
-    logs as a failed load (tests/e2e/test_pointing_page.py); no other page asks for one."""
-    return "the server responded with a status of 422" in text
-
-
 def test_no_page_scrolls_sideways_at_phone_width(browser, server, request) -> None:  # type: ignore[no-untyped-def]
     """Every page of the tab bar, its data drawn: the document is no wider than the
     viewport (the elements that stick out are named when it is)."""
-    with open_page(browser, request, timeout_ms=60_000, ignore=_pointing_empty_state) as page:
+    with open_page(browser, request, timeout_ms=60_000) as page:
         page.set_viewport_size(PHONE)
         page.goto(server.url + "/#overview")
         names = page.eval_on_selector_all("nav.tabs a[data-page]",
@@ -123,7 +117,7 @@ def test_charts_are_readable_at_phone_width(browser, server, request) -> None:  
     second axis has a title longer than the axis). Drawn with the desktop's fixed margins
     and every tick, the titles were cut at the chart's edge and the dates' labels slanted
     over each other (docs/dashboard.md, "Phone width")."""
-    with open_page(browser, request, timeout_ms=90_000, ignore=_pointing_empty_state) as page:
+    with open_page(browser, request, timeout_ms=90_000) as page:
         page.set_viewport_size(PHONE)
         found: dict[str, dict] = {}
 

@@ -29,6 +29,7 @@ from backend.api.deps import (
 from backend.api.forms import read_form
 from backend.api.schemas.pointing_model import (
     PointingCommandRead,
+    PointingCoverageRead,
     PointingModelPointsRead,
     PointingObservationRead,
 )
@@ -38,6 +39,7 @@ from backend.diagnosis.pointing_model import (
     TooFewObservations,
     cached_range_fit,
     command,
+    count_observations,
     fit_site,
     frame_offsets,
     model_body,
@@ -53,7 +55,7 @@ from backend.measurements.queries import iso_utc
 from backend.sites import SiteInfo
 from backend.timestamps import parse_instant, parse_range
 from backend.vision.service import check_image, decode
-from sim.pointing_model import PointingFit
+from sim.pointing_model import MIN_OBSERVATIONS, PointingFit
 from vision.cameras import PinholeCamera, camera_from_params
 
 router = APIRouter(prefix="/api/v1/sites", tags=["pointing-model"])
@@ -85,6 +87,23 @@ def get_pointing_model(
         rows, fit = _fit(ctx, info, t0, t1)
         return PointingModelPointsRead.model_validate(
             {**model_body(info, fit), "points": residual_points(rows, info, fit, max_points)})
+
+
+@router.get("/{site_id}/pointing-model/coverage", response_model=PointingCoverageRead,
+            **anonymous_read_route({404: {}, 422: {}}))
+def get_pointing_coverage(
+    site_id: str, ctx: ContextDep, start: RangeStart, end: RangeEnd,
+) -> PointingCoverageRead:
+    """How many observations ``GET …/pointing-model`` would fit over ``[start, end)`` (the
+    tracker's readings with encoder angles and sun offsets) and the fewest it takes, counted
+    without reading them: a range or site without them is a 200 saying so, which the
+    dashboard shows as its empty state instead of asking for a fit that fails."""
+    with metered():
+        info, t0, t1 = site_range(ctx, site_id, start, end)
+        with ctx.engine.connect() as conn:
+            n = count_observations(conn, info, t0, t1)
+        return PointingCoverageRead(site_id=info.site_id, has_tracker=n is not None,
+                                    n_observations=n or 0, min_observations=MIN_OBSERVATIONS)
 
 
 @router.get("/{site_id}/pointing-model/command", response_model=PointingCommandRead,

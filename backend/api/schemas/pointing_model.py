@@ -35,6 +35,18 @@ class PointingModelRead(BaseModel):
     correlated: list[CorrelationRead]
 
 
+class PointingCoverageRead(BaseModel):
+    """Whether a range can be fitted, without fitting it: the observations it holds."""
+
+    site_id: str
+    has_tracker: bool = Field(description="whether the site has a tracker array to fit; "
+                                          "false: a camera site or fixed arrays only")
+    n_observations: int = Field(description="the tracker's measured readings in the range "
+                                            "with both encoder angles and both sun offsets")
+    min_observations: int = Field(description="the fewest the fit takes (10); fewer: "
+                                              "GET …/pointing-model answers 422")
+
+
 class PointingCommandRead(BaseModel):
     """Encoder angles that put the real optical axis on the sun at ``time``."""
 
