@@ -4,7 +4,7 @@
 import { api } from "./api.js";
 import { COLORS, baseLayout, draw, showEmpty, zeroBasedAxis } from "./charts.js";
 import { fmtTime } from "./time.js";
-import { banner, energy, num, tile } from "./ui.js";
+import { banner, energy, num, sayInvalid, tile } from "./ui.js";
 
 const $ = (id) => document.getElementById(id);
 const enc = encodeURIComponent;
@@ -356,5 +356,6 @@ async function runSweep(ev) {
 
 export function initSweep() {
   $("sweep-form").addEventListener("submit", runSweep);
+  sayInvalid($("sweep-form"), (message) => { $("sweep-status").textContent = message; });
   $("sweep-case").addEventListener("change", () => drawSweepShade().catch((err) => banner(`Sweep shade: ${err.message}`, "error")));
 }

@@ -5,7 +5,7 @@
 import { api } from "./api.js";
 import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
 import { addDays, toLocalWall } from "./time.js";
-import { h, num, remember } from "./ui.js";
+import { h, num, remember, sayInvalid } from "./ui.js";
 
 /** The terms in words (docs/pointing-model.md, "Definitions"). */
 export const TERM_WORDS = {
@@ -186,6 +186,7 @@ export function init(state) {
     remember(st, "pointing");
     load();
   });
+  sayInvalid($("pointing-form"), (message) => { $("pointing-status").textContent = message; });
   load();
 }
 

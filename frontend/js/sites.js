@@ -1,6 +1,6 @@
 // Sites: create or edit a site config (docs/sites.md) — PUT /api/v1/sites/{site_id} with a token.
 import { api } from "./api.js";
-import { h } from "./ui.js";
+import { h, sayInvalid } from "./ui.js";
 
 let st = null;
 // a new site is being written ("New site from the selected one"): saving it must not
@@ -91,6 +91,7 @@ async function save(ev) {
     return;
   }
   const siteId = config.site_id || "";
+  result("Saving…");
   if (creating && st.sites.some((s) => s.site_id === siteId)) {
     result(`Not saved: a site with id ${siteId} exists already; give the new site another id `
       + "(or select that site in the header to edit it).", "error");
@@ -142,6 +143,7 @@ function newSite() {
 export function init(state) {
   st = state;
   $("site-form").addEventListener("submit", save);
+  sayInvalid($("site-form"), (message) => result(`Not saved: ${message}`, "error"));
   $("site-new").addEventListener("click", newSite);
   for (const [id] of FIELDS) $(id).addEventListener("input", formToJson);
   $("site-json").addEventListener("change", jsonToForm);

@@ -56,3 +56,20 @@ export function remember(state, page) {
   const q = new URLSearchParams({ site: state.site?.site_id || "", day: state.day || "" });
   history.replaceState(null, "", `#${page}?${q}`);
 }
+
+/** A form's message follows every submit, also one the browser's own validation blocks (a
+ * required field empty, a pattern or range not met): that fires no `submit` event, so the
+ * message of the previous submit stayed beside the browser's bubble as if it were this
+ * one's. `say` gets the first invalid field's label and the browser's reason instead. */
+export function sayInvalid(form, say) {
+  let told = false; // `invalid` fires once per invalid field of one submit: the first is said
+  form.addEventListener("invalid", (ev) => {
+    if (told) return;
+    told = true;
+    setTimeout(() => { told = false; }, 0);
+    const el = ev.target;
+    const label = el.getAttribute("aria-label") || el.closest("label")?.firstChild?.textContent?.trim() || el.name || el.id;
+    const hint = el.validity.patternMismatch && el.title ? ` (${el.title})` : "";
+    say(`${label}: ${el.validationMessage}${hint}`);
+  }, true); // `invalid` does not bubble: caught on its way down
+}

@@ -19,7 +19,7 @@ from zoneinfo import ZoneInfo
 import httpx
 import pytest
 
-from tests.e2e.conftest import open_page
+from tests.e2e.conftest import ARTIFACTS, open_page
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backend"))
 from live_service import ServerProcess, new_database  # noqa: E402
@@ -210,7 +210,8 @@ def test_a_site_made_in_the_form_joins_the_built_in_ones(pg, edge_server: Server
     assert "exists already" in error.inner_text(), error.inner_text()
     pg.fill("#site-id", "hand-made")
     pg.click("#site-save")
-    pg.wait_for_function("() => document.querySelector('[data-testid=site-result] .error')"
+    # "Saving…" replaces the message of the save before at once, then the answer's
+    pg.wait_for_function("() => document.querySelector('[data-testid=site-result]')"
                          ".innerText.includes('latitude_deg')")
     error = pg.locator("[data-testid=site-result] .error")
     assert "latitude_deg" in error.inner_text() and "90" in error.inner_text()
@@ -225,6 +226,40 @@ def test_a_site_made_in_the_form_joins_the_built_in_ones(pg, edge_server: Server
     assert site["readings_stamped"] == "interval_end"
     config = _api(edge_server, "/api/v1/sites/hand-made/config")
     assert "tracker.azimuth_min_deg" in config["assumed"], config.get("assumed")
+
+
+def test_a_submit_the_browser_blocks_replaces_the_forms_message(
+        pg, edge_server: ServerProcess) -> None:
+    """A submit the browser's own validation stops (a required field empty, a pattern not
+    met) fires no ``submit`` event: the message of the save before stayed beside the
+    browser's bubble as if it were this one's. It now says the field and the reason."""
+    pg.goto(f"{edge_server.base_url}/#sites?site=tehuantepec")
+    pg.wait_for_function("() => document.getElementById('site-json').value.includes('tehuantepec')")
+    pg.click("#site-new")
+    pg.fill("#site-id", "guadalajara_fisheye")
+    pg.click("#site-save")
+    result = pg.locator("[data-testid=site-result]")
+    pg.wait_for_function("() => document.querySelector('[data-testid=site-result]')"
+                         ".innerText.includes('exists already')")
+    pg.fill("#site-id", "")
+    pg.click("#site-save")
+    assert pg.evaluate("() => document.getElementById('site-id').validity.valueMissing")
+    pg.wait_for_function("() => !document.querySelector('[data-testid=site-result]')"
+                         ".innerText.includes('exists already')", timeout=5_000)
+    assert result.inner_text().startswith("Not saved: Site id: "), result.inner_text()
+    pg.fill("#site-id", "Not An Id!")
+    pg.click("#site-save")
+    pg.wait_for_function("() => document.querySelector('[data-testid=site-result]')"
+                         ".innerText.includes('lower-case letters')", timeout=5_000)
+    ARTIFACTS.mkdir(exist_ok=True)
+    pg.locator("#page-sites").screenshot(path=str(ARTIFACTS / "sites-blocked-submit.png"))
+    # the Pointing page's range: an empty end, said beside the button
+    pg.goto(f"{edge_server.base_url}/#pointing?site=tehuantepec")
+    pg.locator("[data-testid=pointing-empty]").wait_for(state="visible")
+    pg.fill("#pointing-end", "")
+    pg.click("#pointing-run")
+    pg.wait_for_function("() => document.getElementById('pointing-status').innerText"
+                         ".startsWith('End (exclusive)')", timeout=5_000)
 
 
 # -- the 4-week chart's gain axis (issue 22.4): from zero, round ticks, whole days only --
