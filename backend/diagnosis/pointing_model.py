@@ -30,7 +30,7 @@ from backend.errors import InputError
 from backend.measurements.buckets import ROLLUP_WIDTH_S
 from backend.measurements.fields import SENSOR_NAMES
 from backend.measurements.queries import iso_utc, raw_rows
-from backend.sites import SiteInfo
+from backend.sites import ArrayInfo, SiteInfo
 from sim.pointing_model import (
     CORE_TERMS,
     MIN_OBSERVATIONS,
@@ -43,9 +43,10 @@ from sim.sun import solar_position
 from vision.analyse import analyse_frame
 from vision.cameras import PinholeCamera
 
-#: Columns of :func:`raw_rows` (ts, V, I, P, then the sensors) the fit reads.
-_COLS = tuple(4 + SENSOR_NAMES.index(n) for n in
-              ("azimuth_deg", "elevation_deg", "sun_offset_x_mrad", "sun_offset_y_mrad"))
+#: The readings' fields an observation must carry: the encoder angles and both sun offsets.
+OBSERVED = ("azimuth_deg", "elevation_deg", "sun_offset_x_mrad", "sun_offset_y_mrad")
+#: Their columns of :func:`raw_rows` (ts, V, I, P, then the sensors).
+_COLS = tuple(4 + SENSOR_NAMES.index(n) for n in OBSERVED)
 
 
 #: Fits by the digest of the observations they were made from (and the site's place and
@@ -71,13 +72,19 @@ def refraction_of(info: SiteInfo) -> tuple[float, float]:
 MAX_DAYS = 400
 
 
+def _tracker(info: SiteInfo, t0: dt.datetime, t1: dt.datetime) -> ArrayInfo | None:
+    """The site's tracker array (None: it has none) for a range of at most
+    :data:`MAX_DAYS` days (422 beyond)."""
+    if t1 - t0 > dt.timedelta(days=MAX_DAYS):
+        raise InputError(422, f"end: the range spans over {MAX_DAYS} days; ask for less")
+    return info.array_of_kind("tracker")
+
+
 def observations(conn: Connection, info: SiteInfo, t0: dt.datetime, t1: dt.datetime
                  ) -> np.ndarray:
     """The tracker's readings in ``[t0, t1)`` that carry the encoder angles and both sun
     offsets (the other readings dropped), as raw rows; at most :data:`MAX_DAYS` days."""
-    if t1 - t0 > dt.timedelta(days=MAX_DAYS):
-        raise InputError(422, f"end: the range spans over {MAX_DAYS} days; ask for less")
-    tracker = info.array_of_kind("tracker")
+    tracker = _tracker(info, t0, t1)
     if tracker is None:
         raise TooFewObservations(f"site {info.site_id!r} has no tracker array")
     rows = raw_rows(conn, tracker.array_id, 0, int(t0.timestamp()), int(t1.timestamp()),
@@ -91,16 +98,13 @@ def count_observations(conn: Connection, info: SiteInfo, t0: dt.datetime, t1: dt
     return (encoder angles and both sun offsets), counted by the database without reading
     them; None without a tracker array. The dashboard asks this before a fit, so a range
     without camera offsets is an empty state, not a failed request."""
-    if t1 - t0 > dt.timedelta(days=MAX_DAYS):
-        raise InputError(422, f"end: the range spans over {MAX_DAYS} days; ask for less")
-    tracker = info.array_of_kind("tracker")
+    tracker = _tracker(info, t0, t1)
     if tracker is None:
         return None
+    carried = " AND ".join(f"{name} IS NOT NULL" for name in OBSERVED)
     return int(conn.execute(text(
         "SELECT count(*) FROM measurements WHERE array_id = :a AND source = 0 "
-        "AND ts_s >= :t0 AND ts_s < :t1 AND azimuth_deg IS NOT NULL "
-        "AND elevation_deg IS NOT NULL AND sun_offset_x_mrad IS NOT NULL "
-        "AND sun_offset_y_mrad IS NOT NULL"),
+        f"AND ts_s >= :t0 AND ts_s < :t1 AND {carried}"),
         {"a": tracker.array_id, "t0": int(t0.timestamp()), "t1": int(t1.timestamp())}
     ).scalar_one())
 
