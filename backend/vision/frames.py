@@ -19,7 +19,12 @@ beside each file instead of reading names itself.
   (``…T180000Z``, ``…T120000+0100``; a bare ``±hh`` there is not read, it is too often a
   sequence number). A zone the reader cannot read exactly (``UTC+5:3``, ``UTC+25``,
   ``UTCp5.33``, two zones that disagree) raises :class:`NameZoneError` rather than be
-  rounded: the frame then needs its time sent.
+  rounded: the frame then needs its time sent. So does a name with a zone-like token after
+  the time that is not such an offset — an abbreviation (``CET``, ``CEST``, ``MESZ``,
+  ``PST``, ``GMT``, ``GMT+1``: abbreviations are ambiguous, and ``GMT+1`` is UTC−1 in the
+  tz database's ``Etc/GMT+1``) or a bare ``+hh`` right after the time digits
+  (``…_100600+01``): read as UTC or the place's zone they put the sun an hour or more
+  from where it was. A bare ``-hh`` there stays a sequence number.
 """
 
 from __future__ import annotations
@@ -43,6 +48,18 @@ _NAME_ZONE = re.compile(r"(?<![a-z])UTC(?:([pm+-])(\d+(?:[:.]\d+)?)|(?![pm+-]\d)
 _SIGNED = re.compile(r"UTC[pm+-]\d", re.IGNORECASE)
 #: an ISO 8601 zone right after the time digits: ``Z``, ``±hh:mm`` or ``±hhmm``
 _ISO_ZONE = re.compile(r"(Z(?![a-z]))|([+-])(\d{2}:?\d{2})(?!\d)", re.IGNORECASE)
+#: zone abbreviations (tz database, and German MEZ/MESZ) seen in camera file names, alone
+#: or with an offset (``GMT+1``, ``CET-1``); words such as WEST or ART are left out, as they
+#: name other things. Never read: only refused, so that the frame's time is sent.
+_ABBREVIATIONS = ("CET", "CEST", "MEZ", "MESZ", "WET", "EET", "EEST", "GMT", "BST", "IST",
+                  "PST", "PDT", "MST", "MDT", "CST", "CDT", "EST", "EDT", "AKST", "AKDT",
+                  "HST", "AEST", "AEDT", "ACST", "ACDT", "AWST", "NZST", "NZDT", "JST",
+                  "KST", "MSK", "HKT", "SGT", "WIB", "BRT", "UT")
+_ABBREVIATION = re.compile(r"(?<![a-z])(?:" + "|".join(_ABBREVIATIONS) + r")"
+                           r"(?:[pm+-]\d+(?:[:.]\d+)?)?(?![a-z])", re.IGNORECASE)
+#: a bare ``+hh`` (or ``+h``) right after the time digits: a zone, but not one ISO 8601
+#: spells exactly enough to be told from a number
+_BARE_PLUS = re.compile(r"\+\d{1,2}(?![\d:])")
 _MAX_OFFSET_MIN = 14 * 60  # the farthest zones from UTC (Kiribati, UTC+14)
 _OFFSET_STEP_MIN = 15  # every zone's offset is whole hours, :30 or :45 (tz database)
 
@@ -134,6 +151,16 @@ def time_from_name(name: str) -> NameTime | None:
                                 f"name is not a UTC offset this reader can read (±h, ±hh:mm, "
                                 f"±hhmm or decimal hours such as UTCp5.5): send the frame's "
                                 f"time")
+    rest = name[m.end():]
+    for t in _ABBREVIATION.finditer(rest):  # "…_100600_CEST": a zone by name, not read
+        raise NameZoneError(f"the zone {t.group(0)!r} in the file name is an abbreviation, "
+                            f"which this reader does not read (abbreviations are ambiguous; "
+                            f"write the offset, e.g. UTCp1 or UTC+02:00): send the frame's "
+                            f"time")
+    if iso is None and (plus := _BARE_PLUS.match(name, m.end())) is not None:
+        raise NameZoneError(f"the zone {plus.group(0)!r} after the time in the file name is "
+                            f"not a UTC offset this reader can read (±hh:mm, ±hhmm, or "
+                            f"UTCp1): send the frame's time")
     if len(set(offsets.values())) > 1:
         raise NameZoneError(f"the file name states zones that disagree "
                             f"({', '.join(offsets)}): send the frame's time")

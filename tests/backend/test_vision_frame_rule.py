@@ -207,3 +207,33 @@ def test_a_camera_without_a_known_north_is_searched_blind(client: httpx.Client) 
     assert body["centroid_px"] == blind["centroid_px"]
     assert client.post("/api/v1/vision/sun", data={**place, "north_offset_deg": "1e308"},
                        files={"file": (path.name, path.read_bytes())}).status_code == 422
+
+
+def test_zone_abbreviations_and_bare_plus_hours_are_refused(client: httpx.Client,
+                                                            frame_png: bytes) -> None:
+    """A zone the reader does not read — an abbreviation (``CEST``, ``GMT+1``, which is
+    UTC−1 in the tz database) or a bare ``+hh`` after the time — was read as UTC without a
+    word (``cam_20160530_100600_CEST.jpg`` detected at 10:06Z, two hours off); now it gets
+    a ``zone_error`` and detection a 422 naming ``timestamp`` unless the time is sent."""
+    bad = ["cam_20160530_100600_CEST.jpg", "cam_20160530_100600_CET.jpg",
+           "cam_20160530_100600_GMT+1.jpg", "cam_20160530_100600_PST.jpg",
+           "cam_20160530_100600_MESZ.jpg", "cam_20160530_100600+01.jpg",
+           "cam_20160530_100600_cest.jpg"]
+    r = client.get("/api/v1/vision/frame-times", params=[("filename", n) for n in bad])
+    assert r.status_code == 200, r.text
+    for f in r.json()["frames"]:
+        assert f["wall_time"] is None and f["utc_offset_h"] is None, f
+        assert "send the frame's time" in f["zone_error"], f
+    # words that are no zone after the time still leave the name's time (read in UTC)
+    fine = ["cam_20160530_100600_west.jpg", "cam_20160530_100600_test.jpg"]
+    r = client.get("/api/v1/vision/frame-times", params=[("filename", n) for n in fine])
+    assert [(f["wall_time"], f["zone_error"]) for f in r.json()["frames"]] == \
+        [("2016-05-30T10:06:00", None)] * 2
+    named = "sky_20240210_103000_CST.png"
+    r = client.post("/api/v1/vision/sun", files={"file": (named, frame_png, "image/png")},
+                    data={"camera": "fisheye", "site_id": "tehuantepec"})
+    assert r.status_code == 422 and r.json()["detail"].startswith("timestamp:"), r.text
+    assert "'CST'" in r.json()["detail"]
+    r = client.post("/api/v1/vision/sun", files={"file": (named, frame_png, "image/png")},
+                    data={"camera": "fisheye", "site_id": "tehuantepec", "timestamp": UTC})
+    assert r.status_code == 200 and r.json()["timestamp_source"] == "given"
