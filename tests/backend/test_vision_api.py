@@ -358,6 +358,34 @@ def test_vision_token_required_when_configured(tmp_path: Path) -> None:
         assert r.status_code == 200, r.text
 
 
+
+def test_a_token_writes_only_its_own_sites_history(tmp_path: Path) -> None:
+    """An ingest token of ``tehuantepec`` posting ``site_id=guadalajara_fisheye`` was stored
+    under guadalajara_fisheye (200): a 403 naming ``site_id`` now, for detections and
+    calibrations alike; its own site and a free place are still written."""
+    server = InProcessServer(f"sqlite:///{tmp_path / 'v.sqlite'}",
+                             {"HELIOTWIN_VISION_REQUIRE_TOKEN": "true"})
+    with server, server.client(timeout_s=60) as c:
+        auth = {"Authorization": f"Bearer {server.token('tehuantepec')}"}
+        files = {"file": ("f.jpg", _disc(), "image/jpeg")}
+        other = {"camera": "pinhole", "site_id": "guadalajara_fisheye"}
+        r = c.post(SUN, files=files, data=other, headers=auth)
+        assert r.status_code == 403 and r.json()["detail"].startswith("site_id:"), r.text
+        assert "'tehuantepec'" in r.json()["detail"]
+        stored = c.get("/api/v1/vision/detections",
+                       params={"site_id": "guadalajara_fisheye"}).json()["detections"]
+        assert stored == []
+        three = [("files", (f"f{i}.jpg", _disc(300 + 50 * i), "image/jpeg")) for i in range(3)]
+        r = c.post("/api/v1/vision/calibrations", files=three, headers=auth,
+                   data={"site_id": "guadalajara_fisheye", "timestamps": [
+                       "2024-04-02T15:00:00Z", "2024-04-02T17:00:00Z", "2024-04-02T19:00:00Z"]})
+        assert r.status_code == 403 and r.json()["detail"].startswith("site_id:"), r.text
+        for data in ({"camera": "pinhole", "site_id": "tehuantepec"},
+                     {"camera": "pinhole", "latitude_deg": "20", "longitude_deg": "-100"}):
+            r = c.post(SUN, files=files, data=data, headers=auth)
+            assert r.status_code == 200, r.text
+
+
 def test_cli_detect_fisheye_json(tmp_path: Path, heliotwin_cli: Callable) -> None:
     ts = "2024-02-10T10:30:00-06:00"
     az, el = _spa(ts, *TEHUANTEPEC)

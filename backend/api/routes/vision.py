@@ -232,6 +232,16 @@ def _place(ctx: Any, form: FormData, required: bool = False) -> Place | None:
     return free_place(la, lo, el)
 
 
+def _writes_site(token_site: str | None, place: Place | None, what: str) -> None:
+    """A token writes its own site's history only: a ``site_id`` of another site is a 403
+    naming ``site_id`` (a free place, or no token, writes no site's history of another)."""
+    if token_site is not None and place is not None and place.site_id is not None \
+            and place.site_id != token_site:
+        raise HTTPException(403, f"site_id: this token writes to site {token_site!r}, not "
+                                 f"{place.site_id!r}: {what} of site {place.site_id!r} need "
+                                 f"a token of that site")
+
+
 def _float(text: str, field: str) -> float:
     try:
         return float(text)
@@ -346,6 +356,7 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
         raise HTTPException(422, f"file: exactly one image is needed, got {len(uploads)}")
     ts = _timestamp(_text(form, "timestamp"))
     place = _place(ctx, form)
+    _writes_site(_token, place, "detections")
     method = _method(form)
     stored, cal = await anyio.to_thread.run_sync(_stored_camera, session, form)
     cal_id = None if cal is None else int(cal["calibration_id"])
@@ -445,6 +456,7 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
     if len(name) > 100:
         raise HTTPException(422, f"name: at most 100 characters, got {len(name)}")
     frames, place = await _timed_frames(ctx, form, 3)
+    _writes_site(_token, place, "calibrations")
     # a bad series is refused by the service (InputError: 422 naming files or timestamps)
     async with _admitted(ctx, request, _token, [f[0] for f in frames], CALIBRATION_PASSES):
         row = await anyio.to_thread.run_sync(
