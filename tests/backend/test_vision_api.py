@@ -8,6 +8,7 @@ whose sun is placed by a known camera; the real all-sky frames of
 
 from __future__ import annotations
 
+import asyncio
 import csv
 import datetime as dt
 import json
@@ -418,3 +419,38 @@ def test_cli_calibrate_and_bad_file(tmp_path: Path, heliotwin_cli: Callable) -> 
     bad.write_bytes(b"hello")
     out = heliotwin_cli("vision", "detect", str(bad), "--camera", "pinhole")
     assert out.returncode == 2 and "not a PNG or JPEG" in out.stderr
+
+
+def test_a_busy_queue_does_not_spend_the_anonymous_allowance() -> None:
+    """``_admitted`` took the pixels from the anonymous allowance before waiting in the
+    decode queue, so each 503 (queue full) spent them: three 503s on a 100-pixel allowance
+    of 64-pixel frames became a 429. Only admitted work is charged now."""
+    from contextlib import asynccontextmanager
+    from types import SimpleNamespace
+
+    from fastapi import HTTPException
+
+    from backend.api.routes.vision import _admitted
+    from backend.limits import Busy, RateLimiter
+    from backend.vision.service import Upload
+
+    class FullQueue:
+        @asynccontextmanager
+        async def hold(self, units: int):  # type: ignore[no-untyped-def]
+            raise Busy(503, "the decode queue is full", 1)
+            yield
+
+    allowance = RateLimiter(100, "pixels", "HELIOTWIN_ANONYMOUS_VISION_PIXELS_PER_MIN")
+    ctx = SimpleNamespace(limits=SimpleNamespace(vision_pixels=allowance, decode=FullQueue()))
+    request = SimpleNamespace(client=SimpleNamespace(host="192.0.2.7"))
+    frame = Upload("file", "f.png", b"", (8, 8))
+
+    async def ask() -> None:
+        async with _admitted(ctx, request, None, [frame]):
+            raise AssertionError("not admitted")
+
+    for _ in range(3):
+        with pytest.raises(HTTPException) as refused:
+            asyncio.run(ask())
+        assert refused.value.status_code == 503
+    allowance.take("192.0.2.7", 100)  # the whole allowance is still there

@@ -158,7 +158,11 @@ async def _admitted(ctx: Any, request: Request, token_site: str | None,
     each ``passes`` times): without a token the client's per-minute pixel allowance
     (429 with Retry-After), a batch costing more than the whole allowance refused
     outright (413 naming ``files``: no wait would admit it), then one frame's share of
-    the decode budget, waited for in a bounded queue (503)."""
+    the decode budget, waited for in a bounded queue (503). Only admitted work is
+    charged: a request refused by the queue (503) or gone while it waited gets its
+    pixels back."""
+    taken: tuple[str, float] | None = None
+    entered = False
     try:
         if token_site is None:
             cost = passes * sum(w * h for w, h in (f.size_px for f in frames))
@@ -169,11 +173,18 @@ async def _admitted(ctx: Any, request: Request, token_site: str | None,
                                          f"may cost ({allowance:.0f} pixels, "
                                          f"HELIOTWIN_ANONYMOUS_VISION_PIXELS_PER_MIN); send "
                                          f"fewer or smaller frames, or a write token")
-            ctx.limits.vision_pixels.take(request.client.host if request.client else "?", cost)
+            client = request.client.host if request.client else "?"
+            ctx.limits.vision_pixels.take(client, cost)
+            taken = (client, cost)
         async with ctx.limits.decode.hold(max(w * h for w, h in (f.size_px for f in frames))):
+            entered = True
             yield
-    except Busy as exc:
-        raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
+    except BaseException as exc:
+        if taken is not None and not entered:  # never admitted: nothing was decoded
+            ctx.limits.vision_pixels.refund(*taken)
+        if isinstance(exc, Busy):
+            raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
+        raise
 
 
 async def _store(ctx: Any, insert: Any, table: Any, row: dict[str, Any], anonymous: bool
