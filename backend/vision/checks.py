@@ -95,3 +95,71 @@ def error_warnings(res: dict[str, Any], calibration_max_deg: float | None) -> li
             out.append(f"an error of {float(sep):.1f}° is far beyond this calibration's worst "
                        f"residual ({calibration_max_deg:.2f}°): is the place or the time right?")
     return out
+
+
+MAX_OUTLIER_SHARE = 1 / 3
+"""A calibration whose outliers are more than this share of the frames it fitted is refused:
+its consensus is not a clear majority. The robust fit draws 20 samples of three frames
+(``vision.calibrate._RANSAC_TRIALS``), enough to find a clean sample with probability above
+0.999 while at most a third disagree ((1 − (2/3)³)²⁰ < 0.001); when more disagree, the
+frames that "agree" are as likely a chance fit of wrong times (the 12 even Wolf frames
+given their times reversed: 7 outliers, 5 fitted to 0.38° by a mirrored camera 130 px off
+centre)."""
+
+
+def check_consensus(frames: list[dict[str, Any]], loo_rms_deg: float | None) -> None:
+    """Refuse (422 naming ``timestamps``) a calibration whose inliers are not a clear
+    majority (:data:`MAX_OUTLIER_SHARE`) of the frames with a sun found, or whose outliers
+    leave too few frames to check the fit by leaving each out (``loo_rms_deg`` None)."""
+    fitted = [f for f in frames if f.get("used") or f.get("outlier")]
+    out = [f for f in fitted if f.get("outlier")]
+    if not out:
+        return
+    why = (f"{len(out)} of {len(fitted)} frames disagree with the fit (their suns lie more "
+           f"than 1° from where the camera fitted to the other {len(fitted) - len(out)} "
+           f"puts them: {', '.join(str(f.get('filename') or f.get('name')) for f in out)})")
+    hint = ("are the times in the order of the files, and in the right zone (UTC, or with "
+            "their offset)?")
+    if len(out) > MAX_OUTLIER_SHARE * len(fitted):
+        raise InputError(422, f"timestamps: {why}; a calibration needs at least two thirds "
+                              f"of its frames to agree: {hint}")
+    if loo_rms_deg is None:
+        raise InputError(422, f"timestamps: {why}, and the rest are too few sun directions "
+                              f"to check the fit by leaving each out in turn: {hint} Or "
+                              f"send more frames")
+
+
+MAX_ZENITH_OFFSET_DEG = 4.0
+"""A fitted zenith farther than this [°, in the fitted scale] from the centre of the image
+circle is refused. A sky camera is levelled, and its lens centred on the sensor: on the
+real series the zenith lies 0.6–1.5° from the circle's centre (Wolf 12/11/23 frames
+0.71/0.61/0.66°, Wettermast 6 frames 1.51°), while times an hour off fit a camera whose
+zenith is 7.9–9.8° away (Wolf 12 and 23, Wettermast 6; the fit's RMS stays 0.15–0.41°,
+as good as the right zone's: a path an hour along is the same arc turned)."""
+
+
+def image_circle_centre(image: np.ndarray) -> tuple[float, float] | None:
+    """The centre of the frame's image circle (``vision.fov.image_circle``: the lit disc
+    inside the dark corners), or None when the frame has none."""
+    found = image_circle(to_gray(image))
+    return None if found is None else (float(found[0].cx_px), float(found[0].cy_px))
+
+
+def check_zenith(zenith_px: tuple[float, float], px_per_deg: float,
+                 centres: list[tuple[float, float]]) -> float | None:
+    """Refuse (422 naming ``timestamps``) a fitted camera whose zenith lies more than
+    :data:`MAX_ZENITH_OFFSET_DEG` from the median centre of the frames' image circles;
+    the offset [°], or None when no frame has a circle (nothing to compare)."""
+    if not centres:
+        return None
+    cx, cy = (float(v) for v in np.median(np.asarray(centres, float), axis=0))
+    off = float(np.hypot(zenith_px[0] - cx, zenith_px[1] - cy)) / px_per_deg
+    if off > MAX_ZENITH_OFFSET_DEG:
+        raise InputError(422, f"timestamps: the fitted camera puts the zenith at "
+                              f"({zenith_px[0]:.0f}, {zenith_px[1]:.0f}) px, {off:.1f}° from "
+                              f"the centre of the image circle ({cx:.0f}, {cy:.0f}) px — a "
+                              f"levelled sky camera's zenith lies within "
+                              f"{MAX_ZENITH_OFFSET_DEG:g}°. Times in the wrong zone fit such "
+                              f"a camera (an hour off moves the zenith 8–10°): are the times "
+                              f"UTC, or given with their offset? Is the place right?")
+    return off

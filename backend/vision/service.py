@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from backend.errors import InputError
+from backend.vision.checks import check_consensus, check_zenith, image_circle_centre
 from sim.sun import solar_position
 from vision.analyse import analyse_frame
 from vision.calibrate import DISTINCT_DEG, MIN_DIRECTIONS, n_directions, self_calibrate
@@ -199,7 +200,11 @@ def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
     count once, so an image sent twice with its time adds nothing; sent with another
     time it is a frame whose clock is wrong, an outlier); after the fit, a camera that
     leaves more than :data:`vision.calibrate.MAX_RMS_DEG` RMS (``files``, with every
-    frame's residual) — such a fit is no calibration, so nothing is stored. The stored
+    frame's residual) — such a fit is no calibration, so nothing is stored; so are a fit
+    more than a third of the frames disagree with, and a fitted zenith far from the
+    image circles' centre, the sign of times in a wrong zone (``timestamps``,
+    :func:`backend.vision.checks.check_consensus`, :func:`~backend.vision.checks.check_zenith`;
+    each frame's image circle is found as it is first decoded). The stored
     size is the frames' decoded size (EXIF orientation applied), the size detection
     with this calibration must match.
     """
@@ -212,8 +217,16 @@ def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
                               f"directions (more than {DISTINCT_DEG:g}° apart; frames of one "
                               f"direction count once): a calibration needs at least "
                               f"{MIN_DIRECTIONS}, from frames taken at different times")
+    centres: dict[int, tuple[float, float] | None] = {}
+
+    def load(i: int) -> np.ndarray:
+        img = decode(frames[i][0], max_pixels)
+        if i not in centres:  # the image circle of each frame, on its first decode
+            centres[i] = image_circle_centre(img)
+        return img
+
     try:
-        cal = self_calibrate(lambda i: decode(frames[i][0], max_pixels), az, el,
+        cal = self_calibrate(load, az, el,
                              names=[f[0].filename for f in frames], method=method,
                              projection=projection, east=east, n_radial=n_radial,
                              fit_tilt=fit_tilt)
@@ -228,6 +241,12 @@ def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
              **{k: v for k, v in r.items() if k != "name"}}
         r["ephemeris"] = {"azimuth_deg": float(az[i]), "elevation_deg": float(el[i])}
         report.append(r)
+    # a fit is not yet a calibration: most frames must agree, and a levelled camera's zenith
+    # lies near its image circle's centre (backend.vision.checks)
+    check_consensus(report, cal.loo_rms_deg)
+    zenith = res.camera.sky_to_pixel(0.0, 90.0)
+    check_zenith((float(zenith[0]), float(zenith[1])), res.camera.px_per_deg,
+                 [c for c in centres.values() if c is not None])
     out = res.to_dict()
     cam = out["camera"]
     w, h = cal.image_size_px

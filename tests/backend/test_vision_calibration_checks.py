@@ -17,7 +17,10 @@ product's ephemeris).
 
 from __future__ import annotations
 
+import csv
+import datetime as dt
 import struct
+from pathlib import Path
 
 import cv2
 import httpx
@@ -26,6 +29,8 @@ import pandas as pd
 import pvlib
 import pytest
 
+from backend.errors import InputError
+from backend.vision.checks import check_consensus
 from vision.cameras import FisheyeCamera
 from vision.synth import fisheye_frame
 
@@ -36,6 +41,7 @@ TRUTH = FisheyeCamera(330.0, 238.0, 2.6, north_offset_deg=-20.0, east="left")
 DAY = "2024-04-12"  # this module's day (the live server's database is shared)
 TIMES = [f"{DAY}T{h:02d}:20:00-06:00" for h in (8, 10, 12, 14, 16)]
 HELD_OUT = f"{DAY}T11:05:00-06:00"
+REAL_SKY = Path(__file__).resolve().parents[2] / "tests" / "data" / "real-sky"
 
 
 def _image(ts: str, seed: int) -> np.ndarray:
@@ -136,3 +142,58 @@ def test_series_of_fewer_than_three_sun_directions_are_refused(
         assert r.status_code == 422, (what, r.text)
         detail = r.json()["detail"]
         assert detail.startswith("timestamps:") and "distinct direction" in detail, what
+
+
+def _real(prefix: str) -> list[dict[str, str]]:
+    with (REAL_SKY / "metadata.csv").open(newline="") as fh:
+        return [r for r in csv.DictReader(fh) if r["filename"].startswith(prefix)]
+
+
+def _real_calibrate(client: httpx.Client, rows: list[dict[str, str]], times: list[str]
+                    ) -> httpx.Response:
+    files = [("files", (r["filename"], (REAL_SKY / r["filename"]).read_bytes(), "image/jpeg"))
+             for r in rows]
+    return client.post(CAL, files=files, data={"timestamps": times, "latitude_deg":
+                                               rows[0]["lat"], "longitude_deg": rows[0]["lon"]})
+
+
+def test_a_fit_most_frames_disagree_with_is_refused(client: httpx.Client) -> None:
+    """The six Wettermast frames given their times in reverse order were stored (201) with
+    3 of 6 outliers and no leave-one-out check, fitted to 0.2° by a mirrored camera
+    ~180 px off centre (the 12 even Wolf frames: 7 of 12, 0.38°): at most a third of the
+    frames may disagree (backend.vision.checks.MAX_OUTLIER_SHARE)."""
+    rows = _real("Wettermast")
+    r = _real_calibrate(client, rows, [row["utc_time"] for row in rows][::-1])
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert detail.startswith("timestamps:") and "3 of 6 frames disagree" in detail, detail
+    assert "order of the files" in detail
+
+
+def test_consensus_rule_by_hand() -> None:
+    """One outlier of six with a leave-one-out check passes; two of five do not; one of
+    four leaving too few directions to hold each out is refused too."""
+    def frames(n_out: int, n: int) -> list[dict]:
+        return [{"filename": f"f{i}", "used": i >= n_out, "outlier": i < n_out}
+                for i in range(n)] + [{"filename": "dark", "used": False, "outlier": False}]
+
+    check_consensus(frames(1, 6), 0.3)
+    check_consensus(frames(0, 3), None)  # a clean minimal series: nothing left out
+    for n_out, n, loo in ((2, 5, 0.3), (1, 4, None)):
+        with pytest.raises(InputError, match=f"^timestamps: {n_out} of {n} frames"):
+            check_consensus(frames(n_out, n), loo)
+
+
+def test_times_in_the_wrong_zone_are_refused(client: httpx.Client) -> None:
+    """The Wettermast frames' names read as UTC (every time an hour late) fitted a camera
+    to 0.15° RMS, stored, with its zenith ~110 px (≈ 10°) from the image circle's centre;
+    the right times put it 1.5° away (MAX_ZENITH_OFFSET_DEG = 4°)."""
+    rows = _real("Wettermast")
+    late = [(dt.datetime.fromisoformat(r["utc_time"].replace("Z", "+00:00"))
+             + dt.timedelta(hours=1)).isoformat() for r in rows]
+    r = _real_calibrate(client, rows, late)
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert detail.startswith("timestamps:") and "image circle" in detail, detail
+    assert "zone" in detail
+
