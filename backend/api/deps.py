@@ -215,6 +215,10 @@ async def vision_token(request: Request) -> str | None:
                                      "requests: send 'Authorization: Bearer <token>'",
                                 headers=_BEARER)
         return None
+    if is_admin_token(settings, token):
+        raise HTTPException(403, "the admin token is not a site's token: vision requests write "
+                                 "a site's history, so they need a token of the site "
+                                 "(`heliotwin token create --site ID`)")
     return (await _valid_grant(request.app.state.ctx, token)).site_id
 
 

@@ -454,3 +454,37 @@ def test_a_busy_queue_does_not_spend_the_anonymous_allowance() -> None:
             asyncio.run(ask())
         assert refused.value.status_code == 503
     allowance.take("192.0.2.7", 100)  # the whole allowance is still there
+
+
+def test_an_unknown_site_id_is_not_echoed_whole(client: httpx.Client) -> None:
+    """A 2 MB site_id came back whole in the 404; it is cut as timestamps are (40 chars)."""
+    long_id = "w" * 200_000
+    r = client.post(SUN, files={"file": ("f.jpg", _disc(), "image/jpeg")},
+                    data={"camera": "pinhole", "site_id": long_id})
+    assert r.status_code == 404 and r.json()["detail"].startswith("site_id: unknown site")
+    assert len(r.text) < 400 and "200000 characters" in r.json()["detail"], r.text[:500]
+    r = client.get("/api/v1/vision/detections", params={"site_id": "q" * 5000})
+    assert r.status_code == 404 and len(r.text) < 400, r.text[:500]
+
+
+def test_fields_sent_as_files_and_bad_ids_are_named(client: httpx.Client,
+                                                    tmp_path: Path) -> None:
+    """``-F site_id=@file`` was dropped silently (the frame then had no place); a
+    ``calibration_id`` of -1 said only "not an integer id"; the admin token where a site's
+    token is required was an "unknown write token"."""
+    files = [("file", ("f.jpg", _disc(), "image/jpeg")),
+             ("site_id", ("site.txt", b"tehuantepec", "text/plain"))]
+    r = client.post(SUN, files=files, data={"camera": "pinhole"})
+    assert r.status_code == 422 and r.json()["detail"].startswith("site_id: sent as a file")
+    r = client.post(SUN, files={"file": ("f.jpg", _disc(), "image/jpeg")},
+                    data={"calibration_id": "-1"})
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"] == "calibration_id: '-1' must be a positive integer id"
+    admin = "admin-of-the-vision-fields-test"
+    server = InProcessServer(f"sqlite:///{tmp_path / 'v.sqlite'}",
+                             {"HELIOTWIN_VISION_REQUIRE_TOKEN": "true",
+                              "HELIOTWIN_ADMIN_TOKEN": admin})
+    with server, server.client(timeout_s=60) as c:
+        r = c.post(SUN, files={"file": ("f.jpg", _disc(), "image/jpeg")},
+                   data={"camera": "pinhole"}, headers={"Authorization": f"Bearer {admin}"})
+        assert r.status_code == 403 and "admin token is not a site's token" in r.text, r.text

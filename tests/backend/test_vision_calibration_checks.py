@@ -197,3 +197,66 @@ def test_times_in_the_wrong_zone_are_refused(client: httpx.Client) -> None:
     assert detail.startswith("timestamps:") and "image circle" in detail, detail
     assert "zone" in detail
 
+
+@pytest.fixture
+def stored(client: httpx.Client, images: list[np.ndarray]) -> dict:
+    """A calibration fitted at the site tehuantepec, and a held-out frame."""
+    r = _calibrate(client, [(f"s{i}.png", _encode(im)) for i, im in enumerate(images)], TIMES)
+    assert r.status_code == 201, r.text
+    return {"id": str(r.json()["calibration_id"]), "frame": _encode(_image(HELD_OUT, 11))}
+
+
+def test_evaluate_reads_the_form_it_documents(client: httpx.Client, stored: dict) -> None:
+    """/evaluate's OpenAPI described the calibration form (n_radial, name, fit_tilt) and left
+    out calibration_id, camera, methods …; ``n_radial=zzz`` was ignored (200)."""
+    schema = client.get("/openapi.json").json()["paths"]["/api/v1/vision/evaluate"]["post"]
+    props = schema["requestBody"]["content"]["multipart/form-data"]["schema"]["properties"]
+    assert {"calibration_id", "camera", "px_per_deg", "cx_px", "cy_px", "north_offset_deg",
+            "methods", "files", "timestamps"} <= set(props)
+    assert not {"n_radial", "name", "fit_tilt"} & set(props)
+    files = [("files", ("h.png", stored["frame"], "image/png"))]
+    r = client.post("/api/v1/vision/evaluate", files=files,
+                    data={"calibration_id": stored["id"], "timestamps": [HELD_OUT],
+                          "n_radial": "zzz"})
+    assert r.status_code == 422 and r.json()["detail"].startswith("'n_radial': unknown field")
+    r = client.post("/api/v1/vision/evaluate", files=files,
+                    data={"calibration_id": stored["id"], "timestamps": [HELD_OUT],
+                          "methods": "robust"})
+    assert r.status_code == 200, r.text
+
+
+def test_a_calibrations_place_is_used_when_none_is_given(client: httpx.Client,
+                                                        stored: dict) -> None:
+    """With a calibration_id and no place the frame was searched blind, without a word; the
+    calibration's site is used now, and the answer says so."""
+    r = client.post(SUN, files={"file": ("h.png", stored["frame"], "image/png")},
+                    data={"calibration_id": stored["id"], "timestamp": HELD_OUT})
+    assert r.status_code == 200, r.text
+    d = r.json()
+    assert d["site_id"] == "tehuantepec" and d["ephemeris"] is not None
+    assert d["place_source"].startswith(f"calibration {stored['id']}")
+    assert d["sun_found"] and d["error"]["separation_deg"] < 1.0
+    r = client.post("/api/v1/vision/evaluate",
+                    files=[("files", ("h.png", stored["frame"], "image/png"))],
+                    data={"calibration_id": stored["id"], "timestamps": [HELD_OUT]})
+    assert r.status_code == 200 and r.json()["site_id"] == "tehuantepec", r.text
+
+
+def test_parameters_a_calibration_replaces_are_refused(client: httpx.Client,
+                                                       stored: dict) -> None:
+    """calibration_id with px_per_deg, the centre, north, east or projection: the typed
+    values were silently ignored; reference_x_px without reference_y_px too."""
+    files = {"file": ("h.png", stored["frame"], "image/png")}
+    for field, value in (("px_per_deg", "3"), ("cx_px", "300"), ("north_offset_deg", "10"),
+                         ("east", "right"), ("projection", "equisolid")):
+        r = client.post(SUN, files=files, data={"calibration_id": stored["id"], field: value})
+        assert r.status_code == 422, (field, r.text)
+        assert r.json()["detail"].startswith(f"{field}: a calibration_id carries"), r.text
+    r = client.post("/api/v1/vision/evaluate",
+                    files=[("files", ("h.png", stored["frame"], "image/png"))],
+                    data={"calibration_id": stored["id"], "timestamps": [HELD_OUT],
+                          "east": "sideways"})
+    assert r.status_code == 422 and r.json()["detail"].startswith("east:"), r.text
+    r = client.post(SUN, files=files, data={"camera": "pinhole", "reference_x_px": "10"})
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"] == "reference_x_px and reference_y_px go together"

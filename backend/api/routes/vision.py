@@ -13,7 +13,9 @@
   (``vision.calibrate.self_calibrate``: outlying frames named and left out), stored
   with its per-frame residuals and the frames' decoded size; fewer than three distinct
   sun directions (422 ``timestamps``) or a fit beyond ``vision.calibrate.MAX_RMS_DEG``
-  (422 ``files``) is refused; a calibration made without a token is kept within
+  (422 ``files``), one most frames disagree with or whose zenith lies far from the image
+  circle's centre (times in a wrong zone; 422 ``timestamps``,
+  ``backend/vision/checks.py``) is refused; a calibration made without a token is kept within
   ``anonymous_keep_rows``, as detections are.
 - ``GET /calibrations``, ``GET /calibrations/{id}``.
 - ``POST /evaluate`` — a batch against SPA for each detection method: seed
@@ -125,11 +127,29 @@ def _json(data: Any, status: int = 200) -> Response:
 
 
 async def _read_form(request: Request, limit: int) -> FormData:
-    return await read_form(request, limit, "an image in the field 'file'", _MAX_FILES)
+    """The form; a text field sent as a file part is a 422 naming it (it was dropped)."""
+    form = await read_form(request, limit, "an image in the field 'file'", _MAX_FILES)
+    _fields(form)
+    return form
+
+
+def _cut(text: str, keep: int = 40) -> str:
+    """``text`` quoted for an error message, its first ``keep`` characters only (as
+    timestamps are): a refusal does not echo a 2 MB field back."""
+    return repr(text[:keep]) + (f" … ({len(text)} characters)" if len(text) > keep else "")
+
+
+def _not_a_file(name: str, v: object) -> None:
+    """A text field sent as a file part (``-F site_id=@file``) is a 422 naming it, not
+    silently dropped."""
+    if isinstance(v, UploadFile):
+        raise HTTPException(422, f"{name}: sent as a file ({_cut(v.filename or '')}); send "
+                                 f"it as a text field")
 
 
 def _text(form: FormData, name: str) -> str | None:
     v = form.get(name)
+    _not_a_file(name, v)
     if v is None or isinstance(v, UploadFile):
         return None
     v = v.strip()
@@ -137,10 +157,16 @@ def _text(form: FormData, name: str) -> str | None:
 
 
 def _texts(form: FormData, name: str) -> list[str]:
-    return [v.strip() for v in form.getlist(name) if isinstance(v, str) and v.strip()]
+    values = form.getlist(name)
+    for v in values:
+        _not_a_file(name, v)
+    return [v.strip() for v in values if isinstance(v, str) and v.strip()]
 
 
-def _fields(form: FormData) -> dict[str, object]:
+def _fields(form: FormData, files: tuple[str, ...] = ("file", "files")) -> dict[str, object]:
+    for k, v in form.multi_items():
+        if k not in files:
+            _not_a_file(k, v)
     return {k: v for k, v in form.multi_items() if isinstance(v, str)}
 
 
@@ -228,7 +254,7 @@ def _place(ctx: Any, form: FormData, required: bool = False) -> Place | None:
         info = ctx.registry.get(site_id)
         if info is None:
             known = ", ".join(ctx.registry.sites) or "none"
-            raise HTTPException(404, f"site_id: unknown site {site_id!r}; known: {known}")
+            raise HTTPException(404, f"site_id: unknown site {_cut(site_id)}; known: {known}")
         s = info.site
         return Place(site_id, s.latitude, s.longitude, s.altitude, info.zone)
     if lat is None and lon is None:
@@ -267,6 +293,35 @@ def _method(form: FormData) -> str:
     return method
 
 
+#: the typed camera's parameters, which a calibration_id replaces (both given: a 422)
+_CAMERA_PARAMS = ("px_per_deg", "cx_px", "cy_px", "north_offset_deg", "east", "projection",
+                  "fov_deg", "reference_x_px", "reference_y_px")
+
+
+def _pairs(form: FormData) -> None:
+    """Fields that only mean something together: one without the other is a 422."""
+    if (_text(form, "reference_x_px") is None) != (_text(form, "reference_y_px") is None):
+        raise HTTPException(422, "reference_x_px and reference_y_px go together")
+
+
+def _calibration_place(ctx: Any, cal: dict[str, Any]) -> Place:
+    """Where a stored calibration was fitted: its site (with the site's zone) while the site
+    is known, else its latitude, longitude and altitude."""
+    info = ctx.registry.get(cal["site_id"]) if cal.get("site_id") else None
+    if info is not None:
+        s = info.site
+        return Place(cal["site_id"], s.latitude, s.longitude, s.altitude, info.zone)
+    return free_place(float(cal["latitude_deg"]), float(cal["longitude_deg"]),
+                      float(cal.get("elevation_m") or 0.0))
+
+
+def _place_source(cal: dict[str, Any], place: Place) -> str:
+    where = (f"site {place.site_id}" if place.site_id is not None
+             else f"{place.latitude_deg:.5f}, {place.longitude_deg:.5f}")
+    return (f"calibration {cal['calibration_id']} (no place given: the place it was "
+            f"fitted at, {where})")
+
+
 def _stored_camera(session: Any, form: FormData
                    ) -> tuple[FisheyeCamera | None, dict[str, Any] | None]:
     """The camera of ``calibration_id`` and the stored calibration (its size, its residuals),
@@ -274,8 +329,13 @@ def _stored_camera(session: Any, form: FormData
     raw = _text(form, "calibration_id")
     if raw is None:
         return None, None
-    if not raw.isdigit():
-        raise HTTPException(422, f"calibration_id: {raw!r} is not an integer id")
+    clash = [k for k in _CAMERA_PARAMS if _text(form, k) is not None]
+    if clash:
+        raise HTTPException(422, f"{clash[0]}: a calibration_id carries its own camera "
+                                 f"(centre, scale, north, mirror, projection); give "
+                                 f"calibration_id or {', '.join(clash)}, not both")
+    if not raw.isdigit() or int(raw) == 0:
+        raise HTTPException(422, f"calibration_id: {_cut(raw)} must be a positive integer id")
     if int(raw) > _MAX_ID:
         raise HTTPException(404, f"calibration_id: no calibration {raw}")
     cal = get_calibration(session, int(raw))
@@ -369,8 +429,14 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
     place = _place(ctx, form)
     _writes_site(_token, place, "detections")
     method = _method(form)
+    _pairs(form)
     stored, cal = await anyio.to_thread.run_sync(_stored_camera, session, form)
     cal_id = None if cal is None else int(cal["calibration_id"])
+    place_source = None if place is None else "given"
+    if place is None and cal is not None:
+        place = _calibration_place(ctx, cal)
+        place_source = _place_source(cal, place)
+        _writes_site(_token, place, "detections")
     up = await _upload(uploads[0], "file", s.vision.max_pixels)
     async with _admitted(ctx, request, _token, [up]):
         img = await anyio.to_thread.run_sync(decode, up, s.vision.max_pixels)
@@ -388,14 +454,15 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
     row = detection_row(res, ts, place, cal_id)
     det_id = await _store_detection(ctx, row, anonymous=_token is None)
     res.update({"detection_id": det_id, "calibration_id": cal_id, "timestamp": iso(ts),
+                "place_source": place_source,
                 "site_id": place.site_id if place else None,
                 "latitude_deg": place.latitude_deg if place else None,
                 "longitude_deg": place.longitude_deg if place else None})
     return _json(res)
 
 
-async def _timed_frames(ctx: Any, form: FormData, min_frames: int
-                        ) -> tuple[list[Frame], Place]:
+async def _timed_frames(ctx: Any, form: FormData, min_frames: int,
+                        cal: dict[str, Any] | None = None) -> tuple[list[Frame], Place]:
     """Files with their timestamps and the place; headers checked, nothing decoded yet
     (the work decodes one frame at a time, so a batch holds one decoded frame)."""
     uploads = form.getlist("files")
@@ -406,8 +473,10 @@ async def _timed_frames(ctx: Any, form: FormData, min_frames: int
     if len(stamps) != len(uploads):
         raise HTTPException(422, f"timestamps: one per file in the same order; got "
                                  f"{len(stamps)} for {len(uploads)} files")
-    place = _place(ctx, form, required=True)
-    assert place is not None
+    place = _place(ctx, form, required=cal is None)
+    if place is None:
+        assert cal is not None
+        place = _calibration_place(ctx, cal)
     frames: list[Frame] = []
     for i, (up, text) in enumerate(zip(uploads, stamps, strict=True)):
         ts = _timestamp(text, f"timestamps[{i}]")
@@ -525,7 +594,7 @@ def _detection_bounds(ctx: Any, site_id: str | None, start: str | None, end: str
     if site_id is not None:
         info = ctx.registry.get(site_id)
         if info is None:
-            raise HTTPException(404, f"site_id: unknown site {site_id!r}")
+            raise HTTPException(404, f"site_id: unknown site {_cut(site_id)}")
         zone = info.zone
     bounds: list[int | None] = []
     for name, text in (("start", start), ("end", end)):
@@ -553,20 +622,54 @@ def get_detections(ctx: ContextDep, session: SessionDep,
     return _json({"site_id": site_id, "start": start, "end": end, "detections": rows})
 
 
-@router.post("/evaluate", response_model=EvaluationRead, openapi_extra=_CAL_DOC,
+_EVAL_PROPERTIES: dict[str, Any] = {
+    "files": {"type": "array", "items": {"type": "string", "format": "binary"}},
+    "timestamps": {"type": "array", "items": {"type": "string"},
+                   "description": "ISO 8601 with offset, one per file, same order"},
+    "calibration_id": {"type": "integer", "minimum": 1,
+                       "description": "a stored calibration (its camera, and its place when "
+                                      "none is given); or the fisheye's parameters below"},
+    "camera": {"type": "string", "enum": ["fisheye"]},
+    "px_per_deg": {"type": "number"}, "cx_px": {"type": "number"},
+    "cy_px": {"type": "number"}, "north_offset_deg": {"type": "number"},
+    "east": {"type": "string", "enum": ["left", "right"]},
+    "projection": {"type": "string", "enum": list(PROJECTIONS)},
+    "methods": {"type": "array", "items": {"type": "string", "enum": list(METHODS)},
+                "description": "detection methods to compare (default: all)"},
+    "site_id": {"type": "string"}, "latitude_deg": {"type": "number"},
+    "longitude_deg": {"type": "number"}, "elevation_m": {"type": "number"},
+}
+_EVAL_DOC = {
+    "security": _OPTIONAL_BEARER,
+    "requestBody": {"content": {"multipart/form-data": {"schema": {
+        "type": "object", "required": ["files", "timestamps"],
+        "properties": _EVAL_PROPERTIES}}}, "required": True},
+}
+
+
+def _known_fields(form: FormData, known: dict[str, Any]) -> None:
+    """A field the endpoint does not read is a 422 naming it (it was silently ignored)."""
+    unknown = sorted({k for k in form if k not in known})
+    if unknown:
+        raise HTTPException(422, f"{_cut(unknown[0])}: unknown field; known: "
+                                 f"{', '.join(known)}")
+
+
+@router.post("/evaluate", response_model=EvaluationRead, openapi_extra=_EVAL_DOC,
              responses={400: {"description": "a malformed multipart body"},
                         401: {}, 404: {}, 413: {}, 415: {}, 422: {}, **_BUSY_DOC})
 async def post_evaluate(request: Request, ctx: ContextDep, session: SessionDep,
                         _token: VisionTokenDep) -> Response:
     """Each method's angles against SPA on a batch: seed 003's Table 2 and Table 3."""
     form = await _read_form(request, ctx.settings.server.max_upload_bytes)
+    _known_fields(form, _EVAL_PROPERTIES)
     methods = _texts(form, "methods") or list(METHODS)
     bad = [m for m in methods if m not in METHODS]
     if bad:
         raise HTTPException(422, f"methods: unknown {', '.join(bad)}; known: "
                                  f"{', '.join(METHODS)}")
     stored, cal = await anyio.to_thread.run_sync(_stored_camera, session, form)
-    frames, place = await _timed_frames(ctx, form, 1)
+    frames, place = await _timed_frames(ctx, form, 1, cal)
 
     def camera(w: int, h: int) -> FisheyeCamera:
         """The camera for the frames' decoded size (size and parameters checked)."""

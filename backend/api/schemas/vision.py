@@ -66,6 +66,10 @@ class SunDetectionRead(BaseModel):
     timestamp_source: str | None = Field(None, description=(
         "where the time comes from: `given` (the `timestamp` field), `file name (…)` (the "
         "time the file's name carries, backend/vision/frames.py), null: no time"))
+    place_source: str | None = Field(None, description=(
+        "where the place comes from: `given` (site_id or latitude/longitude), "
+        "`calibration N (…)` (none given: the place calibration_id was fitted at), null: "
+        "no place, no ephemeris"))
     site_id: str | None
     latitude_deg: float | None
     longitude_deg: float | None
