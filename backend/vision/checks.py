@@ -129,13 +129,15 @@ def check_consensus(frames: list[dict[str, Any]], loo_rms_deg: float | None) -> 
                               f"send more frames")
 
 
-MAX_ZENITH_OFFSET_DEG = 4.0
-"""A fitted zenith farther than this [°, in the fitted scale] from the centre of the image
-circle is refused. A sky camera is levelled, and its lens centred on the sensor: on the
-real series the zenith lies 0.6–1.5° from the circle's centre (Wolf 12/11/23 frames
-0.71/0.61/0.66°, Wettermast 6 frames 1.51°), while times an hour off fit a camera whose
-zenith is 7.9–9.8° away (Wolf 12 and 23, Wettermast 6; the fit's RMS stays 0.15–0.41°,
-as good as the right zone's: a path an hour along is the same arc turned)."""
+MAX_CENTRE_OFFSET_DEG = 4.0
+"""A fitted optical centre farther than this [°, in the fitted scale] from the centre of the
+image circle is refused. A fisheye's image circle is centred on its optical axis: on the
+real series the fitted centre (a levelled camera's zenith) lies 0.6–1.5° from the circle's
+centre (Wolf 12/11/23 frames 0.71/0.61/0.66°, Wettermast 6 frames 1.51°), while times an
+hour off fit a camera whose centre is 7.9–9.8° away (Wolf 12 and 23, Wettermast 6; the fit's
+RMS stays 0.15–0.41°, as good as the right zone's: a path an hour along is the same arc
+turned). The optical centre, not the zenith, so that a camera fitted with its tilt
+(``fit_tilt``) is compared where its lens is."""
 
 
 def image_circle_centre(image: np.ndarray) -> tuple[float, float] | None:
@@ -145,21 +147,21 @@ def image_circle_centre(image: np.ndarray) -> tuple[float, float] | None:
     return None if found is None else (float(found[0].cx_px), float(found[0].cy_px))
 
 
-def check_zenith(zenith_px: tuple[float, float], px_per_deg: float,
-                 centres: list[tuple[float, float]]) -> float | None:
-    """Refuse (422 naming ``timestamps``) a fitted camera whose zenith lies more than
-    :data:`MAX_ZENITH_OFFSET_DEG` from the median centre of the frames' image circles;
+def check_centre(centre_px: tuple[float, float], px_per_deg: float,
+                 circles: list[tuple[float, float]]) -> float | None:
+    """Refuse (422 naming ``timestamps``) a fitted camera whose optical centre lies more than
+    :data:`MAX_CENTRE_OFFSET_DEG` from the median centre of the frames' image circles;
     the offset [°], or None when no frame has a circle (nothing to compare)."""
-    if not centres:
+    if not circles:
         return None
-    cx, cy = (float(v) for v in np.median(np.asarray(centres, float), axis=0))
-    off = float(np.hypot(zenith_px[0] - cx, zenith_px[1] - cy)) / px_per_deg
-    if off > MAX_ZENITH_OFFSET_DEG:
-        raise InputError(422, f"timestamps: the fitted camera puts the zenith at "
-                              f"({zenith_px[0]:.0f}, {zenith_px[1]:.0f}) px, {off:.1f}° from "
+    cx, cy = (float(v) for v in np.median(np.asarray(circles, float), axis=0))
+    off = float(np.hypot(centre_px[0] - cx, centre_px[1] - cy)) / px_per_deg
+    if off > MAX_CENTRE_OFFSET_DEG:
+        raise InputError(422, f"timestamps: the fitted camera puts its optical centre at "
+                              f"({centre_px[0]:.0f}, {centre_px[1]:.0f}) px, {off:.1f}° from "
                               f"the centre of the image circle ({cx:.0f}, {cy:.0f}) px — a "
-                              f"levelled sky camera's zenith lies within "
-                              f"{MAX_ZENITH_OFFSET_DEG:g}°. Times in the wrong zone fit such "
-                              f"a camera (an hour off moves the zenith 8–10°): are the times "
-                              f"UTC, or given with their offset? Is the place right?")
+                              f"fisheye's lies within {MAX_CENTRE_OFFSET_DEG:g}° of it. Times "
+                              f"in the wrong zone fit such a camera (an hour off moves it "
+                              f"8–10°): are the times UTC, or given with their offset? Is the "
+                              f"place right?")
     return off

@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from backend.errors import InputError
-from backend.vision.checks import check_consensus, check_zenith, image_circle_centre
+from backend.vision.checks import check_centre, check_consensus, image_circle_centre
 from sim.sun import solar_position
 from vision.analyse import analyse_frame
 from vision.calibrate import DISTINCT_DEG, MIN_DIRECTIONS, n_directions, self_calibrate
@@ -201,9 +201,9 @@ def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
     time it is a frame whose clock is wrong, an outlier); after the fit, a camera that
     leaves more than :data:`vision.calibrate.MAX_RMS_DEG` RMS (``files``, with every
     frame's residual) — such a fit is no calibration, so nothing is stored; so are a fit
-    more than a third of the frames disagree with, and a fitted zenith far from the
-    image circles' centre, the sign of times in a wrong zone (``timestamps``,
-    :func:`backend.vision.checks.check_consensus`, :func:`~backend.vision.checks.check_zenith`;
+    more than a third of the frames disagree with, and a fitted optical centre far from
+    the image circles' centre, the sign of times in a wrong zone (``timestamps``,
+    :func:`backend.vision.checks.check_consensus`, :func:`~backend.vision.checks.check_centre`;
     each frame's image circle is found as it is first decoded). The stored
     size is the frames' decoded size (EXIF orientation applied), the size detection
     with this calibration must match.
@@ -244,8 +244,7 @@ def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
     # a fit is not yet a calibration: most frames must agree, and a levelled camera's zenith
     # lies near its image circle's centre (backend.vision.checks)
     check_consensus(report, cal.loo_rms_deg)
-    zenith = res.camera.sky_to_pixel(0.0, 90.0)
-    check_zenith((float(zenith[0]), float(zenith[1])), res.camera.px_per_deg,
+    check_centre((float(res.camera.cx_px), float(res.camera.cy_px)), res.camera.px_per_deg,
                  [c for c in centres.values() if c is not None])
     out = res.to_dict()
     cam = out["camera"]

@@ -186,8 +186,8 @@ def test_consensus_rule_by_hand() -> None:
 
 def test_times_in_the_wrong_zone_are_refused(client: httpx.Client) -> None:
     """The Wettermast frames' names read as UTC (every time an hour late) fitted a camera
-    to 0.15° RMS, stored, with its zenith ~110 px (≈ 10°) from the image circle's centre;
-    the right times put it 1.5° away (MAX_ZENITH_OFFSET_DEG = 4°)."""
+    to 0.15° RMS, stored, with its optical centre ~110 px (≈ 10°) from the image circle's
+    centre; the right times put it 1.5° away (MAX_CENTRE_OFFSET_DEG = 4°)."""
     rows = _real("Wettermast")
     late = [(dt.datetime.fromisoformat(r["utc_time"].replace("Z", "+00:00"))
              + dt.timedelta(hours=1)).isoformat() for r in rows]
