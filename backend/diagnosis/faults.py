@@ -28,7 +28,11 @@ clear day whose shift is at least :data:`SKY_CLOCK_MIN_S` and fits far better th
 The residual of each is its RMS over the mean measured power; a fault is named when
 its residual is under :data:`FIT_RATIO` of the healthy one on a day with clearness
 ≥ :data:`MIN_CLEARNESS` (under an overcast sky every orientation sees the same
-diffuse light and no shape fault can be told). Across days (:func:`faults_over_days`)
+diffuse light and no shape fault can be told) and with at least
+:data:`SHAPE_READINGS_PER_PARAMETER` independent readings under the sun per fitted
+parameter (a slow logger's minutes are its readings interpolated: an hourly logger's day is
+not fitted, and counts as a day that cannot show a shape fault). Across days
+(:func:`faults_over_days`)
 a step in the healthy scale is a ``module_loss`` (largest two-sample t over all split
 days), a steady decline of it ``soiling`` (least-squares slope, %/day; whichever of step
 and hinge — flat, then a line from the day the decline starts — fits the daily scales
@@ -89,8 +93,18 @@ UNDER_MIN_COVERAGE = 0.5
 #: plane set in the config 10, 20 or 30° off its real azimuth (16° tilt) shifts its shape
 #: by 8, 16 and 23 min, which is not a clock
 SKY_CLOCK_MIN_S = 1500.0
+#: A shape fit needs at least this many independent readings under the sun per fitted
+#: parameter (stuck: tilt and azimuth; azimuth_offset and clock_offset: the offset and a
+#: free scale) — the usual rule against over-fitting (10 observations per parameter): a
+#: slow logger's minutes are its readings interpolated, not readings. Hourly means give
+#: 10–13 readings a day, and on partly cloudy days an azimuth offset of 35–40° with a free
+#: scale explained half the healthy residual of healthy trackers (confidence 0.41–0.48)
+SHAPE_READINGS_PER_PARAMETER = 10
+SHAPE_PARAMETERS = 2
+#: The fits sample every this many minutes (the shape of a day needs no more) [min]
+THIN_MIN = 5
 CARRY_DECAY = 0.8  # a shape fault's confidence on each following day that cannot show it
-CARRIED = " (carried over: today's sky cannot show it)"
+CARRIED = " (carried over: today's sky or readings cannot show it)"
 
 
 def _fit(m: np.ndarray, x: np.ndarray) -> tuple[float, float]:
@@ -206,12 +220,18 @@ def sky_clock(day: pd.DataFrame) -> dict[str, float] | None:
 
 
 def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
-                 first_min: int = 0) -> dict[str, Any]:
+                 first_min: int = 0, spacing_s: float | None = None) -> dict[str, Any]:
     """The fitted explanations of one day (see the module docstring), JSON-ready.
 
     ``day``: the day's rows of :func:`sim.sky_sensor.weather_aware_twin`;
     ``measured_w``: the tracker's readings on the same minutes [W], NaN = none;
-    ``first_min``: the day's minute of the logger's first reading ever (0: earlier).
+    ``first_min``: the day's minute of the logger's first reading ever (0: earlier);
+    ``spacing_s``: the tracker's readings' median spacing [s] (None: a reading a minute).
+    ``readings``: the independent readings the shape fits would rest on — one per fitted
+    minute (every :data:`THIN_MIN`-th), or per reading of a slower logger, whose minutes
+    between readings are interpolated; under :data:`SHAPE_READINGS_PER_PARAMETER` ×
+    :data:`SHAPE_PARAMETERS` the day is not fitted (:func:`faults_over_days` takes it as
+    a day that cannot show a shape fault).
     """
     use = day["valid"].to_numpy(bool) & np.isfinite(measured_w) & (
         day["apparent_elevation"].to_numpy() > 5.0)
@@ -231,11 +251,15 @@ def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
         out["scale"] = s0
         return out
     clear = float(np.nanmean(day["clearness"].to_numpy()[daylight])) if daylight.any() else 0.0
-    out.update(scale=s0, residual=r0, clearness=clear)
-    if clear < MIN_CLEARNESS or r0 < HEALTHY_RESIDUAL:
+    # the orientation fits on every 5th minute: the shape of a day needs no more; the
+    # readings behind them are those minutes, or a slower logger's readings
+    thin = use & (np.arange(use.size) % THIN_MIN == 0)
+    per = max(1.0, max(spacing_s or 60.0, 60.0 * THIN_MIN) / (60.0 * THIN_MIN))
+    out.update(scale=s0, residual=r0, clearness=clear,
+               readings=round(float(thin.sum()) / per, 1))
+    if clear < MIN_CLEARNESS or r0 < HEALTHY_RESIDUAL \
+            or out["readings"] < SHAPE_READINGS_PER_PARAMETER * SHAPE_PARAMETERS:
         return out
-    # the orientation fits on every 5th minute: the shape of a day needs no more
-    thin = use & (np.arange(use.size) % 5 == 0)
     sub = day[thin]
     m_thin = measured_w[thin]
     # stuck: a 10° × 15° grid on every 10th minute (it only finds the basin), then 2° and
@@ -289,18 +313,20 @@ def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
 
 
 def features_by_day(site: Site, first_day: pd.Timestamp, e: pd.DataFrame,
-                    tracker_power_w: np.ndarray) -> list[dict[str, Any]]:
+                    tracker_power_w: np.ndarray, spacing_s: float | None = None
+                    ) -> list[dict[str, Any]]:
     """``[{"date", "features"}]`` of consecutive days of 1440 minutes from ``first_day``
     (local midnight; ``e`` from :func:`sim.sky_sensor.weather_aware_twin` on the same
     minutes, ``tracker_power_w`` the readings [W]) — the input of :func:`faults_over_days`
     for minute series that need no calendar (the service cuts local days by their edges).
     Energies by :mod:`sim.energy`'s rule on the minutes, as the service's; the
-    underperformance is judged on days with a measured sky only."""
+    underperformance is judged on days with a measured sky only; ``spacing_s``: the
+    tracker's readings' spacing (:func:`day_features`)."""
     out = []
     for k in range(len(e) // 1440):
         sl = slice(k * 1440, (k + 1) * 1440)
         day, m = e.iloc[sl], tracker_power_w[sl]
-        f = day_features(site, day, m)
+        f = day_features(site, day, m, spacing_s=spacing_s)
         if day["measured_sky"].to_numpy(bool).any() and np.isfinite(m).any():
             ts = day.index.as_unit("s").asi8
             cover = np.isfinite(m)

@@ -77,8 +77,10 @@ MAX_DAYS = 400
 #: logger's held values are not a frozen logger, sky_sensor._stale; 14: a range that cuts
 #: a day makes it ``partial``, without shape fits, and is not cached; 15: the sky's clock,
 #: faults.sky_clock; 18: a slow logger's stamp convention read from its readings where the
-#: site leaves the default, weather_twin.readings_stamped).
-CACHE_VERSION = 18
+#: site leaves the default, weather_twin.readings_stamped; 19: a shape fit needs 10 readings
+#: under the sun per fitted parameter, a slow logger's readings counted by their spacing,
+#: faults.SHAPE_READINGS_PER_PARAMETER: an hourly logger's day is not fitted).
+CACHE_VERSION = 19
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
@@ -122,7 +124,7 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
                  tracker_w: np.ndarray, fixed_w: np.ndarray,
                  measured_wh: dict[str, float | None],
                  elapsed_min: int | None = None, first_s: int | None = None,
-                 cut: bool = False) -> dict[str, Any]:
+                 cut: bool = False, spacing_s: float | None = None) -> dict[str, Any]:
     """One day's answer (without faults) and its fault features.
 
     ``day_s``: the day's ``[start, end)`` [s since the epoch] (``cut``: the range asked
@@ -136,7 +138,9 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     the matched ones only the minutes the measured series covers (the minute grid is
     NaN where the gap rule bridges no reading). ``elapsed_min``: the minutes of a day not
     yet over that lie before now (None: the day is over); ``first_s``: the tracker
-    logger's first reading ever [Unix s] (None: it has none) — no dropout before it."""
+    logger's first reading ever [Unix s] (None: it has none) — no dropout before it;
+    ``spacing_s``: the tracker's readings' median spacing [s] (the shape fits rest on its
+    readings, not on the minutes interpolated between them: ``faults.day_features``)."""
     t0, t1 = day_s
     ts = e.index.as_unit("s").asi8
     day = ts < t1
@@ -167,7 +171,8 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     # a shape fault needs a whole day with a measured sky; a dropout only the minutes so far
     e_day, tr_day = e[day], tracker_w[day]
     whole = elapsed_min is None and source != "clear_sky" and not cut
-    features: dict[str, Any] = day_features(info.site, e_day, tr_day, first_min) if whole \
+    features: dict[str, Any] = day_features(info.site, e_day, tr_day, first_min,
+                                               spacing_s) if whole \
         else {"missing_daylight_min": missing_daylight_min(e_day, tr_day, elapsed_min,
                                                            first_min)}
     u = band_uncertainty(e_day)
@@ -248,7 +253,8 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
             elapsed = None if day_end_s <= now_s else max(0, int(now_s - day_start_s) // 60)
             out[i] = _day_payload(info, date, (day_start_s, day_end_s), e.iloc[a:b], tr[a:b],
                                   fx[a:b], measured, elapsed, first_s,
-                                  cut=not _whole_day(edges[i], edges[i + 1], info.zone))
+                                  cut=not _whole_day(edges[i], edges[i + 1], info.zone),
+                                  spacing_s=tr_spacing)
             if tr_spacing is not None and tr_spacing > gap:  # its readings bridge nothing
                 out[i]["features"]["slow_logger"] = {"spacing_s": tr_spacing, "max_gap_s": gap}
     return out
