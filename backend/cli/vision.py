@@ -133,6 +133,22 @@ def _place(args: argparse.Namespace) -> Any:
     return free_place(args.lat, args.lon, args.elevation_m, ("--lat", "--lon", "--elevation-m"))
 
 
+def _site_place(site_id: str) -> Any:
+    """The place of a site of the site files (HELIOTWIN_SITES_DIR and the built-in ones),
+    or None when there is none of that id."""
+    from zoneinfo import ZoneInfo
+
+    from backend.vision.service import Place
+    from sim.sites import UnknownSiteError, load_site
+
+    try:
+        site = load_site(site_id, os.environ.get("HELIOTWIN_SITES_DIR"))
+    except UnknownSiteError:
+        return None
+    return Place(site.site_id, site.latitude, site.longitude, site.altitude,
+                 ZoneInfo(site.timezone))
+
+
 def _upload(path: Path, field: str) -> Any:
     from backend.vision.service import check_image
 
@@ -148,6 +164,7 @@ def detect(args: argparse.Namespace) -> dict[str, Any]:
     from backend.vision.frames import frame_inputs
     from backend.vision.service import (
         analyse,
+        calibration_place,
         check_calibration_size,
         decode,
         is_oriented,
@@ -166,9 +183,12 @@ def detect(args: argparse.Namespace) -> dict[str, Any]:
     if args.calibration_id is None and args.camera is None:
         raise ValueError("--camera: required (pinhole or fisheye), or give --calibration-id")
     cal = None
+    place_source = None if place is None else "given"
     if args.calibration_id is not None:  # as the service: only on frames of its size
         cal = _stored_calibration(args.calibration_id)
         check_calibration_size(cal, (w, h), "--calibration-id")
+        if place is None:  # as the service: where the calibration was fitted
+            place, place_source = calibration_place(cal, _site_place)
     try:  # the service's rule (POST /api/v1/vision/sun): scale and time the frame implies
         frame = frame_inputs(img, args.image.name,
                              args.camera if args.calibration_id is None else None, params,
@@ -188,6 +208,7 @@ def detect(args: argparse.Namespace) -> dict[str, Any]:
         out["camera_derived"] = frame.camera_derived
     out["timestamp"] = None if frame.timestamp is None else frame.timestamp.isoformat()
     out["timestamp_source"] = frame.timestamp_source
+    out["place_source"] = place_source
     out["warnings"] = error_warnings(out, None if cal is None else cal["max_deg"])
     if args.calibration_id is not None:
         out["calibration_id"] = args.calibration_id

@@ -101,6 +101,22 @@ def name_zone(place: Place | None) -> ZoneInfo | None:
     return place.zone if place is not None and place.site_id is not None else None
 
 
+def calibration_place(cal: dict[str, Any], site_place: Callable[[str], Place | None]
+                      ) -> tuple[Place, str]:
+    """Where a stored calibration was fitted, for a detection given none: its site (its
+    place and zone, ``site_place``: the service's registry or the CLI's site files) while
+    the site is known, else its latitude, longitude and altitude; and the answer's
+    ``place_source`` saying so."""
+    place = site_place(cal["site_id"]) if cal.get("site_id") else None
+    if place is None:
+        place = free_place(float(cal["latitude_deg"]), float(cal["longitude_deg"]),
+                           float(cal.get("elevation_m") or 0.0))
+    where = (f"site {place.site_id}" if place.site_id is not None
+             else f"{place.latitude_deg:.5f}, {place.longitude_deg:.5f}")
+    return place, (f"calibration {cal['calibration_id']} (no place given: the place it was "
+                   f"fitted at, {where})")
+
+
 def free_place(latitude_deg: float, longitude_deg: float, elevation_m: float,
                fields: tuple[str, str, str] = ("latitude_deg", "longitude_deg", "elevation_m")
                ) -> Place:

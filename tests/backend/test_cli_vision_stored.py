@@ -59,6 +59,16 @@ def test_detect_with_a_stored_calibration(live_server: LiveServer, client: httpx
     assert out["azimuth_deg"] == pytest.approx(az, abs=0.5)
     assert out["elevation_deg"] == pytest.approx(el, abs=0.5)
     assert out["error"]["separation_deg"] < 0.5 and out["warnings"] == []
+    assert out["place_source"] == "given"
+    # no place given: the calibration's, as over HTTP (the CLI searched blind before)
+    p = heliotwin_cli("vision", "detect", str(frame), "--timestamp", held_out,
+                      "--calibration-id", str(cal_id), "--json", env=live_server.env)
+    assert p.returncode == 0, p.stderr
+    own = json.loads(p.stdout)
+    assert own["place_source"].startswith(f"calibration {cal_id} ") \
+        and "site tehuantepec" in own["place_source"]
+    assert own["error"]["separation_deg"] == pytest.approx(out["error"]["separation_deg"],
+                                                           abs=1e-9)
     # a frame of another size than the calibration's is refused, as over HTTP
     bigger = tmp_path / "bigger.png"
     bigger.write_bytes(cv2.imencode(".png", cv2.resize(cv2.imread(str(frame)), (800, 600)))[1]

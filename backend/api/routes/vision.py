@@ -82,6 +82,7 @@ from backend.vision.service import (
     analyse,
     calibrate,
     calibration_answer,
+    calibration_place,
     check_calibration_size,
     check_image,
     decode,
@@ -304,22 +305,13 @@ def _pairs(form: FormData) -> None:
         raise HTTPException(422, "reference_x_px and reference_y_px go together")
 
 
-def _calibration_place(ctx: Any, cal: dict[str, Any]) -> Place:
-    """Where a stored calibration was fitted: its site (with the site's zone) while the site
-    is known, else its latitude, longitude and altitude."""
-    info = ctx.registry.get(cal["site_id"]) if cal.get("site_id") else None
-    if info is not None:
-        s = info.site
-        return Place(cal["site_id"], s.latitude, s.longitude, s.altitude, info.zone)
-    return free_place(float(cal["latitude_deg"]), float(cal["longitude_deg"]),
-                      float(cal.get("elevation_m") or 0.0))
-
-
-def _place_source(cal: dict[str, Any], place: Place) -> str:
-    where = (f"site {place.site_id}" if place.site_id is not None
-             else f"{place.latitude_deg:.5f}, {place.longitude_deg:.5f}")
-    return (f"calibration {cal['calibration_id']} (no place given: the place it was "
-            f"fitted at, {where})")
+def _site_place(ctx: Any, site_id: str) -> Place | None:
+    """A known site's place (with the site's zone), or None."""
+    info = ctx.registry.get(site_id)
+    if info is None:
+        return None
+    s = info.site
+    return Place(site_id, s.latitude, s.longitude, s.altitude, info.zone)
 
 
 def _stored_camera(session: Any, form: FormData
@@ -434,8 +426,7 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
     cal_id = None if cal is None else int(cal["calibration_id"])
     place_source = None if place is None else "given"
     if place is None and cal is not None:
-        place = _calibration_place(ctx, cal)
-        place_source = _place_source(cal, place)
+        place, place_source = calibration_place(cal, lambda sid: _site_place(ctx, sid))
         _writes_site(_token, place, "detections")
     up = await _upload(uploads[0], "file", s.vision.max_pixels)
     async with _admitted(ctx, request, _token, [up]):
@@ -476,7 +467,7 @@ async def _timed_frames(ctx: Any, form: FormData, min_frames: int,
     place = _place(ctx, form, required=cal is None)
     if place is None:
         assert cal is not None
-        place = _calibration_place(ctx, cal)
+        place, _ = calibration_place(cal, lambda sid: _site_place(ctx, sid))
     frames: list[Frame] = []
     for i, (up, text) in enumerate(zip(uploads, stamps, strict=True)):
         ts = _timestamp(text, f"timestamps[{i}]")
