@@ -416,29 +416,52 @@ def _tail(gray: NDArray[np.uint8], c: _Candidate, m4: float, bg: float, contrast
     return _clamp(((m4 - bg) / contrast - lo) / (hi - lo), 0.0, 1.0)
 
 
-def _white_core(image: NDArray[Any] | None, c: _Candidate, level: float
+_GREY_TOP_TOL = 1.5  # a one-channel frame's "white" core: within 1 level of its top
+
+
+def _white_core(image: NDArray[Any] | None, c: _Candidate, level: float,
+                one_channel: bool = False
                 ) -> tuple[NDArray[Any], int, int, NDArray[np.uint8]] | None:
     """The *white* core of a candidate on an 8-bit colour frame → (its outline as OpenCV
     returns it, in the crop; the crop's origin x0, y0 in the frame; the crop's mask), or
-    None (a grey frame, or no pixel of min(B, G, R) up to ``level`` in the candidate's box).
+    None (a grey frame unless ``one_channel``, or no pixel of min(B, G, R) up to ``level``
+    in the candidate's box).
 
     The sun saturates every colour channel; a blue sky's glare around it saturates the
     blue channel, and so the grey level, much farther out. The white core — pixels within
     3 levels of the top of min(B, G, R) in the candidate's box, its largest outline — is
     the part of the glare no colour of the sky reaches: the sun's own core
-    (``vision.detect._white_core_centre`` centres a large glare on it)."""
+    (``vision.detect._white_core_centre`` centres a large glare on it).
+
+    With ``one_channel``, a grey frame's core is its pixels within 1 grey level of the top
+    (:data:`_GREY_TOP_TOL`): a monochrome frame made from a colour sensor (its luma, BT.601
+    Y = 0.299 R + 0.587 G + 0.114 B) keeps the colour channels' clipping in its grey
+    levels, and a pixel within 1 level of the top has its red channel — the one a blue
+    sky's glare lacks, weighted 0.299 — within 1 / 0.299 ≈ 3.3 levels of its top: the
+    white core's own 3.5 levels. Beyond it the blue glare clips blue and green only (the
+    Wolf frames: red 245–247 there, grey 252–253), so the grey core is 1.6–2.3 times this
+    core's area on Wolf made monochrome (Wettermast 1.2, the second renderer's frames at
+    most 1.24; both keep the limb fits, as in colour). Within 0.5 of the top (the top level
+    alone) took the renderer's cirrus and cumulus frames made monochrome past that
+    condition and put them farther off (held-out cirrus 0.71° → 1.18° RMS). A sensor
+    without a colour filter clips its whole saturated disc to one level: this core is then
+    the grey core itself, and the caller's condition that the grey core be larger
+    (``vision.detect._WHITE_BLUE_EXCESS``) leaves such a frame to the limb fits."""
     img = np.asarray(image) if image is not None else None
-    if img is None or img.ndim != 3 or img.shape[2] < 3 or img.dtype != np.uint8:
+    grey = one_channel and img is not None and img.ndim == 2 and img.dtype == np.uint8
+    if img is None or not grey and (img.ndim != 3 or img.shape[2] < 3
+                                    or img.dtype != np.uint8):
         return None
     h, w = img.shape[:2]
     x0, y0 = max(0, c.x - 2), max(0, c.y - 2)
     x1, y1 = min(w, c.x + c.w + 2), min(h, c.y + c.h + 2)
     crop = img[y0:y1, x0:x1]
-    white = cv2.min(cv2.min(crop[:, :, 0], crop[:, :, 1]), crop[:, :, 2])
+    white = crop if grey else cv2.min(cv2.min(crop[:, :, 0], crop[:, :, 1]), crop[:, :, 2])
     top = float(white.max()) if white.size else 0.0
     if top < level:  # no pixel white up to the grey core's top
         return None
-    binary = np.asarray(cv2.threshold(white, top - 3.5, 1, cv2.THRESH_BINARY)[1], np.uint8)
+    tol = _GREY_TOP_TOL if grey else 3.5
+    binary = np.asarray(cv2.threshold(white, top - tol, 1, cv2.THRESH_BINARY)[1], np.uint8)
     contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
         return None

@@ -33,7 +33,8 @@ Three named methods, all returning a :class:`SunDetection`:
   normal exposure (15° in radius, with a known scale: the sky saturated around the sun,
   a long exposure), a censored fit of a power-law glare on a plane of sky to the light
   around it (:func:`vision.glare.censored_glare_centre`); for a colour frame whose white core (every
-  channel saturated) is at least 3° in radius while the grey core, saturated by
+  channel saturated; on a one-channel frame, the grey level within 1 of its top) is at
+  least 3° in radius while the grey core, saturated by
   the blue sky's glare, reaches well beyond it, the centroid of that core opened
   by a disc (:func:`_white_core_centre`) — moved across the radius from the optical
   centre (a fisheye camera's given, else the image circle's: the field stop's edge,
@@ -475,7 +476,7 @@ def _white_core_centre(image: NDArray[Any], gray: NDArray[np.uint8], c: _Candida
                        ppd: float, fov: FovCircle | None, bg: float, peak: float
                        ) -> tuple[float, float, float] | None:
     """The centre of a large glare: the centroid of its *white* core → (x, y, radius_px),
-    or None (grey frame, no white core, a core under :data:`_WHITE_MIN_DEG` or
+    or None (no white core, a core under :data:`_WHITE_MIN_DEG` or
     :data:`_WHITE_MIN_PX` in radius, a grey core less than :data:`_WHITE_BLUE_EXCESS` times
     the white one — no blue glare beyond it to leave out — or one the image circle or an
     obstacle cuts).
@@ -489,12 +490,17 @@ def _white_core_centre(image: NDArray[Any], gray: NDArray[np.uint8], c: _Candida
     lobes narrower than that, its centroid (first moments; Hu 1962) is where a person
     puts the sun on a glare hundreds of pixels wide (the hand labels of Wettermast and
     Wolf: ``docs/validation-vision.md``, *The centre of a large glare*).
+    A one-channel frame's white core is its grey level within 1 of the top (a colour
+    sensor's luma keeps the channels' clipping: :func:`vision.candidates._white_core`;
+    the Wolf frames made monochrome, worst 20.4 → 9.8 px from the labels); a sensor
+    without a colour filter clips to one level, its grey core is no larger, and it keeps
+    :func:`_refine`.
     A core that is visibly cut keeps :func:`_refine` (its arc fits): one that reaches the
     image circle's edge, or one with more than :data:`_WHITE_CUT_SHARE` of its outline
     next to pixels darker than the sky (``bg``: a glare fades into the sky, so darker
     means a mast, the horizon, an overlay); so does a small one (there the limb and the
     weighted centroid are sub-pixel)."""
-    core = _white_core(image, c, min(_SATURATED, peak - 1.0))
+    core = _white_core(image, c, min(_SATURATED, peak - 1.0), one_channel=True)
     if core is None:
         return None
     big, x0, y0, binary = core

@@ -53,6 +53,29 @@ def test_a_ragged_core_is_centred_by_its_glare() -> None:
     assert np.hypot(got[0] - sun[0], got[1] - sun[1]) < 1.0  # measured 0.5 px
 
 
+def test_a_monochrome_glare_is_centred_on_its_top_grey_level() -> None:
+    """A colour camera's frame made monochrome (BT.601 luma): a white core 38 px in radius
+    about the sun, inside a blue sky's glare clipped in blue and green (red 246: grey 252)
+    that reaches 60 px about a point 20 px toward the brighter sky, in an image circle of
+    480 px (5.4 px/°: the core is 7° wide). The grey core (above 250) is the blue glare's
+    disc, whose limb fits put the sun 15.5 px off; its pixels within 1 grey level of the top
+    are the white core (vision.candidates._white_core), centred as in colour (measured
+    1.3 px)."""
+    sun = (600.0, 450.0)
+    yy, xx = np.mgrid[0:1000, 0:1000].astype(float)
+    r = np.hypot(xx - sun[0], yy - sun[1])
+    lum = 140.0 + 0.05 * (xx - 500) + 300.0 * (1.0 + (r / 45.0) ** 2) ** -1.0
+    img = np.stack([lum * 1.15, lum * 1.0, lum * 0.8], axis=-1)  # B, G, R: a blue sky
+    blue = np.hypot(xx - sun[0] - 20.0, yy - sun[1]) < 60.0
+    img[blue] = np.maximum(img[blue], (255.0, 255.0, 246.0))
+    img[r < 38.0] = 255.0
+    img[np.hypot(xx - 500, yy - 500) > 480] = 5.0
+    grey = cv2.cvtColor(np.clip(img, 0, 255).astype(np.uint8), cv2.COLOR_BGR2GRAY)
+    d = detect_sun(grey)
+    assert d.sun_found
+    assert np.hypot(d.centroid_px[0] - sun[0], d.centroid_px[1] - sun[1]) <= 3.0
+
+
 def test_only_the_component_across_the_radius_is_taken(monkeypatch) -> None:
     """The core's centre 300 px right of the optical centre, the glare's 5 px inward and
     3 px across: the answer is the core's distance from the centre, the glare's side."""
