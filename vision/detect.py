@@ -123,6 +123,8 @@ _WHITE_CUT_SHARE = 0.05  # a white core with more of its outline next to darker-
 _COHERENCE_PASSES = 1  # solves of the radial-symmetry fit behind `coherence`
 _PLATEAU_SHARE = 0.3  # a core with this share of its pixels at its peak is clipped (flat)
 _PLATEAU_MIN_PX = 20  # … tested on cores of at least this many pixels
+_JPEG_BLOCK_PX = 16  # a colour JPEG's coding unit (4:2:0: 8 × 8 luma blocks, chroma at half
+# resolution): a plateau keeps one level only in such blocks wholly inside it
 
 
 @dataclass(frozen=True)
@@ -301,17 +303,39 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
 
 def _clipped(gray: NDArray[np.uint8], c: _Candidate, labels: NDArray[Any], peak: float) -> bool:
     """Whether a core below :data:`_SATURATED` is clipped (a frame darkened after the sensor
-    clipped it has its flat top below 255): at least :data:`_PLATEAU_SHARE` of the core's
-    pixels sit exactly at the peak — a flat top. A bright cloud's highlight is a rounded
+    clipped it has its flat top below 255): a flat top, one level held by at least
+    :data:`_PLATEAU_SHARE` of the core's pixels. A bright cloud's highlight is a rounded
     one whose top few pixels alone reach the peak (the real UCEEB, FE3 and EUROCONTROL
     overcast frames: under 16 %; the suns of Wettermast, Wolf and EUROCONTROL: 41–74 %,
-    darkened or not)."""
+    darkened or not).
+
+    Written as JPEG, the clipped plateau keeps its level exactly in the coding blocks wholly
+    inside it (a flat block is its DC term alone, which quantisation moves by well under a
+    level), and only the blocks across its edge ring: a few pixels overshoot it (Wolf 12:07 at
+    gain 0.92, quality 95: 11,525 pixels at 235, 23 at 236) and set the peak. So the level is
+    the core's most common one, not necessarily its peak, and it must also fill a whole
+    :data:`_JPEG_BLOCK_PX` square — a plateau JPEG kept flat. A rounded top spreads over its
+    levels ring by ring; a tone-mapped (HDR) deck's top is banded over several levels of
+    similar area (the second renderer's held-out deck 13018: its most common level 25 % of
+    the core); a clipped cloud fleck of a few dozen pixels (FE3 darkened, quality 75) holds
+    no such square."""
     roi = gray[c.y:c.y + c.h, c.x:c.x + c.w]
     mask = c.mask(labels)
     if roi.shape != mask.shape:
         return False
+    area = max(cv2.countNonZero(mask), 1)
     top = cv2.countNonZero(cv2.bitwise_and(mask, (roi >= peak).astype(np.uint8)))
-    return top >= _PLATEAU_SHARE * max(cv2.countNonZero(mask), 1)
+    if top >= _PLATEAU_SHARE * area:
+        return True
+    if min(roi.shape) < _JPEG_BLOCK_PX:
+        return False
+    hist = np.bincount(roi[mask > 0], minlength=256)
+    level = int(np.argmax(hist))
+    if hist[level] < _PLATEAU_SHARE * area:
+        return False
+    flat = cv2.bitwise_and(mask, (roi == level).astype(np.uint8))
+    block = np.ones((_JPEG_BLOCK_PX, _JPEG_BLOCK_PX), np.uint8)
+    return bool(cv2.erode(flat, block, borderType=cv2.BORDER_CONSTANT, borderValue=0).any())
 
 
 def _guided_search(gray: NDArray[np.uint8], work: _Region, bg: float, fov: FovCircle | None,
