@@ -146,6 +146,73 @@ def local_cluster(n_workers: int) -> Any:
                             dashboard_address=None, silence_logs=logging.WARNING)
 
 
+#: Said with every "cannot reach" of a scheduler address: the port users mistake for it.
+_SCHEDULER_PORT_HINT = ("give the scheduler's own port (8786 by default), not its "
+                        "dashboard's (8787) or a web service's")
+
+
+def reach_scheduler(address: str, cancelled: Callable[[], bool] | None = None) -> None:
+    """Check that a Dask scheduler answers at ``address`` within :data:`CONNECT_TIMEOUT`,
+    else :class:`SweepSetupError` (``scheduler: …``) saying what answered.
+
+    ``distributed``'s ``connect`` bounds the TCP connection by its timeout but not the
+    handshake after it (``comm.read()``): a port that accepts and never answers (the Dask
+    dashboard's, ``python -m http.server``) left ``Client(address, timeout=…)`` waiting
+    for ever, and one that answers HTTP had its reply read as a frame length (a numpy
+    ``MemoryError`` of exbibytes). Here the connection and its handshake run under one
+    deadline, ``cancelled`` polled every :data:`CANCEL_POLL_S` (:class:`SweepCancelled`)."""
+    import asyncio
+
+    from dask.utils import parse_timedelta
+    from distributed.comm import connect, parse_address, parse_host_port
+    from distributed.comm.registry import get_backend
+
+    try:
+        scheme, loc = parse_address(address, strict=True)
+        get_backend(scheme)
+        port = parse_host_port(loc)[1] if scheme in ("tcp", "tls") else None
+    except (ValueError, TypeError) as exc:
+        raise SweepSetupError(f"scheduler: {address!r} is no Dask scheduler address "
+                              f"(tcp://HOST:PORT): {exc}") from None
+    if port is not None and not 1 <= port <= 65535:
+        raise SweepSetupError(f"scheduler: {address!r}: port {port} is out of range "
+                              "(1 to 65535)")
+    timeout_s = float(parse_timedelta(CONNECT_TIMEOUT, default="seconds") or 5.0)
+
+    async def probe() -> None:
+        # the slack: connect's own "Timed out" (nothing listens) comes first
+        task = asyncio.ensure_future(asyncio.wait_for(connect(address, timeout=timeout_s),
+                                                      timeout_s + 1.0))
+        try:
+            while not task.done():
+                await asyncio.wait({task}, timeout=CANCEL_POLL_S)
+                if not task.done() and cancelled is not None and cancelled():
+                    raise SweepCancelled("cancelled while connecting to the scheduler")
+            comm = task.result()
+        finally:
+            if not task.done():
+                task.cancel()
+                await asyncio.gather(task, return_exceptions=True)
+        await comm.close()
+
+    why: str | None = None
+    try:
+        asyncio.run(probe())
+    except SweepCancelled:
+        raise
+    except TimeoutError:                # connected, and no handshake came back (before OSError:
+        # TimeoutError is one)
+        why = (f"it accepts connections but gave no Dask handshake within {timeout_s:g} s, "
+               "so it is not a Dask scheduler")
+    except OSError as exc:              # nothing listens (distributed's "Timed out …")
+        why = str(exc) or type(exc).__name__
+    except Exception as exc:            # an answer Dask cannot read (HTTP's: MemoryError)
+        why = f"it answered, but not as a Dask scheduler ({type(exc).__name__})"
+    if why is not None:
+        raise SweepSetupError(f"scheduler: cannot reach {address!r}: {why}; "
+                              f"{_SCHEDULER_PORT_HINT}")
+
+
 def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame | None = None,
               scheduler: str | None = None, n_workers: int | None = None,
               progress: Callable[[int, int], None] | None = None,
@@ -199,6 +266,8 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
     cluster = None
     if scheduler is None:
         cluster = local_cluster(n_workers or min(cores, len(cases)))
+    if scheduler is not None:   # before the Client, whose handshake has no time bound
+        reach_scheduler(scheduler, cancelled)
     try:
         try:
             client_cm = Client(cluster if cluster is not None else scheduler,

@@ -21,11 +21,13 @@ from typing import Any
 import anyio
 
 from backend.limits import Busy
-from backend.plants.sweep import SweepCancelled, run_sweep
+from backend.plants.sweep import SweepCancelled, SweepSetupError, run_sweep
 from sim.plant.sweep import SweepCase, SweepSpec
 
 log = logging.getLogger(__name__)
 
+#: The setting of the service's Dask scheduler, named by a sweep that cannot reach it.
+SCHEDULER_SETTING = "HELIOTWIN_PLANTS_DASK_SCHEDULER"
 #: Sweeps kept for polling (the oldest ended ones are dropped first).
 KEEP = 50
 
@@ -124,6 +126,10 @@ class SweepRunner:
             except SweepCancelled as exc:  # the cases done stay to be read
                 state.status, state.error = "failed", "cancelled"
                 state.result = exc.result
+            except SweepSetupError as exc:  # the setting's scheduler is not one (or is down)
+                state.status = "failed"
+                state.error = (f"{SCHEDULER_SETTING}: "
+                               f"{str(exc).removeprefix('scheduler: ')}")
             except asyncio.CancelledError:          # the service stops: the thread stops too
                 state.cancel = True
                 state.status, state.error = "failed", "the service stopped"

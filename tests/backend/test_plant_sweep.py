@@ -8,6 +8,7 @@ import json
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -209,6 +210,135 @@ def test_unreachable_scheduler_is_an_error(capsys: pytest.CaptureFixture[str]) -
                                f"tcp://127.0.0.1:{port}"]))
     assert exc.value.code == 2
     assert "--scheduler: cannot reach" in capsys.readouterr().err
+
+
+@pytest.fixture
+def silent_port() -> Iterator[int]:
+    """A port that accepts connections (the kernel's backlog) and never answers, as the
+    Dask dashboard's or ``python -m http.server`` to Dask's binary handshake."""
+    with socket.socket() as srv:
+        srv.bind(("127.0.0.1", 0))
+        srv.listen(16)
+        yield int(srv.getsockname()[1])
+
+
+@pytest.fixture
+def http_port() -> Iterator[int]:
+    """A port that answers any bytes with an HTTP 400, as uvicorn (heliotwin's own port)."""
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(16)
+    srv.settimeout(0.2)
+    stop = threading.Event()
+
+    def serve() -> None:
+        while not stop.is_set():
+            try:
+                conn, _ = srv.accept()
+            except OSError:
+                continue
+            with conn:
+                conn.settimeout(2)
+                try:
+                    conn.recv(4096)
+                    conn.sendall(b"HTTP/1.1 400 Bad Request\r\ncontent-type: text/plain\r\n"
+                                 b"content-length: 11\r\n\r\nBad Request")
+                except OSError:
+                    pass
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        yield int(srv.getsockname()[1])
+    finally:
+        stop.set()
+        thread.join(5)
+        srv.close()
+
+
+@pytest.mark.timeout(60)
+def test_a_port_that_never_answers_is_no_scheduler(silent_port: int,
+                                                   monkeypatch: pytest.MonkeyPatch,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """The Dask dashboard's port accepts the connection and never answers Dask's handshake,
+    which distributed's connect timeout does not bound: the sweep waited for ever (a
+    tester's finding). It fails within the connect timeout, as an address where nothing
+    listens, suggesting the scheduler's port."""
+    from backend.plants import sweep as sweep_mod
+
+    monkeypatch.setattr(sweep_mod, "CONNECT_TIMEOUT", "1s")
+    started = time.monotonic()
+    with pytest.raises(SystemExit) as exc:
+        raise SystemExit(main([*SWEEP, "--gcr", "0.2,0.3", "--scheduler",
+                               f"tcp://127.0.0.1:{silent_port}"]))
+    assert time.monotonic() - started < 15
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert f"--scheduler: cannot reach 'tcp://127.0.0.1:{silent_port}'" in err
+    assert "not a Dask scheduler" in err and "8786" in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.timeout(60)
+def test_an_http_port_is_no_scheduler(http_port: int, capsys: pytest.CaptureFixture[str]
+                                      ) -> None:
+    """An HTTP answer was read as a Dask frame's length (numpy's "Unable to allocate 3.07
+    EiB" as a traceback): one error line instead."""
+    with pytest.raises(SystemExit) as exc:
+        raise SystemExit(main([*SWEEP, "--gcr", "0.2,0.3", "--scheduler",
+                               f"tcp://127.0.0.1:{http_port}"]))
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert f"--scheduler: cannot reach 'tcp://127.0.0.1:{http_port}': it answered, but not " \
+           "as a Dask scheduler" in err and len(err.splitlines()) == 1
+
+
+def test_a_port_out_of_range_is_said(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        raise SystemExit(main([*SWEEP, "--gcr", "0.2,0.3", "--scheduler",
+                               "tcp://127.0.0.1:99999"]))
+    assert exc.value.code == 2
+    assert "--scheduler: 'tcp://127.0.0.1:99999': port 99999 is out of range (1 to 65535)" \
+        in capsys.readouterr().err
+
+
+@pytest.mark.timeout(60)
+def test_the_service_cancels_a_sweep_still_connecting_and_names_its_setting(
+        silent_port: int, http_port: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The service's sweep on a port that never answers: DELETE ends it while it connects
+    (it stayed "running" and the queue filled behind it), and one on a port that is no
+    scheduler fails naming HELIOTWIN_PLANTS_DASK_SCHEDULER."""
+    import asyncio
+
+    import pandas as pd
+
+    from backend.plants import sweep as sweep_mod
+    from backend.plants import sweep_runner
+
+    monkeypatch.setattr(sweep_mod, "CONNECT_TIMEOUT", "30s")
+    spec, cases = sweep_mod.prepare_sweep(
+        layouts=["square"], gcr=[0.2, 0.3], strategies=["sun"],
+        start=pd.Timestamp("2021-12-20", tz="UTC"), end=pd.Timestamp("2021-12-21", tz="UTC"),
+        step_s=3600.0, latitude_deg=38.3, longitude_deg=-5.3, collector_m=(12.0, 5.0))
+
+    async def run(port: int, cancel: bool) -> tuple[str, str | None, float]:
+        runner = sweep_runner.SweepRunner(f"tcp://127.0.0.1:{port}", 2)
+        state = runner.submit(spec, cases, {})
+        while state.status == "queued":
+            await asyncio.sleep(0.05)
+        started = time.monotonic()
+        if cancel:
+            await asyncio.sleep(0.5)
+            runner.cancel(state.sweep_id)
+        while state.status == "running":
+            await asyncio.sleep(0.05)
+        return state.status, state.error, time.monotonic() - started
+
+    status, error, took = run_in_own_thread(run(silent_port, True))
+    assert (status, error) == ("failed", "cancelled") and took < 5
+    status, error, _ = run_in_own_thread(run(http_port, False))
+    assert status == "failed" and error is not None
+    assert error.startswith(f"HELIOTWIN_PLANTS_DASK_SCHEDULER: cannot reach "
+                            f"'tcp://127.0.0.1:{http_port}': it answered, but not as a Dask")
 
 
 def test_a_cancelled_sweep_keeps_the_cases_it_finished(scheduler: str) -> None:
