@@ -105,6 +105,18 @@ def _import_case_modules() -> None:
     import sim.plant.sweep  # noqa: F401
 
 
+#: What a worker that cannot import the cases' code needs.
+_INSTALL_ON_WORKERS = ("install heliotwin in the workers' environment, as the client's "
+                       "(docs/plants.md, § Layout and spacing sweeps)")
+
+
+def _short_error(exc: BaseException) -> str:
+    """``ModuleNotFoundError: No module named 'backend'`` of a worker's failure (Dask wraps
+    one in ``Exception('ModuleNotFoundError(...)')`` when the function does not unpickle)."""
+    text = str(exc)
+    return text if type(exc) is Exception and text else f"{type(exc).__name__}: {text}"
+
+
 def _finish(rows: list[dict[str, Any]], engine: str, extra: dict[str, Any],
             started: float, compute_s: float) -> dict[str, Any]:
     order = {id(r): k for k, r in enumerate(rows)}
@@ -279,7 +291,16 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
             workers = len(client.scheduler_info(n_workers=-1)["workers"])
             address = client.scheduler.address
             log.info("plant sweep: %d cases on %s (%d workers)", len(cases), address, workers)
-            client.run(_import_case_modules)  # each worker's imports, before the clock starts
+            # each worker's imports, before the clock starts; and a worker that cannot import
+            # them (no heliotwin in its environment) refused by name before any case fails
+            imported = client.run(_import_case_modules, on_error="return")
+            lacking = {w: e for w, e in imported.items() if isinstance(e, BaseException)}
+            if lacking:
+                raise SweepSetupError(
+                    f"scheduler: {len(lacking)} of {len(imported)} workers of {address} cannot "
+                    "import heliotwin's code ("
+                    + "; ".join(f"{w}: {_short_error(e)}" for w, e in sorted(lacking.items()))
+                    + f"): {_INSTALL_ON_WORKERS}")
             submitted = time.perf_counter()
             w = client.scatter(weather, broadcast=True) if weather is not None else None
             # longest cases first (Graham's LPT rule): the workers finish together instead
@@ -300,7 +321,13 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
                     finished = set()
                 for fut in finished:
                     pending.discard(fut)
-                    rows.append(fut.result())
+                    try:
+                        rows.append(fut.result())
+                    except ImportError as exc:    # a worker that joined without heliotwin
+                        client.cancel(futures)
+                        raise RuntimeError(f"a worker of {address} cannot import heliotwin's "
+                                           f"code ({_short_error(exc)}): "
+                                           f"{_INSTALL_ON_WORKERS}") from None
                     if progress is not None:
                         progress(len(rows), len(cases))
                 if pending and cancelled is not None and cancelled():

@@ -341,6 +341,48 @@ def test_the_service_cancels_a_sweep_still_connecting_and_names_its_setting(
                             f"'tcp://127.0.0.1:{http_port}': it answered, but not as a Dask")
 
 
+@pytest.mark.timeout(180)
+def test_a_worker_without_heliotwin_is_named(tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """A worker whose environment lacks heliotwin failed the whole sweep with a bare
+    ``ModuleNotFoundError`` and no worker named (a tester's finding): it is refused at
+    connection, by its address, saying to install heliotwin on the workers."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    common = ["--nthreads", "1", "--no-nanny", "--host", "127.0.0.1", "--no-dashboard"]
+    procs = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1",
+                               "--port", str(port), "--no-dashboard"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    bad = tmp_path / "bad.log"
+    blocked = ("import sys; sys.modules['backend'] = sys.modules['sim'] = None; "
+               "from distributed.cli.dask_worker import main; main()")
+    procs += [subprocess.Popen([str(BIN / "dask"), "worker", address, *common],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL),
+              subprocess.Popen([sys.executable, "-c", blocked, address, *common],
+                               cwd=tmp_path, stdout=subprocess.DEVNULL,
+                               stderr=bad.open("w"))]
+    try:
+        from distributed import Client
+
+        with Client(address, timeout="60s") as client:
+            client.wait_for_workers(2, timeout=120)
+            workers = client.scheduler_info(n_workers=-1)["workers"]
+            bad_worker = next(w for w in workers if w in bad.read_text())  # its log says
+        with pytest.raises(SystemExit) as exc:
+            raise SystemExit(main([*SWEEP, "--gcr", "0.2,0.3", "--scheduler", address]))
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        assert len(err.splitlines()) == 1, err
+        assert f"1 of 2 workers of {address} cannot import heliotwin's code ({bad_worker}: " \
+               "ModuleNotFoundError" in err
+        assert "install heliotwin in the workers' environment" in err
+    finally:
+        for p in procs:
+            p.kill()
+        for p in procs:
+            p.wait(20)
+
+
 def test_a_cancelled_sweep_keeps_the_cases_it_finished(scheduler: str) -> None:
     """Cancelled after its first result: the cases done come with the cancellation (they
     were thrown away: a tester's finding), the rest are not run."""
