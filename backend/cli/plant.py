@@ -337,7 +337,7 @@ SWEEP_COLUMNS = ("layout", "gcr", "strategy", "interior_beam_shaded_pct", "field
 
 def run_sweep(args: argparse.Namespace) -> int:
     """``heliotwin plant sweep``; exit 2 on bad input."""
-    from backend.plants.sweep import SweepSetupError
+    from backend.plants.sweep import SweepFailed, SweepSetupError
     from backend.plants.sweep import run_sweep as run
 
     spec, cases, weather = sweep_from_args(args)
@@ -347,6 +347,9 @@ def run_sweep(args: argparse.Namespace) -> int:
         import distributed  # noqa: F401 - first: its import sets its loggers to INFO again
 
         logging.getLogger("distributed").setLevel(logging.WARNING)
+        for name in ("distributed.client", "distributed.utils"):  # a lost scheduler's
+            logging.getLogger(name).setLevel(logging.CRITICAL)      # reconnect tracebacks:
+        # the sweep's own error line says it (SweepFailed), --verbose shows them
     bar, callback = None, None
     if not args.no_progress and sys.stderr.isatty():
         from tqdm import tqdm
@@ -363,9 +366,19 @@ def run_sweep(args: argparse.Namespace) -> int:
         fail(f"--scheduler: cannot reach {args.scheduler!r}: {exc}")
     except SweepSetupError as exc:            # --scheduler unreadable, --workers out of bounds
         fail(f"--{exc}")
+    except SweepFailed as exc:                # the cluster could not finish: the cases done
+        if exc.result is not None and exc.result["rows"]:
+            _print_sweep(args, exc.result)
+        fail(str(exc), code=1)
     finally:
         if bar is not None:
             bar.close()
+    _print_sweep(args, result)
+    return 0
+
+
+def _print_sweep(args: argparse.Namespace, result: dict[str, Any]) -> None:
+    """A sweep's result on stdout: JSON, CSV or the text table."""
     if args.json:
         print(json_text(result))
     elif args.csv:
@@ -382,4 +395,3 @@ def run_sweep(args: argparse.Namespace) -> int:
         print("\t".join(SWEEP_COLUMNS))
         for r in result["rows"]:
             print("\t".join(str(r[c]) for c in SWEEP_COLUMNS))
-    return 0

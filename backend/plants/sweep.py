@@ -268,6 +268,8 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
             progress(1, 1)
         return _finish([row], "in-process", {"scheduler": None, "workers": 1}, started,
                        time.perf_counter() - started)
+    from concurrent.futures import CancelledError
+
     from distributed import Client, wait
 
     cores = os.cpu_count() or 1
@@ -315,21 +317,32 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
                 # woken by the next result (not by a poll's sleep: the last case's result is
                 # taken when it lands), or after CANCEL_POLL_S to look at `cancelled`
                 try:
-                    finished = wait(list(pending), timeout=CANCEL_POLL_S,
-                                    return_when="FIRST_COMPLETED").done
-                except TimeoutError:
-                    finished = set()
-                for fut in finished:
-                    pending.discard(fut)
                     try:
-                        rows.append(fut.result())
-                    except ImportError as exc:    # a worker that joined without heliotwin
-                        client.cancel(futures)
-                        raise RuntimeError(f"a worker of {address} cannot import heliotwin's "
-                                           f"code ({_short_error(exc)}): "
-                                           f"{_INSTALL_ON_WORKERS}") from None
-                    if progress is not None:
-                        progress(len(rows), len(cases))
+                        finished = wait(list(pending), timeout=CANCEL_POLL_S,
+                                        return_when="FIRST_COMPLETED").done
+                    except TimeoutError:
+                        finished = set()
+                    for fut in finished:
+                        pending.discard(fut)
+                        try:
+                            rows.append(fut.result())
+                        except ImportError as exc:  # a worker that joined without heliotwin
+                            client.cancel(futures)
+                            raise SweepFailed(f"a worker of {address} cannot import "
+                                              f"heliotwin's code ({_short_error(exc)}): "
+                                              f"{_INSTALL_ON_WORKERS}") from None
+                        if progress is not None:
+                            progress(len(rows), len(cases))
+                except (CancelledError, OSError) as exc:
+                    # the client lost its scheduler: Dask cancels every future ("scheduler-
+                    # connection-lost"); the cases done are kept, as a cancelled sweep's
+                    if client.status == "running" and "connection-lost" not in str(exc):
+                        raise
+                    done = _finish(rows, "dask", {"scheduler": None if cluster is not None
+                                                  else address, "workers": workers},
+                                   started, time.perf_counter() - submitted)
+                    raise SweepFailed(f"the scheduler at {address} was lost after {len(rows)} "
+                                      f"of {len(cases)} cases", done) from None
                 if pending and cancelled is not None and cancelled():
                     client.cancel(futures)
                     done = _finish(rows, "dask", {"scheduler": None if cluster is not None
@@ -355,6 +368,16 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
             cluster.close()
     return _finish(rows, "dask", {"scheduler": None if cluster is not None else address,
                                   "workers": workers}, started, compute_s)
+
+
+class SweepFailed(RuntimeError):
+    """A sweep its cluster could not finish (the scheduler lost, no worker left, a worker
+    without heliotwin): a message for the user, no traceback; ``result`` holds the cases
+    finished before it (as :func:`run_sweep` returns them) when there were any to keep."""
+
+    def __init__(self, message: str, result: dict[str, Any] | None = None) -> None:
+        super().__init__(message)
+        self.result = result
 
 
 class SweepCancelled(RuntimeError):
@@ -617,5 +640,6 @@ def _case_field(problem: str, layout: str, from_plant: bool) -> str:
 
 
 __all__ = ["MAX_CASES", "MAX_CASE_STEPS", "MAX_GCRS", "MAX_LAYOUTS", "MAX_STRATEGIES",
-           "SWEEP_FIELDS", "SweepCancelled", "SweepInputError", "expected_cost", "parse_gcr",
+           "SWEEP_FIELDS", "SweepCancelled", "SweepFailed", "SweepInputError", "expected_cost",
+           "parse_gcr",
            "parse_polygon", "parse_size", "prepare_sweep", "run_sweep", "sweep_task"]

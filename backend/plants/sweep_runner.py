@@ -21,7 +21,7 @@ from typing import Any
 import anyio
 
 from backend.limits import Busy
-from backend.plants.sweep import SweepCancelled, SweepSetupError, run_sweep
+from backend.plants.sweep import SweepCancelled, SweepFailed, SweepSetupError, run_sweep
 from sim.plant.sweep import SweepCase, SweepSpec
 
 log = logging.getLogger(__name__)
@@ -125,6 +125,10 @@ class SweepRunner:
                 state.status = "done"
             except SweepCancelled as exc:  # the cases done stay to be read
                 state.status, state.error = "failed", "cancelled"
+                state.result = exc.result
+            except SweepFailed as exc:  # the scheduler lost, no worker: the cases done stay
+                log.warning("plant sweep %s failed: %s", state.sweep_id, exc)
+                state.status, state.error = "failed", str(exc)
                 state.result = exc.result
             except SweepSetupError as exc:  # the setting's scheduler is not one (or is down)
                 state.status = "failed"

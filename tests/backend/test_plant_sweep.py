@@ -433,6 +433,62 @@ def test_a_scheduler_without_workers_fails_the_sweep(monkeypatch: pytest.MonkeyP
         proc.wait(20)
 
 
+@pytest.mark.timeout(180)
+def test_a_lost_scheduler_keeps_the_cases_it_finished(capsys: pytest.CaptureFixture[str]
+                                                      ) -> None:
+    """The scheduler killed after the first result: Dask cancels every future
+    ("scheduler-connection-lost") and the finished cases were thrown away with a raw
+    FuturesCancelledError (a tester's finding). They are kept, as a cancelled sweep's, and
+    the message says what happened; the CLI prints them and the error line, exit 1."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    procs = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1",
+                               "--port", str(port), "--no-dashboard"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL),
+             subprocess.Popen([str(BIN / "dask"), "worker", address, "--nthreads", "1",
+                               "--no-nanny", "--host", "127.0.0.1", "--no-dashboard"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        from distributed import Client
+
+        from backend.plants import sweep as sweep_mod
+
+        with Client(address, timeout="60s") as client:
+            client.wait_for_workers(1, timeout=120)
+        real_run = sweep_mod.run_sweep
+
+        def run_and_lose(*args: Any, **kwargs: Any) -> dict[str, Any]:
+            def progress(done: int, total: int) -> None:
+                if procs[0].poll() is None:
+                    procs[0].kill()
+            return real_run(*args, **{**kwargs, "progress": progress})
+
+        sweep_mod.run_sweep = run_and_lose   # the CLI imports it at its call
+        try:
+            with pytest.raises(SystemExit) as exc:
+                raise SystemExit(main(["plant", "sweep", "--collector-m", "12x5", "--lat", "38.3",
+                                       "--lon", "-5.3", "--start", "2021-01-01", "--end",
+                                       "2021-07-01", "--step-s", "600", "--no-progress",
+                                       "--gcr", "0.2,0.25,0.3,0.35", "--json",
+                                       "--scheduler", address]))
+        finally:
+            sweep_mod.run_sweep = real_run
+        assert exc.value.code == 1
+        captured = capsys.readouterr()
+        out = json.loads(captured.out)
+        assert 1 <= out["cases"] < 4 and len(out["rows"]) == out["cases"]
+        assert out["rows"][0]["energy_kwh_per_collector"] > 0
+        err = captured.err.strip()
+        assert len(err.splitlines()) == 1, err
+        assert err.endswith(f"error: the scheduler at {address} was lost after "
+                            f"{out['cases']} of 4 cases")
+    finally:
+        for p in procs:
+            p.kill()
+        for p in procs:
+            p.wait(20)
+
+
 def test_runner_close_cancels_a_running_sweep(monkeypatch: pytest.MonkeyPatch) -> None:
     """The service's shutdown (``SweepRunner.close``, from the app's lifespan) stops a
     running sweep through its ``cancelled`` callback (where run_sweep closes the cluster it
