@@ -358,7 +358,7 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
                         no_workers_since = time.monotonic()
                     elif time.monotonic() - no_workers_since > NO_WORKERS_S:
                         client.cancel(futures)
-                        raise RuntimeError(
+                        raise SweepFailed(
                             f"the Dask scheduler at {address} has had no worker for "
                             f"{NO_WORKERS_S:.0f} s ({len(rows)} of {len(cases)} cases done): "
                             "start workers (dask worker tcp://…) and run the sweep again")

@@ -407,7 +407,9 @@ def test_a_cancelled_sweep_keeps_the_cases_it_finished(scheduler: str) -> None:
     assert len(result["rows"]) == result["cases"] and result["rows"][0]["energy_kwh_per_collector"]
 
 
-def test_a_scheduler_without_workers_fails_the_sweep(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_scheduler_without_workers_fails_the_sweep(monkeypatch: pytest.MonkeyPatch,
+                                                     capsys: pytest.CaptureFixture[str]
+                                                     ) -> None:
     """Every worker gone (killed, or never started): the tasks would wait for one for ever
     and the service showed the sweep "running"; after NO_WORKERS_S it fails, saying so."""
     import pandas as pd
@@ -428,6 +430,14 @@ def test_a_scheduler_without_workers_fails_the_sweep(monkeypatch: pytest.MonkeyP
             step_s=3600.0, latitude_deg=38.3, longitude_deg=-5.3, collector_m=(12.0, 5.0))
         with pytest.raises(RuntimeError, match="has had no worker for 1 s"):
             sweep_mod.run_sweep(spec, cases, scheduler=f"tcp://127.0.0.1:{port}")
+        # the CLI says it in its one error line (it printed an 18-line traceback), exit 1
+        with pytest.raises(SystemExit) as exc:
+            raise SystemExit(main([*SWEEP, "--gcr", "0.2,0.3", "--scheduler",
+                                   f"tcp://127.0.0.1:{port}"]))
+        assert exc.value.code == 1
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("heliotwin plant sweep: error: the Dask scheduler at ") and \
+            "has had no worker for 1 s" in err and len(err.splitlines()) == 1, err
     finally:
         proc.kill()
         proc.wait(20)
