@@ -514,14 +514,17 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
                   plant: Plant | None = None, field_size: tuple[int, int] = (5, 5),
                   custom: tuple[float | None, float | None, float | None] | None = None,
                   slope_azimuth_deg: float = 0.0, slope_tilt_deg: float = 0.0,
-                  timezone: str | None = None,
-                  weather_token: str = "") -> tuple[SweepSpec, list[SweepCase]]:
+                  timezone: str | None = None, weather_token: str = "",
+                  max_case_steps: float = MAX_CASE_STEPS, bound_note: str = ""
+                  ) -> tuple[SweepSpec, list[SweepCase]]:
     """Check a sweep's parameters and build its spec and cases (every layout × GCR ×
     strategy; an existing ``plant`` gives one layout, itself scaled). The collector is
     ``collector_m`` (a rectangle) or ``collector_polygon_m`` ((u, v) vertices [m] about
     the pivot), wired like Peñarroya's. Every case's field is built once here, so an
     infeasible GCR is refused before any task runs. ``custom``: layout custom's (aspect
-    ratio, offset, rotation [°]), all three or none; ``timezone``: :func:`sweep_zone`.
+    ratio, offset, rotation [°]), all three or none; ``timezone``: :func:`sweep_zone`;
+    ``max_case_steps``: the caller's bound on cases × steps (an anonymous caller's is
+    lower), ``bound_note`` said after it (" without a write token").
     :class:`SweepInputError` names the parameter (its request key, :data:`SWEEP_FIELDS`)."""
     from sim.paths import package_dir
     from sim.plant.fields import LAYOUT_TYPES, collector_from_outline, collector_from_size
@@ -612,9 +615,10 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
                               f"{MAX_CASES}: fewer GCRs, layouts or strategies")
     cases = [SweepCase(n, float(g), s) for n in names for g in gcr for s in strategies]
     steps = (end - start).total_seconds() / step_s
-    if steps * len(cases) > MAX_CASE_STEPS:
+    bound = min(max_case_steps, MAX_CASE_STEPS)
+    if steps * len(cases) > bound:
         raise SweepInputError("step_s", f"{len(cases)} cases × {steps:.0f} steps is more than "
-                              f"{MAX_CASE_STEPS:,}: use a larger step or fewer cases")
+                              f"{bound:,.0f}{bound_note}: use a larger step or fewer cases")
     for case in {SweepCase(c.layout, c.gcr, "sun") for c in cases}:
         try:
             case_plant(spec, case)

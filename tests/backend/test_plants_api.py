@@ -379,6 +379,10 @@ def test_a_sweep_at_a_coordinate_runs_on_the_local_days_of_its_timezone(
     ({"start": "2021-12-20T00:00:00"}, 422, "start"),
     ({"plant_id": "nowhere"}, 404, "nowhere"),
     ({"end": "2023-12-20", "step_s": 60}, 422, "without a write token"),
+    # past the bound of a token's sweep too: the anonymous bound is the one quoted (a
+    # tester's finding: "more than 50,000,000")
+    ({"start": "2021-01-01", "end": "2121-01-01", "step_s": 60}, 422,
+     "step_s: 1 cases × 52594560 steps is more than 1,000,000 without a write token"),
     ({"collector_m": None, "collector_polygon_m": [[0, 0], [2, 2], [2, 0], [0, 1]]}, 422,
      "collector_polygon_m: collector outline: the polygon crosses itself"),
     ({"collector_polygon_m": L_SHAPE}, 422, "collector_m: give the collector size"),

@@ -52,7 +52,13 @@ from backend.plants import (
     sky_map_cost_s,
     sky_map_png,
 )
-from backend.plants.sweep import SweepInputError, parse_size, prepare_sweep, sweep_zone
+from backend.plants.sweep import (
+    MAX_CASE_STEPS,
+    SweepInputError,
+    parse_size,
+    prepare_sweep,
+    sweep_zone,
+)
 from backend.plants.sweep_runner import SweepRunner, SweepState
 from backend.timestamps import (
     FIRST_YEAR,
@@ -180,8 +186,11 @@ async def _priced(request: Request, ctx: Any, caller: Any, cost_s: float,
             ctx.simulations.anonymous_hours.settle(charge, spent[0])
 
 
-def _sweep_inputs(body: SweepCreate, service: PlantService) -> tuple[Any, list[Any]]:
-    """The checked spec and cases of a sweep request; 404/422 naming the field."""
+def _sweep_inputs(body: SweepCreate, service: PlantService,
+                  anonymous_bound: float | None = None) -> tuple[Any, list[Any]]:
+    """The checked spec and cases of a sweep request; 404/422 naming the field.
+    ``anonymous_bound``: the cases × steps of a caller without a token (the message quotes
+    it, not the bound of a token's sweep)."""
     plant = None
     if body.plant_id is not None:
         _plant_or_404(service, body.plant_id)
@@ -201,7 +210,9 @@ def _sweep_inputs(body: SweepCreate, service: PlantService) -> tuple[Any, list[A
             collector_polygon_m=body.collector_polygon_m, plant=plant,
             field_size=(rows, columns), custom=None if custom == (None, None, None) else custom,
             slope_azimuth_deg=body.slope_azimuth_deg, slope_tilt_deg=body.slope_tilt_deg,
-            timezone=body.timezone)
+            timezone=body.timezone,
+            max_case_steps=MAX_CASE_STEPS if anonymous_bound is None else anonymous_bound,
+            bound_note="" if anonymous_bound is None else " without a write token")
     except TimestampError as exc:
         raise HTTPException(422, str(exc)) from None
     except SweepInputError as exc:     # names the request's keys (the CLI maps them to flags)
@@ -219,11 +230,13 @@ async def create_sweep(body: SweepCreate, request: Request, ctx: ContextDep,
     ``HELIOTWIN_PLANTS_ANONYMOUS_SWEEP_CASE_STEPS`` cases × steps (422 beyond), spent from
     the address's anonymous simulation allowance (429 when spent); one sweep runs at a time
     (503 past the queue)."""
-    spec, cases = await anyio.to_thread.run_sync(_sweep_inputs, body, service)
+    anonymous = caller is None
+    spec, cases = await anyio.to_thread.run_sync(
+        _sweep_inputs, body, service,
+        ctx.settings.plants.anonymous_sweep_case_steps if anonymous else None)
     # a polygon's case-steps weigh POLYGON_COST_FACTOR (its shade costs that much more)
     factor = cost_factor(spec.collector)
     case_steps = len(cases) * (spec.end - spec.start).total_seconds() / spec.step_s * factor
-    anonymous = caller is None
     host = request.client.host if request.client else "?"
     try:
         if anonymous:
