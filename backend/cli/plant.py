@@ -394,4 +394,10 @@ def _print_sweep(args: argparse.Namespace, result: dict[str, Any]) -> None:
               f"in {result['wall_s']:.1f} s")
         print("\t".join(SWEEP_COLUMNS))
         for r in result["rows"]:
-            print("\t".join(str(r[c]) for c in SWEEP_COLUMNS))
+            print("\t".join(sweep_cell(r[c]) for c in SWEEP_COLUMNS))
+
+
+def sweep_cell(value: Any) -> str:
+    """A value of the sweep's text table: an undefined fraction (None) is ``n/a``, as
+    docs/plants.md says (it printed ``None``)."""
+    return "n/a" if value is None else str(value)

@@ -554,3 +554,12 @@ def test_the_local_clusters_workers_keep_glibc_malloc_and_slow_dask_monitors() -
             "worker.memory.monitor-interval")])
     assert list(env.values()) == [{"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1"}]
     assert list(monitors.values()) == [[False, "1s", "5s", "1s"]]
+
+
+def test_the_text_table_says_n_a_for_an_undefined_fraction() -> None:
+    """A fraction without a denominator (no daylight, no beam) is None in the rows; the
+    text output printed ``None`` where docs/plants.md says ``n/a``."""
+    from backend.cli.plant import sweep_cell
+
+    assert [sweep_cell(v) for v in (None, 0.0, 4.94, "square")] == ["n/a", "0.0", "4.94",
+                                                                     "square"]
