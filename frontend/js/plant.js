@@ -225,17 +225,6 @@ const DASH = { sun: "solid", backtrack: "dash", sky_scan: "dot" };
 const LAYOUT_COLORS = { square: COLORS.tracker, diagonal: COLORS.fixed, hexagonal_n_s: COLORS.gain,
   hexagonal_e_w: COLORS.sun, custom: COLORS.grey, plant: COLORS.grey };
 
-function gcrList(text) {
-  const t = text.trim();
-  if (t.includes(":")) {
-    const [lo, hi, step] = t.split(":").map(Number);
-    const out = [];
-    for (let k = 0; lo + k * step <= hi + 1e-9 && k < 40; k++) out.push(Math.round((lo + k * step) * 1e6) / 1e6);
-    return out;
-  }
-  return t.split(",").map(Number).filter((v) => v > 0);
-}
-
 function curves() {
   const groups = new Map();
   for (const r of sweep.rows) {
@@ -322,7 +311,9 @@ async function runSweep(ev) {
     : null;
   const body = {
     layouts: $("sweep-layouts").value.split(",").map((s) => s.trim()).filter(Boolean),
-    gcr: gcrList($("sweep-gcr").value), strategies: $("sweep-strategies").value.split(",").map((s) => s.trim()).filter(Boolean),
+    // sent as typed ("0.15,0.25" or "0.1:0.5:0.05"): the service reads it by the CLI's rule
+    // and names what is wrong (a copy of that rule here changed what was typed, silently)
+    gcr: $("sweep-gcr").value.trim(), strategies: $("sweep-strategies").value.split(",").map((s) => s.trim()).filter(Boolean),
     ...(polygon ? { collector_polygon_m: polygon } : { collector_m: collector }),
     latitude_deg: p.latitude_deg, longitude_deg: p.longitude_deg, timezone: p.timezone,
     altitude_m: p.altitude_m, start: `${year}-01-01`, end: `${year + 1}-01-01`, step_s: Number($("sweep-step").value),

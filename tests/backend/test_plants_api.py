@@ -9,6 +9,7 @@ from __future__ import annotations
 import datetime as dt
 import json
 import shutil
+import typing
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -373,6 +374,12 @@ def test_a_sweep_at_a_coordinate_runs_on_the_local_days_of_its_timezone(
     ({"timezone": "../etc/passwd"}, 422, "timezone: '../etc/passwd' is not an IANA time "
      "zone"),
     ({"gcr": [0.5]}, 422, "gcr: square at GCR 0.5"),
+    # the CLI's text form, read by its rule (the dashboard sends what was typed: it sent
+    # 0.1:0.3:0.000001 as 40 values from 0.1 to 0.100039, and dropped -0.1 silently)
+    ({"gcr": "0.1:0.3:0.000001"}, 422, "gcr: range '0.1:0.3:0.000001' holds 200,001 "
+     "values, more than 40"),
+    ({"gcr": "-0.1,0.2"}, 422, "gcr: every GCR must be in (0, 1), got [-0.1, 0.2]"),
+    ({"gcr": "abc"}, 422, "gcr: expected numbers like 0.15,0.25 or 0.1:0.5:0.05"),
     ({"layouts": ["triangle"]}, 422, "layouts: must be one or more of"),
     ({"strategies": ["moon"]}, 422, "strategies: must be one or more of"),
     ({"collector_m": None}, 422, "collector_m: give the collector size"),
@@ -421,9 +428,18 @@ def test_sweep_list_bounds_are_the_clis() -> None:
 
     assert set(SWEEP_FIELDS) == set(SweepCreate.model_fields)
 
-    bounds = {name: next(m.max_length for m in SweepCreate.model_fields[name].metadata
-                         if hasattr(m, "max_length"))
-              for name in ("layouts", "gcr", "strategies")}
+    def max_length(name: str) -> int:  # of the list (gcr: or the CLI's text)
+        annotation = SweepCreate.model_fields[name].annotation
+        assert annotation is not None
+        if name == "gcr":
+            listed = next(a for a in typing.get_args(annotation)
+                          if typing.get_origin(typing.get_args(a)[0]) is list)
+            field = typing.get_args(listed)[1]  # the list's Field(...)
+            return next(m.max_length for m in field.metadata if hasattr(m, "max_length"))
+        return next(m.max_length for m in SweepCreate.model_fields[name].metadata
+                    if hasattr(m, "max_length"))
+
+    bounds = {name: max_length(name) for name in ("layouts", "gcr", "strategies")}
     assert bounds == {"layouts": MAX_LAYOUTS, "gcr": MAX_GCRS, "strategies": MAX_STRATEGIES}
     assert MAX_LAYOUTS * MAX_GCRS * MAX_STRATEGIES == MAX_CASES == 600
 

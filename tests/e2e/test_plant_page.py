@@ -185,3 +185,25 @@ def test_the_sweep_panel_runs_a_sweep_and_draws_its_shade_in_the_plants_time(
     assert params["timezone"] == "Europe/Madrid"
     ARTIFACTS.mkdir(exist_ok=True)
     page.locator("#chart-sweep-shade").screenshot(path=str(ARTIFACTS / "plant-sweep-shade.png"))
+
+
+def test_the_sweep_panel_sends_the_gcrs_as_typed(  # type: ignore[no-untyped-def]
+        browser, server, request) -> None:
+    """The GCR field goes to the service as typed, read by the CLI's rule, and a mistake is
+    the service's 422 naming it: the page read it itself and sent 0.1:0.3:0.000001 as 40
+    values from 0.1 to 0.100039 (and ran them), dropped a -0.1 without a word, and made
+    "abc" an empty list (a tester's finding)."""
+    from tests.e2e.conftest import open_page
+
+    with open_page(browser, request, ignore=lambda text: "422" in text) as page:
+        page.goto(server.url + "/#plant?day=2021-12-21")
+        page.wait_for_selector('body[data-plant-loaded="penarroya/2021-12-21"]', timeout=60_000)
+        for typed, said in (("0.1:0.3:0.000001", "gcr: range '0.1:0.3:0.000001' holds "
+                                                 "200,001 values, more than 40"),
+                            ("-0.1,0.2", "gcr: every GCR must be in (0, 1), got [-0.1, 0.2]"),
+                            ("abc", "gcr: expected numbers like 0.15,0.25")):
+            page.fill("#sweep-gcr", typed)
+            page.click("#sweep-run")
+            page.wait_for_function("said => document.getElementById('banner').textContent"
+                                   ".includes(said)", arg=said)
+        assert page.get_attribute("body", "data-sweep-loaded") is None

@@ -20,7 +20,7 @@ from __future__ import annotations
 import datetime as dt
 import time
 from collections.abc import Callable
-from typing import Annotated, Any, TypeVar
+from typing import Annotated, Any, TypeVar, cast
 
 import anyio
 import orjson
@@ -55,6 +55,7 @@ from backend.plants import (
 from backend.plants.sweep import (
     MAX_CASE_STEPS,
     SweepInputError,
+    parse_gcr,
     parse_size,
     prepare_sweep,
     sweep_zone,
@@ -186,6 +187,19 @@ async def _priced(request: Request, ctx: Any, caller: Any, cost_s: float,
             ctx.simulations.anonymous_hours.settle(charge, spent[0])
 
 
+def _gcr_read(body: SweepCreate) -> SweepCreate:
+    """``gcr`` given as the CLI's text (``"0.15,0.25"``, ``"0.1:0.5:0.05"``) read by its rule
+    (:func:`backend.plants.sweep.parse_gcr`; 422 naming ``gcr``), so the dashboard sends what
+    was typed and a mistake is named, not changed (a copy of the rule in the page made
+    ``0.1:0.3:0.000001`` 40 values from 0.1 to 0.100039 and dropped ``-0.1``)."""
+    if not isinstance(body.gcr, str):
+        return body
+    try:
+        return body.model_copy(update={"gcr": parse_gcr(body.gcr)})
+    except SweepInputError as exc:
+        raise HTTPException(422, exc.message()) from None
+
+
 def _sweep_inputs(body: SweepCreate, service: PlantService,
                   anonymous_bound: float | None = None) -> tuple[Any, list[Any]]:
     """The checked spec and cases of a sweep request; 404/422 naming the field.
@@ -202,7 +216,8 @@ def _sweep_inputs(body: SweepCreate, service: PlantService,
         rows, columns = (int(v) for v in body.field_size.split("x"))
         custom = (body.aspect_ratio, body.offset, body.rotation_deg)
         return prepare_sweep(
-            layouts=body.layouts, gcr=body.gcr, strategies=body.strategies, start=start,
+            layouts=body.layouts, strategies=body.strategies, start=start,
+            gcr=cast(list[float], body.gcr),  # the text read to a list by _gcr_read
             end=end, step_s=body.step_s, latitude_deg=body.latitude_deg,
             longitude_deg=body.longitude_deg, altitude_m=body.altitude_m,
             collector_m=None if body.collector_m is None
@@ -231,6 +246,7 @@ async def create_sweep(body: SweepCreate, request: Request, ctx: ContextDep,
     the address's anonymous simulation allowance (429 when spent); one sweep runs at a time
     (503 past the queue)."""
     anonymous = caller is None
+    body = _gcr_read(body)
     spec, cases = await anyio.to_thread.run_sync(
         _sweep_inputs, body, service,
         ctx.settings.plants.anonymous_sweep_case_steps if anonymous else None)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -158,7 +158,11 @@ class SweepCreate(BaseModel):
     layouts: list[str] = Field(["square"], min_length=1, max_length=MAX_LAYOUTS,
                                description="square, diagonal, hexagonal_n_s, hexagonal_e_w, "
                                            "custom (ignored with plant_id)")
-    gcr: list[float] = Field(min_length=1, max_length=MAX_GCRS, description="ground cover ratios")
+    gcr: Annotated[list[float], Field(min_length=1, max_length=MAX_GCRS)] | Annotated[
+        str, Field(min_length=1, max_length=200)] = Field(
+        description="ground cover ratios: a list, or the CLI's text (its rule, "
+                    "backend.plants.sweep.parse_gcr) — \"0.15,0.25\" or a range "
+                    f"\"START:STOP:STEP\" (STOP included); at most {MAX_GCRS} values")
     strategies: list[str] = Field(["sun"], min_length=1, max_length=MAX_STRATEGIES,
                                   description="sun, backtrack, sky_scan")
     collector_m: str | None = Field(None, pattern=r"^\d+(\.\d+)?x\d+(\.\d+)?$",
@@ -186,6 +190,7 @@ class SweepCreate(BaseModel):
     start: str = Field(description="YYYY-MM-DD or ISO 8601 with offset")
     end: str = Field(description="exclusive")
     step_s: float = Field(3600.0, ge=60, le=86400)
+
 
 
 class SweepRowRead(BaseModel):
