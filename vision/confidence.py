@@ -123,6 +123,15 @@ def features(shape: float, glare: float, saturated: float, peak: float, bg: floa
 
 _GATE_SAT = True
 _MIN_SHAPE = 0.2  # below: a shape no sun has, cut by the horizon or not
+SMALL_CORE_GLARE = 0.7
+"""The glare evidence (``glare``) a core smaller than a sun's (``too_small`` > 0) needs. The
+solar disc is 0.53° across; a core that small or smaller is a sun only by its aureole, the
+glare falling off radially over degrees around it (a tone-mapped HDR sun: a core near a pixel
+wide in a strong aureole; the synthetic development suns with such a core have ``glare``
+0.90–1.0). A saturated highlight on a cloud, 0.3–0.45° in radius in a frame resized to
+another width, sits in the bright cloud, not in a fall-off of its own (FE3, UCEEB 06:10:
+``glare`` 0.23–0.54), and the model's weight on ``too_small`` — positive, fitted on those
+HDR suns — rated it up to 0.86."""
 
 
 def admissible(x: NDArray[np.float64]) -> bool:
@@ -130,7 +139,11 @@ def admissible(x: NDArray[np.float64]) -> bool:
     camera exposed for the sky: it is some 10⁵ times brighter) and not of a shape no sun
     has (``shape`` ≥ :data:`_MIN_SHAPE`; a half disc cut by the horizon scores ≈ 0.75).
     The positive evidence against a candidate of issue 24 item 2, applied before the
-    model: a candidate that fails it gets probability 0 and is never fitted on."""
+    model: a candidate that fails it gets probability 0 and is never fitted on. A core
+    smaller than a sun's (``too_small`` > 0, known scale only) must carry the sun's glare
+    (``glare`` ≥ :data:`SMALL_CORE_GLARE`): it has nothing else to show it is the sun."""
+    if x[4] > 0.0 and x[1] < SMALL_CORE_GLARE:
+        return False
     return bool((x[2] >= 0.5 or not _GATE_SAT) and x[0] >= _MIN_SHAPE)
 
 
@@ -172,6 +185,8 @@ _REASONS = {
     "saturated": "brightest region is not saturated (peak {peak:.0f}): sun hidden or overcast",
     "contrast": "too little contrast ({contrast:.0f} grey levels above the sky): overcast",
     "too_small": "brightest region is {radius_deg:.2f}° in radius, smaller than a sun's core",
+    "small_no_glare": "brightest region is {radius_deg:.2f}° in radius, smaller than a sun's "
+                      "core, without the sun's glare around it: cloud highlight",
     "too_large": "brightest region is {radius_deg:.1f}° in radius, wider than a sun's glare",
     "runner_up": "two regions look equally like the sun: ambiguous",
     "coherence": "brightness around the brightest region is not radially symmetric "
@@ -190,6 +205,8 @@ def reason(x: NDArray[np.float64], values: dict[str, float],
         return _REASONS["saturated"].format(**values)
     if x[0] < _MIN_SHAPE:
         return _REASONS["shape"].format(**values)
+    if x[4] > 0.0 and x[1] < SMALL_CORE_GLARE:
+        return _REASONS["small_no_glare"].format(**values)
     w, _ = model if model is not None else _model()
     ideal = np.array([1.0, 1.0, 1.0, 0.6, 0.0, 0.0, 0.0, 1.0, x[8], 0.0])
     loss = w * (ideal - x)
