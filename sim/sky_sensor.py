@@ -690,6 +690,15 @@ STAMP_INFER_MIN_SPACING_S = 1200.0
 STAMP_CLEAR_RESIDUAL = 0.08
 
 
+def slow_logger(ts_s: np.ndarray, max_gap_s: float) -> bool:
+    """Whether readings stamped ``ts_s`` [s] are :data:`STAMP_INFER_MIN_SPACING_S` or more
+    apart (the median of the spacings the energy rule bridges): a logger whose stamps'
+    meaning :func:`inferred_stamped` reads."""
+    step = np.diff(np.asarray(ts_s, np.float64).reshape(-1))
+    bridged = step[step <= max_gap_s]
+    return bridged.size > 0 and float(np.median(bridged)) >= STAMP_INFER_MIN_SPACING_S
+
+
 def inferred_stamped(site: Site, ts_s: np.ndarray, values: np.ndarray, max_gap_s: float,
                      stamped: str = "instant") -> str:
     """What the stamps ``ts_s`` [s] of a logger's readings ``values`` (the fixed array's
@@ -716,12 +725,10 @@ def inferred_stamped(site: Site, ts_s: np.ndarray, values: np.ndarray, max_gap_s
     v = np.asarray(values, np.float64).reshape(-1)
     ok = np.isfinite(ts) & np.isfinite(v)
     ts, v = ts[ok], v[ok]
-    if ts.size < 8:
+    if ts.size < 8 or not slow_logger(ts, max_gap_s):
         return stamped
     step = np.diff(ts)
     bridged = step <= max_gap_s
-    if not bridged.any() or float(np.median(step[bridged])) < STAMP_INFER_MIN_SPACING_S:
-        return stamped
     # the clear sky on the fixed plane, minute by minute over the readings and an interval
     # around them, and its running integral: the mean over any interval is a difference
     reach = float(np.median(step[bridged])) + max_gap_s

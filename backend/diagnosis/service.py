@@ -79,8 +79,9 @@ MAX_DAYS = 400
 #: faults.sky_clock; 18: a slow logger's stamp convention read from its readings where the
 #: site leaves the default, weather_twin.readings_stamped; 19: a shape fit needs 10 readings
 #: under the sun per fitted parameter, a slow logger's readings counted by their spacing,
-#: faults.SHAPE_READINGS_PER_PARAMETER: an hourly logger's day is not fitted).
-CACHE_VERSION = 19
+#: faults.SHAPE_READINGS_PER_PARAMETER: an hourly logger's day is not fitted; 20: that
+#: convention read over the run and the month before it, weather_twin.STAMP_LOOKBACK_S).
+CACHE_VERSION = 20
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99

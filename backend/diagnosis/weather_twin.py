@@ -12,6 +12,7 @@ per-day energies of the same twin are cached by the diagnosis
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -88,20 +89,34 @@ def site_minutes(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int
     with ctx.engine.connect() as conn:
         fx_rows = _rows(conn, fixed.array_id, t0, t1, gap)
         tr_rows = _rows(conn, tracker.array_id, t0, t1, gap)
-    stamped = readings_stamped(info, fx_rows, gap)
+        stamped = readings_stamped(info, fx_rows, gap, lambda: _rows(
+            conn, fixed.array_id, t0 - STAMP_LOOKBACK_S, t1, gap))
     fx, fx_s, _ = minute_grid(fx_rows, t0, t1, gap, stamped)
     tr, tr_s, tr_spacing = minute_grid(tr_rows, t0, t1, gap, stamped)
     return tr, fx, sky_sensors(fx_s, tr_s), tr_spacing
 
 
-def readings_stamped(info: SiteInfo, fixed_rows: np.ndarray, max_gap_s: int) -> str:
+#: How far before a run the fixed array's readings are read to tell what a slow logger's
+#: stamps mark [s]: a month holds clear days (a cloudy day alone shows no convention, and
+#: asked for alone it was read as instants where its month said interval ends)
+STAMP_LOOKBACK_S = 30 * 86400
+
+
+def readings_stamped(info: SiteInfo, fixed_rows: np.ndarray, max_gap_s: int,
+                     lookback_rows: Callable[[], np.ndarray]) -> str:
     """What the loggers' stamps mark for the diagnosis: the site's ``readings_stamped``, or
-    where the site leaves the default ``"instant"`` and the fixed array's readings are
-    20 minutes or more apart, what their clear days' shape says
+    where the site leaves the default ``"instant"`` and the fixed array's readings
+    (``fixed_rows``, the run's) are :data:`sim.sky_sensor.STAMP_INFER_MIN_SPACING_S` or
+    more apart, what the clear days' shape says over the run and the
+    :data:`STAMP_LOOKBACK_S` before it (``lookback_rows``, read only then)
     (:func:`sim.sky_sensor.inferred_stamped`: an hourly logger's means stamped at the end
     of their hour read as instants matched the sky to the sun half an hour later, and every
     clear day was a ``sky_clock_offset``). The fixed plane's sensor where the logger reads
     one, else its power."""
+    if info.site.readings_stamped != "instant" or not sky_sensor.slow_logger(
+            fixed_rows[:, 0], max_gap_s):
+        return info.site.readings_stamped
+    fixed_rows = lookback_rows()
     col = 4 + SENSOR_NAMES.index("poa_irradiance_w_m2")
     poa = fixed_rows[:, col] if fixed_rows.shape[1] > col else np.full(len(fixed_rows), np.nan)
     values = poa if np.isfinite(poa).sum() * 2 > len(fixed_rows) else fixed_rows[:, 3]

@@ -71,6 +71,27 @@ def test_a_slow_loggers_stamp_convention_is_read_from_its_clear_days(logged, ste
     assert inferred_stamped(SITE, ts, v, gap, "interval_start") == "interval_start"
 
 
+def test_a_cloudy_day_asked_for_alone_reads_its_months_convention(logged) -> None:
+    """A partly cloudy day shows no stamp convention of its own (its shape is the clouds'):
+    asked for alone, or as a one-day gap between cached days, it was read as instants where
+    the run with its clear neighbour read interval ends (a reviewer's finding), and cached
+    so. weather_twin.readings_stamped reads the fixed array's month before the run too."""
+    from types import SimpleNamespace
+
+    from backend.diagnosis.weather_twin import readings_stamped
+
+    gap = 3600
+    ts, v = means(logged.times, logged.fixed_power_w, 60, "end")
+    rows = np.column_stack([ts, np.full(ts.size, np.nan), np.full(ts.size, np.nan), v])
+    partly = rows[ts >= (FIRST + pd.Timedelta(days=1)).timestamp()]
+    assert inferred_stamped(SITE, partly[:, 0], partly[:, 3], gap) == "instant"
+    info = SimpleNamespace(site=SITE)
+    assert readings_stamped(info, partly, gap, lambda: rows) == "interval_end"  # type: ignore[arg-type]
+    minute_logger = np.column_stack([np.arange(0, 86400, 60.0), *[np.ones(1440)] * 3])
+    assert readings_stamped(info, minute_logger, gap, lambda: pytest.fail(  # type: ignore[arg-type]
+        "a fast logger's month is not read")) == "instant"
+
+
 @pytest.fixture(scope="module", params=[(60, "end"), (60, "start"), (30, "end")],
                 ids=lambda p: f"{p[0]}min-{p[1]}")
 def diagnosed(request: pytest.FixtureRequest, logged,
