@@ -326,8 +326,11 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
                         pending.discard(fut)
                         try:
                             rows.append(fut.result())
-                        except ImportError as exc:  # a worker that joined without heliotwin
-                            client.cancel(futures)
+                        except ModuleNotFoundError as exc:
+                            if (exc.name or "").split(".")[0] not in ("backend", "sim",
+                                                                      "vision"):
+                                raise  # a case's own failure, not a missing install
+                            client.cancel(futures)  # a worker that joined without heliotwin
                             raise SweepFailed(f"a worker of {address} cannot import "
                                               f"heliotwin's code ({_short_error(exc)}): "
                                               f"{_INSTALL_ON_WORKERS}") from None

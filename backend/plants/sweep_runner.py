@@ -130,10 +130,13 @@ class SweepRunner:
                 log.warning("plant sweep %s failed: %s", state.sweep_id, exc)
                 state.status, state.error = "failed", str(exc)
                 state.result = exc.result
-            except SweepSetupError as exc:  # the setting's scheduler is not one (or is down)
+            except SweepSetupError as exc:  # the scheduler is not one (or is down), or its
+                # workers lack heliotwin; the setting named where it is the setting's address
+                log.warning("plant sweep %s refused by its cluster: %s", state.sweep_id, exc)
                 state.status = "failed"
-                state.error = (f"{SCHEDULER_SETTING}: "
-                               f"{str(exc).removeprefix('scheduler: ')}")
+                why = str(exc).removeprefix("scheduler: ")
+                state.error = f"{SCHEDULER_SETTING}: {why}" if why.startswith(
+                    "cannot reach") or "no Dask scheduler address" in why else why
             except asyncio.CancelledError:          # the service stops: the thread stops too
                 state.cancel = True
                 state.status, state.error = "failed", "the service stopped"

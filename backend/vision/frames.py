@@ -56,7 +56,7 @@ _ABBREVIATIONS = ("CET", "CEST", "MEZ", "MESZ", "WET", "EET", "EEST", "GMT", "BS
                   "HST", "AEST", "AEDT", "ACST", "ACDT", "AWST", "NZST", "NZDT", "JST",
                   "KST", "MSK", "HKT", "SGT", "WIB", "BRT", "UT")
 _ABBREVIATION = re.compile(r"(?<![a-z])(?:" + "|".join(_ABBREVIATIONS) + r")"
-                           r"(?:[pm+-]\d+(?:[:.]\d+)?)?(?![a-z])", re.IGNORECASE)
+                           r"(?:[pm+-]\d+(?:[:.]\d+)?)?(?![a-z0-9])", re.IGNORECASE)
 #: a bare ``+hh`` (or ``+h``) right after the time digits: a zone, but not one ISO 8601
 #: spells exactly enough to be told from a number
 _BARE_PLUS = re.compile(r"\+\d{1,2}(?![\d:])")

@@ -225,10 +225,12 @@ def test_zone_abbreviations_and_bare_plus_hours_are_refused(client: httpx.Client
         assert f["wall_time"] is None and f["utc_offset_h"] is None, f
         assert "send the frame's time" in f["zone_error"], f
     # words that are no zone after the time still leave the name's time (read in UTC)
-    fine = ["cam_20160530_100600_west.jpg", "cam_20160530_100600_test.jpg"]
+    # (nor a letter pair and a number: a camera's "ut1", "est2" — a reviewer's finding)
+    fine = ["cam_20160530_100600_west.jpg", "cam_20160530_100600_test.jpg",
+            "cam_20160530_100600_ut1.jpg", "cam_20160530_100600_est2.jpg"]
     r = client.get("/api/v1/vision/frame-times", params=[("filename", n) for n in fine])
     assert [(f["wall_time"], f["zone_error"]) for f in r.json()["frames"]] == \
-        [("2016-05-30T10:06:00", None)] * 2
+        [("2016-05-30T10:06:00", None)] * 4
     named = "sky_20240210_103000_CST.png"
     r = client.post("/api/v1/vision/sun", files={"file": (named, frame_png, "image/png")},
                     data={"camera": "fisheye", "site_id": "tehuantepec"})

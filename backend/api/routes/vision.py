@@ -13,7 +13,7 @@
   (``vision.calibrate.self_calibrate``: outlying frames named and left out), stored
   with its per-frame residuals and the frames' decoded size; fewer than three distinct
   sun directions (422 ``timestamps``) or a fit beyond ``vision.calibrate.MAX_RMS_DEG``
-  (422 ``files``), one most frames disagree with or whose zenith lies far from the image
+  (422 ``files``), one most frames disagree with or whose optical centre lies far from the image
   circle's centre (times in a wrong zone; 422 ``timestamps``,
   ``backend/vision/checks.py``) is refused; a calibration made without a token is kept within
   ``anonymous_keep_rows``, as detections are.
