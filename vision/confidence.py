@@ -134,6 +134,12 @@ another width, sits in the bright cloud, not in a fall-off of its own (FE3, UCEE
 HDR suns — rated it up to 0.86."""
 
 
+def _small_without_glare(x: NDArray[np.float64]) -> bool:
+    """A core smaller than a sun's (``too_small`` > 0) without the sun's glare
+    (:data:`SMALL_CORE_GLARE`)."""
+    return bool(x[4] > 0.0 and x[1] < SMALL_CORE_GLARE)
+
+
 def admissible(x: NDArray[np.float64]) -> bool:
     """Whether a candidate can be the sun at all: its core clipped (the sun saturates any
     camera exposed for the sky: it is some 10⁵ times brighter) and not of a shape no sun
@@ -142,7 +148,7 @@ def admissible(x: NDArray[np.float64]) -> bool:
     model: a candidate that fails it gets probability 0 and is never fitted on. A core
     smaller than a sun's (``too_small`` > 0, known scale only) must carry the sun's glare
     (``glare`` ≥ :data:`SMALL_CORE_GLARE`): it has nothing else to show it is the sun."""
-    if x[4] > 0.0 and x[1] < SMALL_CORE_GLARE:
+    if _small_without_glare(x):
         return False
     return bool((x[2] >= 0.5 or not _GATE_SAT) and x[0] >= _MIN_SHAPE)
 
@@ -205,7 +211,7 @@ def reason(x: NDArray[np.float64], values: dict[str, float],
         return _REASONS["saturated"].format(**values)
     if x[0] < _MIN_SHAPE:
         return _REASONS["shape"].format(**values)
-    if x[4] > 0.0 and x[1] < SMALL_CORE_GLARE:
+    if _small_without_glare(x):
         return _REASONS["small_no_glare"].format(**values)
     w, _ = model if model is not None else _model()
     ideal = np.array([1.0, 1.0, 1.0, 0.6, 0.0, 0.0, 0.0, 1.0, x[8], 0.0])
