@@ -68,15 +68,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument("--cy-px", type=float, help="optical centre row (image centre)")
     d.add_argument("--reference-x-px", type=float, help="pinhole reference pixel column")
     d.add_argument("--reference-y-px", type=float, help="pinhole reference pixel row")
-    d.add_argument("--projection", default="equidistant",
-                   choices=("equidistant", "equisolid", "stereographic", "orthographic"))
+    d.add_argument("--projection",  # None: equidistant (None tells a calibration's clash)
+                   choices=("equidistant", "equisolid", "stereographic", "orthographic"),
+                   help="fisheye projection (default equidistant)")
     d.add_argument("--px-per-deg", type=float,
                    help="fisheye radial scale [px/deg] (default: from the image circle, "
                         "taken as the horizon of a 180-degree lens, as the service does)")
     d.add_argument("--north-offset-deg", type=float,
                    help="where north lies, clockwise from image-up (default 0, a guess: "
                         "the ephemeris then does not guide the detection)")
-    d.add_argument("--east", choices=("left", "right"), default="left",
+    d.add_argument("--east", choices=("left", "right"),
                    help="east left of north (raw view from below, default) or right")
     d.add_argument("--timestamp", type=_time,
                    help="frame time, ISO 8601 with offset (default: the time in the file "
@@ -163,9 +164,11 @@ def detect(args: argparse.Namespace) -> dict[str, Any]:
     from backend.vision.checks import error_warnings
     from backend.vision.frames import frame_inputs
     from backend.vision.service import (
+        CAMERA_PARAMS,
         analyse,
         calibration_place,
         check_calibration_size,
+        check_no_camera_with_calibration,
         decode,
         is_oriented,
         name_zone,
@@ -180,6 +183,10 @@ def detect(args: argparse.Namespace) -> dict[str, Any]:
                                            "north_offset_deg", "east")}
     if args.calibration_id is not None and args.camera not in (None, "fisheye"):
         raise ValueError("--camera: a --calibration-id is a fisheye camera")
+    if args.calibration_id is not None:  # as the service: a typed camera is not ignored
+        check_no_camera_with_calibration(
+            [k for k in CAMERA_PARAMS if params.get(k) is not None],
+            lambda name: "--" + name.replace("_", "-"))
     if args.calibration_id is None and args.camera is None:
         raise ValueError("--camera: required (pinhole or fisheye), or give --calibration-id")
     cal = None

@@ -101,6 +101,23 @@ def name_zone(place: Place | None) -> ZoneInfo | None:
     return place.zone if place is not None and place.site_id is not None else None
 
 
+#: A typed camera's parameters, which a stored calibration replaces (the form's names).
+CAMERA_PARAMS = ("px_per_deg", "cx_px", "cy_px", "north_offset_deg", "east", "projection",
+                 "fov_deg", "reference_x_px", "reference_y_px")
+
+
+def check_no_camera_with_calibration(given: list[str], spell: Callable[[str], str] = str
+                                     ) -> None:
+    """422 when a calibration is used with typed camera parameters (``given``: the
+    :data:`CAMERA_PARAMS` the caller set), naming the first as the caller spells it
+    (``spell``: the form's name over HTTP, the flag on the CLI) — they were ignored silently."""
+    if given:
+        raise InputError(422, f"{spell(given[0])}: a {spell('calibration_id')} carries its own "
+                              f"camera (centre, scale, north, mirror, projection); give "
+                              f"{spell('calibration_id')} or {', '.join(map(spell, given))}, "
+                              f"not both")
+
+
 def calibration_place(cal: dict[str, Any], site_place: Callable[[str], Place | None]
                       ) -> tuple[Place, str]:
     """Where a stored calibration was fitted, for a detection given none: its site (its

@@ -82,6 +82,10 @@ def test_detect_with_a_stored_calibration(live_server: LiveServer, client: httpx
     assert f"error against SPA {out['error']['separation_deg']:.3f} deg" in text.stdout
     missing = detect("--calibration-id", "999999")
     assert missing.returncode == 2 and "--calibration-id: no calibration 999999" in missing.stderr
+    typed = detect("--calibration-id", str(cal_id), "--px-per-deg", "12")  # was ignored
+    assert typed.returncode == 2 and typed.stderr.strip().endswith(
+        "--px-per-deg: a --calibration-id carries its own camera (centre, scale, north, "
+        "mirror, projection); give --calibration-id or --px-per-deg, not both"), typed.stderr
     pinhole = detect("--calibration-id", str(cal_id), "--camera", "pinhole")
     assert pinhole.returncode == 2 and "fisheye" in pinhole.stderr
     neither = detect()

@@ -76,6 +76,7 @@ from backend.vision.checks import error_warnings
 from backend.vision.frames import FrameInputs, NameZoneError, frame_inputs, time_from_name
 from backend.vision.options import N_RADIAL_CHOICES, N_RADIAL_DEFAULT, parse_n_radial
 from backend.vision.service import (
+    CAMERA_PARAMS,
     Frame,
     Place,
     Upload,
@@ -85,6 +86,7 @@ from backend.vision.service import (
     calibration_place,
     check_calibration_size,
     check_image,
+    check_no_camera_with_calibration,
     decode,
     detection_row,
     evaluate,
@@ -295,10 +297,6 @@ def _method(form: FormData) -> str:
 
 
 #: the typed camera's parameters, which a calibration_id replaces (both given: a 422)
-_CAMERA_PARAMS = ("px_per_deg", "cx_px", "cy_px", "north_offset_deg", "east", "projection",
-                  "fov_deg", "reference_x_px", "reference_y_px")
-
-
 def _pairs(form: FormData) -> None:
     """Fields that only mean something together: one without the other is a 422."""
     if (_text(form, "reference_x_px") is None) != (_text(form, "reference_y_px") is None):
@@ -321,11 +319,7 @@ def _stored_camera(session: Any, form: FormData
     raw = _text(form, "calibration_id")
     if raw is None:
         return None, None
-    clash = [k for k in _CAMERA_PARAMS if _text(form, k) is not None]
-    if clash:
-        raise HTTPException(422, f"{clash[0]}: a calibration_id carries its own camera "
-                                 f"(centre, scale, north, mirror, projection); give "
-                                 f"calibration_id or {', '.join(clash)}, not both")
+    check_no_camera_with_calibration([k for k in CAMERA_PARAMS if _text(form, k) is not None])
     if not raw.isdigit() or int(raw) == 0:
         raise HTTPException(422, f"calibration_id: {_cut(raw)} must be a positive integer id")
     if int(raw) > _MAX_ID:
