@@ -6,7 +6,8 @@ rule of :mod:`backend.measurements.rollups`), the twin's from series stored on
 demand (``TwinService.ensure``). ``gain_pct`` is ``100·(tracker/fixed − 1)`` from
 measured energy, null when either is missing or their readings cover the period unalike
 (:func:`sim.energy.measured_gain_pct`); ``twin_gain_pct`` the same from the twin,
-``twin_matched_gain_pct`` from the twin over the same minutes as the readings. A
+``twin_matched_gain_pct`` from the twin over the minutes both loggers' readings cover
+(``twin_shared_wh``; null where they share none, ``gain_note`` says why). A
 period whose readings miss part of the twin's energy (a half-day) is ``partial``
 and is compared with ``twin_matched_wh``, never with the whole-period twin.
 """
@@ -69,14 +70,28 @@ def compare(arrays: dict[str, dict[str, Any]], tracker: str | None,
                             [tr.get(SHARED), fx.get(SHARED)])
         out["gain_pct"] = measured_gain_pct(tr["measured_wh"], fx["measured_wh"], same)
         out["twin_gain_pct"] = gain_pct(tr["twin_wh"], fx["twin_wh"])
-        out["twin_matched_gain_pct"] = gain_pct(tr["twin_matched_wh"], fx["twin_matched_wh"])
-        if tr["measured_wh"] is not None and fx["measured_wh"] is not None \
-                and out["gain_pct"] is None:
-            out["gain_note"] = (
-                f"the two loggers read different minutes: of the minutes each covers, both "
-                f"cover {_share(tr)} of the tracker's expected energy and {_share(fx)} of the "
-                f"fixed array's" if same is False else "the fixed array measured no energy")
+        # the twin over the minutes BOTH loggers cover (one rule with the measured gain):
+        # each array's twin over its own minutes read a tracker's day beside a fixed
+        # array's silent one as +167 % (a tester's finding)
+        out["twin_matched_gain_pct"] = gain_pct(tr.get(SHARED), fx.get(SHARED))
+        if out["gain_pct"] is None:
+            out["gain_note"] = _gain_note(tr, fx, same)
     return out
+
+
+def _gain_note(tr: dict[str, Any], fx: dict[str, Any], same: bool | None) -> str:
+    """Why a period has no measured gain (and, for want of shared minutes, no
+    ``twin_matched_gain_pct``): every empty gain says why."""
+    missing = [what for what, a in (("the tracker", tr), ("the fixed array", fx))
+               if a["measured_wh"] is None]
+    if missing:
+        return " and ".join(missing) + (" have" if len(missing) > 1 else " has") + \
+            " no readings: the loggers share no minutes"
+    if same is False:
+        return (f"the two loggers read different minutes: of the minutes each covers, both "
+                f"cover {_share(tr)} of the tracker's expected energy and {_share(fx)} of the "
+                f"fixed array's")
+    return "the fixed array measured no energy"
 
 
 def _share(a: dict[str, Any]) -> str:

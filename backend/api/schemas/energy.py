@@ -35,10 +35,13 @@ class EnergyTotalsRead(BaseModel):
     gain_pct: float | None = Field(description="100·(tracker/fixed − 1), measured; null when "
                                               "either is missing, the fixed array's is not "
                                               "positive or the loggers read different minutes")
-    gain_note: str | None = Field(None, description="why gain_pct is null though both arrays "
-                                                    "measured, else null")
+    gain_note: str | None = Field(None, description="why gain_pct (and, when the loggers "
+                                                    "share no minutes, twin_matched_gain_pct) "
+                                                    "is null, else null")
     twin_gain_pct: float | None
-    twin_matched_gain_pct: float | None
+    twin_matched_gain_pct: float | None = Field(
+        description="the twin's gain over the minutes both loggers cover (twin_shared_wh); "
+                    "null where they share none")
     twin_weather_gain_pct: float | None = None
 
 

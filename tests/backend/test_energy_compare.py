@@ -1,0 +1,32 @@
+"""The per-period comparison (:func:`backend.measurements.energy.compare`) and the report's
+CSV and title, without a service: the numbers are a tester's (tehuantepec, Dec 3 with
+tracker readings and no fixed ones, Dec 4 with both)."""
+
+from __future__ import annotations
+
+import pytest
+
+from backend.measurements.energy import COVERED, SHARED, compare
+
+
+def arr(measured: float | None, twin: float, matched: float | None, readings: int,
+        covered: float, shared: float) -> dict:
+    return {"measured_wh": measured, "twin_wh": twin, "twin_matched_wh": matched,
+            "readings": readings, COVERED: covered, SHARED: shared}
+
+
+def test_the_twin_gain_over_the_same_minutes_is_over_the_minutes_both_loggers_cover() -> None:
+    # two days summed: the tracker read both, the fixed logger only the second
+    total = compare({"tracker": arr(11568.8, 12132.3, 12132.3, 2880, 12132.3, 6062.6),
+                     "fixed": arr(4538.4, 9083.9, 4538.4, 288, 4538.4, 4538.4)},
+                    "tracker", "fixed")
+    assert total["twin_matched_gain_pct"] == pytest.approx(100 * (6062.6 / 4538.4 - 1))
+    assert total["gain_pct"] is None and "different minutes" in total["gain_note"]
+
+
+def test_a_day_without_fixed_readings_has_no_same_minutes_gain_and_says_why() -> None:
+    day = compare({"tracker": arr(6069.7, 6069.7, 6069.7, 1440, 6069.7, 0.0),
+                   "fixed": arr(None, 4545.5, None, 0, 0.0, 0.0)}, "tracker", "fixed")
+    assert day["twin_matched_gain_pct"] is None and day["gain_pct"] is None
+    assert day["gain_note"] == "the fixed array has no readings: the loggers share no minutes"
+    assert day["twin_gain_pct"] == pytest.approx(100 * (6069.7 / 4545.5 - 1))
