@@ -30,7 +30,7 @@ from backend.measurements.queries import (
     shared_minutes_wh,
 )
 from backend.sites import SiteInfo
-from sim.energy import gain_pct, measured_gain_pct, same_minutes
+from sim.energy import SAME_MINUTES, gain_pct, measured_gain_pct, same_minutes
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -46,6 +46,13 @@ PARTIAL_BELOW_PCT = 95.0
 #: summed like the energies. Whether the two read the same minutes:
 #: :func:`sim.energy.same_minutes`
 COVERED, SHARED = "twin_covered_wh", "twin_shared_wh"
+#: Where each array's readings cover at least this share of its twin's energy [%], the two
+#: loggers are taken to read the same minutes without reading them (:func:`_coverage`):
+#: what either misses is then under half the same-minutes tolerance
+#: (:data:`sim.energy.SAME_MINUTES`). It was :data:`PARTIAL_BELOW_PCT`: a fixed logger
+#: silent since 12:25 beside a tracker read on to 12:31 (3 % of the day so far, not
+#: partial) gave a gain of +39.5 % beside the twin's +35.4 % (a tester's finding).
+SAME_WITHOUT_READING_PCT = 100.0 * (1.0 - SAME_MINUTES / 2)
 
 
 def _ratio(num: float | None, den: float | None) -> float | None:
@@ -104,8 +111,10 @@ def _coverage(conn: Any, table: Any, matched: dict[int, np.ndarray], tracker_id:
               ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """Per array, its twin over the minutes its readings cover and over those both cover,
     per period (:func:`backend.measurements.queries.shared_minutes_wh`). Read only for a
-    ``partial`` period (an array's readings under :data:`PARTIAL_BELOW_PCT` of its twin's
-    energy): in any other both loggers read all but a few minutes, taken as the same
+    period where an array's readings cover under :data:`SAME_WITHOUT_READING_PCT` of its
+    twin's energy (a partial one, a logger silent for some minutes, a day in progress
+    whose logger stopped: its twin is stored up to now): in any other both loggers read
+    all but a few minutes' worth, taken as the same
     (both: ``twin_matched_wh``; reading a year of gappy months at 1 % cost 15× the
     year's answer, a tester measured); one where a logger has no reading has none in
     common (a gain is not measured there anyway). Read periods are cached like
@@ -117,7 +126,7 @@ def _coverage(conn: Any, table: Any, matched: dict[int, np.ndarray], tracker_id:
         twin = np.asarray(table.energy_wh[(aid, 1)], float)
         with np.errstate(divide="ignore", invalid="ignore"):
             share = np.where(twin > 0, np.asarray(matched[aid], float) / twin, 1.0)
-        full &= share >= PARTIAL_BELOW_PCT / 100.0
+        full &= share >= SAME_WITHOUT_READING_PCT / 100.0
     both = has[tracker_id] & has[fixed_id]
     out = {aid: (np.array(matched[aid], float), np.where(both, matched[aid], 0.0))
            for aid in ids}

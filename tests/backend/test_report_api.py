@@ -230,3 +230,32 @@ def test_a_bad_report_range_is_a_422_naming_it(client: httpx.Client, params: dic
                                                words: str) -> None:
     r = client.get(f"{BASE}/report.png", params=params)
     assert r.status_code == 422 and words in r.json()["detail"]
+
+
+SILENT = HALF + dt.timedelta(days=2)  # the fixed logger silent 08:00–08:25, past the gap
+
+
+def test_a_logger_silent_for_minutes_leaves_no_gain_over_minutes_it_missed(
+        client: httpx.Client, server: InProcessServer) -> None:
+    """The fixed logger silent 26 minutes (over the 20 min energy gap; a logger_silent
+    alert; today's case is the same: the minutes since its last reading): the day is not
+    partial (its readings cover ~97 % of its twin), but the tracker read minutes it did
+    not. The gain was taken as over the same minutes (+33 % for the +30 % posted at every
+    minute, a tester's
+    +39.5 % beside the twin's +35.4 %); it is null with why, and the twin's gain over the
+    minutes both read stays."""
+    token = server.token("tehuantepec")
+    for array, scale in (("tracker", 1.3), ("fixed", 1.0)):
+        minutes = [m for m in range(1440) if array == "tracker" or not 480 <= m < 505]
+        r = client.post(f"{BASE}/measurements", json={"readings": sine_day(
+            SILENT, array, scale, minutes)}, headers={"Authorization": f"Bearer {token}"})
+        assert r.status_code == 200, r.text
+    day = client.get(f"{BASE}/energy", params={
+        "start": SILENT.isoformat(),
+        "end": (SILENT + dt.timedelta(days=1)).isoformat()}).json()["rows"][0]
+    assert day["partial"] is False and day["arrays"]["fixed"]["coverage_pct"] > 95
+    assert day["gain_pct"] is None and "different minutes" in day["gain_note"]
+    tr, fx = day["arrays"]["tracker"], day["arrays"]["fixed"]
+    assert tr["twin_shared_wh"] < 0.99 * tr["twin_covered_wh"]
+    assert day["twin_matched_gain_pct"] == pytest.approx(
+        100 * (tr["twin_shared_wh"] / fx["twin_shared_wh"] - 1))
