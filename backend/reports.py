@@ -90,7 +90,8 @@ def report_csv(rep: dict[str, Any]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["period", "period_start", "period_end", *[f"{n}_{k}" for n, k in cols],
-                "gain_pct", "twin_gain_pct", "twin_matched_gain_pct", "partial", "twin_note"])
+                "gain_pct", "twin_gain_pct", "twin_matched_gain_pct", "partial", "gain_note",
+                "twin_note"])
     total = {**rep["totals"], "period_start": rep["start"], "period_end": rep["end"],
              "twin_note": None}
     for kind, rows in (("day", rep["days"]), ("month", rep["months"]), ("year", rep["years"]),
@@ -101,7 +102,7 @@ def report_csv(rep: dict[str, Any]) -> str:
                         *[_cell(arrays[n].get(k)) for n, k in cols],
                         *[_cell(r.get(k)) for k in ("gain_pct", "twin_gain_pct",
                                                     "twin_matched_gain_pct", "partial",
-                                                    "twin_note")]])
+                                                    "gain_note", "twin_note")]])
     return buf.getvalue()
 
 

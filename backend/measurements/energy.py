@@ -66,9 +66,15 @@ def compare(arrays: dict[str, dict[str, Any]], tracker: str | None,
         a["performance_ratio"] = _ratio(a["measured_wh"], a["twin_matched_wh"])
         cov = _ratio(a["twin_matched_wh"], a["twin_wh"]) if a["readings"] else None
         a["coverage_pct"] = None if cov is None else min(100.0, 100.0 * cov)
-    covs = [a["coverage_pct"] for a in arrays.values()]
+    # an array without a reading covers none of a positive twin: a day the fixed logger
+    # was silent beside the tracker's was partial null (an empty cell in the report's CSV)
+    covs: list[float | None] = [
+        a["coverage_pct"] if a["readings"] else 0.0 if (a["twin_wh"] or 0.0) > 0 else None
+        for a in arrays.values()]
+    known = [c for c in covs if c is not None]
     out: dict[str, Any] = {
-        "partial": None if not arrays or None in covs else min(covs) < PARTIAL_BELOW_PCT,
+        "partial": None if not arrays or len(known) < len(covs)
+        or not any(a["readings"] for a in arrays.values()) else min(known) < PARTIAL_BELOW_PCT,
         "gain_pct": None, "twin_gain_pct": None, "twin_matched_gain_pct": None}
     out["gain_note"] = None
     if tracker is not None and fixed is not None:

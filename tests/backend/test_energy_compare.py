@@ -30,3 +30,34 @@ def test_a_day_without_fixed_readings_has_no_same_minutes_gain_and_says_why() ->
     assert day["twin_matched_gain_pct"] is None and day["gain_pct"] is None
     assert day["gain_note"] == "the fixed array has no readings: the loggers share no minutes"
     assert day["twin_gain_pct"] == pytest.approx(100 * (6069.7 / 4545.5 - 1))
+
+
+def _silent_fixed_day() -> dict:
+    arrays = {"tracker": arr(6069.7, 6069.7, 6069.7, 1440, 6069.7, 0.0),
+              "fixed": arr(None, 4545.5, None, 0, 0.0, 0.0)}
+    return {"period_start": "2026-12-03T00:00:00-06:00",
+            "period_end": "2026-12-04T00:00:00-06:00", "arrays": arrays,
+            **compare(arrays, "tracker", "fixed"), "twin_note": None}
+
+
+def test_a_day_without_fixed_readings_is_partial() -> None:
+    assert _silent_fixed_day()["partial"] is True
+    night = compare({"tracker": arr(None, 0.0, None, 0, 0.0, 0.0),
+                     "fixed": arr(None, 0.0, None, 0, 0.0, 0.0)}, "tracker", "fixed")
+    assert night["partial"] is None  # nothing read, nothing expected
+
+
+def test_the_report_csv_says_why_a_gain_is_empty_and_flags_the_partial_day() -> None:
+    import csv
+    import io
+
+    from backend.reports import report_csv
+
+    day = _silent_fixed_day()
+    rep = {"arrays": ["tracker", "fixed"], "days": [day], "months": [], "years": [],
+           "totals": {k: v for k, v in day.items() if k not in ("period_start", "period_end")},
+           "start": day["period_start"], "end": day["period_end"]}
+    rows = list(csv.DictReader(io.StringIO(report_csv(rep))))
+    for row in rows:
+        assert row["partial"] == "True" and row["gain_pct"] == ""
+        assert row["gain_note"] == "the fixed array has no readings: the loggers share no minutes"

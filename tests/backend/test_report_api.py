@@ -182,7 +182,7 @@ def test_report_csv_names_its_units_and_png_is_one_a4_page(client: httpx.Client,
     assert table[-1]["period"] == "total"
     header = r.text.splitlines()[0].split(",")
     quantities = [c for c in header if c not in ("period", "period_start", "period_end",
-                                                 "partial", "twin_note")]
+                                                 "partial", "gain_note", "twin_note")]
     assert all(c.endswith(("_wh", "_pct", "_ratio")) for c in quantities), quantities
     day_rows = [row for row in table if row["period"] == "day"]
     assert [row["partial"] for row in day_rows] == ["False", "True"]

@@ -109,12 +109,12 @@ def _energy(site_id: str, ctx: ContextDep, start: str, end: str, interval: str, 
             keys += ("twin_weather_wh",)
         w.writerow(["period_start", "period_end", *[f"{n}_{k}" for n in names for k in keys],
                     "gain_pct", "twin_gain_pct", "twin_matched_gain_pct", "partial",
-                    "twin_note"])
+                    "gain_note", "twin_note"])
         for r in data["rows"]:
             w.writerow([r["period_start"], r["period_end"],
                         *[r["arrays"][n][k] for n in names for k in keys],
                         r["gain_pct"], r["twin_gain_pct"], r["twin_matched_gain_pct"],
-                        r["partial"], r["twin_note"]])
+                        r["partial"], r["gain_note"], r["twin_note"]])
         return Response(buf.getvalue(), media_type="text/csv", headers={
             "Content-Disposition": f'attachment; filename="{site_id}_energy_{interval}.csv"'})
     return Response(orjson.dumps(data), media_type="application/json")
