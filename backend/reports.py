@@ -72,7 +72,10 @@ def report(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
     return {
         "site_id": s.site_id, "name": s.name, "latitude_deg": s.latitude,
         "longitude_deg": s.longitude, "timezone": s.timezone,
-        "start": days["start"], "end": days["end"], "arrays": list(info.arrays),
+        # in the site's zone, as every period: a range given in UTC was titled by its UTC
+        # dates and its CSV total row carried +00:00 among −06:00 rows (a tester's finding)
+        "start": start.astimezone(info.zone).isoformat(),
+        "end": end.astimezone(info.zone).isoformat(), "arrays": list(info.arrays),
         "partial_below_pct": days["partial_below_pct"], "max_gap_s": days["max_gap_s"],
         "totals": days["totals"], "days": days["rows"], "months": months["rows"],
         "years": years,
@@ -124,6 +127,15 @@ def _pr(v: float | None) -> str:
     return "—" if v is None else f"{v:.2f}"
 
 
+def _title_time(iso: str) -> str:
+    """A range end in the title, in the site's zone: its date at local midnight, else the
+    date and time with the offset (2026-12-02 18:00 −06:00)."""
+    t = dt.datetime.fromisoformat(iso)
+    if t.time() == dt.time(0):
+        return f"{t:%Y-%m-%d}"
+    return f"{t:%Y-%m-%d %H:%M} {t:%z}"[:-2] + ":" + f"{t:%z}"[-2:]
+
+
 def report_png(rep: dict[str, Any], version: str) -> bytes:
     """A one-page A4 PNG of the report (matplotlib, Agg)."""
     buf = io.BytesIO()
@@ -142,7 +154,7 @@ def report_figure(rep: dict[str, Any], version: str) -> Any:
 
     names = rep["arrays"]
     fig = Figure(figsize=(8.27, 11.69), dpi=150)
-    start, end = rep["start"][:10], rep["end"][:10]
+    start, end = _title_time(rep["start"]), _title_time(rep["end"])
     fig.text(0.06, 0.965, f"{rep['name']}", fontsize=13, weight="bold")
     fig.text(0.06, 0.948, f"site {rep['site_id']} · {rep['latitude_deg']:.4f}°, "
              f"{rep['longitude_deg']:.4f}° · {rep['timezone']} · {start} to {end} "

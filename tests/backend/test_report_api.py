@@ -259,3 +259,22 @@ def test_a_logger_silent_for_minutes_leaves_no_gain_over_minutes_it_missed(
     assert tr["twin_shared_wh"] < 0.99 * tr["twin_covered_wh"]
     assert day["twin_matched_gain_pct"] == pytest.approx(
         100 * (tr["twin_shared_wh"] / fx["twin_shared_wh"] - 1))
+
+
+def test_a_date_time_range_is_titled_in_the_sites_zone(client: httpx.Client) -> None:
+    """start=…T00:00:00Z is 18:00 the day before in Mexico City: the PNG's title and the
+    CSV's total row say so (they read the UTC dates and +00:00 among −06:00 rows)."""
+    from backend.reports import report_figure
+
+    day = HALF + dt.timedelta(days=2)
+    params = {"start": f"{day.isoformat()}T00:00:00Z",
+              "end": f"{(day + dt.timedelta(days=2)).isoformat()}T00:00:00Z"}
+    rep = client.get(f"{BASE}/report", params=params).json()
+    before = day - dt.timedelta(days=1)
+    assert rep["start"] == f"{before.isoformat()}T18:00:00-06:00"
+    title = [t.get_text() for t in report_figure(rep, "test").texts if " to " in t.get_text()]
+    assert f"{before.isoformat()} 18:00 -06:00 to " in title[0], title
+    table = list(csv.DictReader(io.StringIO(client.get(f"{BASE}/report.csv",
+                                                       params=params).text)))
+    assert all(r["period_start"].endswith("-06:00") and r["period_end"].endswith("-06:00")
+               for r in table), [r["period_start"] for r in table if r["period"] == "total"]
