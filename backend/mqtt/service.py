@@ -17,8 +17,9 @@ when ``Settings.mqtt.url`` is set. While connected (aiomqtt) it:
   through an outbox that keeps what could not be sent until the next connection;
 - speaks MQTT 5 and tells the broker the largest packet it takes
   (:data:`MAX_PACKET_BYTES`), so a huge message is dropped by the broker, never read;
-- publishes the retained Home Assistant discovery configs at every connection,
-  and the sensor states every ``Settings.mqtt.publish_interval_s``
+- publishes the retained Home Assistant discovery configs at every connection and
+  whenever the registry's sites change (added, arrays changed, removed), and the
+  sensor states every ``Settings.mqtt.publish_interval_s``
   (:mod:`backend.mqtt.homeassistant`).
 
 A lost or refused connection is retried for as long as the service runs, with
@@ -462,11 +463,22 @@ class MqttService:
             self._outbox.popleft()  # only once the broker has it
 
     async def _publish_ha(self, client: aiomqtt.Client) -> None:
-        sites = [i for i in self.ctx.registry.sites.values() if i.arrays]
-        for info in sites:
-            for topic, config in homeassistant.discovery(self.topics, info, _version()):
-                await client.publish(topic, config, qos=1, retain=True)
+        """Every publish interval: the discovery configs of the registry's sites as they
+        are now (a site added or whose arrays changed gets its configs then, not at the
+        next connection; the configs of a site or array gone, published on this
+        connection, are removed with an empty retained payload), then their states."""
+        published: dict[str, bytes] = {}  # config topic → payload, on this connection
         while True:
+            sites = [i for i in self.ctx.registry.sites.values() if i.arrays]
+            configs = dict(pair for info in sites
+                           for pair in homeassistant.discovery(self.topics, info, _version()))
+            for topic, config in configs.items():
+                if published.get(topic) != config:
+                    await client.publish(topic, config, qos=1, retain=True)
+                    published[topic] = config
+            for topic in [t for t in published if t not in configs]:
+                await client.publish(topic, b"", qos=1, retain=True)
+                del published[topic]
             for info in sites:
                 try:
                     pubs = await asyncio.to_thread(homeassistant.states, self.ctx, info,

@@ -43,6 +43,7 @@ from live_service import (
     ServerProcess,
     free_port,
     new_database,
+    tehuantepec_elsewhere,
 )
 
 from backend.mqtt.assemble import MinuteAssembler, parse_value
@@ -52,6 +53,7 @@ from backend.mqtt.topics import Template, Topics
 BROKER = urlsplit(os.environ.get("MQTT_TEST_URL", "mqtt://127.0.0.1:1883"))
 HOST, PORT = BROKER.hostname or "127.0.0.1", BROKER.port or 1883
 SITE = "tehuantepec"
+ADMIN = "mqtt-admin-token-for-tests"
 WAIT_S = 30.0  # how long a test waits for something to arrive (not a speed check)
 
 
@@ -289,7 +291,9 @@ def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[httpx.Cl
     prefix = f"httest{uuid.uuid4().hex[:10]}"
     tmp = tmp_path_factory.mktemp("mqtt")
     db = new_database("sqlite", tmp)
-    proc = InProcessServer(db.url, extra_env=mqtt_env(prefix, f"mqtt://{HOST}:{PORT}"))
+    env = {**mqtt_env(prefix, f"mqtt://{HOST}:{PORT}"),
+           "HELIOTWIN_SITES_DIR": str(tmp / "user-sites"), "HELIOTWIN_ADMIN_TOKEN": ADMIN}
+    proc = InProcessServer(db.url, extra_env=env)
     try:
         with proc, proc.client(timeout_s=30.0) as c:
             wait_state(c, "connected")
@@ -465,6 +469,30 @@ def test_home_assistant_discovery_is_retained(service: tuple[httpx.Client, str])
         states.wait(lambda m: m.payload == b"0.0025", "fixed energy of 0.0025 kWh")
     finally:
         states.close()
+
+
+def test_a_site_added_while_connected_reaches_home_assistant(
+        service: tuple[httpx.Client, str]) -> None:
+    """A site created over the API (as ``heliotwin site create`` or a dropped file) gets
+    its discovery configs and states within a publish interval, without a reconnection."""
+    c, prefix = service
+    site = f"added{uuid.uuid4().hex[:6]}"
+    ha = Watcher(f"{prefix}_ha/sensor/+/config", f"{prefix}/{site}/+/ha/+")
+    try:
+        r = c.put(f"/api/v1/sites/{site}", json=tehuantepec_elsewhere(c, site),
+                  headers={"Authorization": f"Bearer {ADMIN}"})
+        assert r.status_code == 201, r.text
+        t0 = minute(-1)
+        publish(f"{prefix}/{site}/fixed/state",
+                json.dumps({"ts": iso(t0), "voltage_v": 25.0, "current_a": 4.0}))
+        config = ha.wait(lambda m: m.topic == f"{prefix}_ha/sensor/heliotwin_{site}_fixed_power"
+                                               "/config", f"the config of {site}'s power")
+        assert json.loads(config.payload)["unique_id"] == (
+            f"heliotwin_{site}_fixed_power")
+        ha.wait(lambda m: m.topic == f"{prefix}/{site}/fixed/ha/power" and m.payload == b"100.0",
+                f"{site}'s fixed power of 100 W")
+    finally:
+        ha.close()
 
 
 # ---------------------------------------------------------------- reconnection
