@@ -18,9 +18,16 @@ Energies come from the hourly rollups (:mod:`backend.measurements.rollups`, the
 one energy rule) — all time as the sum of a series' rollups, today from
 :func:`backend.measurements.status.status`, which the dashboard's tiles use too.
 Each state is a bare number on its own topic (``Settings.mqtt.ha_state_topic``),
-retained; a value that is unknown (no readings today, a logger silent for more
-than ``FRESH_S``) is not published, and the power sensors' ``expire_after``
-makes Home Assistant show them unavailable when the logger stops.
+retained; a value that is unknown (no readings today) is not published.
+
+Availability (Home Assistant's ``availability``, ``availability_mode: all``): every
+sensor follows the service's topic :func:`service_availability` — ``online`` retained
+at each connection, ``offline`` at a graceful stop and as the connection's Last Will,
+so a killed service goes unavailable too. The ``power`` sensor also follows its own
+``…/power/availability`` (:func:`power_availability`): ``online`` while the logger's
+last reading is at most :func:`power_max_age_s` old, then ``offline`` (retained, so a
+Home Assistant that restarts later does not show the last value as current); its
+last value stays retained but is not shown.
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ import re
 import time
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 import orjson
 
 from backend.measurements.status import FRESH_S, status
@@ -48,6 +56,9 @@ SENSORS: dict[str, tuple[str, str, str, str]] = {
     "twin_energy_today": ("twin energy today", "kWh", "energy", "total_increasing"),
     "twin_power": ("twin power", "W", "power", "measurement"),
 }
+_RECENT = ("SELECT ts_s FROM measurements WHERE array_id = ? AND source = 0 "
+           "ORDER BY ts_s DESC LIMIT 11")
+ONLINE, OFFLINE = b"online", b"offline"
 _TOTAL = ("SELECT COALESCE(SUM(energy_wh), 0), COALESCE(SUM(n), 0) FROM measurement_rollups "
           "WHERE array_id = ? AND source = ?")
 
@@ -55,6 +66,27 @@ _TOTAL = ("SELECT COALESCE(SUM(energy_wh), 0), COALESCE(SUM(n), 0) FROM measurem
 def object_id(site_id: str, array: str, sensor: str) -> str:
     """``heliotwin_{site_id}_{array}_{sensor}``, in the characters discovery allows."""
     return re.sub(r"[^A-Za-z0-9_-]", "_", f"heliotwin_{site_id}_{array}_{sensor}")
+
+
+def service_availability(topics: Topics) -> str:
+    """The service's availability topic (``online``/``offline``, retained; its Last Will)."""
+    return f"{topics.ha_prefix}/heliotwin/availability"
+
+
+def power_availability(topics: Topics, site_id: str, array: str) -> str:
+    """The availability topic of an array's ``power`` sensor."""
+    return topics.ha_state.format(site_id=site_id, array=array, sensor="power") + "/availability"
+
+
+def power_max_age_s(ts_desc_s: list[float]) -> float:
+    """How old [s] the last reading may be for ``power`` to be shown: :data:`FRESH_S`
+    (5 min), or one cadence of the logger plus a minute when it reports less often
+    (the median interval of its latest readings ``ts_desc_s``, newest first) — a
+    15-minute logger is not unavailable between two readings, and a stopped one is
+    within a minute of its next reading being due."""
+    steps = -np.diff(np.asarray(ts_desc_s, np.float64))
+    cadence = float(np.median(steps)) if steps.size else 0.0
+    return max(float(FRESH_S), cadence + 60.0)
 
 
 def discovery(topics: Topics, info: SiteInfo, version: str) -> list[tuple[str, bytes]]:
@@ -78,30 +110,38 @@ def discovery(topics: Topics, info: SiteInfo, version: str) -> list[tuple[str, b
                 "state_class": state_class, "device": device,
                 "suggested_display_precision": 3 if unit == "kWh" else 0,
             }
+            availability = [{"topic": service_availability(topics)}]
             if sensor == "power":
-                config["expire_after"] = FRESH_S
+                availability.append({"topic": power_availability(topics, site_id, array)})
+            config.update(availability=availability, availability_mode="all")
             out.append((f"{topics.ha_prefix}/sensor/{oid}/config", orjson.dumps(config)))
     return out
 
 
 def states(ctx: ServiceContext, info: SiteInfo, topics: Topics,
            now_s: float | None = None) -> list[tuple[str, bytes]]:
-    """``(state topic, number)`` of every sensor of ``info`` with a known value now."""
+    """``(state topic, number)`` of every sensor of ``info`` with a known value now, and
+    each array's ``(power availability topic, online | offline)``."""
     now = time.time() if now_s is None else now_s
     tiles = status(ctx, info, now)
     values: dict[str, dict[str, float | None]] = {}
+    out = []
     with ctx.engine.connect() as conn:
         for name, arr in info.arrays.items():
             tile = tiles["arrays"][name]
             total_wh, n = fetch(conn, _TOTAL, (arr.array_id, SOURCE_CODES["measured"]))[0]
+            recent = [float(r[0]) for r in fetch(conn, _RECENT, (arr.array_id,))]
+            live = bool(recent) and tile["power_w"] is not None and (
+                now - recent[0] <= power_max_age_s(recent))
+            out.append((power_availability(topics, info.site_id, name),
+                        ONLINE if live else OFFLINE))
             values[name] = {
                 "energy": float(total_wh) / 1000.0 if n else None,
                 "energy_today": _kwh(tile["energy_today_wh"]),
-                "power": tile["power_w"] if tile["logger"] == "reporting" else None,
+                "power": tile["power_w"] if live else None,
                 "twin_energy_today": _kwh(tile["twin_energy_today_wh"]),
                 "twin_power": tile["twin_power_w"],
             }
-    out = []
     for name, sensors in values.items():
         for sensor, value in sensors.items():
             if value is not None:

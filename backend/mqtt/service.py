@@ -32,6 +32,7 @@ each retry logged, a wait ended at once by the service's stop;
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import ssl
 import threading
@@ -121,7 +122,8 @@ def broker_of(url: str) -> dict[str, Any]:
 
 def check_no_echo(topics: Topics) -> None:
     """ValueError when a topic the service publishes would come back as a reading."""
-    published = [topics.errors.format(site_id="s")] + [
+    published = [topics.errors.format(site_id="s"), homeassistant.service_availability(topics),
+                 homeassistant.power_availability(topics, "s", "a")] + [
         topics.ha_state.format(site_id="s", array="a", sensor=x) for x in homeassistant.SENSORS]
     for topic in published:
         value = topics.value.match(topic)
@@ -243,6 +245,8 @@ class MqttService:
                 **self.broker, identifier=s.mqtt.client_id, protocol=aiomqtt.ProtocolVersion.V5,
                 clean_start=s.mqtt.client_id is None,
                 properties=connect_properties(persistent=s.mqtt.client_id is not None),
+                will=aiomqtt.Will(homeassistant.service_availability(self.topics),
+                                  homeassistant.OFFLINE, qos=1, retain=True),
                 keepalive=30, timeout=10.0)
             acks = _manual_acks(client)
             async with client:
@@ -309,6 +313,10 @@ class MqttService:
             if self._in_flight:
                 await asyncio.wait(self._in_flight, timeout=10.0)
             await self._drain(client, time.monotonic() + 5.0)
+            with contextlib.suppress(aiomqtt.MqttError, TimeoutError):  # the Will is for a
+                await client.publish(  # lost connection, not for a graceful disconnect
+                    homeassistant.service_availability(self.topics), homeassistant.OFFLINE,
+                    qos=1, retain=True, timeout=5.0)
             tasks[1].cancel()
             await asyncio.gather(*tasks, return_exceptions=True)
             return
@@ -468,6 +476,8 @@ class MqttService:
         next connection; the configs of a site or array gone, published on this
         connection, are removed with an empty retained payload), then their states."""
         published: dict[str, bytes] = {}  # config topic → payload, on this connection
+        await client.publish(homeassistant.service_availability(self.topics),
+                             homeassistant.ONLINE, qos=1, retain=True)
         while True:
             sites = [i for i in self.ctx.registry.sites.values() if i.arrays]
             configs = dict(pair for info in sites

@@ -461,6 +461,11 @@ def test_home_assistant_discovery_is_retained(service: tuple[httpx.Client, str])
         "energy", "total_increasing", "kWh")
     power = configs[f"heliotwin_{SITE}_tracker_power"]
     assert (power["device_class"], power["unit_of_measurement"]) == ("power", "W")
+    assert power["availability"] == [
+        {"topic": f"{prefix}_ha/heliotwin/availability"},
+        {"topic": f"{prefix}/{SITE}/tracker/ha/power/availability"}]
+    assert power["availability_mode"] == "all"
+    assert energy["availability"] == [{"topic": f"{prefix}_ha/heliotwin/availability"}]
     assert energy["device"]["identifiers"] == power["device"]["identifiers"]
     assert energy["unique_id"] == f"heliotwin_{SITE}_fixed_energy"
     # the state topic of the all-time energy carries the stored readings' energy
@@ -493,6 +498,44 @@ def test_a_site_added_while_connected_reaches_home_assistant(
                 f"{site}'s fixed power of 100 W")
     finally:
         ha.close()
+
+
+def test_home_assistant_power_goes_offline_past_its_age(
+        service: tuple[httpx.Client, str]) -> None:
+    """A 5-minute logger stopped 7 minutes ago: its power's availability is ``offline``
+    (retained) and no power state is published — it was published for 2.5 cadences
+    (12.5 min) and stayed retained as current. A new reading brings it back ``online``."""
+    c, prefix = service
+    site = f"stopped{uuid.uuid4().hex[:6]}"
+    r = c.put(f"/api/v1/sites/{site}", json=tehuantepec_elsewhere(c, site),
+              headers={"Authorization": f"Bearer {ADMIN}"})
+    assert r.status_code == 201, r.text
+    for k in (-12, -7):
+        publish(f"{prefix}/{site}/fixed/state",
+                json.dumps({"ts": iso(minute(k)), "voltage_v": 25.0, "current_a": 4.0}))
+    stored_at = f"/api/v1/sites/{site}/measurements"
+    deadline = time.monotonic() + WAIT_S
+    while len(c.get(stored_at, params={"array": "fixed", "start": iso(minute(-13)),
+                                       "end": iso(minute(1))}).json()["points"]) < 2:
+        assert time.monotonic() < deadline
+        time.sleep(0.2)
+    avail = f"{prefix}/{site}/fixed/ha/power/availability"
+    service_avail = f"{prefix}_ha/heliotwin/availability"
+    w = Watcher(f"{prefix}/{site}/fixed/ha/#", service_avail)
+    try:
+        w.wait(lambda m: m.topic == service_avail and m.payload == b"online", "service online")
+        w.wait(lambda m: m.topic == avail and m.payload == b"offline", "power offline")
+        w.wait(lambda m: m.topic == f"{prefix}/{site}/fixed/ha/energy", "the energy state")
+        time.sleep(2.5)  # a publish interval more
+        powers = [m.payload for m in w.messages if m.topic == f"{prefix}/{site}/fixed/ha/power"]
+        assert powers == [], "a power published for a reading 7 min old"
+        publish(f"{prefix}/{site}/fixed/state",
+                json.dumps({"ts": iso(minute(-1)), "voltage_v": 25.0, "current_a": 8.0}))
+        w.wait(lambda m: m.topic == avail and m.payload == b"online", "power online again")
+        w.wait(lambda m: m.topic == f"{prefix}/{site}/fixed/ha/power" and m.payload == b"200.0",
+               "the new power")
+    finally:
+        w.close()
 
 
 # ---------------------------------------------------------------- reconnection
