@@ -173,10 +173,11 @@ def diagnosed(site_id: str, zone: ZoneInfo, tracker: str, days: list[dict[str, A
         for f in latest["faults"]:
             if f["confidence"] < confidence_min:
                 continue
-            words = FAULT_WORDS.get(f["kind"], f["kind"])
+            # the fault's kind in words is the alert's title (summary(), the dashboard's
+            # alertTitle): the detail does not say it again
             out.conditions.append(Condition(
                 site_id, tracker, "fault", day_start_s(f["since"], zone),
-                f"{words} since {f['since']}: {f['detail']} (confidence {f['confidence']:.2f}, "
+                f"{f['detail']} (since {f['since']}, confidence {f['confidence']:.2f}, "
                 f"diagnosis of {latest['date']})",
                 {"fault_kind": f["kind"], "confidence": f["confidence"],
                  "magnitude": f["magnitude"], "unit": f["unit"], "since_date": f["since"],

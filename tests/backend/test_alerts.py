@@ -197,7 +197,10 @@ def test_diagnosis_rule_latest_day_faults_and_the_low_pr_run() -> None:
     assert kinds == {("fault", "stuck"), ("low_performance_ratio", None)}
     fault = next(c for c in ev.conditions if c.kind == "fault")
     assert fault.since_s == int(dt.datetime(2026, 11, 28, tzinfo=TZ).timestamp())
-    assert fault.detail.startswith("tracker stuck since 2026-11-28: stuck at azimuth 181°")
+    assert fault.detail.startswith("stuck at azimuth 181°, elevation 35° (since 2026-11-28, ")
+    # the kind in words is said once: by the title (the webhook's text, the dashboard's head)
+    text = rules.summary(SITE, "fault", "tracker", "stuck", "active", fault.detail)
+    assert text.count(rules.FAULT_WORDS["stuck"]) == 1, text
     low = next(c for c in ev.conditions if c.kind == "low_performance_ratio")
     # the clear-sky day is not judged, a sensor's is: the low run goes back to the 28th
     assert low.data["first_low_day"] == "2026-11-28" and low.data["performance_ratio"] == 0.61
@@ -540,8 +543,8 @@ def test_fault_and_low_pr_from_an_injected_diagnosis_raised_then_cleared(
         assert len(evs) == 2
         fault = next(e["alert"] for e in evs if e["alert"]["kind"] == "fault")
         assert fault["array"] == "tracker"
-        assert fault["detail"].startswith(f"tracker stuck since {yesterday.isoformat()}: "
-                                          "stuck at azimuth 181°, elevation 35°")
+        assert fault["detail"].startswith("stuck at azimuth 181°, elevation 35° (since "
+                                          f"{yesterday.isoformat()}, ")
         midnight = dt.datetime(yesterday.year, yesterday.month, yesterday.day, tzinfo=TZ)
         assert dt.datetime.fromisoformat(fault["since"]) == midnight
         assert fault["data"]["confidence"] == pytest.approx(0.833, abs=1e-3)
