@@ -28,14 +28,15 @@ from typing import Any
 
 from sqlalchemy import Connection, Engine, insert, select, update
 
+from backend.errors import Refusal
 from backend.storage.tables import LoggerToken, SiteRow, utcnow
 
 
-class UnknownSite(LookupError):
+class UnknownSite(Refusal, LookupError):
     """No site with that id is in the database."""
 
 
-class UnknownToken(LookupError):
+class UnknownToken(Refusal, LookupError):
     """No stored token matches that token or id."""
 
 

@@ -18,6 +18,11 @@ from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
 
+class Refusal(Exception):  # noqa: N818 - an answer, not an error of the service
+    """An ordinary answer to a caller (no such token, no such site), raised in a writer
+    call: the writer hands it back without logging it as a failed write."""
+
+
 class InputError(ValueError):
     """Bad input: ``status_code`` (4xx) and a message that names the field and the problem."""
 

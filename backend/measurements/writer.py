@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 from sqlalchemy import Connection, Engine, delete, insert, select, text, update
 
+from backend.errors import InputError, Refusal
 from backend.measurements.buckets import ROLLUP_WIDTH_S
 from backend.measurements.fields import SENSOR_NAMES
 from backend.measurements.rollups import (
@@ -483,7 +484,11 @@ class Writer:
                     with conn.begin():
                         result = job.fn(conn)
                 except Exception as exc:  # noqa: BLE001 - reported to the submitter
-                    logger.warning("write call failed: %r", exc)
+                    # a refusal or bad input (a 404, a 422) is the caller's answer, not a
+                    # failed write
+                    answer = isinstance(exc, Refusal | InputError)
+                    logger.log(logging.DEBUG if answer else logging.WARNING,
+                               "write call failed: %r", exc)
                     job.future.set_exception(exc)
                 else:
                     job.future.set_result(result)

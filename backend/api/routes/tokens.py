@@ -26,9 +26,17 @@ from backend.api.deps import (
     is_admin_token,
     parse_bearer,
     site_or_404,
+    token_grant,
 )
 from backend.api.schemas.tokens import TokenCreatedRead, TokenRead, TokensRead
-from backend.auth import UnknownToken, create_token, find_token, list_tokens, revoke_token
+from backend.auth import (
+    TokenRefused,
+    UnknownToken,
+    create_token,
+    find_token,
+    list_tokens,
+    revoke_token,
+)
 from backend.timestamps import TimestampError, parse_instant
 
 router = APIRouter(prefix="/api/v1/tokens", tags=["tokens"])
@@ -36,7 +44,8 @@ router = APIRouter(prefix="/api/v1/tokens", tags=["tokens"])
 _ADMIN_DOC: dict[str, Any] = {"security": [{"bearerAuth": []}]}
 _RESPONSES: dict[int | str, dict[str, Any]] = {
     401: {"description": "no admin token, or a wrong one"},
-    403: {"description": "admin endpoints are disabled (HELIOTWIN_ADMIN_TOKEN unset)"},
+    403: {"description": "admin endpoints are disabled (HELIOTWIN_ADMIN_TOKEN unset), or a "
+                         "valid site token (not allowed here)"},
 }
 
 
@@ -46,11 +55,21 @@ async def require_admin(request: Request) -> None:
     if not expected:
         raise HTTPException(403, "admin endpoints are disabled: set HELIOTWIN_ADMIN_TOKEN "
                                  "(or use `heliotwin token` on the server)")
-    if not is_admin_token(request.app.state.settings,
-                          parse_bearer(request.headers.get("authorization"))):
-        raise HTTPException(401, "admin token required: send 'Authorization: Bearer "
-                                 "<HELIOTWIN_ADMIN_TOKEN>'",
-                            headers={"WWW-Authenticate": "Bearer"})
+    token = parse_bearer(request.headers.get("authorization"))
+    if is_admin_token(request.app.state.settings, token):
+        return
+    if token is not None:  # a valid site token is authenticated, only not allowed here
+        try:
+            grant = await token_grant(request.app.state.ctx, token)
+        except TokenRefused:
+            pass
+        else:
+            raise HTTPException(403, f"a {grant.scope}-scope token of site {grant.site_id!r} "
+                                     "cannot manage tokens: send the admin token "
+                                     "(HELIOTWIN_ADMIN_TOKEN)")
+    raise HTTPException(401, "admin token required: send 'Authorization: Bearer "
+                             "<HELIOTWIN_ADMIN_TOKEN>'",
+                        headers={"WWW-Authenticate": "Bearer"})
 
 
 AdminDep = Annotated[None, Depends(require_admin)]
