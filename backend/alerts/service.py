@@ -11,7 +11,9 @@ for every site with arrays (:mod:`backend.alerts.rules`):
   ``Settings.alerts.diagnosis_days`` complete local days: the diagnosis of those days
   (:func:`backend.diagnosis.service.diagnosis`; cached per day in ``diagnosis_days``, so
   a day is computed once, when it is complete, and again only if late readings of it
-  arrive) → faults and the performance ratio.
+  arrive) → faults and the performance ratio; the window ends with the latest day the
+  tracker's readings reached (a back-fill posted day by day is not judged on a day it has
+  not reached yet).
 
 A condition not yet active is inserted as an ``active`` alert (through the writer, the
 one module that commits) and its ``raised`` event offered to the webhook sender; an
@@ -279,14 +281,20 @@ class AlertService:
         end = _local_midnight(today, info.zone)
         start = _local_midnight(today - dt.timedelta(days=s.alerts.diagnosis_days), info.zone)
         with self.engine.connect() as conn:
-            first = conn.execute(select(func.min(Measurement.ts_s)).where(
+            first, last = conn.execute(select(
+                func.min(Measurement.ts_s), func.max(Measurement.ts_s)).where(
                 Measurement.array_id == tracker.array_id, Measurement.source == MEASURED,
                 Measurement.ts_s >= int(start.timestamp()),
-                Measurement.ts_s < int(end.timestamp()))).scalar()
+                Measurement.ts_s < int(end.timestamp()))).one()
         if first is None:  # no tracker readings in the window: nothing to tell
             return rules.Evaluation()
         first_day = dt.datetime.fromtimestamp(int(first), info.zone).date()
         start = max(start, _local_midnight(first_day, info.zone))
+        # the latest day judged is the latest the logger's readings reached: the days after
+        # it are not in yet (a back-fill day by day, a logger offline — that one is
+        # logger_silent's to tell), and diagnosed they would be whole-day dropouts
+        last_day = dt.datetime.fromtimestamp(int(last), info.zone).date()
+        end = min(end, _local_midnight(last_day + dt.timedelta(days=1), info.zone))
         answer = diagnosis(self.ctx, info, start, end)
         return rules.diagnosed(info.site_id, info.zone, tracker.name, answer["days"],
                                s.alerts.pr_below, s.alerts.fault_confidence_min)

@@ -564,6 +564,21 @@ def test_fault_and_low_pr_from_an_injected_diagnosis_raised_then_cleared(
         assert _alerts(c, site_id=SITE, kind="fault")["counts"] == {"active": 0, "cleared": 1}
 
 
+def test_a_back_fill_not_yet_at_yesterday_raises_no_dropout(sqlite_database: Database) -> None:
+    """A logger back-filled day by day, the day before yesterday posted, yesterday not yet:
+    yesterday is not judged — its diagnosis was a whole-day dropout, raised and cleared
+    seconds later when the back-fill reached it (a tester's finding)."""
+    before = dt.datetime.now(TZ).date() - dt.timedelta(days=2)
+    midnight = dt.datetime(before.year, before.month, before.day, tzinfo=TZ).timestamp()
+    env = {"HELIOTWIN_ALERT_DIAGNOSIS_DAYS": "7"}
+    with _server(sqlite_database, **env) as server, server.client(timeout_s=60) as c:
+        _post(c, server.token(), [_reading(midnight + 60 * k, a)
+                                  for k in range(24 * 60) for a in ("tracker", "fixed")])
+        _rounds(c, 3, timeout_s=180.0)
+        faults = _alerts(c, site_id=SITE, kind="fault")["alerts"]
+        assert [a for a in faults if a["fault_kind"] == "dropout"] == [], faults
+
+
 POSTED = 60  # readings posted while the webhook hangs
 
 
