@@ -663,7 +663,14 @@ def test_a_reading_received_but_not_committed_comes_again_after_a_sigkill(
                     assert time.monotonic() < deadline, "the service never got the reading"
                     time.sleep(0.1)
                 assert meta(c)["mqtt_status"]["stored"] == 0
-            session.first.kill()
+            availability = f"{session.prefix}_ha/heliotwin/availability"
+            ha = Watcher(availability)  # as Home Assistant: the killed service goes offline
+            try:
+                ha.wait(lambda m: m.payload == b"online", "the service online (retained)")
+                session.first.kill()
+                ha.wait(lambda m: m.payload == b"offline", "the Last Will: offline")
+            finally:
+                ha.close()
         finally:
             lock.close()  # its transaction rolled back
         assert session.stored_power_w(t0) == 125.0
@@ -676,6 +683,11 @@ def test_a_persistent_session_keeps_readings_while_the_service_is_away(
     with persistent_session(tmp_path) as (session, _):
         with httpx.Client(base_url=session.first.base_url, timeout=30.0) as c:
             wait_state(c, "connected")  # the broker now knows the session
-        session.first.stop()
+        ha = Watcher(f"{session.prefix}_ha/heliotwin/availability")
+        try:
+            session.first.stop()  # a graceful stop says offline itself (no Last Will then)
+            ha.wait(lambda m: m.payload == b"offline", "offline at a graceful stop")
+        finally:
+            ha.close()
         session.publish_reading(t0, 3.0)  # while no service is connected
         assert session.stored_power_w(t0) == 75.0
