@@ -31,19 +31,24 @@ if TYPE_CHECKING:
 FRESH_S = 300
 
 #: the latest readings of a series, newest first: the last one and the logger's cadence
-_LAST = ("SELECT ts_s, voltage_v, current_a, power_w FROM measurements "
-         "WHERE array_id = ? AND source = 0 ORDER BY ts_s DESC LIMIT 11")
+LATEST = ("SELECT ts_s, voltage_v, current_a, power_w FROM measurements "
+          "WHERE array_id = ? AND source = 0 ORDER BY ts_s DESC LIMIT 11")
+
+
+def cadence_s(ts_desc_s: list[float]) -> float:
+    """A logger's cadence [s]: the median interval of its latest readings ``ts_desc_s``
+    (newest first, :data:`LATEST`); 0 with fewer than two."""
+    steps = -np.diff(np.asarray(ts_desc_s, np.float64))
+    return float(np.median(steps)) if steps.size else 0.0
 
 
 def fresh_for(ts_desc_s: list[float], max_gap_s: int) -> int:
     """How old [s] a logger's last reading may be before it is stale: 2.5 of its own
-    cadence (the median interval of its latest readings ``ts_desc_s``, newest first),
-    at least :data:`FRESH_S` and at most the energy rule's ``max_gap_s`` (past it the next
-    reading would not be bridged: :mod:`sim.energy`). A 15-minute logger is not stale
-    between two of its readings; a 1-minute one is after five silent minutes."""
-    steps = -np.diff(np.asarray(ts_desc_s, np.float64))
-    cadence = float(np.median(steps)) if steps.size else 0.0
-    return int(min(max(FRESH_S, 2.5 * cadence), max(FRESH_S, max_gap_s)))
+    cadence (:func:`cadence_s`), at least :data:`FRESH_S` and at most the energy rule's
+    ``max_gap_s`` (past it the next reading would not be bridged: :mod:`sim.energy`). A
+    15-minute logger is not stale between two of its readings; a 1-minute one is after
+    five silent minutes."""
+    return int(min(max(FRESH_S, 2.5 * cadence_s(ts_desc_s)), max(FRESH_S, max_gap_s)))
 
 
 def status(ctx: ServiceContext, info: SiteInfo, now: float) -> dict[str, Any]:
@@ -61,7 +66,7 @@ def status(ctx: ServiceContext, info: SiteInfo, now: float) -> dict[str, Any]:
     arrays: dict[str, Any] = {}
     with ctx.engine.connect() as conn:
         for name, arr in info.arrays.items():
-            last = fetch(conn, _LAST, (arr.array_id,))
+            last = fetch(conn, LATEST, (arr.array_id,))
             entry: dict[str, Any] = {"kind": arr.kind, "last_ts": None, "power_w": None,
                                      "voltage_v": None, "current_a": None, "age_s": None,
                                      "logger": "never", "fresh_s": None,

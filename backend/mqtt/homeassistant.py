@@ -36,10 +36,9 @@ import re
 import time
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
 import orjson
 
-from backend.measurements.status import FRESH_S, status
+from backend.measurements.status import FRESH_S, LATEST, cadence_s, status
 from backend.mqtt.topics import Topics
 from backend.sites import SiteInfo
 from backend.storage.sqlraw import fetch
@@ -56,8 +55,6 @@ SENSORS: dict[str, tuple[str, str, str, str]] = {
     "twin_energy_today": ("twin energy today", "kWh", "energy", "total_increasing"),
     "twin_power": ("twin power", "W", "power", "measurement"),
 }
-_RECENT = ("SELECT ts_s FROM measurements WHERE array_id = ? AND source = 0 "
-           "ORDER BY ts_s DESC LIMIT 11")
 ONLINE, OFFLINE = b"online", b"offline"
 _TOTAL = ("SELECT COALESCE(SUM(energy_wh), 0), COALESCE(SUM(n), 0) FROM measurement_rollups "
           "WHERE array_id = ? AND source = ?")
@@ -84,9 +81,7 @@ def power_max_age_s(ts_desc_s: list[float]) -> float:
     (the median interval of its latest readings ``ts_desc_s``, newest first) — a
     15-minute logger is not unavailable between two readings, and a stopped one is
     within a minute of its next reading being due."""
-    steps = -np.diff(np.asarray(ts_desc_s, np.float64))
-    cadence = float(np.median(steps)) if steps.size else 0.0
-    return max(float(FRESH_S), cadence + 60.0)
+    return max(float(FRESH_S), cadence_s(ts_desc_s) + 60.0)
 
 
 def discovery(topics: Topics, info: SiteInfo, version: str) -> list[tuple[str, bytes]]:
@@ -130,7 +125,7 @@ def states(ctx: ServiceContext, info: SiteInfo, topics: Topics,
         for name, arr in info.arrays.items():
             tile = tiles["arrays"][name]
             total_wh, n = fetch(conn, _TOTAL, (arr.array_id, SOURCE_CODES["measured"]))[0]
-            recent = [float(r[0]) for r in fetch(conn, _RECENT, (arr.array_id,))]
+            recent = [float(r[0]) for r in fetch(conn, LATEST, (arr.array_id,))]
             live = bool(recent) and tile["power_w"] is not None and (
                 now - recent[0] <= power_max_age_s(recent))
             out.append((power_availability(topics, info.site_id, name),

@@ -26,6 +26,7 @@ import re
 import threading
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -209,7 +210,11 @@ def reach_scheduler(address: str, cancelled: Callable[[], bool] | None = None) -
 
     why: str | None = None
     try:
-        asyncio.run(probe())
+        # a loop of its own on a thread of its own: the caller's thread may run an event
+        # loop already (asyncio.run refuses to start there: a RuntimeError that read as
+        # "not a Dask scheduler" on every address, under a test run's browser)
+        with ThreadPoolExecutor(1, thread_name_prefix="heliotwin-dask-probe") as probe_thread:
+            probe_thread.submit(asyncio.run, probe()).result()
     except SweepCancelled:
         raise
     except TimeoutError:                # connected, and no handshake came back (before OSError:
