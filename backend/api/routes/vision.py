@@ -254,12 +254,11 @@ def _place(ctx: Any, form: FormData, required: bool = False) -> Place | None:
     if site_id is not None:
         if lat is not None or lon is not None:
             raise HTTPException(422, "give site_id or latitude_deg/longitude_deg, not both")
-        info = ctx.registry.get(site_id)
-        if info is None:
+        place = _site_place(ctx, site_id)
+        if place is None:
             known = ", ".join(ctx.registry.sites) or "none"
             raise HTTPException(404, f"site_id: unknown site {_cut(site_id)}; known: {known}")
-        s = info.site
-        return Place(site_id, s.latitude, s.longitude, s.altitude, info.zone)
+        return place
     if lat is None and lon is None:
         if required:
             raise HTTPException(422, "a place is required: site_id, or latitude_deg and "
