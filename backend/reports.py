@@ -18,6 +18,7 @@ from __future__ import annotations
 import csv
 import datetime as dt
 import io
+import textwrap
 from typing import TYPE_CHECKING, Any
 
 from backend.errors import InputError
@@ -69,17 +70,32 @@ def report(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
                      tracker.name if tracker is not None else None,
                      fixed.name if fixed is not None else None)
     s = info.site
+    start_local, end_local = start.astimezone(info.zone), end.astimezone(info.zone)
     return {
         "site_id": s.site_id, "name": s.name, "latitude_deg": s.latitude,
         "longitude_deg": s.longitude, "timezone": s.timezone,
         # in the site's zone, as every period: a range given in UTC was titled by its UTC
         # dates and its CSV total row carried +00:00 among −06:00 rows (a tester's finding)
-        "start": start.astimezone(info.zone).isoformat(),
-        "end": end.astimezone(info.zone).isoformat(), "arrays": list(info.arrays),
+        "start": start_local.isoformat(), "end": end_local.isoformat(),
+        "arrays": list(info.arrays),
+        "readings_note": readings_note(days["totals"], start_local, end_local),
         "partial_below_pct": days["partial_below_pct"], "max_gap_s": days["max_gap_s"],
         "totals": days["totals"], "days": days["rows"], "months": months["rows"],
         "years": years,
     }
+
+
+def readings_note(totals: dict[str, Any], start: dt.datetime, end: dt.datetime) -> str | None:
+    """"No readings between START and END" when no array has a reading in ``[start, end)``
+    (a range to come says so), else None; None for a site without arrays, which has
+    nothing to read. The report's one rule for an empty range: the JSON carries it, the
+    PNG draws it over its empty chart (which said nothing: a tester's finding)."""
+    arrays = totals["arrays"]
+    if not arrays or any(a["readings"] for a in arrays.values()):
+        return None
+    note = (f"No readings between {_title_time(start.isoformat())} and "
+            f"{_title_time(end.isoformat())} (end exclusive)")
+    return note + (": the range has not begun" if start > dt.datetime.now(dt.UTC) else "")
 
 
 def _array_columns(names: list[str]) -> list[tuple[str, str]]:
@@ -137,9 +153,14 @@ def _title_time(iso: str) -> str:
 
 
 def report_png(rep: dict[str, Any], version: str) -> bytes:
-    """A one-page A4 PNG of the report (matplotlib, Agg)."""
+    """A one-page A4 PNG of the report (matplotlib, Agg); its ``Title`` text chunk names the
+    site and range, its ``Description`` the readings note (:func:`readings_note`) if any."""
     buf = io.BytesIO()
-    report_figure(rep, version).savefig(buf, format="png")
+    meta = {"Title": f"{rep['name']}: report {_title_time(rep['start'])} to "
+                     f"{_title_time(rep['end'])} (end exclusive)"}
+    if rep.get("readings_note"):
+        meta["Description"] = rep["readings_note"]
+    report_figure(rep, version).savefig(buf, format="png", metadata=meta)
     return buf.getvalue()
 
 
@@ -189,12 +210,14 @@ def report_figure(rep: dict[str, Any], version: str) -> Any:
          for r in days]
     width = 0.8 / max(1, len(names))
     colors = {"tracker": "#f5a400", "fixed": "#3b7dd8"}
+    drawn: list[float] = []  # the energies the chart holds (a bar of 0 holds none)
     for i, n in enumerate(names):
         offset = (i - (len(names) - 1) / 2) * width
         xs = [mdates.date2num(v) + offset for v in x]
         m = [(r["arrays"][n]["measured_wh"] or 0) / 1000 for r in days]
         tw = [None if r["arrays"][n]["twin_wh"] is None else r["arrays"][n]["twin_wh"] / 1000
               for r in days]
+        drawn += [v for v in (*m, *tw) if v]
         color = colors.get(n, "#777777")
         ax.bar(xs, m, width=width, color=color, alpha=0.8, label=f"{n} measured")
         ax.plot(xs, [float("nan") if v is None else v for v in tw], "_", ms=9, mew=2,
@@ -219,6 +242,15 @@ def report_figure(rep: dict[str, Any], version: str) -> Any:
     ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], fontsize=7, loc="upper center",
               bbox_to_anchor=(0.5, -0.14), ncols=3, frameon=False)
     ax.set_title("Daily energy, measured (bars) and twin (ticks)", fontsize=9)
+    if rep.get("readings_note"):  # said over the chart; when it holds no twin either, why
+        why = [] if drawn else sorted({r["twin_note"] for r in days if r.get("twin_note")})
+        said = [f"{rep['readings_note']}.", *(f"Twin: {t}." for t in why)]
+        ax.text(0.5, 0.5, "\n".join(textwrap.fill(t, 90) for t in said),
+                transform=ax.transAxes, ha="center", va="center", fontsize=8.5,
+                bbox={"boxstyle": "round,pad=0.6", "fc": "#fff8e6", "ec": "#f5a400"})
+    for axis, values in ((ax, drawn), (ax2, gains)):
+        if not any(v == v for v in values):  # nothing drawn (NaN != NaN): no ±0.04 scale
+            axis.set_yticks([])
 
     rows = rep["months"] if len(rep["months"]) <= 24 else rep["years"]
     label = "Month" if rows is rep["months"] else "Year"

@@ -56,7 +56,8 @@ def sine_day(day: dt.date, array: str, scale: float, minutes: range) -> list[dic
     return out
 
 
-HALF = dt.datetime.now(TZ).date() - dt.timedelta(days=6)  # readings 06:00–12:00 only
+TODAY = dt.datetime.now(TZ).date()
+HALF = TODAY - dt.timedelta(days=6)  # readings 06:00–12:00 only
 FULL = HALF - dt.timedelta(days=1)  # readings all day
 
 
@@ -278,3 +279,51 @@ def test_a_date_time_range_is_titled_in_the_sites_zone(client: httpx.Client) -> 
                                                        params=params).text)))
     assert all(r["period_start"].endswith("-06:00") and r["period_end"].endswith("-06:00")
                for r in table), [r["period_start"] for r in table if r["period"] == "total"]
+
+
+def _png_text(png: bytes) -> dict[str, str]:
+    """The PNG's tEXt chunks (keyword → text), read from the bytes by the PNG spec."""
+    out, at = {}, 8
+    while at < len(png):
+        length, kind = struct.unpack(">I4s", png[at:at + 8])
+        if kind == b"tEXt":
+            key, _, text = png[at + 8:at + 8 + length].partition(b"\0")
+            out[key.decode("latin-1")] = text.decode("latin-1")
+        at += 12 + length
+    return out
+
+
+@pytest.mark.parametrize(("start", "end", "words"), [
+    # a range to come (a tester's empty chart, drawn without a word)
+    (TODAY + dt.timedelta(days=30), TODAY + dt.timedelta(days=32), ": the range has not begun"),
+    # a past range the loggers did not read (the twin alone)
+    (HALF + dt.timedelta(days=4), HALF + dt.timedelta(days=5), ""),
+])
+def test_a_range_without_readings_says_so_in_json_and_png(
+        client: httpx.Client, posted: dict, start: dt.date, end: dt.date, words: str) -> None:
+    """No reading in the range: the JSON's ``readings_note`` names the range (200, as the
+    report of any range: the twin's numbers stand), and the PNG carries the same words
+    over its daily chart and in its Description (its chart was drawn empty, silently)."""
+    from backend.reports import report_figure
+
+    params = {"start": start.isoformat(), "end": end.isoformat()}
+    rep = client.get(f"{BASE}/report", params=params).json()
+    want = (f"No readings between {start.isoformat()} and {end.isoformat()} "
+            f"(end exclusive){words}")
+    assert rep["readings_note"] == want
+    assert all(a["readings"] == 0 for a in rep["totals"]["arrays"].values())
+    png = client.get(f"{BASE}/report.png", params=params)
+    assert png.status_code == 200 and png.headers["content-type"] == "image/png"
+    assert _png_text(png.content)["Description"] == want
+    (ax,) = [a for a in report_figure(rep, "test").axes
+             if a.get_title().startswith("Daily energy")]
+    assert any(t.get_text().startswith(f"{want}.") for t in ax.texts)
+
+
+def test_a_range_with_readings_has_no_readings_note(client: httpx.Client,
+                                                    posted: dict) -> None:
+    params = {"start": FULL.isoformat(), "end": (FULL + dt.timedelta(days=1)).isoformat()}
+    assert client.get(f"{BASE}/report", params=params).json()["readings_note"] is None
+    png = client.get(f"{BASE}/report.png", params=params)
+    meta = _png_text(png.content)
+    assert "Description" not in meta and f"{FULL.isoformat()} to " in meta["Title"]

@@ -79,6 +79,10 @@ class ReportRead(BaseModel):
     start: str
     end: str
     arrays: list[str]
+    readings_note: str | None = Field(
+        description="'No readings between START and END (end exclusive)' (': the range has "
+                    "not begun' for one to come) when no array has a reading in the range; "
+                    "null otherwise, and for a site without arrays")
     max_gap_s: int
     partial_below_pct: float
     totals: EnergyTotalsRead
