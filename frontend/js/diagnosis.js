@@ -91,6 +91,9 @@ async function load(state) {
     if (mine !== requested) return;
     list.replaceChildren(h("li", { class: "error" }, `Diagnosis failed: ${err.message}`));
     showEmpty("chart-diagnosis", "No diagnosis");
+    // the encoders' own answer for this range: the range before's pointing error stayed
+    // under a refused range's error, read as this one's
+    await loadPointing(state, start, end, mine);
     return;
   }
   const lines = faultLines(body.days);

@@ -69,6 +69,18 @@ function drawTotals(rep) {
     + `(${pct(t.twin_gain_pct)} over the whole range).${t.partial ? " Partial: the readings do not cover the whole range." : ""}`));
 }
 
+/** Nothing of the previous range stays: its tables, its gain, its downloads. A range the
+ * service refused left the previous range's months and years under its error, read as the
+ * answer to the new one (a tester's finding). */
+function clearReport(...message) {
+  $("report-totals").replaceChildren(...message);
+  $("report-months").replaceChildren();
+  $("report-years").replaceChildren();
+  $("report-csv").hidden = true;
+  $("report-png").hidden = true;
+  delete document.body.dataset.reportLoaded;
+}
+
 export async function load() {
   if (!st?.site) return;
   const start = $("report-start").value;
@@ -76,20 +88,23 @@ export async function load() {
   if (!start || !end) return;
   controller?.abort();
   controller = new AbortController();
-  $("report-csv").href = url(".csv");
-  $("report-png").href = url(".png");
-  $("report-totals").textContent = "Loading…";
+  clearReport("Loading…");
   try {
     const rep = await api(`/api/v1/sites/${encodeURIComponent(st.site.site_id)}/report`,
       { params: { start, end }, signal: controller.signal });
     drawTotals(rep);
-    const months = $("report-months");
-    months.replaceChildren(periodTable(rep.months, "Month", rep.arrays, (s) => s.slice(0, 7)));
+    // ReportRead.readings_note: the service's words for a range no array has a reading in
+    if (rep.readings_note) $("report-totals").prepend(h("div", { class: "banner", "data-testid": "report-no-readings" }, `${rep.readings_note}.`));
+    $("report-months").replaceChildren(periodTable(rep.months, "Month", rep.arrays, (s) => s.slice(0, 7)));
     $("report-years").replaceChildren(periodTable(rep.years, "Year", rep.arrays, (s) => s.slice(0, 4)));
+    $("report-csv").href = url(".csv");
+    $("report-png").href = url(".png");
+    $("report-csv").hidden = false;
+    $("report-png").hidden = false;
     document.body.dataset.reportLoaded = `${st.site.site_id}/${start}/${end}`;
   } catch (err) {
     if (err.name === "AbortError") return;
-    $("report-totals").replaceChildren(h("p", { class: "error", "data-testid": "report-error" }, err.message));
+    clearReport(h("p", { class: "error", "data-testid": "report-error" }, err.message));
     banner(`Report unavailable: ${err.message}`);
   }
 }

@@ -188,6 +188,76 @@ def test_the_range_report_shows_totals_months_and_downloads(pg, edge_server: Ser
     assert dt.date.fromisoformat(pg.input_value("#report-end")) == start + dt.timedelta(days=7)
 
 
+def _report(page, start: dt.date, end: dt.date) -> None:
+    page.select_option("#report-kind", "custom")
+    page.fill("#report-start", start.isoformat())
+    page.fill("#report-end", end.isoformat())
+    page.click("#report-run")
+
+
+def test_a_refused_report_range_leaves_none_of_the_previous_ranges_tables(
+        pg, edge_server: ServerProcess) -> None:
+    """A valid range, then one the service refuses (422, the end before the start): the
+    error is shown and nothing of the range before stays — its tables stayed under the
+    error, read as the new range's answer (a tester's finding) — nor its downloads."""
+    _open(pg, edge_server, "tehuantepec", HALF)
+    _report(pg, FULL, EMPTY)
+    pg.wait_for_selector(
+        f'body[data-report-loaded="tehuantepec/{FULL.isoformat()}/{EMPTY.isoformat()}"]')
+    assert pg.locator("[data-testid=report-months] tr").count() >= 2
+    _report(pg, EMPTY, FULL)
+    error = pg.locator("[data-testid=report-error]")
+    error.wait_for()
+    assert error.inner_text().startswith("422") and "end" in error.inner_text()
+    for part in ("report-months", "report-years"):
+        assert pg.locator(f"[data-testid={part}]").inner_text() == ""
+    assert pg.locator("[data-testid=report-gain]").count() == 0
+    assert pg.locator("[data-testid=report-pr-tracker]").count() == 0
+    assert pg.get_attribute("body", "data-report-loaded") is None
+    assert not pg.is_visible("#report-csv") and not pg.is_visible("#report-png")
+    ARTIFACTS.mkdir(exist_ok=True)
+    pg.locator("#report-card").screenshot(path=str(ARTIFACTS / "e2e-report-refused.png"))
+
+
+def test_a_report_range_to_come_says_it_has_no_readings(pg, edge_server: ServerProcess) -> None:
+    """A range in the future: the card says the service's words (``readings_note``), as the
+    PNG does over its chart, instead of tables of dashes without a word."""
+    start, end = TODAY + dt.timedelta(days=40), TODAY + dt.timedelta(days=42)
+    _open(pg, edge_server, "tehuantepec", HALF)
+    _report(pg, start, end)
+    pg.wait_for_selector(
+        f'body[data-report-loaded="tehuantepec/{start.isoformat()}/{end.isoformat()}"]')
+    note = pg.locator("[data-testid=report-no-readings]").inner_text()
+    assert note == (f"No readings between {start.isoformat()} and {end.isoformat()} "
+                    "(end exclusive): the range has not begun.")
+    ARTIFACTS.mkdir(exist_ok=True)
+    pg.locator("#report-card").screenshot(path=str(ARTIFACTS / "e2e-report-to-come.png"))
+    _report(pg, FULL, EMPTY)    # a range with readings: no such note
+    pg.wait_for_selector(
+        f'body[data-report-loaded="tehuantepec/{FULL.isoformat()}/{EMPTY.isoformat()}"]')
+    assert pg.locator("[data-testid=report-no-readings]").count() == 0
+
+
+def test_a_refused_diagnosis_range_leaves_none_of_the_previous_pointing_error(
+        pg, edge_server: ServerProcess) -> None:
+    """The diagnosis card's pointing error belongs to its range too: a range the service
+    refuses leaves the range before's note and chart no more than its faults."""
+    _open(pg, edge_server, "tehuantepec", HALF)
+    pg.fill("#diag-start", FULL.isoformat())
+    pg.fill("#diag-end", EMPTY.isoformat())
+    pg.click("#diag-run")
+    pg.wait_for_function("() => document.querySelector('[data-testid=pointing-note]')"
+                         ".textContent.includes('no encoder angles')", timeout=120_000)
+    pg.fill("#diag-start", EMPTY.isoformat())
+    pg.fill("#diag-end", FULL.isoformat())
+    pg.click("#diag-run")
+    pg.wait_for_function("() => document.querySelector('[data-testid=diag-faults]')"
+                         ".textContent.startsWith('Diagnosis failed: 422')")
+    pg.wait_for_function("() => document.querySelector('[data-testid=pointing-note]')"
+                         ".textContent.startsWith('Pointing error failed: 422')")
+    assert pg.get_attribute("#chart-pointing", "data-points") == "0"
+
+
 def test_a_site_made_in_the_form_joins_the_built_in_ones(pg, edge_server: ServerProcess) -> None:
     pg.goto(f"{edge_server.base_url}/#sites?site=tehuantepec")
     pg.wait_for_function("() => document.getElementById('site-json').value.includes('tehuantepec')")
