@@ -220,7 +220,31 @@ export async function init() {
 }
 
 // ── the layout and spacing sweep (POST /api/v1/plants/sweeps, issue 26) ──
-const sweep = { id: null, rows: [], token: 0 };
+// id: the sweep whose rows are drawn; following: the one being polled (the Cancel button's);
+// stopping: its cancel was accepted
+const sweep = { id: null, rows: [], token: 0, following: null, stopping: false };
+const SWEEP_CHARTS = ["chart-sweep-energy", "chart-sweep-tradeoff", "chart-sweep-shade"];
+
+/** The sweep's words in the panel: `status` its progress and outcome, `message` what went
+ * wrong (a refused request, a cancel that failed), kept until the next sweep is asked for. */
+function sweepSay({ status, message } = {}) {
+  if (status !== undefined) $("sweep-status").textContent = status;
+  if (message !== undefined) {
+    $("sweep-message").textContent = message;
+    $("sweep-message").hidden = !message;
+  }
+}
+
+/** Nothing of an earlier sweep stays while another is asked for, nor after it is refused: a
+ * refused sweep left the previous one's curves and cases under its error. */
+function clearSweep(message) {
+  sweep.id = null;
+  sweep.rows = [];
+  for (const id of SWEEP_CHARTS) showEmpty(id, message);
+  $("sweep-case").replaceChildren();
+  document.body.removeAttribute("data-sweep-loaded");
+}
+
 const DASH = { sun: "solid", backtrack: "dash", sky_scan: "dot" };
 const LAYOUT_COLORS = { square: COLORS.tracker, diagonal: COLORS.fixed, hexagonal_n_s: COLORS.gain,
   hexagonal_e_w: COLORS.sun, custom: COLORS.grey, plant: COLORS.grey };
@@ -271,7 +295,10 @@ async function drawSweep() {
   for (const r of sweep.rows) select.add(new Option(`${r.layout} · GCR ${r.gcr} · ${r.strategy}`, JSON.stringify([r.layout, r.gcr, r.strategy])));
   const densest = sweep.rows.reduce((a, r) => (r.gcr > a.gcr ? r : a), sweep.rows[0]);
   select.value = JSON.stringify([densest.layout, densest.gcr, densest.strategy]);
-  await drawSweepShade();
+  await drawSweepShade().catch((err) => {  // the sweep's curves stand without its shade
+    showEmpty("chart-sweep-shade", `Shade unavailable: ${err.message}`);
+    banner(`Sweep shade: ${err.message}`, "error");
+  });
 }
 
 async function drawSweepShade() {
@@ -301,7 +328,7 @@ async function drawSweepShade() {
 async function runSweep(ev) {
   ev.preventDefault();
   const p = view.plant;
-  if (!p) return;
+  if (!p || sweep.following) return;   // one sweep followed at a time (Cancel stops it)
   const token = ++sweep.token;
   const year = Number($("sweep-year").value);
   // the collector: WIDTHxHEIGHT, or a polygon "u,v;u,v;…" [m] about the pivot (the CLI's --collector-polygon)
@@ -318,35 +345,89 @@ async function runSweep(ev) {
     latitude_deg: p.latitude_deg, longitude_deg: p.longitude_deg, timezone: p.timezone,
     altitude_m: p.altitude_m, start: `${year}-01-01`, end: `${year + 1}-01-01`, step_s: Number($("sweep-step").value),
   };
-  const status = $("sweep-status");
-  document.body.removeAttribute("data-sweep-loaded");
+  clearSweep("Running the sweep…");
+  sweepSay({ status: "starting…", message: "" });
+  $("sweep-run").disabled = true;
   try {
     const acc = await api("/api/v1/plants/sweeps", { method: "POST", json: body });
-    sweep.id = acc.sweep_id;
-    status.textContent = `queued: ${acc.cases} cases`;
+    sweep.following = acc.sweep_id;
+    sweep.stopping = false;
+    $("sweep-cancel").disabled = false;
+    $("sweep-cancel").hidden = false;
+    sweepSay({ status: `queued: ${acc.cases} cases` });
     for (;;) {
       await new Promise((r) => setTimeout(r, 1000));
       if (token !== sweep.token) return;
-      const run = await api(`/api/v1/plants/sweeps/${enc(sweep.id)}`);
-      status.textContent = `${run.status}: ${run.cases_done} of ${run.cases} cases`;
-      if (run.status === "failed") { banner(`Sweep: ${run.error}`, "error"); return; }
-      if (run.status === "done") {
-        const res = run.result;
-        status.textContent = `${res.cases} cases on ${res.engine} (${res.workers} workers) in ${num(res.wall_s, 1)} s`;
-        sweep.rows = res.rows;
-        await drawSweep();
-        document.body.dataset.sweepLoaded = sweep.id;
+      const run = await api(`/api/v1/plants/sweeps/${enc(acc.sweep_id)}`);
+      if (run.status === "done" || run.status === "failed") {
+        await sweepEnded(run);
         return;
       }
+      const stopping = sweep.stopping ? " · cancelling: it stops after its current cases" : "";
+      sweepSay({ status: `${run.status}: ${run.cases_done} of ${run.cases} cases${stopping}` });
     }
   } catch (err) {
-    status.textContent = "";
+    if (token !== sweep.token) return;
+    clearSweep(`No sweep: ${err.message}`);
+    sweepSay({ status: "", message: `Sweep: ${err.message}` });
     banner(`Sweep: ${err.message}`, "error");
+  } finally {
+    if (token === sweep.token) {
+      sweep.following = null;
+      $("sweep-cancel").hidden = true;
+      $("sweep-run").disabled = false;
+    }
+  }
+}
+
+/** A sweep that ended (SweepRunRead): done, or failed — cancelled, or its cluster lost —
+ * with the cases it finished, which are drawn all the same and said to be a part. */
+async function sweepEnded(run) {
+  const rows = run.result?.rows || [];
+  if (run.status === "done") {
+    const res = run.result;
+    sweepSay({ status: `${res.cases} cases on ${res.engine} (${res.workers} workers) in ${num(res.wall_s, 1)} s` });
+  } else {
+    const cancelled = run.error === "cancelled";
+    const kept = !rows.length ? "none had finished"
+      : `the ${rows.length} finished ${rows.length === 1 ? "is" : "are"} drawn below`;
+    sweepSay({ status: `${cancelled ? "Cancelled" : "Failed"} after ${rows.length} of ${run.cases} cases; ${kept}.`,
+      message: cancelled ? "" : `Sweep: ${run.error}` });
+    if (!cancelled) banner(`Sweep: ${run.error}`, "error");
+  }
+  if (!rows.length) {
+    clearSweep(run.status === "done" ? "No case." : `No case finished before the sweep ${run.error === "cancelled" ? "was cancelled" : "failed"}.`);
+    return;
+  }
+  sweep.id = run.sweep_id;
+  sweep.rows = rows;
+  await drawSweep();
+  document.body.dataset.sweepLoaded = sweep.id;
+}
+
+/** Cancel the sweep being followed (DELETE /api/v1/plants/sweeps/{id}; no token: the id is
+ * the capability, docs/service.md). A running sweep stops after its current cases and the
+ * poll then finds it ended with the cases it finished; a refused cancel is said in the
+ * panel and the button offered again. */
+async function cancelSweep() {
+  const id = sweep.following;
+  if (!id) return;
+  $("sweep-cancel").disabled = true;
+  try {
+    await api(`/api/v1/plants/sweeps/${enc(id)}`, { method: "DELETE" });
+    if (sweep.following !== id) return;
+    sweep.stopping = true;
+    sweepSay({ message: "" });
+  } catch (err) {
+    if (sweep.following !== id) return;
+    sweepSay({ message: `Cancel: ${err.message}` });
+    $("sweep-cancel").disabled = false;
   }
 }
 
 export function initSweep() {
   $("sweep-form").addEventListener("submit", runSweep);
+  $("sweep-cancel").addEventListener("click", cancelSweep);
   sayInvalid($("sweep-form"), (message) => { $("sweep-status").textContent = message; });
   $("sweep-case").addEventListener("change", () => drawSweepShade().catch((err) => banner(`Sweep shade: ${err.message}`, "error")));
 }

@@ -207,3 +207,83 @@ def test_the_sweep_panel_sends_the_gcrs_as_typed(  # type: ignore[no-untyped-def
             page.wait_for_function("said => document.getElementById('banner').textContent"
                                    ".includes(said)", arg=said)
         assert page.get_attribute("body", "data-sweep-loaded") is None
+
+
+SWEEP_CHARTS = ("chart-sweep-energy", "chart-sweep-tradeoff", "chart-sweep-shade")
+
+
+def test_a_running_sweep_is_cancelled_from_the_panel_and_keeps_its_finished_cases(  # type: ignore[no-untyped-def]
+        browser, server, request) -> None:
+    """"Cancel sweep" (shown only while a sweep is followed) calls DELETE …/sweeps/{id} on the
+    service's own Dask LocalCluster: the sweep stops after its current cases and the panel
+    says so and draws the cases finished, which the API keeps. A refused cancel (here the
+    service's 404 for a sweep it no longer holds, answered once by the browser's router) is
+    said in the panel and the sweep still followed; a sweep refused next (422) leaves none of
+    the cancelled one's curves (the panel had no cancel: an operator's finding)."""
+    from tests.e2e.conftest import open_page
+
+    def refuse_delete(route) -> None:  # type: ignore[no-untyped-def]
+        if route.request.method != "DELETE":
+            route.continue_()
+            return
+        route.fulfill(status=404, content_type="application/json",
+                      body=json.dumps({"detail": "unknown sweep 'gone'"}))
+
+    with open_page(browser, request, ignore=lambda text: "404" in text or "422" in text) as page:
+        page.goto(server.url + "/#plant?day=2021-12-21")
+        page.wait_for_selector('body[data-plant-loaded="penarroya/2021-12-21"]', timeout=60_000)
+        assert not page.is_visible("#sweep-cancel")
+        # 3 layouts × 9 GCRs × 2 strategies over a year at 1800 s: 54 cases, 946,080 case
+        # steps (under the anonymous bound), long enough to be stopped part-way
+        page.fill("#sweep-layouts", "square,diagonal,hexagonal_e_w")
+        page.fill("#sweep-gcr", "0.1:0.3:0.025")
+        page.fill("#sweep-strategies", "sun,backtrack")
+        page.fill("#sweep-step", "1800")
+        page.route("**/api/v1/plants/sweeps/*", refuse_delete)
+        page.click("#sweep-run")
+        page.wait_for_selector("#sweep-cancel", state="visible")
+        assert page.is_disabled("#sweep-run")        # one sweep followed at a time
+        page.click("#sweep-cancel")
+        message = page.locator("[data-testid=sweep-message]")
+        message.wait_for()
+        assert message.inner_text().startswith("Cancel: 404")
+        assert "unknown sweep 'gone'" in message.inner_text()
+        assert page.is_enabled("#sweep-cancel")      # offered again
+        page.unroute("**/api/v1/plants/sweeps/*")
+        page.wait_for_function("() => /^running: [1-9][0-9]* of 54 cases/"
+                               ".test(document.getElementById('sweep-status').textContent)",
+                               timeout=150_000)
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.locator("#sweep-form").screenshot(path=str(ARTIFACTS / "plant-sweep-running.png"))
+        page.click("#sweep-cancel")
+        page.wait_for_function("() => document.getElementById('sweep-status').textContent"
+                               ".startsWith('Cancelled after')", timeout=60_000)
+        page.wait_for_selector("body[data-sweep-loaded]")  # the cases kept, drawn
+        sweep_id = page.get_attribute("body", "data-sweep-loaded")
+        run = httpx.get(f"{server.url}/api/v1/plants/sweeps/{sweep_id}").json()
+        assert (run["status"], run["error"], run["cases"]) == ("failed", "cancelled", 54)
+        kept = len(run["result"]["rows"])
+        assert 1 <= kept < 54
+        assert page.text_content("#sweep-status") == \
+            f"Cancelled after {kept} of 54 cases; the {kept} finished " \
+            f"{'is' if kept == 1 else 'are'} drawn below."
+        drawn = page.evaluate("() => document.getElementById('chart-sweep-energy').data"
+                              ".filter(t => t.showlegend !== false)"
+                              ".reduce((n, t) => n + t.x.length, 0)")
+        assert drawn == kept
+        assert page.locator("#sweep-case option").count() == kept
+        page.wait_for_function("() => (document.getElementById('chart-sweep-shade').data || [])"
+                               ".length === 3")   # a kept case's shade, from the same sweep
+        assert not page.is_visible("#sweep-cancel") and page.is_enabled("#sweep-run")
+        assert not page.is_visible("[data-testid=sweep-message]")
+        page.locator("#page-plant").screenshot(path=str(ARTIFACTS / "plant-sweep-cancelled.png"))
+        # a sweep the service refuses: said in the panel, the cancelled one's curves gone
+        page.fill("#sweep-gcr", "abc")
+        page.click("#sweep-run")
+        page.wait_for_function("() => document.querySelector('[data-testid=sweep-message]')"
+                               ".textContent.includes('gcr: expected numbers')")
+        for chart in SWEEP_CHARTS:
+            assert page.get_attribute(f"#{chart}", "data-points") == "0"
+        assert page.locator("#sweep-case option").count() == 0
+        assert page.get_attribute("body", "data-sweep-loaded") is None
+        assert page.text_content("#sweep-status") == ""
