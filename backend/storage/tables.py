@@ -35,6 +35,8 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 SOURCE_CODES: dict[str, int] = {"measured": 0, "twin": 1}
 SOURCE_NAMES: dict[int, str] = {v: k for k, v in SOURCE_CODES.items()}
 
+#: Longest note an alert's acknowledgement keeps (``alerts.acknowledged_note``).
+ACK_NOTE_MAX_CHARS = 280
 
 
 def utcnow() -> dt.datetime:
@@ -336,7 +338,8 @@ class VisionDetection(Base):
 class AlertRow(Base):
     """An alert (``backend/alerts/``): one condition of a site's array — a silent logger, a
     diagnosis fault, a low performance ratio — raised once when it starts and cleared once
-    when it ends (migration ``0007_alerts``). Times are UTC Unix seconds."""
+    when it ends (migration ``0007_alerts``), acknowledged at most once by an operator while
+    active (``0014_alert_acknowledgement``). Times are UTC Unix seconds."""
 
     __tablename__ = "alerts"
     __table_args__ = (
@@ -365,3 +368,11 @@ class AlertRow(Base):
     #: ``queued``, ``delivered``, ``failed`` (retries spent or refused), ``dropped`` (queue full)
     webhook_status: Mapped[str] = mapped_column(String(16))
     webhook_attempts: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
+    #: when an operator acknowledged it (``POST …/acknowledge``, migration
+    #: ``0014_alert_acknowledgement``); null until then, set once
+    acknowledged_at_s: Mapped[int | None] = mapped_column(BigInteger, nullable=True)
+    #: who: the token's label, ``token #<id>`` for a token without one, or ``admin``
+    acknowledged_by: Mapped[str | None] = mapped_column(String(200), nullable=True)
+    #: the operator's note, at most :data:`ACK_NOTE_MAX_CHARS` characters
+    acknowledged_note: Mapped[str | None] = mapped_column(String(ACK_NOTE_MAX_CHARS),
+                                                          nullable=True)
