@@ -8,9 +8,10 @@ stays, so ``token list`` shows it).
 Scopes (:data:`SCOPES`): ``ingest`` — a field device: writes its site's readings
 and nothing else (the default, and what every token made before scopes became);
 ``site`` — the site's operator: also edits the site's config, its calibrations
-and the 3D twin's shared replay. Above both is the admin token, a setting
-(``HELIOTWIN_ADMIN_TOKEN``), never stored here. :class:`TokenCache` answers the hot path from memory
-for at most ``ttl_s`` after it last asked the database about a token, so a
+and the 3D twin's shared replay, and acknowledges the site's alerts. Above both is
+the admin token, a setting (``HELIOTWIN_ADMIN_TOKEN``), never stored here.
+:class:`TokenCache` answers the hot path from memory for at most ``ttl_s`` after it
+last asked the database about a token, so a
 token revoked by another process (``heliotwin token revoke``) is refused within
 that time; a revocation through this process's cache (the admin HTTP endpoint)
 is refused at once.
@@ -59,10 +60,19 @@ def scope_allows(held: str, needed: str) -> bool:
 
 @dataclass(frozen=True)
 class Grant:
-    """What a valid token may do: write to ``site_id`` within ``scope``."""
+    """What a valid token may do: write to ``site_id`` within ``scope``; and which token it
+    is (its stored ``token_id`` and ``label``), to record who did what."""
 
     site_id: str
     scope: str
+    token_id: int = 0
+    label: str = ""
+
+    @property
+    def name(self) -> str:
+        """Who the token is, as an action it did records it: its label, else ``token #<id>``
+        (the id ``heliotwin token list`` shows; never the token nor its prefix)."""
+        return self.label or f"token #{self.token_id}"
 
 
 class TokenRefused(LookupError):
@@ -225,8 +235,8 @@ class TokenCache:
             return fresh
         with self._engine.connect() as conn:
             row = conn.execute(
-                select(LoggerToken.site_id, LoggerToken.scope, LoggerToken.expires_at,
-                       LoggerToken.revoked_at)
+                select(LoggerToken.id, LoggerToken.site_id, LoggerToken.scope,
+                       LoggerToken.label, LoggerToken.expires_at, LoggerToken.revoked_at)
                 .where(LoggerToken.token_sha256 == digest)
             ).first()
         expires = _aware(row.expires_at) if row is not None else None
@@ -236,7 +246,7 @@ class TokenCache:
             self.forget(digest)
             raise TokenRefused(reason)
         assert row is not None
-        grant = Grant(str(row.site_id), str(row.scope))
+        grant = Grant(str(row.site_id), str(row.scope), int(row.id), str(row.label or ""))
         with self._lock:
             self._entries[digest] = _Entry(
                 grant, None if expires is None else expires.timestamp(), time.monotonic())

@@ -382,8 +382,8 @@ class AlertSettings(_Group):
         7, ge=0, le=400, description="Complete local days up to yesterday diagnosed for "
                                      "fault and PR alerts (0: only `logger_silent`).")
     webhook_url: HttpUrl | None = Field(
-        None, description="`http(s)://…` that each raised or cleared alert is POSTed to as "
-                          "JSON; unset: alerts are only stored and shown.")
+        None, description="`http(s)://…` that each alert raised, acknowledged or cleared is "
+                          "POSTed to as JSON; unset: alerts are only stored and shown.")
     webhook_secret: SecretStr | None = Field(
         None, description="Signs each webhook body: `X-Heliotwin-Signature: sha256=<HMAC-SHA256 "
                           "hex>`; unset: unsigned.")

@@ -9,5 +9,6 @@ cleared once when it ends, stored in ``alerts``, shown on the dashboard, read at
   retries with exponential backoff; never waited for by anything else;
 - :mod:`backend.alerts.service` — the evaluator thread (``heliotwin-alerts``): every
   ``HELIOTWIN_ALERT_INTERVAL_S`` it evaluates the rules, raises and clears alerts
-  through the writer and hands their events to the sender; the read side of the API.
+  through the writer and hands their events to the sender; the read side of the API, and
+  an operator's acknowledgement of an active alert (who, when, a note).
 """

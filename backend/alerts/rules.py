@@ -219,8 +219,15 @@ def _kwh(wh: float | None) -> str:
 
 def summary(site_id: str, kind: str, array: str, fault_kind: str | None, state: str,
             detail: str) -> str:
-    """One line for chat webhooks (the body's ``text``)."""
+    """One line for chat webhooks (the body's ``text``); ``state``: ``active`` (raised),
+    ``acknowledged`` or ``cleared``."""
     what = {"logger_silent": "logger silent", "low_performance_ratio": "low performance ratio",
             "fault": f"fault: {FAULT_WORDS.get(fault_kind or '', fault_kind)}"}.get(kind, kind)
-    head = "cleared" if state == "cleared" else "ALERT"
+    head = {"cleared": "cleared", "acknowledged": "acknowledged"}.get(state, "ALERT")
     return f"heliotwin {site_id} / {array}: {head} — {what}: {detail}"
+
+
+def acknowledged_text(alert: dict[str, Any]) -> str:
+    """``by Ana (night shift): sent Luis to the drive`` — who took an alert, and their note."""
+    note = alert["acknowledged_note"]
+    return f"by {alert['acknowledged_by']}" + (f": {note}" if note else "")

@@ -19,7 +19,9 @@ A condition not yet active is inserted as an ``active`` alert (through the write
 one module that commits) and its ``raised`` event offered to the webhook sender; an
 active alert whose rule was evaluated and no longer finds it is updated to ``cleared``
 (``cleared_at``, ``cleared_detail``) and its ``cleared`` event offered. Nothing is sent
-again while a condition lasts. The active alerts are read back from the database at
+again while a condition lasts. Between the two an operator may acknowledge it, once
+(:func:`acknowledge`, ``POST /api/v1/alerts/{alert_id}/acknowledge``): its ``acknowledged``
+event goes out between the other two. The active alerts are read back from the database at
 start, so a restart neither repeats nor forgets them. Ingestion never waits for any of
 this: the evaluator only reads (its own pooled connections) and queues small writes,
 and the webhook has a thread and a bounded queue of its own (:mod:`backend.alerts.webhook`).
@@ -27,12 +29,14 @@ and the webhook has a thread and a bounded queue of its own (:mod:`backend.alert
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import logging
 import threading
 import time
+from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import orjson
@@ -55,7 +59,8 @@ logger = logging.getLogger(__name__)
 MEASURED = SOURCE_CODES["measured"]
 _COLUMNS = ("id", "site_id", "array_name", "kind", "fault_kind", "state", "since_s",
             "raised_at_s", "cleared_at_s", "detail", "cleared_detail", "data_json",
-            "webhook_status", "webhook_attempts")
+            "webhook_status", "webhook_attempts", "acknowledged_at_s", "acknowledged_by",
+            "acknowledged_note")
 
 
 def _version() -> str:
@@ -81,23 +86,93 @@ def alert_dict(row: Any) -> dict[str, Any]:
         "cleared_at": iso(row["cleared_at_s"]), "detail": row["detail"],
         "cleared_detail": row["cleared_detail"], "data": orjson.loads(row["data_json"]),
         "webhook_status": row["webhook_status"], "webhook_attempts": row["webhook_attempts"],
+        "acknowledged_at": iso(row["acknowledged_at_s"]),
+        "acknowledged_by": row["acknowledged_by"], "acknowledged_note": row["acknowledged_note"],
     }
 
 
+def latest_event(alert: dict[str, Any]) -> str:
+    """An alert's latest webhook event: ``raised``, then ``acknowledged`` (at most once,
+    while active), then ``cleared`` — the order they happen in, and are sent in."""
+    if alert["state"] == "cleared":
+        return "cleared"
+    return "raised" if alert["acknowledged_at"] is None else "acknowledged"
+
+
+def get_alert(conn: Connection, alert_id: int) -> dict[str, Any] | None:
+    """One stored alert as the API shows it, or None."""
+    cols = [getattr(AlertRow, c) for c in _COLUMNS]
+    row = conn.execute(select(*cols).where(AlertRow.id == alert_id)).mappings().first()
+    return None if row is None else alert_dict(row)
+
+
+@dataclass(frozen=True)
+class Acknowledgement:
+    """What :func:`acknowledge` did: ``acknowledged`` (now), ``already`` (before: kept as it
+    was), ``cleared`` (too late: nothing to take on) or ``unknown``; and the alert as stored."""
+
+    outcome: Literal["acknowledged", "already", "cleared", "unknown"]
+    alert: dict[str, Any] | None
+
+
+def acknowledge(ctx: ServiceContext, alert_id: int, by: str, note: str | None,
+                now_s: float | None = None) -> Acknowledgement:
+    """Record that ``by`` has taken alert ``alert_id`` (with ``note``): once, and only while
+    it is active — a second acknowledgement keeps the first's time, name and note. One
+    transaction of the writer; then, with a webhook, its ``acknowledged`` event is offered
+    (under :attr:`AlertService.events`, so events go out in the order they were stored).
+    Waits for the writer: call it off the event loop."""
+    alerts = ctx.alerts
+    sender = alerts.sender if alerts is not None else None
+    now = int(time.time() if now_s is None else now_s)
+
+    def store(conn: Connection) -> Acknowledgement:
+        alert = get_alert(conn, alert_id)
+        if alert is None:
+            return Acknowledgement("unknown", None)
+        if alert["acknowledged_at"] is not None:
+            return Acknowledgement("already", alert)
+        if alert["state"] != "active":
+            return Acknowledgement("cleared", alert)
+        conn.execute(update(AlertRow).where(AlertRow.id == alert_id).values(
+            acknowledged_at_s=now, acknowledged_by=by, acknowledged_note=note,
+            webhook_status="off" if sender is None else "queued", webhook_attempts=0))
+        return Acknowledgement("acknowledged", get_alert(conn, alert_id))
+
+    with alerts.events if alerts is not None else contextlib.nullcontext():
+        done: Acknowledgement = ctx.writer.call(store).result(timeout=60)
+        if done.outcome == "acknowledged" and alerts is not None:
+            assert done.alert is not None
+            alerts.offer(done.alert, "acknowledged")
+    if done.outcome == "acknowledged" and done.alert is not None:
+        a = done.alert
+        logger.info("%s", rules.summary(a["site_id"], a["kind"], a["array"], a["fault_kind"],
+                                        "acknowledged", rules.acknowledged_text(a)))
+    return done
+
+
 def list_alerts(conn: Connection, site_id: str | None = None, state: str | None = None,
-                kind: str | None = None, limit: int = 100) -> dict[str, Any]:
-    """Stored alerts, newest raised first, and how many of each state match the filter."""
+                kind: str | None = None, limit: int = 100,
+                acknowledged: bool | None = None) -> dict[str, Any]:
+    """Stored alerts, newest raised first, and how many of each state (and active ones not
+    acknowledged) match the ``site_id`` and ``kind`` filter."""
     where = []
     if site_id is not None:
         where.append(AlertRow.site_id == site_id)
     if kind is not None:
         where.append(AlertRow.kind == kind)
-    counts = {"active": 0, "cleared": 0}
-    for st, n in conn.execute(select(AlertRow.state, func.count()).where(*where)
-                              .group_by(AlertRow.state)).all():
-        counts[st] = int(n)
+    counts = {"active": 0, "cleared": 0, "active_unacknowledged": 0}
+    for st, acked, n in conn.execute(
+            select(AlertRow.state, AlertRow.acknowledged_at_s.is_not(None), func.count())
+            .where(*where).group_by(AlertRow.state, AlertRow.acknowledged_at_s.is_not(None))):
+        counts[st] += int(n)
+        if st == "active" and not acked:
+            counts["active_unacknowledged"] += int(n)
     if state is not None:
         where.append(AlertRow.state == state)
+    if acknowledged is not None:
+        where.append(AlertRow.acknowledged_at_s.is_not(None) if acknowledged
+                     else AlertRow.acknowledged_at_s.is_(None))
     cols = [getattr(AlertRow, c) for c in _COLUMNS]
     rows = conn.execute(select(*cols).where(*where)
                         .order_by(AlertRow.raised_at_s.desc(), AlertRow.id.desc())
@@ -164,6 +239,9 @@ class AlertService:
                 secret=None if a.webhook_secret is None else a.webhook_secret.get_secret_value(),
                 user_agent=f"heliotwin/{_version()}", on_result=self._delivered)
         self._active: dict[rules.Key, dict[str, Any]] = {}
+        #: held from the write of an alert's change to the offer of its event (raise, clear,
+        #: :func:`acknowledge`): events are offered in the order they were stored
+        self.events = threading.Lock()
         self._errors: dict[tuple[str, str], str] = {}
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -188,7 +266,7 @@ class AlertService:
             self.sender.start()
             for row in queued:
                 a = alert_dict(row)
-                self._offer(a, "raised" if a["state"] == "active" else "cleared")
+                self.offer(a, latest_event(a))
         self._thread = threading.Thread(target=self._run, name="heliotwin-alerts", daemon=True)
         self._thread.start()
         logger.info("alerts: %d active; evaluated every %.3g s; webhook %s", len(self._active),
@@ -337,56 +415,64 @@ class AlertService:
             assert key is not None
             return int(key[0])
 
-        try:
-            alert_id = self.ctx.writer.call(store).result(timeout=60)
-        except Exception:  # noqa: BLE001 - not raised now: the next round tries again
-            logger.exception("alerts: could not store %s", cond.key)
-            return
-        alert = alert_dict({**values, "id": alert_id})
-        self._active[cond.key] = alert
+        with self.events:
+            try:
+                alert_id = self.ctx.writer.call(store).result(timeout=60)
+            except Exception:  # noqa: BLE001 - not raised now: the next round tries again
+                logger.exception("alerts: could not store %s", cond.key)
+                return
+            alert = alert_dict({**values, "id": alert_id, "acknowledged_at_s": None,
+                                "acknowledged_by": None, "acknowledged_note": None})
+            self._active[cond.key] = alert
+            self.offer(alert, "raised")
         logger.warning("%s", rules.summary(cond.site_id, cond.kind, cond.array, cond.fault_kind,
                                            "active", cond.detail))
-        self._offer(alert, "raised")
 
     def _clear(self, key: rules.Key, alert: dict[str, Any], note: str, now: float) -> None:
         changes = {"state": "cleared", "cleared_at_s": int(now), "cleared_detail": note,
                    "webhook_status": "off" if self.sender is None else "queued",
                    "webhook_attempts": 0}
 
-        def store(conn: Connection) -> None:
+        def store(conn: Connection) -> dict[str, Any] | None:
             conn.execute(update(AlertRow).where(AlertRow.id == alert["id"]).values(**changes))
+            return get_alert(conn, alert["id"])  # as stored: with an acknowledgement, if any
 
-        try:
-            self.ctx.writer.call(store).result(timeout=60)
-        except Exception:  # noqa: BLE001 - still active: the next round tries again
-            logger.exception("alerts: could not clear alert %s", alert["id"])
-            return
-        del self._active[key]
-        cleared = {**alert, "state": "cleared", "cleared_at": iso(now), "cleared_detail": note,
-                   "webhook_status": changes["webhook_status"], "webhook_attempts": 0}
+        with self.events:
+            try:
+                cleared = self.ctx.writer.call(store).result(timeout=60)
+            except Exception:  # noqa: BLE001 - still active: the next round tries again
+                logger.exception("alerts: could not clear alert %s", alert["id"])
+                return
+            del self._active[key]
+            if cleared is not None:  # None: its site was deleted meanwhile
+                self.offer(cleared, "cleared")
         logger.info("%s", rules.summary(alert["site_id"], alert["kind"], alert["array"],
                                         alert["fault_kind"], "cleared", note))
-        self._offer(cleared, "cleared")
 
     # -- the webhook -----------------------------------------------------------
-    def _offer(self, alert: dict[str, Any], event: str) -> None:
+    def offer(self, alert: dict[str, Any], event: str) -> None:
+        """Hand ``alert``'s ``event`` (``raised``, ``acknowledged``, ``cleared``) to the
+        webhook sender, if there is one (never waits)."""
         if self.sender is None:
             return
+        words = {"raised": alert["detail"], "cleared": alert["cleared_detail"],
+                 "acknowledged": rules.acknowledged_text(alert)}[event]
         text = rules.summary(alert["site_id"], alert["kind"], alert["array"],
-                             alert["fault_kind"], alert["state"],
-                             alert["cleared_detail"] if event == "cleared" else alert["detail"])
+                             alert["fault_kind"], "active" if event == "raised" else event,
+                             words)
         body = orjson.dumps({"event": event, "event_id": f"{alert['id']}:{event}",
                              "text": text, "alert": alert, "service": "heliotwin"})
         self.sender.offer(Event(alert["id"], event, body))
 
     def _delivered(self, ev: Event, status: str, attempts: int) -> None:
         """The sender's outcome of ``ev`` → the alert's ``webhook_status`` (unless the alert
-        has moved on to its next event meanwhile)."""
-        state = "active" if ev.event == "raised" else "cleared"
+        has moved on to its next event meanwhile: :func:`latest_event`)."""
+        active, ack = AlertRow.state == "active", AlertRow.acknowledged_at_s
+        still = {"raised": active & ack.is_(None), "acknowledged": active & ack.is_not(None),
+                 "cleared": AlertRow.state == "cleared"}[ev.event]
 
         def store(conn: Connection) -> None:
-            conn.execute(update(AlertRow).where(AlertRow.id == ev.alert_id,
-                                                AlertRow.state == state)
+            conn.execute(update(AlertRow).where(AlertRow.id == ev.alert_id, still)
                          .values(webhook_status=status, webhook_attempts=attempts))
 
         try:

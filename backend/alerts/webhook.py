@@ -4,7 +4,8 @@
 thread (``heliotwin-alert-webhook``). :meth:`WebhookSender.offer` never waits: an event
 that finds the queue full is dropped and counted (its alert stays stored, its
 ``webhook_status`` says ``dropped``). The thread sends the events one at a time, in the
-order they were raised (a receiver sees an alert's ``raised`` before its ``cleared``):
+order they were offered — the order they were stored (a receiver sees an alert's ``raised``
+before its ``acknowledged``, and both before its ``cleared``):
 
 - a 2xx answer delivers it;
 - no answer (refused, reset, ``Settings.alerts.webhook_timeout_s`` passed), a 5xx, 408,
@@ -16,11 +17,12 @@ order they were raised (a receiver sees an alert's ``raised`` before its ``clear
   again would change nothing).
 
 Each POST carries ``Content-Type: application/json``, ``User-Agent: heliotwin/<version>``,
-``X-Heliotwin-Event`` (``raised``/``cleared``), ``X-Heliotwin-Event-Id`` (the same on every
-retry, so a receiver can drop a repeat) and, with ``Settings.alerts.webhook_secret``,
-``X-Heliotwin-Signature: sha256=<hex HMAC-SHA256 of the body>``. Waits between retries
-end at once at shutdown; events still queued then are logged and counted ``unsent``
-(their alerts keep ``webhook_status = queued`` and are offered again at the next start).
+``X-Heliotwin-Event`` (``raised``/``acknowledged``/``cleared``), ``X-Heliotwin-Event-Id``
+(the same on every retry, so a receiver can drop a repeat) and, with
+``Settings.alerts.webhook_secret``, ``X-Heliotwin-Signature: sha256=<hex HMAC-SHA256 of
+the body>``. Waits between retries end at once at shutdown; events still queued then are
+logged and counted ``unsent`` (their alerts keep ``webhook_status = queued`` and are
+offered again at the next start).
 """
 
 from __future__ import annotations
@@ -61,7 +63,7 @@ class Event:
     """One event of one alert, its body ready to send."""
 
     alert_id: int
-    event: str  # raised | cleared
+    event: str  # raised | acknowledged | cleared
     body: bytes
 
     @property

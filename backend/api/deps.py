@@ -143,6 +143,14 @@ Caller = Grant | Literal["admin"] | None
 """Who sent a request: the admin token, a valid site token's grant, or nobody (None)."""
 
 
+def caller_name(caller: Caller) -> str:
+    """How an action is recorded as done by ``caller``: ``admin``, or the token's
+    :attr:`backend.auth.Grant.name`."""
+    if caller is None:
+        raise ValueError("an anonymous caller has no name: authorize() first")
+    return "admin" if caller == "admin" else caller.name
+
+
 async def caller_of(ctx: ServiceContext, authorization: str | None,
                     admin_ok: bool = True) -> Caller:
     """The caller an ``Authorization`` header names (401 for an invalid token)."""

@@ -3,7 +3,8 @@
 - ``create --site ID [--scope ingest|site] [--label TEXT] [--expires-in-days N |
   --expires ISO]`` prints the new token once, alone on the last line; only its SHA-256
   is stored. ``ingest`` (default): a field device, writes readings only; ``site``: also
-  edits the site, its calibrations and the shared 3D replay (``backend/auth.py``).
+  edits the site, its calibrations and the shared 3D replay, and acknowledges its alerts
+  (``backend/auth.py``).
 - ``list [--site ID] [--json]`` shows every token's id, site, scope, prefix, label,
   times and status (``active``, ``expired``, ``revoked``) — never the token.
 - ``revoke TOKEN_OR_ID`` revokes by the id ``list`` shows or by the token itself; a
@@ -33,7 +34,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     c.add_argument("--label", default="", help="a note to recognise the token by")
     c.add_argument("--scope", default="ingest", metavar="ingest|site",
                    help="ingest: a field device, writes readings only (default); site: "
-                        "also edits the site, its calibrations and the shared 3D replay")
+                        "also edits the site, its calibrations and the shared 3D replay, "
+                        "and acknowledges its alerts")
     exp = c.add_mutually_exclusive_group()
     exp.add_argument("--expires-in-days", type=float, metavar="DAYS",
                      help="refused after this many days (default: never expires)")

@@ -404,7 +404,7 @@ def test_silent_logger_raised_once_kept_over_a_restart_and_cleared_once(
             body = _alerts(c, site_id=SITE, state="active")
             assert [a["id"] for a in body["alerts"]] == [alert["id"]]
             assert body["alerts"][0]["webhook_status"] == "delivered"
-            assert body["counts"] == {"active": 1, "cleared": 0}
+            assert body["counts"] == {"active": 1, "cleared": 0, "active_unacknowledged": 1}
             assert body["evaluator"]["webhook"]["delivered"] == 1
             assert "secret-path" not in json.dumps(body)  # the URL's path is never shown
         server.stop()  # graceful: the lifespan's shutdown ran to its end
@@ -425,9 +425,54 @@ def test_silent_logger_raised_once_kept_over_a_restart_and_cleared_once(
             assert (cleared["id"], cleared["state"]) == (alert["id"], "cleared")
             assert cleared["cleared_detail"].startswith("the tracker logger reports again")
             body = _alerts(c, site_id=SITE)
-            assert body["counts"] == {"active": 0, "cleared": 1}
+            assert body["counts"] == {"active": 0, "cleared": 1, "active_unacknowledged": 0}
             assert body["alerts"][0]["cleared_at"] is not None
             assert _alerts(c, state="active")["alerts"] == []
+    finally:
+        server.stop()
+
+
+def test_acknowledged_goes_out_between_raised_and_cleared_and_a_new_alert_is_not(
+        sqlite_database: Database, rx: Receiver) -> None:
+    """An operator acknowledges a silent logger's alert (``POST …/acknowledge``): the webhook
+    gets an ``acknowledged`` event after the ``raised`` one, saying who and their note; the
+    ``cleared`` event then carries who took it; the logger falling silent again is a new
+    alert, not acknowledged."""
+    server = _server(sqlite_database, HELIOTWIN_ALERT_SILENT_MIN=str(SILENT_MIN),
+                     HELIOTWIN_ALERT_WEBHOOK_URL=rx.url).start()
+    try:
+        token = server.token()
+        operator = server.token(label="Ana", scope="site")
+        with server.client(timeout_s=30) as c:
+            _post(c, token, [_reading(time.time() - 1)])
+            first = rx.wait_for(lambda e: len(e) >= 1)[0]["alert"]
+            r = c.post(f"/api/v1/alerts/{first['id']}/acknowledge",
+                       json={"note": "sent Luis to the logger"},
+                       headers={"Authorization": f"Bearer {operator}"})
+            assert r.status_code == 200, r.text
+            evs = rx.wait_for(lambda e: len(e) >= 2)
+            ack = evs[1]
+            assert (ack["event"], ack["event_id"]) == ("acknowledged",
+                                                       f"{first['id']}:acknowledged")
+            assert ack["alert"]["acknowledged_by"] == "Ana" and ack["alert"]["state"] == "active"
+            assert ack["text"] == ("heliotwin tehuantepec / tracker: acknowledged — logger silent: "
+                                   "by Ana: sent Luis to the logger")
+            assert rx.requests[1]["headers"]["X-Heliotwin-Event"] == "acknowledged"
+            _until(lambda: _alerts(c, state="active")["alerts"][0]["webhook_status"]
+                   == "delivered")
+            # the logger reports (cleared), then falls silent again (a new alert)
+            _post(c, token, [_reading(time.time())])
+            evs = rx.wait_for(lambda e: len(e) >= 4)
+            assert [e["event"] for e in evs] == ["raised", "acknowledged", "cleared", "raised"]
+            cleared, again = evs[2]["alert"], evs[3]["alert"]
+            assert cleared["id"] == first["id"]
+            assert (cleared["acknowledged_by"], cleared["acknowledged_note"]) == (
+                "Ana", "sent Luis to the logger")
+            assert again["id"] != first["id"] and again["acknowledged_at"] is None
+            body = _alerts(c, site_id=SITE)
+            assert body["counts"] == {"active": 1, "cleared": 1, "active_unacknowledged": 1}
+            assert [a["id"] for a in _alerts(c, acknowledged="false")["alerts"]] == [again["id"]]
+            assert [a["id"] for a in _alerts(c, acknowledged="true")["alerts"]] == [first["id"]]
     finally:
         server.stop()
 
@@ -472,11 +517,13 @@ def test_alerts_endpoint_names_the_bad_field(sqlite_database: Database) -> None:
         r = c.get("/api/v1/alerts", params={"limit": "0"})
         assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "limit"]
         body = _alerts(c)
-        assert body == {"alerts": [], "counts": {"active": 0, "cleared": 0},
+        assert body == {"alerts": [], "counts": {"active": 0, "cleared": 0,
+                                                 "active_unacknowledged": 0},
                         "evaluator": {"enabled": False}}
         doc = c.get("/openapi.json").json()
         op = doc["paths"]["/api/v1/alerts"]["get"]
-        assert {p["name"] for p in op["parameters"]} == {"site_id", "state", "kind", "limit"}
+        assert {p["name"] for p in op["parameters"]} == {"site_id", "state", "kind",
+                                                          "acknowledged", "limit"}
         assert "AlertRead" in doc["components"]["schemas"]
 
 
@@ -561,7 +608,8 @@ def test_fault_and_low_pr_from_an_injected_diagnosis_raised_then_cleared(
             f"not found in the diagnosis of {yesterday.isoformat()}"
         assert cleared["low_performance_ratio"]["cleared_detail"].startswith(
             "performance ratio 0.97")
-        assert _alerts(c, site_id=SITE, kind="fault")["counts"] == {"active": 0, "cleared": 1}
+        assert _alerts(c, site_id=SITE, kind="fault")["counts"] == {
+            "active": 0, "cleared": 1, "active_unacknowledged": 0}
 
 
 def test_a_back_fill_not_yet_at_yesterday_raises_no_dropout(sqlite_database: Database) -> None:

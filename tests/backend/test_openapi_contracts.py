@@ -183,6 +183,24 @@ def test_service_and_sites_answers(checked: Checker) -> None:
     checked("GET", "/api/v1/alerts")
 
 
+def test_alert_answers(checked: Checker) -> None:
+    """An alert stored as the evaluator stores one, listed and acknowledged."""
+    from sqlalchemy import insert
+
+    from backend.storage.tables import AlertRow
+
+    ctx = checked.client.app.state.ctx  # type: ignore[attr-defined]
+    alert_id = ctx.writer.call(lambda conn: conn.execute(insert(AlertRow).values(
+        site_id=SITE, array_name="tracker", kind="fault", fault_kind="stuck", state="active",
+        since_s=1_764_000_000, raised_at_s=1_764_090_000, detail="stuck", data_json="{}",
+        webhook_status="off")).inserted_primary_key[0]).result(60)
+    listed = checked("GET", "/api/v1/alerts", params={"acknowledged": "false"})
+    assert [a["id"] for a in listed["alerts"]] == [alert_id]
+    acked = checked("POST", "/api/v1/alerts/{alert_id}/acknowledge", path={"alert_id": alert_id},
+                    json={"note": "on it"}, headers={"Authorization": f"Bearer {ADMIN}"})
+    assert (acked["acknowledged_by"], acked["acknowledged_note"]) == ("admin", "on it")
+
+
 def test_token_answers(checked: Checker) -> None:
     admin = {"Authorization": f"Bearer {ADMIN}"}
     made = checked("POST", "/api/v1/tokens", 201, json={"site_id": SITE, "label": "c"},

@@ -87,7 +87,8 @@ class TokenCreate(BaseModel):
                                    "PostgreSQL refuses a NUL)")
     scope: Literal["ingest", "site"] = Field(
         "ingest", description="ingest: a field device, writes readings only; site: also "
-                              "edits the site, its calibrations and the shared 3D replay")
+                              "edits the site, its calibrations and the shared 3D replay, "
+                              "and acknowledges its alerts")
     expires_in_days: float | None = Field(None, gt=0, le=36_600,
                                           description="refused after this many days [d]")
     expires_at: str | None = Field(None, description="refused from this instant (ISO 8601 "

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
+
+from backend.storage.tables import ACK_NOTE_MAX_CHARS
 
 AlertKind = Literal["logger_silent", "fault", "low_performance_ratio"]
 AlertState = Literal["active", "cleared"]
@@ -28,8 +30,27 @@ class AlertRead(BaseModel):
     cleared_detail: str | None = Field(description="why it was cleared, in plain words")
     data: dict[str, Any] = Field(description="the numbers behind it, units in the names")
     webhook_status: Literal["off", "queued", "delivered", "failed", "dropped"] = Field(
-        description="delivery of its latest event (raised or cleared) to the webhook")
+        description="delivery of its latest event (raised, acknowledged or cleared) to the "
+                    "webhook")
     webhook_attempts: int
+    acknowledged_at: str | None = Field(description="when an operator acknowledged it (UTC); "
+                                                    "null while nobody has")
+    acknowledged_by: str | None = Field(description="who: the label of the token used, "
+                                                    "`token #<id>` for a token without one, "
+                                                    "or `admin`")
+    acknowledged_note: str | None = Field(description="what they said (optional)")
+
+
+class AcknowledgeCreate(BaseModel):
+    """An operator's acknowledgement of an alert: seen, someone is on it."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    note: str | None = Field(None, max_length=ACK_NOTE_MAX_CHARS,
+                             pattern=r"^[^\x00-\x1f\x7f]*$",
+                             examples=["sent Luis to check the azimuth drive"],
+                             description="a short note for colleagues (one line, no control "
+                                         "characters); blank is no note")
 
 
 class WebhookRead(BaseModel):
@@ -71,6 +92,8 @@ class AlertsRead(BaseModel):
     """The alerts matching the query, newest raised first."""
 
     alerts: list[AlertRead]
-    counts: dict[str, int] = Field(description="`active` and `cleared` alerts matching "
-                                               "`site_id` and `kind` (whatever `state`)")
+    counts: dict[str, int] = Field(description="`active`, `cleared` and "
+                                               "`active_unacknowledged` alerts matching "
+                                               "`site_id` and `kind` (whatever `state` and "
+                                               "`acknowledged`)")
     evaluator: EvaluatorRead

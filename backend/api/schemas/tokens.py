@@ -16,7 +16,7 @@ class TokenRead(BaseModel):
     label: str
     scope: Literal["ingest", "site"] = Field(
         description="ingest: writes readings only; site: also edits the site, its "
-                    "calibrations and the shared 3D replay")
+                    "calibrations and the shared 3D replay, and acknowledges its alerts")
     created_at: str = Field(description="UTC, ISO 8601")
     expires_at: str | None
     revoked_at: str | None
