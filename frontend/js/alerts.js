@@ -1,7 +1,10 @@
 // Overview: the alerts card — the selected site's active alerts (silent loggers, diagnosis
-// faults, low performance ratio; GET /api/v1/alerts), the recently cleared ones under a fold,
-// and what the service checks. Refreshed every 30 s while the overview is shown (not in a
-// hidden tab), at once when the site changes.
+// faults, low performance ratio; GET /api/v1/alerts), those nobody has acknowledged first,
+// each with an "Acknowledge" button (POST /api/v1/alerts/{id}/acknowledge with the token
+// typed into the card's form, kept there for the page's life as the other pages' token
+// fields), the acknowledged ones shown calmer with who, when and their note; the recently
+// cleared ones under a fold, and what the service checks. Refreshed every 30 s while the
+// overview is shown (not in a hidden tab), at once when the site changes.
 import { api } from "./api.js";
 import { KIND_WORDS as FAULT_WORDS } from "./diagnosis.js";
 import { fmtDateTime } from "./time.js";
@@ -19,6 +22,7 @@ const WEBHOOK_WORDS = { queued: "webhook: sending…", delivered: "webhook: deli
 
 let st = null;
 let controller = null;
+const shownAlerts = new Map(); // id → the active alert drawn, for the form
 const $ = (id) => document.getElementById(id);
 
 /** "Fault: tracker stuck" — the alert's kind in words. */
@@ -27,17 +31,29 @@ export function alertTitle(a) {
   return a.fault_kind ? `${kind}: ${FAULT_WORDS[a.fault_kind] || a.fault_kind}` : kind;
 }
 
+/** "Acknowledged by Ana (night shift), 5 Dec 09:12: sent Luis to the drive". */
+function ackText(a, tz) {
+  return `Acknowledged by ${a.acknowledged_by}, ${fmtDateTime(tz, a.acknowledged_at)}`
+    + (a.acknowledged_note ? `: ${a.acknowledged_note}` : "");
+}
+
 function item(a, tz) {
   const active = a.state === "active";
-  return h("li", { class: `alert ${active ? "active" : "cleared"}`, "data-testid": "alert",
-    "data-kind": a.kind, "data-state": a.state, "data-id": a.id },
+  const acked = Boolean(a.acknowledged_at);
+  const dot = !active ? "ok" : acked ? "ack" : "bad";
+  return h("li", { class: `alert ${active ? "active" : "cleared"}${acked ? " acknowledged" : ""}`,
+    "data-testid": "alert", "data-kind": a.kind, "data-state": a.state, "data-id": a.id,
+    "data-acknowledged": String(acked) },
   h("div", { class: "alert-head" },
-    h("span", { class: `dot ${active ? "bad" : "ok"}`, "aria-hidden": "true" }),
+    h("span", { class: `dot ${dot}`, "aria-hidden": "true" }),
     h("strong", {}, alertTitle(a)),
     h("span", { class: "alert-array" }, a.array),
     h("span", { class: "muted", title: `raised ${fmtDateTime(tz, a.raised_at)}` }, `since ${fmtDateTime(tz, a.since)}`),
-    WEBHOOK_WORDS[a.webhook_status] ? h("span", { class: `muted webhook ${a.webhook_status}` }, WEBHOOK_WORDS[a.webhook_status]) : null),
+    WEBHOOK_WORDS[a.webhook_status] ? h("span", { class: `muted webhook ${a.webhook_status}` }, WEBHOOK_WORDS[a.webhook_status]) : null,
+    active && !acked ? h("button", { type: "button", class: "alert-ack-button", "data-testid": "alert-ack",
+      "data-id": a.id, title: "Say you have seen it and are taking it on (needs a token)" }, "Acknowledge") : null),
   h("div", { class: "alert-detail", "data-testid": "alert-detail" }, a.detail),
+  acked ? h("div", { class: "alert-ack-by", "data-testid": "alert-ack-by" }, ackText(a, tz)) : null,
   active ? null : h("div", { class: "muted" }, `cleared ${fmtDateTime(tz, a.cleared_at)}: ${a.cleared_detail || ""}`));
 }
 
@@ -55,17 +71,96 @@ function rulesText(ev) {
   return parts.join(" · ");
 }
 
+/** "Alerts — 2 unacknowledged · 1 acknowledged": what still needs someone comes first. */
+function titleText(counts) {
+  const open = counts.active_unacknowledged;
+  const taken = counts.active - open;
+  const parts = [open ? `${open} unacknowledged` : null, taken ? `${taken} acknowledged` : null].filter(Boolean);
+  return parts.length ? `Alerts — ${parts.join(" · ")}` : "Alerts";
+}
+
 function render(active, cleared, tz) {
-  const n = active.counts.active;
-  $("alerts-title").textContent = n ? `Alerts — ${n} active` : "Alerts";
-  $("alerts-card").classList.toggle("has-active", n > 0);
+  const open = active.counts.active_unacknowledged;
+  $("alerts-title").textContent = titleText(active.counts);
+  $("alerts-card").classList.toggle("has-active", open > 0);
+  $("alerts-card").classList.toggle("has-acknowledged", open === 0 && active.counts.active > 0);
   $("alerts-rules").textContent = rulesText(active.evaluator);
-  $("alerts-active").replaceChildren(...(active.alerts.length ? active.alerts.map((a) => item(a, tz))
+  // the unacknowledged first (newest raised first within each: the API's order)
+  const shown = [...active.alerts].sort((a, b) => Boolean(a.acknowledged_at) - Boolean(b.acknowledged_at));
+  $("alerts-active").replaceChildren(...(shown.length ? shown.map((a) => item(a, tz))
     : [h("li", { class: "muted", "data-testid": "alerts-none" }, "No active alerts.")]));
+  shownAlerts.clear();
+  for (const a of active.alerts) shownAlerts.set(a.id, a);
+  followForm(active.alerts);
   const total = cleared.counts.cleared;
   $("alerts-cleared-summary").textContent = total
     ? `Recently cleared (${Math.min(total, CLEARED_SHOWN)} of ${total})` : "Recently cleared (none)";
   $("alerts-cleared").replaceChildren(...cleared.alerts.map((a) => item(a, tz)));
+}
+
+// -- acknowledging ----------------------------------------------------------------------------
+// One form under the list (not inside an alert: the 30 s refresh redraws the list, and would
+// take the note being typed with it); it says which alert it is for.
+
+const form = () => $("alerts-ack");
+
+function status(text, kind = "") {
+  $("alerts-ack-status").textContent = text;
+  $("alerts-ack-status").className = `alerts-ack-status ${kind}`;
+}
+
+function closeForm(text = "", kind = "") {
+  form().hidden = true;
+  delete form().dataset.alertId;
+  status(text, kind);
+}
+
+function openForm(a) {
+  const f = form();
+  f.dataset.alertId = a.id;
+  f.dataset.site = a.site_id;
+  f.dataset.title = alertTitle(a);
+  $("alerts-ack-what").textContent = `Acknowledge “${alertTitle(a)}” on the ${a.array} (since ${fmtDateTime(st.tz, a.since)}):`;
+  f.hidden = false;
+  status("");
+  $("alerts-ack-note").focus();
+}
+
+/** After a refresh: the form's alert taken by a colleague or cleared meanwhile closes it. */
+function followForm(alerts) {
+  const id = Number(form().dataset.alertId || 0);
+  if (!id || form().hidden) return;
+  if (form().dataset.site !== st.site?.site_id) { closeForm(); return; }
+  const a = alerts.find((x) => x.id === id);
+  if (!a) closeForm(`“${form().dataset.title}” was cleared meanwhile: nothing to acknowledge.`);
+  else if (a.acknowledged_at) closeForm(`“${form().dataset.title}” was acknowledged meanwhile by ${a.acknowledged_by}.`);
+}
+
+async function send(ev) {
+  ev.preventDefault();
+  const id = form().dataset.alertId;
+  const title = form().dataset.title;
+  const token = $("alerts-ack-token").value.trim();
+  if (!token) {
+    status("Acknowledging needs a token: paste into “Token” a site-scope token of this site named after you "
+      + "(heliotwin token create --site ID --scope site --label \"Your name\") or the admin token.", "error");
+    return;
+  }
+  const note = $("alerts-ack-note").value.trim();
+  $("alerts-ack-send").disabled = true;
+  try {
+    const a = await api(`/api/v1/alerts/${encodeURIComponent(id)}/acknowledge`,
+      { method: "POST", json: note ? { note } : {}, token });
+    $("alerts-ack-note").value = "";
+    closeForm(`“${title}” acknowledged by ${a.acknowledged_by}.`);
+    await load();
+  } catch (err) {
+    if (err.status !== 409) { status(`Not acknowledged: ${err.message}`, "error"); return; }
+    closeForm(`Not acknowledged: ${err.message}`, "error"); // cleared meanwhile: the list moves on
+    await load();
+  } finally {
+    $("alerts-ack-send").disabled = false;
+  }
 }
 
 /** Load the selected site's alerts (two reads: every active one, the latest cleared). */
@@ -98,10 +193,18 @@ function tick() {
 export function init(state) {
   st = state;
   if (!$("alerts-card")) return;
+  $("alerts-active").addEventListener("click", (ev) => {
+    const button = ev.target.closest("[data-testid=alert-ack]");
+    if (!button) return;
+    const a = shownAlerts.get(Number(button.dataset.id));
+    if (a) openForm(a);
+  });
+  form().addEventListener("submit", send);
+  $("alerts-ack-cancel").addEventListener("click", () => closeForm());
   setInterval(tick, POLL_MS);
   document.addEventListener("visibilitychange", tick);
   // main.js updates the shared state in its own listeners, registered before these
-  $("site-select").addEventListener("change", () => load());
+  $("site-select").addEventListener("change", () => { closeForm(); load(); });
   window.addEventListener("hashchange", () => { if (st.page === "overview") load(); });
   load();
 }

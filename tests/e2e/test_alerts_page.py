@@ -3,7 +3,9 @@ this module's own: yesterday's logger readings posted over HTTP, a stuck-tracker
 yesterday put in the diagnosis cache (as the service stores it), alerts evaluated every
 0.3 s with a 3 s silence threshold and a webhook receiver on a local port. The card must
 list what ``GET /api/v1/alerts`` answers — the silent loggers, the fault, the low PR, the
-cleared one under its fold — and follow a change of site.
+cleared one under its fold — and follow a change of site; an operator acknowledges the fault
+with the card's form (refused first with a logger's token) and, after a reload, sees it
+shown as acknowledged, by whom and with the note.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from live_service import InProcessServer, ServerProcess, free_port, new_database
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 TZ = ZoneInfo("America/Mexico_City")
 SITE = "tehuantepec"
+ADMIN = "admin-token-of-the-alerts-page"
 YESTERDAY = dt.datetime.now(TZ).date() - dt.timedelta(days=1)
 
 
@@ -108,6 +111,7 @@ def alert_server(browser, tmp_path_factory: pytest.TempPathFactory) -> Iterator[
     proc = ServerProcess(db.url, tmp / "server.log", extra_env={
         "HELIOTWIN_ALERT_INTERVAL_S": "0.3", "HELIOTWIN_ALERT_SILENT_MIN": "0.05",
         "HELIOTWIN_ALERT_SILENT_DAYLIGHT_ONLY": "false",  # the test runs at any hour
+        "HELIOTWIN_ADMIN_TOKEN": ADMIN,  # to make the operator's site-scope token
         "HELIOTWIN_ALERT_WEBHOOK_URL": f"http://127.0.0.1:{hook.server_address[1]}/hook"})
     proc.start()
     proc.write_token = token  # type: ignore[attr-defined]
@@ -153,7 +157,7 @@ def test_the_alerts_card_lists_what_the_api_answers(pg, alert_server: ServerProc
     pg.goto(f"{alert_server.base_url}/#overview?site={SITE}&day={YESTERDAY.isoformat()}")
     pg.wait_for_selector(f'body[data-alerts-loaded="{SITE}"]')
     card = pg.locator("[data-testid=alerts-card]")
-    assert pg.locator("#alerts-title").inner_text() == "Alerts — 3 active"
+    assert pg.locator("#alerts-title").inner_text() == "Alerts — 3 unacknowledged"
     shown = card.locator("[data-testid=alerts-active] [data-testid=alert]")
     assert shown.count() == 3
     text = card.locator("[data-testid=alerts-active]").inner_text()
@@ -191,5 +195,82 @@ def test_the_alerts_card_lists_what_the_api_answers(pg, alert_server: ServerProc
         time.sleep(0.1)
     pg.select_option("#site-select", SITE)
     pg.wait_for_function("() => document.getElementById('alerts-title').textContent"
-                         " === 'Alerts — 2 active'")
+                         " === 'Alerts — 2 unacknowledged'")
     assert pg.locator("#alerts-cleared-summary").inner_text() == "Recently cleared (2 of 2)"
+
+
+def test_an_operator_acknowledges_an_alert(browser, alert_server: ServerProcess,
+                                           request: pytest.FixtureRequest) -> None:
+    base = alert_server.base_url
+    r = httpx.post(f"{base}/api/v1/tokens", headers={"Authorization": f"Bearer {ADMIN}"},
+                   json={"site_id": SITE, "scope": "site", "label": "Ana (night shift)"})
+    assert r.status_code == 201, r.text
+    operator = r.json()["token"]
+    before = httpx.get(f"{base}/api/v1/alerts", params={"site_id": SITE}).json()["counts"]
+    assert before["active_unacknowledged"] >= 2, before  # the fault and the low PR at least
+    # the logger's token is refused (403): the browser logs the failed request
+    with open_page(browser, request, timeout_ms=30_000,
+                   ignore=lambda text: "status of 403" in text) as pg:
+        pg.goto(f"{base}/#overview?site={SITE}&day={YESTERDAY.isoformat()}")
+        pg.wait_for_selector(f'body[data-alerts-loaded="{SITE}"]')
+        assert pg.locator("#alerts-title").inner_text() == \
+            f"Alerts — {before['active_unacknowledged']} unacknowledged"
+        fault = pg.locator("[data-testid=alerts-active] [data-testid=alert][data-kind=fault]")
+        assert fault.get_attribute("data-acknowledged") == "false"
+        fault.locator("[data-testid=alert-ack]").click()
+        ack_form = pg.locator("[data-testid=alerts-ack]")
+        assert ack_form.is_visible()
+        assert "Acknowledge “Fault: tracker stuck” on the tracker" in ack_form.inner_text()
+        pg.fill("#alerts-ack-note", "sent Luis to the azimuth drive")
+        pg.fill("#alerts-ack-token", alert_server.write_token)  # type: ignore[attr-defined]
+        pg.click("#alerts-ack-send")
+        status = pg.locator("[data-testid=alerts-ack-status]")
+        pg.wait_for_function("() => document.querySelector('[data-testid=alerts-ack-status]')"
+                             ".textContent.startsWith('Not acknowledged')")
+        assert "scope 'ingest'" in status.inner_text() and ack_form.is_visible()
+        ARTIFACTS.mkdir(exist_ok=True)
+        pg.locator("[data-testid=alerts-card]").screenshot(
+            path=str(ARTIFACTS / "e2e-alerts-ack-form.png"))
+        pg.fill("#alerts-ack-token", operator)
+        pg.click("#alerts-ack-send")
+        pg.wait_for_selector("[data-testid=alerts-active] [data-kind=fault]"
+                             "[data-acknowledged=true]")
+        assert status.inner_text() == "“Fault: tracker stuck” acknowledged by Ana (night shift)."
+        assert not ack_form.is_visible()
+
+    stored = httpx.get(f"{base}/api/v1/alerts", params={
+        "site_id": SITE, "state": "active", "acknowledged": "true"}).json()["alerts"]
+    assert [(a["kind"], a["acknowledged_by"], a["acknowledged_note"]) for a in stored] == [
+        ("fault", "Ana (night shift)", "sent Luis to the azimuth drive")]
+    with open_page(browser, request, timeout_ms=30_000) as pg:  # a colleague opens it later
+        pg.goto(f"{base}/#overview?site={SITE}&day={YESTERDAY.isoformat()}")
+        pg.wait_for_selector(f'body[data-alerts-loaded="{SITE}"]')
+        left = before["active_unacknowledged"] - 1
+        assert pg.locator("#alerts-title").inner_text() == \
+            f"Alerts — {left} unacknowledged · 1 acknowledged"
+        items = pg.locator("[data-testid=alerts-active] [data-testid=alert]")
+        flags = [items.nth(i).get_attribute("data-acknowledged") for i in range(items.count())]
+        assert flags == ["false"] * left + ["true"]  # the ones nobody has taken first
+        fault = items.nth(left)
+        assert fault.get_attribute("data-kind") == "fault"
+        by = fault.locator("[data-testid=alert-ack-by]").inner_text()
+        assert by.startswith("Acknowledged by Ana (night shift), ")
+        assert by.endswith(": sent Luis to the azimuth drive")
+        assert fault.locator("[data-testid=alert-ack]").count() == 0
+        assert items.nth(0).locator("[data-testid=alert-ack]").count() == 1
+        # calmer: no red edge on it, and the card keeps its red edge for the others
+        edge = fault.evaluate("e => getComputedStyle(e).borderLeftColor")
+        assert edge == "rgb(173, 181, 189)", edge
+        assert "has-active" in (pg.locator("#alerts-card").get_attribute("class") or "")
+        ARTIFACTS.mkdir(exist_ok=True)
+        pg.locator("[data-testid=alerts-card]").screenshot(
+            path=str(ARTIFACTS / "e2e-alerts-acknowledged.png"))
+        # at phone width the card, its buttons and the open form fit (docs/dashboard.md)
+        pg.set_viewport_size({"width": 390, "height": 900})
+        items.nth(0).locator("[data-testid=alert-ack]").click()
+        assert pg.locator("[data-testid=alerts-ack]").is_visible()
+        assert pg.evaluate("document.documentElement.scrollWidth") <= 390
+        pg.locator("[data-testid=alerts-card]").screenshot(
+            path=str(ARTIFACTS / "e2e-alerts-ack-phone.png"))
+        pg.click("#alerts-ack-cancel")
+        assert not pg.locator("[data-testid=alerts-ack]").is_visible()
