@@ -420,6 +420,43 @@ def test_cli_calibrate_and_bad_file(tmp_path: Path, heliotwin_cli: Callable) -> 
     assert out.returncode == 2 and "not a PNG or JPEG" in out.stderr
 
 
+def _bytes_lost_mid_stream(path: Path) -> bytes:
+    """A real frame with 100 bytes of its entropy-coded data lost half-way (a dropped
+    packet, a bad card sector): libjpeg only warns, and the rest of the frame came back
+    grey, analysed as if whole."""
+    data = path.read_bytes()
+    mid = (data.find(b"\xff\xda") + len(data)) // 2
+    return data[:mid] + data[mid + 100:]
+
+
+def test_a_damaged_jpeg_is_a_422_naming_the_file(client: httpx.Client) -> None:
+    """Issue 24: a JPEG damaged mid-stream (its end marker intact) was a 200 with a sun
+    found on a frame half grey; now a 422 naming the field, the file and what libjpeg found.
+    Blind and with the scale the image circle implies, as a new user sends it."""
+    wolf = REAL_SKY / "Wolf_20160530_095000_UTCp1_sunrow1337_suncol634.jpg"
+    r = client.post(SUN, files={"file": (wolf.name, _bytes_lost_mid_stream(wolf), "image/jpeg")},
+                    data={"camera": "fisheye"})
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert detail.startswith(f"file {wolf.name!r}: corrupt or truncated JPEG image: Corrupt "
+                             f"JPEG data"), detail
+    r = client.post(SUN, files={"file": (wolf.name, wolf.read_bytes(), "image/jpeg")},
+                    data={"camera": "fisheye"})
+    assert r.status_code == 200 and r.json()["sun_found"], r.text  # the whole file
+
+
+def test_cli_a_damaged_jpeg_is_an_error_line(tmp_path: Path, heliotwin_cli: Callable) -> None:
+    """``heliotwin vision detect`` on the same damaged file: exit 2, one ``error:`` line
+    naming the file and libjpeg's finding, nothing on stdout."""
+    wolf = REAL_SKY / "Wolf_20160530_095000_UTCp1_sunrow1337_suncol634.jpg"
+    bad = tmp_path / wolf.name
+    bad.write_bytes(_bytes_lost_mid_stream(wolf))
+    out = heliotwin_cli("vision", "detect", str(bad), "--camera", "fisheye", "--json")
+    assert out.returncode == 2 and out.stdout == "", out.stdout
+    assert "error: " in out.stderr and "Corrupt JPEG data" in out.stderr, out.stderr
+    assert str(bad) in out.stderr
+
+
 def test_a_busy_queue_does_not_spend_the_anonymous_allowance() -> None:
     """``_admitted`` took the pixels from the anonymous allowance before waiting in the
     decode queue, so each 503 (queue full) spent them: three 503s on a 100-pixel allowance

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import struct
 import zlib
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -90,8 +91,6 @@ def test_odd_pngs_decode_to_8bit_bgr(shape: tuple[int, ...], dtype: type) -> Non
 
 
 def _real_frame() -> np.ndarray:
-    from pathlib import Path
-
     path = (Path(__file__).parents[1] / "data" / "real-sky"
             / "Wettermast_20160615_125430UTCp1_sunrow1306_suncol1076.jpg")
     return cv2.imread(str(path), cv2.IMREAD_COLOR)
@@ -161,3 +160,61 @@ def test_a_transparent_colour_is_no_light(colour_type: int, row: bytes, extra: b
     as an alpha channel is: transparent white corners read as white sky."""
     out = decode_image(_png_of(2, 8, colour_type, row, extra), 100)
     assert out[0, 0].tolist() == [0, 0, 0] and out[0, 1].max() > 0
+
+
+REAL_SKY = Path(__file__).resolve().parents[1] / "data" / "real-sky"
+WOLF = REAL_SKY / "Wolf_20160530_095000_UTCp1_sunrow1337_suncol634.jpg"
+
+
+def _damaged(data: bytes) -> dict[str, bytes]:
+    """A JPEG with its entropy-coded data damaged as a failing link or card leaves it:
+    bytes lost mid-stream, bytes zeroed, the file cut short (even by its end marker alone)."""
+    sos = data.find(b"\xff\xda")
+    mid = sos + (len(data) - sos) // 2
+    return {"100 bytes lost": data[:mid] + data[mid + 100:],
+            "7 bytes lost": data[:mid] + data[mid + 7:],
+            "64 bytes zeroed": data[:mid] + bytes(64) + data[mid + 64:],
+            "cut at half": data[:mid],
+            "end marker missing": data[:-2]}
+
+
+@pytest.mark.parametrize("kind", ["100 bytes lost", "7 bytes lost", "64 bytes zeroed",
+                                  "cut at half", "end marker missing"])
+def test_a_damaged_jpeg_is_refused(kind: str) -> None:
+    """Issue 24: a real frame with bytes lost or zeroed mid-stream decoded to a whole
+    1920×1920 frame (libjpeg only warns; ``cv2.imdecode`` says nothing) and was analysed as
+    such. Refused, with libjpeg's own words."""
+    data = WOLF.read_bytes()
+    damaged = _damaged(data)[kind]
+    if kind not in ("cut at half", "end marker missing"):  # what cv2 did with it
+        silent = cv2.imdecode(np.frombuffer(damaged, np.uint8), cv2.IMREAD_COLOR)
+        assert silent is not None and silent.shape == (1920, 1920, 3)
+    with pytest.raises(ImageError, match="corrupt or truncated JPEG image: (Corrupt JPEG data"
+                                         "|Premature end of JPEG file)"):
+        decode_image(damaged, 40_000_000)
+
+
+def test_every_real_jpeg_decodes_as_opencv_does_and_trailing_bytes_are_read_as_whole() -> None:
+    """Every real frame of tests/data/real-sky decodes, to the pixels ``cv2.imdecode`` gives
+    (the same library, libjpeg-turbo); bytes after the end-of-image marker, which some
+    cameras append (a vendor's trailer), leave a file whole."""
+    paths = sorted(REAL_SKY.glob("*.jpg")) + sorted((REAL_SKY / "eurocontrol").glob("*.jpg"))
+    assert len(paths) == 34
+    for path in paths:
+        data = path.read_bytes()
+        ref = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+        assert np.array_equal(decode_image(data, 40_000_000), ref), path.name
+    data = WOLF.read_bytes()
+    assert np.array_equal(decode_image(data + b"\x00" * 64 + b"trailer", 40_000_000),
+                          decode_image(data, 40_000_000))
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_every_exif_orientation_as_opencv_applies_it(orientation: int) -> None:
+    """The eight EXIF orientations turn the raster as OpenCV's own EXIF reader does
+    (``cv2.IMREAD_COLOR``), on a raster with no symmetry."""
+    img = _img(60, 40)
+    ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 100])
+    data = _with_exif_orientation(buf.tobytes(), orientation)
+    ref = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    assert np.array_equal(decode_image(data, 10_000), ref)
