@@ -37,6 +37,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from vision.sphere import SUN_RADIUS_DEG
+
 FEATURES: tuple[str, ...] = (
     "shape",             # circularity of the bright core 0–1 (second moments): round
     "glare",             # glare evidence 0–1: fall-off, a sharp drop to the sky, or a core
@@ -132,6 +134,25 @@ wide in a strong aureole; the synthetic development suns with such a core have `
 another width, sits in the bright cloud, not in a fall-off of its own (FE3, UCEEB 06:10:
 ``glare`` 0.23–0.54), and the model's weight on ``too_small`` — positive, fitted on those
 HDR suns — rated it up to 0.86."""
+
+
+def smaller_than_the_disc(area_px: float, px_per_deg: float) -> bool:
+    """Whether a bright core of ``area_px`` pixels is smaller than the solar disc at
+    ``px_per_deg``: a size no sun has (issue 24 item 2, positive evidence against it).
+
+    The disc (:data:`vision.sphere.SUN_RADIUS_DEG` in radius, ρ px) is some 10⁵ times the
+    clear sky's radiance (a direct normal irradiance of 1000 W m⁻² over its 6.8 × 10⁻⁵ sr
+    against a sky of 30–100 W m⁻² sr⁻¹), and its limb still 0.4 times its centre (limb
+    darkening): on a frame exposed for the sky every pixel wholly inside the disc — its
+    centre within ρ − √2/2 of the disc's — is at the frame's top, clipped by a sensor or
+    mapped there by a tone-mapping HDR camera, and glare and blur only add to it. So the
+    sun's brightest region holds at least π (ρ − √2/2)² pixels; a smaller one is a glint (a
+    sunlit roof, a speck of the glare of a hidden sun, sky through leaves). Where the disc
+    spans under a pixel and a half (ρ ≤ √2/2: 2.7 px/°) nothing is refused. The region
+    may be cut by the image circle or an obstacle, which a sun only a sliver of which shows
+    is too: such a sun is not reported."""
+    r = SUN_RADIUS_DEG * px_per_deg - np.sqrt(0.5)
+    return bool(r > 0.0 and area_px < np.pi * r * r)
 
 
 def _small_without_glare(x: NDArray[np.float64]) -> bool:

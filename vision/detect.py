@@ -18,7 +18,9 @@ Three named methods, all returning a :class:`SunDetection`:
   glare itself, when it still lights the sky at 4 core radii:
   :func:`vision.candidates._tail`). What a sun is (issue 24 item 2): a region at or near
   saturation (≥ 250, or a flat clipped top at any level: a darkened frame),
-  round, brighter than the sky. A candidate that is not saturated or has a
+  round, brighter than the sky. A region smaller than the solar disc at the frame's
+  scale is no candidate (:func:`vision.confidence.smaller_than_the_disc`: a glint);
+  a candidate that is not saturated or has a
   shape no sun has gets probability 0 (:func:`vision.confidence.admissible`);
   the others get ``confidence``, a probability: a logistic model of shape,
   glare evidence, contrast against the sky (the frame's median, or its
@@ -253,6 +255,11 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
     real = np.array([c.labels[0] for c in singles if not c.ghost], dtype=np.int64)
     cands = _clusters(stats, cents, real, ox, oy)
     priors = {id(c): _prior(c, labels, diam) for c in cands}
+    if scale_known:  # a core smaller than the solar disc is no sun (its own core, once narrowed)
+        cands = [c for c in cands if not conf.smaller_than_the_disc(c.area, ppd)]
+        if not cands:
+            return (f"every bright region is smaller than the solar disc at {ppd:.1f} px/° "
+                    "(a glint or a speck, not the sun)")
 
     def near(c: _Candidate) -> float:
         if expected_px is None or not prefer_near:

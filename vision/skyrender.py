@@ -43,8 +43,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vision.cameras import FisheyeCamera
-from vision.sphere import enu_from_sky
-from vision.synth import SUN_RADIUS_DEG, SynthFrame
+from vision.sphere import SUN_RADIUS_DEG, enu_from_sky
+from vision.synth import SynthFrame
 
 SKIES: tuple[str, ...] = ("clear", "cirrus", "cumulus", "overcast")
 

@@ -13,6 +13,12 @@ from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 
+SUN_RADIUS_DEG = 0.2665
+"""The solar disc's mean apparent radius [°]: half of its 0.533° diameter (0.524–0.542° over
+the year, with the Earth's distance). The renderers draw it (``vision.synth``,
+``vision.skyrender``), the detector refuses a core smaller than it
+(``vision.confidence.smaller_than_the_disc``)."""
+
 
 def enu_from_sky(azimuth_deg: ArrayLike, elevation_deg: ArrayLike) -> FloatArray:
     """Unit vectors ``[..., 3]`` (east, north, up) from azimuth/elevation [°]."""

@@ -26,9 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vision.cameras import FisheyeCamera, PinholeCamera
-from vision.sphere import enu_from_sky
-
-SUN_RADIUS_DEG = 0.2665  # half of the sun's 0.533° mean apparent diameter
+from vision.sphere import SUN_RADIUS_DEG, enu_from_sky
 
 
 @dataclass(frozen=True)

@@ -300,3 +300,88 @@ def test_a_resized_frame_without_a_sun_keeps_its_cloud_highlights_no_sun(
         img = _as_jpeg(img, quality)
     d = detect_robust(img, min_confidence=0.0)
     assert d.confidence < 0.3, (d.confidence, d.features, d.reason)
+
+
+def _glare_reach_px(img: np.ndarray, x: float, y: float) -> float:
+    """How far [px] the saturated glare (grey ≥ 245) around the labelled sun reaches."""
+    n, lab = cv2.connectedComponents((to_gray(img) >= 245).astype(np.uint8))
+    i = lab[int(round(y)), int(round(x))]
+    ys, xs = np.nonzero(lab == i)
+    return float(np.hypot(xs - x, ys - y).max()) if i else 20.0
+
+
+def _occulted(img: np.ndarray, x: float, y: float, how: str) -> np.ndarray:
+    """The frame with its sun and glare hidden, as an all-sky imager's shadow ball or an
+    obstacle at a low sun would: a dark disc over the glare (``ball``: 1.5 × its reach + 10
+    px; ``big ball``: 2.5 ×), or everything beyond an edge across the radius through the
+    sun, 1.5 × the glare's reach + 10 px short of it, painted as a roof in shadow."""
+    out = img.copy()
+    reach = _glare_reach_px(img, x, y)
+    if how in ("ball", "big ball"):
+        k = 1.5 if how == "ball" else 2.5
+        cv2.circle(out, (int(x), int(y)), int(k * reach + 10), (25, 25, 25), -1, cv2.LINE_AA)
+        return out
+    h, w = img.shape[:2]
+    c = np.array([w / 2.0, h / 2.0])
+    u = (np.array([x, y]) - c) / np.hypot(x - c[0], y - c[1])
+    v = np.array([-u[1], u[0]])
+    edge = np.hypot(x - c[0], y - c[1]) - 1.5 * reach - 10
+    far = 4.0 * max(h, w)
+    poly = np.array([c + u * edge - v * far, c + u * edge + v * far,
+                     c + u * far + v * far, c + u * far - v * far], np.int32)
+    cv2.fillPoly(out, [poly], (30, 40, 45))
+    return out
+
+
+def test_an_occulted_sun_leaves_no_sun_blind(real_sky) -> None:
+    """A tester's finding (issue 24): with the sun and its glare hidden behind a shadow ball or
+    a roof, blind detection reported a glint instead — a sunlit roof's, a speck of the hidden
+    sun's glare, sky through leaves, 1–9 px at 10.9 px/° — with confidence 0.99–1.00 on 9 of
+    the 69 Wolf frames (0.99 with the ephemeris of a calibrated camera too: such a glint is
+    round, saturated and ringed by light, a plain disc to the confidence). The sun's brightest
+    region holds at least every pixel wholly inside its disc (vision.confidence
+    .smaller_than_the_disc): none is reported now. Measured: highest 0.49 (Wolf 12:36 behind
+    the smaller ball: a fragment of the glare beside it, 0.66° in radius), 1 of 87 at 0.3 or
+    more."""
+    rows = _labelled(real_sky, "Wolf") + _labelled(real_sky, "Wettermast")
+    confidences = []
+    for r in rows:
+        img = cv2.imread(r["path"])
+        x, y = float(r["sun_col_label"]), float(r["sun_row_label"])
+        for how in ("ball", "big ball", "roof"):
+            d = detect_robust(_occulted(img, x, y, how), min_confidence=0.0)
+            assert d.confidence < 0.5, (r["filename"], how, d.confidence, d.features)
+            confidences.append(d.confidence)
+    assert len(confidences) == 87
+    assert sum(c >= 0.3 for c in confidences) <= 1
+
+
+def test_an_occulted_sun_leaves_no_sun_with_a_calibrated_camera(real_sky) -> None:
+    """The same occulted Wolf frames with a camera calibrated on the development frames'
+    labels and the SPA sun through it (the ephemeris-guided path, as a stored calibration
+    gives it): the held-out frames' glints got 0.999–1.000 before the disc rule — the
+    distance from the prediction never counts against a plain disc (vision.confidence) —
+    and their visible suns are found. Measured: highest 0.0009 occulted; the suns 0.97–0.99."""
+    rows = _labelled(real_sky, "Wolf")
+    lat, lon = float(rows[0]["lat"]), float(rows[0]["lon"])
+    sp = pvlib.solarposition.get_solarposition(
+        pd.DatetimeIndex([pd.Timestamp(r["utc_time"]) for r in rows]), lat, lon,
+        method="nrel_numpy")
+    dev = [i for i, r in enumerate(rows) if r["split"] == "development"]
+    cam = fit_fisheye([float(rows[i]["sun_col_label"]) for i in dev],
+                      [float(rows[i]["sun_row_label"]) for i in dev],
+                      sp.azimuth.values[dev], sp.apparent_elevation.values[dev],
+                      (1920, 1920)).camera
+    for i, r in enumerate(rows):
+        if r["split"] != "heldout":
+            continue
+        img = cv2.imread(r["path"])
+        ex, ey = cam.sky_to_pixel(float(sp.azimuth.values[i]),
+                                  float(sp.apparent_elevation.values[i]))
+        d = detect_robust(img, camera=cam, expected_px=(float(ex), float(ey)))
+        assert d.sun_found and d.confidence >= 0.9, (r["filename"], d.confidence)
+        x, y = float(r["sun_col_label"]), float(r["sun_row_label"])
+        for how in ("ball", "big ball", "roof"):
+            d = detect_robust(_occulted(img, x, y, how), camera=cam,
+                              expected_px=(float(ex), float(ey)), min_confidence=0.0)
+            assert d.confidence < 0.01, (r["filename"], how, d.confidence, d.features)
