@@ -644,7 +644,9 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
     pandas.DataFrame
         UTC minute index: ``tracker_power_w`` and ``fixed_power_w`` (GTI-DIRINT sky),
         ``tracker_power_alt_w`` / ``fixed_power_alt_w`` (clear-sky-ratio + Erbs sky)
-        [W], ``solar_azimuth``, ``apparent_elevation`` [°], ``ghi``, ``dni``, ``dhi``,
+        [W], ``solar_azimuth``, ``apparent_elevation``, ``normal_azimuth``,
+        ``normal_elevation`` [°] (the twin's tracker normal: the orientation a tracker that
+        stops there holds), ``ghi``, ``dni``, ``dhi``,
         ``poa_global``, ``poa_clear``, ``dni_extra`` [W m⁻²], ``temp_air`` [°C] and
         ``wind_speed`` [m s⁻¹] (measured where the loggers read them, else the site's),
         ``clearness`` [-], ``valid``, ``measured_sky``, ``flag``, ``sky_source``.
@@ -661,7 +663,8 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
     weather, sensor = weather_from_fixed(site, times, p, temp_air, wind_speed,
                                          saturation_power_w=saturation_power_w,
                                          sensors=sensors, now=now)
-    main = twin.simulate(site, start, end, weather=weather["gti_dirint"]).series
+    run = twin.simulate(site, start, end, weather=weather["gti_dirint"])
+    main = run.series
     alt = twin.simulate(site, start, end, weather=weather["clearsky_erbs"]).series
     out = pd.DataFrame({
         "tracker_power_w": main["tracker_power_w"].to_numpy(),
@@ -670,6 +673,8 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
         "fixed_power_alt_w": alt["fixed_power_w"].to_numpy(),
         "solar_azimuth": main["solar_azimuth"].to_numpy(),
         "apparent_elevation": main["apparent_elevation"].to_numpy(),
+        "normal_azimuth": run.normal_azimuth,
+        "normal_elevation": run.normal_elevation,
     }, index=times)
     for k in ("ghi", "dni", "dhi", "temp_air", "wind_speed"):
         out[k] = weather["gti_dirint"][k].to_numpy()

@@ -95,11 +95,13 @@ class LoggerDays:
 
 def logger_days(site: Site, first_day: pd.Timestamp, days: int, seed: int,
                 fault: str | None = None, fault_day: int = 0, magnitude: float | None = None,
-                kinds: list[str] | None = None) -> LoggerDays:
+                kinds: list[str] | None = None, stop_local: str | None = None) -> LoggerDays:
     """Both arrays' logged power for ``days`` days; ``fault`` from ``fault_day`` on.
 
     ``fault``: ``"stuck"`` (joints frozen at azimuth 181°, elevation 35°: the
-    array at that fixed orientation), ``"azimuth_offset"`` (pedestal yaw of
+    array at that fixed orientation; with ``stop_local``, e.g. ``"10:00"``, the tracker
+    tracks until that local time of ``fault_day`` and then holds the orientation it had
+    there), ``"azimuth_offset"`` (pedestal yaw of
     ``magnitude`` [°], default 10, under the open-loop SPA controller),
     ``"clock_offset"`` (the tracker logger's clock ``magnitude`` [s] ahead,
     default 1800), ``"module_loss"`` (one string of four lost), ``"soiling"`` (the
@@ -109,11 +111,19 @@ def logger_days(site: Site, first_day: pd.Timestamp, days: int, seed: int,
     weather, kinds = cloud_weather(site, first_day, days, seed, kinds)
     start = first_day
     end = first_day + pd.Timedelta(days=days)
-    healthy = twin.simulate(site, start, end, weather=weather).series
+    result = twin.simulate(site, start, end, weather=weather)
+    healthy = result.series
     tracker = healthy["tracker_power_w"].to_numpy().copy()
     on = np.arange(len(healthy)) >= fault_day * 1440
     if fault == "stuck":
-        fixed = replace(site.arrays["fixed"], surface_tilt=55.0, surface_azimuth=181.0)
+        tilt, surf_az = 55.0, 181.0
+        if stop_local is not None:
+            stop = first_day + pd.Timedelta(days=fault_day) + pd.Timedelta(f"{stop_local}:00")
+            on = healthy.index >= stop.tz_convert("UTC")
+            i = int(np.argmax(on))
+            tilt = 90.0 - float(result.normal_elevation[i])
+            surf_az = float(result.normal_azimuth[i])
+        fixed = replace(site.arrays["fixed"], surface_tilt=tilt, surface_azimuth=surf_az)
         stuck_site = replace(site, arrays={**site.arrays, "fixed": fixed})
         tracker[on] = twin.simulate(stuck_site, start, end, weather=weather).series[
             "fixed_power_w"].to_numpy()[on]
@@ -141,6 +151,8 @@ def logger_days(site: Site, first_day: pd.Timestamp, days: int, seed: int,
             "tracker_power_w"].to_numpy()
     elif fault is not None:
         raise ValueError(f"unknown fault {fault!r}")
+    if stop_local is not None and fault != "stuck":
+        raise ValueError("stop_local is for the stuck fault")
     rng = np.random.default_rng(seed + 1)
 
     def logged(p: np.ndarray) -> np.ndarray:
