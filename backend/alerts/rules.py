@@ -17,7 +17,8 @@ Kinds:
   sleep at night). ``since``: its last reading.
 - ``fault`` (``fault_kind`` = the diagnosis' kind) — a fault of confidence ≥
   ``Settings.alerts.fault_confidence_min`` on the latest diagnosed day (yesterday, local);
-  ``since``: the fault's first day (local midnight). Cleared when the latest day no
+  ``since``: the fault's first day (local midnight), or the minute a tracker stopped
+  part-way through it (the fault's ``since_time``). Cleared when the latest day no
   longer shows it. This includes ``underperformance``: a day whose measured tracker
   energy is below the lower edge of its expected band, with its size in Wh and %
   (``data["shortfall_wh"]``), even when no multi-day signature names the cause.
@@ -175,14 +176,18 @@ def diagnosed(site_id: str, zone: ZoneInfo, tracker: str, days: list[dict[str, A
                 continue
             # the fault's kind in words is the alert's title (summary(), the dashboard's
             # alertTitle): the detail does not say it again
+            # a tracker that stopped part-way through a day: since that minute
+            since_s = (int(dt.datetime.fromisoformat(f["since_time"]).timestamp())
+                       if f.get("since_time") else day_start_s(f["since"], zone))
             out.conditions.append(Condition(
-                site_id, tracker, "fault", day_start_s(f["since"], zone),
+                site_id, tracker, "fault", since_s,
                 f"{f['detail']} (since {f['since']}, confidence {f['confidence']:.2f}, "
                 f"diagnosis of {latest['date']})",
                 {"fault_kind": f["kind"], "confidence": f["confidence"],
                  "magnitude": f["magnitude"], "unit": f["unit"], "since_date": f["since"],
                  "day": latest["date"],
-                 **({"shortfall_wh": f["shortfall_wh"]} if "shortfall_wh" in f else {})},
+                 **({"shortfall_wh": f["shortfall_wh"]} if "shortfall_wh" in f else {}),
+                 **({"since_time": f["since_time"]} if f.get("since_time") else {})},
                 fault_kind=f["kind"]))
     judged = [d for d in days if d["sky"].get("source") in ("sensor", "fixed_array")
               and d["tracker"].get("performance_ratio") is not None]

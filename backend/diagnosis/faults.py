@@ -7,7 +7,11 @@ best scale ``s`` (least squares, ``s = Σ m·x / Σ x²``):
 - ``healthy``: ``m ≈ s · e(t)``, ``e`` the weather-aware twin's tracker power;
 - ``stuck``: ``m ≈ P(tilt, azimuth)``, the array at one fixed orientation under the
   same sky, no free scale (the same modules); grid 0…90° of tilt by 10°, azimuth by
-  15° on every 10th minute, then refined by 2° and 1° on every 5th;
+  15° on every 10th minute, then refined by 2° and 1° on every 5th — or, whichever fits
+  better, a stop part-way through the day (:func:`_stopped`): ``m ≈ e(t)`` before a minute
+  ``t0`` and the power at the twin's orientation at ``t0`` after it, one parameter (a
+  tracker that stopped at 13:00 read PR 0.93, inside its band, and no fixed orientation
+  fits its tracking morning);
 - ``azimuth_offset``: the normal at the sun's elevation but ``δ`` (1…40° by 1°) away in azimuth
   (cos AOI = sin²h + cos²h cos δ, even in δ: the sign is not observable from power). Like
   the others it runs only on days whose healthy residual is ≥ :data:`HEALTHY_RESIDUAL`,
@@ -141,6 +145,35 @@ def _power_at(site: Site, day: pd.DataFrame, tilt: np.ndarray, surf_az: np.ndarr
                                       ("wind_speed", site.wind_speed)))
     t_cell = pv.cell_temperature(poa["poa_global"], t_air, wind, arr.temperature_model)
     return pv.array_mpp(e_eff, t_cell, arr)["power_w"].reshape(shape)
+
+
+def _stopped(site: Site, sub: pd.DataFrame, m: np.ndarray, idx: np.ndarray,
+             day: pd.DataFrame) -> dict[str, Any]:
+    """``stuck`` part-way through the day: the twin's tracking power before a minute t0,
+    from t0 on the power at the orientation the twin's tracker had at t0 (its normal,
+    ``normal_azimuth``/``normal_elevation``), under the same sky, no free scale (as the
+    whole-day fit). One parameter, t0: every 2nd fitted minute, then 1 min around the best;
+    residuals on the fitted minutes ``sub`` (minutes ``idx`` of ``day``, readings ``m``)."""
+    e = sub["tracker_power_w"].to_numpy()
+    n_el, n_az = day["normal_elevation"].to_numpy(), day["normal_azimuth"].to_numpy()
+    mean = float(np.mean(m))
+
+    def residual(t0: np.ndarray) -> np.ndarray:
+        shape = (t0.size, idx.size)
+        p = _power_at(site, sub, np.broadcast_to((90.0 - n_el[t0])[:, None], shape),
+                      np.broadcast_to(n_az[t0][:, None], shape))
+        held = np.where(idx[None, :] >= t0[:, None], p, e[None, :])
+        return np.sqrt(np.mean((held - m) ** 2, axis=1)) / mean
+
+    coarse = idx[::2]
+    k = int(np.argmin(residual(coarse)))
+    fine = np.arange(max(coarse[k] - 2 * THIN_MIN + 1, idx[0]),
+                     min(coarse[k] + 2 * THIN_MIN, idx[-1] + 1))
+    r = residual(fine)
+    t0 = int(fine[int(np.argmin(r))])
+    return {"residual": float(r.min()), "tilt_deg": float(90.0 - n_el[t0]),
+            "azimuth_deg": float(n_az[t0] % 360.0), "scale": 1.0,
+            "stopped_at": day.index[t0].tz_convert(site.timezone).isoformat()}
 
 
 def band_uncertainty(day: pd.DataFrame) -> float:
@@ -281,8 +314,10 @@ def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
         k = int(np.argmin(res))
         if step == 0.0 or res[k] < best[0]:  # the coarse residual is of other minutes
             best = (float(res[k]), float(tt.ravel()[k]), float(aa.ravel()[k]), 1.0)
-    out["stuck"] = {"residual": best[0], "tilt_deg": best[1], "azimuth_deg": best[2],
-                    "scale": best[3]}
+    whole = {"residual": best[0], "tilt_deg": best[1], "azimuth_deg": best[2],
+             "scale": best[3], "stopped_at": None}
+    part = _stopped(site, sub, m_thin, np.flatnonzero(thin), day)
+    out["stuck"] = part if part["residual"] < whole["residual"] else whole
     # azimuth offset
     el = sub["apparent_elevation"].to_numpy()
     deltas = np.arange(1.0, 40.01, 1.0)
@@ -365,7 +400,10 @@ def _shape_fault(f: dict[str, Any]) -> tuple[str, float] | None:
 def _magnitude(kind: str, f: dict[str, Any]) -> tuple[float, str, str]:
     if kind == "stuck":
         tilt, az = f["stuck"]["tilt_deg"], f["stuck"]["azimuth_deg"]
-        return 90.0 - tilt, "deg", f"stuck at azimuth {az:.0f}°, elevation {90 - tilt:.0f}°"
+        detail = f"stuck at azimuth {az:.0f}°, elevation {90 - tilt:.0f}°"
+        if stopped := f["stuck"].get("stopped_at"):
+            detail += f" from {stopped[11:16]} (tracking until then)"
+        return 90.0 - tilt, "deg", detail
     if kind == "azimuth_offset":
         d = f["azimuth_offset"]["offset_deg"]
         return d, "deg", f"pointing {d:.1f}° off in azimuth (sign not observable from power)"
@@ -376,12 +414,15 @@ def _magnitude(kind: str, f: dict[str, Any]) -> tuple[float, str, str]:
 def faults_over_days(days: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
     """Faults of each day from the per-day features (``days[i]["features"]``, ``"date"``).
 
-    A shape fault's ``since`` is the first day of its run of days; days too cloudy to
-    tell do not break a run and carry the fault with its confidence × :data:`CARRY_DECAY`
-    per day; a ``module_loss`` holds from its step day on.
+    A shape fault's ``since`` is the first day of its run of days (``since_time``: the
+    minute a ``stuck`` tracker stopped that day, where the stop form fitted it,
+    :func:`_stopped`); days too cloudy to tell do not break a run and carry the fault
+    with its confidence × :data:`CARRY_DECAY` per day; a ``module_loss`` holds from its
+    step day on.
     """
     out: list[list[dict[str, Any]]] = [[] for _ in days]
     run: dict[str, str] = {}
+    run_time: dict[str, str | None] = {}  # the first day's stop time (stuck part-way)
     carried: dict[str, dict[str, Any]] = {}
     for i, d in enumerate(days):
         f = d["features"]
@@ -400,12 +441,17 @@ def faults_over_days(days: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
                     out[i].append(fault)
         else:
             kind, conf = found
-            since = run.setdefault(kind, d["date"])
+            if kind not in run:
+                run[kind] = d["date"]
+                run_time[kind] = f[kind].get("stopped_at")
+            since = run[kind]
             for other in [k for k in run if k != kind]:
                 del run[other]
             mag, unit, detail = _magnitude(kind, f)
             fault = {"kind": kind, "confidence": round(conf, 3), "since": since,
                      "magnitude": round(mag, 2), "unit": unit, "detail": detail}
+            if run_time.get(kind):
+                fault["since_time"] = run_time[kind]
             carried.clear()
             carried[kind] = fault
             out[i].append(fault)

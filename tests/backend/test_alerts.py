@@ -552,11 +552,11 @@ def _inject(db_url: str, day: dt.date, payload: dict) -> None:
         engine.dispose()
 
 
-def _payload(day: dt.date, pr: float, stuck: bool) -> dict:
+def _payload(day: dt.date, pr: float, stuck: bool, stopped_at: str | None = None) -> dict:
     features: dict = {"missing_daylight_min": 0}
     if stuck:  # the fit features of a stuck tracker (backend/diagnosis/faults.py)
         features.update(residual=0.30, stuck={"residual": 0.05, "tilt_deg": 55.0,
-                                              "azimuth_deg": 181.0},
+                                              "azimuth_deg": 181.0, "stopped_at": stopped_at},
                         azimuth_offset={"residual": 0.25, "offset_deg": 10.0},
                         clock_offset={"residual": 0.28, "offset_s": 0.0, "scale": 1.0})
     else:
@@ -610,6 +610,34 @@ def test_fault_and_low_pr_from_an_injected_diagnosis_raised_then_cleared(
             "performance ratio 0.97")
         assert _alerts(c, site_id=SITE, kind="fault")["counts"] == {
             "active": 0, "cleared": 1, "active_unacknowledged": 0}
+
+
+def test_a_tracker_stopped_part_way_through_yesterday_raises_a_fault_since_its_stop(
+        sqlite_database: Database, rx: Receiver) -> None:
+    """A tracker that stopped at 13:00 yesterday, its PR 0.93 above the alert's 0.8 (and
+    inside its band: no underperformance): the diagnosis' ``stuck`` with its stop minute
+    (features.stuck.stopped_at, faults._stopped) raises a ``fault`` alert like a whole-day
+    stuck one, its ``since`` the stop minute, not the day's midnight."""
+    yesterday = dt.datetime.now(TZ).date() - dt.timedelta(days=1)
+    noon = dt.datetime(yesterday.year, yesterday.month, yesterday.day, 12, tzinfo=TZ)
+    stop = noon + dt.timedelta(hours=1)
+    env = {"HELIOTWIN_ALERT_DIAGNOSIS_DAYS": "7", "HELIOTWIN_ALERT_WEBHOOK_URL": rx.url}
+    with _server(sqlite_database, HELIOTWIN_ALERTS="false") as server, \
+            server.client(timeout_s=30) as c:
+        _post(c, server.token(), [_reading(noon.timestamp() + 60 * k, a)
+                                  for k in range(10) for a in ("tracker", "fixed")])
+    _inject(sqlite_database.url, yesterday,
+            _payload(yesterday, 0.93, stuck=True, stopped_at=stop.isoformat()))
+    with _server(sqlite_database, **env) as server, server.client(timeout_s=30) as c:
+        rx.wait_for(lambda e: len(e) >= 1)
+        assert _rounds(c, 3)["webhook"]["offered"] == 1
+        (ev,) = rx.events()
+        fault = ev["alert"]
+        assert (ev["event"], fault["kind"], fault["fault_kind"]) == ("raised", "fault", "stuck")
+        assert dt.datetime.fromisoformat(fault["since"]) == stop
+        assert fault["detail"].startswith("stuck at azimuth 181°, elevation 35° from 13:00 "
+                                          f"(tracking until then) (since {yesterday}, ")
+        assert fault["data"]["since_time"] == stop.isoformat()
 
 
 def test_a_back_fill_not_yet_at_yesterday_raises_no_dropout(sqlite_database: Database) -> None:

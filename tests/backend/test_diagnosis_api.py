@@ -331,3 +331,29 @@ def test_a_measured_wind_cools_the_expected_cells() -> None:
         gains[sky] = e["tracker_power_w"].sum() / default["tracker_power_w"].sum() - 1
     assert 0.032 < gains["sensor_poa"] < 0.042, gains
     assert 0.004 < gains["fixed_array"] < 0.011, gains
+
+
+def test_a_tracker_that_stops_part_way_through_a_day_is_stuck_from_then(client,
+                                                                        live_server) -> None:
+    """A clear day (seed 27, held out) on which the tracker stops at 13:00 and holds its
+    orientation, posted like a logger would: the answer names ``stuck`` that day with the
+    stop minute in ``since_time`` (the site's offset), computed and then from the cache
+    (measured in process: confidence 0.88, 13:00; PR 0.93, an underperformance too)."""
+    site = load_site("tehuantepec")
+    first = "2025-08-20"
+    d = logger_days(site, pd.Timestamp(first, tz=site.timezone), 1, seed=27, kinds=["clear"],
+                    fault="stuck", stop_local="13:00")
+    _post(client, live_server.write_token, _readings(d.times, d.fixed_power_w, "fixed")
+          + _readings(d.times, d.tracker_power_w, "tracker"))
+    params = {"start": first, "end": "2025-08-21"}
+    for _ in range(2):  # computed, then from the cache
+        r = client.get(f"{BASE}/diagnosis", params=params, timeout=120)
+        assert r.status_code == 200, r.text
+        day = r.json()["days"][0]
+        stuck = [f for f in day["faults"] if f["kind"] == "stuck"]
+        assert len(stuck) == 1 and stuck[0]["confidence"] >= 0.8, day["faults"]
+        got = dt.datetime.fromisoformat(stuck[0]["since_time"])
+        assert got.utcoffset() == dt.timedelta(hours=-6), stuck[0]
+        stop = dt.datetime.fromisoformat(f"{first}T13:00:00-06:00")
+        assert abs((got - stop).total_seconds()) <= 5 * 60, stuck[0]
+        assert all(f.get("since_time") is None for f in day["faults"] if f["kind"] != "stuck")

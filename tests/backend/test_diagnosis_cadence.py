@@ -137,11 +137,13 @@ def test_a_healthy_slow_logger_is_no_fault_and_inside_its_band(diagnosed) -> Non
 JUNE = pd.Timestamp("2026-06-01", tz=SITE.timezone)
 
 
-def _found_at(step_min: int, seed: int, fault: str | None = None) -> list[list[dict]]:
-    """Faults of 6 June days (fault from day 3) logged as ``step_min``-minute means stamped
-    at their end, read as such (the site's ``interval_end``), through the diagnosis' own
-    per-day path in process (faults.features_by_day with the readings' spacing)."""
-    d = logger_days(SITE, JUNE, 6, seed, fault=fault, fault_day=3)
+def _found_at(step_min: int, seed: int, fault: str | None = None,
+              stop_local: str | None = None) -> list[list[dict]]:
+    """Faults of 6 June days (fault from day 3; ``stop_local``: a stuck tracker's stop that
+    day) logged as ``step_min``-minute means stamped at their end, read as such (the site's
+    ``interval_end``), through the diagnosis' own per-day path in process
+    (faults.features_by_day with the readings' spacing)."""
+    d = logger_days(SITE, JUNE, 6, seed, fault=fault, fault_day=3, stop_local=stop_local)
     gap = min(max(1200, 2 * 60 * step_min), 3600)
     grid = d.times.as_unit("s").asi8
     site = replace(SITE, readings_stamped="interval_end")
@@ -192,3 +194,24 @@ def test_an_hourly_stuck_tracker_is_an_underperformance_not_a_guess() -> None:
         assert not [f for f in found[k] if f["kind"] in SHAPE], (k, found[k])
         under = [f for f in found[k] if f["kind"] == "underperformance"]
         assert (len(under) == 1 and under[0]["confidence"] >= 0.5) == (k >= 3), (k, found[k])
+
+
+@pytest.mark.parametrize("step_min", [5, 15, 60])
+def test_a_stop_part_way_through_a_day_at_a_loggers_cadence(step_min: int) -> None:
+    """The tracker of seed 11 stops at 13:00 on day 3 (clear, June) and holds the orientation
+    it had. 5- and 15-minute means: ``stuck`` that day (measured 0.93 at both), from 13:00
+    (``since_time``, measured 13:00 at 1–30 min). Hourly means carry no shape fit
+    (SHAPE_READINGS_PER_PARAMETER): the stop is an underperformance that day (0.67, 6.6 %
+    short) — the one-parameter stop fit alone on hourly days named healthy partly cloudy
+    days on development seeds (docs/diagnosis.md, "A stop part-way through a day")."""
+    found = _found_at(step_min, 11, "stuck", "13:00")
+    assert not [f for f in found[2] if f["confidence"] >= 0.5], found[2]
+    stuck = [f for f in found[3] if f["kind"] == "stuck"]
+    if step_min == 60:
+        assert stuck == [], found[3]
+        under = [f for f in found[3] if f["kind"] == "underperformance"]
+        assert len(under) == 1 and under[0]["confidence"] >= 0.6, found[3]
+        return
+    assert len(stuck) == 1 and stuck[0]["confidence"] >= 0.85, found[3]
+    stop = JUNE + pd.Timedelta(days=3, hours=13)
+    assert abs((pd.Timestamp(stuck[0]["since_time"]) - stop).total_seconds()) <= 5 * 60, stuck

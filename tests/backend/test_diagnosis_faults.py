@@ -196,3 +196,36 @@ def test_a_summer_dawn_behind_the_fixed_plane_is_not_read_as_a_beam() -> None:
         limit = 0.01 if d.kinds[k] == "clear" else 0.05
         assert abs(ratio - 1) < limit, (k, d.kinds[k], ratio)
         assert not [f for f in found[k] if f["confidence"] >= 0.5], (k, found[k])
+
+
+@pytest.mark.parametrize("kind", ["clear", "partly"])
+def test_a_tracker_that_stops_part_way_through_a_day_is_stuck_from_then(kind: str) -> None:
+    """A tester's finding: a tracker that stops at 13:00 and holds the orientation it had
+    then (seed 31, February; a clear or partly cloudy day after a clear one, a partly
+    cloudy day after it). That day it made 0.93 (clear) and 0.92 (partly) of the expected
+    energy, inside its band, and no fixed orientation fits its tracking morning: nothing was
+    named. The stop fit (faults._stopped) names ``stuck`` that day (measured confidence
+    0.89 and 0.88), from 12:59, its ``since_time``; the next day, stuck all day, keeps the
+    run's day and minute and the orientation (57° of elevation, then 56°)."""
+    d = logger_days(SITE, FIRST, 3, SEED, fault="stuck", fault_day=1, stop_local="13:00",
+                    kinds=["clear", kind, "partly"])
+    e = sky_sensor.weather_aware_twin(SITE, FIRST, FIRST + pd.Timedelta(days=3),
+                                      d.fixed_power_w)
+    days = features_by_day(SITE, FIRST, e, d.tracker_power_w)
+    found = faults_over_days(days)
+    energy = days[1]["features"]["energy"]
+    assert energy["measured_wh"] >= energy["low_wh"], energy  # the band cannot tell
+    assert not [f for f in found[0] if f["confidence"] >= 0.5], found[0]
+    stop = FIRST + pd.Timedelta(days=1, hours=13)
+    stuck = []
+    for k in (1, 2):
+        mine = [f for f in found[k] if f["kind"] == "stuck"]
+        assert len(mine) == 1 and mine[0]["confidence"] >= 0.8, (k, found[k])
+        assert mine[0]["since"] == stop.date().isoformat(), mine[0]
+        got = pd.Timestamp(mine[0]["since_time"])
+        assert abs((got - stop).total_seconds()) <= 5 * 60, mine[0]
+        stuck.append(mine[0])
+    assert stuck[0]["detail"].endswith(f"from {stuck[0]['since_time'][11:16]} "
+                                       "(tracking until then)"), stuck[0]
+    assert "from" not in stuck[1]["detail"], stuck[1]  # stuck all that day
+    assert abs(stuck[1]["magnitude"] - stuck[0]["magnitude"]) <= 2.0, stuck

@@ -51,6 +51,11 @@ class FaultRead(BaseModel):
                   "underperformance"]
     confidence: float = Field(description="[0, 1]")
     since: str = Field(description="the first day of its run of days (local date)")
+    since_time: str | None = Field(
+        None, description="`stuck`: the minute the tracker stopped on the run's first day, "
+                          "where it tracked before (ISO 8601 with the site's offset, to a "
+                          "few minutes); null when it was stuck all that day, and for the "
+                          "other kinds")
     magnitude: float = Field(description="in `unit`")
     unit: str
     detail: str
