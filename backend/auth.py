@@ -31,6 +31,7 @@ from sqlalchemy import Connection, Engine, insert, select, update
 
 from backend.errors import Refusal
 from backend.storage.tables import LoggerToken, SiteRow, utcnow
+from backend.text import one_line_problem
 
 
 class UnknownSite(Refusal, LookupError):
@@ -141,9 +142,8 @@ def create_token(conn: Connection, site_id: str, label: str = "",
     """Make, store and return a new token of ``scope`` for ``site_id`` (refused from
     ``expires_at``)."""
     check_scope(scope)
-    if any(ord(c) < 32 or ord(c) == 127 for c in label):
-        raise ValueError("label: holds a control character (a NUL, a tab, a newline…); "
-                         "write it without")
+    if (problem := one_line_problem(label)) is not None:
+        raise ValueError(f"label: {problem}")
     if conn.execute(select(SiteRow.site_id).where(SiteRow.site_id == site_id)).first() is None:
         known = ", ".join(conn.execute(select(SiteRow.site_id)).scalars()) or "none"
         raise UnknownSite(f"unknown site {site_id!r}; known sites: {known}")

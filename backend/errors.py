@@ -41,7 +41,10 @@ _INT64 = 2**63
 
 
 def _clip(text: str, limit: int) -> str:
-    return text if len(text) <= limit else text[: limit - 3] + "..."
+    """``text`` cut to ``limit`` characters, a lone surrogate (JSON may escape one, and no
+    UTF-8 encodes it: orjson failed with a 500) written as its escape."""
+    text = text if len(text) <= limit else text[: limit - 3] + "..."
+    return text.encode("utf-8", "backslashreplace").decode("utf-8")
 
 
 def _echo(value: Any) -> Any:

@@ -187,10 +187,13 @@ def test_who_may_acknowledge(client: httpx.Client, server: InProcessServer) -> N
     (str(2**31), None, 422, ["path", "alert_id"]),
     ("ALERT", {"note": "x" * (ACK_NOTE_MAX_CHARS + 1)}, 422, ["body", "note"]),
     ("ALERT", {"note": "two\nlines"}, 422, ["body", "note"]),
+    ("ALERT", {"note": "two\u2028lines"}, 422, ["body", "note"]),
+    ("ALERT", {"note": "a C1 \u0085 control"}, 422, ["body", "note"]),
     ("ALERT", {"note": 5}, 422, ["body", "note"]),
     ("ALERT", {"note": "ok", "by": "someone else"}, 422, ["body", "by"]),
     ("ALERT", ["not", "an", "object"], 422, ["body"]),
 ], ids=["zero", "not-a-number", "past-32-bit", "note-too-long", "note-with-a-newline",
+         "note-with-a-line-separator", "note-with-a-c1-control",
         "note-not-a-string", "unknown-field", "not-an-object"])
 def test_bad_input_names_the_field(client: httpx.Client, server: InProcessServer, path: str,
                                    body: Any, status: int, where: list[str]) -> None:
@@ -199,6 +202,17 @@ def test_bad_input_names_the_field(client: httpx.Client, server: InProcessServer
              **({} if body is None else {"json": body}))
     assert r.status_code == status, r.text
     assert r.json()["detail"][0]["loc"] == where
+    assert _listed(client, alert_id)["acknowledged_at"] is None  # type: ignore[index]
+
+
+def test_a_lone_surrogate_is_a_422_not_a_500(client: httpx.Client,
+                                            server: InProcessServer) -> None:
+    """JSON may escape a lone surrogate; it is no UTF-8, and the driver failed on it (500)."""
+    alert_id = _store(server)
+    r = client.post(f"/api/v1/alerts/{alert_id}/acknowledge", content=b'{"note": "\\ud800"}',
+                    headers={**bearer(ADMIN), "Content-Type": "application/json"})
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "note"], r.text
+    assert "surrogate" in r.json()["detail"][0]["msg"]
     assert _listed(client, alert_id)["acknowledged_at"] is None  # type: ignore[index]
 
 

@@ -143,6 +143,10 @@ def test_admin_endpoints(server: InProcessServer, client: httpx.Client,
     # a NUL: PostgreSQL answered 500
     bad = client.post(url, headers=admin, json={"site_id": "tehuantepec", "label": "a\u0000b"})
     assert bad.status_code == 422 and "label" in bad.text, bad.text
+    # a lone surrogate (JSON may escape one) is no UTF-8: the driver failed on it with a 500
+    bad = client.post(url, headers={**admin, "Content-Type": "application/json"},
+                      content=b'{"site_id": "tehuantepec", "label": "a\\ud800"}')
+    assert bad.status_code == 422 and bad.json()["detail"][0]["loc"] == ["body", "label"], bad.text
 
 
 def test_expired_token_is_refused(client: httpx.Client) -> None:

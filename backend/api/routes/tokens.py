@@ -18,7 +18,7 @@ import anyio
 import orjson
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request
 from fastapi.responses import Response
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 from sqlalchemy import Connection
 
 from backend.api.deps import (
@@ -37,6 +37,7 @@ from backend.auth import (
     list_tokens,
     revoke_token,
 )
+from backend.text import one_line
 from backend.timestamps import TimestampError, parse_instant
 
 router = APIRouter(prefix="/api/v1/tokens", tags=["tokens"])
@@ -82,9 +83,10 @@ class TokenCreate(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     site_id: str = Field(..., min_length=1, max_length=64, examples=["tehuantepec"])
-    label: str = Field("", max_length=200, pattern=r"^[^\x00-\x1f\x7f]*$",
-                       description="a note to recognise the token by (no control characters: "
-                                   "PostgreSQL refuses a NUL)")
+    label: Annotated[str, AfterValidator(one_line)] = Field(
+        "", max_length=200, description="a note to recognise the token by, one line (no "
+                                        "control characters: backend.text.one_line); "
+                                        "shown as who acknowledged an alert")
     scope: Literal["ingest", "site"] = Field(
         "ingest", description="ingest: a field device, writes readings only; site: also "
                               "edits the site, its calibrations and the shared 3D replay, "

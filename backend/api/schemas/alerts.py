@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 from backend.storage.tables import ACK_NOTE_MAX_CHARS
+from backend.text import one_line
 
 AlertKind = Literal["logger_silent", "fault", "low_performance_ratio"]
 AlertState = Literal["active", "cleared"]
@@ -46,8 +47,8 @@ class AcknowledgeCreate(BaseModel):
 
     model_config = ConfigDict(extra="forbid", strict=True)
 
-    note: str | None = Field(None, max_length=ACK_NOTE_MAX_CHARS,
-                             pattern=r"^[^\x00-\x1f\x7f]*$",
+    note: Annotated[str, AfterValidator(one_line)] | None = Field(
+                             None, max_length=ACK_NOTE_MAX_CHARS,
                              examples=["sent Luis to check the azimuth drive"],
                              description="a short note for colleagues (one line, no control "
                                          "characters); blank is no note")
