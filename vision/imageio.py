@@ -102,8 +102,10 @@ def _exif_orientation(data: bytes) -> int:
             if len(entry) < 12:
                 return 1
             tag, kind = struct.unpack(order + "HH", entry[:4])
-            if tag == _EXIF_ORIENTATION_TAG and kind == 3:  # SHORT, in the value field
-                (value,) = struct.unpack(order + "H", entry[8:10])
+            if tag == _EXIF_ORIENTATION_TAG and kind in (3, 4):  # SHORT, or LONG as some
+                # writers store it (OpenCV reads both); in the value field
+                fmt, size = ("H", 2) if kind == 3 else ("I", 4)
+                (value,) = struct.unpack(order + fmt, entry[8:8 + size])
                 return int(value) if 1 <= value <= 8 else 1
         return 1
     return 1
@@ -130,6 +132,15 @@ def _oriented(img: NDArray[Any], orientation: int) -> NDArray[Any]:
     return img
 
 
+#: libjpeg's warnings (jerror.h) that say the entropy-coded data is damaged or cut: bytes
+#: lost (JWRN_HIT_MARKER, JWRN_MUST_RESYNC), altered (JWRN_HUFF_BAD_CODE,
+#: JWRN_ARITH_BAD_CODE, JWRN_BOGUS_PROGRESSION, JWRN_NOT_SEQUENTIAL), added
+#: (JWRN_EXTRANEOUS_DATA) or the file cut (JWRN_JPEG_EOF). Its other warnings are about
+#: metadata (JWRN_JFIF_MAJOR, JWRN_ADOBE_XFORM, JWRN_BOGUS_ICC, the thumbnail's size).
+_JPEG_DAMAGE = ("premature end", "bad huffman code", "bad arithmetic code", "instead of rst",
+                "extraneous bytes", "inconsistent progression", "invalid sos parameters")
+
+
 def _decode_jpeg(data: bytes) -> NDArray[np.uint8]:
     """A JPEG → 8-bit BGR (grey and CMYK converted), its EXIF orientation applied; a damaged
     one is an :class:`ImageError` naming what libjpeg found.
@@ -143,11 +154,20 @@ def _decode_jpeg(data: bytes) -> NDArray[np.uint8]:
     ``cv2.imdecode`` (identical on every real frame of ``tests/data/real-sky``), in about
     half its time. Bytes after the end-of-image marker, which some cameras append, are
     not read: such a file is whole. A bit flipped in the entropy-coded data that still
-    decodes as valid codes is no damage any decoder can see (JPEG has no checksum)."""
+    decodes as valid codes is no damage any decoder can see (JPEG has no checksum). A
+    warning about metadata only (:data:`_JPEG_DAMAGE` names the others) is no damage."""
     try:
         img = simplejpeg.decode_jpeg(data, colorspace="BGR", strict=True)
     except ValueError as exc:
-        raise ImageError(f"corrupt or truncated JPEG image: {exc}") from None
+        if any(words in str(exc).lower() for words in _JPEG_DAMAGE):
+            raise ImageError(f"corrupt or truncated JPEG image: {exc}") from None
+        # a warning about the file's metadata (a JFIF revision 2.01, an Adobe transform
+        # code, an ICC chunk) leaves its pixels whole, but simplejpeg refuses it strict or
+        # not: OpenCV's decoder (the same libjpeg-turbo; it applies the EXIF orientation)
+        shown = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+        if shown is None:
+            raise ImageError(f"unreadable JPEG image: {exc}") from None
+        return np.asarray(shown, dtype=np.uint8)
     return np.asarray(_oriented(img, _exif_orientation(data)), dtype=np.uint8)
 
 

@@ -63,10 +63,15 @@ def test_truncated_png_body_is_an_image_error() -> None:
         decode_image(buf.tobytes()[:40], 1_000_000)
 
 
-def _with_exif_orientation(jpeg: bytes, orientation: int) -> bytes:
-    """Insert an APP1 Exif segment (TIFF, big-endian, one IFD entry 0x0112) after SOI."""
-    ifd = struct.pack(">H", 1) + struct.pack(">HHIHH", 0x0112, 3, 1, orientation, 0)
-    tiff = b"MM\x00\x2a\x00\x00\x00\x08" + ifd + struct.pack(">I", 0)
+def _with_exif_orientation(jpeg: bytes, orientation: int, long: bool = False) -> bytes:
+    """Insert an APP1 Exif segment (TIFF, one IFD entry 0x0112) after SOI: big-endian
+    SHORT, or (``long``) little-endian LONG as some writers store it."""
+    if long:
+        ifd = struct.pack("<H", 1) + struct.pack("<HHII", 0x0112, 4, 1, orientation)
+        tiff = b"II\x2a\x00\x08\x00\x00\x00" + ifd + struct.pack("<I", 0)
+    else:
+        ifd = struct.pack(">H", 1) + struct.pack(">HHIHH", 0x0112, 3, 1, orientation, 0)
+        tiff = b"MM\x00\x2a\x00\x00\x00\x08" + ifd + struct.pack(">I", 0)
     app1 = b"Exif\x00\x00" + tiff
     return jpeg[:2] + b"\xff\xe1" + struct.pack(">H", len(app1) + 2) + app1 + jpeg[2:]
 
@@ -209,12 +214,25 @@ def test_every_real_jpeg_decodes_as_opencv_does_and_trailing_bytes_are_read_as_w
                           decode_image(data, 40_000_000))
 
 
+@pytest.mark.parametrize("long", [False, True], ids=["short", "long"])
 @pytest.mark.parametrize("orientation", range(1, 9))
-def test_every_exif_orientation_as_opencv_applies_it(orientation: int) -> None:
+def test_every_exif_orientation_as_opencv_applies_it(orientation: int, long: bool) -> None:
     """The eight EXIF orientations turn the raster as OpenCV's own EXIF reader does
-    (``cv2.IMREAD_COLOR``), on a raster with no symmetry."""
+    (``cv2.IMREAD_COLOR``), on a raster with no symmetry; also stored as a LONG (a
+    reviewer's finding: it was read as no orientation)."""
     img = _img(60, 40)
     ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 100])
-    data = _with_exif_orientation(buf.tobytes(), orientation)
+    data = _with_exif_orientation(buf.tobytes(), orientation, long)
     ref = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
     assert np.array_equal(decode_image(data, 10_000), ref)
+
+
+def test_a_warning_about_metadata_alone_is_no_damage() -> None:
+    """A JFIF revision 2.01 makes libjpeg warn ("unknown JFIF revision number"), which the
+    strict decoder raised as a corrupt file (a reviewer's finding); the pixels are whole."""
+    data = bytearray(WOLF.read_bytes())
+    at = data.find(b"JFIF\x00")
+    assert at > 0
+    data[at + 5:at + 7] = b"\x02\x01"
+    ref = cv2.imdecode(np.frombuffer(bytes(data), np.uint8), cv2.IMREAD_COLOR)
+    assert np.array_equal(decode_image(bytes(data), 40_000_000), ref)
