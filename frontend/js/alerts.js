@@ -151,10 +151,14 @@ async function send(ev) {
   try {
     const a = await api(`/api/v1/alerts/${encodeURIComponent(id)}/acknowledge`,
       { method: "POST", json: note ? { note } : {}, token });
-    $("alerts-ack-note").value = "";
-    closeForm(`“${title}” acknowledged by ${a.acknowledged_by}.`);
+    // the form may show another alert by now (opened while this one was sent): leave it be
+    const same = form().dataset.alertId === id;
+    if (same) $("alerts-ack-note").value = "";
+    if (same) closeForm(`“${title}” acknowledged by ${a.acknowledged_by}.`);
+    else status(`“${title}” acknowledged by ${a.acknowledged_by}.`);
     await load();
   } catch (err) {
+    if (form().dataset.alertId !== id) { await load(); return; }
     if (err.status !== 409) { status(`Not acknowledged: ${err.message}`, "error"); return; }
     closeForm(`Not acknowledged: ${err.message}`, "error"); // cleared meanwhile: the list moves on
     await load();

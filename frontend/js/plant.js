@@ -355,10 +355,20 @@ async function runSweep(ev) {
     $("sweep-cancel").disabled = false;
     $("sweep-cancel").hidden = false;
     sweepSay({ status: `queued: ${acc.cases} cases` });
-    for (;;) {
+    for (let missed = 0; ; ) {
       await new Promise((r) => setTimeout(r, 1000));
       if (token !== sweep.token) return;
-      const run = await api(`/api/v1/plants/sweeps/${enc(acc.sweep_id)}`);
+      let run;
+      try {
+        run = await api(`/api/v1/plants/sweeps/${enc(acc.sweep_id)}`);
+        missed = 0;
+      } catch (err) {
+        // a poll the service could not answer now (429, 5xx, the network) leaves the sweep
+        // running there: keep following it (and its Cancel); a 404 or a 10th miss ends it
+        if (err.status === 404 || ++missed >= 10) throw err;
+        sweepSay({ status: `${$("sweep-status").textContent.split(" · ")[0]} · no answer (${err.message}); asking again` });
+        continue;
+      }
       if (run.status === "done" || run.status === "failed") {
         await sweepEnded(run);
         return;

@@ -89,6 +89,8 @@ export async function load() {
   controller?.abort();
   controller = new AbortController();
   clearReport("Loading…");
+  // the downloads of the range asked for now: the inputs may change while it loads
+  const csv = url(".csv"), png = url(".png");
   try {
     const rep = await api(`/api/v1/sites/${encodeURIComponent(st.site.site_id)}/report`,
       { params: { start, end }, signal: controller.signal });
@@ -97,8 +99,8 @@ export async function load() {
     if (rep.readings_note) $("report-totals").prepend(h("div", { class: "banner", "data-testid": "report-no-readings" }, `${rep.readings_note}.`));
     $("report-months").replaceChildren(periodTable(rep.months, "Month", rep.arrays, (s) => s.slice(0, 7)));
     $("report-years").replaceChildren(periodTable(rep.years, "Year", rep.arrays, (s) => s.slice(0, 4)));
-    $("report-csv").href = url(".csv");
-    $("report-png").href = url(".png");
+    $("report-csv").href = csv;
+    $("report-png").href = png;
     $("report-csv").hidden = false;
     $("report-png").hidden = false;
     document.body.dataset.reportLoaded = `${st.site.site_id}/${start}/${end}`;

@@ -218,18 +218,27 @@ def test_a_running_sweep_is_cancelled_from_the_panel_and_keeps_its_finished_case
     service's own Dask LocalCluster: the sweep stops after its current cases and the panel
     says so and draws the cases finished, which the API keeps. A refused cancel (here the
     service's 404 for a sweep it no longer holds, answered once by the browser's router) is
-    said in the panel and the sweep still followed; a sweep refused next (422) leaves none of
+    said in the panel and the sweep still followed, as after a poll answered 503 (a
+    reviewer's finding: one failed poll dropped a running sweep); a sweep refused next (422) leaves none of
     the cancelled one's curves (the panel had no cancel: an operator's finding)."""
     from tests.e2e.conftest import open_page
 
+    unanswered: list[str] = []
+
     def refuse_delete(route) -> None:  # type: ignore[no-untyped-def]
+        if route.request.method == "GET" and not unanswered:  # one poll the service missed
+            unanswered.append(route.request.url)
+            route.fulfill(status=503, content_type="application/json",
+                          body=json.dumps({"detail": "busy"}))
+            return
         if route.request.method != "DELETE":
             route.continue_()
             return
         route.fulfill(status=404, content_type="application/json",
                       body=json.dumps({"detail": "unknown sweep 'gone'"}))
 
-    with open_page(browser, request, ignore=lambda text: "404" in text or "422" in text) as page:
+    with open_page(browser, request, ignore=lambda text: any(
+            code in text for code in ("404", "422", "503"))) as page:
         page.goto(server.url + "/#plant?day=2021-12-21")
         page.wait_for_selector('body[data-plant-loaded="penarroya/2021-12-21"]', timeout=60_000)
         assert not page.is_visible("#sweep-cancel")
@@ -249,6 +258,14 @@ def test_a_running_sweep_is_cancelled_from_the_panel_and_keeps_its_finished_case
         assert message.inner_text().startswith("Cancel: 404")
         assert "unknown sweep 'gone'" in message.inner_text()
         assert page.is_enabled("#sweep-cancel")      # offered again
+        for _ in range(100):                         # a poll answered 503: still followed
+            if unanswered:
+                break
+            page.wait_for_timeout(100)
+        assert unanswered
+        page.wait_for_function("() => document.getElementById('sweep-status').textContent"
+                               ".includes('asking again')")
+        assert page.is_visible("#sweep-cancel") and page.is_disabled("#sweep-run")
         page.unroute("**/api/v1/plants/sweeps/*")
         page.wait_for_function("() => /^running: [1-9][0-9]* of 54 cases/"
                                ".test(document.getElementById('sweep-status').textContent)",
