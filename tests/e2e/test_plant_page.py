@@ -219,8 +219,9 @@ def test_a_running_sweep_is_cancelled_from_the_panel_and_keeps_its_finished_case
     says so and draws the cases finished, which the API keeps. A refused cancel (here the
     service's 404 for a sweep it no longer holds, answered once by the browser's router) is
     said in the panel and the sweep still followed, as after a poll answered 503 (a
-    reviewer's finding: one failed poll dropped a running sweep); a sweep refused next (422) leaves none of
-    the cancelled one's curves (the panel had no cancel: an operator's finding)."""
+    reviewer's finding: one failed poll dropped a running sweep); a sweep refused next
+    (422) leaves none of the cancelled one's curves (the panel had no cancel: an
+    operator's finding)."""
     from tests.e2e.conftest import open_page
 
     unanswered: list[str] = []
