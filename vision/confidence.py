@@ -136,23 +136,28 @@ another width, sits in the bright cloud, not in a fall-off of its own (FE3, UCEE
 HDR suns — rated it up to 0.86."""
 
 
-def smaller_than_the_disc(area_px: float, px_per_deg: float) -> bool:
+def smaller_than_the_disc(area_px: float, px_per_deg: float,
+                          px_per_deg_minor: float | None = None) -> bool:
     """Whether a bright core of ``area_px`` pixels is smaller than the solar disc at
-    ``px_per_deg``: a size no sun has (issue 24 item 2, positive evidence against it).
+    ``px_per_deg`` (and ``px_per_deg_minor`` across it, where a fisheye draws the disc as
+    an ellipse: :func:`vision.detect._local_px_per_deg`): a size no sun has (issue 24 item
+    2, positive evidence against it).
 
     The disc (:data:`vision.sphere.SUN_RADIUS_DEG` in radius, ρ px) is some 10⁵ times the
     clear sky's radiance (a direct normal irradiance of 1000 W m⁻² over its 6.8 × 10⁻⁵ sr
     against a sky of 30–100 W m⁻² sr⁻¹), and its limb still 0.4 times its centre (limb
     darkening): on a frame exposed for the sky every pixel wholly inside the disc — its
-    centre within ρ − √2/2 of the disc's — is at the frame's top, clipped by a sensor or
-    mapped there by a tone-mapping HDR camera, and glare and blur only add to it. So the
-    sun's brightest region holds at least π (ρ − √2/2)² pixels; a smaller one is a glint (a
-    sunlit roof, a speck of the glare of a hidden sun, sky through leaves). Where the disc
-    spans under a pixel and a half (ρ ≤ √2/2: 2.7 px/°) nothing is refused. The region
-    may be cut by the image circle or an obstacle, which a sun only a sliver of which shows
-    is too: such a sun is not reported."""
-    r = SUN_RADIUS_DEG * px_per_deg - np.sqrt(0.5)
-    return bool(r > 0.0 and area_px < np.pi * r * r)
+    centre within ρ − √2/2 of the disc's edge — is at the frame's top, clipped by a sensor
+    or mapped there by a tone-mapping HDR camera, and glare and blur only add to it. So the
+    sun's brightest region holds at least π (ρ₁ − √2/2)(ρ₂ − √2/2) pixels; a smaller one is
+    a glint (a sunlit roof, a speck of the glare of a hidden sun, sky through leaves). Where
+    the disc spans under a pixel and a half across (ρ₂ ≤ √2/2: 2.7 px/°) nothing is
+    refused. The region may be cut by the image circle or an obstacle, which a sun only a
+    sliver of which shows is too: such a sun is not reported."""
+    minor = px_per_deg if px_per_deg_minor is None else px_per_deg_minor
+    r1 = SUN_RADIUS_DEG * px_per_deg - np.sqrt(0.5)
+    r2 = SUN_RADIUS_DEG * minor - np.sqrt(0.5)
+    return bool(r1 > 0.0 and r2 > 0.0 and area_px < np.pi * r1 * r2)
 
 
 def _small_without_glare(x: NDArray[np.float64]) -> bool:
