@@ -32,10 +32,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vision.cameras import PinholeCamera
+from vision.sphere import SUN_RADIUS_DEG  # the one value, for the renderers and the detector
 
 __all__ = ["CloudField", "SunRoi", "render_sun_roi", "pointing_error_deg", "SUN_RADIUS_DEG"]
 
-SUN_RADIUS_DEG = 0.2665  # as vision.synth: half of the 0.533° mean apparent diameter
 # vision.synth.tracker_frame's sensor tint, times the 8-bit full scale
 _TINT_255 = np.array([1.0, 0.97, 0.93], np.float32) * np.float32(255.0)
 #: the tint's grey (ITU-R BT.601 luma of B, G, R = 1.0, 0.97, 0.93), for grey frames
