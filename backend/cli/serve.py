@@ -60,8 +60,10 @@ def run(args: argparse.Namespace) -> int:
     gc.collect()
     gc.freeze()
     server = settings.server
+    twin3d = (f"3D twin on :{server.viser_port}" if server.viser
+              else "no 3D twin (HELIOTWIN_VISER=false)")
     print(f"heliotwin: dashboard and API on http://{server.host}:{server.port}/ "
-          f"(OpenAPI at /docs), 3D twin on :{server.viser_port}", flush=True)
+          f"(OpenAPI at /docs), {twin3d}", flush=True)
     uvicorn.run(
         app, host=server.host, port=server.port, loop="uvloop", http="httptools",
         access_log=server.access_log, log_level="info", timeout_graceful_shutdown=10,

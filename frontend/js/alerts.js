@@ -120,7 +120,7 @@ function openForm(a) {
   f.dataset.alertId = a.id;
   f.dataset.site = a.site_id;
   f.dataset.title = alertTitle(a);
-  $("alerts-ack-what").textContent = `Acknowledge “${alertTitle(a)}” on the ${a.array} (since ${fmtDateTime(st.tz, a.since)}):`;
+  $("alerts-ack-what").textContent = `Acknowledge “${alertTitle(a)}” on the ${a.array} array (since ${fmtDateTime(st.tz, a.since)}):`;
   f.hidden = false;
   status("");
   $("alerts-ack-note").focus();
@@ -158,7 +158,11 @@ async function send(ev) {
     else status(`“${title}” acknowledged by ${a.acknowledged_by}.`);
     await load();
   } catch (err) {
-    if (form().dataset.alertId !== id) { await load(); return; }
+    if (form().dataset.alertId !== id) {  // the form shows another alert now: say it there
+      status(`“${title}” not acknowledged: ${err.message}`, "error");
+      await load();
+      return;
+    }
     if (err.status !== 409) { status(`Not acknowledged: ${err.message}`, "error"); return; }
     closeForm(`Not acknowledged: ${err.message}`, "error"); // cleared meanwhile: the list moves on
     await load();

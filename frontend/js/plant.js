@@ -396,7 +396,8 @@ async function sweepEnded(run) {
   const rows = run.result?.rows || [];
   if (run.status === "done") {
     const res = run.result;
-    sweepSay({ status: `${res.cases} cases on ${res.engine} (${res.workers} workers) in ${num(res.wall_s, 1)} s` });
+    // a cancel refused earlier says nothing of a sweep that ended well: its message goes
+    sweepSay({ status: `${res.cases} cases on ${res.engine} (${res.workers} workers) in ${num(res.wall_s, 1)} s`, message: "" });
   } else {
     const cancelled = run.error === "cancelled";
     const kept = !rows.length ? "none had finished"

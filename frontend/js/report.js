@@ -72,6 +72,8 @@ function drawTotals(rep) {
 /** Nothing of the previous range stays: its tables, its gain, its downloads. A range the
  * service refused left the previous range's months and years under its error, read as the
  * answer to the new one (a tester's finding). */
+const REPORT_BANNER = "Report unavailable: ";
+
 function clearReport(...message) {
   $("report-totals").replaceChildren(...message);
   $("report-months").replaceChildren();
@@ -104,10 +106,12 @@ export async function load() {
     $("report-csv").hidden = false;
     $("report-png").hidden = false;
     document.body.dataset.reportLoaded = `${st.site.site_id}/${start}/${end}`;
+    // a refused range's banner goes with the answer that replaces it (another card's stays)
+    if ($("banner").textContent.startsWith(REPORT_BANNER)) banner("");
   } catch (err) {
     if (err.name === "AbortError") return;
     clearReport(h("p", { class: "error", "data-testid": "report-error" }, err.message));
-    banner(`Report unavailable: ${err.message}`);
+    banner(`${REPORT_BANNER}${err.message}`);
   }
 }
 

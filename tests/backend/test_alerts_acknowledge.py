@@ -212,7 +212,7 @@ def test_a_lone_surrogate_is_a_422_not_a_500(client: httpx.Client,
     r = client.post(f"/api/v1/alerts/{alert_id}/acknowledge", content=b'{"note": "\\ud800"}',
                     headers={**bearer(ADMIN), "Content-Type": "application/json"})
     assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "note"], r.text
-    assert "surrogate" in r.json()["detail"][0]["msg"]
+    assert any(w in r.json()["detail"][0]["msg"] for w in ("surrogate", "unicode string"))
     assert _listed(client, alert_id)["acknowledged_at"] is None  # type: ignore[index]
 
 

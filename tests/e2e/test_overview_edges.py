@@ -217,6 +217,12 @@ def test_a_refused_report_range_leaves_none_of_the_previous_ranges_tables(
     assert not pg.is_visible("#report-csv") and not pg.is_visible("#report-png")
     ARTIFACTS.mkdir(exist_ok=True)
     pg.locator("#report-card").screenshot(path=str(ARTIFACTS / "e2e-report-refused.png"))
+    assert pg.inner_text("#banner").startswith("Report unavailable: 422")
+    # the next valid range's answer takes the refused one's banner away (it stayed: a tester)
+    _report(pg, FULL, EMPTY)
+    pg.wait_for_selector(
+        f'body[data-report-loaded="tehuantepec/{FULL.isoformat()}/{EMPTY.isoformat()}"]')
+    assert not pg.is_visible("#banner")
 
 
 def test_a_report_range_to_come_says_it_has_no_readings(pg, edge_server: ServerProcess) -> None:

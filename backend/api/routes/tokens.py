@@ -18,7 +18,7 @@ import anyio
 import orjson
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request
 from fastapi.responses import Response
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StringConstraints
 from sqlalchemy import Connection
 
 from backend.api.deps import (
@@ -83,8 +83,8 @@ class TokenCreate(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     site_id: str = Field(..., min_length=1, max_length=64, examples=["tehuantepec"])
-    label: Annotated[str, AfterValidator(one_line)] = Field(
-        "", max_length=200, description="a note to recognise the token by, one line (no "
+    label: Annotated[str, StringConstraints(max_length=200), AfterValidator(one_line)] = Field(
+        "", description="a note to recognise the token by, one line (no "
                                         "control characters: backend.text.one_line); "
                                         "shown as who acknowledged an alert")
     scope: Literal["ingest", "site"] = Field(

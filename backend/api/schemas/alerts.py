@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StringConstraints
 
 from backend.storage.tables import ACK_NOTE_MAX_CHARS
 from backend.text import one_line
@@ -47,8 +47,9 @@ class AcknowledgeCreate(BaseModel):
 
     model_config = ConfigDict(extra="forbid", strict=True)
 
-    note: Annotated[str, AfterValidator(one_line)] | None = Field(
-                             None, max_length=ACK_NOTE_MAX_CHARS,
+    note: Annotated[str, StringConstraints(max_length=ACK_NOTE_MAX_CHARS),
+                    AfterValidator(one_line)] | None = Field(
+                             None,
                              examples=["sent Luis to check the azimuth drive"],
                              description="a short note for colleagues (one line, no control "
                                          "characters); blank is no note")
