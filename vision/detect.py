@@ -127,6 +127,8 @@ _PLATEAU_SHARE = 0.3  # a core with this share of its pixels at its peak is clip
 _PLATEAU_MIN_PX = 20  # … tested on cores of at least this many pixels
 _JPEG_BLOCK_PX = 16  # a colour JPEG's coding unit (4:2:0: 8 × 8 luma blocks, chroma at half
 # resolution): a plateau keeps one level only in such blocks wholly inside it
+_WHITE_BLUE_MIN_PX = _JPEG_BLOCK_PX / 2  # the blue glare beyond the white core at least this
+# wide in radius: a narrower band is within reach of JPEG's coding error on the colour outline
 
 
 @dataclass(frozen=True)
@@ -534,8 +536,8 @@ def _white_core_centre(image: NDArray[Any], gray: NDArray[np.uint8], c: _Candida
     """The centre of a large glare: the centroid of its *white* core → (x, y, radius_px),
     or None (no white core, a core under :data:`_WHITE_MIN_DEG` or
     :data:`_WHITE_MIN_PX` in radius, a grey core less than :data:`_WHITE_BLUE_EXCESS` times
-    the white one — no blue glare beyond it to leave out — or one the image circle or an
-    obstacle cuts).
+    the white one or reaching less than :data:`_WHITE_BLUE_MIN_PX` beyond it — no blue
+    glare beyond it to leave out — or one the image circle or an obstacle cuts).
 
     The sun saturates every colour channel; the sky's glare around it is blue and
     saturates the blue channel (and so the grey level) much farther out, raggedly, with
@@ -551,6 +553,17 @@ def _white_core_centre(image: NDArray[Any], gray: NDArray[np.uint8], c: _Candida
     the Wolf frames made monochrome, worst 20.4 → 9.8 px from the labels); a sensor
     without a colour filter clips to one level, its grey core is no larger, and it keeps
     :func:`_refine`.
+    The blue glare must be wider than what JPEG alone takes off a white core: colour is
+    coded at half resolution in 16 px units (4:2:0) and quantised more coarsely than the
+    grey level, so the colour outline of a white disc on a blue glare is eroded and moved
+    (quality 60: by 2–3 px, its centroid up to 1.3 px, on a clean disc; with the lens's
+    lateral colour fringe, by 3.1–3.4 px and 1.8 px along the radius on second-renderer
+    development frames — enough to pass the area test on a core of 25 px, whose answer
+    then lay 3.4–4.1 px, ~1°, inside the truth). The grey core's outline, at full
+    resolution, is then the better one (0.23–0.24° on those frames).
+    On the real frames that take this path (Wolf, at every format and exposure of
+    ``docs/validation-vision.md``) the blue glare reaches 21–47 px beyond the white core at
+    native size and 9.9 px at least (resampled to 880 px wide): none of them changes.
     A core that is visibly cut keeps :func:`_refine` (its arc fits): one that reaches the
     image circle's edge, or one with more than :data:`_WHITE_CUT_SHARE` of its outline
     next to pixels darker than the sky (``bg``: a glare fades into the sky, so darker
@@ -564,7 +577,8 @@ def _white_core_centre(image: NDArray[Any], gray: NDArray[np.uint8], c: _Candida
     x1, y1 = x0 + binary.shape[1], y0 + binary.shape[0]
     area = cv2.contourArea(big)
     r_eq = float(np.sqrt(area / np.pi))
-    if r_eq < max(_WHITE_MIN_DEG * ppd, _WHITE_MIN_PX) or c.area < _WHITE_BLUE_EXCESS * area:
+    if r_eq < max(_WHITE_MIN_DEG * ppd, _WHITE_MIN_PX) or c.area < _WHITE_BLUE_EXCESS * area \
+            or np.sqrt(c.area / np.pi) - r_eq < _WHITE_BLUE_MIN_PX:
         return None
     pts = big.reshape(-1, 2)
     if fov is not None and float(np.max(np.hypot(pts[:, 0] + x0 - fov.cx_px,
