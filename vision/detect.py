@@ -46,8 +46,9 @@ Three named methods, all returning a :class:`SunDetection`:
   circle on the camera's sphere through most of the core's limb that leaves none of it
   inside — the clear-sky disc, which thin cloud (adding light near the sun)
   can only grow on one side (:func:`vision.limb.contained_limb_centre`,
-  RANSAC after Fischler & Bolles 1981; outline on the image circle's edge is
-  never limb, and a core the image circle cuts keeps that circle however
+  RANSAC after Fischler & Bolles 1981; outline on the image circle's edge or
+  along an obstacle (trees, a mast) is never limb, and a core the image circle
+  cuts keeps that circle however
   little of its outline lies on it); otherwise the intensity-weighted
   centroid of a complete (point-symmetric) core, or a RANSAC + least-squares
   fit to the saturated limb of a cut one (on the camera's sphere when a model
@@ -687,11 +688,14 @@ def _across_from_glare(image: NDArray[Any], c: _Candidate, r_eq: float, fov: Fov
 
 
 def _next_to_dark(gray: NDArray[np.uint8], pts: NDArray[Any], bg: float,
-                  reach_px: float = _WHITE_CUT_STEP_PX) -> NDArray[np.bool_]:
+                  reach_px: float = _WHITE_CUT_STEP_PX, fov: FovCircle | None = None
+                  ) -> NDArray[np.bool_]:
     """Which outline points ``[N, 2]`` (frame pixels) of a core have, within ``reach_px``
     farther out from the outline's mean (every :data:`_WHITE_CUT_STEP_PX`), a pixel darker
     than the sky's level ``bg``: a glare fades into the sky, so darker there means the core
-    is cut — by a mast, trees, the horizon, an overlay."""
+    is cut — by a mast, trees, the horizon, an overlay. With ``fov``, pixels beyond the
+    image circle (within :data:`_FOV_EDGE_PX` of its edge) do not count: its edge is a cut
+    of its own (:func:`_true_limb`)."""
     h, w = gray.shape
     p = np.asarray(pts, dtype=float)
     out = p - p.mean(axis=0)
@@ -700,16 +704,31 @@ def _next_to_dark(gray: NDArray[np.uint8], pts: NDArray[Any], bg: float,
     for step in np.arange(_WHITE_CUT_STEP_PX, reach_px + 1e-9, _WHITE_CUT_STEP_PX):
         ox = np.clip(np.rint(p[:, 0] + step * out[:, 0]), 0, w - 1).astype(np.intp)
         oy = np.clip(np.rint(p[:, 1] + step * out[:, 1]), 0, h - 1).astype(np.intp)
-        dark |= gray[oy, ox] < bg
+        below = gray[oy, ox] < bg
+        if fov is not None:
+            below &= np.hypot(ox - fov.cx_px, oy - fov.cy_px) < fov.radius_px - _FOV_EDGE_PX
+        dark |= below
     return dark
+
+
+def _cut_by_obstacle(gray: NDArray[np.uint8], pts: NDArray[Any], bg: float, r_eq: float,
+                     fov: FovCircle | None = None) -> NDArray[np.bool_]:
+    """The outline points ``[N, 2]`` of a core ``r_eq`` px in radius that an obstacle cuts:
+    those next to something darker than the sky (:func:`_next_to_dark`, within a quarter of
+    the radius — a saturated core fades over a few pixels of glare before the obstacle's
+    edge) when they are at least :data:`_CUT_SHARE` of the outline; else none. The free arc
+    (the rest) is what :func:`_cut_shape` judges and :func:`_true_limb` fits."""
+    cut = _next_to_dark(gray, pts, bg, max(_WHITE_CUT_STEP_PX, 0.25 * r_eq), fov)
+    if float(np.mean(cut)) < _CUT_SHARE:
+        cut[:] = False
+    return cut
 
 
 def _cut_shape(c: _Candidate, labels: NDArray[Any], gray: NDArray[np.uint8], bg: float,
                model: CameraModel | None = None) -> float:
     """The shape term 0–1 of a core cut by an obstacle (issue 24 item 2: round *allowing
     for the horizon cutting it*): when at least :data:`_CUT_SHARE` of its outline lies next
-    to something darker than the sky (:func:`_next_to_dark`, within a quarter of the core's
-    radius), the share of the rest of the
+    to something darker than the sky (:func:`_cut_by_obstacle`), the share of the rest of the
     outline on one circle — on the sphere of ``model`` when given, where a fisheye's oval of
     a low sun is a circle (RANSAC, Fischler & Bolles 1981;
     :func:`vision.limb._robust_limb_centre`) — on the scale of the circularity term
@@ -724,9 +743,8 @@ def _cut_shape(c: _Candidate, labels: NDArray[Any], gray: NDArray[np.uint8], bg:
     pts = np.vstack(contours).reshape(-1, 2).astype(float) + (c.ox, c.oy)
     if len(pts) < 24:
         return 0.0
-    # a saturated core fades over a few pixels of glare before the obstacle's edge
-    cut = _next_to_dark(gray, pts, bg, max(_WHITE_CUT_STEP_PX, 0.25 * np.sqrt(c.area / np.pi)))
-    if float(np.mean(cut)) < _CUT_SHARE or int(np.count_nonzero(~cut)) < 12:
+    cut = _cut_by_obstacle(gray, pts, bg, float(np.sqrt(c.area / np.pi)))
+    if not cut.any() or int(np.count_nonzero(~cut)) < 12:
         return 0.0
     *_, share = _robust_limb_centre(pts[~cut], model)
     return float(min(max((share - 0.45) / 0.4, 0.0), 1.0))
@@ -742,7 +760,8 @@ def _limb_points(c: _Candidate, labels: NDArray[Any]) -> NDArray[np.float64]:
 
 
 def _true_limb(gray: NDArray[np.uint8], work: _Region, pts: NDArray[np.float64],
-               cx: float, cy: float, thr: float, fov: FovCircle | None = None
+               cx: float, cy: float, thr: float, fov: FovCircle | None = None,
+               bg: float | None = None, r_eq: float = 0.0
                ) -> tuple[NDArray[np.float64], float]:
     """The outline points that are the sun's limb → (points, share of the outline on the
     image circle's edge). Left out: points where a mask cut the core — the search window
@@ -751,7 +770,11 @@ def _true_limb(gray: NDArray[np.uint8], work: _Region, pts: NDArray[np.float64],
     :data:`_FOV_EDGE_PX` of its edge, bright beyond it or not (the edge of the image is
     never the sun's limb; the step outward misses it where the outline runs nearly
     radially from (cx, cy), and the lens's own fall-off can leave the frame just beyond
-    the mask below the threshold)."""
+    the mask below the threshold); with the sky's level ``bg``, the points an obstacle
+    cuts (trees, a mast, the ground inside the image circle: :func:`_cut_by_obstacle` of a
+    core ``r_eq`` px in radius) — their outline is the obstacle's edge, which a circle
+    through most of the outline can follow (second renderer, development scene 122: a
+    low sun's 9° core cut by trees, 0.88° → 0.27°)."""
     h, w = gray.shape
     f = 1.5 / np.maximum(np.hypot(pts[:, 0] - cx, pts[:, 1] - cy), 1e-9)
     # np.clip's bounds, by minimum / maximum (the same values, less overhead)
@@ -764,6 +787,8 @@ def _true_limb(gray: NDArray[np.uint8], work: _Region, pts: NDArray[np.float64],
             > fov.radius_px - _FOV_EDGE_PX
         edge_share = float(np.count_nonzero(on_edge)) / max(len(pts), 1)
         keep &= ~on_edge
+    if bg is not None and len(pts):
+        keep &= ~_cut_by_obstacle(gray, pts, bg, r_eq, fov)
     return pts[keep], edge_share
 
 
@@ -777,7 +802,8 @@ def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
     approximate lens model): the small circle on the camera's sphere through
     most of the core's limb that leaves none of it inside
     (:func:`vision.limb.contained_limb_centre`; outline points where a mask —
-    the search window, the image circle — cut the core are left out) — robust
+    the search window, the image circle — or an obstacle cut the core are left out,
+    :func:`_true_limb`) — robust
     to thin cloud that grows the core on one side and to the fisheye's skew of a
     wide glare — when
     at least :data:`_CONTAINED_MIN_INLIERS` of the limb lies on it, or whatever its share
@@ -807,7 +833,7 @@ def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
         if near.size >= 8 and far.size >= 8 and \
                 peak - _median(near) < _HALO_DROP * (peak - _median(far)):
             pts, edge_share = _true_limb(gray, work, _limb_points(c, labels), c.cx, c.cy,
-                                         thr, fov)
+                                         thr, fov, bg, r_eq)
             rad = np.hypot(pts[:, 0] - c.cx, pts[:, 1] - c.cy) if len(pts) else np.zeros(1)
             # not already a circle about its centroid (a clear-sky core near the zenith:
             # the centroid below is exact and cheaper)
