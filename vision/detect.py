@@ -718,7 +718,15 @@ def _cut_by_obstacle(gray: NDArray[np.uint8], pts: NDArray[Any], bg: float, r_eq
     the radius — a saturated core fades over a few pixels of glare before the obstacle's
     edge) when they are at least :data:`_CUT_SHARE` of the outline; else none. The free arc
     (the rest) is what :func:`_cut_shape` judges and :func:`_true_limb` fits."""
-    cut = _next_to_dark(gray, pts, bg, max(_WHITE_CUT_STEP_PX, 0.25 * r_eq), fov)
+    reach = max(_WHITE_CUT_STEP_PX, 0.25 * r_eq)
+    # nothing darker than the sky within reach of the outline: none cut (most cores; cheap)
+    h, w = gray.shape
+    x0, y0 = (max(int(v - reach) - 1, 0) for v in pts.min(axis=0))
+    x1, y1 = int(pts[:, 0].max() + reach) + 2, int(pts[:, 1].max() + reach) + 2
+    box = gray[y0:min(y1, h), x0:min(x1, w)]
+    if not box.size or float(box.min()) >= bg:
+        return np.zeros(len(pts), bool)
+    cut = _next_to_dark(gray, pts, bg, reach, fov)
     if float(np.mean(cut)) < _CUT_SHARE:
         cut[:] = False
     return cut
