@@ -54,6 +54,7 @@ one day, under the measured sky (docs/diagnosis.md, "pvanalytics").
 
 from __future__ import annotations
 
+import datetime as dt
 from typing import Any
 
 import numpy as np
@@ -424,6 +425,7 @@ def faults_over_days(days: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
     run: dict[str, str] = {}
     run_time: dict[str, str | None] = {}  # the first day's stop time (stuck part-way)
     carried: dict[str, dict[str, Any]] = {}
+    dropout_since: str | None = None  # the first day of a run of dropout days
     for i, d in enumerate(days):
         f = d["features"]
         found = _shape_fault(f)
@@ -465,14 +467,28 @@ def faults_over_days(days: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
                            if slow["spacing_s"] <= MAX_ENERGY_GAP_S else
                            f"the rule bridges at most {MAX_ENERGY_GAP_S:,} s: send readings "
                            f"at least that often")
-            out[i].append({"kind": "dropout", "confidence": 1.0, "since": d["date"],
+            # a run of days, as a shape fault: three silent days were three dropouts
+            # "since" each of them (a tester's finding)
+            dropout_since = (dropout_since if dropout_since is not None and _next_day(days, i)
+                             else d["date"])
+            out[i].append({"kind": "dropout", "confidence": 1.0, "since": dropout_since,
                            "magnitude": float(f["missing_daylight_min"]), "unit": "min",
                            "detail": detail})
+        else:
+            dropout_since = None
     _underperformance(days, out)
     _module_loss(days, out)
     for i in _sky_clock_offset(days, out):  # the tracker judged under a shifted sky: not at all
         out[i] = [f for f in out[i] if f["kind"] in ("sky_clock_offset", "dropout")]
     return out
+
+
+def _next_day(days: list[dict[str, Any]], i: int) -> bool:
+    """Whether ``days[i]`` is the calendar day after ``days[i - 1]``."""
+    if i == 0:
+        return False
+    before, now = (dt.date.fromisoformat(days[k]["date"]) for k in (i - 1, i))
+    return (now - before).days == 1
 
 
 def _sky_clock_offset(days: list[dict[str, Any]], out: list[list[dict[str, Any]]]

@@ -229,3 +229,19 @@ def test_a_tracker_that_stops_part_way_through_a_day_is_stuck_from_then(kind: st
                                        "(tracking until then)"), stuck[0]
     assert "from" not in stuck[1]["detail"], stuck[1]  # stuck all that day
     assert abs(stuck[1]["magnitude"] - stuck[0]["magnitude"]) <= 2.0, stuck
+
+
+def test_silent_days_in_a_row_are_one_dropout_since_the_first() -> None:
+    """Three days in a row without a reading are one dropout since the first of them (the
+    diagnosis listed three, "since" each day: a tester's finding); a day with its readings
+    between two silent days ends the run, and so does a gap in the dates."""
+    def day(date: str, missing_min: int) -> dict:
+        return {"date": date, "features": {"missing_daylight_min": missing_min}}
+
+    days = [day("2026-11-27", 0), day("2026-11-28", 600), day("2026-11-29", 610),
+            day("2026-11-30", 605), day("2026-12-01", 0), day("2026-12-02", 590),
+            day("2026-12-04", 600)]
+    since = [[f["since"] for f in found if f["kind"] == "dropout"]
+             for found in faults_over_days(days)]
+    assert since == [[], ["2026-11-28"], ["2026-11-28"], ["2026-11-28"], [], ["2026-12-02"],
+                     ["2026-12-04"]]
