@@ -213,7 +213,8 @@ def _local_px_per_deg(model: CameraModel, x: float, y: float,
     of the sky there (the singular values of the projection's Jacobian, by differences of
     0.1°): a fisheye draws a small disc as an ellipse whose axes change over the frame
     (an orthographic lens shrinks it to cos θ of the zenith's across the radius, a
-    reviewer's finding). ``ppd``, the frame's nominal scale, where the model cannot tell."""
+    reviewer's finding). ``(0, 0)`` — no size refused — where the model cannot tell (a step
+    beyond the lens's edge: the nominal scale there was an orthographic lens's largest)."""
     step = np.radians(0.1)
     d = np.asarray(model.pixel_to_direction(x, y), dtype=np.float64).reshape(3)
     u = np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0])
@@ -224,7 +225,7 @@ def _local_px_per_deg(model: CameraModel, x: float, y: float,
     px, py = np.asarray(px, dtype=np.float64), np.asarray(py, dtype=np.float64)
     jac = np.array([[px[1] - px[0], px[2] - px[0]], [py[1] - py[0], py[2] - py[0]]])
     if not np.all(np.isfinite(jac)):
-        return ppd, ppd
+        return 0.0, 0.0
     major, minor = np.linalg.svd(jac, compute_uv=False) / np.degrees(step)
     return float(major), float(minor)
 
@@ -283,7 +284,7 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
         cands = [c for c in cands if not conf.smaller_than_the_disc(
             c.area, *_local_px_per_deg(model, c.cx, c.cy, ppd))]
         if not cands:
-            return (f"every bright region is smaller than the solar disc at {ppd:.1f} px/° "
+            return ("every bright region is smaller than the solar disc where it lies "
                     "(a glint or a speck, not the sun)")
     # after that rule: a speck it refused took a slot of the few scored below (a reviewer's
     # finding: a sun behind a branch among six specks was never scored)
@@ -717,7 +718,10 @@ def _cut_by_obstacle(gray: NDArray[np.uint8], pts: NDArray[Any], bg: float, r_eq
     those next to something darker than the sky (:func:`_next_to_dark`, within a quarter of
     the radius — a saturated core fades over a few pixels of glare before the obstacle's
     edge) when they are at least :data:`_CUT_SHARE` of the outline; else none. The free arc
-    (the rest) is what :func:`_cut_shape` judges and :func:`_true_limb` fits."""
+    (the rest) is what :func:`_cut_shape` judges and :func:`_true_limb` fits. With ``fov``
+    (the limb fits) the unlit frame beyond the image circle is no obstacle — its edge is
+    left out of the fit by its own rule; without it (the shape score) a core the image
+    circle cuts is judged on its free arc too."""
     reach = max(_WHITE_CUT_STEP_PX, 0.25 * r_eq)
     # nothing darker than the sky within reach of the outline: none cut (most cores; cheap)
     h, w = gray.shape

@@ -156,19 +156,41 @@ def _decode_jpeg(data: bytes) -> NDArray[np.uint8]:
     not read: such a file is whole. A bit flipped in the entropy-coded data that still
     decodes as valid codes is no damage any decoder can see (JPEG has no checksum). A
     warning about metadata only (:data:`_JPEG_DAMAGE` names the others) is no damage."""
+    def damage(exc: ValueError) -> bool:
+        return any(words in str(exc).lower() for words in _JPEG_DAMAGE)
+
     try:
         img = simplejpeg.decode_jpeg(data, colorspace="BGR", strict=True)
     except ValueError as exc:
-        if any(words in str(exc).lower() for words in _JPEG_DAMAGE):
+        if damage(exc):
             raise ImageError(f"corrupt or truncated JPEG image: {exc}") from None
         # a warning about the file's metadata (a JFIF revision 2.01, an Adobe transform
         # code, an ICC chunk) leaves its pixels whole, but simplejpeg refuses it strict or
-        # not: OpenCV's decoder (the same libjpeg-turbo; it applies the EXIF orientation)
-        shown = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
-        if shown is None:
+        # not, and stops at that first warning: the scan is checked once more without the
+        # segments that warn (a metadata warning hid damaged data: a reviewer), and the
+        # pixels are OpenCV's (the same libjpeg-turbo), turned by the one EXIF rule here
+        try:
+            simplejpeg.decode_jpeg(_without_metadata(data), colorspace="BGR", strict=True)
+        except ValueError as again:
+            if damage(again):
+                raise ImageError(f"corrupt or truncated JPEG image: {again}") from None
+        img = cv2.imdecode(np.frombuffer(data, np.uint8),
+                           cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+        if img is None:
             raise ImageError(f"unreadable JPEG image: {exc}") from None
-        return np.asarray(shown, dtype=np.uint8)
     return np.asarray(_oriented(img, _exif_orientation(data)), dtype=np.uint8)
+
+
+def _without_metadata(data: bytes) -> bytes:
+    """The JPEG without its APP0 (JFIF), APP2 (ICC) and APP14 (Adobe) segments, whose
+    contents make libjpeg warn without touching the scan."""
+    out, last = bytearray(data[:2]), 2
+    for marker, start, end in _jpeg_segments(data):
+        out += data[last:start - 4]  # the marker and the length field before the payload
+        if marker not in (0xE0, 0xE2, 0xEE):
+            out += data[start - 4:end]
+        last = end
+    return bytes(out + data[last:])
 
 
 def _png_chunks_before_data(data: bytes) -> dict[bytes, bytes]:

@@ -365,7 +365,8 @@ async function runSweep(ev) {
       } catch (err) {
         // a poll the service could not answer now (429, 5xx, the network) leaves the sweep
         // running there: keep following it (and its Cancel); a 404 or a 10th miss ends it
-        if (err.status === 404 || ++missed >= 10) throw err;
+        const busy = !err.status || err.status === 429 || err.status >= 500;
+        if (!busy || ++missed >= 10) throw err;
         sweepSay({ status: `${$("sweep-status").textContent.split(" · ")[0]} · no answer (${err.message}); asking again` });
         continue;
       }

@@ -189,11 +189,12 @@ def test_who_may_acknowledge(client: httpx.Client, server: InProcessServer) -> N
     ("ALERT", {"note": "two\nlines"}, 422, ["body", "note"]),
     ("ALERT", {"note": "two\u2028lines"}, 422, ["body", "note"]),
     ("ALERT", {"note": "a C1 \u0085 control"}, 422, ["body", "note"]),
+    ("ALERT", {"note": "seen \u202eoj\u202c"}, 422, ["body", "note"]),
     ("ALERT", {"note": 5}, 422, ["body", "note"]),
     ("ALERT", {"note": "ok", "by": "someone else"}, 422, ["body", "by"]),
     ("ALERT", ["not", "an", "object"], 422, ["body"]),
 ], ids=["zero", "not-a-number", "past-32-bit", "note-too-long", "note-with-a-newline",
-         "note-with-a-line-separator", "note-with-a-c1-control",
+         "note-with-a-line-separator", "note-with-a-c1-control", "note-with-a-bidi-override",
         "note-not-a-string", "unknown-field", "not-an-object"])
 def test_bad_input_names_the_field(client: httpx.Client, server: InProcessServer, path: str,
                                    body: Any, status: int, where: list[str]) -> None:

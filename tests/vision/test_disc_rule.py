@@ -75,3 +75,14 @@ def test_a_sun_behind_a_branch_among_specks_is_scored() -> None:
         found += bool(got.sun_found and got.centroid_px is not None
                       and np.hypot(got.centroid_px[0] - sx, got.centroid_px[1] - sy) < 0.5 * ppd)
     assert found == 10
+
+
+def test_at_the_lens_edge_where_the_scale_cannot_be_told_nothing_is_refused() -> None:
+    """A step of the difference beyond an orthographic lens's horizon has no pixel: the
+    zenith's scale stood in for it, the largest there is, and refused a disc the lens draws
+    a few pixels wide (a reviewer's finding)."""
+    cam = FisheyeCamera(1000.0, 1000.0, 10.0, projection="orthographic")
+    x, y = cam.sky_to_pixel(180.0, 0.05)
+    scales = detect._local_px_per_deg(cam, float(x), float(y), cam.px_per_deg)
+    assert scales[1] < 1.0
+    assert not smaller_than_the_disc(3.0, *scales)

@@ -236,3 +236,36 @@ def test_a_warning_about_metadata_alone_is_no_damage() -> None:
     data[at + 5:at + 7] = b"\x02\x01"
     ref = cv2.imdecode(np.frombuffer(bytes(data), np.uint8), cv2.IMREAD_COLOR)
     assert np.array_equal(decode_image(bytes(data), 40_000_000), ref)
+
+
+def test_a_warning_about_metadata_does_not_hide_damaged_data() -> None:
+    """libjpeg stops at its first warning: a JFIF 2.01 header before damaged scan data let
+    the damage through the metadata fallback (a reviewer's finding)."""
+    data = bytearray(WOLF.read_bytes())
+    at = data.find(b"JFIF\x00")
+    data[at + 5:at + 7] = b"\x02\x01"
+    for kind, damaged in _damaged(bytes(data)).items():
+        if kind in ("cut at half", "end marker missing"):
+            continue  # OpenCV 5 refuses these itself
+        with pytest.raises(ImageError, match="corrupt or truncated JPEG image: Corrupt JPEG"):
+            decode_image(damaged, 40_000_000)
+
+
+@pytest.mark.parametrize("jfif_2_01", [False, True], ids=["strict-decoder", "opencv-fallback"])
+def test_a_big_endian_long_orientation_is_applied_whichever_decoder_reads_it(
+        jfif_2_01: bool) -> None:
+    """One EXIF rule on both decoding paths: a big-endian LONG orientation 6 (which OpenCV's
+    own reader ignores) turns the frame on the strict path and on the fallback alike."""
+    img = _img(60, 40)
+    ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 100])
+    ifd = struct.pack(">H", 1) + struct.pack(">HHII", 0x0112, 4, 1, 6)
+    tiff = b"MM\x00\x2a\x00\x00\x00\x08" + ifd + struct.pack(">I", 0)
+    app1 = b"Exif\x00\x00" + tiff
+    raw = buf.tobytes()
+    data = bytearray(raw[:2] + b"\xff\xe1" + struct.pack(">H", len(app1) + 2) + app1 + raw[2:])
+    if jfif_2_01:
+        at = data.find(b"JFIF\x00")
+        assert at > 0
+        data[at + 5:at + 7] = b"\x02\x01"
+    out = decode_image(bytes(data), 10_000)
+    assert out.shape == (60, 40, 3)  # turned 90° clockwise: 40 wide, 60 high
