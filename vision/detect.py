@@ -18,8 +18,8 @@ Three named methods, all returning a :class:`SunDetection`:
   glare itself, when it still lights the sky at 4 core radii:
   :func:`vision.candidates._tail`). What a sun is (issue 24 item 2): a region at or near
   saturation (≥ 250, or a flat clipped top at any level: a darkened frame),
-  round, brighter than the sky. A region smaller than the solar disc at the frame's
-  scale is no candidate (:func:`vision.confidence.smaller_than_the_disc`: a glint);
+  round, brighter than the sky. A region smaller than the solar disc where it lies
+  is no candidate (:func:`vision.confidence.smaller_than_the_disc`: a glint);
   a candidate that is not saturated or has a
   shape no sun has gets probability 0 (:func:`vision.confidence.admissible`);
   the others get ``confidence``, a probability: a logistic model of shape,
@@ -207,8 +207,7 @@ def px_per_deg_of(camera: CameraModel | None, fov: FovCircle | None, width_px: i
     return width_px / 67.0
 
 
-def _local_px_per_deg(model: CameraModel, x: float, y: float,
-                      ppd: float) -> tuple[float, float]:
+def _local_px_per_deg(model: CameraModel, x: float, y: float) -> tuple[float, float]:
     """The camera's scale at pixel (x, y) [px/°], largest and smallest over the directions
     of the sky there (the singular values of the projection's Jacobian, by differences of
     0.1°): a fisheye draws a small disc as an ellipse whose axes change over the frame
@@ -282,7 +281,7 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
     cands = _clusters(stats, cents, real, ox, oy)
     if scale_known and model is not None:  # a core smaller than the solar disc is no sun
         cands = [c for c in cands if not conf.smaller_than_the_disc(
-            c.area, *_local_px_per_deg(model, c.cx, c.cy, ppd))]
+            c.area, *_local_px_per_deg(model, c.cx, c.cy))]
         if not cands:
             return ("every bright region is smaller than the solar disc where it lies "
                     "(a glint or a speck, not the sun)")

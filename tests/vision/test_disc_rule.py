@@ -40,7 +40,7 @@ def test_a_disc_drawn_whole_is_never_smaller_than_the_disc(projection: str,
     cam = FisheyeCamera(1000.0, 1000.0, 10.0, projection=projection)
     x, y = cam.sky_to_pixel(180.0, elevation_deg)
     area = _disc_area_px(cam, elevation_deg)
-    scales = detect._local_px_per_deg(cam, float(x), float(y), cam.px_per_deg)
+    scales = detect._local_px_per_deg(cam, float(x), float(y))
     assert not smaller_than_the_disc(area, *scales)
     # and a speck a third of it is still refused there, where the disc spans 1.5 px or more
     if scales[1] * SUN_RADIUS_DEG > 0.75:
@@ -83,6 +83,6 @@ def test_at_the_lens_edge_where_the_scale_cannot_be_told_nothing_is_refused() ->
     a few pixels wide (a reviewer's finding)."""
     cam = FisheyeCamera(1000.0, 1000.0, 10.0, projection="orthographic")
     x, y = cam.sky_to_pixel(180.0, 0.05)
-    scales = detect._local_px_per_deg(cam, float(x), float(y), cam.px_per_deg)
+    scales = detect._local_px_per_deg(cam, float(x), float(y))
     assert scales[1] < 1.0
     assert not smaller_than_the_disc(3.0, *scales)
