@@ -152,10 +152,12 @@ async function send(ev) {
     const a = await api(`/api/v1/alerts/${encodeURIComponent(id)}/acknowledge`,
       { method: "POST", json: note ? { note } : {}, token });
     // the form may show another alert by now (opened while this one was sent): leave it be
-    const same = form().dataset.alertId === id;
-    if (same) $("alerts-ack-note").value = "";
-    if (same) closeForm(`“${title}” acknowledged by ${a.acknowledged_by}.`);
-    else status(`“${title}” acknowledged by ${a.acknowledged_by}.`);
+    if (form().dataset.alertId === id) {
+      $("alerts-ack-note").value = "";
+      closeForm(`“${title}” acknowledged by ${a.acknowledged_by}.`);
+    } else {
+      status(`“${title}” acknowledged by ${a.acknowledged_by}.`);
+    }
     await load();
   } catch (err) {
     if (form().dataset.alertId !== id) {  // the form shows another alert now: say it there
