@@ -47,8 +47,11 @@ def test_gives_up_after_the_last_attempt_and_logs_the_drop(
     with caplog.at_level(logging.WARNING, logger="backend.twin.demo_logger"):
         assert demo.post(_readings(7), attempts=3) == (0, 0)
     assert demo.readings_dropped == 7
-    retries = [r for r in caplog.records if r.levelno == logging.WARNING]
-    drops = [r for r in caplog.records if r.levelno == logging.ERROR]
+    # the demo logger's own records: another test's service thread in this xdist worker
+    # may log meanwhile (an MQTT Home Assistant round after its writer stopped, seen once)
+    mine = [r for r in caplog.records if r.name == "backend.twin.demo_logger"]
+    retries = [r for r in mine if r.levelno == logging.WARNING]
+    drops = [r for r in mine if r.levelno == logging.ERROR]
     assert len(retries) == 2  # attempts 1 and 2 are retried, the 3rd gives up
     assert len(drops) == 1 and "dropped 7 readings" in drops[0].getMessage()
     assert "2024-03-15T12:00:00Z..2024-03-15T12:06:00Z" in drops[0].getMessage()
@@ -65,7 +68,8 @@ def test_a_4xx_is_dropped_at_once_and_logged(caplog: pytest.LogCaptureFixture) -
     with caplog.at_level(logging.ERROR, logger="backend.twin.demo_logger"):
         demo.post(_readings(2))
     assert len(calls) == 1 and demo.readings_dropped == 2
-    assert "422" in caplog.records[-1].getMessage()
+    mine = [r for r in caplog.records if r.name == "backend.twin.demo_logger"]
+    assert "422" in mine[-1].getMessage()
 
 
 def test_a_refused_token_stops_the_posting() -> None:
