@@ -218,6 +218,9 @@ class MqttService:
             return
         self._loop.call_soon_threadsafe(self._stop.set)
         self._thread.join(timeout_s)
+        if self._thread.is_alive():  # said, not hidden: what it still does may fail later
+            logger.warning("MQTT thread still running %.0f s after stop was asked; going on",
+                           timeout_s)
         self._thread = None
 
     def status(self) -> dict[str, Any]:
@@ -490,6 +493,9 @@ class MqttService:
                 await client.publish(topic, b"", qos=1, retain=True)
                 del published[topic]
             for info in sites:
+                if self._stop is not None and self._stop.is_set():
+                    break  # stopping (this task is cancelled next): no new states — the
+                    # twin they may compute needs the writer, which stops after this thread
                 try:
                     pubs = await asyncio.to_thread(homeassistant.states, self.ctx, info,
                                                    self.topics)
