@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import os
 import signal
 import socket
@@ -28,7 +29,7 @@ import sys
 import threading
 import time
 import uuid
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -38,6 +39,8 @@ import httpx
 import pytest
 
 if TYPE_CHECKING:
+    from sqlalchemy import Connection
+
     from backend.context import ServiceContext
     from backend.settings import Settings
 
@@ -133,6 +136,38 @@ def settings_from_env(env: Mapping[str, str]) -> Settings:
             del os.environ[name]
         os.environ.update(env)
         return get_settings()
+
+
+@contextlib.contextmanager
+def upgraded_from(database_url: str, revision: str,
+                  rows: Callable[[Connection], None]) -> Iterator[Connection]:
+    """A database migrated to ``revision`` with ``rows(conn)`` written as that revision's
+    schema has them, then upgraded to the heads: the connection after the upgrade (its
+    transaction), for a test of what a migration keeps."""
+    from alembic import command
+
+    from backend.settings import get_settings
+    from backend.storage.engine import alembic_config, make_engine
+
+    engine = make_engine(get_settings(database_url=database_url))
+    cfg = alembic_config(engine)
+    try:
+        with engine.begin() as conn:
+            cfg.attributes["connection"] = conn
+            command.upgrade(cfg, revision)
+            rows(conn)
+        with engine.begin() as conn:
+            cfg.attributes["connection"] = conn
+            command.upgrade(cfg, "heads")
+            yield conn
+    finally:
+        engine.dispose()
+
+
+#: a site ``s`` as the ``sites`` table stores one from revision 0005 on
+OLD_SITE_SQL = ("INSERT INTO sites (site_id, name, latitude_deg, longitude_deg, altitude_m, "
+                "timezone, bucket_phase_s, config_json, updated_at) "
+                "VALUES ('s', 's', 0, 0, 0, 'UTC', 0, '{}', '2026-01-01')")
 
 
 def make_token(database_url: str, site_id: str = "tehuantepec", label: str = "tests") -> str:

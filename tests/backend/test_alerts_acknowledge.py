@@ -17,13 +17,10 @@ from typing import Any
 
 import httpx
 import pytest
-from alembic import command
-from live_service import BACKENDS, InProcessServer, new_database
-from sqlalchemy import insert, text, update
+from live_service import BACKENDS, OLD_SITE_SQL, InProcessServer, new_database, upgraded_from
+from sqlalchemy import Connection, insert, text, update
 
 from backend.alerts.service import latest_event
-from backend.settings import get_settings
-from backend.storage.engine import alembic_config, make_engine
 from backend.storage.tables import ACK_NOTE_MAX_CHARS, AlertRow
 
 SITE = "tehuantepec"
@@ -240,24 +237,15 @@ def test_the_latest_event_of_an_alert() -> None:
 
 
 def test_alerts_stored_before_0014_are_not_acknowledged(tmp_path: Path) -> None:
-    engine = make_engine(get_settings(database_url=f"sqlite:///{tmp_path / 'old.sqlite'}"))
-    cfg = alembic_config(engine)
-    try:
-        with engine.begin() as conn:
-            cfg.attributes["connection"] = conn
-            command.upgrade(cfg, "0013_service_state")
-            conn.execute(text("INSERT INTO sites (site_id, name, latitude_deg, longitude_deg, "
-                              "altitude_m, timezone, bucket_phase_s, config_json, updated_at) "
-                              "VALUES ('s', 's', 0, 0, 0, 'UTC', 0, '{}', '2026-01-01')"))
-            conn.execute(text("INSERT INTO alerts (site_id, array_name, kind, state, since_s, "
-                              "raised_at_s, detail, data_json, webhook_status) VALUES ('s', "
-                              "'tracker', 'logger_silent', 'active', 1, 2, 'silent', '{}', "
-                              "'off')"))
-        with engine.begin() as conn:
-            cfg.attributes["connection"] = conn
-            command.upgrade(cfg, "heads")
-            row = conn.execute(text("SELECT acknowledged_at_s, acknowledged_by, "
-                                    "acknowledged_note FROM alerts")).one()
-            assert tuple(row) == (None, None, None)
-    finally:
-        engine.dispose()
+    def rows(conn: Connection) -> None:
+        conn.execute(text(OLD_SITE_SQL))
+        conn.execute(text("INSERT INTO alerts (site_id, array_name, kind, state, since_s, "
+                          "raised_at_s, detail, data_json, webhook_status) VALUES ('s', "
+                          "'tracker', 'logger_silent', 'active', 1, 2, 'silent', '{}', "
+                          "'off')"))
+
+    with upgraded_from(f"sqlite:///{tmp_path / 'old.sqlite'}", "0013_service_state",
+                       rows) as conn:
+        row = conn.execute(text("SELECT acknowledged_at_s, acknowledged_by, "
+                                "acknowledged_note FROM alerts")).one()
+        assert tuple(row) == (None, None, None)

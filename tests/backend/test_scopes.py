@@ -15,16 +15,15 @@ from typing import Any
 import httpx
 import pandas as pd
 import pytest
-from alembic import command
-from live_service import InProcessServer, LiveServer
-from sqlalchemy import text
+from live_service import OLD_SITE_SQL, InProcessServer, LiveServer, upgraded_from
+from sqlalchemy import Connection, text
 
 from backend.api.routes import twin3d
 from backend.auth import TokenCache, create_token, list_tokens
 from backend.cli.token import create, list_, revoke
 from backend.settings import get_settings
 from backend.sites import Registry, sync_sites
-from backend.storage.engine import alembic_config, make_engine, run_migrations
+from backend.storage.engine import make_engine, run_migrations
 from backend.twin.demo_logger import DEMO_TOKEN_LABEL, demo_token
 
 SITE = "tehuantepec"
@@ -158,25 +157,15 @@ def test_the_cli_makes_and_lists_scoped_tokens(server: InProcessServer,
 
 
 def test_tokens_stored_before_scopes_become_ingest(tmp_path: Path) -> None:
-    engine = make_engine(get_settings(database_url=f"sqlite:///{tmp_path / 'old.sqlite'}"))
-    cfg = alembic_config(engine)
-    try:
-        with engine.begin() as conn:
-            cfg.attributes["connection"] = conn
-            command.upgrade(cfg, "0007_alerts")
-            conn.execute(text("INSERT INTO sites (site_id, name, latitude_deg, longitude_deg, "
-                              "altitude_m, timezone, bucket_phase_s, config_json, updated_at) "
-                              "VALUES ('s', 's', 0, 0, 0, 'UTC', 0, '{}', '2026-01-01')"))
-            conn.execute(text("INSERT INTO logger_tokens (site_id, token_sha256, token_prefix, "
-                              "label, created_at) VALUES ('s', 'h', 'ht_x', 'old', "
-                              "'2026-01-01')"))
-        with engine.begin() as conn:
-            cfg.attributes["connection"] = conn
-            command.upgrade(cfg, "heads")
-            assert conn.execute(text("SELECT scope FROM logger_tokens")).scalars().all() == [
-                "ingest"]
-    finally:
-        engine.dispose()
+    def rows(conn: Connection) -> None:
+        conn.execute(text(OLD_SITE_SQL))
+        conn.execute(text("INSERT INTO logger_tokens (site_id, token_sha256, token_prefix, "
+                          "label, created_at) VALUES ('s', 'h', 'ht_x', 'old', "
+                          "'2026-01-01')"))
+
+    with upgraded_from(f"sqlite:///{tmp_path / 'old.sqlite'}", "0007_alerts", rows) as conn:
+        assert conn.execute(text("SELECT scope FROM logger_tokens")).scalars().all() == [
+            "ingest"]
 
 
 def test_restarts_leave_one_demo_logger_token(tmp_path: Path) -> None:
