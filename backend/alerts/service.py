@@ -467,13 +467,11 @@ class AlertService:
     def _delivered(self, ev: Event, status: str, attempts: int) -> None:
         """The sender's outcome of ``ev`` → the alert's ``webhook_status`` (unless the alert
         has moved on to its next event meanwhile: :func:`latest_event`)."""
-        active, ack = AlertRow.state == "active", AlertRow.acknowledged_at_s
-        still = {"raised": active & ack.is_(None), "acknowledged": active & ack.is_not(None),
-                 "cleared": AlertRow.state == "cleared"}[ev.event]
-
         def store(conn: Connection) -> None:
-            conn.execute(update(AlertRow).where(AlertRow.id == ev.alert_id, still)
-                         .values(webhook_status=status, webhook_attempts=attempts))
+            alert = get_alert(conn, ev.alert_id)  # in the writer's transaction: as it is now
+            if alert is not None and latest_event(alert) == ev.event:
+                conn.execute(update(AlertRow).where(AlertRow.id == ev.alert_id)
+                             .values(webhook_status=status, webhook_attempts=attempts))
 
         try:
             self.ctx.writer.call(store)  # not waited for: the sender goes on at once
