@@ -247,7 +247,7 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
     bg = small_bg
     # each row's brightest pixel: the peak, then the bright pixels' bounding box from it
     row_max = work.pixels.max(axis=1) if work.pixels.size else np.zeros(1, np.uint8)
-    peak = float(row_max.max())
+    peak = _clip_level(work, row_max, float(row_max.max()), image)
     contrast = peak - bg
     if contrast < 20.0:
         return f"no bright region: the brightest pixel is {max(contrast, 0):.0f} grey levels " \
@@ -336,6 +336,72 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
                  values)
 
 
+#: How far above a clipped plateau JPEG's ringing may reach [grey levels]: on the real
+#: frames darkened, up to 6–11 at quality 95, 14 at 75, 22 at 60 (docs/validation-vision.md)
+_JPEG_OVERSHOOT = 32
+#: The most a clipped (white) plateau's colour channels may differ [grey levels]: the sun
+#: clips every channel, and JPEG's coding of a flat colour moves them by a few levels (at
+#: most 6 on the real frames darkened, qualities 50–95); a sunlit sky's blue stands 30–80
+#: above its red (the synthetic and occulted frames this rule refuses)
+_WHITE_SPREAD = 16
+#: A coding block's reach from a pixel (± 8 px: the 8 × 8 luma block the pixel shares)
+_BLOCK_REACH = np.ones((_JPEG_BLOCK_PX + 1, _JPEG_BLOCK_PX + 1), np.uint8)
+
+
+def _clip_level(work: _Region, row_max: NDArray[np.uint8], peak: float,
+                image: NDArray[Any] | None = None) -> float:
+    """The frame's top level: its brightest pixel, unless a flat plateau up to
+    :data:`_JPEG_OVERSHOOT` levels below it fills a whole coding unit
+    (:func:`_flat_units`), every brighter pixel can be its ringing
+    (:func:`_rings_of_a_plateau`) and, in a colour frame, it is white — a clipped core
+    written as JPEG. The blocks wholly inside the core keep the level the sensor clipped at
+    exactly; those across its edge ring above it and set the peak, and cut at the ringing's
+    peak the core fell apart into its edge's overshoot ("every bright region is smaller
+    than the solar disc"). ``row_max``: each row's brightest pixel of ``work``;
+    ``image``: the colour frame, or None."""
+    lo = max(peak - _JPEG_OVERSHOOT, 0.0)
+    rows = np.flatnonzero(row_max >= lo)
+    if rows.size == 0:
+        return peak
+    box = work.pixels[rows[0]:rows[-1] + 1]
+    cols = np.flatnonzero(box.max(axis=0) >= lo)
+    box = box[:, cols[0]:cols[-1] + 1]
+    flat = _flat_units(box)  # the highest level filling a coding unit is the plateau's
+    level = int(cv2.minMaxLoc(box, flat.view(np.uint8))[1]) if flat.any() else -1
+    if level < lo:
+        return peak
+    if level == int(peak):
+        return peak  # the plateau is the peak: nothing rings above it
+    if not _rings_of_a_plateau(box, level):
+        return peak
+    if image is not None and image.ndim == 3:
+        ys, xs = np.nonzero(flat & (box == level))  # centres of units wholly at the level
+        y0, x0 = work.y0 + int(rows[0]), work.x0 + int(cols[0])
+        channels = np.median(image[ys + y0, xs + x0, :3], axis=0)
+        if float(channels.max() - channels.min()) > _WHITE_SPREAD:
+            return peak
+    return float(level)
+
+
+def _rings_of_a_plateau(box: NDArray[np.uint8], level: int) -> bool:
+    """Whether every pixel of ``box`` above ``level`` can be JPEG's ringing of a plateau
+    clipped at ``level``: it lies within a coding block of a pixel below the level (ringing
+    lives only in the blocks that hold an edge; a rounded or banded top has its brighter
+    pixels inside its level's area, away from anything darker)."""
+    edge = cv2.dilate((box < level).astype(np.uint8), _BLOCK_REACH)
+    return bool(edge[box > level].all())
+
+
+def _flat_units(gray: NDArray[np.uint8]) -> NDArray[np.bool_]:
+    """The pixels whose :data:`_JPEG_BLOCK_PX` square about them (a colour JPEG's coding
+    unit) is one grey level — its lowest equal to its highest, squares crossing the edge of
+    ``gray`` excluded: a plateau JPEG kept flat (a block wholly inside a clipped core is its
+    DC term alone, which quantisation moves by well under a level)."""
+    unit = np.ones((_JPEG_BLOCK_PX, _JPEG_BLOCK_PX), np.uint8)
+    return (cv2.erode(gray, unit, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+            == cv2.dilate(gray, unit, borderType=cv2.BORDER_CONSTANT, borderValue=255))
+
+
 def _clipped(gray: NDArray[np.uint8], c: _Candidate, labels: NDArray[Any], peak: float) -> bool:
     """Whether a core below :data:`_SATURATED` is clipped (a frame darkened after the sensor
     clipped it has its flat top below 255): a flat top, one level held by at least
@@ -359,7 +425,7 @@ def _clipped(gray: NDArray[np.uint8], c: _Candidate, labels: NDArray[Any], peak:
     if roi.shape != mask.shape:
         return False
     area = max(cv2.countNonZero(mask), 1)
-    top = cv2.countNonZero(cv2.bitwise_and(mask, (roi >= peak).astype(np.uint8)))
+    top = cv2.countNonZero(cv2.bitwise_and(mask, (roi == peak).astype(np.uint8)))
     if top >= _PLATEAU_SHARE * area:
         return True
     if min(roi.shape) < _JPEG_BLOCK_PX:
@@ -368,9 +434,7 @@ def _clipped(gray: NDArray[np.uint8], c: _Candidate, labels: NDArray[Any], peak:
     level = int(np.argmax(hist))
     if hist[level] < _PLATEAU_SHARE * area:
         return False
-    flat = cv2.bitwise_and(mask, (roi == level).astype(np.uint8))
-    block = np.ones((_JPEG_BLOCK_PX, _JPEG_BLOCK_PX), np.uint8)
-    return bool(cv2.erode(flat, block, borderType=cv2.BORDER_CONSTANT, borderValue=0).any())
+    return bool((_flat_units(roi) & (roi == level) & (mask > 0)).any())
 
 
 def _guided_search(gray: NDArray[np.uint8], work: _Region, bg: float, fov: FovCircle | None,
