@@ -341,11 +341,14 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
 _JPEG_OVERSHOOT = 32
 #: The most a clipped (white) plateau's colour channels may differ [grey levels]: the sun
 #: clips every channel, and JPEG's coding of a flat colour moves them by a few levels (at
-#: most 6 on the real frames darkened, qualities 50–95); a sunlit sky's blue stands 30–80
+#: most 6 on the real frames darkened, qualities 50–95); a sunlit sky's blue stands 30–82
 #: above its red (the synthetic and occulted frames this rule refuses)
 _WHITE_SPREAD = 16
 #: A coding block's reach from a pixel (± 8 px: the 8 × 8 luma block the pixel shares)
 _BLOCK_REACH = np.ones((_JPEG_BLOCK_PX + 1, _JPEG_BLOCK_PX + 1), np.uint8)
+#: A coding unit's reach from the centre of a flat unit (± 16 px: its own half and the edge
+#: block beyond it, where the plateau's ringing lies)
+_UNIT_REACH = np.ones((2 * _JPEG_BLOCK_PX + 1, 2 * _JPEG_BLOCK_PX + 1), np.uint8)
 
 
 def _clip_level(work: _Region, row_max: NDArray[np.uint8], peak: float,
@@ -353,12 +356,15 @@ def _clip_level(work: _Region, row_max: NDArray[np.uint8], peak: float,
     """The frame's top level: its brightest pixel, unless a flat plateau up to
     :data:`_JPEG_OVERSHOOT` levels below it fills a whole coding unit
     (:func:`_flat_units`), every brighter pixel can be its ringing
-    (:func:`_rings_of_a_plateau`) and, in a colour frame, it is white — a clipped core
-    written as JPEG. The blocks wholly inside the core keep the level the sensor clipped at
+    (:func:`_rings_of_a_plateau`), no saturated core lies elsewhere
+    (:func:`_saturated_elsewhere`) and, in an 8-bit colour frame, it is white — a clipped
+    core written as JPEG. The blocks wholly inside the core keep the level the sensor clipped at
     exactly; those across its edge ring above it and set the peak, and cut at the ringing's
     peak the core fell apart into its edge's overshoot ("every bright region is smaller
     than the solar disc"). ``row_max``: each row's brightest pixel of ``work``;
     ``image``: the colour frame, or None."""
+    if work.pixels.size == 0:
+        return peak
     lo = max(peak - _JPEG_OVERSHOOT, 0.0)
     rows = np.flatnonzero(row_max >= lo)
     if rows.size == 0:
@@ -372,10 +378,13 @@ def _clip_level(work: _Region, row_max: NDArray[np.uint8], peak: float,
         return peak
     if level == int(peak):
         return peak  # the plateau is the peak: nothing rings above it
-    if not _rings_of_a_plateau(box, level):
+    plateau = flat & (box == level)  # centres of units wholly at the level
+    if not _rings_of_a_plateau(box, level) or _saturated_elsewhere(box, plateau):
         return peak
     if image is not None and image.ndim == 3:
-        ys, xs = np.nonzero(flat & (box == level))  # centres of units wholly at the level
+        if image.dtype != np.uint8:
+            return peak  # the white test's levels are 8-bit ones
+        ys, xs = np.nonzero(plateau)
         y0, x0 = work.y0 + int(rows[0]), work.x0 + int(cols[0])
         channels = np.median(image[ys + y0, xs + x0, :3], axis=0)
         if float(channels.max() - channels.min()) > _WHITE_SPREAD:
@@ -390,6 +399,21 @@ def _rings_of_a_plateau(box: NDArray[np.uint8], level: int) -> bool:
     pixels inside its level's area, away from anything darker)."""
     edge = cv2.dilate((box < level).astype(np.uint8), _BLOCK_REACH)
     return bool(edge[box > level].all())
+
+
+def _saturated_elsewhere(box: NDArray[np.uint8], plateau: NDArray[np.bool_]) -> bool:
+    """Whether ``box`` holds a saturated core of its own — a clump of at least
+    :data:`_PLATEAU_MIN_PX` pixels at :data:`_SATURATED` or more — beyond a coding unit's
+    reach of the plateau: then the sensor clips up there (a small sun), and the plateau is a
+    flat white thing below it, not the clip (a reviewer's finding: a sun 4–6 px in radius
+    lost to a white board at 225–245)."""
+    sat = (box >= _SATURATED).astype(np.uint8)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(sat, connectivity=8)
+    big = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= _PLATEAU_MIN_PX) + 1
+    if big.size == 0:
+        return False
+    near = cv2.dilate(plateau.view(np.uint8), _UNIT_REACH) > 0
+    return bool(np.setdiff1d(big, labels[near & (sat > 0)]).size)
 
 
 def _flat_units(gray: NDArray[np.uint8]) -> NDArray[np.bool_]:

@@ -16,7 +16,7 @@ import pvlib
 import pytest
 
 from vision.calibrate import fit_fisheye
-from vision.detect import detect_robust
+from vision.detect import detect_robust, detect_sun
 from vision.evaluation import FORMATS, as_format, nearest_direction_px
 from vision.fov import estimate_fov, to_gray
 
@@ -320,6 +320,41 @@ def test_the_clip_level_is_a_white_jpeg_plateau_not_a_rounded_top() -> None:
             assert peak > int(np.median(gray[r < 20])) == top, (peak, top)
         else:
             assert top == peak, (peak, top)
+        # the white test reads 8-bit levels: a frame in floats keeps its peak (a reviewer's
+        # finding: every float plateau passed it, spread ≤ 1)
+        as_float = image.astype(np.float32) / 255.0
+        assert _clip_level(_Region(gray, 0, 0), gray.max(axis=1), peak, as_float) == peak
+    # nothing to search (a prediction off the frame leaves an empty window): the peak
+    assert _clip_level(_Region(np.zeros((0, 0), np.uint8), 0, 0), np.zeros(1, np.uint8),
+                       0.0) == 0.0
+
+
+def test_a_small_saturated_sun_keeps_its_peak_beside_a_flat_white_board() -> None:
+    """A reviewer's finding: a sun 6 px in radius clipped at 255 (its core under a coding
+    unit) beside a flat white board at 225–245 written as JPEG: the board's plateau was
+    taken for the clip level, the sun's core fell under the region threshold and the board
+    won (0.05–0.10, the board's centre). A saturated core of its own away from the plateau
+    shows the sensor clips higher up (vision.detect._saturated_elsewhere): the sun, 0.93."""
+    yy, xx = np.mgrid[0:480, 0:640]
+    r = np.hypot(xx - 200.0, yy - 180.0)
+    glare = 45.0 * np.exp(-r / 6.0) * (r > 6) + 255.0 * (r <= 6)
+    sky = np.dstack([200 + glare, 150 + glare, 110 + glare]).clip(0, 255).astype(np.uint8)
+    for level in (225, 235, 245):
+        img = sky.copy()
+        cv2.ellipse(img, (420, 300), (45, 30), 0, 0, 360, (level,) * 3, -1, cv2.LINE_AA)
+        d = detect_robust(_as_jpeg(cv2.GaussianBlur(img, (3, 3), 0.8), 90), min_confidence=0.0)
+        assert np.hypot(d.candidate_px[0] - 200, d.candidate_px[1] - 180) < 3, (level, d)
+        assert d.confidence >= 0.5, (level, d.confidence, d.reason)
+
+
+def test_a_prediction_off_the_frame_is_searched_blind() -> None:
+    """A reviewer's finding: a prediction far outside the frame left an empty window, which
+    the clip level's search raised on (a camera model puts a low sun off a cropped frame)."""
+    img = np.full((480, 640, 3), 90, np.uint8)
+    cv2.circle(img, (320, 240), 12, (255, 255, 255), -1)
+    for expected in ((2000.0, 2000.0), (-400.0, 240.0), (320.0, -300.0)):
+        d = detect_sun(img, expected_px=expected)
+        assert d.sun_found and np.hypot(d.centroid_px[0] - 320, d.centroid_px[1] - 240) < 2
 
 
 @pytest.mark.parametrize(("stamp", "width", "quality"), [
