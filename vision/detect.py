@@ -408,7 +408,7 @@ def _saturated_elsewhere(box: NDArray[np.uint8], plateau: NDArray[np.bool_]) -> 
     flat white thing below it, not the clip (a reviewer's finding: a sun 4–6 px in radius
     lost to a white board at 225–245)."""
     sat = (box >= _SATURATED).astype(np.uint8)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(sat, connectivity=8)
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(sat, connectivity=8)
     big = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= _PLATEAU_MIN_PX) + 1
     if big.size == 0:
         return False
