@@ -454,6 +454,17 @@ MAX_LAYOUTS, MAX_GCRS, MAX_STRATEGIES = 5, 40, 3
 MAX_CASES = MAX_LAYOUTS * MAX_GCRS * MAX_STRATEGIES
 
 
+def case_steps(spec: SweepSpec, n_cases: int) -> float:
+    """What a sweep of ``n_cases`` cases of ``spec`` costs, in rectangle case-steps: cases ×
+    steps, a polygon collector's steps weighing :func:`backend.plants.cost_factor` (its
+    shade costs that much more). The one measure of :data:`MAX_CASE_STEPS`, the anonymous
+    bound and the anonymous allowance spent."""
+    from backend.plants import cost_factor
+
+    steps = (spec.end - spec.start).total_seconds() / spec.step_s
+    return n_cases * steps * cost_factor(spec.collector)
+
+
 def parse_gcr(text: str) -> list[float]:
     """``"0.15,0.25"`` or a range ``"START:STOP:STEP"`` (STOP included) → GCRs."""
     try:
@@ -531,9 +542,10 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
     the pivot), wired like Peñarroya's. Every case's field is built once here, so an
     infeasible GCR is refused before any task runs. ``custom``: layout custom's (aspect
     ratio, offset, rotation [°]), all three or none; ``timezone``: :func:`sweep_zone`;
-    ``max_case_steps``: the caller's bound on cases × steps (an anonymous caller's is
+    ``max_case_steps``: the caller's bound on :func:`case_steps` (an anonymous caller's is
     lower), ``bound_note`` said after it (" without a write token").
     :class:`SweepInputError` names the parameter (its request key, :data:`SWEEP_FIELDS`)."""
+    from backend.plants import cost_factor
     from sim.paths import package_dir
     from sim.plant.fields import LAYOUT_TYPES, collector_from_outline, collector_from_size
     from sim.plant.layout import load_plant
@@ -622,11 +634,14 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
                               f"{len(strategies)} strategies is {n_cases:,} cases, more than "
                               f"{MAX_CASES}: fewer GCRs, layouts or strategies")
     cases = [SweepCase(n, float(g), s) for n in names for g in gcr for s in strategies]
-    steps = (end - start).total_seconds() / step_s
     bound = min(max_case_steps, MAX_CASE_STEPS)
-    if steps * len(cases) > bound:
-        raise SweepInputError("step_s", f"{len(cases)} cases × {steps:.0f} steps is more than "
-                              f"{bound:,.0f}{bound_note}: use a larger step or fewer cases")
+    if case_steps(spec, len(cases)) > bound:
+        steps = (end - start).total_seconds() / step_s
+        weight = (f" (a polygon collector's steps count {cost_factor(collector):g}×)"
+                  if cost_factor(collector) > 1 else "")
+        raise SweepInputError("step_s", f"{len(cases)} cases × {steps:.0f} steps{weight} is "
+                              f"more than {bound:,.0f}{bound_note}: use a larger {{step_s}}, "
+                              "a shorter range or fewer cases")
     for case in {SweepCase(c.layout, c.gcr, "sun") for c in cases}:
         try:
             case_plant(spec, case)
@@ -652,6 +667,7 @@ def _case_field(problem: str, layout: str, from_plant: bool) -> str:
 
 
 __all__ = ["MAX_CASES", "MAX_CASE_STEPS", "MAX_GCRS", "MAX_LAYOUTS", "MAX_STRATEGIES",
-           "SWEEP_FIELDS", "SweepCancelled", "SweepFailed", "SweepInputError", "expected_cost",
+           "SWEEP_FIELDS", "SweepCancelled", "SweepFailed", "SweepInputError", "case_steps",
+           "expected_cost",
            "parse_gcr",
            "parse_polygon", "parse_size", "prepare_sweep", "run_sweep", "sweep_task"]

@@ -194,6 +194,11 @@ def test_a_polygon_collector_from_text_or_file(tmp_path: Path,
      "--strategy: a polygon collector takes strategy sun only"),
     ([f"--collector-polygon={L_TEXT}", "--collector-m", "12x5"], "--collector-m: give the "
      "collector size, e.g. 12x5, or its polygon"),
+    # its steps weigh 100× in the bound of a token's sweep as in an anonymous one (the CLI
+    # took 1,051,200 polygon steps, worth 105 million of the rectangle's, against 50 million)
+    ([f"--collector-polygon={L_TEXT}", "--end", "2023-12-20", "--step-s", "60"],
+     "--step-s: 1 cases × 1051200 steps (a polygon collector's steps count 100×) is more "
+     "than 50,000,000: use a larger --step-s, a shorter range or fewer cases"),
 ])
 def test_bad_polygon_names_the_flag(extra: list[str], message: str,
                                     capsys: pytest.CaptureFixture[str]) -> None:

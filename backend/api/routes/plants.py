@@ -55,6 +55,7 @@ from backend.plants import (
 from backend.plants.sweep import (
     MAX_CASE_STEPS,
     SweepInputError,
+    case_steps,
     parse_gcr,
     parse_size,
     prepare_sweep,
@@ -250,27 +251,18 @@ async def create_sweep(body: SweepCreate, request: Request, ctx: ContextDep,
     spec, cases = await anyio.to_thread.run_sync(
         _sweep_inputs, body, service,
         ctx.settings.plants.anonymous_sweep_case_steps if anonymous else None)
-    # a polygon's case-steps weigh POLYGON_COST_FACTOR (its shade costs that much more)
-    factor = cost_factor(spec.collector)
-    case_steps = len(cases) * (spec.end - spec.start).total_seconds() / spec.step_s * factor
+    cost = case_steps(spec, len(cases))  # within the caller's bound (prepare_sweep)
     host = request.client.host if request.client else "?"
     try:
         if anonymous:
-            bound = ctx.settings.plants.anonymous_sweep_case_steps
-            if case_steps > bound:
-                weight = f" (a polygon collector's steps count {factor:g}×)" if factor > 1 else ""
-                raise HTTPException(422, f"step_s: {len(cases)} cases × "
-                                         f"{case_steps / len(cases):.0f} steps{weight} is more "
-                                         f"than {bound:,} without a write token: use a larger "
-                                         "step_s, a shorter range or fewer cases")
-            ctx.limits.simulation_steps.take(host, case_steps)
+            ctx.limits.simulation_steps.take(host, cost)
     except Busy as exc:
         raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
     try:
         state = runner.submit(spec, cases, body.model_dump())
     except Busy as exc:  # the queue is full: nothing runs, the allowance is given back
         if anonymous:
-            ctx.limits.simulation_steps.refund(host, case_steps)
+            ctx.limits.simulation_steps.refund(host, cost)
         raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
     state.spec = spec
     return Response(orjson.dumps({"sweep_id": state.sweep_id, "status": state.status,
