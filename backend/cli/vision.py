@@ -117,16 +117,12 @@ def _place(args: argparse.Namespace) -> Any:
     """The ``Place`` of ``--site`` or ``--lat/--lon`` (None when neither is given), checked
     as the service checks ``latitude_deg``/``longitude_deg``/``elevation_m``
     (``backend.vision.service.free_place``: an impossible or NaN place is refused)."""
-    from zoneinfo import ZoneInfo
-
-    from backend.vision.service import Place, free_place
+    from backend.vision.service import free_place
 
     if args.site:
         from sim.sites import load_site
 
-        site = load_site(args.site, os.environ.get("HELIOTWIN_SITES_DIR"))
-        return Place(site.site_id, site.latitude, site.longitude, site.altitude,
-                     ZoneInfo(site.timezone))
+        return _place_of(load_site(args.site, os.environ.get("HELIOTWIN_SITES_DIR")))
     if args.lat is None and args.lon is None:
         return None
     if args.lat is None or args.lon is None:
@@ -137,15 +133,20 @@ def _place(args: argparse.Namespace) -> Any:
 def _site_place(site_id: str) -> Any:
     """The place of a site of the site files (HELIOTWIN_SITES_DIR and the built-in ones),
     or None when there is none of that id."""
-    from zoneinfo import ZoneInfo
-
-    from backend.vision.service import Place
     from sim.sites import UnknownSiteError, load_site
 
     try:
-        site = load_site(site_id, os.environ.get("HELIOTWIN_SITES_DIR"))
+        return _place_of(load_site(site_id, os.environ.get("HELIOTWIN_SITES_DIR")))
     except UnknownSiteError:
         return None
+
+
+def _place_of(site: Any) -> Any:
+    """The vision service's ``Place`` of a ``sim.sites.Site``."""
+    from zoneinfo import ZoneInfo
+
+    from backend.vision.service import Place
+
     return Place(site.site_id, site.latitude, site.longitude, site.altitude,
                  ZoneInfo(site.timezone))
 
