@@ -130,6 +130,8 @@ _JPEG_BLOCK_PX = 16  # a colour JPEG's coding unit (4:2:0: 8 × 8 luma blocks, c
 # resolution): a plateau keeps one level only in such blocks wholly inside it
 _WHITE_BLUE_MIN_PX = _JPEG_BLOCK_PX / 2  # the blue glare beyond the white core at least this
 # wide in radius: a narrower band is within reach of JPEG's coding error on the colour outline
+_GREY_SPREAD = 2  # a colour frame whose channels differ by at most this is a grey frame
+_GREY_STRIDE = 8  # … looked at on every 8th pixel of every 8th row
 
 
 @dataclass(frozen=True)
@@ -530,6 +532,7 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         its distance from the prediction, however far (a wrong place, time or
         zone moves the prediction, not the sun).
     """
+    image = _one_channel_if_grey(image)
     gray = to_gray(image)
     small, scale = _small(gray)
     if fov is None and auto_fov:
@@ -617,6 +620,28 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         features=dict(zip(conf.FEATURES, (float(v) for v in got.x), strict=True)),
         candidate_px=(float(got.best.cx), float(got.best.cy)),
     )
+
+
+def _one_channel_if_grey(image: NDArray[Any]) -> NDArray[Any]:
+    """An 8-bit colour frame whose channels are equal (within :data:`_GREY_SPREAD` on a
+    sample every :data:`_GREY_STRIDE` pixels) as its one grey channel, else ``image``.
+
+    A monochrome camera's frame arrives as colour: ``cv2.IMREAD_COLOR`` (the service's
+    decoding) repeats a grey PNG's or JPEG's one channel, and a colour JPEG of a grey frame
+    codes its chroma flat (±1–2 after quantisation). The detector treats a one-channel
+    frame as a monochrome sensor's (its white core is the grey level within 1 of the top,
+    :func:`vision.candidates._white_core`); as colour, min(B, G, R) within 3 levels of the
+    top took the blue glare's clipped grey levels too — the Wolf frames made monochrome
+    and uploaded as a grey PNG lay up to 21.6 px (1.1 % of the width) from their labels,
+    0.6–2.7 px as one channel (a tester's finding)."""
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8:
+        return image
+    sample = img[::_GREY_STRIDE, ::_GREY_STRIDE, :3].astype(np.int16)
+    if int(np.abs(sample[..., 0] - sample[..., 1]).max()) > _GREY_SPREAD \
+            or int(np.abs(sample[..., 1] - sample[..., 2]).max()) > _GREY_SPREAD:
+        return image
+    return to_gray(img)
 
 
 def _white_core_centre(image: NDArray[Any], gray: NDArray[np.uint8], c: _Candidate,

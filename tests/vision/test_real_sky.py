@@ -166,6 +166,29 @@ def test_a_monochrome_wolf_sun_is_centred_on_its_top_grey_level(real_sky, stamp)
     assert np.hypot(d.centroid_px[0] - x, d.centroid_px[1] - y) <= 0.01 * img.shape[1]
 
 
+@pytest.mark.parametrize("stamp", ["_102400_", "_122200_"])
+@pytest.mark.parametrize("ext", [".png", ".jpg"])
+def test_a_monochrome_frame_decoded_as_colour_is_centred_as_one_channel(real_sky, stamp,
+                                                                         ext) -> None:
+    """The same two frames as a user sends them — a grey PNG or JPEG, decoded by the
+    service into three equal channels (``vision.imageio.decode_image``) — are centred as
+    the one-channel frame (a tester's finding: 21.6 and 20.4 px, over 1 % of the width,
+    when the detector took them for colour)."""
+    from vision.imageio import decode_image
+
+    (r,) = [r for r in _labelled(real_sky, "Wolf") if stamp in r["filename"]]
+    grey, (x, y) = as_format(cv2.imread(r["path"]), (float(r["sun_col_label"]),
+                                                      float(r["sun_row_label"])), "mono")
+    ok, buf = cv2.imencode(ext, grey)
+    img = decode_image(buf.tobytes(), 10_000_000)
+    assert img.ndim == 3 and img.shape[2] == 3
+    d, one = detect_robust(img), detect_robust(cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE))
+    assert d.sun_found and d.confidence >= 0.5, (d.confidence, d.reason)
+    # measured 0.6–2.9 px (PNG and JPEG), the same as the one-channel frame's
+    assert np.hypot(d.centroid_px[0] - x, d.centroid_px[1] - y) <= 4.0
+    assert d.centroid_px == pytest.approx(one.centroid_px, abs=0.01)
+
+
 @pytest.mark.parametrize("gain", [1.1, 1.15])
 def test_a_brightened_cloud_field_around_a_hidden_sun_is_no_sun(real_sky, gain) -> None:
     """Issue 24 items 4 and 6: FE3 (the sun behind altocumulus) brightened × 1.1 and × 1.15 —
