@@ -81,8 +81,9 @@ MAX_DAYS = 400
 #: under the sun per fitted parameter, a slow logger's readings counted by their spacing,
 #: faults.SHAPE_READINGS_PER_PARAMETER: an hourly logger's day is not fitted; 20: that
 #: convention read over the run and the month before it, weather_twin.STAMP_LOOKBACK_S;
-#: 21: ``stuck`` also as a stop part-way through the day, faults._stopped).
-CACHE_VERSION = 21
+#: 21: ``stuck`` also as a stop part-way through the day, faults._stopped; 22: that
+#: convention read on the days the logger was slow only, sim.sky_sensor.inferred_stamped).
+CACHE_VERSION = 22
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99

@@ -92,6 +92,31 @@ def test_a_cloudy_day_asked_for_alone_reads_its_months_convention(logged) -> Non
         "a fast logger's month is not read")) == "instant"
 
 
+def test_a_logger_that_was_faster_before_is_read_on_its_slow_days(logged) -> None:
+    """A site whose logger sent 5-minute samples before it sent hourly means stamped at the
+    hour's end (a replaced logger, a back-fill): the month before the run was read as one
+    logger, its median spacing 5 minutes, so the hourly day was taken as instants and
+    named a sky_clock_offset of +32 min (a tester's finding). Only the days on which the
+    logger is slow say what its slow stamps mark."""
+    gap = 3600
+    t = logged.times.as_unit("s").asi8
+    first = t < (FIRST + pd.Timedelta(days=1)).timestamp()
+    fast = first & ((t // 60) % 5 == 0)  # the clear first day as 5-minute samples
+    ts, v = means(logged.times, logged.fixed_power_w, 60, "end")
+    hourly = ts > (FIRST + pd.Timedelta(days=1)).timestamp()  # the partly cloudy second day
+    day0 = np.column_stack([t[fast], *[np.full(fast.sum(), np.nan)] * 2,
+                            logged.fixed_power_w[fast]])
+    # the clear first day again as hourly means, a week later: the month holds both
+    later = 7 * 86400
+    first_hourly = ~hourly & (ts <= (FIRST + pd.Timedelta(days=1)).timestamp())
+    day7 = np.column_stack([ts[first_hourly] + later, *[np.full(first_hourly.sum(), np.nan)] * 2,
+                            v[first_hourly]])
+    assert inferred_stamped(SITE, np.concatenate([day0[:, 0], day7[:, 0]]),
+                            np.concatenate([day0[:, 3], day7[:, 3]]), gap) == "interval_end"
+    # and the 5-minute day alone keeps the site's word
+    assert inferred_stamped(SITE, day0[:, 0], day0[:, 3], gap) == "instant"
+
+
 @pytest.fixture(scope="module", params=[(60, "end"), (60, "start"), (30, "end")],
                 ids=lambda p: f"{p[0]}min-{p[1]}")
 def diagnosed(request: pytest.FixtureRequest, logged,
