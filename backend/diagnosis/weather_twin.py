@@ -78,11 +78,13 @@ def sky_sensors(fixed: np.ndarray, tracker: np.ndarray | None) -> pd.DataFrame |
 
 
 def site_minutes(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int
-                 ) -> tuple[np.ndarray, np.ndarray, pd.DataFrame | None, float | None]:
+                 ) -> tuple[np.ndarray, np.ndarray, pd.DataFrame | None, float | None,
+                            float | None]:
     """The tracker's and the fixed array's measured power [W] on the minute grid of
     ``[t0, t1)`` (:func:`minute_grid`: NaN where the energy rule bridges no reading), the
-    loggers' sky sensors (:func:`sky_sensors`) and the tracker's readings' median spacing
-    [s]. The site has the twin's arrays (:meth:`SiteInfo.has_twin`)."""
+    loggers' sky sensors (:func:`sky_sensors`) and the tracker's and the fixed array's
+    readings' median spacings [s]. The site has the twin's arrays
+    (:meth:`SiteInfo.has_twin`)."""
     # the arrays the twin simulates (SiteInfo.has_twin), not merely the first of each mount
     tracker, fixed = info.arrays["tracker"], info.arrays["fixed"]
     gap = ctx.settings.ingest.energy_max_gap_s
@@ -91,9 +93,9 @@ def site_minutes(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int
         tr_rows = _rows(conn, tracker.array_id, t0, t1, gap)
         stamped = readings_stamped(info, fx_rows, gap, lambda: _rows(
             conn, fixed.array_id, t0 - STAMP_LOOKBACK_S, t1, gap))
-    fx, fx_s, _ = minute_grid(fx_rows, t0, t1, gap, stamped)
+    fx, fx_s, fx_spacing = minute_grid(fx_rows, t0, t1, gap, stamped)
     tr, tr_s, tr_spacing = minute_grid(tr_rows, t0, t1, gap, stamped)
-    return tr, fx, sky_sensors(fx_s, tr_s), tr_spacing
+    return tr, fx, sky_sensors(fx_s, tr_s), tr_spacing, fx_spacing
 
 
 #: How far before a run the fixed array's readings are read to tell what a slow logger's
@@ -150,11 +152,12 @@ def weather_twin(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int) -> pd.Da
         raise InputError(422, f"source=twin_weather is computed on request: at most {MAX_DAYS} "
                               "days (the diagnosis gives its daily energy for longer ranges)")
     t0, t1 = t0 // 60 * 60, -(-t1 // 60) * 60
-    _, fx, sensors, _ = site_minutes(ctx, info, t0, t1)
+    _, fx, sensors, _, fx_spacing = site_minutes(ctx, info, t0, t1)
     start, now = pd.Timestamp(t0, unit="s", tz="UTC"), pd.Timestamp.now(tz="UTC")
     end = pd.Timestamp(t1, unit="s", tz="UTC")
     return sky_sensor.weather_aware_twin(info.site, start, end, fx, sensors=sensors,
-                                         now=now if end > now else None)
+                                         now=now if end > now else None,
+                                         readings_spacing_s=fx_spacing)
 
 
 def weather_twin_columns(ctx: ServiceContext, info: SiteInfo, array: str, t0: int,

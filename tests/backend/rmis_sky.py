@@ -240,7 +240,8 @@ def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str,
         sensors["ghi_w_m2"] = minute(lg.data["ghi"].to_numpy())
     models = ("gti_dirint", "clearsky_erbs") if second_sky else ("gti_dirint",)
     weather, sky_frame = sky_sensor.weather_from_fixed(site, times, fixed_w, models=models,
-                                                       sensors=sensors)
+                                                       sensors=sensors,
+                                                       readings_spacing_s=float(lg.step_s))
     end = day + pd.Timedelta(days=1)
     main = twin.simulate(site, day, end, weather=weather["gti_dirint"]).series
     out = {"times": times, "tracker_poa": np.nan_to_num(main["tracker_poa_global"].to_numpy()),

@@ -176,7 +176,8 @@ def _found_at(step_min: int, seed: int, fault: str | None = None,
     for name, power in (("tracker", d.tracker_power_w), ("fixed", d.fixed_power_w)):
         ts, v = means(d.times, power, step_min, "end")
         series[name] = on_grid(interval_middles(ts, "interval_end", gap), v, grid, gap)
-    e = sky_sensor.weather_aware_twin(site, JUNE, JUNE + pd.Timedelta(days=6), series["fixed"])
+    e = sky_sensor.weather_aware_twin(site, JUNE, JUNE + pd.Timedelta(days=6), series["fixed"],
+                                      readings_spacing_s=60.0 * step_min)
     return faults_over_days(features_by_day(site, JUNE, e, series["tracker"],
                                             spacing_s=60.0 * step_min))
 
