@@ -43,9 +43,10 @@ def derive_fisheye_scale(image: np.ndarray, params: dict[str, object]
     found = image_circle(to_gray(image))
     if found is None:
         h, w = image.shape[:2]
-        raise InputError(422, f"px_per_deg: required for this {w}×{h} px frame — it has no "
-                              "dark corners around an image circle to derive the scale from "
-                              "(or give calibration_id)")
+        raise InputError(422, f"px_per_deg: required for this {w}×{h} px frame — no image "
+                              "circle to derive the scale from was found (a lit disc filling "
+                              "at least a fifth of the frame, within dark corners; "
+                              "vision.fov.estimate_fov), or give calibration_id")
     circle, clipped = found
     out = dict(params)
     derived: dict[str, Any] = {
