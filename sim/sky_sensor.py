@@ -50,8 +50,9 @@ from sim import pv, sky, sun
 from sim.sites import Site
 
 __all__ = ["FLAGS", "SENSOR_SKIES", "Plane", "decompose", "fixed_clear_sky", "fixed_plane",
-           "horizontal", "invert_poa", "measured_sky", "sensor_flags", "weather_aware_twin",
-           "weather_from_fixed"]
+           "horizontal", "invert_poa", "measured_sky", "on_slow_days", "readings_fine",
+           "sensor_flags",
+           "weather_aware_twin", "weather_from_fixed"]
 
 #: Flags of :func:`invert_poa` (bit values, combined with ``|``).
 FLAGS = {
@@ -260,9 +261,21 @@ def _bound(ghi: np.ndarray, dni: np.ndarray, clear: pd.DataFrame
 
 
 #: Readings at most this far apart [s] show a clear spell (:func:`_clear_beam`: steady over
-#: 11 minutes, three readings or more); coarser readings, interpolated onto the minute grid,
-#: look steady whatever the clouds did between them (an hourly mean's smooth POA)
+#: 11 minutes, two or three readings or more); coarser readings, interpolated onto the minute
+#: grid, look steady whatever the clouds did between them (an hourly mean's smooth POA)
 SPELL_SEEN_MAX_SPACING_S = 300.0
+
+
+def readings_fine(ts_s: np.ndarray, values: np.ndarray, grid_s: np.ndarray) -> np.ndarray:
+    """Per minute of ``grid_s`` [s] (and per column of a 2-D ``values``): whether it lies
+    between two finite readings at most :data:`SPELL_SEEN_MAX_SPACING_S` apart, or on one —
+    where the readings can show a clear spell (:func:`decompose`, ``spells_seen``). The
+    energy rule's bridging (:func:`sim.energy.on_grid`) with that gap."""
+    from sim.energy import on_grid
+
+    v = np.asarray(values, np.float64)
+    return np.isfinite(on_grid(ts_s, np.where(np.isfinite(v), 1.0, np.nan), grid_s,
+                               SPELL_SEEN_MAX_SPACING_S))
 
 
 def _clear_beam(poa: np.ndarray, clear: pd.DataFrame
@@ -358,7 +371,8 @@ def _closure(poa: np.ndarray, dni: np.ndarray, clear: pd.DataFrame, site: Site,
 
 def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
               model: str = "gti_dirint", beam_seen: np.ndarray | None = None,
-              plane: Plane | None = None, spells_seen: bool = True) -> pd.DataFrame:
+              plane: Plane | None = None, spells_seen: np.ndarray | bool = True
+              ) -> pd.DataFrame:
     """GHI, DNI, DHI [W m⁻²] behind a fixed plane's POA (no NaN in ``poa_global``).
 
     Parameters
@@ -377,10 +391,10 @@ def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
     plane : Plane, optional
         The plane ``poa_global`` is on (``clear`` computed for it); default the fixed
         array's. On a horizontal plane GTI-DIRINT is plain DIRINT on a GHI.
-    spells_seen : bool
-        Whether the readings behind ``poa_global`` are fine enough to show a clear spell
-        (:data:`SPELL_SEEN_MAX_SPACING_S`): then ``"clearsky_erbs"`` too takes the clear
-        beam in the clear spells.
+    spells_seen : array_like of bool, or bool
+        Per minute (or for all): whether the readings behind ``poa_global`` are fine enough
+        to show a clear spell (:func:`readings_fine`); there ``"clearsky_erbs"`` too takes
+        the clear beam in the clear spells.
 
     The result reproduces ``poa_global`` on the plane through the site's transposition
     model (:func:`_closure`).
@@ -436,7 +450,7 @@ def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
         # day at 60° N, 0.85 in Madrid in November (a tester's finding); in a gap between
         # clouds, or where coarse readings hide the clouds, the two routes' spread is the
         # band's (healthy hourly partly cloudy days, whose main sky runs 7–10 % high, need it)
-        w_clear = np.where(spell, w_clear, 0.0) if spells_seen else np.zeros(poa.size)
+        w_clear = np.where(spell & np.asarray(spells_seen, bool), w_clear, 0.0)
     dni = (1.0 - w_clear) * dni + w_clear * dni_clear_beam
     dni_clear = clear["dni_clear"].to_numpy()
     up = clear["apparent_elevation"].to_numpy() > 0.0
@@ -506,7 +520,7 @@ def sensor_flags(irradiance_w_m2: np.ndarray, clear: pd.DataFrame) -> np.ndarray
 def _sky_from_plane(site: Site, times: pd.DatetimeIndex, poa_measured: np.ndarray,
                     flag: np.ndarray, clear: pd.DataFrame, plane: Plane,
                     models: tuple[str, ...], extra: dict[str, np.ndarray],
-                    now: pd.Timestamp | None = None, spells_seen: bool = True
+                    now: pd.Timestamp | None = None, spells_seen: np.ndarray | bool = True
                     ) -> tuple[dict[str, pd.DataFrame], pd.DataFrame]:
     """The weather frames and the sensor frame of :func:`weather_from_fixed` from one
     plane's measured irradiance ``poa_measured`` (valid where ``flag`` is 0; ``spells_seen``:
@@ -560,7 +574,7 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
                        saturation_power_w: float | None = None,
                        sensors: pd.DataFrame | None = None,
                        now: pd.Timestamp | None = None,
-                       readings_spacing_s: float | None = None,
+                       fine: dict[str, np.ndarray] | None = None,
                        ) -> tuple[dict[str, pd.DataFrame], pd.DataFrame]:
     """The sky the site's instruments saw, as twin weather frames, one per decomposition model.
 
@@ -590,10 +604,12 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
     now : pandas.Timestamp, optional
         The minutes from it on are still to come (a day in progress): a day's share of
         measured minutes (:func:`measured_sky`) is of its minutes before it.
-    readings_spacing_s : float, optional
-        The fixed array logger's median spacing [s] behind the minute values (default: a
-        reading a minute): above :data:`SPELL_SEEN_MAX_SPACING_S` the second sky takes no
-        clear beam (:func:`decompose`, ``spells_seen``).
+    fine : dict, optional
+        Per minute, whether the readings behind a sky's source are fine enough to show a
+        clear spell (:func:`readings_fine`), by source: ``"fixed_power_w"``, and the sensor
+        columns ``"fixed_poa_w_m2"``, ``"ghi_w_m2"``; a source not in it is taken as read
+        every minute (default: all). Elsewhere the second sky takes no clear beam
+        (:func:`decompose`, ``spells_seen``).
 
     Returns
     -------
@@ -619,10 +635,10 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
     inv = invert_poa(fixed_power_w, clear, site.arrays["fixed"], t_air, wind,
                      saturation_power_w)
     extra = {"temp_air": t_air, "wind_speed": wind}
-    seen = readings_spacing_s is None or readings_spacing_s <= SPELL_SEEN_MAX_SPACING_S
+    fine = fine or {}
     weather, sensor = _sky_from_plane(site, times, inv["poa_global"].to_numpy(),
                                       inv["flag"].to_numpy(), clear, fixed_plane(site),
-                                      models, extra, now, seen)
+                                      models, extra, now, fine.get("fixed_power_w", True))
     source = np.where(sensor["measured_sky"].to_numpy(), "fixed_array", "clear_sky")
     for name, column in SENSOR_SKIES:  # rising priority: a later one replaces
         if sensors is None or column not in sensors or not sensors[column].notna().any():
@@ -632,7 +648,7 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
         g = sensors[column].to_numpy(dtype=float)
         flag = sensor_flags(g, c)
         w_s, s_s = _sky_from_plane(site, times, np.where(flag == 0, g, np.nan), flag, c,
-                                   plane, models, extra, now, seen)
+                                   plane, models, extra, now, fine.get(column, True))
         take = s_s["measured_sky"].to_numpy()
         for m in models:
             weather[m].loc[take] = w_s[m].loc[take]
@@ -649,7 +665,7 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
                        saturation_power_w: float | None = None,
                        sensors: pd.DataFrame | None = None,
                        now: pd.Timestamp | None = None,
-                       readings_spacing_s: float | None = None) -> pd.DataFrame:
+                       fine: dict[str, np.ndarray] | None = None) -> pd.DataFrame:
     """Both arrays' expected power per minute under the sky the site's instruments saw
     (irradiance sensors where they read, else the fixed array: :func:`weather_from_fixed`).
 
@@ -663,8 +679,9 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
         value per minute of it.
     now : pandas.Timestamp, optional
         Minutes from it on are still to come (:func:`weather_from_fixed`).
-    readings_spacing_s : float, optional
-        The fixed array logger's median spacing [s] (:func:`weather_from_fixed`).
+    fine : dict, optional
+        Where each sky source's readings are fine enough to show a clear spell
+        (:func:`weather_from_fixed`).
 
     Returns
     -------
@@ -689,8 +706,7 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
         raise ValueError(f"sensors has {len(sensors)} rows for {len(times)} minutes")
     weather, sensor = weather_from_fixed(site, times, p, temp_air, wind_speed,
                                          saturation_power_w=saturation_power_w,
-                                         sensors=sensors, now=now,
-                                         readings_spacing_s=readings_spacing_s)
+                                         sensors=sensors, now=now, fine=fine)
     run = twin.simulate(site, start, end, weather=weather["gti_dirint"])
     main = run.series
     alt = twin.simulate(site, start, end, weather=weather["clearsky_erbs"]).series
@@ -732,6 +748,20 @@ def slow_logger(ts_s: np.ndarray, max_gap_s: float) -> bool:
     return bridged.size > 0 and float(np.median(bridged)) >= STAMP_INFER_MIN_SPACING_S
 
 
+def on_slow_days(site: Site, ts_s: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """Per reading stamped ``ts_s`` [s]: whether its local day's readings are
+    :data:`STAMP_INFER_MIN_SPACING_S` or more apart (:func:`slow_logger` of that day's) —
+    a logger may change its cadence (a replaced logger, a back-fill), and only its slow
+    days say what its slow stamps mark."""
+    ts = np.asarray(ts_s, np.float64).reshape(-1)
+    if ts.size == 0:
+        return np.zeros(0, bool)
+    # local wall dates (normalize() on the zone raises where a clock change skips midnight)
+    local = pd.to_datetime(ts, unit="s", utc=True).tz_convert(site.timezone).tz_localize(None)
+    day = np.asarray(local.normalize().asi8)
+    return np.isin(day, [d for d in np.unique(day) if slow_logger(ts[day == d], max_gap_s)])
+
+
 def inferred_stamped(site: Site, ts_s: np.ndarray, values: np.ndarray, max_gap_s: float,
                      stamped: str = "instant") -> str:
     """What the stamps ``ts_s`` [s] of a logger's readings ``values`` (the fixed array's
@@ -759,16 +789,16 @@ def inferred_stamped(site: Site, ts_s: np.ndarray, values: np.ndarray, max_gap_s
     v = np.asarray(values, np.float64).reshape(-1)
     ok = np.isfinite(ts) & np.isfinite(v)
     ts, v = ts[ok], v[ok]
-    # local wall dates (normalize() on the zone raises where a clock change skips midnight)
-    local = pd.to_datetime(ts, unit="s", utc=True).tz_convert(site.timezone).tz_localize(None)
-    day = np.asarray(local.normalize().asi8)
     # only the days the logger was slow on say what its slow stamps mark: a site whose
     # logger logged every 5 minutes ten days before its hourly day read that day's hourly
     # means as instants (a tester's finding: a sky_clock_offset of +32 min at 0.90)
-    slow = np.isin(day, [d for d in np.unique(day) if slow_logger(ts[day == d], max_gap_s)])
-    ts, v, day = ts[slow], v[slow], day[slow]
+    slow = on_slow_days(site, ts, max_gap_s)
+    ts, v = ts[slow], v[slow]
     if ts.size < 8:
         return stamped
+    # local wall dates (normalize() on the zone raises where a clock change skips midnight)
+    local = pd.to_datetime(ts, unit="s", utc=True).tz_convert(site.timezone).tz_localize(None)
+    day = np.asarray(local.normalize().asi8)
     step = np.diff(ts)
     bridged = step <= max_gap_s
     # the clear sky on the fixed plane, minute by minute over the readings and an interval

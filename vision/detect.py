@@ -633,9 +633,11 @@ def _one_channel_if_grey(image: NDArray[Any]) -> NDArray[Any]:
     :func:`vision.candidates._white_core`); as colour, min(B, G, R) within 3 levels of the
     top took the blue glare's clipped grey levels too — the Wolf frames made monochrome
     and uploaded as a grey PNG lay up to 21.6 px (1.1 % of the width) from their labels,
-    0.6–2.7 px as one channel (a tester's finding)."""
+    0.6–2.7 px as one channel (a tester's finding). A colour patch narrower than the stride
+    can fall between the samples: such a frame is taken as grey (a reviewer's check: a
+    7 px blue patch on a grey frame)."""
     img = np.asarray(image)
-    if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8:
+    if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8 or img.size == 0:
         return image
     sample = img[::_GREY_STRIDE, ::_GREY_STRIDE, :3].astype(np.int16)
     if int(np.abs(sample[..., 0] - sample[..., 1]).max()) > _GREY_SPREAD \

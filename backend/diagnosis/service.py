@@ -83,8 +83,8 @@ MAX_DAYS = 400
 #: convention read over the run and the month before it, weather_twin.STAMP_LOOKBACK_S;
 #: 21: ``stuck`` also as a stop part-way through the day, faults._stopped; 22: that
 #: convention read on the days the logger was slow only, sim.sky_sensor.inferred_stamped;
-#: 23: the second sky's clear beam in the clear spells readings every 5 minutes or faster
-#: show, sim.sky_sensor.decompose).
+#: 23: the second sky's clear beam in the clear spells that readings 5 minutes apart or
+#: closer show, minute by minute, sim.sky_sensor.readings_fine).
 CACHE_VERSION = 23
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
@@ -242,13 +242,12 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
                                  edges_s[run[0]:run[-1] + 2], info.phase_s,
                                  ctx.settings.ingest.energy_max_gap_s)
         # one minute past the run, so the last day's last minute reaches midnight
-        tr, fx, sensors, tr_spacing, fx_spacing = site_minutes(ctx, info, t0, t1 + 60)
+        tr, fx, sensors, tr_spacing, fine = site_minutes(ctx, info, t0, t1 + 60)
         gap = ctx.settings.ingest.energy_max_gap_s
         start = pd.Timestamp(t0, unit="s", tz="UTC")
         e = sky_sensor.weather_aware_twin(info.site, start, start + pd.Timedelta(
             seconds=(t1 + 60 - t0) // 60 * 60), fx, sensors=sensors,
-            now=pd.Timestamp(now_s, unit="s", tz="UTC") if t1 > now_s else None,
-            readings_spacing_s=fx_spacing)
+            now=pd.Timestamp(now_s, unit="s", tz="UTC") if t1 > now_s else None, fine=fine)
         for j, i in enumerate(run):
             day_start_s, day_end_s = int(edges_s[i]), int(edges_s[i + 1])
             a, b = (day_start_s - t0) // 60, (day_end_s - t0) // 60 + 1

@@ -39,10 +39,13 @@ def _rows(conn: Connection, array_id: int, t0: int, t1: int, max_gap_s: int) -> 
 
 
 def minute_grid(rows: np.ndarray, t0: int, t1: int, max_gap_s: int,
-                stamped: str = "instant") -> tuple[np.ndarray, np.ndarray, float | None]:
-    """Measured power [W], shape (n,), the :data:`SENSOR_NAMES` columns, shape (n, k), and
-    the readings' median spacing [s] (None under two readings: a logger slower than the
-    energy rule's gap leaves every minute NaN), on the minute grid of ``[t0, t1)`` by the
+                stamped: str = "instant"
+                ) -> tuple[np.ndarray, np.ndarray, float | None, np.ndarray]:
+    """Measured power [W], shape (n,), the :data:`SENSOR_NAMES` columns, shape (n, k), the
+    readings' median spacing [s] (None under two readings: a logger slower than the
+    energy rule's gap leaves every minute NaN), and per minute whether the power's and each
+    sensor column's readings are fine enough to show a clear spell, shape (n, 1 + k)
+    (:func:`sim.sky_sensor.readings_fine`), on the minute grid of ``[t0, t1)`` by the
     energy rule's line
     (:func:`sim.energy.on_grid`): linear between readings at most ``max_gap_s`` apart,
     so a 5- or 15-minute logger's minutes between readings are interpolated, never
@@ -56,7 +59,21 @@ def minute_grid(rows: np.ndarray, t0: int, t1: int, max_gap_s: int,
     power = on_grid(ts, rows[:, 3], grid, max_gap_s)
     sensors = on_grid(ts, rows[:, 4:], grid, max_gap_s)
     spacing = float(np.median(np.diff(rows[:, 0]))) if len(rows) > 1 else None
-    return power, sensors, spacing
+    return power, sensors, spacing, sky_sensor.readings_fine(ts, rows[:, 3:], grid)
+
+
+def sky_fine(fixed_fine: np.ndarray, tracker_fine: np.ndarray, fixed_sensors: np.ndarray
+             ) -> dict[str, np.ndarray]:
+    """The ``fine`` of :func:`sim.sky_sensor.weather_aware_twin` from the two loggers'
+    (:func:`minute_grid`), by the sources :func:`sky_sensors` reads: the fixed array's
+    power, its plane's POA sensor, and the GHI of the fixed logger where it reads one, else
+    the tracker's."""
+    col = {name: j for j, name in enumerate(SENSOR_NAMES)}
+    ghi = col["ghi_w_m2"]
+    return {"fixed_power_w": fixed_fine[:, 0],
+            "fixed_poa_w_m2": fixed_fine[:, 1 + col["poa_irradiance_w_m2"]],
+            "ghi_w_m2": np.where(np.isfinite(fixed_sensors[:, ghi]), fixed_fine[:, 1 + ghi],
+                                 tracker_fine[:, 1 + ghi])}
 
 
 def sky_sensors(fixed: np.ndarray, tracker: np.ndarray | None) -> pd.DataFrame | None:
@@ -79,12 +96,12 @@ def sky_sensors(fixed: np.ndarray, tracker: np.ndarray | None) -> pd.DataFrame |
 
 def site_minutes(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int
                  ) -> tuple[np.ndarray, np.ndarray, pd.DataFrame | None, float | None,
-                            float | None]:
+                            dict[str, np.ndarray]]:
     """The tracker's and the fixed array's measured power [W] on the minute grid of
     ``[t0, t1)`` (:func:`minute_grid`: NaN where the energy rule bridges no reading), the
-    loggers' sky sensors (:func:`sky_sensors`) and the tracker's and the fixed array's
-    readings' median spacings [s]. The site has the twin's arrays
-    (:meth:`SiteInfo.has_twin`)."""
+    loggers' sky sensors (:func:`sky_sensors`), the tracker's readings' median spacing [s]
+    and where each sky source's readings show a clear spell (:func:`sky_fine`). The site
+    has the twin's arrays (:meth:`SiteInfo.has_twin`)."""
     # the arrays the twin simulates (SiteInfo.has_twin), not merely the first of each mount
     tracker, fixed = info.arrays["tracker"], info.arrays["fixed"]
     gap = ctx.settings.ingest.energy_max_gap_s
@@ -93,9 +110,9 @@ def site_minutes(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int
         tr_rows = _rows(conn, tracker.array_id, t0, t1, gap)
         stamped = readings_stamped(info, fx_rows, gap, lambda: _rows(
             conn, fixed.array_id, t0 - STAMP_LOOKBACK_S, t1, gap))
-    fx, fx_s, fx_spacing = minute_grid(fx_rows, t0, t1, gap, stamped)
-    tr, tr_s, tr_spacing = minute_grid(tr_rows, t0, t1, gap, stamped)
-    return tr, fx, sky_sensors(fx_s, tr_s), tr_spacing, fx_spacing
+    fx, fx_s, _, fx_fine = minute_grid(fx_rows, t0, t1, gap, stamped)
+    tr, tr_s, tr_spacing, tr_fine = minute_grid(tr_rows, t0, t1, gap, stamped)
+    return tr, fx, sky_sensors(fx_s, tr_s), tr_spacing, sky_fine(fx_fine, tr_fine, fx_s)
 
 
 #: How far before a run the fixed array's readings are read to tell what a slow logger's
@@ -109,14 +126,15 @@ def readings_stamped(info: SiteInfo, fixed_rows: np.ndarray, max_gap_s: int,
     """What the loggers' stamps mark for the diagnosis: the site's ``readings_stamped``, or
     where the site leaves the default ``"instant"`` and the fixed array's readings
     (``fixed_rows``, the run's) are :data:`sim.sky_sensor.STAMP_INFER_MIN_SPACING_S` or
-    more apart, what the clear days' shape says over the run and the
-    :data:`STAMP_LOOKBACK_S` before it (``lookback_rows``, read only then)
+    more apart on a local day at least (:func:`sim.sky_sensor.on_slow_days`), what the
+    clear days' shape says over the run and the :data:`STAMP_LOOKBACK_S` before it
+    (``lookback_rows``, read only then)
     (:func:`sim.sky_sensor.inferred_stamped`: an hourly logger's means stamped at the end
     of their hour read as instants matched the sky to the sun half an hour later, and every
     clear day was a ``sky_clock_offset``). The fixed plane's sensor where the logger reads
     one, else its power."""
-    if info.site.readings_stamped != "instant" or not sky_sensor.slow_logger(
-            fixed_rows[:, 0], max_gap_s):
+    if info.site.readings_stamped != "instant" or not sky_sensor.on_slow_days(
+            info.site, fixed_rows[:, 0], max_gap_s).any():
         return info.site.readings_stamped
     fixed_rows = lookback_rows()
     col = 4 + SENSOR_NAMES.index("poa_irradiance_w_m2")
@@ -152,12 +170,11 @@ def weather_twin(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int) -> pd.Da
         raise InputError(422, f"source=twin_weather is computed on request: at most {MAX_DAYS} "
                               "days (the diagnosis gives its daily energy for longer ranges)")
     t0, t1 = t0 // 60 * 60, -(-t1 // 60) * 60
-    _, fx, sensors, _, fx_spacing = site_minutes(ctx, info, t0, t1)
+    _, fx, sensors, _, fine = site_minutes(ctx, info, t0, t1)
     start, now = pd.Timestamp(t0, unit="s", tz="UTC"), pd.Timestamp.now(tz="UTC")
     end = pd.Timestamp(t1, unit="s", tz="UTC")
     return sky_sensor.weather_aware_twin(info.site, start, end, fx, sensors=sensors,
-                                         now=now if end > now else None,
-                                         readings_spacing_s=fx_spacing)
+                                         now=now if end > now else None, fine=fine)
 
 
 def weather_twin_columns(ctx: ServiceContext, info: SiteInfo, array: str, t0: int,

@@ -239,9 +239,12 @@ def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str,
     if path == "ghi_sensor":
         sensors["ghi_w_m2"] = minute(lg.data["ghi"].to_numpy())
     models = ("gti_dirint", "clearsky_erbs") if second_sky else ("gti_dirint",)
+    # where the readings can show a clear spell, per sky source (the service's sky_fine)
+    fine = {key: sky_sensor.readings_fine(ts, lg.data[col].to_numpy(), grid)
+            for key, col in (("fixed_poa_w_m2", "poa"), ("ghi_w_m2", "ghi"))}
+    fine["fixed_power_w"] = sky_sensor.readings_fine(ts, lg.fixed_power_w, grid)
     weather, sky_frame = sky_sensor.weather_from_fixed(site, times, fixed_w, models=models,
-                                                       sensors=sensors,
-                                                       readings_spacing_s=float(lg.step_s))
+                                                       sensors=sensors, fine=fine)
     end = day + pd.Timedelta(days=1)
     main = twin.simulate(site, day, end, weather=weather["gti_dirint"]).series
     out = {"times": times, "tracker_poa": np.nan_to_num(main["tracker_poa_global"].to_numpy()),

@@ -243,7 +243,8 @@ async def create_sweep(body: SweepCreate, request: Request, ctx: ContextDep,
                        runner: SweepRunnerDep) -> Response:
     """Queue a plant-design sweep (layouts × GCRs × strategies, each case a Dask task);
     202 with the ``sweep_id`` to poll. Without a write token a sweep may hold at most
-    ``HELIOTWIN_PLANTS_ANONYMOUS_SWEEP_CASE_STEPS`` cases × steps (422 beyond), spent from
+    ``HELIOTWIN_PLANTS_ANONYMOUS_SWEEP_CASE_STEPS`` cases × steps (a polygon collector's
+    steps weighing 100×, ``backend.plants.sweep.case_steps``; 422 beyond), spent from
     the address's anonymous simulation allowance (429 when spent); one sweep runs at a time
     (503 past the queue)."""
     anonymous = caller is None
