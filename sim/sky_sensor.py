@@ -754,12 +754,15 @@ def on_slow_days(site: Site, ts_s: np.ndarray, max_gap_s: float) -> np.ndarray:
     a logger may change its cadence (a replaced logger, a back-fill), and only its slow
     days say what its slow stamps mark."""
     ts = np.asarray(ts_s, np.float64).reshape(-1)
-    if ts.size == 0:
-        return np.zeros(0, bool)
-    # local wall dates (normalize() on the zone raises where a clock change skips midnight)
-    local = pd.to_datetime(ts, unit="s", utc=True).tz_convert(site.timezone).tz_localize(None)
-    day = np.asarray(local.normalize().asi8)
+    day = _local_days(site, ts)
     return np.isin(day, [d for d in np.unique(day) if slow_logger(ts[day == d], max_gap_s)])
+
+
+def _local_days(site: Site, ts_s: np.ndarray) -> np.ndarray:
+    """The local wall date of each stamp ``ts_s`` [s] in the site's zone, as int64 ns
+    (normalize() on the zone itself raises where a clock change skips midnight)."""
+    local = pd.to_datetime(ts_s, unit="s", utc=True).tz_convert(site.timezone)
+    return np.asarray(local.tz_localize(None).normalize().asi8)
 
 
 def inferred_stamped(site: Site, ts_s: np.ndarray, values: np.ndarray, max_gap_s: float,
@@ -796,9 +799,7 @@ def inferred_stamped(site: Site, ts_s: np.ndarray, values: np.ndarray, max_gap_s
     ts, v = ts[slow], v[slow]
     if ts.size < 8:
         return stamped
-    # local wall dates (normalize() on the zone raises where a clock change skips midnight)
-    local = pd.to_datetime(ts, unit="s", utc=True).tz_convert(site.timezone).tz_localize(None)
-    day = np.asarray(local.normalize().asi8)
+    day = _local_days(site, ts)
     step = np.diff(ts)
     bridged = step <= max_gap_s
     # the clear sky on the fixed plane, minute by minute over the readings and an interval

@@ -38,13 +38,20 @@ def _rows(conn: Connection, array_id: int, t0: int, t1: int, max_gap_s: int) -> 
     return raw_rows(conn, array_id, 0, t0 - 2 * max_gap_s, t1 + 2 * max_gap_s, sensors=True)
 
 
+#: The readings' columns a sky rests on (the power, the plane's POA sensor, a GHI
+#: pyranometer), by name, as offsets from the power's column (3) of :func:`_rows`: those
+#: whose cadence :func:`minute_grid` reads for each minute
+FINE_COLUMNS = {"power_w": 0, **{name: 1 + SENSOR_NAMES.index(name)
+                                 for name in ("poa_irradiance_w_m2", "ghi_w_m2")}}
+
+
 def minute_grid(rows: np.ndarray, t0: int, t1: int, max_gap_s: int,
                 stamped: str = "instant"
-                ) -> tuple[np.ndarray, np.ndarray, float | None, np.ndarray]:
+                ) -> tuple[np.ndarray, np.ndarray, float | None, dict[str, np.ndarray]]:
     """Measured power [W], shape (n,), the :data:`SENSOR_NAMES` columns, shape (n, k), the
     readings' median spacing [s] (None under two readings: a logger slower than the
-    energy rule's gap leaves every minute NaN), and per minute whether the power's and each
-    sensor column's readings are fine enough to show a clear spell, shape (n, 1 + k)
+    energy rule's gap leaves every minute NaN), and per minute whether the readings of each
+    column a sky can rest on (:data:`FINE_COLUMNS`) are fine enough to show a clear spell
     (:func:`sim.sky_sensor.readings_fine`), on the minute grid of ``[t0, t1)`` by the
     energy rule's line
     (:func:`sim.energy.on_grid`): linear between readings at most ``max_gap_s`` apart,
@@ -59,21 +66,22 @@ def minute_grid(rows: np.ndarray, t0: int, t1: int, max_gap_s: int,
     power = on_grid(ts, rows[:, 3], grid, max_gap_s)
     sensors = on_grid(ts, rows[:, 4:], grid, max_gap_s)
     spacing = float(np.median(np.diff(rows[:, 0]))) if len(rows) > 1 else None
-    return power, sensors, spacing, sky_sensor.readings_fine(ts, rows[:, 3:], grid)
+    fine = {name: sky_sensor.readings_fine(ts, rows[:, 3 + j], grid)
+            for name, j in FINE_COLUMNS.items()}
+    return power, sensors, spacing, fine
 
 
-def sky_fine(fixed_fine: np.ndarray, tracker_fine: np.ndarray, fixed_sensors: np.ndarray
-             ) -> dict[str, np.ndarray]:
+
+def sky_fine(fixed_fine: dict[str, np.ndarray], tracker_fine: dict[str, np.ndarray],
+             fixed_sensors: np.ndarray) -> dict[str, np.ndarray]:
     """The ``fine`` of :func:`sim.sky_sensor.weather_aware_twin` from the two loggers'
     (:func:`minute_grid`), by the sources :func:`sky_sensors` reads: the fixed array's
     power, its plane's POA sensor, and the GHI of the fixed logger where it reads one, else
     the tracker's."""
-    col = {name: j for j, name in enumerate(SENSOR_NAMES)}
-    ghi = col["ghi_w_m2"]
-    return {"fixed_power_w": fixed_fine[:, 0],
-            "fixed_poa_w_m2": fixed_fine[:, 1 + col["poa_irradiance_w_m2"]],
-            "ghi_w_m2": np.where(np.isfinite(fixed_sensors[:, ghi]), fixed_fine[:, 1 + ghi],
-                                 tracker_fine[:, 1 + ghi])}
+    fixed_ghi = np.isfinite(fixed_sensors[:, SENSOR_NAMES.index("ghi_w_m2")])
+    return {"fixed_power_w": fixed_fine["power_w"],
+            "fixed_poa_w_m2": fixed_fine["poa_irradiance_w_m2"],
+            "ghi_w_m2": np.where(fixed_ghi, fixed_fine["ghi_w_m2"], tracker_fine["ghi_w_m2"])}
 
 
 def sky_sensors(fixed: np.ndarray, tracker: np.ndarray | None) -> pd.DataFrame | None:
