@@ -99,6 +99,15 @@ UNDER_MIN_COVERAGE = 0.5
 #: plane set in the config 10, 20 or 30° off its real azimuth (16° tilt) shifts its shape
 #: by 8, 16 and 23 min, which is not a clock
 SKY_CLOCK_MIN_S = 1500.0
+#: … and from this far [s] when the tracker's own clock fit reads the shift with the other
+#: sign that day: the tracker's readings follow the sun and the sky's run late (or early).
+#: A fixed-array logger 7 min late beside a right tracker read a sky shifted +8 min (its fit
+#: 0.07 of the unshifted residual) and a tracker ``clock_offset`` of −12 min (a tester's
+#: finding); healthy generated clear days read 1–3 min, the real RMIS clear days −4 to +4 min
+#: at 0.83–1.0 of their unshifted residual (docs/diagnosis.md). A 15-min logger stamping its
+#: means at the interval's end shifts both arrays alike (+7.5 min): the tracker's fit reads
+#: nothing, so nothing is named
+SKY_CLOCK_BESIDE_TRACKER_S = 300.0
 #: A shape fit needs at least this many independent readings under the sun per fitted
 #: parameter (stuck: tilt and azimuth; azimuth_offset and clock_offset: the offset and a
 #: free scale) — the usual rule against over-fitting (10 observations per parameter): a
@@ -497,40 +506,86 @@ def _sky_clock_offset(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
     """``sky_clock_offset`` on each day whose sky's readings follow the clear sky's shape
     (residual under :data:`HEALTHY_RESIDUAL`) shifted by at least :data:`SKY_CLOCK_MIN_S`,
     that shift fitting under :data:`FIT_RATIO` of the unshifted residual (:func:`sky_clock`);
-    confidence 1 − the ratio; ``since`` the first day of its run. Days too cloudy to show
+    confidence 1 − the ratio; ``since`` the first day of its run. Also on a day whose
+    tracker ``clock_offset`` reads the shift the nearest clear day of the range puts on the
+    sky, with the other sign (:func:`_sky_shift_seen`, :data:`SKY_CLOCK_BESIDE_TRACKER_S`):
+    the tracker's readings follow the sun and the sky's do not — confidence the better of
+    the tracker's fit and the day's own sky fit, magnitude the day's own sky shift, or on a
+    cloudy day the shift the clouds show between the two loggers. Days too cloudy to show
     the shape do not break the run and carry it (× :data:`CARRY_DECAY` a day), as a shape
     fault; a clear day without the shift ends it. Returns the days of the runs: their
     expectation rests on a shifted sky, so the tracker is not judged on them (a tracker
     logged on the same clock read as its own clock −67 min and underperforming)."""
+    seen = [_sky_shift_seen(d["features"].get("sky_clock")) for d in days]
+    clear = [k for k, v in enumerate(seen) if v is not None]
     since: str | None = None
     fault: dict[str, Any] | None = None
     shifted: list[int] = []
     for i, d in enumerate(days):
         c = d["features"].get("sky_clock")
-        if c is None or c["residual"] is None or not c["residual"] < HEALTHY_RESIDUAL:
+        near = min(clear, key=lambda k: (abs(k - i), k)) if clear else None  # i if clear
+        near_s = seen[near] if near is not None else None  # that day's sky shift [s]
+        found = _shape_fault(d["features"])
+        if near is not None and near_s and found is not None and found[0] == "clock_offset" \
+                and d["features"]["clock_offset"]["offset_s"] * near_s < 0.0:
+            since = since or d["date"]
+            rel_s = d["features"]["clock_offset"]["offset_s"]
+            if near == i:  # its own sky shows the shift: its size, and either fit's evidence
+                shift_s, conf = c["offset_s"], max(found[1],
+                                                   1.0 - c["residual"] / c["residual_at_0"])
+            else:  # a cloudy day: the clouds pass the two loggers rel_s apart
+                shift_s, conf = -rel_s, found[1]
+            fault = {"kind": "sky_clock_offset", "confidence": round(conf, 3),
+                     "since": since, "magnitude": round(shift_s, 1), "unit": "s",
+                     "detail": f"the readings the sky comes from (the fixed array's or its "
+                               f"sensor's) run {shift_s / 60:+.0f} min from the sun's time: "
+                               f"the tracker's readings fit that sky only {rel_s / 60:+.0f} min "
+                               f"the other way, and the fixed plane against the clear sky "
+                               f"reads {near_s / 60:+.0f} min on {days[near]['date']} — "
+                               f"the fixed array's logger clock, or its plane's azimuth in the "
+                               f"site's config, not the tracker's clock; the tracker is not "
+                               f"judged under that sky"}
+            out[i].append(fault)
+            shifted.append(i)
+            continue
+        shift = seen[i]
+        if shift is None:
             if fault is not None:  # no measured sky, or too cloudy to show its clock
                 fault = {**fault, "confidence": round(fault["confidence"] * CARRY_DECAY, 3),
                          "detail": fault["detail"].removesuffix(CARRIED) + CARRIED}
                 out[i].append(fault)
                 shifted.append(i)
             continue
-        r0 = c["residual_at_0"]
-        ratio = c["residual"] / r0 if r0 and np.isfinite(r0) else 1.0
-        if abs(c["offset_s"]) < SKY_CLOCK_MIN_S or ratio > FIT_RATIO:
+        if abs(shift) < SKY_CLOCK_MIN_S:
             since, fault = None, None
             continue
         since = since or d["date"]
-        minutes = c["offset_s"] / 60.0
+        ratio = c["residual"] / c["residual_at_0"]
         fault = {"kind": "sky_clock_offset", "confidence": round(1.0 - ratio, 3),
                  "since": since, "magnitude": round(c["offset_s"], 1), "unit": "s",
                  "detail": f"the readings the sky comes from (the fixed array's or its "
-                           f"sensor's) run {minutes:+.0f} min from the sun's time: the "
-                           f"logger's clock or its UTC offset (summer time stamped with the "
+                           f"sensor's) run {c['offset_s'] / 60:+.0f} min from the sun's time: "
+                           f"the logger's clock or its UTC offset (summer time stamped with the "
                            f"winter offset?), or the plane's azimuth in the site's config; "
                            f"the tracker is not judged under that sky"}
         out[i].append(fault)
         shifted.append(i)
     return shifted
+
+
+def _sky_shift_seen(c: dict[str, Any] | None) -> float | None:
+    """The shift [s] a day's sky clock (:func:`sky_clock`) shows: its offset where the
+    fixed plane follows the clear sky's shape (residual under :data:`HEALTHY_RESIDUAL`) and
+    the shift fits under :data:`FIT_RATIO` of the unshifted residual, at least
+    :data:`SKY_CLOCK_BESIDE_TRACKER_S`; 0.0 where such a day shows none; None where the day
+    cannot show it (no measured sky, or clouds)."""
+    if c is None or c["residual"] is None or not c["residual"] < HEALTHY_RESIDUAL:
+        return None
+    r0 = c["residual_at_0"]
+    ratio = c["residual"] / r0 if r0 and np.isfinite(r0) else 1.0
+    if ratio > FIT_RATIO or abs(c["offset_s"]) < SKY_CLOCK_BESIDE_TRACKER_S:
+        return 0.0
+    return float(c["offset_s"])
 
 
 def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]]) -> None:

@@ -78,8 +78,13 @@ class DiagnosisDayRead(BaseModel):
     sky: DaySkyRead
     tracker: TrackerDayRead
     fixed: FixedDayRead
-    gain_measured_pct: float | None
-    gain_expected_pct: float | None
+    gain_measured_pct: float | None = Field(
+        description="the measured tracking gain [%], over the minutes both loggers' readings "
+                    "cover; null when they cover different minutes or one has no reading")
+    gain_expected_pct: float | None = Field(
+        description="the twin's tracking gain under the day's sky [%]: over the same minutes "
+                    "as gain_measured_pct where there is one (a gap in both loggers leaves "
+                    "its minutes out of both), else over the whole day")
     faults: list[FaultRead]
 
 
