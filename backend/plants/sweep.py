@@ -637,8 +637,8 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
     bound = min(max_case_steps, MAX_CASE_STEPS)
     if case_steps(spec, len(cases)) > bound:
         steps = (end - start).total_seconds() / step_s
-        weight = (f" (a polygon collector's steps count {cost_factor(collector):g}×)"
-                  if cost_factor(collector) > 1 else "")
+        factor = cost_factor(collector)
+        weight = f" (a polygon collector's steps count {factor:g}×)" if factor > 1 else ""
         raise SweepInputError("step_s", f"{len(cases)} cases × {steps:.0f} steps{weight} is "
                               f"more than {bound:,.0f}{bound_note}: use a larger {{step_s}}, "
                               "a shorter range or fewer cases")
