@@ -27,7 +27,8 @@ clear-sky POA, ``poa(t) ≈ s · poa_clear(t − τ)``. The expectation assumes 
 right; a logger that stamps summer-time wall clocks with the winter offset shifts both
 arrays and the sky alike, and the tracker then read a PR of 1.2–1.3 with no finding. A
 clear day whose shift is at least :data:`SKY_CLOCK_MIN_S` and fits far better than none is a
-``sky_clock_offset``.
+``sky_clock_offset``; so is a smaller shift that the tracker's own clock fit reads from the
+other side (:func:`_sky_beside_tracker`: a fixed logger minutes late beside a right tracker).
 
 The residual of each is its RMS over the mean measured power; a fault is named when
 its residual is under :data:`FIT_RATIO` of the healthy one on a day with clearness
@@ -95,19 +96,27 @@ GHI_UNCERTAINTY = 0.16
 #: share of its expected energy (a dropout is its own finding)
 UNDER_MIN_COVERAGE = 0.5
 #: A sky whose readings run this far from the sun's time [s] is named ``sky_clock_offset``:
-#: healthy generated clear days 1–3 min, a DST or UTC-offset mistake 30–60 min; a fixed
+#: healthy generated clear days −1 to −3 min, a DST or UTC-offset mistake 30–60 min; a fixed
 #: plane set in the config 10, 20 or 30° off its real azimuth (16° tilt) shifts its shape
 #: by 8, 16 and 23 min, which is not a clock
 SKY_CLOCK_MIN_S = 1500.0
-#: … and from this far [s] when the tracker's own clock fit reads the shift with the other
-#: sign that day: the tracker's readings follow the sun and the sky's run late (or early).
-#: A fixed-array logger 7 min late beside a right tracker read a sky shifted +8 min (its fit
-#: 0.07 of the unshifted residual) and a tracker ``clock_offset`` of −12 min (a tester's
-#: finding); healthy generated clear days read 1–3 min, the real RMIS clear days −4 to +4 min
+#: … and from this far [s] when the tracker's own clock fit reads that shift from the other
+#: side (``_sky_beside_tracker``): the tracker's readings follow the sun and the sky's run
+#: late (or early). A fixed-array logger 7 min late beside a right tracker read a sky shifted
+#: +8 min (its fit 0.07 of the unshifted residual) and a tracker ``clock_offset`` of −12 min
+#: (a tester's finding); healthy generated clear days read −1 to −3 min (768 of them at two
+#: latitudes, none 5 min or more: a reviewer's survey), the real RMIS clear days −4 to +4 min
 #: at 0.83–1.0 of their unshifted residual (docs/diagnosis.md). A 15-min logger stamping its
 #: means at the interval's end shifts both arrays alike (+7.5 min): the tracker's fit reads
 #: nothing, so nothing is named
 SKY_CLOCK_BESIDE_TRACKER_S = 300.0
+#: … read on a clear day at most this many days from the day judged [d]
+SKY_CLOCK_NEAR_DAYS = 7
+#: On a clear day a sky shifted by τ_sky makes the tracker's clock fit read −1.5 to −2.2 τ_sky
+#: (the shifted sky distorts the expected shape: a fixed logger 7 min late, −10 to −13 min
+#: on generated clear days beside +5 to +6 min on the fixed plane, −12 beside +8 on the
+#: twin's own); up to this many times |τ_sky| is the sky's
+SKY_CLOCK_CLEAR_SPREAD = 3.0
 #: A shape fit needs at least this many independent readings under the sun per fitted
 #: parameter (stuck: tilt and azimuth; azimuth_offset and clock_offset: the offset and a
 #: free scale) — the usual rule against over-fitting (10 observations per parameter): a
@@ -505,62 +514,42 @@ def _sky_clock_offset(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
                       ) -> list[int]:
     """``sky_clock_offset`` on each day whose sky's readings follow the clear sky's shape
     (residual under :data:`HEALTHY_RESIDUAL`) shifted by at least :data:`SKY_CLOCK_MIN_S`,
-    that shift fitting under :data:`FIT_RATIO` of the unshifted residual (:func:`sky_clock`);
-    confidence 1 − the ratio; ``since`` the first day of its run. Also on a day whose
-    tracker ``clock_offset`` reads the shift the nearest clear day of the range puts on the
-    sky, with the other sign (:func:`_sky_shift_seen`, :data:`SKY_CLOCK_BESIDE_TRACKER_S`):
-    the tracker's readings follow the sun and the sky's do not — confidence the better of
-    the tracker's fit and the day's own sky fit, magnitude the day's own sky shift, or on a
-    cloudy day the shift the clouds show between the two loggers. Days too cloudy to show
-    the shape do not break the run and carry it (× :data:`CARRY_DECAY` a day), as a shape
-    fault; a clear day without the shift ends it. Returns the days of the runs: their
-    expectation rests on a shifted sky, so the tracker is not judged on them (a tracker
-    logged on the same clock read as its own clock −67 min and underperforming)."""
+    that shift fitting at most :data:`FIT_RATIO` of the unshifted residual
+    (:func:`sky_clock`); confidence 1 − the ratio; ``since`` the first day of its run.
+    Days too cloudy to show the shape do not break the run and carry it
+    (× :data:`CARRY_DECAY` a day), as a shape fault; a clear day without the shift ends it.
+
+    Also on a day whose tracker ``clock_offset`` is the sky's shift seen from the other
+    side (:func:`_sky_beside_tracker`): a fixed logger minutes late beside a right tracker.
+
+    Returns the days so named: their expectation rests on a shifted sky, so the tracker is
+    not judged on them (a tracker logged on the same clock read as its own clock −67 min
+    and underperforming)."""
     seen = [_sky_shift_seen(d["features"].get("sky_clock")) for d in days]
-    clear = [k for k, v in enumerate(seen) if v is not None]
     since: str | None = None
     fault: dict[str, Any] | None = None
     shifted: list[int] = []
     for i, d in enumerate(days):
         c = d["features"].get("sky_clock")
-        near = min(clear, key=lambda k: (abs(k - i), k)) if clear else None  # i if clear
-        near_s = seen[near] if near is not None else None  # that day's sky shift [s]
-        found = _shape_fault(d["features"])
-        if near is not None and near_s and found is not None and found[0] == "clock_offset" \
-                and d["features"]["clock_offset"]["offset_s"] * near_s < 0.0:
+        beside = _sky_beside_tracker(days, seen, i)
+        if beside is not None:
             since = since or d["date"]
-            rel_s = d["features"]["clock_offset"]["offset_s"]
-            if near == i:  # its own sky shows the shift: its size, and either fit's evidence
-                shift_s, conf = c["offset_s"], max(found[1],
-                                                   1.0 - c["residual"] / c["residual_at_0"])
-            else:  # a cloudy day: the clouds pass the two loggers rel_s apart
-                shift_s, conf = -rel_s, found[1]
-            fault = {"kind": "sky_clock_offset", "confidence": round(conf, 3),
-                     "since": since, "magnitude": round(shift_s, 1), "unit": "s",
-                     "detail": f"the readings the sky comes from (the fixed array's or its "
-                               f"sensor's) run {shift_s / 60:+.0f} min from the sun's time: "
-                               f"the tracker's readings fit that sky only {rel_s / 60:+.0f} min "
-                               f"the other way, and the fixed plane against the clear sky "
-                               f"reads {near_s / 60:+.0f} min on {days[near]['date']} — "
-                               f"the fixed array's logger clock, or its plane's azimuth in the "
-                               f"site's config, not the tracker's clock; the tracker is not "
-                               f"judged under that sky"}
+            fault = {**beside, "since": since}
             out[i].append(fault)
             shifted.append(i)
             continue
-        shift = seen[i]
-        if shift is None:
+        if c is None or c["residual"] is None or not c["residual"] < HEALTHY_RESIDUAL:
             if fault is not None:  # no measured sky, or too cloudy to show its clock
                 fault = {**fault, "confidence": round(fault["confidence"] * CARRY_DECAY, 3),
                          "detail": fault["detail"].removesuffix(CARRIED) + CARRIED}
                 out[i].append(fault)
                 shifted.append(i)
             continue
-        if abs(shift) < SKY_CLOCK_MIN_S:
+        ratio = _sky_fit_ratio(c)
+        if abs(c["offset_s"]) < SKY_CLOCK_MIN_S or ratio > FIT_RATIO:
             since, fault = None, None
             continue
         since = since or d["date"]
-        ratio = c["residual"] / c["residual_at_0"]
         fault = {"kind": "sky_clock_offset", "confidence": round(1.0 - ratio, 3),
                  "since": since, "magnitude": round(c["offset_s"], 1), "unit": "s",
                  "detail": f"the readings the sky comes from (the fixed array's or its "
@@ -573,19 +562,85 @@ def _sky_clock_offset(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
     return shifted
 
 
+def _sky_beside_tracker(days: list[dict[str, Any]], seen: list[float | None], i: int
+                        ) -> dict[str, Any] | None:
+    """Day ``i``'s ``sky_clock_offset`` (without ``since``) when its tracker
+    ``clock_offset`` (:func:`_shape_fault`) is the shift of the sky seen from the other
+    side, else None. ``seen``: every day's :func:`_sky_shift_seen`.
+
+    The sky comes from the fixed plane's readings, so a fixed logger late by τ beside a
+    right tracker makes the tracker's readings fit the twin best shifted by about −τ: on a
+    cloudy day exactly (the clouds pass the two loggers τ apart), on a clear day more (a
+    shifted sky distorts the expected shape: −12 min for a fixed logger 7 min late). What
+    tells whose clock it is, is the fixed plane against the clear sky on the nearest day of
+    the range, at most :data:`SKY_CLOCK_NEAR_DAYS` away, that can tell
+    (:func:`_sky_shift_seen`, not None): a shift of τ_sky there, of the other sign than
+    the tracker's τ and of its size — on a cloudy day |τ + τ_sky| at most
+    max(:data:`SKY_CLOCK_BESIDE_TRACKER_S`, half of |τ_sky|), on the clear day itself |τ|
+    at most :data:`SKY_CLOCK_CLEAR_SPREAD` × |τ_sky| (two clocks off, the fixed one 7 min
+    late and the tracker's an hour early, keep the tracker's ``clock_offset``).
+    Confidence: on the clear day the better of the two fits (the sky's own fit against the
+    sun shows the shift), on a cloudy day the lower of the tracker fit's and the clear
+    day's sky fit's (the attribution rests on both); magnitude: the day's own sky shift on
+    a clear day, −τ on a cloudy one."""
+    found = _shape_fault(days[i]["features"])
+    if found is None or found[0] != "clock_offset":
+        return None
+    near = [k for k, v in enumerate(seen) if v is not None
+            and abs(k - i) <= SKY_CLOCK_NEAR_DAYS]
+    if not near:
+        return None
+    k = min(near, key=lambda j: (abs(j - i), j))
+    sky_s, rel_s = seen[k], days[i]["features"]["clock_offset"]["offset_s"]
+    if not sky_s or rel_s * sky_s >= 0.0:
+        return None
+    sky_conf = 1.0 - _sky_fit_ratio(days[k]["features"]["sky_clock"])
+    if k == i:  # a clear day: the sky's own fit against the sun shows the shift
+        if abs(rel_s) > SKY_CLOCK_CLEAR_SPREAD * abs(sky_s):
+            return None
+        conf = max(found[1], sky_conf)
+    else:  # a cloudy day: the clouds time the two loggers; whose clock, another day says
+        if abs(rel_s + sky_s) > max(SKY_CLOCK_BESIDE_TRACKER_S, 0.5 * abs(sky_s)):
+            return None
+        conf = min(found[1], sky_conf)
+    date = days[k]["date"]
+    if k == i:
+        shift_s = sky_s
+        detail = (f"on {date} the fixed plane's readings ran {sky_s / 60:+.0f} min from the "
+                  f"sun's time against the clear sky, and the tracker's readings fit the twin "
+                  f"best shifted {rel_s / 60:+.0f} min")
+    else:
+        shift_s = -rel_s
+        detail = (f"the tracker's readings fit the twin best shifted {rel_s / 60:+.0f} min "
+                  f"(the clouds pass the two loggers that far apart), and on {date} the "
+                  f"fixed plane's readings ran {sky_s / 60:+.0f} min from the sun's time "
+                  f"against the clear sky")
+    return {"kind": "sky_clock_offset", "confidence": round(conf, 3),
+            "magnitude": round(shift_s, 1), "unit": "s",
+            "detail": detail + ": the clock of the logger the sky comes from (the fixed "
+                               "array's or its sensor's), not the tracker's; the tracker is "
+                               "not judged under that sky"}
+
+
+def _sky_fit_ratio(c: dict[str, Any]) -> float:
+    """A day's sky clock fit (:func:`sky_clock`): its residual at the best shift over the
+    unshifted one (1 where the unshifted residual is 0 or unknown)."""
+    r0 = c["residual_at_0"]
+    return float(c["residual"] / r0) if r0 and np.isfinite(r0) else 1.0
+
+
 def _sky_shift_seen(c: dict[str, Any] | None) -> float | None:
-    """The shift [s] a day's sky clock (:func:`sky_clock`) shows: its offset where the
-    fixed plane follows the clear sky's shape (residual under :data:`HEALTHY_RESIDUAL`) and
-    the shift fits under :data:`FIT_RATIO` of the unshifted residual, at least
-    :data:`SKY_CLOCK_BESIDE_TRACKER_S`; 0.0 where such a day shows none; None where the day
-    cannot show it (no measured sky, or clouds)."""
+    """What a day's sky clock (:func:`sky_clock`) says of the sky's clock: its shift [s]
+    where the fixed plane follows the clear sky's shape (residual under
+    :data:`HEALTHY_RESIDUAL`) best shifted by at least :data:`SKY_CLOCK_BESIDE_TRACKER_S`,
+    fitting at most :data:`FIT_RATIO` of the unshifted residual; 0.0 where such a day is
+    best under that shift (the sky on time); None where the day cannot tell (no measured
+    sky, clouds, or a shift that fits little better than none)."""
     if c is None or c["residual"] is None or not c["residual"] < HEALTHY_RESIDUAL:
         return None
-    r0 = c["residual_at_0"]
-    ratio = c["residual"] / r0 if r0 and np.isfinite(r0) else 1.0
-    if ratio > FIT_RATIO or abs(c["offset_s"]) < SKY_CLOCK_BESIDE_TRACKER_S:
+    if abs(c["offset_s"]) < SKY_CLOCK_BESIDE_TRACKER_S:
         return 0.0
-    return float(c["offset_s"])
+    return float(c["offset_s"]) if _sky_fit_ratio(c) <= FIT_RATIO else None
 
 
 def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]]) -> None:
