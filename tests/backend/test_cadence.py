@@ -304,6 +304,7 @@ def test_arrays_read_over_different_minutes_give_no_gain(api: Api) -> None:
                       / _posted_wh(posts[("fixed", "2024-07-16")], "fixed") - 1.0)
     assert offset["gain_pct"] == pytest.approx(phased, abs=1.0)
 
+
 @pytest.mark.parametrize("api", ["sqlite"], indirect=True)
 def test_a_gap_in_both_loggers_compares_the_gains_over_the_same_minutes(api: Api) -> None:
     """Both loggers silent 12:00-15:00 (5-min, power only): the diagnosis's expected gain is
@@ -329,7 +330,6 @@ def test_a_gap_in_both_loggers_compares_the_gains_over_the_same_minutes(api: Api
     assert abs(row["twin_gain_pct"] - measured) > 10.0, (row["twin_gain_pct"], measured)
     assert dday["gain_expected_pct"] == pytest.approx(row["twin_matched_gain_pct"], abs=0.3)
     assert dday["gain_expected_pct"] == pytest.approx(measured, abs=1.5)
-
 
 
 def test_a_service_that_finds_another_gap_recorded_marks_the_hours_mixed(

@@ -119,7 +119,6 @@ def test_a_sky_an_hour_late_is_named(shift_min: int) -> None:
             assert mine[0]["since"] == days[clear[0]]["date"], mine[0]
 
 
-
 @pytest.mark.parametrize(("fixed_lag_min", "tracker_lag_min"),
                          [(0, 0), (7, 0), (-10, 0), (0, 15), (0, -10), (7, -30)])
 def test_a_fixed_logger_late_is_not_the_trackers_clock(fixed_lag_min: int,
@@ -157,6 +156,7 @@ def test_a_fixed_logger_late_is_not_the_trackers_clock(fixed_lag_min: int,
     assert len(sky) >= 2, found
     # the sky's shape reads 5-7 min for 7 min late, 10-14 min for 10 min early
     assert all(abs(f["magnitude"] - 60 * fixed_lag_min) <= 5 * 60 for f in sky), sky
+
 
 def test_azimuth_offset_is_not_named_as_another_fault() -> None:
     """A 10° pedestal yaw (open-loop SPA) from day 3 is not found from power (its 1.5 % ×

@@ -80,7 +80,8 @@ class DiagnosisDayRead(BaseModel):
     fixed: FixedDayRead
     gain_measured_pct: float | None = Field(
         description="the measured tracking gain [%], over the minutes both loggers' readings "
-                    "cover; null when they cover different minutes or one has no reading")
+                    "cover; null when they cover different minutes, one has no reading or "
+                    "the fixed array measured no energy")
     gain_expected_pct: float | None = Field(
         description="the twin's tracking gain under the day's sky [%]: over the same minutes "
                     "as gain_measured_pct where there is one (a gap in both loggers leaves "
