@@ -112,11 +112,12 @@ SKY_CLOCK_MIN_S = 1500.0
 SKY_CLOCK_BESIDE_TRACKER_S = 300.0
 #: … read on a clear day at most this many days from the day judged [d]
 SKY_CLOCK_NEAR_DAYS = 7
-#: On a clear day a sky shifted by τ_sky makes the tracker's clock fit read −1.5 to −2.2 τ_sky
+#: On a clear day a sky shifted by τ_sky makes the tracker's clock fit read −1.1 to −2.2 τ_sky
 #: (the shifted sky distorts the expected shape: a fixed logger 7 min late, −10 to −13 min
 #: on generated clear days beside +5 to +6 min on the fixed plane, −12 beside +8 on the
-#: twin's own); up to this many times |τ_sky| is the sky's
-SKY_CLOCK_CLEAR_SPREAD = 3.0
+#: twin's own; 10 min early, +15 to +16 beside −13 to −14); up to this many times |τ_sky|
+#: is the sky's
+SKY_CLOCK_CLEAR_SPREAD = 2.5
 #: A shape fit needs at least this many independent readings under the sun per fitted
 #: parameter (stuck: tilt and azimuth; azimuth_offset and clock_offset: the offset and a
 #: free scale) — the usual rule against over-fitting (10 observations per parameter): a
@@ -615,11 +616,13 @@ def _sky_beside_tracker(days: list[dict[str, Any]], seen: list[float | None], i:
                   f"(the clouds pass the two loggers that far apart), and on {date} the "
                   f"fixed plane's readings ran {sky_s / 60:+.0f} min from the sun's time "
                   f"against the clear sky")
+    # a plane's azimuth mis-set in the config shifts its clear-sky shape too, not the clouds
+    plane = " or the fixed plane's azimuth in the site's config" if k == i else ""
     return {"kind": "sky_clock_offset", "confidence": round(conf, 3),
             "magnitude": round(shift_s, 1), "unit": "s",
-            "detail": detail + ": the clock of the logger the sky comes from (the fixed "
-                               "array's or its sensor's), not the tracker's; the tracker is "
-                               "not judged under that sky"}
+            "detail": f"{detail}: the clock of the logger the sky comes from (the fixed "
+                      f"array's or its sensor's){plane}, not the tracker's clock; the tracker "
+                      f"is not judged under that sky"}
 
 
 def _sky_fit_ratio(c: dict[str, Any]) -> float:
