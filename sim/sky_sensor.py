@@ -51,8 +51,7 @@ from sim.sites import Site
 
 __all__ = ["FLAGS", "SENSOR_SKIES", "Plane", "decompose", "fixed_clear_sky", "fixed_plane",
            "horizontal", "invert_poa", "measured_sky", "on_slow_days", "readings_fine",
-           "sensor_flags",
-           "weather_aware_twin", "weather_from_fixed"]
+           "sensor_flags", "weather_aware_twin", "weather_from_fixed"]
 
 #: Flags of :func:`invert_poa` (bit values, combined with ``|``).
 FLAGS = {
@@ -754,7 +753,11 @@ def on_slow_days(site: Site, ts_s: np.ndarray, max_gap_s: float) -> np.ndarray:
     a logger may change its cadence (a replaced logger, a back-fill), and only its slow
     days say what its slow stamps mark."""
     ts = np.asarray(ts_s, np.float64).reshape(-1)
-    day = _local_days(site, ts)
+    return _on_slow_days(ts, _local_days(site, ts), max_gap_s)
+
+
+def _on_slow_days(ts: np.ndarray, day: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """:func:`on_slow_days` of stamps ``ts`` [s] whose local days ``day`` are known."""
     return np.isin(day, [d for d in np.unique(day) if slow_logger(ts[day == d], max_gap_s)])
 
 
@@ -795,11 +798,11 @@ def inferred_stamped(site: Site, ts_s: np.ndarray, values: np.ndarray, max_gap_s
     # only the days the logger was slow on say what its slow stamps mark: a site whose
     # logger logged every 5 minutes ten days before its hourly day read that day's hourly
     # means as instants (a tester's finding: a sky_clock_offset of +32 min at 0.90)
-    slow = on_slow_days(site, ts, max_gap_s)
-    ts, v = ts[slow], v[slow]
+    day = _local_days(site, ts)
+    slow = _on_slow_days(ts, day, max_gap_s)
+    ts, v, day = ts[slow], v[slow], day[slow]
     if ts.size < 8:
         return stamped
-    day = _local_days(site, ts)
     step = np.diff(ts)
     bridged = step <= max_gap_s
     # the clear sky on the fixed plane, minute by minute over the readings and an interval

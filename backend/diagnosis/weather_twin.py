@@ -71,7 +71,6 @@ def minute_grid(rows: np.ndarray, t0: int, t1: int, max_gap_s: int,
     return power, sensors, spacing, fine
 
 
-
 def sky_fine(fixed_fine: dict[str, np.ndarray], tracker_fine: dict[str, np.ndarray],
              fixed_sensors: np.ndarray) -> dict[str, np.ndarray]:
     """The ``fine`` of :func:`sim.sky_sensor.weather_aware_twin` from the two loggers'
