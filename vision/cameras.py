@@ -157,6 +157,19 @@ def _project_rad(theta_rad: FloatArray, projection: str) -> FloatArray:
     raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
 
 
+def _project_slope(theta_rad: float, projection: str) -> float:
+    """The derivative g'(θ) of :func:`_project_rad` (NaN outside the lens's domain)."""
+    if projection == "equidistant":
+        return 1.0
+    if projection == "equisolid":
+        return float(np.cos(theta_rad / 2.0))
+    if projection == "stereographic":
+        return float(1.0 / np.cos(theta_rad / 2.0) ** 2)
+    if projection == "orthographic":
+        return float(np.cos(theta_rad)) if theta_rad <= np.pi / 2 else float("nan")
+    raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
+
+
 def _unproject_rad(rho: FloatArray, projection: str) -> FloatArray:
     """Inverse of :func:`_project_rad` (NaN outside the lens's domain)."""
     if projection == "equidistant":
@@ -262,6 +275,26 @@ class FisheyeCamera:
                 if np.all(np.abs(step[np.isfinite(step)]) < 1e-12):
                     break
         return t
+
+    def local_px_per_deg(self, x_px: float, y_px: float) -> tuple[float, float]:
+        """The scale at pixel (x, y) [px/°], largest and smallest over the directions of the
+        sky there: along the radius r'(θ), across it r(θ)/sin θ (the lens maps the
+        meridian and the small circle of a point to the image's radius and its normal, so
+        these are the singular values of the projection's Jacobian; a tilt turns the sky
+        before the projection and changes neither). ``(0, 0)`` beyond the lens's domain."""
+        theta = float(self.theta_rad(float(np.hypot(x_px - self.cx_px, y_px - self.cy_px))))
+        if not np.isfinite(theta):
+            return 0.0, 0.0
+        along = _project_slope(theta, self.projection)
+        for i, c in enumerate(self.radial_coeffs):
+            along += (i + 2) * c * theta ** (i + 1)
+        sin_t = float(np.sin(theta))
+        across = float(self.radius_px(theta)) / self.focal_px / sin_t if sin_t > 1e-9 \
+            else _project_slope(0.0, self.projection)  # the limit at the zenith: g'(0) = 1
+        scales = (self.px_per_deg * abs(along), self.px_per_deg * abs(across))
+        if not all(np.isfinite(scales)):
+            return 0.0, 0.0
+        return float(max(scales)), float(min(scales))
 
     def _image_angle_rad(self, azimuth_deg: FloatArray) -> FloatArray:
         """Image angle φ, clockwise from image-up, of a camera-frame azimuth."""

@@ -215,7 +215,11 @@ def _local_px_per_deg(model: CameraModel, x: float, y: float) -> tuple[float, fl
     0.1°): a fisheye draws a small disc as an ellipse whose axes change over the frame
     (an orthographic lens shrinks it to cos θ of the zenith's across the radius, a
     reviewer's finding). ``(0, 0)`` — no size refused — where the model cannot tell (a step
-    beyond the lens's edge: the nominal scale there was an orthographic lens's largest)."""
+    beyond the lens's edge: the nominal scale there was an orthographic lens's largest).
+    A fisheye's in closed form (:meth:`vision.cameras.FisheyeCamera.local_px_per_deg`: the
+    differences' round trip through the sky cost a tenth of a 640-px frame's detection)."""
+    if isinstance(model, FisheyeCamera):
+        return model.local_px_per_deg(x, y)
     step = np.radians(0.1)
     dx, dy, dz = (float(c) for c in np.asarray(model.pixel_to_direction(x, y),
                                                  dtype=np.float64).reshape(3))
@@ -647,10 +651,13 @@ def _one_channel_if_grey(image: NDArray[Any]) -> NDArray[Any]:
     img = np.asarray(image)
     if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8 or img.size == 0:
         return image
-    sample = img[::_GREY_STRIDE, ::_GREY_STRIDE, :3].astype(np.int16)
-    if int(np.abs(sample[..., 0] - sample[..., 1]).max()) > _GREY_SPREAD \
-            or int(np.abs(sample[..., 1] - sample[..., 2]).max()) > _GREY_SPREAD:
-        return image
+    # every 4th sample first, a subset of the samples (the same answer): a colour frame
+    # shows its colour there (a 640-px colour frame's test 60 → 23 µs)
+    for stride in (4 * _GREY_STRIDE, _GREY_STRIDE):
+        sample = img[::stride, ::stride, :3].astype(np.int16)
+        if int(np.abs(sample[..., 0] - sample[..., 1]).max()) > _GREY_SPREAD \
+                or int(np.abs(sample[..., 1] - sample[..., 2]).max()) > _GREY_SPREAD:
+            return image
     return to_gray(img)
 
 

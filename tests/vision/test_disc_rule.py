@@ -86,3 +86,33 @@ def test_at_the_lens_edge_where_the_scale_cannot_be_told_nothing_is_refused() ->
     scales = detect._local_px_per_deg(cam, float(x), float(y))
     assert scales[1] < 1.0
     assert not smaller_than_the_disc(3.0, *scales)
+
+
+@pytest.mark.parametrize("projection", ["equidistant", "equisolid", "orthographic",
+                                        "stereographic"])
+@pytest.mark.parametrize(("coeffs", "tilt"), [((), (0.0, 0.0)), ((0.01, -0.02), (3.0, -2.0))])
+def test_the_closed_form_scale_is_the_projections_jacobian(projection: str,
+                                                           coeffs: tuple[float, ...],
+                                                           tilt: tuple[float, float]) -> None:
+    """``FisheyeCamera.local_px_per_deg`` (r'(θ) along the radius, r(θ)/sin θ across it)
+    against the singular values of the projection's Jacobian by central differences of
+    ``direction_to_pixel`` (0.01° steps, numpy's SVD), over the sky above 3°: the same to
+    1e-5 where the forward differences it replaced were off by up to 2e-4."""
+    cam = FisheyeCamera(1000.0, 1000.0, 10.0, projection=projection, radial_coeffs=coeffs,
+                        tilt_north_deg=tilt[0], tilt_east_deg=tilt[1], north_offset_deg=25.0)
+    rng = np.random.default_rng(3)
+    step = np.radians(0.01)
+    for az, el in zip(rng.uniform(0.0, 360.0, 40), rng.uniform(3.0, 90.0, 40), strict=True):
+        d = enu_from_sky(az, el)
+        u = np.cross(d, [0.0, 0.0, 1.0]) if el < 80.0 else np.cross(d, [1.0, 0.0, 0.0])
+        u /= np.linalg.norm(u)
+        v = np.cross(d, u)
+        cols = []
+        for e in (u, v):
+            plus = np.asarray(cam.direction_to_pixel(d + step * e), dtype=float)
+            minus = np.asarray(cam.direction_to_pixel(d - step * e), dtype=float)
+            cols.append((plus - minus) / (2.0 * np.degrees(step)))
+        want = np.linalg.svd(np.column_stack(cols), compute_uv=False)
+        x, y = cam.direction_to_pixel(d)
+        got = cam.local_px_per_deg(float(x), float(y))
+        np.testing.assert_allclose(got, want, rtol=1e-5)
