@@ -661,6 +661,13 @@ ANY_SITES = (
     ("Alice Springs, December (facing north)", -23.7, 133.88, "Australia/Darwin", 545.0,
      24.0, 0.0, "2026-12-01"),
     ("Tehuantepec, May", None, None, None, None, None, None, "2026-05-10"),
+    # a tester's sites (session 22): hours of sun behind or grazing the plane a day
+    ("Hobart, December (facing north)", -42.88, 147.33, "Australia/Hobart", 50.0, 35.7, 0.0,
+     "2026-11-28"),
+    ("Palmer Station, Antarctica, December (facing north)", -64.77, -64.05,
+     "Antarctica/Palmer", 10.0, 40.0, 0.0, "2026-11-28"),
+    ("Tromsø, June (the midnight sun)", 69.65, 18.96, "Europe/Oslo", 100.0, 50.0, 180.0,
+     "2026-06-10"),
 )
 
 

@@ -79,10 +79,21 @@ MIN_SENSOR_SHARE = 0.5
 #: The fixed plane tells beam from diffuse where the sun is this far in front of it
 #: (cos AOI; 0.3 = 72.5°): at grazing incidence its POA is nearly all diffuse.
 BEAM_SEEN_COS = 0.3
-#: The fixed plane's POA tells beam from diffuse where the clear beam on it is at least this
-#: share of its clear-sky POA; below it (the sun behind or grazing the plane) its beam is
-#: capped by that of the minutes around that can (:func:`_unseen_beam_capped`).
-BEAM_SHARE_SPLIT = 0.5
+#: Where the sun is behind or grazing the fixed plane (beyond :data:`BEAM_SEEN_COS`), a gap
+#: in the clouds still shows on it when the clear beam is at least this share of its clear
+#: POA (the gap lifts the POA from a deck's diffuse to the clear sky's: :func:`_clear_beam`);
+#: below it the plane is blind to the beam (:func:`_unseen_beam`).
+BEAM_SHARE_SPLIT = 0.8
+#: How long a cloud state persists [min]: the beam the plane last saw (the mean of the seen
+#: minutes within this of the nearest) carries over to a minute it cannot see with weight
+#: exp(−lag / this), the day's seen mean with the rest (:func:`_unseen_beam`).
+BEAM_PERSISTENCE_MIN = 30.0
+#: A plane's clearness k = POA/POA_clear a clear sky can give: from this on (none below: the
+#: plane is darker than a clear sky leaves it, so clouds hide the sun) …
+CLEAR_K_MIN = 0.6
+#: … fully from this on (a clear sky at low sun or in turbid air; :func:`_clear_beam`,
+#: :func:`_unseen_beam`)
+CLEAR_K_FULL = 0.75
 #: A clear spell's plane clearness ranges less than this over 11 minutes (1 % logger noise
 #: spans ~0.05; a cloud edge moves it by the beam's share, ≥ 0.3).
 STEADY_RANGE = 0.06
@@ -291,49 +302,91 @@ def _clear_beam(poa: np.ndarray, clear: pd.DataFrame
       its neighbours — a gap of a few minutes is never steady, and missing it put the
       overcast days' expected energy 2–5 % low with a shape error of 0.1–0.25;
     - in a *clear spell* (k ranging < :data:`STEADY_RANGE` over 11 minutes, no cloud
-      edge passing, and k ≥ 0.75) from k = 0.6 on, fully at 0.75: a clear sky whose
-      plane clearness sits below 0.85 (low sun, turbid air).
+      edge passing, and k ≥ :data:`CLEAR_K_FULL`) from k = :data:`CLEAR_K_MIN` on, fully at
+      :data:`CLEAR_K_FULL`: a clear sky whose plane clearness sits below 0.85 (low sun,
+      turbid air).
 
     The diffuse follows from :func:`_closure`.
     """
-    poa_clear = clear["poa_clear"].to_numpy()
-    k = np.divide(poa, poa_clear, out=np.zeros(poa.size), where=poa_clear > 1.0)
+    k = _clearness(poa, clear)
     roll = pd.Series(k).rolling(11, center=True, min_periods=1)
     steady = (roll.max() - roll.min()).to_numpy() < STEADY_RANGE
-    w = np.maximum(np.clip((k - 0.85) / 0.15, 0.0, 1.0),
-                   np.where(steady, np.clip((k - 0.6) / 0.15, 0.0, 1.0), 0.0))
-    return w, np.minimum(k, 1.0) * clear["dni_clear"].to_numpy(), steady & (k >= 0.75)
+    w = np.maximum(np.clip((k - 0.85) / 0.15, 0.0, 1.0), np.where(steady, _clear_sky_can(k), 0.0))
+    return w, np.minimum(k, 1.0) * clear["dni_clear"].to_numpy(), steady & (k >= CLEAR_K_FULL)
 
 
-def _unseen_beam_capped(dni: np.ndarray, clear: pd.DataFrame, seen: np.ndarray,
-                        up: np.ndarray) -> np.ndarray:
-    """``dni`` [W m⁻²] with each minute whose plane cannot tell beam from diffuse — the sun
-    up but the clear beam under :data:`BEAM_SHARE_SPLIT` of the plane's clear-sky POA (the
-    sun behind the plane or grazing it) — given at most the beam's clear-sky index
-    DNI/DNI_clear of the ``seen`` minutes around the nearest seen minute in time (their
-    mean within ±30 min). There the plane's POA is (nearly) diffuse only, and an overcast
-    deck's diffuse can be as bright as the clear sky's, which :func:`_clear_beam`'s
-    k ≥ 0.85 and GTI-DIRINT both read as a beam: summer dawns and dusks behind the plane
-    put cloudy days up to 28.5 % high at Golden, Madrid, Freiburg and Alice Springs
-    (generated held-out skies), 36 of 120 healthy days called underperforming or soiled;
-    capped, 11.1 % and 6 (``docs/diagnosis.md``, "Any site"). A clear dawn keeps the clear
-    beam of the clear minutes after it. Unchanged without a seen minute."""
+def _clearness(poa: np.ndarray, clear: pd.DataFrame) -> np.ndarray:
+    """The plane's clearness k = POA/POA_clear [-] (0 where the clear sky gives ≤ 1 W m⁻²)."""
+    poa_clear = clear["poa_clear"].to_numpy()
+    return np.divide(poa, poa_clear, out=np.zeros(poa.size), where=poa_clear > 1.0)
+
+
+def _clear_sky_can(k: np.ndarray) -> np.ndarray:
+    """0–1: how plainly a plane at clearness ``k`` can be under a clear sky, from
+    :data:`CLEAR_K_MIN` (0) to :data:`CLEAR_K_FULL` (1)."""
+    return np.clip((k - CLEAR_K_MIN) / (CLEAR_K_FULL - CLEAR_K_MIN), 0.0, 1.0)
+
+
+def _unseen_beam(dni: np.ndarray, clear: pd.DataFrame, seen: np.ndarray, up: np.ndarray,
+                 k: np.ndarray, gap_dni: np.ndarray, zone: str
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """``(dni, sd)`` [W m⁻²]: ``dni`` with each minute the plane is blind to the beam in — the
+    sun up but not ``seen`` (behind the plane, grazing it, or no reading) and the clear beam
+    under :data:`BEAM_SHARE_SPLIT` of the plane's clear POA (where it is not, the plane still
+    shows a gap in the clouds: ``gap_dni``, :func:`_clear_beam`'s clear beam) — given the beam's
+    clear-sky index DNI/DNI_clear that the seen minutes make likely there: that of the seen
+    minutes within :data:`BEAM_PERSISTENCE_MIN` of the nearest seen one, weighted
+    exp(−lag / :data:`BEAM_PERSISTENCE_MIN`) by the lag from it, and the mean of the local
+    day's seen minutes (``zone``) with the rest — a two-state cloud process's expectation
+    (clear or clouded spells, Markov: the state's memory fades with the lag toward the
+    day's share of clear sky; the generated skies are such a process,
+    tests/sim/realistic_sky.py) — where the plane's clearness ``k`` lets a clear sky be
+    (:func:`_clear_sky_can`: a plane darker than a clear sky leaves it is under cloud, and
+    its sun is too). ``sd``: that guess's standard deviation, the day's spread of the seen
+    minutes' index × √(1 − weight²) (the Markov state's variance given the last seen one),
+    0 where the plane sees. Unchanged without a seen minute.
+
+    There the plane's POA is (nearly) diffuse only, and its decomposition says nothing of
+    the beam either way: an overcast deck's diffuse can be as bright as the clear sky's,
+    which :func:`_clear_beam`'s k ≥ 0.85 and GTI-DIRINT read as a beam (summer dawns and
+    dusks behind the plane put cloudy days up to 28.5 % high at Golden, Madrid, Freiburg and
+    Alice Springs, generated held-out skies, 36 of 120 healthy days called underperforming
+    or soiled), and a clear dusk's grazing POA, whose clearness wavers off a clear spell's,
+    read as no beam at all (Palmer, December: a clear evening's tracker expected at 5 % of
+    what it made for a quarter of an hour). The first rule, a cap at the seen minutes' mean
+    alone where the clear beam was under half the plane's clear-sky POA, left a gap in the
+    clouds by the last seen minute to the whole evening behind the plane, and a grazing
+    sun's minutes uncapped (a tester's Hobart and Palmer, December, facing north: overcast
+    days 6–26 % high, underperformance at confidence 1.0; ``docs/diagnosis.md``, "Any
+    site")."""
     idx = np.flatnonzero(seen)
     if idx.size == 0:
-        return dni
+        return dni, np.zeros(dni.size)
     dni_clear = clear["dni_clear"].to_numpy()
-    poa_clear = clear["poa_clear"].to_numpy()
-    beam_clear = dni_clear * np.maximum(np.cos(np.radians(clear["aoi"].to_numpy())), 0.0)
-    share = np.divide(beam_clear, poa_clear, out=np.zeros(dni.size), where=poa_clear > 1.0)
     pos = np.arange(dni.size)
     after = np.clip(np.searchsorted(idx, pos), 0, idx.size - 1)
     before = np.maximum(after - 1, 0)
     near = np.where(np.abs(idx[before] - pos) <= np.abs(idx[after] - pos), idx[before],
                     idx[after])
-    k_b = np.divide(dni, dni_clear, out=np.zeros(dni.size), where=dni_clear > 0)
-    around = pd.Series(np.where(seen, k_b, np.nan)).rolling(61, center=True, min_periods=1)
-    cap = around.mean().to_numpy()[near] * dni_clear
-    return np.where(up & ~seen & (share < BEAM_SHARE_SPLIT), np.minimum(dni, cap), dni)
+    k_b = pd.Series(np.where(seen, np.divide(dni, dni_clear, out=np.zeros(dni.size),
+                                             where=dni_clear > 0), np.nan))
+    window = 2 * int(BEAM_PERSISTENCE_MIN) + 1  # minutes, centred
+    last_seen = k_b.rolling(window, center=True, min_periods=1).mean().to_numpy()[near]
+    day = clear.index.tz_convert(zone).normalize().asi8
+    by_day = k_b.groupby(day)
+    day_mean = by_day.transform("mean").to_numpy()
+    w = np.exp(-np.abs(near - pos) / BEAM_PERSISTENCE_MIN)
+    k_likely = np.where(np.isfinite(day_mean), w * last_seen + (1.0 - w) * day_mean, last_seen)
+    spread = by_day.transform(lambda v: v.var(ddof=0)).to_numpy()
+    # a day without a seen minute: the spread of a two-state sky at that index
+    var_day = np.where(np.isfinite(spread), spread, k_likely * (1.0 - k_likely))
+    beam_clear = dni_clear * np.maximum(np.cos(np.radians(clear["aoi"].to_numpy())), 0.0)
+    blind = up & ~seen & (beam_clear < BEAM_SHARE_SPLIT * clear["poa_clear"].to_numpy())
+    can = _clear_sky_can(k)
+    out = np.where(blind, k_likely * can * dni_clear, np.where(up & ~seen, gap_dni, dni))
+    sd = np.where(blind, np.sqrt(np.maximum(var_day * (1.0 - w * w), 0.0)) * can * dni_clear,
+                  0.0)
+    return out, sd
 
 
 def _closure(poa: np.ndarray, dni: np.ndarray, clear: pd.DataFrame, site: Site,
@@ -396,7 +449,9 @@ def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
         the clear beam in the clear spells.
 
     The result reproduces ``poa_global`` on the plane through the site's transposition
-    model (:func:`_closure`).
+    model (:func:`_closure`). Its columns: ``ghi``, ``dni``, ``dhi`` and ``dni_blind_sd``,
+    the standard deviation of the DNI guessed where the plane cannot see the beam (0 where
+    it can) [W m⁻²].
     """
     from pvlib import atmosphere, irradiance
 
@@ -453,17 +508,12 @@ def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
     dni = (1.0 - w_clear) * dni + w_clear * dni_clear_beam
     dni_clear = clear["dni_clear"].to_numpy()
     up = clear["apparent_elevation"].to_numpy() > 0.0
-    # in a clear spell the beam's clear-sky index carries over to the minutes of the spell
-    # the plane cannot split (a cloudy minute says nothing about the next one's beam)
     seen = up & (dni_clear > 0) & (True if beam_seen is None else np.asarray(beam_seen, bool))
-    source, fill = seen & spell, ~seen & up & spell
-    if source.any() and fill.any():
-        t = sun._unix_seconds(clear.index)
-        k_b = np.interp(t, t[source], dni[source] / dni_clear[source])
-        dni = np.where(fill, k_b * dni_clear, dni)
-    dni = _unseen_beam_capped(dni, clear, seen, up)
+    dni, blind_sd = _unseen_beam(dni, clear, seen, up, _clearness(poa, clear),
+                                 w_clear * dni_clear_beam, site.timezone)
     out = pd.DataFrame(0.0, index=clear.index, columns=["ghi", "dni", "dhi"])
     out.loc[up, :] = np.column_stack(_closure(poa[up], dni[up], clear[up], site, fixed))
+    out["dni_blind_sd"] = blind_sd  # the diagnosis's band widens by it (faults.band_uncertainty)
     return out
 
 
@@ -543,6 +593,7 @@ def _sky_from_plane(site: Site, times: pd.DatetimeIndex, poa_measured: np.ndarra
     for m in models:
         w = decompose(poa, clear, site, m, beam_seen, plane, spells_seen)
         w.loc[~measured, ["ghi", "dni", "dhi"]] = clear_sky
+        w.loc[~measured, "dni_blind_sd"] = 0.0  # the clear-sky twin's own day
         for key, v in extra.items():
             w[key] = v
         weather[m] = w
@@ -692,7 +743,9 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
         stops there holds), ``ghi``, ``dni``, ``dhi``,
         ``poa_global``, ``poa_clear``, ``dni_extra`` [W m⁻²], ``temp_air`` [°C] and
         ``wind_speed`` [m s⁻¹] (measured where the loggers read them, else the site's),
-        ``clearness`` [-], ``valid``, ``measured_sky``, ``flag``, ``sky_source``.
+        ``clearness`` [-], ``valid``, ``measured_sky``, ``flag``, ``sky_source``,
+        ``tracker_blind_sd_w`` [W]: the standard deviation of the tracker's expected power
+        from the beam guessed where the fixed plane cannot see it (0 elsewhere).
     """
     from sim import twin
 
@@ -721,6 +774,11 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
     }, index=times)
     for k in ("ghi", "dni", "dhi", "temp_air", "wind_speed"):
         out[k] = weather["gti_dirint"][k].to_numpy()
+    # the tracker faces the sun: a W m⁻² of beam more is the array's power per W m⁻² of its
+    # plane's irradiance more (the run's mean, an uncertainty's scale)
+    poa_tr = float(main["tracker_poa_global"].sum())
+    per_w_m2 = float(main["tracker_power_w"].sum()) / poa_tr if poa_tr > 0 else 0.0
+    out["tracker_blind_sd_w"] = per_w_m2 * weather["gti_dirint"]["dni_blind_sd"].to_numpy()
     for k in ("poa_global", "poa_clear", "clearness", "valid", "measured_sky", "flag",
               "dni_extra", "sky_source"):
         out[k] = sensor[k].to_numpy()

@@ -202,9 +202,34 @@ def band_uncertainty(day: pd.DataFrame) -> float:
     minutes: :data:`GHI_UNCERTAINTY` when its sky rests on a GHI pyranometer
     (:func:`sim.sky_sensor.main_sky_source` ``"sensor_ghi"``, the source the diagnosis
     reports), else :data:`INVERSION_UNCERTAINTY` (a fixed plane's POA sensor or power, or
-    the clear sky)."""
-    return GHI_UNCERTAINTY if sky_sensor.main_sky_source(day) == "sensor_ghi" \
+    the clear sky); added in quadrature (independent errors, GUM) to twice the relative
+    standard deviation of the day's expected energy from the beam the sky's instrument could
+    not see (:func:`blind_beam_sd_wh`: summer dawns and dusks behind a fixed plane, hours
+    of them at high latitudes)."""
+    u = GHI_UNCERTAINTY if sky_sensor.main_sky_source(day) == "sensor_ghi" \
         else INVERSION_UNCERTAINTY
+    if "tracker_blind_sd_w" not in day:
+        return u
+    expected_wh = float(day["tracker_power_w"].sum()) / 60.0
+    return float(np.hypot(u, 2.0 * blind_beam_sd_wh(day) / expected_wh)) if expected_wh > 0 \
+        else u
+
+
+def blind_beam_sd_wh(day: pd.DataFrame) -> float:
+    """The standard deviation [Wh] of a day's expected tracker energy from the beam guessed
+    where the fixed plane cannot see it: the minutes' standard deviations ``a``
+    (``tracker_blind_sd_w``) correlated as a cloud state persists,
+    exp(−lag / :data:`sim.sky_sensor.BEAM_PERSISTENCE_MIN`) — σ² = aᵀ K a, K by one pass of
+    an exponential filter each way (K a = forward + backward − a)."""
+    from scipy.signal import lfilter
+
+    a = np.nan_to_num(day["tracker_blind_sd_w"].to_numpy(float))
+    if not a.any():
+        return 0.0
+    rho = float(np.exp(-1.0 / sky_sensor.BEAM_PERSISTENCE_MIN))  # per minute
+    forward = lfilter([1.0], [1.0, -rho], a)
+    backward = lfilter([1.0], [1.0, -rho], a[::-1])[::-1]
+    return float(np.sqrt(max(float(a @ (forward + backward - a)), 0.0))) / 60.0
 
 
 def band_wh(expected_wh: float, expected_alt_wh: float,
@@ -212,8 +237,8 @@ def band_wh(expected_wh: float, expected_alt_wh: float,
     """The expected tracker energy's band [Wh]: the spread of the two decompositions of the
     same sky (:func:`sim.sky_sensor.weather_aware_twin`'s ``tracker_power_w`` and
     ``tracker_power_alt_w``) widened by ``u`` on each side (:func:`band_uncertainty`: the
-    instrument the sky rests on)."""
-    return (min(expected_wh, expected_alt_wh) * (1.0 - u),
+    instrument the sky rests on, and what it could not see), the lower edge at least 0."""
+    return (min(expected_wh, expected_alt_wh) * max(1.0 - u, 0.0),
             max(expected_wh, expected_alt_wh) * (1.0 + u))
 
 

@@ -85,8 +85,10 @@ MAX_DAYS = 400
 #: convention read on the days the logger was slow only, sim.sky_sensor.inferred_stamped;
 #: 23: the second sky's clear beam in the clear spells that readings 5 minutes apart or
 #: closer show, minute by minute, sim.sky_sensor.readings_fine; 24: the expected gain over
-#: the minutes of the measured one).
-CACHE_VERSION = 24
+#: the minutes of the measured one; 25: the beam where the fixed plane is blind to it, the
+#: one its seen minutes make likely, and the band widened by that guess,
+#: sim.sky_sensor._unseen_beam, faults.blind_beam_sd_wh).
+CACHE_VERSION = 25
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
