@@ -256,7 +256,9 @@ def report_figure(rep: dict[str, Any], version: str) -> Any:
     label = "Month" if rows is rep["months"] else "Year"
     head = [label, *[f"{n}\nmeasured [kWh]" for n in names], *[f"{n}\nPR [-]" for n in names],
             "gain\nmeasured", "gain twin,\nsame minutes"]
-    body = [[r["period_start"][:7] if label == "Month" else r["period_start"][:4],
+    # a partial period marked as the dashboard's table marks it (a tester's finding)
+    body = [[(r["period_start"][:7] if label == "Month" else r["period_start"][:4])
+             + (" (partial)" if r.get("partial") else ""),
              *[_kwh(r["arrays"][n]["measured_wh"]) for n in names],
              *[_pr(r["arrays"][n].get("performance_ratio")) for n in names],
              _pct(r["gain_pct"]), _pct(r["twin_matched_gain_pct"])] for r in rows]

@@ -84,8 +84,11 @@ def parse_day_or_instant(text: str, zone: ZoneInfo | str, field: str) -> dt.date
         if "no UTC offset" in str(exc):
             raise TimestampError(f"{field}: {text!r} has no UTC offset; add one or give a "
                                  "bare date (YYYY-MM-DD)") from None
+        # a '+' left unencoded in a query string arrives as a space (a tester's finding)
+        hint = "; a '+' in a URL's query reads as a space: send it as %2B" \
+            if re.search(r"\d \d{2}(:?\d{2})?$", text) else ""
         raise TimestampError(f"{field}: {text[:40]!r} is not a date (YYYY-MM-DD) or an ISO "
-                             "8601 date-time with offset") from None
+                             f"8601 date-time with offset{hint}") from None
 
 
 def parse_range(start: str, end: str, zone: ZoneInfo | str,

@@ -41,6 +41,9 @@ _SHORTEST_S = {"hour": 3600.0, "day": 82800.0, "month": 28 * 86400.0}  # DST day
 
 #: A period whose readings cover less of the twin's energy than this is ``partial`` [%].
 PARTIAL_BELOW_PCT = 95.0
+#: Why a period whose twin made no energy has no twin gain (a polar night, a night hour; a
+#: tester's Svalbard December read ``twin_gain_pct`` and ``twin_note`` both null)
+NO_SUN_NOTE = "no sun: the twin made no energy over the period (the sun stayed below the horizon)"
 #: Per array of a period: its twin over the minutes its own readings cover, and over those
 #: both loggers' readings cover (:func:`backend.measurements.queries.shared_minutes_wh`);
 #: summed like the energies. Whether the two read the same minutes:
@@ -302,7 +305,8 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
             "period_end": edges[p + 1].astimezone(info.zone).isoformat(),
             "arrays": arrays, **compared,
             "twin_note": ctx.twin.no_twin_reason(site_id, int(edges_s[p]), int(edges_s[p + 1]))
-            if no_twin else None,
+            if no_twin else NO_SUN_NOTE if compared["twin_gain_pct"] is None
+            and not any(a["twin_wh"] for a in arrays.values()) else None,
         })
     totals = {n: {"measured_wh": t["measured_wh"] if t["readings"] else None,
                   "twin_wh": t["twin_wh"] if t["twin_readings"] else None,
@@ -315,7 +319,9 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
                 totals[n][COVERED], totals[n][SHARED] = cover_sums[n]
     return {
         "site_id": site_id, "interval": interval, "timezone": info.site.timezone,
-        "start": start.isoformat(), "end": end.isoformat(),
+        # in the site's zone, as the periods (an offset given in the range read back in UTC)
+        "start": start.astimezone(info.zone).isoformat(),
+        "end": end.astimezone(info.zone).isoformat(),
         "max_gap_s": gap, "partial_below_pct": PARTIAL_BELOW_PCT,
         "rows": rows, "totals": {"arrays": totals, **compare(totals, tr_name, fx_name)},
     }

@@ -153,6 +153,36 @@ def test_twin_energy_exists_for_past_days(client: httpx.Client) -> None:
     assert len(csv_text.splitlines()) == 4
 
 
+def test_a_period_without_sun_says_why_it_has_no_twin_gain(client: httpx.Client) -> None:
+    """A tester's Svalbard December (polar night) read twin_wh 0, ``twin_gain_pct`` and
+    ``twin_note`` null: nothing said why. A night hour is such a period too; a daylight one
+    keeps its gain and no note."""
+    from backend.measurements.energy import NO_SUN_NOTE
+
+    d0 = dt.datetime.now(TZ).date() - dt.timedelta(days=40)
+    rows = client.get(f"{BASE}/energy", params={
+        "start": d0.isoformat(), "end": (d0 + dt.timedelta(days=1)).isoformat(),
+        "interval": "hour"}).json()["rows"]
+    night, noon = rows[2], rows[12]  # 02:00 and 12:00 local
+    assert night["arrays"]["tracker"]["twin_wh"] == 0 and night["twin_gain_pct"] is None
+    assert night["twin_note"] == NO_SUN_NOTE
+    assert noon["twin_gain_pct"] is not None and noon["twin_note"] is None
+
+
+def test_the_range_is_echoed_in_the_sites_zone(client: httpx.Client) -> None:
+    """A tester's range with an offset of its own read back in UTC beside periods and an
+    ``end`` in the site's zone; now both in the site's, the same instants."""
+    d0 = dt.datetime.now(TZ).date() - dt.timedelta(days=40)
+    body = client.get(f"{BASE}/energy", params={
+        "start": f"{d0.isoformat()}T00:00:00+01:00",
+        "end": (d0 + dt.timedelta(days=1)).isoformat()}).json()
+    start = dt.datetime.fromisoformat(body["start"])
+    assert start == dt.datetime(d0.year, d0.month, d0.day, tzinfo=dt.timezone(
+        dt.timedelta(hours=1)))
+    assert start.utcoffset() == dt.datetime.fromisoformat(body["end"]).utcoffset() \
+        == dt.datetime.fromisoformat(body["rows"][0]["period_start"]).utcoffset()
+
+
 def test_energy_errors(client: httpx.Client) -> None:
     r = client.get(f"{BASE}/energy", params={"start": "2022-01-02", "end": "2022-01-01"})
     assert r.status_code == 422
@@ -161,6 +191,9 @@ def test_energy_errors(client: httpx.Client) -> None:
     assert r.status_code == 422
     r = client.get(f"{BASE}/energy", params={"start": "2022-01-01T00:00:00", "end": "2022-01-02"})
     assert r.status_code == 422 and "offset" in r.json()["detail"]
+    # an offset's '+' typed into the URL unencoded arrives as a space: the answer says so
+    r = client.get(f"{BASE}/energy?start=2022-01-01T00:00:00+01:00&end=2022-01-02")
+    assert r.status_code == 422 and "%2B" in r.json()["detail"], r.text
     # ranges beyond what a calendar can hold, or too many periods: 422, not 500
     r = client.get(f"{BASE}/energy", params={"start": "0001-01-01", "end": "9999-12-31",
                                              "interval": "month"})

@@ -194,6 +194,23 @@ def test_report_csv_names_its_units_and_png_is_one_a4_page(client: httpx.Client,
     assert (width, height) == (1240, 1753)  # A4 (8.27 in × 11.69 in) at 150 dpi
 
 
+def test_the_pngs_monthly_table_marks_a_partial_month(client: httpx.Client,
+                                                     posted: dict) -> None:
+    """A tester's report.png: the month the range cut (readings on a few of its days) was not
+    marked, where the dashboard's table says "(partial)"."""
+    from backend.reports import report_figure
+
+    rep = client.get(f"{BASE}/report", params={
+        "start": (FULL - dt.timedelta(days=40)).isoformat(),
+        "end": (HALF + dt.timedelta(days=1)).isoformat()}).json()
+    fig = report_figure(rep, "test")
+    (ax,) = [a for a in fig.axes if a.get_title(loc="left") == "Monthly table"]
+    cells = {k: c.get_text().get_text() for k, c in ax.tables[0].get_celld().items()}
+    for i, month in enumerate(rep["months"], start=1):
+        assert cells[(i, 0)].endswith("(partial)") == bool(month["partial"]), (i, cells[(i, 0)])
+    assert any(m["partial"] for m in rep["months"])
+
+
 @pytest.mark.parametrize("n_days", [1, 2, 5, 31])
 def test_the_pngs_daily_chart_labels_each_day_under_its_bars(client: httpx.Client,
                                                              n_days: int) -> None:

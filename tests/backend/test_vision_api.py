@@ -164,6 +164,11 @@ def test_detections_of_a_day(client: httpx.Client) -> None:
      "north_offset_deg"),
     ({"camera": "pinhole", "latitude_deg": "1", "longitude_deg": "abc"}, None, 422,
      "longitude_deg"),
+    # a tester's misspellings, answered 200 without the place, time or scale they meant
+    ({"camera": "fisheye", "px_per_degree": "5"}, None, 422, "'px_per_degree': unknown field"),
+    ({"camera": "pinhole", "lat": "53.99", "lon": "9.5"}, None, 422, "'lat': unknown field"),
+    ({"camera": "pinhole", "time": "2016-05-30T11:44:00+01:00"}, None, 422,
+     "'time': unknown field"),
 ])
 def test_bad_input_is_a_4xx_naming_the_field(client: httpx.Client, data: dict,
                                               files: dict | None, status: int,
@@ -282,6 +287,11 @@ def test_calibration_input_errors(client: httpx.Client) -> None:
     r = client.post("/api/v1/vision/calibrations", files=[f, f, f],
                     data={"timestamps": ["2024-03-05T10:00:00Z"] * 3})
     assert r.status_code == 422 and "place" in r.json()["detail"]
+    # a field the fit does not read (a camera parameter it fits itself) is named, not ignored
+    r = client.post("/api/v1/vision/calibrations", files=[f, f, f],
+                    data={"timestamps": ["2024-03-05T10:00:00Z"] * 3, "site_id": "tehuantepec",
+                          "px_per_deg": "2.6"})
+    assert r.status_code == 422 and r.json()["detail"].startswith("'px_per_deg': unknown field")
 
 
 def test_evaluate_gives_seed003_tables(client: httpx.Client) -> None:

@@ -375,27 +375,28 @@ _BUSY_DOC: dict[int | str, dict[str, Any]] = {
     503: {"description": "the decode budget's queue is full; see Retry-After"},
 }
 
+_SUN_PROPERTIES: dict[str, Any] = {
+    "file": {"type": "string", "format": "binary", "description": "PNG or JPEG frame"},
+    "camera": {"type": "string", "enum": ["pinhole", "fisheye"]},
+    "fov_deg": {"type": "number", "description": "pinhole horizontal FOV [°] (67)"},
+    "cx_px": {"type": "number"}, "cy_px": {"type": "number"},
+    "reference_x_px": {"type": "number"}, "reference_y_px": {"type": "number"},
+    "projection": {"type": "string",
+                   "enum": ["equidistant", "equisolid", "stereographic",
+                            "orthographic"]},
+    "px_per_deg": {"type": "number"}, "north_offset_deg": {"type": "number"},
+    "east": {"type": "string", "enum": ["left", "right"]},
+    "calibration_id": {"type": "integer"},
+    "method": {"type": "string", "enum": list(METHODS)},
+    "timestamp": {"type": "string", "description": "ISO 8601 with offset"},
+    "site_id": {"type": "string"}, "latitude_deg": {"type": "number"},
+    "longitude_deg": {"type": "number"}, "elevation_m": {"type": "number"},
+}
 _SUN_DOC = {
     "security": _OPTIONAL_BEARER,
     "requestBody": {"content": {"multipart/form-data": {"schema": {
-        "type": "object", "required": ["file"],
-        "properties": {
-            "file": {"type": "string", "format": "binary", "description": "PNG or JPEG frame"},
-            "camera": {"type": "string", "enum": ["pinhole", "fisheye"]},
-            "fov_deg": {"type": "number", "description": "pinhole horizontal FOV [°] (67)"},
-            "cx_px": {"type": "number"}, "cy_px": {"type": "number"},
-            "reference_x_px": {"type": "number"}, "reference_y_px": {"type": "number"},
-            "projection": {"type": "string",
-                           "enum": ["equidistant", "equisolid", "stereographic",
-                                    "orthographic"]},
-            "px_per_deg": {"type": "number"}, "north_offset_deg": {"type": "number"},
-            "east": {"type": "string", "enum": ["left", "right"]},
-            "calibration_id": {"type": "integer"},
-            "method": {"type": "string", "enum": list(METHODS)},
-            "timestamp": {"type": "string", "description": "ISO 8601 with offset"},
-            "site_id": {"type": "string"}, "latitude_deg": {"type": "number"},
-            "longitude_deg": {"type": "number"}, "elevation_m": {"type": "number"},
-        }}}}, "required": True},
+        "type": "object", "required": ["file"], "properties": _SUN_PROPERTIES}}},
+        "required": True},
 }
 
 
@@ -407,6 +408,7 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
     """Find the sun in one frame; with time and place, compare with SPA. The result is stored."""
     s = ctx.settings
     form = await _read_form(request, s.server.max_upload_bytes)
+    _known_fields(form, _SUN_PROPERTIES)
     uploads = form.getlist("file")
     if len(uploads) != 1:
         raise HTTPException(422, f"file: exactly one image is needed, got {len(uploads)}")
@@ -475,26 +477,27 @@ async def _timed_frames(ctx: Any, form: FormData, min_frames: int,
     return frames, place
 
 
+_CAL_PROPERTIES: dict[str, Any] = {
+    "files": {"type": "array", "items": {"type": "string", "format": "binary"}},
+    "timestamps": {"type": "array", "items": {"type": "string"},
+                   "description": "ISO 8601 with offset, one per file, same order"},
+    "projection": {"type": "string"}, "east": {"type": "string",
+                                              "enum": ["auto", "left", "right"]},
+    "n_radial": {"type": "string", "enum": list(N_RADIAL_CHOICES),
+                 "description": "radial polynomial terms; auto (default): as many "
+                                "as lower the leave-one-out error"},
+    "name": {"type": "string", "maxLength": 100,
+             "description": "a name for the calibration (default: projection, "
+                            "frames, day)"},
+    "fit_tilt": {"type": "boolean"},
+    "site_id": {"type": "string"}, "latitude_deg": {"type": "number"},
+    "longitude_deg": {"type": "number"}, "elevation_m": {"type": "number"},
+}
 _CAL_DOC = {
     "security": _OPTIONAL_BEARER,
     "requestBody": {"content": {"multipart/form-data": {"schema": {
-        "type": "object", "required": ["files", "timestamps"],
-        "properties": {
-            "files": {"type": "array", "items": {"type": "string", "format": "binary"}},
-            "timestamps": {"type": "array", "items": {"type": "string"},
-                           "description": "ISO 8601 with offset, one per file, same order"},
-            "projection": {"type": "string"}, "east": {"type": "string",
-                                                      "enum": ["auto", "left", "right"]},
-            "n_radial": {"type": "string", "enum": list(N_RADIAL_CHOICES),
-                         "description": "radial polynomial terms; auto (default): as many "
-                                        "as lower the leave-one-out error"},
-            "name": {"type": "string", "maxLength": 100,
-                     "description": "a name for the calibration (default: projection, "
-                                    "frames, day)"},
-            "fit_tilt": {"type": "boolean"},
-            "site_id": {"type": "string"}, "latitude_deg": {"type": "number"},
-            "longitude_deg": {"type": "number"}, "elevation_m": {"type": "number"},
-        }}}}, "required": True},
+        "type": "object", "required": ["files", "timestamps"], "properties": _CAL_PROPERTIES}}},
+        "required": True},
 }
 
 
@@ -506,6 +509,7 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
                            ) -> Response:
     """Fit a fisheye camera (centre, scale, north offset, mirror) to timestamped frames."""
     form = await _read_form(request, ctx.settings.server.max_upload_bytes)
+    _known_fields(form, _CAL_PROPERTIES)
     projection = _text(form, "projection") or "equidistant"
     if projection not in PROJECTIONS:
         raise HTTPException(422, f"projection: must be one of {', '.join(PROJECTIONS)}, "

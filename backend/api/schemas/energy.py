@@ -50,7 +50,8 @@ class EnergyRowRead(EnergyTotalsRead):
 
     period_start: str = Field(description="ISO 8601 in the site's zone")
     period_end: str
-    twin_note: str | None = Field(description="why the twin has no value, if so")
+    twin_note: str | None = Field(description="why the twin has no value, or no gain (a "
+                                              "period without sun), if so")
     twin_weather_note: str | None = None
 
 
