@@ -328,7 +328,7 @@ def _clear_sky_can(k: np.ndarray) -> np.ndarray:
 
 
 def _unseen_beam(dni: np.ndarray, clear: pd.DataFrame, seen: np.ndarray, up: np.ndarray,
-                 k: np.ndarray, gap_dni: np.ndarray, zone: str
+                 k: np.ndarray, gap_dni: np.ndarray, site: Site
                  ) -> tuple[np.ndarray, np.ndarray]:
     """``(dni, sd)`` [W m⁻²]: ``dni`` with each minute the plane is blind to the beam in — the
     sun up but not ``seen`` (behind the plane, grazing it, or no reading) and the clear beam
@@ -336,9 +336,9 @@ def _unseen_beam(dni: np.ndarray, clear: pd.DataFrame, seen: np.ndarray, up: np.
     shows a gap in the clouds: ``gap_dni``, :func:`_clear_beam`'s clear beam) — given the beam's
     clear-sky index DNI/DNI_clear that the seen minutes make likely there: that of the seen
     minutes within :data:`BEAM_PERSISTENCE_MIN` of the nearest seen one, weighted
-    exp(−lag / :data:`BEAM_PERSISTENCE_MIN`) by the lag from it, and the mean of the local
-    day's seen minutes (``zone``) with the rest — a two-state cloud process's expectation
-    (clear or clouded spells, Markov: the state's memory fades with the lag toward the
+    exp(−lag / :data:`BEAM_PERSISTENCE_MIN`) by the lag from it, and the mean of the seen
+    minutes of the ``site``'s local day with the rest — a two-state cloud process's
+    expectation (clear or clouded spells, Markov: the state's memory fades with the lag toward the
     day's share of clear sky; the generated skies are such a process,
     tests/sim/realistic_sky.py) — where the plane's clearness ``k`` lets a clear sky be
     (:func:`_clear_sky_can`: a plane darker than a clear sky leaves it is under cloud, and
@@ -372,8 +372,7 @@ def _unseen_beam(dni: np.ndarray, clear: pd.DataFrame, seen: np.ndarray, up: np.
                                              where=dni_clear > 0), np.nan))
     window = 2 * int(BEAM_PERSISTENCE_MIN) + 1  # minutes, centred
     last_seen = k_b.rolling(window, center=True, min_periods=1).mean().to_numpy()[near]
-    day = clear.index.tz_convert(zone).normalize().asi8
-    by_day = k_b.groupby(day)
+    by_day = k_b.groupby(_local_days(site, clear.index.as_unit("s").asi8))
     day_mean = by_day.transform("mean").to_numpy()
     w = np.exp(-np.abs(near - pos) / BEAM_PERSISTENCE_MIN)
     k_likely = np.where(np.isfinite(day_mean), w * last_seen + (1.0 - w) * day_mean, last_seen)
@@ -510,7 +509,7 @@ def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
     up = clear["apparent_elevation"].to_numpy() > 0.0
     seen = up & (dni_clear > 0) & (True if beam_seen is None else np.asarray(beam_seen, bool))
     dni, blind_sd = _unseen_beam(dni, clear, seen, up, _clearness(poa, clear),
-                                 w_clear * dni_clear_beam, site.timezone)
+                                 w_clear * dni_clear_beam, site)
     out = pd.DataFrame(0.0, index=clear.index, columns=["ghi", "dni", "dhi"])
     out.loc[up, :] = np.column_stack(_closure(poa[up], dni[up], clear[up], site, fixed))
     out["dni_blind_sd"] = blind_sd  # the diagnosis's band widens by it (faults.band_uncertainty)
