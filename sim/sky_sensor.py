@@ -448,9 +448,9 @@ def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
         the clear beam in the clear spells.
 
     The result reproduces ``poa_global`` on the plane through the site's transposition
-    model (:func:`_closure`). Its columns: ``ghi``, ``dni``, ``dhi`` and ``dni_blind_sd``,
+    model (:func:`_closure`). Its columns: ``ghi``, ``dni``, ``dhi``, ``dni_blind_sd``,
     the standard deviation of the DNI guessed where the plane cannot see the beam (0 where
-    it can) [W m⁻²].
+    it can) [W m⁻²], and ``beam_seen``, where it can.
     """
     from pvlib import atmosphere, irradiance
 
@@ -513,6 +513,7 @@ def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
     out = pd.DataFrame(0.0, index=clear.index, columns=["ghi", "dni", "dhi"])
     out.loc[up, :] = np.column_stack(_closure(poa[up], dni[up], clear[up], site, fixed))
     out["dni_blind_sd"] = blind_sd  # the diagnosis's band widens by it (faults.band_uncertainty)
+    out["beam_seen"] = seen
     return out
 
 
@@ -593,6 +594,7 @@ def _sky_from_plane(site: Site, times: pd.DatetimeIndex, poa_measured: np.ndarra
         w = decompose(poa, clear, site, m, beam_seen, plane, spells_seen)
         w.loc[~measured, ["ghi", "dni", "dhi"]] = clear_sky
         w.loc[~measured, "dni_blind_sd"] = 0.0  # the clear-sky twin's own day
+        w.loc[~measured, "beam_seen"] = True
         for key, v in extra.items():
             w[key] = v
         weather[m] = w
@@ -744,7 +746,8 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
         ``wind_speed`` [m s⁻¹] (measured where the loggers read them, else the site's),
         ``clearness`` [-], ``valid``, ``measured_sky``, ``flag``, ``sky_source``,
         ``tracker_blind_sd_w`` [W]: the standard deviation of the tracker's expected power
-        from the beam guessed where the fixed plane cannot see it (0 elsewhere).
+        from the beam guessed where the fixed plane cannot see it (0 elsewhere), and
+        ``beam_seen``: where it sees it (the clear-sky fallback's days: everywhere).
     """
     from sim import twin
 
@@ -778,6 +781,7 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
     poa_tr = float(main["tracker_poa_global"].sum())
     per_w_m2 = float(main["tracker_power_w"].sum()) / poa_tr if poa_tr > 0 else 0.0
     out["tracker_blind_sd_w"] = per_w_m2 * weather["gti_dirint"]["dni_blind_sd"].to_numpy()
+    out["beam_seen"] = weather["gti_dirint"]["beam_seen"].to_numpy(bool)
     for k in ("poa_global", "poa_clear", "clearness", "valid", "measured_sky", "flag",
               "dni_extra", "sky_source"):
         out[k] = sensor[k].to_numpy()

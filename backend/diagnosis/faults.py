@@ -331,7 +331,11 @@ def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
         # still reading 0 W — has no shape to fit; its day is an underperformance alone
         out["scale"] = s0
         return out
-    clear = float(np.nanmean(day["clearness"].to_numpy()[daylight])) if daylight.any() else 0.0
+    # the plane's clearness where it sees the beam: behind it or grazing it a bright deck
+    # reads as clear (hours a summer day at high latitudes), which let overcast days be fitted
+    sees = daylight & (day["beam_seen"].to_numpy(bool) if "beam_seen" in day else True)
+    on = sees if sees.any() else daylight
+    clear = float(np.nanmean(day["clearness"].to_numpy()[on])) if on.any() else 0.0
     # the orientation fits on every 5th minute: the shape of a day needs no more; the
     # readings behind them are those minutes, or a slower logger's readings
     thin = use & (np.arange(use.size) % THIN_MIN == 0)
