@@ -754,9 +754,10 @@ def _day_number(date: str) -> int:
 def _soiling(days: list[dict[str, Any]], out: list[list[dict[str, Any]]], idx: list[int],
              s: np.ndarray, x: np.ndarray, slope: float, level: float, sse: float) -> None:
     """A steady decline of the daily scale from ``idx[0]`` on: ``soiling`` in % of the clean
-    level per day (the slope's standard error from the hinge fit's residuals)."""
+    level per day (the slope's standard error from the hinge fit's residuals), over at least
+    :data:`SOILING_MIN_DAYS` days (six had let a healthy run's two cloudy ends read as one)."""
     n = s.size
-    if n < SOILING_MIN_DAYS - 1:
+    if n < SOILING_MIN_DAYS:
         return
     sx = float(np.sum((x - x.mean()) ** 2))
     se = np.sqrt(sse / max(n - 2, 1) / sx) if sx > 0 else np.inf

@@ -88,8 +88,9 @@ MAX_DAYS = 400
 #: the minutes of the measured one; 25: the beam where the fixed plane is blind to it, the
 #: one its seen minutes make likely, and the band widened by that guess,
 #: sim.sky_sensor._unseen_beam, faults.blind_beam_sd_wh; 26: the shape fits' clearness
-#: gate read where the fixed plane sees the beam, ``beam_seen``).
-CACHE_VERSION = 26
+#: gate read where the fixed plane sees the beam, ``beam_seen``; 27: ``soiling`` over a
+#: week of days at least, faults.SOILING_MIN_DAYS).
+CACHE_VERSION = 27
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
