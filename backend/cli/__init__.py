@@ -63,9 +63,19 @@ def _tag_commands(parser: argparse.ArgumentParser) -> None:
                 _tag_commands(sub)
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """argparse's parser whose usage errors are one line, as the subcommands' own errors
+    (:func:`fail`): a bad ``--time`` printed the whole usage block first (a tester's
+    finding); ``--help`` still shows it."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (--help for usage)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """Build the top-level parser with every subcommand that is installed."""
-    parser = argparse.ArgumentParser(
+    """Build the top-level parser with every subcommand that is installed (their parsers
+    are of the top-level parser's class)."""
+    parser = _OneLineParser(
         prog="heliotwin",
         description="Digital twin and field dashboard for dual-axis solar trackers.",
     )

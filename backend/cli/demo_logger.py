@@ -49,10 +49,13 @@ def run(args: argparse.Namespace) -> int:
                 fail(f"--token: the service refuses it ({exc})", code=1)
             print(f"posted: {accepted} accepted, {duplicates} duplicates")
             return 0
-        demo.run(stop, backfill_days=args.backfill_days)
+        ran = demo.run(stop, backfill_days=args.backfill_days)
     except KeyboardInterrupt:
         stop.set()
+        ran = True
     finally:
         demo.close()
     print(f"demo logger stopped; {demo.posted} readings accepted")
+    if not ran:  # the reason is logged above (no service at --url, or --token refused)
+        fail(f"could not post to {args.url}: see the line above", code=1)
     return 0

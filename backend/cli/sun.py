@@ -31,8 +31,8 @@ def _parse_time(text: str) -> datetime:
         return datetime.now(UTC)
     try:
         return parse_instant(text, "--time")
-    except TimestampError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+    except TimestampError as exc:  # argparse names the argument itself
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--time: ")) from None
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -247,12 +247,14 @@ class DemoLogger:
         return False
 
     def run(self, stop: threading.Event, backfill_days: float = 0.0,
-            interval_s: float = 60.0) -> None:
-        """Back-fill, then post each new minute until ``stop`` is set."""
+            interval_s: float = 60.0) -> bool:
+        """Back-fill, then post each new minute until ``stop`` is set → True; False when it
+        could not: the service never answered, or it refuses the token (the CLI's exit
+        status says so)."""
         self.stop = stop
         if not self.wait_until_up(stop):
             logger.error("demo logger: %s did not come up", self.base_url)
-            return
+            return stop.is_set()
         try:
             if backfill_days > 0:
                 self.backfill(backfill_days)
@@ -266,4 +268,6 @@ class DemoLogger:
                 last = now_min
         except TokenRefused as exc:  # no reading would be taken: said once, not every minute
             logger.error("demo logger: the service refuses its token (%s); stopped", exc)
+            return False
+        return True
 

@@ -88,3 +88,17 @@ def test_a_refused_token_stops_the_posting() -> None:
     with pytest.raises(TokenRefused, match="401 unknown write token"):
         demo.post(_readings(2500))  # three batches of 1000: the first refused, no more asked
     assert len(calls) == 1 and demo.readings_dropped == 2500
+
+
+def test_run_says_it_could_not_post_when_the_token_is_refused() -> None:
+    """A tester's finding: ``heliotwin demo-logger`` with a wrong token logged the refusal
+    and exited 0; ``run`` now answers False, and the CLI exits 1."""
+    import threading
+
+    def handle(request: httpx.Request) -> httpx.Response:
+        if request.url.path == "/healthz":
+            return httpx.Response(200, json={"status": "ok"})
+        return httpx.Response(401, json={"detail": "unknown write token"})
+
+    demo = _logger_with(httpx.MockTransport(handle))
+    assert demo.run(threading.Event(), backfill_days=0.01) is False

@@ -96,6 +96,24 @@ def test_dropped_in_plant_appears(client: httpx.Client, plants_dir: Path) -> Non
         path.unlink()
 
 
+def test_a_bad_plant_file_is_not_served_and_not_named_known(client: httpx.Client,
+                                                           plants_dir: Path) -> None:
+    """A tester's finding: a plant file the service cannot load was left out of the list,
+    named among the known plants of a 404, and GET of it answered 500."""
+    bad = plants_dir / "badlat.json"
+    data = json.loads((plants_dir / "penarroya.json").read_text())
+    bad.write_text(json.dumps({**data, "plant_id": "badlat", "latitude_deg": 123.0}))
+    try:
+        assert "badlat" not in [p["plant_id"] for p in client.get("/api/v1/plants").json()]
+        r = client.get("/api/v1/plants/badlat")
+        assert r.status_code == 404, r.text
+        assert "not served" in r.json()["detail"] and "latitude_deg" in r.json()["detail"]
+        r = client.get("/api/v1/plants/atlantis")
+        assert r.status_code == 404 and "badlat" not in r.json()["detail"]
+    finally:
+        bad.unlink()
+
+
 def test_a_plant_file_with_a_polygon_collector(client: httpx.Client, plants_dir: Path) -> None:
     """Peñarroya's pivots with an L-shaped collector (``outline_m``): the plant shows its
     outline, ``/positions`` under sun tracking shades each collector as twoaxistracking does

@@ -108,12 +108,18 @@ def _time(text: str, field: str = "time") -> dt.datetime:
 
 
 def _plant_or_404(service: PlantService, plant_id: str) -> None:
+    """404 for a plant the service does not serve: no such file, or a file it cannot load —
+    left out of ``GET /plants`` as well (a tester's finding: that was a 500, and the 404's
+    list of known plants named it)."""
     try:
         service.get(plant_id)
-    except UnknownPlantError as exc:
-        raise HTTPException(404, str(exc)) from None
+    except UnknownPlantError:
+        known = ", ".join(p["plant_id"] for p in service.list()) or "none"
+        raise HTTPException(404, f"plant_id: no plant {plant_id[:60]!r}; known plants: "
+                                 f"{known}") from None
     except ValueError as exc:
-        raise HTTPException(500, f"plant {plant_id!r} has a bad config: {exc}") from None
+        raise HTTPException(404, f"plant_id: plant {plant_id!r} is not served, its file is "
+                                 f"invalid ({exc}); known plants are GET /api/v1/plants") from None
 
 
 def _strategy(strategy: str, plant: Plant | None = None) -> str:
