@@ -37,7 +37,11 @@ async function drawLayout() {
   const p = view.plant;
   const d = view.day;
   if (!p || !d) return;                 // no day loaded (clearDay said why)
-  if (!d.times.length) { showEmpty("chart-plant-layout", "No daylight on this day."); return; }
+  if (!d.times.length) {  // no instant: nor the previous plant's time and zone under it
+    showEmpty("chart-plant-layout", "No daylight on this day.");
+    $("plant-time-label").textContent = "";
+    return;
+  }
   const row = d.shaded_fraction[view.index] || [];
   const east = p.trackers.map((t) => t.east_m);
   const north = p.trackers.map((t) => t.north_m);
@@ -75,6 +79,7 @@ async function drawLayout() {
 
 async function drawShadeDay() {
   const d = view.day;
+  if (!d.times.length) { showEmpty("chart-plant-shade", "No daylight on this day."); return; }
   const tz = view.plant.timezone;
   const x = d.times.map((t) => new Date(t).toLocaleString("sv-SE", { timeZone: tz }));
   const shaded = d.shaded_fraction.map((r) => r.filter((v) => v > 0).length);
@@ -94,6 +99,13 @@ async function drawShadeDay() {
 
 async function drawStrategies() {
   const s = view.day.strategies;
+  if (!view.day.times.length) {  // a polar night: no energy to compare (a tester's finding:
+    // empty axes and a "0.0 %" shaded tile from 100 × null)
+    showEmpty("chart-plant-strategies", "No daylight on this day.");
+    $("plant-summary").replaceChildren(tile("Trackers", String(view.plant.trackers.length), view.plant.name),
+      tile("Daylight shaded", "—", "no daylight on this day"));
+    return;
+  }
   // PlantDayRead: the strategies the plant can take (PlantRead.strategies) and fixed
   const names = [...view.plant.strategies, "fixed"].filter((n) => s[n]);
   const y = names.map((n) => s[n].plant_energy_wh);
@@ -112,7 +124,8 @@ async function drawStrategies() {
   box.append(
     tile("Trackers", String(view.plant.trackers.length), view.plant.name),
     tile("Shading loss (sun)", `${num(sun.shading_loss_electrical_pct, 2)} %`, `bypass diodes; ${num(sun.shading_loss_area_pct, 2)} % by area`),
-    tile("Daylight shaded", `${num(100 * sun.fraction_of_daylight_any_shaded, 1)} %`, "of steps, any collector"),
+    tile("Daylight shaded", sun.fraction_of_daylight_any_shaded == null ? "—"
+      : `${num(100 * sun.fraction_of_daylight_any_shaded, 1)} %`, "of steps, any collector"),
     s.backtrack
       ? tile("Backtrack vs sun", sun.plant_energy_wh > 0 ? `${num(100 * (s.backtrack.plant_energy_wh / sun.plant_energy_wh - 1), 2)} %` : "—", "clear sky")
       : tile("Backtrack vs sun", "—", "a polygon collector takes sun tracking only"),
@@ -123,14 +136,22 @@ function drawSkyMap() {
   const p = view.plant;
   const d = view.day;
   const img = $("plant-sky-map");
-  if (!d || !d.times.length) { img.removeAttribute("src"); return; }
+  if (!d || !d.times.length) {  // no instant to map: no image (its alt text showed as broken)
+    img.removeAttribute("src");
+    img.hidden = true;
+    $("plant-chosen").textContent = d ? "No daylight on this day." : "";
+    return;
+  }
   const t = d.times[view.index];
   const strategy = $("plant-strategy").value;
   // the 3D page's plant view at this instant and strategy (frontend/js/twin.js)
   $("plant-3d").href = `#twin?plant=${enc(p.plant_id)}&strategy=${enc(strategy)}&time=${enc(t)}`;
   img.dataset.time = t;
   img.dataset.loaded = "";
-  img.onload = () => { img.dataset.loaded = t; };
+  // the previous instant's (or plant's) map is not shown under this one's caption while
+  // the new one loads (a tester's finding: 10–15 s of another plant's sky for a large plant)
+  img.style.opacity = "0.25";
+  img.onload = () => { img.dataset.loaded = t; img.style.opacity = ""; };
   // PlantRead.strategies: the sky map's grey region is the rectangle's shade-free test
   img.hidden = !p.strategies.includes("sky_scan");
   if (img.hidden) img.removeAttribute("src");
@@ -186,7 +207,19 @@ function clearDay(message) {
 }
 
 async function selectPlant(id) {
+  const before = view.plant?.plant_id;
   view.plant = await api(`/api/v1/plants/${enc(id)}`);
+  if (before && before !== id) {
+    // the sweep panel is "at this plant's place": another plant's curves and case shade
+    // (its solstice, its zone) stayed under the new plant (a tester's finding); a sweep
+    // still running there is no longer followed here
+    sweep.token++;
+    sweep.following = null;
+    $("sweep-cancel").hidden = true;
+    $("sweep-run").disabled = false;
+    clearSweep("Run a sweep at this plant's place.");
+    sweepSay({ status: "", message: "" });
+  }
   // the strategies this plant's collector can take (sun alone for a polygon)
   const select = $("plant-strategy");
   const keep = select.value;

@@ -154,8 +154,33 @@ def test_a_day_the_service_refuses_leaves_none_of_the_previous_days_figures(  # 
         assert page.get_attribute("body", "data-plant-loaded") is None
 
 
+def test_a_polar_night_says_no_daylight(page, server) -> None:  # type: ignore[no-untyped-def]
+    """A tester's plant at 69.65° N on the winter solstice: the service answers no times and
+    a null shaded fraction; the page showed "0.0 %" shaded (100 × null), empty axes and a
+    broken sky-map image."""
+    plant = json.loads((default_plants_dir() / "penarroya.json").read_text())
+    plant.update(plant_id="tromso", latitude_deg=69.65, longitude_deg=18.96,
+                 timezone="Europe/Oslo")
+    path = Path(server.env["HELIOTWIN_PLANTS_DIR"]) / "tromso.json"
+    path.write_text(json.dumps(plant))
+    try:
+        page.goto(server.url + "/#plant?day=2021-12-21")
+        page.wait_for_selector('body[data-plant-loaded="penarroya/2021-12-21"]',
+                               timeout=60_000)
+        page.select_option("#plant-select", "tromso")
+        page.wait_for_selector('body[data-plant-loaded="tromso/2021-12-21"]', timeout=60_000)
+        for chart in ("chart-plant-layout", "chart-plant-shade", "chart-plant-strategies"):
+            assert page.text_content(f"#{chart}") == "No daylight on this day.", chart
+        assert "—" in page.text_content("#plant-summary")
+        assert "0.0 %" not in page.text_content("#plant-summary")
+        assert page.evaluate("() => document.getElementById('plant-sky-map').hidden")
+        assert page.text_content("#plant-time-label") == ""  # not Peñarroya's 08:45 Madrid
+    finally:
+        path.unlink()
+
+
 def test_the_sweep_panel_runs_a_sweep_and_draws_its_shade_in_the_plants_time(
-        page, server) -> None:  # type: ignore[no-untyped-def]
+        page, server, polygon_plant: str) -> None:  # type: ignore[no-untyped-def]
     """The layout sweep from the Plant page (POST /api/v1/plants/sweeps on the service's
     own LocalCluster): its energy charts, and the densest case's shade through the winter
     solstice with times in the plant's zone (the axis said UTC; no browser test ran it)."""
@@ -185,6 +210,12 @@ def test_the_sweep_panel_runs_a_sweep_and_draws_its_shade_in_the_plants_time(
     assert params["timezone"] == "Europe/Madrid"
     ARTIFACTS.mkdir(exist_ok=True)
     page.locator("#chart-sweep-shade").screenshot(path=str(ARTIFACTS / "plant-sweep-shade.png"))
+    # another plant: the panel is "at this plant's place", so the sweep's figures go (a
+    # tester's finding: Peñarroya's curves and Madrid's solstice stayed under a Santiago plant)
+    page.select_option("#plant-select", polygon_plant)
+    page.wait_for_selector('body[data-plant-loaded="penarroya-l/2021-12-21"]')
+    assert page.get_attribute("body", "data-sweep-loaded") is None
+    assert page.text_content("#chart-sweep-energy") == "Run a sweep at this plant's place."
 
 
 def test_the_sweep_panel_sends_the_gcrs_as_typed(  # type: ignore[no-untyped-def]
