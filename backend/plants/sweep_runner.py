@@ -45,6 +45,7 @@ class SweepState:
     error: str | None = None
     cancel: bool = field(default=False, repr=False)
     spec: SweepSpec | None = field(default=None, repr=False)   # for a case's day of shade
+    cases: tuple[SweepCase, ...] = field(default=(), repr=False)  # … of the cases it runs
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON of the state (``SweepRunRead``)."""

@@ -342,6 +342,13 @@ def test_sweep_is_queued_polled_and_shows_a_day(client: httpx.Client) -> None:
     np.testing.assert_allclose(d["interior_shaded_fraction"], ref, atol=1e-5)  # 5 decimals
     assert max(d["interior_shaded_fraction"]) > 0.5          # morning and evening shade
     assert len(d["positions_m"]) == 25 and len(d["shaded_fraction"][0]) == 25
+    # a case the sweep did not run is named, not computed (a tester's finding: 200 for any)
+    for params, word in (({"layout": "square", "gcr": 0.22}, "gcr"),
+                         ({"layout": "diagonal", "gcr": 0.3}, "layout"),
+                         ({"layout": "square", "gcr": 0.3, "strategy": "backtrack"},
+                          "strategy")):
+        r = client.get(f"/api/v1/plants/sweeps/{acc['sweep_id']}/shade", params=params)
+        assert r.status_code == 422 and r.json()["detail"].startswith(f"{word}: "), r.text
 
 
 #: An L-shaped collector outline [m] about the pivot (12 m × 5 m less a 6 m × 2.5 m corner).

@@ -71,7 +71,7 @@ from backend.timestamps import (
 )
 from sim.plant.layout import Plant
 from sim.plant.strategies import check_strategy_collector, strategies_for
-from sim.plant.sweep import PLANT_LAYOUT, SweepCase, case_day_shade
+from sim.plant.sweep import SweepCase, case_day_shade
 
 router = APIRouter(prefix="/api/v1/plants", tags=["plants"])
 T = TypeVar("T")
@@ -271,7 +271,7 @@ async def create_sweep(body: SweepCreate, request: Request, ctx: ContextDep,
         if anonymous:
             ctx.limits.simulation_steps.refund(host, cost)
         raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
-    state.spec = spec
+    state.spec, state.cases = spec, tuple(cases)
     return Response(orjson.dumps({"sweep_id": state.sweep_id, "status": state.status,
                                   "progress": 0.0, "cases": state.total}),
                     status_code=202, media_type="application/json",
@@ -303,6 +303,24 @@ def cancel_sweep(sweep_id: str, runner: SweepRunnerDep) -> dict[str, Any]:
     return state.to_dict()
 
 
+def _swept_case(cases: tuple[SweepCase, ...], layout: str, gcr: float,
+                strategy: str) -> SweepCase:
+    """The sweep's case of that layout, GCR (to 1e-9) and strategy; else a 422 naming the
+    first of the three the sweep did not run, with the values it ran."""
+    for name, ran in (("layout", {c.layout for c in cases}),
+                      ("strategy", {c.strategy for c in cases})):
+        value = layout if name == "layout" else strategy
+        if value not in ran:
+            raise HTTPException(422, f"{name}: this sweep ran no case of {value[:60]!r}; its "
+                                     f"{name}s: {', '.join(sorted(ran))}")
+    for c in cases:
+        if (c.layout, c.strategy) == (layout, strategy) and abs(c.gcr - gcr) <= 1e-9:
+            return c
+    gcrs = sorted({c.gcr for c in cases if (c.layout, c.strategy) == (layout, strategy)})
+    raise HTTPException(422, f"gcr: this sweep ran no {layout} · {strategy} case at GCR {gcr:g}; "
+                             f"its GCRs there: {', '.join(f'{g:g}' for g in gcrs)}")
+
+
 @router.get("/sweeps/{sweep_id}/shade", response_model=SweepShadeRead,
             responses=_PRICED_DOC, openapi_extra=_OPTIONAL_TOKEN)
 async def sweep_shade(sweep_id: str, request: Request, ctx: ContextDep, caller: CallerDep,
@@ -310,24 +328,31 @@ async def sweep_shade(sweep_id: str, request: Request, ctx: ContextDep, caller: 
                       layout: Annotated[str, Query(max_length=100)],
                       gcr: Annotated[float, Query(gt=0, lt=1, allow_inf_nan=False)],
                       strategy: Annotated[str, Query()] = "sun",
-                      date: Annotated[str, Query(pattern=r"^\d{4}-\d{2}-\d{2}$")] = "2021-12-21",
+                      date: Annotated[str | None, Query(
+                          pattern=r"^\d{4}-\d{2}-\d{2}$",
+                          description="default: the winter solstice of the sweep's "
+                                      "hemisphere in 2021")] = None,
                       step_s: Annotated[float, Query(ge=300, le=3600, allow_inf_nan=False)] = 900
                       ) -> dict[str, Any]:
-    """One case of a sweep through a clear-sky day: every collector's shaded fraction
-    (priced as a plant day of its field; see the module docstring)."""
+    """One case the sweep ran (its layout — ``plant`` for a plant's —, GCR and strategy)
+    through a clear-sky day: every collector's shaded fraction (priced as a plant day of its
+    field; see the module docstring). A case it did not run is a 422 naming what differs (a
+    tester's finding: any GCR or strategy was computed, and a plant sweep's ``layout=square``
+    answered as the plant's)."""
     state = _sweep_or_404(runner, sweep_id)
     spec = getattr(state, "spec", None)
     if spec is None:
         raise HTTPException(404, f"sweep {sweep_id!r} has no field to show")
+    if date is None:
+        date = "2021-06-21" if spec.latitude < 0 else "2021-12-21"
     try:
         dt.date.fromisoformat(date)
     except ValueError:
         raise HTTPException(422, f"date: {date!r} is not a calendar date") from None
-    name = layout if spec.plant is None else PLANT_LAYOUT
     if strategy in STRATEGIES and strategy not in strategies_for(spec.collector):
         raise HTTPException(422, f"strategy: {strategy!r} needs a rectangular collector; this "
                                  "sweep's polygon takes 'sun'")
-    case = SweepCase(name, gcr, _strategy(strategy))
+    case = _swept_case(state.cases, layout, gcr, _strategy(strategy))
     cost_s = day_cost_s(spec.rows * spec.columns if spec.plant is None
                         else spec.plant.n_trackers, step_s, cost_factor(spec.collector))
     try:
