@@ -84,8 +84,13 @@ function summaryTiles(summary, station) {
     tile("Pointing error", `${num(summary.pointing_error_rms_mrad, 1)} mrad`,
       `${cover} · energy-weighted ${num(summary.pointing_error_energy_weighted_rms_mrad, 1)} · p95 ${num(summary.pointing_error_p95_mrad, 1)} · max ${num(summary.pointing_error_max_mrad, 1)} mrad`),
     tile("Pointing loss", energy(summary.pointing_loss_wh), `against ideal pointing · ${summary.receiver} receiver`),
-    tile("Actuators", energy(summary.actuator_energy_wh), `${num(summary.moves, 0)} moves`),
-    tile("Net gain", pct(summary.net_gain_pct), "tracking gain after the actuators' energy"),
+    // the ideal controller follows the sun exactly, with no drive: its "0 Wh · 0 moves"
+    // beside a tracker turning through 360° read as a measured zero (a tester's finding)
+    ...(summary.controller === "ideal"
+      ? [tile("Actuators", "—", "not modelled: the ideal controller follows the sun exactly"),
+        tile("Net gain", "—", "needs the actuators' energy: pick another controller")]
+      : [tile("Actuators", energy(summary.actuator_energy_wh), `${num(summary.moves, 0)} moves`),
+        tile("Net gain", pct(summary.net_gain_pct), "tracking gain after the actuators' energy")]),
   );
 }
 

@@ -39,6 +39,8 @@ def test_a_year_at_one_minute_waits_for_its_series_and_draws_both_charts(page, s
     assert done.startswith("done in"), done
     tiles = page.text_content("#sim-summary") or ""
     assert "366.0 days" in tiles and "clear sky" in tiles
+    # the ideal controller (the form's default) has no drive model: said, not "0 Wh · 0 moves"
+    assert "ideal" in tiles and "not modelled" in tiles and "0 moves" not in tiles
     # both charts: 2 power traces of ~2,000 buckets; the first day's angles; 366 daily bars
     assert _points(page, "chart-sim-power") > 3000
     assert _points(page, "chart-sim-angles") > 0
