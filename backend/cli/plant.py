@@ -148,7 +148,8 @@ def run_list(args: argparse.Namespace) -> int:
                           for p in plants]))
     else:
         for p in plants:
-            print(f"{p.plant_id}\t{p.n_trackers} trackers\t{p.name}")
+            print(f"{p.plant_id}\t{p.n_trackers} tracker{'' if p.n_trackers == 1 else 's'}"
+                  f"\t{p.name}")
     return 0
 
 

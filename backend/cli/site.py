@@ -159,7 +159,10 @@ def create(args: argparse.Namespace) -> int:
     if args.from_file is not None:
         try:
             config = json.loads(args.from_file.read_text())
-        except (OSError, json.JSONDecodeError) as exc:
+        except json.JSONDecodeError as exc:
+            fail(f"--from-file {args.from_file}: not a JSON site file ({exc.msg} at line "
+                 f"{exc.lineno}, column {exc.colno})")
+        except OSError as exc:
             fail(f"--from-file {args.from_file}: {exc}")
         if isinstance(config, dict) and config.get("site_id") != args.site_id:
             fail(f"--from-file: its site_id {config.get('site_id')!r} is not --id "
@@ -279,7 +282,12 @@ def validate(args: argparse.Namespace) -> int:
             site = site_from_dict(data, where=str(path))
             if path.stem != site.site_id:
                 raise ValueError(f"{path}: site_id {site.site_id!r} does not match the file name")
-        except (OSError, json.JSONDecodeError, ValueError) as exc:
+        except json.JSONDecodeError as exc:  # said as what it is, not the parser's words
+            print(f"{path}: not a JSON site file ({exc.msg} at line {exc.lineno}, column "
+                  f"{exc.colno})", file=sys.stderr)
+            bad += 1
+            continue
+        except (OSError, ValueError) as exc:
             print(f"{exc}" if isinstance(exc, ValueError) and str(path) in str(exc)
                   else f"{path}: {exc}", file=sys.stderr)
             bad += 1
