@@ -8,6 +8,7 @@ from __future__ import annotations
 import datetime as dt
 import functools
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -28,6 +29,23 @@ from tests.sim.realistic_sky import logger_days
 SITE = load_site("tehuantepec")
 FIRST = pd.Timestamp("2026-02-02", tz=SITE.timezone)
 DAYS, FAULT_DAY, SEED = 6, 3, 31
+#: Far sites of these tests: latitude, longitude, zone, altitude [m], fixed tilt and azimuth [°]
+GOLDEN = (39.74, -105.18, "America/Denver", 1828.0, 39.0, 180.0)  # the RMIS station
+TROMSO = (69.65, 18.96, "Europe/Oslo", 100.0, 50.0, 180.0)
+
+
+def _elsewhere(place: tuple[float, float, str, float, float, float], first_day: str, seed: int
+               ) -> tuple[Any, pd.DataFrame, list[dict[str, Any]]]:
+    """Tehuantepec's arrays at ``place`` with its own fixed plane: six healthy generated days
+    from ``first_day`` (seed ``seed``) → (logged days, expectation, days' features)."""
+    lat, lon, zone, altitude, tilt, azimuth = place
+    site = replace(SITE, latitude=lat, longitude=lon, timezone=zone, altitude=altitude,
+                   arrays={**SITE.arrays, "fixed": replace(
+                       SITE.arrays["fixed"], surface_tilt=tilt, surface_azimuth=azimuth)})
+    first = pd.Timestamp(first_day, tz=zone)
+    d = logger_days(site, first, 6, seed)
+    e = sky_sensor.weather_aware_twin(site, first, first + pd.Timedelta(days=6), d.fixed_power_w)
+    return d, e, features_by_day(site, first, e, d.tracker_power_w)
 
 
 @functools.cache
@@ -92,13 +110,8 @@ def test_six_days_are_no_soiling_trend() -> None:
     rule let six through: a healthy 6-day run at Golden in June (development seed 1) whose
     partly cloudy first and last days read −4.4 % and +5.1 % was named ``soiling`` on all
     six days (and the same seed at Madrid and Freiburg). Now a week or more of days."""
-    site = replace(SITE, latitude=39.74, longitude=-105.18, timezone="America/Denver",
-                   altitude=1828.0, arrays={**SITE.arrays, "fixed": replace(
-                       SITE.arrays["fixed"], surface_tilt=39.0, surface_azimuth=180.0)})
-    first = pd.Timestamp("2026-06-10", tz=site.timezone)
-    d = logger_days(site, first, 6, 1)
-    e = sky_sensor.weather_aware_twin(site, first, first + pd.Timedelta(days=6), d.fixed_power_w)
-    found = faults_over_days(features_by_day(site, first, e, d.tracker_power_w))
+    _, _, days = _elsewhere(GOLDEN, "2026-06-10", 1)
+    found = faults_over_days(days)
     assert not [f for day in found for f in day if f["kind"] == "soiling"], found
 
 
@@ -238,13 +251,8 @@ def test_a_summer_dawn_behind_the_fixed_plane_is_not_read_as_a_beam() -> None:
     +4.1, +1.6 and +3.3 %; since the beam there is the one the seen minutes make likely
     (sky_sensor._unseen_beam), +1.2, +2.9 and +3.0 % (the clear days −0.6 … +0.3 %), no
     finding."""
-    site = replace(SITE, latitude=39.74, longitude=-105.18, timezone="America/Denver",
-                   altitude=1828.0, arrays={**SITE.arrays, "fixed": replace(
-                       SITE.arrays["fixed"], surface_tilt=39.0, surface_azimuth=180.0)})
-    first = pd.Timestamp("2026-06-10", tz=site.timezone)
-    d = logger_days(site, first, 6, 11)
-    e = sky_sensor.weather_aware_twin(site, first, first + pd.Timedelta(days=6), d.fixed_power_w)
-    found = faults_over_days(features_by_day(site, first, e, d.tracker_power_w))
+    d, e, days = _elsewhere(GOLDEN, "2026-06-10", 11)
+    found = faults_over_days(days)
     assert d.kinds.count("clear") < 6  # the cloudy days this is about
     for k in range(6):
         sl = slice(k * 1440, (k + 1) * 1440)
@@ -272,13 +280,7 @@ def test_a_december_day_behind_a_plane_facing_north_is_no_underperformance(
     (faults.blind_beam_sd_wh): measured +2.7 … +3.5 % and +8.5 … +17.8 %, every day's truth
     inside its band (Palmer's widened to 11–18 % on its cloudy days), no finding; the clear
     days within 1.6 %."""
-    site = replace(SITE, latitude=latitude, longitude=longitude, timezone=zone,
-                   altitude=altitude, arrays={**SITE.arrays, "fixed": replace(
-                       SITE.arrays["fixed"], surface_tilt=tilt, surface_azimuth=0.0)})
-    first = pd.Timestamp("2026-11-28", tz=site.timezone)
-    d = logger_days(site, first, 6, 11)
-    e = sky_sensor.weather_aware_twin(site, first, first + pd.Timedelta(days=6), d.fixed_power_w)
-    days = features_by_day(site, first, e, d.tracker_power_w)
+    d, e, days = _elsewhere((latitude, longitude, zone, altitude, tilt, 0.0), "2026-11-28", 11)
     found = faults_over_days(days)
     assert d.kinds.count("clear") < 6  # the cloudy days this is about
     for k in range(6):
@@ -298,13 +300,8 @@ def test_an_overcast_midnight_sun_day_is_no_shape_fault() -> None:
     was named ``stuck`` (generated held-out skies, seed 13: day 2 at confidence ≥ 0.5; seeds
     11 and 14 likewise). The gate now reads the plane's clearness where it sees the beam
     (``beam_seen``): no shape fault on any day."""
-    site = replace(SITE, latitude=69.65, longitude=18.96, timezone="Europe/Oslo", altitude=100.0,
-                   arrays={**SITE.arrays, "fixed": replace(
-                       SITE.arrays["fixed"], surface_tilt=50.0, surface_azimuth=180.0)})
-    first = pd.Timestamp("2026-06-10", tz=site.timezone)
-    d = logger_days(site, first, 6, 13)
-    e = sky_sensor.weather_aware_twin(site, first, first + pd.Timedelta(days=6), d.fixed_power_w)
-    found = faults_over_days(features_by_day(site, first, e, d.tracker_power_w))
+    d, _, days = _elsewhere(TROMSO, "2026-06-10", 13)
+    found = faults_over_days(days)
     assert d.kinds.count("overcast") >= 2
     for k in range(6):
         assert not [f for f in found[k] if f["confidence"] >= 0.5
