@@ -118,7 +118,7 @@ def _plant_or_404(service: PlantService, plant_id: str) -> None:
         raise HTTPException(404, f"plant_id: no plant {plant_id[:60]!r}; known plants: "
                                  f"{known}") from None
     except ValueError as exc:
-        raise HTTPException(404, f"plant_id: plant {plant_id!r} is not served, its file is "
+        raise HTTPException(404, f"plant_id: plant {plant_id[:60]!r} is not served, its file is "
                                  f"invalid ({exc}); known plants are GET /api/v1/plants") from None
 
 
@@ -307,9 +307,8 @@ def _swept_case(cases: tuple[SweepCase, ...], layout: str, gcr: float,
                 strategy: str) -> SweepCase:
     """The sweep's case of that layout, GCR (to 1e-9) and strategy; else a 422 naming the
     first of the three the sweep did not run, with the values it ran."""
-    for name, ran in (("layout", {c.layout for c in cases}),
-                      ("strategy", {c.strategy for c in cases})):
-        value = layout if name == "layout" else strategy
+    for name, value, ran in (("layout", layout, {c.layout for c in cases}),
+                             ("strategy", strategy, {c.strategy for c in cases})):
         if value not in ran:
             raise HTTPException(422, f"{name}: this sweep ran no case of {value[:60]!r}; its "
                                      f"{name}s: {', '.join(sorted(ran))}")
