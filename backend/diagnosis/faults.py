@@ -213,8 +213,11 @@ def band_uncertainty(day: pd.DataFrame) -> float:
     if "tracker_blind_sd_w" not in day:
         return u
     expected_wh = float(day["tracker_power_w"].sum()) / 60.0
-    return float(np.hypot(u, 2.0 * blind_beam_sd_wh(day) / expected_wh)) if expected_wh > 0 \
-        else u
+    if expected_wh <= 0:
+        return u
+    # at most 1: a band whose lower edge is 0 says all it can (a reviewer's finding: u of
+    # 1e5 on a day of little expected energy)
+    return float(min(np.hypot(u, 2.0 * blind_beam_sd_wh(day) / expected_wh), 1.0))
 
 
 def blind_beam_sd_wh(day: pd.DataFrame) -> float:

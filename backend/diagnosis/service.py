@@ -89,8 +89,9 @@ MAX_DAYS = 400
 #: one its seen minutes make likely, and the band widened by that guess,
 #: sim.sky_sensor._unseen_beam, faults.blind_beam_sd_wh; 26: the shape fits' clearness
 #: gate read where the fixed plane sees the beam, ``beam_seen``; 27: ``soiling`` over a
-#: week of days at least, faults.SOILING_MIN_DAYS).
-CACHE_VERSION = 27
+#: week of days at least, faults.SOILING_MIN_DAYS; 28: the blind beam's spread on a minute
+#: without a reading, a day without a seen minute and a run without one; u at most 1).
+CACHE_VERSION = 28
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99

@@ -247,6 +247,12 @@ def expectation(site: Site, lg: Logged, day: pd.Timestamp, path: str,
                                                        sensors=sensors, fine=fine)
     end = day + pd.Timedelta(days=1)
     main = twin.simulate(site, day, end, weather=weather["gti_dirint"]).series
+    # the sky frame with what the diagnosis's band reads (faults.band_uncertainty): the
+    # main sky's expected power and its blind beam's spread (a reviewer's finding: without
+    # them the bench's RMIS band left out the widening)
+    sky_frame = sky_frame.assign(
+        tracker_power_w=main["tracker_power_w"].to_numpy(),
+        tracker_blind_sd_w=sky_sensor.tracker_blind_sd_w(main, weather["gti_dirint"]))
     out = {"times": times, "tracker_poa": np.nan_to_num(main["tracker_poa_global"].to_numpy()),
            "tracker_power_w": main["tracker_power_w"].to_numpy(), "sky": sky_frame}
     if second_sky:

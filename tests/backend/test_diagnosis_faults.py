@@ -293,6 +293,30 @@ def test_a_december_day_behind_a_plane_facing_north_is_no_underperformance(
         assert not [f for f in found[k] if f["confidence"] >= 0.5], (k, found[k])
 
 
+def test_a_midday_dropout_of_the_fixed_logger_widens_the_band() -> None:
+    """A reviewer's finding: minutes without a fixed-array reading while the sun is in front
+    of the plane took the clear beam the clearness filled across the gap suggests, with no
+    spread, so a healthy day's truth fell under its band (Golden, June, the fixed logger
+    silent 11:00–14:00 each day; seeds 11–18: 5 of 48 days under it, 4 now). Those minutes
+    now carry the blind beam's spread (sim.sky_sensor._unseen_beam): seed 14's first day,
+    overcast, is inside its band."""
+    site = replace(SITE, latitude=GOLDEN[0], longitude=GOLDEN[1], timezone=GOLDEN[2],
+                   altitude=GOLDEN[3], arrays={**SITE.arrays, "fixed": replace(
+                       SITE.arrays["fixed"], surface_tilt=GOLDEN[4], surface_azimuth=GOLDEN[5])})
+    first = pd.Timestamp("2026-06-10", tz=site.timezone)
+    d = logger_days(site, first, 6, 14)
+    fixed = d.fixed_power_w.copy()
+    hour = d.times.tz_convert(site.timezone).hour
+    gap = (hour >= 11) & (hour < 14)
+    fixed[gap] = np.nan
+    e = sky_sensor.weather_aware_twin(site, first, first + pd.Timedelta(days=6), fixed)
+    days = features_by_day(site, first, e, d.healthy_tracker_power_w)
+    assert d.kinds[0] == "overcast"
+    energy = days[0]["features"]["energy"]
+    assert energy["measured_wh"] >= energy["low_wh"], energy
+    assert (e["tracker_blind_sd_w"].to_numpy()[gap] > 0).mean() > 0.9
+
+
 def test_an_overcast_midnight_sun_day_is_no_shape_fault() -> None:
     """Tromsø (69.7° N) in June, the fixed plane at 50° facing south: the sun circles the sky
     and is behind the plane half the day, where a bright deck reads as clear, so an overcast
