@@ -288,13 +288,14 @@ def readings_fine(ts_s: np.ndarray, values: np.ndarray, grid_s: np.ndarray) -> n
                                SPELL_SEEN_MAX_SPACING_S))
 
 
-def _clear_beam(poa: np.ndarray, clear: pd.DataFrame
+def _clear_beam(k: np.ndarray, clear: pd.DataFrame
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where the plane sees a clear line to the sun: the clear beam's weight per minute,
     its DNI [W m⁻²] and the clear-spell mask.
 
-    With k = POA/POA_clear the plane's clearness, the DNI there is the clear-sky DNI
-    (Ineichen) × min(k, 1); elsewhere GTI-DIRINT's, which runs low in clear skies (its
+    With ``k`` = POA/POA_clear the plane's clearness (:func:`_clearness`), the DNI there is
+    the clear-sky DNI (Ineichen) × min(k, 1); elsewhere GTI-DIRINT's, which runs low in
+    clear skies (its
     Kt′ bins average over turbid and clean air; Perez et al. 1992), by up to 40 % at low
     sun on the fixed plane's grazing incidence. Two rules, the larger weight wins:
 
@@ -308,7 +309,6 @@ def _clear_beam(poa: np.ndarray, clear: pd.DataFrame
 
     The diffuse follows from :func:`_closure`.
     """
-    k = _clearness(poa, clear)
     roll = pd.Series(k).rolling(11, center=True, min_periods=1)
     steady = (roll.max() - roll.min()).to_numpy() < STEADY_RANGE
     w = np.maximum(np.clip((k - 0.85) / 0.15, 0.0, 1.0), np.where(steady, _clear_sky_can(k), 0.0))
@@ -469,7 +469,8 @@ def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
     day = (clear["apparent_elevation"].to_numpy() > 2.0) & (poa > 0)
     ghi = np.zeros(poa.size)
     dni = np.zeros(poa.size)
-    w_clear, dni_clear_beam, spell = _clear_beam(poa, clear)
+    k = _clearness(poa, clear)
+    w_clear, dni_clear_beam, spell = _clear_beam(k, clear)
     if model == "clearsky_erbs":
         poa_clear = clear["poa_clear"].to_numpy()
         ghi[day] = poa[day] * clear["ghi_clear"].to_numpy()[day] / np.maximum(poa_clear[day], 1.0)
@@ -517,8 +518,7 @@ def decompose(poa_global: np.ndarray, clear: pd.DataFrame, site: Site,
     dni_clear = clear["dni_clear"].to_numpy()
     up = clear["apparent_elevation"].to_numpy() > 0.0
     seen = up & (dni_clear > 0) & (True if beam_seen is None else np.asarray(beam_seen, bool))
-    dni, blind_sd = _unseen_beam(dni, clear, seen, up, _clearness(poa, clear),
-                                 w_clear * dni_clear_beam, site)
+    dni, blind_sd = _unseen_beam(dni, clear, seen, up, k, w_clear * dni_clear_beam, site)
     out = pd.DataFrame(0.0, index=clear.index, columns=["ghi", "dni", "dhi"])
     out.loc[up, :] = np.column_stack(_closure(poa[up], dni[up], clear[up], site, fixed))
     out["dni_blind_sd"] = blind_sd  # the diagnosis's band widens by it (faults.band_uncertainty)
