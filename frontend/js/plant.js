@@ -214,9 +214,7 @@ async function selectPlant(id) {
     // (its solstice, its zone) stayed under the new plant (a tester's finding); a sweep
     // still running there is no longer followed here
     sweep.token++;
-    sweep.following = null;
-    $("sweep-cancel").hidden = true;
-    $("sweep-run").disabled = false;
+    sweepIdle();
     clearSweep("Run a sweep at this plant's place.");
     sweepSay({ status: "", message: "" });
   }
@@ -266,6 +264,13 @@ function sweepSay({ status, message } = {}) {
     $("sweep-message").textContent = message;
     $("sweep-message").hidden = !message;
   }
+}
+
+/** No sweep followed: its Cancel hidden, Run offered again. */
+function sweepIdle() {
+  sweep.following = null;
+  $("sweep-cancel").hidden = true;
+  $("sweep-run").disabled = false;
 }
 
 /** Nothing of an earlier sweep stays while another is asked for, nor after it is refused: a
@@ -416,11 +421,7 @@ async function runSweep(ev) {
     sweepSay({ status: "", message: `Sweep: ${err.message}` });
     banner(`Sweep: ${err.message}`, "error");
   } finally {
-    if (token === sweep.token) {
-      sweep.following = null;
-      $("sweep-cancel").hidden = true;
-      $("sweep-run").disabled = false;
-    }
+    if (token === sweep.token) sweepIdle();
   }
 }
 
