@@ -53,6 +53,15 @@ def client(server: InProcessServer) -> Iterator[httpx.Client]:
         yield c
 
 
+@pytest.fixture()
+def my_roof(client: httpx.Client) -> str:
+    """The hand-written site, made if this test is the first to need it (each test stands
+    alone: run in any order, none relies on another having made its site)."""
+    r = client.put("/api/v1/sites/my-roof", json=HAND_WRITTEN, headers=bearer(ADMIN))
+    assert r.status_code in (200, 201), r.text
+    return "my-roof"
+
+
 def _sites_dir(server: InProcessServer) -> Path:
     return Path(server.extra_env["HELIOTWIN_SITES_DIR"])
 
@@ -69,25 +78,31 @@ def test_the_schema_endpoint_serves_the_shipped_schema(client: httpx.Client) -> 
 
 def test_creating_a_site_needs_the_admin_token(client: httpx.Client,
                                                server: InProcessServer) -> None:
-    url = "/api/v1/sites/my-roof"
-    r = client.put(url, json=HAND_WRITTEN)
+    url = "/api/v1/sites/new-roof"
+    body = {**HAND_WRITTEN, "site_id": "new-roof"}
+    r = client.put(url, json=body)
     assert r.status_code == 401 and "admin token" in r.json()["detail"]
-    r = client.put(url, json=HAND_WRITTEN, headers=bearer(server.token("tehuantepec")))
+    r = client.put(url, json=body, headers=bearer(server.token("tehuantepec")))
     assert r.status_code == 403 and "only the admin token" in r.json()["detail"]
-    assert not (_sites_dir(server) / "my-roof.json").exists()
-    r = client.put(url, json=HAND_WRITTEN, headers=bearer(ADMIN))
+    assert not (_sites_dir(server) / "new-roof.json").exists()
+    before = {s["site_id"] for s in client.get("/api/v1/sites").json()}
+    r = client.put(url, json=body, headers=bearer(ADMIN))
     assert r.status_code == 201, r.text
     body = r.json()
     assert body["created"] and body["origin"] == "user" and not body["overrides_builtin"]
     assert body["arrays"]["fixed"]["surface_tilt_deg"] == 36.0
-    ids = [s["site_id"] for s in client.get("/api/v1/sites").json()]
-    assert sorted(ids) == ["guadalajara_fisheye", "my-roof", "tehuantepec"]
-    stored = json.loads((_sites_dir(server) / "my-roof.json").read_text())
+    ids = {s["site_id"] for s in client.get("/api/v1/sites").json()}
+    assert ids == before | {"new-roof"}
+    assert {"guadalajara_fisheye", "tehuantepec"} <= ids
+    stored = json.loads((_sites_dir(server) / "new-roof.json").read_text())
     assert stored["latitude_deg"] == 36.1 and "$schema" not in stored
+    r = client.put(url, json={**HAND_WRITTEN, "site_id": "new-roof"}, headers=bearer(ADMIN))
+    assert r.status_code == 200 and not r.json()["created"]  # a second PUT replaces it
 
 
 def test_the_new_site_takes_readings_and_has_a_twin(client: httpx.Client,
-                                                    server: InProcessServer) -> None:
+                                                    server: InProcessServer,
+                                                    my_roof: str) -> None:
     token = server.token("my-roof")  # the CLI knows the site once the service made it
     day = dt.date.today() - dt.timedelta(days=3)
     ts = dt.datetime(day.year, day.month, day.day, 12, tzinfo=ZoneInfo("America/New_York"))
@@ -142,7 +157,8 @@ def test_a_site_whose_arrays_the_twin_does_not_know_stores_readings_but_has_no_d
     ({"name": "my\u0000roof"}, "body: name: holds a control character"),
 ])
 def test_a_malformed_site_is_a_422_naming_the_field(client: httpx.Client, server: InProcessServer,
-                                                    change: dict, words: str) -> None:
+                                                    my_roof: str, change: dict,
+                                                    words: str) -> None:
     before = (_sites_dir(server) / "my-roof.json").read_text()
     r = client.put("/api/v1/sites/my-roof", json={**HAND_WRITTEN, **change}, headers=bearer(ADMIN))
     assert r.status_code == 422
@@ -194,13 +210,21 @@ def test_a_zone_on_another_hour_grid_is_refused(client: httpx.Client,
 
 
 def test_user_sites_are_there_after_a_restart_and_run_in_simulate(
-        server: InProcessServer, heliotwin_cli: Callable) -> None:
+        client: httpx.Client, server: InProcessServer, heliotwin_cli: Callable,
+        my_roof: str) -> None:
+    config = client.get("/api/v1/sites/tehuantepec/config").json()
+    config["name"] = "Tehuantepec, renamed"  # a built-in site overridden
+    r = client.put("/api/v1/sites/tehuantepec", json=config,
+                   headers=bearer(server.token("tehuantepec", scope="site")))
+    assert r.status_code == 200, r.text
+    client.close()
     server.stop()
     server.start()
     with server.client(timeout_s=60) as c:
         sites = {s["site_id"]: s for s in c.get("/api/v1/sites").json()}
     assert {"my-roof", "tehuantepec", "guadalajara_fisheye"} <= set(sites)
-    assert sites["tehuantepec"]["arrays"]["fixed"]["surface_tilt_deg"] == 45.0
+    assert sites["tehuantepec"]["name"] == "Tehuantepec, renamed"
+    assert sites["tehuantepec"]["origin"] == "user"
     assert sites["guadalajara_fisheye"]["origin"] == "builtin"
     run = heliotwin_cli("simulate", "--site", "my-roof", "--start", "2024-06-21", "--end",
                         "2024-06-22", "--step-s", "600", "--json", env=server.env)
