@@ -303,6 +303,49 @@ def sky_clock(day: pd.DataFrame) -> dict[str, float] | None:
     return {"offset_s": 60.0 * best[1], "residual": best[0], "residual_at_0": shifted(0)[0]}
 
 
+#: Why the readings the sky comes from were refused, by flag (sim.sky_sensor.FLAGS), for
+#: ``sky_unusable``'s detail: what a logger or a site does to make them so.
+UNUSABLE_CAUSES = {
+    "zero": "0 W or nearly (at most 0.5 % of the array's rating) while the clear sky gave "
+            "over 200 W m⁻²: a tripped breaker or inverter, snow on the modules, power sent "
+            "in kW where W are asked, or the logger's clock or UTC offset hours off (its "
+            "power then comes at night)",
+    "above_clear_sky": "above what a clear sky allows the array: power in the wrong unit, "
+                       "more modules than the site's config says, or the logger's clock or "
+                       "UTC offset hours off",
+    "stale": "one value held for readings on end: a frozen logger",
+    "saturated": "at the logger's saturation power",
+}
+
+
+def sky_unusable(day: pd.DataFrame) -> dict[str, Any] | None:
+    """``{"share_pct", "flag"}`` for a day whose sky fell back to the clear sky
+    (:func:`sim.sky_sensor.main_sky_source`) though the fixed array's readings cover at
+    least half of its daylight minutes: the share [%] of those readings refused, and the
+    commonest reason (a :data:`sim.sky_sensor.FLAGS` name). None otherwise — a day with a
+    measured sky, or without readings (a silent logger is not a wrong one).
+
+    Such a day's expectation is the clear-sky twin's and its tracker is not judged, which
+    said nothing where something plainly was wrong: both arrays reading 0 W all day (a
+    tripped site breaker), power posted in kW, local time stamped as UTC — PR 0.000–0.98
+    and no finding (a tester's finding)."""
+    if sky_sensor.main_sky_source(day) != "clear_sky":
+        return None
+    daylight = day["poa_clear"].to_numpy() > 20.0
+    flag = day["flag"].to_numpy().astype(np.int64)
+    read = daylight & ((flag & sky_sensor.FLAGS["missing"]) == 0)
+    if not daylight.any() or read.sum() < 0.5 * daylight.sum():
+        return None
+    counts = {name: int(np.count_nonzero(read & ((flag & bit) > 0)))
+              for name, bit in sky_sensor.FLAGS.items() if name in UNUSABLE_CAUSES}
+    worst = max(counts, key=lambda name: counts[name])
+    if counts[worst] == 0:
+        return None
+    refused = read & ((flag & ~(sky_sensor.FLAGS["night"] | sky_sensor.FLAGS["missing"])) > 0)
+    return {"share_pct": round(100.0 * float(refused.sum()) / float(read.sum()), 1),
+            "flag": worst}
+
+
 def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
                  first_min: int = 0, spacing_s: float | None = None) -> dict[str, Any]:
     """The fitted explanations of one day (see the module docstring), JSON-ready.
@@ -417,6 +460,8 @@ def features_by_day(site: Site, first_day: pd.Timestamp, e: pd.DataFrame,
         sl = slice(k * 1440, (k + 1) * 1440)
         day, m = e.iloc[sl], tracker_power_w[sl]
         f = day_features(site, day, m, spacing_s=spacing_s)
+        if unusable := sky_unusable(day):
+            f["sky_unusable"] = unusable
         if day["measured_sky"].to_numpy(bool).any() and np.isfinite(m).any():
             ts = day.index.as_unit("s").asi8
             cover = np.isfinite(m)
@@ -530,6 +575,15 @@ def faults_over_days(days: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
                            "detail": detail})
         else:
             dropout_since = None
+    for i, d in enumerate(days):
+        if u := d["features"].get("sky_unusable"):
+            out[i].append({"kind": "sky_unusable", "confidence": 1.0, "since": d["date"],
+                           "magnitude": u["share_pct"], "unit": "%",
+                           "detail": f"the fixed array's readings, the sky's source, were "
+                                     f"refused on {u['share_pct']:.0f} % of the daylight "
+                                     f"minutes they cover, most of them "
+                                     f"{UNUSABLE_CAUSES[u['flag']]}; the day's expectation "
+                                     f"is the clear sky's and the tracker is not judged"})
     _underperformance(days, out)
     _module_loss(days, out)
     for i in _sky_clock_offset(days, out):  # the tracker judged under a shifted sky: not at all

@@ -46,6 +46,7 @@ from backend.diagnosis.faults import (
     energy_features,
     faults_over_days,
     missing_daylight_min,
+    sky_unusable,
 )
 from backend.diagnosis.mount import mount_faults, read_observations
 from backend.diagnosis.weather_twin import site_minutes, sky_source
@@ -90,8 +91,9 @@ MAX_DAYS = 400
 #: sim.sky_sensor._unseen_beam, faults.blind_beam_sd_wh; 26: the shape fits' clearness
 #: gate read where the fixed plane sees the beam, ``beam_seen``; 27: ``soiling`` over a
 #: week of days at least, faults.SOILING_MIN_DAYS; 28: the blind beam's spread on a minute
-#: without a reading, a day without a seen minute and a run without one; u at most 1).
-CACHE_VERSION = 28
+#: without a reading, a day without a seen minute and a run without one; u at most 1;
+#: 29: the fixed array's power before a GHI pyranometer, sim.sky_sensor.weather_from_fixed).
+CACHE_VERSION = 29
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
@@ -186,6 +188,8 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
                                                spacing_s) if whole \
         else {"missing_daylight_min": missing_daylight_min(e_day, tr_day, elapsed_min,
                                                            first_min)}
+    if elapsed_min is None and not cut and (unusable := sky_unusable(e_day)):
+        features["sky_unusable"] = unusable
     u = band_uncertainty(e_day)
     if whole and measured_tr is not None:
         energy = energy_features(measured_tr, matched, matched_b, exp_a, u)

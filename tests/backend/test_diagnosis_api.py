@@ -149,20 +149,26 @@ def test_a_day_without_readings_expects_the_clear_sky_twin(client, live_server,
     assert empty["gain_expected_pct"] == pytest.approx(twin["twin_gain_pct"], abs=0.1)
 
 
-def test_a_pyranometer_on_the_logger_is_the_days_sky(client, live_server) -> None:
-    """Readings that carry a GHI pyranometer and an air thermometer (the fixed array's
-    logger) over HTTP: those days' sky is the sensor's, named in the answer, on the
-    diagnosis and on ``source=twin_weather`` alike; held-out seed 23."""
-    site = load_site("tehuantepec")
-    first = "2025-08-04"
-    d = logger_days(site, pd.Timestamp(first, tz=site.timezone), 3, seed=23)
-    fixed = _readings(d.times, d.fixed_power_w, "fixed")
-    by_ts = {r["ts"]: r for r in fixed}
+def _with_pyranometer(readings: list[dict], d) -> list[dict]:
+    """``readings`` (one logger's) carrying the GHI pyranometer and the air thermometer of
+    the logged days ``d`` at their times."""
+    by_ts = {r["ts"]: r for r in readings}
     for t, g, temp in zip(d.times, d.ghi_w_m2, d.temp_air_c, strict=True):
         if t.isoformat() in by_ts:
             by_ts[t.isoformat()].update(ghi_w_m2=float(g), temp_air_c=float(temp))
+    return readings
+
+
+def test_a_pyranometer_on_the_logger_is_the_days_sky(client, live_server) -> None:
+    """Readings that carry a GHI pyranometer and an air thermometer on the tracker's logger,
+    no fixed array reading (a site without a reference array) over HTTP: those days' sky is
+    the sensor's, named in the answer, on the diagnosis and on ``source=twin_weather``
+    alike; held-out seed 23."""
+    site = load_site("tehuantepec")
+    first = "2025-08-04"
+    d = logger_days(site, pd.Timestamp(first, tz=site.timezone), 3, seed=23)
     _post(client, live_server.write_token,
-          fixed + _readings(d.times, d.tracker_power_w, "tracker"))
+          _with_pyranometer(_readings(d.times, d.tracker_power_w, "tracker"), d))
     end = (dt.date.fromisoformat(first) + dt.timedelta(days=3)).isoformat()
     body = client.get(f"{BASE}/diagnosis", params={"start": first, "end": end},
                       timeout=120).json()
@@ -176,6 +182,30 @@ def test_a_pyranometer_on_the_logger_is_the_days_sky(client, live_server) -> Non
                                                     "array": "tracker"}, timeout=120)
     assert r.status_code == 200, r.text
     assert r.json()["sky"]["source"] == "sensor" and r.json()["sky"]["sensor"] == "ghi_w_m2"
+
+
+def test_a_pyranometer_beside_the_fixed_array_does_not_hide_a_loss(client, live_server
+                                                                     ) -> None:
+    """A tester's finding: a tracker making 85 % of a healthy one's, with the fixed array's
+    power, was found underperforming on 7 of 7 days — and on none once the fixed array's
+    logger also sent a GHI pyranometer, whose sky (DIRINT on the horizontal plane) then
+    replaced the fixed array's and whose 16 % band held the loss. The fixed array's power
+    comes first now: every day's sky is the fixed array's and the loss is found (seed 24,
+    held out; the measured gain below the expected one)."""
+    site = load_site("tehuantepec")
+    first = "2025-08-11"
+    d = logger_days(site, pd.Timestamp(first, tz=site.timezone), 3, seed=24)
+    _post(client, live_server.write_token,
+          _with_pyranometer(_readings(d.times, d.fixed_power_w, "fixed"), d)
+          + _readings(d.times, 0.85 * d.tracker_power_w, "tracker"))
+    end = (dt.date.fromisoformat(first) + dt.timedelta(days=3)).isoformat()
+    body = client.get(f"{BASE}/diagnosis", params={"start": first, "end": end},
+                      timeout=120).json()
+    for k, day in enumerate(body["days"]):
+        assert day["sky"]["source"] == "fixed_array", day["sky"]
+        found = {f["kind"]: f["confidence"] for f in day["faults"]}
+        assert found.get("underperformance", 0.0) >= 0.5, (k, d.kinds[k], day["faults"])
+        assert day["tracker"]["measured_wh"] < day["tracker"]["expected_wh_low"], k
 
 
 def test_a_cached_day_of_another_version_is_computed_again(client, live_server) -> None:
@@ -235,6 +265,37 @@ def test_a_tracker_reading_0_w_all_day_is_an_underperformance(client, live_serve
         assert [f["kind"] for f in day["faults"]] == ["underperformance"], day["faults"]
         assert day["tracker"]["performance_ratio"] == 0.0
         assert day["faults"][0]["confidence"] is not None
+
+
+@pytest.mark.parametrize(("first", "case"), [("2025-06-17", "breaker"), ("2025-06-18", "kw"),
+                                             ("2025-06-19", "local_as_utc")])
+def test_a_day_whose_fixed_array_readings_are_refused_says_why(client, live_server,
+                                                               first: str, case: str) -> None:
+    """A tester's finding: a day whose sky fell back to the clear sky because the fixed
+    array's readings were refused had no finding at PR 0.000–0.98 — both arrays reading
+    0 W all day (a tripped site breaker), power posted in kW, local wall-clock time stamped
+    as UTC (here 6 h late: Tehuantepec's offset). Now a ``sky_unusable`` names the share
+    refused and its likely causes; and a healthy day with a measured sky has none (the
+    other tests here)."""
+    site = load_site("tehuantepec")
+    d = logger_days(site, pd.Timestamp(first, tz=site.timezone), 1, seed=27, kinds=["clear"])
+    times, fixed, tracker = d.times, d.fixed_power_w, d.tracker_power_w
+    if case == "breaker":
+        fixed, tracker = np.zeros(times.size), np.zeros(times.size)
+    elif case == "kw":
+        fixed, tracker = fixed / 1000.0, tracker / 1000.0
+    else:  # the wall clock's digits with +00:00
+        times = times.tz_convert(site.timezone).tz_localize(None).tz_localize("UTC")
+    _post(client, live_server.write_token,
+          _readings(times, fixed, "fixed") + _readings(times, tracker, "tracker"))
+    end = (dt.date.fromisoformat(first) + dt.timedelta(days=1)).isoformat()
+    day = client.get(f"{BASE}/diagnosis", params={"start": first, "end": end},
+                     timeout=120).json()["days"][0]
+    assert day["sky"]["source"] == "clear_sky", day["sky"]
+    found = [f for f in day["faults"] if f["kind"] == "sky_unusable"]
+    assert len(found) == 1, day["faults"]
+    assert found[0]["confidence"] == 1.0 and found[0]["magnitude"] > 50.0, found
+    assert "0 W or nearly" in found[0]["detail"] and "kW" in found[0]["detail"], found
 
 
 def test_a_day_not_yet_over_is_judged_up_to_now(client, live_server) -> None:

@@ -38,19 +38,23 @@ LIMITS = {"poa_irradiance_w_m2": (0.015, 0.025), "ghi_w_m2": (0.19, 0.035)}
 
 
 def _readings(lg: rmis_sky.Logged, sensor: str) -> list[dict]:
-    """What the two loggers post of a logged day: the tracker's power; the fixed array's
-    power, the sky instrument ``sensor`` (the reading's field: the fixed plane's POA or the
-    GHI), the air temperature and, where the file has one, the station's wind speed."""
+    """What the loggers post of a logged day: the tracker's power; the sky instrument
+    ``sensor`` (the reading's field: the fixed plane's POA or the GHI), the air temperature
+    and, where the file has one, the station's wind speed; and, beside a POA sensor, the
+    fixed array's power on the same logger. A GHI pyranometer is posted on the tracker's
+    logger with no fixed array (a site without a reference array): beside the fixed
+    array's power it would not be the sky (sim.sky_sensor.weather_from_fixed)."""
     column = "poa" if sensor == "poa_irradiance_w_m2" else "ghi"
     wind = lg.data["wind_speed"].to_numpy()
     out = []
     for k, t in enumerate(lg.times):
         out.append({"ts": t.isoformat(), "array": "tracker",
                     "power_w": round(float(lg.tracker_power_w[k]), 2)})
-        out.append({"ts": t.isoformat(), "array": "fixed",
-                    "power_w": round(float(lg.fixed_power_w[k]), 2),
-                    sensor: round(float(lg.data[column].iloc[k]), 2),
-                    "temp_air_c": round(float(lg.temp_air[k]), 2)})
+        if column == "poa":
+            out.append({"ts": t.isoformat(), "array": "fixed",
+                        "power_w": round(float(lg.fixed_power_w[k]), 2)})
+        out[-1].update({sensor: round(float(lg.data[column].iloc[k]), 2),
+                        "temp_air_c": round(float(lg.temp_air[k]), 2)})
         if np.isfinite(wind[k]):  # the station's anemometer, where the file has it
             out[-1]["wind_speed_m_s"] = round(float(wind[k]), 2)
     return out

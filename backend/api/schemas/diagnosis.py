@@ -47,8 +47,8 @@ class FaultRead(BaseModel):
     """A named fault signature (``backend/diagnosis/faults.py``)."""
 
     kind: Literal["stuck", "azimuth_offset", "elevation_offset", "clock_offset",
-                  "sky_clock_offset", "module_loss", "soiling", "dropout",
-                  "underperformance"]
+                  "sky_clock_offset", "sky_unusable", "module_loss", "soiling",
+                  "dropout", "underperformance"]
     confidence: float = Field(description="[0, 1]")
     since: str = Field(description="the first day of its run of days (local date)")
     since_time: str | None = Field(
