@@ -32,7 +32,7 @@ from sqlalchemy.dialects import postgresql, sqlite
 
 from backend.errors import InputError
 from backend.measurements.buckets import bucket_phase_s
-from backend.measurements.parse import Calibration
+from backend.measurements.parse import Calibration, IngestArray
 from backend.storage.tables import (
     SOURCE_CODES,
     ArrayRow,
@@ -91,9 +91,14 @@ class SiteInfo:
         a site file read while running has none until they are written (:class:`Registry`)."""
         return set(self.site.arrays) <= set(self.arrays)
 
-    def ingest_arrays(self) -> dict[str, tuple[int, Calibration]]:
-        """``{name: (array_id, calibration)}`` for :mod:`backend.measurements.parse`."""
-        return {a.name: (a.array_id, a.calibration) for a in self.arrays.values()}
+    def ingest_arrays(self) -> dict[str, IngestArray]:
+        """``{name: (array_id, calibration, stc_power_w)}`` for
+        :mod:`backend.measurements.parse` (the rating None for an array the site's config
+        does not hold)."""
+        config = self.site.arrays
+        return {a.name: IngestArray(a.array_id, a.calibration,
+                                    config[a.name].stc_power_w if a.name in config else None)
+                for a in self.arrays.values()}
 
     def array_of_kind(self, kind: str) -> ArrayInfo | None:
         """The first array whose kind (mount) is ``kind``."""

@@ -153,6 +153,11 @@ class ArrayConfig:
         return self.modules_in_series * self.strings_in_parallel
 
     @property
+    def stc_power_w(self) -> float:
+        """The array's rating: its modules' power at STC (the CEC table's ``STC``) [W]."""
+        return float(cec_module_parameters(self.module)["STC"]) * self.modules
+
+    @property
     def wiring(self) -> str:
         """``"parallel"``, ``"series"`` or ``"<s>s<p>p"``."""
         if self.modules_in_series == 1:
@@ -163,7 +168,6 @@ class ArrayConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready description with units in the keys."""
-        params = cec_module_parameters(self.module)
         out = {
             "name": self.name,
             "mount": self.mount,
@@ -172,7 +176,7 @@ class ArrayConfig:
             "modules_in_series": self.modules_in_series,
             "strings_in_parallel": self.strings_in_parallel,
             "wiring": self.wiring,
-            "stc_power_w": float(params["STC"]) * self.modules,
+            "stc_power_w": self.stc_power_w,
             "temperature_model": self.temperature_model,
             "albedo": self.albedo,
         }

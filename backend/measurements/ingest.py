@@ -19,7 +19,7 @@ import numpy as np
 
 from backend.measurements.parse import (
     Batch,
-    Calibration,
+    IngestArray,
     Limits,
     body_error,
     parse_csv_batch,
@@ -42,7 +42,7 @@ THREAD_FROM_BYTES = 32 * 1024
 #: (benchmarks/bench_service.py --only backfill, same machine, 2026-12-04).
 _PARSE_THREAD = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ingest-parse")
 
-Parser = Callable[[bytes, dict[str, tuple[int, Calibration]], Limits], Batch]
+Parser = Callable[[bytes, dict[str, IngestArray], Limits], Batch]
 
 
 class StorageUnavailable(Exception):
@@ -80,7 +80,7 @@ def measured_job(batch: Batch) -> MeasurementJob:
 
 
 async def ingest(writer: Writer, parse: Parser, body: bytes,
-                 arrays: dict[str, tuple[int, Calibration]], limits: Limits) -> Stored:
+                 arrays: dict[str, IngestArray], limits: Limits) -> Stored:
     """Validate ``body`` and store it; returns once the writer has committed it.
 
     Raises :class:`backend.measurements.parse.IngestError` for a bad batch (nothing

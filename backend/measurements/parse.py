@@ -23,7 +23,7 @@ import time
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import orjson
@@ -93,6 +93,27 @@ def adc_to_volts_amps(
         cal.current_sensitivity_mv_per_a / 1000.0
     )
     return voltage_v, current_a
+
+
+class IngestArray(NamedTuple):
+    """An array as the parser checks its readings against: its id, its ADC calibration and
+    its rating (its modules' STC power [W]; None: not known, no bound from it)."""
+
+    array_id: int
+    calibration: Calibration
+    stc_power_w: float | None = None
+
+
+#: The most an array's power may be, in multiples of its STC rating: irradiance over a
+#: clear sky's (cloud enhancement, up to ~1.5 × 1000 W m⁻² for minutes; Gueymard 2017) on
+#: cold cells (+10 % at −10 °C) stays under it; a reading past it is a wrong unit or a
+#: config with too few modules (a tester's 50 kW reading on a 820 W array counted +9 % of
+#: the day's energy with no finding).
+MAX_STC_MULTIPLE = 2.0
+#: The most negative a power-only reading may be, as a share of the rating: an inverter's
+#: or meter's night draw, not a reversed sensor (a tracker at −P all day read PR −1.006 and
+#: "underperformance 200.6 %", while the same reading as voltage and current was refused).
+MIN_STC_SHARE = -0.05
 
 
 @dataclass(frozen=True)
@@ -407,7 +428,7 @@ def _emoncms_columns(rows: list[Any], errors: _Errors) -> dict[str, list[Any]]:
 def build_batch(
     columns: dict[str, list[Any]],
     n: int,
-    arrays: dict[str, tuple[int, Calibration]],
+    arrays: dict[str, IngestArray],
     limits: Limits,
     errors: _Errors,
     now_s: float | None = None,
@@ -430,8 +451,9 @@ def build_batch(
 
     names = columns["array"]
     known = list(arrays)
-    ids_by_name = {k: v[0] for k, v in arrays.items()}
+    ids_by_name = {k: a.array_id for k, a in arrays.items()}
     index_by_name = {k: j for j, k in enumerate(known)}
+    unknown = np.zeros(n, bool)
     try:
         idx = np.array([index_by_name[a] for a in names], np.int64)
     except (KeyError, TypeError):
@@ -440,6 +462,7 @@ def build_batch(
             if isinstance(a, str) and a in index_by_name:
                 idx[r] = index_by_name[a]
             else:
+                unknown[r] = True
                 what = "missing" if a is None else f"unknown array {_show(a)}"
                 errors.add(r, "array", f"{what}; this site has {', '.join(known)}",
                            "missing" if a is None else "value_error")
@@ -476,7 +499,7 @@ def build_batch(
             sel = rows[idx[rows] == j]
             if sel.size == 0:
                 continue
-            cal = arrays[name][1]
+            cal = arrays[name].calibration
             for col, field in ((va, "voltage_adc"), (ia, "current_adc")):
                 bad = np.zeros(n, bool)
                 bad[sel] = ((col[sel] < 0) | (col[sel] > cal.adc_max_counts)
@@ -487,21 +510,41 @@ def build_batch(
             v[sel], i[sel] = adc_to_volts_amps(va[sel], ia[sel], cal)
 
     # NaN (absent or already reported) compares false: no second error for a row
-    errors.add_rows((v < 0) | (v > limits.max_voltage_v), "voltage_v", lambda r: (
+    bad_v = (v < 0) | (v > limits.max_voltage_v)
+    errors.add_rows(bad_v, "voltage_v", lambda r: (
         f"voltage_v {v[r]:g} V outside 0..{limits.max_voltage_v:g} V"), "value_error")
-    errors.add_rows((i < limits.min_current_a) | (i > limits.max_current_a), "current_a",
+    bad_i = (i < limits.min_current_a) | (i > limits.max_current_a)
+    errors.add_rows(bad_i, "current_a",
                     lambda r: (f"current_a {i[r]:g} A outside {limits.min_current_a:g}.."
                                f"{limits.max_current_a:g} A"), "value_error")
     vi = v * i
     p = np.where(p_ok, p, vi)
-    errors.add_rows(p_ok & (np.abs(p - vi) > 0.05 * np.abs(vi) + limits.power_tolerance_w),
-                    "power_w", lambda r: (f"power_w {p[r]:g} W disagrees with "
+    mismatch = p_ok & (np.abs(p - vi) > 0.05 * np.abs(vi) + limits.power_tolerance_w)
+    errors.add_rows(mismatch, "power_w", lambda r: (f"power_w {p[r]:g} W disagrees with "
                                           f"voltage_v·current_a = {vi[r]:g} W"), "value_error")
     p_low = limits.max_voltage_v * min(limits.min_current_a, 0.0) - limits.power_tolerance_w
     p_high = limits.max_voltage_v * limits.max_current_a
-    errors.add_rows(p_ok & ((p < p_low) | (p > p_high)), "power_w", lambda r: (
+    outside = p_ok & ((p < p_low) | (p > p_high))
+    errors.add_rows(outside, "power_w", lambda r: (
         f"power_w {p[r]:g} W outside {p_low:g}..{p_high:g} W (the voltage and current "
         "limits)"), "value_error")
+    # each array's own rating (the voltage and current limits are the service's, any array;
+    # one error a row: not where those refused it)
+    stc = np.array([np.nan if arrays[k].stc_power_w is None else arrays[k].stc_power_w
+                    for k in known] or [np.nan])[idx]
+    stc = np.where(outside | bad_v | bad_i | mismatch | unknown, np.nan, stc)
+    errors.add_rows(p > MAX_STC_MULTIPLE * stc + limits.power_tolerance_w, "power_w",
+                    lambda r: (f"power_w {p[r]:g} W is over {MAX_STC_MULTIPLE:g} × array "
+                               f"{_show(names[r])}'s rating ({stc[r]:g} W at STC): a power in "
+                               f"the wrong unit, or more modules than the site's config "
+                               f"says (fix its arrays)"), "value_error")
+    only_p = p_ok & ~(v_ok & i_ok)
+    errors.add_rows(only_p & (p < MIN_STC_SHARE * stc - limits.power_tolerance_w), "power_w",
+                    lambda r: (f"power_w {p[r]:g} W is below "
+                               f"{MIN_STC_SHARE * stc[r] - limits.power_tolerance_w:g} W "
+                               f"({100 * MIN_STC_SHARE:g} % of array {_show(names[r])}'s "
+                               f"rating, less the tolerance): an array makes power; a "
+                               f"reversed current sensor or meter?"), "value_error")
     sensors = _sensor_columns(columns, n, errors, text)
     errors.raise_if_any()
     return Batch(array_ids, ts, v, i, p, sensors)
@@ -532,7 +575,7 @@ def _check_rows(n: int, limits: Limits) -> None:
 
 
 def parse_json_batch(
-    body: bytes, arrays: dict[str, tuple[int, Calibration]], limits: Limits
+    body: bytes, arrays: dict[str, IngestArray], limits: Limits
 ) -> Batch:
     """Validate a JSON body: ``{"readings": [{ts, array, voltage_v, current_a, ...}]}``, or
     emonCMS-style rows ``[[unix_s, array, voltage_v, current_a, power_w], ...]``."""
@@ -593,7 +636,7 @@ def _csv_rows(text: str) -> tuple[list[str], list[list[str]]]:
 
 
 def parse_csv_batch(
-    body: bytes, arrays: dict[str, tuple[int, Calibration]], limits: Limits
+    body: bytes, arrays: dict[str, IngestArray], limits: Limits
 ) -> Batch:
     """Validate a CSV body with a header row naming the same columns as the JSON form."""
     errors = _Errors(csv_lines=True)

@@ -16,6 +16,7 @@ import pytest
 from backend.measurements.ingest import THREAD_FROM_BYTES, StorageUnavailable, ingest, parser_for
 from backend.measurements.parse import (
     Calibration,
+    IngestArray,
     IngestError,
     Limits,
     adc_to_volts_amps,
@@ -23,7 +24,8 @@ from backend.measurements.parse import (
     parse_json_batch,
 )
 
-ARRAYS = {"tracker": (1, Calibration()), "fixed": (2, Calibration(divider_ratio=8.0))}
+ARRAYS = {"tracker": IngestArray(1, Calibration(), 820.0),
+          "fixed": IngestArray(2, Calibration(divider_ratio=8.0))}
 
 
 def _run(coro: Any) -> Any:
@@ -145,6 +147,36 @@ def test_1970_epoch_is_before_1990() -> None:
     with pytest.raises(IngestError) as err:
         parse_json_batch(orjson.dumps({"readings": [one]}), ARRAYS, Limits())
     assert err.value.errors[0]["field"] == "ts" and "1990" in err.value.errors[0]["msg"]
+
+
+@pytest.mark.parametrize(("reading", "words"), [
+    ({"power_w": 50_000.0}, "over 2 × array 'tracker''s rating (820 W at STC)"),
+    ({"power_w": 1.7}, None),  # kW on a power-only logger: plausible alone (the diagnosis
+    # names it: sky_unusable); 1,650 W, twice the rating and the tolerance, passes too
+    ({"power_w": 1645.0}, None),
+    ({"voltage_v": 40.0, "current_a": 45.0}, "over 2 × array 'tracker''s rating"),
+    ({"power_w": -810.0}, "below -46 W (-5 % of array 'tracker''s rating"),
+    ({"power_w": -40.0}, None),  # an inverter's night draw
+    ({"voltage_v": 26.0, "current_a": -1.0}, None),  # the current's own bound holds it
+])
+def test_power_is_bounded_by_the_arrays_rating(reading: dict, words: str | None) -> None:
+    """A tester's finding: 50 kW on an 820 W array and a tracker at −P all day were stored
+    and counted (+9 % of a day's energy, PR −1.006) while −31 A as current was refused.
+    Over twice the array's STC rating (any reading) or under −5 % of it (power alone) is a
+    422 naming the array's rating; an array without a known rating keeps the service's
+    voltage × current bounds only."""
+    one = {"ts": "2024-05-01T10:00:00Z", "array": "tracker", **reading}
+    body = orjson.dumps({"readings": [one]})
+    if words is None:
+        assert len(parse_json_batch(body, ARRAYS, Limits())) == 1
+    else:
+        with pytest.raises(IngestError) as err:
+            parse_json_batch(body, ARRAYS, Limits())
+        assert [e["field"] for e in err.value.errors] == ["power_w"], err.value.errors
+        assert words in err.value.errors[0]["msg"], err.value.errors
+    unrated = orjson.dumps({"readings": [{**one, "array": "fixed"}]})
+    if "current_a" not in reading:  # the fixed array here has no rating: no bound from it
+        assert len(parse_json_batch(unrated, ARRAYS, Limits())) == 1
 
 
 @pytest.mark.parametrize(("body", "needle"), [

@@ -205,7 +205,8 @@ def test_downsampled_buckets_keep_peaks_and_csv_export(client: httpx.Client,
     tok = live_server.write_token
     days = [dt.date(2023, 2, 1) + dt.timedelta(days=k) for k in range(3)]
     rd = [x for d in days for x in day_readings(d, "tracker")]
-    rd[2000] = {**rd[2000], "power_w": 2000.0, "voltage_v": 40.0, "current_a": 50.0}
+    # a peak the array can make (under twice its 820 W rating: parse.MAX_STC_MULTIPLE)
+    rd[2000] = {**rd[2000], "power_w": 1500.0, "voltage_v": 40.0, "current_a": 37.5}
     assert post(client, tok, {"readings": rd})
     params = {"array": "tracker", "start": "2023-02-01", "end": "2023-02-04"}
     full = client.get(PATH, params={**params, "max_points": 10_000}).json()
@@ -215,14 +216,14 @@ def test_downsampled_buckets_keep_peaks_and_csv_export(client: httpx.Client,
         got = client.get(PATH, params={**params, "max_points": max_points}).json()
         pts = got["points"]
         assert 0 < len(pts) <= max_points and got["bucket_s"] > 0
-        assert max(p["power_w_max"] for p in pts) == 2000.0
+        assert max(p["power_w_max"] for p in pts) == 1500.0
         assert sum(p["n"] for p in pts) == len(rd)
         assert sum(p["power_w"] * p["n"] for p in pts) == pytest.approx(powers.sum(), rel=1e-9)
         assert min(p["power_w_min"] for p in pts) == powers.min()
     r = client.get(PATH, params={**params, "format": "csv"})
     rows = list(csv.DictReader(io.StringIO(r.text)))
     assert r.headers["content-type"].startswith("text/csv") and len(rows) == len(rd)
-    assert float(rows[2000]["power_w"]) == 2000.0
+    assert float(rows[2000]["power_w"]) == 1500.0
     r = client.get(PATH, params={**params, "max_points": 10}, headers={"Accept": "text/csv"})
     assert r.text.splitlines()[0].startswith("ts,n,voltage_v")
 
