@@ -399,3 +399,31 @@ def test_silent_days_in_a_row_are_one_dropout_since_the_first() -> None:
              for found in faults_over_days(days)]
     assert since == [[], ["2026-11-28"], ["2026-11-28"], ["2026-11-28"], [], ["2026-12-02"],
                      ["2026-12-04"]]
+
+
+def _stuck_day(date: str, azimuth_deg: float, tilt_deg: float, ratio: float) -> dict[str, Any]:
+    """A day's features whose best explanation is ``stuck`` at that pose, its residual
+    ``ratio`` × the healthy one (confidence 1 − ratio)."""
+    return {"date": date, "features": {
+        "residual": 0.2, "clearness": 0.8,
+        "stuck": {"residual": 0.2 * ratio, "tilt_deg": tilt_deg, "azimuth_deg": azimuth_deg,
+                  "stopped_at": None},
+        "azimuth_offset": {"residual": 0.19, "offset_deg": 30.0},
+        "clock_offset": {"residual": 0.19, "offset_s": 600.0}}}
+
+
+def test_a_runs_pose_is_its_best_fitting_days() -> None:
+    """A tester's finding: a tracker stuck at azimuth 82°, elevation 52° was fitted so on
+    its clear days, then at azimuth 50°, elevation 45° (confidence 0.67) on a partly cloudy
+    one — and the alert, which names the latest day's finding, sent the technician to a
+    pose 32° off. A run's pose is that of its best-fitting day; a better one replaces it."""
+    days = [_stuck_day("2026-12-01", 82.0, 38.0, 0.10), _stuck_day("2026-12-02", 50.0, 45.0, 0.33),
+            _stuck_day("2026-12-03", 83.0, 38.0, 0.05)]
+    found = [[f for f in day if f["kind"] == "stuck"][0] for day in faults_over_days(days)]
+    assert [f["since"] for f in found] == ["2026-12-01"] * 3
+    assert [f["confidence"] for f in found] == [0.9, 0.67, 0.95]  # each day's own
+    assert found[0]["detail"] == "stuck at azimuth 82°, elevation 52°"
+    assert found[1]["detail"].startswith("stuck at azimuth 82°, elevation 52° (the run's best "
+                                         "fit: 2026-12-01, confidence 0.90)"), found[1]
+    assert found[1]["magnitude"] == 52.0
+    assert found[2]["detail"] == "stuck at azimuth 83°, elevation 52°"
