@@ -32,6 +32,22 @@ def test_a_day_without_fixed_readings_has_no_same_minutes_gain_and_says_why() ->
     assert day["twin_gain_pct"] == pytest.approx(100 * (6069.7 / 4545.5 - 1))
 
 
+def test_readings_too_far_apart_to_bridge_say_so() -> None:
+    """A tester's finding: a 30-minute logger at the default gap (1,200 s) read
+    ``measured_wh`` 0.0 for both arrays and the note "the fixed array measured no energy";
+    its readings were there, none within the gap of the next. (The tester's day: 48
+    readings each, 8.9 kWh true, 0.0 counted.)"""
+    day = compare({"tracker": arr(0.0, 9210.0, 0.0, 48, 0.0, 0.0),
+                   "fixed": arr(0.0, 6530.0, 0.0, 48, 0.0, 0.0)}, "tracker", "fixed")
+    assert day["gain_pct"] is None and day["partial"] is True
+    assert day["gain_note"].startswith("the tracker and the fixed array have readings but "
+                                       "none within max_gap_s of the next"), day["gain_note"]
+    assert "HELIOTWIN_ENERGY_MAX_GAP_S" in day["gain_note"]
+    one = compare({"tracker": arr(5000.0, 9210.0, 5000.0, 1440, 9210.0, 0.0),
+                   "fixed": arr(0.0, 6530.0, 0.0, 48, 0.0, 0.0)}, "tracker", "fixed")
+    assert one["gain_note"].startswith("the fixed array has readings but none"), one
+
+
 def _silent_fixed_day() -> dict:
     arrays = {"tracker": arr(6069.7, 6069.7, 6069.7, 1440, 6069.7, 0.0),
               "fixed": arr(None, 4545.5, None, 0, 0.0, 0.0)}
