@@ -468,11 +468,13 @@ def _white_core(image: NDArray[Any] | None, c: _Candidate, level: float,
     return max(contours, key=cv2.contourArea), x0, y0, binary
 
 
-def _mark_ghosts(cands: list[_Candidate], centre: tuple[float, float]) -> int:
-    """Flag clusters on the line through the optical centre, opposite a larger one."""
+def _mark_ghosts(cands: list[_Candidate], centre: tuple[float, float],
+                 sources: list[_Candidate] | None = None) -> int:
+    """Flag clusters on the line through the optical centre, opposite a larger one of
+    ``sources`` (default: any of ``cands``)."""
     n = 0
     ox, oy = centre
-    for a in cands:
+    for a in cands if sources is None else sources:
         for b in cands:
             if a is b or b.ghost or a.ghost or b.area >= a.area:
                 continue

@@ -11,7 +11,7 @@ Three named methods, all returning a :class:`SunDetection`:
   the window are searched in their bounding boxes), connected components
   grouped when a mast splits a glare, streaks (blooming, smear) opened away,
   lens-flare ghosts rejected (on the line through the optical centre,
-  opposite a larger blob). Each
+  opposite a larger blob the frame does not cut). Each
   candidate gets a shape term (second moments; a core cut by trees, the ground or a mast:
   the roundness of its free arc, :func:`_cut_shape`) and glare evidence (isotropic
   fall-off, a sharp drop to the sky, or a saturated core degrees wide — the
@@ -46,13 +46,14 @@ Three named methods, all returning a :class:`SunDetection`:
   circle on the camera's sphere through most of the core's limb that leaves none of it
   inside — the clear-sky disc, which thin cloud (adding light near the sun)
   can only grow on one side (:func:`vision.limb.contained_limb_centre`,
-  RANSAC after Fischler & Bolles 1981; outline on the image circle's edge or
+  RANSAC after Fischler & Bolles 1981; outline on the image circle's or the frame's edge or
   along an obstacle (trees, a mast) is never limb, and a core the image circle
   cuts keeps that circle however
   little of its outline lies on it); otherwise the intensity-weighted
   centroid of a complete (point-symmetric) core, or a RANSAC + least-squares
   fit to the saturated limb of a cut one (on the camera's sphere when a model
-  is known; :mod:`vision.limb`). A "no sun" answer says why (``reason``).
+  is known; :mod:`vision.limb`). A centre is never reported off the frame or outside the
+  image circle (:func:`_inside`). A "no sun" answer says why (``reason``).
 * ``"seed000_hsv"`` and ``"seed003_gray240"`` — the seeds' pipelines
   (:mod:`vision.seeds`), kept for comparison.
 
@@ -290,7 +291,11 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
     singles = [_Candidate([int(i)], int(stats[i, 4]), int(stats[i, 0]), int(stats[i, 1]),
                           int(stats[i, 2]), int(stats[i, 3]), float(cents[i, 0]),
                           float(cents[i, 1])) for i in order]
-    ghosts = _mark_ghosts(singles, centre)
+    # a region the frame cuts casts no ghost: its centroid is the cut's, not its source's
+    # (a tester's white bar across the top of a Wolf frame made the sun opposite it a ghost)
+    sources = [c for c in singles if not _on_frame_edge(
+        np.array([[c.x, c.y], [c.x + c.w - 1, c.y + c.h - 1]], float), gray.shape).any()]
+    ghosts = _mark_ghosts(singles, centre, sources)
     real = np.array([c.labels[0] for c in singles if not c.ghost], dtype=np.int64)
     cands = _clusters(stats, cents, real, ox, oy)
     if scale_known and model is not None:  # a core smaller than the solar disc is no sun
@@ -613,6 +618,10 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         else:
             cx, cy, radius = _refine(gray, got.work, got.labels, got.best, got.peak, got.bg,
                                      got.thr, camera, fallback, fov)
+        if not _inside(cx, cy, gray.shape, fov):
+            # a fit carried beyond the frame or the image circle (an outline the frame cut):
+            # the core's own centroid, the mean of pixels inside both
+            cx, cy = got.best.cx, got.best.cy
     dist = None
     if found and expected_px is not None:
         dist = float(np.hypot(cx - expected_px[0], cy - expected_px[1]))
@@ -632,6 +641,17 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         features=dict(zip(conf.FEATURES, (float(v) for v in got.x), strict=True)),
         candidate_px=(float(got.best.cx), float(got.best.cy)),
     )
+
+
+def _inside(x: float, y: float, shape: tuple[int, ...], fov: FovCircle | None) -> bool:
+    """Whether pixel (x, y) lies on the frame (−0.5 … size − 0.5, the bounds of
+    :func:`vision.cameras.camera_from_params`) and inside the image circle ``fov`` when one
+    is known. A visible sun's centre lies nowhere else; a centre beyond them is a fit
+    carried past the outline it saw (a white bar along the top of a Wolf frame was
+    reported as a sun 367 px above the frame, a tester's finding)."""
+    h, w = shape[:2]
+    on_frame = -0.5 <= x <= w - 0.5 and -0.5 <= y <= h - 0.5
+    return on_frame and (fov is None or np.hypot(x - fov.cx_px, y - fov.cy_px) <= fov.radius_px)
 
 
 def _one_channel_if_grey(image: NDArray[Any]) -> NDArray[Any]:
@@ -885,9 +905,12 @@ def _cut_shape(c: _Candidate, labels: NDArray[Any], gray: NDArray[np.uint8], bg:
     if len(pts) < 24:
         return 0.0
     cut = _cut_by_obstacle(gray, pts, bg, float(np.sqrt(c.area / np.pi)))
+    cut |= _on_frame_edge(pts, gray.shape)
     if not cut.any() or int(np.count_nonzero(~cut)) < 12:
         return 0.0
-    *_, share = _robust_limb_centre(pts[~cut], model)
+    x, y, _, share = _robust_limb_centre(pts[~cut], model)
+    if not _inside(x, y, gray.shape, None):
+        return 0.0  # a circle centred off the frame: no centre the detector would report
     return float(min(max((share - 0.45) / 0.4, 0.0), 1.0))
 
 
@@ -900,18 +923,32 @@ def _limb_points(c: _Candidate, labels: NDArray[Any]) -> NDArray[np.float64]:
     return pts
 
 
+def _on_frame_edge(pts: NDArray[np.float64], shape: tuple[int, ...]) -> NDArray[np.bool_]:
+    """Which outline points ``[N, 2]`` lie within :data:`_FOV_EDGE_PX` of the frame's border:
+    where the frame cuts a region. The frame's edge is never the sun's limb, as the image
+    circle's is not (:func:`_true_limb`): a bright region running along it goes on beyond
+    it, and a circle through that straight edge puts the centre wherever the straight line
+    lets it (a tester's white bar across the top of a Wolf frame: a limb fit through the
+    frame's top row put the sun 367 px above the frame, at confidence 0.999)."""
+    h, w = shape[:2]
+    x, y = pts[:, 0], pts[:, 1]
+    return ((x < _FOV_EDGE_PX) | (y < _FOV_EDGE_PX) | (x > w - 1 - _FOV_EDGE_PX)
+            | (y > h - 1 - _FOV_EDGE_PX))
+
+
 def _true_limb(gray: NDArray[np.uint8], work: _Region, pts: NDArray[np.float64],
                cx: float, cy: float, thr: float, fov: FovCircle | None = None,
                bg: float | None = None, r_eq: float = 0.0
                ) -> tuple[NDArray[np.float64], float]:
     """The outline points that are the sun's limb → (points, share of the outline on the
-    image circle's edge). Left out: points where a mask cut the core — the search window
-    around the prediction: the pixel 1.5 px farther out from (cx, cy) is masked in
+    image circle's or the frame's edge). Left out: points where a mask cut the core — the
+    search window around the prediction: the pixel 1.5 px farther out from (cx, cy) is masked in
     ``work`` while the frame is still bright; the image circle ``fov``: any point within
     :data:`_FOV_EDGE_PX` of its edge, bright beyond it or not (the edge of the image is
     never the sun's limb; the step outward misses it where the outline runs nearly
     radially from (cx, cy), and the lens's own fall-off can leave the frame just beyond
-    the mask below the threshold); with the sky's level ``bg``, the points an obstacle
+    the mask below the threshold); the frame's own edge likewise (:func:`_on_frame_edge`);
+    with the sky's level ``bg``, the points an obstacle
     cuts (trees, a mast, the ground inside the image circle: :func:`_cut_by_obstacle` of a
     core ``r_eq`` px in radius) — their outline is the obstacle's edge, which a circle
     through most of the outline can follow (second renderer, development scene 122: a
@@ -922,12 +959,12 @@ def _true_limb(gray: NDArray[np.uint8], work: _Region, pts: NDArray[np.float64],
     ox = np.minimum(np.maximum(np.rint(pts[:, 0] + (pts[:, 0] - cx) * f), 0), w - 1).astype(np.intp)
     oy = np.minimum(np.maximum(np.rint(pts[:, 1] + (pts[:, 1] - cy) * f), 0), h - 1).astype(np.intp)
     keep = (work.value_at(ox, oy) > 0) | (gray[oy, ox] < thr)
-    edge_share = 0.0
+    on_edge = _on_frame_edge(pts, gray.shape)
     if fov is not None:
-        on_edge = np.hypot(pts[:, 0] - fov.cx_px, pts[:, 1] - fov.cy_px) \
+        on_edge |= np.hypot(pts[:, 0] - fov.cx_px, pts[:, 1] - fov.cy_px) \
             > fov.radius_px - _FOV_EDGE_PX
-        edge_share = float(np.count_nonzero(on_edge)) / max(len(pts), 1)
-        keep &= ~on_edge
+    edge_share = float(np.count_nonzero(on_edge)) / max(len(pts), 1)
+    keep &= ~on_edge
     if bg is not None and len(pts):
         keep &= ~_cut_by_obstacle(gray, pts, bg, r_eq, fov)
     return pts[keep], edge_share
@@ -1002,6 +1039,7 @@ def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
     if _symmetry(c.mask(labels)) >= 0.9:
         return float(wx), float(wy), r_eq
     pts = _limb_points(c, labels)
+    pts = pts[~_on_frame_edge(pts, gray.shape)]
     if len(pts) < 8:
         return float(wx), float(wy), r_eq
     if camera is not None:

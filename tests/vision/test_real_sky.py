@@ -16,6 +16,7 @@ import pvlib
 import pytest
 
 from vision.calibrate import fit_fisheye
+from vision.cameras import FisheyeCamera
 from vision.detect import detect_robust, detect_sun
 from vision.evaluation import FORMATS, as_format, nearest_direction_px
 from vision.fov import estimate_fov, to_gray
@@ -485,3 +486,47 @@ def test_an_occulted_sun_leaves_no_sun_with_a_calibrated_camera(real_sky) -> Non
             d = detect_robust(_occulted(img, x, y, how), camera=cam,
                               expected_px=(float(ex), float(ey)), min_confidence=0.0)
             assert d.confidence < 0.01, (r["filename"], how, d.confidence, d.features)
+
+
+def _white_bar(img: np.ndarray, text: bool) -> np.ndarray:
+    """The frame with a 48 px white bar across its top (a camera's time stamp), black text on
+    it or not, written as JPEG at quality 92."""
+    out = img.copy()
+    out[:48] = 255
+    if text:
+        cv2.putText(out, "2016-05-30 10:44:00  SKYCAM-3", (20, 36), cv2.FONT_HERSHEY_SIMPLEX,
+                    1.2, (0, 0, 0), 2, cv2.LINE_AA)
+    return _as_jpeg(out, 92)
+
+
+@pytest.mark.parametrize(("stamp", "text"), [("114400", True), ("144900", False)])
+def test_a_white_bar_along_the_frames_edge_is_neither_the_sun_nor_its_ghost(
+        real_sky, stamp, text) -> None:
+    """A tester's finding: a white bar across the top of a Wolf frame, with the scale given
+    (10.9 px/°, centred; the bar hides the dark corners, so no image circle is found), was the
+    sun at confidence 0.999 centred 349–367 px *above* the frame — a limb fit through the
+    frame's top row — and the real sun, opposite it through the optical centre and smaller,
+    had been dropped as the bar's lens ghost. The frame's edge is no limb and a region it
+    cuts casts no ghost (vision.detect._on_frame_edge); the sun is found where labelled."""
+    (r,) = [r for r in _labelled(real_sky, "Wolf") if stamp in r["filename"]]
+    img = _white_bar(cv2.imread(r["path"]), text)
+    h, w = img.shape[:2]
+    d = detect_robust(img, camera=FisheyeCamera((w - 1) / 2, (h - 1) / 2, 10.9))
+    assert d.sun_found and d.confidence >= 0.5, (d.confidence, d.reason)
+    assert _label_distance(d, r) <= 0.01 * w, (d.centroid_px, d.candidate_px)
+
+
+def test_a_white_bar_with_the_sun_hidden_is_no_sun_and_never_off_the_frame(real_sky) -> None:
+    """The same bar with the sun and its glare hidden (a shadow ball): the bar alone was a
+    sun at 0.999 centred 239–241 px above the frame. No centre is reported off the frame or
+    the image circle (vision.detect._inside), and the bar, cut by the frame along a straight
+    edge, has no shape a sun has."""
+    for r in _labelled(real_sky, "Wolf")[::4]:
+        x, y = float(r["sun_col_label"]), float(r["sun_row_label"])
+        img = _white_bar(_occulted(cv2.imread(r["path"]), x, y, "big ball"), text=False)
+        h, w = img.shape[:2]
+        d = detect_robust(img, camera=FisheyeCamera((w - 1) / 2, (h - 1) / 2, 10.9),
+                          min_confidence=0.0)
+        assert d.confidence < 0.5, (r["filename"], d.confidence, d.features)
+        cx, cy = d.centroid_px
+        assert -0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5, (r["filename"], cx, cy)
