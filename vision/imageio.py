@@ -227,10 +227,16 @@ def _to_bgr8(raw: NDArray[Any], scaled: bool) -> NDArray[np.uint8]:
     """A PNG decoded as stored (8/16 bits, grey or colour, with or without alpha) → 8-bit
     BGR. A 16-bit PNG holds its samples scaled to the full 16 bits, as the format asks
     (``scaled``: an ``sBIT`` chunk says the camera's depth): its top byte. Without ``sBIT``
-    a frame whose brightest value fits 10 or 12 bits is taken as such a camera's unscaled
-    data (common in industrial cameras' files), its saturation 255 here (its top byte alone
-    made the frame almost black); a brighter one as scaled — a real 16-bit frame is not
-    stretched by a guess from its content. Alpha (a channel, or ``tRNS`` expanded by the
+    the data's depth is the smallest of 10, 12, 14 and 16 bits that holds its brightest
+    value: machine-vision cameras write their 10-, 12- or 14-bit sensor's samples into a
+    16-bit PNG unscaled (a 12-bit frame is 0–4095), and the top byte alone made such a
+    frame almost black (0–15 for 12 bits, 0–63 for 14: no sun; a tester's finding), so its
+    saturation is 255 here, as the sensor's was. A frame with a value above 14 bits is
+    full-range 16-bit data and keeps its top byte. The price: a true 16-bit frame with
+    nothing above a quarter of its range (16383) is read as 14-bit data, four times
+    brighter, its brightest patch near 255 (as one with nothing above a sixteenth was read
+    as 12-bit data before): the content cannot tell the two apart, and a PNG that means
+    its full range can say so with ``sBIT``. Alpha (a channel, or ``tRNS`` expanded by the
     decoder) is composited onto black: a transparent corner outside a fisheye's image
     circle is no light, not the white its colour says."""
     arr = raw if raw.ndim == 3 else raw[..., None]
@@ -244,7 +250,7 @@ def _to_bgr8(raw: NDArray[Any], scaled: bool) -> NDArray[np.uint8]:
         colour = cv2.multiply(np.ascontiguousarray(colour), a, scale=1.0 / full)
     if raw.dtype == np.uint16:
         brightest = int(colour.max()).bit_length()
-        bits = 16 if scaled or brightest > 12 else max(10, brightest + brightest % 2)
+        bits = 16 if scaled or brightest > 14 else max(10, brightest + brightest % 2)
         colour = np.ascontiguousarray(colour)  # shifted in place: 16-bit frames are large
         np.right_shift(colour, bits - 8, out=colour)
         np.minimum(colour, 255, out=colour)
@@ -254,8 +260,8 @@ def _to_bgr8(raw: NDArray[Any], scaled: bool) -> NDArray[np.uint8]:
 def decode_image(data: bytes, max_pixels: int) -> NDArray[np.uint8]:
     """Decode a PNG/JPEG to 8-bit BGR after checking its header size against ``max_pixels``.
 
-    Grey images become BGR; a 16-bit PNG keeps its significant bits and an alpha channel
-    is composited onto black (:func:`_to_bgr8`); a JPEG's EXIF orientation is applied
+    Grey images become BGR; a 16-bit PNG is brought to 8 bits by its data's depth and an
+    alpha channel is composited onto black (:func:`_to_bgr8`); a JPEG's EXIF orientation is applied
     (:func:`_decode_jpeg`; a PNG's by ``cv2.IMREAD_COLOR``), so pixel coordinates are those
     of the image as a browser shows it. A damaged JPEG is an :class:`ImageError`.
     """

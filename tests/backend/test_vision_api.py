@@ -455,6 +455,29 @@ def test_a_damaged_jpeg_is_a_422_naming_the_file(client: httpx.Client) -> None:
     assert r.status_code == 200 and r.json()["sun_found"], r.text  # the whole file
 
 
+@pytest.mark.parametrize("bits", [10, 12, 14, 16])
+def test_a_machine_vision_cameras_samples_in_a_16_bit_png(client: httpx.Client,
+                                                         bits: int) -> None:
+    """A monochrome camera's 10-, 12- or 14-bit samples written unscaled into a 16-bit PNG
+    (0–4095 for 12 bits), and a full-range 16-bit one: each is decoded to the levels of the
+    same frame as an 8-bit PNG and answered alike. A tester's finding: 14-bit data were
+    decoded to their top byte, 0–63, and no sun was found (10 and 12 bits were read by
+    their depth already). Blind, with the scale its image circle implies."""
+    wolf = REAL_SKY / "Wolf_20160530_114400_UTCp1_sunrow1342_suncol962.jpg"
+    grey = cv2.cvtColor(cv2.imread(str(wolf)), cv2.COLOR_BGR2GRAY)
+    deep = (grey.astype(np.int64) * (2**bits - 1) // 255).astype(np.uint16)
+    answers = []
+    for img in (grey, deep):
+        r = client.post(SUN, files={"file": ("sky.png", _png(img), "image/png")},
+                        data={"camera": "fisheye"})
+        assert r.status_code == 200, r.text
+        answers.append(r.json())
+    eight, got = answers
+    assert got["sun_found"] and got["confidence"] >= 0.5, (bits, got["reason"])
+    assert got["centroid_px"] == pytest.approx(eight["centroid_px"], abs=0.01), bits
+    assert np.hypot(got["centroid_px"][0] - 962, got["centroid_px"][1] - 1342) < 0.01 * 1920
+
+
 def test_cli_a_damaged_jpeg_is_an_error_line(tmp_path: Path, heliotwin_cli: Callable) -> None:
     """``heliotwin vision detect`` on the same damaged file: exit 2, one ``error:`` line
     naming the file and libjpeg's finding, nothing on stdout."""
