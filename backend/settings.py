@@ -290,6 +290,13 @@ class VisionSettings(_Group):
     max_pixels: int = Field(
         40_000_000, gt=0, description="Largest image (pixels) the vision endpoints decode."
     )
+    max_batch_bytes: int = Field(
+        64 * 1024 * 1024, gt=0,
+        description="Largest request body of a calibration or an evaluation (`POST "
+                    "/api/v1/vision/calibrations`, `/evaluate`: up to 64 frames; 12 frames of "
+                    "1920² px as JPEG at quality 92 come to ≈ 14 MB); larger → 413. The frames "
+                    "are decoded one at a time."
+    )
     require_token: bool = Field(
         False, description="Vision endpoints need a site write token."
     )

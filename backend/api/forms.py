@@ -17,21 +17,23 @@ _FALSE = {"0", "false", "no", "off"}
 
 
 async def read_form(request: Request, limit: int, expected: str, max_files: int,
-                    max_fields: int = 256) -> FormData:
-    """The multipart form of ``request``; ``expected`` says what the 415 asks for."""
+                    max_fields: int = 256, limit_name: str = "HELIOTWIN_MAX_UPLOAD_BYTES"
+                    ) -> FormData:
+    """The multipart form of ``request``; ``expected`` says what the 415 asks for, and
+    ``limit_name`` the setting a 413 names (the one ``limit`` comes from)."""
     ctype = request.headers.get("content-type", "")
     if not ctype.lower().startswith("multipart/form-data"):
         raise HTTPException(415, f"send multipart/form-data ({expected})")
     length = request.headers.get("content-length")
     if length is not None and length.isdigit() and int(length) > limit:
         raise HTTPException(413, f"body of {length} bytes; the limit is {limit} bytes "
-                                 "(HELIOTWIN_MAX_UPLOAD_BYTES)")
+                                 f"({limit_name})")
     chunks: list[bytes] = []
     size = 0
     async for chunk in request.stream():
         size += len(chunk)
         if size > limit:
-            raise HTTPException(413, f"body over {limit} bytes (HELIOTWIN_MAX_UPLOAD_BYTES)")
+            raise HTTPException(413, f"body over {limit} bytes ({limit_name})")
         chunks.append(chunk)
     body = b"".join(chunks)
 

@@ -210,6 +210,54 @@ def test_too_many_files_is_a_422_naming_files(client: httpx.Client) -> None:
     assert r.status_code == 422 and "files" in r.json()["detail"]
 
 
+def _noisy_wolf_series() -> tuple[list[tuple[str, tuple[str, bytes, str]]], dict[str, object]]:
+    """The 12 Wolf development frames as a camera with sensor noise writes them (σ = 8 grey
+    levels before the clip, JPEG quality 92: ≈ 1.17 MB a frame, 14 MB in all — a tester's
+    series), with their times and place."""
+    with (REAL_SKY / "split.csv").open(newline="") as fh:
+        dev = {r["filename"] for r in csv.DictReader(fh)
+               if r["camera"] == "Wolf" and r["split"] == "development"}
+    with (REAL_SKY / "metadata.csv").open(newline="") as fh:
+        rows = [r for r in csv.DictReader(fh) if r["filename"] in dev]
+    rng = np.random.default_rng(8)
+    files = []
+    for r in rows:
+        img = cv2.imread(str(REAL_SKY / r["filename"]))
+        noisy = np.where(img >= 255, 255.0, np.clip(img + rng.normal(0, 8, img.shape), 0, 255))
+        ok, buf = cv2.imencode(".jpg", noisy.astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, 92])
+        files.append(("files", (r["filename"], buf.tobytes(), "image/jpeg")))
+    return files, {"timestamps": [r["utc_time"] for r in rows], "latitude_deg": rows[0]["lat"],
+                   "longitude_deg": rows[0]["lon"]}
+
+
+@pytest.mark.slow
+def test_a_calibration_of_12_ordinary_frames_fits_its_own_body_bound(
+        client: httpx.Client) -> None:
+    """A tester's finding: 12 frames of 1920² px at JPEG quality 92 (14 MB) were a 413
+    against the 10 MiB of HELIOTWIN_MAX_UPLOAD_BYTES, though a calibration takes up to 64
+    frames. A calibration's body has its own bound, HELIOTWIN_VISION_MAX_BATCH_BYTES (64 MiB
+    by default): the series is fitted."""
+    files, data = _noisy_wolf_series()
+    assert sum(len(f[1][1]) for f in files) > 10 * 1024 * 1024 + 2**20 and len(files) == 12
+    r = client.post("/api/v1/vision/calibrations", files=files, data=data)
+    assert r.status_code == 201, r.text
+    assert r.json()["n_frames"] >= 10
+
+
+def test_a_batch_past_its_body_bound_is_a_413_naming_it(tmp_path: Path) -> None:
+    """Past HELIOTWIN_VISION_MAX_BATCH_BYTES a calibration or an evaluation is a 413 that
+    names that setting (not the single upload's)."""
+    files, data = _noisy_wolf_series()
+    size = sum(len(f[1][1]) for f in files)
+    server = InProcessServer(f"sqlite:///{tmp_path / 'v.sqlite'}",
+                             {"HELIOTWIN_VISION_MAX_BATCH_BYTES": str(size // 2)})
+    with server, server.client(timeout_s=60) as c:
+        for path in ("/api/v1/vision/calibrations", "/api/v1/vision/evaluate"):
+            r = c.post(path, files=files, data=data)
+            assert r.status_code == 413, r.text
+            assert "HELIOTWIN_VISION_MAX_BATCH_BYTES" in r.json()["detail"], r.text
+
+
 def _png_header_only(w: int, h: int) -> bytes:
     ihdr = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)
     chunk = b"IHDR" + ihdr
