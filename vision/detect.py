@@ -90,7 +90,7 @@ from vision.candidates import (
     region_threshold,
 )
 from vision.detection import CameraModel, FovCircle, SunDetection
-from vision.fov import _fov_mask, _median_u8, _small, estimate_fov, to_gray
+from vision.fov import _fov_mask, _median_u8, _small, estimate_fov, overlays_unlit, to_gray
 from vision.glare import censored_glare_centre, symmetric_glare_centre
 from vision.limb import _robust_limb_centre, contained_limb_centre
 from vision.radial import radial_symmetry_centre
@@ -556,6 +556,7 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         fov = estimate_fov(gray, small, scale)
     h, w = gray.shape
     if fov is not None:
+        gray = overlays_unlit(gray, fov)  # a time-stamp bar or box is no candidate
         # the image circle, cropped to its bounding box
         work = _disc_region(_Region(gray, 0, 0), int(round(fov.cx_px)), int(round(fov.cy_px)),
                             int(fov.radius_px))

@@ -69,6 +69,7 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
     """
     if small is None:
         small, scale = _small(gray)
+    small = _without_overlays(small)
     h, w = small.shape
     ph, pw = max(2, h // 12), max(2, w // 12)
     corners = [small[:ph, :pw], small[:ph, -pw:], small[-ph:, :pw], small[-ph:, -pw:]]
@@ -117,6 +118,50 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
     if rim is not None:
         cx, cy, r = rim
     return FovCircle(cx, cy, 0.98 * r)
+
+
+#: An overlay's white [grey level]: what a station draws is 255 (JPEG: 250–255 around text)
+_OVERLAY_WHITE = 250
+
+
+def _without_overlays(small: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """The thumbnail with white regions (≥ :data:`_OVERLAY_WHITE`) that touch its edge set
+    to 0 (unlit): what a station draws on its frames — a timestamp bar or box, a white
+    border — is no lit sky, and a fisheye's field stop leaves the frame's edge dark (a
+    tester's finding: a 48 px white bar across the top, a 520 × 60 box in a corner or a
+    10 px white border lifted the corners' level or joined the image circle, and no circle
+    was found on 29, 6 and 29 of 29 labelled frames). A copy where anything is set."""
+    white = (small >= _OVERLAY_WHITE).view(np.uint8)
+    if not (white[0].any() or white[-1].any() or white[:, 0].any() or white[:, -1].any()):
+        return small  # nothing white on the edge: the usual frame, untouched
+    _, labels = cv2.connectedComponents(white, connectivity=8)
+    edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    out = small.copy()
+    out[np.isin(labels, edge[edge > 0])] = 0
+    return out
+
+
+def overlays_unlit(gray: NDArray[np.uint8], fov: FovCircle) -> NDArray[np.uint8]:
+    """``gray`` with each white region (≥ :data:`_OVERLAY_WHITE`) that touches the frame's
+    edge and reaches outside the image circle ``fov`` set to 0: a station's time-stamp bar
+    or box, a white border, drawn over the frame — never the sun, whose glare lies inside
+    the image circle (a tester's 48 px bar across a Wolf frame's top, where the circle
+    reaches within 16 px of the edge, was the sun at 0.94–0.996 once the circle was read,
+    :func:`_without_overlays`). A copy where anything is set; ``gray`` itself otherwise."""
+    if not ((gray[0] >= _OVERLAY_WHITE).any() or (gray[-1] >= _OVERLAY_WHITE).any()
+            or (gray[:, 0] >= _OVERLAY_WHITE).any() or (gray[:, -1] >= _OVERLAY_WHITE).any()):
+        return gray  # nothing white on the edge: the usual frame, untouched
+    _, labels = cv2.connectedComponents((gray >= _OVERLAY_WHITE).view(np.uint8),
+                                        connectivity=8)
+    edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    out = gray
+    for k in edge[edge > 0]:
+        ys, xs = np.nonzero(labels == k)
+        if (np.hypot(xs - fov.cx_px, ys - fov.cy_px) > fov.radius_px / 0.98).any():
+            if out is gray:
+                out = gray.copy()
+            out[ys, xs] = 0
+    return out
 
 
 _LIFTED_MAX = 0.5  # a lifted black: corners at most this share of the centre's level

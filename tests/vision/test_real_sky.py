@@ -511,7 +511,10 @@ def test_a_white_bar_along_the_frames_edge_is_neither_the_sun_nor_its_ghost(
     (r,) = [r for r in _labelled(real_sky, "Wolf") if stamp in r["filename"]]
     img = _white_bar(cv2.imread(r["path"]), text)
     h, w = img.shape[:2]
-    d = detect_robust(img, camera=FisheyeCamera((w - 1) / 2, (h - 1) / 2, 10.9))
+    # no image circle read (as then: since vision.fov.overlays_unlit the bar is unlit where
+    # one is, test_a_white_overlay_on_the_frames_edge_leaves_the_image_circle_and_the_sun)
+    d = detect_robust(img, camera=FisheyeCamera((w - 1) / 2, (h - 1) / 2, 10.9),
+                      auto_fov=False)
     assert d.sun_found and d.confidence >= 0.5, (d.confidence, d.reason)
     assert _label_distance(d, r) <= 0.01 * w, (d.centroid_px, d.candidate_px)
 
@@ -526,7 +529,52 @@ def test_a_white_bar_with_the_sun_hidden_is_no_sun_and_never_off_the_frame(real_
         img = _white_bar(_occulted(cv2.imread(r["path"]), x, y, "big ball"), text=False)
         h, w = img.shape[:2]
         d = detect_robust(img, camera=FisheyeCamera((w - 1) / 2, (h - 1) / 2, 10.9),
-                          min_confidence=0.0)
+                          min_confidence=0.0, auto_fov=False)  # no circle read, as above
         assert d.confidence < 0.5, (r["filename"], d.confidence, d.features)
         cx, cy = d.centroid_px
         assert -0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5, (r["filename"], cx, cy)
+        # with the image circle read the bar is unlit (vision.fov.overlays_unlit): no sun
+        d = detect_robust(img, camera=FisheyeCamera((w - 1) / 2, (h - 1) / 2, 10.9),
+                          min_confidence=0.0)
+        assert d.confidence < 0.5, (r["filename"], d.confidence, d.features)
+
+
+def _white_box(img: np.ndarray) -> np.ndarray:
+    """The frame with a 520 × 60 px white time-stamp box, black text, in its top-left corner,
+    written as JPEG at quality 92."""
+    out = img.copy()
+    out[:60, :520] = 255
+    cv2.putText(out, "2016-05-30 10:44:00", (15, 42), cv2.FONT_HERSHEY_SIMPLEX, 1.2,
+                (0, 0, 0), 2, cv2.LINE_AA)
+    return _as_jpeg(out, 92)
+
+
+def _white_border(img: np.ndarray, px: int) -> np.ndarray:
+    """The frame padded with a white border ``px`` wide on every side, as JPEG (92)."""
+    return _as_jpeg(cv2.copyMakeBorder(img, px, px, px, px, cv2.BORDER_CONSTANT,
+                                       value=(255, 255, 255)), 92)
+
+
+@pytest.mark.parametrize("overlay", ["box", "border 10", "border 40"])
+def test_a_white_overlay_on_the_frames_edge_leaves_the_image_circle_and_the_sun(
+        real_sky, overlay: str) -> None:
+    """A tester's finding: a white time-stamp box in a corner (520 × 60 px), or a white
+    border, lifted the corners' level or joined the image circle: no circle, so a blind
+    upload was a 422 asking for px_per_deg (box: 6 of 29 labelled Wolf and Wettermast
+    frames; a 10 or 40 px border: 29 of 29). White regions on the frame's edge are unlit for
+    the image circle (vision.fov._without_overlays): blind, every sun within 1 % of the
+    width (measured: 29 of 29 each; a 48 px bar across the top: 22 of 29)."""
+    for r in (_labelled(real_sky, "Wolf") + _labelled(real_sky, "Wettermast"))[::3]:
+        img = cv2.imread(r["path"])
+        pad = 0
+        if overlay == "box":
+            img = _white_box(img)
+        else:
+            pad = int(overlay.split()[1])
+            img = _white_border(img, pad)
+        d = detect_robust(img)
+        assert d.fov is not None, r["filename"]
+        assert d.sun_found and d.confidence >= 0.5, (r["filename"], d.confidence, d.reason)
+        x, y = float(r["sun_col_label"]) + pad, float(r["sun_row_label"]) + pad
+        assert np.hypot(d.centroid_px[0] - x, d.centroid_px[1] - y) <= 0.01 * img.shape[1], \
+            (r["filename"], d.centroid_px)
