@@ -50,7 +50,16 @@ const SKY_WORDS = {
   sensor: "an irradiance sensor",
   fixed_array: "the fixed array's power",
   clear_sky: "the clear sky (too few readings)",
+  // a clear-sky day whose fixed readings were there but refused (the sky_unusable finding)
+  refused: "the clear sky (the fixed array's readings refused)",
 };
+
+/** The words for what a day's sky rests on. */
+function skySource(d) {
+  if (d.sky.source === "sensor" && d.sky.sensor) return `${SKY_WORDS.sensor} (${d.sky.sensor})`;
+  if (d.sky.source === "clear_sky" && (d.faults || []).some((f) => f.kind === "sky_unusable")) return SKY_WORDS.refused;
+  return SKY_WORDS[d.sky.source] || d.sky.source;
+}
 
 /** What the days' skies rest on, e.g. "Sky: 5 days from an irradiance sensor (ghi_w_m2), 2 from …",
  * and which days are not over yet (judged on their minutes so far). */
@@ -58,7 +67,7 @@ export function skyLine(days) {
   const count = new Map();
   const future = days.filter((d) => d.status === "future").length;
   for (const d of days.filter((x) => x.status !== "future")) {
-    const key = d.sky.source === "sensor" && d.sky.sensor ? `${SKY_WORDS.sensor} (${d.sky.sensor})` : SKY_WORDS[d.sky.source] || d.sky.source;
+    const key = skySource(d);
     count.set(key, (count.get(key) || 0) + 1);
   }
   const open = days.filter((d) => d.complete === false && d.status !== "future").map((d) => shortDate(d.date));
@@ -108,7 +117,9 @@ async function load(state) {
     h("li", { class: "muted", "data-testid": "diag-sky" }, skyLine(body.days)));
   const x = body.days.map((d) => d.date);
   const partial = body.days.map((d) => d.partial === true);
-  const pr = body.days.map((d) => d.tracker.performance_ratio);
+  // no PR where the diagnosis does not judge the tracker: its fixed readings were refused
+  // (sky_unusable; a 0 W day drew PR 0 beside "the tracker is not judged")
+  const pr = body.days.map((d) => ((d.faults || []).some((f) => f.kind === "sky_unusable") ? null : d.tracker.performance_ratio));
   // the axes from the whole days only: a partial day's gain (readings over part of the day,
   // e.g. +220 % at 07:30) is drawn apart — hatched, faint, clamped to the axis — and never
   // sets the range; both axes from zero with round ticks

@@ -345,6 +345,8 @@ async function drawSweepShade() {
   // the winter solstice of the plant's hemisphere: the day of the longest shadows
   const tz = view.plant.timezone;
   const solstice = view.plant.latitude_deg < 0 ? "06-21" : "12-21";
+  // the day drawn, in words (the title said 21 December for a southern plant's June)
+  $("sweep-shade-day").textContent = solstice === "06-21" ? "21 June" : "21 December";
   const d = await api(`/api/v1/plants/sweeps/${enc(sweep.id)}/shade`, { params: { layout, gcr, strategy, date: `${$("sweep-year").value}-${solstice}` } });
   const x = d.times.map((t) => fmtTime(tz, t));
   await draw("chart-sweep-shade", [

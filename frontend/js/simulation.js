@@ -148,7 +148,9 @@ async function drawDaily(runId, summary) {
   ], baseLayout({
     barmode: "group",
     xaxis: { type: "date", title: { text: `Day (${tz})` }, tickformat: "%d %b", dtick: everyDays * 86400000, gridcolor: "#e9edf1" },
-    yaxis: { title: { text: "Energy [kWh]" }, ...zeroBasedAxis(whole(kwh("tracker_energy_wh"))), gridcolor: "#e9edf1" },
+    // both arrays' bars: a fixed array beating the tracker (a CPV receiver with a yawed
+    // pedestal, a stuck tracker) ran off the top of an axis set by the tracker's alone
+    yaxis: { title: { text: "Energy [kWh]" }, ...zeroBasedAxis([...whole(kwh("tracker_energy_wh")), ...whole(kwh("fixed_energy_wh"))]), gridcolor: "#e9edf1" },
     yaxis2: { title: { text: "Tracking gain [%]" }, overlaying: "y", side: "right", showgrid: false, ticksuffix: " %", ...gainAxis },
   }), {
     columns: ["date", "tracker_energy_wh", "fixed_energy_wh", "gain_pct", "partial_day"],

@@ -25,7 +25,8 @@ def test_diagnosis_panel_matches_the_api(page, server) -> None:
     page.wait_for_function(
         "() => document.querySelector('#chart-diagnosis').dataset.points !== undefined",
         timeout=120_000)
-    prs = [d["tracker"]["performance_ratio"] for d in body["days"]]
+    prs = [None if any(f["kind"] == "sky_unusable" for f in d["faults"])
+           else d["tracker"]["performance_ratio"] for d in body["days"]]
     gains = [d[k] for d in body["days"] for k in ("gain_measured_pct", "gain_expected_pct")]
     expected_points = sum(v is not None for v in prs + gains)
     assert int(chart.get_attribute("data-points")) == expected_points > 0
@@ -120,6 +121,48 @@ def test_the_panel_shows_the_mount_faults_from_the_camera(page, server) -> None:
     assert shown.all_inner_texts() == [
         f"Mount (from the tracker camera): {f['detail']}" for f in faults]
     page.locator("#diagnosis-card").screenshot(path="test-artifacts/e2e-diagnosis-mount.png")
+    assert page.console_errors == []
+
+
+def test_a_day_whose_fixed_readings_were_refused_says_so(page, server) -> None:
+    """Both arrays at 0 W all day (a tripped site breaker; a date before the demo logger's
+    days): the panel lists the ``sky_unusable`` finding, its sky line says the fixed
+    array's readings were refused (it said "too few readings" of a day read every 5
+    minutes), and the chart draws no PR for it (a PR of 0 beside "the tracker is not
+    judged": a tester's findings)."""
+    from tests.backend.live_service import make_token
+
+    day = dt.date(2022, 6, 14)
+    token = make_token(server.env["HELIOTWIN_DATABASE_URL"])
+    site = server.site["site_id"]
+    t0 = dt.datetime(day.year, day.month, day.day, tzinfo=server.tz)
+    readings = [{"ts": (t0 + dt.timedelta(minutes=m)).isoformat(), "array": a, "power_w": 0.0}
+                for m in range(0, 1440, 5) for a in ("tracker", "fixed")]
+    httpx.post(f"{server.url}/api/v1/sites/{site}/measurements", json={"readings": readings},
+               headers={"Authorization": f"Bearer {token}"}, timeout=120).raise_for_status()
+    rng = {"start": day.isoformat(), "end": (day + dt.timedelta(days=1)).isoformat()}
+    body = httpx.get(f"{server.url}/api/v1/sites/{site}/diagnosis", params=rng,
+                     timeout=300).raise_for_status().json()
+    (d,) = body["days"]
+    assert [f["kind"] for f in d["faults"]] == ["sky_unusable"], d["faults"]
+    page.goto(f"{server.url}/#overview")
+    page.wait_for_selector("#diag-form")
+    page.evaluate("([s, e]) => { document.getElementById('diag-start').value = s; "
+                  "document.getElementById('diag-end').value = e; }",
+                  [rng["start"], rng["end"]])
+    page.click("#diag-run")
+    page.wait_for_function(
+        "() => document.querySelector('#chart-diagnosis').dataset.points !== undefined",
+        timeout=120_000)
+    faults = page.locator("[data-testid=diag-fault]").all_inner_texts()
+    assert len(faults) == 1 and "readings unusable" in faults[0], faults
+    sky = page.locator("[data-testid=diag-sky]").inner_text()
+    assert "1 day from the clear sky (the fixed array's readings refused)" in sky, sky
+    # the two gains (measured: none, both 0 Wh; expected: the clear sky's), no PR
+    gains = [v for v in (d["gain_measured_pct"], d["gain_expected_pct"]) if v is not None]
+    drawn = int(page.locator("[data-testid=chart-diagnosis]").get_attribute("data-points"))
+    assert drawn == len(gains), (drawn, gains, d["tracker"]["performance_ratio"])
+    page.locator("#diagnosis-card").screenshot(path="test-artifacts/e2e-diagnosis-refused.png")
     assert page.console_errors == []
 
 
