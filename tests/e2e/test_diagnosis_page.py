@@ -85,6 +85,18 @@ def test_the_overview_draws_the_twin_under_the_measured_sky(page, server) -> Non
     assert page.console_errors == []
 
 
+def _diagnose_range(page, server, rng: dict[str, str]) -> None:
+    """The Overview's diagnosis panel run on ``rng`` (``start``, ``end``): the range set
+    before the panel first scrolls into view (typing would scroll it there and load the
+    default week with the start already changed: over 400 days, a 422)."""
+    page.goto(f"{server.url}/#overview")
+    page.wait_for_selector("#diag-form")
+    page.evaluate("([s, e]) => { document.getElementById('diag-start').value = s; "
+                  "document.getElementById('diag-end').value = e; }",
+                  [rng["start"], rng["end"]])
+    page.click("#diag-run")
+
+
 def test_the_panel_shows_the_mount_faults_from_the_camera(page, server) -> None:
     """A day of tracker-camera offsets of a misaligned mount (posted with a token, on a
     date before the demo logger's days): the diagnosis panel lists each mount fault the
@@ -108,14 +120,7 @@ def test_the_panel_shows_the_mount_faults_from_the_camera(page, server) -> None:
                      timeout=300).raise_for_status().json()
     faults = body["mount"]["faults"]
     assert {f["term"] for f in faults} == set(MOUNT)
-    page.goto(f"{server.url}/#overview")
-    # the range set before the panel first scrolls into view (typing would scroll it there
-    # and load the default week with the start already changed: over 400 days, a 422)
-    page.wait_for_selector("#diag-form")
-    page.evaluate("([s, e]) => { document.getElementById('diag-start').value = s; "
-                  "document.getElementById('diag-end').value = e; }",
-                  [rng["start"], rng["end"]])
-    page.click("#diag-run")
+    _diagnose_range(page, server, rng)
     shown = page.locator("[data-testid=diag-mount-fault]")
     shown.first.wait_for(timeout=120_000)
     assert shown.all_inner_texts() == [
@@ -145,12 +150,7 @@ def test_a_day_whose_fixed_readings_were_refused_says_so(page, server) -> None:
                      timeout=300).raise_for_status().json()
     (d,) = body["days"]
     assert [f["kind"] for f in d["faults"]] == ["sky_unusable"], d["faults"]
-    page.goto(f"{server.url}/#overview")
-    page.wait_for_selector("#diag-form")
-    page.evaluate("([s, e]) => { document.getElementById('diag-start').value = s; "
-                  "document.getElementById('diag-end').value = e; }",
-                  [rng["start"], rng["end"]])
-    page.click("#diag-run")
+    _diagnose_range(page, server, rng)
     page.wait_for_function(
         "() => document.querySelector('#chart-diagnosis').dataset.points !== undefined",
         timeout=120_000)
