@@ -12,7 +12,7 @@ export const KIND_WORDS = {
   elevation_offset: "elevation offset",
   clock_offset: "clock offset",
   sky_clock_offset: "clock of the sky's readings (fixed array or sensor) off",
-  sky_unusable: "the fixed array's readings unusable (the day judged on the clear sky)",
+  sky_unusable: "the fixed array's readings unusable (no measured sky: the tracker not judged)",
   module_loss: "module or string lost",
   soiling: "soiling",
   dropout: "logger dropout",
