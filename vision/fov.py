@@ -151,12 +151,14 @@ def overlays_unlit(gray: NDArray[np.uint8], fov: FovCircle) -> NDArray[np.uint8]
     if not ((gray[0] >= _OVERLAY_WHITE).any() or (gray[-1] >= _OVERLAY_WHITE).any()
             or (gray[:, 0] >= _OVERLAY_WHITE).any() or (gray[:, -1] >= _OVERLAY_WHITE).any()):
         return gray  # nothing white on the edge: the usual frame, untouched
-    _, labels = cv2.connectedComponents((gray >= _OVERLAY_WHITE).view(np.uint8),
-                                        connectivity=8)
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(
+        (gray >= _OVERLAY_WHITE).view(np.uint8), connectivity=8)
     edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
     out = gray
     for k in edge[edge > 0]:
-        ys, xs = np.nonzero(labels == k)
+        x0, y0, w, h = (int(v) for v in stats[k, :4])  # within its box: a few pixels each
+        ys, xs = np.nonzero(labels[y0:y0 + h, x0:x0 + w] == k)
+        ys, xs = ys + y0, xs + x0
         if (np.hypot(xs - fov.cx_px, ys - fov.cy_px) > fov.radius_px / 0.98).any():
             if out is gray:
                 out = gray.copy()
