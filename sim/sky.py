@@ -374,8 +374,40 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
     weather = weather.iloc[np.argsort(hour, kind="stable")]
     if not np.isfinite(weather[["ghi", "dni", "dhi"]].to_numpy()).all():
         raise ValueError(f"the {fmt.upper()} file has missing irradiance (ghi, dni or dhi)")
+    _check_irradiance(weather, fmt)
     station = {"format": fmt, "name": name, **place, "utc_offset_h": offset}
     return weather, station
+
+
+#: The most any of GHI, DNI, DHI can be [W m⁻²]: the solar constant at perihelion (≈ 1,414)
+#: and a little; EPW writes 9999 for a missing one (EnergyPlus Auxiliary Programs, "EnergyPlus
+#: Weather File (EPW) Data Dictionary": "missing value = 9999")
+IRRADIANCE_MAX_W_M2 = 1500.0
+#: A weather file's irradiance may dip this far below 0 (a pyranometer's night offset) and
+#: is read as 0; further is no irradiance [W m⁻²]
+IRRADIANCE_NIGHT_OFFSET_W_M2 = -10.0
+
+
+def _check_irradiance(weather: pd.DataFrame, fmt: str) -> None:
+    """Refuse a typical year whose GHI, DNI or DHI lies outside
+    [:data:`IRRADIANCE_NIGHT_OFFSET_W_M2`, :data:`IRRADIANCE_MAX_W_M2`], naming the column,
+    the hour and how many such hours; set the small negatives of a night offset to 0
+    (in place). An EPW's 9999 ("missing") was capped at the top of the atmosphere and read
+    as a clear sky: five missing hours put a June day 50 % up and its gain 9 points off; a
+    negative DNI took the beam off the tracker (a tester's findings)."""
+    irr = weather[["ghi", "dni", "dhi"]]
+    bad = (irr < IRRADIANCE_NIGHT_OFFSET_W_M2) | (irr > IRRADIANCE_MAX_W_M2)
+    if bad.to_numpy().any():
+        col = str(bad.any().idxmax())
+        at = bad[col].to_numpy().argmax()
+        value = float(irr[col].iloc[at])
+        why = ("EPW's mark of a missing value" if fmt == "epw" and value == 9999.0 else
+               f"outside {IRRADIANCE_NIGHT_OFFSET_W_M2:g}…{IRRADIANCE_MAX_W_M2:g} W m⁻²")
+        raise ValueError(
+            f"the {fmt.upper()} file's {col} is {value:g} W m⁻² on "
+            f"{irr.index[at]:%d %b %H:%M} (station time): {why}; "
+            f"{int(bad.to_numpy().sum())} such values in all — fill them, or use another file")
+    weather[["ghi", "dni", "dhi"]] = irr.clip(lower=0.0)
 
 
 def typical_year_on(weather: pd.DataFrame, utc_offset_h: float, start: pd.Timestamp,
@@ -473,7 +505,8 @@ def limit_to_extraterrestrial(ghi: np.ndarray, dni: np.ndarray, dhi: np.ndarray,
     No horizontal irradiance can exceed the extraterrestrial horizontal irradiance
     ``E₀ cos θz`` (clearness index ≤ 1, Duffie & Beckman, *Solar Engineering of Thermal
     Processes*, 4th ed., eq. 2.9.3): GHI and DHI are capped there, and the beam takes at most
-    what the diffuse leaves of it, ``DNI cos θz ≤ E₀ cos θz − DHI`` (so ``DNI ≤ E₀``). Data
+    what the diffuse leaves of it, ``DNI cos θz ≤ E₀ cos θz − DHI`` (so ``DNI ≤ E₀``); none
+    is below 0. Data
     within these limits are returned unchanged — at its own station a TMY is touched only in
     hours whose mean is laid onto a sun a degree or two above the horizon; an hour measured
     under a high sun and laid onto a sun on the horizon (a distant station) loses its beam.
@@ -482,11 +515,13 @@ def limit_to_extraterrestrial(ghi: np.ndarray, dni: np.ndarray, dhi: np.ndarray,
     cos_z = np.maximum(np.cos(np.radians(np.asarray(apparent_zenith, dtype=float))), 0.0)
     e0 = np.asarray(dni_extra, dtype=float)
     top = e0 * cos_z
-    ghi = np.minimum(np.asarray(ghi, dtype=float), top)
-    dhi = np.minimum(np.asarray(dhi, dtype=float), top)
+    # and never below 0: a negative DNI took the beam off the tracker's plane (a tester's
+    # finding, a TMY3 hour at −300 W m⁻²)
+    ghi = np.clip(np.asarray(ghi, dtype=float), 0.0, top)
+    dhi = np.clip(np.asarray(dhi, dtype=float), 0.0, top)
     with np.errstate(divide="ignore", invalid="ignore"):
         beam_max = np.where(cos_z > 0, np.maximum(e0 - dhi / cos_z, 0.0), 0.0)
-    dni = np.minimum(np.asarray(dni, dtype=float), beam_max)
+    dni = np.clip(np.asarray(dni, dtype=float), 0.0, beam_max)
     return {"ghi": ghi, "dni": dni, "dhi": dhi}
 
 

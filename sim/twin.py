@@ -311,9 +311,17 @@ def has_twin_arrays(mounts: Mapping[str, Any]) -> bool:
     return all(mounts.get(name) == name for name in ("tracker", "fixed"))
 
 
+#: The longest step of a run [s]: an hour, a typical year's own resolution. The energy is
+#: the steps' power integrated, so a step that skips the day's shape is no energy (a
+#: tester's finding: Hamburg's clear June day read a 5.5 % gain at a 12-hour step against
+#: 56.0 % at a minute, and 0 Wh at a day's step; 56.04 % at an hour).
+MAX_STEP_S = 3600.0
+
+
 def check_step(start: pd.Timestamp, end: pd.Timestamp, step_s: float) -> None:
-    """A run's range and step: ``end`` after ``start``, ``step_s`` positive and no longer
-    than the run (a step of 10⁹ s made a day's control loop tick through 31 years)."""
+    """A run's range and step: ``end`` after ``start``, ``step_s`` positive, no longer
+    than the run (a step of 10⁹ s made a day's control loop tick through 31 years) nor
+    than :data:`MAX_STEP_S`."""
     if not end > start:
         raise ValueError(f"end ({end.isoformat()}) must be after start ({start.isoformat()})")
     if not step_s > 0:
@@ -321,6 +329,9 @@ def check_step(start: pd.Timestamp, end: pd.Timestamp, step_s: float) -> None:
     if step_s > (end - start).total_seconds():
         raise ValueError(f"step_s: {step_s:g} s is longer than the run "
                          f"({(end - start).total_seconds():g} s from start to end)")
+    if step_s > MAX_STEP_S:
+        raise ValueError(f"step_s: {step_s:g} s is longer than an hour ({MAX_STEP_S:g} s), "
+                         f"too coarse to integrate a day's energy")
 
 
 def _check_inputs(

@@ -115,13 +115,15 @@ def test_plant_ranges_add_up_and_an_hourly_step_keeps_its_last_hour() -> None:
 
 
 def test_the_controller_and_motors_stop_at_the_end_whatever_the_step() -> None:
-    """A step that does not divide the run (7 h into a day) ran the control loop and the
-    motors' standby to the grid's next instant past the end: 28 h of standby (14.0 Wh)
-    for a day of 12.0; a step longer than the run is refused (1e9 s ran for minutes)."""
+    """A step that does not divide the run (7 h into a day; since steps are at most an hour,
+    43 min) ran the control loop and the motors' standby to the grid's next instant past
+    the end: 28 h of standby (14.0 Wh) for a day of 12.0; a step longer than the run is
+    refused (1e9 s ran for minutes), and one longer than an hour (12 h read a clear day's
+    gain as 5.5 % against 56 %)."""
     site = load_site("tehuantepec")
     day = (_t("00:00"), _t("00:00", "2024-03-16"))
     by_minute = simulate(site, *day, step_s=60, controller="open_loop_spa")
-    by_7h = simulate(site, *day, step_s=25200, controller="open_loop_spa")
+    by_7h = simulate(site, *day, step_s=2580, controller="open_loop_spa")
     assert by_7h.moves == by_minute.moves
     assert by_7h.actuator_standby_energy_wh == pytest.approx(
         by_minute.actuator_standby_energy_wh, rel=1e-12)
@@ -129,6 +131,8 @@ def test_the_controller_and_motors_stop_at_the_end_whatever_the_step() -> None:
         by_minute.summary()["actuator_energy_wh"], rel=1e-9)
     with pytest.raises(ValueError, match="step_s: 86400 s is longer than the run"):
         simulate(site, _t("12:00"), _t("12:01"), step_s=86400, controller="open_loop_spa")
+    with pytest.raises(ValueError, match="step_s: 43200 s is longer than an hour"):
+        simulate(site, *day, step_s=43200, controller="open_loop_spa")
 
 
 def test_a_last_chunk_holding_only_the_closing_instant_takes_the_weathers_last_row(
@@ -166,8 +170,9 @@ def test_the_days_of_a_run_over_a_missing_or_repeated_midnight(zone: str, start:
 
 def test_the_pointing_minutes_end_with_the_run() -> None:
     """08:00–15:00 at 90-minute steps: the last step is cut at 15:00 (it counted whole:
-    450 minutes against 420)."""
+    450 minutes against 420); since steps are at most an hour, at 55-minute steps (the
+    last cut from 15:20)."""
     site = load_site("tehuantepec")
-    for step in (60, 5400):
+    for step in (60, 3300):
         r = simulate(site, _t("08:00"), _t("15:00"), step_s=step, controller="open_loop_spa")
         assert r.summary()["pointing_error_minutes"] == 420, step

@@ -260,3 +260,38 @@ def test_a_distant_station_gives_no_impossible_irradiance() -> None:
         # energy 94 % and 88 % of the clear-sky days'
         assert ratio.max() < 0.85
         assert 0.8 * clear < run.summary()["tracker_energy_wh"] < clear
+
+
+def test_a_weather_files_missing_or_impossible_irradiance_is_refused(tmp_path: Path) -> None:
+    """A tester's findings: an EPW's 9999 ("missing value", the EPW data dictionary) was
+    capped at the top of the atmosphere and read as a clear sky (five missing hours: a June
+    day +50 %, its gain 9 points off), and a TMY3 hour's GHI of 5000 or DNI of −300 W m⁻² was
+    taken (the negative beam lowered the tracker's POA from 729 to 359 W m⁻²). Each is refused
+    naming the column, the hour and the count; a night offset down to −10 W m⁻² reads as 0."""
+    epw = write_epw(tmp_path / "greensboro.epw")
+    lines = epw.read_text().splitlines()
+    june_15 = 8 + (31 + 28 + 31 + 30 + 31 + 14) * 24  # its first hour's record
+    for k in range(june_15 + 11, june_15 + 14):
+        f = lines[k].split(",")
+        f[13:16] = ["9999", "9999", "9999"]  # 15 June, hours 12–14: GHI, DNI, DHI missing
+        lines[k] = ",".join(f)
+    (tmp_path / "missing.epw").write_text("\n".join(lines) + "\n")
+    with pytest.raises(ValueError, match=r"EPW file's ghi is 9999 W m⁻² on 15 Jun 11:30 "
+                                         r"\(station time\): EPW's mark of a missing value; "
+                                         r"9 such values"):
+        read_typical_year(tmp_path / "missing.epw")
+    tmy3 = pvlib_tmy3_path().read_text().splitlines()
+    row = 2 + (31 + 28 + 31 + 30 + 31 + 14) * 24 + 12  # 15 June 13:00 (the hour's end)
+    head = tmy3[1].split(",")
+    f = tmy3[row].split(",")
+    f[head.index("DNI (W/m^2)")] = "-300"
+    bad = tmy3[:row] + [",".join(f)] + tmy3[row + 1:]
+    (tmp_path / "bad.csv").write_text("\n".join(bad) + "\n")
+    with pytest.raises(ValueError, match=r"TMY3 file's dni is -300 W m⁻² on 15 Jun 12:30 "
+                                         r"\(station time\): outside -10…1500 W m⁻²; 1 such"):
+        read_typical_year(tmp_path / "bad.csv")
+    f[head.index("DNI (W/m^2)")] = "-4"  # a night offset: read as 0
+    night = tmy3[:row] + [",".join(f)] + tmy3[row + 1:]
+    (tmp_path / "night.csv").write_text("\n".join(night) + "\n")
+    weather, _ = read_typical_year(tmp_path / "night.csv")
+    assert float(weather["dni"].min()) == 0.0

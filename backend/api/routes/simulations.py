@@ -31,7 +31,7 @@ from backend.twin.parameters import MACHINE_PARAMETERS
 from backend.twin.scenario import Scenario
 from backend.twin.series_read import PackedSeries
 from backend.twin.simulations import RunTooCostly
-from sim.twin import CONTROLLERS, RECEIVERS
+from sim.twin import CONTROLLERS, MAX_STEP_S, RECEIVERS
 
 router = APIRouter(prefix="/api/v1/simulations", tags=["simulations"])
 
@@ -49,7 +49,8 @@ class _SimulationBase(BaseModel):
                        examples=["2024-03-15"])
     end: str = Field(..., min_length=1, max_length=64, description="exclusive",
                      examples=["2024-03-16"])
-    step_s: float = Field(60.0, gt=0, le=86400, description="time step [s]")
+    step_s: float = Field(60.0, gt=0, le=MAX_STEP_S,
+                          description="time step [s], at most an hour (sim.twin.MAX_STEP_S)")
     controller: Literal[CONTROLLERS] = Field(  # type: ignore[valid-type]
         "ideal", description="tracking controller",
         examples=["open_loop_model"])   # the example body's terms go with this controller
