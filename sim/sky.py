@@ -366,10 +366,11 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
     if len(data) != HOURS_PER_TYPICAL_YEAR or len(np.unique(hour)) != HOURS_PER_TYPICAL_YEAR:
         raise ValueError(f"a typical year has {HOURS_PER_TYPICAL_YEAR} distinct hours; this "
                          f"{fmt.upper()} file has {len(np.unique(hour))} of {len(data)} rows")
-    try:
-        weather = data[list(WEATHER_COLUMNS)].astype(float)
-    except KeyError as exc:
-        raise ValueError(f"not a readable {fmt.upper()} file: no {exc} in it") from None
+    missing = [c for c in WEATHER_COLUMNS if c not in data.columns]
+    if missing:  # (pandas' own KeyError read "no "['dni'] not in index" in it", a tester's find)
+        raise ValueError(f"not a readable {fmt.upper()} file: no {', '.join(missing)} "
+                         f"column in it")
+    weather = data[list(WEATHER_COLUMNS)].astype(float)
     weather.index = pd.DatetimeIndex(middle)
     weather = weather.iloc[np.argsort(hour, kind="stable")]
     if not np.isfinite(weather[["ghi", "dni", "dhi"]].to_numpy()).all():

@@ -295,3 +295,13 @@ def test_a_weather_files_missing_or_impossible_irradiance_is_refused(tmp_path: P
     (tmp_path / "night.csv").write_text("\n".join(night) + "\n")
     weather, _ = read_typical_year(tmp_path / "night.csv")
     assert float(weather["dni"].min()) == 0.0
+
+
+def test_a_weather_file_without_a_column_names_it(tmp_path: Path) -> None:
+    """A TMY3 file without its DNI column (a tester's finding: pandas' own KeyError made the
+    message 'no "['dni'] not in index" in it')."""
+    lines = pvlib_tmy3_path().read_text().splitlines()
+    lines[1] = lines[1].replace("DNI (W/m^2)", "DNX (W/m^2)")
+    (tmp_path / "nodni.csv").write_text("\n".join(lines) + "\n")
+    with pytest.raises(ValueError, match=r"^not a readable TMY3 file: no dni column in it$"):
+        read_typical_year(tmp_path / "nodni.csv")
