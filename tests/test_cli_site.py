@@ -213,3 +213,16 @@ def test_the_library_and_the_service_default_to_the_same_user_folder(monkeypatch
 
     monkeypatch.delenv("HELIOTWIN_SITES_DIR", raising=False)
     assert get_settings().sites.user_dir == default_user_sites_dir()
+
+
+@pytest.mark.parametrize(("flags", "words"), [
+    (["--latitude-deg", "95", "--timezone", "UTC"], "--latitude-deg: Input should be less"),
+    (["--latitude-deg", "45", "--timezone", "Mars/Base"], "--timezone: 'Mars/Base' is not"),
+])
+def test_a_bad_flag_is_named_by_its_flag(tmp_path: Path, heliotwin, flags: list[str],
+                                         words: str) -> None:
+    """A tester's finding: ``--latitude-deg 95`` was refused as ``site: latitude_deg: …``,
+    the config's key, not the flag that was typed."""
+    p = heliotwin(tmp_path, "site", "create", "--id", "bad", "--longitude-deg", "10", *flags)
+    assert p.returncode == 2 and words in p.stderr, p.stderr
+    assert "site: " not in p.stderr

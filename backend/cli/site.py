@@ -188,7 +188,28 @@ def create(args: argparse.Namespace) -> int:
         "latitude_deg": args.latitude_deg, "longitude_deg": args.longitude_deg,
         "altitude_m": args.altitude_m, "timezone": args.timezone,
         "source": f"heliotwin site create (tracker and arrays as {args.like})", "notes": ""})
+    _check_flags(config)
     return _write(config, args.force)
+
+
+#: The config keys ``site create`` takes from its flags, by flag
+_FLAG_KEYS = {"--id": "site_id", "--name": "name", "--latitude-deg": "latitude_deg",
+              "--longitude-deg": "longitude_deg", "--altitude-m": "altitude_m",
+              "--timezone": "timezone"}
+
+
+def _check_flags(config: dict[str, Any]) -> None:
+    """Validate a config made from flags, a refusal naming the flag (it named the config
+    key, ``site: latitude_deg: …`` for ``--latitude-deg 95``: a tester's finding)."""
+    from sim.site_config import validate_site_config
+
+    try:
+        validate_site_config(config, where="site")
+    except ValueError as exc:
+        msg = str(exc)
+        for flag, key in _FLAG_KEYS.items():
+            msg = msg.replace(f"site: {key}:", f"{flag}:")
+        fail(msg)
 
 
 def _station(path: Path, fmt: str) -> dict[str, Any]:
