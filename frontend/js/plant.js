@@ -315,7 +315,9 @@ async function drawSweep() {
   await draw("chart-sweep-energy", [...perCollector, ...perHa], baseLayout({
     xaxis: { title: { text: "ground cover ratio [-]" }, gridcolor: "#e9edf1" },
     yaxis: { title: { text: "per collector [MWh] (thick)" }, gridcolor: "#e9edf1" },
-    yaxis2: { title: { text: "per hectare [MWh] (thin)" }, overlaying: "y", side: "right", rangemode: "tozero" },
+    // round ticks on the right too (Plotly's own fell on 112, 336, 560…: a tester's finding)
+    yaxis2: { title: { text: "per hectare [MWh] (thin)" }, overlaying: "y", side: "right",
+      ...zeroBasedAxis(sweep.rows.map((r) => r.energy_mwh_per_ha)) },
     hovermode: "closest",
   }), table);
   await draw("chart-sweep-tradeoff", [...groups].map(([name, rows]) => ({
