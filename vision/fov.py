@@ -124,41 +124,50 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
 _OVERLAY_WHITE = 250
 
 
-def _without_overlays(small: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    """The thumbnail with white regions (≥ :data:`_OVERLAY_WHITE`) that touch its edge set
-    to 0 (unlit): what a station draws on its frames — a timestamp bar or box, a white
-    border — is no lit sky, and a fisheye's field stop leaves the frame's edge dark (a
-    tester's finding: a 48 px white bar across the top, a 520 × 60 box in a corner or a
-    10 px white border lifted the corners' level or joined the image circle, and no circle
-    was found on 29, 6 and 29 of 29 labelled frames). A copy where anything is set."""
-    white = (small >= _OVERLAY_WHITE).view(np.uint8)
-    if not (white[0].any() or white[-1].any() or white[:, 0].any() or white[:, -1].any()):
-        return small  # nothing white on the edge: the usual frame, untouched
-    _, labels = cv2.connectedComponents(white, connectivity=8)
+def _white_on_edge(img: NDArray[np.uint8]) -> list[tuple[NDArray[np.intp], NDArray[np.intp]]]:
+    """The pixels ``(ys, xs)`` of each white region (≥ :data:`_OVERLAY_WHITE`, 8-connected)
+    that touches the edge of ``img``: what a station draws over its frames (a time-stamp bar
+    or box, a white border). None to find — nothing white on the edge — costs four rows."""
+    if not ((img[0] >= _OVERLAY_WHITE).any() or (img[-1] >= _OVERLAY_WHITE).any()
+            or (img[:, 0] >= _OVERLAY_WHITE).any() or (img[:, -1] >= _OVERLAY_WHITE).any()):
+        return []
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(
+        (img >= _OVERLAY_WHITE).view(np.uint8), connectivity=8)
     edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    out = []
+    for k in edge[edge > 0]:
+        x0, y0, w, h = (int(v) for v in stats[k, :4])  # within its box: a few pixels each
+        ys, xs = np.nonzero(labels[y0:y0 + h, x0:x0 + w] == k)
+        out.append((ys + y0, xs + x0))
+    return out
+
+
+def _without_overlays(small: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """The thumbnail with white regions that touch its edge (:func:`_white_on_edge`) set to
+    0 (unlit): what a station draws on its frames is no lit sky, and a fisheye's field stop
+    leaves the frame's edge dark (a tester's finding: a 48 px white bar across the top, a
+    520 × 60 box in a corner or a 10 px white border lifted the corners' level or joined the
+    image circle, and no circle was found on 29, 6 and 29 of 29 labelled frames). A copy
+    where anything is set."""
+    regions = _white_on_edge(small)
+    if not regions:
+        return small
     out = small.copy()
-    out[np.isin(labels, edge[edge > 0])] = 0
+    for ys, xs in regions:
+        out[ys, xs] = 0
     return out
 
 
 def overlays_unlit(gray: NDArray[np.uint8], fov: FovCircle) -> NDArray[np.uint8]:
-    """``gray`` with each white region (≥ :data:`_OVERLAY_WHITE`) that touches the frame's
-    edge and reaches outside the image circle ``fov`` set to 0: a station's time-stamp bar
-    or box, a white border, drawn over the frame — never the sun, whose glare lies inside
-    the image circle (a tester's 48 px bar across a Wolf frame's top, where the circle
-    reaches within 16 px of the edge, was the sun at 0.94–0.996 once the circle was read,
-    :func:`_without_overlays`). A copy where anything is set; ``gray`` itself otherwise."""
-    if not ((gray[0] >= _OVERLAY_WHITE).any() or (gray[-1] >= _OVERLAY_WHITE).any()
-            or (gray[:, 0] >= _OVERLAY_WHITE).any() or (gray[:, -1] >= _OVERLAY_WHITE).any()):
-        return gray  # nothing white on the edge: the usual frame, untouched
-    _, labels, stats, _ = cv2.connectedComponentsWithStats(
-        (gray >= _OVERLAY_WHITE).view(np.uint8), connectivity=8)
-    edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    """``gray`` with each white region that touches the frame's edge
+    (:func:`_white_on_edge`) and reaches outside the image circle ``fov`` set to 0: a
+    station's time-stamp bar or box, a white border, drawn over the frame — never the sun,
+    whose glare lies inside the image circle (a tester's 48 px bar across a Wolf frame's
+    top, where the circle reaches within 16 px of the edge, was the sun at 0.94–0.996 once
+    the circle was read, :func:`_without_overlays`). A copy where anything is set; ``gray``
+    itself otherwise."""
     out = gray
-    for k in edge[edge > 0]:
-        x0, y0, w, h = (int(v) for v in stats[k, :4])  # within its box: a few pixels each
-        ys, xs = np.nonzero(labels[y0:y0 + h, x0:x0 + w] == k)
-        ys, xs = ys + y0, xs + x0
+    for ys, xs in _white_on_edge(gray):
         if (np.hypot(xs - fov.cx_px, ys - fov.cy_px) > fov.radius_px / 0.98).any():
             if out is gray:
                 out = gray.copy()
