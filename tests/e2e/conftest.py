@@ -73,6 +73,9 @@ class Server:
     viser_url: str
     env: dict[str, str]
     site: dict = field(default_factory=dict)
+    #: a write token of the site, stored before the server started (made while it runs, its
+    #: SQLite write met the demo logger's: "database is locked", a fresh clone's run)
+    write_token: str = ""
 
     @property
     def tz(self) -> ZoneInfo:
@@ -142,6 +145,9 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
         "HELIOTWIN_DEMO_BACKFILL_DAYS": str(BACKFILL_DAYS),
         "PYTHONUNBUFFERED": "1",
     }
+    from tests.backend.live_service import make_token
+
+    token = make_token(env["HELIOTWIN_DATABASE_URL"], SITE_ID)
     log = tmp / "serve.log"
     cmd = [*_heliotwin(), "serve", "--host", "127.0.0.1", "--port", str(port),
            "--viser-port", str(viser_port)]
@@ -151,7 +157,8 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     try:
         with httpx.Client(base_url=url, timeout=30) as client:
             _wait_healthy(client, proc, log)
-            srv = Server(url=url, viser_url=f"http://127.0.0.1:{viser_port}/", env=env)
+            srv = Server(url=url, viser_url=f"http://127.0.0.1:{viser_port}/", env=env,
+                         write_token=token)
             srv.site = client.get(f"/api/v1/sites/{SITE_ID}").raise_for_status().json()
             _wait_for_backfill(client, srv)
         yield srv

@@ -104,12 +104,10 @@ def test_the_panel_shows_the_mount_faults_from_the_camera(page, server) -> None:
     import numpy as np
     import pandas as pd
 
-    from tests.backend.live_service import make_token
     from tests.backend.test_diagnosis_mount import MOUNT, camera_readings
 
     day = dt.date(2022, 8, 9)
-    # as `heliotwin token create` stores one, in this process (no CLI start-up)
-    token = make_token(server.env["HELIOTWIN_DATABASE_URL"])
+    token = server.write_token
     site = server.site["site_id"]
     readings = camera_readings(pd.Timestamp(day.isoformat(), tz=server.site["timezone"]), MOUNT,
                                np.random.default_rng(15))
@@ -135,10 +133,8 @@ def test_a_day_whose_fixed_readings_were_refused_says_so(page, server) -> None:
     array's readings were refused (it said "too few readings" of a day read every 5
     minutes), and the chart draws no PR for it (a PR of 0 beside "the tracker is not
     judged": a tester's findings)."""
-    from tests.backend.live_service import make_token
-
     day = dt.date(2022, 6, 14)
-    token = make_token(server.env["HELIOTWIN_DATABASE_URL"])
+    token = server.write_token
     site = server.site["site_id"]
     t0 = dt.datetime(day.year, day.month, day.day, tzinfo=server.tz)
     readings = [{"ts": (t0 + dt.timedelta(minutes=m)).isoformat(), "array": a, "power_w": 0.0}
