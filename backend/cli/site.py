@@ -95,8 +95,9 @@ def _sites_dir() -> Path:
     return get_settings().sites.user_dir
 
 
-def _write(config: dict[str, Any], force: bool) -> int:
-    """Validate, refuse to overwrite without ``force``, write, say where."""
+def _write(config: dict[str, Any], force: bool, flags: dict[str, str] | None = None) -> int:
+    """Validate, refuse to overwrite without ``force``, write, say where. ``flags``: the
+    config keys made from flags, by flag (:data:`_FLAG_KEYS`), which a refusal names."""
     from backend.sites import config_value, write_site_file
     from sim.site_config import validate_site_config
     from sim.sites import builtin_site_ids
@@ -104,7 +105,10 @@ def _write(config: dict[str, Any], force: bool) -> int:
     try:
         validate_site_config(config, where="site")
     except ValueError as exc:
-        fail(str(exc))
+        msg = str(exc)
+        for flag, key in (flags or {}).items():
+            msg = msg.replace(f"site: {key}:", f"{flag}:")
+        fail(msg)
     directory = _sites_dir()
     target = directory / f"{config['site_id']}.json"
     builtin = config["site_id"] in builtin_site_ids()
@@ -188,28 +192,15 @@ def create(args: argparse.Namespace) -> int:
         "latitude_deg": args.latitude_deg, "longitude_deg": args.longitude_deg,
         "altitude_m": args.altitude_m, "timezone": args.timezone,
         "source": f"heliotwin site create (tracker and arrays as {args.like})", "notes": ""})
-    _check_flags(config)
-    return _write(config, args.force)
+    return _write(config, args.force, flags=_FLAG_KEYS)
 
 
-#: The config keys ``site create`` takes from its flags, by flag
+#: The config keys ``site create`` takes from its flags, by flag: a refusal of a config made
+#: from flags names the flag (it named the key, ``site: latitude_deg: …`` for
+#: ``--latitude-deg 95``: a tester's finding)
 _FLAG_KEYS = {"--id": "site_id", "--name": "name", "--latitude-deg": "latitude_deg",
               "--longitude-deg": "longitude_deg", "--altitude-m": "altitude_m",
               "--timezone": "timezone"}
-
-
-def _check_flags(config: dict[str, Any]) -> None:
-    """Validate a config made from flags, a refusal naming the flag (it named the config
-    key, ``site: latitude_deg: …`` for ``--latitude-deg 95``: a tester's finding)."""
-    from sim.site_config import validate_site_config
-
-    try:
-        validate_site_config(config, where="site")
-    except ValueError as exc:
-        msg = str(exc)
-        for flag, key in _FLAG_KEYS.items():
-            msg = msg.replace(f"site: {key}:", f"{flag}:")
-        fail(msg)
 
 
 def _station(path: Path, fmt: str) -> dict[str, Any]:
