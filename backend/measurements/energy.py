@@ -98,18 +98,17 @@ def compare(arrays: dict[str, dict[str, Any]], tracker: str | None,
 def _gain_note(tr: dict[str, Any], fx: dict[str, Any], same: bool | None) -> str:
     """Why a period has no measured gain (and, for want of shared minutes, no
     ``twin_matched_gain_pct``): every empty gain says why."""
-    missing = [what for what, a in (("the tracker", tr), ("the fixed array", fx))
-               if a["measured_wh"] is None]
-    if missing:
-        return " and ".join(missing) + (" have" if len(missing) > 1 else " has") + \
-            " no readings: the loggers share no minutes"
-    unbridged = [what for what, a in (("the tracker", tr), ("the fixed array", fx))
-                 if a["readings"] and a.get("coverage_pct") == 0.0]
-    if unbridged:  # readings came, but none within the gap of the next: no minute counted
-        return (" and ".join(unbridged) + (" have" if len(unbridged) > 1 else " has")
-                + " readings but none within max_gap_s of the next: the energy rule counts "
-                  "no minute between them (raise HELIOTWIN_ENERGY_MAX_GAP_S to the "
-                  "logger's interval and restart)")
+    def which(test: Any) -> str:  # "the tracker has", "the tracker and the fixed array have"
+        names = [what for what, a in (("the tracker", tr), ("the fixed array", fx)) if test(a)]
+        return " and ".join(names) + (" have" if len(names) > 1 else " has") if names else ""
+
+    if missing := which(lambda a: a["measured_wh"] is None):
+        return missing + " no readings: the loggers share no minutes"
+    # readings came, but none within the gap of the next: no minute counted
+    if unbridged := which(lambda a: a["readings"] and a.get("coverage_pct") == 0.0):
+        return (unbridged + " readings but none within max_gap_s of the next: the energy "
+                "rule counts no minute between them (raise HELIOTWIN_ENERGY_MAX_GAP_S to the "
+                "logger's interval and restart)")
     if same is False:
         return (f"the two loggers read different minutes: of the minutes each covers, both "
                 f"cover {_share(tr)} of the tracker's expected energy and {_share(fx)} of the "
