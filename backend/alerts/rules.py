@@ -34,24 +34,15 @@ from __future__ import annotations
 import datetime as dt
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 from zoneinfo import ZoneInfo
 
-KINDS = ("logger_silent", "fault", "low_performance_ratio")
+from backend.diagnosis.faults import FAULT_WORDS
 
-#: The diagnosis' fault kinds in words (as the dashboard's diagnosis panel says them).
-FAULT_WORDS = {
-    "stuck": "tracker stuck",
-    "azimuth_offset": "azimuth offset",
-    "elevation_offset": "elevation offset",
-    "clock_offset": "clock offset",
-    "sky_clock_offset": "clock of the sky's readings (fixed array or sensor) off",
-    "sky_unusable": "the fixed array's readings unusable (no measured sky: the tracker not judged)",
-    "module_loss": "module or string lost",
-    "soiling": "soiling",
-    "dropout": "logger dropout",
-    "underperformance": "underperformance (below the expected band)",
-}
+AlertKind = Literal["logger_silent", "fault", "low_performance_ratio"]
+KIND_WORDS: dict[str, str] = {"logger_silent": "Logger silent", "fault": "Fault",
+                                    "low_performance_ratio": "Low performance ratio"}
+
 
 Key = tuple[str, str, str, str]
 Scope = tuple[str, str, str]
@@ -227,10 +218,15 @@ def summary(site_id: str, kind: str, array: str, fault_kind: str | None, state: 
             detail: str) -> str:
     """One line for chat webhooks (the body's ``text``); ``state``: ``active`` (raised),
     ``acknowledged`` or ``cleared``."""
-    what = {"logger_silent": "logger silent", "low_performance_ratio": "low performance ratio",
-            "fault": f"fault: {FAULT_WORDS.get(fault_kind or '', fault_kind)}"}.get(kind, kind)
     head = {"cleared": "cleared", "acknowledged": "acknowledged"}.get(state, "ALERT")
-    return f"heliotwin {site_id} / {array}: {head} — {what}: {detail}"
+    return f"heliotwin {site_id} / {array}: {head} — {title(kind, fault_kind)}: {detail}"
+
+
+def title(kind: str, fault_kind: str | None) -> str:
+    """``Fault: tracker stuck`` — an alert's kind (and its fault's) in words: the
+    dashboard's alerts card and the webhook's text."""
+    words = KIND_WORDS.get(kind, kind)
+    return words if fault_kind is None else f"{words}: {FAULT_WORDS.get(fault_kind, fault_kind)}"
 
 
 def acknowledged_text(alert: dict[str, Any]) -> str:

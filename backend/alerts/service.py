@@ -81,7 +81,8 @@ def alert_dict(row: Any) -> dict[str, Any]:
     """An ``alerts`` row (a mapping of its columns) as the API and the webhook show it."""
     return {
         "id": row["id"], "site_id": row["site_id"], "array": row["array_name"],
-        "kind": row["kind"], "fault_kind": row["fault_kind"], "state": row["state"],
+        "kind": row["kind"], "fault_kind": row["fault_kind"],
+        "title": rules.title(row["kind"], row["fault_kind"]), "state": row["state"],
         "since": iso(row["since_s"]), "raised_at": iso(row["raised_at_s"]),
         "cleared_at": iso(row["cleared_at_s"]), "detail": row["detail"],
         "cleared_detail": row["cleared_detail"], "data": orjson.loads(row["data_json"]),

@@ -56,7 +56,7 @@ one day, under the measured sky (docs/diagnosis.md, "pvanalytics").
 from __future__ import annotations
 
 import datetime as dt
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -65,6 +65,25 @@ from backend.settings import MAX_ENERGY_GAP_S
 from sim import pv, sky, sky_sensor
 from sim.energy import energy_wh
 from sim.sites import Site
+
+FaultKind = Literal["stuck", "azimuth_offset", "elevation_offset", "clock_offset",
+                    "sky_clock_offset", "sky_unusable", "module_loss", "soiling", "dropout",
+                    "underperformance"]
+
+#: Each fault kind in words: the dashboard's diagnosis lines, the alerts' titles and the
+#: webhook's text all say these (served as ``title`` in the diagnosis and alerts answers).
+FAULT_WORDS: dict[str, str] = {  # keys: FaultKind's (tests/backend/test_alerts.py)
+    "stuck": "tracker stuck",
+    "azimuth_offset": "azimuth offset",
+    "elevation_offset": "elevation offset",
+    "clock_offset": "clock offset",
+    "sky_clock_offset": "clock of the sky's readings (fixed array or sensor) off",
+    "sky_unusable": "the fixed array's readings unusable (no measured sky: the tracker not judged)",
+    "module_loss": "module or string lost",
+    "soiling": "soiling",
+    "dropout": "logger dropout",
+    "underperformance": "underperformance (below the expected band)",
+}
 
 MIN_CLEARNESS = 0.55  # days clearer than this can show a shape fault [-]
 FIT_RATIO = 0.6  # a fault's residual under this × the healthy residual names it
@@ -518,7 +537,7 @@ def faults_over_days(days: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
     minute a ``stuck`` tracker stopped that day, where the stop form fitted it,
     :func:`_stopped`); days too cloudy to tell do not break a run and carry the fault
     with its confidence × :data:`CARRY_DECAY` per day; a ``module_loss`` holds from its
-    step day on.
+    step day on. Each fault's ``title`` is its kind in words (:data:`FAULT_WORDS`).
     """
     out: list[list[dict[str, Any]]] = [[] for _ in days]
     run: dict[str, str] = {}
@@ -600,7 +619,7 @@ def faults_over_days(days: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
     _module_loss(days, out)
     for i in _sky_clock_offset(days, out):  # the tracker judged under a shifted sky: not at all
         out[i] = [f for f in out[i] if f["kind"] in ("sky_clock_offset", "dropout")]
-    return out
+    return [[{**f, "title": FAULT_WORDS[f["kind"]]} for f in day] for day in out]
 
 
 def _next_day(days: list[dict[str, Any]], i: int) -> bool:

@@ -6,17 +6,11 @@
 // cleared ones under a fold, and what the service checks. Refreshed every 30 s while the
 // overview is shown (not in a hidden tab), at once when the site changes.
 import { api } from "./api.js";
-import { KIND_WORDS as FAULT_WORDS } from "./diagnosis.js";
 import { fmtDateTime } from "./time.js";
 import { h, num } from "./ui.js";
 
 const POLL_MS = 30000;
 const CLEARED_SHOWN = 10;
-const KIND_WORDS = {
-  logger_silent: "Logger silent",
-  fault: "Fault",
-  low_performance_ratio: "Low performance ratio",
-};
 const WEBHOOK_WORDS = { queued: "webhook: sending…", delivered: "webhook: delivered", failed: "webhook: failed",
   dropped: "webhook: dropped (queue full)" };
 
@@ -24,12 +18,6 @@ let st = null;
 let controller = null;
 const shownAlerts = new Map(); // id → the active alert drawn, for the form
 const $ = (id) => document.getElementById(id);
-
-/** "Fault: tracker stuck" — the alert's kind in words. */
-export function alertTitle(a) {
-  const kind = KIND_WORDS[a.kind] || a.kind;
-  return a.fault_kind ? `${kind}: ${FAULT_WORDS[a.fault_kind] || a.fault_kind}` : kind;
-}
 
 /** "Acknowledged by Ana (night shift), 5 Dec 09:12: sent Luis to the drive". */
 function ackText(a, tz) {
@@ -46,7 +34,7 @@ function item(a, tz) {
     "data-acknowledged": String(acked) },
   h("div", { class: "alert-head" },
     h("span", { class: `dot ${dot}`, "aria-hidden": "true" }),
-    h("strong", {}, alertTitle(a)),
+    h("strong", {}, a.title),
     h("span", { class: "alert-array" }, a.array),
     h("span", { class: "muted", title: `raised ${fmtDateTime(tz, a.raised_at)}` }, `since ${fmtDateTime(tz, a.since)}`),
     WEBHOOK_WORDS[a.webhook_status] ? h("span", { class: `muted webhook ${a.webhook_status}` }, WEBHOOK_WORDS[a.webhook_status]) : null,
@@ -119,8 +107,8 @@ function openForm(a) {
   const f = form();
   f.dataset.alertId = a.id;
   f.dataset.site = a.site_id;
-  f.dataset.title = alertTitle(a);
-  $("alerts-ack-what").textContent = `Acknowledge “${alertTitle(a)}” on the ${a.array} array (since ${fmtDateTime(st.tz, a.since)}):`;
+  f.dataset.title = a.title;
+  $("alerts-ack-what").textContent = `Acknowledge “${a.title}” on the ${a.array} array (since ${fmtDateTime(st.tz, a.since)}):`;
   f.hidden = false;
   status("");
   $("alerts-ack-note").focus();

@@ -5,20 +5,6 @@ import { COLORS, baseLayout, draw, showEmpty, zeroBasedAxis } from "./charts.js"
 import { toLocalWall } from "./time.js";
 import { h, num } from "./ui.js";
 
-/** A fault kind in plain words (the diagnosis panel and the alerts card). */
-export const KIND_WORDS = {
-  stuck: "tracker stuck",
-  azimuth_offset: "azimuth offset",
-  elevation_offset: "elevation offset",
-  clock_offset: "clock offset",
-  sky_clock_offset: "clock of the sky's readings (fixed array or sensor) off",
-  sky_unusable: "the fixed array's readings unusable (no measured sky: the tracker not judged)",
-  module_loss: "module or string lost",
-  soiling: "soiling",
-  dropout: "logger dropout",
-  underperformance: "underperformance (below the expected band)",
-};
-
 function addDays(iso, n) {
   const d = new Date(`${iso}T12:00:00Z`);
   d.setUTCDate(d.getUTCDate() + n);
@@ -34,7 +20,7 @@ export function faultLines(days) {
   const last = new Map();
   for (const d of days) for (const f of d.faults) last.set(`${f.kind}|${f.since}`, f);
   return [...last.values()].map((f) =>
-    `${KIND_WORDS[f.kind] || f.kind} since ${shortDate(f.since)}: ${f.detail}; confidence ${num(f.confidence, 2)}`);
+    `${f.title} since ${shortDate(f.since)}: ${f.detail}; confidence ${num(f.confidence, 2)}`);
 }
 
 /** The mount faults the tracker camera's sun offsets show (GET …/diagnosis `mount`): an

@@ -23,6 +23,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import get_args
 from zoneinfo import ZoneInfo
 
 import httpx
@@ -33,6 +34,7 @@ from live_service import Database, InProcessServer, free_port, new_database
 
 from backend.alerts import rules
 from backend.alerts.webhook import Event, WebhookSender, retry_after_s
+from backend.diagnosis.faults import FAULT_WORDS, FaultKind
 
 TZ = ZoneInfo("America/Mexico_City")  # tehuantepec's zone
 SITE = "tehuantepec"
@@ -182,6 +184,14 @@ def _day(date: str, pr: float | None, faults: list[dict], source: str = "fixed_a
             "faults": faults}
 
 
+def test_every_fault_kind_has_its_words() -> None:
+    """The diagnosis' kinds and their words are one list: a new kind without words would
+    be shown as its identifier on the dashboard."""
+    assert set(FAULT_WORDS) == set(get_args(FaultKind))
+    assert rules.title("fault", "sky_unusable") == f"Fault: {FAULT_WORDS['sky_unusable']}"
+    assert rules.title("logger_silent", None) == "Logger silent"
+
+
 def test_diagnosis_rule_latest_day_faults_and_the_low_pr_run() -> None:
     stuck = {"kind": "stuck", "confidence": 0.9, "since": "2026-11-28", "magnitude": 35.0,
              "unit": "deg", "detail": "stuck at azimuth 181°, elevation 35°"}
@@ -200,7 +210,7 @@ def test_diagnosis_rule_latest_day_faults_and_the_low_pr_run() -> None:
     assert fault.detail.startswith("stuck at azimuth 181°, elevation 35° (since 2026-11-28, ")
     # the kind in words is said once: by the title (the webhook's text, the dashboard's head)
     text = rules.summary(SITE, "fault", "tracker", "stuck", "active", fault.detail)
-    assert text.count(rules.FAULT_WORDS["stuck"]) == 1, text
+    assert text.count(FAULT_WORDS["stuck"]) == 1, text
     low = next(c for c in ev.conditions if c.kind == "low_performance_ratio")
     # the clear-sky day is not judged, a sensor's is: the low run goes back to the 28th
     assert low.data["first_low_day"] == "2026-11-28" and low.data["performance_ratio"] == 0.61
@@ -455,7 +465,7 @@ def test_acknowledged_goes_out_between_raised_and_cleared_and_a_new_alert_is_not
             assert (ack["event"], ack["event_id"]) == ("acknowledged",
                                                        f"{first['id']}:acknowledged")
             assert ack["alert"]["acknowledged_by"] == "Ana" and ack["alert"]["state"] == "active"
-            assert ack["text"] == ("heliotwin tehuantepec / tracker: acknowledged — logger silent: "
+            assert ack["text"] == ("heliotwin tehuantepec / tracker: acknowledged — Logger silent: "
                                    "by Ana: sent Luis to the logger")
             assert rx.requests[1]["headers"]["X-Heliotwin-Event"] == "acknowledged"
             _until(lambda: _alerts(c, state="active")["alerts"][0]["webhook_status"]
@@ -590,6 +600,9 @@ def test_fault_and_low_pr_from_an_injected_diagnosis_raised_then_cleared(
         assert len(evs) == 2
         fault = next(e["alert"] for e in evs if e["alert"]["kind"] == "fault")
         assert fault["array"] == "tracker"
+        # the kind in words comes from the service (the dashboard shows it as it is)
+        assert fault["title"] == "Fault: tracker stuck"
+        assert _alerts(c, kind="fault")["alerts"][0]["title"] == "Fault: tracker stuck"
         assert fault["detail"].startswith("stuck at azimuth 181°, elevation 35° (since "
                                           f"{yesterday.isoformat()}, ")
         midnight = dt.datetime(yesterday.year, yesterday.month, yesterday.day, tzinfo=TZ)

@@ -77,6 +77,7 @@ def test_diagnosis_finds_module_loss_and_expects_the_healthy_energy(client, live
             assert abs((since - dt.date.fromisoformat(FIRST)).days - FAULT_DAY) <= 1
             assert 0.70 < day["tracker"]["performance_ratio"] < 0.80
     assert [f["kind"] for f in body["days"][1]["faults"]] == ["dropout"]
+    assert body["days"][1]["faults"][0]["title"] == "logger dropout"  # the words shown
     assert body["days"][1]["faults"][0]["magnitude"] == 90.0
 
     # cached: the same answer; back-filled readings of day 2 drop that day from the cache

@@ -6,10 +6,10 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StringConstraints
 
+from backend.alerts.rules import AlertKind
 from backend.storage.tables import ACK_NOTE_MAX_CHARS
 from backend.text import one_line
 
-AlertKind = Literal["logger_silent", "fault", "low_performance_ratio"]
 AlertState = Literal["active", "cleared"]
 
 
@@ -22,6 +22,8 @@ class AlertRead(BaseModel):
     kind: AlertKind
     fault_kind: str | None = Field(description="for `fault`: the diagnosis' kind (`stuck`, "
                                                "`module_loss`, `dropout`, …); else null")
+    title: str = Field(description="the kind (and the fault's) in words, e.g. `Fault: tracker "
+                                   "stuck`: what the dashboard and the webhook's text say")
     state: AlertState
     since: str = Field(description="when the condition began (UTC): the last reading, the "
                                    "fault's first day, the first low-PR day")

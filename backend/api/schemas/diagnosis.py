@@ -7,7 +7,7 @@ from typing import Literal
 
 from pydantic import BaseModel, Field
 
-from backend.diagnosis.faults import GHI_UNCERTAINTY, INVERSION_UNCERTAINTY
+from backend.diagnosis.faults import GHI_UNCERTAINTY, INVERSION_UNCERTAINTY, FaultKind
 
 
 class DaySkyRead(BaseModel):
@@ -46,9 +46,9 @@ class FixedDayRead(BaseModel):
 class FaultRead(BaseModel):
     """A named fault signature (``backend/diagnosis/faults.py``)."""
 
-    kind: Literal["stuck", "azimuth_offset", "elevation_offset", "clock_offset",
-                  "sky_clock_offset", "sky_unusable", "module_loss", "soiling",
-                  "dropout", "underperformance"]
+    kind: FaultKind
+    title: str = Field(description="the kind in words, e.g. `tracker stuck`: what the "
+                                   "dashboard and the alerts say")
     confidence: float = Field(description="[0, 1]")
     since: str = Field(description="the first day of its run of days (local date)")
     since_time: str | None = Field(
@@ -63,7 +63,6 @@ class FaultRead(BaseModel):
         None, description="`underperformance`: the day's measured tracker energy short of "
                           "the expected one [Wh] (`magnitude` the same in % of expected); "
                           "null for the other kinds")
-
 
 class DiagnosisDayRead(BaseModel):
     """One local day."""
