@@ -33,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike
+from pvlib import atmosphere
 
 METHODS = ("spa", "duffie-beckman")
 
@@ -256,3 +257,18 @@ def solar_position(
     else:
         raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
     return pd.DataFrame({k: np.asarray(cols[k], dtype=float) for k in _COLUMNS}, index=index)
+
+
+def daylight_s(t0_s: float, t1_s: float, step_s: float, latitude: float, longitude: float,
+               altitude: float = 0.0, temperature: float = 12.0) -> float:
+    """Seconds of ``[t0_s, t1_s]`` (Unix seconds) with the sun's apparent elevation above 0°,
+    from the sun at the middles of steps of about ``step_s`` (each middle counts its whole
+    step: the error is at most a step at each sunrise and sunset)."""
+    if t1_s <= t0_s:
+        return 0.0
+    n = max(1, int((t1_s - t0_s) // step_s))
+    mid = t0_s + (np.arange(n) + 0.5) * (t1_s - t0_s) / n
+    when = pd.DatetimeIndex(pd.to_datetime(mid, unit="s", utc=True))
+    pos = solar_position(when, latitude, longitude, altitude,
+                         float(atmosphere.alt2pres(altitude)), temperature)
+    return float(np.count_nonzero(pos["apparent_elevation"].to_numpy() > 0.0)) * (t1_s - t0_s) / n

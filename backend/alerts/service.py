@@ -38,10 +38,7 @@ from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from typing import TYPE_CHECKING, Any, Literal
 
-import numpy as np
 import orjson
-import pandas as pd
-from pvlib import atmosphere
 from sqlalchemy import Connection, Engine, func, insert, select, update
 
 from backend.alerts import rules
@@ -49,7 +46,7 @@ from backend.alerts.webhook import Event, WebhookSender
 from backend.diagnosis.service import diagnosis
 from backend.sites import SiteInfo
 from backend.storage.tables import SOURCE_CODES, AlertRow, Measurement
-from sim.sun import solar_position
+from sim.sun import daylight_s
 
 if TYPE_CHECKING:
     from backend.context import ServiceContext
@@ -189,17 +186,8 @@ DAYLIGHT_SAMPLES = 3000
 
 
 def _daylight_in(info: SiteInfo, t0_s: float, t1_s: float, step_s: float) -> float:
-    """Seconds of ``[t0, t1]`` with the sun's apparent elevation above 0°, from the sun at
-    the middles of steps of about ``step_s``."""
-    if t1_s <= t0_s:
-        return 0.0
-    n = max(1, int((t1_s - t0_s) // step_s))
-    mid = t0_s + (np.arange(n) + 0.5) * (t1_s - t0_s) / n
     s = info.site
-    when = pd.DatetimeIndex(pd.to_datetime(mid, unit="s", utc=True))
-    pos = solar_position(when, s.latitude, s.longitude, s.altitude,
-                         float(atmosphere.alt2pres(s.altitude)), s.temp_air)
-    return float(np.count_nonzero(pos["apparent_elevation"].to_numpy() > 0.0)) * (t1_s - t0_s) / n
+    return daylight_s(t0_s, t1_s, step_s, s.latitude, s.longitude, s.altitude, s.temp_air)
 
 
 def daylight_seconds(info: SiteInfo, t0_s: float, t1_s: float) -> float:

@@ -244,7 +244,7 @@ def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
     from backend.twin.cost import table_cost_s
 
     steps = (end - start).total_seconds() / args.step_s
-    long = steps >= _BAR_MIN_STEPS or table_cost_s(scenario) >= _BAR_MIN_S
+    long = steps >= _BAR_MIN_STEPS or table_cost_s(scenario, site) >= _BAR_MIN_S
     callback, bar = _progress_bar(not args.no_progress and long)
     try:
         result = run_scenario(site, scenario, progress=callback)

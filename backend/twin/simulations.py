@@ -65,7 +65,7 @@ from backend.measurements.writer import Writer
 from backend.settings import Settings
 from backend.sites import Registry
 from backend.storage.tables import SimulationRun, SimulationSeries, utcnow
-from backend.twin.cost import CostModel
+from backend.twin.cost import CostModel, table_cost_s
 from backend.twin.scenario import Scenario, run_scenario
 from sim.sites import Site
 
@@ -150,6 +150,7 @@ class _Job:
     anonymous: bool
     fut: Future[dict[str, Any]]
     cost_s: float
+    table_s: float  # the cost table's price, before the learned factor (CostModel.learn)
     queued_mono: float
     charge: Charge | None = None
 
@@ -340,12 +341,17 @@ class SimulationRunner:
                 "larger step_s, a shorter range or a cheaper controller, or send "
                 "'Authorization: Bearer <token>'")
 
+    def _table_s(self, params: Scenario) -> float:
+        """The cost table's price of ``params`` at its site (:func:`table_cost_s`) [s]."""
+        return table_cost_s(params, self.registry.sites[params.site_id].site)
+
     def estimate(self, params: Scenario, client: str, anonymous: bool) -> Estimate:
         """What ``params`` would cost and when it would start if queued now (nothing is
         queued or charged)."""
-        cost = self.costs.estimate_s(params)
+        table_s = self._table_s(params)
+        cost = self.costs.estimate_s(table_s, params.controller)
         phantom = _Job(RunState("", params.site_id, "queued"), params, client, anonymous,
-                       Future(), cost, time.monotonic())
+                       Future(), cost, table_s, time.monotonic())
         with self._lock:
             order = self._order(phantom)
             running, queued = len(self._running), len(self._queue)
@@ -373,7 +379,8 @@ class SimulationRunner:
         """Queue a run for ``client``; raise :class:`RunTooCostly` (422) when a run without
         a token is expected to take longer than it may, :class:`Busy` when the queue is
         full (503) or the caller's hour is spent (429)."""
-        cost = self.costs.estimate_s(params)
+        table_s = self._table_s(params)
+        cost = self.costs.estimate_s(table_s, params.controller)
         self._check_cost(cost, anonymous)
         with self._lock:
             waiting = len(self._queue)
@@ -397,7 +404,8 @@ class SimulationRunner:
                 self.anonymous_hours.settle(charge, 0.0)
             raise
         fut: Future[dict[str, Any]] = Future()
-        job = _Job(state, params, client, anonymous, fut, cost, time.monotonic(), charge)
+        job = _Job(state, params, client, anonymous, fut, cost, table_s, time.monotonic(),
+                   charge)
         with self._lock:
             self._runs[state.run_id] = state
             self._futures[state.run_id] = fut
@@ -483,7 +491,7 @@ class SimulationRunner:
             self._fail(job, exc, time.monotonic() - t0)
             return
         try:  # bookkeeping: the run is stored and done whatever happens here
-            self.costs.learn(job.params, elapsed)
+            self.costs.learn(job.params.controller, job.table_s, elapsed)
             if job.charge is not None:
                 self.anonymous_hours.settle(job.charge, elapsed)
             if pruned:

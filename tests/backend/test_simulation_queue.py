@@ -10,16 +10,20 @@ lifts the anonymous bounds (a day's run must not be stopped at 4 s on a loaded m
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Iterator
 from typing import Any
 
 import httpx
+import pandas as pd
 import pytest
 from live_service import InProcessServer, new_database
 
 from backend.limits import WindowBudget
-from backend.twin.cost import CostModel
+from backend.twin.cost import CostModel, table_cost_s
+from backend.twin.scenario import Scenario
+from sim.sites import load_site
 
 RUN_MAX_S = 4
 HOUR_MAX_S = 6
@@ -50,10 +54,10 @@ class FixedPrice(CostModel):
         super().__init__()
         self.cost_s = cost_s
 
-    def estimate_s(self, params: Any) -> float:
+    def estimate_s(self, table_s: float, controller: str) -> float:
         return self.cost_s
 
-    def learn(self, params: Any, elapsed_s: float) -> None:
+    def learn(self, controller: str, table_s: float, elapsed_s: float) -> None:
         return None
 
 
@@ -94,6 +98,29 @@ def test_priced_by_controller_not_steps(server: InProcessServer) -> None:
         assert r.status_code == 422, r.text
         assert "HELIOTWIN_SIMULATION_ANONYMOUS_RUN_MAX_S" in r.json()["detail"]
         assert "step_s" in r.json()["detail"]
+
+
+def test_a_camera_loop_is_priced_by_the_daylight_at_its_site() -> None:
+    """``closed_loop_camera`` renders a frame every daylight second: a day took 6.3 s at
+    Tehuantepec in March, 11.0 s at Tromsø on 21 June and 0.24 s there on 21 December
+    (backend/twin/cost.py). A flat price per day refused a week of polar night and let a
+    polar summer's run twice its estimate."""
+    here = load_site("tehuantepec")
+    tromso = dataclasses.replace(here, latitude=69.65, longitude=18.96,
+                                 timezone="Europe/Oslo")
+
+    def price(site: Any, day: str, controller: str = "closed_loop_camera") -> float:
+        t0 = pd.Timestamp(day, tz=site.timezone)
+        return table_cost_s(Scenario("tehuantepec", t0, t0 + pd.Timedelta(days=7),
+                                     controller=controller), site)
+
+    march, june, december = (price(here, "2024-03-15"), price(tromso, "2024-06-18"),
+                             price(tromso, "2024-12-18"))
+    assert march == pytest.approx(7 * 12.0, rel=0.05)  # the table's own conditions
+    assert june / march == pytest.approx(2.0, rel=0.05)  # measured 1.76
+    assert december < 0.02 * march  # measured 0.04 (0.24 s of the loop's ticks)
+    # the other loops tick day and night alike: their price does not follow the sun
+    assert price(tromso, "2024-12-18", "hybrid") == price(here, "2024-03-15", "hybrid")
 
 
 def test_anonymous_caller_holds_the_worker_at_most_the_bound(server: InProcessServer) -> None:
