@@ -65,8 +65,24 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
     the largest bright region, shrunk by 2 % — unless that region fills less than
     :data:`_FILLED` of the circle (trees, buildings, masts or the frame cut the disc and pull
     the enclosing circle off: Wolf 37–111 px), when the field stop's edge is fitted on the
-    full-resolution frame where it is seen (:func:`_rim_circle`).
+    full-resolution frame where it is seen (:func:`_rim_circle`). A frame with no circle
+    found that was padded with a flat lit band (:func:`_padding`) is read inside the band
+    (a gamma-lifted black reads as such a band: read first, it moved circles already found).
     """
+    found = _fov(gray, small, scale)
+    pad = None if found is not None else _padding(gray)
+    if pad is None:
+        return found
+    top, bottom, left, right = pad  # the frame inside the band; its circle in the frame's pixels
+    inner = _fov(np.ascontiguousarray(gray[top:gray.shape[0] - bottom,
+                                           left:gray.shape[1] - right]))
+    return None if inner is None else FovCircle(inner.cx_px + left, inner.cy_px + top,
+                                                inner.radius_px)
+
+
+def _fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None,
+         scale: int = 1) -> FovCircle | None:
+    """:func:`estimate_fov` of a frame without a padding band."""
     if small is None:
         small, scale = _small(gray)
     small = _without_overlays(small)
@@ -118,6 +134,59 @@ def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None
     if rim is not None:
         cx, cy, r = rim
     return FovCircle(cx, cy, 0.98 * r)
+
+
+#: A padding band's pixels lie within this of its level [grey levels] (JPEG at quality 95
+#: keeps a flat band within ±1 on most of a row up to its inner edge, ±5 at the most)
+_PAD_FLAT_DN = 4
+#: … and it is at most this share of the frame's side (thicker flat bands are a flat sky)
+_PAD_MAX_SHARE = 0.1
+#: … and lit above this (a darker band is the unlit field already) [grey levels]
+_PAD_MIN_DN = 35
+
+
+def _flat(line: NDArray[np.uint8], level: int) -> bool:
+    """Whether most of ``line`` lies within :data:`_PAD_FLAT_DN` of ``level`` (text printed on
+    a border, or JPEG's ringing next to the frame's content, moves a minority of a row)."""
+    return 2 * int(np.count_nonzero(np.abs(line.astype(np.int16) - level) <= _PAD_FLAT_DN)) \
+        > line.size
+
+
+def _band(lines: NDArray[np.uint8], level: int) -> int:
+    """How many of ``lines`` (rows, outermost first) are :func:`_flat` from the first on;
+    ``len(lines)`` when the last is (a flat sky: no band)."""
+    if _flat(lines[-1], level):
+        return len(lines)
+    n = 0
+    while _flat(lines[n], level):
+        n += 1
+    return n
+
+
+def _padding(gray: NDArray[np.uint8]) -> tuple[int, int, int, int] | None:
+    """Widths (top, bottom, left, right) [px] of the flat lit band a frame was padded with
+    (a border of one grey or colour all round, or bars above and below or beside it), or
+    None. The band is no sky: a fisheye's field stop leaves the frame outside its image
+    circle unlit (:func:`_sharp_rim`), and a grey or blue border hid the dark corners — no
+    circle was found on 23 of 23 Wolf frames padded by 15 or 40 px, and a calibration with
+    times an hour off then went unchecked (a tester's finding). White borders are overlays
+    (:func:`_without_overlays`). A band reaching :data:`_PAD_MAX_SHARE` of a side is a flat
+    sky, not a border; the corners' four pixels decide at once on every other frame."""
+    h, w = gray.shape
+    level = int(gray[0, 0])
+    corners = (gray[0, -1], gray[-1, 0], gray[-1, -1])
+    if not _PAD_MIN_DN < level < _OVERLAY_WHITE or any(
+            abs(int(c) - level) > _PAD_FLAT_DN for c in corners):
+        return None
+    cap_h, cap_w = max(1, int(_PAD_MAX_SHARE * h)), max(1, int(_PAD_MAX_SHARE * w))
+    widths = (_band(gray[:cap_h], level), _band(gray[::-1][:cap_h], level),
+              _band(gray.T[:cap_w], level), _band(gray.T[::-1][:cap_w], level))
+    top, bottom, left, right = widths
+    if max(top, bottom) >= cap_h or max(left, right) >= cap_w:
+        return None
+    if not ((top and bottom) or (left and right)):
+        return None
+    return widths
 
 
 #: An overlay's white [grey level]: what a station draws is 255 (JPEG: 250–255 around text)
