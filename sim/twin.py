@@ -51,7 +51,13 @@ import pandas as pd
 from sim import array_shade, kinematics, pv, sky, sun
 from sim import disturbances as dist
 from sim.control import CONTROLLERS, ControlSettings, make_controller, noon_reference_azimuth
-from sim.energy import energy_per_period_wh, gain_pct, run_energy_wh, simulation_times
+from sim.energy import (
+    check_step,
+    energy_per_period_wh,
+    gain_pct,
+    run_energy_wh,
+    simulation_times,
+)
 from sim.sites import Site
 from sim.tracking import (
     CameraSetup,
@@ -64,7 +70,7 @@ from sim.tracking import (
 from vision.sphere import angular_separation_deg, enu_from_sky, sky_from_enu
 
 __all__ = ["CONTROLLERS", "POINTING_MIN_ELEVATION_DEG", "RECEIVERS", "SERIES_COLUMNS",
-           "TwinResult", "check_step", "has_twin_arrays", "simulate"]
+           "TwinResult", "has_twin_arrays", "simulate"]
 
 #: The pointing error is stated only with the sun above this apparent elevation [°]: below it
 #: refraction and the horizon make the sun's place uncertain by tenths of a degree, the
@@ -309,29 +315,6 @@ def has_twin_arrays(mounts: Mapping[str, Any]) -> bool:
     """Whether a site of these arrays (name → mount) can be simulated: arrays named
     ``tracker`` and ``fixed``, so mounted (the rule :func:`_check_inputs` enforces)."""
     return all(mounts.get(name) == name for name in ("tracker", "fixed"))
-
-
-#: The longest step of a run [s]: an hour, a typical year's own resolution. The energy is
-#: the steps' power integrated, so a step that skips the day's shape is no energy (a
-#: tester's finding: Hamburg's clear June day read a 5.5 % gain at a 12-hour step against
-#: 56.0 % at a minute, and 0 Wh at a day's step; 56.04 % at an hour).
-MAX_STEP_S = 3600.0
-
-
-def check_step(start: pd.Timestamp, end: pd.Timestamp, step_s: float) -> None:
-    """A run's range and step: ``end`` after ``start``, ``step_s`` positive, no longer
-    than the run (a step of 10⁹ s made a day's control loop tick through 31 years) nor
-    than :data:`MAX_STEP_S`."""
-    if not end > start:
-        raise ValueError(f"end ({end.isoformat()}) must be after start ({start.isoformat()})")
-    if not step_s > 0:
-        raise ValueError(f"step_s must be positive, got {step_s}")
-    if step_s > (end - start).total_seconds():
-        raise ValueError(f"step_s: {step_s:g} s is longer than the run "
-                         f"({(end - start).total_seconds():g} s from start to end)")
-    if step_s > MAX_STEP_S:
-        raise ValueError(f"step_s: {step_s:g} s is longer than an hour ({MAX_STEP_S:g} s), "
-                         f"too coarse to integrate a day's energy")
 
 
 def _check_inputs(

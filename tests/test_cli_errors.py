@@ -38,6 +38,13 @@ from backend import cli
     (["plant", "sweep", "--collector-polygon", "0,0;1,nan;1,1", "--lat", "38.3", "--lon",
       "-5.3", "--gcr", "0.2", "--start", "2021-06-01", "--end", "2021-06-02"],
      "heliotwin plant sweep: error: --collector-polygon: "),
+    # a tester's finding: a 12-hour step read a month +58 %, a day's 0 Wh (the twin's bound)
+    (["plant", "sweep", "--collector-m", "12x5", "--lat", "-33.9", "--lon", "18.4", "--gcr",
+      "0.2", "--start", "2021-06-01", "--end", "2021-07-01", "--step-s", "43200"],
+     "heliotwin plant sweep: error: --step-s: 43200 s is longer than an hour (3600 s)"),
+    (["plant", "simulate", "--plant", "penarroya", "--start", "2021-06-01", "--end",
+      "2021-06-03", "--step-s", "86400"],
+     "heliotwin plant simulate: error: --step-s: 86400 s is longer than an hour (3600 s)"),
 ])
 def test_a_refusal_is_one_error_line_on_stderr_and_exit_2(
         argv: list[str], line: str, capsys: pytest.CaptureFixture[str]) -> None:

@@ -176,8 +176,12 @@ def execute(args: argparse.Namespace) -> dict[str, Any]:
     if not end > start:
         raise InputError(f"--end ({args.end}) must be after --start ({args.start}); "
                          "end is exclusive")
-    if not args.step_s > 0 or args.step_s != args.step_s:
-        raise InputError(f"--step-s: must be positive, got {args.step_s}")
+    from sim.energy import check_step, step_problem
+
+    try:
+        check_step(start, end, args.step_s)
+    except ValueError as exc:
+        raise InputError(f"--step-s: {step_problem(exc)}") from None
     if (end - start).total_seconds() / args.step_s > 5_000_000:
         raise InputError("--step-s: too many steps (more than 5,000,000); use a larger step")
     weather, station, _ = typical_weather(args, plant, start, end)

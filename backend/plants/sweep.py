@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from sim.energy import check_step, step_problem
 from sim.plant.layout import Plant
 from sim.plant.sweep import SweepCase, SweepSpec, case_sky, run_case
 
@@ -558,8 +559,10 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
                               f"got {','.join(strategies) or 'nothing'}")
     if not end > start:
         raise SweepInputError("end", "must be after start (end is exclusive)")
-    if not (step_s > 0 and np.isfinite(step_s)):
-        raise SweepInputError("step_s", f"must be positive, got {step_s}")
+    try:
+        check_step(start, end, float(step_s))  # the energy rule's bounds (at most an hour)
+    except ValueError as exc:
+        raise SweepInputError("step_s", step_problem(exc)) from None
     if len(gcr) > MAX_GCRS:
         raise SweepInputError("gcr", f"{len(gcr):,} values, more than {MAX_GCRS}")
     if any(not (0 < g < 1) for g in gcr):

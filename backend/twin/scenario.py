@@ -25,11 +25,12 @@ import pandas as pd
 from backend.twin.parameters import DISTURBANCE_NAMES, MACHINE_PARAMETERS, RUN_PARAMETERS
 from sim.control import ControlSettings
 from sim.disturbances import Disturbances
+from sim.energy import check_step
 from sim.plant.layout import Plant
 from sim.pointing_model import PointingModel
 from sim.sites import Site
 from sim.sky import typical_year_at_site
-from sim.twin import CONTROLLERS, RECEIVERS, TwinResult, check_step, simulate
+from sim.twin import CONTROLLERS, RECEIVERS, TwinResult, simulate
 
 #: A weather station farther than this from the site is refused unless forced [km]: its sun
 #: rises and sets at other times and its sky is another climate's (about 1° of latitude).

@@ -26,7 +26,13 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from sim.energy import energy_per_period_wh, gain_pct, run_energy_wh, simulation_times
+from sim.energy import (
+    check_step,
+    energy_per_period_wh,
+    gain_pct,
+    run_energy_wh,
+    simulation_times,
+)
 from sim.plant.electrical import beam_factors
 from sim.plant.fields import horizon_elevation
 from sim.plant.layout import Plant
@@ -278,10 +284,7 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
     """
     if start.tz is None or end.tz is None:
         raise ValueError("start and end must be timezone-aware")
-    if not end > start:
-        raise ValueError("end must be after start (end is exclusive)")
-    if not step_s > 0:
-        raise ValueError(f"step_s must be positive, got {step_s}")
+    check_step(start, end, step_s)
     times = simulation_times(start, end, step_s)  # the series' steps and the closing instant
     n_steps = len(times) - 1
     if sky is not None and any(len(v) != len(times) for v in sky.values()):

@@ -438,6 +438,15 @@ def test_sweep_refusals_name_the_field(client: httpx.Client, change: dict, statu
     assert message in r.json()["detail"]
 
 
+def test_a_sweep_step_over_an_hour_is_refused(client: httpx.Client) -> None:
+    """A tester's finding: a day's step was accepted (202) and drew 0 MWh per collector, a
+    12-hour step read a month +58 % (sim.energy.MAX_STEP_S, the twin's bound)."""
+    r = client.post("/api/v1/plants/sweeps", json={**SWEEP, "step_s": 86400})
+    assert r.status_code == 422, r.text
+    (err,) = r.json()["detail"]
+    assert err["loc"] == ["body", "step_s"] and "3600" in err["msg"], err
+
+
 def test_sweep_list_bounds_are_the_clis() -> None:
     """The request's lists are bounded by the constants the CLI's sweep is refused by
     (``backend.plants.sweep``: at most 600 cases, whatever the step), and the names a

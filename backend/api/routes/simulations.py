@@ -31,7 +31,8 @@ from backend.twin.parameters import MACHINE_PARAMETERS
 from backend.twin.scenario import Scenario
 from backend.twin.series_read import PackedSeries
 from backend.twin.simulations import RunTooCostly
-from sim.twin import CONTROLLERS, MAX_STEP_S, RECEIVERS
+from sim.energy import MAX_STEP_S
+from sim.twin import CONTROLLERS, RECEIVERS
 
 router = APIRouter(prefix="/api/v1/simulations", tags=["simulations"])
 
@@ -50,7 +51,7 @@ class _SimulationBase(BaseModel):
     end: str = Field(..., min_length=1, max_length=64, description="exclusive",
                      examples=["2024-03-16"])
     step_s: float = Field(60.0, gt=0, le=MAX_STEP_S,
-                          description="time step [s], at most an hour (sim.twin.MAX_STEP_S)")
+                          description="time step [s], at most an hour (sim.energy.MAX_STEP_S)")
     controller: Literal[CONTROLLERS] = Field(  # type: ignore[valid-type]
         "ideal", description="tracking controller",
         examples=["open_loop_model"])   # the example body's terms go with this controller

@@ -8,6 +8,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from backend.api.schemas.common import SunRead
 from backend.plants.sweep import MAX_GCRS, MAX_LAYOUTS, MAX_STRATEGIES
+from sim.energy import MAX_STEP_S
 
 
 class PlantSummaryRead(BaseModel):
@@ -189,7 +190,8 @@ class SweepCreate(BaseModel):
     slope_tilt_deg: float = Field(0.0, ge=0, lt=45)
     start: str = Field(description="YYYY-MM-DD or ISO 8601 with offset")
     end: str = Field(description="exclusive")
-    step_s: float = Field(3600.0, ge=60, le=86400)
+    step_s: float = Field(3600.0, ge=60, le=MAX_STEP_S,
+                          description="time step [s], at most an hour (sim.energy.MAX_STEP_S)")
 
 
 
