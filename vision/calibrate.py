@@ -35,6 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from vision.cameras import EAST_SIDES, PROJECTIONS, FisheyeCamera
+from vision.confidence import AGREES_DEG
 from vision.sphere import angular_separation_deg, enu_from_sky
 
 
@@ -249,8 +250,9 @@ def fit_fisheye(
 #: detection passes of :func:`self_calibrate` (blind, then ephemeris-guided): each frame is
 #: decoded this many times, what a caller's cost bound counts
 CALIBRATION_PASSES = 2
-#: a frame whose sun lies farther than this from the consensus model is an outlier [°]
-OUTLIER_DEG = 1.0
+#: a frame whose sun lies farther than this from the consensus model is an outlier [°]: the
+#: detector's own tolerance of agreement with an ephemeris (vision.confidence.AGREES_DEG)
+OUTLIER_DEG = AGREES_DEG
 _RANSAC_SAMPLE = 3  # frames per sample: six equations for the four base parameters
 #: samples drawn (all of them when there are fewer triples): with 30 % of the frames
 #: outliers, 20 draws all miss a clean triple with probability (1 − 0.7³)²⁰ < 0.001

@@ -188,6 +188,32 @@ def probability(x: NDArray[np.float64], model: tuple[NDArray[np.float64], float]
     return float(1.0 / (1.0 + np.exp(-(float(w @ x) + b))))
 
 
+AGREES_DEG = 1.0
+"""A candidate this close to where the ephemeris puts the sun [°] agrees with it: the
+tolerance within which a calibration counts a frame's sun as its model's
+(:data:`vision.calibrate.OUTLIER_DEG`)."""
+
+_EPHEMERIS = [FEATURES.index("ephemeris_known"), FEATURES.index("ephemeris_far_unclear")]
+
+
+def agreeing_probability(x: NDArray[np.float64], ephemeris_deg: float | None,
+                         model: tuple[NDArray[np.float64], float] | None = None) -> float:
+    """:func:`probability` of a candidate found by its appearance alone (the blind search's
+    winner), never below what it is without an ephemeris when it lies within
+    :data:`AGREES_DEG` of the predicted sun. The model learned a small penalty for a known
+    ephemeris (``ephemeris_known`` −0.36: a search near a prediction picks *something*, a
+    prior against the pick), which lowered a clear sun found blind at 0.62–0.73 to
+    0.39–0.48 and refused it once its camera was given — exactly where the ephemeris put it
+    (a tester's equisolid frames, a bright sky). Agreement with the ephemeris is no evidence
+    against a candidate; far from it, the penalties stand."""
+    p = probability(x, model)
+    if ephemeris_deg is None or not ephemeris_deg <= AGREES_DEG:
+        return p
+    blind = x.copy()
+    blind[_EPHEMERIS] = 0.0
+    return max(p, probability(blind, model))
+
+
 def fit_logistic(x: NDArray[np.float64], y: NDArray[np.float64], l2: float = 1.0,
                  n_iter: int = 50) -> tuple[NDArray[np.float64], float]:
     """L2-penalised logistic regression by Newton–Raphson (intercept not penalised).

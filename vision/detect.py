@@ -592,6 +592,8 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
     # the confidence, which cannot veto a plain disc (vision.confidence)
     blind = _search(gray, work, bg, fov, diam, centre, ppd, expected_px,
                     prefer_near=False, scale_known=scale_known, image=image, model=model)
+    if isinstance(blind, _Pick) and expected_px is not None:  # found where it was predicted
+        blind.p = conf.agreeing_probability(blind.x, blind.values["ephemeris_deg"])
     if not isinstance(got, _Pick):
         got = blind
     elif isinstance(blind, _Pick) and (blind.p > got.p if got.p < min_confidence

@@ -92,7 +92,19 @@ def error_warnings(res: dict[str, Any], calibration_max_deg: float | None) -> li
     sep = err.get("separation_deg")
     if sep is not None and calibration_max_deg is not None:
         limit = CALIBRATION_ERROR_FACTOR * max(1.0, calibration_max_deg)
-        if float(sep) > limit:
+        d_el = abs(float(err.get("elevation_deg") or 0.0))
+        if float(sep) > limit and d_el <= limit:
+            # the sun's height is right and only its bearing is off: the frame turned or
+            # mirrored against the calibration's frames, not a wrong place or time (a
+            # tester's frame turned 90°: 57° off, 0.01° in elevation)
+            out.append(f"an error of {float(sep):.1f}° is far beyond this calibration's worst "
+                       f"residual ({calibration_max_deg:.2f}°), all of it in azimuth "
+                       f"({float(err.get('azimuth_deg') or 0.0):+.1f}°; elevation "
+                       f"{d_el:.2f}° off): is the frame turned or mirrored against the frames "
+                       f"the camera was calibrated on (a camera mounted anew, images rotated "
+                       f"or flipped on export)? Or is its time off (near noon an hour moves "
+                       f"the sun mostly in azimuth)?")
+        elif float(sep) > limit:
             out.append(f"an error of {float(sep):.1f}° is far beyond this calibration's worst "
                        f"residual ({calibration_max_deg:.2f}°): is the place or the time right?")
     return out

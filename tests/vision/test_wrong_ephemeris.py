@@ -72,6 +72,43 @@ def test_a_wrong_place_gives_the_sun_and_a_warning() -> None:
     assert warnings and "zenith angle" in warnings[0]
 
 
+def test_a_frame_turned_against_its_calibration_is_named() -> None:
+    """A tester's frame turned 90° against the frames its camera was calibrated on: the
+    sun's height right, its bearing 57° off, and the warning asked "is the place or the
+    time right?". The sun drawn at azimuth 200°, the calibration's frame turned by a
+    quarter (the camera's north 90° off): the warning names the turn and the time."""
+    turned = FisheyeCamera(319.5, 239.5, 2.6, north_offset_deg=25.0 + 90.0, east="right")
+    fr = disc_frame(turned, 200.0, 40.0, 8.0, 60)
+    cam = FisheyeCamera(319.5, 239.5, 2.6, north_offset_deg=25.0, east="right")
+    res = analyse_frame(fr.image, cam, "robust", (200.0, 40.0))
+    assert res["sun_found"] and abs(res["error"]["elevation_deg"]) < 0.5
+    (warning,) = error_warnings(res, 0.3)
+    assert "all of it in azimuth" in warning and "turned or mirrored" in warning, warning
+    assert "time off" in warning
+    # a sun off in height too is the place or the time
+    res = analyse_frame(fr.image, cam, "robust", (200.0, 60.0))
+    assert [w for w in error_warnings(res, 0.3) if "place or the time" in w]
+
+
+def test_a_sun_where_the_ephemeris_puts_it_keeps_its_blind_confidence() -> None:
+    """The model's small penalty for a known ephemeris (a search near a prediction picks
+    something) lowered a tester's clear suns found blind at 0.62–0.73 to 0.39–0.48, refused
+    as "overcast", exactly where the ephemeris put them: agreement is no evidence against
+    a candidate (vision.confidence.agreeing_probability); far from the prediction the
+    penalties stand."""
+    from vision import confidence as conf
+
+    x = conf.features(1.0, 1.0, 1.0, 255.0, 148.0, 2.0, 0.0, 0.6, None)
+    blind = conf.probability(x)
+    assert 0.5 < blind < 0.75  # a bright sky: a low but clear margin
+    known = x.copy()
+    known[conf.FEATURES.index("ephemeris_known")] = 1.0
+    assert conf.probability(known) < blind  # the fitted penalty
+    assert conf.agreeing_probability(known, 0.2) == pytest.approx(blind)
+    unclear = conf.features(0.6, 0.3, 1.0, 255.0, 148.0, 2.0, 0.0, 0.6, 12.0)
+    assert conf.agreeing_probability(unclear, 12.0) == conf.probability(unclear)
+
+
 @pytest.mark.parametrize("split", ["development", "heldout"])
 def test_wrong_ephemeris_discs_always_found(split: str) -> None:
     """The contract-like frames of both splits (a disc 20–70° from the prediction)."""
