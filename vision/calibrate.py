@@ -389,36 +389,43 @@ def leave_one_out_deg(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
 
 def choose_radial(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
                   elevation_deg: ArrayLike, image_size: tuple[int, int],
-                  max_terms: int = 2, **fit_kwargs: Any) -> tuple[int, list[dict[str, Any]]]:
+                  max_terms: int = 2, eligible: Sequence[int] | None = None,
+                  **fit_kwargs: Any) -> tuple[int, list[dict[str, Any]]]:
     """How many radial polynomial terms the frames support (0: the plain projection).
 
     Each model (0 … ``max_terms`` terms) is scored by its leave-one-out mean squared
     error on the sky; the one kept is the simplest within one standard error of the
     best (the one-standard-error rule, Hastie, Tibshirani & Friedman, *The Elements of
     Statistical Learning*, 2nd ed., §7.10): a term must lower the held-out error by more
-    than the frames can tell apart from noise. Returns the number of terms and, for each
-    tried, ``n_radial`` and ``loo_rms_deg``. A model needs distinct sun directions
-    enough for a leave-one-out fit with one to spare.
+    than the frames can tell apart from noise. ``eligible`` (default: every model tried)
+    are the models the choice is made among; the others are scored for the report only.
+    Returns the number of terms and, for each tried, ``n_radial`` and ``loo_rms_deg``.
+    A model needs distinct sun directions enough for a leave-one-out fit with one to
+    spare (:func:`radial_terms_possible`).
     """
     x = np.asarray(x_px, float).ravel()
     n_dirs = n_directions(azimuth_deg, elevation_deg)
     tried: list[dict[str, Any]] = []
-    mse: list[float] = []
-    se: list[float] = []
-    for k in range(max_terms + 1):
-        n_par = 4 + k + (2 if fit_kwargs.get("fit_tilt") else 0)
-        if 2 * (n_dirs - 1) < n_par + 4:
-            break
+    mse: dict[int, float] = {}
+    se: dict[int, float] = {}
+    for k in range(radial_terms_possible(n_dirs, bool(fit_kwargs.get("fit_tilt")), max_terms)):
         sq = leave_one_out_deg(x, y_px, azimuth_deg, elevation_deg, image_size,
                                n_radial=k, **fit_kwargs) ** 2
-        mse.append(float(np.mean(sq)))
-        se.append(float(np.std(sq, ddof=1) / np.sqrt(sq.size)))
-        tried.append({"n_radial": k, "loo_rms_deg": float(np.sqrt(mse[-1]))})
-    if not mse:
-        return 0, tried
-    best = int(np.argmin(mse))
-    chosen = next(k for k in range(len(mse)) if mse[k] <= mse[best] + se[best])
-    return chosen, tried
+        mse[k] = float(np.mean(sq))
+        se[k] = float(np.std(sq, ddof=1) / np.sqrt(sq.size))
+        tried.append({"n_radial": k, "loo_rms_deg": float(np.sqrt(mse[k]))})
+    among = [k for k in mse if eligible is None or k in eligible]
+    if not among:
+        return min(eligible or [0]), tried
+    best = min(among, key=lambda k: mse[k])
+    return next(k for k in among if mse[k] <= mse[best] + se[best]), tried
+
+
+def radial_terms_possible(n_dirs: int, fit_tilt: bool = False, max_terms: int = 2) -> int:
+    """How many radial models (0, 1, … terms) ``n_dirs`` distinct sun directions can be
+    checked on by leaving each out: the held-out fit needs two equations to spare."""
+    return sum(1 for k in range(max_terms + 1)
+               if 2 * (n_dirs - 1) >= 4 + k + (2 if fit_tilt else 0) + 4)
 
 
 @dataclass(frozen=True)
@@ -431,34 +438,70 @@ class PositionFit:
     loo_deg: NDArray[np.float64]
 
 
+def consensus_fits(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
+                   elevation_deg: ArrayLike, image_size: tuple[int, int],
+                   n_radial: int | None = None, outlier_deg: float = OUTLIER_DEG,
+                   **fit_kwargs: Any) -> tuple[dict[int, RobustFit], list[int]]:
+    """:func:`robust_fit` of each radial model, each deciding its own outliers, and the
+    models that explain the most distinct sun directions within ``outlier_deg`` — the
+    same frames as the simplest of them (so they can be compared on those frames).
+
+    ``n_radial`` given: that model alone. ``None``: every model the frames can check by
+    leaving each out (:func:`radial_terms_possible`), at least the plain projection.
+    RANSAC's consensus is the base model's, its refits the full model's (:func:`robust_fit`),
+    so a lens the plain projection describes badly (a stereographic lens fitted as
+    equidistant leaves its low suns more than :data:`OUTLIER_DEG` off) is not refused for
+    the plain model's outliers when a radial term explains them. A model explains a frame
+    when the frame is in its fitted set and within ``outlier_deg`` of it (a fit that found
+    no consensus fits every frame and explains only those it lies near).
+    """
+    az, el = np.asarray(azimuth_deg, float).ravel(), np.asarray(elevation_deg, float).ravel()
+    groups = direction_groups(az, el)
+    models = ([n_radial] if n_radial is not None else
+              range(max(1, radial_terms_possible(int(groups.max()) + 1,
+                                                 bool(fit_kwargs.get("fit_tilt"))))))
+    fits = {k: robust_fit(x_px, y_px, az, el, image_size, outlier_deg, n_radial=k,
+                          **fit_kwargs) for k in models}
+    explained = {k: np.unique(groups[f.inlier & (f.residuals_deg <= outlier_deg)]).size
+                 for k, f in fits.items()}
+    first = next(k for k in fits if explained[k] == max(explained.values()))
+    return fits, [k for k in fits if np.array_equal(fits[k].inlier, fits[first].inlier)]
+
+
 def calibrate_positions(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
                         elevation_deg: ArrayLike, image_size: tuple[int, int],
                         projection: str = "equidistant", east: str = "auto",
                         n_radial: int | None = None, fit_tilt: bool = False,
                         outlier_deg: float = OUTLIER_DEG,
                         centre_guess_px: tuple[float, float] | None = None) -> PositionFit:
-    """The fit of :func:`self_calibrate` on sun positions already found: :func:`robust_fit`
-    of the base model, the radial terms from :func:`choose_radial` when ``n_radial`` is
-    None (on the inliers), the fit again with them, and each inlier held out in turn."""
+    """The fit of :func:`self_calibrate` on sun positions already found, and each inlier
+    held out in turn.
+
+    The models of :func:`consensus_fits` that explain the most frames (the same frames)
+    compete by :func:`choose_radial`'s one-standard-error rule on those frames;
+    ``model_selection`` (``n_radial=None`` only) reports every model's leave-one-out RMS on
+    those same frames, the stored fit's, and how many frames its own robust fit explains
+    (``n_inliers``).
+    """
     x, y = np.asarray(x_px, float).ravel(), np.asarray(y_px, float).ravel()
     az, el = np.asarray(azimuth_deg, float).ravel(), np.asarray(elevation_deg, float).ravel()
     fixed: dict[str, Any] = {"projection": projection, "east": east, "fit_tilt": fit_tilt}
-    rf = robust_fit(x, y, az, el, image_size, outlier_deg, n_radial=n_radial or 0,
-                    centre_guess_px=centre_guess_px, **fixed)
+    fits, best = consensus_fits(x, y, az, el, image_size, n_radial, outlier_deg,
+                                centre_guess_px=centre_guess_px, **fixed)
+    inl = fits[best[0]].inlier
     # the mirror is the consensus's; held-out fits start from its centre (each mirror's
     # solve costs as much again, and the wrong one's grinds to its limit)
-    known: dict[str, Any] = {**fixed, "east": rf.result.camera.east,
-                             "centre_guess_px": (rf.result.camera.cx_px,
-                                                 rf.result.camera.cy_px)}
+    cam = fits[best[0]].result.camera
+    known = {**fixed, "east": cam.east, "centre_guess_px": (cam.cx_px, cam.cy_px)}
     selection: list[dict[str, Any]] = []
+    k = best[0]
     if n_radial is None:
-        inl = rf.inlier
-        k, selection = choose_radial(x[inl], y[inl], az[inl], el[inl], image_size, **known)
-        if k:
-            rf = robust_fit(x, y, az, el, image_size, outlier_deg, n_radial=k,
-                            centre_guess_px=centre_guess_px, **fixed)
-    k = len(rf.result.camera.radial_coeffs)
-    inl = rf.inlier
+        k, selection = choose_radial(x[inl], y[inl], az[inl], el[inl], image_size,
+                                     max_terms=max(fits), eligible=best, **known)
+        for row in selection:
+            f = fits[row["n_radial"]]
+            row["n_inliers"] = int(np.sum(f.inlier & (f.residuals_deg <= outlier_deg)))
+    rf = fits[k]
     n_par = 4 + k + (2 if fit_tilt else 0)
     loo = (leave_one_out_deg(x[inl], y[inl], az[inl], el[inl], image_size,
                              **{**known, "n_radial": k})
@@ -590,11 +633,12 @@ def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
     dets, size = _detect_all(load, n, method, None, az, el)
     search = ["blind"] * n
     if guided and method == "robust":
-        # the first fit only guides the second search: the base model is enough
+        # the first fit only guides the second search: the simplest model explaining the
+        # most frames (a model that misplaces the low suns would guide the search there)
         use, xy, guess = found(dets, n_radial or 0)
-        first = robust_fit(xy[:, 0], xy[:, 1], az[use], el[use], size, outlier_deg,
-                           n_radial=n_radial or 0, centre_guess_px=guess, **fixed)
-        again, _ = _detect_all(load, n, method, first.result.camera, az, el)
+        fits, best = consensus_fits(xy[:, 0], xy[:, 1], az[use], el[use], size, n_radial,
+                                    outlier_deg, centre_guess_px=guess, **fixed)
+        again, _ = _detect_all(load, n, method, fits[best[0]].result.camera, az, el)
         # keep the guided answer where it found a sun; a refusal keeps the blind one
         for i, d in enumerate(again):
             if d.sun_found and d.centroid_px is not None:

@@ -140,10 +140,13 @@ class CalibrationsRead(BaseModel):
 
 
 class RadialChoiceRead(BaseModel):
-    """A radial model tried on the inlier frames and its leave-one-out error."""
+    """A radial model tried on the stored fit's inlier frames and its leave-one-out error."""
 
     n_radial: int
-    loo_rms_deg: float
+    loo_rms_deg: float = Field(description="each of the stored fit's inlier frames against "
+                                           "this model fitted without it (held out) [°]")
+    n_inliers: int = Field(description="frames this model's own robust fit explains within "
+                                       "1° (the model explaining the most decides the inliers)")
 
 
 class FittedCalibrationRead(BaseModel):
