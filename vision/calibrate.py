@@ -509,6 +509,80 @@ def calibrate_positions(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike
     return PositionFit(rf, selection, loo)
 
 
+#: the least detection scatter assumed per image axis [°, in the fitted scale]: the fit's
+#: own residual understates it when the frames are few or lie on a short arc (three frames
+#: leave two degrees of freedom). The least any real series in the repository shows:
+#: Wettermast's six frames, 0.11° RMS in-sample, 0.095° per axis over the fit's 12 − 4
+#: degrees of freedom (Wolf's twelve: 0.26° per axis; docs/vision-calibration.md)
+DETECTION_FLOOR_DEG = 0.1
+#: the sky over which :func:`sky_uncertainty_deg` looks: directions this high or higher [°]
+SKY_MIN_ELEVATION_DEG = 10.0
+
+
+def _parameters(cam: FisheyeCamera, tilt: bool) -> NDArray[np.float64]:
+    """The parameter vector of :func:`_camera` for a camera (its inverse)."""
+    return np.array([cam.cx_px, cam.cy_px, cam.px_per_deg, cam.north_offset_deg,
+                     *cam.radial_coeffs,
+                     *((cam.tilt_north_deg, cam.tilt_east_deg) if tilt else ())], float)
+
+
+def sky_uncertainty_deg(fit: CalibrationResult, azimuth_deg: ArrayLike,
+                        elevation_deg: ArrayLike, image_size: tuple[int, int],
+                        floor_deg: float = DETECTION_FLOOR_DEG) -> float:
+    """The largest 1-σ error [°] of the direction the fitted camera gives a pixel, over
+    the sky it sees (directions :data:`SKY_MIN_ELEVATION_DEG` or higher, every 10° of
+    azimuth and 5° of elevation, whose pixel lies in the frame).
+
+    How well the frames constrain the camera away from their own suns: the fitted
+    parameters' covariance ``C = σ² (JᵀJ)⁻¹`` at the solution (``J`` the Jacobian of the
+    sun pixels on the parameters, one row pair per distinct sun direction of
+    ``azimuth_deg``/``elevation_deg``, the fit's inliers; σ the fit's residual per image
+    axis over its degrees of freedom, not below ``floor_deg`` in the fitted scale),
+    propagated to first order to each pixel's direction ``d``: ``Σ_d = G C Gᵀ``,
+    ``G = ∂d/∂p``, and its 1-σ angle ``√trace Σ_d`` (Hartley & Zisserman, *Multiple View
+    Geometry*, 2nd ed., §5.2: backward and forward propagation of covariance). Frames
+    on a short arc fit to a few hundredths of a degree and leave the camera free to turn
+    about them: this grows where their residual does not. Infinite when the parameters
+    are not all determined.
+    """
+    az, el = np.asarray(azimuth_deg, float).ravel(), np.asarray(elevation_deg, float).ravel()
+    _, first = np.unique(direction_groups(az, el), return_index=True)
+    az, el = az[first], el[first]
+    cam = fit.camera
+    tilt = "tilt_north_deg" in fit.fitted
+    p0 = _parameters(cam, tilt)
+    n_radial = len(cam.radial_coeffs)
+
+    def jacobian(f: Callable[[FisheyeCamera], NDArray[np.float64]]) -> NDArray[np.float64]:
+        cols = []
+        for j in range(p0.size):
+            h = 1e-4 * max(1.0, abs(p0[j])) if j != 3 else 1e-3  # the north offset [°]
+            step = np.zeros_like(p0)
+            step[j] = h
+            hi = f(_camera(p0 + step, cam.east, cam.projection, n_radial, tilt))
+            lo = f(_camera(p0 - step, cam.east, cam.projection, n_radial, tilt))
+            cols.append((hi - lo).ravel() / (2 * h))
+        return np.stack(cols, axis=-1)
+
+    J = jacobian(lambda c: np.concatenate(c.sky_to_pixel(az, el)))
+    dof = 2 * fit.n_frames - p0.size
+    sigma_px = float(np.sqrt(np.sum(fit.residuals_px**2) / dof)) if dof > 0 else 0.0
+    sigma_px = max(sigma_px, floor_deg * cam.px_per_deg)
+    try:
+        cov = sigma_px**2 * np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        return float("inf")
+    grid_az, grid_el = np.meshgrid(np.arange(0.0, 360.0, 10.0),
+                                   np.arange(SKY_MIN_ELEVATION_DEG, 90.0, 5.0))
+    gx, gy = cam.sky_to_pixel(np.append(grid_az.ravel(), 0.0), np.append(grid_el.ravel(), 90.0))
+    w, h = image_size
+    seen = np.isfinite(gx) & np.isfinite(gy) & (gx >= 0) & (gx <= w - 1) & (gy >= 0) & (gy <= h - 1)
+    G = jacobian(lambda c: c.pixel_to_direction(gx[seen], gy[seen])).reshape(-1, 3, p0.size)
+    var = np.einsum("mip,pq,miq->m", G, cov, G)  # trace of G C Gᵀ per direction
+    worst = float(np.degrees(np.sqrt(np.max(var)))) if var.size else float("inf")
+    return worst if np.isfinite(worst) and np.all(np.diag(cov) >= 0) else float("inf")
+
+
 @dataclass(frozen=True)
 class SelfCalibration:
     """:func:`self_calibrate`'s answer.
@@ -517,7 +591,8 @@ class SelfCalibration:
     frame; ``loo_deg`` the leave-one-out residual of each inlier (in ``fit``'s
     order; empty when too few frames); ``model_selection`` the radial terms tried;
     ``image_size_px`` the size the frames decode to (orientation applied), the size
-    the camera is valid for.
+    the camera is valid for; ``sky_uncertainty_deg`` how well the frames fix the camera
+    over the whole sky (:func:`sky_uncertainty_deg`).
     """
 
     fit: CalibrationResult
@@ -525,6 +600,7 @@ class SelfCalibration:
     loo_deg: NDArray[np.float64]
     model_selection: list[dict[str, Any]]
     image_size_px: tuple[int, int]  # (width, height) of the decoded frames
+    sky_uncertainty_deg: float  # :func:`sky_uncertainty_deg` of ``fit``
 
     @property
     def n_outliers(self) -> int:
@@ -670,4 +746,6 @@ def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
             f"{MAX_RMS_DEG:g}° within which detection searches around a calibration's "
             f"prediction; check the frames' times (their zone) and the place. Residuals: "
             f"{listed}", report)
-    return SelfCalibration(rf.result, report, pf.loo_deg, pf.model_selection, size)
+    inl = use[rf.inlier]
+    return SelfCalibration(rf.result, report, pf.loo_deg, pf.model_selection, size,
+                           sky_uncertainty_deg(rf.result, az[inl], el[inl], size))

@@ -281,7 +281,11 @@ def _summary(out: dict[str, Any]) -> str:
         return (f"{c['projection']} centre ({c['cx_px']:.1f}, {c['cy_px']:.1f}) px, "
                 f"{c['px_per_deg']:.3f} px/deg, north {c['north_offset_deg']:.2f} deg, "
                 f"east {c['east']}; residual rms {out['rms_px']:.2f} px / "
-                f"{out['rms_deg']:.3f} deg over {out['n_frames']} frames")
+                f"{out['rms_deg']:.3f} deg over {out['n_frames']} frames"
+                + (f"; direction uncertain by up to {out['sky_uncertainty_deg']:.2f} deg "
+                   f"(1 sigma) over the sky" if out.get("sky_uncertainty_deg") is not None
+                   else "")
+                + "".join(f"\nwarning: {w}" for w in out.get("warnings") or []))
     if not out["sun_found"]:
         return f"no sun (confidence {out['confidence']:.2f})"
     x, y = out["centroid_px"]

@@ -14,13 +14,17 @@ whether a detection's error against the ephemeris is one any calibration could l
 
 from __future__ import annotations
 
+import datetime as dt
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from backend.errors import InputError
+from vision.calibrate import MAX_RMS_DEG
 from vision.cameras import PROJECTIONS, px_per_deg_for_horizon
 from vision.fov import image_circle, to_gray
+from vision.sphere import angular_separation_deg
 
 ZENITH_ANGLE_LIMIT_DEG = 15.0
 """A zenith-angle error larger than this needs a scale or centre off by more than any
@@ -120,10 +124,18 @@ given their times reversed: 7 outliers, 5 fitted to 0.38° by a mirrored camera 
 centre)."""
 
 
-def check_consensus(frames: list[dict[str, Any]], loo_rms_deg: float | None) -> None:
+def check_consensus(frames: list[dict[str, Any]], loo_rms_deg: float | None,
+                    other_setting: Callable[[], tuple[str, str] | None] | None = None
+                    ) -> None:
     """Refuse (422 naming ``timestamps``) a calibration whose inliers are not a clear
     majority (:data:`MAX_OUTLIER_SHARE`) of the frames with a sun found, or whose outliers
-    leave too few frames to check the fit by leaving each out (``loo_rms_deg`` None)."""
+    leave too few frames to check the fit by leaving each out (``loo_rms_deg`` None).
+
+    ``other_setting``, asked only on a refusal, names a setting the caller forced (``east``,
+    ``n_radial``, ``projection``) whose other choice fits the same suns, and how: the
+    refusal then names that field, not the times (Wolf's frames mirrored, ``east=left``
+    forced: 9 of 12 disagreed, "are the times in the order…", while ``east=auto`` fits
+    them, east right, to 0.34°)."""
     fitted = [f for f in frames if f.get("used") or f.get("outlier")]
     out = [f for f in fitted if f.get("outlier")]
     if not out:
@@ -134,12 +146,18 @@ def check_consensus(frames: list[dict[str, Any]], loo_rms_deg: float | None) -> 
     hint = ("are the times in the order of the files, and in the right zone (UTC, or with "
             "their offset)?")
     if len(out) > MAX_OUTLIER_SHARE * len(fitted):
-        raise InputError(422, f"timestamps: {why}; a calibration needs at least two thirds "
-                              f"of its frames to agree: {hint}")
-    if loo_rms_deg is None:
-        raise InputError(422, f"timestamps: {why}, and the rest are too few sun directions "
-                              f"to check the fit by leaving each out in turn: {hint} Or "
-                              f"send more frames")
+        why += "; a calibration needs at least two thirds of its frames to agree"
+    elif loo_rms_deg is None:
+        why += (", and the rest are too few sun directions to check the fit by leaving each "
+                "out in turn")
+        hint += " Or send more frames"
+    else:
+        return
+    named = other_setting() if other_setting is not None else None
+    if named is not None:
+        field, how = named
+        raise InputError(422, f"{field}: {why}; {how}: is the {field} you gave right?")
+    raise InputError(422, f"timestamps: {why}: {hint}")
 
 
 MAX_CENTRE_OFFSET_DEG = 4.0
@@ -161,20 +179,88 @@ def image_circle_centre(image: np.ndarray) -> tuple[float, float] | None:
 
 
 def check_centre(centre_px: tuple[float, float], px_per_deg: float,
-                 circles: list[tuple[float, float]]) -> float | None:
+                 circles: list[tuple[float, float]], frames: list[dict[str, Any]] | None = None,
+                 sky_uncertainty_deg: float = 0.0) -> float | None:
     """Refuse (422 naming ``timestamps``) a fitted camera whose optical centre lies more than
     :data:`MAX_CENTRE_OFFSET_DEG` from the median centre of the frames' image circles;
-    the offset [°], or None when no frame has a circle (nothing to compare)."""
+    the offset [°], or None when no frame has a circle (nothing to compare). An offset
+    within three times the camera's own uncertainty (``sky_uncertainty_deg``, 1σ) may be
+    the frames' geometry, not their times: the refusal then says how close together their
+    suns lie (:func:`sun_span`) before it asks about the zone (five Wolf frames within 22
+    minutes, their times right: the centre 7.2° off, the camera uncertain by 4.3°; Wolf's
+    twelve an hour late: 9.4° off, uncertain by 0.6°)."""
     if not circles:
         return None
     cx, cy = (float(v) for v in np.median(np.asarray(circles, float), axis=0))
     off = float(np.hypot(centre_px[0] - cx, centre_px[1] - cy)) / px_per_deg
     if off > MAX_CENTRE_OFFSET_DEG:
-        raise InputError(422, f"timestamps: the fitted camera puts its optical centre at "
-                              f"({centre_px[0]:.0f}, {centre_px[1]:.0f}) px, {off:.1f}° from "
-                              f"the centre of the image circle ({cx:.0f}, {cy:.0f}) px — a "
-                              f"fisheye's lies within {MAX_CENTRE_OFFSET_DEG:g}° of it. Times "
-                              f"in the wrong zone fit such a camera (an hour off moves it "
-                              f"8–10°): are the times UTC, or given with their offset? Is the "
-                              f"place right?")
+        where = (f"the fitted camera puts its optical centre at ({centre_px[0]:.0f}, "
+                 f"{centre_px[1]:.0f}) px, {off:.1f}° from the centre of the image circle "
+                 f"({cx:.0f}, {cy:.0f}) px — a fisheye's lies within "
+                 f"{MAX_CENTRE_OFFSET_DEG:g}° of it")
+        if off <= 3.0 * sky_uncertainty_deg:
+            raise InputError(422, f"timestamps: {where}; {sun_span(frames or [])}, too "
+                                  f"little of the sky to fix the camera (its directions "
+                                  f"are uncertain by up to {sky_uncertainty_deg:.1f}° "
+                                  f"elsewhere): {_SPREAD} If they are, are the times UTC, "
+                                  f"or given with their offset?")
+        raise InputError(422, f"timestamps: {where}. Times in the wrong zone fit such a "
+                              f"camera (an hour off moves it 8–10°): are the times UTC, or "
+                              f"given with their offset? Is the place right?")
     return off
+
+
+SKY_UNCERTAINTY_WARN_DEG = 0.5
+"""A calibration whose direction is uncertain by more than this somewhere on the sky [°, 1σ;
+``vision.calibrate.sky_uncertainty_deg``] is stored with a warning: about the sun's
+diameter (0.53°), so such a camera cannot place the sun within its own disc everywhere.
+Measured (docs/vision-calibration.md): Wolf's 12 even frames 0.47°, its 11 odd 0.40°,
+Wettermast's 6 0.32°; Wolf's morning alone 0.87° (its labels elsewhere 0.69° RMS, 1.28°
+worst), three Wolf frames 12:41–13:49 UTC 1.14° (0.88° / 1.45°), eight rendered frames 2 min
+apart 7.6° (0.58° / 0.91°). Beyond :data:`vision.calibrate.MAX_RMS_DEG` a calibration is
+refused: it could not guide the ephemeris-guided search, whose radius that is."""
+
+_SPREAD = ("send frames whose suns lie far apart on the sky: hours apart on one day, "
+           "better still on days months apart (the sun higher and lower).")
+
+
+def sun_span(frames: list[dict[str, Any]]) -> str:
+    """In words, how much of the sun's path the used frames span: the largest angle between
+    their ephemeris suns and the time between the first and the last."""
+    used = [f for f in frames if f.get("used") and f.get("ephemeris")]
+    if len(used) < 2:
+        return f"the frames' suns lie in {len(used)} place{'' if len(used) == 1 else 's'}"
+    az = np.array([f["ephemeris"]["azimuth_deg"] for f in used], float)
+    el = np.array([f["ephemeris"]["elevation_deg"] for f in used], float)
+    sep = np.asarray(angular_separation_deg(az[:, None], el[:, None], az[None], el[None]))
+    text = f"the {len(used)} frames' suns lie within {float(sep.max()):.1f}° of one another"
+    times = sorted(str(f["timestamp"]) for f in used if f.get("timestamp"))
+    if len(times) == len(used):
+        first, last = (dt.datetime.fromisoformat(t.replace("Z", "+00:00"))
+                       for t in (times[0], times[-1]))
+        minutes = (last - first).total_seconds() / 60.0
+        text += (f" on the sun's path, taken over {minutes:.0f} minutes" if minutes < 180
+                 else f" on the sun's path, taken over {minutes / 60:.1f} hours")
+    return text
+
+
+def check_sky_coverage(sky_uncertainty_deg: float, frames: list[dict[str, Any]]) -> list[str]:
+    """Warnings for a calibration the frames fix poorly over the sky
+    (:data:`SKY_UNCERTAINTY_WARN_DEG`); a refusal (422 naming ``timestamps``) past
+    :data:`vision.calibrate.MAX_RMS_DEG`, a camera too uncertain to guide detection."""
+    if sky_uncertainty_deg > MAX_RMS_DEG:
+        raise InputError(422, f"timestamps: {sun_span(frames)}, too little of the sky to fix "
+                              f"the camera: fitted to them, its directions elsewhere are "
+                              f"uncertain by up to {_degrees(sky_uncertainty_deg)} (1σ), "
+                              f"more than the {MAX_RMS_DEG:g}° within which detection "
+                              f"searches around a calibration's prediction; {_SPREAD}")
+    if sky_uncertainty_deg > SKY_UNCERTAINTY_WARN_DEG:
+        return [f"{sun_span(frames)}: however well they fit (rms_deg), they fix the "
+                f"camera only to {sky_uncertainty_deg:.1f}° (1σ, sky_uncertainty_deg) "
+                f"somewhere on the sky, more than the sun's diameter "
+                f"({SKY_UNCERTAINTY_WARN_DEG:g}°); {_SPREAD}"]
+    return []
+
+
+def _degrees(value: float) -> str:
+    return "any angle" if not np.isfinite(value) else f"{value:.1f}°"

@@ -20,11 +20,23 @@ import numpy as np
 import pandas as pd
 
 from backend.errors import InputError
-from backend.vision.checks import check_centre, check_consensus, image_circle_centre
+from backend.vision.checks import (
+    check_centre,
+    check_consensus,
+    check_sky_coverage,
+    image_circle_centre,
+)
 from sim.sun import solar_position
 from vision.analyse import analyse_frame
-from vision.calibrate import DISTINCT_DEG, MIN_DIRECTIONS, n_directions, self_calibrate
-from vision.cameras import FisheyeCamera, PinholeCamera
+from vision.calibrate import (
+    DISTINCT_DEG,
+    MIN_DIRECTIONS,
+    SelfCalibration,
+    calibrate_positions,
+    n_directions,
+    self_calibrate,
+)
+from vision.cameras import PROJECTIONS, FisheyeCamera, PinholeCamera
 from vision.imageio import ImageError, decode_image, image_size
 from vision.metrics import error_table
 
@@ -276,9 +288,12 @@ def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
         report.append(r)
     # a fit is not yet a calibration: most frames must agree, and a levelled camera's zenith
     # lies near its image circle's centre (backend.vision.checks)
-    check_consensus(report, cal.loo_rms_deg)
+    check_consensus(report, cal.loo_rms_deg,
+                    lambda: _other_setting(cal, az, el, projection, east, n_radial, fit_tilt))
+    warnings = check_sky_coverage(cal.sky_uncertainty_deg, report)
     check_centre((float(res.camera.cx_px), float(res.camera.cy_px)), res.camera.px_per_deg,
-                 [c for c in centres.values() if c is not None])
+                 [c for c in centres.values() if c is not None], report,
+                 cal.sky_uncertainty_deg)
     out = res.to_dict()
     cam = out["camera"]
     w, h = cal.image_size_px
@@ -293,8 +308,47 @@ def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
         "rms_px": out["rms_px"], "max_px": out["max_px"], "rms_deg": out["rms_deg"],
         "max_deg": out["max_deg"], "n_outliers": cal.n_outliers,
         "loo_rms_deg": cal.loo_rms_deg, "model_selection": cal.model_selection,
+        "sky_uncertainty_deg": cal.sky_uncertainty_deg, "warnings": warnings,
         "frames": report,
     }
+
+
+def _other_setting(cal: SelfCalibration, az: np.ndarray, el: np.ndarray, projection: str,
+                   east: str, n_radial: int | None, fit_tilt: bool) -> tuple[str, str] | None:
+    """A setting the caller forced whose other choice fits the calibration's suns by the
+    consensus rule (:func:`backend.vision.checks.check_consensus`), and how: ``east`` given
+    left or right (the other mirror, fitted), ``projection`` (each other one: the default
+    equidistant may not be the lens's), ``n_radial`` given (chosen from the frames). The
+    suns are the ones already found
+    (no frame is decoded again); the one leaving the fewest out, then the closest fit;
+    None when no such choice fits."""
+    idx = [i for i, r in enumerate(cal.frames) if r.get("used") or r.get("outlier")]
+    xy = np.array([cal.frames[i]["centroid_px"] for i in idx], float)
+    given: dict[str, Any] = {"projection": projection, "east": east, "n_radial": n_radial,
+                             "fit_tilt": fit_tilt}
+    tries: list[tuple[str, dict[str, Any]]] = \
+        ([("east", {"east": "auto"})] if east != "auto" else []) + \
+        [("projection", {"projection": p}) for p in PROJECTIONS if p != projection] + \
+        ([("n_radial", {"n_radial": None})] if n_radial is not None else [])
+    fits: list[tuple[int, float, str, str]] = []
+    for name, change in tries:
+        try:
+            pf = calibrate_positions(xy[:, 0], xy[:, 1], az[idx], el[idx], cal.image_size_px,
+                                     **{**given, **change})
+        except ValueError:
+            continue
+        loo = float(np.sqrt(np.mean(pf.loo_deg**2))) if pf.loo_deg.size else None
+        try:
+            check_consensus([{"used": bool(u), "outlier": not u} for u in pf.fit.inlier], loo)
+        except InputError:
+            continue
+        cam, n_out, rms = pf.fit.result.camera, int(np.sum(~pf.fit.inlier)), pf.fit.result.rms_deg
+        value = {"east": cam.east, "n_radial": len(cam.radial_coeffs),
+                 "projection": cam.projection}[name]
+        fits.append((n_out, rms, name, f"with {name}={value} instead of {given[name]} the same "
+                                       f"suns fit a camera to {rms:.2f}° RMS, {n_out} of "
+                                       f"{len(idx)} left out"))
+    return min(fits)[2:] if fits else None  # the fewest left out, then the closest fit
 
 
 def evaluate(frames: list[Frame], place: Place,

@@ -287,7 +287,8 @@ async function calibrate() {
       ["cy_px", "Centre y [px]", 1], ["px_per_deg", "Scale [px/°]", 3], ["north_offset_deg", "North offset [°]", 2],
       ["east", "East"], ["n_frames", "Frames used", 0], ["rms_px", "Residual RMS [px]", 2], ["max_px", "Residual max [px]", 2],
       ["rms_deg", "Residual RMS, in-sample [°]", 3], ["n_outliers", "Outlier frames (left out)", 0],
-      ["loo_rms_deg", "Each frame held out in turn, RMS [°]", 3]];
+      ["loo_rms_deg", "Each frame held out in turn, RMS [°]", 3],
+      ["sky_uncertainty_deg", "Direction uncertainty over the sky, worst 1σ [°]", 2]];
     const rows = show.filter(([k]) => fitted[k] !== undefined && fitted[k] !== null)
       .map(([k, label, d]) => h("tr", {}, h("th", {}, label), h("td", {}, typeof fitted[k] === "number" ? num(fitted[k], d ?? 3) : String(fitted[k]))));
     for (const k of ["projection", "px_per_deg", "cx_px", "cy_px", "north_offset_deg", "east"]) {
@@ -301,6 +302,7 @@ async function calibrate() {
       h("td", {}, num(f.residual_px, 1)), h("td", {}, num(f.residual_deg, 2))));
     box.append(h("article", { class: "card", "data-testid": "calibration-result" },
       h("header", {}, h("h2", {}, `Fitted ${fitted.projection ?? ""} camera`)),
+      ...(fitted.warnings ?? []).map((w) => h("p", { class: "warning", "data-testid": "calibration-warning" }, `⚠ ${w}`)),
       h("div", { class: "grid two-even" },
         h("table", { class: "kv" }, rows),
         frames.length ? h("table", { class: "kv frames" },

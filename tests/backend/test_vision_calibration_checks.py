@@ -276,3 +276,41 @@ def test_parameters_a_calibration_replaces_are_refused(client: httpx.Client,
     r = client.post(SUN, files=files, data={"camera": "pinhole", "reference_x_px": "10"})
     assert r.status_code == 422, r.text
     assert r.json()["detail"] == "reference_x_px and reference_y_px go together"
+
+
+def test_frames_that_span_little_of_the_sky_are_said_to(client: httpx.Client) -> None:
+    """Real Wolf frames with their right times: three within 12 minutes (a 2.8° arc) were
+    refused as "times in the wrong zone?" (the optical centre 87.7° off), five within 22
+    minutes likewise (7.2° off); three at 12:41, 13:40 and 13:49 were stored at 0.027° RMS
+    while the camera is 0.9° RMS (1.5° worst) off on the other 20 labels. The answer now
+    says the suns lie too close together (sky_uncertainty_deg, the fitted parameters'
+    covariance over the sky) and asks for frames hours apart."""
+    rows = _real("Wolf")
+    for idx in ([0, 1, 2], [0, 1, 2, 3, 4]):
+        r = _real_calibrate(client, [rows[i] for i in idx], [rows[i]["utc_time"] for i in idx])
+        assert r.status_code == 422, r.text
+        detail = r.json()["detail"]
+        assert detail.startswith("timestamps:") and "hours apart" in detail, detail
+        assert f"the {len(idx)} frames' suns lie within" in detail, detail
+    late = [rows[i] for i in (20, 21, 22)]
+    r = _real_calibrate(client, late, [row["utc_time"] for row in late])
+    assert r.status_code == 201, r.text
+    cal = r.json()
+    assert cal["rms_deg"] < 0.1 and cal["sky_uncertainty_deg"] > 0.5, cal
+    assert len(cal["warnings"]) == 1 and "hours apart" in cal["warnings"][0]
+
+
+def test_a_forced_setting_that_does_not_fit_is_named(client: httpx.Client) -> None:
+    """Wolf's even frames mirrored (a camera seeing the sky mirrored) with ``east=left``
+    forced: "9 of 12 frames disagree… are the times in the order… zone", never naming
+    east; east=auto fits them (east right, 0.34°). The refusal names the setting."""
+    rows = _real("Wolf")[0::2]
+    files = [("files", (r["filename"], _encode(cv2.flip(cv2.imread(str(REAL_SKY / r["filename"])),
+                                                        1), ".jpg"), "image/jpeg"))
+             for r in rows]
+    r = client.post(CAL, files=files, data={"timestamps": [row["utc_time"] for row in rows],
+                                            "latitude_deg": rows[0]["lat"],
+                                            "longitude_deg": rows[0]["lon"], "east": "left"})
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert detail.startswith("east:") and "with east=right instead of left" in detail, detail

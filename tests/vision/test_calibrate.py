@@ -24,9 +24,11 @@ from vision.calibrate import (
     robust_fit,
     self_calibrate,
     sky_residuals_deg,
+    sky_uncertainty_deg,
 )
 from vision.cameras import FisheyeCamera
 from vision.detect import detect_sun
+from vision.sphere import angular_separation_deg
 from vision.synth import fisheye_frame
 
 EUROCONTROL = Path(__file__).resolve().parents[1] / "data" / "real-sky" / "eurocontrol"
@@ -289,3 +291,29 @@ def test_auto_radial_terms_decide_their_own_outliers() -> None:
                                                   rel=1e-3)
     assert chosen["n_inliers"] == x.size and pf.model_selection[0]["n_inliers"] < x.size
 
+
+def test_sky_uncertainty_is_large_where_the_frames_span_little_of_the_sky() -> None:
+    """Eight suns 2 min apart on a 3° arc fit to hundredths of a degree but leave the camera
+    free to turn about them (the tester's render: 0.58° RMS, 0.91° worst over the sky,
+    answered rms 0.024°); a day's suns fix it. ``sky_uncertainty_deg`` (the parameters'
+    covariance propagated to the sky) says which is which, and bounds the true error."""
+    truth = FisheyeCamera(601.3, 596.8, 560.0 / 90.0, 30.0, "left")
+    rng = np.random.default_rng(4)
+    out = {}
+    for name, times in (("arc", pd.date_range("2024-06-21T08:00Z", periods=8, freq="2min")),
+                        ("day", pd.date_range("2024-06-21T05:00Z", periods=8, freq="100min"))):
+        sp = pvlib.solarposition.get_solarposition(times, 45.0, 7.0, method="nrel_numpy")
+        az, el = sp.azimuth.to_numpy(), sp.apparent_elevation.to_numpy()
+        x, y = truth.sky_to_pixel(az, el)
+        x, y = x + rng.normal(0, 0.3, x.size), y + rng.normal(0, 0.3, y.size)
+        fit = fit_fisheye(x, y, az, el, (1200, 1200), east="left")
+        grid_az, grid_el = np.meshgrid(np.arange(0.0, 360.0, 10.0), np.arange(10.0, 90.0, 5.0))
+        gx, gy = truth.sky_to_pixel(grid_az, grid_el)
+        a2, e2 = fit.camera.pixel_to_sky(gx, gy)
+        worst = float(np.max(angular_separation_deg(grid_az, grid_el, a2, e2)))
+        out[name] = (fit.rms_deg, sky_uncertainty_deg(fit, az, el, (1200, 1200)), worst)
+    (arc_rms, arc_unc, arc_worst), (_, day_unc, day_worst) = out["arc"], out["day"]
+    assert arc_rms < 0.1 and arc_unc > 3.0 and arc_worst < 3 * arc_unc, out
+    assert day_unc < 0.5 and day_worst < 3 * day_unc, out
+    # the floor: a fit's residual understates the scatter of a few frames
+    assert sky_uncertainty_deg(fit, az, el, (1200, 1200), floor_deg=0.0) < day_unc

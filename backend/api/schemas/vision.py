@@ -177,6 +177,13 @@ class FittedCalibrationRead(BaseModel):
     loo_rms_deg: float | None = Field(description="each inlier frame against the model "
                                                   "fitted without it (held out) [°]")
     model_selection: list[RadialChoiceRead]
+    sky_uncertainty_deg: float = Field(
+        description="how well the frames fix the camera away from their own suns: the "
+                    "largest 1-σ error of the direction it gives a pixel over the sky above "
+                    "10° (the fitted parameters' covariance propagated; "
+                    "vision.calibrate.sky_uncertainty_deg) [°]")
+    warnings: list[str] = Field(description="a calibration stored, but doubtful: frames "
+                                            "that fix the camera poorly over the sky")
     frames: list[CalibrationFrameRead]
     camera: FisheyeCameraRead
 
