@@ -35,9 +35,10 @@ beckman``               ``sim.sun.solar_position(method="duffie-beckman")``)
 Shared behaviour (:class:`ControlSettings`): a dead band (an axis moves only
 when its error exceeds it, so the motors run in short bursts — seed 000 §3.2:
 "very short intervals"); joint limits and azimuth wrap (through
-:func:`sim.kinematics.inverse_kinematics`); night stow (elevation joint to its
-maximum, the panel flat, when the controller's ephemeris puts the sun below
-``stow_elevation_deg``) and morning wake-up; with no usable sun in the frame
+:func:`sim.kinematics.inverse_kinematics` with the day's reference, for every
+controller's target, so that a midnight sun is unwound at its lowest); night stow
+(elevation joint to its maximum, the panel flat, when the controller's ephemeris puts
+the sun below ``stow_elevation_deg``) and morning wake-up; with no usable sun in the frame
 (clouds) the camera loops fall back to the ephemeris — ``hybrid`` keeping its
 last valid correction — and a detection that jumps away from the locked sun or
 whose glare has lost its clear-sky size (a cloud edge eating the disc) is not
@@ -237,10 +238,11 @@ def ephemeris_joint_targets(
     """Ephemeris sun and the joint angles that face it, at ``times``.
 
     Returns ``{"solar_azimuth", "apparent_elevation", "azimuth_deg",
-    "elevation_deg"}`` [°]: the sun by :func:`sim.sun.solar_position`
+    "elevation_deg", "reference_azimuth_deg"}`` [°]: the sun by :func:`sim.sun.solar_position`
     (``method`` "spa" or "duffie-beckman", the site's pressure and air
     temperature) and :func:`sim.kinematics.inverse_kinematics` with the daily
-    sweep reference of :func:`noon_reference_azimuth`. With a ``pointing_model``
+    sweep reference of :func:`noon_reference_azimuth` (returned too: every controller's
+    azimuth target is kept within it, :meth:`Controller.command`). With a ``pointing_model``
     the joint angles are the encoder angles that put that mount's real optical axis
     on the sun (:func:`sim.pointing_model.command_angles`, issue 25).
     """
@@ -255,11 +257,11 @@ def ephemeris_joint_targets(
     el = pos["apparent_elevation"].to_numpy()
     aim_az, aim_el = (az, el) if pointing_model is None else command_angles(
         pointing_model, az, el)
-    az_j, el_j = kinematics.inverse_kinematics(
-        aim_az, aim_el, site.tracker, reference_azimuth=noon_reference_azimuth(times, site)
-    )
+    reference = noon_reference_azimuth(times, site)
+    az_j, el_j = kinematics.inverse_kinematics(aim_az, aim_el, site.tracker,
+                                               reference_azimuth=reference)
     return {"solar_azimuth": az, "apparent_elevation": el, "azimuth_deg": az_j,
-            "elevation_deg": el_j}
+            "elevation_deg": el_j, "reference_azimuth_deg": reference}
 
 
 def _sky_weight(elevation_deg: float) -> float:
@@ -352,8 +354,27 @@ class Controller:
             return target
         az_t, el_t = self._track(i, reading, measurement)
         el_t = min(max(el_t, g.elevation_min_deg), g.elevation_max_deg)
-        az_t = min(max(az_t, g.azimuth_min_deg), g.azimuth_max_deg)
+        az_t = self._in_daily_sweep(az_t, self.lists["now_reference_azimuth_deg"][i])
         return self._dead_band(az_t, el_t, reading)
+
+    def _in_daily_sweep(self, azimuth_deg: float, reference_deg: float) -> float:
+        """``azimuth_deg``'s equivalent (± k·360°) in the joint range nearest the day's
+        reference [°]: the unwind rule, one for every controller.
+
+        The ephemeris targets already obey it (:func:`ephemeris_joint_targets`, through
+        :func:`sim.kinematics.inverse_kinematics` with :func:`noon_reference_azimuth`); a
+        camera loop's target is the encoder reading plus a correction, which would follow
+        a midnight sun round past the reference ± 180° into the joint limit and unwind
+        there in daylight (Tromsø, June: 358° at 07:24 with the sun 25.6° up, a tester's
+        finding). Kept within the reference ± 180°, every controller unwinds where the
+        sun is farthest from its noon side — at its lowest (``docs/sites.md``).
+        """
+        g = self.geometry
+        if (g.azimuth_min_deg <= azimuth_deg <= g.azimuth_max_deg
+                and abs(azimuth_deg - reference_deg) <= 180.0):  # the common case, fast
+            return azimuth_deg
+        az, _ = kinematics.inverse_kinematics(azimuth_deg, 0.0, g, reference_deg)
+        return float(az)
 
     def _dead_band(self, az_t: float, el_t: float, reading: Reading) -> tuple[float, float]:
         db = self.settings.dead_band_deg
