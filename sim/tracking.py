@@ -37,7 +37,15 @@ from sim.frames import CloudField, pointing_error_deg, render_sun_roi
 from vision.cameras import PinholeCamera
 
 __all__ = ["DriveLimits", "CameraSetup", "Move", "LoopResult", "LoopState", "run_loop",
-           "move_energies_wh", "trapezoid_duration_s", "clear_sky_area_px"]
+           "move_energies_wh", "trapezoid_duration_s", "clear_sky_area_px",
+           "SUNSHINE_DNI_W_M2"]
+
+#: The camera sees the sun only when the beam is at least this [W m⁻²]: the WMO's
+#: threshold of bright sunshine (direct normal irradiance ≥ 120 W m⁻², WMO-No. 8, *Guide
+#: to Meteorological Instruments and Methods of Observation*, ch. 8 "Measurement of
+#: sunshine duration", 8.1.2). Below it the sun's disc is hidden or too faint to cast a
+#: shadow — to the tracker camera, an overcast sky with no sun to find.
+SUNSHINE_DNI_W_M2 = 120.0
 
 
 @dataclass(frozen=True)
@@ -196,6 +204,7 @@ def run_loop(
     camera: CameraSetup,
     state: LoopState | None,
     act_ticks: int | None = None,
+    dni_w_m2: NDArray[np.float64] | None = None,
 ) -> tuple[LoopResult, LoopState]:
     """Run ``controller`` over one chunk of ``ticks`` (UTC, uniform ``tick_s``).
 
@@ -215,6 +224,10 @@ def run_loop(
         The ticks from this index on are only sampled: the controller neither looks nor
         acts (the instant closing a run's last step, :func:`sim.energy.simulation_times`:
         what would happen at it belongs to the next range). Default: every tick acts.
+    dni_w_m2 : ndarray, shape (n_ticks,), optional
+        The run's weather's direct normal irradiance at the ticks [W m⁻²]: a frame taken
+        when it is below :data:`SUNSHINE_DNI_W_M2` shows no sun (overcast). Default: a
+        clear sky, the sun in every frame it faces.
 
     Returns
     -------
@@ -254,6 +267,7 @@ def run_loop(
     # plain lists for the per-tick lookups (numpy scalar indexing is ~5x slower)
     t_list, night_list, next_list = t_s.tolist(), night.tolist(), next_day.tolist()
     gust_list = gust.tolist()
+    dni_list = None if dni_w_m2 is None else np.asarray(dni_w_m2, dtype=float).tolist()
     sun_list = sun_enu
     half_b = 0.5 * d.backlash_deg
     enc_rate = float(dist.encoder_error_deg(1.0, d))
@@ -311,7 +325,11 @@ def run_loop(
         meas = None
         if detect is not None and not night_list[i] and t - state.last_frame_s >= interval - 1e-6:
             state.last_frame_s = t
-            meas = _frame(output(t, i), sun_list[i], d, camera, cam, detect, state, t)
+            if dni_list is not None and dni_list[i] < SUNSHINE_DNI_W_M2:
+                state.frames += 1  # overcast: the frame shows no sun
+                meas = CameraMeasurement.none()
+            else:
+                meas = _frame(output(t, i), sun_list[i], d, camera, cam, detect, state, t)
         was_stowed = controller.stowed
         c_az, c_el = controller.command(i, Reading(t, r_az, r_el, az_moving, el_moving), meas)
         delta = c_az - r_az

@@ -554,7 +554,9 @@ def simulate(
         Tz-aware index; ``ghi``, ``dni``, ``dhi`` [W m⁻²], optional
         ``temp_air`` [°C] and ``wind_speed`` [m s⁻¹]; interpolated linearly onto
         the steps. Default: clear sky (Ineichen) with the site's air
-        temperature and wind speed.
+        temperature and wind speed. With weather, the camera loops' frames show the
+        sun only while its ``dni`` (interpolated to each frame's time) is at least
+        :data:`sim.tracking.SUNSHINE_DNI_W_M2` (the WMO's sunshine threshold).
     progress : callable, optional
         Called with the fraction done (0…1) after each chunk.
     disturbances : Disturbances, optional
@@ -627,6 +629,9 @@ def simulate(
     if layout is not None:
         extra.update({k: np.zeros(len(grid)) for k in ("fixed_shaded_fraction",
                                                      "fixed_shade_loss_w")})
+    # the camera loops' frames see the sun only in the weather's beam (tracking.run_loop)
+    grid_s = (sun._unix_seconds(grid) if weather_on is not None and ctl is not None
+              and ctl.camera_interval_s else None)
     chunk_steps = _CHUNK_STEPS if ctl is None else max(1, min(_CHUNK_STEPS, (1 << 17) // every))
     for i0 in range(0, len(grid), chunk_steps):
         chunk = grid[i0 : i0 + chunk_steps]
@@ -656,8 +661,13 @@ def simulate(
             sun_enu = enu_from_sky(t_pos["azimuth"].to_numpy(),
                                    t_pos["apparent_elevation"].to_numpy())
             t0_s = (chunk[0] - grid[0]).total_seconds()
+            dni = None  # a clear sky: the camera sees the sun whenever it faces it
+            if grid_s is not None and weather_on is not None:
+                # the run's weather at each frame's time (linear, as at the steps)
+                near = slice(i0, i0 + len(chunk) + 1)
+                dni = np.interp(sun._unix_seconds(ticks), grid_s[near], weather_on["dni"][near])
             res, state = run_loop(ctl, ticks, t0_s, tick_s, every, sun_enu, d, limits, camera,
-                                  state, act_ticks)
+                                  state, act_ticks, dni_w_m2=dni)
             moves.extend(res.moves)
             normal = dist.normal_enu(res.azimuth_joint_deg, res.elevation_joint_deg, d)
             # the series' joints are the real ones (an encoder zero moves the elevation)
