@@ -32,6 +32,9 @@ from backend import cli
     (["simulate", "--start", "2024-03-15", "--end", "2024-03-16", "--controller",
       "open_loop_model", "--pointing-model-terms", "[]"],
      "heliotwin simulate: error: --pointing-model-terms: '[]' is not a JSON object"),
+    # a tester's finding: the ideal controller ignored them while the summary echoed them
+    (["simulate", "--start", "2024-03-15", "--end", "2024-03-16", "--backlash-deg", "1"],
+     "heliotwin simulate: error: --backlash-deg: the ideal controller feels no disturbance"),
     (["plant", "sweep", "--collector-m", "12x5", "--lat", "38.3", "--lon", "-5.3", "--gcr",
       "0.2", "--start", "2021-06-01", "--end", "2021-06-02", "--field", "5"],
      "heliotwin plant sweep: error: --field: expected ROWSxCOLUMNS like 5x5, got '5'"),

@@ -108,6 +108,7 @@ class Scenario:
             if (p.minimum is not None and value < p.minimum) or (
                     p.maximum is not None and value > p.maximum):
                 raise ValueError(f"{name}: {value} is outside [{p.minimum}, {p.maximum}]")
+        _check_disturbances_felt(self.controller, self.machine)
         if self.pointing_model_terms is not None:
             if self.controller != "open_loop_model":
                 raise ValueError("pointing_model_terms: only the open_loop_model controller "
@@ -135,6 +136,21 @@ class Scenario:
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict())
+
+
+def _check_disturbances_felt(controller: str, machine: dict[str, float]) -> None:
+    """Refuse a disturbance the controller cannot feel, naming it: ``ideal`` is the
+    reference — the normal exactly on the sun, no motors — and no disturbance reaches it
+    (``sim.twin.simulate``, ``docs/control.md``). Run with it, a 5° pedestal yaw read
+    1.6e-13 mrad RMS while the summary echoed the yaw as applied (a tester's finding); the
+    same yaw costs ``open_loop_spa`` 61 mrad."""
+    if controller != "ideal":
+        return
+    for name in DISTURBANCE_NAMES:
+        if machine.get(name, 0.0) != 0.0:
+            raise ValueError(f"{name}: the ideal controller feels no disturbance (it is the "
+                             "reference, exactly on the sun); choose a controller that "
+                             "does, e.g. open_loop_spa, closed_loop_camera or hybrid")
 
 
 def run_scenario(site: Site, scenario: Scenario, weather: pd.DataFrame | None = None,

@@ -168,6 +168,28 @@ def test_open_loop_model_takes_the_pointing_model_answers_terms(client: httpx.Cl
         assert bad.status_code == 422 and "pointing_model_terms" in bad.text, bad.text
 
 
+def test_the_ideal_controller_refuses_disturbances_naming_the_field(
+        client: httpx.Client) -> None:
+    """``ideal`` is the reference that no disturbance reaches: a disturbance sent with it is
+    a 422 naming the field (a 5° yaw read 1.6e-13 mrad RMS while the answer echoed it as
+    applied, a tester's finding); the ideal run's own parameters and any other controller
+    take them."""
+    from backend.twin.parameters import DISTURBANCE_NAMES
+
+    body = {"site_id": "tehuantepec", "start": "2024-03-15T10:00-06:00",
+            "end": "2024-03-15T11:00-06:00"}
+    for name in DISTURBANCE_NAMES:
+        bad = client.post("/api/v1/simulations", json={**body, name: 1.0})
+        assert bad.status_code == 422 and bad.json()["detail"].startswith(f"{name}: the ideal"), (
+            bad.text)
+    ok = client.post("/api/v1/simulations", json={**body, "receiver": "cpv",
+                                                  "acceptance_angle_deg": 1.0})
+    assert ok.status_code == 200, ok.text
+    yawed = client.post("/api/v1/simulations", json={**body, "controller": "open_loop_spa",
+                                                     "pedestal_yaw_deg": 5.0})
+    assert yawed.status_code == 200 and yawed.json()["pointing_error_rms_mrad"] > 40, yawed.text
+
+
 def test_a_run_frees_its_worker_before_its_caller_hears_it_ended(tmp_path: Path) -> None:
     """With one worker and no queue, a caller that sends its next run on the answer of the
     last one is never refused as busy: the slot is free before the run's future resolves
