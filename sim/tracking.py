@@ -37,7 +37,7 @@ from sim.frames import CloudField, pointing_error_deg, render_sun_roi
 from vision.cameras import PinholeCamera
 
 __all__ = ["DriveLimits", "CameraSetup", "Move", "LoopResult", "LoopState", "run_loop",
-           "move_energies_wh", "trapezoid_duration_s", "clear_sky_area_px",
+           "move_energies_wh", "MoveEnergies", "trapezoid_duration_s", "clear_sky_area_px",
            "SUNSHINE_DNI_W_M2"]
 
 #: The camera sees the sun only when the beam is at least this [W m⁻²]: the WMO's
@@ -393,10 +393,23 @@ def _frame(pose: tuple[float, float], sun_enu: NDArray[np.float64], d: dist.Dist
                              peak)
 
 
+class MoveEnergies(NamedTuple):
+    """:func:`move_energies_wh`'s answer."""
+
+    energies_wh: NDArray[np.float64]  #: each move's bus energy [Wh]
+    total_wh: float  #: their sum [Wh]
+    #: each move: True where some sample asks more than its drive gives —
+    #: :func:`sim.motors.duty_for`'s ``feasible`` is False (output torque above
+    #: ``max_output_torque_nm``, speed above ``max_output_speed_rad_s``, or an armature
+    #: voltage above the bus): its energy is what a drive that could would draw
+    beyond_drive: NDArray[np.bool_]
+
+
 def move_energies_wh(moves: list[Move], limits: DriveLimits, dt_s: float = 0.01,
                      drives: tuple[Any, Any] | None = None, inertia: Any = None,
-                     ) -> tuple[NDArray[np.float64], float]:
-    """Electrical energy of each move [Wh] and the total [Wh].
+                     ) -> MoveEnergies:
+    """Electrical energy of each move [Wh], the total [Wh], and which moves ask more than
+    their drive gives (:class:`MoveEnergies`).
 
     Each move's trapezoid (:func:`sim.dynamics.trapezoid_motion`) is sampled every
     ``dt_s`` (its samples before the end, as :func:`sim.dynamics.move_profile`'s); the
@@ -415,6 +428,7 @@ def move_energies_wh(moves: list[Move], limits: DriveLimits, dt_s: float = 0.01,
         raise ValueError(f"dt_s must be > 0, got {dt_s}")
     inertia = dynamics.TrackerInertia.seed002() if inertia is None else inertia
     energies = np.zeros(len(moves))
+    beyond = np.zeros(len(moves), dtype=bool)
     if drives is None:
         drives = (motors.AxisDrive.azimuth_default(), motors.AxisDrive.elevation_default())
     for axis in (0, 1):
@@ -443,7 +457,9 @@ def move_energies_wh(moves: list[Move], limits: DriveLimits, dt_s: float = 0.01,
             tau = tau - gust[sl][rep]
             p = np.asarray(motors.electrical_power_w(drives[axis], tau, qd), dtype=float)
             energies[idx[sl]] = np.bincount(rep, weights=p, minlength=ns.size) * dt_s / 3600.0
-    return energies, float(energies.sum())
+            over = ~motors.duty_for(drives[axis], tau, qd).feasible
+            beyond[idx[sl]] = np.bincount(rep, weights=over, minlength=ns.size) > 0
+    return MoveEnergies(energies, float(energies.sum()), beyond)
 
 
 def mass_terms(q2_rad: NDArray[Any], axis: int, inertia: Any) -> NDArray[np.float64]:

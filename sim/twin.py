@@ -131,6 +131,8 @@ class TwinResult:
     moves: int = 0
     actuator_move_energy_wh: float = 0.0
     actuator_standby_energy_wh: float = 0.0
+    #: moves that ask more than their drive gives (:class:`sim.tracking.MoveEnergies`)
+    actuator_moves_beyond_drive: int = 0
     camera_frames: int = 0
     camera_frames_found: int = 0
     camera_frames_used: int = 0
@@ -275,6 +277,8 @@ class TwinResult:
             "actuator_energy_wh": actuator_wh,
             "actuator_move_energy_wh": self.actuator_move_energy_wh,
             "actuator_standby_energy_wh": self.actuator_standby_energy_wh,
+            "actuator_moves_beyond_drive": int(self.actuator_moves_beyond_drive),
+            "actuator_warning": self._actuator_warning(),
             "net_gain_pct": gain_pct(tracker_wh - actuator_wh, fixed_wh),
             "pointing_loss_wh": ideal_wh - tracker_wh,
             "receiver": self.receiver,
@@ -288,6 +292,25 @@ class TwinResult:
             "camera_frames_used": int(self.camera_frames_used),
             "disturbances": self.disturbances.to_dict(),
         }
+
+
+    def _actuator_warning(self) -> str | None:
+        """Words for moves beyond the drives, None when there are none. The twin takes each
+        axis to follow its profile (torque = inverse dynamics), so a move the drive cannot
+        make is still costed as made: past the gearbox's rating, or the bus voltage, that
+        energy is not one this machine would draw (a 1,000 N m gust read 4,926 W per axis
+        where a 24 V bus through a 1.5 Ω winding gives at most 404 W, a tester's finding)."""
+        n = self.actuator_moves_beyond_drive
+        if not n:
+            return None
+        drives = self.site.drives.values()
+        torque = "/".join(sorted({f"{d.max_output_torque_nm:g}" for d in drives}))
+        volts = "/".join(sorted({f"{d.supply_voltage_v:g}" for d in drives}))
+        return (f"{n:,} of {self.moves:,} moves ask more than the drives give (output torque "
+                f"over their {torque} N m rating, or a voltage over the {volts} V bus: "
+                f"sim.motors.duty_for); the twin costs them as if made, so "
+                f"actuator_energy_wh is not what this machine would draw: it would stall "
+                f"or slip (gust_torque_nm {self.disturbances.gust_torque_nm:g} N m)")
 
 
 def _error_components_mrad(
@@ -704,10 +727,12 @@ def simulate(
         series["fixed_shaded_fraction"] = extra["fixed_shaded_fraction"][:n_steps]
         shade_loss_wh = run_energy_wh(extra["fixed_shade_loss_w"], step_s, duration_s)
     move_wh = standby_wh = 0.0
+    beyond_drive = 0
     if ctl is not None:
-        _, move_wh = move_energies_wh(
+        costs = move_energies_wh(
             moves, limits, drives=(site.drives["azimuth"], site.drives["elevation"]),
             inertia=site.inertia)
+        move_wh, beyond_drive = costs.total_wh, int(costs.beyond_drive.sum())
         standby_wh = _standby_energy_wh(site, duration_s)
     ideal_wh = None
     if ctl is not None or receiver == "cpv":
@@ -728,6 +753,7 @@ def simulate(
         moves=len(moves),
         actuator_move_energy_wh=move_wh,
         actuator_standby_energy_wh=standby_wh,
+        actuator_moves_beyond_drive=beyond_drive,
         camera_frames=0 if state is None else state.frames,
         camera_frames_found=0 if state is None else state.frames_found,
         camera_frames_used=0 if ctl is None else ctl.frames_used,

@@ -89,7 +89,8 @@ function summaryTiles(summary, station) {
     ...(summary.controller === "ideal"
       ? [tile("Actuators", "—", "not modelled: the ideal controller follows the sun exactly"),
         tile("Net gain", "—", "needs the actuators' energy: pick another controller")]
-      : [tile("Actuators", energy(summary.actuator_energy_wh), `${num(summary.moves, 0)} moves`),
+      : [tile("Actuators", energy(summary.actuator_energy_wh),
+        summary.actuator_warning || `${num(summary.moves, 0)} moves`),
         tile("Net gain", pct(summary.net_gain_pct), "tracking gain after the actuators' energy")]),
   );
 }

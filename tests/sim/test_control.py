@@ -137,13 +137,17 @@ def test_move_energies_match_motors_tracking_motion_energy() -> None:
         el_t.append(el_t[-1] + (delta if axis else 0.0))
     ref = motors.tracking_motion_energy(az_t, el_t, max_rate_rad_s=math.radians(lim.axis(0)[0]),
                                         max_accel_rad_s2=math.radians(lim.axis(0)[1]))
-    each, total = move_energies_wh(moves, lim)
+    each, total, beyond = move_energies_wh(moves, lim)
     assert total == pytest.approx(ref["motion_wh"], rel=1e-6)
     assert each.sum() == pytest.approx(total) and (each > 0).all()
     # a gust against the motion costs more, one with it less
     against = [Move(m.axis, m.t0_s, m.delta_deg, m.start_deg, m.elevation_deg,
                     -2.0 * math.copysign(1, m.delta_deg)) for m in moves]
     assert move_energies_wh(against, lim)[1] > 1.2 * total
+    assert not beyond.any()  # well inside the drives
+    # a gust past the gearbox's 60 N m rating: every move asks more than the drive gives
+    stalled = [m._replace(gust_nm=-200.0 * math.copysign(1, m.delta_deg)) for m in moves]
+    assert move_energies_wh(stalled, lim).beyond_drive.all()
 
 
 # ---------------------------------------------------------------- controllers
@@ -304,6 +308,20 @@ def test_gusts_cost_energy(site) -> None:
     gusty = _noon_window(site, 2.0, controller="open_loop_spa",
                          disturbances=Disturbances(gust_torque_nm=3.0)).summary()
     assert gusty["actuator_move_energy_wh"] > 1.1 * calm["actuator_move_energy_wh"]
+    assert calm["actuator_moves_beyond_drive"] == gusty["actuator_moves_beyond_drive"] == 0
+    assert calm["actuator_warning"] is None
+
+
+def test_a_gust_beyond_the_drive_is_said_so(site) -> None:
+    """A gust past the gearbox's 60 N m rating asks more than the drive gives: the twin
+    still costs the moves as made (4,926 W per axis at 1,000 N m, where a 24 V bus through
+    a 1.5 Ω winding gives at most 404 W), and the summary says how many and that the
+    energy is not this machine's (a tester's finding: no word of it)."""
+    s = _noon_window(site, 2.0, controller="open_loop_spa",
+                     disturbances=Disturbances(gust_torque_nm=1000.0)).summary()
+    assert 0 < s["actuator_moves_beyond_drive"] <= s["moves"]
+    assert "60 N m rating" in s["actuator_warning"]
+    assert "not what this machine would draw" in s["actuator_warning"]
 
 
 def test_camera_offset_misleads_the_camera_loop_not_the_ephemeris(site) -> None:

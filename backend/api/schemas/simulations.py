@@ -107,6 +107,12 @@ class SimulationSummaryRead(BaseModel):
     actuator_energy_wh: float
     actuator_move_energy_wh: float
     actuator_standby_energy_wh: float
+    actuator_moves_beyond_drive: int = Field(
+        0, description="moves that ask more than their drive gives (torque over its rating, "
+                       "voltage over the bus): costed as if made")
+    actuator_warning: str | None = Field(
+        None, description="words when actuator_moves_beyond_drive > 0: the actuator energy "
+                          "is not what this machine would draw")
     pointing_loss_wh: float
     acceptance_angle_deg: float | None = Field(description="CPV receiver only")
     spot_distance_m: float
