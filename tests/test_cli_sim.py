@@ -147,6 +147,30 @@ def test_simulate_errors_exit_2(args, message, heliotwin_cli) -> None:
     assert message in p.stderr and p.stdout == ""
 
 
+def test_the_text_summary_says_what_tracking_costs(heliotwin_cli) -> None:
+    """Without --json a controller other than ``ideal`` shows its receiver, pointing error,
+    pointing loss, actuator energy and net gain, units in the words, as --json has them
+    (the text left them out, a tester's finding); ``ideal`` has none of them."""
+    window = ["--start", "2024-03-15T10:00-06:00", "--end", "2024-03-15T12:00-06:00",
+              "--no-progress"]
+    args = [*window, "--controller", "open_loop_spa", "--pedestal-yaw-deg", "5",
+            "--receiver", "cpv"]
+    text = heliotwin_cli("simulate", *args)
+    s = json.loads(heliotwin_cli("simulate", *args, "--json").stdout)
+    assert text.returncode == 0, text.stderr
+    assert "receiver: cpv" in text.stdout
+    assert (f"pointing: error {s['pointing_error_rms_mrad']:.2f} mrad RMS "
+            f"(max {s['pointing_error_max_mrad']:.2f} mrad) over 120 minutes with the sun "
+            f"above 5°; pointing loss {s['pointing_loss_wh']:.2f} Wh") in text.stdout
+    assert (f"actuators: {s['actuator_energy_wh']:.2f} Wh (motion "
+            f"{s['actuator_move_energy_wh']:.3f} Wh in {s['moves']:,} moves, standby "
+            f"{s['actuator_standby_energy_wh']:.2f} Wh); net gain {s['net_gain_pct']:.1f} %"
+            ) in text.stdout
+    ideal = heliotwin_cli("simulate", *window).stdout
+    assert "controller ideal" in ideal and "pointing" not in ideal
+    assert "actuators" not in ideal
+
+
 def test_a_run_of_more_steps_than_the_service_allows_is_refused(heliotwin_cli) -> None:
     """``--step-s 0.001`` over a day ran 86.4 M steps for six minutes: the CLI now refuses
     what the service refuses one request (HELIOTWIN_MAX_SIMULATION_STEPS, default from

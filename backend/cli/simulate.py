@@ -267,6 +267,35 @@ def write_csv(series: Any, timezone: str, path: str) -> None:
     series_csv(series, timezone, path)
 
 
+def _tracking_costs(summary: dict[str, Any]) -> list[str]:
+    """What tracking cost, for a controller other than ``ideal`` (which has no drive and
+    no error): the receiver, the pointing error, its energy loss, the actuators' energy and
+    the gain after it, units in the words (the text summary had left them out, a tester's
+    finding; ``docs/control.md`` says what each is)."""
+    if summary["controller"] == "ideal":
+        return []
+
+    def num(value: float | None, fmt: str, unit: str) -> str:
+        return "n/a" if value is None else f"{value:{fmt}}{unit}"
+
+    net = summary["net_gain_pct"]
+    lines = [
+        f"receiver: {summary['receiver']}",
+        f"pointing: error {num(summary['pointing_error_rms_mrad'], '.2f', ' mrad')} RMS "
+        f"(max {num(summary['pointing_error_max_mrad'], '.2f', ' mrad')}) over "
+        f"{summary['pointing_error_minutes']:,} minutes with the sun above "
+        f"{summary['pointing_min_elevation_deg']:g}°; pointing loss "
+        f"{summary['pointing_loss_wh']:.2f} Wh",
+        f"actuators: {summary['actuator_energy_wh']:.2f} Wh (motion "
+        f"{summary['actuator_move_energy_wh']:.3f} Wh in {summary['moves']:,} moves, standby "
+        f"{summary['actuator_standby_energy_wh']:.2f} Wh); net gain "
+        + ("n/a" if net is None else f"{net:.1f} %"),
+    ]
+    if summary.get("actuator_warning"):
+        lines.append(f"warning: {summary['actuator_warning']}")
+    return lines
+
+
 def _text(summary: dict[str, Any]) -> str:
     gain = summary["gain_pct"]
     return "\n".join(
@@ -282,6 +311,7 @@ def _text(summary: dict[str, Any]) -> str:
             if gain is not None
             else "gain:    n/a (no fixed-array energy)",
         ]
+        + _tracking_costs(summary)
         + (
             [
                 f"weather: {w['format'].upper()} {w['name']} ({w['latitude_deg']:.2f}, "
