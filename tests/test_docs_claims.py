@@ -661,6 +661,24 @@ def test_control_reduction_table(label: str, controller: str, disturbances: tupl
     assert_printed(numbers(shown), decimals(shown), computed)
 
 
+def test_control_pointing_error_minutes_is_a_duration() -> None:
+    """``pointing_error_minutes`` is how long the samples cover, not how many there are (the
+    doc said "how many there were"; a tester's finding): the same at 10 s and 60 s steps."""
+    from sim.sites import load_site
+    from sim.twin import simulate
+
+    m = sentence(control_section("Pointing error and losses"),
+                 r"the reference day's ([\d,]+) minutes at 10 s steps and at 60 s steps alike, "
+                 r"([\d,]+) at 3600 s steps")
+    site = load_site("tehuantepec")
+    day = pd.Timestamp("2024-03-15", tz=site.timezone)
+    computed = [simulate(site, day, day + pd.Timedelta(days=1), step_s=step,
+                         controller="open_loop_spa").summary()["pointing_error_minutes"]
+                for step in (10, 60, 3600)]
+    assert computed[0] == computed[1] == reference_day("open_loop_spa")["pointing_error_minutes"]
+    assert numbers(" ".join(m.groups())) == [computed[1], computed[2]]
+
+
 def test_control_day_motion_and_standby_energy() -> None:
     s = reference_day("open_loop_spa")
     m = sentence(control_section("Motion and energy"),
