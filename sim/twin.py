@@ -293,7 +293,6 @@ class TwinResult:
             "disturbances": self.disturbances.to_dict(),
         }
 
-
     def _actuator_warning(self) -> str | None:
         """Words for moves beyond the drives, None when there are none. The twin takes each
         axis to follow its profile (torque = inverse dynamics), so a move the drive cannot
