@@ -11,8 +11,10 @@ the common orientation (azimuth and elevation of the collector normal) that seed
   the sun: for normal azimuths within ±45° of the sun's (3° steps, then 0.5°
   about the best) the lowest shade-free elevation at or above the sun's comes
   in closed form (:func:`lowest_free_elevation`: each pair shades on one
-  interval of elevations), and the flat orientation is added; the candidate of
-  highest POA wins. Where the sun orientation shades nobody, it is kept.
+  interval of elevations), and the flat orientation is added; the shade-free candidate
+  of highest POA wins (those at 90° are checked: on sloped ground flat shades). Where
+  none is shade-free, the sky-scan grid's best; where nothing is, the sun's (its shade
+  shows in the result). Where the sun orientation shades nobody, it is kept.
 - ``sky_scan`` — seed 004's device (§2, Fig. 6): a scan of a hemispheric grid of
   orientations (5° in elevation, 10° in azimuth, plus the zenith, the sun and the
   backtracking candidates) with the shaded region excluded; the orientation of
@@ -133,7 +135,8 @@ def lowest_free_elevation(plant: Plant, solar_azimuth: ArrayLike, solar_elevatio
     ±360° cannot reach [0°, 90°]); their intersection with [0°, 90°] is one open
     interval per pair. Walking up from
     ``from_elevation`` over the intervals that contain the current elevation
-    gives the lowest shade-free one; flat (90°) shades nobody on level ground.
+    gives the lowest shade-free one; where the walk passes 90° the answer is 90°, which
+  shades nobody on level ground but may on a slope (the caller checks it).
 
     Parameters
     ----------
@@ -224,32 +227,62 @@ def _poa(plant: Plant, cand_az: FloatArray, cand_el: FloatArray, sky: dict[str, 
 
 def _backtrack_candidates(plant: Plant, sky: dict[str, FloatArray],
                           steps: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:
-    """Shade-free candidates ``(S, C)``: the lowest shade-free elevation on a 3° azimuth fan
-    (±45° about the sun), refined at 0.5° about the best of the fan, plus flat."""
+    """Candidates ``(S, C)``: the lowest shade-free elevation on a 3° azimuth fan (±45° about
+    the sun), refined at 0.5° about the best of the fan, plus flat. Those below 90° are
+    shade-free by construction; those at 90° (flat, or a fan azimuth whose shade reaches the
+    zenith) are not on sloped ground: :func:`_pick` checks every candidate."""
     az0 = sky["solar_azimuth"][steps]
     el0 = sky["apparent_elevation"][steps]
     caz = (az0[:, None] + _BT_AZ_OFFSETS[None, :]) % 360.0
     hi = lowest_free_elevation(plant, az0, el0, caz, el0)
-    a, _ = _best(plant, caz, hi, sky, steps, check=False)
-    raz = (a[:, None] + _BT_REFINE[None, :]) % 360.0
+    rows = np.arange(len(steps))
+    k = np.argmax(_poa(plant, caz, hi, sky, steps), axis=1)
+    raz = (caz[rows, k][:, None] + _BT_REFINE[None, :]) % 360.0
     rel = lowest_free_elevation(plant, az0, el0, raz, el0)
-    caz = np.concatenate([caz, raz], axis=1)
-    hi = np.concatenate([hi, rel], axis=1)
-    caz = np.concatenate([caz, np.full((len(steps), 1), STOW_AZIMUTH)], axis=1)
-    cel = np.concatenate([hi, np.full((len(steps), 1), 90.0)], axis=1)
+    caz = np.concatenate([caz, raz, np.full((len(steps), 1), STOW_AZIMUTH)], axis=1)
+    cel = np.concatenate([hi, rel, np.full((len(steps), 1), 90.0)], axis=1)
     return caz, cel
 
 
-def _best(plant: Plant, caz: FloatArray, cel: FloatArray, sky: dict[str, FloatArray],
-          steps: NDArray[np.int64], check: bool) -> tuple[FloatArray, FloatArray]:
+def _pick(plant: Plant, caz: FloatArray, cel: FloatArray, sky: dict[str, FloatArray],
+          steps: NDArray[np.int64], known_free: NDArray[np.bool_] | None = None
+          ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+    """The shade-free candidate of highest Perez POA at each step (candidates ``(S, C)``),
+    and whether one was shade-free (where none is, the first candidate is returned: the
+    caller decides). ``known_free``: candidates known to be shade-free; the others are
+    tested (:func:`shade_free`; all of them without it)."""
     poa = _poa(plant, caz, cel, sky, steps)
-    if check:
-        free = shade_free(plant, sky["solar_azimuth"][steps], sky["apparent_elevation"][steps],
-                          caz, cel)
-        poa = np.where(free, poa, -np.inf)
-    k = np.argmax(poa, axis=1)
+    saz, sel = sky["solar_azimuth"][steps], sky["apparent_elevation"][steps]
+    if known_free is None:
+        free = shade_free(plant, saz, sel, caz, cel)
+    else:
+        free = known_free.copy()
+        r, c = np.nonzero(~known_free)
+        free[r, c] = shade_free(plant, saz[r], sel[r], caz[r, c, None], cel[r, c, None])[:, 0]
+    k = np.argmax(np.where(free, poa, -np.inf), axis=1)
     rows = np.arange(len(steps))
-    return caz[rows, k], cel[rows, k]
+    found = np.any(free, axis=1)
+    return caz[rows, k], cel[rows, k], found
+
+
+def _grid(n: int) -> tuple[FloatArray, FloatArray]:
+    """The sky-scan grid as candidates of ``n`` steps ``(n, C)``."""
+    gaz, gel = scan_grid()
+    return np.broadcast_to(gaz, (n, len(gaz))), np.broadcast_to(gel, (n, len(gel)))
+
+
+def _backtrack(plant: Plant, sky: dict[str, FloatArray], steps: NDArray[np.int64]
+               ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+    """Backtracking at ``steps`` (where the sun's orientation shades): the shade-free one of
+    :func:`_backtrack_candidates` of highest POA; where none is shade-free (sloped ground:
+    flat shades there), the sky-scan grid's. The third array is False where neither holds a
+    shade-free orientation."""
+    caz, cel = _backtrack_candidates(plant, sky, steps)
+    a, e, found = _pick(plant, caz, cel, sky, steps, known_free=cel < 90.0)
+    lost = np.nonzero(~found)[0]
+    if len(lost):
+        a[lost], e[lost], found[lost] = _pick(plant, *_grid(len(lost)), sky, steps[lost])
+    return a, e, found
 
 
 def strategies_for(collector: Collector) -> tuple[str, ...]:
@@ -297,33 +330,30 @@ def orientations(strategy: str, plant: Plant, sky: dict[str, FloatArray]
         return saz, sel
     check_strategy_collector(strategy, plant)
     free_sun = shade_free(plant, az, el, saz[:, None], sel[:, None])[:, 0]
+    # where no orientation searched is shade-free, the sun's stays (its shade is then in the
+    # result: the positions' trackers_shaded, a run's shading loss)
     if strategy == "backtrack":
         steps = np.nonzero(up & ~free_sun)[0]
         if len(steps):
-            caz, cel = _backtrack_candidates(plant, sky, steps)
-            saz[steps], sel[steps] = _best(plant, caz, cel, sky, steps, check=False)
+            a, e, found = _backtrack(plant, sky, steps)
+            saz[steps[found]], sel[steps[found]] = a[found], e[found]
         return saz, sel
     steps = np.nonzero(up)[0]
-    gaz, gel = scan_grid()
     for s0 in range(0, len(steps), 2000):
         st = steps[s0:s0 + 2000]
-        caz = np.broadcast_to(gaz, (len(st), len(gaz)))
-        cel = np.broadcast_to(gel, (len(st), len(gel)))
-        sun_ok = free_sun[st]
-        extra_az, extra_el = saz[st, None], sel[st, None]
-        shaded = st[~sun_ok]
-        caz = np.concatenate([caz, extra_az], axis=1)
-        cel = np.concatenate([cel, extra_el], axis=1)
-        a, e = _best(plant, caz, cel, sky, st, check=True)
-        if len(shaded):
-            baz, bel = _backtrack_candidates(plant, sky, shaded)
-            bz, be = _best(plant, baz, bel, sky, shaded, check=False)
-            k = np.nonzero(~sun_ok)[0]
-            p_grid = _poa(plant, a[k, None], e[k, None], sky, shaded)[:, 0]
-            p_bt = _poa(plant, bz[:, None], be[:, None], sky, shaded)[:, 0]
-            better = p_bt > p_grid
+        gaz, gel = _grid(len(st))
+        caz = np.concatenate([gaz, saz[st, None]], axis=1)
+        cel = np.concatenate([gel, sel[st, None]], axis=1)
+        a, e, found = _pick(plant, caz, cel, sky, st)
+        k = np.nonzero(~free_sun[st])[0]
+        if len(k):
+            bz, be, bt_found = _backtrack(plant, sky, st[k])
+            p_grid = _poa(plant, a[k, None], e[k, None], sky, st[k])[:, 0]
+            p_bt = _poa(plant, bz[:, None], be[:, None], sky, st[k])[:, 0]
+            better = bt_found & (~found[k] | (p_bt > p_grid))
             a[k[better]], e[k[better]] = bz[better], be[better]
-        saz[st], sel[st] = a, e
+            found[k[better]] = True
+        saz[st[found]], sel[st[found]] = a[found], e[found]
     return saz, sel
 
 
