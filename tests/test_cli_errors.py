@@ -45,6 +45,15 @@ from backend import cli
     (["plant", "sweep", "--collector-m", "12x5", "--lat", "-33.9", "--lon", "18.4", "--gcr",
       "0.2", "--start", "2021-06-01", "--end", "2021-07-01", "--step-s", "43200"],
      "heliotwin plant sweep: error: --step-s: 43200 s is longer than an hour (3600 s)"),
+    # a plant's sweep takes the plant's ground, field, layout and altitude: the flags were
+    # accepted and ignored (rows byte for byte the same; a tester's finding)
+    *[(["plant", "sweep", "--plant", "penarroya", "--gcr", "0.1", "--start", "2021-12-21",
+        "--end", "2021-12-22", *flag], f"heliotwin plant sweep: error: {flag[0]}: the plant "
+       f"(--plant) sets the place, the collector, the layout, the field and its ground: give "
+       f"--plant or {flag[0]}, not both")
+      for flag in (["--slope-tilt-deg", "10"], ["--slope-azimuth-deg", "180"],
+                   ["--layouts", "hexagonal_e_w"], ["--field", "3x3"], ["--altitude-m", "0"],
+                   ["--rotation-deg", "30"], ["--lat", "38"])],
     (["plant", "simulate", "--plant", "penarroya", "--start", "2021-06-01", "--end",
       "2021-06-03", "--step-s", "86400"],
      "heliotwin plant simulate: error: --step-s: 86400 s is longer than an hour (3600 s)"),

@@ -20,7 +20,7 @@ import json
 import math
 import os
 import sys
-from typing import Any
+from typing import Any, cast
 
 from backend.cli import fail
 from backend.cli.simulate import InputError, parse_when
@@ -86,9 +86,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "case is one Dask task; --scheduler sends them to a running cluster, otherwise a "
         "LocalCluster of one worker per core runs them (one case: in this process). Clear "
         "sky unless --tmy3/--epw. With --lat/--lon a bare date is midnight UTC.")
-    sw.add_argument("--layouts", default="square",
+    sw.add_argument("--layouts",
                     help="comma list of square, diagonal, hexagonal_n_s, hexagonal_e_w, custom "
-                    "(default square; ignored with --plant)")
+                    "(default square; refused with --plant)")
     sw.add_argument("--gcr", required=True,
                     help="ground cover ratios: 0.15,0.25 or START:STOP:STEP (STOP included)")
     sw.add_argument("--strategy", default="sun",
@@ -103,21 +103,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "text or JSON [[u, v], ...]); strategy sun only")
     sw.add_argument("--lat", type=float, help="latitude [°], north positive")
     sw.add_argument("--lon", type=float, help="longitude [°], east positive")
-    sw.add_argument("--altitude-m", type=float, default=0.0, help="altitude [m] (default 0)")
+    sw.add_argument("--altitude-m", type=float,
+                    help="altitude [m] (default 0; a --plant has its own)")
     sw.add_argument("--timezone", help="IANA zone of the local days at --lat/--lon (bare "
                     "--start/--end dates; default UTC; a --plant has its own)")
     sw.add_argument("--plant", help="an existing plant scaled in spacing to each GCR "
                     "(instead of --layouts/--collector-m/--lat/--lon)")
-    sw.add_argument("--field", default="5x5",
+    sw.add_argument("--field",
                     help="ROWSxCOLUMNS of the finite regular field around the interior "
-                    "collector (default 5x5: twoaxistracking's neighbor_order 2)")
+                    "collector (default 5x5: twoaxistracking's neighbor_order 2; refused with "
+                    "--plant)")
     sw.add_argument("--aspect-ratio", type=float, help="layout custom: aspect ratio")
     sw.add_argument("--offset", type=float, help="layout custom: row offset [-0.5, 0.5)")
     sw.add_argument("--rotation-deg", type=float, help="layout custom: rotation [0, 180)")
-    sw.add_argument("--slope-azimuth-deg", type=float, default=0.0,
-                    help="ground slope: azimuth of the downhill normal [°] (default 0)")
-    sw.add_argument("--slope-tilt-deg", type=float, default=0.0,
-                    help="ground slope: tilt [°] (default 0, flat)")
+    sw.add_argument("--slope-azimuth-deg", type=float,
+                    help="ground slope: azimuth of the downhill normal [°] (default 0; "
+                    "refused with --plant)")
+    sw.add_argument("--slope-tilt-deg", type=float,
+                    help="ground slope: tilt [°] (default 0, flat; refused with --plant)")
     sw.add_argument("--start", required=True, help="YYYY-MM-DD or ISO date-time with offset")
     sw.add_argument("--end", required=True, help="YYYY-MM-DD or ISO date-time (exclusive)")
     sw.add_argument("--step-s", type=float, default=600.0, help="time step [s] (default 600)")
@@ -309,9 +312,11 @@ def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
     end = parse_when(args.end, tz, "end")
     custom = (args.aspect_ratio, args.offset, args.rotation_deg)
     try:
-        rows, columns = (int(v) for v in parse_size(args.field, "field_size"))
+        size = None if args.field is None else tuple(
+            int(v) for v in parse_size(args.field, "field_size"))
         spec, cases = prepare_sweep(
-            layouts=[s.strip() for s in args.layouts.split(",") if s.strip()],
+            layouts=None if args.layouts is None
+            else [s.strip() for s in args.layouts.split(",") if s.strip()],
             gcr=parse_gcr(args.gcr),
             strategies=[s.strip() for s in args.strategy.split(",") if s.strip()],
             start=start, end=end, step_s=args.step_s, latitude_deg=args.lat,
@@ -319,7 +324,8 @@ def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
             collector_m=parse_size(args.collector_m, "collector_m") if args.collector_m
             else None,
             collector_polygon_m=parse_polygon(args.collector_polygon, "collector_polygon_m")
-            if args.collector_polygon else None, plant=plant, field_size=(rows, columns),
+            if args.collector_polygon else None, plant=plant,
+            field_size=cast(tuple[int, int] | None, size),
             custom=None if custom == (None, None, None) else custom,
             slope_azimuth_deg=args.slope_azimuth_deg, slope_tilt_deg=args.slope_tilt_deg,
             timezone=args.timezone)

@@ -526,19 +526,30 @@ def parse_polygon(text: str, field: str) -> list[tuple[float, float]]:
     return pairs
 
 
-def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: Sequence[str],
+#: What a sweep of regular fields takes when a parameter is not given (``None``); a plant's
+#: sweep takes none of them (its layout, field, ground and altitude are the plant's).
+REGULAR_DEFAULTS: dict[str, Any] = {"layouts": ("square",), "field_size": (5, 5),
+                                    "altitude_m": 0.0, "slope_azimuth_deg": 0.0,
+                                    "slope_tilt_deg": 0.0}
+
+
+def prepare_sweep(*, gcr: Sequence[float], strategies: Sequence[str],
                   start: pd.Timestamp, end: pd.Timestamp, step_s: float,
+                  layouts: Sequence[str] | None = None,
                   latitude_deg: float | None = None, longitude_deg: float | None = None,
-                  altitude_m: float = 0.0, collector_m: tuple[float, float] | None = None,
+                  altitude_m: float | None = None,
+                  collector_m: tuple[float, float] | None = None,
                   collector_polygon_m: Sequence[Sequence[float]] | None = None,
-                  plant: Plant | None = None, field_size: tuple[int, int] = (5, 5),
+                  plant: Plant | None = None, field_size: tuple[int, int] | None = None,
                   custom: tuple[float | None, float | None, float | None] | None = None,
-                  slope_azimuth_deg: float = 0.0, slope_tilt_deg: float = 0.0,
+                  slope_azimuth_deg: float | None = None, slope_tilt_deg: float | None = None,
                   timezone: str | None = None, weather_token: str = "",
                   max_case_steps: float = MAX_CASE_STEPS, bound_note: str = ""
                   ) -> tuple[SweepSpec, list[SweepCase]]:
     """Check a sweep's parameters and build its spec and cases (every layout × GCR ×
-    strategy; an existing ``plant`` gives one layout, itself scaled). The collector is
+    strategy; an existing ``plant`` gives one layout, itself scaled: the place, collector,
+    layouts, field, ground, altitude and layout custom's numbers are then the plant's and
+    refused when given; ``None`` elsewhere is :data:`REGULAR_DEFAULTS`). The collector is
     ``collector_m`` (a rectangle) or ``collector_polygon_m`` ((u, v) vertices [m] about
     the pivot), wired like Peñarroya's. Every case's field is built once here, so an
     infeasible GCR is refused before any task runs. ``custom``: layout custom's (aspect
@@ -563,11 +574,27 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
         check_step(start, end, float(step_s))  # the energy rule's bounds (at most an hour)
     except ValueError as exc:
         raise SweepInputError("step_s", step_problem(exc)) from None
+    given: dict[str, Any] = {
+        "latitude_deg": latitude_deg, "longitude_deg": longitude_deg,
+        "collector_m": collector_m, "collector_polygon_m": collector_polygon_m,
+        "layouts": layouts, "field_size": field_size, "altitude_m": altitude_m,
+        "slope_azimuth_deg": slope_azimuth_deg, "slope_tilt_deg": slope_tilt_deg,
+        **dict(zip(("aspect_ratio", "offset", "rotation_deg"), custom or (None,) * 3,
+                   strict=True))}
+    if plant is not None:
+        named = [k for k, v in given.items() if v is not None]
+        if named:  # the plant's were used and these echoed back as if they had been
+            raise SweepInputError(named[0], "the plant ({plant_id}) sets the place, the "
+                                  "collector, the layout, the field and its ground: give "
+                                  f"{{plant_id}} or {{{named[0]}}}, not both")
+    else:
+        layouts, field_size, altitude_m, slope_azimuth_deg, slope_tilt_deg = (
+            REGULAR_DEFAULTS[k] if given[k] is None else given[k] for k in REGULAR_DEFAULTS)
     if len(gcr) > MAX_GCRS:
         raise SweepInputError("gcr", f"{len(gcr):,} values, more than {MAX_GCRS}")
     if any(not (0 < g < 1) for g in gcr):
         raise SweepInputError("gcr", f"every GCR must be in (0, 1), got {list(gcr)}")
-    rows, columns = field_size
+    rows, columns = field_size or REGULAR_DEFAULTS["field_size"]
     if not (1 <= rows <= 15 and 1 <= columns <= 15):
         raise SweepInputError("field_size", f"rows and columns must be 1 to 15, "
                               f"got {rows}x{columns}")
@@ -581,15 +608,6 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
                                   "and {rotation_deg} together: give all three")
         layout_custom = (a, o, r)
     if plant is not None:
-        given = [name for name, value in (("latitude_deg", latitude_deg),
-                                          ("longitude_deg", longitude_deg),
-                                          ("collector_m", collector_m),
-                                          ("collector_polygon_m", collector_polygon_m))
-                 if value is not None]
-        if given:  # the plant's were used and the others echoed back as if they had been
-            raise SweepInputError(given[0], "the plant ({plant_id}) sets the place and the "
-                                  "collector: give it or {latitude_deg}, {longitude_deg} and "
-                                  "{collector_m}, not both")
         names = [PLANT_LAYOUT]
         collector = plant.collector
         lat, lon, alt = plant.latitude, plant.longitude, plant.altitude
@@ -612,7 +630,7 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
                 collector = collector_from_outline(collector_polygon_m, template)
             except ValueError as exc:
                 raise SweepInputError("collector_polygon_m", str(exc)) from None
-        names = list(layouts)
+        names = list(layouts or ())
         known = [*LAYOUT_TYPES, "custom"]
         if not names or any(n not in known for n in names):
             raise SweepInputError("layouts", f"must be one or more of {', '.join(known)}, "
@@ -620,11 +638,12 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
         if "custom" in names and layout_custom is None:
             raise SweepInputError("layouts", "layout custom needs {aspect_ratio}, {offset} "
                                   "and {rotation_deg}")
-        lat, lon, alt = latitude_deg, longitude_deg, altitude_m
+        lat, lon, alt = latitude_deg, longitude_deg, float(altitude_m or 0.0)
     tz = sweep_zone(plant, timezone)
     spec = SweepSpec(latitude=lat, longitude=lon, altitude=alt, start=start, end=end,
                      step_s=float(step_s), collector=collector, rows=rows, columns=columns,
-                     slope_azimuth_deg=slope_azimuth_deg, slope_tilt_deg=slope_tilt_deg,
+                     slope_azimuth_deg=float(slope_azimuth_deg or 0.0),
+                     slope_tilt_deg=float(slope_tilt_deg or 0.0),
                      custom=layout_custom, plant=plant, timezone=tz, weather_token=weather_token,
                      **({"albedo": plant.albedo, "temp_air": plant.temp_air,
                          "wind_speed": plant.wind_speed} if plant is not None else {}))
@@ -655,6 +674,23 @@ def prepare_sweep(*, layouts: Sequence[str], gcr: Sequence[float], strategies: S
     return spec, cases
 
 
+def sweep_params(spec: SweepSpec, cases: Sequence[SweepCase], given: dict[str, Any]
+                 ) -> dict[str, Any]:
+    """A sweep's parameters by request key as it runs them: ``given`` (the request) with the
+    values used — the place, zone and step; a regular field's layouts, field size, ground
+    and altitude with their defaults; for a plant's sweep its place and altitude, and null
+    for what it does not take (layouts, field, slope)."""
+    regular = spec.plant is None
+    return {**given, "latitude_deg": spec.latitude, "longitude_deg": spec.longitude,
+            "altitude_m": spec.altitude, "timezone": spec.timezone, "step_s": spec.step_s,
+            "gcr": sorted({c.gcr for c in cases}),
+            "strategies": list(dict.fromkeys(c.strategy for c in cases)),
+            "layouts": list(dict.fromkeys(c.layout for c in cases)) if regular else None,
+            "field_size": f"{spec.rows}x{spec.columns}" if regular else None,
+            "slope_azimuth_deg": spec.slope_azimuth_deg if regular else None,
+            "slope_tilt_deg": spec.slope_tilt_deg if regular else None}
+
+
 def _case_field(problem: str, layout: str, from_plant: bool) -> str:
     """The parameter a case's field refuses (:mod:`sim.plant.fields` names it first: ``gcr
     0.6 outside …``, ``offset must be …``; layout custom's own three only for that layout),
@@ -673,4 +709,5 @@ __all__ = ["MAX_CASES", "MAX_CASE_STEPS", "MAX_GCRS", "MAX_LAYOUTS", "MAX_STRATE
            "SWEEP_FIELDS", "SweepCancelled", "SweepFailed", "SweepInputError", "case_steps",
            "expected_cost",
            "parse_gcr",
-           "parse_polygon", "parse_size", "prepare_sweep", "run_sweep", "sweep_task"]
+           "parse_polygon", "parse_size", "prepare_sweep", "run_sweep", "sweep_params",
+           "sweep_task"]

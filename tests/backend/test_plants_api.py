@@ -381,7 +381,8 @@ def test_a_sweep_at_a_coordinate_runs_on_the_local_days_of_its_timezone(
         r = client.post("/api/v1/plants/sweeps", json={**tokyo, "timezone": zone})
         assert r.status_code == 202, r.text
         run = _poll(client, r.headers["location"])
-        assert run["status"] == "done" and run["params"]["timezone"] == zone, run
+        # the zone used, UTC when none is given
+        assert run["status"] == "done" and run["params"]["timezone"] == (zone or "UTC"), run
         day = client.get(f"/api/v1/plants/sweeps/{run['sweep_id']}/shade",
                          params={"layout": "square", "gcr": 0.2, "date": "2021-12-21"})
         assert day.status_code == 200, day.text
@@ -485,7 +486,7 @@ def test_sweep_refusal_of_a_plant_names_plant_id(client: httpx.Client, plants_di
     path = _two_tracker_plant(plants_dir, "duo")
     try:
         own = {k: v for k, v in SWEEP.items()
-               if k not in ("collector_m", "latitude_deg", "longitude_deg")}
+               if k not in ("collector_m", "latitude_deg", "longitude_deg", "layouts")}
         r = client.post("/api/v1/plants/sweeps", json={**own, "plant_id": "duo"})
         assert r.status_code == 422, r.text
         assert r.json()["detail"] == ("plant_id: plant duo at GCR 0.3: a plant needs at least "
@@ -494,13 +495,49 @@ def test_sweep_refusal_of_a_plant_names_plant_id(client: httpx.Client, plants_di
         r = client.post("/api/v1/plants/sweeps", json={**SWEEP, "plant_id": "duo"})
         assert r.status_code == 422, r.text
         assert r.json()["detail"].startswith("latitude_deg: the plant (plant_id) sets the "
-                                             "place and the collector")
+                                             "place, the collector")
         r = client.post("/api/v1/plants/sweeps", json={**own, "plant_id": "duo",
                                                        "timezone": "UTC"})
         assert r.status_code == 422, r.text
         assert r.json()["detail"].startswith("timezone: the plant (plant_id) has its own zone")
     finally:
         path.unlink()
+
+
+@pytest.mark.parametrize("change", [{"slope_tilt_deg": 10}, {"slope_azimuth_deg": 180},
+                                    {"field_size": "3x3"}, {"layouts": ["hexagonal_e_w"]},
+                                    {"altitude_m": 0.0}, {"rotation_deg": 30}])
+def test_a_plant_sweep_refuses_what_the_plant_sets(client: httpx.Client, change: dict) -> None:
+    """With ``plant_id`` the plant's ground, field, layout and altitude are used: these were
+    accepted, ignored (the same rows) and echoed in ``params`` as if used (a tester's
+    finding)."""
+    own = {k: v for k, v in SWEEP.items()
+           if k not in ("collector_m", "latitude_deg", "longitude_deg", "layouts")}
+    r = client.post("/api/v1/plants/sweeps", json={**own, "plant_id": "penarroya", **change})
+    assert r.status_code == 422, r.text
+    (field,) = change
+    assert r.json()["detail"] == (f"{field}: the plant (plant_id) sets the place, the "
+                                  "collector, the layout, the field and its ground: give "
+                                  f"plant_id or {field}, not both")
+
+
+def test_a_sweeps_params_are_the_values_it_ran_with(client: httpx.Client) -> None:
+    """``params`` echoes what the sweep used: a plant's altitude (550 m, not 0.0) and zone,
+    no slope or field for a plant; a regular field's defaults."""
+    own = {k: v for k, v in SWEEP.items()
+           if k not in ("collector_m", "latitude_deg", "longitude_deg", "layouts")}
+    r = client.post("/api/v1/plants/sweeps", json={**own, "plant_id": "penarroya",
+                                                   "gcr": [0.1], "end": "2021-12-21"})
+    assert r.status_code == 202, r.text
+    params = _poll(client, r.headers["location"])["params"]
+    assert params["altitude_m"] == 550.0 and params["timezone"] == "Europe/Madrid"
+    assert params["latitude_deg"] == pytest.approx(38.299224)
+    assert params["slope_tilt_deg"] is None and params["field_size"] is None
+    assert params["layouts"] is None and params["plant_id"] == "penarroya"
+    r = client.post("/api/v1/plants/sweeps", json={**SWEEP, "end": "2021-12-21"})
+    params = _poll(client, r.headers["location"])["params"]
+    assert (params["altitude_m"], params["slope_tilt_deg"], params["field_size"],
+            params["layouts"], params["timezone"]) == (0.0, 0.0, "5x5", ["square"], "UTC")
 
 
 def test_sweep_with_a_bad_token_is_401_and_unknown_sweep_404(client: httpx.Client) -> None:

@@ -59,6 +59,7 @@ from backend.plants.sweep import (
     parse_gcr,
     parse_size,
     prepare_sweep,
+    sweep_params,
     sweep_zone,
 )
 from backend.plants.sweep_runner import SweepRunner, SweepState
@@ -220,7 +221,8 @@ def _sweep_inputs(body: SweepCreate, service: PlantService,
         zone = sweep_zone(plant, body.timezone)
         start = pd.Timestamp(parse_day_or_instant(body.start, zone, "start"))
         end = pd.Timestamp(parse_day_or_instant(body.end, zone, "end"))
-        rows, columns = (int(v) for v in body.field_size.split("x"))
+        size = None if body.field_size is None else tuple(
+            int(v) for v in body.field_size.split("x"))
         custom = (body.aspect_ratio, body.offset, body.rotation_deg)
         return prepare_sweep(
             layouts=body.layouts, strategies=body.strategies, start=start,
@@ -230,7 +232,8 @@ def _sweep_inputs(body: SweepCreate, service: PlantService,
             collector_m=None if body.collector_m is None
             else parse_size(body.collector_m, "collector_m"),
             collector_polygon_m=body.collector_polygon_m, plant=plant,
-            field_size=(rows, columns), custom=None if custom == (None, None, None) else custom,
+            field_size=cast(tuple[int, int] | None, size),
+            custom=None if custom == (None, None, None) else custom,
             slope_azimuth_deg=body.slope_azimuth_deg, slope_tilt_deg=body.slope_tilt_deg,
             timezone=body.timezone,
             max_case_steps=MAX_CASE_STEPS if anonymous_bound is None else anonymous_bound,
@@ -266,7 +269,7 @@ async def create_sweep(body: SweepCreate, request: Request, ctx: ContextDep,
     except Busy as exc:
         raise HTTPException(exc.status_code, exc.message, headers=exc.headers) from None
     try:
-        state = runner.submit(spec, cases, body.model_dump())
+        state = runner.submit(spec, cases, sweep_params(spec, cases, body.model_dump()))
     except Busy as exc:  # the queue is full: nothing runs, the allowance is given back
         if anonymous:
             ctx.limits.simulation_steps.refund(host, cost)

@@ -156,9 +156,10 @@ class SweepCreate(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    layouts: list[str] = Field(["square"], min_length=1, max_length=MAX_LAYOUTS,
-                               description="square, diagonal, hexagonal_n_s, hexagonal_e_w, "
-                                           "custom (ignored with plant_id)")
+    layouts: list[str] | None = Field(None, min_length=1, max_length=MAX_LAYOUTS,
+                                      description="square, diagonal, hexagonal_n_s, "
+                                                  "hexagonal_e_w, custom; default square "
+                                                  "(refused with plant_id)")
     gcr: Annotated[list[float], Field(min_length=1, max_length=MAX_GCRS)] | Annotated[
         str, Field(min_length=1, max_length=200)] = Field(
         description="ground cover ratios: a list, or the CLI's text (its rule, "
@@ -175,19 +176,24 @@ class SweepCreate(BaseModel):
                     "strategy sun only")
     latitude_deg: float | None = Field(None, ge=-90, le=90)
     longitude_deg: float | None = Field(None, ge=-180, le=180)
-    altitude_m: float = Field(0.0, ge=-500, le=9000)
+    altitude_m: float | None = Field(None, ge=-500, le=9000,
+                                     description="default 0 (refused with plant_id)")
     plant_id: str | None = Field(None, max_length=100)
     timezone: str | None = Field(
         None, max_length=64,
         description="IANA zone of the local days at a latitude/longitude (the dates, the "
                     "shade chart's day); default UTC; with plant_id the plant's own")
-    field_size: str = Field("5x5", pattern=r"^\d{1,2}x\d{1,2}$",
-                            description="ROWSxCOLUMNS of the regular field")
+    field_size: str | None = Field(None, pattern=r"^\d{1,2}x\d{1,2}$",
+                                   description="ROWSxCOLUMNS of the regular field; default "
+                                               "5x5 (refused with plant_id)")
     aspect_ratio: float | None = Field(None, gt=0, le=10, description="layout custom")
     offset: float | None = Field(None, ge=-0.5, lt=0.5, description="layout custom")
     rotation_deg: float | None = Field(None, ge=0, lt=180, description="layout custom")
-    slope_azimuth_deg: float = Field(0.0, ge=0, lt=360)
-    slope_tilt_deg: float = Field(0.0, ge=0, lt=45)
+    slope_azimuth_deg: float | None = Field(None, ge=0, lt=360,
+                                            description="default 0 (refused with plant_id)")
+    slope_tilt_deg: float | None = Field(None, ge=0, lt=45,
+                                         description="default 0, level (refused with "
+                                                     "plant_id)")
     start: str = Field(description="YYYY-MM-DD or ISO 8601 with offset")
     end: str = Field(description="exclusive")
     step_s: float = Field(3600.0, ge=60, le=MAX_STEP_S,
