@@ -599,14 +599,6 @@ def prepare_sweep(*, gcr: Sequence[float], strategies: Sequence[str],
         raise SweepInputError("field_size", f"rows and columns must be 1 to 15, "
                               f"got {rows}x{columns}")
     layout_custom: tuple[float, float, float] | None = None
-    if custom is not None:
-        a, o, r = custom
-        if a is None or o is None or r is None:
-            missing = [k for k, v in zip(("aspect_ratio", "offset", "rotation_deg"), custom,
-                                         strict=True) if v is None]
-            raise SweepInputError(missing[0], "layout custom takes {aspect_ratio}, {offset} "
-                                  "and {rotation_deg} together: give all three")
-        layout_custom = (a, o, r)
     if plant is not None:
         names = [PLANT_LAYOUT]
         collector = plant.collector
@@ -635,9 +627,7 @@ def prepare_sweep(*, gcr: Sequence[float], strategies: Sequence[str],
         if not names or any(n not in known for n in names):
             raise SweepInputError("layouts", f"must be one or more of {', '.join(known)}, "
                                   f"got {','.join(names) or 'nothing'}")
-        if "custom" in names and layout_custom is None:
-            raise SweepInputError("layouts", "layout custom needs {aspect_ratio}, {offset} "
-                                  "and {rotation_deg}")
+        layout_custom = _custom_layout(names, custom)
         lat, lon, alt = latitude_deg, longitude_deg, float(altitude_m or 0.0)
     tz = sweep_zone(plant, timezone)
     spec = SweepSpec(latitude=lat, longitude=lon, altitude=alt, start=start, end=end,
@@ -672,6 +662,32 @@ def prepare_sweep(*, gcr: Sequence[float], strategies: Sequence[str],
             what = case.layout if plant is None else f"plant {plant.plant_id}"
             raise SweepInputError(field, f"{what} at GCR {case.gcr:g}: {exc}") from None
     return spec, cases
+
+
+def _custom_layout(layouts: Sequence[str],
+                   custom: tuple[float | None, float | None, float | None] | None
+                   ) -> tuple[float, float, float] | None:
+    """Layout custom's (aspect ratio, offset, rotation [°]) when ``layouts`` holds it: all
+    three, else :class:`SweepInputError` naming the first missing; given without layout
+    custom, refused naming the first given (they apply to no other layout)."""
+    names = ("aspect_ratio", "offset", "rotation_deg")
+    values = custom or (None, None, None)
+    if "custom" not in layouts:
+        given = [k for k, v in zip(names, values, strict=True) if v is not None]
+        if given:
+            raise SweepInputError(given[0], "{aspect_ratio}, {offset} and {rotation_deg} "
+                                  "apply only to layout custom, which {layouts} ("
+                                  f"{','.join(layouts)}) does not hold")
+        return None
+    a, o, r = values
+    if a is None and o is None and r is None:
+        raise SweepInputError("layouts", "layout custom needs {aspect_ratio}, {offset} "
+                              "and {rotation_deg}")
+    if a is None or o is None or r is None:
+        missing = [k for k, v in zip(names, values, strict=True) if v is None]
+        raise SweepInputError(missing[0], "layout custom takes {aspect_ratio}, {offset} "
+                              "and {rotation_deg} together: give all three")
+    return (a, o, r)
 
 
 def sweep_params(spec: SweepSpec, cases: Sequence[SweepCase], given: dict[str, Any]

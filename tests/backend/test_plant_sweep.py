@@ -114,8 +114,10 @@ def test_one_case_runs_in_process_as_csv(capsys: pytest.CaptureFixture[str]) -> 
     (["--gcr", "0.2", "--field", "5"], "--field: expected ROWSxCOLUMNS like 5x5"),
     (["--gcr", "0.2", "--layouts", "custom"], "--layouts: layout custom needs --aspect-ratio, "
      "--offset and --rotation-deg"),
-    (["--gcr", "0.2", "--offset", "0.1"], "--aspect-ratio: layout custom takes --aspect-ratio, "
-     "--offset and --rotation-deg together"),
+    (["--gcr", "0.2", "--layouts", "custom", "--offset", "0.1"], "--aspect-ratio: layout "
+     "custom takes --aspect-ratio, --offset and --rotation-deg together"),
+    (["--gcr", "0.2", "--rotation-deg", "30"], "--rotation-deg: --aspect-ratio, --offset and "
+     "--rotation-deg apply only to layout custom, which --layouts (square) does not hold"),
     (["--gcr", "0.2", "--layouts", "custom", "--aspect-ratio", "1", "--offset", "0.7",
       "--rotation-deg", "0"], "--offset: custom at GCR 0.2: offset must be in [-0.5, 0.5)"),
     (["--gcr", "0.2", "--step-s", "1"], "--step-s: 1 cases"),

@@ -429,8 +429,11 @@ def test_a_sweep_at_a_coordinate_runs_on_the_local_days_of_its_timezone(
      "plant_id)"),
     ({"layouts": ["custom"]}, 422, "layouts: layout custom needs aspect_ratio, offset and "
      "rotation_deg"),
-    ({"offset": 0.1}, 422, "aspect_ratio: layout custom takes aspect_ratio, offset and "
-     "rotation_deg together"),
+    ({"layouts": ["custom"], "offset": 0.1}, 422, "aspect_ratio: layout custom takes "
+     "aspect_ratio, offset and rotation_deg together"),
+    # no layout custom asked: it said "layout custom takes … together" (a tester's finding)
+    ({"rotation_deg": 30}, 422, "rotation_deg: aspect_ratio, offset and rotation_deg apply "
+     "only to layout custom, which layouts (square) does not hold"),
 ])
 def test_sweep_refusals_name_the_field(client: httpx.Client, change: dict, status: int,
                                        message: str) -> None:
