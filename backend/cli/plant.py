@@ -143,9 +143,11 @@ def run_list(args: argparse.Namespace) -> int:
     from sim.plant import list_plants
 
     try:
-        plants = list_plants(args.plants_dir)
+        plants, skipped = list_plants(args.plants_dir)
     except ValueError as exc:
         fail(f"--plants-dir: {exc}")
+    for name, reason in skipped:  # the others are listed all the same
+        print(f"heliotwin plant list: warning: {name} left out: {reason}", file=sys.stderr)
     if args.json:
         print(json_text([{"plant_id": p.plant_id, "name": p.name, "trackers": p.n_trackers}
                           for p in plants]))

@@ -24,6 +24,7 @@ per-tracker part was not measured again on a larger plant).
 
 from __future__ import annotations
 
+import builtins
 import datetime as dt
 import logging
 import threading
@@ -35,6 +36,7 @@ import numpy as np
 import pandas as pd
 
 from sim.plant import Collector, Plant, UnknownPlantError, default_plants_dir, load_plant
+from sim.plant.layout import plant_file_problem
 from sim.plant.simulate import field_shade, local_day, simulate_plant, sky_conditions
 from sim.plant.strategies import STRATEGIES, orientations, sky_map, strategies_for
 
@@ -167,18 +169,28 @@ class PlantService:
         return plant
 
     def list(self) -> list[dict[str, Any]]:
-        """Every loadable plant (summary); a bad file is logged and left out."""
-        out = []
+        """Every loadable plant (summary); a bad file is left out (:meth:`skipped` names it)."""
+        return self._scan()[0]
+
+    def skipped(self) -> builtins.list[dict[str, str]]:
+        """The plant files left out of :meth:`list`: ``{"file", "reason"}`` each."""
+        return self._scan()[1]
+
+    def _scan(self) -> tuple[builtins.list[dict[str, Any]], builtins.list[dict[str, str]]]:
+        out, skipped = [], []
         for pid in self.ids():
             try:
                 p = self.get(pid)
             except ValueError as exc:
-                log.warning("plant %s left out: %s", pid, exc)
+                path = self.plants_dir / f"{pid}.json"
+                reason = plant_file_problem(exc, path)
+                log.warning("plant %s left out: %s", pid, reason)
+                skipped.append({"file": path.name, "reason": reason})
                 continue
             out.append({"plant_id": p.plant_id, "name": p.name, "trackers": p.n_trackers,
                         "latitude_deg": p.latitude, "longitude_deg": p.longitude,
                         "timezone": p.timezone})
-        return out
+        return out, skipped
 
     def positions(self, plant_id: str, time: dt.datetime, strategy: str = "sun"
                   ) -> dict[str, Any]:

@@ -237,12 +237,17 @@ export async function init() {
   });
   $("plant-strategy").addEventListener("change", drawSkyMap);
   $("plant-select").addEventListener("change", () => selectPlant($("plant-select").value));
+  let skipped = [];
   try {
-    view.plants = await api("/api/v1/plants");
+    [view.plants, skipped] = await Promise.all([api("/api/v1/plants"), api("/api/v1/plants/skipped")]);
   } catch (err) {
     banner(`Could not load the plants: ${err.message}`, "error");
     return;
   }
+  // the plant files the service does not serve, and why (they were left out silently)
+  $("plant-skipped").textContent = skipped.length
+    ? `Not served (the file is invalid): ${skipped.map((s) => `${s.file}: ${s.reason}`).join("; ")}` : "";
+  $("plant-skipped").hidden = !skipped.length;
   if (!view.plants.length) { banner("The service has no plants configured (data/plants/).", "warn"); return; }
   for (const p of view.plants) $("plant-select").add(new Option(`${p.plant_id} (${p.trackers})`, p.plant_id));
   const day = new URLSearchParams(location.hash.split("?")[1] || "").get("day");

@@ -486,9 +486,25 @@ def load_plant(plant_id: str, plants_dir: str | Path | None = None) -> Plant:
     return plant
 
 
-def list_plants(plants_dir: str | Path | None = None) -> list[Plant]:
-    """All plants in ``plants_dir`` (default: :func:`default_plants_dir`), sorted by id."""
+def list_plants(plants_dir: str | Path | None = None
+                ) -> tuple[list[Plant], list[tuple[str, str]]]:
+    """The plants of ``plants_dir`` (default: :func:`default_plants_dir`) that load, sorted by
+    id, and the files that do not: (file name, its problem) — one bad file leaves the others
+    listed (it made ``plant list`` fail for all). ``ValueError`` for a missing folder."""
     directory = Path(plants_dir) if plants_dir is not None else default_plants_dir()
     if not directory.is_dir():  # a mistyped folder listed nothing, as an empty one
         raise ValueError(f"plants folder {str(directory)!r} does not exist")
-    return [load_plant(p.stem, directory) for p in sorted(directory.glob("*.json"))]
+    plants, skipped = [], []
+    for path in sorted(directory.glob("*.json")):
+        try:
+            plants.append(load_plant(path.stem, directory))
+        except ValueError as exc:
+            skipped.append((path.name, plant_file_problem(exc, path)))
+    return plants, skipped
+
+
+def plant_file_problem(exc: ValueError, path: str | Path) -> str:
+    """What is wrong with a plant file, from :func:`load_plant`'s error without the file's
+    path in front (the caller names the file)."""
+    text = str(exc)
+    return text.removeprefix(f"{path}: ")

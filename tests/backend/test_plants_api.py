@@ -110,8 +110,26 @@ def test_a_bad_plant_file_is_not_served_and_not_named_known(client: httpx.Client
         assert "not served" in r.json()["detail"] and "latitude_deg" in r.json()["detail"]
         r = client.get("/api/v1/plants/atlantis")
         assert r.status_code == 404 and "badlat" not in r.json()["detail"]
+        # named, with its problem, where it was left out silently (a tester's finding)
+        skipped = client.get("/api/v1/plants/skipped").raise_for_status().json()
+        assert skipped == [{"file": "badlat.json",
+                            "reason": "field 'latitude_deg' = 123.0 outside [-90, 90]"}]
     finally:
         bad.unlink()
+    assert client.get("/api/v1/plants/skipped").json() == []
+
+
+def test_cli_plant_list_names_a_bad_file_and_lists_the_others(tmp_path: Path,
+                                                              heliotwin_cli: Callable) -> None:
+    """One malformed file made ``plant list`` fail for every plant (rc 2, none listed)."""
+    shutil.copy(default_plants_dir() / "penarroya.json", tmp_path / "penarroya.json")
+    (tmp_path / "broken.json").write_text('{"plant_id": "broken", "name": ')
+    out = heliotwin_cli("plant", "list", "--plants-dir", str(tmp_path))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith("penarroya\t29 trackers\t")
+    assert out.stderr.strip().endswith("heliotwin plant list: warning: broken.json left out: "
+                                       "not valid JSON: Expecting value: line 1 column 32 "
+                                       "(char 31)"), out.stderr
 
 
 def test_a_plant_file_with_a_polygon_collector(client: httpx.Client, plants_dir: Path) -> None:

@@ -83,6 +83,26 @@ def polygon_plant(server) -> Iterator[str]:  # type: ignore[no-untyped-def]
         path.unlink()
 
 
+def test_a_plant_file_not_served_is_named_on_the_page(page, server) -> None:  # type: ignore[no-untyped-def]
+    """A malformed plant file was left out of the plant list and the page never said why."""
+    path = Path(server.env["HELIOTWIN_PLANTS_DIR"]) / "broken.json"
+    path.write_text('{"plant_id": "broken", "name": ')
+    try:
+        page.goto(server.url + "/#plant?day=2021-12-21")
+        page.wait_for_selector('body[data-plant-loaded="penarroya/2021-12-21"]', timeout=60_000)
+        assert page.is_visible("#plant-skipped")
+        assert page.text_content("#plant-skipped") == (
+            "Not served (the file is invalid): broken.json: not valid JSON: Expecting value: "
+            "line 1 column 32 (char 31)")
+        ARTIFACTS.mkdir(exist_ok=True)
+        box = page.locator("#plant-skipped").bounding_box()
+        assert box is not None
+        page.screenshot(path=str(ARTIFACTS / "plant-skipped.png"),
+                        clip={"x": 0, "y": 0, "width": 1280, "height": box["y"] + 200})
+    finally:
+        path.unlink()
+
+
 def test_plant_page_draws_a_polygon_collector_outline(page, server,  # type: ignore[no-untyped-def]
                                                       polygon_plant: str) -> None:
     """Each collector's outline is drawn to scale at its pivot (u east, v north), filled

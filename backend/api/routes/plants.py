@@ -33,6 +33,7 @@ from backend.api.schemas.common import PNG_CONTENT
 from backend.api.schemas.plants import (
     PlantDayRead,
     PlantRead,
+    PlantSkippedRead,
     PlantSummaryRead,
     PositionsRead,
     SkyMapRead,
@@ -368,6 +369,13 @@ async def sweep_shade(sweep_id: str, request: Request, ctx: ContextDep, caller: 
 def list_plants(service: PlantServiceDep) -> list[dict[str, Any]]:
     """Every plant (id, name, number of trackers, place)."""
     return service.list()
+
+
+@router.get("/skipped", response_model=list[PlantSkippedRead])
+def skipped_plants(service: PlantServiceDep) -> list[dict[str, str]]:
+    """The plant files of the folder that are not served, each with its problem (left out of
+    ``GET /api/v1/plants``, which said nothing of them)."""
+    return service.skipped()
 
 
 @router.get("/{plant_id}", response_model=PlantRead, responses={404: {}})

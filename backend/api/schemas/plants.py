@@ -22,6 +22,13 @@ class PlantSummaryRead(BaseModel):
     timezone: str
 
 
+class PlantSkippedRead(BaseModel):
+    """A plant file the service does not serve, and why."""
+
+    file: str = Field(description="its name in the plants folder, e.g. broken.json")
+    reason: str = Field(description="what is wrong with it (the field, or the JSON error)")
+
+
 class PlantFixedRead(BaseModel):
     """The fixed reference plant's orientation."""
 

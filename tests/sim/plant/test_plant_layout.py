@@ -88,10 +88,20 @@ def test_a_dropped_in_plant_is_listed(tmp_path: Path) -> None:
         {"tracker_id": 1, "east_m": 0.0, "north_m": 0.0},
         {"tracker_id": 2, "east_m": 0.0, "north_m": 20.0}])
     (tmp_path / "two.json").write_text(json.dumps(d))
-    assert [p.plant_id for p in list_plants(tmp_path)] == ["penarroya", "two"]
+    assert [p.plant_id for p in list_plants(tmp_path)[0]] == ["penarroya", "two"]
     assert load_plant("two", tmp_path).positions[1].tolist() == [0.0, 20.0, 0.0]
     with pytest.raises(UnknownPlantError, match="known plants: penarroya, two"):
         load_plant("nope", tmp_path)
+
+
+def test_a_bad_plant_file_is_named_and_the_others_listed(tmp_path: Path) -> None:
+    """One malformed file left no plant listed (``plant list`` failed, rc 2)."""
+    shutil.copy(default_plants_dir() / "penarroya.json", tmp_path / "penarroya.json")
+    (tmp_path / "broken.json").write_text('{"plant_id": "broken", "name": ')
+    plants, skipped = list_plants(tmp_path)
+    assert [p.plant_id for p in plants] == ["penarroya"]
+    assert skipped == [("broken.json", "not valid JSON: Expecting value: line 1 column 32 "
+                                       "(char 31)")]
 
 
 @pytest.mark.parametrize(("edit", "message"), [
