@@ -89,7 +89,9 @@ async function drawShadeDay() {
     { type: "scatter", mode: "lines", x, y: mean.map((v) => 100 * v), name: "mean shaded [%]", yaxis: "y2", line: { color: COLORS.grey } },
   ], baseLayout({
     yaxis: { title: { text: "collectors shaded [-]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
-    yaxis2: { title: { text: "mean shaded [%]" }, overlaying: "y", side: "right", rangemode: "tozero" },
+    // round ticks (Plotly's own fell on 10.9, 21.7, 32.6 …: a tester's finding)
+    yaxis2: { title: { text: "mean shaded [%]" }, overlaying: "y", side: "right", showgrid: false,
+      ...zeroBasedAxis(mean.map((v) => 100 * v)) },
   }), {
     columns: ["time", "collectors_shaded", "mean_shaded_pct"],
     rows: d.times.map((t, k) => [t, shaded[k], 100 * mean[k]]),

@@ -41,6 +41,13 @@ def test_plant_page_shows_layout_shade_strategies_and_sky_map(page, server) -> N
                            " return [c.data[0].marker.symbol, c.layout.shapes || []]; }")
     assert layout == ["square", []]
     assert int(page.get_attribute("#chart-plant-shade", "data-points")) > 20
+    # the mean's axis on round ticks from zero (they fell on 10.9, 21.7, 32.6 …)
+    y2 = page.evaluate("() => { const a = document.getElementById('chart-plant-shade')"
+                       ".layout.yaxis2; return [a.range, a.dtick, a.tick0]; }")
+    (lo, hi), dtick, tick0 = y2
+    mantissa = dtick / 10 ** np.floor(np.log10(dtick))
+    assert lo == 0 and tick0 == 0 and min(abs(mantissa - m) for m in (1, 2, 2.5, 5)) < 1e-9
+    assert abs(hi / dtick - round(hi / dtick)) < 1e-9, y2
     bars = page.evaluate("() => document.getElementById('chart-plant-strategies').data[0].x")
     assert bars == ["sun", "backtrack", "sky_scan", "fixed"]
     # the sky map image loads for the selected time and shows the grey shading region
