@@ -351,12 +351,13 @@ async function drawSweep() {
 async function drawSweepShade() {
   if (!sweep.id || !$("sweep-case").value) return;
   const [layout, gcr, strategy] = JSON.parse($("sweep-case").value);
-  // the winter solstice of the plant's hemisphere: the day of the longest shadows
   const tz = view.plant.timezone;
-  const solstice = view.plant.latitude_deg < 0 ? "06-21" : "12-21";
-  // the day drawn, in words (the title said 21 December for a southern plant's June)
-  $("sweep-shade-day").textContent = solstice === "06-21" ? "21 June" : "21 December";
-  const d = await api(`/api/v1/plants/sweeps/${enc(sweep.id)}/shade`, { params: { layout, gcr, strategy, date: `${$("sweep-year").value}-${solstice}` } });
+  // the service's day: the winter solstice of the place's hemisphere in the sweep's year (the
+  // longest shadows), or the day nearest to it with daylight (a polar night drew bare axes)
+  const d = await api(`/api/v1/plants/sweeps/${enc(sweep.id)}/shade`, { params: { layout, gcr, strategy } });
+  $("sweep-shade-day").textContent = new Date(`${d.date}T12:00:00Z`)
+    .toLocaleDateString("en-GB", { day: "numeric", month: "long", year: "numeric", timeZone: "UTC" });
+  if (!d.times.length) { showEmpty("chart-sweep-shade", "No daylight on this day."); return; }
   const x = d.times.map((t) => fmtTime(tz, t));
   await draw("chart-sweep-shade", [
     { type: "scatter", mode: "lines+markers", x, y: d.interior_shaded_fraction.map((v) => 100 * v), name: "interior collector", line: { color: COLORS.tracker } },

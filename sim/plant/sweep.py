@@ -190,6 +190,32 @@ def run_case(spec: SweepSpec, case: SweepCase, sky: dict[str, FloatArray],
     }
 
 
+def _day_times(date: dt.date, timezone: str, step_s: float) -> pd.DatetimeIndex:
+    """The steps of a local day (UTC), from its midnight to the next (23 or 25 h at DST)."""
+    day0, day1 = local_day(date, timezone)
+    return pd.date_range(day0.tz_convert("UTC"), day1.tz_convert("UTC"),
+                         freq=pd.Timedelta(seconds=step_s), inclusive="left")
+
+
+def shade_day(spec: SweepSpec, step_s: float = 900.0) -> str:
+    """The default day of a case's shade (:func:`case_day_shade`): the winter solstice of the
+    place's hemisphere (21 December north, 21 June south: the longest shadows) in the local
+    year the sweep starts, or, where that day has no daylight step (a polar night: 69.65° N
+    on 21 December), the day nearest to it that has one. ISO date."""
+    year = spec.start.tz_convert(spec.timezone).year
+    solstice = dt.date(year, 6 if spec.latitude < 0 else 12, 21)
+    days = sorted((solstice + dt.timedelta(days=k) for k in range(-183, 184)),
+                  key=lambda d: abs((d - solstice).days))
+    for n in (1, 31, len(days)):  # the solstice alone first, then widening windows
+        each = [_day_times(d, spec.timezone, step_s) for d in days[:n]]
+        up = sky_conditions(site_plant(spec), each[0].append(each[1:]))["apparent_elevation"] > 0
+        ends = np.cumsum([len(t) for t in each])
+        lit = np.add.reduceat(up, ends - [len(t) for t in each]) > 0
+        if lit.any():
+            return days[int(np.argmax(lit))].isoformat()
+    return solstice.isoformat()  # no daylight within half a year of it: none anywhere
+
+
 def case_day_shade(spec: SweepSpec, case: SweepCase, date: str, step_s: float = 900.0
                    ) -> dict[str, Any]:
     """A case's field through one clear-sky day (local date in ``spec.timezone``): every
@@ -199,9 +225,7 @@ def case_day_shade(spec: SweepSpec, case: SweepCase, date: str, step_s: float = 
     from sim.plant.strategies import orientations
 
     plant, interior, _ = case_plant(spec, case)
-    day0, day1 = local_day(dt.date.fromisoformat(date), spec.timezone)  # 23 or 25 h at DST
-    times = pd.date_range(day0.tz_convert("UTC"), day1.tz_convert("UTC"),
-                          freq=pd.Timedelta(seconds=step_s), inclusive="left")
+    times = _day_times(dt.date.fromisoformat(date), spec.timezone, step_s)
     sky = sky_conditions(plant, times)
     up = np.nonzero(sky["apparent_elevation"] > 0)[0]
     dsky = {k: v[up] for k, v in sky.items()}
@@ -265,4 +289,4 @@ def least_shaded_layout(collector: Collector, sky: dict[str, FloatArray], gcr: f
 
 __all__ = ["PLANT_LAYOUT", "SweepCase", "SweepSpec", "case_layout", "case_plant", "case_sky",
            "case_day_shade", "interior_beam_shaded_pct", "least_shaded_layout", "run_case",
-           "site_plant"]
+           "shade_day", "site_plant"]

@@ -387,6 +387,27 @@ def test_sweep_takes_a_polygon_collector(client: httpx.Client) -> None:
     assert row["energy_kwh_per_collector"] > 0
 
 
+def test_a_polar_sweeps_shade_defaults_to_a_day_with_daylight(client: httpx.Client) -> None:
+    """At Tromsø (69.65° N) the winter solstice is a polar night: the shade's default day
+    was 21 December, with no times (the chart bare); it is the nearest day to it that has
+    daylight, in the sweep's own year."""
+    r = client.post("/api/v1/plants/sweeps", json={
+        **SWEEP, "latitude_deg": 69.65, "longitude_deg": 18.96, "timezone": "Europe/Oslo",
+        "gcr": [0.2], "start": "2022-03-01", "end": "2022-03-02", "step_s": 3600})
+    assert r.status_code == 202, r.text
+    run = _poll(client, r.headers["location"])
+    url = f"/api/v1/plants/sweeps/{run['sweep_id']}/shade"
+    query = {"layout": "square", "gcr": 0.2}
+    d = client.get(url, params=query).raise_for_status().json()
+    assert d["date"] == "2022-11-25" and len(d["times"]) > 0, d["date"]
+    for dark in ("2022-11-26", "2022-12-21", "2023-01-16"):  # nearer the solstice: none
+        assert client.get(url, params={**query, "date": dark}).json()["times"] == [], dark
+    r = client.post("/api/v1/plants/sweeps", json={**SWEEP, "gcr": [0.2], "end": "2021-12-21"})
+    run = _poll(client, r.headers["location"])
+    d = client.get(f"/api/v1/plants/sweeps/{run['sweep_id']}/shade", params=query).json()
+    assert d["date"] == "2021-12-21" and d["times"]  # Peñarroya: the solstice itself
+
+
 def test_a_sweep_at_a_coordinate_runs_on_the_local_days_of_its_timezone(
         client: httpx.Client) -> None:
     """At Tokyo a UTC day is one local afternoon and the next local morning: with

@@ -206,6 +206,39 @@ def test_a_polar_night_says_no_daylight(page, server) -> None:  # type: ignore[n
         path.unlink()
 
 
+def test_a_polar_sweeps_shade_is_drawn_on_a_day_with_daylight(page, server) -> None:  # type: ignore[no-untyped-def]
+    """A sweep at 69.65° N: its shade chart was set to 21 December, a polar night, and
+    showed bare axes with no word; it is drawn on the nearest day with daylight, named in
+    its title."""
+    plant = json.loads((default_plants_dir() / "penarroya.json").read_text())
+    plant.update(plant_id="tromso", latitude_deg=69.65, longitude_deg=18.96,
+                 timezone="Europe/Oslo")
+    path = Path(server.env["HELIOTWIN_PLANTS_DIR"]) / "tromso.json"
+    path.write_text(json.dumps(plant))
+    try:
+        page.goto(server.url + "/#plant?day=2021-12-21")
+        page.wait_for_selector('body[data-plant-loaded="penarroya/2021-12-21"]',
+                               timeout=60_000)
+        page.select_option("#plant-select", "tromso")
+        page.wait_for_selector('body[data-plant-loaded="tromso/2021-12-21"]', timeout=60_000)
+        page.fill("#sweep-layouts", "square")
+        page.fill("#sweep-gcr", "0.2")
+        page.fill("#sweep-strategies", "sun")
+        page.fill("#sweep-step", "3600")
+        page.click("#sweep-run")
+        page.wait_for_selector("body[data-sweep-loaded]", timeout=150_000)
+        page.wait_for_function("() => (document.getElementById('chart-sweep-shade').data || [])"
+                               ".length === 3")
+        assert page.text_content("#sweep-shade-day") == "25 November 2021"
+        n = page.evaluate("() => document.getElementById('chart-sweep-shade').data[0].x.length")
+        assert n > 0
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.locator("#chart-sweep-shade").screenshot(
+            path=str(ARTIFACTS / "plant-sweep-shade-polar.png"))
+    finally:
+        path.unlink()
+
+
 def test_the_sweep_panel_runs_a_sweep_and_draws_its_shade_in_the_plants_time(
         page, server, polygon_plant: str) -> None:  # type: ignore[no-untyped-def]
     """The layout sweep from the Plant page (POST /api/v1/plants/sweeps on the service's

@@ -73,7 +73,7 @@ from backend.timestamps import (
 )
 from sim.plant.layout import Plant
 from sim.plant.strategies import check_strategy_collector, strategies_for
-from sim.plant.sweep import SweepCase, case_day_shade
+from sim.plant.sweep import SweepCase, case_day_shade, shade_day
 
 router = APIRouter(prefix="/api/v1/plants", tags=["plants"])
 T = TypeVar("T")
@@ -334,7 +334,8 @@ async def sweep_shade(sweep_id: str, request: Request, ctx: ContextDep, caller: 
                       date: Annotated[str | None, Query(
                           pattern=r"^\d{4}-\d{2}-\d{2}$",
                           description="default: the winter solstice of the sweep's "
-                                      "hemisphere in 2021")] = None,
+                                      "hemisphere in the year it starts, or the day nearest "
+                                      "to it with daylight")] = None,
                       step_s: Annotated[float, Query(ge=300, le=3600, allow_inf_nan=False)] = 900
                       ) -> dict[str, Any]:
     """One case the sweep ran (its layout — ``plant`` for a plant's —, GCR and strategy)
@@ -346,10 +347,9 @@ async def sweep_shade(sweep_id: str, request: Request, ctx: ContextDep, caller: 
     spec = getattr(state, "spec", None)
     if spec is None:
         raise HTTPException(404, f"sweep {sweep_id!r} has no field to show")
-    if date is None:
-        date = "2021-06-21" if spec.latitude < 0 else "2021-12-21"
     try:
-        dt.date.fromisoformat(date)
+        if date is not None:
+            dt.date.fromisoformat(date)
     except ValueError:
         raise HTTPException(422, f"date: {date!r} is not a calendar date") from None
     if strategy in STRATEGIES and strategy not in strategies_for(spec.collector):
@@ -360,7 +360,8 @@ async def sweep_shade(sweep_id: str, request: Request, ctx: ContextDep, caller: 
                         else spec.plant.n_trackers, step_s, cost_factor(spec.collector))
     try:
         return await _priced(request, ctx, caller, cost_s,
-                             lambda: case_day_shade(spec, case, date, step_s))
+                             lambda: case_day_shade(spec, case, date or shade_day(spec, step_s),
+                                                    step_s))
     except ValueError as exc:  # the case's field: an unknown layout or a GCR it cannot take
         raise HTTPException(422, f"layout, gcr: {exc}") from None
 
