@@ -82,7 +82,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "sweep", help="layouts × spacings × strategies of a field, as Dask tasks",
         description="Plant design sweep (issue 26): for each layout, GCR and strategy, the "
         "interior collector's and the field's share of beam lost to shade, the energy per "
-        "collector (bypass-diode model) and per hectare, and the land per collector. Each "
+        "collector (bypass-diode model) and per hectare — energy_* the finite field's "
+        "average, most of whose collectors are on its edge, interior_energy_* the interior "
+        "collector's, what a large plant's collectors get —, and the land per collector. Each "
         "case is one Dask task; --scheduler sends them to a running cluster, otherwise a "
         "LocalCluster of one worker per core runs them (one case: in this process). Clear "
         "sky unless --tmy3/--epw. With --lat/--lon a bare date is midnight UTC.")
@@ -345,7 +347,8 @@ def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
 #: Sweep columns of the CSV and text output, in order.
 SWEEP_COLUMNS = ("layout", "gcr", "strategy", "interior_beam_shaded_pct", "field_beam_shaded_pct",
                  "energy_kwh_per_collector", "interior_energy_kwh", "energy_mwh_per_ha",
-                 "land_m2_per_collector", "collectors", "shading_loss_electrical_pct")
+                 "interior_energy_mwh_per_ha", "land_m2_per_collector", "collectors",
+                 "shading_loss_electrical_pct")
 
 
 def run_sweep(args: argparse.Namespace) -> int:

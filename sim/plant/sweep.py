@@ -11,11 +11,13 @@ interior one, or an existing plant scaled to the GCR) and runs
 - ``interior_beam_shaded_pct``: the interior collector's Σ F · DNI / Σ DNI over daylight
   steps [%] (twoaxistracking's interior collector when every collector faces the sun);
 - ``field_beam_shaded_pct``: the same averaged over the finite field's collectors;
-- ``energy_kwh_per_collector``: the field's DC energy per collector, bypass-diode model
-  (Martinez-Moreno 2010 via :mod:`sim.plant.electrical`); ``interior_energy_kwh`` the
-  interior collector's own;
-- ``land_m2_per_collector``: A / GCR; ``energy_mwh_per_ha``: energy per collector over
-  that land.
+- ``energy_kwh_per_collector``: the finite field's DC energy per collector, bypass-diode
+  model (Martinez-Moreno 2010 via :mod:`sim.plant.electrical`) — the field's average, 16 of
+  whose 25 collectors in 5 × 5 stand on its edge with fewer shading neighbours;
+  ``interior_energy_kwh`` the interior collector's own: what a large plant's collectors get
+  (the dashboard's figure; the two can rank strategies differently);
+- ``land_m2_per_collector``: A / GCR; ``energy_mwh_per_ha``: the field average's energy per
+  collector over that land, ``interior_energy_mwh_per_ha`` the interior collector's.
 
 No scheduling here: the backend runs cases as Dask tasks (``backend.plants.sweep``).
 """
@@ -184,6 +186,7 @@ def run_case(spec: SweepSpec, case: SweepCase, sky: dict[str, FloatArray],
         "energy_kwh_per_collector": round(e_kwh, 4),
         "interior_energy_kwh": round(interior_kwh, 4),
         "energy_mwh_per_ha": round(e_kwh / land_m2 * 10.0, 4),   # kWh/m² · 10⁴ m²/ha / 10³
+        "interior_energy_mwh_per_ha": round(interior_kwh / land_m2 * 10.0, 4),
         "land_m2_per_collector": round(land_m2, 4),
         "collectors": n,
         "shading_loss_electrical_pct": s["shading_loss_electrical_pct"],

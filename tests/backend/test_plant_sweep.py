@@ -81,6 +81,9 @@ def test_sweep_runs_on_the_given_cluster(scheduler: str, capsys: pytest.CaptureF
         assert r["land_m2_per_collector"] == pytest.approx(60.0 / r["gcr"], rel=1e-6)
         assert r["energy_mwh_per_ha"] == pytest.approx(
             r["energy_kwh_per_collector"] / r["land_m2_per_collector"] * 10, rel=1e-3)
+        # the interior collector's per hectare too (a large plant's: the dashboard's curves)
+        assert r["interior_energy_mwh_per_ha"] == pytest.approx(
+            r["interior_energy_kwh"] / r["land_m2_per_collector"] * 10, rel=1e-3)
     for lay in ("square", "hexagonal_e_w"):                  # denser: more shade, less each
         mine = [r for r in rows if r["layout"] == lay]
         assert [r["interior_beam_shaded_pct"] for r in mine] == sorted(

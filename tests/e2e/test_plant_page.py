@@ -256,6 +256,19 @@ def test_the_sweep_panel_runs_a_sweep_and_draws_its_shade_in_the_plants_time(
     energy = page.evaluate("() => document.getElementById('chart-sweep-energy').data"
                            ".map(t => t.x.length)")
     assert energy and all(n == 2 for n in energy)
+    # the curves are the interior collector's (a large plant's), not the 5x5 field's average,
+    # whose edge collectors reversed the ranking of sun and backtrack (a tester's finding)
+    rows = httpx.get(f"{server.url}/api/v1/plants/sweeps/"
+                     f"{page.get_attribute('body', 'data-sweep-loaded')}").json()["result"]["rows"]
+    drawn = page.evaluate("() => ['chart-sweep-energy', 'chart-sweep-tradeoff'].map(id => "
+                          "document.getElementById(id)).map(c => [c.data.map(t => t.y), "
+                          "c.layout.yaxis.title.text])")
+    (energy_y, energy_title), (tradeoff_y, tradeoff_title) = drawn
+    interior = [r["interior_energy_kwh"] / 1000 for r in rows]
+    assert energy_y[0] == pytest.approx(interior) and tradeoff_y[0] == pytest.approx(interior)
+    assert energy_y[1] == pytest.approx([r["interior_energy_mwh_per_ha"] for r in rows])
+    assert interior != pytest.approx([r["energy_kwh_per_collector"] / 1000 for r in rows])
+    assert "interior collector" in energy_title and "interior collector" in tradeoff_title
     page.wait_for_function("() => (document.getElementById('chart-sweep-shade').data || [])"
                            ".length === 3")
     shade = page.evaluate("() => { const c = document.getElementById('chart-sweep-shade');"
@@ -270,6 +283,8 @@ def test_the_sweep_panel_runs_a_sweep_and_draws_its_shade_in_the_plants_time(
     assert params["timezone"] == "Europe/Madrid"
     ARTIFACTS.mkdir(exist_ok=True)
     page.locator("#chart-sweep-shade").screenshot(path=str(ARTIFACTS / "plant-sweep-shade.png"))
+    page.locator("#page-plant .grid").last.screenshot(
+        path=str(ARTIFACTS / "plant-sweep-energy.png"))
     # another plant: the panel is "at this plant's place", so the sweep's figures go (a
     # tester's finding: Peñarroya's curves and Madrid's solstice stayed under a Santiago plant)
     page.select_option("#plant-select", polygon_plant)

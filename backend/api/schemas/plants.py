@@ -217,9 +217,14 @@ class SweepRowRead(BaseModel):
     interior_beam_shaded_pct: float | None = Field(
         description="interior collector: Σ shaded fraction × DNI / Σ DNI over daylight [%]")
     field_beam_shaded_pct: float | None = Field(description="the same, field average [%]")
-    energy_kwh_per_collector: float = Field(description="field average, bypass-diode model")
-    interior_energy_kwh: float
-    energy_mwh_per_ha: float
+    energy_kwh_per_collector: float = Field(
+        description="the finite field's average per collector, bypass-diode model (most of a "
+                    "5x5 field's collectors are on its edge)")
+    interior_energy_kwh: float = Field(
+        description="the interior collector's: what a large plant's collectors get")
+    energy_mwh_per_ha: float = Field(description="the field average's, over its land")
+    interior_energy_mwh_per_ha: float = Field(description="the interior collector's, over "
+                                                          "its land")
     land_m2_per_collector: float
     collectors: int
     shading_loss_electrical_pct: float | None
