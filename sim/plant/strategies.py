@@ -136,7 +136,7 @@ def lowest_free_elevation(plant: Plant, solar_azimuth: ArrayLike, solar_elevatio
     interval per pair. Walking up from
     ``from_elevation`` over the intervals that contain the current elevation
     gives the lowest shade-free one; where the walk passes 90° the answer is 90°, which
-  shades nobody on level ground but may on a slope (the caller checks it).
+    shades nobody on level ground but may on a slope (the caller checks it).
 
     Parameters
     ----------
