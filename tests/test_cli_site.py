@@ -226,3 +226,20 @@ def test_a_bad_flag_is_named_by_its_flag(tmp_path: Path, heliotwin, flags: list[
     p = heliotwin(tmp_path, "site", "create", "--id", "bad", "--longitude-deg", "10", *flags)
     assert p.returncode == 2 and words in p.stderr, p.stderr
     assert "site: " not in p.stderr
+
+
+def test_demo_logger_names_a_site_without_the_twins_arrays(tmp_path: Path, heliotwin) -> None:
+    """A tester's site of strings (no arrays named tracker and fixed): demo-logger crashed
+    with a traceback and exited 0; the twin it posts needs both."""
+    site = json.loads((ROOT / "sim" / "data" / "sites" / "tehuantepec.json").read_text())
+    site["site_id"] = "strings"
+    site["arrays"] = {"east_string": site["arrays"]["tracker"],
+                      "west_string": site["arrays"]["fixed"]}
+    (tmp_path / "strings.json").write_text(json.dumps(site))
+    p = heliotwin(tmp_path, "demo-logger", "--site", "strings", "--token", "t", "--once",
+                  "--url", "http://127.0.0.1:9")
+    assert p.returncode == 2, (p.returncode, p.stderr)
+    assert p.stderr.strip().splitlines() == [
+        "heliotwin demo-logger: error: --site: 'strings' has arrays east_string, west_string; "
+        "the demo logger posts the twin's readings and needs arrays 'tracker' and 'fixed' "
+        "(mounts tracker and fixed)"], p.stderr

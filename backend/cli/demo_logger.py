@@ -31,11 +31,18 @@ def run(args: argparse.Namespace) -> int:
     from backend.settings import get_settings
     from backend.twin.demo_logger import DemoLogger, TokenRefused
     from sim.sites import UnknownSiteError, load_site
+    from sim.twin import has_twin_arrays
 
     try:
         site = load_site(args.site, get_settings().sites.user_dir)
     except UnknownSiteError as exc:
         fail(str(exc))
+    if not has_twin_arrays({name: a.mount for name, a in site.arrays.items()}):
+        # the demo logger posts what the twin makes (a tester's string-level site crashed
+        # with a traceback and exit 0)
+        fail(f"--site: {site.site_id!r} has arrays {', '.join(site.arrays)}; the demo logger "
+             "posts the twin's readings and needs arrays 'tracker' and 'fixed' (mounts "
+             "tracker and fixed)")
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     demo = DemoLogger(site, args.url, args.token, seed=args.seed)
