@@ -18,7 +18,10 @@ Energies come from the hourly rollups (:mod:`backend.measurements.rollups`, the
 one energy rule) — all time as the sum of a series' rollups, today from
 :func:`backend.measurements.status.status`, which the dashboard's tiles use too.
 Each state is a bare number on its own topic (``Settings.mqtt.ha_state_topic``),
-retained; a value that is unknown (no readings today) is not published.
+retained; a value that is unknown is not published — except ``energy_today`` of an array
+that has readings but none since local midnight: 0, so that the day's total resets at
+midnight (Home Assistant's ``total_increasing``) and yesterday's value is not shown as
+today's.
 
 Availability (Home Assistant's ``availability``, ``availability_mode: all``): every
 sensor follows the service's topic :func:`service_availability` — ``online`` retained
@@ -132,7 +135,11 @@ def states(ctx: ServiceContext, info: SiteInfo, topics: Topics,
                         ONLINE if live else OFFLINE))
             values[name] = {
                 "energy": float(total_wh) / 1000.0 if n else None,
-                "energy_today": _kwh(tile["energy_today_wh"]),
+                # measured since local midnight: none yet today is 0 for a logger that has
+                # reported before (left unpublished, the retained value of yesterday stayed
+                # "today" after midnight until the first reading; a tester's finding)
+                "energy_today": _kwh(tile["energy_today_wh"]) if tile["energy_today_wh"]
+                is not None or not n else 0.0,
                 "power": tile["power_w"] if live else None,
                 "twin_energy_today": _kwh(tile["twin_energy_today_wh"]),
                 "twin_power": tile["twin_power_w"],

@@ -538,6 +538,35 @@ def test_home_assistant_power_goes_offline_past_its_age(
         w.close()
 
 
+def test_home_assistant_energy_today_is_zero_after_local_midnight(
+        service: tuple[httpx.Client, str]) -> None:
+    """A logger that reported last evening and not yet today: energy today is 0 from local
+    midnight. It was not published, so the retained value of yesterday stayed "today" until
+    the first reading of the new day (a tester's finding). The site's zone is chosen so that
+    local midnight has just passed (Etc/GMT±h), its readings at 23:00–23:05 local."""
+    c, prefix = service
+    now = dt.datetime.now(dt.UTC)
+    hours = (24 - now.hour) % 24  # local = UTC + hours: 00:MM now
+    zone = "Etc/GMT" + (f"-{hours}" if hours <= 14 else f"+{24 - hours}") if hours else "UTC"
+    site = f"midnight{uuid.uuid4().hex[:6]}"
+    r = c.put(f"/api/v1/sites/{site}", json=tehuantepec_elsewhere(c, site, timezone=zone),
+              headers={"Authorization": f"Bearer {ADMIN}"})
+    assert r.status_code == 201, r.text
+    evening = minute(-now.minute - 60)  # 23:00 local, yesterday
+    for k in (0, 5):
+        publish(f"{prefix}/{site}/fixed/state",
+                json.dumps({"ts": iso(evening + dt.timedelta(minutes=k)), "voltage_v": 25.0,
+                            "current_a": 20.0}))
+    w = Watcher(f"{prefix}/{site}/fixed/ha/#")
+    try:
+        w.wait(lambda m: m.topic == f"{prefix}/{site}/fixed/ha/energy" and m.payload != b"0.0000",
+               "yesterday's energy")
+        w.wait(lambda m: m.topic == f"{prefix}/{site}/fixed/ha/energy_today"
+               and m.payload == b"0.0000", "energy today reset to 0")
+    finally:
+        w.close()
+
+
 # ---------------------------------------------------------------- reconnection
 
 
