@@ -291,9 +291,14 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
             m_wh = float(table.energy_wh[(aid, 0)][p])
             t_wh = float(table.energy_wh[(aid, 1)][p])
             mt_wh = float(matched[aid][p])
-            arrays[n] = {"measured_wh": m_wh if m_n else None,
+            # measured: a reading in the period, or one bridged across it (a 15-min
+            # logger's 10:50–11:00 holds none, yet the totals counted its 100 Wh while the
+            # row said null; a tester's finding)
+            measured = bool(m_n) or m_wh != 0.0 or mt_wh != 0.0
+            arrays[n] = {"measured_wh": m_wh if measured else None,
                          "twin_wh": t_wh if t_n else None,
-                         "twin_matched_wh": mt_wh if m_n and t_n else None, "readings": m_n}
+                         "twin_matched_wh": mt_wh if measured and t_n else None,
+                         "readings": m_n}
             for key, value in (("measured_wh", m_wh), ("twin_wh", t_wh),
                                ("twin_matched_wh", mt_wh), ("readings", m_n),
                                ("twin_readings", t_n)):

@@ -131,6 +131,26 @@ def test_unaligned_range_and_out_of_order_posts(client: httpx.Client,
     assert rows[0]["arrays"]["fixed"]["measured_wh"] == pytest.approx(expected, rel=1e-6)
 
 
+def test_a_period_between_two_bridged_readings_has_its_energy(
+        client: httpx.Client, live_server: LiveServer) -> None:
+    """A 15-minute logger at 600 W; the hours of 10:50–11:05: the 10:50–11:00 row holds no
+    reading but lies inside the bridged 10:45–11:00 interval. It said null ("no readings")
+    while the totals counted its 100 Wh: the rows did not add up (a tester's finding)."""
+    day = "2023-09-21"
+    rd = [{"ts": f"{day}T{h}:00-06:00", "array": a, "power_w": 600.0}
+          for h in ("10:00", "10:15", "10:30", "10:45", "11:00", "11:15")
+          for a in ("tracker", "fixed")]
+    _post(client, live_server.write_token, rd)
+    data = client.get(f"{BASE}/energy", params={"start": f"{day}T10:50:00-06:00",
+                                                "end": f"{day}T11:05:00-06:00",
+                                                "interval": "hour"}).json()
+    first, second = (row["arrays"]["tracker"] for row in data["rows"])
+    assert first["readings"] == 0 and first["measured_wh"] == pytest.approx(100.0)
+    assert second["measured_wh"] == pytest.approx(50.0)
+    assert data["totals"]["arrays"]["tracker"]["measured_wh"] == pytest.approx(150.0)
+    assert data["rows"][0]["gain_pct"] == pytest.approx(0.0)
+
+
 def test_twin_energy_exists_for_past_days(client: httpx.Client) -> None:
     d0 = dt.datetime.now(TZ).date() - dt.timedelta(days=40)  # within HELIOTWIN_TWIN_HISTORY_DAYS
     day = [(d0 + dt.timedelta(days=k)).isoformat() for k in range(4)]
