@@ -109,16 +109,26 @@ class PointingModel:
     @classmethod
     def from_terms(cls, terms: Mapping[str, Any]) -> PointingModel:
         """The model of ``terms``: ``{name: value}`` or, as ``GET …/pointing-model`` answers
-        them, ``{name: {"value": v, "std": s}}`` (``std`` is ignored); a term not given is 0.
+        them, ``{name: {"value": v, "std": s}}`` (``std`` is ignored), or that whole answer
+        (its ``terms`` are read); a term not given is 0. The CLI's
+        ``--pointing-model-terms`` and the API's ``pointing_model_terms`` both come here (a
+        tester's whole answer was read by the CLI and refused over HTTP).
 
-        Raises ValueError naming the term for an unknown name or a value that is not a
-        finite number within ±:data:`MAX_TERM_DEG`.
+        Raises ValueError naming the term for an unknown name, a key of a term other than
+        ``value`` and ``std``, or a value that is not a finite number within
+        ±:data:`MAX_TERM_DEG`.
         """
+        if isinstance(terms.get("terms"), Mapping):
+            terms = terms["terms"]
         values: dict[str, float] = {}
         for name, given in terms.items():
             if name not in _ALL_TERMS:
                 raise ValueError(f"{name}: not a pointing-model term; known: "
                                  f"{', '.join(_ALL_TERMS)}")
+            extra = sorted(set(given) - {"value", "std"}) if isinstance(given, Mapping) else []
+            if extra:
+                raise ValueError(f"{name}: unknown key {extra[0]!r} (a term is a number of "
+                                 "degrees or {\"value\": degrees, \"std\": degrees})")
             raw = given.get("value") if isinstance(given, Mapping) else given
             if isinstance(raw, bool) or not isinstance(raw, (int, float)) or not (
                     math.isfinite(raw) and abs(raw) <= MAX_TERM_DEG):

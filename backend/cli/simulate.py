@@ -123,8 +123,8 @@ def parse_when(text: str, timezone: str, field: str) -> Any:
 
 
 def read_pointing_model_terms(text: str) -> dict[str, Any]:
-    """``--pointing-model-terms``: a JSON object, inline or in a file; a saved answer of
-    ``GET …/pointing-model`` gives its ``terms``."""
+    """``--pointing-model-terms``: a JSON object, inline or in a file (a saved answer of
+    ``GET …/pointing-model`` too: ``sim.pointing_model.PointingModel.from_terms``)."""
     source = text
     if text.lstrip()[:1] in ("[", '"') or text.strip() in ("", "null", "true", "false"):
         raise InputError(f"--pointing-model-terms: {text!r} is not a JSON object of terms "
@@ -139,8 +139,6 @@ def read_pointing_model_terms(text: str) -> dict[str, Any]:
         value = json.loads(source)
     except json.JSONDecodeError as exc:
         raise InputError(f"--pointing-model-terms: not JSON ({exc})") from None
-    if isinstance(value, dict) and isinstance(value.get("terms"), dict):
-        value = value["terms"]
     if not isinstance(value, dict):
         raise InputError("--pointing-model-terms: expected a JSON object of terms")
     return value

@@ -162,10 +162,19 @@ def test_open_loop_model_takes_the_pointing_model_answers_terms(client: httpx.Cl
     assert r.json()["pointing_error_max_mrad"] < 3.0  # measured 2.69 (the dead band's)
     run = client.get(f"/api/v1/simulations/{r.json()['run_id']}").json()
     assert run["params"]["pointing_model_terms"]["azimuth_zero_deg"] == 2.0
+    # the whole answer, as the CLI's --pointing-model-terms takes it (a tester's was a 422
+    # dumping the schema's union over HTTP)
+    whole = {"site_id": "tehuantepec", "n_observations": 380,
+             "terms": {"azimuth_zero_deg": {"value": 2.0, "std": 0.01}}}
+    r = client.post("/api/v1/simulations", json={**body, "pointing_model_terms": whole})
+    assert r.status_code == 200, r.text
+    assert r.json()["pointing_error_max_mrad"] < 3.0
     for change in ({"controller": "hybrid"}, {"pointing_model_terms": {"yaw_deg": 1.0}},
-                   {"pointing_model_terms": {"azimuth_zero_deg": 45.0}}):
+                   {"pointing_model_terms": {"azimuth_zero_deg": 45.0}},
+                   {"pointing_model_terms": {"azimuth_zero_deg": {"value": 2, "foo": 1}}}):
         bad = client.post("/api/v1/simulations", json={**body, **change})
         assert bad.status_code == 422 and "pointing_model_terms" in bad.text, bad.text
+    assert "unknown key 'foo'" in bad.text
 
 
 def test_the_ideal_controller_refuses_disturbances_naming_the_field(

@@ -57,11 +57,12 @@ class _SimulationBase(BaseModel):
         examples=["open_loop_model"])   # the example body's terms go with this controller
     receiver: Literal[RECEIVERS] = Field(  # type: ignore[valid-type]
         "flat", description="flat PV, or a CPV receiver with an acceptance angle")
-    pointing_model_terms: dict[str, float | dict[str, float | None]] | None = Field(
-        None, max_length=16,
+    pointing_model_terms: dict[str, Any] | None = Field(
+        None, max_length=32,
         description="open_loop_model only: the mount terms its commands go through — the "
-                    "'terms' of GET /api/v1/sites/{site_id}/pointing-model as they come, or "
-                    "{name: degrees}; default a perfect mount",
+                    "'terms' of GET /api/v1/sites/{site_id}/pointing-model as they come, "
+                    "that whole answer, or {name: degrees}; default a perfect mount "
+                    "(sim.pointing_model.PointingModel.from_terms checks them)",
         examples=[{"azimuth_zero_deg": {"value": 1.5, "std": 0.001}}])
     background: bool = Field(False, description="answer 202 at once and run in the background")
 
