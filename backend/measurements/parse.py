@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import re
 import time
 from collections import Counter
@@ -580,10 +581,14 @@ def parse_json_batch(
     """Validate a JSON body: ``{"readings": [{ts, array, voltage_v, current_a, ...}]}``, or
     emonCMS-style rows ``[[unix_s, array, voltage_v, current_a, power_w], ...]``."""
     errors = _Errors(csv_lines=False)
-    try:  # a byte order mark (Windows tools write one) is not JSON but no reason to refuse
-        doc = orjson.loads(body.removeprefix(b"\xef\xbb\xbf"))
+    body = body.removeprefix(b"\xef\xbb\xbf")  # a byte order mark (Windows tools write
+    try:  # one) is not JSON but no reason to refuse
+        doc = orjson.loads(body)
     except orjson.JSONDecodeError as exc:
-        raise body_error(422, None, "json_invalid", f"invalid JSON: {exc}") from exc
+        try:  # NaN, Infinity or 1e400: Python reads them, and the rows' check names each
+            doc = json.loads(body)  # (orjson's "line 1 column 76" named no row or field)
+        except (ValueError, RecursionError):
+            raise body_error(422, None, "json_invalid", f"invalid JSON: {exc}") from exc
     if isinstance(doc, list):
         _check_rows(len(doc), limits)
         columns = _emoncms_columns(doc, errors)
