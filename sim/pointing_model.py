@@ -80,6 +80,15 @@ OUTLIER_SIGMAS = 5.0
 SIGNIFICANCE_SIGMAS = 3.0
 #: … and this size [°] (0.005° ≈ 0.09 mrad: below any tracker camera's precision).
 MIN_TERM_DEG = 0.005
+#: The least robust sigma of the outlier rule [mrad]: :data:`MIN_TERM_DEG`, below any tracker
+#: camera's precision. Without it noise-free readings (σ ≈ 0) made 38 of 138 observations
+#: "outliers" at 6e-5 mrad from the model (a tester's finding).
+MIN_SIGMA_MRAD = float(np.radians(MIN_TERM_DEG) * 1000.0)
+#: A term is determined when its standard error is under this [°]: 0.5 mrad, the tracker
+#: camera's pointing target (issue 24). Ten observations over 18 minutes left every term
+#: uncorrelated yet uncertain by 0.24–0.33°, larger than the terms, and the dashboard said
+#: "separated by the data: yes" (a tester's finding); a day of them, 0.001°.
+MAX_DETERMINED_STD_DEG = float(np.degrees(0.5e-3))
 #: Fewer observations than this cannot fit the four core terms with any redundancy.
 MIN_OBSERVATIONS = 10
 #: The robust pass that finds the outliers runs on at most this many observations, evenly
@@ -335,13 +344,15 @@ def fit_pointing_model_to_sun(
     Robust non-linear least squares (:func:`scipy.optimize.least_squares`,
     ``soft_l1`` loss with a 1 mrad scale, on at most :data:`ROBUST_SAMPLE` evenly spaced
     observations): observations whose residual exceeds
-    :data:`OUTLIER_SIGMAS` robust sigmas (1.4826 × the median absolute residual)
+    :data:`OUTLIER_SIGMAS` robust sigmas (1.4826 × the median absolute residual, at
+    least :data:`MIN_SIGMA_MRAD`)
     are outliers (glints, a wrong blob); the reported terms are then a plain
     least-squares fit to the inliers, so the standard errors from the Jacobian
     (scaled by the residual variance) hold. ``terms=None`` fits
     :data:`CORE_TERMS` plus those of :data:`OPTIONAL_TERMS` the data support
     (:func:`_select_terms`); ``identifiable`` then names the fitted terms that no
-    other fitted term correlates with beyond :data:`CORRELATION_LIMIT`.
+    other fitted term correlates with beyond :data:`CORRELATION_LIMIT` and whose standard
+    error is at most :data:`MAX_DETERMINED_STD_DEG`.
     """
     az, el, ox, oy, saz, sel = (np.asarray(v, dtype=float).ravel() for v in (
         azimuth_deg, elevation_deg, sun_offset_x_mrad, sun_offset_y_mrad,
@@ -361,7 +372,7 @@ def fit_pointing_model_to_sun(
         np.isin(np.arange(n), np.linspace(0, n - 1, ROBUST_SAMPLE).round().astype(np.int64)))
     p = _solve(core, sample, np.zeros(len(core)), "soft_l1", f_scale=1.0)
     res = _residuals(p, core, obs)
-    sigma = max(1.4826 * float(np.median(np.abs(res))), 1e-3)
+    sigma = max(1.4826 * float(np.median(np.abs(res))), MIN_SIGMA_MRAD)
     outlier = np.hypot(res[:n], res[n:]) > OUTLIER_SIGMAS * sigma
     inliers = obs.subset(~outlier)
 
@@ -379,7 +390,8 @@ def fit_pointing_model_to_sun(
     model = PointingModel(**dict(zip(fit_terms, (float(v) for v in p), strict=True)))
     return PointingFit(
         model=model, std=std,
-        identifiable=tuple(t for t in fit_terms if t not in not_separated),
+        identifiable=tuple(t for t in fit_terms if t not in not_separated
+                           and std[t] <= MAX_DETERMINED_STD_DEG),
         correlated=tuple(correlated), outlier=outlier,
         residual_rms_mrad=float(np.sqrt(np.mean(res**2))), n_observations=n,
         fitted_terms=fit_terms)

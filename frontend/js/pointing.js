@@ -37,7 +37,8 @@ export function termsTable(body) {
     const c = corr.get(name);
     const other = c ? c.terms.find((x) => x !== name) : null;
     const sep = body.identifiable.includes(name) ? "yes"
-      : c ? `no: correlates with ${TERM_WORDS[other] || other} (r = ${num(c.correlation, 2)})` : "no";
+      : c ? `no: correlates with ${TERM_WORDS[other] || other} (r = ${num(c.correlation, 2)})`
+        : t.std !== null ? `no: ± ${num(t.std * MRAD_PER_DEG, 2)} mrad, not determined` : "no";
     return h("tr", { "data-testid": "pointing-term", "data-term": name },
       h("td", { title: name }, TERM_WORDS[name] || name, " ", h("code", { class: "muted" }, name)),
       h("td", {}, num(t.value, 4)), h("td", {}, t.std === null ? "—" : num(t.std, 4)),

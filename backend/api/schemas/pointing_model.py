@@ -31,7 +31,8 @@ class PointingModelRead(BaseModel):
                     "pedestal_tilt_east_deg, and collimation_deg / nonperpendicularity_deg "
                     "where the data's sky coverage separates them")
     identifiable: list[str] = Field(description="terms no other term correlates with beyond "
-                                                "the limit")
+                                                "the limit and whose standard error is at "
+                                                "most 0.5 mrad (determined by the data)")
     correlated: list[CorrelationRead]
 
 
