@@ -57,7 +57,7 @@ __all__ = ["FLAGS", "SENSOR_SKIES", "Plane", "decompose", "fixed_clear_sky", "fi
 FLAGS = {
     "night": 1,  # sun below 2° or clear-sky POA below 20 W m⁻²
     "missing": 2,  # no reading (NaN)
-    "zero": 4,  # ≤ 0.5 % of STC power while the clear sky gives > 200 W m⁻²
+    "zero": 4,  # ≤ 0.5 % of STC power × clear-sky POA / 1000 while that POA is > 200 W m⁻²
     "stale": 8,  # the same value ≥ 5 readings (a coarse logger: an hour) running (_stale)
     "saturated": 16,  # at the logger's saturation power
     "above_clear_sky": 32,  # inverted POA > 1.25 × clear-sky POA + 50 W m⁻²
@@ -194,7 +194,11 @@ def invert_poa(power_w: np.ndarray, clear: pd.DataFrame, array: pv.ArrayConfig,
     beam_clear = np.divide(clear["beam_clear"].to_numpy(), poa_clear,
                            out=np.zeros(n), where=poa_clear > 0)
     stc_w = float(pv.cec_module_parameters(array.module)["STC"]) * array.modules
-    flag = _reading_flags(p, clear, 0.005 * stc_w)
+    # "zero": at most 0.5 % of what the array makes at the clear sky's POA (its rating scaled
+    # by POA / 1000 W m⁻²): a share of the rating alone was 1.5 % of Reykjavík's December
+    # clear sky, and a dark overcast day's 4.2 W on 820 W was refused as a tripped breaker
+    # (a tester's finding); a breaker, kW or hours off still read far under it
+    flag = _reading_flags(p, clear, 0.005 * stc_w * poa_clear / 1000.0)
     if saturation_power_w is not None:
         flag[np.isfinite(p) & (p >= 0.995 * saturation_power_w)] |= FLAGS["saturated"]
     todo = flag == 0
@@ -221,7 +225,8 @@ def invert_poa(power_w: np.ndarray, clear: pd.DataFrame, array: pv.ArrayConfig,
     return pd.DataFrame({"poa_global": g, "flag": flag}, index=clear.index)
 
 
-def _reading_flags(values: np.ndarray, clear: pd.DataFrame, zero_at: float) -> np.ndarray:
+def _reading_flags(values: np.ndarray, clear: pd.DataFrame,
+                   zero_at: float | np.ndarray) -> np.ndarray:
     """:data:`FLAGS` a reading (power, or a measured irradiance) gets before any model:
     night (sun below 2° or clear-sky POA below 20 W m⁻²), missing (NaN), zero (≤
     ``zero_at`` while the clear sky gives > 200 W m⁻²), stale (:func:`_stale`)."""
@@ -545,14 +550,24 @@ def measured_sky(site: Site, times: pd.DatetimeIndex, valid: np.ndarray,
     return (share >= MIN_SENSOR_SHARE)[day_id]
 
 
+def measurable(sky: pd.DataFrame) -> np.ndarray:
+    """The minutes of a frame of :func:`weather_from_fixed`'s sensor columns whose sky a
+    reading can give: not :data:`FLAGS` ``night`` (the sun at 2° or more and a clear-sky
+    POA over 20 W m⁻²). The one daylight of a day's sky source, its share of valid minutes
+    and its refusals: counting the minutes with the sun under 2° (a clear-sky POA over
+    20 W m⁻² all the same, on a steep plane), which no reading can ever make valid, put
+    Reykjavík's December days — the sun under 4.5° at noon — on the clear sky, and a dark
+    one was ``sky_unusable`` (a tester's finding)."""
+    return (sky["flag"].to_numpy().astype(np.int64) & FLAGS["night"]) == 0
+
+
 def main_sky_source(sky: pd.DataFrame) -> str:
-    """What most of the daylight minutes (clear-sky ``poa_clear`` > 20 W m⁻²) of a frame of
-    :func:`weather_from_fixed`'s sensor columns rest on: the most common ``sky_source``
+    """What most of the :func:`measurable` minutes of a frame of :func:`weather_from_fixed`'s
+    sensor columns rest on: the most common ``sky_source``
     (``"sensor_poa"``, ``"sensor_ghi"``, ``"fixed_array"`` or ``"clear_sky"``);
-    ``"clear_sky"`` without daylight. The one rule for a day's source: the diagnosis reports
-    it and widens the day's band by it."""
-    daylight = sky["poa_clear"].to_numpy() > 20.0
-    src = sky["sky_source"].to_numpy()[daylight]
+    ``"clear_sky"`` without such minutes. The one rule for a day's source: the diagnosis
+    reports it and widens the day's band by it."""
+    src = sky["sky_source"].to_numpy()[measurable(sky)]
     if src.size == 0:
         return "clear_sky"
     names, counts = np.unique(src, return_counts=True)

@@ -325,10 +325,10 @@ def sky_clock(day: pd.DataFrame) -> dict[str, float] | None:
 #: Why the readings the sky comes from were refused, by flag (sim.sky_sensor.FLAGS), for
 #: ``sky_unusable``'s detail: what a logger or a site does to make them so.
 UNUSABLE_CAUSES = {
-    "zero": "0 W or nearly (at most 0.5 % of the array's rating) while the clear sky gave "
-            "over 200 W m⁻²: a tripped breaker or inverter, snow on the modules, power sent "
-            "in kW where W are asked, or the logger's clock or UTC offset hours off (its "
-            "power then comes at night)",
+    "zero": "0 W or nearly (at most 0.5 % of what the array makes under the clear sky) "
+            "while the clear sky gave over 200 W m⁻²: a tripped breaker or inverter, snow on "
+            "the modules, power sent in kW where W are asked, or the logger's clock or UTC "
+            "offset hours off (its power then comes at night)",
     "above_clear_sky": "above what a clear sky allows the array: power in the wrong unit, "
                        "more modules than the site's config says, or the logger's clock or "
                        "UTC offset hours off",
@@ -350,7 +350,7 @@ def sky_unusable(day: pd.DataFrame) -> dict[str, Any] | None:
     and no finding (a tester's finding)."""
     if sky_sensor.main_sky_source(day) != "clear_sky":
         return None
-    daylight = day["poa_clear"].to_numpy() > 20.0
+    daylight = sky_sensor.measurable(day)
     flag = day["flag"].to_numpy().astype(np.int64)
     read = daylight & ((flag & sky_sensor.FLAGS["missing"]) == 0)
     if not daylight.any() or read.sum() < 0.5 * daylight.sum():

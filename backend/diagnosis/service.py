@@ -92,8 +92,10 @@ MAX_DAYS = 400
 #: gate read where the fixed plane sees the beam, ``beam_seen``; 27: ``soiling`` over a
 #: week of days at least, faults.SOILING_MIN_DAYS; 28: the blind beam's spread on a minute
 #: without a reading, a day without a seen minute and a run without one; u at most 1;
-#: 29: the fixed array's power before a GHI pyranometer, sim.sky_sensor.weather_from_fixed).
-CACHE_VERSION = 29
+#: 29: the fixed array's power before a GHI pyranometer, sim.sky_sensor.weather_from_fixed;
+#: 30: a day's sky source and valid share over the minutes a reading can give a sky,
+#: sim.sky_sensor.measurable).
+CACHE_VERSION = 30
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
@@ -157,7 +159,7 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     t0, t1 = day_s
     ts = e.index.as_unit("s").asi8
     day = ts < t1
-    daylight = e["poa_clear"].to_numpy()[day] > 20.0
+    daylight = sky_sensor.measurable(e)[day]  # the minutes a reading can give a sky
     if elapsed_min is not None:  # the minutes still to come are not missing readings
         daylight[elapsed_min:] = False
     valid = e["valid"].to_numpy(bool)[day]

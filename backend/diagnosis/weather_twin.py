@@ -197,7 +197,7 @@ def weather_twin_columns(ctx: ServiceContext, info: SiteInfo, array: str, t0: in
     keep = (ts >= t0) & (ts < t1)
     e = e[keep]
     power = e[f"{kind}_power_w"].to_numpy()
-    daylight = e["poa_clear"].to_numpy() > 20.0
+    daylight = sky_sensor.measurable(e)
     valid = e["valid"].to_numpy(bool)
     share = float(valid[daylight].mean()) if daylight.any() else 0.0
     cols: dict[str, list[Any]] = {

@@ -226,6 +226,7 @@ def test_the_band_widens_by_the_instrument_the_days_sky_rests_on() -> None:
     never disagree; the night's minutes do not count."""
     def day(sources: list[str], night: int = 0) -> pd.DataFrame:
         return pd.DataFrame({"poa_clear": [0.0] * night + [500.0] * len(sources),
+                             "flag": [sky_sensor.FLAGS["night"]] * night + [0] * len(sources),
                              "sky_source": ["sensor_ghi"] * night + sources})
 
     assert band_uncertainty(day(["sensor_ghi"] * 6 + ["fixed_array"] * 4)) == GHI_UNCERTAINTY
@@ -342,7 +343,8 @@ def test_the_blind_beams_uncertainty_is_its_minutes_correlated_sum() -> None:
     lag = np.abs(np.subtract.outer(np.arange(1440), np.arange(1440)))
     want = np.sqrt(a @ np.exp(-lag / sky_sensor.BEAM_PERSISTENCE_MIN) @ a) / 60.0
     day = pd.DataFrame({"tracker_blind_sd_w": a, "tracker_power_w": np.full(1440, 300.0),
-                        "poa_clear": np.full(1440, 500.0), "sky_source": "fixed_array"})
+                        "poa_clear": np.full(1440, 500.0), "flag": 0,
+                        "sky_source": "fixed_array"})
     assert blind_beam_sd_wh(day) == pytest.approx(want, rel=1e-9)
     assert band_uncertainty(day) == pytest.approx(
         np.hypot(INVERSION_UNCERTAINTY, 2.0 * want / (300.0 * 24.0)), rel=1e-9)

@@ -201,8 +201,9 @@ def test_times_in_the_wrong_zone_are_refused(client: httpx.Client,
     """The Wettermast frames' names read as UTC (every time an hour late) fitted a camera
     to 0.15° RMS, stored, with its optical centre ~110 px (≈ 10°) from the image circle's
     centre; the right times put it 1.5° away (MAX_CENTRE_OFFSET_DEG = 4°). Frames padded
-    with a grey or coloured border (grey and blue: tests/vision/test_fov.py) had no image circle, the check was skipped and the
-    wrong camera stored (a tester's finding on Wolf frames: 13.9° RMS on held-out labels)."""
+    with a grey or coloured border (both: tests/vision/test_fov.py) had no image circle, the
+    check was skipped and the wrong camera stored (a tester's finding on Wolf frames: 13.9°
+    RMS on held-out labels)."""
     rows = _real("Wettermast")
     late = [(dt.datetime.fromisoformat(r["utc_time"].replace("Z", "+00:00"))
              + dt.timedelta(hours=1)).isoformat() for r in rows]

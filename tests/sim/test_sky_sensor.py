@@ -174,3 +174,31 @@ def test_a_coarse_loggers_held_values_are_not_a_frozen_logger(cadence_min: int) 
         got, ref = (x["tracker_power_w"].to_numpy()[sl].sum() for x in (e, full))
         if cadence_min == 1:
             assert abs(got / ref - 1) < 0.01, (k, d.kinds[k], got / ref)
+
+
+def test_a_dark_winter_day_far_north_is_a_measured_sky_and_a_dead_array_is_not() -> None:
+    """Reykjavík (64.1° N), 1 December, a fixed plane at 60°: its clear-sky POA peaks at
+    357 W m⁻², so "zero" as 0.5 % of the rating (4.1 W of 820 W) was 1.5 % of the clear
+    sky, and a dark overcast day at 1.5 % of it was refused minute by minute — the day's sky
+    fell back to the clear sky and the diagnosis called it sky_unusable, "a tripped breaker"
+    (a tester's finding). Zero is now 0.5 % of what the array makes under the clear sky;
+    the measurable minutes are those with the sun at 2° or more (sky_sensor.measurable)."""
+    import dataclasses
+
+    from sim import twin
+
+    base = load_site("tehuantepec")
+    site = dataclasses.replace(base, latitude=64.13, longitude=-21.9, altitude=20.0,
+                               timezone="Atlantic/Reykjavik")
+    site = dataclasses.replace(site, arrays={**site.arrays, "fixed": dataclasses.replace(
+        site.arrays["fixed"], surface_tilt=60.0, surface_azimuth=180.0)})
+    t0 = pd.Timestamp("2024-12-01", tz=site.timezone)
+    t1 = t0 + pd.Timedelta(days=1)
+    clear_w = twin.simulate(site, t0, t1).series["fixed_power_w"].to_numpy()
+    dark = sky_sensor.weather_aware_twin(site, t0, t1, 0.015 * clear_w)
+    assert sky_sensor.main_sky_source(dark) == "fixed_array"
+    assert not ((dark["flag"].to_numpy().astype(int) & sky_sensor.FLAGS["zero"]) > 0).any()
+    dead = sky_sensor.weather_aware_twin(site, t0, t1, np.zeros_like(clear_w))
+    assert sky_sensor.main_sky_source(dead) == "clear_sky"
+    zero = (dead["flag"].to_numpy().astype(int) & sky_sensor.FLAGS["zero"]) > 0
+    assert zero.sum() > 0.5 * sky_sensor.measurable(dead).sum()
