@@ -385,9 +385,14 @@ class AlertSettings(_Group):
     fault_confidence_min: float = Field(
         0.5, ge=0, le=1, description="Least confidence of a diagnosis fault that raises a "
                                      "`fault` alert.")
+    # 21: the slowest soiling the diagnosis names (0.1 %/day, SOILING_MIN_PCT_PER_DAY) loses
+    # its 2 % (SOILING_MIN_TOTAL) over 20 days; over 7 days an alert needed 0.33 %/day and
+    # a 0.3 %/day soiling the diagnosis found was never alerted (a tester's finding)
     diagnosis_days: int = Field(
-        7, ge=0, le=400, description="Complete local days up to yesterday diagnosed for "
-                                     "fault and PR alerts (0: only `logger_silent`).")
+        21, ge=0, le=400, description="Complete local days up to yesterday diagnosed for "
+                                      "fault and PR alerts (0: only `logger_silent`; 21: the "
+                                      "slowest soiling the diagnosis names, 0.1 %/day, "
+                                      "reaches its 2 % in 20 days).")
     webhook_url: HttpUrl | None = Field(
         None, description="`http(s)://…` that each alert raised, acknowledged or cleared is "
                           "POSTed to as JSON; unset: alerts are only stored and shown.")

@@ -192,6 +192,18 @@ def test_every_fault_kind_has_its_words() -> None:
     assert rules.title("logger_silent", None) == "Logger silent"
 
 
+def test_the_alert_window_holds_the_slowest_soiling_the_diagnosis_names() -> None:
+    """A tester's 0.3 %/day soiling was found by the diagnosis over three weeks and never
+    alerted: the alert diagnosed 7 days, where a decline must lose 2 % (0.33 %/day at the
+    least). The default window reaches the diagnosis' own floor, 0.1 %/day."""
+    from backend.diagnosis import faults
+    from backend.settings import AlertSettings
+
+    days = AlertSettings().diagnosis_days
+    assert (days - 1) * faults.SOILING_MIN_PCT_PER_DAY >= 100 * faults.SOILING_MIN_TOTAL
+    assert days - 1 >= faults.SOILING_MIN_DAYS
+
+
 def test_diagnosis_rule_latest_day_faults_and_the_low_pr_run() -> None:
     stuck = {"kind": "stuck", "confidence": 0.9, "since": "2026-11-28", "magnitude": 35.0,
              "unit": "deg", "detail": "stuck at azimuth 181°, elevation 35°"}
