@@ -19,8 +19,11 @@ function shortDate(iso) {
 export function faultLines(days) {
   const last = new Map();
   for (const d of days) for (const f of d.faults) last.set(`${f.kind}|${f.since}`, f);
-  return [...last.values()].map((f) =>
-    `${f.title} since ${shortDate(f.since)}: ${f.detail}; confidence ${num(f.confidence, 2)}`);
+  // under 0.5 a finding is a possibility, not a fault (the alerts' default threshold,
+  // HELIOTWIN_ALERT_FAULT_CONFIDENCE_MIN): a healthy broken-cloud day listed "azimuth
+  // offset … confidence 0.48" as plainly as a stuck tracker (a tester's finding)
+  return [...last.values()].map((f) => `${f.confidence < 0.5 ? "possibly " : ""}${f.title} `
+    + `since ${shortDate(f.since)}: ${f.detail}; confidence ${num(f.confidence, 2)}`);
 }
 
 /** The mount faults the tracker camera's sun offsets show (GET …/diagnosis `mount`): an
