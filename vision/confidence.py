@@ -242,9 +242,11 @@ _REASONS = {
     "glare": "no glare around the brightest region and too small to be one: bright cloud",
     "saturated": "brightest region is not saturated (peak {peak:.0f}): sun hidden or overcast",
     "contrast": "too little contrast ({contrast:.0f} grey levels above the sky): overcast",
-    "too_small": "brightest region is {radius_deg:.2f}° in radius, smaller than a sun's core",
-    "small_no_glare": "brightest region is {radius_deg:.2f}° in radius, smaller than a sun's "
-                      "core, without the sun's glare around it: cloud highlight",
+    "too_small": "brightest region is {radius_deg:.2f}° in radius, under the "
+                 f"{_SMALLEST_DEG:g}° of a saturated sun's core with its glare",
+    "small_no_glare": "brightest region is {radius_deg:.2f}° in radius, under the "
+                      f"{_SMALLEST_DEG:g}° of a saturated sun's core with its glare, and "
+                      "without the glare falling off around it: cloud highlight",
     "too_large": "brightest region is {radius_deg:.1f}° in radius, wider than a sun's glare",
     "runner_up": "two regions look equally like the sun: ambiguous",
     "coherence": "brightness around the brightest region is not radially symmetric "

@@ -107,6 +107,12 @@ def test_a_sun_where_the_ephemeris_puts_it_keeps_its_blind_confidence() -> None:
     assert conf.agreeing_probability(known, 0.2) == pytest.approx(blind)
     unclear = conf.features(0.6, 0.3, 1.0, 255.0, 148.0, 2.0, 0.0, 0.6, 12.0)
     assert conf.agreeing_probability(unclear, 12.0) == conf.probability(unclear)
+    # a tester's hazy sun: "0.31° in radius, smaller than a sun's core" read as contradicting
+    # the 0.27° solar radius; the bound is the saturated core with its glare
+    small = conf.features(1.0, 0.3, 1.0, 255.0, 100.0, 0.31, 0.0, 0.6, None)
+    words = conf.reason(small, {"radius_deg": 0.31})
+    assert words.startswith("brightest region is 0.31° in radius, under the 0.5° of a "
+                            "saturated sun's core with its glare"), words
 
 
 @pytest.mark.parametrize("split", ["development", "heldout"])
