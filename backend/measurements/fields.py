@@ -50,13 +50,14 @@ SENSOR_FIELDS = (
     SensorField("elevation_deg", -90.0, 90.0,
                 "the tracker's measured elevation joint angle (encoder): elevation of the "
                 "collector's normal above the horizon [°]"),
-    # issue 25: the sun's offset in the tracker camera (docs/pointing-model.md); the limits
-    # are the half fields of seed 000's narrow camera, 640 x 480 px at 67° horizontal:
-    # 33.5° = 585 mrad across, atan(0.75·tan 33.5°) = 26.4° = 461 mrad up.
-    SensorField("sun_offset_x_mrad", -585.0, 585.0,
+    # issue 25: the sun's offset in the tracker camera (docs/pointing-model.md). The limit is
+    # the angle itself: 1000·atan2(·, s·n) of a sun in front of the camera (s·n > 0) is under
+    # 90° = 1,570.8 mrad. Seed 000's camera's half fields (585 / 461 mrad at 67°) refused a
+    # wider camera's sun at 600 mrad, found at confidence 1.0 (a tester's finding).
+    SensorField("sun_offset_x_mrad", -1570.8, 1570.8,
                 "the sun's offset in the tracker camera toward increasing azimuth, "
                 "1000·atan2(s·h, s·n) [mrad]"),
-    SensorField("sun_offset_y_mrad", -461.0, 461.0,
+    SensorField("sun_offset_y_mrad", -1570.8, 1570.8,
                 "the sun's offset in the tracker camera toward increasing elevation, "
                 "1000·atan2(s·u, s·n) [mrad]"),
     # issue 27: the wind speed cools the cells (SAPM cell temperature, King et al. 2004
