@@ -302,6 +302,11 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
         cands = [c for c in cands if not conf.smaller_than_the_disc(
             c.area, *_local_px_per_deg(model, c.cx, c.cy))]
         if not cands:
+            if peak < _SATURATED:  # the rule's premise, a sun clipped to the top, is not met
+                return (f"the brightest region (peak {peak:.0f} of 255) is not clipped and, "
+                        "at its top, smaller than the solar disc: a sun the exposure or a "
+                        "filter keeps under the sensor's top is not read (the detector needs "
+                        "the sun's disc clipped; docs/validation-vision.md), or a glint")
             return ("every bright region is smaller than the solar disc where it lies "
                     "(a glint or a speck, not the sun)")
     # after that rule: a speck it refused took a slot of the few scored below (a reviewer's

@@ -116,3 +116,21 @@ def test_the_closed_form_scale_is_the_projections_jacobian(projection: str,
         x, y = cam.direction_to_pixel(d)
         got = cam.local_px_per_deg(float(x), float(y))
         np.testing.assert_allclose(got, want, rtol=1e-5)
+
+
+def test_an_unclipped_sun_is_refused_saying_so() -> None:
+    """A tester's tracker camera behind a filter: the sun's disc peaks at 180 of 255, limb
+    darkened; its top is smaller than the disc and it was refused as "every bright region is
+    smaller than the solar disc (a glint or a speck)", while the region is the disc. The
+    detector needs the disc clipped (the rule's premise): the refusal says that now."""
+    cam = PinholeCamera(2048, 1536, fov_deg=10.0)
+    img = np.full((1536, 2048), 40, np.uint8)
+    yy, xx = np.mgrid[0:1536, 0:2048]
+    r_px = SUN_RADIUS_DEG * 2048 / 10.0  # ≈ 54 px
+    rho = np.hypot(xx - 1100.0, yy - 700.0) / r_px
+    mu = np.sqrt(np.clip(1.0 - rho**2, 0.0, 1.0))
+    img = np.where(rho < 1.0, 40 + 140 * (0.4 + 0.6 * mu), img).astype(np.uint8)  # peak 180
+    d = detect.detect_robust(img, camera=cam)
+    assert not d.sun_found
+    assert d.reason is not None and "not clipped" in d.reason and "peak 180" in d.reason, \
+        d.reason
