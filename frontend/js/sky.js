@@ -121,6 +121,7 @@ async function cameraParams(form) {
 }
 
 function placeParams(form) {
+  if ($("sky-place").value === "calibration") return; // the service takes the calibration's
   if ($("sky-place").value === "site") {
     form.append("site_id", st.site.site_id);
     return;
@@ -547,6 +548,13 @@ export function init(state) {
     // a stored calibration is the camera: its parameters replace the ones typed here
     const stored = Boolean($("sky-calibration").value);
     $("sky-camera").disabled = stored;
+    // its place is the one it was fitted at: after a reload the place went back to the
+    // selected site, and its own frames read 108–110° off (a tester's finding)
+    const place = $("sky-place");
+    place.querySelector('option[value="calibration"]').disabled = !stored;
+    if (stored) place.value = "calibration";
+    else if (place.value === "calibration") place.value = "site";
+    $("sky-coords").hidden = place.value !== "coords";
     for (const el of document.querySelectorAll(".cam-params input, .cam-params select")) el.disabled = stored;
   });
   $("sky-form").addEventListener("submit", detectAll);

@@ -71,6 +71,20 @@ def test_named_calibration_held_out_evaluation_and_delete(page, server, heliotwi
     assert m, text
     assert float(m.group(1)) < 0.4  # measured 0.16° RMS (worst 0.21°) on the two held out
     assert text.count("held out") == 2 and text.count("fitted on") == 1
+    # picked after a reload, the calibration's own place is the ephemeris' (the place went
+    # back to the selected site, Tehuantepec: its own frames read 108–110° off; a tester's
+    # finding)
+    cal_id = page.locator("#sky-calibration").input_value()
+    page.reload()
+    page.wait_for_function("id => [...document.querySelectorAll('#sky-calibration option')]"
+                           ".some((o) => o.value === id)", arg=cal_id)
+    page.select_option("#sky-calibration", cal_id)
+    assert page.input_value("#sky-place") == "calibration"
+    page.set_input_files("#sky-files", [str(f) for f in held + fit[:1]])
+    page.click("#sky-evaluate")
+    card = page.wait_for_selector("[data-testid=calibration-evaluation]", timeout=60_000)
+    m = re.search(r"Held-out frames: 2, error RMS ([0-9.]+)°", card.text_content())
+    assert m and float(m.group(1)) < 0.4, card.text_content()
     page.click("#sky-detect")
     page.wait_for_selector("[data-testid=sky-result] >> nth=2", timeout=60_000)
     page.wait_for_function("() => +document.getElementById('chart-sky-error').dataset.points > 0")
@@ -88,6 +102,8 @@ def test_named_calibration_held_out_evaluation_and_delete(page, server, heliotwi
     assert "Wettermast roof" not in page.text_content("#sky-calibration")
 
     page.select_option("#sky-calibration", "")
+    assert page.input_value("#sky-place") == "site"  # the calibration's place went with it
+    page.select_option("#sky-place", "coords")
     page.set_input_files("#sky-files", [str(held[0])])
     page.fill('.cam-params[data-camera="fisheye"] [name="px_per_deg"]', "11.7")
     page.click("#sky-detect")
