@@ -100,7 +100,10 @@ async function load(state) {
   list.replaceChildren(...mount.map((t) => h("li", { "data-testid": "diag-mount-fault" }, t)),
     ...(lines.length ? lines.map((t) => h("li", { "data-testid": "diag-fault" }, t))
       : [h("li", { class: "muted", "data-testid": "diag-none" },
-        mount.length ? "No fault found from the power in this range." : "No fault found in this range.")]),
+        // a site that never sent a reading was "no fault found" (a tester's finding)
+        !body.days.some((d) => d.tracker.measured_wh !== null || d.fixed.measured_wh !== null)
+          ? "No readings in this range: nothing measured to diagnose."
+          : mount.length ? "No fault found from the power in this range." : "No fault found in this range.")]),
     ...(body.mount && !mount.length ? [h("li", { class: "muted", "data-testid": "diag-mount-none" },
       `Mount: no significant term in ${body.mount.n_observations} camera observations since ${shortDate(body.mount.since)} (residual ${num(body.mount.residual_rms_mrad, 2)} mrad RMS).`)] : []),
     h("li", { class: "muted", "data-testid": "diag-sky" }, skyLine(body.days)));

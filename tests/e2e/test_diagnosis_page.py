@@ -195,3 +195,18 @@ def test_the_panel_follows_the_site_picker_and_an_edited_address(page, server) -
         page.evaluate(f"() => {{ location.hash = '#overview?site={site}&day={day}'; }}")
     assert page.input_value("#diag-end") == (day + dt.timedelta(days=1)).isoformat()
     assert page.console_errors == []
+
+
+def test_a_range_without_readings_says_there_is_nothing_to_diagnose(page, server) -> None:
+    """A site that never sent a reading (here: a range long before the demo logger's) said
+    "No fault found in this range" beside expected-gain bars (a tester's finding)."""
+    page.goto(f"{server.url}/#overview")
+    # both at once (each field's change runs the panel: one alone is a range it refuses)
+    page.evaluate("() => { document.getElementById('diag-start').value = '2021-01-04';"
+                  " document.getElementById('diag-end').value = '2021-01-07'; }")
+    page.click("#diag-run")
+    none = page.locator("[data-testid=diag-none]")
+    none.wait_for(timeout=120_000)
+    page.wait_for_function("() => document.querySelector('[data-testid=diag-none]')"
+                           ".textContent.startsWith('No readings')", timeout=120_000)
+    assert none.inner_text() == "No readings in this range: nothing measured to diagnose."
