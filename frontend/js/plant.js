@@ -407,6 +407,7 @@ async function runSweep(ev) {
   };
   clearSweep("Running the sweep…");
   sweepSay({ status: "starting…", message: "" });
+  banner(""); // a refusal of the sweep before is said again if it still holds
   $("sweep-run").disabled = true;
   try {
     const acc = await api("/api/v1/plants/sweeps", { method: "POST", json: body });
@@ -496,6 +497,8 @@ async function cancelSweep() {
 export function initSweep() {
   $("sweep-form").addEventListener("submit", runSweep);
   $("sweep-cancel").addEventListener("click", cancelSweep);
-  sayInvalid($("sweep-form"), (message) => { $("sweep-status").textContent = message; });
+  // a field the browser refuses is the sweep's news now: the last refusal's words went
+  // (they stayed beside it, and in the page's banner, after the field was corrected)
+  sayInvalid($("sweep-form"), (message) => { sweepSay({ status: message, message: "" }); banner(""); });
   $("sweep-case").addEventListener("change", () => drawSweepShade().catch((err) => banner(`Sweep shade: ${err.message}`, "error")));
 }

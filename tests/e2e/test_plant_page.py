@@ -411,3 +411,11 @@ def test_a_running_sweep_is_cancelled_from_the_panel_and_keeps_its_finished_case
         assert page.locator("#sweep-case option").count() == 0
         assert page.get_attribute("body", "data-sweep-loaded") is None
         assert page.text_content("#sweep-status") == ""
+        # corrected, then a field the browser refuses: the old refusal goes (it stayed
+        # beside the browser's words and in the page's banner; a tester's finding)
+        page.fill("#sweep-gcr", "0.2")
+        page.fill("#sweep-step", "60")
+        page.click("#sweep-run")
+        assert "600" in page.text_content("#sweep-status")
+        assert not page.is_visible("[data-testid=sweep-message]")
+        assert not page.is_visible("#banner")
