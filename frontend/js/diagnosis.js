@@ -189,7 +189,7 @@ async function loadPointing(state, start, end, mine) {
     { x, y: ys.error_deg, name: "pointing error °", mode: "lines", line: { color: COLORS.tracker } },
     { x, y: ys.azimuth_error_deg, name: "azimuth error °", mode: "lines", line: { color: COLORS.fixed, width: 1 } },
     { x, y: ys.elevation_error_deg, name: "elevation error °", mode: "lines", line: { color: COLORS.sun, width: 1 } },
-  ], baseLayout({ yaxis: { title: "degrees", gridcolor: "#e9edf1", rangemode: "normal" } }),
+  ], baseLayout({ yaxis: { title: { text: "error against the ephemeris sun [°]" }, gridcolor: "#e9edf1", rangemode: "normal" } }),
   { columns: ["time_utc", "azimuth_deg", "elevation_deg", "sun_azimuth_deg", "sun_elevation_deg", "error_deg",
     "azimuth_error_deg", "elevation_error_deg"],
   rows: body.points.map((p) => [p.ts, p.azimuth_deg, p.elevation_deg, p.sun_azimuth_deg, p.sun_elevation_deg,

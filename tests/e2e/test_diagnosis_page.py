@@ -59,6 +59,10 @@ def test_diagnosis_panel_matches_the_api(page, server) -> None:
     note = page.locator("[data-testid=pointing-note]").inner_text()
     assert f"RMS {pointing['summary']['rms_deg']:.2f}°" in note
     page.locator("#chart-pointing").screenshot(path="test-artifacts/e2e-pointing-chart.png")
+    # its axis says what and in what unit (a bare string title is not drawn by this Plotly:
+    # the axis had none; a tester's finding)
+    assert page.locator("#chart-pointing .ytitle").text_content() == \
+        "error against the ephemeris sun [°]"
     assert page.console_errors == []
 
 
