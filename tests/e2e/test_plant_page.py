@@ -7,6 +7,7 @@ built-in one) while it runs, and removed after, as a user would add one."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections.abc import Iterator
 from pathlib import Path
@@ -181,10 +182,10 @@ def test_a_day_the_service_refuses_leaves_none_of_the_previous_days_figures(  # 
         assert page.get_attribute("body", "data-plant-loaded") is None
 
 
-def test_a_polar_night_says_no_daylight(page, server) -> None:  # type: ignore[no-untyped-def]
-    """A tester's plant at 69.65° N on the winter solstice: the service answers no times and
-    a null shaded fraction; the page showed "0.0 %" shaded (100 × null), empty axes and a
-    broken sky-map image."""
+@contextlib.contextmanager
+def _tromso_open(page, server) -> Iterator[None]:  # type: ignore[no-untyped-def]
+    """Peñarroya moved to Tromsø (69.65° N) as a plant file of the server's folder, open on
+    the Plant page on 21 December (a polar night); the file removed after."""
     plant = json.loads((default_plants_dir() / "penarroya.json").read_text())
     plant.update(plant_id="tromso", latitude_deg=69.65, longitude_deg=18.96,
                  timezone="Europe/Oslo")
@@ -196,31 +197,29 @@ def test_a_polar_night_says_no_daylight(page, server) -> None:  # type: ignore[n
                                timeout=60_000)
         page.select_option("#plant-select", "tromso")
         page.wait_for_selector('body[data-plant-loaded="tromso/2021-12-21"]', timeout=60_000)
+        yield
+    finally:
+        path.unlink()
+
+
+def test_a_polar_night_says_no_daylight(page, server) -> None:  # type: ignore[no-untyped-def]
+    """A tester's plant at 69.65° N on the winter solstice: the service answers no times and
+    a null shaded fraction; the page showed "0.0 %" shaded (100 × null), empty axes and a
+    broken sky-map image."""
+    with _tromso_open(page, server):
         for chart in ("chart-plant-layout", "chart-plant-shade", "chart-plant-strategies"):
             assert page.text_content(f"#{chart}") == "No daylight on this day.", chart
         assert "—" in page.text_content("#plant-summary")
         assert "0.0 %" not in page.text_content("#plant-summary")
         assert page.evaluate("() => document.getElementById('plant-sky-map').hidden")
         assert page.text_content("#plant-time-label") == ""  # not Peñarroya's 08:45 Madrid
-    finally:
-        path.unlink()
 
 
 def test_a_polar_sweeps_shade_is_drawn_on_a_day_with_daylight(page, server) -> None:  # type: ignore[no-untyped-def]
     """A sweep at 69.65° N: its shade chart was set to 21 December, a polar night, and
     showed bare axes with no word; it is drawn on the nearest day with daylight, named in
     its title."""
-    plant = json.loads((default_plants_dir() / "penarroya.json").read_text())
-    plant.update(plant_id="tromso", latitude_deg=69.65, longitude_deg=18.96,
-                 timezone="Europe/Oslo")
-    path = Path(server.env["HELIOTWIN_PLANTS_DIR"]) / "tromso.json"
-    path.write_text(json.dumps(plant))
-    try:
-        page.goto(server.url + "/#plant?day=2021-12-21")
-        page.wait_for_selector('body[data-plant-loaded="penarroya/2021-12-21"]',
-                               timeout=60_000)
-        page.select_option("#plant-select", "tromso")
-        page.wait_for_selector('body[data-plant-loaded="tromso/2021-12-21"]', timeout=60_000)
+    with _tromso_open(page, server):
         page.fill("#sweep-layouts", "square")
         page.fill("#sweep-gcr", "0.2")
         page.fill("#sweep-strategies", "sun")
@@ -235,8 +234,6 @@ def test_a_polar_sweeps_shade_is_drawn_on_a_day_with_daylight(page, server) -> N
         ARTIFACTS.mkdir(exist_ok=True)
         page.locator("#chart-sweep-shade").screenshot(
             path=str(ARTIFACTS / "plant-sweep-shade-polar.png"))
-    finally:
-        path.unlink()
 
 
 def test_the_sweep_panel_runs_a_sweep_and_draws_its_shade_in_the_plants_time(
