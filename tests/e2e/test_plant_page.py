@@ -215,17 +215,23 @@ def test_a_polar_night_says_no_daylight(page, server) -> None:  # type: ignore[n
         assert page.text_content("#plant-time-label") == ""  # not Peñarroya's 08:45 Madrid
 
 
+def _run_square_sun_sweep(page, gcr: str) -> None:  # type: ignore[no-untyped-def]
+    """Run a square-layout sun-tracking sweep of ``gcr`` at an hour's step from the Plant
+    page's panel and wait until its cases are drawn."""
+    page.fill("#sweep-layouts", "square")
+    page.fill("#sweep-gcr", gcr)
+    page.fill("#sweep-strategies", "sun")
+    page.fill("#sweep-step", "3600")
+    page.click("#sweep-run")
+    page.wait_for_selector("body[data-sweep-loaded]", timeout=150_000)
+
+
 def test_a_polar_sweeps_shade_is_drawn_on_a_day_with_daylight(page, server) -> None:  # type: ignore[no-untyped-def]
     """A sweep at 69.65° N: its shade chart was set to 21 December, a polar night, and
     showed bare axes with no word; it is drawn on the nearest day with daylight, named in
     its title."""
     with _tromso_open(page, server):
-        page.fill("#sweep-layouts", "square")
-        page.fill("#sweep-gcr", "0.2")
-        page.fill("#sweep-strategies", "sun")
-        page.fill("#sweep-step", "3600")
-        page.click("#sweep-run")
-        page.wait_for_selector("body[data-sweep-loaded]", timeout=150_000)
+        _run_square_sun_sweep(page, "0.2")
         page.wait_for_function("() => (document.getElementById('chart-sweep-shade').data || [])"
                                ".length === 3")
         assert page.text_content("#sweep-shade-day") == "25 November 2021"
@@ -243,12 +249,7 @@ def test_the_sweep_panel_runs_a_sweep_and_draws_its_shade_in_the_plants_time(
     solstice with times in the plant's zone (the axis said UTC; no browser test ran it)."""
     page.goto(server.url + "/#plant?day=2021-12-21")
     page.wait_for_selector('body[data-plant-loaded="penarroya/2021-12-21"]', timeout=60_000)
-    page.fill("#sweep-layouts", "square")
-    page.fill("#sweep-gcr", "0.2,0.3")
-    page.fill("#sweep-strategies", "sun")
-    page.fill("#sweep-step", "3600")
-    page.click("#sweep-run")
-    page.wait_for_selector("body[data-sweep-loaded]", timeout=150_000)
+    _run_square_sun_sweep(page, "0.2,0.3")
     assert "2 cases on" in page.text_content("#sweep-status")
     energy = page.evaluate("() => document.getElementById('chart-sweep-energy').data"
                            ".map(t => t.x.length)")
