@@ -17,6 +17,7 @@ database stays locked (see :func:`_with_db`), so it works while loggers write.
 from __future__ import annotations
 
 import argparse
+import sys
 import datetime as dt
 import json
 from collections.abc import Callable
@@ -125,8 +126,9 @@ def create(args: argparse.Namespace) -> int:
     except (UnknownSite, ValueError) as exc:
         fail(str(exc))
     until = "" if expires is None else f", valid until {expires.isoformat()}"
+    # the sentence on stderr, the token alone on stdout: TOKEN=$(heliotwin token create …)
     print(f"{args.scope} token for site {args.site} (shown once{until}; send it as "
-          "'Authorization: Bearer <token>'):")
+          "'Authorization: Bearer <token>'):", file=sys.stderr)
     print(token)
     return 0
 
