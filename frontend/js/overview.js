@@ -49,7 +49,9 @@ function toSeries(body, tz) {
   const diffs = times.slice(1).map((t, i) => t - times[i]).sort((a, b) => a - b);
   const step = bucket > 0 ? bucket * 1000 : diffs.length ? diffs[Math.floor(diffs.length / 2)] : 60000;
   const gapMs = Math.max(3 * step, 5 * 60000);
-  const out = { x: [], y: [], ymin: [], ymax: [], rows: [], gaps: [], bucket, count: pts.length };
+  // count: the readings of the range (the answer's), not the points drawn: past max_points
+  // a 10-s logger's day comes as minute buckets
+  const out = { x: [], y: [], ymin: [], ymax: [], rows: [], gaps: [], bucket, count: body?.count ?? pts.length };
   pts.forEach((p, i) => {
     if (i > 0 && times[i] - times[i - 1] > gapMs) {
       out.gaps.push([pts[i - 1].ts, p.ts, (times[i] - times[i - 1]) / 60000]);
@@ -346,7 +348,7 @@ function drawLoggers(status, series) {
     table.append(h("tr", {},
       h("td", { title: s.logger || "" }, h("span", { class: `dot ${freshness(s, age)}` }), arr),
       h("td", { title: last ? fmtDateTime(st.tz, last) : "" }, last ? fmtAge(last) : "never"),
-      h("td", {}, m ? num(m.count) : "—"),
+      h("td", { "data-testid": `readings-${arr}` }, m ? num(m.count) : "—"),
       h("td", { "data-testid": `gaps-${arr}`, title: gaps.map((g) => `${fmtTime(st.tz, g[0])}–${fmtTime(st.tz, g[1])}`).join(", ") },
         gapText)));
   }

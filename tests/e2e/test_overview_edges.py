@@ -34,10 +34,12 @@ UNALIKE = FULL - dt.timedelta(days=2)  # the tracker all day, the fixed array 12
 OLD = TODAY - dt.timedelta(days=700)  # before the on-demand twin window
 
 
-def _sine(day: dt.date, array: str, scale: float, minutes: range) -> list[dict]:
+def _sine(day: dt.date, array: str, scale: float, steps: range,
+          step_s: int = 60) -> list[dict]:
     t0 = dt.datetime(day.year, day.month, day.day, tzinfo=TZ)
     out = []
-    for m in minutes:
+    for k in steps:
+        m = k * step_s / 60
         p = scale * 600 * max(0.0, math.sin(math.pi * (m / 60 - 6.5) / 11.5)) ** 1.2
         out.append({"ts": (t0 + dt.timedelta(minutes=m, seconds=17)).isoformat(),
                     "array": array, "voltage_v": 24.0, "current_a": p / 24.0, "power_w": p})
@@ -53,8 +55,9 @@ def edge_server(browser, tmp_path_factory: pytest.TempPathFactory) -> Iterator[S
     try:
         token = proc.token("tehuantepec")
         with httpx.Client(base_url=proc.base_url, timeout=120) as c:
-            for array, scale in (("tracker", 1.3), ("fixed", 1.0)):
-                rows = _sine(FULL, array, scale, range(1440)) + _sine(
+            # the tracker's logger of the full day reads every 20 s (4,320 readings)
+            for array, scale, step_s in (("tracker", 1.3, 20), ("fixed", 1.0, 60)):
+                rows = _sine(FULL, array, scale, range(86400 // step_s), step_s) + _sine(
                     HALF, array, scale, range(360, 720)) + _sine(
                     UNALIKE, array, scale, range(1440) if array == "tracker" else range(720, 1080))
                 r = c.post("/api/v1/sites/tehuantepec/measurements", json={"readings": rows},
@@ -143,6 +146,19 @@ def test_loggers_over_different_minutes_show_no_gain_and_say_why(
     assert note == f"No measured gain: {row['gain_note']}." and "different minutes" in note
     _open(pg, edge_server, "tehuantepec", FULL)
     assert pg.locator("[data-testid=gain-unalike]").count() == 0
+
+
+def test_a_logger_faster_than_a_minute_shows_its_readings_not_the_charts_points(
+        pg, edge_server: ServerProcess) -> None:
+    """The loggers table counts the day's readings: a 20-s logger's 4,320, which the chart
+    draws as minute buckets (the page read 1,440, the bucket count, for it)."""
+    _open(pg, edge_server, "tehuantepec", FULL)
+    end = (FULL + dt.timedelta(days=1)).isoformat()
+    for array, readings, points in (("tracker", 4320, 1440), ("fixed", 1440, 1440)):
+        answer = _api(edge_server, "/api/v1/sites/tehuantepec/measurements", array=array,
+                      start=FULL.isoformat(), end=end, max_points="1440")  # as the page asks
+        assert (answer["count"], len(answer["points"])) == (readings, points)
+        assert pg.locator(f"[data-testid=readings-{array}]").inner_text() == f"{readings:,}"
 
 
 def test_a_day_without_readings_does_not_say_no_gaps(pg, edge_server: ServerProcess) -> None:
