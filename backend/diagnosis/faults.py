@@ -97,6 +97,9 @@ SOILING_MIN_TOTAL = 0.02  # … and at least 2 % lost over the declining days
 #: A tracker whose mean power is under this share of the expected has no day shape to fit
 #: (the residuals divide by its mean): its day is judged by its energy alone [-]
 DEAD_SHARE = 0.02
+#: A dead-looking day whose readings are the expected curve (residual under
+#: HEALTHY_RESIDUAL) scaled by 1/1000 within this range: watts sent as kilowatts [-]
+KW_SCALE = (1 / 1500, 1 / 700)
 DROPOUT_MIN = 30  # daylight minutes without a tracker reading that make a dropout day
 #: Relative widening of the expected band on each side [-]: the sky's own error beyond the
 #: spread of the two decompositions. 3 % held every generated day (docs/diagnosis.md); on
@@ -393,8 +396,11 @@ def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
     s0, r0 = _fit(m, e[use])
     if not float(np.mean(m)) > DEAD_SHARE * float(np.mean(e[use])):
         # a tracker making (next to) nothing — a tripped breaker or inverter, the logger
-        # still reading 0 W — has no shape to fit; its day is an underperformance alone
+        # still reading 0 W — has no shape to fit; its day is an underperformance alone,
+        # unless the readings are the expected day at a thousandth: power sent in kW
         out["scale"] = s0
+        if KW_SCALE[0] <= s0 <= KW_SCALE[1] and r0 < HEALTHY_RESIDUAL:
+            out["power_in_kw"] = True
         return out
     # the plane's clearness where it sees the beam: behind it or grazing it a bright deck
     # reads as clear (hours a summer day at high latitudes), which let overcast days be fitted
@@ -788,7 +794,10 @@ def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
                        "detail": f"made {m / 1000:.2f} kWh, {short_wh / 1000:.2f} kWh "
                                  f"({pct:.1f} %) less than the {x / 1000:.2f} kWh expected "
                                  f"under the measured sky, below the band's lower edge "
-                                 f"{low / 1000:.2f} kWh"})
+                                 f"{low / 1000:.2f} kWh" + (
+                                     "; the readings follow the expected curve at a "
+                                     "thousandth of it: power sent in kW where W are asked?"
+                                     if d["features"].get("power_in_kw") else "")})
 
 
 def _module_loss(days: list[dict[str, Any]], out: list[list[dict[str, Any]]]) -> None:

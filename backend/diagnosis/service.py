@@ -94,8 +94,9 @@ MAX_DAYS = 400
 #: without a reading, a day without a seen minute and a run without one; u at most 1;
 #: 29: the fixed array's power before a GHI pyranometer, sim.sky_sensor.weather_from_fixed;
 #: 30: a day's sky source and valid share over the minutes a reading can give a sky,
-#: sim.sky_sensor.measurable).
-CACHE_VERSION = 30
+#: sim.sky_sensor.measurable; 31: a dead-looking day that is the expected curve at a
+#: thousandth, ``power_in_kw``, faults.KW_SCALE).
+CACHE_VERSION = 31
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99

@@ -268,6 +268,29 @@ def test_a_tracker_reading_0_w_all_day_is_an_underperformance(client, live_serve
         assert day["faults"][0]["confidence"] is not None
 
 
+@pytest.mark.parametrize(("first", "tracker_kw"), [("2025-06-11", True), ("2025-06-12", False)])
+def test_a_tracker_logger_posting_kw_is_told_so(client, live_server, first: str,
+                                                tracker_kw: bool) -> None:
+    """A tester's finding: the tracker's power posted in kW (the fixed array's in W) read
+    "underperformance 99.9 %" with no word of the unit (the fixed array's is named, by
+    ``sky_unusable``). The readings are the expected day at a thousandth: the finding now
+    asks whether they are kW. A tracker at 1/1000 of the expected that does not follow its
+    curve (a dead array with a trickle) is not told so."""
+    site = load_site("tehuantepec")
+    d = logger_days(site, pd.Timestamp(first, tz=site.timezone), 1, seed=28, kinds=["clear"])
+    tracker = d.tracker_power_w / 1000.0
+    if not tracker_kw:  # the same energy, a flat trickle through daylight
+        tracker = np.where(tracker > 0, tracker.mean() * 2.0, 0.0)
+    _post(client, live_server.write_token, _readings(d.times, d.fixed_power_w, "fixed")
+          + _readings(d.times, np.round(tracker, 3), "tracker"))  # a logger's 3 decimals
+    end = (dt.date.fromisoformat(first) + dt.timedelta(days=1)).isoformat()
+    day = client.get(f"{BASE}/diagnosis", params={"start": first, "end": end},
+                     timeout=120).json()["days"][0]
+    assert [f["kind"] for f in day["faults"]] == ["underperformance"], day["faults"]
+    said = "power sent in kW where W are asked?" in day["faults"][0]["detail"]
+    assert said is tracker_kw, day["faults"][0]["detail"]
+
+
 @pytest.mark.parametrize(("first", "case"), [("2025-06-17", "breaker"), ("2025-06-18", "kw"),
                                              ("2025-06-19", "local_as_utc")])
 def test_a_day_whose_fixed_array_readings_are_refused_says_why(client, live_server,
