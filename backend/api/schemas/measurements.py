@@ -101,13 +101,14 @@ def ingest_request_body() -> dict[str, Any]:
 
 
 class IngestResult(BaseModel):
-    """What a stored batch did. Everything up to ``stored_through`` is stored: a logger
-    that buffered offline resumes after it."""
+    """What a stored batch did. The whole batch is stored, up to ``stored_through`` (its
+    own latest reading, not the site's): a logger sending its buffer oldest first resumes
+    after it."""
 
     accepted: int = Field(description="readings stored now")
     duplicates: int = Field(description="readings whose (array, ts) was already stored")
     stored_through: str = Field(json_schema_extra={"format": "date-time"},
-                                description="the batch's latest reading (UTC)")
+                                description="this batch's latest reading (UTC), not the site's")
     stored_through_unix_s: int
     power_only: int | None = Field(default=None, description=(
         "readings with power_w but no voltage and current (present only when there are some)"))
