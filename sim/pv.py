@@ -1,7 +1,7 @@
 """PV electrics: the Kyocera KD205GX-LP through the CEC single-diode model (pvlib).
 
 - Module parameters come from pvlib's copy of the CEC module table (the file
-  ``pvlib.pvsystem.retrieve_sam("CECMod")`` reads, SAM 2018.11.11; only the
+  ``pvlib.pvsystem.retrieve_sam("CECMod")`` reads, the 2019-03-05 file; only the
   wanted row is parsed, once per process — :func:`cec_module_parameters` is
   cached; tests/sim/test_pv.py checks it against ``retrieve_sam``).
 - The five single-diode parameters at operating conditions come from

@@ -412,12 +412,15 @@ def test_a_closed_pipe_ends_quietly(args: list[str]) -> None:
 
 
 def test_sun_at_a_site_now(heliotwin_cli) -> None:
-    """``--site`` gives latitude, longitude and altitude (and the altitude's pressure);
+    """``--site`` gives latitude, longitude, altitude (and the altitude's pressure) and air
+    temperature;
     ``now`` is the current instant (checked against pvlib's SPA at the reported time)."""
     import datetime as dt
 
     import pandas as pd
     import pvlib
+
+    from sim.sites import load_site
 
     before = dt.datetime.now(dt.UTC)
     p = heliotwin_cli("sun", "--site", "tehuantepec", "--time", "now", "--json")
@@ -427,9 +430,14 @@ def test_sun_at_a_site_now(heliotwin_cli) -> None:
     assert before <= when <= dt.datetime.now(dt.UTC)
     assert (d["site_id"], d["latitude_deg"], d["elevation_m"]) == ("tehuantepec", 16.28875, 50.0)
     assert d["pressure_hpa"] == pytest.approx(pvlib.atmosphere.alt2pres(50.0) / 100)
+    # the site's air temperature for the refraction, as the twin takes it (the CLI's 12 °C
+    # had the sun up at 18:30 where the twin had it down and stowed: a tester's finding)
+    assert d["temperature_c"] == load_site("tehuantepec").temp_air == 27.0
     ref = pvlib.solarposition.spa_python(pd.DatetimeIndex([when]), 16.28875, -95.240871, 50.0,
-                                         pressure=d["pressure_hpa"] * 100, temperature=12.0)
+                                         pressure=d["pressure_hpa"] * 100, temperature=27.0)
     assert d["azimuth_deg"] == pytest.approx(float(ref["azimuth"].iloc[0]), abs=1e-6)
+    assert d["apparent_elevation_deg"] == pytest.approx(
+        float(ref["apparent_elevation"].iloc[0]), abs=1e-6)
     both = heliotwin_cli("sun", "--site", "tehuantepec", "--lat", "1", "--lon", "2", "--time",
                          "now")
     assert both.returncode == 2 and "not both" in both.stderr

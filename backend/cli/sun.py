@@ -44,7 +44,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "apparent = with atmospheric refraction (SPA's topocentric zenith).",
     )
     p.add_argument("--site", metavar="ID",
-                   help="a configured site: its latitude, longitude and altitude")
+                   help="a configured site: its latitude, longitude, altitude and air "
+                        "temperature (the twin's refraction)")
     p.add_argument("--sites-dir", default=os.environ.get("HELIOTWIN_SITES_DIR"),
                    help="a folder of user site JSON files, added to the built-in sim/data/sites "
                         "(default $HELIOTWIN_SITES_DIR or data/user-sites; docs/sites.md)")
@@ -59,7 +60,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="air pressure [hPa] (default 1013.25, or that of the site's altitude)",
     )
     p.add_argument(
-        "--temperature-c", type=float, default=12.0, help="air temperature [C] (default 12)"
+        "--temperature-c", type=float,
+        help="air temperature [C] for the refraction (default 12, or the site's, as the twin)"
     )
     p.add_argument("--delta-t-s", type=float, default=67.0, help="TT - UT1 [s] (default 67)")
     p.add_argument(
@@ -95,6 +97,7 @@ def compute(args: argparse.Namespace) -> dict[str, Any]:
         "longitude_deg": args.lon,
         "elevation_m": args.elevation_m,
         "pressure_hpa": args.pressure_hpa,
+        "temperature_c": args.temperature_c,
         **({"site_id": args.site} if args.site else {}),
         "azimuth_deg": float(pos["azimuth"]),
         "zenith_deg": float(pos["zenith"]),
@@ -106,7 +109,8 @@ def compute(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _place(args: argparse.Namespace) -> str | None:
-    """Fill ``lat``/``lon``/``elevation_m``/``pressure_hpa`` from ``--site`` and the defaults;
+    """Fill ``lat``/``lon``/``elevation_m``/``pressure_hpa``/``temperature_c`` from ``--site``
+    (its air temperature, which the twin's refraction takes) and the defaults;
     an error message when the place is missing or given twice, else None."""
     if args.site is not None:
         if args.lat is not None or args.lon is not None:
@@ -124,12 +128,16 @@ def _place(args: argparse.Namespace) -> str | None:
             args.elevation_m = site.altitude
         if args.pressure_hpa is None:
             args.pressure_hpa = float(atmosphere.alt2pres(args.elevation_m)) / 100.0
+        if args.temperature_c is None:
+            args.temperature_c = site.temp_air
     if args.lat is None or args.lon is None:
         return "--lat and --lon (or --site) are required"
     if args.elevation_m is None:
         args.elevation_m = 0.0
     if args.pressure_hpa is None:
         args.pressure_hpa = 1013.25
+    if args.temperature_c is None:
+        args.temperature_c = 12.0
     return None
 
 

@@ -96,7 +96,9 @@ class SimulationSummaryRead(BaseModel):
     pointing_error_p95_mrad: float | None
     pointing_error_max_mrad: float | None
     pointing_error_energy_weighted_rms_mrad: float | None = Field(
-        None, description="RMS weighted by the tracker's clear-beam energy at each step")
+        None, description=(
+            "RMS weighted at each step by the ideal tracker's plane-of-array irradiance "
+            "(the beam alone for a CPV receiver): an error at a dim low sun barely counts"))
     pointing_error_minutes: int | None = Field(
         None, description="tracking minutes the pointing statistics cover")
     pointing_min_elevation_deg: float | None = Field(
