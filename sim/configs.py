@@ -23,8 +23,11 @@ def read_config(kind: str, config_id: str, directory: Path | Sequence[Path],
     ValueError naming the file when it is not valid JSON.
     """
     folders = [directory] if isinstance(directory, Path) else list(directory)
-    found = [d / f"{config_id}.json" for d in folders if (d / f"{config_id}.json").is_file()]
-    if not CONFIG_ID.match(config_id) or not found:
+    # the id is checked before any path is made of it: a 300-character id was a 500 (the
+    # file system's "name too long"), a NUL one "its file is invalid"
+    found = [d / f"{config_id}.json" for d in folders
+             if CONFIG_ID.match(config_id) and (d / f"{config_id}.json").is_file()]
+    if not found:
         ids = sorted({p.stem for d in folders if d.is_dir() for p in d.glob("*.json")})
         raise unknown(f"unknown {kind} {config_id!r}; known {kind}s: {', '.join(ids) or 'none'}")
     path = found[0]

@@ -116,7 +116,7 @@ class PlantService:
         path = self.plants_dir / f"{plant_id}.json"
         try:
             mtime = path.stat().st_mtime
-        except OSError:
+        except (OSError, ValueError):  # no file, a name too long, a NUL in it: load says
             mtime = -1.0
         return plant_id, mtime, date.isoformat(), float(step_s)
 
@@ -157,7 +157,7 @@ class PlantService:
         path = self.plants_dir / f"{plant_id}.json"
         try:
             mtime = path.stat().st_mtime
-        except OSError:
+        except (OSError, ValueError):  # no file, a name too long, a NUL in it: load says
             mtime = -1.0
         with self._lock:
             hit = self._cache.get(plant_id)

@@ -74,6 +74,12 @@ def test_list_and_get(client: httpx.Client) -> None:
     assert p["trackers"][0] == {"tracker_id": 1, "east_m": -18.5, "north_m": -22.7, "up_m": 0.0}
     r = client.get("/api/v1/plants/atlantis")
     assert r.status_code == 404 and "known plants: penarroya" in r.json()["detail"]
+    # an id no file can have is not looked for: 300 characters were a 500 (the file
+    # system's "name too long"), a NUL "its file is invalid" (a tester's finding)
+    for bad in ("x" * 300, "a%00b"):
+        for path in (f"/api/v1/plants/{bad}", f"/api/v1/plants/{bad}/day?date=2021-06-21"):
+            r = client.get(path)
+            assert r.status_code == 404 and "no plant" in r.json()["detail"], (path, r.text)
 
 
 def _two_tracker_plant(plants_dir: Path, plant_id: str) -> Path:
