@@ -338,7 +338,9 @@ def validate_site_config(data: Any, where: str = "site") -> SiteConfig:
         raise ValueError(f"{where}: {path}: holds a control character (a NUL, an escape…); "
                          "write it without")
     try:
-        return SiteConfig.model_validate(data)
+        # strict throughout: `"latitude_deg": true` had moved a site to 1° (a tester's
+        # finding); a number is a JSON number, an integer where a float is asked included
+        return SiteConfig.model_validate(data, strict=True)
     except ValidationError as exc:
         problems = []
         for err in exc.errors()[:10]:

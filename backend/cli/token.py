@@ -17,9 +17,9 @@ database stays locked (see :func:`_with_db`), so it works while loggers write.
 from __future__ import annotations
 
 import argparse
-import sys
 import datetime as dt
 import json
+import sys
 from collections.abc import Callable
 from typing import Any
 

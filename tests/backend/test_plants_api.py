@@ -440,6 +440,17 @@ def test_a_sweep_at_a_coordinate_runs_on_the_local_days_of_its_timezone(
     assert len(set(utc.tz_convert("Asia/Tokyo").date)) == 2         # … is two local days
 
 
+@pytest.mark.parametrize("change", [{"latitude_deg": True}, {"gcr": [True]},
+                                    {"step_s": "600"}])
+def test_a_sweep_takes_numbers_as_json_numbers(client: httpx.Client, change: dict) -> None:
+    """``true`` as a latitude was queued as 1° (a tester's finding)."""
+    r = client.post("/api/v1/plants/sweeps", json={**SWEEP, **change})
+    assert r.status_code == 422, r.text
+    field = next(iter(change))
+    assert any(e["loc"][:2] == ["body", field] and "valid number" in e["msg"]
+               for e in r.json()["detail"]), r.text
+
+
 @pytest.mark.parametrize(("change", "status", "message"), [
     ({"timezone": "Mars/Olympus"}, 422, "timezone: 'Mars/Olympus' is not an IANA time zone"),
     ({"timezone": "../etc/passwd"}, 422, "timezone: '../etc/passwd' is not an IANA time "

@@ -155,6 +155,9 @@ def test_a_site_whose_arrays_the_twin_does_not_know_stores_readings_but_has_no_d
     # PostgreSQL refused the NUL with a 500 after the file was written: the service then
     # could not start
     ({"name": "my\u0000roof"}, "body: name: holds a control character"),
+    # a boolean is not a number: true moved a site to 1° (a tester's finding)
+    ({"latitude_deg": True}, "body: latitude_deg: Input should be a valid number"),
+    ({"temp_air_c": "25"}, "body: temp_air_c: Input should be a valid number"),
 ])
 def test_a_malformed_site_is_a_422_naming_the_field(client: httpx.Client, server: InProcessServer,
                                                     my_roof: str, change: dict,

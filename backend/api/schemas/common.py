@@ -2,7 +2,15 @@
 
 from __future__ import annotations
 
-from pydantic import BaseModel, Field
+from typing import Annotated
+
+from pydantic import BaseModel, Field, Strict
+
+#: A JSON number where a request asks for one: an integer or a float, never a boolean
+#: (``true`` read as 1 moved a sweep's latitude, a tester's finding) nor a numeric string.
+#: For a model that cannot be strict throughout (FastAPI validates the parsed body in
+#: Python mode, where a strict tuple refuses a JSON array).
+JsonNumber = Annotated[float, Strict()]
 
 
 class SunRead(BaseModel):

@@ -6,7 +6,7 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.api.schemas.common import SunRead
+from backend.api.schemas.common import JsonNumber, SunRead
 from backend.plants.sweep import MAX_GCRS, MAX_LAYOUTS, MAX_STRATEGIES
 from sim.energy import MAX_STEP_S
 
@@ -167,7 +167,7 @@ class SweepCreate(BaseModel):
                                       description="square, diagonal, hexagonal_n_s, "
                                                   "hexagonal_e_w, custom; default square "
                                                   "(refused with plant_id)")
-    gcr: Annotated[list[float], Field(min_length=1, max_length=MAX_GCRS)] | Annotated[
+    gcr: Annotated[list[JsonNumber], Field(min_length=1, max_length=MAX_GCRS)] | Annotated[
         str, Field(min_length=1, max_length=200)] = Field(
         description="ground cover ratios: a list, or the CLI's text (its rule, "
                     "backend.plants.sweep.parse_gcr) — \"0.15,0.25\" or a range "
@@ -176,15 +176,15 @@ class SweepCreate(BaseModel):
                                   description="sun, backtrack, sky_scan")
     collector_m: str | None = Field(None, pattern=r"^\d+(\.\d+)?x\d+(\.\d+)?$",
                                     description="collector WIDTHxHEIGHT [m], e.g. 12x5")
-    collector_polygon_m: list[tuple[float, float]] | None = Field(
+    collector_polygon_m: list[tuple[JsonNumber, JsonNumber]] | None = Field(
         None, min_length=3, max_length=256,
         description="any collector outline instead of collector_m: [u, v] vertices [m] about "
                     "the pivot in the collector plane (u right, v up when facing it); "
                     "strategy sun only")
-    latitude_deg: float | None = Field(None, ge=-90, le=90)
-    longitude_deg: float | None = Field(None, ge=-180, le=180)
-    altitude_m: float | None = Field(None, ge=-500, le=9000,
-                                     description="default 0 (refused with plant_id)")
+    latitude_deg: JsonNumber | None = Field(None, ge=-90, le=90)
+    longitude_deg: JsonNumber | None = Field(None, ge=-180, le=180)
+    altitude_m: JsonNumber | None = Field(None, ge=-500, le=9000,
+                                          description="default 0 (refused with plant_id)")
     plant_id: str | None = Field(None, max_length=100)
     timezone: str | None = Field(
         None, max_length=64,
@@ -193,18 +193,18 @@ class SweepCreate(BaseModel):
     field_size: str | None = Field(None, pattern=r"^\d{1,2}x\d{1,2}$",
                                    description="ROWSxCOLUMNS of the regular field; default "
                                                "5x5 (refused with plant_id)")
-    aspect_ratio: float | None = Field(None, gt=0, le=10, description="layout custom")
-    offset: float | None = Field(None, ge=-0.5, lt=0.5, description="layout custom")
-    rotation_deg: float | None = Field(None, ge=0, lt=180, description="layout custom")
-    slope_azimuth_deg: float | None = Field(None, ge=0, lt=360,
-                                            description="default 0 (refused with plant_id)")
-    slope_tilt_deg: float | None = Field(None, ge=0, lt=45,
-                                         description="default 0, level (refused with "
-                                                     "plant_id)")
+    aspect_ratio: JsonNumber | None = Field(None, gt=0, le=10, description="layout custom")
+    offset: JsonNumber | None = Field(None, ge=-0.5, lt=0.5, description="layout custom")
+    rotation_deg: JsonNumber | None = Field(None, ge=0, lt=180, description="layout custom")
+    slope_azimuth_deg: JsonNumber | None = Field(None, ge=0, lt=360,
+                                                 description="default 0 (refused with plant_id)")
+    slope_tilt_deg: JsonNumber | None = Field(None, ge=0, lt=45,
+                                              description="default 0, level (refused with "
+                                                            "plant_id)")
     start: str = Field(description="YYYY-MM-DD or ISO 8601 with offset")
     end: str = Field(description="exclusive")
-    step_s: float = Field(3600.0, ge=60, le=MAX_STEP_S,
-                          description="time step [s], at most an hour (sim.energy.MAX_STEP_S)")
+    step_s: JsonNumber = Field(3600.0, ge=60, le=MAX_STEP_S,
+                               description="time step [s], at most an hour (sim.energy.MAX_STEP_S)")
 
 
 
