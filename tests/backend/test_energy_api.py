@@ -237,3 +237,38 @@ def test_twin_on_demand_is_bounded_to_recent_or_measured_days(client: httpx.Clie
                                              "interval": "day"})
     assert r.status_code == 200, r.text
     assert r.json()["rows"][0]["arrays"]["tracker"]["twin_wh"] > 1000
+
+
+def test_one_address_without_a_token_holds_at_most_two_places_at_the_reader() -> None:
+    """Energy and report reads run one at a time for everybody, in order of arrival: 16
+    100-year reads of one address (5 s each, within its CPU allowance) kept another
+    address's 28-day read waiting 38–130 s (a tester's finding). An address without a
+    token may now have two in flight; a third is a 429 with Retry-After, another address
+    and a caller with a token still get their place, and a place is given back."""
+    import asyncio
+    from contextlib import AsyncExitStack
+
+    from fastapi import HTTPException
+    from starlette.requests import Request
+
+    from backend.api.routes.energy import READS_IN_LINE_PER_CLIENT, in_line
+
+    def request(host: str) -> Request:
+        return Request({"type": "http", "client": (host, 5000), "headers": []})
+
+    async def main() -> None:
+        async with AsyncExitStack() as held:
+            for _ in range(READS_IN_LINE_PER_CLIENT):
+                await held.enter_async_context(in_line(request("10.0.0.1"), None))
+            with pytest.raises(HTTPException) as refused:
+                await held.enter_async_context(in_line(request("10.0.0.1"), None))
+            assert refused.value.status_code == 429
+            assert refused.value.headers == {"Retry-After": "5"}
+            assert "2 energy or report reads in flight" in refused.value.detail
+            await held.enter_async_context(in_line(request("10.0.0.2"), None))
+            await held.enter_async_context(in_line(request("10.0.0.1"), "a token's caller"))
+        async with in_line(request("10.0.0.1"), None):  # the places were given back
+            pass
+
+    assert READS_IN_LINE_PER_CLIENT == 2
+    asyncio.run(main())

@@ -21,12 +21,14 @@ import asyncio
 import csv
 import io
 import weakref
-from collections.abc import Callable
+from collections import Counter
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
 from typing import Annotated, Any, Literal
 
 import anyio
 import orjson
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.responses import Response
 
 from backend.api.deps import (
@@ -35,6 +37,7 @@ from backend.api.deps import (
     RangeEnd,
     RangeStart,
     anonymous_read_route,
+    client_address,
     site_range,
 )
 from backend.api.routes.health import service_version
@@ -60,6 +63,16 @@ _read_limiters: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, anyio.Capac
     weakref.WeakKeyDictionary())
 
 
+#: Of these reads, those one address without a token may have in flight (running or
+#: waiting their turn) at once; more → 429. The reader serves in order of arrival: 16
+#: 100-year reads of one address (5 s each), within its CPU allowance, kept another
+#: address's 28-day read waiting 38–130 s (a tester's finding, session 25). The dashboard
+#: asks one or two at a time.
+READS_IN_LINE_PER_CLIENT = 2
+_in_line: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, Counter[str]] = (
+    weakref.WeakKeyDictionary())
+
+
 def read_limiter() -> anyio.CapacityLimiter:
     """The running event loop's limiter of :data:`READS_AT_ONCE` reads."""
     loop = asyncio.get_running_loop()
@@ -69,10 +82,36 @@ def read_limiter() -> anyio.CapacityLimiter:
     return limiter
 
 
+@asynccontextmanager
+async def in_line(request: Request, caller: object) -> AsyncIterator[None]:
+    """A place in the reader's line for the caller: without a token, 429 past
+    :data:`READS_IN_LINE_PER_CLIENT` of the address's reads in flight (counted on the
+    event loop's thread, no lock)."""
+    if caller is not None:
+        yield
+        return
+    line = _in_line.setdefault(asyncio.get_running_loop(), Counter())
+    client = client_address(request)
+    if line[client] >= READS_IN_LINE_PER_CLIENT:
+        raise HTTPException(429, f"rate limit: without a write token an address may have "
+                                 f"{READS_IN_LINE_PER_CLIENT} energy or report reads in "
+                                 "flight at once (they are served one at a time for "
+                                 "everybody): send 'Authorization: Bearer <token>' or retry "
+                                 "in 5 s", headers={"Retry-After": "5"})
+    line[client] += 1
+    try:
+        yield
+    finally:
+        line[client] -= 1
+        if not line[client]:
+            del line[client]
+
+
 @router.get("/{site_id}/energy", response_model=EnergyRead,
             **anonymous_read_route({200: {"content": CSV_CONTENT}, 404: {}, 422: {}}))
 async def get_energy(
     site_id: str,
+    request: Request,
     ctx: ContextDep,
     start: RangeStart,
     end: RangeEnd,
@@ -89,9 +128,10 @@ async def get_energy(
     """Energy per period for every array, measured and twin, with the tracking gain.
     ``source=twin_weather`` diagnoses the days it needs: without a token, as the
     diagnosis, at most ``ANONYMOUS_MAX_COMPUTED_DAYS`` (31) not cached yet."""
-    return await anyio.to_thread.run_sync(run_metered, _energy, site_id, ctx, start, end,
-                                          interval, format, source, computed_days_cap(caller),
-                                          limiter=read_limiter())
+    async with in_line(request, caller):
+        return await anyio.to_thread.run_sync(
+            run_metered, _energy, site_id, ctx, start, end, interval, format, source,
+            computed_days_cap(caller), limiter=read_limiter())
 
 
 def _energy(site_id: str, ctx: ContextDep, start: str, end: str, interval: str, format: str,
@@ -126,32 +166,34 @@ _RANGE = {
 }
 
 
-async def _report(ctx: ContextDep, site_id: str, start: str, end: str,
-                  shape: Callable[[dict[str, Any]], Any] = lambda rep: rep) -> Any:
+async def _report(request: Request, caller: object, ctx: ContextDep, site_id: str, start: str,
+                  end: str, shape: Callable[[dict[str, Any]], Any] = lambda rep: rep) -> Any:
     """``shape`` of the report of a range, on AnyIO's pool under :func:`read_limiter`."""
     def work() -> Any:
         info, t0, t1 = site_range(ctx, site_id, start, end)
         return shape(report(ctx, info, t0, t1))
 
-    return await anyio.to_thread.run_sync(run_metered, work, limiter=read_limiter())
+    async with in_line(request, caller):
+        return await anyio.to_thread.run_sync(run_metered, work, limiter=read_limiter())
 
 
 @router.get("/{site_id}/report", response_model=ReportRead,
             **anonymous_read_route({404: {}, 422: {}}))
-async def get_report(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
+async def get_report(site_id: str, request: Request, caller: CallerDep, ctx: ContextDep,
+                     start: Annotated[str, _RANGE["start"]],
                      end: Annotated[str, _RANGE["end"]]) -> Response:
     """Totals, daily, monthly and annual energy, gain and performance ratio of a range."""
-    body = await _report(ctx, site_id, start, end, orjson.dumps)
+    body = await _report(request, caller, ctx, site_id, start, end, orjson.dumps)
     return Response(body, media_type="application/json")
 
 
 @router.get("/{site_id}/report.csv", response_class=Response, **anonymous_read_route(
     {200: {"content": CSV_CONTENT, "description": "the report as CSV"}, 404: {}, 422: {}}))
-async def get_report_csv(site_id: str, ctx: ContextDep,
+async def get_report_csv(site_id: str, request: Request, caller: CallerDep, ctx: ContextDep,
                          start: Annotated[str, _RANGE["start"]],
                          end: Annotated[str, _RANGE["end"]]) -> Response:
     """The report as one CSV table: day, month, year and total rows, units in the names."""
-    name, body = await _report(ctx, site_id, start, end, lambda rep: (
+    name, body = await _report(request, caller, ctx, site_id, start, end, lambda rep: (
         f"{site_id}_report_{rep['start'][:10]}_{rep['end'][:10]}.csv", report_csv(rep)))
     return Response(body, media_type="text/csv",
                     headers={"Content-Disposition": f'attachment; filename="{name}"'})
@@ -159,10 +201,11 @@ async def get_report_csv(site_id: str, ctx: ContextDep,
 
 @router.get("/{site_id}/report.png", response_class=Response, **anonymous_read_route(
     {200: {"content": PNG_CONTENT, "description": "an A4 PNG page"}, 404: {}, 422: {}}))
-async def get_report_png(site_id: str, ctx: ContextDep, start: Annotated[str, _RANGE["start"]],
+async def get_report_png(site_id: str, request: Request, caller: CallerDep, ctx: ContextDep,
+                         start: Annotated[str, _RANGE["start"]],
                          end: Annotated[str, _RANGE["end"]]) -> Response:
     """A one-page A4 PNG report of the range (matplotlib), for a paper or a logbook."""
-    name, body = await _report(ctx, site_id, start, end, lambda rep: (
+    name, body = await _report(request, caller, ctx, site_id, start, end, lambda rep: (
         f"{site_id}_report_{rep['start'][:10]}_{rep['end'][:10]}.png",
         report_png(rep, service_version())))
     return Response(body, media_type="image/png",
