@@ -345,6 +345,26 @@ class SimulationRunner:
         """The cost table's price of ``params`` at its site (:func:`table_cost_s`) [s]."""
         return table_cost_s(params, self.registry.sites[params.site_id].site)
 
+    def _place_refused(self, client: str, anonymous: bool) -> Busy | None:
+        """Why the queue has no place for ``client`` now (call under the lock), else None:
+        full (503); without a token, the address's one run already queued or running
+        (429). Three 49-s runs of one address without a token had filled the worker and
+        the queue, and the site's operator was refused for 150 s (a tester's finding)."""
+        s = self.settings.simulations
+        jobs = [*self._running.values(), *self._queue]
+        order = self._order()
+        retry_s = order[0][1] if order else 1.0
+        if len(jobs) >= s.workers + s.queue:
+            return Busy(503, f"busy: {len(self._running)} simulations running and "
+                             f"{len(self._queue)} waiting, the most this service queues "
+                             "(HELIOTWIN_SIMULATION_WORKERS, HELIOTWIN_SIMULATION_QUEUE)",
+                        retry_s)
+        if anonymous and any(j.anonymous and j.client == client for j in jobs):
+            return Busy(429, "rate limit: without a write token an address may have one "
+                             "simulation queued or running at a time: wait for it, or send "
+                             "'Authorization: Bearer <token>'", retry_s)
+        return None
+
     def estimate(self, params: Scenario, client: str, anonymous: bool) -> Estimate:
         """What ``params`` would cost and when it would start if queued now (nothing is
         queued or charged)."""
@@ -354,7 +374,8 @@ class SimulationRunner:
                        Future(), cost, table_s, time.monotonic())
         with self._lock:
             order = self._order(phantom)
-            running, queued = len(self._running), len(self._queue)
+            running = len(self._running)
+            refused = self._place_refused(client, anonymous)
         place = next(i for i, (job, _) in enumerate(order) if job is phantom)
         s = self.settings.simulations
         left = (max(0.0, s.anonymous_hour_max_s - self.anonymous_hours.used(client))
@@ -368,9 +389,8 @@ class SimulationRunner:
             reason = (f"rate limit: {_duration(left)} of the {_duration(s.anonymous_hour_max_s)}"
                       " of worker time an address may ask without a token in an hour are left "
                       "(HELIOTWIN_SIMULATION_ANONYMOUS_HOUR_MAX_S)")
-        if reason is None and running + queued >= s.workers + s.queue:
-            reason = ("busy: the queue is full (HELIOTWIN_SIMULATION_WORKERS, "
-                      "HELIOTWIN_SIMULATION_QUEUE)")
+        if reason is None and refused is not None:
+            reason = refused.message
         return Estimate(cost, order[place][1], place + running,
                         s.anonymous_run_max_s if anonymous else None, left, reason)
 
@@ -383,14 +403,8 @@ class SimulationRunner:
         cost = self.costs.estimate_s(table_s, params.controller)
         self._check_cost(cost, anonymous)
         with self._lock:
-            waiting = len(self._queue)
-            if len(self._running) + waiting >= self.settings.simulations.workers + \
-                    self.settings.simulations.queue:
-                order = self._order()
-                raise Busy(503, f"busy: {len(self._running)} simulations running and "
-                                f"{waiting} waiting, the most this service queues "
-                                "(HELIOTWIN_SIMULATION_WORKERS, HELIOTWIN_SIMULATION_QUEUE)",
-                           order[0][1] if order else 1.0)
+            if (refused := self._place_refused(client, anonymous)) is not None:
+                raise refused
         charge = self.anonymous_hours.take(client, cost) if anonymous else None
         state = RunState(uuid.uuid4().hex, params.site_id, "queued",
                          params=json.loads(params.to_json()), estimated_run_s=cost)

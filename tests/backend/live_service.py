@@ -235,8 +235,10 @@ class _ASGIBridge(httpx.BaseTransport):
     An exception in the app is a 500, as a server answers it; the client's read timeout
     bounds the wait."""
 
-    def __init__(self, app: Any, loop: asyncio.AbstractEventLoop) -> None:
-        self._asgi = httpx.ASGITransport(app=app, raise_app_exceptions=False)
+    def __init__(self, app: Any, loop: asyncio.AbstractEventLoop,
+                 client_host: str = "127.0.0.1") -> None:
+        self._asgi = httpx.ASGITransport(app=app, raise_app_exceptions=False,
+                                         client=(client_host, 123))
         self._loop = loop
 
     def handle_request(self, request: httpx.Request) -> httpx.Response:
@@ -322,10 +324,12 @@ class InProcessServer:
         finally:
             self._close_loop()
 
-    def client(self, timeout_s: float = 60.0, **kwargs: Any) -> httpx.Client:
-        """An ``httpx.Client`` on the app (close it, or use it in a ``with``)."""
+    def client(self, timeout_s: float = 60.0, client_host: str = "127.0.0.1",
+               **kwargs: Any) -> httpx.Client:
+        """An ``httpx.Client`` on the app (close it, or use it in a ``with``), calling from
+        ``client_host`` (the address anonymous work is counted by)."""
         assert self._loop is not None, "start() first"
-        return httpx.Client(transport=_ASGIBridge(self.app, self._loop),
+        return httpx.Client(transport=_ASGIBridge(self.app, self._loop, client_host),
                             base_url=self.base_url, timeout=timeout_s, **kwargs)
 
     def token(self, site_id: str = "tehuantepec", label: str = "tests",

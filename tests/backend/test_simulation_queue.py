@@ -185,6 +185,37 @@ def test_another_callers_day_starts_before_a_second_long_run(
         assert c.delete(f"/api/v1/simulations/{long2}").json()["error"] == "cancelled"
 
 
+def test_an_address_without_a_token_has_one_run_queued_or_running(
+        server: InProcessServer) -> None:
+    """Three 49-s runs of one address without a token filled the worker and the queue and
+    the site's operator was refused for 150 s (a tester's finding). Now an address without
+    a token has one run queued or running (a second is a 429); another address, and a
+    caller with a token, still get a place."""
+    runner = server.ctx.simulations
+    runner.costs = CostModel()
+    bounds = runner.settings.simulations
+    bounds.anonymous_run_max_s = bounds.anonymous_hour_max_s = 600
+    auth = {"Authorization": f"Bearer {server.token()}"}
+    with server.client() as c, server.client(client_host="127.0.0.2") as other:
+        long1 = c.post("/api/v1/simulations", json=YEAR_HYBRID, headers=auth).json()["run_id"]
+        _wait_running(c, long1)
+        mine = c.post("/api/v1/simulations", json=DAY)
+        assert mine.status_code == 202, mine.text
+        second = c.post("/api/v1/simulations", json=DAY)
+        assert second.status_code == 429 and "one simulation queued or running" in \
+            second.json()["detail"], second.text
+        assert "retry-after" in second.headers
+        est = c.post("/api/v1/simulations/estimate", json=DAY).json()
+        assert est["allowed"] is False and "one simulation queued" in est["reason"]
+        operator = c.post("/api/v1/simulations", json=DAY, headers=auth)
+        assert operator.status_code == 202, operator.text  # the queue's last place
+        theirs = other.post("/api/v1/simulations", json=DAY)
+        assert theirs.status_code == 503 and "the most this service queues" in \
+            theirs.json()["detail"], theirs.text  # full: not this address's doing
+        for run_id in (long1, mine.json()["run_id"], operator.json()["run_id"]):
+            c.delete(f"/api/v1/simulations/{run_id}")
+
+
 def test_a_refused_run_does_not_spend_the_anonymous_allowance(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """A run refused as too costly (422) gives its steps back: five refusals in a row of a
     240-step run under a 1,000-step allowance stay 422s (the fifth was a 429)."""
