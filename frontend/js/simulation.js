@@ -71,7 +71,9 @@ function summaryTiles(summary, station) {
   box.append(skyTile(summary, station),
     tile("Tracker energy", energy(summary.tracker_energy_wh), `peak ${num(summary.tracker_peak_w, 0)} W`),
     tile("Fixed energy", energy(summary.fixed_energy_wh), `peak ${num(summary.fixed_peak_w, 0)} W`),
-    tile("Tracking gain", pct(summary.gain_pct), "tracker over fixed, twin"),
+    // a polar night (or a dark run) has no gain: say why rather than a bare "—"
+    tile("Tracking gain", pct(summary.gain_pct), summary.gain_pct === null && !(summary.fixed_energy_wh > 0)
+      ? "none: the fixed array made no energy (the sun below the horizon?)" : "tracker over fixed, twin"),
     tile("Period", `${num((Date.parse(summary.end) - Date.parse(summary.start)) / 86400000, 1)} days`,
       `${summary.start.slice(0, 10)} → ${summary.end.slice(0, 10)} · step ${num(summary.step_s)} s · ${summary.controller}`),
   );
@@ -180,12 +182,20 @@ async function drawResult(runId, summary, allRows, dayRows) {
   });
   await drawDaily(runId, summary);
   const rows = dayRows.rows;
-  $("sim-angles-title").textContent = dayRows.day ? `Sun and tracker angles on ${dayRows.day}, the run's first day` : "Sun and tracker angles";
   const xa = rows.map((r) => toLocalWall(tz, r.ts));
   const commanded = rows.some((r) => colValue(r, "elevation_command_deg") !== null);
-  // the sun only while it is up; both azimuths in 0–360°, clockwise from north
-  const up = rows.map((r) => colValue(r, SUN_ELEVATION) > 0);
+  // the sun only while it is up; both azimuths in 0–360°, clockwise from north. A day it
+  // never rises (a polar night) draws its path below the horizon and says so: the chart
+  // showed the stowed tracker alone (a tester's finding)
+  const elevations = rows.map((r) => colValue(r, SUN_ELEVATION)).filter((v) => v !== null);
+  const highest = elevations.length ? Math.max(...elevations) : null;
+  const polarNight = highest !== null && highest <= 0;
+  const up = rows.map((r) => polarNight || colValue(r, SUN_ELEVATION) > 0);
   const sunOnly = (c) => rows.map((r, i) => (up[i] ? colValue(r, c) : null));
+  const title = dayRows.day ? `Sun and tracker angles on ${dayRows.day}, the run's first day` : "Sun and tracker angles";
+  $("sim-angles-title").textContent = polarNight
+    ? `Polar night: the sun at most ${num(highest, 1)}°` : title;
+  const lowest = polarNight ? Math.min(-10, 10 * Math.floor(Math.min(...elevations) / 10)) : 0;
   const az = (c) => azimuth360(rows.map((r) => colValue(r, c)));
   const angleCols = [
     [SUN_ELEVATION, "sun elevation", COLORS.sun, "solid", "y", sunOnly(SUN_ELEVATION)],
@@ -200,7 +210,7 @@ async function drawResult(runId, summary, allRows, dayRows) {
     line: { color, dash, width: 1.6 }, hovertemplate: "%{y:.1f}°",
   })), baseLayout({
     xaxis,
-    yaxis: { title: { text: "Elevation [°]" }, gridcolor: "#e9edf1", range: [0, 90], dtick: 30, autorange: false },
+    yaxis: { title: { text: "Elevation [°]" }, gridcolor: "#e9edf1", range: [lowest, 90], dtick: 30, tick0: 0, autorange: false },
     yaxis2: { title: { text: "Azimuth [°] (0–360, from N, clockwise)" }, overlaying: "y", side: "right", showgrid: false,
       range: [0, 360], autorange: false, tickmode: "linear", tick0: 0, dtick: 45 },
   }), {

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import datetime as dt
 import math
+import re
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -382,3 +383,36 @@ def test_gain_axis_starts_at_zero_and_ignores_partial_days(pg, edge_server) -> N
     bars = next(t for t in chart["traces"] if t["name"] == "tracker measured")
     k = bars["x"].index(HALF.isoformat())
     assert bars["marker"]["pattern"]["shape"][k] == "/" and bars["marker"]["opacity"][k] < 1
+
+
+def test_a_polar_night_run_draws_the_sun_below_the_horizon_and_says_why(
+        pg, edge_server: ServerProcess) -> None:
+    """A tester's finding: at Tromsø in December the angles chart's axis stopped at 0°, so
+    the sun's path (at most −3° at noon) was not drawn, and the tiles read 0 Wh and a bare
+    "—" gain with no reason."""
+    from live_service import tehuantepec_elsewhere
+
+    with httpx.Client(base_url=edge_server.base_url, timeout=60) as c:
+        body = tehuantepec_elsewhere(c, "tromso-night", latitude_deg=69.65, longitude_deg=18.96,
+                                     timezone="Europe/Oslo")
+        r = c.put("/api/v1/sites/tromso-night", json=body,
+                  headers={"Authorization": f"Bearer {ADMIN}"})
+        assert r.status_code in (200, 201), r.text
+    pg.goto(f"{edge_server.base_url}/#simulation?site=tromso-night")
+    pg.wait_for_selector("#sim-start")
+    pg.fill("#sim-start", "2024-12-20")
+    pg.fill("#sim-end", "2024-12-21")
+    pg.select_option("#sim-step", "900")
+    pg.click("#sim-run")
+    pg.wait_for_selector("body[data-simulation-done]", timeout=90_000)
+    title = pg.inner_text("#sim-angles-title")
+    highest = float(re.fullmatch(r"Polar night: the sun at most (-[\d.]+)°", title).group(1))
+    assert -4.0 < highest < -2.0  # pvlib: about −3° at Tromsø's noon on 20 December
+    chart = pg.evaluate("""() => { const el = document.getElementById('chart-sim-angles');
+        return { range: el.layout.yaxis.range,
+                 sun: el.data.find((t) => t.name === 'sun elevation').y }; }""")
+    assert chart["range"][0] <= -10 and max(v for v in chart["sun"] if v is not None) == \
+        pytest.approx(highest, abs=0.06)
+    assert "the fixed array made no energy" in pg.inner_text("#sim-summary")
+    ARTIFACTS.mkdir(exist_ok=True)
+    pg.screenshot(path=str(ARTIFACTS / "simulation-polar-night.png"), full_page=True)
