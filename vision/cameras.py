@@ -430,6 +430,14 @@ def camera_from_params(camera: str, params: dict[str, object], width_px: int,
     [0.01, 1000].
     """
     xs, ys = (-0.5, width_px - 0.5), (-0.5, height_px - 0.5)
+    # the other kind's parameters are refused, not ignored: a fisheye's fov_deg (even NaN)
+    # was accepted and read by nothing (a tester's finding)
+    own = {"pinhole": PINHOLE_FIELDS, "fisheye": FISHEYE_FIELDS}.get(camera, ())
+    stray = [n for n in dict.fromkeys((*PINHOLE_FIELDS, *FISHEYE_FIELDS))
+             if own and n not in own and params.get(n) not in (None, "")]
+    if stray:
+        raise ValueError(f"{stray[0]}: a {camera} camera does not take it (it takes "
+                         f"{', '.join(own)})")
     if camera == "pinhole":
         fov = _number(params, "fov_deg", 67.0, positive=True)
         if fov is None or not 0 < fov < 180:

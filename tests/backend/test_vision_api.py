@@ -186,9 +186,8 @@ def test_bad_input_is_a_4xx_naming_the_field(client: httpx.Client, data: dict,
                                  np.full((60, 80, 3), 65535, np.uint16)])
 def test_odd_but_valid_images_are_answered(client: httpx.Client, img: np.ndarray) -> None:
     """A 1×1 frame, a grey one, a 16-bit one: decoded and answered, no sun invented."""
-    for camera in ("pinhole", "fisheye"):
-        r = client.post(SUN, files={"file": ("o.png", _png(img), "image/png")},
-                        data={"camera": camera, "px_per_deg": "0.5"})
+    for data in ({"camera": "pinhole"}, {"camera": "fisheye", "px_per_deg": "0.5"}):
+        r = client.post(SUN, files={"file": ("o.png", _png(img), "image/png")}, data=data)
         assert r.status_code == 200, r.text
         assert r.json()["sun_found"] is False and r.json()["centroid_px"] is None
 

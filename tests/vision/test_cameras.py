@@ -135,6 +135,11 @@ def test_camera_from_form_fields() -> None:
                                 ("fisheye", {"px_per_deg": "2", "east": "up"}, "east"),
                                 ("pinhole", {"fov_deg": "200"}, "fov_deg"),
                                 ("pinhole", {"cx_px": "nan"}, "cx_px"),
+                                # the other kind's parameter: refused, not ignored
+                                ("fisheye", {"px_per_deg": "2", "fov_deg": "nan"},
+                                 "fov_deg: a fisheye camera does not take it"),
+                                ("pinhole", {"px_per_deg": "2"},
+                                 "px_per_deg: a pinhole camera does not take it"),
                                 ("tele", {}, "camera")]:
         with pytest.raises(ValueError, match=field):
             camera_from_params(kind, params, 640, 480)
