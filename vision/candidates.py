@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -293,11 +294,11 @@ def _score(c: _Candidate, gray: NDArray[np.uint8], shape: float, size: float, pe
         medians.append(float(med))
         iso *= _clamp(1.0 - ((q75 - q25) / contrast - 0.06) / 0.25, 0.0, 1.0)
     m1, _, m3 = medians
-    falloff = (m1 - m3) / contrast if np.isfinite(m1) and np.isfinite(m3) else 0.0
+    falloff = (m1 - m3) / contrast if math.isfinite(m1) and math.isfinite(m3) else 0.0
     iso_glare = iso ** (1.0 / 3.0) * _clamp((falloff - 0.05) / 0.15, 0.0, 1.0)
-    drop = (peak - m1) / contrast if np.isfinite(m1) else 0.0
+    drop = (peak - m1) / contrast if math.isfinite(m1) else 0.0
     sharp = _clamp((drop - 0.3) / 0.3, 0.0, 1.0)
-    if np.isfinite(m1) and m1 < bg - 0.15 * contrast:
+    if math.isfinite(m1) and m1 < bg - 0.15 * contrast:
         sharp = 0.0  # ringed by something darker than the sky: white text on a dark box
     # a wide core is a glare when its limb drops sharply to the sky or its glare lights
     # the sky out to 4 R (c.wide also stands in for the coherence: vision.detect._search);
@@ -354,12 +355,15 @@ def star_fill(gray: NDArray[np.uint8], c: _Candidate, level: float) -> float:
     xs = np.rint(cx + t[None, :] * _RAY_COS[:, None]).astype(np.intp)
     ys = np.rint(cy + t[None, :] * _RAY_SIN[:, None]).astype(np.intp)
     inside = (xs >= 0) & (xs < c.w) & (ys >= 0) & (ys < c.h)
-    hit = np.zeros(xs.shape, bool)
-    hit[inside] = box[ys[inside], xs[inside]]
-    last = np.where(hit.any(axis=1), n - 1 - np.argmax(hit[:, ::-1], axis=1), -1)
-    weight = (t[None, :] + 0.5) * (t[None, :] <= last[:, None])
-    total = float(weight.sum())
-    return float((weight * hit).sum()) / total if total > 0.0 else 1.0
+    # the box's pixel at each sample, False off the box (clamped indices, then masked)
+    hit = box[np.minimum(np.maximum(ys, 0), c.h - 1), np.minimum(np.maximum(xs, 0), c.w - 1)]
+    hit &= inside
+    # each ray's farthest hit + 1 (0: none); the pixels out to it weigh t + 0.5 each, which
+    # sum to (last + 1)² / 2 — exact in floating point, as the sums of halves they replace
+    reach = (hit * (t + 1.0)).max(axis=1)
+    total = 0.5 * float(reach @ reach)
+    # a hit lies within its ray's reach: the hits' weights are the numerator
+    return float((hit @ (t + 0.5)).sum()) / total if total > 0.0 else 1.0
 
 
 def _solid(gray: NDArray[np.uint8], c: _Candidate, level: float) -> float:
@@ -410,7 +414,7 @@ def _tail(gray: NDArray[np.uint8], c: _Candidate, m4: float, bg: float, contrast
             v = _ring_values(gray, core[1] + m["m10"] / m["m00"], core[2] + m["m01"] / m["m00"],
                              4.0 * float(np.sqrt(m["m00"] / np.pi)), fov)
             m4 = _median(v) if v.size >= 8 else float("nan")
-    if not np.isfinite(m4):
+    if not math.isfinite(m4):
         return 1.0
     lo, hi = _TAIL
     return _clamp(((m4 - bg) / contrast - lo) / (hi - lo), 0.0, 1.0)

@@ -90,7 +90,7 @@ from vision.candidates import (
     region_threshold,
 )
 from vision.detection import CameraModel, FovCircle, SunDetection
-from vision.fov import _fov_mask, _median_u8, _small, estimate_fov, overlays_unlit, to_gray
+from vision.fov import _median_u8, _small, estimate_fov, overlays_unlit, to_gray
 from vision.glare import censored_glare_centre, symmetric_glare_centre
 from vision.limb import _robust_limb_centre, contained_limb_centre
 from vision.radial import radial_symmetry_centre
@@ -370,6 +370,8 @@ _JPEG_OVERSHOOT = 32
 _WHITE_SPREAD = 16
 #: A coding block's reach from a pixel (± 8 px: the 8 × 8 luma block the pixel shares)
 _BLOCK_REACH = np.ones((_JPEG_BLOCK_PX + 1, _JPEG_BLOCK_PX + 1), np.uint8)
+#: A colour JPEG's coding unit, the square :func:`_flat_units` looks at about each pixel
+_UNIT = np.ones((_JPEG_BLOCK_PX, _JPEG_BLOCK_PX), np.uint8)
 #: A coding unit's reach from the centre of a flat unit (± 16 px: its own half and the edge
 #: block beyond it, where the plateau's ringing lies)
 _UNIT_REACH = np.ones((2 * _JPEG_BLOCK_PX + 1, 2 * _JPEG_BLOCK_PX + 1), np.uint8)
@@ -390,19 +392,30 @@ def _clip_level(work: _Region, row_max: NDArray[np.uint8], peak: float,
     if work.pixels.size == 0:
         return peak
     lo = max(peak - _JPEG_OVERSHOOT, 0.0)
-    rows = np.flatnonzero(row_max >= lo)
+    rows = (row_max >= lo).nonzero()[0]
     if rows.size == 0:
         return peak
     box = work.pixels[rows[0]:rows[-1] + 1]
-    cols = np.flatnonzero(box.max(axis=0) >= lo)
+    cols = (box.max(axis=0) >= lo).nonzero()[0]
     box = box[:, cols[0]:cols[-1] + 1]
-    flat = _flat_units(box)  # the highest level filling a coding unit is the plateau's
-    level = int(cv2.minMaxLoc(box, flat.view(np.uint8))[1]) if flat.any() else -1
-    if level < lo:
+    # the highest level from lo up filling a coding unit is the plateau's
+    # (:func:`_flat_units`' highest flat level, found level by level from the top: a unit
+    # holds _UNIT.size pixels of its level, so only levels that common are tried — most
+    # frames one, or none)
+    hist = np.bincount(box.ravel(), minlength=256)
+    plateau = None
+    for level in range(int(peak), int(np.ceil(lo)) - 1, -1):
+        if hist[level] >= _UNIT.size:
+            # centres of units wholly at the level (as _flat_units & (box == level))
+            units = cv2.erode((box == level).view(np.uint8), _UNIT,
+                              borderType=cv2.BORDER_CONSTANT, borderValue=0)
+            if units.any():
+                plateau = units.view(bool)
+                break
+    if plateau is None:
         return peak
     if level == int(peak):
         return peak  # the plateau is the peak: nothing rings above it
-    plateau = flat & (box == level)  # centres of units wholly at the level
     if not _rings_of_a_plateau(box, level) or _saturated_elsewhere(box, plateau):
         return peak
     if image is not None and image.ndim == 3:
@@ -445,9 +458,8 @@ def _flat_units(gray: NDArray[np.uint8]) -> NDArray[np.bool_]:
     unit) is one grey level — its lowest equal to its highest, squares crossing the edge of
     ``gray`` excluded: a plateau JPEG kept flat (a block wholly inside a clipped core is its
     DC term alone, which quantisation moves by well under a level)."""
-    unit = np.ones((_JPEG_BLOCK_PX, _JPEG_BLOCK_PX), np.uint8)
-    return (cv2.erode(gray, unit, borderType=cv2.BORDER_CONSTANT, borderValue=0)
-            == cv2.dilate(gray, unit, borderType=cv2.BORDER_CONSTANT, borderValue=255))
+    return (cv2.erode(gray, _UNIT, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+            == cv2.dilate(gray, _UNIT, borderType=cv2.BORDER_CONSTANT, borderValue=255))
 
 
 def _clipped(gray: NDArray[np.uint8], c: _Candidate, labels: NDArray[Any], peak: float) -> bool:
@@ -565,10 +577,13 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         # the image circle, cropped to its bounding box
         work = _disc_region(_Region(gray, 0, 0), int(round(fov.cx_px)), int(round(fov.cy_px)),
                             int(fov.radius_px))
-        sm = _fov_mask(small.shape, FovCircle((fov.cx_px - scale // 2) / scale,
-                                              (fov.cy_px - scale // 2) / scale,
-                                              fov.radius_px / scale))
-        bg = _median_u8(small, sm) if np.any(sm) else _median_u8(small)
+        # the image circle on the thumbnail (cached by _disc_mask, keyed by the thumbnail's
+        # size and the disc's integer centre and radius: a fixed camera's circle is the same
+        # frame after frame)
+        sh, sw = small.shape
+        sm = _disc_mask(sh, sw, int(round((fov.cx_px - scale // 2) / scale)),
+                        int(round((fov.cy_px - scale // 2) / scale)), int(fov.radius_px / scale))
+        bg = _median_u8(small, sm) if cv2.countNonZero(sm) else _median_u8(small)
         diam = 2.0 * fov.radius_px
         centre = (fov.cx_px, fov.cy_px)
     else:

@@ -31,6 +31,7 @@ points at the centre on the arc that is left.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -68,7 +69,7 @@ def _solve(px: NDArray[np.float64], py: NDArray[np.float64], nx: NDArray[np.floa
     a22 = sw - float(wny @ ny)
     a12 = -float(wnx @ ny)
     det = a11 * a22 - a12 * a12
-    if not np.isfinite(det) or det <= 1e-9 * max(a11 * a22, 1e-30):
+    if not math.isfinite(det) or det <= 1e-9 * max(a11 * a22, 1e-30):
         return None
     q = nx * px + ny * py
     b1 = float(w @ px) - float(wnx @ q)
@@ -89,6 +90,7 @@ def _tangent(camera: CameraModel, x: NDArray[np.float64], y: NDArray[np.float64]
 # a 2 × 2 erosion / dilation anchored at its first pixel: the four pixels of a corner
 _TWO = np.ones((2, 2), np.uint8)
 _THREE = np.ones((3, 3), np.uint8)
+_FOUR = np.ones((4, 4), np.uint8)
 
 
 def gradient_lines(gray: NDArray[np.uint8], x0: int, y0: int, x1: int, y1: int,
@@ -125,8 +127,10 @@ def gradient_lines(gray: NDArray[np.uint8], x0: int, y0: int, x1: int, y1: int,
             gx -= np.float32(sky_gradient[0])
             gy -= np.float32(sky_gradient[1])
     g2 = gx * gx + gy * gy
-    ok = cv2.erode((raw >= dark_level).view(np.uint8), _THREE, borderType=cv2.BORDER_REPLICATE)
-    ok4 = np.asarray(cv2.erode(ok, _TWO, anchor=(0, 0))[:-1, :-1], np.uint8)
+    # no dark pixel next to a corner's four: the 3 × 3 erosion (edge replicated), then the
+    # 2 × 2 one anchored at its first pixel, as one 4 × 4 erosion anchored at (1, 1)
+    ok4 = np.asarray(cv2.erode((raw >= dark_level).view(np.uint8), _FOUR, anchor=(1, 1),
+                               borderType=cv2.BORDER_REPLICATE)[:-1, :-1], np.uint8)
     if glare_level > 0:
         hi = np.asarray(cv2.dilate((raw >= glare_level).view(np.uint8), _TWO, anchor=(0, 0)),
                         np.uint8)
@@ -278,7 +282,7 @@ def radial_symmetry_centre(gray: NDArray[np.uint8], start_px: tuple[float, float
             ex, ey = float(qx), float(qy)
         else:
             ex, ey = float(nux), float(nuy)
-        if not (np.isfinite(ex) and np.isfinite(ey)):
+        if not (math.isfinite(ex) and math.isfinite(ey)):
             return None
         if camera is not None:  # the tangent plane may move before the next pass
             perp_after = np.abs((nux - ux) * my - (nuy - uy) * mx)
@@ -352,10 +356,10 @@ def _radial_flat(px: NDArray[np.float64], py: NDArray[np.float64], nx: NDArray[n
         wgt = base if it == 0 else base / (1.0 + (perp / band) ** 2)
         a11, a22, a12, b1, b2 = (normal @ wgt).tolist()
         det = a11 * a22 - a12 * a12
-        if not np.isfinite(det) or det <= 1e-9 * max(a11 * a22, 1e-30):
+        if not math.isfinite(det) or det <= 1e-9 * max(a11 * a22, 1e-30):
             return None
         ex, ey = (a22 * b1 - a12 * b2) / det, (a11 * b2 - a12 * b1) / det
-        if not (np.isfinite(ex) and np.isfinite(ey)):
+        if not (math.isfinite(ex) and math.isfinite(ey)):
             return None
     perp, inward, dist = at(ex, ey)
     d2 = np.maximum(dist, 2.0)
