@@ -16,6 +16,7 @@ Angles are in degrees at every boundary; azimuth is clockwise from true north.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -283,7 +284,7 @@ class FisheyeCamera:
         these are the singular values of the projection's Jacobian; a tilt turns the sky
         before the projection and changes neither). ``(0, 0)`` beyond the lens's domain."""
         theta = float(self.theta_rad(float(np.hypot(x_px - self.cx_px, y_px - self.cy_px))))
-        if not np.isfinite(theta):
+        if not math.isfinite(theta):
             return 0.0, 0.0
         along = _project_slope(theta, self.projection)
         for i, c in enumerate(self.radial_coeffs):
@@ -292,7 +293,7 @@ class FisheyeCamera:
         across = float(self.radius_px(theta)) / self.focal_px / sin_t if sin_t > 1e-9 \
             else _project_slope(0.0, self.projection)  # the limit at the zenith: g'(0) = 1
         scales = (self.px_per_deg * abs(along), self.px_per_deg * abs(across))
-        if not all(np.isfinite(scales)):
+        if not (math.isfinite(scales[0]) and math.isfinite(scales[1])):
             return 0.0, 0.0
         return float(max(scales)), float(min(scales))
 

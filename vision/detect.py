@@ -288,13 +288,14 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
     order = np.argsort(-stats[1:, cv2.CC_STAT_AREA])[:_MAX_CANDIDATES] + 1
     # ghosts first, per component, so that a ghost next to the sun (the sun near the
     # optical centre) is not merged into the sun's cluster
-    singles = [_Candidate([int(i)], int(stats[i, 4]), int(stats[i, 0]), int(stats[i, 1]),
-                          int(stats[i, 2]), int(stats[i, 3]), float(cents[i, 0]),
-                          float(cents[i, 1])) for i in order]
+    st, ce = stats.tolist(), cents.tolist()  # Python numbers: the same values, cheaper reads
+    singles = [_Candidate([i], st[i][4], st[i][0], st[i][1], st[i][2], st[i][3], ce[i][0],
+                          ce[i][1]) for i in order.tolist()]
     # a region the frame cuts casts no ghost: its centroid is the cut's, not its source's
     # (a tester's white bar across the top of a Wolf frame made the sun opposite it a ghost)
-    sources = [c for c in singles if not _on_frame_edge(
-        np.array([[c.x, c.y], [c.x + c.w - 1, c.y + c.h - 1]], float), gray.shape).any()]
+    fh, fw = gray.shape
+    sources = [c for c in singles if not _box_on_frame_edge(c.x, c.y, c.x + c.w - 1,
+                                                            c.y + c.h - 1, fh, fw)]
     ghosts = _mark_ghosts(singles, centre, sources)
     real = np.array([c.labels[0] for c in singles if not c.ghost], dtype=np.int64)
     cands = _clusters(stats, cents, real, ox, oy)
@@ -338,16 +339,19 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
     radius_deg = r_eq / ppd
     saturated = float(peak >= _SATURATED or (best.area >= _PLATEAU_MIN_PX
                                               and _clipped(gray, best, labels, peak)))
-    ring = _ring_values(gray, best.cx, best.cy, 2.0 * r_eq + 3.0, fov)
-    local_bg = _median(ring) if ring.size else bg
-    fit = radial_symmetry_centre(gray, (best.cx, best.cy), 2.0 * r_eq + 4.0,
-                                 dark_level=0.6 * local_bg,
-                                 glare_level=local_bg + 0.3 * (peak - local_bg),
-                                 n_iter=_COHERENCE_PASSES)
     # a saturated core degrees wide that is a glare (vision.candidates._score: `wide`) has
     # no gradient inside the window (the Wolf frames' coherence is 0.02–0.06): its width
-    # stands for the symmetry
-    coherence = max(fit.coherence if fit is not None else 0.0, best.wide)
+    # stands for the symmetry — wholly when it is 1, the most a coherence can be (a share of
+    # the gradients' weight), so the fit is not needed then (most fisheye suns)
+    coherence = best.wide
+    if coherence < 1.0:
+        ring = _ring_values(gray, best.cx, best.cy, 2.0 * r_eq + 3.0, fov)
+        local_bg = _median(ring) if ring.size else bg
+        fit = radial_symmetry_centre(gray, (best.cx, best.cy), 2.0 * r_eq + 4.0,
+                                     dark_level=0.6 * local_bg,
+                                     glare_level=local_bg + 0.3 * (peak - local_bg),
+                                     n_iter=_COHERENCE_PASSES)
+        coherence = max(fit.coherence if fit is not None else 0.0, coherence)
     # a crop without a camera (the tracker's region of interest) has no known scale: its
     # px/° guessed from its width is wrong by the crop's ratio, so its size is no evidence
     x = conf.features(best.shape, best.glare, saturated, peak, bg,
@@ -370,8 +374,6 @@ _JPEG_OVERSHOOT = 32
 _WHITE_SPREAD = 16
 #: A coding block's reach from a pixel (± 8 px: the 8 × 8 luma block the pixel shares)
 _BLOCK_REACH = np.ones((_JPEG_BLOCK_PX + 1, _JPEG_BLOCK_PX + 1), np.uint8)
-#: A colour JPEG's coding unit, the square :func:`_flat_units` looks at about each pixel
-_UNIT = np.ones((_JPEG_BLOCK_PX, _JPEG_BLOCK_PX), np.uint8)
 #: A coding unit's reach from the centre of a flat unit (± 16 px: its own half and the edge
 #: block beyond it, where the plateau's ringing lies)
 _UNIT_REACH = np.ones((2 * _JPEG_BLOCK_PX + 1, 2 * _JPEG_BLOCK_PX + 1), np.uint8)
@@ -398,20 +400,8 @@ def _clip_level(work: _Region, row_max: NDArray[np.uint8], peak: float,
     box = work.pixels[rows[0]:rows[-1] + 1]
     cols = (box.max(axis=0) >= lo).nonzero()[0]
     box = box[:, cols[0]:cols[-1] + 1]
-    # the highest level from lo up filling a coding unit is the plateau's
-    # (:func:`_flat_units`' highest flat level, found level by level from the top: a unit
-    # holds _UNIT.size pixels of its level, so only levels that common are tried — most
-    # frames one, or none)
-    hist = np.bincount(box.ravel(), minlength=256)
-    plateau = None
-    for level in range(int(peak), int(np.ceil(lo)) - 1, -1):
-        if hist[level] >= _UNIT.size:
-            # centres of units wholly at the level (as _flat_units & (box == level))
-            units = cv2.erode((box == level).view(np.uint8), _UNIT,
-                              borderType=cv2.BORDER_CONSTANT, borderValue=0)
-            if units.any():
-                plateau = units.view(bool)
-                break
+    # the highest level filling a coding unit is the plateau's
+    level, plateau = _plateau(box, lo)
     if plateau is None:
         return peak
     if level == int(peak):
@@ -427,6 +417,56 @@ def _clip_level(work: _Region, row_max: NDArray[np.uint8], peak: float,
         if float(channels.max() - channels.min()) > _WHITE_SPREAD:
             return peak
     return float(level)
+
+
+def _plateau(box: NDArray[np.uint8], lo: float) -> tuple[int, NDArray[np.bool_] | None]:
+    """The highest level of ``box`` that fills a coding unit (:func:`_flat_units`) when it is
+    ``lo`` or more, and the centres of the units wholly at it → ``(level, centres)``; else
+    ``(-1, None)``.
+
+    A unit (16 × 16) wholly inside the box holds an 8 × 8 block of the grid aligned to the
+    box's corner, and lies within 8 px of it: on a box of more than :data:`_BLOCKS_FROM_PX`
+    pixels (a bright cloud field around the sun, hundreds of pixels wide) the units are
+    looked for only around the blocks of one level from ``lo`` up (each block's lowest and
+    highest level by erosions and dilations along the rows, then down every 8th column:
+    about half the cost of the units' own on the whole box). The answer is the whole box's."""
+    h, w = box.shape
+    y0, y1, x0, x1 = 0, h, 0, w
+    if box.size > _BLOCKS_FROM_PX:
+        hb, wb = h - h % _BLOCK_PX, w - w % _BLOCK_PX
+        blocks = box[:hb, :wb]
+        # along the rows, then down the columns of every 8th one (an eighth of the pixels)
+        low = cv2.erode(np.ascontiguousarray(cv2.erode(
+            blocks, _BLOCK_ROW, anchor=(0, 0))[:, ::_BLOCK_PX]), _BLOCK_COL,
+            anchor=(0, 0))[::_BLOCK_PX]
+        high = cv2.dilate(np.ascontiguousarray(cv2.dilate(
+            blocks, _BLOCK_ROW, anchor=(0, 0))[:, ::_BLOCK_PX]), _BLOCK_COL,
+            anchor=(0, 0))[::_BLOCK_PX]
+        by, bx = ((low == high) & (low >= lo)).nonzero()
+        if by.size == 0:
+            return -1, None
+        # the units that can hold those blocks: 8 px before a block to 16 px after its start
+        y0, y1 = max(_BLOCK_PX * int(by.min()) - _BLOCK_PX, 0), \
+            min(_BLOCK_PX * int(by.max()) + 2 * _BLOCK_PX, h)
+        x0, x1 = max(_BLOCK_PX * int(bx.min()) - _BLOCK_PX, 0), \
+            min(_BLOCK_PX * int(bx.max()) + 2 * _BLOCK_PX, w)
+    # units crossing this crop's edge but not the box's hold none of those blocks: not flat
+    # from lo up, so the crop's highest flat level from lo up is the box's
+    sub = box[y0:y1, x0:x1]
+    flat = _flat_units(sub)
+    level = int(cv2.minMaxLoc(sub, flat.view(np.uint8))[1]) if flat.any() else -1
+    if level < lo:
+        return -1, None
+    plateau = np.zeros(box.shape, bool)
+    plateau[y0:y1, x0:x1] = flat & (sub == level)  # centres of units wholly at the level
+    return level, plateau
+
+
+#: A box of more pixels than this is searched for plateaus around aligned flat blocks only
+_BLOCKS_FROM_PX = 64 * 64
+_BLOCK_PX = _JPEG_BLOCK_PX // 2
+_BLOCK_ROW = np.ones((1, _BLOCK_PX), np.uint8)
+_BLOCK_COL = np.ones((_BLOCK_PX, 1), np.uint8)
 
 
 def _rings_of_a_plateau(box: NDArray[np.uint8], level: int) -> bool:
@@ -458,8 +498,9 @@ def _flat_units(gray: NDArray[np.uint8]) -> NDArray[np.bool_]:
     unit) is one grey level — its lowest equal to its highest, squares crossing the edge of
     ``gray`` excluded: a plateau JPEG kept flat (a block wholly inside a clipped core is its
     DC term alone, which quantisation moves by well under a level)."""
-    return (cv2.erode(gray, _UNIT, borderType=cv2.BORDER_CONSTANT, borderValue=0)
-            == cv2.dilate(gray, _UNIT, borderType=cv2.BORDER_CONSTANT, borderValue=255))
+    unit = np.ones((_JPEG_BLOCK_PX, _JPEG_BLOCK_PX), np.uint8)
+    return (cv2.erode(gray, unit, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+            == cv2.dilate(gray, unit, borderType=cv2.BORDER_CONSTANT, borderValue=255))
 
 
 def _clipped(gray: NDArray[np.uint8], c: _Candidate, labels: NDArray[Any], peak: float) -> bool:
@@ -743,11 +784,17 @@ def _white_core_centre(image: NDArray[Any], gray: NDArray[np.uint8], c: _Candida
     next to pixels darker than the sky (``bg``: a glare fades into the sky, so darker
     means a mast, the horizon, an overlay); so does a small one (there the limb and the
     weighted centroid are sub-pixel)."""
+    # the white core lies in the candidate's box grown by 2 px (vision.candidates._white_core):
+    # a box too small for the least radius holds no such core (most suns at ≲ 5 px/°)
+    h, w = gray.shape
+    box_area = (min(w, c.x + c.w + 2) - max(0, c.x - 2)) \
+        * (min(h, c.y + c.h + 2) - max(0, c.y - 2))
+    if box_area < np.pi * max(_WHITE_MIN_DEG * ppd, _WHITE_MIN_PX) ** 2:
+        return None
     core = _white_core(image, c, min(_SATURATED, peak - 1.0), one_channel=True)
     if core is None:
         return None
     big, x0, y0, binary = core
-    h, w = gray.shape
     x1, y1 = x0 + binary.shape[1], y0 + binary.shape[0]
     area = cv2.contourArea(big)
     r_eq = float(np.sqrt(area / np.pi))
@@ -944,6 +991,13 @@ def _limb_points(c: _Candidate, labels: NDArray[Any]) -> NDArray[np.float64]:
     pts[:, 0] += c.x
     pts[:, 1] += c.y
     return pts
+
+
+def _box_on_frame_edge(x0: float, y0: float, x1: float, y1: float, h: int, w: int) -> bool:
+    """Whether either corner of the box from ``(x0, y0)`` to ``(x1, y1)`` (x0 ≤ x1, y0 ≤ y1)
+    lies on the frame's edge (:func:`_on_frame_edge` of the two corners, without arrays)."""
+    e = _FOV_EDGE_PX
+    return x0 < e or y0 < e or x1 > w - 1 - e or y1 > h - 1 - e
 
 
 def _on_frame_edge(pts: NDArray[np.float64], shape: tuple[int, ...]) -> NDArray[np.bool_]:

@@ -206,8 +206,7 @@ def _white_on_edge(img: NDArray[np.uint8]) -> list[tuple[NDArray[np.intp], NDArr
     """The pixels ``(ys, xs)`` of each white region (≥ :data:`_OVERLAY_WHITE`, 8-connected)
     that touches the edge of ``img``: what a station draws over its frames (a time-stamp bar
     or box, a white border). None to find — nothing white on the edge — costs four rows."""
-    if not ((img[0] >= _OVERLAY_WHITE).any() or (img[-1] >= _OVERLAY_WHITE).any()
-            or (img[:, 0] >= _OVERLAY_WHITE).any() or (img[:, -1] >= _OVERLAY_WHITE).any()):
+    if max(img[0].max(), img[-1].max(), img[:, 0].max(), img[:, -1].max()) < _OVERLAY_WHITE:
         return []
     _, labels, stats, _ = cv2.connectedComponentsWithStats(
         (img >= _OVERLAY_WHITE).view(np.uint8), connectivity=8)

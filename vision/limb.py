@@ -8,6 +8,7 @@ cloud has grown on one side (:func:`contained_limb_centre`).
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -82,7 +83,7 @@ def _ransac_circle(x: NDArray[np.float64], y: NDArray[np.float64], n_trials: int
     ext = max(float(np.ptp(x)), float(np.ptp(y)))
     ok &= np.isfinite(r) & (r <= 0.6 * ext + 2.0)
     ok &= (ux >= x.min()) & (ux <= x.max()) & (uy >= y.min()) & (uy <= y.max())
-    if not np.any(ok):
+    if not ok.any():
         return np.ones(n, bool)
     ux, uy, r = ux[ok], uy[ok], r[ok]
     tol = np.maximum(1.5, 0.05 * r)
@@ -97,12 +98,31 @@ _CONTAINED_TRIALS = 96  # RANSAC triples of contained_limb_centre (a ≥ 30 % ar
 _CONTAINED_REL_TOL = 0.02  # tolerance on the limb: ≥ this share of the half-angle
 
 
+try:
+    # np.linalg.eigh's own solver (LAPACK's dsyevd on the lower triangle), called without
+    # the wrapper's per-call checks and error state, which cost 7 times the solve of a
+    # 3 × 3 scatter matrix (always finite here); the same eigenvectors
+    from numpy.linalg import _umath_linalg
+
+    _eigh_lo: Any = _umath_linalg.eigh_lo
+except (ImportError, AttributeError):  # pragma: no cover - a numpy without it
+    _eigh_lo = None
+
+
+def _eigh_vectors(s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The eigenvectors (columns, ascending eigenvalues) of a symmetric float64 matrix, as
+    ``np.linalg.eigh(s)[1]``."""
+    if _eigh_lo is None:
+        return np.linalg.eigh(s)[1]
+    return np.asarray(_eigh_lo(s, signature="d->dd")[1])
+
+
 def _plane_axis(v: NDArray[np.float64]) -> NDArray[np.float64]:
     """Axis of the small circle through unit vectors ``[N, 3]`` (least-squares plane normal:
     the eigenvector of the 3 × 3 scatter matrix with the least eigenvalue)."""
     m = v.sum(axis=0) / len(v)  # v.mean(axis=0), without its overhead
     d = v - m
-    normal = np.linalg.eigh(d.T @ d)[1][:, 0]
+    normal = _eigh_vectors(d.T @ d)[:, 0]
     return normal if np.dot(normal, m) > 0 else -normal
 
 
