@@ -429,27 +429,38 @@ def _plateau(box: NDArray[np.uint8], lo: float) -> tuple[int, NDArray[np.bool_] 
     pixels (a bright cloud field around the sun, hundreds of pixels wide) the units are
     looked for only around the blocks of one level from ``lo`` up (each block's lowest and
     highest level by erosions and dilations along the rows, then down every 8th column:
-    about half the cost of the units' own on the whole box). The answer is the whole box's."""
+    about half the cost of the units' own on the whole box); on a smaller one (a sun's core
+    and its glare) level by level from the top. The answer is the whole box's either way."""
     h, w = box.shape
-    y0, y1, x0, x1 = 0, h, 0, w
-    if box.size > _BLOCKS_FROM_PX:
-        hb, wb = h - h % _BLOCK_PX, w - w % _BLOCK_PX
-        blocks = box[:hb, :wb]
-        # along the rows, then down the columns of every 8th one (an eighth of the pixels)
-        low = cv2.erode(np.ascontiguousarray(cv2.erode(
-            blocks, _BLOCK_ROW, anchor=(0, 0))[:, ::_BLOCK_PX]), _BLOCK_COL,
-            anchor=(0, 0))[::_BLOCK_PX]
-        high = cv2.dilate(np.ascontiguousarray(cv2.dilate(
-            blocks, _BLOCK_ROW, anchor=(0, 0))[:, ::_BLOCK_PX]), _BLOCK_COL,
-            anchor=(0, 0))[::_BLOCK_PX]
-        by, bx = ((low == high) & (low >= lo)).nonzero()
-        if by.size == 0:
-            return -1, None
-        # the units that can hold those blocks: 8 px before a block to 16 px after its start
-        y0, y1 = max(_BLOCK_PX * int(by.min()) - _BLOCK_PX, 0), \
-            min(_BLOCK_PX * int(by.max()) + 2 * _BLOCK_PX, h)
-        x0, x1 = max(_BLOCK_PX * int(bx.min()) - _BLOCK_PX, 0), \
-            min(_BLOCK_PX * int(bx.max()) + 2 * _BLOCK_PX, w)
+    if box.size <= _BLOCKS_FROM_PX:
+        # level by level from the top, only the levels with a unit's worth of pixels (most
+        # boxes: one), the units wholly at it by one erosion of its mask (squares crossing
+        # the box's edge excluded, as by _flat_units)
+        count = np.bincount(box.ravel(), minlength=256).tolist()
+        for level in range(255, int(np.ceil(lo)) - 1, -1):
+            if count[level] >= _JPEG_BLOCK_PX * _JPEG_BLOCK_PX:
+                units = cv2.erode((box == level).view(np.uint8), _UNIT,
+                                  borderType=cv2.BORDER_CONSTANT, borderValue=0)
+                if units.any():
+                    return level, units.view(bool)
+        return -1, None
+    hb, wb = h - h % _BLOCK_PX, w - w % _BLOCK_PX
+    blocks = box[:hb, :wb]
+    # along the rows, then down the columns of every 8th one (an eighth of the pixels)
+    low = cv2.erode(np.ascontiguousarray(cv2.erode(
+        blocks, _BLOCK_ROW, anchor=(0, 0))[:, ::_BLOCK_PX]), _BLOCK_COL,
+        anchor=(0, 0))[::_BLOCK_PX]
+    high = cv2.dilate(np.ascontiguousarray(cv2.dilate(
+        blocks, _BLOCK_ROW, anchor=(0, 0))[:, ::_BLOCK_PX]), _BLOCK_COL,
+        anchor=(0, 0))[::_BLOCK_PX]
+    by, bx = ((low == high) & (low >= lo)).nonzero()
+    if by.size == 0:
+        return -1, None
+    # the units that can hold those blocks: 8 px before a block to 16 px after its start
+    y0, y1 = max(_BLOCK_PX * int(by.min()) - _BLOCK_PX, 0), \
+        min(_BLOCK_PX * int(by.max()) + 2 * _BLOCK_PX, h)
+    x0, x1 = max(_BLOCK_PX * int(bx.min()) - _BLOCK_PX, 0), \
+        min(_BLOCK_PX * int(bx.max()) + 2 * _BLOCK_PX, w)
     # units crossing this crop's edge but not the box's hold none of those blocks: not flat
     # from lo up, so the crop's highest flat level from lo up is the box's
     sub = box[y0:y1, x0:x1]
@@ -462,6 +473,8 @@ def _plateau(box: NDArray[np.uint8], lo: float) -> tuple[int, NDArray[np.bool_] 
     return level, plateau
 
 
+#: A colour JPEG's coding unit: the square :func:`_flat_units` looks at about each pixel
+_UNIT = np.ones((_JPEG_BLOCK_PX, _JPEG_BLOCK_PX), np.uint8)
 #: A box of more pixels than this is searched for plateaus around aligned flat blocks only
 _BLOCKS_FROM_PX = 64 * 64
 _BLOCK_PX = _JPEG_BLOCK_PX // 2
@@ -498,9 +511,8 @@ def _flat_units(gray: NDArray[np.uint8]) -> NDArray[np.bool_]:
     unit) is one grey level — its lowest equal to its highest, squares crossing the edge of
     ``gray`` excluded: a plateau JPEG kept flat (a block wholly inside a clipped core is its
     DC term alone, which quantisation moves by well under a level)."""
-    unit = np.ones((_JPEG_BLOCK_PX, _JPEG_BLOCK_PX), np.uint8)
-    return (cv2.erode(gray, unit, borderType=cv2.BORDER_CONSTANT, borderValue=0)
-            == cv2.dilate(gray, unit, borderType=cv2.BORDER_CONSTANT, borderValue=255))
+    return (cv2.erode(gray, _UNIT, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+            == cv2.dilate(gray, _UNIT, borderType=cv2.BORDER_CONSTANT, borderValue=255))
 
 
 def _clipped(gray: NDArray[np.uint8], c: _Candidate, labels: NDArray[Any], peak: float) -> bool:

@@ -309,3 +309,25 @@ def test_a_pinhole_view_framed_by_something_dark_has_no_image_circle(dark_share:
     img[:, -border:] = 20
     cv2.circle(img, (400, 150), 12, 255, -1)
     assert estimate_fov(img) is None
+
+
+def test_two_cameras_of_one_frame_size_each_get_their_own_image_circle() -> None:
+    """The image circle's mask on the thumbnail (the sky's level is read under it) is cached
+    across frames (vision.detect._disc_mask): keyed by the circle, so a frame of a second
+    camera of the same size after the first gets the answer it gets alone — to the last
+    feature."""
+    from vision.detect import _disc_mask
+
+    cams = (FisheyeCamera(319.5, 239.5, 2.6), FisheyeCamera(300.0, 250.0, 2.2))
+    frames = [fisheye_frame(150.0, 50.0, camera=c, seed=3).image for c in cams]
+    _disc_mask.cache_clear()
+    alone = detect_sun(frames[1], "robust")
+    _disc_mask.cache_clear()
+    first = detect_sun(frames[0], "robust")
+    after = detect_sun(frames[1], "robust")
+    assert first.fov is not None and after.fov is not None
+    assert first.fov != after.fov  # two different circles on frames of one size
+    assert after.fov == alone.fov
+    assert after.sun_found == alone.sun_found
+    assert after.centroid_px == alone.centroid_px
+    assert after.features == alone.features
