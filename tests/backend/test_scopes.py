@@ -147,8 +147,9 @@ def test_the_cli_makes_and_lists_scoped_tokens(server: InProcessServer,
     monkeypatch.setenv("HELIOTWIN_DATABASE_URL", server.database_url)
     create(argparse.Namespace(site=SITE, label="operator", scope="site",
                               expires_in_days=None, expires=None))
-    out = capsys.readouterr().out
-    assert out.startswith("site token for site tehuantepec")
+    made = capsys.readouterr()
+    assert made.err.startswith("site token for site tehuantepec")
+    assert made.out.startswith("ht_") and made.out.count("\n") == 1  # the token alone
     list_(argparse.Namespace(site=SITE, json=False))
     table = capsys.readouterr().out.splitlines()
     assert table[0].split()[:3] == ["id", "site_id", "scope"]
