@@ -38,13 +38,14 @@ from typing import Any
 
 import anyio
 import orjson
-from fastapi import FastAPI, Request
+from fastapi import Depends, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import Response
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.middleware.gzip import GZipMiddleware
 
 from backend.api import security, strict
+from backend.api.deps import read_token
 from backend.api.routes import (
     alerts,
     dashboard,
@@ -192,6 +193,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
         docs_url=None,  # served from local assets by security.add_docs
         redoc_url=None,
+        # HELIOTWIN_READ_REQUIRE_TOKEN: the one check of who may read (deps.read_token)
+        dependencies=[Depends(read_token)],
     )
     app.state.settings = settings
     app.add_exception_handler(RequestValidationError, validation_error)  # type: ignore[arg-type]

@@ -92,6 +92,12 @@ class ServerSettings(_Group):
         None, description="Bearer token of the admin endpoints (`/api/v1/tokens`); unset: "
                           "they answer 403."
     )
+    read_require_token: bool = Field(
+        False, description="Reads of the sites' data (every GET of the API but `/healthz`, "
+                           "`/api/v1/meta`, the docs and the dashboard's files) need a valid "
+                           "token: any site's, any scope, or the admin token; unset: anyone "
+                           "who reaches the port reads them (docs/service.md, \"Who may "
+                           "read\").")
     token_cache_ttl_s: float = Field(
         0.5, gt=0, le=1.0, description="How long a checked write token is trusted from "
                                        "memory (a revocation by the CLI takes effect within it)."

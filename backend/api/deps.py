@@ -10,6 +10,9 @@
 - :data:`SiteAdminDep`: the admin token or a ``site``-scope token of ``{site_id}``
   (403 naming the scope for an ``ingest`` token); :data:`CallerDep` who called (or
   None), for a route whose site is in its body, to :func:`authorize` there.
+- :func:`read_token` (every route's): when ``Settings.server.read_require_token`` is
+  set, the reads of the service's data (every GET but :data:`PUBLIC_READS`) need a valid
+  token of any site and scope, or the admin token (401 naming the setting otherwise).
 - :data:`VisionTokenDep`: when ``Settings.vision.require_token`` is set, a valid
   token of any site is needed (401 otherwise); gives that token's site id, or
   None when no token is needed and none was sent.
@@ -237,6 +240,41 @@ async def authenticated_first(ctx: ServiceContext, authorization: str | None) ->
     if await caller_of(ctx, authorization) is None:
         raise HTTPException(401, "this request needs a token: send 'Authorization: Bearer "
                                  "<token>'", headers=_BEARER)
+
+
+#: The reads (GET) that stay open when ``HELIOTWIN_READ_REQUIRE_TOKEN`` is set, by route
+#: path: they hold none of the sites' data. The liveness probe; what the dashboard needs to
+#: know before it has a token (the meta says that reads need one); the dashboard's page and
+#: its Plotly; the API docs (``/openapi.json`` is a plain route, not checked at all); the
+#: JSON schema of a site's config (the Sites form); the time a sky image's file *name*
+#: carries (the Sky page's analysis is ruled by ``HELIOTWIN_VISION_REQUIRE_TOKEN``).
+#: ``tests/backend/test_read_token.py`` checks every other GET against the setting.
+PUBLIC_READS: frozenset[str] = frozenset({
+    "/healthz", "/api/v1/meta", "/", "/vendor/plotly.min.js", "/docs",
+    "/api/v1/sites/schema.json", "/api/v1/vision/frame-times"})
+
+READ_TOKEN_REQUIRED = (
+    "this service requires a token to read its data (HELIOTWIN_READ_REQUIRE_TOKEN is set): "
+    "send 'Authorization: Bearer <token>' with any site's token (ingest or site scope; "
+    "`heliotwin token create --site ID`) or the admin token")
+
+
+async def read_token(request: Request) -> None:
+    """Dependency of every route (``create_app``): when ``Settings.server.read_require_token``
+    is set, a GET other than :data:`PUBLIC_READS` needs the admin token or a valid token of
+    any site and scope — 401 naming the setting without one, 401 as everywhere for an
+    unknown, revoked or expired one. A token of one site reads every site's data: the
+    setting keeps out who has no token; it does not part the sites of one service. Other
+    methods are the routes' own (writes need a token of their site and scope; the
+    simulations, sweeps and vision analysis keep their anonymous allowances)."""
+    settings: Settings = request.app.state.settings
+    if not settings.server.read_require_token or request.method not in ("GET", "HEAD"):
+        return
+    route = request.scope.get("route")
+    if getattr(route, "path", None) in PUBLIC_READS:
+        return
+    if await caller_of(request.app.state.ctx, request.headers.get("authorization")) is None:
+        raise HTTPException(401, READ_TOKEN_REQUIRED, headers=_BEARER)
 
 
 SiteAdminDep = Annotated[str, Depends(require_site_admin)]

@@ -51,6 +51,7 @@ def meta(request: Request, settings: SettingsDep) -> dict[str, Any]:
         "viser_port": scene.port if scene is not None else settings.server.viser_port,
         "viser_enabled": scene is not None,
         "vision_require_token": settings.vision.require_token,
+        "read_require_token": settings.server.read_require_token,
         "default_site": settings.sites.default_site,
         "energy_max_gap_s": settings.ingest.energy_max_gap_s,
         "docs_url": "/docs",

@@ -33,6 +33,9 @@ class MetaRead(BaseModel):
     viser_port: int = Field(description="the port the 3D scene really listens on")
     viser_enabled: bool
     vision_require_token: bool
+    read_require_token: bool = Field(
+        description="reads of the sites' data need a token (HELIOTWIN_READ_REQUIRE_TOKEN): "
+                    "the dashboard asks for one before it reads")
     default_site: str
     energy_max_gap_s: int = Field(description="longest gap energy bridges [s]")
     docs_url: str
