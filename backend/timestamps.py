@@ -35,6 +35,8 @@ FIRST_YEAR, LAST_YEAR = 1900, 2199
 #: Readings stamped before 1990-01-01T00:00:00Z are refused (no logger of ours is older).
 READINGS_FROM_S = 631_152_000
 _BARE_DATE = re.compile(r"^\d{4}-\d{2}-\d{2}$")
+#: A date-time of a year of five digits or more (or signed), which Python cannot hold.
+_LONG_YEAR = re.compile(r"^(\d{5,}|[+-]\d{4,})-\d{2}-\d{2}([T ]|$)", re.I)
 
 
 class TimestampError(ValueError):
@@ -47,6 +49,9 @@ def parse_instant(text: str, field: str) -> dt.datetime:
     try:
         value = _from_iso(text.upper())  # RFC 3339 allows 't' and 'z'
     except ValueError:
+        if _LONG_YEAR.match(text):  # 10000-01-01T00:00Z: ISO 8601 (expanded), no datetime's
+            raise TimestampError(f"{field}: {text[:40]!r} is outside the years "
+                                 f"{FIRST_YEAR}–{LAST_YEAR}") from None
         raise TimestampError(f"{field}: {text[:40]!r} is not an ISO 8601 date-time") from None
     if value.tzinfo is None or value.utcoffset() is None:
         raise TimestampError(f"{field}: {text[:40]!r} has no UTC offset; add one "
@@ -81,6 +86,8 @@ def parse_day_or_instant(text: str, zone: ZoneInfo | str, field: str) -> dt.date
     try:
         return parse_instant(text, field)
     except TimestampError as exc:
+        if "outside the years" in str(exc):  # a date-time, but of a year not accepted
+            raise
         if "no UTC offset" in str(exc):
             raise TimestampError(f"{field}: {text!r} has no UTC offset; add one or give a "
                                  "bare date (YYYY-MM-DD)") from None

@@ -68,13 +68,15 @@ SettingsDep = Annotated[Settings, Depends(get_settings_dep)]
 SessionDep = Annotated[Session, Depends(get_session)]
 
 
-def site_or_404(ctx: ServiceContext, site_id: str) -> SiteInfo:
-    """The site, or 404 naming the known ones; 503 while its arrays have no database rows
-    (:meth:`backend.sites.SiteInfo.ready`)."""
+def site_or_404(ctx: ServiceContext, site_id: str, field: str | None = None) -> SiteInfo:
+    """The site, or 404 naming the known ones (and ``field``, the body's or the query's
+    field that named it: a path's site needs no name); 503 while its arrays have no
+    database rows (:meth:`backend.sites.SiteInfo.ready`)."""
     info = ctx.registry.get(site_id)
     if info is None:
         known = ", ".join(ctx.registry.sites) or "none"
-        raise HTTPException(404, f"unknown site {site_id!r}; known sites: {known}")
+        named = f"{field}: " if field else ""
+        raise HTTPException(404, f"{named}unknown site {site_id[:64]!r}; known sites: {known}")
     if not info.ready():
         missing = sorted(set(info.site.arrays) - set(info.arrays))
         raise HTTPException(503, f"site {site_id!r}: arrays {missing} have no rows in the "

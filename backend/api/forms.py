@@ -17,10 +17,11 @@ _FALSE = {"0", "false", "no", "off"}
 
 
 async def read_form(request: Request, limit: int, expected: str, max_files: int,
-                    max_fields: int = 256, limit_name: str = "HELIOTWIN_MAX_UPLOAD_BYTES"
-                    ) -> FormData:
-    """The multipart form of ``request``; ``expected`` says what the 415 asks for, and
-    ``limit_name`` the setting a 413 names (the one ``limit`` comes from)."""
+                    max_fields: int = 256, limit_name: str = "HELIOTWIN_MAX_UPLOAD_BYTES",
+                    files_field: str = "file") -> FormData:
+    """The multipart form of ``request``; ``expected`` says what the 415 asks for,
+    ``limit_name`` the setting a 413 names (the one ``limit`` comes from) and
+    ``files_field`` the field of the files that a 422 for too many of them names."""
     ctype = request.headers.get("content-type", "")
     if not ctype.lower().startswith("multipart/form-data"):
         raise HTTPException(415, f"send multipart/form-data ({expected})")
@@ -46,7 +47,8 @@ async def read_form(request: Request, limit: int, expected: str, max_files: int,
     except Exception as exc:  # starlette's HTTPException(400) for a malformed body or limits
         text = str(getattr(exc, "detail", exc))
         if "Too many files" in text:
-            raise HTTPException(422, f"files: at most {max_files} files per request") from None
+            raise HTTPException(422, f"{files_field}: at most {max_files} files per "
+                                     "request") from None
         if "Too many fields" in text:
             raise HTTPException(422, f"form: at most {max_fields} fields per request") from None
         raise HTTPException(400, f"malformed multipart body: {text}") from None

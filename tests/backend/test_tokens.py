@@ -133,6 +133,7 @@ def test_admin_endpoints(server: InProcessServer, client: httpx.Client,
 
     bad = client.post(url, headers=admin, json={"site_id": "mars"})
     assert bad.status_code == 404 and "mars" in bad.text
+    assert bad.json()["detail"].startswith("site_id: unknown site")  # the body's field
     bad = client.get(url, headers=admin, params={"site_id": "mars"})  # was an empty list
     assert bad.status_code == 404 and "mars" in bad.text
     bad = client.post(url, headers=admin, json={"site_id": "tehuantepec",

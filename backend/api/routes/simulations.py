@@ -76,7 +76,7 @@ SimulationCreate = create_model(
 
 
 def _params(ctx: Any, body: _SimulationBase) -> Scenario:
-    info = site_or_404(ctx, body.site_id)
+    info = site_or_404(ctx, body.site_id, "site_id")
     try:
         t0, t1 = parse_range(body.start, body.end, info.zone)
     except ValueError as exc:

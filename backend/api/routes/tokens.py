@@ -107,7 +107,7 @@ async def get_tokens(ctx: ContextDep, _admin: AdminDep,
                      site_id: Annotated[str | None, Query(max_length=64)] = None) -> Response:
     """Every write token (of one site with ``site_id``): id, prefix, times, status."""
     if site_id is not None:
-        site_or_404(ctx, site_id)
+        site_or_404(ctx, site_id, "site_id")
 
     def read() -> list[dict[str, Any]]:
         with ctx.engine.connect() as conn:
@@ -120,7 +120,7 @@ async def get_tokens(ctx: ContextDep, _admin: AdminDep,
              responses={**_RESPONSES, 404: {"description": "unknown site"}, 422: {}})
 async def post_token(body: TokenCreate, ctx: ContextDep, _admin: AdminDep) -> Response:
     """Make a write token; the answer holds it once (``token``), with its ``id``."""
-    site_or_404(ctx, body.site_id)
+    site_or_404(ctx, body.site_id, "site_id")
     if body.expires_in_days is not None and body.expires_at is not None:
         raise HTTPException(422, "expires_at: give expires_at or expires_in_days, not both")
     now = dt.datetime.now(dt.UTC)

@@ -77,7 +77,7 @@ async def create_simulation_on_weather(request: Request, ctx: ContextDep) -> Res
                              for e in exc.errors())
         raise HTTPException(422, problems) from None
     typical, meta = await _weather(form.get("file"))
-    info = site_or_404(ctx, body.site_id)
+    info = site_or_404(ctx, body.site_id, "site_id")
     try:
         station = check_station(meta, info.site, force,
                                 'force (tick "distant station" on the simulation form)')
