@@ -131,11 +131,15 @@ def _json(data: Any, status: int = 200) -> Response:
 
 
 async def _read_form(request: Request, limit: int,
-                     limit_name: str = "HELIOTWIN_MAX_UPLOAD_BYTES") -> FormData:
+                     limit_name: str = "HELIOTWIN_MAX_UPLOAD_BYTES",
+                     field: str = "file") -> FormData:
     """The form; a text field sent as a file part is a 422 naming it (it was dropped).
-    ``limit``: the body's bound in bytes, from the setting ``limit_name``."""
-    form = await read_form(request, limit, "an image in the field 'file'", _MAX_FILES,
-                           limit_name=limit_name)
+    ``limit``: the body's bound in bytes, from the setting ``limit_name``; ``field``: the
+    images' field, which a 415 and a 422 for too many files name."""
+    expected = "an image in the field 'file'" if field == "file" else \
+        f"images in the field {field!r}"
+    form = await read_form(request, limit, expected, _MAX_FILES, limit_name=limit_name,
+                           files_field=field)
     _fields(form)
     return form
 
@@ -147,7 +151,7 @@ async def _batch_form(request: Request, ctx: Any) -> FormData:
     ≈ 1.17 MB each) passed 10 MB (a tester's finding). The frames are decoded one at a
     time (:func:`_timed_frames`), so the bound is on the bytes held, not on pixels."""
     return await _read_form(request, ctx.settings.vision.max_batch_bytes,
-                            "HELIOTWIN_VISION_MAX_BATCH_BYTES")
+                            "HELIOTWIN_VISION_MAX_BATCH_BYTES", field="files")
 
 
 def _cut(text: str, keep: int = 40) -> str:
