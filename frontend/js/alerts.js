@@ -5,7 +5,7 @@
 // fields), the acknowledged ones shown calmer with who, when and their note; the recently
 // cleared ones under a fold, and what the service checks. Refreshed every 30 s while the
 // overview is shown (not in a hidden tab), at once when the site changes.
-import { api } from "./api.js";
+import { api, storedToken } from "./api.js";
 import { fmtDateTime } from "./time.js";
 import { h, num } from "./ui.js";
 
@@ -128,7 +128,8 @@ async function send(ev) {
   ev.preventDefault();
   const id = form().dataset.alertId;
   const title = form().dataset.title;
-  const token = $("alerts-ack-token").value.trim();
+  // the card's field, else the header's token (HELIOTWIN_READ_REQUIRE_TOKEN), if any
+  const token = $("alerts-ack-token").value.trim() || storedToken();
   if (!token) {
     status("Acknowledging needs a token: paste into “Token” a site-scope token of this site named after you "
       + "(heliotwin token create --site ID --scope site --label \"Your name\") or the admin token.", "error");

@@ -19,7 +19,36 @@ function detailText(body, fallback) {
   return JSON.stringify(d);
 }
 
-/** GET/POST JSON; throws ApiError with the server's message on a non-2xx answer. */
+// The dashboard's token: when the service requires one to read (HELIOTWIN_READ_REQUIRE_TOKEN,
+// /api/v1/meta's read_require_token) the header's token field stores it here and every request
+// that names no token of its own sends it. sessionStorage, not localStorage: a token may also
+// write (a site-scope or the admin token), so it stays with this tab and is gone when the tab
+// or the browser is closed — a shared control-room PC keeps no token; a reload keeps it.
+const TOKEN_KEY = "heliotwin.token";
+
+/** The stored token, or "" (no storage: a private window that refuses it). */
+export function storedToken() {
+  try { return sessionStorage.getItem(TOKEN_KEY) || ""; } catch { return ""; }
+}
+
+/** Store the dashboard's token ("" forgets it). */
+export function storeToken(token) {
+  try {
+    if (token) sessionStorage.setItem(TOKEN_KEY, token);
+    else sessionStorage.removeItem(TOKEN_KEY);
+  } catch { /* not stored: the page asks again after a reload */ }
+}
+
+/** The Authorization header of the stored token (for a fetch outside api(): an image). */
+export function authHeaders() {
+  const t = storedToken();
+  return t ? { Authorization: `Bearer ${t}` } : {};
+}
+
+/** GET/POST JSON; throws ApiError with the server's message on a non-2xx answer.
+ *  `token`: the request's own token (a form's field; "" sends none); left out, the stored
+ *  token is sent, and a 401 then dispatches "heliotwin:unauthorized" (main.js shows the
+ *  header's token field with the server's message). */
 export async function api(path, { method = "GET", params, json, form, signal, token } = {}) {
   let url = path;
   if (params) {
@@ -28,7 +57,8 @@ export async function api(path, { method = "GET", params, json, form, signal, to
     url += (url.includes("?") ? "&" : "?") + q.toString();
   }
   const init = { method, signal, headers: { Accept: "application/json" } };
-  if (token) init.headers.Authorization = `Bearer ${token}`;
+  const bearer = token === undefined ? storedToken() : token;
+  if (bearer) init.headers.Authorization = `Bearer ${bearer}`;
   if (json !== undefined) {
     init.body = JSON.stringify(json);
     init.headers["Content-Type"] = "application/json";
@@ -40,9 +70,28 @@ export async function api(path, { method = "GET", params, json, form, signal, to
   let body = null;
   try { body = text ? JSON.parse(text) : null; } catch { body = null; }
   if (!res.ok) {
-    throw new ApiError(res.status, `${res.status} ${res.statusText}: ${detailText(body, text.slice(0, 200))}`, body);
+    const detail = detailText(body, text.slice(0, 200));
+    if (res.status === 401 && token === undefined) {
+      window.dispatchEvent(new CustomEvent("heliotwin:unauthorized", { detail }));
+    }
+    throw new ApiError(res.status, `${res.status} ${res.statusText}: ${detail}`, body);
   }
   return body;
+}
+
+/** An image (or any file) of the API as an object URL, fetched with the stored token (an
+ *  <img src> cannot send one); revoke it with URL.revokeObjectURL when replaced. */
+export async function apiObjectUrl(path, signal) {
+  const res = await fetch(path, { signal, headers: authHeaders() });
+  if (!res.ok) {
+    const text = await res.text();
+    let body = null;
+    try { body = JSON.parse(text); } catch { body = null; }
+    const detail = detailText(body, text.slice(0, 200));
+    if (res.status === 401) window.dispatchEvent(new CustomEvent("heliotwin:unauthorized", { detail }));
+    throw new ApiError(res.status, `${res.status} ${res.statusText}: ${detail}`, body);
+  }
+  return URL.createObjectURL(await res.blob());
 }
 
 export const getMeta = () => api("/api/v1/meta");

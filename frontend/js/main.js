@@ -1,5 +1,5 @@
 // Dashboard shell: site picker, hash navigation between pages, shared state.
-import { getMeta, getSites } from "./api.js";
+import { getMeta, getSites, storedToken, storeToken } from "./api.js";
 import { loadPlotly, resizeVisible, wireCsvButtons } from "./charts.js";
 import { localDate, zoneLabel } from "./time.js";
 import { banner } from "./ui.js";
@@ -62,11 +62,44 @@ function setSite(siteId) {
   localStorage.setItem("heliotwin.site", state.site?.site_id || "");
 }
 
+/** Show the header's token field (HELIOTWIN_READ_REQUIRE_TOKEN) with the server's message. */
+function askToken(message) {
+  document.getElementById("read-token-form").hidden = false;
+  document.getElementById("read-token-msg").textContent = message || "";
+  document.getElementById("read-token").focus();
+}
+
+/** The header's token: stored for this tab (api.js) and the page reloaded with it, so every
+ *  page starts over reading with it; "Forget token" drops it. A 401 of a read (a token
+ *  revoked or expired meanwhile) shows the field again with the server's message. */
+function wireToken() {
+  const form = document.getElementById("read-token-form");
+  const forget = document.getElementById("read-token-forget");
+  forget.hidden = !storedToken();
+  form.addEventListener("submit", (event) => {
+    event.preventDefault();
+    const token = document.getElementById("read-token").value.trim();
+    if (!token) { askToken("Paste a token first."); return; }
+    storeToken(token);
+    location.reload();
+  });
+  forget.addEventListener("click", () => { storeToken(""); location.reload(); });
+  window.addEventListener("heliotwin:unauthorized", (event) => {
+    if (state.meta.read_require_token || storedToken()) askToken(event.detail);
+  });
+}
+
 async function boot() {
   wireCsvButtons();
+  wireToken();
   const select = document.getElementById("site-select");
   const [sitesRes, metaRes] = await Promise.allSettled([getSites(), getMeta()]);
   if (metaRes.status === "fulfilled") state.meta = metaRes.value || {};
+  if (sitesRes.status === "rejected" && sitesRes.reason.status === 401) {
+    // reads need a token (meta.read_require_token) and none, or a bad one, was sent
+    askToken(sitesRes.reason.body?.detail || sitesRes.reason.message);
+    return;
+  }
   if (sitesRes.status === "rejected") {
     banner(`Could not load the sites: ${sitesRes.reason.message}`, "error");
     return;

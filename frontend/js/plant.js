@@ -1,7 +1,7 @@
 // Plant: a plant of dual-axis trackers seen from above with each collector's shade through a
 // clear-sky day, the strategies compared, and seed 004's sky map with the chosen orientation;
 // below, a sweep of regular layouts and spacings at the plant's place (issue 26).
-import { api } from "./api.js";
+import { api, apiObjectUrl, storedToken } from "./api.js";
 import { COLORS, baseLayout, draw, showEmpty, zeroBasedAxis } from "./charts.js";
 import { fmtTime } from "./time.js";
 import { banner, energy, num, sayInvalid, tile } from "./ui.js";
@@ -157,7 +157,18 @@ function drawSkyMap() {
   // PlantRead.strategies: the sky map's grey region is the rectangle's shade-free test
   img.hidden = !p.strategies.includes("sky_scan");
   if (img.hidden) img.removeAttribute("src");
-  else img.src = `/api/v1/plants/${enc(p.plant_id)}/sky-map?time=${enc(t)}&strategy=${enc(strategy)}&format=png`;
+  else {
+    const src = `/api/v1/plants/${enc(p.plant_id)}/sky-map?time=${enc(t)}&strategy=${enc(strategy)}&format=png`;
+    if (!storedToken()) img.src = src;
+    else {
+      // an <img> sends no token (HELIOTWIN_READ_REQUIRE_TOKEN): fetched with it, shown from a blob
+      apiObjectUrl(src).then((url) => {
+        if (img.dataset.time !== t) { URL.revokeObjectURL(url); return; }  // another instant's by now
+        if (img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
+        img.src = url;
+      }).catch((err) => banner(`Sky map: ${err.message}`, "error"));
+    }
+  }
   api(`/api/v1/plants/${enc(p.plant_id)}/positions`, { params: { time: t, strategy } }).then((pos) => {
     if (view.day !== d) return;   // another day (or none) was loaded meanwhile: not its instant
     const tr = pos.trackers[0];

@@ -1,5 +1,5 @@
 // Sky camera: upload frames, find the sun, compare with the ephemeris, calibrate a fisheye.
-import { api } from "./api.js";
+import { api, storedToken } from "./api.js";
 import { COLORS, baseLayout, draw, showEmpty } from "./charts.js";
 import { addDays, fmtDateTime, localDate, localMidnightMs, localWallMs, toLocalWall } from "./time.js";
 import { banner, h, num } from "./ui.js";
@@ -237,7 +237,7 @@ async function detectAll(ev) {
     if (ts) form.append("timestamp", ts);
     let res;
     try { // the server's answer first: its 413/415/422 says what is wrong with the file
-      res = await api("/api/v1/vision/sun", { method: "POST", form, token: $("sky-token").value.trim() });
+      res = await api("/api/v1/vision/sun", { method: "POST", form, token: skyToken(true) });
     } catch (err) {
       out.append(errorCard(row, `Not analysed — ${err.message}`));
       failed += 1;
@@ -282,7 +282,7 @@ async function calibrate() {
   const box = $("sky-calibration-result");
   box.innerHTML = "";
   try {
-    const res = await api("/api/v1/vision/calibrations", { method: "POST", form, token: $("sky-token").value.trim() });
+    const res = await api("/api/v1/vision/calibrations", { method: "POST", form, token: skyToken(true) });
     const fitted = res; // FittedCalibrationRead: the camera's fields at the top level too
     const show = [["calibration_id", "Calibration id", 0], ["projection", "Projection"], ["cx_px", "Centre x [px]", 1],
       ["cy_px", "Centre y [px]", 1], ["px_per_deg", "Scale [px/°]", 3], ["north_offset_deg", "North offset [°]", 2],
@@ -417,18 +417,28 @@ function calibrationLegend(id) {
   return name ? `#${id} ${name}` : `#${id}`;
 }
 
+/** The token of a vision request: the "Write token" field's; empty, the header's stored
+ *  token (HELIOTWIN_READ_REQUIRE_TOKEN) for a deletion, which needs one anyway, and for an
+ *  upload only where the service requires one (HELIOTWIN_VISION_REQUIRE_TOKEN): an analysis
+ *  without one stays anonymous, and the admin token, which vision refuses, is not sent. */
+function skyToken(upload) {
+  const own = $("sky-token").value.trim();
+  if (own) return own;
+  return !upload || st.meta?.vision_require_token ? storedToken() : "";
+}
+
 async function deleteCalibration() {
   const sel = $("sky-calibration");
   const id = sel.value;
   if (!id) return;
-  if (!$("sky-token").value.trim()) {
+  if (!skyToken(false)) {
     $("sky-status").textContent = "Deleting needs a token: paste into “Write token” a site-scope token of the site "
       + "(heliotwin token create --site ID --scope site), any site's write token for a free place, or the admin token.";
     return;
   }
   if (!confirm(`Delete calibration ${calibrationLegend(id)} and the detections made with it?`)) return;
   try {
-    const res = await api(`/api/v1/vision/calibrations/${encodeURIComponent(id)}`, { method: "DELETE", token: $("sky-token").value.trim() });
+    const res = await api(`/api/v1/vision/calibrations/${encodeURIComponent(id)}`, { method: "DELETE", token: skyToken(false) });
     sel.remove(sel.selectedIndex);
     sel.value = "";
     sel.dispatchEvent(new Event("change"));
@@ -469,7 +479,7 @@ async function evaluateCalibration() {
   $("sky-status").textContent = `evaluating ${calibrationLegend(id)} on ${timed.length} frames…`;
   box.innerHTML = "";
   try {
-    const res = await api("/api/v1/vision/evaluate", { method: "POST", form, token: $("sky-token").value.trim() });
+    const res = await api("/api/v1/vision/evaluate", { method: "POST", form, token: skyToken(true) });
     const rows = [];
     const held = [];
     for (const f of res.table2) {
@@ -500,7 +510,7 @@ async function evaluateCalibration() {
 }
 
 async function clearDetections() {
-  if (!$("sky-token").value.trim()) {
+  if (!skyToken(false)) {
     $("sky-status").textContent = "Clearing needs a token: paste into “Write token” a site-scope token of the site "
       + "(heliotwin token create --site ID --scope site), any site's write token for a free place, or the admin token.";
     return;
@@ -511,7 +521,7 @@ async function clearDetections() {
   if ($("sky-place").value === "site") params.site_id = st.site.site_id;
   if ($("sky-clear-which").value === "uncalibrated") params.uncalibrated = "true";
   try {
-    const res = await api("/api/v1/vision/detections", { method: "DELETE", params, token: $("sky-token").value.trim() });
+    const res = await api("/api/v1/vision/detections", { method: "DELETE", params, token: skyToken(false) });
     $("sky-status").textContent = `Cleared ${res.detections_deleted} detection(s) of ${day}.`;
   } catch (err) {
     $("sky-status").textContent = `Could not clear: ${err.message}`;
