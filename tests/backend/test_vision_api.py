@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import datetime as dt
+import functools
 import json
 import struct
 import zlib
@@ -209,10 +210,12 @@ def test_too_many_files_is_a_422_naming_files(client: httpx.Client) -> None:
     assert r.status_code == 422 and "files" in r.json()["detail"]
 
 
+@functools.cache  # 2.6 s of CPU (noise and JPEG of 12 frames of 1920² px), asked 3 times
 def _noisy_wolf_series() -> tuple[list[tuple[str, tuple[str, bytes, str]]], dict[str, object]]:
     """The 12 Wolf development frames as a camera with sensor noise writes them (σ = 8 grey
     levels before the clip, JPEG quality 92: ≈ 1.17 MB a frame, 14 MB in all — a tester's
-    series), with their times and place."""
+    series), with their times and place (the same every call, seeded: computed once; the
+    callers only read it)."""
     with (REAL_SKY / "split.csv").open(newline="") as fh:
         dev = {r["filename"] for r in csv.DictReader(fh)
                if r["camera"] == "Wolf" and r["split"] == "development"}
