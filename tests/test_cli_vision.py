@@ -92,13 +92,15 @@ def test_detect_checks_the_place_and_warns_as_the_service(frames: list[Path], tm
         p = heliotwin_cli(*base, "--lat", lat, "--lon", lon, "--json")
         assert p.returncode == 2 and p.stderr.count(f"{flag}:") == 1, p.stderr
         assert p.stdout == ""
-    # Sydney at this UTC time is night: a sun found, the ephemeris far below the horizon
+    # Sydney at this UTC time is night (the sun 40° down): the bright disc is no sun, as the
+    # service answers (vision.analyse.SUN_DOWN_DEG); it was a sun found with a warning
     p = heliotwin_cli(*base, "--lat", "-33.9", "--lon", "151.2", "--json")
     assert p.returncode == 0, p.stderr
     out = json.loads(p.stdout)
-    assert out["sun_found"] and any("below the horizon" in w for w in out["warnings"])
+    assert not out["sun_found"] and out["confidence"] == 0.0 and out["centroid_px"] is None
+    assert "below the horizon" in out["reason"] and "moon or a light" in out["reason"]
     text = heliotwin_cli(*base, "--lat", "-33.9", "--lon", "151.2")
-    assert "\nwarning: a sun was found" in text.stdout
+    assert text.stdout.startswith("no sun (confidence 0.00)"), text.stdout
     # a PNG header claiming 30000 × 30000 px: refused before decoding, naming the CLI's bound
     ihdr = struct.pack(">IIBBBBB", 30000, 30000, 8, 2, 0, 0, 0)
     bomb = tmp_path / "bomb.png"

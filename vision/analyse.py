@@ -8,6 +8,7 @@ camera model as the detection and measures the angle between the two.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,27 @@ def finite(v: Any) -> float | None:
         return None
     f = float(v)
     return f if np.isfinite(f) else None
+
+
+SUN_DOWN_DEG = -5.0
+"""An ephemeris sun lower than this [°, apparent elevation] cannot be in any frame taken at
+that time and place: whatever bright region is found is the moon or a light, not the sun.
+The margin bounds everything that lets a sun below the horizon be seen: the upper limb lies
+0.27° above the centre; the horizon of the highest place accepted (9000 m) dips 2.9° below
+the level (1.76′ √h); refraction at the horizon strays from SPA's standard 0.57° by about a
+degree in unusual air. Together 4.2°. No camera model enters: the elevation is the
+ephemeris's, so no calibration, right or wrong, moves it. The twilight frame a tester
+rendered at −4.7° is dark anyway (no saturated region)."""
+
+
+def sun_down_reason(elevation_deg: float, found_px: tuple[float, float] | None) -> str:
+    """Why a frame whose ephemeris sun is below :data:`SUN_DOWN_DEG` has no sun."""
+    what = ("the bright region found" + (f" at ({found_px[0]:.0f}, {found_px[1]:.0f}) px"
+                                        if found_px is not None else "")
+            + " is the moon or a light")
+    return (f"the ephemeris puts the sun {-elevation_deg:.1f}° below the horizon at this time "
+            f"and place, so no sun can be in the frame: {what}; if the sun really is in the "
+            f"frame, the time (its zone) or the place is wrong")
 
 
 def ephemeris_block(cam: PinholeCamera | FisheyeCamera, azimuth_deg: float,
@@ -67,6 +89,10 @@ def analyse_frame(image: NDArray[Any], cam: PinholeCamera | FisheyeCamera,
     (wrapped) and elevation differences, detected − ephemeris, and for a
     fisheye the pixel distance between the two (``distance_px``).
 
+    A sun the ephemeris puts below :data:`SUN_DOWN_DEG` is no sun, whatever is found
+    (``sun_found`` false, confidence 0, the reason :func:`sun_down_reason`): a tester's
+    moonlit night (sun 35° down) was answered as a sun at confidence 1.00.
+
     ``oriented``: whether the fisheye's north offset is known (a calibration, or given).
     Only then does the ephemeris's pixel guide the search and count in the confidence
     (issue 24: evidence against a sun is "the ephemeris of a *calibrated* camera puts
@@ -81,6 +107,11 @@ def analyse_frame(image: NDArray[Any], cam: PinholeCamera | FisheyeCamera,
         expected = (ex, ey) if ex is not None and ey is not None else None
     d = detect_sun(image, method=method, camera=cam if method == "robust" else None,
                    expected_px=expected)
+    if ephemeris_deg is not None and ephemeris_deg[1] < SUN_DOWN_DEG:
+        d = replace(d, sun_found=False, confidence=0.0, centroid_px=None,
+                    distance_from_ephemeris_px=None,
+                    reason=sun_down_reason(float(ephemeris_deg[1]),
+                                           d.centroid_px if d.sun_found else None))
     c = d.centroid_px
     out: dict[str, Any] = {
         "sun_found": d.sun_found,

@@ -327,6 +327,18 @@ def test_calibrate_then_detect_with_the_calibration(client: httpx.Client) -> Non
                           "site_id": "tehuantepec"})
     assert r.status_code == 200, r.text
     assert r.json()["error"]["separation_deg"] < 0.5
+    # the same frame said to be taken at night (the sun 62° down): the disc is the moon or a
+    # light, not the sun — with a calibration, time and place known (it was a sun at 1.00)
+    night = "2024-03-05T23:40:00-06:00"
+    r = client.post(SUN, files={"file": ("n.png", _png(frame.image), "image/png")},
+                    data={"calibration_id": str(cal["calibration_id"]), "timestamp": night,
+                          "site_id": "tehuantepec"})
+    assert r.status_code == 200, r.text
+    d = r.json()
+    assert not d["sun_found"] and d["confidence"] == 0.0 and d["centroid_px"] is None
+    below = -_spa(night, *TEHUANTEPEC)[1]
+    assert f"{below:.1f}° below the horizon" in d["reason"] and "moon" in d["reason"], d
+    assert d["warnings"] == []
 
 
 def test_calibration_input_errors(client: httpx.Client) -> None:

@@ -88,11 +88,15 @@ def test_real_frame_scale_and_a_place_that_does_not_match(client: httpx.Client) 
     wrong = {**right, "latitude_deg": "-33.9", "longitude_deg": "151.2"}  # Sydney
     r = client.post(SUN, files={"file": (row["filename"], data, "image/jpeg")}, data=wrong)
     assert r.status_code == 200, r.text
-    warnings = r.json()["warnings"]
-    assert warnings and ("below the horizon" in warnings[0] or "zenith angle" in warnings[0])
+    # the sun is down in Sydney then: no sun at all (vision.analyse.SUN_DOWN_DEG), the reason
+    # saying the time or the place is wrong if the sun is in the frame
+    night = r.json()
+    assert not night["sun_found"] and night["confidence"] == 0.0, night
+    assert "below the horizon" in night["reason"] and "the place is wrong" in night["reason"]
     listed = client.get("/api/v1/vision/detections",
                         params={"start": row["utc_time"][:10], "end": "2016-06-16"}).json()
-    assert any(x["warnings"] for x in listed["detections"])
+    stored = {x["detection_id"]: x for x in listed["detections"]}
+    assert not stored[night["detection_id"]]["sun_found"]
 
 
 def test_a_frame_without_an_image_circle_needs_a_scale(client: httpx.Client) -> None:

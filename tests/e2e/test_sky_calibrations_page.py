@@ -141,3 +141,27 @@ def test_a_refused_file_shows_the_services_reason(page, server, tmp_path: Path) 
     expected = [e for e in page.console_errors if "status of 415" in e]
     assert len(expected) == 1, page.console_errors
     page.console_errors.remove(expected[0])
+
+
+def test_a_frame_taken_at_night_draws_no_sun(page, server, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """A tester's moonlit night (the sun 35° down) showed "Sun found: yes (confidence 1.00)"
+    and the detected-sun cross on the moon. A Wettermast frame named as taken at 23:39
+    (UTC+1, the sun 13° below Hamburg's horizon): no sun, the service's reason shown, and
+    the cross not drawn (it is drawn only for a sun found)."""
+    frame = sorted(REAL_SKY.glob("Wettermast_*.jpg"))[0]
+    night = tmp_path / "Wettermast_20160615_233900UTCp1.jpg"
+    night.write_bytes(frame.read_bytes())
+    page.goto(server.url + "/#sky")
+    page.wait_for_selector("#sky-form")
+    _wettermast_place(page)
+    page.select_option("#sky-camera", "fisheye")
+    page.set_input_files("#sky-files", [str(night)])
+    page.wait_for_function("() => document.querySelector('[data-testid=sky-row-zone]')"
+                           ".textContent.includes('from the file name')")
+    page.click("#sky-detect")
+    page.wait_for_selector("[data-testid=sky-result]", timeout=60_000)
+    result = page.locator("[data-testid=sky-result]").nth(0)
+    assert result.get_attribute("data-sun-found") == "false"
+    text = result.text_content()
+    assert "no (confidence 0.00)" in text and "below the horizon" in text, text
+    assert "moon or a light" in text, text

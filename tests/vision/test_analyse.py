@@ -74,3 +74,21 @@ def test_no_sun_gives_no_angles() -> None:
     assert not out["sun_found"] and out["centroid_px"] is None
     assert out["azimuth_deg"] is None and "error" not in out
     assert out["ephemeris"]["centroid_px"] is not None
+
+
+def test_a_sun_the_ephemeris_puts_well_below_the_horizon_is_no_sun() -> None:
+    """A tester's moonlit night (the sun 35° down, a saturated moon) was answered
+    ``sun_found`` true at confidence 1.00, only a warning saying the sun was down. With the
+    time and place known, a bright disc while the sun is more than 5° down is the moon or a
+    light: no sun, and the reason says so and what else could be wrong (the time, the
+    place). Within the margin, or with no time (blind), the detector's answer stands."""
+    cam = FisheyeCamera(319.5, 239.5, 2.6, north_offset_deg=12.0)
+    moon = fisheye_frame(140.0, 35.0, camera=cam, seed=4).image  # a plain bright disc
+    night = analyse_frame(moon, cam, "robust", (320.0, -35.3))
+    assert not night["sun_found"] and night["confidence"] == 0.0
+    assert night["centroid_px"] is None and night["azimuth_deg"] is None
+    assert "error" not in night
+    assert "35.3° below the horizon" in night["reason"] and "moon or a light" in night["reason"]
+    assert "the time (its zone) or the place is wrong" in night["reason"]
+    assert analyse_frame(moon, cam, "robust", (320.0, -4.0))["sun_found"]  # inside the margin
+    assert analyse_frame(moon, cam, "robust", None)["sun_found"]  # no time: blind, as before
