@@ -282,9 +282,10 @@ def _summary(out: dict[str, Any]) -> str:
                 f"{c['px_per_deg']:.3f} px/deg, north {c['north_offset_deg']:.2f} deg, "
                 f"east {c['east']}; residual rms {out['rms_px']:.2f} px / "
                 f"{out['rms_deg']:.3f} deg over {out['n_frames']} frames"
-                + (f"; direction uncertain by up to {out['sky_uncertainty_deg']:.2f} deg "
-                   f"(1 sigma) over the sky" if out.get("sky_uncertainty_deg") is not None
-                   else "")
+                + (f"; suns fitted {out['fitted_elevation_deg'][0]:.1f}-"
+                   f"{out['fitted_elevation_deg'][1]:.1f} deg up, direction uncertain by up "
+                   f"to {out['sky_uncertainty_deg']:.2f} deg (1 sigma) from the lowest up"
+                   if out.get("sky_uncertainty_deg") is not None else "")
                 + "".join(f"\nwarning: {w}" for w in out.get("warnings") or []))
     if not out["sun_found"]:
         return f"no sun (confidence {out['confidence']:.2f})"

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from backend.errors import InputError
-from vision.calibrate import MAX_RMS_DEG
+from vision.calibrate import MAX_RMS_DEG, SKY_MIN_ELEVATION_DEG
 from vision.cameras import PROJECTIONS, px_per_deg_for_horizon
 from vision.fov import image_circle, to_gray
 from vision.sphere import angular_separation_deg
@@ -214,7 +214,8 @@ SKY_UNCERTAINTY_WARN_DEG = 0.5
 """A calibration whose direction is uncertain by more than this somewhere on the sky [°, 1σ;
 ``vision.calibrate.sky_uncertainty_deg``] is stored with a warning: about the sun's
 diameter (0.53°), so such a camera cannot place the sun within its own disc everywhere.
-Measured (docs/vision-calibration.md): Wolf's 12 even frames 0.47°, its 11 odd 0.40°,
+Measured over the sky from 10° up, before it was taken from the lowest fitted sun up
+(docs/vision-calibration.md): Wolf's 12 even frames 0.47°, its 11 odd 0.40°,
 Wettermast's 6 0.32°; Wolf's morning alone 0.87° (its labels elsewhere 0.69° RMS, 1.28°
 worst), three Wolf frames 12:41–13:49 UTC 1.14° (0.88° / 1.45°), eight rendered frames 2 min
 apart 7.6° (0.58° / 0.91°). Beyond :data:`vision.calibrate.MAX_RMS_DEG` a calibration is
@@ -260,6 +261,40 @@ def check_sky_coverage(sky_uncertainty_deg: float, frames: list[dict[str, Any]])
                 f"somewhere on the sky, more than the sun's diameter "
                 f"({SKY_UNCERTAINTY_WARN_DEG:g}°); {_SPREAD}"]
     return []
+
+
+LOWEST_SUN_WARN_DEG = SKY_MIN_ELEVATION_DEG + 5.0
+"""A calibration whose lowest fitted sun is higher than this [°] warns that the sky below it
+is extrapolated: the sky a calibration is for reaches down to
+:data:`vision.calibrate.SKY_MIN_ELEVATION_DEG`, and a sun within one row (5°) of the grid
+:func:`vision.calibrate.sky_uncertainty_deg` is computed on counts as reaching it."""
+
+
+def check_fitted_band(fitted_elevation_deg: tuple[float, float], sky_uncertainty_deg: float,
+                      frames: list[dict[str, Any]]) -> list[str]:
+    """A warning when no sun below :data:`LOWEST_SUN_WARN_DEG` was fitted: the directions
+    below the lowest fitted sun are extrapolated (the radial law, an unmodelled tilt), and
+    ``sky_uncertainty_deg`` holds only from that sun up (:func:`vision.calibrate.sky_band_deg`).
+    A tester's tilted equisolid camera: its three suns below 25° left out (the detector put
+    them 3–6° outward, in the glare along the horizon), fitted on suns 34–60° up, 0.19°
+    claimed with no warning, 6° RMS true at 5–15° up. Names the frames with a lower sun
+    that were left out as outliers, when there are any."""
+    low, high = fitted_elevation_deg
+    if low <= LOWEST_SUN_WARN_DEG:
+        return []
+    lower = [f for f in frames if f.get("outlier") and f.get("ephemeris")
+             and f["ephemeris"]["elevation_deg"] < low]
+    left = (f"; {len(lower)} frame{'' if len(lower) == 1 else 's'} with a lower sun "
+            f"{'was' if len(lower) == 1 else 'were'} left out as "
+            f"outlier{'' if len(lower) == 1 else 's'} "
+            f"({', '.join(str(f.get('filename') or f.get('name')) for f in lower)})"
+            if lower else "")
+    return [f"no sun below {low:.0f}° was fitted (the suns used lie {low:.1f}–{high:.1f}° "
+            f"up){left}: directions below {low:.0f}° are extrapolated — the lens's radial "
+            f"law and any tilt are not checked there and can be off by degrees near the "
+            f"horizon — and sky_uncertainty_deg ({sky_uncertainty_deg:.2f}°) holds only "
+            f"from {max(low, SKY_MIN_ELEVATION_DEG):.0f}° up; send frames with the sun "
+            f"lower (mornings and evenings)"]
 
 
 def _degrees(value: float) -> str:

@@ -23,6 +23,7 @@ from backend.errors import InputError
 from backend.vision.checks import (
     check_centre,
     check_consensus,
+    check_fitted_band,
     check_sky_coverage,
     image_circle_centre,
 )
@@ -290,7 +291,8 @@ def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
     # lies near its image circle's centre (backend.vision.checks)
     check_consensus(report, cal.loo_rms_deg,
                     lambda: _other_setting(cal, az, el, projection, east, n_radial, fit_tilt))
-    warnings = check_sky_coverage(cal.sky_uncertainty_deg, report)
+    warnings = check_sky_coverage(cal.sky_uncertainty_deg, report) + check_fitted_band(
+        cal.fitted_elevation_deg, cal.sky_uncertainty_deg, report)
     check_centre((float(res.camera.cx_px), float(res.camera.cy_px)), res.camera.px_per_deg,
                  [c for c in centres.values() if c is not None], report,
                  cal.sky_uncertainty_deg)
@@ -308,7 +310,8 @@ def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
         "rms_px": out["rms_px"], "max_px": out["max_px"], "rms_deg": out["rms_deg"],
         "max_deg": out["max_deg"], "n_outliers": cal.n_outliers,
         "loo_rms_deg": cal.loo_rms_deg, "model_selection": cal.model_selection,
-        "sky_uncertainty_deg": cal.sky_uncertainty_deg, "warnings": warnings,
+        "sky_uncertainty_deg": cal.sky_uncertainty_deg,
+        "fitted_elevation_deg": list(cal.fitted_elevation_deg), "warnings": warnings,
         "frames": report,
     }
 

@@ -32,6 +32,7 @@ import pytest
 from backend.errors import InputError
 from backend.vision.checks import check_consensus
 from vision.cameras import FisheyeCamera
+from vision.sphere import angular_separation_deg
 from vision.synth import fisheye_frame
 
 CAL = "/api/v1/vision/calibrations"
@@ -297,7 +298,8 @@ def test_frames_that_span_little_of_the_sky_are_said_to(client: httpx.Client) ->
     assert r.status_code == 201, r.text
     cal = r.json()
     assert cal["rms_deg"] < 0.1 and cal["sky_uncertainty_deg"] > 0.5, cal
-    assert len(cal["warnings"]) == 1 and "hours apart" in cal["warnings"][0]
+    assert len(cal["warnings"]) == 2 and "hours apart" in cal["warnings"][0]
+    assert "no sun below 47° was fitted" in cal["warnings"][1]  # Wolf's suns: 47–53° up
 
 
 def test_a_forced_setting_that_does_not_fit_is_named(client: httpx.Client) -> None:
@@ -314,3 +316,42 @@ def test_a_forced_setting_that_does_not_fit_is_named(client: httpx.Client) -> No
     assert r.status_code == 422, r.text
     detail = r.json()["detail"]
     assert detail.startswith("east:") and "with east=right instead of left" in detail, detail
+
+
+def test_a_calibration_says_the_band_its_suns_cover(client: httpx.Client) -> None:
+    """A tester's tilted equisolid 190° camera, fitted on suns 34–60° up (its low suns left
+    out), claimed ``sky_uncertainty_deg`` 0.19° over the sky from 10° up, with no warning,
+    while it was 6° RMS off at 5–15° up. Here a tilted (3°) equisolid camera of the repo's
+    renderer, eight frames with the sun 50–81° up, fitted as the default equidistant lens:
+    the true error grows below the band (3.4° RMS at 10–20° up) where the fit has no sun.
+    The answer says the band (``fitted_elevation_deg``), warns that below it the lens is
+    extrapolated, and its ``sky_uncertainty_deg`` is the band's, which the true error there
+    keeps to (RMS within twice it)."""
+    truth = FisheyeCamera(318.0, 242.0, 2.5, north_offset_deg=37.0, projection="equisolid",
+                          tilt_north_deg=-1.5, tilt_east_deg=2.6)
+    times = pd.date_range(f"{DAY}T15:40Z", periods=8, freq="45min")
+    sp = pvlib.solarposition.spa_python(times, *TEHUANTEPEC)
+    files = [("files", (f"band_{i}.png", _encode(fisheye_frame(a, e, camera=truth, seed=i)
+                                                 .image), "image/png"))
+             for i, (a, e) in enumerate(zip(sp["azimuth"], sp["apparent_elevation"],
+                                            strict=True))]
+    r = client.post(CAL, files=files, data={"timestamps": [t.isoformat() for t in times],
+                                            "latitude_deg": TEHUANTEPEC[0],
+                                            "longitude_deg": TEHUANTEPEC[1],
+                                            "elevation_m": TEHUANTEPEC[2]})
+    assert r.status_code == 201, r.text
+    cal = r.json()
+    low, high = cal["fitted_elevation_deg"]
+    assert low == pytest.approx(sp["apparent_elevation"].min(), abs=0.05)
+    assert high == pytest.approx(sp["apparent_elevation"].max(), abs=0.05)
+    band = [w for w in cal["warnings"] if f"no sun below {low:.0f}° was fitted" in w]
+    assert len(band) == 1 and "extrapolated" in band[0], cal["warnings"]
+    assert f"holds only from {low:.0f}° up" in band[0]
+    # the fitted camera against the truth over the sky: within the band and below it
+    fitted = FisheyeCamera.from_dict(cal["camera"])
+    grid_az, grid_el = np.meshgrid(np.arange(0.0, 360.0, 10.0), np.arange(10.0, 90.0, 5.0))
+    a2, e2 = fitted.pixel_to_sky(*truth.sky_to_pixel(grid_az, grid_el))
+    err = angular_separation_deg(grid_az, grid_el, a2, e2)
+    inside, below = err[grid_el >= low], err[grid_el < 20.0]
+    assert float(np.sqrt(np.mean(inside**2))) < 2.0 * cal["sky_uncertainty_deg"]
+    assert float(np.sqrt(np.mean(below**2))) > 10 * cal["sky_uncertainty_deg"]

@@ -179,9 +179,14 @@ class FittedCalibrationRead(BaseModel):
     model_selection: list[RadialChoiceRead]
     sky_uncertainty_deg: float = Field(
         description="how well the frames fix the camera away from their own suns: the "
-                    "largest 1-σ error of the direction it gives a pixel over the sky above "
-                    "10° (the fitted parameters' covariance propagated; "
-                    "vision.calibrate.sky_uncertainty_deg) [°]")
+                    "largest 1-σ error of the direction it gives a pixel over the sky from "
+                    "the lowest fitted sun (fitted_elevation_deg, but not below 10°) up (the "
+                    "fitted parameters' covariance propagated; "
+                    "vision.calibrate.sky_uncertainty_deg); below that sun the lens is "
+                    "extrapolated, and a warning says so when it is above 15° [°]")
+    fitted_elevation_deg: list[float] = Field(
+        description="the lowest and highest elevation of the suns the camera was fitted on "
+                    "(its inliers) [°]: the band of the sky the frames measure")
     warnings: list[str] = Field(description="a calibration stored, but doubtful: frames "
                                             "that fix the camera poorly over the sky")
     frames: list[CalibrationFrameRead]
