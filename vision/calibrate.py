@@ -119,6 +119,13 @@ def _too_few(n_dirs: int, n_par: int) -> bool:
     return 2 * n_dirs < n_par + 2
 
 
+#: the largest tilt [°] a fit with ``fit_tilt`` may give, about each axis: an all-sky camera
+#: looks up (the model's "small tilt"). Unbounded, one day's suns leave the tilt and the
+#: centre trading along a shallow valley, and with a radial term the solver followed it to
+#: a camera looking at the horizon (a tester's 3°-tilted equisolid camera: 78–85°, its centre
+#: 18° from its image circle's, refused as times in a wrong zone). A fit ending at the bound
+#: is one the frames cannot determine (``backend.vision.checks.check_tilt``).
+MAX_TILT_DEG = 10.0
 _MIRROR_NFEV = 100  # evaluations each mirror gets before the better one is solved on
 
 
@@ -171,7 +178,7 @@ def fit_fisheye(
     projection : one of :data:`vision.cameras.PROJECTIONS`.
     east : ``"left"``, ``"right"`` or ``"auto"`` (fit both, keep the better).
     n_radial : number of radial polynomial terms (0–2) to fit.
-    fit_tilt : also fit the two tilt angles.
+    fit_tilt : also fit the two tilt angles, each within ±:data:`MAX_TILT_DEG`.
     centre_guess_px : where the solver starts the centre (default the image centre).
     max_nfev : evaluations allowed to each mirror's solve.
 
@@ -215,13 +222,18 @@ def fit_fisheye(
     # with both mirrors: each solved for at most _MIRROR_NFEV evaluations, the better one
     # then to convergence (the wrong mirror's solve would grind to its limit)
     first = min(max_nfev, _MIRROR_NFEV) if len(sides) > 1 else max_nfev
+    n_p = 4 + n_radial + (2 if fit_tilt else 0)
+    lo, hi = np.full(n_p, -np.inf), np.full(n_p, np.inf)
+    if fit_tilt:
+        lo[-2:], hi[-2:] = -MAX_TILT_DEG, MAX_TILT_DEG
     best: tuple[float, Any, str] | None = None
     costs: dict[str, float] = {}
     for side in sides:
         k0, off0 = _initial(x, y, az, el, cx0, cy0, side, projection)
         p0 = np.concatenate([[cx0, cy0, k0, off0], np.zeros(n_radial),
                              np.zeros(2 if fit_tilt else 0)])
-        sol = least_squares(resid_of(side), p0, method="trf", x_scale="jac", max_nfev=first)
+        sol = least_squares(resid_of(side), p0, method="trf", x_scale="jac", max_nfev=first,
+                            bounds=(lo, hi))
         costs[side] = float(sol.cost)
         if best is None or sol.cost < best[0]:
             best = (float(sol.cost), sol, side)
@@ -229,7 +241,7 @@ def fit_fisheye(
     _, sol, side = best
     if sol.status == 0 and first < max_nfev:  # stopped at the evaluation limit: go on
         sol = least_squares(resid_of(side), sol.x, method="trf", x_scale="jac",
-                            max_nfev=max_nfev - first)
+                            max_nfev=max_nfev - first, bounds=(lo, hi))
         costs[side] = float(sol.cost)
     p = sol.x
     cam = _camera(p, side, projection, n_radial, fit_tilt)

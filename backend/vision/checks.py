@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from backend.errors import InputError
-from vision.calibrate import MAX_RMS_DEG, SKY_MIN_ELEVATION_DEG
+from vision.calibrate import MAX_RMS_DEG, MAX_TILT_DEG, SKY_MIN_ELEVATION_DEG
 from vision.cameras import PROJECTIONS, px_per_deg_for_horizon
 from vision.fov import image_circle, to_gray
 from vision.sphere import angular_separation_deg
@@ -158,6 +158,20 @@ def check_consensus(frames: list[dict[str, Any]], loo_rms_deg: float | None,
         field, how = named
         raise InputError(422, f"{field}: {why}; {how}: is the {field} you gave right?")
     raise InputError(422, f"timestamps: {why}: {hint}")
+
+
+def check_tilt(tilt_north_deg: float, tilt_east_deg: float) -> None:
+    """Refuse (422 naming ``fit_tilt``) a tilt fit that ended at its bound
+    (:data:`vision.calibrate.MAX_TILT_DEG`): the frames do not determine the tilt — on
+    one day's arc it trades against the centre — so the refusal names the tilt fit, not the
+    times a far centre would otherwise blame."""
+    worst = max(abs(tilt_north_deg), abs(tilt_east_deg))
+    if worst >= MAX_TILT_DEG - 0.01:
+        raise InputError(422, f"fit_tilt: the tilt fit ran to its bound ({worst:.1f}° of "
+                              f"{MAX_TILT_DEG:g}°): these frames do not determine the tilt "
+                              f"(on one day's arc it trades against the centre); calibrate "
+                              f"without fit_tilt, or add frames of other days (the sun "
+                              f"higher and lower)")
 
 
 MAX_CENTRE_OFFSET_DEG = 4.0

@@ -25,6 +25,7 @@ from backend.vision.checks import (
     check_consensus,
     check_fitted_band,
     check_sky_coverage,
+    check_tilt,
     image_circle_centre,
 )
 from sim.sun import solar_position
@@ -287,8 +288,10 @@ def calibrate(frames: list[Frame], place: Place, projection: str, east: str,
              **{k: v for k, v in r.items() if k != "name"}}
         r["ephemeris"] = {"azimuth_deg": float(az[i]), "elevation_deg": float(el[i])}
         report.append(r)
-    # a fit is not yet a calibration: most frames must agree, and a levelled camera's zenith
-    # lies near its image circle's centre (backend.vision.checks)
+    # a fit is not yet a calibration: a tilt the frames determine, most frames agreeing,
+    # and a camera's optical centre near its image circle's centre (backend.vision.checks)
+    if fit_tilt:
+        check_tilt(res.camera.tilt_north_deg, res.camera.tilt_east_deg)
     check_consensus(report, cal.loo_rms_deg,
                     lambda: _other_setting(cal, az, el, projection, east, n_radial, fit_tilt))
     warnings = check_sky_coverage(cal.sky_uncertainty_deg, report) + check_fitted_band(
@@ -321,8 +324,8 @@ def _other_setting(cal: SelfCalibration, az: np.ndarray, el: np.ndarray, project
     """A setting the caller forced whose other choice fits the calibration's suns by the
     consensus rule (:func:`backend.vision.checks.check_consensus`), and how: ``east`` given
     left or right (the other mirror, fitted), ``projection`` (each other one: the default
-    equidistant may not be the lens's), ``n_radial`` given (chosen from the frames). The
-    suns are the ones already found
+    equidistant may not be the lens's), ``n_radial`` given (chosen from the frames),
+    ``fit_tilt`` asked for (no tilt). The suns are the ones already found
     (no frame is decoded again); the one leaving the fewest out, then the closest fit;
     None when no such choice fits."""
     idx = [i for i, r in enumerate(cal.frames) if r.get("used") or r.get("outlier")]
@@ -332,7 +335,8 @@ def _other_setting(cal: SelfCalibration, az: np.ndarray, el: np.ndarray, project
     tries: list[tuple[str, dict[str, Any]]] = \
         ([("east", {"east": "auto"})] if east != "auto" else []) + \
         [("projection", {"projection": p}) for p in PROJECTIONS if p != projection] + \
-        ([("n_radial", {"n_radial": None})] if n_radial is not None else [])
+        ([("n_radial", {"n_radial": None})] if n_radial is not None else []) + \
+        ([("fit_tilt", {"fit_tilt": False})] if fit_tilt else [])
     fits: list[tuple[int, float, str, str]] = []
     for name, change in tries:
         try:
@@ -347,8 +351,9 @@ def _other_setting(cal: SelfCalibration, az: np.ndarray, el: np.ndarray, project
             continue
         cam, n_out, rms = pf.fit.result.camera, int(np.sum(~pf.fit.inlier)), pf.fit.result.rms_deg
         value = {"east": cam.east, "n_radial": len(cam.radial_coeffs),
-                 "projection": cam.projection}[name]
-        fits.append((n_out, rms, name, f"with {name}={value} instead of {given[name]} the same "
+                 "projection": cam.projection, "fit_tilt": "false"}[name]
+        was = str(given[name]).lower()  # fit_tilt's True as the form spells it
+        fits.append((n_out, rms, name, f"with {name}={value} instead of {was} the same "
                                        f"suns fit a camera to {rms:.2f}° RMS, {n_out} of "
                                        f"{len(idx)} left out"))
     return min(fits)[2:] if fits else None  # the fewest left out, then the closest fit

@@ -30,7 +30,8 @@ import pvlib
 import pytest
 
 from backend.errors import InputError
-from backend.vision.checks import check_consensus
+from backend.vision.checks import check_consensus, check_tilt
+from vision.calibrate import MAX_TILT_DEG
 from vision.cameras import FisheyeCamera
 from vision.sphere import angular_separation_deg
 from vision.synth import fisheye_frame
@@ -355,3 +356,14 @@ def test_a_calibration_says_the_band_its_suns_cover(client: httpx.Client) -> Non
     inside, below = err[grid_el >= low], err[grid_el < 20.0]
     assert float(np.sqrt(np.mean(inside**2))) < 2.0 * cal["sky_uncertainty_deg"]
     assert float(np.sqrt(np.mean(below**2))) > 10 * cal["sky_uncertainty_deg"]
+
+
+def test_a_tilt_fit_at_its_bound_is_refused_naming_fit_tilt() -> None:
+    """A tilt fit that ran to its bound is the tilt the frames do not determine: the 422
+    names ``fit_tilt`` (a tester's tilted camera was refused naming ``timestamps``, "are
+    the times UTC?", its tilt run to 78° and its centre 18° off)."""
+    check_tilt(3.0, -2.6)  # a tilt the frames determined: no refusal
+    with pytest.raises(InputError) as exc:
+        check_tilt(-MAX_TILT_DEG, 1.0)
+    assert exc.value.detail.startswith("fit_tilt: the tilt fit ran to its bound"), exc.value
+    assert "timestamps" not in exc.value.detail
