@@ -123,3 +123,52 @@ def test_calibrate_chooses_the_radial_terms_as_the_service(frames: list[Path],
     assert heliotwin_cli(*args, "--n-radial", "auto").stdout == p.stdout
     p = heliotwin_cli(*args, "--n-radial", "3")
     assert p.returncode == 2 and "--n-radial" in p.stderr
+
+
+def test_a_calibration_file_is_applied_as_a_stored_calibration(frames: list[Path],
+                                                                tmp_path: Path,
+                                                                heliotwin_cli) -> None:
+    """``vision calibrate`` stores nothing (no ``calibration_id``) and ``vision detect``
+    had no flag for the fitted radial terms or tilt: a command-line user could not use the
+    camera just fitted. ``calibrate --json > FILE`` is read by ``detect --calibration-file
+    FILE`` and applied as a stored calibration is (``calibration_record``): its camera with
+    radial terms and tilt, its size, its place, its worst residual."""
+    p = heliotwin_cli("vision", "calibrate", *map(str, frames[::2]), *map(str, frames[1::2]),
+                      "--timestamps", *[t.isoformat() for t in (*TIMES[::2], *TIMES[1::2])],
+                      "--lat", str(LAT), "--lon", str(LON), "--n-radial", "0", "--json")
+    assert p.returncode == 0, p.stderr
+    fitted = json.loads(p.stdout)
+    assert fitted.get("calibration_id") is None  # stored nowhere
+    path = tmp_path / "cam.json"
+    path.write_text(p.stdout)
+    out = json.loads(heliotwin_cli("vision", "detect", str(frames[2]), "--calibration-file",
+                                   str(path), "--timestamp", TIMES[2].isoformat(),
+                                   "--json").stdout)
+    assert out["sun_found"] and out["error"]["separation_deg"] < 0.5
+    assert out["calibration_file"] == str(path)
+    assert out["place_source"].startswith(f"calibration file {path} (no place given")
+    # the radial terms and tilt are applied: the ephemeris sun's pixel is the file's camera's
+    bent = {**fitted, "camera": {**fitted["camera"], "radial_coeffs": [0.05],
+                                 "tilt_north_deg": 2.0, "tilt_east_deg": -1.0}}
+    path.write_text(json.dumps(bent))
+    out = json.loads(heliotwin_cli("vision", "detect", str(frames[2]), "--calibration-file",
+                                   str(path), "--timestamp", TIMES[2].isoformat(),
+                                   "--json").stdout)
+    eph = out["ephemeris"]
+    want = FisheyeCamera.from_dict(bent["camera"]).sky_to_pixel(eph["azimuth_deg"],
+                                                                eph["elevation_deg"])
+    assert eph["centroid_px"] == pytest.approx([float(v) for v in want], abs=1e-6)
+    plain = FisheyeCamera.from_dict(fitted["camera"]).sky_to_pixel(eph["azimuth_deg"],
+                                                                   eph["elevation_deg"])
+    assert abs(eph["centroid_px"][0] - float(plain[0])) > 3.0
+    # as a stored calibration: only on frames of its size, and not with a typed camera
+    small = tmp_path / "small.png"
+    cv2.imwrite(str(small), cv2.resize(cv2.imread(str(frames[2])), (320, 240)))
+    p = heliotwin_cli("vision", "detect", str(small), "--calibration-file", str(path))
+    assert p.returncode == 2 and "--calibration-file: the frame decodes to 320×240" in p.stderr
+    p = heliotwin_cli("vision", "detect", str(frames[2]), "--calibration-file", str(path),
+                      "--px-per-deg", "2.6")
+    assert p.returncode == 2 and p.stderr.count("--px-per-deg: a --calibration-file") == 1
+    path.write_text("{}")
+    p = heliotwin_cli("vision", "detect", str(frames[2]), "--calibration-file", str(path))
+    assert p.returncode == 2 and "--calibration-file:" in p.stderr, p.stderr

@@ -6,14 +6,16 @@
     heliotwin vision detect sky.jpg --calibration-id 3 --timestamp 2016-06-15T08:39:00Z \\
         --site guadalajara_fisheye
     heliotwin vision calibrate a.jpg b.jpg c.jpg --timestamps T1 T2 T3 --lat 53.52 \\
-        --lon 10.105 --json
+        --lon 10.105 --json > cam.json
+    heliotwin vision detect sky.jpg --calibration-file cam.json --timestamp T
 
 The same library (``vision``), ephemeris (``sim.sun``, SPA) and frame rule
 (``backend.vision.frames.frame_inputs``: a fisheye without ``--px-per-deg`` takes the
 scale of its image circle, a frame without ``--timestamp`` the time in its file name) as
 ``POST /api/v1/vision/sun`` and ``/calibrations``; nothing is stored
 (``--calibration-id`` reads a calibration the service stored, from the database
-of ``HELIOTWIN_DATABASE_URL``).
+of ``HELIOTWIN_DATABASE_URL``; ``--calibration-file`` one ``vision calibrate --json``
+wrote, applied the same way: its camera with radial terms and tilt, its size, its place).
 Heavy imports happen inside the commands.
 """
 
@@ -61,6 +63,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument("--calibration-id", type=int, metavar="ID",
                    help="a fisheye calibration stored by the service (POST "
                         "/api/v1/vision/calibrations; database of HELIOTWIN_DATABASE_URL)")
+    d.add_argument("--calibration-file", type=Path, metavar="FILE",
+                   help="a calibration written by 'vision calibrate --json > FILE' (its "
+                        "radial terms and tilt included), applied as the service applies a "
+                        "stored one")
     d.add_argument("--method", default="robust",
                    choices=("robust", "seed000_hsv", "seed003_gray240"))
     d.add_argument("--fov-deg", type=float, help="pinhole horizontal field of view (67)")
@@ -182,25 +188,31 @@ def detect(args: argparse.Namespace) -> dict[str, Any]:
     params = {k: getattr(args, k) for k in ("fov_deg", "cx_px", "cy_px", "reference_x_px",
                                            "reference_y_px", "projection", "px_per_deg",
                                            "north_offset_deg", "east")}
-    if args.calibration_id is not None and args.camera not in (None, "fisheye"):
-        raise ValueError("--camera: a --calibration-id is a fisheye camera")
-    if args.calibration_id is not None:  # as the service: a typed camera is not ignored
+    if args.calibration_id is not None and args.calibration_file is not None:
+        raise ValueError("--calibration-file: give --calibration-id or --calibration-file, "
+                         "not both")
+    flag = "--calibration-id" if args.calibration_id is not None else "--calibration-file"
+    calibrated = args.calibration_id is not None or args.calibration_file is not None
+    if calibrated and args.camera not in (None, "fisheye"):
+        raise ValueError(f"--camera: a {flag} is a fisheye camera")
+    if calibrated:  # as the service: a typed camera is not ignored
         check_no_camera_with_calibration(
             [k for k in CAMERA_PARAMS if params.get(k) is not None],
-            lambda name: "--" + name.replace("_", "-"))
-    if args.calibration_id is None and args.camera is None:
-        raise ValueError("--camera: required (pinhole or fisheye), or give --calibration-id")
+            lambda name: flag if name == "calibration_id" else "--" + name.replace("_", "-"))
+    if not calibrated and args.camera is None:
+        raise ValueError("--camera: required (pinhole or fisheye), or give --calibration-id "
+                         "or --calibration-file")
     cal = None
     place_source = None if place is None else "given"
-    if args.calibration_id is not None:  # as the service: only on frames of its size
-        cal = _stored_calibration(args.calibration_id)
-        check_calibration_size(cal, (w, h), "--calibration-id")
+    if calibrated:  # as the service: only on frames of its size
+        cal = (_stored_calibration(args.calibration_id) if args.calibration_id is not None
+               else _file_calibration(args.calibration_file))
+        check_calibration_size(cal, (w, h), flag)
         if place is None:  # as the service: where the calibration was fitted
             place, place_source = calibration_place(cal, _site_place)
     try:  # the service's rule (POST /api/v1/vision/sun): scale and time the frame implies
-        frame = frame_inputs(img, args.image.name,
-                             args.camera if args.calibration_id is None else None, params,
-                             args.timestamp, name_zone(place))
+        frame = frame_inputs(img, args.image.name, None if calibrated else args.camera,
+                             params, args.timestamp, name_zone(place))
     except InputError as exc:
         raise ValueError(str(exc).replace("px_per_deg:", "--px-per-deg:", 1)
                          .replace("timestamp:", "--timestamp:", 1)) from None
@@ -220,7 +232,25 @@ def detect(args: argparse.Namespace) -> dict[str, Any]:
     out["warnings"] = error_warnings(out, None if cal is None else cal["max_deg"])
     if args.calibration_id is not None:
         out["calibration_id"] = args.calibration_id
+    if args.calibration_file is not None:
+        out["calibration_file"] = str(args.calibration_file)
     return out
+
+
+def _file_calibration(path: Path) -> dict[str, Any]:
+    """A calibration written by ``vision calibrate --json`` (or the body of ``POST
+    /api/v1/vision/calibrations``), in the shape of a stored one
+    (:func:`backend.vision.service.calibration_record`)."""
+    from backend.vision.service import calibration_record
+
+    try:
+        body = json.loads(path.read_text())
+        return calibration_record(body, f"file {path}")
+    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError,
+            ValueError) as exc:
+        raise ValueError(f"--calibration-file: {path} is not a calibration written by "
+                         f"'heliotwin vision calibrate --json' ({type(exc).__name__}: "
+                         f"{exc})") from None
 
 
 def _stored_calibration(calibration_id: int) -> dict[str, Any]:

@@ -412,6 +412,23 @@ CAMERA_FIELDS = ("projection", "cx_px", "cy_px", "px_per_deg", "north_offset_deg
                  "radial_coeffs", "tilt_north_deg", "tilt_east_deg")
 
 
+def calibration_record(body: dict[str, Any], name: str) -> dict[str, Any]:
+    """A calibration's answer (``vision calibrate --json``, the body of ``POST
+    /api/v1/vision/calibrations``) in the shape of a stored one
+    (``backend.vision.store.calibration_to_dict``): what detection with a calibration
+    reads — the camera (radial terms and tilt included), the size it was fitted on, the
+    place, the worst residual. ``name`` stands for its id in what is said of it (a CLI
+    user's file is stored nowhere). A KeyError/ValueError when a field is missing or bad."""
+    camera = {k: body["camera"][k] for k in CAMERA_FIELDS}
+    FisheyeCamera.from_dict(camera)  # a camera it can build, else a ValueError now
+    return {"calibration_id": body.get("calibration_id") or name,
+            "site_id": body.get("site_id"), "latitude_deg": float(body["latitude_deg"]),
+            "longitude_deg": float(body["longitude_deg"]),
+            "elevation_m": float(body.get("elevation_m") or 0.0),
+            "image_size_px": [int(body["image_width_px"]), int(body["image_height_px"])],
+            "max_deg": float(body["max_deg"]), "camera": camera}
+
+
 def calibration_answer(row: dict[str, Any]) -> dict[str, Any]:
     """What a calibration answers (HTTP and CLI): the stored row with its ``camera``."""
     body = {k: v for k, v in row.items() if k != "radial_coeffs"}
