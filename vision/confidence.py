@@ -67,6 +67,7 @@ radially symmetric". The glare's ring-shaped fall-off and the coherence remain e
 a sun, no longer needed by a wide round core."""
 
 _SMALLEST_DEG = 0.5  # equivalent radius of the smallest saturated sun core [°]
+ROUND = 0.8  # circularity from which a region is said to be a disc in a reason
 LARGEST_DEG = 15.0  # … of the widest saturated glare (the M12 fisheye of issue 24: ≈ 14°)
 
 
@@ -241,7 +242,11 @@ _REASONS = {
     "shape": "brightest region is not round (circularity {shape:.2f}): cloud edge or highlight",
     "glare": "no glare around the brightest region and too small to be one: bright cloud",
     "saturated": "brightest region is not saturated (peak {peak:.0f}): sun hidden or overcast",
-    "contrast": "too little contrast ({contrast:.0f} grey levels above the sky): overcast",
+    "contrast": "too little contrast ({contrast:.0f} grey levels above the sky): a sky "
+                "nearly as bright as its brightest region",
+    "contrast_disc": "a round saturated region {radius_deg:.1f}° in radius, but only "
+                     "{contrast:.0f} grey levels above the sky around it: too little "
+                     "contrast to tell it from a washed-out sky (over-exposed?)",
     "too_small": "brightest region is {radius_deg:.2f}° in radius, under the "
                  f"{_SMALLEST_DEG:g}° of a saturated sun's core with its glare",
     "small_no_glare": "brightest region is {radius_deg:.2f}° in radius, under the "
@@ -271,4 +276,9 @@ def reason(x: NDArray[np.float64], values: dict[str, float],
     ideal = np.array([1.0, 1.0, 1.0, 0.6, 0.0, 0.0, 0.0, 1.0, x[8], 0.0])
     loss = w * (ideal - x)
     i = int(np.argmax(loss))
+    if FEATURES[i] == "contrast" and x[0] >= ROUND and x[2] >= 0.5:
+        # a round clipped disc on a bright sky: what was measured, not a guessed overcast
+        # (a tester's clear sky at six times the exposure, the sun a large saturated disc,
+        # was refused as "overcast")
+        return _REASONS["contrast_disc"].format(**values)
     return _REASONS[FEATURES[i]].format(**values)

@@ -331,3 +331,18 @@ def test_two_cameras_of_one_frame_size_each_get_their_own_image_circle() -> None
     assert after.sun_found == alone.sun_found
     assert after.centroid_px == alone.centroid_px
     assert after.features == alone.features
+
+
+def test_an_over_exposed_sun_is_not_called_overcast() -> None:
+    """A tester's clear sky at six times the exposure (the sun a saturated disc ~20° in
+    radius, the sky 79 grey levels under it) was refused "too little contrast … :
+    overcast" — false, the sky was clear. The repository's frame with a 15° glare at twice
+    the exposure is that case (74 grey levels): still refused, the reason now says what was
+    measured (a round saturated region, its radius, the contrast) and claims no overcast."""
+    cam = FisheyeCamera(319.5, 239.5, 2.6)
+    frame = fisheye_frame(140.0, 57.0, camera=cam, seed=2, glare_deg=15.0).image
+    bright = np.clip(frame.astype(np.float32) * 2.0, 0, 255).astype(np.uint8)
+    d = detect_sun(bright, camera=cam)
+    assert not d.sun_found and d.reason is not None
+    assert "overcast" not in d.reason, d.reason
+    assert d.reason.startswith("a round saturated region") and "over-exposed" in d.reason
