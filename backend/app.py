@@ -209,7 +209,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(strict.StrictBodies, own_body=measurements.INGEST_PATH)
     # outermost: CSP, X-Frame-Options, nosniff, Referrer-Policy on every response
     app.add_middleware(security.SecurityHeaders, viser_port=settings.server.viser_port)
-    security.add_docs(app, settings.server.viser_port)
+    security.add_docs(app, settings.server.viser_public_port or settings.server.viser_port)
     # ingest first: a request is matched against the routers in this order, and logger
     # ingest is the busiest request of the service (one match instead of ~12)
     for module in (measurements, health, sites, energy, diagnosis, alerts, simulations, weather,

@@ -84,6 +84,11 @@ class ServerSettings(_Group):
     port: int = Field(8000, ge=0, le=65535, description="Port of the API and dashboard.")
     viser: bool = Field(True, description="Start the viser 3D twin with the service.")
     viser_port: int = Field(8080, ge=0, le=65535, description="Port of the viser 3D twin.")
+    viser_public_port: int | None = Field(
+        None, ge=1, le=65535,
+        description="Port browsers reach the 3D twin on, at the dashboard's host name, when "
+                    "it is not the one it listens on (a container's published port, a proxy); "
+                    "unset: the port it listens on.")
     access_log: bool = Field(False, description="Log every HTTP request (uvicorn access log).")
     max_upload_bytes: int = Field(
         10 * 1024 * 1024, gt=0, description="Largest request body accepted (ingest, images)."

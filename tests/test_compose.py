@@ -6,6 +6,7 @@ skipped when neither is installed (they need no Docker daemon for this).
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -63,3 +64,23 @@ def test_every_setting_is_listed() -> None:
     listed = set(yaml.safe_load(COMPOSE.read_text())["x-settings"])
     fields = set(env_fields())
     assert fields == listed, (sorted(fields - listed), sorted(listed - fields))
+
+
+def test_each_service_frames_the_viser_port_it_publishes() -> None:
+    """The dashboard frames viser at ``HELIOTWIN_VISER_PUBLIC_PORT`` on the page's host: in
+    every service it is the host port published for the container's viser port (8080
+    inside each; framed there, the PostgreSQL service's 3D tab showed the SQLite one's)."""
+    services = yaml.safe_load(COMPOSE.read_text())["services"]
+    checked = 0
+    for name, svc in services.items():
+        env = svc.get("environment") or {}
+        inside = env.get("HELIOTWIN_VISER_PORT")
+        if inside is None:
+            continue
+        # ADDRESS:HOST_PORT:CONTAINER_PORT, each of the first two possibly ${VAR:-default}
+        published = [re.fullmatch(r"(\$\{[^}]*\}|[^:]*):(\$\{[^}]*\}|[^:]*):(\d+)", p)
+                     for p in svc["ports"]]
+        outside = next(m.group(2) for m in published if m and m.group(3) == inside)
+        assert env["HELIOTWIN_VISER_PUBLIC_PORT"] == outside, name
+        checked += 1
+    assert checked == 4

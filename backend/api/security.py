@@ -6,7 +6,8 @@
   Swagger UI write ``style`` attributes), ``data:``/``blob:`` images (the
   favicon, Plotly's PNG export) and, as frame and fetch target, the viser 3D
   twin on its own port of the host the page was asked by (``frontend/js/twin.js``;
-  no other host) — and nothing from elsewhere;
+  no other host; the port :func:`viser_public_port`: the one the scene listens on, or
+  ``HELIOTWIN_VISER_PUBLIC_PORT``) — and nothing from elsewhere;
   ``frame-ancestors 'none'`` with ``X-Frame-Options: DENY``,
   ``X-Content-Type-Options: nosniff``, ``Referrer-Policy: no-referrer``. A
   response that sets its own CSP (the docs pages) keeps it.
@@ -71,9 +72,26 @@ def content_security_policy(viser_port: int, script_hashes: tuple[str, ...] = ()
     ])
 
 
+def viser_listen_port(app: Any) -> int:
+    """The port the app's 3D scene listens on: the configured one, or the next free port
+    the scene moved to when that was busy."""
+    scene = getattr(app.state, "scene", None)
+    return int(scene.port) if scene is not None else int(app.state.settings.server.viser_port)
+
+
+def viser_public_port(app: Any) -> int:
+    """The port a browser reaches the app's 3D scene on, at the dashboard's host name:
+    ``HELIOTWIN_VISER_PUBLIC_PORT`` (a container's published port, a reverse proxy),
+    else :func:`viser_listen_port`. ``GET /api/v1/meta`` says it, ``frontend/js/twin.js``
+    frames it and the CSP allows it."""
+    public = app.state.settings.server.viser_public_port
+    return int(public) if public is not None else viser_listen_port(app)
+
+
 class SecurityHeaders:
     """ASGI middleware adding the security headers to every HTTP response (the CSP names
-    the request's own host for the viser port: :func:`content_security_policy`)."""
+    the request's own host for the viser port: :func:`content_security_policy`; the port
+    :func:`viser_public_port` of the app, else ``viser_port``)."""
 
     def __init__(self, app: ASGIApp, viser_port: int) -> None:
         self.app = app
@@ -85,8 +103,14 @@ class SecurityHeaders:
         ]
 
     @functools.lru_cache(maxsize=64)  # noqa: B019 - one middleware per app, a few host names
-    def _csp(self, host: str | None) -> bytes:
-        return content_security_policy(self.viser_port, host=host).encode()
+    def _csp(self, host: str | None, viser_port: int) -> bytes:
+        return content_security_policy(viser_port, host=host).encode()
+
+    def _viser_port(self, scope: Scope) -> int:
+        app = scope.get("app")
+        if app is None or getattr(app.state, "settings", None) is None:
+            return self.viser_port
+        return viser_public_port(app)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
@@ -94,7 +118,8 @@ class SecurityHeaders:
             return
         host_header = next((v.decode("latin-1") for k, v in scope["headers"] if k == b"host"),
                            None)
-        ours = [(b"content-security-policy", self._csp(request_hostname(host_header))),
+        ours = [(b"content-security-policy",
+                 self._csp(request_hostname(host_header), self._viser_port(scope))),
                 *self.headers]
 
         async def send_with_headers(message: Message) -> None:

@@ -21,8 +21,10 @@ export function viewerKey() {
   return key;
 }
 
+// The port the browser reaches viser on (HELIOTWIN_VISER_PUBLIC_PORT: a container's published
+// port, a proxy), else the one it listens on; always on the host name the page came from.
 function viserBase(state) {
-  const port = state.meta?.viser_port || 8080;
+  const port = state.meta?.viser_public_port || state.meta?.viser_port || 8080;
   return { http: `${location.protocol}//${location.hostname}:${port}/`,
     ws: `${location.protocol === "https:" ? "wss" : "ws"}://${location.hostname}:${port}` };
 }

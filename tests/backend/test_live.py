@@ -86,8 +86,34 @@ def test_meta_reports_the_port_the_3d_twin_really_uses(database: Database) -> No
         with InProcessServer(database.url, extra_env={
                 "HELIOTWIN_VISER": "true", "HELIOTWIN_VISER_PORT": str(taken)}) as server, \
                 server.client(timeout_s=30) as c:
-            meta = c.get("/api/v1/meta").json()
+            r = c.get("/api/v1/meta")
+            meta = r.json()
             assert meta["viser_enabled"] is True
             assert meta["viser_port"] != taken
+            assert meta["viser_public_port"] == meta["viser_port"]
             page = httpx.get(f"http://127.0.0.1:{meta['viser_port']}/", timeout=30)
             assert page.status_code == 200, page.text[:200]
+            # the CSP lets the dashboard frame the port the scene moved to (it named the
+            # configured, busy one: the 3D tab was blocked)
+            csp = r.headers["content-security-policy"]
+            assert f"frame-src http://testserver:{meta['viser_port']} " in csp, csp
+
+
+def test_the_public_viser_port_is_the_one_meta_and_the_csp_give(database: Database) -> None:
+    """Published on another port than it listens on (Docker Compose's 8081 for the
+    container's 8080, a proxy), the 3D twin is framed at ``HELIOTWIN_VISER_PUBLIC_PORT``:
+    /api/v1/meta says it beside the port listened on, and every page's CSP allows it
+    (and not the inside port)."""
+    with InProcessServer(database.url, extra_env={
+            "HELIOTWIN_VISER": "false", "HELIOTWIN_VISER_PORT": "8080",
+            "HELIOTWIN_VISER_PUBLIC_PORT": "8081"}) as server, \
+            server.client(timeout_s=30) as c:
+        r = c.get("/api/v1/meta", headers={"Host": "dash.example:8001"})
+        assert (r.json()["viser_port"], r.json()["viser_public_port"]) == (8080, 8081)
+        for path in ("/api/v1/meta", "/"):
+            csp = c.get(path, headers={"Host": "dash.example:8001"}).headers[
+                "content-security-policy"]
+            directives = dict(d.split(" ", 1) for d in csp.split("; "))
+            assert directives["frame-src"] == \
+                "http://dash.example:8081 https://dash.example:8081", (path, csp)
+            assert ":8080" not in csp, (path, csp)

@@ -10,6 +10,8 @@ is read back from the panel's readout and from ``GET /api/v1/twin3d``. Screensho
 from __future__ import annotations
 
 import contextlib
+import socket
+import threading
 import time
 from collections.abc import Iterator
 
@@ -19,7 +21,7 @@ import numpy as np
 import pytest
 import shapely
 
-from tests.e2e.conftest import ARTIFACTS, call_failed
+from tests.e2e.conftest import ARTIFACTS, call_failed, open_page
 
 #: SwiftShader renders the viser iframe on the CPU: on a loaded machine a click on the
 #: dashboard beside it can wait this long for the page's main thread.
@@ -190,3 +192,51 @@ def test_the_plant_page_opens_the_plant_in_3d(page, server) -> None:  # type: ig
     (ARTIFACTS / "twin3d-plant.png").write_bytes(png)
     page.select_option("#twin-view", "site")
     page.wait_for_selector("#twin-frame[src*='%2Fsite%2F']")
+
+
+
+def _forward(listen: socket.socket, to_port: int) -> None:
+    """Copy every connection accepted on ``listen`` to 127.0.0.1:``to_port`` both ways (the
+    port Docker Compose publishes for the container's viser port)."""
+    def pipe(a: socket.socket, b: socket.socket) -> None:
+        with contextlib.suppress(OSError):
+            while data := a.recv(65536):
+                b.sendall(data)
+        with contextlib.suppress(OSError):
+            b.shutdown(socket.SHUT_WR)
+
+    with contextlib.suppress(OSError):
+        while True:
+            client, _ = listen.accept()
+            upstream = socket.create_connection(("127.0.0.1", to_port))
+            for a, b in ((client, upstream), (upstream, client)):
+                threading.Thread(target=pipe, args=(a, b), daemon=True).start()
+
+
+def test_the_3d_tab_frames_viser_at_its_public_port(browser, tmp_path, request) -> None:  # type: ignore[no-untyped-def]
+    """Published on another port than it listens on (Compose's 8081 for the container's
+    8080), viser is framed at HELIOTWIN_VISER_PUBLIC_PORT, which the CSP allows: the scene
+    draws through the published port (it was framed at the inside port, another service's
+    or nothing)."""
+    from tests.backend.live_service import ServerProcess, free_port, new_database
+
+    published = socket.create_server(("127.0.0.1", 0))
+    public = published.getsockname()[1]
+    inside = free_port()
+    threading.Thread(target=_forward, args=(published, inside), daemon=True).start()
+    proc = ServerProcess(new_database("sqlite", tmp_path).url, tmp_path / "server.log",
+                         viser_port=inside,
+                         extra_env={"HELIOTWIN_VISER": "true",
+                                    "HELIOTWIN_VISER_PUBLIC_PORT": str(public)}).start()
+    try:
+        meta = httpx.get(proc.base_url + "/api/v1/meta", timeout=30).json()
+        assert (meta["viser_port"], meta["viser_public_port"]) == (inside, public)
+        with open_page(browser, request, timeout_ms=60_000) as pg:
+            pg.goto(proc.base_url + "/#twin")
+            src = pg.wait_for_selector("#twin-frame[src*='websocket=']").get_attribute("src")
+            assert src.startswith(f"http://127.0.0.1:{public}/?websocket=ws%3A%2F%2F127.0.0.1"
+                                  f"%3A{public}%2Fsite%2F"), src
+            pg.frame_locator("#twin-frame").locator("text=Readouts").first.wait_for()
+    finally:
+        proc.stop()
+        published.close()

@@ -11,6 +11,7 @@ from pydantic import BaseModel, Field
 
 from backend.api.deps import ContextDep, SettingsDep
 from backend.api.schemas.service import HealthRead, MetaRead
+from backend.api.security import viser_listen_port, viser_public_port
 from backend.measurements.queries import iso_utc
 from backend.twin.parameters import MACHINE_PARAMETERS
 from sim.twin import CONTROLLERS, RECEIVERS
@@ -37,9 +38,11 @@ def meta(request: Request, settings: SettingsDep) -> dict[str, Any]:
     """What the dashboard needs to know about this service.
 
     ``viser_port`` is the port the 3D scene really listens on: it moves to the next
-    free port when the configured one is busy. ``mqtt`` is ``disabled`` (no
-    ``HELIOTWIN_MQTT_URL``), ``connected`` or ``retrying``; ``mqtt_status`` adds the
-    broker and the message counters.
+    free port when the configured one is busy; ``viser_public_port`` the one a browser
+    reaches it on (``HELIOTWIN_VISER_PUBLIC_PORT``, e.g. a container's published port;
+    else ``viser_port``), which the dashboard frames and its CSP allows. ``mqtt`` is
+    ``disabled`` (no ``HELIOTWIN_MQTT_URL``), ``connected`` or ``retrying``;
+    ``mqtt_status`` adds the broker and the message counters.
     """
     scene = getattr(request.app.state, "scene", None)
     ctx = getattr(request.app.state, "ctx", None)
@@ -48,7 +51,8 @@ def meta(request: Request, settings: SettingsDep) -> dict[str, Any]:
         "mqtt": "disabled" if mqtt is None else mqtt["state"],
         "mqtt_status": mqtt,
         "version": service_version(),
-        "viser_port": scene.port if scene is not None else settings.server.viser_port,
+        "viser_port": viser_listen_port(request.app),
+        "viser_public_port": viser_public_port(request.app),
         "viser_enabled": scene is not None,
         "vision_require_token": settings.vision.require_token,
         "read_require_token": settings.server.read_require_token,

@@ -31,6 +31,9 @@ class MetaRead(BaseModel):
         description="the broker and the message counters; null without HELIOTWIN_MQTT_URL")
     version: str
     viser_port: int = Field(description="the port the 3D scene really listens on")
+    viser_public_port: int = Field(description=(
+        "the port browsers reach the 3D scene on, at the dashboard's host name: "
+        "HELIOTWIN_VISER_PUBLIC_PORT, else viser_port"))
     viser_enabled: bool
     vision_require_token: bool
     read_require_token: bool = Field(
