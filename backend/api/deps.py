@@ -285,8 +285,9 @@ VisionTokenDep = Annotated[str | None, Depends(vision_token)]
 
 
 def client_address(request: Request) -> str:
-    """The caller's address (``request.client.host``; behind a proxy, uvicorn's
-    ``--forwarded-allow-ips`` makes it the client's), by which anonymous work is counted."""
+    """The caller's address (``request.client.host``; behind a proxy, ``heliotwin serve
+    --forwarded-allow-ips`` (or ``FORWARDED_ALLOW_IPS``) makes it the client's), by which
+    anonymous work is counted."""
     return request.client.host if request.client else "?"
 
 

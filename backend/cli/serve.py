@@ -22,6 +22,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     p.add_argument("--port", type=int, default=None, help="API/dashboard port (default 8000)")
     p.add_argument("--viser-port", type=int, default=None, help="3D twin port (default 8080)")
     p.add_argument("--no-demo", action="store_true", help="do not run the demo field logger")
+    p.add_argument("--forwarded-allow-ips", default=None, metavar="IPS",
+                   help="addresses of the reverse proxies whose X-Forwarded-For/-Proto are "
+                        "trusted, comma-separated, or '*' (default: $FORWARDED_ALLOW_IPS, else "
+                        "127.0.0.1,::1, uvicorn's); the client address the anonymous "
+                        "allowances are counted by is then the one the proxy forwards")
     p.set_defaults(func=run)
 
 
@@ -67,5 +72,7 @@ def run(args: argparse.Namespace) -> int:
     uvicorn.run(
         app, host=server.host, port=server.port, loop="uvloop", http="httptools",
         access_log=server.access_log, log_level="info", timeout_graceful_shutdown=10,
+        # None: uvicorn reads FORWARDED_ALLOW_IPS, else trusts 127.0.0.1 and ::1
+        forwarded_allow_ips=args.forwarded_allow_ips,
     )
     return 0

@@ -372,6 +372,7 @@ class ServerProcess:
     viser_port: int = 0  # 0: a free one
     port: int = 0
     proc: subprocess.Popen[bytes] | None = None
+    args: tuple[str, ...] = ()  # more flags of ``heliotwin serve``
 
     @property
     def base_url(self) -> str:
@@ -388,7 +389,7 @@ class ServerProcess:
         self.proc = subprocess.Popen(
             [*HELIOTWIN, "serve", "--host", "127.0.0.1", "--port", str(self.port),
              "--viser-port", str(self.viser_port or free_port()),
-             *([] if self.demo else ["--no-demo"])],
+             *([] if self.demo else ["--no-demo"]), *self.args],
             cwd=ROOT, env=self.env, stdout=log, stderr=subprocess.STDOUT,
         )
         deadline = time.monotonic() + timeout_s

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import httpx
 import pytest
-from live_service import InProcessServer, ServerProcess
+from live_service import InProcessServer, ServerProcess, new_database
 
 if TYPE_CHECKING:
     from live_service import Database
@@ -117,3 +117,33 @@ def test_the_public_viser_port_is_the_one_meta_and_the_csp_give(database: Databa
             assert directives["frame-src"] == \
                 "http://dash.example:8081 https://dash.example:8081", (path, csp)
             assert ":8080" not in csp, (path, csp)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("args", "env", "seen"), [
+    ((), {}, "203.0.113.7"),  # a proxy on the same host is trusted (uvicorn's 127.0.0.1,::1)
+    (("--forwarded-allow-ips", "10.0.0.5"), {}, "127.0.0.1"),  # only the proxy named
+    ((), {"FORWARDED_ALLOW_IPS": "10.0.0.5"}, "127.0.0.1"),  # uvicorn's variable, the same
+    (("--forwarded-allow-ips", "127.0.0.1"), {"FORWARDED_ALLOW_IPS": "10.0.0.5"},
+     "203.0.113.7"),  # the flag wins
+])
+def test_serve_trusts_x_forwarded_for_from_the_proxies_named(
+        tmp_path: Path, args: tuple[str, ...], env: dict[str, str], seen: str,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``heliotwin serve --forwarded-allow-ips`` (or FORWARDED_ALLOW_IPS) names the proxies
+    whose X-Forwarded-For is the client's address (the one the anonymous allowances count
+    by), as docs/service.md says; the access log shows the address the service saw."""
+    monkeypatch.delenv("FORWARDED_ALLOW_IPS", raising=False)
+    server = ServerProcess(new_database("sqlite", tmp_path).url, tmp_path / "server.log",
+                           args=args, extra_env={"HELIOTWIN_ACCESS_LOG": "true", **env}).start()
+    try:
+        r = httpx.get(f"{server.base_url}/api/v1/meta", timeout=30,
+                      headers={"X-Forwarded-For": "203.0.113.7"})
+        assert r.status_code == 200
+        assert _wait(lambda: '"GET /api/v1/meta HTTP/1.1" 200' in server.log_path.read_text(),
+                     timeout_s=10)
+    finally:
+        server.stop()
+    line = next(x for x in server.log_path.read_text().splitlines()
+                if '"GET /api/v1/meta HTTP/1.1"' in x)
+    assert f"{seen}:" in line, line
