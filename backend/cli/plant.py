@@ -100,8 +100,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sw.add_argument("--collector-polygon", metavar="U,V;U,V;…",
                     help="any collector outline instead of --collector-m: its vertices [m] "
                     "about the pivot in the collector plane (u right, v up when facing it), "
-                    "e.g. --collector-polygon=-6,-2.5;6,-2.5;6,0;0,0;0,2.5;-6,2.5 for an L "
-                    "(the = form when it starts with a minus), or a file of them (the same "
+                    "e.g. '--collector-polygon=-6,-2.5;6,-2.5;6,0;0,0;0,2.5;-6,2.5' for an L "
+                    "(quoted: a shell ends a command at ';'; the = form when it starts with "
+                    "a minus), or a file of them (the same "
                     "text or JSON [[u, v], ...]); strategy sun only")
     sw.add_argument("--lat", type=float, help="latitude [°], north positive")
     sw.add_argument("--lon", type=float, help="longitude [°], east positive")

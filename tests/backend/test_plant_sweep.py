@@ -175,6 +175,26 @@ L_TEXT = "-6,-2.5;6,-2.5;6,0;0,0;0,2.5;-6,2.5"
 POLY_SWEEP = [a for a in SWEEP if a not in ("--collector-m", "12x5")]
 
 
+
+def test_the_documented_polygon_examples_survive_a_shell(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """The L of docs/plants.md and of ``plant sweep --help`` is quoted: typed into a shell,
+    it stays one argument (unquoted, ``;`` ended the command at the first vertex)."""
+    import re
+    import shlex
+
+    docs = (Path(__file__).resolve().parents[2] / "docs" / "plants.md").read_text()
+    (line,) = [x for x in docs.splitlines() if "plant sweep" in x and "collector-polygon=" in x]
+    monkeypatch.setenv("COLUMNS", "1000")  # the help unwrapped
+    with pytest.raises(SystemExit):
+        main(["plant", "sweep", "--help"])
+    (example,) = re.findall(r"'--collector-polygon=[^']*'", capsys.readouterr().out)
+    for text in (line, example):
+        words = shlex.split(text, comments=True)
+        (arg,) = [w for w in words if w.startswith("--collector-polygon")]
+        assert arg == f"--collector-polygon={L_TEXT}", text
+
+
 def test_a_polygon_collector_from_text_or_file(tmp_path: Path,
                                                capsys: pytest.CaptureFixture[str]) -> None:
     """``--collector-polygon`` as text and as a JSON file give the same row: the L's land
