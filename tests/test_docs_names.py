@@ -347,3 +347,13 @@ def test_named_settings_are_in_the_readme_table() -> None:
         if name not in table | NOT_SETTINGS
     ]
     assert_none_missing("settings", missing)
+
+
+def test_the_readme_lists_every_docs_page() -> None:
+    """The README's "Documentation" list names every page of docs/ (five were found only
+    by a search) and none that is gone."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = readme.split("## Documentation", 1)[1]
+    listed = set(re.findall(r"^- `docs/([a-z0-9_-]+\.md)`", section, re.M))
+    pages = {p.name for p in (ROOT / "docs").glob("*.md")}
+    assert listed == pages, (sorted(pages - listed), sorted(listed - pages))
