@@ -32,7 +32,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import threading
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -149,8 +149,11 @@ async def input_error(request: Request, exc: InputError) -> Response:
     return Response(body, status_code=exc.status_code, media_type="application/json")
 
 
-def create_app(settings: Settings | None = None) -> FastAPI:
-    """Build the application (nothing starts until the lifespan runs)."""
+def create_app(settings: Settings | None = None,
+               on_started: Callable[[FastAPI], None] | None = None) -> FastAPI:
+    """Build the application (nothing starts until the lifespan runs); ``on_started(app)``
+    runs once its start-up is done (the 3D scene on the port it really took:
+    ``heliotwin serve`` prints its banner then)."""
     settings = settings or get_settings()
 
     @asynccontextmanager
@@ -168,6 +171,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         stop_demo = threading.Event()
         demo_thread = _start_demo(ctx, stop_demo)
         trim_task = asyncio.create_task(_trim_memory(stop_live), name="trim-memory")
+        if on_started is not None:
+            on_started(app)
         try:
             yield
         finally:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import gc
 import logging
+from typing import Any
 
 from backend.cli import fail
 
@@ -35,6 +36,7 @@ def run(args: argparse.Namespace) -> int:
     import uvicorn
     from pydantic import ValidationError
 
+    from backend.api.security import viser_listen_port, viser_public_port
     from backend.app import create_app
     from backend.limits import tune_malloc
     from backend.settings import get_settings, settings_error_text
@@ -56,7 +58,26 @@ def run(args: argparse.Namespace) -> int:
         settings = get_settings(**overrides)
     except ValidationError as exc:
         fail(settings_error_text(exc))
-    app = create_app(settings)
+    server = settings.server
+
+    def banner(app: Any) -> None:
+        """Said once the 3D scene started: the port it took (the next free one when the
+        configured one was busy), not the one asked for."""
+        if not server.viser:
+            twin3d = "no 3D twin (HELIOTWIN_VISER=false)"
+        elif getattr(app.state, "scene", None) is None:
+            twin3d = "no 3D twin (it did not start: see the log)"
+        else:
+            port, public = viser_listen_port(app), viser_public_port(app)
+            twin3d = f"3D twin on :{port}"
+            if port != server.viser_port:
+                twin3d += f" (:{server.viser_port} was busy)"
+            if public != port:
+                twin3d += f", framed by the dashboard at :{public}"
+        print(f"heliotwin: dashboard and API on http://{server.host}:{server.port}/ "
+              f"(OpenAPI at /docs), {twin3d}", flush=True)
+
+    app = create_app(settings, on_started=banner)
     # The ~200,000 objects of the libraries loaded by now live as long as the process:
     # moved out of the collector's reach, a full collection (~80-140 ms with the event
     # loop stopped) no longer walks them. 200 loggers at a reading a second each: p99 385
@@ -64,11 +85,6 @@ def run(args: argparse.Namespace) -> int:
     # "service"). Only here, in the served process: the tests' in-process apps come and go.
     gc.collect()
     gc.freeze()
-    server = settings.server
-    twin3d = (f"3D twin on :{server.viser_port}" if server.viser
-              else "no 3D twin (HELIOTWIN_VISER=false)")
-    print(f"heliotwin: dashboard and API on http://{server.host}:{server.port}/ "
-          f"(OpenAPI at /docs), {twin3d}", flush=True)
     uvicorn.run(
         app, host=server.host, port=server.port, loop="uvloop", http="httptools",
         access_log=server.access_log, log_level="info", timeout_graceful_shutdown=10,

@@ -147,3 +147,26 @@ def test_serve_trusts_x_forwarded_for_from_the_proxies_named(
     line = next(x for x in server.log_path.read_text().splitlines()
                 if '"GET /api/v1/meta HTTP/1.1"' in x)
     assert f"{seen}:" in line, line
+
+
+@pytest.mark.slow
+def test_the_serve_banner_names_the_viser_port_really_taken(tmp_path: Path) -> None:
+    """With the viser port taken, ``heliotwin serve`` says the port the scene moved to (its
+    banner, printed before the scene started, named the busy one: a user opening the 3D
+    twin alone went to another program's port)."""
+    import socket
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        taken = busy.getsockname()[1]
+        server = ServerProcess(new_database("sqlite", tmp_path).url, tmp_path / "server.log",
+                               viser_port=taken, extra_env={"HELIOTWIN_VISER": "true"}).start()
+        try:
+            meta = httpx.get(f"{server.base_url}/api/v1/meta", timeout=30).json()
+        finally:
+            server.stop()
+    assert meta["viser_port"] != taken
+    (banner,) = [x for x in server.log_path.read_text().splitlines()
+                 if x.startswith("heliotwin: dashboard and API on")]
+    assert banner.endswith(f"3D twin on :{meta['viser_port']} (:{taken} was busy)"), banner
