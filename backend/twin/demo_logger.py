@@ -240,8 +240,9 @@ class DemoLogger:
             except httpx.HTTPError:
                 pass
             if not said:
-                logger.warning("demo logger: waiting up to %.0f s for %s to answer /healthz",
-                               timeout_s, self.base_url)
+                # INFO: every start waits a second or two for uvicorn to bind, not a problem
+                logger.info("demo logger: waiting up to %.0f s for %s to answer /healthz",
+                            timeout_s, self.base_url)
                 said = True
             stop.wait(0.25)
         return False

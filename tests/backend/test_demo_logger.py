@@ -102,3 +102,24 @@ def test_run_says_it_could_not_post_when_the_token_is_refused() -> None:
 
     demo = _logger_with(httpx.MockTransport(handle))
     assert demo.run(threading.Event(), backfill_days=0.01) is False
+
+
+def test_waiting_for_the_service_at_start_is_no_warning(caplog: pytest.LogCaptureFixture) -> None:
+    """Every start waits a moment for uvicorn to bind: said at INFO (a WARNING in a healthy
+    start-up worried first-time users), once, and the wait ends when /healthz answers."""
+    import threading
+
+    calls = []
+
+    def handle(request: httpx.Request) -> httpx.Response:
+        calls.append(request)
+        if len(calls) < 3:
+            raise httpx.ConnectError("not yet", request=request)
+        return httpx.Response(200, json={"status": "ok"})
+
+    demo = _logger_with(httpx.MockTransport(handle))
+    with caplog.at_level(logging.DEBUG, logger="backend.twin.demo_logger"):
+        assert demo.wait_until_up(threading.Event(), timeout_s=10) is True
+    said = [r for r in caplog.records if "waiting up to" in r.getMessage()]
+    assert [r.levelno for r in said] == [logging.INFO]
+    assert not [r for r in caplog.records if r.levelno >= logging.WARNING]
