@@ -112,6 +112,8 @@ def test_admin_endpoints(server: InProcessServer, client: httpx.Client,
         site_token = server.token("tehuantepec", scope=scope)
         r = client.get(url, headers={"Authorization": f"Bearer {site_token}"})
         assert r.status_code == 403 and "admin token" in r.json()["detail"], r.text
+        assert r.json()["detail"].startswith(
+            f"{'an' if scope == 'ingest' else 'a'} {scope}-scope token of site "), r.text
 
     r = client.post(url, headers=admin, json={"site_id": "tehuantepec", "label": "http"})
     assert r.status_code == 201, r.text

@@ -65,7 +65,9 @@ async def require_admin(request: Request) -> None:
         except TokenRefused:
             pass
         else:
-            raise HTTPException(403, f"a {grant.scope}-scope token of site {grant.site_id!r} "
+            article = "an" if grant.scope[:1] in tuple("aeiou") else "a"  # an ingest-, a site-
+            raise HTTPException(403, f"{article} {grant.scope}-scope token of site "
+                                     f"{grant.site_id!r} "
                                      "cannot manage tokens: send the admin token "
                                      "(HELIOTWIN_ADMIN_TOKEN)")
     raise HTTPException(401, "admin token required: send 'Authorization: Bearer "
