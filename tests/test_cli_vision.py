@@ -172,3 +172,26 @@ def test_a_calibration_file_is_applied_as_a_stored_calibration(frames: list[Path
     path.write_text("{}")
     p = heliotwin_cli("vision", "detect", str(frames[2]), "--calibration-file", str(path))
     assert p.returncode == 2 and "--calibration-file:" in p.stderr, p.stderr
+
+
+def test_calibrate_reads_the_times_in_the_file_names_as_detect_does(
+        frames: list[Path], tmp_path: Path, heliotwin_cli) -> None:  # type: ignore[no-untyped-def]
+    """Without ``--timestamps`` each image's time is the one in its file name, read as
+    ``vision detect`` reads it (``backend.vision.frames.frame_time``: here the name's zone,
+    UTC−6): the same answer as with the times given. A name without a time asks for them."""
+    named = []
+    for path, t in zip(frames, TIMES, strict=True):
+        local = (t - pd.Timedelta(hours=6)).strftime("%Y%m%d_%H%M%S")
+        copy = tmp_path / f"guadalajara_{local}UTCm6.png"
+        copy.write_bytes(path.read_bytes())
+        named.append(copy)
+    place = ("--lat", str(LAT), "--lon", str(LON), "--json")
+    given = heliotwin_cli("vision", "calibrate", *map(str, named), "--timestamps",
+                          *[t.isoformat() for t in TIMES], *place)
+    assert given.returncode == 0, given.stderr
+    from_names = heliotwin_cli("vision", "calibrate", *map(str, named), *place)
+    assert from_names.returncode == 0, from_names.stderr
+    assert from_names.stdout == given.stdout
+    p = heliotwin_cli("vision", "calibrate", *map(str, named[:2]), str(frames[2]), *place)
+    assert p.returncode == 2 and "--timestamps" in p.stderr and "frame_2.png" in p.stderr, \
+        p.stderr

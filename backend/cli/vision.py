@@ -8,10 +8,12 @@
     heliotwin vision calibrate a.jpg b.jpg c.jpg --timestamps T1 T2 T3 --lat 53.52 \\
         --lon 10.105 --json > cam.json
     heliotwin vision detect sky.jpg --calibration-file cam.json --timestamp T
+    heliotwin vision calibrate Wettermast_*UTCp1*.jpg --lat 53.52 --lon 10.105  # times from names
 
 The same library (``vision``), ephemeris (``sim.sun``, SPA) and frame rule
 (``backend.vision.frames.frame_inputs``: a fisheye without ``--px-per-deg`` takes the
-scale of its image circle, a frame without ``--timestamp`` the time in its file name) as
+scale of its image circle, a frame without ``--timestamp`` the time in its file name;
+``vision calibrate`` without ``--timestamps`` the same, ``frame_time``) as
 ``POST /api/v1/vision/sun`` and ``/calibrations``; nothing is stored
 (``--calibration-id`` reads a calibration the service stored, from the database
 of ``HELIOTWIN_DATABASE_URL``; ``--calibration-file`` one ``vision calibrate --json``
@@ -97,8 +99,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        description="Fit centre, scale, north offset and mirror of a fisheye "
                                    "camera to the sun in timestamped images (SPA ephemeris).")
     c.add_argument("images", type=Path, nargs="+")
-    c.add_argument("--timestamps", type=_time, nargs="+", required=True,
-                   help="one ISO 8601 time with offset per image, same order")
+    c.add_argument("--timestamps", type=_time, nargs="+",
+                   help="one ISO 8601 time with offset per image, same order (default: the "
+                        "time in each file name, e.g. _20160615_093900UTCp1, read in the "
+                        "place's zone when the name states none, as vision detect reads it; "
+                        "backend/vision/frames.py)")
     c.add_argument("--projection", default="equidistant",
                    choices=("equidistant", "equisolid", "stereographic", "orthographic"))
     c.add_argument("--east", choices=("auto", "left", "right"), default="auto")
@@ -278,17 +283,40 @@ def calibrate(args: argparse.Namespace) -> dict[str, Any]:
     from backend.vision.service import calibrate as fit
     from backend.vision.service import calibration_answer
 
-    if len(args.timestamps) != len(args.images):
+    if args.timestamps is not None and len(args.timestamps) != len(args.images):
         raise ValueError(f"--timestamps: {len(args.timestamps)} times for "
                          f"{len(args.images)} images")
     place = _place(args)
     if place is None:
         raise ValueError("a place is needed: --site, or --lat and --lon")
+    times = args.timestamps or _times_from_names(args.images, place)
     frames = [(_upload(p, f"images[{i}]"), t)
-              for i, (p, t) in enumerate(zip(args.images, args.timestamps, strict=True))]
+              for i, (p, t) in enumerate(zip(args.images, times, strict=True))]
     return calibration_answer(fit(frames, place, args.projection, args.east,
                                   parse_n_radial(args.n_radial, "--n-radial"), args.fit_tilt,
                                   args.method, _MAX_PIXELS))
+
+
+def _times_from_names(images: list[Path], place: Any) -> list[Any]:
+    """Each image's time from its file name, by the rule ``vision detect`` applies to a
+    frame without ``--timestamp`` (``backend.vision.frames.frame_time``: the name's zone,
+    else the place's); an image whose name holds no time asks for ``--timestamps``."""
+    from backend.errors import InputError
+    from backend.vision.frames import frame_time
+    from backend.vision.service import name_zone
+
+    times = []
+    for path in images:
+        try:
+            t, _ = frame_time(path.name, None, name_zone(place))
+        except InputError as exc:
+            raise ValueError(f"--timestamps: {path.name}: "
+                             f"{str(exc).removeprefix('timestamp: ')}") from None
+        if t is None:
+            raise ValueError(f"--timestamps: no time in the file name {path.name!r}: give "
+                             "one time per image (ISO 8601 with offset)")
+        times.append(t)
+    return times
 
 
 def _run(fn: Any, args: argparse.Namespace) -> int:

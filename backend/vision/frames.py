@@ -198,13 +198,25 @@ def frame_inputs(image: np.ndarray, filename: str, camera: str | None,
     derived = None
     if camera == "fisheye" and params.get("px_per_deg") in (None, ""):
         params, derived = derive_fisheye_scale(image, params)
-    source = None if timestamp is None else "given"
-    if timestamp is None:
-        try:
-            found = time_from_name(filename)
-        except NameZoneError as exc:
-            raise InputError(422, f"timestamp: {exc}") from None
-        if found is not None:
-            timestamp = found.instant(zone or ZoneInfo("UTC"))
-            source = found.source(zone)
+    timestamp, source = frame_time(filename, timestamp, zone)
     return FrameInputs(params, derived, timestamp, source)
+
+
+def frame_time(filename: str, timestamp: dt.datetime | None,
+               zone: dt.tzinfo | None) -> tuple[dt.datetime | None, str | None]:
+    """A frame's time and its ``timestamp_source``: ``timestamp`` when given (``"given"``),
+    else the time in ``filename`` (:func:`time_from_name`, read in ``zone`` when the name
+    states none; None: UTC), else ``(None, None)``. The rule of :func:`frame_inputs`, also
+    ``heliotwin vision calibrate``'s for images given without ``--timestamps``.
+
+    Raises :class:`backend.errors.InputError` (422 naming ``timestamp``) when the name's
+    zone cannot be read exactly."""
+    if timestamp is not None:
+        return timestamp, "given"
+    try:
+        found = time_from_name(filename)
+    except NameZoneError as exc:
+        raise InputError(422, f"timestamp: {exc}") from None
+    if found is None:
+        return None, None
+    return found.instant(zone or ZoneInfo("UTC")), found.source(zone)
