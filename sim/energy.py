@@ -164,7 +164,8 @@ def run_energy_wh(power_w: Any, step_s: float, duration_s: float) -> float:
 READING_STAMPS = ("instant", "interval_end", "interval_start")
 
 
-def interval_middles(ts_s: Any, stamped: str, max_gap_s: float) -> np.ndarray:
+def interval_middles(ts_s: Any, stamped: str, max_gap_s: float,
+                     interval_s: float | None = None) -> np.ndarray:
     """The instants [s] the readings stamped ``ts_s`` (sorted) stand for: as stamped for
     ``"instant"``; for a mean stamped at the end (start) of its interval, the interval's
     middle — half the spacing to the reading before (after) earlier (later), the series'
@@ -172,10 +173,14 @@ def interval_middles(ts_s: Any, stamped: str, max_gap_s: float) -> np.ndarray:
     after a gap; the median of all spacings when none is bridged). Where the sun was while
     a logger averaged is the middle of its interval: an hourly mean stamped at its end sits
     30 minutes after the sun it saw, and the diagnosis matched the morning's sky to a
-    higher sun (docs/diagnosis.md, "Cadence")."""
+    higher sun (docs/diagnosis.md, "Cadence"). A weather file's values are placed by the
+    same rule (:mod:`sim.sky`); ``interval_s``, when given, is every value's interval [s]
+    instead of the spacing (a typical year's hour: its rows need not be in order)."""
     ts = np.asarray(ts_s, np.float64).reshape(-1)
     if stamped not in READING_STAMPS:
         raise ValueError(f"stamped must be one of {READING_STAMPS}; got {stamped!r}")
+    if interval_s is not None and stamped != "instant":
+        return ts + (0.5 if stamped == "interval_start" else -0.5) * float(interval_s)
     if stamped == "instant" or ts.size < 2:
         return ts
     step = np.diff(ts)

@@ -18,7 +18,11 @@ model choices the twin uses and names units:
   :func:`typical_year_on` (calendar hour of the station's standard time, wrapped
   at the year's ends); :func:`typical_year_at_site` moves a distant station's sky to the
   site (Perez et al. 1990 kt′ at the same solar time, Erbs et al. 1982 decomposition), and
-  :func:`limit_to_extraterrestrial` keeps any weather within the top of the atmosphere.
+  :func:`limit_to_extraterrestrial` keeps any weather within the top of the atmosphere;
+  measured weather of its own dates (a CSV of time, GHI, DNI, DHI) is read by
+  :func:`read_measured`. Every weather value stands at the middle of the interval it
+  averages (:func:`weather_middles`) and is interpolated linearly onto a run's steps
+  (:func:`weather_at`).
 """
 
 from __future__ import annotations
@@ -311,6 +315,35 @@ def sniff_weather_format(source: str | Path | IO[str], fmt: str | None = None) -
     return found
 
 
+def weather_middles(stamps: pd.DatetimeIndex, stamped: str,
+                    interval_s: float | None = None) -> pd.DatetimeIndex:
+    """The instants a weather file's values stand for: the middle of the interval each
+    value averages (``stamped`` ``"interval_end"`` or ``"interval_start"``), or the stamp
+    itself (``"instant"``). The twin interpolates linearly between these instants
+    (:func:`weather_at`) for every weather file, typical year or measured: the rule of
+    :func:`sim.energy.interval_middles`, which places a logger's readings the same way.
+    ``interval_s``: every value's interval [s] (a typical year's hour); otherwise the
+    spacing of the (sorted) stamps."""
+    from sim.energy import interval_middles
+
+    ns = stamps.as_unit("ns").asi8.astype(np.float64) / 1e9
+    mid = interval_middles(ns, stamped, MEASURED_MAX_INTERVAL_S, interval_s)
+    return pd.DatetimeIndex(pd.to_datetime(np.round(mid * 1e3).astype(np.int64), unit="ms",
+                                           utc=True)).tz_convert(stamps.tz)
+
+
+def _refuse_sub_hourly_epw(data: pd.DataFrame) -> None:
+    """Refuse an EPW of more than one record an hour (its DATA PERIODS' records per hour,
+    its ``minute`` field varying): pvlib's ``read_epw`` keeps only the hour of each record,
+    so six 10-minute records became six copies of one hour."""
+    per_hour = int(data.groupby(["month", "day", "hour"]).size().max()) if len(data) else 1
+    if per_hour > 1:
+        raise ValueError(
+            f"a sub-hourly EPW ({per_hour} records an hour, {len(data):,} rows) is not read: "
+            "an EPW typical year is read hour by hour — average it to hourly records, or run "
+            "on it as measured weather (a CSV of time, ghi, dni, dhi: --weather-csv)")
+
+
 def _calendar_hour(index: pd.DatetimeIndex) -> np.ndarray:
     """Hour of a 365-day year [0, 8760) of mid-hour stamps; 29 February counts as the 28th."""
     month = index.month.to_numpy()
@@ -351,18 +384,29 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
     try:
         if fmt == "tmy3":
             data, meta = iotools.read_tmy3(src, map_variables=True)
-            middle = data.index - pd.Timedelta(minutes=30)
             name = str(meta.get("Name", "")).strip('"')
+            # read_tmy3 moves 29 February onto 1 March: the file's own dates tell it
+            leap = data["Date (MM/DD/YYYY)"].astype(str).str.startswith("02/29").to_numpy()
         else:
             data, meta = iotools.read_epw(src)
-            middle = data.index + pd.Timedelta(minutes=30)
             name = ", ".join(str(meta.get(k, "")).strip() for k in ("city", "country")
                              if str(meta.get(k, "")).strip())
+            leap = ((data["month"] == 2) & (data["day"] == 29)).to_numpy()
+            _refuse_sub_hourly_epw(data)
         offset = float(meta["TZ"])
         place = {k: float(meta[k]) for k in ("latitude", "longitude", "altitude")}
     except (KeyError, IndexError) as exc:  # pvlib's bare KeyError of a missing column
         raise ValueError(f"not a readable {fmt.upper()} file: no {exc} in it") from None
-    hour = _calendar_hour(pd.DatetimeIndex(middle))
+    if leap.any():
+        raise ValueError(
+            f"this {fmt.upper()} file has 29 February ({len(data):,} rows: an actual year, not "
+            f"a typical one); a typical year has {HOURS_PER_TYPICAL_YEAR:,} hours and a run "
+            "over a leap year's 29 February repeats the 28th — delete 29 February's "
+            f"{int(leap.sum())} rows, or run on it as measured weather (a CSV of time, ghi, "
+            "dni, dhi: --weather-csv)")
+    stamped = "interval_end" if fmt == "tmy3" else "interval_start"
+    middle = weather_middles(pd.DatetimeIndex(data.index), stamped, interval_s=3600.0)
+    hour = _calendar_hour(middle)
     if len(data) != HOURS_PER_TYPICAL_YEAR or len(np.unique(hour)) != HOURS_PER_TYPICAL_YEAR:
         raise ValueError(f"a typical year has {HOURS_PER_TYPICAL_YEAR} distinct hours; this "
                          f"{fmt.upper()} file has {len(np.unique(hour))} of {len(data)} rows")
@@ -380,6 +424,160 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
     return weather, station
 
 
+#: A measured series' rows are at most this far apart [s]: a longer gap is no weather to
+#: interpolate across (an hour is a typical year's cadence) …
+MEASURED_MAX_INTERVAL_S = 3600.0
+#: … and at least this far [s] (finer data: average it to minutes; a year of seconds is
+#: 31 million rows)
+MEASURED_MIN_INTERVAL_S = 60.0
+#: What a measured series' stamps mark unless told (``sim.energy.READING_STAMPS``): the end
+#: of the interval each value averages, as a TMY3 file's and most loggers' (a Campbell
+#: Scientific table's) stamps do
+MEASURED_STAMPED_DEFAULT = "interval_end"
+#: A measured CSV's columns by what they hold (header names read case-insensitively; the
+#: second name carries the unit): the time, GHI, DNI, DHI [W m⁻²], then optional air
+#: temperature [°C] and wind speed [m s⁻¹]
+MEASURED_COLUMNS = {"time": ("time", "timestamp"), "ghi": ("ghi", "ghi_w_m2"),
+                    "dni": ("dni", "dni_w_m2"), "dhi": ("dhi", "dhi_w_m2"),
+                    "temp_air": ("temp_air", "temp_air_c"),
+                    "wind_speed": ("wind_speed", "wind_speed_m_s")}
+
+
+def _numeric_cells(raw: pd.DataFrame, columns: list[str], where: Any, fmt: str
+                   ) -> pd.DataFrame:
+    """``raw``'s ``columns`` as numbers; a blank or a text cell is refused naming the column
+    and where its row is (``where(i)`` of its position i: a line, an hour). A blank GHI
+    cell had read "missing irradiance (ghi, dni or dhi)", a text one pandas' bare "could
+    not convert string to float: 'abc'" (a tester's findings)."""
+    out = pd.DataFrame(index=raw.index)
+    for col in columns:
+        values = pd.to_numeric(raw[col], errors="coerce")
+        bad = ~np.isfinite(values.to_numpy(dtype=float))
+        if bad.any():
+            at = int(np.flatnonzero(bad)[0])
+            cell = raw[col].iloc[at]
+            what = ("blank" if pd.isna(cell) or not str(cell).strip()
+                    else f"{str(cell).strip()[:20]!r}, not a number,")
+            raise ValueError(f"the {fmt} file's {col} is {what} at {where(at)}; "
+                             f"{int(bad.sum())} such cells in {col} — fill them, or use "
+                             "another file")
+        out[col] = values.astype(float)
+    return out
+
+
+def read_measured(source: str | Path | IO[str], stamped: str = MEASURED_STAMPED_DEFAULT,
+                  timezone: str | None = None, name: str = ""
+                  ) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """Read a measured irradiance series: a CSV with a header row, a ``time`` (or
+    ``timestamp``) column and ``ghi``, ``dni``, ``dhi`` [W m⁻²], optionally ``temp_air``
+    [°C] and ``wind_speed`` [m s⁻¹] (:data:`MEASURED_COLUMNS`; other columns ignored).
+
+    Times are ISO 8601 with a UTC offset (``2024-06-01T10:05:00+09:30``), or without one
+    when ``timezone`` (an IANA zone; ``Etc/GMT-10`` for a fixed UTC+10) says where they
+    were read; rows every :data:`MEASURED_MIN_INTERVAL_S` to :data:`MEASURED_MAX_INTERVAL_S`,
+    regular or not, any order. ``stamped`` says what a stamp marks (``"interval_end"``,
+    ``"interval_start"`` or ``"instant"``; default :data:`MEASURED_STAMPED_DEFAULT`): each
+    value is placed at its interval's middle (:func:`weather_middles`, the typical year's
+    rule) and interpolated linearly onto the run's steps (:func:`weather_at`). The series
+    is weather of its own dates, not wrapped onto a typical year: it covers from the start
+    of its first interval to the end of its last (``station["start"]``, ``["end"]``), and
+    the first and last values hold to those edges.
+
+    Refused, naming the column and the line: a blank or text cell, a time without an
+    offset (and no ``timezone``), a time twice, a gap over an hour, irradiance outside
+    −10…1,500 W m⁻².
+
+    Returns
+    -------
+    weather : pandas.DataFrame
+        UTC index; the columns read.
+    station : dict
+        ``format`` ``"measured"``, ``name``, ``stamped``, ``start`` and ``end`` (ISO, UTC);
+        no place: the series is taken as the site's own (``latitude`` etc. None).
+    """
+    if stamped not in ("interval_end", "interval_start", "instant"):
+        raise ValueError(f"stamped must be interval_end, interval_start or instant; got "
+                         f"{stamped!r}")
+    raw = pd.read_csv(source, dtype=str, skipinitialspace=True)
+    by_lower = {str(c).strip().lower(): c for c in raw.columns}
+    found = {key: next((by_lower[n] for n in names if n in by_lower), None)
+             for key, names in MEASURED_COLUMNS.items()}
+    missing = [k for k in ("time", "ghi", "dni", "dhi") if found[k] is None]
+    if missing:
+        raise ValueError(f"a measured weather CSV needs the columns time, ghi, dni and dhi "
+                         f"(W m⁻²) in its header; {', '.join(missing)} not found among "
+                         f"{', '.join(map(str, raw.columns[:12]))}")
+    raw = raw.rename(columns={v: k for k, v in found.items() if v is not None})
+    if len(raw) < 2:
+        raise ValueError(f"a measured weather CSV needs at least 2 rows; it has {len(raw)}")
+
+    def line(i: int) -> str:
+        return f"line {i + 2}"  # the header is line 1
+
+    times = _measured_times(raw["time"], timezone, line)
+    cols = [c for c in WEATHER_COLUMNS if c in raw.columns]
+    values = _numeric_cells(raw, cols, line, "measured")
+    values.index = pd.DatetimeIndex(times).tz_convert("UTC").as_unit("ns")
+    order = np.argsort(values.index.asi8, kind="stable")
+    values, rows = values.iloc[order], order
+    step_s = np.diff(values.index.asi8) / 1e9
+    if (step_s == 0).any():
+        i = int(np.flatnonzero(step_s == 0)[0])
+        raise ValueError(f"time: {values.index[i].isoformat()} is there twice ({line(rows[i])} "
+                         f"and {line(rows[i + 1])}); keep one")
+    for bad, why in ((step_s > MEASURED_MAX_INTERVAL_S, "no rows for more than an hour: "
+                      "the twin does not interpolate across a gap — run on the dates either "
+                      "side of it, or fill it"),
+                     (step_s < MEASURED_MIN_INTERVAL_S, "rows less than a minute apart: "
+                      "average them to 1 minute or more")):
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"time: {values.index[i].isoformat()} ({line(rows[i])}) to "
+                             f"{values.index[i + 1].isoformat()} ({line(rows[i + 1])}): {why}")
+    _check_irradiance(values, "measured", "%Y-%m-%d %H:%M UTC")
+    values.index = weather_middles(values.index, stamped)
+    half = 0.0 if stamped == "instant" else 0.5  # of the first and last intervals
+    first = values.index[0] - pd.Timedelta(seconds=half * step_s[0])
+    last = values.index[-1] + pd.Timedelta(seconds=half * step_s[-1])
+    edges = pd.DataFrame([values.iloc[0].to_numpy(), values.iloc[-1].to_numpy()],
+                         index=pd.DatetimeIndex([first, last]), columns=values.columns)
+    weather = pd.concat([edges.iloc[:1], values, edges.iloc[1:]])
+    weather = weather[~weather.index.duplicated(keep="first")]
+    station = {"format": "measured", "name": name, "latitude": None, "longitude": None,
+               "altitude": None, "utc_offset_h": None, "stamped": stamped,
+               "start": first.isoformat(), "end": last.isoformat()}
+    return weather, station
+
+
+def _measured_times(column: pd.Series, timezone: str | None, line: Any) -> pd.DatetimeIndex:
+    """A measured CSV's time column as UTC instants: every time with its UTC offset, or,
+    given ``timezone``, every time without one read there; refused naming the first bad
+    line otherwise (a blank, no ISO 8601 time, a missing offset)."""
+    text = column.fillna("").astype(str).str.strip()
+    offset = text.str.contains(r"(?:Z|[+-]\d\d(?::?\d\d)?)$", regex=True)
+    want = timezone is None or offset.any()
+    if (offset != want).any():
+        i = int(np.flatnonzero((offset != want).to_numpy())[0])
+        raise ValueError(f"time: {text.iloc[i][:30]!r} at {line(i)} "
+                         + ("has no UTC offset: write every time with one (…T10:05:00+09:30, "
+                            "…Z), or none of them and say the zone they were read in "
+                            "(--weather-timezone / weather_timezone)" if want else
+                            "has a UTC offset while others have none: write all alike"))
+    parsed = pd.to_datetime(text, format="ISO8601", errors="coerce", utc=want)
+    if parsed.isna().any():
+        i = int(np.flatnonzero(parsed.isna().to_numpy())[0])
+        raise ValueError(f"time: {text.iloc[i][:30]!r} at {line(i)} is not an ISO 8601 time "
+                         "(2024-06-01T10:05:00+09:30)")
+    if not want:
+        try:
+            parsed = parsed.dt.tz_localize(timezone, ambiguous="raise", nonexistent="raise")
+        except Exception as exc:  # pytz's errors name the wall time only
+            raise ValueError(f"time: {exc} in {timezone}: a local time that repeats or is "
+                             "skipped at a clock change — give the times a UTC offset, or "
+                             "name a fixed zone, e.g. Etc/GMT-10 for UTC+10") from None
+    return pd.DatetimeIndex(parsed).tz_convert("UTC")
+
+
 #: The most any of GHI, DNI, DHI can be [W m⁻²]: the solar constant at perihelion (≈ 1,414)
 #: and a little; EPW writes 9999 for a missing one (EnergyPlus Auxiliary Programs, "EnergyPlus
 #: Weather File (EPW) Data Dictionary": "missing value = 9999")
@@ -389,7 +587,8 @@ IRRADIANCE_MAX_W_M2 = 1500.0
 IRRADIANCE_NIGHT_OFFSET_W_M2 = -10.0
 
 
-def _check_irradiance(weather: pd.DataFrame, fmt: str) -> None:
+def _check_irradiance(weather: pd.DataFrame, fmt: str,
+                      when: str = "%d %b %H:%M (station time)") -> None:
     """Refuse a typical year whose GHI, DNI or DHI lies outside
     [:data:`IRRADIANCE_NIGHT_OFFSET_W_M2`, :data:`IRRADIANCE_MAX_W_M2`], naming the column,
     the hour and how many such hours; set the small negatives of a night offset to 0
@@ -405,8 +604,9 @@ def _check_irradiance(weather: pd.DataFrame, fmt: str) -> None:
         why = ("EPW's mark of a missing value" if fmt == "epw" and value == 9999.0 else
                f"outside {IRRADIANCE_NIGHT_OFFSET_W_M2:g}…{IRRADIANCE_MAX_W_M2:g} W m⁻²")
         raise ValueError(
-            f"the {fmt.upper()} file's {col} is {value:g} W m⁻² on "
-            f"{irr.index[at]:%d %b %H:%M} (station time): {why}; "
+            f"the {fmt.upper() if fmt in WEATHER_FORMATS else fmt} file's {col} is "
+            f"{value:g} W m⁻² on "
+            f"{irr.index[at].strftime(when)}: {why}; "
             f"{int(bad.to_numpy().sum())} such values in all — fill them, or use another file")
     weather[["ghi", "dni", "dhi"]] = irr.clip(lower=0.0)
 

@@ -465,3 +465,41 @@ def test_a_site_with_placed_arrays_reports_the_shade_and_exports_it(tmp_path: Pa
         rows = list(csv.DictReader(f))
     shaded = [float(r["fixed_shaded_frac"]) for r in rows]
     assert max(shaded) > 0.9 and min(shaded) == 0.0
+
+
+def _measured_day(path: Path) -> Path:
+    """A day of 10-minute measured weather at Tehuantepec (a half sine of GHI, its beam and
+    diffuse), times with the site's offset, stamped at the intervals' ends."""
+    import numpy as np
+    import pandas as pd
+
+    times = pd.date_range("2024-03-15 00:10", "2024-03-16 00:00", freq="10min",
+                          tz="Etc/GMT+6")
+    hours = (times.hour + times.minute / 60).to_numpy()
+    ghi = np.clip(900 * np.sin(np.pi * (hours - 6.5) / 12), 0, None).round(1)
+    pd.DataFrame({"time": [t.isoformat() for t in times], "ghi": ghi, "dni": ghi * 0.9,
+                  "dhi": ghi * 0.15, "temp_air_c": 28.0}).to_csv(path, index=False)
+    return path
+
+
+def test_measured_weather_runs_over_its_own_dates_only(tmp_path: Path, heliotwin_cli) -> None:
+    """``--weather-csv``: measured weather of its own dates runs (no station, no --force);
+    a run past its last interval is refused naming the file's span."""
+    path = str(_measured_day(tmp_path / "day.csv"))
+    day = ["simulate", "--start", "2024-03-15", "--end", "2024-03-16", "--step-s", "300"]
+    p = heliotwin_cli(*day, "--weather-csv", path, "--json")
+    assert p.returncode == 0, p.stderr
+    d = json.loads(p.stdout)
+    assert d["sky"] == "weather" and d["tracker_energy_wh"] > 3000
+    assert d["weather"]["format"] == "measured" and d["weather"]["stamped"] == "interval_end"
+    assert d["weather"]["start"] == "2024-03-15T06:00:00+00:00"
+    text = heliotwin_cli(*day, "--weather-csv", path)
+    assert text.returncode == 0 and "weather: measured day.csv (interval_end" in text.stdout
+    # stamped at the instants, the first value is 00:10's: the day's first 10 min are not in it
+    instant = heliotwin_cli(*day, "--weather-csv", path, "--weather-stamped", "instant")
+    assert instant.returncode == 2 and "covers 2024-03-15 00:10:00-06:00 to" in instant.stderr
+    late = heliotwin_cli("simulate", "--start", "2024-03-15", "--end", "2024-03-17",
+                         "--weather-csv", path)
+    assert late.returncode == 2
+    assert ("--weather-csv: the measured weather covers 2024-03-15 00:00:00-06:00 to "
+            "2024-03-16 00:00:00-06:00") in late.stderr

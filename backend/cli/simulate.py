@@ -19,7 +19,9 @@ A run of more steps than the service allows one request
 the flag that reads it. A typical year is laid onto the run's calendar in its
 station's standard time, wrapping at the year's ends (:mod:`sim.sky`); a
 station more than 100 km from the site is refused unless ``--force``
-(:func:`backend.twin.scenario.check_station`).
+(:func:`backend.twin.scenario.check_station`). ``--weather-csv``: measured weather of its
+own dates (:func:`sim.sky.read_measured`; ``--weather-stamped``, ``--weather-timezone``); a
+run outside them is refused naming them.
 """
 
 from __future__ import annotations
@@ -93,6 +95,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     weather.add_argument(
         "--epw", metavar="PATH", help="use the typical year of an EPW file instead of clear sky"
     )
+    weather.add_argument(
+        "--weather-csv", metavar="PATH",
+        help="use measured weather of its own dates: a CSV with columns time (ISO 8601 with "
+        "a UTC offset), ghi, dni, dhi [W m-2], optionally temp_air [°C] and wind_speed "
+        "[m/s], rows 1 min to 1 h apart; the run must lie within its dates",
+    )
+    p.add_argument("--weather-stamped", choices=("interval_end", "interval_start", "instant"),
+                   default="interval_end",
+                   help="what --weather-csv's times mark: the end (default) or the start of "
+                   "the interval each value averages, or the instant of the value")
+    p.add_argument("--weather-timezone", metavar="ZONE",
+                   help="IANA zone --weather-csv's times were read in, when they carry no "
+                   "UTC offset (Etc/GMT-10 for a fixed UTC+10)")
     p.add_argument(
         "--force", action="store_true",
         help="run on a weather file whose station is more than 100 km from the site",
@@ -204,8 +219,11 @@ def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
     )
 
     weather, station = None, None
-    flag, path = ("--tmy3", args.tmy3) if args.tmy3 else ("--epw", args.epw)
-    if path:
+    flag, path = (("--tmy3", args.tmy3) if args.tmy3 else ("--epw", args.epw) if args.epw
+                  else ("--weather-csv", args.weather_csv))
+    if args.weather_csv:
+        weather, station = _measured(args, site)
+    elif path:
         from sim.sky import read_typical_year, sniff_weather_format
 
         try:
@@ -238,7 +256,8 @@ def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
                             pointing_model_terms=terms)
     except ValueError as exc:
         name, _, problem = str(exc).partition(":")
-        raise InputError(f"--{name.replace('_', '-')}:{problem}") from None
+        raise InputError(f"{flag if name == 'weather' else '--' + name.replace('_', '-')}:"
+                         f"{problem}") from None
     from backend.twin.cost import table_cost_s
 
     steps = (end - start).total_seconds() / args.step_s
@@ -255,6 +274,26 @@ def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
     if station is not None:
         summary["weather"] = {**station, "file": path}
     return summary, result
+
+
+def _measured(args: argparse.Namespace, site: Any) -> tuple[Any, dict[str, Any]]:
+    """``--weather-csv``'s measured weather and its description
+    (:func:`sim.sky.read_measured`, :func:`backend.twin.scenario.check_station`)."""
+    from backend.twin.scenario import check_station
+    from sim.site_config import check_iana_zone
+    from sim.sky import read_measured
+
+    if args.weather_timezone is not None:
+        try:
+            check_iana_zone(args.weather_timezone)
+        except ValueError as exc:
+            raise InputError(f"--weather-timezone: {exc}") from None
+    try:
+        weather, meta = read_measured(args.weather_csv, args.weather_stamped,
+                                      args.weather_timezone, Path(args.weather_csv).name)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"--weather-csv: cannot read {args.weather_csv!r}: {exc}") from None
+    return weather, check_station(meta, site, args.force)
 
 
 def write_csv(series: Any, timezone: str, path: str) -> None:
@@ -312,6 +351,8 @@ def _text(summary: dict[str, Any]) -> str:
         + _tracking_costs(summary)
         + (
             [
+                f"weather: measured {w['name']} ({w['stamped']} stamps), {w['start']} .. "
+                f"{w['end']}" if w["format"] == "measured" else
                 f"weather: {w['format'].upper()} {w['name']} ({w['latitude_deg']:.2f}, "
                 f"{w['longitude_deg']:.2f}), {w['distance_km']:.0f} km from the site"
             ]

@@ -9,7 +9,9 @@ drift apart. :func:`run_scenario` is the one call into ``sim.twin.simulate``.
 Weather: a scenario may carry a typical year (TMY3 or EPW, read by
 :func:`sim.sky.read_typical_year`); :func:`run_scenario` lays it onto the run's
 calendar at the site (:func:`sim.sky.typical_year_at_site`). :func:`check_station` is the one
-rule for a station far from the site: refused unless forced.
+rule for a station far from the site: refused unless forced. Or measured weather
+(:func:`sim.sky.read_measured`): the site's own, of its own dates; a run outside them is
+refused naming them (:func:`check_weather_span`).
 """
 
 from __future__ import annotations
@@ -56,6 +58,9 @@ def check_station(station: dict[str, Any], site: Site | Plant, force: bool,
     units in the keys); raises :class:`StationTooFar` when it is farther than
     :data:`MAX_STATION_DISTANCE_KM` and not ``force`` (the message names the flag or field
     ``force_name``)."""
+    if station["latitude"] is None:  # measured weather: the site's own, no station
+        return {k: station[k] for k in ("format", "name", "stamped", "start", "end")} | {
+            "forced": bool(force)}
     distance = station_distance_km(station, site)
     place = (f"site {site.site_id}" if isinstance(site, Site) else f"plant {site.plant_id}")
     out = {"format": station["format"], "name": station["name"],
@@ -70,6 +75,21 @@ def check_station(station: dict[str, Any], site: Site | Plant, force: bool,
             f"{MAX_STATION_DISTANCE_KM:.0f} km: its sky does not go with this site's sun; use "
             f"weather from nearer the site, or set {force_name} to run on it anyway")
     return out
+
+
+def check_weather_span(station: dict[str, Any] | None, start: pd.Timestamp,
+                       end: pd.Timestamp) -> None:
+    """Refuse a run outside the span of measured weather (``station["start"]``, ``["end"]``),
+    naming both: measured weather is of its own dates (a typical year, of any year's, has
+    no span)."""
+    if station is None or station.get("format") != "measured":
+        return
+    first, last = pd.Timestamp(station["start"]), pd.Timestamp(station["end"])
+    if start < first or end > last:
+        zone = start.tz
+        raise ValueError(f"weather: the measured weather covers {first.tz_convert(zone)} to "
+                         f"{last.tz_convert(zone)}; the run {start} to {end} is not within "
+                         "it — run within those dates")
 
 
 @dataclass(frozen=True)
@@ -119,6 +139,7 @@ class Scenario:
                 raise ValueError(f"pointing_model_terms: {exc}") from None
         if (self.weather is None) != (self.station is None):
             raise ValueError("weather: a typical year goes with its station")
+        check_weather_span(self.station, self.start, self.end)
 
     def disturbances(self) -> Disturbances:
         return disturbances_of(self.machine)
@@ -158,8 +179,11 @@ def run_scenario(site: Site, scenario: Scenario, weather: pd.DataFrame | None = 
     """``sim.twin.simulate`` for ``scenario`` (the one call the CLI and the API share).
 
     ``weather`` (already on the run's times) wins over the scenario's typical year, which is
-    laid onto the run's calendar here.
+    laid onto the run's calendar here, or its measured weather, taken as it is.
     """
+    if (weather is None and scenario.station is not None
+            and scenario.station["format"] == "measured"):
+        weather = scenario.weather  # of its own dates, already on UTC instants
     if weather is None and scenario.weather is not None and scenario.station is not None:
         st = scenario.station
         weather = typical_year_at_site(

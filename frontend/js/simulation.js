@@ -60,6 +60,9 @@ function localIso(tz, iso) {
 
 function skyTile(summary, station) {
   if (!station) return tile("Sky", summary.sky === "weather" ? "weather" : "clear sky", "Ineichen clear sky with Linke turbidity");
+  if (station.format === "measured") {
+    return tile("Sky", "measured weather", `${station.name || "file"} · ${station.stamped.replace("_", " ")} stamps · ${station.start.slice(0, 16)} → ${station.end.slice(0, 16)} UTC`);
+  }
   return tile("Sky", `${station.format.toUpperCase()} typical year`,
     `${station.name || "station"} (${num(station.latitude_deg, 2)}°, ${num(station.longitude_deg, 2)}°) · ${num(station.distance_km, 0)} km from the site`);
 }
@@ -314,14 +317,15 @@ async function firstDayRows(url, summary, t0) {
   return { rows: got.points, day: long ? first : "" };
 }
 
-/** POST the scenario: as JSON, or as multipart with the chosen TMY3/EPW file (clear sky
- * without one). */
+/** POST the scenario: as JSON, or as multipart with the chosen weather file — TMY3/EPW or
+ * measured CSV (clear sky without one). */
 function submit(body) {
   const file = $("sim-weather").files[0];
   if (!file) return api("/api/v1/simulations", { method: "POST", json: body });
   const form = new FormData();
   for (const [k, v] of Object.entries(body)) form.append(k, String(v));
   form.append("force", String($("sim-force").checked));
+  form.append("weather_stamped", $("sim-weather-stamped").value);
   form.append("file", file, file.name);
   return api("/api/v1/simulations/weather", { method: "POST", form });
 }

@@ -45,6 +45,33 @@ def test_a_distant_station_is_refused_unless_forced_and_then_runs_as_the_cli(
     assert http["fixed_energy_wh"] == pytest.approx(ref["fixed_energy_wh"], rel=1e-12)
 
 
+def test_measured_weather_is_read_from_the_upload_and_runs_as_the_cli(
+        client: httpx.Client, heliotwin_cli: Callable, tmp_path: Path) -> None:
+    """A CSV that is neither TMY3 nor EPW is read as measured weather (``weather_stamped``
+    as ``--weather-stamped``); a run outside its dates is a 422 naming them."""
+    from tests.test_cli_sim import _measured_day
+
+    path = _measured_day(tmp_path / "day.csv")
+    day = {"site_id": "tehuantepec", "start": "2024-03-15", "end": "2024-03-16",
+           "step_s": "300", "weather_stamped": "interval_end"}
+    r = client.post("/api/v1/simulations/weather", data=day, files=_files(path))
+    assert r.status_code == 200, r.text
+    cli = heliotwin_cli("simulate", "--start", "2024-03-15", "--end", "2024-03-16",
+                        "--step-s", "300", "--weather-csv", str(path), "--json")
+    assert cli.returncode == 0, cli.stderr
+    assert r.json()["tracker_energy_wh"] == pytest.approx(
+        json.loads(cli.stdout)["tracker_energy_wh"], rel=1e-12)
+    # stamped at the intervals' starts, the file covers 00:10 to 00:10 the next day
+    r = client.post("/api/v1/simulations/weather", data={**day, "weather_stamped":
+                                                         "interval_start"}, files=_files(path))
+    assert r.status_code == 422
+    assert r.json()["detail"].startswith("file: weather: the measured weather covers "
+                                         "2024-03-15 00:10:00-06:00 to 2024-03-16 00:10")
+    r = client.post("/api/v1/simulations/weather", data={**day, "weather_stamped": "end"},
+                    files=_files(path))
+    assert r.status_code == 422 and r.json()["detail"].startswith("weather_stamped:")
+
+
 def test_a_background_run_on_weather_keeps_its_station_and_exports_units(
         client: httpx.Client) -> None:
     r = client.post("/api/v1/simulations/weather", files=_files(),

@@ -94,3 +94,33 @@ def test_a_tmy3_file_uploaded_on_the_page_runs_on_its_weather(page, server,
     assert summary["summary"]["tracker_energy_wh"] == pytest.approx(ref["tracker_energy_wh"],
                                                                     rel=1e-12)
     page.screenshot(path=str(ARTIFACTS / "simulation-tmy3.png"), full_page=True)
+
+
+def test_measured_weather_uploaded_on_the_page_runs_over_its_dates(page, server, tmp_path,
+                                                                   heliotwin_cli) -> None:
+    """A measured CSV (time, ghi, dni, dhi) chosen on the page runs on its own dates, the Sky
+    tile says so, and the energy is the CLI's on the same file."""
+    from tests.test_cli_sim import _measured_day
+
+    path = _measured_day(tmp_path / "day.csv")
+    page.goto(server.url + "/#simulation")
+    page.wait_for_selector("#sim-machine-fields input", state="attached")
+    page.fill("#sim-start", "2024-03-15")
+    page.fill("#sim-end", "2024-03-16")
+    page.select_option("#sim-step", "300")
+    page.set_input_files("#sim-weather", str(path))
+    page.set_checked("#sim-force", False)
+    page.select_option("#sim-weather-stamped", "interval_end")
+    page.click("#sim-run")
+    page.wait_for_selector("body[data-simulation-done]", timeout=120_000)
+    assert page.is_hidden("#banner"), page.text_content("#banner")
+    tiles = page.text_content("#sim-summary") or ""
+    assert "measured weather" in tiles and "day.csv" in tiles, tiles
+    run_id = page.get_attribute("body", "data-simulation-done")
+    summary = httpx.get(f"{server.url}/api/v1/simulations/{run_id}", timeout=30).json()
+    cli = heliotwin_cli("simulate", "--site", "tehuantepec", "--start", "2024-03-15", "--end",
+                        "2024-03-16", "--step-s", "300", "--weather-csv", str(path), "--json")
+    assert cli.returncode == 0, cli.stderr
+    assert summary["summary"]["tracker_energy_wh"] == pytest.approx(
+        json.loads(cli.stdout)["tracker_energy_wh"], rel=1e-12)
+    page.screenshot(path=str(ARTIFACTS / "simulation-measured.png"), full_page=True)

@@ -1,10 +1,14 @@
-"""``POST /api/v1/simulations/weather``: a twin scenario on an uploaded TMY3 or EPW file.
+"""``POST /api/v1/simulations/weather``: a twin scenario on an uploaded weather file.
 
 Multipart: the weather file in ``file`` and the fields of ``POST /api/v1/simulations``
 (``site_id``, ``start``, ``end``, ``step_s``, ``controller``, ``receiver``,
-``background`` and the machine parameters) as form fields, plus ``force``. The
-typical year is read by :func:`sim.sky.read_typical_year` and laid onto the run's
-calendar (:func:`backend.twin.scenario.run_scenario`); a station more than
+``background`` and the machine parameters) as form fields, plus ``force``,
+``weather_stamped`` and ``weather_timezone``. A TMY3 or EPW file (by its first line) is a
+typical year, read by :func:`sim.sky.read_typical_year` and laid onto the run's
+calendar (:func:`backend.twin.scenario.run_scenario`); any other file is read as measured
+weather of its own dates (:func:`sim.sky.read_measured`: ``weather_stamped`` says what its
+times mark, ``weather_timezone`` the zone of times without an offset), and a run outside
+them is a 422 naming them. A station more than
 :data:`backend.twin.scenario.MAX_STATION_DISTANCE_KM` from the site is a 422
 unless ``force`` is true. The body is bounded by ``HELIOTWIN_MAX_UPLOAD_BYTES``
 (413 past it). The answer is that of ``POST /api/v1/simulations`` (the summary,
@@ -17,6 +21,7 @@ import dataclasses
 import io
 from typing import Any
 
+import pandas as pd
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import Response
 from pydantic import ValidationError
@@ -33,7 +38,14 @@ from backend.api.routes.simulations import (
 )
 from backend.api.schemas.simulations import SimulationSummaryRead
 from backend.twin.scenario import StationTooFar, check_station
-from sim.sky import read_typical_year
+from sim.energy import READING_STAMPS
+from sim.site_config import check_iana_zone
+from sim.sky import (
+    MEASURED_STAMPED_DEFAULT,
+    read_measured,
+    read_typical_year,
+    sniff_weather_format,
+)
 
 router = APIRouter(prefix="/api/v1/simulations", tags=["simulations"])
 
@@ -42,20 +54,47 @@ def _field(form: FormData, name: str) -> str | None:
     return value if isinstance(value, str) else None
 
 
-async def _weather(upload: Any) -> tuple[Any, dict[str, Any]]:
-    """The typical year and station of the uploaded file; 422 naming ``file`` when unreadable."""
+async def _weather(upload: Any, stamped: str | None, timezone: str | None
+                   ) -> tuple[Any, dict[str, Any]]:
+    """The weather and station of the uploaded file: a typical year when its first line is a
+    TMY3's or an EPW's, else measured weather; 422 naming ``file`` when unreadable."""
     if not isinstance(upload, UploadFile):
-        raise HTTPException(422, "file: a TMY3 or EPW weather file is required")
+        raise HTTPException(422, "file: a weather file (TMY3, EPW or a measured CSV) is "
+                                 "required")
     raw = await upload.read()
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError:
         text = raw.decode("latin-1")
+    name = upload.filename or "the upload"
+    try:
+        sniff_weather_format(io.StringIO(text))
+    except ValueError:
+        return _measured(text, name, stamped, timezone)
     try:
         return read_typical_year(io.StringIO(text))
     except (ValueError, KeyError, IndexError) as exc:
-        raise HTTPException(422, f"file: {upload.filename or 'the upload'} is not a readable "
-                                 f"TMY3 or EPW typical year: {exc}") from None
+        raise HTTPException(422, f"file: {name} is not a readable TMY3 or EPW typical year: "
+                                 f"{exc}") from None
+
+
+def _measured(text: str, name: str, stamped: str | None, timezone: str | None
+              ) -> tuple[Any, dict[str, Any]]:
+    """Measured weather (:func:`sim.sky.read_measured`); 422 naming the field at fault."""
+    if stamped is not None and stamped not in READING_STAMPS:
+        raise HTTPException(422, f"weather_stamped: {stamped!r} is not one of "
+                                 f"{', '.join(READING_STAMPS)}")
+    if timezone is not None:
+        try:
+            check_iana_zone(timezone)
+        except ValueError as exc:
+            raise HTTPException(422, f"weather_timezone: {exc}") from None
+    try:
+        return read_measured(io.StringIO(text), stamped or MEASURED_STAMPED_DEFAULT, timezone,
+                             name)
+    except (ValueError, pd.errors.ParserError) as exc:
+        raise HTTPException(422, f"file: {name} is neither a TMY3 or EPW typical year (by its "
+                                 f"first line) nor readable measured weather: {exc}") from None
 
 
 @router.post("/weather", response_model=SimulationSummaryRead,
@@ -63,11 +102,13 @@ async def _weather(upload: Any) -> tuple[Any, dict[str, Any]]:
                         **_BUSY_DOC},
              openapi_extra={"security": [{}, {"bearerAuth": []}]})
 async def create_simulation_on_weather(request: Request, ctx: ContextDep) -> Response:
-    """Run a twin scenario on an uploaded TMY3/EPW typical year instead of clear sky."""
+    """Run a twin scenario on an uploaded TMY3/EPW typical year, or measured weather of its
+    own dates, instead of clear sky."""
     form = await read_form(request, ctx.settings.server.max_upload_bytes,
                            "the weather file in 'file'", max_files=1, max_fields=64)
     fields: dict[str, Any] = {k: v for k, v in form.multi_items()
-                              if k not in ("file", "force", "background") and isinstance(v, str)}
+                              if k not in ("file", "force", "background", "weather_stamped",
+                                           "weather_timezone") and isinstance(v, str)}
     force = form_flag(_field(form, "force"), "force")
     background = form_flag(_field(form, "background"), "background")
     try:
@@ -76,13 +117,17 @@ async def create_simulation_on_weather(request: Request, ctx: ContextDep) -> Res
         problems = "; ".join(f"{'.'.join(str(x) for x in e['loc'])}: {e['msg']}"
                              for e in exc.errors())
         raise HTTPException(422, problems) from None
-    typical, meta = await _weather(form.get("file"))
+    typical, meta = await _weather(form.get("file"), _field(form, "weather_stamped"),
+                                   _field(form, "weather_timezone"))
     info = site_or_404(ctx, body.site_id, "site_id")
     try:
         station = check_station(meta, info.site, force,
                                 'force (tick "distant station" on the simulation form)')
     except StationTooFar as exc:
         raise HTTPException(422, f"force: {exc}") from None
-    params = dataclasses.replace(_params(ctx, body), weather=typical, station=station)
+    try:
+        params = dataclasses.replace(_params(ctx, body), weather=typical, station=station)
+    except ValueError as exc:  # a run outside measured weather's dates
+        raise HTTPException(422, f"file: {exc}") from None
     return await submit_scenario(ctx, request, params, background)
 
