@@ -344,6 +344,35 @@ def _refuse_sub_hourly_epw(data: pd.DataFrame) -> None:
             "on it as measured weather (a CSV of time, ghi, dni, dhi: --weather-csv)")
 
 
+def _hour_label(hour: int) -> str:
+    """An hour of a 365-day year [0, 8760) as "16 Jun 16:00–17:00"."""
+    t = pd.Timestamp("2023-01-01") + pd.Timedelta(hours=int(hour))
+    return f"{t:%d %b %H:00}–{t + pd.Timedelta(hours=1):%H:00}"
+
+
+def _check_hours(hour: np.ndarray, first_line: int, fmt: str) -> None:
+    """Refuse a typical year whose rows are not the 8,760 hours once each, naming the
+    first hour missing and the first there twice with its lines (it had said only "8759 of
+    8760 rows": a tester could not find the row among 8,760)."""
+    count = np.bincount(hour, minlength=HOURS_PER_TYPICAL_YEAR)
+    missing, twice = np.flatnonzero(count == 0), np.flatnonzero(count > 1)
+    if not missing.size and not twice.size:
+        return
+    def more(hours: np.ndarray) -> str:
+        return f", and {hours.size - 1} more hours" if hours.size > 1 else ""
+
+    what = []
+    if twice.size:
+        lines = np.flatnonzero(hour == twice[0])[:2] + first_line
+        what.append(f"{_hour_label(twice[0])} is there twice (lines {lines[0]:,} and "
+                    f"{lines[1]:,}){more(twice)}")
+    if missing.size:
+        what.append(f"{_hour_label(missing[0])} is missing{more(missing)}")
+    raise ValueError(f"a typical year has {HOURS_PER_TYPICAL_YEAR:,} hours, each once "
+                     f"(station time); this {fmt.upper()} file has {len(hour):,} rows: "
+                     f"{'; '.join(what)}")
+
+
 def _calendar_hour(index: pd.DatetimeIndex) -> np.ndarray:
     """Hour of a 365-day year [0, 8760) of mid-hour stamps; 29 February counts as the 28th."""
     month = index.month.to_numpy()
@@ -407,18 +436,19 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
     stamped = "interval_end" if fmt == "tmy3" else "interval_start"
     middle = weather_middles(pd.DatetimeIndex(data.index), stamped, interval_s=3600.0)
     hour = _calendar_hour(middle)
-    if len(data) != HOURS_PER_TYPICAL_YEAR or len(np.unique(hour)) != HOURS_PER_TYPICAL_YEAR:
-        raise ValueError(f"a typical year has {HOURS_PER_TYPICAL_YEAR} distinct hours; this "
-                         f"{fmt.upper()} file has {len(np.unique(hour))} of {len(data)} rows")
+    first_line = 3 if fmt == "tmy3" else 9  # the data's first line, after the header lines
+
+    def where(i: int) -> str:
+        return f"line {i + first_line:,} ({_hour_label(hour[i])} station time)"
+
+    _check_hours(hour, first_line, fmt)
     missing = [c for c in WEATHER_COLUMNS if c not in data.columns]
     if missing:  # (pandas' own KeyError read "no "['dni'] not in index" in it", a tester's find)
         raise ValueError(f"not a readable {fmt.upper()} file: no {', '.join(missing)} "
                          f"column in it")
-    weather = data[list(WEATHER_COLUMNS)].astype(float)
+    weather = _numeric_cells(data, list(WEATHER_COLUMNS), where, fmt.upper())
     weather.index = pd.DatetimeIndex(middle)
     weather = weather.iloc[np.argsort(hour, kind="stable")]
-    if not np.isfinite(weather[["ghi", "dni", "dhi"]].to_numpy()).all():
-        raise ValueError(f"the {fmt.upper()} file has missing irradiance (ghi, dni or dhi)")
     _check_irradiance(weather, fmt)
     station = {"format": fmt, "name": name, **place, "utc_offset_h": offset}
     return weather, station

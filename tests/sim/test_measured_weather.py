@@ -200,3 +200,34 @@ def test_a_sub_hourly_epw_is_refused_saying_so(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"a sub-hourly EPW \(6 records an hour, 52,560 rows\) "
                                          "is not read"):
         read_typical_year(path)
+
+
+def _tmy3_with(tmp_path: Path, edit: object) -> Path:
+    """pvlib's Greensboro TMY3 with its data rows (0-based, line = row + 3) edited."""
+    lines = _tmy3_lines()
+    rows = [x.split(",") for x in lines[2:]]
+    edit(rows)  # type: ignore[operator]
+    path = tmp_path / "edited.csv"
+    path.write_text("\n".join(lines[:2] + [",".join(r) for r in rows]) + "\n")
+    return path
+
+
+@pytest.mark.parametrize(("edit", "message"), [
+    (lambda r: r[4000].__setitem__(4, ""),
+     r"ghi is blank at line 4,003 \(16 Jun 16:00–17:00 station time\)"),
+    (lambda r: r[4000].__setitem__(7, "abc"),
+     r"dni is 'abc', not a number, at line 4,003 \(16 Jun 16:00–17:00 station time\)"),
+    (lambda r: r.pop(1000), r"8,759 rows: 11 Feb 16:00–17:00 is missing"),
+    (lambda r: r.__setitem__(2000, list(r[1999])),
+     r"8,760 rows: 25 Mar 07:00–08:00 is there twice \(lines 2,002 and 2,003\); "
+     r"25 Mar 08:00–09:00 is missing"),
+])
+def test_a_bad_typical_year_is_refused_naming_the_column_line_and_hour(
+        tmp_path: Path, edit: object, message: str) -> None:
+    """A blank GHI had read "missing irradiance (ghi, dni or dhi)", a text DNI "could not
+    convert string to float", a missing row "8759 of 8759 rows", a duplicated hour "8759 of
+    8760 rows": none said where (a tester's findings; the README said "naming the hour")."""
+    from sim.sky import read_typical_year
+
+    with pytest.raises(ValueError, match=message):
+        read_typical_year(_tmy3_with(tmp_path, edit))

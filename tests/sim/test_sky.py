@@ -161,7 +161,7 @@ def test_weather_files_that_are_not_a_typical_year(tmp_path: Path) -> None:
     lines = pvlib_tmy3_path().read_text().splitlines()
     short = tmp_path / "short.csv"
     short.write_text("\n".join(lines[:2] + lines[3:]) + "\n")  # one hour missing
-    with pytest.raises(ValueError, match="8760 distinct hours"):
+    with pytest.raises(ValueError, match="8,760 hours, each once.*01 Jan 00:00–01:00 is missing"):
         read_typical_year(short)
     with pytest.raises(ValueError, match="timezone-aware"):
         typical_year_on(read_typical_year(pvlib_tmy3_path())[0], -5.0,
