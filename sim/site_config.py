@@ -231,6 +231,51 @@ def check_iana_zone(name: str) -> str:
     return name
 
 
+#: A clock (a weather file's UTC offset, a site's zone in standard time) this far from its
+#: place's mean solar time (longitude / 15° h⁻¹) [h] is most likely a mistake: a sign slip
+#: (Alice Springs' +9.5 written −9.5) or another place's zone (Europe/Berlin at 133.9° E put
+#: the clear-sky noon at 04:08). Real zones stray up to about 3 h (western China, Spain).
+MAX_CLOCK_OFF_LONGITUDE_H = 3.0
+
+
+def clock_off_longitude(offset_h: float, longitude_deg: float, what: str) -> str | None:
+    """A sentence when ``offset_h`` (a UTC offset [h]) is more than
+    :data:`MAX_CLOCK_OFF_LONGITUDE_H` from ``longitude_deg`` / 15, naming both numbers
+    (``what`` names the clock); None otherwise. The difference is taken across the date
+    line (Samoa's +13 h at 171.8° W is 0.5 h off, not 24.5 h)."""
+    solar_h = longitude_deg / 15.0
+    off_h = (offset_h - solar_h + 12.0) % 24.0 - 12.0
+    if abs(off_h) <= MAX_CLOCK_OFF_LONGITUDE_H:
+        return None
+    noon_min = round((12.0 + off_h) % 24.0 * 60.0)
+    return (f"{what} UTC{offset_h:+g} h is {abs(off_h):.1f} h from the longitude's "
+            f"{longitude_deg:.1f}° / 15 = {solar_h:+.1f} h (more than "
+            f"{MAX_CLOCK_OFF_LONGITUDE_H:g} h): the sun would culminate near "
+            f"{noon_min // 60:02d}:{noon_min % 60:02d} on its clock — a sign slip, or another "
+            "place's zone?")
+
+
+def standard_offset_h(zone: str) -> float:
+    """A zone's standard-time UTC offset [h]: the lesser of its January and July offsets
+    (2024), whichever hemisphere keeps summer time."""
+    import datetime as dt
+
+    tz = ZoneInfo(zone)
+    return min((dt.datetime(2024, m, 15, tzinfo=tz).utcoffset() or dt.timedelta()
+                ).total_seconds() / 3600.0 for m in (1, 7))
+
+
+def site_zone_warning(config: dict[str, Any]) -> str | None:
+    """:func:`clock_off_longitude` of a site config's zone (in standard time), or None."""
+    try:
+        zone, lon = str(config["timezone"]), float(config["longitude_deg"])
+        offset = standard_offset_h(zone)
+    except (KeyError, TypeError, ValueError, ZoneInfoNotFoundError):
+        return None
+    found = clock_off_longitude(offset, lon, f"timezone {zone}")
+    return None if found is None else f"timezone: {found} Check the site's timezone."
+
+
 class SiteConfig(BaseModel):
     """A heliotwin site: a place, its climate defaults, a dual-axis tracker and its PV arrays.
 

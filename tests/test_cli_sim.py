@@ -503,3 +503,20 @@ def test_measured_weather_runs_over_its_own_dates_only(tmp_path: Path, heliotwin
     assert late.returncode == 2
     assert ("--weather-csv: the measured weather covers 2024-03-15 00:00:00-06:00 to "
             "2024-03-16 00:00:00-06:00") in late.stderr
+
+
+def test_a_weather_file_whose_offset_is_far_from_its_longitude_needs_force(
+        tmp_path: Path, heliotwin_cli) -> None:
+    """Alice Springs' TMY3 with its +9.5 h written −9.5 ran without a word, 39 % short (a
+    tester's finding): Greensboro's −5 h written +5 h is refused naming both numbers."""
+    lines = _tmy3().read_text(encoding="latin-1").splitlines()
+    path = tmp_path / "plus5.csv"
+    path.write_text("\n".join([lines[0].replace(",-5.0,", ",5.0,")] + lines[1:]) + "\n")
+    sites = _greensboro_sites(tmp_path)
+    args = ["simulate", "--site", "greensboro", "--sites-dir", str(sites), "--start",
+            "2023-06-01", "--end", "2023-06-02", "--step-s", "600", "--tmy3", str(path)]
+    p = heliotwin_cli(*args)
+    assert p.returncode == 2
+    assert ("--tmy3: the weather file's offset UTC+5 h is 10.3 h from the longitude's "
+            "-80.0° / 15 = -5.3 h (more than 3 h)") in p.stderr and "--force" in p.stderr
+    assert heliotwin_cli(*args, "--force").returncode == 0

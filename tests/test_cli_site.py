@@ -243,3 +243,19 @@ def test_demo_logger_names_a_site_without_the_twins_arrays(tmp_path: Path, helio
         "heliotwin demo-logger: error: --site: 'strings' has arrays east_string, west_string; "
         "the demo logger posts the twin's readings and needs arrays 'tracker' and 'fixed' "
         "(mounts tracker and fixed)"], p.stderr
+
+
+def test_a_zone_far_from_the_longitude_is_written_with_a_warning(tmp_path: Path,
+                                                                   heliotwin) -> None:
+    """Alice Springs (133.9° E) in Europe/Berlin was written without a word, its clear-sky
+    noon at 04:08 (a tester's finding): now a warning on stderr naming both numbers; Samoa's
+    +13 h at 171.8° W (across the date line) is no warning."""
+    p = heliotwin(tmp_path, "site", "create", "--id", "alice-berlin", "--latitude-deg",
+                  "-23.7", "--longitude-deg", "133.88", "--timezone", "Europe/Berlin")
+    assert p.returncode == 0, p.stderr
+    assert ("warning: timezone: timezone Europe/Berlin UTC+1 h is 7.9 h from the longitude's "
+            "133.9° / 15 = +8.9 h (more than 3 h)") in p.stderr
+    assert (tmp_path / "alice-berlin.json").exists()
+    samoa = heliotwin(tmp_path, "site", "create", "--id", "samoa", "--latitude-deg", "-13.8",
+                      "--longitude-deg", "-171.8", "--timezone", "Pacific/Apia")
+    assert samoa.returncode == 0 and "warning" not in samoa.stderr

@@ -27,7 +27,9 @@ to the built-in ``sim/data/sites/``; a user file with a built-in id replaces it.
 ``create`` and ``from-weather`` also write the site's rows to the database of
 ``HELIOTWIN_DATABASE_URL``: a running service on it shows the site within a second, no
 restart (``backend.sites.Registry.rescan``); ``PUT /api/v1/sites/{site_id}`` (the
-dashboard's Sites page) applies a config at once.
+dashboard's Sites page) applies a config at once. A zone whose standard time is more than
+3 h from the longitude / 15 is written with a warning on stderr naming both
+(``sim.site_config.site_zone_warning``), as ``PUT`` answers it in ``warnings``.
 """
 
 from __future__ import annotations
@@ -99,7 +101,7 @@ def _write(config: dict[str, Any], force: bool, flags: dict[str, str] | None = N
     """Validate, refuse to overwrite without ``force``, write, say where. ``flags``: the
     config keys made from flags, by flag (:data:`_FLAG_KEYS`), which a refusal names."""
     from backend.sites import config_value, write_site_file
-    from sim.site_config import validate_site_config
+    from sim.site_config import site_zone_warning, validate_site_config
     from sim.sites import builtin_site_ids
 
     try:
@@ -129,6 +131,8 @@ def _write(config: dict[str, Any], force: bool, flags: dict[str, str] | None = N
     print(f"wrote {path}; {what}; {where}")
     for key, why in config.get("assumed", {}).items():
         print(f"  assumed {key} = {config_value(config, key)}: {why}")
+    if (warning := site_zone_warning(config)) is not None:
+        print(f"warning: {warning}", file=sys.stderr)
     return 0
 
 

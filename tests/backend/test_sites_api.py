@@ -262,3 +262,14 @@ def test_days_split_at_a_midnight_off_the_rollup_grid(client: httpx.Client,
         "interval": "hour"}).json()
     assert [row["arrays"]["fixed"]["measured_wh"] for row in hours["rows"]] == pytest.approx(
         [59 * 100 / 60 + 200 / 60, 300.0], rel=1e-9)
+
+
+def test_a_zone_far_from_the_longitude_is_written_with_a_warning(client: httpx.Client) -> None:
+    body = {**HAND_WRITTEN, "site_id": "far-zone", "timezone": "Asia/Tokyo"}
+    r = client.put("/api/v1/sites/far-zone", json=body, headers=bearer(ADMIN))
+    assert r.status_code == 201, r.text
+    (warning,) = r.json()["warnings"]
+    assert "timezone Asia/Tokyo UTC+9 h is" in warning and "-80.0° / 15 = -5.3 h" in warning
+    r = client.put("/api/v1/sites/far-zone", json={**body, "timezone": "America/New_York"},
+                   headers=bearer(ADMIN))
+    assert r.status_code == 200 and r.json()["warnings"] == []

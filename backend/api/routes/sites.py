@@ -37,7 +37,7 @@ from backend.api.schemas.sites import (
 from backend.measurements.parse import Calibration
 from backend.measurements.status import status
 from backend.sites import save_site
-from sim.site_config import SiteConfig, site_json_schema
+from sim.site_config import SiteConfig, site_json_schema, site_zone_warning
 from sim.sites import builtin_site_ids, is_builtin, site_path
 
 router = APIRouter(prefix="/api/v1/sites", tags=["sites"])
@@ -148,8 +148,9 @@ async def put_site(site_id: str, ctx: ContextDep,
     and the twin series cached for the site are dropped, to be simulated again.
     """
     info, created, dropped = await anyio.to_thread.run_sync(save_site, ctx, site_id, config)
+    warning = site_zone_warning(info.site.to_config())
     body = {**_site_dict(info, ctx), "created": created, "twin_readings_dropped": dropped,
-            "written_by": who}
+            "written_by": who, "warnings": [] if warning is None else [warning]}
     return JSONResponse(body, status_code=201 if created else 200)
 
 

@@ -127,6 +127,9 @@ class SiteWrittenRead(SiteRead):
     twin_readings_dropped: int = Field(description="cached twin readings dropped, to be "
                                                    "simulated again")
     written_by: str = Field(description="`admin`, or the site id whose token wrote it")
+    warnings: list[str] = Field(default_factory=list, description=(
+        "what looks wrong but was written: a timezone whose standard time is more than 3 h "
+        "from the longitude / 15 (sim.site_config.site_zone_warning)"))
 
 
 class ArrayStatusRead(BaseModel):
