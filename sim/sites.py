@@ -288,6 +288,14 @@ def fixed_tilt_from_latitude_deg(latitude_deg: float) -> float:
     return 40.0
 
 
+def altitude_at_m(latitude_deg: float, longitude_deg: float) -> float:
+    """The ground's height at a place [m]: ``pvlib.location.lookup_altitude`` (the terrain
+    table pvlib ships, no network), clipped to the site format's −500…9,000 m."""
+    from pvlib.location import lookup_altitude
+
+    return float(min(max(lookup_altitude(latitude_deg, longitude_deg), -500.0), 9000.0))
+
+
 def place_defaults(config: dict[str, Any], climate: dict[str, float] | None = None,
                    climate_source: str = "",
                    azimuth_span_deg: float | None = None) -> dict[str, Any]:
@@ -297,6 +305,7 @@ def place_defaults(config: dict[str, Any], climate: dict[str, float] | None = No
     without ``surface_azimuth_deg`` the equator (180° north of it, 0° south); a site with a
     tracker array whose ``tracker`` gives neither of :data:`TRACKER_PLACE_KEYS` gets
     :func:`tracker_azimuth_range_deg` (``azimuth_span_deg`` wide, default 540°); a config
+    without ``altitude_m`` the ground's height there (:func:`altitude_at_m`), a config
     without ``temp_air_c``/``wind_speed_m_s`` gets ``climate``'s values (a weather file's
     annual means, named by ``climate_source``) or the defaults the site format states
     (:class:`sim.site_config.SiteConfig`). Each filled key is listed in ``assumed`` with
@@ -310,6 +319,14 @@ def place_defaults(config: dict[str, Any], climate: dict[str, float] | None = No
         return config
     out = {**config}
     assumed = dict(out.get("assumed") or {})
+    lon = config.get("longitude_deg")
+    if ("altitude_m" not in out and isinstance(lon, int | float) and not isinstance(lon, bool)
+            and -90 <= lat <= 90 and -180 <= lon <= 180):  # else validation names it
+        # 0 m had been taken silently: 13 % of a clear day's energy at La Paz (3,640 m)
+        out["altitude_m"] = altitude_at_m(lat, lon)
+        assumed["altitude_m"] = (f"pvlib.location.lookup_altitude at ({lat:g}°, {lon:g}°): "
+                                 "a terrain grid of about 2 km (ships with pvlib): set the "
+                                 "site's own height")
     for key in CLIMATE_KEYS:
         if key in out:
             continue
@@ -365,7 +382,8 @@ def relocated_config(template: dict[str, Any], place: dict[str, Any],
     :data:`FIXED_SURFACE_KEYS`, the tracker's :data:`TRACKER_PLACE_KEYS`, its ``assumed``
     marks) dropped and taken from the new place (:func:`place_defaults`; the tracker keeps
     its azimuth span, centred anew); ``place`` sets ``site_id``, ``latitude_deg`` … ."""
-    out = {k: v for k, v in template.items() if k not in (*CLIMATE_KEYS, "assumed")}
+    out = {k: v for k, v in template.items()
+           if k not in (*CLIMATE_KEYS, "altitude_m", "assumed")}
     out["arrays"] = {name: ({k: v for k, v in arr.items() if k not in FIXED_SURFACE_KEYS}
                             if arr.get("mount") == "fixed" else dict(arr))
                      for name, arr in template.get("arrays", {}).items()}

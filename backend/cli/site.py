@@ -10,7 +10,8 @@ to the built-in ``sim/data/sites/``; a user file with a built-in id replaces it.
   ``tehuantepec``); what the place decides is not copied but taken from the new place
   and marked ``assumed`` (``sim.sites.relocated_config``: fixed tilt from the latitude,
   facing the equator; the tracker's azimuth range, ``--like``'s span, centred on the
-  equator side; air temperature and wind the site format's stated defaults);
+  equator side; the altitude, unless given, the ground's there from pvlib's terrain table;
+  air temperature and wind the site format's stated defaults);
   ``--from-file FILE`` writes a hand-written config after validating it (keys it leaves
   out that the place decides are filled in the same way).
 - ``from-weather FILE --id ID`` writes a site at a TMY3/EPW station's place and zone
@@ -58,7 +59,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     c.add_argument("--name", help="name shown on the dashboard (default: the id)")
     c.add_argument("--latitude-deg", type=float, help="latitude [°], north positive")
     c.add_argument("--longitude-deg", type=float, help="longitude [°], east positive")
-    c.add_argument("--altitude-m", type=float, default=0.0, help="height above sea level [m]")
+    c.add_argument("--altitude-m", type=float,
+                   help="height above sea level [m] (default: the ground's there, "
+                        "pvlib.location.lookup_altitude, marked as assumed)")
     c.add_argument("--timezone", help="IANA zone, e.g. America/New_York")
     c.add_argument("--like", default="tehuantepec",
                    help="copy tracker and arrays from this site (default tehuantepec); the "
@@ -194,7 +197,8 @@ def create(args: argparse.Namespace) -> int:
     config = relocated_config(base, {
         "site_id": args.site_id, "name": args.name or args.site_id,
         "latitude_deg": args.latitude_deg, "longitude_deg": args.longitude_deg,
-        "altitude_m": args.altitude_m, "timezone": args.timezone,
+        **({} if args.altitude_m is None else {"altitude_m": args.altitude_m}),
+        "timezone": args.timezone,
         "source": f"heliotwin site create (tracker and arrays as {args.like})", "notes": ""})
     return _write(config, args.force, flags=_FLAG_KEYS)
 
