@@ -172,3 +172,17 @@ def test_admin_disabled_without_setting(tmp_path: Path) -> None:
     with InProcessServer(db.url) as proc, proc.client() as c:
         r = c.get("/api/v1/tokens", headers={"Authorization": "Bearer anything"})
         assert r.status_code == 403 and "HELIOTWIN_ADMIN_TOKEN" in r.text
+
+
+def test_the_admin_token_runs_simulations_as_site_edits_take_it(client: httpx.Client) -> None:
+    """``POST /api/v1/simulations`` answered the admin token "unknown, expired or revoked
+    write token" while ``PUT /api/v1/sites/{id}`` took it (a tester's finding): it is taken,
+    as every route that reads a caller takes it (``backend.api.deps.caller_of``)."""
+    body = {"site_id": "tehuantepec", "start": "2024-03-15", "end": "2024-03-16",
+            "step_s": 3600}
+    r = client.post("/api/v1/simulations", json=body,
+                    headers={"Authorization": f"Bearer {ADMIN}"})
+    assert r.status_code == 200, r.text
+    r = client.post("/api/v1/simulations", json=body,
+                    headers={"Authorization": "Bearer not-a-token-at-all"})
+    assert r.status_code == 401 and "unknown" in r.json()["detail"]
