@@ -74,7 +74,9 @@ def _from_iso(text: str) -> dt.datetime:
 
 
 def parse_day_or_instant(text: str, zone: ZoneInfo | str, field: str) -> dt.datetime:
-    """A bare date (midnight in ``zone``) or an instant with offset → aware ``datetime``."""
+    """A bare date (midnight in ``zone``; a date the zone skipped whole is refused saying so,
+    where it had read "end must be after start") or an instant with offset → aware
+    ``datetime``."""
     text = text.strip()
     if _BARE_DATE.match(text):
         try:
@@ -82,6 +84,12 @@ def parse_day_or_instant(text: str, zone: ZoneInfo | str, field: str) -> dt.date
         except ValueError:
             raise TimestampError(f"{field}: {text!r} is not a valid date") from None
         value = day.tz_localize(str(zone), ambiguous=True, nonexistent="shift_forward")
+        if value.date() != day.date():  # a whole day skipped: Samoa's 30 December 2011
+            raise TimestampError(
+                f"{field}: {text} is no day in {zone}: its clocks skipped it, from "
+                f"{(day - pd.Timedelta(days=1)).date()} straight to {value.date()} (a date "
+                f"line crossing); give {(day - pd.Timedelta(days=1)).date()} or "
+                f"{value.date()}")
         return _in_years(value.to_pydatetime(), text, field)
     try:
         return parse_instant(text, field)

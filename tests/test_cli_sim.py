@@ -520,3 +520,18 @@ def test_a_weather_file_whose_offset_is_far_from_its_longitude_needs_force(
     assert ("--tmy3: the weather file's offset UTC+5 h is 10.3 h from the longitude's "
             "-80.0° / 15 = -5.3 h (more than 3 h)") in p.stderr and "--force" in p.stderr
     assert heliotwin_cli(*args, "--force").returncode == 0
+
+
+def test_a_date_the_sites_zone_skipped_is_named(tmp_path: Path, heliotwin_cli) -> None:
+    """Samoa skipped 30 December 2011 (it crossed the date line): the run from it had read
+    "end (2011-12-31) must be after start (2011-12-30)" (a tester's finding)."""
+    cfg = json.loads((ROOT / "sim" / "data" / "sites" / "tehuantepec.json").read_text())
+    cfg.update(site_id="samoa", latitude_deg=-13.83, longitude_deg=-171.76,
+               timezone="Pacific/Apia")
+    cfg["arrays"]["fixed"]["surface_azimuth_deg"] = 0.0
+    (tmp_path / "samoa.json").write_text(json.dumps(cfg))
+    p = heliotwin_cli("simulate", "--site", "samoa", "--sites-dir", str(tmp_path), "--start",
+                      "2011-12-30", "--end", "2011-12-31")
+    assert p.returncode == 2 and "must be after" not in p.stderr
+    assert ("--start: 2011-12-30 is no day in Pacific/Apia: its clocks skipped it, from "
+            "2011-12-29 straight to 2011-12-31") in p.stderr
