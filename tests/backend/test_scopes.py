@@ -30,7 +30,10 @@ SITE = "tehuantepec"
 
 
 class _Scene:
-    """What ``/api/v1/twin3d/replay`` needs of the viser scene: no viewer connected."""
+    """What ``/api/v1/twin3d/replay`` needs of the viser scene: no viewer connected; and
+    what every answer's security headers need: the port it serves on."""
+
+    port = 8080
 
     def __init__(self) -> None:
         self.replays: dict[str, Any] = {}

@@ -21,14 +21,13 @@ import asyncio
 import csv
 import io
 import weakref
-from collections import Counter
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from typing import Annotated, Any, Literal
 
 import anyio
 import orjson
-from fastapi import APIRouter, HTTPException, Query, Request
+from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response
 
 from backend.api.deps import (
@@ -63,13 +62,15 @@ _read_limiters: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, anyio.Capac
     weakref.WeakKeyDictionary())
 
 
-#: Of these reads, those one address without a token may have in flight (running or
-#: waiting their turn) at once; more → 429. The reader serves in order of arrival: 16
-#: 100-year reads of one address (5 s each), within its CPU allowance, kept another
-#: address's 28-day read waiting 38–130 s (a tester's finding, session 25). The dashboard
-#: asks one or two at a time.
+#: Of these reads, those of one address without a token that take places in that line at
+#: once; its others wait behind them, off the line. The line is served in order of
+#: arrival: 16 100-year reads of one address (5 s each), within its CPU allowance, kept
+#: another address's 28-day read waiting 38–130 s (a tester's finding, session 25); now
+#: it waits behind at most two of them. (Not a 429: a dashboard whose user flips through
+#: days has more in flight, the aborted ones still running.)
 READS_IN_LINE_PER_CLIENT = 2
-_in_line: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, Counter[str]] = (
+_lines: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop,
+                                  dict[str, tuple[asyncio.Semaphore, list[int]]]] = (
     weakref.WeakKeyDictionary())
 
 
@@ -84,27 +85,25 @@ def read_limiter() -> anyio.CapacityLimiter:
 
 @asynccontextmanager
 async def in_line(request: Request, caller: object) -> AsyncIterator[None]:
-    """A place in the reader's line for the caller: without a token, 429 past
-    :data:`READS_IN_LINE_PER_CLIENT` of the address's reads in flight (counted on the
-    event loop's thread, no lock)."""
+    """The caller's turn to join the reader's line: without a token, once fewer than
+    :data:`READS_IN_LINE_PER_CLIENT` of the address's reads are in it (the address's own
+    semaphore, on the event loop; dropped when none of its reads is left)."""
     if caller is not None:
         yield
         return
-    line = _in_line.setdefault(asyncio.get_running_loop(), Counter())
+    lines = _lines.setdefault(asyncio.get_running_loop(), {})
     client = client_address(request)
-    if line[client] >= READS_IN_LINE_PER_CLIENT:
-        raise HTTPException(429, f"rate limit: without a write token an address may have "
-                                 f"{READS_IN_LINE_PER_CLIENT} energy or report reads in "
-                                 "flight at once (they are served one at a time for "
-                                 "everybody): send 'Authorization: Bearer <token>' or retry "
-                                 "in 5 s", headers={"Retry-After": "5"})
-    line[client] += 1
+    if client not in lines:
+        lines[client] = (asyncio.Semaphore(READS_IN_LINE_PER_CLIENT), [0])
+    turn, users = lines[client]
+    users[0] += 1
     try:
-        yield
+        async with turn:
+            yield
     finally:
-        line[client] -= 1
-        if not line[client]:
-            del line[client]
+        users[0] -= 1
+        if not users[0]:
+            del lines[client]
 
 
 @router.get("/{site_id}/energy", response_model=EnergyRead,
