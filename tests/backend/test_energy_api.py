@@ -248,6 +248,7 @@ def test_one_address_without_a_token_holds_at_most_two_places_at_the_reader() ->
     import asyncio
     from contextlib import AsyncExitStack
 
+    from live_service import run_in_own_thread
     from starlette.requests import Request
 
     from backend.api.routes.energy import READS_IN_LINE_PER_CLIENT, in_line
@@ -278,4 +279,4 @@ def test_one_address_without_a_token_holds_at_most_two_places_at_the_reader() ->
         await asyncio.wait_for(third, 1.0)  # a place given back: the third joins
 
     assert READS_IN_LINE_PER_CLIENT == 2
-    asyncio.run(main())
+    run_in_own_thread(main())  # not asyncio.run: a browser test's loop may run here

@@ -169,6 +169,7 @@ def _real_calibrate(client: httpx.Client, rows: list[dict[str, str]], times: lis
                                                rows[0]["lat"], "longitude_deg": rows[0]["lon"]})
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # a 422: no storage
 def test_a_fit_most_frames_disagree_with_is_refused(client: httpx.Client) -> None:
     """The six Wettermast frames given their times in reverse order were stored (201) with
     3 of 6 outliers and no leave-one-out check, fitted to 0.2° by a mirrored camera
@@ -196,6 +197,7 @@ def test_consensus_rule_by_hand() -> None:
             check_consensus(frames(n_out, n), loo)
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # a 422: no storage
 @pytest.mark.parametrize("border", [None, (30, (200, 120, 40))], ids=["as-taken", "blue-30px"])
 def test_times_in_the_wrong_zone_are_refused(client: httpx.Client,
                                              border: tuple[int, tuple[int, int, int]] | None
@@ -303,6 +305,7 @@ def test_frames_that_span_little_of_the_sky_are_said_to(client: httpx.Client) ->
     assert "no sun below 47° was fitted" in cal["warnings"][1]  # Wolf's suns: 47–53° up
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # a 422: no storage
 def test_a_forced_setting_that_does_not_fit_is_named(client: httpx.Client) -> None:
     """Wolf's even frames mirrored (a camera seeing the sky mirrored) with ``east=left``
     forced: "9 of 12 frames disagree… are the times in the order… zone", never naming
@@ -319,6 +322,7 @@ def test_a_forced_setting_that_does_not_fit_is_named(client: httpx.Client) -> No
     assert detail.startswith("east:") and "with east=right instead of left" in detail, detail
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # the answer, not storage
 def test_a_calibration_says_the_band_its_suns_cover(client: httpx.Client) -> None:
     """A tester's tilted equisolid 190° camera, fitted on suns 34–60° up (its low suns left
     out), claimed ``sky_uncertainty_deg`` 0.19° over the sky from 10° up, with no warning,
