@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import socket
 import sys
+from pathlib import Path
 
 from docs_figures import marked, verdict_text
 
@@ -18,6 +19,13 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+def heliotwin_cmd() -> list[str]:
+    """The ``heliotwin`` console script of this interpreter's venv (``python -m backend``
+    where it is not installed)."""
+    exe = Path(sys.executable).parent / "heliotwin"
+    return [str(exe)] if exe.exists() else [sys.executable, "-m", "backend"]
 
 
 class Figures:

@@ -33,7 +33,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import Figures, log  # noqa: E402  (bench scripts run from this folder)
+from _common import Figures, heliotwin_cmd, log  # noqa: E402  (bench scripts run from this folder)
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -54,11 +54,6 @@ WHERE_THE_TIME_GOES = (
     'moves). Wall time on this shared machine follows the load; CPU time is the steadier '
     'figure.'
 )
-
-
-def heliotwin_cmd() -> list[str]:
-    exe = Path(sys.executable).parent / "heliotwin"
-    return [str(exe)] if exe.exists() else [sys.executable, "-m", "backend"]
 
 
 def run_process(controller: str, start: str, end: str) -> tuple[float, float, dict]:

@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from _common import Figures, log  # noqa: E402  (bench scripts run from here)
+from _common import Figures, heliotwin_cmd, log  # noqa: E402  (bench scripts run from here)
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -82,8 +82,7 @@ def cli_year(strategy: str, step_s: int) -> tuple[float, float, dict]:
     """Wall-clock and CPU (user + system) seconds of a whole CLI process, and its summary."""
     import resource
 
-    exe = Path(sys.executable).parent / "heliotwin"
-    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "backend"]
+    cmd = heliotwin_cmd()
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     out = subprocess.run([*cmd, "plant", "simulate", "--plant", "penarroya", "--start",

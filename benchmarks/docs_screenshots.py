@@ -35,7 +35,6 @@ import datetime as dt
 import io
 import os
 import shutil
-import socket
 import subprocess
 import sys
 import tempfile
@@ -45,6 +44,7 @@ from pathlib import Path
 from zoneinfo import ZoneInfo
 
 import httpx
+from _common import free_port, heliotwin_cmd  # (bench scripts run from this folder)
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -58,17 +58,6 @@ WIDTH = 1400  # the width of the docs' dashboard pictures
 SKY_WIDTH = 1050  # sky-camera.jpg: taken at WIDTH, scaled down
 WETTERMAST = (53.519917, 10.105139)  # the Wettermast Hamburg roof (tests/data/real-sky/README.md)
 PAGES = ("overview", "sky", "plant", "sweep")
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _heliotwin() -> list[str]:
-    exe = Path(sys.executable).with_name("heliotwin")
-    return [str(exe)] if exe.exists() else [sys.executable, "-m", "backend"]
 
 
 def _wait(what: str, ok, timeout_s: float, proc: subprocess.Popen, log: Path) -> None:  # type: ignore[no-untyped-def]
@@ -88,13 +77,13 @@ def _wait(what: str, ok, timeout_s: float, proc: subprocess.Popen, log: Path) ->
 def serve(tmp: Path, port: int = 0, viser_port: int = 0) -> Iterator[str]:
     """``heliotwin serve`` with the demo logger back-filling ``BACKFILL_DAYS``; its URL once
     the back-fill reached the present for both arrays (ports 0: free ones)."""
-    port, viser_port = port or _free_port(), viser_port or _free_port()
+    port, viser_port = port or free_port(), viser_port or free_port()
     env = {**os.environ, "HELIOTWIN_DATABASE_URL": f"sqlite:///{tmp / 'heliotwin.sqlite'}",
            "HELIOTWIN_SITES_DIR": str(tmp / "user-sites"),
            "HELIOTWIN_DEMO_BACKFILL_DAYS": str(BACKFILL_DAYS), "PYTHONUNBUFFERED": "1"}
     log = tmp / "serve.log"
     with open(log, "wb") as out:
-        proc = subprocess.Popen([*_heliotwin(), "serve", "--port", str(port),
+        proc = subprocess.Popen([*heliotwin_cmd(), "serve", "--port", str(port),
                                  "--viser-port", str(viser_port)],
                                 cwd=ROOT, env=env, stdout=out, stderr=subprocess.STDOUT)
     url = f"http://127.0.0.1:{port}"
