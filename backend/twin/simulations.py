@@ -512,8 +512,7 @@ class SimulationRunner:
                 self._forget_pruned()
         except Exception:  # noqa: BLE001
             logger.exception("simulation %s: its bookkeeping failed", state.run_id)
-        state.status = "done"
-        self._ended(state)
+        self._ended(state, "done")
         job.fut.set_result(state.summary)
 
     def _fail(self, job: _Job, exc: Exception, elapsed_s: float = 0.0) -> None:
@@ -522,20 +521,22 @@ class SimulationRunner:
         state = job.state
         if job.charge is not None:
             self.anonymous_hours.settle(job.charge, elapsed_s)
-        state.summary, state.status, state.error = None, "failed", str(exc)
+        state.summary, state.error = None, str(exc)
         state.finished_at = _iso_now()
         logger.warning("simulation %s failed: %s", state.run_id, exc)
         try:
             self.writer.call(lambda conn: _finish(conn, state)).result()
         except Exception:  # noqa: BLE001 - the writer has stopped: the row stays running
             logger.warning("simulation %s: its failure not stored", state.run_id)
-        self._ended(state)
+        self._ended(state, "failed")
         job.fut.set_exception(exc)
 
-    def _ended(self, state: RunState) -> None:
+    def _ended(self, state: RunState, status: str) -> None:
+        """The run leaves the worker with ``status`` (done | failed): one step under the
+        lock, so no caller sees it ended while its place is still held (a client that sends
+        its next run on the answer must not find this one still running)."""
         with self._lock:
-            # the slot is free before the caller hears the run ended: a client that
-            # sends its next run on the answer must not find this one still running
+            state.status = status
             self._running.pop(state.run_id, None)
             self._futures.pop(state.run_id, None)
             self._cancel.discard(state.run_id)
