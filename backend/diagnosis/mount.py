@@ -10,10 +10,10 @@ errors from the Jacobian) against SPA's apparent sun with the site's refraction 
 
 - ``mount_offset``: a term that is significant, |value| > max(:data:`SIGNIFICANCE_SIGMAS`
   · std, :data:`MIN_TERM_DEG`). k = 5 rather than the fit's own 3 (its forward selection of
-  the optional terms): the standard errors are formal ones, from residuals assumed
-  independent, while a camera's residuals are correlated from minute to minute (a drifting
-  blob centre, a thin cloud), so the formal error is optimistic by up to √(correlation
-  length); and four to six terms are tested at once. The minimum, 1 mrad (0.057°) of
+  the optional terms): the standard errors are widened by the residuals' autocorrelation
+  time (a camera's residuals are correlated from frame to frame: a blob centre biased by its
+  sub-pixel phase, a thin cloud; ``sim.pointing_model._serial_inflation``), an estimate
+  that is itself noisy; and four to six terms are tested at once. The minimum, 1 mrad (0.057°) of
   pointing, is what a term must reach to matter: above the fit's stated accuracy (every
   term within 0.05° ≈ 0.87 mrad from a day of data, issue 25's check), and a sixth of the
   ±0.3° (5 mrad) acceptance of a high-concentration module, while a flat plate loses

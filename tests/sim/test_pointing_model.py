@@ -139,6 +139,36 @@ def test_a_burst_of_frames_selects_no_optional_term() -> None:
     assert fit.identifiable == ()
 
 
+@pytest.mark.parametrize("step_s", [60, 10])
+def test_the_uncertainty_covers_a_camera_whose_error_persists_from_frame_to_frame(
+        step_s: int) -> None:
+    """A tester's finding: the standard errors took each frame's error as independent, but a
+    camera's centroid is biased by the sub-pixel phase of the sun's blob, which changes
+    slowly; frames every 10 s over a day with a 0.3 mrad phase bias put the terms up to 21
+    standard errors from the truth (every 60 s, up to 9). The errors are widened by the
+    residuals' autocorrelation time; the terms are unchanged."""
+    times = pd.date_range(pd.Timestamp("2026-03-10", tz=SITE.timezone),
+                          periods=86400 // step_s, freq=f"{step_s}s")
+    sun = solar_position(times, SITE.latitude, SITE.longitude, SITE.altitude)
+    up = sun["apparent_elevation"].to_numpy() > 5.0
+    times, sun = times[up], sun[up]
+    az, el = sun["azimuth"].to_numpy(), sun["apparent_elevation"].to_numpy()
+    ox, oy = _offsets_mrad(enu_from_sky(az, el), *_reference_axes(TRUE, az, el))
+    rng = np.random.default_rng(0)
+    px_per_mrad = 0.55  # seed 000's camera: 505 px of focal length
+
+    def seen(offset_mrad: np.ndarray, phase: float) -> np.ndarray:
+        bias = 0.3 * np.sin(2 * np.pi * (offset_mrad * px_per_mrad + phase))
+        return offset_mrad + bias + rng.normal(0, 0.05, offset_mrad.size)
+
+    fit = fit_pointing_model(times, az, el, seen(ox, 0.3), seen(oy, 0.8), SITE.latitude,
+                             SITE.longitude, SITE.altitude)
+    for name, value in TRUE.items():
+        got = getattr(fit.model, name)
+        assert abs(got - value) < 3 * fit.std[name], (name, got, value, fit.std[name])
+        assert abs(got - value) < 0.01, name
+
+
 def test_next_days_commands_put_the_real_axis_on_the_sun(fitted) -> None:
     _, sun = _day("2026-03-11")
     saz, sel = sun["azimuth"].to_numpy(), sun["apparent_elevation"].to_numpy()
