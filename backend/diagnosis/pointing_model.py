@@ -37,6 +37,7 @@ from sim.pointing_model import (
     PointingFit,
     command_angles,
     fit_pointing_model,
+    pointing_std_mrad,
     predict_offsets_mrad,
 )
 from sim.sun import solar_position
@@ -196,17 +197,20 @@ def model_body(info: SiteInfo, fit: PointingFit) -> dict[str, Any]:
             "correlated": [{"terms": [a, b], "correlation": r} for a, b, r in fit.correlated]}
 
 
-def command(info: SiteInfo, fit: PointingFit, when: dt.datetime) -> dict[str, float]:
-    """Encoder angles to command at ``when`` so the real optical axis points at the sun."""
+def command(info: SiteInfo, fit: PointingFit, when: dt.datetime) -> dict[str, float | None]:
+    """Encoder angles to command at ``when`` so the real optical axis points at the sun, and
+    how far that may miss it (:func:`sim.pointing_model.pointing_std_mrad`; None when the
+    fit has no finite covariance)."""
     s = info.site
     pressure, temperature = refraction_of(info)
     sun = solar_position(pd.DatetimeIndex([when]), s.latitude, s.longitude, s.altitude,
                          pressure, temperature)
-    az, el = command_angles(fit.model, sun["azimuth"].to_numpy(),
-                            sun["apparent_elevation"].to_numpy())
+    saz, sel = sun["azimuth"].to_numpy(), sun["apparent_elevation"].to_numpy()
+    az, el = command_angles(fit.model, saz, sel)
+    std = float(pointing_std_mrad(fit, saz, sel, az, el)[0])
     return {"azimuth_deg": float(np.mod(az[0], 360.0)), "elevation_deg": float(el[0]),
-            "sun_azimuth_deg": float(sun["azimuth"].iloc[0]),
-            "sun_elevation_deg": float(sun["apparent_elevation"].iloc[0])}
+            "sun_azimuth_deg": float(saz[0]), "sun_elevation_deg": float(sel[0]),
+            "pointing_std_mrad": std if np.isfinite(std) else None}
 
 
 #: The most observations :func:`residual_points` returns (evenly spaced over the range).

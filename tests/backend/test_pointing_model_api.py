@@ -147,6 +147,8 @@ def test_the_model_recovers_the_mount_and_its_command_holds_the_sun(
         return 1000 * float(np.arccos(min(1.0, float(n[0] @ enu_from_sky(az[0], el[0])))))
 
     assert miss_mrad(cmd["azimuth_deg"], cmd["elevation_deg"]) < 0.3
+    assert 0 < cmd["pointing_std_mrad"] < 0.3
+    assert miss_mrad(cmd["azimuth_deg"], cmd["elevation_deg"]) < 3 * cmd["pointing_std_mrad"]
     assert miss_mrad(az[0], el[0]) > 10.0  # the plain open loop on SPA
 
 

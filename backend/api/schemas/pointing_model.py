@@ -55,6 +55,10 @@ class PointingCommandRead(BaseModel):
     elevation_deg: float = Field(description="encoder elevation to command [°]")
     sun_azimuth_deg: float = Field(description="the sun's azimuth at time (SPA) [°]")
     sun_elevation_deg: float = Field(description="the sun's apparent elevation (SPA) [°]")
+    pointing_std_mrad: float | None = Field(description=(
+        "standard error of where the command puts the optical axis, relative to the sun "
+        "[mrad], from the terms' covariance (null for a singular fit): large where the "
+        "range's sky does not determine the model at this sun"))
 
 
 class PointingPointsRead(BaseModel):
