@@ -238,7 +238,10 @@ def mount_faults(obs: Observations | None, day_edges_s: list[int], dates: list[s
     the days' edges [Unix s], one more than ``dates``), or None without observations.
 
     Slips first (per-day fits); the offsets from the day of the last slip on (the whole
-    range without one). ``faults``: slips, oldest first, then offsets."""
+    range without one). ``faults``: slips, oldest first, then offsets; ``undetermined``: the
+    fitted terms the observations do not determine (:func:`offsets` names none of them, and
+    no fault named is not a mount found sound: 72 frames a second apart of a mount 2.5° off
+    read "no significant term", a tester's finding)."""
     if obs is None:
         return None
     found = slips(_day_fits(obs, day_edges_s), dates)
@@ -253,4 +256,6 @@ def mount_faults(obs: Observations | None, day_edges_s: list[int], dates: list[s
     since = dates[min(max(day, 0), len(dates) - 1)]
     return {"n_observations": fit.n_observations, "n_outliers": fit.n_outliers,
             "residual_rms_mrad": round(fit.residual_rms_mrad, 4), "since": since,
-            "faults": found + offsets(fit, since)}
+            "faults": found + offsets(fit, since),
+            "undetermined": [t for t in fit.fitted_terms
+                             if not fit.std.get(t, np.nan) <= MAX_DETERMINED_STD_DEG]}

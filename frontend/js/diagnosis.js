@@ -104,7 +104,11 @@ async function load(state) {
         !body.days.some((d) => d.tracker.measured_wh !== null || d.fixed.measured_wh !== null)
           ? "No readings in this range: nothing measured to diagnose."
           : mount.length ? "No fault found from the power in this range." : "No fault found in this range.")]),
-    ...(body.mount && !mount.length ? [h("li", { class: "muted", "data-testid": "diag-mount-none" },
+    ...(body.mount && body.mount.undetermined.length ? [h("li", { class: "muted", "data-testid": "diag-mount-undetermined" },
+      `Mount: ${body.mount.n_observations} camera observations since ${shortDate(body.mount.since)} do not determine `
+      + `${body.mount.undetermined.join(", ")} (too little of the sky: send frames over more of the day); `
+      + "not named, and not found sound.")] : []),
+    ...(body.mount && !mount.length && !body.mount.undetermined.length ? [h("li", { class: "muted", "data-testid": "diag-mount-none" },
       `Mount: no significant term in ${body.mount.n_observations} camera observations since ${shortDate(body.mount.since)} (residual ${num(body.mount.residual_rms_mrad, 2)} mrad RMS).`)] : []),
     h("li", { class: "muted", "data-testid": "diag-sky" }, skyLine(body.days)));
   const x = body.days.map((d) => d.date);

@@ -119,6 +119,7 @@ def test_a_steady_misaligned_mount_is_named_term_by_term() -> None:
     body = _diagnose([MOUNT] * 5, seed=12)
     faults = body["faults"]
     assert [f["kind"] for f in faults] == ["mount_offset"] * 4, faults
+    assert body["undetermined"] == []
     assert body["n_outliers"] > 0 and body["residual_rms_mrad"] < 0.4
     for f in faults:
         assert abs(f["value_deg"] - MOUNT[f["term"]]) < 0.005, f
@@ -180,6 +181,7 @@ def test_a_burst_of_frames_names_no_term_it_does_not_determine() -> None:
                               [FIRST.date().isoformat()])
     assert body is not None and body["n_observations"] == ox.size
     assert body["faults"] == [], body["faults"]
+    assert body["undetermined"] == list(MOUNT)  # said, not taken for a sound mount
 
 
 # ----------------------------------------------------------------- over HTTP

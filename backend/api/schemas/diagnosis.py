@@ -179,6 +179,9 @@ class MountRead(BaseModel):
     residual_rms_mrad: float
     since: str = Field(description="local date of the first of those observations")
     faults: list[MountFaultRead] = Field(description="slips (oldest first), then offsets")
+    undetermined: list[str] = Field(description=(
+        "terms the observations do not determine (standard error over 0.5 mrad, as from "
+        "minutes of sky): neither named as a fault nor cleared"))
 
 
 class DiagnosisTrackerDayRead(TrackerDayRead):
