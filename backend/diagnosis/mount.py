@@ -84,6 +84,14 @@ TERM_WORDS = {
     "nonperpendicularity_deg": "axis non-perpendicularity",
 }
 
+#: What a step of each core term is: the zeros are the encoders', a tilt is the pedestal's
+#: (no encoder reads it: a tilt that stepped was "an encoder that slipped", a tester's finding).
+STEP_CAUSES = {
+    "azimuth_zero_deg": "an encoder that slipped (or the pedestal turned)",
+    "elevation_zero_deg": "an encoder that slipped",
+    "pedestal_tilt_north_deg": "the pedestal moved (its foundation settled or it was re-levelled)",
+    "pedestal_tilt_east_deg": "the pedestal moved (its foundation settled or it was re-levelled)",
+}
 
 #: Fits kept by the digest of what they were fitted from (the sun, encoder angles and
 #: offsets): a repeated diagnosis of a long range refits no day whose observations did not
@@ -205,7 +213,7 @@ def slips(day_fits: list[tuple[int, PointingFit]], dates: list[str]) -> list[dic
                 "detail": f"{TERM_WORDS[term]} stepped by {step:+.{d}f}° ± {std:.{d}f}° on "
                           f"{dates[j]} (from {v1:+.{d}f}° to {v2:+.{d}f}°; "
                           f"{f1.n_observations} and {f2.n_observations} camera observations "
-                          f"on the days either side): an encoder that slipped{gap}"})
+                          f"on the days either side): {STEP_CAUSES[term]}{gap}"})
     return out
 
 

@@ -27,11 +27,12 @@ export function faultLines(days) {
 }
 
 /** The mount faults the tracker camera's sun offsets show (GET …/diagnosis `mount`): an
- * encoder slip with its first day, then each significant term with its uncertainty. */
+ * step of a term (an encoder slip, a pedestal that moved: the detail says which) with its
+ * first day, then each significant term with its uncertainty. */
 export function mountLines(mount) {
   if (!mount) return [];
   return mount.faults.map((f) => (f.kind === "encoder_slip"
-    ? `Encoder slip since ${shortDate(f.since)}: ${f.detail}`
+    ? `Mount step since ${shortDate(f.since)}: ${f.detail}`
     : `Mount (from the tracker camera): ${f.detail}`));
 }
 

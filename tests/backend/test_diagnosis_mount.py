@@ -145,6 +145,17 @@ def test_an_encoder_slip_is_found_with_its_start_day(slipped: dict) -> None:
     assert abs(now["azimuth_zero_deg"]["value_deg"] - 3.0) < 0.01
 
 
+def test_a_tilt_that_steps_is_the_pedestal_not_an_encoder() -> None:
+    """A tester's finding: a pedestal re-levelled between two days (its tilt toward north
+    from 0.7° to 0.2°) was reported as "an encoder that slipped"; no encoder reads a tilt."""
+    body = _diagnose([MOUNT] * 2 + [{**MOUNT, "pedestal_tilt_north_deg": 0.2}] * 2, seed=17)
+    steps = [f for f in body["faults"] if f["kind"] == "encoder_slip"]
+    assert [(f["term"], f["since"]) for f in steps] == [("pedestal_tilt_north_deg",
+                                                         "2026-03-04")]
+    assert "the pedestal moved" in steps[0]["detail"], steps[0]["detail"]
+    assert "encoder" not in steps[0]["detail"]
+
+
 def test_a_slip_behind_an_overcast_day_says_it_may_be_earlier() -> None:
     """The same slip on day 3, the camera clouded all of day 3: found on day 4, the detail
     naming the days it may have happened on."""
