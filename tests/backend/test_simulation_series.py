@@ -105,7 +105,7 @@ def test_ended_runs_in_memory_are_bounded(run: dict[str, Any]) -> None:
     with runner._lock:
         for k in range(KEEP_ENDED + 50):
             runner._runs[f"old-{k}"] = RunState(f"old-{k}", "tehuantepec", "done")
-    runner._ended(RunState("old-0", "tehuantepec", "done"))
+    runner._ended(RunState("old-0", "tehuantepec", "running"), "done")
     assert sum(s.status in ("done", "failed") for s in runner._runs.values()) == KEEP_ENDED
     assert run["run_id"] not in runner._runs and "old-0" not in runner._runs
     state = runner.get(run["run_id"])            # the real run, from its row
