@@ -45,7 +45,23 @@ export function authHeaders() {
   return t ? { Authorization: `Bearer ${t}` } : {};
 }
 
-/** GET/POST JSON; throws ApiError with the server's message on a non-2xx answer.
+/** The message of a request that got no answer at all (fetch's bare "Failed to fetch": the
+ *  service stopped or restarting, or the network down), naming the address and what to do. */
+export const NO_ANSWER_STATUS = 0;
+
+async function send(url, init) {
+  try {
+    return await fetch(url, init);
+  } catch (err) {
+    if (err.name === "AbortError") throw err;
+    throw new ApiError(NO_ANSWER_STATUS, `The service at ${location.host} did not answer (${url.split("?")[0]}): `
+      + "it is stopped or restarting, or the network is down. Nothing is known of this data until it answers; "
+      + "reload the page once it is back.", null);
+  }
+}
+
+/** GET/POST JSON; throws ApiError with the server's message on a non-2xx answer, and with
+ *  status 0 (NO_ANSWER_STATUS) and a message saying so when the service does not answer.
  *  `token`: the request's own token (a form's field; "" sends none); left out, the stored
  *  token is sent, and a 401 then dispatches "heliotwin:unauthorized" (main.js shows the
  *  header's token field with the server's message). */
@@ -65,7 +81,7 @@ export async function api(path, { method = "GET", params, json, form, signal, to
   } else if (form !== undefined) {
     init.body = form;
   }
-  const res = await fetch(url, init);
+  const res = await send(url, init);
   const text = await res.text();
   let body = null;
   try { body = text ? JSON.parse(text) : null; } catch { body = null; }
@@ -82,7 +98,7 @@ export async function api(path, { method = "GET", params, json, form, signal, to
 /** An image (or any file) of the API as an object URL, fetched with the stored token (an
  *  <img src> cannot send one); revoke it with URL.revokeObjectURL when replaced. */
 export async function apiObjectUrl(path, signal) {
-  const res = await fetch(path, { signal, headers: authHeaders() });
+  const res = await send(path, { signal, headers: authHeaders() });
   if (!res.ok) {
     const text = await res.text();
     let body = null;

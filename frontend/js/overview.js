@@ -14,7 +14,8 @@ const MAX_POINTS = 1440;
 let st = null;
 let timer = null;
 let controller = null;
-const lastDay = { measured: {}, status: null, followToday: true };
+// failed: why the selected day's readings could not be loaded ("" when they were)
+const lastDay = { measured: {}, status: null, followToday: true, failed: "" };
 
 const $ = (id) => document.getElementById(id);
 
@@ -104,7 +105,8 @@ async function drawPower(series) {
   if (!traces.length) {
     const noArrays = st.site.arrays && !Object.keys(st.site.arrays).length;
     showEmpty("chart-power", noArrays ? "This site has no PV arrays (a camera site): see the Sky camera page."
-      : `No readings for ${fmtDate(day)} — pick another day.`);
+      : lastDay.failed ? `The readings of ${fmtDate(day)} could not be loaded: ${lastDay.failed}`
+        : `No readings for ${fmtDate(day)} — pick another day.`);
     return;
   }
   const shapes = [];
@@ -143,12 +145,13 @@ function twinNote(row) {
   return row?.twin_note || "";
 }
 
-function drawDayEnergy(row) {
+function drawDayEnergy(row, failed = "") {
   const box = $("day-energy");
   box.innerHTML = "";
   $("day-energy-title").textContent = `Energy of ${fmtDate(st.day)}`;
   if (!row) {
-    box.append(h("p", { class: "muted" }, "No energy recorded for this day."));
+    box.append(h("p", { class: failed ? "error" : "muted" },
+      failed ? `The energy could not be loaded: ${failed}` : "No energy recorded for this day."));
     return;
   }
   const partial = row.partial === true;
@@ -345,9 +348,10 @@ function drawLoggers(status, series) {
     const gaps = m ? m.gaps : [];
     const longest = gaps.reduce((a, g) => Math.max(a, g[2]), 0);
     const gapText = !m ? "—" : !m.count ? "no readings" : gaps.length ? `${gaps.length} (longest ${num(longest, 0)} min)` : "none";
+    const unknown = !status && !last; // neither answer came: not "never" (a stopped service)
     table.append(h("tr", {},
-      h("td", { title: s.logger || "" }, h("span", { class: `dot ${freshness(s, age)}` }), arr),
-      h("td", { title: last ? fmtDateTime(st.tz, last) : "" }, last ? fmtAge(last) : "never"),
+      h("td", { title: s.logger || "" }, h("span", { class: `dot ${unknown ? "" : freshness(s, age)}` }), arr),
+      h("td", { title: last ? fmtDateTime(st.tz, last) : "" }, last ? fmtAge(last) : unknown ? "unknown" : "never"),
       h("td", { "data-testid": `readings-${arr}` }, m ? num(m.count) : "—"),
       h("td", { "data-testid": `gaps-${arr}`, title: gaps.map((g) => `${fmtTime(st.tz, g[0])}–${fmtTime(st.tz, g[1])}`).join(", ") },
         gapText)));
@@ -406,7 +410,9 @@ async function load(quiet = false) {
     for (const source of SOURCES) {
       measurementJobs.push(getMeasurements(site, { array: arr, source, start: day, end, maxPoints: MAX_POINTS }, signal)
         .then((body) => { series[`${arr}-${source}`] = toSeries(body, st.tz); })
-        .catch((err) => { if (err.name !== "AbortError") series[`${arr}-${source}`] = toSeries(null, st.tz); throw err; }));
+        // a failed request leaves no series: an empty one read as "No readings" and "never"
+        // with the service stopped (a tester's finding); lastDay.failed says why instead
+        .catch((err) => { if (err.name !== "AbortError") delete series[`${arr}-${source}`]; throw err; }));
     }
   }
   const energyJob = getEnergy(site, { start: addDays(day, 1 - HISTORY_DAYS), end, interval: "day" }, signal);
@@ -416,6 +422,7 @@ async function load(quiet = false) {
   const measured = await Promise.allSettled(measurementJobs);
   if (signal.aborted) return;
   for (const r of measured) if (r.status === "rejected") errors.push(r.reason.message);
+  lastDay.failed = errors[0] || "";
   lastDay.measured = series;
   await drawPower(series);
   drawLoggers(lastDay.status, series);
@@ -428,7 +435,7 @@ async function load(quiet = false) {
   } catch (err) {
     if (err.name === "AbortError") return;
     errors.push(err.message);
-    drawDayEnergy(null);
+    drawDayEnergy(null, err.message);
     showEmpty("chart-daily", "Energy unavailable.");
     showEmpty("chart-cumulative", "Energy unavailable.");
   }
