@@ -18,6 +18,9 @@ function result(text, kind = "ok") {
 // What a site's place decides (sim.sites.CLIMATE_KEYS, FIXED_SURFACE_KEYS): a new site does not
 // copy them; the service fills them in from its place when it is saved, marked "assumed".
 const CLIMATE_KEYS = ["temp_air_c", "wind_speed_m_s"];
+// the ground's height there (sim.sites.relocated_config drops it too): a copy kept the
+// selected site's, 50 m of Tehuantepec for a site at 558 m (a tester's finding)
+const ALTITUDE_KEY = "altitude_m";
 const FIXED_SURFACE_KEYS = ["surface_tilt_deg", "surface_azimuth_deg"];
 const TRACKER_PLACE_KEYS = ["azimuth_min_deg", "azimuth_max_deg"];
 
@@ -123,8 +126,8 @@ function newSite() {
   config.name = "";
   config.source = "";
   config.notes = "";
-  const pending = [...CLIMATE_KEYS];
-  for (const key of [...CLIMATE_KEYS, "assumed"]) delete config[key];
+  const pending = [ALTITUDE_KEY, ...CLIMATE_KEYS];
+  for (const key of [ALTITUDE_KEY, ...CLIMATE_KEYS, "assumed"]) delete config[key];
   for (const [name, arr] of Object.entries(config.arrays || {})) {
     if (arr.mount !== "fixed") continue;
     for (const key of FIXED_SURFACE_KEYS) delete arr[key];
@@ -136,8 +139,8 @@ function newSite() {
   fill(config, pending);
   $("site-id").focus();
   result("A copy of the selected site's tracker and arrays: give it an id and a place, then save with the admin "
-    + "token (HELIOTWIN_ADMIN_TOKEN). Its fixed tilt, the tracker's azimuth range, air temperature and wind "
-    + "come from the new place.");
+    + "token (HELIOTWIN_ADMIN_TOKEN). Its altitude (unless you type one), fixed tilt, the tracker's azimuth "
+    + "range, air temperature and wind come from the new place.");
 }
 
 export function init(state) {

@@ -291,6 +291,8 @@ def test_a_site_made_in_the_form_joins_the_built_in_ones(pg, edge_server: Server
     pg.fill("#site-lon", "-99.13")
     pg.fill("#site-tz-input", "America/Mexico_City")
     assert "azimuth_min_deg" not in pg.input_value("#site-json")  # the new place's, not a copy
+    # nor the selected site's altitude (Tehuantepec's 50 m was kept for any place)
+    assert pg.input_value("#site-alt") == "" and "altitude_m" not in pg.input_value("#site-json")
     assert pg.input_value("#site-stamped") == ""  # the selected site's: the default
     pg.select_option("#site-stamped", "interval_end")  # an hourly logger's means
     assert '"readings_stamped": "interval_end"' in pg.input_value("#site-json")
@@ -319,6 +321,9 @@ def test_a_site_made_in_the_form_joins_the_built_in_ones(pg, edge_server: Server
     assert site["readings_stamped"] == "interval_end"
     config = _api(edge_server, "/api/v1/sites/hand-made/config")
     assert "tracker.azimuth_min_deg" in config["assumed"], config.get("assumed")
+    from pvlib.location import lookup_altitude
+    assert "altitude_m" in config["assumed"], config.get("assumed")
+    assert config["altitude_m"] == pytest.approx(lookup_altitude(19.43, -99.13), abs=1)
 
 
 def test_a_submit_the_browser_blocks_replaces_the_forms_message(
