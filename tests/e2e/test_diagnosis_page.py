@@ -64,6 +64,10 @@ def test_diagnosis_panel_matches_the_api(page, server) -> None:
     # the axis had none; a tester's finding)
     assert page.locator("#chart-pointing .ytitle").text_content() == \
         "error against the ephemeris sun [°]"
+    # and its times are the site's wall clock, said (the x axis had no title)
+    tz = server.site["timezone"]
+    assert page.locator("#chart-pointing .xtitle").text_content() == f"Local time ({tz})"
+    assert page.locator("#chart-diagnosis .xtitle").text_content() == f"Day ({tz})"
     assert page.console_errors == []
 
 
