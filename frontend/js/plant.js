@@ -87,14 +87,15 @@ async function drawShadeDay() {
   await draw("chart-plant-shade", [
     { type: "scatter", mode: "lines+markers", x, y: shaded, name: "collectors shaded", line: { color: COLORS.tracker } },
     { type: "scatter", mode: "lines", x, y: mean.map((v) => 100 * v), name: "mean shaded [%]", yaxis: "y2", line: { color: COLORS.grey } },
-  ], baseLayout({
+  ], baseLayout({ // the plant's wall clock, said (the axis had no title)
+    xaxis: { title: { text: `Local time (${tz})` }, type: "date", gridcolor: "#e9edf1" },
     yaxis: { title: { text: "collectors shaded [-]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
     // round ticks (Plotly's own fell on 10.9, 21.7, 32.6 …: a tester's finding)
     yaxis2: { title: { text: "mean shaded [%]" }, overlaying: "y", side: "right", showgrid: false,
       ...zeroBasedAxis(mean.map((v) => 100 * v)) },
   }), {
-    columns: ["time", "collectors_shaded", "mean_shaded_pct"],
-    rows: d.times.map((t, k) => [t, shaded[k], 100 * mean[k]]),
+    columns: ["time_utc", "local_time", "collectors_shaded", "mean_shaded_pct"],
+    rows: d.times.map((t, k) => [t, x[k], shaded[k], 100 * mean[k]]),
     filename: `${view.plant.plant_id}-shade-${d.date}.csv`,
   });
 }

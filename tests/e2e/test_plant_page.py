@@ -42,6 +42,8 @@ def test_plant_page_shows_layout_shade_strategies_and_sky_map(page, server) -> N
                            " return [c.data[0].marker.symbol, c.layout.shapes || []]; }")
     assert layout == ["square", []]
     assert int(page.get_attribute("#chart-plant-shade", "data-points")) > 20
+    # its times are the plant's wall clock, said (the axis had no title)
+    assert page.locator("#chart-plant-shade .xtitle").text_content() == "Local time (Europe/Madrid)"
     # the mean's axis on round ticks from zero (they fell on 10.9, 21.7, 32.6 …)
     y2 = page.evaluate("() => { const a = document.getElementById('chart-plant-shade')"
                        ".layout.yaxis2; return [a.range, a.dtick, a.tick0]; }")
