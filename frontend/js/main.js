@@ -96,8 +96,11 @@ async function boot() {
   const [sitesRes, metaRes] = await Promise.allSettled([getSites(), getMeta()]);
   if (metaRes.status === "fulfilled") state.meta = metaRes.value || {};
   if (sitesRes.status === "rejected" && sitesRes.reason.status === 401) {
-    // reads need a token (meta.read_require_token) and none, or a bad one, was sent
-    askToken(sitesRes.reason.body?.detail || sitesRes.reason.message);
+    // reads need a token (meta.read_require_token) and none, or a bad one, was sent; a bad
+    // one is said as such ("unknown write token" alone left a reader guessing)
+    const detail = sitesRes.reason.body?.detail || sitesRes.reason.message;
+    askToken(storedToken() ? `The token you gave was refused (${detail}): paste a valid one — any site's `
+      + "token (heliotwin token create --site ID) or the admin token — or Forget token." : detail);
     return;
   }
   if (sitesRes.status === "rejected") {
