@@ -129,7 +129,8 @@ async function load(state) {
     // "partial" here: readings under 99 % of the day's expected energy (the diagnosis'
     // rule), stricter than the daily energy chart's 95 %: a day whole there is hatched here
     // (a tester read it as a contradiction)
-    { x, y: measured, name: "gain measured % (hatched: readings under 99 % of the day)", type: "bar",
+    // on two lines: on one it ran past a phone's chart, cut mid-word ("… of the da")
+    { x, y: measured, name: "gain measured %<br>(hatched: readings under 99 % of the day)", type: "bar",
       marker: { color: COLORS.gain, opacity: partial.map((p) => (p ? 0.4 : 1)), pattern: { shape: partial.map((p) => (p ? "/" : "")) } },
       customdata: body.days.map((d, i) => (partial[i] ? ` (partial day: ${num(d.gain_measured_pct, 1)} %)` : "")),
       hovertemplate: "%{y:.1f} %%{customdata}" },

@@ -96,6 +96,12 @@ _CHART_DEFECTS = """() => [...document.querySelectorAll('.js-plotly-plot')]
         return r.left < svg.left - 0.5 || r.right > svg.right + 0.5
           || r.top < svg.top - 0.5 || r.bottom > svg.bottom + 0.5; })
       .map(t => t.textContent);
+    // a legend entry's text past the chart's edge is cut there ("… under 99 % of the da")
+    for (const t of el.querySelectorAll('.legend text.legendtext')) {
+      const r = t.getBoundingClientRect();
+      if (t.textContent && r.width > 0 && (r.right > svg.right + 0.5 || r.left < svg.left - 0.5))
+        cut.push(`legend: ${t.textContent}`);
+    }
     const overlaps = [];
     for (const axis of el.querySelectorAll('.cartesianlayer g[class$=axislayer-above]')) {
       if (!/^x/.test(axis.getAttribute('class'))) continue;
@@ -114,7 +120,8 @@ def test_charts_are_readable_at_phone_width(browser, server, request) -> None:  
     """At 390 px no two x tick labels of a chart touch or overlap and every axis title lies
     inside its chart: the Overview's (yesterday's power, the daily bars with the gain on a
     second axis, the diagnosis's dates), the Plant page's and a simulation's (its angles'
-    second axis has a title longer than the axis). Drawn with the desktop's fixed margins
+    second axis has a title longer than the axis), nor a legend's entry past its edge (the
+    diagnosis's was cut mid-word). Drawn with the desktop's fixed margins
     and every tick, the titles were cut at the chart's edge and the dates' labels slanted
     over each other (docs/dashboard.md, "Phone width")."""
     with open_page(browser, request, timeout_ms=90_000) as page:
