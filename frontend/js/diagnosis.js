@@ -15,15 +15,32 @@ function shortDate(iso) {
   return new Date(`${iso}T12:00:00Z`).toLocaleDateString(undefined, { day: "numeric", month: "short", timeZone: "UTC" });
 }
 
-/** One line per fault (the latest day it was seen), e.g. "tracker stuck since 12 Mar …". */
+/** One line per fault (the latest day it was seen), e.g. "tracker stuck since 12 Mar …", or
+ * "tracker stuck on 4 Dec, not on 5 Dec: …" when a later day of the range was judged without
+ * it: "since 4 Dec" alone read as a tracker still stuck on a range whose last day was fine (a
+ * tester's finding). A later day judges only when both arrays reported and its sky was usable. */
 export function faultLines(days) {
   const last = new Map();
-  for (const d of days) for (const f of d.faults) last.set(`${f.kind}|${f.since}`, f);
+  const lastSeen = new Map();
+  for (const d of days) {
+    for (const f of d.faults) {
+      last.set(`${f.kind}|${f.since}`, f);
+      lastSeen.set(`${f.kind}|${f.since}`, d.date);
+    }
+  }
+  const judged = (d) => d.tracker?.measured_wh != null && d.fixed?.measured_wh != null
+    && !(d.faults || []).some((g) => g.kind === "sky_unusable");
   // under 0.5 a finding is a possibility, not a fault (the alerts' default threshold,
   // HELIOTWIN_ALERT_FAULT_CONFIDENCE_MIN): a healthy broken-cloud day listed "azimuth
   // offset … confidence 0.48" as plainly as a stuck tracker (a tester's finding)
-  return [...last.values()].map((f) => `${f.confidence < 0.5 ? "possibly " : ""}${f.title} `
-    + `since ${shortDate(f.since)}: ${f.detail}; confidence ${num(f.confidence, 2)}`);
+  return [...last.entries()].map(([key, f]) => {
+    const seen = lastSeen.get(key);
+    const after = days.find((d) => d.date > seen && judged(d) && !d.faults.some((g) => g.kind === f.kind));
+    const when = !after ? `since ${shortDate(f.since)}`
+      : `${f.since === seen ? `on ${shortDate(seen)}` : `${shortDate(f.since)} to ${shortDate(seen)}`}, `
+        + `not on ${shortDate(after.date)}`;
+    return `${f.confidence < 0.5 ? "possibly " : ""}${f.title} ${when}: ${f.detail}; confidence ${num(f.confidence, 2)}`;
+  });
 }
 
 /** The mount faults the tracker camera's sun offsets show (GET …/diagnosis `mount`): an

@@ -231,3 +231,37 @@ def test_a_range_without_readings_says_there_is_nothing_to_diagnose(page, server
     assert none.count() and none.first.text_content() == \
         "No readings in this range: nothing measured to diagnose.", \
         page.locator("[data-testid=diag-faults]").inner_text()
+
+
+def _day(date: str, tracker_wh: float | None, faults: list[dict]) -> dict:
+    return {"date": date, "tracker": {"measured_wh": tracker_wh},
+            "fixed": {"measured_wh": None if tracker_wh is None else 6222.0}, "faults": faults}
+
+
+_STUCK = {"kind": "stuck", "title": "tracker stuck", "since": "2026-12-04", "confidence": 0.97,
+          "detail": "stuck at azimuth 0°, elevation 73°"}
+
+
+def test_a_fault_a_later_day_was_judged_without_is_not_said_to_go_on(page, server) -> None:
+    """Santiago, a tracker stuck on 4 December and fine on the 5th: the card said "tracker
+    stuck since Dec 4", read as still stuck. Over, it says on which day and that the next
+    judged day had none; still on (or nothing judged after it), "since" as before."""
+    page.goto(f"{server.url}/#overview")
+    page.wait_for_selector('body[data-overview-loaded]', state="attached")
+    cases = {
+        "over": [_day("2026-12-03", 10230.0, []), _day("2026-12-04", 6820.0, [_STUCK]),
+                 _day("2026-12-05", 10253.0, [])],
+        "on": [_day("2026-12-04", 6820.0, [_STUCK]), _day("2026-12-05", 6800.0, [_STUCK])],
+        "unjudged": [_day("2026-12-04", 6820.0, [_STUCK]), _day("2026-12-05", None, [])],
+        "two days": [_day("2026-12-04", 6820.0, [_STUCK]), _day("2026-12-05", 6800.0, [_STUCK]),
+                     _day("2026-12-06", 10250.0, [])],
+    }
+    lines = page.evaluate("""async (cases) => {
+      const m = await import('/static/js/diagnosis.js');
+      return Object.fromEntries(Object.entries(cases).map(([k, days]) => [k, m.faultLines(days)]));
+    }""", cases)
+    tail = ": stuck at azimuth 0°, elevation 73°; confidence 0.97"
+    assert lines["over"] == ["tracker stuck on Dec 4, not on Dec 5" + tail]
+    assert lines["on"] == ["tracker stuck since Dec 4" + tail]
+    assert lines["unjudged"] == ["tracker stuck since Dec 4" + tail]
+    assert lines["two days"] == ["tracker stuck Dec 4 to Dec 5, not on Dec 6" + tail]
