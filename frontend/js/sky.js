@@ -375,7 +375,10 @@ async function loadTrajectory() {
     { type: "scatterpolar", r: found.map((d) => 90 - (ephEl(d) ?? NaN)), theta: found.map((d) => ephAz(d) ?? null), text: label,
       mode: "markers", name: "ephemeris (SPA)", marker: { color: COLORS.fixed, size: 9, symbol: "circle-open" }, hovertemplate: "%{text}: az %{theta:.1f}°, zenith %{r:.1f}°" },
   ], baseLayout({
-    margin: { l: 30, r: 30, t: 30, b: 30 }, hovermode: "closest",
+    // room for the compass labels beside the circle and the legend above "N 0°" (a polar
+    // chart grows no margin for them: at 390 px "W 270°" was cut and the legend lay over N)
+    margin: { l: 52, r: 52, t: 64, b: 30 }, hovermode: "closest",
+    legend: { orientation: "h", yref: "container", y: 1, yanchor: "top", x: 0 },
     polar: { radialaxis: { range: [0, 90], tickvals: [30, 60, 90], ticksuffix: "°", angle: 45, tickfont: { size: 10 } },
       angularaxis: { rotation: 90, direction: "clockwise", tickvals: [0, 90, 180, 270], ticktext: ["N 0°", "E 90°", "S 180°", "W 270°"] } },
   }), {

@@ -157,3 +157,42 @@ def test_charts_are_readable_at_phone_width(browser, server, request) -> None:  
         assert expected <= set(found), f"charts not drawn: {expected - set(found)}"
         bad = {k: v for k, v in found.items() if v["cut"] or v["overlaps"]}
         assert not bad, f"charts unreadable at {PHONE['width']} px: {bad}"
+
+
+_POLAR_DEFECTS = """(id) => {
+  const el = document.getElementById(id);
+  const svg = el.querySelector('svg.main-svg').getBoundingClientRect();
+  const ticks = [...el.querySelectorAll(
+      '.polarlayer .angularaxistick text, .polarlayer .angulartick text')]
+    .map(t => [t.textContent, t.getBoundingClientRect()]).filter(([, r]) => r.width > 0);
+  const legend = [...el.querySelectorAll('.legend .traces')].map(t => t.getBoundingClientRect());
+  const cut = ticks.filter(([, r]) => r.left < svg.left - 0.5 || r.right > svg.right + 0.5
+    || r.top < svg.top - 0.5 || r.bottom > svg.bottom + 0.5).map(([t]) => t);
+  const hit = (a, b) => a.left < b.right && b.left < a.right
+    && a.top < b.bottom && b.top < a.bottom;
+  const underLegend = ticks.filter(([, r]) => legend.some(l => hit(r, l))).map(([t]) => t);
+  return { ticks: ticks.map(([t]) => t), cut, underLegend };
+}"""
+
+
+def test_the_sky_map_is_readable_at_phone_width(browser, server, request) -> None:  # type: ignore[no-untyped-def]
+    """At 390 px the sky map's compass labels lie inside the chart, clear of its legend: "W 270°"
+    was cut at the left edge and the legend's "ephemeris (SPA)" lay over "N 0°"."""
+    frame = (ARTIFACTS.parent / "tests" / "data" / "real-sky"
+             / "Wettermast_20160615_093900UTCp1_sunrow1202_suncol535.jpg")
+    with open_page(browser, request, timeout_ms=90_000) as page:
+        page.set_viewport_size(PHONE)
+        page.goto(f"{server.url}/#sky")
+        page.set_input_files("#sky-files", str(frame))
+        page.select_option("#sky-place", "coords")
+        page.fill("#sky-coords input[name=latitude_deg]", "53.52")
+        page.fill("#sky-coords input[name=longitude_deg]", "10.105")
+        page.click("#sky-detect")
+        page.wait_for_function(
+            "() => document.querySelector('#chart-sky-track .polarlayer .angularaxistick text, "
+            "#chart-sky-track .polarlayer .angulartick text')")
+        page.locator("#chart-sky-track").scroll_into_view_if_needed()
+        page.locator("#chart-sky-track").screenshot(path=str(ARTIFACTS / "phone-sky-map.png"))
+        found = page.evaluate(_POLAR_DEFECTS, "chart-sky-track")
+        assert set(found["ticks"]) == {"N 0°", "E 90°", "S 180°", "W 270°"}, found
+        assert not found["cut"] and not found["underLegend"], found
