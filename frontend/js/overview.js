@@ -443,7 +443,8 @@ async function load(quiet = false) {
   if (signal.aborted) return;
   weatherTwin(site, day, end, series, signal); // redraws when it arrives; never blocks the page
   banner(errors.length ? `Some data could not be loaded: ${errors[0]}` : "");
-  $("live-stamp").textContent = `updated ${fmtTime(st.tz, new Date().toISOString())}`;
+  // "updated" only when it was: a load that failed said "updated 01:20" with nothing loaded
+  $("live-stamp").textContent = `${errors.length ? "update failed" : "updated"} ${fmtTime(st.tz, new Date().toISOString())}`;
   document.body.dataset.overviewLoaded = `${site}/${day}`;
   if (!performance.getEntriesByName("heliotwin:overview-loaded").length) performance.mark("heliotwin:overview-loaded");
 }

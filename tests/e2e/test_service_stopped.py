@@ -55,6 +55,7 @@ def test_a_stopped_service_is_not_read_as_a_day_without_readings(
             pg.goto(f"{proc.base_url}/#overview?site=tehuantepec&day={DAY.isoformat()}")
             pg.wait_for_selector(f'body[data-overview-loaded="tehuantepec/{DAY.isoformat()}"]')
             assert pg.inner_text("[data-testid=readings-tracker]") == "1,440"
+            assert pg.inner_text("#live-stamp").startswith("updated ")
             proc.stop()
             pg.click("#day-prev")
             pg.wait_for_function("() => !document.getElementById('banner').hidden")
@@ -69,6 +70,7 @@ def test_a_stopped_service_is_not_read_as_a_day_without_readings(
             loggers = pg.inner_text("#loggers")
             assert "never" not in loggers and "no readings" not in loggers
             assert "unknown" in loggers
+            assert pg.inner_text("#live-stamp").startswith("update failed ")
             day = pg.inner_text("#day-energy")
             assert "No energy recorded" not in day and "could not be loaded" in day
     finally:
