@@ -231,6 +231,34 @@ def check_iana_zone(name: str) -> str:
     return name
 
 
+def fixed_tilt_from_latitude_deg(latitude_deg: float) -> float:
+    """Tilt [°] of a fixed array for the most yearly energy, from the latitude alone.
+
+    C. R. Landau's rule of thumb (solarpaneltilt.com, "Optimum tilt of solar panels"),
+    as GSEE implements it (``gsee.pv.optimal_tilt``; Pfenninger & Staffell, Energy 114
+    (2016) 1251–1265, doi:10.1016/j.energy.2016.08.060): 0.87 |φ| up to |φ| = 25°,
+    0.76 |φ| + 3.1° up to 50°, and 40° beyond (where the rule was not fitted). Facing
+    the equator (:func:`equator_azimuth_deg`). The one rule of a site's fixed arrays
+    (:func:`sim.sites.place_defaults`) and a plant's fixed comparison plant
+    (:func:`sim.plant.layout.plant_from_dict`). A rule, not a site survey: a site's config
+    marks it as assumed.
+    """
+    lat = abs(float(latitude_deg))
+    if lat <= 25.0:
+        return round(0.87 * lat, 1)
+    if lat <= 50.0:
+        return round(0.76 * lat + 3.1, 1)
+    return 40.0
+
+
+def equator_azimuth_deg(latitude_deg: float) -> float:
+    """Azimuth [°, clockwise from north] facing the equator: 180° (south) on the equator and
+    north of it, 0° (north) south of it — where a fixed array faces and a tracker's azimuth
+    range is centred when a config does not say (a site's arrays, a plant's fixed
+    comparison plant: a southern plant's had faced the pole)."""
+    return 180.0 if latitude_deg >= 0 else 0.0
+
+
 #: A clock (a weather file's UTC offset, a site's zone in standard time) this far from its
 #: place's mean solar time (longitude / 15° h⁻¹) [h] is most likely a mistake: a sign slip
 #: (Alice Springs' +9.5 written −9.5) or another place's zone (Europe/Berlin at 133.9° E put

@@ -20,7 +20,11 @@ from sim.kinematics import TrackerGeometry
 from sim.motors import AxisDrive
 from sim.paths import default_sites_dir, default_user_sites_dir
 from sim.pv import ArrayConfig, array_config_from_dict
-from sim.site_config import validate_site_config
+from sim.site_config import (
+    equator_azimuth_deg,
+    fixed_tilt_from_latitude_deg,
+    validate_site_config,
+)
 
 _TRACKER_KEYS = (
     "d1_m",
@@ -265,27 +269,9 @@ def tracker_azimuth_range_deg(latitude_deg: float,
     geometry = TrackerGeometry()
     span = (geometry.azimuth_max_deg - geometry.azimuth_min_deg
             if span_deg is None else float(span_deg))
-    centre = 180.0 if latitude_deg >= 0 else 0.0
+    centre = equator_azimuth_deg(latitude_deg)
     return (max(centre - span / 2.0, -_AZIMUTH_JOINT_BOUND_DEG),
             min(centre + span / 2.0, _AZIMUTH_JOINT_BOUND_DEG))
-
-
-def fixed_tilt_from_latitude_deg(latitude_deg: float) -> float:
-    """Tilt [°] of a fixed array for the most yearly energy, from the latitude alone.
-
-    C. R. Landau's rule of thumb (solarpaneltilt.com, "Optimum tilt of solar panels"),
-    as GSEE implements it (``gsee.pv.optimal_tilt``; Pfenninger & Staffell, Energy 114
-    (2016) 1251–1265, doi:10.1016/j.energy.2016.08.060): 0.87 |φ| up to |φ| = 25°,
-    0.76 |φ| + 3.1° up to 50°, and 40° beyond (where the rule was not fitted). Facing
-    the equator (:func:`place_defaults`). A rule, not a site survey: the config marks it
-    as assumed.
-    """
-    lat = abs(float(latitude_deg))
-    if lat <= 25.0:
-        return round(0.87 * lat, 1)
-    if lat <= 50.0:
-        return round(0.76 * lat + 3.1, 1)
-    return 40.0
 
 
 def altitude_at_m(latitude_deg: float, longitude_deg: float) -> float:
@@ -350,7 +336,7 @@ def place_defaults(config: dict[str, Any], climate: dict[str, float] | None = No
                     f"from latitude {lat:g}°: Landau's rule as GSEE's optimal_tilt "
                     "(sim.sites.fixed_tilt_from_latitude_deg)")
             if "surface_azimuth_deg" not in arr:
-                arr["surface_azimuth_deg"] = 180.0 if lat >= 0 else 0.0
+                arr["surface_azimuth_deg"] = equator_azimuth_deg(lat)
                 assumed[f"arrays.{name}.surface_azimuth_deg"] = "facing the equator"
         tracker = out.get("tracker", {})
         has_tracker = any(isinstance(a, dict) and a.get("mount", default_mount) == "tracker"

@@ -22,7 +22,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from sim.configs import read_config
 from sim.paths import default_plants_dir
-from sim.site_config import check_iana_zone
+from sim.site_config import (
+    check_iana_zone,
+    equator_azimuth_deg,
+    fixed_tilt_from_latitude_deg,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -266,7 +270,8 @@ class Plant:
     temp_air, wind_speed : float
         Clear-sky weather [°C], [m s⁻¹].
     fixed_tilt, fixed_azimuth : float
-        Orientation of the fixed comparison plant [°].
+        Orientation of the fixed comparison plant [°] (a plant file without them: the tilt
+        from the latitude and facing the equator, :func:`plant_from_dict`).
     slope_azimuth, slope_tilt : float
         The plane ground the plant stands on, when it extends beyond the plant (a regular
         field of :mod:`sim.plant.fields`): azimuth of its downhill normal and tilt [°]. With
@@ -459,9 +464,11 @@ def plant_from_dict(d: dict[str, Any], where: str = "plant") -> Plant:
         albedo=_num(d, "albedo", where, default=0.2, lo=0, hi=1),
         temp_air=_num(d, "temp_air_c", where, default=20.0, lo=-60, hi=60),
         wind_speed=_num(d, "wind_speed_m_s", where, default=1.0, lo=0, hi=60),
-        fixed_tilt=_num(fixed, "surface_tilt_deg", f"{where}: fixed", default=30.0, lo=0, hi=90),
-        fixed_azimuth=_num(fixed, "surface_azimuth_deg", f"{where}: fixed", default=180.0,
-                           lo=0, hi=360),
+        fixed_tilt=_num(fixed, "surface_tilt_deg", f"{where}: fixed",
+                        default=fixed_tilt_from_latitude_deg(lat), lo=0, hi=90),
+        # facing the equator, as a site's fixed array (a southern plant's had faced the pole)
+        fixed_azimuth=_num(fixed, "surface_azimuth_deg", f"{where}: fixed",
+                           default=equator_azimuth_deg(lat), lo=0, hi=360),
         source=str(d.get("source", "")),
         notes=str(d.get("notes", "")),
     )

@@ -122,3 +122,20 @@ def test_bad_config_names_the_field(tmp_path: Path, edit, message: str) -> None:
     (tmp_path / "penarroya.json").write_text(json.dumps(d))
     with pytest.raises(ValueError, match=message):
         load_plant("penarroya", tmp_path)
+
+
+@pytest.mark.parametrize(("latitude_deg", "tilt_deg", "azimuth_deg"), [
+    (38.3, 32.2, 180.0),    # 0.76 · 38.3 + 3.1, facing south
+    (-23.5, 20.4, 0.0),     # 0.87 · 23.5, facing north: it faced the pole (south) before
+])
+def test_a_plant_without_fixed_compares_with_an_equator_facing_plant(
+        tmp_path: Path, latitude_deg: float, tilt_deg: float, azimuth_deg: float) -> None:
+    """A southern plant file without ``fixed`` was compared with collectors tilted 30° to the
+    south, away from the sun: its gain over the fixed plant read 114 % where 41 % was due.
+    Left out, the fixed plant takes a site's rule (Landau's tilt, facing the equator)."""
+    d = json.loads((default_plants_dir() / "penarroya.json").read_text())
+    d.pop("fixed")
+    d["latitude_deg"] = latitude_deg
+    (tmp_path / "penarroya.json").write_text(json.dumps(d))
+    plant = load_plant("penarroya", tmp_path)
+    assert (plant.fixed_tilt, plant.fixed_azimuth) == (pytest.approx(tilt_deg), azimuth_deg)
