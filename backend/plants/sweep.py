@@ -616,7 +616,10 @@ def prepare_sweep(*, gcr: Sequence[float], strategies: Sequence[str],
                                   "its polygon ({collector_polygon_m}), one of the two")
         template = load_plant("penarroya", package_dir("sim", "data", "plants")).collector
         if collector_m is not None:
-            collector = collector_from_size(collector_m[0], collector_m[1], template)
+            try:
+                collector = collector_from_size(collector_m[0], collector_m[1], template)
+            except ValueError as exc:
+                raise SweepInputError("collector_m", str(exc)) from None
         else:
             try:
                 collector = collector_from_outline(collector_polygon_m, template)

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.plant.layout import Collector, Plant, check_outline
+from sim.plant.layout import Collector, Plant, check_collector_size, check_outline
 
 FloatArray = NDArray[np.float64]
 
@@ -212,9 +212,12 @@ def interior_tracker(plant: Plant) -> int:
 def collector_from_size(width_m: float, height_m: float, template: Collector) -> Collector:
     """A ``width × height`` collector wired like ``template``: the template's module size
     (and so its power per m², orientation, bypass diodes, temperature coefficient), as many
-    modules as fit across and up (at least one), their power scaled by the area kept."""
+    modules as fit across and up (at least one), their power scaled by the area kept.
+    ``ValueError`` for a side not positive or above
+    :data:`sim.plant.layout.MAX_COLLECTOR_SIDE_M` (a size in mm taken as metres)."""
     if not (width_m > 0 and height_m > 0):
         raise ValueError(f"collector size must be positive, got {width_m} x {height_m} m")
+    check_collector_size(width_m, height_m, ("width", "height"))
     mw, mh = template.width / template.modules_across, template.height / template.modules_high
     across, high = max(1, round(width_m / mw)), max(1, round(height_m / mh))
     module_power = template.module_power * (width_m * height_m) / (across * high * mw * mh)

@@ -106,6 +106,23 @@ def check_outline(vertices: ArrayLike, where: str = "outline"
     return tuple((float(u), float(v)) for u, v in p)
 
 
+#: Largest side of a tracker's collector [m] (its bounding box): the largest dual-axis
+#: trackers built carry about 300 m² (some 25 m across); a side beyond this is a size in mm
+#: or cm taken as metres (8000x4000 gave 12 GWh a collector a year, 1.6 km² of land each).
+MAX_COLLECTOR_SIDE_M = 50.0
+
+
+def check_collector_size(width_m: float, height_m: float,
+                         keys: tuple[str, str] = ("width_m", "height_m")) -> None:
+    """``ValueError`` naming the side (``keys``: how the caller calls width and height) when
+    the collector's width or height [m] is more than :data:`MAX_COLLECTOR_SIDE_M`. The one
+    bound of a plant file's collector and a sweep's (rectangle or polygon's bounding box)."""
+    for key, side in zip(keys, (width_m, height_m), strict=True):
+        if side > MAX_COLLECTOR_SIDE_M:
+            raise ValueError(f"{key} {side:g} m is more than {MAX_COLLECTOR_SIDE_M:g} m, larger "
+                             "than any tracker's collector: give metres (not mm or cm)")
+
+
 @dataclass(frozen=True)
 class Collector:
     """A tracker's collector and its electrical layout.
@@ -385,6 +402,11 @@ def _collector(d: Any, where: str) -> Collector:
     else:
         width = _num(d, "width_m", w, positive=True)
         height = _num(d, "height_m", w, positive=True)
+    try:
+        check_collector_size(width, height, ("'width_m'", "'height_m'") if outline is None
+                             else ("'outline_m' width", "'outline_m' height"))
+    except ValueError as exc:
+        raise ValueError(f"{w}: field {exc}") from None
     return Collector(
         width=width,
         height=height,

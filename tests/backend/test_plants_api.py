@@ -465,6 +465,10 @@ def test_a_sweep_takes_numbers_as_json_numbers(client: httpx.Client, change: dic
     ({"layouts": ["triangle"]}, 422, "layouts: must be one or more of"),
     ({"strategies": ["moon"]}, 422, "strategies: must be one or more of"),
     ({"collector_m": None}, 422, "collector_m: give the collector size"),
+    # a size in mm taken as metres: 8 km × 4 km collectors, 12 GWh each a year, were run
+    ({"collector_m": "8000x4000"}, 422, "collector_m: width 8000 m is more than 50 m"),
+    ({"collector_m": None, "collector_polygon_m": [[-4, -2], [4, -2], [0, 2000]]}, 422,
+     "collector_polygon_m: height 2002 m is more than 50 m"),
     ({"start": "2021-12-20T00:00:00"}, 422, "start"),
     ({"plant_id": "nowhere"}, 404, "nowhere"),
     ({"end": "2023-12-20", "step_s": 60}, 422, "without a write token"),

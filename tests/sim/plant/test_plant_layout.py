@@ -109,6 +109,8 @@ def test_a_bad_plant_file_is_named_and_the_others_listed(tmp_path: Path) -> None
     (lambda d: d.update(latitude_deg=95), "'latitude_deg' = 95.0 outside"),
     (lambda d: d.update(timezone="Mars/Olympus"), "'timezone' 'Mars/Olympus'"),
     (lambda d: d["collector"].update(width_m=-1), "collector: field 'width_m' must be positive"),
+    (lambda d: d["collector"].update(height_m=5000), "collector: field 'height_m' 5000 m is "
+     "more than 50 m"),
     (lambda d: d["collector"].update(bypass_diodes=0), "'bypass_diodes' must be a positive"),
     (lambda d: d["trackers"][3].pop("y_m"), r"trackers\[3\]: missing field 'y_m'"),
     (lambda d: d["trackers"][1].update(tracker_id=1), "duplicate tracker_id \\[1\\]"),
