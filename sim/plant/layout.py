@@ -96,11 +96,14 @@ def check_outline(vertices: ArrayLike, where: str = "outline"
     if len(p) > 256:
         raise ValueError(f"{where}: at most 256 vertices, got {len(p)}")
     area = polygon_area(p)
-    if not abs(area) > 1e-6:
-        raise ValueError(f"{where}: the polygon has no area")
-    if not shapely.Polygon(p).is_valid:
+    polygon = shapely.Polygon(p)
+    # a crossing is told before the area: a symmetric bow tie's signed areas cancel, and it
+    # was refused as having none (its parts have: shapely's make_valid keeps them)
+    if not polygon.is_valid and (abs(area) > 1e-6 or shapely.make_valid(polygon).area > 1e-6):
         raise ValueError(f"{where}: the polygon crosses itself (give its vertices in order "
                          "around it)")
+    if not abs(area) > 1e-6:
+        raise ValueError(f"{where}: the polygon has no area")
     if area < 0:
         p = p[::-1]
     return tuple((float(u), float(v)) for u, v in p)

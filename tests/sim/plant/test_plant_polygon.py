@@ -23,7 +23,7 @@ from sim.plant.fields import (
     collector_from_size,
     lattice_positions,
 )
-from sim.plant.layout import Collector, plant_from_dict
+from sim.plant.layout import Collector, check_outline, plant_from_dict
 from sim.plant.shading import plant_shade
 from sim.plant.strategies import orientations
 from sim.plant.sweep import SweepCase, SweepSpec, case_plant, case_sky, run_case
@@ -218,3 +218,16 @@ def test_backtracking_refuses_a_polygon() -> None:
     for strategy in ("backtrack", "sky_scan"):
         with pytest.raises(ValueError, match=f"strategy '{strategy}' needs a rectangular"):
             orientations(strategy, plant, sky)
+
+
+@pytest.mark.parametrize(("outline", "problem"), [
+    # a symmetric bow tie: its two triangles' signed areas cancel, and it was refused as
+    # having "no area" (a user reordering an 8 m × 4 m collector's corners)
+    ([[-4, -2], [4, 2], [4, -2], [-4, 2]], "the polygon crosses itself"),
+    ([[0, 0], [2, 2], [2, 0], [0, 1]], "the polygon crosses itself"),   # unequal parts
+    ([[0, 0], [1, 0], [2, 0]], "the polygon has no area"),              # on one line
+])
+def test_an_outline_is_refused_for_what_is_wrong_with_it(outline: list[list[float]],
+                                                         problem: str) -> None:
+    with pytest.raises(ValueError, match=f"^collector outline: {problem}"):
+        check_outline(outline, "collector outline")
