@@ -568,6 +568,7 @@ def prepare_sweep(*, gcr: Sequence[float], strategies: Sequence[str],
     if bad or not strategies:
         raise SweepInputError("strategies", f"must be one or more of {', '.join(STRATEGIES)}, "
                               f"got {','.join(strategies) or 'nothing'}")
+    _listed_once("strategies", strategies)
     if not end > start:
         raise SweepInputError("end", "must be after start (end is exclusive)")
     try:
@@ -594,6 +595,7 @@ def prepare_sweep(*, gcr: Sequence[float], strategies: Sequence[str],
         raise SweepInputError("gcr", f"{len(gcr):,} values, more than {MAX_GCRS}")
     if any(not (0 < g < 1) for g in gcr):
         raise SweepInputError("gcr", f"every GCR must be in (0, 1), got {list(gcr)}")
+    _listed_once("gcr", [float(g) for g in gcr])
     rows, columns = field_size or REGULAR_DEFAULTS["field_size"]
     if not (1 <= rows <= 15 and 1 <= columns <= 15):
         raise SweepInputError("field_size", f"rows and columns must be 1 to 15, "
@@ -630,6 +632,7 @@ def prepare_sweep(*, gcr: Sequence[float], strategies: Sequence[str],
         if not names or any(n not in known for n in names):
             raise SweepInputError("layouts", f"must be one or more of {', '.join(known)}, "
                                   f"got {','.join(names) or 'nothing'}")
+        _listed_once("layouts", names)
         layout_custom = _custom_layout(names, custom)
         lat, lon, alt = latitude_deg, longitude_deg, float(altitude_m or 0.0)
     tz = sweep_zone(plant, timezone)
@@ -665,6 +668,18 @@ def prepare_sweep(*, gcr: Sequence[float], strategies: Sequence[str],
             what = case.layout if plant is None else f"plant {plant.plant_id}"
             raise SweepInputError(field, f"{what} at GCR {case.gcr:g}: {exc}") from None
     return spec, cases
+
+
+def _listed_once(field: str, values: Sequence[Any]) -> None:
+    """:class:`SweepInputError` naming ``field`` when a value is listed twice: its cases would
+    run twice, their rows alike (``params`` echoing it once); 10,000 times ``square`` was
+    refused as too many cases naming the GCRs. So no list passes its bound (at most 5
+    layouts and 3 strategies exist)."""
+    seen: set[Any] = set()
+    for v in values:
+        if v in seen:
+            raise SweepInputError(field, f"{v!s} is listed twice: list each once")
+        seen.add(v)
 
 
 def _custom_layout(layouts: Sequence[str],

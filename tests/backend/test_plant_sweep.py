@@ -131,9 +131,14 @@ def test_one_case_runs_in_process_as_csv(capsys: pytest.CaptureFixture[str]) -> 
      "more than 40"),
     (["--gcr", "0.1:0.3:1e-15"], "more than 40"),
     (["--gcr", ",".join(["0.2"] * 41)], "--gcr: 41 values, more than 40"),
+    # a name listed twice ran its cases twice; 10,000 times was "too many cases" on --gcr
     (["--gcr", "0.1:0.3:0.01", "--layouts", "square,diagonal,hexagonal_n_s,hexagonal_e_w,"
-      "square", "--strategy", "sun,backtrack,sky_scan,sun,backtrack,sky_scan"],
-     "--gcr: 5 layouts × 21 GCRs × 6 strategies is 630 cases, more than 600"),
+      "square", "--strategy", "sun,backtrack,sky_scan"],
+     "--layouts: square is listed twice: list each once"),
+    (["--gcr", "0.2", "--layouts", ",".join(["square"] * 10_000)],
+     "--layouts: square is listed twice"),
+    (["--gcr", "0.2", "--strategy", "sun,backtrack,sun"], "--strategy: sun is listed twice"),
+    (["--gcr", "0.2,0.3,0.20"], "--gcr: 0.2 is listed twice"),
     # a thousand worker processes on two cores hung; -1 hung; 0 was the default
     (["--gcr", "0.2,0.3", "--workers", "1000"], "--workers: 1000 is not in [1, "),
     (["--gcr", "0.2,0.3", "--workers", "0"], "--workers: 0 is not in [1, "),

@@ -463,6 +463,8 @@ def test_a_sweep_takes_numbers_as_json_numbers(client: httpx.Client, change: dic
     ({"gcr": "-0.1,0.2"}, 422, "gcr: every GCR must be in (0, 1), got [-0.1, 0.2]"),
     ({"gcr": "abc"}, 422, "gcr: expected numbers like 0.15,0.25 or 0.1:0.5:0.05"),
     ({"layouts": ["triangle"]}, 422, "layouts: must be one or more of"),
+    ({"layouts": ["square", "square"]}, 422, "layouts: square is listed twice"),
+    ({"gcr": "0.3,0.30"}, 422, "gcr: 0.3 is listed twice"),
     ({"strategies": ["moon"]}, 422, "strategies: must be one or more of"),
     ({"collector_m": None}, 422, "collector_m: give the collector size"),
     # a size in mm taken as metres: 8 km × 4 km collectors, 12 GWh each a year, were run
