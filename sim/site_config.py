@@ -259,6 +259,11 @@ def equator_azimuth_deg(latitude_deg: float) -> float:
     return 180.0 if latitude_deg >= 0 else 0.0
 
 
+#: The heights [m] a place may have (the Dead Sea shore to above any plant): a site's, a
+#: plant file's and a sweep's ``altitude_m`` (a sweep at 99,999 m had run, its energy negative).
+ALTITUDE_MIN_M, ALTITUDE_MAX_M = -500.0, 9000.0
+
+
 #: A clock (a weather file's UTC offset, a site's zone in standard time) this far from its
 #: place's mean solar time (longitude / 15° h⁻¹) [h] is most likely a mistake: a sign slip
 #: (Alice Springs' +9.5 written −9.5) or another place's zone (Europe/Berlin at 133.9° E put
@@ -321,7 +326,7 @@ class SiteConfig(BaseModel):
                              description="Name shown on the dashboard. Default: the site_id.")
     latitude_deg: float = Field(ge=-90, le=90, description="[°] latitude, north positive.")
     longitude_deg: float = Field(ge=-180, le=180, description="[°] longitude, east positive.")
-    altitude_m: float = Field(0.0, ge=-500, le=9000, description=(
+    altitude_m: float = Field(0.0, ge=ALTITUDE_MIN_M, le=ALTITUDE_MAX_M, description=(
         "[m] height above sea level (air mass, pressure). Default 0."))
     timezone: str = Field(description=(
         "IANA time zone of the site (America/Mexico_City, Etc/GMT+5): local days and display."))

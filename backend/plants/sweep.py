@@ -563,6 +563,7 @@ def prepare_sweep(*, gcr: Sequence[float], strategies: Sequence[str],
     from sim.plant.layout import load_plant
     from sim.plant.strategies import STRATEGIES, strategies_for
     from sim.plant.sweep import PLANT_LAYOUT, case_plant
+    from sim.site_config import ALTITUDE_MAX_M, ALTITUDE_MIN_M
 
     bad = [s for s in strategies if s not in STRATEGIES]
     if bad or not strategies:
@@ -613,6 +614,9 @@ def prepare_sweep(*, gcr: Sequence[float], strategies: Sequence[str],
             raise SweepInputError("latitude_deg", f"must be in [-90, 90], got {latitude_deg}")
         if not (-180 <= longitude_deg <= 180):
             raise SweepInputError("longitude_deg", f"must be in [-180, 180], got {longitude_deg}")
+        if altitude_m is not None and not (ALTITUDE_MIN_M <= altitude_m <= ALTITUDE_MAX_M):
+            raise SweepInputError("altitude_m", f"must be in [{ALTITUDE_MIN_M:g}, "  # 99,999 m
+                                  f"{ALTITUDE_MAX_M:g}] m, got {altitude_m:g}")  # gave < 0 kWh
         if (collector_m is None) == (collector_polygon_m is None):
             raise SweepInputError("collector_m", "give the collector size, e.g. 12x5, or "
                                   "its polygon ({collector_polygon_m}), one of the two")

@@ -23,6 +23,8 @@ from numpy.typing import ArrayLike, NDArray
 from sim.configs import read_config
 from sim.paths import default_plants_dir
 from sim.site_config import (
+    ALTITUDE_MAX_M,
+    ALTITUDE_MIN_M,
     check_iana_zone,
     equator_azimuth_deg,
     fixed_tilt_from_latitude_deg,
@@ -481,7 +483,8 @@ def plant_from_dict(d: dict[str, Any], where: str = "plant") -> Plant:
         name=str(d.get("name", plant_id)),
         latitude=lat,
         longitude=lon,
-        altitude=_num(d, "altitude_m", where, default=0.0, lo=-500, hi=9000),
+        altitude=_num(d, "altitude_m", where, default=0.0, lo=ALTITUDE_MIN_M,
+                      hi=ALTITUDE_MAX_M),
         timezone=tz,
         tracker_ids=tuple(ids),
         positions=positions,

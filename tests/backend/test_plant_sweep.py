@@ -112,6 +112,9 @@ def test_one_case_runs_in_process_as_csv(capsys: pytest.CaptureFixture[str]) -> 
 @pytest.mark.parametrize(("extra", "message"), [
     (["--gcr", "0.6"], "--gcr: square at GCR 0.6: gcr 0.6 outside (0, 0.3550]"),
     (["--gcr", "0.2,x"], "--gcr: expected numbers"),
+    # the request's bound; on the command line 99,999 m ran, its energy negative
+    (["--gcr", "0.2", "--altitude-m", "99999"], "--altitude-m: must be in [-500, 9000] m, "
+     "got 99999"),
     (["--gcr", "0.2", "--collector-m", "12000x5000"], "--collector-m: width 12000 m is more "
      "than 50 m, larger than any tracker's collector: give metres (not mm or cm)"),
     (["--gcr", "0.2", "--layouts", "triangle"], "--layouts: must be one or more of"),

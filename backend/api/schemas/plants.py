@@ -9,6 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from backend.api.schemas.common import JsonNumber, SunRead
 from backend.plants.sweep import MAX_GCRS, MAX_LAYOUTS, MAX_STRATEGIES
 from sim.energy import MAX_STEP_S
+from sim.site_config import ALTITUDE_MAX_M, ALTITUDE_MIN_M
 
 
 class PlantSummaryRead(BaseModel):
@@ -183,7 +184,7 @@ class SweepCreate(BaseModel):
                     "strategy sun only")
     latitude_deg: JsonNumber | None = Field(None, ge=-90, le=90)
     longitude_deg: JsonNumber | None = Field(None, ge=-180, le=180)
-    altitude_m: JsonNumber | None = Field(None, ge=-500, le=9000,
+    altitude_m: JsonNumber | None = Field(None, ge=ALTITUDE_MIN_M, le=ALTITUDE_MAX_M,
                                           description="default 0 (refused with plant_id)")
     plant_id: str | None = Field(None, max_length=100)
     timezone: str | None = Field(
