@@ -595,7 +595,8 @@ def prepare_sweep(*, gcr: Sequence[float], strategies: Sequence[str],
     if len(gcr) > MAX_GCRS:
         raise SweepInputError("gcr", f"{len(gcr):,} values, more than {MAX_GCRS}")
     if any(not (0 < g < 1) for g in gcr):
-        raise SweepInputError("gcr", f"every GCR must be in (0, 1), got {list(gcr)}")
+        raise SweepInputError("gcr", f"every GCR must be in (0, 1), got {list(gcr)}: a fraction "
+                              "of the ground, 0.3 not 30 (%)")
     _listed_once("gcr", [float(g) for g in gcr])
     rows, columns = field_size or REGULAR_DEFAULTS["field_size"]
     if not (1 <= rows <= 15 and 1 <= columns <= 15):

@@ -112,6 +112,8 @@ def test_one_case_runs_in_process_as_csv(capsys: pytest.CaptureFixture[str]) -> 
 @pytest.mark.parametrize(("extra", "message"), [
     (["--gcr", "0.6"], "--gcr: square at GCR 0.6: gcr 0.6 outside (0, 0.3550]"),
     (["--gcr", "0.2,x"], "--gcr: expected numbers"),
+    (["--gcr", "20,30"], "--gcr: every GCR must be in (0, 1), got [20.0, 30.0]: a fraction of "
+     "the ground, 0.3 not 30 (%)"),
     # the request's bound; on the command line 99,999 m ran, its energy negative
     (["--gcr", "0.2", "--altitude-m", "99999"], "--altitude-m: must be in [-500, 9000] m, "
      "got 99999"),
