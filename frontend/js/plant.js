@@ -346,7 +346,9 @@ async function drawSweep() {
     xaxis: { title: { text: "ground cover ratio [-]" }, gridcolor: "#e9edf1" },
     yaxis: { title: { text: "interior collector [MWh] (thick)" }, gridcolor: "#e9edf1" },
     // round ticks on the right too (Plotly's own fell on 112, 336, 560…: a tester's finding)
-    yaxis2: { title: { text: "interior collector per hectare [MWh/ha] (thin)" }, overlaying: "y", side: "right",
+    // short: the long "interior collector per hectare …" ran past a plot made low by a
+    // legend of two rows and was cut at both ends (a tester's screenshot)
+    yaxis2: { title: { text: "per hectare [MWh/ha] (thin)" }, overlaying: "y", side: "right",
       ...zeroBasedAxis(sweep.rows.map((r) => r.interior_energy_mwh_per_ha)) },
     hovermode: "closest",
   }), table);

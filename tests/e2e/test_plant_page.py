@@ -429,3 +429,31 @@ def test_a_running_sweep_is_cancelled_from_the_panel_and_keeps_its_finished_case
         assert "600" in page.text_content("#sweep-status")
         assert not page.is_visible("[data-testid=sweep-message]")
         assert not page.is_visible("#banner")
+
+
+def test_the_sweep_charts_axis_titles_fit_in_their_charts(page, server) -> None:  # type: ignore[no-untyped-def]
+    """Four curves (two layouts × two strategies) put the energy chart's legend on two rows;
+    its per-hectare axis title, longer than the plot was then high, was cut at both ends
+    ("terior collector per hectare [MWh/ha] (thin", a tester's screenshot): every axis title
+    of the sweep's charts lies inside its chart."""
+    page.goto(server.url + "/#plant?day=2021-12-21")
+    page.wait_for_selector('body[data-plant-loaded="penarroya/2021-12-21"]', timeout=60_000)
+    page.fill("#sweep-layouts", "square,diagonal")
+    page.fill("#sweep-gcr", "0.2,0.3")
+    page.fill("#sweep-strategies", "sun,backtrack")
+    page.fill("#sweep-step", "3600")
+    page.click("#sweep-run")
+    page.wait_for_function("() => document.body.dataset.sweepLoaded !== undefined",
+                           timeout=150_000)
+    boxes = page.evaluate("""() => ['chart-sweep-energy', 'chart-sweep-tradeoff'].flatMap(id => {
+        const svg = document.querySelector(`#${id} svg.main-svg`).getBoundingClientRect();
+        return [...document.querySelectorAll(`#${id} .g-xtitle text, #${id} .g-ytitle text,`
+                                             + ` #${id} .g-y2title text`)].map(t => {
+          const b = t.getBoundingClientRect();
+          return [id, t.textContent, b.top - svg.top, svg.bottom - b.bottom, b.left - svg.left,
+                  svg.right - b.right];
+        });
+    })""")
+    assert len(boxes) == 5, boxes          # x and y of both, and the energy chart's y2
+    for chart, title, *margins_px in boxes:
+        assert min(margins_px) >= 0, (chart, title, margins_px)
