@@ -244,7 +244,8 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
     weather : pandas.DataFrame, optional
         Covering the range (clear sky when None); ``spec.weather_token`` must name it.
     scheduler : str, optional
-        ``tcp://HOST:PORT`` of a running Dask scheduler.
+        ``tcp://HOST:PORT`` of a running Dask scheduler (``HOST:PORT`` means tcp, as to
+        Dask's ``Client``).
     n_workers : int, optional
         Workers of the ``LocalCluster`` (default: the cores, at most one per case).
     progress : callable, optional
@@ -286,6 +287,8 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
     cluster = None
     if scheduler is None:
         cluster = local_cluster(n_workers or min(cores, len(cases)))
+    elif "://" not in scheduler:  # HOST:PORT is tcp to Dask's own Client (a tester's finding)
+        scheduler = f"tcp://{scheduler}"
     if scheduler is not None:   # before the Client, whose handshake has no time bound
         reach_scheduler(scheduler, cancelled)
     try:

@@ -605,3 +605,14 @@ def test_the_text_table_says_n_a_for_an_undefined_fraction() -> None:
 
     assert [sweep_cell(v) for v in (None, 0.0, 4.94, "square")] == ["n/a", "0.0", "4.94",
                                                                      "square"]
+
+
+def test_a_scheduler_given_as_host_and_port_is_tcp(scheduler: str,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """``--scheduler 127.0.0.1:PORT``, the form Dask's own ``Client`` takes, runs on that
+    cluster (it was refused as 'no Dask scheduler address', a tester's finding)."""
+    bare = scheduler.removeprefix("tcp://")
+    code = main([*SWEEP, "--layouts", "square", "--gcr", "0.25", "--scheduler", bare, "--json"])
+    assert code == 0, capsys.readouterr().err
+    out = json.loads(capsys.readouterr().out)
+    assert out["engine"] == "dask" and out["scheduler"] == scheduler and out["cases"] == 1
