@@ -102,7 +102,7 @@ class SweepRunner:
         await asyncio.gather(*late, return_exceptions=True)
 
     def cancel(self, sweep_id: str) -> SweepState | None:
-        """Stop a queued or running sweep (a running one after its current cases)."""
+        """Stop a queued or running sweep (a running one at once, its running cases dropped)."""
         state = self._states.get(sweep_id)
         if state is not None and state.status in ("queued", "running"):
             state.cancel = True

@@ -449,7 +449,7 @@ async function runSweep(ev) {
         await sweepEnded(run);
         return;
       }
-      const stopping = sweep.stopping ? " · cancelling: it stops after its current cases" : "";
+      const stopping = sweep.stopping ? " · cancelling: the cases still running are dropped" : "";
       sweepSay({ status: `${run.status}: ${run.cases_done} of ${run.cases} cases${stopping}` });
     }
   } catch (err) {
@@ -489,8 +489,8 @@ async function sweepEnded(run) {
 }
 
 /** Cancel the sweep being followed (DELETE /api/v1/plants/sweeps/{id}; no token: the id is
- * the capability, docs/service.md). A running sweep stops after its current cases and the
- * poll then finds it ended with the cases it finished; a refused cancel is said in the
+ * the capability, docs/service.md). A running sweep stops at once (its running cases dropped) and
+ * the poll then finds it ended with the cases it finished; a refused cancel is said in the
  * panel and the button offered again. */
 async function cancelSweep() {
   const id = sweep.following;

@@ -331,8 +331,8 @@ SWEEP_CHARTS = ("chart-sweep-energy", "chart-sweep-tradeoff", "chart-sweep-shade
 def test_a_running_sweep_is_cancelled_from_the_panel_and_keeps_its_finished_cases(  # type: ignore[no-untyped-def]
         browser, server, request) -> None:
     """"Cancel sweep" (shown only while a sweep is followed) calls DELETE …/sweeps/{id} on the
-    service's own Dask LocalCluster: the sweep stops after its current cases and the panel
-    says so and draws the cases finished, which the API keeps. A refused cancel (here the
+    service's own Dask LocalCluster: the sweep stops at once (its running cases dropped) and
+    the panel says so and draws the cases finished, which the API keeps. A refused cancel (here the
     service's 404 for a sweep it no longer holds, answered once by the browser's router) is
     said in the panel and the sweep still followed, as after a poll answered 503 (a
     reviewer's finding: one failed poll dropped a running sweep); a sweep refused next

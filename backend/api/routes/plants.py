@@ -297,7 +297,7 @@ def get_sweep(sweep_id: str, runner: SweepRunnerDep) -> dict[str, Any]:
 
 @router.delete("/sweeps/{sweep_id}", response_model=SweepRunRead, responses={404: {}})
 def cancel_sweep(sweep_id: str, runner: SweepRunnerDep) -> dict[str, Any]:
-    """Cancel a queued or running sweep (a running one stops after its current cases).
+    """Cancel a queued or running sweep (a running one at once, its running cases dropped).
 
     No token is needed: the ``sweep_id`` (64 random bits, returned only to the caller
     who started the sweep) is the capability, as a simulation's ``run_id``."""
