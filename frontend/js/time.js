@@ -93,14 +93,16 @@ export function fmtDate(date) {
   return displayFormatter("UTC", "date").format(new Date(`${date}T12:00:00Z`));
 }
 
-/** Short zone name with offset, e.g. "America/Mexico_City (UTC−06:00)". */
+/** Short zone name with today's offset, e.g. "Europe/Madrid (UTC+01:00 now)": "now", as a
+ *  day shown in summer is at +02:00 there (a researcher read the winter offset over a June
+ *  day); each chart's time axis names the zone. */
 export function zoneLabel(tz) {
   const off = zoneOffsetMs(tz, Date.now()) / 60000;
   const sign = off < 0 ? "−" : "+";
   const a = Math.abs(off);
   const hh = String(Math.floor(a / 60)).padStart(2, "0");
   const mm = String(a % 60).padStart(2, "0");
-  return `${tz} (UTC${sign}${hh}:${mm})`;
+  return `${tz} (UTC${sign}${hh}:${mm} now)`;
 }
 
 /** "3 min ago" style age of an ISO instant. */

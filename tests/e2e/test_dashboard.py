@@ -10,6 +10,7 @@ any console error. Screenshots go to ``test-artifacts/``.
 from __future__ import annotations
 
 import datetime as dt
+import re
 import urllib.parse
 from pathlib import Path
 
@@ -270,3 +271,7 @@ def test_the_address_follows_the_site_picker_on_every_page(page, server) -> None
     page.reload()
     page.wait_for_selector("#sky-form")
     assert page.input_value("#site-select") == "guadalajara_fisheye"
+    # the header's offset is today's, and says so (a June day under a winter offset was
+    # read as the day's; a researcher's finding)
+    assert re.fullmatch(r"America/Mexico_City \(UTC−06:00 now\)",
+                        page.text_content("#site-tz") or ""), page.text_content("#site-tz")
