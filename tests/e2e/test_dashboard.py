@@ -59,6 +59,9 @@ def test_overview_shows_charts_with_data(page, server) -> None:
     traces = page.evaluate("() => document.getElementById('chart-power').data.map(t => t.name)")
     assert "tracker measured" in traces and "fixed measured" in traces
     assert page.locator("#tiles [data-testid=tile]").count() >= 6
+    # the gain of today is so far, and says so (at sunrise it reads several hundred percent)
+    gain_tile = page.locator("#tiles [data-testid=tile]", has_text="Gain today")
+    assert "so far" in (gain_tile.locator(".sub").text_content() or "")
     axis = page.evaluate(
         "() => document.getElementById('chart-power').layout.yaxis.title.text")
     assert "[W]" in axis
