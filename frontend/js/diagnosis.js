@@ -192,10 +192,15 @@ async function loadPointing(state, start, end, mine) {
     return;
   }
   const s = body.summary;
-  note.textContent = `${body.minutes} sunlit minutes: RMS ${num(s.rms_deg, 2)}°, 95 % under ${num(s.p95_deg, 2)}°, `
+  // readings, not minutes (a 1-s logger's 72 readings had read "72 sunlit minutes"); the
+  // encoders' own view: a mount error they cannot see is the camera's (a researcher read
+  // "cosine loss 0.00 %" beside a camera that saw 45 mrad)
+  note.textContent = `${body.minutes} readings with the sun up: RMS ${num(s.rms_deg, 2)}°, 95 % under ${num(s.p95_deg, 2)}°, `
     + `max ${num(s.max_deg, 2)}°; mean azimuth error ${num(s.mean_azimuth_error_deg, 2)}°, `
     + `elevation ${num(s.mean_elevation_error_deg, 2)}°; cosine loss ${num(s.mean_cos_loss_pct, 2)} %`
-    + (body.points_step > 1 ? ` (chart: every ${body.points_step}th minute)` : "");
+    + (body.points_step > 1 ? ` (chart: every ${body.points_step}th reading)` : "")
+    + ". The encoders' angles against the sun: a mount error they cannot see (a tilted pedestal, an"
+    + " encoder's zero) is measured by the tracker's camera, on the Pointing page.";
   // a gap (night, a dropout) breaks the lines instead of bridging it
   const gapMs = 10 * 60_000 * body.points_step;
   const x = [];

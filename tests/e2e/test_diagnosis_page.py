@@ -185,13 +185,13 @@ def test_the_panel_follows_the_site_picker_and_an_edited_address(page, server) -
         page.locator("#diagnosis-card").scroll_into_view_if_needed()
     page.wait_for_selector("[data-testid=diag-sky]", timeout=120_000)
     page.wait_for_function("() => document.getElementById('pointing-note').textContent"
-                           ".includes('sunlit minutes')", timeout=60_000)
+                           ".includes('readings with the sun up')", timeout=60_000)
     page.select_option("#site-select", camera)
     page.wait_for_selector("[data-testid=diag-no-twin]", timeout=10_000)
     assert page.locator("[data-testid=diag-sky]").count() == 0   # the old site's days gone
     # and its pointing error too (it stayed, under the camera site's name)
     page.wait_for_function("() => !document.getElementById('pointing-note').textContent"
-                           ".includes('sunlit minutes') && !document.getElementById("
+                           ".includes('readings with the sun up') && !document.getElementById("
                            "'pointing-note').textContent.startsWith('Loading')",
                            timeout=30_000)
     today = server.today()

@@ -142,11 +142,12 @@ class PointingRead(BaseModel):
     array: str | None = Field(description="the tracker array; null when the site has none")
     start: str
     end: str
-    minutes: int = Field(description="minutes with both angles and the sun up")
+    minutes: int = Field(description="readings with both angles and the sun up (one a minute "
+                                     "for a 1-minute logger; the name is kept for the contract)")
     summary: PointingSummaryRead | None
     days: list[PointingDayRead]
     points: list[PointingPointRead]
-    points_step: int = Field(description="every k-th minute is in `points`")
+    points_step: int = Field(description="every k-th reading is in `points`")
 
 
 MountTerm = Literal["azimuth_zero_deg", "elevation_zero_deg", "pedestal_tilt_north_deg",
