@@ -48,6 +48,7 @@ async function loadSelected() {
   try {
     fill(await api(`/api/v1/sites/${encodeURIComponent(st.site.site_id)}/config`));
     $("site-result").replaceChildren();
+    document.body.dataset.sitesLoaded = st.site.site_id; // the form holds this site's config
   } catch (err) {
     result(`Could not read the config: ${err.message}`, "error");
   }

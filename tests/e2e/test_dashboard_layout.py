@@ -10,18 +10,21 @@ from __future__ import annotations
 import datetime as dt
 
 import pytest
-from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from tests.e2e.conftest import ARTIFACTS, open_page
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(180)]
 
 PHONE = {"width": 390, "height": 844}
-#: What a page sets on <body> once it has drawn its data (the others draw forms, or wait for
-#: the network to go quiet).
+#: What a page shows once it has drawn its data, for every page of the tab bar: a marker on
+#: <body>, or its last chart's ``data-points`` (set when drawn or said empty: charts.js). A
+#: page without one waited for the network to go quiet, up to 10 s on a page that polls.
 LOADED = {"overview": "body[data-overview-loaded][data-report-loaded]",
+          "simulation": "#chart-sim-power[data-points]",
+          "sky": "#chart-sky-error[data-points]",
           "twin": "body[data-twin-view]", "plant": "body[data-plant-loaded]",
-          "pointing": "body[data-pointing], [data-testid=pointing-empty]:not([hidden])"}
+          "pointing": "body[data-pointing], [data-testid=pointing-empty]:not([hidden])",
+          "sites": "body[data-sites-loaded]"}
 
 
 def test_no_page_scrolls_sideways_at_phone_width(browser, server, request) -> None:  # type: ignore[no-untyped-def]
@@ -37,13 +40,8 @@ def test_no_page_scrolls_sideways_at_phone_width(browser, server, request) -> No
         for name in names:
             page.goto(f"{server.url}/#{name}")
             page.wait_for_selector(f'section.page[data-page="{name}"]:not([hidden])')
-            if name in LOADED:
-                page.wait_for_selector(LOADED[name], state="attached")
-            else:  # the network quiet, or 10 s for a page that keeps polling
-                try:
-                    page.wait_for_load_state("networkidle", timeout=10_000)
-                except PlaywrightTimeout:
-                    pass
+            assert name in LOADED, f"page {name!r}: no loaded marker in LOADED"
+            page.wait_for_selector(LOADED[name], state="attached")
             # a visible card title keeps some width (they shrank to 0 px beside a select)
             titles = page.evaluate(
                 f"""() => [...document.querySelectorAll('section.page[data-page="{name}"] '
