@@ -25,7 +25,11 @@ from sim.sites import load_site
 from sim.twin import simulate
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # the answer, not storage
 def test_sync_summary_is_the_twin_summary(client: httpx.Client) -> None:
+    """The synchronous answer is ``simulate``'s summary to 1e-9. On SQLite only: the
+    answer is computed, not read back (a run's storage on both back-ends:
+    ``test_background_run_progress_and_series``)."""
     r = client.post("/api/v1/simulations", json={"site_id": "tehuantepec",
                                                  "start": "2024-03-15", "end": "2024-03-16"})
     assert r.status_code == 200, r.text

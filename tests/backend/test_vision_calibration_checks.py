@@ -282,6 +282,7 @@ def test_parameters_a_calibration_replaces_are_refused(client: httpx.Client,
     assert r.json()["detail"] == "reference_x_px and reference_y_px go together"
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # the answer, not storage
 def test_frames_that_span_little_of_the_sky_are_said_to(client: httpx.Client) -> None:
     """Real Wolf frames with their right times: three within 12 minutes (a 2.8° arc) were
     refused as "times in the wrong zone?" (the optical centre 87.7° off), five within 22
