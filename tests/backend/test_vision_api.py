@@ -241,7 +241,7 @@ def test_a_calibration_of_12_ordinary_frames_fits_its_own_body_bound(
     frames. A calibration's body has its own bound, HELIOTWIN_VISION_MAX_BATCH_BYTES (64 MiB
     by default): the series is fitted. On SQLite only: the bound is the request's, and a
     calibration's storage on both back-ends is ``test_calibrate_then_detect_with_the_
-    calibration`` and ``test_real_wettermast_calibration_over_http`` (9 s of PostgreSQL
+    calibration`` and ``test_real_wettermast_calibration_over_http`` (4.5-5.6 s of PostgreSQL
     fitting the same 12 frames again)."""
     files, data = _noisy_wolf_series()
     assert sum(len(f[1][1]) for f in files) > 10 * 1024 * 1024 + 2**20 and len(files) == 12
