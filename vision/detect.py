@@ -53,7 +53,9 @@ Three named methods, all returning a :class:`SunDetection`:
   centroid of a complete (point-symmetric) core, or a RANSAC + least-squares
   fit to the saturated limb of a cut one (on the camera's sphere when a model
   is known; :mod:`vision.limb`). A centre is never reported off the frame or outside the
-  image circle (:func:`_inside`). A "no sun" answer says why (``reason``).
+  image circle (:func:`_inside`). A centre whose solar disc is darker than the sky and
+  nowhere at the core's level is a sun behind an obstacle, its glare seen above it: no sun
+  (:func:`_disc_behind_obstacle`). A "no sun" answer says why (``reason``).
 * ``"seed000_hsv"`` and ``"seed003_gray240"`` — the seeds' pipelines
   (:mod:`vision.seeds`), kept for comparison.
 
@@ -95,6 +97,7 @@ from vision.glare import censored_glare_centre, symmetric_glare_centre
 from vision.limb import _robust_limb_centre, contained_limb_centre
 from vision.radial import radial_symmetry_centre
 from vision.seeds import detect_seed000, detect_seed003, threshold_moments
+from vision.sphere import SUN_RADIUS_DEG
 
 __all__ = ["METHODS", "CameraModel", "FovCircle", "SunDetection", "detect_robust",
            "detect_seed000", "detect_seed003", "detect_sun", "estimate_fov",
@@ -698,6 +701,11 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
             # a fit carried beyond the frame or the image circle (an outline the frame cut):
             # the core's own centroid, the mean of pixels inside both
             cx, cy = got.best.cx, got.best.cy
+        if model is not None and _disc_behind_obstacle(gray, cx, cy, model, got):
+            found, got.p = False, 0.0
+            reason = (f"a glare cut by an obstacle, but the solar disc at its centre "
+                      f"({cx:.0f}, {cy:.0f}) px is darker than the sky: the sun is behind "
+                      "the obstacle, not visible")
     dist = None
     if found and expected_px is not None:
         dist = float(np.hypot(cx - expected_px[0], cy - expected_px[1]))
@@ -717,6 +725,39 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         features=dict(zip(conf.FEATURES, (float(v) for v in got.x), strict=True)),
         candidate_px=(float(got.best.cx), float(got.best.cy)),
     )
+
+
+_DISC_BLUR_PX = 1.0  # the solar disc's reach beyond its radius: a pixel's blur and JPEG's
+
+
+def _disc_behind_obstacle(gray: NDArray[np.uint8], cx: float, cy: float, model: CameraModel,
+                          got: _Pick) -> bool:
+    """Whether the solar disc centred at (``cx``, ``cy``) — the centre found for the glare of
+    ``got`` — is hidden behind an obstacle: no pixel within its radius
+    (:data:`vision.sphere.SUN_RADIUS_DEG` at the camera's largest local scale, plus
+    :data:`_DISC_BLUR_PX`) reaches the core's level (:func:`vision.candidates.region_threshold`)
+    and their median is darker than the sky (``got.bg``). Issue 24 item 2's positive
+    evidence against a round saturated core: the sun's disc is some 10⁵ times the sky's
+    radiance, so wherever it shows it is clipped; a glare whose centre lies on a tree or a
+    roof darker than the sky is the aureole of a sun behind it (a tester's sun behind trees
+    at the horizon, reported at 0.96: the free arc of the glare above the tree line fits a
+    circle centred behind it). A sun the horizon cuts keeps part of its disc above the
+    line, clipped, and is kept. Where the model cannot tell the scale, nothing is refused."""
+    major, _ = _local_px_per_deg(model, cx, cy)
+    if not major > 0.0:
+        return False
+    r = SUN_RADIUS_DEG * major + _DISC_BLUR_PX
+    h, w = gray.shape
+    x0, x1 = max(int(np.floor(cx - r)), 0), min(int(np.ceil(cx + r)) + 1, w)
+    y0, y1 = max(int(np.floor(cy - r)), 0), min(int(np.ceil(cy + r)) + 1, h)
+    if x1 <= x0 or y1 <= y0:
+        return False
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    disc = gray[y0:y1, x0:x1][(xx - cx) ** 2 + (yy - cy) ** 2 <= r * r]
+    if disc.size == 0:
+        return False
+    _, level = region_threshold(got.peak, got.bg)
+    return bool(int(disc.max()) <= level and float(np.median(disc)) < got.bg)
 
 
 def _inside(x: float, y: float, shape: tuple[int, ...], fov: FovCircle | None) -> bool:
