@@ -261,11 +261,11 @@ def test_guided_window_does_not_cut_a_wide_glare(offset_deg: float) -> None:
                     guided.centroid_px[1] - fr.sun_px[1]) < 1.0
 
 
-def _cut_frame(outline_px: np.ndarray) -> np.ndarray:
+def _cut_frame(outline_px: np.ndarray, ground_y: float = 690.0) -> np.ndarray:
     """A 960² fisheye frame (``FisheyeCamera(479.5, 479.5, 5.0)``), sky at 100, a saturated
     core bounded by ``outline_px`` (its radius at 360 angles about (560, 700), [px] at
     5 px/°, drawn on the camera's sphere as a glare is) with a glare falling off outside
-    it, the ground (grey 8) below y = 690 cutting the lower part of the core."""
+    it, the ground (grey 8) below y = ``ground_y`` cutting the lower part of the core."""
     cam = FisheyeCamera(479.5, 479.5, 5.0)
     yy, xx = np.mgrid[0:960, 0:960].astype(float)
     ang = (np.degrees(np.arctan2(yy - 700.0, xx - 560.0)) % 360).astype(int)
@@ -273,7 +273,7 @@ def _cut_frame(outline_px: np.ndarray) -> np.ndarray:
     view = np.nan_to_num(cam.pixel_to_direction(xx.ravel(), yy.ravel())).reshape(960, 960, 3)
     rel = np.degrees(np.arccos(np.clip(view @ sun, -1.0, 1.0))) / (outline_px[ang] / 5.0)
     lum = 100 + 155 * np.clip(1.0 / np.maximum(rel, 1e-3), 0, 1.6)
-    lum = np.where(yy > 690, 8.0, lum)
+    lum = np.where(yy > ground_y, 8.0, lum)
     lum = np.where(np.hypot(xx - 479.5, yy - 479.5) <= 0.98 * 90 * 5, lum, 0)
     g = np.clip(np.rint(lum), 0, 255).astype(np.uint8)
     return cv2.merge([g, g, g])
@@ -281,16 +281,25 @@ def _cut_frame(outline_px: np.ndarray) -> np.ndarray:
 
 def test_a_sun_cut_by_the_ground_is_round_on_its_free_arc() -> None:
     """Issue 24 item 2 (round, allowing for the horizon cutting it): a glare 8° in radius
-    with more than half of it below the ground line. Its second moments score the shape
-    0.21 (not found, 0.26); the free arc is one circle (``_cut_shape``): found, at the
-    disc's centre (the contained circle of the free arc: the ground's edge is no limb,
-    ``vision.detect._true_limb``; measured 0.04 px, 0.45 px when the ground's edge was
-    in the limb fits), where a bright patch with lobes cut the same way keeps its ragged
-    arc (shape 0.30)."""
+    cut by the ground line. With more than half of it below the line its second moments
+    score the shape 0.21; the free arc is one circle (``_cut_shape``): found, at the
+    disc's centre while the disc shows (the contained circle of the free arc: the ground's
+    edge is no limb, ``vision.detect._true_limb``; measured 0.04 px, 0.45 px when the
+    ground's edge was in the limb fits), where a bright patch with lobes cut the same way
+    keeps its ragged arc (shape 0.30).
+
+    With the ground 2° above the disc's centre (y = 690) the disc itself is hidden: the
+    glare above the ground is the aureole of a sun behind it, no visible sun
+    (``vision.detect._disc_behind_obstacle``; reported at the hidden centre before it). The
+    round glare is found with the ground 0.2° below the centre (y = 701), the disc's upper
+    part above it (measured 0.05 px)."""
     cam = FisheyeCamera(479.5, 479.5, 5.0)
-    d = detect_robust(_cut_frame(np.full(360, 40.0)), camera=cam)
+    d = detect_robust(_cut_frame(np.full(360, 40.0), ground_y=701.0), camera=cam)
     assert d.sun_found and d.features["shape"] >= 0.95, d.features
     assert np.hypot(d.centroid_px[0] - 560.0, d.centroid_px[1] - 700.0) <= 0.3
+    d = detect_robust(_cut_frame(np.full(360, 40.0)), camera=cam)
+    assert not d.sun_found and d.features["shape"] >= 0.95, d.features
+    assert "behind the obstacle" in str(d.reason)
     lobes = 40.0 * (1.0 + 0.35 * np.sin(np.radians(5 * np.arange(360))))
     d = detect_robust(_cut_frame(lobes), camera=cam)
     assert d.features["shape"] < 0.4, d.features
