@@ -100,6 +100,7 @@ class _Candidate:
     glare: float = 0.0  # set by _score(): the glare evidence 0–1
     wide: float = 0.0  # set by _score(): a wide core's own glare credit 0–1
     shape: float = 0.0  # set by the detector: the shape term 0–1
+    upright: float = 0.0  # set by _prior(): the shape term without the lens's squash allowed
     ghost: bool = False
     ox: int = 0  # where the label image (a region of interest) starts in the frame
     oy: int = 0
@@ -157,13 +158,34 @@ def _clusters(stats: NDArray[Any], cents: NDArray[Any], order: NDArray[np.int64]
     return out
 
 
-def _shape(c: _Candidate, labels: NDArray[Any]) -> float:
+_STRETCHES = np.linspace(0.0, 1.0, 17)  # the radial un-compressions tried, 0 → the most
+
+
+def _aspect(mu20: float, mu02: float, mu11: float) -> float:
+    """``√(λ2/λ1)`` of a second-moment matrix."""
+    half_tr = 0.5 * (mu20 + mu02)
+    disc = np.sqrt(max(half_tr**2 - (mu20 * mu02 - mu11**2), 0.0))
+    return float(np.sqrt(max(half_tr - disc, 1e-6) / max(half_tr + disc, 1e-6)))
+
+
+def _shape(c: _Candidate, labels: NDArray[Any],
+           circle: tuple[float, float, float] | None = None) -> float:
     """Circularity 0–1 from the cluster's second moments.
 
     ``aspect = √(λ2/λ1)`` and ``fill = A / (4π√(λ1 λ2))`` (1 for a filled disc);
     thin spikes (a flare streak, blooming) barely move them, ragged or
     elongated cloud edges do.
-    """
+
+    With ``circle`` (the fisheye's image circle: centre x, y and radius, px) the aspect is
+    the roundest the region becomes when stretched along the radius from the circle's centre
+    by any factor from 1 to the most a fisheye compresses a small disc there: a lens maps
+    the sky's zenith angle θ to a radius r(θ), drawing a disc r′(θ) / (r(θ) / sin θ) times as
+    wide along the radius as across it; of the common projections the orthographic one
+    (r ∝ sin θ: cos θ, to 0 at its 90° rim) compresses most, so at ρ / R of a 180° circle
+    the factor is at least √(1 − (ρ/R)²). An equidistant lens draws the sun at 10° elevation
+    0.64 times as wide along the radius (within the 0.75 allowed), an equisolid one 0.51 and an
+    orthographic one 0.17 (a tester's lenses, refused as "not round"). The stretch keeps the
+    fill (area and √(λ1 λ2) both scale by it)."""
     if c.area < 5:
         return 1.0
     m = cv2.moments(c.mask(labels), True)
@@ -173,6 +195,20 @@ def _shape(c: _Candidate, labels: NDArray[Any]) -> float:
     l1, l2 = half_tr + disc, max(half_tr - disc, 1e-6)
     aspect = float(np.sqrt(l2 / l1))
     fill = c.area / (4.0 * np.pi * np.sqrt(l1 * l2))
+    if circle is not None and aspect < 0.75:
+        ox, oy, radius = circle
+        gx, gy = c.cx, c.cy
+        rho = float(np.hypot(gx - ox, gy - oy))
+        if rho > 0.0:
+            most = 1.0 / max(np.sqrt(max(1.0 - (rho / radius) ** 2, 0.0)), 1e-3)
+            ux, uy = (gx - ox) / rho, (gy - oy) / rho  # the radial direction
+            # the moments along the radius (a), across it (cc) and their covariance (b)
+            a = ux * ux * mu20 + 2 * ux * uy * mu11 + uy * uy * mu02
+            cc = uy * uy * mu20 - 2 * ux * uy * mu11 + ux * ux * mu02
+            b = (mu02 - mu20) * ux * uy + mu11 * (ux * ux - uy * uy)
+            for t in _STRETCHES[1:]:
+                k = most ** t
+                aspect = max(aspect, _aspect(k * k * a, cc, k * b))
     return min(1.0, aspect / 0.75) * _clamp(fill / 0.85, 0.0, 1.0)
 
 
@@ -230,12 +266,15 @@ def _core(c: _Candidate, labels: NDArray[Any]) -> _Candidate | None:
                       c.y + float(cents[i, 1]), ox=c.ox, oy=c.oy, core=core)
 
 
-def _prior(c: _Candidate, labels: NDArray[Any], diam: float) -> tuple[float, float]:
+def _prior(c: _Candidate, labels: NDArray[Any], diam: float,
+           circle: tuple[float, float, float] | None = None) -> tuple[float, float]:
     """``(shape term, size term)`` of the score: cheap, so computed for every candidate.
 
     A candidate that is not a clean disc is narrowed to its core
     (:func:`_core`) when the core is the cleaner disc: a sun with blooming or
-    smear along its columns is a disc with spikes.
+    smear along its columns is a disc with spikes. With ``circle`` (a fisheye's image
+    circle) the shape term allows for the lens squashing a disc along the radius
+    (:func:`_shape`); ``c.upright`` keeps the term without that allowance.
     """
     raw = _shape(c, labels)
     if raw < 0.95 and c.area >= 30:
@@ -246,7 +285,9 @@ def _prior(c: _Candidate, labels: NDArray[Any], diam: float) -> tuple[float, flo
                 c.area, c.x, c.y, c.w, c.h = core.area, core.x, core.y, core.w, core.h
                 c.cx, c.cy, c.core = core.cx, core.cy, core.core
                 raw = core_shape
-    shape = _clamp((raw - 0.45) / 0.4, 0.0, 1.0)
+    shape = c.upright = _clamp((raw - 0.45) / 0.4, 0.0, 1.0)
+    if circle is not None and raw < 1.0:  # a disc the lens squashed along the radius
+        shape = _clamp((_shape(c, labels, circle) - 0.45) / 0.4, 0.0, 1.0)
     min_area = max(4.0, np.pi * (0.0025 * diam) ** 2)
     return shape, _clamp(c.area / min_area, 0.25, 1.0)
 

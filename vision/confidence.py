@@ -57,8 +57,11 @@ FEATURES: tuple[str, ...] = (
                               # disc), 0 when unknown: never counts against a plain disc
 )
 """What the logistic model sees (issue 24 item 2): the sun is a region at or near
-saturation, round (allowing for the projection: the second moments of an oval fisheye disc
-stay near 1), brighter than the sky, of a size a sun with its glare can have at this px/°.
+saturation, round (allowing for the projection: the region's aspect is taken along the
+radius from the image circle's centre up to the most a fisheye squashes a disc there —
+an orthographic lens's cos θ — for a free core with the sun's glare,
+:func:`vision.candidates._shape`), brighter than the sky, of a size a sun with its glare
+can have at this px/°.
 A saturated core degrees wide counts as glare and as radially symmetric by its width alone
 (``glare``, ``coherence``): on the Wolf frames a round saturated core on a bright clear
 sky has no ring-shaped fall-off, and the model before issue 24 (fitted without a Wolf

@@ -315,7 +315,9 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
                     "(a glint or a speck, not the sun)")
     # after that rule: a speck it refused took a slot of the few scored below (a reviewer's
     # finding: a sun behind a branch among six specks was never scored)
-    priors = {id(c): _prior(c, labels, diam) for c in cands}
+    # a fisheye's image circle: the disc a low sun is drawn as, squashed along the radius
+    circle = None if fov is None else (fov.cx_px, fov.cy_px, fov.radius_px)
+    priors = {id(c): _prior(c, labels, diam, circle) for c in cands}
 
     def near(c: _Candidate) -> float:
         if expected_px is None or not prefer_near:
@@ -328,10 +330,23 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
     for c in cands:
         c.shape = priors[id(c)][0]
         if id(c) in ranked:
+            # the lens's squash along the radius allowed (vision.candidates._prior) only a
+            # free disc — a core an obstacle cuts (a sun behind trees) is judged on its free
+            # arc — with the sun's glare (below): a sunlit roof at the rim is as oval as a
+            # low sun there (a Wolf frame with its sun occulted, 0.90 without it)
+            squashed = c.shape > c.upright
+            if squashed and _cut_outline(c, labels, gray, bg, fov):
+                c.shape, squashed = c.upright, False
             if c.shape < 1.0 and c.area >= _SMALL_AREA_PX:
                 c.shape = max(c.shape, _cut_shape(c, labels, gray, bg, model))
             c.score = _score(c, gray, c.shape, priors[id(c)][1], peak, bg, fov, diam, ppd,
                              scale_known, image)
+            if squashed and c.glare < conf.SMALL_CORE_GLARE:
+                c.shape = c.upright
+                if c.area >= _SMALL_AREA_PX:
+                    c.shape = max(c.shape, _cut_shape(c, labels, gray, bg, model))
+                c.score = _score(c, gray, c.shape, priors[id(c)][1], peak, bg, fov, diam,
+                                 ppd, scale_known, image)
     cands.sort(key=lambda c: -c.score * near(c))
     best = cands[0]
     runner = max((c.score for c in cands[1:]), default=0.0) / max(best.score, 1e-9)
@@ -1006,6 +1021,17 @@ def _cut_by_obstacle(gray: NDArray[np.uint8], pts: NDArray[Any], bg: float, r_eq
     if float(np.mean(cut)) < _CUT_SHARE:
         cut[:] = False
     return cut
+
+
+def _cut_outline(c: _Candidate, labels: NDArray[Any], gray: NDArray[np.uint8], bg: float,
+                 fov: FovCircle | None) -> bool:
+    """Whether an obstacle cuts the core of ``c`` (:func:`_cut_by_obstacle` on its outline;
+    the unlit frame beyond the image circle ``fov`` is none)."""
+    contours, _ = cv2.findContours(c.mask(labels), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return False
+    pts = np.vstack(contours).reshape(-1, 2).astype(float) + (c.x, c.y)
+    return bool(_cut_by_obstacle(gray, pts, bg, float(np.sqrt(c.area / np.pi)), fov).any())
 
 
 def _cut_shape(c: _Candidate, labels: NDArray[Any], gray: NDArray[np.uint8], bg: float,

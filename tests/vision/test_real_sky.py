@@ -130,6 +130,63 @@ def test_a_sun_whose_disc_an_obstacle_hides_is_not_reported(real_sky) -> None:
     assert np.hypot(d.centroid_px[0] - bx, d.centroid_px[1] - by) <= 0.01 * w
 
 
+def _as_tilted_orthographic(img: np.ndarray, sun_x: float, sun_y: float, tilt_deg: float
+                            ) -> tuple[np.ndarray, float, float]:
+    """The frame as a 180° orthographic lens (r ∝ sin θ) tilted ``tilt_deg`` away from the
+    sun would draw it, and the sun's pixel there: the input read as an equidistant 180° lens
+    on its image circle (``vision.fov.estimate_fov``, a 2 % margin), every output pixel's
+    direction rotated back into it (cv2.remap, bilinear). The sun moves toward the rim, where
+    an orthographic lens squashes it along the radius to cos θ of its width."""
+    fov = estimate_fov(to_gray(img))
+    cx, cy, r_in = fov.cx_px, fov.cy_px, fov.radius_px / 0.98
+    h, w = img.shape[:2]
+    phi = np.arctan2(sun_y - cy, sun_x - cx)
+    axis = np.array([-np.sin(phi), np.cos(phi), 0.0])
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    t = np.radians(tilt_deg)
+    rot = np.eye(3) + np.sin(t) * k + (1 - np.cos(t)) * k @ k
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    ox, oy, r_out = (w - 1) / 2, (h - 1) / 2, 0.47 * min(w, h)
+    rho = np.hypot(xx - ox, yy - oy) / r_out
+    th = np.arcsin(np.clip(rho, 0.0, 1.0))
+    ph = np.arctan2(yy - oy, xx - ox)
+    v = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1) @ rot
+    th_in = np.arccos(np.clip(v[..., 2], -1.0, 1.0))
+    ph_in = np.arctan2(v[..., 1], v[..., 0])
+    ok = (rho <= 1.0) & (th_in <= np.pi / 2)
+    r = th_in / (np.pi / 2) * r_in
+    mx = np.where(ok, cx + r * np.cos(ph_in), -10.0).astype(np.float32)
+    my = np.where(ok, cy + r * np.sin(ph_in), -10.0).astype(np.float32)
+    out = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                    borderValue=(0, 0, 0))
+    th_s = np.hypot(sun_x - cx, sun_y - cy) / r_in * np.pi / 2
+    s = rot @ np.array([np.sin(th_s) * np.cos(phi), np.sin(th_s) * np.sin(phi), np.cos(th_s)])
+    rs = np.sin(np.arccos(s[2])) * r_out
+    ps = np.arctan2(s[1], s[0])
+    return out, float(ox + rs * np.cos(ps)), float(oy + rs * np.sin(ps))
+
+
+@pytest.mark.parametrize("name", ["Wolf_20160530_094400", "Wolf_20160530_100100",
+                                  "Wolf_20160530_103100"])
+def test_a_low_sun_squashed_by_an_orthographic_lens_is_round_enough(real_sky, name) -> None:
+    """Issue 24 item 2, round *allowing for the projection*: a real sun re-projected through
+    a 180° orthographic lens tilted 35° away from it (77–83° from the axis, drawn 0.12–0.22
+    times as wide along the radius as across it) was refused as "not round (circularity
+    0.00)"; the region's aspect is now taken along the radius up to the most a fisheye
+    compresses there (``vision.candidates._shape``), for a free core with the sun's glare.
+    Found with confidence ≥ 0.5. Its centre is not yet where a person would put it: 23–27 px
+    (1.2–1.4 % of the width) from the sun re-projected by the same chain — the limb fit runs
+    on the sphere of an equidistant lens guessed from the image circle
+    (docs/validation-vision.md); bounded here at 2 %. Not met: hazy Wettermast 09:39 so
+    re-projected (glare evidence under ``vision.confidence.SMALL_CORE_GLARE``) stays refused."""
+    (r,) = [r for r in real_sky if r["filename"].startswith(name)]
+    img, tx, ty = _as_tilted_orthographic(cv2.imread(r["path"]), float(r["sun_col_label"]),
+                                          float(r["sun_row_label"]), 35.0)
+    d = detect_robust(img)
+    assert d.sun_found and d.confidence >= 0.5, (d.confidence, d.reason)
+    assert np.hypot(d.centroid_px[0] - tx, d.centroid_px[1] - ty) <= 0.02 * img.shape[1]
+
+
 def test_frames_without_a_sun_get_no_confident_sun(real_sky, detections) -> None:
     """UCEEB (overcast), EUROCONTROL overcast, FE3 (sun behind altocumulus): confidence < 0.3."""
     rows = [r for r in real_sky if r["sun_visible"] == "0"]
