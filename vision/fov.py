@@ -114,7 +114,11 @@ def _fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None,
     else:
         corner_dark = corner_level
     lifted = False  # the corners passed only as a lifted black behind a sharp rim
-    if centre_level < 20.0:
+    # the centre lit: at 20 grey levels, or 10 levels and twice above the unlit corners (a
+    # darkened frame: the EUROCONTROL low sun at gain 0.4, its sky at 17 over corners at 3-4,
+    # lost its circle and with it the scale camera=fisheye alone needs)
+    if centre_level < 20.0 and (centre_level - corner_level < 10.0
+                                or centre_level < 2.0 * corner_level):
         return None
     # the unlit level the lifted-black test reads: the corners' mean, or their 90th
     # percentile when overlay text lifts the mean

@@ -187,6 +187,30 @@ def test_a_low_sun_squashed_by_an_orthographic_lens_is_round_enough(real_sky, na
     assert np.hypot(d.centroid_px[0] - tx, d.centroid_px[1] - ty) <= 0.02 * img.shape[1]
 
 
+@pytest.mark.parametrize(("gain", "gamma"), [(0.4, 1.0), (0.7, 1.4)])
+def test_a_darkened_low_sun_frame_keeps_its_image_circle(real_sky, gain, gamma) -> None:
+    """Issue 24 item 4 (any exposure) on the EUROCONTROL low sun: darkened so that the sky
+    in the middle of the frame is at 15–17 grey levels over corners at 1–4, it lost its image
+    circle to an absolute "centre lit to ≥ 20" rule (``vision.fov``), and with it the scale
+    that ``camera=fisheye`` alone needs: the service and the CLI refused the frame
+    ("px_per_deg: required"). A centre 10 levels and twice above the unlit corners is lit.
+    The circle found is within 0.5 % of the width of the full exposure's (measured: centre
+    1.3 and 10.1 px, radius 4.7 and 7.6 px; the rim's contrast falls), and the sun,
+    detected blind, within 1 % of the width of the direction maps' truth (1377, 313;
+    measured 8.5–8.7 px, 8.4 at the full exposure)."""
+    (r,) = [r for r in real_sky if r["camera"] == "EUROCONTROL" and r["sun_visible"] == "1"]
+    img = cv2.imread(r["path"])
+    full = estimate_fov(to_gray(img))
+    dark = _exposed(img, gain, gamma)
+    fov = estimate_fov(to_gray(dark))
+    assert fov is not None
+    assert np.hypot(fov.cx_px - full.cx_px, fov.cy_px - full.cy_px) <= 0.005 * img.shape[1]
+    assert abs(fov.radius_px - full.radius_px) <= 0.005 * img.shape[1]
+    d = detect_robust(dark)
+    assert d.sun_found and d.confidence >= 0.5, (d.confidence, d.reason)
+    assert np.hypot(d.centroid_px[0] - 1377.0, d.centroid_px[1] - 313.0) <= 0.01 * img.shape[1]
+
+
 def test_frames_without_a_sun_get_no_confident_sun(real_sky, detections) -> None:
     """UCEEB (overcast), EUROCONTROL overcast, FE3 (sun behind altocumulus): confidence < 0.3."""
     rows = [r for r in real_sky if r["sun_visible"] == "0"]
