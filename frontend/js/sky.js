@@ -549,6 +549,9 @@ async function loadCalibrations() {
 export function init(state) {
   st = state;
   $("sky-files").addEventListener("change", onFiles);
+  // files chosen before this page was ready (its module starts after the site list has come)
+  // raised no change it heard: "Detect the sun" then said to choose images already chosen
+  if ($("sky-files").files.length) onFiles();
   $("sky-camera").addEventListener("change", () => {
     const cam = $("sky-camera").value;
     for (const box of document.querySelectorAll(".cam-params")) box.hidden = box.dataset.camera !== cam;

@@ -235,6 +235,28 @@ def test_sky_calibration_from_timestamped_frames(page, server) -> None:
     page.screenshot(path=str(ARTIFACTS / "sky-calibration.png"), full_page=True)
 
 
+def test_images_chosen_before_the_sky_page_is_ready_are_detected(page, server) -> None:  # type: ignore[no-untyped-def]
+    """A file chosen while the page still waits for the site list (its module starts after it)
+    raised a change no one heard: "Detect the sun" said "Choose one or more images first"
+    over the chosen file (a CI run under load). The page takes the files already chosen."""
+    frame = sorted(REAL_SKY.glob("Wettermast_*.jpg"))[0]
+    held: list = []
+    page.route("**/api/v1/sites", lambda route: held.append(route))
+    page.goto(server.url + "/#sky", wait_until="domcontentloaded")
+    while not held:          # the site list asked for, and held: the Sky page not yet started
+        page.wait_for_timeout(20)
+    page.set_input_files("#sky-files", str(frame))
+    for route in held:
+        route.continue_()
+    page.unroute("**/api/v1/sites")
+    page.wait_for_selector("#chart-sky-error[data-points]", state="attached")
+    page.select_option("#sky-place", "coords")
+    page.fill('#sky-coords [name="latitude_deg"]', "53.519917")
+    page.fill('#sky-coords [name="longitude_deg"]', "10.105139")
+    page.click("#sky-detect")
+    page.wait_for_selector("[data-testid=sky-result][data-sun-found=true]", timeout=60_000)
+
+
 def test_simulation_runs_from_the_browser(page, server) -> None:
     page.goto(server.url + "/#simulation")
     page.wait_for_selector("#sim-form")

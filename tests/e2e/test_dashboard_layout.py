@@ -181,6 +181,7 @@ def test_the_sky_map_is_readable_at_phone_width(browser, server, request) -> Non
     with open_page(browser, request, timeout_ms=90_000) as page:
         page.set_viewport_size(PHONE)
         page.goto(f"{server.url}/#sky")
+        page.wait_for_selector(LOADED["sky"], state="attached")
         page.set_input_files("#sky-files", str(frame))
         page.select_option("#sky-place", "coords")
         page.fill("#sky-coords input[name=latitude_deg]", "53.52")
