@@ -86,6 +86,7 @@ from vision.candidates import (
     _ring_values,
     _rings,
     _score,
+    _shape,
     _symmetry,
     _weighted_centroid,
     _white_core,
@@ -109,6 +110,11 @@ _SMALL_AREA_PX = 30  # below: intensity-weighted centroid only; above: also a li
 _HALO_DROP = 0.97  # a glare: (peak − ring at 1.6 R) < this × (peak − ring at 4 R)
 _CONTAINED_MIN_INLIERS = 0.3  # share of the limb on the contained circle to trust it
 _FOV_EDGE_PX = 2.5  # outline points this close to the image circle's edge lie on the edge
+#: The least solidity (area / convex hull's area) of a cut core completed by its mirror
+#: image (:func:`_mirrored_shape`): the real suns' uncut cores of grey ≥ 250 on the
+#: development split (Wolf, Wettermast) are 0.81–0.97; a cloud patch with 5 lobes of ± 35 %
+#: of its radius (tests/vision/test_detect.py) 0.73
+_MIRROR_SOLIDITY = 0.8
 _CUT_SHARE = 0.1  # a core with this share of its outline on the image circle's edge is cut
 _CUT_TRIALS = 512  # RANSAC triples of the contained fit of a cut core (a 20 % arc: P(miss) 2 %)
 _ROUND_SPREAD_PX = 1.5  # a core whose outline spans ≤ this + 5 % of R in radius is round
@@ -1042,7 +1048,11 @@ def _cut_shape(c: _Candidate, labels: NDArray[Any], gray: NDArray[np.uint8], bg:
     outline on one circle — on the sphere of ``model`` when given, where a fisheye's oval of
     a low sun is a circle (RANSAC, Fischler & Bolles 1981;
     :func:`vision.limb._robust_limb_centre`) — on the scale of the circularity term
-    (:func:`vision.candidates._prior`); else 0. A sun low behind trees keeps a round arc
+    (:func:`vision.candidates._prior`); or, when higher, the circularity term itself of the
+    core completed by its mirror image across the cut (:func:`_mirrored_shape`) — as strict
+    as the test of an uncut core, which a real glare's ragged outline passes by its moments
+    and not by a circle within a pixel or two (the EUROCONTROL low sun: 0.61 of its whole
+    outline on one circle, moments 1.0); else 0. A sun low behind trees keeps a round arc
     above them; a cloud highlight cut by a tree top does not."""
     # the whole cluster's outline (not the core it was narrowed to: vision.candidates._prior)
     full = (labels == c.labels[0]) if len(c.labels) == 1 else np.isin(labels, c.labels)
@@ -1058,9 +1068,52 @@ def _cut_shape(c: _Candidate, labels: NDArray[Any], gray: NDArray[np.uint8], bg:
     if not cut.any() or int(np.count_nonzero(~cut)) < 12:
         return 0.0
     x, y, _, share = _robust_limb_centre(pts[~cut], model)
-    if not _inside(x, y, gray.shape, None):
-        return 0.0  # a circle centred off the frame: no centre the detector would report
-    return float(min(max((share - 0.45) / 0.4, 0.0), 1.0))
+    arc = 0.0
+    if _inside(x, y, gray.shape, None):  # else a circle centred off the frame: no centre
+        arc = float(min(max((share - 0.45) / 0.4, 0.0), 1.0))
+    if arc >= 1.0 or int(np.count_nonzero(cut)) < 2:
+        return arc
+    return max(arc, _mirrored_shape(full.astype(np.uint8), c.ox, c.oy, pts[cut]))
+
+
+def _mirrored_shape(mask: NDArray[np.uint8], ox: int, oy: int, cut_pts: NDArray[np.float64]
+                    ) -> float:
+    """The circularity term (:func:`vision.candidates._shape`, on the scale of
+    :func:`vision.candidates._prior`) of a cut core ``mask`` (its label image's pixels, the
+    image starting at ``(ox, oy)`` in the frame) joined with its mirror image across the
+    straight line fitted to its cut outline points ``cut_pts`` [N, 2]: symmetry completion of
+    an occluded shape (Zabrodsky, Peleg & Avnir, CVPR 1993). A disc cut through its centre
+    completes to the disc, one cut short of its centre to a disc a little longer across the
+    cut. The largest piece is judged (a cluster's ghost or speck is left out); when it
+    holds under 80 % of the union (the mirror image apart from the core: a cut line beside
+    it), or is less solid than :data:`_MIRROR_SOLIDITY` (lobes), the term is 0."""
+    vx, vy, x0, y0 = (float(v) for v in cv2.fitLine(cut_pts.astype(np.float32), cv2.DIST_L2,
+                                                     0, 0.01, 0.01).ravel())
+    ys, xs = np.nonzero(mask)
+    if xs.size < 5:
+        return 0.0
+    pad = int(max(np.ptp(xs), np.ptp(ys))) + 2
+    bx, by = int(xs.min()) - pad, int(ys.min()) - pad  # a box that holds the mirror image
+    w, h = int(np.ptp(xs)) + 2 * pad + 1, int(np.ptp(ys)) + 2 * pad + 1
+    box = np.zeros((h, w), np.uint8)
+    box[ys - by, xs - bx] = 1
+    # the reflection across the line through (x0, y0) along (vx, vy), in the box's pixels
+    refl = np.array([[2 * vx * vx - 1, 2 * vx * vy], [2 * vx * vy, 2 * vy * vy - 1]])
+    p0 = np.array([x0 - ox - bx, y0 - oy - by])
+    warp = np.hstack([refl, (p0 - refl @ p0)[:, None]])
+    both = cv2.bitwise_or(box, cv2.warpAffine(box, warp, (w, h), flags=cv2.INTER_NEAREST))
+    _, lab, stats, cents = cv2.connectedComponentsWithStats(both, connectivity=8)
+    i = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    x, y, bw, bh, area = (int(v) for v in stats[i])
+    if area < 0.8 * int(np.count_nonzero(both)):
+        return 0.0  # the core and its mirror image apart: the cut line lies beside the core
+    # a mirror image is symmetric by construction, so its moments are blind to lobes (a
+    # cloud patch's); its solidity is not (area / its convex hull's)
+    hull = cv2.convexHull(np.argwhere(lab == i)[:, ::-1].astype(np.int32))
+    if area < _MIRROR_SOLIDITY * cv2.contourArea(hull):
+        return 0.0
+    whole = _Candidate([i], area, x, y, bw, bh, float(cents[i][0]), float(cents[i][1]))
+    return float(min(max((_shape(whole, lab) - 0.45) / 0.4, 0.0), 1.0))
 
 
 def _limb_points(c: _Candidate, labels: NDArray[Any]) -> NDArray[np.float64]:

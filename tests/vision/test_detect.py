@@ -286,7 +286,8 @@ def test_a_sun_cut_by_the_ground_is_round_on_its_free_arc() -> None:
     disc's centre while the disc shows (the contained circle of the free arc: the ground's
     edge is no limb, ``vision.detect._true_limb``; measured 0.04 px, 0.45 px when the
     ground's edge was in the limb fits), where a bright patch with lobes cut the same way
-    keeps its ragged arc (shape 0.30).
+    keeps its ragged arc (shape 0.30) and, completed by its mirror image across the ground
+    (``vision.detect._mirrored_shape``), is a lobed shape (solidity 0.73).
 
     With the ground 2° above the disc's centre (y = 690) the disc itself is hidden: the
     glare above the ground is the aureole of a sun behind it, no visible sun
