@@ -18,7 +18,12 @@ Three named methods, all returning a :class:`SunDetection`:
   glare itself, when it still lights the sky at 4 core radii:
   :func:`vision.candidates._tail`). What a sun is (issue 24 item 2): a region at or near
   saturation (≥ 250, or a flat clipped top at any level: a darkened frame),
-  round, brighter than the sky. A region smaller than the solar disc where it lies
+  round, brighter than the sky — or, when no region at the top is the disc's size (a
+  neutral-density filter or a short exposure keeps the sun unclipped: item 4, any
+  exposure), the one region at half the peak's contrast (the full width at half maximum)
+  of the solar disc's size at the camera's scale, holding the peak, with a dark sky around
+  it, centred by its intensity-weighted centroid (:func:`_unclipped_disc`). A region
+  smaller than the solar disc where it lies
   is no candidate (:func:`vision.confidence.smaller_than_the_disc`: a glint);
   a candidate that is not saturated or has a
   shape no sun has gets probability 0 (:func:`vision.confidence.admissible`);
@@ -205,6 +210,7 @@ class _Pick:
     x: NDArray[np.float64]
     p: float
     values: dict[str, float]
+    unclipped: bool = False  # the sun's disc read unclipped (:func:`_unclipped_disc`)
 
 
 def px_per_deg_of(camera: CameraModel | None, fov: FovCircle | None, width_px: int) -> float:
@@ -253,32 +259,11 @@ def _local_px_per_deg(model: CameraModel, x: float, y: float) -> tuple[float, fl
     return float(major / np.degrees(step)), float(minor / np.degrees(step))
 
 
-def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
-            fov: FovCircle | None, diam: float, centre: tuple[float, float],
-            ppd: float, expected_px: tuple[float, float] | None,
-            prefer_near: bool = True, scale_known: bool = True,
-            image: NDArray[Any] | None = None, model: CameraModel | None = None
-            ) -> _Pick | str:
-    """Candidates in ``work`` (the frame, masked and cropped), the winner and its probability;
-    or a reason.
 
-    With ``prefer_near`` the candidates are ranked by their score weighted by their
-    nearness to ``expected_px`` (the search around the prediction); without it by their
-    score alone (the blind search), the distance entering only the confidence. ``image``:
-    the frame in colour, for the white core of a wide glare (:func:`_score`); ``model``:
-    the camera, or the image circle's approximate one, for the arc of a cut core
-    (:func:`_cut_shape`)."""
-    bg = small_bg
-    # each row's brightest pixel: the peak, then the bright pixels' bounding box from it
-    row_max = work.pixels.max(axis=1) if work.pixels.size else np.zeros(1, np.uint8)
-    peak = _clip_level(work, row_max, float(row_max.max()), image)
-    contrast = peak - bg
-    if contrast < 20.0:
-        return f"no bright region: the brightest pixel is {max(contrast, 0):.0f} grey levels " \
-               "above the sky"
-    # components only inside the bright pixels' bounding box (most frames: a small box);
-    # the region keeps the pixels above ``level`` (vision.candidates.region_threshold)
-    thr, level = region_threshold(peak, bg)
+def _regions(gray: NDArray[np.uint8], work: _Region, row_max: NDArray[np.uint8], level: int,
+             centre: tuple[float, float]) -> tuple[NDArray[Any], list[_Candidate], int] | str:
+    """The bright regions of ``work`` above ``level`` → ``(labels, candidates, ghosts)``:
+    connected components, lens-flare ghosts marked, clusters grouped; or a reason."""
     rows = np.flatnonzero(row_max > level)
     if rows.size == 0:
         return "no bright region above the threshold"
@@ -307,18 +292,130 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
                                                             c.y + c.h - 1, fh, fw)]
     ghosts = _mark_ghosts(singles, centre, sources)
     real = np.array([c.labels[0] for c in singles if not c.ghost], dtype=np.int64)
-    cands = _clusters(stats, cents, real, ox, oy)
+    return labels, _clusters(stats, cents, real, ox, oy), ghosts
+
+
+#: An unclipped disc's region at half its contrast (the full width at half maximum) spans
+#: this share of the solar disc's radius at least, less the pixel grid's √2/2: limb darkening
+#: I(μ) = 1 − u (1 − μ) puts the half level at 0.99 of the radius for u = 0.6 (the visible
+#: band's; an edge 0.4 of the centre), 0.93 for u = 0.8 (the blue's), a little inside that
+#: when noise raises the peak the level is taken from
+_UNCLIPPED_MIN_RADIUS = 0.85
+#: … and at most this share of it plus a pixel (a lens's blur of a pixel or two, the grid):
+#: a glare that reaches half the disc's contrast is a saturated sun's, not this one's
+_UNCLIPPED_MAX_RADIUS = 1.3
+#: … and the sky around it, at 2-3 radii, stays below this share of its contrast: the disc is
+#: some 10⁵ times the sky, so a filter that keeps its centre unclipped leaves the sky dark
+_UNCLIPPED_RING = 0.25
+#: An unclipped disc is centred by its intensity-weighted centroid above this share of its
+#: contrast: the whole disc's light, limb included (its top alone, the clipped core's 80 %,
+#: was 0.122 mrad RMS against 0.046 on a 4.5-px disc; docs/validation-vision.md)
+_UNCLIPPED_CENTROID_SHARE = 0.1
+
+
+def _unclipped_disc(gray: NDArray[np.uint8], work: _Region, row_max: NDArray[np.uint8],
+                    peak: float, bg: float, centre: tuple[float, float], model: CameraModel
+                    ) -> tuple[NDArray[Any], list[_Candidate], int] | str:
+    """The sun a neutral-density filter or a short exposure keeps under the sensor's top
+    (issue 24 item 4: any exposure), when no region at the top is as large as the solar
+    disc → the regions with the disc alone, or why there is none.
+
+    Its top is smaller than the disc (limb darkening), so the regions are cut again at half
+    the peak's contrast over the sky (the full width at half maximum, which limb darkening
+    puts at the disc's edge). The sun is the one region there whose size is the solar disc's
+    at the camera's scale (its radius between :data:`_UNCLIPPED_MIN_RADIUS` of the disc's,
+    less the grid's √2/2, and :data:`_UNCLIPPED_MAX_RADIUS` of it and a pixel), that holds
+    the frame's peak, and around which the sky at 2-3 radii stays under
+    :data:`_UNCLIPPED_RING` of the contrast. A glint or a speck is smaller than the disc at
+    half its contrast too, a bright cloud larger or in a bright surround; roundness is then
+    judged as for any core."""
+    contrast = peak - bg
+    level = int(np.floor(bg + 0.5 * contrast - 0.5))
+    got = _regions(gray, work, row_max, level, centre)
+    if isinstance(got, str):
+        return got
+    labels, cands, ghosts = got
+    clip = "not clipped" if peak < _SATURATED else "at the sensor's top"
+    sized, large = [], []
+    for c in cands:
+        major, minor = _local_px_per_deg(model, c.cx, c.cy)
+        rho1, rho2 = SUN_RADIUS_DEG * major, SUN_RADIUS_DEG * minor
+        half = np.sqrt(0.5)
+        if c.area < np.pi * max(_UNCLIPPED_MIN_RADIUS * rho1 - half, 0.0) * max(
+                _UNCLIPPED_MIN_RADIUS * rho2 - half, 0.0):
+            continue
+        if c.area > np.pi * (_UNCLIPPED_MAX_RADIUS * rho1 + 1.0) * (
+                _UNCLIPPED_MAX_RADIUS * rho2 + 1.0) and major > 0.0:
+            large.append((c, rho1))
+            continue
+        sized.append(c)
+    if not sized and large:
+        c, rho1 = large[0]
+        r_eq = float(np.sqrt(c.area / np.pi))
+        return (f"the brightest region (peak {peak:.0f} of 255, {clip}) is {2 * r_eq:.0f} px "
+                f"across at half its contrast, where the solar disc is {2 * rho1:.0f} px at "
+                "the camera's scale: too large for the sun's disc unless the field of view "
+                "(fov_deg) is narrower than the one used")
+    if not sized:
+        if peak < _SATURATED:
+            return (f"the brightest region (peak {peak:.0f} of 255) is not clipped and, at "
+                    "half its contrast over the sky, smaller than the solar disc where it "
+                    "lies: a glint or a speck, not the sun")
+        return ("every bright region is smaller than the solar disc where it lies "
+                "(a glint or a speck, not the sun)")
+    if len(sized) > 1:
+        return (f"{len(sized)} regions the solar disc's size above half the contrast of the "
+                f"brightest (peak {peak:.0f} of 255, {clip}): none stands out as the sun")
+    c = sized[0]
+    if float(gray[c.y:c.y + c.h, c.x:c.x + c.w].max()) < region_threshold(peak, bg)[0]:
+        return (f"the region the solar disc's size at half the brightest's contrast (peak "
+                f"{peak:.0f} of 255, {clip}) does not hold that peak: no sun stands out")
+    r_eq = float(np.sqrt(c.area / np.pi))
+    ring = _rings(gray, c.cx, c.cy, (2.0 * r_eq + 2.0, 3.0 * r_eq + 3.0), None)
+    values = np.concatenate(ring) if ring else np.zeros(0)
+    if values.size < 8 or float(np.median(values)) > bg + _UNCLIPPED_RING * contrast:
+        return (f"the brightest region (peak {peak:.0f} of 255, {clip}) is the solar disc's "
+                "size at half its contrast but not far brighter than the sky around it: "
+                "not the sun's disc")
+    return labels, [c], ghosts
+
+def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
+            fov: FovCircle | None, diam: float, centre: tuple[float, float],
+            ppd: float, expected_px: tuple[float, float] | None,
+            prefer_near: bool = True, scale_known: bool = True,
+            image: NDArray[Any] | None = None, model: CameraModel | None = None
+            ) -> _Pick | str:
+    """Candidates in ``work`` (the frame, masked and cropped), the winner and its probability;
+    or a reason.
+
+    With ``prefer_near`` the candidates are ranked by their score weighted by their
+    nearness to ``expected_px`` (the search around the prediction); without it by their
+    score alone (the blind search), the distance entering only the confidence. ``image``:
+    the frame in colour, for the white core of a wide glare (:func:`_score`); ``model``:
+    the camera, or the image circle's approximate one, for the arc of a cut core
+    (:func:`_cut_shape`)."""
+    bg = small_bg
+    # each row's brightest pixel: the peak, then the bright pixels' bounding box from it
+    row_max = work.pixels.max(axis=1) if work.pixels.size else np.zeros(1, np.uint8)
+    peak = _clip_level(work, row_max, float(row_max.max()), image)
+    contrast = peak - bg
+    if contrast < 20.0:
+        return f"no bright region: the brightest pixel is {max(contrast, 0):.0f} grey levels " \
+               "above the sky"
+    thr, level = region_threshold(peak, bg)
+    got_regions = _regions(gray, work, row_max, level, centre)
+    if isinstance(got_regions, str):
+        return got_regions
+    labels, cands, ghosts = got_regions
+    unclipped = False
     if scale_known and model is not None:  # a core smaller than the solar disc is no sun
         cands = [c for c in cands if not conf.smaller_than_the_disc(
             c.area, *_local_px_per_deg(model, c.cx, c.cy))]
         if not cands:
-            if peak < _SATURATED:  # the rule's premise, a sun clipped to the top, is not met
-                return (f"the brightest region (peak {peak:.0f} of 255) is not clipped and, "
-                        "at its top, smaller than the solar disc: a sun the exposure or a "
-                        "filter keeps under the sensor's top is not read (the detector needs "
-                        "the sun's disc clipped; docs/validation-vision.md), or a glint")
-            return ("every bright region is smaller than the solar disc where it lies "
-                    "(a glint or a speck, not the sun)")
+            disc = _unclipped_disc(gray, work, row_max, peak, bg, centre, model)
+            if isinstance(disc, str):
+                return disc
+            (labels, cands, ghosts), thr, unclipped = disc, float(bg + 0.5 * contrast), True
     # after that rule: a speck it refused took a slot of the few scored below (a reviewer's
     # finding: a sun behind a branch among six specks was never scored)
     # a fisheye's image circle: the disc a low sun is drawn as, squashed along the radius
@@ -361,8 +458,10 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
     if expected_px is not None:
         eph = float(np.hypot(best.cx - expected_px[0], best.cy - expected_px[1])) / ppd
     radius_deg = r_eq / ppd
-    saturated = float(peak >= _SATURATED or (best.area >= _PLATEAU_MIN_PX
-                                              and _clipped(gray, best, labels, peak)))
+    # an unclipped disc of the sun's size, round and alone above half its contrast
+    # (_unclipped_disc) stands where the clipped core stands: the disc, read whole
+    saturated = float(unclipped or peak >= _SATURATED or (
+        best.area >= _PLATEAU_MIN_PX and _clipped(gray, best, labels, peak)))
     # a saturated core degrees wide that is a glare (vision.candidates._score: `wide`) has
     # no gradient inside the window (the Wolf frames' coherence is 0.02–0.06): its width
     # stands for the symmetry — wholly when it is 1, the most a coherence can be (a share of
@@ -385,7 +484,7 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
               "radius_deg": radius_deg, "coherence": coherence,
               "ephemeris_deg": eph if eph is not None else float("nan")}
     return _Pick(best, work, labels, peak, bg, thr, len(cands), ghosts, x, conf.probability(x),
-                 values)
+                 values, unclipped)
 
 
 #: How far above a clipped plateau JPEG's ringing may reach [grey levels]: on the real
@@ -717,7 +816,8 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
             cx, cy, radius = white
         else:
             cx, cy, radius = _refine(gray, got.work, got.labels, got.best, got.peak, got.bg,
-                                     got.thr, camera, fallback, fov)
+                                     got.thr, camera, fallback, fov,
+                                     _UNCLIPPED_CENTROID_SHARE if got.unclipped else 0.8)
         if not _inside(cx, cy, gray.shape, fov):
             # a fit carried beyond the frame or the image circle (an outline the frame cut):
             # the core's own centroid, the mean of pixels inside both
@@ -1181,8 +1281,8 @@ def _true_limb(gray: NDArray[np.uint8], work: _Region, pts: NDArray[np.float64],
 
 def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
             c: _Candidate, peak: float, bg: float, thr: float, camera: CameraModel | None,
-            fallback: CameraModel | None = None, fov: FovCircle | None = None
-            ) -> tuple[float, float, float]:
+            fallback: CameraModel | None = None, fov: FovCircle | None = None,
+            share: float = 0.8) -> tuple[float, float, float]:
     """Sub-pixel centre of the winning cluster → (x, y, radius_px).
 
     A core with a glare around it, given a fisheye model (or ``fallback``, an
@@ -1205,10 +1305,10 @@ def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
     circle) as before: a complete blob —
     point-symmetric about its centroid (:func:`_symmetry` ≥ 0.9): a disc, an
     oval, a disc with blooming or flare spikes on both sides — gets the
-    intensity-weighted centroid of a disc window above 80 % of the way from the
-    local background to the peak. A blob cut by the horizon, a mast or an
-    overlay, or merged with a cloud on one side, gets the limb fit
-    (:func:`_robust_limb_centre`): on the sphere of ``camera`` when one is
+    intensity-weighted centroid of a disc window above ``share`` (80 %) of the way from the
+    local background to the peak (an unclipped disc's: :data:`_UNCLIPPED_CENTROID_SHARE`).
+    A blob cut by the horizon, a mast or an overlay, or merged with a cloud on one side,
+    gets the limb fit (:func:`_robust_limb_centre`): on the sphere of ``camera`` when one is
     given, else in the image — or on the sphere of ``fallback`` when that puts
     more of the limb on one circle.
     """
@@ -1240,7 +1340,7 @@ def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
     pad = max(3.0, 0.5 * r_eq + 2.0)
     ring = _ring_values(gray, c.cx, c.cy, r_eq + pad + 1.0, None)
     local_bg = _median(ring) if ring.size else bg
-    level = local_bg + 0.8 * (peak - local_bg)
+    level = local_bg + share * (peak - local_bg)
     got_c = _weighted_centroid(gray, c.cx, c.cy, r_eq + pad, level)
     wx, wy = got_c if got_c is not None else (c.cx, c.cy)
     if c.area < _SMALL_AREA_PX:
