@@ -11,13 +11,16 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from vision.cameras import FisheyeCamera, PinholeCamera
+from vision.candidates import _median, _ring_values, region_threshold
 from vision.detect import detect_sun
+from vision.fov import to_gray
 from vision.metrics import wrap_deg
-from vision.sphere import angular_separation_deg
+from vision.sphere import SUN_RADIUS_DEG, angular_separation_deg
 
 
 def finite(v: Any) -> float | None:
@@ -47,6 +50,52 @@ def sun_down_reason(elevation_deg: float, found_px: tuple[float, float] | None) 
     return (f"the ephemeris puts the sun {-elevation_deg:.1f}° below the horizon at this time "
             f"and place, so no sun can be in the frame: {what}; if the sun really is in the "
             f"frame, the time (its zone) or the place is wrong")
+
+
+#: A saturated core whose edge drops this share of its contrast within 2 px of it is the
+#: sun's disc itself: a glare that saturates beyond the disc falls off over degrees (the
+#: synthetic tracker frames' 0.4-2° glares drop 0.25-0.55 there, haze 0.2-0.25)
+SHARP_EDGE_DROP = 0.6
+#: … and such a disc this many times the solar disc's radius at the camera's scale is drawn
+#: at another scale: blur and the pixel grid add a pixel (1.02-1.2 times on the tester's
+#: discs at the right scale); a field of view half the one used makes it 2
+SCALE_RATIO = 2.0
+
+
+def disc_scale_warning(image: NDArray[Any], centroid_px: tuple[float, float],
+                       cam: PinholeCamera) -> str | None:
+    """A warning when the sun found at ``centroid_px`` is a sharp-edged disc (the disc itself,
+    not a glare: its edge drops :data:`SHARP_EDGE_DROP` of the contrast within 2 px) more
+    than :data:`SCALE_RATIO` times the solar disc's radius at ``cam``'s scale — a camera whose
+    field of view was not given, read at the default 67° (a tester's 1280 × 960 camera of 20°:
+    offsets 3.7 times too large, a mount fit 6.8° off in azimuth, and no word). A glare only
+    grows a core, so only a larger, sharp-edged one is looked at; a warning, not a refusal:
+    the offsets are still given. None when nothing is wrong."""
+    gray = to_gray(image)
+    peak, bg = float(gray.max()), float(np.median(gray))
+    x, y = (int(round(v)) for v in centroid_px)
+    h, w = gray.shape
+    if not (0 <= x < w and 0 <= y < h) or peak - bg < 20.0:
+        return None
+    mask = (gray > region_threshold(peak, bg)[1]).astype(np.uint8)
+    if not mask[y, x]:
+        return None
+    _, labels = cv2.connectedComponents(mask, connectivity=8)
+    area = float(np.count_nonzero(labels == labels[y, x]))
+    r_eq = float(np.sqrt(area / np.pi))
+    rho = cam.focal_px * float(np.tan(np.radians(SUN_RADIUS_DEG)))
+    ring = _ring_values(gray, centroid_px[0], centroid_px[1], r_eq + 2.0, None)
+    if ring.size < 8 or r_eq <= SCALE_RATIO * rho:
+        return None
+    if (peak - _median(ring)) / (peak - bg) < SHARP_EDGE_DROP:
+        return None
+    focal = r_eq / float(np.tan(np.radians(SUN_RADIUS_DEG)))
+    implied = float(np.degrees(2.0 * np.arctan(0.5 * cam.width_px / focal)))
+    return (f"fov_deg: the sun's disc is {2 * r_eq:.0f} px across with a sharp edge (the disc "
+            f"itself, not a glare), {r_eq / rho:.1f} times the {2 * rho:.0f} px a field of "
+            f"view of {cam.fov_deg:g}° gives it: the frame looks like a field of view near "
+            f"{implied:.0f}° and the offsets about {r_eq / rho:.1f} times too large; give the "
+            "camera's fov_deg")
 
 
 def ephemeris_block(cam: PinholeCamera | FisheyeCamera, azimuth_deg: float,

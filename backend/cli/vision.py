@@ -235,6 +235,11 @@ def detect(args: argparse.Namespace) -> dict[str, Any]:
     out["timestamp_source"] = frame.timestamp_source
     out["place_source"] = place_source
     out["warnings"] = error_warnings(out, None if cal is None else cal["max_deg"])
+    if isinstance(cam, PinholeCamera) and args.fov_deg is None and out.get("centroid_px"):
+        from vision.analyse import disc_scale_warning
+        scale = disc_scale_warning(img, tuple(out["centroid_px"]), cam)
+        out["warnings"] = ([] if scale is None else [scale.replace("fov_deg", "--fov-deg")])\
+            + out["warnings"]
     if args.calibration_id is not None:
         out["calibration_id"] = args.calibration_id
     if args.calibration_file is not None:

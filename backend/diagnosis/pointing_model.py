@@ -41,7 +41,7 @@ from sim.pointing_model import (
     predict_offsets_mrad,
 )
 from sim.sun import solar_position
-from vision.analyse import analyse_frame
+from vision.analyse import analyse_frame, disc_scale_warning
 from vision.cameras import PinholeCamera
 
 #: The readings' fields an observation must carry: the encoder angles and both sun offsets.
@@ -272,10 +272,13 @@ def offsets_from_pixel_mrad(camera: PinholeCamera, x_px: float, y_px: float
     return 1000.0 * float(np.arctan2(d @ h, dn)), 1000.0 * float(np.arctan2(d @ u, dn))
 
 
-def frame_offsets(image: np.ndarray, camera: PinholeCamera) -> dict[str, Any]:
+def frame_offsets(image: np.ndarray, camera: PinholeCamera, fov_given: bool = True
+                  ) -> dict[str, Any]:
     """Find the sun in a tracker-camera frame (:func:`vision.analyse.analyse_frame`, the
     robust detector) and give its offsets: ``sun_offset_x_mrad``, ``sun_offset_y_mrad``,
-    ``confidence`` (the detector's calibrated probability) and ``centroid_px``.
+    ``confidence`` (the detector's calibrated probability), ``centroid_px`` and ``warnings``:
+    with ``fov_given`` false (the default 67° used), one naming ``fov_deg`` when the sun's
+    disc is drawn at another scale (:func:`vision.analyse.disc_scale_warning`).
 
     No sun found (overcast, the sun outside the frame, a glare without a disc) is a 422
     on ``file`` with the detector's reason: nothing is observed.
@@ -286,5 +289,7 @@ def frame_offsets(image: np.ndarray, camera: PinholeCamera) -> dict[str, Any]:
                               "nothing was stored")
     x, y = found["centroid_px"]
     ox, oy = offsets_from_pixel_mrad(camera, x, y)
+    warning = None if fov_given else disc_scale_warning(image, (x, y), camera)
     return {"sun_offset_x_mrad": ox, "sun_offset_y_mrad": oy,
-            "confidence": float(found["confidence"]), "centroid_px": [float(x), float(y)]}
+            "confidence": float(found["confidence"]), "centroid_px": [float(x), float(y)],
+            "warnings": [] if warning is None else [warning]}

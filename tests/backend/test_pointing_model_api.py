@@ -363,3 +363,45 @@ def test_a_pixel_off_the_reference_gives_the_offsets_of_the_definition() -> None
     x, y = offsets_from_pixel_mrad(centred, 319.5 + 100.0, 239.5 - 50.0)
     f = centred.focal_px
     assert (x, y) == pytest.approx((1000 * np.arctan(100 / f), 1000 * np.arctan(50 / f)))
+
+
+def _narrow_frame_png(width: int, height: int, fov_deg: float, x: float, y: float) -> bytes:
+    """A tracker camera of ``fov_deg`` with no filter: the sun's disc (limb darkened, 4000
+    grey levels at its centre: clipped to its sharp edge) and a faint glare on a sky of 60,
+    drawn 8 × 8 supersampled around the disc."""
+    f = 0.5 * width / np.tan(np.radians(fov_deg) / 2.0)
+    r_px = f * np.tan(np.radians(0.2666))
+    ss, reach = 8, int(np.ceil(r_px)) + 3
+    x0, y0, n = int(x) - reach, int(y) - reach, 2 * reach + 1
+    yy, xx = np.mgrid[0:n * ss, 0:n * ss].astype(np.float64)
+    rho = np.hypot(x0 + (xx + 0.5) / ss - 0.5 - x, y0 + (yy + 0.5) / ss - 0.5 - y) / r_px
+    mu = np.sqrt(np.clip(1.0 - rho**2, 0.0, 1.0))
+    disc = np.zeros((height, width))
+    disc[y0:y0 + n, x0:x0 + n] = np.where(rho <= 1.0, 0.4 + 0.6 * mu, 0.0).reshape(
+        n, ss, n, ss).mean((1, 3))
+    rr = np.hypot(*np.meshgrid(np.arange(width) - x, np.arange(height) - y)) / r_px
+    grey = np.clip(60.0 + 4000.0 * disc + 64.0 / (1.0 + (rr / 3.0) ** 2), 0, 255)
+    ok, png = cv2.imencode(".png", grey.astype(np.uint8))
+    assert ok
+    return png.tobytes()
+
+
+def test_a_camera_sent_without_its_field_of_view_is_warned_about(
+        client: httpx.Client, ingest_token: str) -> None:
+    """A tester's 1280 × 960 camera of 20° posted without ``fov_deg`` was read at the default
+    67°: offsets 3.7 times too large and no word, though its sharp-edged disc is 3.8 times
+    the one 67° draws. The answer now warns, naming fov_deg and the field of view the disc
+    implies; with fov_deg given, no warning."""
+    png = _narrow_frame_png(1280, 960, 20.0, 700.3, 420.6)
+    fields = {"azimuth_deg": 150.0, "elevation_deg": 60.0, "power_w": 500.0}
+    r = _post_frame(client, ingest_token, png, ts="2021-10-15T11:00:00-06:00", **fields)
+    assert r.status_code == 200, r.text
+    (warning,) = r.json()["warnings"]
+    assert warning.startswith("fov_deg:") and "near 20°" in warning, warning
+    r = _post_frame(client, ingest_token, png, ts="2021-10-15T11:05:00-06:00", fov_deg=20.0,
+                    **fields)
+    assert r.status_code == 200 and r.json()["warnings"] == [], r.text
+    # the product's own tracker frames (a glare saturated to 0.8°) at 67°: no warning
+    r = _post_frame(client, ingest_token, _frame_png(3.0, -2.0, seed=1),
+                    ts="2021-10-15T11:10:00-06:00", **fields)
+    assert r.status_code == 200 and r.json()["warnings"] == [], r.text

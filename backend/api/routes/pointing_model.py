@@ -223,7 +223,8 @@ def _observe(data: Any, params: dict[str, object], max_pixels: int) -> dict[str,
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
     assert isinstance(camera, PinholeCamera)
-    return frame_offsets(image, camera)
+    fov_given = str(params.get("fov_deg") or "").strip() != ""
+    return frame_offsets(image, camera, fov_given)
 
 
 @router.post("/{site_id}/pointing-model/observations", response_model=PointingObservationRead,
@@ -287,4 +288,4 @@ async def post_pointing_observation(site_id: str, request: Request, ctx: Context
         site_id=site_id, array=tracker.name, ts=iso_utc([stored.stored_through_s])[0],
         azimuth_deg=float(np.mod(reading["azimuth_deg"], 360.0)),
         elevation_deg=reading["elevation_deg"], confidence=found["confidence"],
-        centroid_px=found["centroid_px"], **offsets)
+        centroid_px=found["centroid_px"], warnings=found["warnings"], **offsets)

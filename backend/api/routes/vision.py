@@ -105,6 +105,7 @@ from backend.vision.store import (
     list_calibrations,
     list_detections,
 )
+from vision.analyse import disc_scale_warning
 from vision.calibrate import CALIBRATION_PASSES
 from vision.cameras import (
     EAST_SIDES,
@@ -166,6 +167,16 @@ def _not_a_file(name: str, v: object) -> None:
     if isinstance(v, UploadFile):
         raise HTTPException(422, f"{name}: sent as a file ({_cut(v.filename or '')}); send "
                                  f"it as a text field")
+
+
+def _scale_warnings(found: tuple[Any, Any], cam: object, fov_text: str | None) -> list[str]:
+    """A pinhole camera sent without ``fov_deg`` whose sun's disc belies the default 67°
+    (:func:`vision.analyse.disc_scale_warning`), as a one-item list; else none."""
+    image, centroid = found
+    if not isinstance(cam, PinholeCamera) or fov_text or centroid is None:
+        return []
+    warning = disc_scale_warning(image, (float(centroid[0]), float(centroid[1])), cam)
+    return [] if warning is None else [warning]
 
 
 def _text(form: FormData, name: str) -> str | None:
@@ -450,11 +461,13 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
         ts = frame.timestamp
         oriented = is_oriented(stored is not None, _text(form, "north_offset_deg"))
         res = await anyio.to_thread.run_sync(analyse, img, cam, method, ts, place, oriented)
+        scale = await anyio.to_thread.run_sync(_scale_warnings, (img, res.get("centroid_px")),
+                                                cam, _text(form, "fov_deg"))
         del img
     if frame.camera_derived is not None:
         res["camera_derived"] = frame.camera_derived
     res["timestamp_source"] = frame.timestamp_source
-    res["warnings"] = error_warnings(res, None if cal is None else cal["max_deg"])
+    res["warnings"] = scale + error_warnings(res, None if cal is None else cal["max_deg"])
     row = detection_row(res, ts, place, cal_id)
     det_id = await _store_detection(ctx, row, anonymous=_token is None)
     res.update({"detection_id": det_id, "calibration_id": cal_id, "timestamp": iso(ts),

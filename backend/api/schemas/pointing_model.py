@@ -99,3 +99,6 @@ class PointingObservationRead(BaseModel):
     confidence: float = Field(description="the detector's calibrated probability that the "
                                           "blob is the sun")
     centroid_px: list[float] = Field(description="the sun's centroid [x, y] in the frame [px]")
+    warnings: list[str] = Field(default_factory=list,
+                                description="plain-language doubts about the frame (a field "
+                                            "of view not given that the sun's disc belies)")
