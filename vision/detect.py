@@ -354,8 +354,8 @@ def _unclipped_disc(gray: NDArray[np.uint8], work: _Region, row_max: NDArray[np.
         r_eq = float(np.sqrt(c.area / np.pi))
         return (f"the brightest region (peak {peak:.0f} of 255, {clip}) is {2 * r_eq:.0f} px "
                 f"across at half its contrast, where the solar disc is {2 * rho1:.0f} px at "
-                "the camera's scale: too large for the sun's disc unless the field of view "
-                "(fov_deg) is narrower than the one used")
+                "the camera's scale: too large for the sun's disc — a bright cloud, or the "
+                "sun through a field of view (fov_deg) narrower than the one used")
     if not sized:
         if peak < _SATURATED:
             return (f"the brightest region (peak {peak:.0f} of 255) is not clipped and, at "
