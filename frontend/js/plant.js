@@ -100,13 +100,20 @@ async function drawShadeDay() {
   });
 }
 
+/** The plant's ground cover ratio (PlantRead.gcr): collector area over the ground it covers. */
+function gcrTile(p) {
+  return tile("Ground cover ratio", p.gcr == null ? "—" : num(p.gcr, 3),
+    p.gcr == null ? "fewer than 3 trackers: no ground area"
+      : `collector area / ${num(p.land_m2 / 1e4, 2)} ha of ground`);
+}
+
 async function drawStrategies() {
   const s = view.day.strategies;
   if (!view.day.times.length) {  // a polar night: no energy to compare (a tester's finding:
     // empty axes and a "0.0 %" shaded tile from 100 × null)
     showEmpty("chart-plant-strategies", "No daylight on this day.");
     $("plant-summary").replaceChildren(tile("Trackers", String(view.plant.trackers.length), view.plant.name),
-      tile("Daylight shaded", "—", "no daylight on this day"));
+      gcrTile(view.plant), tile("Daylight shaded", "—", "no daylight on this day"));
     return;
   }
   // PlantDayRead: the strategies the plant can take (PlantRead.strategies) and fixed
@@ -126,6 +133,7 @@ async function drawStrategies() {
   const sun = s.sun;
   box.append(
     tile("Trackers", String(view.plant.trackers.length), view.plant.name),
+    gcrTile(view.plant),
     tile("Shading loss (sun)", `${num(sun.shading_loss_electrical_pct, 2)} %`, `bypass diodes; ${num(sun.shading_loss_area_pct, 2)} % by area`),
     tile("Daylight shaded", sun.fraction_of_daylight_any_shaded == null ? "—"
       : `${num(100 * sun.fraction_of_daylight_any_shaded, 1)} %`, "of steps, any collector"),

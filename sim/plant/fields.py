@@ -29,7 +29,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.plant.layout import Collector, Plant, check_collector_size, check_outline
+from sim.plant.layout import (
+    Collector,
+    Plant,
+    check_collector_size,
+    check_outline,
+    plant_gcr,
+    plant_land_m2,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -156,30 +163,6 @@ def regular_field(layout: FieldLayout, collector: Collector, latitude: float,
         slope_azimuth=layout.slope_azimuth_deg, slope_tilt=layout.slope_tilt_deg,
         source="Cumpston & Pye 2014 regular field (sim.plant.fields)")
     return plant, interior
-
-
-def plant_land_m2(plant: Plant) -> float:
-    """Ground of an irregular plant [m²]: its pivots' convex hull grown by half the median
-    nearest-neighbour distance r (Steiner's formula: hull area + perimeter·r + π r²).
-
-    For an n × n square lattice of spacing L this is n²L² − (1 − π/4)L², the lattice's
-    own ground less the rounded corners; it scales as the square of the spacing.
-    """
-    from scipy.spatial import ConvexHull
-
-    xy = plant.positions[:, :2]
-    if len(xy) < 3:
-        raise ValueError("a plant needs at least 3 trackers to have a ground area")
-    gaps = np.linalg.norm(xy[:, None] - xy[None], axis=-1)
-    np.fill_diagonal(gaps, np.inf)
-    r = float(np.median(gaps.min(axis=1))) / 2
-    hull = ConvexHull(xy)                              # 2-D: volume = area, area = perimeter
-    return float(hull.volume + hull.area * r + np.pi * r * r)
-
-
-def plant_gcr(plant: Plant) -> float:
-    """Ground cover ratio of a plant: N · collector area / :func:`plant_land_m2` [-]."""
-    return plant.n_trackers * plant.collector.area / plant_land_m2(plant)
 
 
 def scaled_plant(plant: Plant, gcr: float) -> Plant:

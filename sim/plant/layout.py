@@ -353,9 +353,48 @@ class Plant:
                  "up_m": float(p[2])}
                 for tid, p in zip(self.tracker_ids, self.positions, strict=True)
             ],
+            "gcr": plant_gcr(self) if self.n_trackers >= 3 else None,
+            "land_m2": plant_land_m2(self) if self.n_trackers >= 3 else None,
             "source": self.source,
             "notes": self.notes,
         }
+
+
+def plant_land_m2(plant: Plant) -> float:
+    """Ground of an irregular plant [m²]: its pivots' convex hull grown by half the median
+    nearest-neighbour distance r (Steiner's formula: hull area + perimeter·r + π r²).
+
+    For an n × n square lattice of spacing L this is n²L² − (1 − π/4)L², the lattice's
+    own ground less the rounded corners; it scales as the square of the spacing. A single
+    row is a segment of length L: 2L·r + π r² (its hull had raised a ``QhullError``).
+    """
+    from scipy.spatial import ConvexHull, QhullError
+
+    xy = plant.positions[:, :2]
+    if len(xy) < 3:
+        raise ValueError("a plant needs at least 3 trackers to have a ground area")
+    gaps = np.linalg.norm(xy[:, None] - xy[None], axis=-1)
+    length = float(gaps.max())
+    np.fill_diagonal(gaps, np.inf)
+    r = float(np.median(gaps.min(axis=1))) / 2
+    try:
+        hull = ConvexHull(xy)                          # 2-D: volume = area, area = perimeter
+        area, perimeter = float(hull.volume), float(hull.area)
+    except QhullError:                                 # one row: a segment
+        area, perimeter = 0.0, 2 * length
+    return area + perimeter * r + np.pi * r * r
+
+
+def plant_gcr(plant: Plant) -> float:
+    """Ground cover ratio of a plant: N · collector area / :func:`plant_land_m2` [-]."""
+    return plant.n_trackers * plant.collector.area / plant_land_m2(plant)
+
+
+#: Lowest ground cover ratio of a plant file (:func:`plant_gcr`). Built plants of dual-axis
+#: trackers lie at about 0.1–0.6 (Peñarroya I: 0.14); 0.02 leaves a sparse test layout
+#: room and refuses positions typed in cm (GCR ÷ 10⁴: 0.14 → 0.00001) or dm (÷ 100). The
+#: other side is the swept-diameter rule: trackers that close would collide.
+MIN_PLANT_GCR = 0.02
 
 
 def _num(d: dict[str, Any], key: str, where: str, default: float | None = None,
@@ -478,7 +517,7 @@ def plant_from_dict(d: dict[str, Any], where: str = "plant") -> Plant:
     fixed = d.get("fixed", {})
     if not isinstance(fixed, dict):
         raise ValueError(f"{where}: field 'fixed' must be an object")
-    return Plant(
+    plant = Plant(
         plant_id=plant_id,
         name=str(d.get("name", plant_id)),
         latitude=lat,
@@ -500,6 +539,14 @@ def plant_from_dict(d: dict[str, Any], where: str = "plant") -> Plant:
         source=str(d.get("source", "")),
         notes=str(d.get("notes", "")),
     )
+    if len(ids) >= 3 and (gcr := plant_gcr(plant)) < MIN_PLANT_GCR:
+        raise ValueError(
+            f"{where}: field 'trackers': ground cover ratio {gcr:.2g} (collector area over the "
+            f"ground the trackers cover) is below {MIN_PLANT_GCR:g}, a real plant's lies at "
+            f"about 0.1-0.6: trackers {ids[i]} and {ids[j]}, the nearest, are "
+            f"{gaps[i, j]:.4g} m apart for a {collector.width:g} m x {collector.height:g} m "
+            "collector; give positions in metres (not cm or mm)")
+    return plant
 
 
 def load_plant(plant_id: str, plants_dir: str | Path | None = None) -> Plant:

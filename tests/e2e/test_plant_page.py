@@ -53,6 +53,10 @@ def test_plant_page_shows_layout_shade_strategies_and_sky_map(page, server) -> N
     assert abs(hi / dtick - round(hi / dtick)) < 1e-9, y2
     bars = page.evaluate("() => document.getElementById('chart-plant-strategies').data[0].x")
     assert bars == ["sun", "backtrack", "sky_scan", "fixed"]
+    # the plant's own ground cover ratio (shown nowhere before): 29 × 60 m² over its ground
+    gcr_tile = page.locator("#plant-summary .tile", has_text="Ground cover ratio")
+    assert gcr_tile.locator(".value").text_content() == "0.145"
+    assert "collector area / 1.20 ha of ground" in gcr_tile.text_content()
     # the sky map image loads for the selected time and shows the grey shading region
     page.wait_for_function(
         "() => { const i = document.getElementById('plant-sky-map');"
@@ -171,7 +175,7 @@ def test_a_day_the_service_refuses_leaves_none_of_the_previous_days_figures(  # 
     with open_page(browser, request, ignore=lambda text: "422" in text) as page:
         page.goto(server.url + "/#plant?day=2021-12-21")
         page.wait_for_selector('body[data-plant-loaded="penarroya/2021-12-21"]', timeout=60_000)
-        assert page.locator("#plant-summary .tile").count() == 4
+        assert page.locator("#plant-summary .tile").count() == 5
         page.fill("#plant-day", "1899-12-31")
         page.wait_for_function(
             "() => document.getElementById('banner').textContent.startsWith('Plant day:')")

@@ -82,6 +82,11 @@ class PlantRead(BaseModel):
     fixed: PlantFixedRead
     collector: CollectorRead
     trackers: list[PlantTrackerRead]
+    gcr: float | None = Field(description="ground cover ratio [-]: the collectors' area over "
+                                          "land_m2; null for fewer than 3 trackers")
+    land_m2: float | None = Field(description="ground the plant covers [m²]: its pivots' convex "
+                                              "hull grown by half the median nearest-neighbour "
+                                              "distance; null for fewer than 3 trackers")
     source: str
     notes: str
     strategies: list[str] = Field(description="the strategies its collector can take: sun, "

@@ -16,6 +16,7 @@ from sim.plant.layout import (
     enu_from_seed004,
     list_plants,
     load_plant,
+    plant_from_dict,
 )
 from sim.sun import solar_position
 
@@ -115,6 +116,10 @@ def test_a_bad_plant_file_is_named_and_the_others_listed(tmp_path: Path) -> None
     (lambda d: d["trackers"][3].pop("y_m"), r"trackers\[3\]: missing field 'y_m'"),
     (lambda d: d["trackers"][1].update(tracker_id=1), "duplicate tracker_id \\[1\\]"),
     (lambda d: d["trackers"][1].update(x_m=18.5, y_m=30.0), "trackers 1 and 2 are 7.30 m apart"),
+    (lambda d: [t.update(x_m=100 * t["x_m"], y_m=100 * t["y_m"]) for t in d["trackers"]],
+     r"field 'trackers': ground cover ratio 1.4e-05 \(collector area over the ground the "
+     r"trackers cover\) is below 0.02, .* trackers 26 and 27, the nearest, are 1839 m apart "
+     "for a 12 m x 5 m collector; give positions in metres"),  # typed in cm: GCR 0.00001
     (lambda d: d.update(frame="nwu"), "field 'frame' must be one of"),
     (lambda d: d.update(plant_id="other"), "does not match the file name"),
 ])
@@ -124,6 +129,19 @@ def test_bad_config_names_the_field(tmp_path: Path, edit, message: str) -> None:
     (tmp_path / "penarroya.json").write_text(json.dumps(d))
     with pytest.raises(ValueError, match=message):
         load_plant("penarroya", tmp_path)
+
+
+def test_a_plant_reports_its_ground_cover_ratio() -> None:
+    """The plant's GCR was shown nowhere: Peñarroya I's 29 collectors of 60 m² cover 0.145 of
+    its ground; a single row (a degenerate hull) has one too, two trackers none."""
+    d = load_plant("penarroya").to_dict()
+    assert d["gcr"] == pytest.approx(0.1449, abs=1e-4)
+    assert d["land_m2"] == pytest.approx(29 * 60 / d["gcr"])
+    row = dict(d, trackers=[{"tracker_id": k, "east_m": 20.0 * k, "north_m": 0.0}
+                            for k in range(1, 5)])
+    # a segment of 60 m grown by 10 m: 2·60·10 + π·10² m²
+    assert plant_from_dict(row).to_dict()["land_m2"] == pytest.approx(1200 + 100 * np.pi)
+    assert plant_from_dict(dict(d, trackers=d["trackers"][:2])).to_dict()["gcr"] is None
 
 
 @pytest.mark.parametrize(("latitude_deg", "tilt_deg", "azimuth_deg"), [
