@@ -494,13 +494,23 @@ def parse_gcr(text: str) -> list[float]:
     return values
 
 
+#: A collector's WIDTHxHEIGHT [m] (``collector_m``) and a regular field's ROWSxCOLUMNS
+#: (``field_size``), spaces around the x allowed: the one rule of the CLI's --collector-m and
+#: --field (:func:`parse_size`) and of the HTTP body's pattern ("8 x 4" was refused by the
+#: body's pattern and run by the CLI, which split on "x" and let float() read the rest).
+COLLECTOR_SIZE_PATTERN = r"^\s*\d+(\.\d+)?\s*[xX]\s*\d+(\.\d+)?\s*$"
+FIELD_SIZE_PATTERN = r"^\s*\d{1,2}\s*[xX]\s*\d{1,2}\s*$"
+
+
 def parse_size(text: str, field: str) -> tuple[float, float]:
-    """``"12x5"`` → (12.0, 5.0): a collector's WIDTHxHEIGHT, a field's ROWSxCOLUMNS."""
-    try:
-        a, b = (float(x) for x in text.lower().split("x"))
-    except ValueError:
-        shape = "ROWSxCOLUMNS like 5x5" if field == "field_size" else "WIDTHxHEIGHT like 12x5"
-        raise SweepInputError(field, f"expected {shape}, got {text!r}") from None
+    """``"12x5"`` → (12.0, 5.0): a collector's WIDTHxHEIGHT, a field's ROWSxCOLUMNS
+    (``field`` ``"field_size"``), by :data:`COLLECTOR_SIZE_PATTERN` / :data:`FIELD_SIZE_PATTERN`."""
+    is_field = field == "field_size"
+    if not re.fullmatch(FIELD_SIZE_PATTERN if is_field else COLLECTOR_SIZE_PATTERN, text):
+        shape = ("ROWSxCOLUMNS like 5x5" if is_field
+                 else "WIDTHxHEIGHT in metres like 12x5")
+        raise SweepInputError(field, f"expected {shape}, got {text!r}")
+    a, b = (float(x) for x in re.split("[xX]", text))
     if not (a > 0 and b > 0 and np.isfinite(a) and np.isfinite(b)):
         raise SweepInputError(field, f"both sizes must be positive, got {text!r}")
     return a, b

@@ -5,6 +5,7 @@ refusals. The rows' physics is checked in tests/sim/plant/test_plant_fields.py."
 from __future__ import annotations
 
 import json
+import re
 import socket
 import subprocess
 import sys
@@ -622,3 +623,36 @@ def test_a_scheduler_given_as_host_and_port_is_tcp(scheduler: str,
     assert code == 0, capsys.readouterr().err
     out = json.loads(capsys.readouterr().out)
     assert out["engine"] == "dask" and out["scheduler"] == scheduler and out["cases"] == 1
+
+
+@pytest.mark.parametrize(("field", "text", "parsed"), [
+    ("collector_m", "12x5", (12.0, 5.0)),
+    ("collector_m", "8 x 4", (8.0, 4.0)),      # the HTTP body refused it, the CLI ran it
+    ("collector_m", "8X4.5", (8.0, 4.5)),
+    ("collector_m", "8*4", None),
+    ("collector_m", "1e1x5", None),           # float() read these on the CLI alone
+    ("collector_m", "8_0x4", None),
+    ("collector_m", "infx5", None),
+    ("collector_m", "12x", None),
+    ("field_size", "5 x 5", (5.0, 5.0)),
+    ("field_size", "5.5x5", None),            # the CLI ran a 5 x 5 field (int(5.5))
+    ("field_size", "100x5", None),
+])
+def test_a_size_is_read_by_one_rule_on_the_cli_and_over_http(
+        field: str, text: str, parsed: tuple[float, float] | None) -> None:
+    """``collector_m``/``field_size``: the HTTP body's pattern and the CLI's ``parse_size``
+    accept and refuse the same texts."""
+    from pydantic import ValidationError
+
+    from backend.api.schemas.plants import SweepCreate
+    from backend.plants.sweep import SweepInputError, parse_size
+
+    body = {"gcr": [0.2], "start": "2021-06-01", "end": "2021-06-02", field: text}
+    if parsed is None:
+        with pytest.raises(SweepInputError, match=f"expected .*, got {re.escape(repr(text))}"):
+            parse_size(text, field)
+        with pytest.raises(ValidationError, match=field):
+            SweepCreate(**body)
+    else:
+        assert parse_size(text, field) == parsed
+        assert getattr(SweepCreate(**body), field) == text

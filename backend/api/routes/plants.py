@@ -223,7 +223,7 @@ def _sweep_inputs(body: SweepCreate, service: PlantService,
         start = pd.Timestamp(parse_day_or_instant(body.start, zone, "start"))
         end = pd.Timestamp(parse_day_or_instant(body.end, zone, "end"))
         size = None if body.field_size is None else tuple(
-            int(v) for v in body.field_size.split("x"))
+            int(v) for v in parse_size(body.field_size, "field_size"))
         custom = (body.aspect_ratio, body.offset, body.rotation_deg)
         return prepare_sweep(
             layouts=body.layouts, strategies=body.strategies, start=start,

@@ -7,7 +7,13 @@ from typing import Annotated, Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from backend.api.schemas.common import JsonNumber, SunRead
-from backend.plants.sweep import MAX_GCRS, MAX_LAYOUTS, MAX_STRATEGIES
+from backend.plants.sweep import (
+    COLLECTOR_SIZE_PATTERN,
+    FIELD_SIZE_PATTERN,
+    MAX_GCRS,
+    MAX_LAYOUTS,
+    MAX_STRATEGIES,
+)
 from sim.energy import MAX_STEP_S
 from sim.site_config import ALTITUDE_MAX_M, ALTITUDE_MIN_M
 
@@ -180,7 +186,7 @@ class SweepCreate(BaseModel):
                     f"\"START:STOP:STEP\" (STOP included); at most {MAX_GCRS} values")
     strategies: list[str] = Field(["sun"], min_length=1, max_length=MAX_STRATEGIES,
                                   description="sun, backtrack, sky_scan")
-    collector_m: str | None = Field(None, pattern=r"^\d+(\.\d+)?x\d+(\.\d+)?$",
+    collector_m: str | None = Field(None, pattern=COLLECTOR_SIZE_PATTERN,
                                     description="collector WIDTHxHEIGHT [m], e.g. 12x5")
     collector_polygon_m: list[tuple[JsonNumber, JsonNumber]] | None = Field(
         None, min_length=3, max_length=256,
@@ -196,7 +202,7 @@ class SweepCreate(BaseModel):
         None, max_length=64,
         description="IANA zone of the local days at a latitude/longitude (the dates, the "
                     "shade chart's day); default UTC; with plant_id the plant's own")
-    field_size: str | None = Field(None, pattern=r"^\d{1,2}x\d{1,2}$",
+    field_size: str | None = Field(None, pattern=FIELD_SIZE_PATTERN,
                                    description="ROWSxCOLUMNS of the regular field; default "
                                                "5x5 (refused with plant_id)")
     aspect_ratio: JsonNumber | None = Field(None, gt=0, le=10, description="layout custom")
