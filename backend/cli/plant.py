@@ -20,6 +20,7 @@ import json
 import math
 import os
 import sys
+import threading
 from typing import Any, cast
 
 from backend.cli import fail
@@ -354,7 +355,14 @@ SWEEP_COLUMNS = ("layout", "gcr", "strategy", "interior_beam_shaded_pct", "field
 
 def run_sweep(args: argparse.Namespace) -> int:
     """``heliotwin plant sweep``; exit 2 on bad input."""
-    from backend.plants.sweep import SweepFailed, SweepSetupError
+    import signal
+
+    from backend.plants.sweep import (
+        SweepCancelled,
+        SweepFailed,
+        SweepSetupError,
+        runs_in_process,
+    )
     from backend.plants.sweep import run_sweep as run
 
     spec, cases, weather = sweep_from_args(args)
@@ -376,9 +384,33 @@ def run_sweep(args: argparse.Namespace) -> int:
         def callback(done: int, total: int) -> None:
             bar.update(done - bar.n)
 
+    # Ctrl-C stops the sweep as a cancel does (HTTP DELETE): the cases finished are printed
+    # and the rest dropped, exit 130 (it exited 130 with nothing printed); a second Ctrl-C,
+    # or one during a single case run in this process, quits at once
+    interrupted = threading.Event()
+
+    def on_interrupt(signum: int, frame: Any) -> None:
+        if interrupted.is_set():
+            raise KeyboardInterrupt
+        interrupted.set()
+
+    previous = None
+    if not runs_in_process(cases, args.scheduler) and \
+            threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGINT, on_interrupt)
     try:
         result = run(spec, cases, weather, scheduler=args.scheduler, n_workers=args.workers,
-                     progress=callback)
+                     progress=callback, cancelled=interrupted.is_set)
+    except KeyboardInterrupt:
+        _say_interrupted(0, len(cases))
+        return 130
+    except SweepCancelled as exc:             # Ctrl-C: the cases finished before it
+        if bar is not None:
+            bar.close()
+        if exc.result is not None:             # None: stopped while reaching the scheduler
+            _print_sweep(args, exc.result)
+        _say_interrupted(exc.result["cases"] if exc.result is not None else 0, len(cases))
+        return 130
     except OSError as exc:                    # no scheduler at that address
         fail(f"--scheduler: cannot reach {args.scheduler!r}: {exc}")
     except SweepSetupError as exc:            # --scheduler unreadable, --workers out of bounds
@@ -388,10 +420,17 @@ def run_sweep(args: argparse.Namespace) -> int:
             _print_sweep(args, exc.result)
         fail(str(exc), code=1)
     finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
         if bar is not None:
             bar.close()
     _print_sweep(args, result)
     return 0
+
+
+def _say_interrupted(done: int, total: int) -> None:
+    print(f"heliotwin plant sweep: interrupted after {done} of {total} cases (the cases "
+          "finished are printed, the rest dropped)", file=sys.stderr, flush=True)
 
 
 def _print_sweep(args: argparse.Namespace, result: dict[str, Any]) -> None:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 import os
 import re
+import signal
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -151,6 +152,21 @@ def local_cluster(n_workers: int) -> Any:
     import dask
     from distributed import LocalCluster
 
+    # its worker processes ignore SIGINT (a disposition SIG_IGN outlives their exec; a
+    # handler does not): a Ctrl-C at the terminal, sent to the whole process group, stops the
+    # sweep in this process (the CLI's cancel) instead of killing each worker with a
+    # KeyboardInterrupt traceback. Only the main thread may set a handler (not the service's).
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        return _local_cluster(dask, LocalCluster, n_workers)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _local_cluster(dask: Any, LocalCluster: Any, n_workers: int) -> Any:  # noqa: N803
     with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
                           "distributed.worker.profile.enabled": False,
                           "distributed.admin.tick.interval": "1s",
@@ -231,6 +247,12 @@ def reach_scheduler(address: str, cancelled: Callable[[], bool] | None = None) -
                               f"{_SCHEDULER_PORT_HINT}")
 
 
+def runs_in_process(cases: Sequence[SweepCase], scheduler: str | None) -> bool:
+    """Whether :func:`run_sweep` runs its one case in the caller's process (no Dask, and no
+    ``cancelled`` polled: it cannot be stopped between cases)."""
+    return scheduler is None and len(cases) == 1
+
+
 def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame | None = None,
               scheduler: str | None = None, n_workers: int | None = None,
               progress: Callable[[int, int], None] | None = None,
@@ -267,7 +289,7 @@ def run_sweep(spec: SweepSpec, cases: Sequence[SweepCase], weather: pd.DataFrame
     started = time.perf_counter()
     if not cases:
         raise ValueError("a sweep needs at least one case")
-    if scheduler is None and len(cases) == 1:
+    if runs_in_process(cases, scheduler):
         row = sweep_task(spec, cases[0], weather)
         with _SKY_LOCK:  # in the caller's process (the service): not kept after the sweep
             _SKY_CACHE.clear()

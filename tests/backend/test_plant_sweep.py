@@ -656,3 +656,42 @@ def test_a_size_is_read_by_one_rule_on_the_cli_and_over_http(
     else:
         assert parse_size(text, field) == parsed
         assert getattr(SweepCreate(**body), field) == text
+
+
+@pytest.mark.parametrize("fmt", ["--json", "--csv"])
+def test_ctrl_c_prints_the_cases_finished_and_exits_130(fmt: str) -> None:
+    """Ctrl-C at the terminal (SIGINT to the whole process group, the LocalCluster's workers
+    too) exited 130 with nothing printed: the cases finished are printed in the format
+    asked, stderr says after how many of how many it stopped, and no worker's traceback."""
+    import os
+    import signal
+
+    cmd = [str(BIN / "heliotwin"), "--verbose", "plant", "sweep", "--collector-m", "12x5",
+           "--lat", "38.3", "--lon", "-5.3", "--gcr", "0.05:0.35:0.05", "--start",
+           "2021-01-01", "--end", "2022-01-01", "--step-s", "60", "--workers", "1", fmt]
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         start_new_session=True)
+    try:
+        assert p.stderr is not None
+        lines = []
+        for line in p.stderr:      # its cluster up, the cases submitted (a year each at 1 min)
+            lines.append(line)
+            if "plant sweep: 7 cases on" in line:
+                break
+        os.killpg(p.pid, signal.SIGINT)
+        out, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    err = "".join(lines) + err
+    assert p.returncode == 130, err[-2000:]
+    said = re.search(r"heliotwin plant sweep: interrupted after (\d) of 7 cases", err)
+    assert said, err[-2000:]
+    assert "Traceback" not in err, err[-3000:]
+    done = int(said.group(1))
+    if fmt == "--json":
+        result = json.loads(out)
+        assert result["cases"] == len(result["rows"]) == done
+    else:
+        lines = out.splitlines()
+        assert lines[0].startswith("layout,gcr,strategy,") and len(lines) == 1 + done
