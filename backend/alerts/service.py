@@ -205,6 +205,17 @@ def daylight_seconds(info: SiteInfo, t0_s: float, t1_s: float) -> float:
             + _daylight_in(info, t0_s, recent, max(DAYLIGHT_STEP_S, earlier / DAYLIGHT_SAMPLES)))
 
 
+def silence_counter(settings: Any, info: SiteInfo) -> Any:
+    """The seconds of ``[a, b]`` that count as a logger's silence at ``info``'s site, as a
+    function of (a, b): the daylight seconds (:func:`daylight_seconds`) while
+    ``Settings.alerts.silent_daylight_only``, else None (all of them). The one rule of the
+    ``logger_silent`` alert and of the overview's stale logger (``SiteStatusRead``): a logger
+    silent through the night was red "4.0 h ago" there while the alerts said nothing."""
+    if settings.alerts.silent_daylight_only:
+        return lambda a, b: daylight_seconds(info, a, b)
+    return None
+
+
 def _local_midnight(day: dt.date, zone: Any) -> dt.datetime:
     return dt.datetime(day.year, day.month, day.day, tzinfo=zone)
 
@@ -334,11 +345,9 @@ class AlertService:
                     Measurement.array_id == arr.array_id,
                     Measurement.source == MEASURED)).scalar()
                 last[name] = None if value is None else int(value)
-        daylight = self.ctx.settings.alerts.silent_daylight_only
         return rules.silent_loggers(info.site_id, info.zone, last, now, self.started_s,
                                     self.ctx.settings.alerts.silent_min,
-                                    (lambda a, b: daylight_seconds(info, a, b)) if daylight
-                                    else None)
+                                    silence_counter(self.ctx.settings, info))
 
     def _diagnosed(self, info: SiteInfo, now: float) -> rules.Evaluation:
         s = self.ctx.settings

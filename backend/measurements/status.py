@@ -63,21 +63,27 @@ def status(ctx: ServiceContext, info: SiteInfo, now: float) -> dict[str, Any]:
                              float(atmosphere.alt2pres(s.altitude)), s.temp_air).iloc[0]
         v = {**v, "solar_azimuth": float(pos["azimuth"]),
              "apparent_elevation": float(pos["apparent_elevation"])}
+    from backend.alerts.service import silence_counter
+
+    counted = silence_counter(ctx.settings, info)
     arrays: dict[str, Any] = {}
     with ctx.engine.connect() as conn:
         for name, arr in info.arrays.items():
             last = fetch(conn, LATEST, (arr.array_id,))
             entry: dict[str, Any] = {"kind": arr.kind, "last_ts": None, "power_w": None,
                                      "voltage_v": None, "current_a": None, "age_s": None,
-                                     "logger": "never", "fresh_s": None,
+                                     "logger": "never", "fresh_s": None, "silent_s": None,
                                      "twin_power_w": v.get(f"{name}_power_w")}
             if last:
                 ts, volt, amp, pw = last[0]
                 age = now - ts
                 fresh = fresh_for([r[0] for r in last], ctx.settings.ingest.energy_max_gap_s)
+                # the silence the alerts count: at night a sleeping logger is not late
+                silent = age if age <= fresh or counted is None else counted(ts, now)
                 entry.update(last_ts=iso_utc([int(ts)])[0], power_w=pw, voltage_v=volt,
                              current_a=amp, age_s=round(age, 1), fresh_s=fresh,
-                             logger="reporting" if age <= fresh else "stale")
+                             silent_s=round(silent, 1),
+                             logger="reporting" if silent <= fresh else "stale")
             arrays[name] = entry
     local_now = dt.datetime.fromtimestamp(now, info.zone)
     today = local_now.replace(hour=0, minute=0, second=0, microsecond=0)

@@ -284,14 +284,17 @@ async function drawHistory(rows) {
   });
 }
 
-/** ok / warn / bad from the service's logger state ("reporting", "stale", "never") or the age. */
+/** ok / warn / bad from the service's logger state ("reporting", "stale", "never") or the age;
+ * a stale logger by its silence (SiteStatusRead silent_s: the daylight seconds the alerts
+ * count, so a logger asleep since sunset is not red "4.0 h ago" while Alerts say nothing). */
 function freshness(entry, ageS) {
   if (entry?.logger === "reporting") return "ok";
   if (entry?.logger === "never") return "bad";
-  if (ageS === null || ageS === undefined) return "bad";
+  const silent = entry?.silent_s ?? ageS;
+  if (silent === null || silent === undefined) return "bad";
   const fresh = entry?.fresh_s || lastDay.status?.fresh_s || 300;
-  if (ageS <= fresh) return "ok";
-  return ageS <= 12 * fresh ? "warn" : "bad";
+  if (silent <= fresh) return "ok";
+  return silent <= 12 * fresh ? "warn" : "bad";
 }
 
 /** One array's tile of the status (SiteStatusRead); {} while no status is loaded. */

@@ -370,3 +370,36 @@ def _gap_state() -> object:
     from backend.storage.tables import ServiceState
 
     return select(ServiceState.value).where(ServiceState.key == "rollup_energy_max_gap_s")
+
+
+@pytest.mark.parametrize("api", ["sqlite"], indirect=True)
+def test_a_logger_silent_since_sunset_is_not_stale(api: Api) -> None:
+    """A tester's Overview at night: a logger silent since sunset was red "4.0 h ago" while
+    Alerts said nothing. Its silence is the alerts' own count (the daylight seconds since its
+    last reading): one asleep since after sunset is reporting, one silent through the
+    afternoon is stale, each with the silence the logger_silent alert counts."""
+    client, token, server = api
+    from backend.alerts.service import silence_counter
+    from backend.measurements.status import status
+
+    ctx = server.ctx
+    info = ctx.registry.sites[SITE]
+    # the day's last readings at Tehuantepec (sunset about 18:45 local in May): the tracker's
+    # an hour after sunset, the fixed array's in the morning (dates after the tests above)
+    for array, first in (("tracker", "2025-05-20 20:00"), ("fixed", "2025-05-20 09:00")):
+        t0 = pd.Timestamp(first, tz=TZ)
+        body = "ts,array,voltage_v,current_a,power_w\n" + "".join(
+            f"{(t0 + pd.Timedelta(minutes=k)).isoformat()},{array},30.0,1.0,30.0\n"
+            for k in range(61))
+        r = client.post(f"/api/v1/sites/{SITE}/measurements", content=body,
+                        headers={"Authorization": f"Bearer {token}", "Content-Type": "text/csv"})
+        assert r.status_code == 200, r.text
+    now = pd.Timestamp("2025-05-21 01:00", tz=TZ).timestamp()   # 4 h after the tracker's last
+    arrays = status(ctx, info, now)["arrays"]
+    tracker, fixed = arrays["tracker"], arrays["fixed"]
+    assert tracker["age_s"] == 4 * 3600
+    assert (tracker["silent_s"], tracker["logger"]) == (0, "reporting")
+    assert fixed["logger"] == "stale" and 8.5 * 3600 < fixed["silent_s"] < 9 * 3600
+    counted = silence_counter(ctx.settings, info)
+    last = pd.Timestamp("2025-05-20 10:00", tz=TZ).timestamp()
+    assert fixed["silent_s"] == pytest.approx(counted(last, now), abs=0.1)

@@ -144,7 +144,13 @@ class ArrayStatusRead(BaseModel):
                                             "clock minus its stamp; negative when the "
                                             "logger's clock runs ahead (readings up to the "
                                             "ingest's future tolerance are taken)")
-    logger: Literal["never", "reporting", "stale"]
+    silent_s: float | None = Field(
+        None, description="the part of age_s that counts as the logger's silence [s]: its "
+                          "daylight seconds while the alerts count silence in daylight only "
+                          "(HELIOTWIN_ALERT_SILENT_DAYLIGHT_ONLY, the default), else age_s; "
+                          "a logger quiet since sunset is not late (null: never reported)")
+    logger: Literal["never", "reporting", "stale"] = Field(
+        description="stale: silent_s is past fresh_s (the logger_silent alert's count)")
     fresh_s: int | None = Field(
         None, description="this logger's last reading is stale past this age [s]: 2.5 of its "
                           "own cadence, from the site's fresh_s up to the energy rule's gap "
