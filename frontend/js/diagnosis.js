@@ -163,12 +163,15 @@ async function load(state) {
     d.tracker.measured_wh, d.tracker.expected_wh, d.tracker.expected_wh_low, d.tracker.expected_wh_high,
     d.tracker.performance_ratio, d.gain_measured_pct, d.gain_expected_pct]),
   filename: `${state.site.site_id}_diagnosis_${start}_${end}.csv` });
-  if (mine === requested) await loadPointing(state, start, end, mine);
+  // no tracker reading at all in the range: the pointing card says so, not that its logger
+  // sends no encoder angles (a tester's empty database)
+  const trackerRead = body.days.some((d) => d.tracker.measured_wh !== null);
+  if (mine === requested) await loadPointing(state, start, end, mine, trackerRead);
 }
 
 /** The pointing error the tracker's own encoders report (GET …/pointing), beside the
  * power-based diagnosis: every sunlit minute, split into azimuth and elevation. */
-async function loadPointing(state, start, end, mine) {
+async function loadPointing(state, start, end, mine, trackerRead = true) {
   const note = document.getElementById("pointing-note");
   if (!note) return;
   const tz = state.site.timezone;
@@ -185,10 +188,10 @@ async function loadPointing(state, start, end, mine) {
     return;
   }
   if (!body.minutes) {
-    note.textContent = body.array
-      ? "The tracker's logger reports no encoder angles (azimuth_deg, elevation_deg) while the sun is up in this range: send them with the readings to see the pointing error measured directly."
-      : "This site has no tracker.";
-    showEmpty("chart-pointing", "No encoder angles");
+    note.textContent = !body.array ? "This site has no tracker."
+      : !trackerRead ? "No readings from the tracker's logger in this range: no encoder angles to compare with the sun."
+      : "The tracker's logger reports no encoder angles (azimuth_deg, elevation_deg) while the sun is up in this range: send them with the readings to see the pointing error measured directly.";
+    showEmpty("chart-pointing", body.array && !trackerRead ? "No readings" : "No encoder angles");
     return;
   }
   const s = body.summary;

@@ -183,10 +183,12 @@ function drawDayEnergy(row, failed = "") {
   if (row.gain_note) { // why there is no measured gain, in the service's words
     box.append(h("div", { class: "muted", "data-testid": "gain-unalike" }, `No measured gain: ${row.gain_note}.`));
   }
+  const gain = gainOf(row, "measured");
   box.append(
-    h("div", { class: "gain-big", "data-testid": "gain-day" }, pct(gainOf(row, "measured"))),
+    // no measured gain: the note above says why (a large red "—" under it read as a fault)
+    ...(gain === null ? [] : [h("div", { class: "gain-big", "data-testid": "gain-day" }, pct(gain))]),
     h("div", { class: "muted", "data-testid": "gain-day-twin" },
-      `tracking gain measured (tracker over fixed); the twin expects ${pct(expect)}${partial ? " over the same minutes" : ""}`));
+      `${gain === null ? "" : "tracking gain measured (tracker over fixed); "}the twin expects ${pct(expect)}${partial ? " over the same minutes" : ""}`));
 }
 
 /** A date axis with one tick per day (per week past ten days) at local midnight, labelled
@@ -225,7 +227,10 @@ async function drawHistory(rows) {
   const wholeGains = gains.filter((g, i) => !partial[i] && g !== null);
   const gainAxis = zeroBasedAxis(wholeGains.length ? wholeGains : gains);
   const { whole, part } = splitPartial(dates, gains, partial, gainAxis.range);
-  traces.push({ x: whole.x, y: whole.y, name: "gain", yaxis: "y2", type: "scatter", connectgaps: false,
+  // four weeks without a measured gain (no readings): no gain axis (it was drawn 0–1 %,
+  // empty), a word instead
+  const noGain = gains.every((g) => g === null);
+  if (!noGain) traces.push({ x: whole.x, y: whole.y, name: "gain", yaxis: "y2", type: "scatter", connectgaps: false,
     mode: "lines+markers", line: { color: COLORS.gain, width: 1.5 }, marker: { size: 5 }, hovertemplate: "%{y:.1f} %" });
   if (part.x.length) {
     traces.push({ x: part.x, y: part.y, name: "gain, partial day", yaxis: "y2", type: "scatter", mode: "markers",
@@ -237,8 +242,14 @@ async function drawHistory(rows) {
     barmode: "group", bargap: 0.25,
     xaxis: dayAxis(tz, dates),
     yaxis: { title: { text: "Energy [kWh]" }, rangemode: "tozero", gridcolor: "#e9edf1" },
-    yaxis2: { title: { text: "Tracking gain [%] (whole days)" }, overlaying: "y", side: "right", showgrid: false, zeroline: true,
-      zerolinecolor: "#c3e6cb", ticksuffix: " %", ...gainAxis },
+    ...(noGain ? {
+      annotations: [{ text: "no measured gain in these four weeks: no day with readings of both arrays",
+        xref: "paper", yref: "paper", x: 1, y: 1, xanchor: "right", yanchor: "bottom", showarrow: false,
+        font: { size: 11, color: "#6c757d" } }],
+    } : {
+      yaxis2: { title: { text: "Tracking gain [%] (whole days)" }, overlaying: "y", side: "right", showgrid: false, zeroline: true,
+        zerolinecolor: "#c3e6cb", ticksuffix: " %", ...gainAxis },
+    }),
   });
   const energyCols = ARRAYS.flatMap((a) => SOURCES.map((src) => [a, src]));
   const table = {

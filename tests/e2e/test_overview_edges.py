@@ -142,7 +142,8 @@ def test_loggers_over_different_minutes_show_no_gain_and_say_why(
     row = _api(edge_server, "/api/v1/sites/tehuantepec/energy", start=UNALIKE.isoformat(),
                end=(UNALIKE + dt.timedelta(days=1)).isoformat())["rows"][0]
     assert row["gain_pct"] is None
-    assert pg.locator("[data-testid=gain-day]").inner_text() == "—"
+    # no big red "—" under the note: the note says why there is none
+    assert pg.locator("[data-testid=gain-day]").count() == 0
     note = pg.locator("[data-testid=gain-unalike]").inner_text()
     assert note == f"No measured gain: {row['gain_note']}." and "different minutes" in note
     _open(pg, edge_server, "tehuantepec", FULL)
@@ -166,6 +167,39 @@ def test_a_day_without_readings_does_not_say_no_gaps(pg, edge_server: ServerProc
     _open(pg, edge_server, "tehuantepec", EMPTY)
     for array in ("tracker", "fixed"):
         assert pg.locator(f"[data-testid=gaps-{array}]").inner_text() == "no readings"
+
+
+def test_a_site_without_readings_says_so(pg, edge_server: ServerProcess) -> None:
+    """A tester's site without readings: the daily chart drew an empty 0–1 % gain axis, the
+    day a large red "—" under "No measured gain", and the pointing card said the tracker's
+    logger sends no encoder angles when it had sent nothing at all."""
+    import json
+
+    from sim.paths import default_sites_dir
+
+    config = json.loads((default_sites_dir() / "tehuantepec.json").read_text())
+    config.update(site_id="quiet", name="Quiet site")
+    r = httpx.put(f"{edge_server.base_url}/api/v1/sites/quiet", json=config, timeout=120,
+                  headers={"Authorization": f"Bearer {ADMIN}"})
+    assert r.status_code in (200, 201), r.text
+    _open(pg, edge_server, "quiet", HALF)
+    assert "No measured gain" in pg.locator("[data-testid=gain-unalike]").inner_text()
+    assert pg.locator("[data-testid=gain-day]").count() == 0
+    assert pg.locator("[data-testid=gain-day-twin]").inner_text().startswith("the twin expects")
+    daily = pg.evaluate("() => { const c = document.getElementById('chart-daily');"
+                        " return [c.layout.yaxis2 === undefined, c.data.map((t) => t.name),"
+                        " (c.layout.annotations || []).map((a) => a.text)]; }")
+    no_axis, names, notes = daily
+    assert no_axis and "gain" not in names, daily
+    assert notes == ["no measured gain in these four weeks: no day with readings of both "
+                     "arrays"]
+    pg.locator("[data-testid=pointing-note]").scroll_into_view_if_needed()
+    pg.wait_for_function("() => document.querySelector('[data-testid=pointing-note]')"
+                         ".textContent.startsWith('No readings')", timeout=120_000)
+    assert pg.locator("[data-testid=pointing-note]").inner_text() == (
+        "No readings from the tracker's logger in this range: no encoder angles to compare "
+        "with the sun.")
+    pg.locator("#page-overview").screenshot(path=str(ARTIFACTS / "overview-no-readings.png"))
 
 
 def test_a_day_before_the_twin_window_says_why(pg, edge_server: ServerProcess) -> None:
