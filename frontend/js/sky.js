@@ -192,7 +192,10 @@ function resultCard(row, img, res, params) {
   if (!img) kv("Picture", "this browser cannot draw the file; the markers are on a blank canvas");
   const warnings = res.warnings.map((w) => h("p", { class: "warning", "data-testid": "sky-warning" }, `⚠ ${w}`));
   const ts = rowTimestamp(row);
-  const when = !ts ? "" : $("sky-place").value === "site" ? `  · ${fmtDateTime(st.tz, ts)} (${st.tz})` : `  · ${ts}`;
+  // in the zone the sky map's day is drawn in: the site's, or UTC for typed coordinates
+  // (their time was shown as raw ISO)
+  const zone = trajectoryZone();
+  const when = ts ? `  · ${fmtDateTime(zone, ts)} (${zone})` : "";
   return h("article", { class: "card sky-result", "data-testid": "sky-result", "data-sun-found": String(Boolean(res.sun_found)) },
     h("header", {}, h("h2", { title: row.file.name }, row.file.name)),
     canvas,

@@ -200,6 +200,12 @@ def test_sky_upload_shows_the_detected_sun(page, server, tmp_path: Path, kind: s
     cell = page.locator("[data-testid=sky-result] tr:has-text('Centroid') td").text_content()
     cx, cy = [float(v.replace(",", "")) for v in cell.split(", ")]
     assert abs(cx - label[0]) < tolerance_px and abs(cy - label[1]) < tolerance_px, (cx, cy, label)
+    # the frame's time formatted in the sky map's zone, named: typed coordinates' in UTC
+    # (it was the raw ISO instant there, formatted only for a site)
+    legend = page.locator("[data-testid=sky-result] .legend").text_content()
+    zone = "UTC" if kind == "real" else "America/Mexico_City"
+    assert legend.endswith(f"({zone})"), legend
+    assert not re.search(r"\d{4}-\d{2}-\d{2}T\d", legend), legend
     # The orange detection marker is drawn on the canvas.
     orange = page.evaluate(
         """() => { const c = document.querySelector('[data-testid=sky-canvas]');
