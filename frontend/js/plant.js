@@ -27,6 +27,9 @@ function shadeColor(f, cmax) {
   return `rgb(${a.map((v, i) => Math.round(v + s * (b[i] - v))).join(",")})`;
 }
 
+/** The collectors' colour on a day without sun: no shade to show. */
+const NIGHT_GREY = "#ced4da";
+
 /** A polygon collector's outline (PlantRead.collector.outline_m, [u, v] m about the pivot)
  * laid flat at its pivot, u east and v north, as an SVG path in the chart's metres. */
 function outlinePath(outline, t) {
@@ -37,20 +40,20 @@ async function drawLayout() {
   const p = view.plant;
   const d = view.day;
   if (!p || !d) return;                 // no day loaded (clearDay said why)
-  if (!d.times.length) {  // no instant: nor the previous plant's time and zone under it
-    showEmpty("chart-plant-layout", "No daylight on this day.");
-    $("plant-time-label").textContent = "";
-    return;
-  }
-  const row = d.shaded_fraction[view.index] || [];
+  // a polar night: the layout all the same (it was not drawn at all), grey, with no shade to
+  // colour and the reason said over it; no instant, nor the previous plant's time under it
+  const night = !d.times.length;
+  const row = night ? [] : d.shaded_fraction[view.index] || [];
   const east = p.trackers.map((t) => t.east_m);
   const north = p.trackers.map((t) => t.north_m);
   const f = row.map((v) => (v > 0 ? v : 0));
   const cmax = Math.max(0.05, ...f);
-  const text = p.trackers.map((t, k) => `tracker ${t.tracker_id}<br>shaded ${num(100 * (row[k] || 0), 1)} %`);
+  const text = p.trackers.map((t, k) => `tracker ${t.tracker_id}<br>`
+    + (night ? "no sun on this day" : `shaded ${num(100 * (row[k] || 0), 1)} %`));
   const ids = p.trackers.map((t) => String(t.tracker_id));
-  const marker = { color: f, cmin: 0, cmax, colorscale: [[0, SHADE_SCALE[0]], [1, SHADE_SCALE[1]]],
-    line: { color: "#495057", width: 1 }, colorbar: { title: { text: "shaded [-]" }, thickness: 12 } };
+  const marker = night ? { color: NIGHT_GREY, line: { color: "#495057", width: 1 } }
+    : { color: f, cmin: 0, cmax, colorscale: [[0, SHADE_SCALE[0]], [1, SHADE_SCALE[1]]],
+      line: { color: "#495057", width: 1 }, colorbar: { title: { text: "shaded [-]" }, thickness: 12 } };
   const pivots = { type: "scatter", x: east, y: north, hovertext: text, hoverinfo: "text", name: "shaded fraction" };
   // a rectangle: a square marker per collector; a polygon: its outline to scale, filled with
   // the shade's colour (shapes), a dot at the pivot and the id above the outline
@@ -62,19 +65,22 @@ async function drawLayout() {
   ] : [{ ...pivots, mode: "markers+text", text: ids, textposition: "top center", marker: { ...marker, symbol: "square", size: 22 } }];
   const shapes = outline ? p.trackers.map((t, k) => ({
     type: "path", layer: "between", path: outlinePath(outline, t),
-    fillcolor: shadeColor(f[k], cmax), line: { color: "#495057", width: 1 },
+    fillcolor: night ? NIGHT_GREY : shadeColor(f[k], cmax), line: { color: "#495057", width: 1 },
   })) : [];
+  const annotations = night ? [{ text: "No daylight on this day: the sun stays below the horizon.",
+    xref: "paper", yref: "paper", x: 0.5, y: 1, xanchor: "center", yanchor: "bottom", showarrow: false,
+    font: { size: 13, color: "#495057" } }] : [];
   await draw("chart-plant-layout", traces, baseLayout({
-    hovermode: "closest", showlegend: false, shapes,
+    hovermode: "closest", showlegend: false, shapes, annotations,
     xaxis: { title: { text: "east [m]" }, gridcolor: "#e9edf1", zeroline: false, scaleanchor: "y" },
     yaxis: { title: { text: "north [m]" }, gridcolor: "#e9edf1", zeroline: false },
-    margin: { l: 60, r: 20, t: 10, b: 46 },
+    margin: { l: 60, r: 20, t: night ? 30 : 10, b: 46 },
   }), {
     columns: ["tracker_id", "east_m", "north_m", "shaded_fraction"],
-    rows: p.trackers.map((t, k) => [t.tracker_id, t.east_m, t.north_m, row[k]]),
-    filename: `${p.plant_id}-shade-${d.times[view.index]}.csv`,
+    rows: p.trackers.map((t, k) => [t.tracker_id, t.east_m, t.north_m, row[k] ?? null]),
+    filename: night ? `${p.plant_id}-layout-${d.date}.csv` : `${p.plant_id}-shade-${d.times[view.index]}.csv`,
   });
-  $("plant-time-label").textContent = `${fmtTime(p.timezone, d.times[view.index])} (${p.timezone})`;
+  $("plant-time-label").textContent = night ? "" : `${fmtTime(p.timezone, d.times[view.index])} (${p.timezone})`;
 }
 
 async function drawShadeDay() {

@@ -213,8 +213,17 @@ def test_a_polar_night_says_no_daylight(page, server) -> None:  # type: ignore[n
     a null shaded fraction; the page showed "0.0 %" shaded (100 × null), empty axes and a
     broken sky-map image."""
     with _tromso_open(page, server):
-        for chart in ("chart-plant-layout", "chart-plant-shade", "chart-plant-strategies"):
+        for chart in ("chart-plant-shade", "chart-plant-strategies"):
             assert page.text_content(f"#{chart}") == "No daylight on this day.", chart
+        # the layout is drawn all the same (it was not drawn at all), the reason over it
+        layout = page.evaluate(
+            "() => { const c = document.getElementById('chart-plant-layout');"
+            " return [c.data[0].x.length, (c.layout.annotations || []).map((a) => a.text),"
+            " c.data[0].marker.colorbar === undefined]; }")
+        assert layout == [29, ["No daylight on this day: the sun stays below the horizon."],
+                          True], layout
+        page.locator("#page-plant .grid").first.screenshot(
+            path=str(ARTIFACTS / "plant-polar-night.png"))
         assert "—" in page.text_content("#plant-summary")
         assert "0.0 %" not in page.text_content("#plant-summary")
         assert page.evaluate("() => document.getElementById('plant-sky-map').hidden")
