@@ -288,12 +288,46 @@ class PlantService:
         return out
 
 
+#: Width of the sky map's colour bar strip [px], right of the disk.
+COLOUR_BAR_W_PX = 100
+#: The colour bar's top and bottom rows [px from the top; from the bottom].
+COLOUR_BAR_TOP_PX, COLOUR_BAR_BOTTOM_PX = 48, 90
+
+
+def _colour_bar(lo: float, hi: float, height_px: int) -> np.ndarray:
+    """The sky map's colour bar: POA from ``lo`` (bottom) to ``hi`` (top) [W m⁻²] in the
+    disk's turbo scale, five ticks labelled, the quantity and unit above, and the grey of the
+    orientations that shade a collector below (it had only a "lo-hi W/m2" corner label)."""
+    import cv2
+
+    strip = np.full((height_px, COLOUR_BAR_W_PX, 3), 255, np.uint8)
+    top, bottom, x0, width = COLOUR_BAR_TOP_PX, height_px - COLOUR_BAR_BOTTOM_PX, 8, 18
+    ramp = np.linspace(255, 0, bottom - top).round().astype(np.uint8)
+    strip[top:bottom, x0:x0 + width] = cv2.applyColorMap(
+        np.repeat(ramp[:, None], width, axis=1), cv2.COLORMAP_TURBO)
+    cv2.rectangle(strip, (x0 - 1, top - 1), (x0 + width, bottom), (0, 0, 0), 1)
+    font, black = cv2.FONT_HERSHEY_SIMPLEX, (0, 0, 0)
+    cv2.putText(strip, "POA", (x0 - 2, top - 26), font, 0.42, black, 1, cv2.LINE_AA)
+    cv2.putText(strip, "[W/m2]", (x0 - 2, top - 10), font, 0.42, black, 1, cv2.LINE_AA)
+    for k in range(5):
+        y = int(round(bottom - 1 - k / 4 * (bottom - top - 1)))
+        cv2.line(strip, (x0 + width, y), (x0 + width + 4, y), black, 1)
+        cv2.putText(strip, f"{lo + k / 4 * (hi - lo):.0f}", (x0 + width + 7, y + 4), font, 0.38,
+                    black, 1, cv2.LINE_AA)
+    cv2.rectangle(strip, (x0, bottom + 22), (x0 + width - 1, bottom + 36), (150, 150, 150), -1)
+    cv2.putText(strip, "shades", (x0 + width + 7, bottom + 34), font, 0.38, black, 1,
+                cv2.LINE_AA)
+    cv2.putText(strip, "a collector", (x0 - 2, bottom + 52), font, 0.38, black, 1, cv2.LINE_AA)
+    return strip
+
+
 def sky_map_png(m: dict[str, Any], size_px: int = 420) -> bytes:
     """Render a sky map (from :meth:`PlantService.sky_map`) as a Lambert-disk PNG with OpenCV.
 
-    Colour: POA (turbo colour map, its range in the corner), grey: orientations that
-    shade a collector, yellow disc: the sun, white cross: the chosen orientation.
-    North up, east right (looking down on the sky map).
+    Colour: POA (turbo colour map; a colour bar with its range and unit right of the disk,
+    :func:`_colour_bar`), grey: orientations that shade a collector, yellow disc: the sun,
+    white cross: the chosen orientation. North up, east right (looking down on the sky map).
+    The image is ``size_px`` high and ``size_px`` + :data:`COLOUR_BAR_W_PX` wide.
     """
     import cv2
 
@@ -341,8 +375,7 @@ def sky_map_png(m: dict[str, Any], size_px: int = 420) -> bytes:
     ch = m["chosen"]
     cv2.drawMarker(img, px(ch["azimuth_deg"], ch["elevation_deg"]), (255, 255, 255),
                    cv2.MARKER_CROSS, 16, 2)
-    cv2.putText(img, f"{lo:.0f}-{hi:.0f} W/m2", (6, size_px - 8), cv2.FONT_HERSHEY_SIMPLEX,
-                0.4, (0, 0, 0), 1, cv2.LINE_AA)
+    img = np.concatenate([img, _colour_bar(lo, hi, size_px)], axis=1)
     ok, buf = cv2.imencode(".png", img)
     if not ok:
         raise RuntimeError("PNG encoding failed")

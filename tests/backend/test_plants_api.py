@@ -240,7 +240,17 @@ def test_sky_map_json_and_png(client: httpx.Client) -> None:
     png = client.get(url, params={"time": DEC21_0824_TST}, headers={"Accept": "image/png"})
     assert png.headers["content-type"] == "image/png"
     img = cv2.imdecode(np.frombuffer(png.content, np.uint8), cv2.IMREAD_COLOR)
-    assert img is not None and img.shape == (420, 420, 3)
+    # the disk, and right of it a colour bar of its POA scale (it had only a "lo-hi W/m2"
+    # corner label): the top of the bar the turbo colour of the highest POA, its bottom the
+    # lowest's
+    from backend.plants import COLOUR_BAR_BOTTOM_PX, COLOUR_BAR_TOP_PX, COLOUR_BAR_W_PX
+
+    assert img is not None and img.shape == (420, 420 + COLOUR_BAR_W_PX, 3)
+    turbo = cv2.applyColorMap(np.array([[255, 0]], np.uint8), cv2.COLORMAP_TURBO)[0]
+    column = img[:, 420 + 15]
+    assert (column[COLOUR_BAR_TOP_PX] == turbo[0]).all()
+    assert (column[420 - COLOUR_BAR_BOTTOM_PX - 1] == turbo[1]).all()
+    assert (img[:8, 420:] == 255).all()   # white above its labels
     grey = np.all(img == 150, axis=-1).mean()
     assert 0.01 < grey < 0.9, "the shading region is drawn grey"
     assert client.get(url, params={"time": "2021-12-21T08:00"}).status_code == 422
