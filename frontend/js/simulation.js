@@ -268,6 +268,9 @@ function progressText(res, t0) {
       + `${res.estimated_run_s ? ` · then about ${duration(res.estimated_run_s)} of work` : ""} · ${elapsed(t0)}`;
   }
   if (frac >= 0.999) return `storing the series · ${elapsed(t0)}`;
+  // a run reports at the end of each 65,536 steps (≈ 45 days at 1 min): before its first
+  // report no percentage ("0 % of about 1 s" stayed there for a 4-day run to its end)
+  if (frac <= 0) return `running${res.estimated_run_s ? ` · about ${duration(res.estimated_run_s)} expected` : ""} · ${elapsed(t0)}`;
   return `running · ${num(100 * frac, 0)} %${res.estimated_run_s ? ` of about ${duration(res.estimated_run_s)}` : ""} · ${elapsed(t0)}`;
 }
 
