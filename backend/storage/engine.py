@@ -114,12 +114,33 @@ def alembic_config(engine: Engine) -> Config:
     return cfg
 
 
+class SchemaTooNewError(RuntimeError):
+    """The database holds a migration this code does not have: a newer heliotwin wrote it."""
+
+
 def run_migrations(engine: Engine) -> None:
-    """Upgrade the database to every head revision (core ``0001_initial`` and later)."""
+    """Upgrade the database to every head revision (core ``0001_initial`` and later).
+
+    A database at a revision this code does not know (written by a newer heliotwin) is
+    refused with :class:`SchemaTooNewError`, untouched: Alembic's own answer was only
+    "Can't locate revision identified by '…'" under a long traceback."""
     cfg = alembic_config(engine)
     from alembic import command
+    from alembic.migration import MigrationContext
+    from alembic.script import ScriptDirectory
 
+    script = ScriptDirectory.from_config(cfg)
+    known = {rev.revision for rev in script.walk_revisions()}
     with _migrate_lock, engine.begin() as conn:
+        current = MigrationContext.configure(conn).get_current_heads()
+        unknown = sorted(set(current) - known)
+        if unknown:
+            raise SchemaTooNewError(
+                f"the database {engine.url.render_as_string(hide_password=True)} is at schema "
+                f"revision {', '.join(unknown)}, which this heliotwin does not know (its latest: "
+                f"{', '.join(script.get_heads())}): a newer heliotwin migrated it. Run that "
+                "version or a newer one, or restore a backup taken before the upgrade; the "
+                "database was left as it is")
         cfg.attributes["connection"] = conn
         command.upgrade(cfg, "heads")
     logger.info("database at the latest schema (%s)", engine.url.get_backend_name())

@@ -12,7 +12,7 @@ from live_service import new_database
 from sqlalchemy import inspect
 
 from backend.settings import get_settings
-from backend.storage.engine import alembic_config, make_engine, run_migrations
+from backend.storage.engine import SchemaTooNewError, alembic_config, make_engine, run_migrations
 from backend.storage.tables import Base
 
 
@@ -44,3 +44,27 @@ def test_every_revision_chains_to_0001() -> None:
     assert bases == ["0001_initial"]
     for rev in script.walk_revisions():
         assert rev.revision == "0001_initial" or rev.down_revision is not None
+
+
+@pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
+def test_a_database_of_a_newer_version_is_refused_by_name(backend: str, tmp_path: Path) -> None:
+    """A database migrated by a newer heliotwin (a revision this code lacks) is refused
+    with a message saying so and what to do, and is left as it was (an operator's
+    finding: Alembic's "Can't locate revision" under a 150-line traceback)."""
+    db = new_database(backend, tmp_path)
+    engine = make_engine(get_settings(database_url=db.url))
+    try:
+        run_migrations(engine)
+        with engine.begin() as conn:
+            conn.exec_driver_sql("UPDATE alembic_version SET version_num = '0999_from_the_future'")
+        with pytest.raises(SchemaTooNewError) as err:
+            run_migrations(engine)
+        msg = str(err.value)
+        assert "0999_from_the_future" in msg and "newer heliotwin" in msg
+        assert "restore a backup" in msg
+        with engine.connect() as conn:
+            assert MigrationContext.configure(conn).get_current_heads() == (
+                "0999_from_the_future",)
+    finally:
+        engine.dispose()
+        db.drop()
