@@ -101,7 +101,11 @@ def discovery(topics: Topics, info: SiteInfo, version: str) -> list[tuple[str, b
         for sensor, (name, unit, device_class, state_class) in SENSORS.items():
             oid = object_id(site_id, array, sensor)
             config: dict[str, Any] = {
+                # the entity id: default_entity_id for Home Assistant 2025.10 and later
+                # (object_id, deprecated then, is no longer honoured from 2026.4), object_id
+                # for the older ones
                 "name": f"{array} {name}", "unique_id": oid, "object_id": oid,
+                "default_entity_id": f"sensor.{oid}",
                 "state_topic": topics.ha_state.format(site_id=site_id, array=array,
                                                       sensor=sensor),
                 "unit_of_measurement": unit, "device_class": device_class,
