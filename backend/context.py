@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from pathlib import Path
 
 from sqlalchemy import Engine, text
 from sqlalchemy.orm import Session, sessionmaker
@@ -76,6 +77,26 @@ def _statistics(engine: Engine) -> None:
         logger.info("tables %s analysed (they had no planner statistics)", ", ".join(stale))
 
 
+def warn_sites_without_config(engine: Engine, known: set[str], sites_dir: Path) -> list[str]:
+    """Log a warning for each site the database holds that no config file gives (a
+    database restored from a backup without its ``HELIOTWIN_SITES_DIR``, or a site file
+    removed): its readings stay stored but every request answers "unknown site" — an
+    operator's finding, which no line of the start-up log explained. Returns their ids."""
+    with engine.connect() as conn:
+        rows = conn.execute(text(
+            "SELECT s.site_id, COALESCE(SUM(r.n), 0) FROM sites s "
+            "LEFT JOIN arrays a ON a.site_id = s.site_id "
+            "LEFT JOIN measurement_rollups r ON r.array_id = a.id AND r.source = 0 "
+            "GROUP BY s.site_id ORDER BY s.site_id")).all()
+    orphans = [(site_id, int(n)) for site_id, n in rows if site_id not in known]
+    for site_id, n in orphans:
+        logger.warning(
+            "site %s is in the database (%d measured readings) but no site config gives it: "
+            "not served (\"unknown site\") until its file is back in HELIOTWIN_SITES_DIR (%s); "
+            "the database keeps its last config in sites.config_json", site_id, n, sites_dir)
+    return [site_id for site_id, _ in orphans]
+
+
 def open_context(settings: Settings) -> ServiceContext:
     """Migrate, load sites, start the writer (and MQTT, if set, and the alert evaluator)."""
     engine = make_engine(settings)
@@ -86,6 +107,7 @@ def open_context(settings: Settings) -> ServiceContext:
         sync_sites(conn, sites)
         registry.refresh_arrays(conn)
     logger.info("sites loaded: %s", ", ".join(registry.sites) or "none")
+    warn_sites_without_config(engine, set(registry.sites), settings.sites.user_dir)
     writer = Writer(engine, registry.phase_of_array, settings.ingest.energy_max_gap_s,
                     settings.database.writer_max_group_rows)
     writer.start()
