@@ -181,6 +181,17 @@ def find_token(conn: Connection, token_or_id: str | int) -> tuple[TokenInfo, str
         what = f"token {text[:10]}…"
         q = _COLUMNS.where(LoggerToken.token_sha256 == hash_token(text))
     row = None if q is None else conn.execute(q).first()
+    if row is None and not text.isdigit():
+        # the prefix `heliotwin token list` shows is not the token: name the id to use
+        # (an operator's finding: "no write token with token ht_BEu5pV8…" for a token
+        # that list showed as ht_BEu5pV8)
+        ids = [str(i) for i in conn.execute(select(LoggerToken.id).where(
+            LoggerToken.token_prefix == text).order_by(LoggerToken.id)).scalars()]
+        if ids:
+            raise UnknownToken(
+                f"{text} is the token_prefix `heliotwin token list` shows, not the token: "
+                f"name it by its id ({' or '.join(ids)}), e.g. `heliotwin token revoke "
+                f"{ids[0]}`")
     if row is None:
         raise UnknownToken(f"no write token with {what} (see `heliotwin token list`)")
     return _info(row), str(row.token_sha256)
