@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 from pvlib import atmosphere
 
+from backend.alerts.service import silence_counter
 from backend.measurements.energy import energy_rows
 from backend.measurements.queries import iso_utc
 from backend.sites import SiteInfo
@@ -63,8 +64,6 @@ def status(ctx: ServiceContext, info: SiteInfo, now: float) -> dict[str, Any]:
                              float(atmosphere.alt2pres(s.altitude)), s.temp_air).iloc[0]
         v = {**v, "solar_azimuth": float(pos["azimuth"]),
              "apparent_elevation": float(pos["apparent_elevation"])}
-    from backend.alerts.service import silence_counter
-
     counted = silence_counter(ctx.settings, info)
     arrays: dict[str, Any] = {}
     with ctx.engine.connect() as conn:
