@@ -60,6 +60,10 @@ SHARP_EDGE_DROP = 0.6
 #: at another scale: blur and the pixel grid add a pixel (1.02-1.2 times on the tester's
 #: discs at the right scale); a field of view half the one used makes it 2
 SCALE_RATIO = 2.0
+#: The window :func:`disc_scale_warning` reads, in disc radii at the assumed scale each side
+#: of the sun: a core up to some 15 times the disc (a field of view 15 times narrower than the
+#: one assumed) lies in it with its ring.
+SCALE_WINDOW_RADII = 16.0
 
 
 def disc_scale_warning(image: NDArray[Any], centroid_px: tuple[float, float],
@@ -70,21 +74,30 @@ def disc_scale_warning(image: NDArray[Any], centroid_px: tuple[float, float],
     field of view was not given, read at the default 67° (a tester's 1280 × 960 camera of 20°:
     offsets 3.7 times too large, a mount fit 6.8° off in azimuth, and no word). A glare only
     grows a core, so only a larger, sharp-edged one is looked at; a warning, not a refusal:
-    the offsets are still given. None when nothing is wrong."""
-    gray = to_gray(image)
-    peak, bg = float(gray.max()), float(np.median(gray))
+    the offsets are still given. None when nothing is wrong.
+
+    Read in a window of :data:`SCALE_WINDOW_RADII` disc radii around the sun (the sky's
+    level from every 8th pixel of the frame): on the whole of a 40-megapixel frame its
+    labels had raised an upload's peak memory by 180 MB (``test_limits``)."""
     x, y = (int(round(v)) for v in centroid_px)
-    h, w = gray.shape
-    if not (0 <= x < w and 0 <= y < h) or peak - bg < 20.0:
+    h, w = image.shape[:2]
+    if not (0 <= x < w and 0 <= y < h):
+        return None
+    rho = cam.focal_px * float(np.tan(np.radians(SUN_RADIUS_DEG)))
+    half = int(np.ceil(max(32.0, SCALE_WINDOW_RADII * rho)))
+    x0, y0 = max(x - half, 0), max(y - half, 0)
+    gray = to_gray(np.ascontiguousarray(image[y0:y + half + 1, x0:x + half + 1]))
+    bg = float(np.median(to_gray(np.ascontiguousarray(image[::8, ::8]))))
+    peak = float(gray.max())
+    if peak - bg < 20.0:
         return None
     mask = (gray > region_threshold(peak, bg)[1]).astype(np.uint8)
-    if not mask[y, x]:
+    if not mask[y - y0, x - x0]:
         return None
     _, labels = cv2.connectedComponents(mask, connectivity=8)
-    area = float(np.count_nonzero(labels == labels[y, x]))
+    area = float(np.count_nonzero(labels == labels[y - y0, x - x0]))
     r_eq = float(np.sqrt(area / np.pi))
-    rho = cam.focal_px * float(np.tan(np.radians(SUN_RADIUS_DEG)))
-    ring = _ring_values(gray, centroid_px[0], centroid_px[1], r_eq + 2.0, None)
+    ring = _ring_values(gray, centroid_px[0] - x0, centroid_px[1] - y0, r_eq + 2.0, None)
     if ring.size < 8 or r_eq <= SCALE_RATIO * rho:
         return None
     if (peak - _median(ring)) / (peak - bg) < SHARP_EDGE_DROP:
