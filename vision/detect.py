@@ -121,6 +121,10 @@ _FOV_EDGE_PX = 2.5  # outline points this close to the image circle's edge lie o
 #: of its radius (tests/vision/test_detect.py) 0.73
 _MIRROR_SOLIDITY = 0.8
 _CUT_SHARE = 0.1  # a core with this share of its outline on the image circle's edge is cut
+_ARC_SHARE_FLOOR = 0.45  # a free arc with more than this share on one circle is round
+# (:func:`_cut_shape`'s term rises from 0 here to 1 at 0.85); its circle's centre is
+# evidence of where a hidden sun is (:func:`_disc_behind_obstacle`) from the term's midpoint
+_ARC_EVIDENCE_SHARE = 0.65
 _CUT_TRIALS = 512  # RANSAC triples of the contained fit of a cut core (a 20 % arc: P(miss) 2 %)
 _ROUND_SPREAD_PX = 1.5  # a core whose outline spans ≤ this + 5 % of R in radius is round
 _MAX_CANDIDATES = 12
@@ -822,11 +826,13 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
             # a fit carried beyond the frame or the image circle (an outline the frame cut):
             # the core's own centroid, the mean of pixels inside both
             cx, cy = got.best.cx, got.best.cy
-        if model is not None and _disc_behind_obstacle(gray, cx, cy, model, got):
+        hidden = (_disc_behind_obstacle(gray, cx, cy, model, got, fov) if model is not None
+                  else None)
+        if hidden is not None:
             found, got.p = False, 0.0
             reason = (f"a glare cut by an obstacle, but the solar disc at its centre "
-                      f"({cx:.0f}, {cy:.0f}) px is darker than the sky: the sun is behind "
-                      "the obstacle, not visible")
+                      f"({hidden[0]:.0f}, {hidden[1]:.0f}) px is darker than the sky: the sun "
+                      "is behind the obstacle, not visible")
     dist = None
     if found and expected_px is not None:
         dist = float(np.hypot(cx - expected_px[0], cy - expected_px[1]))
@@ -852,9 +858,10 @@ _DISC_BLUR_PX = 1.0  # the solar disc's reach beyond its radius: a pixel's blur 
 
 
 def _disc_behind_obstacle(gray: NDArray[np.uint8], cx: float, cy: float, model: CameraModel,
-                          got: _Pick) -> bool:
-    """Whether the solar disc centred at (``cx``, ``cy``) — the centre found for the glare of
-    ``got`` — is hidden behind an obstacle: no pixel within its radius
+                          got: _Pick, fov: FovCircle | None = None
+                          ) -> tuple[float, float] | None:
+    """Where the solar disc centred at (``cx``, ``cy``) — the centre found for the glare of
+    ``got`` — is hidden behind an obstacle (that centre, else None): no pixel within its radius
     (:data:`vision.sphere.SUN_RADIUS_DEG` at the camera's largest local scale, plus
     :data:`_DISC_BLUR_PX`) reaches the core's level (:func:`vision.candidates.region_threshold`)
     and their median is darker than the sky (``got.bg``). Issue 24 item 2's positive
@@ -863,7 +870,35 @@ def _disc_behind_obstacle(gray: NDArray[np.uint8], cx: float, cy: float, model: 
     roof darker than the sky is the aureole of a sun behind it (a tester's sun behind trees
     at the horizon, reported at 0.96: the free arc of the glare above the tree line fits a
     circle centred behind it). A sun the horizon cuts keeps part of its disc above the
-    line, clipped, and is kept. Where the model cannot tell the scale, nothing is refused."""
+    line, clipped, and is kept. Where the model cannot tell the scale, nothing is refused.
+
+    The disc is looked for at the centre found and, when an obstacle cuts the core, at the
+    centre of the circle through its free arc (:func:`_free_arc`, when at least
+    :data:`_ARC_EVIDENCE_SHARE` of the arc lies on it — half way up :func:`_cut_shape`'s
+    roundness term; a ragged arc's circle is no evidence: the EUROCONTROL sun cut through
+    its centre, share 0.47, has it 0.6° off, on the trees): the glare's isophote, centred on
+    the sun. The centre found for a cut core follows the cut (the limb fit, the core
+    completed by its mirror image): the EUROCONTROL low sun with trees 0.3-0.8° beyond its
+    disc was reported at 0.98 centred on the tree line (share 0.68-0.70), a stereographic
+    sun 3.4° under a skyline at 0.89 (share 1.0). A circle centred beyond the image circle
+    ``fov`` is none: the unlit frame there is no obstacle (a poly-lens sun 2° high, its arc's
+    circle centred 4° beyond the circle's edge)."""
+    _, level = region_threshold(got.peak, got.bg)
+    centres = [(cx, cy)]
+    c = got.best
+    full = (got.labels == c.labels[0]) if len(c.labels) == 1 else np.isin(got.labels, c.labels)
+    arc = _free_arc(full, c, gray, got.bg, model)
+    if arc is not None and arc[2][2] >= _ARC_EVIDENCE_SHARE and \
+            _inside(arc[2][0], arc[2][1], gray.shape, fov):
+        centres.append((arc[2][0], arc[2][1]))
+    return next(((x, y) for x, y in centres if _disc_dark(gray, x, y, model, level, got.bg)),
+                None)
+
+
+def _disc_dark(gray: NDArray[np.uint8], cx: float, cy: float, model: CameraModel,
+               level: float, bg: float) -> bool:
+    """Whether no pixel of the solar disc centred at (``cx``, ``cy``) reaches ``level`` and
+    their median is below the sky's ``bg`` (:func:`_disc_behind_obstacle`)."""
     major, _ = _local_px_per_deg(model, cx, cy)
     if not major > 0.0:
         return False
@@ -877,8 +912,7 @@ def _disc_behind_obstacle(gray: NDArray[np.uint8], cx: float, cy: float, model: 
     disc = gray[y0:y1, x0:x1][(xx - cx) ** 2 + (yy - cy) ** 2 <= r * r]
     if disc.size == 0:
         return False
-    _, level = region_threshold(got.peak, got.bg)
-    return bool(int(disc.max()) <= level and float(np.median(disc)) < got.bg)
+    return bool(int(disc.max()) <= level and float(np.median(disc)) < bg)
 
 
 def _inside(x: float, y: float, shape: tuple[int, ...], fov: FovCircle | None) -> bool:
@@ -1156,24 +1190,39 @@ def _cut_shape(c: _Candidate, labels: NDArray[Any], gray: NDArray[np.uint8], bg:
     above them; a cloud highlight cut by a tree top does not."""
     # the whole cluster's outline (not the core it was narrowed to: vision.candidates._prior)
     full = (labels == c.labels[0]) if len(c.labels) == 1 else np.isin(labels, c.labels)
-    contours, _ = cv2.findContours(full.astype(np.uint8), cv2.RETR_EXTERNAL,
-                                   cv2.CHAIN_APPROX_NONE)
-    if not contours:
+    got = _free_arc(full, c, gray, bg, model)
+    if got is None:
         return 0.0
-    pts = np.vstack(contours).reshape(-1, 2).astype(float) + (c.ox, c.oy)
-    if len(pts) < 24:
-        return 0.0
-    cut = _cut_by_obstacle(gray, pts, bg, float(np.sqrt(c.area / np.pi)))
-    cut |= _on_frame_edge(pts, gray.shape)
-    if not cut.any() or int(np.count_nonzero(~cut)) < 12:
-        return 0.0
-    x, y, _, share = _robust_limb_centre(pts[~cut], model)
+    pts, cut, (x, y, share) = got
     arc = 0.0
     if _inside(x, y, gray.shape, None):  # else a circle centred off the frame: no centre
-        arc = float(min(max((share - 0.45) / 0.4, 0.0), 1.0))
+        arc = float(min(max((share - _ARC_SHARE_FLOOR) / 0.4, 0.0), 1.0))
     if arc >= 1.0 or int(np.count_nonzero(cut)) < 2:
         return arc
     return max(arc, _mirrored_shape(full.astype(np.uint8), c.ox, c.oy, pts[cut]))
+
+
+def _free_arc(full: NDArray[np.bool_], c: _Candidate, gray: NDArray[np.uint8], bg: float,
+              model: CameraModel | None
+              ) -> tuple[NDArray[np.float64], NDArray[np.bool_], tuple[float, float, float]] | None:
+    """The outline of the cluster ``full`` (the candidate ``c``'s pixels), which of its
+    points an obstacle or the frame cuts, and the circle through most of the rest — the free
+    arc (:func:`vision.limb._robust_limb_centre` on the sphere of ``model``): its centre
+    ``(x, y)`` [px] and the share of the free arc on it; None when nothing is cut or too
+    little is left."""
+    contours, _ = cv2.findContours(full.astype(np.uint8), cv2.RETR_EXTERNAL,
+                                   cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return None
+    pts = np.vstack(contours).reshape(-1, 2).astype(float) + (c.ox, c.oy)
+    if len(pts) < 24:
+        return None
+    cut = _cut_by_obstacle(gray, pts, bg, float(np.sqrt(c.area / np.pi)))
+    cut |= _on_frame_edge(pts, gray.shape)
+    if not cut.any() or int(np.count_nonzero(~cut)) < 12:
+        return None
+    x, y, _, share = _robust_limb_centre(pts[~cut], model)
+    return pts, cut, (float(x), float(y), float(share))
 
 
 def _mirrored_shape(mask: NDArray[np.uint8], ox: int, oy: int, cut_pts: NDArray[np.float64]
