@@ -804,7 +804,11 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
     found = got.p >= min_confidence
     reason = None if found else conf.reason(got.x, got.values)
     cx = cy = radius = 0.0
-    if found:
+    refused = not found
+    # a refused glare's confidence is reported too: where its disc is hidden (positive
+    # evidence, as for a found one) it is none (issue 24: no sun ≥ 0.3 where none is visible;
+    # the independent renderer's hidden suns refused at 0.40-0.46 as "not radially symmetric")
+    if found or got.p > 0.0:
         white = None
         r_eq = float(np.sqrt(got.best.area / np.pi))
         if r_eq > conf.LARGEST_DEG * ppd and scale_known:
@@ -833,6 +837,8 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
             reason = (f"a glare cut by an obstacle, but the solar disc at its centre "
                       f"({hidden[0]:.0f}, {hidden[1]:.0f}) px is darker than the sky: the sun "
                       "is behind the obstacle, not visible")
+    if refused:
+        cx = cy = radius = 0.0
     dist = None
     if found and expected_px is not None:
         dist = float(np.hypot(cx - expected_px[0], cy - expected_px[1]))
