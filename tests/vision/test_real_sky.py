@@ -100,6 +100,17 @@ def _eurocontrol_low_sun(real_sky: list[dict[str, str]]) -> tuple[np.ndarray, fl
     return img, float(cents[i][0]), float(cents[i][1])
 
 
+def _eurocontrol_radial(real_sky: list[dict[str, str]]
+                       ) -> tuple[np.ndarray, float, float, np.ndarray, float]:
+    """:func:`_eurocontrol_low_sun`, the unit vector from the image circle's centre to the
+    sun (the radius, the sun's azimuth) and the blind scale [px/°] (the circle read as an
+    equidistant 180° lens with a 2 % margin)."""
+    img, bx, by = _eurocontrol_low_sun(real_sky)
+    fov = estimate_fov(to_gray(img))
+    u = np.array([bx - fov.cx_px, by - fov.cy_px]) / np.hypot(bx - fov.cx_px, by - fov.cy_px)
+    return img, bx, by, u, fov.radius_px / 0.98 / 90.0
+
+
 def test_a_sun_whose_disc_an_obstacle_hides_is_not_reported(real_sky) -> None:
     """Issue 24 item 2's positive evidence against a round saturated glare: the solar disc
     at its centre is hidden. The EUROCONTROL low sun (≈ 10° high, 10.9 px/° blind) with a
@@ -141,13 +152,9 @@ def test_a_sun_wholly_behind_a_straight_obstacle_is_not_reported(real_sky,
     0.98 (both). The circle through the cap's free arc is centred
     on the hidden disc (``vision.detect._disc_behind_obstacle``): no sun. (The trees on the
     other side, 0.54-0.59 of the arc on one circle, are still reported: docs.)"""
-    img, bx, by = _eurocontrol_low_sun(real_sky)
-    h, w = img.shape[:2]
-    yy, xx = np.mgrid[0:h, 0:w]
-    fov = estimate_fov(to_gray(img))
-    px_per_deg = fov.radius_px / 0.98 / 90.0
-    u = np.array([bx - fov.cx_px, by - fov.cy_px]) / np.hypot(bx - fov.cx_px, by - fov.cy_px)
+    img, bx, by, u, px_per_deg = _eurocontrol_radial(real_sky)
     v = np.array([-u[1], u[0]])  # across the radius
+    yy, xx = np.mgrid[0:img.shape[0], 0:img.shape[1]]
     hidden = img.copy()
     hidden[(((xx - bx) * v[0] + (yy - by) * v[1]) < beyond_deg * px_per_deg)
            & (np.hypot(xx - bx, yy - by) < 40 * px_per_deg)] = (40, 44, 40)
@@ -168,12 +175,9 @@ def test_a_sun_cut_by_an_obstacle_through_its_centre_is_found_at_the_discs_centr
     confidence ≥ 0.5 at the disc's centre — the uncut frame's plain centroid of grey ≥ 250 —
     within 0.3 % of the width (the visible half's own centroid of grey ≥ 250 lies 0.32 and 0.35 %
     away)."""
-    img, bx, by = _eurocontrol_low_sun(real_sky)
+    img, bx, by, u, px_per_deg = _eurocontrol_radial(real_sky)
     h, w = img.shape[:2]
     yy, xx = np.mgrid[0:h, 0:w]
-    fov = estimate_fov(to_gray(img))
-    px_per_deg = fov.radius_px / 0.98 / 90.0
-    u = np.array([bx - fov.cx_px, by - fov.cy_px]) / np.hypot(bx - fov.cx_px, by - fov.cy_px)
     if side == "across":
         u = np.array([-u[1], u[0]])
     cut = img.copy()
