@@ -207,6 +207,21 @@ def test_a_half_hour_offset_has_no_etc_zone(offset: float) -> None:
     assert fixed_offset_zone(-6) == "Etc/GMT+6" and fixed_offset_zone(1) == "Etc/GMT-1"
 
 
+def test_the_etc_zones_run_from_utc_minus_12_to_utc_plus_14() -> None:
+    """Tonga's UTC+13 (and Kiribati's +14) had no zone, "pass --timezone", while a −13 (no
+    place keeps it) was written as ``Etc/GMT+13``, which is no zone."""
+    from zoneinfo import ZoneInfo
+
+    from backend.cli.site import fixed_offset_zone
+
+    for offset in (-12, 13, 14):
+        ZoneInfo(fixed_offset_zone(offset))  # a zone that exists
+    assert fixed_offset_zone(13) == "Etc/GMT-13" and fixed_offset_zone(-12) == "Etc/GMT+12"
+    for offset in (-13, 15):
+        with pytest.raises(ValueError, match="--timezone"):
+            fixed_offset_zone(offset)
+
+
 def test_the_library_and_the_service_default_to_the_same_user_folder(monkeypatch) -> None:
     from backend.settings import get_settings
     from sim.sites import default_user_sites_dir

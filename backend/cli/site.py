@@ -239,8 +239,10 @@ def _station(path: Path, fmt: str) -> dict[str, Any]:
 
 
 def fixed_offset_zone(tz_h: float) -> str:
-    """The IANA ``Etc/GMT±N`` zone of a whole-hour UTC offset [h] (POSIX sign: inverted)."""
-    if tz_h != int(tz_h) or not -14 <= tz_h <= 12:
+    """The IANA ``Etc/GMT±N`` zone of a whole-hour UTC offset [h] (POSIX sign: inverted).
+    The zones run from UTC−12 (``Etc/GMT+12``) to UTC+14 (``Etc/GMT-14``): Tonga's +13 had
+    been refused and a −13 named the zone ``Etc/GMT+13``, which does not exist."""
+    if tz_h != int(tz_h) or not -12 <= tz_h <= 14:
         raise ValueError(f"the file's UTC offset {tz_h} h has no Etc/GMT zone: pass --timezone")
     n = -int(tz_h)
     return "Etc/GMT" if n == 0 else f"Etc/GMT{n:+d}"
