@@ -28,6 +28,7 @@ model choices the twin uses and names units:
 from __future__ import annotations
 
 import functools
+import io
 from pathlib import Path
 from typing import IO, Any
 
@@ -292,6 +293,24 @@ def weather_format(first_line: str) -> str:
                      "(not TMY2 .tm2 files)")
 
 
+def weather_text(raw: bytes) -> str:
+    """A weather file's bytes as text: UTF-8 (a byte-order mark dropped), else Latin-1, which
+    every byte decodes. An EPW or TMY3 written on Windows names its station in Latin-1
+    (``Tromsø``): the CLI refused it with "'utf-8' codec can't decode byte 0xf8" while the
+    same file uploaded ran (a tester's finding)."""
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+def weather_buffer(source: str | Path | IO[str]) -> IO[str]:
+    """A weather file (a path, read by :func:`weather_text`, or a text buffer) as a buffer."""
+    if isinstance(source, (str, Path)):
+        return io.StringIO(weather_text(Path(source).read_bytes()))
+    return source
+
+
 def sniff_weather_format(source: str | Path | IO[str], fmt: str | None = None) -> str:
     """The format of a weather file (path or text buffer) read from its first line
     (:func:`weather_format`); a buffer is left where it was.
@@ -408,8 +427,8 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
     """
     from pvlib import iotools
 
-    fmt = sniff_weather_format(source, fmt)
-    src: Any = str(source) if isinstance(source, Path) else source
+    src = weather_buffer(source)
+    fmt = sniff_weather_format(src, fmt)
     try:
         if fmt == "tmy3":
             data, meta = iotools.read_tmy3(src, map_variables=True)
@@ -528,7 +547,7 @@ def read_measured(source: str | Path | IO[str], stamped: str = MEASURED_STAMPED_
     if stamped not in ("interval_end", "interval_start", "instant"):
         raise ValueError(f"stamped must be interval_end, interval_start or instant; got "
                          f"{stamped!r}")
-    raw = pd.read_csv(source, dtype=str, skipinitialspace=True)
+    raw = pd.read_csv(weather_buffer(source), dtype=str, skipinitialspace=True)
     by_lower = {str(c).strip().lower(): c for c in raw.columns}
     found = {key: next((by_lower[n] for n in names if n in by_lower), None)
              for key, names in MEASURED_COLUMNS.items()}

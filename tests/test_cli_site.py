@@ -159,6 +159,18 @@ def test_from_weather_epw_in_the_southern_hemisphere_faces_north(tmp_path: Path,
     assert "tracker.azimuth_min_deg" in site["assumed"]
 
 
+def test_from_weather_reads_a_latin1_station_name(tmp_path: Path, heliotwin) -> None:
+    """An EPW written on Windows names its station in Latin-1: refused with "'utf-8' codec
+    can't decode byte 0xd1" (the same file uploaded ran); now read as the service reads it
+    (``sim.sky.weather_text``)."""
+    epw = tmp_path / "nunoa.epw"
+    _epw(epw)
+    epw.write_bytes(epw.read_bytes().replace(b"Santiago,RM", "Ñuñoa,RM".encode("latin-1")))
+    p = heliotwin(tmp_path, "site", "from-weather", str(epw), "--id", "nunoa")
+    assert p.returncode == 0, p.stderr
+    assert json.loads((tmp_path / "nunoa.json").read_text())["name"] == "Ñuñoa, RM, CHL"
+
+
 def test_a_southern_site_s_tracker_faces_the_sun_all_afternoon(tmp_path: Path, heliotwin) -> None:
     """A tracker copied from Tehuantepec to 45° S kept its azimuth range centred on south
     (−90°…450°); the December sun there runs east → north → west, so the joint unwound

@@ -217,14 +217,16 @@ def _station(path: Path, fmt: str) -> dict[str, Any]:
     KeyError of the field."""
     from pvlib import iotools
 
+    from sim.sky import weather_buffer
+
     try:
         if fmt == "epw":
-            data, meta = iotools.read_epw(str(path))
+            data, meta = iotools.read_epw(weather_buffer(path))
             name = ", ".join(str(meta.get(k)) for k in ("city", "state-prov", "country")
                              if meta.get(k) not in (None, "", "-"))
             code = meta.get("WMO_code", "")
         else:
-            data, meta = iotools.read_tmy3(str(path), map_variables=True)
+            data, meta = iotools.read_tmy3(weather_buffer(path), map_variables=True)
             name = ", ".join(str(meta.get(k)).strip('"') for k in ("Name", "State")
                              if meta.get(k))
             code = meta.get("USAF", "")

@@ -153,6 +153,25 @@ def test_epw_reads_as_the_same_typical_year(tmp_path: Path) -> None:
     assert epw.index[171 * 24 + 12].strftime("%m-%d %H:%M") == "06-21 12:30"
 
 
+def test_a_latin1_or_bom_weather_file_reads_as_the_plain_one(tmp_path: Path) -> None:
+    """An EPW naming its station in Latin-1 (``Tromsø``, as a Windows tool writes it) was
+    refused from a path ("'utf-8' codec can't decode byte 0xf8"), and a TMY3 saved with a
+    UTF-8 byte-order mark (a spreadsheet's "CSV UTF-8") with "invalid literal for int()
+    with base 10: '\\ufeff723170'"; both read as the plain files."""
+    plain_epw = write_epw(tmp_path / "plain.epw")
+    latin1 = tmp_path / "latin1.epw"
+    latin1.write_bytes(plain_epw.read_bytes().replace(b"Greensboro", "Tromsø".encode("latin-1"), 1))
+    bom = tmp_path / "bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + pvlib_tmy3_path().read_bytes())
+    epw, epw_station = read_typical_year(latin1)
+    assert epw_station["name"] == "Tromsø, USA"
+    pd.testing.assert_frame_equal(epw, read_typical_year(plain_epw)[0])
+    tmy, tmy_station = read_typical_year(bom)
+    plain, plain_station = read_typical_year(pvlib_tmy3_path())
+    assert tmy_station == plain_station
+    pd.testing.assert_frame_equal(tmy, plain)
+
+
 def test_weather_files_that_are_not_a_typical_year(tmp_path: Path) -> None:
     junk = tmp_path / "junk.csv"
     junk.write_text("a,b,c\n1,2,3\n")

@@ -45,6 +45,7 @@ from sim.sky import (
     read_measured,
     read_typical_year,
     sniff_weather_format,
+    weather_text,
 )
 
 router = APIRouter(prefix="/api/v1/simulations", tags=["simulations"])
@@ -61,11 +62,7 @@ async def _weather(upload: Any, stamped: str | None, timezone: str | None
     if not isinstance(upload, UploadFile):
         raise HTTPException(422, "file: a weather file (TMY3, EPW or a measured CSV) is "
                                  "required")
-    raw = await upload.read()
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")
+    text = weather_text(await upload.read())
     name = upload.filename or "the upload"
     try:
         sniff_weather_format(io.StringIO(text))
