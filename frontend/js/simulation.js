@@ -321,7 +321,7 @@ async function firstDayRows(url, summary, t0) {
 }
 
 /** POST the scenario: as JSON, or as multipart with the chosen weather file — TMY3/EPW or
- * measured CSV (clear sky without one). */
+ * measured CSV, with the zone of its times when given (clear sky without one). */
 function submit(body) {
   const file = $("sim-weather").files[0];
   if (!file) return api("/api/v1/simulations", { method: "POST", json: body });
@@ -329,6 +329,10 @@ function submit(body) {
   for (const [k, v] of Object.entries(body)) form.append(k, String(v));
   form.append("force", String($("sim-force").checked));
   form.append("weather_stamped", $("sim-weather-stamped").value);
+  // a measured CSV of local times without offsets needs their zone: the service refused it
+  // naming weather_timezone, which the page had no field for (a tester's finding)
+  const zone = $("sim-weather-timezone").value.trim();
+  if (zone) form.append("weather_timezone", zone);
   form.append("file", file, file.name);
   return api("/api/v1/simulations/weather", { method: "POST", form });
 }

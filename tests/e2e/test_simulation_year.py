@@ -96,26 +96,19 @@ def test_a_tmy3_file_uploaded_on_the_page_runs_on_its_weather(page, server,
     page.screenshot(path=str(ARTIFACTS / "simulation-tmy3.png"), full_page=True)
 
 
-def test_measured_weather_uploaded_on_the_page_runs_over_its_dates(page, server, tmp_path,
-                                                                   heliotwin_cli) -> None:
-    """A measured CSV (time, ghi, dni, dhi) chosen on the page runs on its own dates, the Sky
-    tile says so, and the energy is the CLI's on the same file."""
-    from tests.test_cli_sim import _measured_day
-
-    path = _measured_day(tmp_path / "day.csv")
+def _open_measured_day(page, server, path: Path) -> None:
+    """The Simulation page set for 15 March 2024 at 300 s steps on the weather file ``path``."""
     page.goto(server.url + "/#simulation")
     page.wait_for_selector("#sim-machine-fields input", state="attached")
     page.fill("#sim-start", "2024-03-15")
     page.fill("#sim-end", "2024-03-16")
     page.select_option("#sim-step", "300")
     page.set_input_files("#sim-weather", str(path))
-    page.set_checked("#sim-force", False)
-    page.select_option("#sim-weather-stamped", "interval_end")
-    page.click("#sim-run")
-    page.wait_for_selector("body[data-simulation-done]", timeout=120_000)
-    assert page.is_hidden("#banner"), page.text_content("#banner")
-    tiles = page.text_content("#sim-summary") or ""
-    assert "measured weather" in tiles and "day.csv" in tiles, tiles
+
+
+def _is_the_clis_measured_day(page, server, heliotwin_cli, path: Path) -> None:
+    """The page's finished run has the tracker energy of ``heliotwin simulate`` on the
+    measured day ``path`` (15 March 2024 at Tehuantepec, 300 s steps)."""
     run_id = page.get_attribute("body", "data-simulation-done")
     summary = httpx.get(f"{server.url}/api/v1/simulations/{run_id}", timeout=30).json()
     cli = heliotwin_cli("simulate", "--site", "tehuantepec", "--start", "2024-03-15", "--end",
@@ -123,4 +116,40 @@ def test_measured_weather_uploaded_on_the_page_runs_over_its_dates(page, server,
     assert cli.returncode == 0, cli.stderr
     assert summary["summary"]["tracker_energy_wh"] == pytest.approx(
         json.loads(cli.stdout)["tracker_energy_wh"], rel=1e-12)
+
+
+def test_measured_weather_uploaded_on_the_page_runs_over_its_dates(page, server, tmp_path,
+                                                                   heliotwin_cli) -> None:
+    """A measured CSV (time, ghi, dni, dhi) chosen on the page runs on its own dates, the Sky
+    tile says so, and the energy is the CLI's on the same file."""
+    from tests.test_cli_sim import _measured_day
+
+    path = _measured_day(tmp_path / "day.csv")
+    _open_measured_day(page, server, path)
+    page.set_checked("#sim-force", False)
+    page.select_option("#sim-weather-stamped", "interval_end")
+    page.click("#sim-run")
+    page.wait_for_selector("body[data-simulation-done]", timeout=120_000)
+    assert page.is_hidden("#banner"), page.text_content("#banner")
+    tiles = page.text_content("#sim-summary") or ""
+    assert "measured weather" in tiles and "day.csv" in tiles, tiles
+    _is_the_clis_measured_day(page, server, heliotwin_cli, path)
     page.screenshot(path=str(ARTIFACTS / "simulation-measured.png"), full_page=True)
+
+
+def test_measured_weather_of_local_times_runs_with_the_zone_given_on_the_page(
+        page, server, tmp_path, heliotwin_cli) -> None:
+    """A logger's CSV of local times without offsets was refused naming weather_timezone,
+    which the page had no field for; the zone typed on the page reads them, and the run is
+    the CLI's on the same times with their offsets."""
+    from tests.test_cli_sim import _measured_day
+
+    path = _measured_day(tmp_path / "day.csv")
+    local = tmp_path / "local.csv"  # 2024-03-15T00:10:00-06:00 → 2024-03-15 00:10:00
+    local.write_text(path.read_text().replace("-06:00,", ",").replace("T", " "))
+    _open_measured_day(page, server, local)
+    page.fill("#sim-weather-timezone", "Etc/GMT+6")
+    page.click("#sim-run")
+    page.wait_for_selector("body[data-simulation-done]", timeout=120_000)
+    assert page.is_hidden("#banner"), page.text_content("#banner")
+    _is_the_clis_measured_day(page, server, heliotwin_cli, path)
