@@ -171,6 +171,22 @@ def test_from_weather_reads_a_latin1_station_name(tmp_path: Path, heliotwin) -> 
     assert json.loads((tmp_path / "nunoa.json").read_text())["name"] == "Ñuñoa, RM, CHL"
 
 
+def test_from_weather_warns_of_a_zone_off_the_files_clock(tmp_path: Path, heliotwin) -> None:
+    """``--timezone`` for a zone whose standard time is not the file's UTC offset was written
+    silently, its notes saying the zone was the file's offset; now a warning names both."""
+    epw = tmp_path / "santiago.epw"  # UTC-4
+    _epw(epw)
+    same = heliotwin(tmp_path, "site", "from-weather", str(epw), "--id", "scl",
+                     "--timezone", "America/Santiago")  # -4 in standard time, -3 in summer
+    assert same.returncode == 0 and "warning" not in same.stderr, same.stderr
+    off = heliotwin(tmp_path, "site", "from-weather", str(epw), "--id", "aep",
+                    "--timezone", "America/Argentina/Buenos_Aires")
+    assert off.returncode == 0, off.stderr
+    assert "UTC-3 h in standard time, the file's hours UTC-4 h" in off.stderr
+    notes = json.loads((tmp_path / "aep.json").read_text())["notes"]
+    assert notes.startswith("zone America/Argentina/Buenos_Aires (--timezone)") and "-4" in notes
+
+
 def test_a_southern_site_s_tracker_faces_the_sun_all_afternoon(tmp_path: Path, heliotwin) -> None:
     """A tracker copied from Tehuantepec to 45° S kept its azimuth range centred on south
     (−90°…450°); the December sun there runs east → north → west, so the joint unwound

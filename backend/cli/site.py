@@ -251,7 +251,9 @@ def fixed_offset_zone(tz_h: float) -> str:
 
 
 def from_weather(args: argparse.Namespace) -> int:
-    """Write a site at the station of a TMY3/EPW file."""
+    """Write a site at the station of a TMY3/EPW file; a ``--timezone`` whose standard time
+    is not the file's offset is written with a warning naming both."""
+    from sim.site_config import standard_offset_h
     from sim.sites import CLIMATE_KEYS, UnknownSiteError, relocated_config
     from sim.sky import sniff_weather_format
 
@@ -274,10 +276,20 @@ def from_weather(args: argparse.Namespace) -> int:
         "altitude_m": st["altitude_m"], "timezone": zone,
         "source": f"{fmt.upper()} station {st['code']} {st['name']} ({args.file.name}); "
                   f"tracker and modules as {args.like}",
-        "notes": f"zone {zone}: the file's fixed UTC offset {st['tz_h']:+g} h (its typical "
-                 "year's clock)"},
+        "notes": (f"zone {zone} (--timezone); the file's typical year keeps its own clock, "
+                  f"UTC{st['tz_h']:+g} h" if args.timezone else
+                  f"zone {zone}: the file's fixed UTC offset {st['tz_h']:+g} h (its typical "
+                  "year's clock)")},
         climate={k: st[k] for k in CLIMATE_KEYS}, climate_source=args.file.name)
-    return _write(config, args.force)
+    written = _write(config, args.force)
+    if args.timezone and (std := standard_offset_h(zone)) != st["tz_h"]:
+        # Asia/Kathmandu given for a +5.5 h file was written silently, its notes saying
+        # the zone was the file's offset (a tester's finding)
+        print(f"warning: --timezone {zone} is UTC{std:+g} h in standard time, the file's "
+              f"hours UTC{st['tz_h']:+g} h: the run lays the typical year on the file's clock, "
+              "the site's days and times are the zone's — another place's zone?",
+              file=sys.stderr)
+    return written
 
 
 def show(args: argparse.Namespace) -> int:
