@@ -617,13 +617,15 @@ def _measured_times(column: pd.Series, timezone: str | None, line: Any) -> pd.Da
         i = int(np.flatnonzero(parsed.isna().to_numpy())[0])
         raise ValueError(f"time: {text.iloc[i][:30]!r} at {line(i)} is not an ISO 8601 time "
                          "(2024-06-01T10:05:00+09:30)")
-    if not want:
-        try:
-            parsed = parsed.dt.tz_localize(timezone, ambiguous="raise", nonexistent="raise")
-        except Exception as exc:  # pytz's errors name the wall time only
-            raise ValueError(f"time: {exc} in {timezone}: a local time that repeats or is "
-                             "skipped at a clock change — give the times a UTC offset, or "
-                             "name a fixed zone, e.g. Etc/GMT-10 for UTC+10") from None
+    if not want:  # a time a clock change repeats or skips is refused naming its line (the
+        # error had been pandas' "Cannot infer dst time …, try using the 'ambiguous' argument")
+        parsed = parsed.dt.tz_localize(timezone, ambiguous="NaT", nonexistent="NaT")
+        if parsed.isna().any():
+            i = int(np.flatnonzero(parsed.isna().to_numpy())[0])
+            raise ValueError(f"time: {text.iloc[i][:30]!r} at {line(i)} repeats or is skipped "
+                             f"at a clock change in {timezone} — give the times a UTC offset, "
+                             "or name the fixed zone of the logger's clock, e.g. Etc/GMT+4 "
+                             "for UTC−4")
     return pd.DatetimeIndex(parsed).tz_convert("UTC")
 
 

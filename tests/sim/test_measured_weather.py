@@ -139,6 +139,23 @@ def test_times_without_an_offset_are_read_in_the_zone_given() -> None:
         read_measured(io.StringIO(text))
 
 
+@pytest.mark.parametrize(("times", "line"), [
+    (["2023-04-01 22:50", "2023-04-01 23:00", "2023-04-01 23:10"], 3),  # 23:00 falls twice
+    (["2023-09-02 23:50", "2023-09-03 00:00", "2023-09-03 00:10"], 3),  # 00:00 is skipped
+])
+def test_a_local_time_a_clock_change_repeats_or_skips_is_refused_naming_its_line(
+        times: list[str], line: int) -> None:
+    """Santiago's clocks go back at midnight on 2 April 2023 and forward on 3 September: the
+    refusal was pandas' "Cannot infer dst time from 2023-04-01 23:00:00, try using the
+    'ambiguous' argument", naming no line; the fixed zone of the same clock reads them."""
+    text = "time,ghi,dni,dhi\n" + "".join(f"{t},0,0,0\n" for t in times)
+    with pytest.raises(ValueError, match=rf"'{times[1]}' at line {line} repeats or is skipped "
+                                         "at a clock change in America/Santiago"):
+        read_measured(io.StringIO(text), timezone="America/Santiago")
+    weather, _ = read_measured(io.StringIO(text), timezone="Etc/GMT+4")
+    assert len(weather) == 5  # the three rows and the two edges
+
+
 @pytest.mark.parametrize(("rows", "message"), [
     (["2024-06-01T10:00+09:30,1,2,3", "2024-06-01T10:00+09:30,1,2,3"],
      r"2024-06-01T00:30:00\+00:00 is there twice \(line 2 and line 3\)"),
