@@ -547,7 +547,10 @@ def read_measured(source: str | Path | IO[str], stamped: str = MEASURED_STAMPED_
     if stamped not in ("interval_end", "interval_start", "instant"):
         raise ValueError(f"stamped must be interval_end, interval_start or instant; got "
                          f"{stamped!r}")
-    raw = pd.read_csv(weather_buffer(source), dtype=str, skipinitialspace=True)
+    src = weather_buffer(source)
+    _refuse_pvgis(src.readline())
+    src.seek(0)
+    raw = pd.read_csv(src, dtype=str, skipinitialspace=True)
     by_lower = {str(c).strip().lower(): c for c in raw.columns}
     found = {key: next((by_lower[n] for n in names if n in by_lower), None)
              for key, names in MEASURED_COLUMNS.items()}
@@ -596,6 +599,19 @@ def read_measured(source: str | Path | IO[str], stamped: str = MEASURED_STAMPED_
                "altitude": None, "utc_offset_h": None, "stamped": stamped,
                "start": first.isoformat(), "end": last.isoformat()}
     return weather, station
+
+
+def _refuse_pvgis(first_line: str) -> None:
+    """Refuse a PVGIS download (its CSV opens with ``Latitude (decimal degrees):``, its JSON
+    with ``{``) saying how to write it as measured weather: it had been refused with pandas'
+    "Error tokenizing data. C error: Expected 1 fields in line 5, saw 2", or its JSON shown
+    as the columns found (a tester's finding)."""
+    head = first_line.lstrip("\ufeff").strip()
+    if head.startswith("{") or head.lower().startswith("latitude (decimal degrees)"):
+        raise ValueError(
+            "a PVGIS download (or JSON) is not read: write its rows as a CSV of time (its "
+            "time(UTC) 20230101:0010 as 2023-01-01T00:10:00Z), ghi, dni, dhi (its G(h), "
+            "Gb(n), Gd(h)), and say what its times mark (--weather-stamped / weather_stamped)")
 
 
 def _measured_times(column: pd.Series, timezone: str | None, line: Any) -> pd.DatetimeIndex:

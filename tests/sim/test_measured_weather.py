@@ -176,6 +176,17 @@ def test_a_bad_measured_file_is_refused_naming_the_line(rows: list[str], message
         read_measured(io.StringIO("time,ghi,dni,dhi\n" + "\n".join(rows) + "\n"))
 
 
+@pytest.mark.parametrize("head", ["Latitude (decimal degrees):\t28.610\n"
+                                  "Longitude (decimal degrees):\t77.210\n",
+                                  '{"inputs": {"location": {"latitude": 28.61}}}\n'])
+def test_a_pvgis_download_is_refused_saying_how_to_write_it(head: str) -> None:
+    """A PVGIS CSV was refused with pandas' "Error tokenizing data. C error: Expected 1
+    fields in line 5, saw 2", its JSON with the JSON shown as the columns found."""
+    rows = "time(UTC),T2m,G(h),Gb(n),Gd(h)\n20230101:0010,20.8,0.0,0.0,0.0\n"
+    with pytest.raises(ValueError, match=r"a PVGIS download .* ghi, dni, dhi \(its G\(h\)"):
+        read_measured(io.StringIO(head + rows))
+
+
 def test_a_file_without_the_columns_names_what_it_has() -> None:
     with pytest.raises(ValueError, match="dni, dhi not found among measured_on"):
         read_measured(io.StringIO("measured_on,ghi\n2024-06-01T10:00Z,1\n"))
