@@ -23,6 +23,12 @@ class Refusal(Exception):  # noqa: N818 - an answer, not an error of the service
     call: the writer hands it back without logging it as a failed write."""
 
 
+class SetupError(RuntimeError):
+    """What the service was given cannot be used (a database a newer heliotwin migrated):
+    the message says what and what to do, so the CLI prints it alone on one line and exits
+    1 (``backend.cli.main``) — no traceback, which hid it."""
+
+
 class InputError(ValueError):
     """Bad input: ``status_code`` (4xx) and a message that names the field and the problem."""
 

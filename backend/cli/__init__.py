@@ -10,7 +10,9 @@ prints its token and nothing about migrations), at DEBUG with ``-v``.
 A subcommand that refuses (bad input, nothing to act on) calls :func:`fail` (or
 raises :class:`CliError`) from anywhere below its ``func``; :func:`main` alone prints
 ``heliotwin <command>: error: <message>`` to stderr — argparse's own form — and
-exits with the error's code (2 by default, as argparse's usage errors).
+exits with the error's code (2 by default, as argparse's usage errors). A
+:class:`backend.errors.SetupError` (a database a newer heliotwin migrated) is printed the
+same way, exit 1: its message says what to do, a traceback only hid it.
 """
 
 from __future__ import annotations
@@ -22,6 +24,8 @@ import logging
 import os
 import sys
 from typing import NoReturn
+
+from backend.errors import SetupError
 
 # Subcommand modules, in the order `heliotwin --help` lists them.
 SUBCOMMAND_MODULES = (
@@ -125,6 +129,9 @@ def _run(argv: list[str] | None) -> int:
     except CliError as exc:
         print(f"{getattr(args, 'cli_prog', parser.prog)}: error: {exc}", file=sys.stderr)
         return exc.code
+    except SetupError as exc:
+        print(f"{getattr(args, 'cli_prog', parser.prog)}: error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         return 130
     except BrokenPipeError:

@@ -31,6 +31,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     p.set_defaults(func=run)
 
 
+def _check_database(settings: Any) -> None:
+    """Refuse a database a newer heliotwin migrated before uvicorn starts
+    (``SchemaTooNewError``, one line by :func:`backend.cli.main`): the app's lifespan would
+    refuse it too, but uvicorn prints that under a 90-line traceback and exits 3."""
+    from backend.storage.engine import check_schema, make_engine
+
+    engine = make_engine(settings)
+    try:
+        check_schema(engine)
+    finally:
+        engine.dispose()
+
+
 def run(args: argparse.Namespace) -> int:
     """Start uvicorn with :func:`backend.app.create_app` until interrupted."""
     import uvicorn
@@ -59,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     except ValidationError as exc:
         fail(settings_error_text(exc))
     server = settings.server
+    _check_database(settings)
 
     def banner(app: Any) -> None:
         """Said once the 3D scene started: the port it took (the next free one when the

@@ -147,7 +147,7 @@ def _sync_database(config: dict[str, Any]) -> str:
 
     from backend.settings import get_settings
     from backend.sites import sync_sites
-    from backend.storage.engine import make_engine, run_migrations
+    from backend.storage.engine import SchemaTooNewError, make_engine, run_migrations
     from sim.sites import site_from_dict
 
     engine = make_engine(get_settings())
@@ -158,6 +158,8 @@ def _sync_database(config: dict[str, Any]) -> str:
     except SQLAlchemyError as exc:
         return (f"the database could not take it now ({type(exc).__name__}): the service "
                 "adds it at its next start")
+    except SchemaTooNewError as exc:  # the file is written all the same: say both
+        return f"not added to the database: {exc}"
     finally:
         engine.dispose()
     return "a running service on the same database shows it within a second, no restart"

@@ -23,6 +23,7 @@ from sqlalchemy import Connection, Engine, create_engine, event
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
+from backend.errors import SetupError
 from backend.settings import Settings
 
 if TYPE_CHECKING:
@@ -114,8 +115,37 @@ def alembic_config(engine: Engine) -> Config:
     return cfg
 
 
-class SchemaTooNewError(RuntimeError):
+class SchemaTooNewError(SetupError):
     """The database holds a migration this code does not have: a newer heliotwin wrote it."""
+
+
+def _refuse_newer(engine: Engine, conn: Connection, script: Any) -> None:
+    """Raise :class:`SchemaTooNewError` if ``conn``'s database is at a revision ``script``
+    (the code's migrations) does not know."""
+    from alembic.migration import MigrationContext
+
+    current = MigrationContext.configure(conn).get_current_heads()
+    unknown = sorted(set(current) - {rev.revision for rev in script.walk_revisions()})
+    if unknown:
+        raise SchemaTooNewError(
+            f"the database {engine.url.render_as_string(hide_password=True)} is at schema "
+            f"revision {', '.join(unknown)}, which this heliotwin does not know (its latest: "
+            f"{', '.join(script.get_heads())}): a newer heliotwin migrated it. Run that "
+            "version or a newer one, or restore a backup taken before the upgrade; the "
+            "database was left as it is")
+
+
+def check_schema(engine: Engine) -> None:
+    """Refuse, reading only, a database a newer heliotwin migrated (:class:`SchemaTooNewError`).
+
+    ``heliotwin serve`` asks before it starts uvicorn: refused in the app's lifespan, the
+    message came under uvicorn's 90-line traceback."""
+    cfg = alembic_config(engine)  # first: it quietens alembic's import-time log
+    from alembic.script import ScriptDirectory
+
+    script = ScriptDirectory.from_config(cfg)
+    with engine.connect() as conn:
+        _refuse_newer(engine, conn, script)
 
 
 def run_migrations(engine: Engine) -> None:
@@ -126,21 +156,11 @@ def run_migrations(engine: Engine) -> None:
     "Can't locate revision identified by '…'" under a long traceback."""
     cfg = alembic_config(engine)
     from alembic import command
-    from alembic.migration import MigrationContext
     from alembic.script import ScriptDirectory
 
     script = ScriptDirectory.from_config(cfg)
-    known = {rev.revision for rev in script.walk_revisions()}
     with _migrate_lock, engine.begin() as conn:
-        current = MigrationContext.configure(conn).get_current_heads()
-        unknown = sorted(set(current) - known)
-        if unknown:
-            raise SchemaTooNewError(
-                f"the database {engine.url.render_as_string(hide_password=True)} is at schema "
-                f"revision {', '.join(unknown)}, which this heliotwin does not know (its latest: "
-                f"{', '.join(script.get_heads())}): a newer heliotwin migrated it. Run that "
-                "version or a newer one, or restore a backup taken before the upgrade; the "
-                "database was left as it is")
+        _refuse_newer(engine, conn, script)
         cfg.attributes["connection"] = conn
         command.upgrade(cfg, "heads")
     logger.info("database at the latest schema (%s)", engine.url.get_backend_name())

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import subprocess
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from alembic.script import ScriptDirectory
-from live_service import new_database
+from live_service import HELIOTWIN, ROOT, free_port, new_database, process_env
 from sqlalchemy import inspect
 
 from backend.settings import get_settings
@@ -47,10 +50,13 @@ def test_every_revision_chains_to_0001() -> None:
 
 
 @pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
-def test_a_database_of_a_newer_version_is_refused_by_name(backend: str, tmp_path: Path) -> None:
+def test_a_database_of_a_newer_version_is_refused_by_name(
+        backend: str, tmp_path: Path, heliotwin_cli: Callable[..., Any]) -> None:
     """A database migrated by a newer heliotwin (a revision this code lacks) is refused
     with a message saying so and what to do, and is left as it was (an operator's
-    finding: Alembic's "Can't locate revision" under a 150-line traceback)."""
+    finding: Alembic's "Can't locate revision" under a 150-line traceback). ``heliotwin
+    serve`` and ``token create`` say it in one line and exit 1 (they had printed it under
+    uvicorn's 90-line traceback, exit 3, and Python's, exit 1)."""
     db = new_database(backend, tmp_path)
     engine = make_engine(get_settings(database_url=db.url))
     try:
@@ -62,6 +68,15 @@ def test_a_database_of_a_newer_version_is_refused_by_name(backend: str, tmp_path
         msg = str(err.value)
         assert "0999_from_the_future" in msg and "newer heliotwin" in msg
         assert "restore a backup" in msg
+        token = heliotwin_cli("token", "create", "--site", "tehuantepec",
+                              env={"HELIOTWIN_DATABASE_URL": db.url})
+        serve = subprocess.run(
+            [*HELIOTWIN, "serve", "--port", str(free_port()), "--viser-port", "0",
+             "--no-demo"], cwd=ROOT, env=process_env(db.url), capture_output=True,
+            text=True, timeout=120)
+        for name, run in (("token create", token), ("serve", serve)):
+            assert (run.returncode, run.stdout) == (1, ""), (name, run)
+            assert run.stderr.splitlines() == [f"heliotwin {name}: error: {msg}"], run.stderr
         with engine.connect() as conn:
             assert MigrationContext.configure(conn).get_current_heads() == (
                 "0999_from_the_future",)
