@@ -80,14 +80,18 @@ def _with_db(work: Callable[[Any], Any], site_id: str | None = None) -> Any:
 
     On SQLite the transaction is ``BEGIN IMMEDIATE``: it takes the write lock first (and
     waits for it, ``busy_timeout``), where a deferred one that reads and then writes fails
-    at once with "database is locked" when a logger committed in between. ``sites`` is not
-    rewritten: only a ``site_id`` missing from the database is added from its file (a
-    token needs its site's row). Still locked after the timeout: retried 4 times with
-    backoff (:mod:`backend.retry`), then the error.
+    at once with "database is locked" when a logger committed in between. A ``site_id``
+    must have a site config (built-in or in ``HELIOTWIN_SITES_DIR``; :class:`UnknownSite`
+    otherwise, as the service's 404): a site the database still holds after its file went
+    had been given a token whose every reading the service refused as "unknown site".
+    ``sites`` is not rewritten: only a ``site_id`` missing from the database is added from
+    its file (a token needs its site's row). Still locked after the timeout: retried 4
+    times with backoff (:mod:`backend.retry`), then the error.
     """
     from sqlalchemy import select
     from tenacity import Retrying, retry_if_exception, stop_after_attempt
 
+    from backend.auth import UnknownSite
     from backend.retry import backoff
     from backend.settings import get_settings
     from backend.sites import Registry, sync_sites
@@ -101,13 +105,19 @@ def _with_db(work: Callable[[Any], Any], site_id: str | None = None) -> Any:
         with engine.connect().execution_options(sqlite_immediate=True) as conn, conn.begin():
             if site_id is not None and conn.execute(
                     select(SiteRow.site_id).where(SiteRow.site_id == site_id)).first() is None:
-                info = Registry.load_files(settings.sites.user_dir).get(site_id)
-                if info is not None:
-                    sync_sites(conn, [info.site])
+                sync_sites(conn, [registry.sites[site_id].site])
             return work(conn)
 
     try:
         run_migrations(engine)
+        if site_id is not None:
+            registry = Registry.load_files(settings.sites.user_dir)
+            if site_id not in registry.sites:
+                raise UnknownSite(
+                    f"unknown site {site_id!r}: no site config gives it (built-in, or a file "
+                    f"in HELIOTWIN_SITES_DIR, {settings.sites.user_dir}), so the service "
+                    f"would refuse the token's readings; known sites: "
+                    f"{', '.join(registry.sites) or 'none'}")
         return Retrying(stop=stop_after_attempt(5), wait=backoff(0.5, 4.0),
                         retry=retry_if_exception(_locked), reraise=True)(attempt)
     finally:
@@ -123,7 +133,9 @@ def create(args: argparse.Namespace) -> int:
         expires = _expiry(args)
         token = _with_db(lambda conn: create_token(conn, args.site, args.label, expires,
                                                    args.scope), args.site)
-    except (UnknownSite, ValueError) as exc:
+    except UnknownSite as exc:
+        fail(f"--site: {exc}")
+    except ValueError as exc:
         fail(str(exc))
     until = "" if expires is None else f", valid until {expires.isoformat()}"
     # the sentence on stderr, the token alone on stdout: TOKEN=$(heliotwin token create …)

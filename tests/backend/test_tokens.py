@@ -186,3 +186,26 @@ def test_the_admin_token_runs_simulations_as_site_edits_take_it(client: httpx.Cl
     r = client.post("/api/v1/simulations", json=body,
                     headers={"Authorization": "Bearer not-a-token-at-all"})
     assert r.status_code == 401 and "unknown" in r.json()["detail"]
+
+
+def test_cli_refuses_a_site_without_a_config(tmp_path: Path, heliotwin_cli: Callable) -> None:
+    """``token create`` for a site no config gives is refused naming it and the known sites,
+    also when the database still holds the site after its file went (a token had been made
+    there, exit 0, though the service answers "unknown site" to its every reading, and
+    ``POST /api/v1/tokens`` 404s)."""
+    env = {"HELIOTWIN_DATABASE_URL": f"sqlite:///{tmp_path / 'db.sqlite'}",
+           "HELIOTWIN_SITES_DIR": str(tmp_path / "sites")}
+    made = heliotwin_cli("site", "create", "--id", "gone", "--latitude-deg", "53.5",
+                         "--longitude-deg", "10", "--altitude-m", "10", "--timezone",
+                         "Europe/Berlin", env=env)
+    assert made.returncode == 0, made.stderr
+    (tmp_path / "sites" / "gone.json").unlink()  # the database keeps the site's row
+    for site in ("gone", "nowhere"):
+        out = heliotwin_cli("token", "create", "--site", site, env=env)
+        assert (out.returncode, out.stdout) == (2, ""), out
+        assert out.stderr.startswith(
+            f"heliotwin token create: error: --site: unknown site {site!r}: no site config "
+            "gives it"), out.stderr
+        assert "known sites: guadalajara_fisheye, tehuantepec" in out.stderr  # was "none"
+    listed = heliotwin_cli("token", "list", "--site", "gone", "--json", env=env)
+    assert (listed.returncode, json.loads(listed.stdout)) == (0, [])  # nothing was stored
