@@ -75,18 +75,21 @@ def _locked(exc: BaseException) -> bool:
         w in str(exc.orig) for w in ("locked", "busy"))
 
 
-def _with_db(work: Callable[[Any], Any], site_id: str | None = None) -> Any:
+def _with_db(work: Callable[[Any], Any], site_id: str | None = None,
+             configured: bool = True) -> Any:
     """Migrate if needed, run ``work(conn)`` in one write transaction, retried while locked.
 
     On SQLite the transaction is ``BEGIN IMMEDIATE``: it takes the write lock first (and
     waits for it, ``busy_timeout``), where a deferred one that reads and then writes fails
     at once with "database is locked" when a logger committed in between. A ``site_id``
-    must have a site config (built-in or in ``HELIOTWIN_SITES_DIR``; :class:`UnknownSite`
-    otherwise, as the service's 404): a site the database still holds after its file went
-    had been given a token whose every reading the service refused as "unknown site".
-    ``sites`` is not rewritten: only a ``site_id`` missing from the database is added from
-    its file (a token needs its site's row). Still locked after the timeout: retried 4
-    times with backoff (:mod:`backend.retry`), then the error.
+    must have a site config (built-in or in ``HELIOTWIN_SITES_DIR``), or with ``configured``
+    False at least a row in the database (:class:`UnknownSite` otherwise, naming the
+    configured sites): a site the database still held after its file went had been given a
+    token whose every reading the service refused as "unknown site" (its 404), and a
+    built-in site the database did not hold yet had been "unknown" to ``list``. ``sites`` is
+    not rewritten: only a ``site_id`` missing from the database is added from its file (a
+    token needs its site's row). Still locked after the timeout: retried 4 times with
+    backoff (:mod:`backend.retry`), then the error.
     """
     from sqlalchemy import select
     from tenacity import Retrying, retry_if_exception, stop_after_attempt
@@ -103,21 +106,22 @@ def _with_db(work: Callable[[Any], Any], site_id: str | None = None) -> Any:
 
     def attempt() -> Any:
         with engine.connect().execution_options(sqlite_immediate=True) as conn, conn.begin():
-            if site_id is not None and conn.execute(
-                    select(SiteRow.site_id).where(SiteRow.site_id == site_id)).first() is None:
-                sync_sites(conn, [registry.sites[site_id].site])
+            if site_id is not None:
+                stored = conn.execute(
+                    select(SiteRow.site_id).where(SiteRow.site_id == site_id)).first()
+                info = registry.sites.get(site_id)
+                if info is None and (configured or stored is None):
+                    raise UnknownSite(
+                        f"unknown site {site_id!r}: no site config gives it (built-in, or a "
+                        f"file in HELIOTWIN_SITES_DIR, {settings.sites.user_dir}); known "
+                        f"sites: {', '.join(registry.sites) or 'none'}")
+                if stored is None and info is not None:
+                    sync_sites(conn, [info.site])
             return work(conn)
 
     try:
         run_migrations(engine)
-        if site_id is not None:
-            registry = Registry.load_files(settings.sites.user_dir)
-            if site_id not in registry.sites:
-                raise UnknownSite(
-                    f"unknown site {site_id!r}: no site config gives it (built-in, or a file "
-                    f"in HELIOTWIN_SITES_DIR, {settings.sites.user_dir}), so the service "
-                    f"would refuse the token's readings; known sites: "
-                    f"{', '.join(registry.sites) or 'none'}")
+        registry = Registry.load_files(settings.sites.user_dir)
         return Retrying(stop=stop_after_attempt(5), wait=backoff(0.5, 4.0),
                         retry=retry_if_exception(_locked), reraise=True)(attempt)
     finally:
@@ -150,7 +154,8 @@ def list_(args: argparse.Namespace) -> int:
     from backend.auth import UnknownSite, list_tokens
 
     try:
-        rows = [t.to_dict() for t in _with_db(lambda conn: list_tokens(conn, args.site))]
+        rows = [t.to_dict() for t in _with_db(lambda conn: list_tokens(conn, args.site),
+                                              args.site, configured=False)]
     except UnknownSite as exc:
         fail(f"--site: {exc}")
     if args.json:

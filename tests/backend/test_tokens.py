@@ -192,20 +192,24 @@ def test_cli_refuses_a_site_without_a_config(tmp_path: Path, heliotwin_cli: Call
     """``token create`` for a site no config gives is refused naming it and the known sites,
     also when the database still holds the site after its file went (a token had been made
     there, exit 0, though the service answers "unknown site" to its every reading, and
-    ``POST /api/v1/tokens`` 404s)."""
+    ``POST /api/v1/tokens`` 404s). ``list`` takes a built-in site the database does not
+    hold yet (it answered "unknown site 'tehuantepec'; known sites: none") and one the
+    database holds without a config (its tokens can be revoked)."""
     env = {"HELIOTWIN_DATABASE_URL": f"sqlite:///{tmp_path / 'db.sqlite'}",
            "HELIOTWIN_SITES_DIR": str(tmp_path / "sites")}
+    fresh = heliotwin_cli("token", "list", "--site", "tehuantepec", "--json", env=env)
+    assert (fresh.returncode, fresh.stdout.strip()) == (0, "[]"), fresh
     made = heliotwin_cli("site", "create", "--id", "gone", "--latitude-deg", "53.5",
                          "--longitude-deg", "10", "--altitude-m", "10", "--timezone",
                          "Europe/Berlin", env=env)
     assert made.returncode == 0, made.stderr
     (tmp_path / "sites" / "gone.json").unlink()  # the database keeps the site's row
-    for site in ("gone", "nowhere"):
-        out = heliotwin_cli("token", "create", "--site", site, env=env)
+    for command, site in (("create", "gone"), ("create", "nowhere"), ("list", "nowhere")):
+        out = heliotwin_cli("token", command, "--site", site, env=env)
         assert (out.returncode, out.stdout) == (2, ""), out
         assert out.stderr.startswith(
-            f"heliotwin token create: error: --site: unknown site {site!r}: no site config "
-            "gives it"), out.stderr
+            f"heliotwin token {command}: error: --site: unknown site {site!r}: no site "
+            "config gives it"), out.stderr
         assert "known sites: guadalajara_fisheye, tehuantepec" in out.stderr  # was "none"
     listed = heliotwin_cli("token", "list", "--site", "gone", "--json", env=env)
     assert (listed.returncode, json.loads(listed.stdout)) == (0, [])  # nothing was stored
