@@ -82,32 +82,50 @@ def _jpeg_size(data: bytes) -> tuple[int, int]:
 _EXIF_ORIENTATION_TAG = 0x0112
 
 
-def _exif_orientation(data: bytes) -> int:
-    """A JPEG's EXIF orientation (1–8; 1, as stored, when it has none or it is unreadable):
-    the tag 0x0112 of the TIFF structure's first directory in the APP1 ``Exif`` segment
-    (CIPA DC-008, the EXIF 2.3 standard, §4.6.4)."""
-    for marker, start, end in _jpeg_segments(data):
-        if marker != 0xE1 or data[start:start + 6] != b"Exif\x00\x00":
-            continue
-        tiff = data[start + 6:end]
-        order = {b"II": "<", b"MM": ">"}.get(tiff[:2])
-        if order is None or len(tiff) < 8:
-            return 1
-        (ifd,) = struct.unpack(order + "I", tiff[4:8])
-        if ifd + 2 > len(tiff):
-            return 1
-        (count,) = struct.unpack(order + "H", tiff[ifd:ifd + 2])
-        for k in range(count):
-            entry = tiff[ifd + 2 + 12 * k:ifd + 14 + 12 * k]
-            if len(entry) < 12:
-                return 1
-            tag, kind = struct.unpack(order + "HH", entry[:4])
-            if tag == _EXIF_ORIENTATION_TAG and kind in (3, 4):  # SHORT, or LONG as some
-                # writers store it (OpenCV reads both); in the value field
-                fmt, size = ("H", 2) if kind == 3 else ("I", 4)
-                (value,) = struct.unpack(order + fmt, entry[8:8 + size])
-                return int(value) if 1 <= value <= 8 else 1
+def _tiff_orientation(tiff: bytes) -> int:
+    """The orientation (1–8; 1 when absent or unreadable) in an EXIF TIFF structure: the
+    tag 0x0112 of its first directory (CIPA DC-008, the EXIF 2.3 standard, §4.6.4)."""
+    order = {b"II": "<", b"MM": ">"}.get(tiff[:2])
+    if order is None or len(tiff) < 8:
         return 1
+    (ifd,) = struct.unpack(order + "I", tiff[4:8])
+    if ifd + 2 > len(tiff):
+        return 1
+    (count,) = struct.unpack(order + "H", tiff[ifd:ifd + 2])
+    for k in range(count):
+        entry = tiff[ifd + 2 + 12 * k:ifd + 14 + 12 * k]
+        if len(entry) < 12:
+            return 1
+        tag, kind = struct.unpack(order + "HH", entry[:4])
+        if tag == _EXIF_ORIENTATION_TAG and kind in (3, 4):  # SHORT, or LONG as some
+            # writers store it (OpenCV reads both); in the value field
+            fmt, size = ("H", 2) if kind == 3 else ("I", 4)
+            (value,) = struct.unpack(order + fmt, entry[8:8 + size])
+            return int(value) if 1 <= value <= 8 else 1
+    return 1
+
+
+def _exif_orientation(data: bytes) -> int:
+    """A JPEG's EXIF orientation (1–8; 1, as stored, when it has none or it is unreadable),
+    from the TIFF structure in its APP1 ``Exif`` segment."""
+    for marker, start, end in _jpeg_segments(data):
+        if marker == 0xE1 and data[start:start + 6] == b"Exif\x00\x00":
+            return _tiff_orientation(data[start + 6:end])
+    return 1
+
+
+def _png_orientation(data: bytes) -> int:
+    """A PNG's EXIF orientation (1–8; 1 when it has none): the TIFF structure of its
+    ``eXIf`` chunk (PNG Third Edition, §11.3.3.8), wherever the chunk lies."""
+    i = 8
+    while i + 8 <= len(data):
+        (length,) = struct.unpack(">I", data[i:i + 4])
+        kind = data[i + 4:i + 8]
+        if kind == b"eXIf":
+            return _tiff_orientation(data[i + 8:i + 8 + length])
+        if kind == b"IEND":
+            break
+        i += 12 + length
     return 1
 
 
@@ -261,9 +279,10 @@ def decode_image(data: bytes, max_pixels: int) -> NDArray[np.uint8]:
     """Decode a PNG/JPEG to 8-bit BGR after checking its header size against ``max_pixels``.
 
     Grey images become BGR; a 16-bit PNG is brought to 8 bits by its data's depth and an
-    alpha channel is composited onto black (:func:`_to_bgr8`); a JPEG's EXIF orientation is applied
-    (:func:`_decode_jpeg`; a PNG's by ``cv2.IMREAD_COLOR``), so pixel coordinates are those
-    of the image as a browser shows it. A damaged JPEG is an :class:`ImageError`.
+    alpha channel is composited onto black (:func:`_to_bgr8`); the EXIF orientation of a JPEG
+    (:func:`_decode_jpeg`) and of a PNG of any depth (its ``eXIf`` chunk) is applied by
+    :func:`_oriented`, so pixel coordinates are those of the image as a browser shows it. A
+    damaged JPEG is an :class:`ImageError`.
     """
     fmt, w, h = image_size(data)
     if w <= 0 or h <= 0:
@@ -281,13 +300,18 @@ def decode_image(data: bytes, max_pixels: int) -> NDArray[np.uint8]:
         img = _decode_jpeg(data)
     else:
         buf = np.frombuffer(data, np.uint8)
-        img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED if as_stored else cv2.IMREAD_COLOR)
+        img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED if as_stored
+                           else cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
     if img is None:
         raise ImageError(f"corrupt or truncated {fmt.upper()} image")
     if as_stored:
         if b"tRNS" in chunks:
             img = _transparent_colour(img, data[25], chunks[b"tRNS"])
         img = _to_bgr8(img, b"sBIT" in chunks)
+    if fmt == "png":
+        # one EXIF rule for every PNG: OpenCV applied an 8-bit PNG's orientation and not
+        # that of a PNG read as stored (16 bits, alpha), so one frame came out turned or not
+        img = _oriented(img, _png_orientation(data))
     # a JPEG's EXIF orientation (as browsers apply it when they show it) of 5-8 swaps the
     # header's width and height
     if (img.shape[1], img.shape[0]) not in ((w, h), (h, w)):

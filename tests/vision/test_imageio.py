@@ -269,3 +269,29 @@ def test_a_big_endian_long_orientation_is_applied_whichever_decoder_reads_it(
         data[at + 5:at + 7] = b"\x02\x01"
     out = decode_image(bytes(data), 10_000)
     assert out.shape == (60, 40, 3)  # turned 90° clockwise: 40 wide, 60 high
+
+
+def _with_png_exif(png: bytes, orientation: int) -> bytes:
+    """Insert an ``eXIf`` chunk (a big-endian TIFF, one IFD entry 0x0112) after the IHDR."""
+    ifd = struct.pack(">H", 1) + struct.pack(">HHIHH", 0x0112, 3, 1, orientation, 0)
+    tiff = b"MM\x00\x2a\x00\x00\x00\x08" + ifd + struct.pack(">I", 0)
+    chunk = struct.pack(">I", len(tiff)) + b"eXIf" + tiff \
+        + struct.pack(">I", zlib.crc32(b"eXIf" + tiff))
+    return png[:33] + chunk + png[33:]  # signature (8) + IHDR (25)
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_a_pngs_exif_orientation_is_applied_at_every_depth(orientation: int) -> None:
+    """A PNG's EXIF orientation turns it as OpenCV's reader turns an 8-bit PNG, and a
+    16-bit or RGBA PNG of the same raster alike: those were decoded as stored, unturned
+    (a tester's finding: the same frame came out turned 90° or 180° by its depth)."""
+    img = _img(60, 40)
+    ok, buf = cv2.imencode(".png", img)
+    plain = _with_png_exif(buf.tobytes(), orientation)
+    ref = cv2.imdecode(np.frombuffer(plain, np.uint8), cv2.IMREAD_COLOR)
+    assert np.array_equal(decode_image(plain, 10_000), ref)
+    alpha = np.full(img.shape[:2], 255, np.uint8)
+    for raster in (img.astype(np.uint16) * 257, np.dstack([img, alpha])):
+        ok, buf = cv2.imencode(".png", raster)
+        assert np.array_equal(decode_image(_with_png_exif(buf.tobytes(), orientation), 10_000),
+                              ref)
