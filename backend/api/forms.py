@@ -21,20 +21,21 @@ async def read_form(request: Request, limit: int, expected: str, max_files: int,
                     files_field: str = "file") -> FormData:
     """The multipart form of ``request``; ``expected`` says what the 415 asks for,
     ``limit_name`` the setting a 413 names (the one ``limit`` comes from) and
-    ``files_field`` the field of the files that a 422 for too many of them names."""
+    ``files_field`` the field of the files that a 413 for a body over ``limit`` and a 422
+    for too many files name (the files are what makes a body that large)."""
     ctype = request.headers.get("content-type", "")
     if not ctype.lower().startswith("multipart/form-data"):
         raise HTTPException(415, f"send multipart/form-data ({expected})")
     length = request.headers.get("content-length")
     if length is not None and length.isdigit() and int(length) > limit:
-        raise HTTPException(413, f"body of {length} bytes; the limit is {limit} bytes "
-                                 f"({limit_name})")
+        raise HTTPException(413, f"{files_field}: body of {length} bytes; the limit is "
+                                 f"{limit} bytes ({limit_name})")
     chunks: list[bytes] = []
     size = 0
     async for chunk in request.stream():
         size += len(chunk)
         if size > limit:
-            raise HTTPException(413, f"body over {limit} bytes ({limit_name})")
+            raise HTTPException(413, f"{files_field}: body over {limit} bytes ({limit_name})")
         chunks.append(chunk)
     body = b"".join(chunks)
 
