@@ -9,7 +9,9 @@ whether a detection's error against the ephemeris is one any calibration could l
   horizon, or a zenith-angle difference that no north offset or mirror can
   explain (they only turn the sky about the zenith), or an error far beyond the
   stored calibration's own residuals, means the place, the time (its zone) or the
-  camera is wrong, not the detector: say so rather than store a silent 110°.
+  camera is wrong, not the detector: say so rather than store a silent 110°. A
+  calibrated camera that puts the ephemeris sun beyond the frame's edge (a fisheye
+  circle the frame cuts) says that what was found at the edge is its glare.
 """
 
 from __future__ import annotations
@@ -111,7 +113,29 @@ def error_warnings(res: dict[str, Any], calibration_max_deg: float | None) -> li
         elif float(sep) > limit:
             out.append(f"an error of {float(sep):.1f}° is far beyond this calibration's worst "
                        f"residual ({calibration_max_deg:.2f}°): is the place or the time right?")
+    out += _off_frame_warning(res, calibration_max_deg)
     return out
+
+
+def _off_frame_warning(res: dict[str, Any], calibration_max_deg: float | None) -> list[str]:
+    """A sun found while the calibrated camera puts the ephemeris sun off the frame (a
+    fisheye circle cut by the frame's top and bottom): what was found at the edge is the
+    glare of a sun beyond it, not the sun's position. A tester's 3000 × 2000 frame with the
+    sun 21 px above its top edge was answered as a sun 45 px from it (5.0° from the
+    ephemeris) at confidence 0.95, with no warning: just under the error warning's 5°.
+    Only for a calibration: a camera's guessed north puts the ephemeris anywhere."""
+    eph_px = (res.get("ephemeris") or {}).get("centroid_px")
+    size = res.get("image_size_px")
+    if calibration_max_deg is None or not res.get("sun_found") or eph_px is None or not size:
+        return []
+    ex, ey = (float(v) for v in eph_px)
+    w, h = (int(v) for v in size)
+    if -0.5 <= ex <= w - 0.5 and -0.5 <= ey <= h - 0.5:
+        return []
+    cx, cy = (float(v) for v in res["centroid_px"])
+    return [f"the calibrated camera puts the ephemeris sun at ({ex:.0f}, {ey:.0f}) px, off "
+            f"the {w}×{h} px frame: the bright region found at ({cx:.0f}, {cy:.0f}) px is "
+            f"likely the glare of a sun beyond the frame's edge, not the sun's position"]
 
 
 MAX_OUTLIER_SHARE = 1 / 3

@@ -219,3 +219,20 @@ def test_a_clock_an_hour_off_does_not_take_a_piece_of_the_glare_for_the_sun() ->
         assert res["sun_found"], (stamp, res["reason"])
         cx, cy = res["centroid_px"]
         assert np.hypot(cx - x[i], cy - y[i]) < 20.0, (stamp, cx, cy, x[i], y[i])
+
+
+def test_a_sun_the_calibration_puts_off_the_frame_is_named() -> None:
+    """A 3000 × 2000 frame whose fisheye circle the frame cuts, the sun 21 px above its top
+    edge: its glare at the edge was answered as the sun, 5.0° from the ephemeris, with no
+    warning (a tester's finding). A calibrated camera putting the ephemeris off the frame
+    says so; one putting it on the frame, or a camera without a calibration, does not."""
+    res = {"sun_found": True, "centroid_px": [1137.7, 20.0], "image_size_px": [3000, 2000],
+           "ephemeris": {"azimuth_deg": 110.9, "elevation_deg": 6.6,
+                         "centroid_px": [1155.6, -44.0]},
+           "error": {"separation_deg": 4.96, "azimuth_deg": 1.0, "elevation_deg": 4.8}}
+    (warning,) = error_warnings(res, 0.64)
+    assert "(1156, -44) px, off the 3000×2000 px frame" in warning, warning
+    assert "glare of a sun beyond the frame's edge" in warning
+    assert error_warnings(res, None) == []
+    res["ephemeris"]["centroid_px"] = [1155.6, 44.0]
+    assert error_warnings(res, 0.64) == []
