@@ -321,3 +321,42 @@ def test_a_new_sites_altitude_is_the_grounds_and_marked_assumed(tmp_path: Path,
     written = json.loads((tmp_path / "lapaz2.json").read_text())
     assert given.returncode == 0 and written["altitude_m"] == 3640.0
     assert "altitude_m" not in written["assumed"]
+
+
+def test_create_holds_the_write_lock_while_a_service_writes(tmp_path: Path, heliotwin,
+                                                             monkeypatch) -> None:
+    """A running service writes the new file's rows itself (it sees the file within a
+    second) while its loggers commit: ``site create`` read the sites in a deferred
+    transaction and failed at its write, "the database could not take it now" (a user's
+    first ``site from-weather`` beside ``make run``). It now takes the write lock first:
+    another writer is refused meanwhile, and the site's row is stored."""
+    import sqlite3
+
+    import backend.sites
+
+    real_sync = backend.sites.sync_sites
+    others: list[str] = []
+
+    def sync_while_another_writes(conn: Any, sites: list[Any]) -> Any:
+        list(conn.exec_driver_sql("SELECT count(*) FROM sites"))  # the CLI has read
+        other = sqlite3.connect(tmp_path / "cli.sqlite", timeout=0)
+        try:
+            other.execute("CREATE TABLE IF NOT EXISTS another_writer (x)")
+            other.execute("INSERT INTO another_writer VALUES (1)")
+            other.commit()
+            others.append("committed")
+        except sqlite3.OperationalError as exc:
+            others.append(str(exc))
+        finally:
+            other.close()
+        return real_sync(conn, sites)
+
+    monkeypatch.setattr(backend.sites, "sync_sites", sync_while_another_writes)
+    p = heliotwin(tmp_path, "site", "create", "--id", "hamburg", "--latitude-deg", "53.52",
+                  "--longitude-deg", "10.1", "--timezone", "Europe/Berlin")
+    assert p.returncode == 0, p.stderr
+    assert "could not take it" not in p.stdout, p.stdout
+    assert others == ["database is locked"]
+    with sqlite3.connect(tmp_path / "cli.sqlite") as db:
+        assert db.execute("SELECT site_id FROM sites WHERE site_id = 'hamburg'").fetchall() \
+            == [("hamburg",)]

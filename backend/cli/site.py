@@ -142,26 +142,24 @@ def _write(config: dict[str, Any], force: bool, flags: dict[str, str] | None = N
 def _sync_database(config: dict[str, Any]) -> str:
     """Write the site's rows to the database of ``HELIOTWIN_DATABASE_URL`` (as the service
     does at start-up), so a running service on it takes the site at once
-    (``backend.sites.Registry.rescan``); says what happened."""
+    (``backend.sites.Registry.rescan``); says what happened. One write transaction that
+    takes the write lock first (:func:`backend.cli.db.with_db`): the running service adds
+    the new file's rows too, and its loggers commit meanwhile."""
     from sqlalchemy.exc import SQLAlchemyError
 
-    from backend.settings import get_settings
+    from backend.cli.db import with_db
     from backend.sites import sync_sites
-    from backend.storage.engine import SchemaTooNewError, make_engine, run_migrations
+    from backend.storage.engine import SchemaTooNewError
     from sim.sites import site_from_dict
 
-    engine = make_engine(get_settings())
+    site = site_from_dict(config)
     try:
-        run_migrations(engine)
-        with engine.begin() as conn:
-            sync_sites(conn, [site_from_dict(config)])
+        with_db(lambda conn: sync_sites(conn, [site]))
     except SQLAlchemyError as exc:
         return (f"the database could not take it now ({type(exc).__name__}): the service "
                 "adds it at its next start")
     except SchemaTooNewError as exc:  # the file is written all the same: say both
         return f"not added to the database: {exc}"
-    finally:
-        engine.dispose()
     return "a running service on the same database shows it within a second, no restart"
 
 

@@ -11,7 +11,7 @@
   running service refuses it within ``HELIOTWIN_TOKEN_CACHE_TTL_S`` (≤ 1 s).
 
 Each command is one ``BEGIN IMMEDIATE`` transaction on SQLite, retried while the
-database stays locked (see :func:`_with_db`), so it works while loggers write.
+database stays locked (:func:`backend.cli.db.with_db`), so it works while loggers write.
 """
 
 from __future__ import annotations
@@ -20,10 +20,9 @@ import argparse
 import datetime as dt
 import json
 import sys
-from collections.abc import Callable
-from typing import Any
 
 from backend.cli import fail
+from backend.cli.db import with_db
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -67,67 +66,6 @@ def _expiry(args: argparse.Namespace) -> dt.datetime | None:
     return None
 
 
-def _locked(exc: BaseException) -> bool:
-    """SQLite's "database is locked"/"busy": another writer held the lock past the timeout."""
-    from sqlalchemy.exc import OperationalError
-
-    return isinstance(exc, OperationalError) and any(
-        w in str(exc.orig) for w in ("locked", "busy"))
-
-
-def _with_db(work: Callable[[Any], Any], site_id: str | None = None,
-             configured: bool = True) -> Any:
-    """Migrate if needed, run ``work(conn)`` in one write transaction, retried while locked.
-
-    On SQLite the transaction is ``BEGIN IMMEDIATE``: it takes the write lock first (and
-    waits for it, ``busy_timeout``), where a deferred one that reads and then writes fails
-    at once with "database is locked" when a logger committed in between. A ``site_id``
-    must have a site config (built-in or in ``HELIOTWIN_SITES_DIR``), or with ``configured``
-    False at least a row in the database (:class:`UnknownSite` otherwise, naming the
-    configured sites): a site the database still held after its file went had been given a
-    token whose every reading the service refused as "unknown site" (its 404), and a
-    built-in site the database did not hold yet had been "unknown" to ``list``. ``sites`` is
-    not rewritten: only a ``site_id`` missing from the database is added from its file (a
-    token needs its site's row). Still locked after the timeout: retried 4 times with
-    backoff (:mod:`backend.retry`), then the error.
-    """
-    from sqlalchemy import select
-    from tenacity import Retrying, retry_if_exception, stop_after_attempt
-
-    from backend.auth import UnknownSite
-    from backend.retry import backoff
-    from backend.settings import get_settings
-    from backend.sites import Registry, sync_sites
-    from backend.storage.engine import make_engine, run_migrations
-    from backend.storage.tables import SiteRow
-
-    settings = get_settings()
-    engine = make_engine(settings)
-
-    def attempt() -> Any:
-        with engine.connect().execution_options(sqlite_immediate=True) as conn, conn.begin():
-            if site_id is not None:
-                stored = conn.execute(
-                    select(SiteRow.site_id).where(SiteRow.site_id == site_id)).first()
-                info = registry.sites.get(site_id)
-                if info is None and (configured or stored is None):
-                    raise UnknownSite(
-                        f"unknown site {site_id!r}: no site config gives it (built-in, or a "
-                        f"file in HELIOTWIN_SITES_DIR, {settings.sites.user_dir}); known "
-                        f"sites: {', '.join(registry.sites) or 'none'}")
-                if stored is None and info is not None:
-                    sync_sites(conn, [info.site])
-            return work(conn)
-
-    try:
-        run_migrations(engine)
-        registry = Registry.load_files(settings.sites.user_dir)
-        return Retrying(stop=stop_after_attempt(5), wait=backoff(0.5, 4.0),
-                        retry=retry_if_exception(_locked), reraise=True)(attempt)
-    finally:
-        engine.dispose()
-
-
 def create(args: argparse.Namespace) -> int:
     """Store and print a new token."""
     from backend.auth import UnknownSite, check_scope, create_token
@@ -135,7 +73,7 @@ def create(args: argparse.Namespace) -> int:
     try:
         check_scope(args.scope)
         expires = _expiry(args)
-        token = _with_db(lambda conn: create_token(conn, args.site, args.label, expires,
+        token = with_db(lambda conn: create_token(conn, args.site, args.label, expires,
                                                    args.scope), args.site)
     except UnknownSite as exc:
         fail(f"--site: {exc}")
@@ -154,8 +92,8 @@ def list_(args: argparse.Namespace) -> int:
     from backend.auth import UnknownSite, list_tokens
 
     try:
-        rows = [t.to_dict() for t in _with_db(lambda conn: list_tokens(conn, args.site),
-                                              args.site, configured=False)]
+        rows = [t.to_dict() for t in with_db(lambda conn: list_tokens(conn, args.site),
+                                             args.site, configured=False)]
     except UnknownSite as exc:
         fail(f"--site: {exc}")
     if args.json:
@@ -175,7 +113,7 @@ def revoke(args: argparse.Namespace) -> int:
     from backend.auth import UnknownToken, revoke_token
 
     try:
-        info, _ = _with_db(lambda conn: revoke_token(conn, args.token_or_id))
+        info, _ = with_db(lambda conn: revoke_token(conn, args.token_or_id))
     except UnknownToken as exc:
         fail(str(exc))
     assert info.revoked_at is not None

@@ -182,7 +182,7 @@ def make_token(database_url: str, site_id: str = "tehuantepec", label: str = "te
     try:
         run_migrations(engine)
         registry = Registry.load_files(settings.sites.user_dir)
-        # BEGIN IMMEDIATE, as the CLI's (backend/cli/token.py): a deferred transaction that
+        # BEGIN IMMEDIATE, as the CLI's (backend/cli/db.py): a deferred transaction that
         # reads, then writes beside a running server's writer is refused at once ("database
         # is locked", whatever the busy timeout: a fresh clone's e2e run)
         with engine.connect().execution_options(sqlite_immediate=True) as conn, conn.begin():
