@@ -32,6 +32,13 @@ from backend import cli
     (["simulate", "--start", "2024-03-15", "--end", "2024-03-16", "--controller",
       "open_loop_model", "--pointing-model-terms", "[]"],
      "heliotwin simulate: error: --pointing-model-terms: '[]' is not a JSON object"),
+    # a user's `curl …/pointing-model > model.json` of a range without offsets: it read
+    # "detail: not a pointing-model term"
+    (["simulate", "--start", "2024-03-15", "--end", "2024-03-16", "--controller",
+      "open_loop_model", "--pointing-model-terms", '{"detail": "0 observations with sun '
+      'offsets in the range; the fit needs at least 10"}'],
+     "heliotwin simulate: error: --pointing-model-terms: the service's refusal, not a "
+     "pointing model: 0 observations with sun offsets in the range"),
     # a tester's finding: the ideal controller ignored them while the summary echoed them
     (["simulate", "--start", "2024-03-15", "--end", "2024-03-16", "--backlash-deg", "1"],
      "heliotwin simulate: error: --backlash-deg: the ideal controller feels no disturbance"),

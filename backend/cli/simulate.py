@@ -156,6 +156,9 @@ def read_pointing_model_terms(text: str) -> dict[str, Any]:
         raise InputError(f"--pointing-model-terms: not JSON ({exc})") from None
     if not isinstance(value, dict):
         raise InputError("--pointing-model-terms: expected a JSON object of terms")
+    if "detail" in value and "terms" not in value:  # the route's 4xx, saved by curl
+        raise InputError("--pointing-model-terms: the service's refusal, not a pointing "
+                         f"model: {value['detail']}")
     return value
 
 
