@@ -147,6 +147,15 @@ def load_store() -> dict:
 
 def main(argv: list[str]) -> int:
     scripts = sorted(HERE.glob("bench_*.py"))
+    names = [s.stem.removeprefix("bench_") for s in scripts]
+    if {"-h", "--help"} & set(argv):
+        print(__doc__.strip() + "\n\nsections: " + " ".join(names))
+        return 0
+    if unknown := [a for a in argv if a not in names]:
+        # a typo ran nothing and said "wrote RESULTS.md"
+        print(f"run.py: no section {', '.join(unknown)}; the sections: {' '.join(names)}",
+              file=sys.stderr)
+        return 2
     if argv:
         scripts = [s for s in scripts if s.stem.removeprefix("bench_") in argv]
     failed = []

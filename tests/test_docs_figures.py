@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import subprocess
 import sys
 from pathlib import Path
 
@@ -75,3 +76,15 @@ def test_rewrite_fills_markers_and_verdicts(docs_figures) -> None:
     )
     _, missing = docs_figures.rewrite("<!-- fig:x.nope -->1<!-- /fig -->", figs)
     assert missing == ["x.nope"]
+
+
+def test_the_bench_runner_refuses_a_section_it_does_not_have() -> None:
+    """``benchmarks/run.py dashbord`` (or ``--help``) ran no bench, said "wrote RESULTS.md"
+    and exited 0: now a typo is refused naming the sections, and nothing is written."""
+    results = ROOT / "benchmarks" / "RESULTS.md"
+    before = results.stat().st_mtime_ns
+    p = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "run.py"), "dashbord"],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2, p.stderr
+    assert "no section dashbord" in p.stderr and " dashboard " in p.stderr
+    assert results.stat().st_mtime_ns == before
