@@ -360,3 +360,27 @@ def test_create_holds_the_write_lock_while_a_service_writes(tmp_path: Path, heli
     with sqlite3.connect(tmp_path / "cli.sqlite") as db:
         assert db.execute("SELECT site_id FROM sites WHERE site_id = 'hamburg'").fetchall() \
             == [("hamburg",)]
+
+
+@pytest.mark.parametrize("args", [
+    ["sun", "--site", "my-roof", "--time", "2024-03-15T12:00:00Z"],
+    ["simulate", "--site", "my-roof", "--start", "2024-03-15", "--end", "2024-03-16"],
+    ["site", "create", "--id", "roof2", "--latitude-deg", "36", "--longitude-deg", "-80",
+     "--timezone", "America/New_York", "--like", "my-roof"],
+    ["demo-logger", "--site", "my-roof", "--token", "t", "--once"],
+], ids=lambda a: a[0] if a[0] != "site" else "site-create")
+def test_a_malformed_site_file_is_refused_naming_its_fields(tmp_path: Path, heliotwin,
+                                                            args: list[str]) -> None:
+    """docs/sites.md's malformed ``my-roof.json`` (latitude 91, a key ``tilt``): ``sun``,
+    ``simulate``, ``site create --like`` and ``demo-logger`` printed a ValueError traceback
+    (exit 1) where ``site show`` and ``vision detect`` named the fields (exit 2)."""
+    (tmp_path / "my-roof.json").write_text(json.dumps({
+        "site_id": "my-roof", "latitude_deg": 91, "longitude_deg": -79.95,
+        "timezone": "America/New_York",
+        "arrays": {"tracker": {"mount": "tracker"},
+                   "fixed": {"mount": "fixed", "surface_tilt_deg": 36, "tilt": 36}}}))
+    p = heliotwin(tmp_path, *args)
+    assert p.returncode == 2, p.stderr
+    assert "error: " in p.stderr and "Traceback" not in p.stderr
+    assert "latitude_deg: Input should be less than or equal to 90" in p.stderr
+    assert "arrays.fixed.tilt: unknown key" in p.stderr

@@ -23,7 +23,11 @@ import importlib
 import logging
 import os
 import sys
-from typing import NoReturn
+from pathlib import Path
+from typing import TYPE_CHECKING, NoReturn
+
+if TYPE_CHECKING:
+    from sim.sites import Site
 
 from backend.errors import SetupError
 
@@ -55,6 +59,17 @@ class CliError(Exception):
 def fail(message: str, code: int = 2) -> NoReturn:
     """Stop the subcommand: :func:`main` prints ``message`` as its error and exits ``code``."""
     raise CliError(message, code)
+
+
+def site_or_fail(site_id: str, sites_dir: str | Path | None, flag: str = "--site") -> Site:
+    """The site a command names, else its refusal ``FLAG: why``: an unknown id, or a file
+    that does not validate (every bad field named, as ``site validate`` says it)."""
+    from sim.sites import load_site
+
+    try:
+        return load_site(site_id, sites_dir)
+    except ValueError as exc:  # UnknownSiteError, or the file's problems
+        fail(f"{flag}: {exc}")
 
 
 def _tag_commands(parser: argparse.ArgumentParser) -> None:

@@ -6,7 +6,7 @@ import argparse
 import signal
 import threading
 
-from backend.cli import fail
+from backend.cli import fail, site_or_fail
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -30,13 +30,9 @@ def run(args: argparse.Namespace) -> int:
     """Run until interrupted (or, with ``--once``, until the back-fill is posted)."""
     from backend.settings import get_settings
     from backend.twin.demo_logger import DemoLogger, TokenRefused
-    from sim.sites import UnknownSiteError, load_site
     from sim.twin import has_twin_arrays
 
-    try:
-        site = load_site(args.site, get_settings().sites.user_dir)
-    except UnknownSiteError as exc:
-        fail(str(exc))
+    site = site_or_fail(args.site, get_settings().sites.user_dir)
     if not has_twin_arrays({name: a.mount for name, a in site.arrays.items()}):
         # the demo logger posts what the twin makes (a tester's string-level site crashed
         # with a traceback and exit 0)

@@ -35,7 +35,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from backend.cli import CliError, fail
+from backend.cli import CliError, fail, site_or_fail
 from backend.twin.parameters import MACHINE_PARAMETERS
 
 _BAR_MIN_STEPS = 20_000  # a progress bar for long runs (two weeks at 1 min and up) …
@@ -198,12 +198,7 @@ def check_step_count(start: Any, end: Any, step_s: float) -> None:
 
 def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
     """Run the simulation; returns (summary, TwinResult). Raises InputError on bad input."""
-    from sim.sites import UnknownSiteError, load_site
-
-    try:
-        site = load_site(args.site, args.sites_dir)
-    except UnknownSiteError as exc:
-        raise InputError(f"--site: {exc}") from None
+    site = site_or_fail(args.site, args.sites_dir)
     start = parse_when(args.start, site.timezone, "start")
     end = parse_when(args.end, site.timezone, "end")
     if not end > start:

@@ -41,7 +41,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from backend.cli import fail
+from backend.cli import fail, site_or_fail
 
 
 def _not_json(exc: json.JSONDecodeError) -> str:
@@ -164,14 +164,12 @@ def _sync_database(config: dict[str, Any]) -> str:
 
 
 def _template(like: str) -> dict[str, Any]:
-    from sim.sites import load_site
-
-    return load_site(like, _sites_dir()).to_config()
+    return site_or_fail(like, _sites_dir(), "--like").to_config()
 
 
 def create(args: argparse.Namespace) -> int:
     """Write a new site (from flags and a template, or from a file)."""
-    from sim.sites import UnknownSiteError, place_defaults, relocated_config
+    from sim.sites import place_defaults, relocated_config
 
     if args.from_file is not None:
         try:
@@ -190,10 +188,7 @@ def create(args: argparse.Namespace) -> int:
                if getattr(args, n) is None]
     if missing:
         fail(f"{', '.join(missing)} required (or --from-file FILE)")
-    try:
-        base = _template(args.like)
-    except UnknownSiteError as exc:
-        fail(f"--like: {exc}")
+    base = _template(args.like)
     config = relocated_config(base, {
         "site_id": args.site_id, "name": args.name or args.site_id,
         "latitude_deg": args.latitude_deg, "longitude_deg": args.longitude_deg,
@@ -254,7 +249,7 @@ def from_weather(args: argparse.Namespace) -> int:
     """Write a site at the station of a TMY3/EPW file; a ``--timezone`` whose standard time
     is not the file's offset is written with a warning naming both."""
     from sim.site_config import standard_offset_h
-    from sim.sites import CLIMATE_KEYS, UnknownSiteError, relocated_config
+    from sim.sites import CLIMATE_KEYS, relocated_config
     from sim.sky import sniff_weather_format
 
     try:  # the content decides: a TMY2 file named .csv is not read as TMY3
@@ -268,7 +263,7 @@ def from_weather(args: argparse.Namespace) -> int:
         st = _station(args.file, fmt)
         zone = args.timezone or fixed_offset_zone(st["tz_h"])
         base = _template(args.like)
-    except (OSError, ValueError, KeyError, UnknownSiteError) as exc:
+    except (OSError, ValueError, KeyError) as exc:
         fail(f"{args.file}: {exc}")
     config = relocated_config(base, {
         "site_id": args.site_id, "name": st["name"] or args.site_id,

@@ -20,7 +20,7 @@ import os
 from datetime import UTC, datetime
 from typing import Any
 
-from backend.cli import fail
+from backend.cli import fail, site_or_fail
 
 
 def _parse_time(text: str) -> datetime:
@@ -117,12 +117,7 @@ def _place(args: argparse.Namespace) -> str | None:
             return "--site: give either --site or --lat/--lon, not both"
         from pvlib import atmosphere
 
-        from sim.sites import UnknownSiteError, load_site
-
-        try:
-            site = load_site(args.site, args.sites_dir)
-        except UnknownSiteError as exc:
-            return f"--site: {exc}"
+        site = site_or_fail(args.site, args.sites_dir)
         args.lat, args.lon = site.latitude, site.longitude
         if args.elevation_m is None:
             args.elevation_m = site.altitude
