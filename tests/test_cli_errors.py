@@ -7,6 +7,7 @@ In process (``main(argv)``): the error path is the dispatcher's, not a process's
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import pytest
 
@@ -93,6 +94,28 @@ def test_serve_names_a_bad_setting_in_one_line(name: str, value: str, line: str,
     out, err = capsys.readouterr()
     assert err.startswith(f"heliotwin serve: error: {line}") and err.count("\n") == 1, err
     assert "s3cret" not in err
+
+
+def test_serve_names_a_malformed_site_file_in_one_line(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """docs/sites.md's malformed ``my-roof.json`` in the sites folder stopped ``serve``'s
+    start-up with a 40-frame traceback (exit 3); now one line naming its fields, exit 2."""
+    (tmp_path / "my-roof.json").write_text(
+        '{"site_id": "my-roof", "latitude_deg": 91, "longitude_deg": -79.95, '
+        '"timezone": "America/New_York", "arrays": {"tracker": {"mount": "tracker"}, '
+        '"fixed": {"mount": "fixed", "tilt": 36}}}')
+    for name, value in {"HELIOTWIN_SITES_DIR": str(tmp_path), "HELIOTWIN_PORT": "0",
+                        "HELIOTWIN_VISER": "false",
+                        "HELIOTWIN_DATABASE_URL": f"sqlite:///{tmp_path / 's.sqlite'}"}.items():
+        monkeypatch.setenv(name, value)
+    monkeypatch.delenv("HELIOTWIN_MQTT_URL", raising=False)
+    assert cli.main(["serve", "--no-demo"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("heliotwin serve: error: HELIOTWIN_SITES_DIR: ") and \
+        err.count("\n") == 1, err
+    assert "latitude_deg: Input should be less than or equal to 90" in err
+    assert "arrays.fixed.tilt: unknown key" in err
 
 
 def test_fail_carries_its_exit_code(monkeypatch: pytest.MonkeyPatch,

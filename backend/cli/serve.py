@@ -53,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
     from backend.app import create_app
     from backend.limits import tune_malloc
     from backend.settings import get_settings, settings_error_text
+    from sim.sites import list_sites
 
     # before any thread starts: two glibc heaps and large arrays unmapped when freed, so
     # an idle server gives back what its big requests used (backend/limits.py)
@@ -71,6 +72,10 @@ def run(args: argparse.Namespace) -> int:
         settings = get_settings(**overrides)
     except ValidationError as exc:
         fail(settings_error_text(exc))
+    try:  # a malformed site file stopped the start-up with a 40-frame traceback
+        list_sites(settings.sites.user_dir)
+    except ValueError as exc:
+        fail(f"HELIOTWIN_SITES_DIR: {exc}")
     server = settings.server
     _check_database(settings)
 
