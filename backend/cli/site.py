@@ -81,7 +81,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     w.add_argument("--timezone", help="IANA zone instead of the file's fixed UTC offset")
     w.add_argument("--like", default="tehuantepec",
                    help="tracker and array modules like this site (default tehuantepec)")
-    w.add_argument("--force", action="store_true", help="overwrite an existing user site")
+    w.add_argument("--force", action="store_true",
+                   help="overwrite a user site, or replace a built-in one")
     w.set_defaults(func=from_weather)
     s = sub.add_parser("show", help="print a site's config and where it comes from")
     s.add_argument("site_id", metavar="ID")
