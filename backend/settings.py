@@ -384,8 +384,9 @@ class AlertSettings(_Group):
     )
     silent_min: float = Field(
         30.0, gt=0, description="A logger with no reading for this many minutes (counted "
-                                "from the service's start at the earliest) raises "
-                                "`logger_silent`.")
+                                "from the service's start at the earliest), or for 2.5 of "
+                                "its own cadence when that is longer (a 30-minute logger: "
+                                "75 min), raises `logger_silent`.")
     silent_daylight_only: bool = Field(
         True, description="Count a logger's silence only while the sun is up at the site, "
                           "so a logger that sleeps at night is not reported every night.")

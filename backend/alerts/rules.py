@@ -11,7 +11,9 @@ diagnosis) is left as it is — "unknown" is never "all clear".
 Kinds:
 
 - ``logger_silent`` — an array whose logger has reported before has no reading for
-  ``Settings.alerts.silent_min`` minutes; the silence is counted from the service's start
+  ``Settings.alerts.silent_min`` minutes, or for :data:`SILENT_CADENCES` of its own cadence
+  when that is longer (a logger slower than :data:`FRESH_S`: a 30-minute logger's next
+  reading is due just as 30 minutes run out); the silence is counted from the service's start
   at the earliest (a logger cannot report to a service that was down), and by default
   only while the sun is up (``Settings.alerts.silent_daylight_only``: many loggers
   sleep at night). ``since``: its last reading.
@@ -37,11 +39,30 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 from zoneinfo import ZoneInfo
 
+import numpy as np
+
 from backend.diagnosis.faults import FAULT_WORDS
 
 AlertKind = Literal["logger_silent", "fault", "low_performance_ratio"]
 KIND_WORDS: dict[str, str] = {"logger_silent": "Logger silent", "fault": "Fault",
                                     "low_performance_ratio": "Low performance ratio"}
+
+
+#: A logger is late after this many of its own cadences (the median interval of its latest
+#: readings, :func:`cadence_s`): the overview's stale logger and the ``logger_silent`` alert
+SILENT_CADENCES = 2.5
+#: Readings at most this far apart [s] are a minute logger's: the overview calls it stale
+#: after this at the least, and the alert's threshold alone judges its silence
+FRESH_S = 300
+#: the latest readings a logger's cadence is read from
+CADENCE_READINGS = 11
+
+
+def cadence_s(ts_desc_s: list[float]) -> float:
+    """A logger's cadence [s]: the median interval of its latest readings ``ts_desc_s``
+    (newest first); 0 with fewer than two."""
+    steps = -np.diff(np.asarray(ts_desc_s, np.float64))
+    return float(np.median(steps)) if steps.size else 0.0
 
 
 Key = tuple[str, str, str, str]
@@ -112,24 +133,31 @@ def day_start_s(date: str, zone: ZoneInfo) -> int:
 
 def silent_loggers(site_id: str, zone: ZoneInfo, last_ts: dict[str, int | None], now_s: float,
                    started_s: float, silent_min: float,
-                   counted_s: Callable[[float, float], float] | None = None) -> Evaluation:
+                   counted_s: Callable[[float, float], float] | None = None,
+                   cadence_s: dict[str, float] | None = None) -> Evaluation:
     """``logger_silent`` for each array of ``last_ts`` (its last measured reading [Unix s],
     None when it never reported: no alert, nothing to be silent about).
 
     ``counted_s(a, b)``: the seconds of ``[a, b]`` that count as silence (the daylight
-    seconds, by default of the service); None: all of them."""
+    seconds, by default of the service); None: all of them. ``cadence_s``: each array's
+    logger cadence [s] (:func:`cadence_s`); a logger slower than :data:`FRESH_S` is silent
+    after :data:`SILENT_CADENCES` of it when that is longer than ``silent_min`` — a
+    30-minute logger was raised and cleared every half hour. The service's start is
+    waited for ``silent_min`` alone."""
     out = Evaluation()
-    limit_s = silent_min * 60.0
     counted = counted_s or (lambda a, b: b - a)
     daylight = counted_s is not None
     for array, last in last_ts.items():
+        cadence = (cadence_s or {}).get(array, 0.0)
+        slow = cadence if cadence > FRESH_S else 0.0
+        limit_s = max(silent_min * 60.0, SILENT_CADENCES * slow)
         scope = (site_id, array, "logger_silent")
         if last is None:
             out.scopes.add(scope)
             out.clear_notes[scope] = f"the {array} logger has no readings at all"
             continue
         silent_s = counted(last, now_s)
-        if silent_s >= limit_s and counted(started_s, now_s) < limit_s:
+        if silent_s >= limit_s and counted(started_s, now_s) < silent_min * 60.0:
             continue  # silent, but the service has not listened long enough to say so
         out.scopes.add(scope)
         if silent_s >= limit_s:
@@ -138,9 +166,11 @@ def silent_loggers(site_id: str, zone: ZoneInfo, last_ts: dict[str, int | None],
                 site_id, array, "logger_silent", int(last),
                 f"no reading from the {array} logger for {duration_text(silent_s)}{of} "
                 f"(last one {local_text(last, zone)}); alert after "
-                f"{duration_text(limit_s)}{of} without one",
+                f"{duration_text(limit_s)}{of} without one"
+                + (f" ({SILENT_CADENCES:g} × its cadence {duration_text(cadence)})"
+                   if limit_s > silent_min * 60.0 else ""),
                 {"last_reading_ts": _iso(last), "silent_min": round(silent_s / 60, 1),
-                 "threshold_min": silent_min, "daylight_only": daylight}))
+                 "threshold_min": round(limit_s / 60.0, 2), "daylight_only": daylight}))
         else:
             out.clear_notes[scope] = (f"the {array} logger reports again: last reading "
                                       f"{local_text(last, zone)}")

@@ -339,15 +339,18 @@ class AlertService:
 
     def _silent(self, info: SiteInfo, now: float) -> rules.Evaluation:
         last: dict[str, int | None] = {}
+        cadence: dict[str, float] = {}
         with self.engine.connect() as conn:
             for name, arr in info.arrays.items():
-                value = conn.execute(select(func.max(Measurement.ts_s)).where(
-                    Measurement.array_id == arr.array_id,
-                    Measurement.source == MEASURED)).scalar()
-                last[name] = None if value is None else int(value)
+                # the latest readings (the overview's): the last one and the logger's cadence
+                ts = conn.execute(select(Measurement.ts_s).where(
+                    Measurement.array_id == arr.array_id, Measurement.source == MEASURED)
+                    .order_by(Measurement.ts_s.desc()).limit(rules.CADENCE_READINGS)).scalars().all()
+                last[name] = int(ts[0]) if ts else None
+                cadence[name] = rules.cadence_s(list(ts))
         return rules.silent_loggers(info.site_id, info.zone, last, now, self.started_s,
                                     self.ctx.settings.alerts.silent_min,
-                                    silence_counter(self.ctx.settings, info))
+                                    silence_counter(self.ctx.settings, info), cadence)
 
     def _diagnosed(self, info: SiteInfo, now: float) -> rules.Evaluation:
         s = self.ctx.settings

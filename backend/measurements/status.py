@@ -13,10 +13,10 @@ from __future__ import annotations
 import datetime as dt
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
 import pandas as pd
 from pvlib import atmosphere
 
+from backend.alerts.rules import CADENCE_READINGS, FRESH_S, SILENT_CADENCES, cadence_s
 from backend.alerts.service import silence_counter
 from backend.measurements.energy import energy_rows
 from backend.measurements.queries import iso_utc
@@ -27,29 +27,20 @@ from sim.sun import solar_position
 if TYPE_CHECKING:
     from backend.context import ServiceContext
 
-#: A logger whose last reading is older than this is "stale" [s] — at the least: a slower
-#: logger is given :func:`fresh_for` its own cadence.
-FRESH_S = 300
-
 #: the latest readings of a series, newest first: the last one and the logger's cadence
 LATEST = ("SELECT ts_s, voltage_v, current_a, power_w FROM measurements "
-          "WHERE array_id = ? AND source = 0 ORDER BY ts_s DESC LIMIT 11")
-
-
-def cadence_s(ts_desc_s: list[float]) -> float:
-    """A logger's cadence [s]: the median interval of its latest readings ``ts_desc_s``
-    (newest first, :data:`LATEST`); 0 with fewer than two."""
-    steps = -np.diff(np.asarray(ts_desc_s, np.float64))
-    return float(np.median(steps)) if steps.size else 0.0
+          f"WHERE array_id = ? AND source = 0 ORDER BY ts_s DESC LIMIT {CADENCE_READINGS}")
 
 
 def fresh_for(ts_desc_s: list[float], max_gap_s: int) -> int:
     """How old [s] a logger's last reading may be before it is stale: 2.5 of its own
-    cadence (:func:`cadence_s`), at least :data:`FRESH_S` and at most the energy rule's
+    cadence (``SILENT_CADENCES``, :func:`cadence_s`), at least ``FRESH_S`` (the alert's
+    rules, :mod:`backend.alerts.rules`) and at most the energy rule's
     ``max_gap_s`` (past it the next reading would not be bridged: :mod:`sim.energy`). A
     15-minute logger is not stale between two of its readings; a 1-minute one is after
     five silent minutes."""
-    return int(min(max(FRESH_S, 2.5 * cadence_s(ts_desc_s)), max(FRESH_S, max_gap_s)))
+    return int(min(max(FRESH_S, SILENT_CADENCES * cadence_s(ts_desc_s)),
+                   max(FRESH_S, max_gap_s)))
 
 
 def status(ctx: ServiceContext, info: SiteInfo, now: float) -> dict[str, Any]:

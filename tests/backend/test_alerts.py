@@ -122,6 +122,28 @@ def test_silent_logger_rule_counts_from_the_start_and_ignores_never() -> None:
     assert ev.conditions == [] and (SITE, "tracker", "logger_silent") not in ev.scopes
 
 
+def test_a_slow_logger_is_silent_after_its_own_cadence_not_between_two_readings() -> None:
+    """A 30-minute logger's next reading is due when the 30-minute threshold runs out: it
+    was raised and cleared every half hour (an hourly one every hour) whenever the reading
+    came a minute late. A logger slower than ``FRESH_S`` is given 2.5 of its cadence; a
+    minute logger keeps the threshold alone."""
+    now = 1_764_000_000.0
+    last = {"tracker": int(now - 31 * 60), "fixed": int(now - 31 * 60)}
+    cadence = {"tracker": 1800.0, "fixed": 60.0}
+    ev = rules.silent_loggers(SITE, TZ, last, now, now - 86400, 30, cadence_s=cadence)
+    assert [c.array for c in ev.conditions] == ["fixed"]
+    assert (SITE, "tracker", "logger_silent") in ev.scopes  # evaluated: an alert clears
+    ev = rules.silent_loggers(SITE, TZ, {"tracker": int(now - 76 * 60)}, now, now - 86400, 30,
+                              cadence_s=cadence)
+    c = ev.conditions[0]
+    assert c.array == "tracker" and c.data["threshold_min"] == 75.0
+    assert "alert after 75 min" in c.detail and "× its cadence 30 min" in c.detail
+    # the service's start: the threshold's own minutes, whatever the cadence
+    ev = rules.silent_loggers(SITE, TZ, {"tracker": int(now - 76 * 60)}, now, now - 31 * 60,
+                              30, cadence_s=cadence)
+    assert [c.array for c in ev.conditions] == ["tracker"]
+
+
 def test_a_logger_that_sleeps_at_night_is_not_silent() -> None:
     """Daylight-only silence (the default): a logger quiet from sunset to 07:00 local is
     not silent; one quiet since 10:00 is, by the daylight seconds of the site's sun."""
@@ -524,6 +546,23 @@ def test_a_newer_reading_still_old_ends_one_silence_and_starts_another(
             assert _rounds(c, 3)["webhook"]["offered"] == 3  # and no more
             active = _alerts(c, state="active")["alerts"]
             assert [a["since"] for a in active] == [stamp[1]]
+    finally:
+        server.stop()
+
+
+def test_the_service_gives_a_30_minute_logger_its_cadence(sqlite_database: Database) -> None:
+    """Both loggers last read 40 minutes ago, past the threshold: the minute logger is
+    silent, the 30-minute one (next reading 10 minutes late, within 2.5 of its cadence) is
+    not — before, both were raised."""
+    server = _server(sqlite_database, HELIOTWIN_ALERT_SILENT_MIN=str(SILENT_MIN)).start()
+    try:
+        with server.client(timeout_s=30) as c:
+            last = int(time.time()) // 60 * 60 - 2400
+            _post(c, server.token(), [_reading(last - 1800 * k) for k in range(11)]
+                  + [_reading(last - 60 * k, "fixed") for k in range(11)])
+            _rounds(c, ROUNDS_PAST_SILENCE)
+            active = _alerts(c, site_id=SITE, state="active")["alerts"]
+            assert [(a["array"], a["kind"]) for a in active] == [("fixed", "logger_silent")]
     finally:
         server.stop()
 
