@@ -650,6 +650,12 @@ def parse_csv_batch(
     except UnicodeDecodeError as exc:
         raise body_error(422, None, "value_error", f"CSV is not UTF-8: {exc}") from exc
     header, data = _csv_rows(text)
+    sep = next((c for c in ";\t|" if len(header) == 1 and c in header[0]), None)
+    if sep:  # a portal's export in its own dialect (Europe: ';' and a decimal comma)
+        raise body_error(422, "header", "value_error",
+                          f"CSV header {_show(header[0])} is one column: the file is separated "
+                          f"by {sep!r}; separate the columns with commas (and write numbers "
+                          f"with a decimal point)", line=1)
     seen = Counter(header)  # linear in the header, whatever its length
     unknown = [h for h in seen if h not in _FIELD_SET]
     twice = [h for h, k in seen.items() if k > 1 and h in _FIELD_SET]
