@@ -314,7 +314,12 @@ def _floats(values: list[Any], field: str, errors: _Errors, text: bool
                 continue
             if (t is str and text and _NUMBER.fullmatch(x)) or (
                     not text and (t is float or t is int)):
-                col[r] = float(x)
+                try:
+                    col[r] = float(x)
+                except OverflowError:  # a JSON integer of 309+ digits (was a 500)
+                    invalid[r] = True
+                    errors.add(r, field, f"not a finite number: {_show(x)} is beyond a "
+                                         "double's range", "finite_number")
                 continue
             invalid[r] = True
             hint = " (send a JSON number)" if t is str and not text else ""
