@@ -389,6 +389,12 @@ def _where(loc: tuple[int | str, ...]) -> str:
     return ".".join(str(p) for p in loc) or "(top level)"
 
 
+def _clip(text: str, limit: int = 200) -> str:
+    """``text`` cut to ``limit`` characters: a problem's key or message may echo what was
+    sent (a 10 MB time zone name had come back whole in the 422)."""
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
 def _control_characters(value: Any, path: str = "") -> str | None:
     """The dotted path of the first string (key or value) holding a control character other
     than a tab or a line end (U+0000–U+001F but those, U+007F), None when there is none:
@@ -424,7 +430,7 @@ def validate_site_config(data: Any, where: str = "site") -> SiteConfig:
         for err in exc.errors()[:10]:
             msg = "unknown key (docs/site.schema.json lists the keys)" if (
                 err["type"] == "extra_forbidden") else err["msg"].removeprefix("Value error, ")
-            problems.append(f"{_where(err['loc'])}: {msg}")
+            problems.append(f"{_clip(_where(err['loc']))}: {_clip(msg)}")
         raise ValueError(f"{where}: " + "; ".join(problems)) from None
 
 

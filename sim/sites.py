@@ -296,15 +296,17 @@ def place_defaults(config: dict[str, Any], climate: dict[str, float] | None = No
     annual means, named by ``climate_source``) or the defaults the site format states
     (:class:`sim.site_config.SiteConfig`). Each filled key is listed in ``assumed`` with
     its rule; a key the config gives is left alone. A config without a numeric
-    ``latitude_deg`` is returned unchanged (its validation names the field).
+    ``latitude_deg``, or whose ``assumed`` is not an object, is returned unchanged (its
+    validation names the field).
     """
     from sim.site_config import Array, SiteConfig
 
     lat = config.get("latitude_deg")
-    if not isinstance(lat, int | float) or isinstance(lat, bool):
+    marks = config.get("assumed") or {}
+    if not isinstance(lat, int | float) or isinstance(lat, bool) or not isinstance(marks, dict):
         return config
     out = {**config}
-    assumed = dict(out.get("assumed") or {})
+    assumed = dict(marks)
     lon = config.get("longitude_deg")
     if ("altitude_m" not in out and isinstance(lon, int | float) and not isinstance(lon, bool)
             and -90 <= lat <= 90 and -180 <= lon <= 180):  # else validation names it
