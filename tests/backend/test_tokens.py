@@ -144,6 +144,10 @@ def test_admin_endpoints(server: InProcessServer, client: httpx.Client,
     bad = client.post(url, headers=admin, json={"site_id": "tehuantepec",
                                                 "expires_in_days": -1})
     assert bad.status_code == 422 and "expires_in_days" in bad.text
+    for days in (True, "30"):  # strict: true had made a token expiring in one day
+        bad = client.post(url, headers=admin, json={"site_id": "tehuantepec",
+                                                    "expires_in_days": days})
+        assert bad.status_code == 422 and "expires_in_days" in bad.text, bad.text
     # a NUL: PostgreSQL answered 500
     bad = client.post(url, headers=admin, json={"site_id": "tehuantepec", "label": "a\u0000b"})
     assert bad.status_code == 422 and "label" in bad.text, bad.text

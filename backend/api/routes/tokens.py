@@ -80,9 +80,10 @@ _TOKEN_ID = Annotated[int, Path(ge=1, le=2**31 - 1, description="the id `list` s
 
 
 class TokenCreate(BaseModel):
-    """A new write token for a site."""
+    """A new write token for a site; strict, as every request model (``true`` is not a
+    number of days: it made a token expiring in one)."""
 
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
     site_id: str = Field(..., min_length=1, max_length=64, examples=["tehuantepec"])
     label: Annotated[str, StringConstraints(max_length=200), AfterValidator(one_line)] = Field(
