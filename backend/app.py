@@ -212,6 +212,8 @@ def create_app(settings: Settings | None = None,
     app.add_middleware(GZipMiddleware, minimum_size=2048, compresslevel=5)
     # first of all: Content-Encoding, repeated keys (ingest checks its token, then its body)
     app.add_middleware(strict.StrictBodies, own_body=measurements.INGEST_PATH)
+    # HEAD routed as GET (FastAPI's routes take only the methods they declare)
+    app.add_middleware(strict.HeadAsGet)
     # outermost: CSP, X-Frame-Options, nosniff, Referrer-Policy on every response
     app.add_middleware(security.SecurityHeaders, viser_port=settings.server.viser_port)
     security.add_docs(app, settings.server.viser_public_port or settings.server.viser_port)

@@ -12,7 +12,8 @@
   write token first and then reads the body by :func:`read_body`, the same rules, and
   checks repeated keys itself, in bulk.
 - :func:`http_error`: FastAPI's HTTP-error answer, except that a 405 lists in
-  ``Allow`` every method of the path (Starlette names only the first route's).
+  ``Allow`` every method of the path (Starlette names only the first route's), and
+  :class:`HeadAsGet` answers the HEAD that ``Allow`` names beside every GET.
 - :func:`document_errors`: the OpenAPI's 422 body says what the service sends
   (``detail`` a message, or a list of ``{loc, msg, type}``).
 """
@@ -272,6 +273,27 @@ def _compiled(template: str) -> re.Pattern[str]:
 class _Repeated(Exception):
     def __init__(self, path: tuple[str | int, ...], key: str) -> None:
         self.path, self.key = path, key
+
+
+class HeadAsGet:
+    """ASGI middleware: a HEAD request is answered as its GET would be, without the body
+    (RFC 9110 §9.3.2). FastAPI's routes take only the methods they declare, so ``HEAD
+    /healthz`` (``curl -I``, an uptime probe) was a 405 whose ``Allow`` named HEAD."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope["method"] != "HEAD":
+            await self.app(scope, receive, send)
+            return
+
+        async def headers_only(message: Message) -> None:
+            if message["type"] == "http.response.body":  # the length header stays the GET's
+                message = {**message, "body": b""}
+            await send(message)
+
+        await self.app({**scope, "method": "GET"}, receive, headers_only)
 
 
 def allowed_methods(request: Request, also: str = "") -> list[str]:

@@ -70,6 +70,19 @@ def test_405_allow_names_every_method_of_the_path(client: httpx.Client) -> None:
     assert r.headers["allow"] == "DELETE, PUT"
 
 
+def test_head_is_answered_as_get_without_a_body(client: httpx.Client) -> None:
+    """The HEAD that a 405's Allow names beside GET is served: it was itself a 405
+    (``curl -I /healthz``, an uptime probe)."""
+    for path in ("/healthz", "/api/v1/sites/tehuantepec/config"):
+        got, head = client.get(path), client.head(path)
+        assert head.status_code == got.status_code == 200, head.text
+        assert head.content == b""
+        assert head.headers["content-type"] == got.headers["content-type"]
+        assert head.headers["content-length"] == got.headers["content-length"]
+    head = client.head("/api/v1/sites/nowhere")  # an error's status too, headers only
+    assert head.status_code == 404 and head.content == b""
+
+
 def _emoncms_day(day_s: int, array: str) -> list[list]:
     """Minute rows of a day, emonCMS-style, power from V·I (power-line noise free)."""
     return [[day_s + 60 * k, array, 20.0 + k % 7, 3.0 + (k % 5) / 10, (20.0 + k % 7) *
