@@ -63,7 +63,7 @@ from backend.api.routes import (
     weather,
 )
 from backend.context import ServiceContext, open_context
-from backend.errors import InputError, bounded_errors
+from backend.errors import InputError, bounded_detail, bounded_errors
 from backend.limits import TRIM_INTERVAL_S, release_memory
 from backend.settings import Settings, get_settings
 from backend.twin import viser_http
@@ -145,7 +145,7 @@ async def validation_error(request: Request, exc: RequestValidationError) -> Res
 
 async def input_error(request: Request, exc: InputError) -> Response:
     """A service function's :class:`backend.errors.InputError` → its 4xx with ``detail``."""
-    body = orjson.dumps({"detail": exc.detail})
+    body = orjson.dumps({"detail": bounded_detail(exc.detail)})
     return Response(body, status_code=exc.status_code, media_type="application/json")
 
 

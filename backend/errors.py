@@ -44,6 +44,9 @@ class InputError(ValueError):
 MAX_LISTED = 20
 _MAX_ECHO = 80
 _INT64 = 2**63
+#: Characters of an error answer's ``detail`` message: a message may quote what was sent
+#: (a weather file's 5 MB header line came back whole in its 422).
+MAX_DETAIL = 1000
 
 
 def _clip(text: str, limit: int) -> str:
@@ -51,6 +54,12 @@ def _clip(text: str, limit: int) -> str:
     UTF-8 encodes it: orjson failed with a 500) written as its escape."""
     text = text if len(text) <= limit else text[: limit - 3] + "..."
     return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
+def bounded_detail(detail: Any) -> Any:
+    """An error answer's ``detail``: a message cut to :data:`MAX_DETAIL` characters (a list
+    of problems is :func:`bounded_errors`' already)."""
+    return _clip(detail, MAX_DETAIL) if isinstance(detail, str) else detail
 
 
 def _echo(value: Any) -> Any:

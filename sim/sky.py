@@ -445,6 +445,9 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
         place = {k: float(meta[k]) for k in ("latitude", "longitude", "altitude")}
     except (KeyError, IndexError) as exc:  # pvlib's bare KeyError of a missing column
         raise ValueError(f"not a readable {fmt.upper()} file: no {exc} in it") from None
+    except TypeError as exc:  # pvlib's arithmetic on a text cell (the EPW hour 'x': a 500)
+        raise ValueError(f"not a readable {fmt.upper()} file: a column holds text where "
+                         f"numbers are due ({exc})") from None
     if leap.any():
         raise ValueError(
             f"this {fmt.upper()} file has 29 February ({len(data):,} rows: an actual year, not "

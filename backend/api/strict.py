@@ -37,7 +37,7 @@ from starlette.routing import compile_path
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from backend.api.deps import authenticated_first
-from backend.errors import InputError, load_json_pairs, repeated_keys
+from backend.errors import InputError, bounded_detail, load_json_pairs, repeated_keys
 
 _BODY_METHODS = frozenset(("POST", "PUT", "PATCH"))
 _HTTP_METHODS = frozenset(("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"))
@@ -316,8 +316,12 @@ def allowed_methods(request: Request, also: str = "") -> list[str]:
 
 
 async def http_error(request: Request, exc: StarletteHTTPException) -> Response:
-    """FastAPI's answer to an HTTP error; a 405's ``Allow`` names every method of the path."""
+    """FastAPI's answer to an HTTP error, its message bounded (:func:`bounded_detail`); a
+    405's ``Allow`` names every method of the path."""
     if exc.status_code != 405:
+        detail = bounded_detail(exc.detail)
+        if detail is not exc.detail:
+            exc = StarletteHTTPException(exc.status_code, detail, exc.headers)
         return await http_exception_handler(request, exc)
     allow = allowed_methods(request, (exc.headers or {}).get("Allow", ""))
     body = orjson.dumps({"detail": f"method {request.method} is not allowed here; "
