@@ -170,6 +170,8 @@ def test_detections_of_a_day(client: httpx.Client) -> None:
     ({"camera": "pinhole", "lat": "53.99", "lon": "9.5"}, None, 422, "'lat': unknown field"),
     ({"camera": "pinhole", "time": "2016-05-30T11:44:00+01:00"}, None, 422,
      "'time': unknown field"),
+    # a field given twice: the last had silently won (adversary, session 27)
+    ({"camera": ["fisheye", "pinhole"]}, None, 422, "camera: given 2 times"),
 ])
 def test_bad_input_is_a_4xx_naming_the_field(client: httpx.Client, data: dict,
                                               files: dict | None, status: int,

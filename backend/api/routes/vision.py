@@ -667,11 +667,17 @@ _EVAL_DOC = {
 
 
 def _known_fields(form: FormData, known: dict[str, Any]) -> None:
-    """A field the endpoint does not read is a 422 naming it (it was silently ignored)."""
+    """A field the endpoint does not read is a 422 naming it (it was silently ignored), and
+    so is a one-value text field given twice (the last had silently won, as a JSON key given
+    twice would: ``camera=fisheye&camera=pinhole`` ran a pinhole camera)."""
     unknown = sorted({k for k in form if k not in known})
     if unknown:
         raise HTTPException(422, f"{_cut(unknown[0])}: unknown field; known: "
                                  f"{', '.join(known)}")
+    for name in sorted(set(form)):
+        spec, n = known[name], len(form.getlist(name))
+        if n > 1 and spec.get("type") != "array" and spec.get("format") != "binary":
+            raise HTTPException(422, f"{name}: given {n} times; send it once")
 
 
 @router.post("/evaluate", response_model=EvaluationRead, openapi_extra=_EVAL_DOC,
