@@ -46,6 +46,7 @@ import io
 import json
 import logging
 import multiprocessing
+import re
 import tempfile
 import threading
 import time
@@ -628,7 +629,11 @@ class SimulationRunner:
 
     def get(self, run_id: str) -> RunState | None:
         """A run's state: from memory (a queued run with its place and expected wait, a
-        running one with its expected time left), or as stored."""
+        running one with its expected time left), or as stored; None for an unknown run,
+        or an id no run has (not a uuid4's 32 hex digits: PostgreSQL refused a NUL in the
+        query with a 500)."""
+        if not _RUN_ID.fullmatch(run_id):
+            return None
         with self._lock:
             state = self._runs.get(run_id)
             if state is not None:
@@ -679,6 +684,10 @@ class SimulationRunner:
         """A finished run's series (read from the database), or None."""
         blob = self.series_blob(run_id)
         return None if blob is None else npz_to_series(blob.data)
+
+
+#: What a run id is (``uuid.uuid4().hex``, :meth:`SimulationRunner.submit`).
+_RUN_ID = re.compile(r"[0-9a-f]{32}")
 
 
 def _duration(seconds: float) -> str:

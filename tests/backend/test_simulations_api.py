@@ -81,6 +81,9 @@ def test_simulation_errors(client: httpx.Client) -> None:
                                                  "end": "2024-01-02"})
     assert r.status_code == 404
     assert client.get("/api/v1/simulations/nope").status_code == 404
+    for path in ("/api/v1/simulations/%00", "/api/v1/simulations/a%00b/series"):
+        assert client.get(path).status_code == 404  # a NUL: PostgreSQL's error was a 500
+    assert client.delete("/api/v1/simulations/%00").status_code == 404
 
 
 def test_sites_and_meta(client: httpx.Client) -> None:
