@@ -365,6 +365,12 @@ def test_calibration_input_errors(client: httpx.Client) -> None:
                     data={"timestamps": ["2024-03-05T10:00:00Z"] * 3, "site_id": "tehuantepec",
                           "px_per_deg": "2.6"})
     assert r.status_code == 422 and r.json()["detail"].startswith("'px_per_deg': unknown field")
+    # the name is one line, as a token's label: a NUL was a 500 on PostgreSQL once fitted
+    for name in ("a\x00b", "two\nlines", "\u202eevil"):
+        r = client.post("/api/v1/vision/calibrations", files=[f, f, f],
+                        data={"timestamps": ["2024-03-05T10:00:00Z"] * 3,
+                              "site_id": "tehuantepec", "name": name})
+        assert r.status_code == 422 and r.json()["detail"].startswith("name: holds"), r.text
 
 
 def test_evaluate_gives_seed003_tables(client: httpx.Client) -> None:

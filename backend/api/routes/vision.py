@@ -72,6 +72,7 @@ from backend.api.schemas.vision import (
 )
 from backend.limits import Busy, prune_anonymous
 from backend.storage.tables import VisionCalibration, VisionDetection
+from backend.text import one_line_problem
 from backend.timestamps import TimestampError, parse_day_or_instant, parse_instant
 from backend.vision.checks import error_warnings
 from backend.vision.frames import FrameInputs, NameZoneError, frame_inputs, time_from_name
@@ -518,7 +519,7 @@ _CAL_PROPERTIES: dict[str, Any] = {
                  "description": "radial polynomial terms; auto (default): as many "
                                 "as lower the leave-one-out error"},
     "name": {"type": "string", "maxLength": 100,
-             "description": "a name for the calibration (default: projection, "
+             "description": "a name for the calibration, one line (default: projection, "
                             "frames, day)"},
     "fit_tilt": {"type": "boolean"},
     "site_id": {"type": "string"}, "latitude_deg": {"type": "number"},
@@ -554,6 +555,8 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
     name = _text(form, "name") or ""
     if len(name) > 100:
         raise HTTPException(422, f"name: at most 100 characters, got {len(name)}")
+    if (problem := one_line_problem(name)) is not None:  # a NUL was a 500 on PostgreSQL
+        raise HTTPException(422, f"name: {problem}")
     frames, place = await _timed_frames(ctx, form, 3)
     _writes_site(_token, place, "calibrations")
     # a bad series is refused by the service (InputError: 422 naming files or timestamps)
