@@ -57,7 +57,8 @@ _DRIVE_DOCS = {
     "gear_ratio": ("-", "motor turns per output turn; assumption (worm train)"),
     "gear_efficiency": ("-", "forward gearbox efficiency in (0, 1]; assumption, single-start worm"),
     "max_output_torque_nm": ("N m", "gearbox output rating; assumption"),
-    "max_output_speed_rad_s": ("rad s⁻¹", "output speed limit; assumption"),
+    "max_output_speed_rad_s": ("rad s⁻¹", "output speed limit; the twin moves the axis no "
+                               "faster than it or 0.05 (sim.tracking.DriveLimits); assumption"),
     "driver_efficiency": ("-", "H-bridge efficiency in (0, 1]; assumption"),
     "standby_power_w": ("W", "driver logic drawn all day; assumption (MD03 logic)"),
 }

@@ -55,7 +55,8 @@ class DriveLimits:
     Defaults: 0.05 rad s⁻¹ (2.86° s⁻¹) and 0.1 rad s⁻² (5.73° s⁻²) on both
     axes, the slew limits :func:`sim.motors.tracking_motion_energy` assumes
     (no seed gives them; the drives' own limit is 0.2 rad s⁻¹,
-    ``AxisDrive.max_output_speed_rad_s``).
+    ``AxisDrive.max_output_speed_rad_s``). A twin run takes :meth:`for_drives` of its
+    site: these, with a rate no faster than the site's drive.
     """
 
     azimuth_rate_deg_s: float = math.degrees(0.05)
@@ -67,6 +68,22 @@ class DriveLimits:
         for k, v in self.__dict__.items():
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"DriveLimits.{k} must be a positive number, got {v}")
+
+    @classmethod
+    def for_drives(cls, azimuth: Any, elevation: Any) -> DriveLimits:
+        """The default profile with each axis's rate capped at its drive's rated output
+        speed (``AxisDrive.max_output_speed_rad_s``, a site's ``tracker.drives``).
+
+        A site's slow drive (a heavy tracker at 0.05° s⁻¹) had moved at 2.86° s⁻¹, with
+        every move counted beyond the drive and no lag in the pointing (a tester's
+        finding). The cap sits 1e-9 under the rating so that the trip through degrees
+        never reads a move at the rated speed as over it.
+        """
+        d = cls()
+        az = math.degrees(azimuth.max_output_speed_rad_s) * (1 - 1e-9)
+        el = math.degrees(elevation.max_output_speed_rad_s) * (1 - 1e-9)
+        return cls(min(d.azimuth_rate_deg_s, az), d.azimuth_accel_deg_s2,
+                   min(d.elevation_rate_deg_s, el), d.elevation_accel_deg_s2)
 
     def axis(self, k: int) -> tuple[float, float]:
         """(rate [° s⁻¹], acceleration [° s⁻²]) of axis ``k`` (0 azimuth, 1 elevation)."""

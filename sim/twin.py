@@ -305,8 +305,10 @@ class TwinResult:
         drives = self.site.drives.values()
         torque = "/".join(sorted({f"{d.max_output_torque_nm:g}" for d in drives}))
         volts = "/".join(sorted({f"{d.supply_voltage_v:g}" for d in drives}))
+        speed = "/".join(sorted({f"{d.max_output_speed_rad_s:g}" for d in drives}))
         return (f"{n:,} of {self.moves:,} moves ask more than the drives give (output torque "
-                f"over their {torque} N m rating, or a voltage over the {volts} V bus: "
+                f"over their {torque} N m rating, a speed over their {speed} rad/s, or a "
+                f"voltage over the {volts} V bus: "
                 f"sim.motors.duty_for); the twin costs them as if made, so "
                 f"actuator_energy_wh is not what this machine would draw: it would stall "
                 f"or slip (gust_torque_nm {self.disturbances.gust_torque_nm:g} N m)")
@@ -590,7 +592,8 @@ def simulate(
     settings : ControlSettings, optional
         Dead band, stow, PID and camera-loop parameters.
     limits : DriveLimits, optional
-        Axis speed and acceleration limits.
+        Axis speed and acceleration limits; default :meth:`DriveLimits.for_drives` of the
+        site's drives (0.05 rad s⁻¹, slower when a drive's rated speed is).
     camera : CameraSetup, optional
         The tracker camera, exposure and clouds for the camera loops.
     spot_distance_m : float
@@ -619,7 +622,7 @@ def simulate(
                          f"them, not {controller!r}")
     d = disturbances if disturbances is not None else dist.Disturbances()
     settings = settings or ControlSettings()
-    limits = limits or DriveLimits()
+    limits = limits or DriveLimits.for_drives(site.drives["azimuth"], site.drives["elevation"])
     camera = camera or CameraSetup()
     from pvlib import atmosphere
 
