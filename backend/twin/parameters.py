@@ -33,7 +33,9 @@ MACHINE_PARAMETERS: tuple[Parameter, ...] = (
     Parameter("clock_offset_s", 0.0, "controller clock minus true time [s]",
               -86400.0, 86400.0),
     Parameter("backlash_deg", 0.0, "gear backlash per axis [deg]", 0.0, 10.0),
-    Parameter("gust_torque_nm", 0.0, "wind-gust torque amplitude per axis [N m]", 0.0, 1000.0),
+    # an 80 m² collector with an 8 m chord takes 3-7.5 kN m at 8 m/s and 19-47 kN m at 20 m/s
+    # (½ρv²·A·1.2·(0.1-0.25 chord), docs/control.md); 1,000 N m had refused them
+    Parameter("gust_torque_nm", 0.0, "wind-gust torque amplitude per axis [N m]", 0.0, 1e6),
     Parameter("camera_offset_right_deg", 0.0, "camera boresight right of the normal [deg]",
               -30.0, 30.0),
     Parameter("camera_offset_up_deg", 0.0, "camera boresight above the normal [deg]",

@@ -206,6 +206,21 @@ def test_the_ideal_controller_refuses_disturbances_naming_the_field(
     assert yawed.status_code == 200 and yawed.json()["pointing_error_rms_mrad"] > 40, yawed.text
 
 
+def test_a_large_trackers_gust_is_taken() -> None:
+    """A gust on an 80 m² tracker (8 m chord) is ½ρv²·A·1.2·(0.1-0.25 chord): 3-7.5 kN m at
+    8 m/s, 19-47 kN m at 20 m/s; the bound of 1,000 N m had refused them (a tester's
+    finding). Beyond the bound the refusal names the field."""
+    from backend.twin.scenario import Scenario
+
+    day = (pd.Timestamp("2024-03-15", tz="UTC"), pd.Timestamp("2024-03-16", tz="UTC"))
+    s = Scenario("tehuantepec", *day, controller="open_loop_spa",
+                 machine={"gust_torque_nm": 47_000.0})
+    assert s.disturbances().gust_torque_nm == 47_000.0
+    with pytest.raises(ValueError, match="^gust_torque_nm: .* outside"):
+        Scenario("tehuantepec", *day, controller="open_loop_spa",
+                 machine={"gust_torque_nm": 2e6})
+
+
 def test_a_run_frees_its_worker_before_its_caller_hears_it_ended(tmp_path: Path) -> None:
     """With one worker and no queue, a caller that sends its next run on the answer of the
     last one is never refused as busy: the slot is free before the run's future resolves
