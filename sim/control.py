@@ -119,6 +119,11 @@ class ControlSettings:
         kp e + ki Σ e dt + kd de/dt [-, s⁻¹, s].
     hybrid_gain : float
         Fraction of the newly measured correction taken each frame [-].
+    hybrid_max_offset_deg : float
+        ``hybrid`` uses a frame only when the sun it shows is within this of the encoder
+        azimuth (``h / cos E``) and the panel is below the zenith's singular cap (cos E at
+        least the 0.05 that floors an azimuth error's weight): the small-angle conversion
+        holds there [°]. 10° holds seed 001's drift (87–100 mrad).
     min_confidence : float
         Detections below this confidence are not used [-].
     max_jump_deg : float
@@ -153,6 +158,7 @@ class ControlSettings:
     ki_per_s: float = 0.02
     kd_s: float = 0.0
     hybrid_gain: float = 0.7
+    hybrid_max_offset_deg: float = 10.0
     min_confidence: float = 0.5
     max_jump_deg: float = 1.0
     reacquire_frames: int = 5
@@ -172,6 +178,8 @@ class ControlSettings:
             raise ValueError(f"camera_interval_s must be > 0, got {self.camera_interval_s}")
         if not 0 < self.hybrid_gain <= 1:
             raise ValueError(f"hybrid_gain must be in (0, 1], got {self.hybrid_gain}")
+        if not self.hybrid_max_offset_deg > 0:
+            raise ValueError(f"hybrid_max_offset_deg must be > 0, got {self.hybrid_max_offset_deg}")
         if self.area_tolerance <= 1 or self.reacquire_frames < 1 or self.max_jump_deg <= 0:
             raise ValueError("area_tolerance must be > 1, reacquire_frames >= 1, max_jump_deg > 0")
 
@@ -264,9 +272,13 @@ def ephemeris_joint_targets(
             "elevation_deg": el_j, "reference_azimuth_deg": reference}
 
 
+#: The floor of an azimuth error's weight cos(elevation) [-]: within 2.9° of the zenith.
+_SKY_WEIGHT_FLOOR = 0.05
+
+
 def _sky_weight(elevation_deg: float) -> float:
     """cos(elevation), floored so that near the zenith an azimuth error stays finite."""
-    return max(math.cos(math.radians(elevation_deg)), 0.05)
+    return max(math.cos(math.radians(elevation_deg)), _SKY_WEIGHT_FLOOR)
 
 
 class Controller:
@@ -368,11 +380,20 @@ class Controller:
         there in daylight (Tromsø, June: 358° at 07:24 with the sun 25.6° up, a tester's
         finding). Kept within the reference ± 180°, every controller unwinds where the
         sun is farthest from its noon side — at its lowest (``docs/sites.md``).
+
+        Where the day's sweep runs past a joint limit (the reference ± 180° wider than the
+        range on that side), a target beyond the limit stays at it: its equivalent 360°
+        away lies outside the sweep. At the equator on the equinox the sweep ends at the
+        −90° limit at sunset; a 2° yaw's correction had sent ``hybrid`` round the other way
+        at 1:50 pm, unwinding 360° in daylight (a tester's finding).
         """
         g = self.geometry
         if (g.azimuth_min_deg <= azimuth_deg <= g.azimuth_max_deg
                 and abs(azimuth_deg - reference_deg) <= 180.0):  # the common case, fast
             return azimuth_deg
+        near = reference_deg + (azimuth_deg - reference_deg + 180.0) % 360.0 - 180.0
+        if not g.azimuth_min_deg <= near <= g.azimuth_max_deg:
+            return min(max(near, g.azimuth_min_deg), g.azimuth_max_deg)
         az, _ = kinematics.inverse_kinematics(azimuth_deg, 0.0, g, reference_deg)
         return float(az)
 
@@ -599,14 +620,30 @@ class Hybrid(Controller):
             if self.have_correction:
                 expected = ((az_e + c[0] - reading.azimuth_deg) * w,
                             el_e + c[1] - reading.elevation_deg)
-            if self._gate.usable(measurement, expected):
-                new = (reading.azimuth_deg + measurement.right_deg / w - az_e,
-                       reading.elevation_deg + measurement.up_deg - el_e)
+            if self._in_small_angle(reading, el_e, measurement) and self._gate.usable(
+                    measurement, expected):
+                d_az = reading.azimuth_deg + measurement.right_deg / w - az_e
+                if abs(d_az) > 180.0:  # the reading a turn from the ephemeris's branch
+                    d_az -= 360.0 * round(d_az / 360.0)
+                new = (d_az, reading.elevation_deg + measurement.up_deg - el_e)
                 g = self.settings.hybrid_gain if self.have_correction else 1.0
                 self.correction = [c[k] + g * (new[k] - c[k]) for k in (0, 1)]
                 self.have_correction = True
         return (self.lists["ahead_azimuth_deg"][i] + self.correction[0],
                 self.lists["ahead_elevation_deg"][i] + self.correction[1])
+
+    def _in_small_angle(self, reading: Reading, elevation_deg: float,
+                        m: CameraMeasurement) -> bool:
+        """Whether the frame's ``(A + h / cos E, E + v)`` is where the sun is: the panel and
+        the ephemeris sun outside the zenith's cap (cos E ≥ the weight's floor) and the sun
+        within ``hybrid_max_offset_deg`` of the encoder azimuth. Elsewhere the correction
+        was garbage and kept: a tracker slewing at 0.05° s⁻¹ through the equator's noon
+        took 9° and then 99° of azimuth correction from frames 13° and 123° of azimuth
+        behind the sun and lay flat at 3 pm, 772 mrad off (a tester's finding)."""
+        cos_e = math.cos(math.radians(reading.elevation_deg))
+        if min(cos_e, math.cos(math.radians(elevation_deg))) < _SKY_WEIGHT_FLOOR:
+            return False
+        return abs(m.right_deg) <= self.settings.hybrid_max_offset_deg * cos_e
 
 
 def make_controller(name: str, site: Site, settings: ControlSettings | None = None,

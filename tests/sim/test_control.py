@@ -388,6 +388,67 @@ def test_clouds_do_not_make_the_closed_loop_wander(site) -> None:
     assert r3.series["pointing_error_mrad"].max() < 12.5
 
 
+def _relocated(site, **place):
+    """``site``'s tracker and arrays at another place (``sim.sites.relocated_config``)."""
+    from sim.sites import relocated_config, site_from_dict
+
+    return site_from_dict(relocated_config(site.to_config(), place))
+
+
+def test_hybrid_keeps_a_yaws_correction_across_the_midnight_suns_unwind(site) -> None:
+    """Tromsø, 20-21 June, a 2° pedestal yaw: after the unwind at the sun's lowest the
+    encoder reads 358° while the ephemeris's joint azimuth is 0.06°; the correction taken
+    from such a frame was 358°, and the hybrid lost the sun for the night and morning
+    (1,175 mrad RMS, 1,455 Wh of 3,960 lost over 12 h; a tester's finding). The correction
+    is an angle: taken the short way round, 2.08 mrad RMS, beside open_loop_spa's 33."""
+    tromso = _relocated(site, site_id="tromso", latitude_deg=69.65, longitude_deg=18.96,
+                        timezone="Europe/Oslo")
+    start = pd.Timestamp("2024-06-20 18:00", tz="Europe/Oslo")
+    s = simulate(tromso, start, start + pd.Timedelta(hours=12), controller="hybrid",
+                 disturbances=Disturbances(pedestal_yaw_deg=2.0)).summary()
+    assert s["pointing_error_rms_mrad"] < 3.0  # measured 2.08
+    assert s["pointing_loss_wh"] < 3.0  # measured 2.64
+
+
+def test_a_correction_past_the_sweeps_limit_stays_at_it(site) -> None:
+    """The equator on the equinox: the noon sun passes 0.1° north of the zenith, the day's
+    sweep is 0° ± 180° and ends at the −90° limit, where the sun sets (270.2°). A 2° yaw's
+    correction asks for −91.8°: its equivalent 268.2° lies outside the sweep, and the
+    hybrid had turned 360° round to it in the afternoon (720.6° of azimuth travel that
+    day); it stays at the limit, 1.8° short at worst (31.2 mrad; a tester's finding)."""
+    equator = _relocated(site, site_id="equator", latitude_deg=0.0, longitude_deg=32.58,
+                         timezone="Africa/Kampala")
+    start = pd.Timestamp("2024-03-20", tz="Africa/Kampala")
+    r = simulate(equator, start, start + pd.Timedelta(days=1), controller="hybrid",
+                 disturbances=Disturbances(pedestal_yaw_deg=2.0))
+    joint = r.series["azimuth_joint_deg"].to_numpy()
+    assert joint.min() >= -90.0 and joint.max() <= 270.0
+    assert np.abs(np.diff(joint)).sum() < 361.0  # measured 359.6: the flip and the night's
+    assert r.summary()["pointing_error_max_mrad"] < 32.0  # measured 31.2
+
+
+def test_hybrid_takes_no_correction_from_a_slewing_tracker_near_the_zenith(site) -> None:
+    """A drive at 0.05° s⁻¹ at the equator on the equinox needs an hour for the noon
+    flip, with the sun within 3° of the zenith. The camera still sees the sun, 13° of
+    azimuth and then 123° off; ``A + h / cos E`` with cos E floored at 0.05 took 9° and
+    then 99° of correction from those frames, kept them, and the panel lay flat at 2 pm
+    (a tester's finding). Frames where the small-angle conversion does not hold are not
+    used: the hybrid points as the open loop does through the flip (77.1 mrad RMS each
+    from 12:30 to 14:30, the flip's lag) and is back on the sun after it (1.4 mrad)."""
+    slow = dataclasses.replace(motors.AxisDrive.azimuth_default(),
+                               max_output_speed_rad_s=math.radians(0.05))
+    equator = dataclasses.replace(
+        _relocated(site, site_id="equator", latitude_deg=0.0, longitude_deg=32.58,
+                   timezone="Africa/Kampala"), drives={"azimuth": slow, "elevation": slow})
+    start = pd.Timestamp("2024-03-20 12:30", tz="Africa/Kampala")
+    runs = {c: simulate(equator, start, start + pd.Timedelta(hours=2), controller=c)
+            for c in ("hybrid", "open_loop_spa")}
+    hyb, ol = (runs[c].summary() for c in ("hybrid", "open_loop_spa"))
+    assert hyb["pointing_loss_wh"] == pytest.approx(ol["pointing_loss_wh"], rel=0.02)
+    assert hyb["pointing_error_max_mrad"] < 160.0  # measured 158.6, the open loop's 158.5
+    assert runs["hybrid"].series["pointing_error_mrad"].iloc[-1] < 3.0  # measured 1.36
+
+
 def test_hybrid_keeps_its_correction_through_clouds(site) -> None:
     cloudy = CameraSetup(clouds=CloudField(cover=0.6, optical_depth=4.0, seed=5))
     d = Disturbances(pedestal_yaw_deg=2.0)
