@@ -103,7 +103,8 @@ class ControlSettings:
     wake_lead_s : float
         The tracker wakes this long before the ephemeris sun rises above
         ``stow_elevation_deg`` and turns to the sunrise pose, so that it faces
-        the sun when it rises [s].
+        the sun when it rises [s]; :func:`sim.twin.simulate` lengthens it to the drives'
+        slew (:meth:`sim.tracking.DriveLimits.wake_slew_s`) when that is longer.
     chronological_interval_min : float
         The chronological controller's period [min] (seed 000's ref. [34]:
         5, 30 or 60).

@@ -85,6 +85,13 @@ class DriveLimits:
         return cls(min(d.azimuth_rate_deg_s, az), d.azimuth_accel_deg_s2,
                    min(d.elevation_rate_deg_s, el), d.elevation_accel_deg_s2)
 
+    def wake_slew_s(self) -> float:
+        """The longest slew from the night stow to a sunrise pose [s]: a full turn of
+        azimuth (the daily sweep keeps the joint within its reference ± 180°) and 90° of
+        elevation, the axes moving together."""
+        return max(trapezoid_duration_s(360.0, *self.axis(0)),
+                   trapezoid_duration_s(90.0, *self.axis(1)))
+
     def axis(self, k: int) -> tuple[float, float]:
         """(rate [° s⁻¹], acceleration [° s⁻²]) of axis ``k`` (0 azimuth, 1 elevation)."""
         if k == 0:

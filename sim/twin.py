@@ -623,6 +623,10 @@ def simulate(
     d = disturbances if disturbances is not None else dist.Disturbances()
     settings = settings or ControlSettings()
     limits = limits or DriveLimits.for_drives(site.drives["azimuth"], site.drives["elevation"])
+    if limits.wake_slew_s() > settings.wake_lead_s:
+        # wake early enough to face the sun as it rises: a 0.05° s⁻¹ drive's 176° from the
+        # evening's stow took the first hour of sun (a tester's finding)
+        settings = replace(settings, wake_lead_s=limits.wake_slew_s())
     camera = camera or CameraSetup()
     from pvlib import atmosphere
 

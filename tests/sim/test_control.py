@@ -325,14 +325,16 @@ def test_a_gust_beyond_the_drive_is_said_so(site) -> None:
     assert "not what this machine would draw" in s["actuator_warning"]
 
 
-def test_a_slow_drive_moves_at_its_rated_speed(site) -> None:
+def test_a_slow_drive_moves_at_its_rated_speed_and_wakes_in_time(site) -> None:
     """A site's drive rated 0.05° s⁻¹ (a heavy tracker) is moved at that speed, not at
     the default profile's 2.86° s⁻¹: it had swung the 176° from the evening's pose to the
-    sunrise's within one 60 s step, every move counted beyond the drive, the day's beam
-    loss 0 (a tester's finding). The loss of the second day is the beam's (1 − cos θ) as
-    an independent follower gives it (pvlib's sun, 1 s steps, the same 30 s commands aimed
-    15 s ahead, dead band and night stow, each axis at 0.05° s⁻¹): 31.9 Wh m⁻², the twin's
-    series 32.0 — the morning's hour-long slew from the stow, most of it."""
+    sunrise's within one 60 s step, every move counted beyond the drive (a tester's
+    finding). Moved at its speed, it wakes early enough to face the sun as it rises
+    (``DriveLimits.wake_slew_s``, 2 h here): 5 min before sunrise, the slew took the first
+    hour of sun — 32.0 Wh m⁻² of beam on the second day, 84 of 1,350 minutes outside the
+    pointing statistics. An independent follower (pvlib's sun, 1 s steps, the same 30 s
+    commands and dead band, each axis at 0.05° s⁻¹) loses 31.0 Wh m⁻² waking 300 s
+    before sunrise and 0.00 waking 3,900 s before; the twin now 0.007."""
     slow = dataclasses.replace(motors.AxisDrive.azimuth_default(),
                                max_output_speed_rad_s=math.radians(0.05))
     slow_site = dataclasses.replace(site, drives={"azimuth": slow, "elevation": dataclasses.replace(
@@ -343,12 +345,13 @@ def test_a_slow_drive_moves_at_its_rated_speed(site) -> None:
     assert s["actuator_moves_beyond_drive"] == 0
     assert np.abs(np.diff(ser["azimuth_joint_deg"].to_numpy())).max() <= 0.05 * 60 + 1e-6
     assert np.abs(np.diff(ser["elevation_joint_deg"].to_numpy())).max() <= 0.05 * 60 + 1e-6
+    assert s["pointing_error_minutes"] == 1350  # every minute with the sun above 5°
     day2 = ser[ser.index >= start + pd.Timedelta(days=1)]
     loc = pvlib.location.Location(site.latitude, site.longitude, altitude=site.altitude)
     dni = loc.get_clearsky(day2.index, model="ineichen")["dni"].to_numpy()
     cos = np.maximum(np.cos(np.radians(day2["tracker_aoi"].to_numpy())), 0.0)
     up = day2["apparent_elevation"].to_numpy() > 0
-    assert (dni * (1 - cos))[up].sum() / 60 == pytest.approx(31.9, rel=0.02)
+    assert (dni * (1 - cos))[up].sum() / 60 < 0.1
 
 
 def test_camera_offset_misleads_the_camera_loop_not_the_ephemeris(site) -> None:
