@@ -369,10 +369,12 @@ class Controller:
             return target
         az_t, el_t = self._track(i, reading, measurement)
         el_t = min(max(el_t, g.elevation_min_deg), g.elevation_max_deg)
-        az_t = self._in_daily_sweep(az_t, self.lists["now_reference_azimuth_deg"][i])
+        az_t = self._in_daily_sweep(az_t, self.lists["now_reference_azimuth_deg"][i],
+                                    self.lists["ahead_azimuth_deg"][i])
         return self._dead_band(az_t, el_t, reading)
 
-    def _in_daily_sweep(self, azimuth_deg: float, reference_deg: float) -> float:
+    def _in_daily_sweep(self, azimuth_deg: float, reference_deg: float,
+                        ephemeris_deg: float) -> float:
         """``azimuth_deg``'s equivalent (± k·360°) in the joint range nearest the day's
         reference [°]: the unwind rule, one for every controller.
 
@@ -384,18 +386,21 @@ class Controller:
         finding). Kept within the reference ± 180°, every controller unwinds where the
         sun is farthest from its noon side — at its lowest (``docs/sites.md``).
 
-        Where the day's sweep runs past a joint limit (the reference ± 180° wider than the
-        range on that side), a target beyond the limit stays at it: its equivalent 360°
-        away lies outside the sweep. At the equator on the equinox the sweep ends at the
-        −90° limit at sunset; a 2° yaw's correction had sent ``hybrid`` round the other way
-        at 1:50 pm, unwinding 360° in daylight (a tester's finding).
+        Where a correction (a camera's, a pointing model's) takes the target past a joint
+        limit that the ephemeris's own target ``ephemeris_deg`` keeps within the sweep, it
+        stays at the limit: its equivalent 360° away lies outside the sweep. At the equator
+        on the equinox the sweep ends at the −90° limit at sunset; a 2° yaw's correction had
+        sent ``hybrid`` round the other way at 1:50 pm, unwinding 360° in daylight (a
+        tester's finding). Where the sun's path itself leaves the range (a ±180° range
+        facing a southern sun), the target turns round with the ephemeris's.
         """
         g = self.geometry
         if (g.azimuth_min_deg <= azimuth_deg <= g.azimuth_max_deg
                 and abs(azimuth_deg - reference_deg) <= 180.0):  # the common case, fast
             return azimuth_deg
         near = reference_deg + (azimuth_deg - reference_deg + 180.0) % 360.0 - 180.0
-        if not g.azimuth_min_deg <= near <= g.azimuth_max_deg:
+        if (not g.azimuth_min_deg <= near <= g.azimuth_max_deg
+                and abs(ephemeris_deg - reference_deg) <= 180.0):
             return min(max(near, g.azimuth_min_deg), g.azimuth_max_deg)
         az, _ = kinematics.inverse_kinematics(azimuth_deg, 0.0, g, reference_deg)
         return float(az)

@@ -430,6 +430,20 @@ def test_a_correction_past_the_sweeps_limit_stays_at_it(site) -> None:
     assert r.summary()["pointing_error_max_mrad"] < 32.0  # measured 31.2
 
 
+def test_a_sun_path_past_the_range_still_turns_round(site) -> None:
+    """A ±180° azimuth range facing Tehuantepec's southern sun: the sun's own path leaves
+    the range at noon, and the tracker turns round once (the range's cost: 485 mrad for a
+    sample, 1.9 Wh of the day). Staying at the limit is for a correction past it only:
+    applied to the sun's path it held the tracker at 180° all afternoon (665 mrad RMS,
+    979 Wh lost; a tester's own first fix)."""
+    narrow = dataclasses.replace(site, tracker=dataclasses.replace(
+        site.tracker, azimuth_min_deg=-180.0, azimuth_max_deg=180.0))
+    start = pd.Timestamp("2024-03-15", tz=TZ)
+    s = simulate(narrow, start, start + pd.Timedelta(days=1), controller="open_loop_spa")
+    assert s.summary()["pointing_loss_wh"] < 3.0  # measured 1.90
+    assert s.summary()["pointing_error_p95_mrad"] < 3.0  # measured 2.35
+
+
 def test_hybrid_takes_no_correction_from_a_slewing_tracker_near_the_zenith(site) -> None:
     """A drive at 0.05° s⁻¹ at the equator on the equinox needs an hour for the noon
     flip, with the sun within 3° of the zenith. The camera still sees the sun, 13° of
