@@ -19,7 +19,8 @@ three-frame samples, MSAC scoring; Fischler & Bolles 1981, Torr & Zisserman
 model and the ephemeris put the sun (the detector's ephemeris-guided path) and
 fit again. The equidistant model comes first; a radial polynomial term is kept
 only where it lowers the leave-one-out error on the sky by more than one standard
-error (the frames the data hold, not the fit's own residual, decide).
+error (the frames the data hold, not the fit's own residual, decide), and with
+``projection="auto"`` another lens projection by the same rule (:func:`choose_projection`).
 """
 
 from __future__ import annotations
@@ -429,8 +430,47 @@ def choose_radial(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
     among = [k for k in mse if eligible is None or k in eligible]
     if not among:
         return min(eligible or [0]), tried
-    best = min(among, key=lambda k: mse[k])
-    return next(k for k in among if mse[k] <= mse[best] + se[best]), tried
+    return _one_standard_error(among, mse, se), tried
+
+
+def _one_standard_error(order: Sequence[Any], mse: dict[Any, float],
+                        se: dict[Any, float]) -> Any:
+    """The first model of ``order`` whose leave-one-out mean squared error is within one
+    standard error of the best's (Hastie, Tibshirani & Friedman §7.10): ``order`` runs from
+    the model kept unless the frames show another to be better."""
+    best = min(order, key=lambda k: mse[k])
+    return next(k for k in order if mse[k] <= mse[best] + se[best])
+
+
+#: ``projection`` of :func:`calibrate_positions` / :func:`self_calibrate` that lets the frames
+#: choose the lens's projection (:func:`choose_projection`)
+PROJECTION_FROM_FRAMES = "auto"
+
+
+def choose_projection(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
+                      elevation_deg: ArrayLike, image_size: tuple[int, int],
+                      **fit_kwargs: Any) -> tuple[str, list[dict[str, Any]]]:
+    """The lens projection the frames support, among :data:`vision.cameras.PROJECTIONS`.
+
+    Each projection, without radial terms (the same four parameters), is scored by its
+    leave-one-out mean squared error on the sky; equidistant is kept unless another is
+    better by more than one standard error (:func:`_one_standard_error`, the order of
+    ``PROJECTIONS``). A radial polynomial on an equidistant model stands in for another
+    projection only where the frames pay for its terms: an equisolid lens's frames at Cape
+    Town (suns 6–32° up) fitted as equidistant with the radial terms the frames chose left
+    0.45° held out where the equisolid model left 0.135° (a tester's renderer). Returns the
+    projection and, for each, ``projection``, ``n_radial`` 0 and ``loo_rms_deg``.
+    """
+    mse: dict[str, float] = {}
+    se: dict[str, float] = {}
+    tried: list[dict[str, Any]] = []
+    for p in PROJECTIONS:
+        sq = leave_one_out_deg(x_px, y_px, azimuth_deg, elevation_deg, image_size,
+                               **{**fit_kwargs, "projection": p, "n_radial": 0}) ** 2
+        mse[p] = float(np.mean(sq))
+        se[p] = float(np.std(sq, ddof=1) / np.sqrt(sq.size))
+        tried.append({"projection": p, "n_radial": 0, "loo_rms_deg": float(np.sqrt(mse[p]))})
+    return _one_standard_error(list(PROJECTIONS), mse, se), tried
 
 
 def radial_terms_possible(n_dirs: int, fit_tilt: bool = False, max_terms: int = 2) -> int:
@@ -493,10 +533,14 @@ def calibrate_positions(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike
     compete by :func:`choose_radial`'s one-standard-error rule on those frames;
     ``model_selection`` (``n_radial=None`` only) reports every model's leave-one-out RMS on
     those same frames, the stored fit's, and how many frames its own robust fit explains
-    (``n_inliers``).
+    (``n_inliers``). ``projection="auto"``: the projection too (:func:`choose_projection`;
+    its rows without ``n_inliers``).
     """
     x, y = np.asarray(x_px, float).ravel(), np.asarray(y_px, float).ravel()
     az, el = np.asarray(azimuth_deg, float).ravel(), np.asarray(elevation_deg, float).ravel()
+    if projection == PROJECTION_FROM_FRAMES:
+        return _positions_any_projection(x, y, az, el, image_size, east, n_radial, fit_tilt,
+                                         outlier_deg, centre_guess_px)
     fixed: dict[str, Any] = {"projection": projection, "east": east, "fit_tilt": fit_tilt}
     fits, best = consensus_fits(x, y, az, el, image_size, n_radial, outlier_deg,
                                 centre_guess_px=centre_guess_px, **fixed)
@@ -518,7 +562,33 @@ def calibrate_positions(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike
     loo = (leave_one_out_deg(x[inl], y[inl], az[inl], el[inl], image_size,
                              **{**known, "n_radial": k})
            if not _too_few(n_directions(az[inl], el[inl]) - 1, n_par) else np.empty(0))
-    return PositionFit(rf, selection, loo)
+    return PositionFit(rf, [{"projection": projection, **row} for row in selection], loo)
+
+
+def _positions_any_projection(x: NDArray[np.float64], y: NDArray[np.float64],
+                              az: NDArray[np.float64], el: NDArray[np.float64],
+                              image_size: tuple[int, int], east: str, n_radial: int | None,
+                              fit_tilt: bool, outlier_deg: float,
+                              centre_guess_px: tuple[float, float] | None) -> PositionFit:
+    """:func:`calibrate_positions` with the projection chosen by :func:`choose_projection` on
+    the equidistant fit's inliers (its consensus decides the frames, its mirror and centre
+    start the held-out fits); ``model_selection`` lists every projection tried, then the
+    chosen one's radial terms."""
+    def positions(p: str) -> PositionFit:
+        return calibrate_positions(x, y, az, el, image_size, p, east, n_radial, fit_tilt,
+                                   outlier_deg, centre_guess_px)
+
+    base = positions("equidistant")
+    inl, cam = base.fit.inlier, base.fit.result.camera
+    if _too_few(n_directions(az[inl], el[inl]) - 1, 4 + (2 if fit_tilt else 0)):
+        return base  # too few frames to hold one out: the equidistant model
+    chosen, tried = choose_projection(x[inl], y[inl], az[inl], el[inl], image_size,
+                                      east=cam.east, fit_tilt=fit_tilt,
+                                      centre_guess_px=(cam.cx_px, cam.cy_px))
+    pf = base if chosen == "equidistant" else positions(chosen)
+    rows = [r for r in tried if r["projection"] != chosen] + (pf.model_selection or [
+        r for r in tried if r["projection"] == chosen])
+    return replace(pf, model_selection=rows)
 
 
 #: the least detection scatter assumed per image axis [°, in the fitted scale]: the fit's
@@ -691,7 +761,8 @@ def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
     base parameters, then — with ``guided`` and the ``robust`` method — each
     frame searched again around the sun the fitted model predicts, and the model
     fitted again; ``n_radial=None`` lets :func:`choose_radial` decide the radial
-    terms. Each frame's report: ``name``, ``sun_found``, ``confidence``,
+    terms, ``projection="auto"`` (:data:`PROJECTION_FROM_FRAMES`) :func:`choose_projection`
+    the projection. Each frame's report: ``name``, ``sun_found``, ``confidence``,
     ``centroid_px``, ``search`` (``blind`` or ``ephemeris-guided``), ``used``,
     ``outlier`` and, when a sun was found above the horizon, ``residual_px`` and
     ``residual_deg`` to the final model. A ValueError says why when too few
@@ -709,6 +780,9 @@ def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
     if n_radial is not None and not 0 <= n_radial <= 2:
         raise ValueError("n_radial must be 0, 1, 2 or None (chosen from the frames)")
     fixed: dict[str, Any] = {"projection": projection, "east": east, "fit_tilt": fit_tilt}
+    # the first fit only guides the second search: equidistant where the frames choose
+    guide = {**fixed, "projection": "equidistant" if projection == PROJECTION_FROM_FRAMES
+             else projection}
     up = el > 0
     given = n_directions(az[up], el[up])
     if given < MIN_DIRECTIONS:
@@ -742,7 +816,7 @@ def self_calibrate(load: Callable[[int], NDArray[Any]], azimuth_deg: ArrayLike,
         # most frames (a model that misplaces the low suns would guide the search there)
         use, xy, guess = found(dets, n_radial or 0)
         fits, best = consensus_fits(xy[:, 0], xy[:, 1], az[use], el[use], size, n_radial,
-                                    outlier_deg, centre_guess_px=guess, **fixed)
+                                    outlier_deg, centre_guess_px=guess, **guide)
         again, _ = _detect_all(load, n, method, fits[best[0]].result.camera, az, el)
         # keep the guided answer where it found a sun; a refusal keeps the blind one
         for i, d in enumerate(again):

@@ -31,7 +31,12 @@ from pathlib import Path
 from typing import Any
 
 from backend.cli import fail
-from backend.vision.options import N_RADIAL_CHOICES, N_RADIAL_DEFAULT
+from backend.vision.options import (
+    N_RADIAL_CHOICES,
+    N_RADIAL_DEFAULT,
+    PROJECTION_CHOICES,
+    PROJECTION_DEFAULT,
+)
 
 
 def _time(text: str) -> datetime:
@@ -104,8 +109,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "time in each file name, e.g. _20160615_093900UTCp1, read in the "
                         "place's zone when the name states none, as vision detect reads it; "
                         "backend/vision/frames.py)")
-    c.add_argument("--projection", default="equidistant",
-                   choices=("equidistant", "equisolid", "stereographic", "orthographic"))
+    c.add_argument("--projection", default=PROJECTION_DEFAULT, choices=PROJECTION_CHOICES,
+                   help="the lens's projection; auto (default, as the service): the one the "
+                        "frames support by leave-one-out, equidistant unless another is "
+                        "clearly better")
     c.add_argument("--east", choices=("auto", "left", "right"), default="auto")
     c.add_argument("--n-radial", choices=N_RADIAL_CHOICES, default=N_RADIAL_DEFAULT,
                    help="radial polynomial terms to fit; auto (default, as the service): as "

@@ -19,3 +19,19 @@ def parse_n_radial(text: str, field: str = "n_radial") -> int | None:
     if text not in N_RADIAL_CHOICES:
         raise InputError(422, f"{field}: must be auto, 0, 1 or 2, got {text!r}")
     return None if text == "auto" else int(text)
+
+#: ``projection`` of a calibration: ``auto`` lets the frames choose the lens's projection
+#: (leave-one-out, ``vision.calibrate.choose_projection``; equidistant unless another is
+#: better by more than one standard error), a name fixes it — ``vision.cameras.PROJECTIONS``
+#: after ``auto`` (spelt out here: this module stays free of numpy)
+PROJECTION_CHOICES = ("auto", "equidistant", "equisolid", "stereographic", "orthographic")
+PROJECTION_DEFAULT = "auto"
+
+
+def parse_projection(text: str, field: str = "projection") -> str:
+    """A calibration's ``projection`` as ``backend.vision.service.calibrate`` takes it; a 422
+    naming ``field`` for anything else."""
+    if text not in PROJECTION_CHOICES:
+        raise InputError(422, f"{field}: must be one of {', '.join(PROJECTION_CHOICES)}, got "
+                              f"{text!r}")
+    return text

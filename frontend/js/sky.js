@@ -275,13 +275,15 @@ async function calibrate() {
     form.append("timestamps", rowTimestamp(r));
   }
   placeParams(form);
-  const projection = document.querySelector('.cam-params[data-camera="fisheye"] [name="projection"]').value;
+  const projection = $("sky-calibration-projection").value; // "auto": the frames choose
   form.append("projection", projection);
   form.append("east", "auto"); // fit the mirror too
   const name = $("sky-calibration-name").value.trim();
   if (name) form.append("name", name);
   $("sky-calibrate").disabled = true;
-  $("sky-status").textContent = `fitting ${/^[aeiou]/i.test(projection) ? "an" : "a"} ${projection} camera to ${timed.length} frames…`;
+  $("sky-status").textContent = projection === "auto"
+    ? `fitting a camera to ${timed.length} frames (the projection they support)…`
+    : `fitting ${/^[aeiou]/i.test(projection) ? "an" : "a"} ${projection} camera to ${timed.length} frames…`;
   const box = $("sky-calibration-result");
   box.innerHTML = "";
   try {
@@ -295,6 +297,10 @@ async function calibrate() {
       ["sky_uncertainty_deg", "Direction uncertainty over the sky, worst 1σ [°]", 2]];
     const rows = show.filter(([k]) => fitted[k] !== undefined && fitted[k] !== null)
       .map(([k, label, d]) => h("tr", {}, h("th", {}, label), h("td", {}, typeof fitted[k] === "number" ? num(fitted[k], d ?? 3) : String(fitted[k]))));
+    if (fitted.model_selection?.length) { // each model's held-out RMS: why this one was kept
+      const models = fitted.model_selection.map((m) => `${m.projection}${m.n_radial ? ` + ${m.n_radial} radial` : ""} ${num(m.loo_rms_deg, 3)}°`);
+      rows.push(h("tr", {}, h("th", {}, "Models compared, each frame held out [°]"), h("td", {}, models.join(" · "))));
+    }
     for (const k of ["projection", "px_per_deg", "cx_px", "cy_px", "north_offset_deg", "east"]) {
       const field = document.querySelector(`.cam-params[data-camera="fisheye"] [name="${k}"]`);
       if (field && fitted[k] !== undefined && fitted[k] !== null) {

@@ -25,7 +25,7 @@ import pvlib
 import pytest
 from live_service import InProcessServer, run_in_own_thread
 
-from vision.cameras import FisheyeCamera
+from vision.cameras import PROJECTIONS, FisheyeCamera
 from vision.synth import fisheye_frame
 
 SUN = "/api/v1/vision/sun"
@@ -316,12 +316,14 @@ def test_calibrate_then_detect_with_the_calibration(client: httpx.Client) -> Non
         files.append(("files", (f"f{i}.png", _png(fisheye_frame(az, el, camera=truth,
                                                                 seed=i).image), "image/png")))
         stamps.append(ts)
+    # the projection left to the frames (the default, auto): a rendered equidistant lens
     r = client.post("/api/v1/vision/calibrations", files=files,
-                    data={"timestamps": stamps, "site_id": "tehuantepec",
-                          "projection": "equidistant"})
+                    data={"timestamps": stamps, "site_id": "tehuantepec"})
     assert r.status_code == 201, r.text
     cal = r.json()
     cam = cal["camera"]
+    assert cam["projection"] == "equidistant" and cal["name"].startswith("equidistant, 5 frames")
+    assert all(m["projection"] in PROJECTIONS for m in cal["model_selection"])
     assert cam["east"] == "right"
     assert cam["px_per_deg"] == pytest.approx(2.55, rel=0.02)
     assert (cam["north_offset_deg"] - 30.0 + 180) % 360 - 180 == pytest.approx(0, abs=1.0)
@@ -365,6 +367,11 @@ def test_calibration_input_errors(client: httpx.Client) -> None:
                     data={"timestamps": ["2024-03-05T10:00:00Z"] * 3, "site_id": "tehuantepec",
                           "px_per_deg": "2.6"})
     assert r.status_code == 422 and r.json()["detail"].startswith("'px_per_deg': unknown field")
+    r = client.post("/api/v1/vision/calibrations", files=[f, f, f],
+                    data={"timestamps": ["2024-03-05T10:00:00Z"] * 3, "site_id": "tehuantepec",
+                          "projection": "fisheye"})
+    assert r.status_code == 422 and r.json()["detail"].startswith(
+        "projection: must be one of auto, equidistant"), r.text
     # the name is one line, as a token's label: a NUL was a 500 on PostgreSQL once fitted
     for name in ("a\x00b", "two\nlines", "\u202eevil"):
         r = client.post("/api/v1/vision/calibrations", files=[f, f, f],

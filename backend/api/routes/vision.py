@@ -76,7 +76,14 @@ from backend.text import one_line_problem
 from backend.timestamps import TimestampError, parse_day_or_instant, parse_instant
 from backend.vision.checks import error_warnings
 from backend.vision.frames import FrameInputs, NameZoneError, frame_inputs, time_from_name
-from backend.vision.options import N_RADIAL_CHOICES, N_RADIAL_DEFAULT, parse_n_radial
+from backend.vision.options import (
+    N_RADIAL_CHOICES,
+    N_RADIAL_DEFAULT,
+    PROJECTION_CHOICES,
+    PROJECTION_DEFAULT,
+    parse_n_radial,
+    parse_projection,
+)
 from backend.vision.service import (
     CAMERA_PARAMS,
     Frame,
@@ -513,8 +520,11 @@ _CAL_PROPERTIES: dict[str, Any] = {
     "files": {"type": "array", "items": {"type": "string", "format": "binary"}},
     "timestamps": {"type": "array", "items": {"type": "string"},
                    "description": "ISO 8601 with offset, one per file, same order"},
-    "projection": {"type": "string"}, "east": {"type": "string",
-                                              "enum": ["auto", "left", "right"]},
+    "projection": {"type": "string", "enum": list(PROJECTION_CHOICES),
+                   "description": "the lens's projection; auto (default): the one the "
+                                  "frames support by leave-one-out, equidistant unless "
+                                  "another is clearly better"},
+    "east": {"type": "string", "enum": ["auto", "left", "right"]},
     "n_radial": {"type": "string", "enum": list(N_RADIAL_CHOICES),
                  "description": "radial polynomial terms; auto (default): as many "
                                 "as lower the leave-one-out error"},
@@ -542,10 +552,7 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
     """Fit a fisheye camera (centre, scale, north offset, mirror) to timestamped frames."""
     form = await _batch_form(request, ctx)
     _known_fields(form, _CAL_PROPERTIES)
-    projection = _text(form, "projection") or "equidistant"
-    if projection not in PROJECTIONS:
-        raise HTTPException(422, f"projection: must be one of {', '.join(PROJECTIONS)}, "
-                                 f"got {projection!r}")
+    projection = parse_projection(_text(form, "projection") or PROJECTION_DEFAULT)
     east = _text(form, "east") or "auto"
     if east not in ("auto", *EAST_SIDES):
         raise HTTPException(422, f"east: must be auto, left or right, got {east!r}")
@@ -564,7 +571,7 @@ async def post_calibration(request: Request, ctx: ContextDep, _token: VisionToke
         row = await anyio.to_thread.run_sync(
             calibrate, frames, place, projection, east, n_radial, fit_tilt,
             method, ctx.settings.vision.max_pixels)
-    row["name"] = name or (f"{projection}, {row['n_frames']} frames, "
+    row["name"] = name or (f"{row['projection']}, {row['n_frames']} frames, "
                            f"{frames[0][1].date().isoformat()}")
     cal_id = await _store_calibration(ctx, row, anonymous=_token is None)
     return _json({**calibration_answer(row), "calibration_id": cal_id}, 201)

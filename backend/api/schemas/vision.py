@@ -140,13 +140,18 @@ class CalibrationsRead(BaseModel):
 
 
 class RadialChoiceRead(BaseModel):
-    """A radial model tried on the stored fit's inlier frames and its leave-one-out error."""
+    """A camera model (projection and radial terms) tried on the fit's inlier frames and its
+    leave-one-out error."""
 
+    projection: str
     n_radial: int
     loo_rms_deg: float = Field(description="each of the stored fit's inlier frames against "
                                            "this model fitted without it (held out) [°]")
-    n_inliers: int = Field(description="frames this model's own robust fit explains within "
-                                       "1° (the model explaining the most decides the inliers)")
+    n_inliers: int | None = Field(
+        None, description="frames this model's own robust fit explains within 1° (the model "
+                          "explaining the most decides the inliers); none for the "
+                          "projections compared (projection=auto) on the equidistant "
+                          "fit's inliers")
 
 
 class FittedCalibrationRead(BaseModel):
