@@ -42,6 +42,7 @@ from sim.sites import load_site  # noqa: E402
 from tests.sim.realistic_sky import logger_days  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "tests" / "backend"))
+import heldout_sky  # noqa: E402
 import rmis_sky  # noqa: E402
 
 from sim.energy import energy_wh, interval_middles, on_grid  # noqa: E402
@@ -651,6 +652,61 @@ def band_lines(fig: Figures, days_wh: dict[str, dict[str, tuple[float, float, fl
     return lines
 
 
+HELD_OUT_PATHS = ("poa_sensor", "fixed_array", "ghi_sensor")
+
+
+def heldout_lines() -> list[str]:
+    """Issue 27's check on held-out real skies (tests/data/heldout-sky: BSRN Payerne, SURFRAD
+    Alamosa, MIDC Tucson; :mod:`heldout_sky`): per station, fixed tilt (the site's and the
+    issue's 16°), truth transposition (:data:`heldout_sky.TRUTH_MODELS`) and day, the expected
+    tracker energy's error [%] from each instrument, whether the truth is inside the band,
+    and the error's part from the minutes the instrument's plane sees the sun behind or
+    grazing it. Nothing is tuned on these days. Not in ``make bench``'s figures: a run
+    takes some minutes (``python benchmarks/bench_diagnosis.py --held-out``)."""
+    lines = ["| station, fixed tilt, truth by | day | sky (GHI / DNI clear-sky index) | "
+             + " | ".join(f"{PATH_WORDS[p]}: error (of it behind the plane), band" for p in
+                          HELD_OUT_PATHS) + " |",
+             "|---|---|---|" + "---|" * len(HELD_OUT_PATHS)]
+    worst: dict[tuple[str, str, str], list[float]] = {}
+    for st in heldout_sky.STATIONS:
+        raw = heldout_sky.load(st)
+        for tilt in (None, heldout_sky.ISSUE_TILT_DEG):
+            site = heldout_sky.station_site(st, tilt)
+            for model in heldout_sky.TRUTH_MODELS:
+                df = heldout_sky.planes(site, raw, model)
+                for date in st.days:
+                    log(f"held-out sky {st.site_id} {date} tilt {tilt} {model}")
+                    day = pd.Timestamp(date, tz=site.timezone)
+                    lg = heldout_sky.logged_day(site, df, day)
+                    kc, kb = heldout_sky.clear_sky_index(site, lg)
+                    kind = heldout_sky.kind(kc, kb)
+                    limit = 3.0 if kind == "clear" else 8.0
+                    cells = []
+                    for path in HELD_OUT_PATHS:
+                        if path == "ghi_sensor" and tilt is not None:
+                            cells.append("(as above)")
+                            continue
+                        r = heldout_sky.judged(site, lg, day, path)
+                        x = r["error_pct"]
+                        worst.setdefault((kind, path, model), []).append(abs(x))
+                        miss = "" if abs(x) <= limit else " **not met**"
+                        band = "inside" if r["inside"] else "**outside**"
+                        cells.append(f"{x:+.1f} % ({r['blind_pct']:+.1f}){miss}, {band}")
+                    label = (f"{st.site_id.removeprefix('heldout_').title()}, "
+                             f"{site.arrays['fixed'].surface_tilt:.1f}°, {model}")
+                    lines.append(f"| {label} | {date} | {kind} ({kc:.2f} / {kb:.2f}) | "
+                                 + " | ".join(cells) + " |")
+    lines.append("")
+    for (kind, path, model), v in sorted(worst.items()):
+        limit = 3.0 if kind == "clear" else 8.0
+        n_miss = sum(x > limit for x in v)
+        lines.append(f"- {kind} days, {PATH_WORDS[path]}, truth by {model}: largest error "
+                     f"{max(v):.1f} % (target {limit:.0f} %: "
+                     + ("met" if n_miss == 0 else f"**not met** on {n_miss} of {len(v)}")
+                     + f"), n = {len(v)}")
+    return lines
+
+
 #: Sites where the sun rises and sets behind the fixed plane in their summer (issue 27:
 #: "any site"): (name, latitude, longitude, time zone, altitude [m], fixed tilt and
 #: azimuth [°], first day); tehuantepec's arrays otherwise.
@@ -869,6 +925,8 @@ if __name__ == "__main__":
     if sys.argv[1:] == ["--real-sky"]:  # that part alone, for development
         f = Figures("diagnosis")
         print("\n".join(real_sky(f)))
+    elif sys.argv[1:] == ["--held-out"]:  # issue 27's held-out stations
+        print("\n".join(heldout_lines()))
     elif os.environ.get("HELIOTWIN_BENCH_DIAGNOSIS") == "real_sky":
         real_sky_only()
     else:

@@ -1,0 +1,88 @@
+"""Issue 27 held out: real 1-minute skies at stations the diagnosis was never tuned on
+(tests/data/heldout-sky; tests/backend/heldout_sky.py). A healthy tracker and the fixed
+array are made from the measured DNI, DHI and GHI (Perez's transposition, pvlib), and the
+diagnosis' expected tracker energy from the fixed plane's POA sensor and from the fixed
+array's power is held to what docs/diagnosis.md ("Held-out real skies") measured.
+
+The miss there (Payerne, 23 June 2016, −10 % on a clear day) is held by its cause, not by
+its size: the error lies in the minutes the fixed plane sees the sun from behind, where
+the beam can only be guessed and is bounded by a clear sky whose climatological turbidity
+puts the low sun's beam at under 0.6 of the measured one.
+"""
+
+from __future__ import annotations
+
+import heldout_sky
+import numpy as np
+import pandas as pd
+import pytest
+
+STATIONS = {st.site_id: st for st in heldout_sky.STATIONS}
+#: (station, day, path) → (the measured error of the expected tracker energy [%], tolerance)
+MEASURED = {
+    ("heldout_alamosa", "2016-01-01", "poa_sensor"): (-0.7, 0.5),
+    ("heldout_tucson", "2018-10-18", "poa_sensor"): (-0.3, 0.5),
+    ("heldout_tucson", "2018-10-18", "fixed_array"): (0.1, 0.5),
+    ("heldout_payerne", "2016-06-16", "poa_sensor"): (-0.3, 0.5),
+    ("heldout_payerne", "2016-06-16", "fixed_array"): (-0.1, 0.5),
+}
+
+
+def _day(site_id: str, date: str):  # noqa: ANN202
+    st = STATIONS[site_id]
+    site = heldout_sky.station_site(st)
+    day = pd.Timestamp(date, tz=site.timezone)
+    df = heldout_sky.planes(site, heldout_sky.load(st), "perez")
+    return site, day, heldout_sky.logged_day(site, df, day)
+
+
+@pytest.mark.parametrize("case", sorted(MEASURED))
+def test_the_expected_energy_holds_a_held_out_day(case: tuple[str, str, str]) -> None:
+    """Clear days at Alamosa and Tucson, an overcast one at Payerne: within the targets
+    (3 %, 8 %), at the error measured, the truth inside the band."""
+    site_id, date, path = case
+    site, day, lg = _day(site_id, date)
+    r = heldout_sky.judged(site, lg, day, path)
+    err, tol = MEASURED[case]
+    assert r["error_pct"] == pytest.approx(err, abs=tol), r
+    assert r["inside"] == 1.0, r
+
+
+def test_payerne_23_june_misses_behind_the_plane() -> None:
+    """The clear 23 June 2016 at Payerne (GHI / DNI clear-sky index 1.08 / 1.28): the error
+    lies in the minutes the sun is behind or grazing the 38.7° plane facing south (dawn
+    and dusk in June), where the expected beam is bounded by the Ineichen clear sky, and the
+    measured DNI was 1.7× that clear sky's at 10–20° of sun (pvlib's Linke turbidity 4.45);
+    where the plane sees the sun, the expectation is 1 % low. A better guess of that beam
+    moves the first two figures: update them with docs/diagnosis.md."""
+    from pvlib.location import Location
+
+    site, day, lg = _day("heldout_payerne", "2016-06-23")
+    r = heldout_sky.judged(site, lg, day, "poa_sensor")
+    assert not r["inside"], r  # −10.0 %, the truth above its band: docs/diagnosis.md
+    assert r["blind_pct"] == pytest.approx(-9.0, abs=0.5), r
+    assert r["seen_pct"] == pytest.approx(-1.0, abs=0.5), r
+    loc = Location(site.latitude, site.longitude, altitude=site.altitude)
+    sp = loc.get_solarposition(lg.times)
+    cs = loc.get_clearsky(lg.times, solar_position=sp)
+    low = ((sp["apparent_elevation"] >= 10) & (sp["apparent_elevation"] < 20)).to_numpy()
+    ratio = lg.data["dni"].to_numpy()[low].sum() / cs["dni"].to_numpy()[low].sum()
+    assert ratio == pytest.approx(1.67, abs=0.02)
+
+
+def test_the_data_close_and_are_stamped_at_solar_noon() -> None:
+    """The README's checks of the data: closure under 5 % on every day taken, and the clear
+    symmetric days' GHI-weighted mean time within 3.5 min of solar noon."""
+    for st in heldout_sky.STATIONS:
+        site = heldout_sky.station_site(st)
+        raw = heldout_sky.load(st)
+        for date in st.days:
+            start = pd.Timestamp(date, tz=site.timezone)
+            d = raw[(raw.index >= start) & (raw.index < start + pd.Timedelta(days=1))]
+            assert heldout_sky.closure_pct(site, d) < 5.0, (st.site_id, date)
+            if (st.site_id, date) in (("heldout_payerne", "2016-06-23"),
+                                      ("heldout_payerne", "2016-06-27"),
+                                      ("heldout_alamosa", "2016-01-01"),
+                                      ("heldout_tucson", "2018-10-18")):
+                assert abs(heldout_sky.noon_offset_min(site, d)) < 3.5, (st.site_id, date)
+    assert np.isclose(heldout_sky.station_site(STATIONS["heldout_payerne"]).latitude, 46.815)
