@@ -136,13 +136,20 @@ def test_services_do_not_import_the_web_layer() -> None:
 
 
 def test_storage_is_the_bottom_of_backend() -> None:
+    """Storage imports only itself, the settings and ``backend.errors`` — a leaf beneath it
+    (the error types every layer raises, the standard library alone: checked here), so
+    that storage can raise a ``SetupError`` the CLI prints in one line."""
     offenders = []
     for path in modules_of("backend/storage"):
         ours = {m for m in imported_modules(path) if m == "backend" or m.startswith("backend.")}
-        bad = {m for m in ours if not m.startswith(("backend.storage", "backend.settings"))}
+        bad = {m for m in ours if not m.startswith(("backend.storage", "backend.settings"))
+               and m.split(".")[:2] != ["backend", "errors"]}
         if bad:
             offenders.append(f"{path.relative_to(ROOT)} imports {sorted(bad)}")
     assert not offenders, "\n".join(offenders)
+    leaf = {m for m in imported_modules(ROOT / "backend" / "errors.py")
+            if m.split(".")[0] in ("backend", "sim", "vision")}
+    assert not leaf, f"backend/errors.py imports {sorted(leaf)}: it must stay a leaf"
 
 
 def test_tables_are_declared_in_one_module() -> None:
