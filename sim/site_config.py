@@ -276,7 +276,8 @@ def clock_off_longitude(offset_h: float, longitude_deg: float, what: str) -> str
     """A sentence when ``offset_h`` (a UTC offset [h]) is more than
     :data:`MAX_CLOCK_OFF_LONGITUDE_H` from ``longitude_deg`` / 15, naming both numbers
     (``what`` names the clock); None otherwise. The difference is taken across the date
-    line (Samoa's +13 h at 171.8° W is 0.5 h off, not 24.5 h)."""
+    line (Samoa's +13 h at 171.8° W is 0.5 h off, not 24.5 h). UTC itself (0 h) is named as
+    a likely cause: weather written in UTC far from Greenwich (an EPW at Delhi)."""
     solar_h = longitude_deg / 15.0
     off_h = (offset_h - solar_h + 12.0) % 24.0 - 12.0
     if abs(off_h) <= MAX_CLOCK_OFF_LONGITUDE_H:
@@ -285,8 +286,9 @@ def clock_off_longitude(offset_h: float, longitude_deg: float, what: str) -> str
     return (f"{what} UTC{offset_h:+g} h is {abs(off_h):.1f} h from the longitude's "
             f"{longitude_deg:.1f}° / 15 = {solar_h:+.1f} h (more than "
             f"{MAX_CLOCK_OFF_LONGITUDE_H:g} h): the sun would culminate near "
-            f"{noon_min // 60:02d}:{noon_min % 60:02d} on its clock — a sign slip, or another "
-            "place's zone?")
+            f"{noon_min // 60:02d}:{noon_min % 60:02d} on its clock — a sign slip, "
+            + ("another place's zone, or a file written in UTC?" if offset_h == 0
+               else "or another place's zone?"))
 
 
 def standard_offset_h(zone: str) -> float:

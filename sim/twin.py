@@ -147,6 +147,10 @@ class TwinResult:
     #: each array's power [W] at the instant closing the last step (one step after the
     #: series' last row, :func:`sim.energy.simulation_times`), by array name
     closing_power_w: dict[str, float] = field(default_factory=dict)
+    #: a weather file's shift from the sun [min] (:func:`sim.weather_clock.irradiance_shift`)
+    #: and the words when it is too large (:func:`sim.weather_clock.shift_warning`)
+    weather_shift_min: float | None = None
+    weather_warning: str | None = None
 
     def _power_to_close(self, array: str) -> np.ndarray:
         """``array``'s power [W] at every step and at the instant closing the last."""
@@ -224,6 +228,9 @@ class TwinResult:
             out["pointing_model_terms"] = dict(self.pointing_model_terms)
         if self.fixed_shade_loss_wh is not None:
             out["fixed_shade_loss_wh"] = self.fixed_shade_loss_wh
+        if self.sky == "weather":
+            out["weather_shift_min"] = self.weather_shift_min
+            out["weather_warning"] = self.weather_warning
         return out
 
     def _pointing_summary(self, tracker_wh: float, fixed_wh: float) -> dict[str, Any]:

@@ -357,6 +357,8 @@ def _text(summary: dict[str, Any]) -> str:
             if (w := summary.get("weather"))
             else []
         )
+        + ([f"warning: {summary['weather_warning']}"] if summary.get("weather_warning")
+           else [])
     )
 
 

@@ -65,6 +65,7 @@ from backend.settings import MAX_ENERGY_GAP_S
 from sim import pv, sky, sky_sensor
 from sim.energy import energy_wh
 from sim.sites import Site
+from sim.weather_clock import best_shift, scaled_fit
 
 FaultKind = Literal["stuck", "azimuth_offset", "elevation_offset", "clock_offset",
                     "sky_clock_offset", "sky_unusable", "module_loss", "soiling", "dropout",
@@ -154,15 +155,6 @@ SHAPE_PARAMETERS = 2
 THIN_MIN = 5
 CARRY_DECAY = 0.8  # a shape fault's confidence on each following day that cannot show it
 CARRIED = " (carried over: today's sky or readings cannot show it)"
-
-
-def _fit(m: np.ndarray, x: np.ndarray) -> tuple[float, float]:
-    """Best scale and the relative RMS residual of ``m ≈ s·x``."""
-    den = float(np.dot(x, x))
-    s = float(np.dot(m, x) / den) if den > 0 else 0.0
-    mean = float(np.mean(m)) if m.size else 0.0
-    r = float(np.sqrt(np.mean((m - s * x) ** 2)) / mean) if mean > 0 else np.inf
-    return s, r
 
 
 def _power_at(site: Site, day: pd.DataFrame, tilt: np.ndarray, surf_az: np.ndarray
@@ -304,25 +296,17 @@ def sky_clock(day: pd.DataFrame) -> dict[str, float] | None:
     """The shift ``τ`` [s] of the day's measured fixed-plane POA (``poa_global`` where the
     sky is measured) against its clear-sky POA: ``poa(t) ≈ s · poa_clear(t − τ)``, τ over
     ±180 min (5-min steps, then 1 min around the best) — the clock of the readings the sky
-    comes from, ``τ`` ahead. ``residual`` at ``τ``, ``residual_at_0`` unshifted (relative
-    RMS, :func:`_fit`); None without an hour of measured daylight minutes."""
+    comes from, ``τ`` ahead (:func:`sim.weather_clock.best_shift`, the rule a weather file's
+    check shares). ``residual`` at ``τ``, ``residual_at_0`` unshifted (relative RMS); None
+    without an hour of measured daylight minutes."""
     poa, clear = day["poa_global"].to_numpy(), day["poa_clear"].to_numpy()
     ok = day["valid"].to_numpy(bool) & day["measured_sky"].to_numpy(bool) & (clear > 50.0) \
         & np.isfinite(poa)
-    idx = np.flatnonzero(ok)
-    if idx.size < 60:
+    fit = best_shift(poa, clear, ok, 180, 5, 60)
+    if fit is None:
         return None
-
-    def shifted(tau: int) -> tuple[float, int]:
-        j = idx - tau
-        inside = (j >= 0) & (j < clear.size)
-        if inside.sum() < 60:
-            return (np.inf, tau)
-        return (_fit(poa[idx[inside]], clear[j[inside]])[1], tau)
-
-    best = min(shifted(tau) for tau in range(-180, 181, 5))
-    best = min(shifted(tau) for tau in range(best[1] - 4, best[1] + 5))
-    return {"offset_s": 60.0 * best[1], "residual": best[0], "residual_at_0": shifted(0)[0]}
+    return {"offset_s": 60.0 * fit["shift"], "residual": fit["residual"],
+            "residual_at_0": fit["residual_at_0"]}
 
 
 #: Why the readings the sky comes from were refused, by flag (sim.sky_sensor.FLAGS), for
@@ -393,7 +377,7 @@ def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
         return out
     m = measured_w[use]
     e = day["tracker_power_w"].to_numpy()
-    s0, r0 = _fit(m, e[use])
+    s0, r0 = scaled_fit(m, e[use])
     if not float(np.mean(m)) > DEAD_SHARE * float(np.mean(e[use])):
         # a tracker making (next to) nothing — a tripped breaker or inverter, the logger
         # still reading 0 W — has no shape to fit; its day is an underperformance alone,
@@ -447,7 +431,7 @@ def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
     tilt_t = np.broadcast_to(90.0 - el, (deltas.size, el.size))
     az_t = (sub["solar_azimuth"].to_numpy()[None, :] + deltas[:, None]) % 360.0
     p = _power_at(site, sub, tilt_t, az_t)
-    fits = [_fit(m_thin, p[k]) for k in range(deltas.size)]
+    fits = [scaled_fit(m_thin, p[k]) for k in range(deltas.size)]
     k = int(np.argmin([f[1] for f in fits]))
     out["azimuth_offset"] = {"residual": fits[k][1], "offset_deg": float(deltas[k]),
                              "scale": fits[k][0]}
@@ -460,7 +444,7 @@ def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
         ok = (j >= 0) & (j < e.size)
         if ok.sum() < 60:
             return (np.inf, tau, 0.0)
-        s, r = _fit(measured_w[idx[ok]], e[j[ok]])
+        s, r = scaled_fit(measured_w[idx[ok]], e[j[ok]])
         return (r, tau, s)
 
     best_t = min(shifted(tau) for tau in range(-180, 181, 5))
@@ -534,6 +518,23 @@ def _magnitude(kind: str, f: dict[str, Any]) -> tuple[float, str, str]:
         return d, "deg", f"pointing {d:.1f}° off in azimuth (sign not observable from power)"
     s = f["clock_offset"]["offset_s"]
     return s, "s", f"logger clock {s / 60:+.0f} min from the sun's time"
+
+
+def shape_untested(features: dict[str, Any]) -> dict[str, Any] | None:
+    """``{"readings", "needed", "detail"}`` for a day whose tracker readings under the sun are
+    too few for the shape fits (:func:`day_features`' ``readings`` under
+    :data:`SHAPE_READINGS_PER_PARAMETER` × :data:`SHAPE_PARAMETERS`), None otherwise: a
+    30-minute logger's winter day at 40° N has 16 and was never fitted without a word (a
+    tester's finding)."""
+    needed = SHAPE_READINGS_PER_PARAMETER * SHAPE_PARAMETERS
+    readings = features.get("readings")
+    if readings is None or readings >= needed:
+        return None
+    return {"readings": readings, "needed": needed,
+            "detail": f"{readings:g} tracker readings under the sun (over 5°), "
+                      f"{needed} needed ({SHAPE_READINGS_PER_PARAMETER} per fitted "
+                      "parameter): too few to test for a stuck tracker, a clock offset or "
+                      "an azimuth offset — a faster logger shows them"}
 
 
 def faults_over_days(days: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:

@@ -46,6 +46,7 @@ from backend.diagnosis.faults import (
     energy_features,
     faults_over_days,
     missing_daylight_min,
+    shape_untested,
     sky_unusable,
 )
 from backend.diagnosis.mount import mount_faults, read_observations
@@ -383,11 +384,13 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
     found = faults_over_days(days)
     out_days = []
     for d, f in zip(days, found, strict=True):
+        untested = shape_untested(d.get("features") or {})
         d = {k: v for k, v in d.items()
              if k not in ("features", "cache_version", "site_key", "history_start_s")}
         d.setdefault("partial", not d.get("complete", True))
         d["status"] = "complete" if d.get("complete", True) else "in_progress"
         d["faults"] = f
+        d["shape_untested"] = untested
         out_days.append(d)
     out_days += [_future_day(dates[i]) for i in range(len(starts)) if future[i]]
     return {"site_id": info.site_id, "timezone": info.site.timezone,  # both in the site's

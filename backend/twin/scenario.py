@@ -34,6 +34,7 @@ from sim.site_config import clock_off_longitude
 from sim.sites import Site
 from sim.sky import typical_year_at_site
 from sim.twin import CONTROLLERS, RECEIVERS, TwinResult, simulate
+from sim.weather_clock import irradiance_shift, shift_warning
 
 #: A weather station farther than this from the site is refused unless forced [km]: its sun
 #: rises and sets at other times and its sky is another climate's (about 1° of latitude).
@@ -68,8 +69,10 @@ def check_station(station: dict[str, Any], site: Site | Plant, force: bool,
     clock = clock_off_longitude(station["utc_offset_h"], station["longitude"],
                                 "the weather file's offset")
     if clock is not None and not force:  # Alice Springs' −9.5 for +9.5 cost 39 % of its energy
+        utc = (" (a file written in UTC, its header saying so, is read right when forced)"
+               if station["utc_offset_h"] == 0 else "")
         raise StationTooFar(f"{clock} Fix the file's header, or set {force_name} to run on it "
-                            "anyway")
+                            f"anyway{utc}")
     distance = station_distance_km(station, site)
     place = (f"site {site.site_id}" if isinstance(site, Site) else f"plant {site.plant_id}")
     out = {"format": station["format"], "name": station["name"],
@@ -188,7 +191,9 @@ def run_scenario(site: Site, scenario: Scenario, weather: pd.DataFrame | None = 
     """``sim.twin.simulate`` for ``scenario`` (the one call the CLI and the API share).
 
     ``weather`` (already on the run's times) wins over the scenario's typical year, which is
-    laid onto the run's calendar here, or its measured weather, taken as it is.
+    laid onto the run's calendar here, or its measured weather, taken as it is. A run on
+    weather says how far its irradiance runs from the sun, and warns past
+    ``sim.weather_clock.WEATHER_SHIFT_WARN_MIN`` (``weather_shift_min``, ``weather_warning``).
     """
     if (weather is None and scenario.station is not None
             and scenario.station["format"] == "measured"):
@@ -201,7 +206,7 @@ def run_scenario(site: Site, scenario: Scenario, weather: pd.DataFrame | None = 
             (site.latitude, site.longitude, site.altitude))
     defaults = {p.name: p.default for p in MACHINE_PARAMETERS}
     run = {k: scenario.machine.get(k, defaults[k]) for k in RUN_PARAMETERS}
-    return simulate(
+    result = simulate(
         site, scenario.start, scenario.end, step_s=scenario.step_s,
         controller=scenario.controller, weather=weather, progress=progress,
         disturbances=scenario.disturbances(), receiver=scenario.receiver,
@@ -210,6 +215,12 @@ def run_scenario(site: Site, scenario: Scenario, weather: pd.DataFrame | None = 
         settings=ControlSettings(chronological_interval_min=run["chronological_interval_min"]),
         pointing_model_terms=scenario.pointing_model_terms,
     )
+    if weather is not None:  # is the file on the sun's time? (a misread stamp or zone)
+        shift = irradiance_shift(weather, site.latitude, site.longitude, site.altitude,
+                                 scenario.start, scenario.end)
+        result.weather_shift_min = None if shift is None else shift["shift_min"]
+        result.weather_warning = shift_warning(shift, scenario.station)
+    return result
 
 
 def disturbances_of(params: dict[str, Any]) -> Disturbances:

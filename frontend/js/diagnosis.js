@@ -83,6 +83,16 @@ export function skyLine(days) {
   return `Sky: ${[...count].map(([k, n]) => `${n} day${n === 1 ? "" : "s"} from ${k}`).join(", ") || "no day judged"}.${note}`;
 }
 
+/** The days too few readings left untested for a stuck tracker or a clock offset
+ * (GET …/diagnosis `shape_untested`), e.g. "Not tested for a stuck tracker or a clock offset
+ * (too few readings under the sun, 20 needed): 2 Dec (16), 3 Dec (16)." */
+export function untestedLines(days) {
+  const few = days.filter((d) => d.shape_untested);
+  if (!few.length) return [];
+  return [`Not tested for a stuck tracker, a clock offset or an azimuth offset (too few tracker readings under the sun, ${few[0].shape_untested.needed} needed): `
+    + `${few.map((d) => `${shortDate(d.date)} (${num(d.shape_untested.readings, 0)})`).join(", ")}.`];
+}
+
 let requested = 0; // the latest load; an older one that answers later is dropped
 
 async function load(state) {
@@ -128,6 +138,7 @@ async function load(state) {
       + "not named, and not found sound.")] : []),
     ...(body.mount && !mount.length && !body.mount.undetermined.length ? [h("li", { class: "muted", "data-testid": "diag-mount-none" },
       `Mount: no significant term in ${body.mount.n_observations} camera observations since ${shortDate(body.mount.since)} (residual ${num(body.mount.residual_rms_mrad, 2)} mrad RMS).`)] : []),
+    ...untestedLines(body.days).map((t) => h("li", { class: "muted", "data-testid": "diag-untested" }, t)),
     h("li", { class: "muted", "data-testid": "diag-sky" }, skyLine(body.days)));
   const x = body.days.map((d) => d.date);
   const partial = body.days.map((d) => d.partial === true);

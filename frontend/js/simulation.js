@@ -3,7 +3,7 @@ import { ApiError, api } from "./api.js";
 import { COLORS, baseLayout, draw, roundStep, showEmpty, splitPartial, zeroBasedAxis } from "./charts.js";
 import { addDays, localMidnightMs, toLocalWall, zoneOffsetMs } from "./time.js";
 import { viewerKey } from "./twin.js";
-import { banner, energy, num, pct, tile } from "./ui.js";
+import { banner, energy, h, num, pct, tile } from "./ui.js";
 
 const POLL_MS = 400;
 // the series' columns as the API exports them (units in the names: backend/twin/export.py)
@@ -58,7 +58,17 @@ function localIso(tz, iso) {
   return `${toLocalWall(tz, ms).replace(" ", "T")}${off < 0 ? "-" : "+"}${hhmm}`;
 }
 
+/** The Sky tile, with the run's weather warning (a file off the sun's time) when it has one. */
 function skyTile(summary, station) {
+  const t = skyTileOf(summary, station);
+  if (summary.weather_warning) {
+    t.classList.add("warn");
+    t.append(h("div", { class: "sub", "data-testid": "weather-warning" }, `⚠ ${summary.weather_warning}`));
+  }
+  return t;
+}
+
+function skyTileOf(summary, station) {
   if (!station) return tile("Sky", summary.sky === "weather" ? "weather" : "clear sky", "Ineichen clear sky with Linke turbidity");
   if (station.format === "measured") {
     return tile("Sky", "measured weather", `${station.name || "file"} · ${station.stamped.replace("_", " ")} stamps · ${station.start.slice(0, 16)} → ${station.end.slice(0, 16)} UTC`);

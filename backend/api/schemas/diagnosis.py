@@ -64,6 +64,15 @@ class FaultRead(BaseModel):
                           "the expected one [Wh] (`magnitude` the same in % of expected); "
                           "null for the other kinds")
 
+class ShapeUntestedRead(BaseModel):
+    """Why a day was not tested for shape faults (``faults.shape_untested``)."""
+
+    readings: float = Field(description="independent tracker readings under the sun (a slow "
+                                        "logger's counted by their spacing)")
+    needed: int = Field(description="what the shape fits need: 10 per fitted parameter")
+    detail: str
+
+
 class DiagnosisDayRead(BaseModel):
     """One local day."""
 
@@ -86,6 +95,10 @@ class DiagnosisDayRead(BaseModel):
                     "as gain_measured_pct where there is one (a gap in both loggers leaves "
                     "its minutes out of both), else over the whole day")
     faults: list[FaultRead]
+    shape_untested: ShapeUntestedRead | None = Field(
+        None, description="the day's tracker readings under the sun were too few for the "
+                          "shape fits (stuck, clock offset, azimuth offset): none of them was "
+                          "tested; null when they were enough")
 
 
 class DiagnosisRead(BaseModel):

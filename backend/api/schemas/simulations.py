@@ -116,6 +116,13 @@ class SimulationSummaryRead(BaseModel):
         None, description="words when actuator_moves_beyond_drive > 0: the actuator energy "
                           "is not what this machine would draw")
     pointing_loss_wh: float
+    weather_shift_min: float | None = Field(
+        None, description="a run on weather: the shift [min] that best aligns the file's GHI "
+                          "with the clear sky at the site, the median of its sunny days "
+                          "(> 0: the file runs late); null without such a day")
+    weather_warning: str | None = Field(
+        None, description="words when weather_shift_min is past 15 min: the file's times "
+                          "misread (weather_stamped, the zone)")
     acceptance_angle_deg: float | None = Field(description="CPV receiver only")
     spot_distance_m: float
     spot_displacement_rms_m: float | None
