@@ -99,3 +99,18 @@ def test_a_misread_measured_day_is_warned_in_the_runs_summary() -> None:
         summary = run_scenario(golden_site(), scenario).summary()
         assert summary["weather_shift_min"] == pytest.approx(shift, abs=5), summary
         assert (summary["weather_warning"] is None) == (shift == 0.0), summary
+
+
+def test_an_epw_written_in_utc_far_from_greenwich_is_refused_naming_utc() -> None:
+    """A UTC EPW at Delhi was refused as "a sign slip, or another place's zone?" — a file
+    written in UTC, the likeliest, went unnamed; forced, such a file is read right."""
+    from backend.twin.scenario import StationTooFar, check_station
+
+    station = {"format": "epw", "name": "Delhi", "latitude": DELHI[0], "longitude": DELHI[1],
+               "altitude": DELHI[2], "utc_offset_h": 0.0}
+    with pytest.raises(StationTooFar, match=r"a sign slip, another place's zone, or a file "
+                                            r"written in UTC\?.*read right when forced"):
+        check_station(station, golden_site(), False)
+    with pytest.raises(StationTooFar, match=r"a sign slip, or another place's zone\?") as exc:
+        check_station({**station, "utc_offset_h": -5.0}, golden_site(), False)
+    assert "UTC?" not in str(exc.value)
