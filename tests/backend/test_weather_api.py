@@ -61,6 +61,10 @@ def test_measured_weather_is_read_from_the_upload_and_runs_as_the_cli(
     assert cli.returncode == 0, cli.stderr
     assert r.json()["tracker_energy_wh"] == pytest.approx(
         json.loads(cli.stdout)["tracker_energy_wh"], rel=1e-12)
+    # the file's shift from the sun as the CLI says (sim.weather_clock): none read from a
+    # half sine, which is no clear day's shape, and no warning
+    for key in ("weather_shift_min", "weather_warning"):
+        assert r.json()[key] == json.loads(cli.stdout)[key] is None, key
     # stamped at the intervals' starts, the file covers 00:10 to 00:10 the next day
     r = client.post("/api/v1/simulations/weather", data={**day, "weather_stamped":
                                                          "interval_start"}, files=_files(path))
