@@ -3,7 +3,7 @@ import { ApiError, api } from "./api.js";
 import { COLORS, baseLayout, draw, roundStep, showEmpty, splitPartial, zeroBasedAxis } from "./charts.js";
 import { addDays, localMidnightMs, toLocalWall, zoneOffsetMs } from "./time.js";
 import { viewerKey } from "./twin.js";
-import { banner, energy, h, num, pct, tile } from "./ui.js";
+import { banner, energy, num, pct, tile } from "./ui.js";
 
 const POLL_MS = 400;
 // the series' columns as the API exports them (units in the names: backend/twin/export.py)
@@ -58,17 +58,17 @@ function localIso(tz, iso) {
   return `${toLocalWall(tz, ms).replace(" ", "T")}${off < 0 ? "-" : "+"}${hhmm}`;
 }
 
-/** The Sky tile, with the run's weather warning (a file off the sun's time) when it has one. */
-function skyTile(summary, station) {
-  const t = skyTileOf(summary, station);
-  if (summary.weather_warning) {
-    t.classList.add("warn");
-    t.append(h("div", { class: "sub", "data-testid": "weather-warning" }, `⚠ ${summary.weather_warning}`));
-  }
-  return t;
+/** The run's weather warning (a file off the sun's time, sim.weather_clock) as a tile across
+ * the row, or nothing. */
+function weatherWarning(summary) {
+  if (!summary.weather_warning) return [];
+  const t = tile("Weather off the sun's time", `${num(summary.weather_shift_min, 0)} min`, summary.weather_warning, "warn");
+  t.classList.add("wide");
+  t.dataset.testid = "weather-warning";
+  return [t];
 }
 
-function skyTileOf(summary, station) {
+function skyTile(summary, station) {
   if (!station) return tile("Sky", summary.sky === "weather" ? "weather" : "clear sky", "Ineichen clear sky with Linke turbidity");
   if (station.format === "measured") {
     return tile("Sky", "measured weather", `${station.name || "file"} · ${station.stamped.replace("_", " ")} stamps · ${station.start.slice(0, 16)} → ${station.end.slice(0, 16)} UTC`);
@@ -81,7 +81,7 @@ function summaryTiles(summary, station) {
   const box = $("sim-summary");
   box.innerHTML = "";
   if (!summary) return;
-  box.append(skyTile(summary, station),
+  box.append(...weatherWarning(summary), skyTile(summary, station),
     tile("Tracker energy", energy(summary.tracker_energy_wh), `peak ${num(summary.tracker_peak_w, 0)} W`),
     tile("Fixed energy", energy(summary.fixed_energy_wh), `peak ${num(summary.fixed_peak_w, 0)} W`),
     // a polar night (or a dark run) has no gain: say why rather than a bare "—"

@@ -82,6 +82,9 @@ def test_a_tmy3_file_uploaded_on_the_page_runs_on_its_weather(page, server,
     assert page.is_hidden("#banner"), page.text_content("#banner")
     tiles = page.text_content("#sim-summary") or ""
     assert "TMY3 typical year" in tiles and "GREENSBORO" in tiles and "2,672 km" in tiles
+    # every tile's value reads whole at 1,400 px ("EPW typical year" was cut to "EPW typical
+    # y": the values did not wrap)
+    _values_read_whole(page)
     assert _points(page, "chart-sim-power") > 0 and _points(page, "chart-sim-angles") > 0
     run_id = page.get_attribute("body", "data-simulation-done")
     summary = httpx.get(f"{server.url}/api/v1/simulations/{run_id}", timeout=30).json()
@@ -94,6 +97,38 @@ def test_a_tmy3_file_uploaded_on_the_page_runs_on_its_weather(page, server,
     assert summary["summary"]["tracker_energy_wh"] == pytest.approx(ref["tracker_energy_wh"],
                                                                     rel=1e-12)
     page.screenshot(path=str(ARTIFACTS / "simulation-tmy3.png"), full_page=True)
+
+
+def _values_read_whole(page) -> None:
+    cut = page.evaluate("() => [...document.querySelectorAll('#sim-summary .tile .value')]"
+                        ".filter(v => v.scrollWidth > v.clientWidth).map(v => v.textContent)")
+    assert not cut, cut
+
+
+def test_a_weather_file_off_the_suns_time_is_named_on_the_page(page, server,
+                                                                tmp_path) -> None:
+    """A clear day at Tehuantepec (pvlib's Ineichen GHI, DNI, DHI) written as hour-start
+    means and read with the default interval_end ran without a word, an hour early against
+    the sun (a tester's finding at Delhi): the page shows the shift and its likely causes."""
+    import pandas as pd
+    import pvlib
+
+    loc = pvlib.location.Location(16.28875, -95.240871, altitude=30.0)
+    t = pd.date_range("2024-03-14", "2024-03-17", freq="1min", tz="UTC", inclusive="left")
+    hourly = loc.get_clearsky(t).resample("60min", label="left", closed="left").mean()
+    path = tmp_path / "hour_start.csv"
+    pd.DataFrame({"time": [x.isoformat() for x in hourly.index],
+                  **{c: hourly[c].round(1) for c in ("ghi", "dni", "dhi")}}
+                 ).to_csv(path, index=False)
+    _open_measured_day(page, server, path)
+    page.select_option("#sim-weather-stamped", "interval_end")
+    page.click("#sim-run")
+    page.wait_for_selector("body[data-simulation-done]", timeout=120_000)
+    warning = page.text_content("[data-testid=weather-warning]") or ""
+    assert "-60 min" in warning and "60 min early" in warning, warning
+    assert "weather_stamped" in warning and "zone" in warning, warning
+    _values_read_whole(page)
+    page.screenshot(path=str(ARTIFACTS / "simulation-weather-warning.png"), full_page=True)
 
 
 def _open_measured_day(page, server, path: Path) -> None:
