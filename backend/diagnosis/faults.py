@@ -531,7 +531,7 @@ def shape_untested(features: dict[str, Any]) -> dict[str, Any] | None:
     if readings is None or readings >= needed:
         return None
     return {"readings": readings, "needed": needed,
-            "detail": f"{readings:g} tracker readings under the sun (over 5°), "
+            "detail": f"about {int(readings + 0.5)} tracker readings under the sun (over 5°), "
                       f"{needed} needed ({SHAPE_READINGS_PER_PARAMETER} per fitted "
                       "parameter): too few to test for a stuck tracker, a clock offset or "
                       "an azimuth offset — a faster logger shows them"}

@@ -265,3 +265,22 @@ def test_a_fault_a_later_day_was_judged_without_is_not_said_to_go_on(page, serve
     assert lines["on"] == ["tracker stuck since Dec 4" + tail]
     assert lines["unjudged"] == ["tracker stuck since Dec 4" + tail]
     assert lines["two days"] == ["tracker stuck Dec 4 to Dec 5, not on Dec 6" + tail]
+
+
+def test_days_too_short_of_readings_for_the_shape_fits_are_named(page, server) -> None:
+    """A 30-minute logger's December days at 40° N (about 17 readings under the sun of the 20
+    the shape fits need) were never fitted, and the card said only "No fault found": it
+    names the days not tested for a stuck tracker or a clock offset, with their readings."""
+    page.goto(f"{server.url}/#overview")
+    page.wait_for_selector('body[data-overview-loaded]', state="attached")
+    few = {"readings": 16.7, "needed": 20, "detail": "…"}
+    days = [{"date": "2025-12-01", "shape_untested": few},
+            {"date": "2025-12-02", "shape_untested": {**few, "readings": 16.5}},
+            {"date": "2025-12-03", "shape_untested": None}]
+    lines = page.evaluate("""async (days) => {
+      const m = await import('/static/js/diagnosis.js');
+      return [m.untestedLines(days), m.untestedLines([days[2]])];
+    }""", days)
+    assert lines == [["Not tested for a stuck tracker, a clock offset or an azimuth offset (too "
+                      "few tracker readings under the sun, 20 needed): Dec 1 (17), Dec 2 (17)."],
+                     []]
