@@ -17,9 +17,9 @@ import numpy as np
 import pandas as pd
 
 #: A weather file whose GHI best aligns with the clear sky this far from its stamps' time
-#: [min] is warned of (:func:`shift_warning`). Correctly read files measured 0–5 min
-#: (docs/validation.md, section 5): hourly TMY3 and EPW typical years, 1-, 5-, 15-, 30- and
-#: 60-minute measured series; a half-hour slip of hourly means reads 30 min.
+#: [min] is warned of (:func:`shift_warning`). Correctly read files measured 0–5 min over a
+#: month and at most 10 on a single day (docs/validation.md, section 5): hourly TMY3 and EPW
+#: typical years, 1- to 60-minute measured series; misread hourly means read 30 or 60 min.
 WEATHER_SHIFT_WARN_MIN = 15.0
 #: The grid the weather's GHI is compared on [min], and the shifts searched [min]: half a
 #: day either way, so a file in another zone (UTC at Delhi: +330 min) reads its whole shift
