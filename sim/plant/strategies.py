@@ -8,8 +8,8 @@ the common orientation (azimuth and elevation of the collector normal) that seed
 - ``backtrack`` — where pointing at the sun shades a collector, search the
   orientations that shade nobody (seed 004's Boolean, :mod:`sim.plant.shading`)
   for the one of maximum plane-of-array irradiance, not merely the closest to
-  the sun: for normal azimuths within ±45° of the sun's (3° steps, then 0.5°
-  about the best) the lowest shade-free elevation at or above the sun's comes
+  the sun: for normal azimuths within ±45° of the sun's (3° steps, then 0.5°, 0.05°
+  and 0.005° about the best) the lowest shade-free elevation at or above the sun's comes
   in closed form (:func:`lowest_free_elevation`: each pair shades on one
   interval of elevations), and the flat orientation is added; the shade-free candidate
   of highest POA wins (those at 90° are checked: on sloped ground flat shades). Where
@@ -40,7 +40,11 @@ STRATEGIES = ("sun", "backtrack", "sky_scan")
 STOW_AZIMUTH, STOW_ELEVATION = 180.0, 90.0
 
 _BT_AZ_OFFSETS = np.arange(-45.0, 45.1, 3.0)
-_BT_REFINE = np.arange(-2.5, 2.6, 0.5)
+# backtracking's refinements about the best azimuth so far: (half-width, step) [°], each grid
+# on the multiples of its step, not offsets from the sun: a grid that moved with the sun served
+# an optimum standing still as a zig-zag of its step (3x3 plant, 21 Dec: 114 reversals of the
+# azimuth, 57 of the elevation, in a day at 1 min; 10 and 7 with these, docs/plants.md)
+_BT_LEVELS = ((2.5, 0.5), (0.3, 0.05), (0.03, 0.005))
 _SCAN_EL = np.arange(0.0, 86.0, 5.0)
 _SCAN_AZ = np.arange(0.0, 360.0, 10.0)
 # (pair, candidate) rows computed at once: 1,000,000 peaked at 181 MB (a Peñarroya sky_scan
@@ -228,20 +232,30 @@ def _poa(plant: Plant, cand_az: FloatArray, cand_el: FloatArray, sky: dict[str, 
 def _backtrack_candidates(plant: Plant, sky: dict[str, FloatArray],
                           steps: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:
     """Candidates ``(S, C)``: the lowest shade-free elevation on a 3° azimuth fan (±45° about
-    the sun), refined at 0.5° about the best of the fan, plus flat. Those below 90° are
-    shade-free by construction; those at 90° (flat, or a fan azimuth whose shade reaches the
-    zenith) are not on sloped ground: :func:`_pick` checks every candidate."""
+    the sun), refined about the best azimuth so far at 0.5°, 0.05° and 0.005°
+    (:data:`_BT_LEVELS`), plus flat. The optimum found is then continuous in time wherever the
+    optimum is (a 0.05° step in azimuth still moved the elevation 0.35° along a steep shade
+    boundary). Those below 90° are shade-free by construction; those at 90° (flat, or a fan
+    azimuth whose shade reaches the zenith) are not on sloped ground: :func:`_pick` checks
+    every candidate."""
     az0 = sky["solar_azimuth"][steps]
     el0 = sky["apparent_elevation"][steps]
-    caz = (az0[:, None] + _BT_AZ_OFFSETS[None, :]) % 360.0
-    hi = lowest_free_elevation(plant, az0, el0, caz, el0)
     rows = np.arange(len(steps))
-    k = np.argmax(_poa(plant, caz, hi, sky, steps), axis=1)
-    raz = (caz[rows, k][:, None] + _BT_REFINE[None, :]) % 360.0
-    rel = lowest_free_elevation(plant, az0, el0, raz, el0)
-    caz = np.concatenate([caz, raz, np.full((len(steps), 1), STOW_AZIMUTH)], axis=1)
-    cel = np.concatenate([hi, rel, np.full((len(steps), 1), 90.0)], axis=1)
-    return caz, cel
+    caz = [(az0[:, None] + _BT_AZ_OFFSETS[None, :]) % 360.0]
+    cel = [lowest_free_elevation(plant, az0, el0, caz[0], el0)]
+    poa = _poa(plant, caz[0], cel[0], sky, steps)
+    for half, step in _BT_LEVELS:
+        k = np.argmax(poa, axis=1)
+        best_az, best_poa = caz[-1][rows, k], poa[rows, k]
+        grid = np.arange(-half, half + step / 2, step)
+        raz = (np.round(best_az / step)[:, None] * step + grid[None, :]) % 360.0
+        rel = lowest_free_elevation(plant, az0, el0, raz, el0)
+        caz.append(np.concatenate([best_az[:, None], raz], axis=1))
+        cel.append(np.concatenate([cel[-1][rows, k][:, None], rel], axis=1))
+        poa = np.concatenate([best_poa[:, None], _poa(plant, raz, rel, sky, steps)], axis=1)
+    caz.append(np.full((len(steps), 1), STOW_AZIMUTH))
+    cel.append(np.full((len(steps), 1), 90.0))
+    return np.concatenate(caz, axis=1), np.concatenate(cel, axis=1)
 
 
 def _pick(plant: Plant, caz: FloatArray, cel: FloatArray, sky: dict[str, FloatArray],
