@@ -15,7 +15,7 @@ import csv
 import io
 import itertools
 import logging
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from typing import Annotated, Any, Literal
 
 import numpy as np
@@ -45,6 +45,7 @@ from backend.measurements.queries import (
     count_rows,
     downsample,
     iso_utc,
+    raw_pages,
     raw_rows,
     sensor_columns,
 )
@@ -54,6 +55,8 @@ logger = logging.getLogger(__name__)
 router = APIRouter(prefix="/api/v1/sites", tags=["measurements"])
 
 _JSON = "application/json"
+#: Readings a streamed CSV or line-protocol export reads and holds at once (≈ 10 MB).
+EXPORT_PAGE_ROWS = 20_000
 #: The one path of the resource; POST is logger ingest, whose body the route reads itself.
 _PATH = "/{site_id}/measurements"
 #: Requests :class:`backend.api.strict.StrictBodies` leaves to the ingest route (it checks
@@ -130,22 +133,33 @@ def _blank_nan(col: list[Any]) -> list[Any]:
     return ["" if x != x else x for x in col]
 
 
-def _csv_lines(header: list[str], cols: list[list[Any]], chunk_rows: int = 20_000
+def _csv_lines(header: list[str], pages: Iterable[list[list[Any]]], chunk_rows: int = 20_000
                ) -> Iterator[str]:
-    """The CSV text in pieces of ``chunk_rows`` rows (a year is not one string in memory);
-    a value that is not there (NaN: a power-only reading's voltage) is an empty cell."""
-    cols = [_blank_nan(c) for c in cols]
+    """The CSV text of ``pages`` of columns, in pieces of at most ``chunk_rows`` rows (a
+    year is not one string in memory); a value that is not there (NaN: a power-only
+    reading's voltage) is an empty cell."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(header)
-    rows = zip(*cols, strict=True)
-    while part := list(itertools.islice(rows, chunk_rows)):
-        w.writerows(part)
-        yield buf.getvalue()
-        buf.seek(0)
-        buf.truncate()
+    for cols in pages:
+        rows = zip(*[_blank_nan(c) for c in cols], strict=True)
+        while part := list(itertools.islice(rows, chunk_rows)):
+            w.writerows(part)
+            yield buf.getvalue()
+            buf.seek(0)
+            buf.truncate()
     if buf.tell():  # no rows: the header alone
         yield buf.getvalue()
+
+
+def _raw_columns(rows: np.ndarray, sensors: list[str]) -> dict[str, list[Any]]:
+    """The answer's columns of :func:`raw_rows` rows: ts, the quantities, ``sensors``."""
+    cols: dict[str, list[Any]] = {"ts": iso_utc(rows[:, 0].astype(np.int64))}
+    for j, q in enumerate(QUANTITIES):
+        cols[q] = rows[:, j + 1].tolist()
+    if rows.shape[1] > 4:
+        cols.update(sensor_columns(rows, sensors))
+    return cols
 
 
 _GET_TEXT: dict[int | str, dict[str, Any]] = {200: {"content": {
@@ -194,18 +208,19 @@ def get_measurements(
         if source == "twin":
             ctx.twin.ensure(site_id, t0, t1)
         arr = info.arrays[array]
-        cols: dict[str, list[Any]]
         if source == "twin_weather":
             cols, sky = weather_twin_columns(ctx, info, array, t0, t1)  # InputError: a 4xx
             n = len(cols["ts"])
             bucket_s = 0
             if max_points is not None and n > max_points:
                 cols, bucket_s = _minute_buckets(cols, max_points)
-            return _answer(request, site_id, array, source, start, end, t0, t1, format, cols,
+            return _answer(request, site_id, array, source, start, end, t0, t1, format, [cols],
                            bucket_s, n, sky)
         src = SOURCE_CODES[source]
+        measured = src == SOURCE_CODES["measured"]
         with ctx.engine.connect() as conn:
-            n = count_rows(conn, arr.array_id, src, t0, t1, info.phase_s)
+            n, sensors = count_rows(conn, arr.array_id, src, t0, t1, info.phase_s)
+            sensors = sensors if measured else []
             # a JSON answer holds at most max_json_points, max_points or not (a tester's
             # max_points=1000000 built 200,001 raw points past the setting, anonymously)
             cap = None if want_text else ctx.settings.ingest.max_json_points
@@ -213,37 +228,44 @@ def get_measurements(
             if max_points is None and limit is not None and n > limit:
                 raise HTTPException(422, f"{n} readings in the range; pass max_points (buckets) or "
                                          "format=csv or format=influx for all of them")
-            if limit is None or n <= limit:
-                rows = raw_rows(conn, arr.array_id, src, t0, t1, sensors=src == SOURCE_CODES[
-                    "measured"])
-                bucket_s = 0
-                cols = {"ts": iso_utc(rows[:, 0].astype(np.int64))}
-                for j, q in enumerate(QUANTITIES):
-                    cols[q] = rows[:, j + 1].tolist()
-                if rows.shape[1] > 4:
-                    cols.update(sensor_columns(rows))
-            else:
+            if limit is not None and n > limit:
                 b = downsample(conn, arr.array_id, src, t0, t1, limit, info.phase_s)
-                bucket_s = b.width_s
-                cols = b.points()
-        return _answer(request, site_id, array, source, start, end, t0, t1, format, cols,
-                       bucket_s, n, None)
+                return _answer(request, site_id, array, source, start, end, t0, t1, format,
+                               [b.points()], b.width_s, n, None)
+            if not want_text:
+                rows = raw_rows(conn, arr.array_id, src, t0, t1, sensors=measured)
+                return _answer(request, site_id, array, source, start, end, t0, t1, format,
+                               [_raw_columns(rows, sensors)], 0, n, None)
+        # streamed raw: page by page after this returns, the header decided by count_rows
+        pages = (_raw_columns(rows, sensors) for rows in
+                 raw_pages(ctx.engine, arr.array_id, src, t0, t1, measured, EXPORT_PAGE_ROWS))
+        header = ["ts", *QUANTITIES, *sensors]
+        return _answer(request, site_id, array, source, start, end, t0, t1, format, pages, 0,
+                       n, None, header)
 
 
 def _answer(request: Request, site_id: str, array: str, source: str, start: str, end: str,
-            t0: int, t1: int, format: str | None, cols: dict[str, list[Any]], bucket_s: int,
-            n: int, sky: dict[str, Any] | None) -> Response:
-    """A measurements answer as JSON, CSV or line protocol."""
+            t0: int, t1: int, format: str | None, pages: Iterable[dict[str, list[Any]]],
+            bucket_s: int, n: int, sky: dict[str, Any] | None, header: list[str] | None = None
+            ) -> Response:
+    """A measurements answer as JSON, CSV or line protocol from ``pages`` of columns: one
+    page, or for CSV and line protocol an iterator of them made as the body is sent, whose
+    column names ``header`` gives."""
     want_csv = format == "csv" or (format is None and "text/csv" in
                                    request.headers.get("accept", ""))
     if format == "influx":
-        return StreamingResponse(metered_iter(influx_lines(site_id, array, source, cols)),
-                                 media_type="text/plain; charset=utf-8")
+        lines = itertools.chain.from_iterable(influx_lines(site_id, array, source, cols)
+                                              for cols in pages)
+        return StreamingResponse(metered_iter(lines), media_type="text/plain; charset=utf-8")
     if want_csv:
+        if header is None:
+            pages = list(pages)
+            header = list(pages[0])
         name = f"{site_id}_{array}_{source}_{start}_{end}.csv".replace(":", "")
-        return StreamingResponse(metered_iter(_csv_lines(list(cols), list(cols.values()))),
-                                 media_type="text/csv",
+        text = _csv_lines(header, (list(cols.values()) for cols in pages))
+        return StreamingResponse(metered_iter(text), media_type="text/csv",
                                  headers={"Content-Disposition": f'attachment; filename="{name}"'})
+    (cols,) = pages
     keys = list(cols)
     points = [dict(zip(keys, vals, strict=True)) for vals in zip(*cols.values(), strict=True)]
     body: dict[str, Any] = {
