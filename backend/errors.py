@@ -24,7 +24,8 @@ class Refusal(Exception):  # noqa: N818 - an answer, not an error of the service
 
 
 class SetupError(RuntimeError):
-    """What the service was given cannot be used (a database a newer heliotwin migrated):
+    """What the service was given cannot be used (a database a newer heliotwin migrated,
+    or one that cannot be connected to):
     the message says what and what to do, so the CLI prints it alone on one line and exits
     1 (``backend.cli.main``) — no traceback, which hid it."""
 

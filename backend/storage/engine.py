@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 from sqlalchemy import Connection, Engine, create_engine, event
 from sqlalchemy.engine import make_url
+from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session, sessionmaker
 
 from backend.errors import SetupError
@@ -115,6 +116,28 @@ def alembic_config(engine: Engine) -> Config:
     return cfg
 
 
+class DatabaseUnreachableError(SetupError):
+    """The database could not be connected to (PostgreSQL not running, a wrong host, a
+    SQLite file that cannot be opened)."""
+
+
+def connect(engine: Engine) -> Connection:
+    """``engine.connect()``; a failure to connect is :class:`DatabaseUnreachableError`, one
+    line naming the URL (password hidden), the driver's reason and what to do (``heliotwin
+    serve`` with PostgreSQL down had printed SQLAlchemy's traceback)."""
+    try:
+        return engine.connect()
+    except OperationalError as exc:
+        why = " ".join(str(exc.orig or exc).split())
+        todo = ("start PostgreSQL (the README's \"PostgreSQL and Mosquitto\" says how) or set "
+                "HELIOTWIN_DATABASE_URL to one that runs"
+                if engine.url.get_backend_name() == "postgresql" else
+                "check that its folder exists and is writable, or set HELIOTWIN_DATABASE_URL")
+        raise DatabaseUnreachableError(
+            f"cannot connect to the database {engine.url.render_as_string(hide_password=True)}"
+            f": {why}; {todo}") from None
+
+
 class SchemaTooNewError(SetupError):
     """The database holds a migration this code does not have: a newer heliotwin wrote it."""
 
@@ -144,7 +167,7 @@ def check_schema(engine: Engine) -> None:
     from alembic.script import ScriptDirectory
 
     script = ScriptDirectory.from_config(cfg)
-    with engine.connect() as conn:
+    with connect(engine) as conn:
         _refuse_newer(engine, conn, script)
 
 
@@ -159,7 +182,7 @@ def run_migrations(engine: Engine) -> None:
     from alembic.script import ScriptDirectory
 
     script = ScriptDirectory.from_config(cfg)
-    with _migrate_lock, engine.begin() as conn:
+    with _migrate_lock, connect(engine) as conn, conn.begin():
         _refuse_newer(engine, conn, script)
         cfg.attributes["connection"] = conn
         command.upgrade(cfg, "heads")

@@ -83,3 +83,22 @@ def test_a_database_of_a_newer_version_is_refused_by_name(
     finally:
         engine.dispose()
         db.drop()
+
+
+def test_an_unreachable_postgresql_is_one_line(heliotwin_cli: Callable[..., Any]) -> None:
+    """``heliotwin serve`` (and a command that opens the database) with no PostgreSQL at
+    the URL says so in one line — the URL with its password hidden, the driver's reason,
+    what to do — and exits 1 (serve had printed SQLAlchemy's traceback)."""
+    url = f"postgresql+psycopg://heliotwin:s3cret@127.0.0.1:{free_port()}/heliotwin"
+    serve = subprocess.run(
+        [*HELIOTWIN, "serve", "--port", str(free_port()), "--viser-port", "0", "--no-demo"],
+        cwd=ROOT, env=process_env(url), capture_output=True, text=True, timeout=120)
+    token = heliotwin_cli("token", "list", env={"HELIOTWIN_DATABASE_URL": url})
+    for name, run in (("serve", serve), ("token list", token)):
+        assert (run.returncode, run.stdout) == (1, ""), (name, run)
+        lines = run.stderr.splitlines()
+        assert len(lines) == 1 and lines[0].startswith(
+            f"heliotwin {name}: error: cannot connect to the database "
+            f"postgresql+psycopg://heliotwin:***@127.0.0.1:"), lines
+        assert "s3cret" not in lines[0] and "Connection refused" in lines[0]
+        assert "start PostgreSQL" in lines[0], lines[0]
