@@ -49,6 +49,8 @@ _READINGS_FROM_YEAR = time.gmtime(READINGS_FROM_S).tm_year
 #: Python types a JSON number column may hold (``bool`` is not a number).
 _JSON_NUMBERS = frozenset((float, int, type(None)))
 _CSV_CELLS = frozenset((str, type(None)))
+#: A UTF-8 byte order mark, taken off the front of a body or payload.
+BOM = b"\xef\xbb\xbf"
 #: A CSV number: plain decimal notation only (Python's float() would also take ``1_0``,
 #: ``nan``, ``Infinity`` and non-ASCII digits).
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
@@ -580,20 +582,38 @@ def _check_rows(n: int, limits: Limits) -> None:
         raise body_error(422, "readings", "missing", "no readings in the request")
 
 
+def load_json(body: bytes) -> Any:
+    """A logger's JSON document (HTTP's body, MQTT's state payload), a leading byte order
+    mark dropped (Windows tools write one; it is not JSON but no reason to refuse); NaN,
+    Infinity and 1e400 are read as Python reads them, so the rows' checks name each field
+    (orjson's "line 1 column 76" named none). Else an :class:`IngestError`."""
+    body = body.removeprefix(BOM)
+    try:
+        return orjson.loads(body)
+    except orjson.JSONDecodeError as exc:
+        try:
+            return json.loads(body)
+        except (ValueError, RecursionError):
+            raise body_error(422, None, "json_invalid", f"invalid JSON: {exc}") from exc
+
+
+def decimal_value(text: str, field: str) -> float:
+    """One number in plain decimal notation (a CSV cell's rule: MQTT's single values),
+    surrounding blanks ignored; else an :class:`IngestError` naming ``field``."""
+    errors = _Errors(csv_lines=False)
+    col = _floats([text.strip()], field, errors, text=True)[0]
+    errors.raise_if_any()
+    return float(col[0])
+
+
 def parse_json_batch(
     body: bytes, arrays: dict[str, IngestArray], limits: Limits
 ) -> Batch:
     """Validate a JSON body: ``{"readings": [{ts, array, voltage_v, current_a, ...}]}``, or
     emonCMS-style rows ``[[unix_s, array, voltage_v, current_a, power_w], ...]``."""
     errors = _Errors(csv_lines=False)
-    body = body.removeprefix(b"\xef\xbb\xbf")  # a byte order mark (Windows tools write
-    try:  # one) is not JSON but no reason to refuse
-        doc = orjson.loads(body)
-    except orjson.JSONDecodeError as exc:
-        try:  # NaN, Infinity or 1e400: Python reads them, and the rows' check names each
-            doc = json.loads(body)  # (orjson's "line 1 column 76" named no row or field)
-        except (ValueError, RecursionError):
-            raise body_error(422, None, "json_invalid", f"invalid JSON: {exc}") from exc
+    body = body.removeprefix(BOM)  # for the repeated keys' check too
+    doc = load_json(body)
     if isinstance(doc, list):
         _check_rows(len(doc), limits)
         columns = _emoncms_columns(doc, errors)

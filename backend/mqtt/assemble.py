@@ -21,23 +21,19 @@ topic of its own, as a bare number, without a timestamp, every few seconds.
 
 from __future__ import annotations
 
-import math
-import re
 from dataclasses import dataclass, field
+
+from backend.measurements.parse import decimal_value
 
 #: topic quantity → reading field
 QUANTITIES = {"voltage": "voltage_v", "current": "current_a", "power": "power_w"}
-_NUMBER = re.compile(rb"^\s*[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?\s*$")
 
 
-def parse_value(payload: bytes) -> float:
-    """A bare decimal number (``26.1``, ``-0.02``, ``1e3``) → float; ValueError otherwise."""
-    if len(payload) > 64 or not _NUMBER.match(payload):
-        raise ValueError(f"payload {payload[:64]!r} is not a decimal number")
-    value = float(payload)
-    if not math.isfinite(value):
-        raise ValueError(f"payload {payload[:64]!r} is not a finite number")
-    return value
+def parse_value(payload: bytes, quantity: str) -> float:
+    """A bare decimal number (``26.1``, ``-0.02``, ``1e3``) → float, by the rule of a
+    number in HTTP's CSV (:func:`backend.measurements.parse.decimal_value`); else an
+    ``IngestError`` naming the quantity's field (``power_w``), as HTTP's do."""
+    return decimal_value(payload.decode("utf-8-sig", "replace"), QUANTITIES[quantity])
 
 
 @dataclass

@@ -18,8 +18,15 @@ from typing import Any
 
 import orjson
 
-from backend.measurements.parse import Batch, IngestError, Limits, parse_json_batch
-from backend.mqtt.assemble import Closed
+from backend.measurements.parse import (
+    BOM,
+    Batch,
+    IngestError,
+    Limits,
+    load_json,
+    parse_json_batch,
+)
+from backend.mqtt.assemble import Closed, parse_value
 from backend.settings import Settings
 from backend.sites import SiteInfo
 
@@ -53,7 +60,8 @@ def limits(settings: Settings) -> Limits:
 
 
 def _rejected(topic: str, payload: bytes, exc: IngestError) -> Rejection:
-    msgs = [e.get("msg", "") for e in exc.errors]
+    msgs = [f"{e['field']}: {e.get('msg', '')}" if e.get("field") else e.get("msg", "")
+            for e in exc.errors]  # the field named first, as HTTP's entries name it
     reason = "; ".join(m for m in msgs[:3] if m) or "invalid reading"
     return Rejection(topic, reason, payload, exc.errors)
 
@@ -64,10 +72,11 @@ def state_batch(info: SiteInfo, array: str, topic: str, payload: bytes,
     if len(payload) > MAX_PAYLOAD_BYTES:
         return Rejection(topic, f"payload of {len(payload)} bytes; the limit is "
                                 f"{MAX_PAYLOAD_BYTES}", payload)
+    body = payload.removeprefix(BOM).strip()  # the payload's own bytes, below
     try:
-        doc = orjson.loads(payload)
-    except orjson.JSONDecodeError as exc:
-        return Rejection(topic, f"invalid JSON: {exc}", payload)
+        doc = load_json(body)
+    except IngestError as exc:
+        return _rejected(topic, payload, exc)
     if not isinstance(doc, dict):
         return Rejection(topic, "payload must be one JSON object {\"ts\", \"voltage_v\", "
                                 f"\"current_a\"[, \"power_w\"]}}, got {type(doc).__name__}",
@@ -76,13 +85,21 @@ def state_batch(info: SiteInfo, array: str, topic: str, payload: bytes,
         return Rejection(topic, f"array {str(doc['array'])[:40]!r} in the payload is not "
                                 f"the topic's array {array!r}", payload)
     # the payload's own bytes, so parse.py judges exactly what was sent (one object: checked)
-    body = payload.strip()
     if "array" not in doc:
         inner = body[:-1].rstrip()
         sep = b"" if inner.endswith(b"{") else b","
         body = inner + sep + b'"array":' + orjson.dumps(array) + b"}"
     try:
         return parse_json_batch(b'{"readings":[' + body + b"]}", info.ingest_arrays(), lim)
+    except IngestError as exc:
+        return _rejected(topic, payload, exc)
+
+
+def single_value(topic: str, payload: bytes, quantity: str) -> float | Rejection:
+    """The number of a single-value message (``…/{array}/power``), or its rejection naming
+    the field."""
+    try:
+        return parse_value(payload, quantity)
     except IngestError as exc:
         return _rejected(topic, payload, exc)
 

@@ -52,12 +52,13 @@ from tenacity import AsyncRetrying, RetryCallState, retry_if_exception
 from backend.measurements.ingest import measured_job
 from backend.measurements.parse import Batch
 from backend.mqtt import homeassistant
-from backend.mqtt.assemble import QUANTITIES, Closed, MinuteAssembler, parse_value
+from backend.mqtt.assemble import QUANTITIES, Closed, MinuteAssembler
 from backend.mqtt.ingest import (
     MAX_PAYLOAD_BYTES,
     Rejection,
     limits,
     minute_batch,
+    single_value,
     state_batch,
 )
 from backend.mqtt.topics import Topics
@@ -397,10 +398,9 @@ class MqttService:
             return self._store(site_id, topic,
                                state_batch(info, array, topic, payload, self.limits), payload,
                                handled)
-        try:
-            value = parse_value(payload)
-        except ValueError as exc:
-            self._reject(site_id, Rejection(topic, str(exc), payload))
+        value = single_value(topic, payload, quantity)
+        if isinstance(value, Rejection):
+            self._reject(site_id, value)
             return False
         for closed in self.assembler.add(site_id, array, quantity, value, topic, now_s):
             self._take_minute(closed)
