@@ -33,6 +33,7 @@ from vision.analyse import analyse_frame
 from vision.calibrate import (
     DISTINCT_DEG,
     MIN_DIRECTIONS,
+    PROJECTION_FROM_FRAMES,
     SelfCalibration,
     calibrate_positions,
     n_directions,
@@ -323,8 +324,9 @@ def _other_setting(cal: SelfCalibration, az: np.ndarray, el: np.ndarray, project
                    east: str, n_radial: int | None, fit_tilt: bool) -> tuple[str, str] | None:
     """A setting the caller forced whose other choice fits the calibration's suns by the
     consensus rule (:func:`backend.vision.checks.check_consensus`), and how: ``east`` given
-    left or right (the other mirror, fitted), ``projection`` (each other one: the default
-    equidistant may not be the lens's), ``n_radial`` given (chosen from the frames),
+    left or right (the other mirror, fitted), ``projection`` given (each other one: a named
+    projection may not be the lens's; ``auto`` compared them already), ``n_radial`` given
+    (chosen from the frames),
     ``fit_tilt`` asked for (no tilt). The suns are the ones already found
     (no frame is decoded again); the one leaving the fewest out, then the closest fit;
     None when no such choice fits."""
@@ -334,7 +336,8 @@ def _other_setting(cal: SelfCalibration, az: np.ndarray, el: np.ndarray, project
                              "fit_tilt": fit_tilt}
     tries: list[tuple[str, dict[str, Any]]] = \
         ([("east", {"east": "auto"})] if east != "auto" else []) + \
-        [("projection", {"projection": p}) for p in PROJECTIONS if p != projection] + \
+        [("projection", {"projection": p}) for p in PROJECTIONS
+         if projection not in (p, PROJECTION_FROM_FRAMES)] + \
         ([("n_radial", {"n_radial": None})] if n_radial is not None else []) + \
         ([("fit_tilt", {"fit_tilt": False})] if fit_tilt else [])
     fits: list[tuple[int, float, str, str]] = []
