@@ -10,7 +10,8 @@ Two ways the twin series gets into ``measurements``:
   days, the missing part of each local day up to now is simulated in one
   vectorised run and stored, so ``twin_wh`` exists for any day, not only for the
   minutes the service happened to be running. ``twin_coverage`` remembers how
-  far each day is stored.
+  far each day is stored; the live loop extends it by the minute it stores, so a read of
+  today does not simulate that minute again.
 
 The twin uses clear sky (``sim.twin.simulate`` with ``weather=None``).
 
@@ -35,7 +36,7 @@ from typing import Any
 import anyio
 import numpy as np
 import pandas as pd
-from sqlalchemy import Connection, Engine
+from sqlalchemy import Connection, Engine, update
 from sqlalchemy.dialects import postgresql, sqlite
 
 from backend.measurements.writer import MeasurementJob, Writer
@@ -318,11 +319,15 @@ class TwinService:
         """One tick of the live loop: the current minute for every site, stored."""
         minute = int((time.time() if now_s is None else now_s) // 60 * 60)
         futures = []
+        stored: list[tuple[str, int]] = []
         for site_id, info in self.registry.sites.items():
             if not self.simulable(site_id):
                 continue
             sample, series = self._minute(info, minute)
             futures += [self.writer.submit(job) for job in jobs_from_series(info, series)]
+            d = dt.datetime.fromtimestamp(minute, info.zone).date()
+            stored.append((site_id, int(dt.datetime(d.year, d.month, d.day,
+                                                    tzinfo=info.zone).timestamp())))
             if self.scene is not None and site_id == self.scene_site:
                 try:
                     self.scene.update_live(
@@ -334,6 +339,8 @@ class TwinService:
                     logger.exception("3D scene update failed")
         for f in futures:
             f.result()
+        if stored:
+            self.writer.call(lambda conn: _extend_coverage(conn, stored, minute)).result()
 
     async def run_live(self, stop: asyncio.Event, interval_s: float) -> None:
         """Run the live loop on its own thread (``heliotwin-live``) until ``stop`` is set.
@@ -368,6 +375,18 @@ class TwinService:
             clock.end(due, time.time(), started)
             due = clock.next_due(time.time())
             halt.wait(max(0.0, due - time.time()))
+
+
+def _extend_coverage(conn: Connection, days: list[tuple[str, int]], minute: int) -> None:
+    """Count the live loop's ``minute`` (stored) in each ``(site, local day)``'s coverage
+    where that coverage reaches it: else every read of today (the tiles, Home Assistant's
+    states every minute) simulated the minutes the loop had already stored again — a
+    fleet of 40 sites ran 40 ``simulate`` calls a minute for one minute each."""
+    for site_id, day in days:
+        conn.execute(update(TwinCoverage).where(
+            TwinCoverage.site_id == site_id, TwinCoverage.day_start_s == day,
+            TwinCoverage.covered_until_s >= minute,
+            TwinCoverage.covered_until_s < minute + 60).values(covered_until_s=minute + 60))
 
 
 def _mark_coverage(conn: Connection, site_id: str, marks: list[tuple[int, int]]) -> None:
