@@ -150,6 +150,9 @@ class TwinService:
         self.latest: dict[str, LiveSample] = {}
         #: per site: its Site, the window [from, to) [s] and its minutes (see :meth:`_minute`)
         self._ahead: dict[str, tuple[Any, int, int, pd.DataFrame]] = {}
+        #: per site: the first and the last minute of the live loop's current run of
+        #: minutes stored tick after tick (:meth:`live_step`, :func:`_extend_coverage`)
+        self._live_run: dict[str, tuple[int, int]] = {}
         #: the live loop's schedule and lag (None until :meth:`run_live` starts)
         self.clock: LiveClock | None = None
         self._locks = {sid: threading.Lock() for sid in registry.sites}
@@ -237,6 +240,7 @@ class TwinService:
         """Drop the cached live sample of a site whose config changed."""
         self.latest.pop(site_id, None)
         self._ahead.pop(site_id, None)
+        self._live_run.pop(site_id, None)
 
     def no_twin_reason(self, site_id: str, start_s: int, end_s: int,
                        now_s: float | None = None) -> str | None:
@@ -319,15 +323,17 @@ class TwinService:
         """One tick of the live loop: the current minute for every site, stored."""
         minute = int((time.time() if now_s is None else now_s) // 60 * 60)
         futures = []
-        stored: list[tuple[str, int]] = []
+        runs: list[tuple[str, int, int]] = []  # (site, local day start, the run's first minute)
         for site_id, info in self.registry.sites.items():
             if not self.simulable(site_id):
                 continue
             sample, series = self._minute(info, minute)
             futures += [self.writer.submit(job) for job in jobs_from_series(info, series)]
+            first, last = self._live_run.get(site_id, (minute, minute))
             d = dt.datetime.fromtimestamp(minute, info.zone).date()
-            stored.append((site_id, int(dt.datetime(d.year, d.month, d.day,
-                                                    tzinfo=info.zone).timestamp())))
+            runs.append((site_id, int(dt.datetime(d.year, d.month, d.day,
+                                                  tzinfo=info.zone).timestamp()),
+                         first if last == minute - 60 else minute))
             if self.scene is not None and site_id == self.scene_site:
                 try:
                     self.scene.update_live(
@@ -339,8 +345,9 @@ class TwinService:
                     logger.exception("3D scene update failed")
         for f in futures:
             f.result()
-        if stored:
-            self.writer.call(lambda conn: _extend_coverage(conn, stored, minute)).result()
+        self._live_run.update({site_id: (first, minute) for site_id, _, first in runs})
+        if runs:
+            self.writer.call(lambda conn: _extend_coverage(conn, runs, minute)).result()
 
     async def run_live(self, stop: asyncio.Event, interval_s: float) -> None:
         """Run the live loop on its own thread (``heliotwin-live``) until ``stop`` is set.
@@ -377,15 +384,16 @@ class TwinService:
             halt.wait(max(0.0, due - time.time()))
 
 
-def _extend_coverage(conn: Connection, days: list[tuple[str, int]], minute: int) -> None:
-    """Count the live loop's ``minute`` (stored) in each ``(site, local day)``'s coverage
-    where that coverage reaches it: else every read of today (the tiles, Home Assistant's
-    states every minute) simulated the minutes the loop had already stored again — a
-    fleet of 40 sites ran 40 ``simulate`` calls a minute for one minute each."""
-    for site_id, day in days:
+def _extend_coverage(conn: Connection, runs: list[tuple[str, int, int]], minute: int) -> None:
+    """Count the live loop's minutes in each ``(site, local day)``'s coverage: where it
+    reaches the first minute of the loop's current run (every minute from there to
+    ``minute`` stored), it now reaches past ``minute``. Without this every read of today
+    (the tiles, Home Assistant's states every minute) simulated the minute the loop had
+    just stored again: a fleet of 40 sites ran 40 ``simulate`` calls a minute."""
+    for site_id, day, first in runs:
         conn.execute(update(TwinCoverage).where(
             TwinCoverage.site_id == site_id, TwinCoverage.day_start_s == day,
-            TwinCoverage.covered_until_s >= minute,
+            TwinCoverage.covered_until_s >= first,
             TwinCoverage.covered_until_s < minute + 60).values(covered_until_s=minute + 60))
 
 
