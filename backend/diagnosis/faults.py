@@ -88,6 +88,13 @@ FAULT_WORDS: dict[str, str] = {  # keys: FaultKind's (tests/backend/test_alerts.
 
 MIN_CLEARNESS = 0.55  # days clearer than this can show a shape fault [-]
 FIT_RATIO = 0.6  # a fault's residual under this × the healthy residual names it
+#: An ``azimuth_offset`` whose fitted scale is above this is no explanation: a tracker
+#: pointing δ off cannot make more than the twin at that pointing gives. A healthy
+#: tracker's clear summer day, its truth transposed by the isotropic sky (no circumsolar
+#: light on the sun-facing plane: 4–5 % below the twin's Hay-Davies), fitted a 35–40°
+#: offset at scale 1.022–1.087 and confidence 0.57–0.76 (6 of 30 site-days, 35–55° N,
+#: a tester's generator); a real 40° offset fits at 0.968–1.000 whichever sky made it
+AZIMUTH_OFFSET_MAX_SCALE = 1.01
 HEALTHY_RESIDUAL = 0.05  # healthy residuals stay under this (1 % noise + sky errors) [-]
 STEP_MIN_DROP = 0.08  # a module_loss is a drop of the daily scale by at least 8 %
 STEP_MIN_T = 6.0  # … with a two-sample t of at least this
@@ -496,7 +503,9 @@ def _shape_fault(f: dict[str, Any]) -> tuple[str, float] | None:
     r0 = f["residual"]
     # an explanation without a residual (a cached JSON null: inf, nothing to fit) is out
     fitted = [k for k in ("stuck", "azimuth_offset", "clock_offset")
-              if f[k]["residual"] is not None and np.isfinite(f[k]["residual"])]
+              if f[k]["residual"] is not None and np.isfinite(f[k]["residual"])
+              and not (k == "azimuth_offset"
+                       and f[k].get("scale", 0.0) > AZIMUTH_OFFSET_MAX_SCALE)]
     if not fitted:
         return None
     kind = min(fitted, key=lambda k: f[k]["residual"])
