@@ -91,7 +91,10 @@ class ServerSettings(_Group):
                     "unset: the port it listens on.")
     access_log: bool = Field(False, description="Log every HTTP request (uvicorn access log).")
     max_upload_bytes: int = Field(
-        10 * 1024 * 1024, gt=0, description="Largest request body accepted (ingest, images)."
+        10 * 1024 * 1024, gt=0,
+        description="Largest request body accepted (ingest, weather files; a vision "
+                    "upload's: `HELIOTWIN_VISION_MAX_IMAGE_BYTES`, "
+                    "`HELIOTWIN_VISION_MAX_BATCH_BYTES`)."
     )
     admin_token: SecretStr | None = Field(
         None, description="Bearer token of the admin endpoints (`/api/v1/tokens`); unset: "
@@ -300,6 +303,13 @@ class VisionSettings(_Group):
 
     max_pixels: int = Field(
         40_000_000, gt=0, description="Largest image (pixels) the vision endpoints decode."
+    )
+    max_image_bytes: int = Field(
+        64 * 1024 * 1024, gt=0,
+        description="Largest request body of a single-frame upload (`POST /api/v1/vision/sun`, "
+                    "a pointing-model observation): a 6000×4000 camera JPEG at quality 100 is "
+                    "≈ 13 MiB, a 16-bit PNG of 3000×2000 px ≈ 27 MiB; larger → 413. The "
+                    "frame's pixels are bounded by `HELIOTWIN_VISION_MAX_PIXELS`."
     )
     max_batch_bytes: int = Field(
         64 * 1024 * 1024, gt=0,

@@ -340,9 +340,9 @@ def test_a_frame_without_a_sun_or_with_a_bad_field_is_refused_and_not_stored(
     r = _post_frame(client, live_server.token("tehuantepec", scope="ingest"), b"not a png",
                     **fields)
     assert r.status_code == 415 and "file" in r.text
-    big = b"\x89PNG" + bytes(live_server.process.settings.server.max_upload_bytes)
+    big = b"\x89PNG" + bytes(live_server.process.settings.vision.max_image_bytes)
     r = _post_frame(client, ingest_token, big, **fields)
-    assert r.status_code == 413 and "HELIOTWIN_MAX_UPLOAD_BYTES" in r.text
+    assert r.status_code == 413 and "HELIOTWIN_VISION_MAX_IMAGE_BYTES" in r.text
     stored = client.get(PATH, params={"array": "tracker", "start": "2021-10-13",
                                       "end": "2021-10-14"}).json()["points"]
     assert stored == []

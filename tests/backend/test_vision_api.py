@@ -281,29 +281,45 @@ def test_decompression_bomb_refused_from_its_header(client: httpx.Client) -> Non
     assert "100000" in r.json()["detail"] and "file" in r.json()["detail"]
 
 
-def test_oversized_body_is_413_even_without_content_length(client: httpx.Client) -> None:
-    """With or without Content-Length, the 413 names the field (a tester's 16-bit PNG of
-    3000 × 2000 px, 30 MB: the refusal named only the setting)."""
-    big = b"\xff\xd8" + b"\x00" * (11 * 1024 * 1024)
-    r = client.post(SUN, files={"file": ("big.jpg", big, "image/jpeg")},
-                    data={"camera": "pinhole"})
-    assert r.status_code == 413
-    assert r.json()["detail"].startswith("file: body of "), r.text
-    boundary = "b0undary"
-    head = (f"--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; "
-            f"filename=\"big.jpg\"\r\nContent-Type: image/jpeg\r\n\r\n").encode()
+def test_a_single_frame_has_its_own_body_bound_named_in_its_413(tmp_path: Path) -> None:
+    """A single frame is bounded by HELIOTWIN_VISION_MAX_IMAGE_BYTES, not by the ingest
+    body's HELIOTWIN_MAX_UPLOAD_BYTES: a 6000×4000 camera JPEG at quality 100 (≈ 13 MiB)
+    and a tester's 16-bit PNG of 3000 × 2000 px (30 MB) were 413s under its 10 MiB. Here
+    both bounds are set small: a real frame past the ingest bound is found; past the image
+    bound, with or without Content-Length, the 413 names the field and the setting."""
+    img = cv2.imread(str(REAL_SKY / "Wolf_20160530_094400_UTCp1_sunrow1338_suncol616.jpg"))
+    frame = cv2.imencode(".png", cv2.resize(img, (960, 960), interpolation=cv2.INTER_AREA)
+                         )[1].tobytes()
+    assert 256 << 10 < len(frame) < 8 << 20, len(frame)
+    server = InProcessServer(f"sqlite:///{tmp_path / 'v.sqlite'}",
+                             {"HELIOTWIN_MAX_UPLOAD_BYTES": str(256 << 10),
+                              "HELIOTWIN_VISION_MAX_IMAGE_BYTES": str(8 << 20)})
+    with server, server.client(timeout_s=60) as client:
+        r = client.post(SUN, files={"file": ("wolf.png", frame, "image/png")},
+                        data={"camera": "fisheye"})
+        assert r.status_code == 200 and r.json()["sun_found"], r.text
+        big = b"\xff\xd8" + b"\x00" * (9 << 20)
+        r = client.post(SUN, files={"file": ("big.jpg", big, "image/jpeg")},
+                        data={"camera": "pinhole"})
+        assert r.status_code == 413
+        assert r.json()["detail"].startswith("file: body of "), r.text
+        assert "HELIOTWIN_VISION_MAX_IMAGE_BYTES" in r.json()["detail"], r.text
+        boundary = "b0undary"
+        head = (f"--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; "
+                f"filename=\"big.jpg\"\r\nContent-Type: image/jpeg\r\n\r\n").encode()
 
-    def chunks():  # streamed: httpx sends it chunked, with no Content-Length
-        yield head
-        for _ in range(12):
-            yield b"\x00" * (1024 * 1024)
-        yield f"\r\n--{boundary}--\r\n".encode()
+        def chunks():  # streamed: httpx sends it chunked, with no Content-Length
+            yield head
+            for _ in range(9):
+                yield b"\x00" * (1 << 20)
+            yield f"\r\n--{boundary}--\r\n".encode()
 
-    r = client.post(SUN, content=chunks(),
-                    headers={"Content-Type": f"multipart/form-data; boundary={boundary}"})
-    assert r.status_code == 413
-    assert r.json()["detail"].startswith("file: body over "), r.text
-    assert client.get("/healthz").status_code == 200
+        r = client.post(SUN, content=chunks(),
+                        headers={"Content-Type": f"multipart/form-data; boundary={boundary}"})
+        assert r.status_code == 413
+        assert r.json()["detail"].startswith("file: body over "), r.text
+        assert "HELIOTWIN_VISION_MAX_IMAGE_BYTES" in r.json()["detail"], r.text
+        assert client.get("/healthz").status_code == 200
 
 
 def test_calibrate_then_detect_with_the_calibration(client: httpx.Client) -> None:

@@ -244,7 +244,8 @@ async def post_pointing_observation(site_id: str, request: Request, ctx: Context
     """A tracker-camera frame with its time and encoder angles → the sun's offsets in it,
     stored as an observation (a reading of the tracker array, through the writer: answered
     once committed). Needs a token of the site (``ingest`` scope or wider); the body is
-    bounded by ``HELIOTWIN_MAX_UPLOAD_BYTES``, the image by ``HELIOTWIN_VISION_MAX_PIXELS``.
+    bounded by ``HELIOTWIN_VISION_MAX_IMAGE_BYTES``, the image by
+    ``HELIOTWIN_VISION_MAX_PIXELS``.
     A frame without a sun is a 422 saying why, and nothing is stored."""
     await check_site_token(ctx, site_id, request.headers.get("authorization"), "ingest",
                            "storing pointing observations")
@@ -253,9 +254,10 @@ async def post_pointing_observation(site_id: str, request: Request, ctx: Context
     if tracker is None:
         raise HTTPException(422, f"site {site_id!r} has no tracker array to observe")
     s = ctx.settings
-    form = await read_form(request, s.server.max_upload_bytes,
+    form = await read_form(request, s.vision.max_image_bytes,
                            "a tracker-camera frame in the field 'file'", max_files=1,
-                           max_fields=len(_READING_FIELDS) + len(_CAMERA_FIELDS) + 1)
+                           max_fields=len(_READING_FIELDS) + len(_CAMERA_FIELDS) + 1,
+                           limit_name="HELIOTWIN_VISION_MAX_IMAGE_BYTES")
     uploads = form.getlist("file")
     if len(uploads) != 1 or not isinstance(uploads[0], UploadFile):
         raise HTTPException(422, "file: exactly one image of the tracker's camera is needed")

@@ -24,7 +24,7 @@
   trajectory on the dashboard.
 
 Uploads are bounded: the body is read in chunks and refused with 413 past
-``max_upload_bytes`` — a batch's (``/calibrations``, ``/evaluate``) past
+``vision.max_image_bytes`` — a batch's (``/calibrations``, ``/evaluate``) past
 ``vision.max_batch_bytes`` (Content-Length is not trusted alone); each image's size
 is read from its PNG/JPEG header and refused (413) above
 ``vision_max_pixels`` before anything is decoded; a non-image or a corrupt
@@ -139,8 +139,7 @@ def _json(data: Any, status: int = 200) -> Response:
 # --------------------------------------------------------------------------- input
 
 
-async def _read_form(request: Request, limit: int,
-                     limit_name: str = "HELIOTWIN_MAX_UPLOAD_BYTES",
+async def _read_form(request: Request, limit: int, limit_name: str,
                      field: str = "file") -> FormData:
     """The form; a text field sent as a file part is a 422 naming it (it was dropped).
     ``limit``: the body's bound in bytes, from the setting ``limit_name``; ``field``: the
@@ -155,8 +154,8 @@ async def _read_form(request: Request, limit: int,
 
 async def _batch_form(request: Request, ctx: Any) -> FormData:
     """The form of a batch (a calibration, an evaluation: up to :data:`_MAX_FILES` frames),
-    bounded by ``HELIOTWIN_VISION_MAX_BATCH_BYTES`` rather than the single upload's
-    ``HELIOTWIN_MAX_UPLOAD_BYTES``: 12 ordinary frames (1920² px, JPEG quality 92,
+    bounded by ``HELIOTWIN_VISION_MAX_BATCH_BYTES`` rather than the single frame's
+    ``HELIOTWIN_VISION_MAX_IMAGE_BYTES``: 12 ordinary frames (1920² px, JPEG quality 92,
     ≈ 1.17 MB each) passed 10 MB (a tester's finding). The frames are decoded one at a
     time (:func:`_timed_frames`), so the bound is on the bytes held, not on pixels."""
     return await _read_form(request, ctx.settings.vision.max_batch_bytes,
@@ -444,7 +443,8 @@ async def post_sun(request: Request, ctx: ContextDep, session: SessionDep,
                    _token: VisionTokenDep) -> Response:
     """Find the sun in one frame; with time and place, compare with SPA. The result is stored."""
     s = ctx.settings
-    form = await _read_form(request, s.server.max_upload_bytes)
+    form = await _read_form(request, s.vision.max_image_bytes,
+                            "HELIOTWIN_VISION_MAX_IMAGE_BYTES")
     _known_fields(form, _SUN_PROPERTIES)
     uploads = form.getlist("file")
     if len(uploads) != 1:
