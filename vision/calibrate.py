@@ -403,6 +403,7 @@ def leave_one_out_deg(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
 def choose_radial(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
                   elevation_deg: ArrayLike, image_size: tuple[int, int],
                   max_terms: int = 2, eligible: Sequence[int] | None = None,
+                  held_out: dict[int, NDArray[np.float64]] | None = None,
                   **fit_kwargs: Any) -> tuple[int, list[dict[str, Any]]]:
     """How many radial polynomial terms the frames support (0: the plain projection).
 
@@ -412,9 +413,10 @@ def choose_radial(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
     Statistical Learning*, 2nd ed., §7.10): a term must lower the held-out error by more
     than the frames can tell apart from noise. ``eligible`` (default: every model tried)
     are the models the choice is made among; the others are scored for the report only.
-    Returns the number of terms and, for each tried, ``n_radial`` and ``loo_rms_deg``.
-    A model needs distinct sun directions enough for a leave-one-out fit with one to
-    spare (:func:`radial_terms_possible`).
+    Returns the number of terms and, for each tried, ``n_radial`` and ``loo_rms_deg``;
+    ``held_out`` (a dict given) receives each model's held-out residuals [°], so that the
+    caller does not fit them again. A model needs distinct sun directions enough for a
+    leave-one-out fit with one to spare (:func:`radial_terms_possible`).
     """
     x = np.asarray(x_px, float).ravel()
     n_dirs = n_directions(azimuth_deg, elevation_deg)
@@ -422,8 +424,11 @@ def choose_radial(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
     mse: dict[int, float] = {}
     se: dict[int, float] = {}
     for k in range(radial_terms_possible(n_dirs, bool(fit_kwargs.get("fit_tilt")), max_terms)):
-        sq = leave_one_out_deg(x, y_px, azimuth_deg, elevation_deg, image_size,
-                               n_radial=k, **fit_kwargs) ** 2
+        loo = leave_one_out_deg(x, y_px, azimuth_deg, elevation_deg, image_size,
+                                n_radial=k, **fit_kwargs)
+        if held_out is not None:
+            held_out[k] = loo
+        sq = loo ** 2
         mse[k] = float(np.mean(sq))
         se[k] = float(np.std(sq, ddof=1) / np.sqrt(sq.size))
         tried.append({"n_radial": k, "loo_rms_deg": float(np.sqrt(mse[k]))})
@@ -559,18 +564,21 @@ def calibrate_positions(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike
     cam = fits[best[0]].result.camera
     known = {**fixed, "east": cam.east, "centre_guess_px": (cam.cx_px, cam.cy_px)}
     selection: list[dict[str, Any]] = []
+    held: dict[int, NDArray[np.float64]] = {}  # the models' held-out residuals, fitted once
     k = best[0]
     if n_radial is None:
         k, selection = choose_radial(x[inl], y[inl], az[inl], el[inl], image_size,
-                                     max_terms=max(fits), eligible=best, **known)
+                                     max_terms=max(fits), eligible=best, held_out=held,
+                                     **known)
         for row in selection:
             f = fits[row["n_radial"]]
             row["n_inliers"] = int(np.sum(f.inlier & (f.residuals_deg <= outlier_deg)))
     rf = fits[k]
     n_par = 4 + k + (2 if fit_tilt else 0)
-    loo = (leave_one_out_deg(x[inl], y[inl], az[inl], el[inl], image_size,
-                             **{**known, "n_radial": k})
-           if not _too_few(n_directions(az[inl], el[inl]) - 1, n_par) else np.empty(0))
+    loo = held[k] if k in held else (
+        leave_one_out_deg(x[inl], y[inl], az[inl], el[inl], image_size,
+                          **{**known, "n_radial": k})
+        if not _too_few(n_directions(az[inl], el[inl]) - 1, n_par) else np.empty(0))
     return PositionFit(rf, [{"projection": projection, **row} for row in selection], loo)
 
 

@@ -16,6 +16,7 @@ from vision.calibrate import (
     MAX_RMS_DEG,
     MAX_TILT_DEG,
     CalibrationFailed,
+    PositionFit,
     calibrate_positions,
     choose_radial,
     direction_groups,
@@ -320,23 +321,20 @@ def test_the_frames_choose_the_lens_projection(lens: str, seed: int) -> None:
     x, y, az, el = _lens_day(lens, seed)
     fit, held = np.arange(0, x.size, 2), np.arange(1, x.size, 2)
 
-    def held_out(projection: str) -> tuple[FisheyeCamera, float]:
+    def held_out(projection: str) -> tuple[PositionFit, float]:
         pf = calibrate_positions(x[fit], y[fit], az[fit], el[fit], (3000, 2000),
                                  projection=projection)
-        cam = pf.fit.result.camera
-        r = sky_residuals_deg(cam, x[held], y[held], az[held], el[held])
-        return cam, float(np.sqrt(np.mean(r**2)))
+        r = sky_residuals_deg(pf.fit.result.camera, x[held], y[held], az[held], el[held])
+        return pf, float(np.sqrt(np.mean(r**2)))
 
-    auto, auto_rms = held_out("auto")
-    plain, plain_rms = held_out("equidistant")
+    (pf, auto_rms), (plain_pf, plain_rms) = held_out("auto"), held_out("equidistant")
+    auto, plain = pf.fit.result.camera, plain_pf.fit.result.camera
     assert auto.projection == lens
     if lens == "equidistant":
         assert auto == plain
     else:
         assert plain.radial_coeffs and not auto.radial_coeffs
         assert auto_rms < 0.9 * plain_rms
-    pf = calibrate_positions(x[fit], y[fit], az[fit], el[fit], (3000, 2000),
-                             projection="auto")
     assert {m["projection"] for m in pf.model_selection} == set(PROJECTIONS)
 
 
