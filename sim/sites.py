@@ -25,6 +25,7 @@ from sim.site_config import (
     fixed_tilt_from_latitude_deg,
     validate_site_config,
 )
+from sim.stow import STOW_RELEASE_MIN, WindStow
 
 _TRACKER_KEYS = (
     "d1_m",
@@ -69,6 +70,9 @@ class Site:
     inertia : TrackerInertia
         The two links' masses, inertias and centres of gravity (seed 002,
         Table 1 by default; the config's ``tracker.inertia`` overrides).
+    wind_stow : WindStow, optional
+        The tracker's wind stow (:mod:`sim.stow`; config ``tracker.stow_wind_speed_m_s``,
+        ``tracker.stow_release_min``); None, the default: it never stows for wind.
     placements : dict of str to Placement
         Where the arrays that have a configured position stand
         (:class:`sim.array_shade.Placement`); with ``tracker`` and ``fixed`` placed, the
@@ -93,6 +97,7 @@ class Site:
     drives: dict[str, AxisDrive] = field(default_factory=lambda: {
         "azimuth": AxisDrive.azimuth_default(), "elevation": AxisDrive.elevation_default()})
     inertia: TrackerInertia = field(default_factory=TrackerInertia.seed002)
+    wind_stow: WindStow | None = None
     placements: dict[str, Placement] = field(default_factory=dict)
     source: str = ""
     notes: str = ""
@@ -118,6 +123,10 @@ class Site:
                 **{k: getattr(self.tracker, k) for k in _TRACKER_KEYS},
                 "drives": {axis: dataclasses.asdict(d) for axis, d in self.drives.items()},
                 "inertia": dataclasses.asdict(self.inertia),
+                # only when set: the configs stored before the keys are unchanged by them
+                **({} if self.wind_stow is None else {
+                    "stow_wind_speed_m_s": self.wind_stow.wind_speed_m_s,
+                    "stow_release_min": self.wind_stow.release_min}),
             },
             "arrays": {name: {**arr.to_dict(), **self._placement(name)}
                        for name, arr in self.arrays.items()},
@@ -160,6 +169,9 @@ def site_from_dict(d: dict[str, Any], where: str = "site") -> Site:
         drives = {"azimuth": AxisDrive(**t.drives.azimuth.model_dump()),
                   "elevation": AxisDrive(**t.drives.elevation.model_dump())}
         inertia = TrackerInertia(**t.inertia.model_dump())
+        wind_stow = None if t.stow_wind_speed_m_s is None else WindStow(
+            t.stow_wind_speed_m_s,
+            STOW_RELEASE_MIN if t.stow_release_min is None else t.stow_release_min)
         arrays = {name: array_config_from_dict(name, a.model_dump(exclude=set(PLACEMENT_KEYS)))
                   for name, a in cfg.arrays.items()}
         placements = {name: Placement(**a.model_dump(include=set(PLACEMENT_KEYS)))
@@ -181,6 +193,7 @@ def site_from_dict(d: dict[str, Any], where: str = "site") -> Site:
         readings_stamped=cfg.readings_stamped,
         drives=drives,
         inertia=inertia,
+        wind_stow=wind_stow,
         placements=placements,
         source=cfg.source,
         notes=cfg.notes,

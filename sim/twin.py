@@ -36,6 +36,15 @@ area-proportional, a lower bound (a shaded cell row drops its bypass-diode
 substring) — and the series gains ``fixed_shaded_fraction`` [-], the summary
 ``fixed_shade_loss_wh`` (the fixed array's energy unshaded minus shaded, same
 PV model). Without positions nothing changes.
+
+Wind stow: a site whose tracker has ``stow_wind_speed_m_s`` (:class:`sim.stow.WindStow`), on a
+run whose weather has a ``wind_speed`` column, lies flat (the night stow's elevation, on its
+base) in the steps :meth:`sim.stow.WindStow.stowed` marks; its power there is the flat
+plane's, through the same sky, temperature and PV chain. The ideal tracker of the pointing
+loss stows too (the stow is not a pointing error) and the stowed steps are not tracking. The
+series gains ``stow_loss_power_w`` [W] (the tracker's power had it not stowed minus its
+power), the summary ``stow_min`` (daylight minutes stowed) and ``stow_loss_wh``, each day
+``stow_loss_wh``. The control loop and its motors do not see the stow (no move to it costed).
 """
 
 from __future__ import annotations
@@ -151,6 +160,9 @@ class TwinResult:
     #: and the words when it is too large (:func:`sim.weather_clock.shift_warning`)
     weather_shift_min: float | None = None
     weather_warning: str | None = None
+    #: daylight minutes the wind held the tracker stowed (:mod:`sim.stow`); None when the
+    #: run's weather has no wind speed
+    stow_min: int | None = None
 
     def _power_to_close(self, array: str) -> np.ndarray:
         """``array``'s power [W] at every step and at the instant closing the last."""
@@ -186,10 +198,11 @@ class TwinResult:
         t = np.append(t, t[-1] + self.step_s)  # the instant closing the last step
         gap = 1.5 * self.step_s
         per = {a: energy_per_period_wh(t, self._power_to_close(a), gap, edges_s)
-               for a in ("tracker", "fixed")}
+               for a in ("tracker", "fixed", "stow_loss") if a in self.closing_power_w}
         return [{"date": d.date().isoformat(), "tracker_energy_wh": float(per["tracker"][k]),
                  "fixed_energy_wh": float(per["fixed"][k]),
-                 "gain_pct": gain_pct(float(per["tracker"][k]), float(per["fixed"][k]))}
+                 "gain_pct": gain_pct(float(per["tracker"][k]), float(per["fixed"][k])),
+                 **({"stow_loss_wh": float(per["stow_loss"][k])} if "stow_loss" in per else {})}
                 for k, d in enumerate(dates)]
 
     def summary(self) -> dict[str, Any]:
@@ -228,6 +241,11 @@ class TwinResult:
             out["pointing_model_terms"] = dict(self.pointing_model_terms)
         if self.fixed_shade_loss_wh is not None:
             out["fixed_shade_loss_wh"] = self.fixed_shade_loss_wh
+        if self.site.wind_stow is not None:  # null: the run's sky has no wind to stow for
+            out["stow_wind_speed_m_s"] = self.site.wind_stow.wind_speed_m_s
+            out["stow_min"] = self.stow_min
+            out["stow_loss_wh"] = (self.energy_wh("stow_loss") if self.stow_min is not None
+                                   else None)
         if self.sky == "weather":
             out["weather_shift_min"] = self.weather_shift_min
             out["weather_warning"] = self.weather_warning
@@ -388,6 +406,7 @@ def _arrays_step(
     acceptance_angle_deg: float = 0.5,
     layout: array_shade.Layout | None = None,
     base: np.ndarray | None = None,
+    stowed: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """All series columns for one chunk of steps.
 
@@ -396,7 +415,10 @@ def _arrays_step(
     The extra key ``ideal_tracker_power_w`` is the ideal tracker's power when
     a pose or the CPV receiver is given. With a ``layout`` (the arrays' places,
     :func:`sim.array_shade.layout_of`; ``base`` the tracker's disturbed base rotation)
-    the extra keys ``fixed_shaded_fraction`` [-] and ``fixed_shade_loss_w`` [W].
+    the extra keys ``fixed_shaded_fraction`` [-] and ``fixed_shade_loss_w`` [W]. With
+    ``stowed`` (bool per step, :meth:`sim.stow.WindStow.stowed`) the tracker and the ideal
+    tracker lie flat in those steps and the series key ``stow_loss_power_w`` [W] is the
+    tracker's power in its pose before the stow minus its power.
     """
     from pvlib import atmosphere
 
@@ -420,6 +442,16 @@ def _arrays_step(
         az_joint, el_joint, normal = az_ideal, el_ideal, ideal_normal
     else:
         az_joint, el_joint, normal = pose
+    unstowed = None
+    if stowed is not None and np.any(stowed):
+        # flat as at night (elevation joint at its maximum, azimuth kept), on its base
+        unstowed = kinematics.normal_to_tilt_azimuth(normal)
+        el_joint = np.where(stowed, site.tracker.elevation_max_deg, el_joint)
+        flat = kinematics.forward_kinematics(az_joint, el_joint, site.tracker)
+        normal = np.where(stowed[:, None], flat if base is None else flat @ base.T, normal)
+        ideal_normal = np.where(stowed[:, None], kinematics.forward_kinematics(
+            az_ideal, np.where(stowed, site.tracker.elevation_max_deg, el_ideal),
+            site.tracker), ideal_normal)
     out["azimuth_joint_deg"], out["elevation_joint_deg"] = az_joint, el_joint
     tilt, surf_az = kinematics.normal_to_tilt_azimuth(normal)
     fixed = site.arrays["fixed"]
@@ -446,6 +478,8 @@ def _arrays_step(
         out["ideal_tracker_poa_global"] = np.zeros(n)
     if layout is not None:
         out["fixed_shaded_fraction"], out["fixed_shade_loss_w"] = np.zeros(n), np.zeros(n)
+    if stowed is not None:
+        out["stow_loss_power_w"], out["tracker_unstowed_power_w"] = np.zeros(n), np.zeros(n)
 
     day = app_el > 0
     if not np.any(day):
@@ -478,9 +512,13 @@ def _arrays_step(
         i_tilt, i_az = kinematics.normal_to_tilt_azimuth(ideal_normal[day])
         i_aoi = sky.angle_of_incidence(i_tilt, i_az, app_zen[day], azimuth[day])
         orientation["ideal_tracker"] = (i_tilt, i_az, i_aoi)
+    if unstowed is not None:  # the stow's loss: the same chain in the pose before it
+        u_tilt, u_az = unstowed[0][day], unstowed[1][day]
+        orientation["tracker_unstowed"] = (
+            u_tilt, u_az, sky.angle_of_incidence(u_tilt, u_az, app_zen[day], azimuth[day]))
     unshaded_w = None
     for name, (s_tilt, s_az, aoi) in orientation.items():
-        arr = site.arrays["tracker" if name == "ideal_tracker" else name]
+        arr = site.arrays["fixed" if name == "fixed" else "tracker"]
         if name != "fixed" and receiver == "cpv":
             # a concentrator converts the beam inside its acceptance angle only
             beam = irr["dni"] * _beam_transmission(aoi, acceptance_angle_deg)
@@ -517,10 +555,16 @@ def _arrays_step(
             out["ideal_tracker_power_w"][day] = mpp["power_w"]
             out["ideal_tracker_poa_global"][day] = poa_global
             continue
+        if name == "tracker_unstowed":
+            out["tracker_unstowed_power_w"][day] = mpp["power_w"]
+            continue
         out[f"{name}_poa_global"][day] = poa_global
         out[f"{name}_temp_cell"][day] = t_cell
         for q in ("current_a", "voltage_v", "power_w"):
             out[f"{name}_{q}"][day] = mpp[q]
+    if unstowed is not None and stowed is not None:
+        out["stow_loss_power_w"] = np.where(
+            stowed, out["tracker_unstowed_power_w"] - out["tracker_power_w"], 0.0)
     return out
 
 
@@ -643,6 +687,10 @@ def simulate(
     weather_on = (None if weather is None else
                   sky.weather_at(grid, weather, site.temp_air, site.wind_speed, closing=True))
     pressure = float(atmosphere.alt2pres(site.altitude))
+    stowed = None  # the wind stow, on weather with a wind speed only (sim.stow)
+    if (site.wind_stow is not None and weather is not None and weather_on is not None
+            and "wind_speed" in weather.columns):
+        stowed = site.wind_stow.stowed(sun._unix_seconds(grid), weather_on["wind_speed"])
     ctl = None
     if controller != "ideal":
         if controller in ("closed_loop_camera", "hybrid") and settings.reference_area_px is None:
@@ -665,6 +713,8 @@ def simulate(
     if layout is not None:
         extra.update({k: np.zeros(len(grid)) for k in ("fixed_shaded_fraction",
                                                      "fixed_shade_loss_w")})
+    if stowed is not None:
+        extra["stow_loss_power_w"] = np.zeros(len(grid))
     # the camera loops' frames see the sun only in the weather's beam (tracking.run_loop)
     grid_s = (sun._unix_seconds(grid) if weather_on is not None and ctl is not None
               and ctl.camera_interval_s else None)
@@ -710,7 +760,7 @@ def simulate(
             pose = (res.azimuth_joint_deg,
                     dist.real_elevation_deg(res.elevation_joint_deg, d), normal)
         part = _arrays_step(site, chunk, pos, w, pose, receiver, acceptance_angle_deg, layout,
-                            base)
+                            base, None if stowed is None else stowed[i0 : i0 + len(chunk)])
         if ctl is not None:
             part["azimuth_command_deg"] = res.azimuth_command_deg
             part["elevation_command_deg"] = res.elevation_command_deg
@@ -733,6 +783,15 @@ def simulate(
                        for a in ("tracker", "fixed")}
     duration_s = (end - start).total_seconds()
     tracking = tracking[:n_steps]
+    stow_min = None
+    if stowed is not None:
+        tracking &= ~stowed[:n_steps]  # a stowed tracker is not pointing
+        series["stow_loss_power_w"] = extra["stow_loss_power_w"][:n_steps]
+        closing_power_w["stow_loss"] = float(extra["stow_loss_power_w"][n_steps])
+        step_cut_s = np.full(n_steps, float(step_s))  # the last step only up to the end
+        step_cut_s[-1] = duration_s - (n_steps - 1) * float(step_s)
+        day_stowed = stowed[:n_steps] & (series["apparent_elevation"].to_numpy() > 0)
+        stow_min = int(round(float(step_cut_s[day_stowed].sum()) / 60.0))
     pointing = tracking & (series["apparent_elevation"].to_numpy() > POINTING_MIN_ELEVATION_DEG)
     series.loc[~pointing, "pointing_error_mrad"] = np.nan
     shade_loss_wh = None
@@ -778,6 +837,7 @@ def simulate(
         pointing_model_terms=(None if ctl is None or ctl.pointing_model is None
                               else ctl.pointing_model.as_dict()),
         closing_power_w=closing_power_w,
+        stow_min=stow_min,
     )
 
 

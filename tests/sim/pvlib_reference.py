@@ -81,8 +81,10 @@ def modelchain_dc_power(
     strings: int = 4,
     modules_per_string: int = 1,
     weather: pd.DataFrame | None = None,
+    fixed_tilt: float = FIXED_TILT,
 ) -> pd.DataFrame:
-    """DC power [W] of the tracker and the fixed (16°, south) array by ``ModelChain``.
+    """DC power [W] of the tracker and the fixed (16°, south; ``fixed_tilt`` [°]) array by
+    ``ModelChain``.
 
     Clear sky (Ineichen) with ``temp_air`` [°C] and ``wind_speed`` [m s⁻¹] by
     default, else ``weather`` (``ghi``, ``dni``, ``dhi``, ``temp_air``,
@@ -102,7 +104,7 @@ def modelchain_dc_power(
         )
         for name, mount in (
             ("tracker", DualAxisMount()),
-            ("fixed", pvsystem.FixedMount(FIXED_TILT, FIXED_AZIMUTH)),
+            ("fixed", pvsystem.FixedMount(fixed_tilt, FIXED_AZIMUTH)),
         )
     ]
     system = pvsystem.PVSystem(arrays=arrays)
