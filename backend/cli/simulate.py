@@ -331,6 +331,18 @@ def _tracking_costs(summary: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _stow_lines(summary: dict[str, Any]) -> list[str]:
+    """The wind stow's cost (``sim.stow``), for a site that stows: its daylight minutes and
+    the energy lost, or why there is none (a sky without wind)."""
+    if "stow_wind_speed_m_s" not in summary:
+        return []
+    over = f"wind over {summary['stow_wind_speed_m_s']:g} m/s"
+    if summary["stow_min"] is None:
+        return [f"wind stow: n/a (the run's sky has no wind speed; it stows at {over})"]
+    return [f"wind stow: {summary['stow_min']:,} daylight minutes, "
+            f"{summary['stow_loss_wh']:.2f} Wh lost ({over})"]
+
+
 def _text(summary: dict[str, Any]) -> str:
     gain = summary["gain_pct"]
     return "\n".join(
@@ -346,6 +358,7 @@ def _text(summary: dict[str, Any]) -> str:
             if gain is not None
             else "gain:    n/a (no fixed-array energy)",
         ]
+        + _stow_lines(summary)
         + _tracking_costs(summary)
         + (
             [

@@ -65,6 +65,9 @@ class SimulationDayRead(BaseModel):
     tracker_energy_wh: float
     fixed_energy_wh: float
     gain_pct: float | None
+    stow_loss_wh: float | None = Field(None, description=(
+        "the tracker's energy lost to wind stow that day; absent when the run has no wind "
+        "stow (sim.stow)"))
 
 
 class SimulationSummaryRead(BaseModel):
@@ -135,6 +138,14 @@ class SimulationSummaryRead(BaseModel):
     days: list[SimulationDayRead]
     fixed_shade_loss_wh: float | None = Field(None, description="when the site places both "
                                                                 "arrays")
+    stow_wind_speed_m_s: float | None = Field(None, description=(
+        "the site's wind-stow threshold (tracker.stow_wind_speed_m_s); absent: it never stows"))
+    stow_min: int | None = Field(None, description=(
+        "daylight minutes the wind held the tracker flat (sim.stow); null when the site "
+        "stows but the run's sky has no wind speed (clear sky, or weather without one)"))
+    stow_loss_wh: float | None = Field(None, description=(
+        "the tracker's energy without the stow minus with it, same sky and PV model; null "
+        "as stow_min"))
 
 
 class SimulationRunRead(BaseModel):

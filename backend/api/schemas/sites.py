@@ -88,6 +88,10 @@ class TrackerGeometryRead(BaseModel):
     elevation_max_deg: float
     drives: dict[str, DriveRead] = Field(description="`azimuth` and `elevation`")
     inertia: InertiaRead
+    stow_wind_speed_m_s: float | None = Field(None, description=(
+        "wind speed above which the tracker stows flat (sim.stow); absent: it never stows"))
+    stow_release_min: float | None = Field(None, description=(
+        "minutes of calm after which a stowed tracker tracks again; with the threshold"))
 
 
 class SiteRead(BaseModel):
