@@ -77,6 +77,17 @@ function skyTile(summary, station) {
     `${station.name || "station"} (${num(station.latitude_deg, 2)}°, ${num(station.longitude_deg, 2)}°) · ${num(station.distance_km, 0)} km from the site`);
 }
 
+/** The wind stow's cost beside the gain (sim/stow.py), for a site that stows; nothing otherwise. */
+function stowTile(summary) {
+  if (summary.stow_wind_speed_m_s === undefined || summary.stow_wind_speed_m_s === null) return [];
+  const over = `wind over ${num(summary.stow_wind_speed_m_s, 1)} m/s`;
+  const t = summary.stow_min === null
+    ? tile("Wind stow", "—", `no wind speed in this run's sky; stows at ${over}`)
+    : tile("Wind stow", energy(summary.stow_loss_wh), `lost in ${num(summary.stow_min, 0)} daylight minutes flat · ${over}`);
+  t.dataset.testid = "stow-tile";
+  return [t];
+}
+
 function summaryTiles(summary, station) {
   const box = $("sim-summary");
   box.innerHTML = "";
@@ -87,6 +98,7 @@ function summaryTiles(summary, station) {
     // a polar night (or a dark run) has no gain: say why rather than a bare "—"
     tile("Tracking gain", pct(summary.gain_pct), summary.gain_pct === null && !(summary.fixed_energy_wh > 0)
       ? "none: the fixed array made no energy (the sun below the horizon?)" : "tracker over fixed, twin"),
+    ...stowTile(summary),
     tile("Period", `${num((Date.parse(summary.end) - Date.parse(summary.start)) / 86400000, 1)} days`,
       `${summary.start.slice(0, 10)} → ${summary.end.slice(0, 10)} · step ${num(summary.step_s)} s · ${summary.controller}`),
   );
