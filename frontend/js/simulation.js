@@ -167,9 +167,12 @@ async function drawDaily(runId, summary) {
   const faint = partial.map((p) => (p ? 0.35 : 1));
   const everyDays = Math.max(1, roundStep(days.length, 8));
   const kwh = (k) => days.map((d) => d[k] / 1000);
+  // a site that stows: each day's energy lost to the wind beside its energies (sim/stow.py)
+  const stow = days.every((d) => typeof d.stow_loss_wh === "number");
   await draw("chart-sim-daily", [
     { x, y: kwh("tracker_energy_wh"), name: "tracker", type: "bar", marker: { color: COLORS.tracker, opacity: faint }, hovertemplate: "%{y:.2f} kWh" },
     { x, y: kwh("fixed_energy_wh"), name: "fixed", type: "bar", marker: { color: COLORS.fixed, opacity: faint }, hovertemplate: "%{y:.2f} kWh" },
+    ...(stow ? [{ x, y: kwh("stow_loss_wh"), name: "lost to wind stow", type: "bar", marker: { color: COLORS.grey, opacity: faint }, hovertemplate: "%{y:.2f} kWh" }] : []),
     { ...split.whole, name: "gain", yaxis: "y2", type: "scatter", mode: "lines+markers", line: { color: COLORS.gain }, hovertemplate: "%{y:.1f} %" },
     ...(split.part.x.length ? [{ x: split.part.x, y: split.part.y, customdata: split.part.value, name: "gain (partial day)", yaxis: "y2", type: "scatter", mode: "markers",
       marker: { color: COLORS.gain, opacity: 0.35, symbol: "circle-open" }, hovertemplate: "%{customdata:.1f} % (partial day)" }] : []),
@@ -181,8 +184,8 @@ async function drawDaily(runId, summary) {
     yaxis: { title: { text: "Energy [kWh]" }, ...zeroBasedAxis([...whole(kwh("tracker_energy_wh")), ...whole(kwh("fixed_energy_wh"))]), gridcolor: "#e9edf1" },
     yaxis2: { title: { text: "Tracking gain [%]" }, overlaying: "y", side: "right", showgrid: false, ticksuffix: " %", ...gainAxis },
   }), {
-    columns: ["date", "tracker_energy_wh", "fixed_energy_wh", "gain_pct", "partial_day"],
-    rows: days.map((d, i) => [d.date, d.tracker_energy_wh, d.fixed_energy_wh, d.gain_pct, partial[i]]),
+    columns: ["date", "tracker_energy_wh", "fixed_energy_wh", "gain_pct", ...(stow ? ["stow_loss_wh"] : []), "partial_day"],
+    rows: days.map((d, i) => [d.date, d.tracker_energy_wh, d.fixed_energy_wh, d.gain_pct, ...(stow ? [d.stow_loss_wh] : []), partial[i]]),
     filename: `simulation_${runId}_daily_energy.csv`,
   });
 }
