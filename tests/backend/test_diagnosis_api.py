@@ -160,6 +160,7 @@ def _with_pyranometer(readings: list[dict], d) -> list[dict]:
     return readings
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # the sky, not storage
 def test_a_pyranometer_on_the_logger_is_the_days_sky(client, live_server) -> None:
     """Readings that carry a GHI pyranometer and an air thermometer on the tracker's logger,
     no fixed array reading (a site without a reference array) over HTTP: those days' sky is
@@ -185,6 +186,7 @@ def test_a_pyranometer_on_the_logger_is_the_days_sky(client, live_server) -> Non
     assert r.json()["sky"]["source"] == "sensor" and r.json()["sky"]["sensor"] == "ghi_w_m2"
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # the sky, not storage
 def test_a_pyranometer_beside_the_fixed_array_does_not_hide_a_loss(client, live_server
                                                                      ) -> None:
     """A tester's finding: a tracker making 85 % of a healthy one's, with the fixed array's

@@ -24,6 +24,7 @@ if TYPE_CHECKING:
 DAY = dt.date(2023, 4, 12)
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # the twin, not storage
 def test_the_weather_aware_twin_follows_the_fixed_arrays_sky(
         client: httpx.Client, live_server: LiveServer) -> None:
     from sim import sky_sensor, twin
