@@ -144,7 +144,10 @@ class DatabaseSettings(_Group):
                     "a power cut (one fsync per group commit).",
         validation_alias=_env("sqlite_synchronous"))
     writer_max_group_rows: int = Field(
-        200_000, gt=0, description="Most rows the writer commits in one group commit.",
+        20_000, gt=0, description="Most rows the writer commits in one transaction: a bigger "
+                                  "batch is committed in pieces of this size, other writes "
+                                  "between them (a live reading waits for one piece, not for "
+                                  "a whole back-fill).",
         validation_alias=_env("writer_max_group_rows"))
 
     @field_validator("url")

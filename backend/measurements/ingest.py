@@ -4,7 +4,8 @@
 authorises, reads and decodes the body, then calls :func:`ingest`: the body is
 validated whole by :mod:`backend.measurements.parse` (JSON or CSV, chosen by its
 media type) and handed to the single writer; :func:`ingest` returns only once the
-writer has committed it, so an answered batch survives a killed process.
+writer has committed it (a batch over ``HELIOTWIN_WRITER_MAX_GROUP_ROWS`` readings: all
+its pieces), so an answered batch survives a killed process.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from backend.measurements.parse import (
     parse_csv_batch,
     parse_json_batch,
 )
-from backend.measurements.writer import MeasurementJob, Writer
+from backend.measurements.writer import MeasurementJob, PartlyStored, Writer
 from backend.storage.tables import SOURCE_CODES
 
 logger = logging.getLogger(__name__)
@@ -46,7 +47,9 @@ Parser = Callable[[bytes, dict[str, IngestArray], Limits], Batch]
 
 
 class StorageUnavailable(Exception):
-    """The writer could not commit the batch: nothing of it is stored; send it again."""
+    """The writer could not commit the batch: nothing of it is stored, or of a batch
+    committed in pieces the pieces before the failure (the message says how many); either
+    way, send it again."""
 
 
 @dataclass(frozen=True)
@@ -94,6 +97,13 @@ async def ingest(writer: Writer, parse: Parser, body: bytes,
     job = measured_job(batch)
     try:
         accepted, duplicates = await asyncio.wrap_future(writer.submit(job))
+    except PartlyStored as exc:  # a batch committed in pieces: the first ones are stored
+        logger.error("storing %d readings failed after %d: %r", len(job), exc.stored,
+                     exc.__cause__)
+        raise StorageUnavailable(
+            f"storage unavailable ({type(exc.__cause__).__name__}); {exc.stored} of "
+            f"{exc.total} readings were stored before it failed: send the batch again (the "
+            "stored ones count as duplicates, none twice)") from exc
     except Exception as exc:  # nothing was committed: the logger should send it again
         logger.error("storing %d readings failed: %r", len(job), exc)
         raise StorageUnavailable(f"storage unavailable ({type(exc).__name__}); nothing was "

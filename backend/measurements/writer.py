@@ -12,6 +12,15 @@ one COMMIT (one fsync with
 SQLite ``synchronous=FULL``) makes the group durable. Only then are the futures
 resolved, so a 2xx answer means the rows are committed.
 
+A batch of more rows than that (a back-fill of months) is committed in pieces of at
+most that many, each queued behind whatever arrived meanwhile, so a live logger waits
+for one piece, not for the whole back-fill (200,000 rows in one transaction held a live
+reading 0.56-0.74 s on SQLite and 5.3-9.0 s on PostgreSQL). The batch is answered after
+its last piece; should a piece fail, the pieces before it stay stored and
+:class:`PartlyStored` says how many readings — sending the batch again stores exactly
+the rest, as readings are keyed by (array, source, second) and inserted
+``ON CONFLICT DO NOTHING``.
+
 The hot path talks to the DBAPI driver directly (SQLite: multi-row
 ``INSERT … VALUES``; PostgreSQL: ``INSERT … SELECT FROM unnest(arrays)``)
 because SQLAlchemy Core would cost more than the whole rest of the request.
@@ -19,6 +28,7 @@ because SQLAlchemy Core would cost more than the whole rest of the request.
 
 from __future__ import annotations
 
+import functools
 import logging
 import queue
 import threading
@@ -98,6 +108,25 @@ class MeasurementJob:
         """Value columns in storage order: voltage, current, power, then the sensors."""
         base = (self.ts_s, self.voltage_v, self.current_a, self.power_w)
         return base if self.sensors is None else (*base, *self.sensors.T)
+
+
+    def piece(self, sel: slice) -> MeasurementJob:
+        """The readings ``sel`` of this job as a job of their own (views, a future of
+        their own)."""
+        return MeasurementJob(
+            self.array_ids[sel], self.source, self.ts_s[sel], self.voltage_v[sel],
+            self.current_a[sel], self.power_w[sel],
+            None if self.sensors is None else self.sensors[sel])
+
+
+class PartlyStored(Exception):
+    """A batch committed in pieces failed at a piece: its first ``stored`` of ``total``
+    readings are committed, the rest is not written (the piece's error is the cause)."""
+
+    def __init__(self, stored: int, total: int) -> None:
+        super().__init__(f"{stored} of {total} readings stored before a piece failed")
+        self.stored = stored
+        self.total = total
 
 
 @dataclass
@@ -293,6 +322,11 @@ def _series_window(parts: list[tuple[np.ndarray, ...]]) -> SeriesWindow:
     return SeriesWindow(ts, v, i, p, sensors)
 
 
+def _rows(job: Any) -> int:
+    """Readings a queued job writes (a call: none)."""
+    return len(job) if isinstance(job, MeasurementJob) else 0
+
+
 #: A run of new readings of a series (a slice of them) and the stored readings
 #: ``(ts_s, power_w)`` just before and after it.
 _Hole = tuple[slice, tuple[int, float] | None, tuple[int, float] | None]
@@ -311,7 +345,7 @@ class Writer:
 
     def __init__(
         self, engine: Engine, phase_of_array: Callable[[int], int], max_gap_s: int,
-        max_group_rows: int = 200_000,
+        max_group_rows: int = 20_000,
     ) -> None:
         self.engine = engine
         self.phase_of_array = phase_of_array
@@ -333,6 +367,8 @@ class Writer:
         #: WAL truncations done, and when the writer may try the next one (monotonic s)
         self.wal_truncations = 0
         self._wal_next_try = 0.0
+        #: batches committed in pieces whose last piece is still to come (writer thread only)
+        self._split_open = 0
 
     # -- lifecycle ---------------------------------------------------------
     def start(self) -> None:
@@ -403,32 +439,75 @@ class Writer:
         if not self._sql.pg:
             conn.connection.driver_connection.execute(  # type: ignore[union-attr]
                 "PRAGMA wal_autocheckpoint=0")
+        carry: Any = None  # a job taken from the queue that did not fit the last group
         try:
-            for first in iter(self._queue.get, _STOP):
+            while True:
+                first = self._queue.get() if carry is None else carry
+                carry = None
+                if first is _STOP:
+                    if self._split_open:  # a batch's next piece is queued behind the stop
+                        self._queue.put(_STOP)
+                        continue
+                    break
+                first = self._first_piece(first)
                 group = [first]
-                rows = len(first) if isinstance(first, MeasurementJob) else 0
-                stop_after = False
+                rows = _rows(first)
                 while rows < self.max_group_rows:
                     try:
                         nxt = self._queue.get_nowait()
                     except queue.Empty:
                         break
-                    if nxt is _STOP:
-                        stop_after = True
+                    if nxt is _STOP or rows + _rows(nxt) > self.max_group_rows:
+                        carry = nxt
                         break
                     group.append(nxt)
-                    rows += len(nxt) if isinstance(nxt, MeasurementJob) else 0
+                    rows += _rows(nxt)
                 self._commit_group(conn, group)
                 self._check_gap(conn)
                 if self._wal_path is not None:
                     self._bound_wal(conn)
-                if stop_after:
-                    break
         finally:
             conn.close()
             logger.info("writer stopped after %d group commits of %d readings "
                         "(%d rollup recomputations)", self.groups_committed,
                         self.rows_committed, self.rollup_refreshes)
+
+    def _first_piece(self, job: Any) -> Any:
+        """A job, or of a batch over :attr:`max_group_rows` readings its first piece.
+
+        The batch is sorted and cut into pieces of at most that many readings; each piece
+        commits in a group of its own, and once it has, the next is queued behind what
+        arrived meanwhile (the batch's other writes wait for one piece at a time). The
+        batch's future gives the summed counts after the last piece, or
+        :class:`PartlyStored` after a failed one (the rest is then not written)."""
+        if not isinstance(job, MeasurementJob) or len(job) <= self.max_group_rows:
+            return job
+        job.sort()
+        step = self.max_group_rows
+        pieces = [job.piece(slice(k, k + step)) for k in range(0, len(job), step)]
+        counts = [0, 0]  # accepted, duplicates so far
+        self._split_open += 1
+
+        def committed(k: int, done: Future[tuple[int, int]]) -> None:  # on the writer thread
+            exc = done.exception()
+            if exc is not None:
+                self._split_open -= 1
+                err = PartlyStored(sum(counts), len(job))
+                err.__cause__ = exc
+                job.future.set_exception(err)
+                return
+            accepted, duplicates = done.result()
+            counts[0] += accepted
+            counts[1] += duplicates
+            if k + 1 < len(pieces):
+                self._queue.put(pieces[k + 1])
+            else:
+                self._split_open -= 1
+                job.future.set_result((counts[0], counts[1]))
+
+        for k, piece in enumerate(pieces):
+            piece.future.add_done_callback(functools.partial(committed, k))
+        return pieces[0]
 
     def _bound_wal(self, conn: Connection) -> None:
         """SQLite: checkpoint and truncate a WAL grown past :attr:`wal_truncate_bytes`.

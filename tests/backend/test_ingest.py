@@ -23,6 +23,7 @@ from backend.measurements.parse import (
     parse_csv_batch,
     parse_json_batch,
 )
+from backend.measurements.writer import PartlyStored
 
 ARRAYS = {"tracker": IngestArray(1, Calibration(), 820.0),
           "fixed": IngestArray(2, Calibration(divider_ratio=8.0))}
@@ -401,6 +402,17 @@ def test_a_failed_commit_is_storage_unavailable() -> None:
     body = orjson.dumps({"readings": [GOOD]})
     with pytest.raises(StorageUnavailable, match="OSError.*nothing was stored"):
         _run(ingest(writer, parse_json_batch, body, ARRAYS, Limits()))  # type: ignore[arg-type]
+
+
+def test_a_batch_failing_part_way_says_how_much_is_stored() -> None:
+    """A batch committed in pieces that fails at one: the 503 says how many readings are
+    stored and that sending it again is safe (the writer's test checks that it is)."""
+    failed = PartlyStored(3000, 3510)
+    failed.__cause__ = OSError("disk full")
+    body = orjson.dumps({"readings": [GOOD]})
+    with pytest.raises(StorageUnavailable, match=r"OSError.*3000 of 3510 readings were stored"
+                                                 r".*send the batch again"):
+        _run(ingest(_Writer(error=failed), parse_json_batch, body, ARRAYS, Limits()))  # type: ignore[arg-type]
 
 
 def test_a_bad_batch_never_reaches_the_writer() -> None:

@@ -17,7 +17,7 @@ from live_service import new_database
 from sqlalchemy import text
 
 from backend.context import open_context
-from backend.measurements.writer import SQLITE_CHUNK_ROWS, MeasurementJob
+from backend.measurements.writer import SQLITE_CHUNK_ROWS, MeasurementJob, PartlyStored
 from backend.settings import get_settings
 
 T0 = 1_700_000_000 // 3600 * 3600 - 3600  # on the UTC hour grid (phase 0 for UTC-6)
@@ -183,6 +183,68 @@ def test_a_re_sent_batch_leaves_the_rollups_untouched(ctx) -> None:  # type: ign
         after = conn.execute(text("SELECT * FROM measurement_rollups WHERE array_id = :a "
                                   "ORDER BY bucket_s"), {"a": aid}).all()
     assert after == before
+    _assert_rollups_equal_direct_aggregates(ctx, aid, ts.size)
+
+
+def _hold_writer(ctx) -> threading.Event:  # type: ignore[no-untyped-def]
+    """Park the writer in a call until the returned gate is set: what is submitted meanwhile
+    is queued in submission order."""
+    holding, gate = threading.Event(), threading.Event()
+
+    def hold(_conn: object) -> None:
+        holding.set()
+        gate.wait(60)
+
+    ctx.writer.call(hold)
+    assert holding.wait(60)
+    return gate
+
+
+def test_a_back_fill_is_committed_in_pieces_and_a_live_reading_goes_between(ctx) -> None:  # type: ignore[no-untyped-def]
+    """A batch over ``max_group_rows`` readings is committed in pieces of at most that many,
+    each behind whatever was queued meanwhile: a live reading queued after a 10-piece
+    back-fill is committed before the back-fill's last piece (it waited behind all 10,000
+    rows in one transaction before), the back-fill is answered once, after its last
+    piece, with the counts of all of them, and the rollups equal the readings."""
+    arrays = ctx.registry.sites["tehuantepec"].arrays
+    back, live = arrays["tracker"].array_id, arrays["fixed"].array_id
+    ctx.writer.max_group_rows = 1000
+    done: list[str] = []
+    gate = _hold_writer(ctx)
+    ts = T0 + 60 * np.arange(10_000)
+    big = ctx.writer.submit(_job(back, ts[::-1].copy(), 1))  # newest first: sorted by the writer
+    small = ctx.writer.submit(_job(live, np.array([T0]), 2))
+    big.add_done_callback(lambda _f: done.append("back-fill"))
+    small.add_done_callback(lambda _f: done.append("live"))
+    groups = ctx.writer.groups_committed
+    gate.set()
+    assert big.result(timeout=60) == (10_000, 0)
+    assert small.result(timeout=60) == (1, 0)
+    assert done == ["live", "back-fill"]
+    assert ctx.writer.groups_committed - groups == 11  # 10 pieces and the live reading
+    _assert_rollups_equal_direct_aggregates(ctx, back, ts.size)
+
+
+def test_a_batch_failing_part_way_says_what_is_stored_and_a_retry_completes_it(ctx) -> None:  # type: ignore[no-untyped-def]
+    """A piece that fails ends the batch: the pieces committed before stay (the error says
+    how many readings), the rest is not written, and sending the batch again stores
+    exactly the rest — readings are keyed by (array, source, second) — with rollups equal
+    to the readings, as if it had gone through at once."""
+    aid = ctx.registry.sites["tehuantepec"].arrays["tracker"].array_id
+    ctx.writer.max_group_rows = 1000
+    ts = T0 + 60 * np.arange(3500)
+    good = _job(aid, ts, 1)
+    bad = _job(10**6, T0 + 60 * np.arange(10), 2)  # no such array (FK): sorts last
+    job = MeasurementJob(*(np.concatenate([getattr(good, c), getattr(bad, c)]) if c != "source"
+                           else 0 for c in ("array_ids", "source", "ts_s", "voltage_v",
+                                            "current_a", "power_w")))
+    with pytest.raises(PartlyStored) as err:
+        ctx.writer.submit(job).result(timeout=60)
+    assert (err.value.stored, err.value.total) == (3000, 3510)
+    with ctx.engine.connect() as conn:
+        assert conn.execute(text("SELECT COUNT(*) FROM measurements WHERE array_id = :a"),
+                            {"a": aid}).scalar() == 3000
+    assert ctx.writer.submit(_job(aid, ts, 1)).result(timeout=60) == (500, 3000)
     _assert_rollups_equal_direct_aggregates(ctx, aid, ts.size)
 
 

@@ -90,7 +90,9 @@ def _rejected(status: int, entries: list[dict[str, Any]]) -> Response:
                404: {"description": "unknown site"}, 413: {"description": "body too large"},
                415: {"description": "not JSON or CSV, or a Content-Encoding other than gzip"},
                422: {"description": "invalid rows (each named)"},
-               503: {"description": "storage unavailable; nothing stored, send again"}})
+               503: {"description": "storage unavailable; nothing stored (of a batch over "
+                                     "HELIOTWIN_WRITER_MAX_GROUP_ROWS readings: the count "
+                                     "the message gives), send again"}})
 async def post_measurements(site_id: str, request: Request) -> IngestResult | Response:
     """Store a logger's batch (JSON readings, emonCMS rows or CSV), all or nothing.
 
