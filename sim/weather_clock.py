@@ -155,3 +155,17 @@ def shift_warning(shift: dict[str, Any] | None, station: dict[str, Any] | None
                   "hours were written in) and whether its hours are labelled by their start "
                   "or their end")
     return head + causes
+
+
+def weather_clock(weather: pd.DataFrame, latitude: float, longitude: float, altitude: float,
+                  start: pd.Timestamp, end: pd.Timestamp, station: dict[str, Any] | None
+                  ) -> dict[str, Any]:
+    """The clock check of a run on ``weather`` (UTC index, on the run's times) at a place
+    [° N, ° E, m]: ``{"weather_shift_min", "weather_warning"}`` — :func:`irradiance_shift`'s
+    median shift [min] (None without a sunny day to fit) and :func:`shift_warning`'s words
+    past :data:`WEATHER_SHIFT_WARN_MIN` (None within it). The one rule of every run on a
+    weather file, the twin's (``backend.twin.scenario.run_scenario``) and a plant's
+    (``heliotwin plant simulate``)."""
+    shift = irradiance_shift(weather, latitude, longitude, altitude, start, end)
+    return {"weather_shift_min": None if shift is None else shift["shift_min"],
+            "weather_warning": shift_warning(shift, station)}

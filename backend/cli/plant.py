@@ -217,6 +217,10 @@ def execute(args: argparse.Namespace) -> dict[str, Any]:
     summary = result.summary()
     if station is not None:
         summary["weather_station"] = station
+        from sim.weather_clock import weather_clock  # is the file on the sun's time?
+
+        summary.update(weather_clock(weather, plant.latitude, plant.longitude, plant.altitude,
+                                     start, end, station))
     return summary
 
 
@@ -236,6 +240,7 @@ def _text(s: dict[str, Any]) -> str:
         f"shading loss {pct(s['shading_loss_electrical_pct'])} electrical, "
         f"{pct(s['shading_loss_area_pct'])} by area",
         f"fixed plant  {s['fixed_energy_wh'] / 1000:.1f} kWh; gain {pct(s['gain_vs_fixed_pct'])}",
+        *([f"warning: {s['weather_warning']}"] if s.get("weather_warning") else []),
     ])
 
 

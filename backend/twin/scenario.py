@@ -34,7 +34,7 @@ from sim.site_config import clock_off_longitude
 from sim.sites import Site
 from sim.sky import typical_year_at_site
 from sim.twin import CONTROLLERS, RECEIVERS, TwinResult, simulate
-from sim.weather_clock import irradiance_shift, shift_warning
+from sim.weather_clock import weather_clock
 
 #: A weather station farther than this from the site is refused unless forced [km]: its sun
 #: rises and sets at other times and its sky is another climate's (about 1° of latitude).
@@ -216,10 +216,10 @@ def run_scenario(site: Site, scenario: Scenario, weather: pd.DataFrame | None = 
         pointing_model_terms=scenario.pointing_model_terms,
     )
     if weather is not None:  # is the file on the sun's time? (a misread stamp or zone)
-        shift = irradiance_shift(weather, site.latitude, site.longitude, site.altitude,
-                                 scenario.start, scenario.end)
-        result.weather_shift_min = None if shift is None else shift["shift_min"]
-        result.weather_warning = shift_warning(shift, scenario.station)
+        clock = weather_clock(weather, site.latitude, site.longitude, site.altitude,
+                              scenario.start, scenario.end, scenario.station)
+        result.weather_shift_min = clock["weather_shift_min"]
+        result.weather_warning = clock["weather_warning"]
     return result
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -164,3 +166,40 @@ def test_the_plant_sun_is_refracted_at_the_plant_s_pressure_and_temperature() ->
     sky = sky_conditions(plant, times)
     assert ref["apparent_elevation"].iloc[0] == pytest.approx(1.3595, abs=1e-3)  # near 0°
     np.testing.assert_allclose(sky["apparent_elevation"], ref["apparent_elevation"], atol=1e-3)
+
+
+def test_cli_weather_read_in_the_wrong_zone_is_warned(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``plant simulate --tmy3`` runs the twin's clock check (sim.weather_clock): pvlib's
+    Greensboro TMY3 at a plant on the station reads within 5 min of the sun, no warning;
+    the same file whose header says UTC−4 instead of −5 (each hour placed an hour early
+    against the sun: a shift built here, −60 min from the right file's) is warned of, in
+    the JSON and as a ``warning:`` line of the text. It ran silently before."""
+    import json
+
+    from backend import cli
+    from sim.paths import default_plants_dir
+    from sim.sky import pvlib_tmy3_path
+
+    plant = json.loads((default_plants_dir() / "penarroya.json").read_text())
+    plant.update(plant_id="greensboro", latitude_deg=36.1, longitude_deg=-79.95,
+                 altitude_m=273.0, timezone="America/New_York")
+    (tmp_path / "greensboro.json").write_text(json.dumps(plant))
+    lines = pvlib_tmy3_path().read_text().splitlines(keepends=True)
+    assert lines[0].startswith('723170,"GREENSBORO PIEDMONT TRIAD INT",NC,-5.0,')
+    wrong = tmp_path / "utc-4.csv"
+    wrong.write_text(lines[0].replace(",-5.0,", ",-4.0,") + "".join(lines[1:]))
+    argv = ["plant", "simulate", "--plant", "greensboro", "--plants-dir", str(tmp_path),
+            "--start", "2021-06-01", "--end", "2021-06-15", "--step-s", "1800",
+            "--no-progress"]
+    assert cli.main([*argv, "--tmy3", str(pvlib_tmy3_path()), "--json"]) == 0
+    right = json.loads(capsys.readouterr().out)
+    assert abs(right["weather_shift_min"]) <= 5 and right["weather_warning"] is None, right
+    assert cli.main([*argv, "--tmy3", str(wrong), "--json"]) == 0
+    misread = json.loads(capsys.readouterr().out)
+    shift = misread["weather_shift_min"]  # measured −65 (the right file's −5, an hour early)
+    assert shift - right["weather_shift_min"] == pytest.approx(-60, abs=5), misread
+    assert f"runs {-shift:.0f} min early" in misread["weather_warning"], misread
+    assert cli.main([*argv, "--tmy3", str(wrong)]) == 0
+    text = capsys.readouterr().out
+    assert f"\nwarning: the weather's irradiance runs {-shift:.0f} min early" in text, text
