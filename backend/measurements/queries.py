@@ -154,10 +154,11 @@ class Buckets:
     sensor_sums: np.ndarray  # (m, len(SENSOR_NAMES))
     sensor_n: np.ndarray
 
-    def points(self) -> dict[str, list[object]]:
+    def points(self, sensors: Sequence[str] | None = None) -> dict[str, list[object]]:
         """Columns of the answer: ts, n, mean/min/max per quantity (means over the
         readings that have the value; NaN, null in JSON, where none has it), and the
-        mean of every sensor field some reading of the range carried."""
+        mean of every sensor field some reading of the range carried (``sensors``: of
+        these, so that the pages of one export have the same columns)."""
         out: dict[str, list[object]] = {
             "ts": list(iso_utc(self.origin_s + self.k * self.width_s)), "n": self.n.tolist(),
         }
@@ -168,7 +169,7 @@ class Buckets:
                 out[f"{q}_min"] = self.mins[:, j].tolist()
                 out[f"{q}_max"] = self.maxs[:, j].tolist()
             for j, f in enumerate(SENSOR_NAMES):
-                if self.sensor_n[:, j].any():
+                if f in sensors if sensors is not None else self.sensor_n[:, j].any():
                     c = self.sensor_n[:, j]
                     out[f] = np.where(c > 0, self.sensor_sums[:, j] / c, np.nan).tolist()
         return out
@@ -203,20 +204,27 @@ def _merge(parts: list[Buckets], origin: int, width: int) -> Buckets:
                    total("sensor_sums"), total("sensor_n"))
 
 
-def downsample(conn: Connection, array_id: int, source: int, start: int, end: int,
-               max_points: int, phase: int) -> Buckets:
-    """Aggregate ``[start, end)`` into at most ``max_points`` buckets (min/mean/max).
+def bucket_grid(start: int, end: int, max_points: int, phase: int) -> tuple[int, int]:
+    """``(origin_s, width_s)`` of at most ``max_points`` buckets over ``[start, end)``.
 
     Widths of an hour or more are whole hours on the rollup grid (so the rollups
     answer); shorter widths group the raw rows, starting at ``start``.
     """
-    span = end - start
-    width = max(1, math.ceil(span / max_points))
+    width = max(1, math.ceil((end - start) / max_points))
     if width < ROLLUP_WIDTH_S:
-        rows = fetch(conn, _RAW_BUCKETS, (start, width, array_id, source, start, end))
-        return _buckets_from_rows(rows, start, width)
+        return start, width
     origin = grid_floor(start, phase)  # buckets from here: at most max_points of them
-    width = ROLLUP_WIDTH_S * math.ceil((end - origin) / max_points / ROLLUP_WIDTH_S)
+    return origin, ROLLUP_WIDTH_S * math.ceil((end - origin) / max_points / ROLLUP_WIDTH_S)
+
+
+def _buckets_of(conn: Connection, array_id: int, source: int, start: int, end: int,
+                origin: int, width: int, phase: int) -> Buckets:
+    """The buckets of :func:`bucket_grid`'s ``(origin, width)`` over ``[start, end)``: raw
+    rows grouped for widths under an hour, else the rollups of the whole hours and the raw
+    rows of the partial hours at the edges."""
+    if width < ROLLUP_WIDTH_S:
+        rows = fetch(conn, _RAW_BUCKETS, (origin, width, array_id, source, start, end))
+        return _buckets_from_rows(rows, origin, width)
     a, b = grid_ceil(start, phase), grid_floor(end, phase)
     parts: list[Buckets] = []
     if a < b:
@@ -227,6 +235,32 @@ def downsample(conn: Connection, array_id: int, source: int, start: int, end: in
             rows = fetch(conn, _RAW_BUCKETS, (origin, width, array_id, source, lo, hi))
             parts.append(_buckets_from_rows(rows, origin, width))
     return _merge(parts, origin, width)
+
+
+def downsample(conn: Connection, array_id: int, source: int, start: int, end: int,
+               max_points: int, phase: int) -> Buckets:
+    """Aggregate ``[start, end)`` into at most ``max_points`` buckets (min/mean/max) of
+    :func:`bucket_grid`."""
+    origin, width = bucket_grid(start, end, max_points, phase)
+    return _buckets_of(conn, array_id, source, start, end, origin, width, phase)
+
+
+def bucket_pages(engine: Engine, array_id: int, source: int, start: int, end: int,
+                 max_points: int, phase: int, page_buckets: int = 20_000) -> Iterator[Buckets]:
+    """:func:`downsample` of ``[start, end)`` in pages of at most ``page_buckets`` buckets
+    (cut at bucket edges, so every bucket is whole in one page), each read on a connection
+    of its own, as :func:`raw_pages` does for raw rows: a streamed export holds one page at
+    a time (a year of minutes as 492,750 buckets, ``max_points=500000``, had taken the
+    service from 262 to 745 MB; raw, streamed, 316 MB)."""
+    origin, width = bucket_grid(start, end, max_points, phase)
+    lo = start
+    while lo < end:
+        hi = min(end, origin + ((lo - origin) // width + page_buckets) * width)
+        with engine.connect() as conn:
+            page = _buckets_of(conn, array_id, source, lo, hi, origin, width, phase)
+        if page.k.size:
+            yield page
+        lo = hi
 
 
 # ---------------------------------------------------------------- energy

@@ -42,6 +42,8 @@ from backend.measurements.export import influx_lines
 from backend.measurements.parse import IngestError, Limits, body_error
 from backend.measurements.queries import (
     QUANTITIES,
+    bucket_grid,
+    bucket_pages,
     count_rows,
     downsample,
     iso_utc,
@@ -55,7 +57,8 @@ logger = logging.getLogger(__name__)
 router = APIRouter(prefix="/api/v1/sites", tags=["measurements"])
 
 _JSON = "application/json"
-#: Readings a streamed CSV or line-protocol export reads and holds at once (≈ 10 MB).
+#: Readings (or buckets) a streamed CSV or line-protocol export reads and holds at once
+#: (≈ 10 MB).
 EXPORT_PAGE_ROWS = 20_000
 #: The one path of the resource; POST is logger ingest, whose body the route reads itself.
 _PATH = "/{site_id}/measurements"
@@ -230,7 +233,7 @@ def get_measurements(
             if max_points is None and limit is not None and n > limit:
                 raise HTTPException(422, f"{n} readings in the range; pass max_points (buckets) or "
                                          "format=csv or format=influx for all of them")
-            if limit is not None and n > limit:
+            if limit is not None and n > limit and not want_text:
                 b = downsample(conn, arr.array_id, src, t0, t1, limit, info.phase_s)
                 return _answer(request, site_id, array, source, start, end, t0, t1, format,
                                [b.points()], b.width_s, n, None)
@@ -238,6 +241,11 @@ def get_measurements(
                 rows = raw_rows(conn, arr.array_id, src, t0, t1, sensors=measured)
                 return _answer(request, site_id, array, source, start, end, t0, t1, format,
                                [_raw_columns(rows, sensors)], 0, n, None)
+        if limit is not None and n > limit:  # streamed buckets, page by page, as raw rows
+            pages = (b.points(sensors) for b in bucket_pages(
+                ctx.engine, arr.array_id, src, t0, t1, limit, info.phase_s, EXPORT_PAGE_ROWS))
+            return _answer(request, site_id, array, source, start, end, t0, t1, format, pages,
+                           bucket_grid(t0, t1, limit, info.phase_s)[1], n, None)
         # streamed raw: page by page after this returns, the header decided by count_rows
         pages = (_raw_columns(rows, sensors) for rows in
                  raw_pages(ctx.engine, arr.array_id, src, t0, t1, measured, EXPORT_PAGE_ROWS))
@@ -260,9 +268,11 @@ def _answer(request: Request, site_id: str, array: str, source: str, start: str,
                                               for cols in pages)
         return StreamingResponse(metered_iter(lines), media_type="text/plain; charset=utf-8")
     if want_csv:
-        if header is None:
-            pages = list(pages)
-            header = list(pages[0])
+        if header is None:  # the first page's columns, every page's
+            pages = iter(pages)
+            first = next(pages)
+            header = list(first)
+            pages = itertools.chain([first], pages)
         name = f"{site_id}_{array}_{source}_{start}_{end}.csv".replace(":", "")
         text = _csv_lines(header, (list(cols.values()) for cols in pages))
         return StreamingResponse(metered_iter(text), media_type="text/csv",
