@@ -9,8 +9,9 @@ dependencies in ``backend/api/deps.py`` hand its parts to the routes.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from sqlalchemy import Engine, text
 from sqlalchemy.orm import Session, sessionmaker
@@ -45,6 +46,9 @@ class ServiceContext:
     limits: Limits  # rate limits of anonymous work, the decode budget (backend/limits.py)
     mqtt: MqttService | None = None  # with Settings.mqtt.url (backend/mqtt/service.py)
     alerts: AlertService | None = None  # with Settings.alerts.enabled (backend/alerts/service.py)
+    #: per site, its day in progress's diagnosis and what it rests on
+    #: (``backend.diagnosis.service.in_progress_key``)
+    diagnosis_today: dict[str, tuple[tuple[Any, ...], bytes]] = field(default_factory=dict)
 
     def close(self) -> None:
         """Stop alerts, MQTT, runs and the writer; dispose of the engine."""

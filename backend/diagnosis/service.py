@@ -13,7 +13,10 @@ code (:data:`CACHE_VERSION`) or under another config of the site (:func:`site_ke
 faults across days (``since``, steps) are recomputed from the cached days on every
 request. A day not yet over (``complete`` false: today, or a day to come) is judged on its
 minutes before now only — the minutes still to come are not missing readings — with no
-shape fault (half a day does not show one), and it is never cached.
+shape fault (half a day does not show one), and it is never stored in ``diagnosis_days``:
+its answer is kept in the service's memory (``ServiceContext.diagnosis_today``, one per
+site) while what it rests on is unchanged (:func:`in_progress_key`: the current minute
+and the count of readings among it), so repeated reads of today do not re-run the fits.
 
 ``expected_wh_low``/``expected_wh_high``: the spread of the two decompositions of the
 same POA (GTI-DIRINT, clear-sky ratio + Erbs) widened by
@@ -50,9 +53,9 @@ from backend.diagnosis.faults import (
     sky_unusable,
 )
 from backend.diagnosis.mount import mount_faults, read_observations
-from backend.diagnosis.weather_twin import site_minutes, sky_source
+from backend.diagnosis.weather_twin import STAMP_LOOKBACK_S, site_minutes, sky_source
 from backend.errors import InputError
-from backend.measurements.queries import energy_table, period_edges
+from backend.measurements.queries import count_rows, energy_table, period_edges
 from backend.sites import SiteInfo
 from backend.storage.tables import SOURCE_CODES, DiagnosisDay, Measurement
 from sim import sky_sensor
@@ -135,6 +138,24 @@ def _cache_usable(payload: dict[str, Any], day_start_s: int, day_end_s: int,
     lo = min(inf if old is None else old, inf if new is None else new)
     hi = max(inf if old is None else old, inf if new is None else new)
     return lo == hi or day_end_s <= lo or day_start_s >= hi
+
+
+def in_progress_key(conn: Connection, info: SiteInfo, day_s: tuple[int, int], now_s: float,
+                    first_s: int | None, site: str) -> tuple[Any, ...]:
+    """What the answer of a day in progress (``day_s``: its ``[start, end)`` [Unix s], as
+    asked) rests on, beside the code (:data:`CACHE_VERSION`) and the site's config
+    (``site``, :func:`site_key`): the tracker's history start (``first_s``), the current
+    minute — the day is judged on the minutes before now, so its missing and expected
+    minutes move each minute even without a reading — and the measured readings of both
+    arrays from :data:`~backend.diagnosis.weather_twin.STAMP_LOOKBACK_S` before the day
+    (what a slow logger's stamps mark is read there) to its end, by their count: readings
+    are only ever added (``ON CONFLICT DO NOTHING``), so any new one changes it. Counted
+    from the hourly rollups and the raw rows of the partial hours
+    (:func:`~backend.measurements.queries.count_rows`)."""
+    lo, hi = day_s[0] - STAMP_LOOKBACK_S, day_s[1] + 60
+    counts = [count_rows(conn, info.arrays[name].array_id, SOURCE_CODES["measured"], lo, hi,
+                         info.phase_s)[0] for name in ("tracker", "fixed")]
+    return (CACHE_VERSION, site, first_s, *day_s, int(now_s // 60), *counts)
 
 
 def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFrame,
@@ -352,10 +373,19 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
         first_s = None if tracker is None or not past else history_start_s(
             conn, tracker.array_id)
         obs = read_observations(conn, info, edges_s[0], min(edges_s[-1], math.ceil(now)))
-    key = site_key(info.site)
+        key = site_key(info.site)
+        # a day in progress (today) is kept in memory, one per site, while what it rests on
+        # is unchanged: a reading, the next minute or another config computes it again
+        progress = {i: in_progress_key(conn, info, (edges_s[i], edges_s[i + 1]), now,
+                                       first_s, key)
+                    for i in range(len(starts)) if not future[i] and edges_s[i + 1] > now
+                    and info.has_twin()}
+    held = ctx.diagnosis_today.get(info.site_id)
     cached = {r[0]: p for r in rows
               if r[1] == int(edges[starts.index(r[0]) + 1].timestamp())
               and _cache_usable(p := orjson.loads(r[2]), r[0], r[1], first_s, key)}
+    cached.update({starts[i]: orjson.loads(held[1]) for i, k in progress.items()
+                   if held is not None and held[0] == k})
     # only days that are over are cached; days to come are not computed
     uncached_days = [i for i, s in enumerate(starts) if s not in cached and not future[i]]
     if max_computed_days is not None and len(uncached_days) > max_computed_days:
@@ -364,6 +394,9 @@ def diagnosis(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
                               f"{max_computed_days} (ask for less, or send 'Authorization: "
                               "Bearer <token>')")
     fresh = _compute(ctx, info, edges, uncached_days, now, first_s) if uncached_days else {}
+    for i, k in progress.items():
+        if i in fresh:
+            ctx.diagnosis_today[info.site_id] = (k, orjson.dumps(fresh[i]))
     values = [{"site_id": info.site_id, "day_start_s": starts[i],
                "day_end_s": int(edges[i + 1].timestamp()),
                "payload_json": orjson.dumps({**p, "cache_version": CACHE_VERSION,

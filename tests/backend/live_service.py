@@ -110,6 +110,25 @@ def new_database(backend: str, tmp_dir: Path) -> Database:
     return Database(f"{PG_URL}{sep}options=-csearch_path%3D{schema}", schema)
 
 
+@contextlib.contextmanager
+def service_context(backend: str, tmp_dir: Path, **settings: object
+                    ) -> Iterator[ServiceContext]:
+    """The service's parts without HTTP (``backend.context.open_context``: the writer, the
+    built-in sites) on a new database of their own (:func:`new_database`), with
+    ``settings`` on top; closed and dropped after."""
+    from backend.context import open_context
+    from backend.settings import get_settings
+
+    db = new_database(backend, tmp_dir)
+    ctx = open_context(get_settings(database_url=db.url, sites_dir=get_settings().sites.user_dir,
+                                    **settings))
+    try:
+        yield ctx
+    finally:
+        ctx.close()
+        db.drop()
+
+
 def service_env(database_url: str, extra_env: Mapping[str, str] | None = None) -> dict[str, str]:
     """The ``HELIOTWIN_*`` settings of a test service: its database, viser and the live
     twin loop off (tests that want them turn them on in ``extra_env``)."""

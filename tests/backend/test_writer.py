@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from live_service import new_database
+from live_service import new_database, service_context
 from sqlalchemy import text
 
 from backend.context import open_context
@@ -25,14 +25,8 @@ T0 = 1_700_000_000 // 3600 * 3600 - 3600  # on the UTC hour grid (phase 0 for UT
 
 @pytest.fixture(params=["sqlite", "postgresql"])
 def ctx(request: pytest.FixtureRequest, tmp_path: Path):  # type: ignore[no-untyped-def]
-    db = new_database(request.param, tmp_path)
-    context = open_context(get_settings(database_url=db.url,
-                                        sites_dir=get_settings().sites.user_dir))
-    try:
+    with service_context(request.param, tmp_path) as context:
         yield context
-    finally:
-        context.close()
-        db.drop()
 
 
 def _job(aid: int, ts: np.ndarray, seed: int) -> MeasurementJob:
