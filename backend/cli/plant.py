@@ -193,7 +193,7 @@ def execute(args: argparse.Namespace) -> dict[str, Any]:
         raise InputError(f"--step-s: {step_problem(exc)}") from None
     if (end - start).total_seconds() / args.step_s > 5_000_000:
         raise InputError("--step-s: too many steps (more than 5,000,000); use a larger step")
-    weather, station, _ = typical_weather(args, plant, start, end)
+    weather, station, _, clock = typical_weather(args, plant, start, end)
     from sim.plant.simulate import simulate_plant
 
     bar = None
@@ -217,10 +217,7 @@ def execute(args: argparse.Namespace) -> dict[str, Any]:
     summary = result.summary()
     if station is not None:
         summary["weather_station"] = station
-        from sim.weather_clock import weather_clock  # is the file on the sun's time?
-
-        summary.update(weather_clock(weather, plant.latitude, plant.longitude, plant.altitude,
-                                     start, end, station))
+        summary.update(clock)
     return summary
 
 
@@ -264,20 +261,23 @@ def sweep_flag(field: str) -> str:
 
 
 def typical_weather(args: argparse.Namespace, place: Any, start: Any, end: Any
-                    ) -> tuple[Any, dict[str, Any] | None, str]:
-    """(weather on ``[start, end)``, its station, a token naming the file) from --tmy3/--epw,
-    or (None, None, ""): the twin's rule (:func:`backend.twin.scenario.check_station`, a
-    station more than 100 km away refused unless --force; :func:`sim.sky.typical_year_at_site`
-    lays the year on the range and, far away, moves only the state of the sky)."""
+                    ) -> tuple[Any, dict[str, Any] | None, str, dict[str, Any]]:
+    """(weather on ``[start, end)``, its station, a token naming the file, its clock check)
+    from --tmy3/--epw, or (None, None, "", {}): the twin's rules (:func:`backend.twin.scenario
+    .check_station`, a station more than 100 km away refused unless --force;
+    :func:`sim.sky.typical_year_at_site` lays the year on the range and, far away, moves only
+    the state of the sky; :func:`sim.weather_clock.weather_clock`, ``weather_shift_min`` and
+    ``weather_warning``: is the file on the sun's time at the place?)."""
     if getattr(args, "tmy3", None) and getattr(args, "epw", None):
         raise InputError("--tmy3 and --epw: give one weather file, not both")
     flag, path = ("--tmy3", args.tmy3) if args.tmy3 else ("--epw", args.epw)
     if not path:
-        return None, None, ""
+        return None, None, "", {}
     import hashlib
 
     from backend.twin.scenario import StationTooFar, check_station
     from sim.sky import read_typical_year, typical_year_at_site
+    from sim.weather_clock import weather_clock
 
     try:
         typical, meta = read_typical_year(path, flag[2:])
@@ -296,11 +296,15 @@ def typical_weather(args: argparse.Namespace, place: Any, start: Any, end: Any
         raise InputError(f"{flag}: {exc}") from None
     with open(path, "rb") as f:
         token = f"{flag[2:]}:{hashlib.sha256(f.read()).hexdigest()[:16]}"
-    return weather, station, token
+    clock = weather_clock(weather, place.latitude, place.longitude, place.altitude, start, end,
+                          station)
+    return weather, station, token, clock
 
 
-def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
-    """(spec, cases, weather) of ``plant sweep``; InputError names the flag."""
+def sweep_from_args(args: argparse.Namespace
+                    ) -> tuple[Any, list[Any], Any, dict[str, Any]]:
+    """(spec, cases, weather, its clock check as :func:`typical_weather`'s) of
+    ``plant sweep``; InputError names the flag."""
     from dataclasses import replace
 
     from backend.plants.sweep import (
@@ -344,11 +348,11 @@ def sweep_from_args(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
         raise InputError(exc.message(sweep_flag)) from None
     from sim.plant.sweep import site_plant
 
-    weather, _, token = typical_weather(args, spec.plant or site_plant(spec), spec.start,
-                                        spec.end)
+    weather, _, token, clock = typical_weather(args, spec.plant or site_plant(spec),
+                                               spec.start, spec.end)
     if weather is not None:
         spec = replace(spec, weather_token=token)
-    return spec, cases, weather
+    return spec, cases, weather, clock
 
 
 #: Sweep columns of the CSV and text output, in order.
@@ -370,7 +374,7 @@ def run_sweep(args: argparse.Namespace) -> int:
     )
     from backend.plants.sweep import run_sweep as run
 
-    spec, cases, weather = sweep_from_args(args)
+    spec, cases, weather, clock = sweep_from_args(args)
     if not getattr(args, "verbose", False):   # distributed logs its cluster's life at INFO
         import logging
 
@@ -413,7 +417,7 @@ def run_sweep(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
         if exc.result is not None:             # None: stopped while reaching the scheduler
-            _print_sweep(args, exc.result)
+            _print_sweep(args, {**exc.result, **clock})
         _say_interrupted(exc.result["cases"] if exc.result is not None else 0, len(cases))
         return 130
     except OSError as exc:                    # no scheduler at that address
@@ -422,14 +426,14 @@ def run_sweep(args: argparse.Namespace) -> int:
         fail(f"--{exc}")
     except SweepFailed as exc:                # the cluster could not finish: the cases done
         if exc.result is not None and exc.result["rows"]:
-            _print_sweep(args, exc.result)
+            _print_sweep(args, {**exc.result, **clock})
         fail(str(exc), code=1)
     finally:
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
         if bar is not None:
             bar.close()
-    _print_sweep(args, result)
+    _print_sweep(args, {**result, **clock})
     return 0
 
 
@@ -439,7 +443,11 @@ def _say_interrupted(done: int, total: int) -> None:
 
 
 def _print_sweep(args: argparse.Namespace, result: dict[str, Any]) -> None:
-    """A sweep's result on stdout: JSON, CSV or the text table."""
+    """A sweep's result on stdout: JSON, CSV or the text table; a weather file's
+    ``weather_warning`` also as a ``warning:`` line (on stderr beside the CSV)."""
+    if result.get("weather_warning") and not args.json:
+        print(f"warning: {result['weather_warning']}",
+              file=sys.stderr if args.csv else sys.stdout)
     if args.json:
         print(json_text(result))
     elif args.csv:

@@ -168,6 +168,18 @@ def test_the_plant_sun_is_refracted_at_the_plant_s_pressure_and_temperature() ->
     np.testing.assert_allclose(sky["apparent_elevation"], ref["apparent_elevation"], atol=1e-3)
 
 
+def _greensboro_in_the_wrong_zone(tmp_path: Path) -> Path:
+    """pvlib's Greensboro TMY3 with its header's UTC offset −4 for −5: each hour placed an
+    hour early against the sun."""
+    from sim.sky import pvlib_tmy3_path
+
+    lines = pvlib_tmy3_path().read_text().splitlines(keepends=True)
+    assert lines[0].startswith('723170,"GREENSBORO PIEDMONT TRIAD INT",NC,-5.0,')
+    wrong = tmp_path / "utc-4.csv"
+    wrong.write_text(lines[0].replace(",-5.0,", ",-4.0,") + "".join(lines[1:]))
+    return wrong
+
+
 def test_cli_weather_read_in_the_wrong_zone_is_warned(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``plant simulate --tmy3`` runs the twin's clock check (sim.weather_clock): pvlib's
@@ -185,10 +197,7 @@ def test_cli_weather_read_in_the_wrong_zone_is_warned(
     plant.update(plant_id="greensboro", latitude_deg=36.1, longitude_deg=-79.95,
                  altitude_m=273.0, timezone="America/New_York")
     (tmp_path / "greensboro.json").write_text(json.dumps(plant))
-    lines = pvlib_tmy3_path().read_text().splitlines(keepends=True)
-    assert lines[0].startswith('723170,"GREENSBORO PIEDMONT TRIAD INT",NC,-5.0,')
-    wrong = tmp_path / "utc-4.csv"
-    wrong.write_text(lines[0].replace(",-5.0,", ",-4.0,") + "".join(lines[1:]))
+    wrong = _greensboro_in_the_wrong_zone(tmp_path)
     argv = ["plant", "simulate", "--plant", "greensboro", "--plants-dir", str(tmp_path),
             "--start", "2021-06-01", "--end", "2021-06-15", "--step-s", "1800",
             "--no-progress"]
@@ -203,3 +212,30 @@ def test_cli_weather_read_in_the_wrong_zone_is_warned(
     assert cli.main([*argv, "--tmy3", str(wrong)]) == 0
     text = capsys.readouterr().out
     assert f"\nwarning: the weather's irradiance runs {-shift:.0f} min early" in text, text
+
+
+def test_a_sweep_on_weather_read_in_the_wrong_zone_is_warned(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``plant sweep --tmy3`` runs the same check (one case, in process): the right file
+    −5 min and no warning, the one an hour early −65 and warned — in the JSON, and as a
+    ``warning:`` line on stderr beside the CSV."""
+    import json
+
+    from backend import cli
+    from sim.sky import pvlib_tmy3_path
+
+    argv = ["plant", "sweep", "--collector-m", "12x5", "--lat", "36.1", "--lon", "-79.95",
+            "--layouts", "square", "--gcr", "0.25", "--start", "2021-06-01", "--end",
+            "2021-06-15", "--step-s", "1800", "--no-progress"]
+    assert cli.main([*argv, "--tmy3", str(pvlib_tmy3_path()), "--json"]) == 0
+    right = json.loads(capsys.readouterr().out)
+    assert abs(right["weather_shift_min"]) <= 5 and right["weather_warning"] is None, right
+    wrong = _greensboro_in_the_wrong_zone(tmp_path)
+    assert cli.main([*argv, "--tmy3", str(wrong), "--json"]) == 0
+    misread = json.loads(capsys.readouterr().out)
+    shift = misread["weather_shift_min"]
+    assert shift - right["weather_shift_min"] == pytest.approx(-60, abs=5), misread
+    assert cli.main([*argv, "--tmy3", str(wrong), "--csv"]) == 0
+    out = capsys.readouterr()
+    assert out.out.startswith("layout,gcr,") and len(out.out.splitlines()) == 2, out.out
+    assert f"warning: the weather's irradiance runs {-shift:.0f} min early" in out.err, out.err
