@@ -664,7 +664,8 @@ def _check_irradiance(weather: pd.DataFrame, fmt: str,
     the hour and how many such hours; set the small negatives of a night offset to 0
     (in place). An EPW's 9999 ("missing") was capped at the top of the atmosphere and read
     as a clear sky: five missing hours put a June day 50 % up and its gain 9 points off; a
-    negative DNI took the beam off the tracker (a tester's findings)."""
+    negative DNI took the beam off the tracker (a tester's findings). Its ``wind_speed``, if
+    any, is checked too (:func:`_check_wind`)."""
     irr = weather[["ghi", "dni", "dhi"]]
     bad = (irr < IRRADIANCE_NIGHT_OFFSET_W_M2) | (irr > IRRADIANCE_MAX_W_M2)
     if bad.to_numpy().any():
@@ -679,6 +680,33 @@ def _check_irradiance(weather: pd.DataFrame, fmt: str,
             f"{irr.index[at].strftime(when)}: {why}; "
             f"{int(bad.to_numpy().sum())} such values in all — fill them, or use another file")
     weather[["ghi", "dni", "dhi"]] = irr.clip(lower=0.0)
+    if "wind_speed" in weather.columns:
+        _check_wind(weather["wind_speed"], fmt, when)
+
+
+#: The most a weather file's wind speed can be [m s⁻¹]: the highest surface gust measured,
+#: 113.2 m s⁻¹ (WMO World Weather & Climate Extremes Archive, Barrow Island, 10 April 1996).
+#: EPW writes 999 for a missing wind speed ("EnergyPlus Weather File (EPW) Data Dictionary":
+#: "missing value = 999")
+WIND_SPEED_MAX_M_S = 113.2
+
+
+def _check_wind(wind_m_s: pd.Series, fmt: str, when: str) -> None:
+    """Refuse a weather file whose wind speed lies outside [0, :data:`WIND_SPEED_MAX_M_S`],
+    naming the hour and the count. An EPW's 999 ("missing") was read as 999 m s⁻¹: the wind
+    stow (:mod:`sim.stow`) held the tracker flat through four missing hours and their
+    interpolation (320 daylight minutes, 318 Wh "lost" on a Sand Point day at 12 m s⁻¹), and
+    the cells were cooled as in a gale (a review of the stow)."""
+    bad = (wind_m_s < 0.0) | (wind_m_s > WIND_SPEED_MAX_M_S)
+    if bad.to_numpy().any():
+        at = int(bad.to_numpy().argmax())
+        value = float(wind_m_s.iloc[at])
+        why = ("EPW's mark of a missing value" if fmt == "epw" and value == 999.0 else
+               f"outside 0…{WIND_SPEED_MAX_M_S:g} m s⁻¹")
+        raise ValueError(
+            f"the {fmt.upper() if fmt in WEATHER_FORMATS else fmt} file's wind_speed is "
+            f"{value:g} m s⁻¹ on {wind_m_s.index[at].strftime(when)}: {why}; "
+            f"{int(bad.to_numpy().sum())} such values in all — fill them, or use another file")
 
 
 def typical_year_on(weather: pd.DataFrame, utc_offset_h: float, start: pd.Timestamp,

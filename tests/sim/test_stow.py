@@ -142,3 +142,33 @@ def test_config_declares_and_checks_the_stow() -> None:
     with pytest.raises(ValueError, match="tracker.stow_release_min: only used with "
                                          "stow_wind_speed_m_s"):
         site_from_dict(alone)
+
+
+def test_a_missing_wind_speed_is_refused_not_stowed_for(tmp_path) -> None:
+    """An EPW's 999 (the data dictionary's "missing value" of the wind speed) was read as
+    999 m/s: at a 12 m/s threshold the tracker stowed through the missing hours and their
+    interpolation (Sand Point, 4 missing hours: 320 daylight minutes, 318 Wh). Refused naming
+    the column, the hour and the count, as a missing irradiance is; a negative wind too."""
+    from test_sky import write_epw
+
+    from sim.sky import read_typical_year
+
+    lines = write_epw(tmp_path / "greensboro.epw").read_text().splitlines()
+    june_15 = 8 + (31 + 28 + 31 + 30 + 31 + 14) * 24  # its first hour's record
+
+    def with_wind(name: str, wind: str, hours: range):
+        out = list(lines)
+        for k in hours:
+            f = out[june_15 + k].split(",")
+            f[21] = wind  # the wind speed's field
+            out[june_15 + k] = ",".join(f)
+        (tmp_path / name).write_text("\n".join(out) + "\n")
+        return tmp_path / name
+
+    with pytest.raises(ValueError, match=r"EPW file's wind_speed is 999 m s⁻¹ on 15 Jun "
+                                         r"10:30 \(station time\): EPW's mark of a missing "
+                                         r"value; 4 such values"):
+        read_typical_year(with_wind("missing.epw", "999", range(10, 14)))  # hours 11-14
+    with pytest.raises(ValueError, match=r"wind_speed is -1.5 m s⁻¹ on 15 Jun 10:30 "
+                                         r"\(station time\): outside 0…113.2 m s⁻¹; 1 such"):
+        read_typical_year(with_wind("negative.epw", "-1.5", range(10, 11)))
