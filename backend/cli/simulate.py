@@ -339,8 +339,11 @@ def _stow_lines(summary: dict[str, Any]) -> list[str]:
     over = f"wind over {summary['stow_wind_speed_m_s']:g} m/s"
     if summary["stow_min"] is None:
         return [f"wind stow: n/a (the run's sky has no wind speed; it stows at {over})"]
-    return [f"wind stow: {summary['stow_min']:,} daylight minutes, "
-            f"{summary['stow_loss_wh']:.2f} Wh lost ({over})"]
+    loss = summary["stow_loss_wh"]
+    if loss < 0:  # under cloud the flat panel sees more of the sky than one facing a low sun
+        return [f"wind stow: {summary['stow_min']:,} daylight minutes, {-loss:.2f} Wh gained, "
+                f"not lost: a cloudy sky's light is best caught flat ({over})"]
+    return [f"wind stow: {summary['stow_min']:,} daylight minutes, {loss:.2f} Wh lost ({over})"]
 
 
 def _text(summary: dict[str, Any]) -> str:

@@ -83,7 +83,9 @@ function stowTile(summary) {
   const over = `wind over ${num(summary.stow_wind_speed_m_s, 1)} m/s`;
   const t = summary.stow_min === null
     ? tile("Wind stow", "—", `no wind speed in this run's sky; stows at ${over}`)
-    : tile("Wind stow", energy(summary.stow_loss_wh), `lost in ${num(summary.stow_min, 0)} daylight minutes flat · ${over}`);
+    : summary.stow_loss_wh < 0 // under cloud a flat panel sees more of the sky than one facing a low sun
+      ? tile("Wind stow", energy(-summary.stow_loss_wh), `gained, not lost, in ${num(summary.stow_min, 0)} daylight minutes flat: a cloudy sky's light is best caught flat · ${over}`)
+      : tile("Wind stow", energy(summary.stow_loss_wh), `lost in ${num(summary.stow_min, 0)} daylight minutes flat · ${over}`);
   t.dataset.testid = "stow-tile";
   return [t];
 }
@@ -181,7 +183,9 @@ async function drawDaily(runId, summary) {
     xaxis: { type: "date", title: { text: `Day (${tz})` }, tickformat: "%d %b", dtick: everyDays * 86400000, gridcolor: "#e9edf1" },
     // both arrays' bars: a fixed array beating the tracker (a CPV receiver with a yawed
     // pedestal, a stuck tracker) ran off the top of an axis set by the tracker's alone
-    yaxis: { title: { text: "Energy [kWh]" }, ...zeroBasedAxis([...whole(kwh("tracker_energy_wh")), ...whole(kwh("fixed_energy_wh"))]), gridcolor: "#e9edf1" },
+    // and the stow's: a cloudy day's is negative (the flat panel gained) and hid below 0
+    yaxis: { title: { text: "Energy [kWh]" }, ...zeroBasedAxis([...whole(kwh("tracker_energy_wh")), ...whole(kwh("fixed_energy_wh")),
+      ...(stow ? whole(kwh("stow_loss_wh")) : [])]), gridcolor: "#e9edf1" },
     yaxis2: { title: { text: "Tracking gain [%]" }, overlaying: "y", side: "right", showgrid: false, ticksuffix: " %", ...gainAxis },
   }), {
     columns: ["date", "tracker_energy_wh", "fixed_energy_wh", "gain_pct", ...(stow ? ["stow_loss_wh"] : []), "partial_day"],

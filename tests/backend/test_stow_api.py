@@ -116,3 +116,17 @@ def test_a_windy_run_reports_the_stow_as_the_cli_and_the_library(
                                                                          "end")}, "step_s": 300})
     assert r.status_code == 200, r.text
     assert r.json()["stow_min"] is None and r.json()["stow_loss_wh"] is None
+
+
+def test_a_cloudy_runs_negative_stow_loss_reads_as_a_gain() -> None:
+    """Under an overcast sky the flat stowed panel caught more than one facing a low sun: a
+    review's Sand Point day (pvlib's 703165TY, 30 March at 12 m/s) 'lost' -109.54 Wh, as
+    pvlib alone computes it; the text said "-109.54 Wh lost"."""
+    from backend.cli.simulate import _stow_lines
+
+    summary = {"stow_wind_speed_m_s": 12.0, "stow_min": 325, "stow_loss_wh": -109.54}
+    assert _stow_lines(summary) == ["wind stow: 325 daylight minutes, 109.54 Wh gained, not "
+                                    "lost: a cloudy sky's light is best caught flat (wind "
+                                    "over 12 m/s)"]
+    assert _stow_lines({**summary, "stow_loss_wh": 517.77}) == [
+        "wind stow: 325 daylight minutes, 517.77 Wh lost (wind over 12 m/s)"]
