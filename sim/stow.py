@@ -11,7 +11,8 @@ time": the minimum time the wind must stay at or below the threshold before trac
 resumes, docs.plantpredict.com/models/tracking/wind_stow; the OVRO 40 m telescope's
 ``hold_time``). This module holds that rule; :func:`sim.twin.simulate` poses the tracker
 flat in the stowed steps (the night stow's pose, :func:`sim.kinematics.tracking_angles`:
-elevation joint at ``elevation_max_deg``) and reports the minutes and the energy lost.
+elevation joint at ``elevation_max_deg``) and reports the minutes and the energy lost;
+:func:`sim.plant.simulate.simulate_plant` lays every tracker of a plant flat alike.
 """
 
 from __future__ import annotations
@@ -61,3 +62,16 @@ class WindStow:
         over = np.asarray(wind_speed, dtype=float) > self.wind_speed_m_s
         last_over_s = np.maximum.accumulate(np.where(over, t, -np.inf))
         return over | (t - last_over_s < self.release_min * 60.0)
+
+
+def daylight_minutes(stowed: np.ndarray, daylight: np.ndarray, step_s: float,
+                     duration_s: float) -> int:
+    """Daylight minutes stowed over a run's steps (the twin's and the plant's ``stow_min``):
+    each step stowed with the sun up (``stowed``, ``daylight``: bool per step, the run's
+    steps only, not its closing instant) counts ``step_s`` [s], the last one only up to the
+    run's end (``duration_s`` [s]: a step that does not divide the range)."""
+    n = len(stowed)
+    step_cut_s = np.full(n, float(step_s))
+    if n:
+        step_cut_s[-1] = float(duration_s) - (n - 1) * float(step_s)
+    return int(round(float(step_cut_s[np.asarray(stowed) & np.asarray(daylight)].sum()) / 60.0))

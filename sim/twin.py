@@ -68,6 +68,7 @@ from sim.energy import (
     simulation_times,
 )
 from sim.sites import Site
+from sim.stow import daylight_minutes
 from sim.tracking import (
     CameraSetup,
     DriveLimits,
@@ -788,10 +789,9 @@ def simulate(
         tracking &= ~stowed[:n_steps]  # a stowed tracker is not pointing
         series["stow_loss_power_w"] = extra["stow_loss_power_w"][:n_steps]
         closing_power_w["stow_loss"] = float(extra["stow_loss_power_w"][n_steps])
-        step_cut_s = np.full(n_steps, float(step_s))  # the last step only up to the end
-        step_cut_s[-1] = duration_s - (n_steps - 1) * float(step_s)
-        day_stowed = stowed[:n_steps] & (series["apparent_elevation"].to_numpy() > 0)
-        stow_min = int(round(float(step_cut_s[day_stowed].sum()) / 60.0))
+        stow_min = daylight_minutes(stowed[:n_steps],
+                                    series["apparent_elevation"].to_numpy() > 0, step_s,
+                                    duration_s)
     pointing = tracking & (series["apparent_elevation"].to_numpy() > POINTING_MIN_ELEVATION_DEG)
     series.loc[~pointing, "pointing_error_mrad"] = np.nan
     shade_loss_wh = None

@@ -24,7 +24,7 @@ import threading
 from typing import Any, cast
 
 from backend.cli import fail
-from backend.cli.simulate import InputError, parse_when
+from backend.cli.simulate import InputError, _stow_lines, parse_when
 
 _FORCE_HELP = ("run on a weather station more than 100 km from the place anyway (only the "
                "state of its sky is moved there)")
@@ -238,6 +238,7 @@ def _text(s: dict[str, Any]) -> str:
         f"{pct(s['shading_loss_area_pct'])} by area",
         f"fixed plant  {s['fixed_energy_wh'] / 1000:.1f} kWh; gain {pct(s['gain_vs_fixed_pct'])}",
         *([f"warning: {s['weather_warning']}"] if s.get("weather_warning") else []),
+        *_stow_lines(s),  # a plant that stows: the twin's line (sim.stow)
     ])
 
 

@@ -29,6 +29,7 @@ from sim.site_config import (
     equator_azimuth_deg,
     fixed_tilt_from_latitude_deg,
 )
+from sim.stow import STOW_RELEASE_MIN, WindStow
 
 FloatArray = NDArray[np.float64]
 
@@ -299,6 +300,9 @@ class Plant:
         field of :mod:`sim.plant.fields`): azimuth of its downhill normal and tilt [°]. With
         the sun below the ground's horizon every collector is in shade
         (:func:`sim.plant.fields.horizon_elevation`). 0: flat, no horizon.
+    wind_stow : WindStow, optional
+        Every tracker's wind stow (the plant file's ``tracker.stow_wind_speed_m_s`` and
+        ``stow_release_min``, a site's keys, :class:`sim.stow.WindStow`); None: it never stows.
     """
 
     plant_id: str
@@ -319,6 +323,7 @@ class Plant:
     slope_tilt: float = 0.0
     source: str = ""
     notes: str = ""
+    wind_stow: WindStow | None = None
 
     @property
     def n_trackers(self) -> int:
@@ -353,6 +358,9 @@ class Plant:
                  "up_m": float(p[2])}
                 for tid, p in zip(self.tracker_ids, self.positions, strict=True)
             ],
+            **({} if self.wind_stow is None else {"tracker": {
+                "stow_wind_speed_m_s": self.wind_stow.wind_speed_m_s,
+                "stow_release_min": self.wind_stow.release_min}}),
             "gcr": plant_gcr(self) if self.n_trackers >= 3 else None,
             "land_m2": plant_land_m2(self) if self.n_trackers >= 3 else None,
             "source": self.source,
@@ -465,6 +473,25 @@ def _collector(d: Any, where: str) -> Collector:
     )
 
 
+def _wind_stow(d: Any, where: str) -> WindStow | None:
+    """The plant file's ``tracker`` object: ``stow_wind_speed_m_s`` and ``stow_release_min``,
+    the bounds of a site's (:class:`sim.site_config.TrackerGeometry`); None without a speed."""
+    if not isinstance(d, dict):
+        raise ValueError(f"{where} must be an object")
+    unknown = sorted(set(d) - {"stow_wind_speed_m_s", "stow_release_min"})
+    if unknown:
+        raise ValueError(f"{where}: unknown field {unknown[0]!r} (a plant's tracker takes "
+                         "stow_wind_speed_m_s and stow_release_min)")
+    if "stow_wind_speed_m_s" not in d:
+        if "stow_release_min" in d:
+            raise ValueError(f"{where}: field 'stow_release_min' is only used with "
+                             "'stow_wind_speed_m_s'")
+        return None
+    speed = _num(d, "stow_wind_speed_m_s", where, positive=True, hi=100)
+    return WindStow(speed, _num(d, "stow_release_min", where, default=STOW_RELEASE_MIN, lo=0,
+                                hi=1440))
+
+
 def plant_from_dict(d: dict[str, Any], where: str = "plant") -> Plant:
     """A :class:`Plant` from the layout of ``sim/data/plants/*.json``; ValueError names a field."""
     if not isinstance(d, dict):
@@ -538,6 +565,7 @@ def plant_from_dict(d: dict[str, Any], where: str = "plant") -> Plant:
                            default=equator_azimuth_deg(lat), lo=0, hi=360),
         source=str(d.get("source", "")),
         notes=str(d.get("notes", "")),
+        wind_stow=_wind_stow(d.get("tracker", {}), f"{where}: tracker"),
     )
     if len(ids) >= 3 and (gcr := plant_gcr(plant)) < MIN_PLANT_GCR:
         raise ValueError(

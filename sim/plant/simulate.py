@@ -13,6 +13,15 @@ with its own shade, is simulated alongside.
 
 Weather comes on the run's times (a typical year is laid on them by
 :func:`sim.sky.typical_year_at_site`, the twin's rule for a station near or far).
+
+Wind stow: a plant whose file gives ``tracker.stow_wind_speed_m_s`` (``Plant.wind_stow``,
+the twin's rule, :class:`sim.stow.WindStow`), run on weather with a ``wind_speed`` column,
+lays every collector flat (surface elevation 90°, its azimuth kept) in the steps
+:meth:`sim.stow.WindStow.stowed` marks: one anemometer, the whole plant stows. Flat collectors
+on pivots at one height shade nothing; the shading code computes whatever the pivots' heights
+leave. The series gains ``stow_loss_w`` [W] (the plant's power in the strategy's orientation
+minus its power flat, bypass-diode model), the summary ``stow_min`` (daylight minutes stowed)
+and ``stow_loss_wh``; without wind in the run's sky both are None.
 """
 
 from __future__ import annotations
@@ -40,6 +49,7 @@ from sim.plant.layout import Plant
 from sim.plant.shading import BinTable, PlantShade, plant_shade, sum_columns
 from sim.plant.strategies import orientations
 from sim.sky import clearsky_ineichen, iam_physical, poa_irradiance, weather_at
+from sim.stow import daylight_minutes
 from sim.sun import solar_position
 
 FloatArray = NDArray[np.float64]
@@ -206,6 +216,9 @@ class PlantResult:
     #: the series' values at the instant closing the last step (one step after its last
     #: row, :func:`sim.energy.simulation_times`), by column
     closing: dict[str, float] = field(default_factory=dict)
+    #: daylight minutes the wind held the plant flat (:mod:`sim.stow`); None when the plant
+    #: does not stow or the run's sky has no wind speed
+    stow_min: int | None = None
 
     def energy_wh(self, column: str) -> float:
         """The run's integral of a power column [Wh] (irradiance: [Wh m⁻²]) over
@@ -248,6 +261,10 @@ class PlantResult:
             "gain_vs_fixed_pct": None if (g := gain_pct(e, e_fix)) is None else round(g, 4),
             "plant_peak_w": round(float(s["power_w"].max()), 3),
             "poa_insolation_wh_m2": round(wh("poa_global"), 3),
+            **({} if self.plant.wind_stow is None else {  # null: no wind in the run's sky
+                "stow_wind_speed_m_s": self.plant.wind_stow.wind_speed_m_s,
+                "stow_min": self.stow_min,
+                "stow_loss_wh": None if self.stow_min is None else round(wh("stow_loss_w"), 3)}),
         }
 
 
@@ -303,6 +320,11 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
     if tracker is None:
         col["tracker_power_w"][:] = np.nan
     dni_f_tracker = np.zeros(plant.n_trackers)
+    stowed = None  # the wind stow, on weather with a wind speed only (sim.stow)
+    if plant.wind_stow is not None and weather is not None and "wind_speed" in weather.columns:
+        wind = weather_at(times, weather, plant.temp_air, plant.wind_speed, True)["wind_speed"]
+        stowed = plant.wind_stow.stowed(times.as_unit("ns").asi8 / 1e9, wind)
+        col["stow_loss_w"] = np.zeros(len(times))
     table = BinTable()                       # sun bins recur every day: build each once
     for k0 in range(0, len(times), _CHUNK):
         tt = times[k0:k0 + _CHUNK]
@@ -312,6 +334,12 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
         up = csky["apparent_elevation"] > 0
         day = np.nonzero(up)[0]              # shade and power are computed by day only
         dsky = {k: v[day] for k, v in csky.items()}
+        flat, unstowed_w = None, None
+        if stowed is not None and (flat := np.nonzero(stowed[k0 + day])[0]).size:
+            # the strategy's power in the stowed daylight steps, then every collector flat
+            unstowed_w = _power(plant, {k: v[flat] for k, v in dsky.items()}, saz[day][flat],
+                                sel[day][flat], table)["p_elec"]
+            sel = np.where(stowed[k0:k0 + len(tt)], 90.0, sel)
         run = _power(plant, dsky, saz[day], sel[day], table, tracker)
         fixed_w = (_power(plant, dsky, np.full(len(day), plant.fixed_azimuth),
                           np.full(len(day), 90.0 - plant.fixed_tilt), table)["p_elec"]
@@ -337,6 +365,8 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
         col["poa_global"][at], col["fixed_power_w"][at] = run["poa_global"], fixed_w
         col["power_w"][at], col["power_area_w"][at] = run["p_elec"], run["p_area"]
         col["power_unshaded_w"][at] = run["p_unshaded"]
+        if flat is not None and unstowed_w is not None:
+            col["stow_loss_w"][at[flat]] = unstowed_w - run["p_elec"][flat]
         if tracker is not None:
             col["tracker_power_w"][at] = run["p_tracker"]
         if progress is not None:
@@ -367,10 +397,13 @@ def simulate_plant(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s:
         "fixed_energy_wh": per_day_wh("fixed_power_w"),
         "clearness_index": _ratio(per_day_sum("ghi"), per_day_sum("ghi_extra")),
     }, index=dates)
+    stow_min = (None if stowed is None else daylight_minutes(
+        stowed[:n_steps], series["apparent_elevation"].to_numpy() > 0, step_s,
+        (end - start).total_seconds()))
     return PlantResult(plant, start, end, float(step_s), strategy,
                        "clearsky-ineichen" if weather is None else "weather", series, daily,
                        any_shaded, daylight, dni_f / dni_sum if dni_sum > 0 else None,
-                       dni_f_tracker / dni_sum if dni_sum > 0 else None, closing)
+                       dni_f_tracker / dni_sum if dni_sum > 0 else None, closing, stow_min)
 
 
 

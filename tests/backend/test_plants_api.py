@@ -102,6 +102,20 @@ def test_dropped_in_plant_appears(client: httpx.Client, plants_dir: Path) -> Non
         path.unlink()
 
 
+def test_a_plants_wind_stow_is_served_typed(client: httpx.Client, plants_dir: Path) -> None:
+    """The plant file's ``tracker`` (stow_wind_speed_m_s, stow_release_min: a site's keys)
+    in GET /api/v1/plants/{id}; null for a plant that never stows."""
+    path = _two_tracker_plant(plants_dir, "windy-pair")
+    d = json.loads(path.read_text())
+    path.write_text(json.dumps({**d, "tracker": {"stow_wind_speed_m_s": 12.5}}))
+    try:
+        got = client.get("/api/v1/plants/windy-pair").json()
+        assert got["tracker"] == {"stow_wind_speed_m_s": 12.5, "stow_release_min": 30.0}
+        assert client.get("/api/v1/plants/penarroya").json()["tracker"] is None
+    finally:
+        path.unlink()
+
+
 def test_a_bad_plant_file_is_not_served_and_not_named_known(client: httpx.Client,
                                                            plants_dir: Path) -> None:
     """A tester's finding: a plant file the service cannot load was left out of the list,

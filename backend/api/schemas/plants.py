@@ -73,6 +73,16 @@ class PlantTrackerRead(BaseModel):
     up_m: float
 
 
+class PlantStowRead(BaseModel):
+    """The plant's trackers' wind stow (the plant file's ``tracker``, a site's keys:
+    sim/stow.py); a run on weather with wind lays every collector flat while it blows."""
+
+    stow_wind_speed_m_s: float = Field(description="[m s⁻¹] they stow while the weather's "
+                                                   "wind_speed exceeds this")
+    stow_release_min: float = Field(description="[min] they track again once the wind has "
+                                                "stayed at or below it this long")
+
+
 class PlantRead(BaseModel):
     """One plant: place, collector and electrical layout, trackers in ENU metres."""
 
@@ -88,6 +98,8 @@ class PlantRead(BaseModel):
     fixed: PlantFixedRead
     collector: CollectorRead
     trackers: list[PlantTrackerRead]
+    tracker: PlantStowRead | None = Field(None, description="the trackers' wind stow; null: "
+                                                            "they never stow for wind")
     gcr: float | None = Field(description="ground cover ratio [-]: the collectors' area over "
                                           "land_m2; null for fewer than 3 trackers")
     land_m2: float | None = Field(description="ground the plant covers [m²]: its pivots' convex "
