@@ -450,9 +450,9 @@ def _arrays_step(
         el_joint = np.where(stowed, site.tracker.elevation_max_deg, el_joint)
         flat = kinematics.forward_kinematics(az_joint, el_joint, site.tracker)
         normal = np.where(stowed[:, None], flat if base is None else flat @ base.T, normal)
-        ideal_normal = np.where(stowed[:, None], kinematics.forward_kinematics(
-            az_ideal, np.where(stowed, site.tracker.elevation_max_deg, el_ideal),
-            site.tracker), ideal_normal)
+        # the ideal tracker stows as this one does (on its base): a stow is not a pointing
+        # error, and a level ideal beside a leaning pedestal's stow had put its tilt there
+        ideal_normal = np.where(stowed[:, None], normal, ideal_normal)
     out["azimuth_joint_deg"], out["elevation_joint_deg"] = az_joint, el_joint
     tilt, surf_az = kinematics.normal_to_tilt_azimuth(normal)
     fixed = site.arrays["fixed"]
