@@ -47,6 +47,7 @@ def logged():
     return logger_days(site, first, DAYS, seed=21, fault="module_loss", fault_day=FAULT_DAY)
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # fits; PG: tests below
 def test_diagnosis_finds_module_loss_and_expects_the_healthy_energy(client, live_server,
                                                                     logged) -> None:
     tracker = logged.tracker_power_w.copy()

@@ -98,6 +98,7 @@ def gunzips(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[int]]:
 GZ_JSON = {"Content-Encoding": "gzip", "Content-Type": "application/json"}
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # gzip, not storage
 def test_the_bomb_gets_a_4xx_over_http(client: httpx.Client, gunzips: list[int]) -> None:
     r = client.post("/api/v1/simulations", content=BOMB, headers=GZ_JSON)
     assert r.status_code == 413 and "gzip members" in r.json()["detail"]

@@ -30,6 +30,7 @@ def _unit(az_deg: np.ndarray, el_deg: np.ndarray) -> np.ndarray:
     return np.stack([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], axis=-1)
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # the angles, not storage
 def test_encoder_angles_give_the_pointing_error_of_every_sunlit_minute(
         client: httpx.Client, live_server: LiveServer) -> None:
     from sim.sites import load_site

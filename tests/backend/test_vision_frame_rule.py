@@ -162,6 +162,7 @@ def test_zones_in_names_read_to_the_minute_or_refused(client: httpx.Client,
     assert r.status_code == 200 and r.json()["timestamp_source"] == "given"
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # the fit, not storage
 def test_cli_and_service_calibrate_the_same_frames_alike(client: httpx.Client, tmp_path: Path,
                                                           capsys: pytest.CaptureFixture[str]
                                                           ) -> None:
