@@ -447,6 +447,13 @@ def _rim_circle(gray: NDArray[np.uint8], cx: float, cy: float, r: float, corner:
     return fx, fy, fr
 
 
+def lens_circle(fov: FovCircle) -> FovCircle:
+    """The lens's whole image circle (its lit disc: a 180° lens's horizon) of the circle
+    ``fov`` that :func:`estimate_fov` found, which is shrunk by 2 % to keep the detector off
+    the dark rim."""
+    return FovCircle(fov.cx_px, fov.cy_px, fov.radius_px / 0.98)
+
+
 def image_circle(gray: NDArray[np.uint8]) -> tuple[FovCircle, bool] | None:
     """The lens's whole image circle (not shrunk) and whether it reaches the frame's edge.
 
@@ -459,7 +466,7 @@ def image_circle(gray: NDArray[np.uint8]) -> tuple[FovCircle, bool] | None:
     fov = estimate_fov(gray)
     if fov is None:
         return None
-    circle = FovCircle(fov.cx_px, fov.cy_px, fov.radius_px / 0.98)
+    circle = lens_circle(fov)
     h, w = gray.shape[:2]
     clipped = (circle.cx_px - circle.radius_px < -0.5 or circle.cy_px - circle.radius_px < -0.5
                or circle.cx_px + circle.radius_px > w - 0.5
