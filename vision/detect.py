@@ -893,8 +893,8 @@ def _disc_behind_obstacle(gray: NDArray[np.uint8], cx: float, cy: float, model: 
     beyond the circle's edge). The circle moves with the projection it is fitted on, which a
     blind camera only guesses (the image circle read as equidistant): the arc is fitted on
     every candidate projection of the same image circle (:func:`_candidate_projections`) and
-    is evidence when at least one circle is centred inside the lens's circle and the disc is
-    dark at every such centre — whatever the lens, the sun is there and hidden (issue 24: a
+    is evidence when the disc is dark at one such centre inside the lens's circle and wholly
+    clipped at none — a visible disc at any candidate's centre keeps the sun (issue 24: a
     tester's visible equisolid sun 9.9° over a ridge was judged hidden on the equidistant
     guess, a case the independent renderer did not reproduce; an equisolid sun 2.5–4° under
     a ridge, read as equidistant, has its arc's circle
@@ -912,8 +912,9 @@ def _disc_behind_obstacle(gray: NDArray[np.uint8], cx: float, cy: float, model: 
         if arc is not None and arc[2][2] >= _ARC_EVIDENCE_SHARE and \
                 _inside(arc[2][0], arc[2][1], gray.shape, lens):
             centres.append((arc[2][0], arc[2][1], m))
-    if centres and all(_disc_dark(gray, x, y, m, level, got.bg) for x, y, m in centres):
-        return centres[0][0], centres[0][1]
+    dark = [(x, y) for x, y, m in centres if _disc_dark(gray, x, y, m, level, got.bg)]
+    if dark and not any(_disc_clipped(gray, x, y, m, level) for x, y, m in centres):
+        return dark[0]
     return None
 
 
@@ -946,20 +947,36 @@ def _disc_dark(gray: NDArray[np.uint8], cx: float, cy: float, model: CameraModel
                level: float, bg: float) -> bool:
     """Whether no pixel of the solar disc centred at (``cx``, ``cy``) reaches ``level`` and
     their median is below the sky's ``bg`` (:func:`_disc_behind_obstacle`)."""
+    disc = _disc_pixels(gray, cx, cy, model)
+    return disc is not None and bool(int(disc.max()) <= level and float(np.median(disc)) < bg)
+
+
+def _disc_clipped(gray: NDArray[np.uint8], cx: float, cy: float, model: CameraModel,
+                  level: float) -> bool:
+    """Whether every pixel of the solar disc centred at (``cx``, ``cy``) is above ``level``:
+    a visible disc, some 10⁵ times the sky's radiance, clips wherever it shows
+    (:func:`_disc_behind_obstacle`)."""
+    disc = _disc_pixels(gray, cx, cy, model)
+    return disc is not None and int(disc.min()) > level
+
+
+def _disc_pixels(gray: NDArray[np.uint8], cx: float, cy: float, model: CameraModel
+                 ) -> NDArray[np.uint8] | None:
+    """The grey levels of the solar disc centred at (``cx``, ``cy``): within
+    :data:`vision.sphere.SUN_RADIUS_DEG` at ``model``'s largest local scale there, plus
+    :data:`_DISC_BLUR_PX`; None where it has no pixel on the frame or no scale."""
     major, _ = _local_px_per_deg(model, cx, cy)
     if not major > 0.0:
-        return False
+        return None
     r = SUN_RADIUS_DEG * major + _DISC_BLUR_PX
     h, w = gray.shape
     x0, x1 = max(int(np.floor(cx - r)), 0), min(int(np.ceil(cx + r)) + 1, w)
     y0, y1 = max(int(np.floor(cy - r)), 0), min(int(np.ceil(cy + r)) + 1, h)
     if x1 <= x0 or y1 <= y0:
-        return False
+        return None
     yy, xx = np.mgrid[y0:y1, x0:x1]
     disc = gray[y0:y1, x0:x1][(xx - cx) ** 2 + (yy - cy) ** 2 <= r * r]
-    if disc.size == 0:
-        return False
-    return bool(int(disc.max()) <= level and float(np.median(disc)) < bg)
+    return disc if disc.size else None
 
 
 def _inside(x: float, y: float, shape: tuple[int, ...], fov: FovCircle | None) -> bool:

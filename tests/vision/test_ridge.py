@@ -91,6 +91,8 @@ def _blind(img: np.ndarray):  # type: ignore[no-untyped-def]
     ("equisolid", 2.5, 7.0, 280.0, 3.5),
     ("equisolid", 2.5, 12.0, 320.0, 5.5),
     ("equisolid", 4.0, 12.0, 280.0, 5.5),
+    ("equidistant", 1.0, 7.0, 280.0, 3.5),
+    ("equidistant", 1.0, 7.0, 160.0, 6.5),
 ])
 def test_a_sun_behind_the_ridge_is_not_reported(lens: str, below_deg: float, core_deg: float,
                                                 azimuth_deg: float, ridge_mean_deg: float
@@ -102,7 +104,11 @@ def test_a_sun_behind_the_ridge_is_not_reported(lens: str, below_deg: float, cor
     dark rim), so its evidence was dropped — now the lens's whole circle
     (``vision.fov.lens_circle``); for the last three, on the equisolid lens read as
     equidistant (squashed along the radius there) it is centred beyond the horizon itself,
-    and on the equisolid candidate on the disc (``vision.detect._candidate_projections``)."""
+    and on the equisolid candidate on the disc (``vision.detect._candidate_projections``).
+    The two equidistant suns were refused before and are still: a rule that wanted the disc
+    dark at every candidate's centre reported them at 0.99 (a candidate's circle 3 px off,
+    its disc half on the skyline); one clipped disc at a candidate's centre is what keeps a
+    sun."""
     img, _ = _render(lens, 1000, -below_deg, core_deg, azimuth_deg, ridge_mean_deg)
     d = _blind(img)
     print(d.sun_found, d.confidence, d.reason)
