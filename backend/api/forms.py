@@ -7,10 +7,13 @@ whose breach is a 422 naming ``files`` or ``form``; a malformed body is a 400.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypeVar
 
 from fastapi import HTTPException, Request
+from pydantic import BaseModel, ValidationError
 from starlette.datastructures import FormData
+
+M = TypeVar("M", bound=BaseModel)
 
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
@@ -55,6 +58,12 @@ async def read_form(request: Request, limit: int, expected: str, max_files: int,
         raise HTTPException(400, f"malformed multipart body: {text}") from None
 
 
+def form_text(form: FormData, name: str) -> str | None:
+    """A text field of ``form``; None when absent or a file."""
+    value = form.get(name)
+    return value if isinstance(value, str) else None
+
+
 def form_flag(value: str | None, name: str, default: bool = False) -> bool:
     """A boolean form field (true/false, 1/0, yes/no, on/off); anything else a 422 naming it."""
     if value is None or not value.strip():
@@ -63,3 +72,16 @@ def form_flag(value: str | None, name: str, default: bool = False) -> bool:
     if v in _TRUE | _FALSE:
         return v in _TRUE
     raise HTTPException(422, f"{name}: {value!r} is not a boolean (true or false)")
+
+
+def form_model(model: type[M], form: FormData, skip: tuple[str, ...]) -> M:
+    """The text fields of ``form`` but ``skip`` (the file, the flags read by
+    :func:`form_flag`) validated by ``model`` (form fields are text: not strict); a 422
+    naming each field at fault, an unknown one included when ``model`` forbids extras."""
+    fields = {k: v for k, v in form.multi_items() if k not in skip and isinstance(v, str)}
+    try:
+        return model.model_validate(fields, strict=False)
+    except ValidationError as exc:
+        problems = "; ".join(f"{'.'.join(str(x) for x in e['loc'])}: {e['msg']}"
+                             for e in exc.errors())
+        raise HTTPException(422, problems) from None

@@ -194,7 +194,7 @@ def execute(args: argparse.Namespace) -> dict[str, Any]:
     if (end - start).total_seconds() / args.step_s > 5_000_000:
         raise InputError("--step-s: too many steps (more than 5,000,000); use a larger step")
     weather, station, _, clock = typical_weather(args, plant, start, end)
-    from sim.plant.simulate import simulate_plant
+    from backend.plants import simulate_summary
 
     bar = None
     callback = None
@@ -207,17 +207,13 @@ def execute(args: argparse.Namespace) -> dict[str, Any]:
             bar.update(round(100 * fraction) - bar.n)
 
     try:
-        result = simulate_plant(plant, start, end, step_s=args.step_s, strategy=args.strategy,
-                                weather=weather, progress=callback)
+        summary = simulate_summary(plant, start, end, args.step_s, args.strategy, weather,
+                                   station, clock, callback)
     except ValueError as exc:
         raise InputError(str(exc)) from None
     finally:
         if bar is not None:
             bar.close()
-    summary = result.summary()
-    if station is not None:
-        summary["weather_station"] = station
-        summary.update(clock)
     return summary
 
 
@@ -276,29 +272,20 @@ def typical_weather(args: argparse.Namespace, place: Any, start: Any, end: Any
         return None, None, "", {}
     import hashlib
 
-    from backend.twin.scenario import StationTooFar, check_station
-    from sim.sky import read_typical_year, typical_year_at_site
-    from sim.weather_clock import weather_clock
+    from backend.twin.scenario import place_weather
+    from sim.sky import read_typical_year
 
     try:
         typical, meta = read_typical_year(path, flag[2:])
     except (OSError, ValueError, KeyError) as exc:
         raise InputError(f"{flag}: cannot read {path!r}: {exc}") from None
     try:
-        station = check_station(meta, place, args.force, "--force")
-    except StationTooFar as exc:
-        raise InputError(f"{flag}: {exc}") from None
-    try:
-        weather = typical_year_at_site(
-            typical, meta["utc_offset_h"], start, end,
-            (meta["latitude"], meta["longitude"], meta["altitude"]),
-            (place.latitude, place.longitude, place.altitude))
-    except ValueError as exc:
+        weather, station, clock = place_weather(typical, meta, place, start, end, args.force,
+                                                "--force")
+    except ValueError as exc:  # StationTooFar too: a distant station, a clock off longitude
         raise InputError(f"{flag}: {exc}") from None
     with open(path, "rb") as f:
         token = f"{flag[2:]}:{hashlib.sha256(f.read()).hexdigest()[:16]}"
-    clock = weather_clock(weather, place.latitude, place.longitude, place.altitude, start, end,
-                          station)
     return weather, station, token, clock
 
 

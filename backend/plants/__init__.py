@@ -43,8 +43,8 @@ from sim.plant.strategies import STRATEGIES, orientations, sky_map, strategies_f
 log = logging.getLogger(__name__)
 
 __all__ = ["POLYGON_COST_FACTOR", "STRATEGIES", "PlantService", "UnknownPlantError",
-           "cost_factor", "day_cost_s", "lambert_xy", "positions_cost_s", "sky_map_cost_s",
-           "sky_map_png"]
+           "cost_factor", "day_cost_s", "lambert_xy", "positions_cost_s", "simulate_summary",
+           "sky_map_cost_s", "sky_map_png"]
 
 #: A plant day's fixed cost [s]: the sun, backtrack and fixed runs, the sun's ephemeris.
 DAY_OVERHEAD_S = 0.03
@@ -76,6 +76,22 @@ def day_cost_s(n_trackers: int, step_s: float, factor: float = 1.0) -> float:
     """The expected CPU time [s] of :meth:`PlantService.day` (module docstring); ``factor``:
     :func:`cost_factor` of the collector."""
     return DAY_OVERHEAD_S + factor * DAY_STEP_TRACKER_S * 86400.0 / step_s * n_trackers
+
+
+def simulate_summary(plant: Plant, start: pd.Timestamp, end: pd.Timestamp, step_s: float,
+                     strategy: str, weather: pd.DataFrame | None,
+                     station: dict[str, Any] | None, clock: dict[str, Any],
+                     progress: Any = None) -> dict[str, Any]:
+    """The summary of a plant run (:meth:`sim.plant.simulate.PlantResult.summary`), on a
+    weather file with its ``weather_station`` and clock check (``weather_shift_min``,
+    ``weather_warning``: :func:`backend.twin.scenario.place_weather`): ``heliotwin plant
+    simulate``'s JSON and ``POST /api/v1/plants/{plant_id}/weather``'s answer, one rule."""
+    summary = simulate_plant(plant, start, end, step_s=step_s, strategy=strategy,
+                             weather=weather, progress=progress).summary()
+    if station is not None:
+        summary["weather_station"] = station
+        summary.update(clock)
+    return summary
 
 
 def positions_cost_s(n_trackers: int, factor: float = 1.0) -> float:

@@ -104,6 +104,32 @@ def check_weather_span(station: dict[str, Any] | None, start: pd.Timestamp,
                          "it — run within those dates")
 
 
+def place_weather(weather: pd.DataFrame, meta: dict[str, Any], place: Site | Plant,
+                  start: pd.Timestamp, end: pd.Timestamp, force: bool, force_name: str
+                  ) -> tuple[pd.DataFrame, dict[str, Any], dict[str, Any]]:
+    """(weather on ``[start, end)`` at ``place``, its station, its clock check) of a file read
+    by :func:`sim.sky.read_typical_year` or :func:`sim.sky.read_measured` (``meta``): the
+    station checked (:func:`check_station`; :class:`StationTooFar` names ``force_name``), a
+    typical year laid on the range's calendar (:func:`sim.sky.typical_year_at_site`: far
+    away only the state of its sky is moved), measured weather taken as it is within its
+    own dates (:func:`check_weather_span`, a ValueError), and
+    :func:`sim.weather_clock.weather_clock` (``weather_shift_min``, ``weather_warning``).
+    The one path of a plant run on a weather file: ``heliotwin plant simulate``/``sweep``
+    and ``POST /api/v1/plants/{plant_id}/weather``."""
+    station = check_station(meta, place, force, force_name)
+    if station["format"] == "measured":
+        check_weather_span(station, start, end)
+        on_range = weather
+    else:
+        on_range = typical_year_at_site(
+            weather, meta["utc_offset_h"], start, end,
+            (meta["latitude"], meta["longitude"], meta["altitude"]),
+            (place.latitude, place.longitude, place.altitude))
+    clock = weather_clock(on_range, place.latitude, place.longitude, place.altitude, start,
+                          end, station)
+    return on_range, station, clock
+
+
 @dataclass(frozen=True)
 class Scenario:
     """A validated twin scenario."""

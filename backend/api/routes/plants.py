@@ -29,12 +29,17 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from fastapi.responses import Response
 
 from backend.api.deps import CallerDep, ContextDep
+from backend.api.forms import form_flag, form_model, form_text, read_form
+from backend.api.routes.simulations import check_steps
+from backend.api.routes.weather import WEATHER_FORM_FIELDS, read_weather_upload
 from backend.api.schemas.common import PNG_CONTENT
 from backend.api.schemas.plants import (
     PlantDayRead,
     PlantRead,
     PlantSkippedRead,
     PlantSummaryRead,
+    PlantWeatherCreate,
+    PlantWeatherRunRead,
     PositionsRead,
     SkyMapRead,
     SweepAcceptedRead,
@@ -50,6 +55,7 @@ from backend.plants import (
     cost_factor,
     day_cost_s,
     positions_cost_s,
+    simulate_summary,
     sky_map_cost_s,
     sky_map_png,
 )
@@ -71,6 +77,8 @@ from backend.timestamps import (
     parse_day_or_instant,
     parse_instant,
 )
+from backend.twin.scenario import StationTooFar, place_weather
+from sim.energy import check_step
 from sim.plant.layout import Plant
 from sim.plant.strategies import check_strategy_collector, strategies_for
 from sim.plant.sweep import SweepCase, case_day_shade, shade_day
@@ -157,17 +165,19 @@ def _client(request: Request) -> str:
 
 
 async def _priced(request: Request, ctx: Any, caller: Any, cost_s: float,
-                  work: Callable[[], T], one_at_a_time: bool = True) -> T:
+                  work: Callable[[], T], one_at_a_time: bool = True,
+                  fields: str = "step_s, resolution_deg") -> T:
     """Run a plant computation expected to take ``cost_s`` of CPU on a worker thread, one
     at a time (``Limits.plants``, 503 past its queue; not for the few milliseconds of an
     instant's positions, which a plant controller must not wait behind a day for).
     Without a token: 422 above one run's worth, the price taken from the hourly allowance
-    (429) and trued up to the CPU time the work took (nothing when it never ran)."""
+    (429) and trued up to the CPU time the work took (nothing when it never ran); the 422
+    names ``fields``, what makes the work larger."""
     charge = None
     if caller is None:
         s = ctx.settings.simulations
         if cost_s > s.anonymous_run_max_s:
-            raise HTTPException(422, f"step_s, resolution_deg: this computation is expected "
+            raise HTTPException(422, f"{fields}: this computation is expected "
                                      f"to take {amount(cost_s)} s of CPU; without a write token "
                                      f"at most {s.anonymous_run_max_s:g} s "
                                      "(HELIOTWIN_SIMULATION_ANONYMOUS_RUN_MAX_S)")
@@ -460,3 +470,63 @@ async def day(plant_id: str, request: Request, ctx: ContextDep, caller: CallerDe
     cost_s = day_cost_s(plant.n_trackers, step_s, cost_factor(plant.collector))
     return await _priced(request, ctx, caller, cost_s,
                          lambda: service.day(plant_id, day_, step_s))
+
+
+#: The longest plant run on a weather file [days]: a typical year holds one year (a longer
+#: range only repeats it), and a year at 1 min is what ``heliotwin plant simulate`` runs in a
+#: few seconds; the twin's bound on steps (``HELIOTWIN_MAX_SIMULATION_STEPS``) holds too.
+MAX_WEATHER_RUN_DAYS = 366
+
+
+@router.post("/{plant_id}/weather", response_model=PlantWeatherRunRead,
+             response_model_exclude_unset=True,
+             responses={**_PRICED_DOC, 400: {}, 413: {}, 415: {}},
+             openapi_extra=_OPTIONAL_TOKEN)
+async def run_on_weather(plant_id: str, request: Request, ctx: ContextDep, caller: CallerDep,
+                         service: PlantServiceDep) -> dict[str, Any]:
+    """The plant over ``[start, end)`` on an uploaded weather file: ``heliotwin plant
+    simulate --json``'s summary (one ``strategy``; the fixed plant beside it), its wind stow
+    (``stow_min``, ``stow_loss_wh``) and the file's clock check (``weather_shift_min``,
+    ``weather_warning``).
+
+    Multipart, read as ``POST /api/v1/simulations/weather`` reads it (one reading: the body
+    bounded by ``HELIOTWIN_MAX_UPLOAD_BYTES``, a TMY3/EPW typical year laid on the range's
+    calendar or measured weather of its own dates; ``force`` for a station more than 100 km
+    away or a header's UTC offset off its longitude) with the fields ``start``, ``end``,
+    ``step_s`` and ``strategy``. At most :data:`MAX_WEATHER_RUN_DAYS` days and
+    ``HELIOTWIN_MAX_SIMULATION_STEPS`` steps. A token is optional, as for the twin's run on
+    weather: without one the run is priced as that many clear-sky days of the plant
+    (:func:`backend.plants.day_cost_s`, which holds three strategies: an upper bound) from
+    the address's hourly allowance (see the module docstring)."""
+    form = await read_form(request, ctx.settings.server.max_upload_bytes,
+                           "the weather file in 'file'", max_files=1, max_fields=16)
+    force = form_flag(form_text(form, "force"), "force")
+    body = form_model(PlantWeatherCreate, form, WEATHER_FORM_FIELDS)
+    _plant_or_404(service, plant_id)
+    plant = service.get(plant_id)
+    strategy = _strategy(body.strategy, plant)
+    try:
+        start = pd.Timestamp(parse_day_or_instant(body.start, plant.timezone, "start"))
+        end = pd.Timestamp(parse_day_or_instant(body.end, plant.timezone, "end"))
+        check_step(start, end, body.step_s)  # its refusals name end or step_s
+    except (TimestampError, ValueError) as exc:
+        raise HTTPException(422, str(exc)) from None
+    days = (end - start).total_seconds() / 86400.0
+    if days > MAX_WEATHER_RUN_DAYS:
+        raise HTTPException(422, f"end: the run is {days:,.1f} days; at most "
+                                 f"{MAX_WEATHER_RUN_DAYS} on a weather file (a typical year "
+                                 "holds one year)")
+    check_steps(ctx, start, end, body.step_s)
+    typical, meta = await read_weather_upload(form)
+    try:
+        weather, station, clock = await anyio.to_thread.run_sync(
+            place_weather, typical, meta, plant, start, end, force, "force")
+    except StationTooFar as exc:
+        raise HTTPException(422, f"force: {exc}") from None
+    except ValueError as exc:  # a run outside measured weather's dates
+        raise HTTPException(422, f"file: {exc}") from None
+    cost_s = days * day_cost_s(plant.n_trackers, body.step_s, cost_factor(plant.collector))
+    return await _priced(request, ctx, caller, cost_s,
+                         lambda: simulate_summary(plant, start, end, body.step_s, strategy,
+                                                  weather, station, clock),
+                         fields="step_s, end")

@@ -75,18 +75,24 @@ SimulationCreate = create_model(
 )
 
 
+def check_steps(ctx: Any, start: Any, end: Any, step_s: float) -> None:
+    """A 422 naming ``step_s, end`` for a run of more steps than one request may ask
+    (``HELIOTWIN_MAX_SIMULATION_STEPS``): the twin's runs and a plant's on weather."""
+    steps = (end - start).total_seconds() / step_s
+    if steps > ctx.settings.simulations.max_steps:
+        raise HTTPException(422, f"step_s, end: {steps:,.0f} steps asked; the limit is "
+                                 f"{ctx.settings.simulations.max_steps:,} "
+                                 "(HELIOTWIN_MAX_SIMULATION_STEPS): use a larger step_s "
+                                 "or a shorter range")
+
+
 def _params(ctx: Any, body: _SimulationBase) -> Scenario:
     info = site_or_404(ctx, body.site_id, "site_id")
     try:
         t0, t1 = parse_range(body.start, body.end, info.zone)
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
-    steps = (t1 - t0).total_seconds() / body.step_s
-    if steps > ctx.settings.simulations.max_steps:
-        raise HTTPException(422, f"step_s, end: {steps:,.0f} steps asked; the limit is "
-                                 f"{ctx.settings.simulations.max_steps:,} "
-                                 "(HELIOTWIN_MAX_SIMULATION_STEPS): use a larger step_s "
-                                 "or a shorter range")
+    check_steps(ctx, t0, t1, body.step_s)
     machine = {p.name: float(getattr(body, p.name)) for p in MACHINE_PARAMETERS
                if getattr(body, p.name) != p.default}
     try:

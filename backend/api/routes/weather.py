@@ -24,11 +24,10 @@ from typing import Any
 import pandas as pd
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import Response
-from pydantic import ValidationError
 from starlette.datastructures import FormData, UploadFile
 
 from backend.api.deps import ContextDep, site_or_404
-from backend.api.forms import form_flag, read_form
+from backend.api.forms import form_flag, form_model, form_text, read_form
 from backend.api.routes.simulations import (
     _BUSY_DOC,
     SUBMIT_RESPONSES,
@@ -50,15 +49,17 @@ from sim.sky import (
 
 router = APIRouter(prefix="/api/v1/simulations", tags=["simulations"])
 
-def _field(form: FormData, name: str) -> str | None:
-    value = form.get(name)
-    return value if isinstance(value, str) else None
+#: The fields of a weather upload besides a route's own: the file and how to read it.
+WEATHER_FORM_FIELDS = ("file", "force", "weather_stamped", "weather_timezone")
 
 
-async def _weather(upload: Any, stamped: str | None, timezone: str | None
-                   ) -> tuple[Any, dict[str, Any]]:
-    """The weather and station of the uploaded file: a typical year when its first line is a
-    TMY3's or an EPW's, else measured weather; 422 naming ``file`` when unreadable."""
+async def read_weather_upload(form: FormData) -> tuple[Any, dict[str, Any]]:
+    """The weather and station of the form's ``file`` (``weather_stamped`` and
+    ``weather_timezone`` read for measured weather): a typical year when its first line is a
+    TMY3's or an EPW's, else measured weather; 422 naming ``file`` when unreadable. The one
+    reading of a weather upload (the twin's and a plant's)."""
+    upload = form.get("file")
+    stamped, timezone = form_text(form, "weather_stamped"), form_text(form, "weather_timezone")
     if not isinstance(upload, UploadFile):
         raise HTTPException(422, "file: a weather file (TMY3, EPW or a measured CSV) is "
                                  "required")
@@ -103,19 +104,10 @@ async def create_simulation_on_weather(request: Request, ctx: ContextDep) -> Res
     own dates, instead of clear sky."""
     form = await read_form(request, ctx.settings.server.max_upload_bytes,
                            "the weather file in 'file'", max_files=1, max_fields=64)
-    fields: dict[str, Any] = {k: v for k, v in form.multi_items()
-                              if k not in ("file", "force", "background", "weather_stamped",
-                                           "weather_timezone") and isinstance(v, str)}
-    force = form_flag(_field(form, "force"), "force")
-    background = form_flag(_field(form, "background"), "background")
-    try:
-        body = SimulationCreate.model_validate(fields, strict=False)  # form fields are text
-    except ValidationError as exc:
-        problems = "; ".join(f"{'.'.join(str(x) for x in e['loc'])}: {e['msg']}"
-                             for e in exc.errors())
-        raise HTTPException(422, problems) from None
-    typical, meta = await _weather(form.get("file"), _field(form, "weather_stamped"),
-                                   _field(form, "weather_timezone"))
+    force = form_flag(form_text(form, "force"), "force")
+    background = form_flag(form_text(form, "background"), "background")
+    body = form_model(SimulationCreate, form, WEATHER_FORM_FIELDS + ("background",))
+    typical, meta = await read_weather_upload(form)
     info = site_or_404(ctx, body.site_id, "site_id")
     try:
         station = check_station(meta, info.site, force,

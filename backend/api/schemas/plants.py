@@ -176,6 +176,64 @@ class PlantDayRead(BaseModel):
     strategies: dict[str, StrategyEnergyRead]
 
 
+class PlantWeatherCreate(BaseModel):
+    """The form fields of ``POST /api/v1/plants/{plant_id}/weather`` besides the weather
+    file (``file``, ``force``, ``weather_stamped``, ``weather_timezone``: the twin's)."""
+
+    model_config = ConfigDict(allow_inf_nan=False, extra="forbid")
+
+    start: str = Field(min_length=1, max_length=64,
+                       description="YYYY-MM-DD (the plant's midnight) or ISO 8601 with offset")
+    end: str = Field(min_length=1, max_length=64, description="exclusive")
+    step_s: float = Field(60.0, gt=0, le=MAX_STEP_S, description="time step [s], at most an "
+                          "hour (sim.energy.MAX_STEP_S); default 60, as the CLI's")
+    strategy: str = Field("sun", description="sun, backtrack or sky_scan")
+
+
+class PlantWeatherRunRead(BaseModel):
+    """A plant run on a weather file: ``heliotwin plant simulate --json``'s summary
+    (``sim.plant.simulate.PlantResult.summary``, docs/plants.md)."""
+
+    plant_id: str
+    trackers: int
+    start: str
+    end: str
+    step_s: float
+    strategy: str
+    sky: str = Field(description="weather")
+    daylight_steps: int
+    fraction_of_daylight_any_shaded: float | None
+    dni_weighted_shaded_fraction: float | None
+    mean_shaded_fraction: float | None
+    plant_energy_wh: float = Field(description="the strategy's plant energy, bypass-diode "
+                                               "model [Wh]")
+    plant_energy_area_model_wh: float
+    plant_energy_unshaded_wh: float
+    shading_loss_area_pct: float | None
+    shading_loss_electrical_pct: float | None
+    fixed_energy_wh: float = Field(description="the fixed plant of the same collectors [Wh]")
+    gain_vs_fixed_pct: float | None
+    plant_peak_w: float
+    poa_insolation_wh_m2: float
+    stow_wind_speed_m_s: float | None = Field(None, description=(
+        "the plant's wind-stow threshold (tracker.stow_wind_speed_m_s); absent: it never "
+        "stows"))
+    stow_min: int | None = Field(None, description=(
+        "daylight minutes the wind held the plant flat (sim.stow); null when the weather has "
+        "no wind (a distant station's is dropped); absent as stow_wind_speed_m_s"))
+    stow_loss_wh: float | None = Field(None, description=(
+        "the plant's energy in the strategy's orientation minus flat in those minutes "
+        "(bypass-diode model; negative on a cloudy spell) [Wh]; null as stow_min"))
+    weather_station: dict[str, Any] = Field(description=(
+        "the file's station and its distance_km from the plant (measured weather: its "
+        "span), as backend.twin.scenario.check_station describes it"))
+    weather_shift_min: float | None = Field(description=(
+        "the shift [min] that best aligns the file's GHI with the clear sky at the plant "
+        "(> 0: the file runs late); null without a sunny day to fit"))
+    weather_warning: str | None = Field(description="words when weather_shift_min is past "
+                                                    "15 min: the file's times misread")
+
+
 class SweepCreate(BaseModel):
     """A plant-design sweep (issue 26): every layout × GCR × strategy, over a range.
 
