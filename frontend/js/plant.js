@@ -1,10 +1,11 @@
 // Plant: a plant of dual-axis trackers seen from above with each collector's shade through a
 // clear-sky day, the strategies compared, and seed 004's sky map with the chosen orientation;
-// below, a sweep of regular layouts and spacings at the plant's place (issue 26).
+// below, the plant on an uploaded weather file (POST /api/v1/plants/{id}/weather) and a sweep
+// of regular layouts and spacings at the plant's place (issue 26).
 import { api, apiObjectUrl, storedToken } from "./api.js";
 import { COLORS, baseLayout, draw, showEmpty, zeroBasedAxis } from "./charts.js";
-import { fmtTime } from "./time.js";
-import { banner, energy, num, sayInvalid, tile } from "./ui.js";
+import { addDays, fmtTime } from "./time.js";
+import { banner, energy, num, pct, sayInvalid, skyTile, stowTile, tile, weatherWarning } from "./ui.js";
 
 const $ = (id) => document.getElementById(id);
 const enc = encodeURIComponent;
@@ -252,11 +253,85 @@ async function selectPlant(id) {
   select.replaceChildren(...view.plant.strategies.map((s) => new Option(s, s)));
   select.value = view.plant.strategies.includes(keep) ? keep : view.plant.strategies.at(-1);
   if (!$("plant-day").value) $("plant-day").value = localDateIn(view.plant.timezone);
+  weatherForPlant(before !== id);
   await loadDay();
+}
+
+// ── the plant on a weather file (POST /api/v1/plants/{plant_id}/weather) ──
+let weatherToken = 0;
+
+function weatherSay(status, message = "") {
+  $("plant-weather-status").textContent = status;
+  $("plant-weather-message").textContent = message;
+  $("plant-weather-message").hidden = !message;
+}
+
+/** The weather form for the selected plant: its strategies, the day shown as the default
+ * range; another plant's result is not left under this one (`changed`). */
+function weatherForPlant(changed) {
+  const select = $("plant-weather-strategy");
+  const keep = select.value;
+  select.replaceChildren(...view.plant.strategies.map((s) => new Option(s, s)));
+  select.value = view.plant.strategies.includes(keep) ? keep : "sun";
+  if (!$("plant-weather-start").value) {
+    $("plant-weather-start").value = $("plant-day").value;
+    $("plant-weather-end").value = addDays($("plant-day").value, 1);
+  }
+  if (changed) {
+    weatherToken++;
+    $("plant-weather-summary").replaceChildren();
+    weatherSay("");
+  }
+}
+
+/** The run's summary (PlantWeatherRunRead) as tiles: the weather warning first, the sky, the
+ * strategy's energy against the fixed plant, the shading loss and the wind stow. */
+function weatherTiles(s) {
+  $("plant-weather-summary").replaceChildren(
+    ...weatherWarning(s), skyTile(s, s.weather_station, "plant"),
+    tile(`Plant energy (${s.strategy})`, energy(s.plant_energy_wh), `peak ${num(s.plant_peak_w / 1000, 1)} kW · bypass diodes`),
+    tile("Fixed plant", energy(s.fixed_energy_wh), `gain ${pct(s.gain_vs_fixed_pct, 2)}`),
+    tile("Shading loss", s.shading_loss_electrical_pct == null ? "—" : `${num(s.shading_loss_electrical_pct, 2)} %`,
+      s.shading_loss_area_pct == null ? "no daylight" : `bypass diodes; ${num(s.shading_loss_area_pct, 2)} % by area`),
+    ...stowTile(s));
+}
+
+async function runWeather(ev) {
+  ev.preventDefault();
+  const p = view.plant;
+  const file = $("plant-weather-file").files[0];
+  if (!p || !file) return;
+  const form = new FormData();
+  form.append("start", $("plant-weather-start").value);
+  form.append("end", $("plant-weather-end").value);
+  form.append("step_s", $("plant-weather-step").value);
+  form.append("strategy", $("plant-weather-strategy").value);
+  form.append("force", String($("plant-weather-force").checked));
+  form.append("weather_stamped", $("plant-weather-stamped").value);
+  const zone = $("plant-weather-timezone").value.trim();
+  if (zone) form.append("weather_timezone", zone);
+  form.append("file", file, file.name);
+  const token = ++weatherToken;
+  $("plant-weather-summary").replaceChildren();  // no previous run's figures under this one
+  weatherSay(`Running ${p.plant_id} on ${file.name}…`);
+  $("plant-weather-run").disabled = true;
+  try {
+    const s = await api(`/api/v1/plants/${enc(p.plant_id)}/weather`, { method: "POST", form });
+    if (token !== weatherToken) return;
+    weatherTiles(s);
+    weatherSay(`${s.plant_id} on ${file.name}, ${s.start.slice(0, 10)} → ${s.end.slice(0, 10)} at ${num(s.step_s, 0)} s`);
+  } catch (err) {
+    if (token !== weatherToken) return;
+    weatherSay("Not run.", err.message);   // the service's reason, naming the field
+  } finally {
+    $("plant-weather-run").disabled = false;
+  }
 }
 
 export async function init() {
   initSweep();
+  $("plant-weather-form").addEventListener("submit", runWeather);
+  sayInvalid($("plant-weather-form"), (m) => weatherSay("", m));
   $("plant-day").addEventListener("change", loadDay);
   $("plant-time").addEventListener("input", () => {
     view.index = Number($("plant-time").value);

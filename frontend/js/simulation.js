@@ -3,7 +3,7 @@ import { ApiError, api } from "./api.js";
 import { COLORS, baseLayout, draw, roundStep, showEmpty, splitPartial, zeroBasedAxis } from "./charts.js";
 import { addDays, localMidnightMs, toLocalWall, zoneOffsetMs } from "./time.js";
 import { viewerKey } from "./twin.js";
-import { banner, energy, num, pct, tile } from "./ui.js";
+import { banner, energy, num, pct, skyTile, stowTile, tile, weatherWarning } from "./ui.js";
 
 const POLL_MS = 400;
 // the series' columns as the API exports them (units in the names: backend/twin/export.py)
@@ -58,43 +58,11 @@ function localIso(tz, iso) {
   return `${toLocalWall(tz, ms).replace(" ", "T")}${off < 0 ? "-" : "+"}${hhmm}`;
 }
 
-/** The run's weather warning (a file off the sun's time, sim.weather_clock) as a tile across
- * the row, or nothing. */
-function weatherWarning(summary) {
-  if (!summary.weather_warning) return [];
-  const t = tile("Weather off the sun's time", `${num(summary.weather_shift_min, 0)} min`, summary.weather_warning, "warn");
-  t.classList.add("wide");
-  t.dataset.testid = "weather-warning";
-  return [t];
-}
-
-function skyTile(summary, station) {
-  if (!station) return tile("Sky", summary.sky === "weather" ? "weather" : "clear sky", "Ineichen clear sky with Linke turbidity");
-  if (station.format === "measured") {
-    return tile("Sky", "measured weather", `${station.name || "file"} · ${station.stamped.replace("_", " ")} stamps · ${station.start.slice(0, 16)} → ${station.end.slice(0, 16)} UTC`);
-  }
-  return tile("Sky", `${station.format.toUpperCase()} typical year`,
-    `${station.name || "station"} (${num(station.latitude_deg, 2)}°, ${num(station.longitude_deg, 2)}°) · ${num(station.distance_km, 0)} km from the site`);
-}
-
-/** The wind stow's cost beside the gain (sim/stow.py), for a site that stows; nothing otherwise. */
-function stowTile(summary) {
-  if (summary.stow_wind_speed_m_s === undefined || summary.stow_wind_speed_m_s === null) return [];
-  const over = `wind over ${num(summary.stow_wind_speed_m_s, 1)} m/s`;
-  const t = summary.stow_min === null
-    ? tile("Wind stow", "—", `no wind speed in this run's sky; stows at ${over}`)
-    : summary.stow_loss_wh < 0 // under cloud a flat panel sees more of the sky than one facing a low sun
-      ? tile("Wind stow", energy(-summary.stow_loss_wh), `gained, not lost, in ${num(summary.stow_min, 0)} daylight minutes flat: a cloudy sky's light is best caught flat · ${over}`)
-      : tile("Wind stow", energy(summary.stow_loss_wh), `lost in ${num(summary.stow_min, 0)} daylight minutes flat · ${over}`);
-  t.dataset.testid = "stow-tile";
-  return [t];
-}
-
 function summaryTiles(summary, station) {
   const box = $("sim-summary");
   box.innerHTML = "";
   if (!summary) return;
-  box.append(...weatherWarning(summary), skyTile(summary, station),
+  box.append(...weatherWarning(summary), skyTile(summary, station, "site"),
     tile("Tracker energy", energy(summary.tracker_energy_wh), `peak ${num(summary.tracker_peak_w, 0)} W`),
     tile("Fixed energy", energy(summary.fixed_energy_wh), `peak ${num(summary.fixed_peak_w, 0)} W`),
     // a polar night (or a dark run) has no gain: say why rather than a bare "—"

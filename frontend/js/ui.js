@@ -73,3 +73,38 @@ export function sayInvalid(form, say) {
     say(`${label}: ${el.validationMessage}${hint}`);
   }, true); // `invalid` does not bubble: caught on its way down
 }
+
+/** The run's weather warning (a file off the sun's time, sim.weather_clock) as a tile across
+ * the row, or nothing. */
+export function weatherWarning(summary) {
+  if (!summary.weather_warning) return [];
+  const t = tile("Weather off the sun's time", `${num(summary.weather_shift_min, 0)} min`, summary.weather_warning, "warn");
+  t.classList.add("wide");
+  t.dataset.testid = "weather-warning";
+  return [t];
+}
+
+/** The run's sky: clear sky, or the weather file's station and its distance from the
+ * `place` ("site" or "plant") it ran at, or measured weather's span. */
+export function skyTile(summary, station, place) {
+  if (!station) return tile("Sky", summary.sky === "weather" ? "weather" : "clear sky", "Ineichen clear sky with Linke turbidity");
+  if (station.format === "measured") {
+    return tile("Sky", "measured weather", `${station.name || "file"} · ${station.stamped.replace("_", " ")} stamps · ${station.start.slice(0, 16)} → ${station.end.slice(0, 16)} UTC`);
+  }
+  return tile("Sky", `${station.format.toUpperCase()} typical year`,
+    `${station.name || "station"} (${num(station.latitude_deg, 2)}°, ${num(station.longitude_deg, 2)}°) · ${num(station.distance_km, 0)} km from the ${place}`);
+}
+
+/** The wind stow's cost beside the gain (sim/stow.py), for a site or plant that stows;
+ * nothing otherwise. */
+export function stowTile(summary) {
+  if (summary.stow_wind_speed_m_s === undefined || summary.stow_wind_speed_m_s === null) return [];
+  const over = `wind over ${num(summary.stow_wind_speed_m_s, 1)} m/s`;
+  const t = summary.stow_min === null
+    ? tile("Wind stow", "—", `no wind speed in this run's sky; stows at ${over}`)
+    : summary.stow_loss_wh < 0 // under cloud a flat panel sees more of the sky than one facing a low sun
+      ? tile("Wind stow", energy(-summary.stow_loss_wh), `gained, not lost, in ${num(summary.stow_min, 0)} daylight minutes flat: a cloudy sky's light is best caught flat · ${over}`)
+      : tile("Wind stow", energy(summary.stow_loss_wh), `lost in ${num(summary.stow_min, 0)} daylight minutes flat · ${over}`);
+  t.dataset.testid = "stow-tile";
+  return [t];
+}
