@@ -802,3 +802,33 @@ def test_a_plant_run_on_weather_refuses_bad_input_naming_the_field(
                     files=files if files is None or isinstance(files, dict) else {"file": files})
     assert r.status_code == status, r.text
     assert r.json()["detail"].startswith(words) or words in r.json()["detail"], r.text
+
+
+def test_a_plant_runs_on_measured_weather_within_its_dates(client: httpx.Client,
+                                                          plants_dir: Path,
+                                                          tmp_path: Path) -> None:
+    """A CSV that is neither TMY3 nor EPW is the plant's measured weather, read as the twin's
+    upload reads it (``weather_stamped``): the run is the library's on that weather (the CLI
+    has no measured weather for plants), and a run past its dates a 422 naming ``file``."""
+    from sim.plant.simulate import simulate_plant
+    from sim.sky import read_measured
+    from tests.test_cli_sim import _measured_day
+
+    _plant_at(plants_dir, "tehuantepec", {"latitude_deg": 16.28875, "longitude_deg": -95.240871,
+                                          "altitude_m": 40, "timezone": "Etc/GMT+6"})
+    path = _measured_day(tmp_path / "day.csv")
+    files = {"file": (path.name, path.read_bytes(), "text/csv")}
+    day = {"start": "2024-03-15", "end": "2024-03-16", "step_s": "300",
+           "weather_stamped": "interval_end"}
+    r = client.post("/api/v1/plants/tehuantepec/weather", data=day, files=files)
+    assert r.status_code == 200, r.text
+    got = r.json()
+    assert got["sky"] == "weather" and got["weather_station"]["format"] == "measured"
+    weather, _ = read_measured(path, "interval_end", None, path.name)
+    ref = simulate_plant(load_plant("tehuantepec", plants_dir), pd.Timestamp(got["start"]),
+                         pd.Timestamp(got["end"]), 300.0, "sun", weather).summary()
+    assert got["plant_energy_wh"] == ref["plant_energy_wh"] > 0
+    r = client.post("/api/v1/plants/tehuantepec/weather", data={**day, "end": "2024-03-17"},
+                    files=files)
+    assert r.status_code == 422
+    assert r.json()["detail"].startswith("file: weather: the measured weather covers"), r.text
