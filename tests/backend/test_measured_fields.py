@@ -139,6 +139,7 @@ def test_sensor_fields_over_json_and_csv_are_stored_as_sent(
     assert second["wind_speed_m_s"] == "0.8"
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # a schema, not storage
 def test_the_readings_schema_lists_every_sensor_field_with_its_range(
         client: httpx.Client) -> None:
     """The OpenAPI schema of a reading shows each optional sensor field (one list:

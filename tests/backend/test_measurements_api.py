@@ -273,6 +273,7 @@ def test_the_token_is_checked_before_the_body_is_read(client: httpx.Client,
     assert r.status_code == 400 and "not gzip data" in r.json()["detail"][0]["msg"]
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # the OpenAPI, not storage
 def test_openapi_declares_the_ingest_body_and_answer(client: httpx.Client) -> None:
     """The plain route's OpenAPI: JSON readings (their fields those parse.py validates),
     emonCMS rows or CSV in; IngestResult out; the GET's answer typed as well."""

@@ -86,6 +86,7 @@ def test_simulation_errors(client: httpx.Client) -> None:
     assert client.delete("/api/v1/simulations/%00").status_code == 404
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # answers, not storage
 def test_sites_and_meta(client: httpx.Client) -> None:
     sites = {s["site_id"]: s for s in client.get("/api/v1/sites").json()}
     assert set(sites["tehuantepec"]["arrays"]) == {"tracker", "fixed"}
@@ -184,6 +185,7 @@ def test_open_loop_model_takes_the_pointing_model_answers_terms(client: httpx.Cl
     assert "unknown key 'foo'" in bad.text
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # a refusal, not storage
 def test_the_ideal_controller_refuses_disturbances_naming_the_field(
         client: httpx.Client) -> None:
     """``ideal`` is the reference that no disturbance reaches: a disturbance sent with it is

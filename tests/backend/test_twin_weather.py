@@ -78,6 +78,7 @@ def test_twin_weather_without_a_sky_or_over_a_long_range_says_why(
     assert bad.status_code == 422 and "twin_weather" in bad.text
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # the twin, not storage
 def test_energy_of_the_weather_aware_twin_by_day_and_by_hour_agree(
         client: httpx.Client, live_server: LiveServer) -> None:
     """The day's energy from the diagnosis's per-day cache and the hours' from the minute

@@ -40,6 +40,7 @@ def frame_png() -> bytes:
     return buf.tobytes()
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # names, not storage
 def test_frame_times_reads_the_names_the_dashboard_shows(client: httpx.Client) -> None:
     names = ["Wettermast_20160615_093900UTCp1_sunrow1202_suncol535.jpg",
              "UCEEB_20180321061000_11.jpg", "cam-20240210T103000-UTC-6.png",

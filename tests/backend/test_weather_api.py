@@ -25,6 +25,7 @@ def _files(path: Path | None = None) -> dict:
     return {"file": (path.name, path.read_bytes(), "text/csv")}
 
 
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # the twin, not storage
 def test_a_distant_station_is_refused_unless_forced_and_then_runs_as_the_cli(
         client: httpx.Client, heliotwin_cli: Callable) -> None:
     r = client.post("/api/v1/simulations/weather", data=RANGE, files=_files())

@@ -102,8 +102,8 @@ def _drawn(pg) -> bytes:  # type: ignore[no-untyped-def]
         with contextlib.suppress(Exception):
             close.click(timeout=5_000)
     png = b""
-    for _ in range(20):
-        pg.wait_for_timeout(1000)
+    for _ in range(80):  # up to 20 s, looked at every 0.25 s
+        pg.wait_for_timeout(250)
         png = el.screenshot()
         img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_GRAYSCALE)
         if float(img.std()) > 8.0 and len(np.unique(img)) > 32:
