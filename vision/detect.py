@@ -225,7 +225,7 @@ def px_per_deg_of(camera: CameraModel | None, fov: FovCircle | None, width_px: i
     if isinstance(camera, PinholeCamera):
         return float(camera.focal_px * np.pi / 180.0)
     if fov is not None:
-        return fov.radius_px / 0.98 / 90.0
+        return lens_circle(fov).radius_px / 90.0
     return width_px / 67.0
 
 
@@ -782,7 +782,7 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
     # no model given: an equidistant 180° lens spanning the image circle
     fallback = None
     if camera is None and fov is not None:
-        fallback = FisheyeCamera(fov.cx_px, fov.cy_px, fov.radius_px / 0.98 / 90.0)
+        fallback = FisheyeCamera(fov.cx_px, fov.cy_px, lens_circle(fov).radius_px / 90.0)
     model = camera if camera is not None else fallback
     scale_known = model is not None  # a camera, or the image circle's equidistant guess
     got: _Pick | str = "no search"

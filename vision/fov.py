@@ -61,6 +61,11 @@ def _median_u8(a: NDArray[np.uint8], mask: NDArray[np.uint8] | None = None) -> f
     return float(np.searchsorted(np.cumsum(hist), 0.5 * total))
 
 
+#: the circle :func:`estimate_fov` returns is the lens's image circle shrunk by this share,
+#: to keep the detector off the dark rim; :func:`lens_circle` undoes it (the one place of it)
+RIM_MARGIN = 0.98
+
+
 def estimate_fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None,
                  scale: int = 1) -> FovCircle | None:
     """The fisheye image circle: the bright disc surrounded by dark corners, or None.
@@ -142,11 +147,11 @@ def _fov(gray: NDArray[np.uint8], small: NDArray[np.uint8] | None = None,
     off = float(scale // 2)  # thumbnail pixel i is full-res pixel i·s + s//2
     cx, cy, r = cx * scale + off, cy * scale + off, r * scale
     if cv2.contourArea(big) >= _FILLED * np.pi * (r / scale) ** 2:
-        return FovCircle(cx, cy, 0.98 * r)  # a disc nothing cuts: its enclosing circle
+        return FovCircle(cx, cy, RIM_MARGIN * r)  # a disc nothing cuts: its enclosing circle
     rim = _rim_circle(gray, cx, cy, r, corner_level, centre_level)
     if rim is not None:
         cx, cy, r = rim
-    return FovCircle(cx, cy, 0.98 * r)
+    return FovCircle(cx, cy, RIM_MARGIN * r)
 
 
 #: A padding band's pixels lie within this of its level [grey levels] (JPEG at quality 95
@@ -249,7 +254,7 @@ def overlays_unlit(gray: NDArray[np.uint8], fov: FovCircle) -> NDArray[np.uint8]
     itself otherwise."""
     out = gray
     for ys, xs in _white_on_edge(gray):
-        if (np.hypot(xs - fov.cx_px, ys - fov.cy_px) > fov.radius_px / 0.98).any():
+        if (np.hypot(xs - fov.cx_px, ys - fov.cy_px) > lens_circle(fov).radius_px).any():
             if out is gray:
                 out = gray.copy()
             out[ys, xs] = 0
@@ -449,9 +454,9 @@ def _rim_circle(gray: NDArray[np.uint8], cx: float, cy: float, r: float, corner:
 
 def lens_circle(fov: FovCircle) -> FovCircle:
     """The lens's whole image circle (its lit disc: a 180° lens's horizon) of the circle
-    ``fov`` that :func:`estimate_fov` found, which is shrunk by 2 % to keep the detector off
-    the dark rim."""
-    return FovCircle(fov.cx_px, fov.cy_px, fov.radius_px / 0.98)
+    ``fov`` that :func:`estimate_fov` found, which is shrunk by :data:`RIM_MARGIN` to keep
+    the detector off the dark rim."""
+    return FovCircle(fov.cx_px, fov.cy_px, fov.radius_px / RIM_MARGIN)
 
 
 def image_circle(gray: NDArray[np.uint8]) -> tuple[FovCircle, bool] | None:
