@@ -41,7 +41,7 @@ from sim.dynamics import TrackerInertia
 from sim.kinematics import TrackerGeometry
 from sim.motors import AxisDrive
 from sim.pv import ArrayConfig, cec_module_parameters
-from sim.stow import STOW_RELEASE_MIN
+from sim.stow import STOW_RELEASE_MAX_MIN, STOW_RELEASE_MIN, STOW_WIND_MAX_M_S
 
 SCHEMA_ID = "https://heliotwin.example/docs/site.schema.json"
 _ASSUMED_KEY = re.compile(r"^[a-z0-9_-]{1,64}(\.[a-z0-9_-]{1,64}){0,3}$")
@@ -136,11 +136,12 @@ class Tracker(BaseModel):
     inertia: Inertia = Field(default_factory=Inertia,
                              description="Link masses and inertias (sim/dynamics.py).")
     # wind stow (sim/stow.py): only on runs whose weather has a wind speed
-    stow_wind_speed_m_s: float | None = Field(None, gt=0, le=100, description=(
+    stow_wind_speed_m_s: float | None = Field(None, gt=0, le=STOW_WIND_MAX_M_S, description=(
         "[m s⁻¹] the tracker stows flat (panel horizontal, the night stow's pose) while the "
         "weather's wind_speed exceeds this (a mean or a gust, as the weather file gives it); "
         "only runs on weather with a wind speed. Default none: it never stows for wind."))
-    stow_release_min: float | None = Field(None, ge=0, le=1440, validate_default=True,
+    stow_release_min: float | None = Field(None, ge=0, le=STOW_RELEASE_MAX_MIN,
+                                           validate_default=True,
                                            description=(
         "[min] after a stow the tracker tracks again once the wind has stayed at or below "
         f"stow_wind_speed_m_s this long. Default {STOW_RELEASE_MIN:g} (assumption, "

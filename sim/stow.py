@@ -25,6 +25,10 @@ import numpy as np
 #: does not say: an assumption (manufacturers set it per site; PlantPredict leaves it to
 #: the user). Half an hour outlasts the gusts of one squall.
 STOW_RELEASE_MIN = 30.0
+#: The bounds a site's or a plant's file may give [m s⁻¹], [min]: a threshold above 0 and at
+#: most 100 m s⁻¹ (no anemometer reading beyond stands), a hold of at most a day
+STOW_WIND_MAX_M_S = 100.0
+STOW_RELEASE_MAX_MIN = 1440.0
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ from sim.site_config import (
     equator_azimuth_deg,
     fixed_tilt_from_latitude_deg,
 )
-from sim.stow import STOW_RELEASE_MIN, WindStow
+from sim.stow import STOW_RELEASE_MAX_MIN, STOW_RELEASE_MIN, STOW_WIND_MAX_M_S, WindStow
 
 FloatArray = NDArray[np.float64]
 
@@ -487,9 +487,9 @@ def _wind_stow(d: Any, where: str) -> WindStow | None:
             raise ValueError(f"{where}: field 'stow_release_min' is only used with "
                              "'stow_wind_speed_m_s'")
         return None
-    speed = _num(d, "stow_wind_speed_m_s", where, positive=True, hi=100)
+    speed = _num(d, "stow_wind_speed_m_s", where, positive=True, hi=STOW_WIND_MAX_M_S)
     return WindStow(speed, _num(d, "stow_release_min", where, default=STOW_RELEASE_MIN, lo=0,
-                                hi=1440))
+                                hi=STOW_RELEASE_MAX_MIN))
 
 
 def plant_from_dict(d: dict[str, Any], where: str = "plant") -> Plant:
