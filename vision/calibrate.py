@@ -4,7 +4,8 @@ Seed 003 assumed 3.365 px/deg and set the north offset by hand; here the
 centre, the scale, the north offset and the mirror (east left or right) of a
 :class:`vision.cameras.FisheyeCamera` — optionally a radial polynomial and two
 tilt angles — are fitted by non-linear least squares on the pixel residuals
-(``scipy.optimize.least_squares``, trust-region reflective) between the
+(``scipy.optimize.least_squares``, trust-region reflective, with the camera model's
+analytic Jacobian :meth:`vision.cameras.FisheyeCamera.sky_to_pixel_jacobian`) between the
 detected sun centroids and the sun positions the caller provides from an
 ephemeris (SPA). Both mirrors are fitted and the one with the lower cost is
 kept. Residuals are reported in pixels and as the angle on the sky.
@@ -139,6 +140,17 @@ def _camera(p: NDArray[np.float64], east: str, projection: str, n_radial: int,
                          radial_coeffs=radial, tilt_north_deg=tn, tilt_east_deg=te)
 
 
+def _pixel_jacobian(p: NDArray[np.float64], cam: FisheyeCamera, az: NDArray[np.float64],
+                    el: NDArray[np.float64], tilt: bool) -> NDArray[np.float64]:
+    """The Jacobian of :func:`fit_fisheye`'s residuals ``(x…, y…)`` on the parameters ``p`` of
+    :func:`_camera` (``cam``): :meth:`FisheyeCamera.sky_to_pixel_jacobian`, the scale's
+    column signed as ``_camera`` takes ``|p[2]|``, zero where the pixel is undefined (the
+    residual is a constant there)."""
+    J = cam.sky_to_pixel_jacobian(az, el, tilt).reshape(-1, p.size)
+    J[:, 2] *= np.sign(p[2])
+    return np.where(np.all(np.isfinite(J), axis=1, keepdims=True), J, 0.0)
+
+
 def _initial(x: NDArray[np.float64], y: NDArray[np.float64], az: NDArray[np.float64],
              el: NDArray[np.float64], cx: float, cy: float, east: str, projection: str
              ) -> tuple[float, float]:
@@ -220,6 +232,12 @@ def fit_fisheye(
             return np.where(np.isfinite(r), r, 1e4)
         return resid
 
+    def jac_of(side: str) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
+        def jac(p: NDArray[np.float64]) -> NDArray[np.float64]:
+            return _pixel_jacobian(p, _camera(p, side, projection, n_radial, fit_tilt), az, el,
+                                   fit_tilt)
+        return jac
+
     # with both mirrors: each solved for at most _MIRROR_NFEV evaluations, the better one
     # then to convergence (the wrong mirror's solve would grind to its limit)
     first = min(max_nfev, _MIRROR_NFEV) if len(sides) > 1 else max_nfev
@@ -233,16 +251,16 @@ def fit_fisheye(
         k0, off0 = _initial(x, y, az, el, cx0, cy0, side, projection)
         p0 = np.concatenate([[cx0, cy0, k0, off0], np.zeros(n_radial),
                              np.zeros(2 if fit_tilt else 0)])
-        sol = least_squares(resid_of(side), p0, method="trf", x_scale="jac", max_nfev=first,
-                            bounds=(lo, hi))
+        sol = least_squares(resid_of(side), p0, jac=jac_of(side), method="trf", x_scale="jac",
+                            max_nfev=first, bounds=(lo, hi))
         costs[side] = float(sol.cost)
         if best is None or sol.cost < best[0]:
             best = (float(sol.cost), sol, side)
     assert best is not None
     _, sol, side = best
     if sol.status == 0 and first < max_nfev:  # stopped at the evaluation limit: go on
-        sol = least_squares(resid_of(side), sol.x, method="trf", x_scale="jac",
-                            max_nfev=max_nfev - first, bounds=(lo, hi))
+        sol = least_squares(resid_of(side), sol.x, jac=jac_of(side), method="trf",
+                            x_scale="jac", max_nfev=max_nfev - first, bounds=(lo, hi))
         costs[side] = float(sol.cost)
     p = sol.x
     cam = _camera(p, side, projection, n_radial, fit_tilt)
@@ -636,9 +654,9 @@ def sky_uncertainty_deg(fit: CalibrationResult, azimuth_deg: ArrayLike,
 
     How well the frames constrain the camera away from their own suns: the fitted
     parameters' covariance ``C = σ² (JᵀJ)⁻¹`` at the solution (``J`` the Jacobian of the
-    sun pixels on the parameters, one row pair per distinct sun direction of
-    ``azimuth_deg``/``elevation_deg``, the fit's inliers; σ the fit's residual per image
-    axis over its degrees of freedom, not below ``floor_deg`` in the fitted scale),
+    sun pixels on the parameters — the fit's own, analytic — one row pair per distinct sun
+    direction of ``azimuth_deg``/``elevation_deg``, the fit's inliers; σ the fit's residual
+    per image axis over its degrees of freedom, not below ``floor_deg`` in the fitted scale),
     propagated to first order to each pixel's direction ``d``: ``Σ_d = G C Gᵀ``,
     ``G = ∂d/∂p``, and its 1-σ angle ``√trace Σ_d`` (Hartley & Zisserman, *Multiple View
     Geometry*, 2nd ed., §5.2: backward and forward propagation of covariance). Frames
@@ -658,6 +676,8 @@ def sky_uncertainty_deg(fit: CalibrationResult, azimuth_deg: ArrayLike,
     n_radial = len(cam.radial_coeffs)
 
     def jacobian(f: Callable[[FisheyeCamera], NDArray[np.float64]]) -> NDArray[np.float64]:
+        """A central difference: the pixels' direction, the inverse of the fit's model
+        (through :meth:`FisheyeCamera.theta_rad`'s Newton steps), has no analytic one here."""
         cols = []
         for j in range(p0.size):
             h = 1e-4 * max(1.0, abs(p0[j])) if j != 3 else 1e-3  # the north offset [°]
@@ -668,7 +688,7 @@ def sky_uncertainty_deg(fit: CalibrationResult, azimuth_deg: ArrayLike,
             cols.append((hi - lo).ravel() / (2 * h))
         return np.stack(cols, axis=-1)
 
-    J = jacobian(lambda c: np.concatenate(c.sky_to_pixel(az, el)))
+    J = _pixel_jacobian(p0, cam, az, el, tilt)
     dof = 2 * fit.n_frames - p0.size
     sigma_px = float(np.sqrt(np.sum(fit.residuals_px**2) / dof)) if dof > 0 else 0.0
     sigma_px = max(sigma_px, floor_deg * cam.px_per_deg)

@@ -158,16 +158,17 @@ def _project_rad(theta_rad: FloatArray, projection: str) -> FloatArray:
     raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
 
 
-def _project_slope(theta_rad: float, projection: str) -> float:
+def _project_slope(theta_rad: ArrayLike, projection: str) -> FloatArray:
     """The derivative g'(θ) of :func:`_project_rad` (NaN outside the lens's domain)."""
+    t = _as_float(theta_rad)
     if projection == "equidistant":
-        return 1.0
+        return np.ones_like(t)
     if projection == "equisolid":
-        return float(np.cos(theta_rad / 2.0))
+        return np.cos(t / 2.0)
     if projection == "stereographic":
-        return float(1.0 / np.cos(theta_rad / 2.0) ** 2)
+        return 1.0 / np.cos(t / 2.0) ** 2
     if projection == "orthographic":
-        return float(np.cos(theta_rad)) if theta_rad <= np.pi / 2 else float("nan")
+        return np.where(t <= np.pi / 2, np.cos(t), np.nan)
     raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
 
 
@@ -185,17 +186,28 @@ def _unproject_rad(rho: FloatArray, projection: str) -> FloatArray:
     raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
 
 
+def _tilt_rotations(tilt_north_deg: float, tilt_east_deg: float
+                    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The two rotations of :func:`_tilt_matrix`, ``rx`` about the east axis and ``ry``
+    about the north axis, and their derivatives on their angles [rad⁻¹]."""
+    a = np.radians(tilt_north_deg)
+    b = np.radians(tilt_east_deg)
+    ca, sa, cb, sb = np.cos(a), np.sin(a), np.cos(b), np.sin(b)
+    # axis tipped toward north: camera "up" = (0, sin a, cos a); R maps it to (0, 0, 1)
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]])
+    ry = np.array([[cb, 0.0, -sb], [0.0, 1.0, 0.0], [sb, 0.0, cb]])
+    drx = np.array([[0.0, 0.0, 0.0], [0.0, -sa, -ca], [0.0, ca, -sa]])
+    dry = np.array([[-sb, 0.0, -cb], [0.0, 0.0, 0.0], [cb, 0.0, -sb]])
+    return rx, ry, drx, dry
+
+
 def _tilt_matrix(tilt_north_deg: float, tilt_east_deg: float) -> FloatArray:
     """Rotation taking ENU vectors into the (tilted) camera frame.
 
     ``tilt_north_deg`` tips the optical axis toward north (rotation about the
     east axis), ``tilt_east_deg`` toward east (rotation about the north axis).
     """
-    a = np.radians(tilt_north_deg)
-    b = np.radians(tilt_east_deg)
-    # axis tipped toward north: camera "up" = (0, sin a, cos a); R maps it to (0, 0, 1)
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(a), -np.sin(a)], [0.0, np.sin(a), np.cos(a)]])
-    ry = np.array([[np.cos(b), 0.0, -np.sin(b)], [0.0, 1.0, 0.0], [np.sin(b), 0.0, np.cos(b)]])
+    rx, ry, _, _ = _tilt_rotations(tilt_north_deg, tilt_east_deg)
     return ry @ rx
 
 
@@ -261,6 +273,14 @@ class FisheyeCamera:
             rho = rho + c * t ** (i + 2)
         return self.focal_px * rho
 
+    def _mapping_slope(self, theta_rad: ArrayLike) -> FloatArray:
+        """dρ/dθ of the normalised mapping ρ(θ) = g(θ) + c2·θ² + … (:meth:`radius_px` / f)."""
+        t = _as_float(theta_rad)
+        slope = _project_slope(t, self.projection)
+        for i, c in enumerate(self.radial_coeffs):
+            slope = slope + (i + 2) * c * t ** (i + 1)
+        return slope
+
     def theta_rad(self, r_px: ArrayLike) -> FloatArray:
         """Zenith angle [rad] for a radial distance [px] (Newton steps with a polynomial)."""
         rho = _as_float(r_px) / self.focal_px
@@ -268,9 +288,8 @@ class FisheyeCamera:
         if self.radial_coeffs:
             t = np.where(np.isfinite(t), t, rho)
             for _ in range(30):
-                h = 1e-6
                 g = self.radius_px(t) / self.focal_px - rho
-                dg = (self.radius_px(t + h) - self.radius_px(t - h)) / (2 * h * self.focal_px)
+                dg = self._mapping_slope(t)
                 step = g / np.where(np.abs(dg) > 1e-9, dg, 1e-9)
                 t = t - step
                 if np.all(np.abs(step[np.isfinite(step)]) < 1e-12):
@@ -286,21 +305,23 @@ class FisheyeCamera:
         theta = float(self.theta_rad(float(np.hypot(x_px - self.cx_px, y_px - self.cy_px))))
         if not math.isfinite(theta):
             return 0.0, 0.0
-        along = _project_slope(theta, self.projection)
-        for i, c in enumerate(self.radial_coeffs):
-            along += (i + 2) * c * theta ** (i + 1)
+        along = float(self._mapping_slope(theta))
         sin_t = float(np.sin(theta))
         across = float(self.radius_px(theta)) / self.focal_px / sin_t if sin_t > 1e-9 \
-            else _project_slope(0.0, self.projection)  # the limit at the zenith: g'(0) = 1
+            else float(_project_slope(0.0, self.projection))  # the limit at the zenith: g'(0) = 1
         scales = (self.px_per_deg * abs(along), self.px_per_deg * abs(across))
         if not (math.isfinite(scales[0]) and math.isfinite(scales[1])):
             return 0.0, 0.0
         return float(max(scales)), float(min(scales))
 
+    @property
+    def _azimuth_sign(self) -> float:
+        """+1 where the image angle grows with azimuth (east right, mirrored), −1 (east left)."""
+        return -1.0 if self.east == "left" else 1.0
+
     def _image_angle_rad(self, azimuth_deg: FloatArray) -> FloatArray:
         """Image angle φ, clockwise from image-up, of a camera-frame azimuth."""
-        sign = -1.0 if self.east == "left" else 1.0
-        return np.radians(self.north_offset_deg + sign * azimuth_deg)
+        return np.radians(self.north_offset_deg + self._azimuth_sign * azimuth_deg)
 
     def _camera_sky(
         self, azimuth_deg: ArrayLike, elevation_deg: ArrayLike
@@ -320,6 +341,52 @@ class FisheyeCamera:
         phi = self._image_angle_rad(az)
         return self.cx_px + r * np.sin(phi), self.cy_px - r * np.cos(phi)
 
+    def sky_to_pixel_jacobian(self, azimuth_deg: ArrayLike, elevation_deg: ArrayLike,
+                              tilt: bool = True) -> FloatArray:
+        """The derivatives of :meth:`sky_to_pixel`'s ``(x, y)`` on the camera's parameters,
+        shape ``(2, …, P)`` (``[0]`` of x, ``[1]`` of y [px per unit]), in the columns
+        ``cx_px``, ``cy_px``, ``px_per_deg``, ``north_offset_deg``, each of
+        ``radial_coeffs``, and with ``tilt`` ``tilt_north_deg``, ``tilt_east_deg``.
+
+        The chain rule through ``x = cx + r sin φ``, ``y = cy − r cos φ`` with
+        ``r = f·ρ(θ)`` (:meth:`radius_px`), ``φ = Δ ∓ A`` (:meth:`_image_angle_rad`) and, for
+        the tilt, θ and A of the tilted direction ``e = R v`` (:func:`_tilt_matrix`):
+        ``dθ = −de_z / sin θ``, ``dA = (e_y de_x − e_x de_y) / sin² θ``. NaN where the pixel
+        is (beyond an orthographic lens's horizon), and in the tilt's columns on the optical
+        axis itself (θ = 0, where A is undefined).
+        """
+        az, el = self._camera_sky(azimuth_deg, elevation_deg)
+        theta = np.radians(90.0 - el)
+        phi = self._image_angle_rad(az)
+        r = self.radius_px(theta)
+        f = self.focal_px
+        n_rad = len(self.radial_coeffs)
+        # each parameter's dr [px] and dφ [rad] (after cx_px and cy_px)
+        d_r = np.zeros((*r.shape, 2 + n_rad + (2 if tilt else 0)))
+        d_phi = np.zeros_like(d_r)
+        d_r[..., 0] = r / self.px_per_deg
+        d_phi[..., 1] = np.pi / 180.0
+        for i in range(n_rad):
+            d_r[..., 2 + i] = f * theta ** (i + 2)
+        if tilt:
+            rx, ry, drx, dry = _tilt_rotations(self.tilt_north_deg, self.tilt_east_deg)
+            v = enu_from_sky(azimuth_deg, elevation_deg)
+            e = v @ (ry @ rx).T
+            horiz2 = e[..., 0] ** 2 + e[..., 1] ** 2  # sin² θ
+            slope = f * self._mapping_slope(theta)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                for j, d_rot in enumerate((ry @ drx, dry @ rx), start=2 + n_rad):
+                    de = v @ (d_rot * (np.pi / 180.0)).T  # per degree of tilt
+                    d_r[..., j] = slope * -de[..., 2] / np.sqrt(horiz2)
+                    d_phi[..., j] = self._azimuth_sign * (e[..., 1] * de[..., 0]
+                                                          - e[..., 0] * de[..., 1]) / horiz2
+        sin_p, cos_p, r = np.sin(phi)[..., None], np.cos(phi)[..., None], r[..., None]
+        out = np.zeros((2, *d_r.shape[:-1], 2 + d_r.shape[-1]))
+        out[0, ..., 0] = out[1, ..., 1] = 1.0
+        out[0, ..., 2:] = d_r * sin_p + r * d_phi * cos_p
+        out[1, ..., 2:] = -d_r * cos_p + r * d_phi * sin_p
+        return out
+
     def pixel_to_sky(self, x_px: ArrayLike, y_px: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Azimuth [0, 360) and elevation [°] seen at pixel ``(x, y)`` (NaN outside the lens)."""
         dx = _as_float(x_px) - self.cx_px
@@ -327,8 +394,7 @@ class FisheyeCamera:
         r = np.hypot(dx, dy)
         theta = self.theta_rad(r)
         phi_deg = np.degrees(np.arctan2(dx, -dy))
-        sign = -1.0 if self.east == "left" else 1.0
-        az = (sign * (phi_deg - self.north_offset_deg)) % 360.0
+        az = (self._azimuth_sign * (phi_deg - self.north_offset_deg)) % 360.0
         el = 90.0 - np.degrees(theta)
         if self.tilt_north_deg == 0.0 and self.tilt_east_deg == 0.0:
             return az, el
