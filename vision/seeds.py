@@ -10,6 +10,8 @@ from numpy.typing import NDArray
 
 from vision.detection import SunDetection
 
+_KERNEL_3X3 = np.ones((3, 3), np.uint8)  #: seed 000's dilate/erode element
+
 
 def detect_seed000(image: NDArray[Any], tolerance: tuple[int, int, int] = (30, 30, 30)
                    ) -> SunDetection:
@@ -29,14 +31,15 @@ def detect_seed000(image: NDArray[Any], tolerance: tuple[int, int, int] = (30, 3
     blur = cv2.blur(hsv, (15, 15))
     v = blur[:, :, 2]
     _, _, _, (mx, my) = cv2.minMaxLoc(v)
-    ref = blur[my, mx].astype(int)
-    tol = np.array(tolerance)
-    lo = np.clip(ref - tol, 0, 255)
-    hi = np.clip(ref + tol, 0, 255)
-    lo[0], hi[0] = max(0, ref[0] - tol[0]), min(180, ref[0] + tol[0])
-    mask = cv2.inRange(blur, lo.astype(np.uint8), hi.astype(np.uint8))
-    k = np.ones((3, 3), np.uint8)
-    mask = cv2.erode(cv2.dilate(mask, k, iterations=2), k, iterations=2)
+    # the bounds in plain ints: np.clip on three values cost more than the frame's
+    # morphology (the closed loop detects a frame every daylight second)
+    ref = [int(c) for c in blur[my, mx]]
+    top = (180, 255, 255)  # OpenCV's 8-bit hue runs 0…180
+    lo = np.array([max(0, r - t) for r, t in zip(ref, tolerance, strict=True)], np.uint8)
+    hi = np.array([min(m, r + t) for r, t, m in zip(ref, tolerance, top, strict=True)],
+                  np.uint8)
+    mask = cv2.inRange(blur, lo, hi)
+    mask = cv2.erode(cv2.dilate(mask, _KERNEL_3X3, iterations=2), _KERNEL_3X3, iterations=2)
     n, _, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
     if n < 2:
         return SunDetection(False, 0.0, None, "seed000_hsv")
