@@ -472,13 +472,7 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
     # the gradients' weight), so the fit is not needed then (most fisheye suns)
     coherence = best.wide
     if coherence < 1.0:
-        ring = _ring_values(gray, best.cx, best.cy, 2.0 * r_eq + 3.0, fov)
-        local_bg = _median(ring) if ring.size else bg
-        fit = radial_symmetry_centre(gray, (best.cx, best.cy), 2.0 * r_eq + 4.0,
-                                     dark_level=0.6 * local_bg,
-                                     glare_level=local_bg + 0.3 * (peak - local_bg),
-                                     n_iter=_COHERENCE_PASSES)
-        coherence = max(fit.coherence if fit is not None else 0.0, coherence)
+        coherence = max(_glare_coherence(gray, best, r_eq, peak, fov, bg, model), coherence)
     # a crop without a camera (the tracker's region of interest) has no known scale: its
     # px/° guessed from its width is wrong by the crop's ratio, so its size is no evidence
     x = conf.features(best.shape, best.glare, saturated, peak, bg,
@@ -489,6 +483,31 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
               "ephemeris_deg": eph if eph is not None else float("nan")}
     return _Pick(best, work, labels, peak, bg, thr, len(cands), ghosts, x, conf.probability(x),
                  values, unclipped)
+
+
+def _glare_coherence(gray: NDArray[np.uint8], c: _Candidate, r_eq: float, peak: float,
+                     fov: FovCircle | None, bg: float, model: CameraModel | None) -> float:
+    """The radial symmetry of the glare around the core ``c`` (``r_eq`` px in radius), 0–1:
+    the coherence of its gradients (:func:`vision.radial.radial_symmetry_centre`, after
+    Parthasarathy 2012) measured on the sky — on the sphere of a fisheye ``model``, where a
+    sun's glare is round, not the oval the lens draws near the horizon (in the image plane
+    an equisolid sun 4° over a ridge scored 0.10, on its own sphere 0.77) — the highest over
+    the projections the image circle may have (:func:`_candidate_projections`: a plain
+    fisheye may be the image circle's equidistant guess, on whose sphere an equisolid low
+    sun's glare is still oval: 0.31). Without a fisheye model, in the image plane."""
+    ring = _ring_values(gray, c.cx, c.cy, 2.0 * r_eq + 3.0, fov)
+    local_bg = _median(ring) if ring.size else bg
+    spheres: list[CameraModel | None] = (
+        list(_candidate_projections(model)) if isinstance(model, FisheyeCamera) else [None])
+    coherence = 0.0
+    for sphere in spheres:
+        fit = radial_symmetry_centre(gray, (c.cx, c.cy), 2.0 * r_eq + 4.0,
+                                     dark_level=0.6 * local_bg,
+                                     glare_level=local_bg + 0.3 * (peak - local_bg),
+                                     camera=sphere, n_iter=_COHERENCE_PASSES)
+        if fit is not None:
+            coherence = max(coherence, fit.coherence)
+    return coherence
 
 
 #: How far above a clipped plateau JPEG's ringing may reach [grey levels]: on the real

@@ -236,8 +236,13 @@ def radial_symmetry_centre(gray: NDArray[np.uint8], start_px: tuple[float, float
             e1 /= np.linalg.norm(e1)
             e2 = np.cross(axis, e1)
             tx, ty = _tangent(camera, px, py, axis, e1, e2)
-            sx, sy = _tangent(camera, px + 0.5 * nx, py + 0.5 * ny, axis, e1, e2)
-            dx, dy = sx - tx, sy - ty
+            # a gradient is the normal of its isophote, and a normal is not carried by the
+            # map's Jacobian J as a vector is (J n) but as J⁻ᵀ n: the isophote's tangent
+            # (n turned −90°) is carried by J, and the normal is that turned back +90°,
+            # with the map's orientation (det J: a mirrored camera turns it the other way)
+            sx, sy = _tangent(camera, px + 0.5 * ny, py - 0.5 * nx, axis, e1, e2)
+            turn = _orientation(camera, ex, ey, axis, e1, e2)
+            dx, dy = turn * (ty - sy), turn * (sx - tx)
             step = np.hypot(dx, dy)
             good = np.isfinite(step) & (step > 0)
             if good.sum() < 8:
@@ -298,6 +303,16 @@ def radial_symmetry_centre(gray: NDArray[np.uint8], start_px: tuple[float, float
     wi = base * inl
     spread = float(np.sqrt((wi * perp**2).sum() / wi.sum())) if wi.sum() > 0 else float("inf")
     return RadialFit(ex, ey, coherence, spread, int(px.size))
+
+
+def _orientation(camera: CameraModel, x: float, y: float, axis: NDArray[np.float64],
+                 e1: NDArray[np.float64], e2: NDArray[np.float64]) -> float:
+    """The sign (±1) of the determinant of the map from pixels to the gnomonic plane about
+    ``axis`` at pixel (x, y): −1 where the camera's image is mirrored against that plane."""
+    tx, ty = _tangent(camera, np.array([x, x + 1.0, x]), np.array([y, y, y + 1.0]), axis,
+                      e1, e2)
+    det = (tx[1] - tx[0]) * (ty[2] - ty[0]) - (tx[2] - tx[0]) * (ty[1] - ty[0])
+    return 1.0 if not det < 0 else -1.0
 
 
 def _tangent_of(camera: CameraModel, x: float, y: float, axis: NDArray[np.float64],
