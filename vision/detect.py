@@ -72,7 +72,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from functools import lru_cache
+from functools import lru_cache, partial
 from typing import Any
 
 import cv2
@@ -101,7 +101,7 @@ from vision.detection import CameraModel, FovCircle, SunDetection
 from vision.fov import _median_u8, _small, estimate_fov, lens_circle, overlays_unlit, to_gray
 from vision.glare import censored_glare_centre, symmetric_glare_centre
 from vision.limb import _robust_limb_centre, contained_limb_centre
-from vision.radial import radial_symmetry_centre
+from vision.radial import mapped_coherence
 from vision.seeds import detect_seed000, detect_seed003, threshold_moments
 from vision.sphere import SUN_RADIUS_DEG
 
@@ -215,6 +215,7 @@ class _Pick:
     p: float
     values: dict[str, float]
     unclipped: bool = False  # the sun's disc read unclipped (:func:`_unclipped_disc`)
+    sphere: CameraModel | None = None  # the projection the glare chose (:func:`_glare_sphere`)
 
 
 def px_per_deg_of(camera: CameraModel | None, fov: FovCircle | None, width_px: int) -> float:
@@ -470,9 +471,10 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
     # no gradient inside the window (the Wolf frames' coherence is 0.02–0.06): its width
     # stands for the symmetry — wholly when it is 1, the most a coherence can be (a share of
     # the gradients' weight), so the fit is not needed then (most fisheye suns)
-    coherence = best.wide
+    coherence, sphere = best.wide, None
     if coherence < 1.0:
-        coherence = max(_glare_coherence(gray, best, r_eq, peak, fov, bg, model), coherence)
+        fitted, sphere = _glare_sphere(gray, best, r_eq, peak, fov, bg, model)
+        coherence = max(fitted, coherence)
     # a crop without a camera (the tracker's region of interest) has no known scale: its
     # px/° guessed from its width is wrong by the crop's ratio, so its size is no evidence
     x = conf.features(best.shape, best.glare, saturated, peak, bg,
@@ -482,32 +484,97 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
               "radius_deg": radius_deg, "coherence": coherence,
               "ephemeris_deg": eph if eph is not None else float("nan")}
     return _Pick(best, work, labels, peak, bg, thr, len(cands), ghosts, x, conf.probability(x),
-                 values, unclipped)
+                 values, unclipped, sphere)
 
 
-def _glare_coherence(gray: NDArray[np.uint8], c: _Candidate, r_eq: float, peak: float,
-                     fov: FovCircle | None, bg: float, model: CameraModel | None) -> float:
-    """The radial symmetry of the glare around the core ``c`` (``r_eq`` px in radius), 0–1:
-    the coherence of its gradients (:func:`vision.radial.radial_symmetry_centre`, after
-    Parthasarathy 2012) measured on the sky — on the sphere of a fisheye ``model``, where a
-    sun's glare is round, not the oval the lens draws near the horizon (in the image plane
-    an equisolid sun 4° over a ridge scored 0.10, on its own sphere 0.77) — the highest over
-    the projections the image circle may have (:func:`_candidate_projections`: a plain
-    fisheye may be the image circle's equidistant guess, on whose sphere an equisolid low
-    sun's glare is still oval: 0.31). Without a fisheye model, in the image plane."""
+#: Two projections whose local aspect (the scale across the radius over the scale along it,
+#: :func:`_local_px_per_deg`) differs by less than this at a core draw its glare alike: a
+#: gradient's direction moves by at most half of it [rad], a quarter of the 0.08 rad the
+#: coherence allows a line (:func:`vision.radial.radial_symmetry_centre`), so the image
+#: cannot tell them apart there (near the zenith every projection is locally the same)
+_SPHERE_ASPECT = 0.04
+#: A projection other than the model's is chosen only when the glare is more radially
+#: symmetric on its sphere by this much (coherence 0–1) …
+_SPHERE_MARGIN = 0.02
+#: … and symmetric there at all: the majority of its gradients' weight on lines through one
+#: centre. A glare the skyline cuts, or a ragged one, has less on every sphere (0.07–0.22 on
+#: the independent renderer's cut frames 12102–12120) and cannot tell the projection
+_SPHERE_MAJORITY = 0.5
+
+
+def _telling_projections(c: _Candidate, model: FisheyeCamera
+                         ) -> list[tuple[FisheyeCamera, NDArray[np.float64]]]:
+    """``model`` and those of its candidate projections (:func:`_candidate_projections`) whose
+    local aspect at the core ``c`` differs from the model's by :data:`_SPHERE_ASPECT` or
+    more — the ones the glare's shape can tell from it — each with its map to the sky there
+    (:func:`_sky_map`)."""
+    out: list[tuple[FisheyeCamera, NDArray[np.float64]]] = []
+    aspect0 = 0.0
+    for m in _candidate_projections(model):
+        if not isinstance(m, FisheyeCamera):
+            continue
+        a, aspect = _sky_map(m, c.cx, c.cy)
+        if not out:
+            aspect0 = aspect
+        if not out or abs(aspect - aspect0) >= _SPHERE_ASPECT:
+            out.append((m, a))
+    return out
+
+
+def _sky_map(model: FisheyeCamera, x: float, y: float) -> tuple[NDArray[np.float64], float]:
+    """The fisheye's map from pixels to the sky near pixel (x, y), to first order and up to a
+    rotation and a scale (which leave a glare's radial symmetry as it is) → ``(A, aspect)``:
+    A stretches the image along the radius from the optical centre by √(across / along) and
+    shrinks it across by the same, ``aspect`` = along / across — the lens's scales r′(θ)
+    along the radius and r(θ) / sin θ across it (a tilt turns the sky before the projection
+    and changes neither). Closed form: a map per gradient line through the camera cost 2.7
+    times a 640-px frame's detection."""
+    dx, dy = x - model.cx_px, y - model.cy_px
+    r = float(np.hypot(dx, dy))
+    theta = float(model.theta_rad(r))
+    if r < 1e-6 or not 1e-6 < theta < np.pi:
+        return np.eye(2), 1.0
+    h = 1e-4
+    along = float(model.radius_px(theta + h) - model.radius_px(theta - h)) / (2.0 * h)
+    across = r / float(np.sin(theta))
+    if not (along > 0.0 and across > 0.0):
+        return np.eye(2), 1.0
+    k = float(np.sqrt(across / along))
+    ux, uy = dx / r, dy / r
+    radial = np.array([[ux * ux, ux * uy], [ux * uy, uy * uy]])
+    return k * radial + (np.eye(2) - radial) / k, along / across
+
+
+def _glare_sphere(gray: NDArray[np.uint8], c: _Candidate, r_eq: float, peak: float,
+                  fov: FovCircle | None, bg: float, model: CameraModel | None
+                  ) -> tuple[float, CameraModel | None]:
+    """The radial symmetry of the glare around the core ``c`` (``r_eq`` px in radius) on the
+    sky, and the sphere it was measured on → ``(coherence 0–1, model)``.
+
+    The coherence of the glare's gradients (:func:`vision.radial.mapped_coherence`, after
+    Parthasarathy 2012) is measured on the sphere of a fisheye ``model``, where a sun's
+    glare is round — not in the image, where the lens draws it as an oval near the horizon
+    (an equisolid sun 4° over a ridge: 0.10 in the image, 0.77 on its sphere). A plain
+    fisheye may be the image circle's equidistant guess (:func:`_candidate_projections`),
+    on whose sphere an equisolid low sun's glare is still oval (0.31): the glare is measured
+    on each projection the image circle may have, and the one on whose sphere it is most
+    symmetric — the lens's own, on which the centre is then fitted (:func:`_refine`) — is
+    chosen when the projections' local aspects at the core differ by :data:`_SPHERE_ASPECT`
+    or more and its coherence beats ``model``'s by :data:`_SPHERE_MARGIN` and is at least
+    :data:`_SPHERE_MAJORITY`; else ``model`` (the image cannot tell). The coherence returned
+    is the highest on any of them (evidence of a sun's glare, whichever lens drew it).
+    Without a fisheye model, in the image plane."""
+    telling = _telling_projections(c, model) if isinstance(model, FisheyeCamera) else []
+    spheres: list[CameraModel | None] = [m for m, _ in telling] or [None]
     ring = _ring_values(gray, c.cx, c.cy, 2.0 * r_eq + 3.0, fov)
     local_bg = _median(ring) if ring.size else bg
-    spheres: list[CameraModel | None] = (
-        list(_candidate_projections(model)) if isinstance(model, FisheyeCamera) else [None])
-    coherence = 0.0
-    for sphere in spheres:
-        fit = radial_symmetry_centre(gray, (c.cx, c.cy), 2.0 * r_eq + 4.0,
-                                     dark_level=0.6 * local_bg,
-                                     glare_level=local_bg + 0.3 * (peak - local_bg),
-                                     camera=sphere, n_iter=_COHERENCE_PASSES)
-        if fit is not None:
-            coherence = max(coherence, fit.coherence)
-    return coherence
+    coherence = mapped_coherence(
+        gray, (c.cx, c.cy), 2.0 * r_eq + 4.0, 0.6 * local_bg, local_bg + 0.3 * (peak - local_bg),
+        [a for _, a in telling] or [None], _COHERENCE_PASSES)
+    i = int(np.argmax(coherence))
+    if coherence[i] < max(coherence[0] + _SPHERE_MARGIN, _SPHERE_MAJORITY):
+        i = 0
+    return max(coherence), spheres[i] if spheres[i] is not None else model
 
 
 #: How far above a clipped plateau JPEG's ringing may reach [grey levels]: on the real
@@ -844,7 +911,8 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         else:
             cx, cy, radius = _refine(gray, got.work, got.labels, got.best, got.peak, got.bg,
                                      got.thr, camera, fallback, fov,
-                                     _UNCLIPPED_CENTROID_SHARE if got.unclipped else 0.8)
+                                     _UNCLIPPED_CENTROID_SHARE if got.unclipped else 0.8,
+                                     partial(_sphere_of_glare, gray, got, fov, model))
         if not _inside(cx, cy, gray.shape, fov):
             # a fit carried beyond the frame or the image circle (an outline the frame cut):
             # the core's own centroid, the mean of pixels inside both
@@ -877,6 +945,20 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         features=dict(zip(conf.FEATURES, (float(v) for v in got.x), strict=True)),
         candidate_px=(float(got.best.cx), float(got.best.cy)),
     )
+
+
+def _sphere_of_glare(gray: NDArray[np.uint8], pick: _Pick, fov: FovCircle | None,
+                     model: CameraModel | None) -> CameraModel | None:
+    """The sphere the winner's limb is fitted on: the projection its glare is most radially
+    symmetric on (:func:`_glare_sphere`, chosen already when the coherence was measured),
+    else ``model`` — the camera given or the image circle's guess — when the image cannot
+    tell."""
+    if pick.sphere is not None:
+        return pick.sphere
+    if isinstance(model, FisheyeCamera) and len(_telling_projections(pick.best, model)) > 1:
+        r_eq = float(np.sqrt(pick.best.area / np.pi))
+        return _glare_sphere(gray, pick.best, r_eq, pick.peak, fov, pick.bg, model)[1]
+    return model
 
 
 _DISC_BLUR_PX = 1.0  # the solar disc's reach beyond its radius: a pixel's blur and JPEG's
@@ -1414,8 +1496,12 @@ def _true_limb(gray: NDArray[np.uint8], work: _Region, pts: NDArray[np.float64],
 def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
             c: _Candidate, peak: float, bg: float, thr: float, camera: CameraModel | None,
             fallback: CameraModel | None = None, fov: FovCircle | None = None,
-            share: float = 0.8) -> tuple[float, float, float]:
+            share: float = 0.8, sphere: Callable[[], CameraModel | None] | None = None
+            ) -> tuple[float, float, float]:
     """Sub-pixel centre of the winning cluster → (x, y, radius_px).
+
+    ``sphere``: the model a limb fit runs on instead of ``camera`` (or ``fallback``), asked
+    for only when a fit needs one (:func:`_sphere_of_glare`: the projection the glare tells).
 
     A core with a glare around it, given a fisheye model (or ``fallback``, an
     approximate lens model): the small circle on the camera's sphere through
@@ -1446,6 +1532,15 @@ def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
     """
     r_eq = float(np.sqrt(c.area / np.pi))
     model = camera if camera is not None else fallback
+    chosen: list[CameraModel | None] = []
+
+    def fitted_on(default: CameraModel | None) -> CameraModel | None:
+        if sphere is None:
+            return default
+        if not chosen:
+            chosen.append(sphere())
+        return chosen[0]
+
     if isinstance(model, FisheyeCamera) and c.area >= _SMALL_AREA_PX:
         near, far = _rings(gray, c.cx, c.cy, (1.6 * r_eq + 2.0, 4.0 * r_eq + 3.0), None)
         # a glare: the ring just outside the core is still well above the far sky
@@ -1457,6 +1552,7 @@ def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
             # not already a circle about its centroid (a clear-sky core near the zenith:
             # the centroid below is exact and cheaper)
             if float(rad.max() - rad.min()) > _ROUND_SPREAD_PX + 0.05 * r_eq:
+                model = fitted_on(model) or model
                 got = contained_limb_centre(pts, model)
                 if got is not None and got[2] >= _CONTAINED_MIN_INLIERS:
                     return got[0], got[1], r_eq
@@ -1484,11 +1580,11 @@ def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
     if len(pts) < 8:
         return float(wx), float(wy), r_eq
     if camera is not None:
-        cx, cy, r, _ = _robust_limb_centre(pts, camera)
+        cx, cy, r, _ = _robust_limb_centre(pts, fitted_on(camera))
         return cx, cy, r
     ix, iy, ir, inliers = _robust_limb_centre(pts, None)
     if fallback is not None and inliers < 0.6:
-        sx, sy, sr, s_in = _robust_limb_centre(pts, fallback)
+        sx, sy, sr, s_in = _robust_limb_centre(pts, fitted_on(fallback))
         if s_in > inliers:
             return sx, sy, sr
     return ix, iy, ir

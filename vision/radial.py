@@ -178,6 +178,55 @@ def sky_plane_gradient(gray: NDArray[np.uint8], cx: float, cy: float, r_in: floa
     return float(coef[1]), float(coef[2])
 
 
+def mapped_coherence(gray: NDArray[np.uint8], start_px: tuple[float, float],
+                     radius_px: float, dark_level: float, glare_level: float,
+                     maps: list[NDArray[np.float64] | None], n_iter: int = 1) -> list[float]:
+    """The ``coherence`` of :func:`radial_symmetry_centre`'s fit (no camera) with the window's
+    gradient lines first carried by each linear map of ``maps`` (:func:`local_map`; None:
+    the image plane) — the points as vectors (A p), the gradients as the normals of their
+    isophotes (A⁻ᵀ n) — one entry per map, 0 where no fit. The lines are found once."""
+    lines = _window_lines(gray, start_px, radius_px, dark_level, glare_level, 256.0,
+                          (0.0, 0.0))
+    if lines is None:
+        return [0.0] * len(maps)
+    px, py, nx, ny, g2 = lines
+    out = []
+    for a in maps:
+        if a is None:
+            fit = _radial_flat(px, py, nx, ny, g2, start_px[0], start_px[1], n_iter)
+        else:
+            inv_t = np.linalg.inv(a).T
+            mx, my = inv_t[0, 0] * nx + inv_t[0, 1] * ny, inv_t[1, 0] * nx + inv_t[1, 1] * ny
+            norm = np.hypot(mx, my)
+            sx, sy = a @ np.asarray(start_px, dtype=np.float64)
+            fit = _radial_flat(a[0, 0] * px + a[0, 1] * py, a[1, 0] * px + a[1, 1] * py,
+                               mx / norm, my / norm, g2, float(sx), float(sy), n_iter)
+        out.append(fit.coherence if fit is not None else 0.0)
+    return out
+
+
+def _window_lines(gray: NDArray[np.uint8], start_px: tuple[float, float], radius_px: float,
+                  dark_level: float, glare_level: float, saturated_level: float,
+                  sky_gradient: tuple[float, float]) -> tuple[NDArray[Any], ...] | None:
+    """:func:`gradient_lines` of the square window of half-width ``radius_px`` (at least 4)
+    about ``start_px`` → ``(px, py, nx, ny, g2)``, those touching a saturated pixel left out
+    when 30 others are left; None when the window or the lines are too few."""
+    h, w = gray.shape
+    cx, cy = start_px
+    r = max(4.0, float(radius_px))
+    x0, y0 = max(0, int(cx - r)), max(0, int(cy - r))
+    x1, y1 = min(w, int(cx + r) + 2), min(h, int(cy + r) + 2)
+    if x1 - x0 < 4 or y1 - y0 < 4:
+        return None
+    px, py, nx, ny, g2, clipped = gradient_lines(gray, x0, y0, x1, y1, dark_level, glare_level,
+                                                 saturated_level, sky_gradient)
+    if clipped.any() and int((~clipped).sum()) >= 30:
+        px, py, nx, ny, g2 = px[~clipped], py[~clipped], nx[~clipped], ny[~clipped], g2[~clipped]
+    if px.size < 8:
+        return None
+    return px, py, nx, ny, g2
+
+
 def radial_symmetry_centre(gray: NDArray[np.uint8], start_px: tuple[float, float],
                            radius_px: float, dark_level: float, glare_level: float = 0.0,
                            camera: CameraModel | None = None, n_iter: int = 5,
@@ -203,19 +252,12 @@ def radial_symmetry_centre(gray: NDArray[np.uint8], start_px: tuple[float, float
 
     Returns None when too few gradient lines are left.
     """
-    h, w = gray.shape
     cx, cy = start_px
-    r = max(4.0, float(radius_px))
-    x0, y0 = max(0, int(cx - r)), max(0, int(cy - r))
-    x1, y1 = min(w, int(cx + r) + 2), min(h, int(cy + r) + 2)
-    if x1 - x0 < 4 or y1 - y0 < 4:
+    lines = _window_lines(gray, start_px, radius_px, dark_level, glare_level, saturated_level,
+                          sky_gradient)
+    if lines is None:
         return None
-    px, py, nx, ny, g2, clipped = gradient_lines(gray, x0, y0, x1, y1, dark_level, glare_level,
-                                                 saturated_level, sky_gradient)
-    if clipped.any() and int((~clipped).sum()) >= 30:
-        px, py, nx, ny, g2 = px[~clipped], py[~clipped], nx[~clipped], ny[~clipped], g2[~clipped]
-    if px.size < 8:
-        return None
+    px, py, nx, ny, g2 = lines
     if camera is None:
         return _radial_flat(px, py, nx, ny, g2, float(cx), float(cy), n_iter)
     ux, uy, mx, my = px, py, nx, ny  # the solve's coordinates (image, or tangent plane)
