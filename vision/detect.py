@@ -497,7 +497,7 @@ _SPHERE_ASPECT = 0.04
 #: symmetric on its sphere by this much (coherence 0–1) …
 _SPHERE_MARGIN = 0.02
 #: … and symmetric there at all: the majority of its gradients' weight on lines through one
-#: centre. A glare the skyline cuts, or a ragged one, has less on every sphere (0.07–0.22 on
+#: centre. A glare the skyline cuts, or a ragged one, has less on every sphere (0.06–0.24 on
 #: the independent renderer's cut frames 12102–12120) and cannot tell the projection
 _SPHERE_MAJORITY = 0.5
 

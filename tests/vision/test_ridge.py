@@ -150,9 +150,9 @@ def test_a_small_core_low_over_the_ridge_is_found(lens: str) -> None:
     was measured in the image plane, where the lens draws the glare as an oval (and on a
     sphere the gradients were carried as vectors, not as the normals they are). Measured
     on the sphere of each projection the image circle may have
-    (``vision.detect._glare_sphere``): coherence 0.77 and 0.85, confidence 0.76 and
-    0.96, 0.16 % and 0.00 % of the width off (9.9° over the ridge likewise: confidence
-    0.26 and 0.50 → 0.95 and 0.98)."""
+    (``vision.detect._glare_sphere``): coherence 0.77 and 0.85, confidence 0.77 and
+    0.96, 0.01 % and 0.00 % of the width off, the equisolid one centred on its own sphere
+    (9.9° over the ridge likewise: confidence 0.26 and 0.50 → 0.95 and 0.98)."""
     img, (tx, ty) = _render(lens, 3000, 4.0, 1.5, 320.0)
     d = _blind(img)
     assert d.sun_found and d.confidence >= 0.5, (d.confidence, d.reason)
@@ -163,8 +163,7 @@ def test_an_equisolid_glare_is_centred_on_the_projection_the_glare_tells() -> No
     """A 12° core 9.9° over the ridge through an equisolid lens, read blind as equidistant:
     the limb fit on the guess's sphere put it 0.98 % of the width off. The glare's gradients
     are most radially symmetric on the equisolid sphere, and the centre is fitted there
-    (``vision.detect._glare_sphere``): measured 0.07 %. (20° over the ridge the glare is
-    symmetric on no sphere by a majority, 0.45–0.49, and the guess is kept: 0.61 %.)"""
+    (``vision.detect._glare_sphere``): measured 0.07 % (20° over the ridge 0.61 → 0.06 %)."""
     img, (tx, ty) = _render("equisolid", 1000, 9.9, 12.0, 320.0)
     d = _blind(img)
     assert d.sun_found and d.confidence >= 0.5, (d.confidence, d.reason)
