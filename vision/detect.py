@@ -500,6 +500,12 @@ _SPHERE_MARGIN = 0.02
 #: centre. A glare the skyline cuts, or a ragged one, has less on every sphere (0.06–0.24 on
 #: the independent renderer's cut frames 12102–12120) and cannot tell the projection
 _SPHERE_MAJORITY = 0.5
+#: … for a core at least this wide in radius [px]: a limb fitted on another projection's
+#: sphere moves by the change of the lens's scale across the core, which grows as its radius
+#: squared — 0.3–2.6 px for 21-px cores on test_ridge's equisolid frames, so under a pixel
+#: below some 16 px (the small cores of a 640-px frame, where the choice cost a fifth of the
+#: detection's time): there the image cannot tell it and the error is small anyway
+_SPHERE_MIN_PX = 16.0
 
 
 def _telling_projections(c: _Candidate, model: FisheyeCamera
@@ -953,10 +959,12 @@ def _sphere_of_glare(gray: NDArray[np.uint8], pick: _Pick, fov: FovCircle | None
     symmetric on (:func:`_glare_sphere`, chosen already when the coherence was measured),
     else ``model`` — the camera given or the image circle's guess — when the image cannot
     tell."""
+    r_eq = float(np.sqrt(pick.best.area / np.pi))
+    if r_eq < _SPHERE_MIN_PX:
+        return model
     if pick.sphere is not None:
         return pick.sphere
     if isinstance(model, FisheyeCamera) and len(_telling_projections(pick.best, model)) > 1:
-        r_eq = float(np.sqrt(pick.best.area / np.pi))
         return _glare_sphere(gray, pick.best, r_eq, pick.peak, fov, pick.bg, model)[1]
     return model
 
