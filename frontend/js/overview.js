@@ -333,9 +333,10 @@ function drawTiles(status) {
       tile("Tracker energy today", energy(tr.energy_today_wh), `twin so far ${energy(tr.twin_energy_today_wh)}`),
       tile("Fixed energy today", energy(fx.energy_today_wh), `twin so far ${energy(fx.twin_energy_today_wh)}`),
       tile("Gain today", pct(status.gain_today_pct), status.partial_today
-        ? `partial day · twin over the same minutes ${pct(status.twin_matched_gain_today_pct)}`
-        // so far today: at sunrise a tracker facing the sun makes several times a fixed
-        // plane's little (an operator read "twin +913.9 %" at 05:59 as the day's gain)
+        // so far today, said in both: at sunrise a tracker facing the sun makes several times
+        // a fixed plane's little (an operator read "twin +913.9 %" at 05:59 as the day's gain;
+        // a partial morning's "twin over the same minutes +272.3 %" reads the same)
+        ? `tracker over fixed, so far · partial day: twin over the same minutes ${pct(status.twin_matched_gain_today_pct)}`
         : `tracker over fixed, so far · twin so far ${pct(status.twin_gain_today_pct)}`),
     );
   }
