@@ -302,6 +302,16 @@ class FisheyeCamera:
                     break
         return t
 
+    def radial_scales(self, theta_rad: float) -> tuple[float, float]:
+        """The normalised mapping's scales at zenith angle θ [per rad, × focal_px for px]:
+        along the radius ρ'(θ) (:meth:`_mapping_slope`) and across it ρ(θ)/sin θ (its limit
+        at the zenith g'(0) = 1)."""
+        along = float(self._mapping_slope(theta_rad))
+        sin_t = float(np.sin(theta_rad))
+        across = float(self.radius_px(theta_rad)) / self.focal_px / sin_t if sin_t > 1e-9 \
+            else float(_project_slope(0.0, self.projection))
+        return along, across
+
     def local_px_per_deg(self, x_px: float, y_px: float) -> tuple[float, float]:
         """The scale at pixel (x, y) [px/°], largest and smallest over the directions of the
         sky there: along the radius r'(θ), across it r(θ)/sin θ (the lens maps the
@@ -311,10 +321,7 @@ class FisheyeCamera:
         theta = float(self.theta_rad(float(np.hypot(x_px - self.cx_px, y_px - self.cy_px))))
         if not math.isfinite(theta):
             return 0.0, 0.0
-        along = float(self._mapping_slope(theta))
-        sin_t = float(np.sin(theta))
-        across = float(self.radius_px(theta)) / self.focal_px / sin_t if sin_t > 1e-9 \
-            else float(_project_slope(0.0, self.projection))  # the limit at the zenith: g'(0) = 1
+        along, across = self.radial_scales(theta)
         scales = (self.px_per_deg * abs(along), self.px_per_deg * abs(across))
         if not (math.isfinite(scales[0]) and math.isfinite(scales[1])):
             return 0.0, 0.0

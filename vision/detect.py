@@ -540,9 +540,7 @@ def _sky_map(model: FisheyeCamera, x: float, y: float) -> tuple[NDArray[np.float
     theta = float(model.theta_rad(r))
     if r < 1e-6 or not 1e-6 < theta < np.pi:
         return np.eye(2), 1.0
-    h = 1e-4
-    along = float(model.radius_px(theta + h) - model.radius_px(theta - h)) / (2.0 * h)
-    across = r / float(np.sin(theta))
+    along, across = model.radial_scales(theta)
     if not (along > 0.0 and across > 0.0):
         return np.eye(2), 1.0
     k = float(np.sqrt(across / along))
