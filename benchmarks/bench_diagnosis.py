@@ -38,7 +38,7 @@ from backend.diagnosis.faults import (  # noqa: E402
     features_by_day,
 )
 from sim import sky, sky_sensor  # noqa: E402
-from sim.sites import load_site  # noqa: E402
+from sim.sites import Site, load_site  # noqa: E402
 from tests.sim.realistic_sky import logger_days  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "tests" / "backend"))
@@ -728,20 +728,28 @@ ANY_SITES = (
 )
 
 
+def any_sites() -> list[tuple[str, Site, pd.Timestamp]]:
+    """:data:`ANY_SITES` as (name, site, first local day): tehuantepec's arrays, each
+    site's place and fixed plane."""
+    base = load_site("tehuantepec")
+    out = []
+    for name, lat, lon, tz, alt, tilt, az, first_day in ANY_SITES:
+        site = base if lat is None else replace(
+            base, latitude=lat, longitude=lon, timezone=tz, altitude=alt,
+            arrays={**base.arrays, "fixed": replace(base.arrays["fixed"], surface_tilt=tilt,
+                                                     surface_azimuth=az)})
+        out.append((name, site, pd.Timestamp(first_day, tz=site.timezone)))
+    return out
+
+
 def any_site_lines(fig: Figures, seeds: range = range(11, 15)) -> list[str]:
     """The expectation from the fixed array's power on generated held-out days (seeds
     11–14, 6 days each) at :data:`ANY_SITES`: the largest error of the expected tracker
     energy on clear and on cloudy days, the cloudy days' RMS, and the days a healthy
     tracker got a finding of confidence ≥ 0.5."""
-    base = load_site("tehuantepec")
     lines = ["| site | clear days, largest | cloudy days, largest | cloudy days, RMS | "
              "healthy days with a finding |", "|---|---|---|---|---|"]
-    for k, (name, lat, lon, tz, alt, tilt, az, first_day) in enumerate(ANY_SITES):
-        site = base if lat is None else replace(
-            base, latitude=lat, longitude=lon, timezone=tz, altitude=alt,
-            arrays={**base.arrays, "fixed": replace(base.arrays["fixed"], surface_tilt=tilt,
-                                                     surface_azimuth=az)})
-        first = pd.Timestamp(first_day, tz=site.timezone)
+    for k, (name, site, first) in enumerate(any_sites()):
         err: dict[str, list[float]] = {"clear": [], "cloudy": []}
         flagged = 0
         for seed in seeds:
@@ -765,6 +773,93 @@ def any_site_lines(fig: Figures, seeds: range = range(11, 15)) -> list[str]:
                       f"{np.sqrt(np.mean(o**2)):.1f} %") + " | "
             + fig.add(f"any_site_{k}_flagged_days", flagged, "days", f"{flagged} of {n}",
                       "none", flagged == 0) + " |")
+    return lines
+
+
+#: Quantiles of :func:`deck_evidence_lines`' distributions
+DECK_QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95, 0.99, 1.0)
+#: The generated skies' largest clear-sky back-of-plane clearness (seeds 1–9: 1.34, rounded
+#: up): the bound a rule "brighter than a clear sky can be" takes from them (tried, not kept)
+DECK_GENERATED_CLEAR_MAX = 1.35
+
+
+def _by_beam(label: str, k: np.ndarray, beam_index: np.ndarray) -> list[str]:
+    """Rows of :func:`deck_evidence_lines`: the quantiles of ``k`` where the beam's clear-sky
+    index DNI/DNI_clear is ≥ 0.7 (near clear) and < 0.1 (near none), and the share above
+    :data:`DECK_GENERATED_CLEAR_MAX`."""
+    rows = []
+    for beam, x in (("≥ 0.7", k[beam_index >= 0.7]), ("< 0.1", k[beam_index < 0.1])):
+        qs = [f"{v:.2f}" for v in np.quantile(x, DECK_QUANTILES)] if x.size else \
+            ["–"] * len(DECK_QUANTILES)
+        share = f"{100 * np.mean(x > DECK_GENERATED_CLEAR_MAX):.0f} %" if x.size else "–"
+        rows.append(f"| {label} | {beam} | {x.size} | " + " | ".join(qs) + f" | {share} |")
+    return rows
+
+
+def deck_evidence_lines(seeds: range = range(1, 10)) -> list[str]:
+    """Issue 27 (a bright sky behind the fixed plane): does a plane's clearness k =
+    POA/POA_clear where the sun is behind or grazing it (cos AOI under
+    :data:`sim.sky_sensor.BEAM_SEEN_COS`, the clear beam under
+    :data:`sim.sky_sensor.BEAM_SHARE_SPLIT` of the clear POA: the minutes
+    :func:`sim.sky_sensor._unseen_beam` guesses; sun above 3°) tell a beam from none?
+    Development data only: RMIS (its POA sensor, and the horizontal diffuse's clearness
+    DHI/DHI_clear on every step with the sun above 3° — the same comparison of a sky's
+    diffuse with Ineichen's — on all days and on the 2022 days whose components close,
+    :func:`rmis_sky.closes`) and the generated skies of ``seeds`` at :data:`ANY_SITES` (the
+    fixed plane's POA transposed from the generated GHI/DNI/DHI by the site's model). The
+    distributions of k by the measured (generated) beam's clear-sky index."""
+    from pvlib import atmosphere
+
+    from tests.sim.realistic_sky import cloud_weather
+
+    def blind(clear: pd.DataFrame) -> np.ndarray:
+        cos_aoi = np.cos(np.radians(clear["aoi"].to_numpy()))
+        return ((cos_aoi < sky_sensor.BEAM_SEEN_COS)
+                & (clear["apparent_elevation"].to_numpy() > 3.0)
+                & (clear["dni_clear"].to_numpy() * np.maximum(cos_aoi, 0.0)
+                   < sky_sensor.BEAM_SHARE_SPLIT * clear["poa_clear"].to_numpy()))
+
+    def ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.divide(a, b, out=np.zeros(a.size), where=b > 1.0)
+
+    lines = ["| data | beam's clear-sky index | n | "
+             + " | ".join(f"{100 * q:.0f} %" for q in DECK_QUANTILES)
+             + f" | share > {DECK_GENERATED_CLEAR_MAX} |",
+             "|---|---|---|" + "---|" * (len(DECK_QUANTILES) + 1)]
+    site = rmis_sky.station_site()
+    df = rmis_sky.load(mid_interval=True)
+    clear = sky_sensor.fixed_clear_sky(site, df.index)
+    kb = ratio(df["dni"].to_numpy(), clear["dni_clear"].to_numpy())
+    sel = blind(clear)
+    lines += _by_beam("RMIS POA sensor (39°, south), behind the plane",
+                      ratio(df["poa"].to_numpy(), clear["poa_clear"].to_numpy())[sel], kb[sel])
+    kd = ratio(df["dhi"].to_numpy(), clear["dhi_clear"].to_numpy())
+    up = clear["apparent_elevation"].to_numpy() > 3.0
+    closing = rmis_sky.closes(df, clear["apparent_zenith"]).to_numpy()
+    lines += _by_beam("RMIS DHI/DHI_clear, all days", kd[up], kb[up])
+    lines += _by_beam("RMIS DHI/DHI_clear, 2–4 Jan 2022 (closing)", kd[up & closing],
+                      kb[up & closing])
+    k_gen, kb_gen = [], []
+    for name, gen_site, first in any_sites():
+        log(f"deck evidence: {name}")
+        fixed = gen_site.arrays["fixed"]
+        for seed in seeds:
+            w, _ = cloud_weather(gen_site, first, 6, seed)
+            c = sky_sensor.fixed_clear_sky(gen_site, w.index)
+            zen = c["apparent_zenith"].to_numpy()
+            am = np.nan_to_num(np.asarray(atmosphere.get_relative_airmass(np.minimum(zen, 90.0)),
+                                          dtype=float), nan=40.0)
+            poa = sky.poa_irradiance(fixed.surface_tilt, fixed.surface_azimuth, zen,
+                                     c["azimuth"].to_numpy(), w["dni"].to_numpy(),
+                                     w["ghi"].to_numpy(), w["dhi"].to_numpy(),
+                                     c["dni_extra"].to_numpy(), am, albedo=fixed.albedo,
+                                     model=gen_site.transposition_model)["poa_global"]
+            s = blind(c)
+            k_gen.append(ratio(np.asarray(poa, dtype=float), c["poa_clear"].to_numpy())[s])
+            kb_gen.append(ratio(w["dni"].to_numpy(), c["dni_clear"].to_numpy())[s])
+    lines += _by_beam(f"generated, {len(ANY_SITES)} sites × seeds {seeds.start}–"
+                      f"{seeds.stop - 1}, behind the plane", np.concatenate(k_gen),
+                      np.concatenate(kb_gen))
     return lines
 
 
@@ -925,6 +1020,8 @@ if __name__ == "__main__":
     if sys.argv[1:] == ["--real-sky"]:  # that part alone, for development
         f = Figures("diagnosis")
         print("\n".join(real_sky(f)))
+    elif sys.argv[1:] == ["--deck-evidence"]:  # issue 27: a bright sky behind the plane
+        print("\n".join(deck_evidence_lines()))
     elif sys.argv[1:] == ["--held-out"]:  # issue 27's held-out stations
         print("\n".join(heldout_lines()))
     elif os.environ.get("HELIOTWIN_BENCH_DIAGNOSIS") == "real_sky":
