@@ -4,15 +4,18 @@
 under the sky the fixed array's measured power says there was
 (:func:`sim.sky_sensor.weather_aware_twin`, the same pipeline as the clear-sky twin
 and as the diagnosis), beside ``measured`` and the clear-sky ``twin``. Computed on
-request (about 45 ms a day), so a range is at most :data:`MAX_DAYS` long; the
-per-day energies of the same twin are cached by the diagnosis
+request (0.71 s of CPU for a day of a 1-minute fixed logger, 2026-12-06; once for the
+requests that ask for it while it runs: :func:`weather_twin`), so a range is at most
+:data:`MAX_DAYS` long; the per-day energies of the same twin are cached by the diagnosis
 (``backend/diagnosis/service.py``).
 """
 
 from __future__ import annotations
 
 import datetime as dt
+import threading
 from collections.abc import Callable
+from concurrent.futures import Future
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -30,6 +33,12 @@ if TYPE_CHECKING:
     from backend.context import ServiceContext
 
 MAX_DAYS = 31
+#: :func:`weather_twin`s being computed, by (service, site, first and end second): a
+#: request for one of them waits for its answer instead of computing it again. Callers run
+#: on worker threads (the measurements route is a plain ``def``, the energy route's work goes
+#: to ``anyio.to_thread``), hence a lock; never call it on the event loop.
+_IN_FLIGHT: dict[tuple[int, int, int, int], Future[pd.DataFrame]] = {}
+_IN_FLIGHT_LOCK = threading.Lock()
 
 
 def _rows(conn: Connection, array_id: int, t0: int, t1: int, max_gap_s: int) -> np.ndarray:
@@ -177,11 +186,32 @@ def weather_twin(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int) -> pd.Da
         raise InputError(422, f"source=twin_weather is computed on request: at most {MAX_DAYS} "
                               "days (the diagnosis gives its daily energy for longer ranges)")
     t0, t1 = t0 // 60 * 60, -(-t1 // 60) * 60
-    _, fx, sensors, _, fine = site_minutes(ctx, info, t0, t1)
-    start, now = pd.Timestamp(t0, unit="s", tz="UTC"), pd.Timestamp.now(tz="UTC")
-    end = pd.Timestamp(t1, unit="s", tz="UTC")
-    return sky_sensor.weather_aware_twin(info.site, start, end, fx, sensors=sensors,
-                                         now=now if end > now else None, fine=fine)
+    # one computation for the requests that ask for the same twin while it runs: the
+    # Overview asks for both arrays' day at once, and each answer is one column of the
+    # same frame (in flight only, no cache: a later request reads the readings afresh;
+    # an edited site is a new Site object, so a new key)
+    key = (id(ctx), id(info.site), t0, t1)
+    with _IN_FLIGHT_LOCK:
+        running = _IN_FLIGHT.get(key)
+        if running is None:
+            _IN_FLIGHT[key] = mine = Future[pd.DataFrame]()
+    if running is not None:
+        return running.result()
+    try:
+        _, fx, sensors, _, fine = site_minutes(ctx, info, t0, t1)
+        start, now = pd.Timestamp(t0, unit="s", tz="UTC"), pd.Timestamp.now(tz="UTC")
+        end = pd.Timestamp(t1, unit="s", tz="UTC")
+        twin = sky_sensor.weather_aware_twin(info.site, start, end, fx, sensors=sensors,
+                                             now=now if end > now else None, fine=fine)
+    except BaseException as exc:
+        mine.set_exception(exc)
+        raise
+    else:
+        mine.set_result(twin)
+        return twin
+    finally:
+        with _IN_FLIGHT_LOCK:
+            del _IN_FLIGHT[key]
 
 
 def weather_twin_columns(ctx: ServiceContext, info: SiteInfo, array: str, t0: int,

@@ -135,3 +135,53 @@ def test_the_energy_under_the_measured_sky_computes_a_month_without_a_token(
     again = client.get(url, params=params)  # the same 42 days, now diagnosed: no cost
     assert again.status_code == 200, again.text
     assert again.json()["rows"] == served.json()["rows"]
+
+
+@pytest.mark.parametrize("live_server", ["sqlite"], indirect=True)  # the twin, not storage
+def test_both_arrays_asked_at_once_share_one_computation(
+        client: httpx.Client, live_server: LiveServer, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The Overview asks for the tracker's and the fixed array's weather twin of a day at
+    once (``frontend/js/overview.js``, ``weatherTwin``); both are columns of one
+    :func:`sim.sky_sensor.weather_aware_twin` frame, which the second request now waits for
+    instead of computing it again (before: two computations, two thirds of the served
+    dashboard's busy time in the browser tests, py-spy). The first computation is held
+    until the second request has arrived; the answers are those of a request alone."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from backend.diagnosis import weather_twin as wt
+    from sim import sky_sensor
+
+    arrived, computed = threading.Semaphore(0), []
+    need_twin, twin = wt._need_twin, sky_sensor.weather_aware_twin
+
+    def arriving(info):  # type: ignore[no-untyped-def]
+        arrived.release()
+        return need_twin(info)
+
+    def held(*args, **kwargs):  # type: ignore[no-untyped-def]
+        computed.append(1)
+        if len(computed) == 1:  # the first: hold it until both requests are in
+            assert arrived.acquire(timeout=30) and arrived.acquire(timeout=30)
+            threading.Event().wait(0.2)  # the second from its arrival to the shared wait
+        return twin(*args, **kwargs)
+
+    monkeypatch.setattr(wt, "_need_twin", arriving)
+    monkeypatch.setattr(sky_sensor, "weather_aware_twin", held)
+    params = {"start": "2023-04-20", "end": "2023-04-21", "source": "twin_weather"}
+
+    def get(array: str) -> httpx.Response:
+        with live_server.client() as c:
+            return c.get(PATH, params={**params, "array": array})
+
+    with ThreadPoolExecutor(2) as pool:
+        tracker, fixed = pool.map(get, ["tracker", "fixed"])
+    assert tracker.status_code == fixed.status_code == 200, (tracker.text, fixed.text)
+    assert len(computed) == 1
+    monkeypatch.setattr(wt, "_need_twin", need_twin)
+    monkeypatch.setattr(sky_sensor, "weather_aware_twin", twin)
+    for array, shared in (("tracker", tracker), ("fixed", fixed)):
+        alone = client.get(PATH, params={**params, "array": array})
+        assert alone.json()["points"] == shared.json()["points"]
+        assert alone.json()["sky"] == shared.json()["sky"]
+    assert tracker.json()["points"] != fixed.json()["points"]
