@@ -182,6 +182,9 @@ class Registry:
     """How often [s] a look at :attr:`sites` checks the user's folder for new files."""
     FORCED_RESCAN_S = 0.1
     """How often [s], at most, a lookup of an unknown id checks it."""
+    SCAN_WAIT_S = 10.0
+    """How long [s], at most, a lookup of an unknown id waits for a look already running
+    (the watcher's, which may be storing that very site's rows)."""
 
     def __init__(self, sites: list[Site], user_dir: Path | None = None) -> None:
         self._lock = threading.Lock()
@@ -283,6 +286,15 @@ class Registry:
         # a look is found by its id at once)
         gap = self.FORCED_RESCAN_S if force else self.RESCAN_S
         folder_moved = force and self._folder_mtime_ns() != self._dir_mtime_ns
+        if force and self._scan_lock.locked():
+            # a look already running (the watcher's) may be storing this very site's rows
+            # through the writer: wait for its end, then look again if the folder moved
+            # since it began (before, the lookup answered 404 right after `site create` on a
+            # loaded test run, session 30)
+            if self._scan_lock.acquire(timeout=self.SCAN_WAIT_S):
+                self._scan_lock.release()
+            now = time.monotonic()
+            folder_moved = self._folder_mtime_ns() != self._dir_mtime_ns
         if (now - self._checked < gap and not folder_moved) \
                 or not self._scan_lock.acquire(blocking=False):
             return False
@@ -403,7 +415,8 @@ class Registry:
         by id saw an edited file only after some request had listed every site, 44 s later;
         a rescan here ran on the event loop of every ingest request)."""
         info = self._sites.get(site_id)
-        if info is None and self.rescan(force=True):
+        if info is None:  # a look that waited for another may find its work done: read again
+            self.rescan(force=True)
             info = self._sites.get(site_id)
         return info
 

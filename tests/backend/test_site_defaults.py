@@ -163,6 +163,49 @@ def test_a_site_file_without_rows_in_this_database_gets_them(
     assert r.status_code == 200, r.text
 
 
+def test_a_lookup_while_the_folder_is_being_read_waits_for_that_look(
+        server: InProcessServer, client: httpx.Client, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A lookup of a new site's id while a look at the folder runs (the watcher's, which may
+    be storing that very site's rows through the writer) waits for it and finds the site.
+    Before, it could not take the look's lock and answered 404 right after ``site create``
+    (seen once on a loaded run). The look is held here by the test itself, and the lookup is
+    let go only once it has asked for the lock."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    registry = server.ctx.registry
+    lock = registry._scan_lock
+    asked = threading.Event()
+
+    class Watched:  # the registry's lock, telling when a thread other than the watcher asks
+        def locked(self) -> bool:
+            return lock.locked()
+
+        def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
+            if threading.current_thread() is not registry._watcher:
+                asked.set()
+            return lock.acquire(blocking, timeout)
+
+        def release(self) -> None:
+            lock.release()
+
+    monkeypatch.setattr(registry, "_scan_lock", Watched())
+    for name, value in server.env.items():
+        if name.startswith("HELIOTWIN_"):
+            monkeypatch.setenv(name, value)
+    with ThreadPoolExecutor(1) as pool:
+        with lock:  # a look running
+            code = main(["site", "create", "--id", "flensburg", "--latitude-deg", "54.79",
+                         "--longitude-deg", "9.44", "--timezone", "Europe/Berlin"])
+            assert code == 0, capsys.readouterr().err
+            lookup = pool.submit(client.get, "/api/v1/sites/flensburg")
+            assert asked.wait(30)
+        site = lookup.result(timeout=60)
+    assert site.status_code == 200, site.text
+    assert site.json()["site_id"] == "flensburg"
+
+
 def _lookup_until(client: httpx.Client, site_id: str, done: Callable[[httpx.Response], bool]
                   ) -> httpx.Response:
     """``GET /api/v1/sites/{site_id}`` alone (never the list) until ``done``; 10 s at most."""
