@@ -72,7 +72,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from functools import lru_cache, partial
+from functools import cache, lru_cache, partial
 from typing import Any
 
 import cv2
@@ -487,8 +487,8 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
                  values, unclipped, sphere)
 
 
-#: Two projections whose local aspect (the scale across the radius over the scale along it,
-#: :func:`_local_px_per_deg`) differs by less than this at a core draw its glare alike: a
+#: Two projections whose local aspect (the scale along the radius over the scale across it,
+#: :func:`_sky_map`) differs by less than this at a core draw its glare alike: a
 #: gradient's direction moves by at most half of it [rad], a quarter of the 0.08 rad the
 #: coherence allows a line (:func:`vision.radial.radial_symmetry_centre`), so the image
 #: cannot tell them apart there (near the zenith every projection is locally the same)
@@ -1538,14 +1538,10 @@ def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
     """
     r_eq = float(np.sqrt(c.area / np.pi))
     model = camera if camera is not None else fallback
-    chosen: list[CameraModel | None] = []
+    chosen = cache(sphere) if sphere is not None else None  # asked once, when a fit needs it
 
     def fitted_on(default: CameraModel | None) -> CameraModel | None:
-        if sphere is None:
-            return default
-        if not chosen:
-            chosen.append(sphere())
-        return chosen[0]
+        return default if chosen is None else chosen()
 
     if isinstance(model, FisheyeCamera) and c.area >= _SMALL_AREA_PX:
         near, far = _rings(gray, c.cx, c.cy, (1.6 * r_eq + 2.0, 4.0 * r_eq + 3.0), None)

@@ -182,8 +182,8 @@ def mapped_coherence(gray: NDArray[np.uint8], start_px: tuple[float, float],
                      radius_px: float, dark_level: float, glare_level: float,
                      maps: list[NDArray[np.float64] | None], n_iter: int = 1) -> list[float]:
     """The ``coherence`` of :func:`radial_symmetry_centre`'s fit (no camera) with the window's
-    gradient lines first carried by each linear map of ``maps`` (:func:`local_map`; None:
-    the image plane) — the points as vectors (A p), the gradients as the normals of their
+    gradient lines first carried by each linear map of ``maps`` (:func:`vision.detect._sky_map`;
+    None: the image plane) — the points as vectors (A p), the gradients as the normals of their
     isophotes (A⁻ᵀ n) — one entry per map, 0 where no fit. The lines are found once."""
     lines = _window_lines(gray, start_px, radius_px, dark_level, glare_level, 256.0,
                           (0.0, 0.0))
