@@ -1012,13 +1012,16 @@ def _disc_behind_obstacle(gray: NDArray[np.uint8], cx: float, cy: float, model: 
         return cx, cy
     c = got.best
     full = (got.labels == c.labels[0]) if len(c.labels) == 1 else np.isin(got.labels, c.labels)
+    outline = _free_outline(full, c, gray, got.bg)
+    if outline is None:  # nothing cuts the core (most frames): no free arc on any projection
+        return None
+    pts, cut = outline
     lens = None if fov is None else lens_circle(fov)
     centres = []
     for m in _candidate_projections(model):
-        arc = _free_arc(full, c, gray, got.bg, m)
-        if arc is not None and arc[2][2] >= _ARC_EVIDENCE_SHARE and \
-                _inside(arc[2][0], arc[2][1], gray.shape, lens):
-            centres.append((arc[2][0], arc[2][1], m))
+        x, y, _, share = _robust_limb_centre(pts[~cut], m)
+        if share >= _ARC_EVIDENCE_SHARE and _inside(x, y, gray.shape, lens):
+            centres.append((float(x), float(y), m))
     dark = [(x, y) for x, y, m in centres if _disc_dark(gray, x, y, m, level, got.bg)]
     if dark and not any(_disc_clipped(gray, x, y, m, level) for x, y, m in centres):
         return dark[0]
@@ -1081,7 +1084,7 @@ def _disc_pixels(gray: NDArray[np.uint8], cx: float, cy: float, model: CameraMod
     y0, y1 = max(int(np.floor(cy - r)), 0), min(int(np.ceil(cy + r)) + 1, h)
     if x1 <= x0 or y1 <= y0:
         return None
-    yy, xx = np.mgrid[y0:y1, x0:x1]
+    yy, xx = np.ogrid[y0:y1, x0:x1]
     disc = gray[y0:y1, x0:x1][(xx - cx) ** 2 + (yy - cy) ** 2 <= r * r]
     return disc if disc.size else None
 
@@ -1381,6 +1384,21 @@ def _free_arc(full: NDArray[np.bool_], c: _Candidate, gray: NDArray[np.uint8], b
     arc (:func:`vision.limb._robust_limb_centre` on the sphere of ``model``): its centre
     ``(x, y)`` [px] and the share of the free arc on it; None when nothing is cut or too
     little is left."""
+    outline = _free_outline(full, c, gray, bg)
+    if outline is None:
+        return None
+    pts, cut = outline
+    x, y, _, share = _robust_limb_centre(pts[~cut], model)
+    return pts, cut, (float(x), float(y), float(share))
+
+
+def _free_outline(full: NDArray[np.bool_], c: _Candidate, gray: NDArray[np.uint8], bg: float
+                  ) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
+    """The outline ``[N, 2]`` of the cluster ``full`` (the candidate ``c``'s pixels) and which
+    of its points an obstacle or the frame cuts (:func:`_cut_by_obstacle`,
+    :func:`_on_frame_edge`); None when nothing is cut or fewer than 12 points are free. It
+    does not depend on the projection: :func:`_free_arc` fits its free arc on one,
+    :func:`_disc_behind_obstacle` on each candidate."""
     contours, _ = cv2.findContours(full.astype(np.uint8), cv2.RETR_EXTERNAL,
                                    cv2.CHAIN_APPROX_NONE)
     if not contours:
@@ -1392,8 +1410,7 @@ def _free_arc(full: NDArray[np.bool_], c: _Candidate, gray: NDArray[np.uint8], b
     cut |= _on_frame_edge(pts, gray.shape)
     if not cut.any() or int(np.count_nonzero(~cut)) < 12:
         return None
-    x, y, _, share = _robust_limb_centre(pts[~cut], model)
-    return pts, cut, (float(x), float(y), float(share))
+    return pts, cut
 
 
 def _mirrored_shape(mask: NDArray[np.uint8], ox: int, oy: int, cut_pts: NDArray[np.float64]
