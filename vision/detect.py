@@ -1396,9 +1396,9 @@ def _free_outline(full: NDArray[np.bool_], c: _Candidate, gray: NDArray[np.uint8
                   ) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
     """The outline ``[N, 2]`` of the cluster ``full`` (the candidate ``c``'s pixels) and which
     of its points an obstacle or the frame cuts (:func:`_cut_by_obstacle`,
-    :func:`_on_frame_edge`); None when nothing is cut or fewer than 12 points are free. It
-    does not depend on the projection: :func:`_free_arc` fits its free arc on one,
-    :func:`_disc_behind_obstacle` on each candidate."""
+    :func:`_on_frame_edge`); None when the outline has under 24 points, nothing is cut or
+    fewer than 12 points are free. It does not depend on the projection: :func:`_free_arc`
+    fits its free arc on one, :func:`_disc_behind_obstacle` on each candidate."""
     contours, _ = cv2.findContours(full.astype(np.uint8), cv2.RETR_EXTERNAL,
                                    cv2.CHAIN_APPROX_NONE)
     if not contours:
