@@ -244,7 +244,7 @@ async function selectPlant(id) {
     // still running there is no longer followed here
     sweep.token++;
     sweepIdle();
-    clearSweep("Run a sweep at this plant's place.");
+    clearSweep(NO_SWEEP);
     sweepSay({ status: "", message: "" });
   }
   // the strategies this plant's collector can take (sun alone for a polygon)
@@ -363,6 +363,7 @@ export async function init() {
 // stopping: its cancel was accepted
 const sweep = { id: null, rows: [], token: 0, following: null, stopping: false };
 const SWEEP_CHARTS = ["chart-sweep-energy", "chart-sweep-tradeoff", "chart-sweep-shade"];
+const NO_SWEEP = "Run a sweep at this plant's place.";
 
 /** The sweep's words in the panel: `status` its progress and outcome, `message` what went
  * wrong (a refused request, a cancel that failed), kept until the next sweep is asked for. */
@@ -598,6 +599,8 @@ async function cancelSweep() {
 }
 
 export function initSweep() {
+  // the panel's charts say what fills them, not three blank boxes under the form
+  clearSweep(NO_SWEEP);
   $("sweep-form").addEventListener("submit", runSweep);
   $("sweep-cancel").addEventListener("click", cancelSweep);
   // a field the browser refuses is the sweep's news now: the last refusal's words went

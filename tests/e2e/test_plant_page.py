@@ -274,6 +274,9 @@ def test_the_sweep_panel_runs_a_sweep_and_draws_its_shade_in_the_plants_time(
     solstice with times in the plant's zone (the axis said UTC; no browser test ran it)."""
     page.goto(server.url + "/#plant?day=2021-12-21")
     page.wait_for_selector('body[data-plant-loaded="penarroya/2021-12-21"]', timeout=60_000)
+    # before any sweep its charts say what fills them (they were three blank boxes)
+    assert [page.text_content(f"#{c}") for c in SWEEP_CHARTS] == [
+        "Run a sweep at this plant's place."] * 3
     _run_square_sun_sweep(page, "0.2,0.3")
     assert "2 cases on" in page.text_content("#sweep-status")
     energy = page.evaluate("() => document.getElementById('chart-sweep-energy').data"
