@@ -100,6 +100,7 @@ from vision.candidates import (
 from vision.detection import CameraModel, FovCircle, SunDetection
 from vision.fov import _median_u8, _small, estimate_fov, lens_circle, overlays_unlit, to_gray
 from vision.glare import censored_glare_centre, symmetric_glare_centre
+from vision.imageio import to_8bit
 from vision.limb import _robust_limb_centre, contained_limb_centre
 from vision.radial import mapped_coherence
 from vision.seeds import detect_seed000, detect_seed003, threshold_moments
@@ -836,7 +837,9 @@ def detect_robust(image: NDArray[Any], camera: CameraModel | None = None,
         its distance from the prediction, however far (a wrong place, time or
         zone moves the prediction, not the sun).
     """
-    image = _one_channel_if_grey(image)
+    # 16-bit and float frames read as the service decodes them, so the colour tests (the
+    # white core, the clip level's white plateau) see 8-bit levels too
+    image = _one_channel_if_grey(to_8bit(image))
     gray = to_gray(image)
     small, scale = _small(gray)
     if fov is None and auto_fov:

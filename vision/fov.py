@@ -9,18 +9,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vision.detection import FovCircle
+from vision.imageio import to_8bit
 
 
 def to_gray(image: NDArray[Any]) -> NDArray[np.uint8]:
-    """8-bit grey (ITU-R BT.601 luma, cv2.cvtColor) from a BGR, BGRA or grey frame."""
-    img = np.asarray(image)
-    if img.dtype != np.uint8:
-        if img.dtype == np.uint16:
-            img = (img >> 8).astype(np.uint8)
-        elif np.issubdtype(img.dtype, np.floating):
-            img = np.clip(img * (255.0 if img.max() <= 1.0 else 1.0), 0, 255).astype(np.uint8)
-        else:
-            raise ValueError(f"unsupported image dtype {img.dtype}")
+    """8-bit grey (ITU-R BT.601 luma, cv2.cvtColor) from a BGR, BGRA or grey frame, its
+    samples brought to 8 bits by :func:`vision.imageio.to_8bit`."""
+    img = to_8bit(image)
     if img.ndim == 2:
         return img
     if img.ndim == 3 and img.shape[2] == 3:

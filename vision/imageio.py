@@ -266,13 +266,36 @@ def _to_bgr8(raw: NDArray[Any], scaled: bool) -> NDArray[np.uint8]:
     if alpha is not None:
         a = cv2.merge([alpha] * 3)
         colour = cv2.multiply(np.ascontiguousarray(colour), a, scale=1.0 / full)
-    if raw.dtype == np.uint16:
-        brightest = int(colour.max()).bit_length()
+    # shifted in place (copy=False): 16-bit frames are large, and this one is ours
+    return to_8bit(np.ascontiguousarray(colour), scaled, copy=False)
+
+
+def to_8bit(image: NDArray[Any], scaled: bool = False, copy: bool = True
+            ) -> NDArray[np.uint8]:
+    """A frame's samples as 8-bit ones, by the one rule of the service's decoding
+    (:func:`_to_bgr8`) and of the library's detection (``vision.detect.detect_robust``,
+    ``vision.fov.to_gray``): 8 bits as given; 16 bits by the data's depth — its top byte
+    when ``scaled`` (a PNG's ``sBIT``: samples scaled to the full 16 bits) or when a value
+    lies above 14 bits, else the smallest of 10, 12, 14 bits that holds the brightest value
+    (a 12-bit sensor's 0–4095 is 0–255, its saturation 255, as the sensor's was: see
+    :func:`_to_bgr8`); floats as 0–1 when none is above 1, else as 0–255, clipped. The
+    detection read a 16-bit frame by its top byte alone, and its colour tests (the white
+    core of a large glare) only at 8 bits: the Wolf frames × 257 lay up to 20 px farther
+    from their labels than the same frames at 8 bits. ``copy=False``: a 16-bit frame the
+    caller no longer needs is shifted in place."""
+    img = np.asarray(image)
+    if img.dtype == np.uint8:
+        return img
+    if img.dtype == np.uint16:
+        brightest = int(img.max()).bit_length() if img.size else 0
         bits = 16 if scaled or brightest > 14 else max(10, brightest + brightest % 2)
-        colour = np.ascontiguousarray(colour)  # shifted in place: 16-bit frames are large
-        np.right_shift(colour, bits - 8, out=colour)
-        np.minimum(colour, 255, out=colour)
-    return np.ascontiguousarray(colour, dtype=np.uint8)
+        shifted = np.right_shift(img, bits - 8, out=None if copy else img)
+        np.minimum(shifted, 255, out=shifted)
+        return np.ascontiguousarray(shifted, dtype=np.uint8)
+    if np.issubdtype(img.dtype, np.floating):
+        top = float(img.max()) if img.size else 0.0
+        return np.clip(img * (255.0 if top <= 1.0 else 1.0), 0, 255).astype(np.uint8)
+    raise ValueError(f"unsupported image dtype {img.dtype}: 8- or 16-bit integers or floats")
 
 
 def decode_image(data: bytes, max_pixels: int) -> NDArray[np.uint8]:

@@ -295,3 +295,29 @@ def test_a_pngs_exif_orientation_is_applied_at_every_depth(orientation: int) -> 
         ok, buf = cv2.imencode(".png", raster)
         assert np.array_equal(decode_image(_with_png_exif(buf.tobytes(), orientation), 10_000),
                               ref)
+
+
+@pytest.mark.parametrize("name", ["Wolf_20160530_102400_UTCp1_sunrow1354_suncol730.jpg",
+                                  "Wolf_20160530_122200_UTCp1_sunrow1319_suncol1067.jpg"])
+def test_the_library_reads_16_bit_and_float_frames_as_the_service_decodes_them(name: str) -> None:
+    """A frame handed to the library as 16-bit samples (full range, or a 12-bit sensor's
+    0–4095) or as floats in 0–1 is found where its 8-bit frame is (``vision.imageio.to_8bit``,
+    the decoder's rule). Before, the detection read 16 bits by the top byte and ran its colour
+    tests on 8-bit frames only: these two Wolf frames × 257 lay 21.8 and 19.1 px from their
+    8-bit answers (the white core of their glare skipped), 20.4 px from a label."""
+    from vision.detect import detect_robust
+
+    frame = cv2.imread(str(Path(__file__).parents[1] / "data" / "real-sky" / name),
+                       cv2.IMREAD_COLOR)
+    ref = detect_robust(frame)
+    assert ref.sun_found and ref.centroid_px is not None
+    for other in (frame.astype(np.uint16) * 257,
+                  (frame.astype(np.int64) * 4095 // 255).astype(np.uint16),
+                  frame.astype(np.float32) / 255.0):
+        got = detect_robust(other)
+        assert got.sun_found and got.centroid_px is not None
+        assert np.hypot(got.centroid_px[0] - ref.centroid_px[0],
+                        got.centroid_px[1] - ref.centroid_px[1]) < 0.5, other.dtype
+        assert got.confidence == pytest.approx(ref.confidence, abs=0.01)
+    with pytest.raises(ValueError, match="unsupported image dtype int32"):
+        detect_robust(frame.astype(np.int32))
