@@ -266,10 +266,25 @@ def _local_px_per_deg(model: CameraModel, x: float, y: float) -> tuple[float, fl
 
 
 
+def _lit_around(gray: NDArray[np.uint8], c: _Candidate, peak: float,
+                fov: FovCircle | None = None) -> bool:
+    """Whether a core has a glare: the ring just outside it (1.6 R + 2 px) still above the far
+    sky (4 R + 3 px) by :data:`_HALO_DROP`'s share of the peak's contrast over that sky, the
+    rings' points inside the image circle ``fov`` (the unlit frame beyond it is no sky).
+    Only a source far brighter than the sensor's top — the sun — lights its surround so;
+    a white overlay, a sunlit wall or a cloud's edge clipped by the exposure does not."""
+    r_eq = float(np.sqrt(c.area / np.pi))
+    near, far = _rings(gray, c.cx, c.cy, (1.6 * r_eq + 2.0, 4.0 * r_eq + 3.0), fov)
+    return bool(near.size >= 8 and far.size >= 8
+                and peak - _median(near) < _HALO_DROP * (peak - _median(far)))
+
+
 def _regions(gray: NDArray[np.uint8], work: _Region, row_max: NDArray[np.uint8], level: int,
-             centre: tuple[float, float]) -> tuple[NDArray[Any], list[_Candidate], int] | str:
+             centre: tuple[float, float], peak: float, fov: FovCircle | None
+             ) -> tuple[NDArray[Any], list[_Candidate], int] | str:
     """The bright regions of ``work`` above ``level`` → ``(labels, candidates, ghosts)``:
-    connected components, lens-flare ghosts marked, clusters grouped; or a reason."""
+    connected components, lens-flare ghosts marked, clusters grouped; or a reason.
+    ``peak``: the frame's top level (:func:`_clip_level`); ``fov``: the image circle."""
     rows = np.flatnonzero(row_max > level)
     if rows.size == 0:
         return "no bright region above the threshold"
@@ -293,9 +308,15 @@ def _regions(gray: NDArray[np.uint8], work: _Region, row_max: NDArray[np.uint8],
                           ce[i][1]) for i in order.tolist()]
     # a region the frame cuts casts no ghost: its centroid is the cut's, not its source's
     # (a tester's white bar across the top of a Wolf frame made the sun opposite it a ghost)
+    # and only a source with a glare of its own casts one: a lens-flare ghost bright enough
+    # to clip is a reflection of something some 10⁴ times brighter than the sensor's top,
+    # which lights the sky around its own core (_lit_around); a sunlit white roof opposite
+    # the sun through the image centre, larger than its core, made the sun its ghost
     fh, fw = gray.shape
     sources = [c for c in singles if not _box_on_frame_edge(c.x, c.y, c.x + c.w - 1,
                                                             c.y + c.h - 1, fh, fw)]
+    if len(singles) > 1:
+        sources = [c for c in sources if _lit_around(gray, c, peak, fov)]
     ghosts = _mark_ghosts(singles, centre, sources)
     real = np.array([c.labels[0] for c in singles if not c.ghost], dtype=np.int64)
     return labels, _clusters(stats, cents, real, ox, oy), ghosts
@@ -320,8 +341,8 @@ _UNCLIPPED_CENTROID_SHARE = 0.1
 
 
 def _unclipped_disc(gray: NDArray[np.uint8], work: _Region, row_max: NDArray[np.uint8],
-                    peak: float, bg: float, centre: tuple[float, float], model: CameraModel
-                    ) -> tuple[NDArray[Any], list[_Candidate], int] | str:
+                    peak: float, bg: float, centre: tuple[float, float], model: CameraModel,
+                    fov: FovCircle | None) -> tuple[NDArray[Any], list[_Candidate], int] | str:
     """The sun a neutral-density filter or a short exposure keeps under the sensor's top
     (issue 24 item 4: any exposure), when no region at the top is as large as the solar
     disc → the regions with the disc alone, or why there is none.
@@ -337,7 +358,7 @@ def _unclipped_disc(gray: NDArray[np.uint8], work: _Region, row_max: NDArray[np.
     judged as for any core."""
     contrast = peak - bg
     level = int(np.floor(bg + 0.5 * contrast - 0.5))
-    got = _regions(gray, work, row_max, level, centre)
+    got = _regions(gray, work, row_max, level, centre, peak, fov)
     if isinstance(got, str):
         return got
     labels, cands, ghosts = got
@@ -409,7 +430,7 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
         return f"no bright region: the brightest pixel is {max(contrast, 0):.0f} grey levels " \
                "above the sky"
     thr, level = region_threshold(peak, bg)
-    got_regions = _regions(gray, work, row_max, level, centre)
+    got_regions = _regions(gray, work, row_max, level, centre, peak, fov)
     if isinstance(got_regions, str):
         return got_regions
     labels, cands, ghosts = got_regions
@@ -418,7 +439,7 @@ def _search(gray: NDArray[np.uint8], work: _Region, small_bg: float,
         cands = [c for c in cands if not conf.smaller_than_the_disc(
             c.area, *_local_px_per_deg(model, c.cx, c.cy))]
         if not cands:
-            disc = _unclipped_disc(gray, work, row_max, peak, bg, centre, model)
+            disc = _unclipped_disc(gray, work, row_max, peak, bg, centre, model, fov)
             if isinstance(disc, str):
                 return disc
             (labels, cands, ghosts), thr, unclipped = disc, float(bg + 0.5 * contrast), True
@@ -1563,30 +1584,28 @@ def _refine(gray: NDArray[np.uint8], work: _Region, labels: NDArray[Any],
     def fitted_on(default: CameraModel | None) -> CameraModel | None:
         return default if chosen is None else chosen()
 
-    if isinstance(model, FisheyeCamera) and c.area >= _SMALL_AREA_PX:
-        near, far = _rings(gray, c.cx, c.cy, (1.6 * r_eq + 2.0, 4.0 * r_eq + 3.0), None)
-        # a glare: the ring just outside the core is still well above the far sky
-        if near.size >= 8 and far.size >= 8 and \
-                peak - _median(near) < _HALO_DROP * (peak - _median(far)):
-            pts, edge_share = _true_limb(gray, work, _limb_points(c, labels), c.cx, c.cy,
-                                         thr, fov, bg, r_eq)
-            rad = np.hypot(pts[:, 0] - c.cx, pts[:, 1] - c.cy) if len(pts) else np.zeros(1)
-            # not already a circle about its centroid (a clear-sky core near the zenith:
-            # the centroid below is exact and cheaper)
-            if float(rad.max() - rad.min()) > _ROUND_SPREAD_PX + 0.05 * r_eq:
-                model = fitted_on(model) or model
-                got = contained_limb_centre(pts, model)
-                if got is not None and got[2] >= _CONTAINED_MIN_INLIERS:
+    # a glare (the ring just outside the core still well above the far sky): a limb fit
+    if isinstance(model, FisheyeCamera) and c.area >= _SMALL_AREA_PX \
+            and _lit_around(gray, c, peak):
+        pts, edge_share = _true_limb(gray, work, _limb_points(c, labels), c.cx, c.cy,
+                                     thr, fov, bg, r_eq)
+        rad = np.hypot(pts[:, 0] - c.cx, pts[:, 1] - c.cy) if len(pts) else np.zeros(1)
+        # not already a circle about its centroid (a clear-sky core near the zenith:
+        # the centroid below is exact and cheaper)
+        if float(rad.max() - rad.min()) > _ROUND_SPREAD_PX + 0.05 * r_eq:
+            model = fitted_on(model) or model
+            got = contained_limb_centre(pts, model)
+            if got is not None and got[2] >= _CONTAINED_MIN_INLIERS:
+                return got[0], got[1], r_eq
+            if edge_share >= _CUT_SHARE:
+                # cut by the image circle (a low sun's wide glare): the arcs left are
+                # the clear one and those cloud and the brighter sky near the horizon
+                # have pushed outward; a plain circle through most of the outline
+                # follows the bulge along the edge, so the contained circle is kept
+                # whatever its share (more triples: the clear arc is short)
+                got = contained_limb_centre(pts, model, n_trials=_CUT_TRIALS)
+                if got is not None:
                     return got[0], got[1], r_eq
-                if edge_share >= _CUT_SHARE:
-                    # cut by the image circle (a low sun's wide glare): the arcs left are
-                    # the clear one and those cloud and the brighter sky near the horizon
-                    # have pushed outward; a plain circle through most of the outline
-                    # follows the bulge along the edge, so the contained circle is kept
-                    # whatever its share (more triples: the clear arc is short)
-                    got = contained_limb_centre(pts, model, n_trials=_CUT_TRIALS)
-                    if got is not None:
-                        return got[0], got[1], r_eq
     pad = max(3.0, 0.5 * r_eq + 2.0)
     ring = _ring_values(gray, c.cx, c.cy, r_eq + pad + 1.0, None)
     local_bg = _median(ring) if ring.size else bg
