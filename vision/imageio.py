@@ -243,20 +243,10 @@ def _transparent_colour(raw: NDArray[Any], colour_type: int, trns: bytes) -> NDA
 
 def _to_bgr8(raw: NDArray[Any], scaled: bool) -> NDArray[np.uint8]:
     """A PNG decoded as stored (8/16 bits, grey or colour, with or without alpha) → 8-bit
-    BGR. A 16-bit PNG holds its samples scaled to the full 16 bits, as the format asks
-    (``scaled``: an ``sBIT`` chunk says the camera's depth): its top byte. Without ``sBIT``
-    the data's depth is the smallest of 10, 12, 14 and 16 bits that holds its brightest
-    value: machine-vision cameras write their 10-, 12- or 14-bit sensor's samples into a
-    16-bit PNG unscaled (a 12-bit frame is 0–4095), and the top byte alone made such a
-    frame almost black (0–15 for 12 bits, 0–63 for 14: no sun; a tester's finding), so its
-    saturation is 255 here, as the sensor's was. A frame with a value above 14 bits is
-    full-range 16-bit data and keeps its top byte. The price: a true 16-bit frame with
-    nothing above a quarter of its range (16383) is read as 14-bit data, four times
-    brighter, its brightest patch near 255 (as one with nothing above a sixteenth was read
-    as 12-bit data before): the content cannot tell the two apart, and a PNG that means
-    its full range can say so with ``sBIT``. Alpha (a channel, or ``tRNS`` expanded by the
-    decoder) is composited onto black: a transparent corner outside a fisheye's image
-    circle is no light, not the white its colour says."""
+    BGR, its samples by :func:`to_8bit` (``scaled``: an ``sBIT`` chunk says the camera's
+    depth). Alpha (a channel, or ``tRNS`` expanded by the decoder) is composited onto black:
+    a transparent corner outside a fisheye's image circle is no light, not the white its
+    colour says."""
     arr = raw if raw.ndim == 3 else raw[..., None]
     alpha = arr[..., -1] if arr.shape[2] in (2, 4) else None
     colour = arr[..., :-1] if alpha is not None else arr
@@ -274,15 +264,21 @@ def to_8bit(image: NDArray[Any], scaled: bool = False, copy: bool = True
             ) -> NDArray[np.uint8]:
     """A frame's samples as 8-bit ones, by the one rule of the service's decoding
     (:func:`_to_bgr8`) and of the library's detection (``vision.detect.detect_robust``,
-    ``vision.fov.to_gray``): 8 bits as given; 16 bits by the data's depth — its top byte
-    when ``scaled`` (a PNG's ``sBIT``: samples scaled to the full 16 bits) or when a value
-    lies above 14 bits, else the smallest of 10, 12, 14 bits that holds the brightest value
-    (a 12-bit sensor's 0–4095 is 0–255, its saturation 255, as the sensor's was: see
-    :func:`_to_bgr8`); floats as 0–1 when none is above 1, else as 0–255, clipped. The
-    detection read a 16-bit frame by its top byte alone, and its colour tests (the white
-    core of a large glare) only at 8 bits: the Wolf frames × 257 lay up to 20 px farther
-    from their labels than the same frames at 8 bits. ``copy=False``: a 16-bit frame the
-    caller no longer needs is shifted in place."""
+    ``vision.fov.to_gray``). 8 bits as given. 16 bits: a PNG holds its samples scaled to the
+    full 16 bits, as the format asks (``scaled``: its ``sBIT`` chunk says so), so its top
+    byte; without ``sBIT`` the data's depth is the smallest of 10, 12, 14 and 16 bits that
+    holds its brightest value: machine-vision cameras write their 10-, 12- or 14-bit
+    sensor's samples unscaled (a 12-bit frame is 0–4095), and the top byte alone made such
+    a frame almost black (0–15 for 12 bits, 0–63 for 14: no sun; a tester's finding), so its
+    saturation is 255 here, as the sensor's was. A frame with a value above 14 bits is
+    full-range 16-bit data and keeps its top byte. The price: a true 16-bit frame with
+    nothing above a quarter of its range (16383) is read as 14-bit data, four times
+    brighter, its brightest patch near 255: the content cannot tell the two apart, and a
+    PNG that means its full range can say so with ``sBIT``. Floats: 0–1 when none is above
+    1, else 0–255, clipped. The detection read a 16-bit array by its top byte alone, and ran
+    its colour tests (the white core of a large glare) on 8-bit frames only: the Wolf
+    frames × 257 lay up to 20 px farther from their labels than the same frames at 8 bits.
+    ``copy=False``: a 16-bit frame the caller no longer needs is shifted in place."""
     img = np.asarray(image)
     if img.dtype == np.uint8:
         return img
