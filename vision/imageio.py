@@ -275,7 +275,8 @@ def to_8bit(image: NDArray[Any], scaled: bool = False, copy: bool = True
     nothing above a quarter of its range (16383) is read as 14-bit data, four times
     brighter, its brightest patch near 255: the content cannot tell the two apart, and a
     PNG that means its full range can say so with ``sBIT``. Floats: 0–1 when none is above
-    1, else 0–255, clipped. The detection read a 16-bit array by its top byte alone, and ran
+    1, else 0–255, clipped; one above 255 is refused (a linear frame in its sensor's units was
+    clipped to white before). The detection read a 16-bit array by its top byte alone, and ran
     its colour tests (the white core of a large glare) on 8-bit frames only: the Wolf
     frames × 257 lay up to 20 px farther from their labels than the same frames at 8 bits.
     ``copy=False``: a 16-bit frame the caller no longer needs is shifted in place."""
@@ -290,6 +291,9 @@ def to_8bit(image: NDArray[Any], scaled: bool = False, copy: bool = True
         return np.ascontiguousarray(shifted, dtype=np.uint8)
     if np.issubdtype(img.dtype, np.floating):
         top = float(img.max()) if img.size else 0.0
+        if not top <= 255.0:  # NaN too: a raw or linear frame's scale cannot be guessed
+            raise ValueError(f"a float frame's samples must lie in 0–1 or 0–255; its largest "
+                             f"is {top:g}: scale it, or pass its integer samples")
         return np.clip(img * (255.0 if top <= 1.0 else 1.0), 0, 255).astype(np.uint8)
     raise ValueError(f"unsupported image dtype {img.dtype}: 8- or 16-bit integers or floats")
 

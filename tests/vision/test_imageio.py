@@ -321,3 +321,5 @@ def test_the_library_reads_16_bit_and_float_frames_as_the_service_decodes_them(n
         assert got.confidence == pytest.approx(ref.confidence, abs=0.01)
     with pytest.raises(ValueError, match="unsupported image dtype int32"):
         detect_robust(frame.astype(np.int32))
+    with pytest.raises(ValueError, match="largest is 4095: scale it"):
+        detect_robust(frame.astype(np.float32) * 4095 / 255)
