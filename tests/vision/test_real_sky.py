@@ -770,8 +770,8 @@ def test_a_white_roof_opposite_the_sun_does_not_make_it_a_ghost(real_sky, detect
     ghost (vision.candidates._mark_ghosts: a smaller region on the line through the centre,
     opposite): 28 and 23 of 29 found. Only a source lit around by its own glare casts a ghost
     now (vision.detect._lit_around): 29 and 29. Measured, not tested: a 120 × 50 roof, 26 → 27
-    of 29 (on one frame the roof's far ring reaches the dark skyline and reads as lit; on the
-    hazy 11:24:30 frame the roof itself wins at 0.97, a squashed low sun by its shape)."""
+    of 29 (on Wettermast 10:39:30 and 11:24:30 the hazy sky's gradient toward the horizon
+    makes the roof's rings read as lit, so the sun stays its ghost)."""
     for r in _labelled(real_sky, "Wolf") + _labelled(real_sky, "Wettermast"):
         fov = detections[r["filename"]].fov
         sx, sy = float(r["sun_col_label"]), float(r["sun_row_label"])
