@@ -1644,6 +1644,7 @@ def detect_sun(image: NDArray[Any], method: str = "robust", camera: CameraModel 
     ``expected_px`` go to ``robust`` only)."""
     if method not in _DISPATCH:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    image = to_8bit(image)  # every method reads a 16-bit or float frame as 8-bit levels
     if method == "robust":
         return detect_robust(image, camera=camera, **kwargs)
     kwargs.pop("expected_px", None)

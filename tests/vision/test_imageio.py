@@ -323,3 +323,15 @@ def test_the_library_reads_16_bit_and_float_frames_as_the_service_decodes_them(n
         detect_robust(frame.astype(np.int32))
     with pytest.raises(ValueError, match="largest is 4095: scale it"):
         detect_robust(frame.astype(np.float32) * 4095 / 255)
+
+
+def test_every_method_reads_a_16_bit_frame_as_its_8_bit_one() -> None:
+    """The seeds' pipelines behind ``detect_sun`` too: seed 003's grey > 240 on 16-bit
+    samples was true almost everywhere (the frame's centre, 364 px from its 8-bit answer, on this
+    Wettermast frame) and seed 000's HSV conversion raised OpenCV's error on them."""
+    from vision.detect import METHODS, detect_sun
+
+    frame = _real_frame()
+    for method in METHODS:
+        ref, got = detect_sun(frame, method), detect_sun(frame.astype(np.uint16) * 257, method)
+        assert ref.centroid_px is not None and got.centroid_px == ref.centroid_px, method
