@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -514,11 +515,14 @@ def _white_core(image: NDArray[Any] | None, c: _Candidate, level: float,
 
 
 def _mark_ghosts(cands: list[_Candidate], centre: tuple[float, float],
-                 sources: list[_Candidate] | None = None) -> int:
+                 sources: list[_Candidate] | None = None,
+                 casts: Callable[[_Candidate], bool] | None = None) -> int:
     """Flag clusters on the line through the optical centre, opposite a larger one of
-    ``sources`` (default: any of ``cands``)."""
+    ``sources`` (default: any of ``cands``) that ``casts`` a ghost (default: every one;
+    asked once per source, and only of one with a smaller cluster opposite it)."""
     n = 0
     ox, oy = centre
+    verdicts: dict[int, bool] = {}
     for a in cands if sources is None else sources:
         for b in cands:
             if a is b or b.ghost or a.ghost or b.area >= a.area:
@@ -529,6 +533,11 @@ def _mark_ghosts(cands: list[_Candidate], centre: tuple[float, float],
             if na < 3 or nb < 3:
                 continue
             if float(va @ vb / (na * nb)) < -np.cos(np.radians(6.0)):
+                if casts is not None:
+                    if id(a) not in verdicts:
+                        verdicts[id(a)] = casts(a)
+                    if not verdicts[id(a)]:
+                        continue
                 b.ghost = True
                 n += 1
     return n

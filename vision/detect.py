@@ -315,9 +315,8 @@ def _regions(gray: NDArray[np.uint8], work: _Region, row_max: NDArray[np.uint8],
     fh, fw = gray.shape
     sources = [c for c in singles if not _box_on_frame_edge(c.x, c.y, c.x + c.w - 1,
                                                             c.y + c.h - 1, fh, fw)]
-    if len(singles) > 1:
-        sources = [c for c in sources if _lit_around(gray, c, peak, fov)]
-    ghosts = _mark_ghosts(singles, centre, sources)
+    ghosts = _mark_ghosts(singles, centre, sources,
+                          casts=lambda c: _lit_around(gray, c, peak, fov))
     real = np.array([c.labels[0] for c in singles if not c.ghost], dtype=np.int64)
     return labels, _clusters(stats, cents, real, ox, oy), ghosts
 
