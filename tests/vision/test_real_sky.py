@@ -761,18 +761,22 @@ def test_a_white_overlay_on_the_frames_edge_leaves_the_image_circle_and_the_sun(
 
 
 
-@pytest.mark.parametrize("size", [(60, 30), (200, 80)])
+@pytest.mark.parametrize("size", [(60, 30), (120, 50), (200, 80)])
 def test_a_white_roof_opposite_the_sun_does_not_make_it_a_ghost(real_sky, detections,
                                                                  size) -> None:
     """A saturated white roof (a rectangle) opposite the sun through the image circle's centre,
     at 0.8 of its radius, on every labelled Wolf and Wettermast frame: blind, every sun within
     1 % of the width. Before, a roof larger than the sun's core made the sun its lens-flare
     ghost (vision.candidates._mark_ghosts: a smaller region on the line through the centre,
-    opposite): 28 and 23 of 29 found. Only a source lit around by its own glare casts a ghost
-    now (vision.detect._lit_around): 29 and 29. Measured, not tested: a 120 × 50 roof, 26 → 27
-    of 29 (on Wettermast 10:39:30 and 11:24:30 the hazy sky's gradient toward the horizon
-    makes the roof's rings read as lit, so the sun stays its ghost)."""
+    opposite): 28, 26 and 23 of 29 found. Only a source lit around by its own glare casts a
+    ghost (vision.detect._lit_around): 29, 27 and 29 with the limb fit's 3 % (the hazy sky's
+    gradient lit the 120 × 50 roof's rings on Wettermast 10:39:30 and 11:24:30); with a
+    ghost's source's 7 % (_GHOST_SOURCE_DROP) 29, 28 and 29. On 11:24:30 the 120 × 50 roof
+    then wins as the sun itself (a confidence limit, docs/validation-vision.md "A white roof
+    opposite the sun"), so that frame is left out at that size."""
     for r in _labelled(real_sky, "Wolf") + _labelled(real_sky, "Wettermast"):
+        if size == (120, 50) and r["filename"].startswith("Wettermast_20160615_112430"):
+            continue
         fov = detections[r["filename"]].fov
         sx, sy = float(r["sun_col_label"]), float(r["sun_row_label"])
         v = np.array([sx - fov.cx_px, sy - fov.cy_px])
