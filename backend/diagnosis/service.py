@@ -99,8 +99,9 @@ MAX_DAYS = 400
 #: 29: the fixed array's power before a GHI pyranometer, sim.sky_sensor.weather_from_fixed;
 #: 30: a day's sky source and valid share over the minutes a reading can give a sky,
 #: sim.sky_sensor.measurable; 31: a dead-looking day that is the expected curve at a
-#: thousandth, ``power_in_kw``, faults.KW_SCALE).
-CACHE_VERSION = 31
+#: thousandth, ``power_in_kw``, faults.KW_SCALE; 32: the day's share of the expected tracker
+#: energy from minutes the sky instrument did not see the beam in, ``beam_unseen_expected_pct``).
+CACHE_VERSION = 32
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
@@ -236,12 +237,24 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     # tester's finding); with no measured gain, the whole day's
     gain_expected = gain_pct(*shared) if gain_measured is not None and both.any() \
         else gain_pct(exp_a, exp_fixed)
+    # the expectation's part whose beam the sky instrument did not see (behind or grazing the
+    # fixed plane, low for a horizontal pyranometer, a gap in its readings): a guess there,
+    # which a user reading an underperformance should know of (a clear-sky day has no
+    # instrument at all: null); a day not over, of its minutes so far (the rest has no
+    # reading yet: read as unseen, a morning judged at 10:00 was 54 % unseen)
+    power = e["tracker_power_w"].to_numpy()
+    so_far = np.arange(len(ts)) < (len(ts) if elapsed_min is None else elapsed_min)
+    unseen_wh = wh(np.where(so_far & ~e["beam_seen"].to_numpy(bool), power, 0.0))
+    so_far_wh = wh(np.where(so_far, power, 0.0))
+    unseen_pct = None if source == "clear_sky" or so_far_wh <= 0 \
+        else round(100 * unseen_wh / so_far_wh, 1)
     return {
         "date": date,
         "complete": elapsed_min is None,
         "partial": elapsed_min is not None or short or cut,
         "sky": {"clearness_index": None if k_t is None else round(k_t, 4), "source": source,
-                "sensor": sensor, "valid_minutes_pct": round(100.0 * share, 1)},
+                "sensor": sensor, "valid_minutes_pct": round(100.0 * share, 1),
+                "beam_unseen_expected_pct": unseen_pct},
         "tracker": {
             "measured_wh": measured_tr, "expected_wh": exp_a,
             "expected_wh_low": low, "expected_wh_high": high,
@@ -336,7 +349,7 @@ def _future_day(date: str) -> dict[str, Any]:
     """The answer of a day still to come: nothing is computed (no reading can exist yet)."""
     return {"date": date, "status": "future", "complete": False, "partial": True,
             "sky": {"clearness_index": None, "source": "none", "sensor": None,
-                    "valid_minutes_pct": 0.0},
+                    "valid_minutes_pct": 0.0, "beam_unseen_expected_pct": None},
             "tracker": {"measured_wh": None, "expected_wh": None, "expected_wh_low": None,
                         "expected_wh_high": None, "performance_ratio": None},
             "fixed": {"measured_wh": None, "expected_wh": None, "performance_ratio": None},

@@ -68,8 +68,13 @@ function skySource(d) {
   return SKY_WORDS[d.sky.source] || d.sky.source;
 }
 
+/** A day's share of the expected tracker energy whose beam the sky instrument did not see
+ * (`sky.beam_unseen_expected_pct`) from which the sky line names it [%]. */
+const BLIND_NOTE_PCT = 10;
+
 /** What the days' skies rest on, e.g. "Sky: 5 days from an irradiance sensor (ghi_w_m2), 2 from …",
- * and which days are not over yet (judged on their minutes so far). */
+ * which days are not over yet (judged on their minutes so far), and the days whose
+ * expectation rests on a guessed beam for BLIND_NOTE_PCT or more of it. */
 export function skyLine(days) {
   const count = new Map();
   const future = days.filter((d) => d.status === "future").length;
@@ -78,8 +83,13 @@ export function skyLine(days) {
     count.set(key, (count.get(key) || 0) + 1);
   }
   const open = days.filter((d) => d.complete === false && d.status !== "future").map((d) => shortDate(d.date));
+  // the days whose expectation rests on a guessed beam for a tenth of it or more (summer
+  // dawns behind a fixed plane facing the equator: a day below its band may be the sky)
+  const blind = days.filter((d) => d.status !== "future" && (d.sky.beam_unseen_expected_pct ?? 0) >= BLIND_NOTE_PCT);
   const note = (open.length ? ` Not over yet, judged on the minutes so far: ${open.join(", ")}.` : "")
-    + (future ? ` ${future} day${future === 1 ? "" : "s"} still to come: nothing to judge yet.` : "");
+    + (future ? ` ${future} day${future === 1 ? "" : "s"} still to come: nothing to judge yet.` : "")
+    + (blind.length ? ` Beam not seen by the sky instrument (the sun behind or grazing the fixed plane, low for a pyranometer, or readings missing), its share of the expected energy guessed: `
+      + `${blind.map((d) => `${num(d.sky.beam_unseen_expected_pct, 0)} % on ${shortDate(d.date)}`).join(", ")}.` : "");
   return `Sky: ${[...count].map(([k, n]) => `${n} day${n === 1 ? "" : "s"} from ${k}`).join(", ") || "no day judged"}.${note}`;
 }
 
@@ -169,10 +179,11 @@ async function load(state) {
     yaxis: { title: { text: "tracking gain over the fixed array [%]" }, gridcolor: "#e9edf1", zeroline: true, ...gainAxis },
     yaxis2: { title: { text: "performance ratio (measured / expected)" }, overlaying: "y", side: "right", showgrid: false, ...prAxis } }),
   { columns: ["date", "complete", "partial", "sky_source", "clearness_index", "tracker_measured_wh", "tracker_expected_wh",
-    "tracker_expected_wh_low", "tracker_expected_wh_high", "performance_ratio", "gain_measured_pct", "gain_expected_pct"],
+    "tracker_expected_wh_low", "tracker_expected_wh_high", "beam_unseen_expected_pct", "performance_ratio", "gain_measured_pct",
+    "gain_expected_pct"],
   rows: body.days.map((d) => [d.date, d.complete, d.partial, d.sky.sensor || d.sky.source, d.sky.clearness_index,
     d.tracker.measured_wh, d.tracker.expected_wh, d.tracker.expected_wh_low, d.tracker.expected_wh_high,
-    d.tracker.performance_ratio, d.gain_measured_pct, d.gain_expected_pct]),
+    d.sky.beam_unseen_expected_pct, d.tracker.performance_ratio, d.gain_measured_pct, d.gain_expected_pct]),
   filename: `${state.site.site_id}_diagnosis_${start}_${end}.csv` });
   // no tracker reading at all in the range: the pointing card says so, not that its logger
   // sends no encoder angles (a tester's empty database)

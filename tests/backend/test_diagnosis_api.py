@@ -367,6 +367,22 @@ def test_a_day_not_yet_over_is_judged_up_to_now(client, live_server) -> None:
                           now_s=ten.timestamp())["days"][0]
         assert early["sky"]["source"] == "fixed_array", early["sky"]
         assert early["sky"]["valid_minutes_pct"] > 90.0, early["sky"]
+        # nor as minutes whose beam the fixed array did not see (they did: 54.3 % at 10:00);
+        # what it did not see is the dawn grazing its plane (cos AOI < 0.3, pvlib's sun), the
+        # healthy tracker's share of the morning there
+        from pvlib import irradiance, solarposition
+
+        from sim.sky_sensor import BEAM_SEEN_COS
+
+        sp = solarposition.get_solarposition(d.times, site.latitude, site.longitude,
+                                             site.altitude)
+        fixed = site.arrays["fixed"]
+        grazing = np.cos(np.radians(irradiance.aoi(
+            fixed.surface_tilt, fixed.surface_azimuth, sp["apparent_zenith"],
+            sp["azimuth"]).to_numpy())) < BEAM_SEEN_COS
+        p = np.where(before_ten, d.healthy_tracker_power_w, 0.0)
+        share = 100 * p[grazing].sum() / p.sum()
+        assert early["sky"]["beam_unseen_expected_pct"] == pytest.approx(share, abs=1.0), share
     finally:
         ctx.close()
     over = client.get(f"{BASE}/diagnosis", params={"start": first, "end": "2025-10-07"},

@@ -18,6 +18,14 @@ class DaySkyRead(BaseModel):
     sensor: str | None = Field(description="the sensor reading used (`poa_irradiance_w_m2`, "
                                            "`ghi_w_m2`) or null")
     valid_minutes_pct: float = Field(description="daylight minutes with a usable sky [%]")
+    beam_unseen_expected_pct: float | None = Field(
+        None, description="share of the expected tracker energy [%] from minutes the sky "
+                          "instrument did not see the sun's beam in: the sun behind or grazing "
+                          "the fixed plane (summer dawns and dusks), low for a horizontal "
+                          "pyranometer, or a gap in its readings. There the beam is the one "
+                          "the seen minutes make likely and the band widens by that guess "
+                          "(docs/diagnosis.md, \"Any site\"); null on a clear-sky day (no "
+                          "instrument)")
 
 
 BAND = ("lower edge of the expected energy's band [Wh]: the two sky decompositions' spread "
