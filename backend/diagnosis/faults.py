@@ -786,7 +786,10 @@ def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
     edge (``features["energy"]``, :func:`energy_features`): magnitude the shortfall from
     the expected energy [%], ``shortfall_wh`` in Wh; ``since`` the first day of its run of
     such days; confidence 0.5 at the lower edge, rising to 1 one lower half-width of the
-    band (expected − lower edge) under it."""
+    band (expected − lower edge) under it. The detail says how much of the expectation rests
+    on a beam the sky instrument did not see (``features["beam_unseen_pct"]``, the service's
+    ``sky.beam_unseen_expected_pct``): on a summer dawn behind the fixed plane the shortfall
+    may be the sky's."""
     since: str | None = None
     for i, d in enumerate(days):
         en = d["features"].get("energy")
@@ -798,6 +801,7 @@ def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
         short_wh = x - m
         pct = 100.0 * short_wh / x
         conf = float(np.clip(0.5 + 0.5 * (low - m) / max(x - low, 1e-9), 0.5, 1.0))
+        unseen = float(d["features"].get("beam_unseen_pct") or 0.0)
         out[i].append({"kind": "underperformance", "confidence": round(conf, 3),
                        "since": since, "magnitude": round(pct, 1), "unit": "%",
                        "shortfall_wh": round(short_wh, 1),
@@ -807,7 +811,11 @@ def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
                                  f"{low / 1000:.2f} kWh" + (
                                      "; the readings follow the expected curve at a "
                                      "thousandth of it: power sent in kW where W are asked?"
-                                     if d["features"].get("power_in_kw") else "")})
+                                     if d["features"].get("power_in_kw") else "") + (
+                                     f"; {unseen:.0f} % of that expectation rests on a beam "
+                                     f"the sky instrument did not see (the sun behind or "
+                                     f"grazing its plane, or readings missing)"
+                                     if round(unseen) >= 1 else "")})
 
 
 def _module_loss(days: list[dict[str, Any]], out: list[list[dict[str, Any]]]) -> None:

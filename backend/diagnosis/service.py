@@ -100,7 +100,8 @@ MAX_DAYS = 400
 #: 30: a day's sky source and valid share over the minutes a reading can give a sky,
 #: sim.sky_sensor.measurable; 31: a dead-looking day that is the expected curve at a
 #: thousandth, ``power_in_kw``, faults.KW_SCALE; 32: the day's share of the expected tracker
-#: energy from minutes the sky instrument did not see the beam in, ``beam_unseen_expected_pct``).
+#: energy from minutes the sky instrument did not see the beam in, ``beam_unseen_expected_pct``,
+#: and an underperformance's detail saying it).
 CACHE_VERSION = 32
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
@@ -248,6 +249,8 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     so_far_wh = wh(np.where(so_far, power, 0.0))
     unseen_pct = None if source == "clear_sky" or so_far_wh <= 0 \
         else round(100 * unseen_wh / so_far_wh, 1)
+    if unseen_pct is not None:  # an underperformance's detail says it (faults._underperformance)
+        features["beam_unseen_pct"] = unseen_pct
     return {
         "date": date,
         "complete": elapsed_min is None,

@@ -106,6 +106,12 @@ def test_a_day_below_its_band_is_an_underperformance_with_its_size(days: list[di
     assert 20.0 < f["magnitude"] < 30.0
     assert f["confidence"] == 1.0  # far below the band's lower edge
     assert f"{t['measured_wh'] / 1000:.2f} kWh" in f["detail"]
+    # and how much of that expectation rests on a beam the fixed array did not see (the
+    # dawn and dusk grazing its 16° plane at Tehuantepec in February: measured 4.8 %)
+    unseen = day["sky"]["beam_unseen_expected_pct"]
+    assert unseen == pytest.approx(4.8, abs=1.0)
+    assert f"; {unseen:.0f} % of that expectation rests on a beam the sky instrument did " \
+        "not see" in f["detail"], f["detail"]
 
 
 def test_the_faults_validate_against_the_schema(days: list[dict]) -> None:
