@@ -58,9 +58,11 @@ def test_diagnosis_panel_matches_the_api(page, server) -> None:
                          params={"start": start.isoformat(), "end": end.isoformat()},
                          timeout=60).raise_for_status().json()
     assert pointing["minutes"] > 0
+    # drawn once its note is no longer "Loading…" (the chart's "Loading…" placeholder has
+    # data-points 0: waiting for data-points alone read 0 points on a fresh clone's run)
     page.wait_for_function(
-        "() => document.querySelector('#chart-pointing').dataset.points !== undefined",
-        timeout=60_000)
+        "() => { const n = document.querySelector('#pointing-note');"
+        " return n !== null && !n.textContent.startsWith('Loading'); }", timeout=60_000)
     drawn = int(page.locator("[data-testid=chart-pointing]").get_attribute("data-points"))
     assert drawn == 3 * len(pointing["points"])
     note = page.locator("[data-testid=pointing-note]").inner_text()
