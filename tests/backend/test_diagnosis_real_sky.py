@@ -215,7 +215,6 @@ def test_an_hourly_loggers_end_stamped_means_with_the_sites_stamp_convention(
     assert abs(err["interval_end"]) < 0.015, err
 
 
-
 def test_the_share_of_the_expectation_the_sky_instrument_was_blind_to(diagnosed) -> None:
     """``sky.beam_unseen_expected_pct``: the day's expected tracker energy from minutes its
     sky instrument did not see the beam in. The 39° plane facing south sees a January sun
