@@ -405,9 +405,9 @@ def robust_fit(x_px: ArrayLike, y_px: ArrayLike, azimuth_deg: ArrayLike,
 #: 1,141 and 1,142, and 16 to the 2,000: that calibration took 10.3 s of CPU to be refused,
 #: 4.7 s now (the service's, decoding included, by hand). Stopped here, such a fit's held-out
 #: residual is what it is then, large either way, and its model is not chosen: the service's
-#: calibrations of the Wolf and Wettermast frames
-#: (right, reversed and late times) are unchanged but for one such model's held-out RMS on
-#: every third Wolf frame, 36.57° → 36.74° (session 33, by hand).
+#: calibrations of the Wolf and Wettermast frames (right, reversed and late times) are
+#: unchanged but for one such model's held-out RMS on every third Wolf frame, 36.57° → 36.74°
+#: (session 33, by hand).
 LOO_MAX_NFEV = 300
 
 
