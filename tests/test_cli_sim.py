@@ -435,9 +435,12 @@ def test_sun_at_a_site_now(heliotwin_cli) -> None:
     assert d["temperature_c"] == load_site("tehuantepec").temp_air == 27.0
     ref = pvlib.solarposition.spa_python(pd.DatetimeIndex([when]), 16.28875, -95.240871, 50.0,
                                          pressure=d["pressure_hpa"] * 100, temperature=27.0)
-    assert d["azimuth_deg"] == pytest.approx(float(ref["azimuth"].iloc[0]), abs=1e-6)
+    # one instant is interpolated between cached hourly nodes of SPA's geocentric part
+    # (sim.sun: within 1e-5° of pvlib's SPA, 1.7e-6° at worst measured); a refraction at 12 °C
+    # instead of 27 °C would move the elevation a thousandth of a degree
+    assert d["azimuth_deg"] == pytest.approx(float(ref["azimuth"].iloc[0]), abs=1e-5)
     assert d["apparent_elevation_deg"] == pytest.approx(
-        float(ref["apparent_elevation"].iloc[0]), abs=1e-6)
+        float(ref["apparent_elevation"].iloc[0]), abs=1e-5)
     both = heliotwin_cli("sun", "--site", "tehuantepec", "--lat", "1", "--lon", "2", "--time",
                          "now")
     assert both.returncode == 2 and "not both" in both.stderr
