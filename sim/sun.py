@@ -128,7 +128,7 @@ def _spa_topocentric(
 
 
 #: At most this many hourly nodes of the geocentric grid are kept (:func:`_cached_nodes`:
-#: 4 KB a day of them, some 90 days).
+#: some 85 days of hours, 0.5 MB measured with tracemalloc).
 GEOCENTRIC_CACHE_NODES = 2048
 #: A series spanning at most this many nodes takes them from that cache.
 GEOCENTRIC_CACHED_SPAN_NODES = 26
