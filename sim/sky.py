@@ -13,7 +13,9 @@ model choices the twin uses and names units:
   al. (2006, doi:10.1016/j.solener.2005.06.010), the one the CEC model was
   fitted with, ``pvlib.iam.physical``;
 - weather: TMY3 files through ``pvlib.iotools.read_tmy3``, EPW files through
-  ``pvlib.iotools.read_epw``, told apart by their first line (:func:`sniff_weather_format`;
+  ``pvlib.iotools.read_epw``, PVGIS typical years (CSV, JSON; a PVGIS EPW told by its
+  comment) through ``pvlib.iotools.read_pvgis_tmy`` (:func:`_pvgis_typical_year`), told
+  apart by their first line (:func:`sniff_weather_format`;
   any other file is refused saying what is read); a typical year is mapped onto any run's years by
   :func:`typical_year_on` (calendar hour of the station's standard time, wrapped
   at the year's ends); :func:`typical_year_at_site` moves a distant station's sky to the
@@ -264,7 +266,7 @@ def read_tmy3(path: str | Path, coerce_year: int | None = None) -> tuple[pd.Data
     return weather, dict(meta)
 
 
-WEATHER_FORMATS = ("tmy3", "epw")
+WEATHER_FORMATS = ("tmy3", "epw", "pvgis")
 WEATHER_COLUMNS = ("ghi", "dni", "dhi", "temp_air", "wind_speed")
 HOURS_PER_TYPICAL_YEAR = 8760
 #: Days before each month in a year of 365 days (a typical year has no 29 February).
@@ -272,25 +274,37 @@ _DAYS_BEFORE_MONTH = np.cumsum([0, 31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30])
 
 
 def weather_format(first_line: str) -> str:
-    """``"epw"`` or ``"tmy3"`` from a weather file's first line.
+    """``"epw"``, ``"tmy3"`` or ``"pvgis"`` from a weather file's first line.
 
     An EPW file starts with its ``LOCATION,`` record (EnergyPlus Auxiliary
     Programs, "EnergyPlus Weather File Data Dictionary"); a TMY3 file with the
     station's USAF number, name, state, UTC offset, latitude, longitude and
-    elevation (Wilcox & Marion 2008, NREL/TP-581-43156, section 2.1).
+    elevation (Wilcox & Marion 2008, NREL/TP-581-43156, section 2.1); a PVGIS download
+    (the EU JRC's tool) with ``Latitude (decimal degrees):`` (CSV) or ``{`` (JSON).
     """
     line = first_line.lstrip("\ufeff").strip()
     if line.upper().startswith("LOCATION,"):
         return "epw"
+    if line.startswith("{") or line.lower().startswith("latitude (decimal degrees)"):
+        return "pvgis"
     head = line.split(",")
     if len(head) >= 7 and head[0].strip().isdigit():
         return "tmy3"
     shown = " ".join(line.split())
     shown = shown if len(shown) <= 60 else shown[:57] + "…"
-    raise ValueError(f"neither TMY3 nor EPW: its first line {shown!r} is not a TMY3 CSV's "
-                     "(USAF number, name, state, UTC offset, latitude, longitude, elevation) "
-                     "nor an EPW file's (LOCATION,…); only those two formats are read "
+    raise ValueError(f"neither TMY3 nor EPW nor PVGIS: its first line {shown!r} is not a "
+                     "TMY3 CSV's (USAF number, name, state, UTC offset, latitude, longitude, "
+                     "elevation) nor an EPW file's (LOCATION,…) nor a PVGIS download's "
+                     "(Latitude (decimal degrees): …, or JSON); only those formats are read "
                      "(not TMY2 .tm2 files)")
+
+
+def weather_format_or_none(first_line: str) -> str | None:
+    """:func:`weather_format`, or None for a line of no typical year's format."""
+    try:
+        return weather_format(first_line)
+    except ValueError:
+        return None
 
 
 def weather_text(raw: bytes) -> str:
@@ -408,10 +422,14 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
     onto finer steps is centred. The months of a typical year come from
     different years; only the calendar hour matters (:func:`typical_year_on`).
 
+    A PVGIS typical year (CSV or JSON, or an EPW PVGIS wrote, told by its ``Irradiance Time
+    Offset`` comment) is read by :func:`_pvgis_typical_year`: its clock is UTC whatever its
+    EPW header says, and its irradiance is of instants, not hourly means.
+
     Parameters
     ----------
     source : path or text buffer
-    fmt : {"tmy3", "epw"}, optional
+    fmt : {"tmy3", "epw", "pvgis"}, optional
         What the caller was told the file is; a file whose first line says otherwise is
         refused (:func:`sniff_weather_format`). Default: read from the first line.
 
@@ -429,6 +447,9 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
 
     src = weather_buffer(source)
     fmt = sniff_weather_format(src, fmt)
+    if fmt == "pvgis":
+        return _read_pvgis(src)
+    pvgis_offset_h = pvgis_epw_offset_h(src) if fmt == "epw" else None
     try:
         if fmt == "tmy3":
             data, meta = iotools.read_tmy3(src, map_variables=True)
@@ -441,6 +462,11 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
                              if str(meta.get(k, "")).strip())
             leap = ((data["month"] == 2) & (data["day"] == 29)).to_numpy()
             _refuse_sub_hourly_epw(data)
+            if pvgis_offset_h is not None:  # its hours are UTC, labelled by their end
+                place = {k: float(meta[k]) for k in ("latitude", "longitude", "altitude")}
+                data.index = pd.DatetimeIndex(data.index).tz_localize(None).tz_localize("UTC")
+                return _pvgis_typical_year(data, 1.0 + pvgis_offset_h, place,
+                                           "TMY as EPW", first_line=9)
         offset = float(meta["TZ"])
         place = {k: float(meta[k]) for k in ("latitude", "longitude", "altitude")}
     except (KeyError, IndexError) as exc:  # pvlib's bare KeyError of a missing column
@@ -473,6 +499,123 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
     weather = weather.iloc[np.argsort(hour, kind="stable")]
     _check_irradiance(weather, fmt)
     station = {"format": fmt, "name": name, **place, "utc_offset_h": offset}
+    return weather, station
+
+
+#: What to do with a PVGIS hourly series (``seriescalc``: the irradiance on one plane, its
+#: stamps ``20230101:0010`` the instants of its values)
+_PVGIS_SERIES = ("a PVGIS hourly series (seriescalc, irradiance on one plane) is not read as it "
+                 "is: write its rows as measured weather, a CSV of time (its 20230101:0010 as "
+                 "2023-01-01T00:10:00Z), ghi, dni, dhi (a horizontal plane's series: ghi = "
+                 "Gb(i) + Gd(i) + Gr(i), dhi = Gd(i), dni = Gb(i) / sin H_sun), its times "
+                 "instants (--weather-stamped / weather_stamped: instant)")
+#: PVGIS's note of when its irradiance was taken, in its CSV's header and its EPW's comments
+_PVGIS_OFFSET_NOTE = "irradiance time offset (h):"
+
+
+def pvgis_epw_offset_h(src: IO[str]) -> float | None:
+    """The ``Irradiance Time Offset (h):`` an EPW written by PVGIS states in a ``COMMENTS``
+    line (−0.8239: its values are of instants 0.8239 h before each hour's label), or None
+    for any other EPW; the buffer is left where it was."""
+    start = src.tell()
+    head = [src.readline() for _ in range(8)]
+    src.seek(start)
+    for line in head:
+        low = line.lower()
+        if low.startswith("comments") and _PVGIS_OFFSET_NOTE in low:
+            try:
+                return float(low.split(_PVGIS_OFFSET_NOTE, 1)[1].split(",")[0])
+            except ValueError:
+                return None
+    return None
+
+
+def _read_pvgis(src: IO[str]) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """A PVGIS TMY download, CSV or JSON (``pvlib.iotools.read_pvgis_tmy``), as a typical
+    year (:func:`_pvgis_typical_year`). A PVGIS file that is not a TMY (an hourly series of
+    one plane, ``seriescalc``) is refused saying what to do with it, a JSON file that is not
+    PVGIS's saying so."""
+    import json
+
+    from pvlib import iotools
+
+    text = src.read()
+    is_json = text.lstrip().startswith("{")
+    if is_json:
+        try:
+            outputs = json.loads(text).get("outputs")
+        except ValueError as exc:
+            raise ValueError(f"not a readable PVGIS typical year: invalid JSON ({exc})"
+                             ) from None
+        if not isinstance(outputs, dict) or "tmy_hourly" not in outputs:
+            raise ValueError("a JSON file that is not a PVGIS TMY download (no outputs."
+                             "tmy_hourly)" + (f": {_PVGIS_SERIES}"
+                                              if isinstance(outputs, dict) else ""))
+    elif "time(UTC)," not in text[:2000]:  # the TMY's header row, after 18 lines at most
+        raise ValueError(f"a PVGIS file that is not a typical year (TMY): {_PVGIS_SERIES}")
+    try:
+        if is_json:
+            data, meta = iotools.read_pvgis_tmy(io.StringIO(text), pvgis_format="json")
+            location = meta["inputs"]["location"]
+            offset_h = location.get("irradiance_time_offset")
+            db = meta["inputs"].get("meteo_data", {}).get("radiation_db")
+            first_line = 1
+        else:
+            data, meta = iotools.read_pvgis_tmy(io.BytesIO(text.encode()), pvgis_format="csv")
+            location = meta["inputs"]
+            offset_h = location.get("irradiance time offset")
+            db = None
+            first_line = 19 if offset_h is not None else 18
+        place = {"latitude": float(location["latitude"]),
+                 "longitude": float(location["longitude"]),
+                 "altitude": float(location["elevation"])}
+    except (KeyError, IndexError, TypeError, ValueError) as exc:
+        raise ValueError(f"not a readable PVGIS typical year: {type(exc).__name__} {exc}"
+                         ) from None
+    name = f"TMY, {db}" if db else "TMY"
+    return _pvgis_typical_year(data, 0.0 if offset_h is None else float(offset_h), place,
+                               name, first_line)
+
+
+def _pvgis_typical_year(data: pd.DataFrame, irradiance_offset_h: float,
+                        place: dict[str, float], name: str, first_line: int
+                        ) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """A PVGIS typical year (``data`` indexed by its UTC stamps) as :func:`read_typical_year`
+    gives every typical year: one value per calendar hour at the hour's middle, UTC.
+
+    PVGIS's irradiance is not an hourly mean but the satellite's instant: its TMY says
+    ``Irradiance Time Offset (h): 0.1761`` after each stamp (at 45° N; the EPW it writes says
+    −0.8239 h from hours labelled by their end, and its hourly series stamp those instants,
+    ``…:0010``; PVGIS's radiation is SARAH's, Huld et al. 2012, Solar Energy 86, 1803); its
+    air temperature and wind (ERA5) are of the stamp. Each column is interpolated linearly
+    from its instants to the hours' middles, around the year's end. Measured against the
+    sun (:mod:`sim.weather_clock`) at the file's place: 0 min; read as hour-start means, as
+    any EPW, on its header's ``TZ`` of 1, a PVGIS EPW had run 40 min early. An hour with an
+    irradiance out of bounds is refused naming it (:func:`_check_irradiance`)."""
+    stamps = pd.DatetimeIndex(data.index).tz_convert("UTC")
+    hour = _calendar_hour(stamps)
+    _check_hours(hour, first_line, "PVGIS")
+    missing = [c for c in WEATHER_COLUMNS if c not in data.columns]
+    if missing:
+        raise ValueError(f"not a readable PVGIS typical year: no {', '.join(missing)} "
+                         "column in it")
+    order = np.argsort(hour, kind="stable")
+    raw = data[list(WEATHER_COLUMNS)].iloc[order].astype(float)
+    if not np.isfinite(raw.to_numpy()).all():
+        raise ValueError("not a readable PVGIS typical year: a value is blank or not a "
+                         "number")
+    raw.index = stamps[order]
+    _check_irradiance(raw, "pvgis", "%d %b %H:%M UTC")  # the file's hours, as it says them
+    at = np.arange(HOURS_PER_TYPICAL_YEAR, dtype=float)
+    out = np.empty(raw.shape)
+    for j, col in enumerate(WEATHER_COLUMNS):
+        taken = at + (irradiance_offset_h if col in ("ghi", "dni", "dhi") else 0.0)
+        out[:, j] = np.interp(at + 0.5, taken, raw[col].to_numpy(),
+                              period=HOURS_PER_TYPICAL_YEAR)
+    weather = pd.DataFrame(out, index=raw.index.floor("h") + pd.Timedelta(minutes=30),
+                           columns=list(WEATHER_COLUMNS))
+    station = {"format": "pvgis", "name": name, **place, "utc_offset_h": 0.0,
+               "irradiance_offset_h": round(float(irradiance_offset_h), 4)}
     return weather, station
 
 
@@ -606,15 +749,15 @@ def read_measured(source: str | Path | IO[str], stamped: str = MEASURED_STAMPED_
 
 def _refuse_pvgis(first_line: str) -> None:
     """Refuse a PVGIS download (its CSV opens with ``Latitude (decimal degrees):``, its JSON
-    with ``{``) saying how to write it as measured weather: it had been refused with pandas'
+    with ``{``) as measured weather, saying how to read it: it had been refused with pandas'
     "Error tokenizing data. C error: Expected 1 fields in line 5, saw 2", or its JSON shown
-    as the columns found (a tester's finding)."""
+    as the columns found (a tester's finding). A PVGIS TMY is a typical year
+    (:func:`read_typical_year`)."""
     head = first_line.lstrip("\ufeff").strip()
-    if head.startswith("{") or head.lower().startswith("latitude (decimal degrees)"):
-        raise ValueError(
-            "a PVGIS download (or JSON) is not read: write its rows as a CSV of time (its "
-            "time(UTC) 20230101:0010 as 2023-01-01T00:10:00Z), ghi, dni, dhi (its G(h), "
-            "Gb(n), Gd(h)), and say what its times mark (--weather-stamped / weather_stamped)")
+    if weather_format_or_none(head) == "pvgis":
+        raise ValueError("a PVGIS download (or JSON) is not measured weather: a PVGIS "
+                         "typical year (TMY) is read as one (--pvgis PATH, or uploaded); "
+                         + _PVGIS_SERIES)
 
 
 def _measured_times(column: pd.Series, timezone: str | None, line: Any) -> pd.DatetimeIndex:

@@ -96,6 +96,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--epw", metavar="PATH", help="use the typical year of an EPW file instead of clear sky"
     )
     weather.add_argument(
+        "--pvgis", metavar="PATH",
+        help="use the typical year of a PVGIS TMY download (CSV or JSON; its EPW goes to "
+             "--epw) instead of clear sky"
+    )
+    weather.add_argument(
         "--weather-csv", metavar="PATH",
         help="use measured weather of its own dates: a CSV with columns time (ISO 8601 with "
         "a UTC offset), ghi, dni, dhi [W m-2], optionally temp_air [°C] and wind_speed "
@@ -218,6 +223,7 @@ def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
 
     weather, station = None, None
     flag, path = (("--tmy3", args.tmy3) if args.tmy3 else ("--epw", args.epw) if args.epw
+                  else ("--pvgis", args.pvgis) if args.pvgis
                   else ("--weather-csv", args.weather_csv))
     if args.weather_csv:
         weather, station = _measured(args, site)

@@ -14,11 +14,12 @@ to the built-in ``sim/data/sites/``; a user file with a built-in id replaces it.
   air temperature and wind the site format's stated defaults);
   ``--from-file FILE`` writes a hand-written config after validating it (keys it leaves
   out that the place decides are filled in the same way).
-- ``from-weather FILE --id ID`` writes a site at a TMY3/EPW station's place and zone
-  (the format read from the file's first line, ``sim.sky.sniff_weather_format``; any
-  other file refused saying so; ``pvlib.iotools.read_tmy3`` / ``read_epw`` metadata; the
-  file's fixed UTC offset
-  becomes the ``Etc/GMT±N`` zone the typical year is recorded in; the clear-sky air
+- ``from-weather FILE --id ID`` writes a site at a TMY3/EPW station's or a PVGIS TMY's
+  place and zone (the format read from the file's first line,
+  ``sim.sky.sniff_weather_format``; any other file refused saying so;
+  ``pvlib.iotools.read_tmy3`` / ``read_epw`` metadata, ``sim.sky.read_typical_year`` for
+  PVGIS's; the file's fixed UTC offset becomes the ``Etc/GMT±N`` zone the typical year is
+  recorded in — a PVGIS file, in UTC, the longitude's whole hour, said on stderr; the clear-sky air
   temperature and wind are the file's annual means, the fixed tilt from the latitude;
   each marked ``assumed``).
 - ``show ID [--json]`` prints a site's config and which file it comes from.
@@ -72,11 +73,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     c.add_argument("--force", action="store_true",
                    help="overwrite a user site, or replace a built-in one")
     c.set_defaults(func=create)
-    w = sub.add_parser("from-weather", help="a site at a TMY3/EPW station's place and zone")
+    w = sub.add_parser("from-weather",
+                       help="a site at a TMY3/EPW station's or a PVGIS year's place and zone")
     w.add_argument("file", type=Path, metavar="FILE",
-                   help="TMY3 CSV or EPW file (told apart by its first line)")
+                   help="TMY3 CSV, EPW file or PVGIS TMY (CSV or JSON), told apart by its "
+                        "first line")
     w.add_argument("--id", dest="site_id", required=True, help="site id to create")
-    w.add_argument("--format", choices=("tmy3", "epw"),
+    w.add_argument("--format", choices=("tmy3", "epw", "pvgis"),
                    help="default: from the file's first line; given, the file must be it")
     w.add_argument("--timezone", help="IANA zone instead of the file's fixed UTC offset")
     w.add_argument("--like", default="tehuantepec",
@@ -213,8 +216,15 @@ def _station(path: Path, fmt: str) -> dict[str, Any]:
     KeyError of the field."""
     from pvlib import iotools
 
-    from sim.sky import weather_buffer
+    from sim.sky import pvgis_epw_offset_h, read_typical_year, weather_buffer
 
+    if fmt == "pvgis" or (fmt == "epw" and pvgis_epw_offset_h(weather_buffer(path)) is not None):
+        weather, station = read_typical_year(path, fmt)  # a PVGIS year: UTC, no zone named
+        return {"latitude_deg": station["latitude"], "longitude_deg": station["longitude"],
+                "altitude_m": station["altitude"], "tz_h": None, "name": "",
+                "code": f"PVGIS {station['name']}",
+                "temp_air_c": round(float(weather["temp_air"].mean()), 1),
+                "wind_speed_m_s": round(float(weather["wind_speed"].mean()), 1)}
     try:
         if fmt == "epw":
             data, meta = iotools.read_epw(weather_buffer(path))
@@ -262,23 +272,36 @@ def from_weather(args: argparse.Namespace) -> int:
              "line); leave --format out")
     try:
         st = _station(args.file, fmt)
-        zone = args.timezone or fixed_offset_zone(st["tz_h"])
+        utc_file = st["tz_h"] is None  # PVGIS: hours in UTC, no zone named
+        solar_h = round(st["longitude_deg"] / 15.0)
+        zone = args.timezone or fixed_offset_zone(solar_h if utc_file else st["tz_h"])
         base = _template(args.like)
     except (OSError, ValueError, KeyError) as exc:
         fail(f"{args.file}: {exc}")
+    if utc_file:
+        clock = (f"zone {zone} (--timezone); the file's typical year is in UTC (PVGIS)"
+                 if args.timezone else
+                 f"zone {zone}: the longitude's whole hour, {solar_h:+d} h — a PVGIS file is "
+                 "in UTC and names no zone; the typical year keeps UTC")
+    elif args.timezone:
+        clock = (f"zone {zone} (--timezone); the file's typical year keeps its own clock, "
+                 f"UTC{st['tz_h']:+g} h")
+    else:
+        clock = (f"zone {zone}: the file's fixed UTC offset {st['tz_h']:+g} h (its typical "
+                 "year's clock)")
     config = relocated_config(base, {
         "site_id": args.site_id, "name": st["name"] or args.site_id,
         "latitude_deg": st["latitude_deg"], "longitude_deg": st["longitude_deg"],
         "altitude_m": st["altitude_m"], "timezone": zone,
         "source": f"{fmt.upper()} station {st['code']} {st['name']} ({args.file.name}); "
                   f"tracker and modules as {args.like}",
-        "notes": (f"zone {zone} (--timezone); the file's typical year keeps its own clock, "
-                  f"UTC{st['tz_h']:+g} h" if args.timezone else
-                  f"zone {zone}: the file's fixed UTC offset {st['tz_h']:+g} h (its typical "
-                  "year's clock)")},
+        "notes": clock},
         climate={k: st[k] for k in CLIMATE_KEYS}, climate_source=args.file.name)
     written = _write(config, args.force)
-    if args.timezone and (std := standard_offset_h(zone)) != st["tz_h"]:
+    if utc_file and not args.timezone:
+        print(f"note: {clock}: pass --timezone (Europe/Rome, …) for the site's local clock",
+              file=sys.stderr)
+    if args.timezone and not utc_file and (std := standard_offset_h(zone)) != st["tz_h"]:
         # Asia/Kathmandu given for a +5.5 h file was written silently, its notes saying
         # the zone was the file's offset (a tester's finding)
         print(f"warning: --timezone {zone} is UTC{std:+g} h in standard time, the file's "

@@ -7,6 +7,7 @@ The service runs in process with a user-sites folder and an admin token; each si
 from __future__ import annotations
 
 from collections.abc import Iterator
+from pathlib import Path
 
 import httpx
 import pandas as pd
@@ -121,3 +122,31 @@ def test_local_hours_and_days_across_half_hour_and_midnight_clock_changes(
         "start": "2026-09-05", "end": "2026-09-08", "interval": "day"}).json()["rows"]
     assert [r["period_start"] for r in santiago] == [
         "2026-09-05T00:00:00-04:00", "2026-09-06T01:00:00-03:00", "2026-09-07T00:00:00-03:00"]
+
+
+def test_a_pvgis_year_uploaded_runs_on_the_suns_time(client: httpx.Client) -> None:
+    """A PVGIS TMY (JSON, as the tool downloads it) uploaded for a site at its place (45° N,
+    8° E) is read as a typical year in UTC, its irradiance at PVGIS's instants: the run's
+    clock check finds 0 min. Its EPW (header UTC+1) had been read as hour-start means at
+    UTC+1: 40 min early, a warning (``tests/sim/test_pvgis_weather.py``)."""
+    from tests.sim.test_pvgis_weather import TMY, pvgis_text
+
+    _new_site(client, "piedmont", latitude_deg=45.0, longitude_deg=8.0, altitude_m=250.0,
+              timezone="Europe/Rome")
+    week = {"site_id": "piedmont", "start": "2024-06-01", "end": "2024-06-15", "step_s": "600"}
+    for kind in ("json", "epw"):
+        r = client.post("/api/v1/simulations/weather", data=week,
+                        files={"file": (f"{TMY}.{kind}", pvgis_text(kind).encode(),
+                                        "application/octet-stream")})
+        assert r.status_code == 200, r.text
+        run = r.json()
+        assert run["sky"] == "weather" and run["timezone"] == "Europe/Rome"
+        assert abs(run["weather_shift_min"]) <= 2.5 and run["weather_warning"] is None, run
+    r = client.post("/api/v1/simulations/weather", data=week,
+                    files={"file": ("hourly.csv", (Path(__file__).parents[1] / "data" / "pvgis"
+                                    / "pvgis_hourly_Timeseries_45.000_8.000_SA_30deg_0deg_"
+                                    "2016_2016.csv").read_bytes(), "text/csv")})
+    assert r.status_code == 422
+    assert r.json()["detail"].startswith("file: hourly.csv is not a readable TMY3, EPW or "
+                                         "PVGIS typical year: a PVGIS file that is not a "
+                                         "typical year (TMY)")

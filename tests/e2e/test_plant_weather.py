@@ -63,15 +63,19 @@ def test_the_plant_page_runs_a_plant_on_a_weather_file(  # type: ignore[no-untyp
     at 5 min: the service's 1.45 MWh and 194.0 kWh lost in 715 stowed minutes
     (docs/plants.md) as tiles; the file at Peñarroya, 9,000 km away, refused naming
     ``force`` with no tile left; Greensboro's TMY3 with its header's offset −4 for −5 at a
-    plant on the station warned as a file 65 min off the sun's time."""
+    plant on the station warned as a file 65 min off the sun's time; a PVGIS TMY (JSON) at
+    a plant at its place run as a typical year with no warning."""
     sand_point = {"latitude_deg": 55.317, "longitude_deg": -160.517, "altitude_m": 7,
                   "timezone": "America/Anchorage",
                   "tracker": {"stow_wind_speed_m_s": 12}}
     greensboro = {"latitude_deg": 36.1, "longitude_deg": -79.95, "altitude_m": 273,
                   "timezone": "America/New_York"}
+    piedmont = {"latitude_deg": 45.0, "longitude_deg": 8.0, "altitude_m": 250,
+                "timezone": "Europe/Rome"}
     from tests.e2e.conftest import open_page
+    from tests.sim.test_pvgis_weather import pvgis_file
 
-    with _plants(server, sandpoint=sand_point, greensboro=greensboro), \
+    with _plants(server, sandpoint=sand_point, greensboro=greensboro, piedmont=piedmont), \
             open_page(browser, request, ignore=lambda text: "422" in text) as page:
         page.goto(server.url + "/#plant?day=2026-03-30")
         page.wait_for_selector('body[data-plant-loaded$="/2026-03-30"]', state="attached",
@@ -104,6 +108,15 @@ def test_the_plant_page_runs_a_plant_on_a_weather_file(  # type: ignore[no-untyp
         assert "-65 min" in warning or "−65 min" in warning, warning
         assert "stow-tile" not in page.inner_html("#plant-weather-summary")  # never stows
         page.screenshot(path=str(ARTIFACTS / "plant-weather-warning.png"), full_page=True,
+                        clip=_clip(page, "#plant-weather-form", "#plant-weather-summary"))
+
+        # a PVGIS TMY as the tool downloads it (JSON): a typical year on the sun's time
+        _run(page, "piedmont", pvgis_file("json", tmp_path), "2021-06-01", "2021-06-11", "900")
+        tiles = page.locator("#plant-weather-summary").inner_text()
+        assert "PVGIS typical year" in tiles and "TMY, PVGIS-SARAH3" in tiles, tiles
+        assert "0 km from the plant" in tiles and "weather-warning" not in page.inner_html(
+            "#plant-weather-summary"), tiles
+        page.screenshot(path=str(ARTIFACTS / "plant-weather-pvgis.png"), full_page=True,
                         clip=_clip(page, "#plant-weather-form", "#plant-weather-summary"))
 
 

@@ -181,9 +181,12 @@ def test_a_bad_measured_file_is_refused_naming_the_line(rows: list[str], message
                                   '{"inputs": {"location": {"latitude": 28.61}}}\n'])
 def test_a_pvgis_download_is_refused_saying_how_to_write_it(head: str) -> None:
     """A PVGIS CSV was refused with pandas' "Error tokenizing data. C error: Expected 1
-    fields in line 5, saw 2", its JSON with the JSON shown as the columns found."""
+    fields in line 5, saw 2", its JSON with the JSON shown as the columns found. Its TMY is
+    a typical year (``tests/sim/test_pvgis_weather.py``)."""
     rows = "time(UTC),T2m,G(h),Gb(n),Gd(h)\n20230101:0010,20.8,0.0,0.0,0.0\n"
-    with pytest.raises(ValueError, match=r"a PVGIS download .* ghi, dni, dhi \(its G\(h\)"):
+    with pytest.raises(ValueError, match=r"a PVGIS download .* typical year \(TMY\) is read "
+                                         r"as one \(--pvgis PATH.* ghi, dni, dhi \(a "
+                                         r"horizontal plane's series: ghi = Gb\(i\)"):
         read_measured(io.StringIO(head + rows))
 
 

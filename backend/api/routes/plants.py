@@ -490,7 +490,7 @@ async def run_on_weather(plant_id: str, request: Request, ctx: ContextDep, calle
     ``weather_warning``).
 
     Multipart, read as ``POST /api/v1/simulations/weather`` reads it (one reading: the body
-    bounded by ``HELIOTWIN_MAX_UPLOAD_BYTES``, a TMY3/EPW typical year laid on the range's
+    bounded by ``HELIOTWIN_MAX_UPLOAD_BYTES``, a TMY3/EPW/PVGIS typical year laid on the range's
     calendar or measured weather of its own dates; ``force`` for a station more than 100 km
     away or a header's UTC offset off its longitude) with the fields ``start``, ``end``,
     ``step_s`` and ``strategy``. At most :data:`MAX_WEATHER_RUN_DAYS` days and

@@ -3,12 +3,12 @@
 Multipart: the weather file in ``file`` and the fields of ``POST /api/v1/simulations``
 (``site_id``, ``start``, ``end``, ``step_s``, ``controller``, ``receiver``,
 ``background`` and the machine parameters) as form fields, plus ``force``,
-``weather_stamped`` and ``weather_timezone``. A TMY3 or EPW file (by its first line) is a
-typical year, read by :func:`sim.sky.read_typical_year` and laid onto the run's
-calendar (:func:`backend.twin.scenario.run_scenario`); any other file is read as measured
-weather of its own dates (:func:`sim.sky.read_measured`: ``weather_stamped`` says what its
-times mark, ``weather_timezone`` the zone of times without an offset), and a run outside
-them is a 422 naming them. A station more than
+``weather_stamped`` and ``weather_timezone``. A TMY3, EPW or PVGIS TMY (CSV or JSON) file
+(by its first line) is a typical year, read by :func:`sim.sky.read_typical_year` and laid
+onto the run's calendar (:func:`backend.twin.scenario.run_scenario`); any other file is
+read as measured weather of its own dates (:func:`sim.sky.read_measured`:
+``weather_stamped`` says what its times mark, ``weather_timezone`` the zone of times
+without an offset), and a run outside them is a 422 naming them. A station more than
 :data:`backend.twin.scenario.MAX_STATION_DISTANCE_KM` from the site is a 422
 unless ``force`` is true. The body is bounded by ``HELIOTWIN_MAX_UPLOAD_BYTES``
 (413 past it). The answer is that of ``POST /api/v1/simulations`` (the summary,
@@ -56,13 +56,14 @@ WEATHER_FORM_FIELDS = ("file", "force", "weather_stamped", "weather_timezone")
 async def read_weather_upload(form: FormData) -> tuple[Any, dict[str, Any]]:
     """The weather and station of the form's ``file`` (``weather_stamped`` and
     ``weather_timezone`` read for measured weather): a typical year when its first line is a
-    TMY3's or an EPW's, else measured weather; 422 naming ``file`` when unreadable. The one
-    reading of a weather upload (the twin's and a plant's)."""
+    TMY3's, an EPW's or a PVGIS TMY's (CSV or JSON), else measured weather; 422 naming
+    ``file`` when unreadable. The one reading of a weather upload (the twin's and a
+    plant's)."""
     upload = form.get("file")
     stamped, timezone = form_text(form, "weather_stamped"), form_text(form, "weather_timezone")
     if not isinstance(upload, UploadFile):
-        raise HTTPException(422, "file: a weather file (TMY3, EPW or a measured CSV) is "
-                                 "required")
+        raise HTTPException(422, "file: a weather file (TMY3, EPW, PVGIS TMY or a measured "
+                                 "CSV) is required")
     text = weather_text(await upload.read())
     name = upload.filename or "the upload"
     try:
@@ -72,8 +73,8 @@ async def read_weather_upload(form: FormData) -> tuple[Any, dict[str, Any]]:
     try:
         return read_typical_year(io.StringIO(text))
     except (ValueError, KeyError, IndexError) as exc:
-        raise HTTPException(422, f"file: {name} is not a readable TMY3 or EPW typical year: "
-                                 f"{exc}") from None
+        raise HTTPException(422, f"file: {name} is not a readable TMY3, EPW or PVGIS typical "
+                                 f"year: {exc}") from None
 
 
 def _measured(text: str, name: str, stamped: str | None, timezone: str | None
@@ -91,8 +92,9 @@ def _measured(text: str, name: str, stamped: str | None, timezone: str | None
         return read_measured(io.StringIO(text), stamped or MEASURED_STAMPED_DEFAULT, timezone,
                              name)
     except (ValueError, pd.errors.ParserError) as exc:
-        raise HTTPException(422, f"file: {name} is neither a TMY3 or EPW typical year (by its "
-                                 f"first line) nor readable measured weather: {exc}") from None
+        raise HTTPException(422, f"file: {name} is neither a TMY3, EPW or PVGIS typical year "
+                                 f"(by its first line) nor readable measured weather: {exc}"
+                            ) from None
 
 
 @router.post("/weather", response_model=SimulationSummaryRead,
@@ -100,7 +102,7 @@ def _measured(text: str, name: str, stamped: str | None, timezone: str | None
                         **_BUSY_DOC},
              openapi_extra={"security": [{}, {"bearerAuth": []}]})
 async def create_simulation_on_weather(request: Request, ctx: ContextDep) -> Response:
-    """Run a twin scenario on an uploaded TMY3/EPW typical year, or measured weather of its
+    """Run a twin scenario on an uploaded TMY3/EPW/PVGIS typical year, or measured weather of its
     own dates, instead of clear sky."""
     form = await read_form(request, ctx.settings.server.max_upload_bytes,
                            "the weather file in 'file'", max_files=1, max_fields=64)
