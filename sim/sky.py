@@ -21,10 +21,10 @@ model choices the twin uses and names units:
   at the year's ends); :func:`typical_year_at_site` moves a distant station's sky to the
   site (Perez et al. 1990 kt′ at the same solar time, Erbs et al. 1982 decomposition), and
   :func:`limit_to_extraterrestrial` keeps any weather within the top of the atmosphere;
-  measured weather of its own dates (a CSV of time, GHI, DNI, DHI) is read by
-  :func:`read_measured`. Every weather value stands at the middle of the interval it
-  averages (:func:`weather_middles`) and is interpolated linearly onto a run's steps
-  (:func:`weather_at`).
+  measured weather of its own dates (a CSV of time, GHI, DNI, DHI, or an NSRDB download as
+  it is) is read by :func:`read_measured`. Every weather value stands at the middle of the
+  interval it averages, or at its instant (:func:`weather_middles`), and is interpolated
+  linearly onto a run's steps (:func:`weather_at`).
 """
 
 from __future__ import annotations
@@ -667,6 +667,10 @@ def read_measured(source: str | Path | IO[str], stamped: str = MEASURED_STAMPED_
     ``timestamp``) column and ``ghi``, ``dni``, ``dhi`` [W m⁻²], optionally ``temp_air``
     [°C] and ``wind_speed`` [m s⁻¹] (:data:`MEASURED_COLUMNS`; other columns ignored).
 
+    An NSRDB download (PSM3 or PSM4 CSV, :data:`NSRDB_FIRST_CELLS`) is read as it is
+    (:func:`_nsrdb_rows`): its values at their stamps (``stamped`` and ``timezone`` not
+    used), its lines counted as the file's.
+
     Times are ISO 8601 with a UTC offset (``2024-06-01T10:05:00+09:30``), or without one
     when ``timezone`` (an IANA zone; ``Etc/GMT-10`` for a fixed UTC+10) says where they
     were read; rows every :data:`MEASURED_MIN_INTERVAL_S` to :data:`MEASURED_MAX_INTERVAL_S`,
@@ -694,23 +698,30 @@ def read_measured(source: str | Path | IO[str], stamped: str = MEASURED_STAMPED_
         raise ValueError(f"stamped must be interval_end, interval_start or instant; got "
                          f"{stamped!r}")
     src = weather_buffer(source)
-    _refuse_pvgis(src.readline())
+    first = src.readline()
+    _refuse_pvgis(first)
     src.seek(0)
-    raw = pd.read_csv(src, dtype=str, skipinitialspace=True)
-    by_lower = {str(c).strip().lower(): c for c in raw.columns}
-    found = {key: next((by_lower[n] for n in names if n in by_lower), None)
-             for key, names in MEASURED_COLUMNS.items()}
-    missing = [k for k in ("time", "ghi", "dni", "dhi") if found[k] is None]
-    if missing:
-        raise ValueError(f"a measured weather CSV needs the columns time, ghi, dni and dhi "
-                         f"(W m⁻²) in its header; {', '.join(missing)} not found among "
-                         f"{', '.join(map(str, raw.columns[:12]))}")
-    raw = raw.rename(columns={v: k for k, v in found.items() if v is not None})
+    header_lines = 1
+    if first.lstrip("\ufeff").startswith(NSRDB_FIRST_CELLS):
+        raw, where = _nsrdb_rows(src)
+        name = f"{name}: {where}" if name else where
+        stamped, timezone, header_lines = "instant", None, 3
+    else:
+        raw = pd.read_csv(src, dtype=str, skipinitialspace=True)
+        by_lower = {str(c).strip().lower(): c for c in raw.columns}
+        found = {key: next((by_lower[n] for n in names if n in by_lower), None)
+                 for key, names in MEASURED_COLUMNS.items()}
+        missing = [k for k in ("time", "ghi", "dni", "dhi") if found[k] is None]
+        if missing:
+            raise ValueError(f"a measured weather CSV needs the columns time, ghi, dni and dhi "
+                             f"(W m⁻²) in its header; {', '.join(missing)} not found among "
+                             f"{', '.join(map(str, raw.columns[:12]))}")
+        raw = raw.rename(columns={v: k for k, v in found.items() if v is not None})
     if len(raw) < 2:
         raise ValueError(f"a measured weather CSV needs at least 2 rows; it has {len(raw)}")
 
     def line(i: int) -> str:
-        return f"line {i + 2}"  # the header is line 1
+        return f"line {i + header_lines + 1}"  # after the header's lines
 
     times = _measured_times(raw["time"], timezone, line)
     cols = [c for c in WEATHER_COLUMNS if c in raw.columns]
@@ -745,6 +756,63 @@ def read_measured(source: str | Path | IO[str], stamped: str = MEASURED_STAMPED_
                "altitude": None, "utc_offset_h": None, "stamped": stamped,
                "start": first.isoformat(), "end": last.isoformat()}
     return weather, station
+
+
+#: The first cells of an NSRDB download (NREL's National Solar Radiation Database, PSM3 and
+#: PSM4 CSV: a line of names and a line of values about the place, then the data's header)
+NSRDB_FIRST_CELLS = "Source,Location ID,"
+#: An NSRDB download's columns read, by the names the measured CSV's rows take
+_NSRDB_COLUMNS = {"ghi": "GHI", "dni": "DNI", "dhi": "DHI", "temp_air": "Temperature",
+                  "wind_speed": "Wind Speed"}
+
+
+def _nsrdb_rows(src: IO[str]) -> tuple[pd.DataFrame, str]:
+    """An NSRDB download's rows as a measured CSV's (``time`` with the header's UTC offset,
+    ``ghi``, ``dni``, ``dhi``, ``temp_air``, ``wind_speed`` as text) and where it is from.
+
+    NSRDB's irradiance (PSM: Sengupta et al. 2018, Renewable and Sustainable Energy Reviews
+    89, 51) stands at its stamps: read so, the two downloads in ``tests/data/nsrdb/`` sit
+    0 min from the sun in every month with sunny days (:mod:`sim.weather_clock`), read as
+    interval-end means 15 min early; its stamps are in the header's ``Time Zone`` (0 for a
+    UTC download). An NSRDB typical year (8,760 rows, its months from several years) is
+    refused saying what to do: only an actual year runs, on its own dates."""
+    head = pd.read_csv(io.StringIO(src.readline() + src.readline()), dtype=str).iloc[0]
+    try:
+        tz_h = float(head["Time Zone"])
+        lat, lon = float(head["Latitude"]), float(head["Longitude"])
+    except (KeyError, ValueError, TypeError) as exc:
+        raise ValueError(f"an NSRDB file whose second line has no readable {exc} (its "
+                         "place and time zone)") from None
+    body = pd.read_csv(src, dtype=str, skipinitialspace=True)
+    needed = ["Year", "Month", "Day", "Hour", "Minute", "GHI", "DNI", "DHI"]
+    missing = [c for c in needed if c not in body.columns]
+    if missing:
+        raise ValueError(f"an NSRDB file without the columns {', '.join(missing)} in its "
+                         "third line")
+    years = body["Year"].dropna().unique()
+    if len(body) == HOURS_PER_TYPICAL_YEAR and len(years) > 1:
+        raise ValueError(
+            f"an NSRDB typical year (TMY: {len(body):,} hours, its months from "
+            f"{len(years)} years) is not read: run on an actual year's NSRDB download, on "
+            "its own dates, or on a TMY3, EPW or PVGIS typical year")
+    stamp = body[needed[:5]].apply(pd.to_numeric, errors="coerce")
+    bad = stamp.isna().any(axis=1).to_numpy()
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"time: line {i + 4} has no whole Year, Month, Day, Hour and Minute")
+    sign = "+" if tz_h >= 0 else "-"
+    zone = f"{sign}{int(abs(tz_h)):02d}:{round(abs(tz_h) % 1 * 60):02d}"
+    ints = stamp.astype(int).astype(str)
+    time = (ints["Year"] + "-" + ints["Month"].str.zfill(2) + "-" + ints["Day"].str.zfill(2)
+            + "T" + ints["Hour"].str.zfill(2) + ":" + ints["Minute"].str.zfill(2) + ":00"
+            + zone)
+    raw = pd.DataFrame({"time": time})
+    for key, column in _NSRDB_COLUMNS.items():
+        if column in body.columns:
+            raw[key] = body[column]
+    where = (f"NSRDB location {head.get('Location ID', '?')} ({lat:.2f}, {lon:.2f}), "
+             f"UTC{tz_h:+g} h, values at their stamps")
+    return raw, where
 
 
 def _refuse_pvgis(first_line: str) -> None:

@@ -150,3 +150,22 @@ def test_a_pvgis_year_uploaded_runs_on_the_suns_time(client: httpx.Client) -> No
     assert r.json()["detail"].startswith("file: hourly.csv is not a readable TMY3, EPW or "
                                          "PVGIS typical year: a PVGIS file that is not a "
                                          "typical year (TMY)")
+
+
+def test_an_nsrdb_year_uploaded_runs_at_its_stamps(client: httpx.Client) -> None:
+    """An NSRDB PSM4 download (30-min values of 2023 at Craig, Colorado), uploaded as it is
+    for a site at its place, is measured weather at its stamps: 0 min from the sun, where
+    the same values in a CSV read as interval-end means run 15 min early
+    (``tests/sim/test_nsrdb_weather.py``)."""
+    from tests.sim.test_nsrdb_weather import FILES, nsrdb_text
+
+    _new_site(client, "craig", latitude_deg=40.53, longitude_deg=-108.54, altitude_m=2168.0,
+              timezone="America/Denver")
+    r = client.post("/api/v1/simulations/weather",
+                    data={"site_id": "craig", "start": "2023-09-01", "end": "2023-10-01",
+                          "step_s": "600"},
+                    files={"file": (FILES["psm4"], nsrdb_text("psm4").encode(), "text/csv")})
+    assert r.status_code == 200, r.text
+    run = r.json()
+    assert run["sky"] == "weather" and run["timezone"] == "America/Denver"
+    assert abs(run["weather_shift_min"]) <= 5.0 and run["weather_warning"] is None, run

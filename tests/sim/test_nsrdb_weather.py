@@ -1,0 +1,115 @@
+"""NSRDB downloads as measured weather (``sim.sky.read_measured``): two real PSM files of
+one place (Craig, Colorado) in ``tests/data/nsrdb/`` (README). Checked against pvlib's
+own reader of the same files and against the sun (``sim.weather_clock``)."""
+
+from __future__ import annotations
+
+import gzip
+import io
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import pytest
+
+from sim.sky import read_measured
+from sim.weather_clock import irradiance_shift
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "nsrdb"
+FILES = {"psm3": "nsrdb_psm3_401182_2017.csv", "psm4": "nsrdb_psm4_401182_2023.csv"}
+CRAIG = (40.53, -108.54, 2168.0)
+
+
+def nsrdb_text(kind: str) -> str:
+    """The download as NSRDB wrote it (``psm3``: 2017, ``psm4``: 2023; 30-min steps)."""
+    return gzip.decompress((DATA / f"{FILES[kind]}.gz").read_bytes()).decode()
+
+
+@pytest.mark.parametrize("kind", ["psm3", "psm4"])
+def test_an_nsrdb_year_reads_as_pvlib_reads_it_at_its_stamps(kind: str) -> None:
+    from pvlib import iotools
+
+    weather, station = read_measured(io.StringIO(nsrdb_text(kind)), name=FILES[kind])
+    ref, meta = iotools.read_nsrdb_psm4(io.StringIO(nsrdb_text(kind)))
+    ref = ref.tz_convert("UTC")
+    assert len(ref) == 17520 and meta["Time Zone"] == -7
+    for ours, theirs in (("ghi", "ghi"), ("dni", "dni"), ("dhi", "dhi"),
+                         ("temp_air", "temp_air"), ("wind_speed", "wind_speed")):
+        assert (weather.loc[ref.index, ours] == ref[theirs]).all(), ours
+    year = ref.index[0].year
+    assert station["stamped"] == "instant"
+    assert station["start"] == f"{year}-01-01T07:00:00+00:00"  # local midnight, UTC−7
+    assert station["end"] == f"{year + 1}-01-01T06:30:00+00:00"
+    assert station["name"] == (f"{FILES[kind]}: NSRDB location 401182 (40.53, -108.54), "
+                               "UTC-7 h, values at their stamps")
+
+
+@pytest.mark.parametrize("kind", ["psm3", "psm4"])
+def test_an_nsrdb_year_is_on_the_suns_time(kind: str) -> None:
+    """Measured 0 min in each month with sunny days (−5, one step of the grid, in May 2017);
+    the same values written as a CSV and
+    read with its default (interval_end means) run 15 min early, under the warning's
+    threshold: the reason NSRDB's own file is read at its stamps."""
+    weather, _ = read_measured(io.StringIO(nsrdb_text(kind)))
+    year = weather.index[1].year
+    months = 0
+    for month in range(1, 13):
+        start = pd.Timestamp(year, month, 1, tz="UTC")
+        found = irradiance_shift(weather, *CRAIG, start, start + pd.DateOffset(months=1))
+        if found is not None:
+            months += 1
+            assert abs(found["shift_min"]) <= 5.0, (month, found)  # the 5-min grid
+    assert months >= 10
+    rows = weather.iloc[1:-1]
+    text = "time,ghi,dni,dhi\n" + "".join(
+        f"{t.isoformat()},{r.ghi},{r.dni},{r.dhi}\n" for t, r in rows.iterrows())
+    as_means, _ = read_measured(io.StringIO(text))
+    june = pd.Timestamp(year, 6, 1, tz="UTC")
+    found = irradiance_shift(as_means, *CRAIG, june, june + pd.DateOffset(months=1))
+    assert found is not None and found["shift_min"] == pytest.approx(-15.0, abs=2.5)
+
+
+def test_a_bad_nsrdb_cell_is_named_by_its_line_and_a_typical_year_refused() -> None:
+    text = nsrdb_text("psm4")
+    lines = text.splitlines(keepends=True)
+    assert lines[3].startswith("2023,1,1,0,0,")
+    cells = lines[9].split(",")  # 03:00 local, line 10 of the file
+    cells[18] = "abc"  # GHI
+    broken = "".join([*lines[:9], ",".join(cells), *lines[10:]])
+    with pytest.raises(ValueError, match=r"ghi is 'abc', not a number, at line 10;"):
+        read_measured(io.StringIO(broken))
+    # a typical year: 8,760 hours whose months come from several years
+    hourly = [ln for ln in lines[3:] if ln.split(",")[4] == "0"][:8760]  # Minute 0
+    tmy = [ln.replace("2023,", "2019,", 1) if ln.startswith("2023,7,") else ln
+           for ln in hourly]
+    with pytest.raises(ValueError, match=r"an NSRDB typical year \(TMY: 8,760 hours, its "
+                                         r"months from 2 years\) is not read"):
+        read_measured(io.StringIO("".join([*lines[:3], *tmy])))
+
+
+def test_a_run_on_an_nsrdb_year_at_its_place(heliotwin_cli: Callable[..., Any],
+                                             tmp_path: Path) -> None:
+    """``simulate --weather-csv`` on the PSM4 download at a site made at its place, September
+    2023: on the
+    sun's time, the file named with its place; a run outside 2023 refused naming its span."""
+    import json
+
+    env = {"HELIOTWIN_SITES_DIR": str(tmp_path / "sites"),
+           "HELIOTWIN_DATABASE_URL": f"sqlite:///{tmp_path / 'db.sqlite'}"}
+    made = heliotwin_cli("site", "create", "--id", "craig", "--latitude-deg", "40.53",
+                         "--longitude-deg", "-108.54", "--timezone", "America/Denver", env=env)
+    assert made.returncode == 0, made.stderr
+    path = tmp_path / FILES["psm4"]
+    path.write_text(nsrdb_text("psm4"))
+    run = heliotwin_cli("simulate", "--site", "craig", "--start", "2023-09-01", "--end",
+                        "2023-10-01", "--step-s", "600", "--weather-csv", str(path), "--json",
+                        env=env)
+    assert run.returncode == 0, run.stderr
+    summary = json.loads(run.stdout)
+    assert summary["sky"] == "weather" and summary["weather"]["stamped"] == "instant"
+    assert "NSRDB location 401182" in summary["weather"]["name"]
+    assert abs(summary["weather_shift_min"]) <= 2.5 and summary["weather_warning"] is None
+    outside = heliotwin_cli("simulate", "--site", "craig", "--start", "2024-06-01", "--end",
+                            "2024-06-02", "--weather-csv", str(path), env=env)
+    assert outside.returncode == 2 and "the measured weather covers 2023-01-01" in outside.stderr
