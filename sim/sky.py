@@ -776,13 +776,8 @@ def _nsrdb_rows(src: IO[str]) -> tuple[pd.DataFrame, str]:
     interval-end means 15 min early; its stamps are in the header's ``Time Zone`` (0 for a
     UTC download). An NSRDB typical year (8,760 rows, its months from several years) is
     refused saying what to do: only an actual year runs, on its own dates."""
-    head = pd.read_csv(io.StringIO(src.readline() + src.readline()), dtype=str).iloc[0]
-    try:
-        tz_h = float(head["Time Zone"])
-        lat, lon = float(head["Latitude"]), float(head["Longitude"])
-    except (KeyError, ValueError, TypeError) as exc:
-        raise ValueError(f"an NSRDB file whose second line has no readable {exc} (its "
-                         "place and time zone)") from None
+    place = nsrdb_header(src)
+    tz_h = place["utc_offset_h"]
     body = pd.read_csv(src, dtype=str, skipinitialspace=True)
     needed = ["Year", "Month", "Day", "Hour", "Minute", "GHI", "DNI", "DHI"]
     missing = [c for c in needed if c not in body.columns]
@@ -810,9 +805,27 @@ def _nsrdb_rows(src: IO[str]) -> tuple[pd.DataFrame, str]:
     for key, column in _NSRDB_COLUMNS.items():
         if column in body.columns:
             raw[key] = body[column]
-    where = (f"NSRDB location {head.get('Location ID', '?')} ({lat:.2f}, {lon:.2f}), "
-             f"UTC{tz_h:+g} h, values at their stamps")
+    where = (f"NSRDB location {place['location_id']} ({place['latitude']:.2f}, "
+             f"{place['longitude']:.2f}), UTC{tz_h:+g} h, values at their stamps")
     return raw, where
+
+
+def nsrdb_header(src: IO[str]) -> dict[str, Any]:
+    """The place of an NSRDB download from its first two lines (the buffer left after them):
+    ``latitude``, ``longitude`` [°], ``altitude`` [m], ``utc_offset_h`` (its stamps' zone,
+    ``Time Zone``), ``local_utc_offset_h`` (the place's standard time, ``Local Time Zone``),
+    ``location_id``; a field missing or not a number is refused naming it."""
+    head = pd.read_csv(io.StringIO(src.readline() + src.readline()), dtype=str).iloc[0]
+    fields = {"latitude": "Latitude", "longitude": "Longitude", "altitude": "Elevation",
+              "utc_offset_h": "Time Zone", "local_utc_offset_h": "Local Time Zone"}
+    out: dict[str, Any] = {"location_id": str(head.get("Location ID", "?"))}
+    for key, name in fields.items():
+        try:
+            out[key] = float(head[name])
+        except (KeyError, ValueError, TypeError):
+            raise ValueError(f"an NSRDB file whose second line has no readable {name!r} "
+                             "(its place and time zone)") from None
+    return out
 
 
 def _refuse_pvgis(first_line: str) -> None:

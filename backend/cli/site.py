@@ -18,10 +18,11 @@ to the built-in ``sim/data/sites/``; a user file with a built-in id replaces it.
   place and zone (the format read from the file's first line,
   ``sim.sky.sniff_weather_format``; any other file refused saying so;
   ``pvlib.iotools.read_tmy3`` / ``read_epw`` metadata, ``sim.sky.read_typical_year`` for
-  PVGIS's; the file's fixed UTC offset becomes the ``Etc/GMT±N`` zone the typical year is
-  recorded in — a PVGIS file, in UTC, the longitude's whole hour, said on stderr; the clear-sky air
-  temperature and wind are the file's annual means, the fixed tilt from the latitude;
-  each marked ``assumed``).
+  PVGIS's, ``sim.sky.nsrdb_header`` for an NSRDB download's; the file's fixed UTC offset
+  becomes the ``Etc/GMT±N`` zone the typical year is recorded in — a PVGIS file, in UTC,
+  the longitude's whole hour, said on stderr; an NSRDB file its ``Local Time Zone``; the
+  clear-sky air temperature and wind are the file's annual means, the fixed tilt from the
+  latitude; each marked ``assumed``).
 - ``show ID [--json]`` prints a site's config and which file it comes from.
 - ``validate FILE…`` checks files; a malformed one gets a message naming the field (exit 2).
 - ``schema`` prints the JSON Schema.
@@ -74,12 +75,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                    help="overwrite a user site, or replace a built-in one")
     c.set_defaults(func=create)
     w = sub.add_parser("from-weather",
-                       help="a site at a TMY3/EPW station's or a PVGIS year's place and zone")
+                       help="a site at the place and zone of a weather file (TMY3, EPW, "
+                            "PVGIS, NSRDB)")
     w.add_argument("file", type=Path, metavar="FILE",
-                   help="TMY3 CSV, EPW file or PVGIS TMY (CSV or JSON), told apart by its "
-                        "first line")
+                   help="TMY3 CSV, EPW file, PVGIS TMY (CSV or JSON) or NSRDB download, "
+                        "told apart by its first line")
     w.add_argument("--id", dest="site_id", required=True, help="site id to create")
-    w.add_argument("--format", choices=("tmy3", "epw", "pvgis"),
+    w.add_argument("--format", choices=("tmy3", "epw", "pvgis", "nsrdb"),
                    help="default: from the file's first line; given, the file must be it")
     w.add_argument("--timezone", help="IANA zone instead of the file's fixed UTC offset")
     w.add_argument("--like", default="tehuantepec",
@@ -216,8 +218,22 @@ def _station(path: Path, fmt: str) -> dict[str, Any]:
     KeyError of the field."""
     from pvlib import iotools
 
-    from sim.sky import pvgis_epw_offset_h, read_typical_year, weather_buffer
+    from sim.sky import (
+        nsrdb_header,
+        pvgis_epw_offset_h,
+        read_measured,
+        read_typical_year,
+        weather_buffer,
+    )
 
+    if fmt == "nsrdb":  # an actual year: its place and the place's zone from its header
+        head = nsrdb_header(weather_buffer(path))
+        weather, _ = read_measured(path)
+        return {"latitude_deg": head["latitude"], "longitude_deg": head["longitude"],
+                "altitude_m": head["altitude"], "tz_h": head["local_utc_offset_h"],
+                "name": "", "code": f"NSRDB location {head['location_id']}",
+                "temp_air_c": round(float(weather["temp_air"].mean()), 1),
+                "wind_speed_m_s": round(float(weather["wind_speed"].mean()), 1)}
     if fmt == "pvgis" or (fmt == "epw" and pvgis_epw_offset_h(weather_buffer(path)) is not None):
         weather, station = read_typical_year(path, fmt)  # a PVGIS year: UTC, no zone named
         return {"latitude_deg": station["latitude"], "longitude_deg": station["longitude"],
@@ -261,10 +277,11 @@ def from_weather(args: argparse.Namespace) -> int:
     is not the file's offset is written with a warning naming both."""
     from sim.site_config import standard_offset_h
     from sim.sites import CLIMATE_KEYS, relocated_config
-    from sim.sky import sniff_weather_format
+    from sim.sky import NSRDB_FIRST_CELLS, sniff_weather_format, weather_buffer
 
     try:  # the content decides: a TMY2 file named .csv is not read as TMY3
-        fmt = sniff_weather_format(args.file)
+        fmt = ("nsrdb" if weather_buffer(args.file).readline().lstrip("\ufeff").startswith(
+            NSRDB_FIRST_CELLS) else sniff_weather_format(args.file))
     except (OSError, ValueError) as exc:
         fail(f"{args.file}: {exc}")
     if args.format is not None and args.format != fmt:
@@ -283,6 +300,9 @@ def from_weather(args: argparse.Namespace) -> int:
                  if args.timezone else
                  f"zone {zone}: the longitude's whole hour, {solar_h:+d} h — a PVGIS file is "
                  "in UTC and names no zone; the typical year keeps UTC")
+    elif fmt == "nsrdb":  # measured weather: its own stamps, whatever the site's zone
+        clock = (f"zone {zone}" + (" (--timezone)" if args.timezone else
+                                   f": the NSRDB file's Local Time Zone, {st['tz_h']:+g} h"))
     elif args.timezone:
         clock = (f"zone {zone} (--timezone); the file's typical year keeps its own clock, "
                  f"UTC{st['tz_h']:+g} h")
@@ -301,7 +321,8 @@ def from_weather(args: argparse.Namespace) -> int:
     if utc_file and not args.timezone:
         print(f"note: {clock}: pass --timezone (Europe/Rome, …) for the site's local clock",
               file=sys.stderr)
-    if args.timezone and not utc_file and (std := standard_offset_h(zone)) != st["tz_h"]:
+    if (args.timezone and not utc_file and fmt != "nsrdb"
+            and (std := standard_offset_h(zone)) != st["tz_h"]):
         # Asia/Kathmandu given for a +5.5 h file was written silently, its notes saying
         # the zone was the file's offset (a tester's finding)
         print(f"warning: --timezone {zone} is UTC{std:+g} h in standard time, the file's "

@@ -113,3 +113,24 @@ def test_a_run_on_an_nsrdb_year_at_its_place(heliotwin_cli: Callable[..., Any],
     outside = heliotwin_cli("simulate", "--site", "craig", "--start", "2024-06-01", "--end",
                             "2024-06-02", "--weather-csv", str(path), env=env)
     assert outside.returncode == 2 and "the measured weather covers 2023-01-01" in outside.stderr
+
+
+def test_a_site_from_an_nsrdb_download_takes_its_place_and_zone(
+        heliotwin_cli: Callable[..., Any], tmp_path: Path) -> None:
+    """``site from-weather`` on the PSM3 download: its header's place and Local Time Zone
+    (−7: ``Etc/GMT+7``), the year's means as the clear sky's air temperature and wind."""
+    import json
+
+    env = {"HELIOTWIN_SITES_DIR": str(tmp_path / "sites"),
+           "HELIOTWIN_DATABASE_URL": f"sqlite:///{tmp_path / 'db.sqlite'}"}
+    path = tmp_path / FILES["psm3"]
+    path.write_text(nsrdb_text("psm3"))
+    made = heliotwin_cli("site", "from-weather", str(path), "--id", "craig", env=env)
+    assert made.returncode == 0, made.stderr
+    config = json.loads((tmp_path / "sites" / "craig.json").read_text())
+    weather, _ = read_measured(path)
+    assert (config["latitude_deg"], config["longitude_deg"], config["altitude_m"],
+            config["timezone"]) == (40.53, -108.54, 2168.0, "Etc/GMT+7")
+    assert config["temp_air_c"] == round(float(weather["temp_air"].mean()), 1)
+    assert config["notes"] == "zone Etc/GMT+7: the NSRDB file's Local Time Zone, -7 h"
+    assert "NSRDB location 401182" in config["source"]
