@@ -29,6 +29,7 @@ model choices the twin uses and names units:
 
 from __future__ import annotations
 
+import datetime as dt
 import functools
 import io
 from pathlib import Path
@@ -266,7 +267,7 @@ def read_tmy3(path: str | Path, coerce_year: int | None = None) -> tuple[pd.Data
     return weather, dict(meta)
 
 
-WEATHER_FORMATS = ("tmy3", "epw", "pvgis")
+WEATHER_FORMATS = ("tmy3", "epw", "pvgis", "nsrdb")
 WEATHER_COLUMNS = ("ghi", "dni", "dhi", "temp_air", "wind_speed")
 HOURS_PER_TYPICAL_YEAR = 8760
 #: Days before each month in a year of 365 days (a typical year has no 29 February).
@@ -274,19 +275,23 @@ _DAYS_BEFORE_MONTH = np.cumsum([0, 31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30])
 
 
 def weather_format(first_line: str) -> str:
-    """``"epw"``, ``"tmy3"`` or ``"pvgis"`` from a weather file's first line.
+    """``"epw"``, ``"tmy3"``, ``"pvgis"`` or ``"nsrdb"`` from a weather file's first line.
 
     An EPW file starts with its ``LOCATION,`` record (EnergyPlus Auxiliary
     Programs, "EnergyPlus Weather File Data Dictionary"); a TMY3 file with the
     station's USAF number, name, state, UTC offset, latitude, longitude and
     elevation (Wilcox & Marion 2008, NREL/TP-581-43156, section 2.1); a PVGIS download
-    (the EU JRC's tool) with ``Latitude (decimal degrees):`` (CSV) or ``{`` (JSON).
+    (the EU JRC's tool) with ``Latitude (decimal degrees):`` (CSV) or ``{`` (JSON); an NSRDB
+    download with :data:`NSRDB_FIRST_CELLS` (a typical year or an actual one:
+    :func:`nsrdb_is_typical_year`).
     """
     line = first_line.lstrip("\ufeff").strip()
     if line.upper().startswith("LOCATION,"):
         return "epw"
     if line.startswith("{") or line.lower().startswith("latitude (decimal degrees)"):
         return "pvgis"
+    if line.startswith(NSRDB_FIRST_CELLS):
+        return "nsrdb"
     head = line.split(",")
     if len(head) >= 7 and head[0].strip().isdigit():
         return "tmy3"
@@ -424,12 +429,13 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
 
     A PVGIS typical year (CSV or JSON, or an EPW PVGIS wrote, told by its ``Irradiance Time
     Offset`` comment) is read by :func:`_pvgis_typical_year`: its clock is UTC whatever its
-    EPW header says, and its irradiance is of instants, not hourly means.
+    EPW header says, and its irradiance is of instants, not hourly means; an NSRDB typical
+    year by :func:`_read_nsrdb_typical_year`, its values at their stamps too.
 
     Parameters
     ----------
     source : path or text buffer
-    fmt : {"tmy3", "epw", "pvgis"}, optional
+    fmt : {"tmy3", "epw", "pvgis", "nsrdb"}, optional
         What the caller was told the file is; a file whose first line says otherwise is
         refused (:func:`sniff_weather_format`). Default: read from the first line.
 
@@ -449,6 +455,8 @@ def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
     fmt = sniff_weather_format(src, fmt)
     if fmt == "pvgis":
         return _read_pvgis(src)
+    if fmt == "nsrdb":
+        return _read_nsrdb_typical_year(src)
     pvgis_offset_h = pvgis_epw_offset_h(src) if fmt == "epw" else None
     try:
         if fmt == "tmy3":
@@ -581,42 +589,57 @@ def _pvgis_typical_year(data: pd.DataFrame, irradiance_offset_h: float,
                         place: dict[str, float], name: str, first_line: int
                         ) -> tuple[pd.DataFrame, dict[str, Any]]:
     """A PVGIS typical year (``data`` indexed by its UTC stamps) as :func:`read_typical_year`
-    gives every typical year: one value per calendar hour at the hour's middle, UTC.
+    gives every typical year (:func:`_typical_year_of_instants`, UTC).
 
     PVGIS's irradiance is not an hourly mean but the satellite's instant: its TMY says
     ``Irradiance Time Offset (h): 0.1761`` after each stamp (at 45° N; the EPW it writes says
     −0.8239 h from hours labelled by their end, and its hourly series stamp those instants,
     ``…:0010``; PVGIS's radiation is SARAH's, Huld et al. 2012, Solar Energy 86, 1803); its
-    air temperature and wind (ERA5) are of the stamp. Each column is interpolated linearly
-    from its instants to the hours' middles, around the year's end. Measured against the
-    sun (:mod:`sim.weather_clock`) at the file's place: 0 min; read as hour-start means, as
-    any EPW, on its header's ``TZ`` of 1, a PVGIS EPW had run 40 min early. An hour with an
-    irradiance out of bounds is refused naming it (:func:`_check_irradiance`)."""
-    stamps = pd.DatetimeIndex(data.index).tz_convert("UTC")
+    air temperature and wind (ERA5) are of the stamp. Measured against the sun
+    (:mod:`sim.weather_clock`) at the file's place: 0 min; read as hour-start means, as any
+    EPW, on its header's ``TZ`` of 1, a PVGIS EPW had run 40 min early."""
+    stamps = pd.DatetimeIndex(data.index).tz_convert("UTC").tz_localize(None)
+    offsets = {c: irradiance_offset_h if c in ("ghi", "dni", "dhi") else 0.0
+               for c in WEATHER_COLUMNS}
+    weather = _typical_year_of_instants(data.set_axis(stamps), offsets, 0.0, "pvgis",
+                                        first_line)
+    return weather, {"format": "pvgis", "name": name, **place, "utc_offset_h": 0.0,
+                     "irradiance_offset_h": round(float(irradiance_offset_h), 4)}
+
+
+def _typical_year_of_instants(data: pd.DataFrame, offsets_h: dict[str, float],
+                              utc_offset_h: float, fmt: str, first_line: int) -> pd.DataFrame:
+    """A typical year of instants (PVGIS's, NSRDB's: not hourly means) as
+    :func:`read_typical_year` gives every typical year: one value per calendar hour at the
+    hour's middle on the file's clock, UTC + ``utc_offset_h`` (``data`` indexed by its
+    stamps there, naive), each column interpolated linearly from its instants (each stamp,
+    ``offsets_h[column]`` hours after it) to the middles, around the year's end. The file's
+    hours are refused naming one missing or twice (:func:`_check_hours`), an irradiance out
+    of bounds naming its hour (:func:`_check_irradiance`)."""
+    stamps = pd.DatetimeIndex(data.index)
     hour = _calendar_hour(stamps)
-    _check_hours(hour, first_line, "PVGIS")
+    _check_hours(hour, first_line, fmt)
     missing = [c for c in WEATHER_COLUMNS if c not in data.columns]
     if missing:
-        raise ValueError(f"not a readable PVGIS typical year: no {', '.join(missing)} "
-                         "column in it")
+        raise ValueError(f"not a readable {fmt.upper()} typical year: no "
+                         f"{', '.join(missing)} column in it")
     order = np.argsort(hour, kind="stable")
     raw = data[list(WEATHER_COLUMNS)].iloc[order].astype(float)
     if not np.isfinite(raw.to_numpy()).all():
-        raise ValueError("not a readable PVGIS typical year: a value is blank or not a "
-                         "number")
+        raise ValueError(f"not a readable {fmt.upper()} typical year: a value is blank or "
+                         "not a number")
     raw.index = stamps[order]
-    _check_irradiance(raw, "pvgis", "%d %b %H:%M UTC")  # the file's hours, as it says them
+    clock = f"UTC{utc_offset_h:+g}" if utc_offset_h else "UTC"
+    _check_irradiance(raw, fmt, f"%d %b %H:%M {clock}")
+    minute_h = (raw.index - raw.index.floor("h")).total_seconds().to_numpy() / 3600.0
     at = np.arange(HOURS_PER_TYPICAL_YEAR, dtype=float)
     out = np.empty(raw.shape)
     for j, col in enumerate(WEATHER_COLUMNS):
-        taken = at + (irradiance_offset_h if col in ("ghi", "dni", "dhi") else 0.0)
-        out[:, j] = np.interp(at + 0.5, taken, raw[col].to_numpy(),
+        out[:, j] = np.interp(at + 0.5, at + minute_h + offsets_h[col], raw[col].to_numpy(),
                               period=HOURS_PER_TYPICAL_YEAR)
-    weather = pd.DataFrame(out, index=raw.index.floor("h") + pd.Timedelta(minutes=30),
-                           columns=list(WEATHER_COLUMNS))
-    station = {"format": "pvgis", "name": name, **place, "utc_offset_h": 0.0,
-               "irradiance_offset_h": round(float(irradiance_offset_h), 4)}
-    return weather, station
+    zone = dt.timezone(dt.timedelta(hours=utc_offset_h))
+    middles = (raw.index.floor("h") + pd.Timedelta(minutes=30)).tz_localize(zone)
+    return pd.DataFrame(out, index=middles, columns=list(WEATHER_COLUMNS))
 
 
 #: A measured series' rows are at most this far apart [s]: a longer gap is no weather to
@@ -784,20 +807,15 @@ def _nsrdb_rows(src: IO[str]) -> tuple[pd.DataFrame, str]:
     if missing:
         raise ValueError(f"an NSRDB file without the columns {', '.join(missing)} in its "
                          "third line")
-    years = body["Year"].dropna().unique()
-    if len(body) == HOURS_PER_TYPICAL_YEAR and len(years) > 1:
+    if _nsrdb_typical(body):
         raise ValueError(
-            f"an NSRDB typical year (TMY: {len(body):,} hours, its months from "
-            f"{len(years)} years) is not read: run on an actual year's NSRDB download, on "
-            "its own dates, or on a TMY3, EPW or PVGIS typical year")
-    stamp = body[needed[:5]].apply(pd.to_numeric, errors="coerce")
-    bad = stamp.isna().any(axis=1).to_numpy()
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"time: line {i + 4} has no whole Year, Month, Day, Hour and Minute")
+            f"an NSRDB typical year (TMY: {len(body):,} hours, its months from several "
+            "years) is not measured weather: it is read as a typical year (--nsrdb PATH, "
+            "or uploaded)")
+    stamp = _nsrdb_stamps(body)
     sign = "+" if tz_h >= 0 else "-"
     zone = f"{sign}{int(abs(tz_h)):02d}:{round(abs(tz_h) % 1 * 60):02d}"
-    ints = stamp.astype(int).astype(str)
+    ints = stamp.astype(str)
     time = (ints["Year"] + "-" + ints["Month"].str.zfill(2) + "-" + ints["Day"].str.zfill(2)
             + "T" + ints["Hour"].str.zfill(2) + ":" + ints["Minute"].str.zfill(2) + ":00"
             + zone)
@@ -808,6 +826,70 @@ def _nsrdb_rows(src: IO[str]) -> tuple[pd.DataFrame, str]:
     where = (f"NSRDB location {place['location_id']} ({place['latitude']:.2f}, "
              f"{place['longitude']:.2f}), UTC{tz_h:+g} h, values at their stamps")
     return raw, where
+
+
+def _nsrdb_typical(body: pd.DataFrame) -> bool:
+    """Whether an NSRDB download's rows are a typical year: 8,760 hours whose months come
+    from several years (a TMY, TGY or TDY), not one actual year."""
+    return len(body) == HOURS_PER_TYPICAL_YEAR and body["Year"].dropna().nunique() > 1
+
+
+def _nsrdb_stamps(body: pd.DataFrame) -> pd.DataFrame:
+    """An NSRDB download's Year, Month, Day, Hour and Minute as whole numbers; a row without
+    them refused naming its line."""
+    stamp = body[["Year", "Month", "Day", "Hour", "Minute"]].apply(pd.to_numeric,
+                                                                    errors="coerce")
+    bad = stamp.isna().any(axis=1).to_numpy()
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"time: line {i + 4} has no whole Year, Month, Day, Hour and Minute")
+    return stamp.astype(int)
+
+
+def nsrdb_is_typical_year(source: str | Path | IO[str]) -> bool:
+    """Whether a weather file is an NSRDB typical year (:func:`_nsrdb_typical`); False for
+    any other file. A buffer is left where it was."""
+    src = weather_buffer(source)
+    start = src.tell()
+    try:
+        if not src.readline().lstrip("\ufeff").startswith(NSRDB_FIRST_CELLS):
+            return False
+        src.readline()
+        body = pd.read_csv(src, dtype=str, usecols=lambda c: c == "Year")
+        return "Year" in body.columns and _nsrdb_typical(body)
+    finally:
+        src.seek(start)
+
+
+def _read_nsrdb_typical_year(src: IO[str]) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """An NSRDB typical year (TMY, TGY, TDY; PSM3 or PSM4 CSV) as a typical year on its
+    header's clock (``Time Zone``): its values stand at their stamps, as an actual year's do
+    (:func:`_nsrdb_rows`), so each column is interpolated from them to the hours' middles
+    (:func:`_typical_year_of_instants`; stamps at minute 30 are the middles themselves). An
+    actual year is refused saying it is measured weather of its own dates."""
+    place = nsrdb_header(src)
+    body = pd.read_csv(src, dtype=str, skipinitialspace=True)
+    needed = ["Year", "Month", "Day", "Hour", "Minute", *_NSRDB_COLUMNS.values()]
+    missing = [c for c in needed if c not in body.columns]
+    if missing:
+        raise ValueError(f"an NSRDB file without the columns {', '.join(missing)} in its "
+                         "third line")
+    if not _nsrdb_typical(body):
+        raise ValueError(
+            f"an NSRDB download of an actual year ({len(body):,} rows, "
+            f"{body['Year'].dropna().iloc[0]}): measured weather of its own dates "
+            "(--weather-csv PATH, or uploaded), not a typical year")
+    stamp = _nsrdb_stamps(body)
+    stamps = pd.to_datetime(stamp.rename(columns=str.lower))
+    values = _numeric_cells(body.rename(columns={v: k for k, v in _NSRDB_COLUMNS.items()}),
+                            list(WEATHER_COLUMNS), lambda i: f"line {i + 4}", "NSRDB")
+    weather = _typical_year_of_instants(values.set_axis(pd.DatetimeIndex(stamps)),
+                                        dict.fromkeys(WEATHER_COLUMNS, 0.0),
+                                        place["utc_offset_h"], "nsrdb", first_line=4)
+    station = {"format": "nsrdb", "name": f"location {place['location_id']}",
+               **{k: place[k] for k in ("latitude", "longitude", "altitude")},
+               "utc_offset_h": place["utc_offset_h"]}
+    return weather, station
 
 
 def nsrdb_header(src: IO[str]) -> dict[str, Any]:

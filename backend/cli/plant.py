@@ -74,7 +74,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sim.add_argument("--tmy3", metavar="PATH", help="weather from a TMY3 file")
     sim.add_argument("--epw", metavar="PATH", help="weather from an EPW file")
     sim.add_argument("--pvgis", metavar="PATH",
-                        help="weather from a PVGIS TMY download (CSV or JSON)")
+                     help="weather from a PVGIS TMY download (CSV or JSON)")
+    sim.add_argument("--nsrdb", metavar="PATH",
+                     help="weather from an NSRDB TMY download (PSM CSV)")
     sim.add_argument("--force", action="store_true", help=_FORCE_HELP)
     sim.add_argument("--plants-dir", default=plants_dir, help="directory of plant JSON files")
     sim.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -133,7 +135,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sw.add_argument("--tmy3", metavar="PATH", help="weather from a TMY3 file")
     sw.add_argument("--epw", metavar="PATH", help="weather from an EPW file")
     sw.add_argument("--pvgis", metavar="PATH",
-                       help="weather from a PVGIS TMY download (CSV or JSON)")
+                    help="weather from a PVGIS TMY download (CSV or JSON)")
+    sw.add_argument("--nsrdb", metavar="PATH",
+                    help="weather from an NSRDB TMY download (PSM CSV)")
     sw.add_argument("--force", action="store_true", help=_FORCE_HELP)
     sw.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                     help="a running Dask scheduler (default: a LocalCluster on this machine)")
@@ -264,13 +268,13 @@ def sweep_flag(field: str) -> str:
 def typical_weather(args: argparse.Namespace, place: Any, start: Any, end: Any
                     ) -> tuple[Any, dict[str, Any] | None, str, dict[str, Any]]:
     """(weather on ``[start, end)``, its station, a token naming the file, its clock check)
-    from --tmy3/--epw/--pvgis, or (None, None, "", {}): the twin's rules
+    from --tmy3/--epw/--pvgis/--nsrdb, or (None, None, "", {}): the twin's rules
     (:func:`backend.twin.scenario.check_station`, a station more than 100 km away refused
     unless --force; :func:`sim.sky.typical_year_at_site` lays the year on the range and,
     far away, moves only the state of the sky; :func:`sim.weather_clock.weather_clock`,
     ``weather_shift_min`` and ``weather_warning``: is the file on the sun's time at the
     place?)."""
-    given = [(f"--{f}", getattr(args, f)) for f in ("tmy3", "epw", "pvgis")
+    given = [(f"--{f}", getattr(args, f)) for f in ("tmy3", "epw", "pvgis", "nsrdb")
              if getattr(args, f, None)]
     if len(given) > 1:
         raise InputError(f"{' and '.join(f for f, _ in given)}: give one weather file, not "

@@ -101,6 +101,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
              "--epw) instead of clear sky"
     )
     weather.add_argument(
+        "--nsrdb", metavar="PATH",
+        help="use the typical year of an NSRDB TMY download (PSM CSV; an NSRDB actual year "
+             "goes to --weather-csv) instead of clear sky"
+    )
+    weather.add_argument(
         "--weather-csv", metavar="PATH",
         help="use measured weather of its own dates: a CSV with columns time (ISO 8601 with "
         "a UTC offset), ghi, dni, dhi [W m-2], optionally temp_air [°C] and wind_speed "
@@ -224,6 +229,7 @@ def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
     weather, station = None, None
     flag, path = (("--tmy3", args.tmy3) if args.tmy3 else ("--epw", args.epw) if args.epw
                   else ("--pvgis", args.pvgis) if args.pvgis
+                  else ("--nsrdb", args.nsrdb) if args.nsrdb
                   else ("--weather-csv", args.weather_csv))
     if args.weather_csv:
         weather, station = _measured(args, site)

@@ -220,15 +220,16 @@ def _station(path: Path, fmt: str) -> dict[str, Any]:
 
     from sim.sky import (
         nsrdb_header,
+        nsrdb_is_typical_year,
         pvgis_epw_offset_h,
         read_measured,
         read_typical_year,
         weather_buffer,
     )
 
-    if fmt == "nsrdb":  # an actual year: its place and the place's zone from its header
+    if fmt == "nsrdb":  # a typical or an actual year: its place and zone from its header
         head = nsrdb_header(weather_buffer(path))
-        weather, _ = read_measured(path)
+        weather = (read_typical_year if nsrdb_is_typical_year(path) else read_measured)(path)[0]
         return {"latitude_deg": head["latitude"], "longitude_deg": head["longitude"],
                 "altitude_m": head["altitude"], "tz_h": head["local_utc_offset_h"],
                 "name": "", "code": f"NSRDB location {head['location_id']}",
@@ -277,11 +278,10 @@ def from_weather(args: argparse.Namespace) -> int:
     is not the file's offset is written with a warning naming both."""
     from sim.site_config import standard_offset_h
     from sim.sites import CLIMATE_KEYS, relocated_config
-    from sim.sky import NSRDB_FIRST_CELLS, sniff_weather_format, weather_buffer
+    from sim.sky import sniff_weather_format
 
     try:  # the content decides: a TMY2 file named .csv is not read as TMY3
-        fmt = ("nsrdb" if weather_buffer(args.file).readline().lstrip("\ufeff").startswith(
-            NSRDB_FIRST_CELLS) else sniff_weather_format(args.file))
+        fmt = sniff_weather_format(args.file)
     except (OSError, ValueError) as exc:
         fail(f"{args.file}: {exc}")
     if args.format is not None and args.format != fmt:
@@ -300,7 +300,7 @@ def from_weather(args: argparse.Namespace) -> int:
                  if args.timezone else
                  f"zone {zone}: the longitude's whole hour, {solar_h:+d} h — a PVGIS file is "
                  "in UTC and names no zone; the typical year keeps UTC")
-    elif fmt == "nsrdb":  # measured weather: its own stamps, whatever the site's zone
+    elif fmt == "nsrdb":  # the NSRDB wrote its zone: its stamps', whatever the site's
         clock = (f"zone {zone}" + (" (--timezone)" if args.timezone else
                                    f": the NSRDB file's Local Time Zone, {st['tz_h']:+g} h"))
     elif args.timezone:

@@ -66,8 +66,9 @@ def check_station(station: dict[str, Any], site: Site | Plant, force: bool,
     if station["latitude"] is None:  # measured weather: the site's own, no station
         return {k: station[k] for k in ("format", "name", "stamped", "start", "end")} | {
             "forced": bool(force)}
-    # a PVGIS year's clock is UTC by the format, not a header that can slip
-    clock = None if station["format"] == "pvgis" else clock_off_longitude(
+    # a PVGIS year's clock is UTC by the format, an NSRDB year's its header's as the NSRDB
+    # wrote it (UTC for a UTC download): neither is a header a person can slip
+    clock = None if station["format"] in ("pvgis", "nsrdb") else clock_off_longitude(
         station["utc_offset_h"], station["longitude"], "the weather file's offset")
     if clock is not None and not force:  # Alice Springs' −9.5 for +9.5 cost 39 % of its energy
         utc = (" (a file written in UTC, its header saying so, is read right when forced)"

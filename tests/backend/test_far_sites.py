@@ -147,25 +147,26 @@ def test_a_pvgis_year_uploaded_runs_on_the_suns_time(client: httpx.Client) -> No
                                     / "pvgis_hourly_Timeseries_45.000_8.000_SA_30deg_0deg_"
                                     "2016_2016.csv").read_bytes(), "text/csv")})
     assert r.status_code == 422
-    assert r.json()["detail"].startswith("file: hourly.csv is not a readable TMY3, EPW or "
-                                         "PVGIS typical year: a PVGIS file that is not a "
-                                         "typical year (TMY)")
+    assert r.json()["detail"].startswith("file: hourly.csv is not a readable TMY3, EPW, "
+                                         "PVGIS or NSRDB typical year: a PVGIS file that is "
+                                         "not a typical year (TMY)")
 
 
 def test_an_nsrdb_year_uploaded_runs_at_its_stamps(client: httpx.Client) -> None:
     """An NSRDB PSM4 download (30-min values of 2023 at Craig, Colorado), uploaded as it is
     for a site at its place, is measured weather at its stamps: 0 min from the sun, where
-    the same values in a CSV read as interval-end means run 15 min early
-    (``tests/sim/test_nsrdb_weather.py``)."""
+    the same values in a CSV read as interval-end means run 15 min early; its typical year
+    is a typical year, on the sun's time too (``tests/sim/test_nsrdb_weather.py``)."""
     from tests.sim.test_nsrdb_weather import FILES, nsrdb_text
 
     _new_site(client, "craig", latitude_deg=40.53, longitude_deg=-108.54, altitude_m=2168.0,
               timezone="America/Denver")
-    r = client.post("/api/v1/simulations/weather",
-                    data={"site_id": "craig", "start": "2023-09-01", "end": "2023-10-01",
-                          "step_s": "600"},
-                    files={"file": (FILES["psm4"], nsrdb_text("psm4").encode(), "text/csv")})
-    assert r.status_code == 200, r.text
-    run = r.json()
-    assert run["sky"] == "weather" and run["timezone"] == "America/Denver"
-    assert abs(run["weather_shift_min"]) <= 5.0 and run["weather_warning"] is None, run
+    for kind, start, end in (("psm4", "2023-09-01", "2023-10-01"),
+                             ("tmy", "2026-09-01", "2026-10-01")):  # a typical year: any
+        r = client.post("/api/v1/simulations/weather",
+                        data={"site_id": "craig", "start": start, "end": end, "step_s": "600"},
+                        files={"file": (FILES[kind], nsrdb_text(kind).encode(), "text/csv")})
+        assert r.status_code == 200, r.text
+        run = r.json()
+        assert run["sky"] == "weather" and run["timezone"] == "America/Denver"
+        assert abs(run["weather_shift_min"]) <= 5.0 and run["weather_warning"] is None, run

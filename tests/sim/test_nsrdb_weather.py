@@ -1,6 +1,7 @@
-"""NSRDB downloads as measured weather (``sim.sky.read_measured``): two real PSM files of
-one place (Craig, Colorado) in ``tests/data/nsrdb/`` (README). Checked against pvlib's
-own reader of the same files and against the sun (``sim.weather_clock``)."""
+"""NSRDB downloads: actual years as measured weather (``sim.sky.read_measured``), a typical
+year as one (``sim.sky.read_typical_year``), PSM files of one place (Craig, Colorado) in
+``tests/data/nsrdb/`` (README). Checked against pvlib's own reader of the same files and
+against the sun (``sim.weather_clock``)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -17,12 +19,14 @@ from sim.sky import read_measured
 from sim.weather_clock import irradiance_shift
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "nsrdb"
-FILES = {"psm3": "nsrdb_psm3_401182_2017.csv", "psm4": "nsrdb_psm4_401182_2023.csv"}
+FILES = {"psm3": "nsrdb_psm3_401182_2017.csv", "psm4": "nsrdb_psm4_401182_2023.csv",
+         "tmy": "nsrdb_psm4_401182_tmy-2023.csv"}
 CRAIG = (40.53, -108.54, 2168.0)
 
 
 def nsrdb_text(kind: str) -> str:
-    """The download as NSRDB wrote it (``psm3``: 2017, ``psm4``: 2023; 30-min steps)."""
+    """The download as NSRDB wrote it (``psm3``: 2017, ``psm4``: 2023, 30-min steps;
+    ``tmy``: a PSM4 typical year, hourly, README)."""
     return gzip.decompress((DATA / f"{FILES[kind]}.gz").read_bytes()).decode()
 
 
@@ -70,7 +74,7 @@ def test_an_nsrdb_year_is_on_the_suns_time(kind: str) -> None:
     assert found is not None and found["shift_min"] == pytest.approx(-15.0, abs=2.5)
 
 
-def test_a_bad_nsrdb_cell_is_named_by_its_line_and_a_typical_year_refused() -> None:
+def test_a_bad_nsrdb_cell_is_named_by_its_line_and_a_typical_year_sent_on() -> None:
     text = nsrdb_text("psm4")
     lines = text.splitlines(keepends=True)
     assert lines[3].startswith("2023,1,1,0,0,")
@@ -84,7 +88,8 @@ def test_a_bad_nsrdb_cell_is_named_by_its_line_and_a_typical_year_refused() -> N
     tmy = [ln.replace("2023,", "2019,", 1) if ln.startswith("2023,7,") else ln
            for ln in hourly]
     with pytest.raises(ValueError, match=r"an NSRDB typical year \(TMY: 8,760 hours, its "
-                                         r"months from 2 years\) is not read"):
+                                         r"months from several years\) is not measured "
+                                         r"weather: it is read as a typical year \(--nsrdb"):
         read_measured(io.StringIO("".join([*lines[:3], *tmy])))
 
 
@@ -134,3 +139,62 @@ def test_a_site_from_an_nsrdb_download_takes_its_place_and_zone(
     assert config["temp_air_c"] == round(float(weather["temp_air"].mean()), 1)
     assert config["notes"] == "zone Etc/GMT+7: the NSRDB file's Local Time Zone, -7 h"
     assert "NSRDB location 401182" in config["source"]
+
+
+def test_an_nsrdb_typical_year_reads_at_its_stamps_on_its_clock() -> None:
+    """Its stamps are at minute 30 of each hour, UTC−7: the hours' middles themselves, so
+    every value is the file's (as pvlib reads it), in calendar order; 0 min from the sun in
+    each season at its place."""
+    from pvlib import iotools
+
+    from sim.sky import nsrdb_is_typical_year, read_typical_year, typical_year_on
+
+    text = nsrdb_text("tmy")
+    assert nsrdb_is_typical_year(io.StringIO(text))
+    assert not nsrdb_is_typical_year(io.StringIO(nsrdb_text("psm4")))
+    weather, station = read_typical_year(io.StringIO(text))
+    assert station == {"format": "nsrdb", "name": "location 401182",
+                       "latitude": 40.53, "longitude": -108.54, "altitude": 2168.0,
+                       "utc_offset_h": -7.0}
+    ref, _ = iotools.read_nsrdb_psm4(io.StringIO(text))
+    assert len(weather) == len(ref) == 8760 and (ref.index.minute == 30).all()
+    ref = ref.iloc[np.lexsort((ref.index.hour, ref.index.day, ref.index.month))]
+    for col in ("ghi", "dni", "dhi", "temp_air", "wind_speed"):
+        assert np.array_equal(weather[col].to_numpy(), ref[col].to_numpy()), col
+    assert str(weather.index[12]) == f"{ref.index[12].year}-01-01 12:30:00-07:00"
+    for month in (3, 6, 9, 12):
+        start = pd.Timestamp(2024, month, 1, tz="UTC")
+        end = start + pd.DateOffset(months=1)
+        on = typical_year_on(weather, station["utc_offset_h"], start, end)
+        found = irradiance_shift(on, *CRAIG, start, end)
+        assert found is not None and abs(found["shift_min"]) <= 5.0, (month, found)
+    with pytest.raises(ValueError, match=r"an NSRDB download of an actual year \(17,520 "
+                                         r"rows, 2023\): measured weather .*--weather-csv"):
+        read_typical_year(io.StringIO(nsrdb_text("psm4")))
+
+
+def test_a_run_on_an_nsrdb_typical_year(heliotwin_cli: Callable[..., Any],
+                                        tmp_path: Path) -> None:
+    """``site from-weather`` and ``simulate --nsrdb`` on the typical year: the site at its
+    place and zone, the run on the sun's time; its actual year given as ``--nsrdb`` is
+    refused naming ``--weather-csv``."""
+    import json
+
+    env = {"HELIOTWIN_SITES_DIR": str(tmp_path / "sites"),
+           "HELIOTWIN_DATABASE_URL": f"sqlite:///{tmp_path / 'db.sqlite'}"}
+    tmy, year = tmp_path / FILES["tmy"], tmp_path / FILES["psm4"]
+    tmy.write_text(nsrdb_text("tmy"))
+    year.write_text(nsrdb_text("psm4"))
+    made = heliotwin_cli("site", "from-weather", str(tmy), "--id", "craig", env=env)
+    assert made.returncode == 0, made.stderr
+    config = json.loads((tmp_path / "sites" / "craig.json").read_text())
+    assert (config["latitude_deg"], config["timezone"]) == (40.53, "Etc/GMT+7")
+    run = heliotwin_cli("simulate", "--site", "craig", "--start", "2026-06-01", "--end",
+                        "2026-07-01", "--step-s", "600", "--nsrdb", str(tmy), "--json", env=env)
+    assert run.returncode == 0, run.stderr
+    summary = json.loads(run.stdout)
+    assert summary["weather"]["format"] == "nsrdb" and summary["weather"]["distance_km"] == 0
+    assert abs(summary["weather_shift_min"]) <= 5.0 and summary["weather_warning"] is None
+    wrong = heliotwin_cli("simulate", "--site", "craig", "--start", "2023-06-01", "--end",
+                          "2023-06-02", "--nsrdb", str(year), env=env)
+    assert wrong.returncode == 2 and "an NSRDB download of an actual year" in wrong.stderr

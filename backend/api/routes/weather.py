@@ -41,6 +41,7 @@ from sim.energy import READING_STAMPS
 from sim.site_config import check_iana_zone
 from sim.sky import (
     MEASURED_STAMPED_DEFAULT,
+    nsrdb_is_typical_year,
     read_measured,
     read_typical_year,
     sniff_weather_format,
@@ -56,7 +57,8 @@ WEATHER_FORM_FIELDS = ("file", "force", "weather_stamped", "weather_timezone")
 async def read_weather_upload(form: FormData) -> tuple[Any, dict[str, Any]]:
     """The weather and station of the form's ``file`` (``weather_stamped`` and
     ``weather_timezone`` read for measured weather): a typical year when its first line is a
-    TMY3's, an EPW's or a PVGIS TMY's (CSV or JSON), else measured weather; 422 naming
+    TMY3's, an EPW's, a PVGIS TMY's (CSV or JSON) or an NSRDB typical year's, else measured
+    weather (an NSRDB actual year among it); 422 naming
     ``file`` when unreadable. The one reading of a weather upload (the twin's and a
     plant's)."""
     upload = form.get("file")
@@ -67,14 +69,16 @@ async def read_weather_upload(form: FormData) -> tuple[Any, dict[str, Any]]:
     text = weather_text(await upload.read())
     name = upload.filename or "the upload"
     try:
-        sniff_weather_format(io.StringIO(text))
+        fmt = sniff_weather_format(io.StringIO(text))
     except ValueError:
         return _measured(text, name, stamped, timezone)
+    if fmt == "nsrdb" and not nsrdb_is_typical_year(io.StringIO(text)):
+        return _measured(text, name, stamped, timezone)  # an actual year: of its own dates
     try:
         return read_typical_year(io.StringIO(text))
     except (ValueError, KeyError, IndexError) as exc:
-        raise HTTPException(422, f"file: {name} is not a readable TMY3, EPW or PVGIS typical "
-                                 f"year: {exc}") from None
+        raise HTTPException(422, f"file: {name} is not a readable TMY3, EPW, PVGIS or NSRDB "
+                                 f"typical year: {exc}") from None
 
 
 def _measured(text: str, name: str, stamped: str | None, timezone: str | None
@@ -92,9 +96,9 @@ def _measured(text: str, name: str, stamped: str | None, timezone: str | None
         return read_measured(io.StringIO(text), stamped or MEASURED_STAMPED_DEFAULT, timezone,
                              name)
     except (ValueError, pd.errors.ParserError) as exc:
-        raise HTTPException(422, f"file: {name} is neither a TMY3, EPW or PVGIS typical year "
-                                 f"(by its first line) nor readable measured weather: {exc}"
-                            ) from None
+        raise HTTPException(422, f"file: {name} is neither a TMY3, EPW, PVGIS or NSRDB typical "
+                                 f"year (by its first line) nor readable measured weather: "
+                                 f"{exc}") from None
 
 
 @router.post("/weather", response_model=SimulationSummaryRead,
