@@ -64,7 +64,7 @@ def test_the_plant_page_runs_a_plant_on_a_weather_file(  # type: ignore[no-untyp
     (docs/plants.md) as tiles; the file at Peñarroya, 9,000 km away, refused naming
     ``force`` with no tile left; Greensboro's TMY3 with its header's offset −4 for −5 at a
     plant on the station warned as a file 65 min off the sun's time; a PVGIS TMY (JSON) at
-    a plant at its place run as a typical year with no warning."""
+    a plant at its place run as a typical year with no warning, and an NSRDB one too."""
     sand_point = {"latitude_deg": 55.317, "longitude_deg": -160.517, "altitude_m": 7,
                   "timezone": "America/Anchorage",
                   "tracker": {"stow_wind_speed_m_s": 12}}
@@ -72,10 +72,14 @@ def test_the_plant_page_runs_a_plant_on_a_weather_file(  # type: ignore[no-untyp
                   "timezone": "America/New_York"}
     piedmont = {"latitude_deg": 45.0, "longitude_deg": 8.0, "altitude_m": 250,
                 "timezone": "Europe/Rome"}
+    craig = {"latitude_deg": 40.53, "longitude_deg": -108.54, "altitude_m": 2168,
+             "timezone": "America/Denver"}
     from tests.e2e.conftest import open_page
+    from tests.sim.test_nsrdb_weather import FILES, nsrdb_text
     from tests.sim.test_pvgis_weather import pvgis_file
 
-    with _plants(server, sandpoint=sand_point, greensboro=greensboro, piedmont=piedmont), \
+    with _plants(server, sandpoint=sand_point, greensboro=greensboro, piedmont=piedmont,
+                 craig=craig), \
             open_page(browser, request, ignore=lambda text: "422" in text) as page:
         page.goto(server.url + "/#plant?day=2026-03-30")
         page.wait_for_selector('body[data-plant-loaded$="/2026-03-30"]', state="attached",
@@ -118,6 +122,15 @@ def test_the_plant_page_runs_a_plant_on_a_weather_file(  # type: ignore[no-untyp
             "#plant-weather-summary"), tiles
         page.screenshot(path=str(ARTIFACTS / "plant-weather-pvgis.png"), full_page=True,
                         clip=_clip(page, "#plant-weather-form", "#plant-weather-summary"))
+
+        # an NSRDB typical year as the NSRDB writes it: its values at their stamps
+        nsrdb = tmp_path / FILES["tmy"]
+        nsrdb.write_text(nsrdb_text("tmy"))
+        _run(page, "craig", nsrdb, "2021-06-01", "2021-06-11", "900")
+        tiles = page.locator("#plant-weather-summary").inner_text()
+        assert "NSRDB typical year" in tiles and "location 401182" in tiles, tiles
+        assert "0 km from the plant" in tiles and "weather-warning" not in page.inner_html(
+            "#plant-weather-summary"), tiles
 
 
 def _clip(page, first: str, last: str) -> dict:  # type: ignore[no-untyped-def]
