@@ -725,7 +725,7 @@ def read_measured(source: str | Path | IO[str], stamped: str = MEASURED_STAMPED_
     _refuse_pvgis(first)
     src.seek(0)
     header_lines = 1
-    if first.lstrip("\ufeff").startswith(NSRDB_FIRST_CELLS):
+    if weather_format_or_none(first) == "nsrdb":
         raw, where = _nsrdb_rows(src)
         name = f"{name}: {where}" if name else where
         stamped, timezone, header_lines = "instant", None, 3
@@ -798,15 +798,9 @@ def _nsrdb_rows(src: IO[str]) -> tuple[pd.DataFrame, str]:
     0 min from the sun in every month with sunny days (:mod:`sim.weather_clock`), read as
     interval-end means 15 min early; its stamps are in the header's ``Time Zone`` (0 for a
     UTC download). An NSRDB typical year (8,760 rows, its months from several years) is
-    refused saying what to do: only an actual year runs, on its own dates."""
-    place = nsrdb_header(src)
+    refused naming where it is read (:func:`read_typical_year`)."""
+    place, body = _nsrdb_body(src, ["GHI", "DNI", "DHI"])
     tz_h = place["utc_offset_h"]
-    body = pd.read_csv(src, dtype=str, skipinitialspace=True)
-    needed = ["Year", "Month", "Day", "Hour", "Minute", "GHI", "DNI", "DHI"]
-    missing = [c for c in needed if c not in body.columns]
-    if missing:
-        raise ValueError(f"an NSRDB file without the columns {', '.join(missing)} in its "
-                         "third line")
     if _nsrdb_typical(body):
         raise ValueError(
             f"an NSRDB typical year (TMY: {len(body):,} hours, its months from several "
@@ -826,6 +820,19 @@ def _nsrdb_rows(src: IO[str]) -> tuple[pd.DataFrame, str]:
     where = (f"NSRDB location {place['location_id']} ({place['latitude']:.2f}, "
              f"{place['longitude']:.2f}), UTC{tz_h:+g} h, values at their stamps")
     return raw, where
+
+
+def _nsrdb_body(src: IO[str], columns: list[str]) -> tuple[dict[str, Any], pd.DataFrame]:
+    """An NSRDB download's place (:func:`nsrdb_header`) and rows (as text); refused naming
+    the stamp's fields or ``columns`` its data's header lacks."""
+    place = nsrdb_header(src)
+    body = pd.read_csv(src, dtype=str, skipinitialspace=True)
+    missing = [c for c in ["Year", "Month", "Day", "Hour", "Minute", *columns]
+               if c not in body.columns]
+    if missing:
+        raise ValueError(f"an NSRDB file without the columns {', '.join(missing)} in its "
+                         "third line")
+    return place, body
 
 
 def _nsrdb_typical(body: pd.DataFrame) -> bool:
@@ -852,7 +859,7 @@ def nsrdb_is_typical_year(source: str | Path | IO[str]) -> bool:
     src = weather_buffer(source)
     start = src.tell()
     try:
-        if not src.readline().lstrip("\ufeff").startswith(NSRDB_FIRST_CELLS):
+        if weather_format_or_none(src.readline()) != "nsrdb":
             return False
         src.readline()
         body = pd.read_csv(src, dtype=str, usecols=lambda c: c == "Year")
@@ -867,13 +874,7 @@ def _read_nsrdb_typical_year(src: IO[str]) -> tuple[pd.DataFrame, dict[str, Any]
     (:func:`_nsrdb_rows`), so each column is interpolated from them to the hours' middles
     (:func:`_typical_year_of_instants`; stamps at minute 30 are the middles themselves). An
     actual year is refused saying it is measured weather of its own dates."""
-    place = nsrdb_header(src)
-    body = pd.read_csv(src, dtype=str, skipinitialspace=True)
-    needed = ["Year", "Month", "Day", "Hour", "Minute", *_NSRDB_COLUMNS.values()]
-    missing = [c for c in needed if c not in body.columns]
-    if missing:
-        raise ValueError(f"an NSRDB file without the columns {', '.join(missing)} in its "
-                         "third line")
+    place, body = _nsrdb_body(src, list(_NSRDB_COLUMNS.values()))
     if not _nsrdb_typical(body):
         raise ValueError(
             f"an NSRDB download of an actual year ({len(body):,} rows, "
