@@ -420,7 +420,7 @@ def _calendar_hour(index: pd.DatetimeIndex) -> np.ndarray:
 
 def read_typical_year(source: str | Path | IO[str], fmt: str | None = None
                       ) -> tuple[pd.DataFrame, dict[str, Any]]:
-    """Read a typical year (TMY3 or EPW) with pvlib, in its station's standard time.
+    """Read a typical year (TMY3, EPW, PVGIS, NSRDB) with pvlib, in its station's standard time.
 
     ``pvlib.iotools.read_tmy3`` labels each hour by its end, ``read_epw`` by its
     start (hour − 1); both are moved to the middle of the hour, so interpolation

@@ -274,8 +274,9 @@ def fixed_offset_zone(tz_h: float) -> str:
 
 
 def from_weather(args: argparse.Namespace) -> int:
-    """Write a site at the station of a TMY3/EPW file; a ``--timezone`` whose standard time
-    is not the file's offset is written with a warning naming both."""
+    """Write a site at the place of a weather file (TMY3, EPW, PVGIS, NSRDB); a
+    ``--timezone`` whose standard time is not the file's offset is written with a warning
+    naming both."""
     from sim.site_config import standard_offset_h
     from sim.sites import CLIMATE_KEYS, relocated_config
     from sim.sky import sniff_weather_format

@@ -6,7 +6,7 @@ disturbances and the receiver — with their units, defaults and bounds; the CLI
 builds its flags from it and the HTTP schema its fields, so the two never
 drift apart. :func:`run_scenario` is the one call into ``sim.twin.simulate``.
 
-Weather: a scenario may carry a typical year (TMY3 or EPW, read by
+Weather: a scenario may carry a typical year (TMY3, EPW, PVGIS or NSRDB, read by
 :func:`sim.sky.read_typical_year`); :func:`run_scenario` lays it onto the run's
 calendar at the site (:func:`sim.sky.typical_year_at_site`). :func:`check_station` is the one
 rule for a station far from the site: refused unless forced. Or measured weather
