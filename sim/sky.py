@@ -715,7 +715,8 @@ def read_measured(source: str | Path | IO[str], stamped: str = MEASURED_STAMPED_
         UTC index; the columns read.
     station : dict
         ``format`` ``"measured"``, ``name``, ``stamped``, ``start`` and ``end`` (ISO, UTC);
-        no place: the series is taken as the site's own (``latitude`` etc. None).
+        no place: the series is taken as the site's own (``latitude`` etc. None) — but an
+        NSRDB year's place, whose distance to the site is then checked.
     """
     if stamped not in ("interval_end", "interval_start", "instant"):
         raise ValueError(f"stamped must be interval_end, interval_start or instant; got "
@@ -726,7 +727,7 @@ def read_measured(source: str | Path | IO[str], stamped: str = MEASURED_STAMPED_
     src.seek(0)
     header_lines = 1
     if weather_format_or_none(first) == "nsrdb":
-        raw, where = _nsrdb_rows(src)
+        raw, where, place = _nsrdb_rows(src)
         name = f"{name}: {where}" if name else where
         stamped, timezone, header_lines = "instant", None, 3
     else:
@@ -778,6 +779,8 @@ def read_measured(source: str | Path | IO[str], stamped: str = MEASURED_STAMPED_
     station = {"format": "measured", "name": name, "latitude": None, "longitude": None,
                "altitude": None, "utc_offset_h": None, "stamped": stamped,
                "start": first.isoformat(), "end": last.isoformat()}
+    if header_lines == 3:  # an NSRDB year says where it is: its distance is checked
+        station.update({k: place[k] for k in ("latitude", "longitude", "altitude")})
     return weather, station
 
 
@@ -789,9 +792,10 @@ _NSRDB_COLUMNS = {"ghi": "GHI", "dni": "DNI", "dhi": "DHI", "temp_air": "Tempera
                   "wind_speed": "Wind Speed"}
 
 
-def _nsrdb_rows(src: IO[str]) -> tuple[pd.DataFrame, str]:
+def _nsrdb_rows(src: IO[str]) -> tuple[pd.DataFrame, str, dict[str, Any]]:
     """An NSRDB download's rows as a measured CSV's (``time`` with the header's UTC offset,
-    ``ghi``, ``dni``, ``dhi``, ``temp_air``, ``wind_speed`` as text) and where it is from.
+    ``ghi``, ``dni``, ``dhi``, ``temp_air``, ``wind_speed`` as text), where it is from in
+    words, and its place (:func:`nsrdb_header`).
 
     NSRDB's irradiance (PSM: Sengupta et al. 2018, Renewable and Sustainable Energy Reviews
     89, 51) stands at its stamps: read so, the two downloads in ``tests/data/nsrdb/`` sit
@@ -819,7 +823,7 @@ def _nsrdb_rows(src: IO[str]) -> tuple[pd.DataFrame, str]:
             raw[key] = body[column]
     where = (f"NSRDB location {place['location_id']} ({place['latitude']:.2f}, "
              f"{place['longitude']:.2f}), UTC{tz_h:+g} h, values at their stamps")
-    return raw, where
+    return raw, where, place
 
 
 def _nsrdb_body(src: IO[str], columns: list[str]) -> tuple[dict[str, Any], pd.DataFrame]:

@@ -289,7 +289,7 @@ def execute(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
 def _measured(args: argparse.Namespace, site: Any) -> tuple[Any, dict[str, Any]]:
     """``--weather-csv``'s measured weather and its description
     (:func:`sim.sky.read_measured`, :func:`backend.twin.scenario.check_station`)."""
-    from backend.twin.scenario import check_station
+    from backend.twin.scenario import StationTooFar, check_station
     from sim.site_config import check_iana_zone
     from sim.sky import read_measured
 
@@ -303,7 +303,10 @@ def _measured(args: argparse.Namespace, site: Any) -> tuple[Any, dict[str, Any]]
                                       args.weather_timezone, Path(args.weather_csv).name)
     except (OSError, ValueError) as exc:
         raise InputError(f"--weather-csv: cannot read {args.weather_csv!r}: {exc}") from None
-    return weather, check_station(meta, site, args.force)
+    try:
+        return weather, check_station(meta, site, args.force, "--force")
+    except StationTooFar as exc:  # an NSRDB year says where it is from
+        raise InputError(f"--weather-csv: {exc}") from None
 
 
 def write_csv(series: Any, timezone: str, path: str) -> None:
@@ -378,7 +381,9 @@ def _text(summary: dict[str, Any]) -> str:
         + (
             [
                 f"weather: measured {w['name']} ({w['stamped']} stamps), {w['start']} .. "
-                f"{w['end']}" if w["format"] == "measured" else
+                f"{w['end']}" + (f", {w['distance_km']:.0f} km from the site"
+                                 if "distance_km" in w else "")
+                if w["format"] == "measured" else
                 f"weather: {w['format'].upper()} {w['name']} ({w['latitude_deg']:.2f}, "
                 f"{w['longitude_deg']:.2f}), {w['distance_km']:.0f} km from the site"
             ]

@@ -63,9 +63,12 @@ def check_station(station: dict[str, Any], site: Site | Plant, force: bool,
     :data:`MAX_STATION_DISTANCE_KM`, or its UTC offset more than
     ``sim.site_config.MAX_CLOCK_OFF_LONGITUDE_H`` from its longitude / 15, and not ``force``
     (the message names the flag or field ``force_name``)."""
-    if station["latitude"] is None:  # measured weather: the site's own, no station
-        return {k: station[k] for k in ("format", "name", "stamped", "start", "end")} | {
-            "forced": bool(force)}
+    if station["format"] == "measured":  # of its own dates: the site's own, unless it says
+        out = {k: station[k] for k in ("format", "name", "stamped", "start", "end")} | {
+            "forced": bool(force)}                   # where it is from (an NSRDB year)
+        if station["latitude"] is None:
+            return out
+        return out | _checked_distance(station, site, force, force_name)
     # a PVGIS year's clock is UTC by the format, an NSRDB year's its header's as the NSRDB
     # wrote it (UTC for a UTC download): neither is a header a person can slip
     clock = None if station["format"] in ("pvgis", "nsrdb") else clock_off_longitude(
@@ -75,12 +78,19 @@ def check_station(station: dict[str, Any], site: Site | Plant, force: bool,
                if station["utc_offset_h"] == 0 else "")
         raise StationTooFar(f"{clock} Fix the file's header, or set {force_name} to run on it "
                             f"anyway{utc}")
+    where = _checked_distance(station, site, force, force_name)
+    return {"format": station["format"], "name": station["name"],
+            **{k: where[k] for k in ("latitude_deg", "longitude_deg", "altitude_m")},
+            "utc_offset_h": station["utc_offset_h"], "distance_km": where["distance_km"],
+            "forced": bool(force)}
+
+
+def _checked_distance(station: dict[str, Any], site: Site | Plant, force: bool,
+                      force_name: str) -> dict[str, Any]:
+    """The station's place and distance to ``site`` (units in the keys); a
+    :class:`StationTooFar` past :data:`MAX_STATION_DISTANCE_KM` unless ``force``."""
     distance = station_distance_km(station, site)
     place = (f"site {site.site_id}" if isinstance(site, Site) else f"plant {site.plant_id}")
-    out = {"format": station["format"], "name": station["name"],
-           "latitude_deg": station["latitude"], "longitude_deg": station["longitude"],
-           "altitude_m": station["altitude"], "utc_offset_h": station["utc_offset_h"],
-           "distance_km": round(distance, 1), "forced": bool(force)}
     if distance > MAX_STATION_DISTANCE_KM and not force:
         raise StationTooFar(
             f"the weather station {station['name'] or '?'} ({station['latitude']:.2f}, "
@@ -88,7 +98,8 @@ def check_station(station: dict[str, Any], site: Site | Plant, force: bool,
             f"({site.latitude:.2f}, {site.longitude:.2f}), more than "
             f"{MAX_STATION_DISTANCE_KM:.0f} km: its sky does not go with this site's sun; use "
             f"weather from nearer the site, or set {force_name} to run on it anyway")
-    return out
+    return {"latitude_deg": station["latitude"], "longitude_deg": station["longitude"],
+            "altitude_m": station["altitude"], "distance_km": round(distance, 1)}
 
 
 def check_weather_span(station: dict[str, Any] | None, start: pd.Timestamp,

@@ -198,3 +198,25 @@ def test_a_run_on_an_nsrdb_typical_year(heliotwin_cli: Callable[..., Any],
     wrong = heliotwin_cli("simulate", "--site", "craig", "--start", "2023-06-01", "--end",
                           "2023-06-02", "--nsrdb", str(year), env=env)
     assert wrong.returncode == 2 and "an NSRDB download of an actual year" in wrong.stderr
+
+
+def test_an_nsrdb_year_far_from_the_site_is_refused_unless_forced(
+        heliotwin_cli: Callable[..., Any], tmp_path: Path) -> None:
+    """Measured weather is the site's own, but an NSRDB year says where it is from: at
+    Tehuantepec, 3,000 km from Craig, it is refused naming ``--force``; forced, it runs and
+    says how far."""
+    import json
+
+    path = tmp_path / FILES["psm4"]
+    path.write_text(nsrdb_text("psm4"))
+    args = ["simulate", "--site", "tehuantepec", "--start", "2023-06-01", "--end",
+            "2023-06-02", "--step-s", "600", "--weather-csv", str(path)]
+    far = heliotwin_cli(*args)
+    assert far.returncode == 2, far.stderr
+    assert "--weather-csv: the weather station" in far.stderr
+    assert "km from site tehuantepec" in far.stderr and "set --force" in far.stderr
+    forced = heliotwin_cli(*args, "--force", "--json")
+    assert forced.returncode == 0, forced.stderr
+    weather = json.loads(forced.stdout)["weather"]
+    assert weather["format"] == "measured" and weather["forced"] is True
+    assert 2900 < weather["distance_km"] < 3100, weather
