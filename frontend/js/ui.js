@@ -85,11 +85,13 @@ export function weatherWarning(summary) {
 }
 
 /** The run's sky: clear sky, or the weather file's station and its distance from the
- * `place` ("site" or "plant") it ran at, or measured weather's span. */
+ * `place` ("site" or "plant") it ran at, or measured weather's span (and its distance, for
+ * a file that says where it is from: an NSRDB year). */
 export function skyTile(summary, station, place) {
   if (!station) return tile("Sky", summary.sky === "weather" ? "weather" : "clear sky", "Ineichen clear sky with Linke turbidity");
   if (station.format === "measured") {
-    return tile("Sky", "measured weather", `${station.name || "file"} · ${station.stamped.replace("_", " ")} stamps · ${station.start.slice(0, 16)} → ${station.end.slice(0, 16)} UTC`);
+    const far = station.distance_km == null ? "" : ` · ${num(station.distance_km, 0)} km from the ${place}`;
+    return tile("Sky", "measured weather", `${station.name || "file"} · ${station.stamped.replace("_", " ")} stamps · ${station.start.slice(0, 16)} → ${station.end.slice(0, 16)} UTC${far}`);
   }
   return tile("Sky", `${station.format.toUpperCase()} typical year`,
     `${station.name || "station"} (${num(station.latitude_deg, 2)}°, ${num(station.longitude_deg, 2)}°) · ${num(station.distance_km, 0)} km from the ${place}`);

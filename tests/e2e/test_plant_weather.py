@@ -131,6 +131,14 @@ def test_the_plant_page_runs_a_plant_on_a_weather_file(  # type: ignore[no-untyp
         assert "NSRDB typical year" in tiles and "location 401182" in tiles, tiles
         assert "0 km from the plant" in tiles and "weather-warning" not in page.inner_html(
             "#plant-weather-summary"), tiles
+        # and an actual NSRDB year: measured weather of its own dates, its place said
+        year = tmp_path / FILES["psm4"]
+        year.write_text(nsrdb_text("psm4"))
+        _run(page, "craig", year, "2023-09-01", "2023-09-11", "900")
+        tiles = page.locator("#plant-weather-summary").inner_text()
+        assert "measured weather" in tiles and "NSRDB location 401182" in tiles, tiles
+        assert "0 km from the plant" in tiles and "weather-warning" not in page.inner_html(
+            "#plant-weather-summary"), tiles
 
 
 def _clip(page, first: str, last: str) -> dict:  # type: ignore[no-untyped-def]
