@@ -25,7 +25,7 @@ from sim.sky import pvlib_tmy3_path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _env(sites_dir: Path) -> dict[str, str]:
+def sites_env(sites_dir: Path) -> dict[str, str]:
     """The user sites in ``sites_dir``, and a database there (``site create`` syncs it)."""
     return {"HELIOTWIN_SITES_DIR": str(sites_dir),
             "HELIOTWIN_DATABASE_URL": f"sqlite:///{sites_dir / 'cli.sqlite'}"}
@@ -34,13 +34,13 @@ def _env(sites_dir: Path) -> dict[str, str]:
 @pytest.fixture
 def heliotwin(heliotwin_cli: Callable[..., Any]) -> Callable[..., Any]:
     """``heliotwin ARGS`` in process with the user sites of ``sites_dir``."""
-    return lambda sites_dir, *args: heliotwin_cli(*args, env=_env(sites_dir))
+    return lambda sites_dir, *args: heliotwin_cli(*args, env=sites_env(sites_dir))
 
 
 def test_schema_prints_the_shipped_file(tmp_path: Path) -> None:
     env = {k: v for k, v in os.environ.items() if not k.startswith("HELIOTWIN_")}
     p = subprocess.run([sys.executable, "-m", "backend", "site", "schema"], capture_output=True,
-                       text=True, cwd=ROOT, timeout=120, env={**env, **_env(tmp_path)})
+                       text=True, cwd=ROOT, timeout=120, env={**env, **sites_env(tmp_path)})
     assert p.returncode == 0, p.stderr
     assert json.loads(p.stdout) == json.loads((ROOT / "docs" / "site.schema.json").read_text())
 

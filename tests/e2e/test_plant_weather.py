@@ -75,7 +75,7 @@ def test_the_plant_page_runs_a_plant_on_a_weather_file(  # type: ignore[no-untyp
     craig = {"latitude_deg": 40.53, "longitude_deg": -108.54, "altitude_m": 2168,
              "timezone": "America/Denver"}
     from tests.e2e.conftest import open_page
-    from tests.sim.test_nsrdb_weather import FILES, nsrdb_text
+    from tests.sim.test_nsrdb_weather import nsrdb_file
     from tests.sim.test_pvgis_weather import pvgis_file
 
     with _plants(server, sandpoint=sand_point, greensboro=greensboro, piedmont=piedmont,
@@ -114,31 +114,24 @@ def test_the_plant_page_runs_a_plant_on_a_weather_file(  # type: ignore[no-untyp
         page.screenshot(path=str(ARTIFACTS / "plant-weather-warning.png"), full_page=True,
                         clip=_clip(page, "#plant-weather-form", "#plant-weather-summary"))
 
-        # a PVGIS TMY as the tool downloads it (JSON): a typical year on the sun's time
-        _run(page, "piedmont", pvgis_file("json", tmp_path), "2021-06-01", "2021-06-11", "900")
-        tiles = page.locator("#plant-weather-summary").inner_text()
-        assert "PVGIS typical year" in tiles and "TMY, PVGIS-SARAH3" in tiles, tiles
-        assert "0 km from the plant" in tiles and "weather-warning" not in page.inner_html(
-            "#plant-weather-summary"), tiles
-        page.screenshot(path=str(ARTIFACTS / "plant-weather-pvgis.png"), full_page=True,
-                        clip=_clip(page, "#plant-weather-form", "#plant-weather-summary"))
-
-        # an NSRDB typical year as the NSRDB writes it: its values at their stamps
-        nsrdb = tmp_path / FILES["tmy"]
-        nsrdb.write_text(nsrdb_text("tmy"))
-        _run(page, "craig", nsrdb, "2021-06-01", "2021-06-11", "900")
-        tiles = page.locator("#plant-weather-summary").inner_text()
-        assert "NSRDB typical year" in tiles and "location 401182" in tiles, tiles
-        assert "0 km from the plant" in tiles and "weather-warning" not in page.inner_html(
-            "#plant-weather-summary"), tiles
-        # and an actual NSRDB year: measured weather of its own dates, its place said
-        year = tmp_path / FILES["psm4"]
-        year.write_text(nsrdb_text("psm4"))
-        _run(page, "craig", year, "2023-09-01", "2023-09-11", "900")
-        tiles = page.locator("#plant-weather-summary").inner_text()
-        assert "measured weather" in tiles and "NSRDB location 401182" in tiles, tiles
-        assert "0 km from the plant" in tiles and "weather-warning" not in page.inner_html(
-            "#plant-weather-summary"), tiles
+        # typical years as PVGIS and the NSRDB write them, and an NSRDB actual year (measured
+        # weather of its own dates): each at a plant at its place, on the sun's time
+        for plant_id, path, start, end, labels in (
+                ("piedmont", pvgis_file("json", tmp_path), "2021-06-01", "2021-06-11",
+                 ("PVGIS typical year", "TMY, PVGIS-SARAH3")),
+                ("craig", nsrdb_file("tmy", tmp_path), "2021-06-01", "2021-06-11",
+                 ("NSRDB typical year", "location 401182")),
+                ("craig", nsrdb_file("psm4", tmp_path), "2023-09-01", "2023-09-11",
+                 ("measured weather", "NSRDB location 401182"))):
+            _run(page, plant_id, path, start, end, "900")
+            tiles = page.locator("#plant-weather-summary").inner_text()
+            assert all(label in tiles for label in labels), tiles
+            assert "0 km from the plant" in tiles and "weather-warning" not in page.inner_html(
+                "#plant-weather-summary"), tiles
+            if plant_id == "piedmont":
+                page.screenshot(path=str(ARTIFACTS / "plant-weather-pvgis.png"),
+                                full_page=True, clip=_clip(page, "#plant-weather-form",
+                                                           "#plant-weather-summary"))
 
 
 def _clip(page, first: str, last: str) -> dict:  # type: ignore[no-untyped-def]

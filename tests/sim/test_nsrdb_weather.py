@@ -17,6 +17,7 @@ import pytest
 
 from sim.sky import read_measured
 from sim.weather_clock import irradiance_shift
+from tests.test_cli_site import sites_env
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "nsrdb"
 FILES = {"psm3": "nsrdb_psm3_401182_2017.csv", "psm4": "nsrdb_psm4_401182_2023.csv",
@@ -28,6 +29,13 @@ def nsrdb_text(kind: str) -> str:
     """The download as NSRDB wrote it (``psm3``: 2017, ``psm4``: 2023, 30-min steps;
     ``tmy``: a PSM4 typical year, hourly, README)."""
     return gzip.decompress((DATA / f"{FILES[kind]}.gz").read_bytes()).decode()
+
+
+def nsrdb_file(kind: str, folder: Path) -> Path:
+    """The download unpacked into ``folder``, under its name here."""
+    path = folder / FILES[kind]
+    path.write_text(nsrdb_text(kind))
+    return path
 
 
 @pytest.mark.parametrize("kind", ["psm3", "psm4"])
@@ -100,13 +108,11 @@ def test_a_run_on_an_nsrdb_year_at_its_place(heliotwin_cli: Callable[..., Any],
     sun's time, the file named with its place; a run outside 2023 refused naming its span."""
     import json
 
-    env = {"HELIOTWIN_SITES_DIR": str(tmp_path / "sites"),
-           "HELIOTWIN_DATABASE_URL": f"sqlite:///{tmp_path / 'db.sqlite'}"}
+    env = sites_env(tmp_path / "sites")
     made = heliotwin_cli("site", "create", "--id", "craig", "--latitude-deg", "40.53",
                          "--longitude-deg", "-108.54", "--timezone", "America/Denver", env=env)
     assert made.returncode == 0, made.stderr
-    path = tmp_path / FILES["psm4"]
-    path.write_text(nsrdb_text("psm4"))
+    path = nsrdb_file("psm4", tmp_path)
     run = heliotwin_cli("simulate", "--site", "craig", "--start", "2023-09-01", "--end",
                         "2023-10-01", "--step-s", "600", "--weather-csv", str(path), "--json",
                         env=env)
@@ -126,10 +132,8 @@ def test_a_site_from_an_nsrdb_download_takes_its_place_and_zone(
     (−7: ``Etc/GMT+7``), the year's means as the clear sky's air temperature and wind."""
     import json
 
-    env = {"HELIOTWIN_SITES_DIR": str(tmp_path / "sites"),
-           "HELIOTWIN_DATABASE_URL": f"sqlite:///{tmp_path / 'db.sqlite'}"}
-    path = tmp_path / FILES["psm3"]
-    path.write_text(nsrdb_text("psm3"))
+    env = sites_env(tmp_path / "sites")
+    path = nsrdb_file("psm3", tmp_path)
     made = heliotwin_cli("site", "from-weather", str(path), "--id", "craig", env=env)
     assert made.returncode == 0, made.stderr
     config = json.loads((tmp_path / "sites" / "craig.json").read_text())
@@ -180,11 +184,8 @@ def test_a_run_on_an_nsrdb_typical_year(heliotwin_cli: Callable[..., Any],
     refused naming ``--weather-csv``."""
     import json
 
-    env = {"HELIOTWIN_SITES_DIR": str(tmp_path / "sites"),
-           "HELIOTWIN_DATABASE_URL": f"sqlite:///{tmp_path / 'db.sqlite'}"}
-    tmy, year = tmp_path / FILES["tmy"], tmp_path / FILES["psm4"]
-    tmy.write_text(nsrdb_text("tmy"))
-    year.write_text(nsrdb_text("psm4"))
+    env = sites_env(tmp_path / "sites")
+    tmy, year = nsrdb_file("tmy", tmp_path), nsrdb_file("psm4", tmp_path)
     made = heliotwin_cli("site", "from-weather", str(tmy), "--id", "craig", env=env)
     assert made.returncode == 0, made.stderr
     config = json.loads((tmp_path / "sites" / "craig.json").read_text())
@@ -207,8 +208,7 @@ def test_an_nsrdb_year_far_from_the_site_is_refused_unless_forced(
     says how far."""
     import json
 
-    path = tmp_path / FILES["psm4"]
-    path.write_text(nsrdb_text("psm4"))
+    path = nsrdb_file("psm4", tmp_path)
     args = ["simulate", "--site", "tehuantepec", "--start", "2023-06-01", "--end",
             "2023-06-02", "--step-s", "600", "--weather-csv", str(path)]
     far = heliotwin_cli(*args)

@@ -17,6 +17,7 @@ import pytest
 
 from sim.sky import read_typical_year, typical_year_on
 from sim.weather_clock import irradiance_shift
+from tests.test_cli_site import sites_env
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "pvgis"
 TMY = "tmy_45.000_8.000_2005_2023"
@@ -122,8 +123,7 @@ def test_a_site_from_a_pvgis_year_runs_on_it(heliotwin_cli: Callable[..., Any],
     time; the same file given as ``--tmy3`` is refused naming ``--pvgis``."""
     import json
 
-    env = {"HELIOTWIN_SITES_DIR": str(tmp_path / "sites"),
-           "HELIOTWIN_DATABASE_URL": f"sqlite:///{tmp_path / 'db.sqlite'}"}
+    env = sites_env(tmp_path / "sites")
     path = pvgis_file("json", tmp_path)
     made = heliotwin_cli("site", "from-weather", str(path), "--id", "piedmont", env=env)
     assert made.returncode == 0, made.stderr
