@@ -3,10 +3,11 @@
 Multipart: the weather file in ``file`` and the fields of ``POST /api/v1/simulations``
 (``site_id``, ``start``, ``end``, ``step_s``, ``controller``, ``receiver``,
 ``background`` and the machine parameters) as form fields, plus ``force``,
-``weather_stamped`` and ``weather_timezone``. A TMY3, EPW or PVGIS TMY (CSV or JSON) file
-(by its first line) is a typical year, read by :func:`sim.sky.read_typical_year` and laid
-onto the run's calendar (:func:`backend.twin.scenario.run_scenario`); any other file is
-read as measured weather of its own dates (:func:`sim.sky.read_measured`:
+``weather_stamped`` and ``weather_timezone``. A TMY3, EPW, PVGIS TMY (CSV or JSON) or
+NSRDB typical-year file (by its first line) is a typical year, read by
+:func:`sim.sky.read_typical_year` and laid onto the run's calendar
+(:func:`backend.twin.scenario.run_scenario`); any other file (an NSRDB actual year among
+them) is read as measured weather of its own dates (:func:`sim.sky.read_measured`:
 ``weather_stamped`` says what its times mark, ``weather_timezone`` the zone of times
 without an offset), and a run outside them is a 422 naming them. A station more than
 :data:`backend.twin.scenario.MAX_STATION_DISTANCE_KM` from the site is a 422
@@ -64,8 +65,8 @@ async def read_weather_upload(form: FormData) -> tuple[Any, dict[str, Any]]:
     upload = form.get("file")
     stamped, timezone = form_text(form, "weather_stamped"), form_text(form, "weather_timezone")
     if not isinstance(upload, UploadFile):
-        raise HTTPException(422, "file: a weather file (TMY3, EPW, PVGIS TMY or a measured "
-                                 "CSV) is required")
+        raise HTTPException(422, "file: a weather file (TMY3, EPW, PVGIS, NSRDB or a "
+                                 "measured CSV) is required")
     text = weather_text(await upload.read())
     name = upload.filename or "the upload"
     try:
@@ -106,8 +107,8 @@ def _measured(text: str, name: str, stamped: str | None, timezone: str | None
                         **_BUSY_DOC},
              openapi_extra={"security": [{}, {"bearerAuth": []}]})
 async def create_simulation_on_weather(request: Request, ctx: ContextDep) -> Response:
-    """Run a twin scenario on an uploaded TMY3/EPW/PVGIS typical year, or measured weather of its
-    own dates, instead of clear sky."""
+    """Run a twin scenario on an uploaded TMY3/EPW/PVGIS/NSRDB typical year, or measured
+    weather of its own dates, instead of clear sky."""
     form = await read_form(request, ctx.settings.server.max_upload_bytes,
                            "the weather file in 'file'", max_files=1, max_fields=64)
     force = form_flag(form_text(form, "force"), "force")
