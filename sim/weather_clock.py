@@ -16,10 +16,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-#: A weather file whose GHI best aligns with the clear sky this far from its stamps' time
-#: [min] is warned of (:func:`shift_warning`). Correctly read files measured 0–5 min over a
-#: month and at most 10 on a single day (docs/validation.md, section 5): hourly TMY3 and EPW
-#: typical years, 1- to 60-minute measured series; misread hourly means read 30 or 60 min.
+#: A weather file whose GHI best aligns with the clear sky this far or farther from its
+#: stamps' time [min] is warned of (:func:`shift_warning`). Correctly read files measured
+#: 0–5 min over a month and at most 10 on a single day (docs/validation.md, section 5):
+#: hourly TMY3 and EPW typical years, 1- to 60-minute measured series. Misread means are off
+#: by half or a whole interval: 30 or 60 min for hourly ones, 15 for 30-minute instants read
+#: as interval-end means (a converted NSRDB year) or 15-minute hour-start means read as
+#: ends — the smallest misreading, so it is warned of (it had passed, at the threshold).
 WEATHER_SHIFT_WARN_MIN = 15.0
 #: The grid the weather's GHI is compared on [min], and the shifts searched [min]: half a
 #: day either way, so a file in another zone (UTC at Delhi: +330 min) reads its whole shift
@@ -126,11 +129,11 @@ def irradiance_shift(weather: pd.DataFrame, latitude: float, longitude: float,
 
 def shift_warning(shift: dict[str, Any] | None, station: dict[str, Any] | None
                   ) -> str | None:
-    """Words for a weather file whose irradiance runs more than
-    :data:`WEATHER_SHIFT_WARN_MIN` from the sun (:func:`irradiance_shift`), naming the shift
+    """Words for a weather file whose irradiance runs
+    :data:`WEATHER_SHIFT_WARN_MIN` or more from the sun (:func:`irradiance_shift`), naming the shift
     and its likely causes for the file's kind (``station["format"]``, ``["stamped"]``);
     None otherwise."""
-    if shift is None or abs(shift["shift_min"]) <= WEATHER_SHIFT_WARN_MIN:
+    if shift is None or abs(shift["shift_min"]) < WEATHER_SHIFT_WARN_MIN:
         return None
     tau = shift["shift_min"]
     late = "late" if tau > 0 else "early"
@@ -163,7 +166,7 @@ def weather_clock(weather: pd.DataFrame, latitude: float, longitude: float, alti
     """The clock check of a run on ``weather`` (UTC index, on the run's times) at a place
     [° N, ° E, m]: ``{"weather_shift_min", "weather_warning"}`` — :func:`irradiance_shift`'s
     median shift [min] (None without a sunny day to fit) and :func:`shift_warning`'s words
-    past :data:`WEATHER_SHIFT_WARN_MIN` (None within it). The one rule of every run on a
+    from :data:`WEATHER_SHIFT_WARN_MIN` on (None within it). The one rule of every run on a
     weather file, the twin's (``backend.twin.scenario.run_scenario``) and a plant's
     (``heliotwin plant simulate``)."""
     shift = irradiance_shift(weather, latitude, longitude, altitude, start, end)

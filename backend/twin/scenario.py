@@ -231,8 +231,8 @@ def run_scenario(site: Site, scenario: Scenario, weather: pd.DataFrame | None = 
 
     ``weather`` (already on the run's times) wins over the scenario's typical year, which is
     laid onto the run's calendar here, or its measured weather, taken as it is. A run on
-    weather says how far its irradiance runs from the sun, and warns past
-    ``sim.weather_clock.WEATHER_SHIFT_WARN_MIN`` (``weather_shift_min``, ``weather_warning``).
+    weather says how far its irradiance runs from the sun, and warns from
+    ``sim.weather_clock.WEATHER_SHIFT_WARN_MIN`` on (``weather_shift_min``, ``weather_warning``).
     """
     if (weather is None and scenario.station is not None
             and scenario.station["format"] == "measured"):

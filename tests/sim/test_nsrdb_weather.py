@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 
 from sim.sky import read_measured
-from sim.weather_clock import irradiance_shift
+from sim.weather_clock import irradiance_shift, shift_warning
 from tests.test_cli_site import sites_env
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "nsrdb"
@@ -61,8 +61,9 @@ def test_an_nsrdb_year_reads_as_pvlib_reads_it_at_its_stamps(kind: str) -> None:
 def test_an_nsrdb_year_is_on_the_suns_time(kind: str) -> None:
     """Measured 0 min in each month with sunny days (−5, one step of the grid, in May 2017);
     the same values written as a CSV and
-    read with its default (interval_end means) run 15 min early, under the warning's
-    threshold: the reason NSRDB's own file is read at its stamps."""
+    read with its default (interval_end means) run 15 min early, at the warning's threshold
+    (which let it pass before 2026-12-07): the reason NSRDB's own file is read at its
+    stamps."""
     weather, _ = read_measured(io.StringIO(nsrdb_text(kind)))
     year = weather.index[1].year
     months = 0
@@ -80,6 +81,8 @@ def test_an_nsrdb_year_is_on_the_suns_time(kind: str) -> None:
     june = pd.Timestamp(year, 6, 1, tz="UTC")
     found = irradiance_shift(as_means, *CRAIG, june, june + pd.DateOffset(months=1))
     assert found is not None and found["shift_min"] == pytest.approx(-15.0, abs=2.5)
+    assert "15 min early" in shift_warning(found, {"format": "measured",
+                                                   "stamped": "interval_end"})
 
 
 def test_a_bad_nsrdb_cell_is_named_by_its_line_and_a_typical_year_sent_on() -> None:

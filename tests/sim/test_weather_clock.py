@@ -43,15 +43,19 @@ def shift_of(text: str, stamped: str) -> tuple[dict, str | None]:
     return found, shift_warning(found, station)
 
 
-def test_hour_start_means_read_as_hour_ends_are_named_an_hour_early() -> None:
+@pytest.mark.parametrize("minutes", [60, 15])
+def test_start_stamped_means_read_as_ends_are_named_a_whole_interval_early(minutes: int
+                                                                           ) -> None:
     """A PVGIS-style file of hour-start UTC means read with the default interval_end ran
     without a word (a tester's finding: tracker −2.6 %); the check measures −60 min (0 read
-    right), and the warning names the shift and weather_stamped."""
-    hourly = delhi_minutes().resample("60min", label="left", closed="left").mean()
-    found, warning = shift_of(csv(hourly), "interval_end")
-    assert found["shift_min"] == pytest.approx(-60, abs=5) and found["days"] >= 5, found
-    assert warning is not None and "60 min early" in warning and "weather_stamped" in warning
-    found, warning = shift_of(csv(hourly), "interval_start")
+    right), and the warning names the shift and weather_stamped. 15-minute means misread
+    the same way, −15 min, the smallest misreading, had passed at the threshold."""
+    means = delhi_minutes().resample(f"{minutes}min", label="left", closed="left").mean()
+    found, warning = shift_of(csv(means), "interval_end")
+    assert found["shift_min"] == pytest.approx(-minutes, abs=2.5) and found["days"] >= 5, found
+    assert (warning is not None and f"{minutes} min early" in warning
+            and "weather_stamped" in warning), warning
+    found, warning = shift_of(csv(means), "interval_start")
     assert abs(found["shift_min"]) <= 5 and warning is None, found
 
 

@@ -230,8 +230,8 @@ class PlantWeatherRunRead(BaseModel):
     weather_shift_min: float | None = Field(description=(
         "the shift [min] that best aligns the file's GHI with the clear sky at the plant "
         "(> 0: the file runs late); null without a sunny day to fit"))
-    weather_warning: str | None = Field(description="words when weather_shift_min is past "
-                                                    "15 min: the file's times misread")
+    weather_warning: str | None = Field(description="words when weather_shift_min is 15 "
+                                                    "min or more: the file's times misread")
 
 
 class SweepCreate(BaseModel):

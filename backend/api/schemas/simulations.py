@@ -124,8 +124,8 @@ class SimulationSummaryRead(BaseModel):
                           "with the clear sky at the site, the median of its sunny days "
                           "(> 0: the file runs late); null without such a day")
     weather_warning: str | None = Field(
-        None, description="words when weather_shift_min is past 15 min: the file's times "
-                          "misread (weather_stamped, the zone)")
+        None, description="words when weather_shift_min is 15 min or more: the file's "
+                          "times misread (weather_stamped, the zone)")
     acceptance_angle_deg: float | None = Field(description="CPV receiver only")
     spot_distance_m: float
     spot_displacement_rms_m: float | None
