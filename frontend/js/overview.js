@@ -175,9 +175,14 @@ function drawDayEnergy(row, failed = "") {
   box.append(table);
   if (twinNote(row)) box.append(h("div", { class: "muted", "data-testid": "twin-note" }, `Twin “—”: ${twinNote(row)}.`));
   if (partial) {
-    const cov = Math.min(...ARRAYS.map((a) => row.arrays[a]?.coverage_pct ?? 100));
+    // the array covering least names the day: one without a reading covers nothing (it
+    // had counted as 100 %: "the readings cover 100 %" on a day the tracker never reported)
+    const covers = ARRAYS.map((a) => [a, row.arrays[a]?.readings ? row.arrays[a]?.coverage_pct ?? 100 : 0]);
+    const [arr, cov] = covers.reduce((least, c) => (c[1] < least[1] ? c : least));
+    const what = cov === 0 ? `the ${arr} has no readings` :
+      `the ${arr}'s readings cover ${num(cov, 0)} % of the twin's expected energy`;
     box.append(h("div", { class: "banner partial", "data-testid": "partial-day" },
-      `Partial day: the readings cover ${num(cov, 0)} % of the twin's expected energy, so they are compared with the twin over the same minutes.`));
+      `Partial day: ${what}, so the readings are compared with the twin over the same minutes.`));
   }
   const expect = partial ? row.twin_matched_gain_pct : gainOf(row, "twin");
   if (row.gain_note) { // why there is no measured gain, in the service's words

@@ -32,6 +32,7 @@ HALF = TODAY - dt.timedelta(days=4)
 FULL = HALF - dt.timedelta(days=1)
 EMPTY = HALF + dt.timedelta(days=1)  # no readings at all
 UNALIKE = FULL - dt.timedelta(days=2)  # the tracker all day, the fixed array 12:00–18:00
+FIXED_ONLY = UNALIKE - dt.timedelta(days=1)  # the fixed array's logger alone, all day
 OLD = TODAY - dt.timedelta(days=700)  # before the on-demand twin window
 
 
@@ -60,7 +61,8 @@ def edge_server(browser, tmp_path_factory: pytest.TempPathFactory) -> Iterator[S
             for array, scale, step_s in (("tracker", 1.3, 20), ("fixed", 1.0, 60)):
                 rows = _sine(FULL, array, scale, range(86400 // step_s), step_s) + _sine(
                     HALF, array, scale, range(360, 720)) + _sine(
-                    UNALIKE, array, scale, range(1440) if array == "tracker" else range(720, 1080))
+                    UNALIKE, array, scale, range(1440) if array == "tracker" else range(720, 1080)
+                ) + (_sine(FIXED_ONLY, array, scale, range(1440)) if array == "fixed" else [])
                 r = c.post("/api/v1/sites/tehuantepec/measurements", json={"readings": rows},
                            headers={"Authorization": f"Bearer {token}"})
                 assert r.status_code == 200, r.text
@@ -124,13 +126,19 @@ def test_a_half_day_is_flagged_and_compared_over_the_same_minutes(
                end=EMPTY.isoformat())["rows"][0]
     assert row["partial"] is True
     note = pg.locator("[data-testid=partial-day]").inner_text()
-    cov = min(row["arrays"][a]["coverage_pct"] for a in ("tracker", "fixed"))
-    assert f"cover {round(cov)} %" in note
+    cov, arr = min((row["arrays"][a]["coverage_pct"], a) for a in ("tracker", "fixed"))
+    assert f"the {arr}'s readings cover {round(cov)} %" in note
     twin = pg.locator("[data-testid=gain-day-twin]").inner_text()
     assert f"{row['twin_matched_gain_pct']:+.1f} % over the same minutes" in twin
     assert pg.locator("[data-testid=gain-day]").inner_text() == f"{row['gain_pct']:+.1f} %"
     _open(pg, edge_server, "tehuantepec", FULL)
     assert pg.locator("[data-testid=partial-day]").count() == 0
+    # a day only the fixed array's logger reported (its readings cover 100 % of its twin)
+    # named the readings' cover 100 %: the tracker, which covers nothing, names the day
+    _open(pg, edge_server, "tehuantepec", FIXED_ONLY)
+    assert pg.locator("[data-testid=partial-day]").inner_text() == (
+        "Partial day: the tracker has no readings, so the readings are compared with the "
+        "twin over the same minutes.")
 
 
 def test_loggers_over_different_minutes_show_no_gain_and_say_why(

@@ -1,0 +1,242 @@
+"""``heliotwin readings import``: a logger's own export file posted to a running service.
+
+The file is read as its logger wrote it (:mod:`backend.measurements.logger_file`) and
+posted over HTTP as any logger posts (``POST /api/v1/sites/{site}/measurements``, the site's
+write token), in batches, oldest first, each retried on a lost connection or a 5xx. The
+service's checks stay the one rule: a batch it refuses stops the import, its problems
+named by the file's lines. Everything before it is stored; a re-run re-sends it as
+duplicates (one reading per array and second), so an import can simply be run again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from backend.cli import fail
+
+#: Readings a POST carries: about 1.5 MB of JSON, under the service's default body limit
+#: (HELIOTWIN_MAX_UPLOAD_BYTES, 10 MB) and batch limit (HELIOTWIN_MAX_BATCH_ROWS, 100,000).
+BATCH_READINGS = 10_000
+#: A site whose readings_stamped is "instant" is told what a file of means this far apart
+#: or more [s] needs: the diagnosis places an hourly mean stamped at its end 30 min late.
+MEANS_CADENCE_S = 300.0
+#: A refused batch's problems printed (the service lists up to 50, and counts the rest).
+MAX_PROBLEMS_SHOWN = 5
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add ``readings import``."""
+    p = subparsers.add_parser("readings", help="import a logger's history from its own file",
+                              description="Logger history files posted to a running service.")
+    sub = p.add_subparsers(dest="readings_command", metavar="ACTION", required=True)
+    i = sub.add_parser(
+        "import", help="post a logger's export file (TOA5, CSV) to a running service",
+        description="Read a logger's export as it is — a Campbell TOA5 table, a CSV with ',' "
+                    "or ';' (decimal commas), ISO, M/D/YYYY, D.M.YYYY or Unix times — map its "
+                    "columns to the service's fields, and post it to one array of a site. "
+                    "docs/service.md, 'Importing a logger's file'.")
+    i.add_argument("file", type=Path, help="the logger's export file")
+    i.add_argument("--site", required=True, help="site id")
+    i.add_argument("--array", required=True, help="the site's array the file's readings are of")
+    i.add_argument("--column", action="append", default=[], metavar="FIELD=NAME[:UNIT]",
+                   help="map a field (power_w, voltage_v, current_a, poa_irradiance_w_m2, "
+                        "ghi_w_m2, temp_module_c, temp_air_c, wind_speed_m_s, azimuth_deg, "
+                        "elevation_deg, …) to the file's column, in UNIT (kW, mA, °F, km/h …) "
+                        "when the file does not say it; repeat per field. A column named as "
+                        "a field maps itself")
+    i.add_argument("--time-column", help="the column of the times (default: TOA5's "
+                                         "TIMESTAMP, else the first column of times)")
+    i.add_argument("--timezone", help="the logger's clock, for times without a UTC offset: an "
+                                      "IANA zone (America/Denver), Etc/GMT+7 for UTC−7 all "
+                                      "year")
+    i.add_argument("--date-order", choices=("mdy", "dmy"),
+                   help="for slash dates the file cannot tell (every day ≤ 12)")
+    i.add_argument("--url", default="http://127.0.0.1:8000", help="service base URL")
+    i.add_argument("--token", help="the site's write token (required unless --dry-run)")
+    i.add_argument("--dry-run", action="store_true",
+                   help="read and summarise the file; post nothing")
+    i.add_argument("--json", action="store_true", help="print the summary as JSON")
+    i.set_defaults(func=run_import)
+
+
+def _columns(specs: list[str]) -> dict[str, str]:
+    """``--column FIELD=NAME[:UNIT]`` flags as a mapping; a malformed one is refused."""
+    out: dict[str, str] = {}
+    for spec in specs:
+        fld, eq, name = spec.partition("=")
+        if not eq or not fld.strip() or not name.strip():
+            fail(f"--column: {spec!r} is not FIELD=NAME[:UNIT] (e.g. power_w=P_AC:kW)")
+        if fld.strip() in out:
+            fail(f"--column: {fld.strip()} is mapped twice")
+        out[fld.strip()] = name.strip()
+    return out
+
+
+def run_import(args: argparse.Namespace) -> int:
+    """Read, summarise and (unless ``--dry-run``) post the file."""
+    import httpx
+
+    from backend.measurements.logger_file import read_logger_file
+
+    if not args.dry_run and not args.token:
+        fail("--token: the site's write token is required to post (or --dry-run)")
+    if not args.file.is_file():
+        fail(f"file: {args.file} is not a file")
+    try:
+        lf = read_logger_file(args.file, _columns(args.column), args.timezone,
+                              args.time_column, args.date_order)
+    except ValueError as exc:
+        fail(f"{args.file.name}: {exc}")
+    readings = lf.readings(args.array)
+    if not readings:
+        fail(f"{args.file.name}: no row has power, or voltage and current: nothing to post")
+    rows = lf.sendable.nonzero()[0]
+    summary: dict[str, Any] = {
+        "file": str(args.file), "layout": lf.layout, "time_column": lf.time_column,
+        "columns": {k: {"column": c, "unit": u} for k, (c, u) in lf.columns.items()},
+        "rows": len(lf.lines), "readings": len(readings),
+        "rows_without_power": int(len(lf.lines) - len(rows)),
+        "first": readings[0]["ts"], "last": readings[-1]["ts"],
+        "cadence_s": lf.cadence_s(), "notes": list(lf.notes),
+        "site_id": args.site, "array": args.array,
+    }
+    if summary["rows_without_power"]:
+        first = int(lf.lines[(~lf.sendable).nonzero()[0][0]])
+        summary["notes"].append(f"{summary['rows_without_power']} rows without power or voltage "
+                                f"and current (the first at line {first}) are not sent")
+    if not args.dry_run:
+        with httpx.Client(base_url=args.url, timeout=60.0) as client:
+            summary.update(post_readings(client, args.site, args.array, args.token, readings,
+                                         lf.lines[rows], summary))
+    _print(summary, args.json, args.dry_run)
+    return 0
+
+
+def post_readings(client: Any, site_id: str, array: str, token: str,
+                  readings: list[dict[str, Any]], lines: Any, summary: dict[str, Any]
+                  ) -> dict[str, Any]:
+    """Post ``readings`` (their file lines ``lines``) to ``site_id`` through ``client`` (an
+    ``httpx.Client`` on the service) in :data:`BATCH_READINGS`, gzip-compressed; the
+    answer's counts. A refused batch stops it: :func:`backend.cli.fail` naming the lines."""
+    import httpx
+    from tenacity import Retrying, retry_if_exception_type, stop_after_attempt
+    from tqdm import tqdm
+
+    from backend.retry import backoff
+
+    site = _site(client, site_id, array)
+    notes = []
+    cadence = summary.get("cadence_s")
+    if (cadence is not None and cadence >= MEANS_CADENCE_S
+            and site.get("readings_stamped") == "instant"):
+        notes.append(f"the readings are {cadence / 60:g} min apart and site {site_id} takes "
+                     "their stamps as instants (readings_stamped): if they are means stamped "
+                     "at their interval's end, set readings_stamped to interval_end "
+                     "(docs/diagnosis.md, 'Cadence')")
+
+    class Retry(Exception):
+        pass
+
+    def once(body: bytes) -> httpx.Response:
+        try:
+            r = client.post(f"/api/v1/sites/{site_id}/measurements", content=body,
+                            headers={"Authorization": f"Bearer {token}",
+                                     "Content-Type": "application/json",
+                                     "Content-Encoding": "gzip"})
+        except httpx.TransportError as exc:
+            raise Retry(f"{type(exc).__name__}: {exc}") from exc
+        if r.status_code >= 500 or r.status_code == 429:
+            raise Retry(f"{r.status_code} {r.text[:200]}")
+        return r
+
+    retrying = Retrying(stop=stop_after_attempt(5), wait=backoff(1.0, 10.0),
+                        retry=retry_if_exception_type(Retry), reraise=True)
+    accepted = duplicates = 0
+    stored_through = None
+    with tqdm(total=len(readings), unit="reading", disable=None, file=sys.stderr) as bar:
+        for k in range(0, len(readings), BATCH_READINGS):
+            chunk = readings[k : k + BATCH_READINGS]
+            body = gzip.compress(json.dumps({"readings": chunk}).encode(), compresslevel=5)
+            try:
+                r = retrying(once, body)
+            except Retry as exc:
+                fail(f"the service did not take lines {lines[k]}–{lines[k + len(chunk) - 1]} "
+                     f"after 5 tries ({exc}); {accepted} readings were stored — run again to "
+                     "resume (what is stored comes back as duplicates)", code=1)
+            if r.status_code != 200:
+                fail(_refusal(r, lines, k, accepted), code=1)
+            answer = r.json()
+            accepted += answer["accepted"]
+            duplicates += answer["duplicates"]
+            stored_through = answer.get("stored_through")
+            bar.update(len(chunk))
+    return {"accepted": accepted, "duplicates": duplicates, "stored_through": stored_through,
+            "url": str(client.base_url), "notes": summary["notes"] + notes}
+
+
+def _site(client: Any, site_id: str, array: str) -> dict[str, Any]:
+    """The site as the service describes it; an unknown site or array is refused first."""
+    import httpx
+
+    try:
+        r = client.get(f"/api/v1/sites/{site_id}")
+    except httpx.TransportError as exc:
+        fail(f"--url: {client.base_url} does not answer ({type(exc).__name__}: {exc})", code=1)
+    if r.status_code == 404:
+        fail(f"--site: the service at {client.base_url} has no site {site_id!r}")
+    if r.status_code != 200:
+        fail(f"--site: GET /api/v1/sites/{site_id} answered {r.status_code} {r.text[:200]}",
+             code=1)
+    site: dict[str, Any] = r.json()
+    if array not in site.get("arrays", {}):
+        fail(f"--array: site {site_id} has no array {array!r}; its arrays are "
+             f"{', '.join(site.get('arrays', {}))}")
+    return site
+
+
+def _refusal(r: Any, lines: Any, start: int, accepted: int) -> str:
+    """A refused batch's answer in the file's terms: each problem with its line."""
+    try:
+        detail = r.json().get("detail")
+    except ValueError:
+        detail = r.text[:300]
+    if r.status_code in (401, 403):
+        return f"--token: the service refuses it ({r.status_code} {detail})"
+    problems = []
+    if isinstance(detail, list):
+        for d in detail[:MAX_PROBLEMS_SHOWN]:
+            row = d.get("row") if isinstance(d, dict) else None
+            where = f"line {lines[start + row]}: " if isinstance(row, int) else ""
+            problems.append(where + (d.get("msg", str(d)) if isinstance(d, dict) else str(d)))
+        if len(detail) > MAX_PROBLEMS_SHOWN:
+            problems.append(f"and {len(detail) - MAX_PROBLEMS_SHOWN} more problems listed")
+    else:
+        problems.append(str(detail))
+    return (f"the service refused the readings ({r.status_code}): " + "; ".join(problems)
+            + f". {accepted} readings before them were stored; mend the file or the mapping "
+              "and run again (what is stored comes back as duplicates)")
+
+
+def _print(summary: dict[str, Any], as_json: bool, dry_run: bool) -> None:
+    if as_json:
+        print(json.dumps(summary, indent=2))
+        return
+    cadence = summary["cadence_s"]
+    every = "" if cadence is None else f", every {cadence:g} s"
+    print(f"read: {Path(summary['file']).name} ({summary['layout']}), {summary['rows']} rows, "
+          f"{summary['readings']} readings of {summary['site_id']}/{summary['array']} from "
+          f"{summary['first']} to {summary['last']}{every}")
+    for fld, c in summary["columns"].items():
+        print(f"  {fld} ← {c['column']!r} [{c['unit']}]")
+    for note in summary["notes"]:
+        print(f"note: {note}")
+    if dry_run:
+        print("dry run: nothing posted")
+    else:
+        print(f"posted to {summary['url']}: {summary['accepted']} accepted, "
+              f"{summary['duplicates']} duplicates, stored through {summary['stored_through']}")

@@ -1,0 +1,404 @@
+"""A logger's own export file read as the service's readings (``heliotwin readings import``).
+
+Loggers write their history in their own layout: a Campbell Scientific TOA5 table (a line
+naming the logger, then the column names, their units and their processing), a data
+system's CSV (``measured_on,ac_power__752`` with ISO times; ``1/2/2022 0:00`` without an
+offset), a European portal's export (``;`` between cells, decimal commas). The service
+takes readings named and scaled its own way (``backend.measurements.fields``: ``power_w``,
+``voltage_v`` …, with UTC offsets), so a user had to rewrite the file before a back-fill.
+
+:func:`read_logger_file` reads such a file as it is and says what it did:
+
+- **Columns** are mapped by the user (``{"power_w": "ac_power_kw_1137:kW"}``); a column
+  already named as a field maps to itself. Nothing is guessed from a name: two power
+  columns in one file (an array's and an inverter's) are common.
+- **Units**: the one given after ``:``, else the file's (TOA5's units line, or a header's
+  ``[kW]`` / ``(kW)``), else the field's own, and the summary says which
+  (:data:`UNITS`).
+- **Times**: ISO 8601 with or without an offset, ``M/D/YYYY`` or ``D/M/YYYY`` (the order the
+  steps are regular in, or ``date_order``), ``D.M.YYYY``, Unix seconds. A time without an
+  offset is read on the logger's clock, ``timezone`` (an IANA zone; ``Etc/GMT+7`` for a
+  clock on UTC−7 all year), by :func:`sim.sky.clock_times_to_utc`.
+- **Missing cells** (blank, ``NAN`` — Campbell's mark —, ``NaN``, ``null``, ``-``, ``n/a``)
+  leave that field out of the reading; a row left without power or voltage and current is
+  not sent (counted, with its first line). Any other text is refused naming line and column.
+
+The stamps are sent as they are: what they mark (an instant, or the end of the interval
+a mean covers) is the site's ``readings_stamped``, one rule for every logger
+(:func:`sim.energy.interval_middles`).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
+
+import numpy as np
+import pandas as pd
+
+from backend.measurements.fields import SENSOR_NAMES
+from sim.sky import clock_times_to_utc, weather_text
+
+#: The fields a file's columns may be mapped to: the electrical ones and the sensors.
+FIELDS = ("power_w", "voltage_v", "current_a", *SENSOR_NAMES)
+
+#: Per field, the units a file may give it in: normalised unit (:func:`_unit_key`) → (scale,
+#: offset) onto the field's own unit, value·scale + offset. The first is the field's own.
+_POWER = {"w": (1.0, 0.0), "watts": (1.0, 0.0), "kw": (1e3, 0.0), "kilowatts": (1e3, 0.0),
+          "mw": (1e6, 0.0)}
+_IRRADIANCE = {"w/m2": (1.0, 0.0), "kw/m2": (1e3, 0.0)}
+_TEMPERATURE = {"c": (1.0, 0.0), "k": (1.0, -273.15), "f": (5 / 9, -32 * 5 / 9)}
+_ANGLE = {"deg": (1.0, 0.0), "degrees": (1.0, 0.0), "rad": (180 / np.pi, 0.0)}
+_MRAD = {"mrad": (1.0, 0.0), "rad": (1e3, 0.0)}
+UNITS: dict[str, dict[str, tuple[float, float]]] = {
+    "power_w": _POWER,
+    "voltage_v": {"v": (1.0, 0.0), "volts": (1.0, 0.0), "mv": (1e-3, 0.0), "kv": (1e3, 0.0)},
+    "current_a": {"a": (1.0, 0.0), "amps": (1.0, 0.0), "amperes": (1.0, 0.0),
+                  "ma": (1e-3, 0.0)},
+    "poa_irradiance_w_m2": _IRRADIANCE, "ghi_w_m2": _IRRADIANCE,
+    "temp_module_c": _TEMPERATURE, "temp_air_c": _TEMPERATURE,
+    "wind_speed_m_s": {"m/s": (1.0, 0.0), "meters/second": (1.0, 0.0),
+                       "km/h": (1 / 3.6, 0.0), "mph": (0.44704, 0.0), "kn": (0.514444, 0.0),
+                       "knots": (0.514444, 0.0)},
+    "azimuth_deg": _ANGLE, "elevation_deg": _ANGLE,
+    "sun_offset_x_mrad": _MRAD, "sun_offset_y_mrad": _MRAD,
+}
+#: Each field's own unit, as the summary writes it.
+OWN_UNITS = {"power_w": "W", "voltage_v": "V", "current_a": "A", "poa_irradiance_w_m2": "W/m²",
+             "ghi_w_m2": "W/m²", "temp_module_c": "°C", "temp_air_c": "°C",
+             "wind_speed_m_s": "m/s", "azimuth_deg": "°", "elevation_deg": "°",
+             "sun_offset_x_mrad": "mrad", "sun_offset_y_mrad": "mrad"}
+#: Cells that mean "no value": Campbell's NAN, pandas' and spreadsheets' marks.
+MISSING = frozenset({"", "nan", "null", "none", "na", "n/a", "-", "--", "#n/a", "inf", "-inf"})
+DATE_ORDERS = ("mdy", "dmy")
+
+
+@dataclass
+class LoggerFile:
+    """What :func:`read_logger_file` read: one row per time, in the file's order."""
+
+    layout: str  # "TOA5", "CSV (',')", "CSV (';', decimal comma)" …
+    time_column: str
+    times_utc: pd.DatetimeIndex
+    values: pd.DataFrame  # the mapped fields in their own units, NaN where missing
+    lines: np.ndarray  # each row's line in the file (1-based)
+    columns: dict[str, tuple[str, str]]  # field → (the file's column, the unit read)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def sendable(self) -> np.ndarray:
+        """Rows with power, or with voltage and current: the ones a reading is made of."""
+        v = self.values
+        has = v["power_w"].notna() if "power_w" in v else pd.Series(False, index=v.index)
+        if "voltage_v" in v and "current_a" in v:
+            has |= v["voltage_v"].notna() & v["current_a"].notna()
+        return has.to_numpy()
+
+    def readings(self, array: str) -> list[dict[str, Any]]:
+        """The sendable rows as the service's JSON readings of ``array`` (``ts`` in UTC)."""
+        rows = np.flatnonzero(self.sendable)
+        ts = self.times_utc[rows].strftime("%Y-%m-%dT%H:%M:%SZ")
+        cols = {name: self.values[name].to_numpy()[rows] for name in self.values.columns}
+        vi = ("voltage_v" in cols and "current_a" in cols)
+        out = []
+        for k, stamp in enumerate(ts):
+            r: dict[str, Any] = {"ts": stamp, "array": array}
+            for name, col in cols.items():
+                x = col[k]
+                if np.isnan(x) or (name in ("voltage_v", "current_a")
+                                   and not (vi and not np.isnan(cols["voltage_v"][k])
+                                            and not np.isnan(cols["current_a"][k]))):
+                    continue  # voltage and current go together or not at all
+                r[name] = round(float(x), 6)
+            out.append(r)
+        return out
+
+    def cadence_s(self) -> float | None:
+        """The median spacing of the sendable rows' times [s]; None under two rows."""
+        t = np.sort(self.times_utc[self.sendable].as_unit("ns").asi8)
+        return float(np.median(np.diff(t))) / 1e9 if t.size > 1 else None
+
+
+def _unit_key(unit: str) -> str:
+    """A unit as :data:`UNITS` names it: lower case, no spaces, ``m²``/``m^2`` as ``m2``,
+    ``°C``/``Deg C``/``degC`` as ``c``."""
+    u = unit.strip().lower().replace(" ", "").replace("²", "2").replace("^", "")
+    u = re.sub(r"^(deg|°)(?=[cfk]$)", "", u)
+    return {"degree": "deg", "°": "deg", "m/sec": "m/s", "ms-1": "m/s", "wm-2": "w/m2",
+            "kwm-2": "kw/m2"}.get(u, u)
+
+
+def _header_unit(name: str) -> str | None:
+    """A unit written in a column's name: ``P_AC [kW]``, ``Power (W)``."""
+    m = re.search(r"[\[(]([^\[\]()]+)[\])]\s*$", name)
+    return m.group(1) if m else None
+
+
+def _split_lines(text: str) -> tuple[list[list[str]], str]:
+    """The file's cells and its layout's name: TOA5, or a CSV whose separator (``,``, ``;``
+    or a tab; an Excel ``sep=`` first line says it) is the one its header line holds most."""
+    lines = text.splitlines()
+    sep = None
+    if lines and lines[0].lower().startswith("sep=") and len(lines[0].strip()) == 5:
+        sep, lines = lines[0].strip()[4], lines[1:]
+    if not lines:
+        raise ValueError("the file is empty")
+    if sep is None:
+        head = lines[0]
+        sep = max((",", ";", "\t"), key=lambda s: head.count(s))
+    rows = list(csv.reader(io.StringIO("\n".join(lines)), delimiter=sep))
+    name = "TOA5" if rows and rows[0] and rows[0][0] == "TOA5" else (
+        "CSV (tab)" if sep == "\t" else f"CSV ('{sep}')")
+    return rows, name
+
+
+def _numbers(cells: pd.Series, decimal_comma: bool, column: str, lines: np.ndarray
+             ) -> np.ndarray:
+    """A column's cells as numbers, NaN for the :data:`MISSING` marks; any other text is
+    refused naming its line, the column and how many such cells."""
+    text = cells.fillna("").astype(str).str.strip()
+    if decimal_comma:
+        text = text.str.replace(",", ".", regex=False)
+    values = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float, copy=True)
+    missing = text.str.lower().isin(MISSING).to_numpy()
+    bad = (np.isnan(values) & ~missing) | np.isinf(values)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"column {column!r}: {text.iloc[i][:20]!r} at line {lines[i]} is "
+                         f"not a number ({int(bad.sum())} such cells; a missing value may be "
+                         "blank or NAN)")
+    values[missing] = np.nan
+    return values
+
+
+_ISO = re.compile(r"^\d{4}-\d\d-\d\d(?:[T ]\d\d?:\d\d(?::\d\d(?:\.\d+)?)?)?")
+_OFFSET = re.compile(r"(?:Z|[+-]\d\d(?::?\d\d)?)$")
+_NUMERIC_DATE = re.compile(r"^(\d{1,2})([/.-])(\d{1,2})\2(\d{4})(?:[ T]+(\d{1,2}:\d\d(:\d\d)?))?")
+_UNIX = re.compile(r"^\d{9,10}(?:\.\d+)?$")
+
+
+def _times(cells: pd.Series, column: str, lines: np.ndarray, timezone: str | None,
+           date_order: str | None) -> tuple[pd.DatetimeIndex, list[str]]:
+    """The time column as UTC instants, and notes on how it was read (see the module)."""
+    text = cells.fillna("").astype(str).str.strip()
+    first = text.iloc[0]
+
+    def where(i: int) -> str:
+        return f"line {lines[i]}"
+
+    notes: list[str] = []
+    if _UNIX.match(first):
+        secs = pd.to_numeric(text, errors="coerce")
+        if secs.isna().any():
+            i = int(np.flatnonzero(secs.isna().to_numpy())[0])
+            raise ValueError(f"{column}: {text.iloc[i][:30]!r} at {where(i)} is not a Unix "
+                             "time like the first row's")
+        return pd.DatetimeIndex(pd.to_datetime(secs, unit="s", utc=True)), [
+            f"times: Unix seconds in column {column!r}"]
+    offset = text.str.contains(_OFFSET, regex=True).to_numpy()
+    if _ISO.match(first):
+        if offset.all():
+            parsed = pd.to_datetime(text, format="ISO8601", errors="coerce", utc=True)
+        elif not offset.any():
+            parsed = pd.to_datetime(text, format="ISO8601", errors="coerce")
+        else:
+            i = int(np.flatnonzero(offset != offset[0])[0])
+            raise ValueError(f"{column}: {text.iloc[i][:30]!r} at {where(i)} has "
+                             f"{'a' if offset[i] else 'no'} UTC offset while line {lines[0]} "
+                             f"has {'one' if offset[0] else 'none'}: write all alike")
+        form = "ISO 8601"
+    else:
+        m = _NUMERIC_DATE.match(first)
+        if m is None:
+            raise ValueError(f"{column}: {first[:30]!r} at {where(0)} is not a time this "
+                             "reader knows: ISO 8601 (2022-01-02 13:15, with or without a UTC "
+                             "offset), M/D/YYYY or D/M/YYYY H:MM, D.M.YYYY H:MM, or Unix "
+                             "seconds")
+        sep, clock = m.group(2), "" if m.group(5) is None else (
+            " %H:%M:%S" if m.group(6) else " %H:%M")
+        if date_order is not None:
+            orders = [date_order]
+        else:
+            orders = ["dmy"] if sep == "." else list(DATE_ORDERS)
+        tried = {}
+        for order in orders:
+            fmt = (f"%m{sep}%d{sep}%Y" if order == "mdy" else f"%d{sep}%m{sep}%Y") + clock
+            tried[order] = pd.to_datetime(text.str.replace("T", " ", regex=False), format=fmt,
+                                          errors="coerce")
+        parsed = _pick_date_order(tried, text, where, date_order)
+        form = {"mdy": "month/day/year", "dmy": "day/month/year"}[
+            next(k for k, v in tried.items() if v is parsed)]
+    if parsed.isna().any():
+        i = int(np.flatnonzero(parsed.isna().to_numpy())[0])
+        raise ValueError(f"{column}: {text.iloc[i][:30]!r} at {where(i)} is not a time like "
+                         f"line {lines[0]}'s ({first[:30]!r}, {form})")
+    if parsed.dt.tz is not None:
+        notes.append(f"times: {form} with UTC offsets in column {column!r}")
+        return pd.DatetimeIndex(parsed).tz_convert("UTC"), notes
+    if timezone is None:
+        raise ValueError(f"{column}: the times have no UTC offset ({first[:30]!r} at "
+                         f"{where(0)}): say which clock they were read on with --timezone — "
+                         "an IANA zone (America/Denver), or Etc/GMT+7 for a logger's clock "
+                         "on UTC−7 all year (most loggers do not change for summer time)")
+    try:
+        ZoneInfo(timezone)
+    except (ZoneInfoNotFoundError, ValueError):
+        raise ValueError(f"timezone: {timezone!r} is not an IANA time zone (America/Denver, "
+                         "Etc/GMT+7 for UTC−7)") from None
+    notes.append(f"times: {form} on a clock in {timezone}, column {column!r}")
+    return clock_times_to_utc(parsed, timezone, text, where), notes
+
+
+def _pick_date_order(tried: dict[str, pd.Series], text: pd.Series, where: Any,
+                     date_order: str | None) -> pd.Series:
+    """Of month- and day-first readings, the one every time parses in and whose steps are
+    regular (the fewest distinct spacings; a logger's clock ticks evenly): ``1/2/2022`` to
+    ``1/6/2022`` read day-first jumps a month a day. Refused as ambiguous when both read
+    alike well and differ (every day ≤ 12 and as regular either way)."""
+    ok = {k: v for k, v in tried.items() if not v.isna().any()}
+    if not ok:
+        return next(iter(tried.values()))  # the caller names the first bad line
+    if len(ok) == 1:
+        return next(iter(ok.values()))
+
+    def irregularity(v: pd.Series) -> int:
+        return int(np.unique(np.diff(v.to_numpy().astype("datetime64[s]").astype(np.int64))
+                             ).size)
+
+    score = {k: irregularity(v) for k, v in ok.items()}
+    best = min(score.values())
+    winners = [k for k, s in score.items() if s == best]
+    if len(winners) > 1 and not ok["mdy"].equals(ok["dmy"]):
+        raise ValueError(f"the dates read as month/day/year and as day/month/year alike "
+                         f"({text.iloc[0][:30]!r} at {where(0)}): say which with "
+                         "--date-order mdy or dmy")
+    return ok[winners[0]]
+
+
+def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None = None,
+                     timezone: str | None = None, time_column: str | None = None,
+                     date_order: str | None = None) -> LoggerFile:
+    """Read a logger's export (see the module). ``columns``: field → ``"NAME"`` or
+    ``"NAME:UNIT"`` (the file's column; its unit when the file does not say it or says it
+    otherwise). ``time_column``: the column of the times (default: TOA5's ``TIMESTAMP``,
+    else the first column whose first cell reads as a time). ``date_order``: ``"mdy"`` or
+    ``"dmy"`` for slash dates the file cannot tell. Errors are :class:`ValueError`s naming
+    the column, the line and what to do."""
+    if date_order is not None and date_order not in DATE_ORDERS:
+        raise ValueError(f"date_order must be mdy or dmy; got {date_order!r}")
+    raw = source if isinstance(source, bytes) else Path(source).read_bytes()
+    rows, layout = _split_lines(weather_text(raw))
+    toa5 = layout == "TOA5"
+    header_at = 1 if toa5 else 0
+    if len(rows) <= header_at + (3 if toa5 else 1):
+        raise ValueError("the file has a header and no rows")
+    names = [c.strip() for c in rows[header_at]]
+    file_units = ([c.strip() for c in rows[2]] + [""] * len(names))[:len(names)] if toa5 \
+        else [(_header_unit(n) or "") for n in names]
+    body_at = header_at + (3 if toa5 else 1)
+    kept = [i for i in range(body_at, len(rows)) if any(c.strip() for c in rows[i])]
+    body = [rows[i] for i in kept]
+    lines = np.array(kept, dtype=np.int64) + 1 + _skipped_sep_line(raw)  # the file's lines
+    width = len(names)
+    for k, r in enumerate(body):
+        if len(r) != width:
+            raise ValueError(f"line {lines[k]} has {len(r)} cells; the header has {width}")
+    frame = pd.DataFrame(body, columns=range(width), dtype=str)
+    blank = [i for i, n in enumerate(names) if not n]
+    label = {i: (n or f"column {i + 1}") for i, n in enumerate(names)}
+    index = _column_index(names)
+
+    tcol = _time_column(frame, names, label, index, time_column, toa5)
+    times, notes = _times(frame[tcol], label[tcol], lines, timezone, date_order)
+    decimal_comma = layout == "CSV (';')" and _has_decimal_commas(frame, tcol)
+    if decimal_comma:
+        layout = "CSV (';', decimal comma)"
+
+    mapping = dict(columns or {})
+    for i, n in enumerate(names):  # a column already named as a field
+        if n.lower() in FIELDS and n.lower() not in mapping and i not in blank:
+            mapping[n.lower()] = n
+    unknown = [f for f in mapping if f not in FIELDS]
+    if unknown:
+        raise ValueError(f"column: {unknown[0]!r} is not a field; the fields are "
+                         f"{', '.join(FIELDS)}")
+    values = pd.DataFrame(index=frame.index)
+    used: dict[str, tuple[str, str]] = {}
+    unitless = []
+    for fld, spec in mapping.items():
+        name, _, unit_given = spec.partition(":") if spec not in index else (spec, "", "")
+        if name not in index:
+            raise ValueError(f"column: {fld}={spec!r}: the file has no column {name!r}; its "
+                             f"columns are {', '.join(repr(label[i]) for i in range(width))}")
+        i = index[name]
+        unit = unit_given.strip() or file_units[i]
+        units = UNITS[fld]
+        key = _unit_key(unit) if unit else next(iter(units))
+        if key not in units:
+            raise ValueError(f"column: {fld}={spec!r}: unit {unit!r} is not one of "
+                             f"{', '.join(units)} (give NAME:UNIT)")
+        scale, add = units[key]
+        values[fld] = _numbers(frame[i], decimal_comma, label[i], lines) * scale + add
+        used[fld] = (label[i], unit or OWN_UNITS[fld])
+        if not unit:
+            unitless.append(f"{fld} = {label[i]!r} in {OWN_UNITS[fld]}")
+    if unitless:
+        notes.append("no unit in the file, read in the field's own: " + ", ".join(unitless)
+                     + " (give NAME:UNIT where that is wrong)")
+    if "power_w" not in values and not {"voltage_v", "current_a"} <= set(values):
+        raise ValueError("column: map power_w, or voltage_v and current_a, to the file's "
+                         "columns (--column power_w=NAME[:UNIT]); its columns are "
+                         + ", ".join(repr(label[i]) for i in range(width) if i != tcol))
+    if ("voltage_v" in values) != ("current_a" in values):
+        raise ValueError("column: voltage_v and current_a go together; map both or neither")
+    return LoggerFile(layout, label[tcol], times, values, lines, used, notes)
+
+
+def _skipped_sep_line(raw: bytes) -> int:
+    """1 when the file starts with Excel's ``sep=`` line (not among the parsed rows)."""
+    head = raw[:8].lstrip(b"\xef\xbb\xbf").lower()
+    return 1 if head.startswith(b"sep=") else 0
+
+
+def _column_index(names: list[str]) -> dict[str, int]:
+    """The file's column names → their position; a name given twice is refused."""
+    index: dict[str, int] = {}
+    for i, n in enumerate(names):
+        if n and n in index:
+            raise ValueError(f"the header names column {n!r} twice")
+        if n:
+            index[n] = i
+    return index
+
+
+def _time_column(frame: pd.DataFrame, names: list[str], label: dict[int, str],
+                 index: dict[str, int], time_column: str | None, toa5: bool) -> int:
+    """The position of the times: ``time_column``, TOA5's ``TIMESTAMP``, else the first
+    column whose first cell reads as a time (an unnamed first column: a pandas index)."""
+    if time_column is not None:
+        if time_column not in index:
+            raise ValueError(f"time_column: the file has no column {time_column!r}; its "
+                             f"columns are {', '.join(repr(label[i]) for i in label)}")
+        return index[time_column]
+    if toa5 and "TIMESTAMP" in index:
+        return index["TIMESTAMP"]
+    for i in range(len(names)):
+        cell = str(frame[i].iloc[0]).strip()
+        if _ISO.match(cell) or _NUMERIC_DATE.match(cell) or (
+                _UNIX.match(cell) and names[i].lower() in ("ts", "time", "timestamp",
+                                                           "unix", "unix_s", "epoch")):
+            return i
+    raise ValueError("time_column: no column of times found (ISO 8601, M/D/YYYY H:MM, "
+                     "D.M.YYYY H:MM or Unix seconds named ts/time/timestamp); name it with "
+                     "--time-column")
+
+
+def _has_decimal_commas(frame: pd.DataFrame, tcol: int) -> bool:
+    """Whether a ``;`` file writes its numbers with decimal commas (``12,5``)."""
+    sample = frame.drop(columns=[tcol]).head(200).to_numpy().ravel()
+    return any(re.fullmatch(r"-?\d+,\d+", str(c).strip()) for c in sample)

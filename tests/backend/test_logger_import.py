@@ -1,0 +1,210 @@
+"""``heliotwin readings import`` (``backend.measurements.logger_file``, its CLI module):
+real loggers' files as their data systems wrote them (``tests/data/loggers/``, NREL's, from
+pvanalytics), each read against pandas reading the same file by hand; the same readings in
+a Campbell TOA5 table, a European ``;`` export with decimal commas and Unix times; the
+refusals a user meets; and the command posting to a ``heliotwin serve`` over a socket, the
+energy the service then answers against the file's own trapezoid."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pandas as pd
+import pytest
+from live_service import ServerProcess
+
+from backend.measurements.logger_file import read_logger_file
+
+ROOT = Path(__file__).resolve().parents[2]
+LOGGERS = ROOT / "tests" / "data" / "loggers"
+#: SERF West's positive string (its DC transducers) and its sensors, on a clock at UTC−7
+SERF_WEST = {"voltage_v": "dc_pos_voltage__774", "current_a": "dc_pos_current__775",
+             "poa_irradiance_w_m2": "poa_irradiance__771", "temp_module_c": "module_temp_1__781",
+             "temp_air_c": "ambient_temp__780"}
+CASES = {  # file: (columns, timezone, pandas' time format, {field: (column, scale)}, cadence)
+    "serf_west_15min.csv": (SERF_WEST, "Etc/GMT+7", "ISO8601",
+                            {f: (c, 1.0) for f, c in SERF_WEST.items()}, 900.0),
+    "nrel_RSF_II.csv": ({"power_w": "ac_power_kw_1137:kW", "wind_speed_m_s": "wind_speed__1051"},
+                        "Etc/GMT+7", "%m/%d/%Y %H:%M",
+                        {"power_w": ("ac_power_kw_1137", 1000.0),
+                         "wind_speed_m_s": ("wind_speed__1051", 1.0)}, 900.0),
+    "serf_east_1min_ac_power.csv": ({"power_w": "ac_power__752"}, None, None,
+                                    {"power_w": ("ac_power__752", 1.0)}, 60.0),
+    "nrel_1axis_tracker_mesa_ac_power.csv": ({"power_w": "ac_power"}, None, None,
+                                             {"power_w": ("ac_power", 1.0)}, 900.0),
+}
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_a_real_loggers_file_reads_as_pandas_reads_it_by_hand(name: str) -> None:
+    columns, zone, time_format, expect, cadence = CASES[name]
+    lf = read_logger_file(LOGGERS / name, columns, timezone=zone)
+    ref = pd.read_csv(LOGGERS / name, index_col=0)
+    if zone is None:  # ISO times with their UTC offsets
+        times = pd.to_datetime(ref.index, utc=True)
+    else:
+        times = pd.to_datetime(ref.index, format=time_format).tz_localize(zone).tz_convert("UTC")
+    assert (lf.times_utc.as_unit("s").asi8 == times.as_unit("s").asi8).all()
+    for field, (column, scale) in expect.items():
+        np.testing.assert_allclose(lf.values[field], ref[column] * scale, rtol=1e-12)
+    assert lf.cadence_s() == cadence and len(lf.readings("fixed")) == len(ref)
+    assert lf.lines[0] == 2 and lf.lines[-1] == len(ref) + 1
+
+
+def _serf_west() -> pd.DataFrame:
+    ref = pd.read_csv(LOGGERS / "serf_west_15min.csv", index_col=0)
+    ref.index = pd.to_datetime(ref.index)
+    return ref
+
+
+def _toa5(ref: pd.DataFrame) -> str:
+    """The file's positive string as a Campbell CR1000 would log it: TOA5's four header lines
+    (the layout of Campbell's LoggerNet manual), its DC power in kW, NAN for a lost value."""
+    out = ['"TOA5","SERF_W","CR1000","1234","CR1000.Std.32","CPU:serf.CR1","4321","Table15"',
+           '"TIMESTAMP","RECORD","Vdc_pos_Avg","Idc_pos_Avg","Pdc_pos_Avg"',
+           '"TS","RN","Volts","Amps","kW"', '"","","Avg","Avg","Avg"']
+    for k, (t, r) in enumerate(ref.iterrows()):
+        v, i = float(r["dc_pos_voltage__774"]), float(r["dc_pos_current__775"])
+        cells = ["NAN", "NAN", "NAN"] if k == 40 else [f"{v!r}", f"{i!r}", f"{v * i / 1000!r}"]
+        out.append(f'"{t:%Y-%m-%d %H:%M:%S}",{k},' + ",".join(cells))
+    return "\r\n".join(out) + "\r\n"
+
+
+def _european(ref: pd.DataFrame) -> str:
+    """The same as a European portal writes it: Excel's sep= line, ';', decimal commas,
+    D.M.YYYY times, units in the header."""
+    rows = ["sep=;", "Datum;U_DC [V];I_DC [A]"]
+    rows += [f"{t:%d.%m.%Y %H:%M};{str(r['dc_pos_voltage__774']).replace('.', ',')};"
+             f"{str(r['dc_pos_current__775']).replace('.', ',')}" for t, r in ref.iterrows()]
+    return "\n".join(rows) + "\n"
+
+
+def _unix(ref: pd.DataFrame) -> str:
+    """The same as an Arduino logger writes it: Unix seconds, columns named as the fields."""
+    t = (ref.index.tz_localize("Etc/GMT+7").as_unit("s").asi8).tolist()
+    rows = ["unix_s,voltage_v,current_a"] + [
+        f"{s},{v!r},{i!r}" for s, v, i in zip(t, ref["dc_pos_voltage__774"].tolist(),
+                                             ref["dc_pos_current__775"].tolist(), strict=True)]
+    return "\n".join(rows) + "\n"
+
+
+@pytest.mark.parametrize("layout", ["TOA5", "european", "unix"])
+def test_the_same_readings_in_other_loggers_layouts(layout: str) -> None:
+    ref = _serf_west()
+    plain = read_logger_file(LOGGERS / "serf_west_15min.csv",
+                             {"voltage_v": SERF_WEST["voltage_v"],
+                              "current_a": SERF_WEST["current_a"]}, timezone="Etc/GMT+7")
+    if layout == "TOA5":
+        lf = read_logger_file(_toa5(ref).encode(), {"power_w": "Pdc_pos_Avg",
+                                                    "voltage_v": "Vdc_pos_Avg",
+                                                    "current_a": "Idc_pos_Avg"},
+                              timezone="Etc/GMT+7")
+        assert lf.layout == "TOA5" and lf.lines[0] == 5 and lf.time_column == "TIMESTAMP"
+        assert lf.columns["power_w"] == ("Pdc_pos_Avg", "kW")
+        assert lf.columns["voltage_v"] == ("Vdc_pos_Avg", "Volts")
+        assert lf.sendable.sum() == len(ref) - 1 and not lf.sendable[40]  # the NAN row
+        got = lf.readings("fixed")
+        assert got[60]["power_w"] == pytest.approx(got[60]["voltage_v"] * got[60]["current_a"])
+    elif layout == "european":
+        lf = read_logger_file(_european(ref).encode("latin-1"),
+                              {"voltage_v": "U_DC [V]", "current_a": "I_DC [A]"},
+                              timezone="Etc/GMT+7")
+        assert lf.layout == "CSV (';', decimal comma)" and lf.lines[0] == 3
+        assert lf.columns["voltage_v"] == ("U_DC [V]", "V") and not lf.notes[1:]
+        got = lf.readings("fixed")
+    else:
+        lf = read_logger_file(_unix(ref).encode())  # no mapping, no zone: nothing to say
+        assert set(lf.columns) == {"voltage_v", "current_a"}
+        got = lf.readings("fixed")
+    want = [r for k, r in enumerate(plain.readings("fixed")) if layout != "TOA5" or k != 40]
+    assert [(r["ts"], r["voltage_v"], r["current_a"]) for r in got] == [
+        (r["ts"], r["voltage_v"], r["current_a"]) for r in want]
+
+
+REFUSED = [
+    ("ts,power_w\n2022-01-02 10:00,5\n2022-01-02 10:01,6\n", {},
+     r"ts: the times have no UTC offset .* with --timezone"),
+    ("ts,power_w\n2022-01-02T10:00Z,5\n2022-01-02T10:01Z,abc\n", {},
+     r"column 'power_w': 'abc' at line 3 is not a number"),
+    ("ts,power_w\n1/2/2022 10:00,5\n1/2/2022 10:15,6\n", {"timezone": "UTC"},
+     r"month/day/year and as day/month/year alike .* --date-order mdy or dmy"),
+    ("ts,power_w\n2022-11-06 00:30,5\n2022-11-06 01:30,6\n2022-11-06 01:30,6\n",
+     {"timezone": "America/Denver"}, r"'2022-11-06 01:30' at line 3 repeats or is skipped"),
+    ("ts,P\n2022-01-02T10:00Z,5\n", {"columns": {"power_w": "P:furlongs"}},
+     r"unit 'furlongs' is not one of w, watts, kw"),
+    ("ts,P\n2022-01-02T10:00Z,5\n", {"columns": {"power_w": "Q"}},
+     r"no column 'Q'; its columns are 'ts', 'P'"),
+    ("ts,P\n2022-01-02T10:00Z,5\n", {}, r"map power_w, or voltage_v and current_a"),
+    ("ts,power_w\n2022-01-02T10:00Z,5\n2022-01-02T10:01Z\n", {},
+     r"line 3 has 1 cells; the header has 2"),
+    ("ts,power_w\n2022-01-02T10:00Z,5\n", {"timezone": "Mars/Olympus"}, None),  # offsets: unused
+    ("ts,power_w\n2022-01-02 10:00,5\n", {"timezone": "Mars/Olympus"},
+     r"'Mars/Olympus' is not an IANA time zone"),
+]
+
+
+@pytest.mark.parametrize(("text", "kwargs", "match"), REFUSED)
+def test_a_file_it_cannot_read_is_refused_naming_line_column_and_remedy(
+        text: str, kwargs: dict, match: str | None) -> None:
+    if match is None:
+        assert len(read_logger_file(text.encode(), **kwargs).readings("a")) == 1
+        return
+    with pytest.raises(ValueError, match=match):
+        read_logger_file(text.encode(), **kwargs)
+
+
+def test_the_command_posts_a_real_loggers_file_and_the_service_counts_its_energy(
+        tmp_path: Path, heliotwin_cli) -> None:
+    """SERF West's positive string (voltage, current, POA, module and air temperature, 15 min,
+    a clock on UTC−7) into a site at Golden whose fixed array is 8 modules (the string's
+    3.05 kW peak under twice its rating): every reading stored, again as duplicates, and the
+    site's energy over the five days the file's own trapezoid (energy rule, no gap over
+    15 min). Its night voltage (−0.002 V, a transducer's offset) had been refused. The same
+    string into the 820-W tracker array is refused naming the file's lines, nothing stored."""
+    sites = tmp_path / "sites"
+    sites.mkdir()
+    site = json.loads((ROOT / "sim" / "data" / "sites" / "tehuantepec.json").read_text())
+    site.update(site_id="serf", name="SERF West string", latitude_deg=39.7407,
+                longitude_deg=-105.1686, altitude_m=1794.0, timezone="America/Denver",
+                temp_air_c=10.0)
+    site["arrays"]["fixed"].update(modules_in_series=8, strings_in_parallel=1,
+                                   surface_tilt_deg=40.0)
+    (sites / "serf.json").write_text(json.dumps(site))
+    env = {"HELIOTWIN_SITES_DIR": str(sites)}
+    server = ServerProcess(f"sqlite:///{tmp_path / 'serf.sqlite'}", tmp_path / "server.log",
+                           extra_env=env).start()
+    try:
+        token = server.token("serf")
+        args = ["readings", "import", str(LOGGERS / "serf_west_15min.csv"), "--site", "serf",
+                "--timezone", "Etc/GMT+7", "--url", server.base_url, "--token", token,
+                *[f"--column={f}={c}" for f, c in SERF_WEST.items()]]
+        first = heliotwin_cli(*args, "--array", "fixed", env=env)
+        assert first.returncode == 0, first.stderr
+        assert "480 accepted, 0 duplicates, stored through 2022-01-07T06:46:00Z" in first.stdout
+        assert "every 900 s" in first.stdout and "readings_stamped" in first.stdout
+        again = heliotwin_cli(*args, "--array", "fixed", "--json", env=env)
+        assert again.returncode == 0 and json.loads(again.stdout)["duplicates"] == 480
+        refused = heliotwin_cli(*args, "--array", "tracker", env=env)
+        assert refused.returncode == 1
+        assert ("line 44: power_w 2594.93 W is over 2 × array 'tracker''s rating"
+                in refused.stderr), refused.stderr
+        r = httpx.get(f"{server.base_url}/api/v1/sites/serf/energy", params={
+            "start": "2022-01-02", "end": "2022-01-07", "interval": "day"}, timeout=60)
+        assert r.status_code == 200, r.text
+        days = r.json()["rows"]
+        measured = sum(d["arrays"]["fixed"]["measured_wh"] for d in days)
+        assert all(d["arrays"]["tracker"]["readings"] == 0 for d in days)
+        ref = _serf_west()
+        t_s = ref.index.tz_localize("Etc/GMT+7").as_unit("s").asi8.astype(float)
+        power = (ref["dc_pos_voltage__774"] * ref["dc_pos_current__775"]).to_numpy()
+        assert measured == pytest.approx(np.trapezoid(power, t_s) / 3600, rel=1e-12)  # 2e-16
+        m = httpx.get(f"{server.base_url}/api/v1/sites/serf/measurements", params={
+            "array": "fixed", "start": "2022-01-02T15:01:00-07:00",
+            "end": "2022-01-02T15:02:00-07:00"}, timeout=60).json()
+        row = m["readings"][0] if "readings" in m else m["points"][0]
+        assert row["voltage_v"] == 223.79 and row["poa_irradiance_w_m2"] == 526.2
+    finally:
+        server.stop()
