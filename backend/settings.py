@@ -194,6 +194,10 @@ class IngestSettings(_Group):
         900, ge=0, description="How far past the server clock a reading may be stamped."
     )
     max_voltage_v: float = Field(1500.0, gt=0, description="Highest plausible array voltage.")
+    min_voltage_v: float = Field(
+        -1.0, le=0, description="Lowest plausible array voltage (a transducer's zero offset "
+                                "at night: NREL SERF West's logger reads down to −0.026 V)."
+    )
     max_current_a: float = Field(100.0, gt=0, description="Highest plausible array current.")
     min_current_a: float = Field(
         -1.0, le=0, description="Lowest plausible current (sensor offset at night)."

@@ -947,16 +947,26 @@ def _measured_times(column: pd.Series, timezone: str | None, line: Any) -> pd.Da
         i = int(np.flatnonzero(parsed.isna().to_numpy())[0])
         raise ValueError(f"time: {text.iloc[i][:30]!r} at {line(i)} is not an ISO 8601 time "
                          "(2024-06-01T10:05:00+09:30)")
-    if not want:  # a time a clock change repeats or skips is refused naming its line (the
-        # error had been pandas' "Cannot infer dst time …, try using the 'ambiguous' argument")
-        parsed = parsed.dt.tz_localize(timezone, ambiguous="NaT", nonexistent="NaT")
-        if parsed.isna().any():
-            i = int(np.flatnonzero(parsed.isna().to_numpy())[0])
-            raise ValueError(f"time: {text.iloc[i][:30]!r} at {line(i)} repeats or is skipped "
-                             f"at a clock change in {timezone} — give the times a UTC offset, "
-                             "or name the fixed zone of the logger's clock, e.g. Etc/GMT+4 "
-                             "for UTC−4")
+    if timezone is not None and not want:
+        return clock_times_to_utc(parsed, timezone, text, line)
     return pd.DatetimeIndex(parsed).tz_convert("UTC")
+
+
+def clock_times_to_utc(parsed: pd.Series, timezone: str, text: pd.Series, line: Any
+                       ) -> pd.DatetimeIndex:
+    """Times without a UTC offset (``parsed``, naive) read on a clock in ``timezone`` (an IANA
+    zone) as UTC instants. A time a clock change repeats or skips is refused naming its line
+    (``line(i)``) and its cell (``text``): the error had been pandas' "Cannot infer dst time
+    …, try using the 'ambiguous' argument". The rule of a measured weather CSV and of a
+    logger's file (``backend.measurements.logger_file``)."""
+    local = parsed.dt.tz_localize(timezone, ambiguous="NaT", nonexistent="NaT")
+    if local.isna().any():
+        i = int(np.flatnonzero(local.isna().to_numpy())[0])
+        raise ValueError(f"time: {text.iloc[i][:30]!r} at {line(i)} repeats or is skipped "
+                         f"at a clock change in {timezone} — give the times a UTC offset, "
+                         "or name the fixed zone of the logger's clock, e.g. Etc/GMT+4 "
+                         "for UTC−4")
+    return pd.DatetimeIndex(local).tz_convert("UTC")
 
 
 #: The most any of GHI, DNI, DHI can be [W m⁻²]: the solar constant at perihelion (≈ 1,414)

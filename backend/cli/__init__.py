@@ -38,6 +38,7 @@ SUBCOMMAND_MODULES = (
     "backend.cli.serve",
     "backend.cli.token",
     "backend.cli.demo_logger",
+    "backend.cli.readings",
     "backend.cli.vision",
     "backend.cli.dynamics",
     "backend.cli.plant",

@@ -15,9 +15,12 @@ import gzip
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from backend.cli import fail
+
+if TYPE_CHECKING:
+    from backend.measurements.logger_file import LoggerFile
 
 #: Readings a POST carries: about 1.5 MB of JSON, under the service's default body limit
 #: (HELIOTWIN_MAX_UPLOAD_BYTES, 10 MB) and batch limit (HELIOTWIN_MAX_BATCH_ROWS, 100,000).
@@ -92,16 +95,17 @@ def run_import(args: argparse.Namespace) -> int:
                               args.time_column, args.date_order)
     except ValueError as exc:
         fail(f"{args.file.name}: {exc}")
-    readings = lf.readings(args.array)
-    if not readings:
-        fail(f"{args.file.name}: no row has power, or voltage and current: nothing to post")
     rows = lf.sendable.nonzero()[0]
+    if not rows.size:
+        fail(f"{args.file.name}: no row has power, or voltage and current: nothing to post")
+    stamps = lf.times_utc[rows]
     summary: dict[str, Any] = {
         "file": str(args.file), "layout": lf.layout, "time_column": lf.time_column,
         "columns": {k: {"column": c, "unit": u} for k, (c, u) in lf.columns.items()},
-        "rows": len(lf.lines), "readings": len(readings),
-        "rows_without_power": int(len(lf.lines) - len(rows)),
-        "first": readings[0]["ts"], "last": readings[-1]["ts"],
+        "rows": len(lf.lines), "readings": int(rows.size),
+        "rows_without_power": int(len(lf.lines) - rows.size),
+        "first": f"{stamps.min():%Y-%m-%dT%H:%M:%SZ}",
+        "last": f"{stamps.max():%Y-%m-%dT%H:%M:%SZ}",
         "cadence_s": lf.cadence_s(), "notes": list(lf.notes),
         "site_id": args.site, "array": args.array,
     }
@@ -111,18 +115,18 @@ def run_import(args: argparse.Namespace) -> int:
                                 f"and current (the first at line {first}) are not sent")
     if not args.dry_run:
         with httpx.Client(base_url=args.url, timeout=60.0) as client:
-            summary.update(post_readings(client, args.site, args.array, args.token, readings,
-                                         lf.lines[rows], summary))
+            summary.update(post_readings(client, args.site, args.array, args.token, lf,
+                                         summary))
     _print(summary, args.json, args.dry_run)
     return 0
 
 
-def post_readings(client: Any, site_id: str, array: str, token: str,
-                  readings: list[dict[str, Any]], lines: Any, summary: dict[str, Any]
-                  ) -> dict[str, Any]:
-    """Post ``readings`` (their file lines ``lines``) to ``site_id`` through ``client`` (an
-    ``httpx.Client`` on the service) in :data:`BATCH_READINGS`, gzip-compressed; the
-    answer's counts. A refused batch stops it: :func:`backend.cli.fail` naming the lines."""
+def post_readings(client: Any, site_id: str, array: str, token: str, lf: LoggerFile,
+                  summary: dict[str, Any]) -> dict[str, Any]:
+    """Post the file's readings of ``array`` to ``site_id`` through ``client`` (an
+    ``httpx.Client`` on the service) in batches of :data:`BATCH_READINGS`, gzip-compressed;
+    the answers' counts. A refused batch stops it: :func:`backend.cli.fail` naming the
+    file's lines."""
     import httpx
     from tenacity import Retrying, retry_if_exception_type, stop_after_attempt
     from tqdm import tqdm
@@ -156,11 +160,12 @@ def post_readings(client: Any, site_id: str, array: str, token: str,
 
     retrying = Retrying(stop=stop_after_attempt(5), wait=backoff(1.0, 10.0),
                         retry=retry_if_exception_type(Retry), reraise=True)
+    lines = lf.lines[lf.sendable]
     accepted = duplicates = 0
     stored_through = None
-    with tqdm(total=len(readings), unit="reading", disable=None, file=sys.stderr) as bar:
-        for k in range(0, len(readings), BATCH_READINGS):
-            chunk = readings[k : k + BATCH_READINGS]
+    with tqdm(total=lines.size, unit="reading", disable=None, file=sys.stderr) as bar:
+        for k in range(0, lines.size, BATCH_READINGS):
+            chunk = lf.readings(array, k, k + BATCH_READINGS)
             body = gzip.compress(json.dumps({"readings": chunk}).encode(), compresslevel=5)
             try:
                 r = retrying(once, body)

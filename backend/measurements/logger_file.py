@@ -99,24 +99,22 @@ class LoggerFile:
             has |= v["voltage_v"].notna() & v["current_a"].notna()
         return has.to_numpy()
 
-    def readings(self, array: str) -> list[dict[str, Any]]:
-        """The sendable rows as the service's JSON readings of ``array`` (``ts`` in UTC)."""
-        rows = np.flatnonzero(self.sendable)
-        ts = self.times_utc[rows].strftime("%Y-%m-%dT%H:%M:%SZ")
-        cols = {name: self.values[name].to_numpy()[rows] for name in self.values.columns}
-        vi = ("voltage_v" in cols and "current_a" in cols)
-        out = []
-        for k, stamp in enumerate(ts):
-            r: dict[str, Any] = {"ts": stamp, "array": array}
-            for name, col in cols.items():
-                x = col[k]
-                if np.isnan(x) or (name in ("voltage_v", "current_a")
-                                   and not (vi and not np.isnan(cols["voltage_v"][k])
-                                            and not np.isnan(cols["current_a"][k]))):
-                    continue  # voltage and current go together or not at all
-                r[name] = round(float(x), 6)
-            out.append(r)
-        return out
+    def readings(self, array: str, start: int = 0, stop: int | None = None
+                 ) -> list[dict[str, Any]]:
+        """The sendable rows ``[start, stop)`` (counted among the sendable ones) as the
+        service's JSON readings of ``array`` (``ts`` in UTC): each field that has a value,
+        voltage and current only together. Made a batch at a time by a caller that posts
+        them, so a year of minutes is never all dictionaries at once."""
+        rows = np.flatnonzero(self.sendable)[start:stop]
+        values = self.values.iloc[rows].round(6)
+        if "voltage_v" in values:
+            lone = values["voltage_v"].isna() | values["current_a"].isna()
+            values.loc[lone, ["voltage_v", "current_a"]] = np.nan
+        stamps = self.times_utc[rows].strftime("%Y-%m-%dT%H:%M:%SZ").tolist()
+        names = list(values.columns)
+        return [{"ts": ts, "array": array,
+                 **{n: x for n, x in zip(names, row, strict=True) if x == x}}  # x == x: not NaN
+                for ts, row in zip(stamps, values.to_numpy().tolist(), strict=True)]
 
     def cadence_s(self) -> float | None:
         """The median spacing of the sendable rows' times [s]; None under two rows."""
@@ -139,40 +137,68 @@ def _header_unit(name: str) -> str | None:
     return m.group(1) if m else None
 
 
-def _split_lines(text: str) -> tuple[list[list[str]], str]:
-    """The file's cells and its layout's name: TOA5, or a CSV whose separator (``,``, ``;``
-    or a tab; an Excel ``sep=`` first line says it) is the one its header line holds most."""
-    lines = text.splitlines()
-    sep = None
-    if lines and lines[0].lower().startswith("sep=") and len(lines[0].strip()) == 5:
-        sep, lines = lines[0].strip()[4], lines[1:]
-    if not lines:
-        raise ValueError("the file is empty")
+def _header(text: str) -> tuple[list[list[str]], int, str, str]:
+    """The header's rows (TOA5's four, a CSV's one), the file line the body starts after, the
+    layout's name (TOA5, or a CSV) and its separator: ``,``, ``;`` or a tab, the one its
+    header line holds most (an Excel ``sep=`` first line says it)."""
+    head = text[:65536].splitlines()[:6]
+    skip, sep = 0, None
+    if head and head[0].lower().startswith("sep=") and len(head[0].strip()) == 5:
+        sep, skip, head = head[0].strip()[4], 1, head[1:]
+    if not head or not head[0].strip():
+        raise ValueError("the file is empty, or its first line is blank")
     if sep is None:
-        head = lines[0]
-        sep = max((",", ";", "\t"), key=lambda s: head.count(s))
-    rows = list(csv.reader(io.StringIO("\n".join(lines)), delimiter=sep))
-    name = "TOA5" if rows and rows[0] and rows[0][0] == "TOA5" else (
-        "CSV (tab)" if sep == "\t" else f"CSV ('{sep}')")
-    return rows, name
+        sep = max((",", ";", "\t"), key=lambda s: head[0].count(s))
+    rows = list(csv.reader(io.StringIO("\n".join(head)), delimiter=sep))
+    toa5 = bool(rows[0]) and rows[0][0] == "TOA5"
+    n = 4 if toa5 else 1
+    if len(rows) < n:
+        raise ValueError("the file ends inside its header")
+    name = "TOA5" if toa5 else ("CSV (tab)" if sep == "\t" else f"CSV ('{sep}')")
+    return rows[:n], skip + n, name, sep
+
+
+def _body(text: str, skip: int, sep: str, width: int) -> tuple[pd.DataFrame, np.ndarray]:
+    """The rows after the header as text cells (pandas' C reader: a year of minutes is
+    read in seconds), blank lines dropped, and each row's line in the file (1-based). A row
+    with more cells than the header is refused naming its line; a shorter one's missing
+    cells are blank (missing values)."""
+    try:
+        frame = pd.read_csv(io.StringIO(text), sep=sep, header=None, skiprows=skip,
+                            names=range(width), dtype=str, keep_default_na=False,
+                            skip_blank_lines=False, skipinitialspace=True, engine="c")
+    except pd.errors.ParserError as exc:
+        m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", str(exc))
+        if m is None:
+            raise ValueError(f"the file cannot be read as a table: {exc}") from None
+        raise ValueError(f"line {m.group(2)} has {m.group(3)} cells; the header has "
+                         f"{width}") from None
+    filled = np.zeros(len(frame), bool)
+    for col in frame.columns:  # leading blanks are skipped (skipinitialspace)
+        filled |= frame[col].to_numpy() != ""
+    kept = np.flatnonzero(filled)
+    if not kept.size:
+        raise ValueError("the file has a header and no rows")
+    return frame.iloc[kept].reset_index(drop=True), kept + skip + 1
 
 
 def _numbers(cells: pd.Series, decimal_comma: bool, column: str, lines: np.ndarray
              ) -> np.ndarray:
     """A column's cells as numbers, NaN for the :data:`MISSING` marks; any other text is
     refused naming its line, the column and how many such cells."""
-    text = cells.fillna("").astype(str).str.strip()
+    text = cells.fillna("")
     if decimal_comma:
         text = text.str.replace(",", ".", regex=False)
     values = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float, copy=True)
-    missing = text.str.lower().isin(MISSING).to_numpy()
-    bad = (np.isnan(values) & ~missing) | np.isinf(values)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"column {column!r}: {text.iloc[i][:20]!r} at line {lines[i]} is "
-                         f"not a number ({int(bad.sum())} such cells; a missing value may be "
-                         "blank or NAN)")
-    values[missing] = np.nan
+    odd = np.flatnonzero(~np.isfinite(values))  # few: only these cells' text is looked at
+    marks = text.iloc[odd].str.strip()
+    bad = odd[~marks.str.lower().isin(MISSING).to_numpy()]
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"column {column!r}: {marks.loc[text.index[i]][:20]!r} at line "
+                         f"{lines[i]} is not a number ({bad.size} such cells; a missing value "
+                         "may be blank or NAN)")
+    values[odd] = np.nan
     return values
 
 
@@ -292,32 +318,24 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
     if date_order is not None and date_order not in DATE_ORDERS:
         raise ValueError(f"date_order must be mdy or dmy; got {date_order!r}")
     raw = source if isinstance(source, bytes) else Path(source).read_bytes()
-    rows, layout = _split_lines(weather_text(raw))
+    text = weather_text(raw)
+    header, skip, layout, sep = _header(text)
     toa5 = layout == "TOA5"
-    header_at = 1 if toa5 else 0
-    if len(rows) <= header_at + (3 if toa5 else 1):
-        raise ValueError("the file has a header and no rows")
-    names = [c.strip() for c in rows[header_at]]
-    file_units = ([c.strip() for c in rows[2]] + [""] * len(names))[:len(names)] if toa5 \
-        else [(_header_unit(n) or "") for n in names]
-    body_at = header_at + (3 if toa5 else 1)
-    kept = [i for i in range(body_at, len(rows)) if any(c.strip() for c in rows[i])]
-    body = [rows[i] for i in kept]
-    lines = np.array(kept, dtype=np.int64) + 1 + _skipped_sep_line(raw)  # the file's lines
+    names = [c.strip() for c in header[1 if toa5 else 0]]
     width = len(names)
-    for k, r in enumerate(body):
-        if len(r) != width:
-            raise ValueError(f"line {lines[k]} has {len(r)} cells; the header has {width}")
-    frame = pd.DataFrame(body, columns=range(width), dtype=str)
+    file_units = ([c.strip() for c in header[2]] + [""] * width)[:width] if toa5 \
+        else [(_header_unit(n) or "") for n in names]
+    frame, lines = _body(text, skip, sep, width)
+    del text
     blank = [i for i, n in enumerate(names) if not n]
     label = {i: (n or f"column {i + 1}") for i, n in enumerate(names)}
     index = _column_index(names)
 
     tcol = _time_column(frame, names, label, index, time_column, toa5)
     times, notes = _times(frame[tcol], label[tcol], lines, timezone, date_order)
-    decimal_comma = layout == "CSV (';')" and _has_decimal_commas(frame, tcol)
+    decimal_comma = sep != "," and _has_decimal_commas(frame, tcol)
     if decimal_comma:
-        layout = "CSV (';', decimal comma)"
+        layout = layout[:-1] + ", decimal comma)"
 
     mapping = dict(columns or {})
     for i, n in enumerate(names):  # a column already named as a field
@@ -359,12 +377,6 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
     return LoggerFile(layout, label[tcol], times, values, lines, used, notes)
 
 
-def _skipped_sep_line(raw: bytes) -> int:
-    """1 when the file starts with Excel's ``sep=`` line (not among the parsed rows)."""
-    head = raw[:8].lstrip(b"\xef\xbb\xbf").lower()
-    return 1 if head.startswith(b"sep=") else 0
-
-
 def _column_index(names: list[str]) -> dict[str, int]:
     """The file's column names → their position; a name given twice is refused."""
     index: dict[str, int] = {}
@@ -399,6 +411,7 @@ def _time_column(frame: pd.DataFrame, names: list[str], label: dict[int, str],
 
 
 def _has_decimal_commas(frame: pd.DataFrame, tcol: int) -> bool:
-    """Whether a ``;`` file writes its numbers with decimal commas (``12,5``)."""
+    """Whether a file whose cells are not split by commas writes its numbers with decimal
+    commas (``12,5``)."""
     sample = frame.drop(columns=[tcol]).head(200).to_numpy().ravel()
     return any(re.fullmatch(r"-?\d+,\d+", str(c).strip()) for c in sample)

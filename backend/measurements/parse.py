@@ -126,6 +126,7 @@ class Limits:
     max_rows: int = 100_000
     future_tolerance_s: int = 900
     max_voltage_v: float = 1500.0
+    min_voltage_v: float = -1.0
     max_current_a: float = 100.0
     min_current_a: float = -1.0
     power_tolerance_w: float = 5.0
@@ -134,8 +135,8 @@ class Limits:
     def from_settings(cls, settings: Settings) -> Limits:
         """The limits the service's settings set (HTTP and MQTT ingest alike)."""
         s = settings.ingest
-        return cls(s.max_batch_rows, s.future_tolerance_s, s.max_voltage_v, s.max_current_a,
-                   s.min_current_a, s.power_tolerance_w)
+        return cls(s.max_batch_rows, s.future_tolerance_s, s.max_voltage_v, s.min_voltage_v,
+                   s.max_current_a, s.min_current_a, s.power_tolerance_w)
 
 
 @dataclass
@@ -517,10 +518,13 @@ def build_batch(
                     "value_error")
             v[sel], i[sel] = adc_to_volts_amps(va[sel], ia[sel], cal)
 
-    # NaN (absent or already reported) compares false: no second error for a row
-    bad_v = (v < 0) | (v > limits.max_voltage_v)
+    # NaN (absent or already reported) compares false: no second error for a row. A voltage
+    # a little below 0 is a transducer's zero offset at night (a real logger's file, NREL
+    # SERF West, was refused at −0.002 V on every night reading: docs/service.md)
+    bad_v = (v < limits.min_voltage_v) | (v > limits.max_voltage_v)
     errors.add_rows(bad_v, "voltage_v", lambda r: (
-        f"voltage_v {v[r]:g} V outside 0..{limits.max_voltage_v:g} V"), "value_error")
+        f"voltage_v {v[r]:g} V outside {limits.min_voltage_v:g}..{limits.max_voltage_v:g} V"),
+        "value_error")
     bad_i = (i < limits.min_current_a) | (i > limits.max_current_a)
     errors.add_rows(bad_i, "current_a",
                     lambda r: (f"current_a {i[r]:g} A outside {limits.min_current_a:g}.."
@@ -530,7 +534,8 @@ def build_batch(
     mismatch = p_ok & (np.abs(p - vi) > 0.05 * np.abs(vi) + limits.power_tolerance_w)
     errors.add_rows(mismatch, "power_w", lambda r: (f"power_w {p[r]:g} W disagrees with "
                                           f"voltage_v·current_a = {vi[r]:g} W"), "value_error")
-    p_low = limits.max_voltage_v * min(limits.min_current_a, 0.0) - limits.power_tolerance_w
+    p_low = min(limits.max_voltage_v * min(limits.min_current_a, 0.0),
+                limits.min_voltage_v * limits.max_current_a) - limits.power_tolerance_w
     p_high = limits.max_voltage_v * limits.max_current_a
     outside = p_ok & ((p < p_low) | (p > p_high))
     errors.add_rows(outside, "power_w", lambda r: (

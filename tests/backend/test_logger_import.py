@@ -138,8 +138,8 @@ REFUSED = [
     ("ts,P\n2022-01-02T10:00Z,5\n", {"columns": {"power_w": "Q"}},
      r"no column 'Q'; its columns are 'ts', 'P'"),
     ("ts,P\n2022-01-02T10:00Z,5\n", {}, r"map power_w, or voltage_v and current_a"),
-    ("ts,power_w\n2022-01-02T10:00Z,5\n2022-01-02T10:01Z\n", {},
-     r"line 3 has 1 cells; the header has 2"),
+    ("ts,power_w\n2022-01-02T10:00Z,5\n\n2022-01-02T10:01Z,6,7\n", {},
+     r"line 4 has 3 cells; the header has 2"),
     ("ts,power_w\n2022-01-02T10:00Z,5\n", {"timezone": "Mars/Olympus"}, None),  # offsets: unused
     ("ts,power_w\n2022-01-02 10:00,5\n", {"timezone": "Mars/Olympus"},
      r"'Mars/Olympus' is not an IANA time zone"),
