@@ -45,13 +45,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     "docs/service.md, 'Importing a logger's file'.")
     i.add_argument("file", type=Path, help="the logger's export file")
     i.add_argument("--site", required=True, help="site id")
-    i.add_argument("--array", required=True, help="the site's array the file's readings are of")
-    i.add_argument("--column", action="append", default=[], metavar="FIELD=NAME[:UNIT]",
+    i.add_argument("--array", help="the site's array the file's readings are of (or "
+                                    "ARRAY.FIELD in --column, for several arrays)")
+    i.add_argument("--column", action="append", default=[], metavar="[ARRAY.]FIELD=NAME[:UNIT]",
                    help="map a field (power_w, voltage_v, current_a, poa_irradiance_w_m2, "
                         "ghi_w_m2, temp_module_c, temp_air_c, wind_speed_m_s, azimuth_deg, "
-                        "elevation_deg, …) to the file's column, in UNIT (kW, mA, °F, km/h …) "
-                        "when the file does not say it; repeat per field. A column named as "
-                        "a field maps itself")
+                        "elevation_deg, …) of --array, or of ARRAY, to the file's column, in "
+                        "UNIT (kW, mA, °F, km/h …) when the file does not say it; repeat per "
+                        "field. With one array, a column named as a field maps itself")
     i.add_argument("--time-column", help="the column of the times (default: TOA5's "
                                          "TIMESTAMP, else the first column of times)")
     i.add_argument("--timezone", help="the logger's clock, for times without a UTC offset: an "
@@ -67,21 +68,33 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     i.set_defaults(func=run_import)
 
 
-def _columns(specs: list[str]) -> dict[str, str]:
-    """``--column FIELD=NAME[:UNIT]`` flags as a mapping; a malformed one is refused."""
-    out: dict[str, str] = {}
-    for spec in specs:
-        fld, eq, name = spec.partition("=")
-        if not eq or not fld.strip() or not name.strip():
-            fail(f"--column: {spec!r} is not FIELD=NAME[:UNIT] (e.g. power_w=P_AC:kW)")
-        if fld.strip() in out:
-            fail(f"--column: {fld.strip()} is mapped twice")
-        out[fld.strip()] = name.strip()
-    return out
+def _plans(args: argparse.Namespace) -> dict[str, dict[str, str]]:
+    """The ``--column`` flags per array: ``FIELD=NAME[:UNIT]`` for ``--array``,
+    ``ARRAY.FIELD=NAME[:UNIT]`` for any array of the site (a logger that writes the tracker's
+    and the fixed array's readings in one row). A malformed or twice-mapped flag is refused."""
+    plans: dict[str, dict[str, str]] = {}
+    for spec in args.column:
+        left, eq, name = spec.partition("=")
+        array, _, fld = left.strip().rpartition(".")
+        array = array or args.array
+        if not eq or not fld or not name.strip():
+            fail(f"--column: {spec!r} is not FIELD=NAME[:UNIT] (e.g. power_w=P_AC:kW, or "
+                 "tracker.power_w=P_trk for one of several arrays)")
+        if not array:
+            fail(f"--column: {spec!r} names no array: give --array, or write it "
+                 f"ARRAY.{fld}=…")
+        if fld in plans.setdefault(array, {}):
+            fail(f"--column: {array}.{fld} is mapped twice")
+        plans[array][fld] = name.strip()
+    if args.array:
+        plans.setdefault(args.array, {})  # its columns may be named as the fields
+    if not plans:
+        fail("--array: name the array the file's readings are of (or map ARRAY.FIELD columns)")
+    return plans
 
 
 def run_import(args: argparse.Namespace) -> int:
-    """Read, summarise and (unless ``--dry-run``) post the file."""
+    """Read, summarise and (unless ``--dry-run``) post the file, array by array."""
     import httpx
 
     from backend.measurements.logger_file import read_logger_file
@@ -90,39 +103,60 @@ def run_import(args: argparse.Namespace) -> int:
         fail("--token: the site's write token is required to post (or --dry-run)")
     if not args.file.is_file():
         fail(f"file: {args.file} is not a file")
-    try:
-        lf = read_logger_file(args.file, _columns(args.column), args.timezone,
-                              args.time_column, args.date_order)
-    except ValueError as exc:
-        fail(f"{args.file.name}: {exc}")
-    rows = lf.sendable.nonzero()[0]
-    if not rows.size:
-        fail(f"{args.file.name}: no row has power, or voltage and current: nothing to post")
-    stamps = lf.times_utc[rows]
+    plans = _plans(args)
+    files: dict[str, LoggerFile] = {}
+    for array, columns in plans.items():
+        try:  # read once per array: a CLI's seconds, and one plain reader
+            files[array] = read_logger_file(args.file, columns, args.timezone,
+                                            args.time_column, args.date_order,
+                                            fields_by_name=len(plans) == 1)
+        except ValueError as exc:
+            fail(f"{args.file.name}: {exc}" + (f" (array {array})" if len(plans) > 1 else ""))
+    first = next(iter(files.values()))
+    notes = list(dict.fromkeys(n for lf in files.values() for n in lf.notes))
     summary: dict[str, Any] = {
-        "file": str(args.file), "layout": lf.layout, "time_column": lf.time_column,
-        "columns": {k: {"column": c, "unit": u} for k, (c, u) in lf.columns.items()},
-        "rows": len(lf.lines), "readings": int(rows.size),
-        "rows_without_power": int(len(lf.lines) - rows.size),
-        "first": f"{stamps.min():%Y-%m-%dT%H:%M:%SZ}",
-        "last": f"{stamps.max():%Y-%m-%dT%H:%M:%SZ}",
-        "cadence_s": lf.cadence_s(), "notes": list(lf.notes),
-        "site_id": args.site, "array": args.array,
-    }
-    if summary["rows_without_power"]:
-        first = int(lf.lines[(~lf.sendable).nonzero()[0][0]])
-        summary["notes"].append(f"{summary['rows_without_power']} rows without power or voltage "
-                                f"and current (the first at line {first}) are not sent")
+        "file": str(args.file), "layout": first.layout, "time_column": first.time_column,
+        "rows": len(first.lines), "site_id": args.site, "notes": notes, "arrays": {}}
+    for array, lf in files.items():
+        rows = lf.sendable.nonzero()[0]
+        if not rows.size:
+            fail(f"{args.file.name}: no row has power, or voltage and current, for array "
+                 f"{array}: nothing to post")
+        stamps = lf.times_utc[rows]
+        summary["arrays"][array] = {
+            "columns": {k: {"column": c, "unit": u} for k, (c, u) in lf.columns.items()},
+            "readings": int(rows.size), "first": f"{stamps.min():%Y-%m-%dT%H:%M:%SZ}",
+            "last": f"{stamps.max():%Y-%m-%dT%H:%M:%SZ}", "cadence_s": lf.cadence_s()}
+        if rows.size < len(lf.lines):
+            line = int(lf.lines[(~lf.sendable).nonzero()[0][0]])
+            notes.append(f"{array}: {len(lf.lines) - rows.size} rows without power or voltage "
+                         f"and current (the first at line {line}) are not sent")
     if not args.dry_run:
         with httpx.Client(base_url=args.url, timeout=60.0) as client:
-            summary.update(post_readings(client, args.site, args.array, args.token, lf,
-                                         summary))
+            site = _site(client, args.site, list(files))
+            notes.extend(_stamp_note(site, summary))
+            for array, lf in files.items():
+                summary["arrays"][array].update(
+                    post_readings(client, args.site, array, args.token, lf))
+        summary["url"] = args.url
     _print(summary, args.json, args.dry_run)
     return 0
 
 
-def post_readings(client: Any, site_id: str, array: str, token: str, lf: LoggerFile,
-                  summary: dict[str, Any]) -> dict[str, Any]:
+def _stamp_note(site: dict[str, Any], summary: dict[str, Any]) -> list[str]:
+    """What a file of means needs from a site that takes its stamps as instants."""
+    cadences = [a["cadence_s"] for a in summary["arrays"].values() if a["cadence_s"]]
+    cadence = min(cadences, default=None)
+    if cadence is None or cadence < MEANS_CADENCE_S or site.get("readings_stamped") != "instant":
+        return []
+    return [f"the readings are {cadence / 60:g} min apart and site {summary['site_id']} takes "
+            "their stamps as instants (readings_stamped): if they are means stamped at their "
+            "interval's end, set readings_stamped to interval_end (docs/diagnosis.md, "
+            "'Cadence')"]
+
+
+def post_readings(client: Any, site_id: str, array: str, token: str, lf: LoggerFile
+                  ) -> dict[str, Any]:
     """Post the file's readings of ``array`` to ``site_id`` through ``client`` (an
     ``httpx.Client`` on the service) in batches of :data:`BATCH_READINGS`, gzip-compressed;
     the answers' counts. A refused batch stops it: :func:`backend.cli.fail` naming the
@@ -132,16 +166,6 @@ def post_readings(client: Any, site_id: str, array: str, token: str, lf: LoggerF
     from tqdm import tqdm
 
     from backend.retry import backoff
-
-    site = _site(client, site_id, array)
-    notes = []
-    cadence = summary.get("cadence_s")
-    if (cadence is not None and cadence >= MEANS_CADENCE_S
-            and site.get("readings_stamped") == "instant"):
-        notes.append(f"the readings are {cadence / 60:g} min apart and site {site_id} takes "
-                     "their stamps as instants (readings_stamped): if they are means stamped "
-                     "at their interval's end, set readings_stamped to interval_end "
-                     "(docs/diagnosis.md, 'Cadence')")
 
     class Retry(Exception):
         pass
@@ -163,29 +187,31 @@ def post_readings(client: Any, site_id: str, array: str, token: str, lf: LoggerF
     lines = lf.lines[lf.sendable]
     accepted = duplicates = 0
     stored_through = None
-    with tqdm(total=lines.size, unit="reading", disable=None, file=sys.stderr) as bar:
+    with tqdm(total=lines.size, unit="reading", disable=None, file=sys.stderr,
+              desc=array) as bar:
         for k in range(0, lines.size, BATCH_READINGS):
             chunk = lf.readings(array, k, k + BATCH_READINGS)
             body = gzip.compress(json.dumps({"readings": chunk}).encode(), compresslevel=5)
             try:
                 r = retrying(once, body)
             except Retry as exc:
-                fail(f"the service did not take lines {lines[k]}–{lines[k + len(chunk) - 1]} "
-                     f"after 5 tries ({exc}); {accepted} readings were stored — run again to "
-                     "resume (what is stored comes back as duplicates)", code=1)
+                fail(f"the service did not take {array}'s lines {lines[k]}–"
+                     f"{lines[k + len(chunk) - 1]} after 5 tries ({exc}); {accepted} of its "
+                     "readings were stored — run again to resume (what is stored comes back "
+                     "as duplicates)", code=1)
             if r.status_code != 200:
-                fail(_refusal(r, lines, k, accepted), code=1)
+                fail(_refusal(r, lines, k, array, accepted), code=1)
             answer = r.json()
             accepted += answer["accepted"]
             duplicates += answer["duplicates"]
             stored_through = answer.get("stored_through")
             bar.update(len(chunk))
-    return {"accepted": accepted, "duplicates": duplicates, "stored_through": stored_through,
-            "url": str(client.base_url), "notes": summary["notes"] + notes}
+    return {"accepted": accepted, "duplicates": duplicates, "stored_through": stored_through}
 
 
-def _site(client: Any, site_id: str, array: str) -> dict[str, Any]:
-    """The site as the service describes it; an unknown site or array is refused first."""
+def _site(client: Any, site_id: str, arrays: list[str]) -> dict[str, Any]:
+    """The site as the service describes it; an unknown site or array is refused before
+    anything is posted."""
     import httpx
 
     try:
@@ -198,13 +224,14 @@ def _site(client: Any, site_id: str, array: str) -> dict[str, Any]:
         fail(f"--site: GET /api/v1/sites/{site_id} answered {r.status_code} {r.text[:200]}",
              code=1)
     site: dict[str, Any] = r.json()
-    if array not in site.get("arrays", {}):
-        fail(f"--array: site {site_id} has no array {array!r}; its arrays are "
-             f"{', '.join(site.get('arrays', {}))}")
+    for array in arrays:
+        if array not in site.get("arrays", {}):
+            fail(f"--array: site {site_id} has no array {array!r}; its arrays are "
+                 f"{', '.join(site.get('arrays', {}))}")
     return site
 
 
-def _refusal(r: Any, lines: Any, start: int, accepted: int) -> str:
+def _refusal(r: Any, lines: Any, start: int, array: str, accepted: int) -> str:
     """A refused batch's answer in the file's terms: each problem with its line."""
     try:
         detail = r.json().get("detail")
@@ -222,26 +249,28 @@ def _refusal(r: Any, lines: Any, start: int, accepted: int) -> str:
             problems.append(f"and {len(detail) - MAX_PROBLEMS_SHOWN} more problems listed")
     else:
         problems.append(str(detail))
-    return (f"the service refused the readings ({r.status_code}): " + "; ".join(problems)
-            + f". {accepted} readings before them were stored; mend the file or the mapping "
-              "and run again (what is stored comes back as duplicates)")
+    return (f"the service refused {array}'s readings ({r.status_code}): "
+            + "; ".join(problems) + f". {accepted} of its readings before them were stored; "
+            "mend the file or the mapping and run again (what is stored comes back as "
+            "duplicates)")
 
 
 def _print(summary: dict[str, Any], as_json: bool, dry_run: bool) -> None:
     if as_json:
         print(json.dumps(summary, indent=2))
         return
-    cadence = summary["cadence_s"]
-    every = "" if cadence is None else f", every {cadence:g} s"
-    print(f"read: {Path(summary['file']).name} ({summary['layout']}), {summary['rows']} rows, "
-          f"{summary['readings']} readings of {summary['site_id']}/{summary['array']} from "
-          f"{summary['first']} to {summary['last']}{every}")
-    for fld, c in summary["columns"].items():
-        print(f"  {fld} ← {c['column']!r} [{c['unit']}]")
+    print(f"read: {Path(summary['file']).name} ({summary['layout']}), {summary['rows']} rows")
+    for array, a in summary["arrays"].items():
+        every = "" if a["cadence_s"] is None else f", every {a['cadence_s']:g} s"
+        print(f"  {summary['site_id']}/{array}: {a['readings']} readings from {a['first']} to "
+              f"{a['last']}{every}")
+        for fld, c in a["columns"].items():
+            print(f"    {fld} ← {c['column']!r} [{c['unit']}]")
     for note in summary["notes"]:
         print(f"note: {note}")
     if dry_run:
         print("dry run: nothing posted")
-    else:
-        print(f"posted to {summary['url']}: {summary['accepted']} accepted, "
-              f"{summary['duplicates']} duplicates, stored through {summary['stored_through']}")
+        return
+    for array, a in summary["arrays"].items():
+        print(f"posted {array} to {summary['url']}: {a['accepted']} accepted, "
+              f"{a['duplicates']} duplicates, stored through {a['stored_through']}")

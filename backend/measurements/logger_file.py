@@ -308,13 +308,15 @@ def _pick_date_order(tried: dict[str, pd.Series], text: pd.Series, where: Any,
 
 def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None = None,
                      timezone: str | None = None, time_column: str | None = None,
-                     date_order: str | None = None) -> LoggerFile:
+                     date_order: str | None = None, fields_by_name: bool = True
+                     ) -> LoggerFile:
     """Read a logger's export (see the module). ``columns``: field → ``"NAME"`` or
     ``"NAME:UNIT"`` (the file's column; its unit when the file does not say it or says it
     otherwise). ``time_column``: the column of the times (default: TOA5's ``TIMESTAMP``,
     else the first column whose first cell reads as a time). ``date_order``: ``"mdy"`` or
-    ``"dmy"`` for slash dates the file cannot tell. Errors are :class:`ValueError`s naming
-    the column, the line and what to do."""
+    ``"dmy"`` for slash dates the file cannot tell. ``fields_by_name``: a column named as a
+    field maps to it (not when the file holds several arrays' readings). Errors are
+    :class:`ValueError`s naming the column, the line and what to do."""
     if date_order is not None and date_order not in DATE_ORDERS:
         raise ValueError(f"date_order must be mdy or dmy; got {date_order!r}")
     raw = source if isinstance(source, bytes) else Path(source).read_bytes()
@@ -338,7 +340,7 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
         layout = layout[:-1] + ", decimal comma)"
 
     mapping = dict(columns or {})
-    for i, n in enumerate(names):  # a column already named as a field
+    for i, n in enumerate(names if fields_by_name else []):  # a column named as a field
         if n.lower() in FIELDS and n.lower() not in mapping and i not in blank:
             mapping[n.lower()] = n
     unknown = [f for f in mapping if f not in FIELDS]

@@ -158,20 +158,21 @@ def test_a_file_it_cannot_read_is_refused_naming_line_column_and_remedy(
 
 def test_the_command_posts_a_real_loggers_file_and_the_service_counts_its_energy(
         tmp_path: Path, heliotwin_cli) -> None:
-    """SERF West's positive string (voltage, current, POA, module and air temperature, 15 min,
-    a clock on UTC−7) into a site at Golden whose fixed array is 8 modules (the string's
-    3.05 kW peak under twice its rating): every reading stored, again as duplicates, and the
-    site's energy over the five days the file's own trapezoid (energy rule, no gap over
-    15 min). Its night voltage (−0.002 V, a transducer's offset) had been refused. The same
-    string into the 820-W tracker array is refused naming the file's lines, nothing stored."""
+    """SERF West's two DC strings (15 min, a clock at UTC−7) in one run: the positive string
+    with its POA, module and air temperature into the fixed array, the negative one into
+    the tracker, each of 8 modules at a site at Golden (a string's 3.0 kW peak under twice
+    its rating). Every reading stored, again as duplicates, and each array's energy over
+    the five days the file's own trapezoid (the energy rule, no gap over 15 min). The night
+    voltages (−0.002 V, a transducer's offset) had been refused. The inverter's 6 kW DC
+    power into one array is refused naming the file's first line past its rating."""
     sites = tmp_path / "sites"
     sites.mkdir()
     site = json.loads((ROOT / "sim" / "data" / "sites" / "tehuantepec.json").read_text())
-    site.update(site_id="serf", name="SERF West string", latitude_deg=39.7407,
+    site.update(site_id="serf", name="SERF West strings", latitude_deg=39.7407,
                 longitude_deg=-105.1686, altitude_m=1794.0, timezone="America/Denver",
                 temp_air_c=10.0)
-    site["arrays"]["fixed"].update(modules_in_series=8, strings_in_parallel=1,
-                                   surface_tilt_deg=40.0)
+    for array in ("tracker", "fixed"):
+        site["arrays"][array].update(modules_in_series=8, strings_in_parallel=1)
     (sites / "serf.json").write_text(json.dumps(site))
     env = {"HELIOTWIN_SITES_DIR": str(sites)}
     server = ServerProcess(f"sqlite:///{tmp_path / 'serf.sqlite'}", tmp_path / "server.log",
@@ -179,32 +180,63 @@ def test_the_command_posts_a_real_loggers_file_and_the_service_counts_its_energy
     try:
         token = server.token("serf")
         args = ["readings", "import", str(LOGGERS / "serf_west_15min.csv"), "--site", "serf",
-                "--timezone", "Etc/GMT+7", "--url", server.base_url, "--token", token,
-                *[f"--column={f}={c}" for f, c in SERF_WEST.items()]]
-        first = heliotwin_cli(*args, "--array", "fixed", env=env)
+                "--timezone", "Etc/GMT+7", "--url", server.base_url, "--token", token]
+        both = [*args, *[f"--column=fixed.{f}={c}" for f, c in SERF_WEST.items()],
+                "--column=tracker.voltage_v=dc_neg_voltage__776",
+                "--column=tracker.current_a=dc_neg_current__777"]
+        first = heliotwin_cli(*both, env=env)
         assert first.returncode == 0, first.stderr
-        assert "480 accepted, 0 duplicates, stored through 2022-01-07T06:46:00Z" in first.stdout
+        for array in ("fixed", "tracker"):
+            assert (f"posted {array} to {server.base_url}: 480 accepted, 0 duplicates, stored "
+                    "through 2022-01-07T06:46:00Z") in first.stdout
         assert "every 900 s" in first.stdout and "readings_stamped" in first.stdout
-        again = heliotwin_cli(*args, "--array", "fixed", "--json", env=env)
-        assert again.returncode == 0 and json.loads(again.stdout)["duplicates"] == 480
-        refused = heliotwin_cli(*args, "--array", "tracker", env=env)
+        again = heliotwin_cli(*both, "--json", env=env)
+        assert again.returncode == 0
+        assert {a: v["duplicates"] for a, v in json.loads(again.stdout)["arrays"].items()} == {
+            "fixed": 480, "tracker": 480}
+        refused = heliotwin_cli(*args, "--array", "fixed", "--column=power_w=dc_power__772",
+                                env=env)
         assert refused.returncode == 1
-        assert ("line 44: power_w 2594.93 W is over 2 × array 'tracker''s rating"
+        assert ("line 44: power_w 4739 W is over 2 × array 'fixed''s rating"
                 in refused.stderr), refused.stderr
         r = httpx.get(f"{server.base_url}/api/v1/sites/serf/energy", params={
             "start": "2022-01-02", "end": "2022-01-07", "interval": "day"}, timeout=60)
         assert r.status_code == 200, r.text
-        days = r.json()["rows"]
-        measured = sum(d["arrays"]["fixed"]["measured_wh"] for d in days)
-        assert all(d["arrays"]["tracker"]["readings"] == 0 for d in days)
         ref = _serf_west()
         t_s = ref.index.tz_localize("Etc/GMT+7").as_unit("s").asi8.astype(float)
-        power = (ref["dc_pos_voltage__774"] * ref["dc_pos_current__775"]).to_numpy()
-        assert measured == pytest.approx(np.trapezoid(power, t_s) / 3600, rel=1e-12)  # 2e-16
+        for array, sign in (("fixed", "pos"), ("tracker", "neg")):
+            measured = sum(d["arrays"][array]["measured_wh"] for d in r.json()["rows"])
+            v = ref.filter(like=f"dc_{sign}_voltage").iloc[:, 0]
+            i = ref.filter(like=f"dc_{sign}_current").iloc[:, 0]
+            power = (v * i).to_numpy()
+            assert measured == pytest.approx(np.trapezoid(power, t_s) / 3600, rel=1e-12)
         m = httpx.get(f"{server.base_url}/api/v1/sites/serf/measurements", params={
             "array": "fixed", "start": "2022-01-02T15:01:00-07:00",
             "end": "2022-01-02T15:02:00-07:00"}, timeout=60).json()
-        row = m["readings"][0] if "readings" in m else m["points"][0]
-        assert row["voltage_v"] == 223.79 and row["poa_irradiance_w_m2"] == 526.2
+        assert m["points"][0]["voltage_v"] == 223.79
+        assert m["points"][0]["poa_irradiance_w_m2"] == 526.2
     finally:
         server.stop()
+
+
+def test_a_dry_run_says_what_it_would_post_and_a_column_needs_an_array(heliotwin_cli) -> None:
+    path = str(LOGGERS / "nrel_RSF_II.csv")
+    run = heliotwin_cli("readings", "import", path, "--site", "rsf", "--timezone", "Etc/GMT+7",
+                        "--column=fixed.power_w=ac_power_kw_1137:kW",
+                        "--column=tracker.power_w=inv2_ac_power_w__1047", "--dry-run")
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.splitlines()[:5] == [
+        "read: nrel_RSF_II.csv (CSV (',')), 480 rows",
+        "  rsf/fixed: 480 readings from 2022-01-02T07:00:00Z to 2022-01-07T06:45:00Z, every "
+        "900 s",
+        "    power_w ← 'ac_power_kw_1137' [kW]",
+        "  rsf/tracker: 480 readings from 2022-01-02T07:00:00Z to 2022-01-07T06:45:00Z, every "
+        "900 s",
+        "    power_w ← 'inv2_ac_power_w__1047' [W]"]
+    assert run.stdout.rstrip().endswith("dry run: nothing posted")
+    bad = heliotwin_cli("readings", "import", path, "--site", "rsf", "--column=power_w=x",
+                        "--dry-run")
+    assert bad.returncode == 2
+    assert "--column: 'power_w=x' names no array: give --array" in bad.stderr
+    no_token = heliotwin_cli("readings", "import", path, "--site", "rsf", "--array", "fixed")
+    assert no_token.returncode == 2 and "--token: the site's write token" in no_token.stderr
