@@ -16,7 +16,8 @@ takes readings named and scaled its own way (``backend.measurements.fields``: ``
   ``[kW]`` / ``(kW)``), else the field's own, and the summary says which
   (:data:`UNITS`).
 - **Times**: ISO 8601 with or without an offset, ``M/D/YYYY`` or ``D/M/YYYY`` (the order the
-  steps are regular in, or ``date_order``), ``D.M.YYYY``, Unix seconds. A time without an
+  steps are regular in, or ``date_order``; a 2-digit year, a 12-hour clock), ``YYYY/MM/DD``,
+  ``D.M.YYYY``, Unix seconds. A time without an
   offset is read on the logger's clock, ``timezone`` (an IANA zone; ``Etc/GMT+7`` for a
   clock on UTC−7 all year), by :func:`sim.sky.clock_times_to_utc`.
 - **Missing cells** (blank, ``NAN`` — Campbell's mark —, ``NaN``, ``null``, ``-``, ``n/a``)
@@ -204,7 +205,11 @@ def _numbers(cells: pd.Series, decimal_comma: bool, column: str, lines: np.ndarr
 
 _ISO = re.compile(r"^\d{4}-\d\d-\d\d(?:[T ]\d\d?:\d\d(?::\d\d(?:\.\d+)?)?)?")
 _OFFSET = re.compile(r"(?:Z|[+-]\d\d(?::?\d\d)?)$")
-_NUMERIC_DATE = re.compile(r"^(\d{1,2})([/.-])(\d{1,2})\2(\d{4})(?:[ T]+(\d{1,2}:\d\d(:\d\d)?))?")
+#: Dates a spreadsheet or a portal writes: year first (2022/01/02), or day and month first
+#: with a 4- or 2-digit year (1/2/2022, 02.01.22), then a clock (13:15, 1:15:00 PM)
+_YEAR_FIRST = re.compile(r"^\d{4}([/.])\d{1,2}\1\d{1,2}(?!\d)")
+_YEAR_LAST = re.compile(r"^\d{1,2}([/.-])\d{1,2}\1(\d{4}|\d{2})(?!\d)")
+_CLOCK = re.compile(r"[ T]+\d{1,2}:\d\d(:\d\d)?(\s*[AaPp]\.?[Mm]\.?)?$")
 _UNIX = re.compile(r"^\d{9,10}(?:\.\d+)?$")
 
 
@@ -239,26 +244,7 @@ def _times(cells: pd.Series, column: str, lines: np.ndarray, timezone: str | Non
                              f"has {'one' if offset[0] else 'none'}: write all alike")
         form = "ISO 8601"
     else:
-        m = _NUMERIC_DATE.match(first)
-        if m is None:
-            raise ValueError(f"{column}: {first[:30]!r} at {where(0)} is not a time this "
-                             "reader knows: ISO 8601 (2022-01-02 13:15, with or without a UTC "
-                             "offset), M/D/YYYY or D/M/YYYY H:MM, D.M.YYYY H:MM, or Unix "
-                             "seconds")
-        sep, clock = m.group(2), "" if m.group(5) is None else (
-            " %H:%M:%S" if m.group(6) else " %H:%M")
-        if date_order is not None:
-            orders = [date_order]
-        else:
-            orders = ["dmy"] if sep == "." else list(DATE_ORDERS)
-        tried = {}
-        for order in orders:
-            fmt = (f"%m{sep}%d{sep}%Y" if order == "mdy" else f"%d{sep}%m{sep}%Y") + clock
-            tried[order] = pd.to_datetime(text.str.replace("T", " ", regex=False), format=fmt,
-                                          errors="coerce")
-        parsed = _pick_date_order(tried, text, where, date_order)
-        form = {"mdy": "month/day/year", "dmy": "day/month/year"}[
-            next(k for k, v in tried.items() if v is parsed)]
+        parsed, form = _calendar_times(text, column, where, date_order)
     if parsed.isna().any():
         i = int(np.flatnonzero(parsed.isna().to_numpy())[0])
         raise ValueError(f"{column}: {text.iloc[i][:30]!r} at {where(i)} is not a time like "
@@ -278,6 +264,43 @@ def _times(cells: pd.Series, column: str, lines: np.ndarray, timezone: str | Non
                          "Etc/GMT+7 for UTC−7)") from None
     notes.append(f"times: {form} on a clock in {timezone}, column {column!r}")
     return clock_times_to_utc(parsed, timezone, text, where), notes
+
+
+def _calendar_times(text: pd.Series, column: str, where: Any, date_order: str | None
+                    ) -> tuple[pd.Series, str]:
+    """Times written as a spreadsheet or a portal writes them (:data:`_YEAR_FIRST`,
+    :data:`_YEAR_LAST`, :data:`_CLOCK`), naive, and the form they were read in. Day and month
+    first: the order :func:`_pick_date_order` finds (``D.M.`` is day first unless
+    ``date_order`` says otherwise)."""
+    first = text.iloc[0]
+    ymd, ydm = _YEAR_FIRST.match(first), _YEAR_LAST.match(first)
+    clock = _CLOCK.search(first)
+    if (ymd is None and ydm is None) or (clock is None and len(first) > 10):
+        raise ValueError(f"{column}: {first[:30]!r} at {where(0)} is not a time this reader "
+                         "knows: ISO 8601 (2022-01-02 13:15, with or without a UTC offset), "
+                         "2022/01/02 13:15, M/D/YYYY or D/M/YYYY H:MM[:SS] [AM|PM], "
+                         "D.M.YYYY H:MM, a 2-digit year, or Unix seconds")
+    ampm = clock is not None and clock.group(2) is not None
+    hms = "" if clock is None else (
+        (" %I" if ampm else " %H") + ":%M" + (":%S" if clock.group(1) else "")
+        + (" %p" if ampm else ""))
+    text = text.str.replace("T", " ", regex=False)
+    if ampm:  # 1:15pm, 1:15 P.M. → 1:15 PM
+        text = text.str.replace(r"\s*([AaPp])\.?[Mm]\.?$", lambda m: f" {m.group(1).upper()}M",
+                                regex=True)
+    if ymd is not None:
+        sep = ymd.group(1)
+        return pd.to_datetime(text, format=f"%Y{sep}%m{sep}%d{hms}", errors="coerce"), \
+            "year/month/day"
+    assert ydm is not None
+    sep, year = ydm.group(1), "%Y" if len(ydm.group(2)) == 4 else "%y"
+    orders = [date_order] if date_order else (["dmy"] if sep == "." else list(DATE_ORDERS))
+    tried = {order: pd.to_datetime(text, errors="coerce", format=(
+        f"%m{sep}%d{sep}{year}" if order == "mdy" else f"%d{sep}%m{sep}{year}") + hms)
+        for order in orders}
+    parsed = _pick_date_order(tried, text, where, date_order)
+    return parsed, {"mdy": "month/day/year", "dmy": "day/month/year"}[
+        next(k for k, v in tried.items() if v is parsed)]
 
 
 def _pick_date_order(tried: dict[str, pd.Series], text: pd.Series, where: Any,
@@ -403,7 +426,7 @@ def _time_column(frame: pd.DataFrame, names: list[str], label: dict[int, str],
         return index["TIMESTAMP"]
     for i in range(len(names)):
         cell = str(frame[i].iloc[0]).strip()
-        if _ISO.match(cell) or _NUMERIC_DATE.match(cell) or (
+        if _ISO.match(cell) or _YEAR_FIRST.match(cell) or _YEAR_LAST.match(cell) or (
                 _UNIX.match(cell) and names[i].lower() in ("ts", "time", "timestamp",
                                                            "unix", "unix_s", "epoch")):
             return i

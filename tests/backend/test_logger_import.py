@@ -91,7 +91,19 @@ def _unix(ref: pd.DataFrame) -> str:
     return "\n".join(rows) + "\n"
 
 
-@pytest.mark.parametrize("layout", ["TOA5", "european", "unix"])
+def _spreadsheet(ref: pd.DataFrame, year_first: bool) -> str:
+    """The same as a spreadsheet saves it: US Excel's 1/2/22 1:15:00 PM, or 2022/01/02 13:15."""
+    def stamp(t: pd.Timestamp) -> str:
+        if year_first:
+            return f"{t:%Y/%m/%d %H:%M}"
+        return f"{t.month}/{t.day}/{t:%y} {(t.hour + 11) % 12 + 1}:{t:%M:%S %p}"
+    rows = ["Time,Volts,Amps"] + [
+        f"{stamp(t)},{r['dc_pos_voltage__774']},{r['dc_pos_current__775']}"
+        for t, r in ref.iterrows()]
+    return "\n".join(rows) + "\n"
+
+
+@pytest.mark.parametrize("layout", ["TOA5", "european", "unix", "excel_us", "year_first"])
 def test_the_same_readings_in_other_loggers_layouts(layout: str) -> None:
     ref = _serf_west()
     plain = read_logger_file(LOGGERS / "serf_west_15min.csv",
@@ -115,9 +127,15 @@ def test_the_same_readings_in_other_loggers_layouts(layout: str) -> None:
         assert lf.layout == "CSV (';', decimal comma)" and lf.lines[0] == 3
         assert lf.columns["voltage_v"] == ("U_DC [V]", "V") and not lf.notes[1:]
         got = lf.readings("fixed")
-    else:
+    elif layout == "unix":
         lf = read_logger_file(_unix(ref).encode())  # no mapping, no zone: nothing to say
         assert set(lf.columns) == {"voltage_v", "current_a"}
+        got = lf.readings("fixed")
+    else:
+        lf = read_logger_file(_spreadsheet(ref, layout == "year_first").encode(),
+                              {"voltage_v": "Volts", "current_a": "Amps"}, timezone="Etc/GMT+7")
+        assert lf.notes[0] == ("times: year/month/day" if layout == "year_first" else
+                               "times: month/day/year") + " on a clock in Etc/GMT+7, column 'Time'"
         got = lf.readings("fixed")
     want = [r for k, r in enumerate(plain.readings("fixed")) if layout != "TOA5" or k != 40]
     assert [(r["ts"], r["voltage_v"], r["current_a"]) for r in got] == [
