@@ -955,11 +955,17 @@ def _measured_times(column: pd.Series, timezone: str | None, line: Any) -> pd.Da
 def clock_times_to_utc(parsed: pd.Series, timezone: str, text: pd.Series, line: Any
                        ) -> pd.DatetimeIndex:
     """Times without a UTC offset (``parsed``, naive) read on a clock in ``timezone`` (an IANA
-    zone) as UTC instants. A time a clock change repeats or skips is refused naming its line
-    (``line(i)``) and its cell (``text``): the error had been pandas' "Cannot infer dst time
-    …, try using the 'ambiguous' argument". The rule of a measured weather CSV and of a
-    logger's file (``backend.measurements.logger_file``)."""
-    local = parsed.dt.tz_localize(timezone, ambiguous="NaT", nonexistent="NaT")
+    zone) as UTC instants. The hour a clock change repeats is read as the clock wrote it when
+    the times run in order through it twice (a portal's export in local time: 01:00–01:59
+    first in summer time, then in standard time; pandas' ``ambiguous="infer"``). Otherwise a
+    time it repeats, or one it skips, is refused naming its line (``line(i)``) and its cell
+    (``text``): the error had been pandas' "Cannot infer dst time …, try using the
+    'ambiguous' argument". The rule of a measured weather CSV and of a logger's file
+    (``backend.measurements.logger_file``)."""
+    try:
+        local = parsed.dt.tz_localize(timezone, ambiguous="infer", nonexistent="NaT")
+    except ValueError:  # a repeated hour written once, or out of order: not inferable
+        local = parsed.dt.tz_localize(timezone, ambiguous="NaT", nonexistent="NaT")
     if local.isna().any():
         i = int(np.flatnonzero(local.isna().to_numpy())[0])
         raise ValueError(f"time: {text.iloc[i][:30]!r} at {line(i)} repeats or is skipped "

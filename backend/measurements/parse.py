@@ -685,7 +685,8 @@ def parse_csv_batch(
         raise body_error(422, "header", "value_error",
                           f"CSV header {_show(header[0])} is one column: the file is separated "
                           f"by {sep!r}; separate the columns with commas (and write numbers "
-                          f"with a decimal point)", line=1)
+                          f"with a decimal point), or post the file as it is with heliotwin "
+                          f"readings import", line=1)
     seen = Counter(header)  # linear in the header, whatever its length
     unknown = [h for h in seen if h not in _FIELD_SET]
     twice = [h for h, k in seen.items() if k > 1 and h in _FIELD_SET]

@@ -149,8 +149,10 @@ REFUSED = [
      r"column 'power_w': 'abc' at line 3 is not a number"),
     ("ts,power_w\n1/2/2022 10:00,5\n1/2/2022 10:15,6\n", {"timezone": "UTC"},
      r"month/day/year and as day/month/year alike .* --date-order mdy or dmy"),
-    ("ts,power_w\n2022-11-06 00:30,5\n2022-11-06 01:30,6\n2022-11-06 01:30,6\n",
+    ("ts,power_w\n2022-11-06 00:45,5\n2022-11-06 01:30,6\n2022-11-06 02:15,6\n",
      {"timezone": "America/Denver"}, r"'2022-11-06 01:30' at line 3 repeats or is skipped"),
+    ("ts,power_w\n2022-03-13 01:45,5\n2022-03-13 02:30,6\n", {"timezone": "America/Denver"},
+     r"'2022-03-13 02:30' at line 3 repeats or is skipped"),
     ("ts,P\n2022-01-02T10:00Z,5\n", {"columns": {"power_w": "P:furlongs"}},
      r"unit 'furlongs' is not one of w, watts, kw"),
     ("ts,P\n2022-01-02T10:00Z,5\n", {"columns": {"power_w": "Q"}},
@@ -258,3 +260,15 @@ def test_a_dry_run_says_what_it_would_post_and_a_column_needs_an_array(heliotwin
     assert "--column: 'power_w=x' names no array: give --array" in bad.stderr
     no_token = heliotwin_cli("readings", "import", path, "--site", "rsf", "--array", "fixed")
     assert no_token.returncode == 2 and "--token: the site's write token" in no_token.stderr
+
+
+def test_a_portal_export_in_local_summer_time_reads_its_repeated_hour_in_order() -> None:
+    """A year exported in the site's local time has the hour the clocks go back twice, first
+    in summer time: read in order (it had been refused as a time the change repeats)."""
+    times = ["2022-11-06 00:30", "2022-11-06 01:00", "2022-11-06 01:30", "2022-11-06 01:00",
+             "2022-11-06 01:30", "2022-11-06 02:00"]
+    text = "ts,power_w\n" + "".join(f"{t},{k}\n" for k, t in enumerate(times))
+    lf = read_logger_file(text.encode(), timezone="America/Denver")
+    assert [f"{t:%H:%M}" for t in lf.times_utc] == ["06:30", "07:00", "07:30", "08:00", "08:30",
+                                                   "09:00"]
+    assert lf.cadence_s() == 1800.0
