@@ -2,9 +2,9 @@
 
 The file is read as its logger wrote it (:mod:`backend.measurements.logger_file`) and
 posted over HTTP as any logger posts (``POST /api/v1/sites/{site}/measurements``, the site's
-write token), in batches, oldest first, each retried on a lost connection or a 5xx. The
-service's checks stay the one rule: a batch it refuses stops the import, its problems
-named by the file's lines. Everything before it is stored; a re-run re-sends it as
+write token), in batches in the file's order, each retried on a lost connection, a 429 or a
+5xx. The service's checks stay the one rule: a batch it refuses stops the import, its
+problems named by the file's lines. Everything before it is stored; a re-run re-sends it as
 duplicates (one reading per array and second), so an import can simply be run again.
 """
 
@@ -14,6 +14,8 @@ import argparse
 import gzip
 import json
 import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -41,7 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "import", help="post a logger's export file (TOA5, CSV) to a running service",
         description="Read a logger's export as it is — a Campbell TOA5 table, a CSV with ',' "
                     "or ';' (decimal commas), ISO, M/D/Y, Y/M/D, D.M.Y or Unix times — map its "
-                    "columns to the service's fields, and post it to one array of a site. "
+                    "columns to the service's fields, and post it to a site's arrays. "
                     "docs/service.md, 'Importing a logger's file'.")
     i.add_argument("file", type=Path, help="the logger's export file")
     i.add_argument("--site", required=True, help="site id")
@@ -155,12 +157,12 @@ def _stamp_note(site: dict[str, Any], summary: dict[str, Any]) -> list[str]:
             "'Cadence')"]
 
 
-def post_readings(client: Any, site_id: str, array: str, token: str, lf: LoggerFile
-                  ) -> dict[str, Any]:
+def post_readings(client: Any, site_id: str, array: str, token: str, lf: LoggerFile,
+                  sleep: Callable[[float], None] = time.sleep) -> dict[str, Any]:
     """Post the file's readings of ``array`` to ``site_id`` through ``client`` (an
     ``httpx.Client`` on the service) in batches of :data:`BATCH_READINGS`, gzip-compressed;
-    the answers' counts. A refused batch stops it: :func:`backend.cli.fail` naming the
-    file's lines."""
+    the answers' counts. A batch is tried 5 times, 1, 2, 4, 8 s apart (``sleep``); a refused
+    or undelivered one stops it: :func:`backend.cli.fail` naming the file's lines."""
     import httpx
     from tenacity import Retrying, retry_if_exception_type, stop_after_attempt
     from tqdm import tqdm
@@ -183,7 +185,7 @@ def post_readings(client: Any, site_id: str, array: str, token: str, lf: LoggerF
         return r
 
     retrying = Retrying(stop=stop_after_attempt(5), wait=backoff(1.0, 10.0),
-                        retry=retry_if_exception_type(Retry), reraise=True)
+                        retry=retry_if_exception_type(Retry), reraise=True, sleep=sleep)
     lines = lf.lines[lf.sendable]
     accepted = duplicates = 0
     stored_through = None

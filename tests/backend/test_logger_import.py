@@ -7,6 +7,7 @@ energy the service then answers against the file's own trapezoid."""
 
 from __future__ import annotations
 
+import gzip
 import json
 from pathlib import Path
 
@@ -272,3 +273,35 @@ def test_a_portal_export_in_local_summer_time_reads_its_repeated_hour_in_order()
     assert [f"{t:%H:%M}" for t in lf.times_utc] == ["06:30", "07:00", "07:30", "08:00", "08:30",
                                                    "09:00"]
     assert lf.cadence_s() == 1800.0
+
+
+def test_a_busy_service_is_retried_and_a_gone_one_stops_the_import_naming_the_lines() -> None:
+    from backend.cli import CliError
+    from backend.cli.readings import post_readings
+
+    lf = read_logger_file(LOGGERS / "nrel_1axis_tracker_mesa_ac_power.csv",
+                          {"power_w": "ac_power"})
+    calls: list[int] = []
+    waits: list[float] = []
+
+    def busy_once(request: httpx.Request) -> httpx.Response:
+        calls.append(len(json.loads(gzip.decompress(request.content))["readings"]))
+        if len(calls) == 1:
+            return httpx.Response(503, text="busy")
+        return httpx.Response(200, json={"accepted": calls[-1], "duplicates": 0,
+                                         "stored_through": "2010-07-01T05:45:00Z"})
+
+    with httpx.Client(base_url="http://logger.test", transport=httpx.MockTransport(busy_once)
+                      ) as c:
+        got = post_readings(c, "golden", "tracker", "tok", lf, sleep=waits.append)
+    assert got == {"accepted": 576, "duplicates": 0, "stored_through": "2010-07-01T05:45:00Z"}
+    assert calls == [576, 576] and waits == [1.0]
+
+    def gone(request: httpx.Request) -> httpx.Response:
+        raise httpx.ConnectError("refused", request=request)
+
+    with httpx.Client(base_url="http://logger.test", transport=httpx.MockTransport(gone)) as c, \
+            pytest.raises(CliError, match=r"did not take tracker's lines 2–577 after 5 tries "
+                                          r"\(ConnectError: refused\); 0 of its readings"):
+        post_readings(c, "golden", "tracker", "tok", lf, sleep=waits.append)
+    assert waits == [1.0, 1.0, 2.0, 4.0, 8.0]
