@@ -20,6 +20,7 @@ takes readings named and scaled its own way (``backend.measurements.fields``: ``
   ``D.M.YYYY``, Unix seconds. A time without an
   offset is read on the logger's clock, ``timezone`` (an IANA zone; ``Etc/GMT+7`` for a
   clock on UTC−7 all year), by :func:`sim.sky.clock_times_to_utc`.
+- **Compressed**: a gzip archive of such a file is read as the file.
 - **Missing cells** (blank, ``NAN`` — Campbell's mark —, ``NaN``, ``null``, ``-``, ``n/a``)
   leave that field out of the reading; a row left without power or voltage and current is
   not sent (counted, with its first line). Any other text is refused naming line and column.
@@ -32,6 +33,7 @@ a mean covers) is the site's ``readings_stamped``, one rule for every logger
 from __future__ import annotations
 
 import csv
+import gzip
 import io
 import re
 from dataclasses import dataclass, field
@@ -343,6 +345,8 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
     if date_order is not None and date_order not in DATE_ORDERS:
         raise ValueError(f"date_order must be mdy or dmy; got {date_order!r}")
     raw = source if isinstance(source, bytes) else Path(source).read_bytes()
+    if raw[:2] == b"\x1f\x8b":  # a gzip archive of the file (.csv.gz, .dat.gz)
+        raw = gzip.decompress(raw)
     text = weather_text(raw)
     header, skip, layout, sep = _header(text)
     toa5 = layout == "TOA5"
