@@ -153,8 +153,8 @@ def _stamp_note(site: dict[str, Any], summary: dict[str, Any]) -> list[str]:
         return []
     return [f"the readings are {cadence / 60:g} min apart and site {summary['site_id']} takes "
             "their stamps as instants (readings_stamped): if they are means stamped at their "
-            "interval's end, set readings_stamped to interval_end (docs/diagnosis.md, "
-            "'Cadence')"]
+            "interval's end, set readings_stamped to interval_end — the Sites page's "
+            "'Readings stamped', or PUT /api/v1/sites/{id} (docs/diagnosis.md, 'Cadence')"]
 
 
 def post_readings(client: Any, site_id: str, array: str, token: str, lf: LoggerFile,
