@@ -305,3 +305,28 @@ def test_a_busy_service_is_retried_and_a_gone_one_stops_the_import_naming_the_li
                                           r"\(ConnectError: refused\); 0 of its readings"):
         post_readings(c, "golden", "tracker", "tok", lf, sleep=waits.append)
     assert waits == [1.0, 1.0, 2.0, 4.0, 8.0]
+
+
+def test_units_written_in_a_real_header_are_read_and_blank_nights_not_sent() -> None:
+    """pvanalytics' snow example names each unit in its header (``POA [W/m²]``, ``INV1 AC
+    Power [kW]``) and leaves the combiner's voltage and current and the AC power blank at
+    night: the kW read as kW, the blank rows counted out, every value as pandas reads it."""
+    name = "snow_data.csv"
+    columns = {"power_w": "INV1 AC Power [kW]", "poa_irradiance_w_m2": "POA [W/m²]",
+               "temp_module_c": "Module Temp [C]", "temp_air_c": "Ambient Temp [C]"}
+    lf = read_logger_file(LOGGERS / name, columns, timezone="Etc/GMT+7")
+    assert {f: u for f, (_, u) in lf.columns.items()} == {
+        "power_w": "kW", "poa_irradiance_w_m2": "W/m²", "temp_module_c": "C",
+        "temp_air_c": "C"}
+    assert not any(n.startswith("no unit") for n in lf.notes)
+    ref = pd.read_csv(LOGGERS / name, index_col=0)
+    np.testing.assert_allclose(lf.values["power_w"], ref["INV1 AC Power [kW]"] * 1000)
+    np.testing.assert_allclose(lf.values["poa_irradiance_w_m2"], ref["POA [W/m²]"])
+    sent = lf.readings("fixed")
+    assert len(sent) == int(ref["INV1 AC Power [kW]"].notna().sum()) == lf.sendable.sum()
+    assert len(sent) < len(ref)  # the nights' blank rows
+    vi = read_logger_file(LOGGERS / name, {"voltage_v": "INV1 CB2 Voltage [V]",
+                                           "current_a": "INV1 CB2 Current [A]"},
+                          timezone="Etc/GMT+7")
+    assert vi.columns == {"voltage_v": ("INV1 CB2 Voltage [V]", "V"),
+                          "current_a": ("INV1 CB2 Current [A]", "A")}
