@@ -1,9 +1,10 @@
 """Retry with exponential backoff: the one policy, on tenacity, of every loop that retries.
 
 The alert webhook sender (:mod:`backend.alerts.webhook`), the MQTT connection
-(:mod:`backend.mqtt.service`) and the demo logger (:mod:`backend.twin.demo_logger`)
-wait ``first_s · 2^(k−1)`` before their k-th retry, never more than ``max_s``
-(:func:`backoff`, a tenacity wait strategy). Their waits end at once when
+(:mod:`backend.mqtt.service`), the demo logger (:mod:`backend.twin.demo_logger`) and
+``heliotwin readings import`` (:mod:`backend.cli.readings`) wait ``first_s · 2^(k−1)``
+before their k-th retry, never more than ``max_s`` (:func:`backoff`, a tenacity wait
+strategy). Their waits end at once when
 the service stops: tenacity sleeps through :func:`stoppable_sleep` /
 :func:`stoppable_async_sleep`, which raise :class:`Stopped` when the stop event is
 set, so a retrying loop never outlives the shutdown. How many attempts, which

@@ -32,6 +32,7 @@ from __future__ import annotations
 import datetime as dt
 import functools
 import io
+import re
 from pathlib import Path
 from typing import IO, Any
 
@@ -928,12 +929,18 @@ def _refuse_pvgis(first_line: str) -> None:
                          + _PVGIS_SERIES)
 
 
+#: An ISO 8601 time that ends in its UTC offset (``Z``, ``+09:30``, ``-0700``, ``+02``): the
+#: test of a measured weather CSV's times and of a logger file's
+#: (``backend.measurements.logger_file``)
+UTC_OFFSET_AT_END = re.compile(r"(?:Z|[+-]\d\d(?::?\d\d)?)$")
+
+
 def _measured_times(column: pd.Series, timezone: str | None, line: Any) -> pd.DatetimeIndex:
     """A measured CSV's time column as UTC instants: every time with its UTC offset, or,
     given ``timezone``, every time without one read there; refused naming the first bad
     line otherwise (a blank, no ISO 8601 time, a missing offset)."""
     text = column.fillna("").astype(str).str.strip()
-    offset = text.str.contains(r"(?:Z|[+-]\d\d(?::?\d\d)?)$", regex=True)
+    offset = text.str.contains(UTC_OFFSET_AT_END, regex=True)
     want = timezone is None or offset.any()
     if (offset != want).any():
         i = int(np.flatnonzero((offset != want).to_numpy())[0])

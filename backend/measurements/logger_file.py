@@ -45,7 +45,7 @@ import numpy as np
 import pandas as pd
 
 from backend.measurements.fields import SENSOR_NAMES
-from sim.sky import clock_times_to_utc, weather_text
+from sim.sky import UTC_OFFSET_AT_END, clock_times_to_utc, weather_text
 
 #: The fields a file's columns may be mapped to: the electrical ones and the sensors.
 FIELDS = ("power_w", "voltage_v", "current_a", *SENSOR_NAMES)
@@ -206,7 +206,6 @@ def _numbers(cells: pd.Series, decimal_comma: bool, column: str, lines: np.ndarr
 
 
 _ISO = re.compile(r"^\d{4}-\d\d-\d\d(?:[T ]\d\d?:\d\d(?::\d\d(?:\.\d+)?)?)?")
-_OFFSET = re.compile(r"(?:Z|[+-]\d\d(?::?\d\d)?)$")
 #: Dates a spreadsheet or a portal writes: year first (2022/01/02), or day and month first
 #: with a 4- or 2-digit year (1/2/2022, 02.01.22), then a clock (13:15, 1:15:00 PM)
 _YEAR_FIRST = re.compile(r"^\d{4}([/.])\d{1,2}\1\d{1,2}(?!\d)")
@@ -233,7 +232,7 @@ def _times(cells: pd.Series, column: str, lines: np.ndarray, timezone: str | Non
                              "time like the first row's")
         return pd.DatetimeIndex(pd.to_datetime(secs, unit="s", utc=True)), [
             f"times: Unix seconds in column {column!r}"]
-    offset = text.str.contains(_OFFSET, regex=True).to_numpy()
+    offset = text.str.contains(UTC_OFFSET_AT_END, regex=True).to_numpy()
     if _ISO.match(first):
         if offset.all():
             parsed = pd.to_datetime(text, format="ISO8601", errors="coerce", utc=True)
