@@ -37,6 +37,7 @@ import gzip
 import io
 import re
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
@@ -93,9 +94,10 @@ class LoggerFile:
     columns: dict[str, tuple[str, str]]  # field → (the file's column, the unit read)
     notes: list[str] = field(default_factory=list)
 
-    @property
+    @cached_property
     def sendable(self) -> np.ndarray:
-        """Rows with power, or with voltage and current: the ones a reading is made of."""
+        """Rows with power, or with voltage and current: the ones a reading is made of (once:
+        every batch of :meth:`readings` asks)."""
         v = self.values
         has = v["power_w"].notna() if "power_w" in v else pd.Series(False, index=v.index)
         if "voltage_v" in v and "current_a" in v:
