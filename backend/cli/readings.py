@@ -19,6 +19,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from backend.cli import fail
 
 if TYPE_CHECKING:
@@ -128,7 +130,8 @@ def run_import(args: argparse.Namespace) -> int:
         summary["arrays"][array] = {
             "columns": {k: {"column": c, "unit": u} for k, (c, u) in lf.columns.items()},
             "readings": int(rows.size), "first": f"{stamps.min():%Y-%m-%dT%H:%M:%SZ}",
-            "last": f"{stamps.max():%Y-%m-%dT%H:%M:%SZ}", "cadence_s": lf.cadence_s()}
+            "last": f"{stamps.max():%Y-%m-%dT%H:%M:%SZ}", "cadence_s": lf.cadence_s(),
+            "peak_reading": _peak(lf, array)}
         if rows.size < len(lf.lines):
             line = int(lf.lines[(~lf.sendable).nonzero()[0][0]])
             notes.append(f"{array}: {len(lf.lines) - rows.size} rows without power or voltage "
@@ -143,6 +146,15 @@ def run_import(args: argparse.Namespace) -> int:
         summary["url"] = args.url
     _print(summary, args.json, args.dry_run)
     return 0
+
+
+def _peak(lf: LoggerFile, array: str) -> dict[str, Any]:
+    """The reading of the highest power (sent, else V·I) as it is sent: a unit or a column
+    mapped wrong shows at a glance (207,500 W for a 207-kW plant, not 207.5)."""
+    v = lf.values[lf.sendable]
+    power = v["power_w"] if "power_w" in v else v["voltage_v"] * v["current_a"]
+    k = int(np.nanargmax(power.to_numpy())) if power.notna().any() else 0
+    return lf.readings(array, k, k + 1)[0]
 
 
 def _stamp_note(site: dict[str, Any], summary: dict[str, Any]) -> list[str]:
@@ -268,6 +280,7 @@ def _print(summary: dict[str, Any], as_json: bool, dry_run: bool) -> None:
               f"{a['last']}{every}")
         for fld, c in a["columns"].items():
             print(f"    {fld} ← {c['column']!r} [{c['unit']}]")
+        print(f"    its highest power as sent: {json.dumps(a['peak_reading'])}")
     for note in summary["notes"]:
         print(f"note: {note}")
     if dry_run:

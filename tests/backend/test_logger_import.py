@@ -246,14 +246,18 @@ def test_a_dry_run_says_what_it_would_post_and_a_column_needs_an_array(heliotwin
                         "--column=fixed.power_w=ac_power_kw_1137:kW",
                         "--column=tracker.power_w=inv2_ac_power_w__1047", "--dry-run")
     assert run.returncode == 0, run.stderr
-    assert run.stdout.splitlines()[:5] == [
+    assert run.stdout.splitlines()[:7] == [
         "read: nrel_RSF_II.csv (CSV (',')), 480 rows",
         "  rsf/fixed: 480 readings from 2022-01-02T07:00:00Z to 2022-01-07T06:45:00Z, every "
         "900 s",
         "    power_w ← 'ac_power_kw_1137' [kW]",
+        '    its highest power as sent: {"ts": "2022-01-05T20:45:00Z", "array": "fixed", '
+        '"power_w": 207500.2}',
         "  rsf/tracker: 480 readings from 2022-01-02T07:00:00Z to 2022-01-07T06:45:00Z, every "
         "900 s",
-        "    power_w ← 'inv2_ac_power_w__1047' [W]"]
+        "    power_w ← 'inv2_ac_power_w__1047' [W]",
+        '    its highest power as sent: {"ts": "2022-01-05T20:45:00Z", "array": "tracker", '
+        '"power_w": 87153.49}']
     assert run.stdout.rstrip().endswith("dry run: nothing posted")
     bad = heliotwin_cli("readings", "import", path, "--site", "rsf", "--column=power_w=x",
                         "--dry-run")
