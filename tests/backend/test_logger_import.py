@@ -74,11 +74,12 @@ def _toa5(ref: pd.DataFrame) -> str:
     return "\r\n".join(out) + "\r\n"
 
 
-def _european(ref: pd.DataFrame) -> str:
+def _european(ref: pd.DataFrame, sep: str = ";") -> str:
     """The same as a European portal writes it: Excel's sep= line, ';', decimal commas,
-    D.M.YYYY times, units in the header."""
-    rows = ["sep=;", "Datum;U_DC [V];I_DC [A]"]
-    rows += [f"{t:%d.%m.%Y %H:%M};{str(r['dc_pos_voltage__774']).replace('.', ',')};"
+    D.M.YYYY times, units in the header; or tab-separated with a 2-digit year."""
+    rows = ["sep=;", "Datum;U_DC [V];I_DC [A]"] if sep == ";" else ["Datum\tU_DC [V]\tI_DC [A]"]
+    when = "%d.%m.%Y %H:%M" if sep == ";" else "%d.%m.%y %H:%M"
+    rows += [f"{t.strftime(when)}{sep}{str(r['dc_pos_voltage__774']).replace('.', ',')}{sep}"
              f"{str(r['dc_pos_current__775']).replace('.', ',')}" for t, r in ref.iterrows()]
     return "\n".join(rows) + "\n"
 
@@ -104,7 +105,8 @@ def _spreadsheet(ref: pd.DataFrame, year_first: bool) -> str:
     return "\n".join(rows) + "\n"
 
 
-@pytest.mark.parametrize("layout", ["TOA5", "european", "unix", "excel_us", "year_first"])
+@pytest.mark.parametrize("layout", ["TOA5", "european", "european_tab", "unix", "excel_us",
+                                    "year_first"])
 def test_the_same_readings_in_other_loggers_layouts(layout: str) -> None:
     ref = _serf_west()
     plain = read_logger_file(LOGGERS / "serf_west_15min.csv",
@@ -121,11 +123,13 @@ def test_the_same_readings_in_other_loggers_layouts(layout: str) -> None:
         assert lf.sendable.sum() == len(ref) - 1 and not lf.sendable[40]  # the NAN row
         got = lf.readings("fixed")
         assert got[60]["power_w"] == pytest.approx(got[60]["voltage_v"] * got[60]["current_a"])
-    elif layout == "european":
-        lf = read_logger_file(_european(ref).encode("latin-1"),
+    elif layout.startswith("european"):
+        tab = layout.endswith("tab")
+        lf = read_logger_file(_european(ref, "\t" if tab else ";").encode("latin-1"),
                               {"voltage_v": "U_DC [V]", "current_a": "I_DC [A]"},
                               timezone="Etc/GMT+7")
-        assert lf.layout == "CSV (';', decimal comma)" and lf.lines[0] == 3
+        assert (lf.layout, lf.lines[0]) == (("CSV (tab, decimal comma)", 2) if tab else
+                                            ("CSV (';', decimal comma)", 3))
         assert lf.columns["voltage_v"] == ("U_DC [V]", "V") and not lf.notes[1:]
         got = lf.readings("fixed")
     elif layout == "unix":  # gzipped, as a logger's archive is
