@@ -57,8 +57,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         "elevation_deg, …) of --array, or of ARRAY, to the file's column, in "
                         "UNIT (kW, mA, °F, km/h …) when the file does not say it; repeat per "
                         "field. With one array, a column named as a field maps itself")
-    i.add_argument("--time-column", help="the column of the times (default: TOA5's "
-                                         "TIMESTAMP, else the first column of times)")
+    i.add_argument("--time-column", help="the column of the times, or DATE+CLOCK for a pair "
+                                         "(default: TOA5's TIMESTAMP, else the first column "
+                                         "of times, with a clock column beside it)")
     i.add_argument("--timezone", help="the logger's clock, for times without a UTC offset: an "
                                       "IANA zone (America/Denver), Etc/GMT+7 for UTC−7 all "
                                       "year")

@@ -17,7 +17,7 @@ takes readings named and scaled its own way (``backend.measurements.fields``: ``
   (:data:`UNITS`).
 - **Times**: ISO 8601 with or without an offset, ``M/D/YYYY`` or ``D/M/YYYY`` (the order the
   steps are regular in, or ``date_order``; a 2-digit year, a 12-hour clock), ``YYYY/MM/DD``,
-  ``D.M.YYYY``, Unix seconds. A time without an
+  ``D.M.YYYY``, Unix seconds; a date column and a clock column beside it. A time without an
   offset is read on the logger's clock, ``timezone`` (an IANA zone; ``Etc/GMT+7`` for a
   clock on UTC−7 all year), by :func:`sim.sky.clock_times_to_utc`.
 - **Compressed**: a gzip archive of such a file is read as the file.
@@ -214,6 +214,7 @@ _YEAR_FIRST = re.compile(r"^\d{4}([/.])\d{1,2}\1\d{1,2}(?!\d)")
 _YEAR_LAST = re.compile(r"^\d{1,2}([/.-])\d{1,2}\1(\d{4}|\d{2})(?!\d)")
 _CLOCK = re.compile(r"[ T]+\d{1,2}:\d\d(:\d\d)?(\s*[AaPp]\.?[Mm]\.?)?$")
 _UNIX = re.compile(r"^\d{9,10}(?:\.\d+)?$")
+_CLOCK_ONLY = re.compile(r"^\d{1,2}:\d\d(:\d\d(\.\d+)?)?(\s*[AaPp]\.?[Mm]\.?)?$")
 
 
 def _times(cells: pd.Series, column: str, lines: np.ndarray, timezone: str | None,
@@ -361,8 +362,12 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
     label = {i: (n or f"column {i + 1}") for i, n in enumerate(names)}
     index = _column_index(names)
 
-    tcol = _time_column(frame, names, label, index, time_column, toa5)
-    times, notes = _times(frame[tcol], label[tcol], lines, timezone, date_order)
+    tcol, clock = _time_column(frame, names, label, index, time_column, toa5)
+    when, when_label = frame[tcol], label[tcol]
+    if clock is not None:  # a date column and a clock column beside it
+        when, when_label = frame[tcol].str.strip() + " " + frame[clock].str.strip(), \
+            f"{label[tcol]} + {label[clock]}"
+    times, notes = _times(when, when_label, lines, timezone, date_order)
     decimal_comma = sep != "," and _has_decimal_commas(frame, tcol)
     if decimal_comma:
         layout = layout[:-1] + ", decimal comma)"
@@ -404,7 +409,7 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
                          + ", ".join(repr(label[i]) for i in range(width) if i != tcol))
     if ("voltage_v" in values) != ("current_a" in values):
         raise ValueError("column: voltage_v and current_a go together; map both or neither")
-    return LoggerFile(layout, label[tcol], times, values, lines, used, notes)
+    return LoggerFile(layout, when_label, times, values, lines, used, notes)
 
 
 def _column_index(names: list[str]) -> dict[str, int]:
@@ -419,25 +424,33 @@ def _column_index(names: list[str]) -> dict[str, int]:
 
 
 def _time_column(frame: pd.DataFrame, names: list[str], label: dict[int, str],
-                 index: dict[str, int], time_column: str | None, toa5: bool) -> int:
-    """The position of the times: ``time_column``, TOA5's ``TIMESTAMP``, else the first
-    column whose first cell reads as a time (an unnamed first column: a pandas index)."""
+                 index: dict[str, int], time_column: str | None, toa5: bool
+                 ) -> tuple[int, int | None]:
+    """The position of the times, and of a clock column that completes a date column (an
+    Arduino's or a spreadsheet's ``Date,Time``): ``time_column`` (``"Date+Time"`` for such
+    a pair), TOA5's ``TIMESTAMP``, else the first column whose first cell reads as a time
+    (an unnamed first column: a pandas index), with the column after it when that holds
+    only clock times and this only dates."""
     if time_column is not None:
-        if time_column not in index:
-            raise ValueError(f"time_column: the file has no column {time_column!r}; its "
-                             f"columns are {', '.join(repr(label[i]) for i in label)}")
-        return index[time_column]
+        parts = time_column.split("+") if time_column not in index else [time_column]
+        for part in parts:
+            if part not in index:
+                raise ValueError(f"time_column: the file has no column {part!r}; its "
+                                 f"columns are {', '.join(repr(label[i]) for i in label)}")
+        return index[parts[0]], (index[parts[1]] if len(parts) > 1 else None)
     if toa5 and "TIMESTAMP" in index:
-        return index["TIMESTAMP"]
+        return index["TIMESTAMP"], None
     for i in range(len(names)):
         cell = str(frame[i].iloc[0]).strip()
         if _ISO.match(cell) or _YEAR_FIRST.match(cell) or _YEAR_LAST.match(cell) or (
                 _UNIX.match(cell) and names[i].lower() in ("ts", "time", "timestamp",
                                                            "unix", "unix_s", "epoch")):
-            return i
+            after = str(frame[i + 1].iloc[0]).strip() if i + 1 < len(names) else ""
+            date_only = not _UNIX.match(cell) and _CLOCK.search(cell) is None
+            return i, (i + 1 if date_only and _CLOCK_ONLY.match(after) else None)
     raise ValueError("time_column: no column of times found (ISO 8601, M/D/YYYY H:MM, "
-                     "D.M.YYYY H:MM or Unix seconds named ts/time/timestamp); name it with "
-                     "--time-column")
+                     "D.M.YYYY H:MM, a date and a clock column, or Unix seconds named "
+                     "ts/time/timestamp); name it with --time-column (Date+Time for a pair)")
 
 
 def _has_decimal_commas(frame: pd.DataFrame, tcol: int) -> bool:

@@ -105,8 +105,17 @@ def _spreadsheet(ref: pd.DataFrame, year_first: bool) -> str:
     return "\n".join(rows) + "\n"
 
 
+def _arduino(ref: pd.DataFrame) -> str:
+    """The same as an Arduino logger in Mexico writes it to its SD card: a date column
+    (day/month/year) and a clock column, Spanish names."""
+    rows = ["Fecha,Hora,Voltaje,Corriente"] + [
+        f"{t:%d/%m/%Y},{t:%H:%M:%S},{r['dc_pos_voltage__774']},{r['dc_pos_current__775']}"
+        for t, r in ref.iterrows()]
+    return "\n".join(rows) + "\n"
+
+
 @pytest.mark.parametrize("layout", ["TOA5", "european", "european_tab", "unix", "excel_us",
-                                    "year_first"])
+                                    "year_first", "arduino"])
 def test_the_same_readings_in_other_loggers_layouts(layout: str) -> None:
     ref = _serf_west()
     plain = read_logger_file(LOGGERS / "serf_west_15min.csv",
@@ -135,6 +144,17 @@ def test_the_same_readings_in_other_loggers_layouts(layout: str) -> None:
     elif layout == "unix":  # gzipped, as a logger's archive is
         lf = read_logger_file(gzip.compress(_unix(ref).encode()))  # no mapping, no zone
         assert set(lf.columns) == {"voltage_v", "current_a"}
+        got = lf.readings("fixed")
+    elif layout == "arduino":
+        lf = read_logger_file(_arduino(ref).encode(), {"voltage_v": "Voltaje",
+                                                       "current_a": "Corriente"},
+                              timezone="Etc/GMT+7")
+        assert lf.time_column == "Fecha + Hora"
+        assert lf.notes[0].startswith("times: day/month/year on a clock in Etc/GMT+7")
+        explicit = read_logger_file(_arduino(ref).encode(), {"voltage_v": "Voltaje",
+                                                             "current_a": "Corriente"},
+                                    timezone="Etc/GMT+7", time_column="Fecha+Hora")
+        assert (explicit.times_utc == lf.times_utc).all()
         got = lf.readings("fixed")
     else:
         lf = read_logger_file(_spreadsheet(ref, layout == "year_first").encode(),
