@@ -433,6 +433,9 @@ def _time_column(frame: pd.DataFrame, names: list[str], label: dict[int, str],
     only clock times and this only dates."""
     if time_column is not None:
         parts = time_column.split("+") if time_column not in index else [time_column]
+        if len(parts) > 2:
+            raise ValueError(f"time_column: {time_column!r} is one column, or a date column "
+                             "and a clock column as DATE+CLOCK")
         for part in parts:
             if part not in index:
                 raise ValueError(f"time_column: the file has no column {part!r}; its "
