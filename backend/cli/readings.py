@@ -19,8 +19,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
 from backend.cli import fail
 
 if TYPE_CHECKING:
@@ -152,6 +150,8 @@ def run_import(args: argparse.Namespace) -> int:
 def _peak(lf: LoggerFile, array: str) -> dict[str, Any]:
     """The reading of the highest power (sent, else V·I) as it is sent: a unit or a column
     mapped wrong shows at a glance (207,500 W for a 207-kW plant, not 207.5)."""
+    import numpy as np
+
     v = lf.values[lf.sendable]
     power = v["power_w"] if "power_w" in v else v["voltage_v"] * v["current_a"]
     k = int(np.nanargmax(power.to_numpy())) if power.notna().any() else 0
