@@ -127,6 +127,12 @@ class ArrayConfig:
         Key of ``pvlib.temperature.TEMPERATURE_MODEL_PARAMETERS["sapm"]``.
     albedo : float
         Ground reflectance [-].
+    dc_loss_pct : float
+        The array's DC losses the single-diode model does not see [%]: soiling, mismatch,
+        wiring, the modules' nameplate tolerance, light-induced degradation and age. It
+        scales the array's current at the maximum power point (:func:`array_mpp`), as
+        PVWatts' system losses scale its power (Dobos 2014, NREL/TP-6A20-62641, eq. 17 and
+        Table 6: 14 % by default, inverter excluded). 0 by default: the ideal array.
     """
 
     name: str
@@ -138,6 +144,7 @@ class ArrayConfig:
     surface_azimuth: float = 180.0
     temperature_model: str = "open_rack_glass_polymer"
     albedo: float = 0.2
+    dc_loss_pct: float = 0.0
 
     def __post_init__(self) -> None:
         if self.mount not in ("tracker", "fixed"):
@@ -146,6 +153,8 @@ class ArrayConfig:
             raise ValueError(
                 f"array {self.name!r}: modules_in_series and strings_in_parallel must be >= 1"
             )
+        if not 0.0 <= self.dc_loss_pct < 100.0:
+            raise ValueError(f"array {self.name!r}: dc_loss_pct must be in 0..100 %")
 
     @property
     def modules(self) -> int:
@@ -156,6 +165,13 @@ class ArrayConfig:
     def stc_power_w(self) -> float:
         """The array's rating: its modules' power at STC (the CEC table's ``STC``) [W]."""
         return float(cec_module_parameters(self.module)["STC"]) * self.modules
+
+    def to_config(self) -> dict[str, Any]:
+        """The array as a site file's entry (:func:`array_config_from_dict` reads it back)."""
+        out = {key: getattr(self, name) for key, (name, _) in _SITE_FILE_KEYS.items()}
+        if not self.dc_loss_pct:  # only when set: a stored config without it stays unchanged
+            del out["dc_loss_pct"]
+        return out
 
     @property
     def wiring(self) -> str:
@@ -180,6 +196,8 @@ class ArrayConfig:
             "temperature_model": self.temperature_model,
             "albedo": self.albedo,
         }
+        if self.dc_loss_pct:  # only when set: a stored config without it stays unchanged
+            out["dc_loss_pct"] = self.dc_loss_pct
         if self.mount == "fixed":
             out["surface_tilt_deg"] = self.surface_tilt
             out["surface_azimuth_deg"] = self.surface_azimuth
@@ -332,7 +350,9 @@ def array_mpp(
     array: ArrayConfig,
     exact: bool = False,
 ) -> dict[str, np.ndarray]:
-    """Array current, voltage and power at the maximum power point.
+    """Array current, voltage and power at the maximum power point, its current reduced by
+    the array's ``dc_loss_pct`` (the one place the losses enter: the twin, the sky read from
+    an array's power and the diagnosis's fits all come through here).
 
     Parameters
     ----------
@@ -355,7 +375,7 @@ def array_mpp(
         i_mp, v_mp = sol["i_mp"], sol["v_mp"]
     else:
         i_mp, v_mp = mpp_table(array.module).lookup(effective_irradiance, temp_cell)
-    current = i_mp * array.strings_in_parallel
+    current = i_mp * array.strings_in_parallel * (1.0 - array.dc_loss_pct / 100.0)
     voltage = v_mp * array.modules_in_series
     return {"current_a": current, "voltage_v": voltage, "power_w": current * voltage}
 
@@ -415,6 +435,7 @@ _SITE_FILE_KEYS: dict[str, tuple[str, Any]] = {
     "surface_azimuth_deg": ("surface_azimuth", float),
     "temperature_model": ("temperature_model", _as_is),
     "albedo": ("albedo", float),
+    "dc_loss_pct": ("dc_loss_pct", float),
 }
 
 

@@ -145,15 +145,9 @@ class Site:
     def to_config(self) -> dict[str, Any]:
         """The site as a config file (:class:`sim.site_config.SiteConfig`): what
         :func:`site_from_dict` reads back to an equal :class:`Site`."""
-        d = self.to_dict()
-        keys = ("mount", "module", "modules_in_series", "strings_in_parallel",
-                "surface_tilt_deg", "surface_azimuth_deg", "temperature_model", "albedo")
-        arrays = {}
-        for name, arr in self.arrays.items():
-            a = dataclasses.asdict(arr)
-            a["surface_tilt_deg"], a["surface_azimuth_deg"] = arr.surface_tilt, arr.surface_azimuth
-            arrays[name] = {**{k: a[k] for k in keys}, **self._placement(name)}
-        return {**d, "arrays": arrays}
+        arrays = {name: {**arr.to_config(), **self._placement(name)}
+                  for name, arr in self.arrays.items()}
+        return {**self.to_dict(), "arrays": arrays}
 
 
 def site_from_dict(d: dict[str, Any], where: str = "site") -> Site:

@@ -23,7 +23,8 @@ Kinds:
   part-way through it (the fault's ``since_time``). Cleared when the latest day no
   longer shows it. This includes ``underperformance``: a day whose measured tracker
   energy is below the lower edge of its expected band, with its size in Wh and %
-  (``data["shortfall_wh"]``), even when no multi-day signature names the cause.
+  (``data["shortfall_wh"]``), even when no multi-day signature names the cause, and
+  ``fixed_underperformance``, raised on the fixed array (a day's sky from a sensor).
 - ``low_performance_ratio`` — the tracker's performance ratio under the measured sky
   (``diagnosis``: measured / expected, ``sky.source`` ``sensor`` or ``fixed_array``) of the latest
   such day is below ``Settings.alerts.pr_below``; ``since``: the first day of the run of
@@ -189,11 +190,16 @@ def diagnosed(site_id: str, zone: ZoneInfo, tracker: str, days: list[dict[str, A
     if not days:
         return out
     latest = days[-1]
-    if latest["tracker"].get("measured_wh") is not None or latest["faults"]:
-        scope = (site_id, tracker, "fault")
-        out.scopes.add(scope)
-        out.clear_notes[scope] = f"not found in the diagnosis of {latest['date']}"
-        for f in latest["faults"]:
+    note = f"not found in the diagnosis of {latest['date']}"
+    # each array's findings are judged where it has readings or a finding: the tracker's,
+    # and the fixed array's own (fixed_underperformance, under a sensor's sky)
+    for array, name in (("tracker", tracker), ("fixed", "fixed")):
+        found = [f for f in latest["faults"] if f.get("array", "tracker") == array]
+        if (latest.get(array) or {}).get("measured_wh") is None and not found:
+            continue
+        out.scopes.add((site_id, name, "fault"))
+        out.clear_notes[(site_id, name, "fault")] = note
+        for f in found:
             if f["confidence"] < confidence_min:
                 continue
             # the fault's kind in words is the alert's title (summary(), the dashboard's
@@ -202,7 +208,7 @@ def diagnosed(site_id: str, zone: ZoneInfo, tracker: str, days: list[dict[str, A
             since_s = (int(dt.datetime.fromisoformat(f["since_time"]).timestamp())
                        if f.get("since_time") else day_start_s(f["since"], zone))
             out.conditions.append(Condition(
-                site_id, tracker, "fault", since_s,
+                site_id, name, "fault", since_s,
                 f"{f['detail']} (since {f['since']}, confidence {f['confidence']:.2f}, "
                 f"diagnosis of {latest['date']})",
                 {"fault_kind": f["kind"], "confidence": f["confidence"],

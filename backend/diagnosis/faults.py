@@ -69,7 +69,7 @@ from sim.weather_clock import best_shift, scaled_fit
 
 FaultKind = Literal["stuck", "azimuth_offset", "elevation_offset", "clock_offset",
                     "sky_clock_offset", "sky_unusable", "module_loss", "soiling", "dropout",
-                    "underperformance"]
+                    "underperformance", "fixed_underperformance"]
 
 #: Each fault kind in words: the dashboard's diagnosis lines, the alerts' titles and the
 #: webhook's text all say these (served as ``title`` in the diagnosis and alerts answers).
@@ -84,6 +84,7 @@ FAULT_WORDS: dict[str, str] = {  # keys: FaultKind's (tests/backend/test_alerts.
     "soiling": "soiling",
     "dropout": "logger dropout",
     "underperformance": "underperformance (below the expected band)",
+    "fixed_underperformance": "the fixed array below its expected band (under the sensor's sky)",
 }
 
 MIN_CLEARNESS = 0.55  # days clearer than this can show a shape fault [-]
@@ -632,6 +633,7 @@ def faults_over_days(days: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
                                      f"{UNUSABLE_CAUSES[u['flag']]}; the day's expectation "
                                      f"is the clear sky's and the tracker is not judged"})
     _underperformance(days, out)
+    _underperformance(days, out, "fixed")
     _module_loss(days, out)
     for i in _sky_clock_offset(days, out):  # the tracker judged under a shifted sky: not at all
         out[i] = [f for f in out[i] if f["kind"] in ("sky_clock_offset", "dropout")]
@@ -781,18 +783,31 @@ def _sky_shift_seen(c: dict[str, Any] | None) -> float | None:
     return float(c["offset_s"]) if _sky_fit_ratio(c) <= FIT_RATIO else None
 
 
-def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]]) -> None:
-    """``underperformance`` on each day whose measured energy is below its band's lower
-    edge (``features["energy"]``, :func:`energy_features`): magnitude the shortfall from
-    the expected energy [%], ``shortfall_wh`` in Wh; ``since`` the first day of its run of
-    such days; confidence 0.5 at the lower edge, rising to 1 one lower half-width of the
-    band (expected − lower edge) under it. The detail says how much of the expectation rests
-    on a beam the sky instrument did not see (``features["beam_unseen_pct"]``, the service's
-    ``sky.beam_unseen_expected_pct``): on a summer dawn behind the fixed plane the shortfall
-    may be the sky's."""
+#: What an array short of its band under a sensor's sky may have, said in the detail of
+#: ``fixed_underperformance`` (a real utility array under snow read 0.24 and 0.42 of its
+#: expectation, tests/data/loggers/snow_data.csv) and of any underperformance from a sensor
+UNDER_SENSOR_CAUSES = ("snow or soiling on its modules, a string or inverter down, or losses "
+                       "its config does not give (a clean, healthy array read so every day: "
+                       "set its dc_loss_pct, docs/sites.md)")
+
+
+def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]],
+                      array: Literal["tracker", "fixed"] = "tracker") -> None:
+    """``underperformance`` (the tracker) or ``fixed_underperformance`` (``array``
+    ``"fixed"``) on each day whose measured energy is below its band's lower edge
+    (``features["energy"]``, ``features["fixed_energy"]``: :func:`energy_features`):
+    magnitude the shortfall from the expected energy [%], ``shortfall_wh`` in Wh; ``since``
+    the first day of its run of such days; confidence 0.5 at the lower edge, rising to 1 one
+    lower half-width of the band (expected − lower edge) under it. The fixed array is judged
+    only where the sky comes from a sensor (service ``_day_payload``): from its own power
+    it would be judged against itself. The tracker's detail says how much of the
+    expectation rests on a beam the sky instrument did not see
+    (``features["beam_unseen_pct"]``, the service's ``sky.beam_unseen_expected_pct``): on a
+    summer dawn behind the fixed plane the shortfall may be the sky's."""
     since: str | None = None
+    tracker = array == "tracker"
     for i, d in enumerate(days):
-        en = d["features"].get("energy")
+        en = d["features"].get("energy" if tracker else "fixed_energy")
         if en is None or en["measured_wh"] >= en["low_wh"]:
             since = None
             continue
@@ -801,17 +816,22 @@ def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
         short_wh = x - m
         pct = 100.0 * short_wh / x
         conf = float(np.clip(0.5 + 0.5 * (low - m) / max(x - low, 1e-9), 0.5, 1.0))
-        unseen = float(d["features"].get("beam_unseen_pct") or 0.0)
-        out[i].append({"kind": "underperformance", "confidence": round(conf, 3),
+        unseen = float(d["features"].get("beam_unseen_pct") or 0.0) if tracker else 0.0
+        out[i].append({"kind": "underperformance" if tracker else "fixed_underperformance",
+                       "confidence": round(conf, 3), "array": array,
                        "since": since, "magnitude": round(pct, 1), "unit": "%",
                        "shortfall_wh": round(short_wh, 1),
-                       "detail": f"made {m / 1000:.2f} kWh, {short_wh / 1000:.2f} kWh "
+                       "detail": ("" if tracker else "the fixed array ")
+                                 + f"made {m / 1000:.2f} kWh, {short_wh / 1000:.2f} kWh "
                                  f"({pct:.1f} %) less than the {x / 1000:.2f} kWh expected "
                                  f"under the measured sky, below the band's lower edge "
                                  f"{low / 1000:.2f} kWh" + (
                                      "; the readings follow the expected curve at a "
                                      "thousandth of it: power sent in kW where W are asked?"
-                                     if d["features"].get("power_in_kw") else "") + (
+                                     if tracker and d["features"].get("power_in_kw") else "")
+                                 + (f": {UNDER_SENSOR_CAUSES}"
+                                    if not tracker or d["features"].get("sensor_sky")
+                                    else "") + (
                                      f"; {unseen:.0f} % of that expectation rests on a beam "
                                      f"the sky instrument did not see (the sun behind or "
                                      f"grazing its plane, or readings missing)"

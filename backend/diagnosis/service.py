@@ -101,8 +101,9 @@ MAX_DAYS = 400
 #: sim.sky_sensor.measurable; 31: a dead-looking day that is the expected curve at a
 #: thousandth, ``power_in_kw``, faults.KW_SCALE; 32: the day's share of the expected tracker
 #: energy from minutes the sky instrument did not see the beam in, ``beam_unseen_expected_pct``,
-#: and an underperformance's detail saying it).
-CACHE_VERSION = 32
+#: and an underperformance's detail saying it; 33: the fixed array judged under a sensor's sky,
+#: ``fixed_underperformance``).
+CACHE_VERSION = 33
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
@@ -222,6 +223,13 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
         energy = energy_features(measured_tr, matched, matched_b, exp_a, u)
         if energy is not None:
             features["energy"] = energy
+    # the fixed array judged where the sky is a sensor's, not its own (faults._underperformance)
+    if whole and source == "sensor":
+        features["sensor_sky"] = True
+    if whole and source == "sensor" and measured_fx is not None:
+        energy = energy_features(measured_fx, matched_f, matched_f, exp_fixed, u)
+        if energy is not None:
+            features["fixed_energy"] = energy
     low, high = band_wh(exp_a, exp_b, u)
     # readings that miss part of the day's expected energy: its gain is not the day's (a
     # day without any reading has no measured gain at all: not partial, no data)

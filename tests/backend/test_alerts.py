@@ -199,10 +199,12 @@ def test_a_logger_silent_since_summer_is_silent_in_the_polar_night() -> None:
     assert ev.conditions[0].data["silent_min"] > 100_000
 
 
-def _day(date: str, pr: float | None, faults: list[dict], source: str = "fixed_array") -> dict:
+def _day(date: str, pr: float | None, faults: list[dict], source: str = "fixed_array",
+         fixed_wh: float | None = 3000.0) -> dict:
     return {"date": date, "sky": {"source": source},
             "tracker": {"measured_wh": None if pr is None else 4000.0 * pr,
                         "expected_wh": 4000.0, "performance_ratio": pr},
+            "fixed": {"measured_wh": fixed_wh},
             "faults": faults}
 
 
@@ -252,6 +254,27 @@ def test_diagnosis_rule_latest_day_faults_and_the_low_pr_run() -> None:
     healthy = rules.diagnosed(SITE, TZ, "tracker", days[:2], 0.8, 0.5)
     assert healthy.conditions == []
     assert {s[2] for s in healthy.scopes} == {"fault", "low_performance_ratio"}
+
+
+def test_a_fixed_arrays_underperformance_is_raised_and_cleared_on_the_fixed_array() -> None:
+    """Under a sensor's sky the fixed array is judged too (``fixed_underperformance``): its
+    alert names that array, and a later day without it clears it there, even with no
+    tracker readings (a site whose tracker logger is not there yet)."""
+    snow = {"kind": "fixed_underperformance", "array": "fixed", "confidence": 1.0,
+            "since": "2026-11-29", "magnitude": 71.3, "unit": "%",
+            "detail": "the fixed array made 4.46 kWh …"}
+    days = [_day("2026-11-29", None, [snow], source="sensor"),
+            _day("2026-11-30", None, [snow], source="sensor")]
+    ev = rules.diagnosed(SITE, TZ, "tracker", days, pr_below=0.8, confidence_min=0.5)
+    (c,) = ev.conditions
+    assert (c.array, c.kind, c.fault_kind) == ("fixed", "fault", "fixed_underperformance")
+    assert c.since_s == int(dt.datetime(2026, 11, 29, tzinfo=TZ).timestamp())
+    clean = rules.diagnosed(SITE, TZ, "tracker", [_day("2026-12-01", None, [], "sensor")],
+                            0.8, 0.5)
+    assert clean.conditions == [] and (SITE, "fixed", "fault") in clean.scopes
+    silent = rules.diagnosed(SITE, TZ, "tracker", [_day("2026-12-01", None, [], "sensor",
+                                                        fixed_wh=None)], 0.8, 0.5)
+    assert (SITE, "fixed", "fault") not in silent.scopes  # no readings: unknown, not clear
 
 
 # -- the webhook sender against a real receiver ----------------------------------------------

@@ -128,3 +128,22 @@ def test_array_config_from_dict_rejects_unknown_keys() -> None:
         array_config_from_dict("fixed", {"tilt_degrees": 16})
     with pytest.raises(ValueError, match="mount"):
         ArrayConfig("x", mount="roof")
+
+
+def test_an_arrays_dc_loss_takes_its_share_of_the_current_alone() -> None:
+    """``dc_loss_pct`` (PVWatts' system losses, docs/sites.md) scales the current at the
+    maximum power point, so the power by the same share; the voltage is the model's."""
+    import dataclasses
+
+    e, t = np.array([150.0, 600.0, 1000.0]), np.array([5.0, 30.0, 55.0])
+    ideal = ArrayConfig("a", modules_in_series=3, strings_in_parallel=2)
+    lossy = dataclasses.replace(ideal, dc_loss_pct=14.0)
+    a, b = array_mpp(e, t, ideal), array_mpp(e, t, lossy)
+    np.testing.assert_array_equal(b["voltage_v"], a["voltage_v"])
+    np.testing.assert_allclose(b["current_a"], 0.86 * a["current_a"], rtol=1e-12)
+    np.testing.assert_allclose(b["power_w"], 0.86 * a["power_w"], rtol=1e-12)
+    assert lossy.stc_power_w == ideal.stc_power_w  # the rating is the nameplate's
+    assert array_config_from_dict("f", {"dc_loss_pct": 14}).to_dict()["dc_loss_pct"] == 14.0
+    assert "dc_loss_pct" not in ideal.to_dict()  # a stored config without it is unchanged
+    with pytest.raises(ValueError, match="dc_loss_pct"):
+        ArrayConfig("x", dc_loss_pct=100.0)

@@ -254,3 +254,19 @@ def test_a_note_may_span_lines_but_holds_no_nul() -> None:
     for bad in ("a\x00b", "a\x1bb"):
         with pytest.raises(ValueError, match="notes: holds a control character"):
             validate_site_config({**config, "notes": bad})
+
+
+def test_an_arrays_dc_loss_is_bounded_and_named() -> None:
+    from sim.site_config import validate_site_config
+    from sim.sites import load_site, site_from_dict
+
+    config = load_site("tehuantepec").to_config()
+    fixed = config["arrays"]["fixed"]
+    lossy = {**config, "arrays": {**config["arrays"], "fixed": {**fixed, "dc_loss_pct": 16}}}
+    site = site_from_dict(lossy)
+    assert site.arrays["fixed"].dc_loss_pct == 16.0
+    assert site_from_dict(site.to_config()) == site  # the config keeps it
+    for bad in (-1, 51):
+        with pytest.raises(ValueError, match="arrays.fixed.dc_loss_pct"):
+            validate_site_config({**config, "arrays": {**config["arrays"],
+                                                       "fixed": {**fixed, "dc_loss_pct": bad}}})

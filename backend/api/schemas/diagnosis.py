@@ -55,6 +55,9 @@ class FaultRead(BaseModel):
     """A named fault signature (``backend/diagnosis/faults.py``)."""
 
     kind: FaultKind
+    array: Literal["tracker", "fixed"] = Field(
+        "tracker", description="the array it is found on: `fixed` for "
+                               "`fixed_underperformance`, `tracker` for the others")
     title: str = Field(description="the kind in words, e.g. `tracker stuck`: what the "
                                    "dashboard and the alerts say")
     confidence: float = Field(description="[0, 1]")
@@ -68,7 +71,8 @@ class FaultRead(BaseModel):
     unit: str
     detail: str
     shortfall_wh: float | None = Field(
-        None, description="`underperformance`: the day's measured tracker energy short of "
+        None, description="`underperformance` (`fixed_underperformance`): the day's measured "
+                          "tracker (fixed array) energy short of "
                           "the expected one [Wh] (`magnitude` the same in % of expected); "
                           "null for the other kinds")
 

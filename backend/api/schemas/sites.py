@@ -36,6 +36,7 @@ class ArrayRead(BaseModel):
     stc_power_w: float
     temperature_model: str
     albedo: float
+    dc_loss_pct: float | None = Field(None, description="[%] DC losses, when set (else 0)")
     surface_tilt_deg: float | None = None
     surface_azimuth_deg: float | None = None
     position_east_m: float | None = None
