@@ -34,7 +34,8 @@ _SUMMED = ("measured_wh", "twin_wh", "twin_matched_wh", "readings", COVERED, SHA
 
 
 def _by_year(months: list[dict[str, Any]], names: list[str], tracker: str | None,
-             fixed: str | None) -> list[dict[str, Any]]:
+             fixed: str | None, ratings_w: tuple[float, float] | None
+             ) -> list[dict[str, Any]]:
     """Monthly rows summed into local calendar years (null stays null when no month had it)."""
     years: dict[str, dict[str, Any]] = {}
     for row in months:
@@ -52,7 +53,7 @@ def _by_year(months: list[dict[str, Any]], names: list[str], tracker: str | None
     out = []
     for y in years.values():
         notes = sorted(y.pop("notes"))
-        out.append({**y, **compare(y["arrays"], tracker, fixed),
+        out.append({**y, **compare(y["arrays"], tracker, fixed, ratings_w),
                     "twin_note": "; ".join(notes) or None})
     return out
 
@@ -66,9 +67,10 @@ def report(ctx: ServiceContext, info: SiteInfo, start: dt.datetime,
     months = energy_rows(ctx, info, start, end, "month")
     tracker = info.array_of_kind("tracker")
     fixed = info.array_of_kind("fixed")
-    years = _by_year(months["rows"], list(info.arrays),
-                     tracker.name if tracker is not None else None,
-                     fixed.name if fixed is not None else None)
+    tr_name = tracker.name if tracker is not None else None
+    fx_name = fixed.name if fixed is not None else None
+    years = _by_year(months["rows"], list(info.arrays), tr_name, fx_name,
+                     info.site.gain_ratings_w(tr_name, fx_name))
     s = info.site
     start_local, end_local = start.astimezone(info.zone), end.astimezone(info.zone)
     return {

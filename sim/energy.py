@@ -243,18 +243,28 @@ def same_minutes(own_wh: Sequence[float | None], shared_wh: Sequence[float | Non
 
 
 def measured_gain_pct(tracker_wh: float | None, fixed_wh: float | None,
-                      same: bool | None) -> float | None:
+                      same: bool | None, ratings_w: tuple[float, float] | None = None
+                      ) -> float | None:
     """:func:`gain_pct` of measured energies, None when the two loggers read different
     minutes (``same`` False, :func:`same_minutes`): a fixed-array logger that began at
     15:30 beside a tracker's whole day read +1,540 % (a tester's finding); both over the
     same half-day still give one, and so does an unknown ``same`` (no twin to tell)."""
-    return None if same is False else gain_pct(tracker_wh, fixed_wh)
+    return None if same is False else gain_pct(tracker_wh, fixed_wh, ratings_w)
 
 
-def gain_pct(tracker_wh: float | None, fixed_wh: float | None) -> float | None:
-    """The tracking gain [%]: ``100 · (tracker / fixed − 1)``; None when either energy is
-    missing or the fixed array's is not positive (no gain is defined against nothing)."""
+def gain_pct(tracker_wh: float | None, fixed_wh: float | None,
+             ratings_w: tuple[float, float] | None = None) -> float | None:
+    """The tracking gain [%]: the tracker's energy per watt of its rating over the fixed
+    array's, ``100 · ((tracker / P_tracker) / (fixed / P_fixed) − 1)``, ``ratings_w`` =
+    ``(P_tracker, P_fixed)`` their STC ratings [W] (:meth:`sim.sites.Site.gain_ratings_w`):
+    the ratio of their specific yields (IEC 61724-1's final yield), so arrays of different
+    sizes compare by what tracking gains — a tracker of 820 W beside a 24 kW reference read
+    −94 % as the energies' ratio. Equal ratings (seed 000's four modules each) or none
+    given: the energies' ratio exactly. None when either energy is missing or the fixed
+    array's is not positive (no gain is defined against nothing)."""
     if tracker_wh is None or fixed_wh is None or not np.isfinite(tracker_wh) \
             or not np.isfinite(fixed_wh) or fixed_wh <= 0:
         return None
-    return 100.0 * (tracker_wh / fixed_wh - 1.0)
+    per_watt = 1.0 if ratings_w is None or ratings_w[0] == ratings_w[1] \
+        else ratings_w[1] / ratings_w[0]
+    return 100.0 * (tracker_wh / fixed_wh * per_watt - 1.0)

@@ -142,6 +142,14 @@ class Site:
         return {} if p is None else {
             k: v for k, v in dataclasses.asdict(p).items() if v is not None}
 
+    def gain_ratings_w(self, tracker: str | None = "tracker", fixed: str | None = "fixed"
+                       ) -> tuple[float, float] | None:
+        """The STC ratings [W] of the two arrays a tracking gain compares
+        (:func:`sim.energy.gain_pct`), None unless the config holds both."""
+        if tracker not in self.arrays or fixed not in self.arrays:
+            return None
+        return self.arrays[tracker].stc_power_w, self.arrays[fixed].stc_power_w
+
     def to_config(self) -> dict[str, Any]:
         """The site as a config file (:class:`sim.site_config.SiteConfig`): what
         :func:`site_from_dict` reads back to an equal :class:`Site`."""

@@ -202,7 +202,8 @@ class TwinResult:
                for a in ("tracker", "fixed", "stow_loss") if a in self.closing_power_w}
         return [{"date": d.date().isoformat(), "tracker_energy_wh": float(per["tracker"][k]),
                  "fixed_energy_wh": float(per["fixed"][k]),
-                 "gain_pct": gain_pct(float(per["tracker"][k]), float(per["fixed"][k])),
+                 "gain_pct": gain_pct(float(per["tracker"][k]), float(per["fixed"][k]),
+                                      self.site.gain_ratings_w()),
                  **({"stow_loss_wh": float(per["stow_loss"][k])} if "stow_loss" in per else {})}
                 for k, d in enumerate(dates)]
 
@@ -223,7 +224,7 @@ class TwinResult:
             "steps": int(len(s)),
             "tracker_energy_wh": tracker_wh,
             "fixed_energy_wh": fixed_wh,
-            "gain_pct": gain_pct(tracker_wh, fixed_wh),
+            "gain_pct": gain_pct(tracker_wh, fixed_wh, self.site.gain_ratings_w()),
         }
         for name in ("tracker", "fixed"):
             p = s[f"{name}_power_w"]
@@ -305,7 +306,8 @@ class TwinResult:
             "actuator_standby_energy_wh": self.actuator_standby_energy_wh,
             "actuator_moves_beyond_drive": int(self.actuator_moves_beyond_drive),
             "actuator_warning": self._actuator_warning(),
-            "net_gain_pct": gain_pct(tracker_wh - actuator_wh, fixed_wh),
+            "net_gain_pct": gain_pct(tracker_wh - actuator_wh, fixed_wh,
+                                     self.site.gain_ratings_w()),
             "pointing_loss_wh": ideal_wh - tracker_wh,
             "receiver": self.receiver,
             "acceptance_angle_deg": self.acceptance_angle_deg if self.receiver == "cpv" else None,

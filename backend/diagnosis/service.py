@@ -238,14 +238,15 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
                                                                   exp_fixed)))
     shared = [wh(np.where(both, e[c].to_numpy(), np.nan)) for c in ("tracker_power_w",
                                                                     "fixed_power_w")]
+    ratings_w = info.site.gain_ratings_w()
     gain_measured = measured_gain_pct(measured_tr, measured_fx,
-                                      same_minutes([matched, matched_f], shared))
+                                      same_minutes([matched, matched_f], shared), ratings_w)
     # the gain expected beside a measured one is the twin's over the same minutes (the
     # /energy rule, twin_matched_gain_pct): both loggers silent 12:00-15:00 on a clear
     # April day at Tehuantepec read 49.8 % measured beside the whole day's 32.4 % (a
     # tester's finding); with no measured gain, the whole day's
-    gain_expected = gain_pct(*shared) if gain_measured is not None and both.any() \
-        else gain_pct(exp_a, exp_fixed)
+    gain_expected = gain_pct(*shared, ratings_w) if gain_measured is not None and both.any() \
+        else gain_pct(exp_a, exp_fixed, ratings_w)
     # the expectation's part whose beam the sky instrument did not see (behind or grazing the
     # fixed plane, low for a horizontal pyranometer, a gap in its readings): a guess there,
     # which a user reading an underperformance should know of (a clear-sky day has no

@@ -299,15 +299,17 @@ def weather_twin_energy(ctx: ServiceContext, info: SiteInfo, data: dict[str, Any
         for name in kinds:
             r["arrays"][name]["twin_weather_wh"] = wh[name]
             totals[name] += wh[name]
-        r["twin_weather_gain_pct"] = _gain_pct(wh, tracker, fixed)
+        r["twin_weather_gain_pct"] = _gain_pct(info, wh, tracker, fixed)
         r["twin_weather_note"] = note
     for name in kinds:
         data["totals"]["arrays"][name]["twin_weather_wh"] = totals[name]
-    data["totals"]["twin_weather_gain_pct"] = _gain_pct(totals, tracker, fixed)
+    data["totals"]["twin_weather_gain_pct"] = _gain_pct(info, totals, tracker, fixed)
 
 
-def _gain_pct(wh: dict[str, float], tracker: Any, fixed: Any) -> float | None:
+def _gain_pct(info: SiteInfo, wh: dict[str, float], tracker: Any, fixed: Any
+              ) -> float | None:
     """:func:`sim.energy.gain_pct` of the tracker's and the fixed array's energies."""
     if tracker is None or fixed is None:
         return None
-    return gain_pct(wh[tracker.name], wh[fixed.name])
+    return gain_pct(wh[tracker.name], wh[fixed.name],
+                    info.site.gain_ratings_w(tracker.name, fixed.name))

@@ -63,8 +63,9 @@ def _ratio(num: float | None, den: float | None) -> float | None:
 
 
 def compare(arrays: dict[str, dict[str, Any]], tracker: str | None,
-             fixed: str | None) -> dict[str, Any]:
-    """Per array: coverage and performance ratio; per period: partial flag and gains."""
+            fixed: str | None, ratings_w: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Per array: coverage and performance ratio; per period: partial flag and gains
+    (``ratings_w``: the two arrays' STC ratings, :func:`sim.energy.gain_pct`)."""
     for a in arrays.values():
         a["performance_ratio"] = _ratio(a["measured_wh"], a["twin_matched_wh"])
         cov = _ratio(a["twin_matched_wh"], a["twin_wh"]) if a["readings"] else None
@@ -84,12 +85,13 @@ def compare(arrays: dict[str, dict[str, Any]], tracker: str | None,
         tr, fx = arrays[tracker], arrays[fixed]
         same = same_minutes([tr.get(COVERED), fx.get(COVERED)],
                             [tr.get(SHARED), fx.get(SHARED)])
-        out["gain_pct"] = measured_gain_pct(tr["measured_wh"], fx["measured_wh"], same)
-        out["twin_gain_pct"] = gain_pct(tr["twin_wh"], fx["twin_wh"])
+        out["gain_pct"] = measured_gain_pct(tr["measured_wh"], fx["measured_wh"], same,
+                                            ratings_w)
+        out["twin_gain_pct"] = gain_pct(tr["twin_wh"], fx["twin_wh"], ratings_w)
         # the twin over the minutes BOTH loggers cover (one rule with the measured gain):
         # each array's twin over its own minutes read a tracker's day beside a fixed
         # array's silent one as +167 % (a tester's finding)
-        out["twin_matched_gain_pct"] = gain_pct(tr.get(SHARED), fx.get(SHARED))
+        out["twin_matched_gain_pct"] = gain_pct(tr.get(SHARED), fx.get(SHARED), ratings_w)
         if out["gain_pct"] is None:
             out["gain_note"] = _gain_note(tr, fx, same)
     return out
@@ -272,6 +274,7 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
     fixed = info.array_of_kind("fixed")
     tr_name = tracker.name if tracker is not None else None
     fx_name = fixed.name if fixed is not None else None
+    ratings_w = info.site.gain_ratings_w(tr_name, fx_name)
     with ctx.engine.connect() as conn:
         table = energy_table(conn, ids, edges_s, info.phase_s, gap)
         database = ctx.engine.url.render_as_string(hide_password=True)
@@ -309,7 +312,7 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
                     for k, key in enumerate((COVERED, SHARED)):
                         arrays[n][key] = float(coverage[aid][k][p])
                         cover_sums[n][k] += arrays[n][key]
-        compared = compare(arrays, tr_name, fx_name)
+        compared = compare(arrays, tr_name, fx_name, ratings_w)
         no_twin = any(a["twin_wh"] is None for a in arrays.values()) or not arrays
         rows.append({
             "period_start": edges[p].astimezone(info.zone).isoformat(),
@@ -334,5 +337,5 @@ def energy_rows(ctx: ServiceContext, info: SiteInfo, start: dt.datetime, end: dt
         "start": start.astimezone(info.zone).isoformat(),
         "end": end.astimezone(info.zone).isoformat(),
         "max_gap_s": gap, "partial_below_pct": PARTIAL_BELOW_PCT,
-        "rows": rows, "totals": {"arrays": totals, **compare(totals, tr_name, fx_name)},
+        "rows": rows, "totals": {"arrays": totals, **compare(totals, tr_name, fx_name, ratings_w)},
     }

@@ -103,6 +103,10 @@ def test_gain() -> None:
     assert gain_pct(None, 1000.0) is None
     assert gain_pct(1000.0, 0.0) is None
     assert gain_pct(1000.0, float("nan")) is None
+    # per watt of rating: a 1,640 W tracker making 2,560 Wh beside an 820 W fixed array's
+    # 1,000 Wh gains 28 % (each watt 1.5610 Wh against 1.2195 Wh), not 156 %
+    assert gain_pct(2560.0, 1000.0, (1640.0, 820.0)) == pytest.approx(28.0, rel=1e-12)
+    assert gain_pct(1280.0, 1000.0, (820.0, 820.0)) == gain_pct(1280.0, 1000.0)  # exactly
 
 
 def test_interval_middles_put_each_mean_at_its_intervals_middle() -> None:

@@ -21,6 +21,22 @@ def site():
     return load_site("tehuantepec")
 
 
+def test_a_larger_tracker_gains_what_tracking_gains(site) -> None:
+    """The gain compares the arrays' energies per watt of rating (sim.energy.gain_pct): a
+    tracker of twice the modules beside the same fixed array makes twice the energy and
+    gains the same."""
+    import dataclasses
+
+    start = pd.Timestamp("2024-03-15", tz=TZ)
+    big = dataclasses.replace(site, arrays={**site.arrays, "tracker": dataclasses.replace(
+        site.arrays["tracker"], strings_in_parallel=8)})
+    one, two = (simulate(s, start, start + pd.Timedelta(hours=24), step_s=300).summary()
+                for s in (site, big))
+    assert two["tracker_energy_wh"] == pytest.approx(2 * one["tracker_energy_wh"], rel=1e-12)
+    assert two["gain_pct"] == pytest.approx(one["gain_pct"], rel=1e-12)
+    assert 20 < one["gain_pct"] < 60
+
+
 @pytest.mark.parametrize("day", ["2024-03-15", "2024-04-25", "2024-12-21", "2024-06-21"])
 def test_day_energy_agrees_with_pvlib_modelchain(site, day) -> None:
     start = pd.Timestamp(day, tz=TZ)
