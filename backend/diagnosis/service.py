@@ -245,7 +245,8 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     # /energy rule, twin_matched_gain_pct): both loggers silent 12:00-15:00 on a clear
     # April day at Tehuantepec read 49.8 % measured beside the whole day's 32.4 % (a
     # tester's finding); with no measured gain, the whole day's
-    gain_expected = gain_pct(*shared, ratings_w) if gain_measured is not None and both.any() \
+    gain_expected = gain_pct(shared[0], shared[1], ratings_w) \
+        if gain_measured is not None and both.any() \
         else gain_pct(exp_a, exp_fixed, ratings_w)
     # the expectation's part whose beam the sky instrument did not see (behind or grazing the
     # fixed plane, low for a horizontal pyranometer, a gap in its readings): a guess there,
