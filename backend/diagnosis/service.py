@@ -102,8 +102,8 @@ MAX_DAYS = 400
 #: thousandth, ``power_in_kw``, faults.KW_SCALE; 32: the day's share of the expected tracker
 #: energy from minutes the sky instrument did not see the beam in, ``beam_unseen_expected_pct``,
 #: and an underperformance's detail saying it; 33: the fixed array judged under a sensor's sky,
-#: ``fixed_underperformance``).
-CACHE_VERSION = 33
+#: ``fixed_underperformance``; 34: the gains per watt of each array's rating, sim.energy.gain_pct).
+CACHE_VERSION = 34
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99

@@ -53,6 +53,13 @@ export function mountLines(mount) {
     : `Mount (from the tracker camera): ${f.detail}`));
 }
 
+/** The fixed array's PR per day, only under a sensor's sky (null elsewhere): from its own
+ * power it is 1 by construction (a snowed-in reference array read 0.24 under its POA sensor,
+ * the fixed_underperformance finding). */
+export function fixedPerformanceRatios(days) {
+  return days.map((d) => (d.sky.source === "sensor" ? d.fixed.performance_ratio ?? null : null));
+}
+
 const SKY_WORDS = {
   sensor: "an irradiance sensor",
   fixed_array: "the fixed array's power",
@@ -155,12 +162,13 @@ async function load(state) {
   // no PR where the diagnosis does not judge the tracker: its fixed readings were refused
   // (sky_unusable; a 0 W day drew PR 0 beside "the tracker is not judged")
   const pr = body.days.map((d) => ((d.faults || []).some((f) => f.kind === "sky_unusable") ? null : d.tracker.performance_ratio));
+  const fixedPr = fixedPerformanceRatios(body.days);
   // the axes from the whole days only: a partial day's gain (readings over part of the day,
   // e.g. +220 % at 07:30) is drawn apart — hatched, faint, clamped to the axis — and never
   // sets the range; both axes from zero with round ticks
   const gainAxis = zeroBasedAxis(body.days.filter((d, i) => !partial[i])
     .flatMap((d) => [d.gain_measured_pct, d.gain_expected_pct]));
-  const prAxis = zeroBasedAxis([1.2, ...pr.filter((v, i) => !partial[i])]);
+  const prAxis = zeroBasedAxis([1.2, ...[...pr, ...fixedPr].filter((v, i) => !partial[i % pr.length])]);
   const clamp = (v) => (v === null || v === undefined ? v : Math.min(Math.max(v, gainAxis.range[0]), gainAxis.range[1]));
   const measured = body.days.map((d, i) => (partial[i] ? clamp(d.gain_measured_pct) : d.gain_measured_pct));
   await draw("chart-diagnosis", [
@@ -174,16 +182,19 @@ async function load(state) {
       hovertemplate: "%{y:.1f} %%{customdata}" },
     { x, y: body.days.map((d) => d.gain_expected_pct), name: "gain expected for that sky %", type: "bar", marker: { color: COLORS.grey } },
     { x, y: pr, name: "tracker PR", yaxis: "y2", mode: "lines+markers", line: { color: COLORS.tracker } },
+    ...(fixedPr.some((v) => v != null) ? [{ x, y: fixedPr, name: "fixed PR (sensor's sky)", yaxis: "y2",
+      mode: "lines+markers", line: { color: COLORS.fixed, dash: "dot" } }] : []),
   ], baseLayout({ barmode: "group", margin: { l: 64, r: 84, t: 10, b: 52 },
     xaxis: { title: { text: `Day (${state.site.timezone})` }, type: "category", gridcolor: "#e9edf1" },
     yaxis: { title: { text: "tracking gain over the fixed array [%]" }, gridcolor: "#e9edf1", zeroline: true, ...gainAxis },
     yaxis2: { title: { text: "performance ratio (measured / expected)" }, overlaying: "y", side: "right", showgrid: false, ...prAxis } }),
   { columns: ["date", "complete", "partial", "sky_source", "clearness_index", "tracker_measured_wh", "tracker_expected_wh",
     "tracker_expected_wh_low", "tracker_expected_wh_high", "beam_unseen_expected_pct", "performance_ratio", "gain_measured_pct",
-    "gain_expected_pct"],
+    "gain_expected_pct", "fixed_measured_wh", "fixed_expected_wh", "fixed_performance_ratio"],
   rows: body.days.map((d) => [d.date, d.complete, d.partial, d.sky.sensor || d.sky.source, d.sky.clearness_index,
     d.tracker.measured_wh, d.tracker.expected_wh, d.tracker.expected_wh_low, d.tracker.expected_wh_high,
-    d.sky.beam_unseen_expected_pct, d.tracker.performance_ratio, d.gain_measured_pct, d.gain_expected_pct]),
+    d.sky.beam_unseen_expected_pct, d.tracker.performance_ratio, d.gain_measured_pct, d.gain_expected_pct,
+    d.fixed.measured_wh, d.fixed.expected_wh, d.fixed.performance_ratio]),
   filename: `${state.site.site_id}_diagnosis_${start}_${end}.csv` });
   // no tracker reading at all in the range: the pointing card says so, not that its logger
   // sends no encoder angles (a tester's empty database)

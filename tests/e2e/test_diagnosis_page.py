@@ -321,3 +321,20 @@ def test_days_whose_beam_the_sky_instrument_did_not_see_are_named(page, server) 
         "for a pyranometer, or readings missing), its share of the expected energy guessed: "
         "18 % on Jun 22."), lines[0]
     assert "Beam not seen" not in lines[1], lines[1]
+
+
+def test_the_fixed_arrays_pr_is_drawn_only_under_a_sensors_sky(page, server) -> None:
+    """Under a POA sensor the fixed array is judged too (``fixed_underperformance``): the
+    chart draws its PR there (a snowed-in array's 0.29), and not on a day whose sky is the
+    array's own power (1 by construction) or the clear sky."""
+    page.goto(f"{server.url}/#overview")
+    page.wait_for_selector('body[data-overview-loaded]', state="attached")
+    days = [{"sky": {"source": "sensor"}, "fixed": {"performance_ratio": 0.287}},
+            {"sky": {"source": "fixed_array"}, "fixed": {"performance_ratio": 1.0}},
+            {"sky": {"source": "clear_sky"}, "fixed": {"performance_ratio": 0.6}},
+            {"sky": {"source": "sensor"}, "fixed": {"performance_ratio": None}}]
+    got = page.evaluate("""async (days) => {
+      const m = await import('/static/js/diagnosis.js');
+      return m.fixedPerformanceRatios(days);
+    }""", days)
+    assert got == [0.287, None, None, None]
