@@ -354,18 +354,24 @@ class AlertService:
 
     def _diagnosed(self, info: SiteInfo, now: float) -> rules.Evaluation:
         s = self.ctx.settings
-        tracker = info.array_of_kind("tracker")
-        assert tracker is not None
+        tracker, fixed = info.array_of_kind("tracker"), info.array_of_kind("fixed")
+        assert tracker is not None and fixed is not None
         today = dt.datetime.fromtimestamp(now, info.zone).date()
         end = _local_midnight(today, info.zone)
         start = _local_midnight(today - dt.timedelta(days=s.alerts.diagnosis_days), info.zone)
-        with self.engine.connect() as conn:
-            first, last = conn.execute(select(
-                func.min(Measurement.ts_s), func.max(Measurement.ts_s)).where(
-                Measurement.array_id == tracker.array_id, Measurement.source == MEASURED,
-                Measurement.ts_s >= int(start.timestamp()),
-                Measurement.ts_s < int(end.timestamp()))).one()
-        if first is None:  # no tracker readings in the window: nothing to tell
+        # the tracker logger's readings set the days judged; without any, the fixed array's
+        # (under a sensor's sky it is judged itself: fixed_underperformance — a site whose
+        # tracker logger is not there yet had its snowed-in reference array never alerted)
+        for array in (tracker, fixed):
+            with self.engine.connect() as conn:
+                first, last = conn.execute(select(
+                    func.min(Measurement.ts_s), func.max(Measurement.ts_s)).where(
+                    Measurement.array_id == array.array_id, Measurement.source == MEASURED,
+                    Measurement.ts_s >= int(start.timestamp()),
+                    Measurement.ts_s < int(end.timestamp()))).one()
+            if first is not None:
+                break
+        if first is None:  # no readings in the window: nothing to tell
             return rules.Evaluation()
         first_day = dt.datetime.fromtimestamp(int(first), info.zone).date()
         start = max(start, _local_midnight(first_day, info.zone))

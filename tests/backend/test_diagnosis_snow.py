@@ -31,6 +31,7 @@ COLUMNS = {"voltage_v": "INV1 CB2 Voltage [V]", "current_a": "INV1 CB2 Current [
 DC_LOSS_PCT = 17.0
 SNOW_DAYS = ("2022-01-07", "2022-01-08", "2022-01-09")
 CLEAN_DAYS = ("2022-01-05", "2022-01-06")
+NOW_S = 1641902400.0  # 2022-01-11 07:00 at the site (UTC−5)
 
 
 @pytest.fixture(scope="module")
@@ -61,6 +62,11 @@ def diagnoses(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, di
                            params={"start": "2022-01-05", "end": "2022-01-11"})
             assert r.status_code == 200, r.text
             out[name] = {d["date"]: d for d in r.json()["days"]}
+        # the alert evaluator's diagnosis as on 11 Jan (the latest day 10 Jan)
+        from backend.alerts.service import AlertService
+
+        info = server.ctx.registry.sites["snow_lossy"]
+        out["alerts"] = AlertService(server.ctx)._diagnosed(info, NOW_S)
     db.drop()
     yield out
 
@@ -109,3 +115,14 @@ def test_an_arrays_real_losses_read_as_an_underperformance_until_its_config_give
         assert lossy[date]["fixed"]["measured_wh"] == ideal[date]["fixed"]["measured_wh"]
         assert lossy[date]["fixed"]["expected_wh"] == pytest.approx(
             ideal[date]["fixed"]["expected_wh"] * (1 - DC_LOSS_PCT / 100), rel=1e-9)
+
+
+def test_the_alerts_raise_it_on_the_fixed_array_without_a_tracker_logger(diagnoses) -> None:
+    """The alert evaluator judged only the days of the tracker logger's readings: this site's
+    snowed-in array, with no tracker logger, was never alerted. The latest day judged is the
+    fixed logger's last, 10 Jan (its finding since 7 Jan)."""
+    ev = diagnoses["alerts"]
+    (c,) = ev.conditions
+    assert (c.array, c.kind, c.fault_kind) == ("fixed", "fault", "fixed_underperformance")
+    assert c.data["day"] == "2022-01-10" and c.data["since_date"] == "2022-01-07"
+    assert ("snow_lossy", "fixed", "fault") in ev.scopes
