@@ -331,7 +331,8 @@ SETTING = re.compile(r"\bHELIOTWIN_[A-Z0-9_]*[A-Z0-9]\b")
 # environment variables of the tests and benchmarks, and docker-compose.yml's published
 # ports, not of the service
 NOT_SETTINGS = {"HELIOTWIN_REQUIRE_SERVICES", "HELIOTWIN_TEST_PG_URL", "HELIOTWIN_BENCH_FIGURES",
-                "HELIOTWIN_PUBLISH_PORT", "HELIOTWIN_PUBLISH_VISER_PORT"}
+                "HELIOTWIN_PUBLISH_PORT", "HELIOTWIN_PUBLISH_VISER_PORT",
+                "HELIOTWIN_TOKEN"}  # the posting commands' token (backend.cli.TOKEN_ENV)
 
 
 def test_named_settings_are_in_the_readme_table() -> None:

@@ -57,6 +57,20 @@ class CliError(Exception):
         self.code = code
 
 
+#: The environment variable a command posting to the service takes its write token from
+#: when ``--token`` is not given: a token on the command line is visible to every user of
+#: the machine in ``ps`` and stays in the shell's history.
+TOKEN_ENV = "HELIOTWIN_TOKEN"
+
+
+def add_token_argument(parser: argparse.ArgumentParser, needed: str) -> None:
+    """``--token``, by default :data:`TOKEN_ENV`'s value; ``needed`` says when it must be
+    there (the command checks, so ``--help`` and a dry run need none)."""
+    parser.add_argument("--token", default=os.environ.get(TOKEN_ENV) or None,
+                        help=f"the site's write token, {needed}; default ${TOKEN_ENV} "
+                             "(which keeps it out of ps and the shell's history)")
+
+
 def fail(message: str, code: int = 2) -> NoReturn:
     """Stop the subcommand: :func:`main` prints ``message`` as its error and exits ``code``."""
     raise CliError(message, code)

@@ -6,7 +6,7 @@ import argparse
 import signal
 import threading
 
-from backend.cli import fail, site_or_fail
+from backend.cli import TOKEN_ENV, add_token_argument, fail, site_or_fail
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -18,7 +18,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     )
     p.add_argument("--site", default="tehuantepec", help="site id (default tehuantepec)")
     p.add_argument("--url", default="http://127.0.0.1:8000", help="service base URL")
-    p.add_argument("--token", required=True, help="the site's write token")
+    add_token_argument(p, "required")
     p.add_argument("--backfill-days", type=float, default=0.0,
                    help="post the last N days first (default 0)")
     p.add_argument("--once", action="store_true", help="back-fill and exit")
@@ -32,6 +32,8 @@ def run(args: argparse.Namespace) -> int:
     from backend.twin.demo_logger import DemoLogger, TokenRefused
     from sim.twin import has_twin_arrays
 
+    if not args.token:
+        fail(f"--token: the site's write token is required (or set {TOKEN_ENV})")
     site = site_or_fail(args.site, get_settings().sites.user_dir)
     if not has_twin_arrays({name: a.mount for name, a in site.arrays.items()}):
         # the demo logger posts what the twin makes (a tester's string-level site crashed

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from backend.cli import fail
+from backend.cli import TOKEN_ENV, add_token_argument, fail
 
 if TYPE_CHECKING:
     from backend.measurements.logger_file import LoggerFile
@@ -64,7 +64,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     i.add_argument("--date-order", choices=("mdy", "dmy"),
                    help="for slash dates the file cannot tell (every day ≤ 12)")
     i.add_argument("--url", default="http://127.0.0.1:8000", help="service base URL")
-    i.add_argument("--token", help="the site's write token (required unless --dry-run)")
+    add_token_argument(i, "required unless --dry-run")
     i.add_argument("--dry-run", action="store_true",
                    help="read and summarise the file; post nothing")
     i.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -103,7 +103,8 @@ def run_import(args: argparse.Namespace) -> int:
     from backend.measurements.logger_file import read_logger_file
 
     if not args.dry_run and not args.token:
-        fail("--token: the site's write token is required to post (or --dry-run)")
+        fail(f"--token: the site's write token is required to post (or set {TOKEN_ENV}, or "
+             "--dry-run)")
     if not args.file.is_file():
         fail(f"file: {args.file} is not a file")
     plans = _plans(args)
