@@ -786,9 +786,10 @@ def _sky_shift_seen(c: dict[str, Any] | None) -> float | None:
 #: What an array short of its band under a sensor's sky may have, said in the detail of
 #: ``fixed_underperformance`` (a real utility array under snow read 0.24 and 0.42 of its
 #: expectation, tests/data/loggers/snow_data.csv) and of any underperformance from a sensor
-UNDER_SENSOR_CAUSES = ("snow or soiling on its modules, a string or inverter down, or losses "
+UNDER_SENSOR_CAUSES = ("snow or soiling on its modules, a string or inverter down, losses "
                        "its config does not give (a clean, healthy array read so every day: "
-                       "set its dc_loss_pct, docs/sites.md)")
+                       "set its dc_loss_pct, docs/sites.md), or the sensor reading high "
+                       "(its calibration, or a plane other than the fixed array's)")
 
 
 def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]],
