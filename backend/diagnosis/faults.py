@@ -221,17 +221,25 @@ def _stopped(site: Site, sub: pd.DataFrame, m: np.ndarray, idx: np.ndarray,
             "stopped_at": day.index[t0].tz_convert(site.timezone).isoformat()}
 
 
-def band_uncertainty(day: pd.DataFrame) -> float:
-    """The band's widening u [-] for a day of :func:`sim.sky_sensor.weather_aware_twin`'s
-    minutes: :data:`GHI_UNCERTAINTY` when its sky rests on a GHI pyranometer
-    (:func:`sim.sky_sensor.main_sky_source` ``"sensor_ghi"``, the source the diagnosis
-    reports), else :data:`INVERSION_UNCERTAINTY` (a fixed plane's POA sensor or power, or
-    the clear sky); added in quadrature (independent errors, GUM) to twice the relative
-    standard deviation of the day's expected energy from the beam the sky's instrument could
-    not see (:func:`blind_beam_sd_wh`: summer dawns and dusks behind a fixed plane, hours
-    of them at high latitudes)."""
-    u = GHI_UNCERTAINTY if sky_sensor.main_sky_source(day) == "sensor_ghi" \
+def sky_uncertainty(day: pd.DataFrame) -> float:
+    """The sky instrument's share of a band's widening [-]: :data:`GHI_UNCERTAINTY` when the
+    day's sky rests on a GHI pyranometer (:func:`sim.sky_sensor.main_sky_source`
+    ``"sensor_ghi"``, the source the diagnosis reports), else :data:`INVERSION_UNCERTAINTY`
+    (a fixed plane's POA sensor or power, or the clear sky). The fixed array's band under a
+    sensor's sky (``fixed_underperformance``) is this alone: its plane is blind to the same
+    beam as the sky's instrument."""
+    return GHI_UNCERTAINTY if sky_sensor.main_sky_source(day) == "sensor_ghi" \
         else INVERSION_UNCERTAINTY
+
+
+def band_uncertainty(day: pd.DataFrame) -> float:
+    """The tracker's band's widening u [-] for a day of
+    :func:`sim.sky_sensor.weather_aware_twin`'s minutes: :func:`sky_uncertainty` added in
+    quadrature (independent errors, GUM) to twice the relative standard deviation of the
+    day's expected energy from the beam the sky's instrument could not see
+    (:func:`blind_beam_sd_wh`: summer dawns and dusks behind a fixed plane, hours of them at
+    high latitudes)."""
+    u = sky_uncertainty(day)
     if "tracker_blind_sd_w" not in day:
         return u
     expected_wh = float(day["tracker_power_w"].sum()) / 60.0

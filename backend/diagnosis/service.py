@@ -50,6 +50,7 @@ from backend.diagnosis.faults import (
     faults_over_days,
     missing_daylight_min,
     shape_untested,
+    sky_uncertainty,
     sky_unusable,
 )
 from backend.diagnosis.mount import mount_faults, read_observations
@@ -102,8 +103,9 @@ MAX_DAYS = 400
 #: thousandth, ``power_in_kw``, faults.KW_SCALE; 32: the day's share of the expected tracker
 #: energy from minutes the sky instrument did not see the beam in, ``beam_unseen_expected_pct``,
 #: and an underperformance's detail saying it; 33: the fixed array judged under a sensor's sky,
-#: ``fixed_underperformance``; 34: the gains per watt of each array's rating, sim.energy.gain_pct).
-CACHE_VERSION = 34
+#: ``fixed_underperformance``; 34: the gains per watt of each array's rating, sim.energy.gain_pct;
+#: 35: the fixed array's band without the tracker's blind beam, faults.sky_uncertainty).
+CACHE_VERSION = 35
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
@@ -227,7 +229,8 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     if whole and source == "sensor":
         features["sensor_sky"] = True
     if whole and source == "sensor" and measured_fx is not None:
-        energy = energy_features(measured_fx, matched_f, matched_f, exp_fixed, u)
+        energy = energy_features(measured_fx, matched_f, matched_f, exp_fixed,
+                                 sky_uncertainty(e_day))
         if energy is not None:
             features["fixed_energy"] = energy
     low, high = band_wh(exp_a, exp_b, u)
