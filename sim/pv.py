@@ -232,6 +232,26 @@ def cell_temperature(
     )
 
 
+def air_temperature_from_module(
+    temp_module: np.ndarray,
+    poa_global: np.ndarray,
+    wind_speed: np.ndarray | float,
+    model: str = "open_rack_glass_polymer",
+) -> np.ndarray:
+    """The air temperature [°C] under which the SAPM module model (King et al. 2004, eq. 11:
+    ``T_m = E · exp(a + b · WS) + T_a``) gives the measured back-of-module temperature
+    ``temp_module`` at ``poa_global`` [W m⁻²] and ``wind_speed`` [m s⁻¹]: fed to
+    :func:`cell_temperature`, the array's cells are then ``T_m + E / 1000 · ΔT`` (pvlib's
+    ``sapm_cell_from_module``), and an array beside it under the same air gets the same
+    correction of the model's mounting and wind."""
+    from pvlib import temperature
+
+    p = temperature.TEMPERATURE_MODEL_PARAMETERS["sapm"][model]
+    e = np.asarray(poa_global, dtype=float)
+    rise = e * np.exp(p["a"] + p["b"] * np.asarray(wind_speed, dtype=float))
+    return np.asarray(temp_module, dtype=float) - rise
+
+
 def single_diode_parameters(
     effective_irradiance: np.ndarray, temp_cell: np.ndarray, module: str = KD205GX_LP
 ) -> tuple[np.ndarray, ...]:

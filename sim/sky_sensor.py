@@ -643,6 +643,36 @@ def _measured_or(value: np.ndarray | float | None, sensors: pd.DataFrame | None,
     return out
 
 
+def module_air_temperature(site: Site, clear: pd.DataFrame, fixed_power_w: np.ndarray,
+                           temp_air: np.ndarray, wind_speed: np.ndarray,
+                           sensors: pd.DataFrame | None,
+                           saturation_power_w: float | None = None) -> np.ndarray:
+    """``temp_air`` [°C], replaced where the fixed array's back-of-module temperature
+    (``sensors["fixed_temp_module_c"]``) reads by the air temperature that gives it
+    (:func:`sim.pv.air_temperature_from_module`) at the fixed plane's POA — its sensor's where
+    it reads, else the one behind the array's power under ``temp_air`` (:func:`invert_poa`;
+    a cell's temperature moves that POA by 0.4 %/°C, the air temperature it gives by a few
+    hundredths of a degree per W m⁻²). The SAPM module model put a utility array's modules
+    3–4 °C warmer than its sensor read on January days (tests/data/loggers/snow_data.csv, air
+    temperature measured, 1 m s⁻¹): 1.3–1.6 % of its expected power."""
+    if sensors is None or "fixed_temp_module_c" not in sensors:
+        return temp_air
+    t_mod = sensors["fixed_temp_module_c"].to_numpy(dtype=float)
+    if not np.isfinite(t_mod).any():
+        return temp_air
+    fixed = site.arrays["fixed"]
+    poa = np.full(len(t_mod), np.nan)
+    if "fixed_poa_w_m2" in sensors:
+        poa = sensors["fixed_poa_w_m2"].to_numpy(dtype=float)
+    if not np.isfinite(poa[np.isfinite(t_mod)]).all():
+        inverted = invert_poa(fixed_power_w, clear, fixed, temp_air, wind_speed,
+                              saturation_power_w)["poa_global"].to_numpy()
+        poa = np.where(np.isfinite(poa), poa, inverted)
+    air = pv.air_temperature_from_module(t_mod, np.maximum(poa, 0.0), wind_speed,
+                                         fixed.temperature_model)
+    return np.where(np.isfinite(air), air, temp_air)
+
+
 def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.ndarray,
                        temp_air: np.ndarray | float | None = None,
                        wind_speed: np.ndarray | float | None = None,
@@ -684,7 +714,9 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
         Measured on ``times`` (NaN where not): ``fixed_poa_w_m2``, ``ghi_w_m2`` [W m⁻²],
         ``temp_air_c`` [°C] and ``wind_speed_m_s`` [m s⁻¹] (replace ``temp_air`` and
         ``wind_speed`` where they read: the cells' temperature, SAPM, in the inversion
-        and the twin); any may be absent.
+        and the twin), ``fixed_temp_module_c`` [°C], the fixed array's back-of-module
+        temperature (where it reads, the air temperature is the one that gives it,
+        :func:`module_air_temperature`); any may be absent.
     now : pandas.Timestamp, optional
         The minutes from it on are still to come (a day in progress): a day's share of
         measured minutes (:func:`measured_sky`) is of its minutes before it.
@@ -716,6 +748,8 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
     # an anemometer's zero offset reads a calm a little below 0: a calm
     wind = np.maximum(_measured_or(wind_speed, sensors, "wind_speed_m_s", site.wind_speed, n),
                       0.0)
+    t_air = module_air_temperature(site, clear, fixed_power_w, t_air, wind, sensors,
+                                   saturation_power_w)
     inv = invert_poa(fixed_power_w, clear, site.arrays["fixed"], t_air, wind,
                      saturation_power_w)
     extra = {"temp_air": t_air, "wind_speed": wind}

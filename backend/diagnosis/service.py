@@ -104,8 +104,9 @@ MAX_DAYS = 400
 #: energy from minutes the sky instrument did not see the beam in, ``beam_unseen_expected_pct``,
 #: and an underperformance's detail saying it; 33: the fixed array judged under a sensor's sky,
 #: ``fixed_underperformance``; 34: the gains per watt of each array's rating, sim.energy.gain_pct;
-#: 35: the fixed array's band without the tracker's blind beam, faults.sky_uncertainty).
-CACHE_VERSION = 35
+#: 35: the fixed array's band without the tracker's blind beam, faults.sky_uncertainty;
+#: 36: the fixed array's back-of-module temperature, sim.sky_sensor.module_air_temperature).
+CACHE_VERSION = 36
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99

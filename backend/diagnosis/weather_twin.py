@@ -96,10 +96,12 @@ def sky_sensors(fixed: np.ndarray, tracker: np.ndarray | None) -> pd.DataFrame |
     """The ``sensors`` frame of :func:`sim.sky_sensor.weather_aware_twin` from the two
     loggers' sensor columns (:func:`minute_grid`): ``fixed_poa_w_m2`` from the fixed
     array's ``poa_irradiance_w_m2`` (a cell on the tracker shares its pointing: not a sky
-    sensor), ``ghi_w_m2``, ``temp_air_c`` and ``wind_speed_m_s`` from either logger, the
+    sensor), ``fixed_temp_module_c`` from its ``temp_module_c`` (the fixed array's back-of-module
+    temperature), ``ghi_w_m2``, ``temp_air_c`` and ``wind_speed_m_s`` from either logger, the
     fixed one's first. None when neither reports any of them."""
     col = {name: j for j, name in enumerate(SENSOR_NAMES)}
-    out = {"fixed_poa_w_m2": fixed[:, col["poa_irradiance_w_m2"]]}
+    out = {"fixed_poa_w_m2": fixed[:, col["poa_irradiance_w_m2"]],
+           "fixed_temp_module_c": fixed[:, col["temp_module_c"]]}
     for name in ("ghi_w_m2", "temp_air_c", "wind_speed_m_s"):
         v = fixed[:, col[name]]
         if tracker is not None:
