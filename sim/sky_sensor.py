@@ -819,7 +819,8 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
     pandas.DataFrame
         UTC minute index: ``tracker_power_w`` and ``fixed_power_w`` (GTI-DIRINT sky),
         ``tracker_power_alt_w`` / ``fixed_power_alt_w`` (clear-sky-ratio + Erbs sky)
-        [W], ``solar_azimuth``, ``apparent_elevation``, ``normal_azimuth``,
+        [W], ``tracker_voltage_v`` and ``fixed_voltage_v`` (GTI-DIRINT sky: the arrays'
+        maximum power point) [V], ``solar_azimuth``, ``apparent_elevation``, ``normal_azimuth``,
         ``normal_elevation`` [°] (the twin's tracker normal: the orientation a tracker that
         stops there holds), ``ghi``, ``dni``, ``dhi``,
         ``poa_global``, ``poa_clear``, ``dni_extra`` [W m⁻²], ``temp_air`` [°C] and
@@ -849,6 +850,8 @@ def weather_aware_twin(site: Site, start: pd.Timestamp, end: pd.Timestamp,
         "fixed_power_w": main["fixed_power_w"].to_numpy(),
         "tracker_power_alt_w": alt["tracker_power_w"].to_numpy(),
         "fixed_power_alt_w": alt["fixed_power_w"].to_numpy(),
+        "tracker_voltage_v": main["tracker_voltage_v"].to_numpy(),
+        "fixed_voltage_v": main["fixed_voltage_v"].to_numpy(),
         "solar_azimuth": main["solar_azimuth"].to_numpy(),
         "apparent_elevation": main["apparent_elevation"].to_numpy(),
         "normal_azimuth": run.normal_azimuth,

@@ -295,6 +295,38 @@ def energy_features(measured_wh: float, matched_wh: float, matched_alt_wh: float
             "low_wh": float(low)}
 
 
+def electrical_ratios(expected_w: np.ndarray, expected_v: np.ndarray, measured_w: np.ndarray,
+                      measured_v: np.ndarray, valid: np.ndarray) -> dict[str, float] | None:
+    """Where a day's loss lies: the measured voltage over the twin's at the array's maximum
+    power point (``voltage_ratio``, the minutes' ratios weighted by the expected power) and
+    the power's ratio over it (``current_ratio``), on the ``valid`` minutes with a measured
+    voltage (a reading of power alone has none); None under an hour of them. Snow or shade on
+    part of the modules makes their bypass diodes drop substrings, and an inverter pushed
+    below its MPPT range leaves the maximum power point: the voltage falls. A string down,
+    soiling, or snow or dust laid evenly take light or a parallel path away: the current
+    falls (pvanalytics' snow modes split them the same way: Cooper et al., PVSC 2023)."""
+    ok = (valid & np.isfinite(measured_v) & np.isfinite(measured_w) & (expected_v > 0)
+          & (expected_w > 0))
+    if ok.sum() < 60:
+        return None
+    w = expected_w[ok]
+    v = float(np.sum(w * measured_v[ok] / expected_v[ok]) / np.sum(w))
+    p = float(np.sum(measured_w[ok]) / np.sum(w))
+    return {"voltage_ratio": v, "current_ratio": p / v if v > 0 else 0.0}
+
+
+def _where_the_loss_lies(ratios: dict[str, float] | None) -> str:
+    """An underperformance's words for :func:`electrical_ratios` (empty without them)."""
+    if ratios is None:
+        return ""
+    v, i = ratios["voltage_ratio"], ratios["current_ratio"]
+    where = ("its current (a string down, soiling, or snow or dust laid evenly on it)"
+             if i <= v else "its voltage (substrings bypassed under snow or shade on part of "
+             "its modules, or the inverter below its MPPT range)")
+    return (f"; its voltage {100 * v:.0f} % of the model's maximum power point and its current "
+            f"{100 * i:.0f} %: the loss is mostly in {where}")
+
+
 def missing_daylight_min(day: pd.DataFrame, measured_w: np.ndarray,
                          elapsed_min: int | None = None, first_min: int = 0) -> int:
     """Minutes with the sun over 5° and no tracker reading; of a day not yet over, only
@@ -840,7 +872,10 @@ def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
                                      if tracker and d["features"].get("power_in_kw") else "")
                                  + (f": {UNDER_SENSOR_CAUSES}"
                                     if not tracker or d["features"].get("sensor_sky")
-                                    else "") + (
+                                    else "")
+                                 + _where_the_loss_lies(
+                                     (d["features"].get("electrical") or {}).get(array))
+                                 + (
                                      f"; {unseen:.0f} % of that expectation rests on a beam "
                                      f"the sky instrument did not see (the sun behind or "
                                      f"grazing its plane, or readings missing)"

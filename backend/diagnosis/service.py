@@ -46,6 +46,7 @@ from backend.diagnosis.faults import (
     band_uncertainty,
     band_wh,
     day_features,
+    electrical_ratios,
     energy_features,
     faults_over_days,
     missing_daylight_min,
@@ -105,8 +106,9 @@ MAX_DAYS = 400
 #: and an underperformance's detail saying it; 33: the fixed array judged under a sensor's sky,
 #: ``fixed_underperformance``; 34: the gains per watt of each array's rating, sim.energy.gain_pct;
 #: 35: the fixed array's band without the tracker's blind beam, faults.sky_uncertainty;
-#: 36: the fixed array's back-of-module temperature, sim.sky_sensor.module_air_temperature).
-CACHE_VERSION = 36
+#: 36: the fixed array's back-of-module temperature, sim.sky_sensor.module_air_temperature;
+#: 37: where a loss lies, the arrays' voltage and current ratios, faults.electrical_ratios).
+CACHE_VERSION = 37
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
@@ -168,7 +170,8 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
                  tracker_w: np.ndarray, fixed_w: np.ndarray,
                  measured_wh: dict[str, float | None],
                  elapsed_min: int | None = None, first_s: int | None = None,
-                 cut: bool = False, spacing_s: float | None = None) -> dict[str, Any]:
+                 cut: bool = False, spacing_s: float | None = None,
+                 voltages: dict[str, np.ndarray] | None = None) -> dict[str, Any]:
     """One day's answer (without faults) and its fault features.
 
     ``day_s``: the day's ``[start, end)`` [s since the epoch] (``cut``: the range asked
@@ -184,7 +187,9 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     yet over that lie before now (None: the day is over); ``first_s``: the tracker
     logger's first reading ever [Unix s] (None: it has none) — no dropout before it;
     ``spacing_s``: the tracker's readings' median spacing [s] (the shape fits rest on its
-    readings, not on the minutes interpolated between them: ``faults.day_features``)."""
+    readings, not on the minutes interpolated between them: ``faults.day_features``);
+    ``voltages``: the arrays' measured voltage on the same minutes (``tracker``, ``fixed``;
+    where a loss lies, ``faults.electrical_ratios``)."""
     t0, t1 = day_s
     ts = e.index.as_unit("s").asi8
     day = ts < t1
@@ -234,6 +239,13 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
                                  sky_uncertainty(e_day))
         if energy is not None:
             features["fixed_energy"] = energy
+    # where a loss lies, from the arrays' voltage readings (an underperformance's detail)
+    ratios = {name: electrical_ratios(e_day[f"{name}_power_w"].to_numpy(),
+                                      e_day[f"{name}_voltage_v"].to_numpy(), m_w[day],
+                                      voltages[name][day], e_day["valid"].to_numpy(bool))
+              for name, m_w in (("tracker", tracker_w), ("fixed", fixed_w))} \
+        if whole and voltages is not None else {"tracker": None, "fixed": None}
+    features["electrical"] = ratios
     low, high = band_wh(exp_a, exp_b, u)
     # readings that miss part of the day's expected energy: its gain is not the day's (a
     # day without any reading has no measured gain at all: not partial, no data)
@@ -276,10 +288,10 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
             "measured_wh": measured_tr, "expected_wh": exp_a,
             "expected_wh_low": low, "expected_wh_high": high,
             "performance_ratio": None if measured_tr is None or matched <= 0
-            else measured_tr / matched},
+            else measured_tr / matched, **(ratios["tracker"] or {})},
         "fixed": {"measured_wh": measured_fx, "expected_wh": exp_fixed,
                   "performance_ratio": None if measured_fx is None or matched_f <= 0
-                  else measured_fx / matched_f},
+                  else measured_fx / matched_f, **(ratios["fixed"] or {})},
         "gain_measured_pct": gain_measured,
         "gain_expected_pct": gain_expected,
         "features": features,
@@ -314,7 +326,7 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
                                  edges_s[run[0]:run[-1] + 2], info.phase_s,
                                  ctx.settings.ingest.energy_max_gap_s)
         # one minute past the run, so the last day's last minute reaches midnight
-        tr, fx, sensors, tr_spacing, fine = site_minutes(ctx, info, t0, t1 + 60)
+        tr, fx, sensors, tr_spacing, fine, volts = site_minutes(ctx, info, t0, t1 + 60)
         gap = ctx.settings.ingest.energy_max_gap_s
         start = pd.Timestamp(t0, unit="s", tz="UTC")
         e = sky_sensor.weather_aware_twin(info.site, start, start + pd.Timedelta(
@@ -331,7 +343,8 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
             out[i] = _day_payload(info, date, (day_start_s, day_end_s), e.iloc[a:b], tr[a:b],
                                   fx[a:b], measured, elapsed, first_s,
                                   cut=not _whole_day(edges[i], edges[i + 1], info.zone),
-                                  spacing_s=tr_spacing)
+                                  spacing_s=tr_spacing,
+                                  voltages={k: v[a:b] for k, v in volts.items()})
             if tr_spacing is not None and tr_spacing > gap:  # its readings bridge nothing
                 out[i]["features"]["slow_logger"] = {"spacing_s": tr_spacing, "max_gap_s": gap}
     return out

@@ -56,7 +56,8 @@ FINE_COLUMNS = {"power_w": 0, **{name: 1 + SENSOR_NAMES.index(name)
 
 def minute_grid(rows: np.ndarray, t0: int, t1: int, max_gap_s: int,
                 stamped: str = "instant"
-                ) -> tuple[np.ndarray, np.ndarray, float | None, dict[str, np.ndarray]]:
+                ) -> tuple[np.ndarray, np.ndarray, float | None, dict[str, np.ndarray],
+                           np.ndarray]:
     """Measured power [W], shape (n,), the :data:`SENSOR_NAMES` columns, shape (n, k), the
     readings' median spacing [s] (None under two readings: a logger slower than the
     energy rule's gap leaves every minute NaN), and per minute whether the readings of each
@@ -68,7 +69,8 @@ def minute_grid(rows: np.ndarray, t0: int, t1: int, max_gap_s: int,
     missing or zero; NaN outside the readings and inside a longer gap. ``rows``: the
     array's readings (:func:`_rows`). Each reading
     stands at its interval's middle when the readings are means stamped at an
-    interval's end or start (``stamped``, :func:`sim.energy.interval_middles`)."""
+    interval's end or start (``stamped``, :func:`sim.energy.interval_middles`). Last, the
+    measured voltage [V], shape (n,), NaN where the readings carry none (power alone)."""
     n = (t1 - t0) // 60
     grid = t0 + 60 * np.arange(n, dtype=np.int64)
     ts = interval_middles(rows[:, 0], stamped, max_gap_s)
@@ -77,7 +79,7 @@ def minute_grid(rows: np.ndarray, t0: int, t1: int, max_gap_s: int,
     spacing = float(np.median(np.diff(rows[:, 0]))) if len(rows) > 1 else None
     fine = {name: sky_sensor.readings_fine(ts, rows[:, 3 + j], grid)
             for name, j in FINE_COLUMNS.items()}
-    return power, sensors, spacing, fine
+    return power, sensors, spacing, fine, on_grid(ts, rows[:, 1], grid, max_gap_s)
 
 
 def sky_fine(fixed_fine: dict[str, np.ndarray], tracker_fine: dict[str, np.ndarray],
@@ -114,11 +116,12 @@ def sky_sensors(fixed: np.ndarray, tracker: np.ndarray | None) -> pd.DataFrame |
 
 def site_minutes(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int
                  ) -> tuple[np.ndarray, np.ndarray, pd.DataFrame | None, float | None,
-                            dict[str, np.ndarray]]:
+                            dict[str, np.ndarray], dict[str, np.ndarray]]:
     """The tracker's and the fixed array's measured power [W] on the minute grid of
     ``[t0, t1)`` (:func:`minute_grid`: NaN where the energy rule bridges no reading), the
-    loggers' sky sensors (:func:`sky_sensors`), the tracker's readings' median spacing [s]
-    and where each sky source's readings show a clear spell (:func:`sky_fine`). The site
+    loggers' sky sensors (:func:`sky_sensors`), the tracker's readings' median spacing [s],
+    where each sky source's readings show a clear spell (:func:`sky_fine`), and the two
+    arrays' measured voltage [V] (``tracker``, ``fixed``; NaN without a voltage). The site
     has the twin's arrays (:meth:`SiteInfo.has_twin`)."""
     # the arrays the twin simulates (SiteInfo.has_twin), not merely the first of each mount
     tracker, fixed = info.arrays["tracker"], info.arrays["fixed"]
@@ -128,9 +131,10 @@ def site_minutes(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int
         tr_rows = _rows(conn, tracker.array_id, t0, t1, gap)
         stamped = readings_stamped(info, fx_rows, gap, lambda: _rows(
             conn, fixed.array_id, t0 - STAMP_LOOKBACK_S, t1, gap))
-    fx, fx_s, _, fx_fine = minute_grid(fx_rows, t0, t1, gap, stamped)
-    tr, tr_s, tr_spacing, tr_fine = minute_grid(tr_rows, t0, t1, gap, stamped)
-    return tr, fx, sky_sensors(fx_s, tr_s), tr_spacing, sky_fine(fx_fine, tr_fine, fx_s)
+    fx, fx_s, _, fx_fine, fx_v = minute_grid(fx_rows, t0, t1, gap, stamped)
+    tr, tr_s, tr_spacing, tr_fine, tr_v = minute_grid(tr_rows, t0, t1, gap, stamped)
+    return (tr, fx, sky_sensors(fx_s, tr_s), tr_spacing, sky_fine(fx_fine, tr_fine, fx_s),
+            {"tracker": tr_v, "fixed": fx_v})
 
 
 #: How far before a run the fixed array's readings are read to tell what a slow logger's
@@ -200,7 +204,7 @@ def weather_twin(ctx: ServiceContext, info: SiteInfo, t0: int, t1: int) -> pd.Da
     if running is not None:
         return running.result()
     try:
-        _, fx, sensors, _, fine = site_minutes(ctx, info, t0, t1)
+        _, fx, sensors, _, fine, _ = site_minutes(ctx, info, t0, t1)
         start, now = pd.Timestamp(t0, unit="s", tz="UTC"), pd.Timestamp.now(tz="UTC")
         end = pd.Timestamp(t1, unit="s", tz="UTC")
         twin = sky_sensor.weather_aware_twin(info.site, start, end, fx, sensors=sensors,

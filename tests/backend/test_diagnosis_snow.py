@@ -89,6 +89,18 @@ def test_the_snow_days_are_the_fixed_arrays_underperformance(diagnoses) -> None:
         assert days[date]["fixed"]["performance_ratio"] == pytest.approx(pr, abs=0.005), date
         assert f["magnitude"] == pytest.approx(100 * (1 - pr), abs=2.0)
         assert "snow" in f["detail"] and f["title"].startswith("the fixed array below")
+    # where the loss lies (faults.electrical_ratios): 8 Jan in the current (pvanalytics' mode
+    # 3, an even cover: its voltage ratio over 0.933), 9 Jan in the voltage (its mode 0:
+    # 440–470 V, under the inverter's 540 V MPPT floor); the clean days near 1 (0.94 and
+    # 0.97: the CEC module's maximum power point a little over this one's)
+    for date, v, i, words in (("2022-01-08", 0.928, 0.538, "mostly in its current"),
+                              ("2022-01-09", 0.642, 0.885, "mostly in its voltage")):
+        fixed = days[date]["fixed"]
+        assert (fixed["voltage_ratio"], fixed["current_ratio"]) == pytest.approx((v, i),
+                                                                                abs=0.005)
+        assert words in _fixed_findings(days[date])[0]["detail"]
+    for date in CLEAN_DAYS:
+        assert 0.93 < days[date]["fixed"]["voltage_ratio"] < 0.98
     # the tracker has no readings: nothing is said of it
     assert not any(f["array"] == "tracker" for d in days.values() for f in d["faults"])
     # its expected gain is per watt of rating (sim.energy.gain_pct): its 820 W beside the
@@ -126,3 +138,23 @@ def test_the_alerts_raise_it_on_the_fixed_array_without_a_tracker_logger(diagnos
     assert (c.array, c.kind, c.fault_kind) == ("fixed", "fault", "fixed_underperformance")
     assert c.data["day"] == "2022-01-10" and c.data["since_date"] == "2022-01-07"
     assert ("snow_lossy", "fixed", "fault") in ev.scopes
+
+
+def test_a_string_down_is_a_loss_in_the_current_and_bypassed_substrings_in_the_voltage(
+        ) -> None:
+    """faults.electrical_ratios on a day of the twin's own maximum power point: a quarter of
+    the current gone (one string of four) reads voltage 1 and current 0.75; a third of the
+    substrings bypassed (the voltage × 2/3, the current as modelled) the other way round."""
+    import numpy as np
+
+    from backend.diagnosis.faults import electrical_ratios
+
+    t = np.arange(1440)
+    p = np.clip(np.sin((t - 360) / 720 * np.pi), 0, None) * 800.0
+    v = np.where(p > 0, 26.0 + 2.0 * np.cos(t / 200.0), 0.0)
+    valid = p > 0
+    string_down = electrical_ratios(p, v, 0.75 * p, v, valid)
+    bypassed = electrical_ratios(p, v, p * 2 / 3, v * 2 / 3, valid)
+    assert string_down == pytest.approx({"voltage_ratio": 1.0, "current_ratio": 0.75})
+    assert bypassed == pytest.approx({"voltage_ratio": 2 / 3, "current_ratio": 1.0})
+    assert electrical_ratios(p, v, p, np.full(1440, np.nan), valid) is None  # power alone

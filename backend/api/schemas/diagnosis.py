@@ -33,6 +33,15 @@ BAND = ("lower edge of the expected energy's band [Wh]: the two sky decompositio
         f"fixed plane, {100 * GHI_UNCERTAINTY:g} % from a GHI pyranometer alone")
 
 
+VOLTAGE_RATIO = ("the measured voltage over the twin's at the array's maximum power point, "
+                 "power-weighted over the day's valid minutes with a voltage reading "
+                 "(faults.electrical_ratios); null without an hour of them or on a day not "
+                 "whole")
+CURRENT_RATIO = ("the measured power's ratio over `voltage_ratio`: where a loss lies, in the "
+                 "current (a string down, soiling, an even cover) or the voltage (substrings "
+                 "bypassed, the inverter off its maximum power point)")
+
+
 class TrackerDayRead(BaseModel):
     """The tracker's day: measured against the weather-aware twin."""
 
@@ -41,6 +50,8 @@ class TrackerDayRead(BaseModel):
     expected_wh_low: float = Field(description=BAND)
     expected_wh_high: float
     performance_ratio: float | None
+    voltage_ratio: float | None = Field(None, description=VOLTAGE_RATIO)
+    current_ratio: float | None = Field(None, description=CURRENT_RATIO)
 
 
 class FixedDayRead(BaseModel):
@@ -49,6 +60,8 @@ class FixedDayRead(BaseModel):
     measured_wh: float | None
     expected_wh: float
     performance_ratio: float | None
+    voltage_ratio: float | None = Field(None, description=VOLTAGE_RATIO)
+    current_ratio: float | None = Field(None, description=CURRENT_RATIO)
 
 
 class FaultRead(BaseModel):
