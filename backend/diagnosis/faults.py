@@ -315,12 +315,14 @@ def electrical_ratios(expected_w: np.ndarray, expected_v: np.ndarray, measured_w
     return {"voltage_ratio": v, "current_ratio": p / v if v > 0 else 0.0}
 
 
-def _where_the_loss_lies(ratios: dict[str, float] | None) -> str:
-    """An underperformance's words for :func:`electrical_ratios` (empty without them)."""
+def _where_the_loss_lies(ratios: dict[str, float] | None, array: str) -> str:
+    """An underperformance's words for :func:`electrical_ratios` (empty without them); a
+    tracker's current also falls when it points off the sun."""
     if ratios is None:
         return ""
     v, i = ratios["voltage_ratio"], ratios["current_ratio"]
-    where = ("its current (a string down, soiling, or snow or dust laid evenly on it)"
+    off_sun = "pointing off the sun, " if array == "tracker" else ""
+    where = (f"its current ({off_sun}a string down, soiling, or snow or dust laid evenly on it)"
              if i <= v else "its voltage (substrings bypassed under snow or shade on part of "
              "its modules, or the inverter below its MPPT range)")
     return (f"; its voltage {100 * v:.0f} % of the model's maximum power point and its current "
@@ -874,7 +876,7 @@ def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
                                     if not tracker or d["features"].get("sensor_sky")
                                     else "")
                                  + _where_the_loss_lies(
-                                     (d["features"].get("electrical") or {}).get(array))
+                                     (d["features"].get("electrical") or {}).get(array), array)
                                  + (
                                      f"; {unseen:.0f} % of that expectation rests on a beam "
                                      f"the sky instrument did not see (the sun behind or "
