@@ -186,9 +186,10 @@ class Array(BaseModel):
         "[%] the array's DC losses the model does not see: soiling, mismatch, wiring, the "
         "modules' nameplate tolerance, degradation (PVWatts' system losses: 14 % by default, "
         "inverter excluded). Its current is reduced by this share everywhere the array is "
-        "modelled. Set it from a clean, healthy week's performance ratio (1 − PR) when the "
-        "diagnosis's sky comes from an irradiance sensor; with the fixed array's own sky, "
-        f"losses equal on both arrays cancel. Default {_ARRAY.dc_loss_pct}: the ideal array."))
+        "modelled. Left out, a sensor's sky reads them as an underperformance every day and "
+        "the fixed array's own sky reads too dim (a broken-cloud day's tracker expectation "
+        "fell up to 11 %): set it from a clean, healthy week's performance ratio (1 − PR). "
+        f"Default {_ARRAY.dc_loss_pct}: the ideal array."))
     # where it stands: only for the tracker's shade on the fixed array (sim/array_shade.py)
     position_east_m: float | None = Field(None, ge=-100_000, le=100_000, description=(
         "[m] east of the site's origin (any ground point, the same for every array): a "

@@ -229,3 +229,29 @@ def test_a_back_of_module_sensor_sets_the_air_the_arrays_cells_are_modelled_in()
     for array in ("tracker", "fixed"):
         gain = e[f"{array}_power_w"].sum() / base[f"{array}_power_w"].sum()
         assert 1.10 < gain < 1.115, (array, gain)
+
+
+def test_losses_left_out_of_the_config_cancel_on_a_clear_day_only() -> None:
+    """docs/sites.md, "An array's losses": both arrays 15 % down (their logged power × 0.85),
+    the sky read from the fixed array's power. With the losses in the config (``dc_loss_pct``
+    15 on both) the tracker's expectation is the lossy truth. Without them the sky reads
+    15 % dimmer: on a clear day the ideal tracker under it lands on the same expectation
+    (0.4 % under), but on a partly cloudy day the dimmer sky is split into less beam and the
+    expectation falls 11.1 % (seeds 18–21: clear −0.4…+0.9 %, partly cloudy −1.4…−11.1 %,
+    overcast −0.2…−2.7 %) — a tracker's loss of that size would hide there."""
+    import dataclasses
+
+    d = logger_days(SITE, FIRST, 2, seed=18, kinds=["clear", "partly"])
+    lossy = dataclasses.replace(SITE, arrays={name: dataclasses.replace(a, dc_loss_pct=15.0)
+                                              for name, a in SITE.arrays.items()})
+    end = FIRST + pd.Timedelta(days=2)
+    told = sky_sensor.weather_aware_twin(lossy, FIRST, end, 0.85 * d.fixed_power_w)
+    untold = sky_sensor.weather_aware_twin(SITE, FIRST, end, 0.85 * d.fixed_power_w)
+    ratio = []
+    for k in range(2):
+        sl = slice(k * 1440, (k + 1) * 1440)
+        truth = 0.85 * d.healthy_tracker_power_w[sl].sum()
+        a = told["tracker_power_w"].to_numpy()[sl].sum()
+        assert abs(a / truth - 1) < 0.015, (k, a / truth)  # 0.2 % and 1.1 % measured
+        ratio.append(untold["tracker_power_w"].to_numpy()[sl].sum() / a)
+    assert abs(ratio[0] - 1) < 0.006 and 0.88 < ratio[1] < 0.90, ratio
