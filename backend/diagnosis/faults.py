@@ -322,7 +322,8 @@ def _where_the_loss_lies(ratios: dict[str, float] | None, array: str) -> str:
         return ""
     v, i = ratios["voltage_ratio"], ratios["current_ratio"]
     off_sun = "pointing off the sun, " if array == "tracker" else ""
-    where = (f"its current ({off_sun}a string down, soiling, or snow or dust laid evenly on it)"
+    where = (f"its current ({off_sun}a string down, the inverter off — its voltage then at open "
+             "circuit —, soiling, or snow or dust laid evenly on it)"
              if i <= v else "its voltage (substrings bypassed under snow or shade on part of "
              "its modules, or the inverter below its MPPT range)")
     return (f"; its voltage {100 * v:.0f} % of the model's maximum power point and its current "
