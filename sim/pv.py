@@ -131,8 +131,9 @@ class ArrayConfig:
         The array's DC losses the single-diode model does not see [%]: soiling, mismatch,
         wiring, the modules' nameplate tolerance, light-induced degradation and age. It
         scales the array's current at the maximum power point (:func:`array_mpp`), as
-        PVWatts' system losses scale its power (Dobos 2014, NREL/TP-6A20-62641, eq. 17 and
-        Table 6: 14 % by default, inverter excluded). 0 by default: the ideal array.
+        PVWatts' system losses scale its power (Dobos 2014, PVWatts Version 5 Manual,
+        NREL/TP-6A20-62641: 14.08 % by default, its ten categories compounded, the inverter
+        apart; ``pvlib.pvsystem.pvwatts_losses``). 0 by default: the ideal array.
     """
 
     name: str
