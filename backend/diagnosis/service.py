@@ -107,8 +107,9 @@ MAX_DAYS = 400
 #: ``fixed_underperformance``; 34: the gains per watt of each array's rating, sim.energy.gain_pct;
 #: 35: the fixed array's band without the tracker's blind beam, faults.sky_uncertainty;
 #: 36: the fixed array's back-of-module temperature, sim.sky_sensor.module_air_temperature;
-#: 37: where a loss lies, the arrays' voltage and current ratios, faults.electrical_ratios).
-CACHE_VERSION = 37
+#: 37: where a loss lies, the arrays' voltage and current ratios, faults.electrical_ratios;
+#: 38: the fixed array's IEC 61724-1 performance ratio under a POA sensor).
+CACHE_VERSION = 38
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99
@@ -246,6 +247,13 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
               for name, m_w in (("tracker", tracker_w), ("fixed", fixed_w))} \
         if whole and voltages is not None else {"tracker": None, "fixed": None}
     features["electrical"] = ratios
+    # IEC 61724-1's performance ratio of the fixed array (its final yield over the reference
+    # yield of the POA sensor in its plane), model-free, on the minutes both read validly
+    seen = e_day["valid"].to_numpy(bool) & (e_day["sky_source"].to_numpy() == "sensor_poa") \
+        & np.isfinite(fixed_w[day])
+    poa_sum = float(e_day["poa_global"].to_numpy()[seen].sum())  # W m⁻² × minutes
+    iec_pr = None if not whole or seen.sum() < 60 or poa_sum <= 0 else float(
+        fixed_w[day][seen].sum() / (info.site.arrays["fixed"].stc_power_w * poa_sum / 1000.0))
     low, high = band_wh(exp_a, exp_b, u)
     # readings that miss part of the day's expected energy: its gain is not the day's (a
     # day without any reading has no measured gain at all: not partial, no data)
@@ -291,7 +299,8 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
             else measured_tr / matched, **(ratios["tracker"] or {})},
         "fixed": {"measured_wh": measured_fx, "expected_wh": exp_fixed,
                   "performance_ratio": None if measured_fx is None or matched_f <= 0
-                  else measured_fx / matched_f, **(ratios["fixed"] or {})},
+                  else measured_fx / matched_f, "iec_performance_ratio": iec_pr,
+                  **(ratios["fixed"] or {})},
         "gain_measured_pct": gain_measured,
         "gain_expected_pct": gain_expected,
         "features": features,

@@ -191,13 +191,14 @@ async function load(state) {
   { columns: ["date", "complete", "partial", "sky_source", "clearness_index", "tracker_measured_wh", "tracker_expected_wh",
     "tracker_expected_wh_low", "tracker_expected_wh_high", "beam_unseen_expected_pct", "performance_ratio", "gain_measured_pct",
     "gain_expected_pct", "fixed_measured_wh", "fixed_expected_wh", "fixed_performance_ratio",
-    "tracker_voltage_ratio", "tracker_current_ratio", "fixed_voltage_ratio", "fixed_current_ratio"],
+    "tracker_voltage_ratio", "tracker_current_ratio", "fixed_voltage_ratio", "fixed_current_ratio",
+    "fixed_iec_performance_ratio"],
   rows: body.days.map((d) => [d.date, d.complete, d.partial, d.sky.sensor || d.sky.source, d.sky.clearness_index,
     d.tracker.measured_wh, d.tracker.expected_wh, d.tracker.expected_wh_low, d.tracker.expected_wh_high,
     d.sky.beam_unseen_expected_pct, d.tracker.performance_ratio, d.gain_measured_pct, d.gain_expected_pct,
     d.fixed.measured_wh, d.fixed.expected_wh, d.fixed.performance_ratio,
     d.tracker.voltage_ratio ?? null, d.tracker.current_ratio ?? null, d.fixed.voltage_ratio ?? null,
-    d.fixed.current_ratio ?? null]),
+    d.fixed.current_ratio ?? null, d.fixed.iec_performance_ratio ?? null]),
   filename: `${state.site.site_id}_diagnosis_${start}_${end}.csv` });
   // no tracker reading at all in the range: the pointing card says so, not that its logger
   // sends no encoder angles (a tester's empty database)

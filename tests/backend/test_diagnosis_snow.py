@@ -158,3 +158,24 @@ def test_a_string_down_is_a_loss_in_the_current_and_bypassed_substrings_in_the_v
     assert string_down == pytest.approx({"voltage_ratio": 1.0, "current_ratio": 0.75})
     assert bypassed == pytest.approx({"voltage_ratio": 2 / 3, "current_ratio": 1.0})
     assert electrical_ratios(p, v, p, np.full(1440, np.nan), valid) is None  # power alone
+
+
+def test_the_fixed_arrays_iec_performance_ratio_is_the_files_own(diagnoses) -> None:
+    """IEC 61724-1's PR of the fixed array (final over reference yield, the POA sensor's) is
+    model-free: the file's own 15-minute rows give it by hand (Σ V·I over the rating × Σ POA
+    / 1000, the rows with V, I and daylight) within 0.7 % of the service's, which reads the
+    minutes between them and leaves out those its sky flags (8 Jan: 54 above the clear sky)."""
+    import pandas as pd
+
+    f = pd.read_csv(LOGGERS / "snow_data.csv", index_col=0, parse_dates=True)
+    power = f[COLUMNS["voltage_v"]] * f[COLUMNS["current_a"]]
+    poa = f[COLUMNS["poa_irradiance_w_m2"]]
+    rating_w = 72 * pvsystem.retrieve_sam("CECMod")["JA_Solar_JAP72S01_335_SC"]["STC"]
+    for date, d in diagnoses["lossy"].items():
+        rows = (f.index.strftime("%Y-%m-%d") == date) & power.notna() & (poa > 0)
+        by_hand = power[rows].sum() / (rating_w * poa[rows].sum() / 1000)
+        assert d["fixed"]["iec_performance_ratio"] == pytest.approx(by_hand, abs=0.007), date
+    # without a model, the clean days read 0.86 and 0.88 (cold January cells), the first
+    # snow day 0.26
+    iec = {k: d["fixed"]["iec_performance_ratio"] for k, d in diagnoses["lossy"].items()}
+    assert all(0.85 < iec[k] < 0.89 for k in CLEAN_DAYS) and iec["2022-01-07"] < 0.27

@@ -60,6 +60,12 @@ class FixedDayRead(BaseModel):
     measured_wh: float | None
     expected_wh: float
     performance_ratio: float | None
+    iec_performance_ratio: float | None = Field(
+        None, description="IEC 61724-1's performance ratio, model-free: the array's final "
+                          "yield (energy over its STC rating) over the reference yield (the "
+                          "POA sensor in its plane, over 1000 W m⁻²), on the minutes both read "
+                          "validly, no temperature correction; null on a day whose sky is not "
+                          "a POA sensor's, or not whole")
     voltage_ratio: float | None = Field(None, description=VOLTAGE_RATIO)
     current_ratio: float | None = Field(None, description=CURRENT_RATIO)
 
