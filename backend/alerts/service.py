@@ -362,15 +362,15 @@ class AlertService:
         # the tracker logger's readings set the days judged; without any, the fixed array's
         # (under a sensor's sky it is judged itself: fixed_underperformance — a site whose
         # tracker logger is not there yet had its snowed-in reference array never alerted)
-        for array in (tracker, fixed):
-            with self.engine.connect() as conn:
+        with self.engine.connect() as conn:
+            for array in (tracker, fixed):
                 first, last = conn.execute(select(
                     func.min(Measurement.ts_s), func.max(Measurement.ts_s)).where(
                     Measurement.array_id == array.array_id, Measurement.source == MEASURED,
                     Measurement.ts_s >= int(start.timestamp()),
                     Measurement.ts_s < int(end.timestamp()))).one()
-            if first is not None:
-                break
+                if first is not None:
+                    break
         if first is None:  # no readings in the window: nothing to tell
             return rules.Evaluation()
         first_day = dt.datetime.fromtimestamp(int(first), info.zone).date()

@@ -169,10 +169,9 @@ def in_progress_key(conn: Connection, info: SiteInfo, day_s: tuple[int, int], no
 
 def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFrame,
                  tracker_w: np.ndarray, fixed_w: np.ndarray,
-                 measured_wh: dict[str, float | None],
+                 measured_wh: dict[str, float | None], voltages: dict[str, np.ndarray],
                  elapsed_min: int | None = None, first_s: int | None = None,
-                 cut: bool = False, spacing_s: float | None = None,
-                 voltages: dict[str, np.ndarray] | None = None) -> dict[str, Any]:
+                 cut: bool = False, spacing_s: float | None = None) -> dict[str, Any]:
     """One day's answer (without faults) and its fault features.
 
     ``day_s``: the day's ``[start, end)`` [s since the epoch] (``cut``: the range asked
@@ -188,7 +187,7 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     yet over that lie before now (None: the day is over); ``first_s``: the tracker
     logger's first reading ever [Unix s] (None: it has none) — no dropout before it;
     ``spacing_s``: the tracker's readings' median spacing [s] (the shape fits rest on its
-    readings, not on the minutes interpolated between them: ``faults.day_features``);
+    readings, not on the minutes interpolated between them: ``faults.day_features``).
     ``voltages``: the arrays' measured voltage on the same minutes (``tracker``, ``fixed``;
     where a loss lies, ``faults.electrical_ratios``)."""
     t0, t1 = day_s
@@ -235,9 +234,8 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     # the fixed array judged where the sky is a sensor's, not its own (faults._underperformance)
     if whole and source == "sensor":
         features["sensor_sky"] = True
-    if whole and source == "sensor" and measured_fx is not None:
-        energy = energy_features(measured_fx, matched_f, matched_f, exp_fixed,
-                                 sky_uncertainty(e_day))
+        energy = None if measured_fx is None else energy_features(
+            measured_fx, matched_f, matched_f, exp_fixed, sky_uncertainty(e_day))
         if energy is not None:
             features["fixed_energy"] = energy
     # where a loss lies, from the arrays' voltage readings (an underperformance's detail)
@@ -245,7 +243,7 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
                                       e_day[f"{name}_voltage_v"].to_numpy(), m_w[day],
                                       voltages[name][day], e_day["valid"].to_numpy(bool))
               for name, m_w in (("tracker", tracker_w), ("fixed", fixed_w))} \
-        if whole and voltages is not None else {"tracker": None, "fixed": None}
+        if whole else {"tracker": None, "fixed": None}
     features["electrical"] = ratios
     # IEC 61724-1's performance ratio of the fixed array (its final yield over the reference
     # yield of the POA sensor in its plane), model-free, on the minutes both read validly
@@ -350,10 +348,10 @@ def _compute(ctx: ServiceContext, info: SiteInfo, edges: list[dt.datetime],
             date = edges[i].astimezone(info.zone).date().isoformat()
             elapsed = None if day_end_s <= now_s else max(0, int(now_s - day_start_s) // 60)
             out[i] = _day_payload(info, date, (day_start_s, day_end_s), e.iloc[a:b], tr[a:b],
-                                  fx[a:b], measured, elapsed, first_s,
+                                  fx[a:b], measured, {k: v[a:b] for k, v in volts.items()},
+                                  elapsed, first_s,
                                   cut=not _whole_day(edges[i], edges[i + 1], info.zone),
-                                  spacing_s=tr_spacing,
-                                  voltages={k: v[a:b] for k, v in volts.items()})
+                                  spacing_s=tr_spacing)
             if tr_spacing is not None and tr_spacing > gap:  # its readings bridge nothing
                 out[i]["features"]["slow_logger"] = {"spacing_s": tr_spacing, "max_gap_s": gap}
     return out
