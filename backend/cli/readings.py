@@ -52,9 +52,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     i.add_argument("--column", action="append", default=[], metavar="[ARRAY.]FIELD=NAME[:UNIT]",
                    help="map a field (power_w, voltage_v, current_a, poa_irradiance_w_m2, "
                         "ghi_w_m2, temp_module_c, temp_air_c, wind_speed_m_s, azimuth_deg, "
-                        "elevation_deg, …) of --array, or of ARRAY, to the file's column, in "
-                        "UNIT (kW, mA, °F, km/h …) when the file does not say it; repeat per "
-                        "field. With one array, a column named as a field maps itself")
+                        "elevation_deg, …; or instead of power, energy_wh: each interval's "
+                        "energy, energy_total_wh: a meter's running total) of --array, or of "
+                        "ARRAY, to the file's column, in UNIT (kW, kWh, mA, °F, km/h …) when "
+                        "the file does not say it; repeat per field. With one array, a column "
+                        "named as a field maps itself")
     i.add_argument("--time-column", help="the column of the times, or DATE+CLOCK for a pair "
                                          "(default: TOA5's TIMESTAMP, else the first column "
                                          "of times, with a clock column beside it)")
@@ -131,7 +133,7 @@ def run_import(args: argparse.Namespace) -> int:
             "columns": {k: {"column": c, "unit": u} for k, (c, u) in lf.columns.items()},
             "readings": int(rows.size), "first": f"{stamps.min():%Y-%m-%dT%H:%M:%SZ}",
             "last": f"{stamps.max():%Y-%m-%dT%H:%M:%SZ}", "cadence_s": lf.cadence_s(),
-            "peak_reading": _peak(lf, array)}
+            "power_from": lf.power_from, "peak_reading": _peak(lf, array)}
         if rows.size < len(lf.lines):
             line = int(lf.lines[(~lf.sendable).nonzero()[0][0]])
             notes.append(f"{array}: {len(lf.lines) - rows.size} rows without power or voltage "
@@ -160,15 +162,27 @@ def _peak(lf: LoggerFile, array: str) -> dict[str, Any]:
 
 
 def _stamp_note(site: dict[str, Any], summary: dict[str, Any]) -> list[str]:
-    """What a file of means needs from a site that takes its stamps as instants."""
-    cadences = [a["cadence_s"] for a in summary["arrays"].values() if a["cadence_s"]]
-    cadence = min(cadences, default=None)
-    if cadence is None or cadence < MEANS_CADENCE_S or site.get("readings_stamped") != "instant":
+    """What a file of means needs from a site that takes its stamps as instants: readings
+    made from energy are means whatever their spacing."""
+    if site.get("readings_stamped") != "instant":
+        return []
+    where = ("the Sites page's 'Readings stamped', or PUT /api/v1/sites/{id} "
+             "(docs/diagnosis.md, 'Cadence')")
+    arrays = summary["arrays"]
+    if metered := {a["power_from"] for a in arrays.values() if a["power_from"]}:
+        ends = "energy_total_wh" in metered and len(metered) == 1
+        return [f"the readings are means made from energy ({', '.join(sorted(metered))}) and "
+                f"site {summary['site_id']} takes their stamps as instants "
+                "(readings_stamped): set it to interval_end"
+                + (" (a meter's total ends each interval)" if ends else
+                   " or interval_start, as the export stamps its intervals")
+                + " — " + where]
+    cadence = min((a["cadence_s"] for a in arrays.values() if a["cadence_s"]), default=None)
+    if cadence is None or cadence < MEANS_CADENCE_S:
         return []
     return [f"the readings are {cadence / 60:g} min apart and site {summary['site_id']} takes "
             "their stamps as instants (readings_stamped): if they are means stamped at their "
-            "interval's end, set readings_stamped to interval_end — the Sites page's "
-            "'Readings stamped', or PUT /api/v1/sites/{id} (docs/diagnosis.md, 'Cadence')"]
+            "interval's end, set readings_stamped to interval_end — " + where]
 
 
 def post_readings(client: Any, site_id: str, array: str, token: str, lf: LoggerFile,
@@ -281,7 +295,8 @@ def _print(summary: dict[str, Any], as_json: bool, dry_run: bool) -> None:
         print(f"  {summary['site_id']}/{array}: {a['readings']} readings from {a['first']} to "
               f"{a['last']}{every}")
         for fld, c in a["columns"].items():
-            print(f"    {fld} ← {c['column']!r} [{c['unit']}]")
+            made = " (power_w: each interval's mean)" if fld == a["power_from"] else ""
+            print(f"    {fld} ← {c['column']!r} [{c['unit']}]{made}")
         print(f"    its highest power as sent: {json.dumps(a['peak_reading'])}")
     for note in summary["notes"]:
         print(f"note: {note}")

@@ -21,6 +21,9 @@ takes readings named and scaled its own way (``backend.measurements.fields``: ``
   offset is read on the logger's clock, ``timezone`` (an IANA zone; ``Etc/GMT+7`` for a
   clock on UTC−7 all year), by :func:`sim.sky.clock_times_to_utc`.
 - **Compressed**: a gzip archive of such a file is read as the file.
+- **Energy instead of power**: a portal's export of each interval's energy (``energy_wh``)
+  or a meter's running total (``energy_total_wh``) is sent as the mean power over each
+  interval (:func:`power_from_energy`): the energy rule then integrates it back.
 - **Missing cells** (blank, ``NAN`` — Campbell's mark —, ``NaN``, ``null``, ``-``, ``n/a``)
   leave that field out of the reading; a row left without power or voltage and current is
   not sent (counted, with its first line). Any other text is refused naming line and column.
@@ -48,8 +51,14 @@ import pandas as pd
 from backend.measurements.fields import SENSOR_NAMES
 from sim.sky import UTC_OFFSET_AT_END, clock_times_to_utc, weather_text
 
-#: The fields a file's columns may be mapped to: the electrical ones and the sensors.
-FIELDS = ("power_w", "voltage_v", "current_a", *SENSOR_NAMES)
+#: Energy a file may give instead of power: each row's interval's energy, or a meter's
+#: running total; sent as the mean power over each interval (:func:`power_from_energy`).
+ENERGY_FIELDS = ("energy_wh", "energy_total_wh")
+#: The fields a file's columns may be mapped to: the electrical ones, the sensors, energy.
+FIELDS = ("power_w", "voltage_v", "current_a", *SENSOR_NAMES, *ENERGY_FIELDS)
+#: A meter's step longer than this many times the file's spacing spans a gap: its energy is
+#: not spread as a power over it (the service's gap rule would not bridge it either).
+METER_MAX_STEP = 1.5
 
 #: Per field, the units a file may give it in: normalised unit (:func:`_unit_key`) → (scale,
 #: offset) onto the field's own unit, value·scale + offset. The first is the field's own.
@@ -59,6 +68,7 @@ _IRRADIANCE = {"w/m2": (1.0, 0.0), "kw/m2": (1e3, 0.0)}
 _TEMPERATURE = {"c": (1.0, 0.0), "k": (1.0, -273.15), "f": (5 / 9, -32 * 5 / 9)}
 _ANGLE = {"deg": (1.0, 0.0), "degrees": (1.0, 0.0), "rad": (180 / np.pi, 0.0)}
 _MRAD = {"mrad": (1.0, 0.0), "rad": (1e3, 0.0)}
+_ENERGY = {"wh": (1.0, 0.0), "kwh": (1e3, 0.0), "mwh": (1e6, 0.0)}
 UNITS: dict[str, dict[str, tuple[float, float]]] = {
     "power_w": _POWER,
     "voltage_v": {"v": (1.0, 0.0), "volts": (1.0, 0.0), "mv": (1e-3, 0.0), "kv": (1e3, 0.0)},
@@ -71,12 +81,14 @@ UNITS: dict[str, dict[str, tuple[float, float]]] = {
                        "knots": (0.514444, 0.0)},
     "azimuth_deg": _ANGLE, "elevation_deg": _ANGLE,
     "sun_offset_x_mrad": _MRAD, "sun_offset_y_mrad": _MRAD,
+    "energy_wh": _ENERGY, "energy_total_wh": _ENERGY,
 }
 #: Each field's own unit, as the summary writes it.
 OWN_UNITS = {"power_w": "W", "voltage_v": "V", "current_a": "A", "poa_irradiance_w_m2": "W/m²",
              "ghi_w_m2": "W/m²", "temp_module_c": "°C", "temp_air_c": "°C",
              "wind_speed_m_s": "m/s", "azimuth_deg": "°", "elevation_deg": "°",
-             "sun_offset_x_mrad": "mrad", "sun_offset_y_mrad": "mrad"}
+             "sun_offset_x_mrad": "mrad", "sun_offset_y_mrad": "mrad",
+             "energy_wh": "Wh", "energy_total_wh": "Wh"}
 #: Cells that mean "no value": Campbell's NAN, pandas' and spreadsheets' marks.
 MISSING = frozenset({"", "nan", "null", "none", "na", "n/a", "-", "--", "#n/a", "inf", "-inf"})
 DATE_ORDERS = ("mdy", "dmy")
@@ -93,6 +105,7 @@ class LoggerFile:
     lines: np.ndarray  # each row's line in the file (1-based)
     columns: dict[str, tuple[str, str]]  # field → (the file's column, the unit read)
     notes: list[str] = field(default_factory=list)
+    power_from: str | None = None  # the energy field power_w was made from, if any
 
     @cached_property
     def sendable(self) -> np.ndarray:
@@ -376,6 +389,9 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
     for i, n in enumerate(names if fields_by_name else []):  # a column named as a field
         if n.lower() in FIELDS and n.lower() not in mapping and i not in blank:
             mapping[n.lower()] = n
+    if "power_w" in mapping:  # energy columns named as fields beside a power column: not needed
+        mapping = {f: c for f, c in mapping.items()
+                   if f not in ENERGY_FIELDS or f in (columns or {})}
     unknown = [f for f in mapping if f not in FIELDS]
     if unknown:
         raise ValueError(f"column: {unknown[0]!r} is not a field; the fields are "
@@ -403,13 +419,74 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
     if unitless:
         notes.append("no unit in the file, read in the field's own: " + ", ".join(unitless)
                      + " (give NAME:UNIT where that is wrong)")
+    energy = [f for f in ENERGY_FIELDS if f in values]
+    if energy and ("power_w" in values or len(energy) > 1):
+        raise ValueError("column: map one of power_w, energy_wh (each interval's energy) and "
+                         "energy_total_wh (a meter's running total); got "
+                         + ", ".join([f for f in ("power_w", *ENERGY_FIELDS) if f in values]))
+    power_from = energy[0] if energy else None
+    if power_from is not None:
+        values["power_w"], made = power_from_energy(times, values.pop(power_from).to_numpy(),
+                                                    power_from, used[power_from][0], lines)
+        notes.extend(made)
     if "power_w" not in values and not {"voltage_v", "current_a"} <= set(values):
-        raise ValueError("column: map power_w, or voltage_v and current_a, to the file's "
-                         "columns (--column power_w=NAME[:UNIT]); its columns are "
+        raise ValueError("column: map power_w (or energy_wh, energy_total_wh), or voltage_v "
+                         "and current_a, to the file's columns (--column power_w=NAME[:UNIT]); "
+                         "its columns are "
                          + ", ".join(repr(label[i]) for i in range(width) if i != tcol))
     if ("voltage_v" in values) != ("current_a" in values):
         raise ValueError("column: voltage_v and current_a go together; map both or neither")
-    return LoggerFile(layout, when_label, times, values, lines, used, notes)
+    return LoggerFile(layout, when_label, times, values, lines, used, notes, power_from)
+
+
+def power_from_energy(times_utc: pd.DatetimeIndex, energy_wh: np.ndarray, kind: str,
+                      column: str, lines: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Each row's power [W] from a file's energy [Wh] and notes on how it was made: the mean
+    over the interval the energy covers, which the energy rule integrates back (a portal's
+    or an inverter's export gives energy, not power).
+
+    ``kind`` ``"energy_wh"``: each row's energy over its own interval, the rows' median
+    spacing (a row after a gap still covers one interval); what its stamp marks, the start
+    or the end, is the site's ``readings_stamped``. ``"energy_total_wh"``: a meter's running
+    total; a row's power is its rise since the row before over the time between them, the
+    mean over the interval its stamp ends. A total that goes back (a reset, a new meter) or
+    a step over :data:`METER_MAX_STEP` spacings (a gap) gives no power there, and the notes
+    say how much energy that leaves out; the smallest rise bounds the power's resolution."""
+    t = times_utc.as_unit("s").asi8.astype(np.float64)
+    have = np.flatnonzero(np.isfinite(energy_wh))
+    order = have[np.argsort(t[have], kind="stable")]
+    steps_s = np.diff(t[order])
+    if not (steps_s > 0).any():
+        raise ValueError(f"column: {kind}={column!r}: two rows at different times are needed "
+                         "to know the interval its energy covers")
+    spacing_s = float(np.median(steps_s[steps_s > 0]))
+    power_w = np.full(energy_wh.size, np.nan)
+    if kind == "energy_wh":
+        power_w[have] = energy_wh[have] * 3600.0 / spacing_s
+        return power_w, [f"power_w: {column!r}, each row's energy over its interval (the "
+                         f"rows' spacing, {spacing_s:g} s): the interval's mean power"]
+    rise_wh = np.diff(energy_wh[order])
+    later = order[1:]
+    gap = steps_s > METER_MAX_STEP * spacing_s
+    ok = (steps_s > 0) & ~gap & (rise_wh >= 0)
+    power_w[later[ok]] = rise_wh[ok] * 3600.0 / steps_s[ok]
+    notes = [f"power_w: {column!r}, a meter's running total: each row's rise since the row "
+             "before over the time between them, the mean power of the interval its stamp "
+             "ends"]
+    if (back := np.flatnonzero(rise_wh < 0)).size:
+        notes.append(f"{column!r} goes back on {back.size} rows (a reset or a new meter; "
+                     f"the first at line {lines[later[back[0]]]}): their intervals are not "
+                     "sent")
+    if (over := np.flatnonzero(gap & (rise_wh >= 0))).size:
+        notes.append(f"{column!r} spans a gap {over.size} × (a step over {METER_MAX_STEP:g} × "
+                     f"its {spacing_s:g} s spacing; the first ending at line "
+                     f"{lines[later[over[0]]]}): the {rise_wh[over].sum():.6g} Wh it rose over "
+                     "them are not sent as power")
+    if (rises := rise_wh[rise_wh > 0]).size:
+        least = float(rises.min())
+        notes.append(f"{column!r}'s smallest rise is {least:.6g} Wh: an interval's power is "
+                     f"known to {least * 3600.0 / spacing_s:.3g} W at best")
+    return power_w, notes
 
 
 def _column_index(names: list[str]) -> dict[str, int]:

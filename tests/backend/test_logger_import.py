@@ -167,6 +167,77 @@ def test_the_same_readings_in_other_loggers_layouts(layout: str) -> None:
         (r["ts"], r["voltage_v"], r["current_a"]) for r in want]
 
 
+
+def _serf_east_minutes() -> pd.Series:
+    """SERF East's 1-minute AC power [W] (real, ISO times with offsets), by UTC time."""
+    ref = pd.read_csv(LOGGERS / "serf_east_1min_ac_power.csv", index_col=0)
+    return pd.Series(ref["ac_power__752"].to_numpy(), pd.to_datetime(ref.index, utc=True))
+
+
+def _metered(minutes: pd.Series, every: str = "15min") -> tuple[pd.Series, pd.Series]:
+    """What an inverter's meter and a portal make of a logger's minutes: the running total
+    [Wh] at each ``every`` stamp (each minute's power over its minute, summed), and each
+    interval's energy [Wh] stamped at its end; both as pandas makes them by hand."""
+    total = (minutes.clip(lower=0) / 60.0).cumsum()
+    stamps = total.index[total.index.floor(every) == total.index]
+    interval = (minutes.clip(lower=0) / 60.0).resample(every, closed="right",
+                                                       label="right").sum()
+    return total[stamps], interval
+
+
+def test_a_meters_total_and_a_portals_interval_energy_are_sent_as_each_intervals_mean_power(
+        ) -> None:
+    """An inverter's running total in kWh to 1 Wh (a ``;`` export, local clock) and a
+    portal's 15-minute energies in Wh, made from SERF East's real 1-minute power: each
+    reading is the interval's mean power as pandas resamples the minutes, to the total's
+    resolution (4 W at 1 Wh a quarter hour) and the energies' rounding. A reset of the
+    meter and a two-hour gap are not spread as power, and the notes say so with their lines
+    and the energy left out."""
+    minutes = _serf_east_minutes()
+    means = minutes.clip(lower=0).resample("15min", closed="right", label="right").mean()
+    total, interval = _metered(minutes)
+    clock = total.index.tz_convert("Etc/GMT+7").strftime("%d.%m.%Y %H:%M")
+    kwh = [f"{x / 1000:.3f}".replace(".", ",") for x in total.to_numpy()]
+    text = "Datum;Zählerstand [kWh]\n" + "".join(
+        f"{t};{e}\n" for t, e in zip(clock, kwh, strict=True))
+    meter = read_logger_file(text.encode(), {"energy_total_wh": "Zählerstand [kWh]"},
+                             timezone="Etc/GMT+7")
+    assert meter.power_from == "energy_total_wh" and "power_w" not in meter.columns
+    assert meter.columns["energy_total_wh"] == ("Zählerstand [kWh]", "kWh")
+    got = pd.Series(meter.values["power_w"].to_numpy(), meter.times_utc)
+    want = means.reindex(got.index)
+    assert np.isnan(got.iloc[0]) and len(meter.readings("fixed")) == len(total) - 1
+    np.testing.assert_allclose(got.iloc[1:], want.iloc[1:], atol=4.0 + 1e-6)
+    assert any("smallest rise is 1 Wh: an interval's power is known to 4 W" in n
+               for n in meter.notes)
+
+    portal = "Time,Energy (Wh)\n" + "".join(
+        f"{t:%Y-%m-%dT%H:%M:%SZ},{e:.1f}\n" for t, e in interval.items())
+    lf = read_logger_file(portal.encode(), {"energy_wh": "Energy (Wh)"})
+    assert lf.power_from == "energy_wh" and lf.cadence_s() == 900.0
+    np.testing.assert_allclose(lf.values["power_w"], means.reindex(lf.times_utc), atol=0.2)
+    assert lf.notes[-1] == ("power_w: 'Energy (Wh)', each row's energy over its interval (the "
+                            "rows' spacing, 900 s): the interval's mean power")
+
+    # a meter swapped (its total back to 0 at 18 Mar 17:00 UTC) and two hours lost after it
+    swap = int(np.flatnonzero(total.index == pd.Timestamp("2022-03-18 17:00Z"))[0])
+    new_kwh = (total - total.iloc[swap - 1]).to_numpy() / 1000 - 0.5
+    cells = [f"{x:.3f}".replace(".", ",") for x in new_kwh]
+    rows = [f"{t};{kwh[k] if k < swap else cells[k]}\n" for k, t in enumerate(clock)
+            if not swap + 7 <= k < swap + 15]  # 8 rows lost after the swap
+    broken = read_logger_file(("Datum;Zählerstand [kWh]\n" + "".join(rows)).encode(),
+                              {"energy_total_wh": "Zählerstand [kWh]"}, timezone="Etc/GMT+7")
+    assert np.isnan(broken.values["power_w"].iloc[swap])
+    lost_wh = 1000 * (round(new_kwh[swap + 15], 3) - round(new_kwh[swap + 6], 3))  # over the gap
+    notes = " ".join(broken.notes)  # the file's line of row k is k + 2
+    assert (f"goes back on 1 rows (a reset or a new meter; the first at line {swap + 2}): "
+            "their intervals are not sent") in notes
+    assert (f"'Zählerstand [kWh]' spans a gap 1 × (a step over 1.5 × its 900 s spacing; the "
+            f"first ending at line {swap + 9}): the {lost_wh:.6g} Wh it rose over them are not "
+            "sent as power") in notes
+    assert broken.sendable.sum() == meter.sendable.sum() - 8 - 2
+
+
 REFUSED = [
     ("ts,power_w\n2022-01-02 10:00,5\n2022-01-02 10:01,6\n", {},
      r"ts: the times have no UTC offset .* with --timezone"),
@@ -182,7 +253,15 @@ REFUSED = [
      r"unit 'furlongs' is not one of w, watts, kw"),
     ("ts,P\n2022-01-02T10:00Z,5\n", {"columns": {"power_w": "Q"}},
      r"no column 'Q'; its columns are 'ts', 'P'"),
-    ("ts,P\n2022-01-02T10:00Z,5\n", {}, r"map power_w, or voltage_v and current_a"),
+    ("ts,P\n2022-01-02T10:00Z,5\n", {},
+     r"map power_w \(or energy_wh, energy_total_wh\), or voltage_v and current_a"),
+    ("ts,P,E\n2022-01-02T10:00Z,5,1\n2022-01-02T10:15Z,6,2\n",
+     {"columns": {"power_w": "P", "energy_wh": "E"}},
+     r"map one of power_w, energy_wh .* and energy_total_wh .*; got power_w, energy_wh"),
+    ("ts,E [W]\n2022-01-02T10:00Z,5\n2022-01-02T10:15Z,6\n", {"columns": {"energy_wh": "E [W]"}},
+     r"energy_wh='E \[W\]': unit 'W' is not one of wh, kwh, mwh"),
+    ("ts,E\n2022-01-02T10:00Z,5\n", {"columns": {"energy_total_wh": "E"}},
+     r"energy_total_wh='E': two rows at different times are needed"),
     ("ts,power_w\n2022-01-02T10:00Z,5\n\n2022-01-02T10:01Z,6,7\n", {},
      r"line 4 has 3 cells; the header has 2"),
     ("ts,power_w\n2022-01-02T10:00Z,5\n", {"timezone": "Mars/Olympus"}, None),  # offsets: unused
@@ -201,70 +280,127 @@ def test_a_file_it_cannot_read_is_refused_naming_line_column_and_remedy(
         read_logger_file(text.encode(), **kwargs)
 
 
-def test_the_command_posts_a_real_loggers_file_and_the_service_counts_its_energy(
-        tmp_path: Path, heliotwin_cli) -> None:
-    """SERF West's two DC strings (15 min, a clock at UTC−7) in one run: the positive string
-    with its POA, module and air temperature into the fixed array, the negative one into
-    the tracker, each of 8 modules at a site at Golden (a string's 3.0 kW peak under twice
-    its rating). Every reading stored, again as duplicates, and each array's energy over
-    the five days the file's own trapezoid (the energy rule, no gap over 15 min). The night
-    voltages (−0.002 V, a transducer's offset) had been refused. The inverter's 6 kW DC
-    power into one array is refused naming the file's first line past its rating."""
+@pytest.fixture(scope="module")
+def served(tmp_path_factory: pytest.TempPathFactory):
+    """A ``heliotwin serve`` on SQLite over a socket with two sites at Golden, tehuantepec's
+    arrays as strings of 8 modules (a SERF West string's 3.0 kW peak under twice their
+    rating) or 12 (SERF East's 4.6 kW AC peak): ``serf`` (a fixed array of 8, a tracker of
+    12; stamps as instants) and ``meter`` (12 each; ``readings_stamped`` ``interval_end``,
+    as a meter's totals are); the sites' directory in ``HELIOTWIN_SITES_DIR``."""
+    tmp_path = tmp_path_factory.mktemp("import")
     sites = tmp_path / "sites"
     sites.mkdir()
-    site = json.loads((ROOT / "sim" / "data" / "sites" / "tehuantepec.json").read_text())
-    site.update(site_id="serf", name="SERF West strings", latitude_deg=39.7407,
-                longitude_deg=-105.1686, altitude_m=1794.0, timezone="America/Denver",
-                temp_air_c=10.0)
-    for array in ("tracker", "fixed"):
-        site["arrays"][array].update(modules_in_series=8, strings_in_parallel=1)
-    (sites / "serf.json").write_text(json.dumps(site))
+    base = json.loads((ROOT / "sim" / "data" / "sites" / "tehuantepec.json").read_text())
+    for site_id, modules, extra in (
+            ("serf", {"fixed": 8, "tracker": 12}, {}),
+            ("meter", {"fixed": 12, "tracker": 12}, {"readings_stamped": "interval_end"})):
+        site = {**base, "site_id": site_id, "name": f"{site_id} at Golden",
+                "latitude_deg": 39.7407, "longitude_deg": -105.1686, "altitude_m": 1794.0,
+                "timezone": "America/Denver", "temp_air_c": 10.0, **extra}
+        site["arrays"] = {a: {**base["arrays"][a], "modules_in_series": modules[a],
+                              "strings_in_parallel": 1} for a in ("tracker", "fixed")}
+        (sites / f"{site_id}.json").write_text(json.dumps(site))
     env = {"HELIOTWIN_SITES_DIR": str(sites)}
-    server = ServerProcess(f"sqlite:///{tmp_path / 'serf.sqlite'}", tmp_path / "server.log",
+    server = ServerProcess(f"sqlite:///{tmp_path / 'import.sqlite'}", tmp_path / "server.log",
                            extra_env=env).start()
     try:
-        token = server.token("serf")
-        args = ["readings", "import", str(LOGGERS / "serf_west_15min.csv"), "--site", "serf",
-                "--timezone", "Etc/GMT+7", "--url", server.base_url, "--token", token]
-        both = [*args, *[f"--column=fixed.{f}={c}" for f, c in SERF_WEST.items()],
-                "--column=tracker.voltage_v=dc_neg_voltage__776",
-                "--column=tracker.current_a=dc_neg_current__777"]
-        first = heliotwin_cli(*both, env=env)
-        assert first.returncode == 0, first.stderr
-        for array in ("fixed", "tracker"):
-            assert (f"posted {array} to {server.base_url}: 480 accepted, 0 duplicates, stored "
-                    "through 2022-01-07T06:46:00Z") in first.stdout
-        assert "every 900 s" in first.stdout and "readings_stamped" in first.stdout
-        # again, the token from the environment (kept out of ps): all duplicates
-        without_flag = [a for a in both if a not in ("--token", token)]
-        again = heliotwin_cli(*without_flag, "--json", env={**env, "HELIOTWIN_TOKEN": token})
-        assert again.returncode == 0, again.stderr
-        assert {a: v["duplicates"] for a, v in json.loads(again.stdout)["arrays"].items()} == {
-            "fixed": 480, "tracker": 480}
-        refused = heliotwin_cli(*args, "--array", "fixed", "--column=power_w=dc_power__772",
-                                env=env)
-        assert refused.returncode == 1
-        assert ("line 44: power_w 4739 W is over 2 × array 'fixed''s rating"
-                in refused.stderr), refused.stderr
-        r = httpx.get(f"{server.base_url}/api/v1/sites/serf/energy", params={
-            "start": "2022-01-02", "end": "2022-01-07", "interval": "day"}, timeout=60)
-        assert r.status_code == 200, r.text
-        ref = _serf_west()
-        t_s = ref.index.tz_localize("Etc/GMT+7").as_unit("s").asi8.astype(float)
-        for array, sign in (("fixed", "pos"), ("tracker", "neg")):
-            measured = sum(d["arrays"][array]["measured_wh"] for d in r.json()["rows"])
-            v = ref.filter(like=f"dc_{sign}_voltage").iloc[:, 0]
-            i = ref.filter(like=f"dc_{sign}_current").iloc[:, 0]
-            power = (v * i).to_numpy()
-            assert measured == pytest.approx(np.trapezoid(power, t_s) / 3600, rel=1e-12)
-        m = httpx.get(f"{server.base_url}/api/v1/sites/serf/measurements", params={
-            "array": "fixed", "start": "2022-01-02T15:01:00-07:00",
-            "end": "2022-01-02T15:02:00-07:00"}, timeout=60).json()
-        assert m["points"][0]["voltage_v"] == 223.79
-        assert m["points"][0]["poa_irradiance_w_m2"] == 526.2
+        yield server, env
     finally:
         server.stop()
 
+
+def test_the_command_posts_a_real_loggers_file_and_the_service_counts_its_energy(
+        served, heliotwin_cli) -> None:
+    """SERF West's two DC strings (15 min, a clock at UTC−7) in one run: the positive string
+    with its POA, module and air temperature into the fixed array, the negative one into
+    the tracker (site ``serf``). Every reading stored, again as duplicates, and each array's
+    energy over the five days the file's own trapezoid (the energy rule, no gap over 15
+    min). The night voltages (−0.002 V, a transducer's offset) had been refused. The
+    inverter's 6 kW DC power into one array is refused naming the file's first line past
+    its rating."""
+    server, env = served
+    token = server.token("serf")
+    args = ["readings", "import", str(LOGGERS / "serf_west_15min.csv"), "--site", "serf",
+            "--timezone", "Etc/GMT+7", "--url", server.base_url, "--token", token]
+    both = [*args, *[f"--column=fixed.{f}={c}" for f, c in SERF_WEST.items()],
+            "--column=tracker.voltage_v=dc_neg_voltage__776",
+            "--column=tracker.current_a=dc_neg_current__777"]
+    first = heliotwin_cli(*both, env=env)
+    assert first.returncode == 0, first.stderr
+    for array in ("fixed", "tracker"):
+        assert (f"posted {array} to {server.base_url}: 480 accepted, 0 duplicates, stored "
+                "through 2022-01-07T06:46:00Z") in first.stdout
+    assert "every 900 s" in first.stdout and "readings_stamped" in first.stdout
+    # again, the token from the environment (kept out of ps): all duplicates
+    without_flag = [a for a in both if a not in ("--token", token)]
+    again = heliotwin_cli(*without_flag, "--json", env={**env, "HELIOTWIN_TOKEN": token})
+    assert again.returncode == 0, again.stderr
+    assert {a: v["duplicates"] for a, v in json.loads(again.stdout)["arrays"].items()} == {
+        "fixed": 480, "tracker": 480}
+    refused = heliotwin_cli(*args, "--array", "fixed", "--column=power_w=dc_power__772",
+                            env=env)
+    assert refused.returncode == 1
+    assert ("line 44: power_w 4739 W is over 2 × array 'fixed''s rating"
+            in refused.stderr), refused.stderr
+    r = httpx.get(f"{server.base_url}/api/v1/sites/serf/energy", params={
+        "start": "2022-01-02", "end": "2022-01-07", "interval": "day"}, timeout=60)
+    assert r.status_code == 200, r.text
+    ref = _serf_west()
+    t_s = ref.index.tz_localize("Etc/GMT+7").as_unit("s").asi8.astype(float)
+    for array, sign in (("fixed", "pos"), ("tracker", "neg")):
+        measured = sum(d["arrays"][array]["measured_wh"] for d in r.json()["rows"])
+        v = ref.filter(like=f"dc_{sign}_voltage").iloc[:, 0]
+        i = ref.filter(like=f"dc_{sign}_current").iloc[:, 0]
+        power = (v * i).to_numpy()
+        assert measured == pytest.approx(np.trapezoid(power, t_s) / 3600, rel=1e-12)
+    m = httpx.get(f"{server.base_url}/api/v1/sites/serf/measurements", params={
+        "array": "fixed", "start": "2022-01-02T15:01:00-07:00",
+        "end": "2022-01-02T15:02:00-07:00"}, timeout=60).json()
+    assert m["points"][0]["voltage_v"] == 223.79
+    assert m["points"][0]["poa_irradiance_w_m2"] == 526.2
+
+
+
+def test_a_meters_total_is_posted_and_the_service_counts_the_meters_energy(
+        served, heliotwin_cli, tmp_path: Path) -> None:
+    """An inverter's running total (kWh to 1 Wh, every 15 min; made from SERF East's real
+    1-minute power, as :func:`_metered`) posted by the command to site ``meter``, whose
+    stamps end their intervals: the service's energy over the two days is the meter's own
+    rise between its first and last totals, and the day it read whole, 19 March, the
+    minutes' own energy. Posted to a site that takes its stamps as instants, the command
+    says what to set."""
+    server, env = served
+    total, _ = _metered(_serf_east_minutes())
+    path = tmp_path / "meter.csv"
+    path.write_text("Time;E_total [kWh]\n" + "".join(
+        f"{t:%Y-%m-%dT%H:%M:%SZ};{e / 1000:.3f}\n" for t, e in total.items()))
+    run = heliotwin_cli("readings", "import", str(path), "--site", "meter", "--array", "fixed",
+                        "--column", "energy_total_wh=E_total [kWh]", "--url", server.base_url,
+                        env={**env, "HELIOTWIN_TOKEN": server.token("meter")})
+    assert run.returncode == 0, run.stderr
+    assert "energy_total_wh ← 'E_total [kWh]' [kWh] (power_w: each interval's mean)" \
+        in run.stdout
+    assert f"{len(total) - 1} accepted" in run.stdout and "readings_stamped" not in run.stdout
+    r = httpx.get(f"{server.base_url}/api/v1/sites/meter/energy", params={
+        "start": "2022-03-18", "end": "2022-03-21", "interval": "day", "array": "fixed"},
+        timeout=60)
+    assert r.status_code == 200, r.text
+    days = {row["period_start"][:10]: row["arrays"]["fixed"]["measured_wh"]
+            for row in r.json()["rows"]}
+    rounded_wh = np.round(total.to_numpy() / 1000, 3) * 1000  # as the file says it
+    assert sum(days.values()) == pytest.approx(rounded_wh[-1] - rounded_wh[0], rel=1e-12)
+    minutes = _serf_east_minutes().clip(lower=0)
+    local = minutes.index.tz_convert("America/Denver")
+    whole = minutes[(local >= pd.Timestamp("2022-03-19", tz="America/Denver"))
+                    & (local < pd.Timestamp("2022-03-20", tz="America/Denver"))]
+    assert days["2022-03-19"] == pytest.approx(whole.sum() / 60, abs=1.0)  # its 1-Wh steps
+    instant = heliotwin_cli("readings", "import", str(path), "--site", "serf", "--array",
+                            "tracker", "--column", "energy_total_wh=E_total [kWh]", "--url",
+                            server.base_url, env={**env, "HELIOTWIN_TOKEN": server.token("serf")})
+    assert instant.returncode == 0, instant.stderr
+    assert ("note: the readings are means made from energy (energy_total_wh) and site serf "
+            "takes their stamps as instants (readings_stamped): set it to interval_end (a "
+            "meter's total ends each interval)") in instant.stdout
 
 def test_a_dry_run_says_what_it_would_post_and_a_column_needs_an_array(heliotwin_cli) -> None:
     path = str(LOGGERS / "nrel_RSF_II.csv")
