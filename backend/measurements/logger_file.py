@@ -474,9 +474,9 @@ def power_from_energy(times_utc: pd.DatetimeIndex, energy_wh: np.ndarray, kind: 
              "before over the time between them, the mean power of the interval its stamp "
              "ends"]
     if (back := np.flatnonzero(rise_wh < 0)).size:
-        notes.append(f"{column!r} goes back on {back.size} rows (a reset or a new meter; "
-                     f"the first at line {lines[later[back[0]]]}): their intervals are not "
-                     "sent")
+        notes.append(f"{column!r} goes back on {back.size} rows (a reset — a day's total at "
+                     f"midnight — or a new meter; the first at line {lines[later[back[0]]]}): "
+                     "their intervals are not sent")
     if (over := np.flatnonzero(gap & (rise_wh >= 0))).size:
         notes.append(f"{column!r} spans a gap {over.size} × (a step over {METER_MAX_STEP:g} × "
                      f"its {spacing_s:g} s spacing; the first ending at line "

@@ -230,8 +230,8 @@ def test_a_meters_total_and_a_portals_interval_energy_are_sent_as_each_intervals
     assert np.isnan(broken.values["power_w"].iloc[swap])
     lost_wh = 1000 * (round(new_kwh[swap + 15], 3) - round(new_kwh[swap + 6], 3))  # over the gap
     notes = " ".join(broken.notes)  # the file's line of row k is k + 2
-    assert (f"goes back on 1 rows (a reset or a new meter; the first at line {swap + 2}): "
-            "their intervals are not sent") in notes
+    assert (f"goes back on 1 rows (a reset — a day's total at midnight — or a new meter; the "
+            f"first at line {swap + 2}): their intervals are not sent") in notes
     assert (f"'Zählerstand [kWh]' spans a gap 1 × (a step over 1.5 × its 900 s spacing; the "
             f"first ending at line {swap + 9}): the {lost_wh:.6g} Wh it rose over them are not "
             "sent as power") in notes
