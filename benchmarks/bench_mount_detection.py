@@ -23,9 +23,9 @@ power), then :func:`backend.diagnosis.faults.features_by_day` and
 :func:`~backend.diagnosis.faults.faults_over_days`. A window of N days is a detection when
 ``azimuth_offset`` is named with confidence ≥ 0.5 (the alerts' threshold) on any of its
 days; windows do not overlap (30 windows of 1 day per run, 10 of 3, 4 of 7, 1 of 30).
-Without the fixed array the path cannot name a yaw at all, by construction: the service
-computes no shape fault on a day whose sky is the clear sky (``_day_payload`` in
-``backend/diagnosis/service.py``), and even called directly
+Without the fixed array the path cannot name a yaw at all, by construction: neither the
+service nor this path computes a shape fault on a day whose sky is the clear sky
+(:func:`backend.diagnosis.faults.judged_whole`), and even called directly
 :func:`~backend.diagnosis.faults.day_features` fits only minutes with a measured sky
 (``valid``), of which the clear-sky twin has none. That row is stated, not simulated.
 

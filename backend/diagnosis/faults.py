@@ -56,7 +56,7 @@ one day, under the measured sky (docs/diagnosis.md, "pvanalytics").
 from __future__ import annotations
 
 import datetime as dt
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -505,36 +505,138 @@ def day_features(site: Site, day: pd.DataFrame, measured_w: np.ndarray,
     return out
 
 
+class DayExpectedWh(NamedTuple):
+    """A day's expected energies [Wh] (:mod:`sim.energy`'s rule on the twin's minutes): the
+    tracker's under both skies and the fixed array's over the whole day, and the same over the
+    minutes each array's readings cover (``matched``: a dropout is no loss)."""
+
+    tracker: float
+    tracker_alt: float
+    fixed: float
+    tracker_matched: float
+    tracker_alt_matched: float
+    fixed_matched: float
+
+
+def day_expected_wh(e: pd.DataFrame, day_s: tuple[int, int], tracker_w: np.ndarray,
+                    fixed_w: np.ndarray) -> DayExpectedWh:
+    """:class:`DayExpectedWh` of the day ``day_s`` (``[start, end)`` [Unix s]) from ``e``'s
+    minutes (:func:`sim.sky_sensor.weather_aware_twin`; with the next day's first minute, the
+    last one reaches midnight) and the arrays' readings on them [W], NaN = none."""
+    ts = e.index.as_unit("s").asi8
+
+    def wh(power_w: np.ndarray) -> float:
+        return energy_wh(ts, power_w, 60, *day_s)
+
+    a, b = e["tracker_power_w"].to_numpy(), e["tracker_power_alt_w"].to_numpy()
+    f = e["fixed_power_w"].to_numpy()
+    tr, fx = np.isfinite(tracker_w), np.isfinite(fixed_w)
+    return DayExpectedWh(wh(a), wh(b), wh(f), wh(np.where(tr, a, np.nan)),
+                         wh(np.where(tr, b, np.nan)), wh(np.where(fx, f, np.nan)))
+
+
+def judged_whole(day: pd.DataFrame, elapsed_min: int | None = None, cut: bool = False
+                 ) -> bool:
+    """Whether a day (its minutes of :func:`sim.sky_sensor.weather_aware_twin`) is judged
+    whole — shape fits, energies against their bands, voltage ratios: it is over
+    (``elapsed_min`` None), all of it was asked for (not ``cut``) and its sky was measured
+    (the clear-sky fallback's expectation is no measure of the arrays)."""
+    return elapsed_min is None and not cut and sky_sensor.main_sky_source(day) != "clear_sky"
+
+
+def judged_features(site: Site, e: pd.DataFrame, day_s: tuple[int, int],
+                    tracker_w: np.ndarray, fixed_w: np.ndarray,
+                    voltages_v: dict[str, np.ndarray], measured_wh: dict[str, float | None],
+                    expected: DayExpectedWh, first_min: int = 0,
+                    spacing_s: float | None = None, elapsed_min: int | None = None,
+                    cut: bool = False) -> dict[str, Any]:
+    """One day's ``features`` for :func:`faults_over_days`, the service's and
+    :func:`features_by_day`'s one rule.
+
+    ``e``, ``tracker_w``, ``fixed_w`` and ``voltages_v`` (keyed ``tracker``/``fixed`` [V]):
+    the day ``day_s``'s minutes as :func:`day_expected_wh` takes them, NaN = no reading;
+    ``measured_wh``: each array's measured energy (None without readings); ``expected``:
+    :func:`day_expected_wh`'s; ``first_min``: the day's minute of the tracker logger's first
+    reading ever (no dropout before it); ``spacing_s``: its readings' spacing
+    (:func:`day_features`); ``elapsed_min``, ``cut``: as :func:`judged_whole` takes them. A
+    day judged whole gets the shape fits, the tracker's energy against its band (``energy``),
+    under a sensor's sky the fixed array's (``sensor_sky``, ``fixed_energy``: from its own
+    power it would be judged against itself) and both arrays' :func:`electrical_ratios`; any
+    other day its missing minutes. Every day under a measured sky: ``beam_unseen_pct``."""
+    ts = e.index.as_unit("s").asi8
+    day = ts < day_s[1]
+    e_day, tr_day = e[day], tracker_w[day]
+    source = sky_sensor.main_sky_source(e_day)
+    whole = judged_whole(e_day, elapsed_min, cut)
+    features: dict[str, Any] = day_features(site, e_day, tr_day, first_min, spacing_s) \
+        if whole else {"missing_daylight_min": missing_daylight_min(e_day, tr_day, elapsed_min,
+                                                                    first_min)}
+    if elapsed_min is None and not cut and (unusable := sky_unusable(e_day)):
+        features["sky_unusable"] = unusable
+    measured_tr, measured_fx = measured_wh["tracker"], measured_wh["fixed"]
+    if whole and measured_tr is not None:
+        energy = energy_features(measured_tr, expected.tracker_matched,
+                                 expected.tracker_alt_matched, expected.tracker,
+                                 band_uncertainty(e_day))
+        if energy is not None:
+            features["energy"] = energy
+    # the fixed array judged where the sky is a sensor's, not its own (_underperformance)
+    if whole and source in ("sensor_poa", "sensor_ghi"):
+        features["sensor_sky"] = True
+        energy = None if measured_fx is None else energy_features(
+            measured_fx, expected.fixed_matched, expected.fixed_matched, expected.fixed,
+            sky_uncertainty(e_day))
+        if energy is not None:
+            features["fixed_energy"] = energy
+    # where a loss lies, from the arrays' voltage readings (an underperformance's detail)
+    features["electrical"] = {
+        name: electrical_ratios(e_day[f"{name}_power_w"].to_numpy(),
+                                e_day[f"{name}_voltage_v"].to_numpy(), m_w[day],
+                                voltages_v[name][day], e_day["valid"].to_numpy(bool))
+        if whole else None for name, m_w in (("tracker", tracker_w), ("fixed", fixed_w))}
+    # the expectation's part whose beam the sky instrument did not see (behind or grazing the
+    # fixed plane, low for a horizontal pyranometer, a gap in its readings): a guess there,
+    # which a user reading an underperformance should know of (a clear-sky day has no
+    # instrument at all: none); a day not over, of its minutes so far (the rest has no
+    # reading yet: read as unseen, a morning judged at 10:00 was 54 % unseen)
+    power = e["tracker_power_w"].to_numpy()
+    so_far = np.arange(ts.size) < (ts.size if elapsed_min is None else elapsed_min)
+    unseen_wh = energy_wh(ts, np.where(so_far & ~e["beam_seen"].to_numpy(bool), power, 0.0),
+                          60, *day_s)
+    so_far_wh = energy_wh(ts, np.where(so_far, power, 0.0), 60, *day_s)
+    if source != "clear_sky" and so_far_wh > 0:
+        features["beam_unseen_pct"] = round(100 * unseen_wh / so_far_wh, 1)
+    return features
+
+
 def features_by_day(site: Site, first_day: pd.Timestamp, e: pd.DataFrame,
-                    tracker_power_w: np.ndarray, spacing_s: float | None = None
-                    ) -> list[dict[str, Any]]:
+                    tracker_power_w: np.ndarray, spacing_s: float | None = None, *,
+                    fixed_power_w: np.ndarray | None = None,
+                    tracker_voltage_v: np.ndarray | None = None,
+                    fixed_voltage_v: np.ndarray | None = None) -> list[dict[str, Any]]:
     """``[{"date", "features"}]`` of consecutive days of 1440 minutes from ``first_day``
     (local midnight; ``e`` from :func:`sim.sky_sensor.weather_aware_twin` on the same
-    minutes, ``tracker_power_w`` the readings [W]) — the input of :func:`faults_over_days`
-    for minute series that need no calendar (the service cuts local days by their edges).
-    Energies by :mod:`sim.energy`'s rule on the minutes, as the service's; the
-    underperformance is judged on days with a measured sky only; ``spacing_s``: the
-    tracker's readings' spacing (:func:`day_features`)."""
+    minutes) — the input of :func:`faults_over_days` for minute series that need no calendar
+    (the service cuts local days by their edges), by the service's rule
+    (:func:`judged_features`), each measured energy the minutes' by :mod:`sim.energy`'s rule.
+    The arrays' readings on those minutes: ``tracker_power_w`` [W], ``fixed_power_w`` [W]
+    (judged under a sensor's sky), ``tracker_voltage_v``/``fixed_voltage_v`` [V]; None: no
+    readings. ``spacing_s``: the tracker's readings' spacing (:func:`day_features`)."""
+    none = np.full(len(e), np.nan)
+    fixed_w = none if fixed_power_w is None else fixed_power_w
+    voltages_v = {"tracker": none if tracker_voltage_v is None else tracker_voltage_v,
+                  "fixed": none if fixed_voltage_v is None else fixed_voltage_v}
     out = []
     for k in range(len(e) // 1440):
         sl = slice(k * 1440, (k + 1) * 1440)
-        day, m = e.iloc[sl], tracker_power_w[sl]
-        f = day_features(site, day, m, spacing_s=spacing_s)
-        if unusable := sky_unusable(day):
-            f["sky_unusable"] = unusable
-        if day["measured_sky"].to_numpy(bool).any() and np.isfinite(m).any():
-            ts = day.index.as_unit("s").asi8
-            cover = np.isfinite(m)
-
-            def wh(p: np.ndarray, ts: np.ndarray = ts) -> float:
-                return energy_wh(ts, p, 60.0, ts[0], ts[0] + 86400)
-
-            a, b = day["tracker_power_w"].to_numpy(), day["tracker_power_alt_w"].to_numpy()
-            energy = energy_features(wh(m), wh(np.where(cover, a, np.nan)),
-                                     wh(np.where(cover, b, np.nan)), wh(a),
-                                     band_uncertainty(day))
-            if energy is not None:
-                f["energy"] = energy
+        day, tr, fx = e.iloc[sl], tracker_power_w[sl], fixed_w[sl]
+        ts = day.index.as_unit("s").asi8
+        day_s = (int(ts[0]), int(ts[0]) + 86400)
+        measured = {name: energy_wh(ts, p, 60, *day_s) if np.isfinite(p).any() else None
+                    for name, p in (("tracker", tr), ("fixed", fx))}
+        f = judged_features(site, day, day_s, tr, fx,
+                            {name: v[sl] for name, v in voltages_v.items()}, measured,
+                            day_expected_wh(day, day_s, tr, fx), spacing_s=spacing_s)
         out.append({"date": (first_day + pd.Timedelta(days=k)).date().isoformat(),
                     "features": f})
     return out
@@ -843,7 +945,7 @@ def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
     magnitude the shortfall from the expected energy [%], ``shortfall_wh`` in Wh; ``since``
     the first day of its run of such days; confidence 0.5 at the lower edge, rising to 1 one
     lower half-width of the band (expected − lower edge) under it. The fixed array is judged
-    only where the sky comes from a sensor (service ``_day_payload``): from its own power
+    only where the sky comes from a sensor (:func:`judged_features`): from its own power
     it would be judged against itself. The tracker's detail says how much of the
     expectation rests on a beam the sky instrument did not see
     (``features["beam_unseen_pct"]``, the service's ``sky.beam_unseen_expected_pct``): on a

@@ -6,7 +6,7 @@ on a minute grid, the sky behind the loggers' irradiance sensors or else the fix
 array's power, and both arrays' expected power under it
 (:func:`sim.sky_sensor.weather_aware_twin`), then energy,
 performance ratio, gains and the day's fault features
-(:func:`backend.diagnosis.faults.day_features`). Each day's result is cached in
+(:func:`backend.diagnosis.faults.judged_features`). Each day's result is cached in
 ``diagnosis_days`` (written through the one writer) and deleted by the writer when
 readings of that day arrive, and ignored when it was computed by another version of this
 code (:data:`CACHE_VERSION`) or under another config of the site (:func:`site_key`); the
@@ -45,14 +45,11 @@ from sqlalchemy import Connection, delete, func, insert, select
 from backend.diagnosis.faults import (
     band_uncertainty,
     band_wh,
-    day_features,
-    electrical_ratios,
-    energy_features,
+    day_expected_wh,
     faults_over_days,
-    missing_daylight_min,
+    judged_features,
+    judged_whole,
     shape_untested,
-    sky_uncertainty,
-    sky_unusable,
 )
 from backend.diagnosis.mount import mount_faults, read_observations
 from backend.diagnosis.weather_twin import STAMP_LOOKBACK_S, site_minutes, sky_source
@@ -172,7 +169,8 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
                  measured_wh: dict[str, float | None], voltages: dict[str, np.ndarray],
                  elapsed_min: int | None = None, first_s: int | None = None,
                  cut: bool = False, spacing_s: float | None = None) -> dict[str, Any]:
-    """One day's answer (without faults) and its fault features.
+    """One day's answer (without faults) and its fault features
+    (:func:`backend.diagnosis.faults.judged_features`).
 
     ``day_s``: the day's ``[start, end)`` [s since the epoch] (``cut``: the range asked
     for covers only part of the day: it is ``partial`` and gets no shape fits, which
@@ -193,6 +191,7 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     t0, t1 = day_s
     ts = e.index.as_unit("s").asi8
     day = ts < t1
+    e_day = e[day]
     daylight = sky_sensor.measurable(e)[day]  # the minutes a reading can give a sky
     if elapsed_min is not None:  # the minutes still to come are not missing readings
         daylight[elapsed_min:] = False
@@ -200,66 +199,36 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     share = float(valid[daylight].mean()) if daylight.any() else 0.0
     # under sky_sensor.MIN_SENSOR_SHARE of the daylight measured, the day's sky is the clear
     # sky's own GHI/DNI/DHI: the expectation is the clear-sky twin's
-    source, sensor = sky_source(e[day])
+    source, sensor = sky_source(e_day)
     poa, clear = e["poa_global"].to_numpy()[day], e["poa_clear"].to_numpy()[day]
     k_t = float(poa[daylight].sum() / clear[daylight].sum()) if daylight.any() else None
-
-    def wh(power_w: np.ndarray) -> float:
-        return energy_wh(ts, power_w, 60, t0, t1)
-
-    exp_a, exp_b = wh(e["tracker_power_w"].to_numpy()), wh(e["tracker_power_alt_w"].to_numpy())
-    exp_fixed = wh(e["fixed_power_w"].to_numpy())
-    matched = wh(np.where(np.isfinite(tracker_w), e["tracker_power_w"].to_numpy(), np.nan))
-    matched_b = wh(np.where(np.isfinite(tracker_w), e["tracker_power_alt_w"].to_numpy(),
-                            np.nan))
-    matched_f = wh(np.where(np.isfinite(fixed_w), e["fixed_power_w"].to_numpy(), np.nan))
+    exp = day_expected_wh(e, day_s, tracker_w, fixed_w)
+    exp_a, exp_b, exp_fixed = exp.tracker, exp.tracker_alt, exp.fixed
+    matched, matched_f = exp.tracker_matched, exp.fixed_matched
     measured_tr, measured_fx = measured_wh["tracker"], measured_wh["fixed"]
-    both = np.isfinite(tracker_w) & np.isfinite(fixed_w)  # the minutes both loggers cover
     # the logger's history: its minutes before the first reading are not missing
     first_min = 1440 if first_s is None else max(0, -(-(first_s - t0) // 60))
-    # a shape fault needs a whole day with a measured sky; a dropout only the minutes so far
-    e_day, tr_day = e[day], tracker_w[day]
-    whole = elapsed_min is None and source != "clear_sky" and not cut
-    features: dict[str, Any] = day_features(info.site, e_day, tr_day, first_min,
-                                               spacing_s) if whole \
-        else {"missing_daylight_min": missing_daylight_min(e_day, tr_day, elapsed_min,
-                                                           first_min)}
-    if elapsed_min is None and not cut and (unusable := sky_unusable(e_day)):
-        features["sky_unusable"] = unusable
-    u = band_uncertainty(e_day)
-    if whole and measured_tr is not None:
-        energy = energy_features(measured_tr, matched, matched_b, exp_a, u)
-        if energy is not None:
-            features["energy"] = energy
-    # the fixed array judged where the sky is a sensor's, not its own (faults._underperformance)
-    if whole and source == "sensor":
-        features["sensor_sky"] = True
-        energy = None if measured_fx is None else energy_features(
-            measured_fx, matched_f, matched_f, exp_fixed, sky_uncertainty(e_day))
-        if energy is not None:
-            features["fixed_energy"] = energy
-    # where a loss lies, from the arrays' voltage readings (an underperformance's detail)
-    ratios = {name: electrical_ratios(e_day[f"{name}_power_w"].to_numpy(),
-                                      e_day[f"{name}_voltage_v"].to_numpy(), m_w[day],
-                                      voltages[name][day], e_day["valid"].to_numpy(bool))
-              for name, m_w in (("tracker", tracker_w), ("fixed", fixed_w))} \
-        if whole else {"tracker": None, "fixed": None}
-    features["electrical"] = ratios
+    features = judged_features(info.site, e, day_s, tracker_w, fixed_w, voltages, measured_wh,
+                               exp, first_min, spacing_s, elapsed_min, cut)
+    ratios = features["electrical"]
+    unseen_pct = features.get("beam_unseen_pct")
     # IEC 61724-1's performance ratio of the fixed array (its final yield over the reference
     # yield of the POA sensor in its plane), model-free, on the minutes both read validly
     seen = e_day["valid"].to_numpy(bool) & (e_day["sky_source"].to_numpy() == "sensor_poa") \
         & np.isfinite(fixed_w[day])
     poa_sum = float(e_day["poa_global"].to_numpy()[seen].sum())  # W m⁻² × minutes
+    whole = judged_whole(e_day, elapsed_min, cut)
     iec_pr = None if not whole or seen.sum() < 60 or poa_sum <= 0 else float(
         fixed_w[day][seen].sum() / (info.site.arrays["fixed"].stc_power_w * poa_sum / 1000.0))
-    low, high = band_wh(exp_a, exp_b, u)
+    low, high = band_wh(exp_a, exp_b, band_uncertainty(e_day))
     # readings that miss part of the day's expected energy: its gain is not the day's (a
     # day without any reading has no measured gain at all: not partial, no data)
     short = any(m is not None and x > 0 and got < PARTIAL_COVERAGE * x
                 for m, got, x in ((measured_tr, matched, exp_a), (measured_fx, matched_f,
                                                                   exp_fixed)))
-    shared = [wh(np.where(both, e[c].to_numpy(), np.nan)) for c in ("tracker_power_w",
-                                                                    "fixed_power_w")]
+    both = np.isfinite(tracker_w) & np.isfinite(fixed_w)  # the minutes both loggers cover
+    shared = [energy_wh(ts, np.where(both, e[c].to_numpy(), np.nan), 60, t0, t1)
+              for c in ("tracker_power_w", "fixed_power_w")]
     ratings_w = info.site.gain_ratings_w()
     gain_measured = measured_gain_pct(measured_tr, measured_fx,
                                       same_minutes([matched, matched_f], shared), ratings_w)
@@ -270,19 +239,6 @@ def _day_payload(info: SiteInfo, date: str, day_s: tuple[int, int], e: pd.DataFr
     gain_expected = gain_pct(shared[0], shared[1], ratings_w) \
         if gain_measured is not None and both.any() \
         else gain_pct(exp_a, exp_fixed, ratings_w)
-    # the expectation's part whose beam the sky instrument did not see (behind or grazing the
-    # fixed plane, low for a horizontal pyranometer, a gap in its readings): a guess there,
-    # which a user reading an underperformance should know of (a clear-sky day has no
-    # instrument at all: null); a day not over, of its minutes so far (the rest has no
-    # reading yet: read as unseen, a morning judged at 10:00 was 54 % unseen)
-    power = e["tracker_power_w"].to_numpy()
-    so_far = np.arange(len(ts)) < (len(ts) if elapsed_min is None else elapsed_min)
-    unseen_wh = wh(np.where(so_far & ~e["beam_seen"].to_numpy(bool), power, 0.0))
-    so_far_wh = wh(np.where(so_far, power, 0.0))
-    unseen_pct = None if source == "clear_sky" or so_far_wh <= 0 \
-        else round(100 * unseen_wh / so_far_wh, 1)
-    if unseen_pct is not None:  # an underperformance's detail says it (faults._underperformance)
-        features["beam_unseen_pct"] = unseen_pct
     return {
         "date": date,
         "complete": elapsed_min is None,

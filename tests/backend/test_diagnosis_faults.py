@@ -429,3 +429,25 @@ def test_a_runs_pose_is_its_best_fitting_days() -> None:
                                          "fit: 2026-12-01, confidence 0.90)"), found[1]
     assert found[1]["magnitude"] == 52.0
     assert found[2]["detail"] == "stuck at azimuth 83°, elevation 52°"
+
+
+def test_the_library_path_judges_the_fixed_array_under_a_sensors_sky() -> None:
+    """Under a POA sensor's sky the fixed array is judged against its own band
+    (``fixed_underperformance``, faults.judged_features) on the library path as in the
+    service's: its readings 40 % low from the third of four days (seed 31) read 38.0 and
+    38.3 % short (the healthy days' ratios 1.02 and 1.03 of the expectation); without its
+    readings nothing is said of it."""
+    d = logger_days(SITE, FIRST, 4, SEED)
+    fixed = d.fixed_power_w * np.where(np.arange(d.fixed_power_w.size) >= 2 * 1440, 0.6, 1.0)
+    e = sky_sensor.weather_aware_twin(SITE, FIRST, FIRST + pd.Timedelta(days=4), fixed,
+                                      sensors=d.sensors("fixed_poa_w_m2"))
+    days = features_by_day(SITE, FIRST, e, d.tracker_power_w, fixed_power_w=fixed)
+    assert all(day["features"]["sensor_sky"] for day in days)
+    found = [[f for f in day if f["kind"] == "fixed_underperformance"]
+             for day in faults_over_days(days)]
+    assert found[:2] == [[], []]
+    for (f,) in found[2:]:
+        assert f["array"] == "fixed" and f["since"] == days[2]["date"]
+        assert f["magnitude"] == pytest.approx(40.0, abs=2.5), f
+    unjudged = faults_over_days(features_by_day(SITE, FIRST, e, d.tracker_power_w))
+    assert not any(f["kind"] == "fixed_underperformance" for day in unjudged for f in day)
