@@ -11,6 +11,7 @@ duplicates (one reading per array and second), so an import can simply be run ag
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gzip
 import json
 import sys
@@ -65,6 +66,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                                       "year")
     i.add_argument("--date-order", choices=("mdy", "dmy"),
                    help="for slash dates the file cannot tell (every day ≤ 12)")
+    i.add_argument("--sensors", type=Path, metavar="FILE",
+                   help="a weather station's own file (POA, GHI, air and module temperature, "
+                        "wind) whose values are joined to the readings by time")
+    i.add_argument("--sensors-column", action="append", default=[], metavar="FIELD=NAME[:UNIT]",
+                   help="map a field of the station's file (poa_irradiance_w_m2, ghi_w_m2, "
+                        "temp_air_c, wind_speed_m_s, temp_module_c) to its column; repeat per "
+                        "field. A column named as a field maps itself")
+    i.add_argument("--sensors-array", metavar="ARRAY",
+                   help="the array whose readings carry the station's values (default: "
+                        "fixed, whose plane a POA sensor shares, or the only array imported)")
+    i.add_argument("--sensors-timezone", metavar="ZONE",
+                   help="the station's clock, for times without a UTC offset (default: "
+                        "--timezone)")
     i.add_argument("--url", default="http://127.0.0.1:8000", help="service base URL")
     add_token_argument(i, "required unless --dry-run")
     i.add_argument("--dry-run", action="store_true",
@@ -118,6 +132,27 @@ def run_import(args: argparse.Namespace) -> int:
                                             fields_by_name=len(plans) == 1)
         except ValueError as exc:
             fail(f"{args.file.name}: {exc}" + (f" (array {array})" if len(plans) > 1 else ""))
+    with contextlib.ExitStack() as stack:
+        client = None if args.dry_run else stack.enter_context(
+            httpx.Client(base_url=args.url, timeout=60.0))
+        # the site first: an unknown one is refused before anything is read further, and the
+        # station's values are joined as it takes its readings' stamps
+        site = None if client is None else _site(client, args.site, list(files))
+        summary = _summary(args, files, _join_sensors(args, files, site))
+        if client is not None and site is not None:
+            summary["notes"].extend(_stamp_note(site, summary))
+            for array, lf in files.items():
+                summary["arrays"][array].update(
+                    post_readings(client, args.site, array, args.token, lf))
+            summary["url"] = args.url
+    _print(summary, args.json, args.dry_run)
+    return 0
+
+
+def _summary(args: argparse.Namespace, files: dict[str, LoggerFile],
+             sensors: dict[str, Any] | None) -> dict[str, Any]:
+    """What the import read: per array its readings, their times, columns and the reading of
+    the highest power; the station joined (``sensors``); the notes of both."""
     first = next(iter(files.values()))
     notes = list(dict.fromkeys(n for lf in files.values() for n in lf.notes))
     summary: dict[str, Any] = {
@@ -138,16 +173,53 @@ def run_import(args: argparse.Namespace) -> int:
             line = int(lf.lines[(~lf.sendable).nonzero()[0][0]])
             notes.append(f"{array}: {len(lf.lines) - rows.size} rows without power or voltage "
                          f"and current (the first at line {line}) are not sent")
-    if not args.dry_run:
-        with httpx.Client(base_url=args.url, timeout=60.0) as client:
-            site = _site(client, args.site, list(files))
-            notes.extend(_stamp_note(site, summary))
-            for array, lf in files.items():
-                summary["arrays"][array].update(
-                    post_readings(client, args.site, array, args.token, lf))
-        summary["url"] = args.url
-    _print(summary, args.json, args.dry_run)
-    return 0
+    if sensors is not None:
+        summary["sensors"] = sensors
+    return summary
+
+
+def _join_sensors(args: argparse.Namespace, files: dict[str, LoggerFile],
+                  site: dict[str, Any] | None) -> dict[str, Any] | None:
+    """Read ``--sensors`` (a weather station's file) and join its values to one array's
+    readings (:func:`backend.measurements.logger_file.join_station`), as the site takes its
+    readings' stamps (``site`` None, a dry run: at the stamps, and a note says so); what was
+    joined, for the summary. None without ``--sensors``."""
+    from backend.measurements.logger_file import join_station, read_logger_file
+
+    if args.sensors is None:
+        if args.sensors_column or args.sensors_array:
+            fail("--sensors: --sensors-column and --sensors-array need the station's file")
+        return None
+    if not args.sensors.is_file():
+        fail(f"--sensors: {args.sensors} is not a file")
+    array = args.sensors_array or ("fixed" if "fixed" in files else
+                                   next(iter(files)) if len(files) == 1 else None)
+    if array not in files:
+        fail(f"--sensors-array: name the array whose readings carry the station's values, one "
+             f"of {', '.join(files)}" + (f" (not {array!r})" if array else ""))
+    columns = {}
+    for spec in args.sensors_column:
+        fld, eq, name = spec.partition("=")
+        if not eq or not fld.strip() or not name.strip():
+            fail(f"--sensors-column: {spec!r} is not FIELD=NAME[:UNIT] (e.g. "
+                 "poa_irradiance_w_m2=POA_Avg)")
+        columns[fld.strip()] = name.strip()
+    stamped = "instant" if site is None else site.get("readings_stamped", "instant")
+    try:
+        station = read_logger_file(args.sensors, columns, args.sensors_timezone or args.timezone,
+                                   date_order=args.date_order, station=True)
+        notes = join_station(files[array], station, stamped, args.sensors.name)
+    except ValueError as exc:
+        fail(f"{args.sensors.name}: {exc}")
+    if site is None and stamped == "instant":
+        notes.append("a dry run does not read the site: the station's values were taken at the "
+                     "readings' stamps; posted to a site whose readings are interval means "
+                     "(readings_stamped), each reading takes the station's mean over its "
+                     "interval")
+    files[array].notes.extend(notes)
+    return {"file": str(args.sensors), "array": array, "layout": station.layout,
+            "rows": len(station.lines),
+            "columns": {k: {"column": c, "unit": u} for k, (c, u) in station.columns.items()}}
 
 
 def _peak(lf: LoggerFile, array: str) -> dict[str, Any]:
@@ -298,6 +370,11 @@ def _print(summary: dict[str, Any], as_json: bool, dry_run: bool) -> None:
             made = " (power_w: each interval's mean)" if fld == a["power_from"] else ""
             print(f"    {fld} ← {c['column']!r} [{c['unit']}]{made}")
         print(f"    its highest power as sent: {json.dumps(a['peak_reading'])}")
+    if sensors := summary.get("sensors"):
+        print(f"  sensors: {Path(sensors['file']).name} ({sensors['layout']}), {sensors['rows']} "
+              f"rows, beside {sensors['array']}'s readings")
+        for fld, c in sensors["columns"].items():
+            print(f"    {fld} ← {c['column']!r} [{c['unit']}]")
     for note in summary["notes"]:
         print(f"note: {note}")
     if dry_run:

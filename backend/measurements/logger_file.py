@@ -28,6 +28,10 @@ takes readings named and scaled its own way (``backend.measurements.fields``: ``
   leave that field out of the reading; a row left without power or voltage and current is
   not sent (counted, with its first line). Any other text is refused naming line and column.
 
+A weather station's own file (its POA, GHI, temperatures, wind) is read the same way with
+``station=True`` and its values joined to an array logger's readings by time
+(:func:`join_station`): a reading carries its array's power and the sensors beside it.
+
 The stamps are sent as they are: what they mark (an instant, or the end of the interval
 a mean covers) is the site's ``readings_stamped``, one rule for every logger
 (:func:`sim.energy.interval_middles`).
@@ -56,6 +60,10 @@ from sim.sky import UTC_OFFSET_AT_END, clock_times_to_utc, weather_text
 ENERGY_FIELDS = ("energy_wh", "energy_total_wh")
 #: The fields a file's columns may be mapped to: the electrical ones, the sensors, energy.
 FIELDS = ("power_w", "voltage_v", "current_a", *SENSOR_NAMES, *ENERGY_FIELDS)
+#: The fields a weather station's file gives (``station=True``): the sky and the air, and a
+#: module's back-of-module temperature.
+STATION_FIELDS = ("poa_irradiance_w_m2", "ghi_w_m2", "temp_air_c", "wind_speed_m_s",
+                  "temp_module_c")
 #: A meter's step longer than this many times the file's spacing spans a gap: its energy is
 #: not spread as a power over it (the service's gap rule would not bridge it either).
 METER_MAX_STEP = 1.5
@@ -348,15 +356,17 @@ def _pick_date_order(tried: dict[str, pd.Series], text: pd.Series, where: Any,
 
 def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None = None,
                      timezone: str | None = None, time_column: str | None = None,
-                     date_order: str | None = None, fields_by_name: bool = True
-                     ) -> LoggerFile:
+                     date_order: str | None = None, fields_by_name: bool = True,
+                     station: bool = False) -> LoggerFile:
     """Read a logger's export (see the module). ``columns``: field → ``"NAME"`` or
     ``"NAME:UNIT"`` (the file's column; its unit when the file does not say it or says it
     otherwise). ``time_column``: the column of the times (default: TOA5's ``TIMESTAMP``,
     else the first column whose first cell reads as a time). ``date_order``: ``"mdy"`` or
     ``"dmy"`` for slash dates the file cannot tell. ``fields_by_name``: a column named as a
-    field maps to it (not when the file holds several arrays' readings). Errors are
-    :class:`ValueError`s naming the column, the line and what to do."""
+    field maps to it (not when the file holds several arrays' readings). ``station``: a
+    weather station's file, of :data:`STATION_FIELDS` only and no power (every row kept;
+    :func:`join_station`). Errors are :class:`ValueError`s naming the column, the line and
+    what to do."""
     if date_order is not None and date_order not in DATE_ORDERS:
         raise ValueError(f"date_order must be mdy or dmy; got {date_order!r}")
     raw = source if isinstance(source, bytes) else Path(source).read_bytes()
@@ -385,17 +395,23 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
     if decimal_comma:
         layout = layout[:-1] + ", decimal comma)"
 
+    allowed = STATION_FIELDS if station else FIELDS
     mapping = dict(columns or {})
     for i, n in enumerate(names if fields_by_name else []):  # a column named as a field
-        if n.lower() in FIELDS and n.lower() not in mapping and i not in blank:
+        if n.lower() in allowed and n.lower() not in mapping and i not in blank:
             mapping[n.lower()] = n
     if "power_w" in mapping:  # energy columns named as fields beside a power column: not needed
         mapping = {f: c for f, c in mapping.items()
                    if f not in ENERGY_FIELDS or f in (columns or {})}
-    unknown = [f for f in mapping if f not in FIELDS]
+    unknown = [f for f in mapping if f not in allowed]
     if unknown:
-        raise ValueError(f"column: {unknown[0]!r} is not a field; the fields are "
-                         f"{', '.join(FIELDS)}")
+        raise ValueError(f"column: {unknown[0]!r} is not a field"
+                         + (" of a weather station" if station else "")
+                         + f"; the fields are {', '.join(allowed)}")
+    if station and not mapping:
+        raise ValueError("column: map a weather station's fields to the file's columns ("
+                         + ", ".join(allowed) + "); its columns are "
+                         + ", ".join(repr(label[i]) for i in range(width)))
     values = pd.DataFrame(index=frame.index)
     used: dict[str, tuple[str, str]] = {}
     unitless = []
@@ -429,6 +445,8 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
         values["power_w"], made = power_from_energy(times, values.pop(power_from).to_numpy(),
                                                     power_from, used[power_from][0], lines)
         notes.extend(made)
+    if station:
+        return LoggerFile(layout, when_label, times, values, lines, used, notes)
     if "power_w" not in values and not {"voltage_v", "current_a"} <= set(values):
         raise ValueError("column: map power_w (or energy_wh, energy_total_wh), or voltage_v "
                          "and current_a, to the file's columns (--column power_w=NAME[:UNIT]); "
@@ -437,6 +455,62 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
     if ("voltage_v" in values) != ("current_a" in values):
         raise ValueError("column: voltage_v and current_a go together; map both or neither")
     return LoggerFile(layout, when_label, times, values, lines, used, notes, power_from)
+
+
+def join_station(lf: LoggerFile, station: LoggerFile, stamped: str, name: str) -> list[str]:
+    """Put a weather station's values (``station``, read with ``station=True``) beside
+    ``lf``'s readings as their sensors, in place, and say how (notes; ``name``: the
+    station's file as the notes call it).
+
+    A reading takes the station's value at its stamp, linear between the station's rows at
+    most :data:`METER_MAX_STEP` of its spacings apart, the energy rule's line
+    (:func:`sim.energy.on_grid`); but where the readings are interval means (``stamped``,
+    the site's ``readings_stamped``: ``interval_end`` or ``interval_start``) and the station
+    reads at least twice per interval, the mean of its rows in the reading's interval (a
+    15-minute mean of power beside the sky of the same quarter hour, not of its last
+    minute; at least half the interval's rows, else none). A field both files give is
+    refused: which one is the reading's would be a guess."""
+    from sim.energy import on_grid
+
+    both = sorted(set(lf.values) & set(station.values))
+    if both:
+        raise ValueError(f"column: {', '.join(both)}: mapped in both files; map each field "
+                         "from one of them")
+    ts = station.times_utc.as_unit("s").asi8.astype(np.float64)
+    order = np.argsort(ts, kind="stable")
+    ts = ts[order]
+    steps = np.diff(ts)
+    if not (steps > 0).any():
+        raise ValueError(f"{name}: two rows at different times are needed to join its values")
+    station_s = float(np.median(steps[steps > 0]))
+    t = lf.times_utc.as_unit("s").asi8.astype(np.float64)
+    interval_s = lf.cadence_s() or 0.0
+    means = stamped != "instant" and 2 * station_s <= interval_s
+    if stamped == "interval_end":  # the station's rows in (t − interval, t]
+        first = np.searchsorted(ts, t - interval_s, side="right")
+        last = np.searchsorted(ts, t, side="right")
+    else:  # [t, t + interval)
+        first = np.searchsorted(ts, t, side="left")
+        last = np.searchsorted(ts, t + interval_s, side="left")
+    for fld in station.values:
+        v = station.values[fld].to_numpy(np.float64)[order]
+        if not means:
+            lf.values[fld] = on_grid(ts, v, t, METER_MAX_STEP * station_s)
+            continue
+        ok = np.isfinite(v)
+        total = np.concatenate(([0.0], np.cumsum(np.where(ok, v, 0.0))))
+        count = np.concatenate(([0], np.cumsum(ok)))
+        n = count[last] - count[first]
+        enough = n >= 0.5 * interval_s / station_s
+        lf.values[fld] = np.where(enough, (total[last] - total[first]) / np.maximum(n, 1),
+                                  np.nan)
+    got = lf.values[list(station.values)].notna().any(axis=1).to_numpy() & lf.sendable
+    how = (f"the mean of its rows in each reading's interval ({interval_s:g} s, readings "
+           f"stamped {stamped})" if means else
+           f"its value at each reading's stamp (linear between its rows, none across a gap "
+           f"over {METER_MAX_STEP:g} × its {station_s:g} s spacing)")
+    return [f"sensors from {name} ({', '.join(station.values)}): {how}; "
+            f"{int(got.sum())} of {int(lf.sendable.sum())} readings have them"]
 
 
 def power_from_energy(times_utc: pd.DatetimeIndex, energy_wh: np.ndarray, kind: str,

@@ -238,6 +238,66 @@ def test_a_meters_total_and_a_portals_interval_energy_are_sent_as_each_intervals
     assert broken.sendable.sum() == meter.sendable.sum() - 8 - 2
 
 
+
+def _bms_ghi() -> pd.Series:
+    """NREL BMS's 1-minute GHI [W m⁻²] of 20 Jan 2022 (real; ISO times at −07:00), by UTC."""
+    ref = pd.read_csv(LOGGERS / "midc_bms_ghi_20220120.csv", index_col=0)
+    return pd.Series(ref.iloc[:, 0].to_numpy(), pd.to_datetime(ref.index, utc=True))
+
+
+def test_a_weather_stations_file_is_joined_to_the_readings_by_time() -> None:
+    """A plant's weather station logs apart from its strings. SERF West's own file split in
+    two — the positive string's voltage and current, and a station's ``;`` export of its POA,
+    module and air temperature — joins to exactly the readings of the file whole. NREL BMS's
+    real 1-minute GHI beside 15-minute readings: as instants each reading takes the GHI at
+    its stamp; as means stamped at the interval's end (start) the mean of the minutes in
+    (t − 15 min, t] ([t, t + 15 min)), as pandas resamples them; two lost hours of the
+    station leave their readings without (at least half an interval's rows, else none)."""
+    from backend.measurements.logger_file import join_station
+
+    ref = _serf_west()
+    strings = ref[["dc_pos_voltage__774", "dc_pos_current__775"]]
+    station = ref[["poa_irradiance__771", "module_temp_1__781", "ambient_temp__780"]]
+    whole = read_logger_file(LOGGERS / "serf_west_15min.csv", SERF_WEST, timezone="Etc/GMT+7")
+    lf = read_logger_file(strings.to_csv().encode(), {"voltage_v": "dc_pos_voltage__774",
+                                                      "current_a": "dc_pos_current__775"},
+                          timezone="Etc/GMT+7")
+    met = read_logger_file(station.to_csv(sep=";", decimal=",").encode(), {
+        "poa_irradiance_w_m2": "poa_irradiance__771", "temp_module_c": "module_temp_1__781",
+        "temp_air_c": "ambient_temp__780"}, timezone="Etc/GMT+7", station=True)
+    notes = join_station(lf, met, "instant", "met.csv")
+    assert lf.readings("fixed") == whole.readings("fixed")
+    assert notes == ["sensors from met.csv (poa_irradiance_w_m2, temp_module_c, temp_air_c): its "
+                     "value at each reading's stamp (linear between its rows, none across a gap "
+                     "over 1.5 × its 900 s spacing); 480 of 480 readings have them"]
+
+    ghi = _bms_ghi()
+    lost = (ghi.index >= pd.Timestamp("2022-01-20 18:00Z")) \
+        & (ghi.index < pd.Timestamp("2022-01-20 20:00Z"))
+    station_text = "Time,GHI [W/m2]\n" + "".join(
+        f"{t:%Y-%m-%dT%H:%M:%SZ},{g}\n" for t, g in ghi[~lost].items())
+    stamps = pd.date_range("2022-01-20 07:15Z", "2022-01-21 06:45Z", freq="15min")
+    readings = "ts,power_w\n" + "".join(f"{t:%Y-%m-%dT%H:%M:%SZ},100\n" for t in stamps)
+    kept = ghi[~lost]
+    for stamped, want in (
+            ("instant", kept.reindex(stamps)),
+            ("interval_end", kept.resample("15min", closed="right", label="right").mean()),
+            ("interval_start", kept.resample("15min", closed="left", label="left").mean())):
+        lf = read_logger_file(readings.encode())
+        met = read_logger_file(station_text.encode(), {"ghi_w_m2": "GHI [W/m2]"}, station=True)
+        (note,) = join_station(lf, met, stamped, "bms.csv")
+        got = pd.Series(lf.values["ghi_w_m2"].to_numpy(), lf.times_utc)
+        if stamped != "instant":  # an interval of the lost hours has no mean
+            side = "right" if stamped == "interval_end" else "left"
+            count = kept.resample("15min", closed=side, label=side).count()
+            want = want.where(count.reindex(want.index) >= 7.5)
+        np.testing.assert_allclose(got, want.reindex(got.index), rtol=1e-12, atol=1e-9)
+        # the 8 stamps of 18:00-19:45 (instants, interval starts) or 18:15-20:00 (ends: the
+        # quarter ending 20:00 has 1 of its 15 minutes)
+        assert got.isna().sum() == 8, (stamped, got[got.isna()])
+        assert note.endswith(f"{len(stamps) - 8} of {len(stamps)} readings have them")
+
+
 REFUSED = [
     ("ts,power_w\n2022-01-02 10:00,5\n2022-01-02 10:01,6\n", {},
      r"ts: the times have no UTC offset .* with --timezone"),
@@ -401,6 +461,50 @@ def test_a_meters_total_is_posted_and_the_service_counts_the_meters_energy(
     assert ("note: the readings are means made from energy (energy_total_wh) and site serf "
             "takes their stamps as instants (readings_stamped): set it to interval_end (a "
             "meter's total ends each interval)") in instant.stdout
+
+
+def test_the_command_posts_strings_and_their_weather_stations_file_together(
+        served, heliotwin_cli, tmp_path: Path) -> None:
+    """SERF West's positive string and its station's POA and temperatures, as two files (the
+    station a ``;`` export with decimal commas), posted by one command to site ``meter``'s
+    fixed array: the readings stored carry the station's values at their stamps (the
+    station as fine as the readings: no means to take). A dry run says what it joined; a
+    field in both files, a station's power and an array not imported are refused."""
+    server, env = served
+    ref = _serf_west()
+    strings, met = tmp_path / "strings.csv", tmp_path / "met.csv"
+    ref[["dc_pos_voltage__774", "dc_pos_current__775"]].to_csv(strings)
+    ref[["poa_irradiance__771", "ambient_temp__780"]].to_csv(met, sep=";", decimal=",")
+    args = ["readings", "import", str(strings), "--site", "meter", "--array", "fixed",
+            "--timezone", "Etc/GMT+7", "--column=voltage_v=dc_pos_voltage__774",
+            "--column=current_a=dc_pos_current__775", "--sensors", str(met),
+            "--sensors-column=poa_irradiance_w_m2=poa_irradiance__771",
+            "--sensors-column=temp_air_c=ambient_temp__780", "--url", server.base_url]
+    dry = heliotwin_cli(*args, "--dry-run")
+    assert dry.returncode == 0, dry.stderr
+    assert ("  sensors: met.csv (CSV (';', decimal comma)), 480 rows, beside fixed's readings\n"
+            "    poa_irradiance_w_m2 ← 'poa_irradiance__771' [W/m²]\n") in dry.stdout
+    assert "480 of 480 readings have them" in dry.stdout and "a dry run does not read" \
+        in dry.stdout
+    run = heliotwin_cli(*args, env={**env, "HELIOTWIN_TOKEN": server.token("meter")})
+    assert run.returncode == 0, run.stderr
+    assert "posted fixed to" in run.stdout and "480 accepted" in run.stdout
+    m = httpx.get(f"{server.base_url}/api/v1/sites/meter/measurements", params={
+        "array": "fixed", "start": "2022-01-02T15:01:00-07:00",
+        "end": "2022-01-02T15:02:00-07:00"}, timeout=60).json()
+    row = ref.loc["2022-01-02 15:01:00"]
+    assert m["points"][0]["poa_irradiance_w_m2"] == row["poa_irradiance__771"] == 526.2
+    assert m["points"][0]["temp_air_c"] == pytest.approx(row["ambient_temp__780"], abs=1e-6)
+    assert m["points"][0]["voltage_v"] == 223.79
+    for extra, message in (
+            (["--sensors-column=voltage_v=poa_irradiance__771"],
+             "met.csv: column: 'voltage_v' is not a field of a weather station"),
+            (["--column=poa_irradiance_w_m2=dc_pos_voltage__774"],
+             "met.csv: column: poa_irradiance_w_m2: mapped in both files"),
+            (["--sensors-array=tracker"], "--sensors-array: name the array whose readings "
+                                          "carry the station's values, one of fixed")):
+        bad = heliotwin_cli(*args, *extra, "--dry-run")
+        assert bad.returncode == 2 and message in bad.stderr, bad.stderr
 
 def test_a_dry_run_says_what_it_would_post_and_a_column_needs_an_array(heliotwin_cli) -> None:
     path = str(LOGGERS / "nrel_RSF_II.csv")
