@@ -32,17 +32,35 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def _start_scheduler(folder: Path) -> tuple[subprocess.Popen[bytes], str]:
+    """``dask scheduler`` on 127.0.0.1 at a port it takes itself (``--port 0``), and its
+    address from its scheduler file, once it listens. A free port found here and handed to
+    it raced the workers started beside it: a worker's HTTP server got the same port from
+    the kernel first, the scheduler exited ("address in use"), and the client's handshake
+    with that worker hung a CI run for good."""
+    path = folder / "scheduler.json"
+    proc = subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port",
+                             "0", "--scheduler-file", str(path), "--no-dashboard"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60.0
+    while True:
+        try:
+            return proc, str(json.loads(path.read_text())["address"])
+        except (OSError, ValueError, KeyError):  # not written yet, or half written
+            pass
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            raise RuntimeError(f"dask scheduler did not start (exit {proc.poll()})")
+        time.sleep(0.05)
+
+
 @pytest.fixture(scope="module")
-def scheduler() -> Iterator[str]:
+def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1; their address."""
-    port = _free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    common = ["--no-dashboard"]
-    procs = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1",
-                               "--port", str(port), *common],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    first, address = _start_scheduler(tmp_path_factory.mktemp("dask"))
+    procs = [first]
     procs += [subprocess.Popen([str(BIN / "dask"), "worker", address, "--nthreads", "1",
-                                "--no-nanny", "--host", "127.0.0.1", *common],
+                                "--no-nanny", "--host", "127.0.0.1", "--no-dashboard"],
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
               for _ in range(2)]
     try:
@@ -396,12 +414,9 @@ def test_a_worker_without_heliotwin_is_named(tmp_path: Path,
     """A worker whose environment lacks heliotwin failed the whole sweep with a bare
     ``ModuleNotFoundError`` and no worker named (a tester's finding): it is refused at
     connection, by its address, saying to install heliotwin on the workers."""
-    port = _free_port()
-    address = f"tcp://127.0.0.1:{port}"
+    first, address = _start_scheduler(tmp_path)
     common = ["--nthreads", "1", "--no-nanny", "--host", "127.0.0.1", "--no-dashboard"]
-    procs = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1",
-                               "--port", str(port), "--no-dashboard"],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    procs = [first]
     bad = tmp_path / "bad.log"
     blocked = ("import sys; sys.modules['backend'] = sys.modules['sim'] = None; "
                "from distributed.cli.dask_worker import main; main()")
@@ -457,18 +472,15 @@ def test_a_cancelled_sweep_keeps_the_cases_it_finished(scheduler: str) -> None:
 
 
 def test_a_scheduler_without_workers_fails_the_sweep(monkeypatch: pytest.MonkeyPatch,
-                                                     capsys: pytest.CaptureFixture[str]
-                                                     ) -> None:
+                                                     capsys: pytest.CaptureFixture[str],
+                                                     tmp_path: Path) -> None:
     """Every worker gone (killed, or never started): the tasks would wait for one for ever
     and the service showed the sweep "running"; after NO_WORKERS_S it fails, saying so."""
     import pandas as pd
 
     from backend.plants import sweep as sweep_mod
 
-    port = _free_port()
-    proc = subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port",
-                             str(port), "--no-dashboard"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc, address = _start_scheduler(tmp_path)
     try:
         monkeypatch.setattr(sweep_mod, "NO_WORKERS_S", 1.0)
         monkeypatch.setattr(sweep_mod, "WORKERS_LOOK_S", 0.5)
@@ -478,11 +490,10 @@ def test_a_scheduler_without_workers_fails_the_sweep(monkeypatch: pytest.MonkeyP
             start=pd.Timestamp("2021-12-20", tz="UTC"), end=pd.Timestamp("2021-12-21", tz="UTC"),
             step_s=3600.0, latitude_deg=38.3, longitude_deg=-5.3, collector_m=(12.0, 5.0))
         with pytest.raises(RuntimeError, match="has had no worker for 1 s"):
-            sweep_mod.run_sweep(spec, cases, scheduler=f"tcp://127.0.0.1:{port}")
+            sweep_mod.run_sweep(spec, cases, scheduler=address)
         # the CLI says it in its one error line (it printed an 18-line traceback), exit 1
         with pytest.raises(SystemExit) as exc:
-            raise SystemExit(main([*SWEEP, "--gcr", "0.2,0.3", "--scheduler",
-                                   f"tcp://127.0.0.1:{port}"]))
+            raise SystemExit(main([*SWEEP, "--gcr", "0.2,0.3", "--scheduler", address]))
         assert exc.value.code == 1
         err = capsys.readouterr().err.strip()
         assert err.startswith("heliotwin plant sweep: error: the Dask scheduler at ") and \
@@ -493,17 +504,14 @@ def test_a_scheduler_without_workers_fails_the_sweep(monkeypatch: pytest.MonkeyP
 
 
 @pytest.mark.timeout(180)
-def test_a_lost_scheduler_keeps_the_cases_it_finished(capsys: pytest.CaptureFixture[str]
-                                                      ) -> None:
+def test_a_lost_scheduler_keeps_the_cases_it_finished(capsys: pytest.CaptureFixture[str],
+                                                      tmp_path: Path) -> None:
     """The scheduler killed after the first result: Dask cancels every future
     ("scheduler-connection-lost") and the finished cases were thrown away with a raw
     FuturesCancelledError (a tester's finding). They are kept, as a cancelled sweep's, and
     the message says what happened; the CLI prints them and the error line, exit 1."""
-    port = _free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    procs = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1",
-                               "--port", str(port), "--no-dashboard"],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL),
+    first, address = _start_scheduler(tmp_path)
+    procs = [first,
              subprocess.Popen([str(BIN / "dask"), "worker", address, "--nthreads", "1",
                                "--no-nanny", "--host", "127.0.0.1", "--no-dashboard"],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
