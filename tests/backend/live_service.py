@@ -401,8 +401,20 @@ class ServerProcess:
     def env(self) -> dict[str, str]:
         return process_env(self.database_url, self.extra_env)
 
-    def start(self, timeout_s: float = 120.0) -> ServerProcess:
-        """Start and wait for ``/healthz``."""
+    def start(self, timeout_s: float = 120.0, attempts: int = 3) -> ServerProcess:
+        """Start and wait for ``/healthz``; again on new ports (``attempts`` in all) when a
+        port found free was taken before the server bound it (another test's process got
+        it from the kernel first: the Dask sweep tests hung on such a race)."""
+        attempt = 1
+        while True:
+            try:
+                return self._start_once(timeout_s)
+            except RuntimeError as exc:
+                if attempt >= attempts or "address already in use" not in str(exc).lower():
+                    raise
+                attempt += 1
+
+    def _start_once(self, timeout_s: float) -> ServerProcess:
         self.port = free_port()
         log = self.log_path.open("ab")
         self.proc = subprocess.Popen(
