@@ -937,6 +937,36 @@ UNDER_SENSOR_CAUSES = ("snow or soiling on its modules, a string or inverter dow
                        "(its calibration, or a plane other than the fixed array's)")
 
 
+#: A run of underperformance days under a sensor's sky this long [days] whose shortfalls lie
+#: within :data:`STEADY_SPREAD_PCT` of each other reads as a steady loss: its detail gives
+#: the ``dc_loss_pct`` that a clean, healthy array's losses would be (a real array's 10-18 %
+#: left out of its config read as a finding every day: docs/sites.md, "An array's losses")
+STEADY_DAYS = 3
+#: The spread [percentage points] of a steady run's shortfalls: the POA sensor's ±4.5 %
+#: (:data:`INVERSION_UNCERTAINTY`), within which days cannot be told apart; snow, a string
+#: down for a day, soiling washed off vary by more
+STEADY_SPREAD_PCT = 100.0 * INVERSION_UNCERTAINTY
+
+
+def _steady_loss(run: list[tuple[str, float]]) -> str:
+    """An underperformance's words for the steady end of its run (``run``: its days' dates
+    and shortfalls [%], oldest first): the longest stretch of its last days within
+    :data:`STEADY_SPREAD_PCT` of each other, when :data:`STEADY_DAYS` or more; else empty
+    (a run may begin with snow and go on with a steady loss)."""
+    k = len(run)
+    while k > 0 and max(p for _, p in run[k - 1:]) - min(p for _, p in run[k - 1:]) \
+            <= STEADY_SPREAD_PCT:
+        k -= 1
+    steady = [p for _, p in run[k:]]
+    if len(steady) < STEADY_DAYS:
+        return ""
+    median = float(np.median(steady))
+    return (f"; steady at {median:.0f} % ({min(steady):.1f}–{max(steady):.1f} %) over the "
+            f"{len(steady)} days since {run[k][0]}: if the array is clean and healthy, that "
+            f"is losses its config does not give — raise its dc_loss_pct by about "
+            f"{median:.0f} points (docs/sites.md, \"An array's losses\")")
+
+
 def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]],
                       array: Literal["tracker", "fixed"] = "tracker") -> None:
     """``underperformance`` (the tracker) or ``fixed_underperformance`` (``array``
@@ -949,18 +979,22 @@ def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
     it would be judged against itself. The tracker's detail says how much of the
     expectation rests on a beam the sky instrument did not see
     (``features["beam_unseen_pct"]``, the service's ``sky.beam_unseen_expected_pct``): on a
-    summer dawn behind the fixed plane the shortfall may be the sky's."""
+    summer dawn behind the fixed plane the shortfall may be the sky's. Under a sensor's sky a
+    steady run says the losses it would be (:func:`_steady_loss`)."""
     since: str | None = None
+    run: list[tuple[str, float]] = []  # the run's days: date, shortfall [%]
     tracker = array == "tracker"
     for i, d in enumerate(days):
         en = d["features"].get("energy" if tracker else "fixed_energy")
         if en is None or en["measured_wh"] >= en["low_wh"]:
-            since = None
+            since, run = None, []
             continue
         since = since or d["date"]
         m, x, low = en["measured_wh"], en["expected_wh"], en["low_wh"]
         short_wh = x - m
         pct = 100.0 * short_wh / x
+        run.append((d["date"], pct))
+        sensor_sky = not tracker or d["features"].get("sensor_sky")
         conf = float(np.clip(0.5 + 0.5 * (low - m) / max(x - low, 1e-9), 0.5, 1.0))
         unseen = float(d["features"].get("beam_unseen_pct") or 0.0) if tracker else 0.0
         out[i].append({"kind": "underperformance" if tracker else "fixed_underperformance",
@@ -975,9 +1009,8 @@ def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
                                      "; the readings follow the expected curve at a "
                                      "thousandth of it: power sent in kW where W are asked?"
                                      if tracker and d["features"].get("power_in_kw") else "")
-                                 + (f": {UNDER_SENSOR_CAUSES}"
-                                    if not tracker or d["features"].get("sensor_sky")
-                                    else "")
+                                 + (f": {UNDER_SENSOR_CAUSES}" if sensor_sky else "")
+                                 + (_steady_loss(run) if sensor_sky else "")
                                  + _where_the_loss_lies(
                                      (d["features"].get("electrical") or {}).get(array), array)
                                  + (

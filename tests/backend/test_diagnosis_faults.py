@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import datetime as dt
 import functools
+import re
 from dataclasses import replace
 from typing import Any
 
@@ -451,3 +452,35 @@ def test_the_library_path_judges_the_fixed_array_under_a_sensors_sky() -> None:
         assert f["magnitude"] == pytest.approx(40.0, abs=2.5), f
     unjudged = faults_over_days(features_by_day(SITE, FIRST, e, d.tracker_power_w))
     assert not any(f["kind"] == "fixed_underperformance" for day in unjudged for f in day)
+
+
+def test_a_steady_shortfall_under_a_sensors_sky_names_the_losses_it_would_be() -> None:
+    """A fixed array 15 % down every day (seed 31, a POA sensor's sky) reads as a steady
+    loss from its third day on, naming the dc_loss_pct that would give it: 13 % (12.6–13.7 %
+    a day; this healthy generated array reads 1.02–1.03 of its expectation); one whose losses
+    vary by day (snow: 50, 20, 40 %) does not, and a run that begins with a snow day and
+    goes on 15 % down says it from its third steady day, since the first of them."""
+    d = logger_days(SITE, FIRST, DAYS, SEED)
+    e = sky_sensor.weather_aware_twin(SITE, FIRST, FIRST + pd.Timedelta(days=DAYS),
+                                      d.fixed_power_w, sensors=d.sensors("fixed_poa_w_m2"))
+
+    def findings(day_factors: list[float]) -> list[str]:
+        fixed = d.fixed_power_w * np.repeat(day_factors, 1440)
+        days = features_by_day(SITE, FIRST, e, d.tracker_power_w, fixed_power_w=fixed)
+        return [" / ".join(f["detail"] for f in day if f["kind"] == "fixed_underperformance")
+                for day in faults_over_days(days)]
+
+    steady = findings([0.85] * DAYS)
+    assert all(steady) and not any("steady" in x for x in steady[:2]), steady
+    for k, text in enumerate(steady[2:], start=3):
+        m = re.search(r"steady at (\d+) % \(([\d.]+)–([\d.]+) %\) over the (\d) days since "
+                      r"(\S+): .* raise its dc_loss_pct by about (\d+) points", text)
+        assert m is not None, text
+        assert int(m.group(1)) == 13 and int(m.group(6)) == 13
+        assert int(m.group(4)) == k and m.group(5) == FIRST.date().isoformat()
+    varying = findings([0.5, 0.8, 0.6, 1.0, 1.0, 1.0])
+    assert all(varying[:3]) and not any("steady" in x for x in varying)
+    after_snow = findings([0.5, 0.85, 0.85, 0.85, 0.85, 0.85])
+    assert not any("steady" in x for x in after_snow[:3])
+    since = (FIRST + pd.Timedelta(days=1)).date().isoformat()
+    assert f"over the 3 days since {since}" in after_snow[3], after_snow[3]
