@@ -41,9 +41,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                               description="Logger history files posted to a running service.")
     sub = p.add_subparsers(dest="readings_command", metavar="ACTION", required=True)
     i = sub.add_parser(
-        "import", help="post a logger's export file (TOA5, CSV) to a running service",
+        "import", help="post a logger's export file (TOA5, CSV, .xlsx) to a running service",
         description="Read a logger's export as it is — a Campbell TOA5 table, a CSV with ',' "
-                    "or ';' (decimal commas), ISO, M/D/Y, Y/M/D, D.M.Y or Unix times — map its "
+                    "or ';' (decimal commas), a portal's .xlsx workbook, ISO, M/D/Y, Y/M/D, "
+                    "D.M.Y or Unix times — map its "
                     "columns to the service's fields, and post it to a site's arrays. "
                     "docs/service.md, 'Importing a logger's file'.")
     i.add_argument("file", type=Path, help="the logger's export file")

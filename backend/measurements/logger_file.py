@@ -20,7 +20,9 @@ takes readings named and scaled its own way (``backend.measurements.fields``: ``
   ``D.M.YYYY``, Unix seconds; a date column and a clock column beside it. A time without an
   offset is read on the logger's clock, ``timezone`` (an IANA zone; ``Etc/GMT+7`` for a
   clock on UTC−7 all year), by :func:`sim.sky.clock_times_to_utc`.
-- **Compressed**: a gzip archive of such a file is read as the file.
+- **Compressed**: a gzip archive of such a file is read as the file; an **Excel workbook**
+  (``.xlsx``, a portal's export) as its first sheet (:func:`_xlsx_text`), and a units row
+  under a header (``[Wh]``, ``W``) is read as the columns' units (:func:`_row_units`).
 - **Energy instead of power**: a portal's export of each interval's energy (``energy_wh``)
   or a meter's running total (``energy_total_wh``) is sent as the mean power over each
   interval (:func:`power_from_energy`): the energy rule then integrates it back.
@@ -158,13 +160,66 @@ def _unit_key(unit: str) -> str:
 
 
 def _header_unit(name: str) -> str | None:
-    """A unit written in a column's name: ``P_AC [kW]``, ``Power (W)``."""
+    """A unit written in a column's name: ``P_AC [kW]``, ``Power (W)`` — not a number in
+    brackets, as ``Energy | Symo 8.2-3-M (1)`` numbers its inverter."""
     m = re.search(r"[\[(]([^\[\]()]+)[\])]\s*$", name)
-    return m.group(1) if m else None
+    unit = m.group(1).strip() if m else None
+    return unit if unit and (_unit_key(unit) in _UNIT_KEYS or _UNIT_LETTERS.fullmatch(unit)) \
+        else None
+
+
+#: Every unit a file may give a field in (:data:`UNITS`), as :func:`_unit_key` writes them.
+_UNIT_KEYS = frozenset(k for units in UNITS.values() for k in units)
+#: A cell that may be a unit of a column no field is mapped to (``%``, ``hPa``, ``Ohm``).
+_UNIT_LETTERS = re.compile(r"[A-Za-z%°µΩ/²³·^*-]{1,12}")
+
+
+def _row_units(cells: list[str]) -> list[str]:
+    """A units row's units, one per cell ("" where none), or [] when the row is not one: a
+    portal's export may put one under its header (``[dd.MM.yyyy HH:mm]``, ``[Wh]``, ``W``,
+    ``%``) — every cell bracketed or a unit's letters (no digit, not a missing value's
+    mark), at least one a unit a field can be given in, none a number or a time."""
+    units, known = [], False
+    for cell in cells:
+        c = cell.strip()
+        inner = c[1:-1].strip() if len(c) > 1 and (c[0], c[-1]) in (("[", "]"), ("(", ")")) \
+            else c
+        is_unit = bool(inner) and _unit_key(inner) in _UNIT_KEYS
+        if c and inner == c and not is_unit and (
+                not _UNIT_LETTERS.fullmatch(c) or c.lower() in MISSING):
+            return []  # a value, a time or a mark: a data row
+        known |= is_unit
+        units.append(inner if is_unit else "")
+    return units if known else []
+
+
+def _xlsx_text(raw: bytes) -> tuple[str, str]:
+    """An .xlsx workbook's first worksheet as CSV text (``,``; a date-time cell in ISO 8601,
+    naive as Excel keeps it: read on ``timezone``), and the sheet's name: a portal's export
+    (Fronius Solar.web, Huawei FusionSolar …) is a workbook (openpyxl, read-only)."""
+    import datetime as dt
+
+    from openpyxl import load_workbook
+
+    try:
+        book = load_workbook(io.BytesIO(raw), read_only=True, data_only=True)
+    except Exception as exc:  # a zip that is no workbook: BadZipFile, KeyError, …
+        raise ValueError(f"the file is a zip archive but no .xlsx workbook ({type(exc).__name__}"
+                         f": {exc})") from None
+    sheet = book.worksheets[0]
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    for row in sheet.iter_rows(values_only=True):
+        writer.writerow(["" if v is None else v.isoformat(sep=" ") if isinstance(v, dt.datetime)
+                         else v.isoformat() if isinstance(v, dt.date | dt.time) else repr(v)
+                         if isinstance(v, float) else str(v) for v in row])
+    book.close()
+    return out.getvalue(), sheet.title
 
 
 def _header(text: str) -> tuple[list[list[str]], int, str, str]:
-    """The header's rows (TOA5's four, a CSV's one), the file line the body starts after, the
+    """The header's rows (TOA5's four, a CSV's one and a units row under it, if any:
+    :func:`_row_units`), the file line the body starts after, the
     layout's name (TOA5, or a CSV) and its separator: ``,``, ``;`` or a tab, the one its
     header line holds most (an Excel ``sep=`` first line says it)."""
     head = text[:65536].splitlines()[:6]
@@ -177,7 +232,7 @@ def _header(text: str) -> tuple[list[list[str]], int, str, str]:
         sep = max((",", ";", "\t"), key=lambda s: head[0].count(s))
     rows = list(csv.reader(io.StringIO("\n".join(head)), delimiter=sep))
     toa5 = bool(rows[0]) and rows[0][0] == "TOA5"
-    n = 4 if toa5 else 1
+    n = 4 if toa5 else (2 if len(rows) > 1 and _row_units(rows[1]) else 1)
     if len(rows) < n:
         raise ValueError("the file ends inside its header")
     name = "TOA5" if toa5 else ("CSV (tab)" if sep == "\t" else f"CSV ('{sep}')")
@@ -372,13 +427,25 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
     raw = source if isinstance(source, bytes) else Path(source).read_bytes()
     if raw[:2] == b"\x1f\x8b":  # a gzip archive of the file (.csv.gz, .dat.gz)
         raw = gzip.decompress(raw)
-    text = weather_text(raw)
+    if raw[:8] == b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1":  # OLE2: Excel 97-2003
+        raise ValueError("the file is an Excel 97-2003 workbook (.xls): open it and save it as "
+                         ".xlsx or CSV")
+    sheet = None
+    if raw[:4] == b"PK\x03\x04":  # a zip: an .xlsx workbook, read as its first sheet's CSV
+        text, sheet = _xlsx_text(raw)
+    else:
+        text = weather_text(raw)
     header, skip, layout, sep = _header(text)
+    if sheet is not None:
+        layout = f"Excel workbook, sheet {sheet!r}"
     toa5 = layout == "TOA5"
     names = [c.strip() for c in header[1 if toa5 else 0]]
     width = len(names)
-    file_units = ([c.strip() for c in header[2]] + [""] * width)[:width] if toa5 \
-        else [(_header_unit(n) or "") for n in names]
+    if toa5:
+        file_units = ([c.strip() for c in header[2]] + [""] * width)[:width]
+    else:  # a header's [kW], else a units row under it (a portal's export)
+        row = (_row_units(header[1]) if len(header) > 1 else []) + [""] * width
+        file_units = [(_header_unit(n) or row[i]) for i, n in enumerate(names)]
     frame, lines = _body(text, skip, sep, width)
     del text
     blank = [i for i, n in enumerate(names) if not n]

@@ -8,7 +8,9 @@ energy the service then answers against the file's own trapezoid."""
 from __future__ import annotations
 
 import gzip
+import io
 import json
+import zipfile
 from pathlib import Path
 
 import httpx
@@ -297,6 +299,52 @@ def test_a_weather_stations_file_is_joined_to_the_readings_by_time() -> None:
         assert got.isna().sum() == 8, (stamped, got[got.isna()])
         assert note.endswith(f"{len(stamps) - 8} of {len(stamps)} readings have them")
 
+
+
+def test_a_portals_excel_workbook_with_a_units_row_reads_as_its_csv() -> None:
+    """A portal's export as an .xlsx workbook (Fronius Solar.web's layout: a header, a units
+    row under it, ``[dd.MM.yyyy HH:mm]`` and ``[Wh]``, Excel date-time cells on the plant's
+    clock), made with openpyxl from SERF East's real minutes as 5-minute energies: each
+    reading is the interval's mean power as pandas resamples the minutes, the unit read from
+    the units row. The same rows as a ``;`` CSV with the units row read alike; a units row
+    is no data row, and an old .xls or a zip that is no workbook is refused, saying what to
+    do."""
+    from openpyxl import Workbook
+
+    minutes = _serf_east_minutes()
+    _, energy = _metered(minutes, "5min")
+    energy = energy.iloc[1:-1]  # whole intervals of the file
+    local = energy.index.tz_convert("Etc/GMT+7").tz_localize(None)
+    book = Workbook()
+    sheet = book.active
+    sheet.title = "Daten"
+    sheet.append(["Date and time", "Energy | Symo 8.2-3-M (1)"])
+    sheet.append(["[dd.MM.yyyy HH:mm]", "[Wh]"])
+    for t, e in zip(local, energy.round(2), strict=True):
+        sheet.append([t.to_pydatetime(), float(e)])
+    buf = io.BytesIO()
+    book.save(buf)
+    lf = read_logger_file(buf.getvalue(), {"energy_wh": "Energy | Symo 8.2-3-M (1)"},
+                          timezone="Etc/GMT+7")
+    assert lf.layout == "Excel workbook, sheet 'Daten'" and lf.lines[0] == 3
+    assert lf.columns == {"energy_wh": ("Energy | Symo 8.2-3-M (1)", "Wh")}
+    means = minutes.clip(lower=0).resample("5min", closed="right", label="right").mean()
+    # energies to 0.01 Wh: the power to 0.005 Wh over 300 s, 0.06 W
+    np.testing.assert_allclose(lf.values["power_w"], means.reindex(lf.times_utc), atol=0.0601)
+    text = "Date and time;Energy\n[dd.MM.yyyy HH:mm];kWh\n" + "".join(
+        f"{t:%d.%m.%Y %H:%M};{e / 1000:.5f}\n" for t, e in zip(local, energy, strict=True))
+    csv_lf = read_logger_file(text.encode(), {"energy_wh": "Energy"}, timezone="Etc/GMT+7")
+    assert csv_lf.columns["energy_wh"] == ("Energy", "kWh")
+    np.testing.assert_allclose(csv_lf.values["power_w"], means.reindex(csv_lf.times_utc),
+                               atol=0.0601)
+    with pytest.raises(ValueError, match=r"Excel 97-2003 workbook \(.xls\): open it and save "
+                                         r"it as .xlsx or CSV"):
+        read_logger_file(b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1" + bytes(500))
+    archive = io.BytesIO()
+    with zipfile.ZipFile(archive, "w") as z:
+        z.writestr("readings.csv", "ts,power_w\n")
+    with pytest.raises(ValueError, match="the file is a zip archive but no .xlsx workbook"):
+        read_logger_file(archive.getvalue())
 
 REFUSED = [
     ("ts,power_w\n2022-01-02 10:00,5\n2022-01-02 10:01,6\n", {},
