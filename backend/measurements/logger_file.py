@@ -9,8 +9,9 @@ takes readings named and scaled its own way (``backend.measurements.fields``: ``
 
 :func:`read_logger_file` reads such a file as it is and says what it did:
 
-- **Columns** are mapped by the user (``{"power_w": "ac_power_kw_1137:kW"}``); a column
-  already named as a field maps to itself. Nothing is guessed from a name: two power
+- **Columns** are mapped by the user (``{"power_w": "ac_power_kw_1137:kW"}``, or a sum of
+  columns, ``"P_INV1+P_INV2"``, for :data:`ADDITIVE_FIELDS`); a column already named as a
+  field maps to itself. Nothing is guessed from a name: two power
   columns in one file (an array's and an inverter's) are common.
 - **Units**: the one given after ``:``, else the file's (TOA5's units line, or a header's
   ``[kW]`` / ``(kW)``), else the field's own, and the summary says which
@@ -66,6 +67,9 @@ FIELDS = ("power_w", "voltage_v", "current_a", *SENSOR_NAMES, *ENERGY_FIELDS)
 #: module's back-of-module temperature.
 STATION_FIELDS = ("poa_irradiance_w_m2", "ghi_w_m2", "temp_air_c", "wind_speed_m_s",
                   "temp_module_c")
+#: The fields a sum of columns may be mapped to (``power_w=P_INV1+P_INV2``): an array on
+#: several inverters or strings in parallel adds its power, current and energy.
+ADDITIVE_FIELDS = ("power_w", "current_a", "energy_wh", "energy_total_wh")
 #: A meter's step longer than this many times the file's spacing spans a gap: its energy is
 #: not spread as a power over it (the service's gap rule would not bridge it either).
 METER_MAX_STEP = 1.5
@@ -483,22 +487,40 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
     used: dict[str, tuple[str, str]] = {}
     unitless = []
     for fld, spec in mapping.items():
-        name, _, unit_given = spec.partition(":") if spec not in index else (spec, "", "")
-        if name not in index:
-            raise ValueError(f"column: {fld}={spec!r}: the file has no column {name!r}; its "
-                             f"columns are {', '.join(repr(label[i]) for i in range(width))}")
-        i = index[name]
-        unit = unit_given.strip() or file_units[i]
-        units = UNITS[fld]
-        key = _unit_key(unit) if unit else next(iter(units))
-        if key not in units:
-            raise ValueError(f"column: {fld}={spec!r}: unit {unit!r} is not one of "
-                             f"{', '.join(units)} (give NAME:UNIT)")
-        scale, add = units[key]
-        values[fld] = _numbers(frame[i], decimal_comma, label[i], lines) * scale + add
-        used[fld] = (label[i], unit or OWN_UNITS[fld])
-        if not unit:
-            unitless.append(f"{fld} = {label[i]!r} in {OWN_UNITS[fld]}")
+        # NAME[:UNIT], or a sum of them (an array on two inverters: P_INV1:kW+P_INV2); a
+        # column's whole name first (a meter's "A+" is one column)
+        head, colon, unit_part = spec.rpartition(":")
+        pieces = [spec] if spec in index or (colon and head in index and "+" not in unit_part) \
+            else [x.strip() for x in spec.split("+")]
+        named = [(x, "") if x in index or ":" not in x else
+                 (x.rpartition(":")[0].strip(), x.rpartition(":")[2].strip()) for x in pieces]
+        parts = [n for n, _ in named]
+        for part in parts:
+            if part not in index:
+                raise ValueError(f"column: {fld}={spec!r}: the file has no column {part!r}; "
+                                 "its columns are "
+                                 + ", ".join(repr(label[i]) for i in range(width)))
+        if len(parts) > 1 and fld not in ADDITIVE_FIELDS:
+            raise ValueError(f"column: {fld}={spec!r}: only {', '.join(ADDITIVE_FIELDS)} add up "
+                             "over columns")
+        read_units, total = [], np.zeros(len(frame))
+        for part, unit_given in named:
+            i = index[part]
+            unit = unit_given or file_units[i]
+            units = UNITS[fld]
+            key = _unit_key(unit) if unit else next(iter(units))
+            if key not in units:
+                raise ValueError(f"column: {fld}={spec!r}: unit {unit!r} is not one of "
+                                 f"{', '.join(units)} (give NAME:UNIT)")
+            scale, add = units[key]
+            # a cell missing in any column leaves the sum missing: a part of the array unread
+            total = total + _numbers(frame[i], decimal_comma, label[i], lines) * scale + add
+            read_units.append(unit or OWN_UNITS[fld])
+            if not unit:
+                unitless.append(f"{fld} = {label[i]!r} in {OWN_UNITS[fld]}")
+        values[fld] = total
+        used[fld] = (" + ".join(label[index[n]] for n in parts),
+                     " + ".join(dict.fromkeys(read_units)))
     if unitless:
         notes.append("no unit in the file, read in the field's own: " + ", ".join(unitless)
                      + " (give NAME:UNIT where that is wrong)")

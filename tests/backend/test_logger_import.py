@@ -346,6 +346,31 @@ def test_a_portals_excel_workbook_with_a_units_row_reads_as_its_csv() -> None:
     with pytest.raises(ValueError, match="the file is a zip archive but no .xlsx workbook"):
         read_logger_file(archive.getvalue())
 
+
+def test_columns_that_add_up_map_to_one_field() -> None:
+    """An array on two inverters is one array's power: ``power_w=A+B`` adds the columns, each
+    in its own unit (RSF II's plant in kW and its second inverter in W, as pandas adds them;
+    the physics is not the point), a cell missing in either leaves the sum missing; a field
+    that does not add up (a voltage) or a part the file lacks is refused."""
+    name = "nrel_RSF_II.csv"
+    both = "ac_power_kw_1137:kW + inv2_ac_power_w__1047"
+    lf = read_logger_file(LOGGERS / name, {"power_w": both}, timezone="Etc/GMT+7")
+    ref = pd.read_csv(LOGGERS / name, index_col=0)
+    np.testing.assert_allclose(lf.values["power_w"], ref["ac_power_kw_1137"] * 1000
+                               + ref["inv2_ac_power_w__1047"], rtol=1e-12)
+    assert lf.columns["power_w"] == ("ac_power_kw_1137 + inv2_ac_power_w__1047", "kW + W")
+    text = "ts,P1 [kW],P2 [W]\n2022-01-02T10:00Z,1.5,250\n2022-01-02T10:15Z,,300\n"
+    gap = read_logger_file(text.encode(), {"power_w": "P1 [kW] + P2 [W]"})
+    assert gap.columns["power_w"] == ("P1 [kW] + P2 [W]", "kW + W")
+    assert gap.readings("fixed") == [{"ts": "2022-01-02T10:00:00Z", "array": "fixed",
+                                      "power_w": 1750.0}]
+    with pytest.raises(ValueError, match=r"voltage_v=.*: only power_w, current_a, energy_wh, "
+                                         r"energy_total_wh add up over columns"):
+        read_logger_file(text.encode(), {"voltage_v": "P1 [kW]+P2 [W]",
+                                         "current_a": "P2 [W]"})
+    with pytest.raises(ValueError, match=r"the file has no column 'P3'"):
+        read_logger_file(text.encode(), {"power_w": "P1 [kW]+P3"})
+
 REFUSED = [
     ("ts,power_w\n2022-01-02 10:00,5\n2022-01-02 10:01,6\n", {},
      r"ts: the times have no UTC offset .* with --timezone"),
@@ -649,3 +674,14 @@ def test_units_written_in_a_real_header_are_read_and_blank_nights_not_sent() -> 
                           timezone="Etc/GMT+7")
     assert vi.columns == {"voltage_v": ("INV1 CB2 Voltage [V]", "V"),
                           "current_a": ("INV1 CB2 Current [A]", "A")}
+
+
+def test_a_meters_a_plus_column_is_one_column_not_a_sum() -> None:
+    """A bidirectional meter names its import register ``A+`` (OBIS 1.8.0): that column,
+    with or without a unit after it, is one column, not a sum of ``A`` and nothing."""
+    text = "ts,A+,A-\n2022-01-02T10:00Z,1.000,0.5\n2022-01-02T10:15Z,1.250,0.5\n"
+    for spec in ("A+", "A+:kWh"):
+        lf = read_logger_file(text.encode(), {"energy_total_wh": spec})
+        assert lf.columns["energy_total_wh"][0] == "A+"
+    assert lf.readings("fixed") == [{"ts": "2022-01-02T10:15:00Z", "array": "fixed",
+                                     "power_w": 1000.0}]
