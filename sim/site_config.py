@@ -47,6 +47,9 @@ SCHEMA_ID = "https://heliotwin.example/docs/site.schema.json"
 _ASSUMED_KEY = re.compile(r"^[a-z0-9_-]{1,64}(\.[a-z0-9_-]{1,64}){0,3}$")
 _STRICT = ConfigDict(extra="forbid", allow_inf_nan=False)
 _ARRAY = ArrayConfig(name="default")
+#: The most DC losses a config's ``dc_loss_pct`` may give [%]: more is a fault to find, not
+#: losses to model (the diagnosis's steady-shortfall advice stops there too)
+MAX_DC_LOSS_PCT = 50.0
 _GEOMETRY = TrackerGeometry()
 
 #: AxisDrive field → (unit, what the default rests on); sim/motors.py has the reasoning.
@@ -182,7 +185,7 @@ class Array(BaseModel):
             f"['sapm']. Default {_ARRAY.temperature_model!r}."))
     albedo: float = Field(_ARRAY.albedo, ge=0, le=1, description=(
         f"[-] ground reflectance. Default {_ARRAY.albedo} (pvlib's default)."))
-    dc_loss_pct: float = Field(_ARRAY.dc_loss_pct, ge=0, le=50, description=(
+    dc_loss_pct: float = Field(_ARRAY.dc_loss_pct, ge=0, le=MAX_DC_LOSS_PCT, description=(
         "[%] the array's DC losses the model does not see: soiling, mismatch, wiring, the "
         "modules' nameplate tolerance, degradation (PVWatts' system losses: 14 % by default, "
         "inverter excluded). Its current is reduced by this share everywhere the array is "

@@ -14,6 +14,7 @@ import argparse
 import contextlib
 import gzip
 import json
+import re
 import sys
 import time
 from collections.abc import Callable
@@ -80,6 +81,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     i.add_argument("--sensors-timezone", metavar="ZONE",
                    help="the station's clock, for times without a UTC offset (default: "
                         "--timezone)")
+    i.add_argument("--sensors-time-column", metavar="NAME",
+                   help="the station's column of times, or DATE+CLOCK (default: found as for "
+                        "the readings' file)")
+    i.add_argument("--sensors-at-stamps", action="store_true",
+                   help="join the station at the readings' stamps even where the site takes "
+                        "its stamps as instants and the readings look like interval means")
     i.add_argument("--url", default="http://127.0.0.1:8000", help="service base URL")
     add_token_argument(i, "required unless --dry-run")
     i.add_argument("--dry-run", action="store_true",
@@ -141,7 +148,16 @@ def run_import(args: argparse.Namespace) -> int:
         site = None if client is None else _site(client, args.site, list(files))
         summary = _summary(args, files, _join_sensors(args, files, site))
         if client is not None and site is not None:
-            summary["notes"].extend(_stamp_note(site, summary))
+            stamp_notes = _stamp_note(site, summary)
+            if stamp_notes and args.sensors is not None and not args.sensors_at_stamps:
+                # a stored reading is never replaced (a re-import sends duplicates): the
+                # station's values must be joined as the site will read the stamps
+                fail(f"--sensors: {stamp_notes[0]}. The station's values are joined as the site "
+                     "takes the stamps (at each stamp, or averaged over each reading's "
+                     "interval) and a stored reading is never replaced: set the site's "
+                     "readings_stamped first, or give --sensors-at-stamps to join at the "
+                     "stamps as they are; nothing was posted")
+            summary["notes"].extend(stamp_notes)
             for array, lf in files.items():
                 summary["arrays"][array].update(
                     post_readings(client, args.site, array, args.token, lf))
@@ -205,13 +221,18 @@ def _join_sensors(args: argparse.Namespace, files: dict[str, LoggerFile],
             fail(f"--sensors-column: {spec!r} is not FIELD=NAME[:UNIT] (e.g. "
                  "poa_irradiance_w_m2=POA_Avg)")
         columns[fld.strip()] = name.strip()
-    stamped = "instant" if site is None else site.get("readings_stamped", "instant")
+    stamped = "instant" if site is None or args.sensors_at_stamps \
+        else site.get("readings_stamped", "instant")
     try:
         station = read_logger_file(args.sensors, columns, args.sensors_timezone or args.timezone,
-                                   date_order=args.date_order, station=True)
+                                   args.sensors_time_column, args.date_order, station=True)
         notes = join_station(files[array], station, stamped, args.sensors.name)
-    except ValueError as exc:
-        fail(f"{args.sensors.name}: {exc}")
+    except ValueError as exc:  # in the station's flags' words
+        message = re.sub(r"^(time_column|timezone|column):",
+                         lambda m: "--sensors-" + m.group(1).replace("_", "-") + ":", str(exc))
+        message = message.replace("--time-column", "--sensors-time-column").replace(
+            "with --timezone", "with --sensors-timezone")
+        fail(f"{args.sensors.name}: {message}")
     if site is None and stamped == "instant":
         notes.append("a dry run does not read the site: the station's values were taken at the "
                      "readings' stamps; posted to a site whose readings are interval means "
@@ -237,11 +258,17 @@ def _peak(lf: LoggerFile, array: str) -> dict[str, Any]:
 def _stamp_note(site: dict[str, Any], summary: dict[str, Any]) -> list[str]:
     """What a file of means needs from a site that takes its stamps as instants: readings
     made from energy are means whatever their spacing."""
-    if site.get("readings_stamped") != "instant":
-        return []
     where = ("the Sites page's 'Readings stamped', or PUT /api/v1/sites/{id} "
              "(docs/diagnosis.md, 'Cadence')")
     arrays = summary["arrays"]
+    if site.get("readings_stamped") == "interval_start" and any(
+            a["power_from"] == "energy_total_wh" for a in arrays.values()):
+        return [f"a meter's totals end their intervals and site {summary['site_id']} takes its "
+                "readings' stamps as their intervals' starts (readings_stamped "
+                "interval_start): each would be placed an interval early — set it to "
+                "interval_end, " + where]
+    if site.get("readings_stamped") != "instant":
+        return []
     if metered := {a["power_from"] for a in arrays.values() if a["power_from"]}:
         ends = "energy_total_wh" in metered and len(metered) == 1
         return [f"the readings are means made from energy ({', '.join(sorted(metered))}) and "

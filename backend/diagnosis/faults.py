@@ -64,6 +64,7 @@ import pandas as pd
 from backend.settings import MAX_ENERGY_GAP_S
 from sim import pv, sky, sky_sensor
 from sim.energy import energy_wh
+from sim.site_config import MAX_DC_LOSS_PCT
 from sim.sites import Site
 from sim.weather_clock import best_shift, scaled_fit
 
@@ -578,8 +579,8 @@ def judged_features(site: Site, e: pd.DataFrame, day_s: tuple[int, int],
         energy = energy_features(measured_tr, expected.tracker_matched,
                                  expected.tracker_alt_matched, expected.tracker,
                                  band_uncertainty(e_day))
-        if energy is not None:
-            features["energy"] = energy
+        if energy is not None:  # the config's losses: a steady shortfall's advice adds to them
+            features["energy"] = {**energy, "dc_loss_pct": site.arrays["tracker"].dc_loss_pct}
     # the fixed array judged where the sky is a sensor's, not its own (_underperformance)
     if whole and source in ("sensor_poa", "sensor_ghi"):
         features["sensor_sky"] = True
@@ -587,7 +588,8 @@ def judged_features(site: Site, e: pd.DataFrame, day_s: tuple[int, int],
             measured_fx, expected.fixed_matched, expected.fixed_matched, expected.fixed,
             sky_uncertainty(e_day))
         if energy is not None:
-            features["fixed_energy"] = energy
+            features["fixed_energy"] = {**energy,
+                                        "dc_loss_pct": site.arrays["fixed"].dc_loss_pct}
     # where a loss lies, from the arrays' voltage readings (an underperformance's detail)
     features["electrical"] = {
         name: electrical_ratios(e_day[f"{name}_power_w"].to_numpy(),
@@ -948,23 +950,34 @@ STEADY_DAYS = 3
 STEADY_SPREAD_PCT = 100.0 * INVERSION_UNCERTAINTY
 
 
-def _steady_loss(run: list[tuple[str, float]]) -> str:
+def _steady_loss(run: list[tuple[str, float]], dc_loss_pct: float) -> str:
     """An underperformance's words for the steady end of its run (``run``: its days' dates
     and shortfalls [%], oldest first): the longest stretch of its last days within
-    :data:`STEADY_SPREAD_PCT` of each other, when :data:`STEADY_DAYS` or more; else empty
-    (a run may begin with snow and go on with a steady loss)."""
-    k = len(run)
-    while k > 0 and max(p for _, p in run[k - 1:]) - min(p for _, p in run[k - 1:]) \
-            <= STEADY_SPREAD_PCT:
+    :data:`STEADY_SPREAD_PCT` of each other, when :data:`STEADY_DAYS` or more, and the
+    ``dc_loss_pct`` that would make it (losses compound with the ``dc_loss_pct`` [%] the
+    config gives: 1 − (1 − L)(1 − s)); else empty (a run may begin with snow and go on with
+    a steady loss). Scanned back from the last day with its least and greatest so far: a
+    year of such days costs a year's steps a day, not its cube."""
+    k = len(run) - 1
+    low = high = run[k][1]
+    while k > 0 and max(high, run[k - 1][1]) - min(low, run[k - 1][1]) <= STEADY_SPREAD_PCT:
         k -= 1
+        low, high = min(low, run[k][1]), max(high, run[k][1])
     steady = [p for _, p in run[k:]]
     if len(steady) < STEADY_DAYS:
         return ""
     median = float(np.median(steady))
-    return (f"; steady at {median:.0f} % ({min(steady):.1f}–{max(steady):.1f} %) over the "
-            f"{len(steady)} days since {run[k][0]}: if the array is clean and healthy, that "
-            f"is losses its config does not give — raise its dc_loss_pct by about "
-            f"{median:.0f} points (docs/sites.md, \"An array's losses\")")
+    total = 100.0 * (1.0 - (1.0 - dc_loss_pct / 100.0) * (1.0 - median / 100.0))
+    said = (f"; steady at {median:.0f} % ({low:.1f}–{high:.1f} %) over the {len(steady)} days "
+            f"since {run[k][0]}: ")
+    if total > MAX_DC_LOSS_PCT:
+        return said + (f"with the {dc_loss_pct:g} % of losses its config gives, {total:.0f} % "
+                       f"in all, over the {MAX_DC_LOSS_PCT:g} % a config allows: a fault, not "
+                       "losses")
+    return said + (f"if the array is clean and healthy, that is losses its config does not "
+                   f"give — set its dc_loss_pct to about {total:.0f} %"
+                   + (f" (from {dc_loss_pct:g} %)" if dc_loss_pct else "")
+                   + " (docs/sites.md, \"An array's losses\")")
 
 
 def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]],
@@ -1010,7 +1023,8 @@ def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
                                      "thousandth of it: power sent in kW where W are asked?"
                                      if tracker and d["features"].get("power_in_kw") else "")
                                  + (f": {UNDER_SENSOR_CAUSES}" if sensor_sky else "")
-                                 + (_steady_loss(run) if sensor_sky else "")
+                                 + (_steady_loss(run, en.get("dc_loss_pct", 0.0))
+                                    if sensor_sky else "")
                                  + _where_the_loss_lies(
                                      (d["features"].get("electrical") or {}).get(array), array)
                                  + (

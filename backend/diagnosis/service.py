@@ -105,8 +105,10 @@ MAX_DAYS = 400
 #: 35: the fixed array's band without the tracker's blind beam, faults.sky_uncertainty;
 #: 36: the fixed array's back-of-module temperature, sim.sky_sensor.module_air_temperature;
 #: 37: where a loss lies, the arrays' voltage and current ratios, faults.electrical_ratios;
-#: 38: the fixed array's IEC 61724-1 performance ratio under a POA sensor).
-CACHE_VERSION = 38
+#: 38: the fixed array's IEC 61724-1 performance ratio under a POA sensor; 39: each array's
+#: configured dc_loss_pct beside its energy, for a steady shortfall's advice,
+#: faults._steady_loss).
+CACHE_VERSION = 39
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99

@@ -149,8 +149,9 @@ class LoggerFile:
                 for ts, row in zip(stamps, values.to_numpy().tolist(), strict=True)]
 
     def cadence_s(self) -> float | None:
-        """The median spacing of the sendable rows' times [s]; None under two rows."""
-        t = np.sort(self.times_utc[self.sendable].as_unit("ns").asi8)
+        """The median spacing of the sendable rows' distinct times [s]; None under two
+        (a stamp written twice is no interval of 0 s)."""
+        t = np.unique(self.times_utc[self.sendable].as_unit("ns").asi8)
         return float(np.median(np.diff(t))) / 1e9 if t.size > 1 else None
 
 
@@ -181,53 +182,77 @@ _UNIT_LETTERS = re.compile(r"[A-Za-z%°µΩ/²³·^*-]{1,12}")
 def _row_units(cells: list[str]) -> list[str]:
     """A units row's units, one per cell ("" where none), or [] when the row is not one: a
     portal's export may put one under its header (``[dd.MM.yyyy HH:mm]``, ``[Wh]``, ``W``,
-    ``%``) — every cell bracketed or a unit's letters (no digit, not a missing value's
-    mark), at least one a unit a field can be given in, none a number or a time."""
+    ``%``, ``-``) — every cell bracketed, a unit's letters or a missing value's mark, at
+    least one a unit a field can be given in, none a number or a time (a data row's time
+    cell never reads as a unit)."""
     units, known = [], False
     for cell in cells:
         c = cell.strip()
         inner = c[1:-1].strip() if len(c) > 1 and (c[0], c[-1]) in (("[", "]"), ("(", ")")) \
             else c
         is_unit = bool(inner) and _unit_key(inner) in _UNIT_KEYS
-        if c and inner == c and not is_unit and (
-                not _UNIT_LETTERS.fullmatch(c) or c.lower() in MISSING):
-            return []  # a value, a time or a mark: a data row
+        if c and inner == c and not is_unit and not _UNIT_LETTERS.fullmatch(c) \
+                and c.lower() not in MISSING:
+            return []  # a value or a time: a data row
         known |= is_unit
         units.append(inner if is_unit else "")
     return units if known else []
 
 
-def _xlsx_text(raw: bytes) -> tuple[str, str]:
+def _xlsx_text(raw: bytes) -> tuple[str, str, int]:
     """An .xlsx workbook's first worksheet as CSV text (``,``; a date-time cell in ISO 8601,
-    naive as Excel keeps it: read on ``timezone``), and the sheet's name: a portal's export
+    naive as Excel keeps it: read on ``timezone``; a cell formatted as a date alone as a
+    date, so a clock column beside it completes it), the sheet's name, and the sheet's row
+    of the text's first line (empty rows above a header are left out): a portal's export
     (Fronius Solar.web, Huawei FusionSolar …) is a workbook (openpyxl, read-only)."""
     import datetime as dt
 
     from openpyxl import load_workbook
+
+    def cell_text(cell: Any) -> str:
+        v = cell.value
+        if v is None:
+            return ""
+        if isinstance(v, dt.datetime):  # a date's format without hours or seconds: a date
+            fmt = str(getattr(cell, "number_format", "")).lower()
+            return v.date().isoformat() if v.time() == dt.time() and "h" not in fmt \
+                and "s" not in fmt else v.isoformat(sep=" ")
+        if isinstance(v, dt.date | dt.time):
+            return v.isoformat()
+        return repr(v) if isinstance(v, float) else str(v)
 
     try:
         book = load_workbook(io.BytesIO(raw), read_only=True, data_only=True)
     except Exception as exc:  # a zip that is no workbook: BadZipFile, KeyError, …
         raise ValueError(f"the file is a zip archive but no .xlsx workbook ({type(exc).__name__}"
                          f": {exc})") from None
-    sheet = book.worksheets[0]
+    try:
+        sheet = book.worksheets[0]
+        sheet.reset_dimensions()  # a size the exporter stored wrong would cut rows silently
+        rows = [[cell_text(c) for c in row] for row in sheet.iter_rows()]
+    except Exception as exc:  # a damaged sheet (a download cut short)
+        raise ValueError(f"the workbook's first sheet cannot be read ({type(exc).__name__}: "
+                         f"{exc})") from None
+    finally:
+        book.close()
+    first = next((i for i, row in enumerate(rows) if any(row)), None)
+    if first is None:
+        raise ValueError(f"the workbook's first sheet {sheet.title!r} is empty (its sheets: "
+                         f"{', '.join(repr(n) for n in book.sheetnames)}): move the readings "
+                         "to the first sheet")
     out = io.StringIO()
-    writer = csv.writer(out, lineterminator="\n")
-    for row in sheet.iter_rows(values_only=True):
-        writer.writerow(["" if v is None else v.isoformat(sep=" ") if isinstance(v, dt.datetime)
-                         else v.isoformat() if isinstance(v, dt.date | dt.time) else repr(v)
-                         if isinstance(v, float) else str(v) for v in row])
-    book.close()
-    return out.getvalue(), sheet.title
+    csv.writer(out, lineterminator="\n").writerows(rows[first:])
+    return out.getvalue(), sheet.title, first + 1
 
 
-def _header(text: str) -> tuple[list[list[str]], int, str, str]:
+def _header(text: str, sep: str | None = None) -> tuple[list[list[str]], int, str, str]:
     """The header's rows (TOA5's four, a CSV's one and a units row under it, if any:
     :func:`_row_units`), the file line the body starts after, the
-    layout's name (TOA5, or a CSV) and its separator: ``,``, ``;`` or a tab, the one its
-    header line holds most (an Excel ``sep=`` first line says it)."""
+    layout's name (TOA5, or a CSV) and its separator: ``sep`` where it is known (a
+    workbook's text), else ``,``, ``;`` or a tab, the one its header line holds most (an
+    Excel ``sep=`` first line says it)."""
     head = text[:65536].splitlines()[:6]
-    skip, sep = 0, None
+    skip = 0
     if head and head[0].lower().startswith("sep=") and len(head[0].strip()) == 5:
         sep, skip, head = head[0].strip()[4], 1, head[1:]
     if not head or not head[0].strip():
@@ -434,23 +459,28 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
     if raw[:8] == b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1":  # OLE2: Excel 97-2003
         raise ValueError("the file is an Excel 97-2003 workbook (.xls): open it and save it as "
                          ".xlsx or CSV")
-    sheet = None
+    sheet, first_row = None, 1
     if raw[:4] == b"PK\x03\x04":  # a zip: an .xlsx workbook, read as its first sheet's CSV
-        text, sheet = _xlsx_text(raw)
+        text, sheet, first_row = _xlsx_text(raw)
     else:
         text = weather_text(raw)
-    header, skip, layout, sep = _header(text)
+    header, skip, layout, sep = _header(text, "," if sheet is not None else None)
     if sheet is not None:
         layout = f"Excel workbook, sheet {sheet!r}"
     toa5 = layout == "TOA5"
     names = [c.strip() for c in header[1 if toa5 else 0]]
     width = len(names)
+    differ: list[str] = []  # a name's unit against the units row's, where both say one
     if toa5:
         file_units = ([c.strip() for c in header[2]] + [""] * width)[:width]
     else:  # a header's [kW], else a units row under it (a portal's export)
         row = (_row_units(header[1]) if len(header) > 1 else []) + [""] * width
         file_units = [(_header_unit(n) or row[i]) for i, n in enumerate(names)]
+        differ = [f"{n!r} says {u!r}, the units row {row[i]!r}" for i, (n, u) in
+                  enumerate(zip(names, file_units, strict=True))
+                  if u and row[i] and _unit_key(u) != _unit_key(row[i])]
     frame, lines = _body(text, skip, sep, width)
+    lines = lines + (first_row - 1)  # a sheet's rows above its header
     del text
     blank = [i for i, n in enumerate(names) if not n]
     label = {i: (n or f"column {i + 1}") for i, n in enumerate(names)}
@@ -462,6 +492,9 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
         when, when_label = frame[tcol].str.strip() + " " + frame[clock].str.strip(), \
             f"{label[tcol]} + {label[clock]}"
     times, notes = _times(when, when_label, lines, timezone, date_order)
+    if differ:
+        notes.append("units: the column's name is read before the units row where they "
+                     "differ: " + "; ".join(differ) + " (give NAME:UNIT where that is wrong)")
     decimal_comma = sep != "," and _has_decimal_commas(frame, tcol)
     if decimal_comma:
         layout = layout[:-1] + ", decimal comma)"
@@ -471,9 +504,11 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
     for i, n in enumerate(names if fields_by_name else []):  # a column named as a field
         if n.lower() in allowed and n.lower() not in mapping and i not in blank:
             mapping[n.lower()] = n
-    if "power_w" in mapping:  # energy columns named as fields beside a power column: not needed
-        mapping = {f: c for f, c in mapping.items()
-                   if f not in ENERGY_FIELDS or f in (columns or {})}
+    given = columns or {}
+    if any(f in given for f in ENERGY_FIELDS) and "power_w" not in given:
+        mapping.pop("power_w", None)  # energy mapped: a column named power_w is not the power
+    elif "power_w" in mapping:  # energy columns named as fields beside a power column
+        mapping = {f: c for f, c in mapping.items() if f not in ENERGY_FIELDS or f in given}
     unknown = [f for f in mapping if f not in allowed]
     if unknown:
         raise ValueError(f"column: {unknown[0]!r} is not a field"
@@ -503,6 +538,10 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
         if len(parts) > 1 and fld not in ADDITIVE_FIELDS:
             raise ValueError(f"column: {fld}={spec!r}: only {', '.join(ADDITIVE_FIELDS)} add up "
                              "over columns")
+        if len(parts) > 1 and any(u for _, u in named) and not all(
+                u or file_units[index[n]] for n, u in named):
+            raise ValueError(f"column: {fld}={spec!r}: a unit is given for some of the columns "
+                             "only; give each its own (P_INV1:kW+P_INV2:kW)")
         read_units, total = [], np.zeros(len(frame))
         for part, unit_given in named:
             i = index[part]
@@ -642,9 +681,9 @@ def power_from_energy(times_utc: pd.DatetimeIndex, energy_wh: np.ndarray, kind: 
                      "their intervals are not sent")
     if (over := np.flatnonzero(gap & (rise_wh >= 0))).size:
         notes.append(f"{column!r} spans a gap {over.size} × (a step over {METER_MAX_STEP:g} × "
-                     f"its {spacing_s:g} s spacing; the first ending at line "
-                     f"{lines[later[over[0]]]}): the {rise_wh[over].sum():.6g} Wh it rose over "
-                     "them are not sent as power")
+                     f"its {spacing_s:g} s spacing: rows missing, or blank totals; the first "
+                     f"ending at line {lines[later[over[0]]]}): the "
+                     f"{rise_wh[over].sum():.6g} Wh it rose over them are not sent as power")
     if (rises := rise_wh[rise_wh > 0]).size:
         least = float(rises.min())
         notes.append(f"{column!r}'s smallest rise is {least:.6g} Wh: an interval's power is "

@@ -415,7 +415,10 @@ class ServerProcess:
                 attempt += 1
 
     def _start_once(self, timeout_s: float) -> ServerProcess:
+        """One start; its failure names this attempt's log lines only (an earlier attempt's
+        "address already in use" must not make a later failure look like one)."""
         self.port = free_port()
+        since = self.log_path.stat().st_size if self.log_path.exists() else 0
         log = self.log_path.open("ab")
         self.proc = subprocess.Popen(
             [*HELIOTWIN, "serve", "--host", "127.0.0.1", "--port", str(self.port),
@@ -426,7 +429,7 @@ class ServerProcess:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
-                raise RuntimeError(f"server exited at start:\n{self.log_tail()}")
+                raise RuntimeError(f"server exited at start:\n{self.log_tail(since=since)}")
             try:
                 if httpx.get(self.base_url + "/healthz", timeout=1.0).status_code == 200:
                     return self
@@ -434,10 +437,15 @@ class ServerProcess:
                 pass
             time.sleep(0.1)
         self.kill()
-        raise RuntimeError(f"server did not answer /healthz in {timeout_s} s:\n{self.log_tail()}")
+        raise RuntimeError(f"server did not answer /healthz in {timeout_s} s:\n"
+                           f"{self.log_tail(since=since)}")
 
-    def log_tail(self, lines: int = 30) -> str:
-        return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])
+    def log_tail(self, lines: int = 30, since: int = 0) -> str:
+        """The log's last ``lines`` lines, of its bytes from ``since`` on."""
+        with self.log_path.open("rb") as fh:
+            fh.seek(since)
+            text = fh.read().decode(errors="replace")
+        return "\n".join(text.splitlines()[-lines:])
 
     def stop(self, timeout_s: float = 20.0) -> int | None:
         """SIGTERM (graceful), then wait; SIGKILL if it hangs."""

@@ -457,27 +457,44 @@ def test_the_library_path_judges_the_fixed_array_under_a_sensors_sky() -> None:
 def test_a_steady_shortfall_under_a_sensors_sky_names_the_losses_it_would_be() -> None:
     """A fixed array 15 % down every day (seed 31, a POA sensor's sky) reads as a steady
     loss from its third day on, naming the dc_loss_pct that would give it: 13 % (12.6–13.7 %
-    a day; this healthy generated array reads 1.02–1.03 of its expectation); one whose losses
-    vary by day (snow: 50, 20, 40 %) does not, and a run that begins with a snow day and
-    goes on 15 % down says it from its third steady day, since the first of them."""
+    a day; this healthy generated array reads 1.02–1.03 of its expectation); 10 % down, 8 %.
+    Losses compound: with 14 % in the config and the array a further 15 % down, the advice
+    is 1 − 0.86 · 0.87 = 25 %, not 14 + 13; a config's 45 % and 15 % more (53 %) is past the
+    50 % a config allows and named a fault. One whose losses vary by day (snow: 50, 20,
+    40 %) is not steady, and a run that begins with a snow day and goes on 15 % down says it
+    from its third steady day, since the first of them."""
     d = logger_days(SITE, FIRST, DAYS, SEED)
-    e = sky_sensor.weather_aware_twin(SITE, FIRST, FIRST + pd.Timedelta(days=DAYS),
-                                      d.fixed_power_w, sensors=d.sensors("fixed_poa_w_m2"))
 
-    def findings(day_factors: list[float]) -> list[str]:
-        fixed = d.fixed_power_w * np.repeat(day_factors, 1440)
-        days = features_by_day(SITE, FIRST, e, d.tracker_power_w, fixed_power_w=fixed)
+    def findings(day_factors: list[float], dc_loss_pct: float = 0.0) -> list[str]:
+        site = replace(SITE, arrays={**SITE.arrays, "fixed": replace(
+            SITE.arrays["fixed"], dc_loss_pct=dc_loss_pct)})
+        e = sky_sensor.weather_aware_twin(site, FIRST, FIRST + pd.Timedelta(days=DAYS),
+                                          d.fixed_power_w, sensors=d.sensors("fixed_poa_w_m2"))
+        fixed = d.fixed_power_w * (1 - dc_loss_pct / 100) * np.repeat(day_factors, 1440)
+        days = features_by_day(site, FIRST, e, d.tracker_power_w, fixed_power_w=fixed)
         return [" / ".join(f["detail"] for f in day if f["kind"] == "fixed_underperformance")
                 for day in faults_over_days(days)]
 
+    def advice(texts: list[str]) -> list[tuple[int, int, str]]:
+        """(steady %, days, since) and the dc_loss_pct advised, per day from the third."""
+        out = []
+        for text in texts[2:]:
+            m = re.search(r"steady at (\d+) % \([\d.]+–[\d.]+ %\) over the (\d) days since "
+                          r"(\S+): .*(set its dc_loss_pct to about (\d+) %|a fault, not losses)",
+                          text)
+            assert m is not None, text
+            out.append((int(m.group(1)), int(m.group(2)), m.group(3), m.group(5) or "fault"))
+        return out
+
     steady = findings([0.85] * DAYS)
     assert all(steady) and not any("steady" in x for x in steady[:2]), steady
-    for k, text in enumerate(steady[2:], start=3):
-        m = re.search(r"steady at (\d+) % \(([\d.]+)–([\d.]+) %\) over the (\d) days since "
-                      r"(\S+): .* raise its dc_loss_pct by about (\d+) points", text)
-        assert m is not None, text
-        assert int(m.group(1)) == 13 and int(m.group(6)) == 13
-        assert int(m.group(4)) == k and m.group(5) == FIRST.date().isoformat()
+    start = FIRST.date().isoformat()
+    assert advice(steady) == [(13, k, start, "13") for k in range(3, DAYS + 1)]
+    assert {a[3] for a in advice(findings([0.9] * DAYS))} == {"8"}
+    with_losses = advice(findings([0.85] * DAYS, dc_loss_pct=14.0))
+    assert {(a[0], a[3]) for a in with_losses} == {(13, "25")}, with_losses
+    assert "(from 14 %)" in findings([0.85] * DAYS, dc_loss_pct=14.0)[-1]
+    assert {a[3] for a in advice(findings([0.85] * DAYS, dc_loss_pct=45.0))} == {"fault"}
     varying = findings([0.5, 0.8, 0.6, 1.0, 1.0, 1.0])
     assert all(varying[:3]) and not any("steady" in x for x in varying)
     after_snow = findings([0.5, 0.85, 0.85, 0.85, 0.85, 0.85])

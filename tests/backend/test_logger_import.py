@@ -10,8 +10,10 @@ from __future__ import annotations
 import gzip
 import io
 import json
+import re
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import httpx
 import numpy as np
@@ -234,7 +236,8 @@ def test_a_meters_total_and_a_portals_interval_energy_are_sent_as_each_intervals
     notes = " ".join(broken.notes)  # the file's line of row k is k + 2
     assert (f"goes back on 1 rows (a reset — a day's total at midnight — or a new meter; the "
             f"first at line {swap + 2}): their intervals are not sent") in notes
-    assert (f"'Zählerstand [kWh]' spans a gap 1 × (a step over 1.5 × its 900 s spacing; the "
+    assert (f"'Zählerstand [kWh]' spans a gap 1 × (a step over 1.5 × its 900 s spacing: rows "
+            f"missing, or blank totals; the "
             f"first ending at line {swap + 9}): the {lost_wh:.6g} Wh it rose over them are not "
             "sent as power") in notes
     assert broken.sendable.sum() == meter.sendable.sum() - 8 - 2
@@ -351,9 +354,10 @@ def test_columns_that_add_up_map_to_one_field() -> None:
     """An array on two inverters is one array's power: ``power_w=A+B`` adds the columns, each
     in its own unit (RSF II's plant in kW and its second inverter in W, as pandas adds them;
     the physics is not the point), a cell missing in either leaves the sum missing; a field
-    that does not add up (a voltage) or a part the file lacks is refused."""
+    that does not add up (a voltage), a part the file lacks, or a unit given for one part of
+    columns whose file gives none is refused."""
     name = "nrel_RSF_II.csv"
-    both = "ac_power_kw_1137:kW + inv2_ac_power_w__1047"
+    both = "ac_power_kw_1137:kW + inv2_ac_power_w__1047:W"
     lf = read_logger_file(LOGGERS / name, {"power_w": both}, timezone="Etc/GMT+7")
     ref = pd.read_csv(LOGGERS / name, index_col=0)
     np.testing.assert_allclose(lf.values["power_w"], ref["ac_power_kw_1137"] * 1000
@@ -370,6 +374,10 @@ def test_columns_that_add_up_map_to_one_field() -> None:
                                          "current_a": "P2 [W]"})
     with pytest.raises(ValueError, match=r"the file has no column 'P3'"):
         read_logger_file(text.encode(), {"power_w": "P1 [kW]+P3"})
+    with pytest.raises(ValueError, match=r"a unit is given for some of the columns only; give "
+                                         r"each its own"):  # not P_INV1 in W, P_INV2 in kW
+        read_logger_file(LOGGERS / name, {"power_w": "ac_power_kw_1137+inv2_ac_power_w__1047:kW"},
+                         timezone="Etc/GMT+7")
 
 REFUSED = [
     ("ts,power_w\n2022-01-02 10:00,5\n2022-01-02 10:01,6\n", {},
@@ -542,7 +550,10 @@ def test_the_command_posts_strings_and_their_weather_stations_file_together(
     station a ``;`` export with decimal commas), posted by one command to site ``meter``'s
     fixed array: the readings stored carry the station's values at their stamps (the
     station as fine as the readings: no means to take). A dry run says what it joined; a
-    field in both files, a station's power and an array not imported are refused."""
+    field in both files, a station's power and an array not imported are refused, each in
+    the station's flags' words; so is posting to a site that takes these 15-minute stamps as
+    instants (``serf``): a stored reading is never replaced, so the join must be the one
+    the site will read."""
     server, env = served
     ref = _serf_west()
     strings, met = tmp_path / "strings.csv", tmp_path / "met.csv"
@@ -571,13 +582,19 @@ def test_the_command_posts_strings_and_their_weather_stations_file_together(
     assert m["points"][0]["voltage_v"] == 223.79
     for extra, message in (
             (["--sensors-column=voltage_v=poa_irradiance__771"],
-             "met.csv: column: 'voltage_v' is not a field of a weather station"),
+             "met.csv: --sensors-column: 'voltage_v' is not a field of a weather station"),
             (["--column=poa_irradiance_w_m2=dc_pos_voltage__774"],
-             "met.csv: column: poa_irradiance_w_m2: mapped in both files"),
+             "met.csv: --sensors-column: poa_irradiance_w_m2: mapped in both files"),
             (["--sensors-array=tracker"], "--sensors-array: name the array whose readings "
                                           "carry the station's values, one of fixed")):
         bad = heliotwin_cli(*args, *extra, "--dry-run")
         assert bad.returncode == 2 and message in bad.stderr, bad.stderr
+    # a site that takes 15-minute stamps as instants: the join would be stored as it is
+    # done, so nothing is posted until the site says what its stamps mark
+    instant = [a if a != "meter" else "serf" for a in args]
+    refused = heliotwin_cli(*instant, env={**env, "HELIOTWIN_TOKEN": server.token("serf")})
+    assert refused.returncode == 2 and "set the site's readings_stamped first, or give " \
+        "--sensors-at-stamps" in refused.stderr and "nothing was posted" in refused.stderr
 
 def test_a_dry_run_says_what_it_would_post_and_a_column_needs_an_array(heliotwin_cli) -> None:
     path = str(LOGGERS / "nrel_RSF_II.csv")
@@ -685,3 +702,75 @@ def test_a_meters_a_plus_column_is_one_column_not_a_sum() -> None:
         assert lf.columns["energy_total_wh"][0] == "A+"
     assert lf.readings("fixed") == [{"ts": "2022-01-02T10:15:00Z", "array": "fixed",
                                      "power_w": 1000.0}]
+
+
+
+def test_a_meters_totals_on_a_site_stamping_interval_starts_are_told_to_end_them() -> None:
+    """A meter's totals end their intervals: a site that reads stamps as interval starts
+    would place each an interval early, and the import says so."""
+    from backend.cli.readings import _stamp_note
+
+    summary = {"site_id": "s", "arrays": {"fixed": {"power_from": "energy_total_wh",
+                                                    "cadence_s": 900.0}}}
+    (note,) = _stamp_note({"readings_stamped": "interval_start"}, summary)
+    assert "each would be placed an interval early — set it to interval_end" in note
+    assert _stamp_note({"readings_stamped": "interval_end"}, summary) == []
+    summary["arrays"]["fixed"]["power_from"] = "energy_wh"  # a portal's: either may be right
+    assert _stamp_note({"readings_stamped": "interval_start"}, summary) == []
+
+
+def test_a_workbooks_date_and_clock_columns_its_rows_and_its_sheets() -> None:
+    """A workbook as exporters write them (a reviewer's cases): a date column formatted as a
+    date beside a clock column is one time (it read as midnight, every row); a sheet whose
+    stored size is wrong is read whole (openpyxl's read-only mode trusts it: 96 rows cut to
+    9); empty rows above the header are skipped, the lines named as the sheet's rows; an
+    empty first sheet is refused naming the sheets."""
+    import datetime as dt
+
+    from openpyxl import Workbook
+
+    def workbook(rows: list[list[Any]], date_format: str | None = None, blank_rows: int = 0,
+                 first_empty: bool = False) -> bytes:
+        book = Workbook()
+        if first_empty:
+            book.active.title = "Cover"
+            sheet = book.create_sheet("Data")
+        else:
+            sheet = book.active
+        for _ in range(blank_rows):
+            sheet.append([])
+        for row in rows:
+            sheet.append(row)
+        if date_format:
+            for (cell,) in sheet.iter_rows(min_row=blank_rows + 2, max_col=1):
+                cell.number_format = date_format
+        buf = io.BytesIO()
+        book.save(buf)
+        return buf.getvalue()
+
+    day = dt.datetime(2022, 6, 1)
+    rows = [["Date", "Time", "power_w"]] + [[day, dt.time(12, 15 * k), 100.0 * k]
+                                          for k in range(4)]
+    lf = read_logger_file(workbook(rows, "dd.mm.yyyy", blank_rows=2), timezone="UTC")
+    assert [f"{t:%H:%M}" for t in lf.times_utc] == ["12:00", "12:15", "12:30", "12:45"]
+    assert lf.time_column == "Date + Time" and list(lf.lines) == [4, 5, 6, 7]
+    assert list(lf.values["power_w"]) == [0.0, 100.0, 200.0, 300.0]
+
+    long_rows = [["ts", "power_w"]] + [[day + dt.timedelta(minutes=15 * k), 1.0]
+                                       for k in range(96)]
+    raw = workbook(long_rows)
+    with zipfile.ZipFile(io.BytesIO(raw)) as z:
+        parts = {n: z.read(n) for n in z.namelist()}
+    sheet_xml = parts["xl/worksheets/sheet1.xml"]
+    parts["xl/worksheets/sheet1.xml"] = re.sub(rb'<dimension ref="[^"]*" ?/>',
+                                               b'<dimension ref="A1:B10"/>', sheet_xml)
+    stale = io.BytesIO()
+    with zipfile.ZipFile(stale, "w") as z:
+        for n, data in parts.items():
+            z.writestr(n, data)
+    assert b'ref="A1:B10"' in parts["xl/worksheets/sheet1.xml"]
+    assert len(read_logger_file(stale.getvalue(), timezone="UTC").readings("fixed")) == 96
+
+    with pytest.raises(ValueError, match=r"first sheet 'Cover' is empty \(its sheets: 'Cover', "
+                                         r"'Data'\): move the readings to the first sheet"):
+        read_logger_file(workbook(long_rows, first_empty=True), timezone="UTC")
