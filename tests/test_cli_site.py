@@ -93,6 +93,25 @@ def test_a_user_file_replaces_a_built_in_only_with_force(tmp_path: Path, heliotw
     assert json.loads(show.stdout.split("\n", 1)[1])["altitude_m"] == 60.0
 
 
+
+def test_a_broken_file_beside_a_new_site_is_named_not_a_traceback(tmp_path: Path,
+                                                                   heliotwin) -> None:
+    """A draft in the sites folder whose site_id is not its file's name (a tester's copy):
+    ``site create`` writes its file and says the database did not take it, naming the draft;
+    a command that needs the database refuses naming it (it printed a traceback, exit 1)."""
+    (tmp_path / "draft.json").write_text(json.dumps({
+        "site_id": "other", "name": "x", "latitude_deg": 40, "longitude_deg": -105,
+        "timezone": "America/Denver"}))
+    made = heliotwin(tmp_path, "site", "create", "--id", "hamburg", "--latitude-deg", "53.52",
+                     "--longitude-deg", "10.1", "--timezone", "Europe/Berlin")
+    assert made.returncode == 0, made.stderr
+    assert (tmp_path / "hamburg.json").is_file()
+    assert "not added to the database: HELIOTWIN_SITES_DIR: " in made.stdout
+    assert "draft.json: site_id 'other' does not match the file name: fix or move that file" \
+        in made.stdout
+    token = heliotwin(tmp_path, "token", "create", "--site", "hamburg")
+    assert token.returncode == 2 and "draft.json: site_id 'other'" in token.stderr
+
 def test_validate_names_the_bad_field(tmp_path: Path, heliotwin) -> None:
     good = ROOT / "sim" / "data" / "sites" / "tehuantepec.json"
     bad = tmp_path / "broken.json"

@@ -36,6 +36,7 @@ def with_db(work: Callable[[Any], Any], site_id: str | None = None,
     from tenacity import Retrying, retry_if_exception, stop_after_attempt
 
     from backend.auth import UnknownSite
+    from backend.cli import fail
     from backend.retry import backoff
     from backend.settings import get_settings
     from backend.sites import Registry, sync_sites
@@ -62,7 +63,11 @@ def with_db(work: Callable[[Any], Any], site_id: str | None = None,
 
     try:
         run_migrations(engine)
-        registry = Registry.load_files(settings.sites.user_dir)
+        try:
+            registry = Registry.load_files(settings.sites.user_dir)
+        except ValueError as exc:  # a broken file in the folder (a draft, a copy): say which
+            fail(f"HELIOTWIN_SITES_DIR: {exc}: fix or move that file (the service does not "
+                 "start with it either)")
         return Retrying(stop=stop_after_attempt(5), wait=backoff(0.5, 4.0),
                         retry=retry_if_exception(locked), reraise=True)(attempt)
     finally:

@@ -153,6 +153,7 @@ def _sync_database(config: dict[str, Any]) -> str:
     the new file's rows too, and its loggers commit meanwhile."""
     from sqlalchemy.exc import SQLAlchemyError
 
+    from backend.cli import CliError
     from backend.cli.db import with_db
     from backend.sites import sync_sites
     from backend.storage.engine import SchemaTooNewError
@@ -161,6 +162,8 @@ def _sync_database(config: dict[str, Any]) -> str:
     site = site_from_dict(config)
     try:
         with_db(lambda conn: sync_sites(conn, [site]))
+    except CliError as exc:  # the file is written; another one in the folder is broken
+        return f"not added to the database: {exc}"
     except SQLAlchemyError as exc:
         return (f"the database could not take it now ({type(exc).__name__}): the service "
                 "adds it at its next start")

@@ -616,31 +616,41 @@ def features_by_day(site: Site, first_day: pd.Timestamp, e: pd.DataFrame,
                     fixed_power_w: np.ndarray | None = None,
                     tracker_voltage_v: np.ndarray | None = None,
                     fixed_voltage_v: np.ndarray | None = None) -> list[dict[str, Any]]:
-    """``[{"date", "features"}]`` of consecutive days of 1440 minutes from ``first_day``
-    (local midnight; ``e`` from :func:`sim.sky_sensor.weather_aware_twin` on the same
-    minutes) — the input of :func:`faults_over_days` for minute series that need no calendar
-    (the service cuts local days by their edges), by the service's rule
-    (:func:`judged_features`), each measured energy the minutes' by :mod:`sim.energy`'s rule.
-    The arrays' readings on those minutes: ``tracker_power_w`` [W], ``fixed_power_w`` [W]
-    (judged under a sensor's sky), ``tracker_voltage_v``/``fixed_voltage_v`` [V]; None: no
-    readings. ``spacing_s``: the tracker's readings' spacing (:func:`day_features`)."""
+    """``[{"date", "features"}]`` of the whole local days of ``e``'s minutes (from
+    :func:`sim.sky_sensor.weather_aware_twin`, starting at ``first_day``, a local midnight)
+    — the input of :func:`faults_over_days`, by the service's rule (:func:`judged_features`),
+    each measured energy the minutes' by :mod:`sim.energy`'s rule. A day is cut at the
+    site's local midnights, as the service cuts them: 1,380 or 1,500 minutes on a day the
+    clocks change (slices of 1,440 labelled one date twice and dropped an hour, a tester's
+    finding); a day the minutes do not cover whole is left out. The arrays' readings on
+    those minutes: ``tracker_power_w`` [W], ``fixed_power_w`` [W] (judged under a sensor's
+    sky), ``tracker_voltage_v``/``fixed_voltage_v`` [V]; None: no readings. ``spacing_s``:
+    the tracker's readings' spacing (:func:`day_features`)."""
+    if len(e) and e.index[0] != first_day:
+        raise ValueError(f"e starts at {e.index[0]}, not at first_day {first_day}")
     none = np.full(len(e), np.nan)
     fixed_w = none if fixed_power_w is None else fixed_power_w
     voltages_v = {"tracker": none if tracker_voltage_v is None else tracker_voltage_v,
                   "fixed": none if fixed_voltage_v is None else fixed_voltage_v}
+    dates = e.index.tz_convert(site.timezone).date
+    edges = [*np.flatnonzero(np.r_[True, dates[1:] != dates[:-1]]), len(e)]
     out = []
-    for k in range(len(e) // 1440):
-        sl = slice(k * 1440, (k + 1) * 1440)
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        midnight = pd.Timestamp(dates[a], tz=site.timezone)
+        minutes = (pd.Timestamp(dates[a] + dt.timedelta(days=1), tz=site.timezone)
+                   - midnight) // pd.Timedelta(minutes=1)
+        if e.index[a] != midnight or b - a != minutes:
+            continue  # not a whole local day
+        sl = slice(a, b)
         day, tr, fx = e.iloc[sl], tracker_power_w[sl], fixed_w[sl]
         ts = day.index.as_unit("s").asi8
-        day_s = (int(ts[0]), int(ts[0]) + 86400)
+        day_s = (int(ts[0]), int(ts[0]) + 60 * minutes)
         measured = {name: energy_wh(ts, p, 60, *day_s) if np.isfinite(p).any() else None
                     for name, p in (("tracker", tr), ("fixed", fx))}
         f = judged_features(site, day, day_s, tr, fx,
                             {name: v[sl] for name, v in voltages_v.items()}, measured,
                             day_expected_wh(day, day_s, tr, fx), spacing_s=spacing_s)
-        out.append({"date": (first_day + pd.Timedelta(days=k)).date().isoformat(),
-                    "features": f})
+        out.append({"date": dates[a].isoformat(), "features": f})
     return out
 
 
@@ -951,13 +961,14 @@ STEADY_SPREAD_PCT = 100.0 * INVERSION_UNCERTAINTY
 
 
 def _steady_loss(run: list[tuple[str, float]], dc_loss_pct: float) -> str:
-    """An underperformance's words for the steady end of its run (``run``: its days' dates
-    and shortfalls [%], oldest first): the longest stretch of its last days within
-    :data:`STEADY_SPREAD_PCT` of each other, when :data:`STEADY_DAYS` or more, and the
-    ``dc_loss_pct`` that would make it (losses compound with the ``dc_loss_pct`` [%] the
-    config gives: 1 − (1 − L)(1 − s)); else empty (a run may begin with snow and go on with
-    a steady loss). Scanned back from the last day with its least and greatest so far: a
-    year of such days costs a year's steps a day, not its cube."""
+    """An underperformance's words for the steady end of ``run`` (consecutive days' dates and
+    shortfalls [%] under a sensor's sky, oldest first, the finding's day last): the longest
+    stretch of its last days within :data:`STEADY_SPREAD_PCT` of each other, when
+    :data:`STEADY_DAYS` or more, and the ``dc_loss_pct`` that would make it (losses compound
+    with the ``dc_loss_pct`` [%] the config gives: 1 − (1 − L)(1 − s)), or a step where the
+    day before it made clearly more; else empty (a run may begin with snow and go on with a
+    steady loss). Scanned back from the last day with its least and greatest so far: a year
+    of such days costs a year's steps a day, not its cube."""
     k = len(run) - 1
     low = high = run[k][1]
     while k > 0 and max(high, run[k - 1][1]) - min(low, run[k - 1][1]) <= STEADY_SPREAD_PCT:
@@ -970,6 +981,10 @@ def _steady_loss(run: list[tuple[str, float]], dc_loss_pct: float) -> str:
     total = 100.0 * (1.0 - (1.0 - dc_loss_pct / 100.0) * (1.0 - median / 100.0))
     said = (f"; steady at {median:.0f} % ({low:.1f}–{high:.1f} %) over the {len(steady)} days "
             f"since {run[k][0]}: ")
+    if k > 0 and run[k - 1][1] < low - STEADY_SPREAD_PCT:  # the day before made clearly more
+        return said + (f"a step down on {run[k][0]} (the day before read {run[k - 1][1]:.0f} "
+                       "%): losses do not come overnight — a string or an inverter down, or "
+                       "snow or dirt that stayed")
     if total > MAX_DC_LOSS_PCT:
         return said + (f"with the {dc_loss_pct:g} % of losses its config gives, {total:.0f} % "
                        f"in all, over the {MAX_DC_LOSS_PCT:g} % a config allows: a fault, not "
@@ -993,21 +1008,28 @@ def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
     expectation rests on a beam the sky instrument did not see
     (``features["beam_unseen_pct"]``, the service's ``sky.beam_unseen_expected_pct``): on a
     summer dawn behind the fixed plane the shortfall may be the sky's. Under a sensor's sky a
-    steady run says the losses it would be (:func:`_steady_loss`)."""
+    steady shortfall says the losses it would be (:func:`_steady_loss`), over the days in a
+    row under a sensor's sky whether below their band or not: the days below a wide band
+    alone (a pyranometer's ±16 %) are its deeper ones, and read 17 % for an array whose days
+    read 15.3 % (a tester's finding on SERF East's real array under PSM3's GHI)."""
     since: str | None = None
-    run: list[tuple[str, float]] = []  # the run's days: date, shortfall [%]
+    measured: list[tuple[str, float]] = []  # consecutive sensor-sky days: date, shortfall [%]
     tracker = array == "tracker"
     for i, d in enumerate(days):
         en = d["features"].get("energy" if tracker else "fixed_energy")
+        sensor_sky = not tracker or bool(d["features"].get("sensor_sky"))
+        if en is None or not sensor_sky:
+            measured = []
+        else:
+            measured.append((d["date"], 100.0 * (en["expected_wh"] - en["measured_wh"])
+                             / en["expected_wh"]))
         if en is None or en["measured_wh"] >= en["low_wh"]:
-            since, run = None, []
+            since = None
             continue
         since = since or d["date"]
         m, x, low = en["measured_wh"], en["expected_wh"], en["low_wh"]
         short_wh = x - m
         pct = 100.0 * short_wh / x
-        run.append((d["date"], pct))
-        sensor_sky = not tracker or d["features"].get("sensor_sky")
         conf = float(np.clip(0.5 + 0.5 * (low - m) / max(x - low, 1e-9), 0.5, 1.0))
         unseen = float(d["features"].get("beam_unseen_pct") or 0.0) if tracker else 0.0
         out[i].append({"kind": "underperformance" if tracker else "fixed_underperformance",
@@ -1023,7 +1045,7 @@ def _underperformance(days: list[dict[str, Any]], out: list[list[dict[str, Any]]
                                      "thousandth of it: power sent in kW where W are asked?"
                                      if tracker and d["features"].get("power_in_kw") else "")
                                  + (f": {UNDER_SENSOR_CAUSES}" if sensor_sky else "")
-                                 + (_steady_loss(run, en.get("dc_loss_pct", 0.0))
+                                 + (_steady_loss(measured, en.get("dc_loss_pct", 0.0))
                                     if sensor_sky else "")
                                  + _where_the_loss_lies(
                                      (d["features"].get("electrical") or {}).get(array), array)

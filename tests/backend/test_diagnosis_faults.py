@@ -462,7 +462,9 @@ def test_a_steady_shortfall_under_a_sensors_sky_names_the_losses_it_would_be() -
     is 1 − 0.86 · 0.87 = 25 %, not 14 + 13; a config's 45 % and 15 % more (53 %) is past the
     50 % a config allows and named a fault. One whose losses vary by day (snow: 50, 20,
     40 %) is not steady, and a run that begins with a snow day and goes on 15 % down says it
-    from its third steady day, since the first of them."""
+    from its third steady day, since the first of them; a loss that comes overnight after
+    healthy days is named a step, not losses (every day under the sensor's sky counts, below
+    its band or not: the days below a wide band alone are the deeper ones)."""
     d = logger_days(SITE, FIRST, DAYS, SEED)
 
     def findings(day_factors: list[float], dc_loss_pct: float = 0.0) -> list[str]:
@@ -501,3 +503,27 @@ def test_a_steady_shortfall_under_a_sensors_sky_names_the_losses_it_would_be() -
     assert not any("steady" in x for x in after_snow[:3])
     since = (FIRST + pd.Timedelta(days=1)).date().isoformat()
     assert f"over the 3 days since {since}" in after_snow[3], after_snow[3]
+    assert "set its dc_loss_pct to about 13 %" in after_snow[3]
+    step = findings([1.0, 1.0, 0.85, 0.85, 0.85, 0.85])  # healthy, then down overnight
+    assert not any("steady" in x for x in step[:4])
+    since = (FIRST + pd.Timedelta(days=2)).date().isoformat()
+    assert f"a step down on {since}" in step[4] and "a string or an inverter down" in step[4]
+    assert "dc_loss_pct" not in step[4].split("steady at")[1], step[4]
+
+
+def test_the_library_path_cuts_days_at_local_midnights_across_a_clock_change() -> None:
+    """Across Oslo's autumn change (25 October 2026: 1,500 minutes) the days are cut at the
+    local midnights as the service cuts them: 1,440-minute slices labelled 25 October twice
+    and dropped an hour (a tester's finding); the run's last, partial day is left out."""
+    lat, lon, zone, altitude, tilt, azimuth = TROMSO
+    site = replace(SITE, latitude=lat, longitude=lon, timezone=zone, altitude=altitude,
+                   arrays={**SITE.arrays, "fixed": replace(
+                       SITE.arrays["fixed"], surface_tilt=tilt, surface_azimuth=azimuth)})
+    first = pd.Timestamp("2026-10-24", tz=zone)
+    d = logger_days(site, first, 4, SEED)
+    e = sky_sensor.weather_aware_twin(site, first, first + pd.Timedelta(days=4), d.fixed_power_w)
+    assert len(e) == 4 * 1440  # four times 24 hours: to 23:00 on 27 October, local
+    days = features_by_day(site, first, e, d.tracker_power_w)
+    assert [day["date"] for day in days] == ["2026-10-24", "2026-10-25", "2026-10-26"]
+    with pytest.raises(ValueError, match="not at first_day"):
+        features_by_day(site, first + pd.Timedelta(hours=1), e, d.tracker_power_w)
