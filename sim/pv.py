@@ -134,6 +134,11 @@ class ArrayConfig:
         PVWatts' system losses scale its power (Dobos 2014, PVWatts Version 5 Manual,
         NREL/TP-6A20-62641: 14.08 % by default, its ten categories compounded, the inverter
         apart; ``pvlib.pvsystem.pvwatts_losses``). 0 by default: the ideal array.
+    inverter_limit_w : float or None
+        The most power its inverter delivers [W] (its AC rating, where the logger reads AC
+        power): above it the inverter leaves the maximum power point and clips
+        (:func:`array_mpp`). A plant's DC/AC ratio is 1.1–1.4, so a tracker, which holds its
+        peak for hours, clips on every clear day. None by default: no limit.
     """
 
     name: str
@@ -146,6 +151,7 @@ class ArrayConfig:
     temperature_model: str = "open_rack_glass_polymer"
     albedo: float = 0.2
     dc_loss_pct: float = 0.0
+    inverter_limit_w: float | None = None
 
     def __post_init__(self) -> None:
         if self.mount not in ("tracker", "fixed"):
@@ -156,6 +162,8 @@ class ArrayConfig:
             )
         if not 0.0 <= self.dc_loss_pct < 100.0:
             raise ValueError(f"array {self.name!r}: dc_loss_pct must be in 0..100 %")
+        if self.inverter_limit_w is not None and not self.inverter_limit_w > 0.0:
+            raise ValueError(f"array {self.name!r}: inverter_limit_w must be > 0 W")
 
     @property
     def modules(self) -> int:
@@ -172,6 +180,8 @@ class ArrayConfig:
         out = {key: getattr(self, name) for key, (name, _) in _SITE_FILE_KEYS.items()}
         if not self.dc_loss_pct:  # only when set: a stored config without it stays unchanged
             del out["dc_loss_pct"]
+        if self.inverter_limit_w is None:
+            del out["inverter_limit_w"]
         return out
 
     @property
@@ -199,6 +209,8 @@ class ArrayConfig:
         }
         if self.dc_loss_pct:  # only when set: a stored config without it stays unchanged
             out["dc_loss_pct"] = self.dc_loss_pct
+        if self.inverter_limit_w is not None:
+            out["inverter_limit_w"] = self.inverter_limit_w
         if self.mount == "fixed":
             out["surface_tilt_deg"] = self.surface_tilt
             out["surface_azimuth_deg"] = self.surface_azimuth
@@ -372,8 +384,12 @@ def array_mpp(
     exact: bool = False,
 ) -> dict[str, np.ndarray]:
     """Array current, voltage and power at the maximum power point, its current reduced by
-    the array's ``dc_loss_pct`` (the one place the losses enter: the twin, the sky read from
-    an array's power and the diagnosis's fits all come through here).
+    the array's ``dc_loss_pct`` and its power cut at its ``inverter_limit_w`` (the one place
+    the losses and the clipping enter: the twin, the sky read from an array's power and the
+    diagnosis's fits all come through here). A clipping inverter moves the array's operating
+    point from the maximum power point towards open circuit; that point is not modelled: the
+    voltage stays the MPP's and the current takes the cut (a clipped minute's measured
+    voltage reads above it).
 
     Parameters
     ----------
@@ -398,7 +414,11 @@ def array_mpp(
         i_mp, v_mp = mpp_table(array.module).lookup(effective_irradiance, temp_cell)
     current = i_mp * array.strings_in_parallel * (1.0 - array.dc_loss_pct / 100.0)
     voltage = v_mp * array.modules_in_series
-    return {"current_a": current, "voltage_v": voltage, "power_w": current * voltage}
+    power = current * voltage
+    if array.inverter_limit_w is not None:
+        power = np.minimum(power, array.inverter_limit_w)
+        current = np.divide(power, voltage, out=np.zeros_like(power), where=voltage > 0)
+    return {"current_a": current, "voltage_v": voltage, "power_w": power}
 
 
 def iv_curve(
@@ -457,6 +477,7 @@ _SITE_FILE_KEYS: dict[str, tuple[str, Any]] = {
     "temperature_model": ("temperature_model", _as_is),
     "albedo": ("albedo", float),
     "dc_loss_pct": ("dc_loss_pct", float),
+    "inverter_limit_w": ("inverter_limit_w", float),
 }
 
 
@@ -470,7 +491,8 @@ def array_config_from_dict(name: str, d: dict[str, Any]) -> ArrayConfig:
     unknown = sorted(set(d) - known)
     if unknown:
         raise ValueError(f"array {name!r}: unknown keys {unknown}; known: {sorted(known)}")
-    kwargs = {
-        field: convert(d[key]) for key, (field, convert) in _SITE_FILE_KEYS.items() if key in d
+    kwargs = {  # a key set to null (a model's dump of an optional one) is left out
+        field: convert(d[key]) for key, (field, convert) in _SITE_FILE_KEYS.items()
+        if d.get(key) is not None
     }
     return ArrayConfig(name=name, **kwargs)

@@ -193,6 +193,11 @@ class Array(BaseModel):
         "the fixed array's own sky reads too dim (a broken-cloud day's tracker expectation "
         "fell up to 11 %): set it from a clean, healthy week's performance ratio (1 − PR). "
         f"Default {_ARRAY.dc_loss_pct}: the ideal array."))
+    inverter_limit_w: float | None = Field(None, gt=0, le=1e9, description=(
+        "[W] the most power the array's inverter delivers (its AC rating where the logger "
+        "reads AC power): the expected power is cut there, and the fixed array's readings "
+        "at it give no sky (a clipped noon is no dim sky). A plant's DC/AC ratio of 1.1-1.4 "
+        "clips a tracker on every clear day. Default none: no limit."))
     # where it stands: only for the tracker's shade on the fixed array (sim/array_shade.py)
     position_east_m: float | None = Field(None, ge=-100_000, le=100_000, description=(
         "[m] east of the site's origin (any ground point, the same for every array): a "

@@ -178,7 +178,10 @@ def invert_poa(power_w: np.ndarray, clear: pd.DataFrame, array: pv.ArrayConfig,
     temp_air, wind_speed : array_like or float
         Air temperature [°C] and wind speed [m s⁻¹] (site defaults when unmeasured).
     saturation_power_w : float, optional
-        The logger's full scale [W]; readings within 0.5 % of it are flagged.
+        The most the array's readings can show [W] (its inverter's limit,
+        ``inverter_limit_w``, or the logger's full scale); readings within 0.5 % of it are
+        flagged ``saturated`` and their POA is the one that gives that much: a lower bound
+        (:func:`_sky_from_plane`).
 
     Returns
     -------
@@ -201,10 +204,14 @@ def invert_poa(power_w: np.ndarray, clear: pd.DataFrame, array: pv.ArrayConfig,
     flag = _reading_flags(p, clear, 0.005 * stc_w * poa_clear / 1000.0)
     if saturation_power_w is not None:
         flag[np.isfinite(p) & (p >= 0.995 * saturation_power_w)] |= FLAGS["saturated"]
-    todo = flag == 0
+    # a reading at the limit: the plane got at least the POA that gives the limit, solved
+    # for here and kept beside its flag (_sky_from_plane: a lower bound, not a measurement)
+    saturated = flag == FLAGS["saturated"]
+    todo = (flag == 0) | saturated
     lo = np.zeros(int(todo.sum()))
     hi = np.full(lo.size, G_MAX)
-    target = p[todo]
+    # (its flag's threshold: the modelled array clips at the limit itself, a plateau)
+    target = np.where(saturated, 0.995 * (saturation_power_w or 0.0), p)[todo]
     args = (iam[todo], t_air[todo], wind[todo])
     ratio = np.ones(lo.size)
     for _ in range(2):  # beam share from the plane's clearness of the previous pass
@@ -219,7 +226,7 @@ def invert_poa(power_w: np.ndarray, clear: pd.DataFrame, array: pv.ArrayConfig,
         ratio = 0.5 * (lo + hi) / np.maximum(poa_clear[todo], 1.0)
     g = np.full(n, np.nan)
     g[todo] = 0.5 * (lo + hi)
-    too_high = todo & (g > 1.25 * poa_clear + 50.0)
+    too_high = todo & ~saturated & (g > 1.25 * poa_clear + 50.0)
     flag[too_high] |= FLAGS["above_clear_sky"]
     g[too_high] = np.nan
     return pd.DataFrame({"poa_global": g, "flag": flag}, index=clear.index)
@@ -600,15 +607,26 @@ def _sky_from_plane(site: Site, times: pd.DatetimeIndex, poa_measured: np.ndarra
     plane's measured irradiance ``poa_measured`` (valid where ``flag`` is 0; ``spells_seen``:
     :func:`decompose`)."""
     valid = flag == 0
+    at_limit = flag == FLAGS["saturated"]  # at the array's limit: a lower bound (below)
     night = (flag & FLAGS["night"]) > 0
     poa_clear = clear["poa_clear"].to_numpy()
     k = np.divide(poa_measured, poa_clear, out=np.full(len(times), np.nan), where=valid)
-    measured = measured_sky(site, times, valid, poa_clear, now)
+    # a day clipping for hours is read all the same (its clipped minutes count among its
+    # readings: a clear day at DC/AC 1.4 clips for half its daylight)
+    measured = measured_sky(site, times, valid | at_limit, poa_clear, now)
     src = valid & measured
     t = sun._unix_seconds(times)
     # up but not usable (low, or behind the plane, or a flagged reading): the clear-sky
     # index of the valid neighbours; a day without a measured sky: the clear sky
     k_filled = np.where(measured, np.interp(t, t[src], k[src]) if src.any() else 1.0, 1.0)
+    # a reading at the array's limit (its inverter clips): at least the clearness that gives
+    # the limit (invert_poa), not the neighbours' alone — clipping is the sun out, and on a
+    # broken-cloud day the neighbours are the clouds (their index gave such minutes a fifth
+    # of their beam)
+    if at_limit.any():
+        k_limit = np.divide(poa_measured, poa_clear, out=np.zeros(len(times)),
+                            where=at_limit & (poa_clear > 0) & np.isfinite(poa_measured))
+        k_filled = np.where(at_limit & measured, np.maximum(k_filled, k_limit), k_filled)
     sun_down = clear["apparent_elevation"].to_numpy() <= 0.0
     poa = np.where(sun_down, 0.0, np.where(src, poa_measured, k_filled * poa_clear))
     beam_seen = src & (np.cos(np.radians(clear["aoi"].to_numpy())) >= BEAM_SEEN_COS)
@@ -743,6 +761,8 @@ def weather_from_fixed(site: Site, times: pd.DatetimeIndex, fixed_power_w: np.nd
         ``"fixed_array"`` or ``"clear_sky"``).
     """
     n = len(times)
+    if saturation_power_w is None:  # its inverter's limit: a clipped reading shows no sky
+        saturation_power_w = site.arrays["fixed"].inverter_limit_w
     clear = fixed_clear_sky(site, times)
     t_air = _measured_or(temp_air, sensors, "temp_air_c", site.temp_air, n)
     # an anemometer's zero offset reads a calm a little below 0: a calm

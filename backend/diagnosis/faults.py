@@ -372,7 +372,7 @@ UNUSABLE_CAUSES = {
                        "more modules than the site's config says, or the logger's clock or "
                        "UTC offset hours off",
     "stale": "one value held for readings on end: a frozen logger",
-    "saturated": "at the logger's saturation power",
+    "saturated": "at the logger's saturation power or the inverter's limit (inverter_limit_w)",
 }
 
 

@@ -107,8 +107,9 @@ MAX_DAYS = 400
 #: 37: where a loss lies, the arrays' voltage and current ratios, faults.electrical_ratios;
 #: 38: the fixed array's IEC 61724-1 performance ratio under a POA sensor; 39: each array's
 #: configured dc_loss_pct beside its energy, for a steady shortfall's advice,
-#: faults._steady_loss).
-CACHE_VERSION = 39
+#: faults._steady_loss; 40: a fixed array's readings at its inverter's limit read as at
+#: least the sky that gives it, sim.sky_sensor.invert_poa).
+CACHE_VERSION = 40
 #: A day is ``partial`` when an array's readings cover under this share of its expected
 #: energy (a logger that began or stopped that day, a dropout) [-]
 PARTIAL_COVERAGE = 0.99

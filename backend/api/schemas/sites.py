@@ -37,6 +37,8 @@ class ArrayRead(BaseModel):
     temperature_model: str
     albedo: float
     dc_loss_pct: float | None = Field(None, description="[%] DC losses, when set (else 0)")
+    inverter_limit_w: float | None = Field(None, description="[W] the inverter's limit, when "
+                                                             "set (else none)")
     surface_tilt_deg: float | None = None
     surface_azimuth_deg: float | None = None
     position_east_m: float | None = None
