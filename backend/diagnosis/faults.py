@@ -1115,7 +1115,9 @@ def _soiling(days: list[dict[str, Any]], out: list[list[dict[str, Any]]], idx: l
     sx = float(np.sum((x - x.mean()) ** 2))
     se = np.sqrt(sse / max(n - 2, 1) / sx) if sx > 0 else np.inf
     rate_pct = -100.0 * slope / level
-    t = -slope / se
+    # a perfect fit (se 0: readings equal to the expectation, a tester's healthy tracker) has
+    # no noise to weigh the slope against: a decline is certain, no decline is none
+    t = -slope / se if se > 0 else (np.inf if slope < 0 else 0.0)
     if (rate_pct < SOILING_MIN_PCT_PER_DAY or t < SOILING_MIN_T
             or -slope * (x[-1] - x[0]) < SOILING_MIN_TOTAL * level):
         return
