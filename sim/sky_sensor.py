@@ -203,7 +203,10 @@ def invert_poa(power_w: np.ndarray, clear: pd.DataFrame, array: pv.ArrayConfig,
     # (a tester's finding); a breaker, kW or hours off still read far under it
     flag = _reading_flags(p, clear, 0.005 * stc_w * poa_clear / 1000.0)
     if saturation_power_w is not None:
-        flag[np.isfinite(p) & (p >= 0.995 * saturation_power_w)] |= FLAGS["saturated"]
+        at = np.isfinite(p) & (p >= 0.995 * saturation_power_w)
+        flag[at] |= FLAGS["saturated"]
+        # an inverter holding its limit for hours is clipping, not a frozen logger
+        flag[at] &= ~FLAGS["stale"]
     # a reading at the limit: the plane got at least the POA that gives the limit, solved
     # for here and kept beside its flag (_sky_from_plane: a lower bound, not a measurement)
     saturated = flag == FLAGS["saturated"]

@@ -64,6 +64,13 @@ def test_a_clipping_tracker_is_healthy_when_its_limit_is_known() -> None:
 
     known, known_kinds = diagnose(limited)
     unknown, unknown_kinds = diagnose(SITE)
+    # an inverter that reports its limit exactly (no noise: hours of one value, not a frozen
+    # logger) reads the same
+    exact = d.fixed_power_w.copy()
+    d.fixed_power_w[:] = np.minimum(exact, LIMIT_W)
+    assert (d.fixed_power_w == LIMIT_W).sum() > 300
+    held, held_kinds = diagnose(limited)
+    assert not held_kinds and np.all(np.abs(held - 1.0) < 0.015), held
     assert not known_kinds and np.all(np.abs(known - 1.0) < 0.015), known
     assert unknown_kinds.count("underperformance") == 3, unknown_kinds
     assert np.sum(unknown < 0.95) == 5 and unknown.min() > 0.92, unknown
