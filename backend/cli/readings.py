@@ -256,8 +256,9 @@ def _peak(lf: LoggerFile, array: str) -> dict[str, Any]:
 
 
 def _stamp_note(site: dict[str, Any], summary: dict[str, Any]) -> list[str]:
-    """What a file of means needs from a site that takes its stamps as instants: readings
-    made from energy are means whatever their spacing."""
+    """What a file of means needs from the site: one that takes its stamps as instants is
+    told to set them (readings made from energy are means whatever their spacing), and one
+    that reads them as interval starts is told a meter's totals end their intervals."""
     where = ("the Sites page's 'Readings stamped', or PUT /api/v1/sites/{id} "
              "(docs/diagnosis.md, 'Cadence')")
     arrays = summary["arrays"]

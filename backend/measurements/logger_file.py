@@ -10,7 +10,7 @@ takes readings named and scaled its own way (``backend.measurements.fields``: ``
 :func:`read_logger_file` reads such a file as it is and says what it did:
 
 - **Columns** are mapped by the user (``{"power_w": "ac_power_kw_1137:kW"}``, or a sum of
-  columns, ``"P_INV1+P_INV2"``, for :data:`ADDITIVE_FIELDS`); a column already named as a
+  columns, ``"P_INV1:kW+P_INV2:kW"``, for :data:`ADDITIVE_FIELDS`); a column already named as a
   field maps to itself. Nothing is guessed from a name: two power
   columns in one file (an array's and an inverter's) are common.
 - **Units**: the one given after ``:``, else the file's (TOA5's units line, or a header's
@@ -522,7 +522,7 @@ def read_logger_file(source: str | Path | bytes, columns: dict[str, str] | None 
     used: dict[str, tuple[str, str]] = {}
     unitless = []
     for fld, spec in mapping.items():
-        # NAME[:UNIT], or a sum of them (an array on two inverters: P_INV1:kW+P_INV2); a
+        # NAME[:UNIT], or a sum of them (an array on two inverters: P_INV1:kW+P_INV2:W); a
         # column's whole name first (a meter's "A+" is one column)
         head, colon, unit_part = spec.rpartition(":")
         pieces = [spec] if spec in index or (colon and head in index and "+" not in unit_part) \
