@@ -467,11 +467,18 @@ def test_a_steady_shortfall_under_a_sensors_sky_names_the_losses_it_would_be() -
     its band or not: the days below a wide band alone are the deeper ones)."""
     d = logger_days(SITE, FIRST, DAYS, SEED)
 
-    def findings(day_factors: list[float], dc_loss_pct: float = 0.0) -> list[str]:
+    @functools.cache
+    def expected(dc_loss_pct: float) -> tuple[Any, pd.DataFrame]:
+        """The site with the fixed array's losses, and its expectation under the POA
+        sensor's sky (the sky is the sensor's: the array's readings do not enter it)."""
         site = replace(SITE, arrays={**SITE.arrays, "fixed": replace(
             SITE.arrays["fixed"], dc_loss_pct=dc_loss_pct)})
-        e = sky_sensor.weather_aware_twin(site, FIRST, FIRST + pd.Timedelta(days=DAYS),
-                                          d.fixed_power_w, sensors=d.sensors("fixed_poa_w_m2"))
+        return site, sky_sensor.weather_aware_twin(
+            site, FIRST, FIRST + pd.Timedelta(days=DAYS), d.fixed_power_w,
+            sensors=d.sensors("fixed_poa_w_m2"))
+
+    def findings(day_factors: list[float], dc_loss_pct: float = 0.0) -> list[str]:
+        site, e = expected(dc_loss_pct)
         fixed = d.fixed_power_w * (1 - dc_loss_pct / 100) * np.repeat(day_factors, 1440)
         days = features_by_day(site, FIRST, e, d.tracker_power_w, fixed_power_w=fixed)
         return [" / ".join(f["detail"] for f in day if f["kind"] == "fixed_underperformance")
