@@ -70,8 +70,9 @@ STATION_FIELDS = ("poa_irradiance_w_m2", "ghi_w_m2", "temp_air_c", "wind_speed_m
 #: The fields a sum of columns may be mapped to (``power_w=P_INV1+P_INV2``): an array on
 #: several inverters or strings in parallel adds its power, current and energy.
 ADDITIVE_FIELDS = ("power_w", "current_a", "energy_wh", "energy_total_wh")
-#: A meter's step longer than this many times the file's spacing spans a gap: its energy is
-#: not spread as a power over it (the service's gap rule would not bridge it either).
+#: A meter's step longer than this many times the file's spacing spans rows missing: its
+#: energy is not sent as a power (a mean over a longer interval than the readings' would be
+#: placed as one of theirs). The bound sim.energy puts on a regular series's steps.
 METER_MAX_STEP = 1.5
 
 #: Per field, the units a file may give it in: normalised unit (:func:`_unit_key`) → (scale,
