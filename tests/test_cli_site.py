@@ -112,6 +112,41 @@ def test_a_broken_file_beside_a_new_site_is_named_not_a_traceback(tmp_path: Path
     token = heliotwin(tmp_path, "token", "create", "--site", "hamburg")
     assert token.returncode == 2 and "draft.json: site_id 'other'" in token.stderr
 
+
+def test_create_sets_any_key_and_drops_its_assumed_mark(tmp_path: Path, heliotwin) -> None:
+    """A real array's orientation, losses and inverter, and its logger's stamps, in one
+    command (a tester edited the JSON by hand for each: SERF East at 45°/158°, 14 %): each
+    ``--set`` key is written and no longer marked assumed; a bad value or an unknown key is
+    refused naming it, as the schema says."""
+    made = heliotwin(tmp_path, "site", "create", "--id", "serf", "--latitude-deg", "39.742",
+                     "--longitude-deg", "-105.1727", "--timezone", "Etc/GMT+7",
+                     "--set", "arrays.fixed.surface_tilt_deg=45",
+                     "--set", "arrays.fixed.surface_azimuth_deg=158",
+                     "--set", "arrays.fixed.dc_loss_pct=14",
+                     "--set", "arrays.tracker.inverter_limit_w=600",
+                     "--set", "readings_stamped=interval_end")
+    assert made.returncode == 0, made.stderr
+    config = json.loads((tmp_path / "serf.json").read_text())
+    fixed = config["arrays"]["fixed"]
+    assert (fixed["surface_tilt_deg"], fixed["surface_azimuth_deg"], fixed["dc_loss_pct"]) == (
+        45, 158, 14)
+    assert config["arrays"]["tracker"]["inverter_limit_w"] == 600
+    assert config["readings_stamped"] == "interval_end"
+    assert "arrays.fixed.surface_tilt_deg" not in config["assumed"]
+    assert "arrays.fixed.surface_azimuth_deg" not in config["assumed"]
+    assert "altitude_m" in config["assumed"]  # what was not set stays marked
+    bad = heliotwin(tmp_path, "site", "create", "--id", "bad", "--latitude-deg", "39.742",
+                    "--longitude-deg", "-105.1727", "--timezone", "Etc/GMT+7",
+                    "--set", "arrays.fixed.surface_tilt_deg=145",
+                    "--set", "arrays.fixed.colour=red")
+    assert bad.returncode == 2
+    assert "--set arrays.fixed.surface_tilt_deg: Input should be less than or equal to 90" \
+        in bad.stderr and "arrays.fixed.colour: unknown key" in bad.stderr
+    assert not (tmp_path / "bad.json").exists()
+    malformed = heliotwin(tmp_path, "site", "create", "--id", "m", "--latitude-deg", "1",
+                          "--longitude-deg", "1", "--timezone", "UTC", "--set", "tilt")
+    assert malformed.returncode == 2 and "--set: 'tilt' is not KEY=VALUE" in malformed.stderr
+
 def test_validate_names_the_bad_field(tmp_path: Path, heliotwin) -> None:
     good = ROOT / "sim" / "data" / "sites" / "tehuantepec.json"
     bad = tmp_path / "broken.json"

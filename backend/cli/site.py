@@ -69,6 +69,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                    help="copy tracker and arrays from this site (default tehuantepec); the "
                         "fixed tilt, air temperature and wind come from the new place, "
                         "marked as assumed")
+    c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="a config value by its dotted key, e.g. arrays.fixed.surface_tilt_deg=45, "
+                        "arrays.fixed.dc_loss_pct=14, arrays.tracker.inverter_limit_w=600 "
+                        "(docs/sites.md; a JSON value, else text); repeat per key. A key so "
+                        "given is no longer marked assumed")
     c.add_argument("--from-file", type=Path, metavar="FILE",
                    help="write this hand-written config instead (validated first)")
     c.add_argument("--force", action="store_true",
@@ -192,6 +197,8 @@ def create(args: argparse.Namespace) -> int:
                  f"{args.site_id!r}")
         if isinstance(config, dict):
             config = place_defaults(config)
+        if args.set:
+            fail("--set: edit the file given to --from-file instead")
         return _write(config, args.force)
     missing = [f"--{n.replace('_', '-')}" for n in ("latitude_deg", "longitude_deg", "timezone")
                if getattr(args, n) is None]
@@ -204,7 +211,33 @@ def create(args: argparse.Namespace) -> int:
         **({} if args.altitude_m is None else {"altitude_m": args.altitude_m}),
         "timezone": args.timezone,
         "source": f"heliotwin site create (tracker and arrays as {args.like})", "notes": ""})
-    return _write(config, args.force, flags=_FLAG_KEYS)
+    flags = dict(_FLAG_KEYS)
+    for spec in args.set:
+        key = _set_value(config, spec)
+        flags[f"--set {key}"] = key
+    return _write(config, args.force, flags=flags)
+
+
+def _set_value(config: dict[str, Any], spec: str) -> str:
+    """Put ``--set KEY=VALUE`` into ``config`` (a dotted key into its objects; the value read
+    as JSON, else as text) and drop the key's ``assumed`` mark: the user gave it. Its key."""
+    key, eq, text = spec.partition("=")
+    key = key.strip()
+    parts = key.split(".")
+    if not eq or not key or not all(parts):
+        fail(f"--set: {spec!r} is not KEY=VALUE (e.g. arrays.fixed.surface_tilt_deg=45)")
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError:
+        value = text
+    node = config
+    for i, part in enumerate(parts[:-1]):
+        node = node.setdefault(part, {})
+        if not isinstance(node, dict):
+            fail(f"--set {key}: {'.'.join(parts[:i + 1])} is a value, not an object")
+    node[parts[-1]] = value
+    config.get("assumed", {}).pop(key, None)
+    return key
 
 
 #: The config keys ``site create`` takes from its flags, by flag: a refusal of a config made
