@@ -150,10 +150,16 @@ class LoggerFile:
                 for ts, row in zip(stamps, values.to_numpy().tolist(), strict=True)]
 
     def cadence_s(self) -> float | None:
-        """The median spacing of the sendable rows' distinct times [s]; None under two
-        (a stamp written twice is no interval of 0 s)."""
-        t = np.unique(self.times_utc[self.sendable].as_unit("ns").asi8)
-        return float(np.median(np.diff(t))) / 1e9 if t.size > 1 else None
+        """The sendable rows' :func:`spacing_s`."""
+        return spacing_s(self.times_utc[self.sendable].as_unit("ns").asi8 / 1e9)
+
+
+def spacing_s(times_s: np.ndarray) -> float | None:
+    """A series' spacing [s]: the median step between its distinct times (a stamp written
+    twice is no interval of 0 s; the rows in any order); None under two distinct times. The
+    one rule for the readings' cadence, a meter's interval and a station's spacing."""
+    t = np.unique(np.asarray(times_s, np.float64))
+    return float(np.median(np.diff(t))) if t.size > 1 else None
 
 
 def _unit_key(unit: str) -> str:
@@ -608,10 +614,9 @@ def join_station(lf: LoggerFile, station: LoggerFile, stamped: str, name: str) -
     ts = station.times_utc.as_unit("s").asi8.astype(np.float64)
     order = np.argsort(ts, kind="stable")
     ts = ts[order]
-    steps = np.diff(ts)
-    if not (steps > 0).any():
+    station_s = spacing_s(ts)
+    if station_s is None:
         raise ValueError(f"{name}: two rows at different times are needed to join its values")
-    station_s = float(np.median(steps[steps > 0]))
     t = lf.times_utc.as_unit("s").asi8.astype(np.float64)
     interval_s = lf.cadence_s() or 0.0
     means = stamped != "instant" and 2 * station_s <= interval_s
@@ -659,18 +664,18 @@ def power_from_energy(times_utc: pd.DatetimeIndex, energy_wh: np.ndarray, kind: 
     have = np.flatnonzero(np.isfinite(energy_wh))
     order = have[np.argsort(t[have], kind="stable")]
     steps_s = np.diff(t[order])
-    if not (steps_s > 0).any():
+    spacing = spacing_s(t[order])
+    if spacing is None:
         raise ValueError(f"column: {kind}={column!r}: two rows at different times are needed "
                          "to know the interval its energy covers")
-    spacing_s = float(np.median(steps_s[steps_s > 0]))
     power_w = np.full(energy_wh.size, np.nan)
     if kind == "energy_wh":
-        power_w[have] = energy_wh[have] * 3600.0 / spacing_s
+        power_w[have] = energy_wh[have] * 3600.0 / spacing
         return power_w, [f"power_w: {column!r}, each row's energy over its interval (the "
-                         f"rows' spacing, {spacing_s:g} s): the interval's mean power"]
+                         f"rows' spacing, {spacing:g} s): the interval's mean power"]
     rise_wh = np.diff(energy_wh[order])
     later = order[1:]
-    gap = steps_s > METER_MAX_STEP * spacing_s
+    gap = steps_s > METER_MAX_STEP * spacing
     ok = (steps_s > 0) & ~gap & (rise_wh >= 0)
     power_w[later[ok]] = rise_wh[ok] * 3600.0 / steps_s[ok]
     notes = [f"power_w: {column!r}, a meter's running total: each row's rise since the row "
@@ -682,13 +687,13 @@ def power_from_energy(times_utc: pd.DatetimeIndex, energy_wh: np.ndarray, kind: 
                      "their intervals are not sent")
     if (over := np.flatnonzero(gap & (rise_wh >= 0))).size:
         notes.append(f"{column!r} spans a gap {over.size} × (a step over {METER_MAX_STEP:g} × "
-                     f"its {spacing_s:g} s spacing: rows missing, or blank totals; the first "
+                     f"its {spacing:g} s spacing: rows missing, or blank totals; the first "
                      f"ending at line {lines[later[over[0]]]}): the "
                      f"{rise_wh[over].sum():.6g} Wh it rose over them are not sent as power")
     if (rises := rise_wh[rise_wh > 0]).size:
         least = float(rises.min())
         notes.append(f"{column!r}'s smallest rise is {least:.6g} Wh: an interval's power is "
-                     f"known to {least * 3600.0 / spacing_s:.3g} W at best")
+                     f"known to {least * 3600.0 / spacing:.3g} W at best")
     return power_w, notes
 
 
